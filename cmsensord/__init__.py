@@ -1,0 +1,8 @@
+"""cmsensord: condition-monitoring daemon for rotating machines.
+
+Rooms: ``protocol`` (wire format), ``dsp`` (AKF bank, severity), ``pipeline``
+(per-channel state, the real-time loop), ``link`` (serial port, capture files),
+``sinks`` (MCAP), ``config``, ``cli``.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,1 @@
+"""firmware_sim: the simulated TM4C1294 ADC board (see PROTOCOL.md)."""
