@@ -1,0 +1,416 @@
+"""Command line: the daemon, ``--simulate``, ``replay``, ``record``, ``summary``.
+
+    cmsensord --simulate [--scenario NAME --duration S --speed X --out DIR ...]
+    cmsensord --config FILE              run the daemon on the configured port
+    cmsensord replay CAPTURE [--config FILE] [--out DIR]
+    cmsensord record --port DEV --out FILE [--duration S]
+    cmsensord summary FILE.mcap
+
+Errors a user can cause end in one line on stderr and exit status 2 (usage,
+link) or 78 (configuration), never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Sequence
+
+from cmsensord import __version__
+from cmsensord.config import Config, config_to_dict, default_config, load_config
+from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
+from cmsensord.link import FrameQueue, Progress, SerialReader, open_port_checked, read_capture
+from cmsensord.pipeline import Processor
+from cmsensord.protocol import Decoder
+from cmsensord.sinks.mcap_sink import McapSink, summarize
+
+log = logging.getLogger("cmsensord")
+
+
+# --------------------------------------------------------------------------- helpers
+def _scenarios_help() -> str:
+    try:
+        from firmware_sim.scenarios import SCENARIOS, make_scenario
+    except ImportError:  # pragma: no cover
+        return ""
+    lines = []
+    for name in SCENARIOS:
+        try:
+            desc = make_scenario(name, duration_s=60.0).description.split("\n")[0]
+        except Exception:  # noqa: BLE001 - help text only
+            desc = ""
+        lines.append(f"  {name:<14} {desc}")
+    return "scenarios (--scenario):\n" + "\n".join(lines)
+
+
+def _setup_logging(verbose: bool) -> None:
+    logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
+                        format="%(levelname)s %(message)s", stream=sys.stderr)
+
+
+def _open_sink(cfg: Config, metadata: dict[str, str]) -> McapSink:
+    o = cfg.output
+    return McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
+                    metadata=metadata)
+
+
+def _status_line(proc: Processor, reader: SerialReader | None, queue: FrameQueue | None) -> str:
+    parts = [f"[{proc.adc_seconds:8.1f} s]"]
+    for v in proc.views:
+        flags = "".join(str(a) for a in v.anomaly)
+        parts.append(f"{v.name} S={v.severity:.1f} out/s={v.outliers_first:3d} F={flags}")
+    if reader is not None:
+        c = reader.decoder.counters
+        parts.append(f"| rx {c.bytes_received} B, frames {sum(c.frames.values())}, "
+                     f"lost {c.frames_lost}, crc {c.crc_failures}")
+    if queue is not None:
+        parts.append(f"q {len(queue)} drop {queue.drops}")
+    return " ".join(parts)
+
+
+def _summary(proc: Processor, path: Path, wall_s: float) -> str:
+    lines = [f"MCAP log: {path}",
+             f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
+             f"({proc.observations} observations, {proc.missing_observations} missing, "
+             f"{proc.frames_lost} frames lost)"]
+    for v in proc.views:
+        lines.append(f"  {v.name}: final severity {v.severity:.1f}, max {v.max_severity:.1f}, "
+                     f"{v.failures} failure event(s), {v.decisions} decisions")
+    if proc.event_counts:
+        lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
+    return "\n".join(lines)
+
+
+class _StopFlag:
+    """SIGINT/SIGTERM set a flag the loop checks; a second signal is not needed."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.signal: int | None = None
+
+    def install(self) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._handler)
+
+    def _handler(self, signum, _frame) -> None:
+        self.signal = signum
+        self.event.set()
+
+
+# --------------------------------------------------------------------------- live loop
+def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
+             sim_proc: subprocess.Popen | None = None, capture_path: str | None = None,
+             metadata: dict[str, str] | None = None) -> int:
+    """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP."""
+    stop = _StopFlag()
+    stop.install()
+    sink = _open_sink(cfg, metadata or {})
+    capture = open(capture_path, "wb") if capture_path else None
+    queue = FrameQueue(cfg.link.queue_frames)
+    reader = SerialReader(cfg.link.port, baud=cfg.link.baud, read_size=cfg.link.read_size,
+                          queue=queue, capture=capture, reconnect_min_s=cfg.link.reconnect_min_s,
+                          reconnect_max_s=cfg.link.reconnect_max_s)
+    proc: Processor
+    proc = Processor(cfg, sink, auto_channels=auto_channels,
+                     link_counters=reader.decoder.counters.as_dict,
+                     diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
+                                          "lag_s": round(proc.lag_s(), 3)})
+    t_start = time.monotonic()
+    proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
+    log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
+    reader.start()
+    next_status = time.monotonic() + 1.0
+    stalled = False
+    idle_since = None
+    try:
+        while not stop.event.is_set():
+            frames = queue.get(timeout=0.1)
+            proc.handle(frames)
+            while reader.events:
+                wall_ns, kind, message = reader.events.popleft()
+                proc.event(kind, None, message, wall_ns)
+            now = time.monotonic()
+            if duration_s is not None and proc.adc_seconds >= duration_s:
+                break
+            if frames:
+                idle_since = None
+                stalled = False
+            else:
+                idle_since = idle_since or now
+                if sim_proc is not None and sim_proc.poll() is not None and now - idle_since > 0.5:
+                    break               # the simulated board has finished and everything is read
+                if (not stalled and reader.connected.is_set()
+                        and now - reader.last_data > cfg.link.stall_s and proc.anchor_ns is not None):
+                    stalled = True
+                    proc.event("link_stalled", None,
+                               f"{cfg.link.port}: no bytes for {cfg.link.stall_s:g} s")
+            if cfg.output.status_line and now >= next_status:
+                next_status = now + 1.0
+                print(_status_line(proc, reader, queue), file=sys.stderr, flush=True)
+    finally:
+        reader.stop()
+        reader.join(timeout=2.0)
+        proc.handle(queue.get(timeout=0))
+        why = f"signal {signal.Signals(stop.signal).name}" if stop.signal else "end of run"
+        proc.event("stop", None, f"cmsensord stopping ({why})")
+        path = sink.close()
+        if capture is not None:
+            capture.close()
+    print(_summary(proc, path, time.monotonic() - t_start), file=sys.stderr)
+    if capture_path:
+        print(f"  capture: {capture_path}", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------- replay
+def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, str] | None = None,
+           quiet: bool = False) -> tuple[int, Path, Processor]:
+    """Process a capture file as fast as possible through the same decoder and Processor."""
+    size = Path(path).stat().st_size if Path(path).is_file() else 0
+    chunks = read_capture(path)
+    first = next(chunks, None)          # raises LinkError before any output file exists
+    sink = _open_sink(cfg, {"source": str(path), **(metadata or {})})
+    decoder = Decoder()
+    proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=decoder.counters.as_dict)
+    progress = Progress(size, f"replay {Path(path).name}")
+    t0 = time.monotonic()
+    try:
+        if first is not None:
+            proc.handle(decoder.feed(first))
+            done = len(first)
+            progress.update(done)
+            for data in chunks:
+                proc.handle(decoder.feed(data))
+                done += len(data)
+                progress.update(done, f"{proc.adc_seconds:.0f} s")
+        proc.handle(decoder.flush())
+    finally:
+        progress.close()
+        out = sink.close()
+    if not quiet:
+        print(_summary(proc, out, time.monotonic() - t0), file=sys.stderr)
+    return 0, out, proc
+
+
+# --------------------------------------------------------------------------- record
+def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
+    """Capture the raw bytes of a port to a file (PROTOCOL.md captured serial log)."""
+    ser = open_port_checked(port, baud)
+    stop = _StopFlag()
+    stop.install()
+    decoder = Decoder()             # only to show what is being captured
+    t0 = time.monotonic()
+    n = 0
+    next_status = t0 + 1.0
+    try:
+        f = open(out, "wb")
+    except OSError as exc:
+        raise LinkError(f"{out}: cannot write capture: {exc.strerror or exc}") from None
+    with f, ser:
+        while not stop.event.is_set():
+            if duration_s is not None and time.monotonic() - t0 >= duration_s:
+                break
+            try:
+                data = ser.read(max(1, ser.in_waiting or 1))
+            except (OSError, Exception) as exc:  # pyserial raises SerialException on unplug
+                print(f"cmsensord record: {port}: {exc}; stopping", file=sys.stderr)
+                break
+            if data:
+                f.write(data)
+                n += len(data)
+                decoder.feed(data)
+            if time.monotonic() >= next_status:
+                next_status += 1.0
+                c = decoder.counters
+                print(f"recorded {n} B, {sum(c.frames.values())} frames, crc errors {c.crc_failures}",
+                      file=sys.stderr, flush=True)
+    print(f"capture: {out} ({n} bytes)", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------- simulate
+def simulate(args: argparse.Namespace) -> int:
+    """Start firmware_sim on a pty and the daemon on that pty."""
+    from firmware_sim.scenarios import SCENARIOS
+
+    if args.scenario not in SCENARIOS:
+        raise ConfigError("--scenario", None, f"unknown scenario; choose from {', '.join(SCENARIOS)}",
+                          args.scenario)
+    cfg = load_config(args.config, n_channels=args.channels) if args.config else default_config(args.channels)
+    out_dir = args.out or cfg.output.dir
+    cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=out_dir,
+                                                              akf_trace=cfg.output.akf_trace or args.akf_trace))
+    cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", args.scenario,
+           "--duration", str(args.duration), "--speed", str(args.speed), "--seed", str(args.seed),
+           "--channels", str(args.channels)]
+    sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           start_new_session=True)
+    try:
+        line = sim.stdout.readline().strip()
+        if not line.startswith("/dev/"):
+            err = sim.stderr.read() if sim.poll() is not None else ""
+            print(f"cmsensord: the simulator did not start: {line or err.strip()}", file=sys.stderr)
+            return 1
+        print(f"simulated board ({args.scenario}, {args.channels} channel(s), seed {args.seed}) on "
+              f"{line}; {args.duration:g} s at {args.speed:g}x real time", file=sys.stderr)
+        cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, port=line))
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        capture = args.capture
+        return run_live(cfg, auto_channels=False, duration_s=args.duration, sim_proc=sim,
+                        capture_path=capture,
+                        metadata={"scenario": args.scenario, "seed": str(args.seed),
+                                  "duration_s": str(args.duration)})
+    finally:
+        if sim.poll() is None:
+            sim.terminate()
+        try:
+            sim.wait(timeout=3)
+        except subprocess.TimeoutExpired:
+            sim.kill()
+
+
+# --------------------------------------------------------------------------- argparse
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="cmsensord",
+        description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
+                    "adaptive Kalman filters -> severity indices and events in MCAP logs.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=_scenarios_help() + "\n\nsubcommands: replay, record, summary (see "
+                                   "`cmsensord SUBCOMMAND --help`)")
+    p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
+    p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every event (debug level)")
+    sim = p.add_argument_group("simulation (--simulate)")
+    sim.add_argument("--simulate", action="store_true",
+                     help="run a simulated ADC board on a pty and the daemon on it")
+    sim.add_argument("--scenario", default="degrading", help="machine scenario (default degrading)")
+    sim.add_argument("--duration", type=_positive, default=600.0,
+                     help="simulated seconds; a scenario's shape stretches over it (default 600)")
+    sim.add_argument("--speed", type=_positive, default=20.0,
+                     help="x real time (default 20: 600 s simulated in 30 s)")
+    sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
+    sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sim.add_argument("--channels", type=_channels, default=1, help="number of channels 1..8 (default 1)")
+    sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture file")
+    sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,summary}")
+    r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
+    r.add_argument("capture", help="capture file (the bytes as read from the port)")
+    r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
+    r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
+    r.add_argument("--akf-trace", dest="sub_trace", action="store_true",
+                   help="write /cm/<ch>/akf per observation")
+    rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
+    rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
+    rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
+    rec.add_argument("--baud", type=int, default=921600)
+    rec.add_argument("--duration", dest="sub_duration", type=_positive, help="seconds (default: until Ctrl-C)")
+    s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
+    s.add_argument("mcap", help="MCAP file")
+    s.add_argument("--json", action="store_true", help="print the summary as JSON")
+    return p
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not v > 0 or v != v or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
+def _channels(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer 1..8, got {text!r}") from None
+    if not 1 <= v <= 8:
+        raise argparse.ArgumentTypeError(f"expected an integer 1..8, got {v}")
+    return v
+
+
+def _config_for(path: str | None) -> tuple[Config, bool]:
+    """Load a config; auto_channels when the file does not list channels."""
+    if path is None:
+        return default_config(1), True
+    cfg = load_config(path)
+    import yaml  # only to see whether the file lists channels
+    try:
+        raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    except (OSError, yaml.YAMLError):
+        raw = {}
+    return cfg, not (isinstance(raw, dict) and raw.get("channels"))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _setup_logging(args.verbose)
+    try:
+        if args.command == "summary":
+            info = summarize(args.mcap)
+            print(json.dumps(info, indent=2, default=str) if args.json else _format_summary(info))
+            return 0
+        if args.command == "record":
+            return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
+        if args.command == "replay":
+            cfg, auto = _config_for(args.sub_config)
+            if args.sub_out or args.sub_trace:
+                cfg = dataclasses.replace(cfg, output=dataclasses.replace(
+                    cfg.output, dir=args.sub_out or cfg.output.dir,
+                    akf_trace=cfg.output.akf_trace or args.sub_trace))
+            return replay(args.capture, cfg, auto_channels=auto)[0]
+        if args.simulate:
+            return simulate(args)
+        if args.config:
+            cfg, auto = _config_for(args.config)
+            return run_live(cfg, auto_channels=auto)
+        parser.print_usage(sys.stderr)
+        print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand", file=sys.stderr)
+        return EXIT_USAGE
+    except ConfigError as exc:
+        print(f"cmsensord: configuration error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
+    except SinkError as exc:
+        print(f"cmsensord: output error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
+    except LinkError as exc:
+        print(f"cmsensord: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except CmsensordError as exc:
+        print(f"cmsensord: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        return 130
+
+
+def _format_summary(info: dict) -> str:
+    lines = []
+    for k, v in info.items():
+        if isinstance(v, dict):
+            lines.append(f"{k}:")
+            for kk, vv in v.items():
+                lines.append(f"  {kk}: {vv}")
+        elif isinstance(v, list):
+            lines.append(f"{k}: {len(v)} item(s)")
+            for item in v[:50]:
+                lines.append(f"  {item}")
+        else:
+            lines.append(f"{k}: {v}")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

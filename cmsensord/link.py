@@ -1,0 +1,230 @@
+"""Byte sources: the serial port (reader thread, reconnect), capture files.
+
+Everything here is I/O at the edge.  Bytes go into the push decoder of
+``protocol``; frames come out and go, through a bounded :class:`FrameQueue`,
+to the processing loop.  A capture file is the bytes exactly as read from the
+port (PROTOCOL.md, "A captured serial log"): the reader can tee them to one,
+``record`` writes one, ``replay`` reads one through the same decoder.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import sys
+import termios
+import threading
+import time
+from collections import deque
+from pathlib import Path
+from typing import BinaryIO, Callable, Iterator
+
+import serial
+
+from cmsensord.errors import LinkError
+from cmsensord.protocol import Decoder, Frame
+
+log = logging.getLogger("cmsensord")
+
+#: what pyserial and the OS really raise when a port goes away
+PORT_ERRORS = (serial.SerialException, OSError, termios.error)
+
+
+class FrameQueue:
+    """Bounded FIFO of frames between the reader thread and the loop.
+
+    When full, the oldest frames are dropped and counted (like a UART overrun,
+    the newest data is the most useful to a monitor that has fallen behind).
+    """
+
+    def __init__(self, maxlen: int):
+        self.maxlen = int(maxlen)
+        self._q: deque[Frame] = deque()
+        self._cond = threading.Condition()
+        self.drops = 0
+        self.closed = False
+
+    def put(self, frames: list[Frame]) -> None:
+        if not frames:
+            return
+        with self._cond:
+            self._q.extend(frames)
+            over = len(self._q) - self.maxlen
+            if over > 0:
+                for _ in range(over):
+                    self._q.popleft()
+                self.drops += over
+            self._cond.notify()
+
+    def get(self, timeout: float) -> list[Frame]:
+        """All queued frames (possibly none after ``timeout`` seconds)."""
+        with self._cond:
+            if not self._q and not self.closed:
+                self._cond.wait(timeout)
+            out = list(self._q)
+            self._q.clear()
+            return out
+
+    def close(self) -> None:
+        with self._cond:
+            self.closed = True
+            self._cond.notify_all()
+
+    def __len__(self) -> int:
+        return len(self._q)
+
+
+class SerialReader(threading.Thread):
+    """Reads the port, feeds the decoder, queues frames; reconnects with back-off.
+
+    Link events (``link_lost``, ``link_restored``) are queued in ``events`` as
+    (wall_ns, kind, message) for the processing loop to emit: only the loop
+    writes to the sink.
+    """
+
+    def __init__(self, port: str, *, baud: int, read_size: int, queue: FrameQueue,
+                 decoder: Decoder | None = None, capture: BinaryIO | None = None,
+                 reconnect_min_s: float = 0.5, reconnect_max_s: float = 5.0,
+                 open_port: Callable[..., serial.Serial] | None = None):
+        super().__init__(name="cmsensord-reader", daemon=True)
+        self.port, self.baud, self.read_size = port, baud, read_size
+        self.queue = queue
+        self.decoder = decoder or Decoder()
+        self.capture = capture
+        self.reconnect_min_s, self.reconnect_max_s = reconnect_min_s, reconnect_max_s
+        self._open_port = open_port or (lambda: serial.Serial(self.port, self.baud, timeout=0.05))
+        self._stop = threading.Event()
+        self.events: deque[tuple[int, str, str]] = deque(maxlen=1000)
+        self.connected = threading.Event()
+        self.ever_connected = False
+        self.last_data = time.monotonic()
+        self.failures = 0
+        self.eof = False                 # set when the port went away at least once
+        self.capture_error: str | None = None
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _event(self, kind: str, message: str) -> None:
+        self.events.append((time.time_ns(), kind, message))
+
+    def run(self) -> None:
+        backoff = self.reconnect_min_s
+        ser = None
+        while not self._stop.is_set():
+            if ser is None:
+                try:
+                    ser = self._open_port()
+                except PORT_ERRORS as exc:
+                    if self.failures == 0:
+                        self._event("link_lost", f"cannot open {self.port}: {_why(exc)}; retrying")
+                    self.failures += 1
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, self.reconnect_max_s)
+                    continue
+                if self.ever_connected or self.failures:
+                    self._event("link_restored", f"{self.port} open again")
+                self.ever_connected = True
+                self.failures = 0
+                backoff = self.reconnect_min_s
+                self.connected.set()
+            try:
+                data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+                if not data:
+                    continue
+            except PORT_ERRORS as exc:
+                self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
+                self.connected.clear()
+                self.eof = True
+                self.failures = 1
+                _close_quietly(ser)
+                ser = None
+                continue
+            self.last_data = time.monotonic()
+            if self.capture is not None and self.capture_error is None:
+                try:
+                    self.capture.write(data)
+                except OSError as exc:
+                    self.capture_error = f"capture file: {exc.strerror or exc}"
+                    self._event("disk_error", self.capture_error + "; capture stopped")
+            self.queue.put(self.decoder.feed(data))
+        if ser is not None:
+            _close_quietly(ser)
+        self.queue.put(self.decoder.flush())
+
+
+def _why(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return f"{errno.errorcode.get(exc.errno, exc.errno)} {exc.strerror}"
+    return str(exc) or type(exc).__name__
+
+
+def _close_quietly(ser) -> None:
+    try:
+        ser.close()
+    except PORT_ERRORS:
+        pass
+
+
+def read_capture(path: str | Path, chunk: int = 1 << 20) -> Iterator[bytes]:
+    """The bytes of a capture file, in chunks. LinkError with a one-line reason if unreadable."""
+    p = Path(path)
+    try:
+        f = open(p, "rb")
+    except FileNotFoundError:
+        raise LinkError(f"{p}: capture file not found") from None
+    except IsADirectoryError:
+        raise LinkError(f"{p}: is a directory, not a capture file") from None
+    except OSError as exc:
+        raise LinkError(f"{p}: cannot read capture: {exc.strerror or exc}") from None
+    with f:
+        while True:
+            try:
+                data = f.read(chunk)
+            except OSError as exc:
+                raise LinkError(f"{p}: read error: {exc.strerror or exc}") from None
+            if not data:
+                return
+            yield data
+
+
+class Progress:
+    """A one-line progress bar on a terminal (stderr); silent otherwise."""
+
+    def __init__(self, total: int, label: str, stream=None):
+        self.total = max(1, total)
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.enabled = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.t0 = time.monotonic()
+        self._last = 0.0
+
+    def update(self, done: int, extra: str = "") -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self._last < 0.2 and done < self.total:
+            return
+        self._last = now
+        frac = min(1.0, done / self.total)
+        bar = "#" * int(frac * 30)
+        rate = done / max(now - self.t0, 1e-9) / 1e6
+        self.stream.write(f"\r{self.label} [{bar:<30}] {frac * 100:5.1f}% {rate:6.1f} MB/s {extra}")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def open_port_checked(port: str, baud: int) -> serial.Serial:
+    """Open a serial port or raise LinkError with a one-line reason and the fix."""
+    if not os.path.exists(port):
+        raise LinkError(f"{port}: no such device (is the board plugged in? check `ls /dev/tty*`)")
+    try:
+        return serial.Serial(port, baud, timeout=0.1)
+    except PORT_ERRORS as exc:
+        hint = " (add the user to the dialout group)" if "ermission" in str(exc) else ""
+        raise LinkError(f"{port}: cannot open: {_why(exc)}{hint}") from None

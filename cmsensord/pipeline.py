@@ -1,0 +1,376 @@
+"""Per-channel monitoring state and the frame-to-message processing step.
+
+The :class:`Processor` owns what happens between decoded frames and the sink,
+and nothing else: no threads, no ports, no files.  Live port, replayed capture
+and simulation all hand it the same :class:`~cmsensord.protocol.Frame` objects
+(DESIGN.md: one source interface), so live and replay give the same messages.
+
+For RMS frames (PROTOCOL.md type 2) it
+
+1. places each frame on the board's block clock: slot = (t0_unwrapped - t0 of
+   the first RMS frame) / block_len.  A slot with no frame (lost frame, seq
+   gap) is a *missing observation*: a time update of the AKFs, never a zero;
+2. runs the channels x n AKF bank (``dsp.akf``; seed 000 eqs. 3-15);
+3. counts outliers into the 1-s anomaly decisions and severity index
+   (``dsp.severity``; Fig. 3, eqs. 16-18);
+4. writes ``/cm/<channel>/severity`` per decision, ``/cm/<channel>/akf`` per
+   observation (when enabled), ``/cm/events`` and ``/cm/diagnostics``.
+
+Timestamps come from the ADC clock: t = anchor + (t0_unwrapped - t0_first)/fs,
+the anchor being the wall clock when the first frame was received
+(PROTOCOL.md rule 4).  RAW and TACHO frames are counted and otherwise left to
+the raw chain.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol, Sequence
+
+import numpy as np
+
+from cmsensord.config import ChannelConfig, Config
+from cmsensord.dsp.akf import AkfBank, bank_r
+from cmsensord.dsp.severity import AnomalyDecider, Decision
+from cmsensord.protocol import Frame, FrameType, Status, decode_status
+
+log = logging.getLogger("cmsensord")
+
+DEFAULT_FS = 25000
+DEFAULT_BLOCK_LEN = 250
+#: a jump of the block clock larger than this (or backwards) is a time jump
+#: (board reset, t0 reloaded): the clock is re-anchored instead of inserting
+#: hours of missing observations.
+MAX_GAP_S = 600.0
+
+
+class Sink(Protocol):
+    def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
+
+
+class ListSink:
+    """A sink that keeps messages in memory (tests, the simulate summary)."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple[str, int, dict]] = []
+
+    def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None:
+        self.messages.append((topic, stamp_ns, msg))
+
+    def topic(self, name: str) -> list[dict]:
+        return [m for t, _, m in self.messages if t == name]
+
+
+@dataclass
+class ChannelView:
+    """Latest per-channel figures for the status line and the exit summary."""
+
+    name: str
+    severity: float = 0.0
+    max_severity: float = 0.0
+    anomaly: list[int] = field(default_factory=list)
+    outliers_first: int = 0       # outliers in the last period of the most sensitive AKF
+    decisions: int = 0
+    failures: int = 0
+
+
+class Processor:
+    """Frames in, messages out (see module docstring).
+
+    ``auto_channels``: the channel list follows the board (the first RMS frame's
+    C) instead of the configuration (used when the file lists no channels).
+    ``diagnostics``: callable returning extra fields for ``/cm/diagnostics``
+    (queue depth, drops, lag) — supplied by the live loop.
+    """
+
+    def __init__(self, cfg: Config, sink: Sink, *, auto_channels: bool = False,
+                 clock_ns: Callable[[], int] = time.time_ns,
+                 diagnostics: Callable[[], dict] | None = None,
+                 link_counters: Callable[[], dict] | None = None,
+                 on_event: Callable[[dict], None] | None = None):
+        self.cfg = cfg
+        self.sink = sink
+        self.auto_channels = auto_channels
+        self.clock_ns = clock_ns
+        self.diagnostics = diagnostics
+        self.link_counters = link_counters
+        self.on_event = on_event
+        self.fs = DEFAULT_FS
+        self.block_len = DEFAULT_BLOCK_LEN
+        self.status: Status | None = None
+        self.anchor_ns: int | None = None      # wall clock at the first frame
+        self.t0_first: int | None = None       # t0_unwrapped of the first frame
+        self.slot0_t0: int | None = None       # t0_unwrapped of slot 0 (first RMS frame)
+        self.next_slot = 0                     # next observation slot expected
+        self.channels: tuple[ChannelConfig, ...] = cfg.channels
+        self.bank: AkfBank | None = None
+        self.decider: AnomalyDecider | None = None
+        self.views: list[ChannelView] = []
+        self.observations = 0
+        self.missing_observations = 0
+        self.frames_lost = 0
+        self.events: deque[dict] = deque(maxlen=1000)   # recent events, for status/summary
+        self.event_counts: dict[str, int] = {}
+        self.started_wall = time.monotonic()
+        self._last_stamp_ns = 0
+        self._pending: list[Frame] = []
+
+    # ---- time base -------------------------------------------------------
+    def stamp_ns(self, t0_unwrapped: int) -> int:
+        """ADC sample index -> ns since the epoch (PROTOCOL.md rule 4)."""
+        assert self.anchor_ns is not None and self.t0_first is not None
+        return self.anchor_ns + (t0_unwrapped - self.t0_first) * 1_000_000_000 // self.fs
+
+    def slot_stamp_ns(self, slot: int) -> int:
+        assert self.slot0_t0 is not None
+        return self.stamp_ns(self.slot0_t0 + slot * self.block_len)
+
+    @property
+    def adc_seconds(self) -> float:
+        """ADC time covered by the observations processed so far."""
+        return self.next_slot * self.block_len / self.fs
+
+    # ---- events ------------------------------------------------------------
+    def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
+              **extra: Any) -> None:
+        if stamp_ns is None:
+            stamp_ns = self._last_stamp_ns or self.clock_ns()
+        msg = {"kind": kind, "channel": channel, "message": message, **extra}
+        self.sink.write("/cm/events", "event", stamp_ns, msg)
+        self.events.append(msg)
+        self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
+        level = logging.WARNING if kind in ("failure", "frames_lost", "link_lost", "decode_error",
+                                            "queue_overflow", "disk_error", "link_stalled") else logging.INFO
+        log.log(level, "%s: %s", kind, message)
+        if self.on_event is not None:
+            self.on_event(msg)
+
+    # ---- frames ------------------------------------------------------------
+    def handle(self, frames: Sequence[Frame]) -> None:
+        """Process a batch of decoded frames, in order."""
+        if not frames:
+            return
+        if self.anchor_ns is None:
+            self.anchor_ns = self.clock_ns()
+            self.t0_first = frames[0].t0_unwrapped
+        rms: list[Frame] = []
+        for f in frames:
+            if f.lost_before:
+                self._flush_rms(rms)
+                rms = []
+                self.frames_lost += f.lost_before
+                self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
+                           f"(seq gap)", self.stamp_ns(f.t0_unwrapped), count=f.lost_before)
+            if f.type == FrameType.RMS:
+                rms.append(f)
+            elif f.type == FrameType.STATUS:
+                self._flush_rms(rms)
+                rms = []
+                self._on_status(f)
+        self._flush_rms(rms)
+
+    def _on_status(self, f: Frame) -> None:
+        try:
+            st = decode_status(f.payload)
+        except ValueError as exc:
+            self.event("decode_error", None, f"bad STATUS payload at byte {f.offset}: {exc}")
+            return
+        first = self.status is None
+        if first or (st.fs, st.block_len, st.n_channels, st.mode) != (
+                self.status.fs, self.status.block_len, self.status.n_channels, self.status.mode):
+            if st.fs > 0 and st.block_len > 0 and (st.fs, st.block_len) != (self.fs, self.block_len):
+                if self.slot0_t0 is not None:
+                    self.event("config", None, f"board changed fs/block_len to {st.fs}/{st.block_len}:"
+                               " time base re-anchored")
+                    self.slot0_t0 = None
+                self.fs, self.block_len = st.fs, st.block_len
+            mode = {1: "RMS", 2: "RAW"}.get(st.mode, f"unknown({st.mode})")
+            self.event("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
+                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
+                       self.stamp_ns(f.t0_unwrapped))
+        self.status = st
+
+    def _setup(self, n_board: int) -> None:
+        if self.auto_channels and n_board != len(self.channels):
+            self.channels = tuple(ChannelConfig(name=f"ch{i}", index=i, monitor=self.cfg.monitor)
+                                  for i in range(n_board))
+        usable = tuple(ch for ch in self.channels if ch.index < n_board)
+        if len(usable) < len(self.channels):
+            missing = [ch.name for ch in self.channels if ch.index >= n_board]
+            self.event("config", None, f"board sends {n_board} channel(s); configured channel(s) "
+                       f"{', '.join(missing)} not in the stream")
+        if not usable:
+            raise RuntimeError("no configured channel is in the stream")
+        self.channels = usable
+        mons = [ch.monitor for ch in usable]
+        n = mons[0].n
+        if any(m.n != n for m in mons):
+            # one bank needs one n; differing n per channel would need one bank per channel
+            raise ValueError("all channels must have the same monitor.n")
+        R = np.stack([bank_r(m.r_min, m.r_max, m.n) for m in mons])
+        self.bank = AkfBank(R, window=[m.window for m in mons], z_c=[m.z_c for m in mons],
+                            p0=[m.p0 for m in mons], q0=[m.q0 for m in mons])
+        period = max(1, round(mons[0].decision_period_s * self.fs / self.block_len))
+        self.decider = AnomalyDecider(len(usable), n, f_r=[m.f_r for m in mons],
+                                      c=[m.c for m in mons], period=period)
+        self._index = np.array([ch.index for ch in usable])
+        self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in usable]
+        self._trace_i = min(self.cfg.output.akf_trace_filter, n) - 1
+        self._R = R
+
+    def _flush_rms(self, frames: list[Frame]) -> None:
+        """Place RMS frames on the block clock and run them through the bank."""
+        if not frames:
+            return
+        C = frames[0].chan
+        if any(f.chan != C for f in frames):        # channel count changed mid-batch: split
+            cut = next(i for i, f in enumerate(frames) if f.chan != C)
+            self._flush_rms(frames[:cut])
+            self._flush_rms(frames[cut:])
+            return
+        if self.bank is None:
+            self._setup(C)
+        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
+        try:
+            vals = np.frombuffer(b"".join(f.payload for f in frames), dtype="<f4")
+            vals = vals.reshape(len(frames), C)
+        except ValueError:
+            self.event("decode_error", None, f"RMS payload length does not match C = {C}")
+            return
+        if self.slot0_t0 is None:
+            self.slot0_t0 = int(t0[0]) - self.next_slot * self.block_len
+        slots = (t0 - self.slot0_t0) // self.block_len
+        # time jumps (board reset, t0 reload) and duplicates split the batch
+        max_gap = int(MAX_GAP_S * self.fs / self.block_len)
+        prev = np.concatenate(([self.next_slot - 1], slots[:-1]))
+        bad = np.flatnonzero((slots <= prev) | (slots - prev > max_gap))
+        if bad.size:
+            b = int(bad[0])
+            if b > 0:
+                self._run(slots[:b], vals[:b])
+            old = self.next_slot
+            self.slot0_t0 = int(t0[b]) - self.next_slot * self.block_len
+            self.event("config", None, f"board clock jumped (t0 {int(t0[b])} after slot {old - 1}): "
+                       "time base re-anchored", self.stamp_ns(int(t0[b])))
+            self._flush_rms(frames[b:])
+            return
+        self._run(slots, vals)
+
+    def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:
+        T = int(slots[-1]) + 1 - self.next_slot
+        y = np.full((T, len(self.channels)), np.nan)
+        valid = np.zeros((T, len(self.channels)), dtype=bool)
+        rows = slots - self.next_slot
+        y[rows] = vals[:, self._index]
+        valid[rows] = True
+        valid &= np.isfinite(y)
+        first_slot = self.next_slot
+        out = self.bank.process(y, valid)
+        decisions = self.decider.update(out.outlier, valid)
+        self.next_slot += T
+        self.observations += int(valid.sum())
+        self.missing_observations += int((~valid).sum())
+        self._last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
+        if self.cfg.output.akf_trace:
+            self._write_trace(first_slot, y, valid, out)
+        for d in decisions:
+            self._write_decision(d)
+
+    def _write_trace(self, first_slot, y, valid, out) -> None:
+        i = self._trace_i
+        zc = self.bank.z_c
+        for c, ch in enumerate(self.channels):
+            topic = f"/cm/{ch.name}/akf"
+            xp = out.x_prior[:, c, i]
+            xh = out.x_hat[:, c, i]
+            sd = np.sqrt(out.Y[:, c, i])
+            lo = (xp - zc[c] * sd).tolist()
+            hi = (xp + zc[c] * sd).tolist()
+            z = ((y[:, c] - xp) / sd).tolist()
+            yl = y[:, c].tolist()
+            xpl, xhl = xp.tolist(), xh.tolist()
+            ol = out.outlier[:, c, i].tolist()
+            for k in range(len(yl)):
+                stamp = self.slot_stamp_ns(first_slot + k)
+                if valid[k, c]:
+                    msg = {"channel": ch.name, "filter": i + 1, "y": yl[k], "x_hat": xhl[k],
+                           "x_prior": xpl[k], "lower": lo[k], "upper": hi[k], "z": z[k],
+                           "outlier": bool(ol[k]), "missing": False}
+                else:
+                    msg = {"channel": ch.name, "filter": i + 1, "y": None, "x_hat": _num(xhl[k]),
+                           "x_prior": _num(xpl[k]), "lower": _num(lo[k]), "upper": _num(hi[k]),
+                           "z": None, "outlier": False, "missing": True}
+                self.sink.write(topic, "akf", stamp, msg)
+
+    def _write_decision(self, d: Decision) -> None:
+        stamp = self.slot_stamp_ns(d.slot)
+        n = self.bank.n
+        for c, ch in enumerate(self.channels):
+            sev = float(d.severity[c])
+            level = int(round(sev * n))
+            anomaly = d.anomaly[c].tolist()
+            failure = bool(anomaly[-1])
+            self.sink.write(f"/cm/{ch.name}/severity", "severity", stamp, {
+                "channel": ch.name, "severity_index": sev, "level": level,
+                "anomaly": anomaly, "outliers": d.cnt[c].tolist(), "f_r": float(d.f_r[c]),
+                "r": self._R[c].tolist(), "failure": failure, "missing": int(d.missing[c]),
+                "transient": d.transient,
+            })
+            v = self.views[c]
+            v.severity, v.anomaly, v.outliers_first = sev, anomaly, int(d.cnt[c, 0])
+            v.max_severity = max(v.max_severity, sev)
+            v.decisions += 1
+            prev = d.prev_anomaly[c]
+            for i in np.flatnonzero(d.anomaly[c] != prev):
+                r = self._R[c, i]
+                cnt = int(d.cnt[c, i])
+                if d.anomaly[c, i]:
+                    self.event("anomaly_onset", ch.name, f"{ch.name}: AKF_{i + 1} (R={r:.4g}) anomaly: "
+                               f"{cnt} outliers in the period >= f_r {d.f_r[c]:.4g}", stamp,
+                               filter=int(i + 1), count=cnt)
+                else:
+                    self.event("anomaly_clear", ch.name, f"{ch.name}: AKF_{i + 1} (R={r:.4g}) anomaly "
+                               f"cleared: {cnt} outliers < c*f_r", stamp, filter=int(i + 1), count=cnt)
+            prev_sev = float(d.prev_severity[c])
+            if sev != prev_sev:
+                self.event("severity_change", ch.name, f"{ch.name}: severity index {prev_sev:.2f} -> "
+                           f"{sev:.2f} (level {level}/{n})", stamp, severity_index=sev, level=level)
+            if failure and not prev[-1]:
+                v.failures += 1
+                self.event("failure", ch.name, f"{ch.name}: FAILURE: AKF_{n} with R_max="
+                           f"{self._R[c, -1]:.4g} flags an anomaly", stamp, severity_index=sev, level=level)
+            elif prev[-1] and not failure:
+                self.event("failure_clear", ch.name, f"{ch.name}: failure condition cleared "
+                           f"(AKF_{n} back below c*f_r)", stamp, severity_index=sev, level=level)
+        self._write_diagnostics(stamp)
+
+    def _write_diagnostics(self, stamp: int) -> None:
+        msg: dict[str, Any] = {
+            "link": self.link_counters() if self.link_counters else {},
+            "queue_depth": 0, "queue_drops": 0, "lag_s": 0.0,
+            "observations": self.observations,
+            "uptime_s": round(time.monotonic() - self.started_wall, 3),
+        }
+        if self.diagnostics is not None:
+            msg.update(self.diagnostics())
+        self.sink.write("/cm/diagnostics", "diagnostics", stamp, msg)
+
+    def lag_s(self) -> float:
+        """Wall-clock lag of the newest processed observation (live mode)."""
+        if not self._last_stamp_ns:
+            return 0.0
+        return max(0.0, (self.clock_ns() - self._last_stamp_ns) / 1e9)
+
+
+def _num(x: float):
+    return None if x != x else x
+
+
+def replace_channels(cfg: Config, n: int) -> Config:
+    """A copy of ``cfg`` with channels ch0..ch{n-1} using the global monitor settings."""
+    return dataclasses.replace(cfg, channels=tuple(
+        ChannelConfig(name=f"ch{i}", index=i, monitor=cfg.monitor) for i in range(n)))

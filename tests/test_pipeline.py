@@ -1,0 +1,103 @@
+"""Processor: frames -> AKF bank -> decisions -> messages, independent of batching."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cmsensord.config import default_config
+from cmsensord.pipeline import ListSink, Processor
+from cmsensord.protocol import Decoder, Status, encode_rms, encode_status
+
+FIXED_CLOCK = lambda: 1_700_000_000_000_000_000  # noqa: E731
+
+
+def rms_stream(seconds=12, C=2, seed=0, t0_start=0, drop=(), spike_from=None):
+    """Bytes of a board in RMS mode: STATUS every second, one RMS frame per block."""
+    rng = np.random.default_rng(seed)
+    st_ = Status(fw_version=0x0100, mode=1, n_channels=C, fs=25000, block_len=250, tacho_inputs=0,
+                 tacho_ppr=1, overruns=0, uptime_s=0, scale=(0.0244,) * C, offset=(2048.0,) * C)
+    out = bytearray()
+    seq = 0
+    for b in range(seconds * 100):
+        t0 = (t0_start + b * 250) % 2**32
+        if b % 100 == 0:
+            out += encode_status(seq, t0, st_)
+            seq += 1
+        y = 1.0 + 0.02 * rng.standard_normal(C)
+        if spike_from is not None and b >= spike_from * 100 and b % 3 == 0:
+            y += 1.5
+        if b not in drop:
+            out += encode_rms(seq, t0, y.astype(np.float32))
+        seq += 1
+    return bytes(out)
+
+
+def run(data: bytes, splits=(), cfg=None):
+    cfg = cfg or default_config(2)
+    sink = ListSink()
+    dec = Decoder()
+    proc = Processor(cfg, sink, clock_ns=FIXED_CLOCK)
+    cuts = [0, *sorted(splits), len(data)]
+    for a, b in zip(cuts, cuts[1:]):
+        proc.handle(dec.feed(data[a:b]))
+    proc.handle(dec.flush())
+    return sink, proc
+
+
+def without_runtime(messages):
+    """Drop the fields that depend on the machine's speed (diagnostics uptime)."""
+    return [(t, s, m) for t, s, m in messages if t != "/cm/diagnostics"]
+
+
+def test_severity_every_second_and_anomaly_when_signal_turns_spiky():
+    sink, proc = run(rms_stream(seconds=12, spike_from=6))
+    sev = sink.topic("/cm/ch0/severity")
+    assert len(sev) == 12 and len(sink.topic("/cm/ch1/severity")) == 12
+    assert sev[0]["transient"] is True and all(not s["transient"] for s in sev[1:])
+    assert all(s["severity_index"] == 0 for s in sev[1:6])
+    assert sev[-1]["severity_index"] > 0                    # outliers every 3rd block: 33/s >= f_r
+    kinds = {e["kind"] for e in sink.topic("/cm/events")}
+    assert {"anomaly_onset", "severity_change", "config"} <= kinds
+    assert len(sink.topic("/cm/diagnostics")) == 12
+    stamps = [s for t, s, _ in sink.messages if t == "/cm/ch0/severity"]
+    assert np.all(np.diff(stamps) == 1_000_000_000)         # ADC clock, 1 s apart
+
+
+def test_lost_frames_are_missing_observations_and_an_event():
+    sink, proc = run(rms_stream(seconds=5, drop={250, 251, 252}))
+    sev = sink.topic("/cm/ch0/severity")
+    assert [s["missing"] for s in sev] == [0, 0, 3, 0, 0]
+    lost = [e for e in sink.topic("/cm/events") if e["kind"] == "frames_lost"]
+    assert len(lost) == 1 and lost[0]["count"] == 3
+    assert proc.observations == 2 * (500 - 3) and proc.missing_observations == 2 * 3
+
+
+@settings(max_examples=20, deadline=None)
+@given(splits=st.lists(st.integers(min_value=0, max_value=40000), max_size=6))
+def test_any_split_of_the_byte_stream_gives_the_same_messages(splits):
+    data = rms_stream(seconds=4, spike_from=2)
+    one, _ = run(data)
+    many, _ = run(data, splits=[s % len(data) for s in splits])
+    assert without_runtime(one.messages) == without_runtime(many.messages)
+
+
+def test_t0_wrapping_past_2_32_changes_nothing_downstream():
+    a, _ = run(rms_stream(seconds=6, spike_from=3, t0_start=0))
+    b, _ = run(rms_stream(seconds=6, spike_from=3, t0_start=2**32 - 250 * 150))
+    assert without_runtime(a.messages) == without_runtime(b.messages)
+
+
+def test_akf_trace_per_observation_with_missing_as_null():
+    cfg = default_config(2)
+    import dataclasses
+    cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, akf_trace=True,
+                                                              akf_trace_filter=3))
+    sink, _ = run(rms_stream(seconds=3, drop={120}), cfg=cfg)
+    tr = sink.topic("/cm/ch1/akf")
+    assert len(tr) == 300 and all(m["filter"] == 3 for m in tr)
+    assert tr[120]["missing"] is True and tr[120]["y"] is None and tr[120]["z"] is None
+    ok = [m for m in tr if not m["missing"]]
+    assert all(m["lower"] < m["x_prior"] < m["upper"] for m in ok)
+    assert all((m["y"] < m["lower"] or m["y"] > m["upper"]) == m["outlier"] for m in ok)
