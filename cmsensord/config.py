@@ -1,0 +1,593 @@
+"""Configuration: one YAML file -> typed, frozen dataclasses.
+
+The file has four sections (see ``config/default.yaml``, which lists every key
+with its default)::
+
+    link:     serial port and reader settings          -> LinkConfig
+    output:   MCAP directory, compression, rotation    -> OutputConfig
+    monitor:  seed-000 AKF bank and anomaly decisions  -> MonitorConfig
+    channels: optional list; per channel name, index, scale/offset and any
+              monitor key overriding the global monitor block -> ChannelConfig
+
+Validation is generic. Every setting is a dataclass field whose type annotation
+gives the accepted type (``bool`` is not an ``int``; an ``int`` is accepted
+where a ``float`` is expected) and whose ``metadata`` gives the declarative
+rules (``gt``/``ge``/``lt``/``le``, ``choices``, ``pattern``, ...). Rules that
+relate two fields are listed per class in ``_RULES``. The checks run in
+``__post_init__``, so an object built in code is validated exactly like one
+read from a file. Every failure raises :class:`~cmsensord.errors.ConfigError`
+whose ``str()`` is one line naming the file, the key path and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, ClassVar, Iterable, Iterator, Mapping
+
+import yaml
+
+from cmsensord.errors import ConfigError
+
+__all__ = [
+    "MonitorConfig",
+    "ChannelConfig",
+    "LinkConfig",
+    "OutputConfig",
+    "Config",
+    "MAX_CHANNELS",
+    "load_config",
+    "config_from_dict",
+    "default_config",
+    "config_to_dict",
+]
+
+#: PROTOCOL.md: STATUS carries n_channels C in 1..8.
+MAX_CHANNELS = 8
+
+_CODE = "<code>"  # source name for objects built in code rather than read from a file
+
+# ---------------------------------------------------------------------------
+# Declarative per-field rules
+# ---------------------------------------------------------------------------
+
+_RULE_KEYS = frozenset(
+    {"gt", "ge", "lt", "le", "choices", "pattern", "pattern_reason", "nonzero", "nonempty"}
+)
+
+
+def _setting(default: Any, help: str, **rules: Any) -> Any:
+    """A dataclass field carrying its help text and validation rules."""
+    bad = set(rules) - _RULE_KEYS
+    if bad:  # a misspelt rule must not silently disable a check
+        raise TypeError(f"unknown validation rule(s) {sorted(bad)}")
+    return field(default=default, metadata={"help": help, **rules})
+
+
+class _Invalid(Exception):
+    """Internal: a value failed a check (reason, value)."""
+
+    def __init__(self, reason: str, value: Any) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.value = value
+
+
+def _fmt_num(x: Any) -> str:
+    return repr(x) if isinstance(x, float) else str(x)
+
+
+def _coerce(tp: Any, value: Any) -> Any:
+    """Check ``value`` against the annotation ``tp``; return it (int -> float)."""
+    origin = typing.get_origin(tp)
+    if origin is typing.Union or origin is types.UnionType:
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _coerce(inner, value)
+    if origin is tuple:
+        (item_tp, _ellipsis) = typing.get_args(tp)
+        if not isinstance(value, (tuple, list)):
+            raise _Invalid("expected a list", value)
+        return tuple(_coerce(item_tp, v) for v in value)
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise _Invalid("expected true or false", value)
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return int(value)
+        raise _Invalid("expected an integer", value)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise _Invalid("expected a number", value)
+        try:
+            number = float(value)
+        except OverflowError:
+            raise _Invalid("number too large", value) from None
+        if not math.isfinite(number):
+            raise _Invalid("expected a finite number", value)
+        return number
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise _Invalid("expected a string", value)
+    if dataclasses.is_dataclass(tp):
+        if isinstance(value, tp):
+            return value
+        raise _Invalid(f"expected a {tp.__name__}", value)
+    raise TypeError(f"config: unsupported annotation {tp!r}")  # programming error
+
+
+def _check_rules(meta: Mapping[str, Any], value: Any) -> None:
+    """Apply a field's declarative rules to its (already coerced) value."""
+    if value is None:
+        return
+    if "choices" in meta and value not in meta["choices"]:
+        reason = "must be one of " + ", ".join(str(c) for c in meta["choices"])
+        near = difflib.get_close_matches(str(value), [str(c) for c in meta["choices"]], n=1)
+        if near:
+            reason += f" (did you mean {near[0]!r}?)"
+        raise _Invalid(reason, value)
+    if meta.get("nonempty") and len(value) == 0:
+        raise _Invalid("must not be empty", value)
+    if "pattern" in meta and not re.fullmatch(meta["pattern"], value):
+        raise _Invalid(meta.get("pattern_reason") or f"must match {meta['pattern']}", value)
+    if meta.get("nonzero") and value == 0:
+        raise _Invalid("must not be 0", value)
+    bounds = []
+    ok = True
+    for key, sym, test in (
+        ("gt", ">", lambda v, b: v > b),
+        ("ge", ">=", lambda v, b: v >= b),
+        ("lt", "<", lambda v, b: v < b),
+        ("le", "<=", lambda v, b: v <= b),
+    ):
+        if key in meta:
+            bounds.append(f"{sym} {_fmt_num(meta[key])}")
+            ok = ok and test(value, meta[key])
+    if not ok:
+        raise _Invalid("must be " + " and ".join(bounds), value)
+
+
+# Cross-field rules: callables obj -> None or (key path, reason, value).
+_Rule = Callable[[Any], "tuple[str, str, Any] | None"]
+
+
+def _greater(key: str, other: str) -> _Rule:
+    def rule(obj: Any) -> tuple[str, str, Any] | None:
+        a, b = getattr(obj, key), getattr(obj, other)
+        if not a > b:
+            return key, f"must be greater than {other} = {_fmt_num(b)}", a
+        return None
+
+    return rule
+
+
+def _at_most(key: str, other: str) -> _Rule:
+    def rule(obj: Any) -> tuple[str, str, Any] | None:
+        a, b = getattr(obj, key), getattr(obj, other)
+        if not a <= b:
+            return key, f"must be <= {other} = {_fmt_num(b)}", a
+        return None
+
+    return rule
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def _validate(obj: Any) -> None:
+    """Validate and normalise a config dataclass instance in place.
+
+    Raises ConfigError(source="<code>", path=<field name>); loaders relocate it
+    to the file and the full key path.
+    """
+    cls = type(obj)
+    hints = _HINTS.get(cls)
+    if hints is None:
+        hints = _HINTS[cls] = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        value = getattr(obj, f.name)
+        try:
+            coerced = _coerce(hints[f.name], value)
+        except _Invalid as bad:
+            raise ConfigError(_CODE, f.name, bad.reason, bad.value) from None
+        try:
+            _check_rules(f.metadata, coerced)
+        except _Invalid as bad:  # report the value as written (1, not 1.0)
+            raise ConfigError(_CODE, f.name, bad.reason, value) from None
+        if coerced is not value:
+            object.__setattr__(obj, f.name, coerced)
+    for rule in getattr(cls, "_RULES", ()):
+        found = rule(obj)
+        if found is not None:
+            path, reason, value = found
+            raise ConfigError(_CODE, path, reason, value)
+
+
+# ---------------------------------------------------------------------------
+# The settings
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """Seed-000 parameters: the bank of n AKFs, outliers, 1 s anomaly decisions."""
+
+    n: int = _setting(10, "number of AKFs in the bank (eqs. 16-18)", ge=1, le=64)
+    r_min: float = _setting(4e-3, "R_min of eq. 16, smallest observation noise variance", gt=0)
+    r_max: float = _setting(0.13, "R_max of eq. 16, largest observation noise variance", gt=0)
+    z_c: float = _setting(2.8, "outlier critical value |z| > z_c (eq. 15); 2.8 = 99.5 %", gt=0)
+    c: float = _setting(0.4, "hysteresis: an anomaly clears when cnt < c*f_r (Fig. 3)", gt=0, lt=1)
+    f_r: float = _setting(28.66, "rotation frequency [Hz] compared with cnt each decision", gt=0)
+    window: int = _setting(10, "N, sliding window of eqs. 11 and 14", ge=2, le=1000)
+    decision_period_s: float = _setting(1.0, "seconds between anomaly decisions", gt=0)
+    p0: float = _setting(1.0, "initial error variance P(0)", gt=0)
+    q0: float = _setting(1e-3, "initial process noise estimate Q^(0)", ge=0)
+
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("r_max", "r_min"),)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """One measured channel: its name (MCAP topics), index and monitor settings."""
+
+    name: str = _setting(
+        dataclasses.MISSING,
+        "channel name, used in the MCAP topics /cm/<name>/...",
+        pattern=r"[A-Za-z0-9_]+",
+        pattern_reason="must contain only letters, digits and _",
+    )
+    index: int = _setting(
+        dataclasses.MISSING,
+        "position in the RMS payload / RAW chan index",
+        ge=0,
+        le=MAX_CHANNELS - 1,
+    )
+    monitor: MonitorConfig = _setting(dataclasses.MISSING, "monitor settings of this channel")
+    scale: float | None = _setting(
+        None, "m/s^2 per ADC count, overriding STATUS (RAW mode)", nonzero=True
+    )
+    offset: float | None = _setting(None, "ADC counts at 0 m/s^2, overriding STATUS (RAW mode)")
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """The serial link to the ADC board."""
+
+    port: str = _setting("/dev/ttyACM0", "serial device", nonempty=True)
+    baud: int = _setting(921600, "UART baud rate (ignored by USB CDC and ptys)", gt=0)
+    read_size: int = _setting(4096, "bytes asked for per read()", gt=0, le=16 * 1024 * 1024)
+    queue_frames: int = _setting(
+        4096, "bounded frame queue between reader and pipeline", ge=16, le=1_000_000
+    )
+    reconnect_min_s: float = _setting(0.5, "first reconnect back-off", gt=0)
+    reconnect_max_s: float = _setting(5.0, "longest reconnect back-off", gt=0)
+    stall_s: float = _setting(2.0, "seconds without a frame before link_stalled", gt=0)
+
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_at_most("reconnect_min_s", "reconnect_max_s"),)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """Where and how the MCAP files are written."""
+
+    dir: str = _setting("cmsensord-logs", "directory of the MCAP files", nonempty=True)
+    prefix: str = _setting(
+        "cmsensord",
+        "file name prefix",
+        pattern=r"[A-Za-z0-9_.-]+",
+        pattern_reason="must contain only letters, digits, _ . and -",
+    )
+    compression: str = _setting(
+        "zstd", "MCAP chunk compression", choices=("zstd", "lz4", "none")
+    )
+    flush_s: float = _setting(1.0, "seconds between chunk flushes", gt=0)
+    fsync_s: float = _setting(30.0, "seconds between fsyncs", gt=0)
+    rotate_s: float = _setting(3600.0, "start a new file after this many seconds", gt=0)
+    rotate_mb: float = _setting(256.0, "start a new file after this many MB", gt=0)
+    akf_trace: bool = _setting(False, "write /cm/<ch>/akf per observation")
+    akf_trace_filter: int = _setting(10, "which AKF of the bank (1..n) the trace shows", ge=1)
+    status_line: bool = _setting(True, "print a one-line status to stderr")
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
+    """Rules spanning sections: channel uniqueness, akf_trace_filter <= n."""
+    if not cfg.channels:
+        return "channels", "must list at least one channel", []
+    seen_name: dict[str, int] = {}
+    seen_index: dict[int, int] = {}
+    for i, ch in enumerate(cfg.channels):
+        if ch.name in seen_name:
+            return (
+                f"channels[{i}].name",
+                f"duplicate channel name (also channels[{seen_name[ch.name]}])",
+                ch.name,
+            )
+        if ch.index in seen_index:
+            return (
+                f"channels[{i}].index",
+                f"duplicate channel index (also channels[{seen_index[ch.index]}])",
+                ch.index,
+            )
+        seen_name[ch.name] = i
+        seen_index[ch.index] = i
+    k = cfg.output.akf_trace_filter
+    if k > cfg.monitor.n:
+        return "output.akf_trace_filter", f"must be <= monitor.n = {cfg.monitor.n}", k
+    for i, ch in enumerate(cfg.channels):
+        if k > ch.monitor.n:
+            return (
+                "output.akf_trace_filter",
+                f"must be <= channels[{i}].n = {ch.monitor.n}",
+                k,
+            )
+    return None
+
+
+def _default_channels(n: int, monitor: MonitorConfig | None = None) -> tuple[ChannelConfig, ...]:
+    mon = monitor if monitor is not None else MonitorConfig()
+    return tuple(ChannelConfig(name=f"ch{i}", index=i, monitor=mon) for i in range(n))
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration. ``monitor`` is the default for every channel."""
+
+    link: LinkConfig = field(default_factory=LinkConfig, metadata={"help": "serial link"})
+    output: OutputConfig = field(default_factory=OutputConfig, metadata={"help": "MCAP output"})
+    monitor: MonitorConfig = field(
+        default_factory=MonitorConfig, metadata={"help": "default monitor settings"}
+    )
+    channels: tuple[ChannelConfig, ...] = field(
+        default_factory=lambda: _default_channels(1), metadata={"help": "channels"}
+    )
+
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_config_rules,)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    def channel(self, name: str) -> ChannelConfig:
+        """The channel called ``name`` (KeyError if none)."""
+        for ch in self.channels:
+            if ch.name == name:
+                return ch
+        raise KeyError(name)
+
+
+# ---------------------------------------------------------------------------
+# Loading
+# ---------------------------------------------------------------------------
+
+_SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig}
+_MONITOR_KEYS = tuple(f.name for f in dataclasses.fields(MonitorConfig))
+_CHANNEL_OWN_KEYS = tuple(
+    f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
+)
+_CHANNEL_KEYS = _CHANNEL_OWN_KEYS + _MONITOR_KEYS
+_TOP_KEYS = tuple(f.name for f in dataclasses.fields(Config))
+
+
+def _join(prefix: str, key: Any) -> str:
+    plain = isinstance(key, str) and re.fullmatch(r"[A-Za-z0-9_]+", key)
+    key_text = key if plain else repr(key)
+    return f"{prefix}.{key_text}" if prefix else key_text
+
+
+def _reject_unknown(d: Mapping[Any, Any], known: Iterable[str], source: str, prefix: str) -> None:
+    known = tuple(known)
+    for key in d:
+        if key in known:
+            continue
+        reason = f"unknown key {key!r}"
+        near = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        if near:
+            reason += f" (did you mean {near[0]!r}?)"
+        else:
+            reason += f" (known keys: {', '.join(known)})"
+        raise ConfigError(source, _join(prefix, key), reason)
+
+
+def _mapping(value: Any, source: str, path: str) -> dict[Any, Any]:
+    """A section: a mapping, or empty when the key is present with no value."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError(source, path, "expected a mapping of keys to values", value)
+    return value
+
+
+def _build(cls: type, values: Mapping[str, Any], source: str, prefix: str) -> Any:
+    try:
+        return cls(**values)
+    except ConfigError as err:
+        raise err.relocated(source, prefix) from None
+
+
+def _check_n_channels(n: Any, source: str) -> None:
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_CHANNELS:
+        raise ConfigError(source, "n_channels", f"must be an integer in 1..{MAX_CHANNELS}", n)
+
+
+def config_from_dict(
+    d: Any, *, source: str = "<dict>", n_channels: int | None = None
+) -> Config:
+    """Validate a dict of the YAML shape and build a Config.
+
+    ``n_channels``: if given and ``d`` has no channels list, make ch0..ch{n-1}
+    (default 1). Raises ConfigError naming ``source`` and the key path.
+    """
+    if n_channels is not None:
+        _check_n_channels(n_channels, source)
+    if not isinstance(d, dict):
+        raise ConfigError(
+            source,
+            None,
+            "top level must be a mapping with the sections link, output, monitor, channels",
+            d,
+        )
+    _reject_unknown(d, _TOP_KEYS, source, "")
+    sections: dict[str, Any] = {}
+    for name, cls in _SECTIONS.items():
+        values = _mapping(d.get(name), source, name)
+        _reject_unknown(values, [f.name for f in dataclasses.fields(cls)], source, name)
+        sections[name] = _build(cls, values, source, name)
+    monitor: MonitorConfig = sections["monitor"]
+
+    raw_channels = d.get("channels")
+    if raw_channels is None:
+        channels = _default_channels(n_channels or 1, monitor)
+    else:
+        if not isinstance(raw_channels, list):
+            raise ConfigError(source, "channels", "expected a list of channel entries", raw_channels)
+        built = []
+        for i, entry in enumerate(raw_channels):
+            path = f"channels[{i}]"
+            if not isinstance(entry, dict):
+                raise ConfigError(source, path, "expected a mapping (name: ..., index: ...)", entry)
+            _reject_unknown(entry, _CHANNEL_KEYS, source, path)
+            own = {k: entry[k] for k in _CHANNEL_OWN_KEYS if k in entry}
+            own.setdefault("index", i)
+            if "name" not in own:
+                idx = own["index"]
+                own["name"] = f"ch{idx}" if isinstance(idx, int) and not isinstance(idx, bool) else f"ch{i}"
+            overrides = {k: entry[k] for k in _MONITOR_KEYS if k in entry}
+            try:
+                ch_monitor = dataclasses.replace(monitor, **overrides) if overrides else monitor
+            except ConfigError as err:
+                raise err.relocated(source, path) from None
+            built.append(_build(ChannelConfig, {**own, "monitor": ch_monitor}, source, path))
+        channels = tuple(built)
+    return _build(Config, {**sections, "channels": channels}, source, "")
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that rejects a key given twice in one mapping."""
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _value_node in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                    seen.add(key)
+                except TypeError:  # unhashable key: SafeLoader reports it below
+                    continue
+                if duplicate:
+                    raise yaml.constructor.ConstructorError(
+                        "while constructing a mapping",
+                        node.start_mark,
+                        f"found duplicate key {key!r}",
+                        key_node.start_mark,
+                    )
+        return super().construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _StrictLoader.construct_mapping
+)
+# PyYAML follows YAML 1.1, where "4e-3" (no dot) is a string; accept it as a
+# float, as YAML 1.2 does, since that is how the paper writes R_min.
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def _yaml_reason(err: yaml.YAMLError) -> str:
+    mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+    problem = getattr(err, "problem", None) or getattr(err, "context", None) or str(err)
+    if mark is not None:
+        return f"YAML syntax error at line {mark.line + 1}, column {mark.column + 1}: {problem}"
+    return f"YAML syntax error: {problem}"
+
+
+def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Config:
+    """Read and validate one YAML file. ``path=None`` gives the defaults.
+
+    ``n_channels``: channel count to use when the file has no channels list.
+    Every failure (missing or unreadable file, YAML syntax, unknown key, type,
+    range, cross-field rule) raises ConfigError with a one-line message.
+    """
+    if path is None:
+        return default_config(n_channels if n_channels is not None else 1)
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(source, None, "file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(source, None, "is a directory, not a file") from None
+    except PermissionError:
+        raise ConfigError(source, None, "cannot read: permission denied") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
+    except OSError as err:
+        raise ConfigError(source, None, f"cannot read: {err.strerror or err}") from None
+    try:
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as err:
+        raise ConfigError(source, None, _yaml_reason(err)) from None
+    except RecursionError:
+        raise ConfigError(source, None, "YAML nested too deeply") from None
+    if data is None:  # an empty file (or only comments): all defaults
+        data = {}
+    return config_from_dict(data, source=source, n_channels=n_channels)
+
+
+def default_config(n_channels: int = 1) -> Config:
+    """The built-in defaults with channels ch0..ch{n_channels-1}."""
+    _check_n_channels(n_channels, "<default>")
+    return Config(channels=_default_channels(n_channels))
+
+
+def config_to_dict(cfg: Config) -> dict[str, Any]:
+    """The effective settings as a plain dict of the YAML shape (for logging).
+
+    Channel entries list name, index, scale, offset and only the monitor keys
+    that differ from the global monitor block, so
+    ``config_from_dict(config_to_dict(cfg)) == cfg``.
+    """
+    glob = dataclasses.asdict(cfg.monitor)
+    channels = []
+    for ch in cfg.channels:
+        entry: dict[str, Any] = {k: getattr(ch, k) for k in _CHANNEL_OWN_KEYS}
+        mon = dataclasses.asdict(ch.monitor)
+        entry.update({k: v for k, v in mon.items() if glob[k] != v})
+        channels.append(entry)
+    return {
+        "link": dataclasses.asdict(cfg.link),
+        "output": dataclasses.asdict(cfg.output),
+        "monitor": glob,
+        "channels": channels,
+    }
+
+
+def iter_settings(cls: type) -> Iterator[tuple[str, Any, str]]:
+    """(name, default, help) of every field of a config section class."""
+    for f in dataclasses.fields(cls):
+        default = f.default if f.default is not dataclasses.MISSING else None
+        yield f.name, default, f.metadata.get("help", "")

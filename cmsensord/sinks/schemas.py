@@ -1,0 +1,347 @@
+"""JSON schemas of the MCAP output, one per topic kind (the output contract).
+
+Every message is JSON (message_encoding ``json``) described by a JSON Schema
+(schema encoding ``jsonschema``). Timestamps are ``{"sec": int, "nsec": int}``
+(nanoseconds since the Unix epoch, split), the form Foxglove recognises as a
+time. JSON never carries NaN or infinity: a float that is not finite is written
+as ``null``, so measured quantities are typed ``["number", "null"]``.
+
+Topics (``<channel>`` is the configured channel name, default ``ch0``, ``ch1``...):
+
+=========================  ======================  =================================
+topic                      schema name             rate
+=========================  ======================  =================================
+/cm/<channel>/severity     cmsensord.Severity      once per decision period (1 Hz)
+/cm/<channel>/akf          cmsensord.AkfTrace      per observation (100 Hz)
+/cm/<channel>/orders       cmsensord.Orders        per order-tracker output
+/cm/events                 cmsensord.Event         on every event
+/cm/diagnostics            cmsensord.Diagnostics   1 Hz
+=========================  ======================  =================================
+
+The seed-000 quantities keep the paper's names: S_idx (eq. 17), F_a and cnt
+(Fig. 3), R_i (eq. 16), x^-(k), x^(k), Y(k), z(k) (eqs. 3-15), Q^(k) (eq. 10).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+__all__ = [
+    "SCHEMA_ENCODING",
+    "MESSAGE_ENCODING",
+    "SCHEMAS",
+    "SCHEMA_NAMES",
+    "EVENT_KINDS",
+    "LINK_COUNTERS",
+    "TOPIC_EVENTS",
+    "TOPIC_DIAGNOSTICS",
+    "severity_topic",
+    "akf_topic",
+    "orders_topic",
+    "schema_name",
+    "schema_bytes",
+]
+
+SCHEMA_ENCODING = "jsonschema"
+MESSAGE_ENCODING = "json"
+_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+
+TOPIC_EVENTS = "/cm/events"
+TOPIC_DIAGNOSTICS = "/cm/diagnostics"
+
+
+def severity_topic(channel: str) -> str:
+    return f"/cm/{channel}/severity"
+
+
+def akf_topic(channel: str) -> str:
+    return f"/cm/{channel}/akf"
+
+
+def orders_topic(channel: str) -> str:
+    return f"/cm/{channel}/orders"
+
+
+#: Every value of Event.kind.
+EVENT_KINDS: tuple[str, ...] = (
+    "anomaly_onset",
+    "anomaly_clear",
+    "severity_change",
+    "failure",
+    "failure_clear",
+    "frames_lost",
+    "link_lost",
+    "link_restored",
+    "link_stalled",
+    "queue_overflow",
+    "decode_error",
+    "config",
+    "start",
+    "stop",
+    "disk_error",
+    "salvage",
+)
+
+#: The integer counters of Diagnostics.link (PROTOCOL.md, receiver rule 5).
+LINK_COUNTERS: tuple[str, ...] = (
+    "bytes_received",
+    "bytes_discarded",
+    "crc_failures",
+    "header_rejects",
+    "frames_status",
+    "frames_rms",
+    "frames_raw",
+    "frames_tacho",
+    "frames_lost",
+    "overruns",
+)
+
+# ---------------------------------------------------------------------------
+# building blocks
+# ---------------------------------------------------------------------------
+
+
+def _time() -> dict[str, Any]:
+    return {
+        "type": "object",
+        "title": "time",
+        "description": "Time of the message: seconds and nanoseconds since the Unix epoch.",
+        "properties": {
+            "sec": {"type": "integer", "minimum": 0, "description": "whole seconds"},
+            "nsec": {
+                "type": "integer",
+                "minimum": 0,
+                "maximum": 999_999_999,
+                "description": "nanoseconds within the second",
+            },
+        },
+        "required": ["sec", "nsec"],
+    }
+
+
+def _num(description: str, nullable: bool = True) -> dict[str, Any]:
+    if nullable:
+        return {"type": ["number", "null"], "description": description + " (null if not finite)"}
+    return {"type": "number", "description": description}
+
+
+def _int(description: str, minimum: int | None = 0) -> dict[str, Any]:
+    out: dict[str, Any] = {"type": "integer", "description": description}
+    if minimum is not None:
+        out["minimum"] = minimum
+    return out
+
+
+def _obj(title: str, description: str, properties: dict[str, Any], required: list[str]) -> dict:
+    missing = set(required) - set(properties)
+    assert not missing, missing  # a schema must describe what it requires
+    return {
+        "$schema": _DIALECT,
+        "title": title,
+        "description": description,
+        "type": "object",
+        "properties": properties,
+        "required": required,
+    }
+
+
+_CHANNEL = {"type": "string", "description": "configured channel name (ch0, ch1, ... by default)"}
+
+# ---------------------------------------------------------------------------
+# the schemas
+# ---------------------------------------------------------------------------
+
+SEVERITY = _obj(
+    "cmsensord.Severity",
+    "Seed-000 severity assessment of one channel, published at every anomaly decision "
+    "(once per decision period, 1 s by default).",
+    {
+        "timestamp": _time(),
+        "channel": _CHANNEL,
+        "severity_index": {
+            "type": "number",
+            "minimum": 0,
+            "maximum": 1,
+            "description": "S_idx = max_i I_i with I_i = i/n if F_a of AKF_i is 1 else 0 (eqs. 17-18)",
+        },
+        "level": {
+            "type": "integer",
+            "minimum": 0,
+            "description": "round(S_idx * n): index of the highest-R AKF in anomaly, 0 = none",
+        },
+        "anomaly": {
+            "type": "array",
+            "items": {"type": "integer", "enum": [0, 1]},
+            "description": "F_a of AKF_i for i = 1..n after this decision (Fig. 3)",
+        },
+        "outliers": {
+            "type": "array",
+            "items": {"type": "integer", "minimum": 0},
+            "description": "cnt of AKF_i for i = 1..n at the decision: outliers |z| > z_c "
+            "counted in this period",
+        },
+        "f_r": _num("rotation frequency [Hz] compared with cnt in this decision", nullable=False),
+        "r": {
+            "type": "array",
+            "items": {"type": "number"},
+            "description": "R_i = R_min + i (R_max - R_min) / n of AKF_i, i = 1..n (eq. 16)",
+        },
+        "failure": {
+            "type": "boolean",
+            "description": "true while AKF_n (the largest R) is in anomaly, S_idx = 1",
+        },
+        "missing": _int("observations missing (lost frames) in this decision period"),
+        "transient": {
+            "type": "boolean",
+            "description": "true for the first decision period, while the filters converge",
+        },
+    },
+    [
+        "timestamp",
+        "channel",
+        "severity_index",
+        "level",
+        "anomaly",
+        "outliers",
+        "f_r",
+        "r",
+        "failure",
+        "missing",
+        "transient",
+    ],
+)
+
+AKF_TRACE = _obj(
+    "cmsensord.AkfTrace",
+    "One observation through one AKF of the bank (seed 000, eqs. 3-15).",
+    {
+        "timestamp": _time(),
+        "channel": _CHANNEL,
+        "filter": _int("1-based index i of AKF_i in the bank", minimum=1),
+        "y": _num("observation y(k) (block RMS); null when missing"),
+        "x_hat": _num("a posteriori estimate x^(k) (eq. 8)"),
+        "x_prior": _num("a priori estimate x^-(k) = x^(k-1) (eq. 3)"),
+        "lower": _num("lower adaptive bound x^-(k) - z_c sqrt(Y(k)) (eqs. 6, 15)"),
+        "upper": _num("upper adaptive bound x^-(k) + z_c sqrt(Y(k)) (eqs. 6, 15)"),
+        "z": _num("normalised correction z(k) = innovation / sqrt(Y(k)) (eq. 15); null when missing"),
+        "outlier": {"type": "boolean", "description": "|z(k)| > z_c"},
+        "q_hat": _num("process noise estimate Q^(k) = S(k) M(k) (eq. 10)"),
+        "missing": {
+            "type": "boolean",
+            "description": "the observation was lost: time update only, y and z are null",
+        },
+    },
+    [
+        "timestamp",
+        "channel",
+        "filter",
+        "y",
+        "x_hat",
+        "x_prior",
+        "lower",
+        "upper",
+        "z",
+        "outlier",
+        "q_hat",
+        "missing",
+    ],
+)
+
+EVENT = _obj(
+    "cmsensord.Event",
+    "Something that happened: an anomaly decision changing, a link fault, start and stop.",
+    {
+        "timestamp": _time(),
+        "kind": {"type": "string", "enum": list(EVENT_KINDS), "description": "what happened"},
+        "channel": {
+            "type": ["string", "null"],
+            "description": "channel name, or null for an event of the link or the daemon",
+        },
+        "message": {"type": "string", "description": "human-readable, one line"},
+        "filter": _int("1-based AKF index the event is about", minimum=1),
+        "severity_index": _num("S_idx after the event (eq. 17)"),
+        "level": _int("round(S_idx * n) after the event"),
+        "count": _int("how many (frames lost, bytes discarded, queue drops, ...)"),
+        "details": {"type": "object", "description": "further fields, by kind"},
+    },
+    ["timestamp", "kind", "channel", "message"],
+)
+
+DIAGNOSTICS = _obj(
+    "cmsensord.Diagnostics",
+    "Health of the link and the processing loop, once per second.",
+    {
+        "timestamp": _time(),
+        "link": {
+            "type": "object",
+            "description": "link counters since start (PROTOCOL.md, receiver rule 5)",
+            "properties": {
+                "bytes_received": _int("bytes read from the link"),
+                "bytes_discarded": _int("bytes dropped while hunting for a frame"),
+                "crc_failures": _int("frames with a bad CRC"),
+                "header_rejects": _int("sync found but header invalid (version, type, len)"),
+                "frames_status": _int("STATUS frames decoded"),
+                "frames_rms": _int("RMS frames decoded"),
+                "frames_raw": _int("RAW frames decoded"),
+                "frames_tacho": _int("TACHO frames decoded"),
+                "frames_lost": _int("frames lost, from seq gaps"),
+                "overruns": _int("frames with the ADC overrun flag"),
+            },
+            "required": list(LINK_COUNTERS),
+        },
+        "queue_depth": _int("frames waiting in the pipeline queue"),
+        "queue_drops": _int("frames dropped because the queue was full, since start"),
+        "lag_s": _num("processing lag: wall clock minus the time of the last processed frame [s]"),
+        "observations": _int("observations processed since start"),
+        "uptime_s": _num("seconds since the daemon started", nullable=False),
+    },
+    ["timestamp", "link", "queue_depth", "queue_drops", "lag_s", "observations", "uptime_s"],
+)
+
+ORDERS = _obj(
+    "cmsensord.Orders",
+    "Order tracking of one channel (seed 001): shaft speed and, per tracked order, RMS "
+    "and amplitude.",
+    {
+        "timestamp": _time(),
+        "channel": _CHANNEL,
+        "speed_rpm": _num("shaft speed [rpm]"),
+        "orders": {
+            "type": "array",
+            "description": "one entry per tracked order",
+            "items": {
+                "type": "object",
+                "properties": {
+                    "order": {"type": "number", "description": "order (multiple of shaft speed)"},
+                    "rms": _num("RMS of the order-tracked waveform [m/s^2]"),
+                    "amplitude": _num("envelope amplitude of the order [m/s^2]"),
+                },
+                "required": ["order", "rms", "amplitude"],
+            },
+        },
+    },
+    ["timestamp", "channel", "speed_rpm", "orders"],
+)
+
+#: kind key -> JSON schema.
+SCHEMAS: dict[str, dict[str, Any]] = {
+    "severity": SEVERITY,
+    "akf": AKF_TRACE,
+    "event": EVENT,
+    "diagnostics": DIAGNOSTICS,
+    "orders": ORDERS,
+}
+
+#: kind key -> MCAP schema name.
+SCHEMA_NAMES: dict[str, str] = {kind: s["title"] for kind, s in SCHEMAS.items()}
+
+
+def schema_name(kind: str) -> str:
+    """MCAP schema name of a kind key ("severity" -> "cmsensord.Severity")."""
+    return SCHEMA_NAMES[kind]
+
+
+def schema_bytes(kind: str) -> bytes:
+    """The schema of a kind key as UTF-8 JSON, as stored in the MCAP Schema record."""
+    return json.dumps(SCHEMAS[kind], separators=(",", ":")).encode("utf-8")
