@@ -1,0 +1,329 @@
+"""The simulated EK-TM4C1294XL ADC board: ADC, block RMS, tacho capture and framing.
+
+Owns what the board's firmware does to a :class:`~firmware_sim.scenarios.Scenario`'s
+acceleration (seed 000, section IV: 25 kHz sampling, the RMS of each 250-sample
+block sent at 100 Hz over the UART) and the exact bytes it sends (PROTOCOL.md):
+
+* ADC: ``count = clip(round(x / scale + offset), 0, 4095)`` per channel, 12 bit;
+  a block in which a sample sits at 0 or 4095 carries ``FLAG_CLIPPED``;
+* RMS (PROTOCOL.md, RMS): ``sqrt(mean(((count - offset) * scale)^2))`` over the
+  block, in float64, sent as float32, with nothing removed;
+* tacho: rising edges where the shaft angle (the integral of the scenario's
+  ``shaft_hz``) passes a multiple of 1/ppr revolution, as offsets from the
+  block's t0 in 1/256 sample (a timer capture);
+* framing, only through the encoders of :mod:`cmsensord.protocol`: STATUS at
+  boot (block 0) and every ``status_every_s``, then per block the RMS frame (RMS
+  mode) or one RAW frame per channel (RAW mode), then a TACHO frame when a
+  tacho is wired; seq +1 for every frame (u16 wrap), t0 = the sample index of
+  the block's first sample (u32 wrap).
+
+Samples are produced in vectorised chunks of ``chunk_blocks`` blocks (100, one
+second, aligned with the scenario's 1-s segments); only the frame encoding is
+per block.
+
+STATUS ``scale``/``offset`` travel as float32, so the board works with the
+float32-rounded values throughout (the daemon's recomputation from RAW with the
+STATUS values then matches the RMS frames). ``t0_start`` presets the sample
+counter (a board that has been up for a while: e.g. 2**32 - 1000 to cross the
+u32 wrap soon); the scenario still starts at its t = 0, and the STATUS uptime
+is ``(t0_start + sample index) // fs``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cmsensord.protocol import (
+    FLAG_CLIPPED,
+    FLAG_OVERRUN,
+    MAX_PAYLOAD,
+    MODE_RAW,
+    MODE_RMS,
+    Status,
+    encode_raw,
+    encode_rms,
+    encode_status,
+    encode_tacho,
+)
+
+from .scenarios import Scenario
+
+__all__ = ["ADC_MAX", "BoardConfig", "Board"]
+
+ADC_MAX = 4095  # 12-bit ADC
+_SUB = 256  # tacho edge resolution: 1/256 sample
+_U32 = 1 << 32
+
+
+@dataclass
+class BoardConfig:
+    """How the board is set up; ``scale``/``offset`` default to +-50 m/s^2 full scale.
+
+    ``overrun_blocks``: block indices at which the simulated ADC reports an
+    overrun (FLAG_OVERRUN on that block's first data frame; the STATUS counter
+    includes it from the next STATUS on). The data itself is unaffected.
+    """
+
+    mode: str = "rms"
+    n_channels: int = 1
+    fs: int = 25000
+    block_len: int = 250
+    scale: tuple[float, ...] | None = None  # m/s^2 per count; default 100/4096
+    offset: tuple[float, ...] | None = None  # counts at 0 m/s^2; default 2048.0
+    t0_start: int = 0
+    seq_start: int = 0
+    tacho: bool = False
+    ppr: int = 1
+    fw_version: int = 0x0100
+    status_every_s: float = 1.0
+    overrun_blocks: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("rms", "raw"):
+            raise ValueError(f"mode must be 'rms' or 'raw', got {self.mode!r}")
+        if not isinstance(self.n_channels, int) or not 1 <= self.n_channels <= 8:
+            raise ValueError(f"n_channels must be an integer 1..8, got {self.n_channels!r}")
+        if not isinstance(self.fs, int) or self.fs <= 0:
+            raise ValueError(f"fs must be a positive integer, got {self.fs!r}")
+        if not isinstance(self.block_len, int) or not 1 <= self.block_len <= 0xFFFF:
+            raise ValueError(f"block_len must be an integer 1..65535, got {self.block_len!r}")
+        if self.mode == "raw" and 2 * self.block_len > MAX_PAYLOAD:
+            raise ValueError(f"RAW blocks carry at most {MAX_PAYLOAD // 2} samples, block_len={self.block_len}")
+        if self.scale is None:
+            self.scale = (100.0 / 4096.0,) * self.n_channels
+        if self.offset is None:
+            self.offset = (2048.0,) * self.n_channels
+        self.scale = tuple(float(v) for v in self.scale)
+        self.offset = tuple(float(v) for v in self.offset)
+        if len(self.scale) != self.n_channels or len(self.offset) != self.n_channels:
+            raise ValueError(f"scale and offset need {self.n_channels} values (one per channel), "
+                             f"got {len(self.scale)} and {len(self.offset)}")
+        if not all(v > 0 and math.isfinite(v) for v in self.scale):
+            raise ValueError(f"scale values must be positive, got {self.scale}")
+        if not all(0.0 <= v <= ADC_MAX for v in self.offset):
+            raise ValueError(f"offset values must lie in 0..{ADC_MAX} counts, got {self.offset}")
+        if not isinstance(self.t0_start, int) or self.t0_start < 0:
+            raise ValueError(f"t0_start must be a non-negative integer, got {self.t0_start!r}")
+        if not isinstance(self.seq_start, int) or not 0 <= self.seq_start <= 0xFFFF:
+            raise ValueError(f"seq_start must be an integer 0..65535, got {self.seq_start!r}")
+        if not isinstance(self.ppr, int) or not 1 <= self.ppr <= 255:
+            raise ValueError(f"ppr must be an integer 1..255, got {self.ppr!r}")
+        if not 0 <= self.fw_version <= 0xFFFF:
+            raise ValueError(f"fw_version must fit in u16, got {self.fw_version!r}")
+        if not self.status_every_s > 0:
+            raise ValueError(f"status_every_s must be > 0, got {self.status_every_s!r}")
+        self.overrun_blocks = tuple(int(b) for b in self.overrun_blocks)
+
+
+class Board:
+    """The board sampling ``scenario`` as set up by ``config``."""
+
+    chunk_blocks = 100  # blocks rendered per vectorised step (1 s at 100 blocks/s)
+
+    def __init__(self, scenario: Scenario, config: BoardConfig | None = None):
+        config = config if config is not None else BoardConfig(n_channels=scenario.n_channels, fs=scenario.fs)
+        if scenario.n_channels != config.n_channels:
+            raise ValueError(f"the scenario has {scenario.n_channels} channels, the board config "
+                             f"{config.n_channels}")
+        if scenario.fs != config.fs:
+            raise ValueError(f"the scenario is sampled at {scenario.fs} Hz, the board at {config.fs} Hz")
+        self.scenario = scenario
+        self.config = config
+        self.n_channels = config.n_channels
+        self.fs = config.fs
+        self.block_len = config.block_len
+        # what STATUS carries (float32), used for every computation
+        self.scale = np.asarray(config.scale, dtype=np.float32).astype(np.float64)
+        self.offset = np.asarray(config.offset, dtype=np.float32).astype(np.float64)
+        self._overrun_set = frozenset(config.overrun_blocks)
+        self._status_every = max(1, int(round(config.status_every_s * self.fs / self.block_len)))
+
+    # -- the ADC and the firmware's arithmetic ----------------------------------
+    def counts(self, start: int, n: int) -> np.ndarray:
+        """ADC counts, uint16 (C, n), of sample indices [start, start + n)."""
+        x = self.scenario.samples(start, n)
+        x /= self.scale[:, None]
+        x += self.offset[:, None]
+        np.rint(x, out=x)
+        np.clip(x, 0, ADC_MAX, out=x)
+        return x.astype(np.uint16)
+
+    def _block_rms(self, counts: np.ndarray) -> np.ndarray:
+        """float32 (C, nb): PROTOCOL.md RMS of each block of ``counts`` (C, nb * block_len)."""
+        c, n = counts.shape
+        L = self.block_len
+        if n % L:
+            raise ValueError(f"counts must hold whole blocks of {L} samples, got {n} samples")
+        x = (counts.astype(np.float64) - self.offset[:, None]) * self.scale[:, None]
+        x = x.reshape(c, n // L, L)
+        return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+
+    def rms_block_values(self, counts: np.ndarray) -> np.ndarray:
+        """float32 (C,): the RMS frame values of one block of counts, shape (C, block_len)."""
+        counts = np.asarray(counts)
+        if counts.shape != (self.n_channels, self.block_len):
+            raise ValueError(f"expected counts of shape {(self.n_channels, self.block_len)}, "
+                             f"got {counts.shape}")
+        return self._block_rms(counts)[:, 0]
+
+    def _block_clipped(self, counts: np.ndarray) -> np.ndarray:
+        """bool (C, nb): a sample of the block sits at 0 or 4095."""
+        c, n = counts.shape
+        b = counts.reshape(c, n // self.block_len, self.block_len)
+        return ((b == 0) | (b == ADC_MAX)).any(axis=-1)
+
+    def tacho_edges(self, start_block: int, n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rising tacho edges of blocks [start_block, start_block + n_blocks).
+
+        Returns (block index, offset from the block's t0 in 1/256 sample (uint32)),
+        in time order. An edge is where ``ppr * shaft_turns`` reaches an integer m;
+        the sample interval [i, i + 1) with P(i) <= m < P(i + 1) holds it, at
+        i + (m - P(i)) / (P(i + 1) - P(i)) (linear within one sample), truncated
+        to 1/256 sample (the capture timer's tick).
+        """
+        L = self.block_len
+        i0 = start_block * L
+        n = n_blocks * L
+        idx = np.arange(i0, i0 + n + 1, dtype=np.int64)
+        p = self.config.ppr * self.scenario.shaft_turns(idx / self.fs)
+        lo = np.ceil(p[:-1])
+        cnt = (np.ceil(p[1:]) - lo).astype(np.int64)
+        cnt[cnt < 0] = 0  # the shaft never turns back; guard anyway
+        where = np.nonzero(cnt)[0]
+        if where.size == 0:
+            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.uint32)
+        reps = cnt[where]
+        rel = np.repeat(where, reps)  # sample interval, relative to i0
+        first = np.repeat(np.cumsum(reps) - reps, reps)
+        m = np.repeat(lo[where], reps) + (np.arange(rel.size) - first)
+        frac = (m - p[rel]) / (p[rel + 1] - p[rel])
+        q = rel * _SUB + np.floor(frac * _SUB).astype(np.int64)
+        q = np.clip(q, rel * _SUB, rel * _SUB + _SUB - 1)
+        blk, off = np.divmod(q, L * _SUB)
+        return blk + start_block, off.astype(np.uint32)
+
+    # -- observations without framing ------------------------------------------------
+    def observations(self, n_blocks: int, start_block: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(t0 int64 (n_blocks,), rms float32 (n_blocks, C)): what the RMS frames carry.
+
+        t0 is the unwrapped sample index ``t0_start + block * block_len`` (the wire
+        carries it mod 2^32, the decoder's ``t0_unwrapped`` restores it).
+        """
+        n_blocks, start_block = int(n_blocks), int(start_block)
+        if n_blocks < 0 or start_block < 0:
+            raise ValueError(f"n_blocks and start_block must be >= 0, got {n_blocks}, {start_block}")
+        L = self.block_len
+        rms = np.empty((n_blocks, self.n_channels), dtype=np.float32)
+        b = 0
+        while b < n_blocks:
+            blk = start_block + b
+            nb = min(self.chunk_blocks - blk % self.chunk_blocks, n_blocks - b)
+            rms[b:b + nb] = self._block_rms(self.counts(blk * L, nb * L)).T
+            b += nb
+        t0 = self.config.t0_start + (start_block + np.arange(n_blocks, dtype=np.int64)) * L
+        return t0, rms
+
+    # -- the byte stream ---------------------------------------------------------------
+    def n_blocks_for(self, duration_s: float) -> int:
+        """Whole blocks in ``duration_s`` seconds."""
+        if not duration_s >= 0:
+            raise ValueError(f"duration must be >= 0 s, got {duration_s!r}")
+        return int(math.floor(duration_s * self.fs / self.block_len + 1e-9))
+
+    def _status(self, overruns: int, sample_index: int) -> Status:
+        cfg = self.config
+        return Status(
+            fw_version=cfg.fw_version,
+            mode=MODE_RMS if cfg.mode == "rms" else MODE_RAW,
+            n_channels=self.n_channels, fs=self.fs, block_len=self.block_len,
+            tacho_inputs=1 if cfg.tacho else 0, tacho_ppr=cfg.ppr,
+            overruns=overruns, uptime_s=(cfg.t0_start + sample_index) // self.fs,
+            scale=tuple(float(v) for v in self.scale),
+            offset=tuple(float(v) for v in self.offset),
+        )
+
+    def iter_blocks(self, n_blocks: int | None = None) -> Iterator[tuple[bytes, int]]:
+        """(bytes, number of frames) per block period, for n_blocks (None: forever)."""
+        cfg = self.config
+        L = self.block_len
+        raw = cfg.mode == "raw"
+        seq = cfg.seq_start
+        overruns = 0
+        b = 0
+        while n_blocks is None or b < n_blocks:
+            nb = self.chunk_blocks - b % self.chunk_blocks
+            if n_blocks is not None:
+                nb = min(nb, n_blocks - b)
+            counts = self.counts(b * L, nb * L)
+            clipped = self._block_clipped(counts)  # (C, nb)
+            if raw:
+                chan_blocks = counts.reshape(self.n_channels, nb, L)
+            else:
+                rms = self._block_rms(counts).T  # (nb, C)
+                any_clip = clipped.any(axis=0)
+            if cfg.tacho:
+                e_blk, e_off = self.tacho_edges(b, nb)
+                bounds = np.searchsorted(e_blk, np.arange(b, b + nb + 1))
+            for i in range(nb):
+                blk = b + i
+                sample = blk * L
+                t0 = cfg.t0_start + sample
+                parts = []
+                if blk % self._status_every == 0:
+                    parts.append(encode_status(seq, t0, self._status(overruns, sample)))
+                    seq = (seq + 1) & 0xFFFF
+                over = FLAG_OVERRUN if blk in self._overrun_set else 0
+                if raw:
+                    for c in range(self.n_channels):
+                        flags = (FLAG_CLIPPED if clipped[c, i] else 0) | (over if c == 0 else 0)
+                        parts.append(encode_raw(seq, t0, c, chan_blocks[c, i], flags))
+                        seq = (seq + 1) & 0xFFFF
+                else:
+                    flags = (FLAG_CLIPPED if any_clip[i] else 0) | over
+                    parts.append(encode_rms(seq, t0, rms[i], flags))
+                    seq = (seq + 1) & 0xFFFF
+                if over:
+                    overruns += 1
+                if cfg.tacho:
+                    parts.append(encode_tacho(seq, t0, 0, e_off[bounds[i]:bounds[i + 1]]))
+                    seq = (seq + 1) & 0xFFFF
+                yield b"".join(parts), len(parts)
+            b += nb
+
+    def iter_block_bytes(self, n_blocks: int | None = None) -> Iterator[bytes]:
+        """All bytes the board sends in each block period, for n_blocks (None: forever)."""
+        for data, _ in self.iter_blocks(n_blocks):
+            yield data
+
+    def generate(self, duration_s: float) -> bytes:
+        """All bytes of ``duration_s`` seconds (for small durations; see write_capture)."""
+        return b"".join(self.iter_block_bytes(self.n_blocks_for(duration_s)))
+
+    def write_capture(self, path: str | Path, duration_s: float, *, chunk_blocks: int = 1000) -> dict[str, int]:
+        """Write ``duration_s`` seconds of bytes to ``path`` as fast as possible.
+
+        Streams in chunks of ``chunk_blocks`` blocks (bounded memory). Returns
+        ``{"frames", "bytes", "blocks"}``.
+        """
+        if chunk_blocks < 1:
+            raise ValueError(f"chunk_blocks must be >= 1, got {chunk_blocks}")
+        n_blocks = self.n_blocks_for(duration_s)
+        frames = total = blocks = 0
+        pending: list[bytes] = []
+        with open(path, "wb") as f:
+            for data, nf in self.iter_blocks(n_blocks):
+                pending.append(data)
+                frames += nf
+                total += len(data)
+                blocks += 1
+                if len(pending) >= chunk_blocks:
+                    f.write(b"".join(pending))
+                    pending.clear()
+            if pending:
+                f.write(b"".join(pending))
+        return {"frames": frames, "bytes": total, "blocks": blocks}

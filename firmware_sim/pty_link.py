@@ -1,0 +1,139 @@
+"""The board's serial port, played by a pseudo-terminal.
+
+Owns the link end of the simulated board: :class:`PtyEndpoint` opens a pty
+(``os.openpty``), puts the slave in raw mode and keeps the slave fd open (so
+the pty never hangs up between readers), and publishes the slave's device
+path (``path``) for the daemon to open like ``/dev/ttyACM0``.
+:meth:`PtyEndpoint.run` writes each block's bytes to the master at
+``speed`` x real time, each block at its absolute deadline from a monotonic
+clock (no accumulated sleep drift). The master is non-blocking: when a write
+would block (the reader is slow or absent and the pty's buffer is full) the
+bytes that did not fit are dropped and counted, like a UART without flow
+control; the endpoint itself never blocks.
+"""
+
+from __future__ import annotations
+
+import errno
+import math
+import os
+import threading
+import time
+import tty
+from dataclasses import asdict, dataclass
+
+from .board import Board
+
+__all__ = ["LinkStats", "PtyEndpoint"]
+
+
+@dataclass
+class LinkStats:
+    """What :meth:`PtyEndpoint.run` did (cumulative over runs)."""
+
+    blocks: int = 0  # block periods sent (or attempted)
+    frames: int = 0
+    bytes_offered: int = 0
+    bytes_written: int = 0
+    dropped_bytes: int = 0  # did not fit in the pty (reader slow or absent)
+    dropped_blocks: int = 0  # blocks that lost at least one byte
+    elapsed_s: float = 0.0  # wall time spent in run()
+    max_lag_s: float = 0.0  # worst lateness of a block behind its deadline
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class PtyEndpoint:
+    """A pty whose slave is the simulated board's serial port."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        try:
+            tty.setraw(self.slave)
+            os.set_blocking(self.master, False)
+            self.path = os.ttyname(self.slave)
+        except BaseException:
+            os.close(self.master)
+            os.close(self.slave)
+            raise
+        self.stats = LinkStats()
+        self._closed = False
+
+    def write_block(self, data: bytes) -> int:
+        """Write what fits now; returns the number of bytes written (the rest is dropped)."""
+        view = memoryview(data)
+        written = 0
+        while written < len(view):
+            try:
+                n = os.write(self.master, view[written:])
+            except BlockingIOError:
+                break
+            except OSError as exc:  # EIO: no slave side (cannot happen while we hold it)
+                if exc.errno == errno.EIO:
+                    break
+                raise
+            if n <= 0:
+                break
+            written += n
+        s = self.stats
+        s.bytes_offered += len(view)
+        s.bytes_written += written
+        if written < len(view):
+            s.dropped_bytes += len(view) - written
+            s.dropped_blocks += 1
+        return written
+
+    def run(self, board: Board, *, speed: float = 1.0, duration_s: float | None = None,
+            stop: threading.Event | None = None) -> LinkStats:
+        """Stream ``board`` for ``duration_s`` (None: until ``stop``) at ``speed`` x real time.
+
+        speed 0 or inf: as fast as possible. Returns :attr:`stats`.
+        """
+        if self._closed:
+            raise ValueError("the pty endpoint is closed")
+        if not (speed >= 0):
+            raise ValueError(f"speed must be >= 0 (0 or inf: as fast as possible), got {speed!r}")
+        stop = stop if stop is not None else threading.Event()
+        paced = speed > 0 and math.isfinite(speed)
+        period = board.block_len / board.fs / speed if paced else 0.0
+        n_blocks = board.n_blocks_for(duration_s) if duration_s is not None else None
+        s = self.stats
+        t_start = time.monotonic()
+        try:
+            for i, (data, n_frames) in enumerate(board.iter_blocks(n_blocks)):
+                if stop.is_set():
+                    break
+                if paced:
+                    # block i is complete (and sent) at the end of its period
+                    deadline = t_start + (i + 1) * period
+                    wait = deadline - time.monotonic()
+                    if wait > 0:
+                        if stop.wait(wait):
+                            break
+                    else:
+                        s.max_lag_s = max(s.max_lag_s, -wait)
+                self.write_block(data)
+                s.blocks += 1
+                s.frames += n_frames
+        finally:
+            s.elapsed_s += time.monotonic() - t_start
+        return s
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            os.close(self.master)
+            os.close(self.slave)
+
+    def __enter__(self) -> PtyEndpoint:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:
+            pass
