@@ -1,5 +1,4 @@
 """Benchmark of the simulated board: ``python bench/bench_firmware_sim.py`` prints a table.
-import sys, pathlib; sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 Sample generation speed per scenario (1 and 4 channels, 1-s requests, best of
 3 runs of 20 s) and the wall time of a 1-hour RMS capture (written to a
@@ -8,6 +7,11 @@ channel, a 1-hour capture well under a minute.
 """
 
 from __future__ import annotations
+
+import pathlib
+import sys
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 import os
 import tempfile

@@ -60,9 +60,15 @@ _SUB = 256  # tacho edge resolution: 1/256 sample
 _U32 = 1 << 32
 
 
+#: accelerometer range of the simulated board: +-20 g (196 m/s^2) over the 12-bit
+#: ADC, 0.096 m/s^2 per count. Bearing impacts of the faulty scenarios peak
+#: near 100 m/s^2; a +-5 g range would clip them.
+FULL_SCALE_MS2 = 20 * 9.80665
+
+
 @dataclass
 class BoardConfig:
-    """How the board is set up; ``scale``/``offset`` default to +-50 m/s^2 full scale.
+    """How the board is set up; ``scale``/``offset`` default to +-20 g full scale.
 
     ``overrun_blocks``: block indices at which the simulated ADC reports an
     overrun (FLAG_OVERRUN on that block's first data frame; the STATUS counter
@@ -73,7 +79,7 @@ class BoardConfig:
     n_channels: int = 1
     fs: int = 25000
     block_len: int = 250
-    scale: tuple[float, ...] | None = None  # m/s^2 per count; default 100/4096
+    scale: tuple[float, ...] | None = None  # m/s^2 per count; default FULL_SCALE_MS2*2/4096
     offset: tuple[float, ...] | None = None  # counts at 0 m/s^2; default 2048.0
     t0_start: int = 0
     seq_start: int = 0
@@ -95,7 +101,7 @@ class BoardConfig:
         if self.mode == "raw" and 2 * self.block_len > MAX_PAYLOAD:
             raise ValueError(f"RAW blocks carry at most {MAX_PAYLOAD // 2} samples, block_len={self.block_len}")
         if self.scale is None:
-            self.scale = (100.0 / 4096.0,) * self.n_channels
+            self.scale = (FULL_SCALE_MS2 * 2 / 4096.0,) * self.n_channels
         if self.offset is None:
             self.offset = (2048.0,) * self.n_channels
         self.scale = tuple(float(v) for v in self.scale)

@@ -106,16 +106,17 @@ def test_degrading_severity_shape_and_levels():
     sc = make_scenario("degrading", duration_s=dur, seed=3)
     t = np.linspace(0, dur, 2001)
     s = sc.severity(t)
-    assert np.all(s[t < 0.2 * dur] < 1e-9)
-    assert abs(s[np.searchsorted(t, 0.5 * dur)] - 1.0) < 1e-9
+    assert np.all(s[t < sc.onset * dur] < 1e-9)
+    assert abs(s[np.searchsorted(t, sc.faulty_at * dur)] - 1.0) < 1e-9
     t_peak = t[np.argmax(s)]
-    assert 0.7 * dur <= t_peak <= 0.8 * dur
+    assert (sc.peak_at - 0.05) * dur <= t_peak <= sc.peak_at * dur + 1e-9
     assert 1.3 <= s.max() <= 1.5
     assert s[-1] < s.max()
     assert s[-1] < 1.0
-    # the 100 Hz RMS follows the knob: 2 s windows at 10 %, 50 %, 75 %, 100 %
+    # the 100 Hz RMS follows the knob: 2 s windows at 10 %, faulty, peak, 100 %
     board = Board(sc, BoardConfig())
-    mean_rms = [board.observations(200, int(u * dur * 100) - 200)[1].mean() for u in (0.1, 0.5, 0.75, 1.0)]
+    mean_rms = [board.observations(200, int(u * dur * 100) - 200)[1].mean()
+                for u in (0.1, sc.faulty_at, sc.peak_at, 1.0)]
     assert mean_rms[1] > 2 * mean_rms[0]
     assert mean_rms[2] > mean_rms[1]
     assert mean_rms[3] < mean_rms[2]
