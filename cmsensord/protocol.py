@@ -1,0 +1,422 @@
+"""The serial wire protocol, version 1: frame encoding and the streaming decoder.
+
+Owns everything in /work/shared/PROTOCOL.md ("the contract"):
+
+* the frame layout (sync ``A5 5A``, 14-byte header, payload, CRC-32 of bytes
+  2 .. 14+len-1 stored little-endian) and the four payloads (STATUS, RMS, RAW,
+  TACHO): ``encode_*`` build complete frames (shared with ``firmware_sim``),
+  ``decode_*`` parse payloads and raise :class:`ProtocolError` naming the
+  expected vs the received length;
+* the receiver rules, implemented by :class:`Decoder`:
+
+  - rule 1: hunt for ``A5 5A``; a header with version != 1, an unknown type or
+    len > 4096 is not a frame: drop the first sync byte and hunt again;
+  - rule 2: wait for the whole frame; on a CRC mismatch drop only the first
+    sync byte and hunt again (never skip ``len`` bytes, len may be the bad field);
+  - rule 3: a seq gap of g (mod 65536) is g lost frames (``Frame.lost_before``,
+    ``LinkCounters.frames_lost``); the first frame has no gap;
+  - rule 4: t0 is unwrapped across 2^32 (``Frame.t0_unwrapped``);
+  - rule 5: per-link counters (:class:`LinkCounters`).
+
+The decoder is pure computation over bytes: it is fed bytes and returns frames
+(the style of pyserial's threaded framers) and never reads a port or a file.
+Byte accounting invariant, true after every ``feed``/``flush``::
+
+    bytes_received == bytes in good frames + bytes_discarded + buffered()
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "SYNC", "VERSION", "HEADER_LEN", "CRC_LEN", "OVERHEAD", "MAX_PAYLOAD", "MAX_FRAME",
+    "FrameType", "FLAG_OVERRUN", "FLAG_CLIPPED", "MODE_RMS", "MODE_RAW",
+    "Frame", "Status", "ProtocolError", "LinkCounters", "Decoder", "iter_frames",
+    "encode_frame", "encode_status", "encode_rms", "encode_raw", "encode_tacho",
+    "decode_status", "decode_rms", "decode_raw", "decode_tacho",
+]
+
+SYNC = b"\xa5\x5a"
+VERSION = 1
+HEADER_LEN = 14
+CRC_LEN = 4
+OVERHEAD = HEADER_LEN + CRC_LEN  # 18
+MAX_PAYLOAD = 4096
+MAX_FRAME = OVERHEAD + MAX_PAYLOAD  # 4114, the largest frame the decoder must hold
+
+FLAG_OVERRUN = 0x01  # ADC overrun since the previous frame
+FLAG_CLIPPED = 0x02  # a sample of this block clipped (0 or 4095)
+
+MODE_RMS = 1
+MODE_RAW = 2
+
+
+class FrameType(enum.IntEnum):
+    STATUS = 1
+    RMS = 2
+    RAW = 3
+    TACHO = 4
+
+
+class ProtocolError(ValueError):
+    """A malformed payload (wrong length for its type) or an unencodable value."""
+
+
+# Header after the sync: version u8, type u8, seq u16, t0 u32, chan u8, flags u8, len u16.
+_HDR = struct.Struct("<BBHIBBH")
+_CRC = struct.Struct("<I")
+_FRAME_HEAD = struct.Struct("<2sBBHIBBH")  # sync + header, for encoding
+# STATUS fixed part: fw u16, mode u8, C u8, fs u32, block_len u16, tacho u8, ppr u8,
+# overruns u32, uptime u32 (20 bytes), then C x (scale f32, offset f32).
+_STATUS = struct.Struct("<HBBIHBBII")
+_U16 = struct.Struct("<H")
+
+_TYPE_BY_CODE = {int(t): t for t in FrameType}
+_TYPE_NAMES = {t: t.name.lower() for t in FrameType}
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One frame as on the wire, plus what the decoder derived (rules 3 and 4)."""
+
+    type: FrameType
+    seq: int  # u16 as on the wire
+    t0: int  # u32 as on the wire
+    chan: int
+    flags: int
+    payload: bytes
+    t0_unwrapped: int = 0  # set by the Decoder (rule 4); defaults to t0 for frames built by hand
+    offset: int = -1  # stream byte offset of the frame's first sync byte (Decoder)
+    lost_before: int = 0  # frames lost by seq gap just before this frame (rule 3)
+
+    def __post_init__(self) -> None:
+        # t0_unwrapped == t0 (mod 2^32), so 0 with t0 != 0 can only mean "not given".
+        if self.t0_unwrapped == 0 and self.t0:
+            object.__setattr__(self, "t0_unwrapped", self.t0)
+
+
+@dataclass(frozen=True, slots=True)
+class Status:
+    """STATUS payload fields (PROTOCOL.md, STATUS)."""
+
+    fw_version: int  # major << 8 | minor
+    mode: int  # MODE_RMS or MODE_RAW
+    n_channels: int
+    fs: int
+    block_len: int
+    tacho_inputs: int
+    tacho_ppr: int
+    overruns: int
+    uptime_s: int
+    scale: tuple[float, ...]  # m/s^2 per count, one per channel
+    offset: tuple[float, ...]  # counts at 0 m/s^2, one per channel
+
+
+# ---------------------------------------------------------------------------
+# Encoding
+# ---------------------------------------------------------------------------
+
+def encode_frame(ftype: int, seq: int, t0: int, chan: int, flags: int, payload: bytes) -> bytes:
+    """A complete frame (sync .. crc). seq is masked to u16 and t0 to u32."""
+    n = len(payload)
+    if n > MAX_PAYLOAD:
+        raise ProtocolError(f"payload of {n} bytes exceeds the maximum of {MAX_PAYLOAD}")
+    if not 0 <= chan <= 0xFF:
+        raise ProtocolError(f"chan must fit in u8 (0..255), got {chan}")
+    if not 0 <= flags <= 0xFF:
+        raise ProtocolError(f"flags must fit in u8 (0..255), got {flags}")
+    ftype = FrameType(ftype)  # ValueError for an unknown type
+    head = _FRAME_HEAD.pack(SYNC, VERSION, ftype, seq & 0xFFFF, t0 & 0xFFFFFFFF, chan, flags, n)
+    body = head[2:] + bytes(payload)
+    return SYNC + body + _CRC.pack(zlib.crc32(body))
+
+
+def encode_status(seq: int, t0: int, status: Status, flags: int = 0) -> bytes:
+    c = status.n_channels
+    if len(status.scale) != c or len(status.offset) != c:
+        raise ProtocolError(
+            f"STATUS needs n_channels={c} scale and offset values, "
+            f"got {len(status.scale)} scale and {len(status.offset)} offset"
+        )
+    fixed = _STATUS.pack(
+        status.fw_version, status.mode, c, status.fs, status.block_len,
+        status.tacho_inputs, status.tacho_ppr,
+        status.overruns & 0xFFFFFFFF, status.uptime_s & 0xFFFFFFFF,
+    )
+    per_chan = np.empty((c, 2), dtype="<f4")
+    per_chan[:, 0] = status.scale
+    per_chan[:, 1] = status.offset
+    return encode_frame(FrameType.STATUS, seq, t0, 0, flags, fixed + per_chan.tobytes())
+
+
+def encode_rms(seq: int, t0: int, rms: Sequence[float] | np.ndarray, flags: int = 0) -> bytes:
+    """RMS frame; chan = number of channels, payload C x f32."""
+    values = np.asarray(rms, dtype="<f4")
+    if values.ndim != 1:
+        raise ProtocolError(f"RMS values must be 1-D (one per channel), got shape {values.shape}")
+    return encode_frame(FrameType.RMS, seq, t0, values.size, flags, values.tobytes())
+
+
+def encode_raw(seq: int, t0: int, chan: int, counts: np.ndarray, flags: int = 0) -> bytes:
+    """RAW frame; payload block_len x u16 counts."""
+    a = np.asarray(counts)
+    if a.ndim != 1:
+        raise ProtocolError(f"RAW counts must be 1-D, got shape {a.shape}")
+    if a.size and a.dtype.kind not in "iub":
+        raise ProtocolError(f"RAW counts must be integers, got dtype {a.dtype}")
+    if a.size and (int(a.min()) < 0 or int(a.max()) > 0xFFFF):
+        raise ProtocolError(f"RAW counts must fit in u16, got range {a.min()}..{a.max()}")
+    return encode_frame(FrameType.RAW, seq, t0, chan, flags, a.astype("<u2").tobytes())
+
+
+def encode_tacho(seq: int, t0: int, chan: int, edges: Sequence[int] | np.ndarray,
+                 flags: int = 0) -> bytes:
+    """TACHO frame; payload u16 N then N x u32 edge offsets from t0 in 1/256 sample."""
+    a = np.asarray(edges)
+    if a.ndim != 1:
+        raise ProtocolError(f"TACHO edges must be 1-D, got shape {a.shape}")
+    if a.size and a.dtype.kind not in "iu":
+        raise ProtocolError(f"TACHO edges must be integers (1/256 sample), got dtype {a.dtype}")
+    if a.size and (int(a.min()) < 0 or int(a.max()) > 0xFFFFFFFF):
+        raise ProtocolError(f"TACHO edges must fit in u32, got range {a.min()}..{a.max()}")
+    payload = _U16.pack(a.size) + a.astype("<u4").tobytes()
+    return encode_frame(FrameType.TACHO, seq, t0, chan, flags, payload)
+
+
+# ---------------------------------------------------------------------------
+# Payload decoding
+# ---------------------------------------------------------------------------
+
+def decode_status(payload: bytes) -> Status:
+    n = len(payload)
+    if n < _STATUS.size:
+        raise ProtocolError(
+            f"STATUS payload: expected at least {_STATUS.size} bytes, got {n}")
+    fw, mode, c, fs, block_len, tacho, ppr, overruns, uptime = _STATUS.unpack_from(payload)
+    expected = _STATUS.size + 8 * c
+    if n != expected:
+        raise ProtocolError(
+            f"STATUS payload: expected {expected} bytes (20 + 8 x {c} channels), got {n}")
+    per_chan = np.frombuffer(payload, dtype="<f4", count=2 * c, offset=_STATUS.size)
+    return Status(
+        fw_version=fw, mode=mode, n_channels=c, fs=fs, block_len=block_len,
+        tacho_inputs=tacho, tacho_ppr=ppr, overruns=overruns, uptime_s=uptime,
+        scale=tuple(float(x) for x in per_chan[0::2]),
+        offset=tuple(float(x) for x in per_chan[1::2]),
+    )
+
+
+def decode_rms(frame: Frame) -> np.ndarray:
+    """float32 array of shape (frame.chan,), m/s^2."""
+    n = len(frame.payload)
+    expected = 4 * frame.chan
+    if n != expected:
+        raise ProtocolError(
+            f"RMS payload: expected {expected} bytes (4 x {frame.chan} channels), got {n}")
+    return np.frombuffer(frame.payload, dtype="<f4").astype(np.float32)
+
+
+def decode_raw(payload: bytes) -> np.ndarray:
+    """uint16 ADC counts."""
+    n = len(payload)
+    if n % 2:
+        raise ProtocolError(
+            f"RAW payload: expected an even number of bytes (2 per sample), got {n}")
+    return np.frombuffer(payload, dtype="<u2").astype(np.uint16)
+
+
+def decode_tacho(payload: bytes) -> np.ndarray:
+    """uint32 edge offsets from t0 in 1/256 sample."""
+    n = len(payload)
+    if n < 2:
+        raise ProtocolError(f"TACHO payload: expected at least 2 bytes (u16 N), got {n}")
+    (count,) = _U16.unpack_from(payload)
+    expected = 2 + 4 * count
+    if n != expected:
+        raise ProtocolError(
+            f"TACHO payload: expected {expected} bytes (2 + 4 x N={count} edges), got {n}")
+    return np.frombuffer(payload, dtype="<u4", offset=2).astype(np.uint32)
+
+
+# ---------------------------------------------------------------------------
+# Receiving
+# ---------------------------------------------------------------------------
+
+def _zero_frames() -> dict[str, int]:
+    return {name: 0 for name in _TYPE_NAMES.values()}
+
+
+@dataclass
+class LinkCounters:
+    """Per-link counters (rule 5)."""
+
+    bytes_received: int = 0
+    bytes_discarded: int = 0  # while hunting, incl. rejected/bad-CRC sync bytes
+    crc_failures: int = 0
+    header_rejects: int = 0  # sync found but version/type/len invalid
+    frames: dict[str, int] = field(default_factory=_zero_frames)
+    frames_lost: int = 0  # by seq gaps (rule 3)
+    overruns: int = 0  # frames carrying FLAG_OVERRUN
+
+    def as_dict(self) -> dict[str, int]:
+        d = {
+            "bytes_received": self.bytes_received,
+            "bytes_discarded": self.bytes_discarded,
+            "crc_failures": self.crc_failures,
+            "header_rejects": self.header_rejects,
+        }
+        for name, count in self.frames.items():
+            d[f"frames_{name}"] = count
+        d["frames_lost"] = self.frames_lost
+        d["overruns"] = self.overruns
+        return d
+
+
+class Decoder:
+    """Push bytes in, frames out; never reads (pyserial's threaded framer style).
+
+    Holds at most ``max_buffer`` bytes at any time (a large ``feed`` is processed
+    in slices). After scanning, what stays buffered is either an incomplete
+    candidate frame (< MAX_FRAME bytes) or, if no sync is present, at most the
+    last byte when it is 0xA5.
+    """
+
+    def __init__(self, max_buffer: int = 65536):
+        if max_buffer < MAX_FRAME:
+            raise ValueError(
+                f"max_buffer must hold the largest frame ({MAX_FRAME} bytes), got {max_buffer}")
+        self.max_buffer = max_buffer
+        self.counters = LinkCounters()
+        self._buf = bytearray()
+        self._base = 0  # stream offset of self._buf[0]
+        self._last_seq: int | None = None
+        self._last_t0 = 0
+        self._last_t0_unwrapped = 0
+
+    def buffered(self) -> int:
+        return len(self._buf)
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
+        view = memoryview(data).cast("B")
+        total = len(view)
+        self.counters.bytes_received += total
+        buf = self._buf
+        room = self.max_buffer - len(buf)
+        if total <= room:  # the common case: one append, one scan
+            buf += view
+            return self._scan(final=False)
+        frames: list[Frame] = []
+        start = 0
+        while start < total:
+            room = self.max_buffer - len(buf)
+            buf += view[start:start + room]
+            start += room
+            frames += self._scan(final=False)
+        return frames
+
+    def flush(self) -> list[Frame]:
+        """End of stream: incomplete candidates are not frames (drop their first sync
+        byte and hunt on through the rest); whatever is left is discarded."""
+        return self._scan(final=True)
+
+    def _scan(self, final: bool) -> list[Frame]:
+        buf = self._buf
+        n = len(buf)
+        find = buf.find
+        unpack_hdr = _HDR.unpack_from
+        unpack_crc = _CRC.unpack_from
+        crc32 = zlib.crc32
+        types = _TYPE_BY_CODE
+        names = _TYPE_NAMES
+        frame_cls = Frame
+        c = self.counters
+        counts = c.frames
+        base = self._base
+        last_seq = self._last_seq
+        last_t0 = self._last_t0
+        last_unw = self._last_t0_unwrapped
+        discarded = rejects = crc_fail = lost_total = overruns = 0
+        out: list[Frame] = []
+        pos = 0
+        with memoryview(buf) as mv:
+            while True:
+                i = find(SYNC, pos)
+                if i < 0:
+                    # No sync: keep only a trailing 0xA5 (it may be half a sync).
+                    keep = 1 if (not final and n > pos and buf[n - 1] == 0xA5) else 0
+                    discarded += n - keep - pos
+                    pos = n - keep
+                    break
+                discarded += i - pos
+                pos = i
+                if n - pos < HEADER_LEN:
+                    if final:  # truncated header at end of stream: not a frame
+                        discarded += 1
+                        pos += 1
+                        continue
+                    break
+                ver, code, seq, t0, chan, flags, ln = unpack_hdr(buf, pos + 2)
+                ftype = types.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
+                if ftype is None:  # rule 1
+                    rejects += 1
+                    discarded += 1
+                    pos += 1
+                    continue
+                end_payload = pos + HEADER_LEN + ln
+                end = end_payload + CRC_LEN
+                if end > n:
+                    if final:  # truncated frame at end of stream: not a frame
+                        discarded += 1
+                        pos += 1
+                        continue
+                    break  # rule 2: wait for the whole frame
+                if crc32(mv[pos + 2:end_payload]) != unpack_crc(buf, end_payload)[0]:
+                    crc_fail += 1  # rule 2: drop only the first sync byte
+                    discarded += 1
+                    pos += 1
+                    continue
+                if last_seq is None:
+                    lost = 0
+                    unw = t0
+                else:
+                    lost = (seq - last_seq - 1) & 0xFFFF  # rule 3
+                    unw = last_unw + (((t0 - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
+                last_seq = seq
+                last_t0 = t0
+                last_unw = unw
+                lost_total += lost
+                if flags & FLAG_OVERRUN:
+                    overruns += 1
+                counts[names[ftype]] += 1
+                out.append(frame_cls(ftype, seq, t0, chan, flags,
+                                     bytes(mv[pos + HEADER_LEN:end_payload]),
+                                     unw, base + pos, lost))
+                pos = end
+        if pos:
+            del buf[:pos]
+        self._base = base + pos
+        self._last_seq = last_seq
+        self._last_t0 = last_t0
+        self._last_t0_unwrapped = last_unw
+        c.bytes_discarded += discarded
+        c.header_rejects += rejects
+        c.crc_failures += crc_fail
+        c.frames_lost += lost_total
+        c.overruns += overruns
+        return out
+
+
+def iter_frames(data: bytes | bytearray | memoryview,
+                max_buffer: int = 65536) -> tuple[list[Frame], LinkCounters]:
+    """Decode a whole capture (feed + flush): all frames and the link counters."""
+    dec = Decoder(max_buffer=max_buffer)
+    frames = dec.feed(data)
+    frames += dec.flush()
+    return frames, dec.counters
