@@ -108,7 +108,7 @@ class _StopFlag:
 
 # --------------------------------------------------------------------------- live loop
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
-             sim_proc: subprocess.Popen | None = None, capture_path: str | None = None,
+             sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP."""
     stop = _StopFlag()
@@ -139,15 +139,15 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
                 wall_ns, kind, message = reader.events.popleft()
                 proc.event(kind, None, message, wall_ns)
             now = time.monotonic()
-            if duration_s is not None and proc.adc_seconds >= duration_s:
-                break
+            if duration_s is not None and proc.board_seconds >= duration_s:
+                break                   # the simulated board's clock reached the end of the run
             if frames:
                 idle_since = None
                 stalled = False
             else:
                 idle_since = idle_since or now
-                if sim_proc is not None and sim_proc.poll() is not None and now - idle_since > 0.5:
-                    break               # the simulated board has finished and everything is read
+                if sim_done is not None and sim_done.is_set() and now - idle_since > 1.0:
+                    break               # the simulated board has sent everything and it is read
                 if (not stalled and reader.connected.is_set()
                         and now - reader.last_data > cfg.link.stall_s and proc.anchor_ns is not None):
                     stalled = True
@@ -251,7 +251,7 @@ def simulate(args: argparse.Namespace) -> int:
                                                               akf_trace=cfg.output.akf_trace or args.akf_trace))
     cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", args.scenario,
            "--duration", str(args.duration), "--speed", str(args.speed), "--seed", str(args.seed),
-           "--channels", str(args.channels)]
+           "--channels", str(args.channels), "--hold"]
     sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
     try:
@@ -265,7 +265,16 @@ def simulate(args: argparse.Namespace) -> int:
         cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, port=line))
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         capture = args.capture
-        return run_live(cfg, auto_channels=False, duration_s=args.duration, sim_proc=sim,
+        sim_done = threading.Event()
+
+        def watch_sim() -> None:        # the simulator prints its stats when it has sent everything
+            for out_line in sim.stdout:
+                if out_line.startswith("{"):
+                    sim_done.set()
+            sim_done.set()
+
+        threading.Thread(target=watch_sim, name="sim-watch", daemon=True).start()
+        return run_live(cfg, auto_channels=False, duration_s=args.duration, sim_done=sim_done,
                         capture_path=capture,
                         metadata={"scenario": args.scenario, "seed": str(args.seed),
                                   "duration_s": str(args.duration)})

@@ -94,7 +94,7 @@ class SerialReader(threading.Thread):
         self.capture = capture
         self.reconnect_min_s, self.reconnect_max_s = reconnect_min_s, reconnect_max_s
         self._open_port = open_port or (lambda: serial.Serial(self.port, self.baud, timeout=0.05))
-        self._stop = threading.Event()
+        self._stop_event = threading.Event()
         self.events: deque[tuple[int, str, str]] = deque(maxlen=1000)
         self.connected = threading.Event()
         self.ever_connected = False
@@ -104,7 +104,7 @@ class SerialReader(threading.Thread):
         self.capture_error: str | None = None
 
     def stop(self) -> None:
-        self._stop.set()
+        self._stop_event.set()
 
     def _event(self, kind: str, message: str) -> None:
         self.events.append((time.time_ns(), kind, message))
@@ -112,7 +112,7 @@ class SerialReader(threading.Thread):
     def run(self) -> None:
         backoff = self.reconnect_min_s
         ser = None
-        while not self._stop.is_set():
+        while not self._stop_event.is_set():
             if ser is None:
                 try:
                     ser = self._open_port()
@@ -120,7 +120,7 @@ class SerialReader(threading.Thread):
                     if self.failures == 0:
                         self._event("link_lost", f"cannot open {self.port}: {_why(exc)}; retrying")
                     self.failures += 1
-                    self._stop.wait(backoff)
+                    self._stop_event.wait(backoff)
                     backoff = min(backoff * 2, self.reconnect_max_s)
                     continue
                 if self.ever_connected or self.failures:

@@ -48,6 +48,16 @@ DEFAULT_BLOCK_LEN = 250
 MAX_GAP_S = 600.0
 
 
+#: how events go to the log (the journal): per-AKF flags are detail, the
+#: severity index and everything about the link or the disk is news.
+_LOG_LEVEL = {
+    "anomaly_onset": logging.DEBUG, "anomaly_clear": logging.DEBUG,
+    "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
+    "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
+    "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
+}
+
+
 class Sink(Protocol):
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
 
@@ -130,6 +140,13 @@ class Processor:
         return self.stamp_ns(self.slot0_t0 + slot * self.block_len)
 
     @property
+    def board_seconds(self) -> float:
+        """The board's clock (t0_unwrapped / fs) at the end of the processed observations."""
+        if self.slot0_t0 is None:
+            return 0.0
+        return (self.slot0_t0 + self.next_slot * self.block_len) / self.fs
+
+    @property
     def adc_seconds(self) -> float:
         """ADC time covered by the observations processed so far."""
         return self.next_slot * self.block_len / self.fs
@@ -143,8 +160,7 @@ class Processor:
         self.sink.write("/cm/events", "event", stamp_ns, msg)
         self.events.append(msg)
         self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
-        level = logging.WARNING if kind in ("failure", "frames_lost", "link_lost", "decode_error",
-                                            "queue_overflow", "disk_error", "link_stalled") else logging.INFO
+        level = _LOG_LEVEL.get(kind, logging.INFO)
         log.log(level, "%s: %s", kind, message)
         if self.on_event is not None:
             self.on_event(msg)

@@ -69,6 +69,9 @@ def _build_parser() -> argparse.ArgumentParser:
     out = p.add_mutually_exclusive_group()
     out.add_argument("--out", metavar="FILE", help="write a capture file as fast as possible")
     out.add_argument("--pty", action="store_true", help="serve a pty; its path is the first stdout line")
+    p.add_argument("--hold", action="store_true",
+                   help="with --pty: after --duration keep the pty open (idle) until SIGINT/SIGTERM, "
+                        "so the reader sees the end of the data, not a disconnect")
     p.add_argument("--speed", type=float, default=1.0,
                    help="pty pacing, x real time (0 or inf: as fast as possible; default 1)")
     return p
@@ -116,10 +119,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {args.out}: {args.scenario}, {args.channels} ch, {args.mode}, {duration:g} s, "
               f"{counts['blocks']} blocks, {counts['frames']} frames, {counts['bytes']} bytes in {dt:.1f} s")
         return 0
-    return _serve_pty(board, speed=args.speed, duration=duration)
+    return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold)
 
 
-def _serve_pty(board: Board, *, speed: float, duration: float | None) -> int:
+def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool = False) -> int:
     from .pty_link import PtyEndpoint
 
     stop = threading.Event()
@@ -133,6 +136,8 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None) -> int:
             print(ep.path, flush=True)
             stats = ep.run(board, speed=speed, duration_s=duration, stop=stop)
             print(json.dumps({"stats": stats.as_dict()}), flush=True)
+            if hold:
+                stop.wait()
     except OSError as exc:
         print(f"firmware_sim: error: pty: {exc}", file=sys.stderr)
         return 1

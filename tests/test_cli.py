@@ -1,0 +1,150 @@
+"""The command line end to end, through real processes and a real pty."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cmsensord.protocol import iter_frames
+from cmsensord.sinks.mcap_sink import read_messages
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def cmsensord(*args, timeout=120, **kw):
+    return subprocess.run([sys.executable, "-m", "cmsensord", *args], capture_output=True, text=True,
+                          env=ENV, timeout=timeout, **kw)
+
+
+def comparable(messages):
+    """Severity and event messages with times relative to the first severity message.
+
+    Only the wall-clock anchor may differ between a live run and a replay; the
+    start/stop events name the source and are left out.
+    """
+    sev = [s for t, s, _ in messages if t.endswith("/severity")]
+    base = min(sev)
+    out = []
+    for topic, stamp, msg in messages:
+        if topic == "/cm/diagnostics":
+            continue
+        if topic == "/cm/events" and msg["kind"] in ("start", "stop"):
+            continue
+        msg = {k: v for k, v in msg.items() if k != "timestamp"}
+        out.append((topic, stamp - base, msg))
+    return out
+
+
+@pytest.fixture(scope="module")
+def simulated_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("sim")
+    p = cmsensord("--simulate", "--scenario", "degrading", "--duration", "40", "--speed", "20",
+                  "--channels", "2", "--out", str(tmp / "live"), "--capture", str(tmp / "cap.bin"))
+    return tmp, p
+
+
+def test_simulate_runs_the_chain_over_a_pty_and_writes_mcap(simulated_run):
+    tmp, p = simulated_run
+    assert p.returncode == 0, p.stderr
+    files = list((tmp / "live").glob("*.mcap"))
+    assert len(files) == 1 and not list((tmp / "live").glob("*.part"))
+    assert f"MCAP log: {files[0]}" in p.stderr
+    assert "/dev/pts/" in p.stderr                           # a real pseudo-terminal
+    status = [ln for ln in p.stderr.splitlines() if ln.startswith("[") and "S=" in ln]
+    assert status and "ch0 S=" in status[-1] and "ch1 S=" in status[-1]
+    msgs = read_messages(files[0])
+    topics = {t for t, _, _ in msgs}
+    assert {"/cm/ch0/severity", "/cm/ch1/severity", "/cm/events", "/cm/diagnostics"} <= topics
+    sev = [m for t, _, m in msgs if t == "/cm/ch0/severity"]
+    assert 37 <= len(sev) <= 40
+    # the degrading scenario squeezed into 40 s still rises through the levels
+    assert max(m["severity_index"] for m in sev) >= 0.5
+    diag = [m for t, _, m in msgs if t == "/cm/diagnostics"]
+    assert diag[-1]["link"]["frames_rms"] > 3500 and diag[-1]["link"]["crc_failures"] == 0
+
+
+def test_replaying_the_capture_gives_the_live_messages(simulated_run, tmp_path):
+    tmp, p = simulated_run
+    assert p.returncode == 0, p.stderr
+    r = cmsensord("replay", str(tmp / "cap.bin"), "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    live = read_messages(next((tmp / "live").glob("*.mcap")))
+    replayed = read_messages(next(tmp_path.glob("*.mcap")))
+    a, b = comparable(live), comparable(replayed)
+    assert len(a) > 80
+    assert a == b
+
+
+def test_simulate_help_lists_the_scenarios():
+    p = cmsensord("--simulate", "--help")
+    assert p.returncode == 0
+    for name in ("healthy", "faulty", "degrading", "spikes"):
+        assert name in p.stdout
+
+
+def test_sigterm_finishes_the_mcap_file_promptly(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "cmsensord", "--simulate", "--duration", "3600",
+                             "--speed", "5", "--out", str(tmp_path)], stderr=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, env=ENV)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not list(tmp_path.glob("*.part")):
+        time.sleep(0.1)
+    time.sleep(2.5)
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=10)
+    assert time.monotonic() - t0 < 3.0
+    assert proc.returncode == 0, err
+    files = list(tmp_path.glob("*.mcap"))
+    assert len(files) == 1 and not list(tmp_path.glob("*.part"))
+    msgs = read_messages(files[0])
+    assert any(t == "/cm/ch0/severity" for t, _, _ in msgs)
+    assert any(t == "/cm/events" and m["kind"] == "stop" and "SIGTERM" in m["message"] for t, _, m in msgs)
+
+
+def test_record_captures_the_bytes_of_a_port(tmp_path):
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--scenario", "healthy",
+                            "--speed", "10", "--duration", "60", "--hold"], stdout=subprocess.PIPE,
+                           text=True, env=ENV)
+    try:
+        port = sim.stdout.readline().strip()
+        out = tmp_path / "cap.bin"
+        r = cmsensord("record", "--port", port, "--out", str(out), "--duration", "1.5")
+        assert r.returncode == 0, r.stderr
+        frames, counters = iter_frames(out.read_bytes())
+        assert len(frames) > 500
+        assert counters.crc_failures == 0 and counters.frames_lost == 0
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+
+
+@pytest.mark.parametrize("args, code, text", [
+    (["replay", "/nonexistent/cap.bin"], 2, "capture file not found"),
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "x.bin", "--duration", "1"], 2,
+     "no such device"),
+    (["--simulate", "--scenario", "nosuch"], 78, "unknown scenario"),
+    (["--simulate", "--speed", "-1"], 2, "expected a positive number"),
+    ([], 2, "nothing to do"),
+])
+def test_user_errors_are_one_line_with_a_status(args, code, text, tmp_path):
+    p = cmsensord(*args, cwd=tmp_path)
+    assert p.returncode == code
+    assert text in p.stderr
+    assert "Traceback" not in p.stderr
+
+
+def test_bad_config_is_one_line_and_exit_78(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("monitor:\n  r_mx: 0.2\n")
+    p = cmsensord("--config", str(cfg))
+    assert p.returncode == 78
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "r_mx" in lines[0] and "did you mean 'r_max'" in lines[0]
