@@ -40,7 +40,11 @@ def make_capture(path: Path, channels: int, seconds: float, scenario: str = "deg
 
 
 def replay_in_subprocess(capture: Path, out: Path, trace: bool) -> dict:
-    """Run `cmsensord replay` in a fresh interpreter; time the replay itself (not the imports)."""
+    """Run `cmsensord replay` in a fresh interpreter; time the replay itself (not the imports).
+
+    Peak RSS is VmHWM of /proc/self/status: ru_maxrss survives exec on Linux and
+    would report the benchmark's own (forked) high-water mark.
+    """
     code = (
         "import json,resource,time,sys\n"
         "from cmsensord.cli import main\n"
@@ -49,8 +53,8 @@ def replay_in_subprocess(capture: Path, out: Path, trace: bool) -> dict:
         "c0, t0 = cpu(), time.perf_counter()\n"
         f"rc = main(['replay', {str(capture)!r}, '--out', {str(out)!r}] + (['--akf-trace'] if {trace} else []))\n"
         "wall, c1 = time.perf_counter() - t0, cpu()\n"
-        "print(json.dumps({'rc': rc, 'wall_s': wall, 'cpu_s': c1 - c0,\n"
-        "                  'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))\n"
+        "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]\n"
+        "print(json.dumps({'rc': rc, 'wall_s': wall, 'cpu_s': c1 - c0, 'peak_rss_mb': int(hwm) / 1024}))\n"
     )
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)

@@ -176,7 +176,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
            quiet: bool = False) -> tuple[int, Path, Processor]:
     """Process a capture file as fast as possible through the same decoder and Processor."""
     size = Path(path).stat().st_size if Path(path).is_file() else 0
-    chunks = read_capture(path)
+    chunks = read_capture(path, chunk=1 << 16)
     first = next(chunks, None)          # raises LinkError before any output file exists
     sink = _open_sink(cfg, {"source": str(path), **(metadata or {})})
     decoder = Decoder()
@@ -288,13 +288,13 @@ def simulate(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- argparse
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="cmsensord",
         description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=_scenarios_help() + "\n\nsubcommands: replay, record, summary (see "
+        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, summary (see "
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
@@ -364,7 +364,8 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
     args = parser.parse_args(argv)
     _setup_logging(args.verbose)
     try:

@@ -46,6 +46,9 @@ DEFAULT_BLOCK_LEN = 250
 #: (board reset, t0 reloaded): the clock is re-anchored instead of inserting
 #: hours of missing observations.
 MAX_GAP_S = 600.0
+#: most RMS frames run through the bank in one call (bounds the per-call arrays:
+#: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
+MAX_BATCH = 1000
 
 
 #: how events go to the log (the journal): per-AKF flags are detail, the
@@ -174,6 +177,7 @@ class Processor:
             self.anchor_ns = self.clock_ns()
             self.t0_first = frames[0].t0_unwrapped
         rms: list[Frame] = []
+        RMS, STATUS = FrameType.RMS, FrameType.STATUS
         for f in frames:
             if f.lost_before:
                 self._flush_rms(rms)
@@ -181,34 +185,45 @@ class Processor:
                 self.frames_lost += f.lost_before
                 self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
                            f"(seq gap)", self.stamp_ns(f.t0_unwrapped), count=f.lost_before)
-            if f.type == FrameType.RMS:
+            if f.type == RMS:
                 rms.append(f)
-            elif f.type == FrameType.STATUS:
-                self._flush_rms(rms)
-                rms = []
-                self._on_status(f)
+                if len(rms) >= MAX_BATCH:          # bounded memory per bank call
+                    self._flush_rms(rms)
+                    rms = []
+            elif f.type == STATUS:
+                st = self._decode_status(f)
+                if st is not None and self._status_news(st):
+                    # what the board says changes the time base or the channels: the
+                    # frames before it are processed first, and its event comes after them
+                    self._flush_rms(rms)
+                    rms = []
+                    self._apply_status(f, st)
+                self.status = st or self.status
         self._flush_rms(rms)
 
-    def _on_status(self, f: Frame) -> None:
+    def _decode_status(self, f: Frame) -> Status | None:
         try:
-            st = decode_status(f.payload)
+            return decode_status(f.payload)
         except ValueError as exc:
             self.event("decode_error", None, f"bad STATUS payload at byte {f.offset}: {exc}")
-            return
-        first = self.status is None
-        if first or (st.fs, st.block_len, st.n_channels, st.mode) != (
-                self.status.fs, self.status.block_len, self.status.n_channels, self.status.mode):
-            if st.fs > 0 and st.block_len > 0 and (st.fs, st.block_len) != (self.fs, self.block_len):
-                if self.slot0_t0 is not None:
-                    self.event("config", None, f"board changed fs/block_len to {st.fs}/{st.block_len}:"
-                               " time base re-anchored")
-                    self.slot0_t0 = None
-                self.fs, self.block_len = st.fs, st.block_len
-            mode = {1: "RMS", 2: "RAW"}.get(st.mode, f"unknown({st.mode})")
-            self.event("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
-                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
-                       self.stamp_ns(f.t0_unwrapped))
-        self.status = st
+            return None
+
+    def _status_news(self, st: Status) -> bool:
+        old = self.status
+        return old is None or (st.fs, st.block_len, st.n_channels, st.mode) != (
+            old.fs, old.block_len, old.n_channels, old.mode)
+
+    def _apply_status(self, f: Frame, st: Status) -> None:
+        if st.fs > 0 and st.block_len > 0 and (st.fs, st.block_len) != (self.fs, self.block_len):
+            if self.slot0_t0 is not None:
+                self.event("config", None, f"board changed fs/block_len to {st.fs}/{st.block_len}:"
+                           " time base re-anchored")
+                self.slot0_t0 = None
+            self.fs, self.block_len = st.fs, st.block_len
+        mode = {1: "RMS", 2: "RAW"}.get(st.mode, f"unknown({st.mode})")
+        self.event("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
+                   f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
+                   self.stamp_ns(f.t0_unwrapped))
 
     def _setup(self, n_board: int) -> None:
         if self.auto_channels and n_board != len(self.channels):

@@ -34,6 +34,7 @@ renders each segment once.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 from collections import OrderedDict
@@ -41,8 +42,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
-from scipy.special import ndtri
 
 __all__ = [
     "MACHINE_STREAM",
@@ -93,14 +92,20 @@ def _generator(seed: int, stream: int, k: int) -> np.random.Generator:
 # quantiles of N(0, 1), rescaled to unit variance (tails truncated at +-4.3 sigma).
 # Four values per 64-bit PCG64 output: 4x faster than the ziggurat here, and the
 # bit generator's stream is stable across numpy versions.
-_GAUSS_TABLE = ndtri((np.arange(65536) + 0.5) / 65536)
-_GAUSS_TABLE /= np.sqrt(np.mean(_GAUSS_TABLE**2))
+@functools.lru_cache(maxsize=1)
+def _gauss_table() -> np.ndarray:
+    """The 65536 standard-normal quantiles (scipy imported only when a signal is made,
+    so `cmsensord` can list the scenarios without loading scipy)."""
+    from scipy.special import ndtri
+
+    table = ndtri((np.arange(65536) + 0.5) / 65536)
+    return table / np.sqrt(np.mean(table**2))
 
 
 def _gauss(rng: np.random.Generator, n: int) -> np.ndarray:
     """n standard-normal values (quantised to 16 bits, see _GAUSS_TABLE)."""
     raw = rng.bit_generator.random_raw((n + 3) // 4).astype("<u8", copy=False)
-    return _GAUSS_TABLE.take(raw.view("<u2")[:n])
+    return _gauss_table().take(raw.view("<u2")[:n])
 
 
 def _smooth_ramp(u: np.ndarray) -> np.ndarray:
@@ -327,7 +332,7 @@ class MotorScenario(Scenario):
     * sensor noise: each channel's own white noise w_c of RMS ``noise_rms`` (the
       broadband floor, flat to fs/2).
 
-    White noise is Gaussian, quantised to 16 bits (see ``_GAUSS_TABLE``).
+    White noise is Gaussian, quantised to 16 bits (see ``_gauss_table``).
 
     Calibration against seed 000 (the paper's parameters must give the
     paper's behaviour: n = 10, R_min = 4e-3, R_max = 0.13, z_c = 2.8, c = 0.4,
@@ -431,6 +436,8 @@ class MotorScenario(Scenario):
         self._warmup = int(math.ceil(25.0 * tau))  # e^-25: the ringing carried across a boundary
         if self._warmup > L:
             raise ValueError(f"resonance_zeta={zeta} rings longer than a segment; use >= {25 / (wn * L):.2g}")
+        from scipy.signal import lfilter
+
         h = lfilter(self._res_b, self._res_a, np.r_[1.0, np.zeros(self._warmup * 2)])
         self._res_noise_gain = self.resonance_noise_rms / math.sqrt(float(np.sum(h * h)))
         self.bpfo_hz = self.bpfo_ratio * fr
@@ -508,6 +515,8 @@ class MotorScenario(Scenario):
         u = np.concatenate([prev["white"][L - W:], cur["white"]])
         u *= self._res_noise_gain
         u += imp
+        from scipy.signal import lfilter
+
         machine += lfilter(self._res_b, self._res_a, u)[W:]
         out = np.empty((self.n_channels, L))
         for c in range(self.n_channels):
