@@ -6,8 +6,9 @@
     cmsensord record --port DEV --out FILE [--duration S]
     cmsensord summary FILE.mcap
 
-Errors a user can cause end in one line on stderr and exit status 2 (usage,
-link) or 78 (configuration), never a traceback.
+Errors a user can cause (bad arguments, a bad configuration value, a missing
+device or capture, an unwritable log directory) end in one line on stderr and
+exit status 2, never a traceback.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import Sequence
 
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict, default_config, load_config
-from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
+from cmsensord.errors import EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
 from cmsensord.link import FrameQueue, Progress, SerialReader, open_port_checked, read_capture
 from cmsensord.pipeline import Processor
 from cmsensord.protocol import Decoder
@@ -131,6 +132,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     next_status = time.monotonic() + 1.0
     stalled = False
     idle_since = None
+    last_flush = time.monotonic()
     try:
         while not stop.event.is_set():
             frames = queue.get(timeout=0.1)
@@ -139,6 +141,9 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
                 wall_ns, kind, message = reader.events.popleft()
                 proc.event(kind, None, message, wall_ns)
             now = time.monotonic()
+            if now - last_flush >= cfg.output.flush_s:
+                sink.flush()            # on disk within flush_s even when nothing new arrives
+                last_flush = now
             if duration_s is not None and proc.board_seconds >= duration_s:
                 break                   # the simulated board's clock reached the end of the run
             if frames:
@@ -392,10 +397,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except ConfigError as exc:
         print(f"cmsensord: configuration error: {exc}", file=sys.stderr)
-        return EXIT_CONFIG
+        return EXIT_USAGE
     except SinkError as exc:
         print(f"cmsensord: output error: {exc}", file=sys.stderr)
-        return EXIT_CONFIG
+        return EXIT_USAGE
     except LinkError as exc:
         print(f"cmsensord: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -130,7 +130,9 @@ def test_record_captures_the_bytes_of_a_port(tmp_path):
     (["replay", "/nonexistent/cap.bin"], 2, "capture file not found"),
     (["record", "--port", "/dev/nonexistent-tty", "--out", "x.bin", "--duration", "1"], 2,
      "no such device"),
-    (["--simulate", "--scenario", "nosuch"], 78, "unknown scenario"),
+    (["--simulate", "--scenario", "nosuch"], 2, "unknown scenario"),
+    (["--config", "/nonexistent/cmsensord.yaml"], 2, "file not found"),
+    (["replay", "/nonexistent/cap.bin", "--out", "/proc/nope"], 2, "capture file not found"),
     (["--simulate", "--speed", "-1"], 2, "expected a positive number"),
     ([], 2, "nothing to do"),
 ])
@@ -141,10 +143,43 @@ def test_user_errors_are_one_line_with_a_status(args, code, text, tmp_path):
     assert "Traceback" not in p.stderr
 
 
-def test_bad_config_is_one_line_and_exit_78(tmp_path):
+@pytest.mark.parametrize("text, key", [
+    ("monitor:\n  r_mx: 0.2\n", "did you mean 'r_max'"),
+    ("monitor:\n  r_max: 0.001\n", "monitor.r_max"),
+    ("channels:\n  - name: a\n    window: -3\n", "channels[0].window"),
+    ("link: [1, 2\n", "line"),
+])
+def test_bad_config_is_one_line_naming_the_key_and_exit_2(tmp_path, text, key):
     cfg = tmp_path / "c.yaml"
-    cfg.write_text("monitor:\n  r_mx: 0.2\n")
+    cfg.write_text(text)
     p = cmsensord("--config", str(cfg))
-    assert p.returncode == 78
+    assert p.returncode == 2
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "r_mx" in lines[0] and "did you mean 'r_max'" in lines[0]
+    assert len(lines) == 1 and key in lines[0] and str(cfg) in lines[0]
+
+
+def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
+    """`cmsensord --config FILE` on a board's pty: channels from the board, clean SIGTERM."""
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--scenario", "faulty",
+                            "--channels", "3", "--speed", "10", "--hold"], stdout=subprocess.PIPE,
+                           text=True, env=ENV)
+    try:
+        port = sim.stdout.readline().strip()
+        cfg = tmp_path / "cmsensord.yaml"
+        cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp_path / 'logs'}\n"
+                       "  akf_trace: true\n  status_line: false\n")
+        d = subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
+                             stderr=subprocess.PIPE, text=True, env=ENV)
+        time.sleep(4.0)
+        d.send_signal(signal.SIGTERM)
+        _, err = d.communicate(timeout=10)
+        assert d.returncode == 0, err
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    topics = {t for t, _, _ in msgs}
+    assert {"/cm/ch0/severity", "/cm/ch1/severity", "/cm/ch2/severity",
+            "/cm/ch0/akf", "/cm/ch2/akf"} <= topics
+    akf = [m for t, _, m in msgs if t == "/cm/ch1/akf"]
+    assert len(akf) > 1000 and all(m["filter"] == 10 for m in akf)
