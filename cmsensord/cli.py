@@ -32,7 +32,8 @@ from cmsensord.errors import EXIT_USAGE, CmsensordError, ConfigError, LinkError,
 from cmsensord.link import FrameQueue, Progress, SerialReader, open_port_checked, read_capture
 from cmsensord.pipeline import Processor
 from cmsensord.protocol import Decoder
-from cmsensord.sinks.mcap_sink import McapSink, summarize
+from cmsensord.sinks.mcap_sink import summarize
+from cmsensord.sinks.rotating import RotatingSink
 
 log = logging.getLogger("cmsensord")
 
@@ -58,10 +59,8 @@ def _setup_logging(verbose: bool) -> None:
                         format="%(levelname)s %(message)s", stream=sys.stderr)
 
 
-def _open_sink(cfg: Config, metadata: dict[str, str]) -> McapSink:
-    o = cfg.output
-    return McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
-                    metadata=metadata)
+def _open_sink(cfg: Config, metadata: dict[str, str]) -> RotatingSink:
+    return RotatingSink(cfg.output, metadata=metadata)
 
 
 def _status_line(proc: Processor, reader: SerialReader | None, queue: FrameQueue | None) -> str:
@@ -78,8 +77,8 @@ def _status_line(proc: Processor, reader: SerialReader | None, queue: FrameQueue
     return " ".join(parts)
 
 
-def _summary(proc: Processor, path: Path, wall_s: float) -> str:
-    lines = [f"MCAP log: {path}",
+def _summary(proc: Processor, paths: list[Path], wall_s: float) -> str:
+    lines = [f"MCAP log: {p}" for p in paths] + [
              f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
              f"({proc.observations} observations, {proc.missing_observations} missing, "
              f"{proc.frames_lost} frames lost)"]
@@ -167,10 +166,10 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
         proc.handle(queue.get(timeout=0))
         why = f"signal {signal.Signals(stop.signal).name}" if stop.signal else "end of run"
         proc.event("stop", None, f"cmsensord stopping ({why})")
-        path = sink.close()
+        sink.close()
         if capture is not None:
             capture.close()
-    print(_summary(proc, path, time.monotonic() - t_start), file=sys.stderr)
+    print(_summary(proc, sink.paths, time.monotonic() - t_start), file=sys.stderr)
     if capture_path:
         print(f"  capture: {capture_path}", file=sys.stderr)
     return 0
@@ -202,7 +201,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        print(_summary(proc, out, time.monotonic() - t0), file=sys.stderr)
+        print(_summary(proc, sink.paths, time.monotonic() - t0), file=sys.stderr)
     return 0, out, proc
 
 
