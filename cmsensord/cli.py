@@ -17,7 +17,6 @@ import argparse
 import dataclasses
 import json
 import logging
-import os
 import signal
 import subprocess
 import sys
@@ -132,6 +131,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     stalled = False
     idle_since = None
     last_flush = time.monotonic()
+    drops_seen = 0
     try:
         while not stop.event.is_set():
             frames = queue.get(timeout=0.1)
@@ -139,6 +139,11 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
             while reader.events:
                 wall_ns, kind, message = reader.events.popleft()
                 proc.event(kind, None, message, wall_ns)
+            if queue.drops != drops_seen:
+                proc.event("queue_overflow", None, f"processing fell behind: {queue.drops - drops_seen} "
+                           f"frame(s) dropped from the queue ({queue.drops} in all)",
+                           count=queue.drops - drops_seen)
+                drops_seen = queue.drops
             now = time.monotonic()
             if now - last_flush >= cfg.output.flush_s:
                 sink.flush()            # on disk within flush_s even when nothing new arrives

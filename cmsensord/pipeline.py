@@ -325,16 +325,17 @@ class Processor:
             yl = y[:, c].tolist()
             xpl, xhl = xp.tolist(), xh.tolist()
             ol = out.outlier[:, c, i].tolist()
+            ql = out.Q[:, c, i].tolist()
             for k in range(len(yl)):
                 stamp = self.slot_stamp_ns(first_slot + k)
                 if valid[k, c]:
                     msg = {"channel": ch.name, "filter": i + 1, "y": yl[k], "x_hat": xhl[k],
                            "x_prior": xpl[k], "lower": lo[k], "upper": hi[k], "z": z[k],
-                           "outlier": bool(ol[k]), "missing": False}
+                           "outlier": bool(ol[k]), "q_hat": ql[k], "missing": False}
                 else:
                     msg = {"channel": ch.name, "filter": i + 1, "y": None, "x_hat": _num(xhl[k]),
                            "x_prior": _num(xpl[k]), "lower": _num(lo[k]), "upper": _num(hi[k]),
-                           "z": None, "outlier": False, "missing": True}
+                           "z": None, "outlier": False, "q_hat": _num(ql[k]), "missing": True}
                 self.sink.write(topic, "akf", stamp, msg)
 
     def _write_decision(self, d: Decision) -> None:

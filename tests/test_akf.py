@@ -57,6 +57,7 @@ def reference(R, y, valid, windows, z_c=2.8):
     T, C = y.shape
     n = R.shape[1]
     x_hat = np.full((T, C, n), np.nan)
+    Q = np.full((T, C, n), np.nan)
     outl = np.zeros((T, C, n), dtype=np.uint8)
     for c in range(C):
         for i in range(n):
@@ -64,8 +65,9 @@ def reference(R, y, valid, windows, z_c=2.8):
             for k in range(T):
                 r = f.step(float(y[k, c]) if valid[k, c] else None)
                 x_hat[k, c, i] = r["x_hat"]
+                Q[k, c, i] = r["Q"]
                 outl[k, c, i] = r["outlier"]
-    return x_hat, outl
+    return x_hat, Q, outl
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -78,9 +80,10 @@ def test_vectorised_bank_equals_scalar_reference(backend):
     windows = [10, 4, 25]
     bank = AkfBank(R, window=windows, z_c=2.8, backend=backend)
     out = bank.process(y, valid)
-    ref_x, ref_o = reference(R, y, valid, windows)
+    ref_x, ref_q, ref_o = reference(R, y, valid, windows)
     assert np.array_equal(np.isnan(out.x_hat), np.isnan(ref_x))
     np.testing.assert_allclose(out.x_hat, ref_x, rtol=0, atol=1e-12, equal_nan=True)
+    np.testing.assert_allclose(out.Q, ref_q, rtol=1e-12, atol=1e-15, equal_nan=True)
     assert np.array_equal(out.outlier, ref_o)
     assert ref_o.sum() > 50               # the comparison covered outliers too
 
@@ -143,3 +146,15 @@ def test_bad_shapes_say_expected_and_got():
     bank = AkfBank(np.array([[0.01, 0.1]] * 2), window=10, z_c=2.8)
     with pytest.raises(ValueError, match=r"expected shape \(T, 2\), got \(5, 3\)"):
         bank.process(np.zeros((5, 3)))
+
+
+def test_the_compiled_kernel_is_built():
+    """`pip install` builds the C kernel where a compiler exists (CI has one).
+
+    Set CMSENSORD_NO_KERNEL_OK=1 to run the suite on a machine without a compiler.
+    """
+    import os
+
+    if os.environ.get("CMSENSORD_NO_KERNEL_OK") == "1":
+        pytest.skip("running without the compiled kernel by request")
+    assert have_kernel(), "cmsensord.dsp._akfkernel is not built: pip install -e . with a C compiler"

@@ -23,6 +23,23 @@ def cmsensord(*args, timeout=120, **kw):
                           env=ENV, timeout=timeout, **kw)
 
 
+def assert_messages_match_their_schemas(path):
+    """Every message in the file validates against the jsonschema stored with it."""
+    import json
+
+    import jsonschema
+    from mcap.reader import make_reader
+
+    seen = set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+            doc = json.loads(message.data)
+            jsonschema.validate(doc, json.loads(schema.data))
+            seen.add(schema.name)
+    return seen
+
+
 def comparable(messages):
     """Severity and event messages with times relative to the first severity message.
 
@@ -68,6 +85,8 @@ def test_simulate_runs_the_chain_over_a_pty_and_writes_mcap(simulated_run):
     assert max(m["severity_index"] for m in sev) >= 0.5
     diag = [m for t, _, m in msgs if t == "/cm/diagnostics"]
     assert diag[-1]["link"]["frames_rms"] > 3500 and diag[-1]["link"]["crc_failures"] == 0
+    assert assert_messages_match_their_schemas(files[0]) == {
+        "cmsensord.Severity", "cmsensord.Event", "cmsensord.Diagnostics"}
 
 
 def test_replaying_the_capture_gives_the_live_messages(simulated_run, tmp_path):
@@ -183,3 +202,5 @@ def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
             "/cm/ch0/akf", "/cm/ch2/akf"} <= topics
     akf = [m for t, _, m in msgs if t == "/cm/ch1/akf"]
     assert len(akf) > 1000 and all(m["filter"] == 10 for m in akf)
+    assert "cmsensord.AkfTrace" in assert_messages_match_their_schemas(
+        next((tmp_path / "logs").glob("*.mcap")))

@@ -25,11 +25,11 @@ static int need(Py_buffer *b, Py_ssize_t bytes, const char *name) {
 
 static PyObject *run(PyObject *self, PyObject *args) {
     Py_buffer by, bvalid, bR, bzc, bN, bx, bP, bQ, bres2, bdx2, bpos, bfill, bstarted,
-        bxp, bxh, bY, bout;
+        bxp, bxh, bY, bQo, bout;
     int scaling;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*iw*w*w*w*w*w*w*w*w*w*w*w*",
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*iw*w*w*w*w*w*w*w*w*w*w*w*w*",
                           &by, &bvalid, &bR, &bzc, &bN, &scaling, &bx, &bP, &bQ,
-                          &bres2, &bdx2, &bpos, &bfill, &bstarted, &bxp, &bxh, &bY, &bout))
+                          &bres2, &bdx2, &bpos, &bfill, &bstarted, &bxp, &bxh, &bY, &bQo, &bout))
         return NULL;
     PyObject *ret = NULL;
     const Py_ssize_t C = bzc.len / (Py_ssize_t)sizeof(double);
@@ -45,7 +45,8 @@ static PyObject *run(PyObject *self, PyObject *args) {
         !need(&bdx2, C * n * Nmax * 8, "dx2") || !need(&bpos, C * 8, "pos") ||
         !need(&bfill, C * 8, "fill") || !need(&bstarted, C, "started") ||
         !need(&bxp, T * C * n * 8, "x_prior") || !need(&bxh, T * C * n * 8, "x_hat") ||
-        !need(&bY, T * C * n * 8, "Y") || !need(&bout, T * C * n, "outlier"))
+        !need(&bY, T * C * n * 8, "Y") || !need(&bQo, T * C * n * 8, "Q_out") ||
+        !need(&bout, T * C * n, "outlier"))
         goto done;
 
     const double *y = by.buf, *R = bR.buf, *zc = bzc.buf;
@@ -54,7 +55,7 @@ static PyObject *run(PyObject *self, PyObject *args) {
     double *x = bx.buf, *P = bP.buf, *Q = bQ.buf, *res2 = bres2.buf, *dx2 = bdx2.buf;
     int64_t *pos = bpos.buf, *fill = bfill.buf;
     uint8_t *started = bstarted.buf, *outl = bout.buf;
-    double *oxp = bxp.buf, *oxh = bxh.buf, *oY = bY.buf;
+    double *oxp = bxp.buf, *oxh = bxh.buf, *oY = bY.buf, *oQ = bQo.buf;
     for (Py_ssize_t c = 0; c < C; c++) {
         if (N[c] < 1 || N[c] > Nmax) {
             PyErr_Format(PyExc_ValueError, "N[%zd] = %lld out of 1..%zd", c, (long long)N[c], Nmax);
@@ -73,7 +74,7 @@ static PyObject *run(PyObject *self, PyObject *args) {
             if (!started[c]) {
                 if (!v) {           /* nothing happens before the first observation */
                     for (Py_ssize_t i = 0; i < n; i++) {
-                        oxp[o + i] = NAN; oxh[o + i] = NAN; oY[o + i] = NAN; outl[o + i] = 0;
+                        oxp[o + i] = NAN; oxh[o + i] = NAN; oY[o + i] = NAN; oQ[o + i] = NAN; outl[o + i] = 0;
                     }
                     continue;
                 }
@@ -84,7 +85,7 @@ static PyObject *run(PyObject *self, PyObject *args) {
                 for (Py_ssize_t i = 0; i < n; i++) {
                     const double Pp = Pc[i] + Qc[i];                 /* (4) */
                     oxp[o + i] = xc[i]; oxh[o + i] = xc[i];
-                    oY[o + i] = Pp + Rc[i]; outl[o + i] = 0;
+                    oY[o + i] = Pp + Rc[i]; oQ[o + i] = Qc[i]; outl[o + i] = 0;
                     Pc[i] = Pp;
                 }
                 continue;
@@ -122,7 +123,7 @@ static PyObject *run(PyObject *self, PyObject *args) {
                 if (scaling) { const double q = Gh / Gt; S = q > 1.0 ? q : 1.0; }   /* (12) */
                 Qc[i] = S * M;                                       /* (10) */
                 const double z = innov / sqrt(Yv);                   /* (15) */
-                oxp[o + i] = xp; oxh[o + i] = xn; oY[o + i] = Yv;
+                oxp[o + i] = xp; oxh[o + i] = xn; oY[o + i] = Yv; oQ[o + i] = Qc[i];
                 outl[o + i] = fabs(z) > zc[c];
             }
             pos[c] = np_;
@@ -138,7 +139,7 @@ done:
     PyBuffer_Release(&bP); PyBuffer_Release(&bQ); PyBuffer_Release(&bres2);
     PyBuffer_Release(&bdx2); PyBuffer_Release(&bpos); PyBuffer_Release(&bfill);
     PyBuffer_Release(&bstarted); PyBuffer_Release(&bxp); PyBuffer_Release(&bxh);
-    PyBuffer_Release(&bY); PyBuffer_Release(&bout);
+    PyBuffer_Release(&bY); PyBuffer_Release(&bQo); PyBuffer_Release(&bout);
     return ret;
 }
 

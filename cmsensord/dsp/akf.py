@@ -115,7 +115,7 @@ class ScalarAKF:
         if self.x is None:
             if y is None:
                 return {"missing": True, "x_prior": math.nan, "x_hat": math.nan,
-                        "Y": math.nan, "z": math.nan, "outlier": False}
+                        "Y": math.nan, "z": math.nan, "outlier": False, "Q": math.nan}
             self.x = float(y)                 # x̂(0): the first observation
         x_prior = self.x                      # (3)
         P_prior = self.P + self.Q             # (4)
@@ -123,7 +123,7 @@ class ScalarAKF:
         if y is None:                         # time update only
             self.P = P_prior
             return {"missing": True, "x_prior": x_prior, "x_hat": x_prior,
-                    "Y": Y, "z": math.nan, "outlier": False}
+                    "Y": Y, "z": math.nan, "outlier": False, "Q": self.Q}
         innov = y - x_prior                   # (5)
         K = P_prior / Y                       # (7)
         dx = K * innov
@@ -166,6 +166,7 @@ class AkfBlock:
     x_prior: np.ndarray
     x_hat: np.ndarray
     Y: np.ndarray
+    Q: np.ndarray         # Q̂(k) after the step (eq. 10), used by the next time update
     outlier: np.ndarray   # uint8
     valid: np.ndarray     # (T, C) bool, False for a missing observation
 
@@ -246,6 +247,7 @@ class AkfBank:
             x_prior=np.empty((T, self.C, self.n)),
             x_hat=np.empty((T, self.C, self.n)),
             Y=np.empty((T, self.C, self.n)),
+            Q=np.empty((T, self.C, self.n)),
             outlier=np.zeros((T, self.C, self.n), dtype=np.uint8),
             valid=valid,
         )
@@ -256,7 +258,7 @@ class AkfBank:
             _akfkernel.run(
                 y, np.ascontiguousarray(valid, dtype=np.uint8), self.R, self.z_c, self.N,
                 int(self.scaling), s.x, s.P, s.Q, s.res2, s.dx2, s.pos, s.fill, s.started,
-                out.x_prior, out.x_hat, out.Y, out.outlier,
+                out.x_prior, out.x_hat, out.Y, out.Q, out.outlier,
             )
         else:
             _run_numpy(self, y, valid, out)
@@ -287,6 +289,7 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
         if not v.any():
             s.P = P_prior
             out.x_hat[k] = out.x_prior[k]
+            out.Q[k] = np.where(on, s.Q, np.nan)
             continue
         innov = yk - x_prior                                   # (5)
         K = P_prior / Y                                        # (7)
@@ -314,6 +317,7 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
         else:
             S = 1.0
         s.Q = np.where(vv, S * M, s.Q)                         # (10)
+        out.Q[k] = np.where(on, s.Q, np.nan)
         z = innov / np.sqrt(Y)                                 # (15)
         out.outlier[k] = (np.abs(z) > zc) & vv
 
