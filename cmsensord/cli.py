@@ -169,6 +169,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
         reader.stop()
         reader.join(timeout=2.0)
         proc.handle(queue.get(timeout=0))
+        proc.finish()
         why = f"signal {signal.Signals(stop.signal).name}" if stop.signal else "end of run"
         proc.event("stop", None, f"cmsensord stopping ({why})")
         sink.close()
@@ -202,6 +203,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
                 done += len(data)
                 progress.update(done, f"{proc.adc_seconds:.0f} s")
         proc.handle(decoder.flush())
+        proc.finish()
     finally:
         progress.close()
         out = sink.close()

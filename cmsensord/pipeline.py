@@ -35,6 +35,7 @@ import numpy as np
 
 from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.akf import AkfBank, bank_r
+from cmsensord.dsp.rms import rows_rms
 from cmsensord.dsp.severity import AnomalyDecider, Decision
 from cmsensord.protocol import Frame, FrameType, Status, decode_status
 
@@ -49,6 +50,8 @@ MAX_GAP_S = 600.0
 #: most RMS frames run through the bank in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
+#: RAW frames held while waiting for the first STATUS (its scale/offset): 2 s of 4 channels
+RAW_WAIT_FRAMES = 800
 
 
 #: how events go to the log (the journal): per-AKF flags are detail, the
@@ -130,7 +133,8 @@ class Processor:
         self.event_counts: dict[str, int] = {}
         self.started_wall = time.monotonic()
         self._last_stamp_ns = 0
-        self._pending: list[Frame] = []
+        self._raw_waiting: list[Frame] = []
+        self.raw_dropped = 0
 
     # ---- time base -------------------------------------------------------
     def stamp_ns(self, t0_unwrapped: int) -> int:
@@ -177,11 +181,13 @@ class Processor:
             self.anchor_ns = self.clock_ns()
             self.t0_first = frames[0].t0_unwrapped
         rms: list[Frame] = []
-        RMS, STATUS = FrameType.RMS, FrameType.STATUS
+        raw: list[Frame] = []
+        RMS, RAW, STATUS = FrameType.RMS, FrameType.RAW, FrameType.STATUS
         for f in frames:
             if f.lost_before:
                 self._flush_rms(rms)
-                rms = []
+                self._flush_raw(raw)
+                rms, raw = [], []
                 self.frames_lost += f.lost_before
                 self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
                            f"(seq gap)", self.stamp_ns(f.t0_unwrapped), count=f.lost_before)
@@ -190,16 +196,29 @@ class Processor:
                 if len(rms) >= MAX_BATCH:          # bounded memory per bank call
                     self._flush_rms(rms)
                     rms = []
+            elif f.type == RAW:
+                raw.append(f)
+                if len(raw) >= MAX_BATCH:
+                    self._flush_raw(raw)
+                    raw = []
             elif f.type == STATUS:
                 st = self._decode_status(f)
                 if st is not None and self._status_news(st):
                     # what the board says changes the time base or the channels: the
                     # frames before it are processed first, and its event comes after them
                     self._flush_rms(rms)
-                    rms = []
+                    self._flush_raw(raw)
+                    rms, raw = [], []
                     self._apply_status(f, st)
                 self.status = st or self.status
+                if self._raw_waiting and self.status is not None:
+                    self._flush_raw([])
         self._flush_rms(rms)
+        self._flush_raw(raw)
+
+    def finish(self) -> None:
+        """End of the stream: process what still waits (an incomplete last RAW block)."""
+        self._flush_raw([], final=True)
 
     def _decode_status(self, f: Frame) -> Status | None:
         try:
@@ -272,6 +291,84 @@ class Processor:
         except ValueError:
             self.event("decode_error", None, f"RMS payload length does not match C = {C}")
             return
+        self._observe(t0, vals)
+
+    def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
+        """RAW blocks -> m/s² -> the board's block RMS (dsp.rms) -> the same bank.
+
+        RAW frames arriving before the first STATUS (no scale/offset yet) wait,
+        at most RAW_WAIT_FRAMES of them; the oldest beyond that are dropped and counted.
+        """
+        if frames:
+            self._raw_waiting.extend(frames)
+        if not self._raw_waiting:
+            return
+        if self.status is None and not self._raw_overrides_complete():
+            over = len(self._raw_waiting) - RAW_WAIT_FRAMES
+            if over > 0:
+                del self._raw_waiting[:over]
+                self.raw_dropped += over
+                self.event("decode_error", None, f"{over} RAW frame(s) dropped: no STATUS "
+                           "(scale/offset) from the board yet")
+            return
+        frames, self._raw_waiting = self._raw_waiting, []
+        C = self.status.n_channels if self.status is not None else 1 + max(f.chan for f in frames)
+        if not final:
+            # the newest block may still be missing channels (its frames can straddle a
+            # read or a batch): it waits for a frame of a later block, or for finish()
+            last = frames[-1].t0_unwrapped
+            k = len(frames)
+            while k > 0 and frames[k - 1].t0_unwrapped == last:
+                k -= 1
+            if len(frames) - k < C:
+                frames, self._raw_waiting = frames[:k], frames[k:]
+            if not frames:
+                return
+        if self.bank is None:
+            self._setup(C)
+        L = self.block_len
+        good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
+        if len(good) < len(frames):
+            self.event("decode_error", None, f"{len(frames) - len(good)} RAW frame(s) with a channel "
+                       f">= {C} or a payload that is not {L} samples skipped")
+        if not good:
+            return
+        t0 = np.fromiter((f.t0_unwrapped for f in good), dtype=np.int64, count=len(good))
+        chan = np.fromiter((f.chan for f in good), dtype=np.int64, count=len(good))
+        counts = np.frombuffer(b"".join(f.payload for f in good), dtype="<u2").reshape(len(good), L)
+        blocks, row = np.unique(t0, return_inverse=True)
+        if np.any(np.diff(t0) < 0):             # out of order: a board reset; keep arrival order
+            blocks, first = np.unique(t0, return_index=True)
+            order = np.argsort(first)
+            blocks = blocks[order]
+            row = np.argsort(order)[row]
+        scale, offset = self._raw_cal()
+        rms = rows_rms(counts, scale[chan], offset[chan])
+        vals = np.full((len(blocks), C), np.nan, dtype=np.float32)
+        vals[row, chan] = rms
+        self._observe(blocks, vals)
+
+    def _raw_overrides_complete(self) -> bool:
+        return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)
+
+    def _raw_cal(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per board channel scale/offset: STATUS, overridden by the configuration."""
+        st = self.status
+        n = max(st.n_channels if st else 0, 1 + max((ch.index for ch in self.cfg.channels), default=0))
+        scale = np.ones(n, dtype=np.float32)
+        offset = np.zeros(n, dtype=np.float32)
+        if st is not None:
+            scale[:len(st.scale)] = st.scale
+            offset[:len(st.offset)] = st.offset
+        for ch in self.cfg.channels:
+            if ch.scale is not None:
+                scale[ch.index] = ch.scale
+            if ch.offset is not None:
+                offset[ch.index] = ch.offset
+        return scale, offset
+
+    def _observe(self, t0: np.ndarray, vals: np.ndarray) -> None:
+        """Observations (n, C_board) of the blocks starting at t0 -> slots -> bank."""
         if self.slot0_t0 is None:
             self.slot0_t0 = int(t0[0]) - self.next_slot * self.block_len
         slots = (t0 - self.slot0_t0) // self.block_len
@@ -287,7 +384,7 @@ class Processor:
             self.slot0_t0 = int(t0[b]) - self.next_slot * self.block_len
             self.event("config", None, f"board clock jumped (t0 {int(t0[b])} after slot {old - 1}): "
                        "time base re-anchored", self.stamp_ns(int(t0[b])))
-            self._flush_rms(frames[b:])
+            self._observe(t0[b:], vals[b:])
             return
         self._run(slots, vals)
 

@@ -1,0 +1,42 @@
+"""The 100 Hz block RMS, exactly as PROTOCOL.md defines it (RMS frames, type 2).
+
+One implementation for both sides: the simulated board computes its RMS frames
+with it and the daemon computes the RMS of RAW blocks with it, so RMS mode and
+RAW mode of the same signal give the same observations bit for bit:
+
+    RMS = sqrt(mean(((count - offset) * scale)^2))   over the block_len samples,
+
+in float64 from the float32 scale/offset of STATUS, then stored as float32.
+Nothing else is removed (no block-mean subtraction, no filtering).  Both
+functions reduce each block as one contiguous row, so the floating-point
+summation is the same whichever way the blocks arrive.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["rows_rms", "block_rms"]
+
+
+def rows_rms(counts: np.ndarray, scale, offset) -> np.ndarray:
+    """float32 (n,): the RMS of n blocks of counts (n, block_len), row i calibrated
+    with scale[i], offset[i] (float32 values, as STATUS carries them)."""
+    scale = np.asarray(scale, dtype=np.float32).astype(np.float64)
+    offset = np.asarray(offset, dtype=np.float32).astype(np.float64)
+    x = (np.asarray(counts).astype(np.float64) - offset[:, None]) * scale[:, None]
+    return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+
+
+def block_rms(counts: np.ndarray, scale, offset, block_len: int) -> np.ndarray:
+    """float32 (C, n // block_len): the RMS frame values of whole blocks of counts (C, n)."""
+    counts = np.asarray(counts)
+    c, n = counts.shape
+    if n % block_len:
+        raise ValueError(f"counts must hold whole blocks of {block_len} samples, got {n} samples")
+    nb = n // block_len
+    rows = counts.reshape(c * nb, block_len)
+    per_row = np.repeat(np.arange(c), nb)
+    scale = np.asarray(scale, dtype=np.float32)[per_row]
+    offset = np.asarray(offset, dtype=np.float32)[per_row]
+    return rows_rms(rows, scale, offset).reshape(c, nb)
