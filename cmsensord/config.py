@@ -332,6 +332,11 @@ def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
             )
         seen_name[ch.name] = i
         seen_index[ch.index] = i
+    n0 = cfg.channels[0].monitor.n
+    for i, ch in enumerate(cfg.channels):
+        if ch.monitor.n != n0:
+            return (f"channels[{i}].n", f"every channel needs the same bank size n "
+                    f"(channels[0] has {n0}): the banks run as one array", ch.monitor.n)
     k = cfg.output.akf_trace_filter
     if k > cfg.monitor.n:
         return "output.akf_trace_filter", f"must be <= monitor.n = {cfg.monitor.n}", k

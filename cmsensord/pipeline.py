@@ -134,6 +134,7 @@ class Processor:
         self.started_wall = time.monotonic()
         self._last_stamp_ns = 0
         self._raw_waiting: list[Frame] = []
+        self._no_channels = False
         self.raw_dropped = 0
 
     # ---- time base -------------------------------------------------------
@@ -254,13 +255,15 @@ class Processor:
             self.event("config", None, f"board sends {n_board} channel(s); configured channel(s) "
                        f"{', '.join(missing)} not in the stream")
         if not usable:
-            raise RuntimeError("no configured channel is in the stream")
+            if not self._no_channels:
+                self._no_channels = True
+                self.event("config", None, f"none of the configured channels is among the board's "
+                           f"{n_board}: observations are not monitored until it sends them")
+            return
+        self._no_channels = False
         self.channels = usable
         mons = [ch.monitor for ch in usable]
-        n = mons[0].n
-        if any(m.n != n for m in mons):
-            # one bank needs one n; differing n per channel would need one bank per channel
-            raise ValueError("all channels must have the same monitor.n")
+        n = mons[0].n                   # the same for every channel (config rule)
         R = np.stack([bank_r(m.r_min, m.r_max, m.n) for m in mons])
         self.bank = AkfBank(R, window=[m.window for m in mons], z_c=[m.z_c for m in mons],
                             p0=[m.p0 for m in mons], q0=[m.q0 for m in mons])
@@ -284,6 +287,8 @@ class Processor:
             return
         if self.bank is None:
             self._setup(C)
+            if self.bank is None:
+                return
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
         try:
             vals = np.frombuffer(b"".join(f.payload for f in frames), dtype="<f4")
@@ -326,6 +331,8 @@ class Processor:
                 return
         if self.bank is None:
             self._setup(C)
+            if self.bank is None:
+                return
         L = self.block_len
         good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
         if len(good) < len(frames):

@@ -176,8 +176,12 @@ BAD_DICTS = [
     ({"link": {"reconnect_min_s": 9}}, "link.reconnect_min_s: must be <= reconnect_max_s = 5.0 (got 9.0)"),
     ({"output": {"akf_trace_filter": 11}}, "output.akf_trace_filter: must be <= monitor.n = 10 (got 11)"),
     (
-        {"output": {"akf_trace_filter": 5}, "channels": [{"name": "a"}, {"name": "b", "n": 4}]},
-        "output.akf_trace_filter: must be <= channels[1].n = 4 (got 5)",
+        {"output": {"akf_trace_filter": 5}, "channels": [{"name": "a", "n": 4}, {"name": "b", "n": 4}]},
+        "output.akf_trace_filter: must be <= channels[0].n = 4 (got 5)",
+    ),
+    (
+        {"channels": [{"name": "a"}, {"name": "b", "n": 4}]},
+        "channels[1].n: every channel needs the same bank size n (channels[0] has 10)",
     ),
     ({"channels": [{"name": "a"}, {"name": "a"}]}, "cfg.yaml: channels[1].name: duplicate channel name (also channels[0]) (got 'a')"),
     ({"channels": [{"name": "a", "index": 1}, {"name": "b"}]}, "channels[1].index: duplicate channel index (also channels[0]) (got 1)"),
@@ -269,7 +273,7 @@ VALID = {
     "monitor": {"n": 5, "r_min": 0.01, "r_max": 0.2, "c": 0.5},
     "channels": [
         {"name": "a", "r_max": 0.3},
-        {"name": "b", "index": 3, "scale": 0.5, "offset": 2048, "n": 4},
+        {"name": "b", "index": 3, "scale": 0.5, "offset": 2048, "window": 4},
     ],
 }
 KEYS = sorted(
@@ -334,7 +338,7 @@ def mutated(draw):
 
 def test_valid_base_document_loads():
     cfg = config_from_dict(VALID)
-    assert cfg.channels[1].monitor.n == 4 and cfg.channels[1].index == 3
+    assert cfg.channels[1].monitor.window == 4 and cfg.channels[1].index == 3
 
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])

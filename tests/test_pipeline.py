@@ -101,3 +101,15 @@ def test_akf_trace_per_observation_with_missing_as_null():
     ok = [m for m in tr if not m["missing"]]
     assert all(m["lower"] < m["x_prior"] < m["upper"] for m in ok)
     assert all((m["y"] < m["lower"] or m["y"] > m["upper"]) == m["outlier"] for m in ok)
+
+
+def test_configured_channel_not_in_the_stream_is_an_event_not_a_crash():
+    from cmsensord.config import config_from_dict
+
+    cfg = config_from_dict({"channels": [{"name": "motor", "index": 5}]})
+    sink = ListSink()
+    proc = Processor(cfg, sink, clock_ns=FIXED_CLOCK)
+    proc.handle(Decoder().feed(rms_stream(seconds=2)))
+    msgs = [m["message"] for m in sink.topic("/cm/events")]
+    assert any("none of the configured channels" in m for m in msgs)
+    assert not sink.topic("/cm/motor/severity")
