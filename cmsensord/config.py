@@ -40,6 +40,9 @@ __all__ = [
     "ChannelConfig",
     "LinkConfig",
     "OutputConfig",
+    "TachoConfig",
+    "OrdersConfig",
+    "ComponentConfig",
     "Config",
     "MAX_CHANNELS",
     "load_config",
@@ -311,6 +314,78 @@ class OutputConfig:
         _validate(self)
 
 
+def _one_frequency(obj: Any) -> tuple[str, str, Any] | None:
+    if (obj.order is None) == (obj.freq_hz is None):
+        return "order", "give exactly one of order (x shaft speed) or freq_hz (fixed frequency)", obj.order
+    given = [k for k in ("r", "bandwidth_hz", "bandwidth_pct") if getattr(obj, k) is not None]
+    if len(given) > 1:
+        return given[1], f"give at most one of r, bandwidth_hz, bandwidth_pct (also {given[0]})", \
+            getattr(obj, given[1])
+    return None
+
+
+@dataclass(frozen=True)
+class ComponentConfig:
+    """One component the order tracker follows (seed 001): an order or a fixed frequency."""
+
+    name: str = _setting(dataclasses.MISSING, "component name, e.g. 1x, whirl, whip",
+                         pattern=r"[A-Za-z0-9_.]+",
+                         pattern_reason="must contain only letters, digits, _ and .")
+    order: float | None = _setting(None, "multiple of the shaft speed (e.g. 1, 2, 0.47)", gt=0)
+    freq_hz: float | None = _setting(None, "fixed frequency [Hz] (e.g. a 47 Hz resonance)", gt=0)
+    r: float | None = _setting(None, "the paper's weighting factor r (eq. 25)", gt=0)
+    bandwidth_hz: float | None = _setting(None, "-3 dB bandwidth [Hz] instead of r", gt=0)
+    bandwidth_pct: float | None = _setting(None, "-3 dB bandwidth in % of the component's "
+                                           "frequency instead of r", gt=0, le=100)
+    alarm_rms: float | None = _setting(None, "order alarm: event when the RMS rises above this "
+                                       "[m/s^2] (and when it falls below alarm_clear of it)", gt=0)
+
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_one_frequency,)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+def _default_components() -> tuple[ComponentConfig, ...]:
+    return tuple(ComponentConfig(name=f"{k}x", order=float(k)) for k in (1, 2, 3, 4))
+
+
+@dataclass(frozen=True)
+class OrdersConfig:
+    """The recursive Vold-Kalman order tracker (seed 001) on RAW channels with a tacho."""
+
+    enabled: bool = _setting(True, "track orders when the board sends RAW blocks and a tacho")
+    q1: float = _setting(0.1, "process noise q1 of the structural equation (Q1 = q1 I, eq. 25)", gt=0)
+    bandwidth_pct: float = _setting(5.0, "default -3 dB bandwidth in % of each component's "
+                                    "frequency (for components without r/bandwidth)", gt=0, le=100)
+    min_rpm: float = _setting(300.0, "no order output below this shaft speed", ge=0)
+    smoother_lag_s: float = _setting(0.0, "fixed-lag RTS smoother lag (0: the plain recursive "
+                                     "filter)", ge=0, le=0.2)
+    output_rate_hz: float = _setting(10.0, "order RMS/amplitude messages per second", ge=1, le=100)
+    alarm_clear: float = _setting(0.8, "an order alarm clears below alarm_clear x alarm_rms",
+                                  gt=0, lt=1)
+    components: tuple[ComponentConfig, ...] = field(
+        default_factory=_default_components,
+        metadata={"help": "components to track (default: orders 1, 2, 3, 4)"})
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+@dataclass(frozen=True)
+class TachoConfig:
+    """The shaft tacho (TACHO frames, PROTOCOL.md type 4)."""
+
+    input: int = _setting(0, "tacho input index (TACHO chan) to use", ge=0, le=255)
+    ppr: int | None = _setting(None, "pulses per revolution (default: the board's STATUS)",
+                               ge=1, le=255)
+    timeout_s: float = _setting(0.5, "no edge for this long -> tacho_lost event, speed invalid", gt=0)
+    f_r_from_tacho: bool = _setting(True, "use the tacho speed as f_r of the anomaly decisions")
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
 def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
     """Rules spanning sections: channel uniqueness, akf_trace_filter <= n."""
     if not cfg.channels:
@@ -367,6 +442,8 @@ class Config:
     channels: tuple[ChannelConfig, ...] = field(
         default_factory=lambda: _default_channels(1), metadata={"help": "channels"}
     )
+    tacho: TachoConfig = field(default_factory=TachoConfig, metadata={"help": "shaft tacho"})
+    orders: OrdersConfig = field(default_factory=OrdersConfig, metadata={"help": "order tracker"})
 
     _RULES: ClassVar[tuple[_Rule, ...]] = (_config_rules,)
 
@@ -385,7 +462,8 @@ class Config:
 # Loading
 # ---------------------------------------------------------------------------
 
-_SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig}
+_SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
+                              "tacho": TachoConfig}
 _MONITOR_KEYS = tuple(f.name for f in dataclasses.fields(MonitorConfig))
 _CHANNEL_OWN_KEYS = tuple(
     f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
@@ -449,7 +527,7 @@ def config_from_dict(
         raise ConfigError(
             source,
             None,
-            "top level must be a mapping with the sections link, output, monitor, channels",
+            "top level must be a mapping with the sections link, output, monitor, channels, tacho, orders",
             d,
         )
     _reject_unknown(d, _TOP_KEYS, source, "")
@@ -459,6 +537,7 @@ def config_from_dict(
         _reject_unknown(values, [f.name for f in dataclasses.fields(cls)], source, name)
         sections[name] = _build(cls, values, source, name)
     monitor: MonitorConfig = sections["monitor"]
+    sections["orders"] = _build_orders(d.get("orders"), source)
 
     raw_channels = d.get("channels")
     if raw_channels is None:
@@ -485,6 +564,31 @@ def config_from_dict(
             built.append(_build(ChannelConfig, {**own, "monitor": ch_monitor}, source, path))
         channels = tuple(built)
     return _build(Config, {**sections, "channels": channels}, source, "")
+
+
+def _build_orders(raw: Any, source: str) -> OrdersConfig:
+    values = _mapping(raw, source, "orders")
+    _reject_unknown(values, [f.name for f in dataclasses.fields(OrdersConfig)], source, "orders")
+    if "components" in values:
+        comps = values["components"]
+        if not isinstance(comps, list) or not comps:
+            raise ConfigError(source, "orders.components", "expected a non-empty list of components",
+                              comps)
+        built = []
+        keys = [f.name for f in dataclasses.fields(ComponentConfig)]
+        for i, entry in enumerate(comps):
+            path = f"orders.components[{i}]"
+            if not isinstance(entry, dict):
+                raise ConfigError(source, path, "expected a mapping (name: ..., order: ...)", entry)
+            _reject_unknown(entry, keys, source, path)
+            built.append(_build(ComponentConfig, entry, source, path))
+        names = [c.name for c in built]
+        dup = next((n for n in names if names.count(n) > 1), None)
+        if dup is not None:
+            raise ConfigError(source, f"orders.components[{names.index(dup, names.index(dup) + 1)}].name",
+                              "duplicate component name", dup)
+        values = {**values, "components": tuple(built)}
+    return _build(OrdersConfig, values, source, "orders")
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -588,6 +692,10 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
         "output": dataclasses.asdict(cfg.output),
         "monitor": glob,
         "channels": channels,
+        "tacho": dataclasses.asdict(cfg.tacho),
+        "orders": {**dataclasses.asdict(cfg.orders),
+                   "components": [{k: v for k, v in dataclasses.asdict(c).items() if v is not None}
+                                  for c in cfg.orders.components]},
     }
 
 

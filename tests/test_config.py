@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import re
 import dataclasses
 from pathlib import Path
 
@@ -192,7 +193,7 @@ BAD_DICTS = [
     ({"channels": {"name": "a"}}, "channels: expected a list of channel entries (got {'name': 'a'})"),
     ({"channels": ["a"]}, "channels[0]: expected a mapping (name: ..., index: ...) (got 'a')"),
     ({"monitor": [1, 2]}, "cfg.yaml: monitor: expected a mapping of keys to values (got [1, 2])"),
-    ([1, 2], "cfg.yaml: top level must be a mapping with the sections link, output, monitor, channels (got [1, 2])"),
+    ([1, 2], "cfg.yaml: top level must be a mapping with the sections link, output, monitor, channels, tacho, orders (got [1, 2])"),
     ("text", "cfg.yaml: top level must be a mapping"),
 ]
 
@@ -212,7 +213,7 @@ BAD_FILES = [
     ("monitor:\n  n: 3\n  r_max: [0.1\n", "YAML syntax error at line 4, column 1"),
     ("monitor:\n  n: 3\n    z_c: 2\n", "YAML syntax error at line 3, column 8: mapping values are not allowed here"),
     ("monitor:\n  r_max: 0.1\n  r_max: 0.2\n", "YAML syntax error at line 3, column 3: found duplicate key 'r_max'"),
-    ("- monitor\n- link\n", "top level must be a mapping with the sections link, output, monitor, channels (got ['monitor', 'link'])"),
+    ("- monitor\n- link\n", "top level must be a mapping with the sections link, output, monitor, channels, tacho, orders (got ['monitor', 'link'])"),
     ("42\n", "top level must be a mapping"),
     ("monitor:\n  f_r: 1e999\n", "monitor.f_r: expected a finite number (got inf)"),
     ("monitor: !!python/object:os.system {}\n", "YAML syntax error at line 1, column 10: could not determine a constructor"),
@@ -366,3 +367,35 @@ def test_random_yaml_text_loads_or_raises_config_error(tmp_path_factory, text):
     except ConfigError as err:
         assert str(err).startswith(f"{path}: ")
         assert "\n" not in str(err)
+
+
+def test_default_yaml_holds_the_tacho_and_orders_defaults():
+    cfg = load_config(Path(__file__).resolve().parents[1] / "config" / "default.yaml")
+    assert cfg.tacho == default_config(1).tacho
+    assert cfg.orders == default_config(1).orders
+    assert [c.order for c in cfg.orders.components] == [1.0, 2.0, 3.0, 4.0]
+
+
+@pytest.mark.parametrize("orders, message", [
+    ({"components": [{"name": "a"}]}, "orders.components[0].order: give exactly one of order"),
+    ({"components": [{"name": "a", "order": 1, "freq_hz": 3}]}, "give exactly one of order"),
+    ({"components": [{"name": "a", "order": 1, "r": 3, "bandwidth_hz": 2}]},
+     "orders.components[0].bandwidth_hz: give at most one of r, bandwidth_hz, bandwidth_pct"),
+    ({"components": [{"name": "a", "order": 1}, {"name": "a", "order": 2}]},
+     "orders.components[1].name: duplicate component name"),
+    ({"components": []}, "orders.components: expected a non-empty list"),
+    ({"components": [{"name": "a", "order": 1, "ordr": 2}]}, "unknown key 'ordr' (did you mean 'order'?)"),
+    ({"smoother_lag_s": 0.5}, "orders.smoother_lag_s: must be >= 0 and <= 0.2"),
+])
+def test_bad_orders_sections(orders, message):
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        config_from_dict({"orders": orders}, source="x.yaml")
+
+
+def test_orders_round_trip():
+    d = {"orders": {"components": [{"name": "whirl", "order": 0.47, "alarm_rms": 1.0},
+                                   {"name": "whip", "freq_hz": 47, "bandwidth_hz": 2}]},
+         "tacho": {"ppr": 4}}
+    cfg = config_from_dict(d)
+    assert config_from_dict(config_to_dict(cfg)) == cfg
+    assert cfg.orders.components[1].freq_hz == 47.0 and cfg.tacho.ppr == 4
