@@ -10,12 +10,17 @@ block sent at 100 Hz over the UART) and the exact bytes it sends (PROTOCOL.md):
   block, in float64, sent as float32, with nothing removed;
 * tacho: rising edges where the shaft angle (the integral of the scenario's
   ``shaft_hz``) passes a multiple of 1/ppr revolution, as offsets from the
-  block's t0 in 1/256 sample (a timer capture);
+  block's t0 in 1/256 sample (a timer capture); optional encoder faults
+  (``tacho_missed``, ``tacho_extra``, ``tacho_jitter``) drawn per pulse from
+  ``SeedSequence([seed, TACHO_STREAM, m // 4096])``, so they are deterministic
+  per seed and independent of chunking;
 * framing, only through the encoders of :mod:`cmsensord.protocol`: STATUS at
   boot (block 0) and every ``status_every_s``, then per block the RMS frame (RMS
   mode) or one RAW frame per channel (RAW mode), then a TACHO frame when a
   tacho is wired; seq +1 for every frame (u16 wrap), t0 = the sample index of
-  the block's first sample (u32 wrap).
+  the block's first sample (u32 wrap);
+* the link's byte budget (:func:`link_budget`, PROTOCOL.md's table): whether a
+  UART at a given baud rate carries the stream.
 
 Samples are produced in vectorised chunks of ``chunk_blocks`` blocks (100, one
 second, aligned with the scenario's 1-s segments); only the frame encoding is
@@ -44,6 +49,7 @@ from cmsensord.protocol import (
     MAX_PAYLOAD,
     MODE_RAW,
     MODE_RMS,
+    OVERHEAD,
     Status,
     encode_raw,
     encode_rms,
@@ -51,13 +57,20 @@ from cmsensord.protocol import (
     encode_tacho,
 )
 
-from .scenarios import Scenario
+from .scenarios import Scenario, _gauss, _generator
 
-__all__ = ["ADC_MAX", "BoardConfig", "Board"]
+__all__ = ["ADC_MAX", "BoardConfig", "Board", "TACHO_STREAM", "link_budget", "link_streams",
+           "DEFAULT_BAUD"]
 
 ADC_MAX = 4095  # 12-bit ADC
 _SUB = 256  # tacho edge resolution: 1/256 sample
 _U32 = 1 << 32
+#: ``SeedSequence([seed, TACHO_STREAM, m // _TACHO_DRAW_BLOCK])`` seeds the encoder
+#: faults of pulses m (the scenario's seed; streams 0..8 are channels, 1 << 16 the machine)
+TACHO_STREAM = (1 << 16) + 1
+_TACHO_DRAW_BLOCK = 4096
+_EXTRA_FRAC = (0.3, 0.7)  # a spurious pulse lies this far into the pulse interval (angle)
+_JITTER_TRUNC = 4.3  # the Gaussian table is truncated at +-4.3 sigma
 
 
 #: accelerometer range of the simulated board: +-20 g (196 m/s^2) over the 12-bit
@@ -88,6 +101,24 @@ class BoardConfig:
     fw_version: int = 0x0100
     status_every_s: float = 1.0
     overrun_blocks: tuple[int, ...] = ()
+    # shaft-encoder faults (see Board.tacho_edges): a probability per pulse, or the
+    # pulse indices m (edge where ppr * turns = m, m = 0 at t = 0) to hit
+    tacho_missed: float | tuple[int, ...] = 0.0  # pulses not seen
+    tacho_extra: float | tuple[int, ...] = 0.0  # spurious pulse after pulse m
+    tacho_jitter: float = 0.0  # std of the edge-time jitter, samples
+
+    @staticmethod
+    def _fault_spec(name: str, v) -> float | tuple[int, ...]:
+        if isinstance(v, (list, tuple, np.ndarray)):
+            idx = tuple(int(i) for i in v)
+            if any(i < 0 for i in idx) or any(i != j for i, j in zip(idx, v)):
+                raise ValueError(f"{name}: pulse indices must be non-negative integers, got {v!r}")
+            return tuple(sorted(set(idx)))
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not 0.0 <= float(v) < 1.0:
+            raise ValueError(f"{name} must be a probability in [0, 1) or a tuple of pulse indices, "
+                             f"got {v!r}")
+        return float(v)
 
     def __post_init__(self) -> None:
         if self.mode not in ("rms", "raw"):
@@ -124,6 +155,16 @@ class BoardConfig:
         if not self.status_every_s > 0:
             raise ValueError(f"status_every_s must be > 0, got {self.status_every_s!r}")
         self.overrun_blocks = tuple(int(b) for b in self.overrun_blocks)
+        self.tacho_missed = self._fault_spec("tacho_missed", self.tacho_missed)
+        self.tacho_extra = self._fault_spec("tacho_extra", self.tacho_extra)
+        if not (self.tacho_jitter >= 0 and math.isfinite(self.tacho_jitter)):
+            raise ValueError(f"tacho_jitter must be >= 0 samples, got {self.tacho_jitter!r}")
+        self.tacho_jitter = float(self.tacho_jitter)
+
+    @property
+    def tacho_faults(self) -> bool:
+        """True when any shaft-encoder fault is configured."""
+        return bool(self.tacho_missed) or bool(self.tacho_extra) or self.tacho_jitter > 0
 
 
 class Board:
@@ -148,6 +189,7 @@ class Board:
         self.offset = np.asarray(config.offset, dtype=np.float32).astype(np.float64)
         self._overrun_set = frozenset(config.overrun_blocks)
         self._status_every = max(1, int(round(config.status_every_s * self.fs / self.block_len)))
+        self._tacho_draw_cache: dict[int, dict[str, np.ndarray]] = {}
 
     # -- the ADC and the firmware's arithmetic ----------------------------------
     def counts(self, start: int, n: int) -> np.ndarray:
@@ -187,31 +229,122 @@ class Board:
         """Rising tacho edges of blocks [start_block, start_block + n_blocks).
 
         Returns (block index, offset from the block's t0 in 1/256 sample (uint32)),
-        in time order. An edge is where ``ppr * shaft_turns`` reaches an integer m;
-        the sample interval [i, i + 1) with P(i) <= m < P(i + 1) holds it, at
-        i + (m - P(i)) / (P(i + 1) - P(i)) (linear within one sample), truncated
-        to 1/256 sample (the capture timer's tick).
+        in time order. An edge is where ``ppr * shaft_turns`` reaches an integer m
+        (pulse m; pulse 0 is at t = 0); the sample interval [i, i + 1) with
+        P(i) <= m < P(i + 1) holds it, at i + (m - P(i)) / (P(i + 1) - P(i))
+        (linear within one sample), truncated to 1/256 sample (the capture
+        timer's tick). Encoder faults (BoardConfig), per pulse m:
+
+        * ``tacho_missed``: pulse m is not seen;
+        * ``tacho_extra``: a spurious pulse where ``ppr * turns`` reaches
+          m + f, f uniform in [0.3, 0.7] (drawn per m), i.e. inside the pulse
+          interval after pulse m (not jittered);
+        * ``tacho_jitter``: the edge time of pulse m moves by ``tacho_jitter`` x
+          N(0, 1) samples (truncated at 4.3 sigma); an edge jittered before
+          sample 0 is lost, one jittered across a block boundary is sent with
+          the block it lands in.
+
+        Each draw belongs to the pulse, not to the request, so the edges never
+        depend on how the blocks are chunked.
         """
+        q, _, _ = self._tacho_pulses(start_block, n_blocks)
+        L = self.block_len
+        blk, off = np.divmod(q, L * _SUB)
+        return blk, off.astype(np.uint32)
+
+    def tacho_pulses(self, start_block: int, n_blocks: int) -> dict[str, np.ndarray]:
+        """What the encoder did in blocks [start_block, start_block + n_blocks) (for tests).
+
+        ``edges``: int64 edge times in 1/256 sample from sample 0 (what
+        :meth:`tacho_edges` sends); ``pulse``: the pulse index m of each edge
+        (for a spurious edge, the pulse it follows); ``extra``: bool, spurious;
+        ``missed``: pulse indices whose (unjittered) edge falls in the range and
+        was dropped.
+        """
+        q, m, extra = self._tacho_pulses(start_block, n_blocks)
+        _, missed = self._tacho_pulses(start_block, n_blocks, missed_only=True)
+        return {"edges": q, "pulse": m, "extra": extra, "missed": missed}
+
+    def _tacho_draws(self, m: np.ndarray) -> dict[str, np.ndarray]:
+        """The per-pulse fault draws of pulse indices m (int64 >= 0)."""
+        B = _TACHO_DRAW_BLOCK
+        out = {k: np.empty(m.size) for k in ("miss", "extra", "frac", "jit")}
+        kb = m // B
+        for k in np.unique(kb):
+            d = self._tacho_draw_cache.get(int(k))
+            if d is None:
+                rng = _generator(self.scenario.seed, TACHO_STREAM, int(k))
+                d = {"miss": rng.random(B), "extra": rng.random(B),
+                     "frac": rng.uniform(*_EXTRA_FRAC, B), "jit": _gauss(rng, B)}
+                self._tacho_draw_cache[int(k)] = d
+                while len(self._tacho_draw_cache) > 4:
+                    self._tacho_draw_cache.pop(next(iter(self._tacho_draw_cache)))
+            sel = kb == k
+            for key in out:
+                out[key][sel] = d[key][m[sel] - k * B]
+        return out
+
+    @staticmethod
+    def _hit(spec: float | tuple[int, ...], m: np.ndarray, u: np.ndarray) -> np.ndarray:
+        if isinstance(spec, tuple):
+            return np.isin(m, np.asarray(spec, dtype=np.int64))
+        return u < spec
+
+    def _tacho_pulses(self, start_block: int, n_blocks: int, missed_only: bool = False):
+        cfg = self.config
         L = self.block_len
         i0 = start_block * L
         n = n_blocks * L
-        idx = np.arange(i0, i0 + n + 1, dtype=np.int64)
-        p = self.config.ppr * self.scenario.shaft_turns(idx / self.fs)
-        lo = np.ceil(p[:-1])
-        cnt = (np.ceil(p[1:]) - lo).astype(np.int64)
-        cnt[cnt < 0] = 0  # the shaft never turns back; guard anyway
-        where = np.nonzero(cnt)[0]
-        if where.size == 0:
-            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.uint32)
-        reps = cnt[where]
-        rel = np.repeat(where, reps)  # sample interval, relative to i0
-        first = np.repeat(np.cumsum(reps) - reps, reps)
-        m = np.repeat(lo[where], reps) + (np.arange(rel.size) - first)
-        frac = (m - p[rel]) / (p[rel + 1] - p[rel])
-        q = rel * _SUB + np.floor(frac * _SUB).astype(np.int64)
-        q = np.clip(q, rel * _SUB, rel * _SUB + _SUB - 1)
-        blk, off = np.divmod(q, L * _SUB)
-        return blk + start_block, off.astype(np.uint32)
+        jit = cfg.tacho_jitter
+        margin = int(math.ceil(_JITTER_TRUNC * jit)) + 1 if jit > 0 else 0
+        a = max(i0 - margin, 0)
+        b = i0 + n + margin
+        idx = np.arange(a, b + 1, dtype=np.int64)
+        p = cfg.ppr * self.scenario.shaft_turns(idx / self.fs)
+
+        def locate(level: np.ndarray) -> np.ndarray:
+            """1/256-sample times (int64, from sample 0) where p reaches ``level`` (in [p[0], p[-1]))."""
+            rel = np.searchsorted(p, level, side="right") - 1
+            rel = np.clip(rel, 0, p.size - 2)
+            frac = (level - p[rel]) / (p[rel + 1] - p[rel])
+            q = rel * _SUB + np.floor(frac * _SUB).astype(np.int64)
+            return np.clip(q, rel * _SUB, rel * _SUB + _SUB - 1) + a * _SUB
+
+        m = np.arange(math.ceil(p[0]), math.ceil(p[-1]), dtype=np.int64)  # p[0] <= m < p[-1]
+        m = m[m >= 0]
+        lo_q, hi_q = i0 * _SUB, (i0 + n) * _SUB
+        if not cfg.tacho_faults:
+            if missed_only:
+                return None, np.empty(0, dtype=np.int64)
+            q = locate(m.astype(np.float64))
+            sel = (q >= lo_q) & (q < hi_q)
+            return q[sel], m[sel], np.zeros(int(sel.sum()), dtype=bool)
+        draws = self._tacho_draws(m)
+        q = locate(m.astype(np.float64))
+        missed = self._hit(cfg.tacho_missed, m, draws["miss"])
+        if missed_only:
+            sel = missed & (q >= lo_q) & (q < hi_q)
+            return None, m[sel]
+        if jit > 0:
+            shift = np.floor(jit * draws["jit"] * _SUB).astype(np.int64)
+            q = q + shift
+        keep = ~missed
+        q, m_real = q[keep], m[keep]
+        # spurious pulses after pulse me, at level me + f
+        me = np.arange(max(math.floor(p[0]) - 1, 0), max(math.ceil(p[-1]), 0), dtype=np.int64)
+        de = self._tacho_draws(me)
+        hit = self._hit(cfg.tacho_extra, me, de["extra"])
+        level = me + de["frac"]
+        ok = hit & (level >= p[0]) & (level < p[-1])
+        me = me[ok]
+        qe = locate(level[ok])
+        q_all = np.concatenate([q, qe])
+        m_all = np.concatenate([m_real, me])
+        extra = np.concatenate([np.zeros(q.size, dtype=bool), np.ones(qe.size, dtype=bool)])
+        sel = (q_all >= max(lo_q, 0)) & (q_all < hi_q)
+        q_all, m_all, extra = q_all[sel], m_all[sel], extra[sel]
+        order = np.lexsort((extra, q_all))
+        return q_all[order], m_all[order], extra[order]
 
     # -- observations without framing ------------------------------------------------
     def observations(self, n_blocks: int, start_block: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -333,3 +466,64 @@ class Board:
             if pending:
                 f.write(b"".join(pending))
         return {"frames": frames, "bytes": total, "blocks": blocks}
+
+
+# --------------------------------------------------------------------------- link budget
+
+#: the UART's default rate (PROTOCOL.md, Link)
+DEFAULT_BAUD = 921600
+_BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
+_TACHO_EDGES_BUDGET = 4  # PROTOCOL.md's table: TACHO with <= 4 edges per block
+
+
+def link_streams(mode: str, n_channels: int, block_len: int = 250, fs: int = 25000,
+                 tacho: bool = False, *, tacho_edges: int = _TACHO_EDGES_BUDGET,
+                 status_per_s: float = 1.0) -> dict[str, float]:
+    """Bytes per second of each stream the board sends (PROTOCOL.md, byte budget table).
+
+    Every frame costs 18 bytes of overhead (sync, header, CRC) plus its payload:
+    RMS ``4 C`` per block; RAW ``2 block_len`` per channel and block; TACHO
+    ``2 + 4 N`` per block with N = ``tacho_edges``; STATUS ``20 + 8 C`` once a
+    second. Returns ``{"rms" or "raw", "tacho" (if wired), "status"}``.
+    """
+    if mode not in ("rms", "raw"):
+        raise ValueError(f"mode must be 'rms' or 'raw', got {mode!r}")
+    if not isinstance(n_channels, (int, np.integer)) or not 1 <= n_channels <= 8:
+        raise ValueError(f"n_channels must be an integer 1..8, got {n_channels!r}")
+    if not block_len >= 1 or not fs > 0:
+        raise ValueError(f"block_len and fs must be positive, got {block_len!r}, {fs!r}")
+    if not tacho_edges >= 0:
+        raise ValueError(f"tacho_edges must be >= 0, got {tacho_edges!r}")
+    blocks_per_s = fs / block_len
+    ovh = OVERHEAD
+    out: dict[str, float] = {}
+    if mode == "rms":
+        out["rms"] = (ovh + 4 * n_channels) * blocks_per_s
+    else:
+        out["raw"] = (ovh + 2 * block_len) * n_channels * blocks_per_s
+    if tacho:
+        out["tacho"] = (ovh + 2 + 4 * tacho_edges) * blocks_per_s
+    out["status"] = (ovh + 20 + 8 * n_channels) * status_per_s
+    return out
+
+
+def link_budget(mode: str, n_channels: int, block_len: int, fs: int, tacho: bool, baud: float,
+                *, tacho_edges: int = _TACHO_EDGES_BUDGET) -> tuple[float, bool, str]:
+    """(bytes_per_s, fits, message): can a UART at ``baud`` (8N1, 10 bits a byte) carry the stream?
+
+    ``bytes_per_s`` is the sum of :func:`link_streams` (data, TACHO with
+    ``tacho_edges`` edges per block, STATUS). At 921600 baud (92 160 B/s) one
+    RAW channel with a tacho fits (56 % + 4 %); two RAW channels do not.
+    ``message`` is one line for a log or a warning.
+    """
+    if not (baud > 0 and math.isfinite(baud)):
+        raise ValueError(f"baud must be a positive number, got {baud!r}")
+    streams = link_streams(mode, n_channels, block_len, fs, tacho, tacho_edges=tacho_edges)
+    total = float(sum(streams.values()))
+    capacity = baud / _BITS_PER_BYTE
+    fits = total <= capacity
+    what = f"{mode.upper()} {n_channels} ch" + (" + TACHO" if tacho else "") + " + STATUS"
+    verdict = "fits" if fits else ("does not fit" + ("; more raw channels need USB CDC" if mode == "raw" else ""))
+    msg = (f"{what}: {total:,.0f} B/s = {100 * total / capacity:.0f} % of a {baud:g}-baud UART "
+           f"({capacity:,.0f} B/s): {verdict}")
+    return total, fits, msg

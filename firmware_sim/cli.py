@@ -3,12 +3,19 @@
     python -m firmware_sim --list
     python -m firmware_sim --scenario degrading --duration 3600 --out capture.bin
     python -m firmware_sim --scenario faulty --channels 2 --tacho --pty --speed 10
+    python -m firmware_sim --scenario close_orders --mode raw --tacho --out cap.bin --truth truth.npz
+    python -m firmware_sim --scenario whirl --mode raw --tacho --tacho-missed 0.01 --tacho-jitter 2 --out w.bin
 
 ``--out`` writes the bytes as fast as possible and prints a one-line summary.
 ``--pty`` prints the slave device path as the first line of stdout (flushed),
 then streams paced at ``--speed`` x real time until ``--duration`` or
 SIGINT/SIGTERM, and prints the link statistics. Bad arguments give a one-line
-error and exit code 2.
+error and exit code 2. ``--truth`` writes the true waveforms (t, rpm, turns,
+each component of the run-up scenarios) of channel 0 to an .npz file
+(:func:`firmware_sim.scenarios.write_truth`). When the stream needs more
+bytes per second than a UART at ``--baud`` carries (PROTOCOL.md's byte
+budget), one warning line goes to stderr (a pty has no baud limit, so for
+``--pty`` it says that a real UART would not carry the stream).
 """
 
 from __future__ import annotations
@@ -22,8 +29,8 @@ import sys
 import threading
 import time
 
-from .board import Board, BoardConfig
-from .scenarios import SCENARIOS, make_scenario
+from .board import DEFAULT_BAUD, Board, BoardConfig, link_budget
+from .scenarios import SCENARIOS, make_scenario, write_truth
 
 __all__ = ["main"]
 
@@ -50,6 +57,17 @@ def _param(text: str) -> tuple[str, object]:
     return key.strip(), parsed
 
 
+def _fault(text: str) -> float | tuple[int, ...]:
+    """A probability ("0.01", with a decimal point) or pulse indices ("5" or "5,17,300": integers)."""
+    t = text.strip().strip("()[]")
+    try:
+        if "," in t or t.isdigit():
+            return tuple(int(v) for v in t.split(",") if v.strip())
+        return float(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a probability or pulse indices like 5,17, got {text!r}") from None
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="firmware_sim", description="The simulated TM4C1294 ADC board of cmsensord "
                 "(PROTOCOL.md): writes a capture file or serves a pseudo-terminal.")
@@ -59,10 +77,24 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--duration", type=float, default=None,
                    help="seconds to generate; also the scenario's time axis (degrading). "
-                        "Default: 3600 for --out, endless for --pty")
+                        "Default: 3600 for --out (a run-up: its own length, whirl 180 s, "
+                        "close_orders 5 s), endless for --pty")
     p.add_argument("--mode", choices=("rms", "raw"), default="rms", help="RMS frames or RAW blocks")
     p.add_argument("--tacho", action="store_true", help="send a TACHO frame per block")
     p.add_argument("--ppr", type=int, default=1, help="tacho pulses per revolution, 1..255 (default 1)")
+    p.add_argument("--tacho-missed", type=_fault, default=0.0, metavar="P|M,M,..",
+                   help="encoder fault: probability a pulse is missed (0.01), or the pulse indices "
+                        "to drop (integers: 5,17; pulse 0 is at t = 0)")
+    p.add_argument("--tacho-extra", type=_fault, default=0.0, metavar="P|M,M,..",
+                   help="encoder fault: probability of a spurious pulse after a pulse, or the pulse indices")
+    p.add_argument("--tacho-jitter", type=float, default=0.0, metavar="SAMPLES",
+                   help="encoder fault: std of the edge-time jitter in samples (default 0)")
+    p.add_argument("--baud", type=float, default=DEFAULT_BAUD,
+                   help=f"UART rate the stream must fit (default {DEFAULT_BAUD}); warns when it does not")
+    p.add_argument("--truth", metavar="FILE.npz",
+                   help="also write the true waveforms (t, rpm, turns, components) of channel 0")
+    p.add_argument("--truth-rate", type=float, default=None, metavar="HZ",
+                   help="sample rate of the truth file (default: the board's 25 kHz)")
     p.add_argument("--t0-start", type=int, default=0, help="initial sample counter (e.g. 4294967000 to wrap soon)")
     p.add_argument("--param", action="append", type=_param, default=[], metavar="KEY=VALUE",
                    help="scenario parameter, repeatable (e.g. --param impact_peak=8)")
@@ -97,16 +129,41 @@ def main(argv: list[str] | None = None) -> int:
             raise _UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
         if not args.speed >= 0:
             raise _UsageError(f"--speed must be >= 0, got {args.speed}")
-        duration = args.duration if args.duration is not None else (3600.0 if args.out else None)
+        natural = getattr(SCENARIOS.get(args.scenario), "natural_duration_s", None)
+        duration = args.duration if args.duration is not None else (
+            (natural or 3600.0) if args.out else None)
         scenario = make_scenario(args.scenario, n_channels=args.channels, seed=args.seed,
-                                 duration_s=duration if duration is not None else 3600.0,
+                                 duration_s=duration if duration is not None else (natural or 3600.0),
                                  **dict(args.param))
         config = BoardConfig(mode=args.mode, n_channels=args.channels, fs=scenario.fs,
-                             tacho=args.tacho, ppr=args.ppr, t0_start=args.t0_start)
+                             tacho=args.tacho, ppr=args.ppr, t0_start=args.t0_start,
+                             tacho_missed=args.tacho_missed, tacho_extra=args.tacho_extra,
+                             tacho_jitter=args.tacho_jitter)
         board = Board(scenario, config)
+        if args.truth_rate is not None and not args.truth:
+            raise _UsageError("--truth-rate needs --truth FILE")
+        truth_duration = duration if duration is not None else natural
+        if args.truth and truth_duration is None:
+            raise _UsageError("--truth with --pty needs --duration")
+        _, fits, budget = link_budget(args.mode, args.channels, config.block_len, config.fs,
+                                      args.tacho, args.baud,
+                                      tacho_edges=_tacho_edges_per_block(scenario, config, duration))
     except (_UsageError, ValueError, TypeError) as exc:
         print(f"firmware_sim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if not fits:
+        where = ("the pty has no baud limit, but a real UART would not carry this stream" if args.pty
+                 else "the capture holds it all, but a real UART would not carry this stream")
+        print(f"firmware_sim: warning: {budget}; {where}", file=sys.stderr, flush=True)
+    if args.truth:
+        try:
+            write_truth(scenario, args.truth, truth_duration, rate=args.truth_rate)
+        except ValueError as exc:
+            print(f"firmware_sim: error: --truth: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        except OSError as exc:
+            print(f"firmware_sim: error: cannot write {args.truth}: {exc.strerror or exc}", file=sys.stderr)
+            return 1
 
     if args.out:
         t = time.perf_counter()
@@ -120,6 +177,17 @@ def main(argv: list[str] | None = None) -> int:
               f"{counts['blocks']} blocks, {counts['frames']} frames, {counts['bytes']} bytes in {dt:.1f} s")
         return 0
     return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold)
+
+
+def _tacho_edges_per_block(scenario, config: BoardConfig, duration: float | None) -> int:
+    """Edges per TACHO frame for the byte budget: the table's 4, or more for a fast shaft."""
+    if not config.tacho:
+        return 0
+    import numpy as np
+
+    span = duration if duration is not None else max(scenario.duration_s, 1.0)
+    top_hz = float(np.max(scenario.shaft_hz(np.linspace(0.0, span, 2001))))
+    return max(4, math.ceil(config.ppr * top_hz * config.block_len / config.fs))
 
 
 def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool = False) -> int:

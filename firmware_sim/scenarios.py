@@ -14,7 +14,15 @@ f_r = 28.66 Hz, with an accelerometer on top of it; a motor is "faulty" above
                 shape of the test input of seed 000, Figs. 14-16
 ``spikes``      the illustrative input of seed 000, Fig. 4: a random 100 Hz RMS
                 sequence with 25 single-block spikes per second
+``whirl``       seed 001 synthetic signal 1: journal-bearing run-up 0 -> 7000 rpm
+                in 180 s with oil whirl (order 0.47) and whip (47 Hz)
+``close_orders`` seed 001 synthetic signal 2: run-up 0 -> 3000 rpm in 5 s with
+                the close orders 4 and 4.2
 ==============  ===============================================================
+
+The two run-ups (:class:`RunUpScenario`) take their components from
+:mod:`firmware_sim.order_signals` and can write their true component waveforms
+beside a capture (:func:`write_truth`).
 
 Determinism and chunk invariance
 --------------------------------
@@ -52,7 +60,12 @@ __all__ = [
     "FaultyMotor",
     "DegradingMotor",
     "SpikesScenario",
+    "RunUpScenario",
+    "WhirlRunUp",
+    "CloseOrdersRunUp",
     "SCENARIOS",
+    "write_truth",
+    "truth_key",
     "make_scenario",
     "velocity_rms",
 ]
@@ -713,11 +726,224 @@ class SpikesScenario(Scenario):
         return out
 
 
+class RunUpScenario(Scenario):
+    """A seed-001 synthetic run-up (:mod:`firmware_sim.order_signals`) on the board.
+
+    Acceleration of channel c (gain g_c), in m/s^2 as the paper gives the
+    amplitudes::
+
+        a_c(t) = g_c * ( sum_i x_i(t) + sigma * w_c(t) ),   sigma = noise * ref_rms
+
+    where x_i are the run-up's components (``RunUp.signals``: orders
+    A(t) cos(2 pi o turns(t)) and fixed-frequency lines), evaluated at the
+    sample times (k * fs + m) / fs of each 1-s segment k (so chunking never
+    changes a sample), and w_c is the channel's own white Gaussian noise with
+    std 1 (16-bit quantised, see ``_gauss``) drawn per segment from
+    ``SeedSequence([seed, c, k])``. The noise std is ``noise`` (default 0.05,
+    issue 3 section 5) times the RMS of the order-1 component at its largest
+    (``RunUp.ref_rms``); it is scaled by the gain like the signal, so every
+    channel has the paper's signal-to-noise ratio. The noise is the only random
+    part; components and speed are analytic.
+
+    ``shaft_hz`` = rpm(t) / 60 and ``shaft_turns`` = the exact integral of the
+    run-up (``RunUp.turns``), so the tacho edges are exact crossings.
+    The run-up lasts the paper's time (``natural_duration_s``) times
+    ``time_scale``, or ``runup_s`` seconds if given; ``rpm_max`` overrides the
+    top speed (the components' switch-on speeds stay those of the paper).
+    After the run-up the speed and the amplitudes hold their end values, so a
+    ``duration_s`` longer than the run-up holds the top speed. ``duration_s``
+    itself does not shape the signal.
+    """
+
+    name = "runup"
+    natural_duration_s: float = 1.0
+    _factory: Callable[..., Any] | None = None
+
+    def __init__(self, *, n_channels: int = 1, duration_s: float = 3600.0, seed: int = 0,
+                 fs: int = 25000, channel_gains: tuple[float, ...] | None = None,
+                 noise: float = 0.05, time_scale: float = 1.0, runup_s: float | None = None,
+                 rpm_max: float | None = None):
+        super().__init__(n_channels=n_channels, duration_s=duration_s, seed=seed, fs=fs,
+                         channel_gains=channel_gains)
+        if not (noise >= 0 and math.isfinite(noise)):
+            raise ValueError(f"noise must be >= 0 (a fraction of the order-1 RMS), got {noise!r}")
+        if not (time_scale > 0 and math.isfinite(time_scale)):
+            raise ValueError(f"time_scale must be > 0, got {time_scale!r}")
+        if runup_s is not None and not (runup_s > 0 and math.isfinite(runup_s)):
+            raise ValueError(f"runup_s must be a positive number of seconds, got {runup_s!r}")
+        if runup_s is not None and time_scale != 1.0:
+            raise ValueError("give either runup_s or time_scale, not both")
+        if rpm_max is not None and not (rpm_max > 0 and math.isfinite(rpm_max)):
+            raise ValueError(f"rpm_max must be > 0, got {rpm_max!r}")
+        self.noise = float(noise)
+        self.time_scale = float(time_scale)
+        self.runup_s = float(runup_s) if runup_s is not None else self.natural_duration_s * self.time_scale
+        kwargs = {"duration_s": self.runup_s}
+        if rpm_max is not None:
+            kwargs["rpm_max"] = float(rpm_max)
+        self.runup = type(self)._factory(**kwargs)
+        self.rpm_max = self.runup.rpm_max
+        self.noise_std = self.noise * float(self.runup.ref_rms())
+
+    # -- physics ---------------------------------------------------------------
+    def shaft_hz(self, t) -> np.ndarray:
+        return self.runup.rpm(t) / 60.0
+
+    def shaft_turns(self, t) -> np.ndarray:
+        return self.runup.turns(t)
+
+    def severity(self, t) -> np.ndarray:
+        return np.zeros(np.shape(t))
+
+    def components(self, t) -> dict[str, np.ndarray]:
+        """The true component waveforms at times t [s] (gain 1, no noise)."""
+        return self.runup.signals(t)
+
+    def _render(self, k: int) -> np.ndarray:
+        L = self.segment_len
+        t = (k * L + np.arange(L, dtype=np.int64)) / self.fs
+        clean = self.runup.clean(t)
+        out = np.empty((self.n_channels, L))
+        for c in range(self.n_channels):
+            row = out[c]
+            if self.noise_std:
+                np.multiply(_gauss(_generator(self.seed, c, k), L), self.noise_std, out=row)
+                row += clean
+            else:
+                row[:] = clean
+            row *= self.channel_gains[c]
+        return out
+
+
+def _lazy_runup(name: str) -> Callable[..., Any]:
+    def make(**kwargs):
+        from . import order_signals
+
+        return order_signals.RUNUPS[name](**kwargs)
+
+    return staticmethod(make)
+
+
+class WhirlRunUp(RunUpScenario):
+    """``whirl``: seed 001 synthetic signal 1 (``order_signals.whirl_runup``).
+
+    A journal-bearing rotor runs up 0 -> 7000 rpm in 180 s: order 1 (unbalance)
+    1 -> 4 peak, order 0.47 (oil whirl) 2 -> 4 between 3000 and 6000 rpm, a
+    47-Hz line (oil whip) 4 -> 6 from 6000 rpm; noise 5 % of the order-1 RMS.
+    """
+
+    name = "whirl"
+    description = ("seed 001 signal 1: journal-bearing run-up 0 -> 7000 rpm in 180 s, order 1, "
+                   "oil whirl (order 0.47, 3000-6000 rpm) and whip (47 Hz from 6000 rpm)")
+    natural_duration_s = 180.0
+    _factory = _lazy_runup("whirl")
+
+
+class CloseOrdersRunUp(RunUpScenario):
+    """``close_orders``: seed 001 synthetic signal 2 (``order_signals.close_orders_runup``).
+
+    Run-up 0 -> 3000 rpm in 5 s: order 1 with RMS 2, order 4 with RMS 0 -> 10
+    and order 4.2 with RMS 2 -> 12 (peaks up to 17 m/s^2, inside the board's
+    +-20 g range); noise 5 % of the order-1 RMS.
+    """
+
+    name = "close_orders"
+    description = ("seed 001 signal 2: run-up 0 -> 3000 rpm in 5 s with order 1 and the close "
+                   "orders 4 and 4.2 (RMS up to 12 m/s^2)")
+    natural_duration_s = 5.0
+    _factory = _lazy_runup("close_orders")
+
+
+def truth_key(component_name: str) -> str:
+    """The .npz key of a component in a truth file: spaces become underscores ("order_0.47")."""
+    return component_name.replace(" ", "_")
+
+
+def write_truth(scenario: Scenario, path, duration_s: float, *, rate: float | None = None,
+                channel: int = 0, chunk_s: float = 10.0) -> dict[str, Any]:
+    """Write the true waveforms of ``scenario`` for ``duration_s`` seconds to an .npz file.
+
+    Arrays (one value per truth sample n at t = n / rate, n = 0 .. floor(duration * rate) - 1):
+
+    * ``t`` float64 [s]; ``rpm`` float64; ``turns`` float64 (shaft revolutions since t = 0);
+    * one float32 array per component, in m/s^2 as channel ``channel`` sees it (times
+      its gain), keyed by :func:`truth_key` of its name (``order_1``, ``order_0.47``,
+      ``47_Hz``, ``order_4``, ``order_4.2``); run-up scenarios only;
+    * ``accel`` float32: the channel's acceleration exactly as the board samples it
+      (components + noise, before the ADC), when ``rate`` divides ``fs`` (the truth
+      samples are then board samples);
+    * scalars/metadata: ``fs``, ``rate``, ``channel``, ``gain``, ``noise_std``
+      (m/s^2, of the channel), ``components`` (the original names), ``keys``,
+      ``scenario``, ``seed``.
+
+    ``rate`` defaults to the board rate ``fs``. Streams each array into the zip in
+    ``chunk_s`` pieces (bounded memory: 180 s at 25 kHz writes 4.5 M samples per
+    array). Returns {"samples", "keys"}.
+    """
+    import zipfile
+
+    from numpy.lib import format as npformat
+
+    fs = scenario.fs
+    rate = float(fs if rate is None else rate)
+    if not (rate > 0 and math.isfinite(rate)) or rate > fs:
+        raise ValueError(f"truth rate must be in (0, fs={fs}] Hz, got {rate!r}")
+    if not 0 <= channel < scenario.n_channels:
+        raise ValueError(f"channel must be 0..{scenario.n_channels - 1}, got {channel}")
+    if not duration_s > 0:
+        raise ValueError(f"duration must be > 0 s, got {duration_s!r}")
+    n = int(math.floor(duration_s * rate + 1e-9))
+    step = fs / rate
+    sub = int(round(step)) if abs(step - round(step)) < 1e-9 else None
+    gain = float(scenario.channel_gains[channel])
+    comps_fn = getattr(scenario, "components", None)
+    names = list(comps_fn(np.zeros(1))) if comps_fn is not None else []
+    chunk = max(1, int(chunk_s * rate))
+
+    def times(a: int, b: int) -> np.ndarray:
+        if sub is not None:  # the board's own sample times, computed the way the scenario does
+            return (np.arange(a, b, dtype=np.int64) * sub) / fs
+        return np.arange(a, b, dtype=np.int64) / rate
+
+    series: list[tuple[str, str, Callable[[int, int], np.ndarray]]] = [
+        ("t", "<f8", times),
+        ("rpm", "<f8", lambda a, b: 60.0 * np.asarray(scenario.shaft_hz(times(a, b)), dtype=np.float64)),
+        ("turns", "<f8", lambda a, b: scenario.shaft_turns(times(a, b))),
+    ]
+    for name in names:
+        series.append((truth_key(name), "<f4",
+                       lambda a, b, name=name: gain * comps_fn(times(a, b))[name]))
+    if sub is not None:
+        series.append(("accel", "<f4",
+                       lambda a, b: scenario.samples(a * sub, (b - a - 1) * sub + 1)[channel, ::sub]))
+    meta = {
+        "fs": np.array(fs), "rate": np.array(rate), "channel": np.array(channel),
+        "gain": np.array(gain), "noise_std": np.array(gain * float(getattr(scenario, "noise_std", 0.0))),
+        "components": np.array(names, dtype=str), "keys": np.array([truth_key(x) for x in names], dtype=str),
+        "scenario": np.array(scenario.name), "seed": np.array(scenario.seed),
+    }
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for key, dtype, fn in series:
+            with zf.open(key + ".npy", "w", force_zip64=True) as f:
+                npformat.write_array_header_1_0(
+                    f, {"descr": npformat.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
+                        "shape": (n,)})
+                for a in range(0, n, chunk):
+                    b = min(n, a + chunk)
+                    f.write(np.ascontiguousarray(fn(a, b), dtype=dtype).tobytes())
+        for key, arr in meta.items():
+            with zf.open(key + ".npy", "w") as f:
+                npformat.write_array(f, arr, allow_pickle=False)
+    return {"samples": n, "keys": [k for k, _, _ in series]}
+
+
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "healthy": HealthyMotor,
     "faulty": FaultyMotor,
     "degrading": DegradingMotor,
     "spikes": SpikesScenario,
+    "whirl": WhirlRunUp,
+    "close_orders": CloseOrdersRunUp,
 }
 
 

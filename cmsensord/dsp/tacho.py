@@ -1,0 +1,696 @@
+"""Tacho edges -> instantaneous shaft speed and angle at every sample.
+
+Owns the shaft reference of the order tracker (seed 001 needs the "reference
+shaft speed ... to be measured", section 2): the TACHO frames of PROTOCOL.md
+carry the rising edges of a shaft encoder with ``ppr`` pulses per revolution,
+as u32 offsets from the frame's t0 in 1/256 sample. :class:`TachoTracker`
+turns them, streaming, into the speed (Hz, rpm) and the shaft angle (turns)
+at any sample index, with a validity flag.
+
+Pipeline, per edge, in time order
+---------------------------------
+1. **Absolute time.** ``q = 256 * t0_unwrapped + offset`` (int64, 1/256 sample),
+   so no rounding ever depends on how frames are grouped.
+2. **Runs and loss.** Edges form a *run* while each follows the previous one
+   within the timeout ``max(timeout_s, timeout_periods x the longer of the last
+   two raw intervals)`` (``max_timeout_s`` after a single edge, whose period is
+   unknown). When the timeout passes with no edge the run ends: a valid run
+   (>= 2 pulses) emits ``tacho_lost`` at ``last edge + timeout``. A new run
+   that becomes valid after a loss emits ``tacho_restored`` at its second
+   pulse. The angle across a loss is unknown: the new run starts at the next
+   whole pulse after the held angle.
+3. **Missed and extra pulses** (repair before smoothing). The next interval
+   P is predicted from the last <= 4 committed intervals by a straight-line
+   fit of the pulse rate against time, integrated forward (exact for a
+   constant acceleration). For an interval d, r = d / P:
+
+   * r within ``tol`` of an integer m >= 2: m - 1 pulses were missed; the
+     pulse count advances by m (event ``tacho_missed_pulse``, counter
+     ``missed``). Nothing is invented for the fit: only the count changes;
+   * r < 1 - ``tol``: if the following edge lies within ``tol`` of P from the
+     last committed edge, this edge is spurious and is removed (event
+     ``tacho_extra_pulse``, counter ``extra``); deciding needs the next edge
+     (one edge of look-ahead);
+   * any other r outside 1 +- tol is kept as is and counted ``irregular``.
+
+   The check starts once a run has two committed intervals (a straight-line
+   rate needs two points); the first pulses of a run are taken as they come.
+4. **Jitter smoothing** (the B&K idea of least-squares fits to edge time vs
+   pulse count, done locally, like a Savitzky-Golay filter): for every
+   committed edge k, the pulse counts n_j of the edges j = k - h .. k + h of
+   its run (``half_window`` h, default 4 ppr: four revolutions each side) are
+   fitted by weighted least squares with a quadratic in the edge time,
+   n(T) = c0 + c1 x + c2 x^2, x = (T - T_k) / S, tricube weights
+   (1 - (|j - k| / (h + 1))^3)^3. The knot of edge k is
+   (T_k, turns_k = (n_k + c0) / ppr, speed_k = c1 / (S ppr)): the fitted
+   angle and its derivative. A quadratic in time is exact for a constant
+   acceleration (n = a t^2 / 2), so a linear run-up is tracked without bias;
+   the tapered weights make neighbouring fits agree (less ripple between knots
+   than uniform weights, which gave twice the peak error with jitter). Near a
+   run's ends the window is one-sided (fewer points; a straight line with two).
+5. **Every sample.** Between consecutive knots of a run the speed is the
+   linear interpolation of the knot speeds (continuous), and the angle the
+   cubic Hermite interpolant of (turns, speed) at both knots (C1, through the
+   fitted angles). At the knots the angle's derivative is the speed; between
+   them they differ by the disagreement of neighbouring fits (within the
+   jitter noise; differentiating the Hermite angle instead would amplify that
+   disagreement by 1.5 / period). After the last edge of a run the speed is
+   ``min(speed_last, (1 / ppr) / elapsed)`` -- the shaft cannot have turned
+   faster than one pulse over the time without an edge -- so it decays to 0
+   when the edges stop; the angle is its integral. After the timeout the speed
+   is 0 and invalid, the angle held.
+
+Accuracy (board edges, 1/256-sample capture; tests/test_tacho.py): constant
+28.66 Hz, ppr 1 and 4: speed error < 3e-6, angle < 1e-5 rev. Close-orders
+run-up (0 -> 3000 rpm in 5 s) with 2 samples (std) of edge jitter: above
+300 rpm the speed error is at most 0.23 % (ppr 1) / 0.29 % (ppr 4), RMS about
+0.05 %, the peak at the kink where the run-up stops (t = 5 s; 0.27 % there
+without jitter: a quadratic cannot follow a kink). Whirl (0 -> 7000 rpm in
+180 s, jitter 2 samples, periods down to 214 samples): at most 0.43 %.
+
+Delay and chunk invariance
+--------------------------
+The knot of edge k is final once edge k + h has been committed (or its run has
+ended); committing may wait for one more edge (step 3). So the speed and angle
+at sample s, between edges k and k + 1, are final once edges up to
+k + 1 + h (+ 1) have arrived: a delay of h + 1 to h + 2 pulse periods (with
+the default h = 4 ppr: 4 revolutions and one or two pulses; 80 ms at 3000 rpm,
+0.8 s at 300 rpm). ``TachoUpdate.final_until``
+and :attr:`TachoTracker.final_until` give the sample index up to which values
+are final; later samples (up to the coverage) hold provisional values
+computed with the one-sided windows. Every decision depends only on the edge
+sequence and the covered time, never on how frames are grouped into calls,
+so final values are identical for any split of the input (tested).
+
+Memory is bounded: knots older than ``history_s`` behind the newest are dropped
+(queries there return NaN and invalid).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, replace
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ["TachoEvent", "TachoCounters", "TachoUpdate", "TachoTracker", "tacho_frames_to_arrays",
+           "LOST", "RESTORED", "MISSED", "EXTRA"]
+
+SUB = 256  # edge resolution: 1/256 sample (PROTOCOL.md, TACHO)
+
+LOST = "tacho_lost"
+RESTORED = "tacho_restored"
+MISSED = "tacho_missed_pulse"
+EXTRA = "tacho_extra_pulse"
+
+_MAX_MISSED_RUN = 8  # at most this many consecutive pulses repaired as missed
+_PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
+
+
+@dataclass(frozen=True)
+class TachoEvent:
+    """One tacho event: ``kind`` (LOST, RESTORED, MISSED, EXTRA), where (unwrapped
+    sample index, float), how many pulses it concerns, and a one-line message."""
+
+    kind: str
+    sample: float
+    count: int
+    message: str
+
+
+@dataclass
+class TachoCounters:
+    """Cumulative counters of a tracker."""
+
+    edges: int = 0  # edges received
+    pulses: int = 0  # pulses committed (edges kept + pulses inserted for missed ones)
+    missed: int = 0  # pulses inserted (missed by the encoder)
+    extra: int = 0  # edges removed as spurious
+    irregular: int = 0  # intervals outside 1 +- tol of the prediction, not repaired
+    out_of_order: int = 0  # edges earlier than one already received (ignored)
+    lost: int = 0  # tacho_lost transitions
+    restored: int = 0  # tacho_restored transitions
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+class TachoUpdate(NamedTuple):
+    """What one :meth:`TachoTracker.update` produced."""
+
+    events: list[TachoEvent]
+    final_until: float  # values at samples < final_until are final
+    valid: bool  # a run with a measured speed is active (at the coverage end)
+    counters: TachoCounters
+
+
+@dataclass
+class _Run:
+    """One run of edges without a timeout."""
+
+    rid: int
+    base: float  # turns at pulse count 0 of the run
+    first_q: int  # first edge, 1/256 sample
+    last_raw_q: int  # last edge received (also spurious ones), 1/256 sample
+    prev_raw_q: int | None = None
+    prev_prev_raw_q: int | None = None
+    ended: bool = False
+    stop: float = math.inf  # samples: last_raw + timeout (set when it ends)
+    committed: int = 0  # committed edges
+    valid: bool = False  # >= 2 committed edges
+    end_turns: float = math.nan  # turns at stop (set when it ends)
+
+
+class TachoTracker:
+    """Streaming tacho processing: edges in, speed and angle at any sample out.
+
+    Parameters
+    ----------
+    fs : samples per second (25000).
+    ppr : tacho pulses per revolution (STATUS ``tacho_ppr``).
+    block_len : samples a TACHO frame covers (STATUS ``block_len``).
+    half_window : h, edges on each side of the local least-squares fit
+        (default 4 ppr: four revolutions each side).
+    tol : tolerance on the interval ratio for missed/extra detection (0.25).
+    timeout_s, timeout_periods, max_timeout_s : the run timeout
+        max(timeout_s, timeout_periods x last interval), capped at max_timeout_s
+        (and max_timeout_s after a single edge).
+    history_s : seconds of knots kept for queries behind the newest one.
+
+    Use::
+
+        tr = TachoTracker(25000, ppr=1)
+        u = tr.update(t0_unwrapped, edges)        # a batch of TACHO frames, in time order
+        for ev in u.events: ...                   # tacho_lost / tacho_restored / missed / extra
+        s = np.arange(done, int(np.ceil(u.final_until)))   # samples whose values are final
+        hz, turns, valid = tr.evaluate(s)
+    """
+
+    def __init__(self, fs: float, ppr: int, *, block_len: int = 250, half_window: int | None = None,
+                 tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
+                 max_timeout_s: float = 10.0, history_s: float = 60.0):
+        if not (fs > 0 and math.isfinite(fs)):
+            raise ValueError(f"fs must be > 0, got {fs!r}")
+        if not isinstance(ppr, (int, np.integer)) or not 1 <= ppr <= 255:
+            raise ValueError(f"ppr must be an integer 1..255, got {ppr!r}")
+        if not isinstance(block_len, (int, np.integer)) or block_len < 1:
+            raise ValueError(f"block_len must be a positive integer, got {block_len!r}")
+        h = 4 * int(ppr) if half_window is None else half_window
+        if not isinstance(h, (int, np.integer)) or h < 1:
+            raise ValueError(f"half_window must be an integer >= 1, got {half_window!r}")
+        if not 0 < tol < 0.5:
+            raise ValueError(f"tol must be in (0, 0.5), got {tol!r}")
+        if not (timeout_s > 0 and timeout_periods > 2 and max_timeout_s >= timeout_s):
+            raise ValueError("need timeout_s > 0, timeout_periods > 2 (a missed pulse is 2 periods) "
+                             f"and max_timeout_s >= timeout_s; got {timeout_s}, {timeout_periods}, "
+                             f"{max_timeout_s}")
+        if not history_s > 0:
+            raise ValueError(f"history_s must be > 0, got {history_s!r}")
+        self.fs = float(fs)
+        self.ppr = int(ppr)
+        self.block_len = int(block_len)
+        self.half_window = int(h)
+        self.tol = float(tol)
+        self.timeout_s = float(timeout_s)
+        self.timeout_periods = float(timeout_periods)
+        self.max_timeout_s = float(max_timeout_s)
+        self.history_s = float(history_s)
+        # tricube weights over the pulse positions k - h .. k + h (module notes, step 4)
+        u = np.arange(-self.half_window, self.half_window + 1) / (self.half_window + 1)
+        self._kernel = (1.0 - np.abs(u) ** 3) ** 3
+        self.counters = TachoCounters()
+        self._now: int | None = None  # coverage end, samples (exclusive)
+        self._last_q: int | None = None  # last edge received
+        self._run: _Run | None = None  # the current (not ended) run
+        self._runs: dict[int, _Run] = {}
+        self._next_rid = 0
+        self._held = 0.0  # turns held after the last ended valid run
+        self._had_loss = False
+        # the current run's committed edges (times in samples, pulse counts), from index _c0
+        self._cT: list[float] = []
+        self._cn: list[int] = []
+        self._c0 = 0
+        self._cq_last: int | None = None  # last committed edge, 1/256 sample
+        self._n_last = 0
+        self._pending: deque[int] = deque()  # edges of the current run not yet classified
+        self._hist: deque[tuple[float, float]] = deque(maxlen=_PREDICT_INTERVALS)  # (mid q, pulses/q)
+        self._final = 0  # knots finalised in the current run (centres 0 .. _final-1)
+        # final knots of all runs: times (samples), turns, speed (turns/sample), run id
+        self._kbuf = np.empty((4, 1024))  # rows: time, turns, speed, run id; live columns [_klo, _khi)
+        self._klo = 0
+        self._khi = 0
+        self._prov: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # provisional knots
+        self._events: list[TachoEvent] = []
+        self._last_t0: int | None = None
+        self._prov_key: tuple | None = None
+        self._pruned = False
+
+    # ------------------------------------------------------------------ input
+    def update(self, t0_unwrapped: Sequence[int] | np.ndarray,
+               edges: Sequence[Sequence[int] | np.ndarray]) -> TachoUpdate:
+        """Feed TACHO frames: their unwrapped t0 (F,) and their edge offsets (F arrays, 1/256 sample).
+
+        Frames must come in time order; each covers [t0, t0 + block_len). Returns
+        the events of this call, the finality horizon, the validity and the counters.
+        """
+        t0 = np.asarray(t0_unwrapped, dtype=np.int64).reshape(-1)
+        if len(edges) != t0.size:
+            raise ValueError(f"expected one edge array per frame: {t0.size} t0 values, {len(edges)} edge arrays")
+        self._events = []
+        for i in range(t0.size):
+            t = int(t0[i])
+            if self._last_t0 is not None and t < self._last_t0:
+                raise ValueError(f"TACHO frames must come in time order: t0 {t} after t0 {self._last_t0}")
+            self._last_t0 = t
+            off = np.asarray(edges[i], dtype=np.int64).reshape(-1)
+            if off.size:
+                if int(off.min()) < 0 or int(off.max()) > 0xFFFFFFFF:
+                    raise ValueError(f"edge offsets must be u32, got {off.min()}..{off.max()}")
+                for q in np.sort(off + t * SUB).tolist():
+                    self._edge(int(q))
+            end = t + self.block_len
+            self._now = end if self._now is None else max(self._now, end)
+            self._check_timeout(self._now * SUB)
+        self._finalise(ended=False)
+        self._prune()
+        ev = self._events
+        self._events = []
+        return TachoUpdate(ev, self.final_until, self.valid, replace(self.counters))
+
+    def update_frames(self, frames: Iterable, chan: int = 0) -> TachoUpdate:
+        """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
+        t0, edges = tacho_frames_to_arrays(frames, chan)
+        return self.update(t0, edges)
+
+    # ------------------------------------------------------------------ output
+    @property
+    def valid(self) -> bool:
+        return self._run is not None and self._run.valid
+
+    @property
+    def final_until(self) -> float:
+        """Sample index (float) below which speed, angle and validity are final."""
+        run = self._run
+        if run is None:
+            return float(self._now) if self._now is not None else 0.0
+        if self._final >= 1:
+            return self._cT[self._final - 1 - self._c0]
+        return run.first_q / SUB
+
+    def evaluate(self, samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(speed in Hz, angle in turns, valid) at unwrapped sample indices (any shape, int or float).
+
+        The angle counts revolutions since the first edge (turns 0 there).
+        Before the first edge, after a loss and behind the kept history the
+        speed is 0 and invalid (NaN behind the history); see the module notes.
+        """
+        s = np.asarray(samples, dtype=np.float64)
+        flat = s.reshape(-1)
+        if flat.size:
+            kT, kth, kw, kr = self._knots(float(flat.min()), float(flat.max()))
+        else:
+            kT, kth, kw, kr = self._knots()
+        speed = np.zeros(flat.size)
+        turns = np.zeros(flat.size)
+        valid = np.zeros(flat.size, dtype=bool)
+        if kT.size == 0:
+            turns[:] = self._held
+            return speed.reshape(s.shape) * self.fs, turns.reshape(s.shape), valid.reshape(s.shape)
+        j = np.searchsorted(kT, flat, side="right") - 1
+        before = j < 0
+        jj = np.clip(j, 0, kT.size - 1)
+        nxt = np.minimum(jj + 1, kT.size - 1)
+        inner = (~before) & (jj + 1 < kT.size) & (kr[nxt] == kr[jj])
+        if inner.any():
+            a, b = jj[inner], nxt[inner]
+            h = kT[b] - kT[a]
+            u = (flat[inner] - kT[a]) / h
+            u2, u3 = u * u, u * u * u
+            th = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
+                  + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b])
+            turns[inner] = th
+            speed[inner] = (1.0 - u) * kw[a] + u * kw[b]
+            valid[inner] = True
+        tail = (~before) & (~inner)
+        if tail.any():
+            a = jj[tail]
+            rids, inv = np.unique(kr[a], return_inverse=True)
+            stops = np.array([self._stop_of(int(r)) for r in rids])[inv.reshape(-1)]
+            tau = flat[tail] - kT[a]
+            w0 = kw[a]
+            c = 1.0 / self.ppr
+            tau_stop = stops - kT[a]
+            ok = tau < tau_stop
+            tq = np.where(ok, tau, tau_stop)
+            sp, dturn = self._tail(w0, tq, c)
+            turns[tail] = kth[a] + dturn
+            speed[tail] = np.where(ok, sp, 0.0)
+            valid[tail] = ok
+        if before.any() and self._pruned:  # behind the kept history: unknown
+            turns[before] = np.nan
+            speed[before] = np.nan
+        return (speed.reshape(s.shape) * self.fs, turns.reshape(s.shape), valid.reshape(s.shape))
+
+    def speed_at(self, samples) -> np.ndarray:
+        """Shaft speed in Hz (revolutions per second) at the sample indices."""
+        return self.evaluate(samples)[0]
+
+    def rpm_at(self, samples) -> np.ndarray:
+        """Shaft speed in rpm at the sample indices."""
+        return 60.0 * self.evaluate(samples)[0]
+
+    def turns_at(self, samples) -> np.ndarray:
+        """Shaft angle in revolutions since the first edge at the sample indices."""
+        return self.evaluate(samples)[1]
+
+    def valid_at(self, samples) -> np.ndarray:
+        """True where the speed is measured (inside a run or before its timeout)."""
+        return self.evaluate(samples)[2]
+
+    # ------------------------------------------------------------------ machinery
+    def _stop_of(self, rid: int) -> float:
+        """End of the valid extrapolation of run ``rid`` (samples): its timeout."""
+        run = self._runs.get(rid)
+        if run is None:
+            return math.inf
+        if run.ended:
+            return run.stop
+        return (run.last_raw_q + self._timeout_q(run)) / SUB
+
+    @staticmethod
+    def _tail(w0: np.ndarray, tau: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray]:
+        """Speed min(w0, c / tau) after the last edge and its integral from 0 to tau."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tc = np.where(w0 > 0, c / np.where(w0 > 0, w0, 1.0), np.inf)
+            slow = tau > tc
+            sp = np.where(slow, c / np.where(slow, tau, 1.0), w0)
+            dturn = np.where(slow, c + c * np.log(np.where(slow, tau / tc, 1.0)), w0 * tau)
+        return sp, dturn
+
+    def _timeout_q(self, run: _Run) -> int:
+        """The current run's timeout in 1/256 sample (integer arithmetic: deterministic)."""
+        hi = int(round(self.max_timeout_s * self.fs * SUB))
+        if run.prev_raw_q is None:
+            return hi
+        d = run.last_raw_q - run.prev_raw_q
+        if run.prev_prev_raw_q is not None:
+            d = max(d, run.prev_raw_q - run.prev_prev_raw_q)
+        lo = int(round(self.timeout_s * self.fs * SUB))
+        return min(hi, max(lo, int(math.ceil(self.timeout_periods * d))))
+
+    def _check_timeout(self, q_now: int) -> None:
+        """End the current run if no edge came within its timeout before q_now (exclusive)."""
+        run = self._run
+        if run is None:
+            return
+        stop_q = run.last_raw_q + self._timeout_q(run)
+        if q_now > stop_q:
+            self._end_run(stop_q)
+
+    def _edge(self, q: int) -> None:
+        c = self.counters
+        c.edges += 1
+        if self._last_q is not None and q < self._last_q:
+            c.out_of_order += 1
+            return
+        self._last_q = q
+        self._check_timeout(q)
+        run = self._run
+        if run is None:
+            self._start_run(q)
+            return
+        run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = run.prev_raw_q, run.last_raw_q, q
+        self._pending.append(q)
+        self._classify(final=False)
+
+    def _start_run(self, q: int) -> None:
+        base = 0.0
+        if self._runs or self._khi:
+            base = (math.floor(self._held * self.ppr + 1e-9) + 1) / self.ppr
+        run = _Run(rid=self._next_rid, base=base, first_q=q, last_raw_q=q)
+        self._next_rid += 1
+        self._run = run
+        self._runs[run.rid] = run
+        self._cT, self._cn, self._c0 = [], [], 0
+        self._pending.clear()
+        self._hist.clear()
+        self._final = 0
+        self._n_last = 0
+        self._cq_last = None
+        self._commit(q, 0)
+
+    def _commit(self, q: int, npulses: int) -> None:
+        """Commit edge q as ``npulses`` pulses after the previous committed edge."""
+        run = self._run
+        if self._cq_last is not None:
+            d = q - self._cq_last
+            self._hist.append((self._cq_last + 0.5 * d, npulses / d))
+        self._n_last += npulses
+        self._cT.append(q / SUB)
+        self._cn.append(self._n_last)
+        self._cq_last = q
+        run.committed += 1
+        self.counters.pulses += 1 if run.committed == 1 else npulses
+        if run.committed == 2 and not run.valid:
+            run.valid = True
+            if self._had_loss:
+                self._had_loss = False
+                self.counters.restored += 1
+                self._events.append(TachoEvent(RESTORED, q / SUB, 1,
+                                               f"tacho restored at sample {q / SUB:.0f}: edges again"))
+
+    def _predict(self) -> float | None:
+        """Predicted next interval (1/256 sample) after the last committed edge, or None."""
+        hist = self._hist
+        n = len(hist)
+        if n < 2:
+            return None
+        t_ref = hist[-1][0]
+        xs = [h[0] - t_ref for h in hist]
+        rt = [h[1] for h in hist]
+        xm, ym = sum(xs) / n, sum(rt) / n
+        sxx = sum((x - xm) ** 2 for x in xs)
+        slope = sum((x - xm) * (r - ym) for x, r in zip(xs, rt)) / sxx if sxx > 0 else 0.0
+        r0 = ym + slope * (self._cq_last - t_ref - xm)  # pulse rate at the last committed edge
+        d_last = 1.0 / rt[-1]
+        disc = r0 * r0 + 2.0 * slope
+        if r0 <= 0 or disc <= 0:
+            return d_last
+        d = 2.0 / (r0 + math.sqrt(disc))  # solves slope/2 d^2 + r0 d = 1 pulse
+        return min(max(d, 0.5 * d_last), 2.0 * d_last)
+
+    def _classify(self, final: bool) -> None:
+        """Commit (or drop) pending edges; waits for one look-ahead edge unless ``final``."""
+        tol = self.tol
+        c = self.counters
+        while self._pending:
+            q = self._pending[0]
+            P = self._predict()
+            if P is None:
+                self._pending.popleft()
+                self._commit(q, 1)
+                continue
+            d = q - self._cq_last
+            r = d / P
+            if r < 1.0 - tol:
+                if len(self._pending) < 2:
+                    if not final:
+                        return  # wait for the next edge
+                    self._pending.popleft()
+                    c.irregular += 1
+                    self._commit(q, 1)
+                    continue
+                r2 = (self._pending[1] - self._cq_last) / P
+                self._pending.popleft()
+                if abs(r2 - 1.0) < tol:
+                    c.extra += 1
+                    self._events.append(TachoEvent(EXTRA, q / SUB, 1,
+                                                   f"spurious tacho pulse removed at sample {q / SUB:.1f}"))
+                    continue
+                c.irregular += 1
+                self._commit(q, 1)
+                continue
+            self._pending.popleft()
+            m = int(round(r))
+            if r > 1.0 + tol and 2 <= m <= _MAX_MISSED_RUN and abs(r - m) < tol:
+                c.missed += m - 1
+                self._events.append(TachoEvent(
+                    MISSED, (self._cq_last + d / m) / SUB, m - 1,
+                    f"{m - 1} missed tacho pulse(s) inserted after sample {self._cq_last / SUB:.1f}"))
+                self._commit(q, m)
+                continue
+            if r > 1.0 + tol:
+                c.irregular += 1
+            self._commit(q, 1)
+
+    def _end_run(self, stop_q: int) -> None:
+        run = self._run
+        self._classify(final=True)
+        run.ended = True
+        run.stop = stop_q / SUB
+        self._finalise(ended=True)
+        self._prov = None
+        if run.valid:
+            # the angle at the stop, from the tail of the last knot
+            T_last, th_last, w_last, _ = self._kbuf[:, self._khi - 1]  # the run's last knot
+            _, dturn = self._tail(np.array([w_last]), np.array([run.stop - T_last]), 1.0 / self.ppr)
+            run.end_turns = float(th_last + dturn[0])
+            self._held = run.end_turns
+            self._had_loss = True
+            self.counters.lost += 1
+            self._events.append(TachoEvent(LOST, run.stop, 1,
+                                           f"tacho lost at sample {run.stop:.0f}: no edge for "
+                                           f"{(stop_q - run.last_raw_q) / SUB / self.fs:.3g} s"))
+        else:
+            # a single edge: no speed; the angle stays where it was
+            self._runs.pop(run.rid, None)
+        self._run = None
+        self._pending.clear()
+
+    def _finalise(self, ended: bool) -> None:
+        """Fit the knots of the current run whose windows are complete (all of them when
+        the run has ended) and append them to the final knots."""
+        run = self._run
+        K = self._c0 + len(self._cT)  # committed edges of the run so far
+        h = self.half_window
+        last = K - 1 if ended else K - 1 - h  # last centre that can be finalised
+        if run is None or K < 2 or last < self._final:
+            if ended:
+                self._final = max(self._final, K)
+            return
+        T, th, w = self._fit(np.arange(self._final, last + 1), K)
+        self._append_knots(T, th, w, run.rid)
+        self._final = last + 1
+        # committed edges no longer needed by any future window
+        drop = self._final - h - self._c0
+        if drop > 256:
+            del self._cT[:drop]
+            del self._cn[:drop]
+            self._c0 += drop
+
+    def _fit(self, centres: np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Local least-squares quadratic of pulse count vs edge time at each centre (see module notes).
+
+        Windows [k - h, k + h] clipped to the committed edges [0, K) of the run.
+        Returns the knot times (samples), angles (turns) and speeds (turns/sample).
+        """
+        h = self.half_window
+        Tc = np.asarray(self._cT)
+        nc = np.asarray(self._cn, dtype=np.float64)
+        c0 = self._c0
+        lo = np.maximum(centres - h, 0)
+        hi = np.minimum(centres + h, K - 1)
+        idx = centres[:, None] + np.arange(-h, h + 1)[None, :]
+        use = (idx >= lo[:, None]) & (idx <= hi[:, None])
+        idx = np.where(use, idx, centres[:, None]) - c0
+        k = centres - c0
+        dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
+        S = np.max(np.abs(dx), axis=1)
+        x = dx / S[:, None]
+        y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
+        wgt = use * self._kernel[None, :]
+        npts = use.sum(axis=1)
+        x2 = x * x
+        s0 = np.sum(wgt, axis=1)
+        s1 = np.sum(wgt * x, axis=1)
+        s2 = np.sum(wgt * x2, axis=1)
+        s3 = np.sum(wgt * x2 * x, axis=1)
+        s4 = np.sum(wgt * x2 * x2, axis=1)
+        b0 = np.sum(wgt * y, axis=1)
+        b1 = np.sum(wgt * x * y, axis=1)
+        b2 = np.sum(wgt * x2 * y, axis=1)
+        A = np.stack([np.stack([s0, s1, s2], -1), np.stack([s1, s2, s3], -1),
+                      np.stack([s2, s3, s4], -1)], -2)
+        b = np.stack([b0, b1, b2], -1)
+        lin = npts < 3  # two points: a straight line
+        if lin.any():
+            A[lin, 2, :] = 0.0
+            A[lin, :, 2] = 0.0
+            A[lin, 2, 2] = 1.0
+            b[lin, 2] = 0.0
+        coef = np.linalg.solve(A, b[..., None])[..., 0]
+        run = self._run
+        T = Tc[k]
+        th = run.base + (nc[k] + coef[:, 0]) / self.ppr
+        w = coef[:, 1] / (S * self.ppr)
+        return T, th, w
+
+    def _provisional(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Knots of the current run beyond the final ones (one-sided windows), fitted when queried."""
+        run = self._run
+        if run is None:
+            return None
+        K = self._c0 + len(self._cT)
+        if K < 2 or self._final >= K:
+            return None
+        key = (run.rid, K, self._final)
+        if key != self._prov_key:
+            self._prov = self._fit(np.arange(self._final, K), K)
+            self._prov_key = key
+        return self._prov
+
+    def _append_knots(self, T: np.ndarray, th: np.ndarray, w: np.ndarray, rid: int) -> None:
+        n = T.size
+        buf = self._kbuf
+        if self._khi + n > buf.shape[1]:  # compact, then grow (amortised O(1) per knot)
+            live = self._khi - self._klo
+            cap = buf.shape[1]
+            while live + n > cap // 2:
+                cap *= 2
+            new = np.empty((4, cap))
+            new[:, :live] = buf[:, self._klo:self._khi]
+            self._kbuf, self._klo, self._khi = new, 0, live
+            buf = new
+        buf[0, self._khi:self._khi + n] = T
+        buf[1, self._khi:self._khi + n] = th
+        buf[2, self._khi:self._khi + n] = w
+        buf[3, self._khi:self._khi + n] = rid
+        self._khi += n
+
+    def _knots(self, t_min: float = -math.inf, t_max: float = math.inf
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Final knots (those around [t_min, t_max]) then the provisional ones: T, turns, speed, run id."""
+        T = self._kbuf[0, self._klo:self._khi]
+        a = max(int(np.searchsorted(T, t_min, side="right")) - 1, 0)
+        b = min(int(np.searchsorted(T, t_max, side="right")) + 1, T.size)
+        k = self._kbuf[:, self._klo + a:self._klo + b]
+        kT, kth, kw, kr = k[0], k[1], k[2], k[3].astype(np.int64)
+        if b < T.size:
+            return kT, kth, kw, kr
+        prov = self._provisional()
+        if prov is None:
+            return kT, kth, kw, kr
+        pT, pth, pw = prov
+        rid = np.full(pT.size, self._run.rid, dtype=np.int64)
+        return (np.concatenate([kT, pT]), np.concatenate([kth, pth]),
+                np.concatenate([kw, pw]), np.concatenate([kr, rid]))
+
+    def _prune(self) -> None:
+        """Drop final knots more than history_s behind the newest (keeping the last two)."""
+        T = self._kbuf[0, self._klo:self._khi]
+        if T.size < 3:
+            return
+        cut = min(int(np.searchsorted(T, T[-1] - self.history_s * self.fs)), T.size - 2)
+        if cut < max(64, T.size // 16):  # prune in batches
+            return
+        self._klo += cut
+        self._pruned = True
+        first_live = int(self._kbuf[3, self._klo])  # run ids increase with time
+        for rid in [r for r in self._runs if r < first_live]:
+            del self._runs[rid]
+
+
+def tacho_frames_to_arrays(frames: Iterable, chan: int = 0) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(t0_unwrapped (F,), [edge offsets]) of the TACHO frames of input ``chan`` among ``frames``."""
+    from cmsensord.protocol import FrameType, decode_tacho
+
+    t0: list[int] = []
+    edges: list[np.ndarray] = []
+    for f in frames:
+        if f.type == FrameType.TACHO and f.chan == chan:
+            t0.append(f.t0_unwrapped)
+            edges.append(decode_tacho(f.payload))
+    return np.asarray(t0, dtype=np.int64), edges
