@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cmsensord.dsp.rms import block_rms
 from cmsensord.protocol import (
     FLAG_CLIPPED,
     FLAG_OVERRUN,
@@ -202,14 +203,9 @@ class Board:
         return x.astype(np.uint16)
 
     def _block_rms(self, counts: np.ndarray) -> np.ndarray:
-        """float32 (C, nb): PROTOCOL.md RMS of each block of ``counts`` (C, nb * block_len)."""
-        c, n = counts.shape
-        L = self.block_len
-        if n % L:
-            raise ValueError(f"counts must hold whole blocks of {L} samples, got {n} samples")
-        x = (counts.astype(np.float64) - self.offset[:, None]) * self.scale[:, None]
-        x = x.reshape(c, n // L, L)
-        return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+        """float32 (C, nb): PROTOCOL.md RMS of each block of ``counts`` (C, nb * block_len),
+        by the same function the daemon applies to RAW blocks (cmsensord.dsp.rms)."""
+        return block_rms(counts, self.scale, self.offset, self.block_len)
 
     def rms_block_values(self, counts: np.ndarray) -> np.ndarray:
         """float32 (C,): the RMS frame values of one block of counts, shape (C, block_len)."""
