@@ -23,6 +23,8 @@ class OptionalBuildExt(build_ext):
 
 setup(
     ext_modules=[Extension("cmsensord.dsp._akfkernel", ["cmsensord/dsp/_akfkernel.c"],
+                           extra_compile_args=["-O2", "-ffp-contract=off"]),
+                 Extension("cmsensord.dsp._trackerkernel", ["cmsensord/dsp/_trackerkernel.c"],
                            extra_compile_args=["-O2", "-ffp-contract=off"])],
     cmdclass={"build_ext": OptionalBuildExt},
 )
