@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Sequence
 
 from cmsensord import __version__
-from cmsensord.config import Config, config_to_dict, default_config, load_config
+from cmsensord.config import Config, config_from_dict, config_to_dict, default_config, load_config
 from cmsensord.errors import EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
 from cmsensord.link import FrameQueue, Progress, SerialReader, open_port_checked, read_capture
 from cmsensord.pipeline import Processor
@@ -249,6 +249,21 @@ def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
 
 
 # --------------------------------------------------------------------------- simulate
+#: order-tracker settings for the run-up scenarios of seed 001 (section 4.1): their components,
+#: a -3 dB bandwidth of 20 Hz (r about 50 at the tracker rate) and the 0.1 s smoother, which
+#: keeps the close orders within the paper's error bounds (tests/test_order_tracker.py)
+RUNUP_ORDERS = {
+    "close_orders": {"max_rpm": 3000.0, "smoother_lag_s": 0.1, "components": [
+        {"name": "o1", "order": 1.0, "bandwidth_hz": 20.0},
+        {"name": "o4", "order": 4.0, "bandwidth_hz": 20.0},
+        {"name": "o4_2", "order": 4.2, "bandwidth_hz": 20.0}]},
+    "whirl": {"max_rpm": 7000.0, "smoother_lag_s": 0.1, "components": [
+        {"name": "o1", "order": 1.0, "bandwidth_hz": 5.0},
+        {"name": "whirl", "order": 0.47, "bandwidth_hz": 5.0, "alarm_rms": 0.7},
+        {"name": "whip", "freq_hz": 47.0, "bandwidth_hz": 5.0}]},
+}
+
+
 def simulate(args: argparse.Namespace) -> int:
     """Start firmware_sim on a pty and the daemon on that pty."""
     from firmware_sim.scenarios import SCENARIOS
@@ -257,12 +272,19 @@ def simulate(args: argparse.Namespace) -> int:
         raise ConfigError("--scenario", None, f"unknown scenario; choose from {', '.join(SCENARIOS)}",
                           args.scenario)
     cfg = load_config(args.config, n_channels=args.channels) if args.config else default_config(args.channels)
+    runup = args.scenario in RUNUP_ORDERS
+    mode = args.mode or ("raw" if runup else "rms")
+    tacho = args.tacho or runup
+    if runup and not args.config:
+        # the paper's validation signals: track their components (seed 001 section 4.1)
+        cfg = dataclasses.replace(cfg, orders=config_from_dict(
+            {"orders": RUNUP_ORDERS[args.scenario]}, source="--scenario").orders)
     out_dir = args.out or cfg.output.dir
     cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=out_dir,
                                                               akf_trace=cfg.output.akf_trace or args.akf_trace))
     cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", args.scenario,
            "--duration", str(args.duration), "--speed", str(args.speed), "--seed", str(args.seed),
-           "--channels", str(args.channels), "--hold"]
+           "--channels", str(args.channels), "--mode", mode, "--hold"] + (["--tacho"] if tacho else [])
     sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
     try:
@@ -271,7 +293,8 @@ def simulate(args: argparse.Namespace) -> int:
             err = sim.stderr.read() if sim.poll() is not None else ""
             print(f"cmsensord: the simulator did not start: {line or err.strip()}", file=sys.stderr)
             return 1
-        print(f"simulated board ({args.scenario}, {args.channels} channel(s), seed {args.seed}) on "
+        print(f"simulated board ({args.scenario}, {mode.upper()} mode{' + tacho' if tacho else ''}, "
+              f"{args.channels} channel(s), seed {args.seed}) on "
               f"{line}; {args.duration:g} s at {args.speed:g}x real time", file=sys.stderr)
         cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, port=line))
         Path(out_dir).mkdir(parents=True, exist_ok=True)
@@ -321,6 +344,10 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--channels", type=_channels, default=1, help="number of channels 1..8 (default 1)")
+    sim.add_argument("--mode", choices=("rms", "raw"),
+                     help="board mode (default: rms; raw for whirl and close_orders)")
+    sim.add_argument("--tacho", action="store_true",
+                     help="the board sends TACHO frames (default for whirl and close_orders)")
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture file")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
     sub = p.add_subparsers(dest="command", metavar="{replay,record,summary}")

@@ -358,7 +358,9 @@ class OrdersConfig:
     q1: float = _setting(0.1, "process noise q1 of the structural equation (Q1 = q1 I, eq. 25)", gt=0)
     bandwidth_pct: float = _setting(5.0, "default -3 dB bandwidth in % of each component's "
                                     "frequency (for components without r/bandwidth)", gt=0, le=100)
-    min_rpm: float = _setting(300.0, "no order output below this shaft speed", ge=0)
+    max_rpm: float = _setting(3600.0, "highest shaft speed expected: sets the tracker's "
+                              "decimation and gain table", gt=0)
+    min_rpm: float = _setting(300.0, "no order output below this shaft speed", gt=0)
     smoother_lag_s: float = _setting(0.0, "fixed-lag RTS smoother lag (0: the plain recursive "
                                      "filter)", ge=0, le=0.2)
     output_rate_hz: float = _setting(10.0, "order RMS/amplitude messages per second", ge=1, le=100)
@@ -367,6 +369,8 @@ class OrdersConfig:
     components: tuple[ComponentConfig, ...] = field(
         default_factory=_default_components,
         metadata={"help": "components to track (default: orders 1, 2, 3, 4)"})
+
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("max_rpm", "min_rpm"),)
 
     def __post_init__(self) -> None:
         _validate(self)

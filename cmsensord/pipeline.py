@@ -37,7 +37,7 @@ from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.akf import AkfBank, bank_r
 from cmsensord.dsp.rms import rows_rms
 from cmsensord.dsp.severity import AnomalyDecider, Decision
-from cmsensord.protocol import Frame, FrameType, Status, decode_status
+from cmsensord.protocol import Frame, FrameType, Status, decode_status, decode_tacho
 
 log = logging.getLogger("cmsensord")
 
@@ -52,6 +52,8 @@ MAX_GAP_S = 600.0
 MAX_BATCH = 1000
 #: RAW frames held while waiting for the first STATUS (its scale/offset): 2 s of 4 channels
 RAW_WAIT_FRAMES = 800
+#: TACHO frames kept while no order chain exists (RMS mode, or before the first RAW block)
+TACHO_WAIT_FRAMES = 200
 
 
 #: how events go to the log (the journal): per-AKF flags are detail, the
@@ -134,6 +136,8 @@ class Processor:
         self.started_wall = time.monotonic()
         self._last_stamp_ns = 0
         self._raw_waiting: list[Frame] = []
+        self._tacho_waiting: list[Frame] = []
+        self.orders = None                      # OrderChain, once RAW blocks and a tacho come
         self._no_channels = False
         self.raw_dropped = 0
 
@@ -183,7 +187,7 @@ class Processor:
             self.t0_first = frames[0].t0_unwrapped
         rms: list[Frame] = []
         raw: list[Frame] = []
-        RMS, RAW, STATUS = FrameType.RMS, FrameType.RAW, FrameType.STATUS
+        RMS, RAW, STATUS, TACHO = FrameType.RMS, FrameType.RAW, FrameType.STATUS, FrameType.TACHO
         for f in frames:
             if f.lost_before:
                 self._flush_rms(rms)
@@ -202,6 +206,11 @@ class Processor:
                 if len(raw) >= MAX_BATCH:
                     self._flush_raw(raw)
                     raw = []
+            elif f.type == TACHO:
+                if f.chan == self.cfg.tacho.input:
+                    self._tacho_waiting.append(f)
+                    if len(self._tacho_waiting) > TACHO_WAIT_FRAMES and self.orders is None:
+                        del self._tacho_waiting[0]      # no RAW chain (yet): keep only the newest
             elif f.type == STATUS:
                 st = self._decode_status(f)
                 if st is not None and self._status_news(st):
@@ -218,8 +227,12 @@ class Processor:
         self._flush_raw(raw)
 
     def finish(self) -> None:
-        """End of the stream: process what still waits (an incomplete last RAW block)."""
+        """End of the stream: process what still waits (an incomplete last RAW block,
+        samples waiting for a final tacho speed)."""
         self._flush_raw([], final=True)
+        if self.orders is not None:
+            self._feed_tacho()
+            self.orders.finish()
 
     def _decode_status(self, f: Frame) -> Status | None:
         try:
@@ -354,6 +367,46 @@ class Processor:
         vals = np.full((len(blocks), C), np.nan, dtype=np.float32)
         vals[row, chan] = rms
         self._observe(blocks, vals)
+        self._feed_orders(blocks, row, chan, counts, scale, offset)
+
+    def _feed_orders(self, blocks, row, chan, counts, scale, offset) -> None:
+        """RAW blocks (and the TACHO frames so far) to the order chain of the machine."""
+        if self.orders is None:
+            if not (self.cfg.orders.enabled and self.status is not None
+                    and self.status.tacho_inputs > 0 and self.bank is not None):
+                self._tacho_waiting.clear()
+                return
+            from cmsensord.orders import OrderChain     # scipy is loaded only for the raw chain
+            ppr = self.cfg.tacho.ppr or self.status.tacho_ppr
+            self.orders = OrderChain(self.cfg, self.channels, fs=self.fs, block_len=self.block_len,
+                                     ppr=ppr, write=self.sink.write, event=self.event,
+                                     stamp=self.stamp_ns)
+        self._feed_tacho()
+        L = self.block_len
+        sel = np.isin(chan, self._index)
+        pos = {int(b): i for i, b in enumerate(self._index)}
+        y = np.full((len(blocks), L, len(self.channels)), np.nan)
+        cal = (counts[sel].astype(np.float64) - offset[chan[sel]].astype(np.float64)[:, None]) \
+            * scale[chan[sel]].astype(np.float64)[:, None]
+        y[row[sel], :, [pos[int(c)] for c in chan[sel]]] = cal
+        # blocks are consecutive here except across lost ones: feed contiguous runs
+        cuts = np.flatnonzero(np.diff(blocks) != L) + 1
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(blocks)]):
+            self.orders.add_samples(int(blocks[a]), y[a:b].reshape(-1, len(self.channels)))
+
+    def _feed_tacho(self) -> None:
+        if not self._tacho_waiting or self.orders is None:
+            return
+        frames, self._tacho_waiting = self._tacho_waiting, []
+        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
+        edges = []
+        for f in frames:
+            try:
+                edges.append(decode_tacho(f.payload))
+            except ValueError as exc:
+                self.event("decode_error", None, f"bad TACHO payload at byte {f.offset}: {exc}")
+                edges.append(np.empty(0, dtype=np.uint32))
+        self.orders.add_tacho(t0, edges)
 
     def _raw_overrides_complete(self) -> bool:
         return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)

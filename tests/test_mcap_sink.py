@@ -97,7 +97,10 @@ def orders_msg() -> dict:
     return {
         "channel": "ch0",
         "speed_rpm": 1720.0,
-        "orders": [{"order": 1.0, "rms": 0.8, "amplitude": 1.13}, {"order": 2.0, "rms": 0.1, "amplitude": 0.14}],
+        "valid": True,
+        "method": "recursive",
+        "orders": [{"name": "1x", "order": 1.0, "freq_hz": 28.67, "rms": 0.8, "amplitude": 1.13},
+                   {"name": "whip", "order": None, "freq_hz": 47.0, "rms": 0.1, "amplitude": 0.14}],
     }
 
 

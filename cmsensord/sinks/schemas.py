@@ -67,6 +67,12 @@ def orders_topic(channel: str) -> str:
 EVENT_KINDS: tuple[str, ...] = (
     "anomaly_onset",
     "anomaly_clear",
+    "order_alarm",
+    "order_alarm_clear",
+    "tacho_lost",
+    "tacho_restored",
+    "tacho_missed_pulse",
+    "tacho_extra_pulse",
     "severity_change",
     "failure",
     "failure_clear",
@@ -301,27 +307,36 @@ DIAGNOSTICS = _obj(
 
 ORDERS = _obj(
     "cmsensord.Orders",
-    "Order tracking of one channel (seed 001): shaft speed and, per tracked order, RMS "
-    "and amplitude.",
+    "Order tracking of one channel (seed 001): shaft speed and, per tracked component (an "
+    "order of the shaft speed or a fixed frequency), RMS and amplitude over the output block.",
     {
         "timestamp": _time(),
         "channel": _CHANNEL,
-        "speed_rpm": _num("shaft speed [rpm]"),
+        "speed_rpm": _num("shaft speed [rpm], mean over the block"),
+        "valid": {"type": "boolean",
+                  "description": "false below orders.min_rpm or without a tacho speed: the "
+                                 "orders cannot be told apart and rms/amplitude are null"},
+        "method": {"type": "string", "enum": ["recursive", "smoothed", "batch"],
+                   "description": "recursive (seed 001, causal), smoothed (fixed-lag RTS) or "
+                                  "batch (seed 003 second-generation VKF, zero-phase)"},
         "orders": {
             "type": "array",
-            "description": "one entry per tracked order",
+            "description": "one entry per tracked component",
             "items": {
                 "type": "object",
                 "properties": {
-                    "order": {"type": "number", "description": "order (multiple of shaft speed)"},
-                    "rms": _num("RMS of the order-tracked waveform [m/s^2]"),
-                    "amplitude": _num("envelope amplitude of the order [m/s^2]"),
+                    "name": {"type": "string", "description": "component name (configured)"},
+                    "order": {"type": ["number", "null"],
+                              "description": "order (multiple of shaft speed); null for a fixed frequency"},
+                    "freq_hz": _num("frequency of the component over the block [Hz]"),
+                    "rms": _num("RMS of the tracked waveform over the block [m/s^2]"),
+                    "amplitude": _num("mean envelope (peak) amplitude over the block [m/s^2]"),
                 },
-                "required": ["order", "rms", "amplitude"],
+                "required": ["name", "order", "rms", "amplitude"],
             },
         },
     },
-    ["timestamp", "channel", "speed_rpm", "orders"],
+    ["timestamp", "channel", "speed_rpm", "valid", "orders"],
 )
 
 #: kind key -> JSON schema.

@@ -1,0 +1,159 @@
+"""The raw chain of one machine: TACHO frames -> shaft speed, RAW samples -> orders.
+
+Owns the glue between the :class:`~cmsensord.pipeline.Processor` (which decodes
+frames and converts counts to m/s²) and two pieces of pure DSP:
+
+* :class:`cmsensord.dsp.tacho.TachoTracker` turns edge times into speed and
+  shaft angle at every sample (pulse repair, least-squares smoothing);
+* :class:`cmsensord.dsp.order_tracker.OrderTracker`, the recursive
+  angular-velocity Vold-Kalman tracker of seed 001, runs over all channels of
+  the machine with the gains shared (they depend only on the speed).
+
+Samples wait until the tacho's speed is final for them (``final_until``), so
+the orders do not depend on how the stream was cut into reads: live and replay
+give the same messages.  Output: ``/cm/<channel>/orders`` per output block
+(10 Hz by default), order alarms and tacho events.
+
+Limitations (documented, not hidden): a lost RAW block is given to the tracker
+as zeros (the tracker has no measurement-free update yet) and its output
+blocks are marked; a gap longer than ``MAX_FILL_S`` restarts the tracker.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from cmsensord.config import ChannelConfig, Config
+from cmsensord.dsp.order_tracker import OrderAlarm, OrderTracker, TrackedComponent
+from cmsensord.dsp.tacho import TachoTracker
+
+#: a gap in the RAW stream up to this long is filled; a longer one restarts the tracker
+MAX_FILL_S = 1.0
+
+
+def _tracked(c, default_pct: float) -> TrackedComponent:
+    """A configured component; without its own r or bandwidth it gets orders.bandwidth_pct."""
+    own = c.r is not None or c.bandwidth_hz is not None or c.bandwidth_pct is not None
+    return TrackedComponent(c.name, order=c.order, freq_hz=c.freq_hz, r=c.r,
+                            bandwidth_hz=c.bandwidth_hz,
+                            bandwidth_pct=c.bandwidth_pct if own else default_pct)
+
+
+class OrderChain:
+    """Tacho + order tracker for the channels of one machine (see module docstring)."""
+
+    def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
+                 ppr: int, write: Callable[[str, str, int, dict], None],
+                 event: Callable[..., None], stamp: Callable[[int], int]):
+        self.cfg = cfg
+        self.channels = channels
+        self.fs = fs
+        self.write = write
+        self.event = event
+        self.stamp = stamp
+        o = cfg.orders
+        self.components = tuple(_tracked(c, o.bandwidth_pct) for c in o.components)
+        self.tacho = TachoTracker(fs, ppr, block_len=block_len, timeout_s=cfg.tacho.timeout_s)
+        self.tracker = OrderTracker(self.components, fs_in=fs, max_rpm=o.max_rpm,
+                                    n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
+                                    smoother_lag_s=o.smoother_lag_s or None,
+                                    output_rate_hz=o.output_rate_hz)
+        levels = {c.name: c.alarm_rms for c in o.components if c.alarm_rms is not None}
+        self.alarm = OrderAlarm(self.components, levels, n_channels=len(channels),
+                                hysteresis=1.0 - o.alarm_clear)
+        self._parts: list[np.ndarray] = []      # samples waiting for a final speed, (n, C) each
+        self._waiting = 0
+        self.sample0: int | None = None         # board sample index of the tracker's first input
+        self.next_sample: int | None = None     # board sample index of the next input expected
+        self.filled_samples = 0
+        self.blocks_written = 0
+
+    # ---------------------------------------------------------------- input
+    def add_tacho(self, t0: np.ndarray, edges: list[np.ndarray]) -> None:
+        u = self.tacho.update(t0, edges)
+        for ev in u.events:
+            self.event(ev.kind, None, ev.message, self.stamp(int(ev.sample)), count=int(ev.count))
+        self._drain(final=False)
+
+    def add_samples(self, start: int, y: np.ndarray) -> None:
+        """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost."""
+        if self.next_sample is None:
+            self.sample0 = self.next_sample = start
+        gap = start - self.next_sample
+        if gap < 0 or gap > MAX_FILL_S * self.fs:
+            self._drain(final=True)
+            self.tracker.reset()
+            self.sample0 = self.next_sample = start
+            self.event("config", None, f"order tracker restarted: RAW stream jumped by {gap} samples",
+                       self.stamp(start))
+        elif gap > 0:
+            self._parts.append(np.zeros((gap, len(self.channels))))
+            self._waiting += gap
+            self.filled_samples += gap
+        missing = np.isnan(y)
+        if missing.any():
+            y = np.where(missing, 0.0, y)
+            self.filled_samples += int(missing.any(axis=1).sum())
+        self._parts.append(y)
+        self._waiting += y.shape[0]
+        self.next_sample = start + y.shape[0]
+        self._drain(final=False)
+
+    def finish(self) -> None:
+        """End of the stream: track what waits, with the provisional speed."""
+        self._drain(final=True)
+
+    # ---------------------------------------------------------------- tracking
+    def _drain(self, final: bool) -> None:
+        if not self._waiting:
+            return
+        first = self.next_sample - self._waiting
+        upto = self.next_sample if final else min(self.next_sample, math.floor(self.tacho.final_until))
+        n = upto - first
+        if n <= 0:
+            return
+        y = np.concatenate(self._parts) if len(self._parts) > 1 else self._parts[0]
+        take, rest = y[:n], y[n:]
+        self._parts = [rest] if rest.shape[0] else []
+        self._waiting = rest.shape[0]
+        idx = np.arange(first, upto)
+        hz, _, valid = self.tacho.evaluate(idx)
+        rpm = np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
+        out = self.tracker.process(take, rpm)
+        self._write_blocks(out.blocks, "recursive")
+        if out.smoothed_blocks is not None:
+            self._write_blocks(out.smoothed_blocks, "smoothed")
+        for a in self.alarm.update(out.blocks):
+            ch = self.channels[a.channel].name
+            stamp = self.stamp(self.sample0 + int(a.block_start) * self.tracker.decimate)
+            if a.kind == "onset":
+                self.event("order_alarm", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² reached the "
+                           f"alarm level {a.level:.3g} at {a.rpm:.0f} rpm", stamp,
+                           component=a.component, rpm=round(a.rpm, 1), rms=a.rms)
+            else:
+                self.event("order_alarm_clear", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² back "
+                           f"below {self.cfg.orders.alarm_clear:g} x {a.level:.3g} at {a.rpm:.0f} rpm",
+                           stamp, component=a.component, rpm=round(a.rpm, 1), rms=a.rms)
+
+    def _write_blocks(self, blocks, method: str) -> None:
+        comps = self.components
+        for e in range(len(blocks.start)):
+            stamp = self.stamp(self.sample0 + int(blocks.t_in[e]))
+            rpm = float(blocks.rpm[e])
+            ok = bool(blocks.valid[e])
+            freqs = [float(c.freq(rpm)) for c in comps]
+            for ci, ch in enumerate(self.channels):
+                orders = []
+                for k, c in enumerate(comps):
+                    rms = float(blocks.rms[e, ci, k])
+                    amp = float(blocks.amplitude[e, ci, k])
+                    orders.append({"name": c.name, "order": c.order, "freq_hz": freqs[k],
+                                   "rms": rms if ok and rms == rms else None,
+                                   "amplitude": amp if ok and amp == amp else None})
+                self.write(f"/cm/{ch.name}/orders", "orders", stamp, {
+                    "channel": ch.name, "speed_rpm": rpm if rpm == rpm else None, "valid": ok,
+                    "method": method, "orders": orders})
+            self.blocks_written += 1
