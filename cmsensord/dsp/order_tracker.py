@@ -357,8 +357,9 @@ def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
     shape = r.shape
     r, f = r.ravel(), f.ravel()
     theta = 2.0 * np.pi * f / fs
-    # geometric grid of offsets (rad/sample) outwards from θ, then bisection
-    off = np.geomspace(1e-7, np.pi, 400)
+    # geometric grid of offsets (rad/sample) outwards from θ (ratio 1.2 between
+    # neighbours), then bisection to double precision
+    off = np.geomspace(1e-7, np.pi, 100)
     filt = _single_filter(r, theta)
     edges = []
     for sgn, limit in ((-1.0, 0.0), (1.0, np.pi)):
@@ -370,7 +371,7 @@ def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
         i = np.where(has, below.argmax(axis=1), 0)
         lo = np.where(i > 0, off[np.maximum(i - 1, 0)], 0.0)
         hi = off[i]
-        for _ in range(60):
+        for _ in range(48):
             mid = 0.5 * (lo + hi)
             gm = _single_response(filt, (theta + sgn * mid)[:, None])[:, 0]
             lo, hi = np.where(gm < 0.5, lo, mid), np.where(gm < 0.5, mid, hi)
@@ -388,19 +389,27 @@ def bandwidth_to_r(bandwidth_hz, freq_hz, fs: float) -> np.ndarray:
     b, f = b.ravel(), f.ravel()
     if np.any(b <= 0) or np.any(b >= fs / 2):
         raise ValueError(f"bandwidth_hz: expected in (0, fs/2 = {fs / 2}), got {b.min()}..{b.max()}")
-    x0 = np.log(fs / (np.pi * b))                      # first guess: B ≈ fs/(π r)
-    x1 = x0 + 0.05
+    # first guess: the narrow-band relation B ≈ fs / (√2 π r sin θ) (see r_to_bandwidth)
+    sin_t = np.maximum(np.sin(2.0 * np.pi * f / fs), 1e-3)
+    x0 = np.log(fs / (np.sqrt(2.0) * np.pi * b * sin_t))
+    x1 = x0 + 0.01
     g0 = np.log(r_to_bandwidth(np.exp(x0), f, fs)) - np.log(b)
-    for _ in range(30):
-        g1 = np.log(r_to_bandwidth(np.exp(x1), f, fs)) - np.log(b)
-        if np.all(np.abs(g1) < 1e-12):
-            x0 = x1
+    act = np.arange(b.size)          # elements still iterating (the others have converged,
+    for _ in range(30):              # or sit where the bandwidth saturates near 0 or fs/2)
+        g1 = np.log(r_to_bandwidth(np.exp(x1[act]), f[act], fs)) - np.log(b[act])
+        done = np.abs(g1) < 1e-10    # bandwidth to 1e-10 relative
+        x0[act[done]] = x1[act[done]]
+        keep = ~done
+        if not keep.any():
             break
-        den = np.where(g1 != g0, g1 - g0, 1.0)
-        x2 = np.where(g1 != g0, x1 - g1 * (x1 - x0) / den, x1)
-        x0, g0, x1 = x1, g1, np.clip(x2, x1 - 2.0, x1 + 2.0)
+        a, g1, gp = act[keep], g1[keep], g0[act[keep]]
+        den = np.where(g1 != gp, g1 - gp, 1.0)
+        x2 = np.where(g1 != gp, x1[a] - g1 * (x1[a] - x0[a]) / den, x1[a])
+        x0[a], g0[a] = x1[a], g1
+        x1[a] = np.clip(x2, x1[a] - 2.0, x1[a] + 2.0)
+        act = a
     else:
-        x0 = x1
+        x0[act] = x1[act]
     return np.exp(x0).reshape(shape)
 
 
