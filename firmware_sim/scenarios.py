@@ -42,6 +42,7 @@ renders each segment once.
 
 from __future__ import annotations
 
+import abc
 import functools
 import inspect
 import math
@@ -156,7 +157,7 @@ def velocity_rms(accel: np.ndarray, fs: float, band: tuple[float, float] = (10.0
     return 1e3 * np.sqrt(power)
 
 
-class Scenario:
+class Scenario(abc.ABC):
     """A machine seen by ``n_channels`` sensors, sampled at ``fs``.
 
     Subclasses implement :meth:`_render` (one 1-s segment, all channels),
@@ -209,9 +210,9 @@ class Scenario:
             pos += take
         return out
 
+    @abc.abstractmethod
     def shaft_hz(self, t: np.ndarray) -> np.ndarray:
         """Instantaneous shaft rotation frequency [Hz] at times t [s]."""
-        raise NotImplementedError
 
     def shaft_turns(self, t: np.ndarray) -> np.ndarray:
         """Shaft angle in revolutions since t = 0 (the integral of :meth:`shaft_hz`).
@@ -256,9 +257,9 @@ class Scenario:
         self._turns_cum = cum
         return cum
 
+    @abc.abstractmethod
     def severity(self, t) -> np.ndarray:
         """The scenario's fault-severity knob s(t) (0 = healthy) at times t [s]."""
-        raise NotImplementedError
 
     @property
     def params(self) -> dict[str, Any]:
@@ -303,8 +304,9 @@ class Scenario:
             self._draws.move_to_end(key)
         return d
 
+    @abc.abstractmethod
     def _render(self, k: int) -> np.ndarray:
-        raise NotImplementedError
+        """The samples of 1-s segment k, shape (n_channels, segment_len)."""
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(n_channels={self.n_channels}, seed={self.seed}, duration_s={self.duration_s})"
