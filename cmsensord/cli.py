@@ -328,7 +328,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
         description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, summary (see "
+        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, vkf, summary (see "
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
@@ -350,7 +350,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                      help="the board sends TACHO frames (default for whirl and close_orders)")
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture file")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,summary}")
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,summary}")
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
@@ -362,6 +362,14 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
     rec.add_argument("--baud", type=int, default=921600)
     rec.add_argument("--duration", dest="sub_duration", type=_positive, help="seconds (default: until Ctrl-C)")
+    v = sub.add_parser("vkf", help="replay a RAW capture and add the batch (zero-phase) Vold-Kalman "
+                                   "orders of seed 003 beside the recursive ones")
+    v.add_argument("capture", help="capture file in RAW mode with a tacho")
+    v.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration (orders)")
+    v.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
+    v.add_argument("--bandwidth", type=_positive, default=1.0,
+                   help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
+    v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -413,6 +421,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "record":
             return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
+        if args.command == "vkf":
+            from cmsensord.batch import batch_orders
+
+            cfg, _ = _config_for(args.sub_config)
+            if args.sub_out:
+                cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
+            paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles)
+            for p in paths:
+                print(f"MCAP log: {p}", file=sys.stderr)
+            print(f"  batch VKF: {info}", file=sys.stderr)
+            return 0
         if args.command == "replay":
             cfg, auto = _config_for(args.sub_config)
             if args.sub_out or args.sub_trace:

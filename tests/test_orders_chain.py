@@ -93,3 +93,34 @@ def test_whirl_alarm_fires_near_3000_rpm():
     alarms = [m for t, _, m in sink.messages if t == "/cm/events" and m["kind"] == "order_alarm"]
     assert len(alarms) == 1 and alarms[0]["component"] == "whirl"
     assert abs(alarms[0]["rpm"] - 3000) <= 100, alarms[0]
+
+
+def test_vkf_subcommand_writes_batch_orders_beside_the_recursive_ones(tmp_path):
+    """`cmsensord vkf CAPTURE`: the batch (seed 003) orders in the same file and time base."""
+    import dataclasses
+
+    from cmsensord.batch import batch_orders
+    from cmsensord.sinks.mcap_sink import read_messages
+
+    sc = make_scenario("close_orders", n_channels=1, duration_s=5.0, seed=2)
+    cap = tmp_path / "cap.bin"
+    Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=True)).write_capture(cap, 5.0)
+    cfg = config_from_dict({"orders": RUNUP_ORDERS["close_orders"]})
+    cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=str(tmp_path / "out")))
+    paths, info = batch_orders(str(cap), cfg)
+    msgs = read_messages(paths[0])
+    methods = {m["method"] for t, _, m in msgs if t == "/cm/ch0/orders"}
+    assert methods == {"recursive", "smoothed", "batch"}
+    batch = [(s, m) for t, s, m in msgs if t == "/cm/ch0/orders" and m["method"] == "batch"]
+    assert len(batch) == 50
+    t_first = min(s for t, s, _ in msgs)
+    worst = 0.0
+    for stamp, m in batch:
+        rel = stamp - t_first
+        if not m["valid"] or m["speed_rpm"] < 800 or rel > 4.8e9:
+            continue
+        for o in m["orders"]:
+            if o["name"] == "o4_2":
+                truth = block_truth(sc, rel, "order 4.2")
+                worst = max(worst, abs(o["rms"] - truth) / truth * 100)
+    assert 0 < worst < 2.0, worst

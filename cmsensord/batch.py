@@ -1,0 +1,162 @@
+"""Offline order tracking of a whole capture with the batch Vold-Kalman filter (seed 003).
+
+``cmsensord vkf CAPTURE`` runs the capture through the daemon's own path (so
+the file holds the recursive orders, severity and events as a replay would)
+and, beside them, the zero-phase second-generation VKF of the whole record
+(``dsp.vkf_batch.vkf2``, all components coupled) on ``/cm/<channel>/orders``
+with ``method: "batch"``, in the same 0.1 s blocks and on the same time base.
+
+Steps: RAW counts -> m/s² (STATUS scale/offset or the configuration), the
+tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record, so
+every value is final), zero-phase decimation to at least 5x the highest
+tracked frequency (``scipy.signal.decimate``, FIR, forwards and backwards),
+phases θ_k = 2π o_k turns (or 2π f t), one coupled banded solve per channel.
+A lost RAW block is zeros in the record (the batch filter sees a short gap).
+This is an offline tool: it holds the whole record in memory (about 8 bytes
+per sample and channel at 25 kHz, plus ~1 kB per decimated sample for the
+solve with 2 poles and 3 components).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cmsensord.config import Config
+from cmsensord.errors import CmsensordError
+from cmsensord.protocol import Decoder, FrameType, decode_status, decode_tacho
+
+
+class _Collector:
+    """RAW counts and TACHO edges of a whole capture, as decoded."""
+
+    def __init__(self) -> None:
+        self.raw: list[tuple[int, int, bytes]] = []      # (t0, chan, payload)
+        self.tacho_t0: list[int] = []
+        self.tacho_edges: list[np.ndarray] = []
+        self.status = None
+
+    def add(self, frames, tacho_input: int) -> None:
+        for f in frames:
+            if f.type == FrameType.RAW:
+                self.raw.append((f.t0_unwrapped, f.chan, f.payload))
+            elif f.type == FrameType.TACHO and f.chan == tacho_input:
+                try:
+                    edges = decode_tacho(f.payload)
+                except ValueError:
+                    continue
+                self.tacho_t0.append(f.t0_unwrapped)
+                self.tacho_edges.append(edges)
+            elif f.type == FrameType.STATUS and self.status is None:
+                try:
+                    self.status = decode_status(f.payload)
+                except ValueError:
+                    pass
+
+
+def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
+                 quiet: bool = False) -> tuple[list[Path], dict]:
+    """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary."""
+    from scipy.signal import decimate   # offline tool: scipy.signal is fine here
+
+    from cmsensord.cli import _open_sink
+    from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.dsp.vkf_batch import Hz, phases_for, r_for_bandwidth, vkf2
+    from cmsensord.link import read_capture
+    from cmsensord.pipeline import Processor
+
+    t_start = time.monotonic()
+    chunks = read_capture(capture)
+    first = next(chunks, None)
+    sink = _open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
+    decoder = Decoder()
+    proc = Processor(cfg, sink, auto_channels=True, link_counters=decoder.counters.as_dict)
+    col = _Collector()
+    try:
+        for data in ([first] if first is not None else []):
+            frames = decoder.feed(data)
+            proc.handle(frames)
+            col.add(frames, cfg.tacho.input)
+        for data in chunks:
+            frames = decoder.feed(data)
+            proc.handle(frames)
+            col.add(frames, cfg.tacho.input)
+        frames = decoder.flush()
+        proc.handle(frames)
+        col.add(frames, cfg.tacho.input)
+        proc.finish()
+        if not col.raw or col.status is None:
+            raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
+                                 "capture in RAW mode")
+        if not col.tacho_t0:
+            raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
+        summary = _track(col, cfg, proc, sink, bandwidth_hz, poles, TachoTracker, Hz, phases_for,
+                         r_for_bandwidth, vkf2, decimate)
+    finally:
+        sink.close()
+    summary["wall_s"] = round(time.monotonic() - t_start, 3)
+    return sink.paths, summary
+
+
+def _track(col, cfg, proc, sink, bandwidth_hz, poles, TachoTracker, Hz, phases_for,
+           r_for_bandwidth, vkf2, decimate) -> dict:
+    st = col.status
+    fs, L = st.fs, st.block_len
+    channels = proc.channels
+    scale, offset = proc._raw_cal()
+    t0s = np.array([t for t, _, _ in col.raw], dtype=np.int64)
+    s0 = int(t0s.min())
+    n = int(t0s.max()) - s0 + L
+    y = np.zeros((n, len(channels)))
+    pos = {ch.index: i for i, ch in enumerate(channels)}
+    for t0, chan, payload in col.raw:
+        if chan in pos and len(payload) == 2 * L:
+            counts = np.frombuffer(payload, dtype="<u2").astype(np.float64)
+            y[t0 - s0:t0 - s0 + L, pos[chan]] = (counts - np.float64(offset[chan])) * np.float64(scale[chan])
+    tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s)
+    tacho.update(np.array(col.tacho_t0, dtype=np.int64), col.tacho_edges)
+    comps = cfg.orders.components
+    rpm_top = cfg.orders.max_rpm
+    f_hi = max(c.freq_hz if c.freq_hz is not None else c.order * rpm_top / 60.0 for c in comps)
+    q = max(1, math.floor(fs / (5.0 * f_hi)))
+    per_block = round(fs / cfg.orders.output_rate_hz)          # blocks line up with the tracker's
+    q = max(d for d in range(1, q + 1) if per_block % d == 0)
+    fs_d = fs / q
+    idx = s0 + np.arange(0, n, q)
+    hz, turns, valid = tacho.evaluate(idx)
+    yd = decimate(y, q, ftype="fir", axis=0, zero_phase=True) if q > 1 else y
+    yd = yd[:len(idx)]
+    spec = [c.order if c.order is not None else Hz(c.freq_hz) for c in comps]
+    t = idx / fs
+    ph = phases_for(spec, turns=np.nan_to_num(turns), t=t)
+    # the batch filter's own bandwidth: zero-phase over the whole record, it can be much
+    # narrower than the causal tracker's (the components' r/bandwidth are for the tracker)
+    r = [r_for_bandwidth(bandwidth_hz, fs_d, poles) for _ in comps]
+    block = max(1, round(fs_d / cfg.orders.output_rate_hz))
+    nb = len(idx) // block
+    rpm_blocks = (60.0 * hz[:nb * block]).reshape(nb, block).mean(axis=1)
+    ok_blocks = valid[:nb * block].reshape(nb, block).all(axis=1) & (rpm_blocks >= cfg.orders.min_rpm)
+    written = 0
+    for ci, ch in enumerate(channels):
+        res = vkf2(yd[:, ci], ph, r, poles=poles)
+        w = res.waveforms[:, :nb * block].reshape(len(comps), nb, block)
+        rms = np.sqrt(np.mean(w * w, axis=2))
+        amp = res.amplitude[:, :nb * block].reshape(len(comps), nb, block).mean(axis=2)
+        for b in range(nb):
+            end_sample = int(idx[(b + 1) * block - 1])
+            rpm = float(rpm_blocks[b])
+            ok = bool(ok_blocks[b])
+            orders = [{"name": c.name, "order": c.order,
+                       "freq_hz": c.freq_hz if c.freq_hz is not None else c.order * rpm / 60.0,
+                       "rms": float(rms[k, b]) if ok else None,
+                       "amplitude": float(amp[k, b]) if ok else None}
+                      for k, c in enumerate(comps)]
+            sink.write(f"/cm/{ch.name}/orders", "orders", proc.stamp_ns(end_sample),
+                       {"channel": ch.name, "speed_rpm": rpm, "valid": ok, "method": "batch",
+                        "orders": orders})
+            written += 1
+    return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
+            "components": [c.name for c in comps], "r": [float(v) for v in r]}
