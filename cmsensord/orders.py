@@ -1,4 +1,4 @@
-"""The raw chain of one machine: TACHO frames -> shaft speed, RAW samples -> orders.
+"""The raw chain of one machine: shaft speed + RAW samples -> orders.
 
 Owns the glue between the :class:`~cmsensord.pipeline.Processor` (which decodes
 frames and converts counts to m/s²) and two pieces of pure DSP:
@@ -45,8 +45,8 @@ def _tracked(c, default_pct: float) -> TrackedComponent:
 class OrderChain:
     """Tacho + order tracker for the channels of one machine (see module docstring)."""
 
-    def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
-                 ppr: int, write: Callable[[str, str, int, dict], None],
+    def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], tacho: TachoTracker, *,
+                 fs: int, write: Callable[[str, str, int, dict], None],
                  event: Callable[..., None], stamp: Callable[[int], int]):
         self.cfg = cfg
         self.channels = channels
@@ -56,7 +56,7 @@ class OrderChain:
         self.stamp = stamp
         o = cfg.orders
         self.components = tuple(_tracked(c, o.bandwidth_pct) for c in o.components)
-        self.tacho = TachoTracker(fs, ppr, block_len=block_len, timeout_s=cfg.tacho.timeout_s)
+        self.tacho = tacho                      # owned and fed by the Processor
         self.tracker = OrderTracker(self.components, fs_in=fs, max_rpm=o.max_rpm,
                                     n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
                                     smoother_lag_s=o.smoother_lag_s or None,
@@ -72,10 +72,8 @@ class OrderChain:
         self.blocks_written = 0
 
     # ---------------------------------------------------------------- input
-    def add_tacho(self, t0: np.ndarray, edges: list[np.ndarray]) -> None:
-        u = self.tacho.update(t0, edges)
-        for ev in u.events:
-            self.event(ev.kind, None, ev.message, self.stamp(int(ev.sample)), count=int(ev.count))
+    def tacho_updated(self) -> None:
+        """The tacho has new edges: track the samples whose speed is now final."""
         self._drain(final=False)
 
     def add_samples(self, start: int, y: np.ndarray) -> None:

@@ -54,6 +54,8 @@ MAX_BATCH = 1000
 RAW_WAIT_FRAMES = 800
 #: TACHO frames kept while no order chain exists (RMS mode, or before the first RAW block)
 TACHO_WAIT_FRAMES = 200
+#: observation slots whose decisions may wait for a final tacho speed (5 s at 100 Hz)
+PENDING_DECISION_SLOTS = 500
 
 
 #: how events go to the log (the journal): per-AKF flags are detail, the
@@ -137,7 +139,10 @@ class Processor:
         self._last_stamp_ns = 0
         self._raw_waiting: list[Frame] = []
         self._tacho_waiting: list[Frame] = []
+        self.tacho = None                       # TachoTracker, once the board sends TACHO frames
         self.orders = None                      # OrderChain, once RAW blocks and a tacho come
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []   # (outlier, valid) awaiting f_r
+        self._pending_slots = 0
         self._no_channels = False
         self.raw_dropped = 0
 
@@ -209,8 +214,8 @@ class Processor:
             elif f.type == TACHO:
                 if f.chan == self.cfg.tacho.input:
                     self._tacho_waiting.append(f)
-                    if len(self._tacho_waiting) > TACHO_WAIT_FRAMES and self.orders is None:
-                        del self._tacho_waiting[0]      # no RAW chain (yet): keep only the newest
+                    if len(self._tacho_waiting) > TACHO_WAIT_FRAMES and self.tacho is None:
+                        del self._tacho_waiting[0]      # no STATUS yet: keep only the newest
             elif f.type == STATUS:
                 st = self._decode_status(f)
                 if st is not None and self._status_news(st):
@@ -221,18 +226,22 @@ class Processor:
                     rms, raw = [], []
                     self._apply_status(f, st)
                 self.status = st or self.status
+                if self.tacho is None and self.status is not None:
+                    self._ensure_tacho()        # from now on decisions wait for its speed
                 if self._raw_waiting and self.status is not None:
                     self._flush_raw([])
         self._flush_rms(rms)
         self._flush_raw(raw)
+        self._feed_tacho()
 
     def finish(self) -> None:
         """End of the stream: process what still waits (an incomplete last RAW block,
         samples waiting for a final tacho speed)."""
         self._flush_raw([], final=True)
+        self._feed_tacho()
         if self.orders is not None:
-            self._feed_tacho()
             self.orders.finish()
+        self._release_decisions(final=True)
 
     def _decode_status(self, f: Frame) -> Status | None:
         try:
@@ -372,16 +381,11 @@ class Processor:
     def _feed_orders(self, blocks, row, chan, counts, scale, offset) -> None:
         """RAW blocks (and the TACHO frames so far) to the order chain of the machine."""
         if self.orders is None:
-            if not (self.cfg.orders.enabled and self.status is not None
-                    and self.status.tacho_inputs > 0 and self.bank is not None):
-                self._tacho_waiting.clear()
+            if not (self.cfg.orders.enabled and self.bank is not None and self._ensure_tacho()):
                 return
             from cmsensord.orders import OrderChain     # scipy is loaded only for the raw chain
-            ppr = self.cfg.tacho.ppr or self.status.tacho_ppr
-            self.orders = OrderChain(self.cfg, self.channels, fs=self.fs, block_len=self.block_len,
-                                     ppr=ppr, write=self.sink.write, event=self.event,
-                                     stamp=self.stamp_ns)
-        self._feed_tacho()
+            self.orders = OrderChain(self.cfg, self.channels, self.tacho, fs=self.fs,
+                                     write=self.sink.write, event=self.event, stamp=self.stamp_ns)
         L = self.block_len
         sel = np.isin(chan, self._index)
         pos = {int(b): i for i, b in enumerate(self._index)}
@@ -394,19 +398,82 @@ class Processor:
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(blocks)]):
             self.orders.add_samples(int(blocks[a]), y[a:b].reshape(-1, len(self.channels)))
 
+    def _ensure_tacho(self) -> bool:
+        """Create the TachoTracker once the board has said it has a tacho (STATUS)."""
+        if self.tacho is None and self.status is not None and self.status.tacho_inputs > 0:
+            from cmsensord.dsp.tacho import TachoTracker
+
+            ppr = self.cfg.tacho.ppr or self.status.tacho_ppr
+            self.tacho = TachoTracker(self.fs, ppr, block_len=self.block_len,
+                                      timeout_s=self.cfg.tacho.timeout_s)
+        return self.tacho is not None
+
     def _feed_tacho(self) -> None:
-        if not self._tacho_waiting or self.orders is None:
+        """TACHO frames -> shaft speed (events), then what waited for a final speed."""
+        if self._tacho_waiting and self._ensure_tacho():
+            frames, self._tacho_waiting = self._tacho_waiting, []
+            t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
+            edges = []
+            for f in frames:
+                try:
+                    edges.append(decode_tacho(f.payload))
+                except ValueError as exc:
+                    self.event("decode_error", None, f"bad TACHO payload at byte {f.offset}: {exc}")
+                    edges.append(np.empty(0, dtype=np.uint32))
+            u = self.tacho.update(t0, edges)
+            for ev in u.events:
+                self.event(ev.kind, None, ev.message, self.stamp_ns(int(ev.sample)), count=int(ev.count))
+            if self.orders is not None:
+                self.orders.tacho_updated()
+        self._release_decisions(final=False, tacho_fed=True)
+
+    # ---- decisions with the tacho speed as f_r (Fig. 3) ---------------------
+    def _f_r_from_tacho(self) -> bool:
+        return self.cfg.tacho.f_r_from_tacho and self.tacho is not None
+
+    def _release_decisions(self, final: bool, tacho_fed: bool = False) -> None:
+        """Outlier counts wait until the tacho speed is final for their decision period,
+        so f_r (the mean speed of the period) does not depend on how the stream was read.
+        Right after the tacho was fed (``tacho_fed``), counts more than
+        PENDING_DECISION_SLOTS behind are released anyway: the tacho has stopped coming."""
+        if not self._pending:
             return
-        frames, self._tacho_waiting = self._tacho_waiting, []
-        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        edges = []
-        for f in frames:
-            try:
-                edges.append(decode_tacho(f.payload))
-            except ValueError as exc:
-                self.event("decode_error", None, f"bad TACHO payload at byte {f.offset}: {exc}")
-                edges.append(np.empty(0, dtype=np.uint32))
-        self.orders.add_tacho(t0, edges)
+        first = self.next_slot - self._pending_slots
+        if final or not self._f_r_from_tacho():
+            upto = self.next_slot
+        else:
+            upto = int((self.tacho.final_until - self.slot0_t0) // self.block_len)
+            upto = min(upto, self.next_slot)
+            if tacho_fed and self._pending_slots > PENDING_DECISION_SLOTS:
+                upto = max(upto, self.next_slot - PENDING_DECISION_SLOTS)
+        n = upto - first
+        if n <= 0:
+            return
+        outl = np.concatenate([o for o, _ in self._pending])
+        valid = np.concatenate([v for _, v in self._pending])
+        self._pending = [(outl[n:], valid[n:])] if outl.shape[0] > n else []
+        self._pending_slots = outl.shape[0] - n
+        outl, valid = outl[:n], valid[:n]
+        d = self.decider
+        pos = 0
+        while pos < n:                          # one call per decision period: its own f_r
+            take = min(n - pos, d.period - d.phase)
+            f_r = None
+            if self._f_r_from_tacho() and d.phase + take == d.period:
+                f_r = self._period_f_r(first + pos + take)
+            for dec in d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=f_r):
+                self._write_decision(dec)
+            pos += take
+
+    def _period_f_r(self, end_slot: int) -> np.ndarray:
+        """Mean tacho speed [Hz] over the decision period ending at ``end_slot``, per channel
+        (the configured f_r where the tacho has no valid speed)."""
+        slots = np.arange(end_slot - self.decider.period, end_slot)
+        hz, _, ok = self.tacho.evaluate(self.slot0_t0 + slots * self.block_len)
+        cfg_fr = np.array([ch.monitor.f_r for ch in self.channels])
+        if ok.mean() < 0.5:
+            return cfg_fr
+        return np.full(len(self.channels), float(np.mean(hz[ok])))
 
     def _raw_overrides_complete(self) -> bool:
         return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)
@@ -458,15 +525,15 @@ class Processor:
         valid &= np.isfinite(y)
         first_slot = self.next_slot
         out = self.bank.process(y, valid)
-        decisions = self.decider.update(out.outlier, valid)
+        self._pending.append((out.outlier, valid))
+        self._pending_slots += T
         self.next_slot += T
         self.observations += int(valid.sum())
         self.missing_observations += int((~valid).sum())
         self._last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
         if self.cfg.output.akf_trace:
             self._write_trace(first_slot, y, valid, out)
-        for d in decisions:
-            self._write_decision(d)
+        self._release_decisions(final=False)
 
     def _write_trace(self, first_slot, y, valid, out) -> None:
         i = self._trace_i
