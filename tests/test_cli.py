@@ -204,3 +204,29 @@ def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
     assert len(akf) > 1000 and all(m["filter"] == 10 for m in akf)
     assert "cmsensord.AkfTrace" in assert_messages_match_their_schemas(
         next((tmp_path / "logs").glob("*.mcap")))
+
+
+def test_close_orders_through_the_pty_meet_the_papers_bounds(tmp_path):
+    """The whole chain: 25 kHz RAW frames and TACHO over a real pty, speed from the tacho,
+    decimation, tracker; smoothed orders above 800 rpm within 5 % (order 4) and 3 % (4.2)."""
+    p = cmsensord("--simulate", "--scenario", "close_orders", "--duration", "5", "--speed", "2",
+                  "--out", str(tmp_path))
+    assert p.returncode == 0, p.stderr
+    msgs = read_messages(next(tmp_path.glob("*.mcap")))
+    smoothed = [m for t, _, m in msgs if t == "/cm/ch0/orders" and m["method"] == "smoothed"]
+    assert len(smoothed) >= 40
+    worst = {"o4": 0.0, "o4_2": 0.0}
+    n = 0
+    for m in smoothed:
+        rpm = m["speed_rpm"]
+        if not m["valid"] or not 800 <= rpm <= 2950:
+            continue
+        n += 1
+        # seed 001 signal 2: order-4 RMS 10 rpm/3000, order-4.2 RMS 2 + 10 rpm/3000 (linear in
+        # time, so the RMS over a 0.1 s block is that at the block's mean speed)
+        truth = {"o4": 10.0 * rpm / 3000.0, "o4_2": 2.0 + 10.0 * rpm / 3000.0}
+        for o in m["orders"]:
+            if o["name"] in worst:
+                worst[o["name"]] = max(worst[o["name"]], abs(o["rms"] - truth[o["name"]]) / truth[o["name"]] * 100)
+    assert n >= 25
+    assert worst["o4"] < 5.0 and worst["o4_2"] < 3.0, worst
