@@ -384,6 +384,10 @@ class TachoConfig:
     ppr: int | None = _setting(None, "pulses per revolution (default: the board's STATUS)",
                                ge=1, le=255)
     timeout_s: float = _setting(0.5, "no edge for this long -> tacho_lost event, speed invalid", gt=0)
+    smoothing_revs: float = _setting(2.0, "revolutions each side of the least-squares fit that "
+                                     "smooths edge jitter; the speed is final this many "
+                                     "revolutions (+1 pulse) later, which adds to the order "
+                                     "latency", gt=0, le=16)
     f_r_from_tacho: bool = _setting(True, "use the tacho speed as f_r of the anomaly decisions")
 
     def __post_init__(self) -> None:

@@ -64,6 +64,14 @@ class OrderChain:
         levels = {c.name: c.alarm_rms for c in o.components if c.alarm_rms is not None}
         self.alarm = OrderAlarm(self.components, levels, n_channels=len(channels),
                                 hysteresis=1.0 - o.alarm_clear)
+        tr = self.tracker
+        revs = (self.tacho.half_window + 2) / self.tacho.ppr     # until the speed is final
+        at = min(1720.0, o.max_rpm)
+        self.latency_s = revs * 60.0 / at + tr.latency_s
+        event("config", None, f"order tracker: {len(self.components)} component(s), decimation "
+              f"{tr.decimate} to {tr.fs_track:g} Hz, {tr.output_rate_hz:g} Hz output; latency "
+              f"{1000 * self.latency_s:.0f} ms at {at:.0f} rpm (tacho {1000 * revs * 60 / at:.0f} ms, "
+              f"tracker {1000 * tr.latency_s:.0f} ms)", None)
         self._parts: list[np.ndarray] = []      # samples waiting for a final speed, (n, C) each
         self._waiting = 0
         self.sample0: int | None = None         # board sample index of the tracker's first input

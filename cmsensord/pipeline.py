@@ -404,7 +404,8 @@ class Processor:
             from cmsensord.dsp.tacho import TachoTracker
 
             ppr = self.cfg.tacho.ppr or self.status.tacho_ppr
-            self.tacho = TachoTracker(self.fs, ppr, block_len=self.block_len,
+            h = max(1, round(self.cfg.tacho.smoothing_revs * ppr))
+            self.tacho = TachoTracker(self.fs, ppr, block_len=self.block_len, half_window=h,
                                       timeout_s=self.cfg.tacho.timeout_s)
         return self.tacho is not None
 
