@@ -248,3 +248,71 @@ def test_history_is_bounded():
     assert np.isnan(hz[0]) and np.isnan(turns[0]) and not valid[0]  # dropped
     assert abs(hz[1] - 28.66) < 1e-3 and valid[1]
     assert tr._khi - tr._klo <= 2.0 * 28.66 + 64 + 1  # history_s of knots, pruned in batches of >= 64
+
+
+# --------------------------------------------------------------------------- implementation
+
+def test_compiled_evaluate_equals_numpy():
+    """evaluate() between knots in the compiled kernel: bit for bit the numpy path,
+    before the first edge, inside runs, after a loss, behind the history, at NaN/inf."""
+    from cmsensord.dsp import tacho as tacho_mod
+
+    if tacho_mod._kernel is None:
+        pytest.skip("compiled kernel not built")
+    t0, edges = FRAMES
+    tr = TachoTracker(FS, 2, block_len=L, history_s=1.0)
+    tr.update(t0[:480], edges[:480])        # a loss at 2-3 s, knots before 3.9 s pruned
+    assert tr._pruned and tr.counters.lost == 1
+    rng = np.random.default_rng(4)
+    s = np.concatenate([rng.uniform(-5000, 500 * L, 4000), np.arange(0, 500 * L, 3.3)[::-1],
+                        [np.nan, np.inf, -np.inf, 0.0]])
+    s = s[:s.size // 2 * 2]
+    tr.use_kernel = True
+    got = tr.evaluate(s.reshape(-1, 2))
+    tr.use_kernel = False
+    want = tr.evaluate(s.reshape(-1, 2))
+    assert got[2].any() and not got[2].all() and np.isnan(got[0]).any()   # all cases present
+    for g, w in zip(got, want):
+        assert g.shape == (s.size // 2, 2) and np.array_equal(g, w, equal_nan=True)
+
+
+@pytest.mark.parametrize("bad", ["order", "offsets"])
+def test_a_bad_frame_raises_after_the_frames_before_it(bad):
+    """update() takes the frames before a bad one (as frame-by-frame feeding would),
+    then raises; the tracker goes on from there."""
+    t0, edges = FRAMES
+    t0, edges = t0[:200].copy(), list(edges[:200])
+    if bad == "order":
+        t0[120] = t0[119] - 1
+    else:
+        edges[120] = np.array([3, 2**32], dtype=np.int64)
+    tr = TachoTracker(FS, 2, block_len=L)
+    with pytest.raises(ValueError, match="time order" if bad == "order" else "u32"):
+        tr.update(t0, edges)
+    ref = TachoTracker(FS, 2, block_len=L)
+    for i in range(120):
+        ref.update(t0[i:i + 1], edges[i:i + 1])
+    assert tr.counters == ref.counters and tr._now == ref._now
+    tr.update(t0[121:], edges[121:])
+    ref.update(t0[121:], edges[121:])
+    s = np.arange(0, int(ref.final_until), 7)
+    for got, want in zip(tr.evaluate(s), ref.evaluate(s)):
+        assert np.array_equal(got, want)
+
+
+def test_a_duplicated_edge_is_ignored_and_counted_not_a_crash():
+    """A board (or a corrupted but CRC-valid frame) repeating an edge time must not stop the daemon."""
+    fs, hz = 25000, 28.66
+    period = fs / hz
+    q = [int(round(k * period * 256)) for k in range(60)]
+    q.insert(30, q[29])                     # the same edge twice
+    blocks = {}
+    for e in q:
+        b = e // (250 * 256)
+        blocks.setdefault(b, []).append(e - b * 250 * 256)
+    nb = max(blocks) + 1
+    tr = TachoTracker(fs, 1)
+    u = tr.update(np.arange(nb) * 250, [np.array(blocks.get(b, []), dtype=np.uint32) for b in range(nb)])
+    assert u.counters.out_of_order == 1
+    hz_est, _, ok = tr.evaluate(np.array([20 * period]))
+    assert ok[0] and abs(hz_est[0] - hz) < 1e-3 * hz

@@ -8,9 +8,12 @@
  * component a is (x_a(n-1), x_a(n)) at positions (2a, 2a+1); F(n) is
  * blockdiag([[0, 1], [-1, c_a(n)]]) and the data row h has ones at odd positions.
  *
+ *   sosfilt(sos, x, zi, out, skip, D)              anti-alias SOS cascade + decimation
  *   riccati(c, qd, q2, P, k, S, Pout, want_p)     exact gains, P carried (d x d)
  *   forward(y, c, k, z, zp, e, xf, K)              the filter for C channels
  *   backward(c, k, S, P, zp, e, xs, K)             MBF smoother over one window
+ *   tacho_eval(s, kT, kth, kw, kr, speed, turns, j, code)
+ *                                                  tacho.py: speed and angle between knots
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -23,6 +26,60 @@ static int need(Py_buffer *b, Py_ssize_t n_doubles, const char *name) {
         return 0;
     }
     return 1;
+}
+
+/* The decimator's low-pass: S second-order sections (rows b0 b1 b2 1 a1 a2) in
+ * direct form II transposed, the same arithmetic in the same order as
+ * scipy.signal.sosfilt, over x (T x C) with the state zi (S x 2 x C, scipy's
+ * layout for axis=0) carried in place.  out (rows of C) receives the filtered
+ * samples skip, skip + D, skip + 2D, ... < T: the decimation in the same pass.
+ * C (channels) is the size of zi over 2S. */
+static PyObject *sosfilt(PyObject *self, PyObject *args) {
+    Py_buffer bsos, bx, bzi, bout;
+    Py_ssize_t skip, D;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*nn", &bsos, &bx, &bzi, &bout, &skip, &D))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t S = bsos.len / (Py_ssize_t)sizeof(double) / 6;
+    const Py_ssize_t C = S > 0 ? bzi.len / (Py_ssize_t)sizeof(double) / (2 * S) : 0;
+    if (C <= 0 || D <= 0 || skip < 0 || S <= 0 || bsos.len != S * 6 * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "sosfilt: expected sos (S x 6), C > 0, D > 0, skip >= 0");
+        goto done;
+    }
+    const Py_ssize_t T = bx.len / (Py_ssize_t)sizeof(double) / C;
+    const Py_ssize_t nout = skip < T ? (T - skip + D - 1) / D : 0;
+    if (bx.len != T * C * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "sosfilt: x is not T x C");
+        goto done;
+    }
+    if (!need(&bout, nout * C, "out"))
+        goto done;
+    const double *sos = bsos.buf, *x = bx.buf;
+    double *zi = bzi.buf, *out = bout.buf;
+    Py_BEGIN_ALLOW_THREADS
+    Py_ssize_t next = skip, j = 0;
+    for (Py_ssize_t n = 0; n < T; n++) {
+        const int keep = (n == next);
+        for (Py_ssize_t ch = 0; ch < C; ch++) {
+            double x_cur = x[n * C + ch];
+            for (Py_ssize_t s = 0; s < S; s++) {
+                const double *q = sos + 6 * s;
+                double *z0 = zi + (2 * s) * C + ch, *z1 = zi + (2 * s + 1) * C + ch;
+                const double x_new = q[0] * x_cur + *z0;
+                *z0 = q[1] * x_cur - q[4] * x_new + *z1;
+                *z1 = q[2] * x_cur - q[5] * x_new;
+                x_cur = x_new;
+            }
+            if (keep) out[j * C + ch] = x_cur;
+        }
+        if (keep) { j++; next += D; }
+    }
+    Py_END_ALLOW_THREADS
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&bsos); PyBuffer_Release(&bx); PyBuffer_Release(&bzi); PyBuffer_Release(&bout);
+    return ret;
 }
 
 /* k, S (and P(n|n-1) if want_p) for T samples; P is updated to P(T|T-1). */
@@ -212,10 +269,91 @@ done:
     return ret;
 }
 
+/* TachoTracker.evaluate between knots (tacho.py documents it; same arithmetic, in
+ * the same order, as its numpy expressions).  For each sample s[i]: j[i] = the
+ * last knot with kT <= s[i] (numpy.searchsorted(kT, s, "right") - 1, clipped to
+ * 0 .. n-1; NaN sorts after everything); code[i] = 0 before the first knot, 1
+ * between knots j and j+1 of one run (kr equal): then speed[i] (linear) and
+ * turns[i] (cubic Hermite) are written; 2 otherwise (after a run's last knot:
+ * left to the caller, as are the samples before; speed and turns are 0 there). */
+static PyObject *tacho_eval(PyObject *self, PyObject *args) {
+    Py_buffer bs, bT, bth, bw, br, bsp, btu, bj, bcode;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*w*w*w*w*", &bs, &bT, &bth, &bw, &br, &bsp, &btu, &bj,
+                          &bcode))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = bs.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t n = bT.len / (Py_ssize_t)sizeof(double);
+    if (n <= 0) {
+        PyErr_SetString(PyExc_ValueError, "tacho_eval: no knots");
+        goto done;
+    }
+    if (!need(&bth, n, "kth") || !need(&bw, n, "kw") || !need(&bsp, N, "speed") ||
+        !need(&btu, N, "turns"))
+        goto done;
+    if (br.len < n * (Py_ssize_t)sizeof(long long) || bj.len < N * (Py_ssize_t)sizeof(long long) ||
+        bcode.len < N) {
+        PyErr_SetString(PyExc_ValueError, "tacho_eval: kr, j or code too small");
+        goto done;
+    }
+    const double *s = bs.buf, *kT = bT.buf, *kth = bth.buf, *kw = bw.buf;
+    const long long *kr = br.buf;
+    double *speed = bsp.buf, *turns = btu.buf;
+    long long *jo = bj.buf;
+    unsigned char *code = bcode.buf;
+    Py_BEGIN_ALLOW_THREADS
+    Py_ssize_t j = -1;                 /* last knot <= x; a hint carried from the previous sample */
+    for (Py_ssize_t i = 0; i < N; i++) {
+        const double x = s[i];
+        if (x != x) {
+            j = n - 1;
+        } else if (!((j < 0 ? 1 : kT[j] <= x) && (j + 1 >= n || !(kT[j + 1] <= x)))) {
+            Py_ssize_t lo = 0, hi = n;   /* count of knots <= x */
+            while (lo < hi) {
+                const Py_ssize_t mid = lo + (hi - lo) / 2;
+                if (kT[mid] <= x) lo = mid + 1; else hi = mid;
+            }
+            j = lo - 1;
+        }
+        if (j < 0) {
+            jo[i] = 0;
+            code[i] = 0;
+            speed[i] = 0.0;
+            turns[i] = 0.0;
+            continue;
+        }
+        jo[i] = j;
+        if (j + 1 < n && kr[j + 1] == kr[j]) {
+            const Py_ssize_t a = j, b = j + 1;
+            const double h = kT[b] - kT[a];
+            const double u = (x - kT[a]) / h;
+            const double u2 = u * u, u3 = u * u * u;
+            turns[i] = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
+                        + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b]);
+            speed[i] = (1.0 - u) * kw[a] + u * kw[b];
+            code[i] = 1;
+        } else {
+            code[i] = 2;
+            speed[i] = 0.0;
+            turns[i] = 0.0;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&bs); PyBuffer_Release(&bT); PyBuffer_Release(&bth); PyBuffer_Release(&bw);
+    PyBuffer_Release(&br); PyBuffer_Release(&bsp); PyBuffer_Release(&btu); PyBuffer_Release(&bj);
+    PyBuffer_Release(&bcode);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
+    {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (seed 001, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
+    {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},
     {NULL, NULL, 0, NULL},
 };
 

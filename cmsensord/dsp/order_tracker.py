@@ -65,7 +65,10 @@ Choices of this implementation (documented, configurable):
   so they are computed once per sample for all channels.  ``gains="exact"``
   runs the Riccati recursion above per sample (carried in the state);
   ``gains="table"`` uses the steady-state solution of the Riccati equation at
-  the current speed, tabulated on a speed grid and interpolated linearly.
+  the current speed, tabulated on a speed grid and interpolated linearly.  The
+  table is filled in segments of 64 speeds when the speed first visits them
+  (a machine at constant speed computes one or two segments, a run-up spreads
+  the cost over the run); every entry is the same whenever it is computed.
   ``scipy.linalg.solve_discrete_are`` fails on these undamped models; the table
   is computed by a doubling algorithm (:func:`_riccati_doubling`), which returns
   P after 2^j constant-speed steps, j = ceil(log2(horizon_s fs)): the steady
@@ -83,15 +86,20 @@ Choices of this implementation (documented, configurable):
   so every sample of a block is estimated with at least L samples of future.
   It matters near close orders: a causal filter whose envelope model is a random
   walk lags ramping amplitudes by about 1/Δf when it must separate orders Δf apart.
-* Decimation.  The input (e.g. 25 kHz) is low-passed (SOS, ``scipy.signal.sosfilt``
-  carrying ``zi``) and every D-th sample is kept.  The tracker rate fs_in/D is
+* Decimation.  The input (e.g. 25 kHz) is low-passed (second-order sections,
+  state ``zi`` carried between calls; the compiled kernel filters and decimates
+  in one pass, the numpy path uses ``scipy.signal.sosfilt``, imported only
+  there) and every D-th sample is kept.  The tracker rate fs_in/D is
   at least ``oversample`` (5) times the highest tracked frequency f_hi at
   ``max_rpm``; D is the largest such integer that also divides
   fs_in/output_rate_hz when that is an integer (so output blocks hold a whole
   number of tracker samples).  The filter is a Chebyshev type II low-pass (flat,
   monotonic pass band; order from ``cheb2ord``, 7 for 25 kHz -> 1250 Hz): at
   most 0.001 dB (0.012 %) down at f_hi, and at least 80 dB down from
-  fs_track - f_hi, the lowest frequency that folds onto a tracked one.
+  fs_track - f_hi, the lowest frequency that folds onto a tracked one.  It is
+  designed in numpy (:func:`_cheb2ord`, :func:`_cheby2_sos`: scipy.signal's
+  cheb2ord / cheby2 / zpk2sos step by step, the same sections), so the daemon
+  never imports scipy.signal (~70 MB resident, ~0.9 s).
   The speed (one value per input sample, from the tacho) is delayed by the
   filter's group delay at DC, rounded to whole input samples (``delay_in``), and
   decimated with the same phase as the signal, so that ω(n) belongs to the
@@ -136,7 +144,8 @@ Three implementations of the recursions, with identical semantics:
   chunk cut by the end of a call is re-run from its start in the next one, so
   a stream split anywhere gives bit-identical results.  ``gains="exact"`` in
   numpy loops over samples for the Riccati recursion (slow; for tests).
-* ``cmsensord.dsp._trackerkernel`` — the per-sample loops in C (built by
+* ``cmsensord.dsp._trackerkernel`` — the per-sample loops (and the decimator's
+  filter) in C (built by
   ``python setup.py build_ext --inplace`` / ``pip install``), optional.
 
 State lives in arrays (:class:`TrackerState`) with a leading channel axis where
@@ -184,6 +193,175 @@ lags by about 20 % (eq. 26)."""
 def have_kernel() -> bool:
     """True when the compiled kernel is importable."""
     return _trackerkernel is not None
+
+
+# --------------------------------------------------------------------------
+# the decimator's anti-alias low-pass, designed in numpy (no scipy.signal)
+# --------------------------------------------------------------------------
+# The daemon does not import scipy.signal: it costs ~70 MB of resident memory
+# and ~0.9 s for three small functions.  These follow scipy.signal's cheb2ord,
+# cheby2(output="sos") and zpk2sos(pairing="nearest") step by step, in the
+# same arithmetic, so the sections are scipy's to rounding (compared in
+# tests/test_order_tracker.py); the cascade runs in the compiled kernel.
+
+def _cheb2ord(f_pass: float, f_stop: float, gpass: float, gstop: float, fs: float) -> tuple[int, float]:
+    """Lowest order and stop-band edge [Hz] of the digital Chebyshev type II low-pass
+    that loses at most ``gpass`` dB up to f_pass and at least ``gstop`` dB from f_stop."""
+    passb = math.tan(math.pi * (2.0 * f_pass / fs) / 2.0)     # pre-warped edges
+    stopb = math.tan(math.pi * (2.0 * f_stop / fs) / 2.0)
+    nat = abs(stopb / passb)
+    GSTOP = 10 ** (0.1 * abs(gstop))
+    GPASS = 10 ** (0.1 * abs(gpass))
+    v_pass_stop = math.acosh(math.sqrt((GSTOP - 1.0) / (GPASS - 1.0)))
+    order = int(math.ceil(v_pass_stop / math.acosh(nat)))
+    new_freq = 1.0 / math.cosh(1.0 / order * v_pass_stop)  # where the prototype loses gpass
+    wn = math.atan(passb / new_freq) * 2.0 / math.pi
+    return order, wn * fs / 2
+
+
+def _cheby2_sos(order: int, gstop: float, f_edge: float, fs: float) -> np.ndarray:
+    """Second-order sections (rows b0 b1 b2 1 a1 a2) of the digital Chebyshev type II
+    low-pass of this order, ``gstop`` dB down from its stop-band edge f_edge [Hz]."""
+    N = int(order)
+    # analog prototype (scipy's cheb2ap): stop-band edge at 1 rad/s
+    de = 1.0 / math.sqrt(10 ** (0.1 * gstop) - 1)
+    mu = math.asinh(1.0 / de) / N
+    if N % 2:
+        m = np.concatenate((np.arange(-N + 1, 0, 2, dtype=np.float64),
+                            np.arange(2, N, 2, dtype=np.float64)))
+    else:
+        m = np.arange(-N + 1, N, 2, dtype=np.float64)
+    z = 1j / np.sin(m * np.pi / (2 * N))
+    theta1 = np.pi * np.arange(-N + 1, N, 2, dtype=np.float64) / (2 * N)
+    p = -1 / np.sinh(mu + 1j * theta1)
+    k = np.real(np.prod(-p, axis=0) / np.prod(-z, axis=0))
+    # to the pre-warped edge (lp2lp_zpk), then the bilinear transform (at fs = 2)
+    warped = 2 * 2.0 * math.tan(math.pi * (f_edge / (fs / 2)) / 2.0)
+    degree = len(p) - len(z)
+    z, p, k = warped * z, warped * p, k * warped ** degree
+    fs2 = 4.0
+    z_z = np.concatenate(((fs2 + z) / (fs2 - z), -np.ones(degree)))
+    p_z = (fs2 + p) / (fs2 - p)
+    k_z = k * np.real(np.prod(fs2 - z) / np.prod(fs2 - p))
+    return _zpk2sos(z_z, p_z, float(k_z))
+
+
+def _cplxreal(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One root of each conjugate pair (positive imaginary part, averaged with its
+    partner) and the real roots, sorted as scipy.signal's _cplxreal sorts them."""
+    z = np.atleast_1d(z)
+    if z.size == 0:
+        return z, z
+    tol = 100 * np.finfo(np.float64).eps
+    z = z[np.lexsort((abs(z.imag), z.real))]
+    real = abs(z.imag) <= tol * abs(z)
+    zr = z[real].real
+    if len(zr) == len(z):
+        return np.array([]), zr
+    z = z[~real]
+    zp, zn = z[z.imag > 0], z[z.imag < 0]
+    if len(zp) != len(zn):
+        raise ValueError("complex root without its conjugate")
+    same_real = np.diff(zp.real) <= tol * abs(zp[:-1])        # runs sorted by |imag|
+    diffs = np.diff(np.concatenate(([0], same_real, [0])))
+    for start, stop in zip(np.nonzero(diffs > 0)[0], np.nonzero(diffs < 0)[0] + 1):
+        for chunk in (zp[start:stop], zn[start:stop]):
+            chunk[...] = chunk[np.lexsort([abs(chunk.imag)])]
+    if np.any(abs(zp - zn.conj()) > tol * abs(zn)):
+        raise ValueError("complex root without its conjugate")
+    return (zp + zn.conj()) / 2, zr
+
+
+def _nearest(fro: np.ndarray, to, which: str) -> int:
+    """Index of the root in ``fro`` nearest ``to`` (of the kind ``which``)."""
+    order = np.argsort(np.abs(fro - to))
+    if which == "any":
+        return int(order[0])
+    mask = np.isreal(fro[order])
+    if which == "complex":
+        mask = ~mask
+    return int(order[np.nonzero(mask)[0][0]])
+
+
+def _section(z, p) -> np.ndarray:
+    """One section with up to two zeros and two poles, gain 1 (scipy's _single_zpksos)."""
+    sos = np.zeros(6)
+    b = np.poly(np.asarray(z)) if len(z) else np.ones(1)
+    a = np.poly(np.asarray(p)) if len(p) else np.ones(1)
+    sos[3 - len(b):3] = np.real(b)
+    sos[6 - len(a):6] = np.real(a)
+    return sos
+
+
+def _zpk2sos(z: np.ndarray, p: np.ndarray, k: float) -> np.ndarray:
+    """Digital zeros, poles, gain -> sections, scipy.signal.zpk2sos with pairing
+    "nearest": the pole nearest the unit circle goes with the zeros nearest it,
+    and such sections come last."""
+    p = np.concatenate((p, np.zeros(max(len(z) - len(p), 0))))
+    z = np.concatenate((z, np.zeros(max(len(p) - len(z), 0))))
+    n_sections = (max(len(p), len(z)) + 1) // 2
+    if len(p) % 2 == 1:
+        p = np.concatenate((p, [0.0]))
+        z = np.concatenate((z, [0.0]))
+    z = np.concatenate(_cplxreal(z))
+    p = np.concatenate(_cplxreal(p))
+    sos = np.zeros((n_sections, 6))
+    for si in range(n_sections - 1, -1, -1):
+        p1_idx = int(np.argmin(np.abs(1 - np.abs(p))))         # the "worst" pole left
+        p1 = p[p1_idx]
+        p = np.delete(p, p1_idx)
+        if np.isreal(p1) and np.isreal(p).sum() == 0:          # the last real pole
+            z1_idx = _nearest(z, p1, "real")
+            z1 = z[z1_idx]
+            z = np.delete(z, z1_idx)
+            sos[si] = _section([z1, 0], [p1, 0])
+        elif (len(p) + 1 == len(z) and not np.isreal(p1) and np.isreal(p).sum() == 1
+              and np.isreal(z).sum() == 1):                     # must take a complex zero
+            z1_idx = _nearest(z, p1, "complex")
+            z1 = z[z1_idx]
+            z = np.delete(z, z1_idx)
+            sos[si] = _section([z1, z1.conj()], [p1, p1.conj()])
+        else:
+            if np.isreal(p1):
+                preal = np.flatnonzero(np.isreal(p))
+                p2_idx = int(preal[np.argmin(np.abs(1 - np.abs(p[preal])))])
+                p2 = p[p2_idx]
+                p = np.delete(p, p2_idx)
+            else:
+                p2 = p1.conj()
+            if len(z) > 0:
+                z1_idx = _nearest(z, p1, "any")
+                z1 = z[z1_idx]
+                z = np.delete(z, z1_idx)
+                if not np.isreal(z1):
+                    sos[si] = _section([z1, z1.conj()], [p1, p2])
+                elif len(z) > 0:
+                    z2_idx = _nearest(z, p1, "real")
+                    z2 = z[z2_idx]
+                    z = np.delete(z, z2_idx)
+                    sos[si] = _section([z1, z2], [p1, p2])
+                else:
+                    sos[si] = _section([z1], [p1, p2])
+            else:
+                sos[si] = _section([], [p1, p2])
+    sos[0][:3] *= k
+    return sos
+
+
+def _sos_response(sos: np.ndarray, f, fs: float) -> np.ndarray:
+    """Complex frequency response of the sections at frequencies f [Hz]."""
+    zi = np.exp(-2j * np.pi * np.asarray(f, dtype=np.float64) / fs)
+    h = np.ones(zi.shape, dtype=complex)
+    for b0, b1, b2, a0, a1, a2 in sos:
+        h = h * (b0 + zi * (b1 + zi * b2)) / (a0 + zi * (a1 + zi * a2))
+    return h
+
+
+def _sos_dc_delay(sos: np.ndarray) -> float:
+    """Group delay at DC [samples] of the sections: per polynomial Σ k c_k / Σ c_k
+    (d arg / dω at ω = 0), numerator minus denominator, summed over the sections."""
+    k = np.arange(3.0)
+    return float(sum(np.dot(k, s[:3]) / s[:3].sum() - np.dot(k, s[3:]) / s[3:].sum() for s in sos))
 
 
 # --------------------------------------------------------------------------
@@ -280,32 +458,44 @@ def _riccati_doubling(c: np.ndarray, qdiag: np.ndarray, q2: np.ndarray, n_double
         G_{j+1} = G_j + A_j W⁻¹ G_j A_jᵀ
         H_{j+1} = H_j + A_jᵀ H_j W⁻¹ A_j
 
-    H_j is P after 2^j prediction steps; it stops early once converged.
+    H_j is P after 2^j prediction steps.  Each model of the batch stops on its
+    own once converged (H changes by at most 1e-15 of its largest element), so
+    its result does not depend on the others in the batch (a gain table or r
+    grid filled piecewise equals one filled at once); the stopped ones leave
+    the batch.  W⁻¹A and W⁻¹G come from one solve.
     """
     F = _f_matrices(c)
     G, d = F.shape[0], F.shape[-1]
     h = np.zeros(d)
     h[1::2] = 1.0
     A = np.swapaxes(F, -1, -2).copy()
-    Gm = np.broadcast_to(np.outer(h, h), (G, d, d)) / q2[:, None, None]
+    Gm = np.outer(h, h)[None, :, :] / q2[:, None, None]
     H = np.zeros((G, d, d))
     H[:, np.arange(d), np.arange(d)] = qdiag
+    out = np.empty((G, d, d))
+    act = np.arange(G)
     eye = np.eye(d)
-    for _ in range(n_double):
+    for j in range(n_double):
         W = eye + Gm @ H
-        WA = np.linalg.solve(W, A)
-        WG = np.linalg.solve(W, Gm)
+        X = np.linalg.solve(W, np.concatenate([A, Gm], axis=-1))
+        WA, WG = X[..., :d], X[..., d:]
         At = np.swapaxes(A, -1, -2)
         Hn = H + At @ H @ WA
         Gm = Gm + A @ WG @ At
         A = A @ WA
         Hn = 0.5 * (Hn + np.swapaxes(Hn, -1, -2))
         Gm = 0.5 * (Gm + np.swapaxes(Gm, -1, -2))
-        done = np.max(np.abs(Hn - H)) <= 1e-15 * np.max(np.abs(Hn))
+        done = (np.max(np.abs(Hn - H), axis=(1, 2))
+                <= 1e-15 * np.max(np.abs(Hn), axis=(1, 2)))
         H = Hn
-        if done:
+        if j == n_double - 1 or done.all():
+            out[act] = H
             break
-    return H
+        if done.any():
+            out[act[done]] = H[done]
+            keep = ~done
+            act, A, Gm, H = act[keep], A[keep], Gm[keep], H[keep]
+    return out
 
 
 def _single_filter(r: np.ndarray, theta: np.ndarray):
@@ -441,36 +631,75 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
     log-log (to about 1e-4 of the bandwidth), so the result is a smooth,
     deterministic function of the speed.  r is per tracker sample: the same r
     is a different bandwidth in Hz at a different tracker rate.
+
+    The grid values are computed when first needed (the grid points around
+    the speeds asked for, all components in one batch) and cached; each is
+    the same whenever and with whichever others it is computed.
     """
     speed = np.asarray(speed, dtype=np.float64)
     out = np.empty(speed.shape + (len(components),))
+    grid_comps = [c for c in components if (c.bandwidth_hz is not None or c.bandwidth_pct is not None)
+                  and c.freq_hz is None]
+    span = None
+    finite = speed[np.isfinite(speed)] if grid_comps else speed[:0]
+    if finite.size:
+        s = np.clip(finite, _R_SPEEDS[0], _R_SPEEDS[-1])
+        lo, hi = float(np.min(s)), float(np.max(s))
+        j0 = min(max(int(np.searchsorted(_R_SPEEDS, lo, side="right")) - 1, 0), _R_N - 2)
+        j1 = min(max(int(np.searchsorted(_R_SPEEDS, hi, side="right")) - 1, 0), _R_N - 2) + 1
+        span = (j0, j1 + 1)                          # grid points [j0, j1] bracket every speed
+        _fill_r_grid(grid_comps, fs, *span)
     for i, c in enumerate(components):
         if c.bandwidth_hz is None and c.bandwidth_pct is None:
             out[..., i] = DEFAULT_R if c.r is None else c.r
-            continue
-        out[..., i] = _r_from_bandwidth_on_grid(c, fs, speed)
+        elif c.freq_hz is not None:
+            key = (c, fs)
+            if key not in _R_CACHE:
+                _R_CACHE[key] = float(bandwidth_to_r(c.bandwidth_hz, c.freq_hz, fs))
+            out[..., i] = _R_CACHE[key]
+        elif span is None:                           # no finite speed
+            out[..., i] = np.nan
+        else:
+            j0, j1 = span
+            lr = _R_CACHE[(c, fs)][j0:j1]
+            s = np.clip(speed, _R_SPEEDS[0], _R_SPEEDS[-1])
+            out[..., i] = np.exp(np.interp(np.log(s), _R_LOG[j0:j1], lr))
     return out
 
 
-def _r_from_bandwidth_on_grid(c: TrackedComponent, fs: float, speed: np.ndarray) -> np.ndarray:
-    if c.freq_hz is not None and c.bandwidth_hz is not None:
-        return np.full(speed.shape, float(bandwidth_to_r(c.bandwidth_hz, c.freq_hz, fs)))
-    # a fixed grid (independent of the data) so that any split of a stream agrees
-    grid = np.geomspace(_R_GRID[0], _R_GRID[1], 256)
-    f = c.freq(grid)
-    bw = c.bandwidth_hz if c.bandwidth_hz is not None else c.bandwidth_pct / 100.0 * f
-    bw = np.minimum(bw, 0.45 * fs)
-    f = np.minimum(f, 0.49 * fs)
-    key = (c, fs)
-    if key not in _R_CACHE:
-        _R_CACHE[key] = np.log(bandwidth_to_r(bw, f, fs))
-    lr = _R_CACHE[key]
-    s = np.clip(speed, grid[0], grid[-1])
-    return np.exp(np.interp(np.log(s), np.log(grid), lr))
+def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, j0: int, j1: int) -> None:
+    """Compute the log r of grid points [j0, j1) not yet cached, for all these
+    (bandwidth-given order) components in one batch."""
+    idx, bws, fs_, dest = [], [], [], []
+    for c in components:
+        key = (c, fs)
+        lr = _R_CACHE.get(key)
+        if lr is None:
+            lr = _R_CACHE[key] = np.full(_R_N, np.nan)
+        miss = j0 + np.flatnonzero(np.isnan(lr[j0:j1]))
+        if not miss.size:
+            continue
+        grid = _R_SPEEDS[miss]
+        f = c.freq(grid)
+        bw = c.bandwidth_hz if c.bandwidth_hz is not None else c.bandwidth_pct / 100.0 * f
+        bws.append(np.minimum(np.broadcast_to(bw, f.shape), 0.45 * fs))
+        fs_.append(np.minimum(f, 0.49 * fs))
+        idx.append(miss)
+        dest.append(lr)
+    if not idx:
+        return
+    lr_all = np.log(bandwidth_to_r(np.concatenate(bws), np.concatenate(fs_), fs))
+    n = 0
+    for miss, lr in zip(idx, dest):
+        lr[miss] = lr_all[n:n + miss.size]
+        n += miss.size
 
 
 _R_GRID = (10.0, 100_000.0)   # rpm range of the bandwidth -> r grid
-_R_CACHE: dict = {}
+_R_N = 256                    # its points (geometric)
+_R_SPEEDS = np.geomspace(_R_GRID[0], _R_GRID[1], _R_N)
+_R_LOG = np.log(_R_SPEEDS)
+_R_CACHE: dict = {}           # (component, fs) -> log r on the grid (NaN: not computed yet)
 
 
 # --------------------------------------------------------------------------
@@ -613,6 +842,7 @@ def _a_matrices(c: np.ndarray, k: np.ndarray) -> np.ndarray:
 
 
 _CHUNK = 32       # chunk length of the forward scan (numpy path)
+_TABLE_SEG = 64   # the gain table is computed in segments of this many speeds
 
 
 def _forward_numpy(y, c, k, z0):
@@ -823,14 +1053,9 @@ class OrderTracker:
             raise ValueError(f"decimate: tracker rate {self.fs_track:g} Hz is not above twice the "
                              f"highest tracked frequency {self.f_hi:g} Hz")
         if self.decimate > 1:
-            from scipy import signal
-            order, fc = signal.cheb2ord(self.f_hi, self.fs_track - self.f_hi, gpass=0.001,
-                                        gstop=80.0, fs=self.fs_in)
-            self.sos = signal.cheby2(order, 80.0, fc, fs=self.fs_in, output="sos")
-            gd = 0.0
-            for sec in self.sos:
-                _, g = signal.group_delay((sec[:3], sec[3:]), w=[0.0], fs=self.fs_in)
-                gd += float(g[0])
+            order, fc = _cheb2ord(self.f_hi, self.fs_track - self.f_hi, 0.001, 80.0, self.fs_in)
+            self.sos = _cheby2_sos(order, 80.0, fc, self.fs_in)
+            gd = _sos_dc_delay(self.sos)
             self.filter_delay_s = gd / self.fs_in
             self.delay_in = round(gd)
             self.cutoff_hz = float(fc)             # the stop-band edge of cheby2
@@ -859,8 +1084,18 @@ class OrderTracker:
             n = math.ceil((top - self.min_rpm) / table_step_rpm) + 1
             self._grid0 = self.min_rpm
             self._grid_step = (top - self.min_rpm) / (n - 1)
-            grid = self.min_rpm + self._grid_step * np.arange(n)
-            self._table = self._steady_state(grid)
+            # filled in segments of _TABLE_SEG speeds when first needed (see _fill_table);
+            # np.zeros: pages never touched cost no memory
+            # r on the bandwidth grid over the table's speeds, in one batch (the table
+            # segments, filled as the speed goes, then find it there)
+            component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
+            d = 2 * self.K
+            self._tab_n = n
+            self._tab_have = np.zeros(-(-n // _TABLE_SEG), dtype=bool)
+            self._kS = np.zeros((n, d + 1))
+            self._dkS = np.zeros((n - 1, d + 1))
+            self._P = np.zeros((n, d, d))
+            self._dP = np.zeros((n - 1, d, d))
         self.state = self.initial_state()
 
     # ------------------------------------------------------------------ setup
@@ -871,20 +1106,39 @@ class OrderTracker:
         qd, q2 = _q_diag(rk, self.q1)
         return c, qd, q2
 
-    def _steady_state(self, grid: np.ndarray) -> dict:
-        """Steady-state k, S, P(n|n-1) at the grid speeds (computed in slices)."""
-        ks, Ss, Ps = [], [], []
+    def _steady_state(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Steady-state [k | S] (G, 2K+1) and P(n|n-1) (G, 2K, 2K) at the grid speeds."""
+        ks, Ps = [], []
         for i in range(0, len(grid), 1024):
             c, qd, q2 = self._coeffs(grid[i:i + 1024])
             P = _riccati_doubling(c, qd, q2, self._n_double)
             ph = P[:, :, 1::2].sum(axis=2)
             S = ph[:, 1::2].sum(axis=1) + q2
-            ks.append(ph / S[:, None])
-            Ss.append(S)
+            ks.append(np.concatenate([ph / S[:, None], S[:, None]], axis=1))
             Ps.append(P)
-        kS = np.concatenate([np.concatenate(ks), np.concatenate(Ss)[:, None]], axis=1)
-        P = np.concatenate(Ps)
-        return {"kS": kS, "dkS": np.diff(kS, axis=0), "P": P, "dP": np.diff(P, axis=0)}
+        return np.concatenate(ks), np.concatenate(Ps)
+
+    def _fill_table(self, i: np.ndarray) -> None:
+        """Compute the gain-table segments that hold grid points i or i + 1 and are
+        not there yet (each point is the same whenever it is computed)."""
+        seg = _TABLE_SEG
+        need = np.zeros_like(self._tab_have)
+        need[i // seg] = True
+        need[(i + 1) // seg] = True
+        miss = np.flatnonzero(need & ~self._tab_have)
+        if not miss.size:
+            return
+        n = self._tab_n
+        pts = np.concatenate([np.arange(m * seg, min((m + 1) * seg, n)) for m in miss])
+        grid = self._grid0 + self._grid_step * pts
+        self._kS[pts], self._P[pts] = self._steady_state(grid)
+        self._tab_have[miss] = True
+        # differences to the next point, where both ends are there now
+        j = np.unique(np.concatenate([pts - 1, pts]))
+        j = j[(j >= 0) & (j < n - 1)]
+        j = j[self._tab_have[j // seg] & self._tab_have[(j + 1) // seg]]
+        self._dkS[j] = self._kS[j + 1] - self._kS[j]
+        self._dP[j] = self._P[j + 1] - self._P[j]
 
     def initial_state(self) -> TrackerState:
         d = 2 * self.K
@@ -948,8 +1202,15 @@ class OrderTracker:
             return y, rpm
         if y.shape[0] == 0:
             return y, rpm
-        from scipy import signal
-        yf, st.zi = signal.sosfilt(self.sos, y, axis=0, zi=st.zi)
+        take = np.arange(st.skip, y.shape[0], self.decimate)
+        if self.backend == "c":           # filter and keep every D-th sample in one pass
+            yd = np.empty((len(take), self.C))
+            _trackerkernel.sosfilt(self.sos, np.ascontiguousarray(y), st.zi, yd, st.skip,
+                                   self.decimate)
+        else:                             # the numpy path: scipy, imported only here
+            from scipy.signal import sosfilt
+            yf, st.zi = sosfilt(self.sos, y, axis=0, zi=st.zi)
+            yd = np.ascontiguousarray(yf[take])
         if self.delay_in:
             if st.n_in == 0 and rpm.size:        # the line starts filled with the first speed
                 st.rpm_line[:] = rpm[0]
@@ -958,24 +1219,24 @@ class OrderTracker:
             rdel = line[:len(rpm)]
         else:
             rdel = rpm
-        take = np.arange(st.skip, y.shape[0], self.decimate)
         st.skip = int((st.skip - y.shape[0]) % self.decimate)
         st.n_in += y.shape[0]
-        return np.ascontiguousarray(yf[take]), rdel[take]
+        return yd, rdel[take]
 
     def _gains(self, speed, c):
         """k (N, 2K), S (N,), P (N, 2K, 2K) or None."""
         want_p = self.lag is not None
         if self.gains == "table":           # linear interpolation in the speed
-            tab = self._table
             x = (np.clip(speed, self._grid0, None) - self._grid0) / self._grid_step
-            n = tab["kS"].shape[0]
+            n = self._tab_n
             i = np.minimum(x.astype(np.int64), n - 2)
             f = np.clip(x - i, 0.0, 1.0)
-            kS = tab["kS"][i] + tab["dkS"][i] * f[:, None]
+            if i.size:
+                self._fill_table(i)
+            kS = self._kS[i] + self._dkS[i] * f[:, None]
             P = None
             if want_p:
-                P = tab["P"][i] + tab["dP"][i] * f[:, None, None]
+                P = self._P[i] + self._dP[i] * f[:, None, None]
             return np.ascontiguousarray(kS[:, :-1]), kS[:, -1].copy(), P
         _, qd, q2 = self._coeffs(speed)
         st = self.state

@@ -84,6 +84,12 @@ so final values are identical for any split of the input (tested).
 
 Memory is bounded: knots older than ``history_s`` behind the newest are dropped
 (queries there return NaN and invalid).
+
+Cost: :meth:`TachoTracker.update` touches only the frames that carry edges
+(the others just advance the coverage: one timeout check before the next edge
+is the same as one per frame); :meth:`TachoTracker.evaluate` runs its
+between-knots loop in the compiled ``cmsensord.dsp._trackerkernel`` when it is
+built (the same arithmetic as the numpy path, bit for bit; tested).
 """
 
 from __future__ import annotations
@@ -95,6 +101,11 @@ from dataclasses import asdict, dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
+
+try:  # the compiled loop of evaluate() is optional: numpy is the fallback (same results)
+    from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _kernel = None
 
 __all__ = ["TachoEvent", "TachoCounters", "TachoUpdate", "TachoTracker", "tacho_frames_to_arrays",
            "LOST", "RESTORED", "MISSED", "EXTRA"]
@@ -108,6 +119,7 @@ EXTRA = "tacho_extra_pulse"
 
 _MAX_MISSED_RUN = 8  # at most this many consecutive pulses repaired as missed
 _PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
+_HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])  # moments s0..s4 -> normal equations
 
 
 @dataclass(frozen=True)
@@ -189,6 +201,8 @@ class TachoTracker:
         hz, turns, valid = tr.evaluate(s)
     """
 
+    use_kernel = True  # evaluate() between knots in the compiled kernel when it is built
+
     def __init__(self, fs: float, ppr: int, *, block_len: int = 250, half_window: int | None = None,
                  tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
                  max_timeout_s: float = 10.0, history_s: float = 60.0):
@@ -218,9 +232,14 @@ class TachoTracker:
         self.timeout_periods = float(timeout_periods)
         self.max_timeout_s = float(max_timeout_s)
         self.history_s = float(history_s)
+        self._timeout_hi = int(round(self.max_timeout_s * self.fs * SUB))  # 1/256 sample
+        self._timeout_lo = int(round(self.timeout_s * self.fs * SUB))
         # tricube weights over the pulse positions k - h .. k + h (module notes, step 4)
         u = np.arange(-self.half_window, self.half_window + 1) / (self.half_window + 1)
         self._kernel = (1.0 - np.abs(u) ** 3) ** 3
+        self._offsets = np.arange(-self.half_window, self.half_window + 1)
+        self._committed_key: tuple | None = None
+        self._committed_arrays: tuple[np.ndarray, np.ndarray] | None = None
         self.counters = TachoCounters()
         self._now: int | None = None  # coverage end, samples (exclusive)
         self._last_q: int | None = None  # last edge received
@@ -260,25 +279,68 @@ class TachoTracker:
         if len(edges) != t0.size:
             raise ValueError(f"expected one edge array per frame: {t0.size} t0 values, {len(edges)} edge arrays")
         self._events = []
-        for i in range(t0.size):
-            t = int(t0[i])
-            if self._last_t0 is not None and t < self._last_t0:
-                raise ValueError(f"TACHO frames must come in time order: t0 {t} after t0 {self._last_t0}")
-            self._last_t0 = t
-            off = np.asarray(edges[i], dtype=np.int64).reshape(-1)
-            if off.size:
-                if int(off.min()) < 0 or int(off.max()) > 0xFFFFFFFF:
-                    raise ValueError(f"edge offsets must be u32, got {off.min()}..{off.max()}")
-                for q in np.sort(off + t * SUB).tolist():
-                    self._edge(int(q))
-            end = t + self.block_len
-            self._now = end if self._now is None else max(self._now, end)
-            self._check_timeout(self._now * SUB)
+        F = t0.size
+        if F == 0:
+            self._finalise(ended=False)
+            self._prune()
+            return TachoUpdate([], self.final_until, self.valid, replace(self.counters))
+        # Frames without edges only advance the coverage, and a timeout check at the
+        # end of each of them is the same as one check at the end of the last one
+        # before the next edge (the run's timeout changes only with an edge, and the
+        # checks see a non-decreasing time).  So: one running maximum of the frame
+        # ends, and the frames with edges one by one.
+        prev = np.empty(F, dtype=np.int64)
+        prev[0] = t0[0] if self._last_t0 is None else self._last_t0
+        prev[1:] = t0[:-1]
+        back = np.flatnonzero(t0 < prev)
+        n_ok = int(back[0]) if back.size else F      # frames before the first error
+        err, bad_offsets = None, False
+        if back.size:
+            err = ValueError(f"TACHO frames must come in time order: t0 {int(t0[n_ok])} after "
+                             f"t0 {int(prev[n_ok])}")
+        sizes = np.fromiter((len(e) for e in edges[:n_ok]), dtype=np.int64, count=n_ok)
+        full = np.flatnonzero(sizes)
+        if full.size:                                # all edges at once: q in 1/256 sample
+            off = np.concatenate([edges[i] for i in full.tolist()], axis=None).astype(np.int64)
+            frame = np.repeat(full, sizes[full])
+            out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
+            if out.any():
+                f_bad = int(frame[int(np.argmax(out))])
+                o = off[frame == f_bad]
+                err = ValueError(f"edge offsets must be u32, got {o.min()}..{o.max()}")
+                bad_offsets = True
+                n_ok = f_bad
+                off, frame = off[frame < f_bad], frame[frame < f_bad]
+                full = full[full < f_bad]
+            q = off + t0[frame] * SUB
+            order = np.lexsort((q, frame))           # time order within each frame
+            qs = q[order].tolist()
+            stop = np.cumsum(sizes[full]).tolist()
+        ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
+        k = 0
+        for i, e in zip(full.tolist(), stop if full.size else ()):
+            if i > 0:
+                self._advance(int(ends[i - 1]))
+            for j in range(k, e):
+                self._edge(qs[j])
+            k = e
+        if n_ok:
+            self._advance(int(ends[n_ok - 1]))
+            self._last_t0 = int(t0[n_ok - 1])
+        if err is not None:
+            if bad_offsets:                          # the frame's t0 was taken, as before
+                self._last_t0 = int(t0[n_ok])
+            raise err
         self._finalise(ended=False)
         self._prune()
         ev = self._events
         self._events = []
         return TachoUpdate(ev, self.final_until, self.valid, replace(self.counters))
+
+    def _advance(self, end: int) -> None:
+        """The frames so far cover up to ``end`` (exclusive): coverage and timeout check."""
+        self._now = end if self._now is None else max(self._now, end)
+        self._check_timeout(self._now * SUB)
 
     def update_frames(self, frames: Iterable, chan: int = 0) -> TachoUpdate:
         """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
@@ -313,28 +375,46 @@ class TachoTracker:
             kT, kth, kw, kr = self._knots(float(flat.min()), float(flat.max()))
         else:
             kT, kth, kw, kr = self._knots()
-        speed = np.zeros(flat.size)
-        turns = np.zeros(flat.size)
-        valid = np.zeros(flat.size, dtype=bool)
         if kT.size == 0:
-            turns[:] = self._held
-            return speed.reshape(s.shape) * self.fs, turns.reshape(s.shape), valid.reshape(s.shape)
-        j = np.searchsorted(kT, flat, side="right") - 1
-        before = j < 0
-        jj = np.clip(j, 0, kT.size - 1)
-        nxt = np.minimum(jj + 1, kT.size - 1)
-        inner = (~before) & (jj + 1 < kT.size) & (kr[nxt] == kr[jj])
-        if inner.any():
-            a, b = jj[inner], nxt[inner]
-            h = kT[b] - kT[a]
-            u = (flat[inner] - kT[a]) / h
-            u2, u3 = u * u, u * u * u
-            th = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
-                  + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b])
-            turns[inner] = th
-            speed[inner] = (1.0 - u) * kw[a] + u * kw[b]
-            valid[inner] = True
-        tail = (~before) & (~inner)
+            return (np.zeros(s.shape), np.full(s.shape, self._held), np.zeros(s.shape, dtype=bool))
+        if _kernel is not None and self.use_kernel:
+            # between knots in C (one pass, no temporaries; 0 elsewhere), the rest below
+            speed = np.empty(flat.size)
+            turns = np.empty(flat.size)
+            jj = np.empty(flat.size, dtype=np.int64)
+            code = np.empty(flat.size, dtype=np.uint8)
+            _kernel.tacho_eval(np.ascontiguousarray(flat), np.ascontiguousarray(kT),
+                               np.ascontiguousarray(kth), np.ascontiguousarray(kw),
+                               np.ascontiguousarray(kr, dtype=np.int64), speed, turns, jj, code)
+            valid = code == 1
+            before = code == 0
+            tail = code == 2
+        else:
+            speed = np.zeros(flat.size)
+            turns = np.zeros(flat.size)
+            valid = np.zeros(flat.size, dtype=bool)
+            j = np.searchsorted(kT, flat, side="right") - 1
+            before = j < 0
+            jj = np.clip(j, 0, kT.size - 1)
+            nxt = np.minimum(jj + 1, kT.size - 1)
+            inner = (~before) & (jj + 1 < kT.size) & (kr[nxt] == kr[jj])
+            every = bool(inner.all())         # the usual case: no masks needed
+            a, b, x = (jj, nxt, flat) if every else (jj[inner], nxt[inner], flat[inner])
+            if a.size:
+                h = kT[b] - kT[a]
+                u = (x - kT[a]) / h
+                u2, u3 = u * u, u * u * u
+                th = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
+                      + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b])
+                sp = (1.0 - u) * kw[a] + u * kw[b]
+                if every:
+                    turns, speed = th, sp
+                    valid[:] = True
+                else:
+                    turns[inner] = th
+                    speed[inner] = sp
+                    valid[inner] = True
+            tail = (~before) & (~inner)
         if tail.any():
             a = jj[tail]
             rids, inv = np.unique(kr[a], return_inverse=True)
@@ -392,14 +472,13 @@ class TachoTracker:
 
     def _timeout_q(self, run: _Run) -> int:
         """The current run's timeout in 1/256 sample (integer arithmetic: deterministic)."""
-        hi = int(round(self.max_timeout_s * self.fs * SUB))
+        hi = self._timeout_hi
         if run.prev_raw_q is None:
             return hi
         d = run.last_raw_q - run.prev_raw_q
         if run.prev_prev_raw_q is not None:
             d = max(d, run.prev_raw_q - run.prev_prev_raw_q)
-        lo = int(round(self.timeout_s * self.fs * SUB))
-        return min(hi, max(lo, int(math.ceil(self.timeout_periods * d))))
+        return min(hi, max(self._timeout_lo, int(math.ceil(self.timeout_periods * d))))
 
     def _check_timeout(self, q_now: int) -> None:
         """End the current run if no edge came within its timeout before q_now (exclusive)."""
@@ -413,8 +492,8 @@ class TachoTracker:
     def _edge(self, q: int) -> None:
         c = self.counters
         c.edges += 1
-        if self._last_q is not None and q < self._last_q:
-            c.out_of_order += 1
+        if self._last_q is not None and q <= self._last_q:
+            c.out_of_order += 1     # earlier than, or a duplicate of, an edge already received
             return
         self._last_q = q
         self._check_timeout(q)
@@ -578,33 +657,27 @@ class TachoTracker:
         Returns the knot times (samples), angles (turns) and speeds (turns/sample).
         """
         h = self.half_window
-        Tc = np.asarray(self._cT)
-        nc = np.asarray(self._cn, dtype=np.float64)
+        Tc, nc = self._committed()
         c0 = self._c0
         lo = np.maximum(centres - h, 0)
         hi = np.minimum(centres + h, K - 1)
-        idx = centres[:, None] + np.arange(-h, h + 1)[None, :]
+        idx = centres[:, None] + self._offsets[None, :]
         use = (idx >= lo[:, None]) & (idx <= hi[:, None])
         idx = np.where(use, idx, centres[:, None]) - c0
         k = centres - c0
         dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
-        S = np.max(np.abs(dx), axis=1)
+        S = np.abs(dx).max(axis=1)
         x = dx / S[:, None]
         y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
         wgt = use * self._kernel[None, :]
         npts = use.sum(axis=1)
         x2 = x * x
-        s0 = np.sum(wgt, axis=1)
-        s1 = np.sum(wgt * x, axis=1)
-        s2 = np.sum(wgt * x2, axis=1)
-        s3 = np.sum(wgt * x2 * x, axis=1)
-        s4 = np.sum(wgt * x2 * x2, axis=1)
-        b0 = np.sum(wgt * y, axis=1)
-        b1 = np.sum(wgt * x * y, axis=1)
-        b2 = np.sum(wgt * x2 * y, axis=1)
-        A = np.stack([np.stack([s0, s1, s2], -1), np.stack([s1, s2, s3], -1),
-                      np.stack([s2, s3, s4], -1)], -2)
-        b = np.stack([b0, b1, b2], -1)
+        wx, wx2 = wgt * x, wgt * x2
+        # the weighted moments s0..s4 and right-hand sides b0..b2 (each a sum over its
+        # window, the same products as written out term by term), in one reduction
+        mom = np.stack([wgt, wx, wx2, wx2 * x, wx2 * x2, wgt * y, wx * y, wx2 * y], axis=1).sum(axis=2)
+        A = mom[:, _HANKEL]                  # [[s0 s1 s2] [s1 s2 s3] [s2 s3 s4]]
+        b = mom[:, 5:]
         lin = npts < 3  # two points: a straight line
         if lin.any():
             A[lin, 2, :] = 0.0
@@ -617,6 +690,15 @@ class TachoTracker:
         th = run.base + (nc[k] + coef[:, 0]) / self.ppr
         w = coef[:, 1] / (S * self.ppr)
         return T, th, w
+
+    def _committed(self) -> tuple[np.ndarray, np.ndarray]:
+        """The current run's committed edge times and pulse counts as arrays (cached
+        while they do not change: one conversion per update for both fits)."""
+        key = (self._run.rid if self._run is not None else None, self._c0, len(self._cT))
+        if key != self._committed_key:
+            self._committed_arrays = (np.asarray(self._cT), np.asarray(self._cn, dtype=np.float64))
+            self._committed_key = key
+        return self._committed_arrays
 
     def _provisional(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Knots of the current run beyond the final ones (one-sided windows), fitted when queried."""
