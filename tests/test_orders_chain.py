@@ -13,10 +13,9 @@ import pytest
 
 from cmsensord.cli import RUNUP_ORDERS
 from cmsensord.config import config_from_dict
-from cmsensord.pipeline import ListSink, Processor
-from cmsensord.protocol import Decoder
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
+from stream import run_processor
 
 FS = 25000
 
@@ -24,14 +23,7 @@ FS = 25000
 def run_chain(scenario, seconds, chunk=40_000, seed=0, **params):
     sc = make_scenario(scenario, n_channels=1, duration_s=seconds, seed=seed, **params)
     data = Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=True)).generate(seconds)
-    cfg = config_from_dict({"orders": RUNUP_ORDERS[scenario]})
-    sink = ListSink()
-    proc = Processor(cfg, sink, clock_ns=lambda: 0)
-    dec = Decoder()
-    for k in range(0, len(data), chunk):
-        proc.handle(dec.feed(data[k:k + chunk]))
-    proc.handle(dec.flush())
-    proc.finish()
+    sink, _, _ = run_processor(data, config_from_dict({"orders": RUNUP_ORDERS[scenario]}), chunk=chunk)
     return sc, sink
 
 

@@ -13,18 +13,13 @@ from cmsensord.pipeline import ListSink, Processor
 from cmsensord.protocol import Decoder, FrameType
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
+from stream import run_processor
 
 
 def messages(mode, scenario="faulty", seconds=40.0, channels=2, seed=3, skip_bytes=0, cfg=None):
     sc = make_scenario(scenario, n_channels=channels, duration_s=seconds, seed=seed)
     data = Board(sc, BoardConfig(n_channels=channels, mode=mode)).generate(seconds)[skip_bytes:]
-    sink = ListSink()
-    proc = Processor(cfg or default_config(channels), sink, clock_ns=lambda: 0)
-    dec = Decoder()
-    for k in range(0, len(data), 50_000):
-        proc.handle(dec.feed(data[k:k + 50_000]))
-    proc.handle(dec.flush())
-    proc.finish()
+    sink, proc, _ = run_processor(data, cfg or default_config(channels), chunk=50_000)
     return sink, proc
 
 

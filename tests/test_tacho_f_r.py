@@ -5,10 +5,9 @@ from __future__ import annotations
 import pytest
 
 from cmsensord.config import config_from_dict
-from cmsensord.pipeline import ListSink, Processor
-from cmsensord.protocol import Decoder
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
+from stream import run_processor
 
 
 def severity(mode, *, chunk=40_000, from_tacho=True, seconds=8.0, tacho=True):
@@ -16,13 +15,7 @@ def severity(mode, *, chunk=40_000, from_tacho=True, seconds=8.0, tacho=True):
     data = Board(sc, BoardConfig(n_channels=2, mode=mode, tacho=tacho)).generate(seconds)
     cfg = config_from_dict({"monitor": {"f_r": 10.0}, "tacho": {"f_r_from_tacho": from_tacho},
                             "channels": [{"name": "a"}, {"name": "b"}]})
-    sink = ListSink()
-    proc = Processor(cfg, sink, clock_ns=lambda: 0)
-    dec = Decoder()
-    for k in range(0, len(data), chunk):
-        proc.handle(dec.feed(data[k:k + chunk]))
-    proc.handle(dec.flush())
-    proc.finish()
+    sink, _, _ = run_processor(data, cfg, chunk=chunk)
     return [(s, m) for t, s, m in sink.messages if t == "/cm/b/severity"]
 
 
