@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from cmsensord.config import Config
+from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
 from cmsensord.protocol import Decoder, FrameType, decode_status, decode_tacho
 
@@ -60,11 +61,7 @@ class _Collector:
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
                  quiet: bool = False) -> tuple[list[Path], dict]:
     """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary."""
-    from scipy.signal import decimate   # offline tool: scipy.signal is fine here
-
     from cmsensord.cli import _open_sink
-    from cmsensord.dsp.tacho import TachoTracker
-    from cmsensord.dsp.vkf_batch import Hz, phases_for, r_for_bandwidth, vkf2
     from cmsensord.link import read_capture
     from cmsensord.pipeline import Processor
 
@@ -93,20 +90,24 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
                                  "capture in RAW mode")
         if not col.tacho_t0:
             raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
-        summary = _track(col, cfg, proc, sink, bandwidth_hz, poles, TachoTracker, Hz, phases_for,
-                         r_for_bandwidth, vkf2, decimate)
+        summary = _track(col, cfg, proc, sink, bandwidth_hz, poles)
     finally:
         sink.close()
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
     return sink.paths, summary
 
 
-def _track(col, cfg, proc, sink, bandwidth_hz, poles, TachoTracker, Hz, phases_for,
-           r_for_bandwidth, vkf2, decimate) -> dict:
+def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
+    """The whole record -> speed and angle -> decimation -> coupled solve -> 0.1 s blocks."""
+    from scipy.signal import decimate   # offline tool: scipy.signal is fine here
+
+    from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.dsp.vkf_batch import Hz, phases_for, r_for_bandwidth, vkf2
+
     st = col.status
     fs, L = st.fs, st.block_len
     channels = proc.channels
-    scale, offset = proc._raw_cal()
+    scale, offset = proc.raw_calibration()
     t0s = np.array([t for t, _, _ in col.raw], dtype=np.int64)
     s0 = int(t0s.min())
     n = int(t0s.max()) - s0 + L
@@ -114,8 +115,9 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles, TachoTracker, Hz, phases_f
     pos = {ch.index: i for i, ch in enumerate(channels)}
     for t0, chan, payload in col.raw:
         if chan in pos and len(payload) == 2 * L:
-            counts = np.frombuffer(payload, dtype="<u2").astype(np.float64)
-            y[t0 - s0:t0 - s0 + L, pos[chan]] = (counts - np.float64(offset[chan])) * np.float64(scale[chan])
+            counts = np.frombuffer(payload, dtype="<u2")[None, :]
+            y[t0 - s0:t0 - s0 + L, pos[chan]] = rows_physical(counts, scale[chan:chan + 1],
+                                                              offset[chan:chan + 1])[0]
     tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s)
     tacho.update(np.array(col.tacho_t0, dtype=np.int64), col.tacho_edges)
     comps = cfg.orders.components

@@ -48,6 +48,7 @@ __all__ = [
     "load_config",
     "config_from_dict",
     "default_config",
+    "default_channels",
     "config_to_dict",
 ]
 
@@ -433,7 +434,8 @@ def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
     return None
 
 
-def _default_channels(n: int, monitor: MonitorConfig | None = None) -> tuple[ChannelConfig, ...]:
+def default_channels(n: int, monitor: MonitorConfig | None = None) -> tuple[ChannelConfig, ...]:
+    """Channels ch0..ch{n-1} with the given (or default) monitor settings."""
     mon = monitor if monitor is not None else MonitorConfig()
     return tuple(ChannelConfig(name=f"ch{i}", index=i, monitor=mon) for i in range(n))
 
@@ -448,7 +450,7 @@ class Config:
         default_factory=MonitorConfig, metadata={"help": "default monitor settings"}
     )
     channels: tuple[ChannelConfig, ...] = field(
-        default_factory=lambda: _default_channels(1), metadata={"help": "channels"}
+        default_factory=lambda: default_channels(1), metadata={"help": "channels"}
     )
     tacho: TachoConfig = field(default_factory=TachoConfig, metadata={"help": "shaft tacho"})
     orders: OrdersConfig = field(default_factory=OrdersConfig, metadata={"help": "order tracker"})
@@ -549,7 +551,7 @@ def config_from_dict(
 
     raw_channels = d.get("channels")
     if raw_channels is None:
-        channels = _default_channels(n_channels or 1, monitor)
+        channels = default_channels(n_channels or 1, monitor)
     else:
         if not isinstance(raw_channels, list):
             raise ConfigError(source, "channels", "expected a list of channel entries", raw_channels)
@@ -678,7 +680,7 @@ def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Co
 def default_config(n_channels: int = 1) -> Config:
     """The built-in defaults with channels ch0..ch{n_channels-1}."""
     _check_n_channels(n_channels, "<default>")
-    return Config(channels=_default_channels(n_channels))
+    return Config(channels=default_channels(n_channels))
 
 
 def config_to_dict(cfg: Config) -> dict[str, Any]:

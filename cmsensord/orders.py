@@ -77,7 +77,6 @@ class OrderChain:
         self.sample0: int | None = None         # board sample index of the tracker's first input
         self.next_sample: int | None = None     # board sample index of the next input expected
         self.filled_samples = 0
-        self.blocks_written = 0
 
     # ---------------------------------------------------------------- input
     def tacho_updated(self) -> None:
@@ -162,4 +161,3 @@ class OrderChain:
                 self.write(f"/cm/{ch.name}/orders", "orders", stamp, {
                     "channel": ch.name, "speed_rpm": rpm if rpm == rpm else None, "valid": ok,
                     "method": method, "orders": orders})
-            self.blocks_written += 1

@@ -24,7 +24,6 @@ the raw chain.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from collections import deque
@@ -33,9 +32,9 @@ from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
-from cmsensord.config import ChannelConfig, Config
+from cmsensord.config import ChannelConfig, Config, default_channels
 from cmsensord.dsp.akf import AkfBank, bank_r
-from cmsensord.dsp.rms import rows_rms
+from cmsensord.dsp.rms import rows_physical, rows_rms
 from cmsensord.dsp.severity import AnomalyDecider, Decision
 from cmsensord.protocol import Frame, FrameType, Status, decode_status, decode_tacho
 
@@ -269,8 +268,7 @@ class Processor:
 
     def _setup(self, n_board: int) -> None:
         if self.auto_channels and n_board != len(self.channels):
-            self.channels = tuple(ChannelConfig(name=f"ch{i}", index=i, monitor=self.cfg.monitor)
-                                  for i in range(n_board))
+            self.channels = default_channels(n_board, self.cfg.monitor)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
         if len(usable) < len(self.channels):
             missing = [ch.name for ch in self.channels if ch.index >= n_board]
@@ -371,7 +369,7 @@ class Processor:
             order = np.argsort(first)
             blocks = blocks[order]
             row = np.argsort(order)[row]
-        scale, offset = self._raw_cal()
+        scale, offset = self.raw_calibration()
         rms = rows_rms(counts, scale[chan], offset[chan])
         vals = np.full((len(blocks), C), np.nan, dtype=np.float32)
         vals[row, chan] = rms
@@ -390,8 +388,7 @@ class Processor:
         sel = np.isin(chan, self._index)
         pos = {int(b): i for i, b in enumerate(self._index)}
         y = np.full((len(blocks), L, len(self.channels)), np.nan)
-        cal = (counts[sel].astype(np.float64) - offset[chan[sel]].astype(np.float64)[:, None]) \
-            * scale[chan[sel]].astype(np.float64)[:, None]
+        cal = rows_physical(counts[sel], scale[chan[sel]], offset[chan[sel]])
         y[row[sel], :, [pos[int(c)] for c in chan[sel]]] = cal
         # blocks are consecutive here except across lost ones: feed contiguous runs
         cuts = np.flatnonzero(np.diff(blocks) != L) + 1
@@ -479,7 +476,7 @@ class Processor:
     def _raw_overrides_complete(self) -> bool:
         return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)
 
-    def _raw_cal(self) -> tuple[np.ndarray, np.ndarray]:
+    def raw_calibration(self) -> tuple[np.ndarray, np.ndarray]:
         """Per board channel scale/offset: STATUS, overridden by the configuration."""
         st = self.status
         n = max(st.n_channels if st else 0, 1 + max((ch.index for ch in self.cfg.channels), default=0))
@@ -625,9 +622,3 @@ class Processor:
 
 def _num(x: float):
     return None if x != x else x
-
-
-def replace_channels(cfg: Config, n: int) -> Config:
-    """A copy of ``cfg`` with channels ch0..ch{n-1} using the global monitor settings."""
-    return dataclasses.replace(cfg, channels=tuple(
-        ChannelConfig(name=f"ch{i}", index=i, monitor=cfg.monitor) for i in range(n)))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -38,6 +39,18 @@ def assert_messages_match_their_schemas(path):
             jsonschema.validate(doc, json.loads(schema.data))
             seen.add(schema.name)
     return seen
+
+
+@contextlib.contextmanager
+def board_on_pty(*args):
+    """A simulated board serving a pty (``python -m firmware_sim --pty --hold ARGS``): its path."""
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
+                           stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        yield sim.stdout.readline().strip()
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
 
 
 def comparable(messages):
@@ -129,20 +142,13 @@ def test_sigterm_finishes_the_mcap_file_promptly(tmp_path):
 
 
 def test_record_captures_the_bytes_of_a_port(tmp_path):
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--scenario", "healthy",
-                            "--speed", "10", "--duration", "60", "--hold"], stdout=subprocess.PIPE,
-                           text=True, env=ENV)
-    try:
-        port = sim.stdout.readline().strip()
+    with board_on_pty("--scenario", "healthy", "--speed", "10", "--duration", "60") as port:
         out = tmp_path / "cap.bin"
         r = cmsensord("record", "--port", port, "--out", str(out), "--duration", "1.5")
         assert r.returncode == 0, r.stderr
         frames, counters = iter_frames(out.read_bytes())
         assert len(frames) > 500
         assert counters.crc_failures == 0 and counters.frames_lost == 0
-    finally:
-        sim.terminate()
-        sim.wait(timeout=5)
 
 
 @pytest.mark.parametrize("args, code, text", [
@@ -179,11 +185,7 @@ def test_bad_config_is_one_line_naming_the_key_and_exit_2(tmp_path, text, key):
 
 def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
     """`cmsensord --config FILE` on a board's pty: channels from the board, clean SIGTERM."""
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--scenario", "faulty",
-                            "--channels", "3", "--speed", "10", "--hold"], stdout=subprocess.PIPE,
-                           text=True, env=ENV)
-    try:
-        port = sim.stdout.readline().strip()
+    with board_on_pty("--scenario", "faulty", "--channels", "3", "--speed", "10") as port:
         cfg = tmp_path / "cmsensord.yaml"
         cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp_path / 'logs'}\n"
                        "  akf_trace: true\n  status_line: false\n")
@@ -193,9 +195,6 @@ def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
         d.send_signal(signal.SIGTERM)
         _, err = d.communicate(timeout=10)
         assert d.returncode == 0, err
-    finally:
-        sim.terminate()
-        sim.wait(timeout=5)
     msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
     topics = {t for t, _, _ in msgs}
     assert {"/cm/ch0/severity", "/cm/ch1/severity", "/cm/ch2/severity",

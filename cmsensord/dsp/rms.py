@@ -16,15 +16,20 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rows_rms", "block_rms"]
+__all__ = ["rows_physical", "rows_rms", "block_rms"]
+
+
+def rows_physical(counts: np.ndarray, scale, offset) -> np.ndarray:
+    """float64 (n, block_len) m/s²: ``(count - offset) * scale`` for n blocks of counts,
+    row i calibrated with scale[i], offset[i] (float32 values, as STATUS carries them)."""
+    scale = np.asarray(scale, dtype=np.float32).astype(np.float64)
+    offset = np.asarray(offset, dtype=np.float32).astype(np.float64)
+    return (np.asarray(counts).astype(np.float64) - offset[:, None]) * scale[:, None]
 
 
 def rows_rms(counts: np.ndarray, scale, offset) -> np.ndarray:
-    """float32 (n,): the RMS of n blocks of counts (n, block_len), row i calibrated
-    with scale[i], offset[i] (float32 values, as STATUS carries them)."""
-    scale = np.asarray(scale, dtype=np.float32).astype(np.float64)
-    offset = np.asarray(offset, dtype=np.float32).astype(np.float64)
-    x = (np.asarray(counts).astype(np.float64) - offset[:, None]) * scale[:, None]
+    """float32 (n,): the RMS of n blocks of counts (n, block_len) (see rows_physical)."""
+    x = rows_physical(counts, scale, offset)
     return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
 
 
