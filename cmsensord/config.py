@@ -365,6 +365,9 @@ class OrdersConfig:
     smoother_lag_s: float = _setting(0.0, "fixed-lag RTS smoother lag (0: the plain recursive "
                                      "filter)", ge=0, le=0.2)
     output_rate_hz: float = _setting(10.0, "order RMS/amplitude messages per second", ge=1, le=100)
+    speed: str = _setting("causal", "shaft speed the tracker runs on: causal (from the edges up "
+                          "to each sample, no added latency) or final (the smoothed tacho "
+                          "speed, smoothing_revs + 1 pulse later)", choices=("causal", "final"))
     alarm_clear: float = _setting(0.8, "an order alarm clears below alarm_clear x alarm_rms",
                                   gt=0, lt=1)
     components: tuple[ComponentConfig, ...] = field(
@@ -387,8 +390,11 @@ class TachoConfig:
     timeout_s: float = _setting(0.5, "no edge for this long -> tacho_lost event, speed invalid", gt=0)
     smoothing_revs: float = _setting(2.0, "revolutions each side of the least-squares fit that "
                                      "smooths edge jitter; the speed is final this many "
-                                     "revolutions (+1 pulse) later, which adds to the order "
-                                     "latency", gt=0, le=16)
+                                     "revolutions (+1 pulse) later (f_r of the decisions; the "
+                                     "order latency with orders.speed: final)", gt=0, le=16)
+    causal_revs: float = _setting(16.0, "revolutions behind each edge in the one-sided fit of the "
+                                  "causal speed (orders.speed: causal), at most 64 pulses",
+                                  gt=0, le=64)
     f_r_from_tacho: bool = _setting(True, "use the tacho speed as f_r of the anomaly decisions")
 
     def __post_init__(self) -> None:

@@ -9,9 +9,14 @@ frames and converts counts to m/s²) and two pieces of pure DSP:
   angular-velocity Vold-Kalman tracker of seed 001, runs over all channels of
   the machine with the gains shared (they depend only on the speed).
 
-Samples wait until the tacho's speed is final for them (``final_until``), so
-the orders do not depend on how the stream was cut into reads: live and replay
-give the same messages.  Output: ``/cm/<channel>/orders`` per output block
+The tracker runs on the tacho's causal speed by default (``orders.speed:
+causal``): the speed at a sample comes only from the edges at or before it
+(:meth:`TachoTracker.evaluate_causal`), so samples are tracked as soon as the
+TACHO frame of their block has arrived, and the result does not depend on how
+the stream was cut into reads: live and replay give the same messages.  With
+``orders.speed: final`` samples wait until the smoothed speed is final for them
+(``final_until``, smoothing_revs + 1..2 pulses later), which is more accurate
+at low speed and later.  Output: ``/cm/<channel>/orders`` per output block
 (10 Hz by default), order alarms and tacho events.
 
 Limitations (documented, not hidden): a lost RAW block is given to the tracker
@@ -65,13 +70,18 @@ class OrderChain:
         self.alarm = OrderAlarm(self.components, levels, n_channels=len(channels),
                                 hysteresis=1.0 - o.alarm_clear)
         tr = self.tracker
-        revs = (self.tacho.half_window + 2) / self.tacho.ppr     # until the speed is final
-        at = min(1720.0, o.max_rpm)
-        self.latency_s = revs * 60.0 / at + tr.latency_s
+        self.causal = o.speed == "causal"
+        if self.causal:     # the speed at a sample comes from the edges up to it: no wait
+            self.latency_s = tr.latency_s
+            how = "causal speed"
+        else:               # the smoothed speed is final h + 1..2 pulses later
+            revs = (self.tacho.half_window + 2) / self.tacho.ppr
+            at = min(1720.0, o.max_rpm)
+            self.latency_s = revs * 60.0 / at + tr.latency_s
+            how = f"final speed: tacho {1000 * revs * 60 / at:.0f} ms at {at:.0f} rpm"
         event("config", None, f"order tracker: {len(self.components)} component(s), decimation "
               f"{tr.decimate} to {tr.fs_track:g} Hz, {tr.output_rate_hz:g} Hz output; latency "
-              f"{1000 * self.latency_s:.0f} ms at {at:.0f} rpm (tacho {1000 * revs * 60 / at:.0f} ms, "
-              f"tracker {1000 * tr.latency_s:.0f} ms)", None)
+              f"{1000 * self.latency_s:.0f} ms ({how}, tracker {1000 * tr.latency_s:.0f} ms)", None)
         self._parts: list[np.ndarray] = []      # samples waiting for a final speed, (n, C) each
         self._waiting = 0
         self.sample0: int | None = None         # board sample index of the tracker's first input
@@ -116,7 +126,12 @@ class OrderChain:
         if not self._waiting:
             return
         first = self.next_sample - self._waiting
-        upto = self.next_sample if final else min(self.next_sample, math.floor(self.tacho.final_until))
+        if final:
+            upto = self.next_sample
+        elif self.causal:
+            upto = min(self.next_sample, self.tacho.covered_until)
+        else:
+            upto = min(self.next_sample, math.floor(self.tacho.final_until))
         n = upto - first
         if n <= 0:
             return
@@ -125,7 +140,10 @@ class OrderChain:
         self._parts = [rest] if rest.shape[0] else []
         self._waiting = rest.shape[0]
         idx = np.arange(first, upto)
-        hz, _, valid = self.tacho.evaluate(idx)
+        if self.causal:
+            hz, valid = self.tacho.evaluate_causal(idx)
+        else:
+            hz, _, valid = self.tacho.evaluate(idx)
         rpm = np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
         out = self.tracker.process(take, rpm)
         self._write_blocks(out.blocks, "recursive")

@@ -402,8 +402,9 @@ class Processor:
 
             ppr = self.cfg.tacho.ppr or self.status.tacho_ppr
             h = max(1, round(self.cfg.tacho.smoothing_revs * ppr))
+            m = min(64, max(2, round(self.cfg.tacho.causal_revs * ppr)))
             self.tacho = TachoTracker(self.fs, ppr, block_len=self.block_len, half_window=h,
-                                      timeout_s=self.cfg.tacho.timeout_s)
+                                      timeout_s=self.cfg.tacho.timeout_s, causal_window=m)
         return self.tacho is not None
 
     def _feed_tacho(self) -> None:

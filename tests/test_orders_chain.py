@@ -116,3 +116,39 @@ def test_vkf_subcommand_writes_batch_orders_beside_the_recursive_ones(tmp_path):
                 truth = block_truth(sc, rel, "order 4.2")
                 worst = max(worst, abs(o["rms"] - truth) / truth * 100)
     assert 0 < worst < 2.0, worst
+
+
+def test_order_latency_from_a_samples_arrival_is_within_250_ms():
+    """Frames arrive one board block (10 ms) at a time, as from the serial port; an order
+    message for the 0.1 s block [b0, b1) is written when the newest sample that has arrived
+    is at t_emit: its latency is t_emit - b0 (the first sample of the block waits longest).
+    Measured in board time: the computing time (~1/250 of real time here) comes on top."""
+    from cmsensord.pipeline import ListSink, Processor
+    from cmsensord.protocol import Decoder
+
+    sc = make_scenario("close_orders", n_channels=1, duration_s=4.0, seed=0)
+    data = Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=True, tacho_jitter=2.0)).generate(4.0)
+    frames = Decoder().feed(data)
+    worst = {}
+    for speed in ("causal", "final"):
+        orders = {**RUNUP_ORDERS["close_orders"], "speed": speed}
+        sink = ListSink()
+        proc = Processor(config_from_dict({"orders": orders}), sink, clock_ns=lambda: 0)
+        lat = {"recursive": [], "smoothed": []}
+        i = 0
+        while i < len(frames):
+            j = i
+            while j < len(frames) and frames[j].t0 == frames[i].t0:
+                j += 1                      # one block: its RAW frames, TACHO (and STATUS)
+            seen = len(sink.messages)
+            proc.handle(frames[i:j])
+            t_emit = (frames[i].t0 + 250) / FS
+            for t, stamp, m in sink.messages[seen:]:
+                if t == "/cm/ch0/orders" and m["valid"]:
+                    lat[m["method"]].append(t_emit - (stamp / 1e9 - 0.1))
+            i = j
+        assert min(len(v) for v in lat.values()) >= 20
+        worst[speed] = {k: max(v) for k, v in lat.items()}
+    assert worst["causal"]["recursive"] <= 0.13, worst     # one 0.1 s block + the filter delay
+    assert worst["causal"]["smoothed"] <= 0.25, worst      # + the smoother's 0.1 s lag
+    assert worst["final"]["smoothed"] > 0.25, worst        # waiting for the smoothed tacho speed

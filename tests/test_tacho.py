@@ -316,3 +316,60 @@ def test_a_duplicated_edge_is_ignored_and_counted_not_a_crash():
     assert u.counters.out_of_order == 1
     hz_est, _, ok = tr.evaluate(np.array([20 * period]))
     assert ok[0] and abs(hz_est[0] - hz) < 1e-3 * hz
+
+
+# --------------------------------------------------------------------------- causal speed
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.integers(min_value=1, max_value=499), max_size=12))
+def test_causal_speed_at_a_sample_never_depends_on_later_frames(splits):
+    """Asked for as soon as the frames cover a sample, the causal speed equals the one asked
+    for after the whole stream (missed/extra pulses, a loss and a restart included)."""
+    t0, edges = FRAMES
+    tr = TachoTracker(FS, 2, block_len=L)
+    cuts = [0, *sorted(set(splits)), len(t0)]
+    got, done = [], 0
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        tr.update(t0[a:b], edges[a:b])
+        s = np.arange(done, tr.covered_until)
+        got.append(tr.evaluate_causal(s))
+        done = tr.covered_until
+    hz = np.concatenate([g[0] for g in got])
+    valid = np.concatenate([g[1] for g in got])
+    ref_hz, ref_valid = _REF_TR.evaluate_causal(np.arange(done))
+    assert done == 500 * L
+    assert np.array_equal(hz, ref_hz) and np.array_equal(valid, ref_valid)
+
+
+@pytest.mark.parametrize("ppr", [1, 4])
+def test_causal_speed_follows_the_close_orders_runup_with_jitter_and_faults(ppr):
+    sc, board = make_board("close_orders", 6.0, ppr, tacho_jitter=2.0, tacho_missed=0.02,
+                           tacho_extra=0.02)
+    tr, _ = track(*board_frames(board, 600), ppr)
+    assert tr.counters.missed > 0 and tr.counters.extra > 0
+    s = np.arange(0, tr.covered_until, 3)
+    hz, valid = tr.evaluate_causal(s)
+    true = sc.shaft_hz(s / FS)
+    runup = (true * 60 > 800) & (s < 4.95 * FS)
+    assert valid[runup].all()
+    assert np.max(np.abs(hz[runup] - true[runup]) / true[runup]) < 0.005
+    # the abrupt end of the run-up (constant speed from 5 s): an overshoot that dies out
+    after = s > 5.6 * FS
+    assert np.max(np.abs(hz[after] - true[after]) / true[after]) < 0.005
+    assert np.max(np.abs(hz - true)[s > 4.95 * FS] / true[s > 4.95 * FS]) < 0.02
+
+
+def test_causal_speed_of_a_dead_encoder_is_capped_then_invalid():
+    _, board = make_board("healthy", 6.0, 1, tacho_missed=tuple(range(100, 130)))
+    q = board.tacho_pulses(0, 600)["edges"] / 256
+    e99, e130, e131 = q[99], q[100], q[101]
+    tr, _ = track(*board_frames(board, 600), 1)
+    P = FS / 28.66
+    hz, valid = tr.evaluate_causal(np.array([e99 + 0.5 * P, e99 + 2 * P, e99 + 5 * P,
+                                             e99 + 0.5 * FS + 1, e130 + 1, e131 + 1]))
+    assert abs(hz[0] - 28.66) < 0.03 and abs(hz[1] - 28.66) < 0.03   # a missed pulse is no news
+    assert abs(hz[2] - 28.66 * 2.5 / 5) < 0.03                         # then 2.5 pulses over the wait
+    assert valid[:3].all()
+    assert hz[3] == 0 and not valid[3]                                 # after the timeout
+    assert hz[4] == 0 and not valid[4]                                 # one new edge: no speed yet
+    assert valid[5] and hz[5] > 0

@@ -82,6 +82,25 @@ computed with the one-sided windows. Every decision depends only on the edge
 sequence and the covered time, never on how frames are grouped into calls,
 so final values are identical for any split of the input (tested).
 
+Causal speed
+------------
+For the order tracker, which must not wait for the smoothed speed
+(:meth:`evaluate_causal`, ``orders.speed: causal``): at every committed edge k
+a one-sided weighted least-squares quadratic of pulse count vs edge time over
+the last ``causal_window`` committed edges of the run (default 16 revolutions,
+at most 64 pulses; tricube weights 1 - (j/M)^3)^3 on the edge j places back)
+gives the speed w_k and the acceleration a_k at T_k, and from there the speed
+is extrapolated, w_k + a_k (s - T_k) -- exact for a constant acceleration,
+like the symmetric fit. When no edge has come for 2.5 pulse periods (a
+missed pulse is 2) the speed is capped at 2.5 pulses over the time since
+T_k, and after the run's timeout it is 0 and invalid. The segment of edge k
+applies from max(T_k, the time of the edge whose arrival committed k) on, so
+the value at sample s depends only on the edges at or before s: it is the
+same whenever it is asked for, and any split of the frames gives the same
+values (tested). Accuracy on the close-orders run-up with 2 samples of edge
+jitter, ppr 1, above 800 rpm: at most 0.3 %; it overshoots for about
+``causal_window`` pulses after an abrupt change of the acceleration.
+
 Memory is bounded: knots older than ``history_s`` behind the newest are dropped
 (queries there return NaN and invalid).
 
@@ -119,6 +138,7 @@ EXTRA = "tacho_extra_pulse"
 
 _MAX_MISSED_RUN = 8  # at most this many consecutive pulses repaired as missed
 _PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
+_CAUSAL_SLACK = 2.5  # causal speed: pulse periods without an edge before it is capped (a missed pulse is 2)
 _HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])  # moments s0..s4 -> normal equations
 
 
@@ -205,7 +225,8 @@ class TachoTracker:
 
     def __init__(self, fs: float, ppr: int, *, block_len: int = 250, half_window: int | None = None,
                  tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
-                 max_timeout_s: float = 10.0, history_s: float = 60.0):
+                 max_timeout_s: float = 10.0, history_s: float = 60.0,
+                 causal_window: int | None = None):
         if not (fs > 0 and math.isfinite(fs)):
             raise ValueError(f"fs must be > 0, got {fs!r}")
         if not isinstance(ppr, (int, np.integer)) or not 1 <= ppr <= 255:
@@ -223,6 +244,9 @@ class TachoTracker:
                              f"{max_timeout_s}")
         if not history_s > 0:
             raise ValueError(f"history_s must be > 0, got {history_s!r}")
+        m = min(64, max(3, 16 * int(ppr))) if causal_window is None else causal_window
+        if not isinstance(m, (int, np.integer)) or m < 2:
+            raise ValueError(f"causal_window must be an integer >= 2, got {causal_window!r}")
         self.fs = float(fs)
         self.ppr = int(ppr)
         self.block_len = int(block_len)
@@ -232,6 +256,7 @@ class TachoTracker:
         self.timeout_periods = float(timeout_periods)
         self.max_timeout_s = float(max_timeout_s)
         self.history_s = float(history_s)
+        self.causal_window = int(m)
         self._timeout_hi = int(round(self.max_timeout_s * self.fs * SUB))  # 1/256 sample
         self._timeout_lo = int(round(self.timeout_s * self.fs * SUB))
         # tricube weights over the pulse positions k - h .. k + h (module notes, step 4)
@@ -266,6 +291,14 @@ class TachoTracker:
         self._last_t0: int | None = None
         self._prov_key: tuple | None = None
         self._pruned = False
+        # causal segments (see "Causal speed"): rows key, T, speed, acceleration, valid
+        u = np.arange(self.causal_window) / self.causal_window
+        self._ckernel = (1.0 - u ** 3) ** 3          # weight of the edge j places back
+        self._sbuf = np.empty((5, 1024))
+        self._slo = 0
+        self._shi = 0
+        self._seg_todo: list[tuple[int, float]] = []  # (committed index, known at) to fit
+        self._known_q = 0                             # the edge (or time) being handled
 
     # ------------------------------------------------------------------ input
     def update(self, t0_unwrapped: Sequence[int] | np.ndarray,
@@ -496,6 +529,7 @@ class TachoTracker:
             c.out_of_order += 1     # earlier than, or a duplicate of, an edge already received
             return
         self._last_q = q
+        self._known_q = q
         self._check_timeout(q)
         run = self._run
         if run is None:
@@ -532,6 +566,7 @@ class TachoTracker:
         self._cn.append(self._n_last)
         self._cq_last = q
         run.committed += 1
+        self._seg_todo.append((self._c0 + len(self._cT) - 1, self._known_q / SUB))
         self.counters.pulses += 1 if run.committed == 1 else npulses
         if run.committed == 2 and not run.valid:
             run.valid = True
@@ -607,9 +642,13 @@ class TachoTracker:
 
     def _end_run(self, stop_q: int) -> None:
         run = self._run
+        self._known_q = stop_q
         self._classify(final=True)
         run.ended = True
         run.stop = stop_q / SUB
+        self._flush_segments()
+        self._append_segments(np.array([run.stop]), np.array([run.stop]), np.zeros(1), np.zeros(1),
+                              np.zeros(1))
         self._finalise(ended=True)
         self._prov = None
         if run.valid:
@@ -632,6 +671,7 @@ class TachoTracker:
     def _finalise(self, ended: bool) -> None:
         """Fit the knots of the current run whose windows are complete (all of them when
         the run has ended) and append them to the final knots."""
+        self._flush_segments()
         run = self._run
         K = self._c0 + len(self._cT)  # committed edges of the run so far
         h = self.half_window
@@ -643,8 +683,8 @@ class TachoTracker:
         T, th, w = self._fit(np.arange(self._final, last + 1), K)
         self._append_knots(T, th, w, run.rid)
         self._final = last + 1
-        # committed edges no longer needed by any future window
-        drop = self._final - h - self._c0
+        # committed edges no longer needed by any future window (smoothing or causal)
+        drop = min(self._final - h, K - self.causal_window) - self._c0
         if drop > 256:
             del self._cT[:drop]
             del self._cn[:drop]
@@ -690,6 +730,100 @@ class TachoTracker:
         th = run.base + (nc[k] + coef[:, 0]) / self.ppr
         w = coef[:, 1] / (S * self.ppr)
         return T, th, w
+
+    def _flush_segments(self) -> None:
+        """Fit the causal segments of the edges committed since the last call (see
+        "Causal speed"): a one-sided weighted quadratic over the last ``causal_window``
+        committed edges of the run at each, vectorised over the new edges."""
+        todo = self._seg_todo
+        if not todo:
+            return
+        self._seg_todo = []
+        Tc, nc = self._committed()
+        c0 = self._c0
+        k = np.fromiter((t[0] for t in todo), dtype=np.int64, count=len(todo))
+        known = np.fromiter((t[1] for t in todo), dtype=np.float64, count=len(todo))
+        idx = k[:, None] - np.arange(self.causal_window)[None, :]
+        use = idx >= c0
+        idx = np.where(use, idx, k[:, None]) - c0
+        kr = k - c0
+        dx = np.where(use, Tc[idx] - Tc[kr][:, None], 0.0)
+        S = np.abs(dx).max(axis=1)
+        S = np.where(S > 0, S, 1.0)
+        x = dx / S[:, None]
+        y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
+        wgt = use * self._ckernel[None, :]
+        npts = use.sum(axis=1)
+        x2 = x * x
+        wx, wx2 = wgt * x, wgt * x2
+        mom = np.stack([wgt, wx, wx2, wx2 * x, wx2 * x2, wgt * y, wx * y, wx2 * y], axis=1).sum(axis=2)
+        A = mom[:, _HANKEL]
+        b = mom[:, 5:]
+        lin = npts < 3                       # two points: a straight line; one: no speed
+        if lin.any():
+            A[lin, 2, :] = 0.0
+            A[lin, :, 2] = 0.0
+            A[lin, 2, 2] = 1.0
+            b[lin, 2] = 0.0
+        one = npts < 2
+        if one.any():
+            A[one] = np.eye(3)
+            b[one] = 0.0
+        coef = np.linalg.solve(A, b[..., None])[..., 0]
+        speed = coef[:, 1] / (S * self.ppr)
+        acc = 2.0 * coef[:, 2] / (S * S * self.ppr)
+        self._append_segments(np.maximum(known, Tc[kr]), Tc[kr], speed, acc,
+                              (~one).astype(np.float64))
+
+    def _append_segments(self, key, T, speed, acc, valid) -> None:
+        n = key.size
+        buf = self._sbuf
+        if self._shi + n > buf.shape[1]:
+            live = self._shi - self._slo
+            cap = buf.shape[1]
+            while live + n > cap // 2:
+                cap *= 2
+            new = np.empty((5, cap))
+            new[:, :live] = buf[:, self._slo:self._shi]
+            self._sbuf, self._slo, self._shi = new, 0, live
+            buf = new
+        for row, v in enumerate((key, T, speed, acc, valid)):
+            buf[row, self._shi:self._shi + n] = v
+        self._shi += n
+
+    @property
+    def covered_until(self) -> int:
+        """Sample index (exclusive) up to which TACHO frames have been received."""
+        return 0 if self._now is None else int(self._now)
+
+    def evaluate_causal(self, samples) -> tuple[np.ndarray, np.ndarray]:
+        """(speed in Hz, valid) at sample indices from the edges up to each sample only.
+
+        See "Causal speed" in the module notes: the value at sample s depends only on
+        edges at or before s, so it is the same whenever it is asked for, as long as
+        s < :attr:`covered_until`.  Samples not yet covered get the extrapolation too.
+        """
+        self._flush_segments()
+        s = np.asarray(samples, dtype=np.float64)
+        flat = s.reshape(-1)
+        keys = self._sbuf[0, self._slo:self._shi]
+        j = np.searchsorted(keys, flat, side="right") - 1
+        before = j < 0
+        jj = np.clip(j, 0, None) + self._slo
+        if keys.size == 0:
+            return np.zeros(s.shape), np.zeros(s.shape, dtype=bool)
+        T, w, a, v = (self._sbuf[r, jj] for r in (1, 2, 3, 4))
+        tau = flat - T
+        sp = w + a * tau
+        with np.errstate(divide="ignore", invalid="ignore"):
+            late = tau * w > _CAUSAL_SLACK / self.ppr   # edges overdue: the shaft slows
+            cap = np.where(late, (_CAUSAL_SLACK / self.ppr) / np.where(late, tau, 1.0), np.inf)
+        sp = np.clip(np.minimum(sp, cap), 0.0, None)
+        valid = (v > 0) & (sp > 0) & ~before
+        sp = np.where(valid, sp, 0.0)
+        if before.any() and self._pruned:
+            sp[before] = np.nan
+        return (sp * self.fs).reshape(s.shape), valid.reshape(s.shape)
 
     def _committed(self) -> tuple[np.ndarray, np.ndarray]:
         """The current run's committed edge times and pulse counts as arrays (cached
@@ -760,6 +894,9 @@ class TachoTracker:
             return
         self._klo += cut
         self._pruned = True
+        K = self._sbuf[0, self._slo:self._shi]
+        scut = min(int(np.searchsorted(K, K[-1] - self.history_s * self.fs)), K.size - 2) if K.size > 2 else 0
+        self._slo += max(scut, 0)
         first_live = int(self._kbuf[3, self._klo])  # run ids increase with time
         for rid in [r for r in self._runs if r < first_live]:
             del self._runs[rid]
