@@ -23,7 +23,7 @@ from typing import BinaryIO, Callable, Iterator
 import serial
 
 from cmsensord.errors import LinkError
-from cmsensord.protocol import Decoder, Frame
+from cmsensord.protocol import Decoder, Frame, FrameType
 
 log = logging.getLogger("cmsensord")
 
@@ -34,15 +34,20 @@ PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 class FrameQueue:
     """Bounded FIFO of frames between the reader thread and the loop.
 
-    When full, the oldest frames are dropped and counted (like a UART overrun,
-    the newest data is the most useful to a monitor that has fallen behind).
+    When the loop falls behind and the queue is full, the oldest RAW frames
+    go first (they are most of the bytes, and a lost RAW block is a missing
+    observation the filters handle); RMS, STATUS and TACHO frames are dropped
+    only when no RAW frame is left to drop (then the oldest), so the severity
+    chain and the shaft speed keep their data as long as possible.  Every drop
+    is counted (``drops``, ``raw_drops``); memory stays bounded by ``maxlen``.
     """
 
     def __init__(self, maxlen: int):
         self.maxlen = int(maxlen)
         self._q: deque[Frame] = deque()
         self._cond = threading.Condition()
-        self.drops = 0
+        self.drops = 0          # frames dropped, all types
+        self.raw_drops = 0      # of which RAW
         self.closed = False
 
     def put(self, frames: list[Frame]) -> None:
@@ -52,10 +57,27 @@ class FrameQueue:
             self._q.extend(frames)
             over = len(self._q) - self.maxlen
             if over > 0:
-                for _ in range(over):
-                    self._q.popleft()
-                self.drops += over
+                self._shed(over)
             self._cond.notify()
+
+    def _shed(self, over: int) -> None:
+        """Drop ``over`` frames: the oldest RAW ones, then the oldest of any type."""
+        raw = FrameType.RAW
+        n_raw = sum(1 for f in self._q if f.type == raw)
+        k = min(over, n_raw)
+        if k:
+            kept: deque[Frame] = deque()
+            left = k
+            for f in self._q:
+                if left and f.type == raw:
+                    left -= 1
+                    continue
+                kept.append(f)
+            self._q = kept
+            self.raw_drops += k
+        for _ in range(over - k):
+            self._q.popleft()
+        self.drops += over
 
     def get(self, timeout: float) -> list[Frame]:
         """All queued frames (possibly none after ``timeout`` seconds)."""

@@ -95,6 +95,14 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="also write the true waveforms (t, rpm, turns, components) of channel 0")
     p.add_argument("--truth-rate", type=float, default=None, metavar="HZ",
                    help="sample rate of the truth file (default: the board's 25 kHz)")
+    p.add_argument("--byte-error-rate", type=float, default=0.0, metavar="P",
+                   help="line noise: each byte is flipped, dropped or doubled by a glitch with "
+                        "probability P (e.g. 1e-3); with --pty or --out")
+    p.add_argument("--faults-out", metavar="FILE.jsonl",
+                   help="write the injected line faults (offset in the clean stream, kind) here")
+    p.add_argument("--link", metavar="PATH",
+                   help="with --pty: also publish the port as this symlink (a stable name, as a "
+                        "udev rule gives); removed when the board goes away")
     p.add_argument("--t0-start", type=int, default=0, help="initial sample counter (e.g. 4294967000 to wrap soon)")
     p.add_argument("--param", action="append", type=_param, default=[], metavar="KEY=VALUE",
                    help="scenario parameter, repeatable (e.g. --param impact_peak=8)")
@@ -129,6 +137,12 @@ def main(argv: list[str] | None = None) -> int:
             raise _UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
         if not args.speed >= 0:
             raise _UsageError(f"--speed must be >= 0, got {args.speed}")
+        if not 0.0 <= args.byte_error_rate <= 1.0:
+            raise _UsageError(f"--byte-error-rate must be a probability 0..1, got {args.byte_error_rate}")
+        if args.faults_out and not args.byte_error_rate:
+            raise _UsageError("--faults-out needs --byte-error-rate")
+        if args.link and not args.pty:
+            raise _UsageError("--link needs --pty")
         natural = getattr(SCENARIOS.get(args.scenario), "natural_duration_s", None)
         duration = args.duration if args.duration is not None else (
             (natural or 3600.0) if args.out else None)
@@ -165,10 +179,20 @@ def main(argv: list[str] | None = None) -> int:
             print(f"firmware_sim: error: cannot write {args.truth}: {exc.strerror or exc}", file=sys.stderr)
             return 1
 
+    injector = None
+    if args.byte_error_rate:
+        from .faults import StreamInjector
+
+        injector = StreamInjector(args.byte_error_rate, seed=args.seed)
     if args.out:
         t = time.perf_counter()
         try:
-            counts = board.write_capture(args.out, duration)
+            if injector is None:
+                counts = board.write_capture(args.out, duration)
+            else:
+                counts = _write_noisy_capture(board, args.out, duration, injector)
+                if args.faults_out:
+                    injector.write_records(args.faults_out)
         except OSError as exc:
             print(f"firmware_sim: error: cannot write {args.out}: {exc.strerror or exc}", file=sys.stderr)
             return 1
@@ -176,7 +200,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {args.out}: {args.scenario}, {args.channels} ch, {args.mode}, {duration:g} s, "
               f"{counts['blocks']} blocks, {counts['frames']} frames, {counts['bytes']} bytes in {dt:.1f} s")
         return 0
-    return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold)
+    return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold,
+                      link=args.link, injector=injector, faults_out=args.faults_out)
+
+
+def _write_noisy_capture(board: Board, path: str, duration: float, injector) -> dict:
+    """A capture with line noise: each block's bytes through the injector."""
+    counts = {"blocks": 0, "frames": 0, "bytes": 0}
+    with open(path, "wb") as fh:
+        for data, n_frames in board.iter_blocks(board.n_blocks_for(duration)):
+            out = injector(data)
+            fh.write(out)
+            counts["blocks"] += 1
+            counts["frames"] += n_frames
+            counts["bytes"] += len(out)
+    return counts
 
 
 def _tacho_edges_per_block(scenario, config: BoardConfig, duration: float | None) -> int:
@@ -190,7 +228,8 @@ def _tacho_edges_per_block(scenario, config: BoardConfig, duration: float | None
     return max(4, math.ceil(config.ppr * top_hz * config.block_len / config.fs))
 
 
-def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool = False) -> int:
+def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool = False,
+               link: str | None = None, injector=None, faults_out: str | None = None) -> int:
     from .pty_link import PtyEndpoint
 
     stop = threading.Event()
@@ -200,9 +239,11 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
 
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with PtyEndpoint() as ep:
+        with PtyEndpoint(link=link, injector=injector) as ep:
             print(ep.path, flush=True)
             stats = ep.run(board, speed=speed, duration_s=duration, stop=stop)
+            if injector is not None and faults_out:
+                injector.write_records(faults_out)
             print(json.dumps({"stats": stats.as_dict()}), flush=True)
             if hold:
                 stop.wait()

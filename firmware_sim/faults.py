@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["KINDS", "FaultRecord", "inject"]
+__all__ = ["KINDS", "FaultRecord", "StreamInjector", "frames_hit", "inject", "read_records"]
 
 KINDS = ("flip", "drop", "insert", "gap")
 
@@ -89,3 +89,69 @@ def inject(data: bytes, *, rate: float, seed: int = 0,
             pos = off + g
     out.append(src[pos:].tobytes())
     return b"".join(out), records
+
+
+class StreamInjector:
+    """:func:`inject` applied to a stream chunk by chunk (the pty link, a capture).
+
+    Each chunk gets its own deterministic draw (``seed`` and the chunk's index),
+    so the same chunks give the same faults; ``records`` holds every fault with
+    its offset in the original (uncorrupted) stream, for a test to tell which
+    frames were hit.
+    """
+
+    def __init__(self, rate: float, seed: int = 0,
+                 kinds: tuple[str, ...] = ("flip", "drop", "insert")) -> None:
+        inject(b"", rate=rate, kinds=kinds)          # checks the arguments
+        self.rate, self.seed, self.kinds = rate, seed, tuple(kinds)
+        self.records: list[FaultRecord] = []
+        self.offset = 0          # original bytes seen so far
+        self._chunks = 0
+
+    def __call__(self, chunk: bytes) -> bytes:
+        out, recs = inject(chunk, rate=self.rate, seed=self.seed * 1_000_003 + self._chunks,
+                           kinds=self.kinds)
+        self.records.extend(FaultRecord(r.offset + self.offset, r.kind, r.detail) for r in recs)
+        self.offset += len(chunk)
+        self._chunks += 1
+        return out
+
+    def write_records(self, path) -> None:
+        """The fault records as JSON lines: {"offset", "kind", "detail"}."""
+        import json
+
+        with open(path, "w", encoding="utf-8") as fh:
+            for r in self.records:
+                fh.write(json.dumps({"offset": r.offset, "kind": r.kind, "detail": r.detail}) + "\n")
+
+
+def read_records(path) -> list[FaultRecord]:
+    """Fault records written by :meth:`StreamInjector.write_records`."""
+    import json
+
+    with open(path, encoding="utf-8") as fh:
+        return [FaultRecord(**json.loads(line)) for line in fh if line.strip()]
+
+
+def frames_hit(frame_spans: list[tuple[int, int]], records: list[FaultRecord]) -> set[int]:
+    """Indices of the frames (byte spans [start, end) in the original stream) a fault damaged.
+
+    A flip or a drop damages the frame holding that byte; an insertion damages a
+    frame only when it lands inside it (one in front of a frame's first byte
+    falls between frames); a gap damages every frame it overlaps.
+    """
+    starts = np.array([s for s, _ in frame_spans], dtype=np.int64)
+    ends = np.array([e for _, e in frame_spans], dtype=np.int64)
+    hit: set[int] = set()
+    for r in records:
+        if r.kind == "gap":
+            lo, hi = r.offset, r.offset + r.detail
+            hit.update(np.flatnonzero((starts < hi) & (ends > lo)).tolist())
+            continue
+        i = int(np.searchsorted(starts, r.offset, side="right")) - 1
+        if i < 0 or r.offset >= ends[i]:
+            continue                              # between frames
+        if r.kind == "insert" and r.offset == starts[i]:
+            continue
+        hit.add(i)
+    return hit

@@ -21,6 +21,7 @@ import threading
 import time
 import tty
 from dataclasses import asdict, dataclass
+from typing import Callable
 
 from .board import Board
 
@@ -47,7 +48,11 @@ class LinkStats:
 class PtyEndpoint:
     """A pty whose slave is the simulated board's serial port."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, link: str | None = None,
+                 injector: Callable[[bytes], bytes] | None = None) -> None:
+        """``link``: also publish the port as this symlink (a stable name, like a udev rule
+        gives a USB board; replaced atomically, removed on close). ``injector``: line
+        noise applied to every block's bytes (:class:`firmware_sim.faults.StreamInjector`)."""
         self.master, self.slave = os.openpty()
         try:
             tty.setraw(self.slave)
@@ -59,6 +64,16 @@ class PtyEndpoint:
             raise
         self.stats = LinkStats()
         self._closed = False
+        self.injector = injector
+        self.link = link
+        if link is not None:
+            tmp = f"{link}.{os.getpid()}.tmp"
+            try:
+                os.symlink(self.path, tmp)
+                os.replace(tmp, link)
+            except OSError:
+                self.close()
+                raise
 
     def write_block(self, data: bytes) -> int:
         """Write what fits now; returns the number of bytes written (the rest is dropped)."""
@@ -113,7 +128,7 @@ class PtyEndpoint:
                             break
                     else:
                         s.max_lag_s = max(s.max_lag_s, -wait)
-                self.write_block(data)
+                self.write_block(data if self.injector is None else self.injector(data))
                 s.blocks += 1
                 s.frames += n_frames
         finally:
@@ -123,6 +138,12 @@ class PtyEndpoint:
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            if self.link is not None:
+                try:
+                    if os.path.realpath(self.link) == self.path:   # still ours: unplugged
+                        os.unlink(self.link)
+                except OSError:
+                    pass
             os.close(self.master)
             os.close(self.slave)
 

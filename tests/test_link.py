@@ -56,3 +56,58 @@ def test_reader_thread_decodes_a_pty_and_tees_the_capture(tmp_path):
     assert [f.seq for f in got] == list(range(200))
     assert reader.decoder.counters.crc_failures == 0
     assert (tmp_path / "cap.bin").read_bytes() == data
+
+
+def raw(i, chan=0):
+    return Frame(FrameType.RAW, i & 0xFFFF, i * 250, chan, 0, b"\0\0" * 250)
+
+
+def test_a_full_queue_drops_the_oldest_raw_frames_first():
+    q = FrameQueue(10)
+    q.put([raw(0), frame(1), raw(2), raw(3), frame(4), raw(5)])
+    q.put([frame(6), raw(7), frame(8), raw(9), frame(10), frame(11)])   # 12 > 10: two RAW go
+    got = q.get(timeout=0)
+    assert [f.seq for f in got] == [1, 3, 4, 5, 6, 7, 8, 9, 10, 11]
+    assert (q.drops, q.raw_drops) == (2, 2)
+    # no RAW left to drop: then the oldest frames of any type
+    q.put([frame(i) for i in range(20, 33)])
+    assert [f.seq for f in q.get(timeout=0)] == list(range(23, 33))
+    assert (q.drops, q.raw_drops) == (5, 2)
+
+
+def test_a_stalled_loop_loses_raw_blocks_but_no_rms_frame_and_memory_stays_bounded():
+    """A real reader thread on a pty; the loop stalls while the board sends bursts of 100
+    blocks (one RAW, one RMS and one TACHO frame each: 300 frames) into a queue of 256:
+    exactly 44 RAW frames per burst are shed, every RMS and TACHO frame is delivered."""
+    from cmsensord.protocol import encode_frame, encode_tacho
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    q = FrameQueue(256)
+    reader = SerialReader(os.ttyname(slave), baud=921600, read_size=4096, queue=q)
+    reader.start()
+    assert reader.connected.wait(5.0)
+    payload = b"\1\0" * 250
+    got, depth = [], 0
+    for burst in range(3):
+        for i in range(burst * 100, burst * 100 + 100):
+            os.write(master, encode_frame(FrameType.RAW, (3 * i) & 0xFFFF, i * 250, 0, 0, payload)
+                     + encode_rms((3 * i + 1) & 0xFFFF, i * 250, [1.0])
+                     + encode_tacho((3 * i + 2) & 0xFFFF, i * 250, 0, []))
+        deadline = time.monotonic() + 5.0      # the stalled loop: the reader goes on reading
+        while reader.decoder.counters.frames["tacho"] < 100 * (burst + 1) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        depth = max(depth, len(q))
+        got += q.get(timeout=0)
+    reader.stop()
+    reader.join(timeout=2.0)
+    os.close(master)
+    os.close(slave)
+    kinds = [f.type for f in got]
+    assert kinds.count(FrameType.RMS) == 300 and kinds.count(FrameType.TACHO) == 300
+    assert q.raw_drops == q.drops == 3 * 44
+    assert kinds.count(FrameType.RAW) == 300 - 3 * 44
+    assert depth == 256
+    # the RAW frames kept are the newest of each burst
+    raw_t0 = [f.t0 // 250 for f in got if f.type == FrameType.RAW]
+    assert raw_t0[:56] == list(range(44, 100))

@@ -1,0 +1,155 @@
+"""Link faults through real processes: line noise, an unplugged board, t0 wrapping.
+
+The board is firmware_sim on a real pty (published under a stable symlink, as a
+udev rule would), the daemon is ``python -m cmsensord --config``; nothing is mocked.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from cmsensord.config import config_from_dict
+from cmsensord.protocol import OVERHEAD, Decoder, iter_frames
+from cmsensord.sinks.mcap_sink import read_messages
+from firmware_sim.board import Board, BoardConfig
+from firmware_sim.faults import frames_hit, read_records
+from firmware_sim.scenarios import make_scenario
+from stream import run_processor
+from test_cli import ENV, comparable, cmsensord
+
+
+def start_board(*args):
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
+                           stdout=subprocess.PIPE, text=True, env=ENV)
+    sim.stdout.readline()                      # the pty's path: the board is up
+    return sim
+
+
+def start_daemon(tmp_path, port, *extra):
+    cfg = tmp_path / "cmsensord.yaml"
+    cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n")
+    return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
+                            stderr=subprocess.PIPE, text=True, env=ENV)
+
+
+def stop(proc, timeout=10):
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=timeout)
+    return err
+
+
+def test_line_noise_loses_only_the_frames_it_hits_and_replay_matches_live(tmp_path):
+    """Byte error rate 1e-3 (flips, drops, insertions) injected by firmware_sim on the pty:
+    no exception, exactly the frames hit by a fault are lost, the counters and the
+    frames_lost events say so, and replaying the capture gives the live messages."""
+    link = tmp_path / "ttyBOARD"
+    args = ["--scenario", "faulty", "--channels", "2", "--duration", "30", "--speed", "5",
+            "--seed", "3", "--byte-error-rate", "1e-3", "--faults-out", str(tmp_path / "faults.jsonl"),
+            "--link", str(link)]
+    sim = start_board(*args)
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
+    stats = json.loads(sim.stdout.readline())["stats"]          # the board has sent everything
+    time.sleep(1.5)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    assert "Traceback" not in err
+    assert stats["dropped_bytes"] == 0
+
+    # what the board sent, clean, and which of its frames a fault hit
+    sc = make_scenario("faulty", n_channels=2, duration_s=30.0, seed=3)
+    board = Board(sc, BoardConfig(n_channels=2))
+    clean = b"".join(data for data, _ in board.iter_blocks(board.n_blocks_for(30.0)))
+    sent, _ = iter_frames(clean)
+    spans = [(f.offset, f.offset + OVERHEAD + len(f.payload)) for f in sent]
+    records = read_records(tmp_path / "faults.jsonl")
+    hit = frames_hit(spans, records)
+    assert len(records) > 50 and len(hit) > 40      # ~80 kB at 1e-3
+    kinds = {r.kind for r in records}
+    assert kinds == {"flip", "drop", "insert"}
+
+    captured = (tmp_path / "cap.bin").read_bytes()
+    got, counters = iter_frames(captured)
+    key = lambda f: (f.type, f.seq, f.t0, f.chan, f.payload)        # noqa: E731
+    # pyserial flushes the input when it opens the port: the capture starts with the
+    # first frame read after that, part way into the board's stream
+    first = [key(f) for f in sent].index(key(got[0]))
+    assert first < len(sent) // 2
+    hit = {i - first for i in hit if i >= first}
+    sent = sent[first:]
+    want = [f for i, f in enumerate(sent) if i not in hit]
+    assert [key(f) for f in got] == [key(f) for f in want]
+    last_hit = sum(1 for i in hit if i > max(i for i in range(len(sent)) if i not in hit))
+    assert counters.frames_lost == len(hit) - last_hit
+    assert counters.crc_failures + counters.header_rejects > 0
+
+    live = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    lost_events = [m for t, _, m in live if t == "/cm/events" and m["kind"] == "frames_lost"]
+    assert sum(m["count"] for m in lost_events) == counters.frames_lost
+
+    r = cmsensord("replay", str(tmp_path / "cap.bin"), "--out", str(tmp_path / "replay"))
+    assert r.returncode == 0, r.stderr
+    replayed = read_messages(next((tmp_path / "replay").glob("*.mcap")))
+    assert comparable(live) == comparable(replayed)
+
+
+def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_path):
+    """The board goes away (its pty is closed and its device name removed), comes back 3 s
+    later on a new pty under the same name: link_lost, link_restored within 5 s of the
+    return, the daemon never stops and monitors the second board."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link))
+    d = start_daemon(tmp_path, link)
+    time.sleep(3.0)
+    sim.terminate()                     # unplugged
+    sim.wait(timeout=5)
+    assert not link.exists()
+    time.sleep(3.0)
+    assert d.poll() is None             # still running, waiting for the port
+    back = time.time()
+    sim = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link), "--seed", "1")
+    time.sleep(5.0)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    events = [(s, m) for t, s, m in msgs if t == "/cm/events"]
+    kinds = [m["kind"] for _, m in events]
+    assert "link_lost" in kinds and "link_restored" in kinds
+    assert kinds.index("link_lost") < kinds.index("link_restored")
+    restored = next(s for s, m in events if m["kind"] == "link_restored") / 1e9   # wall clock
+    assert 0 < restored - back < 5.0
+    # the second board's data was processed after the gap
+    sev = [s for t, s, _ in msgs if t == "/cm/ch0/severity"]
+    assert len(sev) >= 8
+
+
+@pytest.mark.parametrize("mode", ["rms", "raw"])
+def test_t0_wrapping_past_2_32_changes_nothing_downstream(mode):
+    """The same board run with its sample counter starting 1 s before 2^32 and from 0:
+    identical messages (stamps are relative to the first frame)."""
+    seconds = 20.0 if mode == "rms" else 3.0
+    kw = dict(n_channels=1, mode=mode, tacho=(mode == "raw"))
+    sc = make_scenario("close_orders" if mode == "raw" else "faulty", n_channels=1,
+                       duration_s=seconds, seed=0)
+    runs = []
+    for t0_start in (0, 2**32 - 25000):
+        data = Board(sc, BoardConfig(t0_start=t0_start, **kw)).generate(seconds)
+        cfg = config_from_dict({"orders": {"max_rpm": 3000.0}}) if mode == "raw" else config_from_dict({})
+        sink, _, dec = run_processor(data, cfg)
+        assert dec.counters.frames_lost == 0
+        runs.append([(t, s, {k: v for k, v in m.items() if k != "timestamp"})
+                     for t, s, m in sink.messages if t != "/cm/diagnostics"])
+    topics = {t for t, _, _ in runs[0]}
+    assert "/cm/ch0/severity" in topics and len(runs[0]) > 20
+    assert mode == "rms" or "/cm/ch0/orders" in topics
+    assert runs[0] == runs[1]
