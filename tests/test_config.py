@@ -12,6 +12,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from fuzz import examples
+
 from cmsensord.config import (
     ChannelConfig,
     Config,
@@ -342,9 +344,9 @@ def test_valid_base_document_loads():
     assert cfg.channels[1].monitor.window == 4 and cfg.channels[1].index == 3
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(400), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated(), st.sampled_from([None, 1, 4]))
-def test_mutations_load_or_raise_config_error(d, n_channels):
+def test_fuzz_mutations_load_or_raise_config_error(d, n_channels):
     try:
         cfg = config_from_dict(d, source="fuzz.yaml", n_channels=n_channels)
     except ConfigError as err:
@@ -357,9 +359,9 @@ def test_mutations_load_or_raise_config_error(d, n_channels):
     assert config_from_dict(config_to_dict(cfg)) == cfg
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.text(alphabet=st.sampled_from(list("monitor:n_cr- []{}\n\t'\"#!&*,.0123456789")), max_size=60))
-def test_random_yaml_text_loads_or_raises_config_error(tmp_path_factory, text):
+def test_fuzz_random_yaml_text_loads_or_raises_config_error(tmp_path_factory, text):
     path = tmp_path_factory.mktemp("y") / "fuzz.yaml"
     path.write_text(text, encoding="utf-8")
     try:

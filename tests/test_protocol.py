@@ -12,6 +12,8 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
+from fuzz import examples
+
 from cmsensord.protocol import (
     FLAG_CLIPPED,
     FLAG_OVERRUN,
@@ -277,7 +279,7 @@ def apply_injections(clean: bytes, spans, errors):
     return bytes(out), [k for k in range(len(spans)) if k not in touched]
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(200), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.data())
 def test_fuzz_recovers_every_untouched_frame(data):
     sent = data.draw(sent_frames())
