@@ -27,11 +27,12 @@ from typing import Sequence
 
 from cmsensord import __version__
 from cmsensord.config import Config, config_from_dict, config_to_dict, default_config, load_config
-from cmsensord.errors import EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
+from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
 from cmsensord.link import FrameQueue, Progress, SerialReader, open_port_checked, read_capture
 from cmsensord.pipeline import Processor
 from cmsensord.protocol import Decoder
-from cmsensord.sinks.mcap_sink import summarize
+from cmsensord.sdnotify import Notifier
+from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
 from cmsensord.sinks.rotating import RotatingSink
 
 log = logging.getLogger("cmsensord")
@@ -53,13 +54,28 @@ def _scenarios_help() -> str:
     return "scenarios (--scenario):\n" + "\n".join(lines)
 
 
-def _setup_logging(verbose: bool) -> None:
-    logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
-                        format="%(levelname)s %(message)s", stream=sys.stderr)
+def _setup_logging(verbose: bool, daemon: bool = True) -> None:
+    """Events to stderr (the journal under systemd): INFO and up for the daemon, WARNING and
+    up for the one-shot subcommands (they print their own summary), everything with -v."""
+    level = logging.DEBUG if verbose else logging.INFO if daemon else logging.WARNING
+    logging.basicConfig(level=level, format="%(levelname)s %(message)s", stream=sys.stderr)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (and the pointer to --help), exit 2."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _open_sink(cfg: Config, metadata: dict[str, str]) -> RotatingSink:
     return RotatingSink(cfg.output, metadata=metadata)
+
+
+def _route_sink_events(sink: RotatingSink, proc: Processor) -> None:
+    """The sink's events (salvage, disk errors, retention) become the Processor's events:
+    /cm/events, proc.events and the journal. Queued ones (salvage at start) go now."""
+    sink.on_event = lambda kind, message, **fields: proc.event(kind, None, message, **fields)
 
 
 def _status_line(proc: Processor, reader: SerialReader | None, queue: FrameQueue | None) -> str:
@@ -95,14 +111,22 @@ class _StopFlag:
     def __init__(self) -> None:
         self.event = threading.Event()
         self.signal: int | None = None
+        self.reopen = False
 
     def install(self) -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._handler)
 
+    def install_reopen(self) -> None:
+        """SIGHUP sets ``reopen``; the loop then reopens the logs (for log rotation tools)."""
+        signal.signal(signal.SIGHUP, self._hup)
+
     def _handler(self, signum, _frame) -> None:
         self.signal = signum
         self.event.set()
+
+    def _hup(self, _signum, _frame) -> None:
+        self.reopen = True              # only a flag: the loop does the work
 
 
 # --------------------------------------------------------------------------- live loop
@@ -112,6 +136,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP."""
     stop = _StopFlag()
     stop.install()
+    stop.install_reopen()
     sink = _open_sink(cfg, metadata or {})
     capture = open(capture_path, "wb") if capture_path else None
     queue = FrameQueue(cfg.link.queue_frames)
@@ -125,15 +150,25 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
                                           "lag_s": round(proc.lag_s(), 3)})
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
+    _route_sink_events(sink, proc)      # salvage at start, disk errors: events from now on
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
     reader.start()
+    notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
+
+    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
+        line = _status_line(proc, reader, queue)
+        return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
+
+    if notify.enabled:
+        reader.connected.wait(0.2)      # a present port opens within ms: READY's STATUS says which
+    notify.ready(service_state())
     next_status = time.monotonic() + 1.0
     stalled = False
     idle_since = None
-    last_flush = time.monotonic()
     drops_seen = 0
     try:
         while not stop.event.is_set():
+            notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             frames = queue.get(timeout=0.1)
             proc.handle(frames)
             while reader.events:
@@ -141,13 +176,15 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
                 proc.event(kind, None, message, wall_ns)
             if queue.drops != drops_seen:
                 proc.event("queue_overflow", None, f"processing fell behind: {queue.drops - drops_seen} "
-                           f"frame(s) dropped from the queue ({queue.drops} in all)",
-                           count=queue.drops - drops_seen)
+                           f"frame(s) dropped from the queue, oldest RAW blocks first ({queue.drops} "
+                           f"in all, {queue.raw_drops} RAW)", count=queue.drops - drops_seen,
+                           raw_total=queue.raw_drops)
                 drops_seen = queue.drops
             now = time.monotonic()
-            if now - last_flush >= cfg.output.flush_s:
-                sink.flush()            # on disk within flush_s even when nothing new arrives
-                last_flush = now
+            if stop.reopen:             # SIGHUP: finish the current file, start a new one
+                stop.reopen = False
+                sink.reopen()
+            sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
             if duration_s is not None and proc.board_seconds >= duration_s:
                 break                   # the simulated board's clock reached the end of the run
             if frames:
@@ -161,11 +198,14 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
                         and now - reader.last_data > cfg.link.stall_s and proc.anchor_ns is not None):
                     stalled = True
                     proc.event("link_stalled", None,
-                               f"{cfg.link.port}: no bytes for {cfg.link.stall_s:g} s")
-            if cfg.output.status_line and now >= next_status:
+                               f"{cfg.link.port}: no bytes for {cfg.link.stall_s:g} s", time.time_ns())
+            if now >= next_status:
                 next_status = now + 1.0
-                print(_status_line(proc, reader, queue), file=sys.stderr, flush=True)
+                if cfg.output.status_line:
+                    print(_status_line(proc, reader, queue), file=sys.stderr, flush=True)
+                notify.status(service_state())
     finally:
+        notify.stopping("stopping: closing the MCAP log")
         reader.stop()
         reader.join(timeout=2.0)
         proc.handle(queue.get(timeout=0))
@@ -183,14 +223,16 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
 
 # --------------------------------------------------------------------------- replay
 def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, str] | None = None,
-           quiet: bool = False) -> tuple[int, Path, Processor]:
-    """Process a capture file as fast as possible through the same decoder and Processor."""
+           quiet: bool = False, speed: float | None = None) -> tuple[int, Path, Processor]:
+    """Process a capture file through the same decoder and Processor: as fast as possible,
+    or paced at ``speed`` x the board's clock (1: real time)."""
     size = Path(path).stat().st_size if Path(path).is_file() else 0
-    chunks = read_capture(path, chunk=1 << 16)
+    chunks = read_capture(path, chunk=1 << 16 if speed is None else 1 << 12)
     first = next(chunks, None)          # raises LinkError before any output file exists
     sink = _open_sink(cfg, {"source": str(path), **(metadata or {})})
     decoder = Decoder()
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=decoder.counters.as_dict)
+    _route_sink_events(sink, proc)
     progress = Progress(size, f"replay {Path(path).name}")
     t0 = time.monotonic()
     try:
@@ -202,6 +244,10 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
                 proc.handle(decoder.feed(data))
                 done += len(data)
                 progress.update(done, f"{proc.adc_seconds:.0f} s")
+                if speed is not None:       # the board's clock at speed x the wall clock
+                    wait = t0 + proc.adc_seconds / speed - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
         proc.handle(decoder.flush())
         proc.finish()
     finally:
@@ -280,6 +326,10 @@ def simulate(args: argparse.Namespace) -> int:
         cfg = dataclasses.replace(cfg, orders=config_from_dict(
             {"orders": RUNUP_ORDERS[args.scenario]}, source="--scenario").orders)
     out_dir = args.out or cfg.output.dir
+    try:                                # before the simulator starts: a clear error first
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SinkError(f"{out_dir}: cannot create the output directory: {exc.strerror or exc}") from None
     cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=out_dir,
                                                               akf_trace=cfg.output.akf_trace or args.akf_trace))
     cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", args.scenario,
@@ -297,7 +347,6 @@ def simulate(args: argparse.Namespace) -> int:
               f"{args.channels} channel(s), seed {args.seed}) on "
               f"{line}; {args.duration:g} s at {args.speed:g}x real time", file=sys.stderr)
         cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, port=line))
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
         capture = args.capture
         sim_done = threading.Event()
 
@@ -323,7 +372,7 @@ def simulate(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- argparse
 def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="cmsensord",
         description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
@@ -348,15 +397,21 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                      help="board mode (default: rms; raw for whirl and close_orders)")
     sim.add_argument("--tacho", action="store_true",
                      help="the board sends TACHO frames (default for whirl and close_orders)")
-    sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture file")
+    sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
+                     "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,summary}")
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,summary}", parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
     r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
     r.add_argument("--akf-trace", dest="sub_trace", action="store_true",
                    help="write /cm/<ch>/akf per observation")
+    pace = r.add_mutually_exclusive_group()
+    pace.add_argument("--realtime", action="store_const", const=1.0, dest="sub_speed",
+                      help="pace the replay at the board's clock (default: as fast as possible)")
+    pace.add_argument("--speed", type=_positive, dest="sub_speed", metavar="X",
+                      help="pace the replay at X times the board's clock")
     rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
@@ -413,10 +468,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
     args = parser.parse_args(argv)
-    _setup_logging(args.verbose)
+    _setup_logging(args.verbose, daemon=args.command is None)
     try:
         if args.command == "summary":
+            if not Path(args.mcap).is_file():
+                what = "is a directory, not an MCAP file" if Path(args.mcap).is_dir() else "file not found"
+                print(f"cmsensord: {args.mcap}: {what}", file=sys.stderr)
+                return EXIT_USAGE
             info = summarize(args.mcap)
+            if info["error"] == NOT_MCAP:
+                print(f"cmsensord: {args.mcap}: {NOT_MCAP}", file=sys.stderr)
+                return EXIT_USAGE
             print(json.dumps(info, indent=2, default=str) if args.json else _format_summary(info))
             return 0
         if args.command == "record":
@@ -438,21 +500,25 @@ def main(argv: Sequence[str] | None = None) -> int:
                 cfg = dataclasses.replace(cfg, output=dataclasses.replace(
                     cfg.output, dir=args.sub_out or cfg.output.dir,
                     akf_trace=cfg.output.akf_trace or args.sub_trace))
-            return replay(args.capture, cfg, auto_channels=auto)[0]
+            return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed)[0]
         if args.simulate:
             return simulate(args)
         if args.config:
             cfg, auto = _config_for(args.config)
-            return run_live(cfg, auto_channels=auto)
-        parser.print_usage(sys.stderr)
-        print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand", file=sys.stderr)
+            return run_live(cfg, auto_channels=auto, capture_path=args.capture)
+        print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
+              "(see cmsensord --help)", file=sys.stderr)
         return EXIT_USAGE
     except ConfigError as exc:
+        if exc.source.startswith("--"):         # a command-line option: a usage error
+            print(f"cmsensord: {exc}", file=sys.stderr)
+            return EXIT_USAGE
         print(f"cmsensord: configuration error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except SinkError as exc:
-        print(f"cmsensord: output error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return EXIT_CONFIG
+    except SinkError as exc:            # the output directory is a setting (output.dir / --out)
+        print(f"cmsensord: output error: {exc} (set output.dir or --out to a writable directory)",
+              file=sys.stderr)
+        return EXIT_CONFIG
     except LinkError as exc:
         print(f"cmsensord: {exc}", file=sys.stderr)
         return EXIT_USAGE

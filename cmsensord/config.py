@@ -289,6 +289,14 @@ class LinkConfig:
         _validate(self)
 
 
+def _cap_holds_a_file(obj: Any) -> tuple[str, str, Any] | None:
+    """OutputConfig: a retention cap below one file would delete every finished file."""
+    if obj.retain_mb and obj.retain_mb < obj.rotate_mb:
+        return ("retain_mb", f"must be 0 (no cap) or >= rotate_mb = {_fmt_num(obj.rotate_mb)}",
+                obj.retain_mb)
+    return None
+
+
 @dataclass(frozen=True)
 class OutputConfig:
     """Where and how the MCAP files are written."""
@@ -307,9 +315,16 @@ class OutputConfig:
     fsync_s: float = _setting(30.0, "seconds between fsyncs", gt=0)
     rotate_s: float = _setting(3600.0, "start a new file after this many seconds", gt=0)
     rotate_mb: float = _setting(256.0, "start a new file after this many MB", gt=0)
+    retain_mb: float = _setting(2048.0, "delete the oldest finished files while all files of "
+                                "this prefix take more than this many MB (0: no cap)", ge=0)
+    min_free_mb: float = _setting(256.0, "... and while the file system has less than this many "
+                                  "MB free (0: no floor)", ge=0)
+    retry_s: float = _setting(10.0, "after a disk error, try a new file this often", gt=0)
     akf_trace: bool = _setting(False, "write /cm/<ch>/akf per observation")
     akf_trace_filter: int = _setting(10, "which AKF of the bank (1..n) the trace shows", ge=1)
     status_line: bool = _setting(True, "print a one-line status to stderr")
+
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_cap_holds_a_file,)
 
     def __post_init__(self) -> None:
         _validate(self)

@@ -248,5 +248,7 @@ def open_port_checked(port: str, baud: int) -> serial.Serial:
     try:
         return serial.Serial(port, baud, timeout=0.1)
     except PORT_ERRORS as exc:
-        hint = " (add the user to the dialout group)" if "ermission" in str(exc) else ""
+        hint = (" (add the user to the dialout group)" if "ermission" in str(exc)
+                else " (is it a serial port? give the board's tty, e.g. /dev/ttyACM0)"
+                if "ioctl" in str(exc) else "")
         raise LinkError(f"{port}: cannot open: {_why(exc)}{hint}") from None

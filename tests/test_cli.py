@@ -132,7 +132,8 @@ def test_sigterm_finishes_the_mcap_file_promptly(tmp_path):
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=10)
-    assert time.monotonic() - t0 < 3.0
+    elapsed = time.monotonic() - t0
+    assert elapsed < 2.0, elapsed
     assert proc.returncode == 0, err
     files = list(tmp_path.glob("*.mcap"))
     assert len(files) == 1 and not list(tmp_path.glob("*.part"))
@@ -149,38 +150,6 @@ def test_record_captures_the_bytes_of_a_port(tmp_path):
         frames, counters = iter_frames(out.read_bytes())
         assert len(frames) > 500
         assert counters.crc_failures == 0 and counters.frames_lost == 0
-
-
-@pytest.mark.parametrize("args, code, text", [
-    (["replay", "/nonexistent/cap.bin"], 2, "capture file not found"),
-    (["record", "--port", "/dev/nonexistent-tty", "--out", "x.bin", "--duration", "1"], 2,
-     "no such device"),
-    (["--simulate", "--scenario", "nosuch"], 2, "unknown scenario"),
-    (["--config", "/nonexistent/cmsensord.yaml"], 2, "file not found"),
-    (["replay", "/nonexistent/cap.bin", "--out", "/proc/nope"], 2, "capture file not found"),
-    (["--simulate", "--speed", "-1"], 2, "expected a positive number"),
-    ([], 2, "nothing to do"),
-])
-def test_user_errors_are_one_line_with_a_status(args, code, text, tmp_path):
-    p = cmsensord(*args, cwd=tmp_path)
-    assert p.returncode == code
-    assert text in p.stderr
-    assert "Traceback" not in p.stderr
-
-
-@pytest.mark.parametrize("text, key", [
-    ("monitor:\n  r_mx: 0.2\n", "did you mean 'r_max'"),
-    ("monitor:\n  r_max: 0.001\n", "monitor.r_max"),
-    ("channels:\n  - name: a\n    window: -3\n", "channels[0].window"),
-    ("link: [1, 2\n", "line"),
-])
-def test_bad_config_is_one_line_naming_the_key_and_exit_2(tmp_path, text, key):
-    cfg = tmp_path / "c.yaml"
-    cfg.write_text(text)
-    p = cmsensord("--config", str(cfg))
-    assert p.returncode == 2
-    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and key in lines[0] and str(cfg) in lines[0]
 
 
 def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
@@ -208,7 +177,7 @@ def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
 def test_close_orders_through_the_pty_meet_the_papers_bounds(tmp_path):
     """The whole chain: 25 kHz RAW frames and TACHO over a real pty, speed from the tacho,
     decimation, tracker; smoothed orders above 800 rpm within 5 % (order 4) and 3 % (4.2)."""
-    p = cmsensord("--simulate", "--scenario", "close_orders", "--duration", "5", "--speed", "2",
+    p = cmsensord("--simulate", "--scenario", "close_orders", "--duration", "5", "--speed", "1",
                   "--out", str(tmp_path))
     assert p.returncode == 0, p.stderr
     msgs = read_messages(next(tmp_path.glob("*.mcap")))

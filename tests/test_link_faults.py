@@ -31,10 +31,11 @@ def start_board(*args):
     return sim
 
 
-def start_daemon(tmp_path, port, *extra):
+def start_daemon(tmp_path, port, *extra, config=""):
+    """``cmsensord --config`` on ``port``, logs in tmp_path/logs; ``config``: more YAML."""
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
-                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n")
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
     return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
                             stderr=subprocess.PIPE, text=True, env=ENV)
 
@@ -153,3 +154,23 @@ def test_t0_wrapping_past_2_32_changes_nothing_downstream(mode):
     assert "/cm/ch0/severity" in topics and len(runs[0]) > 20
     assert mode == "rms" or "/cm/ch0/orders" in topics
     assert runs[0] == runs[1]
+
+
+def test_a_silent_link_is_a_stall_event_and_the_daemon_waits(tmp_path):
+    """The board stops sending but keeps the port open (--hold): link_stalled after 2 s."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--duration", "3", "--speed", "1", "--link", str(link))
+    d = start_daemon(tmp_path, link)
+    json.loads(sim.stdout.readline())                   # the board has sent its 3 s
+    quiet_from = time.time()
+    time.sleep(3.5)
+    assert d.poll() is None
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    stalls = [(s, m) for t, s, m in msgs if t == "/cm/events" and m["kind"] == "link_stalled"]
+    assert len(stalls) == 1
+    assert 1.5 < stalls[0][0] / 1e9 - quiet_from < 3.5      # 2 s after the last byte
+    assert "no bytes for 2 s" in stalls[0][1]["message"]

@@ -458,3 +458,41 @@ def test_corrupted_bytes_summarized_without_exception(tmp_path):
 def test_summarize_missing_file_is_sink_error(tmp_path):
     with pytest.raises(SinkError, match=r"nope.mcap: cannot read"):
         summarize(tmp_path / "nope.mcap")
+
+
+# --- disk errors: a failed file is never written again --------------------------
+
+
+def test_enospc_fails_the_file_and_keeps_what_was_flushed(tmp_path):
+    import os
+
+    from cmsensord.sinks.mcap_sink import SinkIOError
+
+    clock = FakeClock()
+    sink = McapSink(tmp_path, flush_s=1.0, clock=clock)
+    for k in range(5):
+        sink.write(TOPIC_EVENTS, "event", T0 + k, event_msg())
+    sink.flush()
+    full = os.open("/dev/full", os.O_WRONLY)
+    os.dup2(full, sink.fileno())                 # the kernel answers ENOSPC from now on
+    os.close(full)
+    sink.write(TOPIC_EVENTS, "event", T0 + 5, event_msg())
+    with pytest.raises(SinkIOError) as info:
+        sink.flush()
+    assert (info.value.op, info.value.errno) == ("write", 28) and "No space left" in str(info.value)
+    assert sink.failed and sink.persisted == 5 and sink.unpersisted == 1
+    with pytest.raises(SinkIOError, match="abandoned after an error"):
+        sink.write(TOPIC_EVENTS, "event", T0 + 6, event_msg())
+    with pytest.raises(SinkIOError, match="not finished"):
+        sink.close()
+    assert sink.part_path.exists() and not (tmp_path / sink.part_path.name[:-5]).exists()
+    assert summarize(sink.part_path)["messages"] == 5
+
+
+def test_numbering_goes_on_after_the_newest_file_of_the_same_second(tmp_path):
+    clock = lambda: 1_700_000_000.0  # noqa: E731
+    paths = [McapSink(tmp_path, wall_clock=clock).close() for _ in range(3)]
+    paths[0].unlink()                             # retention deleted the oldest two
+    paths[1].unlink()
+    newest = McapSink(tmp_path, wall_clock=clock).close()
+    assert newest.name == "cmsensord-20231114T221320Z-3.mcap"   # sorts after -2, not before

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+
+import pytest
 
 from cmsensord.config import OutputConfig
-from cmsensord.sinks.mcap_sink import read_messages
+from cmsensord.sinks.mcap_sink import log_files, read_messages, summarize
 from cmsensord.sinks.rotating import RotatingSink
+from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 
 class FakeClock:
@@ -49,3 +53,160 @@ def test_rotation_by_size(tmp_path):
     assert all(p.stat().st_size < 6000 for p in sink.paths)
     got = [m["message"] for p in sink.paths for _, _, m in read_messages(p)]
     assert got == [f"message {i}" for i in range(300)]
+
+
+# --- durability schedule, retention, reopen, events --------------------------------
+
+
+def output(tmp_path, **kw):
+    """An output section writing into tmp_path, retention off unless asked for."""
+    base = {"dir": str(tmp_path), "retain_mb": 0.0, "min_free_mb": 0.0}
+    return dataclasses.replace(OutputConfig(), **{**base, **kw})
+
+
+@pytest.fixture
+def fsyncs(monkeypatch):
+    """Every os.fsync call as the inode it was made on (then the real fsync runs)."""
+    calls = []
+    real = os.fsync
+
+    def spy(fd):
+        calls.append(os.fstat(fd).st_ino)
+        return real(fd)
+
+    monkeypatch.setattr(os, "fsync", spy)
+    return calls
+
+
+def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs):
+    clock = FakeClock()
+    sink = RotatingSink(output(tmp_path, fsync_s=30.0), clock=clock)
+    ino = os.fstat(sink.current.fileno()).st_ino
+    sink.write("/cm/ch0/severity", "severity", 10**18, {"severity_index": 0.1})
+    clock.t += 0.1
+    sink.tick()
+    assert fsyncs == []                                  # no event, fsync_s not reached
+    for i in range(3):
+        sink.write(TOPIC_EVENTS, "event", 10**18 + i, event(i))
+    clock.t += 0.1
+    sink.tick()
+    assert fsyncs == [ino]                               # one fsync for the three events
+    on_disk = summarize(sink.current.part_path)
+    assert on_disk["event_counts"] == {"config": 3} and on_disk["messages"] == 4
+    clock.t += 0.1
+    sink.tick()
+    assert fsyncs == [ino]                               # nothing new: no fsync
+    clock.t += 30.0
+    sink.tick()
+    assert fsyncs == [ino, ino]                          # fsync_s
+    sink.close()
+
+
+def test_ticks_every_100_ms_keep_everything_older_than_flush_s_in_the_file(tmp_path):
+    clock = FakeClock()
+    sink = RotatingSink(output(tmp_path, flush_s=1.0), clock=clock)
+    written = []                                         # clock time of each message
+    flushes = 0
+    for k in range(80):
+        for _ in range(3):                               # 3 messages per loop iteration
+            sink.write("/cm/ch0/severity", "severity", 10**18 + len(written),
+                       {"severity_index": 0.1})
+            written.append(clock.t)
+        clock.t += 0.1
+        sink.tick()
+        on_disk = summarize(sink.current.part_path)["messages"]
+        assert on_disk >= sum(t <= clock.t - 1.0 for t in written), k
+        flushes += on_disk == len(written)
+    assert 8 <= flushes <= 9                             # 8 s: about one flush a second
+    sink.close()
+
+
+def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path):
+    clock = FakeClock()
+    (tmp_path / "other-20200101T000000Z.mcap").write_bytes(b"x" * 50_000)    # not our prefix
+    (tmp_path / "cmsensord-20200101T000000Z.mcap.part").write_bytes(b"")    # a leftover: salvaged
+    events = []
+    rotated = []
+    sink = RotatingSink(output(tmp_path, rotate_mb=0.004, retain_mb=0.02, compression="none"),
+                        clock=clock, on_event=lambda kind, message, **f: events.append((kind, f)),
+                        on_rotate=rotated.append)
+    pad = "p" * 300
+    for i in range(200):
+        sink.write("/cm/ch0/severity", "severity", 10**18 + i, {"severity_index": 0.1, "i": i,
+                                                                  "pad": pad})
+        clock.t += 0.25
+        finished, parts = log_files(tmp_path, "cmsensord")
+        assert sum(p.stat().st_size for p in finished + parts) <= 20_000 + 5_000   # + one flush
+    sink.close()
+    finished, parts = log_files(tmp_path, "cmsensord")
+    assert parts == [] and (tmp_path / "other-20200101T000000Z.mcap").exists()
+    kept = [m["i"] for p in finished for _, _, m in read_messages(p)]
+    assert kept == list(range(200 - len(kept), 200)) and len(kept) > 15  # the newest, in order
+    retention = [f for kind, f in events if kind == "disk_error"]
+    assert retention and all(f["details"]["action"] == "retention" for f in retention)
+    deleted = [name for f in retention for name in f["details"]["files"]]
+    assert sorted(deleted + [p.name for p in finished]) == sorted(
+        p.name for p in rotated + [sink.paths[-1]])      # every finished file: kept or deleted once
+    assert sorted(sink.paths) == sorted(finished)        # paths lists only what is left
+
+
+def test_free_space_floor_deletes_finished_files_but_never_the_current_one(tmp_path):
+    clock = FakeClock()
+    old = tmp_path / "cmsensord-20200101T000000Z.mcap"
+    RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda: 1_577_836_800.0).close()
+    assert old.exists()
+    events = []
+    huge = 1e12                                          # never reachable: delete all we may
+    sink = RotatingSink(output(tmp_path, min_free_mb=huge), clock=clock,
+                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    assert not old.exists()                              # retention at start
+    current = sink.current.part_path
+    for i in range(3):
+        sink.write("/cm/ch0/severity", "severity", 10**18 + i, {"severity_index": 0.1})
+        done = sink.rotate()
+        assert not done.exists() and sink.current.part_path.exists()
+    kinds = [(k, f["details"]["action"]) for k, _m, f in events]
+    assert kinds.count(("disk_error", "retention")) == 4
+    assert kinds.count(("disk_error", "low_space")) == 0   # something was deleted each time
+    assert current != sink.current.part_path
+    sink.close()
+
+
+def test_reopen_finishes_the_file_and_continues_in_a_new_one(tmp_path):
+    clock = FakeClock()
+    sink = RotatingSink(output(tmp_path), clock=clock)
+    sink.write(TOPIC_EVENTS, "event", 10**18, event(0))
+    first = sink.path
+    assert sink.reopen() == first and first.exists()
+    sink.write(TOPIC_EVENTS, "event", 10**18 + 1, event(1))
+    second = sink.close()
+    assert second != first and sink.paths == [first, second]
+    assert [m["message"] for p in sink.paths for _, _, m in read_messages(p)] == ["message 0",
+                                                                                  "message 1"]
+
+
+def test_events_wait_for_the_callback_and_arrive_in_order(tmp_path):
+    for k in range(3):
+        (tmp_path / f"cmsensord-2020010{k + 1}T000000Z.mcap.part").write_bytes(b"")
+    sink = RotatingSink(output(tmp_path))
+    queued = sink.pending_events
+    assert [m.split(":")[0] for _k, m, _f in queued] == [
+        f"cmsensord-2020010{k + 1}T000000Z.mcap.part" for k in range(3)]
+    got = []
+    sink.on_event = lambda kind, message, **f: got.append(message)
+    assert got == [m for _k, m, _f in queued] and sink.pending_events == []
+    sink.close()
+
+
+def test_retention_settings_are_validated():
+    from cmsensord.config import config_from_dict
+    from cmsensord.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"output.retain_mb: must be 0 \(no cap\) or >= rotate_mb"):
+        config_from_dict({"output": {"retain_mb": 100, "rotate_mb": 256}}, source="x.yaml")
+    with pytest.raises(ConfigError, match=r"output.min_free_mb: must be >= 0"):
+        config_from_dict({"output": {"min_free_mb": -1}}, source="x.yaml")
+    with pytest.raises(ConfigError, match=r"output.retry_s: must be > 0"):
+        config_from_dict({"output": {"retry_s": 0}}, source="x.yaml")
+    cfg = config_from_dict({"output": {"retain_mb": 0, "min_free_mb": 0}}, source="x.yaml")
+    assert (cfg.output.retain_mb, cfg.output.min_free_mb, cfg.output.retry_s) == (0.0, 0.0, 10.0)

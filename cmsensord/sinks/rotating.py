@@ -1,78 +1,551 @@
-"""A sink that rotates MCAP files by time and size and fsyncs them on a schedule.
+"""The daemon's log writer: MCAP files rotated, flushed, fsynced, salvaged and kept within bounds.
 
-Owns the policy of ``output`` in the configuration (flush_s, fsync_s,
-rotate_s, rotate_mb); each file is an :class:`~cmsensord.sinks.mcap_sink.McapSink`
-(written as ``*.mcap.part``, renamed to ``*.mcap`` when finished).  Rotation
-happens between messages, so no message is split across files.
+Owns the policy of ``output`` in the configuration; each file is an
+:class:`~cmsensord.sinks.mcap_sink.McapSink` (``*.mcap.part``, renamed to
+``*.mcap`` when finished). Rotation happens between messages, so no message
+is split across files.
+
+Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
+the live loop does):
+
+* the open chunk is written to the kernel at least every ``flush_s`` (the
+  tick flushes when the next tick would be late), so a kill -9 loses at most
+  the messages of the last ``flush_s``;
+* the file is fsynced every ``fsync_s``, and at the first tick after any
+  message on ``/cm/events``: an event is on stable storage by the end of the
+  loop iteration that wrote it, or of the next one when it was raised after
+  that iteration's tick (at most one fsync per iteration, so a burst of events
+  costs one fsync);
+* a finished file is fsynced, renamed and its directory fsynced.
+
+Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk
+error) are salvaged (:func:`~cmsensord.sinks.mcap_sink.salvage`) into
+``<stem>.salvaged.mcap`` before the first file is opened; then retention runs.
+
+Retention (after each rotation, at start and on a full disk): the oldest
+finished files of this prefix are deleted while this prefix's files take
+more than ``retain_mb`` or the file system has less than ``min_free_mb``
+free; never the file being written, never a ``.part`` file, never another
+prefix's file.
+
+Disk errors: no OSError ever leaves this class. A failing operation (open,
+write, flush, fsync, close) abandons the file: it is closed without another
+byte, and kept as ``.part`` when it holds complete chunks (salvaged when
+logging is back, or at the next start), deleted when it holds none. A failed
+fsync is never retried on the same file. A new file is tried at once, then
+every ``retry_s``; messages written while no file is open, and those of the
+chunk that could not be written, are counted in :attr:`dropped`. Logging
+counts as back when a new file has been fsynced. One ``disk_error`` event
+per outage, and one when logging resumes (with the count of dropped
+messages).
+
+Events go to :attr:`RotatingSink.on_event` (``on_event(kind, message,
+**fields)``, settable after construction: the Processor that turns them into
+``/cm/events`` messages and journal lines is created after the sink); until
+it is set they are queued. They are delivered at the end of the public call
+that raised them, never from inside another delivery, so an event written
+while the disk fails cannot loop: it is just counted as dropped.
 """
 
 from __future__ import annotations
 
+import collections
+import errno
+import logging
+import os
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from cmsensord.config import OutputConfig
-from cmsensord.sinks.mcap_sink import McapSink
+from cmsensord.sinks.mcap_sink import (
+    McapSink,
+    SalvageResult,
+    SinkIOError,
+    _fsync_dir,
+    log_files,
+    salvage,
+    salvage_leftovers,
+)
+from cmsensord.sinks.schemas import TOPIC_EVENTS
+
+log = logging.getLogger("cmsensord")
+
+#: Event kinds (values of ``schemas.EVENT_KINDS``). Outages, their end and retention
+#: deletions are ``disk_error`` events told apart by ``details["action"]``.
+DISK_EVENT = "disk_error"
+SALVAGE_EVENT = "salvage"
+
+#: errno values that mean the disk is full or failing rather than misconfigured: at
+#: start the sink then runs without a file and retries (at run time every error does)
+_TRANSIENT = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO})
+_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
+_MB = 1_000_000
+_QUEUED_EVENTS = 1000
+
+
+def _errno_name(code: int | None) -> str | None:
+    return errno.errorcode.get(code, str(code)) if code is not None else None
+
+
+def _free_bytes(path: str | Path) -> int:
+    st = os.statvfs(path)
+    return st.f_bavail * st.f_frsize
 
 
 class RotatingSink:
-    """``write``/``flush``/``close`` like McapSink, over a sequence of files."""
+    """``write``/``flush``/``close`` like McapSink, over a sequence of files; never raises
+    an OSError (see the module docstring).
+
+    Args:
+        output: the ``output`` configuration.
+        metadata: written into every file as the ``cmsensord`` metadata record.
+        clock: monotonic seconds (injectable for tests).
+        on_rotate: called with each finished file's path.
+        on_event: ``on_event(kind, message, **fields)``; may be set later.
+        salvage: salvage leftover ``.part`` files at start.
+        wall_clock: Unix seconds, for the file names.
+
+    Raises:
+        SinkError: at start, when the output directory cannot be used for a
+            reason other than a full or failing disk (permissions, not a
+            directory): a configuration error, one line.
+    """
 
     def __init__(self, output: OutputConfig, *, metadata: dict[str, str] | None = None,
                  clock: Callable[[], float] = time.monotonic,
-                 on_rotate: Callable[[Path], None] | None = None):
+                 on_rotate: Callable[[Path], None] | None = None,
+                 on_event: Callable[..., Any] | None = None,
+                 salvage: bool = True,
+                 wall_clock: Callable[[], float] = time.time):
         self.output = output
         self.metadata = metadata or {}
         self.clock = clock
+        self.wall_clock = wall_clock
         self.on_rotate = on_rotate
         self.paths: list[Path] = []          # finished files, oldest first
-        self._rotate_bytes = int(output.rotate_mb * 1e6)
-        self._current = self._open()
-        self._last_sync = clock()
-        self.messages_written = 0
+        self.salvaged: list[SalvageResult] = []
+        self.messages_written = 0            # messages handed to write()
+        self.dropped = 0                     # ... of which not in any file (disk errors)
+        self.disk_errors = 0                 # failed operations, retries included
+        self._rotate_bytes = int(output.rotate_mb * _MB)
+        self._pending: collections.deque[tuple[str, str, dict]] = collections.deque(
+            maxlen=_QUEUED_EVENTS)
+        self._on_event = on_event
+        self._delivering = False
+        self._closed = False
+        self._current: McapSink | None = None
+        self._event_dirty = False            # an event was written since the last fsync
+        self._need_sync = False              # fsync at the next tick (a new file after an error)
+        now = clock()
+        self._last_sync = now
+        self._last_tick = now
+        self._tick_dt = 0.0                  # the last interval between ticks
+        self._opened = now
+        # outage state
+        self._outage: dict[str, Any] | None = None
+        self._next_retry = now
+        self._last_errno: int | None = None
+        self._abandoned: list[Path] = []
+        self._low_space_told = False
+
+        if salvage:
+            for result in salvage_leftovers(output.dir, output.prefix):
+                self._salvage_event(result)
+        self._retention()
+        try:
+            self._current = self._open()
+        except SinkIOError as err:
+            if err.errno not in _TRANSIENT:
+                raise                        # misconfigured: the daemon stops with one line
+            self._failed(err, None)
+        self._deliver()
+
+    # -- events ------------------------------------------------------------
+
+    @property
+    def on_event(self) -> Callable[..., Any] | None:
+        return self._on_event
+
+    @on_event.setter
+    def on_event(self, callback: Callable[..., Any] | None) -> None:
+        self._on_event = callback
+        self._deliver()
+
+    @property
+    def pending_events(self) -> list[tuple[str, str, dict]]:
+        """Events not delivered yet (no on_event): (kind, message, fields)."""
+        return list(self._pending)
+
+    def _emit(self, kind: str, message: str, **fields: Any) -> None:
+        self._pending.append((kind, message, fields))
+
+    def _deliver(self) -> None:
+        if self._delivering or self._on_event is None:
+            return
+        self._delivering = True
+        try:
+            while self._pending:
+                kind, message, fields = self._pending.popleft()
+                self._on_event(kind, message, **fields)
+        finally:
+            self._delivering = False
+
+    def _salvage_event(self, result: SalvageResult | SinkIOError) -> None:
+        if isinstance(result, SinkIOError):
+            self.disk_errors += 1
+            self._emit(DISK_EVENT, f"{result}; left for the next start", details={
+                "action": "salvage_failed", "op": result.op, "errno": _errno_name(result.errno),
+                "file": str(result.path)})
+            return
+        if result.action == "busy":
+            return                           # another writer's open file
+        self.salvaged.append(result)
+        details: dict[str, Any] = {"action": result.action, "source": str(result.source),
+                                   "chunks": result.chunks, "dropped_bytes": result.dropped_bytes}
+        if result.path is not None:
+            details["file"] = str(result.path)
+        self._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=details)
+
+    # -- files -------------------------------------------------------------
 
     def _open(self) -> McapSink:
         o = self.output
         sink = McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
-                        clock=self.clock, metadata=self.metadata)
+                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock)
         self._opened = self.clock()
+        self._last_sync = self._opened
         return sink
 
     @property
-    def path(self) -> Path:
-        """The file being written (its final name)."""
-        return self._current.path
+    def current(self) -> McapSink | None:
+        """The file being written, or None while the disk fails."""
+        return self._current
+
+    @property
+    def path(self) -> Path | None:
+        """The file being written (its final name), or None while the disk fails."""
+        return self._current.path if self._current is not None else None
+
+    @property
+    def logging(self) -> bool:
+        """A file is open and no outage is in progress."""
+        return self._current is not None and self._outage is None
+
+    # -- writing -----------------------------------------------------------
 
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None:
-        self._current.write(topic, schema, stamp_ns, msg)
-        self.messages_written += 1
-        if (self.clock() - self._opened >= self.output.rotate_s
-                or self._current.bytes_written >= self._rotate_bytes):
-            self.rotate()
+        """Append one message; while no file can be written it is counted in ``dropped``.
 
-    def rotate(self) -> Path:
-        """Finish the current file and start the next; returns the finished path."""
-        done = self._current.close()
-        self.paths.append(done)
-        self._current = self._open()
-        self._last_sync = self.clock()
-        if self.on_rotate is not None:
-            self.on_rotate(done)
-        return done
+        Raises SinkError only for a message that cannot be encoded or a misuse
+        (wrong schema for a topic), as McapSink does; never for the disk.
+        """
+        self.messages_written += 1
+        cur = self._current
+        if cur is None:
+            self._retry_if_due()
+            cur = self._current
+            if cur is None:
+                self._drop(1)
+                self._deliver()
+                return
+        try:
+            cur.write(topic, schema, stamp_ns, msg)
+        except SinkIOError as err:
+            self._failed(err, cur)
+            self._deliver()
+            return
+        if topic == TOPIC_EVENTS:
+            self._event_dirty = True
+        if (self.clock() - self._opened >= self.output.rotate_s
+                or cur.bytes_written >= self._rotate_bytes):
+            self.rotate()
+        elif self._pending:
+            self._deliver()
+
+    def _drop(self, n: int) -> None:
+        self.dropped += n
+        if self._outage is not None:
+            self._outage["dropped"] += n
+
+    def tick(self) -> None:
+        """Once per loop iteration: make pending events durable, flush at least every
+        ``flush_s``, fsync every ``fsync_s``, rotate by time, retry after a disk error.
+
+        Cheap when there is nothing to do; at most one fsync per call.
+        """
+        now = self.clock()
+        self._tick_dt = min(max(now - self._last_tick, 0.0), self.output.flush_s / 2)
+        self._last_tick = now
+        if self._current is None:
+            self._retry_if_due()
+        cur = self._current
+        if cur is not None:
+            if now - self._opened >= self.output.rotate_s:
+                self.rotate()
+            elif (self._event_dirty or self._need_sync
+                  or now - self._last_sync >= self.output.fsync_s):
+                self._sync(cur)
+            elif now - cur.last_flush + self._tick_dt >= self.output.flush_s:
+                self._flush(cur)             # the next tick would be later than flush_s
+        self._deliver()
 
     def flush(self) -> None:
-        """Write the open chunk; fsync when fsync_s has passed since the last one."""
-        now = self.clock()
-        if now - self._last_sync >= self.output.fsync_s:
-            self._current.sync()
-            self._last_sync = now
+        """Write the open chunk; fsync when fsync_s has passed or an event is pending."""
+        cur = self._current
+        if cur is None:
+            self._retry_if_due()
+        elif (self._event_dirty or self._need_sync
+              or self.clock() - self._last_sync >= self.output.fsync_s):
+            self._sync(cur)
         else:
-            self._current.flush()
+            self._flush(cur)
+        self._deliver()
 
-    def close(self) -> Path:
-        """Finish the current file; returns its path (all files are in ``paths``)."""
-        done = self._current.close()
-        if not self.paths or self.paths[-1] != done:
-            self.paths.append(done)
+    def _flush(self, cur: McapSink) -> None:
+        try:
+            cur.flush()
+        except SinkIOError as err:
+            self._failed(err, cur)
+
+    def _sync(self, cur: McapSink) -> None:
+        try:
+            cur.sync()
+        except SinkIOError as err:
+            self._failed(err, cur)
+            return
+        self._last_sync = self.clock()
+        self._event_dirty = self._need_sync = False
+        if self._outage is not None:
+            self._resumed()
+
+    def rotate(self) -> Path | None:
+        """Finish the current file and start the next; returns the finished path
+        (None if it could not be finished: it is then kept as ``.part``)."""
+        done = self._finish_current()      # on failure a new file is already being tried
+        if not self._closed and self._current is None and self._outage is None:
+            try:
+                self._current = self._open()
+            except SinkIOError as err:
+                self._failed(err, None)
+        if not self._closed:
+            self._retention()
+        if done is not None and self.on_rotate is not None:
+            self.on_rotate(done)
+        self._deliver()
         return done
+
+    def reopen(self) -> Path | None:
+        """Finish the current file and start a new one (SIGHUP, for log rotation
+        tools); while the disk fails, try a new file now. Returns the finished path."""
+        if self._closed:
+            return None
+        if self._current is None:
+            log.info("reopen: trying a new log file now")
+            self._next_retry = self.clock()
+            self._retry_if_due()
+            self._deliver()
+            return None
+        done = self.rotate()
+        log.info("reopen: finished %s, now writing %s", done, self.path)
+        return done
+
+    def close(self) -> Path | None:
+        """Finish the current file; returns its path (None if it could not be
+        finished). Every finished file is in ``paths``. Idempotent."""
+        if self._closed:
+            return self.paths[-1] if self.paths else None
+        self._closed = True                  # first: a failure now must not open a new file
+        done = self._finish_current()
+        self._deliver()
+        return done
+
+    def _finish_current(self) -> Path | None:
+        cur = self._current
+        if cur is None:
+            return None
+        try:
+            done = cur.close()
+        except SinkIOError as err:
+            if cur.path.exists() and not cur.part_path.exists():
+                done = cur.path              # finished and renamed; the directory fsync failed
+                self.disk_errors += 1
+                self._emit(DISK_EVENT, str(err), details={
+                    "action": "dir_fsync_failed", "op": err.op, "errno": _errno_name(err.errno),
+                    "file": str(done)})
+            else:
+                self._failed(err, cur)
+                return None
+        self._current = None
+        self.paths.append(done)
+        self._event_dirty = self._need_sync = False
+        if self._outage is not None:
+            self._resumed()                  # close fsyncs: the disk takes data again
+        return done
+
+    # -- disk errors -------------------------------------------------------
+
+    def _failed(self, err: SinkIOError, cur: McapSink | None) -> None:
+        """Abandon ``cur`` (if any) after ``err``; event at the start of an outage; retry."""
+        self.disk_errors += 1
+        self._last_errno = err.errno
+        now = self.clock()
+        lost = unsure = 0
+        kept: Path | None = None
+        if cur is not None:
+            lost = cur.unpersisted
+            unsure = cur.unsynced if err.op == "fsync" else 0
+            persisted = cur.persisted
+            part = cur.abandon()
+            if self._current is cur:
+                self._current = None
+            if persisted:
+                kept = part
+                self._abandoned.append(part)
+            else:
+                try:                         # a header alone: nothing to salvage
+                    part.unlink(missing_ok=True)
+                except OSError:
+                    kept = part
+        self._event_dirty = self._need_sync = False
+        first = self._outage is None
+        if first:
+            self._outage = {"start": now, "dropped": 0, "errors": 0, "error": str(err)}
+        self._drop(lost)
+        self._outage["errors"] += 1
+        if first:
+            what = (f"file kept as {kept.name} for salvage" if kept is not None
+                    else "no file open" if cur is None else "file removed (no complete chunk)")
+            unsure_text = (f" ({unsure} more written since the last good fsync may not be on "
+                           f"the disk)" if unsure else "")
+            self._emit(DISK_EVENT, f"{err}; {what}; {lost} message(s) lost{unsure_text}; "
+                       f"trying a new file at once, then every {self.output.retry_s:g} s",
+                       count=lost, details={"action": "abandoned", "op": err.op,
+                                            "errno": _errno_name(err.errno), "unsynced": unsure,
+                                            "file": str(kept or err.path)})
+        if err.errno in _FULL:
+            self._retention()
+        # a new file at once at the start of an outage (a failed fsync needs nothing
+        # else), then every retry_s: a disk that keeps failing gets one file per retry_s
+        self._next_retry = now if first else now + self.output.retry_s
+        self._retry_if_due()
+
+    def _retry_if_due(self) -> None:
+        if self._closed or self._current is not None:
+            return
+        now = self.clock()
+        if now < self._next_retry:
+            return
+        self._next_retry = now + self.output.retry_s
+        if self._last_errno in _FULL:
+            self._retention()
+        try:
+            self._current = self._open()
+        except SinkIOError as err:
+            self.disk_errors += 1
+            self._last_errno = err.errno
+            if self._outage is not None:
+                self._outage["errors"] += 1
+            else:                            # cannot happen: a file was lost before
+                self._failed(err, None)
+            return
+        self._need_sync = True               # logging is back once this file is fsynced
+
+    def _resumed(self) -> None:
+        outage, self._outage = self._outage, None
+        assert outage is not None
+        self._last_errno = None
+        where = self.path.name if self.path is not None else "the log"
+        self._emit(DISK_EVENT, f"logging resumed in {where} after "
+                   f"{self.clock() - outage['start']:.1f} s: {outage['dropped']} message(s) "
+                   f"could not be logged ({outage['errors']} failed disk operation(s); "
+                   f"first: {outage['error']})",
+                   count=outage["dropped"], details={"action": "resumed",
+                                                     "errors": outage["errors"]})
+        abandoned, self._abandoned = self._abandoned, []
+        for part in abandoned:
+            try:
+                result: SalvageResult | SinkIOError = salvage(part)
+            except SinkIOError as err:
+                result = err
+            self._salvage_event(result)
+            if isinstance(result, SalvageResult) and result.path is not None \
+                    and result.action == "salvaged":
+                self.paths.append(result.path)
+
+    # -- retention ---------------------------------------------------------
+
+    def _retention(self) -> None:
+        """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``."""
+        o = self.output
+        cap = o.retain_mb * _MB if o.retain_mb else None
+        floor = o.min_free_mb * _MB if o.min_free_mb else None
+        if cap is None and floor is None:
+            return
+        try:
+            finished, parts = log_files(o.dir, o.prefix)
+            free = _free_bytes(o.dir) if floor is not None else 0
+        except OSError:
+            return                           # no directory yet, or unreadable: nothing to do
+        stats = {}
+        for path in finished + parts:
+            try:
+                stats[path] = path.stat()
+            except OSError:
+                pass                         # gone meanwhile
+        sizes = {p: st.st_size for p, st in stats.items()}
+        total = sum(sizes.values())
+        oldest = [p for p in finished if p in stats]   # by the stamp in the name
+        deleted: list[Path] = []
+        freed = 0
+        for path in oldest:
+            over = cap is not None and total > cap
+            low = floor is not None and free < floor
+            if not (over or low):
+                break
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as err:
+                self.disk_errors += 1
+                self._emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
+                           details={"action": "retention_failed", "errno": _errno_name(err.errno),
+                                    "file": str(path)})
+                break
+            size = sizes[path]
+            total -= size
+            freed += size
+            deleted.append(path)
+            if floor is not None:
+                try:
+                    free = _free_bytes(o.dir)
+                except OSError:
+                    free += size
+        if deleted:
+            try:
+                _fsync_dir(Path(o.dir))
+            except OSError:
+                pass                         # the deletions are done; durability of the names only
+            self.paths = [p for p in self.paths if p not in deleted]
+            why = []
+            if cap is not None:
+                why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
+                           f"(now {total / _MB:.1f} MB)")
+            if floor is not None:
+                why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
+                           f"(now {free / _MB:.1f} MB)")
+            names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
+            self._emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
+                       f"({freed / _MB:.1f} MB: {names}) to keep {' and '.join(why)}",
+                       count=len(deleted), details={"action": "retention",
+                                                    "files": [p.name for p in deleted],
+                                                    "bytes": freed})
+        low = floor is not None and free < floor
+        if low and not self._low_space_told and not deleted:
+            self._low_space_told = True
+            self._emit(DISK_EVENT, f"{o.dir}: {free / _MB:.1f} MB free, below min_free_mb = "
+                       f"{o.min_free_mb:g} MB, and no finished log of prefix {o.prefix!r} left "
+                       f"to delete", details={"action": "low_space", "bytes": free})
+        elif not low:
+            self._low_space_told = False

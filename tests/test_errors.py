@@ -1,0 +1,70 @@
+"""Every error a user can cause: one line naming the thing and the fix, exit 2 (usage)
+or 78 (configuration), no traceback.  The table below is the specification.
+
+Each case runs the real command line in a scratch directory holding:
+``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
+(YAML syntax), ``notmcap.mcap`` (text), ``capdir/`` (a directory), ``afile`` (a
+regular file, so ``afile/logs`` cannot be a directory).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from test_cli import cmsensord
+
+USAGE, CONFIG = 2, 78
+
+CASES = [
+    # (command line, exit status, what the one line must say)
+    # -- configuration (78)
+    (["--config", "bad.yaml"], CONFIG, "bad.yaml: monitor.r_max: must be greater than"),
+    (["--config", "typo.yaml"], CONFIG, "did you mean 'r_max'"),
+    (["--config", "broken.yaml"], CONFIG, "broken.yaml: YAML syntax error at line 2"),
+    (["--config", "missing.yaml"], CONFIG, "missing.yaml: file not found"),
+    (["replay", "notmcap.mcap", "--config", "bad.yaml"], CONFIG, "monitor.r_max"),
+    (["replay", "capture.bin", "--out", "afile/logs"], CONFIG,
+     "afile/logs: cannot create output directory"),
+    (["--simulate", "--duration", "1", "--out", "afile/logs"], CONFIG,
+     "set output.dir or --out to a writable directory"),
+    # -- usage (2)
+    (["replay", "missing.bin"], USAGE, "missing.bin: capture file not found"),
+    (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file"),
+    (["summary", "notmcap.mcap"], USAGE, "notmcap.mcap: not an MCAP file"),
+    (["summary", "missing.mcap"], USAGE, "missing.mcap: file not found"),
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "x.bin", "--duration", "1"], USAGE,
+     "/dev/nonexistent-tty: no such device (is the board plugged in?"),
+    (["record", "--port", "/dev/null", "--out", "x.bin", "--duration", "1"], USAGE,
+     "is it a serial port?"),
+    (["vkf", "capture.bin"], USAGE, "needs a capture in RAW mode"),
+    (["--simulate", "--scenario", "nosuch"], USAGE, "unknown scenario; choose from healthy"),
+    (["--simulate", "--speed", "-1"], USAGE, "expected a positive number"),
+    (["replay", "capture.bin", "--speed", "0"], USAGE, "expected a positive number"),
+    ([], USAGE, "nothing to do: give --simulate, --config FILE or a subcommand"),
+]
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory):
+    d = tmp_path_factory.mktemp("errors")
+    (d / "bad.yaml").write_text("monitor:\n  r_max: 0.001\n")
+    (d / "typo.yaml").write_text("monitor:\n  r_mx: 0.2\n")
+    (d / "broken.yaml").write_text("link: [1, 2\n")
+    (d / "notmcap.mcap").write_text("not an mcap file\n")
+    (d / "capdir").mkdir()
+    (d / "afile").write_text("")
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    Board(make_scenario("healthy", duration_s=2.0), BoardConfig()).write_capture(d / "capture.bin", 2.0)
+    return d
+
+
+@pytest.mark.parametrize("args, code, text", CASES, ids=[" ".join(c[0]) or "(none)" for c in CASES])
+def test_user_error_is_one_line_with_its_exit_status(scratch, args, code, text):
+    p = cmsensord(*args, cwd=scratch)
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert p.returncode == code, p.stderr
+    assert "Traceback" not in p.stderr
+    assert len(lines) == 1, p.stderr
+    assert text in lines[0], lines[0]

@@ -1,0 +1,101 @@
+"""Record and replay: paced replay with a progress bar, and live == replay for RAW captures
+with line noise (real processes on a real pty)."""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import subprocess
+import sys
+import time
+
+from cmsensord.cli import RUNUP_ORDERS
+from cmsensord.sinks.mcap_sink import read_messages
+from firmware_sim.board import Board, BoardConfig
+from firmware_sim.scenarios import make_scenario
+from test_cli import ENV, cmsensord, comparable
+from test_link_faults import start_board, start_daemon, stop
+
+
+def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
+    cap = tmp_path / "cap.bin"
+    sc = make_scenario("faulty", n_channels=1, duration_s=20.0, seed=0)
+    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, 20.0)
+    t = time.monotonic()
+    fast = cmsensord("replay", str(cap), "--out", str(tmp_path / "fast"))
+    t_fast = time.monotonic() - t
+    assert fast.returncode == 0, fast.stderr
+    assert "%" not in fast.stderr                        # not a terminal: no progress bar
+
+    master, slave = pty.openpty()                        # stderr on a terminal
+    t = time.monotonic()
+    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "8",
+                          "--out", str(tmp_path / "paced")], stderr=slave, stdout=subprocess.DEVNULL,
+                         env=ENV)
+    os.close(slave)
+    out = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:                                  # EIO: the child closed the terminal
+            break
+        if not chunk:
+            break
+        out += chunk
+    p.wait(timeout=60)
+    t_paced = time.monotonic() - t
+    os.close(master)
+    assert p.returncode == 0, out.decode(errors="replace")
+    text = out.decode(errors="replace")
+    assert "replay cap.bin [" in text and "100.0%" in text and text.count("\r") >= 5
+    assert t_paced >= 20.0 / 8 - 0.1 and t_paced > t_fast
+    # pacing changes nothing in the results
+    a = read_messages(next((tmp_path / "fast").glob("*.mcap")))
+    b = read_messages(next((tmp_path / "paced").glob("*.mcap")))
+    assert comparable(a) == comparable(b)
+
+
+def per_topic(messages):
+    """comparable() messages grouped by topic (and order-tracker method), each in file order:
+    in RAW mode with a tacho, how the topics interleave follows the reads; each topic's own
+    sequence does not (events: the same set, the tacho's and the frames' interleaved by read)."""
+    out: dict[str, list] = {}
+    for topic, stamp, msg in comparable(messages):
+        if topic == "/cm/events" and msg["kind"] in ("link_lost", "link_restored", "link_stalled"):
+            continue                                     # wall-clock events of the live link
+        key = topic if "method" not in msg else f"{topic} {msg['method']}"
+        out.setdefault(key, []).append((stamp, msg))
+    return out
+
+
+def test_raw_capture_with_line_noise_replays_to_the_live_messages(tmp_path):
+    """RAW blocks + TACHO (close_orders, orders tracked) with byte errors at 1e-3: the
+    daemon's live messages and a replay of its capture are field for field the same."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "close_orders", "--mode", "raw", "--tacho", "--duration", "6",
+                      "--speed", "1", "--byte-error-rate", "1e-3", "--link", str(link))
+    orders = "orders:\n" + "".join(f"  {k}: {json.dumps(v)}\n" for k, v in RUNUP_ORDERS["close_orders"].items())
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"), config=orders)
+    stats = json.loads(sim.stdout.readline())["stats"]
+    time.sleep(1.5)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    assert stats["frames"] > 1000     # (bytes sent before the daemon opened the port may drop)
+    live = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    r = cmsensord("replay", str(tmp_path / "cap.bin"), "--config", str(tmp_path / "cmsensord.yaml"),
+                  "--out", str(tmp_path / "replay"))
+    assert r.returncode == 0, r.stderr
+    replayed = read_messages(next((tmp_path / "replay").glob("*.mcap")))
+    a, b = per_topic(live), per_topic(replayed)
+    assert len(a["/cm/ch0/orders recursive"]) > 40 and len(a["/cm/ch0/orders smoothed"]) > 40
+    lost = [m for _, m in a["/cm/events"] if m["kind"] == "frames_lost"]
+    assert len(lost) > 3                                 # the noise did hit frames
+    assert a.keys() == b.keys()
+    for topic in a:
+        if topic == "/cm/events":       # events of the tacho and of the frames interleave by read
+            assert sorted(a[topic], key=repr) == sorted(b[topic], key=repr)
+        else:
+            assert a[topic] == b[topic], topic
