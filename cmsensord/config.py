@@ -43,6 +43,7 @@ __all__ = [
     "TachoConfig",
     "OrdersConfig",
     "ComponentConfig",
+    "AcousticConfig",
     "Config",
     "MAX_CHANNELS",
     "load_config",
@@ -264,6 +265,11 @@ class ChannelConfig:
         None, "m/s^2 per ADC count, overriding STATUS (RAW mode)", nonzero=True
     )
     offset: float | None = _setting(None, "ADC counts at 0 m/s^2, overriding STATUS (RAW mode)")
+    kind: str = _setting("accelerometer", "what the channel measures: accelerometer (m/s^2), or "
+                         "microphone (Pa): its sound is turned into a vibration estimate (seed 002) "
+                         "that the AKF bank watches", choices=("accelerometer", "microphone"))
+    calibration: str | None = _setting(None, "acoustic calibration file of this microphone "
+                                       "(default: acoustic.calibration)", nonempty=True)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -416,10 +422,28 @@ class TachoConfig:
         _validate(self)
 
 
+@dataclass(frozen=True)
+class AcousticConfig:
+    """Microphone channels (kind: microphone): the seed-002 vibration estimator."""
+
+    calibration: str | None = _setting(None, "acoustic calibration file (JSON, from "
+                                       "python -m cmsensord.acoustic_calib) of the microphone "
+                                       "channels without their own", nonempty=True)
+    zeta_max: float = _setting(5.0, "limit of the standardised observation |z - z*| / "
+                               "sqrt(Gamma_z) entering the update (noise bursts)", gt=0)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
 def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
-    """Rules spanning sections: channel uniqueness, akf_trace_filter <= n."""
+    """Rules spanning sections: channel uniqueness, akf_trace_filter <= n, microphone calibration."""
     if not cfg.channels:
         return "channels", "must list at least one channel", []
+    for i, ch in enumerate(cfg.channels):
+        if ch.kind == "microphone" and ch.calibration is None and cfg.acoustic.calibration is None:
+            return (f"channels[{i}].kind", "a microphone channel needs an acoustic calibration file "
+                    f"(acoustic.calibration or channels[{i}].calibration)", ch.kind)
     seen_name: dict[str, int] = {}
     seen_index: dict[int, int] = {}
     for i, ch in enumerate(cfg.channels):
@@ -475,6 +499,8 @@ class Config:
     )
     tacho: TachoConfig = field(default_factory=TachoConfig, metadata={"help": "shaft tacho"})
     orders: OrdersConfig = field(default_factory=OrdersConfig, metadata={"help": "order tracker"})
+    acoustic: AcousticConfig = field(default_factory=AcousticConfig,
+                                     metadata={"help": "microphone channels (seed 002)"})
 
     _RULES: ClassVar[tuple[_Rule, ...]] = (_config_rules,)
 
@@ -494,12 +520,13 @@ class Config:
 # ---------------------------------------------------------------------------
 
 _SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
-                              "tacho": TachoConfig}
+                              "tacho": TachoConfig, "acoustic": AcousticConfig}
 _MONITOR_KEYS = tuple(f.name for f in dataclasses.fields(MonitorConfig))
 _CHANNEL_OWN_KEYS = tuple(
     f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
 )
 _CHANNEL_KEYS = _CHANNEL_OWN_KEYS + _MONITOR_KEYS
+_ACOUSTIC_CHANNEL_KEYS = ("kind", "calibration")
 _TOP_KEYS = tuple(f.name for f in dataclasses.fields(Config))
 
 
@@ -594,7 +621,23 @@ def config_from_dict(
                 raise err.relocated(source, path) from None
             built.append(_build(ChannelConfig, {**own, "monitor": ch_monitor}, source, path))
         channels = tuple(built)
-    return _build(Config, {**sections, "channels": channels}, source, "")
+    cfg = _build(Config, {**sections, "channels": channels}, source, "")
+    _check_calibrations(cfg, source)
+    return cfg
+
+
+def _check_calibrations(cfg: Config, source: str) -> None:
+    """Every microphone channel's calibration file must load (seed 002): one line naming both files."""
+    for i, ch in enumerate(cfg.channels):
+        if ch.kind != "microphone":
+            continue
+        key = f"channels[{i}].calibration" if ch.calibration is not None else "acoustic.calibration"
+        from cmsensord.acoustic_calib import load_calibration
+
+        try:
+            load_calibration(ch.calibration or cfg.acoustic.calibration)
+        except ConfigError as err:
+            raise ConfigError(source, key, str(err)) from None
 
 
 def _build_orders(raw: Any, source: str) -> OrdersConfig:
@@ -714,7 +757,10 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
     glob = dataclasses.asdict(cfg.monitor)
     channels = []
     for ch in cfg.channels:
-        entry: dict[str, Any] = {k: getattr(ch, k) for k in _CHANNEL_OWN_KEYS}
+        entry: dict[str, Any] = {k: getattr(ch, k) for k in _CHANNEL_OWN_KEYS
+                                 if k not in _ACOUSTIC_CHANNEL_KEYS}
+        if ch.kind != "accelerometer":          # listed only for microphone channels
+            entry.update(kind=ch.kind, calibration=ch.calibration)
         mon = dataclasses.asdict(ch.monitor)
         entry.update({k: v for k, v in mon.items() if glob[k] != v})
         channels.append(entry)
@@ -727,6 +773,7 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
         "orders": {**dataclasses.asdict(cfg.orders),
                    "components": [{k: v for k, v in dataclasses.asdict(c).items() if v is not None}
                                   for c in cfg.orders.components]},
+        "acoustic": dataclasses.asdict(cfg.acoustic),
     }
 
 

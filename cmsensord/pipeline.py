@@ -16,6 +16,11 @@ For RMS frames (PROTOCOL.md type 2) it
 4. writes ``/cm/<channel>/severity`` per decision, ``/cm/<channel>/akf`` per
    observation (when enabled), ``/cm/events`` and ``/cm/diagnostics``.
 
+A channel of kind ``microphone`` (seed 002) is watched through its sound: z_k =
+(block RMS)^2 [Pa^2] goes through the acoustic estimator (``dsp.acoustic``,
+eqs. 6-38), sqrt(x^_k) takes the place of the channel's observation in the bank
+(step 2), and ``/cm/<channel>/vibration_estimate`` is written per block.
+
 Timestamps come from the ADC clock: t = anchor + (t0_unwrapped - t0_first)/fs,
 the anchor being the wall clock when the first frame was received
 (PROTOCOL.md rule 4).  RAW and TACHO frames are counted and otherwise left to
@@ -144,6 +149,8 @@ class Processor:
         self._pending_slots = 0
         self._no_channels = False
         self.raw_dropped = 0
+        self.acoustic = None                    # seed-002 estimator of the microphone channels
+        self._mic_cols: list[int] = []
 
     # ---- time base -------------------------------------------------------
     def stamp_ns(self, t0_unwrapped: int) -> int:
@@ -294,6 +301,29 @@ class Processor:
         self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in usable]
         self._trace_i = min(self.cfg.output.akf_trace_filter, n) - 1
         self._R = R
+        self._setup_acoustic(usable)
+
+    def _setup_acoustic(self, usable) -> None:
+        """Microphone channels (kind: microphone): the seed-002 estimator, one model per channel."""
+        self.acoustic = None
+        self._mic_cols = [c for c, ch in enumerate(usable) if ch.kind == "microphone"]
+        if not self._mic_cols:
+            return
+        from cmsensord.acoustic_calib import load_calibration
+        from cmsensord.dsp.acoustic import AcousticEstimator, Guards
+
+        models = []
+        block_s = self.block_len / self.fs
+        for c in self._mic_cols:
+            ch = usable[c]
+            path = ch.calibration or self.cfg.acoustic.calibration
+            model = load_calibration(path)
+            if abs(model.block_s - block_s) > 1e-9:
+                self.event("config", ch.name, f"{ch.name}: acoustic calibration {path} was made with "
+                           f"{model.block_s * 1e3:g} ms blocks, the board sends {block_s * 1e3:g} ms: "
+                           "the vibration estimate is biased; calibrate with this board setting")
+            models.append(model)
+        self.acoustic = AcousticEstimator(models, Guards(zeta_max=self.cfg.acoustic.zeta_max))
 
     def _flush_rms(self, frames: list[Frame]) -> None:
         """Place RMS frames on the block clock and run them through the bank."""
@@ -523,6 +553,8 @@ class Processor:
         valid[rows] = True
         valid &= np.isfinite(y)
         first_slot = self.next_slot
+        if self.acoustic is not None:
+            self._estimate_vibration(first_slot, y, valid)
         out = self.bank.process(y, valid)
         self._pending.append((out.outlier, valid))
         self._pending_slots += T
@@ -533,6 +565,31 @@ class Processor:
         if self.cfg.output.akf_trace:
             self._write_trace(first_slot, y, valid, out)
         self._release_decisions(final=False)
+
+    def _estimate_vibration(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> None:
+        """Microphone columns of y: block RMS [Pa] -> z = RMS^2 -> seed-002 estimator -> x^, the
+        vibration energy [(m/s^2)^2] -> sqrt(x^) [m/s^2 RMS] replaces them in y (the bank watches
+        it like an accelerometer's block RMS); /cm/<ch>/vibration_estimate per block."""
+        cols = self._mic_cols
+        ok = valid[:, cols]
+        z = y[:, cols] ** 2
+        est = self.acoustic.process(z, ok)
+        rms = np.sqrt(np.maximum(est.x_hat, 0.0))
+        y[:, cols] = np.where(ok, rms, np.nan)
+        fields = [a.T.tolist() for a in (rms, est.x_hat, est.P_x, est.a_hat, est.P_a, est.y_hat,
+                                          est.P_y, est.z_pred)]
+        zl, okl = z.T.tolist(), ok.T.tolist()
+        stamps = [self.slot_stamp_ns(first_slot + k) for k in range(y.shape[0])]
+        for j, c in enumerate(cols):
+            name = self.channels[c].name
+            topic = f"/cm/{name}/vibration_estimate"
+            xr, xh, px, ah, pa, yh, py, zp = (f[j] for f in fields)
+            for k, stamp in enumerate(stamps):
+                self.sink.write(topic, "vibration_estimate", stamp, {
+                    "channel": name, "x_hat": _num(xr[k]), "x_ms": _num(xh[k]), "x_ms_var": _num(px[k]),
+                    "a_hat": _num(ah[k]), "a_var": _num(pa[k]), "y_hat": _num(yh[k]),
+                    "y_var": _num(py[k]), "z": zl[j][k] if okl[j][k] else None, "z_pred": _num(zp[k]),
+                    "missing": not okl[j][k]})
 
     def _write_trace(self, first_slot, y, valid, out) -> None:
         i = self._trace_i

@@ -174,7 +174,9 @@ class Board:
     chunk_blocks = 100  # blocks rendered per vectorised step (1 s at 100 blocks/s)
 
     def __init__(self, scenario: Scenario, config: BoardConfig | None = None):
-        config = config if config is not None else BoardConfig(n_channels=scenario.n_channels, fs=scenario.fs)
+        config = config if config is not None else BoardConfig(
+            n_channels=scenario.n_channels, fs=scenario.fs,
+            scale=getattr(scenario, "board_scale", None))     # a microphone channel: Pa per count
         if scenario.n_channels != config.n_channels:
             raise ValueError(f"the scenario has {scenario.n_channels} channels, the board config "
                              f"{config.n_channels}")

@@ -152,7 +152,8 @@ def main(argv: list[str] | None = None) -> int:
         config = BoardConfig(mode=args.mode, n_channels=args.channels, fs=scenario.fs,
                              tacho=args.tacho, ppr=args.ppr, t0_start=args.t0_start,
                              tacho_missed=args.tacho_missed, tacho_extra=args.tacho_extra,
-                             tacho_jitter=args.tacho_jitter)
+                             tacho_jitter=args.tacho_jitter,
+                             scale=getattr(scenario, "board_scale", None))   # Pa/count for a microphone
         board = Board(scenario, config)
         if args.truth_rate is not None and not args.truth:
             raise _UsageError("--truth-rate needs --truth FILE")

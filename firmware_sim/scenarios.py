@@ -948,6 +948,22 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     "close_orders": CloseOrdersRunUp,
 }
 
+# seed 002: a microphone beside (or instead of) the accelerometer; firmware_sim.microphone
+# imports this module, so it is imported once everything above exists
+from .microphone import (  # noqa: E402
+    DegradingMicMotor,
+    DegradingMicOnlyMotor,
+    FaultyMicMotor,
+    HealthyMicMotor,
+)
+
+SCENARIOS.update({
+    "healthy_mic": HealthyMicMotor,
+    "faulty_mic": FaultyMicMotor,
+    "degrading_mic": DegradingMicMotor,
+    "degrading_mic_only": DegradingMicOnlyMotor,
+})
+
 
 def _accepted_params(factory: Callable[..., Scenario]) -> list[str]:
     names: list[str] = []

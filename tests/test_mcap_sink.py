@@ -112,6 +112,10 @@ SAMPLES = [
     (TOPIC_EVENTS, "event", {"kind": "start", "channel": None, "message": "cmsensord started"}),
     (TOPIC_DIAGNOSTICS, "diagnostics", diagnostics_msg()),
     (orders_topic("ch0"), "orders", orders_msg()),
+    ("/cm/mic0/vibration_estimate", "vibration_estimate", {
+        "channel": "mic0", "x_hat": 0.21, "x_ms": 0.044, "x_ms_var": 1e-4, "a_hat": 0.6,
+        "a_var": 0.01, "y_hat": 0.0069, "y_var": 2e-6, "z": 0.0081, "z_pred": 0.0079,
+        "missing": False}),
 ]
 SCHEMA_NAMES = {
     "severity": "cmsensord.Severity",
@@ -119,6 +123,7 @@ SCHEMA_NAMES = {
     "event": "cmsensord.Event",
     "diagnostics": "cmsensord.Diagnostics",
     "orders": "cmsensord.Orders",
+    "vibration_estimate": "cmsensord.VibrationEstimate",
 }
 
 

@@ -18,6 +18,9 @@ topic                      schema name             rate
 /cm/diagnostics            cmsensord.Diagnostics   1 Hz
 =========================  ======================  =================================
 
+and, for a microphone channel (seed 002), ``/cm/<channel>/vibration_estimate``
+(cmsensord.VibrationEstimate) once per block (100 Hz).
+
 The seed-000 quantities keep the paper's names: S_idx (eq. 17), F_a and cnt
 (Fig. 3), R_i (eq. 16), x^-(k), x^(k), Y(k), z(k) (eqs. 3-15), Q^(k) (eq. 10).
 """
@@ -39,6 +42,7 @@ __all__ = [
     "severity_topic",
     "akf_topic",
     "orders_topic",
+    "vibration_estimate_topic",
     "schema_name",
     "schema_bytes",
 ]
@@ -61,6 +65,10 @@ def akf_topic(channel: str) -> str:
 
 def orders_topic(channel: str) -> str:
     return f"/cm/{channel}/orders"
+
+
+def vibration_estimate_topic(channel: str) -> str:
+    return f"/cm/{channel}/vibration_estimate"
 
 
 #: Every value of Event.kind.
@@ -335,8 +343,39 @@ ORDERS = _obj(
                 "required": ["name", "order", "rms", "amplitude"],
             },
         },
+        "missing_fraction": {"type": "number", "minimum": 0, "maximum": 1,
+                             "description": "recursive and smoothed: fraction of the block's samples "
+                                            "without a measurement (lost RAW frames, gaps); rms and "
+                                            "amplitude there are the tracker's predictions. 0 when none"},
     },
     ["timestamp", "channel", "speed_rpm", "valid", "orders"],
+)
+
+VIBRATION_ESTIMATE = _obj(
+    "cmsensord.VibrationEstimate",
+    "Seed-002 estimate of the machine's vibration from the sound of a microphone channel "
+    "(kind: microphone), one per block (10 ms): the recursive Bayesian estimator of eqs. 6-38. "
+    "x_hat = sqrt(x_ms) is what the channel's AKF bank watches in place of an accelerometer's block RMS.",
+    {
+        "timestamp": _time(),
+        "channel": _CHANNEL,
+        "x_hat": _num("estimated vibration as a block RMS acceleration [m/s^2]: sqrt(x_ms), what "
+                      "the channel's AKF bank watches"),
+        "x_ms": _num("estimated vibration energy x^_k, the block mean square acceleration "
+                     "[(m/s^2)^2] (eq. 16)"),
+        "x_ms_var": _num("its variance P_x,k [(m/s^2)^4] (eq. 18)"),
+        "a_hat": _num("estimated sound-vibration correlation parameter a^_k (eq. 17)"),
+        "a_var": _num("its variance P_a,k (eq. 19)"),
+        "y_hat": _num("estimated machine sound energy y^_k without the background [Pa^2] (eq. 21)"),
+        "y_var": _num("its variance P_y,k [Pa^4] (eq. 22)"),
+        "z": _num("observed sound energy z_k = y_k + v_k, the block mean square [Pa^2] (eq. 1); "
+                  "null when missing"),
+        "z_pred": _num("predicted sound energy z*_k = <z_k | Z_k-1> [Pa^2]"),
+        "missing": {"type": "boolean",
+                    "description": "the block was lost: prediction only (eqs. 34-38), z is null"},
+    },
+    ["timestamp", "channel", "x_hat", "x_ms", "x_ms_var", "a_hat", "a_var", "y_hat", "y_var", "z",
+     "missing"],
 )
 
 #: kind key -> JSON schema.
@@ -346,6 +385,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "event": EVENT,
     "diagnostics": DIAGNOSTICS,
     "orders": ORDERS,
+    "vibration_estimate": VIBRATION_ESTIMATE,
 }
 
 #: kind key -> MCAP schema name.

@@ -1,0 +1,418 @@
+"""Calibration of the seed-002 acoustic estimator: learn what the paper assumes known.
+
+Seed 002 takes as known the orthonormal-polynomial coefficients lambda^(1),
+lambda^(2) of the vibration x and the machine sound y (eqs. 4-5), the
+expansion coefficients e, p (eq. 23), the background-noise moments <v>,
+<v^2>, and the time-transition constants F, G of eq. (33).  This module learns
+them (docs/acoustic.md §6) from
+
+* a *paired* capture: the accelerometer (x_k = block RMS, m/s^2) and the
+  microphone (z_k = block mean square, Pa^2) running together, and
+* a stretch of *background noise alone* (the machine stopped): v_k.
+
+Steps, per block of the board (10 ms by default):
+
+1. lambda^(1) by Schmidt orthogonalisation of 1, x, x^2 under the sample
+   moments of x (eq. 4);
+2. the moments of the machine sound y, which is never observed alone: the
+   cumulants of independent sums add (z = y + v, eq. 1), so
+   kappa_n(y) = kappa_n(z) - kappa_n(v), n = 1..4.  When the deconvolved
+   third and fourth cumulants are not those of any distribution (kurtosis
+   below skewness^2 - 2: the background's heavy tail makes them noisy), they
+   are replaced by those of the gamma distribution with the deconvolved mean
+   and variance (the paper's model family for energies), and ``info`` says so;
+3. lambda^(2) by Schmidt orthogonalisation under those moments (eq. 5); then
+   e10 = <y>, e11 = 1/lambda^(2)_11, p20 = <y^2>, p21 = <y^2 theta1(y)>,
+   p22 = 1/lambda^(2)_22 (eq. 23);
+4. a0 = B_11 = <theta1(x) theta1(y)> = lambda^(2)_11 <theta1(x) z> (eq. 3; v
+   is independent of x, so <theta1(x) v> = 0); the check value
+   B_22 = <theta2(x) theta2(y)>, which the model takes to be a0^2, goes to
+   ``info``;
+5. F = the lag-1 autocorrelation coefficient of x (over consecutive blocks
+   only), G = sqrt((1 - F^2) var x), <u> = (1 - F) <x> / G (eq. 33, docs §5);
+6. <v>, <v^2> from the background stretch;
+7. the initial prior: x* = <x>, Gamma_x = var x, a* = a0,
+   Gamma_a = (``a_rel_std`` a0)^2.
+
+The result is written to a JSON file (:func:`save_calibration`) that the
+daemon's configuration points to (``acoustic.calibration``), read back by
+:func:`load_calibration`, which raises :class:`~cmsensord.errors.ConfigError`
+with a one-line message naming the file and the key for a bad file.
+
+Command line (captures as written by ``cmsensord record`` or firmware_sim)::
+
+    python -m cmsensord.acoustic_calib --paired pair.bin --background bg.bin \\
+        --accel 0 --mic 1 --out acoustic.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cmsensord.dsp.acoustic import AcousticModel
+from cmsensord.errors import ConfigError
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "Calibration",
+    "schmidt",
+    "fit_model",
+    "blocks_from_capture",
+    "fit_captures",
+    "save_calibration",
+    "load_calibration",
+    "main",
+]
+
+FORMAT = "cmsensord.acoustic_calibration"
+VERSION = 1
+#: fewest blocks of each kind a calibration accepts (fourth moments need many)
+MIN_BLOCKS = 500
+#: |a0| is kept below this (a correlation coefficient; above it the model's var(y|x) < 0)
+A_MAX = 0.98
+
+
+@dataclass
+class Calibration:
+    """A fitted model and what the fit saw (diagnostics, warnings)."""
+
+    model: AcousticModel
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def schmidt(moments) -> np.ndarray:
+    """lambda (3x3, lower triangular) of theta_0..2 orthonormal under raw moments <x^j>, j = 0..4.
+
+    Eqs. (4)-(5): theta_0 = 1, theta_1 = (x - mu)/sigma,
+    theta_2 = (x^2 - <x^2> - <x^2 theta_1> theta_1) / norm.  Raises ValueError
+    when the moments are not those of a distribution with at least 3 points.
+    """
+    m = [float(v) for v in moments]
+    mu = m[1]
+    var = m[2] - mu * mu
+    if not var > 0:
+        raise ValueError(f"variance {var:.3g} is not positive")
+    s = math.sqrt(var)
+    lam = np.zeros((3, 3))
+    lam[0, 0] = 1.0
+    lam[1, 0], lam[1, 1] = -mu / s, 1.0 / s
+    c0 = m[2]                                    # <x^2 theta_0>
+    c1 = lam[1, 0] * m[2] + lam[1, 1] * m[3]     # <x^2 theta_1>
+    n2 = m[4] - c0 * c0 - c1 * c1
+    if not n2 > 1e-12 * m[4]:
+        raise ValueError("fourth moment too small for a second-order polynomial (kurtosis <= skewness^2 + 1)")
+    N = math.sqrt(n2)
+    lam[2, 2] = 1.0 / N
+    lam[2, 1] = -c1 * lam[1, 1] / N
+    lam[2, 0] = (-c0 - c1 * lam[1, 0]) / N
+    return lam
+
+
+def _cumulants(a: np.ndarray) -> np.ndarray:
+    mu = float(np.mean(a))
+    d = a - mu
+    m2, m3, m4 = (float(np.mean(d ** j)) for j in (2, 3, 4))
+    return np.array([mu, m2, m3, m4 - 3.0 * m2 * m2])
+
+
+def _raw_moments(k) -> list[float]:
+    mu, k2, k3, k4 = k
+    return [1.0, mu, k2 + mu * mu, k3 + 3 * mu * k2 + mu ** 3,
+            k4 + 4 * k3 * mu + 3 * k2 * k2 + 6 * k2 * mu * mu + mu ** 4]
+
+
+def _admissible(k, margin: float = 0.05) -> bool:
+    """Skewness and kurtosis of a distribution with more than two points: ex. kurtosis > skew^2 - 2."""
+    _, k2, k3, k4 = k
+    if not k2 > 0:
+        return False
+    sk, ex = k3 / k2 ** 1.5, k4 / k2 ** 2
+    return bool(ex > sk * sk - 2.0 + margin)
+
+
+def _consecutive_lag1(x: np.ndarray, t: np.ndarray | None) -> float:
+    xc = x - x.mean()
+    if t is None:
+        pairs = np.ones(x.size - 1, dtype=bool)
+    else:
+        pairs = np.diff(t) == 1
+    if pairs.sum() < 10:
+        raise ValueError("fewer than 10 pairs of consecutive blocks: F of eq. (33) cannot be estimated")
+    num = float(np.mean(xc[1:][pairs] * xc[:-1][pairs]))
+    return num / float(np.mean(xc * xc))
+
+
+def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
+              closure: str = "auto") -> Calibration:
+    """Fit the seed-002 model from arrays (the steps of the module docstring).
+
+    x: vibration (accelerometer block RMS) and z: sound energy of the same
+    blocks (paired capture); v: sound energy of blocks of background noise
+    alone; t: optional block indices of the paired blocks (gaps are lost
+    blocks, F uses consecutive blocks only).  closure: "auto" (deconvolved
+    higher moments of y when admissible, else gamma), "gamma" or "deconvolved"
+    (fail if not admissible).  Raises ValueError with a one-line reason.
+    """
+    x = np.asarray(x, dtype=np.float64).ravel()
+    z = np.asarray(z, dtype=np.float64).ravel()
+    v = np.asarray(v, dtype=np.float64).ravel()
+    if x.shape != z.shape:
+        raise ValueError(f"x and z must have the same length, got {x.size} and {z.size}")
+    if t is not None:
+        t = np.asarray(t, dtype=np.int64).ravel()
+        if t.shape != x.shape or np.any(np.diff(t) <= 0):
+            raise ValueError("t must be increasing block indices, one per paired block")
+    for name, a in (("x", x), ("z", z), ("v", v)):
+        if a.size < MIN_BLOCKS:
+            raise ValueError(f"{name}: need at least {MIN_BLOCKS} blocks, got {a.size}")
+        if not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise ValueError(f"{name}: blocks must be finite and >= 0")
+    if closure not in ("auto", "gamma", "deconvolved"):
+        raise ValueError(f"closure must be auto, gamma or deconvolved, got {closure!r}")
+    if not (a_rel_std > 0 and math.isfinite(a_rel_std)):
+        raise ValueError(f"a_rel_std must be > 0, got {a_rel_std!r}")
+    info: dict[str, Any] = {"blocks_paired": int(x.size), "blocks_background": int(v.size),
+                            "warnings": []}
+    # 1. lambda^(1)
+    mx = [float(np.mean(x ** j)) for j in range(5)]
+    try:
+        lam1 = schmidt(mx)
+    except ValueError as exc:
+        raise ValueError(f"vibration x: {exc}") from None
+    # 2. moments of y by deconvolution of cumulants (z = y + v)
+    ky = _cumulants(z) - _cumulants(v)
+    if not ky[0] > 0 or not ky[1] > 0:
+        raise ValueError(f"the machine sound is not identifiable: mean {ky[0]:.3g} and variance "
+                         f"{ky[1]:.3g} of z - v must be > 0 (the background stretch is louder or "
+                         "more variable than the background during the paired capture)")
+    how = "deconvolved"
+    if closure == "gamma" or (closure == "auto" and not _admissible(ky)):
+        mu, k2 = ky[0], ky[1]
+        ky = np.array([mu, k2, 2.0 * k2 * k2 / mu, 6.0 * k2 ** 3 / mu ** 2])
+        how = "gamma closure" + (" (deconvolved 3rd/4th cumulants not admissible)" if closure == "auto" else "")
+    elif not _admissible(ky):
+        raise ValueError("the deconvolved skewness/kurtosis of y are not those of a distribution")
+    info["y_moments"] = how
+    my = _raw_moments(ky)
+    lam2 = schmidt(my)
+    # 3. e and p of eq. (23)
+    e10, e11 = my[1], 1.0 / lam2[1, 1]
+    p20 = my[2]
+    p21 = lam2[1, 0] * my[2] + lam2[1, 1] * my[3]
+    p22 = 1.0 / lam2[2, 2]
+    # 4. a0 = B_11, and the check value B_22 (the model takes a0^2)
+    th1 = lam1[1, 0] + lam1[1, 1] * x
+    th2 = lam1[2, 0] + lam1[2, 1] * x + lam1[2, 2] * x * x
+    a0 = float(lam2[1, 1] * np.mean(th1 * z))
+    v1, v2 = float(np.mean(v)), float(np.mean(v * v))
+    # <theta2(x) y^2> = <theta2(x) z^2> - 2 <v> <theta2(x) z>  (v independent of x)
+    b22 = float(lam2[2, 2] * (np.mean(th2 * z * z) - 2.0 * v1 * np.mean(th2 * z)))
+    info.update(B11=a0, B22=b22, a0_squared=a0 * a0)
+    if abs(a0) > A_MAX:
+        info["warnings"].append(f"a0 = {a0:.3f} clipped to {math.copysign(A_MAX, a0)}: the background "
+                                "stretch does not represent the background of the paired capture")
+        a0 = math.copysign(A_MAX, a0)
+    # 5. F, G, <u> of eqs. (32)-(34)
+    F = _consecutive_lag1(x, t)
+    F = min(max(F, -0.999), 0.999)
+    var_x = float(np.var(x))
+    G = math.sqrt((1.0 - F * F) * var_x)
+    u_mean = (1.0 - F) * float(np.mean(x)) / G
+    info.update(x_mean=float(np.mean(x)), x_std=math.sqrt(var_x), y_mean=e10, y_std=e11,
+                v_mean=v1, v_std=math.sqrt(max(v2 - v1 * v1, 0.0)),
+                corr_xz=float(np.corrcoef(x, z)[0, 1]))
+    model = AcousticModel(lam1=lam1, lam2=lam2, e10=e10, e11=e11, p20=p20, p21=p21, p22=p22,
+                          v1=v1, v2=v2, F=F, G=G, u_mean=u_mean, x0=float(np.mean(x)), gx0=var_x,
+                          a0=a0, ga0=(a_rel_std * a0) ** 2 if a0 else a_rel_std ** 2,
+                          block_s=block_s)
+    return Calibration(model=model, info=info)
+
+
+# ---------------------------------------------------------------------------
+# captures -> blocks
+# ---------------------------------------------------------------------------
+
+
+def blocks_from_capture(path, channels, *, chunk: int = 1 << 20):
+    """Per-block RMS of the given board channels from a capture file (RMS or RAW mode).
+
+    Returns (block index int64 (n,), rms float64 (n, len(channels)), block_s):
+    only blocks where every requested channel arrived; the RMS is the daemon's
+    (PROTOCOL.md RMS frames, or :func:`cmsensord.dsp.rms.rows_rms` of RAW
+    blocks with the STATUS scale/offset), so z = rms^2 matches what the
+    daemon computes.  Raises ValueError naming the file.
+    """
+    from cmsensord.dsp.rms import rows_rms
+    from cmsensord.protocol import Decoder, FrameType, decode_status
+
+    channels = [int(c) for c in channels]
+    dec = Decoder()
+    status = None
+    rms_rows: dict[int, np.ndarray] = {}
+    raw: dict[int, dict[int, bytes]] = {}
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    with f:
+        while True:
+            data = f.read(chunk)
+            frames = dec.feed(data) if data else dec.flush()
+            for fr in frames:
+                if fr.type == FrameType.STATUS:
+                    try:
+                        status = decode_status(fr.payload)
+                    except ValueError:
+                        continue
+                elif fr.type == FrameType.RMS:
+                    vals = np.frombuffer(fr.payload, dtype="<f4")
+                    if max(channels) < vals.size:
+                        rms_rows[fr.t0_unwrapped] = vals[channels].astype(np.float64)
+                elif fr.type == FrameType.RAW and fr.chan in channels:
+                    raw.setdefault(fr.t0_unwrapped, {})[fr.chan] = fr.payload
+            if not data:
+                break
+    if status is None:
+        raise ValueError(f"{path}: no STATUS frame (block length and scale unknown)")
+    L = status.block_len
+    if raw:
+        scale = np.asarray(status.scale, dtype=np.float32)
+        offset = np.asarray(status.offset, dtype=np.float32)
+        if max(channels) >= len(scale):
+            raise ValueError(f"{path}: channel {max(channels)} not in the board's {len(scale)}")
+        t0s = sorted(t for t, d in raw.items() if all(c in d and len(d[c]) == 2 * L for c in channels))
+        out = np.empty((len(t0s), len(channels)))
+        for j, c in enumerate(channels):
+            counts = np.stack([np.frombuffer(raw[t][c], dtype="<u2") for t in t0s]) if t0s else \
+                np.empty((0, L), dtype=np.uint16)
+            out[:, j] = rows_rms(counts, np.full(len(t0s), scale[c]), np.full(len(t0s), offset[c]))
+        t0 = np.array(t0s, dtype=np.int64)
+    else:
+        t0 = np.array(sorted(rms_rows), dtype=np.int64)
+        out = np.array([rms_rows[t] for t in t0]) if t0.size else np.empty((0, len(channels)))
+    if t0.size == 0:
+        raise ValueError(f"{path}: no blocks of channel(s) {channels}")
+    return (t0 - t0[0]) // L, out, L / status.fs
+
+
+def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_background: int | None = None,
+                 **kwargs) -> Calibration:
+    """Fit from a paired capture (accelerometer ``accel``, microphone ``mic``) and a capture of
+    background noise alone (microphone channel ``mic_background``, default ``mic``)."""
+    t, rms, block_s = blocks_from_capture(paired, [accel, mic])
+    _, bg, block_bg = blocks_from_capture(background, [mic if mic_background is None else mic_background])
+    if abs(block_s - block_bg) > 1e-12:
+        raise ValueError(f"the captures have different blocks: {block_s * 1e3:g} ms and {block_bg * 1e3:g} ms")
+    cal = fit_model(rms[:, 0], rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)
+    cal.info.update(paired=str(paired), background=str(background), accel_channel=accel, mic_channel=mic)
+    return cal
+
+
+# ---------------------------------------------------------------------------
+# the file
+# ---------------------------------------------------------------------------
+
+_MODEL_KEYS = tuple(f.name for f in fields(AcousticModel))
+
+
+def save_calibration(cal: Calibration, path) -> None:
+    """Write the calibration as JSON (``format``, ``version``, ``model``, ``info``)."""
+    model = asdict(cal.model)
+    model["lam1"] = [list(r) for r in model["lam1"]]
+    model["lam2"] = [list(r) for r in model["lam2"]]
+    doc = {"format": FORMAT, "version": VERSION, "model": model, "info": cal.info}
+    Path(path).write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
+
+
+def load_calibration(path) -> AcousticModel:
+    """Read a calibration file; a bad file raises ConfigError naming the file and the key."""
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(source, None, "calibration file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(source, None, "is a directory, not a calibration file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:     # ValueError: a NUL in the path
+        reason = getattr(exc, "strerror", None) or exc
+        raise ConfigError(source, None, f"cannot read the calibration file: {reason}") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(source, None, f"not JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ConfigError(source, "format", f"not an acoustic calibration (expected format {FORMAT!r})",
+                          doc.get("format") if isinstance(doc, dict) else doc)
+    if doc.get("version") != VERSION:
+        raise ConfigError(source, "version", f"unsupported version (this daemon reads {VERSION})",
+                          doc.get("version"))
+    model = doc.get("model")
+    if not isinstance(model, dict):
+        raise ConfigError(source, "model", "expected a mapping of the model's coefficients", model)
+    unknown = [k for k in model if k not in _MODEL_KEYS]
+    if unknown:
+        raise ConfigError(source, f"model.{unknown[0]}", "unknown key")
+    required = [k for k in _MODEL_KEYS if k != "block_s"]
+    missing = [k for k in required if k not in model]
+    if missing:
+        raise ConfigError(source, f"model.{missing[0]}", "missing")
+    try:
+        return AcousticModel(**model)
+    except (ValueError, TypeError) as exc:
+        key, _, reason = str(exc).partition(": ")
+        if key in _MODEL_KEYS:
+            raise ConfigError(source, f"model.{key}", reason) from None
+        raise ConfigError(source, "model", str(exc)) from None
+
+
+# ---------------------------------------------------------------------------
+# command line
+# ---------------------------------------------------------------------------
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m cmsensord.acoustic_calib",
+        description="Fit the seed-002 acoustic estimator (vibration from microphone sound) from a "
+                    "paired accelerometer + microphone capture and a capture of background noise alone.")
+    p.add_argument("--paired", required=True, help="capture with the accelerometer and the microphone")
+    p.add_argument("--background", required=True, help="capture of background noise alone (machine stopped)")
+    p.add_argument("--accel", type=int, default=0, help="accelerometer channel of the paired capture (0)")
+    p.add_argument("--mic", type=int, default=1, help="microphone channel of the paired capture (1)")
+    p.add_argument("--mic-background", type=int, default=None,
+                   help="microphone channel of the background capture (default: --mic)")
+    p.add_argument("--a-rel-std", type=float, default=0.1,
+                   help="initial uncertainty of a, relative to a0 (default 0.1)")
+    p.add_argument("--out", required=True, help="calibration file to write (JSON)")
+    args = p.parse_args(argv)
+    try:
+        cal = fit_captures(args.paired, args.background, accel=args.accel, mic=args.mic,
+                           mic_background=args.mic_background, a_rel_std=args.a_rel_std)
+        save_calibration(cal, args.out)
+    except ValueError as exc:
+        print(f"acoustic_calib: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"acoustic_calib: error: cannot write {args.out}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    i = cal.info
+    m = cal.model
+    print(f"wrote {args.out}: {i['blocks_paired']} paired + {i['blocks_background']} background blocks of "
+          f"{m.block_s * 1e3:g} ms; a0 = {m.a0:.3f} (B22 = {i['B22']:.3f} vs a0^2 = {i['a0_squared']:.3f}), "
+          f"F = {m.F:.3f}, y moments: {i['y_moments']}")
+    for w in i["warnings"]:
+        print(f"acoustic_calib: warning: {w}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
