@@ -408,22 +408,24 @@ class Processor:
 
     def _feed_orders(self, blocks, row, chan, counts, scale, offset) -> None:
         """RAW blocks (and the TACHO frames so far) to the order chain of the machine."""
+        vib = tuple(ch for ch in self.channels if ch.kind != "microphone")   # orders of vibration only
         if self.orders is None:
-            if not (self.cfg.orders.enabled and self.bank is not None and self._ensure_tacho()):
+            if not (vib and self.cfg.orders.enabled and self.bank is not None and self._ensure_tacho()):
                 return
             from cmsensord.orders import OrderChain     # scipy is loaded only for the raw chain
-            self.orders = OrderChain(self.cfg, self.channels, self.tacho, fs=self.fs,
+            self.orders = OrderChain(self.cfg, vib, self.tacho, fs=self.fs,
                                      write=self.sink.write, event=self.event, stamp=self.stamp_ns)
         L = self.block_len
-        sel = np.isin(chan, self._index)
-        pos = {int(b): i for i, b in enumerate(self._index)}
-        y = np.full((len(blocks), L, len(self.channels)), np.nan)
+        index = [ch.index for ch in vib]
+        sel = np.isin(chan, index)
+        pos = {int(b): i for i, b in enumerate(index)}
+        y = np.full((len(blocks), L, len(vib)), np.nan)
         cal = rows_physical(counts[sel], scale[chan[sel]], offset[chan[sel]])
         y[row[sel], :, [pos[int(c)] for c in chan[sel]]] = cal
         # blocks are consecutive here except across lost ones: feed contiguous runs
         cuts = np.flatnonzero(np.diff(blocks) != L) + 1
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(blocks)]):
-            self.orders.add_samples(int(blocks[a]), y[a:b].reshape(-1, len(self.channels)))
+            self.orders.add_samples(int(blocks[a]), y[a:b].reshape(-1, len(vib)))
 
     def _ensure_tacho(self) -> bool:
         """Create the TachoTracker once the board has said it has a tacho (STATUS)."""

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cmsensord.config import default_config
+from cmsensord.config import config_from_dict, default_config
 from cmsensord.dsp.rms import block_rms, rows_rms
 from cmsensord.pipeline import ListSink, Processor
 from cmsensord.protocol import Decoder, FrameType
@@ -88,3 +88,23 @@ def test_a_lost_raw_frame_is_a_missing_observation_of_its_channel_only():
     sev1 = [m["missing"] for t, _, m in sink.messages if t == "/cm/ch1/severity"]
     assert sev0 == [0, 0, 0] and sev1 == [0, 1, 0]
     assert any(m["kind"] == "frames_lost" for t, _, m in sink.messages if t == "/cm/events")
+
+
+def test_a_microphone_channel_is_not_order_tracked(tmp_path):
+    """RAW + tacho with an accelerometer and a microphone: orders of the accelerometer only
+    (the microphone's Pa are not a vibration; it has its own vibration estimate)."""
+    from cmsensord.acoustic_calib import fit_model, save_calibration
+
+    sc = make_scenario("degrading_mic", n_channels=2, duration_s=60.0, seed=3)
+    obs = Board(sc, BoardConfig(n_channels=2, scale=sc.board_scale)).observations(6000)[1].astype(float)
+    bg_sc = make_scenario("degrading_mic", n_channels=2, duration_s=30.0, seed=4, machine_off=True)
+    bg = Board(bg_sc, BoardConfig(n_channels=2, scale=bg_sc.board_scale)).observations(3000)[1].astype(float)
+    cal = tmp_path / "mic.json"
+    save_calibration(fit_model(obs[:, 0] ** 2, obs[:, 1] ** 2, bg[:, 1] ** 2), cal)
+    cfg = config_from_dict({"channels": [{"name": "acc"}, {"name": "mic", "kind": "microphone"}],
+                            "acoustic": {"calibration": str(cal)}})
+    data = Board(sc, BoardConfig(n_channels=2, mode="raw", tacho=True, scale=sc.board_scale)).generate(3.0)
+    sink, _, _ = run_processor(data, cfg)
+    topics = {t for t, _, _ in sink.messages}
+    assert "/cm/acc/orders" in topics and "/cm/mic/vibration_estimate" in topics
+    assert "/cm/mic/orders" not in topics
