@@ -9,9 +9,16 @@
  * blockdiag([[0, 1], [-1, c_a(n)]]) and the data row h has ones at odd positions.
  *
  *   sosfilt(sos, x, zi, out, skip, D)              anti-alias SOS cascade + decimation
- *   riccati(c, qd, q2, P, k, S, Pout, want_p)     exact gains, P carried (d x d)
- *   forward(y, c, k, z, zp, e, xf, K)              the filter for C channels
- *   backward(c, k, S, P, zp, e, xs, K)             MBF smoother over one window
+ *   riccati(c, qd, q2, P, k, S, Pout, want_p[, miss])
+ *                                                  exact gains, P carried (d x d)
+ *   forward(y, c, k, z, zp, e, xf, K[, miss])      the filter for C channels
+ *   backward(c, k, S, P, zp, e, xs, K[, miss])     MBF smoother over one window
+ *
+ * miss (optional; uint8, 1 = missing, empty = none missing) marks samples without a
+ * measurement: riccati takes it per sample (T), forward/backward per sample and
+ * channel (T x C, W x C).  A missing sample gets the time update only (gain 0):
+ * riccati: k = 0, P(n|n) = P(n|n-1); forward: e = 0, X̂(n|n) = X̂(n|n-1); backward:
+ * λ(n) = F(n)ᵀ λ(n+1) (the MBF recursion with k = 0 and no innovation term).
  *   tacho_eval(s, kT, kth, kw, kr, speed, turns, j, code)
  *                                                  tacho.py: speed and angle between knots
  */
@@ -84,9 +91,10 @@ done:
 
 /* k, S (and P(n|n-1) if want_p) for T samples; P is updated to P(T|T-1). */
 static PyObject *riccati(PyObject *self, PyObject *args) {
-    Py_buffer bc, bqd, bq2, bP, bk, bS, bPo;
+    Py_buffer bc, bqd, bq2, bP, bk, bS, bPo, bm = {0};
     int want_p;
-    if (!PyArg_ParseTuple(args, "y*y*y*w*w*w*w*i", &bc, &bqd, &bq2, &bP, &bk, &bS, &bPo, &want_p))
+    if (!PyArg_ParseTuple(args, "y*y*y*w*w*w*w*i|y*", &bc, &bqd, &bq2, &bP, &bk, &bS, &bPo, &want_p,
+                          &bm))
         return NULL;
     PyObject *ret = NULL;
     double *M = NULL, *ph = NULL;
@@ -102,6 +110,11 @@ static PyObject *riccati(PyObject *self, PyObject *args) {
     if (!need(&bc, T * K, "c") || !need(&bqd, T * d, "qd") || !need(&bk, T * d, "k") ||
         !need(&bS, T, "S") || (want_p && !need(&bPo, T * d * d, "Pout")))
         goto done;
+    if (bm.buf != NULL && bm.len != 0 && bm.len < T) {
+        PyErr_SetString(PyExc_ValueError, "riccati: miss has fewer than T entries");
+        goto done;
+    }
+    const unsigned char *miss = (bm.buf != NULL && bm.len != 0) ? bm.buf : NULL;
     M = malloc(sizeof(double) * d * d);
     ph = malloc(sizeof(double) * d);
     if (!M || !ph) { PyErr_NoMemory(); goto done; }
@@ -122,9 +135,13 @@ static PyObject *riccati(PyObject *self, PyObject *args) {
         for (Py_ssize_t i = 1; i < d; i += 2) s += ph[i];
         s += q2[n];
         S[n] = s;
-        for (Py_ssize_t i = 0; i < d; i++) kn[i] = ph[i] / s;    /* k = P hᵀ / S */
-        for (Py_ssize_t i = 0; i < d; i++)            /* P(n|n) = P - k (P hᵀ)ᵀ, in P */
-            for (Py_ssize_t j = 0; j < d; j++) P[i * d + j] -= kn[i] * ph[j];
+        if (miss && miss[n]) {                         /* no measurement: k = 0, P(n|n) = P */
+            for (Py_ssize_t i = 0; i < d; i++) kn[i] = 0.0;
+        } else {
+            for (Py_ssize_t i = 0; i < d; i++) kn[i] = ph[i] / s;    /* k = P hᵀ / S */
+            for (Py_ssize_t i = 0; i < d; i++)        /* P(n|n) = P - k (P hᵀ)ᵀ, in P */
+                for (Py_ssize_t j = 0; j < d; j++) P[i * d + j] -= kn[i] * ph[j];
+        }
         for (Py_ssize_t a = 0; a < K; a++)             /* M = F P(n|n) */
             for (Py_ssize_t j = 0; j < d; j++) {
                 M[2 * a * d + j] = P[(2 * a + 1) * d + j];
@@ -150,14 +167,16 @@ done:
     free(M); free(ph);
     PyBuffer_Release(&bc); PyBuffer_Release(&bqd); PyBuffer_Release(&bq2); PyBuffer_Release(&bP);
     PyBuffer_Release(&bk); PyBuffer_Release(&bS); PyBuffer_Release(&bPo);
+    if (bm.buf != NULL) PyBuffer_Release(&bm);
     return ret;
 }
 
-/* The filter: z (C x d) holds X̂(n|n-1) per channel and is updated. */
+/* The filter: z (C x d) holds X̂(n|n-1) per channel and is updated.  A missing
+ * sample (miss[n, ch]) has no innovation: e = 0, X̂(n|n) = X̂(n|n-1). */
 static PyObject *forward(PyObject *self, PyObject *args) {
-    Py_buffer by, bc, bk, bz, bzp, be, bxf;
+    Py_buffer by, bc, bk, bz, bzp, be, bxf, bm = {0};
     Py_ssize_t K;
-    if (!PyArg_ParseTuple(args, "y*y*y*w*w*w*w*n", &by, &bc, &bk, &bz, &bzp, &be, &bxf, &K))
+    if (!PyArg_ParseTuple(args, "y*y*y*w*w*w*w*n|y*", &by, &bc, &bk, &bz, &bzp, &be, &bxf, &K, &bm))
         return NULL;
     PyObject *ret = NULL;
     const Py_ssize_t d = 2 * K;
@@ -170,6 +189,11 @@ static PyObject *forward(PyObject *self, PyObject *args) {
     if (!need(&by, T * C, "y") || !need(&bk, T * d, "k") || !need(&bzp, T * C * d, "zp") ||
         !need(&be, T * C, "e") || !need(&bxf, T * C * d, "xf"))
         goto done;
+    if (bm.buf != NULL && bm.len != 0 && bm.len < T * C) {
+        PyErr_SetString(PyExc_ValueError, "forward: miss has fewer than T x C entries");
+        goto done;
+    }
+    const unsigned char *miss = (bm.buf != NULL && bm.len != 0) ? bm.buf : NULL;
     const double *y = by.buf, *c = bc.buf, *k = bk.buf;
     double *z = bz.buf, *zp = bzp.buf, *e = be.buf, *xf = bxf.buf;
     Py_BEGIN_ALLOW_THREADS
@@ -180,7 +204,8 @@ static PyObject *forward(PyObject *self, PyObject *args) {
             double *zpo = zp + (n * C + ch) * d, *xo = xf + (n * C + ch) * d;
             double s = 0.0;
             for (Py_ssize_t a = 0; a < K; a++) s += zc[2 * a + 1];
-            const double en = y[n * C + ch] - s;                     /* innovation */
+            const double en = (miss && miss[n * C + ch]) ? 0.0        /* none: missing */
+                                                         : y[n * C + ch] - s;   /* innovation */
             e[n * C + ch] = en;
             for (Py_ssize_t i = 0; i < d; i++) {
                 zpo[i] = zc[i];
@@ -198,16 +223,18 @@ static PyObject *forward(PyObject *self, PyObject *args) {
 done:
     PyBuffer_Release(&by); PyBuffer_Release(&bc); PyBuffer_Release(&bk); PyBuffer_Release(&bz);
     PyBuffer_Release(&bzp); PyBuffer_Release(&be); PyBuffer_Release(&bxf);
+    if (bm.buf != NULL) PyBuffer_Release(&bm);
     return ret;
 }
 
 /* Modified Bryson-Frazier smoothing of one window of W samples (λ = 0 after it):
  *   λ(n) = hᵀ e(n)/S(n) + A(n)ᵀ λ(n+1),  A = F (I - k h),  X̂s(n) = X̂(n) + P(n) λ(n);
+ * at a missing sample (miss[n, ch]) k = 0 and there is no innovation: λ(n) = F(n)ᵀ λ(n+1).
  * xs receives the first nout samples (its size sets nout). */
 static PyObject *backward(PyObject *self, PyObject *args) {
-    Py_buffer bc, bk, bS, bP, bzp, be, bxs;
+    Py_buffer bc, bk, bS, bP, bzp, be, bxs, bm = {0};
     Py_ssize_t K;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*w*n", &bc, &bk, &bS, &bP, &bzp, &be, &bxs, &K))
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*w*n|y*", &bc, &bk, &bS, &bP, &bzp, &be, &bxs, &K, &bm))
         return NULL;
     PyObject *ret = NULL;
     double *lam = NULL, *mu = NULL;
@@ -220,10 +247,12 @@ static PyObject *backward(PyObject *self, PyObject *args) {
     const Py_ssize_t C = (be.len / (Py_ssize_t)sizeof(double)) / W;
     const Py_ssize_t nout = C ? (bxs.len / (Py_ssize_t)sizeof(double)) / (C * d) : 0;
     if (C <= 0 || nout > W || !need(&bk, W * d, "k") || !need(&bP, W * d * d, "P") ||
-        !need(&bzp, W * C * d, "zp") || !need(&be, W * C, "e")) {
+        !need(&bzp, W * C * d, "zp") || !need(&be, W * C, "e") ||
+        (bm.buf != NULL && bm.len != 0 && bm.len < W * C)) {
         if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "backward: inconsistent sizes");
         goto done;
     }
+    const unsigned char *miss = (bm.buf != NULL && bm.len != 0) ? bm.buf : NULL;
     lam = calloc((size_t)(C * d), sizeof(double));
     mu = malloc(sizeof(double) * d);
     if (!lam || !mu) { PyErr_NoMemory(); goto done; }
@@ -234,20 +263,24 @@ static PyObject *backward(PyObject *self, PyObject *args) {
         const double *cn = c + n * K, *kn = k + n * d, *Pn = P + n * d * d;
         for (Py_ssize_t ch = 0; ch < C; ch++) {
             double *l = lam + ch * d;
+            const int gone = miss && miss[n * C + ch];
             if (n < W - 1) {                      /* λ <- A(n)ᵀ λ = (I - hᵀkᵀ) Fᵀ λ */
                 for (Py_ssize_t a = 0; a < K; a++) {
                     mu[2 * a] = -l[2 * a + 1];
                     mu[2 * a + 1] = l[2 * a] + cn[a] * l[2 * a + 1];
                 }
-                double kmu = 0.0;
-                for (Py_ssize_t i = 0; i < d; i++) kmu += kn[i] * mu[i];
+                double kmu = 0.0;                 /* missing: k = 0, λ <- Fᵀ λ */
+                if (!gone)
+                    for (Py_ssize_t i = 0; i < d; i++) kmu += kn[i] * mu[i];
                 for (Py_ssize_t a = 0; a < K; a++) {
                     l[2 * a] = mu[2 * a];
                     l[2 * a + 1] = mu[2 * a + 1] - kmu;
                 }
             }
-            const double g = e[n * C + ch] / S[n];
-            for (Py_ssize_t a = 0; a < K; a++) l[2 * a + 1] += g;
+            if (!gone) {                          /* + hᵀ e(n)/S(n); none when missing */
+                const double g = e[n * C + ch] / S[n];
+                for (Py_ssize_t a = 0; a < K; a++) l[2 * a + 1] += g;
+            }
             if (n < nout) {
                 const double *zc = zp + (n * C + ch) * d;
                 double *xo = xs + (n * C + ch) * d;
@@ -266,6 +299,7 @@ done:
     free(lam); free(mu);
     PyBuffer_Release(&bc); PyBuffer_Release(&bk); PyBuffer_Release(&bS); PyBuffer_Release(&bP);
     PyBuffer_Release(&bzp); PyBuffer_Release(&be); PyBuffer_Release(&bxs);
+    if (bm.buf != NULL) PyBuffer_Release(&bm);
     return ret;
 }
 
