@@ -6,7 +6,7 @@ expansion coefficients e, p (eq. 23), the background-noise moments <v>,
 <v^2>, and the time-transition constants F, G of eq. (33).  This module learns
 them (docs/acoustic.md §6) from
 
-* a *paired* capture: the accelerometer (x_k = block RMS, m/s^2) and the
+* a *paired* capture: the accelerometer (x_k = block mean square, (m/s^2)^2) and the
   microphone (z_k = block mean square, Pa^2) running together, and
 * a stretch of *background noise alone* (the machine stopped): v_k.
 

@@ -46,11 +46,12 @@ P0(z) matches the model's first two moments.  Then::
 
     x^  = sum_l sum_n A_l0n c1l phi_n(z)        (16)    P_x = sum_l sum_n A_l0n c2l phi_n(z)   (18)
     a^  = sum_m sum_n A_0mn d1m phi_n(z)        (17)    P_a = sum_m sum_n A_0mn d2m phi_n(z)   (19)
-    y^  = e10 + a^ e11 (lambda10 + lambda11 x^)                                                (21)
-    P_y = e20 + a^ e21 (lambda10 + lambda11 x^)
-          + (P_a + a^^2) e22 {lambda20 + lambda21 x^ + lambda22 (P_x + x^^2)}                  (22)
+    y^  = <y|Z_k> = y* + D11 phi_1(z) + D12 phi_2(z)                                           (21)
+    P_y = <(y - y^)^2|Z_k>, the same expansion of (y - y^)^2                                    (22)
 
-with c, d, e the coefficients of eq. (23).
+with c, d the coefficients of eq. (23) and D_jn = <y^j phi_n(z)|Z_{k-1}> (docs §4.4): the
+paper defines y^ as <y|Z_k> but prints <<y|x>|Z_k> = e10 + a^ e11 theta1(x^), which ignores
+what z = y + v says about y directly (kept as :func:`sound_estimate`).
 
 Prediction (eqs. 32-38)::
 
@@ -84,7 +85,8 @@ expansion that leave the equations untouched inside their range:
 * the A's of one function are correlations of orthonormal functions, so
   sum_n A_l0n^2 <= 1 (Bessel); a model outside its range can break it, and
   the second-order coefficient is then reduced first; |a^| <= ``A_MAX``
-  (a = B_11 is itself such a correlation); P_y of eq. (22) is kept >= 0.
+  (a = B_11 is itself such a correlation); P_y of eq. (22) is kept >= 0, y^ >= ``y_floor`` e10,
+  and D11^2 + D12^2 <= Gamma_y.
 
 A missing observation (lost frame) is a prediction without an update.
 
@@ -129,6 +131,8 @@ __all__ = [
     "predict",
     "Guards",
     "sound_estimate",
+    "sound_coefficients",
+    "sound_posterior",
 ]
 
 SQRT2 = math.sqrt(2.0)
@@ -445,16 +449,77 @@ def update_closed_form(model: AcousticModel, prior: Prior, z: float | None,
         # P_a between the mean of eq. (19) over P0(z) and the prior variance (docs §7)
         keep_a = max(1.0 - A["011"] ** 2 - A["012"] ** 2, guards.var_floor)
         pa = min(max(pa, keep_a * prior.ga), prior.ga)
-    y_hat, py = sound_estimate(model, x_hat, px, a_hat, pa)
+    D = sound_coefficients(model, z_pred, gz)
     if guards is not None:
+        D = _bessel_y(D)
+    y_hat, py = sound_posterior(D, f1, f2)                                                  # (21), (22)
+    if guards is not None:
+        y_hat = max(y_hat, guards.y_floor * abs(model.e10))   # a sound energy is > 0 (docs §7)
         py = max(py, 0.0)                  # eq. (22) is a truncated expansion too (docs §7)
     return Posterior(x=x_hat, px=px, a=a_hat, pa=pa, y=y_hat, py=py, z_pred=z_pred, gz=gz,
                      zeta=zeta, A=A)
 
 
+def sound_coefficients(model: AcousticModel, z_pred: float, gz: float) -> dict:
+    """The expansion coefficients of the machine sound, D_jn = <y^j phi_n(z) | Z_{k-1}> (docs §4.4).
+
+    y* = <y|Z_{k-1}> = z* - <v>, Gamma_y = Gamma_z - var v (z = y + v, v independent of y); the
+    third and fourth central moments of y given Z_{k-1} are those of the gamma density with
+    this mean and variance (the paper's P0 for energy variables, eqs. 7-8).  Returns
+    D10 = y*, D11, D12 (for y) and D20, D21, D22 (for y^2), and the moments.
+    """
+    ys = z_pred - model.v1
+    gy = gz - model.var_v
+    if not gy > 0:
+        gy = 1e-12 * max(ys * ys, z_pred * z_pred)
+    sz = math.sqrt(gz)
+    kz = gz / (z_pred * z_pred)
+    ca = 1.0 / math.sqrt(2.0 * (1.0 + kz))
+    cb = math.sqrt(2.0 * kz / (1.0 + kz))
+    if ys > 0:
+        mu3 = 2.0 * gy * gy / ys                      # gamma: skewness 2 sqrt(Gamma_y) / y*
+        mu4 = 3.0 * gy * gy + 6.0 * gy ** 3 / (ys * ys)
+    else:                                             # outside the model's range: Gaussian closure
+        mu3, mu4 = 0.0, 3.0 * gy * gy
+    # <y phi1(z)> = -cov(y, z)/sigma_z;  <y phi2(z)> = ca <y (zeta^2 - 1)> - cb <y zeta>
+    D11 = -gy / sz
+    D12 = ca * mu3 / gz - cb * gy / sz
+    # the same for y^2: cov(y^2, z) = mu3 + 2 y* Gamma_y, <y^2 (zeta^2 - 1)> = (mu4 + 2 y* mu3 - Gamma_y^2)/Gamma_z
+    c2 = mu3 + 2.0 * ys * gy
+    D21 = -c2 / sz
+    D22 = ca * (mu4 + 2.0 * ys * mu3 - gy * gy) / gz - cb * c2 / sz
+    return {"y_prior": ys, "gy": gy, "mu3": mu3, "mu4": mu4, "D11": D11, "D12": D12,
+            "D20": gy + ys * ys, "D21": D21, "D22": D22}
+
+
+def _bessel_y(D: dict) -> dict:
+    """Bessel's inequality for y: (D11^2 + D12^2)/Gamma_y <= 1 (the correlations of the
+    standardised y with phi_1(z), phi_2(z)); the second-order coefficient gives way first."""
+    D = dict(D)
+    lim = _BESSEL * D["gy"]
+    if D["D11"] ** 2 + D["D12"] ** 2 > lim:
+        D["D12"] = math.copysign(math.sqrt(max(lim - D["D11"] ** 2, 0.0)), D["D12"])
+    return D
+
+
+def sound_posterior(D: dict, f1: float, f2: float) -> tuple[float, float]:
+    """y^ = <y|Z_k> and P_y = <(y - y^)^2|Z_k> from the D's and phi_1(z), phi_2(z) (docs §4.4).
+
+    Bayes' theorem (eq. 6) for y: <g(y)|Z_k> = sum_n <g(y) phi_n(z)|Z_{k-1}> phi_n(z) /
+    sum_n A_00n phi_n(z), the denominator being 1 (docs §4.2).
+    """
+    ys = D["y_prior"]
+    y_hat = ys + D["D11"] * f1 + D["D12"] * f2                                            # (21)
+    # (y - y^)^2 = y^2 - 2 y^ y + y^^2
+    py = (D["D20"] - 2.0 * y_hat * ys + y_hat * y_hat
+          + (D["D21"] - 2.0 * y_hat * D["D11"]) * f1 + (D["D22"] - 2.0 * y_hat * D["D12"]) * f2)   # (22)
+    return y_hat, py
+
+
 def sound_estimate(model: AcousticModel, x_hat: float, px: float, a_hat: float,
                    pa: float) -> tuple[float, float]:
-    """y^ and P_y from the estimates of x and a, eqs. (21)-(22)."""
+    """The printed eqs. (21)-(22), <<y|x>|Z_k>: y from the estimates of x and a only (docs §4.4;
+    the estimator uses :func:`sound_posterior`, the definition <y|Z_k>)."""
     (l10, l11, _), (l20, l21, l22) = model.lam1[1], model.lam1[2]
     t1 = l10 + l11 * x_hat
     t2 = l20 + l21 * x_hat + l22 * (px + x_hat * x_hat)
@@ -556,7 +621,26 @@ def update_reference(model: AcousticModel, prior: Prior, z: float | None, *, nod
     a_hat = float(np.sum(d1[:2] * Sa[:2]))                                                 # (17)
     d2 = proj_a((as_ - a_hat) ** 2)
     pa = float(np.sum(d2 * Sa))                                                            # (19)
-    y_hat, py = sound_estimate(model, x_hat, px, a_hat, pa)
+    # y (docs §4.4): D_jn = <y^j phi_n(z)>, from the prior moments of y on the same grid (third and
+    # fourth central moments: the gamma density's), z = y + v with v independent
+    my1 = float(np.sum(W * (zm1 - model.v1)))
+    # (E[y^2] = E[<z^2|x,a>] - 2 <v> E[<z|x,a>] + 2 <v>^2 - <v^2>)
+    ey2 = float(np.sum(W * zm2)) - 2.0 * model.v1 * float(np.sum(W * zm1)) + 2.0 * model.v1 ** 2 - model.v2
+    gy = ey2 - my1 * my1
+    mu3 = 2.0 * gy * gy / my1
+    mu4 = 3.0 * gy * gy + 6.0 * gy ** 3 / (my1 * my1)
+    ey = [1.0, my1, ey2, mu3 + 3.0 * my1 * gy + my1 ** 3,
+          mu4 + 4.0 * my1 * mu3 + 6.0 * my1 ** 2 * gy + my1 ** 4]       # E0[y^j], j = 0..4
+    ev = [1.0, model.v1, model.v2]
+
+    def e_yz(j: int, i: int) -> float:                   # E0[y^j z^i], z = y + v, i <= 2
+        return sum(math.comb(i, t) * ey[j + t] * ev[i - t] for t in range(i + 1))
+
+    Dy = [[sum(_z_poly_coeffs(n, z_pred, gz)[i] * e_yz(j, i) for i in range(n + 1)) for n in range(3)]
+          for j in range(3)]
+    y_hat = float(np.dot(Dy[1], fz)) / den                                                 # (21)
+    py = float(np.dot(np.asarray(Dy[2]) - 2.0 * y_hat * np.asarray(Dy[1]) + y_hat ** 2 * np.asarray(Dy[0]),
+                      fz)) / den                                                           # (22)
     Ad = {f"{l}{m}{n}": float(A[l, m, n]) for l in range(3) for m in range(3) for n in range(3)}
     return Posterior(x=x_hat, px=px, a=a_hat, pa=pa, y=y_hat, py=py, z_pred=z_pred, gz=gz,
                      zeta=math.nan if z is None else (z - z_pred) / math.sqrt(gz), A=Ad)
@@ -669,15 +753,19 @@ class AcousticEKF:
     32-36); observation z = <z|x, a> + noise = alpha0 + a alpha1 theta1(x) + w
     with var(w) = var(z|x, a) = <z^2|x, a> - <z|x, a>^2 at the prior mean
     (floored at var(v)).  Linearised at the prior mean:
-    H = (a* alpha1 lambda11, alpha1 theta1(x*)).  y^ and P_y as eqs. (21)-(22)
-    with the EKF's estimates.  No safeguards (a plain EKF).
+    H = (a* alpha1 lambda11, alpha1 theta1(x*)).  ``sound="posterior"``: y^, P_y the EKF's
+    <y|Z_k> with y = <y|x, a> + w_y in the state (docs §8); ``sound="eq21"``: the printed
+    eqs. (21)-(22) from the EKF's x^, a^.  No safeguards (a plain EKF).
     """
 
-    def __init__(self, models):
+    def __init__(self, models, sound: str = "posterior"):
         if isinstance(models, AcousticModel):
             models = [models]
+        if sound not in ("posterior", "eq21"):
+            raise ValueError(f"sound must be 'posterior' or 'eq21', got {sound!r}")
         self.models = list(models)
         self.C = len(self.models)
+        self.sound = sound
         self.reset()
 
     def reset(self) -> None:
@@ -698,16 +786,21 @@ class AcousticEKF:
                 t1 = l10 + l11 * x
                 t2 = l20 + l21 * x + l22 * x * x
                 h = m.alpha0 + a * m.e11 * t1
+                var_z = m.beta0 + a * m.beta1 * t1 + a * a * m.p22 * t2 - h * h
+                R = max(var_z, m.var_v, 1e-12 * h * h)
+                Hx, Ha = a * m.e11 * l11, m.e11 * t1
+                PHx = pxx * Hx + pxa * Ha
+                PHa = pxa * Hx + paa * Ha
+                HPH = Hx * PHx + Ha * PHa
+                # y = <y|x, a> + w_y (var w_y = R - var v), z = y + v: y in the state (docs §8)
+                cyz = HPH + R - m.var_v                     # prior var y = cov(y, z)
+                y_hat, py = h - m.v1, cyz
                 if okc[k]:
-                    var_z = m.beta0 + a * m.beta1 * t1 + a * a * m.p22 * t2 - h * h
-                    R = max(var_z, m.var_v, 1e-12 * h * h)
-                    Hx, Ha = a * m.e11 * l11, m.e11 * t1
-                    PHx = pxx * Hx + pxa * Ha
-                    PHa = pxa * Hx + paa * Ha
-                    S = Hx * PHx + Ha * PHa + R
+                    S = HPH + R
                     Kx, Ka = PHx / S, PHa / S
                     innov = zc[k] - h
                     x, a = x + Kx * innov, a + Ka * innov
+                    y_hat, py = y_hat + cyz / S * innov, cyz - cyz * cyz / S
                     # Joseph form (I - K H) P (I - K H)' + K R K'
                     i00, i01 = 1.0 - Kx * Hx, -Kx * Ha
                     i10, i11 = -Ka * Hx, 1.0 - Ka * Ha
@@ -718,7 +811,8 @@ class AcousticEKF:
                     pxx = n00 * i00 + n01 * i01 + Kx * Kx * R
                     pxa = n00 * i10 + n01 * i11 + Kx * Ka * R
                     paa = n10 * i10 + n11 * i11 + Ka * Ka * R
-                y_hat, py = sound_estimate(m, x, pxx, a, paa)
+                if self.sound == "eq21":
+                    y_hat, py = sound_estimate(m, x, pxx, a, paa)
                 rows.append((x, pxx, a, paa, y_hat, py, h))
                 # prediction (32)-(38)
                 x = m.F * x + m.G * m.u_mean
