@@ -174,3 +174,60 @@ def test_a_silent_link_is_a_stall_event_and_the_daemon_waits(tmp_path):
     assert len(stalls) == 1
     assert 1.5 < stalls[0][0] / 1e9 - quiet_from < 3.5      # 2 s after the last byte
     assert "no bytes for 2 s" in stalls[0][1]["message"]
+
+
+def test_a_throttled_loop_sheds_raw_blocks_and_keeps_the_tacho(tmp_path):
+    """The real daemon's loop is stalled for a few seconds (its stderr, the "journal", is a
+    full pipe: the next status line blocks) while the board streams 2 RAW channels and a
+    tacho into a queue of 512 frames: queue_overflow events, only RAW frames shed, the
+    daemon goes on with orders and severity after the stall."""
+    import fcntl
+    import os
+
+    from test_systemd import drain, fill
+
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--mode", "raw", "--tacho", "--channels", "2",
+                      "--speed", "1", "--link", str(link))
+    r, w = os.pipe()
+    w_test = os.open(f"/proc/self/fd/{w}", os.O_WRONLY | os.O_NONBLOCK)
+    fcntl.fcntl(r, fcntl.F_SETFL, fcntl.fcntl(r, fcntl.F_GETFL) | os.O_NONBLOCK)
+    cfg = tmp_path / "cmsensord.yaml"
+    cfg.write_text(f"link:\n  port: {link}\n  queue_frames: 512\n"
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: true\n")
+    d = subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
+                         stderr=w, env=ENV)
+    os.close(w)
+    try:
+        time.sleep(3.0)                 # running
+        drain(r)
+        fill(w_test)                    # the loop blocks at its next status line (< 1 s)
+        time.sleep(4.0)
+        drain(r)                        # the journal reads again: the loop goes on
+        time.sleep(0.3)
+        drain(r)
+        time.sleep(3.0)
+        d.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + 10
+        while d.poll() is None and time.monotonic() < deadline:
+            drain(r)
+            time.sleep(0.05)
+    finally:
+        if d.poll() is None:
+            d.kill()
+        sim.terminate()
+        sim.wait(timeout=5)
+        os.close(w_test)
+        os.close(r)
+    assert d.returncode == 0
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    over = [(s, m) for t, s, m in msgs if t == "/cm/events" and m["kind"] == "queue_overflow"]
+    assert over, "no queue_overflow event"
+    shed = sum(m["count"] for _, m in over)
+    assert shed > 100 and over[-1][1]["raw_total"] == shed          # RAW frames only
+    kinds = {m["kind"] for t, _, m in msgs if t == "/cm/events"}
+    assert "tacho_lost" not in kinds                                 # every TACHO frame kept
+    t_over = over[-1][0]
+    after = [m for t, s, m in msgs if t == "/cm/ch0/orders" and s > t_over + 1e9 and m["valid"]]
+    assert len(after) >= 10
+    assert any(t == "/cm/ch1/severity" and s > t_over + 1e9 for t, s, _ in msgs)
