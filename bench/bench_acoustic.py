@@ -35,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from cmsensord.acoustic_calib import fit_model, save_calibration  # noqa: E402
+from cmsensord.acoustic_calib import cross_term_variance, fit_model, save_calibration  # noqa: E402
 from cmsensord.dsp.acoustic import AcousticEKF, AcousticEstimator  # noqa: E402
 from firmware_sim.board import Board, BoardConfig  # noqa: E402
 from firmware_sim.scenarios import make_scenario  # noqa: E402
@@ -56,10 +56,29 @@ def board_blocks(name: str, seed: int, seconds: float, **params):
     return rms[:, 0].astype(np.float64), rms[:, 1].astype(np.float64), sc
 
 
-def calibrate(name: str, seconds: float, bg_seconds: float, **params):
+def mic_samples(name: str, seed: int, seconds: float, n_blocks: int = 2000, **params) -> np.ndarray:
+    """Microphone samples [Pa] of ``n_blocks`` blocks spread over the capture, as RAW frames carry
+    them (the board's counts, scale and offset): for the cross-term variance of the calibration."""
+    sc = make_scenario(name, n_channels=2, seed=seed, duration_s=seconds, **params)
+    board = Board(sc, BoardConfig(n_channels=2, scale=sc.board_scale))
+    L, total = board.block_len, int(round(seconds * 100))
+    out = []
+    for start in np.linspace(0, total - 100, n_blocks // 100).astype(int):   # runs of 100 blocks
+        counts = board.counts(int(start) * L, 100 * L)[1].astype(np.float64)
+        out.append(((counts - board.offset[1]) * board.scale[1]).reshape(100, L))
+    return np.concatenate(out)
+
+
+def calibrate(name: str, seconds: float, bg_seconds: float, cross_term: bool = True, **params):
+    """The calibration from a paired capture (seed CAL_SEED) and a background stretch (BG_SEED);
+    cross_term: also the cross-term variance from their waveforms (a RAW-mode calibration)."""
     acc, mic, _ = board_blocks(name, CAL_SEED, seconds, **params)
     _, bg, _ = board_blocks(name, BG_SEED, bg_seconds, machine_off=True, **params)
-    return fit_model(acc ** 2, mic ** 2, bg ** 2)
+    cross = 0.0
+    if cross_term:
+        cross = cross_term_variance(mic_samples(name, CAL_SEED, seconds, **params),
+                                    mic_samples(name, BG_SEED, bg_seconds, machine_off=True, **params))
+    return fit_model(acc ** 2, mic ** 2, bg ** 2, cross_var=cross)
 
 
 def run_sets(model, x_rms, y, z):
@@ -128,12 +147,13 @@ def print_table(title: str, unit: str, est, ekf, fmt: str, ekf21=None) -> None:
 def tables(args) -> bool:
     params = MACHINES[args.machine]
     t = time.perf_counter()
-    cal = calibrate("healthy_mic", args.cal_seconds, args.bg_seconds, **params)
+    cal = calibrate("healthy_mic", args.cal_seconds, args.bg_seconds, not args.no_cross_term, **params)
     m, info = cal.model, cal.info
     print(f"machine: {args.machine}; calibration ({time.perf_counter() - t:.1f} s): "
           f"{info['blocks_paired']} paired + {info['blocks_background']} background blocks, a0 = {m.a0:.3f}, "
           f"B22 = {info['B22']:.3f} (model: a0^2 = {m.a0 ** 2:.3f}), F = {m.F:.3f}, "
-          f"y moments: {info['y_moments']}")
+          f"noise var = {info['noise_var']:.3g} (background {info['background_var']:.3g} + cross term "
+          f"{info['cross_var']:.3g}), implied y skewness {info['y_skew']:.2f}, excess kurtosis {info['y_exkurt']:.2f}")
     summary = []
     blocks = 0
     spent = {"est": 0.0, "ekf": 0.0}
@@ -188,7 +208,7 @@ def severity(args) -> None:
     from cmsensord.protocol import Decoder
 
     dur = args.severity_seconds
-    cal = calibrate("degrading_mic", dur, 60.0)
+    cal = calibrate("degrading_mic", dur, 60.0, not args.no_cross_term)
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "mic.json")
         save_calibration(cal, path)
@@ -229,6 +249,8 @@ def main(argv=None) -> int:
     p.add_argument("--severity", type=int, nargs="*", default=None, metavar="SEED",
                    help="degrading motor heard by the microphone: severity agreement for these seeds")
     p.add_argument("--severity-seconds", type=float, default=300.0)
+    p.add_argument("--no-cross-term", action="store_true",
+                   help="calibrate without the cross-term variance (an RMS-mode calibration)")
     args = p.parse_args(argv)
     if args.severity is not None:
         severity(args)

@@ -14,23 +14,17 @@ Steps, per block of the board (10 ms by default):
 
 1. lambda^(1) by Schmidt orthogonalisation of 1, x, x^2 under the sample
    moments of x (eq. 4);
-2. the moments of the machine sound y, which is never observed alone: the
-   cumulants of independent sums add (z = y + v, eq. 1), so
-   kappa_n(y) = kappa_n(z) - kappa_n(v), n = 1..4.  When the deconvolved
-   third and fourth cumulants are not those of any distribution (kurtosis
-   below skewness^2 - 2: the background's heavy tail makes them noisy), they
-   are replaced by those of the gamma distribution with the deconvolved mean
-   and variance (the paper's model family for energies), and ``info`` says so;
-3. lambda^(2) by Schmidt orthogonalisation under those moments (eq. 5); then
-   e10 = <y>, e11 = 1/lambda^(2)_11, p20 = <y^2>, p21 = <y^2 theta1(y)>,
-   p22 = 1/lambda^(2)_22 (eq. 23);
-4. a0 = B_11 = <theta1(x) theta1(y)> = lambda^(2)_11 <theta1(x) z> (eq. 3; v
-   is independent of x, so <theta1(x) v> = 0); the check value
-   B_22 = <theta2(x) theta2(y)>, which the model takes to be a0^2, goes to
-   ``info``;
+2. the regression of z on theta_0, theta_1 of x (E[z|x] = E[y|x] + <v>: alpha0,
+   a0 e11) and of its squared residual on theta_0..2 (var(z|x)); no deconvolution;
+3. the observation noise: var v of the background stretch plus the variance of
+   the per-block cross term of machine sound and background
+   (:func:`cross_term_variance`, from waveforms; 0 when not given);
+4. the split var z = e11^2 + noise gives e11, a0 = (a0 e11)/e11, then e10, p of
+   eq. (23) so that the model's <z|x,a0>, var(z|x,a0) are the fitted ones, and
+   lambda^(2) from the moments of y they imply (docs §6);
 5. F = the lag-1 autocorrelation coefficient of x (over consecutive blocks
    only), G = sqrt((1 - F^2) var x), <u> = (1 - F) <x> / G (eq. 33, docs §5);
-6. <v>, <v^2> from the background stretch;
+6. <v> from the background stretch, <v^2> = <v>^2 + var v + cross term;
 7. the initial prior: x* = <x>, Gamma_x = var x, a* = a0,
    Gamma_a = (``a_rel_std`` a0)^2.
 
@@ -66,6 +60,7 @@ __all__ = [
     "Calibration",
     "schmidt",
     "fit_model",
+    "cross_term_variance",
     "blocks_from_capture",
     "fit_captures",
     "save_calibration",
@@ -117,28 +112,6 @@ def schmidt(moments) -> np.ndarray:
     return lam
 
 
-def _cumulants(a: np.ndarray) -> np.ndarray:
-    mu = float(np.mean(a))
-    d = a - mu
-    m2, m3, m4 = (float(np.mean(d ** j)) for j in (2, 3, 4))
-    return np.array([mu, m2, m3, m4 - 3.0 * m2 * m2])
-
-
-def _raw_moments(k) -> list[float]:
-    mu, k2, k3, k4 = k
-    return [1.0, mu, k2 + mu * mu, k3 + 3 * mu * k2 + mu ** 3,
-            k4 + 4 * k3 * mu + 3 * k2 * k2 + 6 * k2 * mu * mu + mu ** 4]
-
-
-def _admissible(k, margin: float = 0.05) -> bool:
-    """Skewness and kurtosis of a distribution with more than two points: ex. kurtosis > skew^2 - 2."""
-    _, k2, k3, k4 = k
-    if not k2 > 0:
-        return False
-    sk, ex = k3 / k2 ** 1.5, k4 / k2 ** 2
-    return bool(ex > sk * sk - 2.0 + margin)
-
-
 def _consecutive_lag1(x: np.ndarray, t: np.ndarray | None) -> float:
     xc = x - x.mean()
     if t is None:
@@ -151,16 +124,49 @@ def _consecutive_lag1(x: np.ndarray, t: np.ndarray | None) -> float:
     return num / float(np.mean(xc * xc))
 
 
-def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
-              closure: str = "auto") -> Calibration:
-    """Fit the seed-002 model from arrays (the steps of the module docstring).
+def cross_term_variance(paired, background, *, max_blocks: int = 4000) -> float:
+    """Variance of the per-block cross term 2<p_m p_b> between machine sound and background [Pa^4].
 
-    x: vibration (accelerometer block RMS) and z: sound energy of the same
-    blocks (paired capture); v: sound energy of blocks of background noise
-    alone; t: optional block indices of the paired blocks (gaps are lost
-    blocks, F uses consecutive blocks only).  closure: "auto" (deconvolved
-    higher moments of y when admissible, else gamma), "gamma" or "deconvolved"
-    (fail if not admissible).  Raises ValueError with a one-line reason.
+    z = y + v + 2<p_m p_b>_block: over one block the product of the machine's sound pressure
+    p_m and the background's p_b does not average out (docs §6).  It is zero-mean and
+    uncorrelated with x and y, but it is observation noise the background stretch cannot
+    show.  From the waveforms (RAW mode), blocks of samples [Pa], shape (n, L): for
+    independent blocks P of the paired capture (p_m + p_b) and Q, Q' of the background,
+    E[(2<P Q>)^2] - E[(2<Q Q'>)^2] = (4/L^2) sum_ij R_m(i, j) R_b(i, j) = var of the cross term
+    (the background's own autocorrelation cancels).  Pairs are formed between the captures
+    (P with every Q) and between the two halves of the background capture.
+    """
+    P = np.asarray(paired, dtype=np.float64)
+    Q = np.asarray(background, dtype=np.float64)
+    if P.ndim != 2 or Q.ndim != 2 or P.shape[1] != Q.shape[1]:
+        raise ValueError(f"cross term: expected sample blocks (n, L) of one length, got {P.shape} and {Q.shape}")
+    if P.shape[0] < 100 or Q.shape[0] < 200:
+        raise ValueError(f"cross term: need >= 100 paired and >= 200 background blocks of samples, "
+                         f"got {P.shape[0]} and {Q.shape[0]}")
+    if not (np.all(np.isfinite(P)) and np.all(np.isfinite(Q))):
+        raise ValueError("cross term: samples must be finite")
+    L = P.shape[1]
+    P = P[np.linspace(0, P.shape[0] - 1, min(P.shape[0], max_blocks)).astype(np.int64)]
+    Q = Q[np.linspace(0, Q.shape[0] - 1, min(Q.shape[0], max_blocks)).astype(np.int64)]
+    h = Q.shape[0] // 2
+
+    def msq(A, B):
+        G = (2.0 / L) * (A @ B.T)
+        return float(np.mean(G * G))
+
+    return max(msq(P, Q) - msq(Q[:h], Q[h:2 * h]), 0.0)
+
+
+def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
+              cross_var: float = 0.0) -> Calibration:
+    """Fit the seed-002 model from arrays (the steps of the module docstring, docs §6).
+
+    x: vibration (accelerometer block mean square) and z: sound energy of the same
+    blocks (paired capture); v: sound energy of blocks of background noise alone;
+    t: optional block indices of the paired blocks (gaps are lost blocks, F uses
+    consecutive blocks only); cross_var: variance of the per-block cross term of
+    machine sound and background (:func:`cross_term_variance`, from RAW captures;
+    0 when unknown).  Raises ValueError with a one-line reason.
     """
     x = np.asarray(x, dtype=np.float64).ravel()
     z = np.asarray(z, dtype=np.float64).ravel()
@@ -176,51 +182,64 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
             raise ValueError(f"{name}: need at least {MIN_BLOCKS} blocks, got {a.size}")
         if not np.all(np.isfinite(a)) or np.any(a < 0):
             raise ValueError(f"{name}: blocks must be finite and >= 0")
-    if closure not in ("auto", "gamma", "deconvolved"):
-        raise ValueError(f"closure must be auto, gamma or deconvolved, got {closure!r}")
     if not (a_rel_std > 0 and math.isfinite(a_rel_std)):
         raise ValueError(f"a_rel_std must be > 0, got {a_rel_std!r}")
+    if isinstance(cross_var, bool) or not (math.isfinite(float(cross_var)) and float(cross_var) >= 0):
+        raise ValueError(f"cross_var must be a finite number >= 0, got {cross_var!r}")
+    cross_var = float(cross_var)
     info: dict[str, Any] = {"blocks_paired": int(x.size), "blocks_background": int(v.size),
-                            "warnings": []}
+                            "method": "regression", "warnings": []}
     # 1. lambda^(1)
     mx = [float(np.mean(x ** j)) for j in range(5)]
     try:
         lam1 = schmidt(mx)
     except ValueError as exc:
         raise ValueError(f"vibration x: {exc}") from None
-    # 2. moments of y by deconvolution of cumulants (z = y + v)
-    ky = _cumulants(z) - _cumulants(v)
-    if not ky[0] > 0 or not ky[1] > 0:
-        raise ValueError(f"the machine sound is not identifiable: mean {ky[0]:.3g} and variance "
-                         f"{ky[1]:.3g} of z - v must be > 0 (the background stretch is louder or "
-                         "more variable than the background during the paired capture)")
-    how = "deconvolved"
-    if closure == "gamma" or (closure == "auto" and not _admissible(ky)):
-        mu, k2 = ky[0], ky[1]
-        ky = np.array([mu, k2, 2.0 * k2 * k2 / mu, 6.0 * k2 ** 3 / mu ** 2])
-        how = "gamma closure" + (" (deconvolved 3rd/4th cumulants not admissible)" if closure == "auto" else "")
-    elif not _admissible(ky):
-        raise ValueError("the deconvolved skewness/kurtosis of y are not those of a distribution")
-    info["y_moments"] = how
-    my = _raw_moments(ky)
-    lam2 = schmidt(my)
-    # 3. e and p of eq. (23)
-    e10, e11 = my[1], 1.0 / lam2[1, 1]
-    p20 = my[2]
-    p21 = lam2[1, 0] * my[2] + lam2[1, 1] * my[3]
-    p22 = 1.0 / lam2[2, 2]
-    # 4. a0 = B_11, and the check value B_22 (the model takes a0^2)
     th1 = lam1[1, 0] + lam1[1, 1] * x
     th2 = lam1[2, 0] + lam1[2, 1] * x + lam1[2, 2] * x * x
-    a0 = float(lam2[1, 1] * np.mean(th1 * z))
-    v1, v2 = float(np.mean(v)), float(np.mean(v * v))
-    # <theta2(x) y^2> = <theta2(x) z^2> - 2 <v> <theta2(x) z>  (v independent of x)
-    b22 = float(lam2[2, 2] * (np.mean(th2 * z * z) - 2.0 * v1 * np.mean(th2 * z)))
-    info.update(B11=a0, B22=b22, a0_squared=a0 * a0)
+    g1, g2 = float(np.mean(th1 ** 3)), float(np.mean(th1 * th1 * th2))   # theta1^2 = 1 + g1 theta1 + g2 theta2
+    # 2. the observation noise: the background's moments plus the cross term
+    v1 = float(np.mean(v))
+    var_v = float(np.var(v))
+    noise = var_v + cross_var
+    # 3. the regression of z on theta(x): <z|x> = alpha0 + a e11 theta1(x) (least squares in an
+    #    orthonormal basis = projection), and of the squared residual: var(z|x) = c0 + c1 theta1 + c2 theta2
+    alpha0 = float(np.mean(z))
+    b = float(np.mean(th1 * z))                     # a e11
+    r2 = (z - alpha0 - b * th1) ** 2
+    c0, c1, c2 = float(np.mean(r2)), float(np.mean(th1 * r2)), float(np.mean(th2 * r2))
+    e10 = alpha0 - v1
+    var_y = c0 + b * b - noise                      # var z = e11^2 + noise
+    if not e10 > 0 or not var_y > 0:
+        raise ValueError(f"the machine sound is not identifiable: mean {e10:.3g} and variance {var_y:.3g} "
+                         "of z - v must be > 0 (the background stretch is louder or more variable than "
+                         "the background during the paired capture)")
+    e11 = math.sqrt(var_y)
+    a0 = b / e11                                    # B_11 = corr(theta1(x), theta1(y))
     if abs(a0) > A_MAX:
         info["warnings"].append(f"a0 = {a0:.3f} clipped to {math.copysign(A_MAX, a0)}: the background "
                                 "stretch does not represent the background of the paired capture")
         a0 = math.copysign(A_MAX, a0)
+        e11 = abs(b) / A_MAX
+        noise = max(c0 + b * b - e11 * e11, 0.0)
+    if a0 == 0:
+        raise ValueError("the sound does not follow the vibration: <theta1(x) z> = 0")
+    # 4. p of eq. (23) from the model's <z^2|x, a0> = var(z|x) + <z|x>^2 (docs §6)
+    p21 = (c1 + 2.0 * alpha0 * b + b * b * g1) / a0 - 2.0 * e11 * v1
+    p22 = (c2 + b * b * g2) / (a0 * a0)
+    if not p22 > 0:
+        raise ValueError(f"the conditional variance of z given x has no admissible second-order part "
+                         f"(a0^2 p22 = {c2 + b * b * g2:.3g} <= 0)")
+    p20 = e10 * e10 + e11 * e11
+    # the moments of y these imply (y = e10 + e11 theta1(y), y^2 = p20 + p21 theta1(y) + p22 theta2(y))
+    my = [1.0, e10, p20, e11 * p21 + e10 * p20, p22 * p22 + p20 * p20 + p21 * p21]
+    lam2 = schmidt(my)
+    mu3 = my[3] - 3 * e10 * my[2] + 2 * e10 ** 3
+    mu4 = my[4] - 4 * e10 * my[3] + 6 * e10 ** 2 * my[2] - 3 * e10 ** 4
+    b22 = float(lam2[2, 2] * (np.mean(th2 * z * z) - 2.0 * v1 * np.mean(th2 * z)))
+    info.update(B11=a0, B22=b22, a0_squared=a0 * a0, y_skew=mu3 / e11 ** 3, y_exkurt=mu4 / e11 ** 4 - 3.0,
+                curvature=float(np.mean(th2 * z)), residual_var=c0, noise_var=noise, background_var=var_v,
+                cross_var=cross_var)
     # 5. F, G, <u> of eqs. (32)-(34)
     F = _consecutive_lag1(x, t)
     F = min(max(F, -0.999), 0.999)
@@ -228,12 +247,10 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
     G = math.sqrt((1.0 - F * F) * var_x)
     u_mean = (1.0 - F) * float(np.mean(x)) / G
     info.update(x_mean=float(np.mean(x)), x_std=math.sqrt(var_x), y_mean=e10, y_std=e11,
-                v_mean=v1, v_std=math.sqrt(max(v2 - v1 * v1, 0.0)),
-                corr_xz=float(np.corrcoef(x, z)[0, 1]))
+                v_mean=v1, v_std=math.sqrt(var_v), corr_xz=float(np.corrcoef(x, z)[0, 1]))
     model = AcousticModel(lam1=lam1, lam2=lam2, e10=e10, e11=e11, p20=p20, p21=p21, p22=p22,
-                          v1=v1, v2=v2, F=F, G=G, u_mean=u_mean, x0=float(np.mean(x)), gx0=var_x,
-                          a0=a0, ga0=(a_rel_std * a0) ** 2 if a0 else a_rel_std ** 2,
-                          block_s=block_s)
+                          v1=v1, v2=v1 * v1 + noise, F=F, G=G, u_mean=u_mean, x0=float(np.mean(x)),
+                          gx0=var_x, a0=a0, ga0=(a_rel_std * a0) ** 2, block_s=block_s)
     return Calibration(model=model, info=info)
 
 
@@ -408,7 +425,7 @@ def main(argv: list[str] | None = None) -> int:
     m = cal.model
     print(f"wrote {args.out}: {i['blocks_paired']} paired + {i['blocks_background']} background blocks of "
           f"{m.block_s * 1e3:g} ms; a0 = {m.a0:.3f} (B22 = {i['B22']:.3f} vs a0^2 = {i['a0_squared']:.3f}), "
-          f"F = {m.F:.3f}, y moments: {i['y_moments']}")
+          f"F = {m.F:.3f}, noise var {i['noise_var']:.3g} (cross term not measured from RMS blocks)")
     for w in i["warnings"]:
         print(f"acoustic_calib: warning: {w}", file=sys.stderr)
     return 0

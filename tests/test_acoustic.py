@@ -24,6 +24,7 @@ import pytest
 
 from cmsensord.acoustic_calib import (
     Calibration,
+    cross_term_variance,
     fit_model,
     load_calibration,
     save_calibration,
@@ -349,7 +350,7 @@ def test_calibration_recovers_the_parameters_of_known_data():
     assert m.e10 == pytest.approx(1.0, rel=0.01) and m.e11 == pytest.approx(math.sqrt(2 / n), rel=0.03)
     assert m.v1 == pytest.approx(0.5, rel=0.01) and m.v2 == pytest.approx(0.25 * 1.5, rel=0.03)
     assert m.x_mean == pytest.approx(np.mean(x))
-    assert cal.info["y_moments"] == "deconvolved"
+    assert cal.info["method"] == "regression" and cal.info["cross_var"] == 0.0
     # y's polynomials are orthonormal under the true y
     lam2 = np.asarray(m.lam2)
     th = np.stack([lam2[r, 0] + lam2[r, 1] * y + lam2[r, 2] * y * y for r in range(3)])
@@ -366,6 +367,42 @@ def test_calibration_rejects_unusable_data():
         fit_model(x, (y + v)[:-1], v)
     with pytest.raises(ValueError, match="x: blocks must be finite"):
         fit_model(np.r_[x[:-1], np.nan], y + v, v)
+    with pytest.raises(ValueError, match="cross_var"):
+        fit_model(x, y + v, v, cross_var=-1.0)
+
+
+def test_calibrated_model_reproduces_the_conditional_mean_and_variance_of_z():
+    """docs §6: <z|x, a0> and var(z|x, a0) of the model are the least-squares fits of z and of the
+    squared residual on theta_0..2(x), and the cross-term variance enters as observation noise."""
+    x, y, v = kibble(50_000, seed=3)
+    _, _, vb = kibble(50_000, seed=4)
+    z = y + v
+    m0 = fit_model(x, z, vb).model
+    m1 = fit_model(x, z, vb, cross_var=0.01).model
+    lam = np.asarray(m0.lam1)
+    th1 = lam[1, 0] + lam[1, 1] * x
+    th2 = lam[2, 0] + lam[2, 1] * x + lam[2, 2] * x * x
+    mean = m0.alpha0 + m0.a0 * m0.e11 * th1
+    var = m0.beta0 + m0.a0 * m0.beta1 * th1 + m0.a0 ** 2 * m0.p22 * th2 - mean ** 2
+    r2 = (z - mean) ** 2
+    basis = np.stack([np.ones_like(x), th1, th2])
+    np.testing.assert_allclose(basis @ r2 / x.size, basis @ var / x.size, rtol=1e-8, atol=1e-12)
+    assert np.mean(z - mean) == pytest.approx(0.0, abs=1e-12)
+    # the same fit, with 0.01 moved from the machine sound's variance to the noise
+    assert m1.var_v == pytest.approx(m0.var_v + 0.01)
+    assert m1.e11 ** 2 == pytest.approx(m0.e11 ** 2 - 0.01)
+    assert m1.a0 * m1.e11 == pytest.approx(m0.a0 * m0.e11)
+
+
+def test_cross_term_variance_of_independent_waveforms():
+    rng = np.random.default_rng(5)
+    L = 250
+    m = rng.standard_normal((3000, L)) * 0.3             # machine sound, white
+    b = lambda n: rng.standard_normal((n, L)) * 0.1     # background, white
+    # 2<m b> over L white samples: variance 4 var(m) var(b) / L
+    est = cross_term_variance(m + b(3000), b(3000))
+    assert est == pytest.approx(4 * 0.09 * 0.01 / L, rel=0.1)
+    assert cross_term_variance(b(500), b(500)) < 0.2 * 4 * 0.09 * 0.01 / L
 
 
 def test_calibration_file_round_trips(tmp_path, model):
