@@ -158,11 +158,10 @@ class OrderChain:
         take, rest = y[:n], y[n:]
         self._parts = [rest] if rest.shape[0] else []
         self._waiting = rest.shape[0]
-        idx = np.arange(first, upto)
         if self.causal:
-            hz, valid = self.tacho.evaluate_causal(idx)
+            hz, valid = self.tacho.causal_range(first, upto)
         else:
-            hz, _, valid = self.tacho.evaluate(idx)
+            hz, _, valid = self.tacho.evaluate(np.arange(first, upto))
         rpm = np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
         out = self.tracker.process(take, rpm)
         self._write_blocks(out.blocks, "recursive")

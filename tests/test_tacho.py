@@ -373,3 +373,19 @@ def test_causal_speed_of_a_dead_encoder_is_capped_then_invalid():
     assert hz[3] == 0 and not valid[3]                                 # after the timeout
     assert hz[4] == 0 and not valid[4]                                 # one new edge: no speed yet
     assert valid[5] and hz[5] > 0
+
+
+def test_causal_range_equals_causal_evaluation_bit_for_bit():
+    """The order chain's segment-by-segment path equals the per-sample one, over ranges
+    before the first edge, across missed/extra pulses, a loss and a restart."""
+    rng = np.random.default_rng(5)
+    tr = TachoTracker(FS, 2, block_len=L)
+    t0, edges = FRAMES
+    tr.update(t0, edges)
+    ranges = [(0, 500), (0, 500 * L), (499 * L, 500 * L + 300)]
+    ranges += [tuple(sorted(rng.integers(0, 500 * L, 2))) for _ in range(40)]
+    for a, b in ranges:
+        hz, valid = tr.causal_range(a, b)
+        ref_hz, ref_valid = tr.evaluate_causal(np.arange(a, b))
+        assert np.array_equal(hz, ref_hz, equal_nan=True) and np.array_equal(valid, ref_valid), (a, b)
+    assert tr.causal_range(10, 10)[0].size == 0
