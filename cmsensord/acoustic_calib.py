@@ -18,7 +18,8 @@ Steps, per block of the board (10 ms by default):
    a0 e11) and of its squared residual on theta_0..2 (var(z|x)); no deconvolution;
 3. the observation noise: var v of the background stretch plus the variance of
    the per-block cross term of machine sound and background
-   (:func:`cross_term_variance`, from waveforms; 0 when not given);
+   (:func:`cross_term_variance`, from waveforms: RAW captures; 0 when not given,
+   and :func:`fit_captures` warns that it was not estimated from RMS captures);
 4. the split var z = e11^2 + noise gives e11, a0 = (a0 e11)/e11, then e10, p of
    eq. (23) so that the model's <z|x,a0>, var(z|x,a0) are the fitted ones, and
    lambda^(2) from the moments of y they imply (docs §6);
@@ -259,7 +260,8 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
 # ---------------------------------------------------------------------------
 
 
-def blocks_from_capture(path, channels, *, chunk: int = 1 << 20):
+def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int | None = None,
+                        max_sample_blocks: int = 4000):
     """Per-block RMS of the given board channels from a capture file (RMS or RAW mode).
 
     Returns (block index int64 (n,), rms float64 (n, len(channels)), block_s):
@@ -267,11 +269,19 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20):
     (PROTOCOL.md RMS frames, or :func:`cmsensord.dsp.rms.rows_rms` of RAW
     blocks with the STATUS scale/offset), so z = rms^2 matches what the
     daemon computes.  Raises ValueError naming the file.
+
+    samples_of: a channel (one of ``channels``) whose samples are wanted as well; a fourth
+    item is then returned: float64 (m, block_len) physical samples ``(count - offset) * scale``
+    (:func:`cmsensord.dsp.rms.rows_physical`) of at most ``max_sample_blocks`` of the returned
+    blocks, evenly spread (as :func:`cross_term_variance` would pick them), or None when the
+    capture carries no RAW blocks (RMS mode).
     """
-    from cmsensord.dsp.rms import rows_rms
+    from cmsensord.dsp.rms import rows_physical, rows_rms
     from cmsensord.protocol import Decoder, FrameType, decode_status
 
     channels = [int(c) for c in channels]
+    if samples_of is not None and int(samples_of) not in channels:
+        raise ValueError(f"samples_of: channel {samples_of} is not one of {channels}")
     dec = Decoder()
     status = None
     rms_rows: dict[int, np.ndarray] = {}
@@ -301,6 +311,7 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20):
     if status is None:
         raise ValueError(f"{path}: no STATUS frame (block length and scale unknown)")
     L = status.block_len
+    samples = None
     if raw:
         scale = np.asarray(status.scale, dtype=np.float32)
         offset = np.asarray(status.offset, dtype=np.float32)
@@ -312,25 +323,58 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20):
             counts = np.stack([np.frombuffer(raw[t][c], dtype="<u2") for t in t0s]) if t0s else \
                 np.empty((0, L), dtype=np.uint16)
             out[:, j] = rows_rms(counts, np.full(len(t0s), scale[c]), np.full(len(t0s), offset[c]))
+            if c == samples_of and t0s:
+                pick = np.linspace(0, len(t0s) - 1, min(len(t0s), max_sample_blocks)).astype(np.int64)
+                samples = rows_physical(counts[pick], np.full(pick.size, scale[c]), np.full(pick.size, offset[c]))
         t0 = np.array(t0s, dtype=np.int64)
     else:
         t0 = np.array(sorted(rms_rows), dtype=np.int64)
         out = np.array([rms_rows[t] for t in t0]) if t0.size else np.empty((0, len(channels)))
     if t0.size == 0:
         raise ValueError(f"{path}: no blocks of channel(s) {channels}")
+    if samples_of is not None:
+        return (t0 - t0[0]) // L, out, L / status.fs, samples
     return (t0 - t0[0]) // L, out, L / status.fs
+
+
+#: the warning of a calibration from captures without RAW blocks of the microphone (docs §6)
+NO_CROSS_TERM = ("cross term not estimated ({why}): the noise variance is the background's alone and "
+                 "the sound estimate is less accurate; record the captures in RAW mode to estimate it")
 
 
 def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_background: int | None = None,
                  **kwargs) -> Calibration:
     """Fit from a paired capture (accelerometer ``accel``, microphone ``mic``) and a capture of
-    background noise alone (microphone channel ``mic_background``, default ``mic``)."""
-    t, rms, block_s = blocks_from_capture(paired, [accel, mic])
-    _, bg, block_bg = blocks_from_capture(background, [mic if mic_background is None else mic_background])
+    background noise alone (microphone channel ``mic_background``, default ``mic``).
+
+    When both captures carry RAW blocks of the microphone, the variance of the cross term of
+    machine sound and background is estimated from them (:func:`cross_term_variance`, docs §6)
+    and passed to :func:`fit_model`; otherwise (RMS mode) it is 0 and ``info["warnings"]`` says
+    so in one line.  An explicit ``cross_var`` keyword overrides both.
+    """
+    mic_bg = mic if mic_background is None else mic_background
+    t, rms, block_s, p_samples = blocks_from_capture(paired, [accel, mic], samples_of=mic)
+    _, bg, block_bg, q_samples = blocks_from_capture(background, [mic_bg], samples_of=mic_bg)
     if abs(block_s - block_bg) > 1e-12:
         raise ValueError(f"the captures have different blocks: {block_s * 1e3:g} ms and {block_bg * 1e3:g} ms")
+    warning = None
+    if "cross_var" not in kwargs:
+        if p_samples is None or q_samples is None:
+            which = [name for name, s in (("paired", p_samples), ("background", q_samples)) if s is None]
+            warning = NO_CROSS_TERM.format(why=f"no RAW blocks of the microphone in the {' and '.join(which)} "
+                                               f"capture{'s' if len(which) > 1 else ''}")
+            kwargs["cross_var"] = 0.0
+        else:
+            try:
+                kwargs["cross_var"] = cross_term_variance(p_samples, q_samples)
+            except ValueError as exc:
+                warning = NO_CROSS_TERM.format(why=str(exc))
+                kwargs["cross_var"] = 0.0
     cal = fit_model(rms[:, 0], rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)
-    cal.info.update(paired=str(paired), background=str(background), accel_channel=accel, mic_channel=mic)
+    if warning is not None:
+        cal.info["warnings"].insert(0, warning)
+    cal.info.update(paired=str(paired), background=str(background), accel_channel=accel, mic_channel=mic,
+                    cross_term_estimated=warning is None)
     return cal
 
 
@@ -425,7 +469,8 @@ def main(argv: list[str] | None = None) -> int:
     m = cal.model
     print(f"wrote {args.out}: {i['blocks_paired']} paired + {i['blocks_background']} background blocks of "
           f"{m.block_s * 1e3:g} ms; a0 = {m.a0:.3f} (B22 = {i['B22']:.3f} vs a0^2 = {i['a0_squared']:.3f}), "
-          f"F = {m.F:.3f}, noise var {i['noise_var']:.3g} (cross term not measured from RMS blocks)")
+          f"F = {m.F:.3f}, noise var {i['noise_var']:.3g} (background {i['background_var']:.3g} + cross term "
+          f"{i['cross_var']:.3g}{'' if i.get('cross_term_estimated') else ', not estimated'})")
     for w in i["warnings"]:
         print(f"acoustic_calib: warning: {w}", file=sys.stderr)
     return 0

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cmsensord.acoustic_calib import (
+    cross_term_variance,
     fit_captures,
     fit_model,
     load_calibration,
@@ -78,23 +79,66 @@ def test_microphone_channel_needs_a_loadable_calibration(tmp_path, calibration):
 
 # --------------------------------------------------------------------------- calibration from captures
 
+def _captures(tmp_path, mode):
+    pair, bg = tmp_path / f"pair_{mode}.bin", tmp_path / f"bg_{mode}.bin"
+    pb = board("healthy_mic", 8.0, seed=4, mode=mode)
+    bb = board("healthy_mic", 6.0, seed=5, mode=mode, machine_off=True)
+    pb.write_capture(pair, 8.0)
+    bb.write_capture(bg, 6.0)
+    return (pair, bg), (pb, bb)
+
+
 def test_calibration_from_captures_is_the_same_in_rms_and_raw_mode(tmp_path):
-    paths = {}
-    for mode in ("rms", "raw"):
-        pair, bg = tmp_path / f"pair_{mode}.bin", tmp_path / f"bg_{mode}.bin"
-        board("healthy_mic", 8.0, seed=4, mode=mode).write_capture(pair, 8.0)
-        board("healthy_mic", 6.0, seed=5, mode=mode, machine_off=True).write_capture(bg, 6.0)
-        paths[mode] = (pair, bg)
+    """The block energies are the same in both modes (z = RMS^2 of the board's block RMS), so the
+    fits are identical when the cross term is left out; with it (RAW only) the models still have
+    the same fitted moments of z given x and differ only in how var z splits into sound and noise."""
+    paths = {mode: _captures(tmp_path, mode)[0] for mode in ("rms", "raw")}
     rms = fit_captures(*paths["rms"], accel=0, mic=1)
-    raw = fit_captures(*paths["raw"], accel=0, mic=1)
-    assert rms.model == raw.model
+    raw0 = fit_captures(*paths["raw"], accel=0, mic=1, cross_var=0.0)
+    assert rms.model == raw0.model
     assert rms.model.block_s == 0.01 and rms.info["blocks_paired"] == 800
+    assert not rms.info["cross_term_estimated"] and rms.info["cross_var"] == 0.0
+    assert rms.info["warnings"][0].startswith("cross term not estimated")
+    raw = fit_captures(*paths["raw"], accel=0, mic=1)
+    assert raw.info["cross_term_estimated"] and raw.info["cross_var"] > 0 and not raw.info["warnings"]
+    m0, m1 = rms.model, raw.model
+    for k in ("lam1", "e10", "v1", "F", "G", "u_mean", "x0", "gx0", "block_s"):
+        assert getattr(m1, k) == getattr(m0, k), k
+    # the fitted moments of z given x (docs §6): b = a0 e11, var z, a0 beta1, a0^2 p22, beta0
+    for f in (lambda m: m.a0 * m.e11, lambda m: m.e11 ** 2 + m.v2 - m.v1 ** 2,
+              lambda m: m.a0 * (m.p21 + 2 * m.e11 * m.v1), lambda m: m.a0 ** 2 * m.p22,
+              lambda m: m.p20 + 2 * m.e10 * m.v1 + m.v2):
+        assert f(m1) == pytest.approx(f(m0), rel=1e-9)
+    # ... and the noise term carries the cross term
+    assert m1.v2 - m0.v2 == pytest.approx(raw.info["cross_var"], rel=1e-9)
+    assert calib_main(["--paired", str(tmp_path / "none.bin"), "--background", str(paths["raw"][1]),
+                       "--out", str(tmp_path / "x.json")]) == 2
+
+
+def test_command_line_calibration_estimates_the_cross_term_from_raw_captures(tmp_path, capsys):
+    (pair, bg), (pb, bb) = _captures(tmp_path, "raw")
     out = tmp_path / "cal.json"
-    assert calib_main(["--paired", str(paths["raw"][0]), "--background", str(paths["raw"][1]),
+    assert calib_main(["--paired", str(pair), "--background", str(bg), "--accel", "0", "--mic", "1",
                        "--out", str(out)]) == 0
-    assert load_calibration(out) == raw.model
-    assert calib_main(["--paired", str(tmp_path / "none.bin"), "--background", str(out),
-                       "--out", str(out)]) == 2
+    assert "warning" not in capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    model = load_calibration(out)
+    # the same blocks, straight from the simulator's ADC counts: (count - offset) * scale
+    L = pb.block_len
+    P = ((pb.counts(0, 800 * L)[1] - pb.offset[1]) * pb.scale[1]).reshape(-1, L)
+    Q = ((bb.counts(0, 600 * L)[1] - bb.offset[1]) * bb.scale[1]).reshape(-1, L)
+    expected = cross_term_variance(P, Q)
+    assert expected > 0
+    assert doc["info"]["cross_var"] == pytest.approx(expected, rel=0.25)
+    assert doc["info"]["noise_var"] == pytest.approx(doc["info"]["background_var"] + expected, rel=0.25)
+    assert model == fit_captures(pair, bg).model
+    # RMS captures: the calibration goes on, and says in one line that the cross term is missing
+    (pair_r, bg_r), _ = _captures(tmp_path, "rms")
+    assert calib_main(["--paired", str(pair_r), "--background", str(bg_r), "--out", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("acoustic_calib: warning: cross term not estimated")
+    assert "less accurate" in err[0]
+    assert json.loads(out.read_text())["info"]["cross_var"] == 0.0
 
 
 # --------------------------------------------------------------------------- the daemon
