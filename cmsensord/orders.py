@@ -99,9 +99,10 @@ class OrderChain:
             at = min(1720.0, o.max_rpm)
             self.latency_s = revs * 60.0 / at + tr.latency_s
             how = f"final speed: tacho {1000 * revs * 60 / at:.0f} ms at {at:.0f} rpm"
-        event("config", None, f"order tracker: {len(self.components)} component(s), decimation "
-              f"{tr.decimate} to {tr.fs_track:g} Hz, {tr.output_rate_hz:g} Hz output; latency "
-              f"{1000 * self.latency_s:.0f} ms ({how}, tracker {1000 * tr.latency_s:.0f} ms)", None)
+        # said with the stamp of the first sample (add_samples): the same however the stream was read
+        self._hello = (f"order tracker: {len(self.components)} component(s), decimation "
+                       f"{tr.decimate} to {tr.fs_track:g} Hz, {tr.output_rate_hz:g} Hz output; latency "
+                       f"{1000 * self.latency_s:.0f} ms ({how}, tracker {1000 * tr.latency_s:.0f} ms)")
         self._parts: list[np.ndarray] = []      # samples waiting for a final speed, (n, C) each
         self._waiting = 0
         self.sample0: int | None = None         # board sample index of the tracker's first input
@@ -117,6 +118,7 @@ class OrderChain:
         """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost."""
         if self.next_sample is None:
             self.sample0 = self.next_sample = start
+            self.event("config", None, self._hello, self.stamp(start))
         gap = start - self.next_sample
         if gap < 0 or gap > MAX_FILL_S * self.fs:
             self._drain(final=True)
