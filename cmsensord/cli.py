@@ -17,6 +17,7 @@ import argparse
 import dataclasses
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -479,7 +480,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if info["error"] == NOT_MCAP:
                 print(f"cmsensord: {args.mcap}: {NOT_MCAP}", file=sys.stderr)
                 return EXIT_USAGE
-            print(json.dumps(info, indent=2, default=str) if args.json else _format_summary(info))
+            try:
+                print(json.dumps(info, indent=2, default=str) if args.json else _format_summary(info),
+                      flush=True)
+            except BrokenPipeError:     # `cmsensord summary FILE | head`: the reader has enough
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 0
         if args.command == "record":
             return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)

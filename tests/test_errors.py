@@ -68,3 +68,23 @@ def test_user_error_is_one_line_with_its_exit_status(scratch, args, code, text):
     assert "Traceback" not in p.stderr
     assert len(lines) == 1, p.stderr
     assert text in lines[0], lines[0]
+
+
+def test_summary_into_a_closed_pipe_is_quiet(scratch):
+    """`cmsensord summary FILE | head -1`: the reader closes the pipe early; no traceback."""
+    import subprocess
+    import sys
+
+    from test_cli import ENV
+
+    out = scratch / "logs"
+    r = cmsensord("replay", "capture.bin", "--out", str(out), cwd=scratch)
+    assert r.returncode == 0, r.stderr
+    mcap = next(out.glob("*.mcap"))
+    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "summary", "--json", str(mcap)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
+    p.stdout.read(10)
+    p.stdout.close()                    # like head: stop reading
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=30) == 0
+    assert "Traceback" not in err and "BrokenPipe" not in err
