@@ -138,8 +138,11 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     stop = _StopFlag()
     stop.install()
     stop.install_reopen()
+    try:                                # before the sink: a bad path leaves nothing behind
+        capture = open(capture_path, "wb") if capture_path else None
+    except OSError as exc:
+        raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
     sink = _open_sink(cfg, metadata or {})
-    capture = open(capture_path, "wb") if capture_path else None
     queue = FrameQueue(cfg.link.queue_frames)
     reader = SerialReader(cfg.link.port, baud=cfg.link.baud, read_size=cfg.link.read_size,
                           queue=queue, capture=capture, reconnect_min_s=cfg.link.reconnect_min_s,

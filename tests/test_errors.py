@@ -3,7 +3,7 @@ or 78 (configuration), no traceback.  The table below is the specification.
 
 Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
-(YAML syntax), ``notmcap.mcap`` (text), ``capdir/`` (a directory), ``afile`` (a
+(YAML syntax), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text), ``capdir/`` (a directory), ``afile`` (a
 regular file, so ``afile/logs`` cannot be a directory).
 """
 
@@ -27,6 +27,8 @@ CASES = [
      "afile/logs: cannot create output directory"),
     (["--simulate", "--duration", "1", "--out", "afile/logs"], CONFIG,
      "set output.dir or --out to a writable directory"),
+    (["--config", "port.yaml", "--capture", "afile/cap.bin"], CONFIG,
+     "afile/cap.bin: cannot write the capture file"),
     # -- usage (2)
     (["replay", "missing.bin"], USAGE, "missing.bin: capture file not found"),
     (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file"),
@@ -50,6 +52,7 @@ def scratch(tmp_path_factory):
     (d / "bad.yaml").write_text("monitor:\n  r_max: 0.001\n")
     (d / "typo.yaml").write_text("monitor:\n  r_mx: 0.2\n")
     (d / "broken.yaml").write_text("link: [1, 2\n")
+    (d / "port.yaml").write_text("link:\n  port: /dev/nonexistent-tty\noutput:\n  dir: logs\n")
     (d / "notmcap.mcap").write_text("not an mcap file\n")
     (d / "capdir").mkdir()
     (d / "afile").write_text("")
