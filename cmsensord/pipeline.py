@@ -72,6 +72,10 @@ _LOG_LEVEL = {
 }
 
 
+#: disk_error events that report routine work or a recovery (details.action)
+_DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
+
+
 class Sink(Protocol):
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
 
@@ -184,6 +188,8 @@ class Processor:
         self.events.append(msg)
         self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
         level = _LOG_LEVEL.get(kind, logging.INFO)
+        if kind == "disk_error" and (extra.get("details") or {}).get("action") in _DISK_NEWS:
+            level = logging.INFO        # routine or good news from the sink, not an error
         log.log(level, "%s: %s", kind, message)
         if self.on_event is not None:
             self.on_event(msg)

@@ -113,3 +113,20 @@ def test_configured_channel_not_in_the_stream_is_an_event_not_a_crash():
     msgs = [m["message"] for m in sink.topic("/cm/events")]
     assert any("none of the configured channels" in m for m in msgs)
     assert not sink.topic("/cm/motor/severity")
+
+
+def test_routine_disk_events_are_not_logged_as_errors(caplog):
+    """Retention and "logging resumed" are disk_error events (details.action) for the
+    record, but INFO in the journal; a real disk error stays an ERROR."""
+    import logging
+
+    from cmsensord.config import default_config
+    from cmsensord.pipeline import ListSink, Processor
+
+    proc = Processor(default_config(1), ListSink(), clock_ns=lambda: 0)
+    with caplog.at_level(logging.INFO, logger="cmsensord"):
+        proc.event("disk_error", None, "deleted 2 old files", details={"action": "retention"})
+        proc.event("disk_error", None, "logging resumed", details={"action": "resumed"})
+        proc.event("disk_error", None, "No space left on device", details={"action": "abandoned"})
+    levels = [r.levelno for r in caplog.records if r.name == "cmsensord"]
+    assert levels == [logging.INFO, logging.INFO, logging.ERROR]
