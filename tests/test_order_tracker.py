@@ -296,6 +296,18 @@ def _concat_blocks(outs, attr, field):
 SPLIT_SIG = close_orders(fs=10000.0, seed=5, duration_s=1.6)
 
 
+def _one_pass_and_three_pieces(y, rpm, gains, backend, a, b):
+    """A tracker and its output after one pass over y, and a second tracker and its
+    outputs when fed y[:a], y[a:b], y[b:] (D = 8 from 10 kHz, 2 channels, lag 0.03 s)."""
+    kw = {"fs_in": 10000.0, "max_rpm": 3000.0, "n_channels": 2, "gains": gains,
+          "smoother_lag_s": 0.03, "backend": backend}
+    one = OrderTracker(CLOSE, **kw)
+    full = one.process(y, rpm)
+    two = OrderTracker(CLOSE, **kw)
+    parts = [two.process(y[i:j], rpm[i:j]) for i, j in ((0, a), (a, b), (b, len(y)))]
+    return one, full, two, parts
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("gains", ["table", "exact"])
 @settings(max_examples=12, deadline=None)
@@ -305,12 +317,7 @@ def test_two_pieces_equal_one_pass(backend, gains, split, split2):
     a, b = sorted((split, split2))
     y = np.stack([SPLIT_SIG.y, np.roll(SPLIT_SIG.y, 77)], axis=1)
     rpm = SPLIT_SIG.rpm + 250.0
-    kw = {"fs_in": 10000.0, "max_rpm": 3000.0, "n_channels": 2, "gains": gains,
-          "smoother_lag_s": 0.03, "backend": backend}
-    one = OrderTracker(CLOSE, **kw)
-    full = one.process(y, rpm)
-    two = OrderTracker(CLOSE, **kw)
-    parts = [two.process(y[i:j], rpm[i:j]) for i, j in ((0, a), (a, b), (b, len(y)))]
+    one, full, two, parts = _one_pass_and_three_pieces(y, rpm, gains, backend, a, b)
     assert one.decimate == 8
     for attr in ("index", "t_in", "rpm"):
         np.testing.assert_array_equal(_concat(parts, attr), getattr(full, attr))
@@ -711,12 +718,7 @@ def test_two_pieces_equal_one_pass_with_gaps(backend, gains, a, b):
     if gains == "exact":
         y[np.isnan(y).any(axis=1)] = np.nan
     rpm = SPLIT_SIG.rpm + 250.0
-    kw = {"fs_in": 10000.0, "max_rpm": 3000.0, "n_channels": 2, "gains": gains,
-          "smoother_lag_s": 0.03, "backend": backend}
-    one = OrderTracker(CLOSE, **kw)
-    full = one.process(y, rpm)
-    two = OrderTracker(CLOSE, **kw)
-    parts = [two.process(y[i:j], rpm[i:j]) for i, j in ((0, a), (a, b), (b, len(y)))]
+    one, full, two, parts = _one_pass_and_three_pieces(y, rpm, gains, backend, a, b)
     assert full.missing.any(axis=0).all() and np.isfinite(full.waveform).all()
     np.testing.assert_array_equal(_concat(parts, "missing"), full.missing)
     np.testing.assert_allclose(_concat(parts, "waveform"), full.waveform, rtol=0, atol=1e-12)

@@ -1555,13 +1555,7 @@ class OrderTracker:
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state
         B = self.block
-        cur = {"wave": wave, "env": env, "rpm": rd}
-        p = len(st.pend["rpm"]) if st.pend else 0
-        if p:
-            cur = {k: np.concatenate([st.pend[k], v]) for k, v in cur.items()}
-        m = _cat_miss(st.pend.get("miss") if p else None, p, miss, len(rd), self.C)
-        if m is not None:
-            cur["miss"] = m
+        cur = _with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
         first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
         nb = len(cur["rpm"]) // B
         used = nb * B
@@ -1579,13 +1573,8 @@ class OrderTracker:
     def _smooth(self, out: TrackerOutput, n0, rd, c, k, S, P, zp, e, miss) -> None:
         st = self.state
         B, L = self.block, self.lag
-        cur = {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e}
-        p = len(st.hist["rpm"]) if st.hist else 0
-        if p:
-            cur = {key: np.concatenate([st.hist[key], v]) for key, v in cur.items()}
-        m = _cat_miss(st.hist.get("miss") if p else None, p, miss, len(rd), self.C)
-        if m is not None:
-            cur["miss"] = m
+        cur = _with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
+                          miss, self.C)
         h0 = st.next_smooth * B                              # index of cur[0]
         n_end = n0 + len(rd)
         jb = st.next_smooth
@@ -1647,6 +1636,18 @@ def _cat_miss(before, n_before, now, n_now, C):
         return None
     return np.concatenate([before if before is not None else np.zeros((n_before, C), dtype=bool),
                            now if now is not None else np.zeros((n_now, C), dtype=bool)])
+
+
+def _with_carry(carry, cur, miss, C):
+    """The arrays kept from the last call (``carry``: a dict with "rpm", maybe "miss", or
+    empty) followed by this call's (``cur``); "miss" only when a sample is missing."""
+    p = len(carry["rpm"]) if carry else 0
+    if p:
+        cur = {k: np.concatenate([carry[k], v]) for k, v in cur.items()}
+    m = _cat_miss(carry.get("miss") if p else None, p, miss, len(cur["rpm"]) - p, C)
+    if m is not None:
+        cur["miss"] = m
+    return cur
 
 
 def _miss_blocks(miss, used, nb, B):
