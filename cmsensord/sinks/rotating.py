@@ -1,7 +1,7 @@
 """The daemon's log writer: MCAP files rotated, flushed, fsynced, salvaged and kept within bounds.
 
 Owns the policy of ``output`` in the configuration; each file is an
-:class:`~cmsensord.sinks.mcap_sink.McapSink` (``*.mcap.part``, renamed to
+:class:`~cmsensord.sinks.mcap_file.McapSink` (``*.mcap.part``, renamed to
 ``*.mcap`` when finished). Rotation happens between messages, so no message
 is split across files.
 
@@ -19,7 +19,7 @@ the live loop does):
 * a finished file is fsynced, renamed and its directory fsynced.
 
 Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk
-error) are salvaged (:func:`~cmsensord.sinks.mcap_sink.salvage`) into
+error) are salvaged (:func:`~cmsensord.sinks.mcap_salvage.salvage`) into
 ``<stem>.salvaged.mcap`` before the first file is opened; then retention runs.
 
 Retention (after each rotation, at start and on a full disk): the oldest
@@ -58,15 +58,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from cmsensord.config import OutputConfig
-from cmsensord.sinks.mcap_sink import (
-    McapSink,
-    SalvageResult,
-    SinkIOError,
-    _fsync_dir,
-    log_files,
-    salvage,
-    salvage_leftovers,
-)
+from cmsensord.sinks.mcap_file import McapSink, SinkIOError, fsync_dir, log_files
+from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 log = logging.getLogger("cmsensord")
@@ -524,7 +517,7 @@ class RotatingSink:
                     free += size
         if deleted:
             try:
-                _fsync_dir(Path(o.dir))
+                fsync_dir(Path(o.dir))
             except OSError:
                 pass                         # the deletions are done; durability of the names only
             self.paths = [p for p in self.paths if p not in deleted]
