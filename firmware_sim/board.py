@@ -58,7 +58,8 @@ from cmsensord.protocol import (
     encode_tacho,
 )
 
-from .scenarios import Scenario, _gauss, _generator
+from .scenarios.base import FULL_SCALE_MS2, Scenario
+from .scenarios.noise import gauss, generator
 
 __all__ = ["ADC_MAX", "BoardConfig", "Board", "TACHO_STREAM", "link_budget", "link_streams",
            "DEFAULT_BAUD"]
@@ -72,12 +73,6 @@ TACHO_STREAM = (1 << 16) + 1
 _TACHO_DRAW_BLOCK = 4096
 _EXTRA_FRAC = (0.3, 0.7)  # a spurious pulse lies this far into the pulse interval (angle)
 _JITTER_TRUNC = 4.3  # the Gaussian table is truncated at +-4.3 sigma
-
-
-#: accelerometer range of the simulated board: +-20 g (196 m/s^2) over the 12-bit
-#: ADC, 0.096 m/s^2 per count. Bearing impacts of the faulty scenarios peak
-#: near 100 m/s^2; a +-5 g range would clip them.
-FULL_SCALE_MS2 = 20 * 9.80665
 
 
 @dataclass
@@ -271,9 +266,9 @@ class Board:
         for k in np.unique(kb):
             d = self._tacho_draw_cache.get(int(k))
             if d is None:
-                rng = _generator(self.scenario.seed, TACHO_STREAM, int(k))
+                rng = generator(self.scenario.seed, TACHO_STREAM, int(k))
                 d = {"miss": rng.random(B), "extra": rng.random(B),
-                     "frac": rng.uniform(*_EXTRA_FRAC, B), "jit": _gauss(rng, B)}
+                     "frac": rng.uniform(*_EXTRA_FRAC, B), "jit": gauss(rng, B)}
                 self._tacho_draw_cache[int(k)] = d
                 while len(self._tacho_draw_cache) > 4:
                     self._tacho_draw_cache.pop(next(iter(self._tacho_draw_cache)))

@@ -1,4 +1,4 @@
-"""The simulated microphone (firmware_sim.microphone): determinism, physics, board, CLI."""
+"""The simulated microphone (firmware_sim.scenarios.microphone): determinism, physics, board, CLI."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 from cmsensord.protocol import Decoder, FrameType, decode_status
 from firmware_sim.board import Board
 from firmware_sim.cli import main as sim_main
-from firmware_sim.microphone import MIC_FULL_SCALE_PA
 from firmware_sim.scenarios import SCENARIOS, make_scenario
+from firmware_sim.scenarios.microphone import MIC_FULL_SCALE_PA
 
 MIC_SCENARIOS = ["healthy_mic", "faulty_mic", "degrading_mic", "degrading_mic_only"]
 FS = 25000

@@ -1,8 +1,8 @@
 """A microphone beside the machine: machine sound radiated by its vibration, plus background noise.
 
-Owns the sound models of the simulated board's microphone channel (seed 002,
-issue 5): what a microphone a short distance from the motor of
-:class:`~firmware_sim.scenarios.MotorScenario` hears, in pascal, sampled at
+Owns the sound models of the simulated board's microphone channel (Orimoto,
+Ikuta & Wang): what a microphone a short distance from the motor of
+:class:`~firmware_sim.scenarios.motor.MotorScenario` hears, in pascal, sampled at
 the board's 25 kHz like any other channel (RAW mode: the daemon computes the
 block energy; RMS mode: the board sends the block RMS, whose square is the
 same energy).
@@ -45,7 +45,7 @@ of them Gaussian in level, all slowly varying:
 Default levels: the healthy motor's sound ~76 dB SPL (0.14 Pa RMS) at the
 microphone over a ~69 dB workshop background; the faulty motor ~18 dB louder.
 
-Determinism and chunk invariance follow :mod:`firmware_sim.scenarios`: every
+Determinism and chunk invariance follow :mod:`firmware_sim.scenarios.base`: every
 random draw belongs to a fixed time slot (a 1-s segment, a knot, a 10-s event
 slot) and comes from ``SeedSequence([seed, stream, slot])`` with streams of
 their own (``MIC_STREAMS``), so the microphone is the same whichever channel
@@ -60,15 +60,9 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .scenarios import (
-    DegradingMotor,
-    FaultyMotor,
-    HealthyMotor,
-    Scenario,
-    _cubic_bspline,
-    _gauss,
-    _generator,
-)
+from .base import FULL_SCALE_MS2, keyword_params
+from .motor import DegradingMotor, FaultyMotor, HealthyMotor
+from .noise import MACHINE_STREAM, cubic_bspline, gauss, generator
 
 __all__ = [
     "MIC_STREAMS",
@@ -84,8 +78,8 @@ __all__ = [
 ]
 
 #: random streams of the microphone (distinct from channels 0..8, the machine
-#: (1 << 16) and the tacho (1 << 16) + 1)
-MIC_STREAMS = {name: (1 << 16) + 32 + i for i, name in enumerate(
+#: (MACHINE_STREAM) and the tacho (MACHINE_STREAM + 1))
+MIC_STREAMS = {name: MACHINE_STREAM + 32 + i for i, name in enumerate(
     ("own", "fan", "fan_knots", "other", "other_knots", "road", "road_events", "burst",
      "burst_events"))}
 SOUND_SPEED = 343.0  # m/s
@@ -107,7 +101,7 @@ class _Draws:
         key = (MIC_STREAMS[stream], slot)
         d = self._cache.get(key)
         if d is None:
-            d = make(_generator(self.seed, key[0], slot))
+            d = make(generator(self.seed, key[0], slot))
             self._cache[key] = d
             while len(self._cache) > _CACHE:
                 self._cache.popitem(last=False)
@@ -159,7 +153,7 @@ class MachineSound:
         gain = self.kappa * (np.maximum(e, 1e-9) / self.e_ref) ** (self.gamma - 1.0)
         out = gain * ext[i]
         if self.own_pa:
-            out += self.own_pa * _gauss(_generator(draws.seed, MIC_STREAMS["own"], k), L)
+            out += self.own_pa * gauss(generator(draws.seed, MIC_STREAMS["own"], k), L)
         return out
 
 
@@ -206,8 +200,8 @@ class BackgroundNoise:
         from scipy.signal import lfilter
 
         W = self.warmup
-        cur = _gauss(_generator(draws.seed, MIC_STREAMS[stream], k), L)
-        prev = _gauss(_generator(draws.seed, MIC_STREAMS[stream], k - 1), L)[L - W:] if k > 0 else np.zeros(W)
+        cur = gauss(generator(draws.seed, MIC_STREAMS[stream], k), L)
+        prev = gauss(generator(draws.seed, MIC_STREAMS[stream], k - 1), L)[L - W:] if k > 0 else np.zeros(W)
         u = np.concatenate([prev, cur])
         return g * lfilter([1.0 - rho], [1.0, -rho], u)[W:]
 
@@ -219,7 +213,7 @@ class BackgroundNoise:
         j1 = int(math.floor(t[-1] / dt)) + 2
         out = np.zeros(t.size)
         for j in range(j0, j1 + 1):
-            out += knot(j) * _cubic_bspline(t / dt - j)
+            out += knot(j) * cubic_bspline(t / dt - j)
         return out
 
     def _events(self, draws: _Draws, stream: str, rate: float, t_lo: float, t_hi: float):
@@ -248,18 +242,18 @@ class BackgroundNoise:
         seed = draws.seed
         if self.fan_pa:
             def fan_knot(j):
-                return float(_generator(seed, MIC_STREAMS["fan_knots"], j + (1 << 20)).standard_normal())
+                return float(generator(seed, MIC_STREAMS["fan_knots"], j + (1 << 20)).standard_normal())
             level = self.fan_pa * np.exp(self.fan_wander * self._spline(t, 2.0, fan_knot)
                                          - 0.5 * self.fan_wander ** 2)
             out += level * self._lowpassed(draws, "fan", k, self.fan_rho, self.fan_g, L)
         if self.other_pa:
             def other_knot(j):
-                u = _generator(seed, MIC_STREAMS["other_knots"], j + (1 << 20)).random()
+                u = generator(seed, MIC_STREAMS["other_knots"], j + (1 << 20)).random()
                 return 1.0 if u < self.other_on else 0.0
             on = np.clip(self._spline(t, 4.0, other_knot), 0.0, 1.0)
             if on.any():
                 if self._phases is None:
-                    self._phases = _generator(seed, MIC_STREAMS["other"], 1 << 30).uniform(0, 2 * np.pi, 3)
+                    self._phases = generator(seed, MIC_STREAMS["other"], 1 << 30).uniform(0, 2 * np.pi, 3)
                 hum = sum(math.sqrt(2.0) * w * np.cos(2 * np.pi * f * t + ph)
                           for f, w, ph in zip((100.0, 200.0, 300.0), (0.6, 0.4, 0.3), self._phases))
                 noise = self._lowpassed(draws, "other", k, self.other_rho, self.other_g, L)
@@ -281,7 +275,7 @@ class BackgroundNoise:
                 for t0, a in zip(tb, ab):
                     after = t >= t0
                     env[after] += self.burst_pa * a * np.exp(-(t[after] - t0) / self.burst_tau)
-                out += env * _gauss(_generator(seed, MIC_STREAMS["burst"], k), L)
+                out += env * gauss(generator(seed, MIC_STREAMS["burst"], k), L)
         return out
 
 
@@ -329,8 +323,6 @@ class MicMotorMixin:
                                           bursts_per_min=bursts_per_min, burst_tau_s=burst_tau_s)
         self._mic_draws = _Draws(self.seed)
         self._parts: OrderedDict[int, tuple[np.ndarray, np.ndarray]] = OrderedDict()
-        from .board import FULL_SCALE_MS2
-
         self.board_scale = tuple(
             (MIC_FULL_SCALE_PA if c == self.mic_channel else FULL_SCALE_MS2) * 2 / 4096.0
             for c in range(self.n_channels))
@@ -341,8 +333,9 @@ class MicMotorMixin:
             return np.zeros(self.segment_len)
         twin = self.__dict__.get("_twin")
         if twin is None:
+            motor_params = keyword_params(self._motor_class)
             params = {key: val for key, val in self.params.items()
-                      if key in _motor_param_names(self._motor_class) and key not in ("n_channels", "channel_gains")}
+                      if key in motor_params and key not in ("n_channels", "channel_gains")}
             params.update(n_channels=1, channel_gains=(1.0,), noise_rms=0.0)
             twin = self._twin = self._motor_class(**params)
         return twin._segment(k)[0]
@@ -392,28 +385,12 @@ class MicMotorMixin:
         return out
 
 
-def _motor_param_names(cls) -> set[str]:
-    import inspect
-
-    names: set[str] = set()
-    for c in cls.__mro__:
-        if not isinstance(c, type) or not issubclass(c, Scenario):
-            continue
-        init = c.__dict__.get("__init__")
-        if init is None:
-            continue
-        for p in inspect.signature(init).parameters.values():
-            if p.kind is p.KEYWORD_ONLY:
-                names.add(p.name)
-    return names
-
-
 class HealthyMicMotor(MicMotorMixin, HealthyMotor):
     """``healthy_mic``: the healthy motor, accelerometer on channel 0 and a microphone on channel 1."""
 
     name = "healthy_mic"
     description = ("healthy motor with a microphone (channel 1, Pa) beside the accelerometer "
-                   "(channel 0): machine sound + fan, another machine, road traffic (seed 002)")
+                   "(channel 0): machine sound + fan, another machine, road traffic (Orimoto, Ikuta & Wang)")
     _motor_class = HealthyMotor
 
 
