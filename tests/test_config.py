@@ -250,6 +250,15 @@ def test_directory_and_non_utf8(tmp_path):
         load_config(bad)
 
 
+@pytest.mark.parametrize("name", ["a\0b", Path("a\0b")], ids=["str", "Path"])
+def test_file_name_with_a_nul_byte(name):
+    """The OS cannot take the name: one ConfigError line with the NUL shown escaped, not a ValueError."""
+    with pytest.raises(ConfigError) as info:
+        load_config(name)
+    assert str(info.value) == "a\\0b: not a usable file name: it contains a NUL byte"
+    assert "\0" not in str(info.value) and "\n" not in str(info.value)
+
+
 def test_error_attributes_and_exit_codes(tmp_path):
     path = write(tmp_path, "channels:\n  - name: a\n  - name: b\n    r_max: 0.001\n")
     with pytest.raises(ConfigError) as info:

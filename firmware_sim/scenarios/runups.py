@@ -30,9 +30,9 @@ class RunUpScenario(Scenario):
     A(t) cos(2 pi o turns(t)) and fixed-frequency lines), evaluated at the
     sample times (k * fs + m) / fs of each 1-s segment k (so chunking never
     changes a sample), and w_c is the channel's own white Gaussian noise with
-    std 1 (16-bit quantised, see :func:`~firmware_sim.scenarios.noise.gauss`) drawn per segment from
-    ``SeedSequence([seed, c, k])``. The noise std is ``noise`` (default 0.05,
-    issue 3 section 5) times the RMS of the order-1 component at its largest
+    std 1 (16-bit quantised, :func:`~firmware_sim.scenarios.noise.gauss`)
+    drawn per segment from ``SeedSequence([seed, c, k])``. The noise std is
+    ``noise`` (default 0.05) times the RMS of the order-1 component at its largest
     (``RunUp.ref_rms``); it is scaled by the gain like the signal, so every
     channel has the paper's signal-to-noise ratio. The noise is the only random
     part; components and speed are analytic.

@@ -1,0 +1,297 @@
+"""Reading a configuration: YAML file or dict -> :class:`~.settings.Config`, and back.
+
+:func:`load_config` reads one YAML file (strict: a key given twice is an
+error; ``4e-3`` is a float), :func:`config_from_dict` builds the sections,
+overlays each channel's monitor keys on the global ``monitor`` block and
+checks that microphone calibration files load; :func:`default_config` gives
+the built-in defaults and :func:`config_to_dict` the effective settings in
+the YAML shape. Every failure is one :class:`~cmsensord.errors.ConfigError`
+line naming the file and the key path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import re
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+
+from .settings import (
+    MAX_CHANNELS,
+    AcousticConfig,
+    ChannelConfig,
+    ComponentConfig,
+    Config,
+    LinkConfig,
+    MonitorConfig,
+    OrdersConfig,
+    OutputConfig,
+    TachoConfig,
+    default_channels,
+)
+from .validation import ConfigError
+
+__all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict"]
+
+_SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
+                              "tacho": TachoConfig, "acoustic": AcousticConfig}
+_MONITOR_KEYS = tuple(f.name for f in dataclasses.fields(MonitorConfig))
+_CHANNEL_OWN_KEYS = tuple(
+    f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
+)
+_CHANNEL_KEYS = _CHANNEL_OWN_KEYS + _MONITOR_KEYS
+_ACOUSTIC_CHANNEL_KEYS = ("kind", "calibration")
+_TOP_KEYS = tuple(f.name for f in dataclasses.fields(Config))
+
+
+def _join(prefix: str, key: Any) -> str:
+    plain = isinstance(key, str) and re.fullmatch(r"[A-Za-z0-9_]+", key)
+    key_text = key if plain else repr(key)
+    return f"{prefix}.{key_text}" if prefix else key_text
+
+
+def _reject_unknown(d: Mapping[Any, Any], known: Iterable[str], source: str, prefix: str) -> None:
+    known = tuple(known)
+    for key in d:
+        if key in known:
+            continue
+        reason = f"unknown key {key!r}"
+        near = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        if near:
+            reason += f" (did you mean {near[0]!r}?)"
+        else:
+            reason += f" (known keys: {', '.join(known)})"
+        raise ConfigError(source, _join(prefix, key), reason)
+
+
+def _mapping(value: Any, source: str, path: str) -> dict[Any, Any]:
+    """A section: a mapping, or empty when the key is present with no value."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError(source, path, "expected a mapping of keys to values", value)
+    return value
+
+
+def _build(cls: type, values: Mapping[str, Any], source: str, prefix: str) -> Any:
+    try:
+        return cls(**values)
+    except ConfigError as err:
+        raise err.relocated(source, prefix) from None
+
+
+def _check_n_channels(n: Any, source: str) -> None:
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_CHANNELS:
+        raise ConfigError(source, "n_channels", f"must be an integer in 1..{MAX_CHANNELS}", n)
+
+
+def config_from_dict(
+    d: Any, *, source: str = "<dict>", n_channels: int | None = None
+) -> Config:
+    """Validate a dict of the YAML shape and build a Config.
+
+    ``n_channels``: if given and ``d`` has no channels list, make ch0..ch{n-1}
+    (default 1). Raises ConfigError naming ``source`` and the key path.
+    """
+    if n_channels is not None:
+        _check_n_channels(n_channels, source)
+    if not isinstance(d, dict):
+        raise ConfigError(
+            source,
+            None,
+            "top level must be a mapping with the sections link, output, monitor, channels, tacho, orders",
+            d,
+        )
+    _reject_unknown(d, _TOP_KEYS, source, "")
+    sections: dict[str, Any] = {}
+    for name, cls in _SECTIONS.items():
+        values = _mapping(d.get(name), source, name)
+        _reject_unknown(values, [f.name for f in dataclasses.fields(cls)], source, name)
+        sections[name] = _build(cls, values, source, name)
+    monitor: MonitorConfig = sections["monitor"]
+    sections["orders"] = _build_orders(d.get("orders"), source)
+
+    raw_channels = d.get("channels")
+    if raw_channels is None:
+        channels = default_channels(n_channels or 1, monitor)
+    else:
+        if not isinstance(raw_channels, list):
+            raise ConfigError(source, "channels", "expected a list of channel entries", raw_channels)
+        built = []
+        for i, entry in enumerate(raw_channels):
+            path = f"channels[{i}]"
+            if not isinstance(entry, dict):
+                raise ConfigError(source, path, "expected a mapping (name: ..., index: ...)", entry)
+            _reject_unknown(entry, _CHANNEL_KEYS, source, path)
+            own = {k: entry[k] for k in _CHANNEL_OWN_KEYS if k in entry}
+            own.setdefault("index", i)
+            if "name" not in own:
+                idx = own["index"]
+                own["name"] = f"ch{idx}" if isinstance(idx, int) and not isinstance(idx, bool) else f"ch{i}"
+            overrides = {k: entry[k] for k in _MONITOR_KEYS if k in entry}
+            try:
+                ch_monitor = dataclasses.replace(monitor, **overrides) if overrides else monitor
+            except ConfigError as err:
+                raise err.relocated(source, path) from None
+            built.append(_build(ChannelConfig, {**own, "monitor": ch_monitor}, source, path))
+        channels = tuple(built)
+    cfg = _build(Config, {**sections, "channels": channels}, source, "")
+    _check_calibrations(cfg, source)
+    return cfg
+
+
+def _check_calibrations(cfg: Config, source: str) -> None:
+    """Every microphone channel's calibration file must load: one line naming both files."""
+    for i, ch in enumerate(cfg.channels):
+        if ch.kind != "microphone":
+            continue
+        key = f"channels[{i}].calibration" if ch.calibration is not None else "acoustic.calibration"
+        from cmsensord.acoustic_calib import load_calibration
+
+        try:
+            load_calibration(ch.calibration or cfg.acoustic.calibration)
+        except ConfigError as err:
+            raise ConfigError(source, key, str(err)) from None
+
+
+def _build_orders(raw: Any, source: str) -> OrdersConfig:
+    values = _mapping(raw, source, "orders")
+    _reject_unknown(values, [f.name for f in dataclasses.fields(OrdersConfig)], source, "orders")
+    if "components" in values:
+        comps = values["components"]
+        if not isinstance(comps, list) or not comps:
+            raise ConfigError(source, "orders.components", "expected a non-empty list of components",
+                              comps)
+        built = []
+        keys = [f.name for f in dataclasses.fields(ComponentConfig)]
+        for i, entry in enumerate(comps):
+            path = f"orders.components[{i}]"
+            if not isinstance(entry, dict):
+                raise ConfigError(source, path, "expected a mapping (name: ..., order: ...)", entry)
+            _reject_unknown(entry, keys, source, path)
+            built.append(_build(ComponentConfig, entry, source, path))
+        names = [c.name for c in built]
+        dup = next((n for n in names if names.count(n) > 1), None)
+        if dup is not None:
+            raise ConfigError(source, f"orders.components[{names.index(dup, names.index(dup) + 1)}].name",
+                              "duplicate component name", dup)
+        values = {**values, "components": tuple(built)}
+    return _build(OrdersConfig, values, source, "orders")
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that rejects a key given twice in one mapping."""
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _value_node in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                    seen.add(key)
+                except TypeError:  # unhashable key: SafeLoader reports it below
+                    continue
+                if duplicate:
+                    raise yaml.constructor.ConstructorError(
+                        "while constructing a mapping",
+                        node.start_mark,
+                        f"found duplicate key {key!r}",
+                        key_node.start_mark,
+                    )
+        return super().construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _StrictLoader.construct_mapping
+)
+# PyYAML follows YAML 1.1, where "4e-3" (no dot) is a string; accept it as a
+# float, as YAML 1.2 does, since that is how the paper writes R_min.
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def _yaml_reason(err: yaml.YAMLError) -> str:
+    mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+    problem = getattr(err, "problem", None) or getattr(err, "context", None) or str(err)
+    if mark is not None:
+        return f"YAML syntax error at line {mark.line + 1}, column {mark.column + 1}: {problem}"
+    return f"YAML syntax error: {problem}"
+
+
+def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Config:
+    """Read and validate one YAML file. ``path=None`` gives the defaults.
+
+    ``n_channels``: channel count to use when the file has no channels list.
+    Every failure (missing or unreadable file, YAML syntax, unknown key, type,
+    range, cross-field rule) raises ConfigError with a one-line message.
+    """
+    if path is None:
+        return default_config(n_channels if n_channels is not None else 1)
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(source, None, "file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(source, None, "is a directory, not a file") from None
+    except PermissionError:
+        raise ConfigError(source, None, "cannot read: permission denied") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
+    except OSError as err:
+        raise ConfigError(source, None, f"cannot read: {err.strerror or err}") from None
+    except ValueError as err:  # a name the OS cannot take (a NUL byte, shown escaped)
+        reason = "not a usable file name: it contains a NUL byte" if "\0" in source else f"cannot read: {err}"
+        raise ConfigError(source.replace("\0", "\\0"), None, reason) from None
+    try:
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as err:
+        raise ConfigError(source, None, _yaml_reason(err)) from None
+    except RecursionError:
+        raise ConfigError(source, None, "YAML nested too deeply") from None
+    if data is None:  # an empty file (or only comments): all defaults
+        data = {}
+    return config_from_dict(data, source=source, n_channels=n_channels)
+
+
+def default_config(n_channels: int = 1) -> Config:
+    """The built-in defaults with channels ch0..ch{n_channels-1}."""
+    _check_n_channels(n_channels, "<default>")
+    return Config(channels=default_channels(n_channels))
+
+
+def config_to_dict(cfg: Config) -> dict[str, Any]:
+    """The effective settings as a plain dict of the YAML shape (for logging).
+
+    Channel entries list name, index, scale, offset and only the monitor keys
+    that differ from the global monitor block, so
+    ``config_from_dict(config_to_dict(cfg)) == cfg``.
+    """
+    glob = dataclasses.asdict(cfg.monitor)
+    channels = []
+    for ch in cfg.channels:
+        entry: dict[str, Any] = {k: getattr(ch, k) for k in _CHANNEL_OWN_KEYS
+                                 if k not in _ACOUSTIC_CHANNEL_KEYS}
+        if ch.kind != "accelerometer":          # listed only for microphone channels
+            entry.update(kind=ch.kind, calibration=ch.calibration)
+        mon = dataclasses.asdict(ch.monitor)
+        entry.update({k: v for k, v in mon.items() if glob[k] != v})
+        channels.append(entry)
+    return {
+        "link": dataclasses.asdict(cfg.link),
+        "output": dataclasses.asdict(cfg.output),
+        "monitor": glob,
+        "channels": channels,
+        "tacho": dataclasses.asdict(cfg.tacho),
+        "orders": {**dataclasses.asdict(cfg.orders),
+                   "components": [{k: v for k, v in dataclasses.asdict(c).items() if v is not None}
+                                  for c in cfg.orders.components]},
+        "acoustic": dataclasses.asdict(cfg.acoustic),
+    }

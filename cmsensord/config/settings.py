@@ -1,0 +1,324 @@
+"""The settings: one frozen dataclass per section of the configuration file.
+
+Each field carries its default, help text and checks (:func:`~.validation.setting`);
+each class validates itself on construction, so an object built in code is
+checked exactly like one read from a file (:mod:`.validation`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from .validation import Rule, at_most, fmt_num, greater, setting, validate
+
+__all__ = [
+    "MAX_CHANNELS",
+    "MonitorConfig",
+    "ChannelConfig",
+    "LinkConfig",
+    "OutputConfig",
+    "ComponentConfig",
+    "OrdersConfig",
+    "TachoConfig",
+    "AcousticConfig",
+    "Config",
+    "default_channels",
+]
+
+#: docs/PROTOCOL.md: STATUS carries n_channels C in 1..8.
+MAX_CHANNELS = 8
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """Kim et al. 2023 parameters: the bank of n AKFs, outliers, 1 s anomaly decisions."""
+
+    n: int = setting(10, "number of AKFs in the bank (eqs. 16-18)", ge=1, le=64)
+    r_min: float = setting(4e-3, "R_min of eq. 16, smallest observation noise variance", gt=0)
+    r_max: float = setting(0.13, "R_max of eq. 16, largest observation noise variance", gt=0)
+    z_c: float = setting(2.8, "outlier critical value |z| > z_c (eq. 15); 2.8 = 99.5 %", gt=0)
+    c: float = setting(0.4, "hysteresis: an anomaly clears when cnt < c*f_r (Fig. 3)", gt=0, lt=1)
+    f_r: float = setting(28.66, "rotation frequency [Hz] compared with cnt each decision", gt=0)
+    window: int = setting(10, "N, sliding window of eqs. 11 and 14", ge=2, le=1000)
+    decision_period_s: float = setting(1.0, "seconds between anomaly decisions", gt=0)
+    p0: float = setting(1.0, "initial error variance P(0)", gt=0)
+    q0: float = setting(1e-3, "initial process noise estimate Q^(0)", ge=0)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (greater("r_max", "r_min"),)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """One measured channel: its name (MCAP topics), index and monitor settings."""
+
+    name: str = setting(
+        dataclasses.MISSING,
+        "channel name, used in the MCAP topics /cm/<name>/...",
+        pattern=r"[A-Za-z0-9_]+",
+        pattern_reason="must contain only letters, digits and _",
+    )
+    index: int = setting(
+        dataclasses.MISSING,
+        "position in the RMS payload / RAW chan index",
+        ge=0,
+        le=MAX_CHANNELS - 1,
+    )
+    monitor: MonitorConfig = setting(dataclasses.MISSING, "monitor settings of this channel")
+    scale: float | None = setting(
+        None, "m/s^2 per ADC count, overriding STATUS (RAW mode)", nonzero=True
+    )
+    offset: float | None = setting(None, "ADC counts at 0 m/s^2, overriding STATUS (RAW mode)")
+    kind: str = setting("accelerometer", "what the channel measures: accelerometer (m/s^2), or "
+                         "microphone (Pa): its sound is turned into a vibration estimate (Orimoto, Ikuta & Wang) "
+                         "that the AKF bank watches", choices=("accelerometer", "microphone"))
+    calibration: str | None = setting(None, "acoustic calibration file of this microphone "
+                                       "(default: acoustic.calibration)", nonempty=True)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """The serial link to the ADC board."""
+
+    port: str = setting("/dev/ttyACM0", "serial device", nonempty=True)
+    baud: int = setting(921600, "UART baud rate (ignored by USB CDC and ptys)", gt=0)
+    read_size: int = setting(4096, "bytes asked for per read()", gt=0, le=16 * 1024 * 1024)
+    queue_frames: int = setting(
+        4096, "bounded frame queue between reader and pipeline", ge=16, le=1_000_000
+    )
+    reconnect_min_s: float = setting(0.5, "first reconnect back-off", gt=0)
+    reconnect_max_s: float = setting(5.0, "longest reconnect back-off", gt=0)
+    stall_s: float = setting(2.0, "seconds without a frame before link_stalled", gt=0)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (at_most("reconnect_min_s", "reconnect_max_s"),)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def _cap_holds_a_file(obj: Any) -> tuple[str, str, Any] | None:
+    """OutputConfig: a retention cap below one file would delete every finished file."""
+    if obj.retain_mb and obj.retain_mb < obj.rotate_mb:
+        return ("retain_mb", f"must be 0 (no cap) or >= rotate_mb = {fmt_num(obj.rotate_mb)}",
+                obj.retain_mb)
+    return None
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """Where and how the MCAP files are written."""
+
+    dir: str = setting("cmsensord-logs", "directory of the MCAP files", nonempty=True)
+    prefix: str = setting(
+        "cmsensord",
+        "file name prefix",
+        pattern=r"[A-Za-z0-9_.-]+",
+        pattern_reason="must contain only letters, digits, _ . and -",
+    )
+    compression: str = setting(
+        "zstd", "MCAP chunk compression", choices=("zstd", "lz4", "none")
+    )
+    flush_s: float = setting(1.0, "seconds between chunk flushes", gt=0)
+    fsync_s: float = setting(30.0, "seconds between fsyncs", gt=0)
+    rotate_s: float = setting(3600.0, "start a new file after this many seconds", gt=0)
+    rotate_mb: float = setting(256.0, "start a new file after this many MB", gt=0)
+    retain_mb: float = setting(2048.0, "delete the oldest finished files while all files of "
+                                "this prefix take more than this many MB (0: no cap)", ge=0)
+    min_free_mb: float = setting(256.0, "... and while the file system has less than this many "
+                                  "MB free (0: no floor)", ge=0)
+    retry_s: float = setting(10.0, "after a disk error, try a new file this often", gt=0)
+    akf_trace: bool = setting(False, "write /cm/<ch>/akf per observation")
+    akf_trace_filter: int = setting(10, "which AKF of the bank (1..n) the trace shows", ge=1)
+    status_line: bool = setting(True, "print a one-line status to stderr")
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_cap_holds_a_file,)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def _one_frequency(obj: Any) -> tuple[str, str, Any] | None:
+    if (obj.order is None) == (obj.freq_hz is None):
+        return "order", "give exactly one of order (x shaft speed) or freq_hz (fixed frequency)", obj.order
+    given = [k for k in ("r", "bandwidth_hz", "bandwidth_pct") if getattr(obj, k) is not None]
+    if len(given) > 1:
+        return given[1], f"give at most one of r, bandwidth_hz, bandwidth_pct (also {given[0]})", \
+            getattr(obj, given[1])
+    return None
+
+
+@dataclass(frozen=True)
+class ComponentConfig:
+    """One component the order tracker follows (Yeh, Pan & Le): an order or a fixed frequency."""
+
+    name: str = setting(dataclasses.MISSING, "component name, e.g. 1x, whirl, whip",
+                         pattern=r"[A-Za-z0-9_.]+",
+                         pattern_reason="must contain only letters, digits, _ and .")
+    order: float | None = setting(None, "multiple of the shaft speed (e.g. 1, 2, 0.47)", gt=0)
+    freq_hz: float | None = setting(None, "fixed frequency [Hz] (e.g. a 47 Hz resonance)", gt=0)
+    r: float | None = setting(None, "the paper's weighting factor r (eq. 25)", gt=0)
+    bandwidth_hz: float | None = setting(None, "-3 dB bandwidth [Hz] instead of r", gt=0)
+    bandwidth_pct: float | None = setting(None, "-3 dB bandwidth in % of the component's "
+                                           "frequency instead of r", gt=0, le=100)
+    alarm_rms: float | None = setting(None, "order alarm: event when the RMS rises above this "
+                                       "[m/s^2] (and when it falls below alarm_clear of it)", gt=0)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_one_frequency,)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def _default_components() -> tuple[ComponentConfig, ...]:
+    return tuple(ComponentConfig(name=f"{k}x", order=float(k)) for k in (1, 2, 3, 4))
+
+
+@dataclass(frozen=True)
+class OrdersConfig:
+    """The recursive Vold-Kalman order tracker of Yeh, Pan & Le on RAW channels with a tacho."""
+
+    enabled: bool = setting(True, "track orders when the board sends RAW blocks and a tacho")
+    q1: float = setting(0.1, "process noise q1 of the structural equation (Q1 = q1 I, eq. 25)", gt=0)
+    bandwidth_pct: float = setting(5.0, "default -3 dB bandwidth in % of each component's "
+                                    "frequency (for components without r/bandwidth)", gt=0, le=100)
+    max_rpm: float = setting(3600.0, "highest shaft speed expected: sets the tracker's "
+                              "decimation and gain table", gt=0)
+    min_rpm: float = setting(300.0, "no order output below this shaft speed", gt=0)
+    smoother_lag_s: float = setting(0.0, "fixed-lag RTS smoother lag (0: the plain recursive "
+                                     "filter)", ge=0, le=0.2)
+    output_rate_hz: float = setting(10.0, "order RMS/amplitude messages per second", ge=1, le=100)
+    speed: str = setting("causal", "shaft speed the tracker runs on: causal (from the edges up "
+                          "to each sample, no added latency) or final (the smoothed tacho "
+                          "speed, smoothing_revs + 1 pulse later)", choices=("causal", "final"))
+    alarm_clear: float = setting(0.8, "an order alarm clears below alarm_clear x alarm_rms",
+                                  gt=0, lt=1)
+    components: tuple[ComponentConfig, ...] = field(
+        default_factory=_default_components,
+        metadata={"help": "components to track (default: orders 1, 2, 3, 4)"})
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (greater("max_rpm", "min_rpm"),)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class TachoConfig:
+    """The shaft tacho (TACHO frames, docs/PROTOCOL.md type 4)."""
+
+    input: int = setting(0, "tacho input index (TACHO chan) to use", ge=0, le=255)
+    ppr: int | None = setting(None, "pulses per revolution (default: the board's STATUS)",
+                               ge=1, le=255)
+    timeout_s: float = setting(0.5, "no edge for this long -> tacho_lost event, speed invalid", gt=0)
+    smoothing_revs: float = setting(2.0, "revolutions each side of the least-squares fit that "
+                                     "smooths edge jitter; the speed is final this many "
+                                     "revolutions (+1 pulse) later (f_r of the decisions; the "
+                                     "order latency with orders.speed: final)", gt=0, le=16)
+    causal_revs: float = setting(16.0, "revolutions behind each edge in the one-sided fit of the "
+                                  "causal speed (orders.speed: causal), at most 64 pulses",
+                                  gt=0, le=64)
+    f_r_from_tacho: bool = setting(True, "use the tacho speed as f_r of the anomaly decisions")
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class AcousticConfig:
+    """Microphone channels (kind: microphone): the vibration estimator of Orimoto, Ikuta & Wang."""
+
+    calibration: str | None = setting(None, "acoustic calibration file (JSON, from "
+                                       "python -m cmsensord.acoustic_calib) of the microphone "
+                                       "channels without their own", nonempty=True)
+    zeta_max: float = setting(5.0, "limit of the standardised observation |z - z*| / "
+                               "sqrt(Gamma_z) entering the update (noise bursts)", gt=0)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
+    """Rules spanning sections: channel uniqueness, akf_trace_filter <= n, microphone calibration."""
+    if not cfg.channels:
+        return "channels", "must list at least one channel", []
+    for i, ch in enumerate(cfg.channels):
+        if ch.kind == "microphone" and ch.calibration is None and cfg.acoustic.calibration is None:
+            return (f"channels[{i}].kind", "a microphone channel needs an acoustic calibration file "
+                    f"(acoustic.calibration or channels[{i}].calibration)", ch.kind)
+    seen_name: dict[str, int] = {}
+    seen_index: dict[int, int] = {}
+    for i, ch in enumerate(cfg.channels):
+        if ch.name in seen_name:
+            return (
+                f"channels[{i}].name",
+                f"duplicate channel name (also channels[{seen_name[ch.name]}])",
+                ch.name,
+            )
+        if ch.index in seen_index:
+            return (
+                f"channels[{i}].index",
+                f"duplicate channel index (also channels[{seen_index[ch.index]}])",
+                ch.index,
+            )
+        seen_name[ch.name] = i
+        seen_index[ch.index] = i
+    n0 = cfg.channels[0].monitor.n
+    for i, ch in enumerate(cfg.channels):
+        if ch.monitor.n != n0:
+            return (f"channels[{i}].n", f"every channel needs the same bank size n "
+                    f"(channels[0] has {n0}): the banks run as one array", ch.monitor.n)
+    k = cfg.output.akf_trace_filter
+    if k > cfg.monitor.n:
+        return "output.akf_trace_filter", f"must be <= monitor.n = {cfg.monitor.n}", k
+    for i, ch in enumerate(cfg.channels):
+        if k > ch.monitor.n:
+            return (
+                "output.akf_trace_filter",
+                f"must be <= channels[{i}].n = {ch.monitor.n}",
+                k,
+            )
+    return None
+
+
+def default_channels(n: int, monitor: MonitorConfig | None = None) -> tuple[ChannelConfig, ...]:
+    """Channels ch0..ch{n-1} with the given (or default) monitor settings."""
+    mon = monitor if monitor is not None else MonitorConfig()
+    return tuple(ChannelConfig(name=f"ch{i}", index=i, monitor=mon) for i in range(n))
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration. ``monitor`` is the default for every channel."""
+
+    link: LinkConfig = field(default_factory=LinkConfig, metadata={"help": "serial link"})
+    output: OutputConfig = field(default_factory=OutputConfig, metadata={"help": "MCAP output"})
+    monitor: MonitorConfig = field(
+        default_factory=MonitorConfig, metadata={"help": "default monitor settings"}
+    )
+    channels: tuple[ChannelConfig, ...] = field(
+        default_factory=lambda: default_channels(1), metadata={"help": "channels"}
+    )
+    tacho: TachoConfig = field(default_factory=TachoConfig, metadata={"help": "shaft tacho"})
+    orders: OrdersConfig = field(default_factory=OrdersConfig, metadata={"help": "order tracker"})
+    acoustic: AcousticConfig = field(default_factory=AcousticConfig,
+                                     metadata={"help": "microphone channels (Orimoto, Ikuta & Wang)"})
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules,)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def channel(self, name: str) -> ChannelConfig:
+        """The channel called ``name`` (KeyError if none)."""
+        for ch in self.channels:
+            if ch.name == name:
+                return ch
+        raise KeyError(name)
+
