@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from .noise import generator
+from .noise import SlotDraws
 
-__all__ = ["Scenario", "DEFAULT_CHANNEL_GAINS", "MAX_CHANNELS", "FULL_SCALE_MS2", "keyword_params"]
+__all__ = ["Scenario", "ConstantSpeed", "DEFAULT_CHANNEL_GAINS", "MAX_CHANNELS", "FULL_SCALE_MS2", "keyword_params"]
 
 #: Sensor gains of channels 0..3 (cycled for more channels): each channel is
 #: the same machine seen by a sensor with its own gain and its own noise.
@@ -86,7 +86,7 @@ class Scenario(abc.ABC):
             raise ValueError("channel_gains must hold at least one gain")
         self.channel_gains = np.array([gains[c % len(gains)] for c in range(self.n_channels)])
         self._segments: OrderedDict[int, np.ndarray] = OrderedDict()
-        self._draws: OrderedDict[tuple[int, int], Any] = OrderedDict()
+        self._draws = SlotDraws(self.seed, _DRAW_CACHE)
         self._turns_cum = np.zeros(1)  # shaft angle at whole seconds (shaft_turns)
 
     # -- public API -----------------------------------------------------------
@@ -187,17 +187,9 @@ class Scenario(abc.ABC):
             self._segments.move_to_end(k)
         return seg
 
-    def _cached_draw(self, stream: int, k: int, make: Callable[[np.random.Generator], Any]) -> Any:
-        key = (stream, k)
-        d = self._draws.get(key)
-        if d is None:
-            d = make(generator(self.seed, stream, k), k)
-            self._draws[key] = d
-            while len(self._draws) > _DRAW_CACHE:
-                self._draws.popitem(last=False)
-        else:
-            self._draws.move_to_end(key)
-        return d
+    def _cached_draw(self, stream: int, k: int, make: Callable[[np.random.Generator, int], Any]) -> Any:
+        """``make(rng, k)`` with the generator of segment k of ``stream``, made once."""
+        return self._draws.get(stream, k, lambda rng: make(rng, k))
 
     @abc.abstractmethod
     def _render(self, k: int) -> np.ndarray:
@@ -206,6 +198,20 @@ class Scenario(abc.ABC):
     def __repr__(self) -> str:
         return f"{type(self).__name__}(n_channels={self.n_channels}, seed={self.seed}, duration_s={self.duration_s})"
 
+
+
+class ConstantSpeed:
+    """Mixin of a scenario whose shaft turns at the constant ``shaft_hz_value`` [Hz]."""
+
+    shaft_hz_value: float
+
+    def shaft_hz(self, t) -> np.ndarray:
+        """``shaft_hz_value`` at every time t [s]."""
+        return np.full(np.shape(t), self.shaft_hz_value)
+
+    def shaft_turns(self, t) -> np.ndarray:
+        """The exact angle ``shaft_hz_value * t`` in revolutions."""
+        return self.shaft_hz_value * np.asarray(t, dtype=np.float64)
 
 def keyword_params(factory: Callable[..., Scenario]) -> list[str]:
     """The keyword-only constructor parameters of a scenario class, in MRO order, up to

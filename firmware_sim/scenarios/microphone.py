@@ -62,7 +62,7 @@ import numpy as np
 
 from .base import FULL_SCALE_MS2, keyword_params
 from .motor import DegradingMotor, FaultyMotor, HealthyMotor
-from .noise import MACHINE_STREAM, cubic_bspline, gauss, generator
+from .noise import MACHINE_STREAM, SlotDraws, cubic_bspline, gauss, generator
 
 __all__ = [
     "MIC_STREAMS",
@@ -88,26 +88,6 @@ MIC_FULL_SCALE_PA = 20.0
 
 _EVENT_SLOT_S = 10.0
 _CACHE = 24
-
-
-class _Draws:
-    """Per-(stream, slot) random draws, cached (a slot's draws never depend on the request)."""
-
-    def __init__(self, seed: int):
-        self.seed = seed
-        self._cache: OrderedDict[tuple[int, int], object] = OrderedDict()
-
-    def get(self, stream: str, slot: int, make):
-        key = (MIC_STREAMS[stream], slot)
-        d = self._cache.get(key)
-        if d is None:
-            d = make(generator(self.seed, key[0], slot))
-            self._cache[key] = d
-            while len(self._cache) > _CACHE:
-                self._cache.popitem(last=False)
-        else:
-            self._cache.move_to_end(key)
-        return d
 
 
 def _one_pole(fc: float, fs: int) -> tuple[float, float]:
@@ -138,7 +118,7 @@ class MachineSound:
             raise ValueError("sound_env_s and distance_m reach beyond one segment")
 
     def render(self, k: int, machine_prev: np.ndarray, machine: np.ndarray, machine_next: np.ndarray,
-               draws: _Draws) -> np.ndarray:
+               draws: SlotDraws) -> np.ndarray:
         """p_m over 1-s segment k (Pa) from the machine acceleration of segments k-1, k, k+1."""
         L = machine.size
         M = self.margin
@@ -196,7 +176,7 @@ class BackgroundNoise:
         self._phases = None
 
     # -- carriers: unit-RMS noises, low-passed with the previous segment's memory --
-    def _lowpassed(self, draws: _Draws, stream: str, k: int, rho: float, g: float, L: int) -> np.ndarray:
+    def _lowpassed(self, draws: SlotDraws, stream: str, k: int, rho: float, g: float, L: int) -> np.ndarray:
         from scipy.signal import lfilter
 
         W = self.warmup
@@ -216,7 +196,7 @@ class BackgroundNoise:
             out += knot(j) * cubic_bspline(t / dt - j)
         return out
 
-    def _events(self, draws: _Draws, stream: str, rate: float, t_lo: float, t_hi: float):
+    def _events(self, draws: SlotDraws, stream: str, rate: float, t_lo: float, t_hi: float):
         """(times, log-normal factors) of the Poisson events with times in [t_lo, t_hi)."""
         s0 = int(math.floor(t_lo / _EVENT_SLOT_S))
         s1 = int(math.floor(t_hi / _EVENT_SLOT_S))
@@ -225,7 +205,7 @@ class BackgroundNoise:
             def make(rng, s=s):
                 n = rng.poisson(rate * _EVENT_SLOT_S)
                 return (s + rng.random(n)) * _EVENT_SLOT_S, np.exp(0.5 * rng.standard_normal(n))
-            t, a = draws.get(stream, s, make)
+            t, a = draws.get(MIC_STREAMS[stream], s, make)
             ts.append(t)
             amps.append(a)
         t = np.concatenate(ts) if ts else np.empty(0)
@@ -233,7 +213,7 @@ class BackgroundNoise:
         sel = (t >= t_lo) & (t < t_hi)
         return t[sel], a[sel]
 
-    def render(self, k: int, draws: _Draws) -> np.ndarray:
+    def render(self, k: int, draws: SlotDraws) -> np.ndarray:
         """p_b over 1-s segment k (Pa)."""
         fs = self.fs
         L = fs
@@ -321,7 +301,7 @@ class MicMotorMixin:
                                           road_per_min=road_per_min, road_tau_s=road_tau_s,
                                           road_fc=road_fc, burst_pa=burst_pa,
                                           bursts_per_min=bursts_per_min, burst_tau_s=burst_tau_s)
-        self._mic_draws = _Draws(self.seed)
+        self._mic_draws = SlotDraws(self.seed, _CACHE)
         self._parts: OrderedDict[int, tuple[np.ndarray, np.ndarray]] = OrderedDict()
         self.board_scale = tuple(
             (MIC_FULL_SCALE_PA if c == self.mic_channel else FULL_SCALE_MS2) * 2 / 4096.0

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .base import Scenario
+from .base import ConstantSpeed, Scenario
 from .noise import MACHINE_STREAM, PRE_BOOT, cubic_bspline, gauss, generator
 
 __all__ = ["MotorScenario", "HealthyMotor", "FaultyMotor", "DegradingMotor", "velocity_rms"]
@@ -45,7 +45,7 @@ def velocity_rms(accel: np.ndarray, fs: float, band: tuple[float, float] = (10.0
 
 
 
-class MotorScenario(Scenario):
+class MotorScenario(ConstantSpeed, Scenario):
     """The induction motor of Kim et al. 2023, section IV, with a fault-severity knob s(t).
 
     Physical model (acceleration at the sensor, channel c with gain g_c)::
@@ -196,13 +196,6 @@ class MotorScenario(Scenario):
 
         h = lfilter(self._res_b, self._res_a, np.r_[1.0, np.zeros(self._warmup * 2)])
         self._res_noise_gain = self.resonance_noise_rms / math.sqrt(float(np.sum(h * h)))
-
-    # -- physics ---------------------------------------------------------------
-    def shaft_hz(self, t) -> np.ndarray:
-        return np.full(np.shape(t), self.shaft_hz_value)
-
-    def shaft_turns(self, t) -> np.ndarray:
-        return self.shaft_hz_value * np.asarray(t, dtype=np.float64)
 
     # -- per-segment draws -----------------------------------------------------
     def _machine_draws(self, k: int) -> dict[str, np.ndarray]:

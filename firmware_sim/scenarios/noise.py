@@ -26,11 +26,14 @@ scenarios can be listed without loading it.
 from __future__ import annotations
 
 import functools
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 __all__ = ["MACHINE_STREAM", "PRE_BOOT", "seed_entropy", "generator", "gauss", "gauss_table",
-           "cubic_bspline"]
+           "cubic_bspline", "SlotDraws"]
 
 #: ``SeedSequence([seed, MACHINE_STREAM, k])`` seeds the machine's own draws of
 #: segment k (shared by all channels); channel c's draws use ``[seed, c, k]``.
@@ -75,3 +78,27 @@ def cubic_bspline(x: np.ndarray) -> np.ndarray:
     out[m1] = 2.0 / 3.0 - ax[m1] ** 2 + 0.5 * ax[m1] ** 3
     out[m2] = (2.0 - ax[m2]) ** 3 / 6.0
     return out
+
+
+class SlotDraws:
+    """The random draws of each (stream, slot) under one seed: made once from
+    :func:`generator` and kept for the ``size`` pairs requested last, so a slot's
+    draws never depend on the order of the requests."""
+
+    def __init__(self, seed: int, size: int):
+        self.seed = seed
+        self.size = size
+        self._cache: OrderedDict[tuple[int, int], Any] = OrderedDict()
+
+    def get(self, stream: int, slot: int, make: Callable[[np.random.Generator], Any]) -> Any:
+        """``make(generator(seed, stream, slot))``, made on the first request."""
+        key = (stream, slot)
+        d = self._cache.get(key)
+        if d is None:
+            d = make(generator(self.seed, stream, slot))
+            self._cache[key] = d
+            while len(self._cache) > self.size:
+                self._cache.popitem(last=False)
+        else:
+            self._cache.move_to_end(key)
+        return d

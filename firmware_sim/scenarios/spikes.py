@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Scenario
+from .base import ConstantSpeed, Scenario
 from .noise import MACHINE_STREAM, gauss, generator
 
 __all__ = ["SpikesScenario"]
 
 
-class SpikesScenario(Scenario):
+class SpikesScenario(ConstantSpeed, Scenario):
     """``spikes``: the illustrative input of Kim et al. 2023, Fig. 4, at the observation level.
 
     The 100 Hz RMS sequence is "a random signal with 25 spikes per second"
@@ -30,6 +30,7 @@ class SpikesScenario(Scenario):
     block, as Fig. 5's exact count of 25 implies; ``"random"`` places them at
     random non-adjacent blocks). With R = 1e-2 and N = 10 the AKF then counts
     exactly 25 outliers a second, 50 without scaling (Fig. 5).
+    ``shaft_hz`` (28.66 Hz) is nominal: the signal has no rotational content.
     """
 
     name = "spikes"
@@ -63,13 +64,6 @@ class SpikesScenario(Scenario):
         if spacing == "even" and spikes_per_s and nb % spikes_per_s:
             raise ValueError(f"even spacing needs spikes_per_s dividing {nb}, got {spikes_per_s}")
         self.spacing = spacing
-
-    def shaft_hz(self, t) -> np.ndarray:
-        """Nominal (the signal has no rotational content): ``shaft_hz``, 28.66 Hz."""
-        return np.full(np.shape(t), self.shaft_hz_value)
-
-    def shaft_turns(self, t) -> np.ndarray:
-        return self.shaft_hz_value * np.asarray(t, dtype=np.float64)
 
     def _levels(self, k: int) -> dict[str, np.ndarray]:
         return self._cached_draw(MACHINE_STREAM, k, self._make_levels)
