@@ -114,33 +114,38 @@ def config_from_dict(
     monitor: MonitorConfig = sections["monitor"]
     sections["orders"] = _build_orders(d.get("orders"), source)
 
-    raw_channels = d.get("channels")
-    if raw_channels is None:
-        channels = default_channels(n_channels or 1, monitor)
-    else:
-        if not isinstance(raw_channels, list):
-            raise ConfigError(source, "channels", "expected a list of channel entries", raw_channels)
-        built = []
-        for i, entry in enumerate(raw_channels):
-            path = f"channels[{i}]"
-            if not isinstance(entry, dict):
-                raise ConfigError(source, path, "expected a mapping (name: ..., index: ...)", entry)
-            _reject_unknown(entry, _CHANNEL_KEYS, source, path)
-            own = {k: entry[k] for k in _CHANNEL_OWN_KEYS if k in entry}
-            own.setdefault("index", i)
-            if "name" not in own:
-                idx = own["index"]
-                own["name"] = f"ch{idx}" if isinstance(idx, int) and not isinstance(idx, bool) else f"ch{i}"
-            overrides = {k: entry[k] for k in _MONITOR_KEYS if k in entry}
-            try:
-                ch_monitor = dataclasses.replace(monitor, **overrides) if overrides else monitor
-            except ConfigError as err:
-                raise err.relocated(source, path) from None
-            built.append(_build(ChannelConfig, {**own, "monitor": ch_monitor}, source, path))
-        channels = tuple(built)
+    channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
     _check_calibrations(cfg, source)
     return cfg
+
+
+def _build_channels(raw: Any, monitor: MonitorConfig, n_channels: int | None,
+                    source: str) -> tuple[ChannelConfig, ...]:
+    """The channels list: each entry's own keys, and its monitor keys overlaid on the global
+    ``monitor`` block; no list gives ch0..ch{n_channels-1} (default 1)."""
+    if raw is None:
+        return default_channels(n_channels or 1, monitor)
+    if not isinstance(raw, list):
+        raise ConfigError(source, "channels", "expected a list of channel entries", raw)
+    built = []
+    for i, entry in enumerate(raw):
+        path = f"channels[{i}]"
+        if not isinstance(entry, dict):
+            raise ConfigError(source, path, "expected a mapping (name: ..., index: ...)", entry)
+        _reject_unknown(entry, _CHANNEL_KEYS, source, path)
+        own = {k: entry[k] for k in _CHANNEL_OWN_KEYS if k in entry}
+        own.setdefault("index", i)
+        if "name" not in own:
+            idx = own["index"]
+            own["name"] = f"ch{idx}" if isinstance(idx, int) and not isinstance(idx, bool) else f"ch{i}"
+        overrides = {k: entry[k] for k in _MONITOR_KEYS if k in entry}
+        try:
+            ch_monitor = dataclasses.replace(monitor, **overrides) if overrides else monitor
+        except ConfigError as err:
+            raise err.relocated(source, path) from None
+        built.append(_build(ChannelConfig, {**own, "monitor": ch_monitor}, source, path))
+    return tuple(built)
 
 
 def _check_calibrations(cfg: Config, source: str) -> None:
