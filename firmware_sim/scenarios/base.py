@@ -199,7 +199,6 @@ class Scenario(abc.ABC):
         return f"{type(self).__name__}(n_channels={self.n_channels}, seed={self.seed}, duration_s={self.duration_s})"
 
 
-
 class ConstantSpeed:
     """Mixin of a scenario whose shaft turns at the constant ``shaft_hz_value`` [Hz]."""
 
@@ -212,6 +211,7 @@ class ConstantSpeed:
     def shaft_turns(self, t) -> np.ndarray:
         """The exact angle ``shaft_hz_value * t`` in revolutions."""
         return self.shaft_hz_value * np.asarray(t, dtype=np.float64)
+
 
 def keyword_params(factory: Callable[..., Scenario]) -> list[str]:
     """The keyword-only constructor parameters of a scenario class, in MRO order, up to

@@ -44,7 +44,6 @@ def velocity_rms(accel: np.ndarray, fs: float, band: tuple[float, float] = (10.0
     return 1e3 * np.sqrt(power)
 
 
-
 class MotorScenario(ConstantSpeed, Scenario):
     """The induction motor of Kim et al. 2023, section IV, with a fault-severity knob s(t).
 
