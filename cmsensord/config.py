@@ -223,6 +223,12 @@ def _validate(obj: Any) -> None:
 # ---------------------------------------------------------------------------
 
 
+def _combined_needs_baseline(obj: Any) -> tuple[str, str, Any] | None:
+    if obj.severity == "combined" and obj.baseline is None:
+        return "severity", "combined needs a baseline (run `cmsensord calibrate`)", obj.severity
+    return None
+
+
 @dataclass(frozen=True)
 class MonitorConfig:
     """Seed-000 parameters: the bank of n AKFs, outliers, 1 s anomaly decisions."""
@@ -237,8 +243,27 @@ class MonitorConfig:
     decision_period_s: float = _setting(1.0, "seconds between anomaly decisions", gt=0)
     p0: float = _setting(1.0, "initial error variance P(0)", gt=0)
     q0: float = _setting(1e-3, "initial process noise estimate Q^(0)", ge=0)
+    baseline: float | None = _setting(
+        None, "healthy block RMS learned by `cmsensord calibrate`; when set the bank watches "
+        "block RMS / baseline (R in units of baseline^2)", gt=0)
+    baseline_spread: float | None = _setting(
+        None, "robust std of the healthy per-decision level / baseline (calibrate)", ge=0)
+    severity: str = _setting(
+        "auto", "paper: the AKF index of Kim et al. 2023 alone; combined: also the level against "
+        "the baseline (level_alert, level_danger); auto: combined when a baseline is set",
+        choices=("auto", "paper", "combined"))
+    level_alert: float = _setting(2.0, "level / baseline giving S_level = 0.5 (the analysts' "
+                                  "2 x baseline alert)", gt=1)
+    level_danger: float = _setting(4.0, "level / baseline giving S_level = 1", gt=1)
 
-    _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("r_max", "r_min"),)
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("r_max", "r_min"),
+                                           _greater("level_danger", "level_alert"),
+                                           _combined_needs_baseline)
+
+    @property
+    def combined(self) -> bool:
+        """True when the severity also grades the level against the learned baseline."""
+        return self.severity == "combined" or (self.severity == "auto" and self.baseline is not None)
 
     def __post_init__(self) -> None:
         _validate(self)

@@ -54,7 +54,7 @@ __all__ = ["HOLD_EVENT_DECISIONS", "AnomalyDecider", "Decision", "level_severity
 HOLD_EVENT_DECISIONS = 60
 
 
-def level_severity(ratio, n: int, alert: float, danger: float) -> np.ndarray:
+def level_severity(ratio, n: int, alert, danger) -> np.ndarray:
     """S_level of a level ratio (level / healthy baseline); NaN ratio -> 0.
 
     0 below ``alert``, 0.5 at ``alert``, log-linear up to 1 at ``danger``, floored to
@@ -96,8 +96,7 @@ class AnomalyDecider:
     """
 
     def __init__(self, n_channels: int, n_filters: int, *, f_r, c, period: int = 100,
-                 transient_periods: int = 1, level_alert: float | None = None,
-                 level_danger: float | None = None):
+                 transient_periods: int = 1, level_alert=None, level_danger=None):
         if period < 1:
             raise ValueError(f"period: expected >= 1 observation, got {period}")
         self.C, self.n = n_channels, n_filters
@@ -113,9 +112,12 @@ class AnomalyDecider:
         self.slot = 0             # slots seen in total
         self.level_weights = np.arange(1, n_filters + 1, dtype=np.float64) / n_filters  # i/n
         self.held = np.zeros((n_channels, n_filters), dtype=np.int64)
-        self.level_alert = level_alert
-        self.level_danger = level_danger if level_danger is not None else (
-            2.0 * level_alert if level_alert is not None else None)
+        self.level_alert = None if level_alert is None else np.broadcast_to(
+            np.asarray(level_alert, dtype=np.float64), (n_channels,)).copy()
+        if level_danger is None and self.level_alert is not None:
+            level_danger = 2.0 * self.level_alert
+        self.level_danger = None if level_danger is None else np.broadcast_to(
+            np.asarray(level_danger, dtype=np.float64), (n_channels,)).copy()
         self._level = np.full((self.period, n_channels), np.nan)
         self._last_severity = np.zeros(n_channels)
 
