@@ -10,7 +10,9 @@ exactly what the daemon will see.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -56,6 +58,16 @@ def sidecar(path: str | Path) -> dict:
         return {}
 
 
+@contextlib.contextmanager
+def _quiet(logger: logging.Logger):
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
 class _Collect:
     def __init__(self) -> None:
         self.blocks: list[tuple[int, np.ndarray]] = []
@@ -84,13 +96,14 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     sink = ListSink()
     decoder = Decoder()
     proc = Processor(cfg, sink, auto_channels=auto_channels, observe=collect)
-    for data in read_capture(capture, chunk=1 << 16):
-        proc.handle(decoder.feed(data))
-        if to_s is not None and proc.adc_seconds > to_s + 2.0:
-            break
-    else:
-        proc.handle(decoder.flush())
-        proc.finish()
+    with _quiet(logging.getLogger("cmsensord")):   # the default monitor's events mean nothing here
+        for data in read_capture(capture, chunk=1 << 16):
+            proc.handle(decoder.feed(data))
+            if to_s is not None and proc.adc_seconds > to_s + 2.0:
+                break
+        else:
+            proc.handle(decoder.flush())
+            proc.finish()
     if not collect.blocks:
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
@@ -98,8 +111,9 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     first = int(np.floor(from_s * rate))
     last = y.shape[0] if to_s is None else min(y.shape[0], int(np.floor(to_s * rate)))
     if last <= first:
-        raise CmsensordError(f"calibrate: {capture}: no observations between {from_s:g} and "
-                             f"{to_s:g} board seconds (the capture holds {y.shape[0] / rate:.1f} s)")
+        end = "the end" if to_s is None else f"{to_s:g}"
+        raise CmsensordError(f"calibrate: {capture}: no observations between {from_s:g} and {end} "
+                             f"board seconds (the capture holds {y.shape[0] / rate:.1f} s)")
     shaft = _shaft_hz(sink, proc, first / rate, last / rate)
     rpm = meta.get("rpm")
     return Observations(names=_names(meta, proc, auto_channels), indices=[ch.index for ch in proc.channels],
