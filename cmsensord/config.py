@@ -223,6 +223,19 @@ def _validate(obj: Any) -> None:
 # ---------------------------------------------------------------------------
 
 
+#: observations per second of board time the decision rule is written for (100 Hz RMS frames)
+NOMINAL_RATE_HZ = 100.0
+
+
+def _f_r_below_decision_size(obj: Any) -> tuple[str, str, Any] | None:
+    per_decision = obj.decision_period_s * NOMINAL_RATE_HZ
+    if not obj.f_r < per_decision:
+        return "f_r", (f"must be below the {per_decision:g} observations per decision "
+                       f"(decision_period_s {obj.decision_period_s:g} x {NOMINAL_RATE_HZ:g} blocks/s): "
+                       f"cnt >= f_r could never be reached"), obj.f_r
+    return None
+
+
 def _combined_needs_baseline(obj: Any) -> tuple[str, str, Any] | None:
     if obj.severity == "combined" and obj.baseline is None:
         return "severity", "combined needs a baseline (run `cmsensord calibrate`)", obj.severity
@@ -258,7 +271,7 @@ class MonitorConfig:
 
     _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("r_max", "r_min"),
                                            _greater("level_danger", "level_alert"),
-                                           _combined_needs_baseline)
+                                           _f_r_below_decision_size, _combined_needs_baseline)
 
     @property
     def combined(self) -> bool:
