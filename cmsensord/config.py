@@ -232,7 +232,7 @@ def _f_r_below_decision_size(obj: Any) -> tuple[str, str, Any] | None:
     if not obj.f_r < per_decision:
         return "f_r", (f"must be below the {per_decision:g} observations per decision "
                        f"(decision_period_s {obj.decision_period_s:g} x {NOMINAL_RATE_HZ:g} blocks/s): "
-                       f"cnt >= f_r could never be reached"), obj.f_r
+                       "at or above it no decision can flag an anomaly"), obj.f_r
     return None
 
 

@@ -89,3 +89,14 @@ def test_calibrate_of_a_missing_capture(tmp_path):
     p = run("cmsensord", "calibrate", str(tmp_path / "nope.bin"), "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 2
     assert p.stderr.strip() == f"cmsensord: {tmp_path / 'nope.bin'}: capture file not found"
+
+
+def test_f_r_at_the_decision_size_is_a_configuration_error(degrading, tmp_path):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("monitor:\n  f_r: 100\n")
+    p = run("cmsensord", "replay", str(degrading), "--config", str(cfg), "--out", str(tmp_path / "o"))
+    assert p.returncode == 78
+    assert p.stderr.strip() == (
+        f"cmsensord: configuration error: {cfg}: monitor.f_r: must be below the 100 observations per "
+        "decision (decision_period_s 1 x 100 blocks/s): at or above it no decision can flag an anomaly "
+        "(got 100.0)")
