@@ -440,7 +440,7 @@ def test_anti_alias_design_equals_scipy(fs, f_pass, f_stop, gpass, gstop):
     (same order, edge, sections), and its DC group delay scipy's group_delay."""
     from scipy import signal
 
-    from cmsensord.dsp.order_tracker import _cheb2ord, _cheby2_sos, _sos_dc_delay, _sos_response
+    from cmsensord.dsp.order_tracker.antialias import _cheb2ord, _cheby2_sos, _sos_dc_delay, _sos_response
 
     order, edge = _cheb2ord(f_pass, f_stop, gpass, gstop, fs)
     ref_order, ref_edge = signal.cheb2ord(f_pass, f_stop, gpass, gstop, fs=fs)
@@ -459,7 +459,7 @@ def test_tracker_anti_alias_filter_meets_its_spec():
     """Default raw chain (25 kHz, orders 1-4 up to 3600 rpm): at most 0.001 dB down at
     the highest tracked frequency, at least 80 dB down from fs_track - f_hi (what folds
     onto a tracked frequency) to fs/2; the speed is delayed by the DC group delay."""
-    from cmsensord.dsp.order_tracker import _sos_dc_delay, _sos_response
+    from cmsensord.dsp.order_tracker.antialias import _sos_dc_delay, _sos_response
 
     comps = [TrackedComponent(f"{k}x", order=float(k)) for k in (1, 2, 3, 4)]
     tr = OrderTracker(comps, fs_in=25000.0, max_rpm=3600.0)
@@ -532,7 +532,7 @@ if have_kernel():
 def test_gain_table_filled_piecewise_equals_one_pass():
     """The gain table is computed in segments as the speed visits them (and r on the
     bandwidth grid in batches): any order gives the table of one batch, bit for bit."""
-    import cmsensord.dsp.order_tracker as ot
+    import cmsensord.dsp.order_tracker.bandwidth as ot
 
     comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in (1, 2, 3, 4)]
     kw = {"fs_in": 25000.0, "max_rpm": 3000.0}
