@@ -1,13 +1,13 @@
 """The decimator's anti-alias low-pass, designed in numpy (no scipy.signal).
 
 A Chebyshev type II low-pass (flat, monotonic pass band) in second-order sections:
-:func:`_cheb2ord` and :func:`_cheby2_sos` follow scipy.signal's cheb2ord,
+:func:`cheb2ord` and :func:`cheby2_sos` follow scipy.signal's cheb2ord,
 cheby2(output="sos") and zpk2sos(pairing="nearest") step by step, in the same
 arithmetic, so the sections are scipy's to rounding (compared in
 tests/test_order_tracker.py).  The daemon does not import scipy.signal: it costs
 ~70 MB of resident memory and ~0.9 s for three small functions.  Also the
 sections' response, group delay at DC and how many outputs one missing
-(zero-filled) input spoils (:func:`_missing_window`).  See docs/order_tracker.md
+(zero-filled) input spoils (:func:`missing_window_of`).  See docs/order_tracker.md
 (§4 Decimation, §5 Missing samples).
 """
 
@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 
-def _cheb2ord(f_pass: float, f_stop: float, gpass: float, gstop: float, fs: float) -> tuple[int, float]:
+def cheb2ord(f_pass: float, f_stop: float, gpass: float, gstop: float, fs: float) -> tuple[int, float]:
     """Lowest order and stop-band edge [Hz] of the digital Chebyshev type II low-pass
     that loses at most ``gpass`` dB up to f_pass and at least ``gstop`` dB from f_stop."""
     passb = math.tan(math.pi * (2.0 * f_pass / fs) / 2.0)     # pre-warped edges
@@ -33,7 +33,7 @@ def _cheb2ord(f_pass: float, f_stop: float, gpass: float, gstop: float, fs: floa
     return order, wn * fs / 2
 
 
-def _cheby2_sos(order: int, gstop: float, f_edge: float, fs: float) -> np.ndarray:
+def cheby2_sos(order: int, gstop: float, f_edge: float, fs: float) -> np.ndarray:
     """Second-order sections (rows b0 b1 b2 1 a1 a2) of the digital Chebyshev type II
     low-pass of this order, ``gstop`` dB down from its stop-band edge f_edge [Hz]."""
     N = int(order)
@@ -162,7 +162,7 @@ def _zpk2sos(z: np.ndarray, p: np.ndarray, k: float) -> np.ndarray:
     return sos
 
 
-def _sos_response(sos: np.ndarray, f, fs: float) -> np.ndarray:
+def sos_response(sos: np.ndarray, f, fs: float) -> np.ndarray:
     """Complex frequency response of the sections at frequencies f [Hz]."""
     zi = np.exp(-2j * np.pi * np.asarray(f, dtype=np.float64) / fs)
     h = np.ones(zi.shape, dtype=complex)
@@ -171,7 +171,7 @@ def _sos_response(sos: np.ndarray, f, fs: float) -> np.ndarray:
     return h
 
 
-def _sos_dc_delay(sos: np.ndarray) -> float:
+def sos_dc_delay(sos: np.ndarray) -> float:
     """Group delay at DC [samples] of the sections: per polynomial Σ k c_k / Σ c_k
     (d arg / dω at ω = 0), numerator minus denominator, summed over the sections."""
     k = np.arange(3.0)
@@ -180,7 +180,7 @@ def _sos_dc_delay(sos: np.ndarray) -> float:
 
 MISSING_TAIL = 1e-3
 """L1 tail of the anti-alias filter's impulse response beyond which a missing input
-no longer spoils its outputs (see :func:`_missing_window` and docs/order_tracker.md
+no longer spoils its outputs (see :func:`missing_window_of` and docs/order_tracker.md
 §5 Missing samples)."""
 
 
@@ -206,7 +206,7 @@ def _sos_impulse(sos: np.ndarray) -> np.ndarray:
     return h
 
 
-def _missing_window(sos: np.ndarray | None, tail: float = MISSING_TAIL) -> int:
+def missing_window_of(sos: np.ndarray | None, tail: float = MISSING_TAIL) -> int:
     """W: how many outputs of the anti-alias filter one missing (zero-filled) input
     spoils, the input's own output included: the smallest W with
     Σ_{m >= W} |h(m)| <= ``tail``.  From output W on, the zero fill changes an output

@@ -13,18 +13,18 @@ from collections.abc import Sequence
 import numpy as np
 
 from cmsensord.dsp.order_tracker.components import DEFAULT_R, TrackedComponent
-from cmsensord.dsp.order_tracker.design import _f_matrices, _q_diag, _riccati_doubling
+from cmsensord.dsp.order_tracker.design import f_matrices, q_diag, riccati_doubling
 
 
 def _single_filter(r: np.ndarray, theta: np.ndarray):
     """The isolated steady-state one-component filter for r, θ (G,): the pieces of
     X̂(n+1) = A X̂(n) + F k y(n),  x̂(n|n) = e₂ᵀ(I - k h) X̂(n) + k₂ y(n)."""
     c = 2.0 * np.cos(theta)[:, None]
-    qd, q2 = _q_diag(np.asarray(r, dtype=np.float64)[:, None], 1.0)
-    P = _riccati_doubling(c, qd, q2, 40)
+    qd, q2 = q_diag(np.asarray(r, dtype=np.float64)[:, None], 1.0)
+    P = riccati_doubling(c, qd, q2, 40)
     S = P[:, 1, 1] + q2
     k = P[:, :, 1] / S[:, None]                       # (G, 2)
-    F = _f_matrices(c)                                # (G, 2, 2)
+    F = f_matrices(c)                                # (G, 2, 2)
     IKh = np.eye(2) - k[:, :, None] * np.array([0.0, 1.0])[None, None, :]
     A = F @ IKh
     Fk = (F @ k[:, :, None])[:, :, 0]                 # (G, 2)
@@ -129,11 +129,11 @@ def time_constant(r, freq_hz, fs: float) -> np.ndarray:
     shape = r.shape
     r, f = r.ravel(), f.ravel()
     c = 2.0 * np.cos(2.0 * np.pi * f / fs)[:, None]
-    qd, q2 = _q_diag(r[:, None], 1.0)
-    P = _riccati_doubling(c, qd, q2, 40)
+    qd, q2 = q_diag(r[:, None], 1.0)
+    P = riccati_doubling(c, qd, q2, 40)
     S = P[:, 1, 1] + q2
     k = P[:, :, 1] / S[:, None]
-    A = _f_matrices(c) @ (np.eye(2) - k[:, :, None] * np.array([0.0, 1.0])[None, None, :])
+    A = f_matrices(c) @ (np.eye(2) - k[:, :, None] * np.array([0.0, 1.0])[None, None, :])
     rho = np.max(np.abs(np.linalg.eigvals(A)), axis=-1)
     return (-1.0 / (fs * np.log(rho))).reshape(shape)
 

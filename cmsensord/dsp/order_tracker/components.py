@@ -60,12 +60,12 @@ class TrackedComponent:
         return np.full(rpm.shape, float(self.freq_hz))
 
 
-def _omega(components: Sequence[TrackedComponent], speed: np.ndarray) -> np.ndarray:
+def omega(components: Sequence[TrackedComponent], speed: np.ndarray) -> np.ndarray:
     """ω_k(n) [rad/s] for model speeds ``speed`` (T,): (T, K)."""
     return np.stack([2.0 * np.pi * c.freq(speed) for c in components], axis=-1)
 
 
-def _model_speed(rpm: np.ndarray, min_rpm: float) -> np.ndarray:
+def model_speed(rpm: np.ndarray, min_rpm: float) -> np.ndarray:
     """The speed the model uses: |rpm| clamped from below at min_rpm (NaN -> min_rpm)."""
     s = np.abs(np.asarray(rpm, dtype=np.float64))
     s = np.where(np.isfinite(s), s, 0.0)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def _f_matrices(c: np.ndarray) -> np.ndarray:
+def f_matrices(c: np.ndarray) -> np.ndarray:
     """F(n) of eq. (13) for coefficients c (..., K) = 2cos(ω ΔT): (..., 2K, 2K)."""
     K = c.shape[-1]
     F = np.zeros(c.shape[:-1] + (2 * K, 2 * K))
@@ -22,7 +22,7 @@ def _f_matrices(c: np.ndarray) -> np.ndarray:
     return F
 
 
-def _q_diag(rk: np.ndarray, q1: float) -> tuple[np.ndarray, np.ndarray]:
+def q_diag(rk: np.ndarray, q1: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-sample process-noise diagonal (..., 2K) and Q2 (...) from r_k (..., K).
 
     Q1 = q1 blockdiag((r̄/r_k)² I_2), Q2 = r̄² q1, r̄ = r_1 (eq. 25 generalised).
@@ -32,7 +32,7 @@ def _q_diag(rk: np.ndarray, q1: float) -> tuple[np.ndarray, np.ndarray]:
     return np.repeat(q1k, 2, axis=-1), q1 * rbar[..., 0] ** 2
 
 
-def _riccati_doubling(c: np.ndarray, qdiag: np.ndarray, q2: np.ndarray, n_double: int) -> np.ndarray:
+def riccati_doubling(c: np.ndarray, qdiag: np.ndarray, q2: np.ndarray, n_double: int) -> np.ndarray:
     """P(n|n-1) after 2^n_double constant-model steps from P = 0, batched: (G, 2K, 2K).
 
     Structure-preserving doubling for the filter Riccati equation
@@ -50,7 +50,7 @@ def _riccati_doubling(c: np.ndarray, qdiag: np.ndarray, q2: np.ndarray, n_double
     grid filled piecewise equals one filled at once); the stopped ones leave
     the batch.  W⁻¹A and W⁻¹G come from one solve.
     """
-    F = _f_matrices(c)
+    F = f_matrices(c)
     G, d = F.shape[0], F.shape[-1]
     h = np.zeros(d)
     h[1::2] = 1.0

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from cmsensord.dsp.order_tracker.design import _f_matrices
+from cmsensord.dsp.order_tracker.design import f_matrices
 
 
 def _scan(A: np.ndarray, b: np.ndarray, u0: np.ndarray, m: int | None = None) -> np.ndarray:
@@ -69,15 +69,15 @@ def _fk(c: np.ndarray, k: np.ndarray) -> np.ndarray:
 
 def _a_matrices(c: np.ndarray, k: np.ndarray) -> np.ndarray:
     """A(n) = F(n)(I - k(n) h) = F(n) - (F(n) k(n)) h: (T, 2K, 2K)."""
-    F = _f_matrices(c)
+    F = f_matrices(c)
     F[:, :, 1::2] -= _fk(c, k)[:, :, None]
     return F
 
 
-_CHUNK = 32       # chunk length of the forward scan (numpy path)
+CHUNK = 32       # chunk length of the forward scan (numpy path)
 
 
-def _forward_numpy(y, c, k, z0):
+def forward_numpy(y, c, k, z0):
     """Filter a block that starts at a chunk boundary: y (T, C), c (T, K), k (T, 2K),
     z0 (C, 2K) the predicted state at its start.
 
@@ -86,14 +86,14 @@ def _forward_numpy(y, c, k, z0):
     """
     A = _a_matrices(c, k)
     b = _fk(c, k)[:, :, None] * y[:, None, :]                       # F k y: (T, 2K, C)
-    u = _scan(A, b, z0.T, _CHUNK)                                   # (T+1, 2K, C)
+    u = _scan(A, b, z0.T, CHUNK)                                   # (T+1, 2K, C)
     zp = np.ascontiguousarray(np.swapaxes(u, 1, 2))                 # (T+1, C, 2K)
     e = y - zp[:-1, :, 1::2].sum(axis=2)
     xf = zp[:-1] + k[:, None, :] * e[:, :, None]
     return zp, e, xf
 
 
-def _backward_numpy(c, k, S, P, zp, e, starts, W, nout):
+def backward_numpy(c, k, S, P, zp, e, starts, W, nout):
     """MBF fixed-lag smoothing of E windows [s, s+W) (all inside the given arrays).
 
     Returns smoothed states of the first ``nout`` samples of each window: (E, nout, C, 2K).
@@ -116,7 +116,7 @@ def _backward_numpy(c, k, S, P, zp, e, starts, W, nout):
     return xs
 
 
-def _mask_groups(miss: np.ndarray | None) -> list:
+def mask_groups(miss: np.ndarray | None) -> list:
     """Channels that miss the same samples, with that mask: [(channels, mask (T,) or
     None)], channels a slice (all of them, one group) or an index array.
 
@@ -141,7 +141,7 @@ def _mask_groups(miss: np.ndarray | None) -> list:
     return out
 
 
-def _riccati_numpy(c, qdiag, q2, P, want_p, miss=None):
+def riccati_numpy(c, qdiag, q2, P, want_p, miss=None):
     """Exact gains per sample (a loop: one set of numpy calls per sample).  At samples
     ``miss`` (T,) (None: none) there is no measurement: k = 0, P(n|n) = P(n|n-1)."""
     T, K = c.shape
@@ -149,7 +149,7 @@ def _riccati_numpy(c, qdiag, q2, P, want_p, miss=None):
     k = np.empty((T, d))
     S = np.empty(T)
     Pout = np.empty((T, d, d)) if want_p else None
-    F = _f_matrices(c)
+    F = f_matrices(c)
     hi = np.arange(1, d, 2)
     for n in range(T):
         ph = P[:, hi].sum(axis=1)
@@ -170,7 +170,7 @@ def _riccati_numpy(c, qdiag, q2, P, want_p, miss=None):
     return k, S, Pout, P
 
 
-def _envelope(xs: np.ndarray, c: np.ndarray) -> np.ndarray:
+def envelope(xs: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Peak amplitude from the state pairs: xs (N, C, 2K), c (N, K) -> (N, C, K)."""
     x1, x2 = xs[..., 0::2], xs[..., 1::2]
     cc = c[:, None, :]

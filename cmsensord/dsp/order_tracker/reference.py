@@ -12,8 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from cmsensord.dsp.order_tracker.bandwidth import component_r
-from cmsensord.dsp.order_tracker.components import TrackedComponent, _model_speed, _omega
-from cmsensord.dsp.order_tracker.design import _q_diag
+from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
+from cmsensord.dsp.order_tracker.design import q_diag
 
 
 def reference_track(y, rpm, components: Sequence[TrackedComponent], fs: float, *,
@@ -47,14 +47,14 @@ def reference_track(y, rpm, components: Sequence[TrackedComponent], fs: float, *
     gone = gone[:, 0]
     K = len(components)
     d = 2 * K
-    speed = _model_speed(rpm, min_rpm)
-    w = _omega(components, speed)
+    speed = model_speed(rpm, min_rpm)
+    w = omega(components, speed)
     rk = component_r(components, speed, fs)
     h = np.zeros((1, d))
     h[0, 1::2] = 1.0
-    qd, q2 = _q_diag(rk, q1)
+    qd, q2 = q_diag(rk, q1)
     X = np.zeros((d, C))
-    _, q20 = _q_diag(component_r(components, np.array([min_rpm]), fs), q1)
+    _, q20 = q_diag(component_r(components, np.array([min_rpm]), fs), q1)
     P = q20[0] * np.eye(d)                                  # P(0) = Q2 I, Q2 at min_rpm
     xf_all = np.empty((T, d, C))
     keep = smoother_lag is not None

@@ -80,7 +80,7 @@ class TrackerState:
         return TrackerState(**out)
 
 
-def _cat_miss(before, n_before, now, n_now, C):
+def cat_miss(before, n_before, now, n_now, C):
     """Missing-sample masks of kept samples (``before``, n_before rows) and new ones
     (``now``), either None for none missing: the concatenation, or None."""
     if before is None and now is None:
@@ -89,18 +89,18 @@ def _cat_miss(before, n_before, now, n_now, C):
                            now if now is not None else np.zeros((n_now, C), dtype=bool)])
 
 
-def _with_carry(carry, cur, miss, C):
+def with_carry(carry, cur, miss, C):
     """The arrays kept from the last call (``carry``: a dict with "rpm", maybe "miss", or
     empty) followed by this call's (``cur``); "miss" only when a sample is missing."""
     p = len(carry["rpm"]) if carry else 0
     if p:
         cur = {k: np.concatenate([carry[k], v]) for k, v in cur.items()}
-    m = _cat_miss(carry.get("miss") if p else None, p, miss, len(cur["rpm"]) - p, C)
+    m = cat_miss(carry.get("miss") if p else None, p, miss, len(cur["rpm"]) - p, C)
     if m is not None:
         cur["miss"] = m
     return cur
 
 
-def _miss_blocks(miss, used, nb, B):
+def miss_blocks(miss, used, nb, B):
     """The first ``used`` rows of a mask (or None) as (nb, B, C) blocks (or None)."""
     return None if miss is None else miss[:used].reshape(nb, B, miss.shape[1])

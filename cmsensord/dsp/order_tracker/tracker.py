@@ -14,25 +14,25 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cmsensord.dsp.order_tracker.antialias import _cheb2ord, _cheby2_sos, _missing_window, _sos_dc_delay
+from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
 from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
-from cmsensord.dsp.order_tracker.components import TrackedComponent, _model_speed, _omega
-from cmsensord.dsp.order_tracker.design import _q_diag, _riccati_doubling
+from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
+from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.recursions import (
-    _CHUNK,
-    _backward_numpy,
-    _envelope,
-    _forward_numpy,
-    _mask_groups,
-    _riccati_numpy,
+    CHUNK,
+    backward_numpy,
+    envelope,
+    forward_numpy,
+    mask_groups,
+    riccati_numpy,
 )
 from cmsensord.dsp.order_tracker.state import (
     BlockStats,
     TrackerOutput,
     TrackerState,
-    _cat_miss,
-    _miss_blocks,
-    _with_carry,
+    cat_miss,
+    miss_blocks,
+    with_carry,
 )
 
 try:  # the compiled kernel is optional: numpy is the fallback
@@ -133,9 +133,9 @@ class OrderTracker:
             raise ValueError(f"decimate: tracker rate {self.fs_track:g} Hz is not above twice the "
                              f"highest tracked frequency {self.f_hi:g} Hz")
         if self.decimate > 1:
-            order, fc = _cheb2ord(self.f_hi, self.fs_track - self.f_hi, 0.001, 80.0, self.fs_in)
-            self.sos = _cheby2_sos(order, 80.0, fc, self.fs_in)
-            gd = _sos_dc_delay(self.sos)
+            order, fc = cheb2ord(self.f_hi, self.fs_track - self.f_hi, 0.001, 80.0, self.fs_in)
+            self.sos = cheby2_sos(order, 80.0, fc, self.fs_in)
+            gd = sos_dc_delay(self.sos)
             self.filter_delay_s = gd / self.fs_in
             self.delay_in = round(gd)
         else:
@@ -144,7 +144,7 @@ class OrderTracker:
             self.delay_in = 0
         # a missing input spoils this many filter outputs (its own included): tracker
         # samples within them get no measurement update (docs/order_tracker.md §5)
-        self.missing_window = _missing_window(self.sos)
+        self.missing_window = missing_window_of(self.sos)
 
     def _setup_blocks(self, output_rate_hz: float, smoother_lag_s: float | None) -> None:
         """Output block length, smoother lag and latency."""
@@ -182,9 +182,9 @@ class OrderTracker:
 
     def _coeffs(self, speed: np.ndarray):
         """c_k(n) (T, K), Q1 diagonal (T, 2K) and Q2 (T,) at model speeds."""
-        c = 2.0 * np.cos(_omega(self.components, speed) / self.fs_track)
+        c = 2.0 * np.cos(omega(self.components, speed) / self.fs_track)
         rk = component_r(self.components, speed, self.fs_track)
-        qd, q2 = _q_diag(rk, self.q1)
+        qd, q2 = q_diag(rk, self.q1)
         return c, qd, q2
 
     def _steady_state(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,7 +192,7 @@ class OrderTracker:
         ks, Ps = [], []
         for i in range(0, len(grid), 1024):
             c, qd, q2 = self._coeffs(grid[i:i + 1024])
-            P = _riccati_doubling(c, qd, q2, self._n_double)
+            P = riccati_doubling(c, qd, q2, self._n_double)
             ph = P[:, :, 1::2].sum(axis=2)
             S = ph[:, 1::2].sum(axis=1) + q2
             ks.append(np.concatenate([ph / S[:, None], S[:, None]], axis=1))
@@ -239,7 +239,7 @@ class OrderTracker:
     def describe(self, rpm: float) -> list[dict]:
         """Per component at speed ``rpm``: frequency, r, -3 dB bandwidth [Hz and %],
         time constant [s] (of the isolated steady-state filter at the tracker rate)."""
-        speed = _model_speed(np.array([rpm]), self.min_rpm)
+        speed = model_speed(np.array([rpm]), self.min_rpm)
         rk = component_r(self.components, speed, self.fs_track)[0]
         out = []
         for c, r in zip(self.components, rk):
@@ -286,7 +286,7 @@ class OrderTracker:
         t_in = index * self.decimate - self.delay_in
         xf, zp, e, c, k, S, P = self._filter(yd, rd, miss)
         wave = np.ascontiguousarray(xf[:, :, 1::2])
-        env = _envelope(xf, c)
+        env = envelope(xf, c)
         blocks = self._causal_blocks(n0, wave, env, rd, miss)
         out = TrackerOutput(index=index, t_in=t_in, rpm=rd, waveform=wave, blocks=blocks,
                             missing=miss if miss is not None else np.zeros((N, self.C), dtype=bool))
@@ -377,15 +377,15 @@ class OrderTracker:
                 args += (np.ascontiguousarray(gone).view(np.uint8),)
             _trackerkernel.riccati(*args)
             return k, S, (P if want_p else None)
-        k, S, P, st.P = _riccati_numpy(c, qd, q2, st.P, want_p, gone)
+        k, S, P, st.P = riccati_numpy(c, qd, q2, st.P, want_p, gone)
         return k, S, P
 
     def _filter(self, yd, rd, miss):
         """miss: (N, C) bool with a True somewhere, or None."""
         st = self.state
         N, d = yd.shape[0], 2 * self.K
-        speed = _model_speed(rd, self.min_rpm)
-        c = 2.0 * np.cos(_omega(self.components, speed) / self.fs_track)
+        speed = model_speed(rd, self.min_rpm)
+        c = 2.0 * np.cos(omega(self.components, speed) / self.fs_track)
         any_miss = miss is not None
         k, S, P = self._gains(speed, c, miss[:, 0] if any_miss and self.gains == "exact" else None)
         if N == 0:
@@ -399,35 +399,35 @@ class OrderTracker:
                 args += (np.ascontiguousarray(miss).view(np.uint8),)
             _trackerkernel.forward(*args)
             return xf, zp, e, c, k, S, P
-        # numpy: chunks of _CHUNK samples aligned to absolute tracker indices.  The
+        # numpy: chunks of CHUNK samples aligned to absolute tracker indices.  The
         # chunk cut by the end of the previous call is run again from its start
         # (its inputs are kept in the state), so that every sample is computed
         # exactly as in one pass, however the stream is split.
-        # Channels that miss different samples run as separate groups (_mask_groups),
+        # Channels that miss different samples run as separate groups (mask_groups),
         # each with k = 0 at its missing samples and no innovation there (e = 0).
         ch = st.chunk
         p = len(ch["y"]) if ch else 0
         Y = np.concatenate([ch["y"], yd]) if p else yd
         Cc = np.concatenate([ch["c"], c]) if p else c
         Kk = np.concatenate([ch["k"], k]) if p else k
-        Mm = _cat_miss(ch.get("m") if p else None, p, miss, N, self.C)
+        Mm = cat_miss(ch.get("m") if p else None, p, miss, N, self.C)
         T = len(Y)
         zp = np.empty((T + 1, self.C, d))
         e = np.empty((T, self.C))
         xf = np.empty((T, self.C, d))
-        for chans, m in _mask_groups(Mm):           # all channels each time, see there
+        for chans, m in mask_groups(Mm):           # all channels each time, see there
             kg = Kk if m is None else np.where(m[:, None], 0.0, Kk)
             z0 = st.z0
             for i in range(0, T, 8192):  # bounded memory for long calls (8192 = 256 chunks)
                 j = min(i + 8192, T)
-                zp_i, e_i, xf_i = _forward_numpy(Y[i:j], Cc[i:j], kg[i:j], z0)
+                zp_i, e_i, xf_i = forward_numpy(Y[i:j], Cc[i:j], kg[i:j], z0)
                 if m is not None:
                     e_i[m[i:j]] = 0.0                 # no innovation where missing
                 zp[i:j + 1, chans] = zp_i[:, chans]
                 e[i:j, chans] = e_i[:, chans]
                 xf[i:j, chans] = xf_i[:, chans]
                 z0 = zp_i[-1]
-        nb = (T // _CHUNK) * _CHUNK                   # last chunk boundary
+        nb = (T // CHUNK) * CHUNK                   # last chunk boundary
         tail = T - nb
         st.z0 = np.ascontiguousarray(zp[T - tail])
         st.z = np.ascontiguousarray(zp[T])
@@ -460,7 +460,7 @@ class OrderTracker:
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state
         B = self.block
-        cur = _with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
+        cur = with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
         first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
         nb = len(cur["rpm"]) // B
         used = nb * B
@@ -472,13 +472,13 @@ class OrderTracker:
                                  cur["wave"][:used].reshape(nb, B, C, K),
                                  cur["env"][:used].reshape(nb, B, C, K),
                                  cur["rpm"][:used].reshape(nb, B),
-                                 _miss_blocks(cur.get("miss"), used, nb, B))
+                                 miss_blocks(cur.get("miss"), used, nb, B))
 
     # --------------------------------------------------------------- smoother
     def _smooth(self, out: TrackerOutput, n0, rd, c, k, S, P, zp, e, miss) -> None:
         st = self.state
         B, L = self.block, self.lag
-        cur = _with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
+        cur = with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
                           miss, self.C)
         h0 = st.next_smooth * B                              # index of cur[0]
         n_end = n0 + len(rd)
@@ -502,9 +502,9 @@ class OrderTracker:
                     _trackerkernel.backward(*args)
             else:                     # per mask pattern, as in _filter: k = 0 where missing
                 xs = None
-                for chans, m in _mask_groups(cur.get("miss")):
+                for chans, m in mask_groups(cur.get("miss")):
                     kg = cur["k"] if m is None else np.where(m[:, None], 0.0, cur["k"])
-                    res = _backward_numpy(cur["c"], kg, cur["S"], cur["P"], cur["zp"], cur["e"],
+                    res = backward_numpy(cur["c"], kg, cur["S"], cur["P"], cur["zp"], cur["e"],
                                           starts, W, B)
                     if xs is None:
                         xs = res
@@ -513,13 +513,13 @@ class OrderTracker:
             used = n_emit * B
             cb = cur["c"][:used].reshape(n_emit, B, self.K)
             wave = xs[..., 1::2]
-            env = _envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
+            env = envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
                 n_emit, B, self.C, self.K)
             out.smoothed_index = h0 + np.arange(used)
             out.smoothed_waveform = np.ascontiguousarray(wave.reshape(used, self.C, self.K))
             out.smoothed_blocks = self._block_stats(h0 + B * np.arange(n_emit), wave, env,
                                                     cur["rpm"][:used].reshape(n_emit, B),
-                                                    _miss_blocks(cur.get("miss"), used, n_emit, B))
+                                                    miss_blocks(cur.get("miss"), used, n_emit, B))
         else:
             used = 0
             out.smoothed_index = np.zeros(0, dtype=np.int64)

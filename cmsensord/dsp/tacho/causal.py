@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from cmsensord.dsp.tacho.smoothing import _make_room, _weighted_quadratic
+from cmsensord.dsp.tacho.smoothing import make_room, weighted_quadratic
 
 _CAUSAL_SLACK = 2.5  # causal speed: pulse periods without an edge before it is capped (a missed pulse is 2)
 
 
-class _CausalSpeed:
+class CausalSpeed:
     """The causal part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose ``__init__``
     sets the attributes): one segment (speed, acceleration) per committed edge."""
 
@@ -43,7 +43,7 @@ class _CausalSpeed:
         y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
         wgt = use * self._ckernel[None, :]
         npts = use.sum(axis=1)
-        coef = _weighted_quadratic(x, y, wgt, npts)
+        coef = weighted_quadratic(x, y, wgt, npts)
         speed = coef[:, 1] / (S * self.ppr)
         acc = 2.0 * coef[:, 2] / (S * S * self.ppr)
         self._append_segments(np.maximum(known, Tc[kr]), Tc[kr], speed, acc,
@@ -51,7 +51,7 @@ class _CausalSpeed:
 
     def _append_segments(self, key, T, speed, acc, valid) -> None:
         n = key.size
-        buf, self._slo, self._shi = _make_room(self._sbuf, self._slo, self._shi, n)
+        buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, n)
         self._sbuf = buf
         for row, v in enumerate((key, T, speed, acc, valid)):
             buf[row, self._shi:self._shi + n] = v

@@ -25,7 +25,7 @@ MISSED = "tacho_missed_pulse"
 EXTRA = "tacho_extra_pulse"
 
 _MAX_MISSED_RUN = 8  # at most this many consecutive pulses repaired as missed
-_PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
+PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class TachoUpdate(NamedTuple):
 
 
 @dataclass
-class _Run:
+class Run:
     """One run of edges without a timeout."""
 
     rid: int
@@ -82,7 +82,7 @@ class _Run:
     end_turns: float = math.nan  # turns at stop (set when it ends)
 
 
-class _EdgeRuns:
+class EdgeRuns:
     """The edge part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose ``__init__``
     sets the attributes): coverage and timeouts, runs, the look-ahead classification
     of each edge and its commitment as pulses."""
@@ -92,7 +92,7 @@ class _EdgeRuns:
         self._now = end if self._now is None else max(self._now, end)
         self._check_timeout(self._now * SUB)
 
-    def _timeout_q(self, run: _Run) -> int:
+    def _timeout_q(self, run: Run) -> int:
         """The current run's timeout in 1/256 sample (integer arithmetic: deterministic)."""
         hi = self._timeout_hi
         if run.prev_raw_q is None:
@@ -132,7 +132,7 @@ class _EdgeRuns:
         base = 0.0
         if self._runs or self._khi:
             base = (math.floor(self._held * self.ppr + 1e-9) + 1) / self.ppr
-        run = _Run(rid=self._next_rid, base=base, first_q=q, last_raw_q=q)
+        run = Run(rid=self._next_rid, base=base, first_q=q, last_raw_q=q)
         self._next_rid += 1
         self._run = run
         self._runs[run.rid] = run

@@ -24,7 +24,7 @@ except ImportError:  # pragma: no cover - depends on the build
 _HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])  # moments s0..s4 -> normal equations
 
 
-def _weighted_quadratic(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.ndarray) -> np.ndarray:
+def weighted_quadratic(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.ndarray) -> np.ndarray:
     """Per row, the weighted least-squares quadratic y = c0 + c1 x + c2 x^2 over its
     points (weights ``wgt``, 0 for unused ones): (rows, 3).  A straight line where a
     row has two points, zeros where it has fewer."""
@@ -48,7 +48,7 @@ def _weighted_quadratic(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.
     return np.linalg.solve(A, b[..., None])[..., 0]
 
 
-def _make_room(buf: np.ndarray, lo: int, hi: int, n: int) -> tuple[np.ndarray, int, int]:
+def make_room(buf: np.ndarray, lo: int, hi: int, n: int) -> tuple[np.ndarray, int, int]:
     """A column buffer whose live columns are [lo, hi) with room for n more after them:
     the same one, or a copy compacted to start at 0 and grown by doubling (amortised
     O(1) per column).  Returns (buffer, lo, hi)."""
@@ -63,7 +63,7 @@ def _make_room(buf: np.ndarray, lo: int, hi: int, n: int) -> tuple[np.ndarray, i
     return new, 0, live
 
 
-class _Smoothing:
+class KnotSmoothing:
     """The smoothing part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose
     ``__init__`` sets the attributes): knots of the committed edges and the speed
     and angle at any sample."""
@@ -202,7 +202,7 @@ class _Smoothing:
         y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
         wgt = use * self._kernel[None, :]
         npts = use.sum(axis=1)
-        coef = _weighted_quadratic(x, y, wgt, npts)
+        coef = weighted_quadratic(x, y, wgt, npts)
         run = self._run
         T = Tc[k]
         th = run.base + (nc[k] + coef[:, 0]) / self.ppr
@@ -225,7 +225,7 @@ class _Smoothing:
 
     def _append_knots(self, T: np.ndarray, th: np.ndarray, w: np.ndarray, rid: int) -> None:
         n = T.size
-        buf, self._klo, self._khi = _make_room(self._kbuf, self._klo, self._khi, n)
+        buf, self._klo, self._khi = make_room(self._kbuf, self._klo, self._khi, n)
         self._kbuf = buf
         buf[0, self._khi:self._khi + n] = T
         buf[1, self._khi:self._khi + n] = th

@@ -15,21 +15,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from cmsensord.dsp.tacho.causal import _CausalSpeed
+from cmsensord.dsp.tacho.causal import CausalSpeed
 from cmsensord.dsp.tacho.edges import (
-    _PREDICT_INTERVALS,
+    PREDICT_INTERVALS,
     SUB,
     TachoCounters,
     TachoEvent,
     TachoUpdate,
-    _EdgeRuns,
-    _Run,
+    EdgeRuns,
+    Run,
     tacho_frames_to_arrays,
 )
-from cmsensord.dsp.tacho.smoothing import _Smoothing
+from cmsensord.dsp.tacho.smoothing import KnotSmoothing
 
 
-class TachoTracker(_EdgeRuns, _Smoothing, _CausalSpeed):
+class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
     """Streaming tacho processing: edges in, speed and angle at any sample out.
 
     Parameters
@@ -103,8 +103,8 @@ class TachoTracker(_EdgeRuns, _Smoothing, _CausalSpeed):
         self.counters = TachoCounters()
         self._now: int | None = None  # coverage end, samples (exclusive)
         self._last_q: int | None = None  # last edge received
-        self._run: _Run | None = None  # the current (not ended) run
-        self._runs: dict[int, _Run] = {}
+        self._run: Run | None = None  # the current (not ended) run
+        self._runs: dict[int, Run] = {}
         self._next_rid = 0
         self._held = 0.0  # turns held after the last ended valid run
         self._had_loss = False
@@ -115,7 +115,7 @@ class TachoTracker(_EdgeRuns, _Smoothing, _CausalSpeed):
         self._cq_last: int | None = None  # last committed edge, 1/256 sample
         self._n_last = 0
         self._pending: deque[int] = deque()  # edges of the current run not yet classified
-        self._hist: deque[tuple[float, float]] = deque(maxlen=_PREDICT_INTERVALS)  # (mid q, pulses/q)
+        self._hist: deque[tuple[float, float]] = deque(maxlen=PREDICT_INTERVALS)  # (mid q, pulses/q)
         self._final = 0  # knots finalised in the current run (centres 0 .. _final-1)
         # final knots of all runs: times (samples), turns, speed (turns/sample), run id
         self._kbuf = np.empty((4, 1024))  # rows: time, turns, speed, run id; live columns [_klo, _khi)
