@@ -44,7 +44,6 @@ _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input ye
 _TABLE_SEG = 64   # the gain table is computed in segments of this many speeds
 
 
-
 def have_kernel() -> bool:
     """True when the compiled kernel is importable."""
     return _trackerkernel is not None
@@ -479,7 +478,7 @@ class OrderTracker:
         st = self.state
         B, L = self.block, self.lag
         cur = with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
-                          miss, self.C)
+                         miss, self.C)
         h0 = st.next_smooth * B                              # index of cur[0]
         n_end = n0 + len(rd)
         jb = st.next_smooth
@@ -505,7 +504,7 @@ class OrderTracker:
                 for chans, m in mask_groups(cur.get("miss")):
                     kg = cur["k"] if m is None else np.where(m[:, None], 0.0, cur["k"])
                     res = backward_numpy(cur["c"], kg, cur["S"], cur["P"], cur["zp"], cur["e"],
-                                          starts, W, B)
+                                         starts, W, B)
                     if xs is None:
                         xs = res
                     else:
