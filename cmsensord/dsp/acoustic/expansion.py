@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 from cmsensord.dsp.acoustic.model import AcousticModel
+from cmsensord.dsp.acoustic.polynomials import phi2_coefficients
 from cmsensord.dsp.acoustic.step import Prior
 
 __all__ = ["expansion_coefficients", "z_moments", "bessel_limit", "BESSEL", "SQRT2"]
@@ -62,8 +63,7 @@ def expansion_coefficients(model: AcousticModel, prior: Prior, *, y_floor: float
     delta1 = model.beta1 - 2.0 * z_pred * alpha1
     delta2 = model.p22
     # phi2(z) = ca (zeta^2 - 1) - cb zeta, zeta = (z - z*) / sqrt(Gamma_z)
-    ca = 1.0 / math.sqrt(2.0 * (1.0 + kz))
-    cb = math.sqrt(2.0 * kz / (1.0 + kz))
+    ca, cb = phi2_coefficients(kz)
     q = ca / gz
     r = cb / sz
     A = {}

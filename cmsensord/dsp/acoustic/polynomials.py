@@ -1,8 +1,9 @@
 """The orthonormal polynomial families of the priors (eqs. 9, 10, 15; docs/acoustic.md §3).
 
 :func:`laguerre_phi` and :func:`hermite_phi` evaluate any order with scipy.special (the
-quadrature reference and the tests); :func:`phi_z` is the closed form of orders 1 and 2
-of the observation's family that the estimator uses (math module only).
+quadrature reference and the tests); :func:`phi_z` and :func:`phi2_coefficients` are the
+closed forms of orders 1 and 2 of the observation's family that the estimator uses (math
+module only).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import math
 
 import numpy as np
 
-__all__ = ["laguerre_phi", "hermite_phi", "phi_z"]
+__all__ = ["laguerre_phi", "hermite_phi", "phi_z", "phi2_coefficients"]
 
 
 def laguerre_phi(order: int, x, mean: float, var: float) -> np.ndarray:
@@ -40,8 +41,15 @@ def hermite_phi(order: int, a, mean: float, var: float) -> np.ndarray:
     return eval_hermitenorm(order, u) / math.sqrt(math.factorial(order))
 
 
-def phi_z(zeta: float, kz: float) -> tuple[float, float]:
-    """phi_1(z), phi_2(z) of eq. (10) in terms of zeta = (z - z*)/sqrt(Gamma_z), 1/m_z = kz."""
+def phi2_coefficients(kz: float) -> tuple[float, float]:
+    """ca, cb of phi_2(z) = ca (zeta^2 - 1) - cb zeta, zeta = (z - z*)/sqrt(Gamma_z), 1/m_z = kz
+    (docs §3)."""
     ca = 1.0 / math.sqrt(2.0 * (1.0 + kz))
     cb = math.sqrt(2.0 * kz / (1.0 + kz))
+    return ca, cb
+
+
+def phi_z(zeta: float, kz: float) -> tuple[float, float]:
+    """phi_1(z), phi_2(z) of eq. (10) in terms of zeta = (z - z*)/sqrt(Gamma_z), 1/m_z = kz."""
+    ca, cb = phi2_coefficients(kz)
     return -zeta, ca * (zeta * zeta - 1.0) - cb * zeta

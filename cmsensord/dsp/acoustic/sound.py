@@ -11,6 +11,7 @@ import math
 
 from cmsensord.dsp.acoustic.expansion import BESSEL
 from cmsensord.dsp.acoustic.model import AcousticModel
+from cmsensord.dsp.acoustic.polynomials import phi2_coefficients
 
 __all__ = ["sound_coefficients", "sound_posterior", "sound_estimate", "bessel_limit_sound"]
 
@@ -29,8 +30,7 @@ def sound_coefficients(model: AcousticModel, z_pred: float, gz: float) -> dict:
         gy = 1e-12 * max(ys * ys, z_pred * z_pred)
     sz = math.sqrt(gz)
     kz = gz / (z_pred * z_pred)
-    ca = 1.0 / math.sqrt(2.0 * (1.0 + kz))
-    cb = math.sqrt(2.0 * kz / (1.0 + kz))
+    ca, cb = phi2_coefficients(kz)
     if ys > 0:
         mu3 = 2.0 * gy * gy / ys                      # gamma: skewness 2 sqrt(Gamma_y) / y*
         mu4 = 3.0 * gy * gy + 6.0 * gy ** 3 / (ys * ys)
