@@ -324,7 +324,7 @@ class Processor:
         self._mic_cols = [c for c, ch in enumerate(usable) if ch.kind == "microphone"]
         if not self._mic_cols:
             return
-        from cmsensord.acoustic_calib import load_calibration
+        from cmsensord.acoustic_model import load_calibration
         from cmsensord.dsp.acoustic import AcousticEstimator, Guards
 
         models = []
