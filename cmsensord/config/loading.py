@@ -154,7 +154,7 @@ def _check_calibrations(cfg: Config, source: str) -> None:
         if ch.kind != "microphone":
             continue
         key = f"channels[{i}].calibration" if ch.calibration is not None else "acoustic.calibration"
-        from cmsensord.acoustic_calib import load_calibration
+        from cmsensord.acoustic_model import load_calibration
 
         try:
             load_calibration(ch.calibration or cfg.acoustic.calibration)

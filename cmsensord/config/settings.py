@@ -15,6 +15,7 @@ from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
 __all__ = [
     "MAX_CHANNELS",
+    "NOMINAL_RATE_HZ",
     "MonitorConfig",
     "ChannelConfig",
     "LinkConfig",
@@ -31,6 +32,25 @@ __all__ = [
 MAX_CHANNELS = 8
 
 
+#: observations per second of board time the decision rule is written for (100 Hz RMS frames)
+NOMINAL_RATE_HZ = 100.0
+
+
+def _f_r_below_decision_size(obj: Any) -> tuple[str, str, Any] | None:
+    per_decision = obj.decision_period_s * NOMINAL_RATE_HZ
+    if not obj.f_r < per_decision:
+        return "f_r", (f"must be below the {per_decision:g} observations per decision "
+                       f"(decision_period_s {obj.decision_period_s:g} x {NOMINAL_RATE_HZ:g} blocks/s): "
+                       "at or above it no decision can flag an anomaly"), obj.f_r
+    return None
+
+
+def _combined_needs_baseline(obj: Any) -> tuple[str, str, Any] | None:
+    if obj.severity == "combined" and obj.baseline is None:
+        return "severity", "combined needs a baseline (run `cmsensord calibrate`)", obj.severity
+    return None
+
+
 @dataclass(frozen=True)
 class MonitorConfig:
     """Kim et al. 2023 parameters: the bank of n AKFs, outliers, 1 s anomaly decisions."""
@@ -45,8 +65,27 @@ class MonitorConfig:
     decision_period_s: float = setting(1.0, "seconds between anomaly decisions", gt=0)
     p0: float = setting(1.0, "initial error variance P(0)", gt=0)
     q0: float = setting(1e-3, "initial process noise estimate Q^(0)", ge=0)
+    baseline: float | None = setting(
+        None, "healthy block RMS learned by `cmsensord calibrate`; when set the bank watches "
+        "block RMS / baseline (R in units of baseline^2)", gt=0)
+    baseline_spread: float | None = setting(
+        None, "robust std of the healthy per-decision level / baseline (calibrate)", ge=0)
+    severity: str = setting(
+        "auto", "paper: the AKF index of Kim et al. 2023 alone; combined: also the level against "
+        "the baseline (level_alert, level_danger); auto: combined when a baseline is set",
+        choices=("auto", "paper", "combined"))
+    level_alert: float = setting(2.0, "level / baseline giving S_level = 0.5 (the analysts' "
+                                 "2 x baseline alert)", gt=1)
+    level_danger: float = setting(4.0, "level / baseline giving S_level = 1", gt=1)
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (greater("r_max", "r_min"),)
+    _RULES: ClassVar[tuple[Rule, ...]] = (greater("r_max", "r_min"),
+                                          greater("level_danger", "level_alert"),
+                                          _f_r_below_decision_size, _combined_needs_baseline)
+
+    @property
+    def combined(self) -> bool:
+        """True when the severity also grades the level against the learned baseline."""
+        return self.severity == "combined" or (self.severity == "auto" and self.baseline is not None)
 
     def __post_init__(self) -> None:
         validate(self)
