@@ -397,6 +397,7 @@ def test_default_yaml_holds_the_tacho_and_orders_defaults():
     ({"components": []}, "orders.components: expected a non-empty list"),
     ({"components": [{"name": "a", "order": 1, "ordr": 2}]}, "unknown key 'ordr' (did you mean 'order'?)"),
     ({"smoother_lag_s": 0.5}, "orders.smoother_lag_s: must be >= 0 and <= 0.2"),
+    ({"components": [{"name": "a", "order": 1}, {"order": 2}]}, "orders.components[1].name: missing (required)"),
 ])
 def test_bad_orders_sections(orders, message):
     with pytest.raises(ConfigError, match=re.escape(message)):

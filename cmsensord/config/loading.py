@@ -77,6 +77,12 @@ def _mapping(value: Any, source: str, path: str) -> dict[Any, Any]:
 
 
 def _build(cls: type, values: Mapping[str, Any], source: str, prefix: str) -> Any:
+    """``cls(**values)``; a required key that is absent or a failed check is a ConfigError
+    at ``prefix`` in ``source``."""
+    for f in dataclasses.fields(cls):
+        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        if required and f.name not in values:
+            raise ConfigError(source, _join(prefix, f.name), "missing (required)")
     try:
         return cls(**values)
     except ConfigError as err:
