@@ -210,12 +210,9 @@ SEVERITY = _obj(
             "type": "boolean",
             "description": "true for the first decision period, while the filters converge",
         },
-        "severity_akf": _num("combined severity only: S_idx of the AKF bank alone (eqs. 17-18)",
-                             nullable=False),
-        "severity_level": _num("combined severity only: S_level, the period's level / baseline graded "
-                               "0.5 at monitor.level_alert up to 1 at monitor.level_danger", nullable=False),
-        "level_ratio": _num("combined severity only: median block RMS of the period / the learned "
-                            "baseline (absent when every observation was missing)", nullable=False),
+        "severity_akf": _num("combined: S_idx of the AKF bank", nullable=False),
+        "severity_level": _num("combined: S_level of level_ratio", nullable=False),
+        "level_ratio": _num("combined: median block RMS / baseline", nullable=False),
     },
     [
         "timestamp",
