@@ -69,7 +69,9 @@ def _tacho_frames(rec: Recording, plan: BlockPlan) -> tuple[np.ndarray, np.ndarr
     bounds, off = block_edges(pos, plan.block_len, plan.n_blocks)
     most = int(np.diff(bounds).max()) if plan.n_blocks else 0
     if most > MAX_TACHO_EDGES:
-        raise ImportFailure(f"tacho {rec.tacho_source}: {most} edges in one {plan.block_len}-sample block, "
+        what = (f"--rpm {rec.rpm:g}" if rec.tacho_edges is None else
+                f"{Path(rec.sources[0]).name}: tacho column {rec.tacho_source!r}")
+        raise ImportFailure(f"{what}: {most} edges in one {plan.block_len}-sample block, "
                             f"a TACHO frame holds at most {MAX_TACHO_EDGES}; check --tacho-threshold, "
                             "--ppr or --rpm")
     return bounds, off

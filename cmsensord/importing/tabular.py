@@ -86,6 +86,18 @@ def _first_lines(path: str) -> list[str]:
     return lines[:20]
 
 
+def _loadtxt_message(text: str, header: int) -> str:
+    """numpy.loadtxt's message with file lines (from 1) and columns (from 0, as --channels counts)."""
+    msg = re.sub(r";? ?use `usecols`.*", "", " ".join(text.split())).rstrip(". ")
+    m = re.search(r"could not convert string (.*) to float64 at row (\d+), column (\d+)", msg)
+    if m:  # loadtxt: data row from 0, column from 1
+        return f"line {int(m[2]) + 1 + header}, column {int(m[3]) - 1}: {m[1]} is not a number"
+    m = re.search(r"the number of columns changed from (\d+) to (\d+) at row (\d+)", msg)
+    if m:  # loadtxt: data row from 1
+        return f"line {int(m[3]) + header}: {m[2]} column(s) where the lines before have {m[1]}"
+    return msg
+
+
 def read_tabular(path: str, separator: str | None = None, header: bool | None = None) -> Table:
     lines = _first_lines(path)
     sep, has_header, decimal_comma = sniff(lines, separator, header)
@@ -101,7 +113,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
         a = np.loadtxt(src, delimiter=sep, skiprows=1 if has_header else 0, ndmin=2,
                        dtype=np.float64, quotechar='"', encoding="utf-8-sig")
     except ValueError as exc:
-        msg = re.sub(r";? ?use `usecols`.*", "", " ".join(str(exc).split())).rstrip(". ")
+        msg = _loadtxt_message(str(exc), int(has_header))
         raise ImportFailure(f"{path}: {msg} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
                             f"{'a header line' if has_header else 'no header'}); fix the file, or set "
                             "--separator / --header / --no-header") from None
