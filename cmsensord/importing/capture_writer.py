@@ -143,7 +143,8 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         snaps.append({"source": s.source, "start_s": start / fs,
                       "length": int(plan.snap_blocks[k] * L), "dropped": int(plan.dropped[k]),
                       "pct_of_record": round(100.0 * start / total, 4),
-                      "source_time_s": s.source_time_s, "gap_before_s": gap})
+                      "source_time_s": None if s.source_time_s is None else round(s.source_time_s, 6),
+                      "gap_before_s": gap})
     return {
         "format": "cmsensord import", "version": 1,
         "capture": Path(out).name, "sources": rec.sources, "mode": mode,

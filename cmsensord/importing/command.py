@@ -33,8 +33,8 @@ examples:
   cmsensord import femto/Bearing1_1.npz --unit mg --channels 0 --names horizontal --out b11.bin
   cmsensord import 'Bearing1_1/acc_*.csv' --fs 25600 --channels 4 --unit g --snapshot-interval 10 --out b11.bin
   cmsensord import ims/NA.mat --fs 20480 --unit g --snapshot-len 20480 --out na.bin
-Columns and channels count from 0. The capture's sidecar OUT.json lists the snapshots
-(board second, length, %% of the record, original time and gap), units and scales."""
+Columns and channels count from 0. The sidecar CAPTURE.json (b11.bin.json) lists the snapshots
+(board second, length, % of the record, original time and gap), units and scales."""
 
 
 def _list(text: str) -> tuple[str, ...]:
@@ -146,11 +146,11 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
     tach = p.add_mutually_exclusive_group()
     tach.add_argument("--tacho-column", dest="imp_tacho_column", metavar="COL",
                       help="a tacho pulse column/channel (index or name): rising crossings are edges")
-    tach.add_argument("--rpm", dest="imp_rpm", type=_number,
+    tach.add_argument("--rpm", dest="imp_rpm", type=_number, metavar="RPM",
                       help="constant shaft speed: TACHO frames with --ppr edges a revolution")
     p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=_real, metavar="X",
                    help="pulse threshold (default: halfway between the column's 1st and 99th percentile)")
-    p.add_argument("--ppr", dest="imp_ppr", type=_count(1, 255), default=1,
+    p.add_argument("--ppr", dest="imp_ppr", type=_count(1, 255), default=1, metavar="N",
                    help="tacho pulses per revolution (default 1)")
     return p
 

@@ -193,6 +193,12 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
             time = None if t.times is None else float(t.times[s])
             snaps.append(Snapshot(f"{t.name}[{k}]" if many else t.name, pos, n, time))
             pos += n
+        if t.times is not None and (np.diff(t.times) <= 0).any():
+            bad = np.flatnonzero(np.diff(t.times) <= 0)
+            k = int(bad[0]) + 1
+            notes.append(f"{t.name}: the snapshot times do not increase at {bad.size} place(s), first at "
+                         f"snapshot {k} ({t.times[k - 1]:g} s -> {t.times[k]:g} s); the snapshots stay in "
+                         "file order, the sidecar keeps the file's times")
         if opts.snapshot_len and t.data.shape[1] % opts.snapshot_len:
             notes.append(f"{t.name}: {t.data.shape[1]} samples are not a whole number of "
                          f"{opts.snapshot_len}-sample snapshots: the last one holds "
