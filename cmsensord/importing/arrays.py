@@ -67,7 +67,11 @@ def pick_data(path: str, arrays: dict, chosen: str | None, option: str, what: st
 
 def read_npz(path: str, array: str | None) -> Table:
     with _load(path) as z:
-        arrays = {k: z[k] for k in z.files}
+        try:
+            arrays = {k: z[k] for k in z.files}
+        except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+            raise ImportFailure(f"{path}: an array cannot be read ({' '.join(str(exc).split())}); "
+                                "save the archive with numeric arrays only") from None
     name = pick_data(path, arrays, array, "--array", "array")
     data = as_snapshot_array(path, f"array {name!r}", arrays[name])
     times = None

@@ -32,6 +32,7 @@ from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan
 from .errors import ImportFailure
 from .recording import Recording
+from .tacho import block_edges, rpm_edges
 
 __all__ = ["CHUNK_BLOCKS", "FW_VERSION", "MAX_TACHO_EDGES", "choose_ranges", "sidecar_path",
            "write_capture"]
@@ -58,8 +59,6 @@ def choose_ranges(rec: Recording, requested: tuple[float, ...] | None) -> list[f
 
 
 def _tacho_frames(rec: Recording, plan: BlockPlan) -> tuple[np.ndarray, np.ndarray] | None:
-    from .tacho import block_edges, rpm_edges
-
     if rec.tacho_edges is not None:
         pos = plan.to_board(rec, rec.tacho_edges)
     elif rec.tacho_source == "rpm" and rec.rpm:
@@ -169,18 +168,19 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
     part = Path(f"{out}.part")
     side = sidecar_path(out)
     side_part = Path(f"{side}.part")
+    if Path(out).is_dir():
+        raise ImportFailure(f"{out}: is a directory; give --out a file name, e.g. {Path(out) / 'capture.bin'}")
     try:
         try:
-            f = open(part, "wb")
+            with open(part, "wb") as f:
+                stats = _frames(rec, plan, mode, scale, f, progress)
+            meta = _sidecar(rec, plan, mode, full_scale, scale, stats, out, extra or {})
+            side_part.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+            os.replace(part, out)
+            os.replace(side_part, side)
         except OSError as exc:
-            raise ImportFailure(f"{out}: cannot write the capture: {exc.strerror or exc}; "
-                                "check that the directory exists and is writable") from None
-        with f:
-            stats = _frames(rec, plan, mode, scale, f, progress)
-        meta = _sidecar(rec, plan, mode, full_scale, scale, stats, out, extra or {})
-        side_part.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
-        os.replace(part, out)
-        os.replace(side_part, side)
+            raise ImportFailure(f"{out}: cannot write the capture: {exc.strerror or exc}; check that "
+                                "the directory exists, is writable and has room") from None
     except BaseException:
         for p in (part, side_part):
             p.unlink(missing_ok=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from cmsensord.errors import EXIT_USAGE
 
-from .adc import ADC_MAX, OFFSET
+from .adc import ADC_MAX, OFFSET, nice_range
 from .blocks import choose_block_len, plan_blocks, remainder_note
 from .capture_writer import choose_ranges, sidecar_path, write_capture
 from .errors import ImportFailure
@@ -210,7 +210,6 @@ def _report(meta: dict, rec, out: str, size: int, notes: list[str]) -> list[str]
         nclip = meta["clipped_samples"][c]
         lines.append(line + (", no clipping" if not nclip else ""))
         if nclip:
-            from .adc import nice_range
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
                          f"clipped at +-{fs_:g} m/s2 (counts 0/{ADC_MAX}); those blocks carry the "
                          f"clipped flag; --range {nice_range(peaks[c]):g} avoids it")

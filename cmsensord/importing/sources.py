@@ -81,6 +81,14 @@ def collect_files(srcs: list[str], globs: list[str], order: str) -> list[str]:
 
 
 def read_table(path: str, opts: ImportOptions) -> Table:
+    """The file's table, by its extension; an unreadable file is a one-line ImportFailure."""
+    try:
+        return _read_by_extension(path, opts)
+    except OSError as exc:
+        raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _read_by_extension(path: str, opts: ImportOptions) -> Table:
     ext = Path(path).suffix.lower()
     if ext == ".wav":
         return read_wav(path)

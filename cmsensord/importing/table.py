@@ -10,6 +10,7 @@ or a multi-snapshot file. ``fs``, ``times`` (each snapshot's start, seconds) and
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +38,6 @@ class Table:
 
     @property
     def name(self) -> str:
-        from pathlib import Path
         return Path(self.path).name
 
 
