@@ -277,7 +277,7 @@ def test_errors_are_one_line_and_leave_nothing_behind(tmp_path):
     np.save(tmp_path / "p.npy", np.stack([np.zeros(4096), np.tile([0.0, 1.0], 2048)], axis=1))
     cases = {
         ("x.csv", "--fs", "100", "--columns", "acc"):
-            "x.csv: no column 'acc' (columns: a, b, c); use --channels",
+            "x.csv: no column 'acc' (columns: a, b, c); use --columns",
         ("x.csv",): "x.csv: the file does not say its sampling rate; give --fs HZ",
         ("bad.csv", "--fs", "10"):
             "bad.csv: line 2, column 1: 'oops' is not a number (separator ';', no header); "

@@ -9,6 +9,16 @@ seq counts every frame; t0 is the block's first sample on the board clock,
 which runs on continuously through the snapshots (:mod:`.blocks`). A block with
 a sample at 0 or 4095 carries the clipped flag.
 
+The sidecar (``OUT.json``) holds what the frames cannot: the sources, the
+channel names, the input unit and scale factor, the full-scale range, the
+clipped blocks and samples per channel, the speed (``rpm``, ``rpm_source``) and
+per snapshot its ``source`` (file, ``[i]`` for the i-th inside a file),
+``start_s`` (board seconds), ``length`` (samples in blocks), ``dropped``
+(samples at its end that fill no block), ``pct_of_record`` (its start as a
+percentage of the capture's board time), ``source_time_s`` (its start in the
+original recording, when known) and ``gap_before_s`` (from the previous
+snapshot's end to its start there).
+
 Counts are computed in vectorised chunks of ``CHUNK_BLOCKS`` blocks; only the
 frame encoding is per block. The capture is written to ``OUT.part`` and the
 sidecar to ``OUT.json.part``; both are renamed when complete and deleted on any

@@ -124,7 +124,8 @@ class _Layout:
         self.columns = list(t.columns)
         self.tacho = _column(t, opts.tacho_column, "--tacho-column") if opts.tacho_column else None
         if opts.channels:
-            self.idx = [_column(t, tok, "--channels") for tok in opts.channels]
+            option = "--columns" if t.kind == "column" else "--channels"  # the same option
+            self.idx = [_column(t, tok, option) for tok in opts.channels]
         else:
             self.idx = [i for i in range(len(t.columns)) if i != self.tacho]
         if not self.idx:
