@@ -313,3 +313,21 @@ def test_import_then_replay_end_to_end(tmp_path):
     info = summarize(log)
     assert info["topics"]["/cm/ch0/severity"] == 4  # one severity message per 1-s decision
     assert info["events"][0]["message"] == "board firmware 1.0: RAW mode, 1 channel(s), fs 25600 Hz, block 256"
+
+
+def test_progress_bar_only_on_a_terminal():
+    import io
+
+    from cmsensord.importing.command import _Bar
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    tty, pipe = Tty(), io.StringIO()
+    for stream in (tty, pipe):
+        bar = _Bar(10, "import: writing x.bin", stream=stream)
+        bar(10)
+        bar.close()
+    assert tty.getvalue().startswith("\rimport: writing x.bin [" + "#" * 30 + "] 100.0%")
+    assert pipe.getvalue() == ""

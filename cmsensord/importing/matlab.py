@@ -9,7 +9,6 @@ read: the error says how to re-save them. Axes: see :func:`.table.as_snapshot_ar
 from __future__ import annotations
 
 import numpy as np
-import scipy.io
 
 from .arrays import pick_data, scalar_named
 from .errors import ImportFailure
@@ -19,6 +18,8 @@ __all__ = ["read_mat"]
 
 
 def read_mat(path: str, variable: str | None) -> Table:
+    import scipy.io  # 0.3 s to import: only when a .mat file is read
+
     try:
         m = scipy.io.loadmat(path)
     except NotImplementedError:

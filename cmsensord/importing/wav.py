@@ -12,7 +12,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.io import wavfile
 
 from .errors import ImportFailure
 from .table import Table
@@ -21,6 +20,8 @@ __all__ = ["read_wav"]
 
 
 def read_wav(path: str) -> Table:
+    from scipy.io import wavfile  # 0.3 s to import: only when a WAV file is read
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", wavfile.WavFileWarning)  # unknown chunks are skipped
