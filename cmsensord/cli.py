@@ -405,7 +405,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,calibrate,summary}", parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,summary}",
+                           parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
@@ -430,6 +431,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     v.add_argument("--bandwidth", type=_positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
+    from cmsensord.importing.command import add_import_parser
+    add_import_parser(sub)
     add_calibrate_parser(sub)
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
@@ -491,6 +494,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             except BrokenPipeError:     # `cmsensord summary FILE | head`: the reader has enough
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 0
+        if args.command == "import":
+            from cmsensord.importing.command import run_import
+            return run_import(args)
         if args.command == "calibrate":
             return run_calibrate(args)
         if args.command == "record":

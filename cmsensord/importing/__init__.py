@@ -1,0 +1,28 @@
+"""``cmsensord import``: recordings from other data loggers turned into captures.
+
+A capture of the board's serial protocol (docs/PROTOCOL.md) is the one input
+``replay`` and everything downstream read; this package writes one from a WAV,
+CSV/TSV, NPY/NPZ or MATLAB v5/v7 file, or from a directory or glob of snapshot
+files, plus a sidecar JSON (``CAPTURE.json``, e.g. ``b11.bin.json``) that records where every snapshot
+came from and the gaps between them.
+
+Modules, one job each:
+
+* :mod:`.errors` -- the one-line :class:`ImportFailure`;
+* :mod:`.options` -- the settings the user asked for;
+* :mod:`.table` -- what every reader returns (raw columns, maybe fs, times, rpm);
+* :mod:`.wav`, :mod:`.tabular`, :mod:`.arrays`, :mod:`.matlab` -- the readers;
+* :mod:`.sources` -- SRC arguments to files in order, files to a :class:`Recording`;
+* :mod:`.recording` -- the in-memory recording (m/s², snapshots, tacho edges);
+* :mod:`.units` -- the input unit to m/s²;
+* :mod:`.adc` -- the 12-bit full-scale range and the counts;
+* :mod:`.tacho` -- tacho edges from a pulse column or a constant speed;
+* :mod:`.blocks` -- block length, which samples fill blocks, the board clock;
+* :mod:`.capture_writer` -- frames to ``OUT.part``, the sidecar, the rename;
+* :mod:`.command` -- the argparse sub-command and its summary.
+"""
+
+from .errors import ImportFailure
+from .recording import Recording, Snapshot
+
+__all__ = ["ImportFailure", "Recording", "Snapshot"]

@@ -1,0 +1,198 @@
+"""A Recording to a capture file (the bytes a board would send) and its sidecar JSON.
+
+Frames go out as ``firmware_sim`` sends them (docs/PROTOCOL.md), through the
+encoders of :mod:`cmsensord.protocol`: per block, a STATUS first when one is
+due (block 0, then once a second of board time), then one RAW frame per channel
+(RAW mode) or one RMS frame (RMS mode, the PROTOCOL.md RMS of the block's
+counts, as the board computes it), then a TACHO frame when a tacho is imported.
+seq counts every frame; t0 is the block's first sample on the board clock,
+which runs on continuously through the snapshots (:mod:`.blocks`). A block with
+a sample at 0 or 4095 carries the clipped flag.
+
+The sidecar (``OUT.json``) holds what the frames cannot: the sources, the
+channel names, the input unit and scale factor, the full-scale range, the
+clipped blocks and samples per channel, the speed (``rpm``, ``rpm_source``) and
+per snapshot its ``source`` (file, ``[i]`` for the i-th inside a file),
+``start_s`` (board seconds), ``length`` (samples in blocks), ``dropped``
+(samples at its end that fill no block), ``pct_of_record`` (its start as a
+percentage of the capture's board time), ``source_time_s`` (its start in the
+original recording, when known) and ``gap_before_s`` (from the previous
+snapshot's end to its start there).
+
+Counts are computed in vectorised chunks of ``CHUNK_BLOCKS`` blocks; only the
+frame encoding is per block. The capture is written to ``OUT.part`` and the
+sidecar to ``OUT.json.part``; both are renamed when complete and deleted on any
+error, so no partial capture is left behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from cmsensord.dsp.rms import block_rms
+from cmsensord.protocol import (FLAG_CLIPPED, MODE_RAW, MODE_RMS, Status, encode_raw, encode_rms,
+                                encode_status, encode_tacho)
+
+from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
+from .blocks import BlockPlan
+from .errors import ImportFailure
+from .recording import Recording
+from .tacho import block_edges, rpm_edges
+
+__all__ = ["CHUNK_BLOCKS", "FW_VERSION", "MAX_TACHO_EDGES", "choose_ranges", "sidecar_path",
+           "write_capture"]
+
+CHUNK_BLOCKS = 1000
+FW_VERSION = 0x0100
+MAX_TACHO_EDGES = (4096 - 2) // 4  # edges one TACHO payload holds
+
+
+def sidecar_path(out: str | Path) -> Path:
+    return Path(f"{out}.json")
+
+
+def choose_ranges(rec: Recording, requested: tuple[float, ...] | None) -> list[float]:
+    """Full-scale range (m/s²) per channel: as given (one for all, or one each), else from the data."""
+    C = rec.n_channels
+    if requested:
+        if len(requested) not in (1, C):
+            raise ImportFailure(f"--range gives {len(requested)} values for {C} channels; give one, "
+                                "or one per channel")
+        return [float(v) for v in (requested * C if len(requested) == 1 else requested)]
+    peak = np.abs(rec.data).max(axis=1) if rec.n_samples else np.zeros(C)
+    return [nice_range(p) for p in peak]
+
+
+def _tacho_frames(rec: Recording, plan: BlockPlan) -> tuple[np.ndarray, np.ndarray] | None:
+    if rec.tacho_edges is not None:
+        pos = plan.to_board(rec, rec.tacho_edges)
+    elif rec.tacho_source == "rpm" and rec.rpm:
+        pos = rpm_edges(plan.n_board_samples, rec.fs, rec.rpm, rec.ppr)
+    else:
+        return None
+    bounds, off = block_edges(pos, plan.block_len, plan.n_blocks)
+    most = int(np.diff(bounds).max()) if plan.n_blocks else 0
+    if most > MAX_TACHO_EDGES:
+        what = (f"--rpm {rec.rpm:g}" if rec.tacho_edges is None else
+                f"{Path(rec.sources[0]).name}: tacho column {rec.tacho_source!r}")
+        raise ImportFailure(f"{what}: {most} edges in one {plan.block_len}-sample block, "
+                            f"a TACHO frame holds at most {MAX_TACHO_EDGES}; check --tacho-threshold, "
+                            "--ppr or --rpm")
+    return bounds, off
+
+
+def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
+            progress: Callable[[int], None] | None) -> dict:
+    """Encode and write every frame; returns the counts of frames, clipped blocks and samples."""
+    C, L, fs = rec.n_channels, plan.block_len, rec.fs
+    offset = np.full(C, OFFSET)
+    tacho = _tacho_frames(rec, plan)
+    every = max(1, int(round(fs / L)))
+    status = dict(fw_version=FW_VERSION, mode=MODE_RAW if mode == "raw" else MODE_RMS, n_channels=C,
+                  fs=fs, block_len=L, tacho_inputs=int(tacho is not None), tacho_ppr=rec.ppr,
+                  overruns=0, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()))
+    clip_blocks = np.zeros(C, dtype=np.int64)
+    clip_samples = np.zeros(C, dtype=np.int64)
+    seq = frames = 0
+    ar = np.arange(L)
+    for c0 in range(0, plan.n_blocks, CHUNK_BLOCKS):
+        c1 = min(c0 + CHUNK_BLOCKS, plan.n_blocks)
+        counts = to_counts(rec.data[:, plan.src_start[c0:c1, None] + ar], scale)  # (C, nb, L)
+        edge = (counts == 0) | (counts == ADC_MAX)  # docs/PROTOCOL.md: clipped
+        clip = edge.any(axis=-1)  # (C, nb)
+        clip_blocks += clip.sum(axis=1)
+        clip_samples += edge.sum(axis=(1, 2))
+        if mode == "rms":
+            rms = block_rms(counts.reshape(C, -1), scale, offset, L).T  # (nb, C)
+            any_clip = clip.any(axis=0)
+        parts = []
+        for i in range(c1 - c0):
+            b = c0 + i
+            t0 = b * L
+            if b % every == 0:
+                parts.append(encode_status(seq, t0, Status(**status, uptime_s=t0 // fs)))
+                seq += 1
+            if mode == "raw":
+                for c in range(C):
+                    parts.append(encode_raw(seq, t0, c, counts[c, i], FLAG_CLIPPED if clip[c, i] else 0))
+                    seq += 1
+            else:
+                parts.append(encode_rms(seq, t0, rms[i], FLAG_CLIPPED if any_clip[i] else 0))
+                seq += 1
+            if tacho is not None:
+                bounds, off = tacho
+                parts.append(encode_tacho(seq, t0, 0, off[bounds[b]:bounds[b + 1]]))
+                seq += 1
+        frames += len(parts)
+        f.write(b"".join(parts))
+        if progress is not None:
+            progress(c1)
+    return {"frames": frames, "clipped_blocks": clip_blocks.tolist(),
+            "clipped_samples": clip_samples.tolist(),
+            "tacho_edges": int(tacho[1].size) if tacho is not None else 0}
+
+
+def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float], scale: np.ndarray,
+             stats: dict, out: str, extra: dict) -> dict:
+    L, fs = plan.block_len, rec.fs
+    total = max(plan.n_board_samples, 1)
+    snaps = []
+    prev_end = None
+    for k, s in enumerate(rec.snapshots):
+        start = int(plan.snap_board_start[k])
+        gap = None
+        if s.source_time_s is not None and prev_end is not None:
+            gap = round(s.source_time_s - prev_end, 6)
+        prev_end = None if s.source_time_s is None else s.source_time_s + s.length / fs
+        snaps.append({"source": s.source, "start_s": start / fs,
+                      "length": int(plan.snap_blocks[k] * L), "dropped": int(plan.dropped[k]),
+                      "pct_of_record": round(100.0 * start / total, 4),
+                      "source_time_s": None if s.source_time_s is None else round(s.source_time_s, 6),
+                      "gap_before_s": gap})
+    return {
+        "format": "cmsensord import", "version": 1,
+        "capture": Path(out).name, "sources": rec.sources, "mode": mode,
+        "fs": fs, "block_len": L, "blocks_per_s": fs / L,
+        "channel_names": rec.names, "unit": "m/s2", "source_unit": rec.source_unit, **extra,
+        "full_scale": full_scale, "scale": scale.tolist(), "offset": [OFFSET] * rec.n_channels,
+        "clipped_blocks": stats["clipped_blocks"], "clipped_samples": stats["clipped_samples"],
+        "board_seconds": plan.n_board_samples / fs, "blocks": plan.n_blocks, "frames": stats["frames"],
+        "dropped_samples": int(plan.dropped.sum()),
+        "rpm": rec.rpm, "rpm_source": rec.rpm_source, "ppr": rec.ppr,
+        "tacho": rec.tacho_source if stats["tacho_edges"] or rec.tacho_source else None,
+        "tacho_edges": stats["tacho_edges"],
+        "snapshots": snaps,
+    }
+
+
+def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw",
+                  full_scale: list[float], extra: dict | None = None,
+                  progress: Callable[[int], None] | None = None) -> dict:
+    """Write ``out`` and ``out.json`` (the sidecar, also returned); nothing is left on error."""
+    scale = np.array([scale_for(r) for r in full_scale])
+    part = Path(f"{out}.part")
+    side = sidecar_path(out)
+    side_part = Path(f"{side}.part")
+    if Path(out).is_dir():
+        raise ImportFailure(f"{out}: is a directory; give --out a file name, e.g. {Path(out) / 'capture.bin'}")
+    try:
+        try:
+            with open(part, "wb") as f:
+                stats = _frames(rec, plan, mode, scale, f, progress)
+            meta = _sidecar(rec, plan, mode, full_scale, scale, stats, out, extra or {})
+            side_part.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+            os.replace(part, out)
+            os.replace(side_part, side)
+        except OSError as exc:
+            raise ImportFailure(f"{out}: cannot write the capture: {exc.strerror or exc}; check that "
+                                "the directory exists, is writable and has room") from None
+    except BaseException:
+        for p in (part, side_part):
+            p.unlink(missing_ok=True)
+        raise
+    return meta

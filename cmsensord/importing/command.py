@@ -1,0 +1,263 @@
+"""``cmsensord import SRC... --out CAPTURE``: the sub-command's options, run and summary.
+
+    cmsensord import femto/Bearing1_1.npz --unit mg --channels 0 --names horizontal --out b11.bin
+    cmsensord import ims/NA.mat --fs 20480 --unit g --snapshot-len 20480 --out na.bin
+
+Errors the user can cause end in one line, ``cmsensord import: FILE: what; fix``,
+and exit status 2; nothing is written then. A progress bar shows on a terminal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from cmsensord.errors import EXIT_USAGE
+
+from .adc import ADC_MAX, OFFSET, nice_range
+from .blocks import choose_block_len, plan_blocks, remainder_note
+from .capture_writer import choose_ranges, sidecar_path, write_capture
+from .errors import ImportFailure
+from .options import ImportOptions
+from .sources import collect_files, build_recording
+from .units import G, UNITS
+
+__all__ = ["add_import_parser", "run_import", "options_from_args"]
+
+_EXAMPLES = """\
+examples:
+  cmsensord import rec.wav --unit g --out rec.bin                   (fs from the WAV)
+  cmsensord import log.csv --fs 25600 --channels acc_x,acc_y --unit g --out log.bin
+  cmsensord import femto/Bearing1_1.npz --unit mg --channels 0 --names horizontal --out b11.bin
+  cmsensord import 'Bearing1_1/acc_*.csv' --fs 25600 --channels 4 --unit g --snapshot-interval 10 --out b11.bin
+  cmsensord import ims/NA.mat --fs 20480 --unit g --snapshot-len 20480 --out na.bin
+Columns and channels count from 0. The sidecar CAPTURE.json (b11.bin.json) lists the snapshots
+(board second, length, % of the record, original time and gap), units and scales."""
+
+
+def _list(text: str) -> tuple[str, ...]:
+    items = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
+    return items
+
+
+def _number(text: str) -> float:
+    v = _real(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
+def _real(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if v != v or abs(v) == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return v
+
+
+def _nonzero(text: str) -> float:
+    v = _real(text)
+    if v == 0:
+        raise argparse.ArgumentTypeError("expected a non-zero number, got 0")
+    return v
+
+
+def _count(lo: int, hi: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer {lo}..{hi}, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer {lo}..{hi}, got {v}")
+        return v
+    return parse
+
+
+def _ranges(text: str) -> tuple[float, ...]:
+    """'50', '5g', '50,100' -> m/s² values."""
+    out = []
+    for item in _list(text):
+        g = item.lower().endswith("g")
+        v = _number(item[:-1] if g else item.removesuffix("m/s2"))
+        out.append(v * G if g else v)
+    return tuple(out)
+
+
+_SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "comma": ",", "semicolon": ";", "space": "whitespace",
+                    "whitespace": "whitespace"}
+
+
+def add_import_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "import", help="turn a recording from another data logger (WAV, CSV, NPY/NPZ, MAT, "
+                       "snapshot files) into a capture for replay",
+        description="Turn a recording from another data logger into a capture of the board's "
+                    "protocol (RAW mode at the recording's own rate, or RMS mode), with a sidecar "
+                    "OUT.json that records the snapshots and their gaps.",
+        epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("src", nargs="*", metavar="SRC",
+                   help="file(s), a directory of snapshot files, or a quoted glob pattern")
+    p.add_argument("--out", dest="imp_out", required=True, metavar="CAPTURE", help="capture file to write")
+    p.add_argument("--glob", dest="imp_glob", action="append", default=[], metavar="PATTERN",
+                   help="snapshot files matching PATTERN (repeatable)")
+    p.add_argument("--order", dest="imp_order", choices=("name", "mtime", "given"), default="name",
+                   help="order of snapshot files: natural name order (default), modification time, "
+                        "or as given")
+    p.add_argument("--mode", dest="imp_mode", choices=("raw", "rms"), default="raw",
+                   help="RAW frames at the recording's rate (default) or 100 Hz RMS frames")
+    p.add_argument("--fs", dest="imp_fs", type=_number, metavar="HZ",
+                   help="sampling rate; required for CSV/NPY/MAT files that do not carry it")
+    p.add_argument("--channels", "--columns", dest="imp_channels", type=_list, metavar="LIST",
+                   help="columns/channels to import, by index from 0 or by name (default: all but "
+                        "the tacho column, at most 8)")
+    p.add_argument("--names", dest="imp_names", type=_list, metavar="LIST", help="channel names")
+    p.add_argument("--array", dest="imp_array", metavar="NAME", help="the array of an .npz file")
+    p.add_argument("--variable", dest="imp_variable", metavar="NAME", help="the variable of a .mat file")
+    p.add_argument("--separator", dest="imp_separator", metavar="SEP",
+                   help="CSV separator: ',', ';', tab, whitespace, ... (default: detected)")
+    hdr = p.add_mutually_exclusive_group()
+    hdr.add_argument("--header", dest="imp_header", action="store_const", const=True,
+                     help="the CSV's first line names the columns (default: detected)")
+    hdr.add_argument("--no-header", dest="imp_header", action="store_const", const=False,
+                     help="the CSV has no header line")
+    p.add_argument("--unit", dest="imp_unit", choices=tuple(UNITS), default="m/s2",
+                   help="unit of the values (default m/s2; V needs --sensitivity)")
+    p.add_argument("--sensitivity", dest="imp_sensitivity", type=_number, metavar="MV_PER_G",
+                   help="accelerometer sensitivity in mV/g, for --unit V")
+    p.add_argument("--scale-factor", dest="imp_scale_factor", type=_nonzero,
+                   default=1.0, metavar="X",
+                   help="multiply the values by X first (WAV PCM: the value at full scale)")
+    p.add_argument("--range", dest="imp_range", type=_ranges, metavar="R",
+                   help="12-bit full scale +-R in m/s2 (or e.g. 5g), one or one per channel "
+                        "(default: max |x| x 1.25, rounded up to a 1-1.2-1.5-2-2.5-3-4-5-6-8 value)")
+    p.add_argument("--block-len", dest="imp_block_len", type=_count(1, 0xFFFF), metavar="N",
+                   help="samples per block (default fs/100, rounded: 100 blocks a second)")
+    p.add_argument("--snapshot-len", dest="imp_snapshot_len", type=_count(1, 1 << 40), metavar="N",
+                   help="split each file's samples into snapshots of N (e.g. 20480 for IMS)")
+    p.add_argument("--snapshot-interval", dest="imp_snapshot_interval", type=_number, metavar="S",
+                   help="seconds between snapshot starts in the original recording (for the sidecar)")
+    tach = p.add_mutually_exclusive_group()
+    tach.add_argument("--tacho-column", dest="imp_tacho_column", metavar="COL",
+                      help="a tacho pulse column/channel (index or name): rising crossings are edges")
+    tach.add_argument("--rpm", dest="imp_rpm", type=_number, metavar="RPM",
+                      help="constant shaft speed: TACHO frames with --ppr edges a revolution")
+    p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=_real, metavar="X",
+                   help="pulse threshold (default: halfway between the column's 1st and 99th percentile)")
+    p.add_argument("--ppr", dest="imp_ppr", type=_count(1, 255), default=1, metavar="N",
+                   help="tacho pulses per revolution (default 1)")
+    return p
+
+
+def options_from_args(args: argparse.Namespace) -> ImportOptions:
+    sep = args.imp_separator
+    if sep is not None:
+        sep = _SEPARATOR_NAMES.get(sep.lower(), sep)
+        if len(sep) != 1 and sep != "whitespace":
+            raise ImportFailure(f"--separator {args.imp_separator!r}: give one character, tab or whitespace")
+    return ImportOptions(
+        out=args.imp_out, mode=args.imp_mode, fs=args.imp_fs, channels=args.imp_channels,
+        names=args.imp_names, array=args.imp_array, variable=args.imp_variable, separator=sep,
+        header=args.imp_header, unit=args.imp_unit, sensitivity=args.imp_sensitivity,
+        scale_factor=args.imp_scale_factor, full_scale=args.imp_range, block_len=args.imp_block_len,
+        snapshot_len=args.imp_snapshot_len, snapshot_interval=args.imp_snapshot_interval,
+        order=args.imp_order, tacho_column=args.imp_tacho_column,
+        tacho_threshold=args.imp_tacho_threshold, ppr=args.imp_ppr, rpm=args.imp_rpm)
+
+
+class _Bar:
+    """A one-line progress bar on stderr when it is a terminal; silent otherwise."""
+
+    def __init__(self, total: int, label: str, stream=None):
+        self.total, self.label = max(1, total), label
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if hasattr(self.stream, "isatty") else False
+        self._last = 0.0
+
+    def __call__(self, done: int) -> None:
+        now = time.monotonic()
+        if not self.enabled or (now - self._last < 0.2 and done < self.total):
+            return
+        self._last = now
+        frac = min(1.0, done / self.total)
+        self.stream.write(f"\r{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+
+
+def _report(meta: dict, rec, out: str, size: int, notes: list[str]) -> list[str]:
+    C = len(meta["channel_names"])
+    n_snap = len(meta["snapshots"])
+    lines = [f"capture: {out} ({size:,} bytes, {meta['frames']:,} frames): "
+             f"{meta['mode'].upper()}, {C} channel(s), fs {meta['fs']} Hz, block {meta['block_len']} "
+             f"({meta['blocks_per_s']:g} blocks/s), {meta['board_seconds']:.2f} s of board time"
+             + (f" from {n_snap} snapshots" if n_snap > 1 else "")]
+    peaks = abs(rec.data).max(axis=1) if rec.n_samples else [0.0] * C
+    for c, name in enumerate(meta["channel_names"]):
+        fs_, sc = meta["full_scale"][c], meta["scale"][c]
+        line = (f"  {name}: full scale +-{fs_:g} m/s2 ({sc:.4g} m/s2 a count), "
+                f"peak {peaks[c]:.4g} m/s2")
+        nclip = meta["clipped_samples"][c]
+        lines.append(line + (", no clipping" if not nclip else ""))
+        if nclip:
+            lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
+                         f"clipped at +-{fs_:g} m/s2 (counts 0/{ADC_MAX}); those blocks carry the "
+                         f"clipped flag; --range {nice_range(peaks[c]):g} avoids it")
+    if meta["tacho"]:
+        what = f"constant {meta['rpm']:g} rpm" if meta["tacho"] == "rpm" else f"column {meta['tacho']}"
+        lines.append(f"  tacho: {what}, {meta['tacho_edges']} edge(s), {meta['ppr']} a revolution")
+    elif meta["rpm"]:
+        lines.append(f"  speed: {meta['rpm']:g} rpm from {meta['rpm_source']} (sidecar only; --rpm "
+                     f"{meta['rpm']:g} also sends TACHO frames)")
+    lines += [f"  note: {n}" for n in notes]
+    lines.append(f"  sidecar: {sidecar_path(out)} (sources, snapshots, gaps, scales)")
+    return lines
+
+
+def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
+    files = collect_files(srcs, globs, opts.order)
+    bar = _Bar(len(files), f"import: reading {len(files)} file(s)")
+    try:
+        rec = build_recording(files, opts, progress=bar if len(files) > 1 else None)
+    finally:
+        bar.close()
+    L, note = choose_block_len(rec.fs, opts.block_len, opts.mode)
+    plan = plan_blocks(rec, L)
+    notes = list(rec.notes) + ([note] if note else [])
+    rem = remainder_note(rec, plan)
+    if rem:
+        notes.append(rem)
+    if plan.n_blocks == 0:
+        raise ImportFailure(f"{files[0]}: {rec.n_samples} sample(s) fill no {L}-sample block; "
+                            "give a smaller --block-len")
+    full_scale = choose_ranges(rec, opts.full_scale)
+    extra = {"scale_factor": opts.scale_factor, "sensitivity_mv_per_g": opts.sensitivity,
+             "offset_counts": OFFSET, "notes": notes}
+    bar = _Bar(plan.n_blocks, f"import: writing {Path(opts.out).name}")
+    try:
+        meta = write_capture(rec, plan, opts.out, mode=opts.mode, full_scale=full_scale, extra=extra,
+                             progress=bar)
+    finally:
+        bar.close()
+    size = Path(opts.out).stat().st_size
+    print("\n".join(_report(meta, rec, opts.out, size, notes)), file=sys.stderr)
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    """The ``import`` sub-command: 0 on success, 2 with a one-line message on a usage or input error."""
+    try:
+        return _run(options_from_args(args), list(args.src), list(args.imp_glob))
+    except ImportFailure as exc:
+        print(f"cmsensord import: {exc}", file=sys.stderr)
+        return EXIT_USAGE

@@ -1,0 +1,32 @@
+"""What the user asked for: the import's settings, one typed object."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["ImportOptions"]
+
+
+@dataclass(frozen=True)
+class ImportOptions:
+    out: str
+    mode: str = "raw"  # "raw" or "rms"
+    fs: float | None = None  # overrides / supplies the sampling rate
+    channels: tuple[str, ...] | None = None  # indices (from 0) or names; None: all
+    names: tuple[str, ...] | None = None
+    array: str | None = None  # .npz
+    variable: str | None = None  # .mat
+    separator: str | None = None  # CSV; None: detected
+    header: bool | None = None  # CSV; None: detected
+    unit: str = "m/s2"
+    sensitivity: float | None = None  # mV/g, for unit V
+    scale_factor: float = 1.0
+    full_scale: tuple[float, ...] | None = None  # m/s^2, one or one per channel; None: from the data
+    block_len: int | None = None  # None: round(fs / 100)
+    snapshot_len: int | None = None  # split each file's samples into snapshots of this length
+    snapshot_interval: float | None = None  # s between snapshot starts in the original recording
+    order: str = "name"  # "name", "mtime" or "given"
+    tacho_column: str | None = None
+    tacho_threshold: float | None = None
+    ppr: int = 1
+    rpm: float | None = None  # synthesise TACHO frames at this constant speed

@@ -1,0 +1,242 @@
+"""SRC arguments to files in time order, and files to one :class:`Recording`.
+
+Files: each SRC is a file, a directory (its files of the most common supported
+extension) or a glob pattern (also ``--glob``). They are taken in natural name
+order (``acc_2`` before ``acc_10``) unless ``order`` is ``mtime`` (modification
+time) or ``given`` (as listed). Every file is one contiguous snapshot, or
+several (a 3-D array, or ``snapshot_len``); the snapshots are laid end to end.
+
+Channels: ``channels`` picks columns by index (from 0) or name, the same for
+every file; the default is every column but the tacho column, at most 8 (the
+board's limit). Values become m/s² by :func:`.units.to_ms2_factor`.
+"""
+
+from __future__ import annotations
+
+import glob as globmod
+import os
+import re
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from .arrays import read_npy, read_npz
+from .errors import ImportFailure
+from .matlab import read_mat
+from .options import ImportOptions
+from .recording import Recording, Snapshot
+from .table import Table
+from .tabular import read_tabular
+from .tacho import pulse_edges
+from .units import to_ms2_factor
+from .wav import read_wav
+
+__all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
+
+EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".npy", ".npz", ".mat")
+MAX_CHANNELS = 8
+
+
+def _natural_key(path: str) -> list:
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
+
+
+def _dir_files(d: Path) -> list[str]:
+    files = [p for p in d.iterdir() if p.is_file() and p.suffix.lower() in EXTENSIONS]
+    if not files:
+        raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}) in this directory; "
+                            "give the files or a --glob pattern")
+    ext = Counter(p.suffix.lower() for p in files).most_common(1)[0][0]
+    return [str(p) for p in files if p.suffix.lower() == ext]
+
+
+def collect_files(srcs: list[str], globs: list[str], order: str) -> list[str]:
+    files: list[str] = []
+    for src in srcs:
+        p = Path(src)
+        if p.is_dir():
+            files += _dir_files(p)
+        elif p.exists():
+            files.append(src)
+        elif globmod.has_magic(src):
+            hit = [f for f in globmod.glob(src) if os.path.isfile(f)]
+            if not hit:
+                raise ImportFailure(f"{src}: no file matches this pattern; check the path")
+            files += hit
+        else:
+            raise ImportFailure(f"{src}: no such file or directory")
+    for pattern in globs:
+        hit = [f for f in globmod.glob(pattern) if os.path.isfile(f)]
+        if not hit:
+            raise ImportFailure(f"--glob {pattern}: no file matches this pattern; check the path")
+        files += hit
+    if not files:
+        raise ImportFailure("no recording given; name files, a directory, or --glob PATTERN")
+    if order == "name":
+        files.sort(key=_natural_key)
+    elif order == "mtime":
+        files.sort(key=lambda f: (os.path.getmtime(f), _natural_key(f)))
+    return files
+
+
+def read_table(path: str, opts: ImportOptions) -> Table:
+    """The file's table, by its extension; an unreadable file is a one-line ImportFailure."""
+    try:
+        return _read_by_extension(path, opts)
+    except OSError as exc:
+        raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _read_by_extension(path: str, opts: ImportOptions) -> Table:
+    ext = Path(path).suffix.lower()
+    if ext == ".wav":
+        return read_wav(path)
+    if ext in (".csv", ".tsv", ".txt"):
+        return read_tabular(path, opts.separator, opts.header)
+    if ext == ".npy":
+        return read_npy(path)
+    if ext == ".npz":
+        return read_npz(path, opts.array)
+    if ext == ".mat":
+        return read_mat(path, opts.variable)
+    raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}; supported: "
+                        f"{', '.join(EXTENSIONS)}")
+
+
+def _column(t: Table, token: str, option: str) -> int:
+    n = len(t.columns)
+    if re.fullmatch(r"\d+", token):
+        i = int(token)
+        if i >= n:
+            raise ImportFailure(f"{t.path}: no {t.kind} {i} (the file has {n} {t.kind}s, "
+                                f"numbered 0..{n - 1}); use {option}")
+        return i
+    if token in t.columns:
+        return t.columns.index(token)
+    raise ImportFailure(f"{t.path}: no {t.kind} {token!r} ({t.kind}s: {', '.join(t.columns)}); use {option}")
+
+
+class _Layout:
+    """Column choice, names and rate, fixed by the first file and checked on the others."""
+
+    def __init__(self, t: Table, opts: ImportOptions):
+        self.columns = list(t.columns)
+        self.tacho = _column(t, opts.tacho_column, "--tacho-column") if opts.tacho_column else None
+        if opts.channels:
+            option = "--columns" if t.kind == "column" else "--channels"  # the same option
+            self.idx = [_column(t, tok, option) for tok in opts.channels]
+        else:
+            self.idx = [i for i in range(len(t.columns)) if i != self.tacho]
+        if not self.idx:
+            raise ImportFailure(f"{t.path}: no {t.kind} left to import besides the tacho; check --channels")
+        if len(self.idx) > MAX_CHANNELS:
+            raise ImportFailure(f"{t.path}: {len(self.idx)} {t.kind}s, the board carries at most "
+                                f"{MAX_CHANNELS}; choose some with --channels (e.g. --channels 0,1)")
+        self.names = list(opts.names) if opts.names else [t.columns[i] for i in self.idx]
+        if len(self.names) != len(self.idx):
+            raise ImportFailure(f"--names gives {len(self.names)} name(s) for {len(self.idx)} channel(s); "
+                                "give one name per imported channel")
+        self.fs = opts.fs if opts.fs is not None else t.fs
+        if self.fs is None:
+            raise ImportFailure(f"{t.path}: the file does not say its sampling rate; give --fs HZ")
+        self.file_fs = t.fs
+
+    def check(self, t: Table, first: str) -> None:
+        if t.columns != self.columns:
+            raise ImportFailure(f"{t.path}: {len(t.columns)} {t.kind}s ({', '.join(t.columns[:8])}) "
+                                f"where {first} has {len(self.columns)} ({', '.join(self.columns[:8])}); "
+                                "every snapshot file must have the same layout")
+        if t.fs is not None and self.file_fs is not None and t.fs != self.file_fs:
+            raise ImportFailure(f"{t.path}: sampled at {t.fs:g} Hz, {first} at {self.file_fs:g} Hz; "
+                                "import them separately")
+
+
+def _finite(t: Table, x: np.ndarray, names: list[str]) -> None:
+    """x (C, s, n): an error naming the file and column of the first NaN/inf."""
+    bad = ~np.isfinite(x)
+    if bad.any():
+        c, s, i = np.argwhere(bad)[0]
+        where = f"snapshot {s}, sample {i}" if x.shape[1] > 1 else f"sample {i}"
+        raise ImportFailure(f"{t.path}: {t.kind} {names[c]!r} has {int(bad.sum())} missing or "
+                            f"non-finite value(s) (first at {where}); clean the file or choose "
+                            "other --channels")
+
+
+def _split(t: Table, n: int) -> list[tuple[int, int, int]]:
+    """(snapshot of the table, start, length) pieces of ``snapshot_len`` n (None: whole snapshots)."""
+    s, length, _ = t.data.shape
+    if not n:
+        return [(k, 0, length) for k in range(s)]
+    if s > 1:
+        raise ImportFailure(f"{t.path}: already holds {s} snapshots; drop --snapshot-len")
+    return [(0, a, min(n, length - a)) for a in range(0, length, n)]
+
+
+def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
+    """Read every file (``progress(i)`` after each) and lay the snapshots end to end."""
+    factor = to_ms2_factor(opts.unit, opts.sensitivity, opts.scale_factor)
+    layout: _Layout | None = None
+    pieces: list[np.ndarray] = []
+    tacho_pieces: list[np.ndarray] = []
+    snaps: list[Snapshot] = []
+    notes: list[str] = []
+    rpm_file = None
+    pos = 0
+    for fi, path in enumerate(files):
+        t = read_table(path, opts)
+        if layout is None:
+            layout = _Layout(t, opts)
+        else:
+            layout.check(t, Path(files[0]).name)
+        s_, n_, _ = t.data.shape
+        x = np.empty((len(layout.idx), s_, n_))  # one float64 copy per channel, nothing more
+        for c, i in enumerate(layout.idx):
+            x[c] = t.data[:, :, i]
+        _finite(t, x, layout.names)
+        x *= factor
+        if layout.tacho is not None:
+            tacho_pieces.append(t.data[:, :, layout.tacho].astype(np.float64).reshape(-1))
+        many = t.data.shape[0] > 1 or opts.snapshot_len
+        for k, (s, a, n) in enumerate(_split(t, opts.snapshot_len)):
+            time = None if t.times is None else float(t.times[s])
+            snaps.append(Snapshot(f"{t.name}[{k}]" if many else t.name, pos, n, time))
+            pos += n
+        if t.times is not None and (np.diff(t.times) <= 0).any():
+            bad = np.flatnonzero(np.diff(t.times) <= 0)
+            k = int(bad[0]) + 1
+            notes.append(f"{t.name}: the snapshot times do not increase at {bad.size} place(s), first at "
+                         f"snapshot {k} ({t.times[k - 1]:g} s -> {t.times[k]:g} s); the snapshots stay in "
+                         "file order, the sidecar keeps the file's times")
+        if opts.snapshot_len and t.data.shape[1] % opts.snapshot_len:
+            notes.append(f"{t.name}: {t.data.shape[1]} samples are not a whole number of "
+                         f"{opts.snapshot_len}-sample snapshots: the last one holds "
+                         f"{t.data.shape[1] % opts.snapshot_len}")
+        pieces.append(x.reshape(len(layout.idx), -1))
+        if t.rpm and rpm_file is None:
+            rpm_file = (t.rpm, t.name)
+        if progress is not None:
+            progress(fi + 1)
+    assert layout is not None
+    data = pieces[0] if len(pieces) == 1 else np.concatenate(pieces, axis=1)
+    del pieces
+    fs = layout.fs
+    if fs != round(fs) or fs <= 0:
+        raise ImportFailure(f"{files[0]}: sampling rate {fs:g} Hz; the board protocol carries a whole "
+                            "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
+    if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
+        notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
+    if opts.snapshot_interval is not None:
+        snaps = [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval)
+                 for i, s in enumerate(snaps)]
+    rec = Recording(fs=int(round(fs)), data=data, names=layout.names, snapshots=snaps,
+                    sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes)
+    if layout.tacho is not None:
+        pulses = np.concatenate(tacho_pieces)
+        rec.tacho_edges = pulse_edges(pulses, [(s.start, s.length) for s in snaps], opts.tacho_threshold)
+        rec.tacho_source = f"{layout.columns[layout.tacho]}"
+    if opts.rpm is not None:
+        rec.rpm, rec.rpm_source, rec.tacho_source = opts.rpm, "--rpm", "rpm"
+    elif rpm_file is not None:
+        rec.rpm, rec.rpm_source = rpm_file
+    return rec

@@ -1,0 +1,333 @@
+"""`cmsensord import`: every format round-trips to the capture within one count, snapshot
+files land on a continuous board clock with their gaps in the sidecar, clipping is never
+silent, and a user's mistakes are one-line errors that leave nothing behind."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import wave
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+from scipy.io import wavfile
+
+from cmsensord.cli import main
+from cmsensord.dsp.rms import block_rms
+from cmsensord.importing.adc import nice_range
+from cmsensord.sinks.mcap_sink import summarize
+from cmsensord.protocol import (FLAG_CLIPPED, FrameType, decode_raw, decode_rms, decode_status,
+                                decode_tacho, iter_frames)
+
+G = 9.80665
+REPO = Path(__file__).resolve().parents[1]
+
+
+def decode(path: Path) -> dict:
+    """The capture as the daemon's decoder sees it: STATUS, counts per channel, flags, tacho."""
+    frames, counters = iter_frames(path.read_bytes())
+    assert counters.crc_failures == 0 and counters.bytes_discarded == 0 and counters.frames_lost == 0
+    status = decode_status(next(f for f in frames if f.type == FrameType.STATUS).payload)
+    raw: dict[int, list] = {}
+    flags: dict[int, list] = {}
+    rms, edges, t0s = [], [], []
+    for f in frames:
+        if f.type == FrameType.RAW:
+            raw.setdefault(f.chan, []).append(decode_raw(f.payload))
+            flags.setdefault(f.chan, []).append(f.flags)
+            if f.chan == 0:
+                t0s.append(f.t0_unwrapped)
+        elif f.type == FrameType.RMS:
+            rms.append(decode_rms(f))
+            flags.setdefault(0, []).append(f.flags)
+            t0s.append(f.t0_unwrapped)
+        elif f.type == FrameType.TACHO:
+            edges.extend(f.t0_unwrapped + decode_tacho(f.payload) / 256.0)
+    out = {"status": status, "flags": {c: np.array(v) for c, v in flags.items()},
+           "t0": np.array(t0s), "edges": np.array(edges), "rms": np.array(rms)}
+    if raw:
+        counts = np.stack([np.concatenate(raw[c]) for c in sorted(raw)])
+        scale = np.array(status.scale)[:, None]
+        offset = np.array(status.offset)[:, None]
+        out["counts"] = counts
+        out["x"] = (counts - offset) * scale
+    return out
+
+
+def run(*args: str | Path) -> int:
+    return main(["import", *map(str, args)])
+
+
+def sidecar(out: Path) -> dict:
+    return json.loads(Path(f"{out}.json").read_text())
+
+
+def assert_within_one_count(cap: dict, expected: np.ndarray) -> None:
+    scale = np.array(cap["status"].scale)[:, None]
+    assert cap["x"].shape == expected.shape
+    assert np.all(np.abs(cap["x"] - expected) <= 0.5 * scale * (1 + 1e-6))
+
+
+def signal(n: int, c: int, amp: float = 1.0, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    return np.stack([amp * (0.6 * np.sin(2 * np.pi * (k + 1) * t / 97) + 0.3 * rng.standard_normal(n).clip(-1.3, 1.3))
+                     for k in range(c)])
+
+
+# --------------------------------------------------------------------------- formats
+@pytest.mark.parametrize("kind", ["int16", "int24", "int32", "float32"])
+def test_wav_round_trip(tmp_path, kind):
+    fs, n = 8000, 8000
+    x = signal(n, 2, amp=0.5)  # fractions of full scale
+    path = tmp_path / "rec.wav"
+    if kind == "int16":
+        wavfile.write(path, fs, np.round(x.T * 32767).astype(np.int16))
+        frac = np.round(x * 32767) / 32768
+    elif kind == "int32":
+        wavfile.write(path, fs, np.round(x.T * 2**31).astype(np.int32))
+        frac = np.round(x * 2**31) / 2**31
+    elif kind == "float32":
+        wavfile.write(path, fs, x.T.astype(np.float32))
+        frac = x.astype(np.float32).astype(np.float64)
+    else:  # 24-bit PCM, written by hand (scipy writes no 24-bit files)
+        v = np.round(x.T * (2**23 - 1)).astype(np.int32)
+        b = np.ascontiguousarray(v, dtype="<i4").view(np.uint8).reshape(-1, 4)[:, :3].tobytes()
+        with wave.open(str(path), "wb") as w:
+            w.setnchannels(2)
+            w.setsampwidth(3)
+            w.setframerate(fs)
+            w.writeframes(b)
+        frac = np.round(x * (2**23 - 1)) / 2**23
+    out = tmp_path / "rec.bin"
+    assert run(path, "--unit", "g", "--scale-factor", "2", "--out", out) == 0
+    cap = decode(out)
+    assert (cap["status"].fs, cap["status"].block_len, cap["status"].n_channels) == (8000, 80, 2)
+    assert_within_one_count(cap, frac * 2 * G)
+    assert sidecar(out)["channel_names"] == ["ch0", "ch1"]
+
+
+def test_csv_header_names_and_columns(tmp_path):
+    x = signal(1000, 3, amp=3.0)
+    path = tmp_path / "log.csv"
+    rows = "\n".join(",".join(f"{v:.6f}" for v in r) for r in x.T)
+    path.write_text("time,acc_x,acc_y\n" + rows + "\n")
+    out = tmp_path / "log.bin"
+    assert run(path, "--fs", "1000", "--channels", "acc_y,1", "--unit", "m/s2", "--out", out) == 0
+    cap = decode(out)
+    assert_within_one_count(cap, np.round(x[[2, 1]], 6))
+    meta = sidecar(out)
+    assert meta["channel_names"] == ["acc_y", "acc_x"] and meta["block_len"] == 10
+
+
+def test_tsv_without_header_and_semicolon_decimal_comma(tmp_path):
+    x = signal(600, 2)
+    tsv = tmp_path / "a.tsv"
+    tsv.write_text("\n".join("\t".join(f"{v:.5f}" for v in r) for r in x.T) + "\n")
+    semi = tmp_path / "b.csv"
+    semi.write_text("\n".join(";".join(f"{v:.5f}".replace(".", ",") for v in r) for r in x.T) + "\n")
+    for src in (tsv, semi):
+        out = tmp_path / f"{src.stem}.bin"
+        assert run(src, "--fs", "600", "--unit", "mm/s2", "--names", "h,v", "--out", out) == 0
+        assert_within_one_count(decode(out), np.round(x, 5) * 1e-3)
+
+
+def test_npy_and_npz_with_rate_times_and_speed_in_the_file(tmp_path):
+    x = signal(5120, 2, amp=30)
+    np.save(tmp_path / "a.npy", x.T)  # (samples, channels)
+    out = tmp_path / "a.bin"
+    assert run(tmp_path / "a.npy", "--fs", "5120", "--block-len", "64", "--channels", "1", "--out", out) == 0
+    assert_within_one_count(decode(out), x[[1]])
+    snaps = np.round(x.T.reshape(4, 1280, 2) * 1000).astype(np.int32)  # (snapshots, samples, ch), mg
+    np.savez(tmp_path / "b.npz", acc_mg=snaps, t_s=np.array([0.0, 10.0, 20.0, 40.0]), fs_hz=12800.0,
+             rpm=1800.0, other=np.arange(3))
+    out = tmp_path / "b.bin"
+    assert run(tmp_path / "b.npz", "--array", "acc_mg", "--unit", "mg", "--out", out) == 0
+    cap = decode(out)
+    assert cap["status"].fs == 12800
+    assert_within_one_count(cap, snaps.transpose(2, 0, 1).reshape(2, -1) * 1e-3 * G)
+    meta = sidecar(out)
+    assert meta["rpm"] == 1800.0 and meta["rpm_source"] == "b.npz"
+    assert [s["source"] for s in meta["snapshots"]] == [f"b.npz[{k}]" for k in range(4)]
+    assert [s["gap_before_s"] for s in meta["snapshots"]] == [None, 9.9, 9.9, 19.9]
+
+
+def test_mat_variable_and_snapshot_len(tmp_path):
+    x = signal(3 * 2048 + 100, 1, amp=0.5)  # g; three whole snapshots and a short one
+    scipy.io.savemat(tmp_path / "m.mat", {"data": x.T, "fs": 20480.0, "label": "bearing"})
+    out = tmp_path / "m.bin"
+    assert run(tmp_path / "m.mat", "--variable", "data", "--unit", "g", "--snapshot-len", "2048",
+               "--block-len", "256", "--out", out) == 0
+    meta = sidecar(out)
+    assert meta["fs"] == 20480 and meta["block_len"] == 256
+    assert [s["length"] for s in meta["snapshots"]] == [2048, 2048, 2048, 0]
+    assert [s["dropped"] for s in meta["snapshots"]] == [0, 0, 0, 100]
+    assert_within_one_count(decode(out), x[:, :3 * 2048] * G)
+
+
+# --------------------------------------------------------------------------- snapshots
+def test_glob_of_snapshot_files_in_natural_order_with_gaps_and_remainders(tmp_path, capsys):
+    d = tmp_path / "snaps"
+    d.mkdir()
+    x = signal(5 * 1000, 1, amp=2.0)
+    for k in range(5):  # acc_2 must come before acc_10
+        (d / f"acc_{[1, 2, 3, 10, 11][k]}.csv").write_text(
+            "\n".join(f"9,39,{k},{v:.5f}" for v in x[0, k * 1000:(k + 1) * 1000]) + "\n")
+    out = tmp_path / "g.bin"
+    assert run(str(d / "acc_*.csv"), "--fs", "10000", "--channels", "3", "--snapshot-interval", "10",
+               "--out", out) == 0  # block 100: every 1000-sample snapshot is 10 blocks
+    cap = decode(out)
+    assert_within_one_count(cap, np.round(x, 5))
+    assert np.array_equal(cap["t0"], np.arange(50) * 100)  # one continuous board clock
+    meta = sidecar(out)
+    snaps = meta["snapshots"]
+    assert [s["source"] for s in snaps] == ["acc_1.csv", "acc_2.csv", "acc_3.csv", "acc_10.csv", "acc_11.csv"]
+    assert [s["start_s"] for s in snaps] == [0.0, 0.1, 0.2, 0.3, 0.4]
+    assert [s["pct_of_record"] for s in snaps] == [0.0, 20.0, 40.0, 60.0, 80.0]
+    assert [s["gap_before_s"] for s in snaps] == [None, 9.9, 9.9, 9.9, 9.9]
+    assert meta["dropped_samples"] == 0
+    # a block length that does not divide the snapshots: the remainder is dropped, and said so
+    assert run(str(d), "--fs", "10000", "--channels", "3", "--block-len", "300", "--out", out) == 0
+    err = capsys.readouterr().err
+    assert ("each 1000-sample snapshot ends with 100 sample(s) that do not fill a 300-sample block: "
+            "dropped (500 samples in all, 10.00 %); --block-len 100 (a divisor of 1000) keeps them") in err
+    meta = sidecar(out)
+    assert [s["dropped"] for s in meta["snapshots"]] == [100] * 5 and meta["blocks"] == 15
+    keep = np.concatenate([x[0, k * 1000:k * 1000 + 900] for k in range(5)])
+    assert_within_one_count(decode(out), np.round(keep[None], 5))
+
+
+def test_default_block_len_when_fs_over_100_is_not_whole(tmp_path, capsys):
+    np.save(tmp_path / "a.npy", signal(20480 * 2, 1)[0])
+    out = tmp_path / "a.bin"
+    assert run(tmp_path / "a.npy", "--fs", "20480", "--snapshot-len", "20480", "--out", out) == 0
+    err = capsys.readouterr().err
+    assert "block_len 205 (fs/100 = 204.8 is not whole): 99.902 blocks per second" in err
+    assert "185 sample(s) that do not fill a 205-sample block: dropped (370 samples in all" in err
+    assert sidecar(out)["dropped_samples"] == 370
+
+
+# --------------------------------------------------------------------------- range, clipping, modes
+def test_default_range_has_headroom_and_never_clips():
+    assert [nice_range(v) for v in (0.0, 0.79, 0.81, 4.0, 472.2, 1e-5)] == [1.0, 1.0, 1.2, 5.0, 600.0, 1.5e-05]
+
+
+def test_clipping_is_flagged_per_block_and_reported(tmp_path, capsys):
+    x = signal(1000, 1, amp=1.0)
+    x[0, 345] = 9.0   # block 3 (block_len 100)
+    x[0, 702] = -9.0  # block 7
+    np.save(tmp_path / "a.npy", x[0])
+    out = tmp_path / "a.bin"
+    assert run(tmp_path / "a.npy", "--fs", "10000", "--range", "5", "--out", out) == 0
+    cap = decode(out)
+    assert list(np.flatnonzero(cap["flags"][0] & FLAG_CLIPPED)) == [3, 7]
+    meta = sidecar(out)
+    assert meta["clipped_blocks"] == [2] and meta["clipped_samples"] == [2]
+    err = capsys.readouterr().err
+    assert ("WARNING ch: 2 sample(s) in 2 block(s) clipped at +-5 m/s2 (counts 0/4095); those blocks "
+            "carry the clipped flag; --range 12 avoids it") in err
+    assert run(tmp_path / "a.npy", "--fs", "10000", "--out", out) == 0  # the default range: none
+    assert not (decode(out)["flags"][0] & FLAG_CLIPPED).any() and sidecar(out)["full_scale"] == [12.0]
+
+
+def test_rms_mode_sends_the_rms_of_the_raw_blocks(tmp_path):
+    x = signal(4000, 2, amp=5.0)
+    np.save(tmp_path / "a.npy", x.T)
+    raw, rms = tmp_path / "raw.bin", tmp_path / "rms.bin"
+    assert run(tmp_path / "a.npy", "--fs", "4000", "--out", raw) == 0
+    assert run(tmp_path / "a.npy", "--fs", "4000", "--mode", "rms", "--out", rms) == 0
+    r, m = decode(raw), decode(rms)
+    assert m["status"].mode == 1 and m["rms"].shape == (100, 2)
+    expected = block_rms(r["counts"], r["status"].scale, r["status"].offset, 40).T
+    assert np.array_equal(m["rms"], expected)
+
+
+def test_tacho_from_a_pulse_column_and_from_a_constant_speed(tmp_path):
+    fs, n = 10000, 10000
+    t = np.arange(n)
+    pulses = ((t % 400) < 40).astype(float) * 5.0  # rising edges at 0 (none: starts high), 400, 800 ...
+    data = np.stack([signal(n, 1)[0], pulses], axis=1)
+    np.save(tmp_path / "a.npy", data)
+    out = tmp_path / "a.bin"
+    assert run(tmp_path / "a.npy", "--fs", fs, "--tacho-column", "1", "--out", out) == 0
+    cap = decode(out)
+    assert cap["status"].tacho_inputs == 1 and cap["status"].n_channels == 1
+    assert np.allclose(cap["edges"], np.arange(400, n, 400) - 0.5, atol=1 / 256)
+    assert run(tmp_path / "a.npy", "--fs", fs, "--channels", "0", "--rpm", "1500", "--ppr", "2",
+               "--out", out) == 0
+    cap = decode(out)
+    assert cap["status"].tacho_ppr == 2
+    assert np.allclose(cap["edges"], np.arange(0, n, 200), atol=1 / 256)  # 50 Hz x 2 = every 200 samples
+    assert sidecar(out)["rpm"] == 1500.0
+
+
+# --------------------------------------------------------------------------- the real command
+def cmd(*args, cwd) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cmsensord", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_errors_are_one_line_and_leave_nothing_behind(tmp_path):
+    (tmp_path / "x.csv").write_text("a,b,c\n1,2,3\n4,5,6\n")
+    (tmp_path / "bad.csv").write_text("1;2\n3;oops\n")
+    scipy.io.savemat(tmp_path / "m.mat", {"data": np.zeros((10, 1))})
+    np.save(tmp_path / "p.npy", np.stack([np.zeros(4096), np.tile([0.0, 1.0], 2048)], axis=1))
+    cases = {
+        ("x.csv", "--fs", "100", "--columns", "acc"):
+            "x.csv: no column 'acc' (columns: a, b, c); use --columns",
+        ("x.csv",): "x.csv: the file does not say its sampling rate; give --fs HZ",
+        ("bad.csv", "--fs", "10"):
+            "bad.csv: line 2, column 1: 'oops' is not a number (separator ';', no header); "
+            "fix the file, or set --separator / --header / --no-header",
+        ("m.mat", "--variable", "x", "--fs", "10"): "m.mat: no variable 'x' (variables: data); use --variable",
+        ("x.csv", "--fs", "100", "--unit", "V"):
+            "--unit V needs the sensor's sensitivity; add --sensitivity MV_PER_G (e.g. 100 for a 100 mV/g "
+            "accelerometer)",
+        # found while writing: a TACHO frame holds at most 1023 edges
+        ("p.npy", "--fs", "204800", "--tacho-column", "1", "--block-len", "2048"):
+            "p.npy: tacho column 'ch_1': 1024 edges in one 2048-sample block, a TACHO frame holds at most 1023; "
+            "check --tacho-threshold, --ppr or --rpm",
+    }
+    for args, message in cases.items():
+        r = cmd("import", *args, "--out", "o.bin", cwd=tmp_path)
+        assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), args
+        assert not list(tmp_path.glob("o.bin*")), args
+
+
+def test_import_then_replay_end_to_end(tmp_path):
+    fs = 25600
+    x = signal(fs * 4, 1, amp=3.0)[0]
+    x[3 * fs:] *= 8  # the last second: a machine far from its healthy level
+    wavfile.write(tmp_path / "rec.wav", fs, (x / 40).astype(np.float32))
+    r = cmd("import", "rec.wav", "--scale-factor", "40", "--names", "bearing", "--out", "rec.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "RAW, 1 channel(s), fs 25600 Hz, block 256 (100 blocks/s), 4.00 s of board time" in r.stderr
+    r = cmd("replay", "rec.bin", "--out", "mcap", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "4.0 s of ADC time" in r.stderr and "400 observations, 0 missing, 0 frames lost" in r.stderr
+    assert "ch0: final severity" in r.stderr and "4 decisions" in r.stderr
+    (log,) = (tmp_path / "mcap").glob("*.mcap")
+    info = summarize(log)
+    assert info["topics"]["/cm/ch0/severity"] == 4  # one severity message per 1-s decision
+    assert info["events"][0]["message"] == "board firmware 1.0: RAW mode, 1 channel(s), fs 25600 Hz, block 256"
+
+
+def test_progress_bar_only_on_a_terminal():
+    import io
+
+    from cmsensord.importing.command import _Bar
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    tty, pipe = Tty(), io.StringIO()
+    for stream in (tty, pipe):
+        bar = _Bar(10, "import: writing x.bin", stream=stream)
+        bar(10)
+        bar.close()
+    assert tty.getvalue().startswith("\rimport: writing x.bin [" + "#" * 30 + "] 100.0%")
+    assert pipe.getvalue() == ""
