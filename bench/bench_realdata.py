@@ -80,9 +80,9 @@ def femto(data: Path, work: Path, bearing: str) -> dict:
     rms = np.sqrt(((d["acc_mg"][..., 0] / 1000.0) ** 2).mean(axis=1))
     cap, site, out = work / f"B{bearing}.bin", work / f"B{bearing}.yaml", work / f"B{bearing}"
     cpu = cmsensord("import", str(src), "--array", "acc_mg", "--channels", "0", "--names", "horizontal",
-                    "--unit", "mg", "--fs", f"{float(d['fs_hz']):g}", "--out", str(cap))
+                    "--unit", "mg", "--out", str(cap))
     cpu += cmsensord("calibrate", str(cap), "--to", f"{HEALTHY * snaps * SNAPSHOT_S:g}",
-                     "--rpm", f"{float(d['rpm']):g}", "--out", str(site))
+                     "--out", str(site))          # f_r from the rpm the import read from the archive
     cpu += cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
     t, sev = severity_timeline(out, "horizontal")
     life = t / (snaps * SNAPSHOT_S) * 100

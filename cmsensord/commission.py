@@ -93,7 +93,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         m = r.model
         per = obs.period(1.0) / obs.rate_hz
         lines.append(
-            f"{r.name:<12} {r.f_r:>7.3f} {r.f_r_source[:10]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
+            f"{r.name:<12} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
             f"{m.runin_periods * per:>8.0f} {m.periods * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
             f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
