@@ -27,7 +27,7 @@ import uuid
 
 import pytest
 
-from test_cli import ENV, board_on_pty
+from processes import ENV, board_on_pty
 
 WATCHDOG_USEC = 1_000_000
 WATCHDOG_S = WATCHDOG_USEC / 1e6
@@ -57,7 +57,7 @@ class FakeManager:
         while not self._done.is_set():
             try:
                 data = self.sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             with self._lock:
                 self.messages.append((time.monotonic(), data.decode()))
