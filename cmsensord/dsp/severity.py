@@ -1,6 +1,6 @@
 """Anomaly decisions and the severity index of a bank of AKFs.
 
-Implements seed 000 section III.C-D: the 1-s anomaly decision of Fig. 3 and the
+Implements Kim et al. 2023 section III.C-D: the 1-s anomaly decision of Fig. 3 and the
 severity index of eqs. (16)-(18), vectorised over (channel, filter).
 
 Fig. 3, for every AKF of every channel, once per decision period:
