@@ -1,7 +1,8 @@
 """Shared fixtures, and the ``process`` marker for tests that start processes or ptys.
 
-    python -m pytest -m "not process"      # the fast unit tests
-    python -m pytest -m process            # daemon/board processes, ptys, shell tools
+    python -m pytest -m "not process"                # the unit tests
+    python -m pytest -m "not process and not slow"   # the quick loop: without the long simulations
+    python -m pytest -m process                      # daemon/board processes, ptys, shell tools
 
 A test is marked ``process`` when its module is in PROCESS_MODULES (every test there
 starts ``python -m cmsensord`` or ``python -m firmware_sim``), when it is named in
@@ -52,14 +53,22 @@ PROCESS_TESTS = frozenset({
 #: Fixtures that start a process (``small_fs`` runs mount and umount).
 PROCESS_FIXTURES = frozenset({"small_fs"})
 
+#: Unit tests that simulate a long run (a simulated hour, tens of seconds each): also ``slow``.
+SLOW_TESTS = frozenset({
+    "test_scenarios.py::test_healthy_gives_no_anomaly_in_a_simulated_hour",
+    "test_scenarios.py::test_degrading_rises_through_levels_fails_and_eases",
+})
+
 
 def pytest_collection_modifyitems(config, items):
-    process = pytest.mark.process
     for item in items:
         module = item.path.name
-        if (module in PROCESS_MODULES or f"{module}::{item.originalname}" in PROCESS_TESTS
+        name = f"{module}::{item.originalname}"
+        if (module in PROCESS_MODULES or name in PROCESS_TESTS
                 or PROCESS_FIXTURES.intersection(getattr(item, "fixturenames", ()))):
-            item.add_marker(process)
+            item.add_marker(pytest.mark.process)
+        if name in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(autouse=True)
