@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Sequence
 
 from cmsensord import __version__
+from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, config_from_dict, config_to_dict, default_config, load_config
 from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
 from cmsensord.link import FrameQueue, Progress, SerialReader, open_port_checked, read_capture
@@ -404,7 +405,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,summary}", parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,calibrate,summary}", parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
@@ -429,6 +430,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     v.add_argument("--bandwidth", type=_positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
+    add_calibrate_parser(sub)
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -489,6 +491,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             except BrokenPipeError:     # `cmsensord summary FILE | head`: the reader has enough
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 0
+        if args.command == "calibrate":
+            return run_calibrate(args)
         if args.command == "record":
             return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
         if args.command == "vkf":

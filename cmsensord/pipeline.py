@@ -119,7 +119,8 @@ class Processor:
                  clock_ns: Callable[[], int] = time.time_ns,
                  diagnostics: Callable[[], dict] | None = None,
                  link_counters: Callable[[], dict] | None = None,
-                 on_event: Callable[[dict], None] | None = None):
+                 on_event: Callable[[dict], None] | None = None,
+                 observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
         self.cfg = cfg
         self.sink = sink
         self.auto_channels = auto_channels
@@ -127,6 +128,7 @@ class Processor:
         self.diagnostics = diagnostics
         self.link_counters = link_counters
         self.on_event = on_event
+        self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.fs = DEFAULT_FS
         self.block_len = DEFAULT_BLOCK_LEN
         self.status: Status | None = None
@@ -149,7 +151,9 @@ class Processor:
         self._tacho_waiting: list[Frame] = []
         self.tacho = None                       # TachoTracker, once the board sends TACHO frames
         self.orders = None                      # OrderChain, once RAW blocks and a tacho come
-        self._pending: list[tuple[np.ndarray, np.ndarray]] = []   # (outlier, valid) awaiting f_r
+        self._pending: list[tuple] = []     # (outlier, valid, level ratio or None) awaiting f_r
+        self._baseline = np.ones(1)         # per channel: the bank watches block RMS / baseline
+        self._combined: np.ndarray | None = None   # per channel: severity also grades the level
         self._pending_slots = 0
         self._no_channels = False
         self.raw_dropped = 0
@@ -301,8 +305,13 @@ class Processor:
         self.bank = AkfBank(R, window=[m.window for m in mons], z_c=[m.z_c for m in mons],
                             p0=[m.p0 for m in mons], q0=[m.q0 for m in mons])
         period = max(1, round(mons[0].decision_period_s * self.fs / self.block_len))
-        self.decider = AnomalyDecider(len(usable), n, f_r=[m.f_r for m in mons],
-                                      c=[m.c for m in mons], period=period)
+        combined = [m.combined for m in mons]
+        self._baseline = np.array([m.baseline or 1.0 for m in mons])
+        self._combined = np.array(combined) if any(combined) else None
+        self.decider = AnomalyDecider(
+            len(usable), n, f_r=[m.f_r for m in mons], c=[m.c for m in mons], period=period,
+            level_alert=[m.level_alert for m in mons] if any(combined) else None,
+            level_danger=[m.level_danger for m in mons])
         self._index = np.array([ch.index for ch in usable])
         self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in usable]
         self._trace_i = min(self.cfg.output.akf_trace_filter, n) - 1
@@ -315,7 +324,7 @@ class Processor:
         self._mic_cols = [c for c, ch in enumerate(usable) if ch.kind == "microphone"]
         if not self._mic_cols:
             return
-        from cmsensord.acoustic_calib import load_calibration
+        from cmsensord.acoustic_model import load_calibration
         from cmsensord.dsp.acoustic import AcousticEstimator, Guards
 
         models = []
@@ -486,9 +495,10 @@ class Processor:
         n = upto - first
         if n <= 0:
             return
-        outl = np.concatenate([o for o, _ in self._pending])
-        valid = np.concatenate([v for _, v in self._pending])
-        self._pending = [(outl[n:], valid[n:])] if outl.shape[0] > n else []
+        outl = np.concatenate([o for o, _, _ in self._pending])
+        valid = np.concatenate([v for _, v, _ in self._pending])
+        lv = None if self._combined is None else np.concatenate([x for _, _, x in self._pending])
+        self._pending = [(outl[n:], valid[n:], None if lv is None else lv[n:])] if outl.shape[0] > n else []
         self._pending_slots = outl.shape[0] - n
         outl, valid = outl[:n], valid[:n]
         d = self.decider
@@ -498,7 +508,8 @@ class Processor:
             f_r = None
             if self._f_r_from_tacho() and d.phase + take == d.period:
                 f_r = self._period_f_r(first + pos + take)
-            for dec in d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=f_r):
+            part = None if lv is None else lv[pos:pos + take]
+            for dec in d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=f_r, level=part):
                 self._write_decision(dec)
             pos += take
 
@@ -563,8 +574,12 @@ class Processor:
         first_slot = self.next_slot
         if self.acoustic is not None:
             self._estimate_vibration(first_slot, y, valid)
+        if self.observe is not None:
+            self.observe(first_slot, y, valid)
+        y = y / self._baseline                  # the bank watches block RMS / baseline
         out = self.bank.process(y, valid)
-        self._pending.append((out.outlier, valid))
+        level = None if self._combined is None else np.where(self._combined, y, np.nan)
+        self._pending.append((out.outlier, valid, level))
         self._pending_slots += T
         self.next_slot += T
         self.observations += int(valid.sum())
@@ -633,13 +648,19 @@ class Processor:
             sev = float(d.severity[c])
             level = int(round(sev * n))
             anomaly = d.anomaly[c].tolist()
-            failure = bool(anomaly[-1])
-            self.sink.write(f"/cm/{ch.name}/severity", "severity", stamp, {
+            failure = bool(anomaly[-1]) or sev >= 1.0
+            msg = {
                 "channel": ch.name, "severity_index": sev, "level": level,
                 "anomaly": anomaly, "outliers": d.cnt[c].tolist(), "f_r": float(d.f_r[c]),
                 "r": self._R[c].tolist(), "failure": failure, "missing": int(d.missing[c]),
                 "transient": d.transient,
-            })
+            }
+            if self._combined is not None and self._combined[c]:
+                msg["severity_akf"] = float(d.severity_akf[c])
+                msg["severity_level"] = float(d.severity_level[c])
+                if np.isfinite(d.level[c]):
+                    msg["level_ratio"] = float(d.level[c])
+            self.sink.write(f"/cm/{ch.name}/severity", "severity", stamp, msg)
             v = self.views[c]
             v.severity, v.anomaly, v.outliers_first = sev, anomaly, int(d.cnt[c, 0])
             v.max_severity = max(v.max_severity, sev)
@@ -659,11 +680,14 @@ class Processor:
             if sev != prev_sev:
                 self.event("severity_change", ch.name, f"{ch.name}: severity index {prev_sev:.2f} -> "
                            f"{sev:.2f} (level {level}/{n})", stamp, severity_index=sev, level=level)
-            if failure and not prev[-1]:
+            was_failure = bool(prev[-1]) or prev_sev >= 1.0
+            if failure and not was_failure:
                 v.failures += 1
-                self.event("failure", ch.name, f"{ch.name}: FAILURE: AKF_{n} with R_max="
-                           f"{self._R[c, -1]:.4g} flags an anomaly", stamp, severity_index=sev, level=level)
-            elif prev[-1] and not failure:
+                why = (f"AKF_{n} with R_max={self._R[c, -1]:.4g} flags an anomaly" if anomaly[-1] else
+                       f"level {float(d.level[c]):.2f} x baseline >= level_danger")
+                self.event("failure", ch.name, f"{ch.name}: FAILURE: {why}", stamp,
+                           severity_index=sev, level=level)
+            elif was_failure and not failure:
                 self.event("failure_clear", ch.name, f"{ch.name}: failure condition cleared "
                            f"(AKF_{n} back below c*f_r)", stamp, severity_index=sev, level=level)
         self._write_diagnostics(stamp)
