@@ -1,4 +1,5 @@
-"""Helpers for tests that run the daemon and the simulated board as real processes.
+"""Helpers for tests that run the daemon and the simulated board as real processes, and
+read what they write into pipes.
 
 The environment puts this checkout first on PYTHONPATH, so ``python -m cmsensord``
 and ``python -m firmware_sim`` run the code under test.  Tests using these helpers
@@ -59,3 +60,25 @@ def stop(proc, timeout=10) -> str:
     _, err = proc.communicate(timeout=timeout)
     return err
 
+
+def fill(fd: int) -> None:
+    """Write into a non-blocking pipe until not even one more byte fits."""
+    size = 65536
+    while size:
+        try:
+            os.write(fd, b"#" * size)
+        except BlockingIOError:
+            size //= 2
+
+
+def drain(fd: int) -> bytes:
+    """Everything a non-blocking pipe holds now (up to its end, when the writer has closed it)."""
+    out = b""
+    while True:
+        try:
+            chunk = os.read(fd, 65536)
+        except BlockingIOError:
+            return out
+        if not chunk:
+            return out
+        out += chunk

@@ -21,7 +21,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import frames_hit, read_records
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, cmsensord, start_board, start_daemon, stop
+from processes import ENV, cmsensord, drain, fill, start_board, start_daemon, stop
 from stream import run_processor
 
 
@@ -162,8 +162,6 @@ def test_a_throttled_loop_sheds_raw_blocks_and_keeps_the_tacho(tmp_path):
     daemon goes on with orders and severity after the stall."""
     import fcntl
     import os
-
-    from test_systemd import drain, fill
 
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "healthy", "--mode", "raw", "--tacho", "--channels", "2",
