@@ -1,4 +1,4 @@
-"""Seed 002 on simulated data: the paper's Tables 1 and 2, severity from sound, throughput.
+"""Orimoto, Ikuta & Wang on simulated data: the paper's Tables 1 and 2, severity from sound, throughput.
 
     python bench/bench_acoustic.py                         # tables, seeds 1-5, the project's motor
     python bench/bench_acoustic.py --machine broadband     # a machine with broadband vibration

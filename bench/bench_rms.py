@@ -68,7 +68,7 @@ def replay_in_subprocess(capture: Path, out: Path, trace: bool) -> dict:
 
 # ----------------------------------------------------------------- filterpy peer
 def filterpy_bank(y: np.ndarray, R: np.ndarray, N: int, z_c: float) -> tuple[np.ndarray, np.ndarray]:
-    """The same AKF (seed 000 eqs. 3-15) with one filterpy KalmanFilter per filter.
+    """The same AKF (Kim et al. 2023 eqs. 3-15) with one filterpy KalmanFilter per filter.
 
     filterpy does the Kalman predict/update (eqs. 3-9); the adaptation of
     Q̂ (eqs. 10-14) and the outlier test (15) are done around it, per filter.

@@ -86,7 +86,7 @@ class ConfigError(CmsensordError):
     def __str__(self) -> str:
         return self._format()
 
-    def relocated(self, source: str, prefix: str = "") -> "ConfigError":
+    def relocated(self, source: str, prefix: str = "") -> ConfigError:
         """The same error seen from a containing document.
 
         ``prefix`` is prepended to the key path (``"channels[2]"`` + ``"r_max"``

@@ -3,12 +3,13 @@
 Everything here is I/O at the edge.  Bytes go into the push decoder of
 ``protocol``; frames come out and go, through a bounded :class:`FrameQueue`,
 to the processing loop.  A capture file is the bytes exactly as read from the
-port (PROTOCOL.md, "A captured serial log"): the reader can tee them to one,
+port (docs/PROTOCOL.md, "A captured serial log"): the reader can tee them to one,
 ``record`` writes one, ``replay`` reads one through the same decoder.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import os
@@ -17,8 +18,9 @@ import termios
 import threading
 import time
 from collections import deque
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import BinaryIO, Callable, Iterator
+from typing import BinaryIO
 
 import serial
 
@@ -183,10 +185,8 @@ def _why(exc: BaseException) -> str:
 
 
 def _close_quietly(ser) -> None:
-    try:
+    with contextlib.suppress(*PORT_ERRORS):
         ser.close()
-    except PORT_ERRORS:
-        pass
 
 
 def read_capture(path: str | Path, chunk: int = 1 << 20) -> Iterator[bytes]:

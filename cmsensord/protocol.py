@@ -1,6 +1,6 @@
 """The serial wire protocol, version 1: frame encoding and the streaming decoder.
 
-Owns everything in /work/shared/PROTOCOL.md ("the contract"):
+Owns everything in docs/PROTOCOL.md ("the contract"):
 
 * the frame layout (sync ``A5 5A``, 14-byte header, payload, CRC-32 of bytes
   2 .. 14+len-1 stored little-endian) and the four payloads (STATUS, RMS, RAW,
@@ -32,7 +32,6 @@ import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-
 from typing import NamedTuple
 
 import numpy as np
@@ -106,14 +105,14 @@ class Frame(_FrameFields):
     __slots__ = ()
 
     def __new__(cls, type: FrameType, seq: int, t0: int, chan: int, flags: int, payload: bytes,
-                t0_unwrapped: int | None = None, offset: int = -1, lost_before: int = 0) -> "Frame":
+                t0_unwrapped: int | None = None, offset: int = -1, lost_before: int = 0) -> Frame:
         return tuple.__new__(cls, (type, seq, t0, chan, flags, payload,
                                    t0 if t0_unwrapped is None else t0_unwrapped, offset, lost_before))
 
 
 @dataclass(frozen=True, slots=True)
 class Status:
-    """STATUS payload fields (PROTOCOL.md, STATUS)."""
+    """STATUS payload fields (docs/PROTOCOL.md, STATUS)."""
 
     fw_version: int  # major << 8 | minor
     mode: int  # MODE_RMS or MODE_RAW

@@ -28,7 +28,7 @@ import logging
 import os
 import socket
 import time
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 log = logging.getLogger("cmsensord")
 
@@ -114,9 +114,10 @@ class Notifier:
             self._sock = None
 
     def _send(self, message: str) -> None:
-        if self._sock is None:
+        if self._sock is None or self._addr is None:
             return
         data = message.encode("utf-8", "replace")
+        error: OSError | None = None
         for _attempt in range(2):
             try:
                 # connected, so that waiting for room polls the manager's queue: an unconnected

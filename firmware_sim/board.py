@@ -1,12 +1,12 @@
 """The simulated EK-TM4C1294XL ADC board: ADC, block RMS, tacho capture and framing.
 
 Owns what the board's firmware does to a :class:`~firmware_sim.scenarios.Scenario`'s
-acceleration (seed 000, section IV: 25 kHz sampling, the RMS of each 250-sample
-block sent at 100 Hz over the UART) and the exact bytes it sends (PROTOCOL.md):
+acceleration (Kim et al. 2023, section IV: 25 kHz sampling, the RMS of each 250-sample
+block sent at 100 Hz over the UART) and the exact bytes it sends (docs/PROTOCOL.md):
 
 * ADC: ``count = clip(round(x / scale + offset), 0, 4095)`` per channel, 12 bit;
   a block in which a sample sits at 0 or 4095 carries ``FLAG_CLIPPED``;
-* RMS (PROTOCOL.md, RMS): ``sqrt(mean(((count - offset) * scale)^2))`` over the
+* RMS (docs/PROTOCOL.md, RMS): ``sqrt(mean(((count - offset) * scale)^2))`` over the
   block, in float64, sent as float32, with nothing removed;
 * tacho: rising edges where the shaft angle (the integral of the scenario's
   ``shaft_hz``) passes a multiple of 1/ppr revolution, as offsets from the
@@ -19,7 +19,7 @@ block sent at 100 Hz over the UART) and the exact bytes it sends (PROTOCOL.md):
   mode) or one RAW frame per channel (RAW mode), then a TACHO frame when a
   tacho is wired; seq +1 for every frame (u16 wrap), t0 = the sample index of
   the block's first sample (u32 wrap);
-* the link's byte budget (:func:`link_budget`, PROTOCOL.md's table): whether a
+* the link's byte budget (:func:`link_budget`, docs/PROTOCOL.md's table): whether a
   UART at a given baud rate carries the stream.
 
 Samples are produced in vectorised chunks of ``chunk_blocks`` blocks (100, one
@@ -117,6 +117,18 @@ class BoardConfig:
         return float(v)
 
     def __post_init__(self) -> None:
+        self._check_sampling()
+        self._set_calibration()
+        self._check_header_fields()
+        self.overrun_blocks = tuple(int(b) for b in self.overrun_blocks)
+        self.tacho_missed = self._fault_spec("tacho_missed", self.tacho_missed)
+        self.tacho_extra = self._fault_spec("tacho_extra", self.tacho_extra)
+        if not (self.tacho_jitter >= 0 and math.isfinite(self.tacho_jitter)):
+            raise ValueError(f"tacho_jitter must be >= 0 samples, got {self.tacho_jitter!r}")
+        self.tacho_jitter = float(self.tacho_jitter)
+
+    def _check_sampling(self) -> None:
+        """Mode, channels, sampling rate and block length: ValueError naming the field."""
         if self.mode not in ("rms", "raw"):
             raise ValueError(f"mode must be 'rms' or 'raw', got {self.mode!r}")
         if not isinstance(self.n_channels, int) or not 1 <= self.n_channels <= 8:
@@ -127,6 +139,9 @@ class BoardConfig:
             raise ValueError(f"block_len must be an integer 1..65535, got {self.block_len!r}")
         if self.mode == "raw" and 2 * self.block_len > MAX_PAYLOAD:
             raise ValueError(f"RAW blocks carry at most {MAX_PAYLOAD // 2} samples, block_len={self.block_len}")
+
+    def _set_calibration(self) -> None:
+        """Per-channel scale and offset (defaults: full scale over 12 bits, mid-range): as float tuples."""
         if self.scale is None:
             self.scale = (FULL_SCALE_MS2 * 2 / 4096.0,) * self.n_channels
         if self.offset is None:
@@ -140,6 +155,9 @@ class BoardConfig:
             raise ValueError(f"scale values must be positive, got {self.scale}")
         if not all(0.0 <= v <= ADC_MAX for v in self.offset):
             raise ValueError(f"offset values must lie in 0..{ADC_MAX} counts, got {self.offset}")
+
+    def _check_header_fields(self) -> None:
+        """Start values and STATUS fields that must fit the frame header and payload."""
         if not isinstance(self.t0_start, int) or self.t0_start < 0:
             raise ValueError(f"t0_start must be a non-negative integer, got {self.t0_start!r}")
         if not isinstance(self.seq_start, int) or not 0 <= self.seq_start <= 0xFFFF:
@@ -150,12 +168,6 @@ class BoardConfig:
             raise ValueError(f"fw_version must fit in u16, got {self.fw_version!r}")
         if not self.status_every_s > 0:
             raise ValueError(f"status_every_s must be > 0, got {self.status_every_s!r}")
-        self.overrun_blocks = tuple(int(b) for b in self.overrun_blocks)
-        self.tacho_missed = self._fault_spec("tacho_missed", self.tacho_missed)
-        self.tacho_extra = self._fault_spec("tacho_extra", self.tacho_extra)
-        if not (self.tacho_jitter >= 0 and math.isfinite(self.tacho_jitter)):
-            raise ValueError(f"tacho_jitter must be >= 0 samples, got {self.tacho_jitter!r}")
-        self.tacho_jitter = float(self.tacho_jitter)
 
     @property
     def tacho_faults(self) -> bool:
@@ -200,7 +212,7 @@ class Board:
         return x.astype(np.uint16)
 
     def _block_rms(self, counts: np.ndarray) -> np.ndarray:
-        """float32 (C, nb): PROTOCOL.md RMS of each block of ``counts`` (C, nb * block_len),
+        """float32 (C, nb): docs/PROTOCOL.md RMS of each block of ``counts`` (C, nb * block_len),
         by the same function the daemon applies to RAW blocks (cmsensord.dsp.rms)."""
         return block_rms(counts, self.scale, self.offset, self.block_len)
 
@@ -397,7 +409,7 @@ class Board:
                 chan_blocks = counts.reshape(self.n_channels, nb, L)
             else:
                 rms = self._block_rms(counts).T  # (nb, C)
-                any_clip = clipped.any(axis=0)
+                any_clip = np.asarray(clipped.any(axis=0))
             if cfg.tacho:
                 e_blk, e_off = self.tacho_edges(b, nb)
                 bounds = np.searchsorted(e_blk, np.arange(b, b + nb + 1))
@@ -463,16 +475,16 @@ class Board:
 
 # --------------------------------------------------------------------------- link budget
 
-#: the UART's default rate (PROTOCOL.md, Link)
+#: the UART's default rate (docs/PROTOCOL.md, Link)
 DEFAULT_BAUD = 921600
 _BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
-_TACHO_EDGES_BUDGET = 4  # PROTOCOL.md's table: TACHO with <= 4 edges per block
+_TACHO_EDGES_BUDGET = 4  # docs/PROTOCOL.md's table: TACHO with <= 4 edges per block
 
 
 def link_streams(mode: str, n_channels: int, block_len: int = 250, fs: int = 25000,
                  tacho: bool = False, *, tacho_edges: int = _TACHO_EDGES_BUDGET,
                  status_per_s: float = 1.0) -> dict[str, float]:
-    """Bytes per second of each stream the board sends (PROTOCOL.md, byte budget table).
+    """Bytes per second of each stream the board sends (docs/PROTOCOL.md, byte budget table).
 
     Every frame costs 18 bytes of overhead (sync, header, CRC) plus its payload:
     RMS ``4 C`` per block; RAW ``2 block_len`` per channel and block; TACHO

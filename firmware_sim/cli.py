@@ -13,7 +13,7 @@ SIGINT/SIGTERM, and prints the link statistics. Bad arguments give a one-line
 error and exit code 2. ``--truth`` writes the true waveforms (t, rpm, turns,
 each component of the run-up scenarios) of channel 0 to an .npz file
 (:func:`firmware_sim.scenarios.write_truth`). When the stream needs more
-bytes per second than a UART at ``--baud`` carries (PROTOCOL.md's byte
+bytes per second than a UART at ``--baud`` carries (docs/PROTOCOL.md's byte
 budget), one warning line goes to stderr (a pty has no baud limit, so for
 ``--pty`` it says that a real UART would not carry the stream).
 """
@@ -70,7 +70,7 @@ def _fault(text: str) -> float | tuple[int, ...]:
 
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="firmware_sim", description="The simulated TM4C1294 ADC board of cmsensord "
-                "(PROTOCOL.md): writes a capture file or serves a pseudo-terminal.")
+                "(docs/PROTOCOL.md): writes a capture file or serves a pseudo-terminal.")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--scenario", help=f"machine model: {', '.join(SCENARIOS)}")
     p.add_argument("--channels", type=int, default=1, help="accelerometer channels, 1..8 (default 1)")
@@ -124,31 +124,37 @@ def _list() -> int:
     return 0
 
 
+def _check_args(args: argparse.Namespace) -> None:
+    """The rules between options that argparse does not express: _UsageError naming the option."""
+    if not args.scenario:
+        raise _UsageError("--scenario is required (see --list)")
+    if not args.out and not args.pty:
+        raise _UsageError("give --out FILE or --pty")
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise _UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    if not args.speed >= 0:
+        raise _UsageError(f"--speed must be >= 0, got {args.speed}")
+    if not 0.0 <= args.byte_error_rate <= 1.0:
+        raise _UsageError(f"--byte-error-rate must be a probability 0..1, got {args.byte_error_rate}")
+    if args.faults_out and not args.byte_error_rate:
+        raise _UsageError("--faults-out needs --byte-error-rate")
+    if args.link and not args.pty:
+        raise _UsageError("--link needs --pty")
+
+
 def main(argv: list[str] | None = None) -> int:
+    truth = None                                   # (path, seconds) of --truth
     try:
         args = _build_parser().parse_args(argv)
         if args.list:
             return _list()
-        if not args.scenario:
-            raise _UsageError("--scenario is required (see --list)")
-        if not args.out and not args.pty:
-            raise _UsageError("give --out FILE or --pty")
-        if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
-            raise _UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
-        if not args.speed >= 0:
-            raise _UsageError(f"--speed must be >= 0, got {args.speed}")
-        if not 0.0 <= args.byte_error_rate <= 1.0:
-            raise _UsageError(f"--byte-error-rate must be a probability 0..1, got {args.byte_error_rate}")
-        if args.faults_out and not args.byte_error_rate:
-            raise _UsageError("--faults-out needs --byte-error-rate")
-        if args.link and not args.pty:
-            raise _UsageError("--link needs --pty")
+        _check_args(args)
         natural = getattr(SCENARIOS.get(args.scenario), "natural_duration_s", None)
-        duration = args.duration if args.duration is not None else (
-            (natural or 3600.0) if args.out else None)
+        # the scenario's length; what is sent: all of it for --out, until stopped for --pty
+        span = args.duration if args.duration is not None else (natural or 3600.0)
+        duration = span if args.out or args.duration is not None else None
         scenario = make_scenario(args.scenario, n_channels=args.channels, seed=args.seed,
-                                 duration_s=duration if duration is not None else (natural or 3600.0),
-                                 **dict(args.param))
+                                 duration_s=span, **dict(args.param))
         config = BoardConfig(mode=args.mode, n_channels=args.channels, fs=scenario.fs,
                              tacho=args.tacho, ppr=args.ppr, t0_start=args.t0_start,
                              tacho_missed=args.tacho_missed, tacho_extra=args.tacho_extra,
@@ -157,9 +163,11 @@ def main(argv: list[str] | None = None) -> int:
         board = Board(scenario, config)
         if args.truth_rate is not None and not args.truth:
             raise _UsageError("--truth-rate needs --truth FILE")
-        truth_duration = duration if duration is not None else natural
-        if args.truth and truth_duration is None:
-            raise _UsageError("--truth with --pty needs --duration")
+        if args.truth:
+            truth_duration = duration if duration is not None else natural
+            if truth_duration is None:
+                raise _UsageError("--truth with --pty needs --duration")
+            truth = (args.truth, truth_duration)
         _, fits, budget = link_budget(args.mode, args.channels, config.block_len, config.fs,
                                       args.tacho, args.baud,
                                       tacho_edges=_tacho_edges_per_block(scenario, config, duration))
@@ -170,15 +178,10 @@ def main(argv: list[str] | None = None) -> int:
         where = ("the pty has no baud limit, but a real UART would not carry this stream" if args.pty
                  else "the capture holds it all, but a real UART would not carry this stream")
         print(f"firmware_sim: warning: {budget}; {where}", file=sys.stderr, flush=True)
-    if args.truth:
-        try:
-            write_truth(scenario, args.truth, truth_duration, rate=args.truth_rate)
-        except ValueError as exc:
-            print(f"firmware_sim: error: --truth: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        except OSError as exc:
-            print(f"firmware_sim: error: cannot write {args.truth}: {exc.strerror or exc}", file=sys.stderr)
-            return 1
+    if truth is not None:
+        status = _write_truth(scenario, *truth, rate=args.truth_rate)
+        if status:
+            return status
 
     injector = None
     if args.byte_error_rate:
@@ -186,23 +189,41 @@ def main(argv: list[str] | None = None) -> int:
 
         injector = StreamInjector(args.byte_error_rate, seed=args.seed)
     if args.out:
-        t = time.perf_counter()
-        try:
-            if injector is None:
-                counts = board.write_capture(args.out, duration)
-            else:
-                counts = _write_noisy_capture(board, args.out, duration, injector)
-                if args.faults_out:
-                    injector.write_records(args.faults_out)
-        except OSError as exc:
-            print(f"firmware_sim: error: cannot write {args.out}: {exc.strerror or exc}", file=sys.stderr)
-            return 1
-        dt = time.perf_counter() - t
-        print(f"wrote {args.out}: {args.scenario}, {args.channels} ch, {args.mode}, {duration:g} s, "
-              f"{counts['blocks']} blocks, {counts['frames']} frames, {counts['bytes']} bytes in {dt:.1f} s")
-        return 0
+        return _write_out(board, args, span, injector)
     return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold,
                       link=args.link, injector=injector, faults_out=args.faults_out)
+
+
+def _write_truth(scenario, path: str, duration: float, *, rate) -> int:
+    """--truth: the true waveforms to ``path``; 0, or the exit status after a one-line error."""
+    try:
+        write_truth(scenario, path, duration, rate=rate)
+    except ValueError as exc:
+        print(f"firmware_sim: error: --truth: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        print(f"firmware_sim: error: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _write_out(board: Board, args: argparse.Namespace, duration: float, injector) -> int:
+    """--out: ``duration`` seconds as fast as possible, then a one-line summary; the exit status."""
+    t = time.perf_counter()
+    try:
+        if injector is None:
+            counts = board.write_capture(args.out, duration)
+        else:
+            counts = _write_noisy_capture(board, args.out, duration, injector)
+            if args.faults_out:
+                injector.write_records(args.faults_out)
+    except OSError as exc:
+        print(f"firmware_sim: error: cannot write {args.out}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    dt = time.perf_counter() - t
+    print(f"wrote {args.out}: {args.scenario}, {args.channels} ch, {args.mode}, {duration:g} s, "
+          f"{counts['blocks']} blocks, {counts['frames']} frames, {counts['bytes']} bytes in {dt:.1f} s")
+    return 0
 
 
 def _write_noisy_capture(board: Board, path: str, duration: float, injector) -> dict:

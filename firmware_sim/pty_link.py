@@ -20,8 +20,8 @@ import os
 import threading
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Callable
 
 from .board import Board
 
@@ -154,7 +154,7 @@ class PtyEndpoint:
         self.close()
 
     def __del__(self) -> None:
-        try:
+        try:  # noqa: SIM105 - no contextlib here: __del__ may run at exit, when module globals are gone
             self.close()
         except Exception:
             pass

@@ -46,7 +46,6 @@ from cmsensord.dsp.acoustic import (
 )
 from cmsensord.errors import ConfigError
 
-
 # --------------------------------------------------------------------------- helpers
 
 def kibble(N, *, n=4, rho2=0.8, phi2=0.9, v_shape=2.0, v_mean=0.5, seed=0):
@@ -398,7 +397,10 @@ def test_cross_term_variance_of_independent_waveforms():
     rng = np.random.default_rng(5)
     L = 250
     m = rng.standard_normal((3000, L)) * 0.3             # machine sound, white
-    b = lambda n: rng.standard_normal((n, L)) * 0.1     # background, white
+
+    def b(n):                                           # background, white
+        return rng.standard_normal((n, L)) * 0.1
+
     # 2<m b> over L white samples: variance 4 var(m) var(b) / L
     est = cross_term_variance(m + b(3000), b(3000))
     assert est == pytest.approx(4 * 0.09 * 0.01 / L, rel=0.1)

@@ -15,8 +15,10 @@ from cmsensord.acoustic_calib import (
     fit_captures,
     fit_model,
     load_calibration,
-    main as calib_main,
     save_calibration,
+)
+from cmsensord.acoustic_calib import (
+    main as calib_main,
 )
 from cmsensord.config import config_from_dict, config_to_dict
 from cmsensord.errors import ConfigError

@@ -1,4 +1,4 @@
-"""The AKF bank against seed 000: the spike example, the reference, chunk splits."""
+"""The AKF bank against Kim et al. 2023: the spike example, the reference, chunk splits."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ BACKENDS = ["numpy"] + (["c"] if have_kernel() else [])
 
 
 def spike_input(seconds: int, seed: int) -> np.ndarray:
-    """Seed 000 Fig. 4: a random signal at 100 Hz with 25 single-sample spikes per
+    """Kim et al. 2023 Fig. 4: a random signal at 100 Hz with 25 single-sample spikes per
     second (one every 4th sample).  The base is N(1, 0.05²), the spikes +2."""
     rng = np.random.default_rng(seed)
     y = 1.0 + 0.05 * rng.standard_normal(seconds * 100)

@@ -2,26 +2,17 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from cmsensord.protocol import iter_frames
 from cmsensord.sinks.mcap_sink import read_messages
-
-ROOT = Path(__file__).resolve().parents[1]
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-
-
-def cmsensord(*args, timeout=120, **kw):
-    return subprocess.run([sys.executable, "-m", "cmsensord", *args], capture_output=True, text=True,
-                          env=ENV, timeout=timeout, **kw)
+from messages import comparable
+from processes import ENV, board_on_pty, cmsensord
 
 
 def assert_messages_match_their_schemas(path):
@@ -39,37 +30,6 @@ def assert_messages_match_their_schemas(path):
             jsonschema.validate(doc, json.loads(schema.data))
             seen.add(schema.name)
     return seen
-
-
-@contextlib.contextmanager
-def board_on_pty(*args):
-    """A simulated board serving a pty (``python -m firmware_sim --pty --hold ARGS``): its path."""
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
-                           stdout=subprocess.PIPE, text=True, env=ENV)
-    try:
-        yield sim.stdout.readline().strip()
-    finally:
-        sim.terminate()
-        sim.wait(timeout=5)
-
-
-def comparable(messages):
-    """Severity and event messages with times relative to the first severity message.
-
-    Only the wall-clock anchor may differ between a live run and a replay; the
-    start/stop events name the source and are left out.
-    """
-    sev = [s for t, s, _ in messages if t.endswith("/severity")]
-    base = min(sev)
-    out = []
-    for topic, stamp, msg in messages:
-        if topic == "/cm/diagnostics":
-            continue
-        if topic == "/cm/events" and msg["kind"] in ("start", "stop"):
-            continue
-        msg = {k: v for k, v in msg.items() if k != "timestamp"}
-        out.append((topic, stamp - base, msg))
-    return out
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,14 @@ import pytest
 
 from cmsensord.dsp.akf import AkfBank, bank_r
 from cmsensord.dsp.commissioning import (
-    MARGIN, R_GRID, SPAN, bank_limits, critical_r, learn_healthy, period_counts, run_in_periods,
+    MARGIN,
+    R_GRID,
+    SPAN,
+    bank_limits,
+    critical_r,
+    learn_healthy,
+    period_counts,
+    run_in_periods,
 )
 from cmsensord.dsp.severity import AnomalyDecider, level_severity
 

@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import copy
-import re
 import dataclasses
+import re
 from pathlib import Path
 
 import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-from fuzz import examples
 
 from cmsensord.config import (
     ChannelConfig,
@@ -26,6 +24,7 @@ from cmsensord.config import (
     load_config,
 )
 from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError
+from fuzz import examples
 
 DEFAULT_YAML = Path(__file__).resolve().parents[1] / "config" / "default.yaml"
 

@@ -24,10 +24,10 @@ import time
 from pathlib import Path
 
 from mcap.reader import make_reader
-from test_cli import ENV, board_on_pty
 
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, log_files, summarize
 from cmsensord.sinks.schemas import TOPIC_DIAGNOSTICS, TOPIC_EVENTS
+from processes import ENV, board_on_pty
 
 NS = 1_000_000_000
 

@@ -19,24 +19,17 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
-from test_cli import ENV
 
 from cmsensord.config import OutputConfig
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_sink import log_files, read_messages, summarize
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
+from fakes import FakeClock
+from processes import ENV
 
 T0 = 1_700_000_000_000_000_000
 PAD = "v" * 400
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
 
 
 def output(path, **kw):
@@ -103,8 +96,7 @@ def logged(paths):
     return ii, events
 
 
-def test_full_tmpfs_drops_and_counts_then_resumes_when_space_returns(small_fs):
-    clock = FakeClock()
+def test_full_tmpfs_drops_and_counts_then_resumes_when_space_returns(small_fs, clock):
     logs = small_fs / "logs"
     sink = RotatingSink(output(logs, flush_s=1.0), clock=clock)
     rec = Recorder(sink, clock)
@@ -156,11 +148,10 @@ def test_full_tmpfs_drops_and_counts_then_resumes_when_space_returns(small_fs):
     assert [e["details"]["action"] for e in events if e["kind"] == "disk_error"][-1] == "resumed"
 
 
-def test_starting_on_a_full_disk_runs_without_a_file_and_retries(small_fs):
+def test_starting_on_a_full_disk_runs_without_a_file_and_retries(small_fs, clock):
     logs = small_fs / "logs"
     logs.mkdir()
     filler = fill(small_fs, leave=0)
-    clock = FakeClock()
     sink = RotatingSink(output(logs, retry_s=5.0), clock=clock)   # does not raise
     assert sink.current is None and sink.disk_errors >= 1
     rec = Recorder(sink, clock)
@@ -201,8 +192,7 @@ def _swap_fd(sink: RotatingSink, device: str) -> int:
     return ino
 
 
-def test_dev_full_under_the_open_file_is_enospc_the_file_is_abandoned_and_salvaged(tmp_path):
-    clock = FakeClock()
+def test_dev_full_under_the_open_file_is_enospc_the_file_is_abandoned_and_salvaged(tmp_path, clock):
     sink = RotatingSink(output(tmp_path), clock=clock)
     rec = Recorder(sink, clock)
     for i in range(12):
@@ -234,7 +224,7 @@ def test_dev_full_under_the_open_file_is_enospc_the_file_is_abandoned_and_salvag
     assert {e["details"]["action"] for e in events} == {"abandoned", "resumed", "salvaged"}
 
 
-def test_a_failed_fsync_is_never_retried_on_that_file(tmp_path, monkeypatch):
+def test_a_failed_fsync_is_never_retried_on_that_file(tmp_path, monkeypatch, clock):
     fsynced = []
     real = os.fsync
 
@@ -246,7 +236,6 @@ def test_a_failed_fsync_is_never_retried_on_that_file(tmp_path, monkeypatch):
         return real(fd)
 
     monkeypatch.setattr(os, "fsync", spy)
-    clock = FakeClock()
     sink = RotatingSink(output(tmp_path, fsync_s=5.0), clock=clock)
     rec = Recorder(sink, clock)
     for i in range(8):
@@ -330,8 +319,7 @@ def test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging(small_fs, t
     assert any(e["kind"] == "stop" for e in events)
 
 
-def test_enospc_while_finishing_keeps_the_part_and_the_next_start_salvages_it(tmp_path):
-    clock = FakeClock()
+def test_enospc_while_finishing_keeps_the_part_and_the_next_start_salvages_it(tmp_path, clock):
     sink = RotatingSink(output(tmp_path), clock=clock)
     rec = Recorder(sink, clock)
     for i in range(6):

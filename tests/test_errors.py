@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import pytest
 
-from test_cli import cmsensord
+from processes import cmsensord
 
 USAGE, CONFIG = 2, 78
 
@@ -78,7 +78,7 @@ def test_summary_into_a_closed_pipe_is_quiet(scratch):
     import subprocess
     import sys
 
-    from test_cli import ENV
+    from processes import ENV
 
     out = scratch / "logs"
     r = cmsensord("replay", "capture.bin", "--out", str(out), cwd=scratch)

@@ -5,7 +5,7 @@
 - the TACHO frames of `whirl` give the run-up speed through TachoTracker;
 - encoder faults (missed, extra, jitter) are injected as configured, deterministically per seed;
 - RAW with a tacho for the motor scenarios (4 channels), clipping and overrun flags;
-- link_budget equals PROTOCOL.md's byte budget table and the CLI warns when the UART cannot carry the stream.
+- link_budget equals docs/PROTOCOL.md's byte budget table and the CLI warns when the UART cannot carry the stream.
 """
 
 from __future__ import annotations

@@ -15,35 +15,14 @@ import time
 import pytest
 
 from cmsensord.config import config_from_dict
-from cmsensord.protocol import OVERHEAD, Decoder, iter_frames
+from cmsensord.protocol import OVERHEAD, iter_frames
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import frames_hit, read_records
 from firmware_sim.scenarios import make_scenario
+from messages import comparable
+from processes import ENV, cmsensord, drain, fill, start_board, start_daemon, stop
 from stream import run_processor
-from test_cli import ENV, comparable, cmsensord
-
-
-def start_board(*args):
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
-                           stdout=subprocess.PIPE, text=True, env=ENV)
-    sim.stdout.readline()                      # the pty's path: the board is up
-    return sim
-
-
-def start_daemon(tmp_path, port, *extra, config=""):
-    """``cmsensord --config`` on ``port``, logs in tmp_path/logs; ``config``: more YAML."""
-    cfg = tmp_path / "cmsensord.yaml"
-    cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
-                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
-    return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
-                            stderr=subprocess.PIPE, text=True, env=ENV)
-
-
-def stop(proc, timeout=10):
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=timeout)
-    return err
 
 
 def test_line_noise_loses_only_the_frames_it_hits_and_replay_matches_live(tmp_path):
@@ -183,8 +162,6 @@ def test_a_throttled_loop_sheds_raw_blocks_and_keeps_the_tacho(tmp_path):
     daemon goes on with orders and severity after the stall."""
     import fcntl
     import os
-
-    from test_systemd import drain, fill
 
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "healthy", "--mode", "raw", "--tacho", "--channels", "2",

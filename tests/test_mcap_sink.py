@@ -26,16 +26,9 @@ from cmsensord.sinks.schemas import (
     orders_topic,
     severity_topic,
 )
+from fakes import FakeClock
 
 T0 = 1_700_000_000_123_456_789  # ns since the epoch
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
 
 
 def severity_msg(channel: str = "ch0") -> dict:
@@ -303,9 +296,8 @@ def test_numpy_scalars_and_arrays_are_converted(tmp_path):
 
 
 def test_unencodable_message_is_a_sink_error(tmp_path):
-    with McapSink(tmp_path) as sink:
-        with pytest.raises(SinkError, match=r"^/cm/events: message cannot be encoded as JSON"):
-            sink.write(TOPIC_EVENTS, "event", T0, {"kind": "start", "details": object()})
+    with McapSink(tmp_path) as sink, pytest.raises(SinkError, match=r"^/cm/events: message cannot be encoded as JSON"):
+        sink.write(TOPIC_EVENTS, "event", T0, {"kind": "start", "details": object()})
 
 
 # --- files: names, .part -> .mcap, errors --------------------------------------
@@ -374,8 +366,7 @@ def test_bad_arguments_and_misuse(tmp_path):
 # --- crash safety: flush by clock, truncated files ------------------------------
 
 
-def test_flush_after_flush_s_makes_data_visible_in_open_part_file(tmp_path):
-    clock = FakeClock()
+def test_flush_after_flush_s_makes_data_visible_in_open_part_file(tmp_path, clock):
     sink = McapSink(tmp_path, flush_s=1.0, clock=clock)
     for k in range(5):
         sink.write(severity_topic("ch0"), "severity", T0 + k, severity_msg())
@@ -468,12 +459,11 @@ def test_summarize_missing_file_is_sink_error(tmp_path):
 # --- disk errors: a failed file is never written again --------------------------
 
 
-def test_enospc_fails_the_file_and_keeps_what_was_flushed(tmp_path):
+def test_enospc_fails_the_file_and_keeps_what_was_flushed(tmp_path, clock):
     import os
 
     from cmsensord.sinks.mcap_sink import SinkIOError
 
-    clock = FakeClock()
     sink = McapSink(tmp_path, flush_s=1.0, clock=clock)
     for k in range(5):
         sink.write(TOPIC_EVENTS, "event", T0 + k, event_msg())

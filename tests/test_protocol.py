@@ -1,4 +1,4 @@
-"""Specification tests for cmsensord.protocol (PROTOCOL.md, receiver rules 1-5)."""
+"""Specification tests for cmsensord.protocol (docs/PROTOCOL.md, receiver rules 1-5)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,6 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
-from fuzz import examples
 
 from cmsensord.protocol import (
     FLAG_CLIPPED,
@@ -39,8 +37,9 @@ from cmsensord.protocol import (
     encode_tacho,
     iter_frames,
 )
+from fuzz import examples
 
-# The three PROTOCOL.md test vectors.
+# The three docs/PROTOCOL.md test vectors.
 VEC_RMS = bytes.fromhex(
     "a5 5a 01 02 07 00 d6 06 00 00 02 00 08 00 00 00 00 3f 00 00 a0 3f 30 54 1b de")
 VEC_RAW = bytes.fromhex(

@@ -14,8 +14,8 @@ from cmsensord.cli import RUNUP_ORDERS
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
-from test_cli import ENV, cmsensord, comparable
-from test_link_faults import start_board, start_daemon, stop
+from messages import comparable
+from processes import ENV, cmsensord, start_board, start_daemon, stop
 
 
 def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):

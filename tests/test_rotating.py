@@ -13,20 +13,11 @@ from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 
-class FakeClock:
-    def __init__(self):
-        self.t = 100.0
-
-    def __call__(self):
-        return self.t
-
-
 def event(i):
     return {"kind": "config", "channel": None, "message": f"message {i}"}
 
 
-def test_rotation_by_time_keeps_every_message(tmp_path):
-    clock = FakeClock()
+def test_rotation_by_time_keeps_every_message(tmp_path, clock):
     out = dataclasses.replace(OutputConfig(), dir=str(tmp_path), rotate_s=10.0)
     sink = RotatingSink(out, clock=clock)
     for i in range(100):
@@ -40,8 +31,7 @@ def test_rotation_by_time_keeps_every_message(tmp_path):
     assert got == [f"message {i}" for i in range(100)]
 
 
-def test_rotation_by_size(tmp_path):
-    clock = FakeClock()
+def test_rotation_by_size(tmp_path, clock):
     out = dataclasses.replace(OutputConfig(), dir=str(tmp_path), rotate_mb=0.002, flush_s=1.0,
                               compression="none")
     sink = RotatingSink(out, clock=clock)
@@ -78,8 +68,7 @@ def fsyncs(monkeypatch):
     return calls
 
 
-def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs):
-    clock = FakeClock()
+def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs, clock):
     sink = RotatingSink(output(tmp_path, fsync_s=30.0), clock=clock)
     ino = os.fstat(sink.current.fileno()).st_ino
     sink.write("/cm/ch0/severity", "severity", 10**18, {"severity_index": 0.1})
@@ -102,8 +91,7 @@ def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs):
     sink.close()
 
 
-def test_ticks_every_100_ms_keep_everything_older_than_flush_s_in_the_file(tmp_path):
-    clock = FakeClock()
+def test_ticks_every_100_ms_keep_everything_older_than_flush_s_in_the_file(tmp_path, clock):
     sink = RotatingSink(output(tmp_path, flush_s=1.0), clock=clock)
     written = []                                         # clock time of each message
     flushes = 0
@@ -121,8 +109,7 @@ def test_ticks_every_100_ms_keep_everything_older_than_flush_s_in_the_file(tmp_p
     sink.close()
 
 
-def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path):
-    clock = FakeClock()
+def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, clock):
     (tmp_path / "other-20200101T000000Z.mcap").write_bytes(b"x" * 50_000)    # not our prefix
     (tmp_path / "cmsensord-20200101T000000Z.mcap.part").write_bytes(b"")    # a leftover: salvaged
     events = []
@@ -151,8 +138,7 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path):
     assert sorted(sink.paths) == sorted(finished)        # paths lists only what is left
 
 
-def test_free_space_floor_deletes_finished_files_but_never_the_current_one(tmp_path):
-    clock = FakeClock()
+def test_free_space_floor_deletes_finished_files_but_never_the_current_one(tmp_path, clock):
     old = tmp_path / "cmsensord-20200101T000000Z.mcap"
     RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda: 1_577_836_800.0).close()
     assert old.exists()
@@ -173,8 +159,7 @@ def test_free_space_floor_deletes_finished_files_but_never_the_current_one(tmp_p
     sink.close()
 
 
-def test_reopen_finishes_the_file_and_continues_in_a_new_one(tmp_path):
-    clock = FakeClock()
+def test_reopen_finishes_the_file_and_continues_in_a_new_one(tmp_path, clock):
     sink = RotatingSink(output(tmp_path), clock=clock)
     sink.write(TOPIC_EVENTS, "event", 10**18, event(0))
     first = sink.path

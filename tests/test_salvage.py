@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import os
 import random
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -28,19 +25,11 @@ from cmsensord.sinks.mcap_sink import (
 )
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS, severity_topic
+from fakes import FakeClock
+from processes import cmsensord
 
-ROOT = Path(__file__).resolve().parents[1]
-ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 T0 = 1_700_000_000_000_000_000
 STEM = "cmsensord-20231114T221320Z"
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
 
 
 def _part_bytes(tmp_path: Path, *, compression: str = "zstd", n: int = 16) -> tuple[bytes, bytes]:
@@ -247,8 +236,7 @@ def test_rotating_sink_salvages_at_start_and_queues_the_event_until_routed(tmp_p
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "cmsensord", *args], capture_output=True,
-                          text=True, env=ENV, timeout=60)
+    return cmsensord(*args, timeout=60)
 
 
 def test_summary_of_truncated_files_and_of_a_file_that_is_not_mcap(tmp_path):

@@ -48,14 +48,6 @@ def received(sock) -> list[str]:
             return out
 
 
-class Clock:
-    def __init__(self):
-        self.t = 100.0
-
-    def __call__(self):
-        return self.t
-
-
 @pytest.mark.parametrize("kind", ["path_socket", "abstract_socket"])
 def test_ready_status_stopping_reach_the_socket(kind, request):
     sock, name = request.getfixturevalue(kind)
@@ -82,9 +74,8 @@ def test_without_notify_socket_nothing_is_set_up_or_sent():
     n.ready("x"), n.status("x"), n.watchdog(), n.stopping()   # no socket, no error
 
 
-def test_watchdog_pings_at_a_quarter_of_watchdog_usec_and_only_when_called(abstract_socket):
+def test_watchdog_pings_at_a_quarter_of_watchdog_usec_and_only_when_called(abstract_socket, clock):
     sock, name = abstract_socket
-    clock = Clock()
     n = Notifier({"NOTIFY_SOCKET": name, "WATCHDOG_USEC": "2000000"}, clock=clock)
     assert n.watchdog_interval_s == pytest.approx(0.5)
     sent_at = []

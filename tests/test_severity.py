@@ -1,4 +1,4 @@
-"""Fig. 3 anomaly decisions and eqs. (17)-(18) of seed 000."""
+"""Fig. 3 anomaly decisions and eqs. (17)-(18) of Kim et al. 2023."""
 
 from __future__ import annotations
 

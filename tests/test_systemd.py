@@ -27,7 +27,7 @@ import uuid
 
 import pytest
 
-from test_cli import ENV, board_on_pty
+from processes import ENV, board_on_pty, drain, fill
 
 WATCHDOG_USEC = 1_000_000
 WATCHDOG_S = WATCHDOG_USEC / 1e6
@@ -57,7 +57,7 @@ class FakeManager:
         while not self._done.is_set():
             try:
                 data = self.sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             with self._lock:
                 self.messages.append((time.monotonic(), data.decode()))
@@ -110,28 +110,6 @@ def start_daemon(config, manager: FakeManager, stderr) -> tuple[subprocess.Popen
 
 def gaps(times: list[float]) -> list[float]:
     return [b - a for a, b in zip(times, times[1:])]
-
-
-def fill(fd: int) -> None:
-    """Write into a non-blocking pipe until not even one more byte fits."""
-    size = 65536
-    while size:
-        try:
-            os.write(fd, b"#" * size)
-        except BlockingIOError:
-            size //= 2
-
-
-def drain(fd: int) -> bytes:
-    out = b""
-    while True:
-        try:
-            chunk = os.read(fd, 65536)
-        except BlockingIOError:
-            return out
-        if not chunk:
-            return out
-        out += chunk
 
 
 @pytest.fixture

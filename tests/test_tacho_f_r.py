@@ -1,4 +1,4 @@
-"""With a tacho, its speed is the f_r of the anomaly decision (seed 000 Fig. 3)."""
+"""With a tacho, its speed is the f_r of the anomaly decision (Kim et al. 2023 Fig. 3)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Banks of adaptive Kalman filters (AKF) on a scalar observation stream.
 
-Implements seed 000 (Kim, Song, Kim, Lee, "An Adaptive Kalman Filter-Based
+Implements Kim et al. 2023 (Kim, Song, Kim, Lee, "An Adaptive Kalman Filter-Based
 Condition-Monitoring Technique for Induction Motors", IEEE Access 2023),
 section III.A-B, equations (1)-(15), for many channels and many filters at once.
 
@@ -155,7 +155,7 @@ class AkfState:
     fill: np.ndarray   # (C,) int64 samples in the window (<= N)
     started: np.ndarray  # (C,) uint8: x̂(0) set from a first observation
 
-    def copy(self) -> "AkfState":
+    def copy(self) -> AkfState:
         return AkfState(**{k: v.copy() for k, v in self.__dict__.items()})
 
 
@@ -312,10 +312,7 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
         M = _window_mean(s.res2, s.pos, s.fill, N, slot_mask) / np.maximum(cnt, 1)   # (11)
         G_hat = _window_mean(s.dx2, s.pos, s.fill, N, slot_mask) / np.maximum(cnt, 1)  # (14)
         G_tilde = K * K * Y                                    # (13)
-        if bank.scaling:
-            S = np.maximum(1.0, G_hat / G_tilde)               # (12)
-        else:
-            S = 1.0
+        S = np.maximum(1.0, G_hat / G_tilde) if bank.scaling else 1.0   # (12)
         s.Q = np.where(vv, S * M, s.Q)                         # (10)
         out.Q[k] = np.where(on, s.Q, np.nan)
         z = innov / np.sqrt(Y)                                 # (15)

@@ -1,4 +1,4 @@
-"""The 100 Hz block RMS, exactly as PROTOCOL.md defines it (RMS frames, type 2).
+"""The 100 Hz block RMS, exactly as docs/PROTOCOL.md defines it (RMS frames, type 2).
 
 One implementation for both sides: the simulated board computes its RMS frames
 with it and the daemon computes the RMS of RAW blocks with it, so RMS mode and

@@ -24,12 +24,13 @@ what to do after an error are the caller's policy
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from cmsensord import __version__
 from cmsensord.errors import SinkError
@@ -229,10 +230,8 @@ class McapSink:
                 self._writer.add_metadata("cmsensord", {str(k): str(v) for k, v in metadata.items()})
         except (OSError, SinkError) as err:
             self._fh.close()
-            try:
+            with contextlib.suppress(OSError):
                 self.part_path.unlink(missing_ok=True)  # a header alone holds nothing to keep
-            except OSError:
-                pass
             if isinstance(err, SinkError):
                 raise
             raise SinkIOError(
@@ -274,10 +273,8 @@ class McapSink:
                     f"{self.out_dir}: cannot write in output directory: {os_error_text(err)}",
                     op="open", err=err, path=part,
                 ) from None
-            try:
+            with contextlib.suppress(OSError):  # no flock on this file system: salvage runs only at start anyway
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # salvage skips locked files
-            except OSError:
-                pass  # no flock on this file system: salvage runs only at start anyway
             self.path = final
             self.part_path = part
             return RawFile(fd)
@@ -413,10 +410,8 @@ class McapSink:
             self._failed = True
             self._channels = {}
             self.path = self.part_path
-            try:
+            with contextlib.suppress(OSError):  # the file is given up: nothing to report beyond the first error
                 self._fh.close()
-            except OSError:
-                pass  # the file is given up: nothing to report beyond the first error
         return self.part_path
 
     def close(self) -> Path:
@@ -442,25 +437,19 @@ class McapSink:
         except OSError as err:
             error = self._fail(op, err)
             self.path = self.part_path
-            try:
+            with contextlib.suppress(OSError):  # already failing; the first error is the one to report
                 self._fh.close()
-            except OSError:
-                pass  # already failing; the first error is the one to report
             raise error from None
         try:
             os.replace(self.part_path, self.path)  # still open and locked: no salvage can interfere
         except OSError as err:
             self.path = self.part_path
-            try:
+            with contextlib.suppress(OSError):
                 self._fh.close()
-            except OSError:
-                pass
             raise SinkIOError(f"{self.part_path}: cannot close: {os_error_text(err)}", op="close",
                               err=err, path=self.part_path) from None
-        try:
+        with contextlib.suppress(OSError):  # everything is written and fsynced; close has nothing left to lose
             self._fh.close()
-        except OSError:
-            pass  # everything is written and fsynced; close has nothing left to lose
         try:
             fsync_dir(self.out_dir)
         except OSError as err:  # finished and renamed; only the rename may not be durable
@@ -469,7 +458,7 @@ class McapSink:
                               path=self.path) from None
         return self.path
 
-    def __enter__(self) -> "McapSink":
+    def __enter__(self) -> McapSink:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -15,8 +15,9 @@ from __future__ import annotations
 import io
 import json
 import struct
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, BinaryIO, Iterator
+from typing import Any, BinaryIO
 
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
@@ -305,7 +306,7 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
         "schemas": schemas,
         "start_ns": start_ns,
         "end_ns": end_ns,
-        "duration_s": (end_ns - start_ns) / NS if n else 0.0,
+        "duration_s": (end_ns - start_ns) / NS if start_ns is not None and end_ns is not None else 0.0,
         "event_counts": dict(sorted(events.counts.items())),
         "events": events.events,
         "events_omitted": events.omitted,

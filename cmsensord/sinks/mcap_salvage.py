@@ -12,6 +12,7 @@ unchanged, through :class:`~cmsensord.sinks.mcap_chunks.ChunkWriter` into
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import struct
@@ -245,14 +246,10 @@ class _SalvagedFile:
         """After an error: close and delete the partial file (further errors ignored)."""
         if self._fh is None:
             return
-        try:
+        with contextlib.suppress(OSError):
             self._fh.close()
-        except OSError:
-            pass
-        try:
+        with contextlib.suppress(OSError):
             self.tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
 
 
 def _lock(f: BinaryIO) -> bool:
@@ -306,6 +303,7 @@ def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult) -> int
         elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
             result.reason = "a finished file"  # its summary is rebuilt
             return result.source_bytes
+    assert walker.end is not None                # the loop above ran the walk to its end
     if walker.end == RecordWalker.TOO_LONG:
         result.damaged, result.reason = True, walker.error or ""
     else:

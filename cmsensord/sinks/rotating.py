@@ -50,12 +50,14 @@ while the disk fails cannot loop: it is just counted as dropped.
 from __future__ import annotations
 
 import collections
+import contextlib
 import errno
 import logging
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from cmsensord.config import OutputConfig
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, fsync_dir, log_files
@@ -402,10 +404,11 @@ class RotatingSink:
                     kept = part
         self._event_dirty = self._need_sync = False
         first = self._outage is None
-        if first:
+        if self._outage is None:
             self._outage = {"start": now, "dropped": 0, "errors": 0, "error": str(err)}
+        outage = self._outage
         self._drop(lost)
-        self._outage["errors"] += 1
+        outage["errors"] += 1
         if first:
             what = (f"file kept as {kept.name} for salvage" if kept is not None
                     else "no file open" if cur is None else "file removed (no complete chunk)")
@@ -482,10 +485,8 @@ class RotatingSink:
             return                           # no directory yet, or unreadable: nothing to do
         stats = {}
         for path in finished + parts:
-            try:
+            with contextlib.suppress(OSError):  # gone meanwhile
                 stats[path] = path.stat()
-            except OSError:
-                pass                         # gone meanwhile
         sizes = {p: st.st_size for p, st in stats.items()}
         total = sum(sizes.values())
         oldest = [p for p in finished if p in stats]   # by the stamp in the name
@@ -516,10 +517,8 @@ class RotatingSink:
                 except OSError:
                     free += size
         if deleted:
-            try:
+            with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
                 fsync_dir(Path(o.dir))
-            except OSError:
-                pass                         # the deletions are done; durability of the names only
             self.paths = [p for p in self.paths if p not in deleted]
             why = []
             if cap is not None:

@@ -18,10 +18,10 @@ topic                      schema name             rate
 /cm/diagnostics            cmsensord.Diagnostics   1 Hz
 =========================  ======================  =================================
 
-and, for a microphone channel (seed 002), ``/cm/<channel>/vibration_estimate``
+and, for a microphone channel (Orimoto, Ikuta & Wang), ``/cm/<channel>/vibration_estimate``
 (cmsensord.VibrationEstimate) once per block (100 Hz).
 
-The seed-000 quantities keep the paper's names: S_idx (eq. 17), F_a and cnt
+The quantities of Kim et al. 2023 keep the paper's names: S_idx (eq. 17), F_a and cnt
 (Fig. 3), R_i (eq. 16), x^-(k), x^(k), Y(k), z(k) (eqs. 3-15), Q^(k) (eq. 10).
 """
 
@@ -97,7 +97,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "salvage",
 )
 
-#: The integer counters of Diagnostics.link (PROTOCOL.md, receiver rule 5).
+#: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
 LINK_COUNTERS: tuple[str, ...] = (
     "bytes_received",
     "bytes_discarded",

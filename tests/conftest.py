@@ -1,0 +1,93 @@
+"""Shared fixtures, and the ``process`` marker for tests that start processes or ptys.
+
+    python -m pytest -m "not process"                # the unit tests
+    python -m pytest -m "not process and not slow"   # the quick loop: without the long simulations
+    python -m pytest -m process                      # daemon/board processes, ptys, shell tools
+
+A test is marked ``process`` when its module is in PROCESS_MODULES (every test there
+starts ``python -m cmsensord`` or ``python -m firmware_sim``), when it is named in
+PROCESS_TESTS (such tests in modules of fast unit tests), or when it uses a fixture in
+PROCESS_FIXTURES.  A new test that starts a process or opens a pty goes into a process
+module, is added here, or carries ``@pytest.mark.process`` itself.
+
+    CMSENSORD_CHECK_PROCESS_MARKS=1 python -m pytest -m "not process"
+
+fails every unmarked test that starts a process or opens a pty (the check of these lists).
+"""
+
+from __future__ import annotations
+
+import os
+import pty
+import subprocess
+
+import pytest
+
+from fakes import FakeClock
+
+#: Modules whose every test starts processes or opens ptys.
+PROCESS_MODULES = frozenset({
+    "test_calibrate.py",
+    "test_cli.py",
+    "test_crash.py",
+    "test_errors.py",
+    "test_link_faults.py",
+    "test_replay.py",
+    "test_systemd.py",
+})
+
+#: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
+PROCESS_TESTS = frozenset({
+    "test_disk_full.py::test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging",
+    "test_firmware_sim.py::test_pty_stream_is_paced_and_decodes_contiguously",
+    "test_firmware_sim.py::test_pty_without_reader_drops_bytes_and_never_blocks",
+    "test_firmware_sim_raw.py::test_cli_warns_when_the_uart_cannot_carry_the_stream",
+    "test_link.py::test_reader_thread_decodes_a_pty_and_tees_the_capture",
+    "test_link.py::test_a_stalled_loop_loses_raw_blocks_but_no_rms_frame_and_memory_stays_bounded",
+    "test_order_tracker.py::test_the_tracker_does_not_load_scipy_signal",
+    "test_salvage.py::test_summary_of_truncated_files_and_of_a_file_that_is_not_mcap",
+    "test_systemd_unit.py::test_systemd_analyze_verify_prints_nothing",
+    "test_systemd_unit.py::test_systemd_analyze_verify_does_complain_here",
+    "test_systemd_unit.py::test_systemd_analyze_security_exposure_is_at_most_2",
+})
+
+#: Fixtures that start a process (``small_fs`` runs mount and umount).
+PROCESS_FIXTURES = frozenset({"small_fs"})
+
+#: Unit tests that simulate a long run (a simulated hour, tens of seconds each): also ``slow``.
+SLOW_TESTS = frozenset({
+    "test_scenarios.py::test_healthy_gives_no_anomaly_in_a_simulated_hour",
+    "test_scenarios.py::test_degrading_rises_through_levels_fails_and_eases",
+})
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        module = item.path.name
+        name = f"{module}::{item.originalname}"
+        if (module in PROCESS_MODULES or name in PROCESS_TESTS
+                or PROCESS_FIXTURES.intersection(getattr(item, "fixturenames", ()))):
+            item.add_marker(pytest.mark.process)
+        if name in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(autouse=True)
+def _process_mark_check(request, monkeypatch):
+    """With CMSENSORD_CHECK_PROCESS_MARKS set: an unmarked test that starts a process fails."""
+    if not os.environ.get("CMSENSORD_CHECK_PROCESS_MARKS") or request.node.get_closest_marker("process"):
+        return
+
+    def refuse(*args, **kwargs):
+        raise AssertionError(f"{request.node.nodeid} starts a process or opens a pty: mark it "
+                             "'process' (tests/conftest.py)")
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", refuse)
+    monkeypatch.setattr(os, "openpty", refuse)
+    monkeypatch.setattr(pty, "openpty", refuse)
+
+
+@pytest.fixture
+def clock() -> FakeClock:
+    """A hand-set clock at t = 100.0 s, for the ``clock=`` of sinks and the notifier."""
+    return FakeClock()

@@ -1,0 +1,84 @@
+"""Helpers for tests that run the daemon and the simulated board as real processes, and
+read what they write into pipes.
+
+The environment puts this checkout first on PYTHONPATH, so ``python -m cmsensord``
+and ``python -m firmware_sim`` run the code under test.  Tests using these helpers
+start processes or ptys: tests/conftest.py marks them ``process``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def cmsensord(*args, timeout=120, **kw) -> subprocess.CompletedProcess:
+    """Run ``python -m cmsensord ARGS`` to completion, output captured as text."""
+    return subprocess.run([sys.executable, "-m", "cmsensord", *args], capture_output=True, text=True,
+                          env=ENV, timeout=timeout, **kw)
+
+
+@contextlib.contextmanager
+def board_on_pty(*args):
+    """A simulated board serving a pty (``python -m firmware_sim --pty --hold ARGS``): its path."""
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
+                           stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        yield sim.stdout.readline().strip()
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+
+
+def start_board(*args) -> subprocess.Popen:
+    """``python -m firmware_sim --pty --hold ARGS``, returned once the pty is up; the caller stops it."""
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
+                           stdout=subprocess.PIPE, text=True, env=ENV)
+    sim.stdout.readline()                      # the pty's path: the board is up
+    return sim
+
+
+def start_daemon(tmp_path, port, *extra, config="") -> subprocess.Popen:
+    """``cmsensord --config`` on ``port``, logs in tmp_path/logs; ``config``: more YAML."""
+    cfg = tmp_path / "cmsensord.yaml"
+    cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
+    return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
+                            stderr=subprocess.PIPE, text=True, env=ENV)
+
+
+def stop(proc, timeout=10) -> str:
+    """SIGTERM ``proc`` and wait for it: its stderr."""
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=timeout)
+    return err
+
+
+def fill(fd: int) -> None:
+    """Write into a non-blocking pipe until not even one more byte fits."""
+    size = 65536
+    while size:
+        try:
+            os.write(fd, b"#" * size)
+        except BlockingIOError:
+            size //= 2
+
+
+def drain(fd: int) -> bytes:
+    """Everything a non-blocking pipe holds now (up to its end, when the writer has closed it)."""
+    out = b""
+    while True:
+        try:
+            chunk = os.read(fd, 65536)
+        except BlockingIOError:
+            return out
+        if not chunk:
+            return out
+        out += chunk
