@@ -28,7 +28,8 @@ import numpy as np
 from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
-from cmsensord.protocol import Decoder, FrameType, decode_status, decode_tacho
+from cmsensord.protocol import FrameType, decode_status, decode_tacho
+from cmsensord.source import CaptureSource
 
 
 class _Collector:
@@ -61,29 +62,19 @@ class _Collector:
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
                  quiet: bool = False) -> tuple[list[Path], dict]:
     """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary."""
-    from cmsensord.cli import _open_sink
-    from cmsensord.link import read_capture
     from cmsensord.pipeline import Processor
+    from cmsensord.service.sink import open_sink
 
     t_start = time.monotonic()
-    chunks = read_capture(capture)
-    first = next(chunks, None)
-    sink = _open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
-    decoder = Decoder()
-    proc = Processor(cfg, sink, auto_channels=True, link_counters=decoder.counters.as_dict)
+    source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
+    sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
+    proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)
     col = _Collector()
     try:
-        for data in ([first] if first is not None else []):
-            frames = decoder.feed(data)
-            proc.handle(frames)
-            col.add(frames, cfg.tacho.input)
-        for data in chunks:
-            frames = decoder.feed(data)
-            proc.handle(frames)
-            col.add(frames, cfg.tacho.input)
-        frames = decoder.flush()
-        proc.handle(frames)
-        col.add(frames, cfg.tacho.input)
+        with source:
+            for frames in source:
+                proc.handle(frames)
+                col.add(frames, cfg.tacho.input)
         proc.finish()
         if not col.raw or col.status is None:
             raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "

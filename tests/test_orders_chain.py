@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cmsensord.cli import RUNUP_ORDERS
+from cmsensord.service.simulate import RUNUP_ORDERS
 from cmsensord.config import config_from_dict
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
