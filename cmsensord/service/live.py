@@ -85,7 +85,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
                                           "lag_s": round(proc.lag_s(), 3)})
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
-    route_sink_events(sink, proc)       # salvage at start, disk errors: events from now on
+    route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
     with source:
         try:

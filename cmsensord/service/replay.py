@@ -21,7 +21,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     capture = CaptureSource(path, chunk=1 << 16 if speed is None else 1 << 12)  # LinkError before any output
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
-    route_sink_events(sink, proc)
+    route_sink_events(sink, proc.log)
     progress = Progress(capture.size, f"replay {Path(path).name}")
     source = capture if speed is None else Paced(capture, speed)
     t0 = time.monotonic()

@@ -1,0 +1,141 @@
+"""The severity chain of Kim et al. 2023: an AKF bank per channel, outlier counts, decisions.
+
+Per observation slot the channels' banks (:class:`~cmsensord.dsp.akf.AkfBank`,
+eqs. 3-15) flag outliers; the flags wait in a :class:`SpeedGate` while the
+decision's f_r may come from the tacho, then the decider
+(:class:`~cmsensord.dsp.severity.AnomalyDecider`, Fig. 3, eqs. 16-18) makes one
+decision per period.  A decision becomes a ``/cm/<channel>/severity`` message
+per channel and the events of what changed (anomaly onset/clear, severity
+change, failure), and updates the channels' :class:`ChannelView`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from cmsensord.config import ChannelConfig
+from cmsensord.dsp.akf import AkfBank, AkfBlock, bank_r
+from cmsensord.dsp.severity import AnomalyDecider, Decision
+from cmsensord.monitor import messages
+from cmsensord.monitor.events import Event
+from cmsensord.monitor.speed_gate import SpeedGate
+
+#: observation slots whose decisions may wait for a final tacho speed (5 s at 100 Hz)
+PENDING_DECISION_SLOTS = 500
+
+
+@dataclass
+class ChannelView:
+    """Latest per-channel figures for the status line and the exit summary."""
+
+    name: str
+    severity: float = 0.0
+    max_severity: float = 0.0
+    anomaly: list[int] = field(default_factory=list)
+    outliers_first: int = 0       # outliers in the last period of the most sensitive AKF
+    decisions: int = 0
+    failures: int = 0
+
+
+class SeverityChain:
+    """Banks, decider and views of the monitored ``channels`` (see module docstring)."""
+
+    def __init__(self, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
+                 trace_filter: int):
+        self.channels = channels
+        mons = [ch.monitor for ch in channels]
+        n = mons[0].n                   # the same for every channel (config rule)
+        self.R = np.stack([bank_r(m.r_min, m.r_max, m.n) for m in mons])
+        self.bank = AkfBank(self.R, window=[m.window for m in mons], z_c=[m.z_c for m in mons],
+                            p0=[m.p0 for m in mons], q0=[m.q0 for m in mons])
+        period = max(1, round(mons[0].decision_period_s * fs / block_len))
+        self.decider = AnomalyDecider(len(channels), n, f_r=[m.f_r for m in mons],
+                                      c=[m.c for m in mons], period=period)
+        self.index = np.array([ch.index for ch in channels])     # board column of each channel
+        self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in channels]
+        self.trace_i = min(trace_filter, n) - 1
+        self.gate = SpeedGate(PENDING_DECISION_SLOTS)             # (outlier, valid) per slot
+
+    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> AkfBlock:
+        """Observations (T, C) of slots first_slot.. through the banks; their flags wait."""
+        out = self.bank.process(y, valid)
+        if self.gate.end is None:
+            self.gate.restart(first_slot)
+        self.gate.push(out.outlier, valid)
+        return out
+
+    def release(self, upto: int, *, final: bool, bounded: bool,
+                f_r: Callable[[int], np.ndarray] | None) -> list[Decision]:
+        """Decisions of the slots before ``upto`` (see :meth:`SpeedGate.release`); ``f_r(end)``
+        gives the f_r of the period ending at slot ``end`` (None: the configured f_r)."""
+        got = self.gate.release(upto, final=final, bounded=bounded)
+        if got is None:
+            return []
+        first, (outl, valid) = got
+        n = outl.shape[0]
+        d = self.decider
+        decisions = []
+        pos = 0
+        while pos < n:                          # one call per decision period: its own f_r
+            take = min(n - pos, d.period - d.phase)
+            fr = f_r(first + pos + take) if f_r is not None and d.phase + take == d.period else None
+            decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr)
+            pos += take
+        return decisions
+
+    def trace(self, stamps: list[int], y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> list:
+        """``/cm/<channel>/akf`` messages of one AKF per channel (output.akf_trace_filter)."""
+        i = self.trace_i
+        z = out.z(y)
+        msgs = []
+        for c, ch in enumerate(self.channels):
+            msgs += messages.akf_trace(ch.name, stamps, i, y[:, c], valid[:, c], out.x_prior[:, c, i],
+                                       out.x_hat[:, c, i], out.Y[:, c, i], z[:, c, i],
+                                       out.outlier[:, c, i], out.Q[:, c, i], self.bank.z_c[c])
+        return msgs
+
+    def decision(self, d: Decision, stamp: int) -> list:
+        """Per channel: its severity message, then the events of what changed."""
+        out: list = []
+        for c, ch in enumerate(self.channels):
+            out.append(messages.severity(stamp, ch.name, d, c, self.R[c]))
+            out += self._note(c, d, stamp)
+        return out
+
+    def _note(self, c: int, d: Decision, stamp: int) -> list[Event]:
+        """Update channel ``c``'s view; the events of its decision."""
+        name, n, R = self.channels[c].name, self.bank.n, self.R[c]
+        sev = float(d.severity[c])
+        level = int(round(sev * n))
+        failure = bool(d.anomaly[c, -1])
+        v = self.views[c]
+        v.severity, v.anomaly, v.outliers_first = sev, d.anomaly[c].tolist(), int(d.cnt[c, 0])
+        v.max_severity = max(v.max_severity, sev)
+        v.decisions += 1
+        prev = d.prev_anomaly[c]
+        events = []
+        for i in np.flatnonzero(d.anomaly[c] != prev):
+            cnt = int(d.cnt[c, i])
+            what = {"filter": int(i + 1), "count": cnt}
+            if d.anomaly[c, i]:
+                events.append(Event("anomaly_onset", name, f"{name}: AKF_{i + 1} (R={R[i]:.4g}) anomaly: "
+                                    f"{cnt} outliers in the period >= f_r {d.f_r[c]:.4g}", stamp, what))
+            else:
+                events.append(Event("anomaly_clear", name, f"{name}: AKF_{i + 1} (R={R[i]:.4g}) anomaly "
+                                    f"cleared: {cnt} outliers < c*f_r", stamp, what))
+        prev_sev = float(d.prev_severity[c])
+        where = {"severity_index": sev, "level": level}
+        if sev != prev_sev:
+            events.append(Event("severity_change", name, f"{name}: severity index {prev_sev:.2f} -> "
+                                f"{sev:.2f} (level {level}/{n})", stamp, where))
+        if failure and not prev[-1]:
+            v.failures += 1
+            events.append(Event("failure", name, f"{name}: FAILURE: AKF_{n} with R_max={R[-1]:.4g} "
+                                "flags an anomaly", stamp, where))
+        elif prev[-1] and not failure:
+            events.append(Event("failure_clear", name, f"{name}: failure condition cleared "
+                                f"(AKF_{n} back below c*f_r)", stamp, where))
+        return events
