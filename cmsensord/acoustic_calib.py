@@ -278,7 +278,7 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
     """
     from cmsensord.dsp.rms import rows_physical, rows_rms
     from cmsensord.errors import LinkError
-    from cmsensord.protocol import FrameType, decode_status
+    from cmsensord.protocol import FrameType, decode_rms, decode_status
     from cmsensord.source import CaptureSource
 
     channels = [int(c) for c in channels]
@@ -300,7 +300,10 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
                     except ValueError:
                         continue
                 elif fr.type == FrameType.RMS:
-                    vals = np.frombuffer(fr.payload, dtype="<f4")
+                    try:
+                        vals = decode_rms(fr)
+                    except ValueError:
+                        continue
                     if max(channels) < vals.size:
                         rms_rows[fr.t0_unwrapped] = vals[channels].astype(np.float64)
                 elif fr.type == FrameType.RAW and fr.chan in channels:

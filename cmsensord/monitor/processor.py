@@ -29,7 +29,7 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.shaft import Shaft
-from cmsensord.protocol import Frame, FrameType, ProtocolError, decode_rms
+from cmsensord.protocol import Frame, FrameType, ProtocolError, decode_rms_rows
 
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
@@ -160,7 +160,7 @@ class Processor:
             return
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
         try:
-            vals = np.stack([decode_rms(f) for f in frames])
+            vals = decode_rms_rows(frames, C)
         except ProtocolError:
             self.event("decode_error", None, f"RMS payload length does not match C = {C}")
             return
