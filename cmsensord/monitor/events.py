@@ -13,7 +13,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from cmsensord.sinks.schemas import TOPIC_EVENTS
+from cmsensord.monitor import messages
 
 log = logging.getLogger("cmsensord")
 
@@ -57,8 +57,9 @@ class EventLog:
              log_level: int | None = None, **extra: Any) -> None:
         if stamp_ns is None:
             stamp_ns = self.default_stamp()
-        msg = {"kind": kind, "channel": channel, "message": message, **extra}
-        self.sink.write(TOPIC_EVENTS, "event", stamp_ns, msg)
+        m = messages.event(stamp_ns, kind, channel, message, **extra)
+        self.sink.write(*m)
+        msg = m.msg
         self.recent.append(msg)
         self.counts[kind] = self.counts.get(kind, 0) + 1
         log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
