@@ -3,6 +3,8 @@ and how the bytes are cut into reads changes nothing downstream."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -10,7 +12,7 @@ from cmsensord.config import default_config
 from cmsensord.errors import LinkError
 from cmsensord.pipeline import ListSink, Processor
 from cmsensord.protocol import encode_raw, encode_rms
-from cmsensord.source import ByteStreamSource, CaptureSource, Paced
+from cmsensord.source import ByteStreamSource, CaptureSource, Paced, SerialSource
 from tests.test_pipeline import FIXED_CLOCK, rms_stream, without_runtime
 
 
@@ -116,3 +118,41 @@ def test_paced_source_passes_the_inner_source_through(tmp_path):
         assert src.bytes_read == src.size and src.counters.frames["rms"] == 100
     with pytest.raises(ValueError):
         Paced(ByteStreamSource([]), 0.0)
+
+
+class FakePort:
+    """A port that returns the given reads, then nothing (a quiet board)."""
+
+    def __init__(self, reads: list[bytes]):
+        self.reads = list(reads)
+        self.in_waiting = 0
+        self.closed = False
+
+    def read(self, n: int) -> bytes:
+        if self.reads:
+            return self.reads.pop(0)
+        time.sleep(0.01)
+        return b""
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_serial_source_yields_batches_until_stopped_then_drains(tmp_path):
+    """Empty batches while the board is quiet (the loop does its periodic work); after stop()
+    the frames still queued come once and iteration ends; the capture holds every byte."""
+    data = rms_stream(seconds=1)
+    port = FakePort([data[k:k + 700] for k in range(0, len(data), 700)])
+    got, empty = [], 0
+    with open(tmp_path / "cap.bin", "wb") as cap, \
+            SerialSource("/dev/fake", baud=921600, capture=cap, open_port=lambda: port, timeout=0.02) as src:
+        for frames in src:
+            got += frames
+            empty += not frames
+            if empty >= 3 and not port.reads:
+                break
+        src.stop()
+        got += [f for batch in src for f in batch]
+    assert len(got) == 101 and port.closed
+    assert (tmp_path / "cap.bin").read_bytes() == data
+    assert src.counters.bytes_received == len(data)
