@@ -112,7 +112,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     rec.add_argument("--baud", type=int, default=921600)
     rec.add_argument("--duration", dest="sub_duration", type=_positive, help="seconds (default: until Ctrl-C)")
     v = sub.add_parser("vkf", help="replay a RAW capture and add the batch (zero-phase) Vold-Kalman "
-                                   "orders of seed 003 beside the recursive ones")
+                                   "orders (Tůma) beside the recursive ones")
     v.add_argument("capture", help="capture file in RAW mode with a tacho")
     v.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration (orders)")
     v.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")

@@ -90,7 +90,7 @@ class Processor:
         """Messages to the sink and events to the log, in their order."""
         for it in items:
             if isinstance(it, Event):
-                self.log.emit(it.kind, it.channel, it.message, it.stamp_ns, **it.fields)
+                self.log.add((it,))
             else:
                 self.sink.write(*it)
 
