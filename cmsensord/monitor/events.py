@@ -55,18 +55,20 @@ class EventLog:
 
     def emit(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, *,
              log_level: int | None = None, **extra: Any) -> None:
-        if stamp_ns is None:
-            stamp_ns = self.default_stamp()
-        m = messages.event(stamp_ns, kind, channel, message, **extra)
-        self.sink.write(*m)
-        msg = m.msg
-        self.recent.append(msg)
-        self.counts[kind] = self.counts.get(kind, 0) + 1
-        log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
-        if self.on_event is not None:
-            self.on_event(msg)
+        self._write(kind, channel, message, stamp_ns, extra, log_level)
 
     def add(self, events) -> None:
         """Emit :class:`Event` records made by a part of the chain, in order."""
         for ev in events:
-            self.emit(ev.kind, ev.channel, ev.message, ev.stamp_ns, **ev.fields)
+            self._write(ev.kind, ev.channel, ev.message, ev.stamp_ns, ev.fields, None)
+
+    def _write(self, kind: str, channel: str | None, message: str, stamp_ns: int | None,
+               extra: dict[str, Any], log_level: int | None) -> None:
+        m = messages.event(self.default_stamp() if stamp_ns is None else stamp_ns, kind, channel,
+                           message, extra)
+        self.sink.write(*m)
+        self.recent.append(m.msg)
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
+        if self.on_event is not None:
+            self.on_event(m.msg)

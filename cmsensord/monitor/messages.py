@@ -27,7 +27,8 @@ def num(x: float):
     return None if x != x else x
 
 
-def event(stamp_ns: int, kind: str, channel: str | None, message: str, **extra: Any) -> Message:
+def event(stamp_ns: int, kind: str, channel: str | None, message: str, extra: dict[str, Any]) -> Message:
+    """An event record with its ``extra`` fields (count, filter, details ...)."""
     return Message(TOPIC_EVENTS, "event", stamp_ns,
                    {"kind": kind, "channel": channel, "message": message, **extra})
 

@@ -88,11 +88,12 @@ class Processor:
 
     def _out(self, items) -> None:
         """Messages to the sink and events to the log, in their order."""
+        write = self.sink.write
         for it in items:
-            if isinstance(it, Event):
+            if type(it) is Event:
                 self.log.add((it,))
             else:
-                self.sink.write(*it)
+                write(*it)
 
     # ---- frames ------------------------------------------------------------
     def handle(self, frames: Sequence[Frame]) -> None:

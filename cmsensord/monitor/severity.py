@@ -101,26 +101,30 @@ class SeverityChain:
         """Per channel: its severity message, then the events of what changed."""
         out: list = []
         for c, ch in enumerate(self.channels):
-            out.append(messages.severity(stamp, ch.name, d, c, self.R[c]))
-            out += self._note(c, d, stamp)
+            m = messages.severity(stamp, ch.name, d, c, self.R[c])
+            out.append(m)
+            out += self._note(c, d, m.msg, stamp)
         return out
 
-    def _note(self, c: int, d: Decision, stamp: int) -> list[Event]:
-        """Update channel ``c``'s view; the events of its decision."""
+    def _note(self, c: int, d: Decision, msg: dict, stamp: int) -> list[Event]:
+        """Update channel ``c``'s view from its severity message ``msg``; the events of what
+        changed with the decision."""
         name, n, R = self.channels[c].name, self.bank.n, self.R[c]
-        sev = float(d.severity[c])
-        level = int(round(sev * n))
-        failure = bool(d.anomaly[c, -1])
+        sev, level, anomaly, failure = msg["severity_index"], msg["level"], msg["anomaly"], msg["failure"]
         v = self.views[c]
-        v.severity, v.anomaly, v.outliers_first = sev, d.anomaly[c].tolist(), int(d.cnt[c, 0])
+        v.severity, v.anomaly, v.outliers_first = sev, anomaly, msg["outliers"][0]
         v.max_severity = max(v.max_severity, sev)
         v.decisions += 1
-        prev = d.prev_anomaly[c]
+        prev = d.prev_anomaly[c].tolist()
         events = []
-        for i in np.flatnonzero(d.anomaly[c] != prev):
-            cnt = int(d.cnt[c, i])
-            what = {"filter": int(i + 1), "count": cnt}
-            if d.anomaly[c, i]:
+        if anomaly == prev:
+            changed: list[int] = []
+        else:
+            changed = [i for i, (a, b) in enumerate(zip(anomaly, prev)) if a != b]
+        for i in changed:
+            cnt = msg["outliers"][i]
+            what = {"filter": i + 1, "count": cnt}
+            if anomaly[i]:
                 events.append(Event("anomaly_onset", name, f"{name}: AKF_{i + 1} (R={R[i]:.4g}) anomaly: "
                                     f"{cnt} outliers in the period >= f_r {d.f_r[c]:.4g}", stamp, what))
             else:
