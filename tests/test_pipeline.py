@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from cmsensord.config import default_config
 from cmsensord.pipeline import ListSink, Processor
 from cmsensord.protocol import Decoder, Status, encode_rms, encode_status
+from cmsensord.source import ByteStreamSource
 
 FIXED_CLOCK = lambda: 1_700_000_000_000_000_000  # noqa: E731
 
@@ -37,12 +38,10 @@ def rms_stream(seconds=12, C=2, seed=0, t0_start=0, drop=(), spike_from=None):
 def run(data: bytes, splits=(), cfg=None):
     cfg = cfg or default_config(2)
     sink = ListSink()
-    dec = Decoder()
     proc = Processor(cfg, sink, clock_ns=FIXED_CLOCK)
     cuts = [0, *sorted(splits), len(data)]
-    for a, b in zip(cuts, cuts[1:]):
-        proc.handle(dec.feed(data[a:b]))
-    proc.handle(dec.flush())
+    for frames in ByteStreamSource(data[a:b] for a, b in zip(cuts, cuts[1:])):
+        proc.handle(frames)
     return sink, proc
 
 
