@@ -1,6 +1,6 @@
-"""Calibration of the seed-002 acoustic estimator: learn what the paper assumes known.
+"""Calibration of the acoustic estimator (Orimoto, Ikuta & Wang): learn what the paper assumes known.
 
-Seed 002 takes as known the orthonormal-polynomial coefficients lambda^(1),
+The paper takes as known the orthonormal-polynomial coefficients lambda^(1),
 lambda^(2) of the vibration x and the machine sound y (eqs. 4-5), the
 expansion coefficients e, p (eq. 23), the background-noise moments <v>,
 <v^2>, and the time-transition constants F, G of eq. (33).  This module learns
@@ -32,7 +32,10 @@ Steps, per block of the board (10 ms by default):
 The result is written to a JSON file (:func:`save_calibration`) that the
 daemon's configuration points to (``acoustic.calibration``), read back by
 :func:`load_calibration`, which raises :class:`~cmsensord.errors.ConfigError`
-with a one-line message naming the file and the key for a bad file.
+with a one-line message naming the file and the key for a bad file.  The file
+format, :class:`Calibration`, :func:`save_calibration` and :func:`load_calibration`
+live in :mod:`cmsensord.acoustic_model` (what the daemon needs at run time) and
+are re-exported here.
 
 Command line (captures as written by ``cmsensord record`` or firmware_sim)::
 
@@ -43,17 +46,14 @@ Command line (captures as written by ``cmsensord record`` or firmware_sim)::
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
-from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cmsensord.acoustic_model import FORMAT, VERSION, Calibration, load_calibration, save_calibration
 from cmsensord.dsp.acoustic import AcousticModel
-from cmsensord.errors import ConfigError
 
 __all__ = [
     "FORMAT",
@@ -69,20 +69,10 @@ __all__ = [
     "main",
 ]
 
-FORMAT = "cmsensord.acoustic_calibration"
-VERSION = 1
 #: fewest blocks of each kind a calibration accepts (fourth moments need many)
 MIN_BLOCKS = 500
 #: |a0| is kept below this (a correlation coefficient; above it the model's var(y|x) < 0)
 A_MAX = 0.98
-
-
-@dataclass
-class Calibration:
-    """A fitted model and what the fit saw (diagnostics, warnings)."""
-
-    model: AcousticModel
-    info: dict[str, Any] = field(default_factory=dict)
 
 
 def schmidt(moments) -> np.ndarray:
@@ -160,7 +150,7 @@ def cross_term_variance(paired, background, *, max_blocks: int = 4000) -> float:
 
 def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
               cross_var: float = 0.0) -> Calibration:
-    """Fit the seed-002 model from arrays (the steps of the module docstring, docs §6).
+    """Fit the model of Orimoto, Ikuta & Wang from arrays (the steps of the module docstring, docs §6).
 
     x: vibration (accelerometer block mean square) and z: sound energy of the same
     blocks (paired capture); v: sound energy of blocks of background noise alone;
@@ -169,6 +159,36 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
     machine sound and background (:func:`cross_term_variance`, from RAW captures;
     0 when unknown).  Raises ValueError with a one-line reason.
     """
+    x, z, v, t, cross_var = _checked_inputs(x, z, v, t, a_rel_std, cross_var)
+    info: dict[str, Any] = {"blocks_paired": int(x.size), "blocks_background": int(v.size),
+                            "method": "regression", "warnings": []}
+    # 1. lambda^(1)
+    mx = [float(np.mean(x ** j)) for j in range(5)]
+    try:
+        lam1 = schmidt(mx)
+    except ValueError as exc:
+        raise ValueError(f"vibration x: {exc}") from None
+    # 2.-4. the machine sound and the observation noise
+    snd = _fit_sound(x, z, v, lam1, cross_var, info)
+    e10, e11, a0 = snd["e10"], snd["e11"], snd["a0"]
+    # 5. F, G, <u> of eqs. (32)-(34)
+    F = _consecutive_lag1(x, t)
+    F = min(max(F, -0.999), 0.999)
+    var_x = float(np.var(x))
+    G = math.sqrt((1.0 - F * F) * var_x)
+    u_mean = (1.0 - F) * float(np.mean(x)) / G
+    info.update(x_mean=float(np.mean(x)), x_std=math.sqrt(var_x), y_mean=e10, y_std=e11,
+                v_mean=snd["v1"], v_std=math.sqrt(snd["var_v"]), corr_xz=float(np.corrcoef(x, z)[0, 1]))
+    model = AcousticModel(lam1=lam1, lam2=snd["lam2"], e10=e10, e11=e11, p20=snd["p20"], p21=snd["p21"],
+                          p22=snd["p22"], v1=snd["v1"], v2=snd["v1"] * snd["v1"] + snd["noise"], F=F, G=G,
+                          u_mean=u_mean, x0=float(np.mean(x)), gx0=var_x, a0=a0, ga0=(a_rel_std * a0) ** 2,
+                          block_s=block_s)
+    return Calibration(model=model, info=info)
+
+
+def _checked_inputs(x, z, v, t, a_rel_std, cross_var):
+    """The arguments of :func:`fit_model` as arrays (x, z, v float64, t int64 or None) and a float
+    cross_var; ValueError with a one-line reason for a bad one."""
     x = np.asarray(x, dtype=np.float64).ravel()
     z = np.asarray(z, dtype=np.float64).ravel()
     v = np.asarray(v, dtype=np.float64).ravel()
@@ -187,15 +207,16 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
         raise ValueError(f"a_rel_std must be > 0, got {a_rel_std!r}")
     if isinstance(cross_var, bool) or not (math.isfinite(float(cross_var)) and float(cross_var) >= 0):
         raise ValueError(f"cross_var must be a finite number >= 0, got {cross_var!r}")
-    cross_var = float(cross_var)
-    info: dict[str, Any] = {"blocks_paired": int(x.size), "blocks_background": int(v.size),
-                            "method": "regression", "warnings": []}
-    # 1. lambda^(1)
-    mx = [float(np.mean(x ** j)) for j in range(5)]
-    try:
-        lam1 = schmidt(mx)
-    except ValueError as exc:
-        raise ValueError(f"vibration x: {exc}") from None
+    return x, z, v, t, float(cross_var)
+
+
+def _fit_sound(x, z, v, lam1, cross_var: float, info: dict) -> dict:
+    """Steps 2-4 of the module docstring: the observation noise, the regression of z on theta(x),
+    the split of var z between machine sound and noise, and p, lambda^(2) of eq. (23) (docs §6).
+
+    Returns e10, e11, a0, p20, p21, p22, lam2, v1 (<v>), var_v (of the background stretch) and
+    noise (the observation noise variance); adds the diagnostics and any warning to ``info``.
+    """
     th1 = lam1[1, 0] + lam1[1, 1] * x
     th2 = lam1[2, 0] + lam1[2, 1] * x + lam1[2, 2] * x * x
     g1, g2 = float(np.mean(th1 ** 3)), float(np.mean(th1 * th1 * th2))   # theta1^2 = 1 + g1 theta1 + g2 theta2
@@ -241,18 +262,8 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
     info.update(B11=a0, B22=b22, a0_squared=a0 * a0, y_skew=mu3 / e11 ** 3, y_exkurt=mu4 / e11 ** 4 - 3.0,
                 curvature=float(np.mean(th2 * z)), residual_var=c0, noise_var=noise, background_var=var_v,
                 cross_var=cross_var)
-    # 5. F, G, <u> of eqs. (32)-(34)
-    F = _consecutive_lag1(x, t)
-    F = min(max(F, -0.999), 0.999)
-    var_x = float(np.var(x))
-    G = math.sqrt((1.0 - F * F) * var_x)
-    u_mean = (1.0 - F) * float(np.mean(x)) / G
-    info.update(x_mean=float(np.mean(x)), x_std=math.sqrt(var_x), y_mean=e10, y_std=e11,
-                v_mean=v1, v_std=math.sqrt(var_v), corr_xz=float(np.corrcoef(x, z)[0, 1]))
-    model = AcousticModel(lam1=lam1, lam2=lam2, e10=e10, e11=e11, p20=p20, p21=p21, p22=p22,
-                          v1=v1, v2=v1 * v1 + noise, F=F, G=G, u_mean=u_mean, x0=float(np.mean(x)),
-                          gx0=var_x, a0=a0, ga0=(a_rel_std * a0) ** 2, block_s=block_s)
-    return Calibration(model=model, info=info)
+    return {"e10": e10, "e11": e11, "a0": a0, "p20": p20, "p21": p21, "p22": p22, "lam2": lam2,
+            "v1": v1, "var_v": var_v, "noise": noise}
 
 
 # ---------------------------------------------------------------------------
@@ -266,7 +277,7 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
 
     Returns (block index int64 (n,), rms float64 (n, len(channels)), block_s):
     only blocks where every requested channel arrived; the RMS is the daemon's
-    (PROTOCOL.md RMS frames, or :func:`cmsensord.dsp.rms.rows_rms` of RAW
+    (docs/PROTOCOL.md RMS frames, or :func:`cmsensord.dsp.rms.rows_rms` of RAW
     blocks with the STATUS scale/offset), so z = rms^2 matches what the
     daemon computes.  Raises ValueError naming the file.
 
@@ -379,63 +390,6 @@ def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_backgr
 
 
 # ---------------------------------------------------------------------------
-# the file
-# ---------------------------------------------------------------------------
-
-_MODEL_KEYS = tuple(f.name for f in fields(AcousticModel))
-
-
-def save_calibration(cal: Calibration, path) -> None:
-    """Write the calibration as JSON (``format``, ``version``, ``model``, ``info``)."""
-    model = asdict(cal.model)
-    model["lam1"] = [list(r) for r in model["lam1"]]
-    model["lam2"] = [list(r) for r in model["lam2"]]
-    doc = {"format": FORMAT, "version": VERSION, "model": model, "info": cal.info}
-    Path(path).write_text(json.dumps(doc, indent=2, default=float) + "\n", encoding="utf-8")
-
-
-def load_calibration(path) -> AcousticModel:
-    """Read a calibration file; a bad file raises ConfigError naming the file and the key."""
-    source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(source, None, "calibration file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(source, None, "is a directory, not a calibration file") from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:     # ValueError: a NUL in the path
-        reason = getattr(exc, "strerror", None) or exc
-        raise ConfigError(source, None, f"cannot read the calibration file: {reason}") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ConfigError(source, None, f"not JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ConfigError(source, "format", f"not an acoustic calibration (expected format {FORMAT!r})",
-                          doc.get("format") if isinstance(doc, dict) else doc)
-    if doc.get("version") != VERSION:
-        raise ConfigError(source, "version", f"unsupported version (this daemon reads {VERSION})",
-                          doc.get("version"))
-    model = doc.get("model")
-    if not isinstance(model, dict):
-        raise ConfigError(source, "model", "expected a mapping of the model's coefficients", model)
-    unknown = [k for k in model if k not in _MODEL_KEYS]
-    if unknown:
-        raise ConfigError(source, f"model.{unknown[0]}", "unknown key")
-    required = [k for k in _MODEL_KEYS if k != "block_s"]
-    missing = [k for k in required if k not in model]
-    if missing:
-        raise ConfigError(source, f"model.{missing[0]}", "missing")
-    try:
-        return AcousticModel(**model)
-    except (ValueError, TypeError) as exc:
-        key, _, reason = str(exc).partition(": ")
-        if key in _MODEL_KEYS:
-            raise ConfigError(source, f"model.{key}", reason) from None
-        raise ConfigError(source, "model", str(exc)) from None
-
-
-# ---------------------------------------------------------------------------
 # command line
 # ---------------------------------------------------------------------------
 
@@ -443,8 +397,9 @@ def load_calibration(path) -> AcousticModel:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m cmsensord.acoustic_calib",
-        description="Fit the seed-002 acoustic estimator (vibration from microphone sound) from a "
-                    "paired accelerometer + microphone capture and a capture of background noise alone.")
+        description="Fit the acoustic estimator of Orimoto, Ikuta & Wang (vibration from microphone "
+                    "sound) from a paired accelerometer + microphone capture and a capture of "
+                    "background noise alone.")
     p.add_argument("--paired", required=True, help="capture with the accelerometer and the microphone")
     p.add_argument("--background", required=True, help="capture of background noise alone (machine stopped)")
     p.add_argument("--accel", type=int, default=0, help="accelerometer channel of the paired capture (0)")

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Sequence
 
 from cmsensord import __version__
+from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
 from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
 from cmsensord.service.live import run_live
@@ -94,7 +95,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,summary}", parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,vkf,calibrate,summary}", parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
@@ -119,6 +120,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     v.add_argument("--bandwidth", type=_positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
+    add_calibrate_parser(sub)
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -166,6 +168,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "summary":
             return summary(args.mcap, as_json=args.json)
+        if args.command == "calibrate":
+            return run_calibrate(args)
         if args.command == "record":
             return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
         if args.command == "vkf":

@@ -223,6 +223,25 @@ def _validate(obj: Any) -> None:
 # ---------------------------------------------------------------------------
 
 
+#: observations per second of board time the decision rule is written for (100 Hz RMS frames)
+NOMINAL_RATE_HZ = 100.0
+
+
+def _f_r_below_decision_size(obj: Any) -> tuple[str, str, Any] | None:
+    per_decision = obj.decision_period_s * NOMINAL_RATE_HZ
+    if not obj.f_r < per_decision:
+        return "f_r", (f"must be below the {per_decision:g} observations per decision "
+                       f"(decision_period_s {obj.decision_period_s:g} x {NOMINAL_RATE_HZ:g} blocks/s): "
+                       "at or above it no decision can flag an anomaly"), obj.f_r
+    return None
+
+
+def _combined_needs_baseline(obj: Any) -> tuple[str, str, Any] | None:
+    if obj.severity == "combined" and obj.baseline is None:
+        return "severity", "combined needs a baseline (run `cmsensord calibrate`)", obj.severity
+    return None
+
+
 @dataclass(frozen=True)
 class MonitorConfig:
     """Seed-000 parameters: the bank of n AKFs, outliers, 1 s anomaly decisions."""
@@ -237,8 +256,27 @@ class MonitorConfig:
     decision_period_s: float = _setting(1.0, "seconds between anomaly decisions", gt=0)
     p0: float = _setting(1.0, "initial error variance P(0)", gt=0)
     q0: float = _setting(1e-3, "initial process noise estimate Q^(0)", ge=0)
+    baseline: float | None = _setting(
+        None, "healthy block RMS learned by `cmsensord calibrate`; when set the bank watches "
+        "block RMS / baseline (R in units of baseline^2)", gt=0)
+    baseline_spread: float | None = _setting(
+        None, "robust std of the healthy per-decision level / baseline (calibrate)", ge=0)
+    severity: str = _setting(
+        "auto", "paper: the AKF index of Kim et al. 2023 alone; combined: also the level against "
+        "the baseline (level_alert, level_danger); auto: combined when a baseline is set",
+        choices=("auto", "paper", "combined"))
+    level_alert: float = _setting(2.0, "level / baseline giving S_level = 0.5 (the analysts' "
+                                  "2 x baseline alert)", gt=1)
+    level_danger: float = _setting(4.0, "level / baseline giving S_level = 1", gt=1)
 
-    _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("r_max", "r_min"),)
+    _RULES: ClassVar[tuple[_Rule, ...]] = (_greater("r_max", "r_min"),
+                                           _greater("level_danger", "level_alert"),
+                                           _f_r_below_decision_size, _combined_needs_baseline)
+
+    @property
+    def combined(self) -> bool:
+        """True when the severity also grades the level against the learned baseline."""
+        return self.severity == "combined" or (self.severity == "auto" and self.baseline is not None)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -632,7 +670,7 @@ def _check_calibrations(cfg: Config, source: str) -> None:
         if ch.kind != "microphone":
             continue
         key = f"channels[{i}].calibration" if ch.calibration is not None else "acoustic.calibration"
-        from cmsensord.acoustic_calib import load_calibration
+        from cmsensord.acoustic_model import load_calibration
 
         try:
             load_calibration(ch.calibration or cfg.acoustic.calibration)

@@ -440,18 +440,18 @@ def test_anti_alias_design_equals_scipy(fs, f_pass, f_stop, gpass, gstop):
     (same order, edge, sections), and its DC group delay scipy's group_delay."""
     from scipy import signal
 
-    from cmsensord.dsp.order_tracker import _cheb2ord, _cheby2_sos, _sos_dc_delay, _sos_response
+    from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, sos_dc_delay, sos_response
 
-    order, edge = _cheb2ord(f_pass, f_stop, gpass, gstop, fs)
+    order, edge = cheb2ord(f_pass, f_stop, gpass, gstop, fs)
     ref_order, ref_edge = signal.cheb2ord(f_pass, f_stop, gpass, gstop, fs=fs)
     assert order == ref_order and edge == pytest.approx(ref_edge, rel=1e-14)
-    sos = _cheby2_sos(order, gstop, edge, fs)
+    sos = cheby2_sos(order, gstop, edge, fs)
     ref = signal.cheby2(ref_order, gstop, ref_edge, fs=fs, output="sos")
     np.testing.assert_allclose(sos, ref, rtol=1e-12, atol=1e-15)
     gd = sum(signal.group_delay((s[:3], s[3:]), w=[0.0], fs=fs)[1][0] for s in ref)
-    assert _sos_dc_delay(sos) == pytest.approx(gd, rel=1e-8)
+    assert sos_dc_delay(sos) == pytest.approx(gd, rel=1e-8)
     f = np.linspace(0.0, fs / 2, 3001)
-    np.testing.assert_allclose(_sos_response(sos, f, fs), signal.sosfreqz(ref, worN=f, fs=fs)[1],
+    np.testing.assert_allclose(sos_response(sos, f, fs), signal.sosfreqz(ref, worN=f, fs=fs)[1],
                                rtol=0, atol=1e-12)
 
 
@@ -459,17 +459,17 @@ def test_tracker_anti_alias_filter_meets_its_spec():
     """Default raw chain (25 kHz, orders 1-4 up to 3600 rpm): at most 0.001 dB down at
     the highest tracked frequency, at least 80 dB down from fs_track - f_hi (what folds
     onto a tracked frequency) to fs/2; the speed is delayed by the DC group delay."""
-    from cmsensord.dsp.order_tracker import _sos_dc_delay, _sos_response
+    from cmsensord.dsp.order_tracker.antialias import sos_dc_delay, sos_response
 
     comps = [TrackedComponent(f"{k}x", order=float(k)) for k in (1, 2, 3, 4)]
     tr = OrderTracker(comps, fs_in=25000.0, max_rpm=3600.0)
     assert tr.decimate == 20 and tr.sos.shape == (4, 6)
-    db = 20 * np.log10(np.abs(_sos_response(tr.sos, np.linspace(0.0, tr.f_hi, 200), tr.fs_in)))
+    db = 20 * np.log10(np.abs(sos_response(tr.sos, np.linspace(0.0, tr.f_hi, 200), tr.fs_in)))
     assert db.min() >= -0.001 - 1e-9 and db.max() <= 1e-9     # the design's pass-band edge is f_hi
     stop = np.linspace(tr.fs_track - tr.f_hi, tr.fs_in / 2, 20001)
-    assert 20 * np.log10(np.abs(_sos_response(tr.sos, stop, tr.fs_in))).max() <= -80.0 + 1e-9
-    assert tr.delay_in == round(_sos_dc_delay(tr.sos)) == 38
-    assert tr.filter_delay_s == pytest.approx(_sos_dc_delay(tr.sos) / 25000.0)
+    assert 20 * np.log10(np.abs(sos_response(tr.sos, stop, tr.fs_in))).max() <= -80.0 + 1e-9
+    assert tr.delay_in == round(sos_dc_delay(tr.sos)) == 38
+    assert tr.filter_delay_s == pytest.approx(sos_dc_delay(tr.sos) / 25000.0)
 
 
 if have_kernel():
@@ -532,7 +532,7 @@ if have_kernel():
 def test_gain_table_filled_piecewise_equals_one_pass():
     """The gain table is computed in segments as the speed visits them (and r on the
     bandwidth grid in batches): any order gives the table of one batch, bit for bit."""
-    import cmsensord.dsp.order_tracker as ot
+    import cmsensord.dsp.order_tracker.bandwidth as ot
 
     comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in (1, 2, 3, 4)]
     kw = {"fs_in": 25000.0, "max_rpm": 3000.0}

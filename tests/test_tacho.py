@@ -255,7 +255,7 @@ def test_history_is_bounded():
 def test_compiled_evaluate_equals_numpy():
     """evaluate() between knots in the compiled kernel: bit for bit the numpy path,
     before the first edge, inside runs, after a loss, behind the history, at NaN/inf."""
-    from cmsensord.dsp import tacho as tacho_mod
+    from cmsensord.dsp.tacho import smoothing as tacho_mod
 
     if tacho_mod._kernel is None:
         pytest.skip("compiled kernel not built")

@@ -1,6 +1,6 @@
 """Anomaly decisions and the severity index of a bank of AKFs.
 
-Implements seed 000 section III.C-D: the 1-s anomaly decision of Fig. 3 and the
+Implements Kim et al. 2023 section III.C-D: the 1-s anomaly decision of Fig. 3 and the
 severity index of eqs. (16)-(18), vectorised over (channel, filter).
 
 Fig. 3, for every AKF of every channel, once per decision period:
@@ -25,15 +25,46 @@ Choices the paper leaves open:
 * The first period is the filters' transient (Fig. 5: "except for the first
   1-s interval, in which the AKF is in a transient state"); its decision is
   reported with ``transient = True`` and does not change F_a.
+
+Extension (not in the paper), selected by ``level_alert``: the *combined*
+severity also grades the level of the period against the machine's learned
+healthy baseline, the way vibration analysts grade an overall level:
+
+    ratio     = median over the period of y/baseline
+    S_level   = 0                                   ratio < alert
+              = 0.5 + 0.5 log(ratio/alert)/log(danger/alert), at most 1, floored to i/n
+    S_idx     = max(S_AKF, S_level)
+
+so the AKF bank reports a change of the signal's dynamics early and the level
+part keeps a grown level reported once the bank has adapted to it.  Without
+``level_alert`` the decider is the paper's.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["AnomalyDecider", "Decision"]
+__all__ = ["HOLD_EVENT_DECISIONS", "AnomalyDecider", "Decision", "level_severity"]
+
+#: consecutive decisions a flag may be held by the hysteresis alone
+#: (c f_r <= cnt < f_r) before the monitor reports it
+HOLD_EVENT_DECISIONS = 60
+
+
+def level_severity(ratio, n: int, alert, danger) -> np.ndarray:
+    """S_level of a level ratio (level / healthy baseline); NaN ratio -> 0.
+
+    0 below ``alert``, 0.5 at ``alert``, log-linear up to 1 at ``danger``, floored to
+    the bank's grid i/n so it reads like the paper's index.
+    """
+    r = np.asarray(ratio, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = 0.5 + 0.5 * np.log(r / alert) / np.log(danger / alert)
+    s = np.where(np.isfinite(r) & (r >= alert), np.clip(s, 0.5, 1.0), 0.0)
+    return np.floor(s * n + 1e-9) / n
 
 
 @dataclass
@@ -50,6 +81,10 @@ class Decision:
     prev_severity: np.ndarray
     f_r: np.ndarray           # (C,) rotation frequency used
     missing: np.ndarray       # (C,) observations missing in the period
+    severity_akf: np.ndarray  # (C,) the bank's S_idx (= severity in the paper's mode)
+    level: np.ndarray         # (C,) median level ratio of the period (NaN without a baseline)
+    severity_level: np.ndarray  # (C,) S_level (NaN in the paper's mode)
+    held: np.ndarray          # (C, n) consecutive decisions F_a was kept by the hysteresis alone
 
 
 class AnomalyDecider:
@@ -61,7 +96,7 @@ class AnomalyDecider:
     """
 
     def __init__(self, n_channels: int, n_filters: int, *, f_r, c, period: int = 100,
-                 transient_periods: int = 1):
+                 transient_periods: int = 1, level_alert=None, level_danger=None):
         if period < 1:
             raise ValueError(f"period: expected >= 1 observation, got {period}")
         self.C, self.n = n_channels, n_filters
@@ -76,16 +111,32 @@ class AnomalyDecider:
         self.periods = 0          # decisions made
         self.slot = 0             # slots seen in total
         self.level_weights = np.arange(1, n_filters + 1, dtype=np.float64) / n_filters  # i/n
+        self.held = np.zeros((n_channels, n_filters), dtype=np.int64)
+        self.level_alert = None if level_alert is None else np.broadcast_to(
+            np.asarray(level_alert, dtype=np.float64), (n_channels,)).copy()
+        if level_danger is None and self.level_alert is not None:
+            level_danger = 2.0 * self.level_alert
+        self.level_danger = None if level_danger is None else np.broadcast_to(
+            np.asarray(level_danger, dtype=np.float64), (n_channels,)).copy()
+        self._level = np.full((self.period, n_channels), np.nan)
+        self._last_severity = np.zeros(n_channels)
+
+    @property
+    def combined(self) -> bool:
+        """True when the severity also grades the level (``level_alert`` given)."""
+        return self.level_alert is not None
 
     def severity_of(self, anomaly: np.ndarray) -> np.ndarray:
         """S_idx = max_i I_i with I_i = i/n F_a,i (eqs. 17-18); 0 when no flag is set."""
         return (anomaly * self.level_weights).max(axis=-1)
 
-    def update(self, outlier: np.ndarray, valid: np.ndarray, f_r=None) -> list[Decision]:
+    def update(self, outlier: np.ndarray, valid: np.ndarray, f_r=None,
+               level: np.ndarray | None = None) -> list[Decision]:
         """Count a block of T observation slots; return the decisions it completes.
 
         outlier: (T, C, n) flags; valid: (T, C) False for missing observations.
         f_r: optional (C,) rotation frequency for decisions in this block (tacho).
+        level: (T, C) level ratios y/baseline (combined mode; NaN = missing).
         """
         outlier = np.asarray(outlier)
         T = outlier.shape[0]
@@ -100,6 +151,9 @@ class AnomalyDecider:
             seg = slice(start, start + take)
             self.cnt += outlier[seg].sum(axis=0, dtype=np.int64)
             self.missing += (~np.asarray(valid[seg], dtype=bool)).sum(axis=0)
+            if level is not None:
+                lv = np.where(np.asarray(valid[seg], dtype=bool), level[seg], np.nan)
+                self._level[self.phase:self.phase + take] = lv
             self.phase += take
             self.slot += take
             start += take
@@ -115,14 +169,35 @@ class AnomalyDecider:
             set_ = self.cnt >= fr                       # cnt >= f_r  -> F_a = 1
             clear = self.cnt < self.c[:, None] * fr     # cnt < c f_r -> F_a = 0
             self.anomaly = np.where(set_, 1, np.where(clear, 0, self.anomaly)).astype(np.uint8)
+            kept = (self.anomaly == 1) & ~set_
+            self.held = np.where(kept, self.held + 1, 0)
+        s_akf = self.severity_of(self.anomaly)
+        level, s_level = self._level_part(transient)
+        severity = np.maximum(s_akf, np.nan_to_num(s_level)) if self.combined else s_akf
         d = Decision(
             slot=self.slot, period=self.periods, transient=transient,
             cnt=self.cnt.copy(), anomaly=self.anomaly.copy(), prev_anomaly=prev,
-            severity=self.severity_of(self.anomaly), prev_severity=self.severity_of(prev),
+            severity=severity, prev_severity=self._last_severity.copy(),
             f_r=self.f_r.copy(), missing=self.missing.copy(),
+            severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
         )
+        self._last_severity = severity.copy()
         self.cnt[:] = 0
         self.missing[:] = 0
         self.phase = 0
         self.periods += 1
         return d
+
+    def _level_part(self, transient: bool) -> tuple[np.ndarray, np.ndarray]:
+        """(median level ratio, S_level) of the period; NaN in the paper's mode."""
+        nan = np.full(self.C, np.nan)
+        if not self.combined:
+            return nan, nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period
+            level = np.nanmedian(self._level, axis=0)
+        self._level[:] = np.nan
+        if transient:
+            return level, np.zeros(self.C)
+        assert self.level_alert is not None and self.level_danger is not None
+        return level, level_severity(level, self.n, self.level_alert, self.level_danger)

@@ -1,12 +1,12 @@
 """Batch (offline, zero-phase) Vold-Kalman order tracking filters.
 
-Implements seed 003 (J. Tůma, "Vold-Kalman Order Tracking Filtration as a Tool
+Implements Tůma ("Vold-Kalman Order Tracking Filtration as a Tool
 for Machine Diagnostics"): the first-generation filter of section 2, eqs. (1)-(11),
 with its frequency response and selectivity, and the second-generation,
 multi-order filter of section 3, eqs. (12)-(15).  Both are least-squares
 problems over the whole record, solved at once as banded systems, so the
 result is zero-phase and there is no slew-rate limit.  The per-block RMS and
-the error measure are eq. (26) of seed 001.
+the error measure are eq. (26) of Yeh, Pan & Le.
 
 First generation (one order, the waveform itself is the unknown)::
 
@@ -56,7 +56,7 @@ stationary record sees the envelope low-pass of the usual formulation::
 
 so the full -3 dB bandwidth B (Hz, f_k ± B/2) and r are related by
 r = sqrt(√2 - 1) / (2 sin(π B / (2 fs)))^s (:func:`vkf_bandwidth`,
-:func:`r_for_bandwidth`; the seed cites this relation from its reference [3]
+:func:`r_for_bandwidth`; Tůma cites this relation from its reference [3]
 without giving it — derived here from (R2) and checked numerically in
 tests/test_vkf_batch.py).
 
@@ -81,7 +81,7 @@ instead of returning a wrong envelope.  The limit depends on B/fs: 2 poles
 with B = 0.07 Hz at 2 kHz (r = 5e7) still converge, 0.05 Hz does not; at
 fs = 25 kHz the same limits are 0.9 and 0.6 Hz.
 
-Reading the converted seed text (figures are missing, some equations garbled):
+Reading the converted text of the paper (figures are missing, some equations garbled):
 
 * Eq. (5) reads "x A^T A x"; it is xᵀ AᵀA x.  The number (9) is printed twice,
   for ηᵀη and for J; the loss is the second one.
@@ -183,7 +183,7 @@ def vkf1(y: np.ndarray, omega, r: float, *, fs: float) -> np.ndarray:
     fs     : sampling frequency in Hz (Δt = 1/fs).
 
     Returns the extracted waveform x (N,), real, zero-phase.  The banded
-    Cholesky solve is accurate to ~1e-11 for r <= 1000 (the seed's range); the
+    Cholesky solve is accurate to ~1e-11 for r <= 1000 (the paper's range); the
     error grows as r² ε (~1e-5 at r = 1e6).
     """
     y = np.asarray(y, dtype=np.float64)
@@ -384,6 +384,34 @@ def vkf2(y: np.ndarray, phases: np.ndarray, r: float | Sequence[float], *,
     Solves the normal equations of J = ηᵀη + Σ_k (r_k²/2) Σ_n |∇^s a_k(n)|²
     (= r_k² on A_k and on A_{-k}) as one banded SPD system of 2K N unknowns.
     """
+    y, phases, rk, s = _vkf2_inputs(y, phases, r, poles)
+    N = y.shape[0]
+    P = 2 * phases.shape[0]    # real unknowns per sample: (u_k, v_k) for every k
+    # data equation (15): y(n) ≈ g(n)ᵀ z(n), g = [cos θ_1, -sin θ_1, cos θ_2, ...]
+    g = np.empty((P, N))
+    g[0::2] = np.cos(phases)
+    g[1::2] = -np.sin(phases)
+    ab = _vkf2_normal_matrix(g, rk, s)
+    rhs = (g * y).T.reshape(N, P)           # gᵀ y, in the same unknown order
+    try:
+        cb = cholesky_banded(ab, overwrite_ab=True, check_finite=False)
+    except np.linalg.LinAlgError as e:
+        raise np.linalg.LinAlgError(
+            f"vkf2: normal matrix not positive definite in double precision ({e}); "
+            f"r = {rk.tolist()} too large (bandwidth too narrow for fs) or two phase "
+            "rows identical") from e
+    del ab
+    z = cho_solve_banded((cb, False), rhs.reshape(-1), check_finite=False).reshape(N, P)
+    refinements = _vkf2_refine(z, cb, rhs, g, rk, s)
+    del cb, g
+    env = z[:, 0::2].T + 1j * z[:, 1::2].T
+    wave = z[:, 0::2].T * np.cos(phases) - z[:, 1::2].T * np.sin(phases)
+    return VkfResult(envelopes=env, waveforms=wave, amplitude=np.abs(env), r=rk,
+                     poles=s, refinements=refinements)
+
+
+def _vkf2_inputs(y, phases, r, poles) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The arguments of :func:`vkf2` checked: y (N,), phases (K, N), r (K,) as float64, and s."""
     y = np.asarray(y, dtype=np.float64)
     phases = np.asarray(phases, dtype=np.float64)
     if y.ndim != 1:
@@ -406,15 +434,19 @@ def vkf2(y: np.ndarray, phases: np.ndarray, r: float | Sequence[float], *,
         raise ValueError(f"r: expected a scalar or shape ({K},), got {rk.shape}")
     if not (np.all(rk > 0) and np.all(np.isfinite(rk))):
         raise ValueError(f"r: expected finite values > 0, got {rk.tolist()}")
+    return y, phases, rk, s
 
-    P = 2 * K                  # real unknowns per sample: (u_k, v_k) for every k
+
+def _vkf2_normal_matrix(g: np.ndarray, rk: np.ndarray, s: int) -> np.ndarray:
+    """The normal matrix of :func:`vkf2` in upper banded storage, ab[u + i - j, j] = M[i, j].
+
+    g (2K, N): the data equation's coefficients per sample; the unknowns are ordered
+    sample by sample, (u_1, v_1, ..., u_K, v_K); half-bandwidth u = 2K s.  Fortran order so
+    LAPACK (pbtrf) factorises it in place without a copy.
+    """
+    P, N = g.shape
+    K = P // 2
     u = P * s                  # half-bandwidth of the normal matrix
-    # data equation (15): y(n) ≈ g(n)ᵀ z(n), g = [cos θ_1, -sin θ_1, cos θ_2, ...]
-    g = np.empty((P, N))
-    g[0::2] = np.cos(phases)
-    g[1::2] = -np.sin(phases)
-    # upper banded storage: ab[u + i - j, j] = M[i, j]; Fortran order so LAPACK
-    # (pbtrf) factorises it in place without a copy
     ab = np.zeros((u + 1, P * N), order="F")
     for p in range(P):         # Σ_n g gᵀ, the 2K x 2K block of every sample
         for q in range(p, P):
@@ -425,22 +457,21 @@ def vkf2(y: np.ndarray, phases: np.ndarray, r: float | Sequence[float], *,
             w = 0.5 * rk[k] * rk[k]
             for m in (2 * k, 2 * k + 1):
                 ab[u - P * lag, P * lag + m::P] += w * band
-    rhs = (g * y).T.reshape(N, P)           # gᵀ y, in the same unknown order
-    try:
-        cb = cholesky_banded(ab, overwrite_ab=True, check_finite=False)
-    except np.linalg.LinAlgError as e:
-        raise np.linalg.LinAlgError(
-            f"vkf2: normal matrix not positive definite in double precision ({e}); "
-            f"r = {rk.tolist()} too large (bandwidth too narrow for fs) or two phase "
-            "rows identical") from e
-    del ab
-    z = cho_solve_banded((cb, False), rhs.reshape(-1), check_finite=False).reshape(N, P)
-    # Iterative refinement.  The normal matrix has eigenvalues from ~1 (smooth
-    # envelopes, fixed by the data) to ~2^{2s} r²/2, so the Cholesky solution of
-    # the smooth part carries a relative error ~ r² ε (2 poles, 0.25 Hz at 2 kHz:
-    # r = 4e6, 0.8 % in RMS).  The residual is recomputed from the structure (g and
-    # the differences of eq. 14, exact for smooth envelopes) and corrected with
-    # the same factor until the correction is below _REFINE_TOL.
+    return ab
+
+
+def _vkf2_refine(z: np.ndarray, cb: np.ndarray, rhs: np.ndarray, g: np.ndarray, rk: np.ndarray,
+                 s: int) -> int:
+    """Iterative refinement of the solution z (N, 2K) of :func:`vkf2`, in place; returns the steps.
+
+    The normal matrix has eigenvalues from ~1 (smooth envelopes, fixed by the data) to
+    ~2^{2s} r²/2, so the Cholesky solution of the smooth part carries a relative error
+    ~ r² ε (2 poles, 0.25 Hz at 2 kHz: r = 4e6, 0.8 % in RMS).  The residual is recomputed
+    from the structure (g and the differences of eq. 14, exact for smooth envelopes) and
+    corrected with the same factor ``cb`` until the correction is below _REFINE_TOL.  Raises
+    LinAlgError when it does not converge.
+    """
+    N, P = z.shape
     w = np.repeat(0.5 * rk * rk, 2)          # weight of u_k and v_k
     refinements, step = 0, math.inf
     zmax = max(float(np.abs(z).max()), np.finfo(float).tiny)
@@ -460,11 +491,7 @@ def vkf2(y: np.ndarray, phases: np.ndarray, r: float | Sequence[float], *,
                 f"vkf2: iterative refinement did not converge (last correction "
                 f"{step:.1e} relative, ratio {rate:.2f}); r = {rk.tolist()} is too large "
                 "for double precision: widen the bandwidth")
-    del cb, g
-    env = z[:, 0::2].T + 1j * z[:, 1::2].T
-    wave = z[:, 0::2].T * np.cos(phases) - z[:, 1::2].T * np.sin(phases)
-    return VkfResult(envelopes=env, waveforms=wave, amplitude=np.abs(env), r=rk,
-                     poles=s, refinements=refinements)
+    return refinements
 
 
 def _apply_normal(z: np.ndarray, g: np.ndarray, w: np.ndarray, s: int) -> np.ndarray:
@@ -514,13 +541,13 @@ def phases_for(components: Sequence[float | Hz], turns=None, t=None) -> np.ndarr
 
 
 # --------------------------------------------------------------------------
-# seed 001, eq. (26)
+# Yeh, Pan & Le, eq. (26)
 # --------------------------------------------------------------------------
 
 def block_rms(x: np.ndarray, block: int) -> np.ndarray:
     """RMS of consecutive blocks of ``block`` samples along the last axis.
 
-    sqrt(1/M Σ_{k=(n-1)M+1}^{nM} x²(k)), n = 1..⌊N/M⌋ (the blocks of seed 001
+    sqrt(1/M Σ_{k=(n-1)M+1}^{nM} x²(k)), n = 1..⌊N/M⌋ (the blocks of Yeh, Pan & Le
     eq. 26); an incomplete last block is dropped.
     """
     x = np.asarray(x, dtype=np.float64)

@@ -41,7 +41,7 @@ def severity(stamp_ns: int, channel: str, d, c: int, R: np.ndarray, **extra: Any
     return Message(severity_topic(channel), "severity", stamp_ns, {
         "channel": channel, "severity_index": sev, "level": int(round(sev * len(R))),
         "anomaly": anomaly, "outliers": d.cnt[c].tolist(), "f_r": float(d.f_r[c]),
-        "r": R.tolist(), "failure": bool(anomaly[-1]), "missing": int(d.missing[c]),
+        "r": R.tolist(), "failure": bool(anomaly[-1]) or sev >= 1.0, "missing": int(d.missing[c]),
         "transient": d.transient, **extra,
     })
 

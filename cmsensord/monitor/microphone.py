@@ -32,7 +32,7 @@ class Microphones:
         cols = [c for c, ch in enumerate(channels) if ch.kind == "microphone"]
         if not cols:
             return None, []
-        from cmsensord.acoustic_calib import load_calibration
+        from cmsensord.acoustic_model import load_calibration
         from cmsensord.dsp.acoustic import AcousticEstimator, Guards
 
         models, events = [], []

@@ -42,15 +42,18 @@ class Processor:
     ``auto_channels``: the channel list follows the board (the first RMS frame's
     C) instead of the configuration (used when the file lists no channels).
     ``diagnostics``: callable returning extra fields for ``/cm/diagnostics``
-    (queue depth, drops, lag) — supplied by the live loop.
+    (queue depth, drops, lag) — supplied by the live loop.  ``observe``: called with
+    (first_slot, y, valid) of each block of observations before the banks (commissioning).
     """
 
     def __init__(self, cfg: Config, sink, *, auto_channels: bool = False,
                  clock_ns: Callable[[], int] = time.time_ns,
                  diagnostics: Callable[[], dict] | None = None,
                  link_counters: Callable[[], dict] | None = None,
-                 on_event: Callable[[dict], None] | None = None):
+                 on_event: Callable[[dict], None] | None = None,
+                 observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
         self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
+        self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
         self.log = EventLog(sink, lambda: self.clock.last_stamp_ns or self.clock_ns(), on_event)
@@ -70,6 +73,8 @@ class Processor:
     events = property(lambda self: self.log.recent)
     event_counts = property(lambda self: self.log.counts)
     raw_dropped = property(lambda self: self.raw.dropped)
+    fs = property(lambda self: self.clock.fs)
+    block_len = property(lambda self: self.clock.block_len)
     anchor_ns = property(lambda self: self.clock.anchor_ns)
     next_slot = property(lambda self: self.clock.next_slot)
     board_seconds = property(lambda self: self.clock.board_seconds)
@@ -233,7 +238,9 @@ class Processor:
         stamps = [self.clock.slot_stamp_ns(first + k) for k in range(T)] if mics or trace else []
         if mics is not None:
             self._out(mics.step(y, valid, stamps))
-        out = self.severity.observe(first, y, valid)
+        if self.observe is not None:
+            self.observe(first, y, valid)
+        y, out = self.severity.observe(first, y, valid)
         self.clock.advance(T)
         self.observations += int(valid.sum())
         self.missing_observations += int((~valid).sum())

@@ -7,6 +7,11 @@ decision's f_r may come from the tacho, then the decider
 decision per period.  A decision becomes a ``/cm/<channel>/severity`` message
 per channel and the events of what changed (anomaly onset/clear, severity
 change, failure), and updates the channels' :class:`ChannelView`.
+
+With a commissioned baseline the banks watch block RMS / baseline, and the
+combined severity (``monitor.severity``) also grades the period's level against
+it (:func:`~cmsensord.dsp.severity.level_severity`); its severity messages then
+carry ``severity_akf``, ``severity_level`` and ``level_ratio``.
 """
 
 from __future__ import annotations
@@ -52,20 +57,30 @@ class SeverityChain:
         self.bank = AkfBank(self.R, window=[m.window for m in mons], z_c=[m.z_c for m in mons],
                             p0=[m.p0 for m in mons], q0=[m.q0 for m in mons])
         period = max(1, round(mons[0].decision_period_s * fs / block_len))
-        self.decider = AnomalyDecider(len(channels), n, f_r=[m.f_r for m in mons],
-                                      c=[m.c for m in mons], period=period)
+        combined = [m.combined for m in mons]
+        self.baseline = np.array([m.baseline or 1.0 for m in mons])   # the bank watches y / baseline
+        self.combined = np.array(combined) if any(combined) else None  # severity also grades the level
+        self.decider = AnomalyDecider(
+            len(channels), n, f_r=[m.f_r for m in mons], c=[m.c for m in mons], period=period,
+            level_alert=[m.level_alert for m in mons] if any(combined) else None,
+            level_danger=[m.level_danger for m in mons])
         self.index = np.array([ch.index for ch in channels])     # board column of each channel
         self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in channels]
         self.trace_i = min(trace_filter, n) - 1
-        self.gate = SpeedGate(PENDING_DECISION_SLOTS)             # (outlier, valid) per slot
+        self.gate = SpeedGate(PENDING_DECISION_SLOTS)   # (outlier, valid[, level ratio]) per slot
 
-    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> AkfBlock:
-        """Observations (T, C) of slots first_slot.. through the banks; their flags wait."""
+    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, AkfBlock]:
+        """Observations (T, C) of slots first_slot.. / baseline through the banks; their flags
+        (and level ratios, combined severity) wait. Returns what the banks watched, and their output."""
+        y = y / self.baseline
         out = self.bank.process(y, valid)
         if self.gate.end is None:
             self.gate.restart(first_slot)
-        self.gate.push(out.outlier, valid)
-        return out
+        if self.combined is None:
+            self.gate.push(out.outlier, valid)
+        else:
+            self.gate.push(out.outlier, valid, np.where(self.combined, y, np.nan))
+        return y, out
 
     def release(self, upto: int, *, final: bool, bounded: bool,
                 f_r: Callable[[int], np.ndarray] | None) -> list[Decision]:
@@ -74,7 +89,8 @@ class SeverityChain:
         got = self.gate.release(upto, final=final, bounded=bounded)
         if got is None:
             return []
-        first, (outl, valid) = got
+        first, (outl, valid, *lv) = got
+        level = lv[0] if lv else None
         n = outl.shape[0]
         d = self.decider
         decisions = []
@@ -82,7 +98,8 @@ class SeverityChain:
         while pos < n:                          # one call per decision period: its own f_r
             take = min(n - pos, d.period - d.phase)
             fr = f_r(first + pos + take) if f_r is not None and d.phase + take == d.period else None
-            decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr)
+            part = None if level is None else level[pos:pos + take]
+            decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr, level=part)
             pos += take
         return decisions
 
@@ -101,7 +118,12 @@ class SeverityChain:
         """Per channel: its severity message, then the events of what changed."""
         out: list = []
         for c, ch in enumerate(self.channels):
-            m = messages.severity(stamp, ch.name, d, c, self.R[c])
+            extra = {}
+            if self.combined is not None and self.combined[c]:
+                extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c])}
+                if np.isfinite(d.level[c]):
+                    extra["level_ratio"] = float(d.level[c])
+            m = messages.severity(stamp, ch.name, d, c, self.R[c], **extra)
             out.append(m)
             out += self._note(c, d, m.msg, stamp)
         return out
@@ -135,11 +157,13 @@ class SeverityChain:
         if sev != prev_sev:
             events.append(Event("severity_change", name, f"{name}: severity index {prev_sev:.2f} -> "
                                 f"{sev:.2f} (level {level}/{n})", stamp, where))
-        if failure and not prev[-1]:
+        was_failure = bool(prev[-1]) or prev_sev >= 1.0
+        if failure and not was_failure:
             v.failures += 1
-            events.append(Event("failure", name, f"{name}: FAILURE: AKF_{n} with R_max={R[-1]:.4g} "
-                                "flags an anomaly", stamp, where))
-        elif prev[-1] and not failure:
+            why = (f"AKF_{n} with R_max={R[-1]:.4g} flags an anomaly" if anomaly[-1] else
+                   f"level {float(d.level[c]):.2f} x baseline >= level_danger")
+            events.append(Event("failure", name, f"{name}: FAILURE: {why}", stamp, where))
+        elif was_failure and not failure:
             events.append(Event("failure_clear", name, f"{name}: failure condition cleared "
                                 f"(AKF_{n} back below c*f_r)", stamp, where))
         return events

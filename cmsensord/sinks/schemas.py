@@ -168,7 +168,7 @@ _CHANNEL = {"type": "string", "description": "configured channel name (ch0, ch1,
 
 SEVERITY = _obj(
     "cmsensord.Severity",
-    "Seed-000 severity assessment of one channel, published at every anomaly decision "
+    "Severity assessment (Kim et al. 2023) of one channel, published at every anomaly decision "
     "(once per decision period, 1 s by default).",
     {
         "timestamp": _time(),
@@ -203,13 +203,19 @@ SEVERITY = _obj(
         },
         "failure": {
             "type": "boolean",
-            "description": "true while AKF_n (the largest R) is in anomaly, S_idx = 1",
+            "description": "true while AKF_n (the largest R) is in anomaly, or the combined severity is 1",
         },
         "missing": _int("observations missing (lost frames) in this decision period"),
         "transient": {
             "type": "boolean",
             "description": "true for the first decision period, while the filters converge",
         },
+        "severity_akf": _num("combined severity only: S_idx of the AKF bank alone (eqs. 17-18)",
+                             nullable=False),
+        "severity_level": _num("combined severity only: S_level, the period's level / baseline graded "
+                               "0.5 at monitor.level_alert up to 1 at monitor.level_danger", nullable=False),
+        "level_ratio": _num("combined severity only: median block RMS of the period / the learned "
+                            "baseline (absent when every observation was missing)", nullable=False),
     },
     [
         "timestamp",

@@ -1,0 +1,181 @@
+"""``cmsensord calibrate``: commission the monitor from a machine's healthy period.
+
+Reads a capture through the daemon's own path (``cmsensord.observations``),
+learns per channel what the monitor needs (``dsp.commissioning``), prints a table
+of what it measured and chose, and writes SITE.yaml: a commented overlay that
+``--config SITE.yaml`` loads on top of the defaults (or of ``--config BASE``).
+The same input gives the same file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from cmsensord.config import Config, ConfigError, load_config
+from cmsensord.dsp.commissioning import MARGIN, SPAN, HealthyModel, learn_healthy
+from cmsensord.errors import CmsensordError
+from cmsensord.observations import Observations, read_observations
+
+__all__ = ["ChannelResult", "add_calibrate_parser", "calibrate", "format_table", "run_calibrate",
+           "site_yaml"]
+
+
+@dataclass(frozen=True)
+class ChannelResult:
+    """One channel's commissioning: the learned model and where f_r came from."""
+
+    name: str
+    index: int
+    f_r: float
+    f_r_source: str
+    model: HealthyModel
+
+
+def _f_r(obs: Observations, c: int, cfg: Config, rpm: float | None) -> tuple[float, str]:
+    """f_r of channel c: --rpm, else the tacho's mean speed, else the capture's rpm, else the config."""
+    if rpm is not None:
+        return rpm / 60.0, f"--rpm {rpm:g}"
+    if obs.shaft_hz is not None and np.isfinite(obs.shaft_hz):
+        return float(obs.shaft_hz), "tacho"
+    if obs.rpm is not None:
+        return obs.rpm / 60.0, f"capture rpm {obs.rpm:g}"
+    return float(_monitor(cfg, obs.names[c]).f_r), "config"
+
+
+def _monitor(cfg: Config, name: str):
+    try:
+        return cfg.channel(name).monitor
+    except KeyError:
+        return cfg.monitor
+
+
+def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = None,
+              rpm: float | None = None) -> list[ChannelResult]:
+    """Learn every channel of ``obs`` (already cut to the healthy period)."""
+    results = []
+    for c, name in enumerate(obs.names):
+        mon = _monitor(cfg, name)
+        period = obs.period(mon.decision_period_s)
+        f_r, source = _f_r(obs, c, cfg, rpm)
+        if f_r >= period:
+            raise ConfigError(
+                "calibrate", f"{name}.f_r",
+                f"{f_r:.4g} Hz must be below the {period} observations per decision "
+                f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g})")
+        fy = faulty.y[:, faulty.names.index(name)] if faulty is not None and name in faulty.names else None
+        try:
+            model = learn_healthy(obs.y[:, c], f_r=f_r, period=period, n=mon.n, window=mon.window,
+                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy)
+        except ValueError as exc:
+            raise CmsensordError(f"calibrate: channel {name}: {exc}") from None
+        results.append(ChannelResult(name, obs.indices[c], f_r, source, model))
+    return results
+
+
+def _g(x: float) -> str:
+    return f"{x:.4g}"
+
+
+def format_table(results: list[ChannelResult], obs: Observations) -> str:
+    """What calibrate measured and chose, one row per channel, and the margins."""
+    head = (f"{'channel':<12} {'f_r Hz':>7} {'from':<10} {'baseline':>9} {'spread':>7} {'run-in s':>8} "
+            f"{'learned s':>9} {'H':>9} {'R_1':>9} {'R_min':>9} {'R_max':>9} {'max cnt':>7} {'flagged':>7}")
+    lines = [f"healthy period: {obs.start_s:.1f}-{obs.end_s:.1f} board s, {obs.rate_hz:.4g} blocks/s", head]
+    for r in results:
+        m = r.model
+        per = obs.period(1.0) / obs.rate_hz
+        lines.append(
+            f"{r.name:<12} {r.f_r:>7.3f} {r.f_r_source[:10]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
+            f"{m.runin_periods * per:>8.0f} {m.periods * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
+            f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.flagged:>7d}")
+    lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
+                 f"(twice the healthy fluctuation amplitude), R_n = {SPAN:g} x R_1 unless --faulty.")
+    for r in results:
+        m = r.model
+        margin = r.f_r / m.max_cnt if m.max_cnt else float("inf")
+        lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
+                     f"{m.max_cnt} against f_r {r.f_r:.3g} (margin {margin:.2g}x); "
+                     f"{m.flagged} healthy decision(s) would be flagged")
+    return "\n".join(lines)
+
+
+def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
+              base: dict[str, Any] | None = None, base_path: str | None = None) -> str:
+    """SITE.yaml text: BASE's settings (if any) with the learned channels, commented."""
+    base = dict(base or {})
+    base_channels = {ch.get("name"): ch for ch in base.pop("channels", None) or [] if isinstance(ch, dict)}
+    out = [
+        "# cmsensord site configuration written by `cmsensord calibrate`; re-run it to regenerate.",
+        f"# learned from {source}, board seconds {obs.start_s:.1f}-{obs.end_s:.1f} (the healthy period)"
+        + (f", on top of {base_path}" if base_path else ""),
+        "# Per channel: baseline = median block RMS of the healthy period; the AKF bank watches",
+        "# block RMS / baseline, so r_min and r_max are in units of baseline^2; the severity also",
+        "# grades the level against the baseline (monitor.severity: auto -> combined).",
+    ]
+    if base:
+        out.append(yaml.safe_dump(base, sort_keys=False, default_flow_style=False).rstrip())
+    out.append("channels:")
+    for r in results:
+        m = r.model
+        entry = {k: v for k, v in base_channels.get(r.name, {}).items()
+                 if k not in ("name", "index", "baseline", "baseline_spread", "r_min", "r_max", "f_r")}
+        rows = [("baseline", m.baseline, "median block RMS of the healthy period"),
+                ("baseline_spread", m.spread, "robust std of the per-decision level / baseline"),
+                ("r_min", m.r_min, f"R_1 = {_g(m.r_1)} = {MARGIN:g} x healthy critical R {_g(m.healthy_r)}"),
+                ("r_max", m.r_max, "R_n"), ("f_r", r.f_r, r.f_r_source)]
+        out += [f"  - name: {r.name}", f"    index: {r.index}"]
+        out += [f"    {(k + ': ' + _g(v)):<28}# {why}" for k, v, why in rows]
+        for k, v in entry.items():
+            out.append(f"    {k}: {yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}")
+    return "\n".join(out) + "\n"
+
+
+def add_calibrate_parser(sub) -> argparse.ArgumentParser:
+    """The ``calibrate`` subcommand's arguments."""
+    p = sub.add_parser("calibrate", help="learn a machine's healthy model from a capture -> SITE.yaml",
+                       description="Learn R_min, R_max, f_r and the healthy baseline per channel from the healthy period [--from, --to] of a capture and write a site configuration.")
+    p.add_argument("capture", help="capture of the machine (cmsensord record / import)")
+    p.add_argument("--from", dest="from_s", type=float, default=0.0, metavar="S",
+                   help="start of the healthy period, board seconds (default: 0)")
+    p.add_argument("--to", dest="to_s", type=float, default=None, metavar="S",
+                   help="end of the healthy period, board seconds (default: the end of the capture)")
+    p.add_argument("--faulty", metavar="CAPTURE2", help="a faulty capture of the same machine: R_max "
+                   "becomes the largest R that still flags it (Kim et al. 2023)")
+    p.add_argument("--rpm", type=float, default=None, help="shaft speed, if neither the tacho nor the "
+                   "capture gives it")
+    p.add_argument("--config", metavar="BASE.yaml", help="base configuration the site file extends")
+    p.add_argument("--out", required=True, metavar="SITE.yaml", help="site configuration to write")
+    return p
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """Read, learn, print the table, write SITE.yaml atomically and check it loads."""
+    cfg = load_config(args.config) if args.config else Config()
+    base = yaml.safe_load(Path(args.config).read_text(encoding="utf-8")) if args.config else None
+    auto = not (isinstance(base, dict) and base.get("channels"))
+    if args.rpm is not None and not args.rpm > 0:
+        raise ConfigError("calibrate", "--rpm", "must be > 0", args.rpm)
+    obs = read_observations(args.capture, cfg, auto_channels=auto, from_s=args.from_s, to_s=args.to_s)
+    faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
+    results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
+    print(format_table(results, obs))
+    text = site_yaml(results, obs, source=Path(args.capture).name, base=base, base_path=args.config)
+    out = Path(args.out)
+    tmp = out.with_name(out.name + ".part")
+    try:
+        tmp.write_text(text)
+        load_config(str(tmp))
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    print(f"wrote {out}: run `cmsensord replay CAPTURE --config {out}` or `cmsensord --config {out}`",
+          file=sys.stderr)
+    return 0

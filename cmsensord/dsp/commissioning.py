@@ -1,0 +1,206 @@
+"""Commissioning: learn a machine's healthy model from its own healthy period.
+
+Kim et al. 2023 choose R_min of eq. (16) as the smallest R that keeps the healthy
+baseline free of anomalies and R_max from faulty data (the largest R that still
+flags it).  On real machines that rule alone is fragile (one outlier second or an
+unsteady run-in sets R_min for the whole life), so cmsensord extends it:
+
+1. The bank watches y/b, the block RMS divided by the healthy baseline b (median
+   block RMS of the healthy period), so R is in units of b² and means the same on
+   every machine and sensor.
+2. The healthy period is cut into decision periods.  For each period the
+   *critical R*, R*, is the smallest R on a log grid for which one AKF counts
+   fewer than f_r outliers in that period (it would not flag it).
+3. A run-in transient at the start (a first quarter whose level or R* is well
+   above the rest) is left out of the learning.
+4. H, the healthy fluctuation, is a robust high quantile of R*:
+   exp(median + 3·1.4826·MAD) of log R*, kept between the 75th percentile and the
+   maximum, so a few outlier seconds do not set it.
+5. R_1 (the most sensitive filter) = MARGIN·H: twice the healthy fluctuation in
+   amplitude (R is a variance).  R_n = SPAN·R_1.  With ``faulty`` data, R_n is the
+   paper's rule instead: the largest R that still flags at least half of the
+   faulty capture's decisions.
+
+Everything here is pure numpy on arrays; the command that reads captures is
+``cmsensord.commission``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from cmsensord.dsp.akf import AkfBank
+
+__all__ = [
+    "MARGIN", "R_GRID", "SPAN", "HealthyModel", "bank_limits", "critical_r",
+    "learn_healthy", "period_counts", "r_from_faulty", "run_in_periods",
+]
+
+#: candidate R values (in units of baseline²): 1e-7 .. 1e2, 20 per decade
+R_GRID = np.logspace(-7, 2, 181)
+#: R_1 = MARGIN x H: twice the healthy fluctuation amplitude
+MARGIN = 4.0
+#: R_n = SPAN x R_1 without faulty data
+SPAN = 4.0
+#: a first quarter this much above the rest in level is a run-in transient
+RUNIN_LEVEL = 1.25
+#: ... or this much above the rest in critical R
+RUNIN_RSTAR = 2.0
+
+
+@dataclass(frozen=True)
+class HealthyModel:
+    """What commissioning learned for one channel."""
+
+    baseline: float        # median block RMS of the healthy period [input unit]
+    spread: float          # robust std of the per-decision level ratio (1 = baseline)
+    r_min: float           # eq. (16), units of baseline²
+    r_max: float
+    r_1: float             # R of the most sensitive AKF
+    healthy_r: float       # H, robust high critical R of the healthy period
+    periods: int           # decision periods learned from
+    runin_periods: int     # periods left out at the start as run-in
+    max_cnt: int           # highest outlier count per decision at R_1 on the healthy period
+    flagged: int           # healthy decisions that R_1 would still flag (cnt >= f_r)
+    rstar_median: float
+
+
+def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
+                  p0: float = 1.0, q0: float = 1e-3) -> np.ndarray:
+    """Outlier counts per complete decision period for one AKF per R in ``grid``.
+
+    y: (T,) observations (NaN = missing).  Returns (P, len(grid)) counts, P = T // period.
+    """
+    y = np.asarray(y, dtype=np.float64).reshape(-1)
+    grid = np.asarray(grid, dtype=np.float64)
+    bank = AkfBank(grid[None, :], window=window, z_c=z_c, p0=p0, q0=q0)
+    out = bank.process(y[:, None])
+    P = y.size // period
+    flags = out.outlier[: P * period, 0, :].reshape(P, period, grid.size)
+    return flags.sum(axis=1, dtype=np.int64)
+
+
+def critical_r(counts: np.ndarray, f_r: float, grid: np.ndarray) -> np.ndarray:
+    """Per period, the smallest grid R whose count is below f_r (it would not flag).
+
+    The count falls with R; a period that flags even at the largest R gets inf.
+    """
+    quiet = counts < f_r
+    first = np.argmax(quiet, axis=1)
+    r = np.asarray(grid, dtype=np.float64)[first]
+    return np.where(quiet.any(axis=1), r, np.inf)
+
+
+def _robust_high(rstar: np.ndarray) -> float:
+    finite = rstar[np.isfinite(rstar)]
+    if finite.size == 0:
+        raise ValueError("no decision period of the healthy data is quiet at any R")
+    log_r = np.log(finite)
+    med = np.median(log_r)
+    mad = np.median(np.abs(log_r - med))
+    high = float(np.exp(med + 3.0 * 1.4826 * mad))
+    return float(np.clip(high, np.quantile(finite, 0.75), finite.max()))
+
+
+def run_in_periods(level: np.ndarray, rstar: np.ndarray) -> int:
+    """Periods at the start to leave out as a run-in transient (0, 1 or 2 quarters).
+
+    A quarter is run-in when its median level is above RUNIN_LEVEL x, or its
+    median R* above RUNIN_RSTAR x, the median of the periods after it.
+    """
+    P = level.size
+    q = P // 4
+    if q < 2:
+        return 0
+    skip = 0
+    for _ in range(2):
+        head, rest = slice(skip, skip + q), slice(skip + q, P)
+        lv_head, lv_rest = np.nanmedian(level[head]), np.nanmedian(level[rest])
+        r_head, r_rest = np.median(rstar[head]), np.median(rstar[rest])
+        if lv_head > RUNIN_LEVEL * lv_rest or r_head > RUNIN_RSTAR * r_rest:
+            skip += q
+        else:
+            break
+    return skip
+
+
+def bank_limits(r_1: float, n: int, span: float = SPAN) -> tuple[float, float]:
+    """R_min, R_max of eq. (16) giving AKF_1 the variance r_1 and AKF_n span x r_1.
+
+    R_i = R_min + i (R_max - R_min)/n, so R_1 = R_min + (R_max - R_min)/n.
+    """
+    if n == 1:
+        return r_1 / span, r_1
+    r_max = span * r_1
+    r_min = (n * r_1 - r_max) / (n - 1)
+    if r_min <= 0:
+        r_min = r_1 / span
+    return float(r_min), float(r_max)
+
+
+def r_from_faulty(counts: np.ndarray, f_r: float, grid: np.ndarray) -> float:
+    """The largest grid R that still flags at least half of the faulty decisions.
+
+    Kim et al. 2023 take R_max as the largest R that still flags the faulty data;
+    "half of the decisions" keeps one loud second from setting it.  NaN if even
+    the smallest R flags fewer than half.
+    """
+    flagged = (counts >= f_r).mean(axis=0) >= 0.5
+    idx = np.flatnonzero(flagged)
+    return float(np.asarray(grid)[idx.max()]) if idx.size else float("nan")
+
+
+def _level_per_period(y: np.ndarray, period: int) -> np.ndarray:
+    P = y.size // period
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period is NaN
+        return np.nanmedian(y[: P * period].reshape(P, period), axis=1)
+
+
+def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int, z_c: float,
+                  p0: float = 1.0, q0: float = 1e-3, faulty: np.ndarray | None = None,
+                  grid: np.ndarray = R_GRID) -> HealthyModel:
+    """The healthy model of one channel from its block RMS ``y`` (T,), NaN = missing.
+
+    The first decision period (the filters' transient) is not learned from.
+    ``faulty``: block RMS of a faulty recording of the same machine (optional).
+    """
+    y = np.asarray(y, dtype=np.float64).reshape(-1)
+    if f_r >= period:
+        raise ValueError(f"f_r = {f_r:g} must be below the {period} observations per decision")
+    level_raw = _level_per_period(y, period)[1:]
+    if np.count_nonzero(np.isfinite(level_raw)) < 1:
+        raise ValueError(f"need at least 2 decision periods of data ({period} observations each; "
+                         f"the first is the filters' transient), got {y.size // period}")
+    baseline = float(np.nanmedian(level_raw))
+    if not baseline > 0:
+        raise ValueError("the healthy period's block RMS is zero: no signal on this channel")
+    kw = dict(period=period, window=window, z_c=z_c, p0=p0, q0=q0)
+    counts = period_counts(y / baseline, grid, **kw)[1:]
+    rstar = critical_r(counts, f_r, grid)
+    skip = run_in_periods(level_raw, rstar)
+    kept = slice(skip, None)
+    rstar = rstar[kept]
+    H = _robust_high(rstar)
+    r_1 = MARGIN * H
+    r_min, r_max = bank_limits(r_1, n)
+    if faulty is not None:
+        fc = period_counts(np.asarray(faulty, np.float64) / baseline, grid, **kw)[1:]
+        r_f = r_from_faulty(fc, f_r, grid)
+        if np.isfinite(r_f) and r_f > r_1:
+            r_min = (n * r_1 - r_f) / (n - 1)
+            r_min = r_min if r_min > 0 else r_1 / 2
+            r_max = r_f
+    ratio = level_raw / baseline
+    med = np.nanmedian(ratio)
+    spread = float(1.4826 * np.nanmedian(np.abs(ratio - med)))
+    at_r1 = period_counts(y / baseline, np.array([r_1]), **kw)[1:][kept, 0]
+    return HealthyModel(
+        baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
+        healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
+        max_cnt=int(at_r1.max()), flagged=int(np.count_nonzero(at_r1 >= f_r)),
+        rstar_median=float(np.median(rstar[np.isfinite(rstar)])),
+    )

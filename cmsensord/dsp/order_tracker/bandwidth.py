@@ -1,0 +1,220 @@
+"""Weighting factor r <-> -3 dB bandwidth <-> envelope time constant, and r per component.
+
+The mapping is the -3 dB width of the isolated steady-state one-component
+filter (see docs/order_tracker.md, §4 Bandwidth); :func:`component_r` gives r_k
+at any speed for components given by r or by a bandwidth (a cached grid of
+speeds, interpolated in log-log).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from cmsensord.dsp.order_tracker.components import DEFAULT_R, TrackedComponent
+from cmsensord.dsp.order_tracker.design import f_matrices, q_diag, riccati_doubling
+
+
+def _single_filter(r: np.ndarray, theta: np.ndarray):
+    """The isolated steady-state one-component filter for r, θ (G,): the pieces of
+    X̂(n+1) = A X̂(n) + F k y(n),  x̂(n|n) = e₂ᵀ(I - k h) X̂(n) + k₂ y(n)."""
+    c = 2.0 * np.cos(theta)[:, None]
+    qd, q2 = q_diag(np.asarray(r, dtype=np.float64)[:, None], 1.0)
+    P = riccati_doubling(c, qd, q2, 40)
+    S = P[:, 1, 1] + q2
+    k = P[:, :, 1] / S[:, None]                       # (G, 2)
+    F = f_matrices(c)                                # (G, 2, 2)
+    IKh = np.eye(2) - k[:, :, None] * np.array([0.0, 1.0])[None, None, :]
+    A = F @ IKh
+    Fk = (F @ k[:, :, None])[:, :, 0]                 # (G, 2)
+    return A, Fk, IKh[:, 1, :], k[:, 1]
+
+
+def _single_response(filt, nu: np.ndarray) -> np.ndarray:
+    """|T(e^{jν})|² of :func:`_single_filter`'s filters at ν (G, M) rad/sample:
+    T(z) = e₂ᵀ(I - k h)(zI - A)⁻¹ F k + k₂."""
+    A, Fk, row, k2 = filt
+    z = np.exp(1j * nu)
+    a, b, cc, dd = A[:, 0, 0, None], A[:, 0, 1, None], A[:, 1, 0, None], A[:, 1, 1, None]
+    det = (z - a) * (z - dd) - b * cc
+    u0 = ((z - dd) * Fk[:, 0, None] + b * Fk[:, 1, None]) / det
+    u1 = (cc * Fk[:, 0, None] + (z - a) * Fk[:, 1, None]) / det
+    T = row[:, 0, None] * u0 + row[:, 1, None] * u1 + k2[:, None]
+    return np.abs(T) ** 2
+
+
+def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
+    """-3 dB bandwidth [Hz] of the isolated steady-state tracker with weighting factor r.
+
+    The response of the steady-state one-component filter from y to x̂(n|n) is a
+    band-pass with |T| = 1 exactly at the tracked frequency f (the model's poles
+    are on the unit circle); the bandwidth is f_hi - f_lo where |T|² = 1/2
+    either side (an edge at 0 or fs/2 if |T| never drops that far).  It depends
+    on r and on θ = 2π f/fs, not on q1.  When B ≪ f (to 0.1 % for B < f/10)::
+
+        B ≈ fs / (√2 π r sin θ),   τ = 1/(π B) ≈ √2 r sin θ / fs
+
+    a first-order low-pass on the complex envelope (:func:`time_constant`):
+    the process noise q1 on both samples of the pair (x(n-1), x(n)) is noise
+    of variance 2 q1/sin²θ on the envelope, hence the sin θ.  So r is per
+    sample and per frequency: the same r is narrower at a higher tracker rate
+    and wider at a low frequency.  Vectorised over r and f.
+    """
+    r, f = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(freq_hz, dtype=np.float64))
+    shape = r.shape
+    r, f = r.ravel(), f.ravel()
+    theta = 2.0 * np.pi * f / fs
+    # geometric grid of offsets (rad/sample) outwards from θ (ratio 1.2 between
+    # neighbours), then bisection to double precision
+    off = np.geomspace(1e-7, np.pi, 100)
+    filt = _single_filter(r, theta)
+    edges = []
+    for sgn, limit in ((-1.0, 0.0), (1.0, np.pi)):
+        nu = theta[:, None] + sgn * off[None, :]
+        inside = (nu > 1e-9) & (nu < np.pi - 1e-9)
+        g = _single_response(filt, np.clip(nu, 1e-9, np.pi - 1e-9))
+        below = (g < 0.5) & inside
+        has = below.any(axis=1)
+        i = np.where(has, below.argmax(axis=1), 0)
+        lo = np.where(i > 0, off[np.maximum(i - 1, 0)], 0.0)
+        hi = off[i]
+        for _ in range(48):
+            mid = 0.5 * (lo + hi)
+            gm = _single_response(filt, (theta + sgn * mid)[:, None])[:, 0]
+            lo, hi = np.where(gm < 0.5, lo, mid), np.where(gm < 0.5, mid, hi)
+        edge = theta + sgn * 0.5 * (lo + hi)
+        edges.append(np.where(has, edge, limit))
+    return ((edges[1] - edges[0]) * fs / (2.0 * np.pi)).reshape(shape)
+
+
+def bandwidth_to_r(bandwidth_hz, freq_hz, fs: float) -> np.ndarray:
+    """The weighting factor r whose isolated filter has this -3 dB bandwidth (inverse of
+    :func:`r_to_bandwidth`, by secant iteration in log-log; vectorised)."""
+    b, f = np.broadcast_arrays(np.asarray(bandwidth_hz, dtype=np.float64),
+                               np.asarray(freq_hz, dtype=np.float64))
+    shape = b.shape
+    b, f = b.ravel(), f.ravel()
+    if np.any(b <= 0) or np.any(b >= fs / 2):
+        raise ValueError(f"bandwidth_hz: expected in (0, fs/2 = {fs / 2}), got {b.min()}..{b.max()}")
+    # first guess: the narrow-band relation B ≈ fs / (√2 π r sin θ) (see r_to_bandwidth)
+    sin_t = np.maximum(np.sin(2.0 * np.pi * f / fs), 1e-3)
+    x0 = np.log(fs / (np.sqrt(2.0) * np.pi * b * sin_t))
+    x1 = x0 + 0.01
+    g0 = np.log(r_to_bandwidth(np.exp(x0), f, fs)) - np.log(b)
+    act = np.arange(b.size)          # elements still iterating (the others have converged,
+    for _ in range(30):              # or sit where the bandwidth saturates near 0 or fs/2)
+        g1 = np.log(r_to_bandwidth(np.exp(x1[act]), f[act], fs)) - np.log(b[act])
+        done = np.abs(g1) < 1e-10    # bandwidth to 1e-10 relative
+        x0[act[done]] = x1[act[done]]
+        keep = ~done
+        if not keep.any():
+            break
+        a, g1, gp = act[keep], g1[keep], g0[act[keep]]
+        den = np.where(g1 != gp, g1 - gp, 1.0)
+        x2 = np.where(g1 != gp, x1[a] - g1 * (x1[a] - x0[a]) / den, x1[a])
+        x0[a], g0[a] = x1[a], g1
+        x1[a] = np.clip(x2, x1[a] - 2.0, x1[a] + 2.0)
+        act = a
+    else:
+        x0[act] = x1[act]
+    return np.exp(x0).reshape(shape)
+
+
+def time_constant(r, freq_hz, fs: float) -> np.ndarray:
+    """Envelope time constant [s] of the isolated steady-state tracker: -ΔT/ln ρ,
+    ρ the spectral radius of A = F(I - k h) (the decay of an estimation error);
+    ≈ √2 r sin θ / fs = 1/(π B) when B ≪ f (see :func:`r_to_bandwidth`)."""
+    r, f = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(freq_hz, dtype=np.float64))
+    shape = r.shape
+    r, f = r.ravel(), f.ravel()
+    c = 2.0 * np.cos(2.0 * np.pi * f / fs)[:, None]
+    qd, q2 = q_diag(r[:, None], 1.0)
+    P = riccati_doubling(c, qd, q2, 40)
+    S = P[:, 1, 1] + q2
+    k = P[:, :, 1] / S[:, None]
+    A = f_matrices(c) @ (np.eye(2) - k[:, :, None] * np.array([0.0, 1.0])[None, None, :])
+    rho = np.max(np.abs(np.linalg.eigvals(A)), axis=-1)
+    return (-1.0 / (fs * np.log(rho))).reshape(shape)
+
+
+def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.ndarray:
+    """Weighting factor r_k at model speeds ``speed`` (T,): (T, K).
+
+    Constant for a component given by r (or none: DEFAULT_R); from
+    :func:`bandwidth_to_r` for one given by bandwidth_hz (evaluated at its
+    frequency at each speed: a mild dependence) or bandwidth_pct (bandwidth
+    = pct/100 x its frequency).  Bandwidth-given orders are computed on a fixed
+    grid of 256 speeds (geometric, 10 to 100 000 rpm) and interpolated in
+    log-log (to about 1e-4 of the bandwidth), so the result is a smooth,
+    deterministic function of the speed.  r is per tracker sample: the same r
+    is a different bandwidth in Hz at a different tracker rate.
+
+    The grid values are computed when first needed (the grid points around
+    the speeds asked for, all components in one batch) and cached; each is
+    the same whenever and with whichever others it is computed.
+    """
+    speed = np.asarray(speed, dtype=np.float64)
+    out = np.empty(speed.shape + (len(components),))
+    grid_comps = [c for c in components if (c.bandwidth_hz is not None or c.bandwidth_pct is not None)
+                  and c.freq_hz is None]
+    span = None
+    finite = speed[np.isfinite(speed)] if grid_comps else speed[:0]
+    if finite.size:
+        s = np.clip(finite, _R_SPEEDS[0], _R_SPEEDS[-1])
+        lo, hi = float(np.min(s)), float(np.max(s))
+        j0 = min(max(int(np.searchsorted(_R_SPEEDS, lo, side="right")) - 1, 0), _R_N - 2)
+        j1 = min(max(int(np.searchsorted(_R_SPEEDS, hi, side="right")) - 1, 0), _R_N - 2) + 1
+        span = (j0, j1 + 1)                          # grid points [j0, j1] bracket every speed
+        _fill_r_grid(grid_comps, fs, *span)
+    for i, c in enumerate(components):
+        if c.bandwidth_hz is None and c.bandwidth_pct is None:
+            out[..., i] = DEFAULT_R if c.r is None else c.r
+        elif c.freq_hz is not None:
+            key = (c, fs)
+            if key not in _R_CACHE:
+                _R_CACHE[key] = float(bandwidth_to_r(c.bandwidth_hz, c.freq_hz, fs))
+            out[..., i] = _R_CACHE[key]
+        elif span is None:                           # no finite speed
+            out[..., i] = np.nan
+        else:
+            j0, j1 = span
+            lr = _R_CACHE[(c, fs)][j0:j1]
+            s = np.clip(speed, _R_SPEEDS[0], _R_SPEEDS[-1])
+            out[..., i] = np.exp(np.interp(np.log(s), _R_LOG[j0:j1], lr))
+    return out
+
+
+def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, j0: int, j1: int) -> None:
+    """Compute the log r of grid points [j0, j1) not yet cached, for all these
+    (bandwidth-given order) components in one batch."""
+    idx, bws, fs_, dest = [], [], [], []
+    for c in components:
+        key = (c, fs)
+        lr = _R_CACHE.get(key)
+        if lr is None:
+            lr = _R_CACHE[key] = np.full(_R_N, np.nan)
+        miss = j0 + np.flatnonzero(np.isnan(lr[j0:j1]))
+        if not miss.size:
+            continue
+        grid = _R_SPEEDS[miss]
+        f = c.freq(grid)
+        bw = c.bandwidth_hz if c.bandwidth_hz is not None else c.bandwidth_pct / 100.0 * f
+        bws.append(np.minimum(np.broadcast_to(bw, f.shape), 0.45 * fs))
+        fs_.append(np.minimum(f, 0.49 * fs))
+        idx.append(miss)
+        dest.append(lr)
+    if not idx:
+        return
+    lr_all = np.log(bandwidth_to_r(np.concatenate(bws), np.concatenate(fs_), fs))
+    n = 0
+    for miss, lr in zip(idx, dest):
+        lr[miss] = lr_all[n:n + miss.size]
+        n += miss.size
+
+
+_R_GRID = (10.0, 100_000.0)   # rpm range of the bandwidth -> r grid
+_R_N = 256                    # its points (geometric)
+_R_SPEEDS = np.geomspace(_R_GRID[0], _R_GRID[1], _R_N)
+_R_LOG = np.log(_R_SPEEDS)
+_R_CACHE: dict = {}           # (component, fs) -> log r on the grid (NaN: not computed yet)

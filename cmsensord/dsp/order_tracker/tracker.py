@@ -1,0 +1,533 @@
+"""The streaming order tracker: decimation, gains, filter, per-block outputs, smoother.
+
+:class:`OrderTracker` runs the recursive angular-velocity Vold-Kalman order
+tracker of Yeh, Pan & Le (eqs. (10)-(25)) for the channels of one machine,
+streaming: any split of the input gives the same outputs.  The derivations,
+the choices made where the paper is silent and the measured accuracy are in
+docs/order_tracker.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
+from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
+from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
+from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
+from cmsensord.dsp.order_tracker.recursions import (
+    CHUNK,
+    backward_numpy,
+    envelope,
+    forward_numpy,
+    mask_groups,
+    riccati_numpy,
+)
+from cmsensord.dsp.order_tracker.state import (
+    BlockStats,
+    TrackerOutput,
+    TrackerState,
+    cat_miss,
+    miss_blocks,
+    with_carry,
+)
+
+try:  # the compiled kernel is optional: numpy is the fallback
+    from cmsensord.dsp import _trackerkernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _trackerkernel = None
+
+_NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
+_TABLE_SEG = 64   # the gain table is computed in segments of this many speeds
+
+
+def have_kernel() -> bool:
+    """True when the compiled kernel is importable."""
+    return _trackerkernel is not None
+
+
+class OrderTracker:
+    """Streaming AV2KF order tracker for the channels of one machine (shared speed).
+
+    Parameters
+    ----------
+    components : the tracked orders / fixed frequencies (K).
+    fs_in : input sample rate [Hz] of ``y`` and ``rpm``.
+    max_rpm : the highest speed expected; sets the decimation and the gain table.
+    n_channels : C, channels of one machine (they share the speed, so the gains).
+    q1 : process-noise level of eq. (25) (does not change the estimates).
+    decimate : D, or None to choose it (docs/order_tracker.md §4 Decimation); 1 = none.
+    oversample : minimum tracker rate over the highest tracked frequency (auto D).
+    min_rpm : below this speed the output is invalid (and the model speed clamped).
+    gains : "table" (steady-state, tabulated against speed) or "exact" (Riccati).
+    smoother_lag_s : None (causal only) or the fixed lag L [s] of the smoother.
+    output_rate_hz : rate of the per-block outputs (block = fs_track/rate samples).
+    backend : "auto", "c" or "numpy".
+    table_step_rpm : grid step of the gain table (None: about 1 rpm, <= 8192 points).
+    horizon_s : horizon of the doubling solver for the table.
+    """
+
+    def __init__(self, components: Sequence[TrackedComponent], *, fs_in: float, max_rpm: float,
+                 n_channels: int = 1, q1: float = 0.1, decimate: int | None = None,
+                 oversample: float = 5.0, min_rpm: float = 300.0, gains: str = "table",
+                 smoother_lag_s: float | None = None, output_rate_hz: float = 10.0,
+                 backend: str = "auto", table_step_rpm: float | None = None,
+                 horizon_s: float = 4.0):
+        self.components = tuple(components)
+        if not self.components:
+            raise ValueError("components: expected at least one")
+        names = [c.name for c in self.components]
+        if len(set(names)) != len(names):
+            raise ValueError(f"components: duplicate names in {names}")
+        if not fs_in > 0:
+            raise ValueError(f"fs_in: expected > 0, got {fs_in}")
+        if not max_rpm > 0:
+            raise ValueError(f"max_rpm: expected > 0, got {max_rpm}")
+        if not 0 < min_rpm < max_rpm:
+            raise ValueError(f"min_rpm: expected in (0, max_rpm = {max_rpm}), got {min_rpm}")
+        if int(n_channels) < 1:
+            raise ValueError(f"n_channels: expected >= 1, got {n_channels}")
+        if gains not in ("table", "exact"):
+            raise ValueError(f"gains: expected 'table' or 'exact', got {gains!r}")
+        if backend == "auto":
+            backend = "c" if _trackerkernel is not None else "numpy"
+        if backend not in ("c", "numpy"):
+            raise ValueError(f"backend: expected 'auto', 'c' or 'numpy', got {backend!r}")
+        if backend == "c" and _trackerkernel is None:
+            raise RuntimeError("the compiled tracker kernel is not built; use backend='numpy'")
+        self.backend = backend
+        self.fs_in = float(fs_in)
+        self.max_rpm = float(max_rpm)
+        self.min_rpm = float(min_rpm)
+        self.C = int(n_channels)
+        self.K = len(self.components)
+        self.q1 = float(q1)
+        self.gains = gains
+        self.f_hi = max(float(c.freq(self.max_rpm)) for c in self.components)
+
+        self._setup_decimation(decimate, oversample, output_rate_hz)
+        self._setup_blocks(output_rate_hz, smoother_lag_s)
+        self._setup_table(horizon_s, table_step_rpm)
+        self.state = self.initial_state()
+
+    # ------------------------------------------------------------------ setup
+    def _setup_decimation(self, decimate: int | None, oversample: float, output_rate_hz: float) -> None:
+        """D, the tracker rate, the anti-alias sections, their delay and missing-sample window."""
+        if decimate is None:
+            dmax = max(1, math.floor(self.fs_in / (oversample * self.f_hi)))
+            per_block = self.fs_in / output_rate_hz
+            if abs(per_block - round(per_block)) < 1e-9:
+                pb = round(per_block)
+                decimate = max(q for q in range(1, dmax + 1) if pb % q == 0)
+            else:
+                decimate = dmax
+        self.decimate = int(decimate)
+        if self.decimate < 1:
+            raise ValueError(f"decimate: expected >= 1, got {decimate}")
+        self.fs_track = self.fs_in / self.decimate
+        if self.f_hi >= 0.5 * self.fs_track:
+            raise ValueError(f"decimate: tracker rate {self.fs_track:g} Hz is not above twice the "
+                             f"highest tracked frequency {self.f_hi:g} Hz")
+        if self.decimate > 1:
+            order, fc = cheb2ord(self.f_hi, self.fs_track - self.f_hi, 0.001, 80.0, self.fs_in)
+            self.sos = cheby2_sos(order, 80.0, fc, self.fs_in)
+            gd = sos_dc_delay(self.sos)
+            self.filter_delay_s = gd / self.fs_in
+            self.delay_in = round(gd)
+        else:
+            self.sos = None
+            self.filter_delay_s = 0.0
+            self.delay_in = 0
+        # a missing input spoils this many filter outputs (its own included): tracker
+        # samples within them get no measurement update (docs/order_tracker.md §5)
+        self.missing_window = missing_window_of(self.sos)
+
+    def _setup_blocks(self, output_rate_hz: float, smoother_lag_s: float | None) -> None:
+        """Output block length, smoother lag and latency."""
+        self.block = max(1, round(self.fs_track / output_rate_hz))
+        self.output_rate_hz = self.fs_track / self.block
+        if smoother_lag_s is not None and smoother_lag_s < 0:
+            raise ValueError(f"smoother_lag_s: expected None or >= 0, got {smoother_lag_s}")
+        self.lag = None if smoother_lag_s is None else round(smoother_lag_s * self.fs_track)
+        self.latency_s = (self.filter_delay_s + (self.lag or 0) / self.fs_track
+                          + self.block / self.fs_track)
+
+    def _setup_table(self, horizon_s: float, table_step_rpm: float | None) -> None:
+        """The doubling horizon and the (empty) gain table over [min_rpm, 1.1 max_rpm]."""
+        self.horizon_s = float(horizon_s)
+        self._n_double = max(1, math.ceil(math.log2(max(2.0, horizon_s * self.fs_track))))
+        if self.gains == "table":
+            top = 1.1 * self.max_rpm
+            if table_step_rpm is None:
+                table_step_rpm = max(1.0, (top - self.min_rpm) / 8191)
+            n = math.ceil((top - self.min_rpm) / table_step_rpm) + 1
+            self._grid0 = self.min_rpm
+            self._grid_step = (top - self.min_rpm) / (n - 1)
+            # filled in segments of _TABLE_SEG speeds when first needed (see _fill_table);
+            # np.zeros: pages never touched cost no memory
+            # r on the bandwidth grid over the table's speeds, in one batch (the table
+            # segments, filled as the speed goes, then find it there)
+            component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
+            d = 2 * self.K
+            self._tab_n = n
+            self._tab_have = np.zeros(-(-n // _TABLE_SEG), dtype=bool)
+            self._kS = np.zeros((n, d + 1))
+            self._dkS = np.zeros((n - 1, d + 1))
+            self._P = np.zeros((n, d, d))
+            self._dP = np.zeros((n - 1, d, d))
+
+    def _coeffs(self, speed: np.ndarray):
+        """c_k(n) (T, K), Q1 diagonal (T, 2K) and Q2 (T,) at model speeds."""
+        c = 2.0 * np.cos(omega(self.components, speed) / self.fs_track)
+        rk = component_r(self.components, speed, self.fs_track)
+        qd, q2 = q_diag(rk, self.q1)
+        return c, qd, q2
+
+    def _steady_state(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Steady-state [k | S] (G, 2K+1) and P(n|n-1) (G, 2K, 2K) at the grid speeds."""
+        ks, Ps = [], []
+        for i in range(0, len(grid), 1024):
+            c, qd, q2 = self._coeffs(grid[i:i + 1024])
+            P = riccati_doubling(c, qd, q2, self._n_double)
+            ph = P[:, :, 1::2].sum(axis=2)
+            S = ph[:, 1::2].sum(axis=1) + q2
+            ks.append(np.concatenate([ph / S[:, None], S[:, None]], axis=1))
+            Ps.append(P)
+        return np.concatenate(ks), np.concatenate(Ps)
+
+    def _fill_table(self, i: np.ndarray) -> None:
+        """Compute the gain-table segments that hold grid points i or i + 1 and are
+        not there yet (each point is the same whenever it is computed)."""
+        seg = _TABLE_SEG
+        need = np.zeros_like(self._tab_have)
+        need[i // seg] = True
+        need[(i + 1) // seg] = True
+        miss = np.flatnonzero(need & ~self._tab_have)
+        if not miss.size:
+            return
+        n = self._tab_n
+        pts = np.concatenate([np.arange(m * seg, min((m + 1) * seg, n)) for m in miss])
+        grid = self._grid0 + self._grid_step * pts
+        self._kS[pts], self._P[pts] = self._steady_state(grid)
+        self._tab_have[miss] = True
+        # differences to the next point, where both ends are there now
+        j = np.unique(np.concatenate([pts - 1, pts]))
+        j = j[(j >= 0) & (j < n - 1)]
+        j = j[self._tab_have[j // seg] & self._tab_have[(j + 1) // seg]]
+        self._dkS[j] = self._kS[j + 1] - self._kS[j]
+        self._dP[j] = self._P[j + 1] - self._P[j]
+
+    def initial_state(self) -> TrackerState:
+        d = 2 * self.K
+        _, _, q2 = self._coeffs(np.array([self.min_rpm]))
+        zi = None
+        if self.sos is not None:
+            zi = np.zeros((self.sos.shape[0], 2, self.C))
+        return TrackerState(n_in=0, n_track=0, skip=0, zi=zi,
+                            rpm_line=np.full(self.delay_in, np.nan),
+                            z=np.zeros((self.C, d)), P=q2[0] * np.eye(d),
+                            z0=np.zeros((self.C, d)),
+                            last_miss=np.full(self.C, _NO_MISS, dtype=np.int64))
+
+    def reset(self) -> None:
+        self.state = self.initial_state()
+
+    def describe(self, rpm: float) -> list[dict]:
+        """Per component at speed ``rpm``: frequency, r, -3 dB bandwidth [Hz and %],
+        time constant [s] (of the isolated steady-state filter at the tracker rate)."""
+        speed = model_speed(np.array([rpm]), self.min_rpm)
+        rk = component_r(self.components, speed, self.fs_track)[0]
+        out = []
+        for c, r in zip(self.components, rk):
+            f = float(c.freq(speed)[0])
+            bw = float(r_to_bandwidth(r, f, self.fs_track))
+            out.append({"name": c.name, "freq_hz": f, "r": float(r), "bandwidth_hz": bw,
+                        "bandwidth_pct": 100.0 * bw / f,
+                        "time_constant_s": float(time_constant(r, f, self.fs_track))})
+        return out
+
+    # ---------------------------------------------------------------- process
+    def process(self, y, rpm) -> TrackerOutput:
+        """Track a block: y (T, C) (or (T,) for one channel) at fs_in, rpm (T,) at fs_in.
+
+        NaN in y is a missing sample of that channel (a lost frame, a gap): see
+        docs/order_tracker.md §5.  With ``gains="exact"`` the
+        channels must miss the same samples (ValueError otherwise, before any
+        state changes): the exact Riccati recursion is shared by the channels."""
+        y = np.asarray(y, dtype=np.float64)
+        if y.ndim == 1 and self.C == 1:
+            y = y[:, None]
+        if y.ndim != 2 or y.shape[1] != self.C:
+            raise ValueError(f"y: expected shape (T, {self.C}), got {y.shape}")
+        rpm = np.asarray(rpm, dtype=np.float64)
+        if rpm.shape != (y.shape[0],):
+            raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
+        st = self.state
+        gone_in = None
+        if y.size and np.isnan(y.min()):               # min() propagates NaN; cheaper than isnan
+            gone_in = np.isnan(y)
+        miss, last_miss = self._missing(gone_in, y.shape[0])
+        if (miss is not None and self.gains == "exact" and self.C > 1
+                and (miss != miss[:, :1]).any()):
+            raise ValueError("gains='exact': the channels must miss the same samples (the exact "
+                             "Riccati recursion is shared by the channels); got NaN in some "
+                             "channels only: use gains='table' or one tracker per channel")
+        if gone_in is not None:
+            y = np.where(gone_in, 0.0, y)                # the anti-alias filter takes zeros
+        yd, rd = self._decimate(y, rpm)
+        st.last_miss = last_miss
+        n0 = st.n_track
+        N = yd.shape[0]
+        index = n0 + np.arange(N)
+        t_in = index * self.decimate - self.delay_in
+        xf, zp, e, c, k, S, P = self._filter(yd, rd, miss)
+        wave = np.ascontiguousarray(xf[:, :, 1::2])
+        env = envelope(xf, c)
+        blocks = self._causal_blocks(n0, wave, env, rd, miss)
+        out = TrackerOutput(index=index, t_in=t_in, rpm=rd, waveform=wave, blocks=blocks,
+                            missing=miss if miss is not None else np.zeros((N, self.C), dtype=bool))
+        if self.lag is not None:
+            self._smooth(out, n0, rd, c, k, S, P, zp, e, miss)
+        st.n_track = n0 + N
+        return out
+
+    def _missing(self, gone_in, T):
+        """Tracker samples of this call without a measurement, (N, C) bool or None (none),
+        and the new ``last_miss``: tracker sample j (input jD, filtered) is missing when
+        an input in (jD - W, jD] is, W = ``missing_window`` (the state carries the last
+        missing input per channel across calls).  Changes no state.  (None, not an
+        array of False, is what the rest passes on when nothing is missing: no
+        per-call cost on the common path.)"""
+        st = self.state
+        W = self.missing_window
+        n0 = st.n_in
+        last = st.last_miss
+        first = st.skip if self.sos is not None else 0
+        if gone_in is None and n0 + first - int(last.max()) >= W:
+            return None, last                       # the common case: nothing missing near
+        take = np.arange(first, T, self.decimate)
+        pos = n0 + take
+        if gone_in is None:
+            m = (pos[:, None] - last[None, :]) < W
+            return (m if m.any() else None), last
+        idx = np.where(gone_in, (n0 + np.arange(T))[:, None], _NO_MISS)
+        lm = np.maximum(np.maximum.accumulate(idx, axis=0), last[None, :])
+        m = (pos[:, None] - lm[take]) < W
+        return (m if m.any() else None), lm[-1].copy()
+
+    def _decimate(self, y, rpm):
+        st = self.state
+        if self.sos is None:
+            st.n_in += y.shape[0]
+            return y, rpm
+        if y.shape[0] == 0:
+            return y, rpm
+        take = np.arange(st.skip, y.shape[0], self.decimate)
+        if self.backend == "c":           # filter and keep every D-th sample in one pass
+            yd = np.empty((len(take), self.C))
+            _trackerkernel.sosfilt(self.sos, np.ascontiguousarray(y), st.zi, yd, st.skip,
+                                   self.decimate)
+        else:                             # the numpy path: scipy, imported only here
+            from scipy.signal import sosfilt
+            yf, st.zi = sosfilt(self.sos, y, axis=0, zi=st.zi)
+            yd = np.ascontiguousarray(yf[take])
+        if self.delay_in:
+            if st.n_in == 0 and rpm.size:        # the line starts filled with the first speed
+                st.rpm_line[:] = rpm[0]
+            line = np.concatenate([st.rpm_line, rpm])
+            st.rpm_line = line[len(line) - self.delay_in:].copy()
+            rdel = line[:len(rpm)]
+        else:
+            rdel = rpm
+        st.skip = int((st.skip - y.shape[0]) % self.decimate)
+        st.n_in += y.shape[0]
+        return yd, rdel[take]
+
+    def _gains(self, speed, c, gone=None):
+        """k (N, 2K), S (N,), P (N, 2K, 2K) or None.  ``gone`` (N,) bool or None: samples
+        without a measurement, for the exact gains (k = 0 and no update of P there);
+        the table's steady-state gains do not depend on it (the forward and backward
+        passes zero k per channel)."""
+        want_p = self.lag is not None
+        if self.gains == "table":           # linear interpolation in the speed
+            x = (np.clip(speed, self._grid0, None) - self._grid0) / self._grid_step
+            n = self._tab_n
+            i = np.minimum(x.astype(np.int64), n - 2)
+            f = np.clip(x - i, 0.0, 1.0)
+            if i.size:
+                self._fill_table(i)
+            kS = self._kS[i] + self._dkS[i] * f[:, None]
+            P = None
+            if want_p:
+                P = self._P[i] + self._dP[i] * f[:, None, None]
+            return np.ascontiguousarray(kS[:, :-1]), kS[:, -1].copy(), P
+        _, qd, q2 = self._coeffs(speed)
+        st = self.state
+        if self.backend == "c":
+            N, d = c.shape[0], 2 * self.K
+            k, S = np.empty((N, d)), np.empty(N)
+            P = np.empty((N, d, d)) if want_p else np.empty((0,))
+            args = (np.ascontiguousarray(c), np.ascontiguousarray(qd), np.ascontiguousarray(q2),
+                    st.P, k, S, P, int(want_p))
+            if gone is not None:
+                args += (np.ascontiguousarray(gone).view(np.uint8),)
+            _trackerkernel.riccati(*args)
+            return k, S, (P if want_p else None)
+        k, S, P, st.P = riccati_numpy(c, qd, q2, st.P, want_p, gone)
+        return k, S, P
+
+    def _filter(self, yd, rd, miss):
+        """miss: (N, C) bool with a True somewhere, or None."""
+        st = self.state
+        N, d = yd.shape[0], 2 * self.K
+        speed = model_speed(rd, self.min_rpm)
+        c = 2.0 * np.cos(omega(self.components, speed) / self.fs_track)
+        any_miss = miss is not None
+        k, S, P = self._gains(speed, c, miss[:, 0] if any_miss and self.gains == "exact" else None)
+        if N == 0:
+            return (np.zeros((0, self.C, d)), np.zeros((0, self.C, d)), np.zeros((0, self.C)),
+                    c, k, S, P)
+        if self.backend == "c":
+            zp, e, xf = np.empty((N, self.C, d)), np.empty((N, self.C)), np.empty((N, self.C, d))
+            args = (np.ascontiguousarray(yd), np.ascontiguousarray(c), np.ascontiguousarray(k),
+                    st.z, zp, e, xf, self.K)
+            if any_miss:
+                args += (np.ascontiguousarray(miss).view(np.uint8),)
+            _trackerkernel.forward(*args)
+            return xf, zp, e, c, k, S, P
+        # numpy: chunks of CHUNK samples aligned to absolute tracker indices.  The
+        # chunk cut by the end of the previous call is run again from its start
+        # (its inputs are kept in the state), so that every sample is computed
+        # exactly as in one pass, however the stream is split.
+        # Channels that miss different samples run as separate groups (mask_groups),
+        # each with k = 0 at its missing samples and no innovation there (e = 0).
+        ch = st.chunk
+        p = len(ch["y"]) if ch else 0
+        Y = np.concatenate([ch["y"], yd]) if p else yd
+        Cc = np.concatenate([ch["c"], c]) if p else c
+        Kk = np.concatenate([ch["k"], k]) if p else k
+        Mm = cat_miss(ch.get("m") if p else None, p, miss, N, self.C)
+        T = len(Y)
+        zp = np.empty((T + 1, self.C, d))
+        e = np.empty((T, self.C))
+        xf = np.empty((T, self.C, d))
+        for chans, m in mask_groups(Mm):           # all channels each time, see there
+            kg = Kk if m is None else np.where(m[:, None], 0.0, Kk)
+            z0 = st.z0
+            for i in range(0, T, 8192):  # bounded memory for long calls (8192 = 256 chunks)
+                j = min(i + 8192, T)
+                zp_i, e_i, xf_i = forward_numpy(Y[i:j], Cc[i:j], kg[i:j], z0)
+                if m is not None:
+                    e_i[m[i:j]] = 0.0                 # no innovation where missing
+                zp[i:j + 1, chans] = zp_i[:, chans]
+                e[i:j, chans] = e_i[:, chans]
+                xf[i:j, chans] = xf_i[:, chans]
+                z0 = zp_i[-1]
+        nb = (T // CHUNK) * CHUNK                   # last chunk boundary
+        tail = T - nb
+        st.z0 = np.ascontiguousarray(zp[T - tail])
+        st.z = np.ascontiguousarray(zp[T])
+        st.chunk = {"y": Y[nb:].copy(), "c": Cc[nb:].copy(), "k": Kk[nb:].copy()} if tail else {}
+        if tail and Mm is not None and Mm[nb:].any():
+            st.chunk["m"] = Mm[nb:].copy()
+        return xf[p:], zp[p:T], e[p:], c, k, S, P
+
+    # ----------------------------------------------------------------- blocks
+    def _block_stats(self, starts, wave, env, rpm, miss) -> BlockStats:
+        """Statistics of whole blocks: wave/env (E, B, C, K), rpm (E, B), miss (E, B, C)
+        or None (none missing)."""
+        rms = np.sqrt(np.mean(wave * wave, axis=1))
+        amp = np.mean(env, axis=1)
+        rmean = np.mean(rpm, axis=1)
+        speed_ok = np.all(np.abs(rpm) >= self.min_rpm, axis=1)          # NaN -> False
+        f_hi = np.max(np.abs(rpm), axis=1) / 60.0 * max((c.order or 0.0) for c in self.components)
+        valid = speed_ok & (f_hi < 0.5 * self.fs_track)
+        rms[~valid] = np.nan
+        amp[~valid] = np.nan
+        starts = np.asarray(starts, dtype=np.int64)
+        t_in = (starts + self.block - 1) * self.decimate - self.delay_in
+        if miss is None:
+            missing = np.zeros((len(starts), self.C), dtype=np.int64)
+        else:
+            missing = np.count_nonzero(miss, axis=1).astype(np.int64)
+        return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
+                          missing=missing)
+
+    def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
+        st = self.state
+        B = self.block
+        cur = with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
+        first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
+        nb = len(cur["rpm"]) // B
+        used = nb * B
+        st.pend = {k: v[used:].copy() for k, v in cur.items()}
+        if "miss" in st.pend and not st.pend["miss"].any():
+            del st.pend["miss"]
+        C, K = self.C, self.K
+        return self._block_stats(first + B * np.arange(nb),
+                                 cur["wave"][:used].reshape(nb, B, C, K),
+                                 cur["env"][:used].reshape(nb, B, C, K),
+                                 cur["rpm"][:used].reshape(nb, B),
+                                 miss_blocks(cur.get("miss"), used, nb, B))
+
+    # --------------------------------------------------------------- smoother
+    def _smooth(self, out: TrackerOutput, n0, rd, c, k, S, P, zp, e, miss) -> None:
+        st = self.state
+        B, L = self.block, self.lag
+        cur = with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
+                         miss, self.C)
+        h0 = st.next_smooth * B                              # index of cur[0]
+        n_end = n0 + len(rd)
+        jb = st.next_smooth
+        n_emit = max(0, (n_end - L) // B - jb)
+        W = B + L
+        d = 2 * self.K
+        if n_emit:
+            starts = (np.arange(n_emit) * B).tolist()        # positions in cur
+            if self.backend == "c":
+                xs = np.empty((n_emit, B, self.C, d))
+                some = "miss" in cur
+                for i, s0 in enumerate(starts):
+                    sl = slice(s0, s0 + W)
+                    args = (np.ascontiguousarray(cur["c"][sl]), np.ascontiguousarray(cur["k"][sl]),
+                            np.ascontiguousarray(cur["S"][sl]), np.ascontiguousarray(cur["P"][sl]),
+                            np.ascontiguousarray(cur["zp"][sl]), np.ascontiguousarray(cur["e"][sl]),
+                            xs[i], self.K)
+                    if some and cur["miss"][sl].any():
+                        args += (np.ascontiguousarray(cur["miss"][sl]).view(np.uint8),)
+                    _trackerkernel.backward(*args)
+            else:                     # per mask pattern, as in _filter: k = 0 where missing
+                xs = None
+                for chans, m in mask_groups(cur.get("miss")):
+                    kg = cur["k"] if m is None else np.where(m[:, None], 0.0, cur["k"])
+                    res = backward_numpy(cur["c"], kg, cur["S"], cur["P"], cur["zp"], cur["e"],
+                                         starts, W, B)
+                    if xs is None:
+                        xs = res
+                    else:
+                        xs[:, :, chans] = res[:, :, chans]
+            used = n_emit * B
+            cb = cur["c"][:used].reshape(n_emit, B, self.K)
+            wave = xs[..., 1::2]
+            env = envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
+                n_emit, B, self.C, self.K)
+            out.smoothed_index = h0 + np.arange(used)
+            out.smoothed_waveform = np.ascontiguousarray(wave.reshape(used, self.C, self.K))
+            out.smoothed_blocks = self._block_stats(h0 + B * np.arange(n_emit), wave, env,
+                                                    cur["rpm"][:used].reshape(n_emit, B),
+                                                    miss_blocks(cur.get("miss"), used, n_emit, B))
+        else:
+            used = 0
+            out.smoothed_index = np.zeros(0, dtype=np.int64)
+            out.smoothed_waveform = np.zeros((0, self.C, self.K))
+            out.smoothed_blocks = self._block_stats(np.zeros(0, np.int64),
+                                                    np.zeros((0, B, self.C, self.K)),
+                                                    np.zeros((0, B, self.C, self.K)),
+                                                    np.zeros((0, B)), None)
+        st.next_smooth = jb + n_emit
+        st.hist = {key: v[used:].copy() for key, v in cur.items()}
+        if "miss" in st.hist and not st.hist["miss"].any():
+            del st.hist["miss"]

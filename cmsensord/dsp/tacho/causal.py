@@ -1,0 +1,122 @@
+"""The causal speed: from the edges at or before each sample only.
+
+For the order tracker, which must not wait for the smoothed speed (see "Causal
+speed" in docs/tacho.md): at every committed edge a one-sided weighted
+quadratic over the last ``causal_window`` edges of the run gives the speed and
+acceleration, extrapolated from there; capped when edges are overdue, 0 and
+invalid after the run's timeout.  Any split of the frames gives the same values.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cmsensord.dsp.tacho.smoothing import make_room, weighted_quadratic
+
+_CAUSAL_SLACK = 2.5  # causal speed: pulse periods without an edge before it is capped (a missed pulse is 2)
+
+
+class CausalSpeed:
+    """The causal part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose ``__init__``
+    sets the attributes): one segment (speed, acceleration) per committed edge."""
+
+    def _flush_segments(self) -> None:
+        """Fit the causal segments of the edges committed since the last call (see
+        "Causal speed"): a one-sided weighted quadratic over the last ``causal_window``
+        committed edges of the run at each, vectorised over the new edges."""
+        todo = self._seg_todo
+        if not todo:
+            return
+        self._seg_todo = []
+        Tc, nc = self._committed()
+        c0 = self._c0
+        k = np.fromiter((t[0] for t in todo), dtype=np.int64, count=len(todo))
+        known = np.fromiter((t[1] for t in todo), dtype=np.float64, count=len(todo))
+        idx = k[:, None] - np.arange(self.causal_window)[None, :]
+        use = idx >= c0
+        idx = np.where(use, idx, k[:, None]) - c0
+        kr = k - c0
+        dx = np.where(use, Tc[idx] - Tc[kr][:, None], 0.0)
+        S = np.abs(dx).max(axis=1)
+        S = np.where(S > 0, S, 1.0)
+        x = dx / S[:, None]
+        y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
+        wgt = use * self._ckernel[None, :]
+        npts = use.sum(axis=1)
+        coef = weighted_quadratic(x, y, wgt, npts)
+        speed = coef[:, 1] / (S * self.ppr)
+        acc = 2.0 * coef[:, 2] / (S * S * self.ppr)
+        self._append_segments(np.maximum(known, Tc[kr]), Tc[kr], speed, acc,
+                              (npts >= 2).astype(np.float64))
+
+    def _append_segments(self, key, T, speed, acc, valid) -> None:
+        n = key.size
+        buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, n)
+        self._sbuf = buf
+        for row, v in enumerate((key, T, speed, acc, valid)):
+            buf[row, self._shi:self._shi + n] = v
+        self._shi += n
+
+    def evaluate_causal(self, samples) -> tuple[np.ndarray, np.ndarray]:
+        """(speed in Hz, valid) at sample indices from the edges up to each sample only.
+
+        See "Causal speed" in docs/tacho.md: the value at sample s depends only on
+        edges at or before s, so it is the same whenever it is asked for, as long as
+        s < :attr:`covered_until`.  Samples not yet covered get the extrapolation too.
+        """
+        self._flush_segments()
+        s = np.asarray(samples, dtype=np.float64)
+        flat = s.reshape(-1)
+        keys = self._sbuf[0, self._slo:self._shi]
+        if keys.size == 0:
+            return np.zeros(s.shape), np.zeros(s.shape, dtype=bool)
+        j = np.searchsorted(keys, flat, side="right") - 1
+        before = j < 0
+        jj = np.clip(j, 0, None) + self._slo
+        T, w, a, v = (self._sbuf[r, jj] for r in (1, 2, 3, 4))
+        sp, valid = self._causal_speed(flat - T, w, a, v, before)
+        return (sp * self.fs).reshape(s.shape), valid.reshape(s.shape)
+
+    def causal_range(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`evaluate_causal` at the samples start .. stop - 1 (the same values, bit
+        for bit), segment by segment: no per-sample search or gather (the order chain
+        asks for every sample, 25 000 a second)."""
+        self._flush_segments()
+        n = max(0, int(stop) - int(start))
+        lo, hi = self._slo, self._shi
+        keys = self._sbuf[0, lo:hi]
+        if keys.size == 0 or n == 0:
+            return np.zeros(n), np.zeros(n, dtype=bool)
+        a = int(np.searchsorted(keys, start, side="right")) - 1       # segment of the first sample
+        b = int(np.searchsorted(keys, stop - 1, side="right")) - 1    # ... and of the last
+        first = max(a, 0)
+        # sample s is in segment k when keys[k] <= s < keys[k + 1]: cut at ceil(keys)
+        cuts = np.clip(np.ceil(keys[first + 1:b + 1]), start, stop).astype(np.int64) if b > first else \
+            np.empty(0, dtype=np.int64)
+        if a < 0:       # samples before the first segment
+            head = int(min(max(np.ceil(keys[0]), start), stop)) - start
+        else:
+            head = 0
+        edges = np.concatenate(([start + head], cuts, [stop]))
+        counts = np.diff(edges)
+        seg = np.arange(first, first + counts.size) + lo
+        x = np.arange(start + head, stop, dtype=np.float64)
+        T, w, acc, v = (np.repeat(self._sbuf[r, seg], counts) for r in (1, 2, 3, 4))
+        sp, valid = self._causal_speed(x - T, w, acc, v, np.zeros(x.size, dtype=bool))
+        if head:
+            sp = np.concatenate((np.full(head, np.nan if self._pruned else 0.0), sp))
+            valid = np.concatenate((np.zeros(head, dtype=bool), valid))
+        return sp * self.fs, valid
+
+    def _causal_speed(self, tau, w, a, v, before) -> tuple[np.ndarray, np.ndarray]:
+        """Speed (turns/sample) and validity tau samples after a segment's edge (docs/tacho.md, "Causal speed")."""
+        sp = w + a * tau
+        with np.errstate(divide="ignore", invalid="ignore"):
+            late = tau * w > _CAUSAL_SLACK / self.ppr   # edges overdue: the shaft slows
+            cap = np.where(late, (_CAUSAL_SLACK / self.ppr) / np.where(late, tau, 1.0), np.inf)
+        sp = np.clip(np.minimum(sp, cap), 0.0, None)
+        valid = (v > 0) & (sp > 0) & ~before
+        sp = np.where(valid, sp, 0.0)
+        if before.any() and self._pruned:
+            sp[before] = np.nan
+        return sp, valid

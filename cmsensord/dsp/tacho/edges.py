@@ -1,0 +1,280 @@
+"""Tacho edges and their repair: absolute edge times, runs, loss, missed and extra pulses.
+
+Steps 1-3 of docs/tacho.md: each edge becomes an absolute time in 1/256 sample;
+edges form runs that end at a timeout (``tacho_lost``, ``tacho_restored``); an
+interval that is a whole multiple of the predicted one counts missed pulses, a
+short one followed by a regular one is a spurious edge and is removed.  The
+committed edges feed the smoothing and the causal speed.  Also the event and
+counter types of :class:`~cmsensord.dsp.tacho.TachoTracker`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+SUB = 256  # edge resolution: 1/256 sample (docs/PROTOCOL.md, TACHO)
+
+LOST = "tacho_lost"
+RESTORED = "tacho_restored"
+MISSED = "tacho_missed_pulse"
+EXTRA = "tacho_extra_pulse"
+
+_MAX_MISSED_RUN = 8  # at most this many consecutive pulses repaired as missed
+PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
+
+
+@dataclass(frozen=True)
+class TachoEvent:
+    """One tacho event: ``kind`` (LOST, RESTORED, MISSED, EXTRA), where (unwrapped
+    sample index, float), how many pulses it concerns, and a one-line message."""
+
+    kind: str
+    sample: float
+    count: int
+    message: str
+
+
+@dataclass
+class TachoCounters:
+    """Cumulative counters of a tracker."""
+
+    edges: int = 0  # edges received
+    pulses: int = 0  # pulses committed (edges kept + pulses inserted for missed ones)
+    missed: int = 0  # pulses inserted (missed by the encoder)
+    extra: int = 0  # edges removed as spurious
+    irregular: int = 0  # intervals outside 1 +- tol of the prediction, not repaired
+    out_of_order: int = 0  # edges earlier than one already received (ignored)
+    lost: int = 0  # tacho_lost transitions
+    restored: int = 0  # tacho_restored transitions
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+class TachoUpdate(NamedTuple):
+    """What one :meth:`TachoTracker.update` produced."""
+
+    events: list[TachoEvent]
+    final_until: float  # values at samples < final_until are final
+    valid: bool  # a run with a measured speed is active (at the coverage end)
+    counters: TachoCounters
+
+
+@dataclass
+class Run:
+    """One run of edges without a timeout."""
+
+    rid: int
+    base: float  # turns at pulse count 0 of the run
+    first_q: int  # first edge, 1/256 sample
+    last_raw_q: int  # last edge received (also spurious ones), 1/256 sample
+    prev_raw_q: int | None = None
+    prev_prev_raw_q: int | None = None
+    ended: bool = False
+    stop: float = math.inf  # samples: last_raw + timeout (set when it ends)
+    committed: int = 0  # committed edges
+    valid: bool = False  # >= 2 committed edges
+    end_turns: float = math.nan  # turns at stop (set when it ends)
+
+
+class EdgeRuns:
+    """The edge part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose ``__init__``
+    sets the attributes): coverage and timeouts, runs, the look-ahead classification
+    of each edge and its commitment as pulses."""
+
+    def _advance(self, end: int) -> None:
+        """The frames so far cover up to ``end`` (exclusive): coverage and timeout check."""
+        self._now = end if self._now is None else max(self._now, end)
+        self._check_timeout(self._now * SUB)
+
+    def _timeout_q(self, run: Run) -> int:
+        """The current run's timeout in 1/256 sample (integer arithmetic: deterministic)."""
+        hi = self._timeout_hi
+        if run.prev_raw_q is None:
+            return hi
+        d = run.last_raw_q - run.prev_raw_q
+        if run.prev_prev_raw_q is not None:
+            d = max(d, run.prev_raw_q - run.prev_prev_raw_q)
+        return min(hi, max(self._timeout_lo, int(math.ceil(self.timeout_periods * d))))
+
+    def _check_timeout(self, q_now: int) -> None:
+        """End the current run if no edge came within its timeout before q_now (exclusive)."""
+        run = self._run
+        if run is None:
+            return
+        stop_q = run.last_raw_q + self._timeout_q(run)
+        if q_now > stop_q:
+            self._end_run(stop_q)
+
+    def _edge(self, q: int) -> None:
+        c = self.counters
+        c.edges += 1
+        if self._last_q is not None and q <= self._last_q:
+            c.out_of_order += 1     # earlier than, or a duplicate of, an edge already received
+            return
+        self._last_q = q
+        self._known_q = q
+        self._check_timeout(q)
+        run = self._run
+        if run is None:
+            self._start_run(q)
+            return
+        run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = run.prev_raw_q, run.last_raw_q, q
+        self._pending.append(q)
+        self._classify(final=False)
+
+    def _start_run(self, q: int) -> None:
+        base = 0.0
+        if self._runs or self._khi:
+            base = (math.floor(self._held * self.ppr + 1e-9) + 1) / self.ppr
+        run = Run(rid=self._next_rid, base=base, first_q=q, last_raw_q=q)
+        self._next_rid += 1
+        self._run = run
+        self._runs[run.rid] = run
+        self._cT, self._cn, self._c0 = [], [], 0
+        self._pending.clear()
+        self._hist.clear()
+        self._final = 0
+        self._n_last = 0
+        self._cq_last = None
+        self._commit(q, 0)
+
+    def _commit(self, q: int, npulses: int) -> None:
+        """Commit edge q as ``npulses`` pulses after the previous committed edge."""
+        run = self._run
+        if self._cq_last is not None:
+            d = q - self._cq_last
+            self._hist.append((self._cq_last + 0.5 * d, npulses / d))
+        self._n_last += npulses
+        self._cT.append(q / SUB)
+        self._cn.append(self._n_last)
+        self._cq_last = q
+        run.committed += 1
+        self._seg_todo.append((self._c0 + len(self._cT) - 1, self._known_q / SUB))
+        self.counters.pulses += 1 if run.committed == 1 else npulses
+        if run.committed == 2 and not run.valid:
+            run.valid = True
+            if self._had_loss:
+                self._had_loss = False
+                self.counters.restored += 1
+                self._events.append(TachoEvent(RESTORED, q / SUB, 1,
+                                               f"tacho restored at sample {q / SUB:.0f}: edges again"))
+
+    def _predict(self) -> float | None:
+        """Predicted next interval (1/256 sample) after the last committed edge, or None."""
+        hist = self._hist
+        n = len(hist)
+        if n < 2:
+            return None
+        t_ref = hist[-1][0]
+        xs = [h[0] - t_ref for h in hist]
+        rt = [h[1] for h in hist]
+        xm, ym = sum(xs) / n, sum(rt) / n
+        sxx = sum((x - xm) ** 2 for x in xs)
+        slope = sum((x - xm) * (r - ym) for x, r in zip(xs, rt)) / sxx if sxx > 0 else 0.0
+        r0 = ym + slope * (self._cq_last - t_ref - xm)  # pulse rate at the last committed edge
+        d_last = 1.0 / rt[-1]
+        disc = r0 * r0 + 2.0 * slope
+        if r0 <= 0 or disc <= 0:
+            return d_last
+        d = 2.0 / (r0 + math.sqrt(disc))  # solves slope/2 d^2 + r0 d = 1 pulse
+        return min(max(d, 0.5 * d_last), 2.0 * d_last)
+
+    def _classify(self, final: bool) -> None:
+        """Commit (or drop) pending edges; waits for one look-ahead edge unless ``final``."""
+        tol = self.tol
+        c = self.counters
+        while self._pending:
+            q = self._pending[0]
+            P = self._predict()
+            if P is None:
+                self._pending.popleft()
+                self._commit(q, 1)
+                continue
+            d = q - self._cq_last
+            r = d / P
+            if r < 1.0 - tol:
+                if len(self._pending) < 2:
+                    if not final:
+                        return  # wait for the next edge
+                    self._pending.popleft()
+                    c.irregular += 1
+                    self._commit(q, 1)
+                    continue
+                r2 = (self._pending[1] - self._cq_last) / P
+                self._pending.popleft()
+                if abs(r2 - 1.0) < tol:
+                    c.extra += 1
+                    self._events.append(TachoEvent(EXTRA, q / SUB, 1,
+                                                   f"spurious tacho pulse removed at sample {q / SUB:.1f}"))
+                    continue
+                c.irregular += 1
+                self._commit(q, 1)
+                continue
+            self._pending.popleft()
+            m = int(round(r))
+            if r > 1.0 + tol and 2 <= m <= _MAX_MISSED_RUN and abs(r - m) < tol:
+                c.missed += m - 1
+                self._events.append(TachoEvent(
+                    MISSED, (self._cq_last + d / m) / SUB, m - 1,
+                    f"{m - 1} missed tacho pulse(s) inserted after sample {self._cq_last / SUB:.1f}"))
+                self._commit(q, m)
+                continue
+            if r > 1.0 + tol:
+                c.irregular += 1
+            self._commit(q, 1)
+
+    def _end_run(self, stop_q: int) -> None:
+        run = self._run
+        self._known_q = stop_q
+        self._classify(final=True)
+        run.ended = True
+        run.stop = stop_q / SUB
+        self._flush_segments()
+        self._append_segments(np.array([run.stop]), np.array([run.stop]), np.zeros(1), np.zeros(1),
+                              np.zeros(1))
+        self._finalise(ended=True)
+        self._prov = None
+        if run.valid:
+            # the angle at the stop, from the tail of the last knot
+            T_last, th_last, w_last, _ = self._kbuf[:, self._khi - 1]  # the run's last knot
+            _, dturn = self._tail(np.array([w_last]), np.array([run.stop - T_last]), 1.0 / self.ppr)
+            run.end_turns = float(th_last + dturn[0])
+            self._held = run.end_turns
+            self._had_loss = True
+            self.counters.lost += 1
+            self._events.append(TachoEvent(LOST, run.stop, 1,
+                                           f"tacho lost at sample {run.stop:.0f}: no edge for "
+                                           f"{(stop_q - run.last_raw_q) / SUB / self.fs:.3g} s"))
+        else:
+            # a single edge: no speed; the angle stays where it was
+            self._runs.pop(run.rid, None)
+        self._run = None
+        self._pending.clear()
+
+    def _committed(self) -> tuple[np.ndarray, np.ndarray]:
+        """The current run's committed edge times and pulse counts as arrays (cached
+        while they do not change: one conversion per update for both fits)."""
+        key = (self._run.rid if self._run is not None else None, self._c0, len(self._cT))
+        if key != self._committed_key:
+            self._committed_arrays = (np.asarray(self._cT), np.asarray(self._cn, dtype=np.float64))
+            self._committed_key = key
+        return self._committed_arrays
+
+
+def tacho_frames_to_arrays(frames: Iterable, chan: int = 0) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(t0_unwrapped (F,), [edge offsets]) of the TACHO frames of input ``chan`` among ``frames``."""
+    from cmsensord.protocol import FrameType, decode_tacho
+
+    t0: list[int] = []
+    edges: list[np.ndarray] = []
+    for f in frames:
+        if f.type == FrameType.TACHO and f.chan == chan:
+            t0.append(f.t0_unwrapped)
+            edges.append(decode_tacho(f.payload))
+    return np.asarray(t0, dtype=np.int64), edges

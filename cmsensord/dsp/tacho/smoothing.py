@@ -1,0 +1,269 @@
+"""Jitter smoothing of the committed edges and the speed and angle at every sample.
+
+Steps 4-5 of docs/tacho.md: at every committed edge a local weighted
+least-squares quadratic of pulse count vs edge time gives a knot (time, angle,
+speed); between knots the speed is interpolated linearly and the angle by a
+cubic Hermite; after a run's last edge the speed decays as one pulse over the
+elapsed time.  Knots older than ``history_s`` are dropped.  The loop between
+knots also runs in the compiled ``cmsensord.dsp._trackerkernel`` (bit for bit).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cmsensord.dsp.tacho.edges import SUB
+
+try:  # the compiled loop of evaluate() is optional: numpy is the fallback (same results)
+    from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _kernel = None
+
+_HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])  # moments s0..s4 -> normal equations
+
+
+def weighted_quadratic(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.ndarray) -> np.ndarray:
+    """Per row, the weighted least-squares quadratic y = c0 + c1 x + c2 x^2 over its
+    points (weights ``wgt``, 0 for unused ones): (rows, 3).  A straight line where a
+    row has two points, zeros where it has fewer."""
+    x2 = x * x
+    wx, wx2 = wgt * x, wgt * x2
+    # the weighted moments s0..s4 and right-hand sides b0..b2 (each a sum over its
+    # window, the same products as written out term by term), in one reduction
+    mom = np.stack([wgt, wx, wx2, wx2 * x, wx2 * x2, wgt * y, wx * y, wx2 * y], axis=1).sum(axis=2)
+    A = mom[:, _HANKEL]                  # [[s0 s1 s2] [s1 s2 s3] [s2 s3 s4]]
+    b = mom[:, 5:]
+    lin = npts < 3                       # two points: a straight line; one: no speed
+    if lin.any():
+        A[lin, 2, :] = 0.0
+        A[lin, :, 2] = 0.0
+        A[lin, 2, 2] = 1.0
+        b[lin, 2] = 0.0
+    one = npts < 2
+    if one.any():
+        A[one] = np.eye(3)
+        b[one] = 0.0
+    return np.linalg.solve(A, b[..., None])[..., 0]
+
+
+def make_room(buf: np.ndarray, lo: int, hi: int, n: int) -> tuple[np.ndarray, int, int]:
+    """A column buffer whose live columns are [lo, hi) with room for n more after them:
+    the same one, or a copy compacted to start at 0 and grown by doubling (amortised
+    O(1) per column).  Returns (buffer, lo, hi)."""
+    if hi + n <= buf.shape[1]:
+        return buf, lo, hi
+    live = hi - lo
+    cap = buf.shape[1]
+    while live + n > cap // 2:
+        cap *= 2
+    new = np.empty((buf.shape[0], cap))
+    new[:, :live] = buf[:, lo:hi]
+    return new, 0, live
+
+
+class KnotSmoothing:
+    """The smoothing part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose
+    ``__init__`` sets the attributes): knots of the committed edges and the speed
+    and angle at any sample."""
+
+    def evaluate(self, samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(speed in Hz, angle in turns, valid) at unwrapped sample indices (any shape, int or float).
+
+        The angle counts revolutions since the first edge (turns 0 there).
+        Before the first edge, after a loss and behind the kept history the
+        speed is 0 and invalid (NaN behind the history); see docs/tacho.md.
+        """
+        s = np.asarray(samples, dtype=np.float64)
+        flat = s.reshape(-1)
+        if flat.size:
+            kT, kth, kw, kr = self._knots(float(flat.min()), float(flat.max()))
+        else:
+            kT, kth, kw, kr = self._knots()
+        if kT.size == 0:
+            return (np.zeros(s.shape), np.full(s.shape, self._held), np.zeros(s.shape, dtype=bool))
+        if _kernel is not None and self.use_kernel:
+            # between knots in C (one pass, no temporaries; 0 elsewhere), the rest below
+            speed = np.empty(flat.size)
+            turns = np.empty(flat.size)
+            jj = np.empty(flat.size, dtype=np.int64)
+            code = np.empty(flat.size, dtype=np.uint8)
+            _kernel.tacho_eval(np.ascontiguousarray(flat), np.ascontiguousarray(kT),
+                               np.ascontiguousarray(kth), np.ascontiguousarray(kw),
+                               np.ascontiguousarray(kr, dtype=np.int64), speed, turns, jj, code)
+            valid = code == 1
+            before = code == 0
+            tail = code == 2
+        else:
+            speed = np.zeros(flat.size)
+            turns = np.zeros(flat.size)
+            valid = np.zeros(flat.size, dtype=bool)
+            j = np.searchsorted(kT, flat, side="right") - 1
+            before = j < 0
+            jj = np.clip(j, 0, kT.size - 1)
+            nxt = np.minimum(jj + 1, kT.size - 1)
+            inner = (~before) & (jj + 1 < kT.size) & (kr[nxt] == kr[jj])
+            every = bool(inner.all())         # the usual case: no masks needed
+            a, b, x = (jj, nxt, flat) if every else (jj[inner], nxt[inner], flat[inner])
+            if a.size:
+                h = kT[b] - kT[a]
+                u = (x - kT[a]) / h
+                u2, u3 = u * u, u * u * u
+                th = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
+                      + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b])
+                sp = (1.0 - u) * kw[a] + u * kw[b]
+                if every:
+                    turns, speed = th, sp
+                    valid[:] = True
+                else:
+                    turns[inner] = th
+                    speed[inner] = sp
+                    valid[inner] = True
+            tail = (~before) & (~inner)
+        if tail.any():
+            a = jj[tail]
+            rids, inv = np.unique(kr[a], return_inverse=True)
+            stops = np.array([self._stop_of(int(r)) for r in rids])[inv.reshape(-1)]
+            tau = flat[tail] - kT[a]
+            w0 = kw[a]
+            c = 1.0 / self.ppr
+            tau_stop = stops - kT[a]
+            ok = tau < tau_stop
+            tq = np.where(ok, tau, tau_stop)
+            sp, dturn = self._tail(w0, tq, c)
+            turns[tail] = kth[a] + dturn
+            speed[tail] = np.where(ok, sp, 0.0)
+            valid[tail] = ok
+        if before.any() and self._pruned:  # behind the kept history: unknown
+            turns[before] = np.nan
+            speed[before] = np.nan
+        return (speed.reshape(s.shape) * self.fs, turns.reshape(s.shape), valid.reshape(s.shape))
+
+    def _stop_of(self, rid: int) -> float:
+        """End of the valid extrapolation of run ``rid`` (samples): its timeout."""
+        run = self._runs.get(rid)
+        if run is None:
+            return math.inf
+        if run.ended:
+            return run.stop
+        return (run.last_raw_q + self._timeout_q(run)) / SUB
+
+    @staticmethod
+    def _tail(w0: np.ndarray, tau: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray]:
+        """Speed min(w0, c / tau) after the last edge and its integral from 0 to tau."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tc = np.where(w0 > 0, c / np.where(w0 > 0, w0, 1.0), np.inf)
+            slow = tau > tc
+            sp = np.where(slow, c / np.where(slow, tau, 1.0), w0)
+            dturn = np.where(slow, c + c * np.log(np.where(slow, tau / tc, 1.0)), w0 * tau)
+        return sp, dturn
+
+    def _finalise(self, ended: bool) -> None:
+        """Fit the knots of the current run whose windows are complete (all of them when
+        the run has ended) and append them to the final knots."""
+        self._flush_segments()
+        run = self._run
+        K = self._c0 + len(self._cT)  # committed edges of the run so far
+        h = self.half_window
+        last = K - 1 if ended else K - 1 - h  # last centre that can be finalised
+        if run is None or K < 2 or last < self._final:
+            if ended:
+                self._final = max(self._final, K)
+            return
+        T, th, w = self._fit(np.arange(self._final, last + 1), K)
+        self._append_knots(T, th, w, run.rid)
+        self._final = last + 1
+        # committed edges no longer needed by any future window (smoothing or causal)
+        drop = min(self._final - h, K - self.causal_window) - self._c0
+        if drop > 256:
+            del self._cT[:drop]
+            del self._cn[:drop]
+            self._c0 += drop
+
+    def _fit(self, centres: np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Local least-squares quadratic of pulse count vs edge time at each centre (docs/tacho.md, step 4).
+
+        Windows [k - h, k + h] clipped to the committed edges [0, K) of the run.
+        Returns the knot times (samples), angles (turns) and speeds (turns/sample).
+        """
+        h = self.half_window
+        Tc, nc = self._committed()
+        c0 = self._c0
+        lo = np.maximum(centres - h, 0)
+        hi = np.minimum(centres + h, K - 1)
+        idx = centres[:, None] + self._offsets[None, :]
+        use = (idx >= lo[:, None]) & (idx <= hi[:, None])
+        idx = np.where(use, idx, centres[:, None]) - c0
+        k = centres - c0
+        dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
+        S = np.abs(dx).max(axis=1)
+        x = dx / S[:, None]
+        y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
+        wgt = use * self._kernel[None, :]
+        npts = use.sum(axis=1)
+        coef = weighted_quadratic(x, y, wgt, npts)
+        run = self._run
+        T = Tc[k]
+        th = run.base + (nc[k] + coef[:, 0]) / self.ppr
+        w = coef[:, 1] / (S * self.ppr)
+        return T, th, w
+
+    def _provisional(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Knots of the current run beyond the final ones (one-sided windows), fitted when queried."""
+        run = self._run
+        if run is None:
+            return None
+        K = self._c0 + len(self._cT)
+        if K < 2 or self._final >= K:
+            return None
+        key = (run.rid, K, self._final)
+        if key != self._prov_key:
+            self._prov = self._fit(np.arange(self._final, K), K)
+            self._prov_key = key
+        return self._prov
+
+    def _append_knots(self, T: np.ndarray, th: np.ndarray, w: np.ndarray, rid: int) -> None:
+        n = T.size
+        buf, self._klo, self._khi = make_room(self._kbuf, self._klo, self._khi, n)
+        self._kbuf = buf
+        buf[0, self._khi:self._khi + n] = T
+        buf[1, self._khi:self._khi + n] = th
+        buf[2, self._khi:self._khi + n] = w
+        buf[3, self._khi:self._khi + n] = rid
+        self._khi += n
+
+    def _knots(self, t_min: float = -math.inf, t_max: float = math.inf
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Final knots (those around [t_min, t_max]) then the provisional ones: T, turns, speed, run id."""
+        T = self._kbuf[0, self._klo:self._khi]
+        a = max(int(np.searchsorted(T, t_min, side="right")) - 1, 0)
+        b = min(int(np.searchsorted(T, t_max, side="right")) + 1, T.size)
+        k = self._kbuf[:, self._klo + a:self._klo + b]
+        kT, kth, kw, kr = k[0], k[1], k[2], k[3].astype(np.int64)
+        if b < T.size:
+            return kT, kth, kw, kr
+        prov = self._provisional()
+        if prov is None:
+            return kT, kth, kw, kr
+        pT, pth, pw = prov
+        rid = np.full(pT.size, self._run.rid, dtype=np.int64)
+        return (np.concatenate([kT, pT]), np.concatenate([kth, pth]),
+                np.concatenate([kw, pw]), np.concatenate([kr, rid]))
+
+    def _prune(self) -> None:
+        """Drop final knots more than history_s behind the newest (keeping the last two)."""
+        T = self._kbuf[0, self._klo:self._khi]
+        if T.size < 3:
+            return
+        cut = min(int(np.searchsorted(T, T[-1] - self.history_s * self.fs)), T.size - 2)
+        if cut < max(64, T.size // 16):  # prune in batches
+            return
+        self._klo += cut
+        self._pruned = True
+        K = self._sbuf[0, self._slo:self._shi]
+        scut = min(int(np.searchsorted(K, K[-1] - self.history_s * self.fs)), K.size - 2) if K.size > 2 else 0
+        self._slo += max(scut, 0)
+        first_live = int(self._kbuf[3, self._klo])  # run ids increase with time
+        for rid in [r for r in self._runs if r < first_live]:
+            del self._runs[rid]

@@ -1,0 +1,243 @@
+"""TachoTracker: TACHO frames in, shaft speed and angle at any sample out.
+
+Streaming, with repair of missed and spurious pulses, local least-squares
+smoothing of the edge jitter, a causal speed for the order tracker, and final
+values that do not depend on how frames are grouped.  The method and its
+measured accuracy: docs/tacho.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from cmsensord.dsp.tacho.causal import CausalSpeed
+from cmsensord.dsp.tacho.edges import (
+    PREDICT_INTERVALS,
+    SUB,
+    TachoCounters,
+    TachoEvent,
+    TachoUpdate,
+    EdgeRuns,
+    Run,
+    tacho_frames_to_arrays,
+)
+from cmsensord.dsp.tacho.smoothing import KnotSmoothing
+
+
+class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
+    """Streaming tacho processing: edges in, speed and angle at any sample out.
+
+    Parameters
+    ----------
+    fs : samples per second (25000).
+    ppr : tacho pulses per revolution (STATUS ``tacho_ppr``).
+    block_len : samples a TACHO frame covers (STATUS ``block_len``).
+    half_window : h, edges on each side of the local least-squares fit
+        (default 4 ppr: four revolutions each side).
+    tol : tolerance on the interval ratio for missed/extra detection (0.25).
+    timeout_s, timeout_periods, max_timeout_s : the run timeout
+        max(timeout_s, timeout_periods x last interval), capped at max_timeout_s
+        (and max_timeout_s after a single edge).
+    history_s : seconds of knots kept for queries behind the newest one.
+    causal_window : committed edges in the one-sided fit of the causal speed
+        (default 16 ppr, within 3..64).
+
+    Use::
+
+        tr = TachoTracker(25000, ppr=1)
+        u = tr.update(t0_unwrapped, edges)        # a batch of TACHO frames, in time order
+        for ev in u.events: ...                   # tacho_lost / tacho_restored / missed / extra
+        s = np.arange(done, int(np.ceil(u.final_until)))   # samples whose values are final
+        hz, turns, valid = tr.evaluate(s)
+    """
+
+    use_kernel = True  # evaluate() between knots in the compiled kernel when it is built
+
+    def __init__(self, fs: float, ppr: int, *, block_len: int = 250, half_window: int | None = None,
+                 tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
+                 max_timeout_s: float = 10.0, history_s: float = 60.0,
+                 causal_window: int | None = None):
+        if not (fs > 0 and math.isfinite(fs)):
+            raise ValueError(f"fs must be > 0, got {fs!r}")
+        if not isinstance(ppr, (int, np.integer)) or not 1 <= ppr <= 255:
+            raise ValueError(f"ppr must be an integer 1..255, got {ppr!r}")
+        if not isinstance(block_len, (int, np.integer)) or block_len < 1:
+            raise ValueError(f"block_len must be a positive integer, got {block_len!r}")
+        h = 4 * int(ppr) if half_window is None else half_window
+        if not isinstance(h, (int, np.integer)) or h < 1:
+            raise ValueError(f"half_window must be an integer >= 1, got {half_window!r}")
+        if not 0 < tol < 0.5:
+            raise ValueError(f"tol must be in (0, 0.5), got {tol!r}")
+        if not (timeout_s > 0 and timeout_periods > 2 and max_timeout_s >= timeout_s):
+            raise ValueError("need timeout_s > 0, timeout_periods > 2 (a missed pulse is 2 periods) "
+                             f"and max_timeout_s >= timeout_s; got {timeout_s}, {timeout_periods}, "
+                             f"{max_timeout_s}")
+        if not history_s > 0:
+            raise ValueError(f"history_s must be > 0, got {history_s!r}")
+        m = min(64, max(3, 16 * int(ppr))) if causal_window is None else causal_window
+        if not isinstance(m, (int, np.integer)) or m < 2:
+            raise ValueError(f"causal_window must be an integer >= 2, got {causal_window!r}")
+        self.fs = float(fs)
+        self.ppr = int(ppr)
+        self.block_len = int(block_len)
+        self.half_window = int(h)
+        self.tol = float(tol)
+        self.timeout_s = float(timeout_s)
+        self.timeout_periods = float(timeout_periods)
+        self.max_timeout_s = float(max_timeout_s)
+        self.history_s = float(history_s)
+        self.causal_window = int(m)
+        self._timeout_hi = int(round(self.max_timeout_s * self.fs * SUB))  # 1/256 sample
+        self._timeout_lo = int(round(self.timeout_s * self.fs * SUB))
+        # tricube weights over the pulse positions k - h .. k + h (docs/tacho.md, step 4)
+        u = np.arange(-self.half_window, self.half_window + 1) / (self.half_window + 1)
+        self._kernel = (1.0 - np.abs(u) ** 3) ** 3
+        self._offsets = np.arange(-self.half_window, self.half_window + 1)
+        self._committed_key: tuple | None = None
+        self._committed_arrays: tuple[np.ndarray, np.ndarray] | None = None
+        self.counters = TachoCounters()
+        self._now: int | None = None  # coverage end, samples (exclusive)
+        self._last_q: int | None = None  # last edge received
+        self._run: Run | None = None  # the current (not ended) run
+        self._runs: dict[int, Run] = {}
+        self._next_rid = 0
+        self._held = 0.0  # turns held after the last ended valid run
+        self._had_loss = False
+        # the current run's committed edges (times in samples, pulse counts), from index _c0
+        self._cT: list[float] = []
+        self._cn: list[int] = []
+        self._c0 = 0
+        self._cq_last: int | None = None  # last committed edge, 1/256 sample
+        self._n_last = 0
+        self._pending: deque[int] = deque()  # edges of the current run not yet classified
+        self._hist: deque[tuple[float, float]] = deque(maxlen=PREDICT_INTERVALS)  # (mid q, pulses/q)
+        self._final = 0  # knots finalised in the current run (centres 0 .. _final-1)
+        # final knots of all runs: times (samples), turns, speed (turns/sample), run id
+        self._kbuf = np.empty((4, 1024))  # rows: time, turns, speed, run id; live columns [_klo, _khi)
+        self._klo = 0
+        self._khi = 0
+        self._prov: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # provisional knots
+        self._events: list[TachoEvent] = []
+        self._last_t0: int | None = None
+        self._prov_key: tuple | None = None
+        self._pruned = False
+        # causal segments (see "Causal speed"): rows key, T, speed, acceleration, valid
+        u = np.arange(self.causal_window) / self.causal_window
+        self._ckernel = (1.0 - u ** 3) ** 3          # weight of the edge j places back
+        self._sbuf = np.empty((5, 1024))
+        self._slo = 0
+        self._shi = 0
+        self._seg_todo: list[tuple[int, float]] = []  # (committed index, known at) to fit
+        self._known_q = 0                             # the edge (or time) being handled
+
+    # ------------------------------------------------------------------ input
+    def update(self, t0_unwrapped: Sequence[int] | np.ndarray,
+               edges: Sequence[Sequence[int] | np.ndarray]) -> TachoUpdate:
+        """Feed TACHO frames: their unwrapped t0 (F,) and their edge offsets (F arrays, 1/256 sample).
+
+        Frames must come in time order; each covers [t0, t0 + block_len). Returns
+        the events of this call, the finality horizon, the validity and the counters.
+        """
+        t0 = np.asarray(t0_unwrapped, dtype=np.int64).reshape(-1)
+        if len(edges) != t0.size:
+            raise ValueError(f"expected one edge array per frame: {t0.size} t0 values, {len(edges)} edge arrays")
+        self._events = []
+        F = t0.size
+        if F == 0:
+            self._finalise(ended=False)
+            self._prune()
+            return TachoUpdate([], self.final_until, self.valid, replace(self.counters))
+        # Frames without edges only advance the coverage, and a timeout check at the
+        # end of each of them is the same as one check at the end of the last one
+        # before the next edge (the run's timeout changes only with an edge, and the
+        # checks see a non-decreasing time).  So: one running maximum of the frame
+        # ends, and the frames with edges one by one.
+        prev = np.empty(F, dtype=np.int64)
+        prev[0] = t0[0] if self._last_t0 is None else self._last_t0
+        prev[1:] = t0[:-1]
+        back = np.flatnonzero(t0 < prev)
+        n_ok = int(back[0]) if back.size else F      # frames before the first error
+        err, bad_offsets = None, False
+        if back.size:
+            err = ValueError(f"TACHO frames must come in time order: t0 {int(t0[n_ok])} after "
+                             f"t0 {int(prev[n_ok])}")
+        sizes = np.fromiter((len(e) for e in edges[:n_ok]), dtype=np.int64, count=n_ok)
+        full = np.flatnonzero(sizes)
+        if full.size:                                # all edges at once: q in 1/256 sample
+            off = np.concatenate([edges[i] for i in full.tolist()], axis=None).astype(np.int64)
+            frame = np.repeat(full, sizes[full])
+            out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
+            if out.any():
+                f_bad = int(frame[int(np.argmax(out))])
+                o = off[frame == f_bad]
+                err = ValueError(f"edge offsets must be u32, got {o.min()}..{o.max()}")
+                bad_offsets = True
+                n_ok = f_bad
+                off, frame = off[frame < f_bad], frame[frame < f_bad]
+                full = full[full < f_bad]
+            q = off + t0[frame] * SUB
+            order = np.lexsort((q, frame))           # time order within each frame
+            qs = q[order].tolist()
+            stop = np.cumsum(sizes[full]).tolist()
+        ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
+        k = 0
+        for i, e in zip(full.tolist(), stop if full.size else ()):
+            if i > 0:
+                self._advance(int(ends[i - 1]))
+            for j in range(k, e):
+                self._edge(qs[j])
+            k = e
+        if n_ok:
+            self._advance(int(ends[n_ok - 1]))
+            self._last_t0 = int(t0[n_ok - 1])
+        if err is not None:
+            if bad_offsets:                          # the frame's t0 was taken, as before
+                self._last_t0 = int(t0[n_ok])
+            raise err
+        self._finalise(ended=False)
+        self._prune()
+        ev = self._events
+        self._events = []
+        return TachoUpdate(ev, self.final_until, self.valid, replace(self.counters))
+
+    def update_frames(self, frames: Iterable, chan: int = 0) -> TachoUpdate:
+        """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
+        t0, edges = tacho_frames_to_arrays(frames, chan)
+        return self.update(t0, edges)
+
+    # ------------------------------------------------------------------ output
+    @property
+    def valid(self) -> bool:
+        return self._run is not None and self._run.valid
+
+    @property
+    def final_until(self) -> float:
+        """Sample index (float) below which speed, angle and validity are final."""
+        run = self._run
+        if run is None:
+            return float(self._now) if self._now is not None else 0.0
+        if self._final >= 1:
+            return self._cT[self._final - 1 - self._c0]
+        return run.first_q / SUB
+
+    @property
+    def covered_until(self) -> int:
+        """Sample index (exclusive) up to which TACHO frames have been received."""
+        return 0 if self._now is None else int(self._now)
+
+    def speed_at(self, samples) -> np.ndarray:
+        """Shaft speed in Hz (revolutions per second) at the sample indices."""
+        return self.evaluate(samples)[0]
+
+    def rpm_at(self, samples) -> np.ndarray:
+        """Shaft speed in rpm at the sample indices."""
+        return 60.0 * self.evaluate(samples)[0]
+
+    def turns_at(self, samples) -> np.ndarray:
+        """Shaft angle in revolutions since the first edge at the sample indices."""
+        return self.evaluate(samples)[1]

@@ -1,0 +1,130 @@
+"""The observations the AKF bank would watch, read from a capture through the daemon's path.
+
+``read_observations`` replays a capture through the same decoder and Processor
+as ``cmsensord replay`` (RAW blocks -> physical values -> block RMS, the block
+clock with its missing slots, the tacho) and keeps, per channel, the block RMS of
+every observation slot in [from, to] board seconds (NaN where an observation is
+missing), the board's block rate and the shaft speed.  Commissioning learns from
+exactly what the daemon will see.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from cmsensord.config import Config
+from cmsensord.errors import CmsensordError
+from cmsensord.pipeline import ListSink, Processor
+from cmsensord.source import CaptureSource
+
+__all__ = ["Observations", "read_observations", "sidecar"]
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Block RMS per observation slot of a board-time window, per channel."""
+
+    names: list[str]
+    indices: list[int]
+    y: np.ndarray                 # (T, C), NaN = missing observation
+    rate_hz: float                # observations per board second (fs / block_len)
+    start_s: float                # board seconds of the first slot kept
+    shaft_hz: float | None        # median tacho speed over the window (None: no tacho)
+    rpm: float | None             # the capture's nominal speed (import sidecar), if any
+
+    @property
+    def end_s(self) -> float:
+        return self.start_s + self.y.shape[0] / self.rate_hz
+
+    def period(self, decision_period_s: float) -> int:
+        """Observation slots per decision, as the daemon counts them."""
+        return max(1, int(round(decision_period_s * self.rate_hz)))
+
+
+def sidecar(path: str | Path) -> dict:
+    """The capture's metadata written by ``cmsensord import`` (CAPTURE.json beside it), or {}."""
+    p = Path(str(path) + ".json")
+    try:
+        return json.loads(p.read_text()) if p.is_file() else {}
+    except (OSError, ValueError):
+        return {}
+
+
+@contextlib.contextmanager
+def _quiet(logger: logging.Logger):
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+class _Collect:
+    def __init__(self) -> None:
+        self.blocks: list[tuple[int, np.ndarray]] = []
+
+    def __call__(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> None:
+        self.blocks.append((first_slot, np.where(valid, y, np.nan)))
+
+
+def _names(meta: dict, proc: Processor, auto_channels: bool) -> list[str]:
+    """Channel names: the configuration's, else the import's, else ch0, ch1, ..."""
+    given = meta.get("channel_names") or []
+    if not auto_channels:
+        return [ch.name for ch in proc.channels]
+    return [str(given[i]) if i < len(given) else ch.name for i, ch in enumerate(proc.channels)]
+
+
+def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool = True,
+                      from_s: float = 0.0, to_s: float | None = None) -> Observations:
+    """Replay ``capture`` up to ``to_s`` and keep the observations in [from_s, to_s].
+
+    ``auto_channels``: the configuration lists no channels (take the board's).
+    """
+    meta = sidecar(capture)
+    cfg = replace(cfg, output=replace(cfg.output, akf_trace=False, status_line=False))
+    collect = _Collect()
+    sink = ListSink()
+    proc = Processor(cfg, sink, auto_channels=auto_channels, observe=collect)
+    with _quiet(logging.getLogger("cmsensord")), CaptureSource(capture) as source:
+        for frames in source:            # the default monitor's events mean nothing here
+            proc.handle(frames)
+            if to_s is not None and proc.adc_seconds > to_s + 2.0:
+                break
+        else:
+            proc.finish()
+    if not collect.blocks:
+        raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
+    rate = proc.fs / proc.block_len
+    y = np.concatenate([b for _, b in collect.blocks])
+    first = int(np.floor(from_s * rate))
+    last = y.shape[0] if to_s is None else min(y.shape[0], int(np.floor(to_s * rate)))
+    if last <= first:
+        end = "the end" if to_s is None else f"{to_s:g}"
+        raise CmsensordError(f"calibrate: {capture}: no observations between {from_s:g} and {end} "
+                             f"board seconds (the capture holds {y.shape[0] / rate:.1f} s)")
+    shaft = _shaft_hz(sink, proc, first / rate, last / rate)
+    rpm = meta.get("rpm")
+    return Observations(names=_names(meta, proc, auto_channels), indices=[ch.index for ch in proc.channels],
+                        y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
+                        rpm=float(rpm) if rpm else None)
+
+
+def _shaft_hz(sink: ListSink, proc: Processor, start: float, end: float) -> float | None:
+    """Median f_r of the decisions in the window, when the tacho gave it."""
+    if proc.tacho is None or not proc.cfg.tacho.f_r_from_tacho:
+        return None
+    vals = [m["f_r"] for t, _, m in sink.messages if t.endswith("/severity") and "f_r" in m]
+    if not vals:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return float(np.nanmedian(vals))

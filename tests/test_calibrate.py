@@ -1,0 +1,102 @@
+"""`cmsensord calibrate` end to end: simulator capture -> calibrate -> replay --config SITE.yaml."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from cmsensord.sinks.mcap_sink import read_messages
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def run(*args, timeout=120):
+    return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True, env=ENV,
+                          timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def degrading(tmp_path_factory):
+    """600 s of the degrading motor, RMS mode: healthy at first, failing at the end."""
+    path = tmp_path_factory.mktemp("cal") / "degrading.bin"
+    p = run("firmware_sim", "--scenario", "degrading", "--duration", "600", "--seed", "3", "--out", str(path))
+    assert p.returncode == 0, p.stderr
+    return path
+
+
+def _severity(out_dir: Path, channel="ch0"):
+    msgs = read_messages(next(out_dir.glob("*.mcap")))
+    sev = [(t, m) for topic, t, m in msgs if topic == f"/cm/{channel}/severity"]
+    t0 = sev[0][0] - 1_000_000_000          # the first decision ends 1 s after the first block
+    return [((t - t0) / 1e9, m) for t, m in sev]
+
+
+def test_calibrate_writes_a_site_file_that_keeps_the_healthy_period_silent(degrading, tmp_path):
+    site = tmp_path / "site.yaml"
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "150", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "healthy period: 0.0-150.0 board s, 100 blocks/s" in p.stdout
+    assert "ch0: highest outlier count per decision on the healthy period at R_1:" in p.stdout
+    ch = yaml.safe_load(site.read_text())["channels"][0]
+    assert ch["name"] == "ch0" and ch["baseline"] > 0 and ch["r_max"] > ch["r_min"] > 0
+    again = tmp_path / "again.yaml"
+    assert run("cmsensord", "calibrate", str(degrading), "--to", "150", "--out", str(again)).returncode == 0
+    assert again.read_bytes() == site.read_bytes()
+
+    out = tmp_path / "logs"
+    p = run("cmsensord", "replay", str(degrading), "--config", str(site), "--out", str(out))
+    assert p.returncode == 0, p.stderr
+    sev = _severity(out)
+    assert all(m["severity_index"] == 0.0 for t, m in sev if t <= 150.5)
+    assert max(m["severity_index"] for _, m in sev) == 1.0
+    last = sev[-1][1]
+    assert {"severity_akf", "severity_level", "level_ratio"} <= set(last)
+    assert last["severity_index"] == max(last["severity_akf"], last["severity_level"])
+
+
+def test_calibrate_on_a_base_config_keeps_its_settings(degrading, tmp_path):
+    base = tmp_path / "base.yaml"
+    base.write_text("monitor:\n  c: 0.5\nchannels:\n  - name: motor_de\n    z_c: 3.0\n")
+    site = tmp_path / "site.yaml"
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "100", "--config", str(base), "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    cfg = yaml.safe_load(site.read_text())
+    assert cfg["monitor"]["c"] == 0.5
+    assert cfg["channels"][0]["name"] == "motor_de" and cfg["channels"][0]["z_c"] == 3.0
+
+
+@pytest.mark.parametrize("args, line, code", [
+    (["--rpm", "6000"], "cmsensord: configuration error: calibrate: ch0.f_r: 100 Hz must be below the 100 "
+                        "observations per decision (100 blocks/s x decision_period_s 1)", 78),
+    (["--from", "700"], "cmsensord: calibrate: {cap}: no observations between 700 and", 2),
+    (["--to", "1"], "cmsensord: calibrate: channel ch0: need at least 2 decision periods", 2),
+])
+def test_calibrate_errors_are_one_line(degrading, tmp_path, args, line, code):
+    p = run("cmsensord", "calibrate", str(degrading), *args, "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == code
+    assert p.stderr.startswith(line.format(cap=degrading)), p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "s.yaml").exists() and not (tmp_path / "s.yaml.part").exists()
+
+
+def test_calibrate_of_a_missing_capture(tmp_path):
+    p = run("cmsensord", "calibrate", str(tmp_path / "nope.bin"), "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 2
+    assert p.stderr.strip() == f"cmsensord: {tmp_path / 'nope.bin'}: capture file not found"
+
+
+def test_f_r_at_the_decision_size_is_a_configuration_error(degrading, tmp_path):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("monitor:\n  f_r: 100\n")
+    p = run("cmsensord", "replay", str(degrading), "--config", str(cfg), "--out", str(tmp_path / "o"))
+    assert p.returncode == 78
+    assert p.stderr.strip() == (
+        f"cmsensord: configuration error: {cfg}: monitor.f_r: must be below the 100 observations per "
+        "decision (decision_period_s 1 x 100 blocks/s): at or above it no decision can flag an anomaly "
+        "(got 100.0)")

@@ -1,0 +1,156 @@
+"""Commissioning (dsp.commissioning) and the combined severity (dsp.severity)."""
+
+import numpy as np
+import pytest
+
+from cmsensord.dsp.akf import AkfBank, bank_r
+from cmsensord.dsp.commissioning import (
+    MARGIN, R_GRID, SPAN, bank_limits, critical_r, learn_healthy, period_counts, run_in_periods,
+)
+from cmsensord.dsp.severity import AnomalyDecider, level_severity
+
+KW = dict(period=100, n=10, window=10, z_c=2.8)
+
+
+def _healthy(seconds, level=3.0, sigma=0.05, seed=0):
+    """Block RMS of a healthy machine: a steady level with small relative fluctuation."""
+    rng = np.random.default_rng(seed)
+    return level * (1.0 + sigma * rng.standard_normal(seconds * 100))
+
+
+def _run(y, model, f_r, **decider):
+    u = y / model.baseline
+    bank = AkfBank(bank_r(model.r_min, model.r_max, 10)[None], window=10, z_c=2.8)
+    dec = AnomalyDecider(1, 10, f_r=f_r, c=0.4, period=100, **decider)
+    out = bank.process(u[:, None])
+    level = u[:, None] if decider else None
+    return dec.update(out.outlier, out.valid, level=level)
+
+
+@pytest.mark.parametrize("r_1", [1e-5, 3e-3, 0.2])
+def test_bank_limits_give_r1_and_span(r_1):
+    r_min, r_max = bank_limits(r_1, 10)
+    R = bank_r(r_min, r_max, 10)
+    assert R[0] == pytest.approx(r_1, rel=1e-12)
+    assert R[-1] == pytest.approx(SPAN * r_1, rel=1e-12)
+
+
+def test_critical_r_is_the_first_quiet_r():
+    grid = np.array([1e-3, 1e-2, 1e-1])
+    counts = np.array([[40, 20, 3], [10, 5, 1], [50, 45, 40]])
+    r = critical_r(counts, 30.0, grid)
+    assert r.tolist() == [1e-2, 1e-3, np.inf]
+
+
+def test_counts_fall_with_r():
+    c = period_counts(_healthy(5), R_GRID[::10], period=100, window=10, z_c=2.8)
+    assert c.shape == (5, R_GRID[::10].size)
+    assert np.all(np.diff(c.sum(axis=0)) <= 2)
+
+
+def test_learned_model_is_quiet_on_new_healthy_data_and_flags_a_change():
+    m = learn_healthy(_healthy(60, seed=1), f_r=30.0, **KW)
+    assert m.baseline == pytest.approx(3.0, rel=0.01)
+    assert m.r_1 == pytest.approx(MARGIN * m.healthy_r)
+    assert m.flagged == 0 and m.max_cnt < 30
+    quiet = _run(_healthy(60, seed=2), m, 30.0)
+    assert max(d.severity[0] for d in quiet) == 0.0
+    rough = _healthy(30, sigma=0.25, seed=3)       # the fluctuation grows 5x at the same level
+    flagged = _run(np.concatenate([_healthy(30, seed=4), rough]), m, 30.0)
+    assert max(d.severity[0] for d in flagged[31:]) >= 0.5
+
+
+def test_r_scales_with_the_baseline_not_the_unit():
+    a = learn_healthy(_healthy(40, seed=5), f_r=30.0, **KW)
+    b = learn_healthy(1000.0 * _healthy(40, seed=5), f_r=30.0, **KW)
+    assert (a.r_min, a.r_max) == pytest.approx((b.r_min, b.r_max), rel=1e-9)
+    assert b.baseline == pytest.approx(1000.0 * a.baseline)
+
+
+def test_run_in_is_left_out():
+    y = _healthy(80, seed=6)
+    y[100:1600] *= 1.0 + 0.5 * np.random.default_rng(7).standard_normal(1500).clip(-1, 1)
+    m = learn_healthy(y, f_r=30.0, **KW)
+    plain = learn_healthy(y[1600:], f_r=30.0, **KW)
+    assert m.runin_periods == 19          # the first quarter of the 79 learned periods
+    assert m.r_1 == pytest.approx(plain.r_1, rel=0.5)
+
+
+def test_run_in_periods_needs_a_clear_step():
+    level = np.ones(40)
+    rstar = np.full(40, 1e-4)
+    assert run_in_periods(level, rstar) == 0
+    level[:10] = 1.5
+    assert run_in_periods(level, rstar) == 10
+
+
+def test_a_few_outlier_seconds_do_not_set_r():
+    y = _healthy(100, seed=8)
+    ref = learn_healthy(y, f_r=30.0, **KW)
+    y[5000:5100:2] *= 3.0           # one loud second
+    m = learn_healthy(y, f_r=30.0, **KW)
+    assert m.r_1 <= 2.0 * ref.r_1
+
+
+def test_faulty_capture_sets_r_max_the_papers_way():
+    healthy = _healthy(40, seed=9)
+    faulty = _healthy(20, sigma=0.3, seed=10)
+    m = learn_healthy(healthy, f_r=30.0, faulty=faulty, **KW)
+    plain = learn_healthy(healthy, f_r=30.0, **KW)
+    assert m.r_1 == pytest.approx(plain.r_1)
+    assert m.r_max > plain.r_max
+    assert bank_r(m.r_min, m.r_max, 10)[0] == pytest.approx(m.r_1)
+    last = _run(faulty, m, 30.0)[1:]
+    assert np.mean([d.anomaly[0, -1] for d in last]) >= 0.5
+
+
+def test_f_r_at_or_above_the_period_is_rejected():
+    with pytest.raises(ValueError, match="below the 100 observations"):
+        learn_healthy(_healthy(10), f_r=100.0, **KW)
+
+
+def test_too_short_is_rejected():
+    with pytest.raises(ValueError, match="at least 2 decision periods"):
+        learn_healthy(_healthy(1), f_r=30.0, **KW)
+
+
+def test_level_severity_grades():
+    s = level_severity(np.array([np.nan, 1.0, 1.99, 2.0, 2.9, 4.0, 9.0]), 10, 2.0, 4.0)
+    assert s.tolist() == [0.0, 0.0, 0.0, 0.5, 0.7, 1.0, 1.0]
+
+
+def test_combined_severity_is_the_max_and_split_invariant():
+    m = learn_healthy(_healthy(30, seed=11), f_r=30.0, **KW)
+    y = np.concatenate([_healthy(20, seed=12), _healthy(10, level=7.5, seed=13)])
+    whole = _run(y, m, 30.0, level_alert=2.0, level_danger=4.0)
+    assert whole[-1].level[0] == pytest.approx(2.5, rel=0.02)
+    for d in whole:
+        assert d.severity[0] == max(d.severity_akf[0], d.severity_level[0])
+    assert whole[-1].severity_level[0] == 0.6
+    u = y / m.baseline
+    bank = AkfBank(bank_r(m.r_min, m.r_max, 10)[None], window=10, z_c=2.8)
+    dec = AnomalyDecider(1, 10, f_r=30.0, c=0.4, period=100, level_alert=2.0, level_danger=4.0)
+    parts = []
+    for chunk in np.array_split(np.arange(u.size), 7):
+        out = bank.process(u[chunk, None])
+        parts += dec.update(out.outlier, out.valid, level=u[chunk, None])
+    assert [d.severity[0] for d in parts] == [d.severity[0] for d in whole]
+    assert [d.prev_severity[0] for d in parts[1:]] == [d.severity[0] for d in whole[:-1]]
+
+
+def test_paper_mode_has_no_level_part():
+    m = learn_healthy(_healthy(10, seed=14), f_r=30.0, **KW)
+    for d in _run(_healthy(10, level=9.0, seed=15), m, 30.0):
+        assert np.isnan(d.level[0]) and np.isnan(d.severity_level[0])
+        assert d.severity[0] == d.severity_akf[0]
+
+
+def test_held_counts_decisions_kept_by_hysteresis_alone():
+    dec = AnomalyDecider(1, 1, f_r=10.0, c=0.4, period=10, transient_periods=0)
+    one = np.ones((10, 1, 1), np.uint8)
+    valid = np.ones((10, 1), bool)
+    assert dec.update(one, valid)[0].held[0, 0] == 0          # cnt 10 >= f_r: set
+    some = one.copy()
+    some[:5] = 0                                              # cnt 5: 4 <= 5 < 10, kept
+    assert [dec.update(some, valid)[0].held[0, 0] for _ in range(3)] == [1, 2, 3]
+    assert dec.update(one, valid)[0].held[0, 0] == 0
