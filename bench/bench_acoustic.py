@@ -205,7 +205,7 @@ def paper_model(args) -> bool:
 def severity(args) -> None:
     from cmsensord.config import config_from_dict
     from cmsensord.pipeline import ListSink, Processor
-    from cmsensord.protocol import Decoder
+    from cmsensord.source import ByteStreamSource
 
     dur = args.severity_seconds
     cal = calibrate("degrading_mic", dur, 60.0, not args.no_cross_term)
@@ -222,11 +222,10 @@ def severity(args) -> None:
         for seed in args.severity:
             sc = make_scenario("degrading_mic", n_channels=2, seed=seed, duration_s=dur)
             board = Board(sc, BoardConfig(n_channels=2, scale=sc.board_scale))
-            sink, dec = ListSink(), Decoder()
+            sink = ListSink()
             proc = Processor(cfg, sink)
-            for chunk in board.iter_block_bytes(int(dur * 100)):
-                proc.handle(dec.feed(chunk))
-            proc.handle(dec.flush())
+            for frames in ByteStreamSource(board.iter_block_bytes(int(dur * 100))):
+                proc.handle(frames)
             proc.finish()
             la = np.array([m["level"] for m in sink.topic("/cm/acc/severity")])
             lm = np.array([m["level"] for m in sink.topic("/cm/mic/severity")])

@@ -288,23 +288,22 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
     capture carries no RAW blocks (RMS mode).
     """
     from cmsensord.dsp.rms import rows_physical, rows_rms
-    from cmsensord.protocol import Decoder, FrameType, decode_status
+    from cmsensord.errors import LinkError
+    from cmsensord.protocol import FrameType, decode_rms, decode_status
+    from cmsensord.source import CaptureSource
 
     channels = [int(c) for c in channels]
     if samples_of is not None and int(samples_of) not in channels:
         raise ValueError(f"samples_of: channel {samples_of} is not one of {channels}")
-    dec = Decoder()
     status = None
     rms_rows: dict[int, np.ndarray] = {}
     raw: dict[int, dict[int, bytes]] = {}
     try:
-        f = open(path, "rb")
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    with f:
-        while True:
-            data = f.read(chunk)
-            frames = dec.feed(data) if data else dec.flush()
+        source = CaptureSource(path, chunk=chunk)
+    except LinkError as exc:
+        raise ValueError(str(exc)) from None
+    with source:
+        for frames in source:
             for fr in frames:
                 if fr.type == FrameType.STATUS:
                     try:
@@ -312,13 +311,14 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
                     except ValueError:
                         continue
                 elif fr.type == FrameType.RMS:
-                    vals = np.frombuffer(fr.payload, dtype="<f4")
+                    try:
+                        vals = decode_rms(fr)
+                    except ValueError:
+                        continue
                     if max(channels) < vals.size:
                         rms_rows[fr.t0_unwrapped] = vals[channels].astype(np.float64)
                 elif fr.type == FrameType.RAW and fr.chan in channels:
                     raw.setdefault(fr.t0_unwrapped, {})[fr.chan] = fr.payload
-            if not data:
-                break
     if status is None:
         raise ValueError(f"{path}: no STATUS frame (block length and scale unknown)")
     L = status.block_len

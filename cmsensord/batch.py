@@ -1,4 +1,4 @@
-"""Offline order tracking of a whole capture with the batch Vold-Kalman filter (seed 003).
+"""Offline order tracking of a whole capture with the batch Vold-Kalman filter (Tůma).
 
 ``cmsensord vkf CAPTURE`` runs the capture through the daemon's own path (so
 the file holds the recursive orders, severity and events as a replay would)
@@ -11,7 +11,8 @@ tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record, so
 every value is final), zero-phase decimation to at least 5x the highest
 tracked frequency (``scipy.signal.decimate``, FIR, forwards and backwards),
 phases θ_k = 2π o_k turns (or 2π f t), one coupled banded solve per channel.
-A lost RAW block is zeros in the record (the batch filter sees a short gap).
+A lost RAW block is zeros in the record (the batch filter sees a short gap); each
+/orders message says which fraction of its block's samples had none (``missing_fraction``).
 This is an offline tool: it holds the whole record in memory (about 8 bytes
 per sample and channel at 25 kHz, plus ~1 kB per decimated sample for the
 solve with 2 poles and 3 components).
@@ -28,7 +29,9 @@ import numpy as np
 from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
-from cmsensord.protocol import Decoder, FrameType, decode_status, decode_tacho
+from cmsensord.monitor import messages
+from cmsensord.protocol import FrameType, decode_raw, decode_status, decode_tacho
+from cmsensord.source import CaptureSource
 
 
 class _Collector:
@@ -61,29 +64,19 @@ class _Collector:
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
                  quiet: bool = False) -> tuple[list[Path], dict]:
     """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary."""
-    from cmsensord.cli import _open_sink
-    from cmsensord.link import read_capture
     from cmsensord.pipeline import Processor
+    from cmsensord.service.sink import open_sink
 
     t_start = time.monotonic()
-    chunks = read_capture(capture)
-    first = next(chunks, None)
-    sink = _open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
-    decoder = Decoder()
-    proc = Processor(cfg, sink, auto_channels=True, link_counters=decoder.counters.as_dict)
+    source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
+    sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
+    proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)
     col = _Collector()
     try:
-        for data in ([first] if first is not None else []):
-            frames = decoder.feed(data)
-            proc.handle(frames)
-            col.add(frames, cfg.tacho.input)
-        for data in chunks:
-            frames = decoder.feed(data)
-            proc.handle(frames)
-            col.add(frames, cfg.tacho.input)
-        frames = decoder.flush()
-        proc.handle(frames)
-        col.add(frames, cfg.tacho.input)
+        with source:
+            for frames in source:
+                proc.handle(frames)
+                col.add(frames, cfg.tacho.input)
         proc.finish()
         if not col.raw or col.status is None:
             raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
@@ -112,12 +105,14 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     s0 = int(t0s.min())
     n = int(t0s.max()) - s0 + L
     y = np.zeros((n, len(channels)))
+    lost = np.ones((n, len(channels)), dtype=bool)          # no RAW block there: zeros in y
     pos = {ch.index: i for i, ch in enumerate(channels)}
     for t0, chan, payload in col.raw:
         if chan in pos and len(payload) == 2 * L:
-            counts = np.frombuffer(payload, dtype="<u2")[None, :]
+            counts = decode_raw(payload)[None, :]
             y[t0 - s0:t0 - s0 + L, pos[chan]] = rows_physical(counts, scale[chan:chan + 1],
                                                               offset[chan:chan + 1])[0]
+            lost[t0 - s0:t0 - s0 + L, pos[chan]] = False
     tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s)
     tacho.update(np.array(col.tacho_t0, dtype=np.int64), col.tacho_edges)
     comps = cfg.orders.components
@@ -141,6 +136,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     nb = len(idx) // block
     rpm_blocks = (60.0 * hz[:nb * block]).reshape(nb, block).mean(axis=1)
     ok_blocks = valid[:nb * block].reshape(nb, block).all(axis=1) & (rpm_blocks >= cfg.orders.min_rpm)
+    gone = lost[idx[:nb * block] - s0].reshape(nb, block, len(channels)).mean(axis=1)
     written = 0
     for ci, ch in enumerate(channels):
         res = vkf2(yd[:, ci], ph, r, poles=poles)
@@ -148,17 +144,12 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
         rms = np.sqrt(np.mean(w * w, axis=2))
         amp = res.amplitude[:, :nb * block].reshape(len(comps), nb, block).mean(axis=2)
         for b in range(nb):
-            end_sample = int(idx[(b + 1) * block - 1])
             rpm = float(rpm_blocks[b])
+            freqs = [c.freq_hz if c.freq_hz is not None else c.order * rpm / 60.0 for c in comps]
             ok = bool(ok_blocks[b])
-            orders = [{"name": c.name, "order": c.order,
-                       "freq_hz": c.freq_hz if c.freq_hz is not None else c.order * rpm / 60.0,
-                       "rms": float(rms[k, b]) if ok else None,
-                       "amplitude": float(amp[k, b]) if ok else None}
-                      for k, c in enumerate(comps)]
-            sink.write(f"/cm/{ch.name}/orders", "orders", proc.stamp_ns(end_sample),
-                       {"channel": ch.name, "speed_rpm": rpm, "valid": ok, "method": "batch",
-                        "orders": orders})
+            entries = messages.order_entries(comps, freqs, rms[:, b].tolist(), amp[:, b].tolist(), ok)
+            sink.write(*messages.orders(proc.stamp_ns(int(idx[(b + 1) * block - 1])), ch.name, rpm, ok,
+                                        "batch", entries, float(gone[b, ci])))
             written += 1
     return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
             "components": [c.name for c in comps], "r": [float(v) for v in r]}

@@ -1,10 +1,9 @@
-"""Byte sources: the serial port (reader thread, reconnect), capture files.
+"""The serial port at the edge: reader thread (reconnect with back-off), bounded frame queue.
 
-Everything here is I/O at the edge.  Bytes go into the push decoder of
-``protocol``; frames come out and go, through a bounded :class:`FrameQueue`,
-to the processing loop.  A capture file is the bytes exactly as read from the
-port (docs/PROTOCOL.md, "A captured serial log"): the reader can tee them to one,
-``record`` writes one, ``replay`` reads one through the same decoder.
+Bytes read from the port go into the push decoder of ``protocol``; frames come
+out and go, through a bounded :class:`FrameQueue`, to the processing loop
+(wrapped as :class:`cmsensord.source.SerialSource`).  The reader can tee the
+bytes to a capture file (docs/PROTOCOL.md, "A captured serial log").
 """
 
 from __future__ import annotations
@@ -18,8 +17,7 @@ import termios
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 from typing import BinaryIO
 
 import serial
@@ -124,7 +122,6 @@ class SerialReader(threading.Thread):
         self.ever_connected = False
         self.last_data = time.monotonic()
         self.failures = 0
-        self.eof = False                 # set when the port went away at least once
         self.capture_error: str | None = None
 
     def stop(self) -> None:
@@ -160,7 +157,6 @@ class SerialReader(threading.Thread):
             except PORT_ERRORS as exc:
                 self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
                 self.connected.clear()
-                self.eof = True
                 self.failures = 1
                 _close_quietly(ser)
                 ser = None
@@ -187,28 +183,6 @@ def _why(exc: BaseException) -> str:
 def _close_quietly(ser) -> None:
     with contextlib.suppress(*PORT_ERRORS):
         ser.close()
-
-
-def read_capture(path: str | Path, chunk: int = 1 << 20) -> Iterator[bytes]:
-    """The bytes of a capture file, in chunks. LinkError with a one-line reason if unreadable."""
-    p = Path(path)
-    try:
-        f = open(p, "rb")
-    except FileNotFoundError:
-        raise LinkError(f"{p}: capture file not found") from None
-    except IsADirectoryError:
-        raise LinkError(f"{p}: is a directory, not a capture file") from None
-    except OSError as exc:
-        raise LinkError(f"{p}: cannot read capture: {exc.strerror or exc}") from None
-    with f:
-        while True:
-            try:
-                data = f.read(chunk)
-            except OSError as exc:
-                raise LinkError(f"{p}: read error: {exc.strerror or exc}") from None
-            if not data:
-                return
-            yield data
 
 
 class Progress:

@@ -21,9 +21,8 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.errors import CmsensordError
-from cmsensord.link import read_capture
 from cmsensord.pipeline import ListSink, Processor
-from cmsensord.protocol import Decoder
+from cmsensord.source import CaptureSource
 
 __all__ = ["Observations", "read_observations", "sidecar"]
 
@@ -94,15 +93,13 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     cfg = replace(cfg, output=replace(cfg.output, akf_trace=False, status_line=False))
     collect = _Collect()
     sink = ListSink()
-    decoder = Decoder()
     proc = Processor(cfg, sink, auto_channels=auto_channels, observe=collect)
-    with _quiet(logging.getLogger("cmsensord")):   # the default monitor's events mean nothing here
-        for data in read_capture(capture, chunk=1 << 16):
-            proc.handle(decoder.feed(data))
+    with _quiet(logging.getLogger("cmsensord")), CaptureSource(capture) as source:
+        for frames in source:            # the default monitor's events mean nothing here
+            proc.handle(frames)
             if to_s is not None and proc.adc_seconds > to_s + 2.0:
                 break
         else:
-            proc.handle(decoder.flush())
             proc.finish()
     if not collect.blocks:
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")

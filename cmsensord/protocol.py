@@ -231,6 +231,19 @@ def decode_rms(frame: Frame) -> np.ndarray:
     return np.frombuffer(frame.payload, dtype="<f4").astype(np.float32)
 
 
+def decode_rms_rows(frames: Sequence[Frame], n_channels: int) -> np.ndarray:
+    """float32 array (len(frames), n_channels), m/s^2: the RMS frames of one channel count in
+    one pass (:func:`decode_rms` of each, stacked)."""
+    expected = 4 * n_channels
+    payloads = [f.payload for f in frames]
+    lengths = set(map(len, payloads))
+    if lengths - {expected}:
+        raise ProtocolError(f"RMS payload: expected {expected} bytes (4 x {n_channels} channels), "
+                            f"got {max(lengths - {expected})}")
+    rows = np.frombuffer(b"".join(payloads), dtype="<f4")
+    return rows.reshape(len(frames), n_channels).astype(np.float32)
+
+
 def decode_raw(payload: bytes) -> np.ndarray:
     """uint16 ADC counts."""
     n = len(payload)

@@ -515,7 +515,7 @@ if have_kernel():
 
         code = (
             "import sys, numpy as np\n"
-            "from cmsensord.orders import OrderChain\n"
+            "from cmsensord.monitor.orders import OrderChain\n"
             "from cmsensord.dsp.order_tracker import OrderTracker, TrackedComponent\n"
             "from cmsensord.dsp.tacho import TachoTracker\n"
             "c = [TrackedComponent(f'{k}x', order=float(k), bandwidth_pct=5.0) for k in (1, 2, 3, 4)]\n"

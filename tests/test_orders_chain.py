@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cmsensord.cli import RUNUP_ORDERS
+from cmsensord.service.simulate import RUNUP_ORDERS
 from cmsensord.config import config_from_dict
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
@@ -116,6 +116,31 @@ def test_vkf_subcommand_writes_batch_orders_beside_the_recursive_ones(tmp_path):
                 truth = block_truth(sc, rel, "order 4.2")
                 worst = max(worst, abs(o["rms"] - truth) / truth * 100)
     assert 0 < worst < 2.0, worst
+    assert all(m["missing_fraction"] == 0.0 for _, m in batch)
+
+
+def test_batch_orders_say_which_fraction_of_a_block_was_lost(tmp_path):
+    """A RAW block (10 ms) missing from the capture: the batch /orders message of the 0.1 s
+    block holding it has missing_fraction 0.1, as the recursive ones would say."""
+    import dataclasses
+
+    from cmsensord.batch import batch_orders
+    from cmsensord.protocol import OVERHEAD, FrameType, iter_frames
+    from cmsensord.sinks.mcap_sink import read_messages
+
+    sc = make_scenario("close_orders", n_channels=1, duration_s=3.0, seed=2)
+    data = Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=True)).generate(3.0)
+    frames, _ = iter_frames(data)
+    gone = [f for f in frames if f.type == FrameType.RAW][150]           # board block 150: 1.5 s
+    cap = tmp_path / "cap.bin"
+    cap.write_bytes(data[:gone.offset] + data[gone.offset + OVERHEAD + len(gone.payload):])
+    cfg = config_from_dict({"orders": RUNUP_ORDERS["close_orders"]})
+    cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=str(tmp_path / "out")))
+    paths, _ = batch_orders(str(cap), cfg)
+    batch = [m for t, _, m in read_messages(paths[0]) if t == "/cm/ch0/orders" and m["method"] == "batch"]
+    fractions = [m["missing_fraction"] for m in batch]
+    assert fractions[15] == pytest.approx(0.1, abs=0.02)
+    assert sum(f > 0 for f in fractions) == 1
 
 
 def test_order_latency_from_a_samples_arrival_is_within_250_ms():

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from cmsensord.config import default_config
 from cmsensord.pipeline import ListSink, Processor
 from cmsensord.protocol import Decoder, Status, encode_rms, encode_status
+from cmsensord.source import ByteStreamSource
 
 FIXED_CLOCK = lambda: 1_700_000_000_000_000_000  # noqa: E731
 
@@ -37,12 +38,10 @@ def rms_stream(seconds=12, C=2, seed=0, t0_start=0, drop=(), spike_from=None):
 def run(data: bytes, splits=(), cfg=None):
     cfg = cfg or default_config(2)
     sink = ListSink()
-    dec = Decoder()
     proc = Processor(cfg, sink, clock_ns=FIXED_CLOCK)
     cuts = [0, *sorted(splits), len(data)]
-    for a, b in zip(cuts, cuts[1:]):
-        proc.handle(dec.feed(data[a:b]))
-    proc.handle(dec.flush())
+    for frames in ByteStreamSource(data[a:b] for a, b in zip(cuts, cuts[1:])):
+        proc.handle(frames)
     return sink, proc
 
 
@@ -117,16 +116,22 @@ def test_configured_channel_not_in_the_stream_is_an_event_not_a_crash():
 
 def test_routine_disk_events_are_not_logged_as_errors(caplog):
     """Retention and "logging resumed" are disk_error events (details.action) for the
-    record, but INFO in the journal; a real disk error stays an ERROR."""
+    record, but the sink reports them at INFO in the journal; a real disk error stays an ERROR."""
     import logging
 
-    from cmsensord.config import default_config
-    from cmsensord.pipeline import ListSink, Processor
+    from cmsensord.service.sink import route_sink_events
 
-    proc = Processor(default_config(1), ListSink(), clock_ns=lambda: 0)
+    class FakeSink(ListSink):
+        on_event = None
+
+    sink = FakeSink()
+    proc = Processor(default_config(1), sink, clock_ns=lambda: 0)
+    route_sink_events(sink, proc.log)
     with caplog.at_level(logging.INFO, logger="cmsensord"):
-        proc.event("disk_error", None, "deleted 2 old files", details={"action": "retention"})
-        proc.event("disk_error", None, "logging resumed", details={"action": "resumed"})
-        proc.event("disk_error", None, "No space left on device", details={"action": "abandoned"})
+        sink.on_event("disk_error", "deleted 2 old files", details={"action": "retention"})
+        sink.on_event("disk_error", "logging resumed", details={"action": "resumed"})
+        sink.on_event("disk_error", "No space left on device", details={"action": "abandoned"})
+        proc.event("disk_error", None, "capture file: No space left on device")
     levels = [r.levelno for r in caplog.records if r.name == "cmsensord"]
-    assert levels == [logging.INFO, logging.INFO, logging.ERROR]
+    assert levels == [logging.INFO, logging.INFO, logging.ERROR, logging.ERROR]
+    assert [m["kind"] for m in sink.topic("/cm/events")] == ["disk_error"] * 4

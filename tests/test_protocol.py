@@ -28,6 +28,7 @@ from cmsensord.protocol import (
     Status,
     decode_raw,
     decode_rms,
+    decode_rms_rows,
     decode_status,
     decode_tacho,
     encode_frame,
@@ -85,6 +86,10 @@ def test_vectors_decode_to_the_stated_values():
     assert [f.offset for f in frames] == [0, len(VEC_RMS), len(VEC_RMS) + len(VEC_RAW)]
     assert decode_rms(frames[0]).tolist() == [0.5, 1.25]
     assert decode_rms(frames[0]).dtype == np.float32
+    rows = decode_rms_rows([frames[0], frames[0]], 2)
+    assert rows.dtype == np.float32 and rows.tolist() == [[0.5, 1.25], [0.5, 1.25]]
+    with pytest.raises(ProtocolError, match="expected 12 bytes"):
+        decode_rms_rows([frames[0]], 3)
     assert decode_raw(frames[1].payload).tolist() == [2048, 2100, 1996, 2048]
     assert decode_tacho(frames[2].payload).tolist() == [3200]  # 12.5 * 256
     assert counters.frames == {"status": 0, "rms": 1, "raw": 1, "tacho": 1}

@@ -10,7 +10,7 @@ import subprocess
 import sys
 import time
 
-from cmsensord.cli import RUNUP_ORDERS
+from cmsensord.service.simulate import RUNUP_ORDERS
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario

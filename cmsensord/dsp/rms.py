@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rows_physical", "rows_rms", "block_rms"]
+__all__ = ["rows_physical", "physical_rms", "rows_rms", "block_rms"]
 
 
 def rows_physical(counts: np.ndarray, scale, offset) -> np.ndarray:
@@ -27,10 +27,14 @@ def rows_physical(counts: np.ndarray, scale, offset) -> np.ndarray:
     return (np.asarray(counts).astype(np.float64) - offset[:, None]) * scale[:, None]
 
 
+def physical_rms(x: np.ndarray) -> np.ndarray:
+    """float32 (n,): the RMS of n blocks of physical values (n, block_len) from rows_physical."""
+    return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+
+
 def rows_rms(counts: np.ndarray, scale, offset) -> np.ndarray:
     """float32 (n,): the RMS of n blocks of counts (n, block_len) (see rows_physical)."""
-    x = rows_physical(counts, scale, offset)
-    return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+    return physical_rms(rows_physical(counts, scale, offset))
 
 
 def block_rms(counts: np.ndarray, scale, offset, block_len: int) -> np.ndarray:

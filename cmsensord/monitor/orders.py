@@ -1,12 +1,12 @@
 """The raw chain of one machine: shaft speed + RAW samples -> orders.
 
-Owns the glue between the :class:`~cmsensord.pipeline.Processor` (which decodes
-frames and converts counts to m/s²) and two pieces of pure DSP:
+Owns the glue between the monitoring chain (which decodes frames and converts
+counts to m/s², :mod:`cmsensord.monitor.raw`) and two pieces of pure DSP:
 
 * :class:`cmsensord.dsp.tacho.TachoTracker` turns edge times into speed and
   shaft angle at every sample (pulse repair, least-squares smoothing);
 * :class:`cmsensord.dsp.order_tracker.OrderTracker`, the recursive
-  angular-velocity Vold-Kalman tracker of seed 001, runs over all channels of
+  angular-velocity Vold-Kalman tracker of Yeh, Pan & Le, runs over all channels of
   the machine with the gains shared (they depend only on the speed).
 
 The tracker runs on the tacho's causal speed by default (``orders.speed:
@@ -16,8 +16,12 @@ TACHO frame of their block has arrived, and the result does not depend on how
 the stream was cut into reads: live and replay give the same messages.  With
 ``orders.speed: final`` samples wait until the smoothed speed is final for them
 (``final_until``, smoothing_revs + 1..2 pulses later), which is more accurate
-at low speed and later.  Output: ``/cm/<channel>/orders`` per output block
-(10 Hz by default), order alarms and tacho events.
+at low speed and later.  Samples wait in a bounded
+:class:`~cmsensord.monitor.speed_gate.SpeedGate`: at most ``MAX_WAIT_S``, so a
+tacho whose TACHO frames never come cannot make the chain grow without limit.
+Output, returned in order to the caller as :class:`~cmsensord.monitor.messages.Message`
+and :class:`~cmsensord.monitor.events.Event` items: ``/cm/<channel>/orders`` per
+output block (10 Hz by default) and the order alarms.
 
 Missing samples: a lost RAW frame (one channel's block) and a gap in the RAW
 stream of at most ``MAX_FILL_S`` reach the tracker as NaN, which it treats as
@@ -47,16 +51,23 @@ Limitations (documented, not hidden):
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
 from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.order_tracker import OrderAlarm, OrderTracker, TrackedComponent
 from cmsensord.dsp.tacho import TachoTracker
+from cmsensord.monitor import messages
+from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.events import Event
+from cmsensord.monitor.speed_gate import SpeedGate
 
 #: a gap in the RAW stream up to this long is filled; a longer one restarts the tracker
 MAX_FILL_S = 1.0
+#: samples wait at most this long for a final speed (then go with the speed as it is)
+MAX_WAIT_S = 10.0
+
+Out = list  # of messages.Message and Event, in the order they happened
 
 
 def _tracked(c, default_pct: float) -> TrackedComponent:
@@ -68,20 +79,21 @@ def _tracked(c, default_pct: float) -> TrackedComponent:
 
 
 class OrderChain:
-    """Tacho + order tracker for the channels of one machine (see module docstring)."""
+    """Tacho + order tracker for the channels of one machine (see module docstring).
+
+    ``tacho`` is fed by its owner; after each feed :meth:`release` tracks what it made final.
+    ``clock`` gives the stamps of board sample indices.
+    """
 
     def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], tacho: TachoTracker, *,
-                 fs: int, write: Callable[[str, str, int, dict], None],
-                 event: Callable[..., None], stamp: Callable[[int], int]):
+                 fs: int, clock: BlockClock):
         self.cfg = cfg
         self.channels = channels
         self.fs = fs
-        self.write = write
-        self.event = event
-        self.stamp = stamp
+        self.clock = clock
         o = cfg.orders
         self.components = tuple(_tracked(c, o.bandwidth_pct) for c in o.components)
-        self.tacho = tacho                      # owned and fed by the Processor
+        self.tacho = tacho
         self.tracker = OrderTracker(self.components, fs_in=fs, max_rpm=o.max_rpm,
                                     n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
                                     smoother_lag_s=o.smoother_lag_s or None,
@@ -103,101 +115,93 @@ class OrderChain:
         self._hello = (f"order tracker: {len(self.components)} component(s), decimation "
                        f"{tr.decimate} to {tr.fs_track:g} Hz, {tr.output_rate_hz:g} Hz output; latency "
                        f"{1000 * self.latency_s:.0f} ms ({how}, tracker {1000 * tr.latency_s:.0f} ms)")
-        self._parts: list[np.ndarray] = []      # samples waiting for a final speed, (n, C) each
-        self._waiting = 0
+        self.gate = SpeedGate(round(MAX_WAIT_S * fs))   # samples (n, C) waiting for a final speed
         self.sample0: int | None = None         # board sample index of the tracker's first input
-        self.next_sample: int | None = None     # board sample index of the next input expected
-        self.filled_samples = 0                 # samples given to the tracker as missing (NaN in a channel)
+
+    def _event(self, kind: str, channel: str | None, message: str, sample: int, **fields) -> Event:
+        return Event(kind, channel, message, self.clock.stamp_ns(sample), fields)
 
     # ---------------------------------------------------------------- input
-    def tacho_updated(self) -> None:
-        """The tacho has new edges: track the samples whose speed is now final."""
-        self._drain(final=False)
-
-    def add_samples(self, start: int, y: np.ndarray) -> None:
+    def add_samples(self, start: int, y: np.ndarray) -> Out:
         """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost."""
-        if self.next_sample is None:
-            self.sample0 = self.next_sample = start
-            self.event("config", None, self._hello, self.stamp(start))
-        gap = start - self.next_sample
+        out: Out = []
+        if self.sample0 is None:
+            self.sample0 = start
+            self.gate.restart(start)
+            out.append(self._event("config", None, self._hello, start))
+        gap = start - self.gate.end
         if gap < 0 or gap > MAX_FILL_S * self.fs:
-            self._drain(final=True)
+            out += self.release(final=True)
             self.tracker.reset()
-            self.sample0 = self.next_sample = start
-            self.event("config", None, f"order tracker restarted: RAW stream jumped by {gap} samples",
-                       self.stamp(start))
+            self.sample0 = start
+            self.gate.restart(start)
+            out.append(self._event("config", None, f"order tracker restarted: RAW stream jumped by "
+                                   f"{gap} samples", start))
         elif gap > 0:                           # missing: the tracker does a time update only
-            self._parts.append(np.full((gap, len(self.channels)), np.nan))
-            self._waiting += gap
-            self.filled_samples += gap
-        missing = np.isnan(y)
-        if missing.any():                       # lost RAW frames: NaN, passed on as missing
-            self.filled_samples += int(missing.any(axis=1).sum())
-        self._parts.append(y)
-        self._waiting += y.shape[0]
-        self.next_sample = start + y.shape[0]
-        self._drain(final=False)
+            self.gate.push(np.full((gap, len(self.channels)), np.nan))
+        self.gate.push(y)                       # NaN of lost RAW frames: passed on as missing
+        return out + self.release()
 
-    def finish(self) -> None:
+    def finish(self) -> Out:
         """End of the stream: track what waits, with the provisional speed."""
-        self._drain(final=True)
+        return self.release(final=True)
 
     # ---------------------------------------------------------------- tracking
-    def _drain(self, final: bool) -> None:
-        if not self._waiting:
-            return
-        first = self.next_sample - self._waiting
+    def release(self, *, final: bool = False, bounded: bool = False) -> Out:
+        """Track the samples whose speed is final (all if ``final``; with ``bounded``, at least
+        those waiting longer than MAX_WAIT_S)."""
+        if not self.gate.waiting:
+            return []
         if final:
-            upto = self.next_sample
+            upto = self.gate.end
         elif self.causal:
-            upto = min(self.next_sample, self.tacho.covered_until)
+            upto = self.tacho.covered_until
         else:
-            upto = min(self.next_sample, math.floor(self.tacho.final_until))
-        n = upto - first
-        if n <= 0:
-            return
-        y = np.concatenate(self._parts) if len(self._parts) > 1 else self._parts[0]
-        take, rest = y[:n], y[n:]
-        self._parts = [rest] if rest.shape[0] else []
-        self._waiting = rest.shape[0]
+            upto = math.floor(self.tacho.final_until)
+        got = self.gate.release(upto, final=final, bounded=bounded)
+        if got is None:
+            return []
+        first, (take,) = got
+        upto = first + take.shape[0]
         if self.causal:
             hz, valid = self.tacho.causal_range(first, upto)
         else:
             hz, _, valid = self.tacho.evaluate(np.arange(first, upto))
         rpm = np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
-        out = self.tracker.process(take, rpm)
-        self._write_blocks(out.blocks, "recursive")
-        if out.smoothed_blocks is not None:
-            self._write_blocks(out.smoothed_blocks, "smoothed")
-        for a in self.alarm.update(out.blocks):
-            ch = self.channels[a.channel].name
-            stamp = self.stamp(self.sample0 + int(a.block_start) * self.tracker.decimate)
-            if a.kind == "onset":
-                self.event("order_alarm", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² reached the "
-                           f"alarm level {a.level:.3g} at {a.rpm:.0f} rpm", stamp,
-                           component=a.component, rpm=round(a.rpm, 1), rms=a.rms)
-            else:
-                self.event("order_alarm_clear", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² back "
-                           f"below {self.cfg.orders.alarm_clear:g} x {a.level:.3g} at {a.rpm:.0f} rpm",
-                           stamp, component=a.component, rpm=round(a.rpm, 1), rms=a.rms)
+        res = self.tracker.process(take, rpm)
+        out: Out = self._blocks(res.blocks, "recursive")
+        if res.smoothed_blocks is not None:
+            out += self._blocks(res.smoothed_blocks, "smoothed")
+        return out + self._alarms(res.blocks)
 
-    def _write_blocks(self, blocks, method: str) -> None:
+    def _alarms(self, blocks) -> Out:
+        out: Out = []
+        for a in self.alarm.update(blocks):
+            ch = self.channels[a.channel].name
+            sample = self.sample0 + int(a.block_start) * self.tracker.decimate
+            fields = {"component": a.component, "rpm": round(a.rpm, 1), "rms": a.rms}
+            if a.kind == "onset":
+                out.append(self._event("order_alarm", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² "
+                                       f"reached the alarm level {a.level:.3g} at {a.rpm:.0f} rpm",
+                                       sample, **fields))
+            else:
+                out.append(self._event("order_alarm_clear", ch, f"{ch}: {a.component} RMS {a.rms:.3g} "
+                                       f"m/s² back below {self.cfg.orders.alarm_clear:g} x {a.level:.3g} "
+                                       f"at {a.rpm:.0f} rpm", sample, **fields))
+        return out
+
+    def _blocks(self, blocks, method: str) -> Out:
         comps = self.components
         B = self.tracker.block
+        out: Out = []
         for e in range(len(blocks.start)):
-            stamp = self.stamp(self.sample0 + int(blocks.t_in[e]))
+            stamp = self.clock.stamp_ns(self.sample0 + int(blocks.t_in[e]))
             rpm = float(blocks.rpm[e])
             ok = bool(blocks.valid[e])
             freqs = [float(c.freq(rpm)) for c in comps]
             for ci, ch in enumerate(self.channels):
-                gone = int(blocks.missing[e, ci]) / B
-                orders = []
-                for k, c in enumerate(comps):
-                    rms = float(blocks.rms[e, ci, k])
-                    amp = float(blocks.amplitude[e, ci, k])
-                    orders.append({"name": c.name, "order": c.order, "freq_hz": freqs[k],
-                                   "rms": rms if ok and rms == rms else None,
-                                   "amplitude": amp if ok and amp == amp else None})
-                self.write(f"/cm/{ch.name}/orders", "orders", stamp, {
-                    "channel": ch.name, "speed_rpm": rpm if rpm == rpm else None, "valid": ok,
-                    "method": method, "orders": orders, "missing_fraction": gone})
+                entries = messages.order_entries(comps, freqs, blocks.rms[e, ci].tolist(),
+                                                 blocks.amplitude[e, ci].tolist(), ok)
+                out.append(messages.orders(stamp, ch.name, rpm, ok, method, entries,
+                                           int(blocks.missing[e, ci]) / B))
+        return out

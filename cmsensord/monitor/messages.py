@@ -1,0 +1,109 @@
+"""Every message the monitoring chain writes, built in one place from the schema helpers.
+
+A :class:`Message` is what a sink's ``write(topic, schema, stamp_ns, msg)`` takes.
+The field names and their meaning are the output contract of
+:mod:`cmsensord.sinks.schemas`; a value that is not finite becomes ``None``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple, Sequence
+
+import numpy as np
+
+from cmsensord.sinks.schemas import (TOPIC_DIAGNOSTICS, TOPIC_EVENTS, akf_topic, orders_topic,
+                                     severity_topic, vibration_estimate_topic)
+
+
+class Message(NamedTuple):
+    topic: str
+    schema: str
+    stamp_ns: int
+    msg: dict
+
+
+def num(x: float):
+    """A float for JSON: None when it is NaN."""
+    return None if x != x else x
+
+
+def event(stamp_ns: int, kind: str, channel: str | None, message: str, extra: dict[str, Any]) -> Message:
+    """An event record with its ``extra`` fields (count, filter, details ...)."""
+    return Message(TOPIC_EVENTS, "event", stamp_ns,
+                   {"kind": kind, "channel": channel, "message": message, **extra})
+
+
+def severity(stamp_ns: int, channel: str, d, c: int, R: np.ndarray, **extra: Any) -> Message:
+    """The decision ``d`` (:class:`~cmsensord.dsp.severity.Decision`) of channel column ``c``
+    whose bank has the noise variances ``R``; ``extra``: further optional fields."""
+    sev = float(d.severity[c])
+    anomaly = d.anomaly[c].tolist()
+    return Message(severity_topic(channel), "severity", stamp_ns, {
+        "channel": channel, "severity_index": sev, "level": int(round(sev * len(R))),
+        "anomaly": anomaly, "outliers": d.cnt[c].tolist(), "f_r": float(d.f_r[c]),
+        "r": R.tolist(), "failure": bool(anomaly[-1]) or sev >= 1.0, "missing": int(d.missing[c]),
+        "transient": d.transient, **extra,
+    })
+
+
+def diagnostics(stamp_ns: int, link: dict, observations: int, uptime_s: float,
+                extra: dict | None = None) -> Message:
+    msg: dict[str, Any] = {"link": link, "queue_depth": 0, "queue_drops": 0, "lag_s": 0.0,
+                           "observations": observations, "uptime_s": uptime_s}
+    if extra:
+        msg.update(extra)
+    return Message(TOPIC_DIAGNOSTICS, "diagnostics", stamp_ns, msg)
+
+
+def akf_trace(channel: str, stamps: Sequence[int], i: int, y: np.ndarray, valid: np.ndarray,
+              x_prior: np.ndarray, x_hat: np.ndarray, Y: np.ndarray, z: np.ndarray,
+              outlier: np.ndarray, Q: np.ndarray, z_c: float) -> list[Message]:
+    """Per observation of one channel, the AKF ``i`` (0-based) of its bank (arrays (T,))."""
+    sd = np.sqrt(Y)
+    lo = (x_prior - z_c * sd).tolist()
+    hi = (x_prior + z_c * sd).tolist()
+    yl, zl, xpl, xhl = y.tolist(), z.tolist(), x_prior.tolist(), x_hat.tolist()
+    ol, ql = outlier.tolist(), Q.tolist()
+    topic = akf_topic(channel)
+    out = []
+    for k, stamp in enumerate(stamps):
+        if valid[k]:
+            msg = {"channel": channel, "filter": i + 1, "y": yl[k], "x_hat": xhl[k],
+                   "x_prior": xpl[k], "lower": lo[k], "upper": hi[k], "z": zl[k],
+                   "outlier": bool(ol[k]), "q_hat": ql[k], "missing": False}
+        else:
+            msg = {"channel": channel, "filter": i + 1, "y": None, "x_hat": num(xhl[k]),
+                   "x_prior": num(xpl[k]), "lower": num(lo[k]), "upper": num(hi[k]),
+                   "z": None, "outlier": False, "q_hat": num(ql[k]), "missing": True}
+        out.append(Message(topic, "akf", stamp, msg))
+    return out
+
+
+def vibration_estimate(channel: str, stamps: Sequence[int], rms, z, ok, est, j: int) -> list[Message]:
+    """Per block of microphone column ``j``: the acoustic estimator's output ``est`` (arrays
+    (T, M)), the vibration RMS sqrt(x^) ``rms``, the observed z and whether it was there."""
+    xr, xh, px, ah, pa, yh, py, zp = (a[:, j].tolist() for a in (
+        rms, est.x_hat, est.P_x, est.a_hat, est.P_a, est.y_hat, est.P_y, est.z_pred))
+    zl, okl = z[:, j].tolist(), ok[:, j].tolist()
+    topic = vibration_estimate_topic(channel)
+    return [Message(topic, "vibration_estimate", stamp, {
+        "channel": channel, "x_hat": num(xr[k]), "x_ms": num(xh[k]), "x_ms_var": num(px[k]),
+        "a_hat": num(ah[k]), "a_var": num(pa[k]), "y_hat": num(yh[k]),
+        "y_var": num(py[k]), "z": zl[k] if okl[k] else None, "z_pred": num(zp[k]),
+        "missing": not okl[k]}) for k, stamp in enumerate(stamps)]
+
+
+def order_entries(components, freqs: Sequence[float], rms: Sequence[float], amplitude: Sequence[float],
+                  ok: bool) -> list[dict]:
+    """The ``orders`` array of one /orders message: per tracked component, its frequency, and
+    RMS and amplitude where the block is valid and they are finite."""
+    return [{"name": c.name, "order": c.order, "freq_hz": f,
+             "rms": r if ok and r == r else None, "amplitude": a if ok and a == a else None}
+            for c, f, r, a in zip(components, freqs, rms, amplitude)]
+
+
+def orders(stamp_ns: int, channel: str, speed_rpm: float, valid: bool, method: str,
+           entries: list[dict], missing_fraction: float) -> Message:
+    return Message(orders_topic(channel), "orders", stamp_ns, {
+        "channel": channel, "speed_rpm": num(speed_rpm), "valid": valid, "method": method,
+        "orders": entries, "missing_fraction": missing_fraction})

@@ -1,0 +1,272 @@
+"""The Processor: decoded frames in, messages out, routed through the monitoring chain's parts.
+
+No threads, ports or files: the live port, a replayed capture and a simulation
+hand it the same :class:`~cmsensord.protocol.Frame` batches
+(:mod:`cmsensord.source`), so live and replay give the same messages.  Per frame:
+
+* STATUS -> the block clock's rate, the channels, the tacho (:mod:`.clock`, :mod:`.shaft`);
+* RMS (values per block) and RAW (:mod:`.raw`: counts -> m/s² -> block RMS) -> slots on the
+  block clock -> microphone estimator (:mod:`.microphone`) -> AKF banks -> outlier flags
+  waiting for a final speed -> decisions (:mod:`.severity`, :mod:`.speed_gate`);
+* RAW samples of the vibration channels -> order chain (:mod:`.orders`);
+* TACHO -> shaft speed (:mod:`.shaft`).
+
+Every message is built in :mod:`.messages`; every event goes through the
+:class:`~cmsensord.monitor.events.EventLog`.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from cmsensord.config import Config
+from cmsensord.monitor import messages
+from cmsensord.monitor.channels import ChannelSetup
+from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.events import Event, EventLog
+from cmsensord.monitor.raw import RawInput
+from cmsensord.monitor.shaft import Shaft
+from cmsensord.protocol import Frame, FrameType, ProtocolError, decode_rms_rows
+
+#: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
+#: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
+MAX_BATCH = 1000
+
+
+class Processor:
+    """Frames in, messages out (see module docstring).
+
+    ``auto_channels``: the channel list follows the board (the first RMS frame's
+    C) instead of the configuration (used when the file lists no channels).
+    ``diagnostics``: callable returning extra fields for ``/cm/diagnostics``
+    (queue depth, drops, lag) — supplied by the live loop.  ``observe``: called with
+    (first_slot, y, valid) of each block of observations before the banks (commissioning).
+    """
+
+    def __init__(self, cfg: Config, sink, *, auto_channels: bool = False,
+                 clock_ns: Callable[[], int] = time.time_ns,
+                 diagnostics: Callable[[], dict] | None = None,
+                 link_counters: Callable[[], dict] | None = None,
+                 on_event: Callable[[dict], None] | None = None,
+                 observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
+        self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
+        self.observe = observe        # (first_slot, y, valid) of each block the bank watches
+        self.diagnostics, self.link_counters = diagnostics, link_counters
+        self.clock = BlockClock()
+        self.log = EventLog(sink, lambda: self.clock.last_stamp_ns or self.clock_ns(), on_event)
+        self.raw = RawInput(cfg)
+        self.shaft = Shaft(cfg)
+        self.orders = None                      # OrderChain, once RAW blocks and a tacho come
+        self.observations = self.missing_observations = self.frames_lost = 0
+        self.started_wall = time.monotonic()
+        self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
+
+    # ---- the parts' figures, for the status line, the summary and the tools --
+    status = property(lambda self: self.setup.status)
+    channels = property(lambda self: self.setup.channels)
+    severity = property(lambda self: self.setup.severity)
+    views = property(lambda self: self.setup.severity.views if self.setup.severity else [])
+    tacho = property(lambda self: self.shaft.tacho)
+    events = property(lambda self: self.log.recent)
+    event_counts = property(lambda self: self.log.counts)
+    raw_dropped = property(lambda self: self.raw.dropped)
+    fs = property(lambda self: self.clock.fs)
+    block_len = property(lambda self: self.clock.block_len)
+    anchor_ns = property(lambda self: self.clock.anchor_ns)
+    next_slot = property(lambda self: self.clock.next_slot)
+    board_seconds = property(lambda self: self.clock.board_seconds)
+    adc_seconds = property(lambda self: self.clock.adc_seconds)
+
+    def stamp_ns(self, t0_unwrapped: int) -> int:
+        return self.clock.stamp_ns(t0_unwrapped)
+
+    def raw_calibration(self):
+        """Per board channel scale/offset: STATUS, overridden by the configuration."""
+        return self.raw.calibration(self.status)
+
+    def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
+              **extra: Any) -> None:
+        self.log.emit(kind, channel, message, stamp_ns, **extra)
+
+    def _out(self, items) -> None:
+        """Messages to the sink and events to the log, in their order."""
+        write = self.sink.write
+        for it in items:
+            if type(it) is Event:
+                self.log.add((it,))
+            else:
+                write(*it)
+
+    # ---- frames ------------------------------------------------------------
+    def handle(self, frames: Sequence[Frame]) -> None:
+        """Process a batch of decoded frames, in order."""
+        if not frames:
+            return
+        if self.clock.anchor_ns is None:
+            self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
+        rms: list[Frame] = []
+        raw: list[Frame] = []
+        for f in frames:
+            if f.lost_before:
+                rms, raw = self._flush(rms, raw)
+                self.frames_lost += f.lost_before
+                self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
+                           f"(seq gap)", self.clock.stamp_ns(f.t0_unwrapped), count=f.lost_before)
+            if f.type == FrameType.RMS:
+                rms.append(f)
+                if len(rms) >= MAX_BATCH:          # bounded memory per bank call
+                    rms = self._flush(rms, [])[0]
+            elif f.type == FrameType.RAW:
+                raw.append(f)
+                if len(raw) >= MAX_BATCH:
+                    raw = self._flush([], raw)[1]
+            elif f.type == FrameType.TACHO:
+                self.shaft.add(f)
+            elif f.type == FrameType.STATUS:
+                st, news = self.setup.decode(f)
+                if news:                        # it changes the time base or the channels:
+                    rms, raw = self._flush(rms, raw)    # the frames before it go first
+                    self.setup.apply(f, st)
+                self.setup.status = st or self.setup.status
+                if self.status is not None:
+                    self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
+                    if self.raw.waiting:
+                        self._flush_raw([])
+        self._flush(rms, raw)
+        self._feed_tacho()
+
+    def finish(self) -> None:
+        """End of the stream: process what still waits (an incomplete last RAW block,
+        samples waiting for a final tacho speed)."""
+        self._flush_raw([], final=True)
+        self._feed_tacho(end=True)
+        if self.orders is not None:
+            self._out(self.orders.finish())
+        self._release_decisions(final=True)
+
+    def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
+        self._flush_rms(rms)
+        self._flush_raw(raw)
+        return [], []
+
+    def _flush_rms(self, frames: list[Frame]) -> None:
+        """RMS frames -> observations on the block clock."""
+        if not frames:
+            return
+        C = frames[0].chan
+        if any(f.chan != C for f in frames):        # channel count changed mid-batch: split
+            cut = next(i for i, f in enumerate(frames) if f.chan != C)
+            self._flush_rms(frames[:cut])
+            self._flush_rms(frames[cut:])
+            return
+        if not self.setup.ready(C):
+            return
+        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
+        try:
+            vals = decode_rms_rows(frames, C)
+        except ProtocolError:
+            self.event("decode_error", None, f"RMS payload length does not match C = {C}")
+            return
+        self._observe(t0, vals)
+
+    def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
+        """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
+        self.raw.add(frames)
+        ready, C, events = self.raw.ready(self.status, final)
+        self._out(events)
+        if not ready or not self.setup.ready(C):
+            return
+        blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.status)
+        self._out(events)
+        if blocks is None:
+            return
+        self._observe(blocks.t0, blocks.rms())
+        if self._orders_ready():
+            index = [ch.index for ch in self.orders.channels]
+            y = blocks.samples(index)
+            for a, b in blocks.runs():          # consecutive except across lost blocks
+                self._out(self.orders.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(index))))
+
+    def _orders_ready(self) -> bool:
+        """The order chain of the vibration channels, created with the first RAW blocks."""
+        if self.orders is None:
+            vib = tuple(ch for ch in self.channels if ch.kind != "microphone")
+            if not (vib and self.cfg.orders.enabled and self.severity is not None
+                    and self.shaft.ensure(self.status, self.clock)):
+                return False
+            from cmsensord.monitor.orders import OrderChain     # scipy is loaded only for the raw chain
+            self.orders = OrderChain(self.cfg, vib, self.shaft.tacho, fs=self.clock.fs, clock=self.clock)
+        return True
+
+    def _feed_tacho(self, end: bool = False) -> None:
+        """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as
+        the speed gates allow, except at the ``end`` where the order chain drains anyway)."""
+        fed = bool(self.shaft.waiting) and self.shaft.ensure(self.status, self.clock)
+        if fed:
+            self._out(self.shaft.feed(self.clock))
+        if self.orders is not None and (fed or not end):
+            self._out(self.orders.release(bounded=not end))
+        self._release_decisions(final=False, bounded=True)
+
+    # ---- observations and decisions -----------------------------------------
+    def _observe(self, t0: np.ndarray, vals: np.ndarray) -> None:
+        """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain."""
+        while len(t0):
+            slots, n = self.clock.place(t0)
+            if n:
+                self._run(slots, vals[:n])
+            if n == len(t0):
+                return
+            old = self.clock.next_slot
+            self.clock.reanchor(int(t0[n]))
+            self.event("config", None, f"board clock jumped (t0 {int(t0[n])} after slot {old - 1}): "
+                       "time base re-anchored", self.clock.stamp_ns(int(t0[n])))
+            t0, vals = t0[n:], vals[n:]
+
+    def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:
+        first = self.clock.next_slot
+        T = int(slots[-1]) + 1 - first
+        y = np.full((T, len(self.channels)), np.nan)
+        valid = np.zeros((T, len(self.channels)), dtype=bool)
+        y[slots - first] = vals[:, self.severity.index]
+        valid[slots - first] = True
+        valid &= np.isfinite(y)
+        mics, trace = self.setup.microphones, self.cfg.output.akf_trace
+        stamps = [self.clock.slot_stamp_ns(first + k) for k in range(T)] if mics or trace else []
+        if mics is not None:
+            self._out(mics.step(y, valid, stamps))
+        if self.observe is not None:
+            self.observe(first, y, valid)
+        y, out = self.severity.observe(first, y, valid)
+        self.clock.advance(T)
+        self.observations += int(valid.sum())
+        self.missing_observations += int((~valid).sum())
+        if trace:
+            self._out(self.severity.trace(stamps, y, valid, out))
+        self._release_decisions(final=False)
+
+    def _release_decisions(self, final: bool, bounded: bool = False) -> None:
+        """Decisions of the slots whose tacho speed is final (f_r: the period's mean speed);
+        with ``bounded``, also those waiting longer than the speed gate allows."""
+        sev = self.severity
+        if sev is None or not sev.gate.waiting:
+            return
+        tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
+        upto = self.shaft.final_slot(self.clock) if tacho and not final else self.clock.next_slot
+        cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
+        f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
+        for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
+            stamp = self.clock.slot_stamp_ns(d.slot)
+            self._out(sev.decision(d, stamp))
+            self._out([messages.diagnostics(
+                stamp, self.link_counters() if self.link_counters else {}, self.observations,
+                round(time.monotonic() - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+
+    def lag_s(self) -> float:
+        """Wall-clock lag of the newest processed observation (live mode)."""
+        if not self.clock.last_stamp_ns:
+            return 0.0
+        return max(0.0, (self.clock_ns() - self.clock.last_stamp_ns) / 1e9)

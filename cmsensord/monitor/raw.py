@@ -1,0 +1,137 @@
+"""RAW blocks (docs/PROTOCOL.md type 3) -> physical values, once; the block RMS from them.
+
+RAW frames wait here until they can be converted: before the first STATUS (its
+scale/offset) at most ``RAW_WAIT_FRAMES`` of them (the oldest beyond are
+dropped and counted), and the newest block until all its channels came (its
+frames can straddle a read).  :meth:`RawInput.blocks` turns ready frames into
+:class:`RawBlocks`: m/s² per frame, ``(count - offset) * scale`` with the
+STATUS calibration overridden by the configuration (:mod:`cmsensord.dsp.rms`),
+from which both the severity chain's block RMS and the order chain's samples
+come.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cmsensord.config import Config
+from cmsensord.dsp.rms import physical_rms, rows_physical
+from cmsensord.monitor.events import Event
+from cmsensord.protocol import Frame, Status, decode_raw
+
+#: RAW frames held while waiting for the first STATUS (its scale/offset): 2 s of 4 channels
+RAW_WAIT_FRAMES = 800
+
+
+@dataclass
+class RawBlocks:
+    """Converted RAW frames of consecutive (or, across lost ones, gapped) blocks."""
+
+    t0: np.ndarray          # (B,) int64 first sample of each block, in arrival order
+    row: np.ndarray         # (F,) the block of each frame
+    chan: np.ndarray        # (F,) the board channel of each frame
+    x: np.ndarray           # (F, block_len) float64 m/s²
+    n_channels: int         # C of the board
+
+    def rms(self) -> np.ndarray:
+        """float32 (B, C): the block RMS per board channel, NaN where a frame is missing."""
+        vals = np.full((len(self.t0), self.n_channels), np.nan, dtype=np.float32)
+        vals[self.row, self.chan] = physical_rms(self.x)
+        return vals
+
+    def samples(self, index: list[int]) -> np.ndarray:
+        """float64 (B, block_len, len(index)): the board channels ``index``, NaN where lost."""
+        L = self.x.shape[1]
+        sel = np.isin(self.chan, index)
+        pos = {int(b): i for i, b in enumerate(index)}
+        y = np.full((len(self.t0), L, len(index)), np.nan)
+        y[self.row[sel], :, [pos[int(c)] for c in self.chan[sel]]] = self.x[sel]
+        return y
+
+    def runs(self) -> list[tuple[int, int]]:
+        """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
+        L = self.x.shape[1]
+        cuts = np.flatnonzero(np.diff(self.t0) != L) + 1
+        return list(zip(np.r_[0, cuts].tolist(), np.r_[cuts, len(self.t0)].tolist()))
+
+
+class RawInput:
+    """RAW frames waiting for a STATUS or the rest of their block (see module docstring)."""
+
+    def __init__(self, cfg: Config):
+        self.cfg = cfg
+        self.waiting: list[Frame] = []
+        self.dropped = 0
+
+    def add(self, frames: list[Frame]) -> None:
+        self.waiting.extend(frames)
+
+    def _overrides_complete(self) -> bool:
+        return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)
+
+    def ready(self, status: Status | None, final: bool) -> tuple[list[Frame], int, list[Event]]:
+        """The frames that can be converted now and the board's channel count C (with
+        ``final``, also the newest block's however many channels came)."""
+        if not self.waiting:
+            return [], 0, []
+        if status is None and not self._overrides_complete():
+            over = len(self.waiting) - RAW_WAIT_FRAMES
+            if over <= 0:
+                return [], 0, []
+            del self.waiting[:over]
+            self.dropped += over
+            return [], 0, [Event("decode_error", None, f"{over} RAW frame(s) dropped: no STATUS "
+                                 "(scale/offset) from the board yet")]
+        frames, self.waiting = self.waiting, []
+        C = status.n_channels if status is not None else 1 + max(f.chan for f in frames)
+        if not final:
+            # the newest block may still be missing channels (its frames can straddle a
+            # read or a batch): it waits for a frame of a later block, or for the end
+            last = frames[-1].t0_unwrapped
+            k = len(frames)
+            while k > 0 and frames[k - 1].t0_unwrapped == last:
+                k -= 1
+            if len(frames) - k < C:
+                frames, self.waiting = frames[:k], frames[k:]
+        return frames, C, []
+
+    def blocks(self, frames: list[Frame], C: int, L: int,
+               status: Status | None) -> tuple[RawBlocks | None, list[Event]]:
+        """Frames of ``L`` samples -> :class:`RawBlocks` (frames of another length or a channel
+        >= C are skipped with a decode_error event)."""
+        good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
+        events = []
+        if len(good) < len(frames):
+            events.append(Event("decode_error", None, f"{len(frames) - len(good)} RAW frame(s) with "
+                                f"a channel >= {C} or a payload that is not {L} samples skipped"))
+        if not good:
+            return None, events
+        t0 = np.fromiter((f.t0_unwrapped for f in good), dtype=np.int64, count=len(good))
+        chan = np.fromiter((f.chan for f in good), dtype=np.int64, count=len(good))
+        counts = decode_raw(b"".join(f.payload for f in good)).reshape(len(good), L)
+        blocks, row = np.unique(t0, return_inverse=True)
+        if np.any(np.diff(t0) < 0):             # out of order: a board reset; keep arrival order
+            blocks, first = np.unique(t0, return_index=True)
+            order = np.argsort(first)
+            blocks = blocks[order]
+            row = np.argsort(order)[row]
+        scale, offset = self.calibration(status)
+        return RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C), events
+
+    def calibration(self, status: Status | None) -> tuple[np.ndarray, np.ndarray]:
+        """Per board channel scale/offset: STATUS, overridden by the configuration."""
+        st = status
+        n = max(st.n_channels if st else 0, 1 + max((ch.index for ch in self.cfg.channels), default=0))
+        scale = np.ones(n, dtype=np.float32)
+        offset = np.zeros(n, dtype=np.float32)
+        if st is not None:
+            scale[:len(st.scale)] = st.scale
+            offset[:len(st.offset)] = st.offset
+        for ch in self.cfg.channels:
+            if ch.scale is not None:
+                scale[ch.index] = ch.scale
+            if ch.offset is not None:
+                offset[ch.index] = ch.offset
+        return scale, offset

@@ -1,0 +1,169 @@
+"""The severity chain of Kim et al. 2023: an AKF bank per channel, outlier counts, decisions.
+
+Per observation slot the channels' banks (:class:`~cmsensord.dsp.akf.AkfBank`,
+eqs. 3-15) flag outliers; the flags wait in a :class:`SpeedGate` while the
+decision's f_r may come from the tacho, then the decider
+(:class:`~cmsensord.dsp.severity.AnomalyDecider`, Fig. 3, eqs. 16-18) makes one
+decision per period.  A decision becomes a ``/cm/<channel>/severity`` message
+per channel and the events of what changed (anomaly onset/clear, severity
+change, failure), and updates the channels' :class:`ChannelView`.
+
+With a commissioned baseline the banks watch block RMS / baseline, and the
+combined severity (``monitor.severity``) also grades the period's level against
+it (:func:`~cmsensord.dsp.severity.level_severity`); its severity messages then
+carry ``severity_akf``, ``severity_level`` and ``level_ratio``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from cmsensord.config import ChannelConfig
+from cmsensord.dsp.akf import AkfBank, AkfBlock, bank_r
+from cmsensord.dsp.severity import AnomalyDecider, Decision
+from cmsensord.monitor import messages
+from cmsensord.monitor.events import Event
+from cmsensord.monitor.speed_gate import SpeedGate
+
+#: observation slots whose decisions may wait for a final tacho speed (5 s at 100 Hz)
+PENDING_DECISION_SLOTS = 500
+
+
+@dataclass
+class ChannelView:
+    """Latest per-channel figures for the status line and the exit summary."""
+
+    name: str
+    severity: float = 0.0
+    max_severity: float = 0.0
+    anomaly: list[int] = field(default_factory=list)
+    outliers_first: int = 0       # outliers in the last period of the most sensitive AKF
+    decisions: int = 0
+    failures: int = 0
+
+
+class SeverityChain:
+    """Banks, decider and views of the monitored ``channels`` (see module docstring)."""
+
+    def __init__(self, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
+                 trace_filter: int):
+        self.channels = channels
+        mons = [ch.monitor for ch in channels]
+        n = mons[0].n                   # the same for every channel (config rule)
+        self.R = np.stack([bank_r(m.r_min, m.r_max, m.n) for m in mons])
+        self.bank = AkfBank(self.R, window=[m.window for m in mons], z_c=[m.z_c for m in mons],
+                            p0=[m.p0 for m in mons], q0=[m.q0 for m in mons])
+        period = max(1, round(mons[0].decision_period_s * fs / block_len))
+        combined = [m.combined for m in mons]
+        self.baseline = np.array([m.baseline or 1.0 for m in mons])   # the bank watches y / baseline
+        self.combined = np.array(combined) if any(combined) else None  # severity also grades the level
+        self.decider = AnomalyDecider(
+            len(channels), n, f_r=[m.f_r for m in mons], c=[m.c for m in mons], period=period,
+            level_alert=[m.level_alert for m in mons] if any(combined) else None,
+            level_danger=[m.level_danger for m in mons])
+        self.index = np.array([ch.index for ch in channels])     # board column of each channel
+        self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in channels]
+        self.trace_i = min(trace_filter, n) - 1
+        self.gate = SpeedGate(PENDING_DECISION_SLOTS)   # (outlier, valid[, level ratio]) per slot
+
+    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, AkfBlock]:
+        """Observations (T, C) of slots first_slot.. / baseline through the banks; their flags
+        (and level ratios, combined severity) wait. Returns what the banks watched, and their output."""
+        y = y / self.baseline
+        out = self.bank.process(y, valid)
+        if self.gate.end is None:
+            self.gate.restart(first_slot)
+        if self.combined is None:
+            self.gate.push(out.outlier, valid)
+        else:
+            self.gate.push(out.outlier, valid, np.where(self.combined, y, np.nan))
+        return y, out
+
+    def release(self, upto: int, *, final: bool, bounded: bool,
+                f_r: Callable[[int], np.ndarray] | None) -> list[Decision]:
+        """Decisions of the slots before ``upto`` (see :meth:`SpeedGate.release`); ``f_r(end)``
+        gives the f_r of the period ending at slot ``end`` (None: the configured f_r)."""
+        got = self.gate.release(upto, final=final, bounded=bounded)
+        if got is None:
+            return []
+        first, (outl, valid, *lv) = got
+        level = lv[0] if lv else None
+        n = outl.shape[0]
+        d = self.decider
+        decisions = []
+        pos = 0
+        while pos < n:                          # one call per decision period: its own f_r
+            take = min(n - pos, d.period - d.phase)
+            fr = f_r(first + pos + take) if f_r is not None and d.phase + take == d.period else None
+            part = None if level is None else level[pos:pos + take]
+            decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr, level=part)
+            pos += take
+        return decisions
+
+    def trace(self, stamps: list[int], y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> list:
+        """``/cm/<channel>/akf`` messages of one AKF per channel (output.akf_trace_filter)."""
+        i = self.trace_i
+        z = out.z(y)
+        msgs = []
+        for c, ch in enumerate(self.channels):
+            msgs += messages.akf_trace(ch.name, stamps, i, y[:, c], valid[:, c], out.x_prior[:, c, i],
+                                       out.x_hat[:, c, i], out.Y[:, c, i], z[:, c, i],
+                                       out.outlier[:, c, i], out.Q[:, c, i], self.bank.z_c[c])
+        return msgs
+
+    def decision(self, d: Decision, stamp: int) -> list:
+        """Per channel: its severity message, then the events of what changed."""
+        out: list = []
+        for c, ch in enumerate(self.channels):
+            extra = {}
+            if self.combined is not None and self.combined[c]:
+                extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c])}
+                if np.isfinite(d.level[c]):
+                    extra["level_ratio"] = float(d.level[c])
+            m = messages.severity(stamp, ch.name, d, c, self.R[c], **extra)
+            out.append(m)
+            out += self._note(c, d, m.msg, stamp)
+        return out
+
+    def _note(self, c: int, d: Decision, msg: dict, stamp: int) -> list[Event]:
+        """Update channel ``c``'s view from its severity message ``msg``; the events of what
+        changed with the decision."""
+        name, n, R = self.channels[c].name, self.bank.n, self.R[c]
+        sev, level, anomaly, failure = msg["severity_index"], msg["level"], msg["anomaly"], msg["failure"]
+        v = self.views[c]
+        v.severity, v.anomaly, v.outliers_first = sev, anomaly, msg["outliers"][0]
+        v.max_severity = max(v.max_severity, sev)
+        v.decisions += 1
+        prev = d.prev_anomaly[c].tolist()
+        events = []
+        if anomaly == prev:
+            changed: list[int] = []
+        else:
+            changed = [i for i, (a, b) in enumerate(zip(anomaly, prev)) if a != b]
+        for i in changed:
+            cnt = msg["outliers"][i]
+            what = {"filter": i + 1, "count": cnt}
+            if anomaly[i]:
+                events.append(Event("anomaly_onset", name, f"{name}: AKF_{i + 1} (R={R[i]:.4g}) anomaly: "
+                                    f"{cnt} outliers in the period >= f_r {d.f_r[c]:.4g}", stamp, what))
+            else:
+                events.append(Event("anomaly_clear", name, f"{name}: AKF_{i + 1} (R={R[i]:.4g}) anomaly "
+                                    f"cleared: {cnt} outliers < c*f_r", stamp, what))
+        prev_sev = float(d.prev_severity[c])
+        where = {"severity_index": sev, "level": level}
+        if sev != prev_sev:
+            events.append(Event("severity_change", name, f"{name}: severity index {prev_sev:.2f} -> "
+                                f"{sev:.2f} (level {level}/{n})", stamp, where))
+        was_failure = bool(prev[-1]) or prev_sev >= 1.0
+        if failure and not was_failure:
+            v.failures += 1
+            why = (f"AKF_{n} with R_max={R[-1]:.4g} flags an anomaly" if anomaly[-1] else
+                   f"level {float(d.level[c]):.2f} x baseline >= level_danger")
+            events.append(Event("failure", name, f"{name}: FAILURE: {why}", stamp, where))
+        elif was_failure and not failure:
+            events.append(Event("failure_clear", name, f"{name}: failure condition cleared "
+                                f"(AKF_{n} back below c*f_r)", stamp, where))
+        return events

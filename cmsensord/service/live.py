@@ -1,0 +1,139 @@
+"""The daemon's real-time loop: serial source -> Processor -> MCAP, with systemd and signals."""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import threading
+import time
+
+from cmsensord import __version__
+from cmsensord.config import Config, config_to_dict
+from cmsensord.errors import SinkError
+from cmsensord.pipeline import Processor
+from cmsensord.sdnotify import Notifier
+from cmsensord.service.signals import StopFlag
+from cmsensord.service.sink import open_sink, route_sink_events
+from cmsensord.service.status import run_summary, status_line
+from cmsensord.source import SerialSource
+
+log = logging.getLogger("cmsensord")
+
+
+class _Watch:
+    """What the loop notices besides frames: queue drops, a stalled link, the end of a simulation."""
+
+    def __init__(self, cfg: Config, proc: Processor, source: SerialSource,
+                 duration_s: float | None, sim_done: threading.Event | None):
+        self.cfg, self.proc, self.source = cfg, proc, source
+        self.duration_s, self.sim_done = duration_s, sim_done
+        self.stalled = False
+        self.idle_since: float | None = None
+        self.drops_seen = 0
+
+    def link_events(self) -> None:
+        """The reader's link events and the queue's drops become events."""
+        proc, events, queue = self.proc, self.source.events, self.source.queue
+        while events:
+            wall_ns, kind, message = events.popleft()
+            proc.event(kind, None, message, wall_ns)
+        if queue.drops != self.drops_seen:
+            proc.event("queue_overflow", None, f"processing fell behind: {queue.drops - self.drops_seen} "
+                       f"frame(s) dropped from the queue, oldest RAW blocks first ({queue.drops} "
+                       f"in all, {queue.raw_drops} RAW)", count=queue.drops - self.drops_seen,
+                       raw_total=queue.raw_drops)
+            self.drops_seen = queue.drops
+
+    def done(self, got_frames: bool, now: float) -> bool:
+        """True when the run is over (simulated board finished); notes a stalled link."""
+        if self.duration_s is not None and self.proc.board_seconds >= self.duration_s:
+            return True                 # the simulated board's clock reached the end of the run
+        if got_frames:
+            self.idle_since = None
+            self.stalled = False
+            return False
+        self.idle_since = self.idle_since or now
+        if self.sim_done is not None and self.sim_done.is_set() and now - self.idle_since > 1.0:
+            return True                 # the simulated board has sent everything and it is read
+        reader, link = self.source.reader, self.cfg.link
+        if (not self.stalled and reader.connected.is_set()
+                and now - reader.last_data > link.stall_s and self.proc.anchor_ns is not None):
+            self.stalled = True
+            self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
+                            time.time_ns())
+        return False
+
+
+def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
+             sim_done: threading.Event | None = None, capture_path: str | None = None,
+             metadata: dict[str, str] | None = None) -> int:
+    """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP."""
+    stop = StopFlag()
+    stop.install()
+    stop.install_reopen()
+    try:                                # before the sink: a bad path leaves nothing behind
+        capture = open(capture_path, "wb") if capture_path else None
+    except OSError as exc:
+        raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
+    sink = open_sink(cfg, metadata or {})
+    source = SerialSource.from_link(cfg.link, capture=capture)
+    queue = source.queue
+    proc: Processor
+    proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
+                     diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
+                                          "lag_s": round(proc.lag_s(), 3)})
+    t_start = time.monotonic()
+    proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
+    route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
+    log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
+    with source:
+        try:
+            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done))
+        finally:
+            source.stop()
+            for frames in source:       # what the reader queued before it stopped
+                proc.handle(frames)
+            proc.finish()
+            proc.event("stop", None, f"cmsensord stopping ({stop.why()})")
+            sink.close()
+            if capture is not None:
+                capture.close()
+    print(run_summary(proc, sink.paths, time.monotonic() - t_start), file=sys.stderr)
+    if capture_path:
+        print(f"  capture: {capture_path}", file=sys.stderr)
+    return 0
+
+
+def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
+          watch: _Watch) -> None:
+    notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
+    reader = source.reader
+
+    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
+        line = status_line(proc, source)
+        return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
+
+    if notify.enabled:
+        reader.connected.wait(0.2)      # a present port opens within ms: READY's STATUS says which
+    notify.ready(service_state())
+    next_status = time.monotonic() + 1.0
+    try:
+        for frames in source:
+            notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
+            proc.handle(frames)
+            watch.link_events()
+            now = time.monotonic()
+            if stop.reopen:             # SIGHUP: finish the current file, start a new one
+                stop.reopen = False
+                sink.reopen()
+            sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
+            if watch.done(bool(frames), now) or stop.event.is_set():
+                break
+            if now >= next_status:
+                next_status = now + 1.0
+                if cfg.output.status_line:
+                    print(status_line(proc, source), file=sys.stderr, flush=True)
+                notify.status(service_state())
+    finally:
+        notify.stopping("stopping: closing the MCAP log")

@@ -1,0 +1,34 @@
+"""The one-line status (stderr, systemd STATUS=) and the exit summary of a run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def status_line(proc, source=None) -> str:
+    """ADC time, each channel's severity and flags, and (live) the link and queue counters."""
+    parts = [f"[{proc.adc_seconds:8.1f} s]"]
+    for v in proc.views:
+        flags = "".join(str(a) for a in v.anomaly)
+        parts.append(f"{v.name} S={v.severity:.1f} out/s={v.outliers_first:3d} F={flags}")
+    if source is not None:
+        c = source.counters
+        parts.append(f"| rx {c.bytes_received} B, frames {sum(c.frames.values())}, "
+                     f"lost {c.frames_lost}, crc {c.crc_failures}")
+        queue = source.queue
+        parts.append(f"q {len(queue)} drop {queue.drops}")
+    return " ".join(parts)
+
+
+def run_summary(proc, paths: list[Path], wall_s: float) -> str:
+    """What a run wrote and saw, printed at its end."""
+    lines = [f"MCAP log: {p}" for p in paths] + [
+             f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
+             f"({proc.observations} observations, {proc.missing_observations} missing, "
+             f"{proc.frames_lost} frames lost)"]
+    for v in proc.views:
+        lines.append(f"  {v.name}: final severity {v.severity:.1f}, max {v.max_severity:.1f}, "
+                     f"{v.failures} failure event(s), {v.decisions} decisions")
+    if proc.event_counts:
+        lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
+    return "\n".join(lines)

@@ -1,0 +1,44 @@
+"""``cmsensord summary FILE.mcap``: what an MCAP log (or a truncated .mcap.part) holds."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+from cmsensord.errors import EXIT_USAGE
+from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
+
+
+def summary(path: str, *, as_json: bool = False) -> int:
+    """Print the summary of ``path`` (text or JSON); exit status 2 if it is not an MCAP file."""
+    if not Path(path).is_file():
+        what = "is a directory, not an MCAP file" if Path(path).is_dir() else "file not found"
+        print(f"cmsensord: {path}: {what}", file=sys.stderr)
+        return EXIT_USAGE
+    info = summarize(path)
+    if info["error"] == NOT_MCAP:
+        print(f"cmsensord: {path}: {NOT_MCAP}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        print(json.dumps(info, indent=2, default=str) if as_json else format_summary(info), flush=True)
+    except BrokenPipeError:     # `cmsensord summary FILE | head`: the reader has enough
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
+def format_summary(info: dict) -> str:
+    lines = []
+    for k, v in info.items():
+        if isinstance(v, dict):
+            lines.append(f"{k}:")
+            for kk, vv in v.items():
+                lines.append(f"  {kk}: {vv}")
+        elif isinstance(v, list):
+            lines.append(f"{k}: {len(v)} item(s)")
+            for item in v[:50]:
+                lines.append(f"  {item}")
+        else:
+            lines.append(f"{k}: {v}")
+    return "\n".join(lines)

@@ -1,0 +1,22 @@
+"""The sink interface, and a sink that keeps messages in memory (tests, tools)."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+
+class Sink(Protocol):
+    def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
+
+
+class ListSink:
+    """A sink that keeps messages in memory (tests, the simulate summary)."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple[str, int, dict]] = []
+
+    def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None:
+        self.messages.append((topic, stamp_ns, msg))
+
+    def topic(self, name: str) -> list[dict]:
+        return [m for t, _, m in self.messages if t == name]

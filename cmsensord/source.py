@@ -1,0 +1,227 @@
+"""Frame sources: where decoded frames come from, behind one small interface.
+
+A source is an iterable of frame batches (``list[Frame]``, possibly empty) and
+a context manager.  Every consumer — the daemon's live loop, ``replay``,
+``record``, ``vkf``, the calibration tool, the tests and the benchmarks —
+reads frames this way, so they all decode bytes the same way:
+
+* :class:`ByteStreamSource` — any iterable of byte chunks through one
+  :class:`~cmsensord.protocol.Decoder`, flushed at the end;
+* :class:`CaptureSource` — a capture file (docs/PROTOCOL.md, "A captured
+  serial log"), read in chunks; a missing or unreadable file raises
+  :class:`~cmsensord.errors.LinkError` when the source is made;
+* :class:`SerialSource` — the serial port: a reader thread (reconnecting with
+  back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
+  yields what is queued every ``timeout`` seconds (empty batches included, so
+  the loop can do its periodic work) until :meth:`SerialSource.stop`, then
+  what is left, then ends;
+* :class:`Paced` — wraps any source and paces it at ``speed`` times the
+  board's clock (the frames' own t0), with an injectable clock and sleep.
+
+``counters`` (the decoder's :class:`~cmsensord.protocol.LinkCounters`) is on
+every source.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import BinaryIO, Callable, Iterable, Iterator
+
+from cmsensord.errors import LinkError
+from cmsensord.link import FrameQueue, SerialReader
+from cmsensord.protocol import Decoder, Frame, FrameType, LinkCounters, decode_status
+
+__all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced"]
+
+Batch = list[Frame]
+
+
+class FrameSource:
+    """Base of the sources: an iterable of frame batches and a context manager."""
+
+    decoder: Decoder
+
+    @property
+    def counters(self) -> LinkCounters:
+        return self.decoder.counters
+
+    def __iter__(self) -> Iterator[Batch]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release what the source holds (file, port); iteration ends."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class ByteStreamSource(FrameSource):
+    """Byte chunks -> one decoder -> one batch per chunk, and the decoder's flush at the end.
+
+    ``bytes_read`` counts the bytes decoded so far.
+    """
+
+    def __init__(self, chunks: Iterable[bytes], decoder: Decoder | None = None):
+        self._chunks = chunks
+        self.decoder = decoder or Decoder()
+        self.bytes_read = 0
+
+    @classmethod
+    def of(cls, data: bytes, chunk: int) -> "ByteStreamSource":
+        """``data`` in reads of ``chunk`` bytes (tests: chunk-split invariance)."""
+        return cls(data[k:k + chunk] for k in range(0, len(data), chunk))
+
+    def __iter__(self) -> Iterator[Batch]:
+        for data in self._chunks:
+            self.bytes_read += len(data)
+            yield self.decoder.feed(data)
+        yield self.decoder.flush()
+
+
+class CaptureSource(ByteStreamSource):
+    """The frames of a capture file, read ``chunk`` bytes at a time (flushed at the end).
+
+    Opening happens here: a missing, unreadable or directory path raises LinkError
+    with a one-line reason before the caller creates any output.
+    """
+
+    def __init__(self, path: str | Path, chunk: int = 1 << 16, decoder: Decoder | None = None):
+        self.path = Path(path)
+        self.size = self.path.stat().st_size if self.path.is_file() else 0
+        self._file = _open_capture(self.path)
+        self.chunk = chunk
+        super().__init__(self._read(), decoder)
+
+    def _read(self) -> Iterator[bytes]:
+        f = self._file
+        while not f.closed:
+            try:
+                data = f.read(self.chunk)
+            except OSError as exc:
+                raise LinkError(f"{self.path}: read error: {exc.strerror or exc}") from None
+            if not data:
+                return
+            yield data
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _open_capture(p: Path) -> BinaryIO:
+    try:
+        return open(p, "rb")
+    except FileNotFoundError:
+        raise LinkError(f"{p}: capture file not found") from None
+    except IsADirectoryError:
+        raise LinkError(f"{p}: is a directory, not a capture file") from None
+    except OSError as exc:
+        raise LinkError(f"{p}: cannot read capture: {exc.strerror or exc}") from None
+
+
+class SerialSource(FrameSource):
+    """The serial port: :class:`~cmsensord.link.SerialReader` thread -> bounded queue.
+
+    Entering starts the reader thread.  Iteration yields the queued frames every
+    ``timeout`` seconds (an empty batch when none came) until :meth:`stop`; then it
+    yields the frames still queued once and ends.  ``events`` holds the reader's
+    link events as (wall_ns, kind, message); ``capture`` tees the bytes to a file.
+    """
+
+    def __init__(self, port: str, *, baud: int, read_size: int = 4096, queue_frames: int = 20000,
+                 capture: BinaryIO | None = None, reconnect_min_s: float = 0.5,
+                 reconnect_max_s: float = 5.0, open_port: Callable | None = None,
+                 timeout: float = 0.1):
+        self.queue = FrameQueue(queue_frames)
+        self.reader = SerialReader(port, baud=baud, read_size=read_size, queue=self.queue,
+                                   capture=capture, reconnect_min_s=reconnect_min_s,
+                                   reconnect_max_s=reconnect_max_s, open_port=open_port)
+        self.decoder = self.reader.decoder
+        self.timeout = timeout
+        self._stopped = False
+
+    @classmethod
+    def from_link(cls, link, capture: BinaryIO | None = None) -> "SerialSource":
+        """A source on the port of a :class:`~cmsensord.config.LinkConfig`."""
+        return cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
+                   capture=capture, reconnect_min_s=link.reconnect_min_s,
+                   reconnect_max_s=link.reconnect_max_s)
+
+    @property
+    def events(self):
+        return self.reader.events
+
+    def __enter__(self):
+        self.reader.start()
+        return self
+
+    def __iter__(self) -> Iterator[Batch]:
+        while not self._stopped:
+            yield self.queue.get(timeout=self.timeout)
+        yield self.queue.get(timeout=0)
+
+    def stop(self) -> None:
+        """Stop the reader thread (waits up to 2 s for it); iteration then drains and ends."""
+        if not self._stopped:
+            self._stopped = True
+            self.reader.stop()
+            if self.reader.is_alive():
+                self.reader.join(timeout=2.0)
+
+    def close(self) -> None:
+        self.stop()
+
+
+class Paced(FrameSource):
+    """``source`` at ``speed`` times the board's clock (1: real time).
+
+    The board's time of a batch is the t0 of its last frame over fs (fs from the
+    STATUS frames seen, 25 kHz before one), counted from the first frame.  After the
+    consumer is done with a batch, the wrapper sleeps until ``clock()`` reaches the
+    start time plus that board time / speed.  ``clock`` and ``sleep`` are injectable.
+    """
+
+    def __init__(self, source: FrameSource, speed: float, *,
+                 clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep, fs: int = 25000):
+        if not speed > 0:
+            raise ValueError(f"speed must be positive, got {speed}")
+        self.source = source
+        self.speed = speed
+        self.clock = clock
+        self.sleep = sleep
+        self.fs = fs
+
+    def __getattr__(self, name: str):
+        return getattr(self.source, name)      # counters, bytes_read, size, events ...
+
+    def __iter__(self) -> Iterator[Batch]:
+        t_start = self.clock()
+        first: int | None = None
+        for frames in self.source:
+            yield frames
+            if not frames:
+                continue
+            for f in frames:
+                if f.type == FrameType.STATUS:
+                    try:
+                        st = decode_status(f.payload)
+                    except ValueError:
+                        continue
+                    if st.fs > 0:
+                        self.fs = st.fs
+            if first is None:
+                first = frames[0].t0_unwrapped
+            wait = t_start + (frames[-1].t0_unwrapped - first) / self.fs / self.speed - self.clock()
+            if wait > 0:
+                self.sleep(wait)
+
+    def close(self) -> None:
+        self.source.close()
+
+    def __enter__(self):
+        self.source.__enter__()
+        return self
