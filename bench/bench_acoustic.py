@@ -204,7 +204,8 @@ def paper_model(args) -> bool:
 
 def severity(args) -> None:
     from cmsensord.config import config_from_dict
-    from cmsensord.pipeline import ListSink, Processor
+    from cmsensord.monitor.processor import Processor
+    from cmsensord.sinks.memory import ListSink
     from cmsensord.source import ByteStreamSource
 
     dur = args.severity_seconds

@@ -64,7 +64,7 @@ class _Collector:
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
                  quiet: bool = False) -> tuple[list[Path], dict]:
     """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary."""
-    from cmsensord.pipeline import Processor
+    from cmsensord.monitor.processor import Processor
     from cmsensord.service.sink import open_sink
 
     t_start = time.monotonic()

@@ -21,7 +21,8 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.errors import CmsensordError
-from cmsensord.pipeline import ListSink, Processor
+from cmsensord.monitor.processor import Processor
+from cmsensord.sinks.memory import ListSink
 from cmsensord.source import CaptureSource
 
 __all__ = ["Observations", "read_observations", "sidecar"]

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from cmsensord.pipeline import ListSink, Processor
+from cmsensord.monitor.processor import Processor
+from cmsensord.sinks.memory import ListSink
 from cmsensord.source import ByteStreamSource
 
 

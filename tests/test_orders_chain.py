@@ -148,7 +148,8 @@ def test_order_latency_from_a_samples_arrival_is_within_250_ms():
     message for the 0.1 s block [b0, b1) is written when the newest sample that has arrived
     is at t_emit: its latency is t_emit - b0 (the first sample of the block waits longest).
     Measured in board time: the computing time (~1/250 of real time here) comes on top."""
-    from cmsensord.pipeline import ListSink, Processor
+    from cmsensord.monitor.processor import Processor
+    from cmsensord.sinks.memory import ListSink
     from cmsensord.protocol import Decoder
 
     sc = make_scenario("close_orders", n_channels=1, duration_s=4.0, seed=0)

@@ -7,7 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cmsensord.config import default_config
-from cmsensord.pipeline import ListSink, Processor
+from cmsensord.monitor.processor import Processor
+from cmsensord.sinks.memory import ListSink
 from cmsensord.protocol import Decoder, Status, encode_rms, encode_status
 from cmsensord.source import ByteStreamSource
 

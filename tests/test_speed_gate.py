@@ -7,7 +7,8 @@ import numpy as np
 from cmsensord.config import default_config
 from cmsensord.monitor.orders import MAX_WAIT_S
 from cmsensord.monitor.speed_gate import SpeedGate
-from cmsensord.pipeline import ListSink, Processor
+from cmsensord.monitor.processor import Processor
+from cmsensord.sinks.memory import ListSink
 from cmsensord.monitor.severity import PENDING_DECISION_SLOTS
 from cmsensord.protocol import Decoder, FrameType, Status, encode_raw, encode_status
 

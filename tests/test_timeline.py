@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cmsensord.monitor_timeline import SeverityTimeline
+from cmsensord.monitor.timeline import SeverityTimeline
 
 
 @pytest.mark.parametrize("n", [1, 59, 60, 61, 121, 1000, 86_400])

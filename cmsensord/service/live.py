@@ -11,7 +11,7 @@ import time
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict
 from cmsensord.errors import SinkError
-from cmsensord.pipeline import Processor
+from cmsensord.monitor.processor import Processor
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, route_sink_events

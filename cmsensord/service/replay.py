@@ -8,7 +8,7 @@ from pathlib import Path
 
 from cmsensord.config import Config
 from cmsensord.link import Progress
-from cmsensord.pipeline import Processor
+from cmsensord.monitor.processor import Processor
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
