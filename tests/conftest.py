@@ -34,6 +34,8 @@ PROCESS_MODULES = frozenset({
     "test_link_faults.py",
     "test_replay.py",
     "test_systemd.py",
+    "test_traps.py",
+    "test_import.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

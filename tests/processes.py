@@ -25,6 +25,12 @@ def cmsensord(*args, timeout=120, **kw) -> subprocess.CompletedProcess:
                           env=ENV, timeout=timeout, **kw)
 
 
+def run_module(module: str, *args, timeout=120) -> subprocess.CompletedProcess:
+    """``python -m MODULE ARGS`` as a user types it (text output captured)."""
+    return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True,
+                          env=ENV, timeout=timeout)
+
+
 @contextlib.contextmanager
 def board_on_pty(*args):
     """A simulated board serving a pty (``python -m firmware_sim --pty --hold ARGS``): its path."""

@@ -21,5 +21,5 @@ def test_render_names_first_times():
     tl = SeverityTimeline()
     for t, s in [(1, 0.0), (2, 0.0), (3, 0.2), (4, 0.6), (5, 1.0), (6, 0.0)]:
         tl.add(float(t), s)
-    assert tl.render() == "|  ▂▅█ | 1-6 s; first 0.1 at 3 s, 0.5 at 4 s, 1 at 5 s"
+    assert tl.render() == "|··▂▅█·| 1-6 s; first 0.1 at 3 s, 0.5 at 4 s, 1 at 5 s"
     assert SeverityTimeline().render() == "no decision"

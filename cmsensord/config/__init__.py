@@ -24,6 +24,7 @@ from __future__ import annotations
 from .loading import config_from_dict, config_to_dict, default_config, load_config
 from .settings import (
     MAX_CHANNELS,
+    NOMINAL_RATE_HZ,
     AcousticConfig,
     ChannelConfig,
     ComponentConfig,
@@ -49,6 +50,7 @@ __all__ = [
     "Config",
     "ConfigError",
     "MAX_CHANNELS",
+    "NOMINAL_RATE_HZ",
     "load_config",
     "config_from_dict",
     "default_config",

@@ -78,6 +78,8 @@ class ChannelSetup:
         self.channels = usable
         self.severity = SeverityChain(usable, fs=self.clock.fs, block_len=self.clock.block_len,
                                       trace_filter=self.cfg.output.akf_trace_filter)
+        self.log.add(self.severity.notes)
+        self.severity.notes.clear()
         self.microphones, events = Microphones.create(self.cfg, usable, fs=self.clock.fs,
                                                       block_len=self.clock.block_len)
         self.log.add(events)

@@ -17,6 +17,7 @@ Every message is built in :mod:`.messages`; every event goes through the
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any, Callable, Sequence
 
@@ -260,6 +261,9 @@ class Processor:
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
         for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
             stamp = self.clock.slot_stamp_ns(d.slot)
+            if sev.notes:
+                self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
+                sev.notes.clear()
             self._out(sev.decision(d, stamp))
             self._out([messages.diagnostics(
                 stamp, self.link_counters() if self.link_counters else {}, self.observations,

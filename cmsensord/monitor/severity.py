@@ -21,12 +21,13 @@ from typing import Callable
 
 import numpy as np
 
-from cmsensord.config import ChannelConfig
+from cmsensord.config import NOMINAL_RATE_HZ, ChannelConfig
 from cmsensord.dsp.akf import AkfBank, AkfBlock, bank_r
-from cmsensord.dsp.severity import AnomalyDecider, Decision
+from cmsensord.dsp.severity import HOLD_EVENT_DECISIONS, AnomalyDecider, Decision
 from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.speed_gate import SpeedGate
+from cmsensord.monitor.timeline import SeverityTimeline
 
 #: observation slots whose decisions may wait for a final tacho speed (5 s at 100 Hz)
 PENDING_DECISION_SLOTS = 500
@@ -42,7 +43,9 @@ class ChannelView:
     anomaly: list[int] = field(default_factory=list)
     outliers_first: int = 0       # outliers in the last period of the most sensitive AKF
     decisions: int = 0
+    judged: int = 0               # decisions after the filters' transient
     failures: int = 0
+    timeline: SeverityTimeline = field(default_factory=SeverityTimeline)
 
 
 class SeverityChain:
@@ -68,6 +71,42 @@ class SeverityChain:
         self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in channels]
         self.trace_i = min(trace_filter, n) - 1
         self.gate = SpeedGate(PENDING_DECISION_SLOTS)   # (outlier, valid[, level ratio]) per slot
+        self.rate = fs / block_len
+        self.cfg_f_r = np.array([m.f_r for m in mons])
+        self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
+        self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
+
+    def _rate_notes(self, fs: int, block_len: int) -> list[Event]:
+        """What the decision rule means at this block rate, when it is not the nominal one, and
+        channels whose f_r no decision can reach."""
+        period, mon = self.decider.period, self.channels[0].monitor
+        notes = []
+        if abs(self.rate - NOMINAL_RATE_HZ) > 1e-9:
+            notes.append(Event("decision_rule", None, (
+                f"board block rate {self.rate:.4g} blocks/s (fs {fs} / block {block_len}), not "
+                f"{NOMINAL_RATE_HZ:g}: a decision is {period} observations ({period / self.rate:.3g} s); "
+                f"f_r {mon.f_r:.4g} is {mon.f_r / period:.0%} of them; the window N = {mon.window} "
+                f"observations is {mon.window / self.rate:.3g} s")))
+        for ch, f_r in zip(self.channels, self.cfg_f_r):
+            if f_r >= period:
+                notes.append(Event("decision_rule", ch.name, (
+                    f"{ch.name}: f_r {f_r:.4g} >= the {period} observations per decision at "
+                    f"{self.rate:.4g} blocks/s: no decision can flag an anomaly (set f_r below {period})")))
+        return notes
+
+    def checked_f_r(self, f_r: np.ndarray) -> np.ndarray:
+        """The tacho's f_r, or the configured one where the tacho's is not below the observations
+        per decision (an event when that starts and when it ends)."""
+        period = self.decider.period
+        fast = f_r >= period
+        for c in np.flatnonzero(fast != self._tacho_too_fast):
+            name = self.channels[c].name
+            msg = (f"{name}: tacho f_r {f_r[c]:.4g} Hz >= the {period} observations per decision: "
+                   f"using the configured f_r {self.cfg_f_r[c]:.4g}" if fast[c] else
+                   f"{name}: tacho f_r {f_r[c]:.4g} Hz below the {period} observations per decision again")
+            self.notes.append(Event("decision_rule", name, msg))
+        self._tacho_too_fast = fast
+        return np.where(fast, self.cfg_f_r, f_r)
 
     def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, AkfBlock]:
         """Observations (T, C) of slots first_slot.. / baseline through the banks; their flags
@@ -98,6 +137,8 @@ class SeverityChain:
         while pos < n:                          # one call per decision period: its own f_r
             take = min(n - pos, d.period - d.phase)
             fr = f_r(first + pos + take) if f_r is not None and d.phase + take == d.period else None
+            if fr is not None:
+                fr = self.checked_f_r(np.asarray(fr, dtype=np.float64))
             part = None if level is None else level[pos:pos + take]
             decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr, level=part)
             pos += take
@@ -128,6 +169,19 @@ class SeverityChain:
             out += self._note(c, d, m.msg, stamp)
         return out
 
+    def _held(self, c: int, d: Decision, stamp: int) -> list[Event]:
+        """An event when a flag has been kept HOLD_EVENT_DECISIONS decisions by the hysteresis alone."""
+        name, f_r = self.channels[c].name, float(d.f_r[c])
+        held = np.flatnonzero(d.held[c] == HOLD_EVENT_DECISIONS)
+        if not held.size:
+            return []
+        lo = self.decider.c[c] * f_r
+        which = ", ".join(f"AKF_{i + 1}" for i in held)
+        return [Event("anomaly_held", name, (
+            f"{name}: {which} anomaly flag held {HOLD_EVENT_DECISIONS} decisions by the hysteresis alone "
+            f"({lo:.3g} <= outliers < f_r {f_r:.3g}): it neither sets anew nor clears; if the machine "
+            "is healthy, commission it (cmsensord calibrate)"), stamp, {"filters": [int(i + 1) for i in held]})]
+
     def _note(self, c: int, d: Decision, msg: dict, stamp: int) -> list[Event]:
         """Update channel ``c``'s view from its severity message ``msg``; the events of what
         changed with the decision."""
@@ -137,8 +191,11 @@ class SeverityChain:
         v.severity, v.anomaly, v.outliers_first = sev, anomaly, msg["outliers"][0]
         v.max_severity = max(v.max_severity, sev)
         v.decisions += 1
+        if not d.transient:
+            v.judged += 1
+            v.timeline.add(d.slot / self.rate, sev)
         prev = d.prev_anomaly[c].tolist()
-        events = []
+        events = self._held(c, d, stamp)
         if anomaly == prev:
             changed: list[int] = []
         else:

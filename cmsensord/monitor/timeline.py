@@ -12,7 +12,7 @@ __all__ = ["BINS", "SeverityTimeline"]
 
 #: bins in the rendered timeline
 BINS = 60
-_BARS = " ▁▂▃▄▅▆▇█"
+_BARS = "·▁▂▃▄▅▆▇█"
 
 
 class SeverityTimeline:

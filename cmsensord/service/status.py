@@ -26,9 +26,15 @@ def run_summary(proc, paths: list[Path], wall_s: float) -> str:
              f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
              f"({proc.observations} observations, {proc.missing_observations} missing, "
              f"{proc.frames_lost} frames lost)"]
+    period = proc.severity.decider.period / proc.severity.rate if proc.severity is not None else 1.0
     for v in proc.views:
+        if not v.judged:
+            lines.append(f"  {v.name}: no decision (the recording is shorter than two decision periods "
+                         f"of {period:.3g} s; the first is the filters' transient)")
+            continue
         lines.append(f"  {v.name}: final severity {v.severity:.1f}, max {v.max_severity:.1f}, "
                      f"{v.failures} failure event(s), {v.decisions} decisions")
+        lines.append(f"  {v.name}: {v.timeline.render()}")
     if proc.event_counts:
         lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
     return "\n".join(lines)
