@@ -92,7 +92,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
 
 def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     """The whole record -> speed and angle -> decimation -> coupled solve -> 0.1 s blocks."""
-    from scipy.signal import decimate   # offline tool: scipy.signal is fine here
+    from scipy.signal import decimate  # offline tool: scipy.signal is fine here
 
     from cmsensord.dsp.tacho import TachoTracker
     from cmsensord.dsp.vkf_batch import Hz, phases_for, r_for_bandwidth, vkf2

@@ -17,8 +17,8 @@ import argparse
 import dataclasses
 import logging
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from cmsensord import __version__
 from cmsensord.commission import add_calibrate_parser, run_calibrate

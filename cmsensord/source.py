@@ -25,8 +25,9 @@ every source.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import BinaryIO, Callable, Iterable, Iterator
+from typing import BinaryIO
 
 from cmsensord.errors import LinkError
 from cmsensord.link import FrameQueue, SerialReader
@@ -71,7 +72,7 @@ class ByteStreamSource(FrameSource):
         self.bytes_read = 0
 
     @classmethod
-    def of(cls, data: bytes, chunk: int) -> "ByteStreamSource":
+    def of(cls, data: bytes, chunk: int) -> ByteStreamSource:
         """``data`` in reads of ``chunk`` bytes (tests: chunk-split invariance)."""
         return cls(data[k:k + chunk] for k in range(0, len(data), chunk))
 
@@ -144,7 +145,7 @@ class SerialSource(FrameSource):
         self._stopped = False
 
     @classmethod
-    def from_link(cls, link, capture: BinaryIO | None = None) -> "SerialSource":
+    def from_link(cls, link, capture: BinaryIO | None = None) -> SerialSource:
         """A source on the port of a :class:`~cmsensord.config.LinkConfig`."""
         return cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
                    capture=capture, reconnect_min_s=link.reconnect_min_s,

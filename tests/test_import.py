@@ -18,9 +18,8 @@ from scipy.io import wavfile
 from cmsensord.cli import main
 from cmsensord.dsp.rms import block_rms
 from cmsensord.importing.adc import nice_range
+from cmsensord.protocol import FLAG_CLIPPED, FrameType, decode_raw, decode_rms, decode_status, decode_tacho, iter_frames
 from cmsensord.sinks.mcap_sink import summarize
-from cmsensord.protocol import (FLAG_CLIPPED, FrameType, decode_raw, decode_rms, decode_status,
-                                decode_tacho, iter_frames)
 
 G = 9.80665
 REPO = Path(__file__).resolve().parents[1]

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cmsensord.service.simulate import RUNUP_ORDERS
 from cmsensord.config import config_from_dict
+from cmsensord.service.simulate import RUNUP_ORDERS
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from stream import run_processor
@@ -149,8 +149,8 @@ def test_order_latency_from_a_samples_arrival_is_within_250_ms():
     is at t_emit: its latency is t_emit - b0 (the first sample of the block waits longest).
     Measured in board time: the computing time (~1/250 of real time here) comes on top."""
     from cmsensord.monitor.processor import Processor
-    from cmsensord.sinks.memory import ListSink
     from cmsensord.protocol import Decoder
+    from cmsensord.sinks.memory import ListSink
 
     sc = make_scenario("close_orders", n_channels=1, duration_s=4.0, seed=0)
     data = Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=True, tacho_jitter=2.0)).generate(4.0)

@@ -8,8 +8,8 @@ from hypothesis import strategies as st
 
 from cmsensord.config import default_config
 from cmsensord.monitor.processor import Processor
-from cmsensord.sinks.memory import ListSink
 from cmsensord.protocol import Decoder, Status, encode_rms, encode_status
+from cmsensord.sinks.memory import ListSink
 from cmsensord.source import ByteStreamSource
 
 FIXED_CLOCK = lambda: 1_700_000_000_000_000_000  # noqa: E731

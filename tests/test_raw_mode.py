@@ -10,8 +10,8 @@ import pytest
 from cmsensord.config import config_from_dict, default_config
 from cmsensord.dsp.rms import block_rms, rows_rms
 from cmsensord.monitor.processor import Processor
-from cmsensord.sinks.memory import ListSink
 from cmsensord.protocol import Decoder, FrameType
+from cmsensord.sinks.memory import ListSink
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from stream import run_processor

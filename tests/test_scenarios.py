@@ -16,8 +16,8 @@ import pytest
 from cmsensord.config import default_config
 from cmsensord.dsp.akf import AkfBank
 from cmsensord.monitor.processor import Processor
-from cmsensord.sinks.memory import ListSink
 from cmsensord.protocol import Decoder
+from cmsensord.sinks.memory import ListSink
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 

@@ -11,8 +11,8 @@ import pytest
 from cmsensord.config import default_config
 from cmsensord.errors import LinkError
 from cmsensord.monitor.processor import Processor
-from cmsensord.sinks.memory import ListSink
 from cmsensord.protocol import encode_raw, encode_rms
+from cmsensord.sinks.memory import ListSink
 from cmsensord.source import ByteStreamSource, CaptureSource, Paced, SerialSource
 from tests.test_pipeline import FIXED_CLOCK, rms_stream, without_runtime
 

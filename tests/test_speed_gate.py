@@ -6,11 +6,11 @@ import numpy as np
 
 from cmsensord.config import default_config
 from cmsensord.monitor.orders import MAX_WAIT_S
-from cmsensord.monitor.speed_gate import SpeedGate
 from cmsensord.monitor.processor import Processor
-from cmsensord.sinks.memory import ListSink
 from cmsensord.monitor.severity import PENDING_DECISION_SLOTS
+from cmsensord.monitor.speed_gate import SpeedGate
 from cmsensord.protocol import Decoder, FrameType, Status, encode_raw, encode_status
+from cmsensord.sinks.memory import ListSink
 
 
 def test_rows_wait_until_their_position_is_final():

@@ -283,7 +283,7 @@ class AcousticConfig:
         validate(self)
 
 
-def _config_rules(cfg: "Config") -> tuple[str, str, Any] | None:
+def _config_rules(cfg: Config) -> tuple[str, str, Any] | None:
     """Rules spanning sections: channel uniqueness, akf_trace_filter <= n, microphone calibration."""
     if not cfg.channels:
         return "channels", "must list at least one channel", []

@@ -20,8 +20,9 @@ import math
 import re
 import types
 import typing
+from collections.abc import Callable, Mapping
 from dataclasses import field
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from cmsensord.errors import ConfigError
 

@@ -29,14 +29,22 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from cmsensord.dsp.rms import block_rms
-from cmsensord.protocol import (FLAG_CLIPPED, MODE_RAW, MODE_RMS, Status, encode_raw, encode_rms,
-                                encode_status, encode_tacho)
+from cmsensord.protocol import (
+    FLAG_CLIPPED,
+    MODE_RAW,
+    MODE_RMS,
+    Status,
+    encode_raw,
+    encode_rms,
+    encode_status,
+    encode_tacho,
+)
 
 from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan

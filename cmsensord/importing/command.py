@@ -21,8 +21,8 @@ from .blocks import choose_block_len, plan_blocks, remainder_note
 from .capture_writer import choose_ranges, sidecar_path, write_capture
 from .errors import ImportFailure
 from .options import ImportOptions
-from .sources import collect_files, build_recording
-from .units import G, UNITS
+from .sources import build_recording, collect_files
+from .units import UNITS, G
 
 __all__ = ["add_import_parser", "run_import", "options_from_args"]
 

@@ -7,12 +7,19 @@ The field names and their meaning are the output contract of
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from cmsensord.sinks.schemas import (TOPIC_DIAGNOSTICS, TOPIC_EVENTS, akf_topic, orders_topic,
-                                     severity_topic, vibration_estimate_topic)
+from cmsensord.sinks.schemas import (
+    TOPIC_DIAGNOSTICS,
+    TOPIC_EVENTS,
+    akf_topic,
+    orders_topic,
+    severity_topic,
+    vibration_estimate_topic,
+)
 
 
 class Message(NamedTuple):

@@ -26,7 +26,7 @@ class Microphones:
 
     @classmethod
     def create(cls, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int,
-               block_len: int) -> tuple["Microphones | None", list[Event]]:
+               block_len: int) -> tuple[Microphones | None, list[Event]]:
         """The estimator of the microphone channels among ``channels`` (None when there is
         none), and an event per calibration made with another block length."""
         cols = [c for c, ch in enumerate(channels) if ch.kind == "microphone"]

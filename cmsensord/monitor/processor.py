@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -198,7 +199,7 @@ class Processor:
             if not (vib and self.cfg.orders.enabled and self.severity is not None
                     and self.shaft.ensure(self.status, self.clock)):
                 return False
-            from cmsensord.monitor.orders import OrderChain     # scipy is loaded only for the raw chain
+            from cmsensord.monitor.orders import OrderChain  # scipy is loaded only for the raw chain
             self.orders = OrderChain(self.cfg, vib, self.shaft.tacho, fs=self.clock.fs, clock=self.clock)
         return True
 

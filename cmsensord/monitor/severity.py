@@ -16,8 +16,8 @@ carry ``severity_akf``, ``severity_level`` and ``level_ratio``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
