@@ -41,7 +41,7 @@ from firmware_sim.board import Board, BoardConfig  # noqa: E402
 from firmware_sim.scenarios import make_scenario  # noqa: E402
 
 MACHINES = {
-    "motor": {},                 # the project's seed-000 motor (tonal: 1x, 2x, 120 Hz)
+    "motor": {},                 # the project's motor (Kim et al. 2023) (tonal: 1x, 2x, 120 Hz)
     "broadband": dict(v1x=0.3, v2x=0.2, v_line=0.1, resonance_noise_rms=0.8),
 }
 CAL_SEED, BG_SEED = 1000, 1001

@@ -2,7 +2,7 @@
 """Benchmark of the raw chain: decode + block RMS + AKF banks + tacho + 4-order tracker + MCAP.
 
 Builds RAW-mode captures with a tacho (the `faulty` motor at 1720 rpm, and the
-seed-001 `close_orders` run-up) with firmware_sim, replays each in a fresh
+`close_orders` run-up of Yeh, Pan & Le) with firmware_sim, replays each in a fresh
 process through `cmsensord replay` (default config: orders 1x-4x, recursive
 and smoothed outputs) and prints real-time factor, throughput, CPU and peak
 RSS.  Figures are ratios measured side by side in one run.

@@ -10,7 +10,7 @@
    the tracker, same orders.
 3. The public peer, sdynpy's ``vold_kalman_filter`` (second-generation batch
    VKF, sparse least squares over the whole record; ``pip install sdynpy`` in the
-   benchmark's environment only), on the seed-001 signals close_orders (5 s)
+   benchmark's environment only), on the signals of Yeh, Pan & Le, close_orders (5 s)
    and whirl (180 s) at 2 kHz: time, throughput ratio, eq. (26) errors of
    both, and latency (ours: recursive; theirs: the whole record).
 

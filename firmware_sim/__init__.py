@@ -1,4 +1,4 @@
-"""firmware_sim: the simulated TM4C1294 ADC board (see PROTOCOL.md).
+"""firmware_sim: the simulated TM4C1294 ADC board (see docs/PROTOCOL.md).
 
 * :mod:`firmware_sim.scenarios` — machine signal models (``make_scenario``);
 * :mod:`firmware_sim.board` — ADC, block RMS, tacho and framing (``Board``);

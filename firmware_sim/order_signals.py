@@ -1,4 +1,4 @@
-"""The synthetic validation signals of seed 001 (Yeh, Pan, Le), section 4.1, at any rate.
+"""The synthetic validation signals of Yeh, Pan & Le, section 4.1, at any rate.
 
 Both are linear run-ups whose components are known exactly, so they are the
 ground truth for the order tracker, the batch VKF, the simulator's `whirl` and

@@ -150,7 +150,7 @@ def test_close_orders_through_the_pty_meet_the_papers_bounds(tmp_path):
         if not m["valid"] or not 800 <= rpm <= 2950:
             continue
         n += 1
-        # seed 001 signal 2: order-4 RMS 10 rpm/3000, order-4.2 RMS 2 + 10 rpm/3000 (linear in
+        # Yeh, Pan & Le's signal 2: order-4 RMS 10 rpm/3000, order-4.2 RMS 2 + 10 rpm/3000 (linear in
         # time, so the RMS over a 0.1 s block is that at the block's mean speed)
         truth = {"o4": 10.0 * rpm / 3000.0, "o4_2": 2.0 + 10.0 * rpm / 3000.0}
         for o in m["orders"]:

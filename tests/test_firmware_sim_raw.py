@@ -1,4 +1,4 @@
-"""RAW mode end to end on the simulated board: the seed-001 run-ups, truth files, tacho faults, link budget.
+"""RAW mode end to end on the simulated board: the run-ups of Yeh, Pan & Le, truth files, tacho faults, link budget.
 
 - `whirl` and `close_orders` RAW frames decode to counts whose physical values are the truth + noise;
 - the truth file (`--truth`) holds t, rpm, turns and the components, consistent with order_signals;

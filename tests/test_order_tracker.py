@@ -1,4 +1,4 @@
-"""The AV2KF order tracker against seed 001: section 4.1's synthetic signals, the
+"""The AV2KF order tracker against Yeh, Pan & Le: section 4.1's synthetic signals, the
 plain reference of eqs. (10)-(25), chunk splits, the speed gate and r <-> bandwidth.
 
 RMS everywhere below is the RMS over one 0.1-s output block: sqrt(mean(x²)) of

@@ -1,6 +1,6 @@
 """The raw chain through the daemon: RAW frames + TACHO -> speed -> order tracker -> /orders.
 
-25 kHz RAW blocks of the seed-001 signals from the simulated board, decoded,
+25 kHz RAW blocks of the signals of Yeh, Pan & Le from the simulated board, decoded,
 converted to m/s², speed from the tacho edges, decimated and tracked, exactly
 as the daemon runs them (Processor); the /cm/<ch>/orders messages are compared
 with the true components.
@@ -88,7 +88,7 @@ def test_whirl_alarm_fires_near_3000_rpm():
 
 
 def test_vkf_subcommand_writes_batch_orders_beside_the_recursive_ones(tmp_path):
-    """`cmsensord vkf CAPTURE`: the batch (seed 003) orders in the same file and time base."""
+    """`cmsensord vkf CAPTURE`: the batch (Tůma) orders in the same file and time base."""
     import dataclasses
 
     from cmsensord.batch import batch_orders

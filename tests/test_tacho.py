@@ -1,8 +1,8 @@
 """Tacho edges -> shaft speed and angle (cmsensord.dsp.tacho.TachoTracker), as a specification.
 
 Edges come from the simulated board (firmware_sim), whose shaft angle is exact:
-- a constant 28.66 Hz shaft (seed 000's motor), ppr 1 and 4: speed within 0.1 %, angle within 1e-3 rev;
-- the close-orders run-up of seed 001 with 2 samples of edge jitter: speed within 0.5 % above 300 rpm;
+- a constant 28.66 Hz shaft (the motor of Kim et al. 2023), ppr 1 and 4: speed within 0.1 %, angle within 1e-3 rev;
+- the close-orders run-up of Yeh, Pan & Le with 2 samples of edge jitter: speed within 0.5 % above 300 rpm;
 - missed and spurious pulses are repaired, counted and reported, the speed unaffected beyond 0.5 %;
 - any split of the frames gives the same final output (hypothesis), and final values never change;
 - a dead encoder: tacho_lost after the timeout, the speed decays then is 0 and invalid, tacho_restored.

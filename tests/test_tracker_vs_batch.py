@@ -1,4 +1,4 @@
-"""The recursive tracker (seed 001) and the batch second-generation VKF (seed 003)
+"""The recursive tracker (Yeh, Pan & Le) and the batch second-generation VKF (Tůma)
 agree on the paper's signals away from the ends: median per-block RMS difference <= 3 %."""
 
 from __future__ import annotations

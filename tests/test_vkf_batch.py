@@ -1,11 +1,11 @@
-"""The batch Vold-Kalman filters against seed 003 (Tůma) and seed 001's synthetic signals.
+"""The batch Vold-Kalman filters against Tůma and the synthetic signals of Yeh, Pan & Le.
 
 First generation: banded solve equals the dense (r²AᵀA + E)⁻¹y, a stationary
 tone is kept and its neighbour attenuated as vkf1_response says, the
 selectivity statement of section 2 (Fig. 1), a chirp (Fig. 2).
 Second generation: banded solve equals a dense least-squares reference, the
 -3 dB bandwidth relation, the negative-frequency image, and the eq. (26) error
-on seed 001's close_orders and whirl run-ups.
+of Yeh, Pan & Le on their close_orders and whirl run-ups.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from cmsensord.dsp.vkf_batch import (
 )
 from firmware_sim.order_signals import close_orders, whirl
 
-M = 200          # seed 001 eq. (26) blocks: 0.1 s at 2 kHz
+M = 200          # Yeh, Pan & Le eq. (26) blocks: 0.1 s at 2 kHz
 
 
 def rms(v):

@@ -1,5 +1,5 @@
 /*
- * The AKF bank recursion of seed 000, eqs. (3)-(15), in C.
+ * The AKF bank recursion of Kim et al. 2023, eqs. (3)-(15), in C.
  *
  * Same semantics, same order of floating-point operations as ScalarAKF and
  * _run_numpy in akf.py (which document the equations); tested against them to
@@ -144,7 +144,7 @@ done:
 }
 
 static PyMethodDef methods[] = {
-    {"run", run, METH_VARARGS, "Run a block of observations through an AKF bank (seed 000, eqs. 3-15)."},
+    {"run", run, METH_VARARGS, "Run a block of observations through an AKF bank (Kim et al. 2023, eqs. 3-15)."},
     {NULL, NULL, 0, NULL},
 };
 

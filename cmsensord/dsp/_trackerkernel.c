@@ -1,5 +1,5 @@
 /*
- * The per-sample loops of the AV2KF order tracker (seed 001, eqs. 10-25) in C.
+ * The per-sample loops of the AV2KF order tracker (Yeh, Pan & Le, eqs. 10-25) in C.
  *
  * order_tracker.py documents the equations and checks dtypes and shapes; this
  * file checks buffer sizes so that a mistake cannot write out of bounds.  Same
@@ -384,7 +384,7 @@ done:
 
 static PyMethodDef methods[] = {
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
-    {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (seed 001, eqs. 19-25)."},
+    {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
     {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},

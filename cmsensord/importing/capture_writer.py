@@ -3,7 +3,7 @@
 Frames go out as ``firmware_sim`` sends them (docs/PROTOCOL.md), through the
 encoders of :mod:`cmsensord.protocol`: per block, a STATUS first when one is
 due (block 0, then once a second of board time), then one RAW frame per channel
-(RAW mode) or one RMS frame (RMS mode, the PROTOCOL.md RMS of the block's
+(RAW mode) or one RMS frame (RMS mode, the docs/PROTOCOL.md RMS of the block's
 counts, as the board computes it), then a TACHO frame when a tacho is imported.
 seq counts every frame; t0 is the block's first sample on the board clock,
 which runs on continuously through the snapshots (:mod:`.blocks`). A block with

@@ -231,7 +231,7 @@ SEVERITY = _obj(
 
 AKF_TRACE = _obj(
     "cmsensord.AkfTrace",
-    "One observation through one AKF of the bank (seed 000, eqs. 3-15).",
+    "One observation through one AKF of the bank (Kim et al. 2023, eqs. 3-15).",
     {
         "timestamp": _time(),
         "channel": _CHANNEL,
@@ -292,7 +292,7 @@ DIAGNOSTICS = _obj(
         "timestamp": _time(),
         "link": {
             "type": "object",
-            "description": "link counters since start (PROTOCOL.md, receiver rule 5)",
+            "description": "link counters since start (docs/PROTOCOL.md, receiver rule 5)",
             "properties": {
                 "bytes_received": _int("bytes read from the link"),
                 "bytes_discarded": _int("bytes dropped while hunting for a frame"),
@@ -318,7 +318,7 @@ DIAGNOSTICS = _obj(
 
 ORDERS = _obj(
     "cmsensord.Orders",
-    "Order tracking of one channel (seed 001): shaft speed and, per tracked component (an "
+    "Order tracking of one channel (Yeh, Pan & Le): shaft speed and, per tracked component (an "
     "order of the shaft speed or a fixed frequency), RMS and amplitude over the output block.",
     {
         "timestamp": _time(),
@@ -328,8 +328,8 @@ ORDERS = _obj(
                   "description": "false below orders.min_rpm or without a tacho speed: the "
                                  "orders cannot be told apart and rms/amplitude are null"},
         "method": {"type": "string", "enum": ["recursive", "smoothed", "batch"],
-                   "description": "recursive (seed 001, causal), smoothed (fixed-lag RTS) or "
-                                  "batch (seed 003 second-generation VKF, zero-phase)"},
+                   "description": "recursive (Yeh, Pan & Le, causal), smoothed (fixed-lag RTS) or "
+                                  "batch (Tůma's second-generation VKF, zero-phase)"},
         "orders": {
             "type": "array",
             "description": "one entry per tracked component",
