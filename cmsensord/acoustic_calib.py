@@ -105,10 +105,7 @@ def schmidt(moments) -> np.ndarray:
 
 def _consecutive_lag1(x: np.ndarray, t: np.ndarray | None) -> float:
     xc = x - x.mean()
-    if t is None:
-        pairs = np.ones(x.size - 1, dtype=bool)
-    else:
-        pairs = np.diff(t) == 1
+    pairs = np.ones(x.size - 1, dtype=bool) if t is None else np.diff(t) == 1
     if pairs.sum() < 10:
         raise ValueError("fewer than 10 pairs of consecutive blocks: F of eq. (33) cannot be estimated")
     num = float(np.mean(xc[1:][pairs] * xc[:-1][pairs]))

@@ -20,6 +20,7 @@ solve with 2 poles and 3 components).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from pathlib import Path
@@ -30,7 +31,7 @@ from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor import messages
-from cmsensord.protocol import FrameType, decode_raw, decode_status, decode_tacho
+from cmsensord.protocol import FrameType, Status, decode_raw, decode_status, decode_tacho
 from cmsensord.source import CaptureSource
 
 
@@ -41,7 +42,7 @@ class _Collector:
         self.raw: list[tuple[int, int, bytes]] = []      # (t0, chan, payload)
         self.tacho_t0: list[int] = []
         self.tacho_edges: list[np.ndarray] = []
-        self.status = None
+        self.status: Status | None = None
 
     def add(self, frames, tacho_input: int) -> None:
         for f in frames:
@@ -55,10 +56,8 @@ class _Collector:
                 self.tacho_t0.append(f.t0_unwrapped)
                 self.tacho_edges.append(edges)
             elif f.type == FrameType.STATUS and self.status is None:
-                try:
+                with contextlib.suppress(ValueError):
                     self.status = decode_status(f.payload)
-                except ValueError:
-                    pass
 
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,

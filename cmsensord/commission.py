@@ -141,7 +141,8 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
 def add_calibrate_parser(sub) -> argparse.ArgumentParser:
     """The ``calibrate`` subcommand's arguments."""
     p = sub.add_parser("calibrate", help="learn a machine's healthy model from a capture -> SITE.yaml",
-                       description="Learn R_min, R_max, f_r and the healthy baseline per channel from the healthy period [--from, --to] of a capture and write a site configuration.")
+                       description="Learn R_min, R_max, f_r and the healthy baseline per channel from the "
+                                   "healthy period [--from, --to] of a capture and write a site configuration.")
     p.add_argument("capture", help="capture of the machine (cmsensord record / import)")
     p.add_argument("--from", dest="from_s", type=float, default=0.0, metavar="S",
                    help="start of the healthy period, board seconds (default: 0)")

@@ -207,20 +207,22 @@ class _Vkf1Response:
     def __init__(self, r: float, n: int, fs: float, f0: float):
         self.n, self.fs, self.f0, self.r = n, fs, f0, r
         w0 = 2.0 * np.pi * f0 / fs
+        self.q: np.ndarray | None = None
+        self.cb: np.ndarray | None = None
         if math.isinf(r):
             # r -> ∞: x is the projection of y on the null space of A, which
             # for a stationary ω₀ is span{cos ω₀n, sin ω₀n}.
             nn = np.arange(n)
             q, _ = np.linalg.qr(np.column_stack([np.cos(w0 * nn), np.sin(w0 * nn)]))
-            self.q, self.cb = q, None
+            self.q = q
         else:
-            self.q = None
             self.cb = cholesky_banded(_vkf1_bands(np.full(n, w0), r), check_finite=False)
 
     def __call__(self, freqs) -> np.ndarray:
         freqs = np.atleast_1d(np.asarray(freqs, dtype=np.float64))
         e = _complex_probe(self.n, self.fs, freqs)
         if self.cb is None:
+            assert self.q is not None
             x = self.q @ (self.q.T @ e)
         else:
             x = cho_solve_banded((self.cb, False), e, check_finite=False)

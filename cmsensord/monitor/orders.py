@@ -129,7 +129,9 @@ class OrderChain:
             self.sample0 = start
             self.gate.restart(start)
             out.append(self._event("config", None, self._hello, start))
-        gap = start - self.gate.end
+        end = self.gate.end
+        assert end is not None                  # restarted above or before
+        gap = start - end
         if gap < 0 or gap > MAX_FILL_S * self.fs:
             out += self.release(final=True)
             self.tracker.reset()
@@ -153,7 +155,7 @@ class OrderChain:
         if not self.gate.waiting:
             return []
         if final:
-            upto = self.gate.end
+            upto = self.gate.first + self.gate.waiting      # the gate's end: everything
         elif self.causal:
             upto = self.tacho.covered_until
         else:
@@ -174,11 +176,16 @@ class OrderChain:
             out += self._blocks(res.smoothed_blocks, "smoothed")
         return out + self._alarms(res.blocks)
 
+    def _input_sample(self, i: int) -> int:
+        """Board sample index of the tracker's input sample ``i`` (since its first input)."""
+        assert self.sample0 is not None, "no samples yet"
+        return self.sample0 + i
+
     def _alarms(self, blocks) -> Out:
         out: Out = []
         for a in self.alarm.update(blocks):
             ch = self.channels[a.channel].name
-            sample = self.sample0 + int(a.block_start) * self.tracker.decimate
+            sample = self._input_sample(int(a.block_start) * self.tracker.decimate)
             fields = {"component": a.component, "rpm": round(a.rpm, 1), "rms": a.rms}
             if a.kind == "onset":
                 out.append(self._event("order_alarm", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² "
@@ -195,7 +202,7 @@ class OrderChain:
         B = self.tracker.block
         out: Out = []
         for e in range(len(blocks.start)):
-            stamp = self.clock.stamp_ns(self.sample0 + int(blocks.t_in[e]))
+            stamp = self.clock.stamp_ns(self._input_sample(int(blocks.t_in[e])))
             rpm = float(blocks.rpm[e])
             ok = bool(blocks.valid[e])
             freqs = [float(c.freq(rpm)) for c in comps]

@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.protocol import Frame, FrameType, ProtocolError, decode_rms_rows
+
+if TYPE_CHECKING:
+    from cmsensord.monitor.orders import OrderChain
 
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
@@ -61,7 +64,7 @@ class Processor:
         self.log = EventLog(sink, lambda: self.clock.last_stamp_ns or self.clock_ns(), on_event)
         self.raw = RawInput(cfg)
         self.shaft = Shaft(cfg)
-        self.orders = None                      # OrderChain, once RAW blocks and a tacho come
+        self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -129,7 +132,7 @@ class Processor:
                 self.shaft.add(f)
             elif f.type == FrameType.STATUS:
                 st, news = self.setup.decode(f)
-                if news:                        # it changes the time base or the channels:
+                if st is not None and news:     # it changes the time base or the channels:
                     rms, raw = self._flush(rms, raw)    # the frames before it go first
                     self.setup.apply(f, st)
                 self.setup.status = st or self.setup.status
@@ -186,22 +189,24 @@ class Processor:
         if blocks is None:
             return
         self._observe(blocks.t0, blocks.rms())
-        if self._orders_ready():
-            index = [ch.index for ch in self.orders.channels]
+        orders = self._order_chain()
+        if orders is not None:
+            index = [ch.index for ch in orders.channels]
             y = blocks.samples(index)
             for a, b in blocks.runs():          # consecutive except across lost blocks
-                self._out(self.orders.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(index))))
+                self._out(orders.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(index))))
 
-    def _orders_ready(self) -> bool:
-        """The order chain of the vibration channels, created with the first RAW blocks."""
+    def _order_chain(self) -> OrderChain | None:
+        """The order chain of the vibration channels, created with the first RAW blocks
+        (None while there is none to make)."""
         if self.orders is None:
             vib = tuple(ch for ch in self.channels if ch.kind != "microphone")
             if not (vib and self.cfg.orders.enabled and self.severity is not None
                     and self.shaft.ensure(self.status, self.clock)):
-                return False
+                return None
             from cmsensord.monitor.orders import OrderChain  # scipy is loaded only for the raw chain
-            self.orders = OrderChain(self.cfg, vib, self.shaft.tacho, fs=self.clock.fs, clock=self.clock)
-        return True
+            self.orders = OrderChain(self.cfg, vib, self.shaft.tracker(), fs=self.clock.fs, clock=self.clock)
+        return self.orders
 
     def _feed_tacho(self, end: bool = False) -> None:
         """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as

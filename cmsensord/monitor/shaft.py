@@ -9,12 +9,17 @@ severity chain (:meth:`Shaft.period_f_r`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
 from cmsensord.protocol import Frame, Status, decode_tacho
+
+if TYPE_CHECKING:
+    from cmsensord.dsp.tacho import TachoTracker
 
 #: TACHO frames kept while no tacho tracker exists (no STATUS announcing one yet)
 TACHO_WAIT_FRAMES = 200
@@ -26,7 +31,7 @@ class Shaft:
     def __init__(self, cfg: Config):
         self.cfg = cfg
         self.waiting: list[Frame] = []
-        self.tacho = None                       # TachoTracker, once STATUS announces a tacho
+        self.tacho: TachoTracker | None = None  # once STATUS announces a tacho
 
     def add(self, f: Frame) -> None:
         """A TACHO frame of any input; only the configured one is kept."""
@@ -48,6 +53,11 @@ class Shaft:
                                       timeout_s=t.timeout_s, causal_window=m)
         return self.tacho is not None
 
+    def tracker(self) -> TachoTracker:
+        """The tracker; only called once :meth:`ensure` has returned True."""
+        assert self.tacho is not None, "no tacho tracker before ensure()"
+        return self.tacho
+
     def feed(self, clock: BlockClock) -> list[Event]:
         """The waiting TACHO frames -> the tracker; its events (and bad payloads)."""
         frames, self.waiting = self.waiting, []
@@ -59,19 +69,19 @@ class Shaft:
             except ValueError as exc:
                 events.append(Event("decode_error", None, f"bad TACHO payload at byte {f.offset}: {exc}"))
                 edges.append(np.empty(0, dtype=np.uint32))
-        u = self.tacho.update(t0, edges)
+        u = self.tracker().update(t0, edges)
         return events + [Event(ev.kind, None, ev.message, clock.stamp_ns(int(ev.sample)),
                                {"count": int(ev.count)}) for ev in u.events]
 
     def final_slot(self, clock: BlockClock) -> int:
         """The first observation slot whose speed is not final yet."""
-        return int((self.tacho.final_until - clock.slot0_t0) // clock.block_len)
+        return int((self.tracker().final_until - clock.slot_t0(0)) // clock.block_len)
 
     def period_f_r(self, clock: BlockClock, cfg_f_r: np.ndarray, end_slot: int, period: int) -> np.ndarray:
         """Mean tacho speed [Hz] over the decision period ending at ``end_slot``, per channel
         (the configured ``cfg_f_r`` where the tacho has no valid speed)."""
         slots = np.arange(end_slot - period, end_slot)
-        hz, _, ok = self.tacho.evaluate(clock.slot_t0(slots))
+        hz, _, ok = self.tracker().evaluate(clock.slot_t0(slots))
         if ok.mean() < 0.5:
             return cfg_f_r
         return np.full(len(cfg_f_r), float(np.mean(hz[ok])))

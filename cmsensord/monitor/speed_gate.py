@@ -53,19 +53,17 @@ class SpeedGate:
         if not self.waiting:
             return None
         first = self.first
+        end = first + self.waiting      # == self.end
         if final:
-            upto = self.end
+            upto = end
         else:
-            upto = min(upto, self.end)
+            upto = min(upto, end)
             if bounded and self.waiting > self.max_rows:
-                upto = max(upto, self.end - self.max_rows)
+                upto = max(upto, end - self.max_rows)
         n = upto - first
         if n <= 0:
             return None
-        if len(self._parts) > 1:
-            whole = tuple(np.concatenate(a) for a in zip(*self._parts))
-        else:
-            whole = self._parts[0]
+        whole = tuple(np.concatenate(a) for a in zip(*self._parts)) if len(self._parts) > 1 else self._parts[0]
         rest = whole[0].shape[0] - n
         self._parts = [tuple(a[n:] for a in whole)] if rest else []
         self.waiting = rest

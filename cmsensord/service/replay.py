@@ -15,9 +15,10 @@ from cmsensord.source import CaptureSource, Paced
 
 
 def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, str] | None = None,
-           quiet: bool = False, speed: float | None = None) -> tuple[int, Path, Processor]:
+           quiet: bool = False, speed: float | None = None) -> tuple[int, Path | None, Processor]:
     """Process a capture file through the same decoder and Processor: as fast as possible,
-    or paced at ``speed`` x the board's clock (1: real time)."""
+    or paced at ``speed`` x the board's clock (1: real time).  Returns (exit status, the last
+    MCAP file or None if it could not be finished, the Processor)."""
     capture = CaptureSource(path, chunk=1 << 16 if speed is None else 1 << 12)  # LinkError before any output
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)

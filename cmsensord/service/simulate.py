@@ -73,6 +73,7 @@ def simulate(opt: SimulateOptions) -> int:
            "--channels", str(opt.channels), "--mode", mode, "--hold"] + (["--tacho"] if tacho else [])
     sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
+    assert sim.stdout is not None and sim.stderr is not None    # both piped above
     try:
         line = sim.stdout.readline().strip()
         if not line.startswith("/dev/"):
@@ -96,6 +97,7 @@ def _watch(sim: subprocess.Popen) -> threading.Event:
     done = threading.Event()
 
     def watch_sim() -> None:
+        assert sim.stdout is not None                   # piped by simulate()
         for out_line in sim.stdout:
             if out_line.startswith("{"):
                 done.set()
