@@ -57,6 +57,40 @@ def fmt_num(x: Any) -> str:
     return repr(x) if isinstance(x, float) else str(x)
 
 
+def _as_bool(value: Any) -> bool:
+    if isinstance(value, bool):
+        return value
+    raise _Invalid("expected true or false", value)
+
+
+def _as_int(value: Any) -> int:
+    if isinstance(value, int) and not isinstance(value, bool):
+        return int(value)
+    raise _Invalid("expected an integer", value)
+
+
+def _as_float(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _Invalid("expected a number", value)
+    try:
+        number = float(value)
+    except OverflowError:
+        raise _Invalid("number too large", value) from None
+    if not math.isfinite(number):
+        raise _Invalid("expected a finite number", value)
+    return number
+
+
+def _as_str(value: Any) -> str:
+    if isinstance(value, str):
+        return value
+    raise _Invalid("expected a string", value)
+
+
+#: the scalar annotations and their checks (int -> float for float)
+_SCALARS: dict[Any, Callable[[Any], Any]] = {bool: _as_bool, int: _as_int, float: _as_float, str: _as_str}
+
+
 def _coerce(tp: Any, value: Any) -> Any:
     """Check ``value`` against the annotation ``tp``; return it (int -> float)."""
     origin = typing.get_origin(tp)
@@ -71,29 +105,9 @@ def _coerce(tp: Any, value: Any) -> Any:
         if not isinstance(value, (tuple, list)):
             raise _Invalid("expected a list", value)
         return tuple(_coerce(item_tp, v) for v in value)
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        raise _Invalid("expected true or false", value)
-    if tp is int:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return int(value)
-        raise _Invalid("expected an integer", value)
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _Invalid("expected a number", value)
-        try:
-            number = float(value)
-        except OverflowError:
-            raise _Invalid("number too large", value) from None
-        if not math.isfinite(number):
-            raise _Invalid("expected a finite number", value)
-        return number
-    if tp is str:
-        if isinstance(value, str):
-            return value
-        raise _Invalid("expected a string", value)
-    if dataclasses.is_dataclass(tp):
+    if tp in _SCALARS:
+        return _SCALARS[tp](value)
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if isinstance(value, tp):
             return value
         raise _Invalid(f"expected a {tp.__name__}", value)
