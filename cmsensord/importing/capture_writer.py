@@ -27,6 +27,7 @@ error, so no partial capture is left behind.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Callable
@@ -101,9 +102,9 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
     offset = np.full(C, OFFSET)
     tacho = _tacho_frames(rec, plan)
     every = max(1, int(round(fs / L)))
-    status = dict(fw_version=FW_VERSION, mode=MODE_RAW if mode == "raw" else MODE_RMS, n_channels=C,
-                  fs=fs, block_len=L, tacho_inputs=int(tacho is not None), tacho_ppr=rec.ppr,
-                  overruns=0, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()))
+    status = Status(fw_version=FW_VERSION, mode=MODE_RAW if mode == "raw" else MODE_RMS, n_channels=C,
+                    fs=fs, block_len=L, tacho_inputs=int(tacho is not None), tacho_ppr=rec.ppr,
+                    overruns=0, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()), uptime_s=0)
     clip_blocks = np.zeros(C, dtype=np.int64)
     clip_samples = np.zeros(C, dtype=np.int64)
     seq = frames = 0
@@ -123,7 +124,7 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
             b = c0 + i
             t0 = b * L
             if b % every == 0:
-                parts.append(encode_status(seq, t0, Status(**status, uptime_s=t0 // fs)))
+                parts.append(encode_status(seq, t0, dataclasses.replace(status, uptime_s=t0 // fs)))
                 seq += 1
             if mode == "raw":
                 for c in range(C):

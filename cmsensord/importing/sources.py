@@ -137,9 +137,10 @@ class _Layout:
         if len(self.names) != len(self.idx):
             raise ImportFailure(f"--names gives {len(self.names)} name(s) for {len(self.idx)} channel(s); "
                                 "give one name per imported channel")
-        self.fs = opts.fs if opts.fs is not None else t.fs
-        if self.fs is None:
+        fs = opts.fs if opts.fs is not None else t.fs
+        if fs is None:
             raise ImportFailure(f"{t.path}: the file does not say its sampling rate; give --fs HZ")
+        self.fs: float = fs
         self.file_fs = t.fs
 
     def check(self, t: Table, first: str) -> None:
@@ -163,7 +164,7 @@ def _finite(t: Table, x: np.ndarray, names: list[str]) -> None:
                             "other --channels")
 
 
-def _split(t: Table, n: int) -> list[tuple[int, int, int]]:
+def _split(t: Table, n: int | None) -> list[tuple[int, int, int]]:
     """(snapshot of the table, start, length) pieces of ``snapshot_len`` n (None: whole snapshots)."""
     s, length, _ = t.data.shape
     if not n:
@@ -171,6 +172,33 @@ def _split(t: Table, n: int) -> list[tuple[int, int, int]]:
     if s > 1:
         raise ImportFailure(f"{t.path}: already holds {s} snapshots; drop --snapshot-len")
     return [(0, a, min(n, length - a)) for a in range(0, length, n)]
+
+
+def _channels(t: Table, layout: _Layout, factor: float) -> np.ndarray:
+    """The imported channels of one file in m/s², (C, snapshots, samples), checked finite."""
+    s_, n_, _ = t.data.shape
+    x = np.empty((len(layout.idx), s_, n_))  # one float64 copy per channel, nothing more
+    for c, i in enumerate(layout.idx):
+        x[c] = t.data[:, :, i]
+    _finite(t, x, layout.names)
+    x *= factor
+    return x
+
+
+def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
+    """What the sidecar says about one file: snapshot times out of order, a short last snapshot."""
+    notes = []
+    if t.times is not None and (np.diff(t.times) <= 0).any():
+        bad = np.flatnonzero(np.diff(t.times) <= 0)
+        k = int(bad[0]) + 1
+        notes.append(f"{t.name}: the snapshot times do not increase at {bad.size} place(s), first at "
+                     f"snapshot {k} ({t.times[k - 1]:g} s -> {t.times[k]:g} s); the snapshots stay in "
+                     "file order, the sidecar keeps the file's times")
+    if opts.snapshot_len and t.data.shape[1] % opts.snapshot_len:
+        notes.append(f"{t.name}: {t.data.shape[1]} samples are not a whole number of "
+                     f"{opts.snapshot_len}-sample snapshots: the last one holds "
+                     f"{t.data.shape[1] % opts.snapshot_len}")
+    return notes
 
 
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
@@ -189,29 +217,15 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
             layout = _Layout(t, opts)
         else:
             layout.check(t, Path(files[0]).name)
-        s_, n_, _ = t.data.shape
-        x = np.empty((len(layout.idx), s_, n_))  # one float64 copy per channel, nothing more
-        for c, i in enumerate(layout.idx):
-            x[c] = t.data[:, :, i]
-        _finite(t, x, layout.names)
-        x *= factor
+        x = _channels(t, layout, factor)
         if layout.tacho is not None:
             tacho_pieces.append(t.data[:, :, layout.tacho].astype(np.float64).reshape(-1))
         many = t.data.shape[0] > 1 or opts.snapshot_len
-        for k, (s, a, n) in enumerate(_split(t, opts.snapshot_len)):
+        for k, (s, _a, n) in enumerate(_split(t, opts.snapshot_len)):
             time = None if t.times is None else float(t.times[s])
             snaps.append(Snapshot(f"{t.name}[{k}]" if many else t.name, pos, n, time))
             pos += n
-        if t.times is not None and (np.diff(t.times) <= 0).any():
-            bad = np.flatnonzero(np.diff(t.times) <= 0)
-            k = int(bad[0]) + 1
-            notes.append(f"{t.name}: the snapshot times do not increase at {bad.size} place(s), first at "
-                         f"snapshot {k} ({t.times[k - 1]:g} s -> {t.times[k]:g} s); the snapshots stay in "
-                         "file order, the sidecar keeps the file's times")
-        if opts.snapshot_len and t.data.shape[1] % opts.snapshot_len:
-            notes.append(f"{t.name}: {t.data.shape[1]} samples are not a whole number of "
-                         f"{opts.snapshot_len}-sample snapshots: the last one holds "
-                         f"{t.data.shape[1] % opts.snapshot_len}")
+        notes += _file_notes(t, opts)
         pieces.append(x.reshape(len(layout.idx), -1))
         if t.rpm and rpm_file is None:
             rpm_file = (t.rpm, t.name)

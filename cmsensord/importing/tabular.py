@@ -107,7 +107,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     try:
         if decimal_comma:
             text = Path(path).read_text(encoding="utf-8-sig", errors="replace").replace(",", ".")
-            src: object = io.StringIO(text)
+            src: str | io.StringIO = io.StringIO(text)
         else:
             src = path
         a = np.loadtxt(src, delimiter=sep, skiprows=1 if has_header else 0, ndmin=2,
