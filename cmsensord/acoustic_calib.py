@@ -176,8 +176,9 @@ def fit_model(x, z, v, *, t=None, block_s: float = 0.01, a_rel_std: float = 0.1,
     u_mean = (1.0 - F) * float(np.mean(x)) / G
     info.update(x_mean=float(np.mean(x)), x_std=math.sqrt(var_x), y_mean=e10, y_std=e11,
                 v_mean=snd["v1"], v_std=math.sqrt(snd["var_v"]), corr_xz=float(np.corrcoef(x, z)[0, 1]))
-    model = AcousticModel(lam1=lam1, lam2=snd["lam2"], e10=e10, e11=e11, p20=snd["p20"], p21=snd["p21"],
-                          p22=snd["p22"], v1=snd["v1"], v2=snd["v1"] * snd["v1"] + snd["noise"], F=F, G=G,
+    model = AcousticModel(lam1=tuple(map(tuple, lam1.tolist())), lam2=snd["lam2"], e10=e10, e11=e11,
+                          p20=snd["p20"], p21=snd["p21"], p22=snd["p22"], v1=snd["v1"],
+                          v2=snd["v1"] * snd["v1"] + snd["noise"], F=F, G=G,
                           u_mean=u_mean, x0=float(np.mean(x)), gx0=var_x, a0=a0, ga0=(a_rel_std * a0) ** 2,
                           block_s=block_s)
     return Calibration(model=model, info=info)
@@ -284,14 +285,31 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
     blocks, evenly spread (as :func:`cross_term_variance` would pick them), or None when the
     capture carries no RAW blocks (RMS mode).
     """
-    from cmsensord.dsp.rms import rows_physical, rows_rms
+    channels = [int(c) for c in channels]
+    if samples_of is not None and int(samples_of) not in channels:
+        raise ValueError(f"samples_of: channel {samples_of} is not one of {channels}")
+    status, rms_rows, raw = _read_capture(path, channels, chunk)
+    L = status.block_len
+    samples = None
+    if raw:
+        t0, out, samples = _raw_block_rms(path, status, raw, channels, samples_of, max_sample_blocks)
+    else:
+        t0 = np.array(sorted(rms_rows), dtype=np.int64)
+        out = np.array([rms_rows[t] for t in t0]) if t0.size else np.empty((0, len(channels)))
+    if t0.size == 0:
+        raise ValueError(f"{path}: no blocks of channel(s) {channels}")
+    if samples_of is not None:
+        return (t0 - t0[0]) // L, out, L / status.fs, samples
+    return (t0 - t0[0]) // L, out, L / status.fs
+
+
+def _read_capture(path, channels: list[int], chunk: int):
+    """A capture's last decodable STATUS, the RMS rows of ``channels`` by t0 and
+    the RAW payloads by t0 and channel; bad payloads are skipped."""
     from cmsensord.errors import LinkError
     from cmsensord.protocol import FrameType, decode_rms, decode_status
     from cmsensord.source import CaptureSource
 
-    channels = [int(c) for c in channels]
-    if samples_of is not None and int(samples_of) not in channels:
-        raise ValueError(f"samples_of: channel {samples_of} is not one of {channels}")
     status = None
     rms_rows: dict[int, np.ndarray] = {}
     raw: dict[int, dict[int, bytes]] = {}
@@ -318,31 +336,31 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
                     raw.setdefault(fr.t0_unwrapped, {})[fr.chan] = fr.payload
     if status is None:
         raise ValueError(f"{path}: no STATUS frame (block length and scale unknown)")
+    return status, rms_rows, raw
+
+
+def _raw_block_rms(path, status, raw: dict[int, dict[int, bytes]], channels: list[int],
+                   samples_of: int | None, max_sample_blocks: int):
+    """(t0 of the RAW blocks where every channel arrived whole, their RMS (n, C), the physical
+    samples of ``samples_of`` in at most ``max_sample_blocks`` of them or None)."""
+    from cmsensord.dsp.rms import rows_physical, rows_rms
+
     L = status.block_len
     samples = None
-    if raw:
-        scale = np.asarray(status.scale, dtype=np.float32)
-        offset = np.asarray(status.offset, dtype=np.float32)
-        if max(channels) >= len(scale):
-            raise ValueError(f"{path}: channel {max(channels)} not in the board's {len(scale)}")
-        t0s = sorted(t for t, d in raw.items() if all(c in d and len(d[c]) == 2 * L for c in channels))
-        out = np.empty((len(t0s), len(channels)))
-        for j, c in enumerate(channels):
-            counts = np.stack([np.frombuffer(raw[t][c], dtype="<u2") for t in t0s]) if t0s else \
-                np.empty((0, L), dtype=np.uint16)
-            out[:, j] = rows_rms(counts, np.full(len(t0s), scale[c]), np.full(len(t0s), offset[c]))
-            if c == samples_of and t0s:
-                pick = np.linspace(0, len(t0s) - 1, min(len(t0s), max_sample_blocks)).astype(np.int64)
-                samples = rows_physical(counts[pick], np.full(pick.size, scale[c]), np.full(pick.size, offset[c]))
-        t0 = np.array(t0s, dtype=np.int64)
-    else:
-        t0 = np.array(sorted(rms_rows), dtype=np.int64)
-        out = np.array([rms_rows[t] for t in t0]) if t0.size else np.empty((0, len(channels)))
-    if t0.size == 0:
-        raise ValueError(f"{path}: no blocks of channel(s) {channels}")
-    if samples_of is not None:
-        return (t0 - t0[0]) // L, out, L / status.fs, samples
-    return (t0 - t0[0]) // L, out, L / status.fs
+    scale = np.asarray(status.scale, dtype=np.float32)
+    offset = np.asarray(status.offset, dtype=np.float32)
+    if max(channels) >= len(scale):
+        raise ValueError(f"{path}: channel {max(channels)} not in the board's {len(scale)}")
+    t0s = sorted(t for t, d in raw.items() if all(c in d and len(d[c]) == 2 * L for c in channels))
+    out = np.empty((len(t0s), len(channels)))
+    for j, c in enumerate(channels):
+        counts = np.stack([np.frombuffer(raw[t][c], dtype="<u2") for t in t0s]) if t0s else \
+            np.empty((0, L), dtype=np.uint16)
+        out[:, j] = rows_rms(counts, np.full(len(t0s), scale[c]), np.full(len(t0s), offset[c]))
+        if c == samples_of and t0s:
+            pick = np.linspace(0, len(t0s) - 1, min(len(t0s), max_sample_blocks)).astype(np.int64)
+            samples = rows_physical(counts[pick], np.full(pick.size, scale[c]), np.full(pick.size, offset[c]))
+    return np.array(t0s, dtype=np.int64), out, samples
 
 
 #: the warning of a calibration from captures without RAW blocks of the microphone (docs §6)

@@ -163,50 +163,65 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
     return cfg, not (isinstance(raw, dict) and raw.get("channels"))
 
 
+def _run_vkf(args: argparse.Namespace) -> int:
+    """``cmsensord vkf``: the batch orders of a capture."""
+    from cmsensord.batch import batch_orders
+
+    cfg, _ = _config_for(args.sub_config)
+    if args.sub_out:
+        cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
+    paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles)
+    for p in paths:
+        print(f"MCAP log: {p}", file=sys.stderr)
+    print(f"  batch VKF: {info}", file=sys.stderr)
+    return 0
+
+
+def _run_replay(args: argparse.Namespace) -> int:
+    """``cmsensord replay``: a capture through the daemon's Processor."""
+    cfg, auto = _config_for(args.sub_config)
+    if args.sub_out or args.sub_trace:
+        cfg = dataclasses.replace(cfg, output=dataclasses.replace(
+            cfg.output, dir=args.sub_out or cfg.output.dir,
+            akf_trace=cfg.output.akf_trace or args.sub_trace))
+    return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed)[0]
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    """Run the subcommand, the simulation or the daemon that ``args`` ask for."""
+    if args.command == "summary":
+        return summary(args.mcap, as_json=args.json)
+    if args.command == "import":
+        from cmsensord.importing.command import run_import
+        return run_import(args)
+    if args.command == "calibrate":
+        return run_calibrate(args)
+    if args.command == "record":
+        return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
+    if args.command == "vkf":
+        return _run_vkf(args)
+    if args.command == "replay":
+        return _run_replay(args)
+    if args.simulate:
+        return simulate(SimulateOptions(
+            scenario=args.scenario, duration=args.duration, speed=args.speed, seed=args.seed,
+            channels=args.channels, mode=args.mode, tacho=args.tacho, config=args.config,
+            out=args.out, capture=args.capture, akf_trace=args.akf_trace))
+    if args.config:
+        cfg, auto = _config_for(args.config)
+        return run_live(cfg, auto_channels=auto, capture_path=args.capture)
+    print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
+          "(see cmsensord --help)", file=sys.stderr)
+    return EXIT_USAGE
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
     args = parser.parse_args(argv)
     _setup_logging(args.verbose, daemon=args.command is None)
     try:
-        if args.command == "summary":
-            return summary(args.mcap, as_json=args.json)
-        if args.command == "import":
-            from cmsensord.importing.command import run_import
-            return run_import(args)
-        if args.command == "calibrate":
-            return run_calibrate(args)
-        if args.command == "record":
-            return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
-        if args.command == "vkf":
-            from cmsensord.batch import batch_orders
-
-            cfg, _ = _config_for(args.sub_config)
-            if args.sub_out:
-                cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
-            paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles)
-            for p in paths:
-                print(f"MCAP log: {p}", file=sys.stderr)
-            print(f"  batch VKF: {info}", file=sys.stderr)
-            return 0
-        if args.command == "replay":
-            cfg, auto = _config_for(args.sub_config)
-            if args.sub_out or args.sub_trace:
-                cfg = dataclasses.replace(cfg, output=dataclasses.replace(
-                    cfg.output, dir=args.sub_out or cfg.output.dir,
-                    akf_trace=cfg.output.akf_trace or args.sub_trace))
-            return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed)[0]
-        if args.simulate:
-            return simulate(SimulateOptions(
-                scenario=args.scenario, duration=args.duration, speed=args.speed, seed=args.seed,
-                channels=args.channels, mode=args.mode, tacho=args.tacho, config=args.config,
-                out=args.out, capture=args.capture, akf_trace=args.akf_trace))
-        if args.config:
-            cfg, auto = _config_for(args.config)
-            return run_live(cfg, auto_channels=auto, capture_path=args.capture)
-        print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
-              "(see cmsensord --help)", file=sys.stderr)
-        return EXIT_USAGE
+        return _dispatch(args)
     except ConfigError as exc:
         if exc.source.startswith("--"):         # a command-line option: a usage error
             print(f"cmsensord: {exc}", file=sys.stderr)

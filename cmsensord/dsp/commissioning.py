@@ -178,8 +178,10 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     baseline = float(np.nanmedian(level_raw))
     if not baseline > 0:
         raise ValueError("the healthy period's block RMS is zero: no signal on this channel")
-    kw = dict(period=period, window=window, z_c=z_c, p0=p0, q0=q0)
-    counts = period_counts(y / baseline, grid, **kw)[1:]
+    def counts_of(series: np.ndarray, rs: np.ndarray) -> np.ndarray:
+        return period_counts(series / baseline, rs, period=period, window=window, z_c=z_c, p0=p0, q0=q0)[1:]
+
+    counts = counts_of(y, grid)
     rstar = critical_r(counts, f_r, grid)
     skip = run_in_periods(level_raw, rstar)
     kept = slice(skip, None)
@@ -188,7 +190,7 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     r_1 = MARGIN * H
     r_min, r_max = bank_limits(r_1, n)
     if faulty is not None:
-        fc = period_counts(np.asarray(faulty, np.float64) / baseline, grid, **kw)[1:]
+        fc = counts_of(np.asarray(faulty, np.float64), grid)
         r_f = r_from_faulty(fc, f_r, grid)
         if np.isfinite(r_f) and r_f > r_1:
             r_min = (n * r_1 - r_f) / (n - 1)
@@ -197,7 +199,7 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     ratio = level_raw / baseline
     med = np.nanmedian(ratio)
     spread = float(1.4826 * np.nanmedian(np.abs(ratio - med)))
-    at_r1 = period_counts(y / baseline, np.array([r_1]), **kw)[1:][kept, 0]
+    at_r1 = counts_of(y, np.array([r_1]))[kept, 0]
     return HealthyModel(
         baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
         healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),

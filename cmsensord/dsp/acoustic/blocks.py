@@ -63,7 +63,11 @@ def stream_input(z: np.ndarray, C: int, valid) -> tuple[np.ndarray, np.ndarray]:
 
 def empty_block(T: int, C: int, valid: np.ndarray) -> AcousticBlock:
     """T blocks of C channels, every output NaN."""
-    return AcousticBlock(*(np.full((T, C), np.nan) for _ in range(7)), valid=valid)
+    def nan() -> np.ndarray:
+        return np.full((T, C), np.nan)
+
+    return AcousticBlock(x_hat=nan(), P_x=nan(), a_hat=nan(), P_a=nan(), y_hat=nan(), P_y=nan(),
+                         z_pred=nan(), valid=valid)
 
 
 def fill_channel(out: AcousticBlock, c: int, rows: list) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 
 from cmsensord.dsp.acoustic.blocks import AcousticBlock, empty_block, fill_channel, stream_input
 from cmsensord.dsp.acoustic.model import AcousticModel
-from cmsensord.dsp.acoustic.step import Guards, Prior
+from cmsensord.dsp.acoustic.step import DEFAULT_GUARDS, Guards, Prior
 from cmsensord.dsp.acoustic.update import predict, update_closed_form
 
 __all__ = ["AcousticEstimator"]
@@ -26,7 +26,7 @@ class AcousticEstimator:
     split of the stream gives the same estimates as one pass.
     """
 
-    def __init__(self, models, guards: Guards | None = Guards()):
+    def __init__(self, models, guards: Guards | None = DEFAULT_GUARDS):
         if isinstance(models, AcousticModel):
             models = [models]
         self.models = list(models)

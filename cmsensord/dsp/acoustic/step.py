@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["Prior", "Posterior", "Guards"]
+__all__ = ["Prior", "Posterior", "Guards", "DEFAULT_GUARDS"]
 
 
 @dataclass
@@ -65,3 +65,7 @@ class Guards:
             raise ValueError(f"zeta_max must be > 0, got {self.zeta_max!r}")
         if not (0 < self.x_floor < 1 and 0 < self.var_floor < 1 and 0 < self.y_floor < 1):
             raise ValueError("guards: need 0 < x_floor, var_floor, y_floor < 1")
+
+
+#: the default safeguards (the defaults of :class:`Guards`), shared: a Guards is immutable
+DEFAULT_GUARDS = Guards()

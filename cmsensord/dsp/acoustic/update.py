@@ -11,7 +11,7 @@ from cmsensord.dsp.acoustic.expansion import SQRT2, bessel_limit, expansion_coef
 from cmsensord.dsp.acoustic.model import AcousticModel
 from cmsensord.dsp.acoustic.polynomials import phi_z
 from cmsensord.dsp.acoustic.sound import bessel_limit_sound, sound_coefficients, sound_posterior
-from cmsensord.dsp.acoustic.step import Guards, Posterior, Prior
+from cmsensord.dsp.acoustic.step import DEFAULT_GUARDS, Guards, Posterior, Prior
 
 __all__ = ["update_closed_form", "predict", "A_MAX"]
 
@@ -20,7 +20,7 @@ A_MAX = 0.99
 
 
 def update_closed_form(model: AcousticModel, prior: Prior, z: float | None,
-                       guards: Guards | None = Guards()) -> Posterior:
+                       guards: Guards | None = DEFAULT_GUARDS) -> Posterior:
     """One update (eqs. 16-19, 21-22) from the closed forms of eqs. (24)-(31).
 
     ``z=None`` (no observation) returns the prior.  ``guards=None`` runs the
@@ -75,7 +75,7 @@ def update_closed_form(model: AcousticModel, prior: Prior, z: float | None,
                      zeta=zeta, A=A)
 
 
-def predict(model: AcousticModel, post: Posterior, guards: Guards | None = Guards()) -> Prior:
+def predict(model: AcousticModel, post: Posterior, guards: Guards | None = DEFAULT_GUARDS) -> Prior:
     """The prior of the next step, eqs. (34)-(35) and (37)-(38)."""
     x = model.F * post.x + model.G * model.u_mean                                          # (34)
     gx = model.F * model.F * post.px + model.G * model.G                                   # (35)
