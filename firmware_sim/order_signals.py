@@ -92,9 +92,11 @@ class RunUp:
         t = np.asarray(t, dtype=np.float64)
         if comp.order is not None:
             phase = 2 * np.pi * comp.order * self.turns(t)
-        else:
+        elif comp.freq_hz is not None:
             t_on = self.time_at_rpm(comp.rpm_on)
             phase = 2 * np.pi * comp.freq_hz * (t - t_on)
+        else:
+            raise ValueError(f"{comp.name}: a component needs an order or a frequency")
         return self.amplitude(comp, t) * np.cos(phase)
 
     def signals(self, t) -> dict[str, np.ndarray]:
@@ -102,7 +104,7 @@ class RunUp:
         return {c.name: self.component(c, t) for c in self.components}
 
     def clean(self, t) -> np.ndarray:
-        return sum(self.signals(t).values())
+        return np.asarray(sum(self.signals(t).values()))
 
     def ref_rms(self) -> float:
         """RMS of the reference component at its largest (noise is relative to it)."""

@@ -61,7 +61,7 @@ from collections import OrderedDict
 import numpy as np
 
 from .base import FULL_SCALE_MS2, keyword_params
-from .motor import DegradingMotor, FaultyMotor, HealthyMotor
+from .motor import DegradingMotor, FaultyMotor, HealthyMotor, MotorScenario
 from .noise import MACHINE_STREAM, SlotDraws, cubic_bspline, gauss, generator
 
 __all__ = [
@@ -173,7 +173,7 @@ class BackgroundNoise:
         self.warmup = int(math.ceil(25.0 / -math.log(rho)))
         if self.warmup >= fs:
             raise ValueError("fan_fc/road_fc too low: the filters ring longer than a segment")
-        self._phases = None
+        self._phases: np.ndarray | None = None
 
     # -- carriers: unit-RMS noises, low-passed with the previous segment's memory --
     def _lowpassed(self, draws: SlotDraws, stream: str, k: int, rho: float, g: float, L: int) -> np.ndarray:
@@ -259,7 +259,7 @@ class BackgroundNoise:
         return out
 
 
-class MicMotorMixin:
+class MicMotorMixin(MotorScenario):
     """A motor scenario whose channel ``mic_channel`` is a microphone (Pa) instead of an accelerometer.
 
     The other channels are the motor's accelerometers, unchanged.  The
@@ -270,7 +270,12 @@ class MicMotorMixin:
     calibration.  ``mic_channel`` >= n_channels means the board does not carry
     the microphone.  ``board_scale`` gives the STATUS scale per channel (m/s^2
     per count, Pa per count for the microphone).
+
+    It comes first in the bases of a concrete motor scenario (``_motor_class``, also the
+    class of the noise-free twin whose vibration the microphone hears).
     """
+
+    _motor_class: type[MotorScenario]
 
     def __init__(self, *, mic_channel: int = 1, machine_off: bool = False,
                  sound_kappa: float = 0.2, sound_gamma: float = 1.3, sound_e_ref: float = 0.7,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 from .base import Scenario, keyword_params
@@ -14,7 +13,7 @@ from .spikes import SpikesScenario
 __all__ = ["SCENARIOS", "make_scenario"]
 
 #: every scenario by its name (the ``--scenario`` of the command lines), in listing order
-SCENARIOS: dict[str, Callable[..., Scenario]] = {
+SCENARIOS: dict[str, type[Scenario]] = {
     "healthy": HealthyMotor,
     "faulty": FaultyMotor,
     "degrading": DegradingMotor,

@@ -73,7 +73,10 @@ class RunUpScenario(Scenario):
         kwargs = {"duration_s": self.runup_s}
         if rpm_max is not None:
             kwargs["rpm_max"] = float(rpm_max)
-        self.runup = type(self)._factory(**kwargs)
+        factory = type(self)._factory
+        if factory is None:
+            raise TypeError(f"{type(self).__name__}: a run-up scenario needs a _factory")
+        self.runup = factory(**kwargs)
         self.rpm_max = self.runup.rpm_max
         self.noise_std = self.noise * float(self.runup.ref_rms())
 

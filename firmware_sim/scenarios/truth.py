@@ -69,9 +69,12 @@ def write_truth(scenario: Scenario, path, duration_s: float, *, rate: float | No
         ("rpm", "<f8", lambda a, b: 60.0 * np.asarray(scenario.shaft_hz(times(a, b)), dtype=np.float64)),
         ("turns", "<f8", lambda a, b: scenario.shaft_turns(times(a, b))),
     ]
-    for name in names:
-        series.append((truth_key(name), "<f4",
-                       lambda a, b, name=name: gain * comps_fn(times(a, b))[name]))
+    if comps_fn is not None:
+        def component(name: str) -> Callable[[int, int], np.ndarray]:
+            return lambda a, b: gain * comps_fn(times(a, b))[name]
+
+        for name in names:
+            series.append((truth_key(name), "<f4", component(name)))
     if sub is not None:
         series.append(("accel", "<f4",
                        lambda a, b: scenario.samples(a * sub, (b - a - 1) * sub + 1)[channel, ::sub]))
