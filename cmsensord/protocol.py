@@ -348,6 +348,12 @@ class Decoder:
         return self._scan(final=True)
 
     def _scan(self, final: bool) -> list[Frame]:
+        """Frame every complete candidate in the buffer (docs/PROTOCOL.md receiver rules 1-3);
+        with ``final``, incomplete candidates are dropped byte by byte.
+
+        The receiver's hot loop, every byte of the link passes through it: one function, the
+        lookups bound to locals and the counters summed locally, so it stays whole on purpose.
+        """
         buf = self._buf
         n = len(buf)
         find = buf.find
