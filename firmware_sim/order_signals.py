@@ -113,7 +113,7 @@ class RunUp:
 
 
 def whirl_runup(duration_s: float = 180.0, rpm_max: float = 7000.0) -> RunUp:
-    """Seed 001 synthetic signal 1 (scaled in time by ``duration_s``)."""
+    """Yeh, Pan & Le synthetic signal 1 (scaled in time by ``duration_s``)."""
     return RunUp("whirl", rpm_max, duration_s, (
         Component("order 1", 1.0, 4.0, order=1.0),
         Component("order 0.47", 2.0, 4.0, rpm_on=3000.0, rpm_off=6000.0, order=0.47),
@@ -122,7 +122,7 @@ def whirl_runup(duration_s: float = 180.0, rpm_max: float = 7000.0) -> RunUp:
 
 
 def close_orders_runup(duration_s: float = 5.0, rpm_max: float = 3000.0) -> RunUp:
-    """Seed 001 synthetic signal 2: RMS 2, 0 -> 10 and 2 -> 12 (peak = RMS * sqrt 2)."""
+    """Yeh, Pan & Le synthetic signal 2: RMS 2, 0 -> 10 and 2 -> 12 (peak = RMS * sqrt 2)."""
     s = np.sqrt(2.0)
     return RunUp("close_orders", rpm_max, duration_s, (
         Component("order 1", 2.0 * s, 2.0 * s, order=1.0),

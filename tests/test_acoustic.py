@@ -1,4 +1,4 @@
-"""Seed 002: the acoustic estimator (cmsensord.dsp.acoustic) and its calibration.
+"""Orimoto, Ikuta & Wang: the acoustic estimator (cmsensord.dsp.acoustic) and its calibration.
 
 - the Laguerre (eqs. 9-10) and Hermite (eq. 15) families are orthonormal under
   their weights (Gauss quadrature);

@@ -1,4 +1,4 @@
-"""Seed 000's behaviour on the simulated board, through bytes, decoder and Processor.
+"""The AKF bank and severity index of Kim et al. 2023 on the simulated board, through bytes, decoder and Processor.
 
 With the paper's parameters (the defaults: n = 10, R_min = 4e-3, R_max = 0.13,
 z_c = 2.8, c = 0.4, f_r = 28.66 Hz):

@@ -146,7 +146,7 @@ def test_vkf1_long_record_approaches_the_analytic_bandwidth(r):
 
 
 def test_vkf1_tracks_a_chirp():
-    """Seed 003 Fig. 2: a 500-sample chirp at fs = 1 Hz, here 0.05 -> 0.15 fs, with
+    """Tůma Fig. 2: a 500-sample chirp at fs = 1 Hz, here 0.05 -> 0.15 fs, with
     a stationary tone at 0.3 fs and white noise; ω(n) is passed per sample."""
     rng = np.random.default_rng(3)
     n = np.arange(500)
@@ -262,7 +262,7 @@ def close():
 
 @pytest.mark.parametrize(("poles", "bw", "bound"), [(2, 1.0, 0.5), (1, 4.0, 1.0)])
 def test_close_orders_eq26_error_above_800_rpm(close, poles, bw, bound):
-    """Seed 001 synthetic signal 2 (orders 1, 4, 4.2; 5 % noise), the three orders
+    """Yeh, Pan & Le synthetic signal 2 (orders 1, 4, 4.2; 5 % noise), the three orders
     coupled.  Requirement: well under 3 % above 800 rpm for orders 4 and 4.2.
     Measured max: 2 poles, 1 Hz: 0.09 % / 0.04 %; 1 pole, 4 Hz: 0.44 % / 0.43 %
     (the 1-pole filter needs the wider band: its envelope is biased near the
@@ -296,7 +296,7 @@ def whirl_sig(request):
 
 @pytest.mark.parametrize("poles", [1, 2])
 def test_whirl_orders_and_fixed_47hz_coupled(whirl_sig, poles):
-    """Seed 001 synthetic signal 1, 180 s at 2 kHz (N = 360 000): order 1, order 0.47
+    """Yeh, Pan & Le synthetic signal 1, 180 s at 2 kHz (N = 360 000): order 1, order 0.47
     and the fixed 47-Hz component solved together, 1-Hz bandwidth.
     Requirement: order 0.47 within 10 % between 3200 and 5800 rpm, 47 Hz within
     10 % above 6500 rpm.  Measured max (clean / 5 % noise): 1 pole 0.00 / 0.51 %

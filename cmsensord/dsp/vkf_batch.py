@@ -562,7 +562,7 @@ def block_rms(x: np.ndarray, block: int) -> np.ndarray:
 
 
 def block_rms_error(extracted: np.ndarray, designated: np.ndarray, block: int) -> np.ndarray:
-    """Seed 001 eq. (26) in percent, per block: |RMS(y) - RMS(x)| / RMS(x) x 100,
+    """Yeh, Pan & Le eq. (26) in percent, per block: |RMS(y) - RMS(x)| / RMS(x) x 100,
     y the extracted and x the designated (true) waveform.  inf or nan where the
     designated block is zero."""
     ex = block_rms(extracted, block)

@@ -356,7 +356,7 @@ ORDERS = _obj(
 
 VIBRATION_ESTIMATE = _obj(
     "cmsensord.VibrationEstimate",
-    "Seed-002 estimate of the machine's vibration from the sound of a microphone channel "
+    "Orimoto, Ikuta & Wang estimate of the machine's vibration from the sound of a microphone channel "
     "(kind: microphone), one per block (10 ms): the recursive Bayesian estimator of eqs. 6-38. "
     "x_hat = sqrt(x_ms) is what the channel's AKF bank watches in place of an accelerometer's block RMS.",
     {
