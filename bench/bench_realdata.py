@@ -51,10 +51,10 @@ def cmsensord(*args: str) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def severity_timeline(out_dir: Path, channel: str) -> tuple[np.ndarray, np.ndarray]:
-    """(board seconds at the end of each decision, S_idx) from the replay's MCAP log."""
+def severity_timeline(out_dir: Path, channel: str, field: str = "severity_index") -> tuple[np.ndarray, np.ndarray]:
+    """(board seconds at the end of each decision, the severity ``field``) from the replay's MCAP log."""
     msgs = read_messages(next(out_dir.glob("*.mcap")))
-    sev = [(t, m["severity_index"]) for topic, t, m in msgs if topic == f"/cm/{channel}/severity"]
+    sev = [(t, m.get(field, 0.0)) for topic, t, m in msgs if topic == f"/cm/{channel}/severity"]
     t = np.array([s[0] for s in sev], dtype=np.float64)
     period = np.median(np.diff(t)) if t.size > 1 else 1e9
     return (t - t[0] + period) / 1e9, np.array([s[1] for s in sev])
@@ -85,12 +85,14 @@ def femto(data: Path, work: Path, bearing: str) -> dict:
                      "--out", str(site))          # f_r from the rpm the import read from the archive
     cpu += cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
     t, sev = severity_timeline(out, "horizontal")
+    akf = severity_timeline(out, "horizontal", "severity_akf")[1]
     life = t / (snaps * SNAPSHOT_S) * 100
     mid = (life > 20) & (life <= 50)
     rule = level_rule(rms)
     s05 = first_reached(life, sev, 0.5)
     return {"bearing": f"Bearing{bearing}", "snapshots": snaps, "quiet": int(np.count_nonzero(sev[mid] > 0)),
             "s01": first_reached(life, sev, 0.1), "s05": s05, "s10": first_reached(life, sev, 1.0),
+            "akf01": first_reached(life, akf, 0.1), "akf05": first_reached(life, akf, 0.5),
             "rule": rule, "diff": s05 - rule, "decision": 100.0 / (snaps * SNAPSHOT_S), "cpu": cpu}
 
 
@@ -130,13 +132,13 @@ def main() -> int:
         work = Path(tmp)
         print("FEMTO learning bearings, horizontal, calibrated on the first 20 % of life "
               "(% of life; 'quiet' = decisions with S_idx > 0 in 20-50 %)")
-        print("| bearing | snapshots | S>0 in 20-50 % | S>=0.1 | S>=0.5 | S>=1.0 | 2x rule | "
-              "S>=0.5 - rule | 1 decision | CPU s |")
-        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+        print("| bearing | snapshots | S>0 in 20-50 % | S>=0.1 | S>=0.5 | S>=1.0 | AKF part >=0.1 | "
+              "AKF part >=0.5 | 2x rule | S>=0.5 - rule | 1 decision | CPU s |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         for b in args.bearings:
             r = femto(args.data, work, b)
             print(f"| {r['bearing']} | {r['snapshots']} | {r['quiet']} | {_pct(r['s01'])} | {_pct(r['s05'])} | "
-                  f"{_pct(r['s10'])} | {_pct(r['rule'])} | {r['diff']:+.1f} | {r['decision']:.2f} | "
+                  f"{_pct(r['s10'])} | {_pct(r['akf01'])} | {_pct(r['akf05'])} | {_pct(r['rule'])} | {r['diff']:+.1f} | {r['decision']:.2f} | "
                   f"{r['cpu']:.1f} |", flush=True)
         if not args.no_ims:
             print("\nIMS, calibrated on the first half (3 s) of the healthy segment NA")

@@ -130,7 +130,8 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         rows = [("baseline", m.baseline, "median block RMS of the healthy period"),
                 ("baseline_spread", m.spread, "robust std of the per-decision level / baseline"),
                 ("r_min", m.r_min, f"R_1 = {_g(m.r_1)} = {MARGIN:g} x healthy critical R {_g(m.healthy_r)}"),
-                ("r_max", m.r_max, "R_n"), ("f_r", r.f_r, r.f_r_source)]
+                ("r_max", m.r_max, f"R_n = {SPAN:g} x R_1" if m.r_max_rule == "span" else
+                 "R_n: the largest R that still flags the faulty capture"), ("f_r", r.f_r, r.f_r_source)]
         out += [f"  - name: {r.name}", f"    index: {r.index}"]
         out += [f"    {(k + ': ' + _g(v)):<28}# {why}" for k, v, why in rows]
         for k, v in entry.items():

@@ -35,6 +35,7 @@ PROCESS_MODULES = frozenset({
     "test_replay.py",
     "test_systemd.py",
     "test_traps.py",
+    "test_realdata.py",
     "test_import.py",
 })
 

@@ -97,3 +97,18 @@ def test_f_r_at_the_decision_size_is_a_configuration_error(degrading, tmp_path):
         f"cmsensord: configuration error: {cfg}: monitor.f_r: must be below the 100 observations per "
         "decision (decision_period_s 1 x 100 blocks/s): at or above it no decision can flag an anomaly "
         "(got 100.0)")
+
+
+def test_faulty_capture_sets_r_max(degrading, tmp_path):
+    faulty = tmp_path / "faulty.bin"
+    p = run("firmware_sim", "--scenario", "faulty", "--duration", "30", "--seed", "4", "--out", str(faulty))
+    assert p.returncode == 0, p.stderr
+    plain, with_faulty = tmp_path / "plain.yaml", tmp_path / "faulty.yaml"
+    assert run("cmsensord", "calibrate", str(degrading), "--to", "150", "--out", str(plain)).returncode == 0
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "150", "--faulty", str(faulty),
+            "--out", str(with_faulty))
+    assert p.returncode == 0, p.stderr
+    a = yaml.safe_load(plain.read_text())["channels"][0]
+    b = yaml.safe_load(with_faulty.read_text())["channels"][0]
+    assert b["r_max"] > a["r_max"] and b["baseline"] == a["baseline"]
+    assert "# R_n: the largest R that still flags the faulty capture" in with_faulty.read_text()

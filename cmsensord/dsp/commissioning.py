@@ -66,6 +66,7 @@ class HealthyModel:
     max_cnt: int           # highest outlier count per decision at R_1 on the healthy period
     flagged: int           # healthy decisions that R_1 would still flag (cnt >= f_r)
     rstar_median: float
+    r_max_rule: str = "span"   # "span": R_n = SPAN x R_1; "faulty": from the faulty recording
 
 
 def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
@@ -189,13 +190,14 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     H = _robust_high(rstar)
     r_1 = MARGIN * H
     r_min, r_max = bank_limits(r_1, n)
+    rule = "span"
     if faulty is not None:
         fc = counts_of(np.asarray(faulty, np.float64), grid)
         r_f = r_from_faulty(fc, f_r, grid)
         if np.isfinite(r_f) and r_f > r_1:
             r_min = (n * r_1 - r_f) / (n - 1)
             r_min = r_min if r_min > 0 else r_1 / 2
-            r_max = r_f
+            r_max, rule = r_f, "faulty"
     ratio = level_raw / baseline
     med = np.nanmedian(ratio)
     spread = float(1.4826 * np.nanmedian(np.abs(ratio - med)))
@@ -204,5 +206,5 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
         baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
         healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
         max_cnt=int(at_r1.max()), flagged=int(np.count_nonzero(at_r1 >= f_r)),
-        rstar_median=float(np.median(rstar[np.isfinite(rstar)])),
+        rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule,
     )

@@ -85,6 +85,7 @@ class Decision:
     level: np.ndarray         # (C,) median level ratio of the period (NaN without a baseline)
     severity_level: np.ndarray  # (C,) S_level (NaN in the paper's mode)
     held: np.ndarray          # (C, n) consecutive decisions F_a was kept by the hysteresis alone
+    held_max: int = 0         # the largest of ``held``
 
 
 class AnomalyDecider:
@@ -180,6 +181,7 @@ class AnomalyDecider:
             severity=severity, prev_severity=self._last_severity.copy(),
             f_r=self.f_r.copy(), missing=self.missing.copy(),
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
+            held_max=int(self.held.max()),
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0

@@ -195,7 +195,7 @@ class SeverityChain:
             v.judged += 1
             v.timeline.add(d.slot / self.rate, sev)
         prev = d.prev_anomaly[c].tolist()
-        events = self._held(c, d, stamp)
+        events = self._held(c, d, stamp) if d.held_max >= HOLD_EVENT_DECISIONS else []
         if anomaly == prev:
             changed: list[int] = []
         else:

@@ -199,7 +199,11 @@ def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, j0: int, j1:
             continue
         grid = _R_SPEEDS[miss]
         f = c.freq(grid)
-        bw = c.bandwidth_hz if c.bandwidth_hz is not None else c.bandwidth_pct / 100.0 * f
+        if c.bandwidth_hz is not None:
+            bw: float | np.ndarray = c.bandwidth_hz
+        else:
+            assert c.bandwidth_pct is not None  # the components here give one of the two
+            bw = c.bandwidth_pct / 100.0 * f
         bws.append(np.minimum(np.broadcast_to(bw, f.shape), 0.45 * fs))
         fs_.append(np.minimum(f, 0.49 * fs))
         idx.append(miss)

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 DEFAULT_R = 50.0
 """Default weighting factor.  At a 2-kHz tracker rate its -3 dB bandwidth is
 15 Hz at 200 Hz, 29 Hz at 100 Hz (see :func:`r_to_bandwidth`; time constant
@@ -57,6 +56,7 @@ class TrackedComponent:
         rpm = np.asarray(rpm, dtype=np.float64)
         if self.order is not None:
             return self.order * rpm / 60.0
+        assert self.freq_hz is not None  # exactly one of order, freq_hz (__post_init__)
         return np.full(rpm.shape, float(self.freq_hz))
 
 

@@ -83,7 +83,7 @@ def reference_track(y, rpm, components: Sequence[TrackedComponent], fs: float, *
         P = F @ Pf @ F.T + Q1
         P = 0.5 * (P + P.T)                                 # keep P symmetric (docs/order_tracker.md §3)
     wave = np.transpose(xf_all[:, 1::2, :], (0, 2, 1))      # (T, C, K)
-    if not keep:
+    if smoother_lag is None:
         return wave[:, 0, :] if one else wave
     sm = _reference_smooth(xf_all, Pf_all, F_all, qd, int(smoother_lag), int(block))
     swave = np.transpose(sm[:, 1::2, :], (0, 2, 1))

@@ -133,7 +133,7 @@ class OrderTracker:
                              f"highest tracked frequency {self.f_hi:g} Hz")
         if self.decimate > 1:
             order, fc = cheb2ord(self.f_hi, self.fs_track - self.f_hi, 0.001, 80.0, self.fs_in)
-            self.sos = cheby2_sos(order, 80.0, fc, self.fs_in)
+            self.sos: np.ndarray | None = cheby2_sos(order, 80.0, fc, self.fs_in)
             gd = sos_dc_delay(self.sos)
             self.filter_delay_s = gd / self.fs_in
             self.delay_in = round(gd)
@@ -290,7 +290,7 @@ class OrderTracker:
         out = TrackerOutput(index=index, t_in=t_in, rpm=rd, waveform=wave, blocks=blocks,
                             missing=miss if miss is not None else np.zeros((N, self.C), dtype=bool))
         if self.lag is not None:
-            self._smooth(out, n0, rd, c, k, S, P, zp, e, miss)
+            self._smooth(out, self.lag, n0, rd, c, k, S, P, zp, e, miss)
         st.n_track = n0 + N
         return out
 
@@ -474,9 +474,9 @@ class OrderTracker:
                                  miss_blocks(cur.get("miss"), used, nb, B))
 
     # --------------------------------------------------------------- smoother
-    def _smooth(self, out: TrackerOutput, n0, rd, c, k, S, P, zp, e, miss) -> None:
+    def _smooth(self, out: TrackerOutput, L: int, n0, rd, c, k, S, P, zp, e, miss) -> None:
         st = self.state
-        B, L = self.block, self.lag
+        B = self.block
         cur = with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
                          miss, self.C)
         h0 = st.next_smooth * B                              # index of cur[0]
@@ -492,23 +492,26 @@ class OrderTracker:
                 some = "miss" in cur
                 for i, s0 in enumerate(starts):
                     sl = slice(s0, s0 + W)
-                    args = (np.ascontiguousarray(cur["c"][sl]), np.ascontiguousarray(cur["k"][sl]),
-                            np.ascontiguousarray(cur["S"][sl]), np.ascontiguousarray(cur["P"][sl]),
-                            np.ascontiguousarray(cur["zp"][sl]), np.ascontiguousarray(cur["e"][sl]),
-                            xs[i], self.K)
+                    args: tuple[np.ndarray | int, ...] = (
+                        np.ascontiguousarray(cur["c"][sl]), np.ascontiguousarray(cur["k"][sl]),
+                        np.ascontiguousarray(cur["S"][sl]), np.ascontiguousarray(cur["P"][sl]),
+                        np.ascontiguousarray(cur["zp"][sl]), np.ascontiguousarray(cur["e"][sl]),
+                        xs[i], self.K)
                     if some and cur["miss"][sl].any():
                         args += (np.ascontiguousarray(cur["miss"][sl]).view(np.uint8),)
                     _trackerkernel.backward(*args)
             else:                     # per mask pattern, as in _filter: k = 0 where missing
-                xs = None
+                acc: np.ndarray | None = None
                 for chans, m in mask_groups(cur.get("miss")):
                     kg = cur["k"] if m is None else np.where(m[:, None], 0.0, cur["k"])
                     res = backward_numpy(cur["c"], kg, cur["S"], cur["P"], cur["zp"], cur["e"],
                                          starts, W, B)
-                    if xs is None:
-                        xs = res
+                    if acc is None:
+                        acc = res
                     else:
-                        xs[:, :, chans] = res[:, :, chans]
+                        acc[:, :, chans] = res[:, :, chans]
+                assert acc is not None  # mask_groups returns at least one group
+                xs = acc
             used = n_emit * B
             cb = cur["c"][:used].reshape(n_emit, B, self.K)
             wave = xs[..., 1::2]

@@ -10,15 +10,17 @@ invalid after the run's timeout.  Any split of the frames gives the same values.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
+from cmsensord.dsp.tacho.edges import BoolArray, FloatArray, TachoState
 from cmsensord.dsp.tacho.smoothing import make_room, weighted_quadratic
 
 _CAUSAL_SLACK = 2.5  # causal speed: pulse periods without an edge before it is capped (a missed pulse is 2)
 
 
-class CausalSpeed:
-    """The causal part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose ``__init__``
-    sets the attributes): one segment (speed, acceleration) per committed edge."""
+class CausalSpeed(TachoState):
+    """The causal part of :class:`~cmsensord.dsp.tacho.TachoTracker`: one segment
+    (speed, acceleration) per committed edge."""
 
     def _flush_segments(self) -> None:
         """Fit the causal segments of the edges committed since the last call (see
@@ -49,7 +51,8 @@ class CausalSpeed:
         self._append_segments(np.maximum(known, Tc[kr]), Tc[kr], speed, acc,
                               (npts >= 2).astype(np.float64))
 
-    def _append_segments(self, key, T, speed, acc, valid) -> None:
+    def _append_segments(self, key: FloatArray, T: FloatArray, speed: FloatArray, acc: FloatArray,
+                         valid: FloatArray) -> None:
         n = key.size
         buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, n)
         self._sbuf = buf
@@ -57,7 +60,7 @@ class CausalSpeed:
             buf[row, self._shi:self._shi + n] = v
         self._shi += n
 
-    def evaluate_causal(self, samples) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate_causal(self, samples: npt.ArrayLike) -> tuple[FloatArray, BoolArray]:
         """(speed in Hz, valid) at sample indices from the edges up to each sample only.
 
         See "Causal speed" in docs/tacho.md: the value at sample s depends only on
@@ -77,7 +80,7 @@ class CausalSpeed:
         sp, valid = self._causal_speed(flat - T, w, a, v, before)
         return (sp * self.fs).reshape(s.shape), valid.reshape(s.shape)
 
-    def causal_range(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def causal_range(self, start: int, stop: int) -> tuple[FloatArray, BoolArray]:
         """:meth:`evaluate_causal` at the samples start .. stop - 1 (the same values, bit
         for bit), segment by segment: no per-sample search or gather (the order chain
         asks for every sample, 25 000 a second)."""
@@ -93,10 +96,8 @@ class CausalSpeed:
         # sample s is in segment k when keys[k] <= s < keys[k + 1]: cut at ceil(keys)
         cuts = np.clip(np.ceil(keys[first + 1:b + 1]), start, stop).astype(np.int64) if b > first else \
             np.empty(0, dtype=np.int64)
-        if a < 0:       # samples before the first segment
-            head = int(min(max(np.ceil(keys[0]), start), stop)) - start
-        else:
-            head = 0
+        # samples before the first segment
+        head = int(min(max(np.ceil(keys[0]), start), stop)) - start if a < 0 else 0
         edges = np.concatenate(([start + head], cuts, [stop]))
         counts = np.diff(edges)
         seg = np.arange(first, first + counts.size) + lo
@@ -108,7 +109,8 @@ class CausalSpeed:
             valid = np.concatenate((np.zeros(head, dtype=bool), valid))
         return sp * self.fs, valid
 
-    def _causal_speed(self, tau, w, a, v, before) -> tuple[np.ndarray, np.ndarray]:
+    def _causal_speed(self, tau: FloatArray, w: FloatArray, a: FloatArray, v: FloatArray,
+                      before: BoolArray) -> tuple[FloatArray, BoolArray]:
         """Speed (turns/sample) and validity tau samples after a segment's edge (docs/tacho.md, "Causal speed")."""
         sp = w + a * tau
         with np.errstate(divide="ignore", invalid="ignore"):

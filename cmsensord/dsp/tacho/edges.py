@@ -5,17 +5,24 @@ edges form runs that end at a timeout (``tacho_lost``, ``tacho_restored``); an
 interval that is a whole multiple of the predicted one counts missed pulses, a
 short one followed by a regular one is a spurious edge and is removed.  The
 committed edges feed the smoothing and the causal speed.  Also the event and
-counter types of :class:`~cmsensord.dsp.tacho.TachoTracker`.
+counter types of :class:`~cmsensord.dsp.tacho.TachoTracker`, and
+:class:`TachoState`, the state its parts share.
 """
 
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from cmsensord.protocol import Frame
 
 SUB = 256  # edge resolution: 1/256 sample (docs/PROTOCOL.md, TACHO)
 
@@ -82,10 +89,102 @@ class Run:
     end_turns: float = math.nan  # turns at stop (set when it ends)
 
 
-class EdgeRuns:
-    """The edge part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose ``__init__``
-    sets the attributes): coverage and timeouts, runs, the look-ahead classification
-    of each edge and its commitment as pulses."""
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+class TachoState(ABC):
+    """The state shared by the parts of :class:`~cmsensord.dsp.tacho.TachoTracker`
+    (:class:`EdgeRuns`, :class:`~cmsensord.dsp.tacho.smoothing.KnotSmoothing`,
+    :class:`~cmsensord.dsp.tacho.causal.CausalSpeed`): the attributes its
+    ``__init__`` sets and the methods one part calls on another."""
+
+    # configuration
+    fs: float
+    ppr: int
+    block_len: int
+    half_window: int
+    tol: float
+    timeout_s: float
+    timeout_periods: float
+    max_timeout_s: float
+    history_s: float
+    causal_window: int
+    use_kernel: bool
+    _timeout_hi: int  # 1/256 sample
+    _timeout_lo: int
+    _kernel: FloatArray  # tricube weights of the smoothing window
+    _offsets: npt.NDArray[np.signedinteger]  # pulse positions -h .. h of the window
+    _ckernel: FloatArray  # weights of the causal window
+    # coverage, runs and events
+    counters: TachoCounters
+    _now: int | None  # coverage end, samples (exclusive)
+    _last_q: int | None  # last edge received
+    _last_t0: int | None
+    _run: Run | None  # the current (not ended) run
+    _runs: dict[int, Run]
+    _next_rid: int
+    _held: float  # turns held after the last ended valid run
+    _had_loss: bool
+    _events: list[TachoEvent]
+    _known_q: int  # the edge (or time) being handled
+    # the current run's committed edges (times in samples, pulse counts), from index _c0
+    _cT: list[float]
+    _cn: list[int]
+    _c0: int
+    _cq_last: int | None  # last committed edge, 1/256 sample
+    _n_last: int
+    _committed_key: tuple[int | None, int, int] | None
+    _committed_arrays: tuple[FloatArray, FloatArray] | None
+    _pending: deque[int]  # edges of the current run not yet classified
+    _hist: deque[tuple[float, float]]  # (mid q, pulses/q)
+    # knots: finalised ones of all runs (rows time, turns, speed, run id; live columns
+    # [_klo, _khi)), the provisional ones of the current run
+    _final: int
+    _kbuf: FloatArray
+    _klo: int
+    _khi: int
+    _prov: tuple[FloatArray, FloatArray, FloatArray] | None
+    _prov_key: tuple[int, int, int] | None
+    _pruned: bool
+    # causal segments: rows key, T, speed, acceleration, valid; live columns [_slo, _shi)
+    _sbuf: FloatArray
+    _slo: int
+    _shi: int
+    _seg_todo: list[tuple[int, float]]  # (committed index, known at) to fit
+
+    @abstractmethod
+    def _committed(self) -> tuple[FloatArray, FloatArray]:
+        """The current run's committed edge times and pulse counts (:class:`EdgeRuns`)."""
+
+    @abstractmethod
+    def _timeout_q(self, run: Run) -> int:
+        """The run's timeout in 1/256 sample (:class:`EdgeRuns`)."""
+
+    @abstractmethod
+    def _finalise(self, ended: bool) -> None:
+        """Fit the knots whose windows are complete (``KnotSmoothing``)."""
+
+    @staticmethod
+    @abstractmethod
+    def _tail(w0: FloatArray, tau: FloatArray, c: float) -> tuple[FloatArray, FloatArray]:
+        """Speed after a run's last edge and its integral (``KnotSmoothing``)."""
+
+    @abstractmethod
+    def _flush_segments(self) -> None:
+        """Fit the causal segments of the newly committed edges (``CausalSpeed``)."""
+
+    @abstractmethod
+    def _append_segments(self, key: FloatArray, T: FloatArray, speed: FloatArray, acc: FloatArray,
+                         valid: FloatArray) -> None:
+        """Append causal segments (``CausalSpeed``)."""
+
+
+class EdgeRuns(TachoState):
+    """The edge part of :class:`~cmsensord.dsp.tacho.TachoTracker`: coverage and
+    timeouts, runs, the look-ahead classification of each edge and its commitment
+    as pulses."""
 
     def _advance(self, end: int) -> None:
         """The frames so far cover up to ``end`` (exclusive): coverage and timeout check."""
@@ -109,7 +208,7 @@ class EdgeRuns:
             return
         stop_q = run.last_raw_q + self._timeout_q(run)
         if q_now > stop_q:
-            self._end_run(stop_q)
+            self._end_run(run, stop_q)
 
     def _edge(self, q: int) -> None:
         c = self.counters
@@ -126,7 +225,7 @@ class EdgeRuns:
             return
         run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = run.prev_raw_q, run.last_raw_q, q
         self._pending.append(q)
-        self._classify(final=False)
+        self._classify(run, final=False)
 
     def _start_run(self, q: int) -> None:
         base = 0.0
@@ -142,11 +241,11 @@ class EdgeRuns:
         self._final = 0
         self._n_last = 0
         self._cq_last = None
-        self._commit(q, 0)
+        self._commit(run, q, 0)
 
-    def _commit(self, q: int, npulses: int) -> None:
-        """Commit edge q as ``npulses`` pulses after the previous committed edge."""
-        run = self._run
+    def _commit(self, run: Run, q: int, npulses: int) -> None:
+        """Commit edge q of ``run`` (the current one) as ``npulses`` pulses after the
+        previous committed edge."""
         if self._cq_last is not None:
             d = q - self._cq_last
             self._hist.append((self._cq_last + 0.5 * d, npulses / d))
@@ -169,7 +268,8 @@ class EdgeRuns:
         """Predicted next interval (1/256 sample) after the last committed edge, or None."""
         hist = self._hist
         n = len(hist)
-        if n < 2:
+        cq_last = self._cq_last
+        if n < 2 or cq_last is None:  # two intervals imply a committed edge
             return None
         t_ref = hist[-1][0]
         xs = [h[0] - t_ref for h in hist]
@@ -177,7 +277,7 @@ class EdgeRuns:
         xm, ym = sum(xs) / n, sum(rt) / n
         sxx = sum((x - xm) ** 2 for x in xs)
         slope = sum((x - xm) * (r - ym) for x, r in zip(xs, rt)) / sxx if sxx > 0 else 0.0
-        r0 = ym + slope * (self._cq_last - t_ref - xm)  # pulse rate at the last committed edge
+        r0 = ym + slope * (cq_last - t_ref - xm)  # pulse rate at the last committed edge
         d_last = 1.0 / rt[-1]
         disc = r0 * r0 + 2.0 * slope
         if r0 <= 0 or disc <= 0:
@@ -185,18 +285,20 @@ class EdgeRuns:
         d = 2.0 / (r0 + math.sqrt(disc))  # solves slope/2 d^2 + r0 d = 1 pulse
         return min(max(d, 0.5 * d_last), 2.0 * d_last)
 
-    def _classify(self, final: bool) -> None:
-        """Commit (or drop) pending edges; waits for one look-ahead edge unless ``final``."""
+    def _classify(self, run: Run, final: bool) -> None:
+        """Commit (or drop) pending edges of ``run`` (the current one); waits for one
+        look-ahead edge unless ``final``."""
         tol = self.tol
         c = self.counters
         while self._pending:
             q = self._pending[0]
             P = self._predict()
-            if P is None:
+            cq_last = self._cq_last
+            if P is None or cq_last is None:  # a prediction implies a committed edge
                 self._pending.popleft()
-                self._commit(q, 1)
+                self._commit(run, q, 1)
                 continue
-            d = q - self._cq_last
+            d = q - cq_last
             r = d / P
             if r < 1.0 - tol:
                 if len(self._pending) < 2:
@@ -204,9 +306,9 @@ class EdgeRuns:
                         return  # wait for the next edge
                     self._pending.popleft()
                     c.irregular += 1
-                    self._commit(q, 1)
+                    self._commit(run, q, 1)
                     continue
-                r2 = (self._pending[1] - self._cq_last) / P
+                r2 = (self._pending[1] - cq_last) / P
                 self._pending.popleft()
                 if abs(r2 - 1.0) < tol:
                     c.extra += 1
@@ -214,25 +316,25 @@ class EdgeRuns:
                                                    f"spurious tacho pulse removed at sample {q / SUB:.1f}"))
                     continue
                 c.irregular += 1
-                self._commit(q, 1)
+                self._commit(run, q, 1)
                 continue
             self._pending.popleft()
             m = int(round(r))
             if r > 1.0 + tol and 2 <= m <= _MAX_MISSED_RUN and abs(r - m) < tol:
                 c.missed += m - 1
                 self._events.append(TachoEvent(
-                    MISSED, (self._cq_last + d / m) / SUB, m - 1,
-                    f"{m - 1} missed tacho pulse(s) inserted after sample {self._cq_last / SUB:.1f}"))
-                self._commit(q, m)
+                    MISSED, (cq_last + d / m) / SUB, m - 1,
+                    f"{m - 1} missed tacho pulse(s) inserted after sample {cq_last / SUB:.1f}"))
+                self._commit(run, q, m)
                 continue
             if r > 1.0 + tol:
                 c.irregular += 1
-            self._commit(q, 1)
+            self._commit(run, q, 1)
 
-    def _end_run(self, stop_q: int) -> None:
-        run = self._run
+    def _end_run(self, run: Run, stop_q: int) -> None:
+        """End ``run`` (the current one) at its timeout ``stop_q`` (1/256 sample)."""
         self._known_q = stop_q
-        self._classify(final=True)
+        self._classify(run, final=True)
         run.ended = True
         run.stop = stop_q / SUB
         self._flush_segments()
@@ -257,22 +359,24 @@ class EdgeRuns:
         self._run = None
         self._pending.clear()
 
-    def _committed(self) -> tuple[np.ndarray, np.ndarray]:
+    def _committed(self) -> tuple[FloatArray, FloatArray]:
         """The current run's committed edge times and pulse counts as arrays (cached
         while they do not change: one conversion per update for both fits)."""
         key = (self._run.rid if self._run is not None else None, self._c0, len(self._cT))
-        if key != self._committed_key:
-            self._committed_arrays = (np.asarray(self._cT), np.asarray(self._cn, dtype=np.float64))
+        arrays = self._committed_arrays
+        if key != self._committed_key or arrays is None:
+            arrays = (np.asarray(self._cT, dtype=np.float64), np.asarray(self._cn, dtype=np.float64))
+            self._committed_arrays = arrays
             self._committed_key = key
-        return self._committed_arrays
+        return arrays
 
 
-def tacho_frames_to_arrays(frames: Iterable, chan: int = 0) -> tuple[np.ndarray, list[np.ndarray]]:
+def tacho_frames_to_arrays(frames: Iterable[Frame], chan: int = 0) -> tuple[IntArray, list[npt.NDArray[np.uint32]]]:
     """(t0_unwrapped (F,), [edge offsets]) of the TACHO frames of input ``chan`` among ``frames``."""
     from cmsensord.protocol import FrameType, decode_tacho
 
     t0: list[int] = []
-    edges: list[np.ndarray] = []
+    edges: list[npt.NDArray[np.uint32]] = []
     for f in frames:
         if f.type == FrameType.TACHO and f.chan == chan:
             t0.append(f.t0_unwrapped)

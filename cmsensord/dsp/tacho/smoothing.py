@@ -13,8 +13,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
-from cmsensord.dsp.tacho.edges import SUB
+from cmsensord.dsp.tacho.edges import SUB, BoolArray, FloatArray, IntArray, Run, TachoState
 
 try:  # the compiled loop of evaluate() is optional: numpy is the fallback (same results)
     from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
@@ -24,7 +25,7 @@ except ImportError:  # pragma: no cover - depends on the build
 _HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])  # moments s0..s4 -> normal equations
 
 
-def weighted_quadratic(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.ndarray) -> np.ndarray:
+def weighted_quadratic(x: FloatArray, y: FloatArray, wgt: FloatArray, npts: IntArray) -> FloatArray:
     """Per row, the weighted least-squares quadratic y = c0 + c1 x + c2 x^2 over its
     points (weights ``wgt``, 0 for unused ones): (rows, 3).  A straight line where a
     row has two points, zeros where it has fewer."""
@@ -48,7 +49,7 @@ def weighted_quadratic(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.n
     return np.linalg.solve(A, b[..., None])[..., 0]
 
 
-def make_room(buf: np.ndarray, lo: int, hi: int, n: int) -> tuple[np.ndarray, int, int]:
+def make_room(buf: FloatArray, lo: int, hi: int, n: int) -> tuple[FloatArray, int, int]:
     """A column buffer whose live columns are [lo, hi) with room for n more after them:
     the same one, or a copy compacted to start at 0 and grown by doubling (amortised
     O(1) per column).  Returns (buffer, lo, hi)."""
@@ -63,12 +64,11 @@ def make_room(buf: np.ndarray, lo: int, hi: int, n: int) -> tuple[np.ndarray, in
     return new, 0, live
 
 
-class KnotSmoothing:
-    """The smoothing part of :class:`~cmsensord.dsp.tacho.TachoTracker` (whose
-    ``__init__`` sets the attributes): knots of the committed edges and the speed
-    and angle at any sample."""
+class KnotSmoothing(TachoState):
+    """The smoothing part of :class:`~cmsensord.dsp.tacho.TachoTracker`: knots of
+    the committed edges and the speed and angle at any sample."""
 
-    def evaluate(self, samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def evaluate(self, samples: npt.ArrayLike) -> tuple[FloatArray, FloatArray, BoolArray]:
         """(speed in Hz, angle in turns, valid) at unwrapped sample indices (any shape, int or float).
 
         The angle counts revolutions since the first edge (turns 0 there).
@@ -150,7 +150,7 @@ class KnotSmoothing:
         return (run.last_raw_q + self._timeout_q(run)) / SUB
 
     @staticmethod
-    def _tail(w0: np.ndarray, tau: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray]:
+    def _tail(w0: FloatArray, tau: FloatArray, c: float) -> tuple[FloatArray, FloatArray]:
         """Speed min(w0, c / tau) after the last edge and its integral from 0 to tau."""
         with np.errstate(divide="ignore", invalid="ignore"):
             tc = np.where(w0 > 0, c / np.where(w0 > 0, w0, 1.0), np.inf)
@@ -171,7 +171,7 @@ class KnotSmoothing:
             if ended:
                 self._final = max(self._final, K)
             return
-        T, th, w = self._fit(np.arange(self._final, last + 1), K)
+        T, th, w = self._fit(run, np.arange(self._final, last + 1), K)
         self._append_knots(T, th, w, run.rid)
         self._final = last + 1
         # committed edges no longer needed by any future window (smoothing or causal)
@@ -181,10 +181,10 @@ class KnotSmoothing:
             del self._cn[:drop]
             self._c0 += drop
 
-    def _fit(self, centres: np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _fit(self, run: Run, centres: IntArray, K: int) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Local least-squares quadratic of pulse count vs edge time at each centre (docs/tacho.md, step 4).
 
-        Windows [k - h, k + h] clipped to the committed edges [0, K) of the run.
+        Windows [k - h, k + h] clipped to the committed edges [0, K) of ``run`` (the current one).
         Returns the knot times (samples), angles (turns) and speeds (turns/sample).
         """
         h = self.half_window
@@ -203,13 +203,12 @@ class KnotSmoothing:
         wgt = use * self._kernel[None, :]
         npts = use.sum(axis=1)
         coef = weighted_quadratic(x, y, wgt, npts)
-        run = self._run
         T = Tc[k]
         th = run.base + (nc[k] + coef[:, 0]) / self.ppr
         w = coef[:, 1] / (S * self.ppr)
         return T, th, w
 
-    def _provisional(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def _provisional(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """Knots of the current run beyond the final ones (one-sided windows), fitted when queried."""
         run = self._run
         if run is None:
@@ -219,11 +218,11 @@ class KnotSmoothing:
             return None
         key = (run.rid, K, self._final)
         if key != self._prov_key:
-            self._prov = self._fit(np.arange(self._final, K), K)
+            self._prov = self._fit(run, np.arange(self._final, K), K)
             self._prov_key = key
         return self._prov
 
-    def _append_knots(self, T: np.ndarray, th: np.ndarray, w: np.ndarray, rid: int) -> None:
+    def _append_knots(self, T: FloatArray, th: FloatArray, w: FloatArray, rid: int) -> None:
         n = T.size
         buf, self._klo, self._khi = make_room(self._kbuf, self._klo, self._khi, n)
         self._kbuf = buf
@@ -234,7 +233,7 @@ class KnotSmoothing:
         self._khi += n
 
     def _knots(self, t_min: float = -math.inf, t_max: float = math.inf
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray]:
         """Final knots (those around [t_min, t_max]) then the provisional ones: T, turns, speed, run id."""
         T = self._kbuf[0, self._klo:self._khi]
         a = max(int(np.searchsorted(T, t_min, side="right")) - 1, 0)
@@ -244,10 +243,11 @@ class KnotSmoothing:
         if b < T.size:
             return kT, kth, kw, kr
         prov = self._provisional()
-        if prov is None:
+        run = self._run
+        if prov is None or run is None:  # provisional knots imply a current run
             return kT, kth, kw, kr
         pT, pth, pw = prov
-        rid = np.full(pT.size, self._run.rid, dtype=np.int64)
+        rid = np.full(pT.size, run.rid, dtype=np.int64)
         return (np.concatenate([kT, pT]), np.concatenate([kth, pth]),
                 np.concatenate([kw, pw]), np.concatenate([kr, rid]))
 

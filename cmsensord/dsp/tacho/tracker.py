@@ -12,21 +12,25 @@ import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from cmsensord.dsp.tacho.causal import CausalSpeed
 from cmsensord.dsp.tacho.edges import (
     PREDICT_INTERVALS,
     SUB,
-    TachoCounters,
-    TachoEvent,
-    TachoUpdate,
     EdgeRuns,
-    Run,
+    FloatArray,
+    TachoCounters,
+    TachoUpdate,
     tacho_frames_to_arrays,
 )
 from cmsensord.dsp.tacho.smoothing import KnotSmoothing
+
+if TYPE_CHECKING:
+    from cmsensord.protocol import Frame
 
 
 class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
@@ -98,33 +102,33 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         u = np.arange(-self.half_window, self.half_window + 1) / (self.half_window + 1)
         self._kernel = (1.0 - np.abs(u) ** 3) ** 3
         self._offsets = np.arange(-self.half_window, self.half_window + 1)
-        self._committed_key: tuple | None = None
-        self._committed_arrays: tuple[np.ndarray, np.ndarray] | None = None
+        self._committed_key = None
+        self._committed_arrays = None
         self.counters = TachoCounters()
-        self._now: int | None = None  # coverage end, samples (exclusive)
-        self._last_q: int | None = None  # last edge received
-        self._run: Run | None = None  # the current (not ended) run
-        self._runs: dict[int, Run] = {}
+        self._now = None  # coverage end, samples (exclusive)
+        self._last_q = None  # last edge received
+        self._run = None  # the current (not ended) run
+        self._runs = {}
         self._next_rid = 0
         self._held = 0.0  # turns held after the last ended valid run
         self._had_loss = False
         # the current run's committed edges (times in samples, pulse counts), from index _c0
-        self._cT: list[float] = []
-        self._cn: list[int] = []
+        self._cT = []
+        self._cn = []
         self._c0 = 0
-        self._cq_last: int | None = None  # last committed edge, 1/256 sample
+        self._cq_last = None  # last committed edge, 1/256 sample
         self._n_last = 0
-        self._pending: deque[int] = deque()  # edges of the current run not yet classified
-        self._hist: deque[tuple[float, float]] = deque(maxlen=PREDICT_INTERVALS)  # (mid q, pulses/q)
+        self._pending = deque()  # edges of the current run not yet classified
+        self._hist = deque(maxlen=PREDICT_INTERVALS)  # (mid q, pulses/q)
         self._final = 0  # knots finalised in the current run (centres 0 .. _final-1)
         # final knots of all runs: times (samples), turns, speed (turns/sample), run id
         self._kbuf = np.empty((4, 1024))  # rows: time, turns, speed, run id; live columns [_klo, _khi)
         self._klo = 0
         self._khi = 0
-        self._prov: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # provisional knots
-        self._events: list[TachoEvent] = []
-        self._last_t0: int | None = None
-        self._prov_key: tuple | None = None
+        self._prov = None  # provisional knots
+        self._events = []
+        self._last_t0 = None
+        self._prov_key = None
         self._pruned = False
         # causal segments (see "Causal speed"): rows key, T, speed, acceleration, valid
         u = np.arange(self.causal_window) / self.causal_window
@@ -132,7 +136,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._sbuf = np.empty((5, 1024))
         self._slo = 0
         self._shi = 0
-        self._seg_todo: list[tuple[int, float]] = []  # (committed index, known at) to fit
+        self._seg_todo = []  # (committed index, known at) to fit
         self._known_q = 0                             # the edge (or time) being handled
 
     # ------------------------------------------------------------------ input
@@ -205,7 +209,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._events = []
         return TachoUpdate(ev, self.final_until, self.valid, replace(self.counters))
 
-    def update_frames(self, frames: Iterable, chan: int = 0) -> TachoUpdate:
+    def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
         """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
         t0, edges = tacho_frames_to_arrays(frames, chan)
         return self.update(t0, edges)
@@ -230,14 +234,14 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         """Sample index (exclusive) up to which TACHO frames have been received."""
         return 0 if self._now is None else int(self._now)
 
-    def speed_at(self, samples) -> np.ndarray:
+    def speed_at(self, samples: npt.ArrayLike) -> FloatArray:
         """Shaft speed in Hz (revolutions per second) at the sample indices."""
         return self.evaluate(samples)[0]
 
-    def rpm_at(self, samples) -> np.ndarray:
+    def rpm_at(self, samples: npt.ArrayLike) -> FloatArray:
         """Shaft speed in rpm at the sample indices."""
         return 60.0 * self.evaluate(samples)[0]
 
-    def turns_at(self, samples) -> np.ndarray:
+    def turns_at(self, samples: npt.ArrayLike) -> FloatArray:
         """Shaft angle in revolutions since the first edge at the sample indices."""
         return self.evaluate(samples)[1]
