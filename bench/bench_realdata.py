@@ -138,7 +138,8 @@ def main() -> int:
         for b in args.bearings:
             r = femto(args.data, work, b)
             print(f"| {r['bearing']} | {r['snapshots']} | {r['quiet']} | {_pct(r['s01'])} | {_pct(r['s05'])} | "
-                  f"{_pct(r['s10'])} | {_pct(r['akf01'])} | {_pct(r['akf05'])} | {_pct(r['rule'])} | {r['diff']:+.1f} | {r['decision']:.2f} | "
+                  f"{_pct(r['s10'])} | {_pct(r['akf01'])} | {_pct(r['akf05'])} | {_pct(r['rule'])} | "
+                  f"{r['diff']:+.1f} | {r['decision']:.2f} | "
                   f"{r['cpu']:.1f} |", flush=True)
         if not args.no_ims:
             print("\nIMS, calibrated on the first half (3 s) of the healthy segment NA")

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import run_module
 
 from cmsensord.sinks.mcap_sink import read_messages
+from processes import run_module
 
 DATA = Path(__file__).parent / "data" / "ims"
 
