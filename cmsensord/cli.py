@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cmsensord import __version__
+from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
 from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
@@ -81,13 +82,13 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--simulate", action="store_true",
                      help="run a simulated ADC board on a pty and the daemon on it")
     sim.add_argument("--scenario", default="degrading", help="machine scenario (default degrading)")
-    sim.add_argument("--duration", type=_positive, default=600.0,
+    sim.add_argument("--duration", type=positive, default=600.0,
                      help="simulated seconds; a scenario's shape stretches over it (default 600)")
-    sim.add_argument("--speed", type=_positive, default=20.0,
+    sim.add_argument("--speed", type=positive, default=20.0,
                      help="x real time (default 20: 600 s simulated in 30 s)")
     sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    sim.add_argument("--channels", type=_channels, default=1, help="number of channels 1..8 (default 1)")
+    sim.add_argument("--channels", type=count(1, 8), default=1, help="number of channels 1..8 (default 1)")
     sim.add_argument("--mode", choices=("rms", "raw"),
                      help="board mode (default: rms; raw for whirl and close_orders)")
     sim.add_argument("--tacho", action="store_true",
@@ -106,19 +107,19 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     pace = r.add_mutually_exclusive_group()
     pace.add_argument("--realtime", action="store_const", const=1.0, dest="sub_speed",
                       help="pace the replay at the board's clock (default: as fast as possible)")
-    pace.add_argument("--speed", type=_positive, dest="sub_speed", metavar="X",
+    pace.add_argument("--speed", type=positive, dest="sub_speed", metavar="X",
                       help="pace the replay at X times the board's clock")
     rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
     rec.add_argument("--baud", type=int, default=921600)
-    rec.add_argument("--duration", dest="sub_duration", type=_positive, help="seconds (default: until Ctrl-C)")
+    rec.add_argument("--duration", dest="sub_duration", type=positive, help="seconds (default: until Ctrl-C)")
     v = sub.add_parser("vkf", help="replay a RAW capture and add the batch (zero-phase) Vold-Kalman "
                                    "orders (Tůma) beside the recursive ones")
     v.add_argument("capture", help="capture file in RAW mode with a tacho")
     v.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration (orders)")
     v.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
-    v.add_argument("--bandwidth", type=_positive, default=1.0,
+    v.add_argument("--bandwidth", type=positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
     from cmsensord.importing.command import add_import_parser
@@ -128,26 +129,6 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
     return p
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not v > 0 or v != v or v == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
-
-
-def _channels(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer 1..8, got {text!r}") from None
-    if not 1 <= v <= 8:
-        raise argparse.ArgumentTypeError(f"expected an integer 1..8, got {v}")
-    return v
 
 
 def _config_for(path: str | None) -> tuple[Config, bool]:

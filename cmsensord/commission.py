@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cmsensord.argtypes import positive, real
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.dsp.commissioning import MARGIN, SPAN, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
@@ -145,13 +146,13 @@ def add_calibrate_parser(sub) -> argparse.ArgumentParser:
                        description="Learn R_min, R_max, f_r and the healthy baseline per channel from the "
                                    "healthy period [--from, --to] of a capture and write a site configuration.")
     p.add_argument("capture", help="capture of the machine (cmsensord record / import)")
-    p.add_argument("--from", dest="from_s", type=float, default=0.0, metavar="S",
+    p.add_argument("--from", dest="from_s", type=real, default=0.0, metavar="S",
                    help="start of the healthy period, board seconds (default: 0)")
-    p.add_argument("--to", dest="to_s", type=float, default=None, metavar="S",
+    p.add_argument("--to", dest="to_s", type=real, default=None, metavar="S",
                    help="end of the healthy period, board seconds (default: the end of the capture)")
     p.add_argument("--faulty", metavar="CAPTURE2", help="a faulty capture of the same machine: R_max "
                    "becomes the largest R that still flags it (Kim et al. 2023)")
-    p.add_argument("--rpm", type=float, default=None, help="shaft speed, if neither the tacho nor the "
+    p.add_argument("--rpm", type=positive, default=None, help="shaft speed, if neither the tacho nor the "
                    "capture gives it")
     p.add_argument("--config", metavar="BASE.yaml", help="base configuration the site file extends")
     p.add_argument("--out", required=True, metavar="SITE.yaml", help="site configuration to write")
@@ -163,8 +164,6 @@ def run_calibrate(args: argparse.Namespace) -> int:
     cfg = load_config(args.config) if args.config else Config()
     base = yaml.safe_load(Path(args.config).read_text(encoding="utf-8")) if args.config else None
     auto = not (isinstance(base, dict) and base.get("channels"))
-    if args.rpm is not None and not args.rpm > 0:
-        raise ConfigError("calibrate", "--rpm", "must be > 0", args.rpm)
     obs = read_observations(args.capture, cfg, auto_channels=auto, from_s=args.from_s, to_s=args.to_s)
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)

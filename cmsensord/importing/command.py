@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+from cmsensord.argtypes import comma_list, count, nonzero, positive, real
 from cmsensord.errors import EXIT_USAGE
 
 from .adc import ADC_MAX, OFFSET, nice_range
@@ -37,55 +38,12 @@ Columns and channels count from 0. The sidecar CAPTURE.json (b11.bin.json) lists
 (board second, length, % of the record, original time and gap), units and scales."""
 
 
-def _list(text: str) -> tuple[str, ...]:
-    items = tuple(t.strip() for t in text.split(",") if t.strip())
-    if not items:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
-    return items
-
-
-def _number(text: str) -> float:
-    v = _real(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
-
-
-def _real(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if v != v or abs(v) == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return v
-
-
-def _nonzero(text: str) -> float:
-    v = _real(text)
-    if v == 0:
-        raise argparse.ArgumentTypeError("expected a non-zero number, got 0")
-    return v
-
-
-def _count(lo: int, hi: int):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer {lo}..{hi}, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer {lo}..{hi}, got {v}")
-        return v
-    return parse
-
-
 def _ranges(text: str) -> tuple[float, ...]:
     """'50', '5g', '50,100' -> m/s² values."""
     out = []
-    for item in _list(text):
+    for item in comma_list(text):
         g = item.lower().endswith("g")
-        v = _number(item[:-1] if g else item.removesuffix("m/s2"))
+        v = positive(item[:-1] if g else item.removesuffix("m/s2"))
         out.append(v * G if g else v)
     return tuple(out)
 
@@ -112,12 +70,12 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                         "or as given")
     p.add_argument("--mode", dest="imp_mode", choices=("raw", "rms"), default="raw",
                    help="RAW frames at the recording's rate (default) or 100 Hz RMS frames")
-    p.add_argument("--fs", dest="imp_fs", type=_number, metavar="HZ",
+    p.add_argument("--fs", dest="imp_fs", type=positive, metavar="HZ",
                    help="sampling rate; required for CSV/NPY/MAT files that do not carry it")
-    p.add_argument("--channels", "--columns", dest="imp_channels", type=_list, metavar="LIST",
+    p.add_argument("--channels", "--columns", dest="imp_channels", type=comma_list, metavar="LIST",
                    help="columns/channels to import, by index from 0 or by name (default: all but "
                         "the tacho column, at most 8)")
-    p.add_argument("--names", dest="imp_names", type=_list, metavar="LIST", help="channel names")
+    p.add_argument("--names", dest="imp_names", type=comma_list, metavar="LIST", help="channel names")
     p.add_argument("--array", dest="imp_array", metavar="NAME", help="the array of an .npz file")
     p.add_argument("--variable", dest="imp_variable", metavar="NAME", help="the variable of a .mat file")
     p.add_argument("--separator", dest="imp_separator", metavar="SEP",
@@ -129,28 +87,28 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                      help="the CSV has no header line")
     p.add_argument("--unit", dest="imp_unit", choices=tuple(UNITS), default="m/s2",
                    help="unit of the values (default m/s2; V needs --sensitivity)")
-    p.add_argument("--sensitivity", dest="imp_sensitivity", type=_number, metavar="MV_PER_G",
+    p.add_argument("--sensitivity", dest="imp_sensitivity", type=positive, metavar="MV_PER_G",
                    help="accelerometer sensitivity in mV/g, for --unit V")
-    p.add_argument("--scale-factor", dest="imp_scale_factor", type=_nonzero,
+    p.add_argument("--scale-factor", dest="imp_scale_factor", type=nonzero,
                    default=1.0, metavar="X",
                    help="multiply the values by X first (WAV PCM: the value at full scale)")
     p.add_argument("--range", dest="imp_range", type=_ranges, metavar="R",
                    help="12-bit full scale +-R in m/s2 (or e.g. 5g), one or one per channel "
                         "(default: max |x| x 1.25, rounded up to a 1-1.2-1.5-2-2.5-3-4-5-6-8 value)")
-    p.add_argument("--block-len", dest="imp_block_len", type=_count(1, 0xFFFF), metavar="N",
+    p.add_argument("--block-len", dest="imp_block_len", type=count(1, 0xFFFF), metavar="N",
                    help="samples per block (default fs/100, rounded: 100 blocks a second)")
-    p.add_argument("--snapshot-len", dest="imp_snapshot_len", type=_count(1, 1 << 40), metavar="N",
+    p.add_argument("--snapshot-len", dest="imp_snapshot_len", type=count(1, 1 << 40), metavar="N",
                    help="split each file's samples into snapshots of N (e.g. 20480 for IMS)")
-    p.add_argument("--snapshot-interval", dest="imp_snapshot_interval", type=_number, metavar="S",
+    p.add_argument("--snapshot-interval", dest="imp_snapshot_interval", type=positive, metavar="S",
                    help="seconds between snapshot starts in the original recording (for the sidecar)")
     tach = p.add_mutually_exclusive_group()
     tach.add_argument("--tacho-column", dest="imp_tacho_column", metavar="COL",
                       help="a tacho pulse column/channel (index or name): rising crossings are edges")
-    tach.add_argument("--rpm", dest="imp_rpm", type=_number, metavar="RPM",
+    tach.add_argument("--rpm", dest="imp_rpm", type=positive, metavar="RPM",
                       help="constant shaft speed: TACHO frames with --ppr edges a revolution")
-    p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=_real, metavar="X",
+    p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=real, metavar="X",
                    help="pulse threshold (default: halfway between the column's 1st and 99th percentile)")
-    p.add_argument("--ppr", dest="imp_ppr", type=_count(1, 255), default=1, metavar="N",
+    p.add_argument("--ppr", dest="imp_ppr", type=count(1, 255), default=1, metavar="N",
                    help="tacho pulses per revolution (default 1)")
     return p
 
