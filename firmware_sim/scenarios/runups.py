@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..order_signals import RUNUPS
 from .base import Scenario
 from .noise import gauss, generator
 
@@ -110,11 +111,9 @@ class RunUpScenario(Scenario):
         return out
 
 
-def _lazy_runup(name: str) -> Callable[..., Any]:
+def _runup_signal(name: str) -> Callable[..., Any]:
     def make(**kwargs):
-        from .. import order_signals
-
-        return order_signals.RUNUPS[name](**kwargs)
+        return RUNUPS[name](**kwargs)
 
     return staticmethod(make)
 
@@ -131,7 +130,7 @@ class WhirlRunUp(RunUpScenario):
     description = ("Yeh, Pan & Le signal 1: journal-bearing run-up 0 -> 7000 rpm in 180 s, order 1, "
                    "oil whirl (order 0.47, 3000-6000 rpm) and whip (47 Hz from 6000 rpm)")
     natural_duration_s = 180.0
-    _factory = _lazy_runup("whirl")
+    _factory = _runup_signal("whirl")
 
 
 class CloseOrdersRunUp(RunUpScenario):
@@ -146,4 +145,4 @@ class CloseOrdersRunUp(RunUpScenario):
     description = ("Yeh, Pan & Le signal 2: run-up 0 -> 3000 rpm in 5 s with order 1 and the close "
                    "orders 4 and 4.2 (RMS up to 12 m/s^2)")
     natural_duration_s = 5.0
-    _factory = _lazy_runup("close_orders")
+    _factory = _runup_signal("close_orders")
