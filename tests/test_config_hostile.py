@@ -13,7 +13,7 @@ import pytest
 from cmsensord.config import load_config
 from cmsensord.config.loading import MAX_CONFIG_BYTES
 from cmsensord.errors import EXIT_CONFIG, ConfigError, _short_repr
-from tests.processes import cmsensord
+from processes import cmsensord
 
 
 def _alias_bomb() -> str:
