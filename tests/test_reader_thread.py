@@ -14,6 +14,8 @@ import subprocess
 import sys
 
 from cmsensord.errors import EXIT_CONFIG
+from cmsensord.sinks.mcap_sink import read_messages
+from cmsensord.sinks.schemas import EVENT_KINDS
 from processes import ENV, board_on_pty, stop
 
 INJECT = '''\
@@ -77,6 +79,10 @@ def test_one_failed_read_is_reported_and_reading_goes_on(tmp_path):
     assert lines.count(_error_line(port)) == 1, lines
     assert f"INFO reader_recovered: {port}: reading again after 1 reader error(s)" in lines
     assert not [x for x in lines if "Traceback" in x or "link_restored" in x], lines
+    events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap"))) if t == "/cm/events"]
+    kinds = [m["kind"] for m in events]
+    assert [k for k in kinds if k != "frames_lost"] == ["start", "reader_error", "reader_recovered", "stop"]
+    assert set(kinds) <= set(EVENT_KINDS)       # the kinds the event schema allows
 
 
 def test_a_read_that_always_fails_is_one_event_and_the_daemon_keeps_trying(tmp_path):
