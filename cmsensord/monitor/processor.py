@@ -167,8 +167,9 @@ class Processor:
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
-        if not self.setup.ready(C):
+        if not (self.setup.ready(C) and self.setup.accept(C, len(frames))):
             return
+        self._board_channels(C)
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
         try:
             vals = decode_rms_rows(frames, C)
@@ -184,6 +185,7 @@ class Processor:
         self._out(events)
         if not ready or not self.setup.ready(C):
             return
+        self._board_channels(C)
         blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.status)
         self._out(events)
         if blocks is None:
@@ -195,6 +197,13 @@ class Processor:
             y = blocks.samples(index)
             for a, b in blocks.runs():          # consecutive except across lost blocks
                 self._out(orders.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(index))))
+
+    def _board_channels(self, C: int) -> None:
+        """The board now sends C channels: a new chain drains the old one's decisions first."""
+        if self.setup.changed(C):
+            if C > self.setup.n_board:
+                self._release_decisions(final=True)
+            self.setup.change(C)
 
     def _order_chain(self) -> OrderChain | None:
         """The order chain of the vibration channels, created with the first RAW blocks
@@ -238,7 +247,10 @@ class Processor:
         T = int(slots[-1]) + 1 - first
         y = np.full((T, len(self.channels)), np.nan)
         valid = np.zeros((T, len(self.channels)), dtype=bool)
-        y[slots - first] = vals[:, self.severity.index]
+        index = self.severity.index
+        if vals.shape[1] <= index.max():        # the board sends fewer channels: those are missing
+            vals = np.pad(vals, ((0, 0), (0, index.max() + 1 - vals.shape[1])), constant_values=np.nan)
+        y[slots - first] = vals[:, index]
         valid[slots - first] = True
         valid &= np.isfinite(y)
         mics, trace = self.setup.microphones, self.cfg.output.akf_trace

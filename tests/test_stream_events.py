@@ -1,0 +1,70 @@
+"""Stream events (issue 11, items 2, 7, 8): a change of channel count, losses that are
+reported, and floods of events summarised — each fed by one small capture built with the
+protocol encoder and replayed by a real ``cmsensord replay`` process, which must finish
+(exit 0) with the exact event in its MCAP."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cmsensord.protocol import MODE_RMS, Status, encode_rms, encode_status
+from cmsensord.sinks.mcap_read import read_messages
+from processes import cmsensord
+
+FS, L = 25000, 250
+
+
+def status(seq: int, t0: int, n: int, scale: float = 1.0) -> bytes:
+    return encode_status(seq, t0, Status(0x0100, MODE_RMS, n, FS, L, 0, 0, 0, 0,
+                                         (scale,) * n, (0.0,) * n))
+
+
+def rms_stream(counts: list[int], statuses: dict[int, bytes] | None = None) -> bytes:
+    """A STATUS of counts[0] channels, then one RMS frame of counts[k] channels per block k
+    (a STATUS from ``statuses`` before block k)."""
+    out = bytearray(status(0, 0, counts[0]))
+    seq = 1
+    for k, c in enumerate(counts):
+        if statuses and k in statuses:
+            out += statuses[k]
+        out += encode_rms(seq, k * L, np.full(c, 0.5))
+        seq += 1
+    return bytes(out)
+
+
+def replay(tmp_path, data: bytes, config: str | None = None) -> list[str]:
+    """``cmsensord replay`` of ``data``: exit 0, and its events as 'kind | message' lines."""
+    cap = tmp_path / "cap.bin"
+    cap.write_bytes(data)
+    args = ["replay", str(cap), "--out", str(tmp_path / "out")]
+    if config is not None:
+        (tmp_path / "c.yaml").write_text(f"output:\n  dir: {tmp_path / 'out'}\n{config}")
+        args += ["--config", str(tmp_path / "c.yaml")]
+    r = cmsensord(*args)
+    assert r.returncode == 0, r.stderr
+    return [f"{m['kind']} | {m['message']}" for f in sorted((tmp_path / "out").glob("*.mcap"))
+            for t, _, m in read_messages(f) if t == "/cm/events"]
+
+
+# ---- item 2: a change of channel count ------------------------------------------------
+def test_one_rms_frame_of_another_channel_count_is_dropped_with_an_event(tmp_path):
+    events = replay(tmp_path, rms_stream([4] * 200 + [2] + [4] * 199))
+    assert "channels | 1 RMS frame(s) of 2 channel(s) in a 4-channel stream dropped (1 in all)" in events
+
+
+def test_a_board_swapped_from_4_to_2_channels_reports_the_channels_gone(tmp_path):
+    events = replay(tmp_path, rms_stream([4] * 300 + [2] * 300))
+    assert ("channels | board now sends 2 channel(s), not 4: channel(s) ch2, ch3 not in the "
+            "stream (observations missing)") in events
+
+
+def test_a_board_swapped_from_2_to_4_channels_re_sets_auto_channels(tmp_path):
+    events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300, {300: status(9999, 300 * L, 4)}))
+    assert "channels | board now sends 4 channel(s), not 2: channels re-set to ch0, ch1, ch2, ch3" in events
+
+
+def test_new_board_channels_that_are_not_configured_are_named_as_not_monitored(tmp_path):
+    config = "channels:\n  - {name: a, index: 0}\n  - {name: b, index: 1}\n"
+    events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300), config)
+    assert ("channels | board now sends 4 channel(s), not 2: board channel(s) 2, 3 not configured, "
+            "not monitored") in events
