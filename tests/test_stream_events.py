@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cmsensord.protocol import MODE_RMS, Status, encode_rms, encode_status
+from cmsensord.protocol import MODE_RMS, Status, encode_rms, encode_status, encode_tacho
 from cmsensord.sinks.mcap_read import read_messages
 from processes import cmsensord
 
@@ -68,3 +68,37 @@ def test_new_board_channels_that_are_not_configured_are_named_as_not_monitored(t
     events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300), config)
     assert ("channels | board now sends 4 channel(s), not 2: board channel(s) 2, 3 not configured, "
             "not monitored") in events
+
+
+# ---- item 8: event floods and false events ---------------------------------------------
+def tacho_stream(lose: int | None = None, flood: range = range(0)) -> bytes:
+    """1 RMS channel and a tacho (1 pulse per rev at 25 Hz: an edge every 4th block) for
+    600 blocks; the TACHO frame of block ``lose`` lost on the link (its seq skipped); the
+    blocks in ``flood`` with 1023 edges at random times."""
+    out = bytearray(encode_status(0, 0, Status(0x0100, MODE_RMS, 1, FS, L, 1, 1, 0, 0, (1.0,), (0.0,))))
+    seq = 1
+    for k in range(600):
+        out += encode_rms(seq, k * L, [0.5])
+        seq += 1
+        edges = [100 * 256] if k % 4 == 1 else []
+        if k in flood:
+            edges = np.sort(np.random.default_rng(k).integers(0, L * 256, 1023)).tolist()
+        if k != lose:
+            out += encode_tacho(seq, k * L, 0, edges)
+        seq += 1
+    return bytes(out)
+
+
+def test_a_lost_tacho_frame_is_a_frame_loss_not_a_missed_pulse(tmp_path):
+    events = replay(tmp_path, tacho_stream(lose=201))
+    assert "frames_lost | 1 frame(s) lost before seq 405 (seq gap)" in events
+    assert not [e for e in events if e.startswith("tacho_")]
+
+
+def test_100_tacho_frames_of_1023_edges_are_summarised(tmp_path):
+    events = replay(tmp_path, tacho_stream(flood=range(200, 300)))
+    extra = [e for e in events if e.startswith("tacho_extra_pulse")]
+    assert extra == ["tacho_extra_pulse | spurious tacho pulse removed at sample 50003.2",
+                     "tacho_extra_pulse | 7829 more tacho_extra_pulse event(s) in 1 s (7829 in all): "
+                     "at most one per 1 s is written on its own"]
+    assert len(events) < 20            # 23,682 events (7,830 extra and 15,852 missed pulses)

@@ -151,6 +151,7 @@ class Processor:
         if self.orders is not None:
             self._out(self.orders.finish())
         self._release_decisions(final=True)
+        self.log.summarise(final=True)
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
         self._flush_rms(rms)
