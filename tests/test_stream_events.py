@@ -5,9 +5,22 @@ protocol encoder and replayed by a real ``cmsensord replay`` process, which must
 
 from __future__ import annotations
 
-import numpy as np
+import re
 
-from cmsensord.protocol import MODE_RMS, Status, encode_rms, encode_status, encode_tacho
+import numpy as np
+import pytest
+
+from cmsensord.protocol import (
+    MODE_RAW,
+    MODE_RMS,
+    FrameType,
+    Status,
+    encode_frame,
+    encode_raw,
+    encode_rms,
+    encode_status,
+    encode_tacho,
+)
 from cmsensord.sinks.mcap_read import read_messages
 from processes import cmsensord
 
@@ -42,8 +55,17 @@ def replay(tmp_path, data: bytes, config: str | None = None) -> list[str]:
         args += ["--config", str(tmp_path / "c.yaml")]
     r = cmsensord(*args)
     assert r.returncode == 0, r.stderr
+    (tmp_path / "stderr.txt").write_text(r.stderr)
     return [f"{m['kind']} | {m['message']}" for f in sorted((tmp_path / "out").glob("*.mcap"))
             for t, _, m in read_messages(f) if t == "/cm/events"]
+
+
+def summary_observations(tmp_path) -> tuple[int, int]:
+    """(observations, missing observations) of the replay's exit summary."""
+    text = (tmp_path / "stderr.txt").read_text()
+    m = re.search(r"(\d+) observations?, (\d+) missing", text)
+    assert m, text
+    return int(m.group(1)), int(m.group(2))
 
 
 # ---- item 2: a change of channel count ------------------------------------------------
@@ -102,3 +124,42 @@ def test_100_tacho_frames_of_1023_edges_are_summarised(tmp_path):
                      "tacho_extra_pulse | 7829 more tacho_extra_pulse event(s) in 1 s (7829 in all): "
                      "at most one per 1 s is written on its own"]
     assert len(events) < 20            # 23,682 events (7,830 extra and 15,852 missed pulses)
+
+
+# ---- item 7: losses that are reported --------------------------------------------------
+def test_one_rms_frame_of_a_wrong_payload_length_costs_only_that_frame(tmp_path):
+    data = bytearray(status(0, 0, 4))
+    for k in range(400):
+        payload = np.full(4, 0.5, dtype="<f4").tobytes()
+        data += encode_frame(FrameType.RMS, k + 1, k * L, 4, 0, payload[:12] if k == 200 else payload)
+    events = replay(tmp_path, bytes(data))
+    assert "decode_error | 1 RMS frame(s) with a payload that is not 4 x 4 bytes dropped" in events
+    obs = summary_observations(tmp_path)
+    assert obs == (399 * 4, 4)            # (observations, missing): the frame's 4 only
+
+
+def raw_stream(bad_scale: float) -> bytes:
+    """RAW mode, 1 channel: a STATUS (scale 0.01), 400 blocks, a STATUS with ``bad_scale``
+    after block 200."""
+    def st(seq, t0, scale):
+        return encode_status(seq, t0, Status(0x0100, MODE_RAW, 1, FS, L, 0, 0, 0, 0, (scale,), (2048.0,)))
+    out = bytearray(st(0, 0, 0.01))
+    seq = 1
+    counts = (2048 + 100 * np.sin(np.arange(L) / 5)).astype(np.uint16)
+    for k in range(400):
+        if k == 200:
+            out += st(seq, k * L, bad_scale)
+            seq += 1
+        out += encode_raw(seq, k * L, 0, counts)
+        seq += 1
+    return bytes(out)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), 0.0])
+def test_a_status_with_a_bad_scale_is_ignored_with_an_event(tmp_path, bad):
+    events = replay(tmp_path, raw_stream(bad))
+    at = raw_stream(bad).index(encode_status(201, 200 * L, Status(0x0100, MODE_RAW, 1, FS, L, 0, 0, 0, 0,
+                                                                   (bad,), (2048.0,))))
+    assert (f"decode_error | STATUS at byte {at} ignored: channel(s) 0 with scale/offset {bad:g}/2048, "
+            "not finite (and a scale not 0): the previous STATUS is kept") in events
+    assert summary_observations(tmp_path) == (400, 0)

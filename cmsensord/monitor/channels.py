@@ -8,6 +8,9 @@ when the configuration lists none (``auto_channels``); configured channels the
 board does not send are reported and left out.  With the first data, the
 severity chain (and the microphone estimator) of the usable channels is made.
 
+A STATUS whose scale or offset is not finite, or whose scale is 0, is ignored
+with a ``decode_error`` event: the previous one (its calibration) is kept.
+
 A data frame whose channel count is not the board's (:meth:`ChannelSetup.accept`)
 is one odd frame, dropped and counted with a ``channels`` event, unless a
 STATUS announces that count or ``CHANGE_FRAMES`` such frames come in a row: then
@@ -18,6 +21,8 @@ chain is made, or a ``channels`` event names the board channels not monitored.
 """
 
 from __future__ import annotations
+
+import math
 
 from cmsensord.config import ChannelConfig, Config, default_channels
 from cmsensord.monitor.clock import BlockClock
@@ -51,6 +56,14 @@ class ChannelSetup:
             st = decode_status(f.payload)
         except ValueError as exc:
             self.log.emit("decode_error", None, f"bad STATUS payload at byte {f.offset}: {exc}")
+            return None, False
+        bad = [i for i, (a, b) in enumerate(zip(st.scale, st.offset))
+               if not (math.isfinite(a) and a != 0.0 and math.isfinite(b))]
+        if bad:
+            self.log.emit("decode_error", None, f"STATUS at byte {f.offset} ignored: channel(s) "
+                          f"{', '.join(map(str, bad))} with scale/offset "
+                          f"{', '.join(f'{st.scale[i]:g}/{st.offset[i]:g}' for i in bad)}, not finite "
+                          "(and a scale not 0): the previous STATUS is kept")
             return None, False
         old = self.status
         return st, old is None or (st.fs, st.block_len, st.n_channels, st.mode) != (

@@ -31,7 +31,7 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.shaft import Shaft
-from cmsensord.protocol import Frame, FrameType, ProtocolError, decode_rms_rows
+from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
 if TYPE_CHECKING:
     from cmsensord.monitor.orders import OrderChain
@@ -171,13 +171,16 @@ class Processor:
         if not (self.setup.ready(C) and self.setup.accept(C, len(frames))):
             return
         self._board_channels(C)
+        good = [f for f in frames if len(f.payload) == 4 * C]
+        if len(good) < len(frames):             # only those frames are lost
+            n = len(frames) - len(good)
+            self.event("decode_error", None, f"{n} RMS frame(s) with a payload that is not 4 x {C} "
+                       "bytes dropped", count=n)
+            if not good:
+                return
+            frames = good
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        try:
-            vals = decode_rms_rows(frames, C)
-        except ProtocolError:
-            self.event("decode_error", None, f"RMS payload length does not match C = {C}")
-            return
-        self._observe(t0, vals)
+        self._observe(t0, decode_rms_rows(frames, C))
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
