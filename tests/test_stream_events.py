@@ -6,6 +6,8 @@ protocol encoder and replayed by a real ``cmsensord replay`` process, which must
 from __future__ import annotations
 
 import re
+import shutil
+import time
 
 import numpy as np
 import pytest
@@ -22,7 +24,7 @@ from cmsensord.protocol import (
     encode_tacho,
 )
 from cmsensord.sinks.mcap_read import read_messages
-from processes import cmsensord
+from processes import cmsensord, start_board, start_daemon, stop
 
 FS, L = 25000, 250
 
@@ -163,3 +165,36 @@ def test_a_status_with_a_bad_scale_is_ignored_with_an_event(tmp_path, bad):
     assert (f"decode_error | STATUS at byte {at} ignored: channel(s) 0 with scale/offset {bad:g}/2048, "
             "not finite (and a scale not 0): the previous STATUS is kept") in events
     assert summary_observations(tmp_path) == (400, 0)
+
+
+def wait_until(cond, what: str, limit_s: float = 20.0) -> None:
+    """Poll ``cond`` until it holds (a bound against a hang, not a timing assertion)."""
+    deadline = time.monotonic() + limit_s
+    while not cond():
+        assert time.monotonic() < deadline, f"still waiting for {what}"
+        time.sleep(0.05)
+
+
+def test_output_directory_deleted_while_running_is_reported_at_the_next_flush(tmp_path):
+    link = tmp_path / "ttyBOARD"
+    logs = tmp_path / "logs"
+    sim = start_board("--scenario", "healthy", "--link", str(link))
+    d = start_daemon(tmp_path, link, config="  flush_s: 0.2\n")
+    try:
+        wait_until(lambda: list(logs.glob("*.part")), "the first file")
+        first = next(logs.glob("*.part"))
+        shutil.rmtree(logs)
+        wait_until(lambda: list(logs.glob("*.part")), "a new file in the directory made again")
+        assert d.poll() is None                               # still running
+        err = stop(d)
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    line = next(x for x in err.splitlines() if "was removed while open" in x)
+    head, _, tail = line.partition(" message(s) written to it lost")
+    assert head.startswith(f"ERROR disk_error: {first} was removed while open (output directory "
+                           "deleted?): ") and head.rsplit(" ", 1)[1].isdigit(), line
+    assert tail == "; logging goes on in a new file", line
+    events = [m["message"] for f in logs.glob("*.mcap") for t, _, m in read_messages(f) if t == "/cm/events"]
+    assert line.split("disk_error: ", 1)[1] in events
