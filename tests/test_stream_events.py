@@ -5,8 +5,12 @@ protocol encoder and replayed by a real ``cmsensord replay`` process, which must
 
 from __future__ import annotations
 
+import contextlib
+import os
+import pty
 import re
 import shutil
+import threading
 import time
 
 import numpy as np
@@ -198,3 +202,41 @@ def test_output_directory_deleted_while_running_is_reported_at_the_next_flush(tm
     assert tail == "; logging goes on in a new file", line
     events = [m["message"] for f in logs.glob("*.mcap") for t, _, m in read_messages(f) if t == "/cm/events"]
     assert line.split("disk_error: ", 1)[1] in events
+
+
+def test_a_link_sending_only_garbage_is_link_stalled_with_diagnostics(tmp_path):
+    """A board at the wrong baud rate: bytes, never a valid frame."""
+    master, slave = pty.openpty()
+    port = os.ttyname(slave)
+    stop_writing = threading.Event()
+
+    def garbage():
+        rng = np.random.default_rng(0)
+        while not stop_writing.is_set():
+            with contextlib.suppress(OSError):
+                os.write(master, rng.integers(0, 256, 512, dtype=np.uint8).tobytes())
+            time.sleep(0.01)
+
+    writer = threading.Thread(target=garbage, daemon=True)
+    writer.start()
+    d = start_daemon(tmp_path, port, config="  flush_s: 0.2\n")
+    lines: list[str] = []
+    try:
+        def stalled():
+            lines.append(d.stderr.readline())
+            return "link_stalled" in lines[-1]
+        wait_until(stalled, "link_stalled")
+        assert d.poll() is None                               # still running
+        err = stop(d)
+    finally:
+        stop_writing.set()
+        writer.join()
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0, err
+    assert re.fullmatch(rf"WARNING link_stalled: {port}: bytes but no valid frame for \d+\.\d s "
+                        r"\(wrong baud rate, or line noise\?\)", lines[-1].strip()), lines[-1]
+    msgs = [(t, m) for f in (tmp_path / "logs").glob("*.mcap") for t, _, m in read_messages(f)]
+    diag = [m for t, m in msgs if t == "/cm/diagnostics"]
+    assert diag and diag[0]["link"]["bytes_discarded"] > 0 and diag[0]["observations"] == 0
+    assert [m["kind"] for t, m in msgs if t == "/cm/events"] == ["start", "link_stalled", "stop"]

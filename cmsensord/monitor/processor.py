@@ -66,7 +66,7 @@ class Processor:
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self.observations = self.missing_observations = self.frames_lost = 0
-        self.started_wall = time.monotonic()
+        self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
 
     # ---- the parts' figures, for the status line, the summary and the tools --
@@ -287,9 +287,15 @@ class Processor:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
             self._out(sev.decision(d, stamp))
-            self._out([messages.diagnostics(
-                stamp, self.link_counters() if self.link_counters else {}, self.observations,
-                round(time.monotonic() - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+            self.write_diagnostics(stamp)
+
+    def write_diagnostics(self, stamp_ns: int) -> None:
+        """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
+        when none came for a while)."""
+        self.diagnostics_at = time.monotonic()
+        self._out([messages.diagnostics(
+            stamp_ns, self.link_counters() if self.link_counters else {}, self.observations,
+            round(self.diagnostics_at - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
 
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""
