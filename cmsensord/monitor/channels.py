@@ -79,9 +79,10 @@ class ChannelSetup:
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
                       self.clock.stamp_ns(f.t0_unwrapped))
 
-    def accept(self, n: int, n_frames: int) -> bool:
-        """``n_frames`` data frames in a row of ``n`` channels: True to process them (the board's
-        count, or a change of the board), False when they are dropped as odd frames."""
+    def accept(self, n: int, frames: list[Frame]) -> bool:
+        """Data frames in a row of ``n`` channels: True to process them (the board's count, or a
+        change of the board), False when they are dropped as odd frames."""
+        n_frames = len(frames)
         if self.severity is None or n == self.n_board:
             self._odd_run = 0
             return True
@@ -93,7 +94,7 @@ class ChannelSetup:
         self.odd_dropped += n_frames
         self.log.emit("channels", None, f"{n_frames} RMS frame(s) of {n} channel(s) in a "
                       f"{self.n_board}-channel stream dropped ({self.odd_dropped} in all)",
-                      count=n_frames, total=self.odd_dropped)
+                      self.clock.stamp_ns(frames[0].t0_unwrapped), count=n_frames, total=self.odd_dropped)
         return False
 
     def changed(self, n_board: int) -> bool:

@@ -168,14 +168,15 @@ class Processor:
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
-        if not (self.setup.ready(C) and self.setup.accept(C, len(frames))):
+        if not (self.setup.ready(C) and self.setup.accept(C, frames)):
             return
         self._board_channels(C)
         good = [f for f in frames if len(f.payload) == 4 * C]
         if len(good) < len(frames):             # only those frames are lost
             n = len(frames) - len(good)
+            first = next(f for f in frames if len(f.payload) != 4 * C)
             self.event("decode_error", None, f"{n} RMS frame(s) with a payload that is not 4 x {C} "
-                       "bytes dropped", count=n)
+                       "bytes dropped", self.clock.stamp_ns(first.t0_unwrapped), count=n)
             if not good:
                 return
             frames = good
