@@ -5,8 +5,9 @@ ones (status line, exit summary), counted by kind, logged to the journal at the
 level of its kind, and handed to ``on_event`` when one is given.  A producer
 that knows better (the sink about its own routine work) passes ``log_level``.
 
-Repeated events of one kind on one channel are rate-limited: at most one per
-``RATE_S`` of event time; the ones within that interval after it are counted
+Repeated events of one kind on one channel are rate-limited: at most
+``RATE_BURST`` in an interval of ``RATE_S`` of event time starting at the first;
+the ones after them within that interval are counted
 (their ``count`` fields summed) and written as one summary event of that kind
 with the next event of that kind after the interval, or at the end of the run
 (:meth:`EventLog.summarise`) — so where a summary lands depends on the stream
@@ -38,8 +39,9 @@ LOG_LEVEL = {
     "decision_rule": logging.WARNING, "anomaly_held": logging.WARNING,
 }
 
-#: at most one event of a kind per channel in this many seconds of event time; then a summary
+#: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
 RATE_S = 1.0
+RATE_BURST = 5
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change"})
@@ -50,6 +52,7 @@ class _Held:
     """Events of one (kind, channel) held back in the interval starting at ``since_ns``."""
 
     since_ns: int
+    written: int = 1        # written one by one in the interval
     n: int = 0
     count: int = 0          # their ``count`` fields, summed
     last_ns: int = 0
@@ -110,7 +113,7 @@ class EventLog:
                 extra["count"] = h.count
             self._record(kind, channel, f"{h.n} more {kind} event(s) in "
                          f"{(h.last_ns - h.since_ns) / 1e9:.3g} s" + (f" ({h.count} in all)" if h.count else "")
-                         + f": at most one per {RATE_S:g} s is written on its own", h.last_ns, extra, None)
+                         + f": at most {RATE_BURST} per {RATE_S:g} s are written one by one", h.last_ns, extra, None)
 
     def _write(self, kind: str, channel: str | None, message: str, stamp_ns: int | None,
                extra: dict[str, Any], log_level: int | None) -> None:
@@ -120,6 +123,11 @@ class EventLog:
             key = (kind, channel)
             h = self._held.get(key)
             if h is not None and 0 <= stamp - h.since_ns < RATE_S * 1e9:
+                if h.written < RATE_BURST:
+                    h.written += 1
+                    h.last_ns = max(h.last_ns, stamp)
+                    self._record(kind, channel, message, stamp, extra, log_level)
+                    return
                 h.n += 1
                 h.count += int(extra.get("count", 0) or 0)
                 h.last_ns = max(h.last_ns, stamp)
