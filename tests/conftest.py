@@ -39,6 +39,7 @@ PROCESS_MODULES = frozenset({
     "test_import.py",
     "test_config_hostile.py",
     "test_reader_thread.py",
+    "test_stream_events.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

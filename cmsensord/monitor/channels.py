@@ -7,9 +7,22 @@ channels come from the configuration, or from the board's first data frame's C
 when the configuration lists none (``auto_channels``); configured channels the
 board does not send are reported and left out.  With the first data, the
 severity chain (and the microphone estimator) of the usable channels is made.
+
+A STATUS whose scale or offset is not finite, or whose scale is 0, is ignored
+with a ``decode_error`` event: the previous one (its calibration) is kept.
+
+A data frame whose channel count is not the board's (:meth:`ChannelSetup.accept`)
+is one odd frame, dropped and counted with a ``channels`` event, unless a
+STATUS announces that count or ``CHANGE_FRAMES`` such frames come in a row: then
+the board has changed.  Fewer channels: the channels no longer sent are
+reported and observed as missing.  More channels: the channels are re-set (with
+``auto_channels``, or when configured channels come back) and a new severity
+chain is made, or a ``channels`` event names the board channels not monitored.
 """
 
 from __future__ import annotations
+
+import math
 
 from cmsensord.config import ChannelConfig, Config, default_channels
 from cmsensord.monitor.clock import BlockClock
@@ -17,6 +30,9 @@ from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
 from cmsensord.monitor.severity import SeverityChain
 from cmsensord.protocol import Frame, Status, decode_status
+
+#: data frames of another channel count in a row that mean the board changed (1 s of RMS blocks)
+CHANGE_FRAMES = 100
 
 
 class ChannelSetup:
@@ -29,6 +45,9 @@ class ChannelSetup:
         self.severity: SeverityChain | None = None
         self.microphones: Microphones | None = None
         self._no_channels = False
+        self.n_board = 0                        # the board's channel count the chain was made for
+        self._odd_run = 0                       # data frames of another count in a row
+        self.odd_dropped = 0                    # odd frames dropped in all
 
     def decode(self, f: Frame) -> tuple[Status | None, bool]:
         """A STATUS frame -> (its Status or None if bad, whether it changes the time base or
@@ -37,6 +56,14 @@ class ChannelSetup:
             st = decode_status(f.payload)
         except ValueError as exc:
             self.log.emit("decode_error", None, f"bad STATUS payload at byte {f.offset}: {exc}")
+            return None, False
+        bad = [i for i, (a, b) in enumerate(zip(st.scale, st.offset))
+               if not (math.isfinite(a) and a != 0.0 and math.isfinite(b))]
+        if bad:
+            self.log.emit("decode_error", None, f"STATUS at byte {f.offset} ignored: channel(s) "
+                          f"{', '.join(map(str, bad))} with scale/offset "
+                          f"{', '.join(f'{st.scale[i]:g}/{st.offset[i]:g}' for i in bad)}, not finite "
+                          "(and a scale not 0): the previous STATUS is kept")
             return None, False
         old = self.status
         return st, old is None or (st.fs, st.block_len, st.n_channels, st.mode) != (
@@ -51,6 +78,52 @@ class ChannelSetup:
         self.log.emit("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
                       self.clock.stamp_ns(f.t0_unwrapped))
+
+    def accept(self, n: int, frames: list[Frame]) -> bool:
+        """Data frames in a row of ``n`` channels: True to process them (the board's count, or a
+        change of the board), False when they are dropped as odd frames."""
+        n_frames = len(frames)
+        if self.severity is None or n == self.n_board:
+            self._odd_run = 0
+            return True
+        self._odd_run += n_frames
+        announced = self.status is not None and self.status.n_channels == n
+        if announced or self._odd_run >= CHANGE_FRAMES:
+            self._odd_run = 0
+            return True
+        self.odd_dropped += n_frames
+        self.log.emit("channels", None, f"{n_frames} RMS frame(s) of {n} channel(s) in a "
+                      f"{self.n_board}-channel stream dropped ({self.odd_dropped} in all)",
+                      self.clock.stamp_ns(frames[0].t0_unwrapped), count=n_frames, total=self.odd_dropped)
+        return False
+
+    def changed(self, n_board: int) -> bool:
+        """True when the board now sends ``n_board`` channels, not the chain's count: the
+        caller drains the decisions of the chain, then calls :meth:`change`."""
+        return self.severity is not None and n_board != self.n_board
+
+    def change(self, n_board: int) -> None:
+        """The board sends ``n_board`` channels from now on (see module docstring)."""
+        old, self.n_board = self.n_board, n_board
+        emit = self.log.emit
+        if n_board < old:
+            gone = [ch.name for ch in self.channels if ch.index >= n_board]
+            emit("channels", None, f"board now sends {n_board} channel(s), not {old}"
+                 + (f": channel(s) {', '.join(gone)} not in the stream (observations missing)"
+                    if gone else ""), n_channels=n_board)
+            return
+        wanted = (default_channels(n_board, self.cfg.monitor) if self.auto_channels
+                  else tuple(ch for ch in self.cfg.channels if ch.index < n_board))
+        if [ch.name for ch in wanted] != [ch.name for ch in self.channels]:
+            self.severity, self.channels = None, wanted
+            self._setup(n_board)
+            emit("channels", None, f"board now sends {n_board} channel(s), not {old}: channels "
+                 f"re-set to {', '.join(ch.name for ch in self.channels)}", n_channels=n_board)
+        known = {ch.index for ch in self.channels}
+        idle = [str(i) for i in range(n_board) if i not in known]
+        if idle:
+            emit("channels", None, f"board now sends {n_board} channel(s), not {old}: board "
+                 f"channel(s) {', '.join(idle)} not configured, not monitored", n_channels=n_board)
 
     def ready(self, n_board: int) -> bool:
         """True when the severity chain exists (made now for a board sending ``n_board``
@@ -75,6 +148,7 @@ class ChannelSetup:
                      f"{n_board}: observations are not monitored until it sends them")
             return
         self._no_channels = False
+        self.n_board = n_board
         self.channels = usable
         self.severity = SeverityChain(usable, fs=self.clock.fs, block_len=self.clock.block_len,
                                       trace_filter=self.cfg.output.akf_trace_filter)

@@ -4,6 +4,17 @@ An event is written to ``/cm/events`` (schema ``event``), kept among the recent
 ones (status line, exit summary), counted by kind, logged to the journal at the
 level of its kind, and handed to ``on_event`` when one is given.  A producer
 that knows better (the sink about its own routine work) passes ``log_level``.
+
+Repeated events of one kind on one channel are rate-limited: at most
+``RATE_BURST`` in an interval of ``RATE_S`` of event time starting at the first;
+the ones after them within that interval are counted
+(their ``count`` fields summed) and written as one summary event of that kind
+with the next event of that kind after the interval, or at the end of the run
+(:meth:`EventLog.summarise`) — so where a summary lands depends on the stream
+only, not on how it was read (live and replay write the same).  Every occurrence
+stays in :attr:`EventLog.counts`.  Kinds in
+``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears,
+failures and decisions' notes) are never held back.
 """
 
 from __future__ import annotations
@@ -27,6 +38,24 @@ LOG_LEVEL = {
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
     "decision_rule": logging.WARNING, "anomaly_held": logging.WARNING,
 }
+
+#: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
+RATE_S = 1.0
+RATE_BURST = 5
+#: kinds never rate-limited: made once, in pairs, or at most once per decision period
+UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
+                       "decision_rule", "anomaly_held", "severity_change"})
+
+
+@dataclass
+class _Held:
+    """Events of one (kind, channel) held back in the interval starting at ``since_ns``."""
+
+    since_ns: int
+    written: int = 1        # written one by one in the interval
+    n: int = 0
+    count: int = 0          # their ``count`` fields, summed
+    last_ns: int = 0
 
 
 @dataclass
@@ -54,6 +83,7 @@ class EventLog:
         self.on_event = on_event
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
+        self._held: dict[tuple[str, str | None], _Held] = {}
 
     def emit(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, *,
              log_level: int | None = None, **extra: Any) -> None:
@@ -64,13 +94,54 @@ class EventLog:
         for ev in events:
             self._write(ev.kind, ev.channel, ev.message, ev.stamp_ns, ev.fields, None)
 
+    def summarise(self, now_ns: int | None = None, *, final: bool = False) -> None:
+        """Summary events of the intervals over at ``now_ns`` (the default stamp), or of all
+        (``final``: the end of the run)."""
+        if not self._held:
+            return
+        now = self.default_stamp() if now_ns is None else now_ns
+        for key, h in list(self._held.items()):
+            if final or not 0 <= now - h.since_ns < RATE_S * 1e9:
+                self._close(key, h)
+
+    def _close(self, key: tuple[str, str | None], h: _Held) -> None:
+        del self._held[key]
+        if h.n:
+            kind, channel = key
+            extra: dict[str, Any] = {"summarised": h.n}
+            if h.count:
+                extra["count"] = h.count
+            self._record(kind, channel, f"{h.n} more {kind} event(s) in "
+                         f"{(h.last_ns - h.since_ns) / 1e9:.3g} s" + (f" ({h.count} in all)" if h.count else "")
+                         + f": at most {RATE_BURST} per {RATE_S:g} s are written one by one", h.last_ns, extra, None)
+
     def _write(self, kind: str, channel: str | None, message: str, stamp_ns: int | None,
                extra: dict[str, Any], log_level: int | None) -> None:
-        m = messages.event(self.default_stamp() if stamp_ns is None else stamp_ns, kind, channel,
-                           message, extra)
+        stamp = self.default_stamp() if stamp_ns is None else stamp_ns
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if kind not in UNLIMITED:
+            key = (kind, channel)
+            h = self._held.get(key)
+            if h is not None and 0 <= stamp - h.since_ns < RATE_S * 1e9:
+                if h.written < RATE_BURST:
+                    h.written += 1
+                    h.last_ns = max(h.last_ns, stamp)
+                    self._record(kind, channel, message, stamp, extra, log_level)
+                    return
+                h.n += 1
+                h.count += int(extra.get("count", 0) or 0)
+                h.last_ns = max(h.last_ns, stamp)
+                return
+            if h is not None:
+                self._close(key, h)
+            self._held[key] = _Held(stamp, last_ns=stamp)
+        self._record(kind, channel, message, stamp, extra, log_level)
+
+    def _record(self, kind: str, channel: str | None, message: str, stamp_ns: int,
+                extra: dict[str, Any], log_level: int | None) -> None:
+        m = messages.event(stamp_ns, kind, channel, message, extra)
         self.sink.write(*m)
         self.recent.append(m.msg)
-        self.counts[kind] = self.counts.get(kind, 0) + 1
         log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
         if self.on_event is not None:
             self.on_event(m.msg)

@@ -31,7 +31,7 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.shaft import Shaft
-from cmsensord.protocol import Frame, FrameType, ProtocolError, decode_rms_rows
+from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
 if TYPE_CHECKING:
     from cmsensord.monitor.orders import OrderChain
@@ -66,7 +66,7 @@ class Processor:
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self.observations = self.missing_observations = self.frames_lost = 0
-        self.started_wall = time.monotonic()
+        self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
 
     # ---- the parts' figures, for the status line, the summary and the tools --
@@ -151,6 +151,7 @@ class Processor:
         if self.orders is not None:
             self._out(self.orders.finish())
         self._release_decisions(final=True)
+        self.log.summarise(final=True)
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
         self._flush_rms(rms)
@@ -167,15 +168,20 @@ class Processor:
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
-        if not self.setup.ready(C):
+        if not (self.setup.ready(C) and self.setup.accept(C, frames)):
             return
+        self._board_channels(C)
+        good = [f for f in frames if len(f.payload) == 4 * C]
+        if len(good) < len(frames):             # only those frames are lost
+            n = len(frames) - len(good)
+            first = next(f for f in frames if len(f.payload) != 4 * C)
+            self.event("decode_error", None, f"{n} RMS frame(s) with a payload that is not 4 x {C} "
+                       "bytes dropped", self.clock.stamp_ns(first.t0_unwrapped), count=n)
+            if not good:
+                return
+            frames = good
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        try:
-            vals = decode_rms_rows(frames, C)
-        except ProtocolError:
-            self.event("decode_error", None, f"RMS payload length does not match C = {C}")
-            return
-        self._observe(t0, vals)
+        self._observe(t0, decode_rms_rows(frames, C))
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
@@ -184,6 +190,7 @@ class Processor:
         self._out(events)
         if not ready or not self.setup.ready(C):
             return
+        self._board_channels(C)
         blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.status)
         self._out(events)
         if blocks is None:
@@ -195,6 +202,13 @@ class Processor:
             y = blocks.samples(index)
             for a, b in blocks.runs():          # consecutive except across lost blocks
                 self._out(orders.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(index))))
+
+    def _board_channels(self, C: int) -> None:
+        """The board now sends C channels: a new chain drains the old one's decisions first."""
+        if self.setup.changed(C):
+            if C > self.setup.n_board:
+                self._release_decisions(final=True)
+            self.setup.change(C)
 
     def _order_chain(self) -> OrderChain | None:
         """The order chain of the vibration channels, created with the first RAW blocks
@@ -238,7 +252,10 @@ class Processor:
         T = int(slots[-1]) + 1 - first
         y = np.full((T, len(self.channels)), np.nan)
         valid = np.zeros((T, len(self.channels)), dtype=bool)
-        y[slots - first] = vals[:, self.severity.index]
+        index = self.severity.index
+        if vals.shape[1] <= index.max():        # the board sends fewer channels: those are missing
+            vals = np.pad(vals, ((0, 0), (0, index.max() + 1 - vals.shape[1])), constant_values=np.nan)
+        y[slots - first] = vals[:, index]
         valid[slots - first] = True
         valid &= np.isfinite(y)
         mics, trace = self.setup.microphones, self.cfg.output.akf_trace
@@ -271,9 +288,15 @@ class Processor:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
             self._out(sev.decision(d, stamp))
-            self._out([messages.diagnostics(
-                stamp, self.link_counters() if self.link_counters else {}, self.observations,
-                round(time.monotonic() - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+            self.write_diagnostics(stamp)
+
+    def write_diagnostics(self, stamp_ns: int) -> None:
+        """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
+        when none came for a while)."""
+        self.diagnostics_at = time.monotonic()
+        self._out([messages.diagnostics(
+            stamp_ns, self.link_counters() if self.link_counters else {}, self.observations,
+            round(self.diagnostics_at - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
 
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""

@@ -5,10 +5,16 @@ Until then at most ``TACHO_WAIT_FRAMES`` of the newest TACHO frames wait.  The
 tracker's events (pulses lost, missed, restored ...) are returned as events;
 the speed is read by the order chain and, as the decisions' f_r, by the
 severity chain (:meth:`Shaft.period_f_r`).
+
+A TACHO frame lost on the link (a gap in the input's t0 sequence) is a frame
+loss, reported as such by the decoder's ``frames_lost``: pulses the tracker
+inserts in it are not reported as ``tacho_missed_pulse`` (counted in
+:attr:`Shaft.missed_in_lost_frames`).
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,6 +29,8 @@ if TYPE_CHECKING:
 
 #: TACHO frames kept while no tacho tracker exists (no STATUS announcing one yet)
 TACHO_WAIT_FRAMES = 200
+#: gaps of lost TACHO frames remembered (the tracker reports a missed pulse a few frames late)
+LOST_GAPS = 64
 
 
 class Shaft:
@@ -32,6 +40,9 @@ class Shaft:
         self.cfg = cfg
         self.waiting: list[Frame] = []
         self.tacho: TachoTracker | None = None  # once STATUS announces a tacho
+        self._prev_t0: int | None = None         # t0 of the last TACHO frame fed
+        self._gaps: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # [first, end) samples not covered
+        self.missed_in_lost_frames = 0
 
     def add(self, f: Frame) -> None:
         """A TACHO frame of any input; only the configured one is kept."""
@@ -69,9 +80,28 @@ class Shaft:
             except ValueError as exc:
                 events.append(Event("decode_error", None, f"bad TACHO payload at byte {f.offset}: {exc}"))
                 edges.append(np.empty(0, dtype=np.uint32))
+        self._note_gaps(t0, clock.block_len)
         u = self.tracker().update(t0, edges)
-        return events + [Event(ev.kind, None, ev.message, clock.stamp_ns(int(ev.sample)),
-                               {"count": int(ev.count)}) for ev in u.events]
+        for ev in u.events:
+            if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
+                self.missed_in_lost_frames += int(ev.count)
+                continue
+            events.append(Event(ev.kind, None, ev.message, clock.stamp_ns(int(ev.sample)),
+                                {"count": int(ev.count)}))
+        return events
+
+    def _note_gaps(self, t0: np.ndarray, L: int) -> None:
+        """Gaps between consecutive TACHO frames (one per block): lost frames."""
+        if not len(t0):
+            return
+        prev = np.concatenate(([t0[0] if self._prev_t0 is None else self._prev_t0], t0[:-1]))
+        for a, b in zip(prev[(t0 - prev) > L].tolist(), t0[(t0 - prev) > L].tolist()):
+            self._gaps.append((a + L, b))
+        self._prev_t0 = int(t0[-1])
+
+    def _in_gap(self, sample: float, L: int) -> bool:
+        """True when ``sample`` is in (or within a block of) a gap of lost TACHO frames."""
+        return any(a - L <= sample < b + L for a, b in self._gaps)
 
     def final_slot(self, clock: BlockClock) -> int:
         """The first observation slot whose speed is not final yet."""

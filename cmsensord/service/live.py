@@ -29,9 +29,13 @@ EXIT_READER_DIED = 70
 class ReaderDied(Exception):
     """The serial reader thread ended while the loop still ran (it only ends on stop)."""
 
+#: /cm/diagnostics at least this often (seconds), also when no decision brings one
+DIAGNOSTICS_S = 5.0
+
 
 class _Watch:
-    """What the loop notices besides frames: queue drops, a stalled link, the end of a simulation."""
+    """What the loop notices besides frames: queue drops, a stalled link (no bytes, or bytes but
+    no valid frame, for ``link.stall_s``), the end of a simulation."""
 
     def __init__(self, cfg: Config, proc: Processor, source: SerialSource,
                  duration_s: float | None, sim_done: threading.Event | None):
@@ -40,6 +44,7 @@ class _Watch:
         self.stalled = False
         self.idle_since: float | None = None
         self.drops_seen = 0
+        self.last_frame = time.monotonic()      # a valid frame, or the start
 
     def link_events(self) -> None:
         """The reader's link events and the queue's drops become events."""
@@ -64,17 +69,30 @@ class _Watch:
         if got_frames:
             self.idle_since = None
             self.stalled = False
+            self.last_frame = now
             return False
         self.idle_since = self.idle_since or now
         if self.sim_done is not None and self.sim_done.is_set() and now - self.idle_since > 1.0:
             return True                 # the simulated board has sent everything and it is read
         reader, link = self.source.reader, self.cfg.link
-        if (not self.stalled and reader.connected.is_set()
-                and now - reader.last_data > link.stall_s and self.proc.anchor_ns is not None):
+        if self.stalled or not reader.connected.is_set():
+            return False
+        if now - reader.last_data > link.stall_s and self.proc.anchor_ns is not None:
             self.stalled = True
             self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
                             time.time_ns())
+        elif now - self.last_frame > link.stall_s and now - reader.last_data <= link.stall_s:
+            self.stalled = True
+            self.proc.event("link_stalled", None, f"{link.port}: bytes but no valid frame for "
+                            f"{now - self.last_frame:.1f} s (wrong baud rate, or line noise?)",
+                            time.time_ns())
+            self.proc.write_diagnostics(time.time_ns())
         return False
+
+    def diagnostics(self, now: float) -> None:
+        """``/cm/diagnostics`` when no decision wrote one for ``DIAGNOSTICS_S``."""
+        if now - self.proc.diagnostics_at >= DIAGNOSTICS_S:
+            self.proc.write_diagnostics(self.proc.log.default_stamp())
 
 
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
@@ -153,6 +171,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 break
             if now >= next_status:
                 next_status = now + 1.0
+                watch.diagnostics(now)
                 if cfg.output.status_line:
                     print(status_line(proc, source), file=sys.stderr, flush=True)
                 notify.status(service_state())

@@ -302,12 +302,16 @@ class RotatingSink:
             cur.flush()
         except SinkIOError as err:
             self._failed(err, cur)
+            return
+        self._check_present(cur)
 
     def _sync(self, cur: McapSink) -> None:
         try:
             cur.sync()
         except SinkIOError as err:
             self._failed(err, cur)
+            return
+        if not self._check_present(cur):
             return
         self._last_sync = self.clock()
         self._event_dirty = self._need_sync = False
@@ -379,6 +383,29 @@ class RotatingSink:
         return done
 
     # -- disk errors -------------------------------------------------------
+
+    def _check_present(self, cur: McapSink) -> bool:
+        """After each flush: True while the open file is still in the output directory; a file
+        (or directory) removed under the daemon is reported, with every message written to
+        it as lost, and logging goes on in a new file (the directory made again)."""
+        try:
+            os.stat(cur.part_path)
+            return True
+        except FileNotFoundError:
+            pass
+        except OSError:
+            return True                      # not known to be gone: the next write tells
+        lost = cur.messages_written
+        cur.abandon()
+        self._current = None
+        self._drop(lost)
+        self._event_dirty = self._need_sync = False
+        self._emit(DISK_EVENT, f"{cur.part_path} was removed while open (output directory "
+                   f"deleted?): {lost} message(s) written to it lost; logging goes on in a new file",
+                   count=lost, details={"action": "removed", "file": str(cur.part_path)})
+        self._next_retry = self.clock()
+        self._retry_if_due()
+        return False
 
     def _failed(self, err: SinkIOError, cur: McapSink | None) -> None:
         """Abandon ``cur`` (if any) after ``err``; event at the start of an outage; retry."""

@@ -1,0 +1,244 @@
+"""Stream events (issue 11, items 2, 7, 8): a change of channel count, losses that are
+reported, and floods of events summarised — each fed by one small capture built with the
+protocol encoder and replayed by a real ``cmsensord replay`` process, which must finish
+(exit 0) with the exact event in its MCAP."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pty
+import re
+import shutil
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from cmsensord.protocol import (
+    MODE_RAW,
+    MODE_RMS,
+    FrameType,
+    Status,
+    encode_frame,
+    encode_raw,
+    encode_rms,
+    encode_status,
+    encode_tacho,
+)
+from cmsensord.sinks.mcap_read import read_messages
+from processes import cmsensord, start_board, start_daemon, stop
+
+FS, L = 25000, 250
+
+
+def status(seq: int, t0: int, n: int, scale: float = 1.0) -> bytes:
+    return encode_status(seq, t0, Status(0x0100, MODE_RMS, n, FS, L, 0, 0, 0, 0,
+                                         (scale,) * n, (0.0,) * n))
+
+
+def rms_stream(counts: list[int], statuses: dict[int, bytes] | None = None) -> bytes:
+    """A STATUS of counts[0] channels, then one RMS frame of counts[k] channels per block k
+    (a STATUS from ``statuses`` before block k)."""
+    out = bytearray(status(0, 0, counts[0]))
+    seq = 1
+    for k, c in enumerate(counts):
+        if statuses and k in statuses:
+            out += statuses[k]
+        out += encode_rms(seq, k * L, np.full(c, 0.5))
+        seq += 1
+    return bytes(out)
+
+
+def replay(tmp_path, data: bytes, config: str | None = None) -> list[str]:
+    """``cmsensord replay`` of ``data``: exit 0, and its events as 'kind | message' lines."""
+    cap = tmp_path / "cap.bin"
+    cap.write_bytes(data)
+    args = ["replay", str(cap), "--out", str(tmp_path / "out")]
+    if config is not None:
+        (tmp_path / "c.yaml").write_text(f"output:\n  dir: {tmp_path / 'out'}\n{config}")
+        args += ["--config", str(tmp_path / "c.yaml")]
+    r = cmsensord(*args)
+    assert r.returncode == 0, r.stderr
+    (tmp_path / "stderr.txt").write_text(r.stderr)
+    return [f"{m['kind']} | {m['message']}" for f in sorted((tmp_path / "out").glob("*.mcap"))
+            for t, _, m in read_messages(f) if t == "/cm/events"]
+
+
+def summary_observations(tmp_path) -> tuple[int, int]:
+    """(observations, missing observations) of the replay's exit summary."""
+    text = (tmp_path / "stderr.txt").read_text()
+    m = re.search(r"(\d+) observations?, (\d+) missing", text)
+    assert m, text
+    return int(m.group(1)), int(m.group(2))
+
+
+# ---- item 2: a change of channel count ------------------------------------------------
+def test_one_rms_frame_of_another_channel_count_is_dropped_with_an_event(tmp_path):
+    events = replay(tmp_path, rms_stream([4] * 200 + [2] + [4] * 199))
+    assert "channels | 1 RMS frame(s) of 2 channel(s) in a 4-channel stream dropped (1 in all)" in events
+
+
+def test_a_board_swapped_from_4_to_2_channels_reports_the_channels_gone(tmp_path):
+    events = replay(tmp_path, rms_stream([4] * 300 + [2] * 300))
+    assert ("channels | board now sends 2 channel(s), not 4: channel(s) ch2, ch3 not in the "
+            "stream (observations missing)") in events
+
+
+def test_a_board_swapped_from_2_to_4_channels_re_sets_auto_channels(tmp_path):
+    events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300, {300: status(9999, 300 * L, 4)}))
+    assert "channels | board now sends 4 channel(s), not 2: channels re-set to ch0, ch1, ch2, ch3" in events
+
+
+def test_new_board_channels_that_are_not_configured_are_named_as_not_monitored(tmp_path):
+    config = "channels:\n  - {name: a, index: 0}\n  - {name: b, index: 1}\n"
+    events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300), config)
+    assert ("channels | board now sends 4 channel(s), not 2: board channel(s) 2, 3 not configured, "
+            "not monitored") in events
+
+
+# ---- item 8: event floods and false events ---------------------------------------------
+def tacho_stream(lose: int | None = None, flood: range = range(0)) -> bytes:
+    """1 RMS channel and a tacho (1 pulse per rev at 25 Hz: an edge every 4th block) for
+    600 blocks; the TACHO frame of block ``lose`` lost on the link (its seq skipped); the
+    blocks in ``flood`` with 1023 edges at random times."""
+    out = bytearray(encode_status(0, 0, Status(0x0100, MODE_RMS, 1, FS, L, 1, 1, 0, 0, (1.0,), (0.0,))))
+    seq = 1
+    for k in range(600):
+        out += encode_rms(seq, k * L, [0.5])
+        seq += 1
+        edges = [100 * 256] if k % 4 == 1 else []
+        if k in flood:
+            edges = np.sort(np.random.default_rng(k).integers(0, L * 256, 1023)).tolist()
+        if k != lose:
+            out += encode_tacho(seq, k * L, 0, edges)
+        seq += 1
+    return bytes(out)
+
+
+def test_a_lost_tacho_frame_is_a_frame_loss_not_a_missed_pulse(tmp_path):
+    events = replay(tmp_path, tacho_stream(lose=201))
+    assert "frames_lost | 1 frame(s) lost before seq 405 (seq gap)" in events
+    assert not [e for e in events if e.startswith("tacho_")]
+
+
+def test_100_tacho_frames_of_1023_edges_are_summarised(tmp_path):
+    events = replay(tmp_path, tacho_stream(flood=range(200, 300)))
+    extra = [e for e in events if e.startswith("tacho_extra_pulse")]
+    assert len(extra) == 6 and extra[:5] == [
+        f"tacho_extra_pulse | spurious tacho pulse removed at sample {x}"
+        for x in ("50003.2", "50003.6", "50004.6", "50007.8", "50014.4")]
+    assert extra[5] == ("tacho_extra_pulse | 7825 more tacho_extra_pulse event(s) in 1 s (7825 in all): "
+                        "at most 5 per 1 s are written one by one")
+    assert len(events) == 33            # of 23,682 events (7,830 extra and 15,852 missed pulses)
+
+
+# ---- item 7: losses that are reported --------------------------------------------------
+def test_one_rms_frame_of_a_wrong_payload_length_costs_only_that_frame(tmp_path):
+    data = bytearray(status(0, 0, 4))
+    for k in range(400):
+        payload = np.full(4, 0.5, dtype="<f4").tobytes()
+        data += encode_frame(FrameType.RMS, k + 1, k * L, 4, 0, payload[:12] if k == 200 else payload)
+    events = replay(tmp_path, bytes(data))
+    assert "decode_error | 1 RMS frame(s) with a payload that is not 4 x 4 bytes dropped" in events
+    obs = summary_observations(tmp_path)
+    assert obs == (399 * 4, 4)            # (observations, missing): the frame's 4 only
+
+
+def raw_stream(bad_scale: float) -> bytes:
+    """RAW mode, 1 channel: a STATUS (scale 0.01), 400 blocks, a STATUS with ``bad_scale``
+    after block 200."""
+    def st(seq, t0, scale):
+        return encode_status(seq, t0, Status(0x0100, MODE_RAW, 1, FS, L, 0, 0, 0, 0, (scale,), (2048.0,)))
+    out = bytearray(st(0, 0, 0.01))
+    seq = 1
+    counts = (2048 + 100 * np.sin(np.arange(L) / 5)).astype(np.uint16)
+    for k in range(400):
+        if k == 200:
+            out += st(seq, k * L, bad_scale)
+            seq += 1
+        out += encode_raw(seq, k * L, 0, counts)
+        seq += 1
+    return bytes(out)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), 0.0])
+def test_a_status_with_a_bad_scale_is_ignored_with_an_event(tmp_path, bad):
+    events = replay(tmp_path, raw_stream(bad))
+    at = raw_stream(bad).index(encode_status(201, 200 * L, Status(0x0100, MODE_RAW, 1, FS, L, 0, 0, 0, 0,
+                                                                   (bad,), (2048.0,))))
+    assert (f"decode_error | STATUS at byte {at} ignored: channel(s) 0 with scale/offset {bad:g}/2048, "
+            "not finite (and a scale not 0): the previous STATUS is kept") in events
+    assert summary_observations(tmp_path) == (400, 0)
+
+
+def wait_until(cond, what: str, limit_s: float = 20.0) -> None:
+    """Poll ``cond`` until it holds (a bound against a hang, not a timing assertion)."""
+    deadline = time.monotonic() + limit_s
+    while not cond():
+        assert time.monotonic() < deadline, f"still waiting for {what}"
+        time.sleep(0.05)
+
+
+def test_output_directory_deleted_while_running_is_reported_at_the_next_flush(tmp_path):
+    link = tmp_path / "ttyBOARD"
+    logs = tmp_path / "logs"
+    sim = start_board("--scenario", "healthy", "--link", str(link))
+    d = start_daemon(tmp_path, link, config="  flush_s: 0.2\n")
+    try:
+        wait_until(lambda: list(logs.glob("*.part")), "the first file")
+        first = next(logs.glob("*.part"))
+        shutil.rmtree(logs)
+        wait_until(lambda: list(logs.glob("*.part")), "a new file in the directory made again")
+        assert d.poll() is None                               # still running
+        err = stop(d)
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    line = next(x for x in err.splitlines() if "was removed while open" in x)
+    head, _, tail = line.partition(" message(s) written to it lost")
+    assert head.startswith(f"ERROR disk_error: {first} was removed while open (output directory "
+                           "deleted?): ") and head.rsplit(" ", 1)[1].isdigit(), line
+    assert tail == "; logging goes on in a new file", line
+    events = [m["message"] for f in logs.glob("*.mcap") for t, _, m in read_messages(f) if t == "/cm/events"]
+    assert line.split("disk_error: ", 1)[1] in events
+
+
+def test_a_link_sending_only_garbage_is_link_stalled_with_diagnostics(tmp_path):
+    """A board at the wrong baud rate: bytes, never a valid frame."""
+    master, slave = pty.openpty()
+    port = os.ttyname(slave)
+    stop_writing = threading.Event()
+
+    def garbage():
+        rng = np.random.default_rng(0)
+        while not stop_writing.is_set():
+            with contextlib.suppress(OSError):
+                os.write(master, rng.integers(0, 256, 512, dtype=np.uint8).tobytes())
+            time.sleep(0.01)
+
+    writer = threading.Thread(target=garbage, daemon=True)
+    writer.start()
+    d = start_daemon(tmp_path, port, config="  flush_s: 0.2\n")
+    lines: list[str] = []
+    try:
+        def stalled():
+            lines.append(d.stderr.readline())
+            return "link_stalled" in lines[-1]
+        wait_until(stalled, "link_stalled")
+        assert d.poll() is None                               # still running
+        err = stop(d)
+    finally:
+        stop_writing.set()
+        writer.join()
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0, err
+    assert re.fullmatch(rf"WARNING link_stalled: {port}: bytes but no valid frame for \d+\.\d s "
+                        r"\(wrong baud rate, or line noise\?\)", lines[-1].strip()), lines[-1]
+    msgs = [(t, m) for f in (tmp_path / "logs").glob("*.mcap") for t, _, m in read_messages(f)]
+    diag = [m for t, m in msgs if t == "/cm/diagnostics"]
+    assert diag and diag[0]["link"]["bytes_discarded"] > 0 and diag[0]["observations"] == 0
+    assert [m["kind"] for t, m in msgs if t == "/cm/events"] == ["start", "link_stalled", "stop"]
