@@ -161,12 +161,21 @@ def test_what_is_not_recoverable(tmp_path):
     assert r.action == "set_aside" and r.damaged and "not an MCAP file" in r.reason
     assert not part.exists() and (tmp_path / f"{STEM}.mcap.part.unreadable").exists()
     assert "kept as" in r.message()
-    first_chunk = _chunks_of(_part_bytes(tmp_path / "b")[1])[0][0]
+    chunks = _chunks_of(_part_bytes(tmp_path / "b")[1])
+    first_chunk = chunks[0][0]
     bad = bytearray(data)
     bad[first_chunk - 20] ^= 0xFF                  # inside the first chunk's data: CRC fails
     part.write_bytes(bytes(bad))
     r = salvage(part)
-    assert r.action == "set_aside" and r.damaged and r.messages == 0
+    # the later chunks are kept, but for the messages on the channels chunk 1 defined
+    lost_topics = {topic for topic, _t, _d in chunks[0][1]}
+    later = [m for _end, msgs in chunks[1:] for m in msgs]
+    expected = [m for m in later if m[0] not in lost_topics]
+    assert r.action == "salvaged" and r.damaged and r.lost_chunks == 1
+    assert r.messages == len(expected) > 0 and _read_all(r.path) == expected
+    assert r.lost_messages == len(chunks[0][1]) + len(later) - len(expected)
+    assert not part.exists() and r.kept == tmp_path / f"{STEM}.mcap.part.damaged"
+    assert r.kept.read_bytes() == bytes(bad)
 
 
 def test_a_finished_but_not_renamed_file_is_salvaged_whole(tmp_path):

@@ -76,7 +76,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
         capture = open(capture_path, "wb") if capture_path else None
     except OSError as exc:
         raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
-    sink = open_sink(cfg, metadata or {})
+    sink = open_sink(cfg, metadata or {}, background_salvage=True)
     source = SerialSource.from_link(cfg.link, capture=capture)
     queue = source.queue
     proc: Processor
