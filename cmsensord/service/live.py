@@ -91,6 +91,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
         try:
             _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done))
         finally:
+            if stop.event.is_set():     # SIGTERM: a salvage under way stops between records
+                sink.stop_salvage()
             source.stop()
             for frames in source:       # what the reader queued before it stopped
                 proc.handle(frames)

@@ -4,7 +4,8 @@ A ``.part`` file is what a crash, a kill or a disk error leaves of a
 :class:`~cmsensord.sinks.mcap_file.McapSink` file: every chunk flushed before
 it, then possibly a partial record. :func:`salvage` walks it with
 :class:`~cmsensord.sinks.mcap_read.RecordWalker`, checks each complete chunk
-(CRC, record framing, channels), and copies the good ones, compressed data
+(:func:`~cmsensord.sinks.mcap_chunk_check.check_chunk`: CRC, record framing,
+channels), and copies the good ones, compressed data
 unchanged, through :class:`~cmsensord.sinks.mcap_chunks.ChunkWriter` into
 ``<stem>.salvaged.mcap``; :func:`salvage_leftovers` does that for every
 ``.part`` file of a prefix in a directory. A damaged record is skipped: the
@@ -18,22 +19,19 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import mmap
 import os
 import stat
-import struct
 import threading
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-import zstandard
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Metadata, Schema
 
 from cmsensord import __version__
-from cmsensord.sinks.mcap_chunks import MESSAGE_FIXED, OP_MESSAGE, ChunkWriter, lz4_frame
+from cmsensord.sinks.mcap_chunk_check import ChunkDamaged, Interrupted, Resync, check_chunk
+from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_file import (
     RawFile,
     SinkIOError,
@@ -42,7 +40,7 @@ from cmsensord.sinks.mcap_file import (
     os_error_text,
     salvaged_path,
 )
-from cmsensord.sinks.mcap_read import NOT_MCAP, RECORD_LIMIT, RecordWalker, parse_record
+from cmsensord.sinks.mcap_read import NOT_MCAP, RecordWalker, parse_record
 
 __all__ = ["SalvageResult", "salvage", "salvage_leftovers"]
 
@@ -98,141 +96,6 @@ class SalvageResult:
         if self.action == "interrupted":
             return f"{name}: salvage interrupted by stop; left for the next start"
         return f"{name}: in use by another writer; left alone"
-
-
-class _Damaged(Exception):
-    """Internal: a complete record failed its checks (salvage skips it)."""
-
-
-class _Interrupted(Exception):
-    """Internal: the stop flag was set during the scan (the ``.part`` is left as it was)."""
-
-
-def _decompress(chunk: Chunk) -> bytes:
-    """The chunk's records, checked against its size and CRC; _Damaged if they fail."""
-    if chunk.compression == "zstd":
-        data = zstandard.ZstdDecompressor().decompress(
-            chunk.data, max_output_size=chunk.uncompressed_size
-        )
-    elif chunk.compression == "lz4":
-        if lz4_frame is None:
-            raise _Damaged("lz4 chunk, but the lz4 package is not installed")
-        data = lz4_frame.decompress(chunk.data)
-    elif chunk.compression == "":
-        data = chunk.data
-    else:
-        raise _Damaged(f"unknown chunk compression {chunk.compression!r}")
-    if len(data) != chunk.uncompressed_size:
-        raise _Damaged(f"chunk holds {len(data)} bytes, its header says {chunk.uncompressed_size}")
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise _Damaged("chunk CRC mismatch")
-    return bytes(data)
-
-
-
-def _index_records(
-    data: bytes, channels: dict[int, Channel]
-) -> tuple[dict[int, list[tuple[int, int]]], int, int, int, list[Schema], list[Channel],
-           list[tuple[int, int]]]:
-    """Walk the records of a decompressed chunk and rebuild its message index.
-
-    Returns (index {channel: [(log time, offset)]}, messages, first and last
-    log time, schemas, channels defined in it, spans of the records to keep);
-    a channel defined in it is also added to ``channels``. A message on a
-    channel no record defines (its definition was in a damaged chunk) is left
-    out of the index and of the spans. Raises _Damaged for a record that
-    crosses the end of the chunk, a message too short for its fields, or a
-    schema or channel record that does not parse.
-    """
-    index: dict[int, list[tuple[int, int]]] = {}
-    schemas: list[Schema] = []
-    new_channels: list[Channel] = []
-    spans: list[tuple[int, int]] = []
-    n = t0 = t1 = 0
-    off, end = 0, len(data)
-    while off < end:
-        if off + 9 > end:
-            raise _Damaged("a record header crosses the end of the chunk")
-        opcode, length = struct.unpack_from("<BQ", data, off)
-        stop = off + 9 + length
-        if stop > end:
-            raise _Damaged("a record crosses the end of the chunk")
-        if opcode == OP_MESSAGE:
-            if length < MESSAGE_FIXED:
-                raise _Damaged("a message record too short for its fields")
-            channel_id, _seq, log_time = struct.unpack_from("<HIQ", data, off + 9)
-            if channel_id not in channels:
-                off = stop
-                continue
-            index.setdefault(channel_id, []).append((log_time, off))
-            if n:
-                t0, t1 = min(t0, log_time), max(t1, log_time)
-            else:
-                t0 = t1 = log_time
-            n += 1
-        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
-            try:
-                record = parse_record(data[off:stop])
-            except Exception as err:  # noqa: BLE001 - corruption
-                raise _Damaged(f"bad schema/channel record: {type(err).__name__}: {err}") from None
-            if isinstance(record, Schema):
-                schemas.append(record)
-            elif isinstance(record, Channel):
-                channels[record.id] = record
-                new_channels.append(record)
-        spans.append((off, stop))
-        off = stop
-    return index, n, t0, t1, schemas, new_channels, spans
-
-
-def _open_chunk(
-    raw: bytes, channels: dict[int, Channel]
-) -> tuple[Chunk, dict[int, list[tuple[int, int]]], int, list[Schema], list[Channel], int]:
-    """Check a complete chunk record and rebuild its message index.
-
-    Returns (chunk as written to the salvaged file, index {channel: [(log
-    time, offset)]}, messages, schemas, channels defined in it, messages left
-    out). Messages on a channel no record defines are left out: the chunk is
-    then rewritten uncompressed with the other records. Raises _Damaged for
-    anything else that is not exactly what the writer produces.
-    """
-    try:
-        chunk = parse_record(raw)
-        if not isinstance(chunk, Chunk):
-            raise _Damaged("a chunk opcode that does not parse as a chunk")
-        data = _decompress(chunk)
-    except _Damaged:
-        raise
-    except Exception as err:  # noqa: BLE001 - any failure of the parser or codec is damage
-        raise _Damaged(f"{type(err).__name__}: {err}") from None
-    index, n, t0, t1, schemas, new_channels, spans = _index_records(data, channels)
-    compression, stored, dropped = chunk.compression, chunk.data, 0
-    kept = sum(b - a for a, b in spans)
-    if kept != len(data):               # messages on undefined channels left out
-        total = _count_messages(data)
-        data = stored = b"".join(data[a:b] for a, b in spans)
-        compression = ""
-        index, n, t0, t1, _s, _c, _spans = _index_records(data, dict(channels))
-        dropped = total - n
-    fresh = Chunk(  # times from the messages themselves: the header's are not CRC-protected
-        compression=compression,
-        data=stored,
-        message_start_time=t0,
-        message_end_time=t1,
-        uncompressed_crc=zlib.crc32(data),
-        uncompressed_size=len(data),
-    )
-    return fresh, index, n, schemas, new_channels, dropped
-
-
-def _count_messages(data: bytes) -> int:
-    """The message records of a decompressed chunk already walked by _index_records."""
-    n = off = 0
-    while off + 9 <= len(data):
-        opcode, length = struct.unpack_from("<BQ", data, off)
-        n += opcode == OP_MESSAGE
-        off += 9 + length
-    return n
 
 
 class _SalvagedFile:
@@ -330,56 +193,6 @@ _WALK_END = {  # RecordWalker.end -> (damaged, reason) when the file itself ends
 }
 
 
-class _Resync:
-    """Finds where intact records resume after damage: the next chunk record of
-    the file whose length fits, whose CRC is set and whose content checks out."""
-
-    _MIN_CHUNK = 8 + 8 + 8 + 4 + 4 + 8  # a chunk record body with no compression name, no data
-
-    def __init__(self, f: BinaryIO, size: int, stop: threading.Event | None) -> None:
-        self._f, self._size, self._stop = f, size, stop
-        self._mm: mmap.mmap | None = None
-
-    def close(self) -> None:
-        if self._mm is not None:
-            self._mm.close()
-
-    def next_chunk(self, start: int, channels: dict[int, Channel]) -> int | None:
-        """The offset of the first good chunk record at or after ``start``, or None."""
-        if self._size <= start:
-            return None
-        if self._mm is None:
-            self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)
-        mm, size, i = self._mm, self._size, start
-        while (i := mm.find(b"\x06", i)) >= 0 and i + 9 + self._MIN_CHUNK <= size:
-            if self._stop is not None and self._stop.is_set():
-                raise _Interrupted
-            length = struct.unpack_from("<Q", mm, i + 1)[0]
-            if (self._MIN_CHUNK <= length <= RECORD_LIMIT and i + 9 + length <= size
-                    and struct.unpack_from("<I", mm, i + 33)[0] != 0):
-                try:
-                    _open_chunk(mm[i: i + 9 + length], dict(channels))
-                    return i
-                except _Damaged:
-                    pass
-            i += 1
-        return None
-
-    def indexed_messages(self, start: int, end: int) -> int:
-        """Messages listed by the message index records from ``start`` up to ``end``
-        (those that follow a damaged chunk): what it held, as far as they tell."""
-        n, pos = 0, start
-        self._f.seek(pos)
-        while pos + 9 + 6 <= end:
-            opcode, length = struct.unpack("<BQ", self._f.read(9))
-            if opcode != Opcode.MESSAGE_INDEX or pos + 9 + length > end or length < 6:
-                break
-            body = self._f.read(length)
-            n += struct.unpack_from("<I", body, 2)[0] // 16
-            pos += 9 + length
-        return n
-
-
 def _note_damage(result: SalvageResult, what: str) -> None:
     result.damaged = True
     result.damage = result.damage or what
@@ -391,18 +204,18 @@ def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult,
 
     A damaged chunk or metadata record, an unknown opcode or an impossible
     length is skipped: the scan resumes at the next good chunk record
-    (:class:`_Resync`); the messages of a damaged chunk are counted as lost
+    (:class:`Resync`); the messages of a damaged chunk are counted as lost
     from the message index records after it. Stops at the end of the file
     (its unflushed tail) or of the data section (DataEnd or Footer: a
     finished file). Counts the messages and chunks in ``result`` and sets its
     ``damaged``, ``damage`` and ``reason``; returns the offset up to which
     ``f`` was read as good (its size for a finished file). Raises
-    _Interrupted when ``stop`` is set. Header and message index records
+    Interrupted when ``stop`` is set. Header and message index records
     (rebuilt) are skipped.
     """
     walker = RecordWalker(f)
     channels: dict[int, Channel] = {}
-    resync = _Resync(f, result.source_bytes, stop)
+    resync = Resync(f, result.source_bytes, stop)
     start: int | None = None
     try:
         while True:
@@ -444,11 +257,11 @@ def _copy_until_damage(walker: RecordWalker, start: int | None, out: _SalvagedFi
     at the end of the data section; None at the end of the file."""
     for pos, opcode, raw in walker.records(start):
         if stop is not None and stop.is_set():
-            raise _Interrupted
+            raise Interrupted
         if opcode == Opcode.CHUNK:
             try:
-                chunk, index, n, schemas, new_channels, dropped = _open_chunk(raw, channels)
-            except _Damaged as err:
+                chunk, index, n, schemas, new_channels, dropped = check_chunk(raw, channels)
+            except ChunkDamaged as err:
                 result.lost_chunks += 1
                 return pos, f"damaged chunk at byte {pos}: {err}", pos + len(raw)
             out.add_chunk(chunk, index, n, schemas, new_channels)
@@ -571,7 +384,7 @@ def salvage(part: str | Path, *, durable: bool = True,
             result.source_bytes = os.fstat(f.fileno()).st_size
             try:
                 valid = _copy_records(f, out, result, stop)
-            except _Interrupted:
+            except Interrupted:
                 out.discard()
                 result.action = "interrupted"
                 return result

@@ -22,9 +22,10 @@ Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk
 error) are salvaged (:func:`~cmsensord.sinks.mcap_salvage.salvage`) into
 ``<stem>.salvaged.mcap`` before the first file is opened, or, with
 ``background_salvage``, by a thread while the first file is written (the
-daemon: start-up never waits for it; :meth:`RotatingSink.close` stops it
-between records and leaves an unfinished ``.part`` for the next start);
-then retention runs.
+daemon: start-up never waits for it); then retention runs.
+:meth:`RotatingSink.stop_salvage` (the daemon on SIGTERM) stops that thread
+between two records and leaves the ``.part`` it was reading as it was, for
+the next start; :meth:`RotatingSink.close` waits for the thread.
 
 Retention (after each rotation, at start and on a full disk): the oldest
 finished files of this prefix are deleted while this prefix's files take
@@ -376,13 +377,17 @@ class RotatingSink:
         if self._closed:
             return self.paths[-1] if self.paths else None
         self._closed = True                  # first: a failure now must not open a new file
-        if self._salvager is not None:       # between two records: bounded by one chunk's work
-            self._salvage_stop.set()
+        if self._salvager is not None:
             self._salvager.join()
             self._deliver()                  # its events, into the file still open
         done = self._finish_current()
         self._deliver()
         return done
+
+    def stop_salvage(self) -> None:
+        """Stop the background salvage between two records (a stop signal): the
+        ``.part`` it was reading is left as it was, for the next start."""
+        self._salvage_stop.set()
 
     def _finish_current(self) -> Path | None:
         cur = self._current
