@@ -525,7 +525,7 @@ class RotatingSink:
         stats = {}
         for path in finished + parts:
             with contextlib.suppress(OSError):  # gone meanwhile
-                stats[path] = path.stat()
+                stats[path] = path.lstat()   # a planted link: its own size, never its target's
         sizes = {p: st.st_size for p, st in stats.items()}
         total = sum(sizes.values())
         oldest = [p for p in finished if p in stats]   # by the stamp in the name
