@@ -178,7 +178,7 @@ def test_what_is_not_recoverable(tmp_path):
     assert r.kept.read_bytes() == bytes(bad)
 
 
-@pytest.mark.parametrize("where", ["length", "opcode", "data"])
+@pytest.mark.parametrize("where", ["length", "past_end", "opcode", "data"])
 def test_after_a_damaged_chunk_every_intact_chunk_is_kept(tmp_path, where):
     data, finished = _part_bytes(tmp_path, compression="none")
     chunks = _chunks_of(finished)
@@ -186,6 +186,8 @@ def test_after_a_damaged_chunk_every_intact_chunk_is_kept(tmp_path, where):
     bad = bytearray(data)
     if where == "length":                          # its length claims far too much
         bad[start + 1 + 6] ^= 0x40
+    elif where == "past_end":                      # ... or 16 MiB more than the file holds
+        bad[start + 1 + 3] ^= 0x01
     elif where == "opcode":                        # no longer a chunk record at all
         bad[start] = 0x7F
     else:                                          # its content fails the CRC
@@ -207,6 +209,12 @@ def test_after_a_damaged_chunk_every_intact_chunk_is_kept(tmp_path, where):
     # the damaged chunk's own messages are known from its message index when its length held
     assert r.lost_messages == on_undefined + (len(lost) if where == "data" else 0)
     assert r.kept is not None and r.kept.read_bytes() == bytes(bad) and not part.exists()
+    assert r.damage == {
+        "length": f"record at byte {start} claims {int.from_bytes(bad[start + 1:start + 9], 'little')}"
+                  " bytes",
+        "past_end": f"a record at byte {start} claims more bytes than the file holds",
+        "opcode": f"unknown opcode 0x7f at byte {start}",
+        "data": f"damaged chunk at byte {start}: chunk CRC mismatch"}[where]
 
 
 def _chunk_starts(finished: bytes) -> list[int]:

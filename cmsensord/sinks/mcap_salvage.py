@@ -234,6 +234,8 @@ def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult,
                     _note_damage(result, what)
                 result.reason = what
                 return pos
+            if what == "ends inside a record":      # not the tail: its length was hit
+                what = f"a record at byte {pos} claims more bytes than the file holds"
             _note_damage(result, what)
             if after:                   # a damaged chunk: what its message index says it held
                 result.lost_messages += resync.indexed_messages(after, nxt)
