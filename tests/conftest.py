@@ -32,6 +32,7 @@ PROCESS_MODULES = frozenset({
     "test_crash.py",
     "test_errors.py",
     "test_link_faults.py",
+    "test_output_trust.py",
     "test_replay.py",
     "test_systemd.py",
     "test_traps.py",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 
 import pytest
 
@@ -138,25 +139,54 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, 
     assert sorted(sink.paths) == sorted(finished)        # paths lists only what is left
 
 
-def test_free_space_floor_deletes_finished_files_but_never_the_current_one(tmp_path, clock):
+def test_an_unreachable_free_space_floor_deletes_nothing_and_says_so(tmp_path, clock):
     old = tmp_path / "cmsensord-20200101T000000Z.mcap"
     RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda: 1_577_836_800.0).close()
     assert old.exists()
     events = []
-    huge = 1e12                                          # never reachable: delete all we may
+    huge = 1e12                                          # never reachable by deleting logs
     sink = RotatingSink(output(tmp_path, min_free_mb=huge), clock=clock,
                         on_event=lambda kind, message, **f: events.append((kind, message, f)))
-    assert not old.exists()                              # retention at start
-    current = sink.current.part_path
+    assert old.exists()                                  # the history is kept
     for i in range(3):
         sink.write("/cm/ch0/severity", "severity", 10**18 + i, {"severity_index": 0.1})
         done = sink.rotate()
-        assert not done.exists() and sink.current.part_path.exists()
+        assert done.exists() and sink.current.part_path.exists()
     kinds = [(k, f["details"]["action"]) for k, _m, f in events]
-    assert kinds.count(("disk_error", "retention")) == 4
-    assert kinds.count(("disk_error", "low_space")) == 0   # something was deleted each time
-    assert current != sink.current.part_path
+    assert kinds == [("disk_error", "low_space")]        # said once, nothing deleted
+    assert re.fullmatch(
+        rf"{re.escape(str(tmp_path))}: [0-9.]+ MB free, below min_free_mb = 1e\+12 MB, which "
+        r"deleting the 0 older finished log\(s\) of prefix 'cmsensord' \(0.0 MB; never the "
+        r"newest\) cannot reach: none deleted for it", events[0][1])
     sink.close()
+
+
+def test_a_reachable_free_space_floor_deletes_the_oldest_but_never_the_newest(
+        tmp_path, clock, monkeypatch):
+    import cmsensord.sinks.rotating as rotating
+    for k in range(4):
+        RotatingSink(output(tmp_path), clock=clock,
+                     wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
+    files = sorted(tmp_path.glob("*.mcap"))
+    size = files[0].stat().st_size
+    state = {"free": 0}
+
+    def free_bytes(_path):                               # freed only by what retention deletes
+        return state["free"] + sum(size for p in files if not p.exists())
+
+    monkeypatch.setattr(rotating, "_free_bytes", free_bytes)
+    floor_mb = 2.5 * size / 1e6                          # reached after three deletions
+    events = []
+    sink = RotatingSink(output(tmp_path, min_free_mb=floor_mb), clock=clock,
+                        on_event=lambda kind, message, **f: events.append(f["details"]))
+    assert [p.exists() for p in files] == [False, False, False, True]
+    assert [d["action"] for d in events] == ["retention"] and len(events[0]["files"]) == 3
+    sink.close()
+    state["free"] = -10 * size                           # now beyond reach: nothing more goes
+    events.clear()
+    RotatingSink(output(tmp_path, min_free_mb=floor_mb), clock=clock,
+                 on_event=lambda kind, message, **f: events.append(f["details"])).close()
+    assert files[3].exists() and [d["action"] for d in events] == ["low_space"]
 
 
 def test_reopen_finishes_the_file_and_continues_in_a_new_one(tmp_path, clock):

@@ -161,12 +161,65 @@ def test_what_is_not_recoverable(tmp_path):
     assert r.action == "set_aside" and r.damaged and "not an MCAP file" in r.reason
     assert not part.exists() and (tmp_path / f"{STEM}.mcap.part.unreadable").exists()
     assert "kept as" in r.message()
-    first_chunk = _chunks_of(_part_bytes(tmp_path / "b")[1])[0][0]
+    chunks = _chunks_of(_part_bytes(tmp_path / "b")[1])
+    first_chunk = chunks[0][0]
     bad = bytearray(data)
     bad[first_chunk - 20] ^= 0xFF                  # inside the first chunk's data: CRC fails
     part.write_bytes(bytes(bad))
     r = salvage(part)
-    assert r.action == "set_aside" and r.damaged and r.messages == 0
+    # the later chunks are kept, but for the messages on the channels chunk 1 defined
+    lost_topics = {topic for topic, _t, _d in chunks[0][1]}
+    later = [m for _end, msgs in chunks[1:] for m in msgs]
+    expected = [m for m in later if m[0] not in lost_topics]
+    assert r.action == "salvaged" and r.damaged and r.lost_chunks == 1
+    assert r.messages == len(expected) > 0 and _read_all(r.path) == expected
+    assert r.lost_messages == len(chunks[0][1]) + len(later) - len(expected)
+    assert not part.exists() and r.kept == tmp_path / f"{STEM}.mcap.part.damaged"
+    assert r.kept.read_bytes() == bytes(bad)
+
+
+@pytest.mark.parametrize("where", ["length", "past_end", "opcode", "data"])
+def test_after_a_damaged_chunk_every_intact_chunk_is_kept(tmp_path, where):
+    data, finished = _part_bytes(tmp_path, compression="none")
+    chunks = _chunks_of(finished)
+    start = max(s for s in _chunk_starts(finished) if s < chunks[3][0])
+    bad = bytearray(data)
+    if where == "length":                          # its length claims far too much
+        bad[start + 1 + 6] ^= 0x40
+    elif where == "past_end":                      # ... or 16 MiB more than the file holds
+        bad[start + 1 + 3] ^= 0x01
+    elif where == "opcode":                        # no longer a chunk record at all
+        bad[start] = 0x7F
+    else:                                          # its content fails the CRC
+        bad[chunks[3][0] - 20] ^= 0x01
+    part = tmp_path / f"{STEM}.mcap.part"
+    part.write_bytes(bytes(bad))
+    r = salvage(part, durable=False)
+    lost = chunks[3][1]
+    earlier = {topic for _end, msgs in chunks[:3] for topic, _t, _d in msgs}
+    undefined = {topic for topic, _t, _d in lost} - earlier      # channels chunk 4 defined
+    later = [m for _end, msgs in chunks[4:] for m in msgs]
+    expected = [m for _end, msgs in chunks[:3] for m in msgs] + [
+        m for m in later if m[0] not in undefined]
+    assert undefined and len(expected) < len(later) + sum(len(m) for _e, m in chunks[:3])
+    assert r.action == "salvaged" and r.damaged and _read_all(r.path) == expected
+    assert r.messages == len(expected) and r.chunks == len(chunks) - 1
+    assert r.lost_chunks == (where == "data")      # a chunk that failed its checks
+    on_undefined = len(later) - len(expected) + sum(len(m) for _e, m in chunks[:3])
+    # the damaged chunk's own messages are known from its message index when its length held
+    assert r.lost_messages == on_undefined + (len(lost) if where == "data" else 0)
+    assert r.kept is not None and r.kept.read_bytes() == bytes(bad) and not part.exists()
+    assert r.damage == {
+        "length": f"record at byte {start} claims {int.from_bytes(bad[start + 1:start + 9], 'little')}"
+                  " bytes",
+        "past_end": f"a record at byte {start} claims more bytes than the file holds",
+        "opcode": f"unknown opcode 0x7f at byte {start}",
+        "data": f"damaged chunk at byte {start}: chunk CRC mismatch"}[where]
+
+
+def _chunk_starts(finished: bytes) -> list[int]:
+    reader = make_reader(io.BytesIO(finished))
+    return sorted(ci.chunk_start_offset for ci in reader.get_summary().chunk_indexes)
 
 
 def test_a_finished_but_not_renamed_file_is_salvaged_whole(tmp_path):

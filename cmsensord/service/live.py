@@ -106,7 +106,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
         capture = open(capture_path, "wb") if capture_path else None
     except OSError as exc:
         raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
-    sink = open_sink(cfg, metadata or {})
+    sink = open_sink(cfg, metadata or {}, background_salvage=True)
     source = SerialSource.from_link(cfg.link, capture=capture)
     queue = source.queue
     proc: Processor
@@ -125,6 +125,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
             proc.event("reader_died", None, str(died), log_level=logging.ERROR)
             status = EXIT_READER_DIED
         finally:
+            if stop.event.is_set():     # SIGTERM: a salvage under way stops between records
+                sink.stop_salvage()
             source.stop()
             for frames in source:       # what the reader queued before it stopped
                 proc.handle(frames)

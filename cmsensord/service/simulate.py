@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import subprocess
 import sys
 import threading
@@ -68,11 +69,11 @@ def simulate(opt: SimulateOptions) -> int:
         raise SinkError(f"{out_dir}: cannot create the output directory: {exc.strerror or exc}") from None
     cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=out_dir,
                                                               akf_trace=cfg.output.akf_trace or opt.akf_trace))
-    cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", opt.scenario,
+    cmd = [sys.executable, "-P", "-m", "firmware_sim", "--pty", "--scenario", opt.scenario,
            "--duration", str(opt.duration), "--speed", str(opt.speed), "--seed", str(opt.seed),
            "--channels", str(opt.channels), "--mode", mode, "--hold"] + (["--tacho"] if tacho else [])
     sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           start_new_session=True)
+                           start_new_session=True, env=_sim_env())
     assert sim.stdout is not None and sim.stderr is not None    # both piped above
     try:
         line = sim.stdout.readline().strip()
@@ -90,6 +91,19 @@ def simulate(opt: SimulateOptions) -> int:
                                   "duration_s": str(opt.duration)})
     finally:
         _end(sim)
+
+
+def _sim_env() -> dict[str, str]:
+    """The simulator's environment: PYTHONPATH without its empty or relative entries,
+    which would put the working directory (and a ``numpy.py`` there) on sys.path; with
+    ``python -P`` the simulator imports only from installed and absolute paths."""
+    env = dict(os.environ)
+    path = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if os.path.isabs(p)]
+    if path:
+        env["PYTHONPATH"] = os.pathsep.join(path)
+    else:
+        env.pop("PYTHONPATH", None)
+    return env
 
 
 def _watch(sim: subprocess.Popen) -> threading.Event:

@@ -12,9 +12,11 @@ from cmsensord.sinks.rotating import RotatingSink
 _DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
 
 
-def open_sink(cfg: Config, metadata: dict[str, str]) -> RotatingSink:
-    """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable."""
-    return RotatingSink(cfg.output, metadata=metadata)
+def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False
+              ) -> RotatingSink:
+    """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable.
+    ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon)."""
+    return RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
 
 
 def sink_log_level(kind: str, fields: dict) -> int | None:

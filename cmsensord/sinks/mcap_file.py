@@ -246,7 +246,8 @@ class McapSink:
         self._last_flush = self.opened_at
 
     def _open_unique(self, prefix: str, stamp: str) -> RawFile:
-        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+        flags = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+                 | getattr(os, "O_CLOEXEC", 0))
         # after the newest file of this stamp: names stay in creation order even when
         # retention has deleted older files of the same second
         first = 0

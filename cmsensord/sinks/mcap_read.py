@@ -78,14 +78,23 @@ class RecordWalker:
         self.error: str | None = None
         self.valid_bytes = 0
 
-    def records(self) -> Iterator[tuple[int, int, bytes]]:
-        """(offset, opcode, raw record) of each complete record, in file order."""
+    def records(self, start: int | None = None) -> Iterator[tuple[int, int, bytes]]:
+        """(offset, opcode, raw record) of each complete record, in file order.
+
+        ``start``: the offset of a record to resume at (after damage); the
+        magic is then not read again.
+        """
         f = self._f
-        magic = f.read(len(MAGIC))
-        if magic != MAGIC:
-            self.end = self.IN_MAGIC if MAGIC.startswith(magic) else self.NOT_MCAP
-            return
-        pos = self.valid_bytes = len(MAGIC)
+        if start is None:
+            magic = f.read(len(MAGIC))
+            if magic != MAGIC:
+                self.end = self.IN_MAGIC if MAGIC.startswith(magic) else self.NOT_MCAP
+                return
+            start = len(MAGIC)
+        else:
+            f.seek(start)
+        self.end = self.error = None
+        pos = self.valid_bytes = start
         while True:
             head = f.read(_HEAD.size)
             if len(head) < _HEAD.size:

@@ -4,29 +4,34 @@ A ``.part`` file is what a crash, a kill or a disk error leaves of a
 :class:`~cmsensord.sinks.mcap_file.McapSink` file: every chunk flushed before
 it, then possibly a partial record. :func:`salvage` walks it with
 :class:`~cmsensord.sinks.mcap_read.RecordWalker`, checks each complete chunk
-(CRC, record framing, channels), and copies the good ones, compressed data
+(:func:`~cmsensord.sinks.mcap_chunk_check.check_chunk`: CRC, record framing,
+channels), and copies the good ones, compressed data
 unchanged, through :class:`~cmsensord.sinks.mcap_chunks.ChunkWriter` into
 ``<stem>.salvaged.mcap``; :func:`salvage_leftovers` does that for every
-``.part`` file of a prefix in a directory.
+``.part`` file of a prefix in a directory. A damaged record is skipped: the
+scan resynchronises at the next chunk record whose CRC checks out, so every
+intact chunk after the damage is kept, and a damaged ``.part`` is kept as
+``<name>.damaged`` rather than deleted.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import os
-import struct
-import zlib
+import stat
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-import zstandard
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Metadata, Schema
 
 from cmsensord import __version__
-from cmsensord.sinks.mcap_chunks import MESSAGE_FIXED, OP_MESSAGE, ChunkWriter, lz4_frame
+from cmsensord.sinks.mcap_chunk_check import ChunkDamaged, Interrupted, Resync, check_chunk
+from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_file import (
     RawFile,
     SinkIOError,
@@ -45,10 +50,13 @@ class SalvageResult:
     """What :func:`salvage` did with one ``.part`` file.
 
     ``action``: ``"salvaged"`` (``path`` is the finished file; the ``.part`` is
-    gone), ``"removed"`` (it ended before its first complete chunk: nothing to
-    recover; deleted), ``"set_aside"`` (damaged before any complete chunk, or
+    gone, or kept as ``kept`` = ``<name>.damaged`` when a damaged record was
+    skipped), ``"removed"`` (it ended before its first complete chunk: nothing
+    to recover; deleted), ``"set_aside"`` (damaged with no intact chunk, or
     not MCAP at all: renamed to ``<name>.unreadable`` and kept for a human),
-    ``"busy"`` (another writer holds it open: left alone).
+    ``"busy"`` (another writer holds it open: left alone), ``"skipped"`` (not
+    a regular file, e.g. a FIFO or a symbolic link: left alone, never opened
+    for reading), ``"interrupted"`` (the stop flag was set: left as it was).
     """
 
     source: Path
@@ -60,6 +68,10 @@ class SalvageResult:
     dropped_bytes: int = 0  # after the last complete record: the unflushed tail
     damaged: bool = False  # a complete record failed its checks (CRC, parse)
     reason: str = ""  # what ended the scan, one line
+    damage: str = ""  # the first damaged record, one line
+    lost_chunks: int = 0  # damaged chunks skipped
+    lost_messages: int = 0  # messages known lost (damaged chunks' indexes, undefined channels)
+    kept: Path | None = None  # the damaged .part, kept under this name
 
     def message(self) -> str:
         """One line for the event."""
@@ -67,6 +79,9 @@ class SalvageResult:
         if self.action == "salvaged":
             text = (f"{name}: salvaged {self.messages} message(s) from {self.chunks} complete "
                     f"chunk(s) into {self.path.name if self.path else '?'}")
+            if self.kept is not None:
+                text += (f"; {self.lost_chunks} damaged chunk(s) skipped, {self.lost_messages} "
+                         f"message(s) known lost ({self.damage}); source kept as {self.kept.name}")
             if self.dropped_bytes:
                 text += f"; {self.dropped_bytes} byte(s) after them dropped ({self.reason})"
             return text
@@ -76,112 +91,11 @@ class SalvageResult:
         if self.action == "set_aside":
             return (f"{name}: nothing recoverable ({self.reason}); kept as "
                     f"{self.path.name if self.path else name}")
+        if self.action == "skipped":
+            return f"{name}: {self.reason}, not a regular file; skipped"
+        if self.action == "interrupted":
+            return f"{name}: salvage interrupted by stop; left for the next start"
         return f"{name}: in use by another writer; left alone"
-
-
-class _Damaged(Exception):
-    """Internal: a complete record failed its checks (salvage stops there)."""
-
-
-def _decompress(chunk: Chunk) -> bytes:
-    """The chunk's records, checked against its size and CRC; _Damaged if they fail."""
-    if chunk.compression == "zstd":
-        data = zstandard.ZstdDecompressor().decompress(
-            chunk.data, max_output_size=chunk.uncompressed_size
-        )
-    elif chunk.compression == "lz4":
-        if lz4_frame is None:
-            raise _Damaged("lz4 chunk, but the lz4 package is not installed")
-        data = lz4_frame.decompress(chunk.data)
-    elif chunk.compression == "":
-        data = chunk.data
-    else:
-        raise _Damaged(f"unknown chunk compression {chunk.compression!r}")
-    if len(data) != chunk.uncompressed_size:
-        raise _Damaged(f"chunk holds {len(data)} bytes, its header says {chunk.uncompressed_size}")
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise _Damaged("chunk CRC mismatch")
-    return bytes(data)
-
-
-
-def _index_records(
-    data: bytes, channels: dict[int, Channel]
-) -> tuple[dict[int, list[tuple[int, int]]], int, int, int, list[Schema], list[Channel]]:
-    """Walk the records of a decompressed chunk and rebuild its message index.
-
-    Returns (index {channel: [(log time, offset)]}, messages, first and last
-    log time, schemas, channels defined in it); a channel defined in it is
-    also added to ``channels``. Raises _Damaged for a record that crosses
-    the end of the chunk, a message too short for its fields or on a channel
-    no record defines, or a schema or channel record that does not parse.
-    """
-    index: dict[int, list[tuple[int, int]]] = {}
-    schemas: list[Schema] = []
-    new_channels: list[Channel] = []
-    n = t0 = t1 = 0
-    off, end = 0, len(data)
-    while off < end:
-        if off + 9 > end:
-            raise _Damaged("a record header crosses the end of the chunk")
-        opcode, length = struct.unpack_from("<BQ", data, off)
-        stop = off + 9 + length
-        if stop > end:
-            raise _Damaged("a record crosses the end of the chunk")
-        if opcode == OP_MESSAGE:
-            if length < MESSAGE_FIXED:
-                raise _Damaged("a message record too short for its fields")
-            channel_id, _seq, log_time = struct.unpack_from("<HIQ", data, off + 9)
-            if channel_id not in channels:
-                raise _Damaged(f"a message on channel {channel_id}, which no record defines")
-            index.setdefault(channel_id, []).append((log_time, off))
-            if n:
-                t0, t1 = min(t0, log_time), max(t1, log_time)
-            else:
-                t0 = t1 = log_time
-            n += 1
-        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
-            try:
-                record = parse_record(data[off:stop])
-            except Exception as err:  # noqa: BLE001 - corruption
-                raise _Damaged(f"bad schema/channel record: {type(err).__name__}: {err}") from None
-            if isinstance(record, Schema):
-                schemas.append(record)
-            elif isinstance(record, Channel):
-                channels[record.id] = record
-                new_channels.append(record)
-        off = stop
-    return index, n, t0, t1, schemas, new_channels
-
-
-def _open_chunk(
-    raw: bytes, channels: dict[int, Channel]
-) -> tuple[Chunk, dict[int, list[tuple[int, int]]], int, list[Schema], list[Channel]]:
-    """Check a complete chunk record and rebuild its message index.
-
-    Returns (chunk as written to the salvaged file, index {channel: [(log
-    time, offset)]}, messages, schemas, channels defined in it). Raises
-    _Damaged for anything that is not exactly what the writer produces.
-    """
-    try:
-        chunk = parse_record(raw)
-        if not isinstance(chunk, Chunk):
-            raise _Damaged("a chunk opcode that does not parse as a chunk")
-        data = _decompress(chunk)
-    except _Damaged:
-        raise
-    except Exception as err:  # noqa: BLE001 - any failure of the parser or codec is damage
-        raise _Damaged(f"{type(err).__name__}: {err}") from None
-    index, n, t0, t1, schemas, new_channels = _index_records(data, channels)
-    fresh = Chunk(  # times from the messages themselves: the header's are not CRC-protected
-        compression=chunk.compression,
-        data=chunk.data,
-        message_start_time=t0,
-        message_end_time=t1,
-        uncompressed_crc=zlib.crc32(data),
-        uncompressed_size=len(data),
-    )
-    return fresh, index, n, schemas, new_channels
 
 
 class _SalvagedFile:
@@ -221,8 +135,14 @@ class _SalvagedFile:
         self._writer.add_chunk(chunk, index, n, schemas, channels)
 
     def _create(self) -> ChunkWriter:
-        flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0)
-        self._fh = RawFile(os.open(self.tmp, flags, 0o644))
+        flags = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+                 | getattr(os, "O_CLOEXEC", 0))
+        try:                            # never through a name planted in the directory
+            fd = os.open(self.tmp, flags, 0o644)
+        except FileExistsError:         # a stale .tmp (or a planted link): remove the name itself
+            os.unlink(self.tmp)
+            fd = os.open(self.tmp, flags, 0o644)
+        self._fh = RawFile(fd)
         writer = ChunkWriter(self._fh, "", 1)
         writer.start(library=f"cmsensord/{__version__}")
         for record in self._metadata:
@@ -263,6 +183,8 @@ def _lock(f: BinaryIO) -> bool:
     return True
 
 
+_KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
+
 _WALK_END = {  # RecordWalker.end -> (damaged, reason) when the file itself ends the walk
     RecordWalker.NOT_MCAP: (True, NOT_MCAP),
     RecordWalker.IN_MAGIC: (False, "ends inside the magic"),
@@ -271,44 +193,97 @@ _WALK_END = {  # RecordWalker.end -> (damaged, reason) when the file itself ends
 }
 
 
-def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult) -> int:
+def _note_damage(result: SalvageResult, what: str) -> None:
+    result.damaged = True
+    result.damage = result.damage or what
+
+
+def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult,
+                  stop: threading.Event | None = None) -> int:
     """Copy the good chunks and the metadata of ``f`` into ``out``.
 
-    Stops at the first incomplete or damaged record, or at the end of the
-    data section (DataEnd or Footer: a finished file). Counts the messages
-    and chunks in ``result`` and sets its ``damaged`` and ``reason``; returns
-    the offset up to which ``f`` was read as good (its size for a finished
-    file). Header and message index records (rebuilt) and unknown records
-    are skipped.
+    A damaged chunk or metadata record, an unknown opcode or an impossible
+    length is skipped: the scan resumes at the next good chunk record
+    (:class:`Resync`); the messages of a damaged chunk are counted as lost
+    from the message index records after it. Stops at the end of the file
+    (its unflushed tail) or of the data section (DataEnd or Footer: a
+    finished file). Counts the messages and chunks in ``result`` and sets its
+    ``damaged``, ``damage`` and ``reason``; returns the offset up to which
+    ``f`` was read as good (its size for a finished file). Raises
+    Interrupted when ``stop`` is set. Header and message index records
+    (rebuilt) are skipped.
     """
     walker = RecordWalker(f)
     channels: dict[int, Channel] = {}
-    for pos, opcode, raw in walker.records():
+    resync = Resync(f, result.source_bytes, stop)
+    start: int | None = None
+    try:
+        while True:
+            bad = _copy_until_damage(walker, start, out, result, channels, stop)
+            if bad is None:             # the walk reached the end of the data or of the file
+                if walker.end in (RecordWalker.TOO_LONG, RecordWalker.IN_RECORD):
+                    bad = (walker.valid_bytes, walker.error or "ends inside a record", 0)
+                else:
+                    break
+            elif bad[0] < 0:            # DataEnd or Footer
+                return result.source_bytes
+            pos, what, after = bad
+            nxt = resync.next_chunk(pos + 1, channels)
+            if nxt is None:
+                if what != "ends inside a record":
+                    _note_damage(result, what)
+                result.reason = what
+                return pos
+            if what == "ends inside a record":      # not the tail: its length was hit
+                what = f"a record at byte {pos} claims more bytes than the file holds"
+            _note_damage(result, what)
+            if after:                   # a damaged chunk: what its message index says it held
+                result.lost_messages += resync.indexed_messages(after, nxt)
+            start = nxt
+    finally:
+        resync.close()
+    assert walker.end is not None
+    if walker.end == RecordWalker.TOO_LONG:
+        result.damaged, result.reason = True, walker.error or ""
+    else:
+        damaged, result.reason = _WALK_END[walker.end]
+        result.damaged = result.damaged or damaged
+    return walker.valid_bytes
+
+
+def _copy_until_damage(walker: RecordWalker, start: int | None, out: _SalvagedFile,
+                       result: SalvageResult, channels: dict[int, Channel],
+                       stop: threading.Event | None) -> tuple[int, str, int] | None:
+    """Copy records from ``start`` until the first damaged one: (its offset, what is
+    wrong, the offset after it when it is a chunk of intact length, else 0); (-1, "", 0)
+    at the end of the data section; None at the end of the file."""
+    for pos, opcode, raw in walker.records(start):
+        if stop is not None and stop.is_set():
+            raise Interrupted
         if opcode == Opcode.CHUNK:
             try:
-                chunk, index, n, schemas, new_channels = _open_chunk(raw, channels)
-            except _Damaged as err:
-                result.damaged, result.reason = True, f"damaged chunk at byte {pos}: {err}"
-                return pos
+                chunk, index, n, schemas, new_channels, dropped = check_chunk(raw, channels)
+            except ChunkDamaged as err:
+                result.lost_chunks += 1
+                return pos, f"damaged chunk at byte {pos}: {err}", pos + len(raw)
             out.add_chunk(chunk, index, n, schemas, new_channels)
             result.messages += n
             result.chunks += 1
+            result.lost_messages += dropped
+            if dropped:
+                _note_damage(result, f"{dropped} message(s) at byte {pos} on undefined channels")
         elif opcode == Opcode.METADATA:
             try:
                 record = parse_record(raw)
             except Exception as err:  # noqa: BLE001 - corruption
-                result.damaged, result.reason = True, f"bad metadata record at byte {pos}: {err}"
-                return pos
+                return pos, f"bad metadata record at byte {pos}: {err}", 0
             out.add_metadata(record)
         elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
             result.reason = "a finished file"  # its summary is rebuilt
-            return result.source_bytes
-    assert walker.end is not None                # the loop above ran the walk to its end
-    if walker.end == RecordWalker.TOO_LONG:
-        result.damaged, result.reason = True, walker.error or ""
-    else:
-        result.damaged, result.reason = _WALK_END[walker.end]
-    return walker.valid_bytes
+            return -1, "", 0
+        elif opcode not in _KNOWN_OPCODES:
+            return pos, f"unknown opcode 0x{opcode:02x} at byte {pos}", 0
+    return None
 
 
 def _drop_part(part: Path, result: SalvageResult, durable: bool) -> None:
@@ -325,22 +300,52 @@ def _drop_part(part: Path, result: SalvageResult, durable: bool) -> None:
 
 
 def _replace_part(part: Path, out: _SalvagedFile, result: SalvageResult, durable: bool) -> None:
-    """Finish the salvaged file, then delete ``part`` (directory fsynced after each step)."""
+    """Finish the salvaged file, then delete ``part``, or keep it as ``<name>.damaged``
+    when a damaged record was skipped (directory fsynced after each step)."""
     final = out.finish({
         "source": part.name,
         "messages": str(result.messages),
         "source_bytes": str(result.source_bytes),
         "dropped_bytes": str(result.dropped_bytes),
+        **({"lost_chunks": str(result.lost_chunks), "lost_messages": str(result.lost_messages)}
+           if result.damaged else {}),
     }, durable)
     if durable:
         fsync_dir(part.parent)
-    part.unlink()
+    if result.damaged:
+        result.kept = part.with_name(part.name + ".damaged")
+        os.replace(part, result.kept)
+    else:
+        part.unlink()
     if durable:
         fsync_dir(part.parent)
     result.action, result.path = "salvaged", final
 
 
-def salvage(part: str | Path, *, durable: bool = True) -> SalvageResult:
+def _open_regular(part: Path, result: SalvageResult) -> BinaryIO | None:
+    """``part`` open for reading when it is a regular file; else None with ``result``
+    set to ``skipped`` (a FIFO is never waited on, a symbolic link never followed)."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(part, flags)
+    except OSError as err:
+        if err.errno != errno.ELOOP:
+            raise
+        result.action, result.reason = "skipped", "a symbolic link"
+        return None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = {stat.S_IFIFO: "a FIFO", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a directory",
+                stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device"}
+        result.action, result.reason = "skipped", kind.get(stat.S_IFMT(mode), "special")
+        return None
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "rb")
+
+
+def salvage(part: str | Path, *, durable: bool = True,
+            stop: threading.Event | None = None) -> SalvageResult:
     """Rewrite the complete chunks of a leftover ``.part`` file into a finished file.
 
     Reads ``part`` record by record (each length-checked before it is
@@ -351,8 +356,12 @@ def salvage(part: str | Path, *, durable: bool = True) -> SalvageResult:
     directory fsynced); then the ``.part`` is deleted. The scan ends at the
     first incomplete record (the unflushed tail), at a damaged one, or at the
     end of the data section of a file that was finished but not renamed.
-    Metadata records are kept. See :class:`SalvageResult` for what happens
-    when nothing is recoverable.
+    Metadata records are kept. A damaged record is skipped and the scan
+    resumes at the next intact chunk; the ``.part`` is then kept as
+    ``<name>.damaged``. See :class:`SalvageResult` for what happens when
+    nothing is recoverable, and for what is not a regular file. When
+    ``stop`` is set the scan ends between records and the ``.part`` is left
+    as it was (``"interrupted"``).
 
     Never raises on the file's content. Raises SinkIOError when it cannot be
     read or the salvaged file cannot be written (the ``.part`` is then left as
@@ -362,7 +371,9 @@ def salvage(part: str | Path, *, durable: bool = True) -> SalvageResult:
     part = Path(part)
     result = SalvageResult(source=part, action="removed")
     try:
-        f = open(part, "rb")
+        f = _open_regular(part, result)
+        if f is None:
+            return result
     except OSError as err:
         raise SinkIOError(f"{part}: cannot read: {os_error_text(err)}", op="read", err=err,
                           path=part) from None
@@ -373,7 +384,12 @@ def salvage(part: str | Path, *, durable: bool = True) -> SalvageResult:
                 result.action = "busy"
                 return result
             result.source_bytes = os.fstat(f.fileno()).st_size
-            valid = _copy_records(f, out, result)
+            try:
+                valid = _copy_records(f, out, result, stop)
+            except Interrupted:
+                out.discard()
+                result.action = "interrupted"
+                return result
             result.dropped_bytes = max(0, result.source_bytes - valid)
             if out.created:
                 _replace_part(part, out, result, durable)
@@ -386,8 +402,8 @@ def salvage(part: str | Path, *, durable: bool = True) -> SalvageResult:
                           path=part) from None
 
 
-def salvage_leftovers(out_dir: str | Path, prefix: str, *, durable: bool = True
-                      ) -> list[SalvageResult | SinkIOError]:
+def salvage_leftovers(out_dir: str | Path, prefix: str, *, durable: bool = True,
+                      stop: threading.Event | None = None) -> list[SalvageResult | SinkIOError]:
     """:func:`salvage` every ``<prefix>-*.mcap.part`` in ``out_dir`` (oldest first).
 
     One entry per file: its SalvageResult, or the SinkIOError that stopped it
@@ -400,8 +416,10 @@ def salvage_leftovers(out_dir: str | Path, prefix: str, *, durable: bool = True
     except OSError:
         return results  # an unreadable directory: opening the next file reports it
     for part in parts:
+        if stop is not None and stop.is_set():
+            break
         try:
-            results.append(salvage(part, durable=durable))
+            results.append(salvage(part, durable=durable, stop=stop))
         except SinkIOError as err:
             results.append(err)
     return results

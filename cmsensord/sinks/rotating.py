@@ -20,7 +20,12 @@ the live loop does):
 
 Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk
 error) are salvaged (:func:`~cmsensord.sinks.mcap_salvage.salvage`) into
-``<stem>.salvaged.mcap`` before the first file is opened; then retention runs.
+``<stem>.salvaged.mcap`` before the first file is opened, or, with
+``background_salvage``, by a thread while the first file is written (the
+daemon: start-up never waits for it); then retention runs.
+:meth:`RotatingSink.stop_salvage` (the daemon on SIGTERM) stops that thread
+between two records and leaves the ``.part`` it was reading as it was, for
+the next start; :meth:`RotatingSink.close` waits for the thread.
 
 Retention (after each rotation, at start and on a full disk): the oldest
 finished files of this prefix are deleted while this prefix's files take
@@ -54,6 +59,7 @@ import contextlib
 import errno
 import logging
 import os
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -99,6 +105,7 @@ class RotatingSink:
         on_rotate: called with each finished file's path.
         on_event: ``on_event(kind, message, **fields)``; may be set later.
         salvage: salvage leftover ``.part`` files at start.
+        background_salvage: ... in a thread, after the first file is open.
         wall_clock: Unix seconds, for the file names.
 
     Raises:
@@ -112,7 +119,8 @@ class RotatingSink:
                  on_rotate: Callable[[Path], None] | None = None,
                  on_event: Callable[..., Any] | None = None,
                  salvage: bool = True,
-                 wall_clock: Callable[[], float] = time.time):
+                 wall_clock: Callable[[], float] = time.time,
+                 background_salvage: bool = False):
         self.output = output
         self.metadata = metadata or {}
         self.clock = clock
@@ -144,9 +152,10 @@ class RotatingSink:
         self._abandoned: list[Path] = []
         self._low_space_told = False
 
-        if salvage:
-            for result in salvage_leftovers(output.dir, output.prefix):
-                self._salvage_event(result)
+        self._salvage_stop = threading.Event()
+        self._salvager: threading.Thread | None = None
+        if salvage and not background_salvage:
+            self._salvage_leftovers()
         self._retention()
         try:
             self._current = self._open()
@@ -154,7 +163,17 @@ class RotatingSink:
             if err.errno not in _TRANSIENT:
                 raise                        # misconfigured: the daemon stops with one line
             self._failed(err, None)
+        if salvage and background_salvage:   # the file being written is flock'ed: left alone
+            self._salvager = threading.Thread(target=self._salvage_leftovers, name="salvage",
+                                              daemon=True)
+            self._salvager.start()
         self._deliver()
+
+    def _salvage_leftovers(self) -> None:
+        """Salvage the leftover ``.part`` files; their events are queued (thread-safe)."""
+        for result in salvage_leftovers(self.output.dir, self.output.prefix,
+                                        stop=self._salvage_stop):
+            self._salvage_event(result)
 
     # -- events ------------------------------------------------------------
 
@@ -195,11 +214,18 @@ class RotatingSink:
             return
         if result.action == "busy":
             return                           # another writer's open file
+        if result.action == "interrupted":   # stopping: the journal says so, the file is intact
+            log.info("%s", result.message())
+            return
         self.salvaged.append(result)
         details: dict[str, Any] = {"action": result.action, "source": str(result.source),
                                    "chunks": result.chunks, "dropped_bytes": result.dropped_bytes}
         if result.path is not None:
             details["file"] = str(result.path)
+        if result.damaged:
+            details.update(lost_chunks=result.lost_chunks, lost_messages=result.lost_messages)
+        if result.kept is not None:
+            details["kept"] = str(result.kept)
         self._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=details)
 
     # -- files -------------------------------------------------------------
@@ -355,9 +381,17 @@ class RotatingSink:
         if self._closed:
             return self.paths[-1] if self.paths else None
         self._closed = True                  # first: a failure now must not open a new file
+        if self._salvager is not None:
+            self._salvager.join()
+            self._deliver()                  # its events, into the file still open
         done = self._finish_current()
         self._deliver()
         return done
+
+    def stop_salvage(self) -> None:
+        """Stop the background salvage between two records (a stop signal): the
+        ``.part`` it was reading is left as it was, for the next start."""
+        self._salvage_stop.set()
 
     def _finish_current(self) -> Path | None:
         cur = self._current
@@ -499,7 +533,12 @@ class RotatingSink:
     # -- retention ---------------------------------------------------------
 
     def _retention(self) -> None:
-        """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``."""
+        """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``.
+
+        For ``min_free_mb`` the newest finished file is never deleted, and
+        nothing is when deleting all the others could not reach it (the free
+        space is taken by something else): a ``low_space`` event says so.
+        """
         o = self.output
         cap = o.retain_mb * _MB if o.retain_mb else None
         floor = o.min_free_mb * _MB if o.min_free_mb else None
@@ -513,15 +552,17 @@ class RotatingSink:
         stats = {}
         for path in finished + parts:
             with contextlib.suppress(OSError):  # gone meanwhile
-                stats[path] = path.stat()
+                stats[path] = path.lstat()   # a planted link: its own size, never its target's
         sizes = {p: st.st_size for p, st in stats.items()}
         total = sum(sizes.values())
         oldest = [p for p in finished if p in stats]   # by the stamp in the name
+        older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
+        reachable = floor is not None and free + older >= floor
         deleted: list[Path] = []
         freed = 0
         for path in oldest:
             over = cap is not None and total > cap
-            low = floor is not None and free < floor
+            low = reachable and floor is not None and free < floor and path != oldest[-1]
             if not (over or low):
                 break
             try:
@@ -563,8 +604,11 @@ class RotatingSink:
         low = floor is not None and free < floor
         if low and not self._low_space_told and not deleted:
             self._low_space_told = True
+            left = [p for p in oldest if p not in deleted]
             self._emit(DISK_EVENT, f"{o.dir}: {free / _MB:.1f} MB free, below min_free_mb = "
-                       f"{o.min_free_mb:g} MB, and no finished log of prefix {o.prefix!r} left "
-                       f"to delete", details={"action": "low_space", "bytes": free})
+                       f"{o.min_free_mb:g} MB, which deleting the {max(0, len(left) - 1)} older "
+                       f"finished log(s) of prefix {o.prefix!r} ({older / _MB:.1f} MB; never the "
+                       f"newest) cannot reach: none deleted for it",
+                       details={"action": "low_space", "bytes": free})
         elif not low:
             self._low_space_told = False
