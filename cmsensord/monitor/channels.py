@@ -11,7 +11,7 @@ severity chain (and the microphone estimator) of the usable channels is made.
 
 from __future__ import annotations
 
-from cmsensord.config import ChannelConfig, Config, default_channels
+from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
@@ -62,7 +62,11 @@ class ChannelSetup:
     def _setup(self, n_board: int) -> None:
         emit = self.log.emit
         if self.auto_channels and n_board != len(self.channels):
-            self.channels = default_channels(n_board, self.cfg.monitor)
+            if n_board > MAX_CHANNELS:
+                emit("config", None, f"board sends {n_board} channels, more than the "
+                     f"{MAX_CHANNELS} a configuration can name: ch0..ch{MAX_CHANNELS - 1} are "
+                     f"monitored, the rest is not")
+            self.channels = default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
         if len(usable) < len(self.channels):
             missing = [ch.name for ch in self.channels if ch.index >= n_board]

@@ -25,7 +25,7 @@ LOG_LEVEL = {
     "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
-    "decision_rule": logging.WARNING, "anomaly_held": logging.WARNING,
+    "decision_rule": logging.WARNING, "time_base": logging.WARNING, "anomaly_held": logging.WARNING,
 }
 
 

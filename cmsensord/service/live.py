@@ -20,6 +20,9 @@ from cmsensord.source import SerialSource
 
 log = logging.getLogger("cmsensord")
 
+#: the board's clock is compared with the wall clock only with fewer frames than this queued
+DRIFT_QUEUE_MAX = 50
+
 
 class _Watch:
     """What the loop notices besides frames: queue drops, a stalled link, the end of a simulation."""
@@ -122,6 +125,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
         for frames in source:
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             proc.handle(frames)
+            if cfg.link.max_drift_s and watch.sim_done is None and len(source.queue) < DRIFT_QUEUE_MAX:
+                proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
             watch.link_events()
             now = time.monotonic()
             if stop.reopen:             # SIGHUP: finish the current file, start a new one
