@@ -37,6 +37,7 @@ PROCESS_MODULES = frozenset({
     "test_traps.py",
     "test_realdata.py",
     "test_import.py",
+    "test_stream_time.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

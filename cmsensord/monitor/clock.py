@@ -150,7 +150,11 @@ class BlockClock:
         return slots[:n], n
 
     def reanchor(self, t0: int) -> None:
-        """The block starting at ``t0`` takes the next slot."""
+        """The block starting at ``t0`` takes the next slot; when ``t0`` is not after the
+        newest slot's (a duplicate, a stuck t0), it is stamped one block after the newest stamp."""
+        if self.slot0_t0 is not None and self.next_slot and t0 <= self.slot_t0(self.next_slot - 1):
+            self.anchor_ns = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.stamp_fs
+            self.t0_first = t0
         self.slot0_t0 = t0 - self.next_slot * self.block_len
 
     def advance(self, n_slots: int) -> None:

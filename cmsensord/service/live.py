@@ -125,7 +125,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
         for frames in source:
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             proc.handle(frames)
-            if cfg.link.max_drift_s and watch.sim_done is None and len(source.queue) < DRIFT_QUEUE_MAX:
+            if (frames and cfg.link.max_drift_s and watch.sim_done is None
+                    and len(source.queue) < DRIFT_QUEUE_MAX):
                 proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
             watch.link_events()
             now = time.monotonic()
