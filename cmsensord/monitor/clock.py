@@ -66,14 +66,14 @@ class BlockClock:
         """A new segment: the block at ``t0_unwrapped`` takes the next slot and is stamped
         ``wall_ns``, but never earlier than one block after the newest stamp.  Its stamps run
         at ``stamp_fs`` board ticks per second (default fs).  Returns its stamp."""
-        after = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.fs if self.last_stamp_ns else 0
+        after = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.stamp_fs if self.last_stamp_ns else 0
         self.anchor_ns = max(wall_ns, after)
         self.t0_first = t0_unwrapped
         self.seg_wall_ns, self.seg_t0 = wall_ns, t0_unwrapped
         self.stamp_fs = stamp_fs or self.fs
         self.segment += 1
         if self.slot0_t0 is not None:
-            self.reanchor(t0_unwrapped)
+            self.slot0_t0 = t0_unwrapped - self.next_slot * self.block_len
         return self.anchor_ns
 
     def drift(self, wall_ns: int, max_drift_s: float = 2.0) -> tuple[float, int] | None:
