@@ -169,6 +169,30 @@ def test_a_t0_stuck_at_one_value_does_not_end_the_replay(tmp_path):
     assert rss < 100 * MB
 
 
+def test_a_t0_stuck_at_one_value_does_not_end_the_daemon(tmp_path):
+    """Live on a pty: 3000 frames with one t0 (and a STATUS every 100): the daemon runs on,
+    stops cleanly on SIGTERM, and its decisions are stamped one after the other."""
+    master, slave = os.openpty()
+    d = start_daemon(tmp_path, os.ttyname(slave))
+    try:
+        time.sleep(1.0)                     # the daemon has opened the port
+        seq = 0
+        for _ in range(30):
+            data, seq = rms_run(seq, [1000] * 100, st=status())
+            os.write(master, data)
+        time.sleep(1.5)
+        assert d.poll() is None
+        err = stop(d)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0, err
+    assert "Recursion" not in err and "Traceback" not in err and "output error" not in err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    assert len([t for t, _, _ in msgs if t == "/cm/ch0/severity"]) >= 25
+    assert_time_goes_on(msgs)
+
+
 def test_nine_channels_without_a_channel_list_monitor_eight_and_say_so(tmp_path):
     data, _ = rms_run(0, blocks(3000), c=9, st=status(9))
     p, msgs, rss = replay(tmp_path, data)
@@ -238,3 +262,36 @@ def test_rms_frames_in_a_raw_stream_are_ignored_and_counted(tmp_path):
     assert "(1900 observations, 100 missing, 0 frames lost)" in p.stderr
     assert_time_goes_on(msgs)
     assert rss < 100 * MB
+
+
+# ---- the same invariants under random time ---------------------------------------------------
+def random_time_stream(n: int, seed: int) -> bytes:
+    """``n`` valid-CRC frames of one channel whose t0 steps are random (on by a block, a few
+    blocks, minutes, stuck, back), with STATUS frames of random mode, fs and block_len, and
+    RMS and RAW frames mixed."""
+    rng = np.random.default_rng(seed)
+    out, t0 = bytearray(), 0
+    steps = [250, 250, 250, 250, 500, 2500, 0, -250 * 100, 600 * 25000, 10**9]
+    for seq in range(n):
+        t0 = max(0, t0 + int(rng.choice(steps)))
+        r = rng.random()
+        if r < 0.02:
+            fs, bl = int(rng.choice([1, 100, 25000, 10**6])), int(rng.choice([1, 10, 250, 4096]))
+            out += encode_status(seq, t0, status(mode=int(rng.choice([MODE_RMS, MODE_RAW])), fs=fs,
+                                                 block_len=bl))
+        elif r < 0.8:
+            out += encode_rms(seq, t0, [float(rng.choice([0.5, 1e30, np.nan, -1.0]))])
+        else:
+            out += encode_raw(seq, t0, 0, rng.integers(0, 4096, 250).astype(np.uint16))
+    return bytes(out)
+
+
+def test_random_time_keeps_the_replay_running_bounded_and_in_order(tmp_path):
+    """Seeded: 3000 frames here, ``CMSENSORD_STREAM_FRAMES=100000`` for the long run."""
+    n = int(os.environ.get("CMSENSORD_STREAM_FRAMES", "3000"))
+    p, msgs, rss = replay(tmp_path, random_time_stream(n, seed=11))
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "Traceback" not in p.stderr
+    assert rss < 100 * MB
+    stamps = [s for t, s, _ in msgs if t.endswith("/severity")]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
