@@ -2,12 +2,14 @@
 
 Timestamps come from the ADC clock (docs/PROTOCOL.md rule 4):
 t = anchor + (t0_unwrapped - t0_first) / fs, the anchor being the wall clock
-when the first frame was received.  Observations sit on slots of one block:
+when the first frame of the segment was received (fs: the board's, or its rate
+measured live).  Observations sit on slots of one block:
 slot = (t0_unwrapped - slot0_t0) / block_len, slot 0 being the first
 observation.  A slot with no frame is a *missing observation*, but at most
 ``MAX_FILL_S`` seconds (and ``MAX_FILL_SLOTS`` slots) of them per gap: a longer
 gap forward, a duplicate or a step backwards re-anchors the slots instead of
-inventing missing observations for the whole gap.
+inventing missing observations for the whole gap; a duplicate (a stuck t0) is
+stamped one block after the newest stamp.
 
 Stamps are made in *segments*.  A step backwards or forward by more than
 ``MAX_GAP_S`` is a board reset (t0 restarted or reloaded): a new segment starts,

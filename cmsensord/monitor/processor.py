@@ -4,6 +4,8 @@ No threads, ports or files: the live port, a replayed capture and a simulation
 hand it the same :class:`~cmsensord.protocol.Frame` batches
 (:mod:`cmsensord.source`), so live and replay give the same messages.  Per frame:
 
+* a board reset or a frame of the mode the board is not in -> :mod:`.segments`;
+
 * STATUS -> the block clock's rate, the channels, the tacho (:mod:`.clock`, :mod:`.shaft`);
 * RMS (values per block) and RAW (:mod:`.raw`: counts -> m/s² -> block RMS) -> slots on the
   block clock -> microphone estimator (:mod:`.microphone`) -> AKF banks -> outlier flags
