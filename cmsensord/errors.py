@@ -8,6 +8,9 @@ prints that line and exits with a non-zero code instead of a traceback.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import Any
+
 __all__ = [
     "CmsensordError",
     "ConfigError",
@@ -32,15 +35,60 @@ def _one_line(text: str) -> str:
 
 
 def _short_repr(value: object) -> str:
-    """repr() of a value, on one line and at most ~60 characters."""
+    """repr() of a value, on one line and at most ~60 characters.
+
+    Lists, tuples, dicts and sets are written piece by piece and the writing stops once
+    the text is long enough, so a value that shares one sub-list many times over (a
+    YAML alias bomb) costs what is shown, not its full repr.
+    """
+    parts: list[str] = []
+    length = 0
+    check_at = _MAX_VALUE_REPR
     try:
-        text = repr(value)
+        for piece in _repr_pieces(value, set()):
+            parts.append(piece)
+            length += len(piece)
+            if length > check_at:           # whitespace collapses: measure the one-line text
+                if len(_one_line("".join(parts))) > _MAX_VALUE_REPR:
+                    break
+                check_at = 2 * length
     except Exception:  # a broken __repr__ must not hide the config error
-        text = f"<{type(value).__name__}>"
-    text = _one_line(text)
+        parts = [f"<{type(value).__name__}>"]
+    text = _one_line("".join(parts))
     if len(text) > _MAX_VALUE_REPR:
         text = text[: _MAX_VALUE_REPR - 3] + "..."
     return text
+
+
+def _repr_pieces(value: Any, inside: set[int]) -> Iterator[str]:
+    """repr(value) in pieces, the same text for the built-in containers (``[...]`` for a
+    container inside itself)."""
+    kind = type(value)
+    if kind not in (list, tuple, dict, set, frozenset) or (kind in (set, frozenset) and not value):
+        yield repr(value)
+        return
+    if id(value) in inside:
+        yield "[...]" if kind is list else "{...}" if kind is dict else repr(value)
+        return
+    inside.add(id(value))
+    brackets: dict[type, tuple[str, str]] = {list: ("[", "]"), tuple: ("(", ")"), dict: ("{", "}"), set: ("{", "}"),
+                        frozenset: ("frozenset({", "})")}
+    opening, closing = brackets[kind]
+    yield opening
+    if kind is dict:
+        for i, (k, v) in enumerate(value.items()):
+            yield ", " if i else ""
+            yield from _repr_pieces(k, inside)
+            yield ": "
+            yield from _repr_pieces(v, inside)
+    else:
+        for i, item in enumerate(value):
+            yield ", " if i else ""
+            yield from _repr_pieces(item, inside)
+        if kind is tuple and len(value) == 1:
+            yield ","
+    yield closing
+    inside.discard(id(value))
 
 
 class CmsensordError(Exception):

@@ -16,6 +16,7 @@ import sys
 import termios
 import threading
 import time
+import traceback
 from collections import deque
 from collections.abc import Callable
 from typing import BinaryIO
@@ -100,7 +101,7 @@ class FrameQueue:
 class SerialReader(threading.Thread):
     """Reads the port, feeds the decoder, queues frames; reconnects with back-off.
 
-    Link events (``link_lost``, ``link_restored``) are queued in ``events`` as
+    Link events (``link_lost``, ``link_restored``, ``reader_error``, ``reader_recovered``) are queued in ``events`` as
     (wall_ns, kind, message) for the processing loop to emit: only the loop
     writes to the sink.
     """
@@ -122,6 +123,9 @@ class SerialReader(threading.Thread):
         self.ever_connected = False
         self.last_data = time.monotonic()
         self.failures = 0
+        self.errors = 0                       # unexpected exceptions since the last bytes read
+        self.error: str | None = None         # the last one, as reported
+        self._backoff = reconnect_min_s
         self.capture_error: str | None = None
 
     def stop(self) -> None:
@@ -131,47 +135,91 @@ class SerialReader(threading.Thread):
         self.events.append((time.time_ns(), kind, message))
 
     def run(self) -> None:
-        backoff = self.reconnect_min_s
+        """Read until :meth:`stop`. A port error closes the port and reconnects with back-off;
+        any other exception (a bug, a setting the driver refuses) is reported as a
+        ``reader_error`` event, closes the port and is retried the same way, so the thread
+        never ends before :meth:`stop`."""
+        self._backoff = self.reconnect_min_s
         ser = None
         while not self._stop_event.is_set():
-            if ser is None:
-                try:
-                    ser = self._open_port()
-                except PORT_ERRORS as exc:
-                    if self.failures == 0:
-                        self._event("link_lost", f"cannot open {self.port}: {_why(exc)}; retrying")
-                    self.failures += 1
-                    self._stop_event.wait(backoff)
-                    backoff = min(backoff * 2, self.reconnect_max_s)
-                    continue
-                if self.ever_connected or self.failures:
-                    self._event("link_restored", f"{self.port} open again")
-                self.ever_connected = True
-                self.failures = 0
-                backoff = self.reconnect_min_s
-                self.connected.set()
             try:
-                data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
-                if not data:
-                    continue
-            except PORT_ERRORS as exc:
-                self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
-                self.connected.clear()
-                self.failures = 1
-                _close_quietly(ser)
+                ser = self._step(ser)
+            except Exception as exc:  # noqa: BLE001 - a reader that died silently would look healthy
+                self._unexpected(exc, ser)
                 ser = None
-                continue
-            self.last_data = time.monotonic()
-            if self.capture is not None and self.capture_error is None:
-                try:
-                    self.capture.write(data)
-                except OSError as exc:
-                    self.capture_error = f"capture file: {exc.strerror or exc}"
-                    self._event("disk_error", self.capture_error + "; capture stopped")
-            self.queue.put(self.decoder.feed(data))
         if ser is not None:
             _close_quietly(ser)
         self.queue.put(self.decoder.flush())
+
+    def _step(self, ser):
+        """Open the port if it is closed, then one read fed to the decoder: the port (None
+        when it is closed or lost)."""
+        if ser is None:
+            try:
+                ser = self._open_port()
+            except PORT_ERRORS as exc:
+                if self.failures == 0:
+                    self._event("link_lost", f"cannot open {self.port}: {_why(exc)}; retrying")
+                self.failures += 1
+                self._wait_backoff()
+                return None
+            if (self.ever_connected or self.failures) and not self.errors:
+                self._event("link_restored", f"{self.port} open again")
+            self.ever_connected = True
+            self.failures = 0
+            self._backoff = self.reconnect_min_s
+            self.connected.set()
+        try:
+            data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+            if not data:
+                return ser
+        except PORT_ERRORS as exc:
+            self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
+            self.connected.clear()
+            self.failures = 1
+            _close_quietly(ser)
+            return None
+        self.last_data = time.monotonic()
+        if self.capture is not None and self.capture_error is None:
+            try:
+                self.capture.write(data)
+            except OSError as exc:
+                self.capture_error = f"capture file: {exc.strerror or exc}"
+                self._event("disk_error", self.capture_error + "; capture stopped")
+        self.queue.put(self.decoder.feed(data))
+        if self.errors:
+            self._event("reader_recovered", f"{self.port}: reading again after {self.errors} "
+                        "reader error(s)")
+            self.errors, self.error = 0, None
+        return ser
+
+    def _unexpected(self, exc: Exception, ser) -> None:
+        """An exception that is not a port error: report it (once while it repeats), close the
+        port, wait the back-off; the caller reopens."""
+        self.connected.clear()
+        self.errors += 1
+        text = _one_line_error(exc)
+        if text != self.error:
+            self.error = text
+            self._event("reader_error", f"{self.port}: reader failed: {text}; closing the port, "
+                        f"retrying every {self.reconnect_min_s:g}..{self.reconnect_max_s:g} s")
+        if ser is not None:
+            with contextlib.suppress(Exception):
+                ser.close()
+        self._wait_backoff()
+        return None
+
+    def _wait_backoff(self) -> None:
+        self._stop_event.wait(self._backoff)
+        self._backoff = min(self._backoff * 2, self.reconnect_max_s)
+
+
+def _one_line_error(exc: BaseException) -> str:
+    """``Type: message (at file.py:line)``, on one line: where the exception was raised."""
+    text = " ".join(str(exc).split())
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {os.path.basename(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
+    return f"{type(exc).__name__}{': ' + text if text else ''}{where}"
 
 
 def _why(exc: BaseException) -> str:

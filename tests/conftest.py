@@ -38,6 +38,8 @@ PROCESS_MODULES = frozenset({
     "test_realdata.py",
     "test_import.py",
     "test_stream_time.py",
+    "test_config_hostile.py",
+    "test_reader_thread.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import os
 import re
+import stat
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -197,6 +199,13 @@ def _build_orders(raw: Any, source: str) -> OrdersConfig:
 class _StrictLoader(yaml.SafeLoader):
     """SafeLoader that rejects a key given twice in one mapping."""
 
+    def get_single_node(self) -> Any:
+        """The document's node graph, refused before construction if its aliases expand too far."""
+        node = super().get_single_node()
+        if node is not None:
+            _expanded_nodes(node)
+        return node
+
     def construct_mapping(self, node: Any, deep: bool = False) -> Any:
         if isinstance(node, yaml.MappingNode):
             seen: set[Any] = set()
@@ -220,13 +229,99 @@ class _StrictLoader(yaml.SafeLoader):
 _StrictLoader.add_constructor(
     yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _StrictLoader.construct_mapping
 )
-# PyYAML follows YAML 1.1, where "4e-3" (no dot) is a string; accept it as a
-# float, as YAML 1.2 does, since that is how the paper writes R_min.
+# PyYAML follows YAML 1.1, where an exponent needs a dot and a sign: "4e-3" and "1.0e300"
+# are strings there. Accept every exponent form as a float, as YAML 1.2 does ("4e-3" is
+# how the paper writes R_min).
 _StrictLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
 )
+
+
+#: the largest configuration file read: the defaults with comments are ~10 kB
+MAX_CONFIG_BYTES = 1 << 20
+#: the most YAML nodes a document may stand for once every alias is expanded
+MAX_YAML_NODES = 100_000
+
+
+def _read_text(path: str | Path, source: str) -> str:
+    """The text of a regular file of at most MAX_CONFIG_BYTES; anything else is a ConfigError.
+
+    The file is opened non-blocking, so a FIFO never waits for a writer, and its type is
+    checked on the open descriptor before anything is read (a device such as /dev/zero
+    is refused, not read to the end of memory).
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise ConfigError(source, None, "file not found") from None
+    except PermissionError:
+        raise ConfigError(source, None, "cannot read: permission denied") from None
+    except OSError as err:
+        raise ConfigError(source, None, f"cannot read: {err.strerror or err}") from None
+    except ValueError as err:  # a name the OS cannot take (a NUL byte, shown escaped)
+        reason = "not a usable file name: it contains a NUL byte" if "\0" in source else f"cannot read: {err}"
+        raise ConfigError(source.replace("\0", "\\0"), None, reason) from None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        if stat.S_ISDIR(mode):
+            raise ConfigError(source, None, "is a directory, not a file")
+        raise ConfigError(source, None, f"not a regular file (a {_file_kind(mode)}); "
+                          "give the path of a YAML file")
+    with os.fdopen(fd, "rb") as f:
+        try:
+            data = f.read(MAX_CONFIG_BYTES + 1)
+        except OSError as err:
+            raise ConfigError(source, None, f"cannot read: {err.strerror or err}") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(source, None, f"larger than {MAX_CONFIG_BYTES} bytes: not a configuration file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
+
+
+def _file_kind(mode: int) -> str:
+    for test, name in ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"),
+                       (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket")):
+        if test(mode):
+            return name
+    return "special file"
+
+
+class _TooLarge(Exception):
+    """Internal: the YAML document stands for too many nodes (aliases), or refers to itself."""
+
+
+def _expanded_nodes(root: yaml.Node) -> int:
+    """How many nodes ``root`` stands for with every alias expanded (shared nodes counted each
+    time they are referred to), computed without expanding; raises _TooLarge past
+    MAX_YAML_NODES or when a node contains itself."""
+    sizes: dict[int, int] = {}
+    open_nodes: set[int] = set()
+
+    def size(node: yaml.Node) -> int:
+        key = id(node)
+        if key in sizes:
+            return sizes[key]
+        if key in open_nodes:
+            raise _TooLarge("a YAML alias refers to a node that contains it (a recursive structure)")
+        total = 1
+        if isinstance(node, (yaml.SequenceNode, yaml.MappingNode)):
+            open_nodes.add(key)
+            children = (node.value if isinstance(node, yaml.SequenceNode)
+                        else [n for pair in node.value for n in pair])
+            for child in children:
+                total += size(child)
+                if total > MAX_YAML_NODES:
+                    raise _TooLarge(f"YAML aliases expand to more than {MAX_YAML_NODES} values")
+            open_nodes.discard(key)
+        sizes[key] = total
+        return total
+
+    return size(root)
 
 
 def _yaml_reason(err: yaml.YAMLError) -> str:
@@ -247,27 +342,15 @@ def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Co
     if path is None:
         return default_config(n_channels if n_channels is not None else 1)
     source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(source, None, "file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(source, None, "is a directory, not a file") from None
-    except PermissionError:
-        raise ConfigError(source, None, "cannot read: permission denied") from None
-    except UnicodeDecodeError as err:
-        raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
-    except OSError as err:
-        raise ConfigError(source, None, f"cannot read: {err.strerror or err}") from None
-    except ValueError as err:  # a name the OS cannot take (a NUL byte, shown escaped)
-        reason = "not a usable file name: it contains a NUL byte" if "\0" in source else f"cannot read: {err}"
-        raise ConfigError(source.replace("\0", "\\0"), None, reason) from None
+    text = _read_text(path, source)
     try:
         data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as err:
         raise ConfigError(source, None, _yaml_reason(err)) from None
     except RecursionError:
         raise ConfigError(source, None, "YAML nested too deeply") from None
+    except _TooLarge as err:
+        raise ConfigError(source, None, str(err)) from None
     if data is None:  # an empty file (or only comments): all defaults
         data = {}
     return config_from_dict(data, source=source, n_channels=n_channels)

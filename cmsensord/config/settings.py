@@ -31,6 +31,13 @@ __all__ = [
 #: docs/PROTOCOL.md: STATUS carries n_channels C in 1..8.
 MAX_CHANNELS = 8
 
+#: the fastest UART a USB-UART bridge offers (FT232H: 12 Mbaud); a larger baud rate is a typo
+#: that the serial driver would reject only when the port opens.
+MAX_BAUD = 12_000_000
+
+#: rule of every file or device name: the OS cannot take a NUL byte in one.
+_A_PATH: dict[str, Any] = {"pattern": r"[^\x00]*", "pattern_reason": "must not contain a NUL byte"}
+
 
 #: observations per second of board time the decision rule is written for (100 Hz RMS frames)
 NOMINAL_RATE_HZ = 100.0
@@ -116,7 +123,7 @@ class ChannelConfig:
                          "microphone (Pa): its sound is turned into a vibration estimate (Orimoto, Ikuta & Wang) "
                          "that the AKF bank watches", choices=("accelerometer", "microphone"))
     calibration: str | None = setting(None, "acoustic calibration file of this microphone "
-                                       "(default: acoustic.calibration)", nonempty=True)
+                                       "(default: acoustic.calibration)", nonempty=True, **_A_PATH)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -126,8 +133,9 @@ class ChannelConfig:
 class LinkConfig:
     """The serial link to the ADC board."""
 
-    port: str = setting("/dev/ttyACM0", "serial device", nonempty=True)
-    baud: int = setting(921600, "UART baud rate (ignored by USB CDC and ptys)", gt=0)
+    port: str = setting("/dev/ttyACM0", "serial device", nonempty=True, **_A_PATH)
+    baud: int = setting(921600, "UART baud rate (ignored by USB CDC and ptys); at most 12 Mbaud, "
+                        "the fastest USB-UART bridges", gt=0, le=MAX_BAUD)
     read_size: int = setting(4096, "bytes asked for per read()", gt=0, le=16 * 1024 * 1024)
     queue_frames: int = setting(
         4096, "bounded frame queue between reader and pipeline", ge=16, le=1_000_000
@@ -157,7 +165,7 @@ def _cap_holds_a_file(obj: Any) -> tuple[str, str, Any] | None:
 class OutputConfig:
     """Where and how the MCAP files are written."""
 
-    dir: str = setting("cmsensord-logs", "directory of the MCAP files", nonempty=True)
+    dir: str = setting("cmsensord-logs", "directory of the MCAP files", nonempty=True, **_A_PATH)
     prefix: str = setting(
         "cmsensord",
         "file name prefix",
@@ -278,7 +286,7 @@ class AcousticConfig:
 
     calibration: str | None = setting(None, "acoustic calibration file (JSON, from "
                                        "python -m cmsensord.acoustic_calib) of the microphone "
-                                       "channels without their own", nonempty=True)
+                                       "channels without their own", nonempty=True, **_A_PATH)
     zeta_max: float = setting(5.0, "limit of the standardised observation |z - z*| / "
                                "sqrt(Gamma_z) entering the update (noise bursts)", gt=0)
 

@@ -22,6 +22,14 @@ log = logging.getLogger("cmsensord")
 
 #: the board's clock is compared with the wall clock only with fewer frames than this queued
 DRIFT_QUEUE_MAX = 50
+#: reader events logged as ERROR: a failure of the daemon's own code, for the maintainer
+_ERRORS = frozenset({"reader_error", "reader_died"})
+#: exit status when the reader thread has ended (EX_SOFTWARE): the unit restarts the daemon
+EXIT_READER_DIED = 70
+
+
+class ReaderDied(Exception):
+    """The serial reader thread ended while the loop still ran (it only ends on stop)."""
 
 
 class _Watch:
@@ -40,7 +48,10 @@ class _Watch:
         proc, events, queue = self.proc, self.source.events, self.source.queue
         while events:
             wall_ns, kind, message = events.popleft()
-            proc.event(kind, None, message, wall_ns)
+            if kind in _ERRORS:
+                proc.event(kind, None, message, wall_ns, log_level=logging.ERROR)
+            else:
+                proc.event(kind, None, message, wall_ns)
         if queue.drops != self.drops_seen:
             proc.event("queue_overflow", None, f"processing fell behind: {queue.drops - self.drops_seen} "
                        f"frame(s) dropped from the queue, oldest RAW blocks first ({queue.drops} "
@@ -90,9 +101,13 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
+    status = 0
     with source:
         try:
             _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done))
+        except ReaderDied as died:
+            proc.event("reader_died", None, str(died), log_level=logging.ERROR)
+            status = EXIT_READER_DIED
         finally:
             source.stop()
             for frames in source:       # what the reader queued before it stopped
@@ -105,7 +120,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     print(run_summary(proc, sink.paths, time.monotonic() - t_start), file=sys.stderr)
     if capture_path:
         print(f"  capture: {capture_path}", file=sys.stderr)
-    return 0
+    return status
 
 
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
@@ -115,6 +130,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
 
     def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
         line = status_line(proc, source)
+        if reader.error is not None:
+            return f"reader error x{reader.errors}: {reader.error} | {line}"
         return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
 
     if notify.enabled:
@@ -123,6 +140,9 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
     next_status = time.monotonic() + 1.0
     try:
         for frames in source:
+            if not reader.is_alive():   # it ends only on stop: reading nothing, the loop must not look well
+                raise ReaderDied(f"the serial reader thread has ended; exiting with status "
+                                 f"{EXIT_READER_DIED} for the service manager to restart the daemon")
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             proc.handle(frames)
             if (frames and cfg.link.max_drift_s and watch.sim_done is None
