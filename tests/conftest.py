@@ -38,6 +38,7 @@ PROCESS_MODULES = frozenset({
     "test_traps.py",
     "test_realdata.py",
     "test_import.py",
+    "test_stream_time.py",
     "test_config_hostile.py",
     "test_reader_thread.py",
     "test_stream_events.py",

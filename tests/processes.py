@@ -51,10 +51,12 @@ def start_board(*args) -> subprocess.Popen:
     return sim
 
 
-def start_daemon(tmp_path, port, *extra, config="") -> subprocess.Popen:
-    """``cmsensord --config`` on ``port``, logs in tmp_path/logs; ``config``: more YAML."""
+def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subprocess.Popen:
+    """``cmsensord --config`` on ``port``, logs in tmp_path/logs; ``config``: more YAML.
+    ``max_drift_s``: 0 by default, as the simulated boards run faster than real time."""
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
+                   f"  max_drift_s: {max_drift_s}\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
     return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
                             stderr=subprocess.PIPE, text=True, env=ENV)

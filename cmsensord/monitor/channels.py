@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 
-from cmsensord.config import ChannelConfig, Config, default_channels
+from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
@@ -135,7 +135,11 @@ class ChannelSetup:
     def _setup(self, n_board: int) -> None:
         emit = self.log.emit
         if self.auto_channels and n_board != len(self.channels):
-            self.channels = default_channels(n_board, self.cfg.monitor)
+            if n_board > MAX_CHANNELS:
+                emit("config", None, f"board sends {n_board} channels, more than the "
+                     f"{MAX_CHANNELS} a configuration can name: ch0..ch{MAX_CHANNELS - 1} are "
+                     f"monitored, the rest is not")
+            self.channels = default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
         if len(usable) < len(self.channels):
             missing = [ch.name for ch in self.channels if ch.index >= n_board]

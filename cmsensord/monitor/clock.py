@@ -2,11 +2,22 @@
 
 Timestamps come from the ADC clock (docs/PROTOCOL.md rule 4):
 t = anchor + (t0_unwrapped - t0_first) / fs, the anchor being the wall clock
-when the first frame was received.  Observations sit on slots of one block:
+when the first frame of the segment was received (fs: the board's, or its rate
+measured live).  Observations sit on slots of one block:
 slot = (t0_unwrapped - slot0_t0) / block_len, slot 0 being the first
-observation.  A slot with no frame is a *missing observation*; a jump of more
-than ``MAX_GAP_S`` (or backwards) is a time jump (board reset, t0 reloaded)
-and re-anchors the slots instead of inserting hours of missing observations.
+observation.  A slot with no frame is a *missing observation*, but at most
+``MAX_FILL_S`` seconds (and ``MAX_FILL_SLOTS`` slots) of them per gap: a longer
+gap forward, a duplicate or a step backwards re-anchors the slots instead of
+inventing missing observations for the whole gap; a duplicate (a stuck t0) is
+stamped one block after the newest stamp.
+
+Stamps are made in *segments*.  A step backwards or forward by more than
+``MAX_GAP_S`` is a board reset (t0 restarted or reloaded): a new segment starts,
+anchored to the wall clock at the reset but never before the newest stamp
+(:meth:`BlockClock.new_segment`), so stamps never go backwards.  Live, the
+board's clock is compared with the wall clock (:meth:`BlockClock.drift`); one
+running fast or slow by more than ``link.max_drift_s`` starts a new segment whose
+stamps follow the board's measured rate.
 """
 
 from __future__ import annotations
@@ -15,8 +26,15 @@ import numpy as np
 
 DEFAULT_FS = 25000
 DEFAULT_BLOCK_LEN = 250
-#: a jump of the block clock larger than this (or backwards) is a time jump
+#: a jump of the block clock larger than this (or backwards) is a board reset: a new segment
 MAX_GAP_S = 600.0
+#: most missing observations one gap inserts: a longer gap re-anchors the slots
+MAX_FILL_S = 10.0
+MAX_FILL_SLOTS = 1000
+#: live: least wall time over which the board's rate is measured
+DRIFT_MIN_WALL_S = 5.0
+#: a board ahead of the wall clock is stamped this much slower than its rate until caught up
+CATCH_UP = 0.1
 
 
 class BlockClock:
@@ -30,27 +48,75 @@ class BlockClock:
         self.slot0_t0: int | None = None       # t0_unwrapped of slot 0
         self.next_slot = 0                     # next observation slot expected
         self.last_stamp_ns = 0                 # stamp of the newest observation slot
+        self.stamp_fs = DEFAULT_FS             # board ticks per second of stamps (fs, or measured)
+        self.segment = 0                       # segments started after the first
+        self.seg_wall_ns = 0                   # wall clock and t0 at the segment's start (drift)
+        self.seg_t0 = 0
 
     def anchor(self, t0_unwrapped: int, wall_ns: int) -> None:
         """The first frame: its t0 is ``wall_ns``."""
         if self.anchor_ns is None:
-            self.anchor_ns = wall_ns
-            self.t0_first = t0_unwrapped
+            self.anchor_ns = self.seg_wall_ns = wall_ns
+            self.t0_first = self.seg_t0 = t0_unwrapped
+
+    def is_reset(self, t0_unwrapped: int, last_t0: int) -> bool:
+        """True when a frame at ``t0_unwrapped`` after one at ``last_t0`` means the board
+        restarted its clock: a step backwards, or forward by more than ``MAX_GAP_S``."""
+        return t0_unwrapped < last_t0 or t0_unwrapped - last_t0 > MAX_GAP_S * self.fs
+
+    def new_segment(self, t0_unwrapped: int, wall_ns: int, stamp_fs: int | None = None) -> int:
+        """A new segment: the block at ``t0_unwrapped`` takes the next slot and is stamped
+        ``wall_ns``, but never earlier than one block after the newest stamp.  Its stamps run
+        at ``stamp_fs`` board ticks per second (default fs).  Returns its stamp."""
+        after = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.stamp_fs if self.last_stamp_ns else 0
+        self.anchor_ns = max(wall_ns, after)
+        self.t0_first = t0_unwrapped
+        self.seg_wall_ns, self.seg_t0 = wall_ns, t0_unwrapped
+        self.stamp_fs = stamp_fs or self.fs
+        self.segment += 1
+        if self.slot0_t0 is not None:
+            self.slot0_t0 = t0_unwrapped - self.next_slot * self.block_len
+        return self.anchor_ns
+
+    def drift(self, wall_ns: int, max_drift_s: float = 2.0) -> tuple[float, int] | None:
+        """Live: (offset s, measured board ticks per wall second) when the newest stamp is
+        more than ``max_drift_s`` off the wall clock ``wall_ns`` (positive: the board is
+        ahead) and the rate is measured over at least ``DRIFT_MIN_WALL_S``; else None."""
+        if not self.last_stamp_ns or self.slot0_t0 is None:
+            return None
+        offset = (self.last_stamp_ns - wall_ns) / 1e9
+        wall_s = (wall_ns - self.seg_wall_ns) / 1e9
+        if abs(offset) <= max_drift_s or wall_s < DRIFT_MIN_WALL_S:
+            return None
+        ticks = self.slot_t0(self.next_slot) - self.seg_t0
+        if ticks <= 0:
+            return None
+        return offset, max(1, round(ticks / wall_s))
+
+    def rebase(self, wall_ns: int, offset_s: float, rate: int) -> int:
+        """A new segment after a drift of ``offset_s`` (see :meth:`drift`): stamps from the
+        wall clock at the next slot, at the measured ``rate`` (slower by ``CATCH_UP`` while
+        the board is ahead, so the stamps never go back yet meet the wall clock)."""
+        stamp_fs = round(rate * (1 + CATCH_UP)) if offset_s > 0 else rate
+        return self.new_segment(self.slot_t0(self.next_slot), wall_ns, stamp_fs)
 
     def set_rate(self, fs: int, block_len: int) -> bool:
         """The board's fs/block_len; True when the slots had to be re-anchored for it."""
         if fs <= 0 or block_len <= 0 or (fs, block_len) == (self.fs, self.block_len):
             return False
         moved = self.slot0_t0 is not None
+        if moved and self.next_slot:            # stamps go on from the newest one at the new rate
+            self.anchor_ns, self.t0_first = self.last_stamp_ns, self.slot_t0(self.next_slot - 1)
         self.slot0_t0 = None
         self.fs, self.block_len = fs, block_len
+        self.stamp_fs = fs
         return moved
 
     # ---- stamps ------------------------------------------------------------
     def stamp_ns(self, t0_unwrapped: int) -> int:
         """ADC sample index -> ns since the epoch (docs/PROTOCOL.md rule 4)."""
         assert self.anchor_ns is not None and self.t0_first is not None
-        return self.anchor_ns + (t0_unwrapped - self.t0_first) * 1_000_000_000 // self.fs
+        return self.anchor_ns + (t0_unwrapped - self.t0_first) * 1_000_000_000 // self.stamp_fs
 
     def slot_t0(self, slot) -> int:
         assert self.slot0_t0 is not None
@@ -79,14 +145,18 @@ class BlockClock:
         if self.slot0_t0 is None:
             self.slot0_t0 = int(t0[0]) - self.next_slot * self.block_len
         slots = (t0 - self.slot0_t0) // self.block_len
-        max_gap = int(MAX_GAP_S * self.fs / self.block_len)
+        max_gap = max(1, min(MAX_FILL_SLOTS, int(MAX_FILL_S * self.fs / self.block_len)))
         prev = np.concatenate(([self.next_slot - 1], slots[:-1]))
         bad = np.flatnonzero((slots <= prev) | (slots - prev > max_gap))
         n = int(bad[0]) if bad.size else len(t0)
         return slots[:n], n
 
     def reanchor(self, t0: int) -> None:
-        """The block starting at ``t0`` takes the next slot."""
+        """The block starting at ``t0`` takes the next slot; when ``t0`` is not after the
+        newest slot's (a duplicate, a stuck t0), it is stamped one block after the newest stamp."""
+        if self.slot0_t0 is not None and self.next_slot and t0 <= self.slot_t0(self.next_slot - 1):
+            self.anchor_ns = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.stamp_fs
+            self.t0_first = t0
         self.slot0_t0 = t0 - self.next_slot * self.block_len
 
     def advance(self, n_slots: int) -> None:

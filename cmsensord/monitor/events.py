@@ -36,7 +36,7 @@ LOG_LEVEL = {
     "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
-    "decision_rule": logging.WARNING, "anomaly_held": logging.WARNING,
+    "decision_rule": logging.WARNING, "time_base": logging.WARNING, "anomaly_held": logging.WARNING,
 }
 
 #: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary

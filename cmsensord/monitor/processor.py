@@ -4,6 +4,8 @@ No threads, ports or files: the live port, a replayed capture and a simulation
 hand it the same :class:`~cmsensord.protocol.Frame` batches
 (:mod:`cmsensord.source`), so live and replay give the same messages.  Per frame:
 
+* a board reset or a frame of the mode the board is not in -> :mod:`.segments`;
+
 * STATUS -> the block clock's rate, the channels, the tacho (:mod:`.clock`, :mod:`.shaft`);
 * RMS (values per block) and RAW (:mod:`.raw`: counts -> m/s² -> block RMS) -> slots on the
   block clock -> microphone estimator (:mod:`.microphone`) -> AKF banks -> outlier flags
@@ -30,6 +32,7 @@ from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.raw import RawInput
+from cmsensord.monitor.segments import Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
@@ -68,6 +71,8 @@ class Processor:
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
+        self.segments = Segments(self.clock, self.setup, self.log, clock_ns,
+                                 lambda: self._flush_raw([], final=True))
 
     # ---- the parts' figures, for the status line, the summary and the tools --
     status = property(lambda self: self.setup.status)
@@ -115,11 +120,10 @@ class Processor:
         rms: list[Frame] = []
         raw: list[Frame] = []
         for f in frames:
-            if f.lost_before:
+            if self.segments.check(f) or f.lost_before:   # a reset, the other mode, a loss
                 rms, raw = self._flush(rms, raw)
-                self.frames_lost += f.lost_before
-                self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
-                           f"(seq gap)", self.clock.stamp_ns(f.t0_unwrapped), count=f.lost_before)
+                if self._break(f):
+                    continue
             if f.type == FrameType.RMS:
                 rms.append(f)
                 if len(rms) >= MAX_BATCH:          # bounded memory per bank call
@@ -143,9 +147,21 @@ class Processor:
         self._flush(rms, raw)
         self._feed_tacho()
 
+    def _break(self, f: Frame) -> bool:
+        """A break in the stream in front of ``f`` (the frames before it are processed): a
+        board reset starts a new segment (its seq gap is no loss), a seq gap is counted as
+        lost frames.  True when ``f`` is to be skipped (a frame of the other mode)."""
+        if self.segments.pending(f):
+            return self.segments.start(f)
+        self.frames_lost += f.lost_before
+        self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
+                   f"(seq gap)", self.clock.stamp_ns(f.t0_unwrapped), count=f.lost_before)
+        return False
+
     def finish(self) -> None:
         """End of the stream: process what still waits (an incomplete last RAW block,
         samples waiting for a final tacho speed)."""
+        self.segments.finish()
         self._flush_raw([], final=True)
         self._feed_tacho(end=True)
         if self.orders is not None:
@@ -297,6 +313,14 @@ class Processor:
         self._out([messages.diagnostics(
             stamp_ns, self.link_counters() if self.link_counters else {}, self.observations,
             round(self.diagnostics_at - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+
+    def check_wall(self, max_drift_s: float) -> None:
+        """Live, with the queue drained: a board clock off the wall clock by more than
+        ``max_drift_s`` starts a new segment at its measured rate (:meth:`BlockClock.drift`)."""
+        now = self.clock_ns()
+        drift = self.clock.drift(now, max_drift_s)
+        if drift is not None:
+            self.segments.drifted(now, *drift)
 
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""

@@ -20,6 +20,8 @@ from cmsensord.source import SerialSource
 
 log = logging.getLogger("cmsensord")
 
+#: the board's clock is compared with the wall clock only with fewer frames than this queued
+DRIFT_QUEUE_MAX = 50
 #: reader events logged as ERROR: a failure of the daemon's own code, for the maintainer
 _ERRORS = frozenset({"reader_error", "reader_died"})
 #: exit status when the reader thread has ended (EX_SOFTWARE): the unit restarts the daemon
@@ -163,6 +165,9 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                                  f"{EXIT_READER_DIED} for the service manager to restart the daemon")
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             proc.handle(frames)
+            if (frames and cfg.link.max_drift_s and watch.sim_done is None
+                    and len(source.queue) < DRIFT_QUEUE_MAX):
+                proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
             watch.link_events()
             now = time.monotonic()
             if stop.reopen:             # SIGHUP: finish the current file, start a new one

@@ -98,6 +98,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "stop",
     "disk_error",
     "salvage",
+    "time_base",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).

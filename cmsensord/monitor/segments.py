@@ -1,0 +1,110 @@
+"""Time segments of the stream: board resets, a board clock drifting off the wall clock,
+and frames of the mode the board is not in.
+
+A frame whose t0 steps backwards, or forward by more than ``MAX_GAP_S``, means the
+board restarted its clock (a reset, a replug of a rebooted board): a new segment
+starts (:meth:`~cmsensord.monitor.clock.BlockClock.new_segment`), stamped from the
+wall clock at the reset and never before the newest stamp, with a ``time_base``
+event; the seq gap in front of that frame is not a loss (the board restarted its
+seq too).  Live, a board clock off the wall clock by more than ``link.max_drift_s``
+starts a new segment at the board's measured rate, with a ``time_base`` event.
+
+RAW frames in an RMS stream (STATUS says RMS mode), or RMS frames in a RAW one,
+are ignored: each run of them is counted in one ``decode_error`` event when it ends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from cmsensord.monitor.channels import ChannelSetup
+from cmsensord.monitor.clock import MAX_GAP_S, BlockClock
+from cmsensord.monitor.events import EventLog
+from cmsensord.protocol import Frame, FrameType
+
+#: STATUS mode -> the data frame type the board does not send in it
+_OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
+_NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
+
+
+class Segments:
+    """Resets, drift and frames of the other mode for one Processor (see module docstring).
+
+    ``flush``: processes what waits before a reset (the last, maybe incomplete RAW block).
+    """
+
+    def __init__(self, clock: BlockClock, setup: ChannelSetup, log: EventLog,
+                 clock_ns: Callable[[], int], flush: Callable[[], None]):
+        self.clock, self.setup, self.log = clock, setup, log
+        self.clock_ns, self.flush = clock_ns, flush
+        self.last_t0: int | None = None     # t0_unwrapped of the newest frame taken
+        self.previous_t0 = 0                # before the frame that :meth:`check` found a reset
+        self.ignored = 0                    # frames of the other mode in the current run
+        self.ignored_type: FrameType | None = None
+        self.ignored_total = 0
+        self.hit = False                    # the last frame checked needs :meth:`start`
+
+    def check(self, f: Frame) -> bool:
+        """True when ``f`` is a board reset or a frame of the other mode: call :meth:`start`
+        (:meth:`pending` says so until the next check)."""
+        self.hit = self._check(f)
+        return self.hit
+
+    def pending(self, f: Frame) -> bool:
+        """True when the last :meth:`check` (of ``f``) found a reset or the other mode."""
+        return self.hit
+
+    def _check(self, f: Frame) -> bool:
+        st = self.setup.status
+        if st is not None and f.type is _OTHER.get(st.mode):
+            return True
+        if self.ignored:
+            self._report()
+        t, last = f.t0_unwrapped, self.last_t0
+        self.last_t0 = t
+        if last is not None and (t < last or t - last > MAX_GAP_S * self.clock.fs):
+            self.previous_t0 = last
+            return True
+        return False
+
+    def start(self, f: Frame) -> bool:
+        """After :meth:`check` said so (and the frames before ``f`` are processed): True when
+        ``f`` is to be skipped (the other mode); else ``f`` starts a new segment."""
+        st = self.setup.status
+        if st is not None and f.type is _OTHER.get(st.mode):
+            self.ignored += 1
+            self.ignored_type = f.type
+            return True
+        self.flush()
+        stamp = self.clock.new_segment(f.t0_unwrapped, self.clock_ns())
+        lost = (f"; the seq gap of {f.lost_before} in front of it is not a loss (seq restarted)"
+                if f.lost_before else "")
+        self.log.emit("time_base", None, f"board clock restarted (t0 {f.t0_unwrapped} after "
+                   f"{self.previous_t0}): time segment {self.clock.segment} starts at the wall "
+                   f"clock{lost}", stamp, details={"segment": self.clock.segment, "reason": "reset"})
+        return False
+
+    def drifted(self, now_ns: int, offset_s: float, rate: int) -> None:
+        """Live: the board's stamps are ``offset_s`` off the wall clock ``now_ns`` (positive:
+        ahead) and its clock runs at ``rate`` ticks per wall second: a new segment."""
+        fs = self.clock.fs
+        stamp = self.clock.rebase(now_ns, offset_s, rate)
+        self.log.emit("time_base", None, f"board clock {'ahead of' if offset_s > 0 else 'behind'} "
+                        f"the wall clock by {abs(offset_s):.1f} s (it runs at {rate} Hz for fs "
+                        f"{fs} Hz): time segment {self.clock.segment} re-anchored to the wall clock",
+                        stamp, details={"segment": self.clock.segment, "reason": "drift",
+                                        "offset_s": round(offset_s, 3), "rate_hz": rate})
+
+    def finish(self) -> None:
+        """End of the stream: a run of frames of the other mode is reported."""
+        if self.ignored:
+            self._report()
+
+    def _report(self) -> None:
+        st = self.setup.status
+        mode = {1: "RMS", 2: "RAW"}.get(st.mode, "?") if st is not None else "?"
+        kind = _NAME.get(self.ignored_type, "?") if self.ignored_type is not None else "?"
+        self.ignored_total += self.ignored
+        self.log.emit("decode_error", None, f"{self.ignored} {kind} frame(s) ignored: the board "
+                        f"is in {mode} mode (STATUS)", count=self.ignored)
+        self.ignored = 0

@@ -1,0 +1,297 @@
+"""Time and memory against what the board sends: resets, t0 stuck or jumping, a STATUS
+changing the rate, frames of the other mode, more channels than a configuration names,
+a board clock running fast.  Each case is one small capture (or a board on a pty) run
+through a real ``cmsensord`` process: it exits 0, says what happened in the exact event
+line, its stamps never go backwards and it stays under 100 MB resident."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from cmsensord.protocol import (
+    MODE_RAW,
+    MODE_RMS,
+    Status,
+    encode_raw,
+    encode_rms,
+    encode_status,
+)
+from cmsensord.sinks.mcap_sink import read_messages
+from processes import ENV, start_board, start_daemon, stop
+
+MB = 1024          # ru_maxrss is in kB
+
+
+def status(c=1, mode=MODE_RMS, fs=25000, block_len=250) -> Status:
+    return Status(0x0102, mode, c, fs, block_len, 0, 1, 0, 0, (1.0,) * c, (0.0,) * c)
+
+
+def rms_run(seq: int, t0s, c=1, st: Status | None = None) -> tuple[bytes, int]:
+    """A STATUS (when ``st``) then one RMS frame per t0: (bytes, next seq)."""
+    rng = np.random.default_rng(seq)
+    out = bytearray()
+    if st is not None:
+        out += encode_status(seq, int(t0s[0]), st)
+        seq += 1
+    for t in t0s:
+        out += encode_rms(seq, int(t), 0.5 + 0.01 * rng.standard_normal(c))
+        seq += 1
+    return bytes(out), seq
+
+
+def blocks(n, start=0, step=250):
+    return [start + k * step for k in range(n)]
+
+
+def replay(tmp_path, data: bytes):
+    """``cmsensord replay`` of ``data`` in a process of its own: (completed process with its
+    stderr, the MCAP messages, its peak resident kB)."""
+    cap = tmp_path / "cap.bin"
+    cap.write_bytes(data)
+    wrapper = ("import resource, subprocess, sys\n"
+               "r = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+               "sys.stderr.write(r.stderr)\n"
+               "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+               "sys.exit(r.returncode)\n")
+    p = subprocess.run([sys.executable, "-c", wrapper, sys.executable, "-m", "cmsensord", "replay",
+                        str(cap), "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                       env=ENV, timeout=60)
+    msgs = [m for f in sorted((tmp_path / "out").glob("*.mcap")) for m in read_messages(f)]
+    return p, msgs, int(p.stdout.split()[-1])
+
+
+def assert_time_goes_on(msgs) -> None:
+    """Every channel's decisions strictly later than the one before, in the order written."""
+    topics = {t for t, _, _ in msgs if t.endswith("/severity")}
+    assert topics
+    for topic in topics:
+        stamps = [s for t, s, _ in msgs if t == topic]
+        assert all(b > a for a, b in zip(stamps, stamps[1:])), topic
+
+
+def events(msgs, kind):
+    return [(s, m) for t, s, m in msgs if t == "/cm/events" and m["kind"] == kind]
+
+
+def said(msgs, kind) -> list[str]:
+    """The messages of the events of ``kind``."""
+    return [m["message"] for _, m in events(msgs, kind)]
+
+
+# ---- item 1: a board reset ---------------------------------------------------------------
+def test_a_board_reset_starts_a_new_segment_with_no_bogus_loss_in_replay(tmp_path):
+    first, seq = rms_run(0, blocks(3000), st=status())
+    again, _ = rms_run(0, blocks(3000), st=status())          # the board restarted: seq and t0 from 0
+    p, msgs, rss = replay(tmp_path, first + again)
+    assert p.returncode == 0, p.stderr
+    assert ("WARNING time_base: board clock restarted (t0 0 after 749750): time segment 1 starts "
+            "at the wall clock; the seq gap of 62535 in front of it is not a loss (seq restarted)"
+            in p.stderr)
+    assert "frames_lost" not in p.stderr and not events(msgs, "frames_lost")
+    assert "(6000 observations, 0 missing, 0 frames lost)" in p.stderr
+    (stamp, ev), = events(msgs, "time_base")
+    assert ev["details"] == {"segment": 1, "reason": "reset"}
+    assert_time_goes_on(msgs)
+    sev = [s for t, s, _ in msgs if t == "/cm/ch0/severity"]
+    assert sum(s < stamp for s in sev) >= 28 and sum(s > stamp for s in sev) >= 28
+    assert rss < 100 * MB
+
+
+def test_a_replugged_board_that_restarted_is_a_new_segment_from_the_wall_clock(tmp_path):
+    """Live: the board goes away and comes back restarted (t0 and seq from 0) on the same
+    name: a time_base event stamped from the wall clock when it is read, no frames_lost, and
+    the decisions after it are stamped later than every one before."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--speed", "1", "--link", str(link))
+    d = start_daemon(tmp_path, link)
+    time.sleep(2.5)
+    sim.terminate()
+    sim.wait(timeout=5)
+    back = time.time_ns()
+    sim = start_board("--scenario", "healthy", "--speed", "1", "--link", str(link), "--seed", "1")
+    time.sleep(4.0)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    (stamp, ev), = events(msgs, "time_base")
+    assert re.fullmatch(r"board clock restarted \(t0 \d+ after \d+\): time segment 1 starts at the "
+                        r"wall clock(; the seq gap of \d+ in front of it is not a loss \(seq restarted\))?",
+                        ev["message"]), ev["message"]
+    assert back < stamp < back + 5e9      # the wall clock when the restarted board was read
+    assert not events(msgs, "frames_lost")
+    assert_time_goes_on(msgs)
+    assert sum(s > stamp for t, s, _ in msgs if t == "/cm/ch0/severity") >= 1
+
+
+def test_a_board_clock_running_fast_is_re_anchored_to_the_wall_clock(tmp_path):
+    """Live on a pty: a board whose clock runs twice as fast as the wall clock (1 s of blocks
+    every 0.5 s for 6.5 s): one time_base event says it ran ahead, and the stamps never go back."""
+    master, slave = os.openpty()
+    d = start_daemon(tmp_path, os.ttyname(slave), max_drift_s=2.0)
+    try:
+        time.sleep(1.0)                     # the daemon has opened the port
+        seq, t0 = 0, 0
+        for k in range(13):
+            data, seq = rms_run(seq, blocks(100, start=t0), st=status() if k == 0 else None)
+            t0 += 100 * 250
+            os.write(master, data)
+            time.sleep(0.5)
+        err = stop(d)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0, err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    (stamp, ev), = events(msgs, "time_base")
+    assert re.fullmatch(r"board clock ahead of the wall clock by \d+\.\d s \(it runs at \d+ Hz for fs "
+                        r"25000 Hz\): time segment 1 re-anchored to the wall clock", ev["message"])
+    assert ev["details"]["reason"] == "drift" and ev["details"]["offset_s"] > 2.0
+    assert 40000 < ev["details"]["rate_hz"] < 60000
+    assert_time_goes_on(msgs)
+
+
+# ---- item 3: stream content never ends the daemon ------------------------------------------
+def test_a_t0_stuck_at_one_value_does_not_end_the_replay(tmp_path):
+    data, _ = rms_run(0, [1000] * 3000, st=status())
+    p, msgs, rss = replay(tmp_path, data)
+    assert p.returncode == 0, p.stderr
+    assert "Recursion" not in p.stderr and "Traceback" not in p.stderr
+    assert "(3000 observations, 0 missing, 0 frames lost)" in p.stderr
+    assert_time_goes_on(msgs)
+    assert rss < 100 * MB
+
+
+def test_a_t0_stuck_at_one_value_does_not_end_the_daemon(tmp_path):
+    """Live on a pty: 3000 frames with one t0 (and a STATUS every 100): the daemon runs on,
+    stops cleanly on SIGTERM, and its decisions are stamped one after the other."""
+    master, slave = os.openpty()
+    d = start_daemon(tmp_path, os.ttyname(slave))
+    try:
+        time.sleep(1.0)                     # the daemon has opened the port
+        seq = 0
+        for _ in range(30):
+            data, seq = rms_run(seq, [1000] * 100, st=status())
+            os.write(master, data)
+        time.sleep(1.5)
+        assert d.poll() is None
+        err = stop(d)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0, err
+    assert "Recursion" not in err and "Traceback" not in err and "output error" not in err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    assert len([t for t, _, _ in msgs if t == "/cm/ch0/severity"]) >= 25
+    assert_time_goes_on(msgs)
+
+
+def test_nine_channels_without_a_channel_list_monitor_eight_and_say_so(tmp_path):
+    data, _ = rms_run(0, blocks(3000), c=9, st=status(9))
+    p, msgs, rss = replay(tmp_path, data)
+    assert p.returncode == 0, p.stderr
+    assert ("board sends 9 channels, more than the 8 a configuration can name: ch0..ch7 are "
+            "monitored, the rest is not") in said(msgs, "config")
+    assert {t for t, _, _ in msgs if t.endswith("/severity")} == {f"/cm/ch{i}/severity" for i in range(8)}
+    assert_time_goes_on(msgs)
+
+
+# ---- item 4: bounded memory ----------------------------------------------------------------
+def test_t0_jumping_600_s_a_frame_invents_no_missing_observations(tmp_path):
+    data, _ = rms_run(0, blocks(300, step=600 * 25000), st=status())
+    p, msgs, rss = replay(tmp_path, data)
+    assert p.returncode == 0, p.stderr
+    assert "(300 observations, 0 missing, 0 frames lost)" in p.stderr
+    assert "board clock jumped (t0 30000000 after slot 1): time base re-anchored" in said(msgs, "config")
+    assert len(said(msgs, "config")) == 300       # the STATUS's, and one per jump
+    assert rss < 100 * MB
+
+
+def test_a_gap_of_a_minute_inserts_at_most_10_s_of_missing_observations(tmp_path):
+    data, _ = rms_run(0, blocks(1000) + blocks(1000, start=(1000 + 6000) * 250), st=status())
+    p, msgs, rss = replay(tmp_path, data)
+    assert p.returncode == 0, p.stderr
+    assert "(2000 observations, 0 missing, 0 frames lost)" in p.stderr
+    assert "board clock jumped (t0 1750000 after slot 999): time base re-anchored" in said(msgs, "config")
+    assert_time_goes_on(msgs)
+
+
+def test_a_status_announcing_fs_1_mid_stream_invents_no_missing_observations(tmp_path):
+    a, seq = rms_run(0, blocks(3000), st=status())
+    b, _ = rms_run(seq, blocks(3000, start=3000 * 250), st=status(fs=1, block_len=1))
+    p, msgs, rss = replay(tmp_path, a + b)
+    assert p.returncode == 0, p.stderr
+    assert "board changed fs/block_len to 1/1: time base re-anchored" in said(msgs, "config")
+    assert "(6000 observations, 0 missing, 0 frames lost)" in p.stderr
+    assert_time_goes_on(msgs)
+    assert rss < 100 * MB
+
+
+def test_raw_frames_in_an_rms_stream_are_ignored_and_counted(tmp_path):
+    a, seq = rms_run(0, blocks(1000), st=status())
+    raw = b"".join(encode_raw(seq + k, 1000 * 250 + k * 250, 0, np.full(250, 100, np.uint16))
+                   for k in range(500))
+    b, _ = rms_run(seq + 500, blocks(1000, start=1000 * 250))
+    p, msgs, rss = replay(tmp_path, a + raw + b)
+    assert p.returncode == 0, p.stderr
+    assert "WARNING decode_error: 500 RAW frame(s) ignored: the board is in RMS mode (STATUS)" in p.stderr
+    assert "20.0 s of ADC time" in p.stderr and "(2000 observations, 0 missing, 0 frames lost)" in p.stderr
+    assert_time_goes_on(msgs)
+
+
+def test_rms_frames_in_a_raw_stream_are_ignored_and_counted(tmp_path):
+    st = Status(0x0102, MODE_RAW, 1, 25000, 250, 0, 1, 0, 0, (0.01,), (2048.0,))
+    rng = np.random.default_rng(0)
+    out, seq = bytearray(encode_status(0, 0, st)), 1
+    for k in range(2000):
+        if 1000 <= k < 1100:
+            out += encode_rms(seq, k * 250, [0.5])
+        else:
+            out += encode_raw(seq, k * 250, 0, (2048 + 50 * rng.standard_normal(250)).astype(np.uint16))
+        seq += 1
+    p, msgs, rss = replay(tmp_path, bytes(out))
+    assert p.returncode == 0, p.stderr
+    assert "WARNING decode_error: 100 RMS frame(s) ignored: the board is in RAW mode (STATUS)" in p.stderr
+    assert "(1900 observations, 100 missing, 0 frames lost)" in p.stderr
+    assert_time_goes_on(msgs)
+    assert rss < 100 * MB
+
+
+# ---- the same invariants under random time ---------------------------------------------------
+def random_time_stream(n: int, seed: int) -> bytes:
+    """``n`` valid-CRC frames of one channel whose t0 steps are random (on by a block, a few
+    blocks, minutes, stuck, back), with STATUS frames of random mode, fs and block_len, and
+    RMS and RAW frames mixed."""
+    rng = np.random.default_rng(seed)
+    out, t0 = bytearray(), 0
+    steps = [250, 250, 250, 250, 500, 2500, 0, -250 * 100, 600 * 25000, 10**9]
+    for seq in range(n):
+        t0 = max(0, t0 + int(rng.choice(steps)))
+        r = rng.random()
+        if r < 0.02:
+            fs, bl = int(rng.choice([1, 100, 25000, 10**6])), int(rng.choice([1, 10, 250, 4096]))
+            out += encode_status(seq, t0, status(mode=int(rng.choice([MODE_RMS, MODE_RAW])), fs=fs,
+                                                 block_len=bl))
+        elif r < 0.8:
+            out += encode_rms(seq, t0, [float(rng.choice([0.5, 1e30, np.nan, -1.0]))])
+        else:
+            out += encode_raw(seq, t0, 0, rng.integers(0, 4096, 250).astype(np.uint16))
+    return bytes(out)
+
+
+def test_random_time_keeps_the_replay_running_bounded_and_in_order(tmp_path):
+    """Seeded: 3000 frames here, ``CMSENSORD_STREAM_FRAMES=100000`` for the long run."""
+    n = int(os.environ.get("CMSENSORD_STREAM_FRAMES", "3000"))
+    p, msgs, rss = replay(tmp_path, random_time_stream(n, seed=11))
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "Traceback" not in p.stderr
+    assert rss < 100 * MB
+    stamps = [s for t, s, _ in msgs if t.endswith("/severity")]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
