@@ -36,6 +36,7 @@ PROCESS_MODULES = frozenset({
     "test_replay.py",
     "test_systemd.py",
     "test_traps.py",
+    "test_stream_random.py",
     "test_realdata.py",
     "test_import.py",
     "test_stream_time.py",

@@ -83,6 +83,7 @@ class EventLog:
         self.on_event = on_event
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
+        self._newest = 0                  # stamp of the newest event written
         self._held: dict[tuple[str, str | None], _Held] = {}
 
     def emit(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, *,
@@ -139,6 +140,7 @@ class EventLog:
 
     def _record(self, kind: str, channel: str | None, message: str, stamp_ns: int,
                 extra: dict[str, Any], log_level: int | None) -> None:
+        stamp_ns = self._newest = max(stamp_ns, self._newest)   # /cm/events never goes back in time
         m = messages.event(stamp_ns, kind, channel, message, extra)
         self.sink.write(*m)
         self.recent.append(m.msg)

@@ -68,6 +68,7 @@ class Processor:
         self.raw = RawInput(cfg)
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
+        self._orders_refused: int | None = None  # the fs at which the order chain could not be made
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -137,11 +138,14 @@ class Processor:
             elif f.type == FrameType.STATUS:
                 st, news = self.setup.decode(f)
                 if st is not None and news:     # it changes the time base or the channels:
-                    rms, raw = self._flush(rms, raw)    # the frames before it go first
+                    rms, raw = self._flush(rms, raw)    # the frames before it go first,
+                    self._release_decisions(final=True)  # decided on the old time base
                     self.setup.apply(f, st)
                 self.setup.status = st or self.setup.status
                 if self.status is not None:
                     self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
+                    self._out(self.shaft.notes)
+                    self.shaft.notes.clear()
                     if self.raw.waiting:
                         self._flush_raw([])
         self._flush(rms, raw)
@@ -152,6 +156,7 @@ class Processor:
         board reset starts a new segment (its seq gap is no loss), a seq gap is counted as
         lost frames.  True when ``f`` is to be skipped (a frame of the other mode)."""
         if self.segments.pending(f):
+            self._release_decisions(final=True)     # decided on the old segment's time base
             return self.segments.start(f)
         self.frames_lost += f.lost_before
         self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
@@ -234,8 +239,15 @@ class Processor:
             if not (vib and self.cfg.orders.enabled and self.severity is not None
                     and self.shaft.ensure(self.status, self.clock)):
                 return None
+            if self._orders_refused == self.clock.fs:
+                return None
             from cmsensord.monitor.orders import OrderChain  # scipy is loaded only for the raw chain
-            self.orders = OrderChain(self.cfg, vib, self.shaft.tracker(), fs=self.clock.fs, clock=self.clock)
+            try:
+                self.orders = OrderChain(self.cfg, vib, self.shaft.tracker(), fs=self.clock.fs, clock=self.clock)
+            except ValueError as exc:           # a rate the tracked orders do not fit in
+                self._orders_refused = self.clock.fs
+                self.event("config", None, f"order tracker not started at fs {self.clock.fs} Hz: {exc}")
+                return None
         return self.orders
 
     def _feed_tacho(self, end: bool = False) -> None:
@@ -299,7 +311,7 @@ class Processor:
         cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
         for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
-            stamp = self.clock.slot_stamp_ns(d.slot)
+            stamp = self.clock.slot_stamp_ns((sev.start_slot or 0) + d.slot)   # d.slot counts from the chain's start
             if sev.notes:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()

@@ -72,6 +72,7 @@ class SeverityChain:
         self.trace_i = min(trace_filter, n) - 1
         self.gate = SpeedGate(PENDING_DECISION_SLOTS)   # (outlier, valid[, level ratio]) per slot
         self.rate = fs / block_len
+        self.start_slot: int | None = None      # the block clock's slot of this chain's first observation
         self.cfg_f_r = np.array([m.f_r for m in mons])
         self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
         self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
@@ -115,6 +116,8 @@ class SeverityChain:
         out = self.bank.process(y, valid)
         if self.gate.end is None:
             self.gate.restart(first_slot)
+        if self.start_slot is None:
+            self.start_slot = first_slot
         if self.combined is None:
             self.gate.push(out.outlier, valid)
         else:

@@ -41,6 +41,9 @@ class Shaft:
         self.waiting: list[Frame] = []
         self.tacho: TachoTracker | None = None  # once STATUS announces a tacho
         self._prev_t0: int | None = None         # t0 of the last TACHO frame fed
+        self._fed_t0: int | None = None          # newest t0 given to the tracker
+        self._bad_ppr: int | None = None
+        self.notes: list[Event] = []             # events of ensure(), for the processor to emit
         self._gaps: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # [first, end) samples not covered
         self.missed_in_lost_frames = 0
 
@@ -58,6 +61,12 @@ class Shaft:
 
             t = self.cfg.tacho
             ppr = t.ppr or status.tacho_ppr
+            if not 1 <= ppr <= 255:
+                if ppr != self._bad_ppr:
+                    self._bad_ppr = ppr
+                    self.notes.append(Event("decode_error", None, f"STATUS announces a tacho with {ppr} pulses "
+                                            "per revolution: no shaft speed (set tacho.ppr)"))
+                return False
             h = max(1, round(t.smoothing_revs * ppr))
             m = min(64, max(2, round(t.causal_revs * ppr)))
             self.tacho = TachoTracker(clock.fs, ppr, block_len=clock.block_len, half_window=h,
@@ -71,9 +80,13 @@ class Shaft:
 
     def feed(self, clock: BlockClock) -> list[Event]:
         """The waiting TACHO frames -> the tracker; its events (and bad payloads)."""
-        frames, self.waiting = self.waiting, []
+        frames, dropped = self._in_time_order(self.waiting)
+        self.waiting, events = [], []
+        if dropped:
+            events.append(Event("decode_error", None, f"{dropped} TACHO frame(s) before the newest one "
+                                "in board time dropped (the tacho needs time order)"))
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        edges, events = [], []
+        edges = []
         for f in frames:
             try:
                 edges.append(decode_tacho(f.payload))
@@ -90,6 +103,17 @@ class Shaft:
                                 {"count": int(ev.count)}))
         return events
 
+    def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int]:
+        """The frames at or after the newest t0 fed so far, and how many stepped back (dropped)."""
+        kept = []
+        last = self._fed_t0
+        for f in frames:
+            if last is None or f.t0_unwrapped >= last:
+                kept.append(f)
+                last = f.t0_unwrapped
+        self._fed_t0 = last
+        return kept, len(frames) - len(kept)
+
     def _note_gaps(self, t0: np.ndarray, L: int) -> None:
         """Gaps between consecutive TACHO frames (one per block): lost frames."""
         if not len(t0):
@@ -104,12 +128,17 @@ class Shaft:
         return any(a - L <= sample < b + L for a, b in self._gaps)
 
     def final_slot(self, clock: BlockClock) -> int:
-        """The first observation slot whose speed is not final yet."""
+        """The first observation slot whose speed is not final yet (none before the slots
+        are anchored)."""
+        if clock.slot0_t0 is None:
+            return 0
         return int((self.tracker().final_until - clock.slot_t0(0)) // clock.block_len)
 
     def period_f_r(self, clock: BlockClock, cfg_f_r: np.ndarray, end_slot: int, period: int) -> np.ndarray:
         """Mean tacho speed [Hz] over the decision period ending at ``end_slot``, per channel
         (the configured ``cfg_f_r`` where the tacho has no valid speed)."""
+        if clock.slot0_t0 is None:
+            return cfg_f_r
         slots = np.arange(end_slot - period, end_slot)
         hz, _, ok = self.tracker().evaluate(clock.slot_t0(slots))
         if ok.mean() < 0.5:
