@@ -163,7 +163,7 @@ def test_an_unreachable_free_space_floor_deletes_nothing_and_says_so(tmp_path, c
 
 def test_a_reachable_free_space_floor_deletes_the_oldest_but_never_the_newest(
         tmp_path, clock, monkeypatch):
-    import cmsensord.sinks.rotating as rotating
+    import cmsensord.sinks.retention as retention
     for k in range(4):
         RotatingSink(output(tmp_path), clock=clock,
                      wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
@@ -174,7 +174,7 @@ def test_a_reachable_free_space_floor_deletes_the_oldest_but_never_the_newest(
     def free_bytes(_path):                               # freed only by what retention deletes
         return state["free"] + sum(size for p in files if not p.exists())
 
-    monkeypatch.setattr(rotating, "_free_bytes", free_bytes)
+    monkeypatch.setattr(retention, "free_bytes", free_bytes)
     floor_mb = 2.5 * size / 1e6                          # reached after three deletions
     events = []
     sink = RotatingSink(output(tmp_path, min_free_mb=floor_mb), clock=clock,

@@ -55,7 +55,6 @@ while the disk fails cannot loop: it is just counted as dropped.
 from __future__ import annotations
 
 import collections
-import contextlib
 import errno
 import logging
 import os
@@ -66,32 +65,23 @@ from pathlib import Path
 from typing import Any
 
 from cmsensord.config import OutputConfig
-from cmsensord.sinks.mcap_file import McapSink, SinkIOError, fsync_dir, log_files
+from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
+from cmsensord.sinks.retention import DISK_EVENT, MB, apply_retention, errno_name
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 log = logging.getLogger("cmsensord")
 
 #: Event kinds (values of ``schemas.EVENT_KINDS``). Outages, their end and retention
 #: deletions are ``disk_error`` events told apart by ``details["action"]``.
-DISK_EVENT = "disk_error"
 SALVAGE_EVENT = "salvage"
 
 #: errno values that mean the disk is full or failing rather than misconfigured: at
 #: start the sink then runs without a file and retries (at run time every error does)
 _TRANSIENT = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO})
 _FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
-_MB = 1_000_000
+_MB = MB
 _QUEUED_EVENTS = 1000
-
-
-def _errno_name(code: int | None) -> str | None:
-    return errno.errorcode.get(code, str(code)) if code is not None else None
-
-
-def _free_bytes(path: str | Path) -> int:
-    st = os.statvfs(path)
-    return st.f_bavail * st.f_frsize
 
 
 class RotatingSink:
@@ -209,7 +199,7 @@ class RotatingSink:
         if isinstance(result, SinkIOError):
             self.disk_errors += 1
             self._emit(DISK_EVENT, f"{result}; left for the next start", details={
-                "action": "salvage_failed", "op": result.op, "errno": _errno_name(result.errno),
+                "action": "salvage_failed", "op": result.op, "errno": errno_name(result.errno),
                 "file": str(result.path)})
             return
         if result.action == "busy":
@@ -404,7 +394,7 @@ class RotatingSink:
                 done = cur.path              # finished and renamed; the directory fsync failed
                 self.disk_errors += 1
                 self._emit(DISK_EVENT, str(err), details={
-                    "action": "dir_fsync_failed", "op": err.op, "errno": _errno_name(err.errno),
+                    "action": "dir_fsync_failed", "op": err.op, "errno": errno_name(err.errno),
                     "file": str(done)})
             else:
                 self._failed(err, cur)
@@ -478,7 +468,7 @@ class RotatingSink:
             self._emit(DISK_EVENT, f"{err}; {what}; {lost} message(s) lost{unsure_text}; "
                        f"trying a new file at once, then every {self.output.retry_s:g} s",
                        count=lost, details={"action": "abandoned", "op": err.op,
-                                            "errno": _errno_name(err.errno), "unsynced": unsure,
+                                            "errno": errno_name(err.errno), "unsynced": unsure,
                                             "file": str(kept or err.path)})
         if err.errno in _FULL:
             self._retention()
@@ -533,82 +523,6 @@ class RotatingSink:
     # -- retention ---------------------------------------------------------
 
     def _retention(self) -> None:
-        """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``.
-
-        For ``min_free_mb`` the newest finished file is never deleted, and
-        nothing is when deleting all the others could not reach it (the free
-        space is taken by something else): a ``low_space`` event says so.
-        """
-        o = self.output
-        cap = o.retain_mb * _MB if o.retain_mb else None
-        floor = o.min_free_mb * _MB if o.min_free_mb else None
-        if cap is None and floor is None:
-            return
-        try:
-            finished, parts = log_files(o.dir, o.prefix)
-            free = _free_bytes(o.dir) if floor is not None else 0
-        except OSError:
-            return                           # no directory yet, or unreadable: nothing to do
-        stats = {}
-        for path in finished + parts:
-            with contextlib.suppress(OSError):  # gone meanwhile
-                stats[path] = path.lstat()   # a planted link: its own size, never its target's
-        sizes = {p: st.st_size for p, st in stats.items()}
-        total = sum(sizes.values())
-        oldest = [p for p in finished if p in stats]   # by the stamp in the name
-        older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
-        reachable = floor is not None and free + older >= floor
-        deleted: list[Path] = []
-        freed = 0
-        for path in oldest:
-            over = cap is not None and total > cap
-            low = reachable and floor is not None and free < floor and path != oldest[-1]
-            if not (over or low):
-                break
-            try:
-                path.unlink()
-            except FileNotFoundError:
-                pass
-            except OSError as err:
-                self.disk_errors += 1
-                self._emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
-                           details={"action": "retention_failed", "errno": _errno_name(err.errno),
-                                    "file": str(path)})
-                break
-            size = sizes[path]
-            total -= size
-            freed += size
-            deleted.append(path)
-            if floor is not None:
-                try:
-                    free = _free_bytes(o.dir)
-                except OSError:
-                    free += size
-        if deleted:
-            with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
-                fsync_dir(Path(o.dir))
-            self.paths = [p for p in self.paths if p not in deleted]
-            why = []
-            if cap is not None:
-                why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
-                           f"(now {total / _MB:.1f} MB)")
-            if floor is not None:
-                why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
-                           f"(now {free / _MB:.1f} MB)")
-            names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
-            self._emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
-                       f"({freed / _MB:.1f} MB: {names}) to keep {' and '.join(why)}",
-                       count=len(deleted), details={"action": "retention",
-                                                    "files": [p.name for p in deleted],
-                                                    "bytes": freed})
-        low = floor is not None and free < floor
-        if low and not self._low_space_told and not deleted:
-            self._low_space_told = True
-            left = [p for p in oldest if p not in deleted]
-            self._emit(DISK_EVENT, f"{o.dir}: {free / _MB:.1f} MB free, below min_free_mb = "
-                       f"{o.min_free_mb:g} MB, which deleting the {max(0, len(left) - 1)} older "
-                       f"finished log(s) of prefix {o.prefix!r} ({older / _MB:.1f} MB; never the "
-                       f"newest) cannot reach: none deleted for it",
-                       details={"action": "low_space", "bytes": free})
-        elif not low:
-            self._low_space_told = False
+        """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``
+        (:func:`cmsensord.sinks.retention.apply_retention`)."""
+        apply_retention(self)

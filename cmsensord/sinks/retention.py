@@ -1,0 +1,111 @@
+"""Retention of a rotating sink's finished log files: size cap and free-space floor."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from cmsensord.sinks.mcap_file import fsync_dir, log_files
+
+if TYPE_CHECKING:
+    from cmsensord.sinks.rotating import RotatingSink
+
+#: the kind of retention and disk events (``details["action"]`` tells them apart)
+DISK_EVENT = "disk_error"
+MB = 1_000_000
+
+
+def errno_name(code: int | None) -> str | None:
+    """errno's symbolic name (ENOSPC ...), None without a code."""
+    return errno.errorcode.get(code, str(code)) if code is not None else None
+
+
+def free_bytes(path: str | Path) -> int:
+    """Bytes free for an unprivileged writer on the file system of ``path``."""
+    st = os.statvfs(path)
+    return st.f_bavail * st.f_frsize
+
+
+def apply_retention(sink: RotatingSink) -> None:
+    """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``.
+
+    For ``min_free_mb`` the newest finished file is never deleted, and
+    nothing is when deleting all the others could not reach it (the free
+    space is taken by something else): a ``low_space`` event says so.
+    """
+    o = sink.output
+    cap = o.retain_mb * MB if o.retain_mb else None
+    floor = o.min_free_mb * MB if o.min_free_mb else None
+    if cap is None and floor is None:
+        return
+    try:
+        finished, parts = log_files(o.dir, o.prefix)
+        free = free_bytes(o.dir) if floor is not None else 0
+    except OSError:
+        return                           # no directory yet, or unreadable: nothing to do
+    stats = {}
+    for path in finished + parts:
+        with contextlib.suppress(OSError):  # gone meanwhile
+            stats[path] = path.lstat()   # a planted link: its own size, never its target's
+    sizes = {p: st.st_size for p, st in stats.items()}
+    total = sum(sizes.values())
+    oldest = [p for p in finished if p in stats]   # by the stamp in the name
+    older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
+    reachable = floor is not None and free + older >= floor
+    deleted: list[Path] = []
+    freed = 0
+    for path in oldest:
+        over = cap is not None and total > cap
+        low = reachable and floor is not None and free < floor and path != oldest[-1]
+        if not (over or low):
+            break
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError as err:
+            sink.disk_errors += 1
+            sink._emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
+                       details={"action": "retention_failed", "errno": errno_name(err.errno),
+                                "file": str(path)})
+            break
+        size = sizes[path]
+        total -= size
+        freed += size
+        deleted.append(path)
+        if floor is not None:
+            try:
+                free = free_bytes(o.dir)
+            except OSError:
+                free += size
+    if deleted:
+        with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
+            fsync_dir(Path(o.dir))
+        sink.paths = [p for p in sink.paths if p not in deleted]
+        why = []
+        if cap is not None:
+            why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
+                       f"(now {total / MB:.1f} MB)")
+        if floor is not None:
+            why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
+                       f"(now {free / MB:.1f} MB)")
+        names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
+        sink._emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
+                   f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}",
+                   count=len(deleted), details={"action": "retention",
+                                                "files": [p.name for p in deleted],
+                                                "bytes": freed})
+    low = floor is not None and free < floor
+    if low and not sink._low_space_told and not deleted:
+        sink._low_space_told = True
+        left = [p for p in oldest if p not in deleted]
+        sink._emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
+                   f"{o.min_free_mb:g} MB, which deleting the {max(0, len(left) - 1)} older "
+                   f"finished log(s) of prefix {o.prefix!r} ({older / MB:.1f} MB; never the "
+                   f"newest) cannot reach: none deleted for it",
+                   details={"action": "low_space", "bytes": free})
+    elif not low:
+        sink._low_space_told = False
