@@ -140,7 +140,6 @@ class EventLog:
 
     def _record(self, kind: str, channel: str | None, message: str, stamp_ns: int,
                 extra: dict[str, Any], log_level: int | None) -> None:
-        stamp_ns = self._newest = max(stamp_ns, self._newest)   # /cm/events never goes back in time
         m = messages.event(stamp_ns, kind, channel, message, extra)
         self.sink.write(*m)
         self.recent.append(m.msg)
