@@ -44,6 +44,8 @@ PROCESS_MODULES = frozenset({
     "test_reader_thread.py",
     "test_stream_events.py",
     "test_vkf_command.py",
+    "test_simulate_scenarios.py",
+    "test_acoustic_calib_command.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
