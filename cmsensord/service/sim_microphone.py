@@ -104,6 +104,6 @@ def microphone_config(cfg: Config, scenario: str, microphones: tuple[int, ...], 
                                   f"{ch.kind} cannot take", ch.kind)
         return cfg
     cal = cfg.acoustic.calibration or str(simulator_calibration())
-    channels = tuple(dataclasses.replace(ch, kind="microphone", calibration=cal)
+    channels = tuple(dataclasses.replace(ch, kind="microphone", calibration=cal, unit="Pa")
                      if ch.index in microphones else ch for ch in cfg.channels)
     return dataclasses.replace(cfg, channels=channels)
