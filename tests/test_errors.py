@@ -4,8 +4,8 @@ or 78 (configuration), no traceback.  The table below is the specification.
 Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
 (YAML syntax), ``unit.yaml`` (a unit that does not fit the channel's kind), ``nocal.yaml`` (a
-microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text), ``capdir/`` (a directory), ``afile`` (a
-regular file, so ``afile/logs`` cannot be a directory).
+microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text),
+``capdir/`` (a directory), ``afile`` (a regular file, so ``afile/logs`` cannot be a directory).
 """
 
 from __future__ import annotations
