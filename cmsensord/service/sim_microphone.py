@@ -44,16 +44,22 @@ def cache_dir() -> Path:
     return Path(base) / "cmsensord"
 
 
-def simulator_calibration() -> Path:
+def simulator_calibration(fallback_dir: Path | None = None) -> Path:
     """The acoustic calibration of the simulated motor: the cached file, made first if missing
-    (about 10 s); a line on stderr says which and how."""
+    (10-30 s); a line on stderr says which and how.  Where the cache directory cannot be made,
+    the file goes into ``fallback_dir`` (the run's output directory)."""
     key = hashlib.sha256(repr((sorted(RECIPE.items()), __version__)).encode()).hexdigest()[:12]
     path = cache_dir() / f"acoustic-simulated-motor-{key}.json"
     if path.is_file():
         print(f"acoustic calibration of the simulated motor: {path} (cached)", file=sys.stderr)
         return path
     t = time.monotonic()
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        if fallback_dir is None:
+            raise
+        path = fallback_dir / path.name
     with tempfile.TemporaryDirectory(dir=path.parent) as tmp:
         cal = _fit(Path(tmp))
         from cmsensord.acoustic_calib import save_calibration
@@ -88,7 +94,7 @@ def _fit(tmp: Path):
 
 
 def microphone_config(cfg: Config, scenario: str, microphones: tuple[int, ...], *,
-                      from_file: str | None) -> Config:
+                      from_file: str | None, fallback_dir: Path | None = None) -> Config:
     """``cfg`` for a scenario whose channels ``microphones`` carry sound (Pa).
 
     Without a configuration file: those channels become ``kind: microphone`` with the
@@ -103,7 +109,7 @@ def microphone_config(cfg: Config, scenario: str, microphones: tuple[int, ...], 
                                   f"sends {sends} on channel {ch.index}, which a channel of kind "
                                   f"{ch.kind} cannot take", ch.kind)
         return cfg
-    cal = cfg.acoustic.calibration or str(simulator_calibration())
+    cal = cfg.acoustic.calibration or str(simulator_calibration(fallback_dir))
     channels = tuple(dataclasses.replace(ch, kind="microphone", calibration=cal, unit="Pa")
                      if ch.index in microphones else ch for ch in cfg.channels)
     return dataclasses.replace(cfg, channels=channels)

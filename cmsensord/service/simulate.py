@@ -1,4 +1,9 @@
-"""``cmsensord --simulate``: firmware_sim on a pty, and the daemon's live loop on that pty."""
+"""``cmsensord --simulate``: firmware_sim on a pty, and the daemon's live loop on that pty.
+
+Each scenario runs with its own defaults (:data:`SCENARIO_RUNS`: length, speed, channels,
+mode, microphone channels) unless the command line says otherwise; the board's pty has flow
+control, so a daemon that falls behind slows the board down and no byte is dropped.
+"""
 
 from __future__ import annotations
 
@@ -97,8 +102,6 @@ def simulate(opt: SimulateOptions) -> int:
                           f"{max(run.microphones)}: give at least {max(run.microphones) + 1} channels",
                           opt.channels)
     cfg = load_config(opt.config, n_channels=opt.channels) if opt.config else default_config(opt.channels)
-    if run.microphones:
-        cfg = microphone_config(cfg, opt.scenario, run.microphones, from_file=opt.config)
     runup = opt.scenario in RUNUP_ORDERS
     mode = opt.mode
     tacho = opt.tacho or runup
@@ -111,6 +114,9 @@ def simulate(opt: SimulateOptions) -> int:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise SinkError(f"{out_dir}: cannot create the output directory: {exc.strerror or exc}") from None
+    if run.microphones:
+        cfg = microphone_config(cfg, opt.scenario, run.microphones, from_file=opt.config,
+                                fallback_dir=Path(out_dir))
     cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=out_dir,
                                                               akf_trace=cfg.output.akf_trace or opt.akf_trace))
     cmd = [sys.executable, "-P", "-m", "firmware_sim", "--pty", "--scenario", opt.scenario,
