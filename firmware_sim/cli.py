@@ -9,7 +9,9 @@
 ``--out`` writes the bytes as fast as possible and prints a one-line summary.
 ``--pty`` prints the slave device path as the first line of stdout (flushed),
 then streams paced at ``--speed`` x real time until ``--duration`` or
-SIGINT/SIGTERM, and prints the link statistics. Bad arguments give a one-line
+SIGINT/SIGTERM, and prints the link statistics; a reader that falls behind loses the
+bytes that do not fit in the pty, unless ``--flow-control`` makes the board wait for it
+(what ``cmsensord --simulate`` uses). Bad arguments give a one-line
 error and exit code 2. ``--truth`` writes the true waveforms (t, rpm, turns,
 each component of the run-up scenarios) of channel 0 to an .npz file
 (:func:`firmware_sim.scenarios.write_truth`). When the stream needs more
