@@ -7,12 +7,15 @@ and, beside them, the zero-phase second-generation VKF of the whole record
 with ``method: "batch"``, in the same 0.1 s blocks and on the same time base.
 
 Steps: RAW counts -> m/s² (STATUS scale/offset or the configuration), the
-tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record, so
-every value is final), zero-phase decimation to at least 5x the highest
+tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record and
+keeping all of it, so every value is final and known), zero-phase decimation to at least 5x the highest
 tracked frequency (``scipy.signal.decimate``, FIR, forwards and backwards),
 phases θ_k = 2π o_k turns (or 2π f t), one coupled banded solve per channel.
 A lost RAW block is zeros in the record (the batch filter sees a short gap); each
 /orders message says which fraction of its block's samples had none (``missing_fraction``).
+Whatever it cannot handle (no RAW blocks or tacho, a bandwidth too narrow for double
+precision or not below the tracked rate, a record too large for memory) is one
+CmsensordError line, and the files of the run are deleted: nothing is left behind.
 This is an offline tool: it holds the whole record in memory (about 8 bytes
 per sample and channel at 25 kHz, plus ~1 kB per decimated sample for the
 solve with 2 poles and 3 components).
