@@ -42,6 +42,8 @@ if TYPE_CHECKING:
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
+#: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
+MAX_RUN_SLOTS = 2 * MAX_BATCH
 
 
 class Processor:
@@ -64,7 +66,8 @@ class Processor:
         self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
-        self.log = EventLog(sink, lambda: self.clock.last_stamp_ns or self.clock_ns(), on_event)
+        self.log = EventLog(sink, lambda: self.clock.floor_ns or self.clock_ns(), on_event,
+                            lambda: self.clock.seg_stamp_ns)
         self.raw = RawInput(cfg)
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
@@ -173,6 +176,8 @@ class Processor:
             self._out(self.orders.finish())
         self._release_decisions(final=True)
         self.log.summarise(final=True)
+        self.log.flush()
+        self.log.hold = False
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
         self._flush_rms(rms)
@@ -265,8 +270,11 @@ class Processor:
         """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain."""
         while len(t0):
             slots, n = self.clock.place(t0)
-            if n:
-                self._run(slots, vals[:n])
+            a = 0
+            while a < n:                        # bounded memory: at most MAX_RUN_SLOTS slots a run
+                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + MAX_RUN_SLOTS))
+                self._run(slots[a:b], vals[a:b])
+                a = b
             if n == len(t0):
                 return
             old = self.clock.next_slot
@@ -311,10 +319,11 @@ class Processor:
         cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
         for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
-            stamp = self.clock.slot_stamp_ns((sev.start_slot or 0) + d.slot)   # d.slot counts from the chain's start
+            stamp = self.clock.slot_end_ns((sev.start_slot or 0) + d.slot - 1)   # d.slot: from the chain's start
             if sev.notes:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
+            self.log.release(stamp)             # events well before it, at a point set by the stream
             self._out(sev.decision(d, stamp))
             self.write_diagnostics(stamp)
 

@@ -169,6 +169,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                     and len(source.queue) < DRIFT_QUEUE_MAX):
                 proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
             watch.link_events()
+            if not frames:              # no data moves the events' release on: the wall clock does
+                proc.log.release(time.time_ns())
             now = time.monotonic()
             if stop.reopen:             # SIGHUP: finish the current file, start a new one
                 stop.reopen = False
