@@ -25,6 +25,7 @@ from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
 from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
+from cmsensord.journal import JournalStream, error_line, setup_logging, under_journal
 from cmsensord.service.live import run_live
 from cmsensord.service.record import record
 from cmsensord.service.replay import replay
@@ -52,18 +53,12 @@ def _scenarios_help() -> str:
     return "scenarios (--scenario):\n" + "\n".join(lines)
 
 
-def _setup_logging(verbose: bool, daemon: bool = True) -> None:
-    """Events to stderr (the journal under systemd): INFO and up for the daemon, WARNING and
-    up for the one-shot subcommands (they print their own summary), everything with -v."""
-    level = logging.DEBUG if verbose else logging.INFO if daemon else logging.WARNING
-    logging.basicConfig(level=level, format="%(levelname)s %(message)s", stream=sys.stderr)
-
-
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line (and the pointer to --help), exit 2."""
 
     def error(self, message: str):
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        prefix = "<3>" if isinstance(sys.stderr, JournalStream) else ""
+        self.exit(EXIT_USAGE, f"{prefix}{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 # --------------------------------------------------------------------------- argparse
@@ -77,7 +72,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
-    p.add_argument("-v", "--verbose", action="store_true", help="log every event (debug level)")
+    p.add_argument("-v", "--verbose", action="count", default=0,
+                   help="log more: -v the per-AKF anomaly flags too, -vv everything (debug)")
     sim = p.add_argument_group("simulation (--simulate)")
     sim.add_argument("--simulate", action="store_true",
                      help="run a simulated ADC board on a pty and the daemon on it")
@@ -191,33 +187,34 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.config:
         cfg, auto = _config_for(args.config)
         return run_live(cfg, auto_channels=auto, capture_path=args.capture)
-    print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
-          "(see cmsensord --help)", file=sys.stderr)
+    error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
+               "(see cmsensord --help)")
     return EXIT_USAGE
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if under_journal() and not isinstance(sys.stderr, JournalStream):
+        sys.stderr = JournalStream(sys.stderr)  # type: ignore[assignment]
     parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
     args = parser.parse_args(argv)
-    _setup_logging(args.verbose, daemon=args.command is None)
+    setup_logging(args.verbose, daemon=args.command is None)
     try:
         return _dispatch(args)
     except ConfigError as exc:
         if exc.source.startswith("--"):         # a command-line option: a usage error
-            print(f"cmsensord: {exc}", file=sys.stderr)
+            error_line(f"cmsensord: {exc}")
             return EXIT_USAGE
-        print(f"cmsensord: configuration error: {exc}", file=sys.stderr)
+        error_line(f"cmsensord: configuration error: {exc}")
         return EXIT_CONFIG
     except SinkError as exc:            # the output directory is a setting (output.dir / --out)
-        print(f"cmsensord: output error: {exc} (set output.dir or --out to a writable directory)",
-              file=sys.stderr)
+        error_line(f"cmsensord: output error: {exc} (set output.dir or --out to a writable directory)")
         return EXIT_CONFIG
     except LinkError as exc:
-        print(f"cmsensord: {exc}", file=sys.stderr)
+        error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
     except CmsensordError as exc:
-        print(f"cmsensord: {exc}", file=sys.stderr)
+        error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130

@@ -25,14 +25,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
 
 log = logging.getLogger("cmsensord")
 
-#: how events go to the log (the journal): per-AKF flags are detail, the
+#: how events go to the log (the journal): per-AKF flags are detail (VERBOSE: -v), the
 #: severity index and everything about the link or the disk is news.
 LOG_LEVEL = {
-    "anomaly_onset": logging.DEBUG, "anomaly_clear": logging.DEBUG,
+    "anomaly_onset": VERBOSE, "anomaly_clear": VERBOSE,
     "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,

@@ -181,6 +181,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 watch.diagnostics(now)
                 if cfg.output.status_line:
                     print(status_line(proc, source), file=sys.stderr, flush=True)
+                else:
+                    log.debug("status: %s", status_line(proc, source))
                 notify.status(service_state())
     finally:
         notify.stopping("stopping: closing the MCAP log")
