@@ -195,7 +195,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if under_journal() and not isinstance(sys.stderr, JournalStream):
-        sys.stderr = JournalStream(sys.stderr)  # type: ignore[assignment]
+        sys.stderr = JournalStream(sys.stderr)
     parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
     args = parser.parse_args(argv)
     setup_logging(args.verbose, daemon=args.command is None)

@@ -126,7 +126,7 @@ def setup_logging(verbose: int, daemon: bool = True) -> bool:
     root.addHandler(handler)
     root.setLevel(level_for(verbose, daemon))
     if journal and not isinstance(sys.stderr, JournalStream):
-        sys.stderr = JournalStream(sys.stderr)  # type: ignore[assignment]
+        sys.stderr = JournalStream(sys.stderr)
     return journal
 
 
