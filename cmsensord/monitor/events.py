@@ -1,6 +1,7 @@
 """The event log: one place for event records, where they go and their journal level.
 
-An event is written to ``/cm/events`` (schema ``event``), kept among the recent
+An event is written to ``/cm/events`` (schema ``event``) and, as a ``foxglove.Log``
+record at its journal level, to ``/cm/log`` (Foxglove's Log panel), kept among the recent
 ones (status line, exit summary), counted by kind, logged to the journal at the
 level of its kind, and handed to ``on_event`` when one is given.  A producer
 that knows better (the sink about its own routine work) passes ``log_level``.
@@ -143,7 +144,9 @@ class EventLog:
                 extra: dict[str, Any], log_level: int | None) -> None:
         m = messages.event(stamp_ns, kind, channel, message, extra)
         self.sink.write(*m)
+        level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
+        self.sink.write(*messages.log(stamp_ns, level, kind, channel, message))
         self.recent.append(m.msg)
-        log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
+        log.log(level, "%s: %s", kind, message)
         if self.on_event is not None:
             self.on_event(m.msg)
