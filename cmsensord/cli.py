@@ -14,8 +14,10 @@ exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -68,10 +70,12 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
         description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, vkf, summary (see "
+        epilog=(_scenarios_help() if with_scenarios else "")
+        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary (see "
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
-    p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
+    p.add_argument("--config", metavar="FILE", help="YAML configuration (`cmsensord config --default` "
+                   "prints every key with its default and meaning)")
     p.add_argument("-v", "--verbose", action="count", default=0,
                    help="log more: -v the per-AKF anomaly flags too, -vv everything (debug)")
     sim = p.add_argument_group("simulation (--simulate)")
@@ -92,7 +96,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,summary}",
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,config,summary}",
                            parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
@@ -121,6 +125,9 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     from cmsensord.importing.command import add_import_parser
     add_import_parser(sub)
     add_calibrate_parser(sub)
+    c = sub.add_parser("config", help="print the default configuration (every key, commented)")
+    c.add_argument("--default", action="store_true", required=True,
+                   help="print config/default.yaml: start a site file from it")
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -164,8 +171,23 @@ def _run_replay(args: argparse.Namespace) -> int:
     return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed)[0]
 
 
+def _print_default_config() -> int:
+    """``cmsensord config --default``: the commented default configuration on stdout."""
+    from cmsensord.config.default_file import default_yaml
+
+    text = default_yaml()
+    if text is None:
+        error_line("cmsensord: the default configuration file is not installed (config/default.yaml)")
+        return 1
+    sys.stdout.write(text)
+    sys.stdout.flush()
+    return 0
+
+
 def _dispatch(args: argparse.Namespace) -> int:
     """Run the subcommand, the simulation or the daemon that ``args`` ask for."""
+    if args.command == "config":
+        return _print_default_config()
     if args.command == "summary":
         return summary(args.mcap, as_json=args.json)
     if args.command == "import":
@@ -218,6 +240,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:             # `cmsensord ... | head -1`: the reader is gone
+        return _quiet_broken_pipe()
+
+
+#: exit status after a closed pipe, as a shell reports a process ended by SIGPIPE
+EXIT_PIPE = 141
+
+
+def _quiet_broken_pipe() -> int:
+    """stdout or stderr is a pipe whose reader has gone (the run is already finished: the MCAP
+    file is closed on the way out): no traceback, nothing more written, exit 141."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(devnull, stream.fileno())
+    os.close(devnull)
+    return EXIT_PIPE
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -45,6 +45,7 @@ PROCESS_MODULES = frozenset({
     "test_stream_events.py",
     "test_journal.py",
     "test_foxglove.py",
+    "test_package.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
