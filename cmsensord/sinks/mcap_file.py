@@ -173,7 +173,8 @@ class McapSink:
         wall_clock: Unix seconds used for the file name (injectable for tests).
         chunk_size: uncompressed bytes after which a chunk is finished anyway.
         reorder_s: the longest a message is held to write the file in log-time order
-            (:class:`~cmsensord.sinks.reorder.ReorderWindow`; 0: written as they come).
+            (:class:`~cmsensord.sinks.reorder.ReorderWindow`; 0: nothing held, a late
+            message gets the newest log time written).
         reorder_horizon_ns: the window's horizon to start with (the previous file's).
 
     Raises:
