@@ -69,6 +69,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
     sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
+    sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
     proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)
     col = _Collector()
     try:

@@ -153,3 +153,17 @@ def test_the_layout_shows_existing_topics(runs):
             assert series["value"].split(".")[0] in topics, series
     assert layout["configById"][next(k for k in layout["configById"] if k.startswith("RawMessages!"))][
         "topicPath"] == "/cm/diagnostics"
+
+
+def test_vkf_writes_its_batch_orders_in_log_time_order(tmp_path):
+    """``cmsensord vkf`` adds the batch orders of the whole run after it: the file is still in
+    log-time order, each batch message at its own stamp (none clamped)."""
+    cap = tmp_path / "co.bin"
+    r = run_module("firmware_sim", "--scenario", "close_orders", "--mode", "raw", "--tacho", "--out", str(cap))
+    assert r.returncode == 0, r.stderr
+    r = cmsensord("vkf", str(cap), "--out", str(tmp_path / "logs"))
+    assert r.returncode == 0, r.stderr
+    path, = (tmp_path / "logs").glob("*.mcap")
+    assert doctor(path) == []
+    batch = [(lt, pt) for t, _, _, lt, pt, m in _read(path) if t.endswith("/orders") and m["method"] == "batch"]
+    assert len(batch) > 20 and all(lt == pt for lt, pt in batch)

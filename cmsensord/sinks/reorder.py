@@ -47,6 +47,11 @@ class ReorderWindow:
         self._newest = -1          # newest stamp pushed
         self._released = -1        # newest log time released
 
+    def hold_all(self) -> None:
+        """Hold every message until :meth:`drain` (up to ``max_held``): for a writer of results
+        that come after the whole run (``cmsensord vkf``)."""
+        self.max_ns = self.horizon_ns = 1 << 62
+
     def __len__(self) -> int:
         return len(self._heap)
 

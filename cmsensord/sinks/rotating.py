@@ -151,6 +151,7 @@ class RotatingSink:
         self._abandoned: list[Path] = []
         self._low_space_told = False
         self._horizon_ns = 0                 # the reorder window's horizon, carried to the next file
+        self._hold_all = False
 
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
@@ -235,6 +236,8 @@ class RotatingSink:
         sink = McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
                         clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock,
                         reorder_horizon_ns=self._horizon_ns)
+        if self._hold_all:
+            sink.reorder.hold_all()
         self._opened = self.clock()
         self._last_sync = self._opened
         return sink
@@ -293,6 +296,13 @@ class RotatingSink:
         if self._current is not None:
             window = self._current.reorder
             window.horizon_ns = max(window.horizon_ns, min(self._horizon_ns, window.max_ns))
+
+    def hold_all(self) -> None:
+        """Every message is held until its file is finished (at most 200,000, then the oldest
+        go): ``cmsensord vkf`` writes the batch orders of the whole run after it, in order."""
+        self._hold_all = True
+        if self._current is not None:
+            self._current.reorder.hold_all()
 
     def _drop(self, n: int) -> None:
         self.dropped += n
