@@ -397,7 +397,8 @@ def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_backgr
             except ValueError as exc:
                 warning = NO_CROSS_TERM.format(why=str(exc))
                 kwargs["cross_var"] = 0.0
-    cal = fit_model(rms[:, 0], rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)
+    # x and z are block mean squares ((m/s²)², Pa²), as fit_model documents: the squared RMS
+    cal = fit_model(rms[:, 0] ** 2, rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)
     if warning is not None:
         cal.info["warnings"].insert(0, warning)
     cal.info.update(paired=str(paired), background=str(background), accel_channel=accel, mic_channel=mic,

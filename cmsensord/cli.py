@@ -45,13 +45,18 @@ def _scenarios_help() -> str:
         from firmware_sim.scenarios import SCENARIOS, make_scenario
     except ImportError:  # pragma: no cover
         return ""
+    from cmsensord.service.simulate import scenario_run
+
     lines = []
     for name in SCENARIOS:
         try:
             desc = make_scenario(name, duration_s=60.0).description.split("\n")[0]
         except Exception:  # noqa: BLE001 - help text only
             desc = ""
-        lines.append(f"  {name:<14} {desc}")
+        run = scenario_run(name)
+        mics = f", microphone on ch{','.join(map(str, run.microphones))}" if run.microphones else ""
+        lines.append(f"  {name:<19} {desc}\n  {'':<19} (defaults: {run.duration_s:g} s at {run.speed:g}x, "
+                     f"{run.channels} channel(s), {run.mode.upper()}{mics})")
     return "scenarios (--scenario):\n" + "\n".join(lines)
 
 
@@ -82,13 +87,17 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--simulate", action="store_true",
                      help="run a simulated ADC board on a pty and the daemon on it")
     sim.add_argument("--scenario", default="degrading", help="machine scenario (default degrading)")
-    sim.add_argument("--duration", type=positive, default=600.0,
-                     help="simulated seconds; a scenario's shape stretches over it (default 600)")
-    sim.add_argument("--speed", type=positive, default=20.0,
-                     help="x real time (default 20: 600 s simulated in 30 s)")
+    sim.add_argument("--duration", type=positive, default=None,
+                     help="simulated seconds; a scenario's shape stretches over it (default: the "
+                          "scenario's, 600 for the motors, listed below)")
+    sim.add_argument("--speed", type=positive, default=None,
+                     help="x real time (default: the scenario's, 20 for the motors: 600 s simulated "
+                          "in 30 s; listed below); a reader that falls behind slows the board down")
     sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    sim.add_argument("--channels", type=count(1, 8), default=1, help="number of channels 1..8 (default 1)")
+    sim.add_argument("--channels", type=count(1, 8), default=None,
+                     help="number of channels 1..8 (default: the scenario's, 1; 2 with a microphone "
+                          "beside the accelerometer)")
     sim.add_argument("--mode", choices=("rms", "raw"),
                      help="board mode (default: rms; raw for whirl and close_orders)")
     sim.add_argument("--tacho", action="store_true",

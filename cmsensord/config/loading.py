@@ -46,7 +46,7 @@ _CHANNEL_OWN_KEYS = tuple(
     f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
 )
 _CHANNEL_KEYS = _CHANNEL_OWN_KEYS + _MONITOR_KEYS
-_ACOUSTIC_CHANNEL_KEYS = ("kind", "calibration")
+_ACOUSTIC_CHANNEL_KEYS = ("kind", "calibration", "unit")
 _TOP_KEYS = tuple(f.name for f in dataclasses.fields(Config))
 
 
@@ -376,6 +376,8 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
                                  if k not in _ACOUSTIC_CHANNEL_KEYS}
         if ch.kind != "accelerometer":          # listed only for microphone channels
             entry.update(kind=ch.kind, calibration=ch.calibration)
+        if ch.unit is not None:
+            entry["unit"] = ch.unit
         mon = dataclasses.asdict(ch.monitor)
         entry.update({k: v for k, v in mon.items() if glob[k] != v})
         channels.append(entry)
