@@ -2,8 +2,9 @@
 them, events on Foxglove's Log panel, files in log-time order, no empty file, the layout.
 
 The logs are those of real runs: ``cmsensord --simulate`` in RMS mode (two channels, the AKF
-trace) and in RAW mode with a tacho (close_orders), and ``cmsensord replay`` of a RAW whirl
-capture (orders lagging seconds behind the decisions).
+trace), in RAW mode with a tacho (close_orders) and with a microphone (degrading_mic: the
+vibration estimate), and ``cmsensord replay`` of a RAW whirl capture (orders lagging seconds
+behind the decisions).
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ def runs(tmp_path_factory) -> dict[str, list[Path]]:
     assert r.returncode == 0, r.stderr
     r = cmsensord("--simulate", "--scenario", "close_orders", "--duration", "10", "--out", str(base / "raw"))
     assert r.returncode == 0, r.stderr
+    r = cmsensord("--simulate", "--scenario", "degrading_mic", "--duration", "30", "--out", str(base / "mic"))
+    assert r.returncode == 0, r.stderr
     cap = base / "whirl.bin"
     r = run_module("firmware_sim", "--scenario", "whirl", "--mode", "raw", "--tacho", "--duration", "40",
                    "--out", str(cap))
@@ -50,7 +53,7 @@ def runs(tmp_path_factory) -> dict[str, list[Path]]:
     cfg.write_text(json.dumps({"orders": RUNUP_ORDERS["whirl"]}))       # JSON is YAML
     r = cmsensord("replay", str(cap), "--config", str(cfg), "--out", str(base / "replay"))
     assert r.returncode == 0, r.stderr
-    for name in ("rms", "raw", "replay"):
+    for name in ("rms", "raw", "replay", "mic"):
         out[name] = sorted((base / name).glob("*.mcap"))
         assert out[name], name
     return out
@@ -79,7 +82,7 @@ def test_the_checker_refuses_what_foxglove_refuses():
     assert message_problems({}, schema) == ["<root>: required field 'x' absent"]
 
 
-@pytest.mark.parametrize("run", ["rms", "raw", "replay"])
+@pytest.mark.parametrize("run", ["rms", "raw", "replay", "mic"])
 def test_every_topic_and_message_fits_a_schema_foxglove_reads(runs, run):
     topics: dict[str, int] = {}
     problems: list[str] = []
@@ -91,15 +94,20 @@ def test_every_topic_and_message_fits_a_schema_foxglove_reads(runs, run):
             problems += [f"{topic}: {p}" for p in message_problems(msg, schema)]
     assert problems[:10] == []
     expected = {"/cm/events", "/cm/log", "/cm/diagnostics", "/cm/ch0/severity"}
-    expected |= {"/cm/ch0/akf", "/cm/ch1/akf", "/cm/ch1/severity"} if run == "rms" else {"/cm/ch0/orders"}
+    if run == "rms":
+        expected |= {"/cm/ch0/akf", "/cm/ch1/akf", "/cm/ch1/severity"}
+    elif run == "mic":          # the microphone beside the accelerometer: its vibration estimate
+        expected.add(next(t for t in topics if t.endswith("/vibration_estimate")))
+    else:
+        expected.add("/cm/ch0/orders")
     assert expected <= set(topics), topics
 
 
-@pytest.mark.parametrize("run", ["rms", "raw", "replay"])
+@pytest.mark.parametrize("run", ["rms", "raw", "replay", "mic"])
 def test_files_are_in_log_time_order_as_mcap_doctor_checks(runs, run):
     for path in runs[run]:
         assert doctor(path) == [], path
-    if run != "rms":        # the orders come seconds behind the decisions: held, not clamped
+    if run in ("raw", "replay"):    # the orders come seconds behind the decisions: held, not clamped
         orders = [(lt, pt) for p in runs[run] for t, _, _, lt, pt, _ in _read(p) if t == "/cm/ch0/orders"]
         assert len(orders) > 50
         assert all(lt == pt for lt, pt in orders)
