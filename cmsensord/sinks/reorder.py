@@ -3,7 +3,9 @@
 The monitoring chain writes each message when it is computed, stamped with the
 time of the data it is about. Most topics come in time order, but some lag
 the others: in RAW mode with a tacho the order tracker's ``/orders`` wait for
-the shaft speed and the smoother (up to ~6 s behind the decisions). MCAP
+the shaft speed and the smoother (up to ~6 s behind the decisions); with the
+AKF trace of several channels, one channel's trace of a batch of frames comes
+after the other's (up to ~1.3 s behind). MCAP
 readers (``mcap doctor``, Foxglove's playback) want the messages of a file in
 log-time order.
 
