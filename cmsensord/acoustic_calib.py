@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from cmsensord import __version__
 from cmsensord.acoustic_model import FORMAT, VERSION, Calibration, load_calibration, save_calibration
 from cmsensord.dsp.acoustic import AcousticModel
 
@@ -416,6 +417,7 @@ def main(argv: list[str] | None = None) -> int:
         description="Fit the acoustic estimator of Orimoto, Ikuta & Wang (vibration from microphone "
                     "sound) from a paired accelerometer + microphone capture and a capture of "
                     "background noise alone.")
+    p.add_argument("--version", action="version", version=f"cmsensord.acoustic_calib (cmsensord {__version__})")
     p.add_argument("--paired", required=True, help="capture with the accelerometer and the microphone")
     p.add_argument("--background", required=True, help="capture of background noise alone (machine stopped)")
     p.add_argument("--accel", type=int, default=0, help="accelerometer channel of the paired capture (0)")

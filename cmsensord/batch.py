@@ -79,6 +79,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
     sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
+    sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
     done = False
     try:
         proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)

@@ -31,6 +31,8 @@ import sys
 import threading
 import time
 
+from cmsensord import __version__
+
 from .board import DEFAULT_BAUD, Board, BoardConfig, link_budget
 from .scenarios import SCENARIOS, make_scenario, write_truth
 
@@ -73,6 +75,7 @@ def _fault(text: str) -> float | tuple[int, ...]:
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="firmware_sim", description="The simulated TM4C1294 ADC board of cmsensord "
                 "(docs/PROTOCOL.md): writes a capture file or serves a pseudo-terminal.")
+    p.add_argument("--version", action="version", version=f"firmware_sim (cmsensord {__version__})")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--scenario", help=f"machine model: {', '.join(SCENARIOS)}")
     p.add_argument("--channels", type=int, default=1, help="accelerometer channels, 1..8 (default 1)")

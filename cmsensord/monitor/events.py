@@ -1,6 +1,7 @@
 """The event log: one place for event records, where they go and their journal level.
 
-An event is written to ``/cm/events`` (schema ``event``), kept among the recent
+An event is written to ``/cm/events`` (schema ``event``) and, as a ``foxglove.Log``
+record at its journal level, to ``/cm/log`` (Foxglove's Log panel), kept among the recent
 ones (status line, exit summary), counted by kind, logged to the journal at the
 level of its kind, and handed to ``on_event`` when one is given.  A producer
 that knows better (the sink about its own routine work) passes ``log_level``.
@@ -39,14 +40,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
 
 log = logging.getLogger("cmsensord")
 
-#: how events go to the log (the journal): per-AKF flags are detail, the
+#: how events go to the log (the journal): per-AKF flags are detail (VERBOSE: -v), the
 #: severity index and everything about the link or the disk is news.
 LOG_LEVEL = {
-    "anomaly_onset": logging.DEBUG, "anomaly_clear": logging.DEBUG,
+    "anomaly_onset": VERBOSE, "anomaly_clear": VERBOSE,
     "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
@@ -108,7 +110,7 @@ class EventLog:
         self.on_event = on_event
         self.segment_start = segment_start
         self.hold = True                  # False: records are written at once (after the run)
-        self._pending: list[tuple[int, int, messages.Message]] = []
+        self._pending: list[tuple[int, int, messages.Message, int]] = []
         self._n = 0
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
@@ -170,17 +172,19 @@ class EventLog:
     def _record(self, kind: str, channel: str | None, message: str, stamp_ns: int,
                 extra: dict[str, Any], log_level: int | None) -> None:
         m = messages.event(stamp_ns, kind, channel, message, extra)
+        level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind in WALL_KINDS:
-            self._put(m, m.stamp_ns)
+            self._put(m, m.stamp_ns, level)
         else:
             self._n += 1
-            heapq.heappush(self._pending, (min(stamp_ns, self.default_stamp() + int(AHEAD_S * 1e9)), self._n, m))
+            key = min(stamp_ns, self.default_stamp() + int(AHEAD_S * 1e9))
+            heapq.heappush(self._pending, (key, self._n, m, level))
         if not self.hold:
             self.flush()
         elif len(self._pending) > MAX_PENDING:
             self._write_upto(self._pending[0][0])
         self.recent.append(m.msg)
-        log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
+        log.log(level, "%s: %s", kind, message)
         if self.on_event is not None:
             self.on_event(m.msg)
 
@@ -196,10 +200,13 @@ class EventLog:
     def _write_upto(self, upto_ns: int | None) -> None:
         pending = self._pending
         while pending and (upto_ns is None or pending[0][0] <= upto_ns):
-            stamp, _, m = heapq.heappop(pending)
-            self._put(m, stamp)
+            stamp, _, m, level = heapq.heappop(pending)
+            self._put(m, stamp, level)
 
-    def _put(self, m: messages.Message, stamp: int) -> None:
+    def _put(self, m: messages.Message, stamp: int, level: int) -> None:
+        """The event at ``stamp`` (or the newest stamp written), and its foxglove.Log copy."""
         at = max(stamp, self._newest, self.segment_start())
         self.sink.write(*(m if at == m.stamp_ns else m._replace(stamp_ns=at)))
+        ev = m.msg
+        self.sink.write(*messages.log(at, level, ev["kind"], ev.get("channel"), ev["message"]))
         self._newest = at

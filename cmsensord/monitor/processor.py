@@ -253,6 +253,9 @@ class Processor:
                 self._orders_refused = self.clock.fs
                 self.event("config", None, f"order tracker not started at fs {self.clock.fs} Hz: {exc}")
                 return None
+            expect_lag = getattr(self.sink, "expect_lag", None)
+            if expect_lag is not None:          # orders come seconds behind: the file's order waits
+                expect_lag()
         return self.orders
 
     def _feed_tacho(self, end: bool = False) -> None:
