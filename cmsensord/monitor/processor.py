@@ -11,7 +11,9 @@ hand it the same :class:`~cmsensord.protocol.Frame` batches
   block clock -> microphone estimator (:mod:`.microphone`) -> AKF banks -> outlier flags
   waiting for a final speed -> decisions (:mod:`.severity`, :mod:`.speed_gate`);
 * RAW samples of the vibration channels -> order chain (:mod:`.orders`);
-* TACHO -> shaft speed (:mod:`.shaft`).
+* TACHO -> shaft speed (:mod:`.shaft`);
+* RAW samples (or RMS values) of the vibration channels -> indicator records per interval
+  (:mod:`.indicators`).
 
 Every message is built in :mod:`.messages`; every event goes through the
 :class:`~cmsensord.monitor.events.EventLog`.
@@ -31,6 +33,7 @@ from cmsensord.monitor import messages
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
+from cmsensord.monitor.indicators import IndicatorChain, RmsIndicators
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.segments import Segments
 from cmsensord.monitor.shaft import Shaft
@@ -69,6 +72,8 @@ class Processor:
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
+        self.indicators: IndicatorChain | None = None       # RAW mode, with the first RAW blocks
+        self.rms_indicators: RmsIndicators | None = None    # RMS mode, with the first RMS frames
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -171,6 +176,9 @@ class Processor:
         self._feed_tacho(end=True)
         if self.orders is not None:
             self._out(self.orders.finish())
+        for chain in (self.indicators, self.rms_indicators):
+            if chain is not None:
+                self._out(chain.finish())
         self._release_decisions(final=True)
         self.log.summarise(final=True)
 
@@ -202,7 +210,11 @@ class Processor:
                 return
             frames = good
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        self._observe(t0, decode_rms_rows(frames, C))
+        vals = decode_rms_rows(frames, C)
+        rms_ind = self._rms_indicator_chain()
+        if rms_ind is not None:
+            self._out(rms_ind.add(t0, vals))
+        self._observe(t0, vals)
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
@@ -217,6 +229,11 @@ class Processor:
         if blocks is None:
             return
         self._observe(blocks.t0, blocks.rms())
+        ind = self._indicator_chain()
+        if ind is not None:
+            y = blocks.samples(ind.index)
+            for a, b in blocks.runs():
+                self._out(ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index))))
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
@@ -250,6 +267,32 @@ class Processor:
                 return None
         return self.orders
 
+    def _vibration_channels(self) -> tuple:
+        return tuple(ch for ch in self.channels if ch.kind != "microphone") if self.cfg.indicators.enabled else ()
+
+    def _indicator_chain(self) -> IndicatorChain | None:
+        """The RAW indicator chain of the vibration channels, re-made (the old one finished)
+        when the rate or the channels change."""
+        vib = self._vibration_channels()
+        ind = self.indicators
+        if vib and (ind is None or ind.fs != self.clock.fs or ind.channels != vib):
+            if ind is not None:
+                self._out(ind.finish())
+            self.indicators = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
+                                             tacho=lambda: self.shaft.tacho)
+        return self.indicators if vib else None
+
+    def _rms_indicator_chain(self) -> RmsIndicators | None:
+        """The RMS-mode indicator chain (overall RMS per interval), re-made like the RAW one."""
+        vib = self._vibration_channels()
+        ind = self.rms_indicators
+        if vib and (ind is None or (ind.fs, ind.L) != (self.clock.fs, self.clock.block_len) or ind.channels != vib):
+            if ind is not None:
+                self._out(ind.finish())
+            self.rms_indicators = RmsIndicators(self.cfg, vib, fs=self.clock.fs,
+                                                block_len=self.clock.block_len, clock=self.clock)
+        return self.rms_indicators if vib else None
+
     def _feed_tacho(self, end: bool = False) -> None:
         """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as
         the speed gates allow, except at the ``end`` where the order chain drains anyway)."""
@@ -258,6 +301,8 @@ class Processor:
             self._out(self.shaft.feed(self.clock))
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
+        if self.indicators is not None:
+            self._out(self.indicators.release())
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------

@@ -124,9 +124,11 @@ def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> Indic
     bearings = [_bearing_lines(setup, b, shaft_hz, fe, A) for b in setup.bearings]
     bands = []
     for band in setup.bands:
-        if band.orders and not (shaft_hz is not None and shaft_hz > 0):
-            continue
-        edges = order_band_hz(band.lo, band.hi, shaft_hz) if band.orders else (band.lo, band.hi)
+        edges = (band.lo, band.hi)
+        if band.orders:
+            if shaft_hz is None or not shaft_hz > 0:
+                continue
+            edges = order_band_hz(band.lo, band.hi, shaft_hz)
         bands.append((band, edges, band_rms(f, P, *edges)))
     return IndicatorRecord(stats, v, (setup.velocity_band[0], min(setup.velocity_band[1], setup.fs / 2)),
                            ZONES[zone_index(v, setup.group, setup.foundation)], bounds, alarm,
