@@ -2,7 +2,7 @@
 
 With n rolling elements of diameter d on a pitch diameter D, contact angle phi,
 the inner race turning at f_r with the outer race fixed (the kinematic relations
-without slip, e.g. Randall & Antoni 2011, eqs. 1-4):
+without slip, Randall & Antoni 2011, the bearing characteristic frequencies):
 
     FTF  = f_r / 2 (1 - d/D cos phi)                  cage (fundamental train)
     BPFO = n f_r / 2 (1 - d/D cos phi)                ball pass, outer race

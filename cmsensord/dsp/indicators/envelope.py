@@ -2,7 +2,7 @@
 
 The impacts of a bearing defect excite structural resonances of a few kHz; their
 repetition rate (BPFO, BPFI, ...) shows in the *envelope* of the band around
-the resonance, not in the raw spectrum (Randall & Antoni 2011, section 3).  Here,
+the resonance, not in the raw spectrum (Randall & Antoni 2011, envelope analysis).  Here,
 for one record of N samples at fs, all in the frequency domain (numpy FFT, no
 filter design):
 
