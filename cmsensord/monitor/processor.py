@@ -45,6 +45,8 @@ if TYPE_CHECKING:
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
+#: indicator records waiting for the decision of their stamp at most (then written anyway)
+MAX_RECORDS = 1000
 
 
 class Processor:
@@ -74,6 +76,7 @@ class Processor:
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
         self.indicators: IndicatorChain | None = None       # RAW mode, with the first RAW blocks
         self.rms_indicators: RmsIndicators | None = None    # RMS mode, with the first RMS frames
+        self._records: list[messages.Message] = []          # indicator records waiting for a decision
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -178,8 +181,9 @@ class Processor:
             self._out(self.orders.finish())
         for chain in (self.indicators, self.rms_indicators):
             if chain is not None:
-                self._out(chain.finish())
+                self._records.extend(chain.finish())
         self._release_decisions(final=True)
+        self._release_records(None)
         self.log.summarise(final=True)
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
@@ -213,7 +217,7 @@ class Processor:
         vals = decode_rms_rows(frames, C)
         rms_ind = self._rms_indicator_chain()
         if rms_ind is not None:
-            self._out(rms_ind.add(t0, vals))
+            self._records.extend(rms_ind.add(t0, vals))
         self._observe(t0, vals)
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
@@ -233,7 +237,7 @@ class Processor:
         if ind is not None:
             y = blocks.samples(ind.index)
             for a, b in blocks.runs():
-                self._out(ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index))))
+                self._records.extend(ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index))))
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
@@ -277,7 +281,7 @@ class Processor:
         ind = self.indicators
         if vib and (ind is None or ind.fs != self.clock.fs or ind.channels != vib):
             if ind is not None:
-                self._out(ind.finish())
+                self._records.extend(ind.finish())
             self.indicators = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
                                              tacho=lambda: self.shaft.tacho)
         return self.indicators if vib else None
@@ -288,10 +292,19 @@ class Processor:
         ind = self.rms_indicators
         if vib and (ind is None or (ind.fs, ind.L) != (self.clock.fs, self.clock.block_len) or ind.channels != vib):
             if ind is not None:
-                self._out(ind.finish())
+                self._records.extend(ind.finish())
             self.rms_indicators = RmsIndicators(self.cfg, vib, fs=self.clock.fs,
                                                 block_len=self.clock.block_len, clock=self.clock)
         return self.rms_indicators if vib else None
+
+    def _release_records(self, upto_ns: int | None) -> None:
+        """The indicator records stamped at or before ``upto_ns`` (all with None), written just
+        before the decision of that stamp: the order of the messages does not depend on the reads."""
+        n = len(self._records) if upto_ns is None else \
+            next((i for i, m in enumerate(self._records) if m.stamp_ns > upto_ns), len(self._records))
+        if n:
+            self._out(self._records[:n])
+            del self._records[:n]
 
     def _feed_tacho(self, end: bool = False) -> None:
         """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as
@@ -302,7 +315,7 @@ class Processor:
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
         if self.indicators is not None:
-            self._out(self.indicators.release())
+            self._records.extend(self.indicators.release())
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------
@@ -349,6 +362,8 @@ class Processor:
         """Decisions of the slots whose tacho speed is final (f_r: the period's mean speed);
         with ``bounded``, also those waiting longer than the speed gate allows."""
         sev = self.severity
+        if sev is None or len(self._records) > MAX_RECORDS:     # no decision to wait for / bounded
+            self._release_records(None if sev is None else self._records[-MAX_RECORDS].stamp_ns)
         if sev is None or not sev.gate.waiting:
             return
         tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
@@ -360,6 +375,7 @@ class Processor:
             if sev.notes:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
+            self._release_records(stamp)
             self._out(sev.decision(d, stamp))
             self.write_diagnostics(stamp)
 
