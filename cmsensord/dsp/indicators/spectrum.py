@@ -31,7 +31,7 @@ def power_spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     N = x.shape[-1]
     w = hann(N)
     X = np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * w, axis=-1)
-    P = (X.real ** 2 + X.imag ** 2) / (N * float(np.dot(w, w)))
+    P = (X.real ** 2 + X.imag ** 2) / (N * float((w * w).sum()))
     P[..., 1:(N + 1) // 2] *= 2.0          # the negative frequencies (not DC, not Nyquist)
     return np.fft.rfftfreq(N, 1.0 / fs), P
 
