@@ -89,3 +89,14 @@ def test_rms_mode_reports_the_overall_rms_and_the_rest_unavailable():
     with_rpm = {**CFG, "indicators": {**CFG["indicators"], "rpm": 1500}}
     c = [m for t, _, m in indicators(raw, chunk=50_000, cfg=with_rpm) if t == "/cm/ch0/indicators"]
     assert c[0]["speed_source"] == "config" and c[0]["speed_rpm"] == 1500 and "unavailable" not in c[0]
+
+
+def test_a_board_reset_ends_the_intervals_in_their_own_time_segment(raw6):
+    """The board restarts (t0 and seq from 0 again): the intervals before it are stamped in the
+    old segment, the ones after start anew, and no stamp goes back."""
+    again = capture("raw", seconds=3.0)
+    recs = [(s, m) for t, s, m in indicators(raw6 + again, chunk=50_000) if t == "/cm/ch0/indicators"]
+    assert len(recs) == 9 and all(m["missing_fraction"] == 0.0 for _, m in recs)
+    stamps = [s for s, _ in recs]
+    assert stamps == sorted(stamps) and stamps[0] > 0
+    assert [m["accel_rms"] for _, m in recs[6:]] == [m["accel_rms"] for _, m in recs[:3]]   # the same 3 s again

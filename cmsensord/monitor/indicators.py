@@ -108,7 +108,7 @@ class IndicatorChain:
         self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
         self.buf = np.full((self.N, len(channels)), np.nan)
         self.start: int | None = None          # board sample of the open interval's first sample
-        self.pending: list[tuple[int, np.ndarray]] = []   # complete intervals waiting for a speed
+        self.pending: list[tuple[int, np.ndarray, int]] = []   # (start, samples, stamp) waiting for a speed
         self.newest = 0                        # board sample after the newest one given
 
     # ---------------------------------------------------------------- input
@@ -133,16 +133,19 @@ class IndicatorChain:
         return self.release()
 
     def _close(self) -> None:
-        """The open interval is done: to the waiting list if it has any sample."""
+        """The open interval is done: to the waiting list if it has any sample, with the stamp
+        of its end taken now, in the time segment its samples came in."""
         if self.start is not None and np.isfinite(self.buf).any():
-            self.pending.append((self.start, self.buf.copy()))
+            self.pending.append((self.start, self.buf.copy(), self.clock.stamp_ns(self.start + self.N)))
         if self.start is not None:
             self.start += self.N
         self.buf[:] = np.nan
 
     def finish(self) -> list:
-        """End of the stream: the open interval (partial) and every waiting one."""
+        """End of the stream or of a time segment: the open interval (partial) and every waiting
+        one; the next samples start a new interval."""
         self._close()
+        self.start = None
         return self.release(final=True)
 
     # ---------------------------------------------------------------- output
@@ -152,13 +155,13 @@ class IndicatorChain:
         out: list = []
         tacho = self.tacho()
         while self.pending:
-            s, x = self.pending[0]
+            s, x, stamp = self.pending[0]
             end = s + self.N
             late = bounded and self.newest - end > MAX_WAIT_S * self.fs
             if tacho is not None and tacho.covered_until < end and not (final or late):
                 break
             self.pending.pop(0)
-            out += self._records(s, x, tacho)
+            out += self._records(s, x, stamp, tacho)
         return out
 
     def _speed(self, s: int, tacho: TachoTracker | None) -> tuple[float | None, str | None]:
@@ -170,9 +173,8 @@ class IndicatorChain:
             return None, None
         return float(np.mean(hz[ok])), "tacho"
 
-    def _records(self, s: int, x: np.ndarray, tacho: TachoTracker | None) -> list:
+    def _records(self, s: int, x: np.ndarray, stamp: int, tacho: TachoTracker | None) -> list:
         shaft_hz, source = self._speed(s, tacho)
-        stamp = self.clock.stamp_ns(s + self.N)
         head = {"mode": "raw", "interval_s": self.N / self.fs}
         if shaft_hz is not None:
             head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
@@ -231,7 +233,10 @@ class RmsIndicators:
         return out
 
     def finish(self) -> list:
-        return self._close()
+        """End of the stream or of a time segment: the open interval; the next block starts anew."""
+        out = self._close()
+        self.start = None
+        return out
 
     def _close(self) -> list:
         out = []

@@ -80,8 +80,7 @@ class Processor:
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
-        self.segments = Segments(self.clock, self.setup, self.log, clock_ns,
-                                 lambda: self._flush_raw([], final=True))
+        self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
 
     # ---- the parts' figures, for the status line, the summary and the tools --
     status = property(lambda self: self.setup.status)
@@ -185,6 +184,14 @@ class Processor:
         self._release_decisions(final=True)
         self._release_records(None)
         self.log.summarise(final=True)
+
+    def _segment_ends(self) -> None:
+        """Before a new time segment: the waiting RAW frames, and the indicator intervals, stamped
+        in the segment their samples came in."""
+        self._flush_raw([], final=True)
+        for chain in (self.indicators, self.rms_indicators):
+            if chain is not None:
+                self._records.extend(chain.finish())
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
         self._flush_rms(rms)
