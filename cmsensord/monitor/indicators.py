@@ -19,6 +19,13 @@ once TACHO frames cover the interval's end; at most ``MAX_WAIT_S``), then
 RMS mode (:class:`RmsIndicators`): the board's 100 Hz block RMS supports the
 overall acceleration RMS only, sqrt(mean(block RMS^2)) over the interval (the
 board's RMS keeps any DC offset); every other indicator is listed unavailable.
+
+:class:`Indicators` is what the Processor holds: it makes the chains for the
+vibration channels (again when the rate or the channels change, the old one
+finished), and keeps their records until :meth:`Indicators.take` asks for those
+stamped up to a decision's stamp, so the order of all messages does not depend
+on how the stream was read.  An interval's stamp is its end, taken when it
+closes; a new time segment (a board reset) finishes the open intervals first.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ from cmsensord.monitor.clock import BlockClock
 
 if TYPE_CHECKING:
     from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.monitor.raw import RawBlocks
 
 #: a complete interval waits at most this long (board time) for the tacho to cover it
 MAX_WAIT_S = 10.0
@@ -251,4 +259,64 @@ class RmsIndicators:
             self.start += self.N
         self.sq[:] = 0.0
         self.n[:] = 0
+        return out
+
+
+class Indicators:
+    """The indicator chains of one Processor and their records waiting to be written (see
+    module docstring).  ``tacho``: the tacho tracker, or None while there is none."""
+
+    def __init__(self, cfg: Config, clock: BlockClock, tacho: Callable[[], TachoTracker | None]):
+        self.cfg, self.clock, self.tacho = cfg, clock, tacho
+        self.raw_chain: IndicatorChain | None = None
+        self.rms_chain: RmsIndicators | None = None
+        self.records: list[messages.Message] = []
+
+    def _vibration(self, channels: tuple[ChannelConfig, ...]) -> tuple[ChannelConfig, ...]:
+        return tuple(ch for ch in channels if ch.kind != "microphone") if self.cfg.indicators.enabled else ()
+
+    def raw(self, channels: tuple[ChannelConfig, ...], blocks: RawBlocks) -> None:
+        """Converted RAW blocks -> the RAW chain of the vibration channels among ``channels``."""
+        vib = self._vibration(channels)
+        if not vib:
+            return
+        ind = self.raw_chain
+        if ind is None or ind.fs != self.clock.fs or ind.channels != vib:
+            if ind is not None:
+                self.records += ind.finish()
+            ind = self.raw_chain = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
+                                                  tacho=self.tacho)
+        y = blocks.samples(ind.index)
+        for a, b in blocks.runs():          # consecutive except across lost blocks
+            self.records += ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index)))
+
+    def rms(self, channels: tuple[ChannelConfig, ...], t0: np.ndarray, vals: np.ndarray) -> None:
+        """Block RMS (B, C_board) of the blocks at t0 -> the RMS chain."""
+        vib = self._vibration(channels)
+        if not vib:
+            return
+        ind = self.rms_chain
+        if ind is None or (ind.fs, ind.L) != (self.clock.fs, self.clock.block_len) or ind.channels != vib:
+            if ind is not None:
+                self.records += ind.finish()
+            ind = self.rms_chain = RmsIndicators(self.cfg, vib, fs=self.clock.fs,
+                                                 block_len=self.clock.block_len, clock=self.clock)
+        self.records += ind.add(t0, vals)
+
+    def release(self) -> None:
+        """After a tacho feed: the intervals it covers."""
+        if self.raw_chain is not None:
+            self.records += self.raw_chain.release()
+
+    def finish(self) -> None:
+        """End of the stream or of a time segment: every open and waiting interval."""
+        for chain in (self.raw_chain, self.rms_chain):
+            if chain is not None:
+                self.records += chain.finish()
+
+    def take(self, upto_ns: int | None) -> list[messages.Message]:
+        """The records stamped at or before ``upto_ns`` (all with None), oldest first."""
+        n = len(self.records) if upto_ns is None else \
+            next((i for i, m in enumerate(self.records) if m.stamp_ns > upto_ns), len(self.records))
+        out, self.records = self.records[:n], self.records[n:]
         return out

@@ -13,7 +13,7 @@ hand it the same :class:`~cmsensord.protocol.Frame` batches
 * RAW samples of the vibration channels -> order chain (:mod:`.orders`);
 * TACHO -> shaft speed (:mod:`.shaft`);
 * RAW samples (or RMS values) of the vibration channels -> indicator records per interval
-  (:mod:`.indicators`).
+  (:mod:`.indicators`), written just before the decision of their stamp.
 
 Every message is built in :mod:`.messages`; every event goes through the
 :class:`~cmsensord.monitor.events.EventLog`.
@@ -33,7 +33,7 @@ from cmsensord.monitor import messages
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
-from cmsensord.monitor.indicators import IndicatorChain, RmsIndicators
+from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.segments import Segments
 from cmsensord.monitor.shaft import Shaft
@@ -74,9 +74,7 @@ class Processor:
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
-        self.indicators: IndicatorChain | None = None       # RAW mode, with the first RAW blocks
-        self.rms_indicators: RmsIndicators | None = None    # RMS mode, with the first RMS frames
-        self._records: list[messages.Message] = []          # indicator records waiting for a decision
+        self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho)
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -178,20 +176,16 @@ class Processor:
         self._feed_tacho(end=True)
         if self.orders is not None:
             self._out(self.orders.finish())
-        for chain in (self.indicators, self.rms_indicators):
-            if chain is not None:
-                self._records.extend(chain.finish())
+        self.indicators.finish()
         self._release_decisions(final=True)
-        self._release_records(None)
+        self._out(self.indicators.take(None))
         self.log.summarise(final=True)
 
     def _segment_ends(self) -> None:
-        """Before a new time segment: the waiting RAW frames, and the indicator intervals, stamped
-        in the segment their samples came in."""
+        """Before a new time segment: what waits of the old one (the last RAW block, the
+        indicator intervals, stamped in their own segment)."""
         self._flush_raw([], final=True)
-        for chain in (self.indicators, self.rms_indicators):
-            if chain is not None:
-                self._records.extend(chain.finish())
+        self.indicators.finish()
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
         self._flush_rms(rms)
@@ -222,9 +216,7 @@ class Processor:
             frames = good
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
         vals = decode_rms_rows(frames, C)
-        rms_ind = self._rms_indicator_chain()
-        if rms_ind is not None:
-            self._records.extend(rms_ind.add(t0, vals))
+        self.indicators.rms(self.channels, t0, vals)
         self._observe(t0, vals)
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
@@ -240,11 +232,7 @@ class Processor:
         if blocks is None:
             return
         self._observe(blocks.t0, blocks.rms())
-        ind = self._indicator_chain()
-        if ind is not None:
-            y = blocks.samples(ind.index)
-            for a, b in blocks.runs():
-                self._records.extend(ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index))))
+        self.indicators.raw(self.channels, blocks)
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
@@ -278,41 +266,6 @@ class Processor:
                 return None
         return self.orders
 
-    def _vibration_channels(self) -> tuple:
-        return tuple(ch for ch in self.channels if ch.kind != "microphone") if self.cfg.indicators.enabled else ()
-
-    def _indicator_chain(self) -> IndicatorChain | None:
-        """The RAW indicator chain of the vibration channels, re-made (the old one finished)
-        when the rate or the channels change."""
-        vib = self._vibration_channels()
-        ind = self.indicators
-        if vib and (ind is None or ind.fs != self.clock.fs or ind.channels != vib):
-            if ind is not None:
-                self._records.extend(ind.finish())
-            self.indicators = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
-                                             tacho=lambda: self.shaft.tacho)
-        return self.indicators if vib else None
-
-    def _rms_indicator_chain(self) -> RmsIndicators | None:
-        """The RMS-mode indicator chain (overall RMS per interval), re-made like the RAW one."""
-        vib = self._vibration_channels()
-        ind = self.rms_indicators
-        if vib and (ind is None or (ind.fs, ind.L) != (self.clock.fs, self.clock.block_len) or ind.channels != vib):
-            if ind is not None:
-                self._records.extend(ind.finish())
-            self.rms_indicators = RmsIndicators(self.cfg, vib, fs=self.clock.fs,
-                                                block_len=self.clock.block_len, clock=self.clock)
-        return self.rms_indicators if vib else None
-
-    def _release_records(self, upto_ns: int | None) -> None:
-        """The indicator records stamped at or before ``upto_ns`` (all with None), written just
-        before the decision of that stamp: the order of the messages does not depend on the reads."""
-        n = len(self._records) if upto_ns is None else \
-            next((i for i, m in enumerate(self._records) if m.stamp_ns > upto_ns), len(self._records))
-        if n:
-            self._out(self._records[:n])
-            del self._records[:n]
-
     def _feed_tacho(self, end: bool = False) -> None:
         """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as
         the speed gates allow, except at the ``end`` where the order chain drains anyway)."""
@@ -321,8 +274,7 @@ class Processor:
             self._out(self.shaft.feed(self.clock))
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
-        if self.indicators is not None:
-            self._records.extend(self.indicators.release())
+        self.indicators.release()
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------
@@ -369,8 +321,9 @@ class Processor:
         """Decisions of the slots whose tacho speed is final (f_r: the period's mean speed);
         with ``bounded``, also those waiting longer than the speed gate allows."""
         sev = self.severity
-        if sev is None or len(self._records) > MAX_RECORDS:     # no decision to wait for / bounded
-            self._release_records(None if sev is None else self._records[-MAX_RECORDS].stamp_ns)
+        waiting = self.indicators.records
+        if sev is None or len(waiting) > MAX_RECORDS:       # no decision to wait for / bounded
+            self._out(self.indicators.take(None if sev is None else waiting[-MAX_RECORDS].stamp_ns))
         if sev is None or not sev.gate.waiting:
             return
         tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
@@ -382,7 +335,7 @@ class Processor:
             if sev.notes:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
-            self._release_records(stamp)
+            self._out(self.indicators.take(stamp))
             self._out(sev.decision(d, stamp))
             self.write_diagnostics(stamp)
 
