@@ -145,6 +145,7 @@ class Processor:
                 if st is not None and news:     # it changes the time base or the channels:
                     rms, raw = self._flush(rms, raw)    # the frames before it go first,
                     self._release_decisions(final=True)  # decided on the old time base
+                    self.indicators.finish()             # intervals stamped on it too
                     self.setup.apply(f, st)
                 self.setup.status = st or self.setup.status
                 if self.status is not None:
