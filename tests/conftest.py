@@ -49,6 +49,7 @@ PROCESS_MODULES = frozenset({
     "test_vkf_command.py",
     "test_simulate_scenarios.py",
     "test_acoustic_calib_command.py",
+    "test_indicators_daemon.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

@@ -111,6 +111,17 @@ SAMPLES = [
         "missing": False}),
     ("/cm/log", "log", {"level": 3, "message": "failure: ch0: FAILURE", "name": "ch0", "file": "",
                         "line": 0}),
+    ("/cm/ch0/indicators", "indicators", {
+        "channel": "ch0", "mode": "raw", "interval_s": 1.0, "missing_fraction": 0.0, "accel_rms": 2.1,
+        "accel_peak": 8.4, "crest_factor": 4.0, "kurtosis": 3.2, "velocity_rms_mm_s": 1.9,
+        "velocity_band_hz": [10.0, 1000.0], "zone": "B", "zone_boundaries_mm_s": [1.4, 2.8, 4.5],
+        "envelope_rms": 0.7, "envelope_band_hz": [2000.0, 10000.0], "speed_rpm": 1480.0,
+        "speed_source": "tacho", "bands": [{"name": "low", "lo_hz": 10.0, "hi_hz": 1000.0, "rms": 1.2}],
+        "bearings": [{"name": "de", "ftf_hz": 9.9, "bpfo_hz": 88.6, "bpfi_hz": 133.4, "bsf_hz": 58.0,
+                      "lines": {"bpfo": {"amplitude": 0.2, "freq_hz": 89.0, "ratio": 12.5}}}]}),
+    ("/cm/ch1/indicators", "indicators", {
+        "channel": "ch1", "mode": "rms", "interval_s": 1.0, "missing_fraction": 0.0, "accel_rms": 2.1,
+        "unavailable": ["accel_peak", "crest_factor", "kurtosis", "velocity_rms_mm_s", "zone"]}),
 ]
 SCHEMA_NAMES = {
     "severity": "cmsensord.Severity",
@@ -120,6 +131,7 @@ SCHEMA_NAMES = {
     "orders": "cmsensord.Orders",
     "vibration_estimate": "cmsensord.VibrationEstimate",
     "log": "foxglove.Log",
+    "indicators": "cmsensord.Indicators",
 }
 
 

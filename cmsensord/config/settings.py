@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
 __all__ = [
@@ -370,8 +371,11 @@ class Config:
     orders: OrdersConfig = field(default_factory=OrdersConfig, metadata={"help": "order tracker"})
     acoustic: AcousticConfig = field(default_factory=AcousticConfig,
                                      metadata={"help": "microphone channels (Orimoto, Ikuta & Wang)"})
+    indicators: IndicatorsConfig = field(default_factory=IndicatorsConfig,
+                                         metadata={"help": "vibration indicators (ISO 10816-3, envelope)"})
+    bearings: tuple[BearingConfig, ...] = field(default=(), metadata={"help": "bearings and their channels"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules,)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
 
     def __post_init__(self) -> None:
         validate(self)

@@ -18,6 +18,7 @@ from cmsensord.sinks.schemas import (
     TOPIC_EVENTS,
     TOPIC_LOG,
     akf_topic,
+    indicators_topic,
     orders_topic,
     severity_topic,
     vibration_estimate_topic,
@@ -125,3 +126,8 @@ def orders(stamp_ns: int, channel: str, speed_rpm: float, valid: bool, method: s
     return Message(orders_topic(channel), "orders", stamp_ns, {
         "channel": channel, "speed_rpm": num(speed_rpm), "valid": valid, "method": method,
         "orders": entries, "missing_fraction": missing_fraction})
+
+
+def indicators(stamp_ns: int, channel: str, fields: dict) -> Message:
+    """One /cm/<channel>/indicators record (:mod:`cmsensord.monitor.indicators` builds the fields)."""
+    return Message(indicators_topic(channel), "indicators", stamp_ns, {"channel": channel, **fields})

@@ -30,7 +30,8 @@ topic                      schema name             rate
 /cm/diagnostics            cmsensord.Diagnostics   1 Hz
 =========================  ======================  =================================
 
-and, for a microphone channel (Orimoto, Ikuta & Wang), ``/cm/<channel>/vibration_estimate``
+``/cm/<channel>/indicators`` (cmsensord.Indicators, :mod:`.indicator_schema`) once per
+``indicators.interval_s``, and, for a microphone channel (Orimoto, Ikuta & Wang), ``/cm/<channel>/vibration_estimate``
 (cmsensord.VibrationEstimate) once per block (100 Hz).
 
 The quantities of Kim et al. 2023 keep the paper's names: S_idx (eq. 17), F_a and cnt
@@ -41,6 +42,8 @@ from __future__ import annotations
 
 import json
 from typing import Any
+
+from cmsensord.sinks.indicator_schema import indicators_schema
 
 __all__ = [
     "SCHEMA_ENCODING",
@@ -56,6 +59,7 @@ __all__ = [
     "severity_topic",
     "akf_topic",
     "orders_topic",
+    "indicators_topic",
     "vibration_estimate_topic",
     "schema_name",
     "schema_bytes",
@@ -83,6 +87,10 @@ def akf_topic(channel: str) -> str:
 
 def orders_topic(channel: str) -> str:
     return f"/cm/{channel}/orders"
+
+
+def indicators_topic(channel: str) -> str:
+    return f"/cm/{channel}/indicators"
 
 
 def vibration_estimate_topic(channel: str) -> str:
@@ -490,6 +498,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "orders": ORDERS,
     "vibration_estimate": VIBRATION_ESTIMATE,
     "log": LOG,
+    "indicators": indicators_schema(_time(), _obj),
 }
 
 #: kind key -> MCAP schema name.
