@@ -27,6 +27,7 @@ from cmsensord.protocol import (
     encode_status,
     encode_tacho,
 )
+from cmsensord.service.live import DIAGNOSTICS_S
 from cmsensord.sinks.mcap_read import read_messages
 from processes import cmsensord, start_board, start_daemon, stop
 
@@ -228,6 +229,7 @@ def test_a_link_sending_only_garbage_is_link_stalled_with_diagnostics(tmp_path):
             lines.append(d.stderr.readline())
             return "link_stalled" in lines[-1]
         wait_until(stalled, "link_stalled")
+        time.sleep(DIAGNOSTICS_S + 1.5)                      # no decision: diagnostics come anyway
         assert d.poll() is None                               # still running
         err = stop(d)
     finally:
@@ -241,4 +243,5 @@ def test_a_link_sending_only_garbage_is_link_stalled_with_diagnostics(tmp_path):
     msgs = [(t, m) for f in (tmp_path / "logs").glob("*.mcap") for t, _, m in read_messages(f)]
     diag = [m for t, m in msgs if t == "/cm/diagnostics"]
     assert diag and diag[0]["link"]["bytes_discarded"] > 0 and diag[0]["observations"] == 0
+    assert len(diag) >= 2 and diag[-1]["link"]["bytes_discarded"] > diag[0]["link"]["bytes_discarded"]
     assert [m["kind"] for t, m in msgs if t == "/cm/events"] == ["start", "link_stalled", "stop"]

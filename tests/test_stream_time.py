@@ -97,6 +97,8 @@ def test_a_board_reset_starts_a_new_segment_with_no_bogus_loss_in_replay(tmp_pat
     assert "(6000 observations, 0 missing, 0 frames lost)" in p.stderr
     (stamp, ev), = events(msgs, "time_base")
     assert ev["details"] == {"segment": 1, "reason": "reset"}
+    diag = [m for t, _, m in msgs if t == "/cm/diagnostics"]
+    assert diag[-1]["link"]["frames_lost"] == 0          # the link's counter leaves the restart out too
     assert_time_goes_on(msgs)
     sev = [s for t, s, _ in msgs if t == "/cm/ch0/severity"]
     assert sum(s < stamp for s in sev) >= 28 and sum(s > stamp for s in sev) >= 28

@@ -357,8 +357,16 @@ class Processor:
         when none came for a while)."""
         self.diagnostics_at = time.monotonic()
         self._out([messages.diagnostics(
-            stamp_ns, self.link_counters() if self.link_counters else {}, self.observations,
+            stamp_ns, self.link(), self.observations,
             round(self.diagnostics_at - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+
+    def link(self) -> dict:
+        """The link's counters; a seq gap in front of a board reset is no loss (the board
+        restarted its seq), so ``frames_lost`` leaves it out."""
+        counters = self.link_counters() if self.link_counters else {}
+        if "frames_lost" in counters:
+            counters = {**counters, "frames_lost": counters["frames_lost"] - self.segments.seq_restarts}
+        return counters
 
     def check_wall(self, max_drift_s: float) -> None:
         """Live, with the queue drained: a board clock off the wall clock by more than

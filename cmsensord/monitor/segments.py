@@ -43,6 +43,7 @@ class Segments:
         self.ignored_type: FrameType | None = None
         self.ignored_total = 0
         self.hit = False                    # the last frame checked needs :meth:`start`
+        self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
 
     def check(self, f: Frame) -> bool:
         """True when ``f`` is a board reset or a frame of the other mode: call :meth:`start`
@@ -80,6 +81,7 @@ class Segments:
         stamp = self.clock.new_segment(f.t0_unwrapped, self.clock_ns())
         lost = (f"; the seq gap of {f.lost_before} in front of it is not a loss (seq restarted)"
                 if f.lost_before else "")
+        self.seq_restarts += f.lost_before
         self.log.emit("time_base", None, f"board clock restarted (t0 {f.t0_unwrapped} after "
                    f"{self.previous_t0}): time segment {self.clock.segment} starts at the wall "
                    f"clock{lost}", stamp, details={"segment": self.clock.segment, "reason": "reset"})

@@ -14,7 +14,7 @@ def status_line(proc, source=None) -> str:
     if source is not None:
         c = source.counters
         parts.append(f"| rx {c.bytes_received} B, frames {sum(c.frames.values())}, "
-                     f"lost {c.frames_lost}, crc {c.crc_failures}")
+                     f"lost {c.frames_lost - proc.segments.seq_restarts}, crc {c.crc_failures}")
         queue = source.queue
         parts.append(f"q {len(queue)} drop {queue.drops}")
     return " ".join(parts)
