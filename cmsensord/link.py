@@ -41,6 +41,10 @@ class FrameQueue:
     only when no RAW frame is left to drop (then the oldest), so the severity
     chain and the shaft speed keep their data as long as possible.  Every drop
     is counted (``drops``, ``raw_drops``); memory stays bounded by ``maxlen``.
+
+    :meth:`get` batches by time: it returns once ``enough`` frames wait or its
+    ``timeout`` has passed, so the loop can hand the Processor many frames per call
+    (its cost is mostly per call, not per frame) while waking at a steady pace.
     """
 
     def __init__(self, maxlen: int):
@@ -50,6 +54,7 @@ class FrameQueue:
         self.drops = 0          # frames dropped, all types
         self.raw_drops = 0      # of which RAW
         self.closed = False
+        self._enough = 1        # frames the waiting get() wants before it returns early
 
     def put(self, frames: list[Frame]) -> None:
         if not frames:
@@ -59,7 +64,8 @@ class FrameQueue:
             over = len(self._q) - self.maxlen
             if over > 0:
                 self._shed(over)
-            self._cond.notify()
+            if len(self._q) >= self._enough:
+                self._cond.notify()
 
     def _shed(self, over: int) -> None:
         """Drop ``over`` frames: the oldest RAW ones, then the oldest of any type."""
@@ -80,11 +86,20 @@ class FrameQueue:
             self._q.popleft()
         self.drops += over
 
-    def get(self, timeout: float) -> list[Frame]:
-        """All queued frames (possibly none after ``timeout`` seconds)."""
+    def get(self, timeout: float, enough: int = 1) -> list[Frame]:
+        """All queued frames, once at least ``enough`` wait (at once if they already do),
+        ``timeout`` seconds have passed (then possibly none) or the queue is closed."""
+        deadline = time.monotonic() + timeout
         with self._cond:
-            if not self._q and not self.closed:
-                self._cond.wait(timeout)
+            self._enough = max(1, min(enough, self.maxlen))
+            try:
+                while len(self._q) < self._enough and not self.closed:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
+            finally:
+                self._enough = 1
             out = list(self._q)
             self._q.clear()
             return out

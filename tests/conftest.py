@@ -43,6 +43,7 @@ PROCESS_MODULES = frozenset({
     "test_config_hostile.py",
     "test_reader_thread.py",
     "test_stream_events.py",
+    "test_live_batching.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
