@@ -44,7 +44,9 @@ class FrameQueue:
 
     :meth:`get` batches by time: it returns once ``enough`` frames wait or its
     ``timeout`` has passed, so the loop can hand the Processor many frames per call
-    (its cost is mostly per call, not per frame) while waking at a steady pace.
+    (its cost is mostly per call, not per frame) while waking at a steady pace; and
+    as soon as the frames of the block :meth:`wake_at` names are in (the block that
+    completes the next output: batching adds no latency to it).
     """
 
     def __init__(self, maxlen: int):
@@ -55,6 +57,8 @@ class FrameQueue:
         self.raw_drops = 0      # of which RAW
         self.closed = False
         self._enough = 1        # frames the waiting get() wants before it returns early
+        self._wake_t0: int | None = None    # get() returns once this block's frames are in
+        self._woken = False
 
     def put(self, frames: list[Frame]) -> None:
         if not frames:
@@ -64,7 +68,9 @@ class FrameQueue:
             over = len(self._q) - self.maxlen
             if over > 0:
                 self._shed(over)
-            if len(self._q) >= self._enough:
+            if self._wake_t0 is not None and _completes(frames[-1], self._wake_t0):
+                self._woken = True
+            if self._woken or len(self._q) >= self._enough:
                 self._cond.notify()
 
     def _shed(self, over: int) -> None:
@@ -86,20 +92,30 @@ class FrameQueue:
             self._q.popleft()
         self.drops += over
 
+    def wake_at(self, t0: int | None) -> None:
+        """The next :meth:`get` returns as soon as the block starting at board sample ``t0``
+        is in: its TACHO frame (the last of a block), or any frame of a later block.  None:
+        no such wish.  Used once: a get clears it."""
+        with self._cond:
+            self._wake_t0 = t0
+            self._woken = t0 is not None and bool(self._q) and _completes(self._q[-1], t0)
+
     def get(self, timeout: float, enough: int = 1) -> list[Frame]:
         """All queued frames, once at least ``enough`` wait (at once if they already do),
-        ``timeout`` seconds have passed (then possibly none) or the queue is closed."""
+        the block of :meth:`wake_at` is in, ``timeout`` seconds have passed (then possibly
+        none) or the queue is closed."""
         deadline = time.monotonic() + timeout
         with self._cond:
             self._enough = max(1, min(enough, self.maxlen))
             try:
-                while len(self._q) < self._enough and not self.closed:
+                while len(self._q) < self._enough and not self._woken and not self.closed:
                     left = deadline - time.monotonic()
                     if left <= 0:
                         break
                     self._cond.wait(left)
             finally:
                 self._enough = 1
+                self._wake_t0, self._woken = None, False
             out = list(self._q)
             self._q.clear()
             return out
@@ -111,6 +127,11 @@ class FrameQueue:
 
     def __len__(self) -> int:
         return len(self._q)
+
+
+def _completes(f: Frame, t0: int) -> bool:
+    """``f`` shows the block at ``t0`` is in: its TACHO frame, or a frame of a later block."""
+    return f.t0_unwrapped > t0 or (f.t0_unwrapped == t0 and f.type == FrameType.TACHO)
 
 
 class SerialReader(threading.Thread):
@@ -188,6 +209,8 @@ class SerialReader(threading.Thread):
             data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
             if not data:
                 return ser
+            if len(data) < self.read_size and ser.in_waiting:   # the rest of what woke the read:
+                data += ser.read(min(self.read_size - len(data), ser.in_waiting))  # one feed
         except PORT_ERRORS as exc:
             self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
             self.connected.clear()

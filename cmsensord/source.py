@@ -37,9 +37,11 @@ __all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "
 
 Batch = list[Frame]
 
-#: the live loop's batching: the queued frames every BATCH_S seconds, or as soon as
-#: BATCH_FRAMES wait (the Processor's MAX_BATCH: a fast board is not held back)
-BATCH_S = 0.05
+#: the live loop's batching: the queued frames every BATCH_S seconds (the loop's period,
+#: also for the watchdog and the status), as soon as BATCH_FRAMES wait (the Processor's
+#: MAX_BATCH: a fast board is not held back), or when the block completing the next
+#: /orders block is in (FrameQueue.wake_at)
+BATCH_S = 0.1
 BATCH_FRAMES = 1000
 
 

@@ -11,11 +11,13 @@ frame per call).
 
 from __future__ import annotations
 
+import threading
 import time
 
 from cmsensord.config import default_config
+from cmsensord.link import FrameQueue
 from cmsensord.monitor.processor import Processor
-from cmsensord.protocol import iter_frames
+from cmsensord.protocol import Frame, FrameType, iter_frames
 from cmsensord.sinks.mcap_sink import read_messages
 from cmsensord.sinks.memory import ListSink
 from cmsensord.source import BATCH_FRAMES, BATCH_S, SerialSource
@@ -142,3 +144,34 @@ def test_live_raw_with_orders_on_a_pty_equals_the_replay_of_its_capture(tmp_path
     a, b = by_topic(live), by_topic(read_messages(next((tmp_path / "replay").glob("*.mcap"))))
     assert len(a["/cm/ch0/orders recursive"]) >= 30
     assert a == b
+
+
+def test_the_loop_wakes_with_the_frame_that_completes_an_orders_block():
+    """Processor.wake_t0 names the block whose TACHO frame (the last of a block) completes the
+    next /orders block: fed one frame per call, every /orders block after the first comes out
+    in the call of exactly that frame, so a loop waking then adds no latency to the orders."""
+    frames, _ = iter_frames(raw_capture(3.0))
+    sink = ListSink()
+    proc = Processor(default_config(1), sink, clock_ns=lambda: 10**18)
+    wake, emitted_at = None, []
+    for f in frames:
+        before = len(sink.topic("/cm/ch0/orders"))
+        proc.handle([f])
+        if len(sink.topic("/cm/ch0/orders")) > before:
+            emitted_at.append((f.type, f.t0_unwrapped, wake))
+        wake = proc.wake_t0()
+    assert len(emitted_at) >= 25
+    assert all(t == FrameType.TACHO and t0 == w for t, t0, w in emitted_at[1:]), emitted_at[:5]
+
+
+def test_a_queue_told_the_block_to_wake_at_returns_when_its_tacho_frame_is_in():
+    q = FrameQueue(100)
+    q.wake_at(500)
+    threading.Timer(0.05, lambda: q.put([Frame(FrameType.RAW, 1, 500, 0, 0, b"")])).start()
+    threading.Timer(0.1, lambda: q.put([Frame(FrameType.TACHO, 2, 500, 0, 0, b"\0\0")])).start()
+    t = time.monotonic()
+    got = q.get(timeout=5.0, enough=1000)
+    assert [f.type for f in got] == [FrameType.RAW, FrameType.TACHO] and time.monotonic() - t < 4.0
+    q.put([Frame(FrameType.TACHO, 3, 750, 0, 0, b"\0\0")])  # the wish was used: a get waits again
+    t = time.monotonic()
+    assert len(q.get(timeout=0.2, enough=1000)) == 1 and time.monotonic() - t >= 0.15

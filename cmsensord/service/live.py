@@ -165,6 +165,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                                  f"{EXIT_READER_DIED} for the service manager to restart the daemon")
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             proc.handle(frames)
+            source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block does
             if (frames and cfg.link.max_drift_s and watch.sim_done is None
                     and len(source.queue) < DRIFT_QUEUE_MAX):
                 proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock

@@ -235,6 +235,13 @@ class OrderTracker:
     def reset(self) -> None:
         self.state = self.initial_state()
 
+    def next_block_input(self) -> int:
+        """Input sample index (counted from the first input) whose arrival completes the
+        next causal output block (tracker sample j is input sample j x decimate)."""
+        st = self.state
+        pending = len(st.pend["rpm"]) if st.pend else 0
+        return (st.n_track - pending + self.block - 1) * self.decimate
+
     def describe(self, rpm: float) -> list[dict]:
         """Per component at speed ``rpm``: frequency, r, -3 dB bandwidth [Hz and %],
         time constant [s] (of the isolated steady-state filter at the tracker rate)."""
