@@ -12,6 +12,7 @@ import contextlib
 import errno
 import logging
 import os
+import select
 import sys
 import termios
 import threading
@@ -25,9 +26,12 @@ import serial
 
 from cmsensord.errors import LinkError
 from cmsensord.protocol import Decoder, Frame, FrameType
+from cmsensord.read_pace import ReadPace
 
 log = logging.getLogger("cmsensord")
 
+#: the reader waits this long for bytes before it looks at its stop flag again
+READ_WAIT_S = 0.05
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 
@@ -58,6 +62,7 @@ class FrameQueue:
         self.closed = False
         self._enough = 1        # frames the waiting get() wants before it returns early
         self._wake_t0: int | None = None    # get() returns once this block's frames are in
+        self.hint: int | None = None        # the last wake_at() block, kept after the get (reader)
         self._woken = False
 
     def put(self, frames: list[Frame]) -> None:
@@ -97,7 +102,7 @@ class FrameQueue:
         is in: its TACHO frame (the last of a block), or any frame of a later block.  None:
         no such wish.  Used once: a get clears it."""
         with self._cond:
-            self._wake_t0 = t0
+            self._wake_t0 = self.hint = t0
             self._woken = t0 is not None and bool(self._q) and _completes(self._q[-1], t0)
 
     def get(self, timeout: float, enough: int = 1) -> list[Frame]:
@@ -137,6 +142,10 @@ def _completes(f: Frame, t0: int) -> bool:
 class SerialReader(threading.Thread):
     """Reads the port, feeds the decoder, queues frames; reconnects with back-off.
 
+    Between reads it waits as :class:`~cmsensord.read_pace.ReadPace` allows (bytes gather
+    in the port's buffer until the loop wants them), so a slow link costs a few reads a
+    second, not one per block.
+
     Link events (``link_lost``, ``link_restored``, ``reader_error``, ``reader_recovered``) are queued in ``events`` as
     (wall_ns, kind, message) for the processing loop to emit: only the loop
     writes to the sink.
@@ -163,6 +172,7 @@ class SerialReader(threading.Thread):
         self.error: str | None = None         # the last one, as reported
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
+        self.pace = ReadPace()
 
     def stop(self) -> None:
         self._stop_event.set()
@@ -206,30 +216,51 @@ class SerialReader(threading.Thread):
             self._backoff = self.reconnect_min_s
             self.connected.set()
         try:
-            data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+            data = self._read(ser)
             if not data:
                 return ser
-            if len(data) < self.read_size and ser.in_waiting:   # the rest of what woke the read:
-                data += ser.read(min(self.read_size - len(data), ser.in_waiting))  # one feed
         except PORT_ERRORS as exc:
             self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
             self.connected.clear()
             self.failures = 1
             _close_quietly(ser)
             return None
-        self.last_data = time.monotonic()
+        now = self.last_data = time.monotonic()
         if self.capture is not None and self.capture_error is None:
             try:
                 self.capture.write(data)
             except OSError as exc:
                 self.capture_error = f"capture file: {exc.strerror or exc}"
                 self._event("disk_error", self.capture_error + "; capture stopped")
-        self.queue.put(self.decoder.feed(data))
+        frames = self.decoder.feed(data)
+        self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None)
+        self.queue.put(frames)
         if self.errors:
             self._event("reader_recovered", f"{self.port}: reading again after {self.errors} "
                         "reader error(s)")
             self.errors, self.error = 0, None
+        hold = self.pace.hold(now, self.queue.hint)
+        if hold > 0.001:            # bytes gather in the port's buffer meanwhile
+            self._stop_event.wait(hold)
         return ser
+
+    def _read(self, ser) -> bytes:
+        """What the port has (up to ``read_size`` bytes), waiting up to 50 ms for it: b"" if
+        nothing came.  A pyserial port on a file descriptor is read with one select and one
+        read (pyserial's read(1) + in_waiting + read(rest) costs 3x the calls per arrival)."""
+        fd = getattr(ser, "fd", None)
+        if not isinstance(fd, int):
+            data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+            if data and len(data) < self.read_size and ser.in_waiting:   # the rest: one feed
+                data += ser.read(min(self.read_size - len(data), ser.in_waiting))
+            return data
+        if not select.select([fd], [], [], READ_WAIT_S)[0]:
+            return b""
+        data = os.read(fd, self.read_size)
+        if not data:        # what pyserial says of a device that went away (and raises)
+            raise serial.SerialException("device reports readiness to read but returned no data "
+                                         "(device disconnected or multiple access on port?)")
+        return data
 
     def _unexpected(self, exc: Exception, ser) -> None:
         """An exception that is not a port error: report it (once while it repeats), close the

@@ -11,10 +11,9 @@ the state-space system z' = A z + B x, y = c z + b0 x with
 Over a block of M samples the outputs are a lower-triangular Toeplitz matrix of the
 impulse response times the block's inputs plus c A^k times the state at the block's
 start, and the state at its end is A^M z plus a 2 x M matrix times the inputs:
-matrix products for up to MAX_BLOCKS blocks at once, the states at the blocks'
-starts included (one matrix of powers of A^M).  Same results as sosfilt to rounding (~1e-15 relative,
-compared in tests/test_order_tracker.py), the state carried between calls in
-scipy's layout (S, 2, C).
+matrix products for all the blocks of a call, and a recursion over blocks (not
+samples) for the states.  Same results as sosfilt to rounding (~1e-15 relative,
+tests/test_sos_blocks.py).
 """
 
 from __future__ import annotations
@@ -23,8 +22,6 @@ import numpy as np
 
 #: samples per block of the block recursion
 BLOCK = 64
-#: most blocks chained in one matrix product (bounds the cached (2n x 2n) matrices)
-MAX_BLOCKS = 64
 
 
 class _Section:
@@ -46,64 +43,58 @@ class _Section:
         lag = idx[:, None] - idx[None, :]
         self.toeplitz = np.where(lag >= 0, h[np.clip(lag, 0, M - 1)], 0.0)   # (M, M)
         self.ctrl = (self.A_pow[M - 1::-1] @ B).T            # (2, M): A^(M-1-k) B
-
         self.M = M
-        self._links: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
-    def _chain(self, nb: int) -> tuple[np.ndarray, np.ndarray]:
-        """The states at the starts of nb blocks from the state z0 and the blocks' drives
-        d_j: z_b = (A^M)^b z0 + sum_{j<b} (A^M)^(b-1-j) d_j, as (2nb x 2) and (2nb x 2nb)
-        matrices (cached per nb)."""
-        got = self._links.get(nb)
-        if got is None:
-            Q = [np.eye(2)]
-            for _ in range(nb):
-                Q.append(self.A_pow[self.M] @ Q[-1])
-            from_z = np.concatenate(Q[:nb])                  # (2nb, 2)
-            W = np.zeros((nb, 2, nb, 2))
-            for b in range(1, nb):
-                for j in range(b):
-                    W[b, :, j, :] = Q[b - 1 - j]
-            got = self._links[nb] = (from_z, W.reshape(2 * nb, 2 * nb))
-        return got
-
-    def run(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """x (T, C) with the state z (2, C) -> y (T, C), the final state."""
+    def blocks(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whole blocks x (nb M, C) from the state z (2, C): y, the state after them.  Every
+        block is one product of the same shapes and the state steps block by block, so any
+        grouping of the blocks into calls gives the same bits."""
         M = self.M
-        T, C = x.shape
-        y = np.empty_like(x)
-        done = 0
-        while T - done >= M:
-            nb = min((T - done) // M, MAX_BLOCKS)
-            end = done + nb * M
-            X = x[done:end].reshape(nb, M, C).transpose(1, 0, 2).reshape(M, nb * C)
-            drive = (self.ctrl @ X).reshape(2, nb, C).transpose(1, 0, 2).reshape(2 * nb, C)
-            from_z, W = self._chain(nb)
-            starts = from_z @ z + W @ drive                  # (2nb, C)
-            z = self.A_pow[M] @ starts[-2:] + drive[-2:]
-            S = starts.reshape(nb, 2, C).transpose(1, 0, 2).reshape(2, nb * C)
-            Y = self.toeplitz @ X + self.obs @ S             # (M, nb C)
-            y[done:end] = Y.reshape(M, nb, C).transpose(1, 0, 2).reshape(nb * M, C)
-            done = end
-        tail = T - done
-        if tail:
-            xt = x[done:]
-            y[done:] = self.toeplitz[:tail, :tail] @ xt + self.obs[:tail] @ z
-            z = self.A_pow[tail] @ z + self.ctrl[:, M - tail:] @ xt
-        return y, z
+        nb, C = x.shape[0] // M, x.shape[1]
+        xb = x.reshape(nb, M, C)
+        drive = self.ctrl @ xb                               # (nb, 2, C)
+        S = np.empty((nb, 2, C))
+        A_M = self.A_pow[M]
+        for b in range(nb):
+            S[b] = z
+            z = A_M @ z + drive[b]
+        return (self.toeplitz @ xb + self.obs @ S).reshape(nb * M, C), z
+
+    def partial(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """The outputs of the first len(x) < M samples of a block from its start state z:
+        the block's products with the missing inputs zero (they do not reach these rows)."""
+        pad = np.zeros((1, self.M, x.shape[1]))
+        pad[0, :len(x)] = x
+        return (self.toeplitz @ pad + self.obs @ z[None])[0, :len(x)]
 
 
 class SosBlocks:
-    """A cascade of second-order sections (rows b0 b1 b2 a0 a1 a2) run block by block."""
+    """A cascade of second-order sections (rows b0 b1 b2 a0 a1 a2) run block by block.
+
+    Blocks are aligned to the stream's first sample: the state carried between calls is
+    each section's state at the start of the current block (scipy's (S, 2, C) layout)
+    and that block's inputs so far (``part``), so every output is computed the same way
+    however the stream was cut into calls (tests/test_sos_blocks.py).
+    """
 
     def __init__(self, sos: np.ndarray, block: int = BLOCK):
         self.M = int(block)
         self.sections = [_Section(np.asarray(row, dtype=np.float64), self.M) for row in sos]
 
-    def __call__(self, x: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """scipy.signal.sosfilt(sos, x, axis=0, zi=zi) for x (T, C), zi (S, 2, C): (y, zf)."""
-        y = np.asarray(x, dtype=np.float64)
+    def __call__(self, x: np.ndarray, zi: np.ndarray, part: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x (T, C) after the inputs ``part`` of the current block, from the block-start
+        states zi (S, 2, C): (y (T, C), the new block-start states, the new ``part``).
+        With part empty and T a multiple of BLOCK, scipy.signal.sosfilt(sos, x, axis=0,
+        zi=zi)'s (y, zf) to rounding."""
+        x = np.asarray(x, dtype=np.float64)
+        p = 0 if part is None else len(part)
+        xx = x if not p else np.concatenate([part, x])
+        n = len(xx) // self.M * self.M
         zf = np.empty_like(zi)
+        y_full, y_rest = xx[:n], xx[n:]
         for s, sec in enumerate(self.sections):
-            y, zf[s] = sec.run(y, zi[s])
-        return y, zf
+            y_full, zf[s] = sec.blocks(y_full, zi[s])
+            if len(y_rest):
+                y_rest = sec.partial(y_rest, zf[s])
+        return np.concatenate([y_full, y_rest])[p:], zf, xx[n:].copy()

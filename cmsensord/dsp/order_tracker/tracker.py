@@ -342,7 +342,7 @@ class OrderTracker:
         else:                             # the numpy path: sosfilt by blocks, no scipy
             if self._sos_blocks is None:
                 self._sos_blocks = SosBlocks(self.sos)
-            yf, st.zi = self._sos_blocks(y, st.zi)
+            yf, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
             yd = np.ascontiguousarray(yf[take])
         if self.delay_in:
             if st.n_in == 0 and rpm.size:        # the line starts filled with the first speed
