@@ -12,7 +12,6 @@ import contextlib
 import errno
 import logging
 import os
-import select
 import sys
 import termios
 import threading
@@ -30,8 +29,6 @@ from cmsensord.read_pace import ReadPace
 
 log = logging.getLogger("cmsensord")
 
-#: the reader waits this long for bytes before it looks at its stop flag again
-READ_WAIT_S = 0.05
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 
@@ -245,21 +242,12 @@ class SerialReader(threading.Thread):
         return ser
 
     def _read(self, ser) -> bytes:
-        """What the port has (up to ``read_size`` bytes), waiting up to 50 ms for it: b"" if
-        nothing came.  A pyserial port on a file descriptor is read with one select and one
-        read (pyserial's read(1) + in_waiting + read(rest) costs 3x the calls per arrival)."""
-        fd = getattr(ser, "fd", None)
-        if not isinstance(fd, int):
-            data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
-            if data and len(data) < self.read_size and ser.in_waiting:   # the rest: one feed
-                data += ser.read(min(self.read_size - len(data), ser.in_waiting))
-            return data
-        if not select.select([fd], [], [], READ_WAIT_S)[0]:
-            return b""
-        data = os.read(fd, self.read_size)
-        if not data:        # what pyserial says of a device that went away (and raises)
-            raise serial.SerialException("device reports readiness to read but returned no data "
-                                         "(device disconnected or multiple access on port?)")
+        """What the port has (up to ``read_size`` bytes), waiting up to the port's timeout for
+        the first byte: b"" if nothing came.  One result per arrival (the byte that woke the
+        read and the rest), so the decoder is fed once."""
+        data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+        if data and len(data) < self.read_size and ser.in_waiting:
+            data += ser.read(min(self.read_size - len(data), ser.in_waiting))
         return data
 
     def _unexpected(self, exc: Exception, ser) -> None:
