@@ -102,6 +102,12 @@ class FrameQueue:
             self._wake_t0 = self.hint = t0
             self._woken = t0 is not None and bool(self._q) and _completes(self._q[-1], t0)
 
+    def poke(self) -> None:
+        """The waiting :meth:`get` returns now (something besides frames wants the loop)."""
+        with self._cond:
+            self._woken = True
+            self._cond.notify()
+
     def get(self, timeout: float, enough: int = 1) -> list[Frame]:
         """All queued frames, once at least ``enough`` wait (at once if they already do),
         the block of :meth:`wake_at` is in, ``timeout`` seconds have passed (then possibly

@@ -111,6 +111,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     sink = open_sink(cfg, metadata or {}, background_salvage=True)
     source = SerialSource.from_link(cfg.link, capture=capture)
     queue = source.queue
+    sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
     proc: Processor
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
                      diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
