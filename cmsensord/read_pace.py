@@ -9,7 +9,8 @@ reader may let bytes gather in the port's kernel buffer meanwhile:
 * with a block to wake at (``wake_t0``), until shortly (``margin_s``) before that
   block is due: its arrival time extrapolated from the board's clock as measured
   (board samples per wall second over the last ``window_s``, from the frames' t0 and
-  arrival times), so the orders are not delayed;
+  arrival times; the earliest arrivals, as a read after a wait comes late), so the
+  reader waits in its read when that block comes and the orders are not delayed;
 * when that block is already in (the loop has not named the next yet), not at all;
 * with no block to wake at (no order chain), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
@@ -28,7 +29,7 @@ MAX_HOLD_S = 0.1
 class ReadPace:
     """The reader's wait before its next read (see module docstring)."""
 
-    def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = 0.004,
+    def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = 0.01,
                  window_s: float = 10.0, min_span_s: float = 1.0):
         self.buffer_bytes, self.idle_hold_s, self.margin_s = buffer_bytes, idle_hold_s, margin_s
         self.window_s, self.min_span_s = window_s, min_span_s
@@ -37,6 +38,8 @@ class ReadPace:
         self.last: tuple[float, int] | None = None           # (wall, t0) of the newest frame
         self.rate: float | None = None                       # board samples per wall second
         self.byte_rate: float | None = None
+        self._base: float | None = None     # arrival of the window's first t0: the last window's
+        self._win: float | None = None      # ... and this window's estimate
 
     def arrived(self, now: float, nbytes: int, t0: int | None) -> None:
         """A read of ``nbytes`` at ``now``; ``t0``: the newest frame's t0_unwrapped (None: none)."""
@@ -44,7 +47,7 @@ class ReadPace:
         if t0 is None:
             return
         if self.last is not None and t0 < self.last[1]:     # the board's clock went back: start over
-            self._ref, self.rate = None, None
+            self._ref, self.rate, self._base, self._win = None, None, None, None
         self.last = (now, t0)
         if self._ref is None:
             self._ref = (now, t0, self._bytes)
@@ -54,8 +57,17 @@ class ReadPace:
         if span >= self.min_span_s:
             self.rate = (t0 - t00) / span if t0 > t00 else None
             self.byte_rate = (self._bytes - b0) / span
+        if not self.rate:
+            return
+        # when the window's first t0 arrived, from the earliest arrival (a read after a wait
+        # is late; the one waiting for the block to wake at is not): this window's and the
+        # last one's, so an estimate is never older than two windows
+        base = now - (t0 - t00) / self.rate
+        self._win = base if self._win is None else min(self._win, base)
         if span >= self.window_s:
+            shift = (t0 - t00) / self.rate
             self._ref = (now, t0, self._bytes)
+            self._base, self._win = self._win + shift, now
 
     def hold(self, now: float, wake_t0: int | None) -> float:
         """Seconds the reader may wait before its next read (0: read now)."""
@@ -64,8 +76,9 @@ class ReadPace:
         cap = self.buffer_bytes / self.byte_rate
         if wake_t0 is None:
             return min(cap, self.idle_hold_s)
-        wall, t0 = self.last
-        if wake_t0 <= t0:
+        if wake_t0 <= self.last[1] or self._win is None:
             return 0.0
-        due = wall + (wake_t0 - t0) / self.rate - self.margin_s
+        assert self._ref is not None                # set with the rate
+        base = self._win if self._base is None else min(self._base, self._win)
+        due = base + (wake_t0 - self._ref[1]) / self.rate - self.margin_s
         return max(0.0, min(cap, MAX_HOLD_S, due - now))
