@@ -1,10 +1,16 @@
-"""Build the optional compiled AKF kernel; everything else is in pyproject.toml.
+"""Build the optional compiled kernels and put the default configuration into the package;
+everything else is in pyproject.toml.
 
-The kernel is optional: without a C compiler the install still succeeds and
-cmsensord falls back to the numpy implementation (slower, same results).
+The kernels are optional: without a C compiler the install still succeeds and
+cmsensord falls back to the numpy implementation (slower, same results); the daemon
+names the missing kernel(s) at start (cmsensord/kernels.py).
 """
+import shutil
+from pathlib import Path
+
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
+from setuptools.command.build_py import build_py
 
 
 class OptionalBuildExt(build_ext):
@@ -12,13 +18,24 @@ class OptionalBuildExt(build_ext):
         try:
             super().run()
         except Exception as exc:  # noqa: BLE001 - any compiler failure
-            print(f"warning: compiled AKF kernel not built ({exc}); using the numpy fallback")
+            print(f"warning: compiled kernels not built ({exc}); cmsensord uses the numpy fallback")
 
     def build_extension(self, ext):
         try:
             super().build_extension(ext)
         except Exception as exc:  # noqa: BLE001
-            print(f"warning: compiled AKF kernel not built ({exc}); using the numpy fallback")
+            print(f"warning: {ext.name} not built ({exc}); cmsensord uses the numpy fallback for it")
+
+
+class BuildPyWithDefaultConfig(build_py):
+    """config/default.yaml -> cmsensord/config/default.yaml in the build (package data)."""
+
+    def run(self):
+        super().run()
+        source = Path(__file__).resolve().parent / "config" / "default.yaml"
+        target = Path(self.build_lib) / "cmsensord" / "config" / "default.yaml"
+        if source.is_file() and target.parent.is_dir():
+            shutil.copyfile(source, target)
 
 
 setup(
@@ -26,5 +43,5 @@ setup(
                            extra_compile_args=["-O2", "-ffp-contract=off"]),
                  Extension("cmsensord.dsp._trackerkernel", ["cmsensord/dsp/_trackerkernel.c"],
                            extra_compile_args=["-O2", "-ffp-contract=off"])],
-    cmdclass={"build_ext": OptionalBuildExt},
+    cmdclass={"build_ext": OptionalBuildExt, "build_py": BuildPyWithDefaultConfig},
 )

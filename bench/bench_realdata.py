@@ -11,6 +11,11 @@ level rule beside it (one RMS per snapshot, baseline = median of the first 20 %,
 alarm at the third consecutive snapshot above 2 x baseline).  Life fraction =
 board time / (snapshots x 0.1 s): the import puts the 0.1-s snapshots end to end.
 
+The vibration indicators of the same replays (``indicators.interval_s`` 0.1: one record per
+FEMTO snapshot; the speed from the archive): velocity RMS, kurtosis and envelope RMS over
+life -- the median of the first 20 % (baseline), around 50 % and of the last 5 %, and the
+life fraction at which each first stays above 2 x its baseline for 3 snapshots.
+
 IMS (NASA/Cincinnati): calibrated on the first half of the healthy segment; the
 severity of its second half, and the mean severity of each fault segment.
 
@@ -83,6 +88,10 @@ def femto(data: Path, work: Path, bearing: str) -> dict:
                     "--unit", "mg", "--out", str(cap))
     cpu += cmsensord("calibrate", str(cap), "--to", f"{HEALTHY * snaps * SNAPSHOT_S:g}",
                      "--out", str(site))          # f_r from the rpm the import read from the archive
+    text = site.read_text(encoding="utf-8")
+    if "indicators:" not in text:               # one record per 0.1-s snapshot
+        site.write_text(text + f"\nindicators:\n  interval_s: {SNAPSHOT_S}\n  rpm: {float(d['rpm']):g}\n",
+                        encoding="utf-8")
     cpu += cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
     t, sev = severity_timeline(out, "horizontal")
     akf = severity_timeline(out, "horizontal", "severity_akf")[1]
@@ -93,7 +102,25 @@ def femto(data: Path, work: Path, bearing: str) -> dict:
     return {"bearing": f"Bearing{bearing}", "snapshots": snaps, "quiet": int(np.count_nonzero(sev[mid] > 0)),
             "s01": first_reached(life, sev, 0.1), "s05": s05, "s10": first_reached(life, sev, 1.0),
             "akf01": first_reached(life, akf, 0.1), "akf05": first_reached(life, akf, 0.5),
-            "rule": rule, "diff": s05 - rule, "decision": 100.0 / (snaps * SNAPSHOT_S), "cpu": cpu}
+            "rule": rule, "diff": s05 - rule, "decision": 100.0 / (snaps * SNAPSHOT_S), "cpu": cpu,
+            "trends": indicator_trends(out, "horizontal")}
+
+
+TRENDS = (("velocity_rms_mm_s", "velocity RMS mm/s"), ("kurtosis", "kurtosis"), ("envelope_rms", "envelope RMS m/s^2"))
+
+
+def indicator_trends(out_dir: Path, channel: str) -> dict[str, tuple[float, float, float, float]]:
+    """Per indicator: (baseline = median of the first 20 % of the records, median of 45-55 %,
+    median of the last 5 %, % of life of the 3rd consecutive record above 2 x baseline)."""
+    recs = [m for topic, _, m in read_messages(next(out_dir.glob("*.mcap")))
+            if topic == f"/cm/{channel}/indicators" and m.get("missing_fraction", 0) == 0]
+    out = {}
+    for key, _ in TRENDS:
+        v = np.array([m.get(key, np.nan) for m in recs], dtype=np.float64)
+        n = v.size
+        out[key] = (float(np.nanmedian(v[: max(1, n // 5)])), float(np.nanmedian(v[int(0.45 * n):int(0.55 * n) + 1])),
+                    float(np.nanmedian(v[int(0.95 * n):])), level_rule(v))
+    return out
 
 
 def ims(data: Path, work: Path) -> list[dict]:
@@ -135,12 +162,22 @@ def main() -> int:
         print("| bearing | snapshots | S>0 in 20-50 % | S>=0.1 | S>=0.5 | S>=1.0 | AKF part >=0.1 | "
               "AKF part >=0.5 | 2x rule | S>=0.5 - rule | 1 decision | CPU s |")
         print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+        femto_rows = []
         for b in args.bearings:
             r = femto(args.data, work, b)
+            femto_rows.append(r)
             print(f"| {r['bearing']} | {r['snapshots']} | {r['quiet']} | {_pct(r['s01'])} | {_pct(r['s05'])} | "
                   f"{_pct(r['s10'])} | {_pct(r['akf01'])} | {_pct(r['akf05'])} | {_pct(r['rule'])} | "
                   f"{r['diff']:+.1f} | {r['decision']:.2f} | "
                   f"{r['cpu']:.1f} |", flush=True)
+        print("\nIndicator trends over life (one record per snapshot): baseline (first 20 %) -> 50 % -> "
+              "last 5 %, and the % of life where it first stays above 2 x baseline (3 snapshots)")
+        print("| bearing | " + " | ".join(name for _, name in TRENDS) + " |")
+        print("| --- |" + " ---: |" * len(TRENDS))
+        for r in femto_rows:
+            cells = [f"{a:.3g} -> {b:.3g} -> {c:.3g} ({_pct(p)})" for a, b, c, p in
+                     (r["trends"][k] for k, _ in TRENDS)]
+            print(f"| {r['bearing']} | " + " | ".join(cells) + " |")
         if not args.no_ims:
             print("\nIMS, calibrated on the first half (3 s) of the healthy segment NA")
             print("| segment | decisions | max S_idx | mean S_idx |")

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from cmsensord import __version__
 from cmsensord.acoustic_model import FORMAT, VERSION, Calibration, load_calibration, save_calibration
 from cmsensord.dsp.acoustic import AcousticModel
 
@@ -396,7 +397,8 @@ def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_backgr
             except ValueError as exc:
                 warning = NO_CROSS_TERM.format(why=str(exc))
                 kwargs["cross_var"] = 0.0
-    cal = fit_model(rms[:, 0], rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)
+    # x and z are block mean squares ((m/s²)², Pa²), as fit_model documents: the squared RMS
+    cal = fit_model(rms[:, 0] ** 2, rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)
     if warning is not None:
         cal.info["warnings"].insert(0, warning)
     cal.info.update(paired=str(paired), background=str(background), accel_channel=accel, mic_channel=mic,
@@ -415,6 +417,7 @@ def main(argv: list[str] | None = None) -> int:
         description="Fit the acoustic estimator of Orimoto, Ikuta & Wang (vibration from microphone "
                     "sound) from a paired accelerometer + microphone capture and a capture of "
                     "background noise alone.")
+    p.add_argument("--version", action="version", version=f"cmsensord.acoustic_calib (cmsensord {__version__})")
     p.add_argument("--paired", required=True, help="capture with the accelerometer and the microphone")
     p.add_argument("--background", required=True, help="capture of background noise alone (machine stopped)")
     p.add_argument("--accel", type=int, default=0, help="accelerometer channel of the paired capture (0)")

@@ -7,12 +7,15 @@ and, beside them, the zero-phase second-generation VKF of the whole record
 with ``method: "batch"``, in the same 0.1 s blocks and on the same time base.
 
 Steps: RAW counts -> m/s² (STATUS scale/offset or the configuration), the
-tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record, so
-every value is final), zero-phase decimation to at least 5x the highest
+tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record and
+keeping all of it, so every value is final and known), zero-phase decimation to at least 5x the highest
 tracked frequency (``scipy.signal.decimate``, FIR, forwards and backwards),
 phases θ_k = 2π o_k turns (or 2π f t), one coupled banded solve per channel.
 A lost RAW block is zeros in the record (the batch filter sees a short gap); each
 /orders message says which fraction of its block's samples had none (``missing_fraction``).
+Whatever it cannot handle (no RAW blocks or tacho, a bandwidth too narrow for double
+precision or not below the tracked rate, a record too large for memory) is one
+CmsensordError line, and the files of the run are deleted: nothing is left behind.
 This is an offline tool: it holds the whole record in memory (about 8 bytes
 per sample and channel at 25 kHz, plus ~1 kB per decimated sample for the
 solve with 2 poles and 3 components).
@@ -62,16 +65,25 @@ class _Collector:
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
                  quiet: bool = False) -> tuple[list[Path], dict]:
-    """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary."""
+    """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary.
+
+    A capture or a bandwidth the batch filter cannot handle (no RAW blocks or no tacho, a
+    bandwidth too narrow for double precision, a record too large for memory) raises
+    CmsensordError with one line, and the files this run wrote are deleted: nothing is left
+    behind."""
     from cmsensord.monitor.processor import Processor
     from cmsensord.service.sink import open_sink
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
+    out_dir = Path(cfg.output.dir)
+    made_dir = not out_dir.exists()
     sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
-    proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)
-    col = _Collector()
+    sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
+    done = False
     try:
+        proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)
+        col = _Collector()
         with source:
             for frames in source:
                 proc.handle(frames)
@@ -82,11 +94,33 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
                                  "capture in RAW mode")
         if not col.tacho_t0:
             raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
-        summary = _track(col, cfg, proc, sink, bandwidth_hz, poles)
+        try:
+            summary = _track(col, cfg, proc, sink, bandwidth_hz, poles)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise CmsensordError(f"{capture}: batch VKF at {bandwidth_hz:g} Hz, {poles} pole(s): "
+                                 f"{exc}") from None
+        except MemoryError:
+            raise CmsensordError(f"{capture}: batch VKF: not enough memory for the whole record "
+                                 "(shorten the capture or track fewer components)") from None
+        done = True
     finally:
         sink.close()
+        if not done:
+            _remove(sink.paths, out_dir if made_dir else None)
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
     return sink.paths, summary
+
+
+def _remove(paths: list[Path], made_dir: Path | None) -> None:
+    """Delete the files of a failed run (they would hold the replay without the batch orders),
+    and the output directory when this run made it and it is empty again."""
+    for p in paths:
+        with contextlib.suppress(FileNotFoundError):
+            p.unlink()
+    paths.clear()
+    if made_dir is not None:
+        with contextlib.suppress(OSError):
+            made_dir.rmdir()
 
 
 def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
@@ -112,7 +146,10 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
             y[t0 - s0:t0 - s0 + L, pos[chan]] = rows_physical(counts, scale[chan:chan + 1],
                                                               offset[chan:chan + 1])[0]
             lost[t0 - s0:t0 - s0 + L, pos[chan]] = False
-    tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s)
+    # the whole record's speed and angle stay queryable (the daemon keeps 60 s of knots; behind
+    # them the angle is unknown, which made every order's phase 0 there, all orders alike)
+    tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s,
+                         history_s=n / fs + 60.0)
     tacho.update(np.array(col.tacho_t0, dtype=np.int64), col.tacho_edges)
     comps = cfg.orders.components
     rpm_top = cfg.orders.max_rpm
@@ -136,9 +173,10 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     rpm_blocks = (60.0 * hz[:nb * block]).reshape(nb, block).mean(axis=1)
     ok_blocks = valid[:nb * block].reshape(nb, block).all(axis=1) & (rpm_blocks >= cfg.orders.min_rpm)
     gone = lost[idx[:nb * block] - s0].reshape(nb, block, len(channels)).mean(axis=1)
-    written = 0
+    written, ridge = 0, []
     for ci, ch in enumerate(channels):
         res = vkf2(yd[:, ci], ph, r, poles=poles)
+        ridge.append(res.ridge)
         w = res.waveforms[:, :nb * block].reshape(len(comps), nb, block)
         rms = np.sqrt(np.mean(w * w, axis=2))
         amp = res.amplitude[:, :nb * block].reshape(len(comps), nb, block).mean(axis=2)
@@ -151,4 +189,5 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
                                         "batch", entries, float(gone[b, ci])))
             written += 1
     return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
-            "components": [c.name for c in comps], "r": [float(v) for v in r]}
+            "components": [c.name for c in comps], "r": [float(v) for v in r],
+            "ridge": [float(f"{m:.3g}") for m in ridge]}

@@ -14,8 +14,10 @@ exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,6 +27,7 @@ from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
 from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
+from cmsensord.journal import JournalStream, error_line, setup_logging, under_journal
 from cmsensord.service.live import run_live
 from cmsensord.service.record import record
 from cmsensord.service.replay import replay
@@ -42,28 +45,27 @@ def _scenarios_help() -> str:
         from firmware_sim.scenarios import SCENARIOS, make_scenario
     except ImportError:  # pragma: no cover
         return ""
+    from cmsensord.service.simulate import scenario_run
+
     lines = []
     for name in SCENARIOS:
         try:
             desc = make_scenario(name, duration_s=60.0).description.split("\n")[0]
         except Exception:  # noqa: BLE001 - help text only
             desc = ""
-        lines.append(f"  {name:<14} {desc}")
+        run = scenario_run(name)
+        mics = f", microphone on ch{','.join(map(str, run.microphones))}" if run.microphones else ""
+        lines.append(f"  {name:<19} {desc}\n  {'':<19} (defaults: {run.duration_s:g} s at {run.speed:g}x, "
+                     f"{run.channels} channel(s), {run.mode.upper()}{mics})")
     return "scenarios (--scenario):\n" + "\n".join(lines)
-
-
-def _setup_logging(verbose: bool, daemon: bool = True) -> None:
-    """Events to stderr (the journal under systemd): INFO and up for the daemon, WARNING and
-    up for the one-shot subcommands (they print their own summary), everything with -v."""
-    level = logging.DEBUG if verbose else logging.INFO if daemon else logging.WARNING
-    logging.basicConfig(level=level, format="%(levelname)s %(message)s", stream=sys.stderr)
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line (and the pointer to --help), exit 2."""
 
     def error(self, message: str):
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        prefix = "<3>" if isinstance(sys.stderr, JournalStream) else ""
+        self.exit(EXIT_USAGE, f"{prefix}{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 # --------------------------------------------------------------------------- argparse
@@ -73,22 +75,29 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
         description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, vkf, summary (see "
+        epilog=(_scenarios_help() if with_scenarios else "")
+        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary (see "
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
-    p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
-    p.add_argument("-v", "--verbose", action="store_true", help="log every event (debug level)")
+    p.add_argument("--config", metavar="FILE", help="YAML configuration (`cmsensord config --default` "
+                   "prints every key with its default and meaning)")
+    p.add_argument("-v", "--verbose", action="count", default=0,
+                   help="log more: -v the per-AKF anomaly flags too, -vv everything (debug)")
     sim = p.add_argument_group("simulation (--simulate)")
     sim.add_argument("--simulate", action="store_true",
                      help="run a simulated ADC board on a pty and the daemon on it")
     sim.add_argument("--scenario", default="degrading", help="machine scenario (default degrading)")
-    sim.add_argument("--duration", type=positive, default=600.0,
-                     help="simulated seconds; a scenario's shape stretches over it (default 600)")
-    sim.add_argument("--speed", type=positive, default=20.0,
-                     help="x real time (default 20: 600 s simulated in 30 s)")
+    sim.add_argument("--duration", type=positive, default=None,
+                     help="simulated seconds; a scenario's shape stretches over it (default: the "
+                          "scenario's, 600 for the motors, listed below)")
+    sim.add_argument("--speed", type=positive, default=None,
+                     help="x real time (default: the scenario's, 20 for the motors: 600 s simulated "
+                          "in 30 s; listed below); a reader that falls behind slows the board down")
     sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    sim.add_argument("--channels", type=count(1, 8), default=1, help="number of channels 1..8 (default 1)")
+    sim.add_argument("--channels", type=count(1, 8), default=None,
+                     help="number of channels 1..8 (default: the scenario's, 1; 2 with a microphone "
+                          "beside the accelerometer)")
     sim.add_argument("--mode", choices=("rms", "raw"),
                      help="board mode (default: rms; raw for whirl and close_orders)")
     sim.add_argument("--tacho", action="store_true",
@@ -96,7 +105,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,summary}",
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,config,summary}",
                            parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
@@ -125,6 +134,9 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     from cmsensord.importing.command import add_import_parser
     add_import_parser(sub)
     add_calibrate_parser(sub)
+    c = sub.add_parser("config", help="print the default configuration (every key, commented)")
+    c.add_argument("--default", action="store_true", required=True,
+                   help="print config/default.yaml: start a site file from it")
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -168,8 +180,23 @@ def _run_replay(args: argparse.Namespace) -> int:
     return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed)[0]
 
 
+def _print_default_config() -> int:
+    """``cmsensord config --default``: the commented default configuration on stdout."""
+    from cmsensord.config.default_file import default_yaml
+
+    text = default_yaml()
+    if text is None:
+        error_line("cmsensord: the default configuration file is not installed (config/default.yaml)")
+        return 1
+    sys.stdout.write(text)
+    sys.stdout.flush()
+    return 0
+
+
 def _dispatch(args: argparse.Namespace) -> int:
     """Run the subcommand, the simulation or the daemon that ``args`` ask for."""
+    if args.command == "config":
+        return _print_default_config()
     if args.command == "summary":
         return summary(args.mcap, as_json=args.json)
     if args.command == "import":
@@ -191,36 +218,54 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.config:
         cfg, auto = _config_for(args.config)
         return run_live(cfg, auto_channels=auto, capture_path=args.capture)
-    print("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
-          "(see cmsensord --help)", file=sys.stderr)
+    error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
+               "(see cmsensord --help)")
     return EXIT_USAGE
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if under_journal() and not isinstance(sys.stderr, JournalStream):
+        sys.stderr = JournalStream(sys.stderr)
     parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
     args = parser.parse_args(argv)
-    _setup_logging(args.verbose, daemon=args.command is None)
+    setup_logging(args.verbose, daemon=args.command is None)
     try:
         return _dispatch(args)
     except ConfigError as exc:
         if exc.source.startswith("--"):         # a command-line option: a usage error
-            print(f"cmsensord: {exc}", file=sys.stderr)
+            error_line(f"cmsensord: {exc}")
             return EXIT_USAGE
-        print(f"cmsensord: configuration error: {exc}", file=sys.stderr)
+        error_line(f"cmsensord: configuration error: {exc}")
         return EXIT_CONFIG
     except SinkError as exc:            # the output directory is a setting (output.dir / --out)
-        print(f"cmsensord: output error: {exc} (set output.dir or --out to a writable directory)",
-              file=sys.stderr)
+        error_line(f"cmsensord: output error: {exc} (set output.dir or --out to a writable directory)")
         return EXIT_CONFIG
     except LinkError as exc:
-        print(f"cmsensord: {exc}", file=sys.stderr)
+        error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
     except CmsensordError as exc:
-        print(f"cmsensord: {exc}", file=sys.stderr)
+        error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:             # `cmsensord ... | head -1`: the reader is gone
+        return _quiet_broken_pipe()
+
+
+#: exit status after a closed pipe, as a shell reports a process ended by SIGPIPE
+EXIT_PIPE = 141
+
+
+def _quiet_broken_pipe() -> int:
+    """stdout or stderr is a pipe whose reader has gone (the run is already finished: the MCAP
+    file is closed on the way out): no traceback, nothing more written, exit 141."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(devnull, stream.fileno())
+    os.close(devnull)
+    return EXIT_PIPE
 
 
 if __name__ == "__main__":  # pragma: no cover

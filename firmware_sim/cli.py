@@ -9,7 +9,9 @@
 ``--out`` writes the bytes as fast as possible and prints a one-line summary.
 ``--pty`` prints the slave device path as the first line of stdout (flushed),
 then streams paced at ``--speed`` x real time until ``--duration`` or
-SIGINT/SIGTERM, and prints the link statistics. Bad arguments give a one-line
+SIGINT/SIGTERM, and prints the link statistics; a reader that falls behind loses the
+bytes that do not fit in the pty, unless ``--flow-control`` makes the board wait for it
+(what ``cmsensord --simulate`` uses). Bad arguments give a one-line
 error and exit code 2. ``--truth`` writes the true waveforms (t, rpm, turns,
 each component of the run-up scenarios) of channel 0 to an .npz file
 (:func:`firmware_sim.scenarios.write_truth`). When the stream needs more
@@ -28,6 +30,8 @@ import signal
 import sys
 import threading
 import time
+
+from cmsensord import __version__
 
 from .board import DEFAULT_BAUD, Board, BoardConfig, link_budget
 from .scenarios import SCENARIOS, make_scenario, write_truth
@@ -71,6 +75,7 @@ def _fault(text: str) -> float | tuple[int, ...]:
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="firmware_sim", description="The simulated TM4C1294 ADC board of cmsensord "
                 "(docs/PROTOCOL.md): writes a capture file or serves a pseudo-terminal.")
+    p.add_argument("--version", action="version", version=f"firmware_sim (cmsensord {__version__})")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--scenario", help=f"machine model: {', '.join(SCENARIOS)}")
     p.add_argument("--channels", type=int, default=1, help="accelerometer channels, 1..8 (default 1)")
@@ -114,6 +119,9 @@ def _build_parser() -> argparse.ArgumentParser:
                         "so the reader sees the end of the data, not a disconnect")
     p.add_argument("--speed", type=float, default=1.0,
                    help="pty pacing, x real time (0 or inf: as fast as possible; default 1)")
+    p.add_argument("--flow-control", action="store_true",
+                   help="with --pty: wait for a slow reader (hardware handshake) instead of dropping "
+                        "the bytes that do not fit, as a UART without flow control does (default)")
     return p
 
 
@@ -140,6 +148,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise _UsageError("--faults-out needs --byte-error-rate")
     if args.link and not args.pty:
         raise _UsageError("--link needs --pty")
+    if args.flow_control and not args.pty:
+        raise _UsageError("--flow-control needs --pty")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -191,7 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:
         return _write_out(board, args, span, injector)
     return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold,
-                      link=args.link, injector=injector, faults_out=args.faults_out)
+                      link=args.link, injector=injector, faults_out=args.faults_out,
+                      flow_control=args.flow_control)
 
 
 def _write_truth(scenario, path: str, duration: float, *, rate) -> int:
@@ -251,7 +262,8 @@ def _tacho_edges_per_block(scenario, config: BoardConfig, duration: float | None
 
 
 def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool = False,
-               link: str | None = None, injector=None, faults_out: str | None = None) -> int:
+               link: str | None = None, injector=None, faults_out: str | None = None,
+               flow_control: bool = False) -> int:
     from .pty_link import PtyEndpoint
 
     stop = threading.Event()
@@ -261,7 +273,7 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
 
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with PtyEndpoint(link=link, injector=injector) as ep:
+        with PtyEndpoint(link=link, injector=injector, flow_control=flow_control) as ep:
             print(ep.path, flush=True)
             stats = ep.run(board, speed=speed, duration_s=duration, stop=stop)
             if injector is not None and faults_out:

@@ -9,7 +9,10 @@ path (``path``) for the daemon to open like ``/dev/ttyACM0``.
 clock (no accumulated sleep drift). The master is non-blocking: when a write
 would block (the reader is slow or absent and the pty's buffer is full) the
 bytes that did not fit are dropped and counted, like a UART without flow
-control; the endpoint itself never blocks.
+control; the endpoint itself never blocks.  With ``flow_control`` (hardware
+handshake, RTS/CTS) it waits for the reader instead, never dropping a byte:
+the stream slows down, the time waited is counted (``stalled_s``) and the
+following blocks keep the pace from where the reader let it go on.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import errno
 import math
 import os
+import select
 import threading
 import time
 import tty
@@ -40,6 +44,7 @@ class LinkStats:
     dropped_blocks: int = 0  # blocks that lost at least one byte
     elapsed_s: float = 0.0  # wall time spent in run()
     max_lag_s: float = 0.0  # worst lateness of a block behind its deadline
+    stalled_s: float = 0.0  # flow control: time spent waiting for the reader
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -49,10 +54,12 @@ class PtyEndpoint:
     """A pty whose slave is the simulated board's serial port."""
 
     def __init__(self, *, link: str | None = None,
-                 injector: Callable[[bytes], bytes] | None = None) -> None:
+                 injector: Callable[[bytes], bytes] | None = None, flow_control: bool = False) -> None:
         """``link``: also publish the port as this symlink (a stable name, like a udev rule
         gives a USB board; replaced atomically, removed on close). ``injector``: line
-        noise applied to every block's bytes (:class:`firmware_sim.faults.StreamInjector`)."""
+        noise applied to every block's bytes (:class:`firmware_sim.faults.StreamInjector`).
+        ``flow_control``: wait for the reader when the pty is full instead of dropping."""
+        self.flow_control = flow_control
         self.master, self.slave = os.openpty()
         try:
             tty.setraw(self.slave)
@@ -75,14 +82,17 @@ class PtyEndpoint:
                 self.close()
                 raise
 
-    def write_block(self, data: bytes) -> int:
-        """Write what fits now; returns the number of bytes written (the rest is dropped)."""
+    def write_block(self, data: bytes, stop: threading.Event | None = None) -> int:
+        """Write what fits now (with flow control: all of it, waiting for the reader unless
+        ``stop`` is set); returns the number of bytes written (the rest is dropped)."""
         view = memoryview(data)
         written = 0
         while written < len(view):
             try:
                 n = os.write(self.master, view[written:])
             except BlockingIOError:
+                if self.flow_control and self._wait_writable(stop):
+                    continue
                 break
             except OSError as exc:  # EIO: no slave side (cannot happen while we hold it)
                 if exc.errno == errno.EIO:
@@ -98,6 +108,19 @@ class PtyEndpoint:
             s.dropped_bytes += len(view) - written
             s.dropped_blocks += 1
         return written
+
+    def _wait_writable(self, stop: threading.Event | None) -> bool:
+        """Flow control: wait until the pty takes bytes again; False when ``stop`` is set."""
+        t = time.monotonic()
+        poller = select.poll()
+        poller.register(self.master, select.POLLOUT)
+        try:
+            while not (stop is not None and stop.is_set()):
+                if poller.poll(100):
+                    return True
+            return False
+        finally:
+            self.stats.stalled_s += time.monotonic() - t
 
     def run(self, board: Board, *, speed: float = 1.0, duration_s: float | None = None,
             stop: threading.Event | None = None) -> LinkStats:
@@ -128,7 +151,9 @@ class PtyEndpoint:
                             break
                     else:
                         s.max_lag_s = max(s.max_lag_s, -wait)
-                self.write_block(data if self.injector is None else self.injector(data))
+                stalled = s.stalled_s
+                self.write_block(data if self.injector is None else self.injector(data), stop)
+                t_start += s.stalled_s - stalled     # the reader held the line: the pace goes on from here
                 s.blocks += 1
                 s.frames += n_frames
         finally:

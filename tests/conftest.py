@@ -45,6 +45,13 @@ PROCESS_MODULES = frozenset({
     "test_stream_events.py",
     "test_live_batching.py",
     "test_no_compiler.py",
+    "test_journal.py",
+    "test_foxglove.py",
+    "test_package.py",
+    "test_vkf_command.py",
+    "test_simulate_scenarios.py",
+    "test_acoustic_calib_command.py",
+    "test_indicators_daemon.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
@@ -52,6 +59,7 @@ PROCESS_TESTS = frozenset({
     "test_disk_full.py::test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging",
     "test_firmware_sim.py::test_pty_stream_is_paced_and_decodes_contiguously",
     "test_firmware_sim.py::test_pty_without_reader_drops_bytes_and_never_blocks",
+    "test_firmware_sim.py::test_pty_with_flow_control_waits_for_a_slow_reader_and_drops_nothing",
     "test_firmware_sim_raw.py::test_cli_warns_when_the_uart_cannot_carry_the_stream",
     "test_link.py::test_reader_thread_decodes_a_pty_and_tees_the_capture",
     "test_link.py::test_a_stalled_loop_loses_raw_blocks_but_no_rms_frame_and_memory_stays_bounded",

@@ -19,10 +19,11 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
 
-def cmsensord(*args, timeout=120, **kw) -> subprocess.CompletedProcess:
-    """Run ``python -m cmsensord ARGS`` to completion, output captured as text."""
+def cmsensord(*args, timeout=120, env=None, **kw) -> subprocess.CompletedProcess:
+    """Run ``python -m cmsensord ARGS`` to completion, output captured as text (``env``: the
+    environment, default ENV)."""
     return subprocess.run([sys.executable, "-m", "cmsensord", *args], capture_output=True, text=True,
-                          env=ENV, timeout=timeout, **kw)
+                          env=ENV if env is None else env, timeout=timeout, **kw)
 
 
 def run_module(module: str, *args, timeout=120) -> subprocess.CompletedProcess:

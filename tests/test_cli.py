@@ -59,7 +59,8 @@ def test_simulate_runs_the_chain_over_a_pty_and_writes_mcap(simulated_run):
     diag = [m for t, _, m in msgs if t == "/cm/diagnostics"]
     assert diag[-1]["link"]["frames_rms"] > 3500 and diag[-1]["link"]["crc_failures"] == 0
     assert assert_messages_match_their_schemas(files[0]) == {
-        "cmsensord.Severity", "cmsensord.Event", "cmsensord.Diagnostics"}
+        "cmsensord.Severity", "cmsensord.Event", "cmsensord.Diagnostics", "foxglove.Log",
+        "cmsensord.Indicators"}
 
 
 def test_replaying_the_capture_gives_the_live_messages(simulated_run, tmp_path):

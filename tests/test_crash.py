@@ -33,9 +33,10 @@ NS = 1_000_000_000
 
 
 def read_all(path: Path) -> list[tuple[str, int, bytes]]:
-    """Every message through mcap's reader, CRCs checked (raises on any damage)."""
+    """Every message through mcap's reader, CRCs checked (raises on any damage), with the stamp
+    it was written with (its publish time, as iter_messages_lenient gives it)."""
     with open(path, "rb") as f:
-        return [(c.topic, m.log_time, m.data)
+        return [(c.topic, m.publish_time, m.data)
                 for _s, c, m in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False)]
 
 

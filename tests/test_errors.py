@@ -3,8 +3,9 @@ or 78 (configuration), no traceback.  The table below is the specification.
 
 Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
-(YAML syntax), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text), ``capdir/`` (a directory), ``afile`` (a
-regular file, so ``afile/logs`` cannot be a directory).
+(YAML syntax), ``unit.yaml`` (a unit that does not fit the channel's kind), ``nocal.yaml`` (a
+microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text),
+``capdir/`` (a directory), ``afile`` (a regular file, so ``afile/logs`` cannot be a directory).
 """
 
 from __future__ import annotations
@@ -29,6 +30,11 @@ CASES = [
      "set output.dir or --out to a writable directory"),
     (["--config", "port.yaml", "--capture", "afile/cap.bin"], CONFIG,
      "afile/cap.bin: cannot write the capture file"),
+    (["replay", "capture.bin", "--config", "unit.yaml"], CONFIG,
+     "unit.yaml: channels[1].unit: Pa is not what a channel of kind accelerometer measures (m/s^2): "
+     "set kind: microphone (got 'Pa')"),
+    (["replay", "capture.bin", "--config", "nocal.yaml"], CONFIG,
+     "nocal.yaml: channels[0].kind: a microphone channel needs an acoustic calibration file"),
     # -- usage (2)
     (["replay", "missing.bin"], USAGE, "missing.bin: capture file not found"),
     (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file"),
@@ -52,6 +58,8 @@ def scratch(tmp_path_factory):
     (d / "bad.yaml").write_text("monitor:\n  r_max: 0.001\n")
     (d / "typo.yaml").write_text("monitor:\n  r_mx: 0.2\n")
     (d / "broken.yaml").write_text("link: [1, 2\n")
+    (d / "unit.yaml").write_text("channels:\n  - name: acc\n  - name: mic\n    unit: Pa\n")
+    (d / "nocal.yaml").write_text("channels:\n  - name: mic\n    kind: microphone\n")
     (d / "port.yaml").write_text("link:\n  port: /dev/nonexistent-tty\noutput:\n  dir: logs\n")
     (d / "notmcap.mcap").write_text("not an mcap file\n")
     (d / "capdir").mkdir()

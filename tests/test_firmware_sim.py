@@ -356,6 +356,28 @@ def test_pty_without_reader_drops_bytes_and_never_blocks():
     assert [f.seq for f in frames] == list(range(202))
 
 
+def test_pty_with_flow_control_waits_for_a_slow_reader_and_drops_nothing():
+    """--flow-control (the board under --simulate): a reader that falls behind slows the
+    board down; every byte arrives, in order, as the capture writer would write them."""
+    def board():
+        return Board(make_scenario("faulty", n_channels=2, seed=1), BoardConfig(mode="raw", n_channels=2))
+
+    with PtyEndpoint(flow_control=True) as ep:
+        ser = serial.Serial(ep.path, timeout=0.05)
+        th = threading.Thread(target=ep.run, args=(board(),), kwargs=dict(speed=0, duration_s=3.0))
+        th.start()
+        time.sleep(0.5)                                   # the reader is late: the pty fills up
+        got = bytearray()
+        while th.is_alive() or ser.in_waiting:
+            got += ser.read(4096)
+            time.sleep(0.002)                             # and slow: ~2 MB/s at most
+        got += ser.read(65536)
+        ser.close()
+    assert ep.stats.dropped_bytes == 0 and ep.stats.blocks == 300
+    assert ep.stats.stalled_s > 0.3                       # it did wait for the reader
+    assert bytes(got) == board().generate(3.0)
+
+
 # --------------------------------------------------------------------------- faults
 
 def test_inject_records_faults_and_decoder_resynchronises():

@@ -43,6 +43,7 @@ def run(data: bytes, splits=(), cfg=None):
     cuts = [0, *sorted(splits), len(data)]
     for frames in ByteStreamSource(data[a:b] for a, b in zip(cuts, cuts[1:])):
         proc.handle(frames)
+    proc.finish()                   # the end of the stream: the events still in the reorder buffer
     return sink, proc
 
 
@@ -110,6 +111,7 @@ def test_configured_channel_not_in_the_stream_is_an_event_not_a_crash():
     sink = ListSink()
     proc = Processor(cfg, sink, clock_ns=FIXED_CLOCK)
     proc.handle(Decoder().feed(rms_stream(seconds=2)))
+    proc.finish()
     msgs = [m["message"] for m in sink.topic("/cm/events")]
     assert any("none of the configured channels" in m for m in msgs)
     assert not sink.topic("/cm/motor/severity")

@@ -22,6 +22,7 @@ from typing import Any
 
 import yaml
 
+from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .settings import (
     MAX_CHANNELS,
     AcousticConfig,
@@ -46,7 +47,7 @@ _CHANNEL_OWN_KEYS = tuple(
     f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
 )
 _CHANNEL_KEYS = _CHANNEL_OWN_KEYS + _MONITOR_KEYS
-_ACOUSTIC_CHANNEL_KEYS = ("kind", "calibration")
+_ACOUSTIC_CHANNEL_KEYS = ("kind", "calibration", "unit")
 _TOP_KEYS = tuple(f.name for f in dataclasses.fields(Config))
 
 
@@ -122,6 +123,9 @@ def config_from_dict(
         sections[name] = _build(cls, values, source, name)
     monitor: MonitorConfig = sections["monitor"]
     sections["orders"] = _build_orders(d.get("orders"), source)
+    sections["indicators"] = _build_indicators(d.get("indicators"), source)
+    sections["bearings"] = _build_list(BearingConfig, d.get("bearings"), source, "bearings",
+                                       "(name: ..., channel: ..., elements: ...)")
 
     channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
@@ -194,6 +198,32 @@ def _build_orders(raw: Any, source: str) -> OrdersConfig:
                               "duplicate component name", dup)
         values = {**values, "components": tuple(built)}
     return _build(OrdersConfig, values, source, "orders")
+
+
+def _build_list(cls: type, raw: Any, source: str, path: str, shape: str) -> tuple:
+    """A list of ``cls`` entries (absent or empty: none)."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise ConfigError(source, path, f"expected a list of entries {shape}", raw)
+    keys = [f.name for f in dataclasses.fields(cls)]
+    built = []
+    for i, entry in enumerate(raw):
+        where = f"{path}[{i}]"
+        if not isinstance(entry, dict):
+            raise ConfigError(source, where, f"expected a mapping {shape}", entry)
+        _reject_unknown(entry, keys, source, where)
+        built.append(_build(cls, entry, source, where))
+    return tuple(built)
+
+
+def _build_indicators(raw: Any, source: str) -> IndicatorsConfig:
+    values = _mapping(raw, source, "indicators")
+    _reject_unknown(values, [f.name for f in dataclasses.fields(IndicatorsConfig)], source, "indicators")
+    if "bands" in values:
+        values = {**values, "bands": _build_list(BandConfig, values["bands"], source, "indicators.bands",
+                                                 "(name: ..., lo_hz: ..., hi_hz: ...)")}
+    return _build(IndicatorsConfig, values, source, "indicators")
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -376,6 +406,8 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
                                  if k not in _ACOUSTIC_CHANNEL_KEYS}
         if ch.kind != "accelerometer":          # listed only for microphone channels
             entry.update(kind=ch.kind, calibration=ch.calibration)
+        if ch.unit is not None:
+            entry["unit"] = ch.unit
         mon = dataclasses.asdict(ch.monitor)
         entry.update({k: v for k, v in mon.items() if glob[k] != v})
         channels.append(entry)
@@ -389,4 +421,14 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
                    "components": [{k: v for k, v in dataclasses.asdict(c).items() if v is not None}
                                   for c in cfg.orders.components]},
         "acoustic": dataclasses.asdict(cfg.acoustic),
+        "indicators": {**dataclasses.asdict(cfg.indicators),
+                       "velocity_band_hz": _as_list(cfg.indicators.velocity_band_hz),
+                       "envelope_band_hz": _as_list(cfg.indicators.envelope_band_hz),
+                       "bands": [{k: v for k, v in dataclasses.asdict(b).items() if v is not None}
+                                 for b in cfg.indicators.bands]},
+        "bearings": [dataclasses.asdict(b) for b in cfg.bearings],
     }
+
+
+def _as_list(v: tuple | None) -> list | None:
+    return None if v is None else list(v)

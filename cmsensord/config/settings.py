@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
 __all__ = [
@@ -98,6 +99,10 @@ class MonitorConfig:
         validate(self)
 
 
+#: the unit of each channel kind (ChannelConfig.unit, the simulated board's channels)
+KIND_UNITS = {"accelerometer": "m/s^2", "microphone": "Pa"}
+
+
 @dataclass(frozen=True)
 class ChannelConfig:
     """One measured channel: its name (MCAP topics), index and monitor settings."""
@@ -124,6 +129,9 @@ class ChannelConfig:
                          "that the AKF bank watches", choices=("accelerometer", "microphone"))
     calibration: str | None = setting(None, "acoustic calibration file of this microphone "
                                        "(default: acoustic.calibration)", nonempty=True, **_A_PATH)
+    unit: str | None = setting(None, "what the channel's values are in: m/s^2 (an accelerometer) "
+                               "or Pa (a microphone); null: its kind's; one that does not fit the "
+                               "kind is refused", choices=("m/s^2", "Pa"))
 
     def __post_init__(self) -> None:
         validate(self)
@@ -299,6 +307,10 @@ def _config_rules(cfg: Config) -> tuple[str, str, Any] | None:
     if not cfg.channels:
         return "channels", "must list at least one channel", []
     for i, ch in enumerate(cfg.channels):
+        if ch.unit is not None and ch.unit != KIND_UNITS[ch.kind]:
+            fits = next(k for k, u in KIND_UNITS.items() if u == ch.unit)
+            return (f"channels[{i}].unit", f"{ch.unit} is not what a channel of kind {ch.kind} "
+                    f"measures ({KIND_UNITS[ch.kind]}): set kind: {fits}", ch.unit)
         if ch.kind == "microphone" and ch.calibration is None and cfg.acoustic.calibration is None:
             return (f"channels[{i}].kind", "a microphone channel needs an acoustic calibration file "
                     f"(acoustic.calibration or channels[{i}].calibration)", ch.kind)
@@ -359,8 +371,11 @@ class Config:
     orders: OrdersConfig = field(default_factory=OrdersConfig, metadata={"help": "order tracker"})
     acoustic: AcousticConfig = field(default_factory=AcousticConfig,
                                      metadata={"help": "microphone channels (Orimoto, Ikuta & Wang)"})
+    indicators: IndicatorsConfig = field(default_factory=IndicatorsConfig,
+                                         metadata={"help": "vibration indicators (ISO 10816-3, envelope)"})
+    bearings: tuple[BearingConfig, ...] = field(default=(), metadata={"help": "bearings and their channels"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules,)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
 
     def __post_init__(self) -> None:
         validate(self)

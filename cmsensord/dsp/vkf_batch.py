@@ -76,8 +76,25 @@ envelope (2 poles, B = 0.25 Hz at fs = 2 kHz: r = 4e6 and 0.8 % RMS error).
 recomputed from the structure (the differences of eq. 14 are exact for smooth
 envelopes) and corrected with the same factor until the correction is below
 1e-10 of the envelope (3-6 steps for 2 poles and 0.25-2 Hz at 2 kHz; 1 for
-1 pole).  When r is too large even for that, it raises ``LinAlgError``
-instead of returning a wrong envelope.  The limit depends on B/fs: 2 poles
+1 pole).
+
+Extension (not in Tůma): where the orders cannot be told apart by the data —
+the shaft at standstill for a while (every θ_k constant, the same for all
+orders), orders closer than the bandwidth for longer than the filter's memory
+— the normal matrix is singular in exact arithmetic or numerically, and the
+Cholesky factorisation fails or the refinement does not converge.  Only then
+the loss gets a ridge (Tikhonov) term, J + μ Σ_n |z(n)|², with the smallest
+μ = 10^{2j} ε λ_max (λ_max = K + 2^{2s} r²/2 bounds the eigenvalues) that lets
+the factorisation through, and the refinement solves that regularised
+system exactly.  Where the data decide the envelopes (1/2 per sample and
+unknown) μ shrinks a steady envelope by μ/(1/2 + μ); μ is refused above
+1e-3 (0.2 %).  Where they do not, the envelopes are the smallest ones that
+explain the data.  ``VkfResult.ridge`` says which μ a solve took (0: the
+paper's system as it is, which every record that the plain factorisation
+handles keeps).  When r is too large even for that, it raises
+``LinAlgError`` ("widen the bandwidth") instead of returning a wrong
+envelope; so do two phase rows that are the same component (their difference
+constant).  The limit depends on B/fs: 2 poles
 with B = 0.07 Hz at 2 kHz (r = 5e7) still converge, 0.05 Hz does not; at
 fs = 25 kHz the same limits are 0.9 and 0.6 Hz.
 
@@ -110,6 +127,8 @@ import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded, solveh_banded
 from scipy.optimize import brentq
 
+from cmsensord.dsp.vkf_normal import ridge_solve, solve
+
 __all__ = [
     "Hz",
     "VkfResult",
@@ -125,9 +144,6 @@ __all__ = [
 ]
 
 _SQRT_HALF = 1.0 / math.sqrt(2.0)
-_REFINE_TOL = 1e-10      # vkf2: stop refining when max|Δz| <= tol max|z|
-_REFINE_MAX = 50         # ... or after this many steps, accepting the result when
-_REFINE_ACCEPT = 1e-7    # the estimated error left is below this (relative)
 _G3 = math.sqrt(math.sqrt(2.0) - 1.0)   # |H| = 1/√2  <=>  r² q² = √2 - 1
 
 
@@ -335,24 +351,6 @@ def _check_poles(poles) -> int:
     return int(poles)
 
 
-def _difference_gram_bands(n: int, s: int) -> list[np.ndarray]:
-    """Bands lag = 0..s of DᵀD, D the (n-s) x n s-th difference of eq. (14).
-
-    Row i of D has the coefficients d_j = (-1)^{s-j} binom(s, j) at columns
-    i + j, j = 0..s ([-1, 1] for s = 1, [1, -2, 1] for s = 2).
-    """
-    d = np.array([1.0])
-    for _ in range(s):
-        d = np.convolve(d, [-1.0, 1.0])
-    bands = []
-    for lag in range(s + 1):
-        b = np.zeros(n - lag)
-        for j in range(s + 1 - lag):
-            b[j:j + n - s] += d[j] * d[j + lag]   # entry (i+j, i+j+lag) of row i
-        bands.append(b)
-    return bands
-
-
 @dataclass(frozen=True)
 class VkfResult:
     """Output of :func:`vkf2`, one row per order (phase row) k.
@@ -363,6 +361,7 @@ class VkfResult:
     r, poles  : the weighting factors (K,) and the number of poles used.
     refinements : iterative-refinement steps the solve took (1 when the
                   Cholesky solution was already accurate).
+    ridge     : μ of the ridge term the solve needed (0: the paper's system as it is).
     """
 
     envelopes: np.ndarray
@@ -371,6 +370,7 @@ class VkfResult:
     r: np.ndarray
     poles: int
     refinements: int
+    ridge: float = 0.0
 
 
 def vkf2(y: np.ndarray, phases: np.ndarray, r: float | Sequence[float], *,
@@ -393,23 +393,19 @@ def vkf2(y: np.ndarray, phases: np.ndarray, r: float | Sequence[float], *,
     g = np.empty((P, N))
     g[0::2] = np.cos(phases)
     g[1::2] = -np.sin(phases)
-    ab = _vkf2_normal_matrix(g, rk, s)
     rhs = (g * y).T.reshape(N, P)           # gᵀ y, in the same unknown order
     try:
-        cb = cholesky_banded(ab, overwrite_ab=True, check_finite=False)
-    except np.linalg.LinAlgError as e:
-        raise np.linalg.LinAlgError(
-            f"vkf2: normal matrix not positive definite in double precision ({e}); "
-            f"r = {rk.tolist()} too large (bandwidth too narrow for fs) or two phase "
-            "rows identical") from e
-    del ab
-    z = cho_solve_banded((cb, False), rhs.reshape(-1), check_finite=False).reshape(N, P)
-    refinements = _vkf2_refine(z, cb, rhs, g, rk, s)
-    del cb, g
+        mu, z, refinements = 0.0, *solve(g, rhs, rk, s, 0.0)
+    except np.linalg.LinAlgError:
+        # not positive definite, or too ill-conditioned to refine, in double precision:
+        # stretches where the orders cannot be told apart (a speed near 0, orders closer
+        # than the bandwidth); the smallest ridge μ|z|² that makes the factor exist
+        mu, z, refinements = ridge_solve(g, rhs, rk, s)
+    del g
     env = z[:, 0::2].T + 1j * z[:, 1::2].T
     wave = z[:, 0::2].T * np.cos(phases) - z[:, 1::2].T * np.sin(phases)
     return VkfResult(envelopes=env, waveforms=wave, amplitude=np.abs(env), r=rk,
-                     poles=s, refinements=refinements)
+                     poles=s, refinements=refinements, ridge=mu)
 
 
 def _vkf2_inputs(y, phases, r, poles) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -436,77 +432,14 @@ def _vkf2_inputs(y, phases, r, poles) -> tuple[np.ndarray, np.ndarray, np.ndarra
         raise ValueError(f"r: expected a scalar or shape ({K},), got {rk.shape}")
     if not (np.all(rk > 0) and np.all(np.isfinite(rk))):
         raise ValueError(f"r: expected finite values > 0, got {rk.tolist()}")
+    for i in range(K):
+        for j in range(i + 1, K):
+            d = phases[i] - phases[j]
+            if float(np.ptp(d)) <= 1e-12 * max(1.0, float(np.abs(phases[i]).max())):
+                raise np.linalg.LinAlgError(
+                    f"vkf2: phase rows {i} and {j} are identical (up to a constant): one "
+                    "component asked for twice cannot be split between its two envelopes")
     return y, phases, rk, s
-
-
-def _vkf2_normal_matrix(g: np.ndarray, rk: np.ndarray, s: int) -> np.ndarray:
-    """The normal matrix of :func:`vkf2` in upper banded storage, ab[u + i - j, j] = M[i, j].
-
-    g (2K, N): the data equation's coefficients per sample; the unknowns are ordered
-    sample by sample, (u_1, v_1, ..., u_K, v_K); half-bandwidth u = 2K s.  Fortran order so
-    LAPACK (pbtrf) factorises it in place without a copy.
-    """
-    P, N = g.shape
-    K = P // 2
-    u = P * s                  # half-bandwidth of the normal matrix
-    ab = np.zeros((u + 1, P * N), order="F")
-    for p in range(P):         # Σ_n g gᵀ, the 2K x 2K block of every sample
-        for q in range(p, P):
-            ab[u + p - q, q::P] += g[p] * g[q]
-    # structural equation (14) on u_k and on v_k: (r_k²/2) DᵀD, unknowns P apart
-    for lag, band in enumerate(_difference_gram_bands(N, s)):
-        for k in range(K):
-            w = 0.5 * rk[k] * rk[k]
-            for m in (2 * k, 2 * k + 1):
-                ab[u - P * lag, P * lag + m::P] += w * band
-    return ab
-
-
-def _vkf2_refine(z: np.ndarray, cb: np.ndarray, rhs: np.ndarray, g: np.ndarray, rk: np.ndarray,
-                 s: int) -> int:
-    """Iterative refinement of the solution z (N, 2K) of :func:`vkf2`, in place; returns the steps.
-
-    The normal matrix has eigenvalues from ~1 (smooth envelopes, fixed by the data) to
-    ~2^{2s} r²/2, so the Cholesky solution of the smooth part carries a relative error
-    ~ r² ε (2 poles, 0.25 Hz at 2 kHz: r = 4e6, 0.8 % in RMS).  The residual is recomputed
-    from the structure (g and the differences of eq. 14, exact for smooth envelopes) and
-    corrected with the same factor ``cb`` until the correction is below _REFINE_TOL.  Raises
-    LinAlgError when it does not converge.
-    """
-    N, P = z.shape
-    w = np.repeat(0.5 * rk * rk, 2)          # weight of u_k and v_k
-    refinements, step = 0, math.inf
-    zmax = max(float(np.abs(z).max()), np.finfo(float).tiny)
-    while refinements < _REFINE_MAX:
-        refinements += 1
-        res = rhs - _apply_normal(z, g, w, s)
-        dz = cho_solve_banded((cb, False), res.reshape(-1), check_finite=False)
-        z += dz.reshape(N, P)
-        prev, step = step, float(np.abs(dz).max()) / zmax
-        if step <= _REFINE_TOL:
-            break
-    else:  # no break: _REFINE_MAX steps
-        # slow but converging (rate < 1): the error left is about step·rate/(1-rate)
-        rate = step / prev
-        if not (rate < 1.0 and step * rate / (1.0 - rate) <= _REFINE_ACCEPT):
-            raise np.linalg.LinAlgError(
-                f"vkf2: iterative refinement did not converge (last correction "
-                f"{step:.1e} relative, ratio {rate:.2f}); r = {rk.tolist()} is too large "
-                "for double precision: widen the bandwidth")
-    return refinements
-
-
-def _apply_normal(z: np.ndarray, g: np.ndarray, w: np.ndarray, s: int) -> np.ndarray:
-    """M z for the vkf2 normal matrix, from its structure: z (N, 2K), g (2K, N).
-
-    M z = g(n) (g(n)ᵀ z(n)) + w Dᵀ D z, D the s-th difference along n, whose
-    adjoint is (-1)^s times the s-th difference of the zero-padded sequence.
-    """
-    h = np.einsum("pn,np->n", g, z)                      # data equation, g(n)ᵀ z(n)
-    out = (g * h).T
-    dz = np.diff(z, n=s, axis=0) * w                     # structural equation (14)
-    out += (-1.0) ** s * np.diff(np.pad(dz, ((s, s), (0, 0))), n=s, axis=0)
-    return out
 
 
 @dataclass(frozen=True)

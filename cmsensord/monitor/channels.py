@@ -112,7 +112,7 @@ class ChannelSetup:
                  + (f": channel(s) {', '.join(gone)} not in the stream (observations missing)"
                     if gone else ""), n_channels=n_board)
             return
-        wanted = (default_channels(n_board, self.cfg.monitor) if self.auto_channels
+        wanted = (default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor) if self.auto_channels
                   else tuple(ch for ch in self.cfg.channels if ch.index < n_board))
         if [ch.name for ch in wanted] != [ch.name for ch in self.channels]:
             self.severity, self.channels = None, wanted

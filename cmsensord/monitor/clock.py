@@ -13,7 +13,7 @@ stamped one block after the newest stamp.
 
 Stamps are made in *segments*.  A step backwards or forward by more than
 ``MAX_GAP_S`` is a board reset (t0 restarted or reloaded): a new segment starts,
-anchored to the wall clock at the reset but never before the newest stamp
+anchored to the wall clock at the reset but never before the end of the newest slot
 (:meth:`BlockClock.new_segment`), so stamps never go backwards.  Live, the
 board's clock is compared with the wall clock (:meth:`BlockClock.drift`); one
 running fast or slow by more than ``link.max_drift_s`` starts a new segment whose
@@ -21,6 +21,8 @@ stamps follow the board's measured rate.
 """
 
 from __future__ import annotations
+
+import bisect
 
 import numpy as np
 
@@ -35,6 +37,8 @@ MAX_FILL_SLOTS = 1000
 DRIFT_MIN_WALL_S = 5.0
 #: a board ahead of the wall clock is stamped this much slower than its rate until caught up
 CATCH_UP = 0.1
+#: time bases (epochs) kept to stamp slots already processed (a decision released late)
+MAX_EPOCHS = 4096
 
 
 class BlockClock:
@@ -48,15 +52,19 @@ class BlockClock:
         self.slot0_t0: int | None = None       # t0_unwrapped of slot 0
         self.next_slot = 0                     # next observation slot expected
         self.last_stamp_ns = 0                 # stamp of the newest observation slot
+        self.floor_ns = 0                      # no later stamp is before this (the end of the newest slot)
         self.stamp_fs = DEFAULT_FS             # board ticks per second of stamps (fs, or measured)
         self.segment = 0                       # segments started after the first
         self.seg_wall_ns = 0                   # wall clock and t0 at the segment's start (drift)
         self.seg_t0 = 0
+        self.seg_stamp_ns = 0                  # the first stamp of the current segment
+        #: (first slot, anchor_ns, t0_first, slot0_t0, block_len, stamp_fs) of each time base
+        self._epochs: list[tuple[int, int, int, int, int, int]] = []
 
     def anchor(self, t0_unwrapped: int, wall_ns: int) -> None:
         """The first frame: its t0 is ``wall_ns``."""
         if self.anchor_ns is None:
-            self.anchor_ns = self.seg_wall_ns = wall_ns
+            self.anchor_ns = self.seg_wall_ns = self.seg_stamp_ns = wall_ns
             self.t0_first = self.seg_t0 = t0_unwrapped
 
     def is_reset(self, t0_unwrapped: int, last_t0: int) -> bool:
@@ -66,10 +74,9 @@ class BlockClock:
 
     def new_segment(self, t0_unwrapped: int, wall_ns: int, stamp_fs: int | None = None) -> int:
         """A new segment: the block at ``t0_unwrapped`` takes the next slot and is stamped
-        ``wall_ns``, but never earlier than one block after the newest stamp.  Its stamps run
+        ``wall_ns``, but never earlier than the end of the newest slot (``floor_ns``).  Its stamps run
         at ``stamp_fs`` board ticks per second (default fs).  Returns its stamp."""
-        after = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.stamp_fs if self.last_stamp_ns else 0
-        self.anchor_ns = max(wall_ns, after)
+        self.anchor_ns = self.floor_ns = self.seg_stamp_ns = max(wall_ns, self.floor_ns)
         self.t0_first = t0_unwrapped
         self.seg_wall_ns, self.seg_t0 = wall_ns, t0_unwrapped
         self.stamp_fs = stamp_fs or self.fs
@@ -105,8 +112,8 @@ class BlockClock:
         if fs <= 0 or block_len <= 0 or (fs, block_len) == (self.fs, self.block_len):
             return False
         moved = self.slot0_t0 is not None
-        if moved and self.next_slot:            # stamps go on from the newest one at the new rate
-            self.anchor_ns, self.t0_first = self.last_stamp_ns, self.slot_t0(self.next_slot - 1)
+        if self.next_slot:                      # stamps go on from the end of the newest slot,
+            self.anchor_ns, self.t0_first = self.floor_ns, None     # from the next frame's t0
         self.slot0_t0 = None
         self.fs, self.block_len = fs, block_len
         self.stamp_fs = fs
@@ -115,7 +122,9 @@ class BlockClock:
     # ---- stamps ------------------------------------------------------------
     def stamp_ns(self, t0_unwrapped: int) -> int:
         """ADC sample index -> ns since the epoch (docs/PROTOCOL.md rule 4)."""
-        assert self.anchor_ns is not None and self.t0_first is not None
+        assert self.anchor_ns is not None
+        if self.t0_first is None:               # after a rate change, before the next block
+            return self.anchor_ns
         return self.anchor_ns + (t0_unwrapped - self.t0_first) * 1_000_000_000 // self.stamp_fs
 
     def slot_t0(self, slot) -> int:
@@ -123,7 +132,31 @@ class BlockClock:
         return self.slot0_t0 + slot * self.block_len
 
     def slot_stamp_ns(self, slot: int) -> int:
-        return self.stamp_ns(self.slot_t0(slot))
+        """The stamp of observation slot ``slot``: a slot already processed keeps the stamp
+        of the time base it was processed in (a re-anchoring since does not move it)."""
+        return self._stamp(slot, 0)
+
+    def slot_end_ns(self, slot: int) -> int:
+        """The stamp of the end of slot ``slot`` (one block after its start, in its time base):
+        a decision over slots up to ``slot`` is stamped so."""
+        return self._stamp(slot, 1)
+
+    def _stamp(self, slot: int, blocks: int) -> int:
+        if slot >= self.next_slot or not self._epochs or slot >= self._epochs[-1][0] and self._current():
+            return self.stamp_ns(self.slot_t0(slot + blocks))
+        i = max(0, bisect.bisect_right(self._epochs, slot, key=lambda e: e[0]) - 1)
+        _, anchor, t0_first, slot0_t0, block_len, stamp_fs = self._epochs[i]
+        return anchor + (slot0_t0 + (slot + blocks) * block_len - t0_first) * 1_000_000_000 // stamp_fs
+
+    def _params(self) -> tuple[int, int, int, int, int]:
+        assert self.anchor_ns is not None and self.t0_first is not None and self.slot0_t0 is not None
+        return self.anchor_ns, self.t0_first, self.slot0_t0, self.block_len, self.stamp_fs
+
+    def _current(self) -> bool:
+        """True when the newest epoch is the current time base."""
+        if self.anchor_ns is None or self.t0_first is None or self.slot0_t0 is None:
+            return False
+        return self._epochs[-1][1:] == self._params()
 
     @property
     def board_seconds(self) -> float:
@@ -144,6 +177,8 @@ class BlockClock:
         :meth:`reanchor` with t0[n], then place the rest."""
         if self.slot0_t0 is None:
             self.slot0_t0 = int(t0[0]) - self.next_slot * self.block_len
+        if self.t0_first is None:
+            self.t0_first = int(t0[0])
         slots = (t0 - self.slot0_t0) // self.block_len
         max_gap = max(1, min(MAX_FILL_SLOTS, int(MAX_FILL_S * self.fs / self.block_len)))
         prev = np.concatenate(([self.next_slot - 1], slots[:-1]))
@@ -155,11 +190,17 @@ class BlockClock:
         """The block starting at ``t0`` takes the next slot; when ``t0`` is not after the
         newest slot's (a duplicate, a stuck t0), it is stamped one block after the newest stamp."""
         if self.slot0_t0 is not None and self.next_slot and t0 <= self.slot_t0(self.next_slot - 1):
-            self.anchor_ns = self.last_stamp_ns + self.block_len * 1_000_000_000 // self.stamp_fs
+            self.anchor_ns = self.floor_ns
             self.t0_first = t0
         self.slot0_t0 = t0 - self.next_slot * self.block_len
 
     def advance(self, n_slots: int) -> None:
         """``n_slots`` more observation slots are processed."""
+        params = self._params()
+        if not self._epochs or self._epochs[-1][1:] != params:
+            self._epochs.append((self.next_slot, *params))
+            if len(self._epochs) > MAX_EPOCHS:
+                del self._epochs[0]
         self.next_slot += n_slots
         self.last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
+        self.floor_ns = max(self.floor_ns, self.slot_end_ns(self.next_slot - 1))

@@ -1,6 +1,7 @@
 """The event log: one place for event records, where they go and their journal level.
 
-An event is written to ``/cm/events`` (schema ``event``), kept among the recent
+An event is written to ``/cm/events`` (schema ``event``) and, as a ``foxglove.Log``
+record at its journal level, to ``/cm/log`` (Foxglove's Log panel), kept among the recent
 ones (status line, exit summary), counted by kind, logged to the journal at the
 level of its kind, and handed to ``on_event`` when one is given.  A producer
 that knows better (the sink about its own routine work) passes ``log_level``.
@@ -15,24 +16,39 @@ only, not on how it was read (live and replay write the same).  Every occurrence
 stays in :attr:`EventLog.counts`.  Kinds in
 ``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears,
 failures and decisions' notes) are never held back.
+
+``/cm/events`` goes forward in time: an event carries the stamp of what it is
+about (a frame, a tacho edge, a decision), and parts of the chain report late
+(the tacho, the order tracker), so records wait in a reorder buffer and are
+written in stamp order once a decision is ``HOLD_S`` past them
+(:meth:`EventLog.release`, called before each decision is written, so where
+they land among the other messages depends on the stream only), the oldest
+when more than ``MAX_PENDING`` wait, and all at a board reset and at the end
+of the run.  Events of the wall clock, not of the stream (``WALL_KINDS``: start
+and stop, the link, the reader, the queue, the disk) are written at once.  A
+record that still comes after a later one was written (or stamped before its
+time segment started) is written at the newest stamp instead.  The journal,
+the recent list and ``on_event`` get every event at once.
 """
 
 from __future__ import annotations
 
+import heapq
 import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
 
 log = logging.getLogger("cmsensord")
 
-#: how events go to the log (the journal): per-AKF flags are detail, the
+#: how events go to the log (the journal): per-AKF flags are detail (VERBOSE: -v), the
 #: severity index and everything about the link or the disk is news.
 LOG_LEVEL = {
-    "anomaly_onset": logging.DEBUG, "anomaly_clear": logging.DEBUG,
+    "anomaly_onset": VERBOSE, "anomaly_clear": VERBOSE,
     "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
@@ -45,6 +61,15 @@ RATE_BURST = 5
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change"})
+#: records wait until the processed stream is this far past them (events reported late)
+HOLD_S = 10.0
+#: events of the daemon and its surroundings, stamped by the wall clock: written at once
+WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_stalled", "reader_error",
+                        "reader_recovered", "reader_died", "queue_overflow", "disk_error", "salvage"})
+#: most records waiting (a stream with no decisions)
+MAX_PENDING = 1000
+#: a record stamped further than this past the processed stream waits as if stamped there
+AHEAD_S = 600.0
 
 
 @dataclass
@@ -72,15 +97,21 @@ class Event:
 class EventLog:
     """Events -> the sink, the recent list, the counts and the journal.
 
-    ``default_stamp`` gives the stamp of an event that brings none (the newest
-    observation's, or the wall clock before there is one).
+    ``default_stamp`` gives the stamp of an event that brings none (the end of the
+    newest observation, or the wall clock before there is one); ``segment_start``
+    the first stamp of the current time segment (0: none yet).
     """
 
     def __init__(self, sink, default_stamp: Callable[[], int],
-                 on_event: Callable[[dict], None] | None = None):
+                 on_event: Callable[[dict], None] | None = None,
+                 segment_start: Callable[[], int] = lambda: 0):
         self.sink = sink
         self.default_stamp = default_stamp
         self.on_event = on_event
+        self.segment_start = segment_start
+        self.hold = True                  # False: records are written at once (after the run)
+        self._pending: list[tuple[int, int, messages.Message, int]] = []
+        self._n = 0
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
@@ -141,8 +172,41 @@ class EventLog:
     def _record(self, kind: str, channel: str | None, message: str, stamp_ns: int,
                 extra: dict[str, Any], log_level: int | None) -> None:
         m = messages.event(stamp_ns, kind, channel, message, extra)
-        self.sink.write(*m)
+        level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
+        if kind in WALL_KINDS:
+            self._put(m, m.stamp_ns, level)
+        else:
+            self._n += 1
+            key = min(stamp_ns, self.default_stamp() + int(AHEAD_S * 1e9))
+            heapq.heappush(self._pending, (key, self._n, m, level))
+        if not self.hold:
+            self.flush()
+        elif len(self._pending) > MAX_PENDING:
+            self._write_upto(self._pending[0][0])
         self.recent.append(m.msg)
-        log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
+        log.log(level, "%s: %s", kind, message)
         if self.on_event is not None:
             self.on_event(m.msg)
+
+    def release(self, processed_ns: int) -> None:
+        """Write the records at least ``HOLD_S`` before ``processed_ns`` (a decision's
+        stamp; live, the wall clock while no frames come), in stamp order."""
+        self._write_upto(processed_ns - int(HOLD_S * 1e9))
+
+    def flush(self) -> None:
+        """Write every waiting record, in stamp order."""
+        self._write_upto(None)
+
+    def _write_upto(self, upto_ns: int | None) -> None:
+        pending = self._pending
+        while pending and (upto_ns is None or pending[0][0] <= upto_ns):
+            stamp, _, m, level = heapq.heappop(pending)
+            self._put(m, stamp, level)
+
+    def _put(self, m: messages.Message, stamp: int, level: int) -> None:
+        """The event at ``stamp`` (or the newest stamp written), and its foxglove.Log copy."""
+        at = max(stamp, self._newest, self.segment_start())
+        self.sink.write(*(m if at == m.stamp_ns else m._replace(stamp_ns=at)))
+        ev = m.msg
+        self.sink.write(*messages.log(at, level, ev["kind"], ev.get("channel"), ev["message"]))
+        self._newest = at

@@ -13,9 +13,12 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from cmsensord.sinks.schemas import (
+    LOG_LEVELS,
     TOPIC_DIAGNOSTICS,
     TOPIC_EVENTS,
+    TOPIC_LOG,
     akf_topic,
+    indicators_topic,
     orders_topic,
     severity_topic,
     vibration_estimate_topic,
@@ -38,6 +41,15 @@ def event(stamp_ns: int, kind: str, channel: str | None, message: str, extra: di
     """An event record with its ``extra`` fields (count, filter, details ...)."""
     return Message(TOPIC_EVENTS, "event", stamp_ns,
                    {"kind": kind, "channel": channel, "message": message, **extra})
+
+
+def log(stamp_ns: int, level: int, kind: str, channel: str | None, message: str) -> Message:
+    """The event again as a ``foxglove.Log`` record: ``level`` (a logging level) as the
+    foxglove.LogLevel, ``name`` the channel or "cmsensord", the message as in the journal."""
+    name = "ERROR" if level >= 40 else "WARNING" if level >= 30 else "INFO" if level >= 20 else "DEBUG"
+    return Message(TOPIC_LOG, "log", stamp_ns, {
+        "level": LOG_LEVELS[name], "message": f"{kind}: {message}", "name": channel or "cmsensord",
+        "file": "", "line": 0})
 
 
 def severity(stamp_ns: int, channel: str, d, c: int, R: np.ndarray, **extra: Any) -> Message:
@@ -114,3 +126,8 @@ def orders(stamp_ns: int, channel: str, speed_rpm: float, valid: bool, method: s
     return Message(orders_topic(channel), "orders", stamp_ns, {
         "channel": channel, "speed_rpm": num(speed_rpm), "valid": valid, "method": method,
         "orders": entries, "missing_fraction": missing_fraction})
+
+
+def indicators(stamp_ns: int, channel: str, fields: dict) -> Message:
+    """One /cm/<channel>/indicators record (:mod:`cmsensord.monitor.indicators` builds the fields)."""
+    return Message(indicators_topic(channel), "indicators", stamp_ns, {"channel": channel, **fields})

@@ -11,7 +11,9 @@ hand it the same :class:`~cmsensord.protocol.Frame` batches
   block clock -> microphone estimator (:mod:`.microphone`) -> AKF banks -> outlier flags
   waiting for a final speed -> decisions (:mod:`.severity`, :mod:`.speed_gate`);
 * RAW samples of the vibration channels -> order chain (:mod:`.orders`);
-* TACHO -> shaft speed (:mod:`.shaft`).
+* TACHO -> shaft speed (:mod:`.shaft`);
+* RAW samples (or RMS values) of the vibration channels -> indicator records per interval
+  (:mod:`.indicators`), written just before the decision of their stamp.
 
 Every message is built in :mod:`.messages`; every event goes through the
 :class:`~cmsensord.monitor.events.EventLog`.
@@ -31,6 +33,7 @@ from cmsensord.monitor import messages
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
+from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.segments import Segments
 from cmsensord.monitor.shaft import Shaft
@@ -42,6 +45,10 @@ if TYPE_CHECKING:
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
+#: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
+MAX_RUN_SLOTS = 2 * MAX_BATCH
+#: indicator records waiting for the decision of their stamp at most (then written anyway)
+MAX_RECORDS = 1000
 
 
 class Processor:
@@ -64,16 +71,17 @@ class Processor:
         self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
-        self.log = EventLog(sink, lambda: self.clock.last_stamp_ns or self.clock_ns(), on_event)
+        self.log = EventLog(sink, lambda: self.clock.floor_ns or self.clock_ns(), on_event,
+                            lambda: self.clock.seg_stamp_ns)
         self.raw = RawInput(cfg)
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
+        self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho)
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
-        self.segments = Segments(self.clock, self.setup, self.log, clock_ns,
-                                 lambda: self._flush_raw([], final=True))
+        self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
 
     # ---- the parts' figures, for the status line, the summary and the tools --
     status = property(lambda self: self.setup.status)
@@ -140,6 +148,7 @@ class Processor:
                 if st is not None and news:     # it changes the time base or the channels:
                     rms, raw = self._flush(rms, raw)    # the frames before it go first,
                     self._release_decisions(final=True)  # decided on the old time base
+                    self.indicators.finish()             # intervals stamped on it too
                     self.setup.apply(f, st)
                 self.setup.status = st or self.setup.status
                 if self.status is not None:
@@ -171,8 +180,18 @@ class Processor:
         self._feed_tacho(end=True)
         if self.orders is not None:
             self._out(self.orders.finish())
+        self.indicators.finish()
         self._release_decisions(final=True)
+        self._out(self.indicators.take(None))
         self.log.summarise(final=True)
+        self.log.flush()
+        self.log.hold = False
+
+    def _segment_ends(self) -> None:
+        """Before a new time segment: what waits of the old one (the last RAW block, the
+        indicator intervals, stamped in their own segment)."""
+        self._flush_raw([], final=True)
+        self.indicators.finish()
 
     def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
         self._flush_rms(rms)
@@ -202,7 +221,9 @@ class Processor:
                 return
             frames = good
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        self._observe(t0, decode_rms_rows(frames, C))
+        vals = decode_rms_rows(frames, C)
+        self.indicators.rms(self.channels, t0, vals)
+        self._observe(t0, vals)
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
@@ -217,6 +238,7 @@ class Processor:
         if blocks is None:
             return
         self._observe(blocks.t0, blocks.rms())
+        self.indicators.raw(self.channels, blocks)
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
@@ -248,6 +270,9 @@ class Processor:
                 self._orders_refused = self.clock.fs
                 self.event("config", None, f"order tracker not started at fs {self.clock.fs} Hz: {exc}")
                 return None
+            expect_lag = getattr(self.sink, "expect_lag", None)
+            if expect_lag is not None:          # orders come seconds behind: the file's order waits
+                expect_lag()
         return self.orders
 
     def _feed_tacho(self, end: bool = False) -> None:
@@ -258,6 +283,7 @@ class Processor:
             self._out(self.shaft.feed(self.clock))
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
+        self.indicators.release()
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------
@@ -265,8 +291,11 @@ class Processor:
         """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain."""
         while len(t0):
             slots, n = self.clock.place(t0)
-            if n:
-                self._run(slots, vals[:n])
+            a = 0
+            while a < n:                        # bounded memory: at most MAX_RUN_SLOTS slots a run
+                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + MAX_RUN_SLOTS))
+                self._run(slots[a:b], vals[a:b])
+                a = b
             if n == len(t0):
                 return
             old = self.clock.next_slot
@@ -304,6 +333,9 @@ class Processor:
         """Decisions of the slots whose tacho speed is final (f_r: the period's mean speed);
         with ``bounded``, also those waiting longer than the speed gate allows."""
         sev = self.severity
+        waiting = self.indicators.records
+        if sev is None or len(waiting) > MAX_RECORDS:       # no decision to wait for / bounded
+            self._out(self.indicators.take(None if sev is None else waiting[-MAX_RECORDS].stamp_ns))
         if sev is None or not sev.gate.waiting:
             return
         tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
@@ -311,10 +343,12 @@ class Processor:
         cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
         for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
-            stamp = self.clock.slot_stamp_ns((sev.start_slot or 0) + d.slot)   # d.slot counts from the chain's start
+            stamp = self.clock.slot_end_ns((sev.start_slot or 0) + d.slot - 1)   # d.slot: from the chain's start
             if sev.notes:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
+            self.log.release(stamp)             # events well before it, at a point set by the stream
+            self._out(self.indicators.take(stamp))
             self._out(sev.decision(d, stamp))
             self.write_diagnostics(stamp)
 

@@ -11,6 +11,7 @@ import time
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict
 from cmsensord.errors import SinkError
+from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.signals import StopFlag
@@ -120,6 +121,9 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
+    warning = fallback_warning()
+    if warning:
+        log.warning("%s", warning)
     status = 0
     with source:
         try:
@@ -149,8 +153,14 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
     notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
     reader = source.reader
 
-    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
+    fallback = fallback_note()
+
+    def line_now() -> str:              # the status line; a missing C kernel said at its end
         line = status_line(proc, source)
+        return f"{line} | {fallback}" if fallback else line
+
+    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
+        line = line_now()
         if reader.error is not None:
             return f"reader error x{reader.errors}: {reader.error} | {line}"
         return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
@@ -171,6 +181,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                     and len(source.queue) < DRIFT_QUEUE_MAX):
                 proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
             watch.link_events()
+            if not frames:              # no data moves the events' release on: the wall clock does
+                proc.log.release(time.time_ns())
             now = time.monotonic()
             if stop.reopen:             # SIGHUP: finish the current file, start a new one
                 stop.reopen = False
@@ -182,7 +194,9 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 next_status = now + 1.0
                 watch.diagnostics(now)
                 if cfg.output.status_line:
-                    print(status_line(proc, source), file=sys.stderr, flush=True)
+                    print(line_now(), file=sys.stderr, flush=True)
+                else:
+                    log.debug("status: %s", line_now())
                 notify.status(service_state())
     finally:
         notify.stopping("stopping: closing the MCAP log")

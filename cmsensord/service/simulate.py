@@ -1,4 +1,9 @@
-"""``cmsensord --simulate``: firmware_sim on a pty, and the daemon's live loop on that pty."""
+"""``cmsensord --simulate``: firmware_sim on a pty, and the daemon's live loop on that pty.
+
+Each scenario runs with its own defaults (:data:`SCENARIO_RUNS`: length, speed, channels,
+mode, microphone channels) unless the command line says otherwise; the board's pty has flow
+control, so a daemon that falls behind slows the board down and no byte is dropped.
+"""
 
 from __future__ import annotations
 
@@ -13,6 +18,7 @@ from pathlib import Path
 from cmsensord.config import config_from_dict, default_config, load_config
 from cmsensord.errors import ConfigError, SinkError
 from cmsensord.service.live import run_live
+from cmsensord.service.sim_microphone import microphone_config
 
 #: order-tracker settings for the run-up scenarios of Yeh, Pan & Le (section 4.1): their
 #: components, a -3 dB bandwidth of 20 Hz (r about 50 at the tracker rate) and the 0.1 s
@@ -31,15 +37,46 @@ RUNUP_ORDERS = {
 
 
 @dataclass(frozen=True)
+class ScenarioRun:
+    """How ``--simulate`` runs a scenario when the command line does not say: its natural
+    length, a speed this project's 2-core machine sustains with the simulator, the daemon and
+    other work on it (measured: README, Using it), the board's channels and mode, and which
+    channels carry a microphone (Pa) rather than an accelerometer (m/s²)."""
+
+    duration_s: float = 600.0
+    speed: float = 20.0
+    channels: int = 1
+    mode: str = "rms"
+    microphones: tuple[int, ...] = ()
+
+
+#: every scenario's defaults under --simulate (the others: ScenarioRun())
+SCENARIO_RUNS = {
+    "whirl": ScenarioRun(duration_s=180.0, speed=10.0, mode="raw"),
+    "close_orders": ScenarioRun(duration_s=5.0, speed=1.0, mode="raw"),
+    "healthy_mic": ScenarioRun(channels=2, microphones=(1,)),
+    "faulty_mic": ScenarioRun(channels=2, microphones=(1,)),
+    "degrading_mic": ScenarioRun(channels=2, microphones=(1,)),
+    "degrading_mic_only": ScenarioRun(channels=1, microphones=(0,)),
+}
+
+
+def scenario_run(name: str) -> ScenarioRun:
+    """The --simulate defaults of scenario ``name``."""
+    return SCENARIO_RUNS.get(name, ScenarioRun())
+
+
+@dataclass(frozen=True)
 class SimulateOptions:
-    """What ``--simulate`` runs: the scenario and board settings, and where the output goes."""
+    """What ``--simulate`` runs: the scenario and board settings, and where the output goes.
+    None: the scenario's default (:data:`SCENARIO_RUNS`)."""
 
     scenario: str = "degrading"
-    duration: float = 600.0
-    speed: float = 20.0
+    duration: float | None = None
+    speed: float | None = None
     seed: int = 0
-    channels: int = 1
-    mode: str | None = None         # rms | raw; None: raw for the run-up scenarios
+    channels: int | None = None
+    mode: str | None = None         # rms | raw
     tacho: bool = False
     config: str | None = None
     out: str | None = None
@@ -48,15 +85,25 @@ class SimulateOptions:
 
 
 def simulate(opt: SimulateOptions) -> int:
-    """Start firmware_sim on a pty and the daemon on that pty."""
+    """Start firmware_sim on a pty (with flow control: a slow reader slows the board down, no
+    byte is dropped) and the daemon on that pty."""
     from firmware_sim.scenarios import SCENARIOS
 
     if opt.scenario not in SCENARIOS:
         raise ConfigError("--scenario", None, f"unknown scenario; choose from {', '.join(SCENARIOS)}",
                           opt.scenario)
+    run = scenario_run(opt.scenario)
+    opt = dataclasses.replace(
+        opt, duration=opt.duration or run.duration_s, speed=opt.speed or run.speed,
+        channels=opt.channels or run.channels, mode=opt.mode or run.mode)
+    assert opt.channels is not None and opt.mode is not None and opt.duration and opt.speed
+    if run.microphones and max(run.microphones) >= opt.channels:
+        raise ConfigError("--channels", None, f"{opt.scenario} sends its microphone on channel "
+                          f"{max(run.microphones)}: give at least {max(run.microphones) + 1} channels",
+                          opt.channels)
     cfg = load_config(opt.config, n_channels=opt.channels) if opt.config else default_config(opt.channels)
     runup = opt.scenario in RUNUP_ORDERS
-    mode = opt.mode or ("raw" if runup else "rms")
+    mode = opt.mode
     tacho = opt.tacho or runup
     if runup and not opt.config:
         # the paper's validation signals: track their components (Yeh, Pan & Le, section 4.1)
@@ -67,11 +114,15 @@ def simulate(opt: SimulateOptions) -> int:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise SinkError(f"{out_dir}: cannot create the output directory: {exc.strerror or exc}") from None
+    if run.microphones:
+        cfg = microphone_config(cfg, opt.scenario, run.microphones, from_file=opt.config,
+                                fallback_dir=Path(out_dir))
     cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=out_dir,
                                                               akf_trace=cfg.output.akf_trace or opt.akf_trace))
     cmd = [sys.executable, "-P", "-m", "firmware_sim", "--pty", "--scenario", opt.scenario,
            "--duration", str(opt.duration), "--speed", str(opt.speed), "--seed", str(opt.seed),
-           "--channels", str(opt.channels), "--mode", mode, "--hold"] + (["--tacho"] if tacho else [])
+           "--channels", str(opt.channels), "--mode", mode, "--hold", "--flow-control"] + \
+        (["--tacho"] if tacho else [])
     sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True, env=_sim_env())
     assert sim.stdout is not None and sim.stderr is not None    # both piped above

@@ -155,16 +155,18 @@ class ChunkWriter:
         self._chunk += build_records(channel)
         return channel.id
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes) -> None:
-        """A Message record (sequence 0, publish time = ``log_time`` ns) into the open
-        chunk; the chunk is finished when it passes ``chunk_size`` bytes."""
+    def add_message(self, channel_id: int, log_time: int, data: bytes,
+                    publish_time: int | None = None) -> None:
+        """A Message record (sequence 0, publish time = ``publish_time`` or ``log_time``, ns)
+        into the open chunk; the chunk is finished when it passes ``chunk_size`` bytes."""
         chunk = self._chunk
         records = self._index.get(channel_id)
         if records is None:
             records = self._index[channel_id] = []
         records.append((log_time, len(chunk)))
         chunk += _MESSAGE_HEAD.pack(
-            OP_MESSAGE, MESSAGE_FIXED + len(data), channel_id, 0, log_time, log_time
+            OP_MESSAGE, MESSAGE_FIXED + len(data), channel_id, 0, log_time,
+            log_time if publish_time is None else publish_time
         )
         chunk += data
         if self._n:

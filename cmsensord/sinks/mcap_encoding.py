@@ -7,9 +7,13 @@ Messages are JSON (``MESSAGE_ENCODING``) described by jsonschema schemas
   record: compact JSON, with ``"timestamp": {"sec", "nsec"}`` put first
   unless the message has a ``timestamp`` field. numpy scalars and arrays
   become Python numbers and lists.
-* JSON never carries NaN or infinity: they become ``null``. The fast path
-  encodes with ``allow_nan=False``; only a message that fails it is
-  sanitised and encoded again, so clean messages cost nothing extra.
+* JSON never carries NaN, infinity or ``null``: a field whose value is
+  ``None`` or not finite is left out (a missing value is an absent field,
+  :mod:`cmsensord.sinks.schemas`); in an array, where nothing can be left
+  out, such a value is ``null``. The fast path encodes with
+  ``allow_nan=False``; only a message that fails it, or whose JSON holds
+  ``null``, is sanitised and encoded again, so clean messages cost one
+  substring search extra.
 * :class:`ChannelRegistry` registers a schema on the first message of its
   kind and a channel on the first message of its topic; a topic's kind is
   fixed by its first message.
@@ -57,14 +61,21 @@ _encode = json.JSONEncoder(
 
 
 def _sanitize(obj: Any) -> Any:
-    """A copy of ``obj`` with every non-finite float replaced by None.
+    """A copy of ``obj`` with every non-finite float replaced by None, and every dict key
+    whose value is then None left out.
 
-    The slow path: only called for a message the strict encoder rejected.
+    The slow path: only called for a message the strict encoder rejected or whose
+    JSON holds ``null``.
     """
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
     if isinstance(obj, dict):
-        return {k: _sanitize(v) for k, v in obj.items()}
+        out = {}
+        for k, v in obj.items():
+            v = _sanitize(v)
+            if v is not None:
+                out[k] = v
+        return out
     if isinstance(obj, (list, tuple)):
         return [_sanitize(v) for v in obj]
     if isinstance(obj, (str, int)) or obj is None:
@@ -93,6 +104,9 @@ def encode_message(topic: str, stamp_ns: int, msg: dict) -> bytes:
         body = _encode(msg)
     except (ValueError, TypeError, RecursionError):  # NaN/inf (allow_nan=False), bad type
         body = _encode_sanitized(topic, msg)
+    else:
+        if "null" in body:                           # a None (or the word in a string)
+            body = _encode_sanitized(topic, msg)
     if "timestamp" not in msg:
         sec, nsec = divmod(stamp_ns, NS)
         if len(body) > 2:

@@ -36,6 +36,7 @@ from cmsensord import __version__
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import ChannelRegistry, encode_message
+from cmsensord.sinks.reorder import MAX_S, ReorderWindow
 
 __all__ = [
     "McapSink",
@@ -171,6 +172,10 @@ class McapSink:
         metadata: written as an MCAP Metadata record named ``"cmsensord"``.
         wall_clock: Unix seconds used for the file name (injectable for tests).
         chunk_size: uncompressed bytes after which a chunk is finished anyway.
+        reorder_s: the longest a message is held to write the file in log-time order
+            (:class:`~cmsensord.sinks.reorder.ReorderWindow`; 0: nothing held, a late
+            message gets the newest log time written).
+        reorder_horizon_ns: the window's horizon to start with (the previous file's).
 
     Raises:
         SinkError: an argument is invalid; :class:`SinkIOError` (a SinkError,
@@ -198,6 +203,8 @@ class McapSink:
         metadata: dict[str, str] | None = None,
         wall_clock: Callable[[], float] = time.time,
         chunk_size: int = 1024 * 1024,
+        reorder_s: float = MAX_S,
+        reorder_horizon_ns: int = 0,
     ) -> None:
         if compression not in _COMPRESSION:
             raise SinkError(
@@ -238,6 +245,7 @@ class McapSink:
                 f"{self.part_path}: cannot write: {os_error_text(err)}", op="open", err=err,
                 path=self.part_path,
             ) from None
+        self.reorder = ReorderWindow(reorder_s, horizon_ns=reorder_horizon_ns)
         self._registry = ChannelRegistry(self._writer)
         # topic -> (channel id, kind): the registry's map while the file takes messages, an
         # empty one once it is closed or failed (write() then calls _register(), which refuses)
@@ -299,8 +307,9 @@ class McapSink:
         ``schema`` is the kind key ("severity", "akf", "event", "diagnostics",
         "orders"); a topic's kind is fixed by its first message. A
         ``"timestamp": {"sec", "nsec"}`` field is added from ``stamp_ns`` unless
-        ``msg`` has one; ``msg`` itself is not modified. log_time =
-        publish_time = ``stamp_ns``.
+        ``msg`` has one; ``msg`` itself is not modified. publish_time =
+        ``stamp_ns``; log_time too, unless the message comes after later ones were
+        written (then the newest log time written: :mod:`cmsensord.sinks.reorder`).
         """
         entry = self._channels.get(topic)
         if entry is None or entry[1] != schema:
@@ -312,7 +321,8 @@ class McapSink:
         data = encode_message(topic, stamp_ns, msg)
         self.messages_written += 1  # before: if its chunk cannot be written it is lost
         try:
-            self._writer.add_message(entry[0], stamp_ns, data)
+            for log_time, publish_time, channel_id, body in self.reorder.push(stamp_ns, entry[0], data):
+                self._writer.add_message(channel_id, log_time, body, publish_time)
         except OSError as err:  # a chunk got full and could not be written
             raise self._fail("write", err) from None
         if self._clock() - self._last_flush >= self._flush_s:
@@ -432,6 +442,8 @@ class McapSink:
         self._channels = {}  # any later write() goes through _register(), which refuses
         op = "close"
         try:
+            for log_time, publish_time, channel_id, body in self.reorder.drain():
+                self._writer.add_message(channel_id, log_time, body, publish_time)
             self._writer.finish()
             op = "fsync"
             os.fsync(self._fh.fileno())

@@ -127,7 +127,10 @@ def parse_record(raw: bytes) -> Any:
 
 
 def read_messages(path: str | Path, *, lenient: bool = False) -> list[tuple[str, int, dict]]:
-    """All messages of a file as (topic, log_time_ns, decoded JSON), in file order.
+    """All messages of a file as (topic, stamp_ns, decoded JSON), in file order.
+
+    The stamp is the message's publish time: the stamp it was written with, also for
+    a message the sink wrote with a clamped log time (:mod:`cmsensord.sinks.reorder`).
 
     Uses mcap's reader (``make_reader``) on a finished file; ``lenient=True``
     reads a truncated ``.part`` file up to its first incomplete record.
@@ -137,7 +140,7 @@ def read_messages(path: str | Path, *, lenient: bool = False) -> list[tuple[str,
     with open(path, "rb") as f:
         reader = make_reader(f)
         return [
-            (channel.topic, message.log_time, json.loads(message.data))
+            (channel.topic, message.publish_time, json.loads(message.data))
             for _schema, channel, message in reader.iter_messages(log_time_order=False)
         ]
 
@@ -219,11 +222,12 @@ class _Scan:
 
 
 def iter_messages_lenient(path: str | Path) -> Iterator[tuple[str, int, bytes]]:
-    """(topic, log_time_ns, raw data) of every readable message, never raising on damage."""
+    """(topic, stamp_ns, raw data) of every readable message (the stamp: its publish time, as in
+    :func:`read_messages`), never raising on damage."""
     scan = _Scan(path)
     for record in scan.records():
         if isinstance(record, Message):
-            yield scan.topic(record.channel_id), record.log_time, record.data
+            yield scan.topic(record.channel_id), record.publish_time, record.data
 
 
 class _Events:

@@ -3,7 +3,14 @@
 Owns the policy of ``output`` in the configuration; each file is an
 :class:`~cmsensord.sinks.mcap_file.McapSink` (``*.mcap.part``, renamed to
 ``*.mcap`` when finished). Rotation happens between messages, so no message
-is split across files.
+is split across files; a file opened by a rotation that gets no message
+before :meth:`RotatingSink.close` is deleted, never finished empty. Each file
+is in log-time order (:mod:`cmsensord.sinks.reorder`: late messages are held
+back up to the lag they come with, at most 10 s; the learnt lag carries over
+to the next file). Messages held there are not yet in the file: what the
+durability rules below say of "the messages of the last second" covers them
+only in a stream that comes in order (RMS mode); in RAW mode with order
+tracking add the orders' lag (a few seconds).
 
 Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
@@ -55,6 +62,7 @@ while the disk fails cannot loop: it is just counted as dropped.
 from __future__ import annotations
 
 import collections
+import contextlib
 import errno
 import logging
 import os
@@ -67,6 +75,7 @@ from typing import Any
 from cmsensord.config import OutputConfig
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
+from cmsensord.sinks.reorder import MAX_S as REORDER_MAX_S
 from cmsensord.sinks.retention import DISK_EVENT, MB, apply_retention, errno_name
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
@@ -143,6 +152,8 @@ class RotatingSink:
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []
         self._low_space_told = False
+        self._horizon_ns = 0                 # the reorder window's horizon, carried to the next file
+        self._hold_all = False
 
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
@@ -227,7 +238,10 @@ class RotatingSink:
     def _open(self) -> McapSink:
         o = self.output
         sink = McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
-                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock)
+                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock,
+                        reorder_horizon_ns=self._horizon_ns)
+        if self._hold_all:
+            sink.reorder.hold_all()
         self._opened = self.clock()
         self._last_sync = self._opened
         return sink
@@ -277,6 +291,22 @@ class RotatingSink:
             self.rotate()
         elif self._pending:
             self._deliver()
+
+    def expect_lag(self, seconds: float = REORDER_MAX_S) -> None:
+        """Messages will come up to ``seconds`` late (the order chain has started): the
+        reorder window holds that long from now on, instead of learning it from the first
+        late messages (which it would write with a clamped log time)."""
+        self._horizon_ns = max(self._horizon_ns, min(int(seconds * 1e9), int(REORDER_MAX_S * 1e9)))
+        if self._current is not None:
+            window = self._current.reorder
+            window.horizon_ns = max(window.horizon_ns, min(self._horizon_ns, window.max_ns))
+
+    def hold_all(self) -> None:
+        """Every message is held until its file is finished (at most 200,000, then the oldest
+        go): ``cmsensord vkf`` writes the batch orders of the whole run after it, in order."""
+        self._hold_all = True
+        if self._current is not None:
+            self._current.reorder.hold_all()
 
     def _drop(self, n: int) -> None:
         self.dropped += n
@@ -378,6 +408,13 @@ class RotatingSink:
         if self._salvager is not None:
             self._salvager.join()
             self._deliver()                  # its events, into the file still open
+        cur = self._current
+        if cur is not None and cur.messages_written == 0 and self.paths:
+            self._current = None             # opened by a rotation, nothing came: no empty file
+            part = cur.abandon()
+            with contextlib.suppress(OSError):   # a header alone: salvage deletes it at the next start
+                part.unlink()
+            return self.paths[-1]
         done = self._finish_current()
         self._deliver()
         return done
@@ -391,6 +428,7 @@ class RotatingSink:
         cur = self._current
         if cur is None:
             return None
+        self._horizon_ns = cur.reorder.horizon_ns
         try:
             done = cur.close()
         except SinkIOError as err:

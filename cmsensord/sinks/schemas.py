@@ -3,8 +3,19 @@
 Every message is JSON (message_encoding ``json``) described by a JSON Schema
 (schema encoding ``jsonschema``). Timestamps are ``{"sec": int, "nsec": int}``
 (nanoseconds since the Unix epoch, split), the form Foxglove recognises as a
-time. JSON never carries NaN or infinity: a float that is not finite is written
-as ``null``, so measured quantities are typed ``["number", "null"]``.
+time.
+
+The schemas keep to what every Foxglove JSON-schema reader accepts (Foxglove
+and Lichtblick's ``parseJsonSchema``): every object has ``"type": "object"``
+and ``properties``; every field one ``type`` (boolean, string, number,
+integer, object, or an array of one of these), or a ``oneOf`` of numeric
+constants (``foxglove.Log``'s level); no union types, no ``null``. **A missing
+value is an absent field**: JSON never carries NaN, infinity or ``null``; a
+value that is missing (a lost observation) or not finite is left out of the
+message (the encoder drops every ``None``), so such fields are not in
+``required``, and a flag says why where it matters (``missing`` of AkfTrace and
+VibrationEstimate, ``valid`` of Orders). An event of the link or the daemon has
+no ``channel``; a fixed-frequency component of Orders has no ``order``.
 
 Topics (``<channel>`` is the configured channel name, default ``ch0``, ``ch1``...):
 
@@ -15,10 +26,12 @@ topic                      schema name             rate
 /cm/<channel>/akf          cmsensord.AkfTrace      per observation (100 Hz)
 /cm/<channel>/orders       cmsensord.Orders        per order-tracker output
 /cm/events                 cmsensord.Event         on every event
+/cm/log                    foxglove.Log            on every event (Foxglove's Log panel)
 /cm/diagnostics            cmsensord.Diagnostics   1 Hz
 =========================  ======================  =================================
 
-and, for a microphone channel (Orimoto, Ikuta & Wang), ``/cm/<channel>/vibration_estimate``
+``/cm/<channel>/indicators`` (cmsensord.Indicators, :mod:`.indicator_schema`) once per
+``indicators.interval_s``, and, for a microphone channel (Orimoto, Ikuta & Wang), ``/cm/<channel>/vibration_estimate``
 (cmsensord.VibrationEstimate) once per block (100 Hz).
 
 The quantities of Kim et al. 2023 keep the paper's names: S_idx (eq. 17), F_a and cnt
@@ -30,6 +43,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from cmsensord.sinks.indicator_schema import indicators_schema
+
 __all__ = [
     "SCHEMA_ENCODING",
     "MESSAGE_ENCODING",
@@ -39,9 +54,12 @@ __all__ = [
     "LINK_COUNTERS",
     "TOPIC_EVENTS",
     "TOPIC_DIAGNOSTICS",
+    "TOPIC_LOG",
+    "LOG_LEVELS",
     "severity_topic",
     "akf_topic",
     "orders_topic",
+    "indicators_topic",
     "vibration_estimate_topic",
     "schema_name",
     "schema_bytes",
@@ -53,6 +71,10 @@ _DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 TOPIC_EVENTS = "/cm/events"
 TOPIC_DIAGNOSTICS = "/cm/diagnostics"
+TOPIC_LOG = "/cm/log"
+
+#: foxglove.LogLevel: name -> value
+LOG_LEVELS: dict[str, int] = {"UNKNOWN": 0, "DEBUG": 1, "INFO": 2, "WARNING": 3, "ERROR": 4, "FATAL": 5}
 
 
 def severity_topic(channel: str) -> str:
@@ -65,6 +87,10 @@ def akf_topic(channel: str) -> str:
 
 def orders_topic(channel: str) -> str:
     return f"/cm/{channel}/orders"
+
+
+def indicators_topic(channel: str) -> str:
+    return f"/cm/{channel}/indicators"
 
 
 def vibration_estimate_topic(channel: str) -> str:
@@ -139,8 +165,9 @@ def _time() -> dict[str, Any]:
 
 
 def _num(description: str, nullable: bool = True) -> dict[str, Any]:
+    """A number; ``nullable``: absent from a message when missing or not finite (so not required)."""
     if nullable:
-        return {"type": ["number", "null"], "description": description + " (null if not finite)"}
+        return {"type": "number", "description": description + " (absent when missing or not finite)"}
     return {"type": "number", "description": description}
 
 
@@ -165,6 +192,39 @@ def _obj(title: str, description: str, properties: dict[str, Any], required: lis
 
 
 _CHANNEL = {"type": "string", "description": "configured channel name (ch0, ch1, ... by default)"}
+
+def _str(description: str) -> dict[str, Any]:
+    return {"type": "string", "description": description}
+
+
+#: Event.details: further fields by kind (disk_error and salvage by ``action``, time_base)
+_DETAILS: dict[str, Any] = {
+    "type": "object",
+    "description": "further fields, by kind; only those that apply are present",
+    "properties": {
+        "action": _str("disk_error, salvage: what happened (abandoned, resumed, removed, retention, "
+                       "retention_failed, low_space, salvage_failed, dir_fsync_failed; salvaged, "
+                       "deleted, unreadable, ...)"),
+        "op": _str("disk_error: the failed operation (open, write, fsync, close, read)"),
+        "errno": _str("disk_error: the OS error's name (ENOSPC, EIO, ...)"),
+        "file": _str("the file concerned"),
+        "source": _str("salvage: the .part file read"),
+        "kept": _str("salvage: where a damaged or unreadable file was kept"),
+        "files": {"type": "array", "items": {"type": "string"},
+                  "description": "retention: the files deleted"},
+        "bytes": _int("retention: bytes freed; low_space: bytes free"),
+        "unsynced": _int("disk_error: messages written since the last good fsync"),
+        "errors": _int("disk_error (resumed): failed disk operations during the outage"),
+        "chunks": _int("salvage: chunks recovered"),
+        "dropped_bytes": _int("salvage: bytes that were not a complete chunk"),
+        "lost_chunks": _int("salvage: damaged chunks skipped"),
+        "lost_messages": _int("salvage: messages of the damaged chunks"),
+        "segment": _int("time_base: the new time segment"),
+        "reason": _str("time_base: reset (the board's clock restarted) or drift"),
+        "offset_s": {"type": "number", "description": "time_base (drift): board clock minus wall clock [s]"},
+        "rate_hz": _int("time_base (drift): the board clock's measured rate [Hz]"),
+    },
+}
 
 # ---------------------------------------------------------------------------
 # the schemas
@@ -240,33 +300,20 @@ AKF_TRACE = _obj(
         "timestamp": _time(),
         "channel": _CHANNEL,
         "filter": _int("1-based index i of AKF_i in the bank", minimum=1),
-        "y": _num("observation y(k) (block RMS); null when missing"),
+        "y": _num("observation y(k) (block RMS)"),
         "x_hat": _num("a posteriori estimate x^(k) (eq. 8)"),
         "x_prior": _num("a priori estimate x^-(k) = x^(k-1) (eq. 3)"),
         "lower": _num("lower adaptive bound x^-(k) - z_c sqrt(Y(k)) (eqs. 6, 15)"),
         "upper": _num("upper adaptive bound x^-(k) + z_c sqrt(Y(k)) (eqs. 6, 15)"),
-        "z": _num("normalised correction z(k) = innovation / sqrt(Y(k)) (eq. 15); null when missing"),
+        "z": _num("normalised correction z(k) = innovation / sqrt(Y(k)) (eq. 15)"),
         "outlier": {"type": "boolean", "description": "|z(k)| > z_c"},
         "q_hat": _num("process noise estimate Q^(k) = S(k) M(k) (eq. 10)"),
         "missing": {
             "type": "boolean",
-            "description": "the observation was lost: time update only, y and z are null",
+            "description": "the observation was lost: time update only, y and z are absent",
         },
     },
-    [
-        "timestamp",
-        "channel",
-        "filter",
-        "y",
-        "x_hat",
-        "x_prior",
-        "lower",
-        "upper",
-        "z",
-        "outlier",
-        "q_hat",
-        "missing",
-    ],
+    ["timestamp", "channel", "filter", "outlier", "missing"],
 )
 
 EVENT = _obj(
@@ -276,17 +323,20 @@ EVENT = _obj(
         "timestamp": _time(),
         "kind": {"type": "string", "enum": list(EVENT_KINDS), "description": "what happened"},
         "channel": {
-            "type": ["string", "null"],
-            "description": "channel name, or null for an event of the link or the daemon",
+            "type": "string",
+            "description": "channel name; absent for an event of the link or the daemon",
         },
         "message": {"type": "string", "description": "human-readable, one line"},
         "filter": _int("1-based AKF index the event is about", minimum=1),
         "severity_index": _num("S_idx after the event (eq. 17)"),
         "level": _int("round(S_idx * n) after the event"),
         "count": _int("how many (frames lost, bytes discarded, queue drops, ...)"),
-        "details": {"type": "object", "description": "further fields, by kind"},
+        "summarised": _int("a summary of this many events of the kind held back (at most 5 a "
+                           "second are written one by one)"),
+        "raw_total": _int("queue_overflow: RAW frames dropped from the queue since start"),
+        "details": _DETAILS,
     },
-    ["timestamp", "kind", "channel", "message"],
+    ["timestamp", "kind", "message"],
 )
 
 DIAGNOSTICS = _obj(
@@ -317,7 +367,7 @@ DIAGNOSTICS = _obj(
         "observations": _int("observations processed since start"),
         "uptime_s": _num("seconds since the daemon started", nullable=False),
     },
-    ["timestamp", "link", "queue_depth", "queue_drops", "lag_s", "observations", "uptime_s"],
+    ["timestamp", "link", "queue_depth", "queue_drops", "observations", "uptime_s"],
 )
 
 ORDERS = _obj(
@@ -330,7 +380,7 @@ ORDERS = _obj(
         "speed_rpm": _num("shaft speed [rpm], mean over the block"),
         "valid": {"type": "boolean",
                   "description": "false below orders.min_rpm or without a tacho speed: the "
-                                 "orders cannot be told apart and rms/amplitude are null"},
+                                 "orders cannot be told apart and rms/amplitude are absent"},
         "method": {"type": "string", "enum": ["recursive", "smoothed", "batch"],
                    "description": "recursive (Yeh, Pan & Le, causal), smoothed (fixed-lag RTS) or "
                                   "batch (Tůma's second-generation VKF, zero-phase)"},
@@ -341,13 +391,13 @@ ORDERS = _obj(
                 "type": "object",
                 "properties": {
                     "name": {"type": "string", "description": "component name (configured)"},
-                    "order": {"type": ["number", "null"],
-                              "description": "order (multiple of shaft speed); null for a fixed frequency"},
+                    "order": {"type": "number",
+                              "description": "order (multiple of shaft speed); absent for a fixed frequency"},
                     "freq_hz": _num("frequency of the component over the block [Hz]"),
                     "rms": _num("RMS of the tracked waveform over the block [m/s^2]"),
                     "amplitude": _num("mean envelope (peak) amplitude over the block [m/s^2]"),
                 },
-                "required": ["name", "order", "rms", "amplitude"],
+                "required": ["name"],
             },
         },
         "missing_fraction": {"type": "number", "minimum": 0, "maximum": 1,
@@ -355,7 +405,7 @@ ORDERS = _obj(
                                             "without a measurement (lost RAW frames, gaps); rms and "
                                             "amplitude there are the tracker's predictions. 0 when none"},
     },
-    ["timestamp", "channel", "speed_rpm", "valid", "orders"],
+    ["timestamp", "channel", "valid", "orders"],
 )
 
 VIBRATION_ESTIMATE = _obj(
@@ -375,15 +425,69 @@ VIBRATION_ESTIMATE = _obj(
         "a_var": _num("its variance P_a,k (eq. 19)"),
         "y_hat": _num("estimated machine sound energy y^_k without the background [Pa^2] (eq. 21)"),
         "y_var": _num("its variance P_y,k [Pa^4] (eq. 22)"),
-        "z": _num("observed sound energy z_k = y_k + v_k, the block mean square [Pa^2] (eq. 1); "
-                  "null when missing"),
+        "z": _num("observed sound energy z_k = y_k + v_k, the block mean square [Pa^2] (eq. 1)"),
         "z_pred": _num("predicted sound energy z*_k = <z_k | Z_k-1> [Pa^2]"),
         "missing": {"type": "boolean",
-                    "description": "the block was lost: prediction only (eqs. 34-38), z is null"},
+                    "description": "the block was lost: prediction only (eqs. 34-38), z is absent"},
     },
-    ["timestamp", "channel", "x_hat", "x_ms", "x_ms_var", "a_hat", "a_var", "y_hat", "y_var", "z",
-     "missing"],
+    ["timestamp", "channel", "missing"],
 )
+
+#: foxglove.Log, as published by Foxglove (foxglove-sdk ``schemas/jsonschema/Log.json``): the
+#: events again, for Foxglove's Log panel
+def _ref(title: str, description: str, what: str) -> dict[str, Any]:
+    return {"title": title, "description": description, "type": "object", "properties": {
+        "topic": {"type": "string", "description": f"Topic name of the {what} message"},
+        "message_id": {"type": "string", "description": f"Unique identifier of the {what} message "
+                                                        "(e.g., UUID7, ULID, or custom format)"}},
+        "required": ["topic", "message_id"]}
+
+
+LOG = {
+    "title": "foxglove.Log",
+    "description": "A log message",
+    "$comment": "Generated by https://github.com/foxglove/foxglove-sdk",
+    "type": "object",
+    "properties": {
+        "timestamp": {
+            "type": "object",
+            "title": "time",
+            "properties": {
+                "sec": {"type": "integer", "minimum": 0},
+                "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+            },
+            "description": "Timestamp of log message",
+        },
+        "level": {
+            "title": "foxglove.LogLevel",
+            "description": "Log level",
+            "oneOf": [{"title": name, "const": value,
+                       "description": f"{name.capitalize()} log level"} for name, value in LOG_LEVELS.items()],
+        },
+        "message": {"type": "string", "description": "Log message"},
+        "name": {"type": "string", "description": "Process or node name"},
+        "file": {"type": "string", "description": "Filename"},
+        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
+        "message_id": {"type": "string",
+                       "description": "Unique identifier for this message (e.g., UUID7, ULID, or custom format)"},
+        "lineage": {
+            "title": "foxglove.LineageInfo",
+            "description": "Lineage information for tracking data provenance",
+            "type": "object",
+            "properties": {
+                "inputs": {"type": "array", "items": _ref(
+                    "foxglove.InputReference", "Reference to an input message used in lineage tracking",
+                    "input"), "description": "References to input messages that contributed to this message"},
+                "processing_node": {"type": "string",
+                                    "description": "Name of the processing node that produced this message"},
+                "state": _ref("foxglove.StateReference",
+                              "Optional reference to the state of the processing node", "state"),
+            },
+            "required": ["inputs", "processing_node"],
+        },
+    },
+    "required": ["timestamp", "level", "message", "name", "file", "line"],
+}
 
 #: kind key -> JSON schema.
 SCHEMAS: dict[str, dict[str, Any]] = {
@@ -393,6 +497,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "diagnostics": DIAGNOSTICS,
     "orders": ORDERS,
     "vibration_estimate": VIBRATION_ESTIMATE,
+    "log": LOG,
+    "indicators": indicators_schema(_time(), _obj),
 }
 
 #: kind key -> MCAP schema name.

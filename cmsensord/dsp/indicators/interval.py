@@ -1,0 +1,135 @@
+"""All indicators of one channel over one interval: a record an alarm manager can read.
+
+:func:`compute` takes the interval's acceleration samples (m/s^2, contiguous) and
+the shaft speed (or None) and returns an :class:`IndicatorRecord`: the waveform
+statistics (:mod:`.statistics`), the velocity RMS and its ISO zone
+(:mod:`.velocity`, :mod:`.iso_zones`), the envelope RMS and, per bearing seen by
+the channel, the envelope spectrum's lines at the defect frequencies and their
+second harmonics (:mod:`.envelope`, :mod:`.bearings`), and the band RMS
+(:mod:`.bands`).  :meth:`IndicatorRecord.values` flattens the numbers under
+stable names (``accel_rms``, ``velocity_rms_mm_s``, ``<bearing>.bpfi``,
+``band.<name>`` ...); what cannot be computed (no speed for an order band or a
+bearing) is absent, never NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bands import band_rms, order_band_hz
+from .bearings import DEFECTS, DefectFrequencies, Geometry, defect_frequencies
+from .envelope import LinePeak, envelope, envelope_spectrum, line_peak
+from .iso_zones import ZONES, baseline_alarm_mm_s, boundaries, zone_index
+from .spectrum import power_spectrum
+from .statistics import WaveformStats, waveform_stats
+from .velocity import velocity_rms_mm_s
+
+__all__ = ["Band", "Bearing", "Setup", "BearingLines", "IndicatorRecord", "compute"]
+
+#: harmonics of each defect frequency read from the envelope spectrum
+HARMONICS = (1, 2)
+
+
+@dataclass(frozen=True)
+class Band:
+    """A band [lo, hi], in Hz or (``orders``) in multiples of the shaft speed."""
+
+    name: str
+    lo: float
+    hi: float
+    orders: bool = False
+
+
+@dataclass(frozen=True)
+class Bearing:
+    name: str
+    geometry: Geometry
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What :func:`compute` needs besides the samples, for one channel."""
+
+    fs: float
+    velocity_band: tuple[float, float]
+    envelope_band: tuple[float, float]
+    group: int = 2
+    foundation: str = "rigid"
+    velocity_baseline_mm_s: float | None = None
+    slip: float = 0.02
+    bearings: tuple[Bearing, ...] = ()
+    bands: tuple[Band, ...] = ()
+
+
+@dataclass
+class BearingLines:
+    name: str
+    freqs: DefectFrequencies | None                 # Hz; None without a shaft speed
+    lines: dict[str, LinePeak] = field(default_factory=dict)   # "bpfo", "bpfo_2x", ...
+
+
+@dataclass
+class IndicatorRecord:
+    accel: WaveformStats
+    velocity_rms_mm_s: float
+    velocity_band: tuple[float, float]
+    zone: str
+    zone_boundaries_mm_s: tuple[float, float, float]
+    velocity_alarm_mm_s: float | None
+    envelope_rms: float
+    envelope_band: tuple[float, float]
+    shaft_hz: float | None
+    bearings: list[BearingLines]
+    bands: list[tuple[Band, tuple[float, float], float]]   # band, its Hz edges, RMS
+
+    def values(self) -> dict[str, float]:
+        """Every number under a stable name (what an alarm manager compares with its levels)."""
+        out = {"accel_rms": self.accel.rms, "accel_peak": self.accel.peak,
+               "crest_factor": self.accel.crest_factor, "kurtosis": self.accel.kurtosis,
+               "velocity_rms_mm_s": self.velocity_rms_mm_s, "envelope_rms": self.envelope_rms,
+               "zone": float(ZONES.index(self.zone))}
+        for b in self.bearings:
+            out.update({f"{b.name}.{k}": p.amplitude for k, p in b.lines.items()})
+        out.update({f"band.{band.name}": rms for band, _, rms in self.bands})
+        return {k: v for k, v in out.items() if v == v}
+
+
+def _bearing_lines(setup: Setup, b: Bearing, shaft_hz: float | None, f: np.ndarray,
+                   A: np.ndarray) -> BearingLines:
+    if shaft_hz is None or not shaft_hz > 0:
+        return BearingLines(b.name, None)
+    freqs = defect_frequencies(b.geometry, shaft_hz)
+    out = BearingLines(b.name, freqs)
+    for name, f0 in zip(DEFECTS, freqs):
+        for h in HARMONICS:
+            p = line_peak(f, A, h * f0, setup.slip)
+            if p is not None:
+                out.lines[name if h == 1 else f"{name}_{h}x"] = p
+    return out
+
+
+def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> IndicatorRecord:
+    """The indicators of the contiguous record x (1-D, m/s^2, no NaN) at ``shaft_hz``."""
+    stats = waveform_stats(x)
+    f, P = power_spectrum(x, setup.fs)
+    v = float(velocity_rms_mm_s(f, P, setup.velocity_band))
+    bounds = boundaries(setup.group, setup.foundation)
+    alarm = (baseline_alarm_mm_s(setup.velocity_baseline_mm_s, setup.group, setup.foundation)
+             if setup.velocity_baseline_mm_s is not None else None)
+    env = envelope(x, setup.fs, setup.envelope_band)
+    e = env.env - env.env.mean()
+    fe, A = envelope_spectrum(env.env, env.fs_env)
+    bearings = [_bearing_lines(setup, b, shaft_hz, fe, A) for b in setup.bearings]
+    bands = []
+    for band in setup.bands:
+        edges = (band.lo, band.hi)
+        if band.orders:
+            if shaft_hz is None or not shaft_hz > 0:
+                continue
+            edges = order_band_hz(band.lo, band.hi, shaft_hz)
+        bands.append((band, edges, band_rms(f, P, *edges)))
+    return IndicatorRecord(stats, v, (setup.velocity_band[0], min(setup.velocity_band[1], setup.fs / 2)),
+                           ZONES[zone_index(v, setup.group, setup.foundation)], bounds, alarm,
+                           float(np.sqrt(np.mean(e * e))), env.band, shaft_hz, bearings, bands)

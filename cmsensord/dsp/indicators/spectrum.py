@@ -1,0 +1,41 @@
+"""The one-sided power spectrum that the velocity and band indicators read.
+
+A periodic Hann window, the record's mean removed first; the power of bin k is
+scaled so that the sum over all bins is the record's mean square (Parseval with
+the window's power, ``sum(w^2)``, divided out), so a band sum is a mean square
+in the band whatever the record length:
+
+    P_k = c_k |X_k|^2 / (N sum(w^2)),   c_k = 2 except at DC and Nyquist (1).
+
+Resolution 1 / T (T the record length, 1 Hz for the default 1-s interval); the
+Hann main lobe is 4 bins wide, so a tone within 2 bins of a band edge is partly
+counted on the other side.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["hann", "power_spectrum", "band_mask"]
+
+
+def hann(N: int) -> np.ndarray:
+    """The periodic Hann window of N samples (``0.5 - 0.5 cos(2 pi n / N)``)."""
+    return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(N) / N)
+
+
+def power_spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """x (..., N) -> (f (N // 2 + 1,) Hz, P (..., N // 2 + 1) in x's unit squared): the
+    one-sided Hann power per bin, ``P.sum(-1)`` = the mean square of a stationary x."""
+    x = np.asarray(x, dtype=np.float64)
+    N = x.shape[-1]
+    w = hann(N)
+    X = np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * w, axis=-1)
+    P = (X.real ** 2 + X.imag ** 2) / (N * float((w * w).sum()))
+    P[..., 1:(N + 1) // 2] *= 2.0          # the negative frequencies (not DC, not Nyquist)
+    return np.fft.rfftfreq(N, 1.0 / fs), P
+
+
+def band_mask(f: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Bins with lo <= f <= hi."""
+    return (f >= lo) & (f <= hi)

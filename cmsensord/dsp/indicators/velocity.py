@@ -1,0 +1,39 @@
+"""Velocity RMS in mm/s from acceleration, by integration in the frequency domain.
+
+ISO 10816-3 / ISO 20816-3 grade the broadband velocity RMS over 10-1000 Hz, and
+over 2-1000 Hz for machines running below 600 rpm.  Each bin of the acceleration
+power spectrum (:mod:`.spectrum`, m^2/s^4) divided by (2 pi f)^2 is the velocity
+power of that bin; the velocity RMS is the root of their sum over the bins with
+lo <= f <= hi (both edges included, rectangular: the band is the standard's, not a
+filter's -3 dB points), times 1000 for mm/s.  Above fs / 2 nothing is measured, so
+the upper edge is min(hi, fs / 2).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .spectrum import band_mask
+
+__all__ = ["ISO_BAND_HZ", "SLOW_ISO_BAND_HZ", "SLOW_RPM", "velocity_band", "velocity_rms_mm_s"]
+
+#: ISO 10816-3 measurement band, and for machines below SLOW_RPM
+ISO_BAND_HZ = (10.0, 1000.0)
+SLOW_ISO_BAND_HZ = (2.0, 1000.0)
+SLOW_RPM = 600.0
+
+
+def velocity_band(rpm: float | None, configured: tuple[float, float] | None = None) -> tuple[float, float]:
+    """The band: as configured, else 2-1000 Hz below 600 rpm and 10-1000 Hz otherwise
+    (no speed known: 10-1000 Hz)."""
+    if configured is not None:
+        return configured
+    return SLOW_ISO_BAND_HZ if rpm is not None and rpm < SLOW_RPM else ISO_BAND_HZ
+
+
+def velocity_rms_mm_s(f: np.ndarray, P: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """Velocity RMS [mm/s] in ``band`` from the acceleration power spectrum P (..., bins) at
+    frequencies f (:func:`~.spectrum.power_spectrum`)."""
+    m = band_mask(f, band[0], band[1]) & (f > 0)
+    w = 1.0 / (2.0 * np.pi * f[m]) ** 2
+    return 1000.0 * np.sqrt((P[..., m] * w).sum(axis=-1))     # not @: no BLAS threads

@@ -1,0 +1,322 @@
+"""The indicator chain: samples by board time -> one record per channel per interval.
+
+RAW mode (:class:`IndicatorChain`): the m/s² samples of the vibration channels
+are gathered into intervals of ``N = round(indicators.interval_s x fs)`` board
+samples, counted from the first sample of the stream, so an interval holds the
+same samples however the stream was cut into reads, frames or batches.  A
+complete interval waits for its shaft speed (the tacho's causal speed, final
+once TACHO frames cover the interval's end; at most ``MAX_WAIT_S``), then
+:func:`cmsensord.dsp.indicators.compute` makes its record, one
+``/cm/<channel>/indicators`` message per channel, stamped at the interval's end.
+
+* Speed: the mean of the tacho's causal speed at 16 points of the interval (None
+  when fewer than half are valid: the machine stopped or the tacho is lost);
+  without a tacho, ``indicators.rpm``.
+* An interval with missing samples (lost RAW frames, a gap, the end of the stream)
+  gives the waveform statistics of the samples it has, with ``missing_fraction``;
+  the spectral indicators, which need all N samples, are listed as unavailable.
+
+RMS mode (:class:`RmsIndicators`): the board's 100 Hz block RMS supports the
+overall acceleration RMS only, sqrt(mean(block RMS^2)) over the interval (the
+board's RMS keeps any DC offset); every other indicator is listed unavailable.
+
+:class:`Indicators` is what the Processor holds: it makes the chains for the
+vibration channels (again when the rate or the channels change, the old one
+finished), and keeps their records until :meth:`Indicators.take` asks for those
+stamped up to a decision's stamp, so the order of all messages does not depend
+on how the stream was read.  An interval's stamp is its end, taken when it
+closes; a new time segment (a board reset) finishes the open intervals first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cmsensord.config import ChannelConfig, Config
+from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute
+from cmsensord.dsp.indicators.bearings import Geometry
+from cmsensord.dsp.indicators.envelope import default_band
+from cmsensord.dsp.indicators.statistics import waveform_stats
+from cmsensord.dsp.indicators.velocity import velocity_band
+from cmsensord.monitor import messages
+from cmsensord.monitor.clock import BlockClock
+
+if TYPE_CHECKING:
+    from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.monitor.raw import RawBlocks
+
+#: a complete interval waits at most this long (board time) for the tacho to cover it
+MAX_WAIT_S = 10.0
+#: points of the interval at which the tacho speed is read
+SPEED_POINTS = 16
+#: every indicator a RAW record can carry, for ``unavailable``
+SPECTRAL = ("velocity_rms_mm_s", "zone", "envelope_rms", "bearings", "bands")
+WAVEFORM = ("accel_peak", "crest_factor", "kurtosis")
+
+
+def channel_setup(cfg: Config, ch: ChannelConfig, fs: float) -> Setup:
+    """The :class:`~cmsensord.dsp.indicators.Setup` of one channel from the configuration."""
+    ic = cfg.indicators
+    vb = ic.velocity_band_hz
+    eb = ic.envelope_band_hz
+    bands = tuple(Band(b.name, b.lo_hz, b.hi_hz) if b.lo_hz is not None and b.hi_hz is not None
+                  else Band(b.name, b.lo_order or 0.0, b.hi_order or 0.0, orders=True) for b in ic.bands)
+    bearings = tuple(Bearing(b.name, Geometry(b.elements, b.ball_diameter, b.pitch_diameter, b.contact_angle_deg))
+                     for b in cfg.bearings if b.channel == ch.name)
+    return Setup(fs, velocity_band(ic.rpm, (vb[0], vb[1]) if vb else None),
+                 (eb[0], eb[1]) if eb else default_band(fs), ic.machine_group, ic.foundation,
+                 ic.velocity_baseline_mm_s, ic.slip_pct / 100.0, bearings, bands)
+
+
+def _num(x: float) -> float:
+    return round(float(x), 9)
+
+
+def record_fields(r: IndicatorRecord) -> dict:
+    """The message fields of a RAW record (absent: not computed)."""
+    out: dict = {}
+    for k, v in (("accel_rms", r.accel.rms), ("accel_peak", r.accel.peak),
+                 ("crest_factor", r.accel.crest_factor), ("kurtosis", r.accel.kurtosis),
+                 ("velocity_rms_mm_s", r.velocity_rms_mm_s), ("envelope_rms", r.envelope_rms)):
+        if v == v:
+            out[k] = _num(v)
+    out.update(velocity_band_hz=list(r.velocity_band), zone=r.zone,
+               zone_boundaries_mm_s=list(r.zone_boundaries_mm_s), envelope_band_hz=list(r.envelope_band))
+    if r.velocity_alarm_mm_s is not None:
+        out["velocity_alarm_mm_s"] = _num(r.velocity_alarm_mm_s)
+    out["bearings"] = [_bearing(b) for b in r.bearings]
+    out["bands"] = [{"name": band.name, "lo_hz": _num(lo), "hi_hz": _num(hi), "rms": _num(rms)}
+                    for band, (lo, hi), rms in r.bands]
+    return out
+
+
+def _bearing(b) -> dict:
+    d: dict = {"name": b.name}
+    if b.freqs is not None:
+        d.update({f"{k}_hz": _num(v) for k, v in b.freqs._asdict().items()})
+    d["lines"] = {k: {"amplitude": _num(p.amplitude), "freq_hz": _num(p.freq_hz),
+                      **({"ratio": _num(p.ratio)} if p.ratio == p.ratio else {})}
+                  for k, p in b.lines.items()}
+    return d
+
+
+class IndicatorChain:
+    """RAW samples of ``channels`` -> /cm/<channel>/indicators (see module docstring).
+
+    ``tacho``: returns the tacho tracker, or None when the board has no tacho."""
+
+    def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, clock: BlockClock,
+                 tacho: Callable[[], TachoTracker | None]):
+        self.cfg, self.channels, self.fs, self.clock, self.tacho = cfg, channels, fs, clock, tacho
+        self.N = max(2, round(cfg.indicators.interval_s * fs))
+        self.index = [ch.index for ch in channels]
+        self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
+        self.buf = np.full((self.N, len(channels)), np.nan)
+        self.start: int | None = None          # board sample of the open interval's first sample
+        self.pending: list[tuple[int, np.ndarray, int]] = []   # (start, samples, stamp) waiting for a speed
+        self.newest = 0                        # board sample after the newest one given
+
+    # ---------------------------------------------------------------- input
+    def add_samples(self, start: int, y: np.ndarray) -> list:
+        """m/s² samples (n, C) from board sample ``start`` on; NaN where lost."""
+        pos = start
+        while len(y):
+            if self.start is None or pos < self.start:          # the first, or the clock stepped back
+                self._close()
+                self.start = pos
+            elif pos >= self.start + self.N:                    # a gap past the open interval
+                self._close()
+                self.start += (pos - self.start) // self.N * self.N
+            off = pos - self.start
+            take = min(self.N - off, len(y))
+            self.buf[off:off + take] = y[:take]
+            pos += take
+            y = y[take:]
+            if off + take == self.N:
+                self._close()
+        self.newest = max(self.newest, pos)
+        return self.release()
+
+    def _close(self) -> None:
+        """The open interval is done: to the waiting list if it has any sample, with the stamp
+        of its end taken now, in the time segment its samples came in."""
+        if self.start is not None and np.isfinite(self.buf).any():
+            self.pending.append((self.start, self.buf.copy(), self.clock.stamp_ns(self.start + self.N)))
+        if self.start is not None:
+            self.start += self.N
+        self.buf[:] = np.nan
+
+    def finish(self) -> list:
+        """End of the stream or of a time segment: the open interval (partial) and every waiting
+        one; the next samples start a new interval."""
+        self._close()
+        self.start = None
+        return self.release(final=True)
+
+    # ---------------------------------------------------------------- output
+    def release(self, *, final: bool = False, bounded: bool = True) -> list:
+        """Records of the waiting intervals whose speed is known (all with ``final``; with
+        ``bounded``, also those waiting longer than MAX_WAIT_S)."""
+        out: list = []
+        tacho = self.tacho()
+        while self.pending:
+            s, x, stamp = self.pending[0]
+            end = s + self.N
+            late = bounded and self.newest - end > MAX_WAIT_S * self.fs
+            if tacho is not None and tacho.covered_until < end and not (final or late):
+                break
+            self.pending.pop(0)
+            out += self._records(s, x, stamp, tacho)
+        return out
+
+    def _speed(self, s: int, tacho: TachoTracker | None) -> tuple[float | None, str | None]:
+        if tacho is None:
+            rpm = self.cfg.indicators.rpm
+            return (rpm / 60.0, "config") if rpm else (None, None)
+        hz, ok = tacho.evaluate_causal(s + (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS)
+        if ok.mean() < 0.5:
+            return None, None
+        return float(np.mean(hz[ok])), "tacho"
+
+    def _records(self, s: int, x: np.ndarray, stamp: int, tacho: TachoTracker | None) -> list:
+        shaft_hz, source = self._speed(s, tacho)
+        head = {"mode": "raw", "interval_s": self.N / self.fs}
+        if shaft_hz is not None:
+            head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
+        out = []
+        for c, ch in enumerate(self.channels):
+            xc = x[:, c]
+            ok = np.isfinite(xc)
+            missing = 1.0 - float(ok.mean())
+            if missing == 0.0:
+                fields = record_fields(compute(xc, self.setups[c], shaft_hz))
+                if shaft_hz is None and (self.setups[c].bearings or any(b.orders for b in self.setups[c].bands)):
+                    fields["unavailable"] = ["speed"]
+            elif ok.any():
+                st = waveform_stats(xc)
+                fields = {k: _num(v) for k, v in zip(("accel_rms",) + WAVEFORM, st) if v == v}
+                fields["unavailable"] = list(SPECTRAL)
+            else:
+                continue
+            out.append(messages.indicators(stamp, ch.name, {**head, "missing_fraction": _num(missing), **fields}))
+        return out
+
+
+class RmsIndicators:
+    """RMS mode: the overall acceleration RMS per interval from the board's block RMS."""
+
+    UNAVAILABLE = list(WAVEFORM + SPECTRAL)
+
+    def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
+                 clock: BlockClock):
+        self.channels, self.clock, self.fs, self.L = channels, clock, fs, block_len
+        self.per = max(1, round(cfg.indicators.interval_s * fs / block_len))   # blocks per interval
+        self.N = self.per * block_len
+        self.start: int | None = None
+        self.sq = np.zeros(len(channels))
+        self.n = np.zeros(len(channels), dtype=np.int64)
+
+    def add(self, t0: np.ndarray, vals: np.ndarray) -> list:
+        """Block RMS (B, C_board) of the blocks starting at board samples t0."""
+        out: list = []
+        idx = [ch.index for ch in self.channels]
+        v = np.full((len(t0), len(idx)), np.nan)
+        have = [i for i, j in enumerate(idx) if j < vals.shape[1]]
+        v[:, have] = vals[:, [idx[i] for i in have]]
+        for k, t in enumerate(t0.tolist()):
+            if self.start is None or t < self.start:
+                out += self._close()
+                self.start = t
+            elif t >= self.start + self.N:
+                out += self._close()
+                self.start += (t - self.start) // self.N * self.N
+            ok = np.isfinite(v[k])
+            self.sq[ok] += v[k, ok].astype(np.float64) ** 2
+            self.n += ok
+            if t + self.L >= self.start + self.N:
+                out += self._close()
+        return out
+
+    def finish(self) -> list:
+        """End of the stream or of a time segment: the open interval; the next block starts anew."""
+        out = self._close()
+        self.start = None
+        return out
+
+    def _close(self) -> list:
+        out = []
+        if self.start is not None:
+            stamp = self.clock.stamp_ns(self.start + self.N)
+            for c, ch in enumerate(self.channels):
+                if self.n[c]:
+                    out.append(messages.indicators(stamp, ch.name, {
+                        "mode": "rms", "interval_s": self.N / self.fs,
+                        "missing_fraction": _num(1.0 - self.n[c] / self.per),
+                        "accel_rms": _num(np.sqrt(self.sq[c] / self.n[c])), "unavailable": self.UNAVAILABLE}))
+            self.start += self.N
+        self.sq[:] = 0.0
+        self.n[:] = 0
+        return out
+
+
+class Indicators:
+    """The indicator chains of one Processor and their records waiting to be written (see
+    module docstring).  ``tacho``: the tacho tracker, or None while there is none."""
+
+    def __init__(self, cfg: Config, clock: BlockClock, tacho: Callable[[], TachoTracker | None]):
+        self.cfg, self.clock, self.tacho = cfg, clock, tacho
+        self.raw_chain: IndicatorChain | None = None
+        self.rms_chain: RmsIndicators | None = None
+        self.records: list[messages.Message] = []
+
+    def _vibration(self, channels: tuple[ChannelConfig, ...]) -> tuple[ChannelConfig, ...]:
+        return tuple(ch for ch in channels if ch.kind != "microphone") if self.cfg.indicators.enabled else ()
+
+    def raw(self, channels: tuple[ChannelConfig, ...], blocks: RawBlocks) -> None:
+        """Converted RAW blocks -> the RAW chain of the vibration channels among ``channels``."""
+        vib = self._vibration(channels)
+        if not vib:
+            return
+        ind = self.raw_chain
+        if ind is None or ind.fs != self.clock.fs or ind.channels != vib:
+            if ind is not None:
+                self.records += ind.finish()
+            ind = self.raw_chain = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
+                                                  tacho=self.tacho)
+        y = blocks.samples(ind.index)
+        for a, b in blocks.runs():          # consecutive except across lost blocks
+            self.records += ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index)))
+
+    def rms(self, channels: tuple[ChannelConfig, ...], t0: np.ndarray, vals: np.ndarray) -> None:
+        """Block RMS (B, C_board) of the blocks at t0 -> the RMS chain."""
+        vib = self._vibration(channels)
+        if not vib:
+            return
+        ind = self.rms_chain
+        if ind is None or (ind.fs, ind.L) != (self.clock.fs, self.clock.block_len) or ind.channels != vib:
+            if ind is not None:
+                self.records += ind.finish()
+            ind = self.rms_chain = RmsIndicators(self.cfg, vib, fs=self.clock.fs,
+                                                 block_len=self.clock.block_len, clock=self.clock)
+        self.records += ind.add(t0, vals)
+
+    def release(self) -> None:
+        """After a tacho feed: the intervals it covers."""
+        if self.raw_chain is not None:
+            self.records += self.raw_chain.release()
+
+    def finish(self) -> None:
+        """End of the stream or of a time segment: every open and waiting interval."""
+        for chain in (self.raw_chain, self.rms_chain):
+            if chain is not None:
+                self.records += chain.finish()
+
+    def take(self, upto_ns: int | None) -> list[messages.Message]:
+        """The records stamped at or before ``upto_ns`` (all with None), oldest first."""
+        n = len(self.records) if upto_ns is None else \
+            next((i for i, m in enumerate(self.records) if m.stamp_ns > upto_ns), len(self.records))
+        out, self.records = self.records[:n], self.records[n:]
+        return out
