@@ -25,6 +25,7 @@ import serial
 
 from cmsensord.errors import LinkError
 from cmsensord.protocol import Decoder, Frame, FrameType
+from cmsensord.read_pace import ReadPace
 
 log = logging.getLogger("cmsensord")
 
@@ -41,6 +42,12 @@ class FrameQueue:
     only when no RAW frame is left to drop (then the oldest), so the severity
     chain and the shaft speed keep their data as long as possible.  Every drop
     is counted (``drops``, ``raw_drops``); memory stays bounded by ``maxlen``.
+
+    :meth:`get` batches by time: it returns once ``enough`` frames wait or its
+    ``timeout`` has passed, so the loop can hand the Processor many frames per call
+    (its cost is mostly per call, not per frame) while waking at a steady pace; and
+    as soon as the frames of the block :meth:`wake_at` names are in (the block that
+    completes the next output: batching adds no latency to it).
     """
 
     def __init__(self, maxlen: int):
@@ -50,6 +57,10 @@ class FrameQueue:
         self.drops = 0          # frames dropped, all types
         self.raw_drops = 0      # of which RAW
         self.closed = False
+        self._enough = 1        # frames the waiting get() wants before it returns early
+        self._wake_t0: int | None = None    # get() returns once this block's frames are in
+        self.hint: int | None = None        # the last wake_at() block, kept after the get (reader)
+        self._woken = False
 
     def put(self, frames: list[Frame]) -> None:
         if not frames:
@@ -59,7 +70,10 @@ class FrameQueue:
             over = len(self._q) - self.maxlen
             if over > 0:
                 self._shed(over)
-            self._cond.notify()
+            if self._wake_t0 is not None and _completes(frames[-1], self._wake_t0):
+                self._woken = True
+            if self._woken or len(self._q) >= self._enough:
+                self._cond.notify()
 
     def _shed(self, over: int) -> None:
         """Drop ``over`` frames: the oldest RAW ones, then the oldest of any type."""
@@ -80,11 +94,36 @@ class FrameQueue:
             self._q.popleft()
         self.drops += over
 
-    def get(self, timeout: float) -> list[Frame]:
-        """All queued frames (possibly none after ``timeout`` seconds)."""
+    def wake_at(self, t0: int | None) -> None:
+        """The next :meth:`get` returns as soon as the block starting at board sample ``t0``
+        is in: its TACHO frame (the last of a block), or any frame of a later block.  None:
+        no such wish.  Used once: a get clears it."""
         with self._cond:
-            if not self._q and not self.closed:
-                self._cond.wait(timeout)
+            self._wake_t0 = self.hint = t0
+            self._woken = t0 is not None and bool(self._q) and _completes(self._q[-1], t0)
+
+    def poke(self) -> None:
+        """The waiting :meth:`get` returns now (something besides frames wants the loop)."""
+        with self._cond:
+            self._woken = True
+            self._cond.notify()
+
+    def get(self, timeout: float, enough: int = 1) -> list[Frame]:
+        """All queued frames, once at least ``enough`` wait (at once if they already do),
+        the block of :meth:`wake_at` is in, ``timeout`` seconds have passed (then possibly
+        none) or the queue is closed."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            self._enough = max(1, min(enough, self.maxlen))
+            try:
+                while len(self._q) < self._enough and not self._woken and not self.closed:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
+            finally:
+                self._enough = 1
+                self._wake_t0, self._woken = None, False
             out = list(self._q)
             self._q.clear()
             return out
@@ -98,8 +137,17 @@ class FrameQueue:
         return len(self._q)
 
 
+def _completes(f: Frame, t0: int) -> bool:
+    """``f`` shows the block at ``t0`` is in: its TACHO frame, or a frame of a later block."""
+    return f.t0_unwrapped > t0 or (f.t0_unwrapped == t0 and f.type == FrameType.TACHO)
+
+
 class SerialReader(threading.Thread):
     """Reads the port, feeds the decoder, queues frames; reconnects with back-off.
+
+    Between reads it waits as :class:`~cmsensord.read_pace.ReadPace` allows (bytes gather
+    in the port's buffer until the loop wants them), so a slow link costs a few reads a
+    second, not one per block.
 
     Link events (``link_lost``, ``link_restored``, ``reader_error``, ``reader_recovered``) are queued in ``events`` as
     (wall_ns, kind, message) for the processing loop to emit: only the loop
@@ -127,6 +175,7 @@ class SerialReader(threading.Thread):
         self.error: str | None = None         # the last one, as reported
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
+        self.pace = ReadPace()
 
     def stop(self) -> None:
         self._stop_event.set()
@@ -170,7 +219,7 @@ class SerialReader(threading.Thread):
             self._backoff = self.reconnect_min_s
             self.connected.set()
         try:
-            data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+            data = self._read(ser)
             if not data:
                 return ser
         except PORT_ERRORS as exc:
@@ -179,19 +228,33 @@ class SerialReader(threading.Thread):
             self.failures = 1
             _close_quietly(ser)
             return None
-        self.last_data = time.monotonic()
+        now = self.last_data = time.monotonic()
         if self.capture is not None and self.capture_error is None:
             try:
                 self.capture.write(data)
             except OSError as exc:
                 self.capture_error = f"capture file: {exc.strerror or exc}"
                 self._event("disk_error", self.capture_error + "; capture stopped")
-        self.queue.put(self.decoder.feed(data))
+        frames = self.decoder.feed(data)
+        self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None)
+        self.queue.put(frames)
         if self.errors:
             self._event("reader_recovered", f"{self.port}: reading again after {self.errors} "
                         "reader error(s)")
             self.errors, self.error = 0, None
+        hold = self.pace.hold(now, self.queue.hint)
+        if hold > 0.001:            # bytes gather in the port's buffer meanwhile
+            self._stop_event.wait(hold)
         return ser
+
+    def _read(self, ser) -> bytes:
+        """What the port has (up to ``read_size`` bytes), waiting up to the port's timeout for
+        the first byte: b"" if nothing came.  One result per arrival (the byte that woke the
+        read and the rest), so the decoder is fed once."""
+        data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
+        if data and len(data) < self.read_size and ser.in_waiting:
+            data += ser.read(min(self.read_size - len(data), ser.in_waiting))
+        return data
 
     def _unexpected(self, exc: Exception, ser) -> None:
         """An exception that is not a port error: report it (once while it repeats), close the

@@ -12,9 +12,9 @@ reads frames this way, so they all decode bytes the same way:
   :class:`~cmsensord.errors.LinkError` when the source is made;
 * :class:`SerialSource` — the serial port: a reader thread (reconnecting with
   back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
-  yields what is queued every ``timeout`` seconds (empty batches included, so
-  the loop can do its periodic work) until :meth:`SerialSource.stop`, then
-  what is left, then ends;
+  yields what is queued every ``timeout`` seconds, or as soon as ``batch_frames``
+  wait (empty batches included, so the loop can do its periodic work), until
+  :meth:`SerialSource.stop`, then what is left, then ends;
 * :class:`Paced` — wraps any source and paces it at ``speed`` times the
   board's clock (the frames' own t0), with an injectable clock and sleep.
 
@@ -36,6 +36,13 @@ from cmsensord.protocol import Decoder, Frame, FrameType, LinkCounters, decode_s
 __all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced"]
 
 Batch = list[Frame]
+
+#: the live loop's batching: the queued frames every BATCH_S seconds (the loop's period,
+#: also for the watchdog and the status), as soon as BATCH_FRAMES wait (the Processor's
+#: MAX_BATCH: a fast board is not held back), or when the block completing the next
+#: /orders block is in (FrameQueue.wake_at)
+BATCH_S = 0.1
+BATCH_FRAMES = 1000
 
 
 class FrameSource:
@@ -127,21 +134,26 @@ class SerialSource(FrameSource):
     """The serial port: :class:`~cmsensord.link.SerialReader` thread -> bounded queue.
 
     Entering starts the reader thread.  Iteration yields the queued frames every
-    ``timeout`` seconds (an empty batch when none came) until :meth:`stop`; then it
-    yields the frames still queued once and ends.  ``events`` holds the reader's
+    ``timeout`` seconds (an empty batch when none came), or sooner once ``batch_frames``
+    wait, until :meth:`stop`; then it yields the frames still queued once and ends.
+    Batching by time is what keeps the live daemon's cost near a replay's: the
+    Processor's work is mostly per call, and one call per 10-ms block costs ~3x the
+    work of its frames (issue 13).  ``batch_frames=1`` yields as soon as any frame is
+    queued.  ``events`` holds the reader's
     link events as (wall_ns, kind, message); ``capture`` tees the bytes to a file.
     """
 
     def __init__(self, port: str, *, baud: int, read_size: int = 4096, queue_frames: int = 20000,
                  capture: BinaryIO | None = None, reconnect_min_s: float = 0.5,
                  reconnect_max_s: float = 5.0, open_port: Callable | None = None,
-                 timeout: float = 0.1):
+                 timeout: float = BATCH_S, batch_frames: int = BATCH_FRAMES):
         self.queue = FrameQueue(queue_frames)
         self.reader = SerialReader(port, baud=baud, read_size=read_size, queue=self.queue,
                                    capture=capture, reconnect_min_s=reconnect_min_s,
                                    reconnect_max_s=reconnect_max_s, open_port=open_port)
         self.decoder = self.reader.decoder
         self.timeout = timeout
+        self.batch_frames = batch_frames
         self._stopped = False
 
     @classmethod
@@ -161,7 +173,7 @@ class SerialSource(FrameSource):
 
     def __iter__(self) -> Iterator[Batch]:
         while not self._stopped:
-            yield self.queue.get(timeout=self.timeout)
+            yield self.queue.get(timeout=self.timeout, enough=self.batch_frames)
         yield self.queue.get(timeout=0)
 
     def stop(self) -> None:

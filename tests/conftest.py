@@ -43,6 +43,8 @@ PROCESS_MODULES = frozenset({
     "test_config_hostile.py",
     "test_reader_thread.py",
     "test_stream_events.py",
+    "test_live_batching.py",
+    "test_no_compiler.py",
     "test_journal.py",
     "test_foxglove.py",
     "test_package.py",

@@ -144,6 +144,13 @@ class OrderChain:
         self.gate.push(y)                       # NaN of lost RAW frames: passed on as missing
         return out + self.release()
 
+    def next_output_sample(self) -> int | None:
+        """Board sample index whose arrival completes the next /orders block (None before
+        the first samples)."""
+        if self.sample0 is None:
+            return None
+        return self.sample0 + self.tracker.next_block_input()
+
     def finish(self) -> Out:
         """End of the stream: track what waits, with the provisional speed."""
         return self.release(final=True)

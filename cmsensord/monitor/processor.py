@@ -376,6 +376,15 @@ class Processor:
         if drift is not None:
             self.segments.drifted(now, *drift)
 
+    def wake_t0(self) -> int | None:
+        """t0 of the board block whose frames complete the next /orders block (None without
+        an order chain): the live loop processes as soon as it is in."""
+        s = self.orders.next_output_sample() if self.orders is not None else None
+        if s is None or self.clock.slot0_t0 is None:
+            return None
+        L = self.clock.block_len
+        return s - (s - self.clock.slot0_t0) % L
+
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""
         if not self.clock.last_stamp_ns:

@@ -13,11 +13,12 @@ from cmsensord.config import Config, config_to_dict
 from cmsensord.errors import SinkError
 from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
+from cmsensord.protocol import Frame
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary, status_line
-from cmsensord.source import SerialSource
+from cmsensord.source import BATCH_S, SerialSource
 
 log = logging.getLogger("cmsensord")
 
@@ -98,6 +99,24 @@ class _Watch:
             self.proc.write_diagnostics(self.proc.log.default_stamp())
 
 
+def board_time_parts(frames: list[Frame], span: int) -> list[list[Frame]]:
+    """``frames`` cut into runs of less than ``span`` board samples (t0 from a run's first
+    frame; a t0 stepping back starts a run).  One batch of a board faster than real time
+    (a simulation) spans many BATCH_S of board time; handled whole, the messages it writes
+    would come out of log-time order by up to that span, and the sink holds such messages
+    back that long before they are in the file (cmsensord/sinks/reorder.py)."""
+    if not frames or frames[-1].t0_unwrapped - frames[0].t0_unwrapped < span:
+        return [frames]
+    parts, start, first = [], 0, frames[0].t0_unwrapped
+    for i, f in enumerate(frames):
+        t0 = f.t0_unwrapped
+        if t0 - first >= span or t0 < first:
+            parts.append(frames[start:i])
+            start, first = i, t0
+    parts.append(frames[start:])
+    return parts
+
+
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None) -> int:
@@ -112,6 +131,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     sink = open_sink(cfg, metadata or {}, background_salvage=True)
     source = SerialSource.from_link(cfg.link, capture=capture)
     queue = source.queue
+    sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
     proc: Processor
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
                      diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
@@ -174,7 +194,9 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 raise ReaderDied(f"the serial reader thread has ended; exiting with status "
                                  f"{EXIT_READER_DIED} for the service manager to restart the daemon")
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
-            proc.handle(frames)
+            for part in board_time_parts(frames, round(BATCH_S * proc.fs)):
+                proc.handle(part)
+            source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block does
             if (frames and cfg.link.max_drift_s and watch.sim_done is None
                     and len(source.queue) < DRIFT_QUEUE_MAX):
                 proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock

@@ -134,6 +134,8 @@ class RotatingSink:
         self._pending: collections.deque[tuple[str, str, dict]] = collections.deque(
             maxlen=_QUEUED_EVENTS)
         self._on_event = on_event
+        #: called when an event is queued (a salvage thread's): the live loop wakes and ticks
+        self.wake: Callable[[], Any] | None = None
         self._delivering = False
         self._closed = False
         self._current: McapSink | None = None
@@ -194,6 +196,8 @@ class RotatingSink:
 
     def _emit(self, kind: str, message: str, **fields: Any) -> None:
         self._pending.append((kind, message, fields))
+        if self.wake is not None:
+            self.wake()
 
     def _deliver(self) -> None:
         if self._delivering or self._on_event is None:

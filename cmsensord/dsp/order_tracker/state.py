@@ -62,6 +62,7 @@ class TrackerState:
     z: np.ndarray              # (C, 2K) predicted state X̂(n|n-1)
     P: np.ndarray              # (2K, 2K) predicted covariance (exact gains)
     z0: np.ndarray | None = None   # numpy path: X̂ at the start of the current chunk
+    aa_part: np.ndarray | None = None   # numpy path: inputs of the anti-alias filter's current block
     last_miss: np.ndarray | None = None   # (C,) input index of the last missing input
     chunk: dict = field(default_factory=dict)   # numpy path: inputs of the current chunk so far
     pend: dict = field(default_factory=dict)    # partial causal block, per-sample arrays

@@ -26,6 +26,7 @@ from cmsensord.dsp.order_tracker.recursions import (
     mask_groups,
     riccati_numpy,
 )
+from cmsensord.dsp.order_tracker.sos_blocks import SosBlocks
 from cmsensord.dsp.order_tracker.state import (
     BlockStats,
     TrackerOutput,
@@ -99,6 +100,7 @@ class OrderTracker:
         if backend == "c" and _trackerkernel is None:
             raise RuntimeError("the compiled tracker kernel is not built; use backend='numpy'")
         self.backend = backend
+        self._sos_blocks: SosBlocks | None = None       # the numpy path's anti-alias filter
         self.fs_in = float(fs_in)
         self.max_rpm = float(max_rpm)
         self.min_rpm = float(min_rpm)
@@ -235,6 +237,13 @@ class OrderTracker:
     def reset(self) -> None:
         self.state = self.initial_state()
 
+    def next_block_input(self) -> int:
+        """Input sample index (counted from the first input) whose arrival completes the
+        next causal output block (tracker sample j is input sample j x decimate)."""
+        st = self.state
+        pending = len(st.pend["rpm"]) if st.pend else 0
+        return (st.n_track - pending + self.block - 1) * self.decimate
+
     def describe(self, rpm: float) -> list[dict]:
         """Per component at speed ``rpm``: frequency, r, -3 dB bandwidth [Hz and %],
         time constant [s] (of the isolated steady-state filter at the tracker rate)."""
@@ -330,9 +339,10 @@ class OrderTracker:
             yd = np.empty((len(take), self.C))
             _trackerkernel.sosfilt(self.sos, np.ascontiguousarray(y), st.zi, yd, st.skip,
                                    self.decimate)
-        else:                             # the numpy path: scipy, imported only here
-            from scipy.signal import sosfilt
-            yf, st.zi = sosfilt(self.sos, y, axis=0, zi=st.zi)
+        else:                             # the numpy path: sosfilt by blocks, no scipy
+            if self._sos_blocks is None:
+                self._sos_blocks = SosBlocks(self.sos)
+            yf, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
             yd = np.ascontiguousarray(yf[take])
         if self.delay_in:
             if st.n_in == 0 and rpm.size:        # the line starts filled with the first speed

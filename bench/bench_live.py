@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""The live daemon's cost at 1x real time, beside a replay of the same capture.
+
+Per configuration (RMS 4 channels; RAW 1 channel + tacho + the default 4 orders;
+RAW 4 channels + tacho + 4 orders), with and without the compiled kernels: starts
+the simulated board on a pty at 1x (``python -m firmware_sim --pty --speed 1``) and
+the daemon on it (``cmsensord --config ... --capture cap.bin``, through
+bench/live_probe.py), lets it warm up, then measures the daemon process alone over a
+fixed window: CPU % of one core from /proc/<pid>/stat (utime + stime, all threads),
+RSS and peak RSS (VmRSS, VmHWM), and the order latency (write time minus the
+sample's arrival, median and 95th percentile).  Then replays the capture the daemon
+wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its CPU
+per board second and the ratio live / replay.
+
+    python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--tree before=DIR]
+
+``--tree LABEL=DIR`` (repeatable) runs the simulator, the daemon and the replay from
+another checkout too (its C kernels built in place: ``python setup.py build_ext
+--inplace``), interleaved with this one, for before/after figures of one run.
+
+The machine is shared and noisy: compare rows of one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBE = str(ROOT / "bench" / "live_probe.py")
+TICK = os.sysconf("SC_CLK_TCK")
+
+#: name -> (simulator arguments, label)
+CONFIGS = {
+    "rms4": (["--scenario", "faulty", "--mode", "rms", "--channels", "4"], "RMS 4 ch"),
+    "raw1": (["--scenario", "faulty", "--mode", "raw", "--tacho", "--channels", "1"],
+             "RAW 1 ch + tacho + 4 orders"),
+    "raw4": (["--scenario", "faulty", "--mode", "raw", "--tacho", "--channels", "4"],
+             "RAW 4 ch + tacho + 4 orders"),
+}
+
+
+def cpu_s(pid: int) -> float:
+    """utime + stime of the process (all its threads), seconds."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def memory_mb(pid: int) -> tuple[float, float]:
+    """(VmRSS, VmHWM) of the process, MB."""
+    got = {}
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            key = line.split(":")[0]
+            if key in ("VmRSS", "VmHWM"):
+                got[key] = int(line.split()[1]) / 1024
+    return got["VmRSS"], got["VmHWM"]
+
+
+def tree_env(tree: Path) -> dict[str, str]:
+    """The environment that runs the code of checkout ``tree``."""
+    return dict(os.environ, PYTHONPATH=str(tree) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: float,
+         env: dict[str, str]) -> dict:
+    """The daemon at 1x on a simulated board: CPU over the window, memory, latency, capture."""
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--speed", "1",
+                            "--seed", "1", *sim_args], stdout=subprocess.PIPE, text=True, env=env)
+    assert sim.stdout is not None
+    port = sim.stdout.readline().strip()
+    cfg = tmp / "cmsensord.yaml"
+    cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp / 'logs'}\n  status_line: false\n")
+    report = tmp / "live.json"
+    cap = tmp / "cap.bin"
+    daemon = subprocess.Popen([sys.executable, PROBE, str(report), *([] if kernels else ["--no-kernels"]),
+                               "--", "--config", str(cfg), "--capture", str(cap)],
+                              stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        time.sleep(warmup)
+        c0, t0 = cpu_s(daemon.pid), time.monotonic()
+        time.sleep(seconds)
+        c1, t1 = cpu_s(daemon.pid), time.monotonic()
+        rss, hwm = memory_mb(daemon.pid)
+    finally:
+        daemon.send_signal(signal.SIGTERM)
+        _, err = daemon.communicate(timeout=30)
+        sim.terminate()
+        sim.wait(timeout=5)
+    if daemon.returncode != 0:
+        raise SystemExit(f"daemon failed ({daemon.returncode}): {err}")
+    r = json.loads(report.read_text())
+    lat = r["latency_ms"][int(len(r["latency_ms"]) * warmup / (warmup + seconds)):]
+    return {"cpu_pct": 100 * (c1 - c0) / (t1 - t0), "rss_mb": rss, "hwm_mb": hwm, "scipy": r["scipy"],
+            "lat_med": statistics.median(lat) if lat else None,
+            "lat_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None, "capture": cap}
+
+
+def replay(tmp: Path, cap: Path, kernels: bool, env: dict[str, str]) -> dict:
+    """``cmsensord replay`` of the capture in a fresh process: CPU of the replay, board seconds."""
+    report = tmp / "replay.json"
+    p = subprocess.run([sys.executable, PROBE, str(report), *([] if kernels else ["--no-kernels"]),
+                        "--", "replay", str(cap), "--out", str(tmp / "replay")],
+                       capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        raise SystemExit(f"replay failed: {p.stderr}")
+    return json.loads(report.read_text())
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=60.0, help="measuring window per configuration (s)")
+    ap.add_argument("--warmup", type=float, default=8.0, help="seconds before the window (start-up)")
+    ap.add_argument("--only", action="append", choices=sorted(CONFIGS), help="run only these configurations")
+    ap.add_argument("--kernels", choices=("both", "on", "off"), default="both")
+    ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
+                    help="also run the code of another checkout (e.g. before=/tmp/before)")
+    args = ap.parse_args()
+    kernel_runs = {"both": (True, False), "on": (True,), "off": (False,)}[args.kernels]
+    trees = [(lab, Path(d).resolve()) for lab, d in (t.split("=", 1) for t in args.tree)]
+    trees.append(("this" if trees else "", ROOT))
+    rows = []
+    for name in args.only or list(CONFIGS):
+        sim_args, label = CONFIGS[name]
+        for kernels in kernel_runs:
+            for tree_label, tree in trees:
+                env = tree_env(tree)
+                with tempfile.TemporaryDirectory(prefix="bench_live") as tmp:
+                    lv = live(Path(tmp), sim_args, kernels, args.warmup, args.seconds, env)
+                    rp = replay(Path(tmp), lv["capture"], kernels, env)
+                rep_pct = 100 * rp["cpu_s"] / rp["board_s"]
+                row_label = f"{label} ({tree_label})" if tree_label else label
+                rows.append((row_label, "yes" if kernels else "no", lv, rp, rep_pct))
+                print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
+    print(f"# live daemon at 1x, {args.seconds:g} s window after {args.warmup:g} s warm-up; "
+          "replay of the same capture\n")
+    print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95) "
+          "| scipy loaded | replay CPU s / board s | replay % | x real time | live / replay |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |")
+    for label, k, lv, rp, rep_pct in rows:
+        lat = f"{lv['lat_med']:.0f} / {lv['lat_p95']:.0f}" if lv["lat_med"] is not None else "-"
+        print(f"| {label} | {k} | {lv['cpu_pct']:.2f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
+              f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.2f} / {rp['board_s']:.0f} | {rep_pct:.2f} "
+              f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

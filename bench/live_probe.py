@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Run ``cmsensord ARGS`` in this process with probes, for bench/bench_live.py.
+
+    python bench/live_probe.py REPORT.json [--no-kernels] -- ARGS...
+
+``--no-kernels`` makes the compiled kernels unimportable (``sys.modules[name] =
+None``), as on a board without a C compiler: the numpy fallbacks run.  The probes
+change nothing the daemon computes:
+
+* order latency: for every ``/cm/<ch>/orders`` message, the wall clock at its write
+  minus the time the frame holding the block's first sample arrived.  Stamps are the board clock anchored
+  to the wall clock when the Processor first sees a frame (possibly bytes the pty held
+  since before the daemon opened it); the probe notes when the reader thread received
+  each frame and takes the board clock's earliest arrival (the least arrival time minus
+  the frame's board time) as the time a board sample arrives, so a loop that waits
+  before processing shows its wait in the latency;
+* the CPU seconds of ``main`` alone (imports excluded) and the board seconds processed;
+* whether scipy was imported, and the peak RSS (VmHWM).
+
+At exit the figures go to REPORT.json.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import sys
+import time
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def main() -> int:
+    report_path, rest = sys.argv[1], sys.argv[2:]
+    no_kernels = "--no-kernels" in rest[:rest.index("--")]
+    args = rest[rest.index("--") + 1:]
+    if no_kernels:
+        for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel"):
+            sys.modules[name] = None  # type: ignore[assignment]  # import raises ImportError
+    from cmsensord import link, service
+    from cmsensord.cli import main as cli_main
+    from cmsensord.monitor import clock, processor
+    from cmsensord.service import live
+
+    state: dict = {"arrivals": [], "anchor": None, "writes": [], "procs": []}
+
+    put = link.FrameQueue.put
+
+    def probed_put(self, frames):
+        if frames:
+            state["arrivals"].append((time.time_ns(), frames[-1].t0_unwrapped))
+        return put(self, frames)
+
+    anchor = clock.BlockClock.anchor
+
+    def probed_anchor(self, t0, wall_ns):
+        if state["anchor"] is None:
+            state["anchor"] = (t0, wall_ns)
+        return anchor(self, t0, wall_ns)
+
+    init = processor.Processor.__init__
+
+    def probed_init(self, *a, **kw):
+        init(self, *a, **kw)
+        state["procs"].append(self)
+
+    open_sink = live.open_sink
+
+    def probed_open_sink(*a, **kw):
+        sink = open_sink(*a, **kw)
+        write = sink.write
+
+        def probed_write(topic, schema, stamp_ns, msg):
+            if topic.endswith("/orders"):
+                state["writes"].append((time.time_ns(), stamp_ns))
+            return write(topic, schema, stamp_ns, msg)
+
+        sink.write = probed_write
+        return sink
+
+    link.FrameQueue.put = probed_put            # type: ignore[method-assign]
+    clock.BlockClock.anchor = probed_anchor     # type: ignore[method-assign]
+    processor.Processor.__init__ = probed_init  # type: ignore[method-assign]
+    live.open_sink = probed_open_sink           # type: ignore[attr-defined]
+    del service
+    c0 = _cpu()
+    rc = cli_main(args)
+    cpu = _cpu() - c0
+    hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM")).split()[1]
+    procs = state["procs"]
+    latency = []
+    if state["anchor"] is not None and state["arrivals"] and procs:
+        fs, bl, rate = procs[-1].fs, procs[-1].block_len, procs[-1].cfg.orders.output_rate_hz
+        t0_first, anchor_ns = state["anchor"]
+        # wall time at which the frame of board sample t0_first arrived, at the earliest
+        first_ns = min(a - (t0 - t0_first) * 1e9 / fs for a, t0 in state["arrivals"])
+        for w, s in state["writes"]:
+            # a block's stamp is its last sample; its first sample waits longest
+            first = round((s - anchor_ns) * fs / 1e9 - fs / rate + 1)
+            latency.append((w - first_ns - (first // bl) * bl * 1e9 / fs) / 1e6)
+    with open(report_path, "w") as f:
+        json.dump({"rc": rc, "cpu_s": cpu, "board_s": procs[-1].board_seconds if procs else 0.0,
+                   "latency_ms": latency, "scipy": "scipy" in sys.modules,
+                   "peak_rss_mb": int(hwm) / 1024}, f)
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,177 @@
+"""The live loop batches frames by time (issue 13): the same messages as one frame per call.
+
+The serial source hands the Processor what the reader queued every ``BATCH_S``
+seconds (or once ``BATCH_FRAMES`` wait), not each read's few frames; the
+Processor's results do not depend on how the frames are cut into calls.  In
+process: a reader thread on a paced fake port, batched as the daemon batches,
+against one frame per call.  Through real processes: the daemon on a pty, whose
+batches are whatever the timing gave, against a replay of its capture (one
+frame per call).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from cmsensord.config import default_config
+from cmsensord.link import FrameQueue
+from cmsensord.monitor.processor import Processor
+from cmsensord.protocol import Frame, FrameType, iter_frames
+from cmsensord.sinks.mcap_sink import read_messages
+from cmsensord.sinks.memory import ListSink
+from cmsensord.source import BATCH_FRAMES, BATCH_S, SerialSource
+from messages import comparable
+from processes import cmsensord, start_board, start_daemon, stop
+
+
+def raw_capture(seconds: float, channels: int = 1) -> bytes:
+    """RAW blocks + TACHO of the faulty motor (default orders 1x-4x are tracked)."""
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    sc = make_scenario("faulty", n_channels=channels, duration_s=seconds, seed=3)
+    return Board(sc, BoardConfig(n_channels=channels, mode="raw", tacho=True)).generate(seconds)
+
+
+def by_topic(messages) -> dict[str, list]:
+    """comparable() messages per topic, each in its own order; events as a sorted list (the
+    tacho's events and the frames' interleave by call, each one's stamp is its own)."""
+    out: dict[str, list] = {}
+    for topic, stamp, msg in comparable(messages):
+        if topic == "/cm/events" and msg["kind"] in ("link_lost", "link_restored", "link_stalled"):
+            continue                                 # wall-clock events of a live link
+        key = topic if "method" not in msg else f"{topic} {msg['method']}"
+        out.setdefault(key, []).append((stamp, msg))
+    if "/cm/events" in out:
+        out["/cm/events"].sort(key=repr)
+    return out
+
+
+class PacedPort:
+    """A fake serial port returning ``reads`` one per ``read`` call, ``pause`` s apart."""
+
+    def __init__(self, reads: list[bytes], pause: float):
+        self.reads, self.pause = list(reads), pause
+        self.in_waiting = 0
+        self.closed = False
+
+    def read(self, n: int) -> bytes:
+        time.sleep(self.pause)
+        return self.reads.pop(0) if self.reads else b""
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_the_loops_batches_give_the_messages_of_one_frame_per_call():
+    data = raw_capture(4.0)
+    cfg = default_config(1)
+    frames, _ = iter_frames(data)
+    one = ListSink()
+    proc = Processor(cfg, one, clock_ns=lambda: 10**18)
+    for f in frames:
+        proc.handle([f])
+    proc.finish()
+
+    batched, sizes = ListSink(), []
+    proc = Processor(cfg, batched, clock_ns=lambda: 10**18)
+    port = PacedPort([data[k:k + 1100] for k in range(0, len(data), 1100)], pause=0.001)
+    with SerialSource("/dev/fake", baud=921600, open_port=lambda: port) as src:
+        for batch in src:
+            sizes.append(len(batch))
+            proc.handle(batch)
+            if not port.reads and not batch:
+                break
+        src.stop()
+        for batch in src:
+            sizes.append(len(batch))
+            proc.handle(batch)
+    proc.finish()
+
+    assert sum(sizes) == len(frames)
+    assert max(sizes) > 20                          # really batched: many reads per call
+    a, b = by_topic(one.messages), by_topic(batched.messages)
+    assert len(a["/cm/ch0/orders recursive"]) >= 35 and len(a["/cm/ch0/severity"]) >= 3
+    assert a == b
+
+
+def test_the_serial_source_wakes_every_batch_period_or_when_enough_frames_wait():
+    """Frames trickling in come out together once per BATCH_S, not one call per read; a burst
+    of BATCH_FRAMES comes out at once."""
+    from cmsensord.protocol import encode_rms
+
+    trickle = [encode_rms(i, i * 250, [1.0]) for i in range(40)]
+    port = PacedPort(trickle, pause=0.005)          # one frame per 5 ms
+    with SerialSource("/dev/fake", baud=921600, open_port=lambda: port) as src:
+        got, t_first = [], None
+        for batch in src:
+            if batch:
+                t_first = t_first or time.monotonic()
+                got.append(len(batch))
+            if sum(got) >= 40:
+                break
+        src.stop()
+    assert len(got) <= 40 * 0.005 / BATCH_S + 2 and max(got) >= 5, got
+
+    burst = b"".join(encode_rms(i, i * 250, [1.0]) for i in range(BATCH_FRAMES))
+    port = PacedPort([burst], pause=0.0)
+    with SerialSource("/dev/fake", baud=921600, open_port=lambda: port, timeout=5.0) as src:
+        t = time.monotonic()
+        first = next(b for b in src if b)
+        waited = time.monotonic() - t
+        src.stop()
+    assert len(first) == BATCH_FRAMES and waited < 4.0
+
+
+def test_live_raw_with_orders_on_a_pty_equals_the_replay_of_its_capture(tmp_path):
+    """The daemon at 1x on a pty (batches of ~5 blocks, cut wherever the timing fell) writes
+    the messages a replay of its capture writes (one read of 64 kB per call)."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "faulty", "--mode", "raw", "--tacho", "--duration", "5",
+                      "--speed", "1", "--seed", "2", "--link", str(link))
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
+    sim.stdout.readline()                            # the board's stats: all is sent
+    time.sleep(1.0)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    live = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    r = cmsensord("replay", str(tmp_path / "cap.bin"), "--config", str(tmp_path / "cmsensord.yaml"),
+                  "--out", str(tmp_path / "replay"))
+    assert r.returncode == 0, r.stderr
+    a, b = by_topic(live), by_topic(read_messages(next((tmp_path / "replay").glob("*.mcap"))))
+    assert len(a["/cm/ch0/orders recursive"]) >= 30
+    assert a == b
+
+
+def test_the_loop_wakes_with_the_frame_that_completes_an_orders_block():
+    """Processor.wake_t0 names the block whose TACHO frame (the last of a block) completes the
+    next /orders block: fed one frame per call, every /orders block after the first comes out
+    in the call of exactly that frame, so a loop waking then adds no latency to the orders."""
+    frames, _ = iter_frames(raw_capture(3.0))
+    sink = ListSink()
+    proc = Processor(default_config(1), sink, clock_ns=lambda: 10**18)
+    wake, emitted_at = None, []
+    for f in frames:
+        before = len(sink.topic("/cm/ch0/orders"))
+        proc.handle([f])
+        if len(sink.topic("/cm/ch0/orders")) > before:
+            emitted_at.append((f.type, f.t0_unwrapped, wake))
+        wake = proc.wake_t0()
+    assert len(emitted_at) >= 25
+    assert all(t == FrameType.TACHO and t0 == w for t, t0, w in emitted_at[1:]), emitted_at[:5]
+
+
+def test_a_queue_told_the_block_to_wake_at_returns_when_its_tacho_frame_is_in():
+    q = FrameQueue(100)
+    q.wake_at(500)
+    threading.Timer(0.05, lambda: q.put([Frame(FrameType.RAW, 1, 500, 0, 0, b"")])).start()
+    threading.Timer(0.1, lambda: q.put([Frame(FrameType.TACHO, 2, 500, 0, 0, b"\0\0")])).start()
+    t = time.monotonic()
+    got = q.get(timeout=5.0, enough=1000)
+    assert [f.type for f in got] == [FrameType.RAW, FrameType.TACHO] and time.monotonic() - t < 4.0
+    q.put([Frame(FrameType.TACHO, 3, 750, 0, 0, b"\0\0")])  # the wish was used: a get waits again
+    t = time.monotonic()
+    assert len(q.get(timeout=0.2, enough=1000)) == 1 and time.monotonic() - t >= 0.15

@@ -1,0 +1,45 @@
+"""The serial reader's wait between reads (cmsensord/read_pace.py): a board at 25 kHz sending
+a 10-ms block (250 samples, 600 bytes) at every block's end, read as it comes."""
+
+from __future__ import annotations
+
+import pytest
+
+from cmsensord.read_pace import MAX_HOLD_S, ReadPace
+
+
+def paced(seconds: float, bytes_per_block: int = 600) -> tuple[ReadPace, float]:
+    pace = ReadPace()
+    t = 0.0
+    for k in range(int(seconds * 100)):
+        t = 0.01 * (k + 1)
+        pace.arrived(t, bytes_per_block, 250 * k)
+    return pace, t
+
+
+def test_no_wait_before_the_rates_are_measured():
+    pace, now = paced(0.5)
+    assert pace.hold(now, None) == 0.0 and pace.hold(now, 250 * 60) == 0.0
+
+
+def test_waits_until_shortly_before_the_block_to_wake_at_is_due():
+    pace, now = paced(3.0)                      # newest frame: t0 = 250 x 299, arrived at 3.0 s
+    assert pace.rate == pytest.approx(25000.0)
+    due = (250 * 305 - 250 * 299) / 25000.0     # 6 blocks later: 60 ms
+    assert pace.hold(now, 250 * 305) == pytest.approx(due - pace.margin_s)
+    assert pace.hold(now, 250 * 299) == 0.0     # that block is in: the loop names the next soon
+    assert pace.hold(now, 250 * 400) == MAX_HOLD_S
+
+
+def test_without_a_block_to_wake_at_it_waits_the_idle_hold_but_never_fills_the_buffer():
+    pace, now = paced(3.0)
+    assert pace.hold(now, None) == pace.idle_hold_s
+    fast, now = paced(3.0, bytes_per_block=20000)        # 2 MB/s: 16 kB in 8 ms
+    assert fast.hold(now, None) == pytest.approx(fast.buffer_bytes / 2e6)
+    assert fast.hold(now, 250 * 305) == pytest.approx(fast.buffer_bytes / 2e6)
+
+
+def test_a_board_clock_going_back_starts_the_measurement_over():
+    pace, now = paced(3.0)
+    pace.arrived(now + 0.01, 600, 0)
+    assert pace.rate is None and pace.hold(now + 0.01, 250) == 0.0
