@@ -1,0 +1,193 @@
+"""What a report shows, gathered from the messages of MCAP logs in one pass with bounded memory.
+
+:class:`LogData` takes (topic, log_time_ns, JSON bytes) one message at a time
+(:meth:`LogData.add`) and keeps per channel: the severity index and the anomaly
+flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend with the
+latest ISO zone boundaries and alarm level, the order RMS per 10-rpm speed bin,
+and at most ``MAX_CAPTURES`` captured waveforms with their spectra; for the whole
+log: the events (the first ``MAX_EVENTS``, counts of all), the link counters
+(summed over daemon restarts), the largest processing lag and queue depth, and
+the files read. Nothing grows with the length of the log beyond these bounds.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from cmsensord.report.trend import Trend
+
+__all__ = ["LogData", "ChannelData", "Capture", "FileInfo", "INDICATOR_FIELDS", "MAX_EVENTS", "MAX_CAPTURES"]
+
+MAX_EVENTS = 2000
+MAX_CAPTURES = 12
+SPEED_BIN_RPM = 10.0
+#: indicator fields drawn as trends (name, unit)
+INDICATOR_FIELDS = (("velocity_rms_mm_s", "mm/s"), ("accel_rms", "m/s²"), ("envelope_rms", "m/s²"),
+                    ("kurtosis", ""), ("crest_factor", ""))
+_CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
+                  "capture_envelope": "envelope"}
+
+
+@dataclass
+class Capture:
+    """One capture: its trigger time and the messages of its parts (waveform, spectrum, envelope)."""
+
+    channel: str
+    time_ns: int
+    parts: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass
+class ChannelData:
+    """Per channel: severity, anomaly flags, indicators, orders versus speed, captures."""
+
+    name: str
+    severity: Trend = field(default_factory=Trend)
+    anomaly: Trend = field(default_factory=Trend)
+    indicators: dict[str, Trend] = field(default_factory=dict)
+    zone_boundaries: list[float] | None = None
+    velocity_alarm: float | None = None
+    orders: dict[str, dict[int, list[float]]] = field(default_factory=dict)   # name -> bin -> [sum, n]
+    captures: list[Capture] = field(default_factory=list)
+    captures_omitted: int = 0
+
+
+@dataclass
+class FileInfo:
+    """One file read: its path, size and how far it could be read."""
+
+    path: str
+    bytes: int
+    messages: int = 0
+    complete: bool = False
+
+
+class LogData:
+    """Everything a report draws, filled message by message (see the module docstring)."""
+
+    def __init__(self) -> None:
+        self.channels: dict[str, ChannelData] = {}
+        self.events: list[tuple[int, dict[str, Any]]] = []
+        self.event_counts: dict[str, int] = {}
+        self.messages = 0
+        self.start_ns: int | None = None
+        self.end_ns: int | None = None
+        self.files: list[FileInfo] = []
+        self.link_total: dict[str, int] = {}
+        self._link_last: dict[str, int] = {}
+        self.max_lag_s = 0.0
+        self.max_queue_depth = 0
+        self.queue_drops = 0
+        self._drops_last = 0
+        self.undecodable = 0
+
+    def channel(self, name: str) -> ChannelData:
+        ch = self.channels.get(name)
+        if ch is None:
+            ch = self.channels[name] = ChannelData(name)
+        return ch
+
+    def add(self, topic: str, t_ns: int, data: bytes) -> None:
+        """One message of any topic; topics the report does not draw only count."""
+        self.messages += 1
+        self.start_ns = t_ns if self.start_ns is None else min(self.start_ns, t_ns)
+        self.end_ns = t_ns if self.end_ns is None else max(self.end_ns, t_ns)
+        parts = topic.split("/")
+        kind = parts[-1]
+        if kind in ("akf", "vibration_estimate"):
+            return                      # 100 Hz traces: not drawn, not decoded
+        try:
+            msg = json.loads(data)
+        except ValueError:
+            self.undecodable += 1
+            return
+        if topic == "/cm/events":
+            self._event(t_ns, msg)
+        elif topic == "/cm/diagnostics":
+            self._diagnostics(msg)
+        elif len(parts) == 4 and parts[1] == "cm":
+            self._channel_message(parts[2], kind, t_ns, msg)
+
+    def _channel_message(self, name: str, kind: str, t_ns: int, msg: dict[str, Any]) -> None:
+        if kind == "severity":
+            ch = self.channel(name)
+            ch.severity.add(t_ns, msg.get("severity_index"))
+            ch.anomaly.add(t_ns, 1.0 if any(msg.get("anomaly") or ()) else 0.0)
+        elif kind == "indicators":
+            self._indicators(self.channel(name), t_ns, msg)
+        elif kind == "orders":
+            self._orders(self.channel(name), msg)
+        elif kind in _CAPTURE_PARTS:
+            self._capture(self.channel(name), _CAPTURE_PARTS[kind], t_ns, msg)
+
+    def _event(self, t_ns: int, msg: dict[str, Any]) -> None:
+        kind = str(msg.get("kind"))
+        self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
+        if len(self.events) < MAX_EVENTS:
+            self.events.append((t_ns, {"kind": kind, "channel": msg.get("channel"),
+                                       "message": msg.get("message") or ""}))
+
+    def _diagnostics(self, msg: dict[str, Any]) -> None:
+        link = msg.get("link") or {}
+        restarted = any(link.get(k, 0) < v for k, v in self._link_last.items())
+        if restarted:                    # counters start again at a daemon restart
+            for k, v in self._link_last.items():
+                self.link_total[k] = self.link_total.get(k, 0) + v
+            self.queue_drops += self._drops_last
+        self._link_last = {k: int(v) for k, v in link.items() if isinstance(v, int | float)}
+        self._drops_last = int(msg.get("queue_drops") or 0)
+        self.max_lag_s = max(self.max_lag_s, float(msg.get("lag_s") or 0.0))
+        self.max_queue_depth = max(self.max_queue_depth, int(msg.get("queue_depth") or 0))
+
+    def link_counters(self) -> dict[str, int]:
+        """The link counters over the whole log (summed across daemon restarts)."""
+        out = dict(self.link_total)
+        for k, v in self._link_last.items():
+            out[k] = out.get(k, 0) + v
+        return out
+
+    def total_queue_drops(self) -> int:
+        return self.queue_drops + self._drops_last
+
+    @staticmethod
+    def _indicators(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
+        for name, _unit in INDICATOR_FIELDS:
+            value = msg.get(name)
+            if isinstance(value, int | float):
+                trend = ch.indicators.get(name)
+                if trend is None:
+                    trend = ch.indicators[name] = Trend()
+                trend.add(t_ns, float(value))
+        if msg.get("zone_boundaries_mm_s"):
+            ch.zone_boundaries = [float(x) for x in msg["zone_boundaries_mm_s"]]
+        if isinstance(msg.get("velocity_alarm_mm_s"), int | float):
+            ch.velocity_alarm = float(msg["velocity_alarm_mm_s"])
+
+    @staticmethod
+    def _orders(ch: ChannelData, msg: dict[str, Any]) -> None:
+        speed = msg.get("speed_rpm")
+        if not msg.get("valid") or not isinstance(speed, int | float):
+            return
+        b = int(speed // SPEED_BIN_RPM)
+        for order in msg.get("orders") or ():
+            rms = order.get("rms")
+            if isinstance(rms, int | float):
+                bins = ch.orders.setdefault(str(order.get("name")), {})
+                acc = bins.setdefault(b, [0.0, 0.0])
+                acc[0] += rms
+                acc[1] += 1
+
+    @staticmethod
+    def _capture(ch: ChannelData, part: str, t_ns: int, msg: dict[str, Any]) -> None:
+        stamp = msg.get("trigger_time") or msg.get("timestamp") or {}
+        time_ns = int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nsec", 0)) if stamp else t_ns
+        for cap in ch.captures:
+            if cap.time_ns == time_ns:
+                cap.parts[part] = msg
+                return
+        if len(ch.captures) >= MAX_CAPTURES:
+            ch.captures_omitted += part == "waveform"
+            return
+        ch.captures.append(Capture(ch.name, time_ns, {part: msg}))
