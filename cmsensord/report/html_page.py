@@ -69,6 +69,12 @@ def _events_table(data: LogData) -> str:
             f"<th>message</th></tr>{rows}</table>")
 
 
+def _file_state(f: Any) -> str:
+    if f.error:
+        return html.escape(f"damaged: {f.error}; read up to there")
+    return "complete" if f.complete else "unfinished (read up to its last complete record)"
+
+
 def _diagnostics_table(data: LogData) -> str:
     link = data.link_counters()
     rows = "".join(f'<tr><td>{html.escape(k)}</td><td class="n">{v:,}</td></tr>' for k, v in link.items())
@@ -78,7 +84,7 @@ def _diagnostics_table(data: LogData) -> str:
     disk = {k: data.event_counts.get(k, 0) for k in ("disk_error", "salvage")}
     files = "".join(
         f'<tr><td>{html.escape(f.path)}</td><td class="n">{f.bytes:,}</td><td class="n">{f.messages:,}</td>'
-        f'<td>{"complete" if f.complete else "unfinished (read up to its last complete record)"}</td></tr>'
+        f'<td>{_file_state(f)}</td></tr>'
         for f in data.files)
     return ("<h2>Link and disk</h2><h3>Link counters and processing</h3>"
             f'<table id="link"><tr><th>counter</th><th>total</th></tr>{rows}</table>'

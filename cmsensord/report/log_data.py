@@ -13,10 +13,12 @@ the files read. Nothing grows with the length of the log beyond these bounds.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
 from cmsensord.report.trend import Trend
+from cmsensord.sinks.schemas import LINK_COUNTERS
 
 __all__ = ["LogData", "ChannelData", "Capture", "FileInfo", "INDICATOR_FIELDS", "MAX_EVENTS", "MAX_CAPTURES"]
 
@@ -26,6 +28,12 @@ SPEED_BIN_RPM = 10.0
 #: indicator fields drawn as trends (name, unit)
 INDICATOR_FIELDS = (("velocity_rms_mm_s", "mm/s"), ("accel_rms", "m/s²"), ("envelope_rms", "m/s²"),
                     ("kurtosis", ""), ("crest_factor", ""))
+# The 1-Hz topics are read by their scalar fields ("name": number), not decoded whole:
+# json.loads costs more than the rest of a week's report together.
+_SCALAR = re.compile(rb'"(\w+)":(-?[0-9][0-9.eE+-]*|null|true|false)')
+_ANOMALY = re.compile(rb'"anomaly":\[([^\]]*)\]')
+_ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
+_FAST_KINDS = frozenset(("severity", "indicators"))
 _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
                   "capture_envelope": "envelope"}
 
@@ -62,6 +70,7 @@ class FileInfo:
     bytes: int
     messages: int = 0
     complete: bool = False
+    error: str | None = None
 
 
 class LogData:
@@ -98,6 +107,9 @@ class LogData:
         kind = parts[-1]
         if kind in ("akf", "vibration_estimate"):
             return                      # 100 Hz traces: not drawn, not decoded
+        if topic == "/cm/diagnostics" or (kind in _FAST_KINDS and len(parts) == 4):
+            self._scalar_message(parts, kind, t_ns, data)
+            return
         try:
             msg = json.loads(data)
         except ValueError:
@@ -109,6 +121,22 @@ class LogData:
             self._diagnostics(msg)
         elif len(parts) == 4 and parts[1] == "cm":
             self._channel_message(parts[2], kind, t_ns, msg)
+
+    def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
+        """A severity, indicators or diagnostics message, read by its scalar fields."""
+        fields: dict[str, Any] = {k.decode(): _number(v) for k, v in _SCALAR.findall(data)}
+        if kind == "diagnostics":
+            self._diagnostics(fields)
+        elif kind == "severity":
+            ch = self.channel(parts[2])
+            ch.severity.add(t_ns, fields.get("severity_index"))
+            m = _ANOMALY.search(data)
+            ch.anomaly.add(t_ns, 1.0 if m is not None and b"1" in m.group(1) else 0.0)
+        else:
+            m = _ZONES.search(data)
+            if m is not None and m.group(1):
+                fields["zone_boundaries_mm_s"] = [float(x) for x in m.group(1).split(b",")]
+            self._indicators(self.channel(parts[2]), t_ns, fields)
 
     def _channel_message(self, name: str, kind: str, t_ns: int, msg: dict[str, Any]) -> None:
         if kind == "severity":
@@ -130,7 +158,7 @@ class LogData:
                                        "message": msg.get("message") or ""}))
 
     def _diagnostics(self, msg: dict[str, Any]) -> None:
-        link = msg.get("link") or {}
+        link = {k: msg[k] for k in LINK_COUNTERS if isinstance(msg.get(k), int | float)}
         restarted = any(link.get(k, 0) < v for k, v in self._link_last.items())
         if restarted:                    # counters start again at a daemon restart
             for k, v in self._link_last.items():
@@ -191,3 +219,12 @@ class LogData:
             ch.captures_omitted += part == "waveform"
             return
         ch.captures.append(Capture(ch.name, time_ns, {part: msg}))
+
+
+def _number(v: bytes) -> float | bool | None:
+    """A JSON scalar of :data:`_SCALAR` (number, null, true, false) as Python."""
+    if v == b"null":
+        return None
+    if v in (b"true", b"false"):
+        return v == b"true"
+    return float(v)

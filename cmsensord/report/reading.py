@@ -2,7 +2,7 @@
 
 A directory stands for its ``*.mcap`` and ``*.mcap.part`` files (salvaged
 files included), oldest name first. Every file is read with the lenient
-reader (:func:`~cmsensord.sinks.mcap_read.iter_messages_at`), so a ``.part``
+reader (:class:`~cmsensord.report.fast_read.FastScan`), so a ``.part``
 file of a crashed daemon or a damaged file gives what it holds up to the
 damage.
 """
@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import TextIO
 
 from cmsensord.errors import CmsensordError
+from cmsensord.report.fast_read import FastScan
 from cmsensord.report.log_data import FileInfo, LogData
 from cmsensord.report.progress import Progress
-from cmsensord.sinks.mcap_read import iter_messages_at
 
 __all__ = ["log_paths", "read_logs"]
 
@@ -50,22 +50,15 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
     done = 0
     for path, size in zip(paths, sizes):
         info = FileInfo(str(path), size)
-        offset = 0
-        for topic, t, raw, offset in iter_messages_at(path):
+        scan = FastScan(path)
+        for topic, t, raw, offset in scan.messages():
             data.add(topic, t, raw)
             info.messages += 1
             if info.messages % 4096 == 0:
                 progress.update(done + offset)
-        info.complete = offset > 0 and not path.name.endswith(".part") and _has_footer(path)
+        info.complete, info.error = scan.complete, scan.error
         data.files.append(info)
         done += size
     progress.close()
     return data
 
-
-def _has_footer(path: Path) -> bool:
-    """Whether the file ends with the MCAP closing magic (a finished file)."""
-    from cmsensord.sinks.mcap_chunks import MAGIC
-    with open(path, "rb") as f:
-        f.seek(max(0, path.stat().st_size - len(MAGIC)))
-        return f.read() == MAGIC
