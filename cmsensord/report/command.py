@@ -9,7 +9,6 @@ so in one line and exits with status 2.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,9 @@ def add_report_parser(sub: Any) -> None:
 
 def run_report(args: argparse.Namespace) -> int:
     """Write the report; one line on stderr and status 2 on a user error."""
-    if importlib.util.find_spec("matplotlib") is None:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
         print(MISSING_MATPLOTLIB, file=sys.stderr)
         return EXIT_USAGE
     from cmsensord.report.reading import log_paths, read_logs

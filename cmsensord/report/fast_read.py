@@ -20,6 +20,7 @@ import struct
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunks import MAGIC
@@ -36,10 +37,10 @@ _MSG = struct.Struct("<HIQQ")          # channel_id, sequence, log_time, publish
 _CHUNK = struct.Struct("<QQQI")         # message start, end, uncompressed size, uncompressed crc
 
 
-_ZSTD: list = []
+_ZSTD: list[Any] = []
 
 
-def _zstd():  # type: ignore[no-untyped-def]
+def _zstd() -> Any:
     """One zstd decompressor for every chunk (making one costs more than a small chunk's data)."""
     if not _ZSTD:
         import zstandard

@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cmsensord.report.trend import Trend
-from cmsensord.sinks.schemas import LINK_COUNTERS
 
 __all__ = ["LogData", "ChannelData", "Capture", "FileInfo", "INDICATOR_FIELDS", "MAX_EVENTS", "MAX_CAPTURES"]
 
@@ -28,12 +27,17 @@ SPEED_BIN_RPM = 10.0
 #: indicator fields drawn as trends (name, unit)
 INDICATOR_FIELDS = (("velocity_rms_mm_s", "mm/s"), ("accel_rms", "m/s²"), ("envelope_rms", "m/s²"),
                     ("kurtosis", ""), ("crest_factor", ""))
-# The 1-Hz topics are read by their scalar fields ("name": number), not decoded whole:
-# json.loads costs more than the rest of a week's report together.
-_SCALAR = re.compile(rb'"(\w+)":(-?[0-9][0-9.eE+-]*|null|true|false)')
+# The 1-Hz topics are read by the few fields drawn, not decoded whole: json.loads of
+# every message costs more than the rest of a week's report together.
+_NUM = rb'(-?[0-9][0-9.eE+-]*|null)'
+_SEVERITY = re.compile(rb'"severity_index":' + _NUM)
 _ANOMALY = re.compile(rb'"anomaly":\[([^\]]*)\]')
+_INDICATOR = re.compile(rb'"(velocity_rms_mm_s|accel_rms|envelope_rms|kurtosis|crest_factor|velocity_alarm_mm_s)":'
+                        + _NUM)
 _ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
+_DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s)":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
+_TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
 _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
                   "capture_envelope": "envelope"}
 
@@ -85,11 +89,11 @@ class LogData:
         self.end_ns: int | None = None
         self.files: list[FileInfo] = []
         self.link_total: dict[str, int] = {}
-        self._link_last: dict[str, int] = {}
+        self._diag_last: bytes | None = None
+        self._received_last = 0.0
         self.max_lag_s = 0.0
         self.max_queue_depth = 0
         self.queue_drops = 0
-        self._drops_last = 0
         self.undecodable = 0
 
     def channel(self, name: str) -> ChannelData:
@@ -101,8 +105,12 @@ class LogData:
     def add(self, topic: str, t_ns: int, data: bytes) -> None:
         """One message of any topic; topics the report does not draw only count."""
         self.messages += 1
-        self.start_ns = t_ns if self.start_ns is None else min(self.start_ns, t_ns)
-        self.end_ns = t_ns if self.end_ns is None else max(self.end_ns, t_ns)
+        if self.start_ns is None or self.end_ns is None:
+            self.start_ns = self.end_ns = t_ns
+        elif t_ns > self.end_ns:
+            self.end_ns = t_ns
+        elif t_ns < self.start_ns:
+            self.start_ns = t_ns
         parts = topic.split("/")
         kind = parts[-1]
         if kind in ("akf", "vibration_estimate"):
@@ -117,22 +125,21 @@ class LogData:
             return
         if topic == "/cm/events":
             self._event(t_ns, msg)
-        elif topic == "/cm/diagnostics":
-            self._diagnostics(msg)
         elif len(parts) == 4 and parts[1] == "cm":
             self._channel_message(parts[2], kind, t_ns, msg)
 
     def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
-        """A severity, indicators or diagnostics message, read by its scalar fields."""
-        fields: dict[str, Any] = {k.decode(): _number(v) for k, v in _SCALAR.findall(data)}
+        """A severity, indicators or diagnostics message, read by the fields drawn."""
         if kind == "diagnostics":
-            self._diagnostics(fields)
+            self._diagnostics(data)
         elif kind == "severity":
             ch = self.channel(parts[2])
-            ch.severity.add(t_ns, fields.get("severity_index"))
+            m = _SEVERITY.search(data)
+            ch.severity.add(t_ns, _number(m.group(1)) if m is not None else None)
             m = _ANOMALY.search(data)
             ch.anomaly.add(t_ns, 1.0 if m is not None and b"1" in m.group(1) else 0.0)
         else:
+            fields: dict[str, Any] = {k.decode(): _number(v) for k, v in _INDICATOR.findall(data)}
             m = _ZONES.search(data)
             if m is not None and m.group(1):
                 fields["zone_boundaries_mm_s"] = [float(x) for x in m.group(1).split(b",")]
@@ -157,33 +164,38 @@ class LogData:
             self.events.append((t_ns, {"kind": kind, "channel": msg.get("channel"),
                                        "message": msg.get("message") or ""}))
 
-    def _diagnostics(self, msg: dict[str, Any]) -> None:
-        link = {k: msg[k] for k in LINK_COUNTERS if isinstance(msg.get(k), int | float)}
-        restarted = any(link.get(k, 0) < v for k, v in self._link_last.items())
-        if restarted:                    # counters start again at a daemon restart
-            for k, v in self._link_last.items():
-                self.link_total[k] = self.link_total.get(k, 0) + v
-            self.queue_drops += self._drops_last
-        self._link_last = {k: int(v) for k, v in link.items() if isinstance(v, int | float)}
-        self._drops_last = int(msg.get("queue_drops") or 0)
-        self.max_lag_s = max(self.max_lag_s, float(msg.get("lag_s") or 0.0))
-        self.max_queue_depth = max(self.max_queue_depth, int(msg.get("queue_depth") or 0))
+    def _diagnostics(self, data: bytes) -> None:
+        """Largest lag and queue depth; the counters of the last message before each restart."""
+        fields = {k: _number(v) for k, v in _DIAG.findall(data)}
+        received = fields.get(b"bytes_received") or 0.0
+        if received < self._received_last:          # the counters start again at a daemon restart
+            self._add_counters(self._diag_last)
+        self._received_last = received
+        self._diag_last = data
+        self.max_lag_s = max(self.max_lag_s, fields.get(b"lag_s") or 0.0)
+        self.max_queue_depth = max(self.max_queue_depth, int(fields.get(b"queue_depth") or 0))
+
+    def _add_counters(self, data: bytes | None) -> None:
+        link, drops = _counters(data)
+        for k, v in link.items():
+            self.link_total[k] = self.link_total.get(k, 0) + v
+        self.queue_drops += drops
 
     def link_counters(self) -> dict[str, int]:
         """The link counters over the whole log (summed across daemon restarts)."""
         out = dict(self.link_total)
-        for k, v in self._link_last.items():
+        for k, v in _counters(self._diag_last)[0].items():
             out[k] = out.get(k, 0) + v
         return out
 
     def total_queue_drops(self) -> int:
-        return self.queue_drops + self._drops_last
+        """Frames the daemon's queue dropped over the whole log."""
+        return self.queue_drops + _counters(self._diag_last)[1]
 
     @staticmethod
     def _indicators(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
-        for name, _unit in INDICATOR_FIELDS:
-            value = msg.get(name)
-            if isinstance(value, int | float):
+        for name, value in msg.items():
+            if name in _TRENDS and isinstance(value, int | float):
                 trend = ch.indicators.get(name)
                 if trend is None:
                     trend = ch.indicators[name] = Trend()
@@ -221,10 +233,15 @@ class LogData:
         ch.captures.append(Capture(ch.name, time_ns, {part: msg}))
 
 
-def _number(v: bytes) -> float | bool | None:
-    """A JSON scalar of :data:`_SCALAR` (number, null, true, false) as Python."""
-    if v == b"null":
-        return None
-    if v in (b"true", b"false"):
-        return v == b"true"
-    return float(v)
+def _number(v: bytes) -> float | None:
+    """A JSON number or null as a float or None."""
+    return None if v == b"null" else float(v)
+
+
+def _counters(data: bytes | None) -> tuple[dict[str, int], int]:
+    """(link counters, queue drops) of one diagnostics message."""
+    if data is None:
+        return {}, 0
+    msg = json.loads(data)
+    link = {k: int(v) for k, v in (msg.get("link") or {}).items() if isinstance(v, int | float)}
+    return link, int(msg.get("queue_drops") or 0)

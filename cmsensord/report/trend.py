@@ -24,27 +24,21 @@ class Trend:
         self.stride = 1             # input points per kept point
         self._pending: tuple[int, float, int] | None = None   # (t, max v, count) of a part-filled point
         self.count = 0              # points added
-        self.vmin = float("inf")
-        self.vmax = float("-inf")
 
     def add(self, t_ns: int, value: float | None) -> None:
         """One point; ``None`` (a value the log wrote as null) is skipped."""
         if value is None:
             return
         self.count += 1
-        self.vmin = min(self.vmin, value)
-        self.vmax = max(self.vmax, value)
-        if self.stride == 1:
-            self._keep(t_ns, value)
-            return
-        if self._pending is None:
-            self._pending = (t_ns, value, 1)
+        pending = self._pending
+        if pending is None:
+            pending = (t_ns, value, 1)
         else:
-            t0, v0, n = self._pending
-            self._pending = (t0, max(v0, value), n + 1)
-        if self._pending[2] == self.stride:
-            self._keep(*self._pending[:2])
-            self._pending = None
+            pending = (pending[0], value if value > pending[1] else pending[1], pending[2] + 1)
+        if pending[2] == self.stride:
+            self._keep(pending[0], pending[1])
+            pending = None
+        self._pending = pending
 
     def _keep(self, t_ns: int, value: float) -> None:
         self.t.append(t_ns)
