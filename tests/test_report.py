@@ -111,13 +111,13 @@ def test_a_part_file_is_read_up_to_its_last_complete_record(logs, tmp_path):
     data = whole.read_bytes()
     part = tmp_path / "logs" / "cut.mcap.part"
     part.parent.mkdir()
-    part.write_bytes(data[: len(data) * 2 // 3])
+    part.write_bytes(data[: len(data) // 2])        # ends inside the second chunk
     p, page, metas = _report(tmp_path, part.parent)
     assert "ch0-severity" in metas
     assert "unfinished (read up to its last complete record)" in page
     n = int(re.search(r"([0-9,]+) messages from 1 file", p.stderr).group(1).replace(",", ""))
     full = json.loads(cmsensord("summary", "--json", str(whole)).stdout)["messages"]
-    assert 0 < n < full
+    assert 0 < n < full and n == json.loads(cmsensord("summary", "--json", str(part)).stdout)["messages"]
 
 
 def test_without_matplotlib_one_line_says_how_to_install_it(logs, tmp_path):
