@@ -81,6 +81,8 @@ class EventLog:
         self.sink = sink
         self.default_stamp = default_stamp
         self.on_event = on_event
+        #: called with (kind, channel, message, stamp_ns, fields) of every event written (captures)
+        self.watch: Callable[[str, str | None, str, int, dict], None] | None = None
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
@@ -142,6 +144,8 @@ class EventLog:
                 extra: dict[str, Any], log_level: int | None) -> None:
         m = messages.event(stamp_ns, kind, channel, message, extra)
         self.sink.write(*m)
+        if self.watch is not None:
+            self.watch(kind, channel, message, stamp_ns, extra)
         self.recent.append(m.msg)
         log.log(LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level, "%s: %s", kind, message)
         if self.on_event is not None:

@@ -31,6 +31,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from cmsensord.sinks.capture_schema import capture_spectrum_schema, capture_waveform_schema
 from cmsensord.sinks.indicator_schema import indicators_schema
 
 __all__ = [
@@ -107,6 +108,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "disk_error",
     "salvage",
     "time_base",
+    "capture",
+    "capture_skipped",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -402,6 +405,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "orders": ORDERS,
     "vibration_estimate": VIBRATION_ESTIMATE,
     "indicators": indicators_schema(_time(), _obj),
+    "capture_waveform": capture_waveform_schema(_time, _obj),
+    "capture_spectrum": capture_spectrum_schema(_time, _obj),
 }
 
 #: kind key -> MCAP schema name.
