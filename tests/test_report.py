@@ -15,7 +15,12 @@ from pathlib import Path
 
 import pytest
 
+from cmsensord.sinks.mcap_file import McapSink
+from cmsensord.sinks.mcap_read import read_messages
 from processes import ENV, cmsensord, run_module
+
+SCHEMA_OF = {"events": "event", "diagnostics": "diagnostics", "severity": "severity", "orders": "orders",
+             "indicators": "indicators"}
 
 Image = pytest.importorskip("PIL.Image", reason="Pillow comes with matplotlib, the report extra")
 
@@ -78,9 +83,9 @@ def test_raw_report_has_severity_indicators_with_zones_and_orders(logs, tmp_path
     assert ind["main"] == "velocity_rms_mm_s" and ind["zones"] is True      # the faulty motor: zone D
     assert ind["axes"][0]["ylabel"] == "velocity RMS [mm/s]" and ind["axes"][0]["ylim"][1] >= 4.5 * 1.3
     assert ind["axes"][1]["lines"] == ["kurtosis", "crest_factor"]
-    orders = metas["ch0-orders"]["axes"][0]            # the motor runs at 1720 rpm
-    assert orders["xlabel"] == "shaft speed [rpm]" and orders["xlim"][0] < 1720 < orders["xlim"][1]
-    assert orders["lines"] == ["order 1x", "order 2x", "order 3x", "order 4x"]
+    orders = metas["ch0-orders"]             # the motor runs at 1720 rpm: bars per order at that speed
+    assert orders["speed_rpm"][0] <= 1720 <= orders["speed_rpm"][1] and orders["axes"][0]["xlabel"] == "order"
+    assert orders["orders"] == ["1x", "2x", "3x", "4x"]
 
 
 def test_rms_report_and_a_run_up(logs, tmp_path):
@@ -88,7 +93,8 @@ def test_rms_report_and_a_run_up(logs, tmp_path):
     assert set(metas) == {"ch0-severity", "ch0-indicators", "ch0-orders"}   # one channel name in both logs
     assert metas["ch0-indicators"]["main"] == "velocity_rms_mm_s"           # the RAW log gives velocity
     orders = metas["ch0-orders"]["axes"][0]            # close_orders: a run-up 0 -> 3000 rpm
-    assert orders["xlim"][0] < 500 and orders["xlim"][1] > 2500
+    assert orders["xlabel"] == "shaft speed [rpm]" and orders["xlim"][0] < 500 and orders["xlim"][1] > 2500
+    assert orders["lines"] == ["order 1x", "order 2x", "order 3x", "order 4x"]   # the default orders
     assert "failure" in page and "<th>local time</th>" in page
     (tmp_path / "rms").mkdir()
     rms_only = _report(tmp_path / "rms", logs["degrading_rms"])[2]
@@ -107,11 +113,19 @@ def test_events_table_in_local_time_and_link_summary(logs, tmp_path):
 
 
 def test_a_part_file_is_read_up_to_its_last_complete_record(logs, tmp_path):
+    """The log of a daemon that died: its .part file, one chunk a second, ending inside a chunk."""
     whole = next(logs["faulty_raw"].glob("*.mcap"))
-    data = whole.read_bytes()
+    clock = [0.0]
+    sink = McapSink(tmp_path / "writing", clock=lambda: clock[0])
+    for topic, t, msg in read_messages(whole):
+        clock[0] = t / 1e9                  # log time: a chunk is finished every second
+        sink.write(topic, SCHEMA_OF[topic.rsplit("/", 1)[-1]], t, msg)
+    (part_now,) = (tmp_path / "writing").glob("*.mcap.part")
+    data = part_now.read_bytes()            # as the file is while the daemon writes it
+    sink.close()
     part = tmp_path / "logs" / "cut.mcap.part"
     part.parent.mkdir()
-    part.write_bytes(data[: len(data) // 2])        # ends inside the second chunk
+    part.write_bytes(data[: len(data) - 100])
     p, page, metas = _report(tmp_path, part.parent)
     assert "ch0-severity" in metas
     assert "unfinished (read up to its last complete record)" in page

@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import json
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 import matplotlib
@@ -26,6 +27,8 @@ from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogDa
 
 __all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "capture_figure"]
 
+#: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
+MIN_SPEED_BINS = 5
 _ZONE_COLOURS = ("#cfeccf", "#f4f1c0", "#f8d9b0", "#f4b8b8")
 #: channel events drawn as vertical lines on the severity plot (kind -> colour)
 MARKED_EVENTS = {"failure": "#b00020", "failure_clear": "#2e7d32", "alarm_alert": "#e08a00",
@@ -58,6 +61,8 @@ def _axes_meta(ax: Any, time_axis: bool = False) -> dict[str, Any]:
 
 def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: bool = False) -> Figure:
     if time_axis:
+        offset = datetime.now().astimezone().strftime("%z")
+        axes[-1].set_xlabel(f"local time (UTC{offset[:3]}:{offset[3:]})")
         for ax in axes:
             locator = mdates.AutoDateLocator()
             ax.xaxis.set_major_locator(locator)
@@ -158,22 +163,32 @@ def indicators_figure(ch: ChannelData) -> Figure | None:
 
 
 def orders_figure(ch: ChannelData) -> Figure | None:
-    """Order RMS versus shaft speed (mean per 10-rpm bin) of every tracked order."""
+    """Order RMS versus shaft speed (mean per 10-rpm bin) of every tracked order; at an almost
+    constant speed (fewer than ``MIN_SPEED_BINS`` bins) the mean order RMS as bars instead."""
     if not ch.orders:
         return None
+    keys_all = sorted({k for bins in ch.orders.values() for k in bins})
+    lo, hi = keys_all[0] * SPEED_BIN_RPM, (keys_all[-1] + 1) * SPEED_BIN_RPM
     fig, ax = plt.subplots(figsize=(11, 3.4), layout="constrained")
-    for name, bins in ch.orders.items():
-        keys = sorted(bins)
-        rpm = (np.array(keys) + 0.5) * SPEED_BIN_RPM
-        rms = np.array([bins[k][0] / bins[k][1] for k in keys])
-        ax.plot(rpm, rms, marker=".", ms=3, lw=1, label=f"order {name}")
-    ax.set_xlabel("shaft speed [rpm]")
+    if len(keys_all) < MIN_SPEED_BINS:
+        names = list(ch.orders)
+        means = [sum(v[0] for v in ch.orders[n].values()) / sum(v[1] for v in ch.orders[n].values()) for n in names]
+        ax.bar(names, means, color="#1f4e99", label=f"{lo:.0f}-{hi:.0f} rpm")
+        ax.set_xlabel("order")
+        ax.set_title(f"{ch.name}: order RMS at {lo:.0f}-{hi:.0f} rpm (constant speed; Yeh, Pan & Le)")
+    else:
+        for name, bins in ch.orders.items():
+            keys = sorted(bins)
+            rpm = (np.array(keys) + 0.5) * SPEED_BIN_RPM
+            rms = np.array([bins[k][0] / bins[k][1] for k in keys])
+            ax.plot(rpm, rms, marker=".", ms=3, lw=1, label=f"order {name}")
+        ax.set_xlabel("shaft speed [rpm]")
+        ax.set_title(f"{ch.name}: order RMS versus speed (Yeh, Pan & Le)")
+        ax.legend(loc="upper left", fontsize=8, ncols=4)
     ax.set_ylabel("order RMS [m/s²]")
-    ax.set_title(f"{ch.name}: order RMS versus speed (Yeh, Pan & Le)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8, ncols=4)
     meta = {"id": f"{ch.name}-orders", "kind": "orders", "channel": ch.name,
-            "title": f"{ch.name}: order RMS versus speed"}
+            "title": f"{ch.name}: order RMS versus speed", "speed_rpm": [lo, hi], "orders": list(ch.orders)}
     return _finish(fig, meta, [ax])
 
 

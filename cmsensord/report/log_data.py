@@ -223,8 +223,10 @@ class LogData:
     def _capture(ch: ChannelData, part: str, t_ns: int, msg: dict[str, Any]) -> None:
         stamp = msg.get("trigger_time") or msg.get("timestamp") or {}
         time_ns = int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nsec", 0)) if stamp else t_ns
+        kind = (msg.get("trigger") or {}).get("kind")
         for cap in ch.captures:
-            if cap.time_ns == time_ns:
+            first = next(iter(cap.parts.values()))
+            if cap.time_ns == time_ns and (first.get("trigger") or {}).get("kind") == kind and part not in cap.parts:
                 cap.parts[part] = msg
                 return
         if len(ch.captures) >= MAX_CAPTURES:
