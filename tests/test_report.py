@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import html
 import json
+import os
+import pty
 import re
 import shutil
 import subprocess
@@ -191,3 +193,24 @@ def test_headless_chromium_renders_the_report(logs, tmp_path):
     lo, hi = img.getextrema()
     assert hi - lo > 200                            # not a blank page: dark text and plot lines on white
     assert len(img.getcolors(maxcolors=1 << 20)) > 50
+
+
+def test_progress_bar_on_a_terminal_only(logs, tmp_path):
+    master, slave = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "report", str(logs["faulty_raw"]), "--out",
+                          str(tmp_path / "r.html")], stdout=subprocess.PIPE, stderr=slave, env=ENV)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:                             # EIO: the process closed the terminal
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    assert p.wait(timeout=60) == 0
+    assert b"\r[" + b"#" * 30 + b"] 100%" in seen
+    piped = cmsensord("report", str(logs["faulty_raw"]), "--out", str(tmp_path / "r2.html"))
+    assert "[#" not in piped.stderr and piped.stderr.count("\n") == 1
