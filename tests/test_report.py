@@ -214,3 +214,21 @@ def test_progress_bar_on_a_terminal_only(logs, tmp_path):
     assert b"\r[" + b"#" * 30 + b"] 100%" in seen
     piped = cmsensord("report", str(logs["faulty_raw"]), "--out", str(tmp_path / "r2.html"))
     assert "[#" not in piped.stderr and piped.stderr.count("\n") == 1
+
+
+def test_captured_waveform_spectrum_and_envelope_are_drawn(logs, tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("capture:\n  every_s: 6\n  pre_s: 1\n  post_s: 2\n  min_interval_s: 0\n")
+    cap = logs["faulty_raw"].parent / "faulty_raw.cap"
+    assert cmsensord("replay", str(cap), "--config", str(cfg), "--out", str(tmp_path / "logs")).returncode == 0
+    _, page, metas = _report(tmp_path, tmp_path / "logs")
+    captures = [m for m in metas.values() if m["kind"] == "capture"]
+    # ticks at 6, 12 and 18 s of 20: the last one ends with the stream
+    assert [m["id"] for m in captures] == ["ch0-capture-0", "ch0-capture-1", "ch0-capture-2"]
+    for m in captures:
+        assert m["trigger"] == "periodic" and m["parts"] == ["waveform", "spectrum", "envelope"]
+        wave, spectrum, env = m["axes"]
+        assert wave["xlabel"] == "time from trigger [s]" and wave["xlim"][0] <= -1 and 2 <= wave["xlim"][1] < 2.5
+        assert spectrum["xlabel"] == "frequency [Hz]" and 12000 < spectrum["xlim"][1] < 13500   # up to fs/2
+        assert env["ylabel"] == "envelope spectrum [m/s^2]" and 950 < env["xlim"][1] < 1100
+    assert page.count('src="data:image/png;base64,') == 3 + 3

@@ -193,7 +193,7 @@ def orders_figure(ch: ChannelData) -> Figure | None:
 
 
 def _spectrum(ax: Any, msg: dict[str, Any], label: str) -> None:
-    amp = np.asarray([a if a is not None else np.nan for a in msg.get("amplitude") or []], dtype=float)
+    amp = np.asarray(msg.get("amplitude", []), dtype=float)
     f = float(msg.get("freq_start_hz") or 0.0) + float(msg.get("freq_step_hz") or 1.0) * np.arange(amp.size)
     ax.plot(f, amp, lw=0.8, color="#1f4e99")
     for i, (name, hz) in enumerate(sorted((msg.get("defect_hz") or {}).items())):
@@ -214,7 +214,7 @@ def capture_figure(cap: Capture, index: int) -> Figure:
     for ax, part in zip((a[0] for a in axes), parts):
         msg = cap.parts[part]
         if part == "waveform":
-            y = np.asarray([v if v is not None else np.nan for v in msg.get("samples") or []], dtype=float)
+            y = np.asarray(msg.get("samples", []), dtype=float)
             rate = float(msg.get("sample_rate_hz") or 1.0)
             x = -float(msg.get("pre_s") or 0.0) + np.arange(y.size) / rate
             ax.plot(x, y, lw=0.5, color="#1f4e99")

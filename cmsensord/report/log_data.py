@@ -17,6 +17,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from cmsensord.report.trend import Trend
 
 __all__ = ["LogData", "ChannelData", "Capture", "FileInfo", "INDICATOR_FIELDS", "MAX_EVENTS", "MAX_CAPTURES"]
@@ -221,6 +223,9 @@ class LogData:
 
     @staticmethod
     def _capture(ch: ChannelData, part: str, t_ns: int, msg: dict[str, Any]) -> None:
+        for key in ("samples", "amplitude"):     # as float32 arrays: 2 MB, not 16, for 20 s at 25 kHz
+            if isinstance(msg.get(key), list):
+                msg[key] = np.array([np.nan if v is None else v for v in msg[key]], dtype=np.float32)
         stamp = msg.get("trigger_time") or msg.get("timestamp") or {}
         time_ns = int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nsec", 0)) if stamp else t_ns
         kind = (msg.get("trigger") or {}).get("kind")
