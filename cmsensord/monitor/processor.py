@@ -30,7 +30,6 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.monitor import messages
-from cmsensord.monitor.capture import Captures
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
@@ -41,6 +40,7 @@ from cmsensord.monitor.shaft import Shaft
 from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
 if TYPE_CHECKING:
+    from cmsensord.monitor.capture import Captures
     from cmsensord.monitor.orders import OrderChain
 
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
@@ -82,6 +82,7 @@ class Processor:
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
         self.captures: Captures | None = None
         if cfg.capture.enabled:
+            from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
             self.captures = Captures(cfg.capture, self.clock.stamp_ns)
             self.log.watch = self.captures.watch
 
