@@ -5,6 +5,7 @@
     cmsensord replay CAPTURE [--config FILE] [--out DIR]
     cmsensord record --port DEV --out FILE [--duration S]
     cmsensord summary FILE.mcap
+    cmsensord report LOG_OR_DIR... --out report.html [--png DIR]
 
 Errors a user can cause (bad arguments, a bad configuration value, a missing
 device or capture, an unwritable log directory) end in one line on stderr and
@@ -76,7 +77,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=(_scenarios_help() if with_scenarios else "")
-        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary (see "
+        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary, report (see "
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (`cmsensord config --default` "
@@ -105,7 +106,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,config,summary}",
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,config,summary,report}",
                            parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
@@ -137,6 +138,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     c = sub.add_parser("config", help="print the default configuration (every key, commented)")
     c.add_argument("--default", action="store_true", required=True,
                    help="print config/default.yaml: start a site file from it")
+    from cmsensord.report.command import add_report_parser
+    add_report_parser(sub)
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -202,6 +205,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "import":
         from cmsensord.importing.command import run_import
         return run_import(args)
+    if args.command == "report":
+        from cmsensord.report.command import run_report
+        return run_report(args)
     if args.command == "calibrate":
         return run_calibrate(args)
     if args.command == "record":

@@ -122,6 +122,14 @@ SAMPLES = [
     ("/cm/ch1/indicators", "indicators", {
         "channel": "ch1", "mode": "rms", "interval_s": 1.0, "missing_fraction": 0.0, "accel_rms": 2.1,
         "unavailable": ["accel_peak", "crest_factor", "kurtosis", "velocity_rms_mm_s", "zone"]}),
+    ("/cm/ch0/capture_waveform", "capture_waveform", {
+        "channel": "ch0", "trigger": {"kind": "alarm_danger", "message": "ch0: danger"}, "source": "raw",
+        "sample_rate_hz": 25000.0, "first_sample": 250000, "pre_s": 10.0, "post_s": 10.0, "unit": "m/s^2",
+        "missing": 1, "samples": [0.1, None, -0.2]}),
+    ("/cm/ch0/capture_envelope", "capture_spectrum", {
+        "channel": "ch0", "trigger": {"kind": "periodic", "message": "every 600 s"}, "kind": "envelope",
+        "freq_start_hz": 0.0, "freq_step_hz": 0.05, "band_hz": [2000.0, 10000.0], "unit": "m/s^2",
+        "amplitude": [0.0, 0.3, 0.1]}),
 ]
 SCHEMA_NAMES = {
     "severity": "cmsensord.Severity",
@@ -132,6 +140,8 @@ SCHEMA_NAMES = {
     "vibration_estimate": "cmsensord.VibrationEstimate",
     "log": "foxglove.Log",
     "indicators": "cmsensord.Indicators",
+    "capture_waveform": "cmsensord.CaptureWaveform",
+    "capture_spectrum": "cmsensord.CaptureSpectrum",
 }
 
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import yaml
 
+from .capture import CaptureConfig
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .settings import (
     MAX_CHANNELS,
@@ -41,7 +42,7 @@ from .validation import ConfigError
 __all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict"]
 
 _SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
-                              "tacho": TachoConfig, "acoustic": AcousticConfig}
+                              "tacho": TachoConfig, "acoustic": AcousticConfig, "capture": CaptureConfig}
 _MONITOR_KEYS = tuple(f.name for f in dataclasses.fields(MonitorConfig))
 _CHANNEL_OWN_KEYS = tuple(
     f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
@@ -427,6 +428,7 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
                        "bands": [{k: v for k, v in dataclasses.asdict(b).items() if v is not None}
                                  for b in cfg.indicators.bands]},
         "bearings": [dataclasses.asdict(b) for b in cfg.bearings],
+        "capture": {**dataclasses.asdict(cfg.capture), "triggers": list(cfg.capture.triggers)},
     }
 
 

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from .capture import CaptureConfig
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
@@ -374,6 +375,8 @@ class Config:
     indicators: IndicatorsConfig = field(default_factory=IndicatorsConfig,
                                          metadata={"help": "vibration indicators (ISO 10816-3, envelope)"})
     bearings: tuple[BearingConfig, ...] = field(default=(), metadata={"help": "bearings and their channels"})
+    capture: CaptureConfig = field(default_factory=CaptureConfig,
+                                   metadata={"help": "event-triggered captures of the signal"})
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
 

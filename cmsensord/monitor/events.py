@@ -112,6 +112,8 @@ class EventLog:
         self.hold = True                  # False: records are written at once (after the run)
         self._pending: list[tuple[int, int, messages.Message, int]] = []
         self._n = 0
+        #: called with (kind, channel, message, stamp_ns, fields) of every event written (captures)
+        self.watch: Callable[[str, str | None, str, int, dict], None] | None = None
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
@@ -183,6 +185,8 @@ class EventLog:
             self.flush()
         elif len(self._pending) > MAX_PENDING:
             self._write_upto(self._pending[0][0])
+        if self.watch is not None:
+            self.watch(kind, channel, message, stamp_ns, extra)
         self.recent.append(m.msg)
         log.log(level, "%s: %s", kind, message)
         if self.on_event is not None:

@@ -40,6 +40,7 @@ from cmsensord.monitor.shaft import Shaft
 from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
 if TYPE_CHECKING:
+    from cmsensord.monitor.capture import Captures
     from cmsensord.monitor.orders import OrderChain
 
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
@@ -82,6 +83,11 @@ class Processor:
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
+        self.captures: Captures | None = None
+        if cfg.capture.enabled:
+            from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
+            self.captures = Captures(cfg.capture, self.clock.stamp_ns)
+            self.log.watch = self.captures.watch
 
     # ---- the parts' figures, for the status line, the summary and the tools --
     status = property(lambda self: self.setup.status)
@@ -183,6 +189,8 @@ class Processor:
         self.indicators.finish()
         self._release_decisions(final=True)
         self._out(self.indicators.take(None))
+        if self.captures is not None:
+            self._out(self.captures.finish())
         self.log.summarise(final=True)
         self.log.flush()
         self.log.hold = False
@@ -224,6 +232,10 @@ class Processor:
         vals = decode_rms_rows(frames, C)
         self.indicators.rms(self.channels, t0, vals)
         self._observe(t0, vals)
+        if self.captures is not None:
+            vib = [ch for ch in self.channels if ch.index < C]
+            self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
+                                        self.clock.fs, self.clock.block_len))
 
     def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
@@ -239,6 +251,9 @@ class Processor:
             return
         self._observe(blocks.t0, blocks.rms())
         self.indicators.raw(self.channels, blocks)
+        if self.captures is not None:
+            self._out(self.captures.raw([ch.name for ch in self.channels], blocks.t0,
+                                        blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]

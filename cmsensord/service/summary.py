@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from cmsensord.errors import EXIT_USAGE
+from cmsensord.report.localtime import iso_local
 from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
 
 
@@ -29,9 +30,16 @@ def summary(path: str, *, as_json: bool = False) -> int:
 
 
 def format_summary(info: dict) -> str:
+    """The summary as text: times as ISO 8601 local time, one line per event
+    (``time kind [channel]: message``), other lists and dicts one item a line."""
     lines = []
     for k, v in info.items():
-        if isinstance(v, dict):
+        if k in ("start_ns", "end_ns"):
+            lines.append(f"{k[:-3]}: {iso_local(v, ms=True)}")
+        elif k == "events":
+            lines.append(f"events: {len(v)} shown")
+            lines.extend(f"  {event_line(e)}" for e in v)
+        elif isinstance(v, dict):
             lines.append(f"{k}:")
             for kk, vv in v.items():
                 lines.append(f"  {kk}: {vv}")
@@ -42,3 +50,13 @@ def format_summary(info: dict) -> str:
         else:
             lines.append(f"{k}: {v}")
     return "\n".join(lines)
+
+
+def event_line(event: dict) -> str:
+    """One event of :func:`~cmsensord.sinks.mcap_read.summarize` as a line:
+    ``2026-11-26T17:47:02.522+00:00 anomaly_onset ch0: message``."""
+    channel, message = event.get("channel"), event.get("message") or ""
+    where = f" {channel}" if channel and not message.startswith(f"{channel}:") else ""
+    if not where and channel:
+        where, message = f" {channel}", message[len(channel) + 2:]
+    return f"{iso_local(event.get('time_ns'), ms=True)} {event.get('kind')}{where}: {message}"

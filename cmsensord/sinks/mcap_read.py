@@ -35,6 +35,7 @@ __all__ = [
     "parse_record",
     "read_messages",
     "iter_messages_lenient",
+    "iter_messages_at",
     "summarize",
 ]
 
@@ -228,6 +229,14 @@ def iter_messages_lenient(path: str | Path) -> Iterator[tuple[str, int, bytes]]:
     for record in scan.records():
         if isinstance(record, Message):
             yield scan.topic(record.channel_id), record.publish_time, record.data
+
+
+def iter_messages_at(path: str | Path) -> Iterator[tuple[str, int, bytes, int]]:
+    """As :func:`iter_messages_lenient`, with the byte offset read so far (for a progress bar)."""
+    scan = _Scan(path)
+    for record in scan.records():
+        if isinstance(record, Message):
+            yield scan.topic(record.channel_id), record.log_time, record.data, scan.valid_bytes
 
 
 class _Events:

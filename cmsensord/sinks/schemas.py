@@ -43,6 +43,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from cmsensord.sinks.capture_schema import capture_spectrum_schema, capture_waveform_schema
 from cmsensord.sinks.indicator_schema import indicators_schema
 
 __all__ = [
@@ -125,6 +126,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "disk_error",
     "salvage",
     "time_base",
+    "capture",
+    "capture_skipped",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -499,6 +502,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "vibration_estimate": VIBRATION_ESTIMATE,
     "log": LOG,
     "indicators": indicators_schema(_time(), _obj),
+    "capture_waveform": capture_waveform_schema(_time, _obj),
+    "capture_spectrum": capture_spectrum_schema(_time, _obj),
 }
 
 #: kind key -> MCAP schema name.

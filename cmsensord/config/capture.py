@@ -1,0 +1,49 @@
+"""Settings of event-triggered captures (``capture``): which events keep the signal around them.
+
+A capture keeps ``pre_s`` seconds before and ``post_s`` seconds after its trigger of
+each channel's RAW samples (RMS mode: the 100 Hz block RMS), written to the log with
+its spectrum and envelope spectrum (:mod:`cmsensord.monitor.capture`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from .validation import Rule, setting, validate
+
+__all__ = ["CaptureConfig", "TRIGGER_KINDS"]
+
+#: event kinds that can trigger a capture (the alarm manager's kinds included)
+TRIGGER_KINDS = ("alarm_alert", "alarm_danger", "alarm_clear", "severity_change", "anomaly_onset",
+                 "failure", "order_alarm", "time_base", "tacho_lost")
+
+
+def _known_triggers(obj: Any) -> tuple[str, str, Any] | None:
+    for kind in obj.triggers:
+        if kind not in TRIGGER_KINDS:
+            return "triggers", f"unknown trigger {kind!r} (one of {', '.join(TRIGGER_KINDS)})", kind
+    return None
+
+
+@dataclass(frozen=True)
+class CaptureConfig:
+    """Which events trigger a capture, how long it is and how much may be kept."""
+
+    triggers: tuple[str, ...] = setting((), "event kinds that trigger a capture (none: only every_s)")
+    anomaly_akf: int = setting(0, "anomaly_onset triggers only for this AKF_n (1..n); 0: any", ge=0)
+    every_s: float = setting(0.0, "also a periodic capture every this many seconds of board time; 0: none",
+                             ge=0)
+    pre_s: float = setting(10.0, "seconds kept before the trigger", gt=0, le=120)
+    post_s: float = setting(10.0, "seconds kept after the trigger", gt=0, le=120)
+    min_interval_s: float = setting(60.0, "at most one capture per channel in this many seconds", ge=0)
+    max_mb_per_hour: float = setting(200.0, "captures written per hour of board time at most [MB]", gt=0)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_known_triggers,)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.triggers) or self.every_s > 0

@@ -1,0 +1,251 @@
+"""Event-triggered captures: the signal around a trigger, with its spectrum and envelope spectrum.
+
+:class:`Captures` holds, per stream (RAW samples at fs, or in RMS mode the block RMS
+at fs / block length), a bounded ring of the last ``pre_s + post_s + HOLD_S``
+seconds of every channel, indexed by board sample (RAW: the sample counter t0;
+RMS: t0 / block length). An event record whose kind is in ``capture.triggers``
+(:meth:`watch`, called by the event log for every event written) or a periodic
+tick every ``capture.every_s`` of board time starts a capture of its channel (of
+every channel for an event without one): the samples from ``pre_s`` before the
+trigger's board sample to ``post_s`` after it, written once the stream has passed
+its end (:meth:`raw`, :meth:`rms`), as three messages stamped at the trigger
+(:mod:`cmsensord.sinks.capture_schema`). A capture starting within
+``min_interval_s`` of the channel's last one, one whose size would exceed
+``max_mb_per_hour`` in the hour of board time, one whose first samples have left
+the ring, and one still open at the end of the stream are not written: a
+``capture_skipped`` event says which and why; a written one has its ``capture``
+event. A capture is written whole or not at all.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cmsensord.config.capture import CaptureConfig
+from cmsensord.dsp.capture_spectra import amplitude_spectrum
+from cmsensord.dsp.indicators.envelope import default_band, envelope, envelope_spectrum
+from cmsensord.monitor.events import Event
+from cmsensord.monitor.messages import Message
+from cmsensord.sinks.capture_schema import capture_topics
+
+__all__ = ["Captures"]
+
+#: seconds the ring holds beyond pre_s + post_s: how late a trigger may come (decisions wait for the tacho)
+HOLD_S = 20.0
+#: JSON bytes per sample counted against max_mb_per_hour
+BYTES_PER_SAMPLE = 12
+
+
+@dataclass
+class _Pending:
+    channel: str
+    column: int
+    start: int
+    end: int
+    trigger_idx: int
+    stamp_ns: int
+    trigger: dict[str, str]
+
+
+class _Ring:
+    """The last ``capacity`` samples of C channels, by board sample index; lost samples NaN."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.blocks: deque[tuple[int, np.ndarray]] = deque()
+        self.held = 0
+
+    def add(self, first: int, x: np.ndarray) -> None:
+        self.blocks.append((first, x.astype(np.float32)))
+        self.held += len(x)
+        while self.held - len(self.blocks[0][1]) >= self.capacity:
+            self.held -= len(self.blocks.popleft()[1])
+
+    @property
+    def oldest(self) -> int | None:
+        return self.blocks[0][0] if self.blocks else None
+
+    @property
+    def newest_end(self) -> int | None:
+        return self.blocks[-1][0] + len(self.blocks[-1][1]) if self.blocks else None
+
+    def window(self, a: int, b: int, column: int) -> np.ndarray:
+        out = np.full(b - a, np.nan)
+        for first, x in self.blocks:
+            lo, hi = max(a, first), min(b, first + len(x))
+            if lo < hi:
+                out[lo - a:hi - a] = x[lo - first:hi - first, column]
+        return out
+
+
+class Captures:
+    """Triggers -> captures of the channels' signal (see the module docstring)."""
+
+    def __init__(self, cfg: CaptureConfig, stamp_of: Callable[[int], int]) -> None:
+        self.cfg = cfg
+        self.stamp_of = stamp_of            # board t0 -> stamp [ns]
+        self.source = ""
+        self.rate = 0.0
+        self.ticks = 1                      # board samples per index (RMS: block length)
+        self.channels: list[str] = []
+        self.ring: _Ring | None = None
+        self.anchors: deque[tuple[int, int]] = deque(maxlen=64)   # (index, stamp_ns)
+        self.pending: list[_Pending] = []
+        self.last_ns: dict[str, int] = {}
+        self.budget: deque[tuple[int, int]] = deque()             # (stamp_ns, bytes) of the last hour
+        self.next_tick: int | None = None
+        self.out: list[Any] = []
+
+    # ---- triggers ------------------------------------------------------------
+    def watch(self, kind: str, channel: str | None, message: str, stamp_ns: int, fields: dict) -> None:
+        """An event written to the log: a trigger when its kind is configured."""
+        if kind not in self.cfg.triggers or self.ring is None:
+            return
+        if kind == "anomaly_onset" and self.cfg.anomaly_akf and fields.get("filter") != self.cfg.anomaly_akf:
+            return
+        idx = self._index_of(stamp_ns)
+        if idx is not None:
+            self._trigger(channel, idx, stamp_ns, {"kind": kind, "message": message})
+
+    def _index_of(self, stamp_ns: int) -> int | None:
+        """The board index at ``stamp_ns`` (from the last block stamped at or before it)."""
+        best = None
+        for idx, st in self.anchors:
+            if st <= stamp_ns:
+                best = (idx, st)
+        if best is None:
+            best = self.anchors[0] if self.anchors else None
+        if best is None:
+            return None
+        return best[0] + round((stamp_ns - best[1]) * self.rate / 1e9)
+
+    def _trigger(self, channel: str | None, idx: int, stamp_ns: int, trigger: dict[str, str]) -> None:
+        pre, post = round(self.cfg.pre_s * self.rate), round(self.cfg.post_s * self.rate)
+        for col, name in enumerate(self.channels):
+            if channel not in (None, name):
+                continue
+            why = self._refusal(name, stamp_ns, pre + post)
+            if why is not None:
+                self._event("capture_skipped", name, f"{name}: capture on {trigger['kind']} skipped: {why}",
+                            stamp_ns)
+                continue
+            self.last_ns[name] = stamp_ns
+            self.budget.append((stamp_ns, (pre + post) * BYTES_PER_SAMPLE))
+            self.pending.append(_Pending(name, col, idx - pre, idx + post, idx, stamp_ns, trigger))
+
+    def _refusal(self, name: str, stamp_ns: int, n: int) -> str | None:
+        last = self.last_ns.get(name)
+        if last is not None and stamp_ns - last < self.cfg.min_interval_s * 1e9:
+            return f"{(stamp_ns - last) / 1e9:.3g} s after the last one (capture.min_interval_s " \
+                   f"{self.cfg.min_interval_s:g})"
+        while self.budget and stamp_ns - self.budget[0][0] >= 3600e9:
+            self.budget.popleft()
+        used = sum(b for _, b in self.budget)
+        if used + n * BYTES_PER_SAMPLE > self.cfg.max_mb_per_hour * 1e6:
+            return f"{used / 1e6:.1f} MB written in the last hour (capture.max_mb_per_hour " \
+                   f"{self.cfg.max_mb_per_hour:g})"
+        return None
+
+    def _event(self, kind: str, channel: str | None, message: str, stamp_ns: int, **fields: Any) -> None:
+        self.out.append(Event(kind, channel, message, stamp_ns, fields))
+
+    # ---- the streams ---------------------------------------------------------
+    def raw(self, channels: list[str], t0: np.ndarray, y: np.ndarray, fs: float) -> list[Any]:
+        """RAW blocks: t0 (B,) first sample of each, y (B, L, C) m/s²; what became complete."""
+        self._start("raw", channels, fs, 1)
+        for b in range(len(t0)):
+            self._add(int(t0[b]), y[b])
+        return self._complete()
+
+    def rms(self, channels: list[str], t0: np.ndarray, vals: np.ndarray, fs: float, block_len: int) -> list[Any]:
+        """RMS rows: t0 (n,) of each block, vals (n, C) of the channels; what became complete."""
+        self._start("rms", channels, fs / block_len, block_len)
+        for k in range(len(t0)):
+            self._add(int(t0[k]) // block_len, vals[k:k + 1])
+        return self._complete()
+
+    def _start(self, source: str, channels: list[str], rate: float, ticks: int) -> None:
+        if self.ring is not None and (source, channels, rate) == (self.source, self.channels, self.rate):
+            return
+        self.source, self.channels, self.rate, self.ticks = source, list(channels), rate, ticks
+        self.ring = _Ring(int((self.cfg.pre_s + self.cfg.post_s + HOLD_S) * rate))
+        self.anchors.clear()
+        self.next_tick = None
+        for p in self.pending:
+            self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} skipped: "
+                        "the stream changed (mode, rate or channels)", p.stamp_ns)
+        self.pending.clear()
+
+    def _add(self, idx: int, x: np.ndarray) -> None:
+        assert self.ring is not None
+        stamp = self.stamp_of(idx * self.ticks)
+        self.anchors.append((idx, stamp))
+        self.ring.add(idx, x)
+        if self.cfg.every_s > 0:
+            step = round(self.cfg.every_s * self.rate)
+            if self.next_tick is None:
+                self.next_tick = idx + step
+            while self.next_tick < idx + len(x):
+                tick = self.next_tick
+                self.next_tick += step
+                self._trigger(None, tick, self.stamp_of(tick * self.ticks),
+                              {"kind": "periodic", "message": f"every {self.cfg.every_s:g} s"})
+
+    def _complete(self) -> list[Any]:
+        ring = self.ring
+        assert ring is not None
+        end, oldest = ring.newest_end, ring.oldest
+        still = []
+        for p in self.pending:
+            if oldest is not None and p.start < oldest:
+                self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} "
+                            "skipped: its first samples are no longer held", p.stamp_ns)
+            elif end is not None and end >= p.end:
+                self.out.extend(self._messages(p, ring.window(p.start, p.end, p.column)))
+            else:
+                still.append(p)
+        self.pending = still
+        out, self.out = self.out, []
+        return out
+
+    def finish(self) -> list[Any]:
+        """End of the stream: the captures complete by now are written, those still open skipped."""
+        done = self._complete() if self.ring is not None else []
+        for p in self.pending:
+            self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} skipped: "
+                        "the stream ended before its post_s", p.stamp_ns)
+        self.pending.clear()
+        out, self.out = self.out, []
+        return done + out
+
+    def _messages(self, p: _Pending, x: np.ndarray) -> list[Any]:
+        wave_t, spec_t, env_t = capture_topics(p.channel)
+        head = {"channel": p.channel, "trigger": p.trigger}
+        lost = ~np.isfinite(x)
+        samples = [None if m else round(float(v), 6) for v, m in zip(x, lost)]
+        filled = np.where(lost, 0.0, x)
+        out: list[Any] = [Message(wave_t, "capture_waveform", p.stamp_ns, {
+            **head, "source": self.source, "sample_rate_hz": self.rate, "first_sample": p.start,
+            "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s, "unit": "m/s^2", "missing": int(lost.sum()),
+            "samples": samples})]
+        f, A = amplitude_spectrum(filled, self.rate)
+        out.append(Message(spec_t, "capture_spectrum", p.stamp_ns, {
+            **head, "kind": "spectrum", "freq_start_hz": 0.0, "freq_step_hz": float(f[1] - f[0]),
+            "unit": "m/s^2", "amplitude": np.round(A, 6).tolist()}))
+        if self.source == "raw":
+            env = envelope(filled, self.rate, default_band(self.rate))
+            fe, Ae = envelope_spectrum(env.env, env.fs_env)
+            keep = fe <= 1000.0
+            out.append(Message(env_t, "capture_spectrum", p.stamp_ns, {
+                **head, "kind": "envelope", "freq_start_hz": 0.0, "freq_step_hz": float(fe[1] - fe[0]),
+                "band_hz": [float(env.band[0]), float(env.band[1])], "unit": "m/s^2",
+                "amplitude": np.round(Ae[keep], 6).tolist()}))
+        out.append(Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "
+                         f"{p.trigger['kind']} ({len(x)} samples, {int(lost.sum())} lost)", p.stamp_ns,
+                         {"samples": len(x)}))
+        return out

@@ -1,0 +1,77 @@
+"""``cmsensord report LOG_OR_DIR... --out report.html [--png DIR]``: MCAP logs -> an HTML report.
+
+Reads the logs (:mod:`.reading`), draws the figures (:mod:`.figures`, which
+needs matplotlib: ``pip install 'cmsensord[report]'``) and writes one
+self-contained page (:mod:`.html_page`). Without matplotlib the command says
+so in one line and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from cmsensord.errors import EXIT_USAGE, CmsensordError
+
+__all__ = ["add_report_parser", "run_report", "MISSING_MATPLOTLIB"]
+
+MISSING_MATPLOTLIB = ("cmsensord: report needs matplotlib: install it with "
+                      "pip install 'cmsensord[report]' (or pip install matplotlib)")
+
+
+def add_report_parser(sub: Any) -> None:
+    r = sub.add_parser("report", help="turn MCAP logs into a self-contained HTML report with plots")
+    r.add_argument("logs", nargs="+", metavar="LOG_OR_DIR", help="MCAP files (.mcap, .mcap.part) or directories")
+    r.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="HTML file to write")
+    r.add_argument("--png", metavar="DIR", help="also write each figure as a PNG into DIR")
+    r.add_argument("--title", help="page title (default: cmsensord report and the time span)")
+
+
+def run_report(args: argparse.Namespace) -> int:
+    """Write the report; one line on stderr and status 2 on a user error."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        print(MISSING_MATPLOTLIB, file=sys.stderr)
+        return EXIT_USAGE
+    from cmsensord.report.reading import log_paths, read_logs
+    paths = log_paths(args.logs)
+    data = read_logs(paths, sys.stderr)
+    sections = _draw(data)
+    from cmsensord.report.html_page import render_page
+    from cmsensord.report.localtime import local_text
+    title = args.title or f"cmsensord report {local_text(data.start_ns)[:16]} – {local_text(data.end_ns)[:16]}"
+    out = Path(args.sub_out)
+    try:
+        out.write_text(render_page(data, sections, title), encoding="utf-8")
+        if args.png:
+            png_dir = Path(args.png)
+            png_dir.mkdir(parents=True, exist_ok=True)
+            for _, figs in sections:
+                for fig in figs:
+                    (png_dir / f"{fig.meta['id']}.png").write_bytes(fig.png)
+    except OSError as err:
+        raise CmsensordError(f"{err.filename}: cannot write: {err.strerror}") from None
+    n = sum(len(f) for _, f in sections)
+    print(f"report: {out} ({n} figures, {data.messages:,} messages from {len(paths)} file(s))", file=sys.stderr)
+    return 0
+
+
+def _draw(data: Any) -> list[tuple[str, list[Any]]]:
+    """(heading, figures) per channel, in channel-name order."""
+    from cmsensord.report import figures
+    sections = []
+    for name in sorted(data.channels):
+        ch = data.channels[name]
+        figs = []
+        if ch.severity:
+            figs.append(figures.severity_figure(data, ch))
+        for make in (figures.indicators_figure, figures.orders_figure):
+            fig = make(ch)
+            if fig is not None:
+                figs.append(fig)
+        figs.extend(figures.capture_figure(cap, i) for i, cap in enumerate(ch.captures))
+        sections.append((f"Channel {name}", figs))
+    return sections

@@ -1,0 +1,143 @@
+"""A fast lenient reader of MCAP messages for long logs: chunks parsed with ``struct``, not record objects.
+
+:func:`iter_messages_fast` yields the same (topic, log_time_ns, data) as
+:func:`~cmsensord.sinks.mcap_read.iter_messages_lenient`, plus the bytes read so far,
+about ten times faster: the file is walked with the rules of
+:class:`~cmsensord.sinks.mcap_read.RecordWalker` (a ``.part`` file ends at its
+last complete record, a record claiming more than ``RECORD_LIMIT`` bytes ends the
+read, nothing is raised on the content; the file is memory-mapped, not read into memory), each chunk is checked
+against its CRC and decompressed once, and the Channel and Message records in it
+are read by their fixed layouts (MCAP specification, "Records"). A chunk that
+cannot be decompressed or fails its CRC ends the read, as it ends the lenient
+reader's; :attr:`FastScan.error` says where.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import struct
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from cmsensord.errors import SinkError
+from cmsensord.sinks.mcap_chunks import MAGIC
+from cmsensord.sinks.mcap_read import RECORD_LIMIT
+
+__all__ = ["FastScan"]
+
+_OP_CHANNEL = 0x04
+_OP_MESSAGE = 0x05
+_OP_CHUNK = 0x06
+_OP_FOOTER = 0x02
+_HEAD = struct.Struct("<BQ")
+_MSG = struct.Struct("<HIQQ")          # channel_id, sequence, log_time, publish_time
+_CHUNK = struct.Struct("<QQQI")         # message start, end, uncompressed size, uncompressed crc
+
+
+_ZSTD: list[Any] = []
+
+
+def _zstd() -> Any:
+    """One zstd decompressor for every chunk (making one costs more than a small chunk's data)."""
+    if not _ZSTD:
+        import zstandard
+        _ZSTD.append(zstandard.ZstdDecompressor())
+    return _ZSTD[0]
+
+
+class FastScan:
+    """One file's messages (:meth:`messages`); :attr:`error` set when damage ended the read."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.topics: dict[int, str] = {}
+        self.error: str | None = None
+        self.complete = False
+
+    def messages(self) -> Iterator[tuple[str, int, bytes, int]]:
+        """(topic, log_time_ns, data, bytes read) of every message up to the first damage."""
+        try:
+            f = open(self.path, "rb")
+            size = os.fstat(f.fileno()).st_size
+        except OSError as err:
+            raise SinkError(f"{self.path}: cannot read: {err.strerror or err}") from None
+        with f:
+            if size < len(MAGIC):
+                return
+            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+                yield from self._walk(buf, size)
+
+    def _walk(self, buf: mmap.mmap, size: int) -> Iterator[tuple[str, int, bytes, int]]:
+        """The top-level records of the mapped file, as :class:`RecordWalker` walks them."""
+        if buf[: len(MAGIC)] != MAGIC:
+            self.error = "not an MCAP file (bad magic)"
+            return
+        pos = len(MAGIC)
+        while pos + 9 <= size:
+            opcode, length = _HEAD.unpack_from(buf, pos)
+            end = pos + 9 + length
+            if length > RECORD_LIMIT:
+                self.error = f"record at byte {pos} claims {length} bytes"
+                return
+            if end > size:
+                return                                  # the file ends inside a record
+            if opcode == _OP_CHUNK:
+                try:
+                    records = self._chunk_records(buf[pos:end])
+                except (ValueError, struct.error, zlib.error) as err:
+                    self.error = f"bad chunk at byte {pos}: {err}"
+                    return
+                for topic, t, data in self._records(records, pos):
+                    yield topic, t, data, end
+            elif opcode in (_OP_CHANNEL, _OP_MESSAGE):
+                for topic, t, data in self._records(buf[pos:end], pos):
+                    yield topic, t, data, end
+            elif opcode == _OP_FOOTER:
+                self.complete = buf[end: end + len(MAGIC)] == MAGIC
+                return
+            if self.error:
+                return
+            pos = end
+
+    @staticmethod
+    def _chunk_records(raw: bytes) -> bytes:
+        """The decompressed, CRC-checked records of a chunk record (opcode and length included)."""
+        _start, _end, size, crc = _CHUNK.unpack_from(raw, 9)
+        off = 9 + _CHUNK.size
+        (n,) = struct.unpack_from("<I", raw, off)
+        compression = raw[off + 4: off + 4 + n].decode()
+        off += 4 + n
+        (n,) = struct.unpack_from("<Q", raw, off)
+        body = raw[off + 8: off + 8 + n]
+        if compression == "zstd":
+            body = _zstd().decompress(body, max_output_size=size)
+        elif compression == "lz4":
+            import lz4.frame  # type: ignore[import-not-found,unused-ignore]
+            body = lz4.frame.decompress(body)
+        elif compression:
+            raise ValueError(f"unknown compression {compression!r}")
+        if len(body) != size or (crc and zlib.crc32(body) != crc):
+            raise ValueError("CRC or size mismatch")
+        return body
+
+    def _records(self, buf: bytes, pos: int) -> Iterator[tuple[str, int, bytes]]:
+        """Messages of a run of records (from the record at byte ``pos``); Channel records
+        remembered on the way; a record running past the end sets :attr:`error`."""
+        off, n = 0, len(buf)
+        topics = self.topics
+        while off + 9 <= n:
+            opcode, length = _HEAD.unpack_from(buf, off)
+            body = off + 9
+            off = body + length
+            if off > n:
+                self.error = f"bad chunk at byte {pos}: a record runs past its end"
+                return
+            if opcode == _OP_MESSAGE:
+                cid, _seq, t, _pub = _MSG.unpack_from(buf, body)
+                yield topics.get(cid, f"<channel {cid}>"), t, buf[body + _MSG.size: off]
+            elif opcode == _OP_CHANNEL:
+                cid, _schema, tlen = struct.unpack_from("<HHI", buf, body)
+                topics[cid] = buf[body + 8: body + 8 + tlen].decode("utf-8", "replace")

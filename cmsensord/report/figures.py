@@ -1,0 +1,232 @@
+"""The report's figures, drawn with matplotlib (the ``report`` extra; the daemon never imports this).
+
+Each ``*_figure`` function returns a :class:`Figure`: the PNG bytes and its
+metadata (id, title, kind, channel and, per axes, the labels and the limits;
+time axes also as ISO 8601 local times), which the HTML carries beside the
+image and ``--png`` writes into the PNG's text chunk, so a test or a tool can
+check what a figure shows without reading pixels.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.dates as mdates  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from cmsensord.report.localtime import local_datetime  # noqa: E402
+from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
+
+__all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "capture_figure"]
+
+#: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
+MIN_SPEED_BINS = 5
+_ZONE_COLOURS = ("#cfeccf", "#f4f1c0", "#f8d9b0", "#f4b8b8")
+#: channel events drawn as vertical lines on the severity plot (kind -> colour)
+MARKED_EVENTS = {"failure": "#b00020", "failure_clear": "#2e7d32", "alarm_alert": "#e08a00",
+                 "alarm_danger": "#b00020", "alarm_clear": "#2e7d32", "order_alarm": "#6a1b9a",
+                 "capture": "#1565c0", "tacho_lost": "#555555"}
+
+
+@dataclass
+class Figure:
+    """A drawn figure: ``png`` bytes and ``meta`` (see the module docstring)."""
+
+    meta: dict[str, Any]
+    png: bytes
+
+
+def _times(t_ns: np.ndarray) -> np.ndarray:
+    """Unix ns -> matplotlib date numbers of the local wall-clock time."""
+    return np.asarray(mdates.date2num([local_datetime(int(t)).replace(tzinfo=None) for t in t_ns]))
+
+
+def _axes_meta(ax: Any, time_axis: bool = False) -> dict[str, Any]:
+    xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
+    out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
+                           "xlim": xlim, "ylim": ylim, "lines": [ln.get_label() for ln in ax.get_lines()
+                                                                 if not ln.get_label().startswith("_")]}
+    if time_axis:
+        out["xlim_local"] = [mdates.num2date(x).replace(tzinfo=None).isoformat(timespec="seconds") for x in xlim]
+    return out
+
+
+def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: bool = False) -> Figure:
+    if time_axis:
+        offset = datetime.now().astimezone().strftime("%z")
+        axes[-1].set_xlabel(f"local time (UTC{offset[:3]}:{offset[3:]})")
+        for ax in axes:
+            locator = mdates.AutoDateLocator()
+            ax.xaxis.set_major_locator(locator)
+            ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    meta["axes"] = [_axes_meta(ax, time_axis) for ax in axes]
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, metadata={"Title": meta["title"],
+                                                      "Description": json.dumps(meta)})
+    plt.close(fig)
+    return Figure(meta, buf.getvalue())
+
+
+def _event_lines(ax: Any, data: LogData, channel: str) -> None:
+    shown: set[str] = set()
+    for t_ns, ev in data.events:
+        colour = MARKED_EVENTS.get(ev["kind"])
+        if colour is None or ev["channel"] not in (channel, None):
+            continue
+        label = ev["kind"] if ev["kind"] not in shown else None
+        shown.add(ev["kind"])
+        ax.axvline(_times(np.array([t_ns]))[0], color=colour, lw=1.2, ls="--", label=label)
+
+
+def severity_figure(data: LogData, ch: ChannelData) -> Figure:
+    """The severity index S_idx over time, anomaly periods shaded, channel events as lines."""
+    fig, ax = plt.subplots(figsize=(11, 3.2), layout="constrained")
+    t, s = ch.severity.arrays()
+    x = _times(t)
+    ax.step(x, s, where="post", color="#1f4e99", lw=1.4, label="severity index")
+    ta, a = ch.anomaly.arrays()
+    if a.size and a.max() > 0:
+        ax.fill_between(_times(ta), 0, 1, where=a > 0, step="post", color="#ff9800", alpha=0.25,
+                        transform=ax.get_xaxis_transform(), label="anomaly flagged")
+    _event_lines(ax, data, ch.name)
+    ax.set_ylim(0, 1.05)
+    if x.size:
+        ax.set_xlim(x[0], x[-1] if x[-1] > x[0] else x[0] + 1 / 86400)
+    ax.set_ylabel("severity index")
+    ax.set_title(f"{ch.name}: severity index (Kim et al. 2023)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8, ncols=4)
+    meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
+            "title": f"{ch.name}: severity index", "points": int(ch.severity.count)}
+    return _finish(fig, meta, [ax], time_axis=True)
+
+
+def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
+    edges = [0.0, *bounds, max(top, bounds[-1] * 1.3)]
+    for i, zone in enumerate("ABCD"):
+        ax.axhspan(edges[i], edges[i + 1], color=_ZONE_COLOURS[i], zorder=0)
+        ax.text(1.003, (edges[i] + edges[i + 1]) / 2, zone, transform=ax.get_yaxis_transform(),
+                va="center", fontsize=9, color="#444")
+
+
+def indicators_figure(ch: ChannelData) -> Figure | None:
+    """Velocity RMS with the ISO 10816-3 zones shaded (or the acceleration RMS in RMS mode),
+    and the shape indicators (kurtosis, crest factor) when the log has them."""
+    main = "velocity_rms_mm_s" if "velocity_rms_mm_s" in ch.indicators else "accel_rms"
+    if main not in ch.indicators:
+        return None
+    shape = [k for k in ("kurtosis", "crest_factor") if k in ch.indicators]
+    rows = 2 if shape else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(11, 2.9 * rows), sharex=True, layout="constrained", squeeze=False)
+    ax = axes[0][0]
+    t, v = ch.indicators[main].arrays()
+    ax.plot(_times(t), v, color="#1f4e99", lw=1.2, label=main)
+    if main == "velocity_rms_mm_s":
+        top = max(float(v.max()) * 1.1, 0.1)
+        if ch.zone_boundaries:
+            _zone_bands(ax, ch.zone_boundaries, top)
+            top = max(top, ch.zone_boundaries[-1] * 1.3)
+        if ch.velocity_alarm is not None:
+            ax.axhline(ch.velocity_alarm, color="#b00020", ls="--", lw=1, label="alarm level")
+        ax.set_ylim(0, top)
+        ax.set_ylabel("velocity RMS [mm/s]")
+        ax.set_title(f"{ch.name}: velocity RMS, ISO 10816-3 zones A-D shaded")
+    else:
+        if "envelope_rms" in ch.indicators:
+            te, ve = ch.indicators["envelope_rms"].arrays()
+            ax.plot(_times(te), ve, color="#e08a00", lw=1, label="envelope_rms")
+        ax.set_ylabel("acceleration RMS [m/s²]")
+        ax.set_title(f"{ch.name}: acceleration RMS")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.grid(alpha=0.3)
+    used = [ax]
+    if shape:
+        ax2 = axes[1][0]
+        for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
+            tk, vk = ch.indicators[k].arrays()
+            ax2.plot(_times(tk), vk, color=colour, lw=1, label=k)
+        ax2.set_ylabel("kurtosis, crest factor")
+        ax2.legend(loc="upper left", fontsize=8)
+        ax2.grid(alpha=0.3)
+        used.append(ax2)
+    meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
+            "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries)}
+    return _finish(fig, meta, used, time_axis=True)
+
+
+def orders_figure(ch: ChannelData) -> Figure | None:
+    """Order RMS versus shaft speed (mean per 10-rpm bin) of every tracked order; at an almost
+    constant speed (fewer than ``MIN_SPEED_BINS`` bins) the mean order RMS as bars instead."""
+    if not ch.orders:
+        return None
+    keys_all = sorted({k for bins in ch.orders.values() for k in bins})
+    lo, hi = keys_all[0] * SPEED_BIN_RPM, (keys_all[-1] + 1) * SPEED_BIN_RPM
+    fig, ax = plt.subplots(figsize=(11, 3.4), layout="constrained")
+    if len(keys_all) < MIN_SPEED_BINS:
+        names = list(ch.orders)
+        means = [sum(v[0] for v in ch.orders[n].values()) / sum(v[1] for v in ch.orders[n].values()) for n in names]
+        ax.bar(names, means, color="#1f4e99", label=f"{lo:.0f}-{hi:.0f} rpm")
+        ax.set_xlabel("order")
+        ax.set_title(f"{ch.name}: order RMS at {lo:.0f}-{hi:.0f} rpm (constant speed; Yeh, Pan & Le)")
+    else:
+        for name, bins in ch.orders.items():
+            keys = sorted(bins)
+            rpm = (np.array(keys) + 0.5) * SPEED_BIN_RPM
+            rms = np.array([bins[k][0] / bins[k][1] for k in keys])
+            ax.plot(rpm, rms, marker=".", ms=3, lw=1, label=f"order {name}")
+        ax.set_xlabel("shaft speed [rpm]")
+        ax.set_title(f"{ch.name}: order RMS versus speed (Yeh, Pan & Le)")
+        ax.legend(loc="upper left", fontsize=8, ncols=4)
+    ax.set_ylabel("order RMS [m/s²]")
+    ax.grid(alpha=0.3)
+    meta = {"id": f"{ch.name}-orders", "kind": "orders", "channel": ch.name,
+            "title": f"{ch.name}: order RMS versus speed", "speed_rpm": [lo, hi], "orders": list(ch.orders)}
+    return _finish(fig, meta, [ax])
+
+
+def _spectrum(ax: Any, msg: dict[str, Any], label: str) -> None:
+    amp = np.asarray(msg.get("amplitude", []), dtype=float)
+    f = float(msg.get("freq_start_hz") or 0.0) + float(msg.get("freq_step_hz") or 1.0) * np.arange(amp.size)
+    ax.plot(f, amp, lw=0.8, color="#1f4e99")
+    for i, (name, hz) in enumerate(sorted((msg.get("defect_hz") or {}).items())):
+        if isinstance(hz, int | float) and f.size and hz <= f[-1]:
+            ax.axvline(hz, color=f"C{i + 1}", ls="--", lw=1, label=f"{name} {hz:.1f} Hz")
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel(f"{label} [{msg.get('unit', 'm/s²')}]")
+    ax.grid(alpha=0.3)
+    if msg.get("defect_hz"):
+        ax.legend(loc="upper right", fontsize=8, ncols=2)
+
+
+def capture_figure(cap: Capture, index: int) -> Figure:
+    """A captured waveform (seconds from its trigger), its spectrum and its envelope spectrum."""
+    parts = [p for p in ("waveform", "spectrum", "envelope") if p in cap.parts]
+    fig, axes = plt.subplots(len(parts), 1, figsize=(11, 2.6 * len(parts)), layout="constrained", squeeze=False)
+    trigger = cap.parts.get("waveform", next(iter(cap.parts.values()))).get("trigger") or {}
+    for ax, part in zip((a[0] for a in axes), parts):
+        msg = cap.parts[part]
+        if part == "waveform":
+            y = np.asarray(msg.get("samples", []), dtype=float)
+            rate = float(msg.get("sample_rate_hz") or 1.0)
+            x = -float(msg.get("pre_s") or 0.0) + np.arange(y.size) / rate
+            ax.plot(x, y, lw=0.5, color="#1f4e99")
+            ax.axvline(0.0, color="#b00020", lw=1, ls="--", label="trigger")
+            ax.set_xlabel("time from trigger [s]")
+            ax.set_ylabel(f"waveform [{msg.get('unit', 'm/s²')}]")
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper right", fontsize=8)
+        else:
+            _spectrum(ax, msg, "spectrum" if part == "spectrum" else "envelope spectrum")
+    axes[0][0].set_title(f"{cap.channel}: capture at {local_datetime(cap.time_ns).isoformat(timespec='seconds')}"
+                         f" — trigger {trigger.get('kind', '?')}")
+    meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
+            "title": f"{cap.channel}: capture {index}", "trigger": trigger.get("kind"), "parts": parts}
+    return _finish(fig, meta, [a[0] for a in axes])

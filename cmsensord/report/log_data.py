@@ -1,0 +1,254 @@
+"""What a report shows, gathered from the messages of MCAP logs in one pass with bounded memory.
+
+:class:`LogData` takes (topic, log_time_ns, JSON bytes) one message at a time
+(:meth:`LogData.add`) and keeps per channel: the severity index and the anomaly
+flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend with the
+latest ISO zone boundaries and alarm level, the order RMS per 10-rpm speed bin,
+and at most ``MAX_CAPTURES`` captured waveforms with their spectra; for the whole
+log: the events (the first ``MAX_EVENTS``, counts of all), the link counters
+(summed over daemon restarts), the largest processing lag and queue depth, and
+the files read. Nothing grows with the length of the log beyond these bounds.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cmsensord.report.trend import Trend
+
+__all__ = ["LogData", "ChannelData", "Capture", "FileInfo", "INDICATOR_FIELDS", "MAX_EVENTS", "MAX_CAPTURES"]
+
+MAX_EVENTS = 2000
+MAX_CAPTURES = 12
+SPEED_BIN_RPM = 10.0
+#: indicator fields drawn as trends (name, unit)
+INDICATOR_FIELDS = (("velocity_rms_mm_s", "mm/s"), ("accel_rms", "m/s²"), ("envelope_rms", "m/s²"),
+                    ("kurtosis", ""), ("crest_factor", ""))
+# The 1-Hz topics are read by the few fields drawn, not decoded whole: json.loads of
+# every message costs more than the rest of a week's report together.
+_NUM = rb'(-?[0-9][0-9.eE+-]*|null)'
+_SEVERITY = re.compile(rb'"severity_index":' + _NUM)
+_ANOMALY = re.compile(rb'"anomaly":\[([^\]]*)\]')
+_INDICATOR = re.compile(rb'"(velocity_rms_mm_s|accel_rms|envelope_rms|kurtosis|crest_factor|velocity_alarm_mm_s)":'
+                        + _NUM)
+_ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
+_DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s)":' + _NUM)
+_FAST_KINDS = frozenset(("severity", "indicators"))
+_TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
+_CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
+                  "capture_envelope": "envelope"}
+
+
+@dataclass
+class Capture:
+    """One capture: its trigger time and the messages of its parts (waveform, spectrum, envelope)."""
+
+    channel: str
+    time_ns: int
+    parts: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass
+class ChannelData:
+    """Per channel: severity, anomaly flags, indicators, orders versus speed, captures."""
+
+    name: str
+    severity: Trend = field(default_factory=Trend)
+    anomaly: Trend = field(default_factory=Trend)
+    indicators: dict[str, Trend] = field(default_factory=dict)
+    zone_boundaries: list[float] | None = None
+    velocity_alarm: float | None = None
+    orders: dict[str, dict[int, list[float]]] = field(default_factory=dict)   # name -> bin -> [sum, n]
+    captures: list[Capture] = field(default_factory=list)
+    captures_omitted: int = 0
+
+
+@dataclass
+class FileInfo:
+    """One file read: its path, size and how far it could be read."""
+
+    path: str
+    bytes: int
+    messages: int = 0
+    complete: bool = False
+    error: str | None = None
+
+
+class LogData:
+    """Everything a report draws, filled message by message (see the module docstring)."""
+
+    def __init__(self) -> None:
+        self.channels: dict[str, ChannelData] = {}
+        self.events: list[tuple[int, dict[str, Any]]] = []
+        self.event_counts: dict[str, int] = {}
+        self.messages = 0
+        self.start_ns: int | None = None
+        self.end_ns: int | None = None
+        self.files: list[FileInfo] = []
+        self.link_total: dict[str, int] = {}
+        self._diag_last: bytes | None = None
+        self._received_last = 0.0
+        self.max_lag_s = 0.0
+        self.max_queue_depth = 0
+        self.queue_drops = 0
+        self.undecodable = 0
+
+    def channel(self, name: str) -> ChannelData:
+        ch = self.channels.get(name)
+        if ch is None:
+            ch = self.channels[name] = ChannelData(name)
+        return ch
+
+    def add(self, topic: str, t_ns: int, data: bytes) -> None:
+        """One message of any topic; topics the report does not draw only count."""
+        self.messages += 1
+        if self.start_ns is None or self.end_ns is None:
+            self.start_ns = self.end_ns = t_ns
+        elif t_ns > self.end_ns:
+            self.end_ns = t_ns
+        elif t_ns < self.start_ns:
+            self.start_ns = t_ns
+        parts = topic.split("/")
+        kind = parts[-1]
+        if kind in ("akf", "vibration_estimate"):
+            return                      # 100 Hz traces: not drawn, not decoded
+        if topic == "/cm/diagnostics" or (kind in _FAST_KINDS and len(parts) == 4):
+            self._scalar_message(parts, kind, t_ns, data)
+            return
+        try:
+            msg = json.loads(data)
+        except ValueError:
+            self.undecodable += 1
+            return
+        if topic == "/cm/events":
+            self._event(t_ns, msg)
+        elif len(parts) == 4 and parts[1] == "cm":
+            self._channel_message(parts[2], kind, t_ns, msg)
+
+    def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
+        """A severity, indicators or diagnostics message, read by the fields drawn."""
+        if kind == "diagnostics":
+            self._diagnostics(data)
+        elif kind == "severity":
+            ch = self.channel(parts[2])
+            m = _SEVERITY.search(data)
+            ch.severity.add(t_ns, _number(m.group(1)) if m is not None else None)
+            m = _ANOMALY.search(data)
+            ch.anomaly.add(t_ns, 1.0 if m is not None and b"1" in m.group(1) else 0.0)
+        else:
+            fields: dict[str, Any] = {k.decode(): _number(v) for k, v in _INDICATOR.findall(data)}
+            m = _ZONES.search(data)
+            if m is not None and m.group(1):
+                fields["zone_boundaries_mm_s"] = [float(x) for x in m.group(1).split(b",")]
+            self._indicators(self.channel(parts[2]), t_ns, fields)
+
+    def _channel_message(self, name: str, kind: str, t_ns: int, msg: dict[str, Any]) -> None:
+        if kind == "severity":
+            ch = self.channel(name)
+            ch.severity.add(t_ns, msg.get("severity_index"))
+            ch.anomaly.add(t_ns, 1.0 if any(msg.get("anomaly") or ()) else 0.0)
+        elif kind == "indicators":
+            self._indicators(self.channel(name), t_ns, msg)
+        elif kind == "orders":
+            self._orders(self.channel(name), msg)
+        elif kind in _CAPTURE_PARTS:
+            self._capture(self.channel(name), _CAPTURE_PARTS[kind], t_ns, msg)
+
+    def _event(self, t_ns: int, msg: dict[str, Any]) -> None:
+        kind = str(msg.get("kind"))
+        self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
+        if len(self.events) < MAX_EVENTS:
+            self.events.append((t_ns, {"kind": kind, "channel": msg.get("channel"),
+                                       "message": msg.get("message") or ""}))
+
+    def _diagnostics(self, data: bytes) -> None:
+        """Largest lag and queue depth; the counters of the last message before each restart."""
+        fields = {k: _number(v) for k, v in _DIAG.findall(data)}
+        received = fields.get(b"bytes_received") or 0.0
+        if received < self._received_last:          # the counters start again at a daemon restart
+            self._add_counters(self._diag_last)
+        self._received_last = received
+        self._diag_last = data
+        self.max_lag_s = max(self.max_lag_s, fields.get(b"lag_s") or 0.0)
+        self.max_queue_depth = max(self.max_queue_depth, int(fields.get(b"queue_depth") or 0))
+
+    def _add_counters(self, data: bytes | None) -> None:
+        link, drops = _counters(data)
+        for k, v in link.items():
+            self.link_total[k] = self.link_total.get(k, 0) + v
+        self.queue_drops += drops
+
+    def link_counters(self) -> dict[str, int]:
+        """The link counters over the whole log (summed across daemon restarts)."""
+        out = dict(self.link_total)
+        for k, v in _counters(self._diag_last)[0].items():
+            out[k] = out.get(k, 0) + v
+        return out
+
+    def total_queue_drops(self) -> int:
+        """Frames the daemon's queue dropped over the whole log."""
+        return self.queue_drops + _counters(self._diag_last)[1]
+
+    @staticmethod
+    def _indicators(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
+        for name, value in msg.items():
+            if name in _TRENDS and isinstance(value, int | float):
+                trend = ch.indicators.get(name)
+                if trend is None:
+                    trend = ch.indicators[name] = Trend()
+                trend.add(t_ns, float(value))
+        if msg.get("zone_boundaries_mm_s"):
+            ch.zone_boundaries = [float(x) for x in msg["zone_boundaries_mm_s"]]
+        if isinstance(msg.get("velocity_alarm_mm_s"), int | float):
+            ch.velocity_alarm = float(msg["velocity_alarm_mm_s"])
+
+    @staticmethod
+    def _orders(ch: ChannelData, msg: dict[str, Any]) -> None:
+        speed = msg.get("speed_rpm")
+        if not msg.get("valid") or not isinstance(speed, int | float):
+            return
+        b = int(speed // SPEED_BIN_RPM)
+        for order in msg.get("orders") or ():
+            rms = order.get("rms")
+            if isinstance(rms, int | float):
+                bins = ch.orders.setdefault(str(order.get("name")), {})
+                acc = bins.setdefault(b, [0.0, 0.0])
+                acc[0] += rms
+                acc[1] += 1
+
+    @staticmethod
+    def _capture(ch: ChannelData, part: str, t_ns: int, msg: dict[str, Any]) -> None:
+        for key in ("samples", "amplitude"):     # as float32 arrays: 2 MB, not 16, for 20 s at 25 kHz
+            if isinstance(msg.get(key), list):
+                msg[key] = np.array([np.nan if v is None else v for v in msg[key]], dtype=np.float32)
+        stamp = msg.get("trigger_time") or msg.get("timestamp") or {}
+        time_ns = int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nsec", 0)) if stamp else t_ns
+        kind = (msg.get("trigger") or {}).get("kind")
+        for cap in ch.captures:
+            first = next(iter(cap.parts.values()))
+            if cap.time_ns == time_ns and (first.get("trigger") or {}).get("kind") == kind and part not in cap.parts:
+                cap.parts[part] = msg
+                return
+        if len(ch.captures) >= MAX_CAPTURES:
+            ch.captures_omitted += part == "waveform"
+            return
+        ch.captures.append(Capture(ch.name, time_ns, {part: msg}))
+
+
+def _number(v: bytes) -> float | None:
+    """A JSON number or null as a float or None."""
+    return None if v == b"null" else float(v)
+
+
+def _counters(data: bytes | None) -> tuple[dict[str, int], int]:
+    """(link counters, queue drops) of one diagnostics message."""
+    if data is None:
+        return {}, 0
+    msg = json.loads(data)
+    link = {k: int(v) for k, v in (msg.get("link") or {}).items() if isinstance(v, int | float)}
+    return link, int(msg.get("queue_drops") or 0)

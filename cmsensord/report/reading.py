@@ -1,0 +1,64 @@
+"""The logs of a report: the files named or found in directories, read leniently into a LogData.
+
+A directory stands for its ``*.mcap`` and ``*.mcap.part`` files (salvaged
+files included), oldest name first. Every file is read with the lenient
+reader (:class:`~cmsensord.report.fast_read.FastScan`), so a ``.part``
+file of a crashed daemon or a damaged file gives what it holds up to the
+damage.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TextIO
+
+from cmsensord.errors import CmsensordError
+from cmsensord.report.fast_read import FastScan
+from cmsensord.report.log_data import FileInfo, LogData
+from cmsensord.report.progress import Progress
+
+__all__ = ["log_paths", "read_logs"]
+
+
+def log_paths(names: list[str]) -> list[Path]:
+    """The files of ``names`` (files, or directories of logs), in order, each once.
+
+    Raises CmsensordError (one line) for a name that does not exist or a
+    directory without logs.
+    """
+    out: list[Path] = []
+    for name in names:
+        p = Path(name)
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.is_file() and f.name.endswith((".mcap", ".mcap.part")))
+            if not found:
+                raise CmsensordError(f"{name}: no MCAP logs (*.mcap, *.mcap.part) in this directory")
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise CmsensordError(f"{name}: file not found")
+    seen: set[Path] = set()
+    return [p for p in out if not (p.resolve() in seen or seen.add(p.resolve()))]   # type: ignore[func-returns-value]
+
+
+def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
+    """All messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal."""
+    data = LogData()
+    sizes = [p.stat().st_size for p in paths]
+    progress = Progress(sum(sizes), progress_stream)
+    done = 0
+    for path, size in zip(paths, sizes):
+        info = FileInfo(str(path), size)
+        scan = FastScan(path)
+        for topic, t, raw, offset in scan.messages():
+            data.add(topic, t, raw)
+            info.messages += 1
+            if info.messages % 4096 == 0:
+                progress.update(done + offset)
+        info.complete, info.error = scan.complete, scan.error
+        data.files.append(info)
+        done += size
+    progress.close()
+    return data
+

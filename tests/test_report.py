@@ -1,0 +1,234 @@
+"""``cmsensord report``: logs of simulated boards (replayed as a user would) -> an HTML page whose
+figures, their axes and their PNGs are checked structurally; ``.part`` files; matplotlib missing;
+a headless Chromium screenshot; ``cmsensord summary`` in ISO time with event lines."""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+import pty
+import re
+import shutil
+import subprocess
+import sys
+from datetime import datetime
+from pathlib import Path
+
+import pytest
+
+from cmsensord.sinks.mcap_file import McapSink
+from cmsensord.sinks.mcap_read import read_messages
+from processes import ENV, cmsensord, run_module
+
+SCHEMA_OF = {"events": "event", "diagnostics": "diagnostics", "severity": "severity", "orders": "orders",
+             "indicators": "indicators"}
+
+Image = pytest.importorskip("PIL.Image", reason="Pillow comes with matplotlib, the report extra")
+
+
+def _replayed(tmp: Path, name: str, *sim_args: str) -> Path:
+    """A firmware_sim capture replayed through `cmsensord replay`: the log directory."""
+    cap = tmp / f"{name}.cap"
+    p = run_module("firmware_sim", "--out", str(cap), *sim_args)
+    assert p.returncode == 0, p.stderr
+    out = tmp / name
+    p = cmsensord("replay", str(cap), "--out", str(out))
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory) -> dict[str, Path]:
+    tmp = tmp_path_factory.mktemp("report_logs")
+    return {
+        "faulty_raw": _replayed(tmp, "faulty_raw", "--scenario", "faulty", "--mode", "raw", "--tacho",
+                                "--duration", "20"),
+        "degrading_rms": _replayed(tmp, "degrading_rms", "--scenario", "degrading", "--duration", "120"),
+        "close_orders": _replayed(tmp, "close_orders", "--scenario", "close_orders", "--mode", "raw",
+                                  "--tacho"),
+    }
+
+
+def _report(tmp_path: Path, *logs: Path) -> tuple[subprocess.CompletedProcess, str, dict[str, dict]]:
+    out = tmp_path / "report.html"
+    p = cmsensord("report", *map(str, logs), "--out", str(out), "--png", str(tmp_path / "png"))
+    assert p.returncode == 0, p.stderr
+    page = out.read_text(encoding="utf-8")
+    metas = {m["id"]: m for m in json.loads(re.search(
+        r'<script type="application/json" id="figures">(.*?)</script>', page, re.S).group(1))}
+    return p, page, metas
+
+
+def _log_span(log_dir: Path) -> tuple[str, str]:
+    """Local start and end (ISO, seconds) of the log as `cmsensord summary --json` gives them."""
+    info = json.loads(cmsensord("summary", "--json", str(next(log_dir.glob("*.mcap")))).stdout)
+    return tuple(datetime.fromtimestamp(info[k] / 1e9).isoformat(timespec="seconds")  # type: ignore[return-value]
+                 for k in ("start_ns", "end_ns"))
+
+
+def test_raw_report_has_severity_indicators_with_zones_and_orders(logs, tmp_path):
+    p, page, metas = _report(tmp_path, logs["faulty_raw"])
+    assert set(metas) == {"ch0-severity", "ch0-indicators", "ch0-orders"}
+    assert p.stderr.strip().splitlines()[-1].startswith(f"report: {tmp_path / 'report.html'} (3 figures,")
+    for fid, meta in metas.items():                   # each figure inline, with its metadata beside it
+        assert f'id="{fid}" data-meta="{html.escape(json.dumps(meta), quote=True)}"' in page
+        png = Image.open(tmp_path / "png" / f"{fid}.png")
+        png.load()
+        assert png.size[0] > 800 and json.loads(png.text["Description"]) == meta
+    assert page.count('src="data:image/png;base64,') == 3 and "http://" not in page and "https://" not in page
+    sev = metas["ch0-severity"]["axes"][0]
+    assert sev["ylim"] == [0.0, 1.05] and sev["lines"][0] == "severity index"
+    start, end = _log_span(logs["faulty_raw"])
+    assert start <= sev["xlim_local"][0] < sev["xlim_local"][1] <= end
+    ind = metas["ch0-indicators"]
+    assert ind["main"] == "velocity_rms_mm_s" and ind["zones"] is True      # the faulty motor: zone D
+    assert ind["axes"][0]["ylabel"] == "velocity RMS [mm/s]" and ind["axes"][0]["ylim"][1] >= 4.5 * 1.3
+    assert ind["axes"][1]["lines"] == ["kurtosis", "crest_factor"]
+    orders = metas["ch0-orders"]             # the motor runs at 1720 rpm: bars per order at that speed
+    assert orders["speed_rpm"][0] <= 1720 <= orders["speed_rpm"][1] and orders["axes"][0]["xlabel"] == "order"
+    assert orders["orders"] == ["1x", "2x", "3x", "4x"]
+
+
+def test_rms_report_and_a_run_up(logs, tmp_path):
+    _, page, metas = _report(tmp_path, logs["degrading_rms"], logs["close_orders"])
+    assert set(metas) == {"ch0-severity", "ch0-indicators", "ch0-orders"}   # one channel name in both logs
+    assert metas["ch0-indicators"]["main"] == "velocity_rms_mm_s"           # the RAW log gives velocity
+    orders = metas["ch0-orders"]["axes"][0]            # close_orders: a run-up 0 -> 3000 rpm
+    assert orders["xlabel"] == "shaft speed [rpm]" and orders["xlim"][0] < 500 and orders["xlim"][1] > 2500
+    assert orders["lines"] == ["order 1x", "order 2x", "order 3x", "order 4x"]   # the default orders
+    assert "failure" in page and "<th>local time</th>" in page
+    (tmp_path / "rms").mkdir()
+    rms_only = _report(tmp_path / "rms", logs["degrading_rms"])[2]
+    assert rms_only["ch0-indicators"]["main"] == "accel_rms" and "ch0-orders" not in rms_only
+
+
+def test_events_table_in_local_time_and_link_summary(logs, tmp_path):
+    _, page, _ = _report(tmp_path, logs["degrading_rms"])
+    info = json.loads(cmsensord("summary", "--json", str(next(logs["degrading_rms"].glob("*.mcap")))).stdout)
+    first = info["events"][0]
+    when = datetime.fromtimestamp(first["time_ns"] / 1e9).isoformat(sep=" ", timespec="milliseconds")
+    assert f'<td class="t">{when}</td><td>{first["kind"]}</td>' in page
+    assert str(first["time_ns"]) not in page
+    assert '<tr><td>frames_rms</td><td class="n">12,000</td></tr>' in page      # 120 s at 100 Hz
+    assert "complete</td></tr>" in page
+
+
+def test_a_part_file_is_read_up_to_its_last_complete_record(logs, tmp_path):
+    """The log of a daemon that died: its .part file, one chunk a second, ending inside a chunk."""
+    whole = next(logs["faulty_raw"].glob("*.mcap"))
+    clock = [0.0]
+    sink = McapSink(tmp_path / "writing", clock=lambda: clock[0])
+    for topic, t, msg in read_messages(whole):
+        clock[0] = t / 1e9                  # log time: a chunk is finished every second
+        sink.write(topic, SCHEMA_OF[topic.rsplit("/", 1)[-1]], t, msg)
+    (part_now,) = (tmp_path / "writing").glob("*.mcap.part")
+    data = part_now.read_bytes()            # as the file is while the daemon writes it
+    sink.close()
+    part = tmp_path / "logs" / "cut.mcap.part"
+    part.parent.mkdir()
+    part.write_bytes(data[: len(data) - 100])
+    p, page, metas = _report(tmp_path, part.parent)
+    assert "ch0-severity" in metas
+    assert "unfinished (read up to its last complete record)" in page
+    n = int(re.search(r"([0-9,]+) messages from 1 file", p.stderr).group(1).replace(",", ""))
+    full = json.loads(cmsensord("summary", "--json", str(whole)).stdout)["messages"]
+    assert 0 < n < full and n == json.loads(cmsensord("summary", "--json", str(part)).stdout)["messages"]
+
+
+def test_without_matplotlib_one_line_says_how_to_install_it(logs, tmp_path):
+    code = ("import sys; sys.modules['matplotlib'] = None; from cmsensord.cli import main; "
+            f"sys.exit(main(['report', {str(logs['faulty_raw'])!r}, '--out', {str(tmp_path / 'r.html')!r}]))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
+    assert p.returncode == 2
+    assert p.stderr.splitlines() == ["cmsensord: report needs matplotlib: install it with "
+                                     "pip install 'cmsensord[report]' (or pip install matplotlib)"]
+    assert not (tmp_path / "r.html").exists()
+
+
+def test_the_daemon_never_imports_matplotlib(logs, tmp_path):
+    code = ("import sys; from cmsensord.cli import main; rc = main(['replay', sys.argv[1], '--out', sys.argv[2]]);"
+            "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'PIL', 'cmsensord.report.'))))")
+    cap = logs["faulty_raw"].parent / "faulty_raw.cap"
+    p = subprocess.run([sys.executable, "-c", code, str(cap), str(tmp_path)], capture_output=True, text=True,
+                       env=ENV, timeout=120)
+    assert p.returncode == 0, p.stderr
+    # only the command's parser and the times of `summary`: no figures, no matplotlib
+    assert p.stdout.strip() == "['cmsensord.report.command', 'cmsensord.report.localtime']"
+
+
+def test_missing_log_is_one_line(tmp_path):
+    p = cmsensord("report", str(tmp_path / "nothing"), "--out", str(tmp_path / "r.html"))
+    assert p.returncode == 2 and p.stderr.strip() == f"cmsensord: {tmp_path / 'nothing'}: file not found"
+    p = cmsensord("report", str(tmp_path), "--out", str(tmp_path / "r.html"))
+    assert p.stderr.strip() == f"cmsensord: {tmp_path}: no MCAP logs (*.mcap, *.mcap.part) in this directory"
+
+
+def test_summary_prints_iso_times_and_event_lines(logs):
+    log = next(logs["degrading_rms"].glob("*.mcap"))
+    info = json.loads(cmsensord("summary", "--json", str(log)).stdout)
+    text = cmsensord("summary", str(log)).stdout
+    start = datetime.fromtimestamp(info["start_ns"] / 1e9).astimezone().isoformat(timespec="milliseconds")
+    assert f"\nstart: {start}\n" in text and "start_ns" not in text
+    onset = next(e for e in info["events"] if e["kind"] == "anomaly_onset")
+    when = datetime.fromtimestamp(onset["time_ns"] / 1e9).astimezone().isoformat(timespec="milliseconds")
+    assert f"\n  {when} anomaly_onset ch0: {onset['message'][len('ch0: '):]}\n" in text
+    assert "{'time_ns'" not in text
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no chromium (Debian package chromium) on this machine")
+def test_headless_chromium_renders_the_report(logs, tmp_path):
+    _report(tmp_path, logs["faulty_raw"])
+    shot = tmp_path / "shot.png"
+    p = subprocess.run([_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                        "--window-size=1200,1600", f"--screenshot={shot}", (tmp_path / "report.html").as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    img = Image.open(shot).convert("L")
+    assert img.size == (1200, 1600)
+    lo, hi = img.getextrema()
+    assert hi - lo > 200                            # not a blank page: dark text and plot lines on white
+    assert len(img.getcolors(maxcolors=1 << 20)) > 50
+
+
+def test_progress_bar_on_a_terminal_only(logs, tmp_path):
+    master, slave = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "report", str(logs["faulty_raw"]), "--out",
+                          str(tmp_path / "r.html")], stdout=subprocess.PIPE, stderr=slave, env=ENV)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:                             # EIO: the process closed the terminal
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    assert p.wait(timeout=60) == 0
+    assert b"\r[" + b"#" * 30 + b"] 100%" in seen
+    piped = cmsensord("report", str(logs["faulty_raw"]), "--out", str(tmp_path / "r2.html"))
+    assert "[#" not in piped.stderr and piped.stderr.count("\n") == 1
+
+
+def test_captured_waveform_spectrum_and_envelope_are_drawn(logs, tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("capture:\n  every_s: 6\n  pre_s: 1\n  post_s: 2\n  min_interval_s: 0\n")
+    cap = logs["faulty_raw"].parent / "faulty_raw.cap"
+    assert cmsensord("replay", str(cap), "--config", str(cfg), "--out", str(tmp_path / "logs")).returncode == 0
+    _, page, metas = _report(tmp_path, tmp_path / "logs")
+    captures = [m for m in metas.values() if m["kind"] == "capture"]
+    # ticks at 6, 12 and 18 s of 20: the last one ends with the stream
+    assert [m["id"] for m in captures] == ["ch0-capture-0", "ch0-capture-1", "ch0-capture-2"]
+    for m in captures:
+        assert m["trigger"] == "periodic" and m["parts"] == ["waveform", "spectrum", "envelope"]
+        wave, spectrum, env = m["axes"]
+        assert wave["xlabel"] == "time from trigger [s]" and wave["xlim"][0] <= -1 and 2 <= wave["xlim"][1] < 2.5
+        assert spectrum["xlabel"] == "frequency [Hz]" and 12000 < spectrum["xlim"][1] < 13500   # up to fs/2
+        assert env["ylabel"] == "envelope spectrum [m/s^2]" and 950 < env["xlim"][1] < 1100
+    assert page.count('src="data:image/png;base64,') == 3 + 3
