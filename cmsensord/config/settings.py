@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
+from .mqtt import MqttConfig
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
 __all__ = [
@@ -363,6 +364,7 @@ class Config:
     indicators: IndicatorsConfig = field(default_factory=IndicatorsConfig,
                                          metadata={"help": "vibration indicators (ISO 10816-3, envelope)"})
     bearings: tuple[BearingConfig, ...] = field(default=(), metadata={"help": "bearings and their channels"})
+    mqtt: MqttConfig | None = field(default=None, metadata={"help": "publishing to an MQTT broker"})
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
 

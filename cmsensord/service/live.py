@@ -14,7 +14,7 @@ from cmsensord.errors import SinkError
 from cmsensord.monitor.processor import Processor
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.signals import StopFlag
-from cmsensord.service.sink import open_sink, route_sink_events
+from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
 from cmsensord.source import SerialSource
 
@@ -112,9 +112,11 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     source = SerialSource.from_link(cfg.link, capture=capture)
     queue = source.queue
     proc: Processor
+    publisher = publisher_of(sink)
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
                      diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
-                                          "lag_s": round(proc.lag_s(), 3)})
+                                          "lag_s": round(proc.lag_s(), 3),
+                                          **({"mqtt": publisher.diagnostics()} if publisher else {})})
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
@@ -148,8 +150,14 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
     notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
     reader = source.reader
 
-    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
+    publisher = publisher_of(sink)
+
+    def line_now() -> str:              # the status line, with the broker link when publishing
         line = status_line(proc, source)
+        return f"{line} | {publisher.status()}" if publisher is not None else line
+
+    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
+        line = line_now()
         if reader.error is not None:
             return f"reader error x{reader.errors}: {reader.error} | {line}"
         return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
@@ -180,7 +188,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 next_status = now + 1.0
                 watch.diagnostics(now)
                 if cfg.output.status_line:
-                    print(status_line(proc, source), file=sys.stderr, flush=True)
+                    print(line_now(), file=sys.stderr, flush=True)
                 notify.status(service_state())
     finally:
         notify.stopping("stopping: closing the MCAP log")

@@ -107,6 +107,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "disk_error",
     "salvage",
     "time_base",
+    "mqtt_link",
+    "mqtt_queue",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -324,6 +326,10 @@ DIAGNOSTICS = _obj(
         "lag_s": _num("processing lag: wall clock minus the time of the last processed frame [s]"),
         "observations": _int("observations processed since start"),
         "uptime_s": _num("seconds since the daemon started", nullable=False),
+        "mqtt": {"type": "object", "description": "the link to the MQTT broker (only with an mqtt "
+                 "section): state (connecting, connected, disconnected, refused), messages queued "
+                 "and not yet acknowledged, the queue's bytes on disk, dropped, sent and acknowledged "
+                 "since start"},
     },
     ["timestamp", "link", "queue_depth", "queue_drops", "lag_s", "observations", "uptime_s"],
 )
