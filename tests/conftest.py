@@ -44,6 +44,7 @@ PROCESS_MODULES = frozenset({
     "test_reader_thread.py",
     "test_stream_events.py",
     "test_indicators_daemon.py",
+    "test_mqtt.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
