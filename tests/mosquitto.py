@@ -7,6 +7,7 @@ misses nothing while the broker is down.
 
 from __future__ import annotations
 
+import getpass
 import json
 import shutil
 import socket
@@ -36,7 +37,8 @@ class Broker:
         self.work, self.port = work, free_port()
         work.mkdir(parents=True, exist_ok=True)
         self.conf = work / "mosquitto.conf"
-        self.conf.write_text(f"per_listener_settings true\nlistener {self.port} 127.0.0.1\n"
+        # run as the test's user: as root, mosquitto would drop to "mosquitto" and not read tmp_path
+        self.conf.write_text(f"user {getpass.getuser()}\nper_listener_settings true\nlistener {self.port} 127.0.0.1\n"
                              f"allow_anonymous true\n{extra}"
                              f"persistence true\npersistence_location {work}/\n"
                              f"log_dest file {work}/mosquitto.log\nlog_type all\n")

@@ -24,9 +24,9 @@ PUBLISHED = ("severity", "indicators", "events", "diagnostics")
 
 
 def mqtt_yaml(port: int, *lines: str, publish=PUBLISHED) -> str:
-    return ("mqtt:\n  host: 127.0.0.1\n  port: %d\n  client_id: rig1\n  publish: [%s]\n"
-            "  reconnect_min_s: 0.2\n  reconnect_max_s: 1.0\n  resend_per_s: 2000\n%s"
-            % (port, ", ".join(publish), "".join(f"  {line}\n" for line in lines)))
+    more = "".join(f"  {line}\n" for line in lines)
+    return (f"mqtt:\n  host: 127.0.0.1\n  port: {port}\n  client_id: rig1\n  publish: [{', '.join(publish)}]\n"
+            f"  reconnect_min_s: 0.2\n  reconnect_max_s: 1.0\n  resend_per_s: 2000\n{more}")
 
 
 def simulate(tmp_path: Path, yaml: str, *args: str, duration: float = 60, speed: float = 20) -> list:
@@ -144,3 +144,117 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
         board2.wait(timeout=5)
         sub.close()
         broker.stop()
+
+
+def test_the_queue_bound_drops_the_oldest_messages_with_an_event(tmp_path):
+    down = free_port()                          # nothing listens there: the broker is down
+    queue = tmp_path / "queue"
+    p = subprocess.run(simulate(tmp_path, mqtt_yaml(down, "queue_mb: 0.01", f"queue_dir: {queue}")),
+                       capture_output=True, text=True, env=ENV, timeout=120)
+    assert p.returncode == 0, p.stderr
+    drops = [int(n) for n in re.findall(r"WARNING mqtt_queue: store-and-forward queue over 0\.01 MB: "
+                                        r"dropped the (\d+) oldest unsent message\(s\)", p.stderr)]
+    assert drops and sum(drops) > 0, p.stderr
+    q = DiskQueue(queue, max_bytes=10_000)
+    assert q.size_bytes <= 10_000 + 4096        # the bound and at most the open segment beyond it
+    assert q.acked == sum(drops) == len(expected(tmp_path / "logs")) - q.depth
+    q.close()
+
+
+def _openssl(*args: str, cwd: Path) -> None:
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True)
+
+
+def make_certificates(d: Path) -> None:
+    """A test CA, a server certificate for 127.0.0.1 and a client certificate, both signed by it."""
+    d.mkdir()
+    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem",
+             "-days", "2", "-subj", "/CN=cmsensord test CA", cwd=d)
+    (d / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    for name, ext in (("server", ["-extfile", "san.ext"]), ("client", [])):
+        _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key", "-out", f"{name}.csr",
+                 "-subj", f"/CN={'127.0.0.1' if name == 'server' else 'rig1'}", cwd=d)
+        _openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+                 "-CAcreateserial", "-out", f"{name}.pem", "-days", "2", *ext, cwd=d)
+
+
+def test_tls_with_a_client_certificate(tmp_path):
+    certs = tmp_path / "certs"
+    make_certificates(certs)
+    tls = free_port()
+    broker = Broker(tmp_path / "broker", extra=(
+        f"listener {tls} 127.0.0.1\nallow_anonymous true\ncafile {certs}/ca.pem\n"
+        f"certfile {certs}/server.pem\nkeyfile {certs}/server.key\nrequire_certificate true\n")).start()
+    sub = Subscriber(broker.port)
+    try:
+        yaml = mqtt_yaml(tls, f"ca_file: {certs}/ca.pem", f"certfile: {certs}/client.pem",
+                         f"keyfile: {certs}/client.key")
+        p = subprocess.run(simulate(tmp_path, yaml), capture_output=True, text=True, env=ENV, timeout=120)
+        assert p.returncode == 0, p.stderr
+        want = expected(tmp_path / "logs")
+        assert sub.wait_for(lambda: len(seqs(sub)) >= len(want))
+        assert first_occurrences(seqs(sub)) == list(range(1, len(want) + 1))
+        assert f"mqtt_link: connected to 127.0.0.1:{tls} as rig1" in p.stderr
+    finally:
+        sub.close()
+        broker.stop()
+
+
+def test_a_wrong_password_is_one_clear_event_and_retries(tmp_path):
+    secured = free_port()
+    pw = tmp_path / "broker.passwd"
+    subprocess.run(["mosquitto_passwd", "-c", "-b", str(pw), "rig", "right"], check=True, capture_output=True)
+    broker = Broker(tmp_path / "broker", extra=(
+        f"listener {secured} 127.0.0.1\nallow_anonymous false\npassword_file {pw}\n")).start()
+    (tmp_path / "password").write_text("wrong\n")
+    try:
+        yaml = mqtt_yaml(secured, "username: rig", f"password_file: {tmp_path / 'password'}")
+        p = subprocess.run(simulate(tmp_path, yaml, duration=60, speed=10), capture_output=True, text=True,
+                           env=ENV, timeout=120)
+        assert p.returncode == 0, p.stderr
+        link = [line for line in p.stderr.splitlines() if "mqtt_link:" in line]
+        assert len(link) == 1, p.stderr
+        assert re.fullmatch(rf"ERROR mqtt_link: broker 127\.0\.0\.1:{secured} refused the connection: "
+                            r"Not authorized; retrying with back-off up to 1 s, \d+ message\(s\) queued",
+                            link[0]), link
+        assert broker.log().count("not authorised") >= 3     # it kept trying
+    finally:
+        broker.stop()
+
+
+@pytest.mark.parametrize(("yaml", "line"), [
+    ("mqtt:\n  host: h\n  password: secret\n",
+     "mqtt.password: unknown key 'password' (did you mean 'password_file'?)"),
+    ("mqtt:\n  host: h\n  qos: 2\n", "mqtt.qos: must be one of 0, 1 (got 2)"),
+    ("mqtt:\n  host: h\n  publish: [severity, akf]\n",
+     "mqtt.publish: unknown kind 'akf'; choose from severity, indicators, alarms, events, diagnostics, "
+     "orders, vibration_estimate (got 'akf')"),
+    ("mqtt:\n  host: h\n  username: u\n  password_file: /nonexistent/pw\n",
+     "mqtt.password_file: cannot read: No such file or directory (got '/nonexistent/pw')"),
+])
+def test_mqtt_config_errors_are_one_line(tmp_path, yaml, line):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(yaml)
+    p = cmsensord("--config", str(cfg))
+    assert p.returncode == 78, p.stderr
+    assert p.stderr.strip().splitlines() == [f"cmsensord: configuration error: {cfg}: {line}"]
+
+
+def test_mqtt_without_paho_is_a_config_error_and_without_mqtt_paho_is_not_imported(tmp_path):
+    fake = tmp_path / "site" / "paho"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("")      # a paho package without paho.mqtt
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("mqtt:\n  host: h\n")
+    env = dict(ENV, PYTHONPATH=f"{tmp_path / 'site'}{os.pathsep}{ENV['PYTHONPATH']}")
+    p = subprocess.run([sys.executable, "-m", "cmsensord", "--config", str(cfg)], capture_output=True,
+                       text=True, env=env, timeout=60)
+    assert p.returncode == 78
+    assert p.stderr.strip() == (f"cmsensord: configuration error: {cfg}: mqtt: publishing needs paho-mqtt: "
+                                "pip install 'cmsensord[mqtt]'")
+    p = subprocess.run(simulate(tmp_path, "", duration=4), capture_output=True, text=True, env=env, timeout=60)
+    assert p.returncode == 0, p.stderr
+    check = ("import sys, cmsensord.service.live, cmsensord.service.sink; "
+             "print([m for m in sys.modules if m.startswith('paho')])")
+    assert subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
+                          env=ENV).stdout.strip() == "[]"
