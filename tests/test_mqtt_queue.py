@@ -138,3 +138,18 @@ def _wait(test, timeout: float = 10.0) -> bool:
             return True
         time.sleep(0.02)
     return test()
+
+
+def test_default_yaml_documents_every_mqtt_key_with_its_default():
+    import dataclasses
+    from pathlib import Path
+
+    import yaml
+
+    text = (Path(__file__).resolve().parents[1] / "config" / "default.yaml").read_text()
+    block = text[text.index("# mqtt:\n"):]
+    data = yaml.safe_load("\n".join(line[2:] for line in block.splitlines()))["mqtt"]
+    fields = {f.name: f.default for f in dataclasses.fields(MqttConfig)}
+    assert set(data) == set(fields)
+    cfg = MqttConfig(**{**data, "publish": tuple(data["publish"])})
+    assert all(getattr(cfg, k) == v for k, v in fields.items() if k != "host")
