@@ -85,7 +85,7 @@ class DiskQueue:
         self._dirty = False
         self._synced_at = time.monotonic()
         self._acked_ids: set[int] = set()
-        self._cache: tuple[tuple[Path, int] | None, list[Record]] = (None, [])
+        self._cache: tuple[Path | None, int, list[Record]] = (None, 0, [])
         self.acked = self._read_acked()
         self._acked_written = self.acked
         self._open_segments()
@@ -199,19 +199,27 @@ class DiskQueue:
                 break
             if seg.last < self.send_seq:
                 continue
-            for rec in self._records(seg):
-                if rec.seq >= self.send_seq and len(out) < n:
-                    out.append(rec)
-                    self.send_seq = rec.seq + 1
+            records = self._records(seg)
+            start = max(0, self.send_seq - seg.first)      # seqs are contiguous in a segment
+            for rec in records[start:start + n - len(out)]:
+                out.append(rec)
+                self.send_seq = rec.seq + 1
         return out
 
     def _records(self, seg: _Segment) -> list[Record]:
-        """The records of ``seg`` (the last segment read is kept while it does not grow)."""
-        key = (seg.path, seg.size)
-        if self._cache[0] != key:
+        """The records of ``seg``, parsed once: the last segment read is kept, and only what
+        was appended to it since is read again."""
+        path, done, records = self._cache
+        if path != seg.path:
+            path, done, records = seg.path, 0, []
+        if done < seg.size:
             with open(seg.path, "rb") as f:
-                self._cache = (key, [r for _, r in _read_records(f.read(seg.size))[0]])
-        return self._cache[1]
+                f.seek(done)
+                more, valid = _read_records(f.read(seg.size - done))
+            records.extend(r for _, r in more)
+            done += valid
+        self._cache = (path, done, records)
+        return records
 
     def ack(self, seq: int) -> None:
         """The broker acknowledged ``seq``: the cursor moves over every contiguous acknowledgement
