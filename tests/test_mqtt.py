@@ -4,6 +4,7 @@ down, the queue's bound, TLS with a client certificate and a wrong password."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -261,3 +262,23 @@ def test_mqtt_without_paho_is_a_config_error_and_without_mqtt_paho_is_not_import
              "print([m for m in sys.modules if m.startswith('paho')])")
     assert subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
                           env=ENV).stdout.strip() == "[]"
+
+
+def test_status_line_diagnostics_and_home_assistant_discovery(tmp_path, broker):
+    sub = Subscriber(broker.port)
+    try:
+        cmd = simulate(tmp_path, mqtt_yaml(broker.port, "discovery: true"), duration=30)
+        (tmp_path / "site.yaml").write_text((tmp_path / "site.yaml").read_text().replace(
+            "status_line: false", "status_line: true"))
+        p = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=120)
+        assert p.returncode == 0, p.stderr
+        assert re.search(r"\| mqtt connected q \d+$", p.stderr, re.M), p.stderr
+        diags = [m for t, m in expected(tmp_path / "logs") if t.endswith("/diagnostics")]
+        assert diags and diags[-1]["mqtt"]["state"] == "connected" and diags[-1]["mqtt"]["dropped"] == 0
+        topic = "homeassistant/sensor/rig1_ch0_severity/config"
+        assert sub.wait_for(lambda: any(t == topic for t, _, _ in sub.got))
+        config = next(json.loads(body) for t, body, _ in sub.got if t == topic)
+        assert (config["state_topic"], config["value_template"], config["availability_topic"]) == (
+            "cmsensord/rig1/ch0/severity", "{{ value_json.severity_index }}", "cmsensord/rig1/status")
+    finally:
+        sub.close()
