@@ -16,12 +16,14 @@ from pathlib import Path
 import pytest
 
 from cmsensord.publish.disk_queue import DiskQueue
-from cmsensord.sinks.mcap_sink import read_messages
+from cmsensord.sinks.mcap_sink import iter_messages_lenient, read_messages
 from mosquitto import Broker, Subscriber, free_port, needs_mosquitto
 from processes import ENV, cmsensord, start_daemon
 
 pytestmark = needs_mosquitto
 PUBLISHED = ("severity", "indicators", "events", "diagnostics")
+#: board seconds per wall second of the kill -9 test
+SPEED = 2
 
 
 def mqtt_yaml(port: int, *lines: str, publish=PUBLISHED) -> str:
@@ -109,12 +111,12 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
     broker = Broker(tmp_path / "broker")           # not started: the broker is down
     yaml = mqtt_yaml(broker.port, f"queue_dir: {tmp_path / 'queue'}")
     with_board = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
-                                   "degrading", "--speed", "20", "--duration", "600"],
+                                   "degrading", "--speed", str(SPEED), "--duration", "600"],
                                   stdout=subprocess.PIPE, text=True, env=ENV)
     pty = with_board.stdout.readline().strip()
     daemon = start_daemon(tmp_path, pty, config=yaml)
     try:
-        time.sleep(5.0)
+        time.sleep(8.0)
         daemon.send_signal(signal.SIGKILL)
         daemon.wait(timeout=10)
     finally:
@@ -122,8 +124,17 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
         with_board.wait(timeout=5)
     q = DiskQueue(tmp_path / "queue", max_bytes=64_000_000)
     queued = q.next_seq - 1
+    on_disk = {(r.topic, r.payload.rsplit(b',"seq":', 1)[0] + b"}") for r in q.next_batch(queued)}
     q.close()
     assert queued >= 20
+    # the queue lost at most the last second: it holds every message of the (flushed) MCAP log
+    # but those of the last wall second (SPEED board seconds) before the kill
+    (part,) = (tmp_path / "logs").glob("*.mcap.part")
+    logged = [(t, s, data) for t, s, data in iter_messages_lenient(part)
+              if t.strip("/").split("/")[-1] in PUBLISHED]
+    missing = [s for t, s, data in logged if ("cmsensord/rig1" + t[3:], data) not in on_disk]
+    assert len(logged) >= 20
+    assert all(s >= logged[-1][1] - SPEED * 1e9 for s in missing), (len(missing), len(logged))
     broker.start()
     sub = Subscriber(broker.port)
     board2 = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",

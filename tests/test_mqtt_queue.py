@@ -153,3 +153,23 @@ def test_default_yaml_documents_every_mqtt_key_with_its_default():
     assert set(data) == set(fields)
     cfg = MqttConfig(**{**data, "publish": tuple(data["publish"])})
     assert all(getattr(cfg, k) == v for k, v in fields.items() if k != "host")
+
+
+def test_a_full_hand_over_queue_drops_the_oldest_with_an_event(tmp_path):
+    pytest.importorskip("paho.mqtt")
+    from cmsensord.publish.publisher import Publisher
+
+    pub = Publisher(MqttConfig(host="127.0.0.1", port=9, client_id="t", publish=("events",),
+                               handover_messages=16, reconnect_min_s=5.0), str(tmp_path / "q"))
+    for i in range(20):                         # before the thread runs: 4 too many
+        pub.offer("/cm/events", 10**18, {"kind": "start", "message": str(i)})
+    pub.start()
+    try:
+        assert _wait(lambda: pub.queue.next_seq == 17)
+        assert _wait(lambda: any(e[3].get("action") == "handover_dropped" for e in list(pub.events)))
+        dropped = [e for e in list(pub.events) if e[3].get("action") == "handover_dropped"]
+        assert [(e[1], e[3]["count"]) for e in dropped] == [
+            ("the publisher fell behind: dropped the 4 oldest message(s) waiting in memory (4 in all)", 4)]
+        assert b'"message":"4"' in pub.queue.next_batch(1)[0].payload       # 0..3 were dropped
+    finally:
+        pub.close()

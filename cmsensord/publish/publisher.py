@@ -61,7 +61,7 @@ class Publisher:
         self._tokens = 0.0
         self._refused: str | None = None          # the reason of the last refusal (one event each)
         self._queue_error: str | None = None
-        self._dropped_seen = 0
+        self._dropped_seen = self._handover_seen = 0
         self._connecting_since = 0.0
         self._last_send = 0.0
         self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
@@ -230,6 +230,11 @@ class Publisher:
                 self._queue_error = None
                 self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO,
                             action="resumed")
+        if self.handover_drops != self._handover_seen:
+            n, self._handover_seen = self.handover_drops - self._handover_seen, self.handover_drops
+            self._event("mqtt_queue", f"the publisher fell behind: dropped the {n} oldest message(s) "
+                        f"waiting in memory ({self.handover_drops} in all)", logging.WARNING,
+                        action="handover_dropped", count=n, total=self.handover_drops)
         if self.queue.dropped != self._dropped_seen:
             n = self.queue.dropped - self._dropped_seen
             self._dropped_seen = self.queue.dropped

@@ -9,6 +9,7 @@ publish without knowing. The publisher's events (link state, queue drops) are ha
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 _OWN = frozenset({"inner", "publisher", "_draining", "on_publisher_event"})
@@ -42,6 +43,9 @@ class TeeSink:
             return self.inner.close()
         finally:
             self.publisher.close()
+            while self.publisher.events:        # after the log's end: to the journal only
+                kind, message, level, _ = self.publisher.events.popleft()
+                logging.getLogger("cmsensord").log(level, "%s: %s", kind, message)
 
     def drain_events(self) -> None:
         """The publisher's events -> ``on_publisher_event`` (the event log), in order, never
