@@ -60,6 +60,7 @@ class Publisher:
         self._inflight: dict[int, int] = {}       # paho mid -> seq
         self._tokens = 0.0
         self._refused: str | None = None          # the reason of the last refusal (one event each)
+        self._down_reported = False               # this outage has had its event
         self._queue_error: str | None = None
         self._dropped_seen = self._handover_seen = 0
         self._connecting_since = 0.0
@@ -164,13 +165,15 @@ class Publisher:
         self._client, self._connecting_since = client, time.monotonic()
 
     def _down(self, reason: str, state: str) -> None:
-        """The link is down: one event per distinct reason (a retry failing alike is silent)."""
+        """The link is down: one event per outage (a retry failing alike is silent), and one per
+        distinct refusal (a wrong password is reported even while the outage is)."""
         self.state = state
-        if self._refused != reason:
-            self._refused = reason
-            level = logging.ERROR if state == "refused" else logging.WARNING
-            self._event("mqtt_link", f"{reason}; retrying with back-off up to {self.cfg.reconnect_max_s:g} s, "
-                        f"{self.queue.depth} message(s) queued", level, state=state, queued=self.queue.depth)
+        if self._refused == reason or (state == "disconnected" and self._down_reported):
+            return
+        self._refused, self._down_reported = reason, True
+        level = logging.ERROR if state == "refused" else logging.WARNING
+        self._event("mqtt_link", f"{reason}; retrying with back-off up to {self.cfg.reconnect_max_s:g} s, "
+                    f"{self.queue.depth} message(s) queued", level, state=state, queued=self.queue.depth)
 
     def _drop_client(self) -> None:
         client, self._client = self._client, None
@@ -183,7 +186,7 @@ class Publisher:
         if reason.is_failure:
             self._down(f"broker {self.cfg.host}:{self.cfg.port} refused the connection: {reason}", "refused")
             return
-        self.state, self._refused = "connected", None
+        self.state, self._refused, self._down_reported = "connected", None, False
         self._inflight.clear()
         self.queue.rewind()
         self._event("mqtt_link", f"connected to {self.cfg.host}:{self.cfg.port} as {self.cfg.client}; "
@@ -281,6 +284,7 @@ class Publisher:
             self._client.loop(timeout=POLL_S)
         if self._client is not None and self.state == "connected":
             info = self._client.publish(self.topics.status, "offline", qos=1, retain=True)
+            self.state = "stopping"             # the disconnection below is ours: no event
             for _ in range(10):
                 if info.is_published():
                     break
