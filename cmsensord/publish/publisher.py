@@ -64,6 +64,9 @@ class Publisher:
         self._queue_error: str | None = None
         self._dropped_seen = self._handover_seen = 0
         self._connecting_since = 0.0
+        self._dialing: threading.Thread | None = None
+        self._dialed: Any = None                  # the client the dialling thread connected
+        self._dial_error = ""
         self._last_send = 0.0
         self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
         if self.queue.truncated_bytes:
@@ -117,10 +120,15 @@ class Publisher:
             while not self._stop.is_set():
                 self._to_disk()
                 now = time.monotonic()
-                if self._client is None and now >= next_try:
-                    self._connect(mqtt)
-                    if self._client is None:
+                if self._client is None and self._dialing is None and now >= next_try:
+                    self._dialing = self._dial(mqtt)
+                if self._dialing is not None and not self._dialing.is_alive():
+                    self._dialing = None
+                    if self._dialed is None:
+                        self._down(self._dial_error, "disconnected")
                         next_try, backoff = now + backoff, min(backoff * 2, self.cfg.reconnect_max_s)
+                    else:
+                        self._client, self._connecting_since, self._dialed = self._dialed, now, None
                 if self._client is not None:
                     self._client.loop(timeout=POLL_S)
                     if self.state == "connected":
@@ -143,8 +151,10 @@ class Publisher:
             self._event("mqtt_link", f"the MQTT publisher stopped: {type(exc).__name__}: {exc}",
                         logging.ERROR, state="failed")
 
-    def _connect(self, mqtt: Any) -> None:
-        """A new client, connected (TCP and TLS) or not; CONNACK arrives in ``loop``."""
+    def _dial(self, mqtt: Any) -> threading.Thread:
+        """A new client connecting (TCP and TLS) in a short-lived thread, so that this thread
+        keeps moving offered messages to disk meanwhile: ``_dialed`` is the client, or None
+        on failure; CONNACK arrives in ``loop``."""
         cfg = self.cfg
         client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=cfg.client,
                              protocol=mqtt.MQTTv311, clean_session=True)
@@ -152,17 +162,24 @@ class Publisher:
         client.will_set(self.topics.status, "offline", qos=1, retain=True)
         client.on_connect, client.on_disconnect = self._on_connect, self._on_disconnect
         client.on_publish = self._on_publish
-        self.state = "connecting"
-        try:
-            if cfg.username is not None:
-                client.username_pw_set(cfg.username, _password(cfg.password_file))
-            if cfg.ca_file is not None or cfg.certfile is not None:
-                client.tls_set(ca_certs=cfg.ca_file, certfile=cfg.certfile, keyfile=cfg.keyfile)
-            client.connect(cfg.host, cfg.port, keepalive=cfg.keepalive_s)
-        except (OSError, ValueError) as err:        # refused, unreachable, TLS handshake, files
-            self._down(f"cannot connect to {cfg.host}:{cfg.port}: {err}", "disconnected")
-            return
-        self._client, self._connecting_since = client, time.monotonic()
+        self.state, self._dialed = "connecting", None
+
+        def dial() -> None:
+            try:
+                if cfg.username is not None:
+                    client.username_pw_set(cfg.username, _password(cfg.password_file))
+                if cfg.ca_file is not None or cfg.certfile is not None:
+                    client.tls_set(ca_certs=cfg.ca_file, certfile=cfg.certfile, keyfile=cfg.keyfile)
+                client.connect(cfg.host, cfg.port, keepalive=cfg.keepalive_s)
+            except Exception as err:                # noqa: BLE001 - refused, unreachable, TLS, files
+                self._dial_error = f"cannot connect to {cfg.host}:{cfg.port}: {err}"
+                return
+            self._dialed = client
+
+        self._dial_error = ""
+        thread = threading.Thread(target=dial, name="mqtt-connect", daemon=True)
+        thread.start()
+        return thread
 
     def _down(self, reason: str, state: str) -> None:
         """The link is down: one event per outage (a retry failing alike is silent), and one per
