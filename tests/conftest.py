@@ -54,6 +54,7 @@ PROCESS_MODULES = frozenset({
     "test_simulate_scenarios.py",
     "test_acoustic_calib_command.py",
     "test_indicators_daemon.py",
+    "test_mqtt.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
@@ -70,6 +71,7 @@ PROCESS_TESTS = frozenset({
     "test_systemd_unit.py::test_systemd_analyze_verify_prints_nothing",
     "test_systemd_unit.py::test_systemd_analyze_verify_does_complain_here",
     "test_systemd_unit.py::test_systemd_analyze_security_exposure_is_at_most_2",
+    "test_systemd_unit.py::test_systemd_analyze_with_the_mqtt_drop_in_verifies_and_stays_at_most_2",
 })
 
 #: Fixtures that start a process (``small_fs`` runs mount and umount).

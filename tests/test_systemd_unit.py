@@ -132,3 +132,30 @@ def test_systemd_analyze_security_exposure_is_at_most_2(tmp_path):
     m = re.search(r"Overall exposure level for cmsensord\.service: (\d+\.\d+)", r.stdout)
     assert m, r.stdout + r.stderr
     assert float(m.group(1)) <= MAX_EXPOSURE, r.stdout
+
+
+DROP_IN = ROOT / "systemd" / "cmsensord-mqtt.conf"
+
+
+def with_drop_in(text: str) -> str:
+    """The unit as systemd reads it with the MQTT drop-in: its [Service] lines after the unit's."""
+    service = DROP_IN.read_text().split("[Service]", 1)[1]
+    return text.replace("\n[Install]", f"\n{service}\n[Install]")
+
+
+def test_the_mqtt_drop_in_opens_only_internet_sockets_to_the_listed_ranges():
+    s = settings(with_drop_in(UNIT.read_text()))
+    assert s["PrivateNetwork"][-1] == "no"
+    assert s["RestrictAddressFamilies"][-1].split() == ["AF_UNIX", "AF_INET", "AF_INET6"]
+    assert s["IPAddressDeny"] == ["any"] and "localhost" in s["IPAddressAllow"]
+
+
+@needs_analyze
+def test_systemd_analyze_with_the_mqtt_drop_in_verifies_and_stays_at_most_2(tmp_path):
+    unit = installed_unit(tmp_path, with_drop_in(UNIT.read_text()))
+    r = analyze("verify", "--man=no", str(unit))
+    assert (r.returncode, r.stdout + r.stderr) == (0, "")
+    r = analyze("security", "--offline=true", "--no-pager", str(unit))
+    m = re.search(r"Overall exposure level for cmsensord\.service: (\d+\.\d+)", r.stdout)
+    assert m, r.stdout + r.stderr
+    assert float(m.group(1)) <= MAX_EXPOSURE, r.stdout

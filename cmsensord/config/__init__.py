@@ -11,6 +11,8 @@ with its default)::
     tacho:    the shaft tacho                          -> TachoConfig
     orders:   the order tracker and its components     -> OrdersConfig
     acoustic: microphone channels                      -> AcousticConfig
+    indicators, bearings: vibration indicators         -> IndicatorsConfig, BearingConfig
+    mqtt:     optional: publishing to an MQTT broker   -> MqttConfig (absent: None)
 
 Modules: :mod:`.validation` (the generic checks, :class:`ConfigError`),
 :mod:`.settings` (the dataclasses), :mod:`.loading` (YAML and dicts -> Config,

@@ -24,6 +24,7 @@ import yaml
 
 from .capture import CaptureConfig
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
+from .mqtt import MqttConfig
 from .settings import (
     MAX_CHANNELS,
     AcousticConfig,
@@ -127,6 +128,7 @@ def config_from_dict(
     sections["indicators"] = _build_indicators(d.get("indicators"), source)
     sections["bearings"] = _build_list(BearingConfig, d.get("bearings"), source, "bearings",
                                        "(name: ..., channel: ..., elements: ...)")
+    sections["mqtt"] = _build_mqtt(d.get("mqtt"), source)
 
     channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
@@ -225,6 +227,28 @@ def _build_indicators(raw: Any, source: str) -> IndicatorsConfig:
         values = {**values, "bands": _build_list(BandConfig, values["bands"], source, "indicators.bands",
                                                  "(name: ..., lo_hz: ..., hi_hz: ...)")}
     return _build(IndicatorsConfig, values, source, "indicators")
+
+
+def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
+    """The optional ``mqtt`` section; its files must be readable and paho-mqtt installed."""
+    if raw is None:
+        return None
+    values = _mapping(raw, source, "mqtt")
+    _reject_unknown(values, [f.name for f in dataclasses.fields(MqttConfig)], source, "mqtt")
+    cfg: MqttConfig = _build(MqttConfig, values, source, "mqtt")
+    for key in ("password_file", "ca_file", "certfile", "keyfile"):
+        path = getattr(cfg, key)
+        if path is not None:
+            try:
+                with open(path, "rb"):
+                    pass
+            except OSError as err:
+                raise ConfigError(source, f"mqtt.{key}", f"cannot read: {err.strerror or err}", path) from None
+    import importlib.util
+
+    if importlib.util.find_spec("paho") is None or importlib.util.find_spec("paho.mqtt") is None:
+        raise ConfigError(source, "mqtt", "publishing needs paho-mqtt: pip install 'cmsensord[mqtt]'")
+    return cfg
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -429,6 +453,8 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
                                  for b in cfg.indicators.bands]},
         "bearings": [dataclasses.asdict(b) for b in cfg.bearings],
         "capture": {**dataclasses.asdict(cfg.capture), "triggers": list(cfg.capture.triggers)},
+        **({"mqtt": {**dataclasses.asdict(cfg.mqtt), "publish": list(cfg.mqtt.publish)}}
+           if cfg.mqtt is not None else {}),
     }
 
 

@@ -13,6 +13,7 @@ from typing import Any, ClassVar
 
 from .capture import CaptureConfig
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
+from .mqtt import MqttConfig
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
 __all__ = [
@@ -377,6 +378,7 @@ class Config:
     bearings: tuple[BearingConfig, ...] = field(default=(), metadata={"help": "bearings and their channels"})
     capture: CaptureConfig = field(default_factory=CaptureConfig,
                                    metadata={"help": "event-triggered captures of the signal"})
+    mqtt: MqttConfig | None = field(default=None, metadata={"help": "publishing to an MQTT broker"})
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
 

@@ -16,7 +16,7 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.signals import StopFlag
-from cmsensord.service.sink import open_sink, route_sink_events
+from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
 from cmsensord.source import BATCH_S, SerialSource
 
@@ -133,9 +133,11 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     queue = source.queue
     sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
     proc: Processor
+    publisher = publisher_of(sink)
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
                      diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
-                                          "lag_s": round(proc.lag_s(), 3)})
+                                          "lag_s": round(proc.lag_s(), 3),
+                                          **({"mqtt": publisher.diagnostics()} if publisher else {})})
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
@@ -173,10 +175,13 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
     reader = source.reader
 
     fallback = fallback_note()
+    publisher = publisher_of(sink)
 
-    def line_now() -> str:              # the status line; a missing C kernel said at its end
+    def line_now() -> str:              # the status line; a missing C kernel, the broker link at its end
         line = status_line(proc, source)
-        return f"{line} | {fallback}" if fallback else line
+        if fallback:
+            line = f"{line} | {fallback}"
+        return f"{line} | {publisher.status()}" if publisher is not None else line
 
     def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
         line = line_now()

@@ -5,8 +5,10 @@ from __future__ import annotations
 import logging
 
 from cmsensord.config import Config
+from cmsensord.errors import SinkError
 from cmsensord.monitor.events import EventLog
 from cmsensord.sinks.rotating import RotatingSink
+from cmsensord.sinks.tee import TeeSink
 
 #: disk_error events that report routine work or a recovery (details.action): INFO in the journal
 _DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
@@ -15,8 +17,27 @@ _DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False
               ) -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable.
-    ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon)."""
-    return RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
+    ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
+    With an ``mqtt`` section, a :class:`TeeSink` that also publishes (its thread started;
+    its ``close`` stops it)."""
+    sink = RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
+    if cfg.mqtt is None:
+        return sink
+    from cmsensord.publish.publisher import Publisher  # paho only when mqtt is configured
+
+    queue_dir = cfg.mqtt.queue_path(cfg.output.dir)
+    try:
+        publisher = Publisher(cfg.mqtt, queue_dir, channels=tuple(ch.name for ch in cfg.channels))
+    except OSError as exc:
+        sink.close()
+        raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None
+    publisher.start()
+    return TeeSink(sink, publisher)  # type: ignore[return-value]  # a RotatingSink to its callers
+
+
+def publisher_of(sink: RotatingSink):
+    """The sink's MQTT publisher, or None."""
+    return sink.publisher if isinstance(sink, TeeSink) else None
 
 
 def sink_log_level(kind: str, fields: dict) -> int | None:
@@ -32,3 +53,7 @@ def route_sink_events(sink: RotatingSink, log: EventLog) -> None:
     the recent events and the journal. Queued ones (salvage at start) go now."""
     sink.on_event = lambda kind, message, **fields: log.emit(
         kind, None, message, log_level=sink_log_level(kind, fields), **fields)
+    if isinstance(sink, TeeSink):
+        sink.on_publisher_event = lambda kind, message, level, fields: log.emit(
+            kind, None, message, log_level=level, **fields)
+        sink.drain_events()

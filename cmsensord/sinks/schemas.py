@@ -128,6 +128,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "time_base",
     "capture",
     "capture_skipped",
+    "mqtt_link",
+    "mqtt_queue",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -369,6 +371,10 @@ DIAGNOSTICS = _obj(
         "lag_s": _num("processing lag: wall clock minus the time of the last processed frame [s]"),
         "observations": _int("observations processed since start"),
         "uptime_s": _num("seconds since the daemon started", nullable=False),
+        "mqtt": {"type": "object", "description": "the link to the MQTT broker (only with an mqtt "
+                 "section): state (connecting, connected, disconnected, refused), messages queued "
+                 "and not yet acknowledged, the queue's bytes on disk, dropped, sent and acknowledged "
+                 "since start"},
     },
     ["timestamp", "link", "queue_depth", "queue_drops", "observations", "uptime_s"],
 )

@@ -1,0 +1,311 @@
+"""The MQTT publisher: paho-mqtt in its own thread, fed by a bounded in-memory hand-over queue.
+
+The processing loop calls :meth:`Publisher.offer`, which only appends to a bounded deque (the
+oldest entry is dropped and counted when it is full): it never waits for the network or the
+disk. The thread moves offered messages into the :class:`~.disk_queue.DiskQueue` (numbering
+them), sends from the queue while connected (at most ``MAX_INFLIGHT`` unacknowledged, at most
+``resend_per_s``), and moves the queue's cursor with each PUBACK. A lost connection rewinds the
+send cursor to the first unacknowledged message; reconnection backs off from
+``reconnect_min_s`` doubling to ``reconnect_max_s``. State changes and losses become events
+(:attr:`Publisher.events`, drained by the caller's thread into /cm/events).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import functools
+import json
+import logging
+import threading
+import time
+from typing import Any
+
+from cmsensord.config.mqtt import MqttConfig
+from cmsensord.publish.disk_queue import DiskQueue
+from cmsensord.publish.topics import TopicMap, payload
+from cmsensord.sinks.mcap_encoding import ns_to_stamp
+
+#: messages sent and not yet acknowledged (paho's own default window)
+MAX_INFLIGHT = 20
+#: the thread's poll period [s]: how long an offered message waits at most before it is queued
+#: (0.05 s costs 0.8 % of a core more at the default rate; bench/bench_mqtt.py)
+POLL_S = 0.2
+#: a broker that accepted TCP but sent no CONNACK for this long is given up and retried
+CONNACK_S = 10.0
+
+
+def _password(path: str | None) -> str | None:
+    """The password: the file's first line (the file is read at each connection)."""
+    if path is None:
+        return None
+    with open(path, encoding="utf-8") as f:
+        return f.readline().rstrip("\r\n")
+
+
+class Publisher:
+    """Publishes what :meth:`offer` is given to the broker of ``cfg``; ``queue_dir`` holds the
+    disk queue (OSError if it cannot be created)."""
+
+    def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = ()) -> None:
+        self.cfg, self.topics, self.channels = cfg, TopicMap(cfg), channels
+        self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s)
+        self.handover: collections.deque = collections.deque(maxlen=cfg.handover_messages)
+        self.handover_drops = 0
+        self.events: collections.deque = collections.deque(maxlen=1000)
+        self.state = "connecting"
+        self.sent = self.acked_total = 0
+        self._stop = threading.Event()
+        self._client: Any = None
+        self._inflight: dict[int, int] = {}       # paho mid -> seq
+        self._tokens = 0.0
+        self._refused: str | None = None          # the reason of the last refusal (one event each)
+        self._down_reported = False               # this outage has had its event
+        self._queue_error: str | None = None
+        self._dropped_seen = self._handover_seen = 0
+        self._connecting_since = 0.0
+        self._dialing: threading.Thread | None = None
+        self._dialed: Any = None                  # the client the dialling thread connected
+        self._dial_error = ""
+        self._last_send = 0.0
+        self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
+        if self.queue.truncated_bytes:
+            self._event("mqtt_queue", f"store-and-forward queue: cut {self.queue.truncated_bytes} "
+                        "byte(s) of a torn record at its end (a crash while writing)",
+                        logging.WARNING, action="truncated", bytes=self.queue.truncated_bytes)
+        if self.queue.depth:
+            self._event("mqtt_queue", f"store-and-forward queue: {self.queue.depth} message(s) "
+                        "from an earlier run wait for the broker", logging.INFO, action="resumed",
+                        count=self.queue.depth)
+
+    # -- the caller's side ---------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread.start()
+
+    def offer(self, topic: str, stamp_ns: int, msg: dict) -> None:
+        """Hand one MCAP message over (non-blocking); not published kinds are ignored here."""
+        route = self.topics.route(topic)
+        if route is None:
+            return
+        if len(self.handover) == self.handover.maxlen:
+            self.handover_drops += 1
+        self.handover.append((route, topic, stamp_ns, msg))
+
+    def close(self, timeout: float = 3.0) -> None:
+        """Stop the thread: offered messages are queued on disk, sent if connected, and the
+        retained status becomes ``offline``."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def diagnostics(self) -> dict:
+        """The link's state for /cm/diagnostics."""
+        q = self.queue
+        return {"state": self.state, "queued": q.depth, "queue_bytes": q.size_bytes,
+                "dropped": q.dropped + self.handover_drops, "sent": self.sent, "acked": self.acked_total}
+
+    def status(self) -> str:
+        """The status line's part: ``mqtt connected q 0``."""
+        return f"mqtt {self.state} q {self.queue.depth}"
+
+    def _event(self, kind: str, message: str, level: int, **fields: Any) -> None:
+        self.events.append((kind, message, level, fields))
+
+    # -- the thread ----------------------------------------------------------------------------
+    def _run(self) -> None:
+        import paho.mqtt.client as mqtt
+
+        backoff, next_try, last_beat = self.cfg.reconnect_min_s, 0.0, 0.0
+        try:
+            while not self._stop.is_set():
+                self._to_disk()
+                now = time.monotonic()
+                if self._client is None and self._dialing is None and now >= next_try:
+                    self._dialing = self._dial(mqtt)
+                if self._dialing is not None and not self._dialing.is_alive():
+                    self._dialing = None
+                    if self._dialed is None:
+                        self._down(self._dial_error, "disconnected")
+                        next_try, backoff = now + backoff, min(backoff * 2, self.cfg.reconnect_max_s)
+                    else:
+                        self._client, self._connecting_since, self._dialed = self._dialed, now, None
+                if self._client is not None:
+                    self._client.loop(timeout=POLL_S)
+                    if self.state == "connected":
+                        backoff = self.cfg.reconnect_min_s
+                        self._send(now)
+                        if now - last_beat >= self.cfg.heartbeat_s:
+                            last_beat = now
+                            self._heartbeat()
+                    elif self.state != "connecting" or now - self._connecting_since > CONNACK_S:
+                        if self.state == "connecting":
+                            self._down(f"no answer from {self.cfg.host}:{self.cfg.port}", "disconnected")
+                        self._drop_client()
+                        next_try, backoff = now + backoff, min(backoff * 2, self.cfg.reconnect_max_s)
+                else:
+                    self._stop.wait(POLL_S)
+                self._sync()
+            self._finish()
+        except Exception as exc:                    # noqa: BLE001 - reported, never a crash
+            self.state = "failed"
+            self._event("mqtt_link", f"the MQTT publisher stopped: {type(exc).__name__}: {exc}",
+                        logging.ERROR, state="failed")
+
+    def _dial(self, mqtt: Any) -> threading.Thread:
+        """A new client connecting (TCP and TLS) in a short-lived thread, so that this thread
+        keeps moving offered messages to disk meanwhile: ``_dialed`` is the client, or None
+        on failure; CONNACK arrives in ``loop``."""
+        cfg = self.cfg
+        client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=cfg.client,
+                             protocol=mqtt.MQTTv311, clean_session=True)
+        client.max_inflight_messages_set(MAX_INFLIGHT)
+        client.will_set(self.topics.status, "offline", qos=1, retain=True)
+        client.on_connect, client.on_disconnect = self._on_connect, self._on_disconnect
+        client.on_publish = self._on_publish
+        self.state, self._dialed = "connecting", None
+
+        def dial() -> None:
+            try:
+                if cfg.username is not None:
+                    client.username_pw_set(cfg.username, _password(cfg.password_file))
+                if cfg.ca_file is not None or cfg.certfile is not None:
+                    client.tls_set(ca_certs=cfg.ca_file, certfile=cfg.certfile, keyfile=cfg.keyfile)
+                client.connect(cfg.host, cfg.port, keepalive=cfg.keepalive_s)
+            except Exception as err:                # noqa: BLE001 - refused, unreachable, TLS, files
+                self._dial_error = f"cannot connect to {cfg.host}:{cfg.port}: {err}"
+                return
+            self._dialed = client
+
+        self._dial_error = ""
+        thread = threading.Thread(target=dial, name="mqtt-connect", daemon=True)
+        thread.start()
+        return thread
+
+    def _down(self, reason: str, state: str) -> None:
+        """The link is down: one event per outage (a retry failing alike is silent), and one per
+        distinct refusal (a wrong password is reported even while the outage is)."""
+        self.state = state
+        if self._refused == reason or (state == "disconnected" and self._down_reported):
+            return
+        self._refused, self._down_reported = reason, True
+        level = logging.ERROR if state == "refused" else logging.WARNING
+        self._event("mqtt_link", f"{reason}; retrying with back-off up to {self.cfg.reconnect_max_s:g} s, "
+                    f"{self.queue.depth} message(s) queued", level, state=state, queued=self.queue.depth)
+
+    def _drop_client(self) -> None:
+        client, self._client = self._client, None
+        with contextlib.suppress(Exception):        # the socket may be gone already
+            client.disconnect()
+        self._inflight.clear()
+        self.queue.rewind()
+
+    def _on_connect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
+        if reason.is_failure:
+            self._down(f"broker {self.cfg.host}:{self.cfg.port} refused the connection: {reason}", "refused")
+            return
+        self.state, self._refused, self._down_reported = "connected", None, False
+        self._inflight.clear()
+        self.queue.rewind()
+        self._event("mqtt_link", f"connected to {self.cfg.host}:{self.cfg.port} as {self.cfg.client}; "
+                    f"{self.queue.depth} message(s) queued", logging.INFO, state="connected",
+                    queued=self.queue.depth)
+        client.publish(self.topics.status, "online", qos=1, retain=True)
+        if self.cfg.discovery:
+            from cmsensord.publish.discovery import discovery_messages
+
+            for topic, body in discovery_messages(self.cfg, self.channels):
+                client.publish(topic, body, qos=1, retain=True)
+
+    def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
+        if self.state == "connected":
+            self._down(f"lost the broker {self.cfg.host}:{self.cfg.port}: {reason}", "disconnected")
+        elif self.state == "connecting":
+            self._down(f"cannot connect to {self.cfg.host}:{self.cfg.port}: {reason}", "disconnected")
+
+    def _on_publish(self, client: Any, userdata: Any, mid: int, reason: Any, properties: Any) -> None:
+        seq = self._inflight.pop(mid, None)
+        if seq is not None:
+            self.queue.ack(seq)
+            self.acked_total += 1
+
+    def _to_disk(self) -> None:
+        """Offered messages -> the disk queue, numbered; a full disk is one event per outage."""
+        while self.handover:
+            (mqtt_topic, retain), topic, stamp_ns, msg = self.handover[0]
+            try:
+                self.queue.append(mqtt_topic, functools.partial(payload, topic, stamp_ns, msg), retain)
+            except OSError as err:
+                reason = err.strerror or str(err)
+                if self._queue_error != reason:
+                    self._queue_error = reason
+                    self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: cannot write "
+                                f"({reason}); new messages wait in memory ({self.handover.maxlen} at most)",
+                                logging.ERROR, action="write_error", reason=reason)
+                return
+            except Exception as err:                # noqa: BLE001 - a message JSON cannot carry
+                self._event("mqtt_queue", f"{topic}: not published: {err}", logging.WARNING,
+                            action="encode_error")
+            self.handover.popleft()
+            if self._queue_error is not None:
+                self._queue_error = None
+                self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO,
+                            action="resumed")
+        if self.handover_drops != self._handover_seen:
+            n, self._handover_seen = self.handover_drops - self._handover_seen, self.handover_drops
+            self._event("mqtt_queue", f"the publisher fell behind: dropped the {n} oldest message(s) "
+                        f"waiting in memory ({self.handover_drops} in all)", logging.WARNING,
+                        action="handover_dropped", count=n, total=self.handover_drops)
+        if self.queue.dropped != self._dropped_seen:
+            n = self.queue.dropped - self._dropped_seen
+            self._dropped_seen = self.queue.dropped
+            self._event("mqtt_queue", f"store-and-forward queue over {self.cfg.queue_mb:g} MB: dropped "
+                        f"the {n} oldest unsent message(s) ({self.queue.dropped} in all)",
+                        logging.WARNING, action="dropped", count=n, total=self.queue.dropped)
+
+    def _sync(self) -> None:
+        try:
+            self.queue.sync()
+        except OSError as err:
+            reason = err.strerror or str(err)
+            if self._queue_error != reason:
+                self._queue_error = reason
+                self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: fsync failed "
+                            f"({reason})", logging.ERROR, action="write_error", reason=reason)
+
+    def _send(self, now: float) -> None:
+        rate = self.cfg.resend_per_s
+        self._tokens = min(max(rate, 1.0), self._tokens + rate * (now - (self._last_send or now)))
+        self._last_send = now
+        room = min(MAX_INFLIGHT - len(self._inflight), int(self._tokens))
+        if room <= 0:
+            return
+        for rec in self.queue.next_batch(room):
+            info = self._client.publish(rec.topic, rec.payload, qos=self.cfg.qos, retain=rec.retain)
+            self._inflight[info.mid] = rec.seq
+            self._tokens -= 1
+            self.sent += 1
+
+    def _heartbeat(self) -> None:
+        q = self.queue
+        beat = {"timestamp": ns_to_stamp(time.time_ns()), "state": self.state, "queued": q.depth,
+                "dropped": q.dropped + self.handover_drops, "next_seq": q.next_seq}
+        self._client.publish(self.topics.heartbeat, json.dumps(beat), qos=0, retain=False)
+
+    def _finish(self) -> None:
+        """At stop: queue what was offered; send for up to a second; ``offline``; disconnect."""
+        self._to_disk()
+        end = time.monotonic() + 1.0
+        while self._client is not None and self.state == "connected" and time.monotonic() < end \
+                and (self.queue.send_seq < self.queue.next_seq or self._inflight):
+            self._send(time.monotonic())
+            self._client.loop(timeout=POLL_S)
+        if self._client is not None and self.state == "connected":
+            info = self._client.publish(self.topics.status, "offline", qos=1, retain=True)
+            self.state = "stopping"             # the disconnection below is ours: no event
+            for _ in range(10):
+                if info.is_published():
+                    break
+                self._client.loop(timeout=POLL_S)
+            self._client.disconnect()
+        self.state = "stopped"
+        self.queue.close()

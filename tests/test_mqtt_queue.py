@@ -1,0 +1,175 @@
+"""The store-and-forward queue of the MQTT publisher (cmsensord/publish/disk_queue.py): order,
+acknowledgements, a torn record after a crash, the bound, a full disk (/dev/full under its file)."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from cmsensord.config.mqtt import MqttConfig
+from cmsensord.publish.disk_queue import DiskQueue
+from cmsensord.publish.topics import TopicMap, payload
+
+
+def fill(q: DiskQueue, n: int, size: int = 100) -> list[int]:
+    return [q.append(f"p/ch0/severity/{i}", lambda seq, i=i: b"x" * size + str(i).encode(), i % 2 == 0)
+            for i in range(n)]
+
+
+def test_records_come_back_in_order_and_a_reconnection_resends_only_the_unacknowledged(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=1000)
+    assert fill(q, 30) == list(range(1, 31))
+    first = q.next_batch(10)
+    assert [r.seq for r in first] == list(range(1, 11))
+    assert first[3].topic == "p/ch0/severity/3" and first[3].payload.endswith(b"3") and not first[3].retain
+    for seq in (2, 1, 4):                       # out of order: the cursor stops before 3
+        q.ack(seq)
+    assert q.acked == 2 and q.depth == 28
+    q.rewind()
+    assert [r.seq for r in q.next_batch(3)] == [3, 4, 5]
+    for seq in range(3, 21):
+        q.ack(seq)
+    assert q.acked == 20 and min(s.first for s in q.segments) > 1      # acknowledged segments gone
+    q.close()
+
+
+def test_a_torn_record_is_cut_off_and_numbering_goes_on_after_a_restart(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 5)
+    q.ack(1)
+    q.close()
+    seg = sorted(tmp_path.glob("q-*.seg"))[-1]
+    whole = seg.read_bytes()
+    seg.write_bytes(whole + whole[:40])         # a crash in the middle of the next record
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.truncated_bytes == 40 and seg.stat().st_size == len(whole)
+    assert q.acked == 1 and [r.seq for r in q.next_batch(10)] == [2, 3, 4, 5]
+    assert q.append("t", lambda seq: b"{}", False) == 6
+    q.close()
+
+
+def test_a_corrupt_record_ends_the_segment_there(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 3)
+    q.close()
+    seg = sorted(tmp_path.glob("q-*.seg"))[-1]
+    data = bytearray(seg.read_bytes())
+    data[-5] ^= 0xFF                            # a bit flip in the last record's payload
+    seg.write_bytes(bytes(data))
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert [r.seq for r in q.next_batch(10)] == [1, 2]
+    q.close()
+
+
+def test_the_bound_drops_the_oldest_segment_and_counts_its_unsent_records(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=5000, segment_bytes=1000)
+    fill(q, 100)
+    assert q.size_bytes <= 5000 + 1000
+    assert q.dropped == q.acked > 0
+    assert q.depth == 100 - q.dropped
+    assert q.next_batch(1)[0].seq == q.dropped + 1
+    q.close()
+
+
+def test_a_full_disk_raises_and_leaves_the_queue_as_it_was(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 2)
+    saved = os.dup(q._fd)
+    full = os.open("/dev/full", os.O_WRONLY)
+    os.dup2(full, q._fd)
+    try:
+        with pytest.raises(OSError):
+            q.append("t", lambda seq: b"{}", False)
+        assert q.next_seq == 3 and q.depth == 2
+    finally:
+        os.dup2(saved, q._fd)
+        os.close(full)
+        os.close(saved)
+    assert q.append("t", lambda seq: b"{}", False) == 3
+    q.close()
+
+
+def test_the_publisher_reports_a_full_disk_once_keeps_the_messages_and_resumes(tmp_path):
+    pytest.importorskip("paho.mqtt")
+    from cmsensord.publish.publisher import Publisher
+
+    pub = Publisher(MqttConfig(host="127.0.0.1", port=9, client_id="t", publish=("events",),
+                               reconnect_min_s=5.0), str(tmp_path / "q"))
+    pub.start()
+    try:
+        pub.offer("/cm/events", 10**18, {"kind": "start", "message": "first"})
+        assert _wait(lambda: pub.queue.next_seq == 2)
+        saved, full = os.dup(pub.queue._fd), os.open("/dev/full", os.O_WRONLY)
+        os.dup2(full, pub.queue._fd)
+        for i in range(5):
+            pub.offer("/cm/events", 10**18, {"kind": "stop", "message": str(i)})
+        assert _wait(lambda: any(e[3].get("action") == "write_error" for e in list(pub.events)))
+        time.sleep(0.3)
+        errors = [e for e in list(pub.events) if e[0] == "mqtt_queue"]
+        assert [e[1] for e in errors] == [f"store-and-forward queue {tmp_path / 'q'}: cannot write "
+                                          "(No space left on device); new messages wait in memory "
+                                          "(10000 at most)"]
+        assert len(pub.handover) == 5
+        os.dup2(saved, pub.queue._fd)
+        assert _wait(lambda: pub.queue.next_seq == 7)
+        assert [e[3].get("action") for e in list(pub.events) if e[0] == "mqtt_queue"] == \
+            ["write_error", "resumed"]
+        os.close(full)
+        os.close(saved)
+    finally:
+        pub.close()
+
+
+def test_topics_mirror_the_mcap_topics_and_the_payload_carries_seq():
+    topics = TopicMap(MqttConfig(host="h", client_id="rig1", publish=("severity", "events")))
+    assert topics.route("/cm/ch0/severity") == ("cmsensord/rig1/ch0/severity", True)
+    assert topics.route("/cm/events") == ("cmsensord/rig1/events", False)
+    assert topics.route("/cm/ch0/akf") is None and topics.route("/cm/diagnostics") is None
+    assert payload("/cm/events", 1_500_000_000_000_000_001, {"kind": "x", "v": float("nan")}, 7) == \
+        b'{"timestamp":{"sec":1500000000,"nsec":1},"kind":"x","v":null,"seq":7}'
+
+
+def _wait(test, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if test():
+            return True
+        time.sleep(0.02)
+    return test()
+
+
+def test_default_yaml_documents_every_mqtt_key_with_its_default():
+    import dataclasses
+    from pathlib import Path
+
+    import yaml
+
+    text = (Path(__file__).resolve().parents[1] / "config" / "default.yaml").read_text()
+    block = text[text.index("# mqtt:\n"):]
+    data = yaml.safe_load("\n".join(line[2:] for line in block.splitlines()))["mqtt"]
+    fields = {f.name: f.default for f in dataclasses.fields(MqttConfig)}
+    assert set(data) == set(fields)
+    cfg = MqttConfig(**{**data, "publish": tuple(data["publish"])})
+    assert all(getattr(cfg, k) == v for k, v in fields.items() if k != "host")
+
+
+def test_a_full_hand_over_queue_drops_the_oldest_with_an_event(tmp_path):
+    pytest.importorskip("paho.mqtt")
+    from cmsensord.publish.publisher import Publisher
+
+    pub = Publisher(MqttConfig(host="127.0.0.1", port=9, client_id="t", publish=("events",),
+                               handover_messages=16, reconnect_min_s=5.0), str(tmp_path / "q"))
+    for i in range(20):                         # before the thread runs: 4 too many
+        pub.offer("/cm/events", 10**18, {"kind": "start", "message": str(i)})
+    pub.start()
+    try:
+        assert _wait(lambda: pub.queue.next_seq == 17)
+        assert _wait(lambda: any(e[3].get("action") == "handover_dropped" for e in list(pub.events)))
+        dropped = [e for e in list(pub.events) if e[3].get("action") == "handover_dropped"]
+        assert [(e[1], e[3]["count"]) for e in dropped] == [
+            ("the publisher fell behind: dropped the 4 oldest message(s) waiting in memory (4 in all)", 4)]
+        assert b'"message":"4"' in pub.queue.next_batch(1)[0].payload       # 0..3 were dropped
+    finally:
+        pub.close()
