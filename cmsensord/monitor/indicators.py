@@ -1,7 +1,7 @@
 """The indicator chain: samples by board time -> one record per channel per interval.
 
 RAW mode (:class:`IndicatorChain`): the m/s² samples of the vibration channels
-are gathered into intervals of ``N = round(indicators.interval_s x fs)`` board
+are gathered into intervals of ``N = round(indicators.interval_s x fs)`` (at most 65536) board
 samples, counted from the first sample of the stream, so an interval holds the
 same samples however the stream was cut into reads, frames or batches.  A
 complete interval waits for its shaft speed (the tacho's causal speed, final
@@ -103,6 +103,11 @@ def _bearing(b) -> dict:
     return d
 
 
+#: most samples in one interval (a board far faster than the TM4C's 25 kHz gets shorter
+#: intervals, so memory stays bounded: a copy per interval waits for the shaft speed)
+MAX_INTERVAL_SAMPLES = 1 << 16
+
+
 class IndicatorChain:
     """RAW samples of ``channels`` -> /cm/<channel>/indicators (see module docstring).
 
@@ -111,7 +116,7 @@ class IndicatorChain:
     def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, clock: BlockClock,
                  tacho: Callable[[], TachoTracker | None]):
         self.cfg, self.channels, self.fs, self.clock, self.tacho = cfg, channels, fs, clock, tacho
-        self.N = max(2, round(cfg.indicators.interval_s * fs))
+        self.N = max(2, min(MAX_INTERVAL_SAMPLES, round(cfg.indicators.interval_s * fs)))
         self.index = [ch.index for ch in channels]
         self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
         self.buf = np.full((self.N, len(channels)), np.nan)
@@ -271,6 +276,7 @@ class Indicators:
         self.raw_chain: IndicatorChain | None = None
         self.rms_chain: RmsIndicators | None = None
         self.records: list[messages.Message] = []
+        self._newest: dict[str, int] = {}      # per topic, the stamp of the newest record taken
 
     def _vibration(self, channels: tuple[ChannelConfig, ...]) -> tuple[ChannelConfig, ...]:
         return tuple(ch for ch in channels if ch.kind != "microphone") if self.cfg.indicators.enabled else ()
@@ -319,4 +325,9 @@ class Indicators:
         n = len(self.records) if upto_ns is None else \
             next((i for i, m in enumerate(self.records) if m.stamp_ns > upto_ns), len(self.records))
         out, self.records = self.records[:n], self.records[n:]
+        for i, m in enumerate(out):             # a re-anchored clock, or a switch of chain,
+            at = max(m.stamp_ns, self._newest.get(m.topic, 0))   # never steps a topic back
+            self._newest[m.topic] = at
+            if at != m.stamp_ns:
+                out[i] = m._replace(stamp_ns=at)
         return out

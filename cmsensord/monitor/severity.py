@@ -148,15 +148,15 @@ class SeverityChain:
         return decisions
 
     def trace(self, stamps: list[int], y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> list:
-        """``/cm/<channel>/akf`` messages of one AKF per channel (output.akf_trace_filter)."""
+        """``/cm/<channel>/akf`` messages of one AKF per channel (output.akf_trace_filter), in
+        time order: the channels' messages of one slot side by side."""
         i = self.trace_i
         z = out.z(y)
-        msgs = []
-        for c, ch in enumerate(self.channels):
-            msgs += messages.akf_trace(ch.name, stamps, i, y[:, c], valid[:, c], out.x_prior[:, c, i],
-                                       out.x_hat[:, c, i], out.Y[:, c, i], z[:, c, i],
-                                       out.outlier[:, c, i], out.Q[:, c, i], self.bank.z_c[c])
-        return msgs
+        per = [messages.akf_trace(ch.name, stamps, i, y[:, c], valid[:, c], out.x_prior[:, c, i],
+                                  out.x_hat[:, c, i], out.Y[:, c, i], z[:, c, i],
+                                  out.outlier[:, c, i], out.Q[:, c, i], self.bank.z_c[c])
+               for c, ch in enumerate(self.channels)]
+        return [m for row in zip(*per) for m in row]
 
     def decision(self, d: Decision, stamp: int) -> list:
         """Per channel: its severity message, then the events of what changed."""

@@ -21,8 +21,8 @@ released log time; its ``publish_time`` and its ``timestamp`` field keep its
 own stamp, so log times never go back within a file and nothing is lost.
 :attr:`ReorderWindow.clamped` counts these.
 
-At most ``max_held`` messages are held (the oldest are released beyond it), so
-memory stays bounded whatever the stamps do.
+At most ``max_held`` messages and ``max_bytes`` of them (8 MB) are held (the
+oldest are released beyond it), so memory stays bounded whatever the stamps do.
 """
 
 from __future__ import annotations
@@ -39,10 +39,12 @@ _NS = 1_000_000_000
 class ReorderWindow:
     """A heap of ``(stamp, seq, channel_id, data)`` released in stamp order (see the module)."""
 
-    def __init__(self, max_s: float = MAX_S, *, horizon_ns: int = 0, max_held: int = 200_000):
+    def __init__(self, max_s: float = MAX_S, *, horizon_ns: int = 0, max_held: int = 200_000,
+                 max_bytes: int = 8 << 20):
         self.max_ns = int(max_s * _NS)
         self.horizon_ns = min(int(horizon_ns), self.max_ns)
-        self.max_held = max_held
+        self.max_held, self.max_bytes = max_held, max_bytes
+        self._bytes = 0                # of the messages held
         self.clamped = 0
         self._heap: list[tuple[int, int, int, bytes]] = []
         self._seq = 0
@@ -74,13 +76,15 @@ class ReorderWindow:
             return [(stamp_ns, stamp_ns, channel_id, data)]
         self._seq += 1
         heapq.heappush(self._heap, (stamp_ns, self._seq, channel_id, data))
+        self._bytes += len(data)
         return self._due(self._newest - self.horizon_ns)
 
     def _due(self, upto_ns: int) -> list[tuple[int, int, int, bytes]]:
         out = []
         heap = self._heap
-        while heap and (heap[0][0] <= upto_ns or len(heap) > self.max_held):
+        while heap and (heap[0][0] <= upto_ns or len(heap) > self.max_held or self._bytes > self.max_bytes):
             stamp, _, channel_id, data = heapq.heappop(heap)
+            self._bytes -= len(data)
             self._released = max(self._released, stamp)
             out.append((stamp, stamp, channel_id, data))
         return out
