@@ -22,6 +22,7 @@ from typing import Any
 
 import yaml
 
+from .alarms import AlarmRuleConfig, AlarmsConfig, BaselineConfig, OperatingConfig, SpeedBandConfig
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .settings import (
     MAX_CHANNELS,
@@ -126,6 +127,7 @@ def config_from_dict(
     sections["indicators"] = _build_indicators(d.get("indicators"), source)
     sections["bearings"] = _build_list(BearingConfig, d.get("bearings"), source, "bearings",
                                        "(name: ..., channel: ..., elements: ...)")
+    sections["alarms"] = _build_alarms(d.get("alarms"), source)
 
     channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
@@ -224,6 +226,24 @@ def _build_indicators(raw: Any, source: str) -> IndicatorsConfig:
         values = {**values, "bands": _build_list(BandConfig, values["bands"], source, "indicators.bands",
                                                  "(name: ..., lo_hz: ..., hi_hz: ...)")}
     return _build(IndicatorsConfig, values, source, "indicators")
+
+
+def _build_alarms(raw: Any, source: str) -> AlarmsConfig:
+    values = dict(_mapping(raw, source, "alarms"))
+    _reject_unknown(values, [f.name for f in dataclasses.fields(AlarmsConfig)], source, "alarms")
+    op = _mapping(values.get("operating"), source, "alarms.operating")
+    _reject_unknown(op, [f.name for f in dataclasses.fields(OperatingConfig)], source, "alarms.operating")
+    values["operating"] = _build(OperatingConfig, op, source, "alarms.operating")
+    rules = values.get("rules")
+    if isinstance(rules, list):
+        rules = [{**r, "bands": _build_list(SpeedBandConfig, r["bands"], source, f"alarms.rules[{i}].bands",
+                                            "(below_rpm: ..., alert: ..., danger: ...)")}
+                 if isinstance(r, dict) and "bands" in r else r for i, r in enumerate(rules)]
+    values["rules"] = _build_list(AlarmRuleConfig, rules, source, "alarms.rules",
+                                  "(name: ..., indicator: ..., alert: ..., danger: ...)")
+    values["baselines"] = _build_list(BaselineConfig, values.get("baselines"), source, "alarms.baselines",
+                                      "(channel: ..., indicator: ..., value: ...)")
+    return _build(AlarmsConfig, values, source, "alarms")
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -425,7 +445,19 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
                        "bands": [{k: v for k, v in dataclasses.asdict(b).items() if v is not None}
                                  for b in cfg.indicators.bands]},
         "bearings": [dataclasses.asdict(b) for b in cfg.bearings],
+        "alarms": _alarms_dict(cfg.alarms),
     }
+
+
+def _alarms_dict(a: AlarmsConfig) -> dict:
+    def rule(r: AlarmRuleConfig) -> dict:
+        d = {k: v for k, v in dataclasses.asdict(r).items() if v is not None and k != "bands"}
+        d["channels"] = list(r.channels)
+        if r.bands:
+            d["bands"] = [{k: v for k, v in dataclasses.asdict(b).items() if v is not None} for b in r.bands]
+        return d
+    return {"enabled": a.enabled, "operating": dataclasses.asdict(a.operating),
+            "rules": [rule(r) for r in a.rules], "baselines": [dataclasses.asdict(b) for b in a.baselines]}
 
 
 def _as_list(v: tuple | None) -> list | None:

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from .alarms import AlarmsConfig, alarms_see_channels
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
@@ -363,8 +364,9 @@ class Config:
     indicators: IndicatorsConfig = field(default_factory=IndicatorsConfig,
                                          metadata={"help": "vibration indicators (ISO 10816-3, envelope)"})
     bearings: tuple[BearingConfig, ...] = field(default=(), metadata={"help": "bearings and their channels"})
+    alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels, alarms_see_channels)
 
     def __post_init__(self) -> None:
         validate(self)
