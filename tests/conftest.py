@@ -27,6 +27,7 @@ from fakes import FakeClock
 
 #: Modules whose every test starts processes or opens ptys.
 PROCESS_MODULES = frozenset({
+    "test_alarms_daemon.py",
     "test_calibrate.py",
     "test_cli.py",
     "test_crash.py",

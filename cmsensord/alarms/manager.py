@@ -72,7 +72,7 @@ class Alarm:
             if lv is not None:
                 out[name] = round(lv, 9)
         if s.changed_ns is not None:
-            out["since_ns"] = s.changed_ns
+            out["since"] = {"sec": s.changed_ns // 1_000_000_000, "nsec": s.changed_ns % 1_000_000_000}
         return out
 
 

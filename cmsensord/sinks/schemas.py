@@ -31,6 +31,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from cmsensord.sinks.alarm_schema import TOPIC_ALARMS, alarms_schema
 from cmsensord.sinks.indicator_schema import indicators_schema
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "LINK_COUNTERS",
     "TOPIC_EVENTS",
     "TOPIC_DIAGNOSTICS",
+    "TOPIC_ALARMS",
     "severity_topic",
     "akf_topic",
     "orders_topic",
@@ -107,6 +109,10 @@ EVENT_KINDS: tuple[str, ...] = (
     "disk_error",
     "salvage",
     "time_base",
+    "alarm_alert",
+    "alarm_danger",
+    "alarm_clear",
+    "alarm_ack",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -402,6 +408,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "orders": ORDERS,
     "vibration_estimate": VIBRATION_ESTIMATE,
     "indicators": indicators_schema(_time(), _obj),
+    "alarms": alarms_schema(_time(), _obj),
 }
 
 #: kind key -> MCAP schema name.

@@ -1,0 +1,120 @@
+"""The chain's messages -> the alarm manager -> alarm events and ``/cm/alarms``.
+
+:class:`Alarms` reads the messages the Processor writes: each
+``/cm/<ch>/indicators`` record (its values under the stable names of
+:meth:`cmsensord.dsp.indicators.IndicatorRecord.values`, its shaft speed, which
+also sets the operating state), each ``/cm/<ch>/severity`` decision
+(``severity_index``) and each ``/cm/<ch>/orders`` block (``order.<name>``: the
+order's RMS).  What they change comes back as events (``alarm_alert``,
+``alarm_danger``, ``alarm_clear``, ``alarm_ack``) and, whenever the alarm table
+changes, one ``/cm/alarms`` message — all stamped with the stamp of the message
+that caused them (an acknowledgement: the newest stamp), so a replay gives what
+the live run gave.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from cmsensord.alarms import LEVELS, AlarmManager, Transition
+from cmsensord.config import Config
+from cmsensord.dsp.indicators.iso_zones import boundaries
+from cmsensord.monitor import messages
+from cmsensord.monitor.events import Event
+
+__all__ = ["Alarms", "indicator_values"]
+
+#: the message kinds the alarm manager reads
+WATCHED = frozenset({"indicators", "severity", "orders"})
+_SCALARS = ("accel_rms", "accel_peak", "crest_factor", "kurtosis", "velocity_rms_mm_s", "envelope_rms")
+
+
+def indicator_values(msg: dict) -> dict[str, float]:
+    """The values of an indicators message under the stable names (zone A-D as 0-3)."""
+    out = {k: float(msg[k]) for k in _SCALARS if k in msg}
+    if "zone" in msg:
+        out["zone"] = float("ABCD".index(msg["zone"]))
+    for b in msg.get("bearings", ()):
+        out.update({f"{b['name']}.{k}": float(p["amplitude"]) for k, p in b.get("lines", {}).items()})
+    out.update({f"band.{b['name']}": float(b["rms"]) for b in msg.get("bands", ())})
+    return out
+
+
+def _order_values(msg: dict) -> dict[str, float]:
+    return {f"order.{o['name']}": float(o["rms"]) for o in msg.get("orders", ()) if o.get("rms") is not None}
+
+
+class Alarms:
+    """Messages -> alarm events and /cm/alarms (see module docstring).  ``channels``: the
+    vibration channels' names when the first watched message comes."""
+
+    def __init__(self, cfg: Config, channels: Callable[[], tuple[str, ...]]):
+        self.cfg, self.channels = cfg, channels
+        self.manager: AlarmManager | None = None
+        self.active = cfg.alarms.enabled and bool(cfg.alarms.rules)
+        self.newest_ns = 0
+        self._signature: tuple = ()
+
+    def _manager(self) -> AlarmManager:
+        if self.manager is None:
+            ic = self.cfg.indicators
+            self.manager = AlarmManager(self.cfg.alarms, self.channels(), boundaries(ic.machine_group, ic.foundation))
+        return self.manager
+
+    def see(self, m: messages.Message) -> list:
+        """The events and the /cm/alarms message that message ``m`` causes (often none)."""
+        if m.schema not in WATCHED or not self.active:
+            return []
+        msg, stamp = m.msg, m.stamp_ns
+        self.newest_ns = max(self.newest_ns, stamp)
+        mgr = self._manager()
+        ch = msg["channel"]
+        if m.schema == "indicators":
+            speed = msg.get("speed_rpm")
+            tr = mgr.record(stamp, ch, indicator_values(msg), None if speed is None else float(speed))
+        elif m.schema == "severity":
+            tr = mgr.values(stamp, ch, {"severity_index": float(msg["severity_index"])})
+        else:
+            tr = mgr.values(stamp, ch, _order_values(msg))
+        return self._after(stamp, tr)
+
+    def ack(self, which: str | None) -> list:
+        """Acknowledge alarm ``which`` (None: all); KeyError for an unknown alarm."""
+        if not self.active:
+            raise KeyError(which or "all")
+        return self._after(self.newest_ns, self._manager().ack(self.newest_ns, which))
+
+    def _after(self, stamp: int, tr: list[Transition]) -> list:
+        out: list[Any] = [Event(t.kind, t.channel, t.message, t.stamp_ns,
+                                {"alarm": t.alarm, "level": LEVELS[t.level], "previous": LEVELS[t.previous]})
+                          for t in tr]
+        mgr = self._manager()
+        sig = mgr.signature()
+        if sig != self._signature:
+            self._signature = sig
+            out.append(messages.alarms(stamp, self.table()))
+        return out
+
+    def table(self) -> dict:
+        """The /cm/alarms message body: operating state, worst level, every alarm's row."""
+        mgr = self._manager()
+        worst = mgr.worst()
+        out: dict[str, Any] = {"operating_state": mgr.operating.state,
+                               "worst": LEVELS[worst.state.level] if worst else "normal",
+                               "alarms": mgr.table()}
+        if worst is not None:
+            out["worst_alarm"] = worst.id
+        if mgr.speed_rpm is not None:
+            out["speed_rpm"] = round(mgr.speed_rpm, 6)
+        return out
+
+    def summary(self) -> str | None:
+        """The worst active alarm for the status line ("ALARM danger vel/ch0 +1"), None if none."""
+        if self.manager is None:
+            return None
+        worst = self.manager.worst()
+        if worst is None:
+            return None
+        n = sum(a.state.level > 0 for a in self.manager.alarms.values())
+        return f"ALARM {LEVELS[worst.state.level]} {worst.id}" + (f" +{n - 1}" if n > 1 else "")
