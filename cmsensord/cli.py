@@ -73,8 +73,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
         description="Condition-monitoring daemon: serial frames from a TM4C ADC board -> banks of "
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, vkf, summary (see "
-                                   "`cmsensord SUBCOMMAND --help`)")
+        epilog=(_scenarios_help() if with_scenarios else "") + "\n\nsubcommands: replay, record, vkf, summary, "
+                                   "ack, status (see `cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (see config/default.yaml)")
     p.add_argument("-v", "--verbose", action="store_true", help="log every event (debug level)")
@@ -96,7 +96,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,summary}",
+    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,summary,ack,status}",
                            parser_class=_Parser)
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
@@ -125,6 +125,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     from cmsensord.importing.command import add_import_parser
     add_import_parser(sub)
     add_calibrate_parser(sub)
+    from cmsensord.service.operator import add_operator_parsers
+    add_operator_parsers(sub)
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -177,6 +179,9 @@ def _dispatch(args: argparse.Namespace) -> int:
         return run_import(args)
     if args.command == "calibrate":
         return run_calibrate(args)
+    if args.command in ("ack", "status"):
+        from cmsensord.service.operator import run_ack, run_status
+        return (run_ack if args.command == "ack" else run_status)(args)
     if args.command == "record":
         return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
     if args.command == "vkf":

@@ -4,11 +4,16 @@ acknowledged over its control socket (`cmsensord ack`, `cmsensord status`)."""
 
 from __future__ import annotations
 
+import json
+import time
+from pathlib import Path
+
 import pytest
 
+from cmsensord.service.control import SOCKET_NAME
 from cmsensord.sinks.mcap_sink import read_messages
 from cmsensord.sinks.schemas import SCHEMAS
-from processes import run_module
+from processes import board_on_pty, run_module, start_daemon, stop
 
 S = 1_000_000_000
 ALARMS = """\
@@ -89,3 +94,54 @@ def test_alarm_table_follows_the_operating_state_and_holds_the_latch(degrading):
     assert all(isinstance(p["type"], str) for p in row.values())
     for m in tables:
         jsonschema.validate(m, SCHEMAS["alarms"])
+
+
+def status(cfg: Path) -> dict:
+    p = run_module("cmsensord", "status", "--config", str(cfg), "--json")
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout)
+
+
+def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
+    """A running daemon on a degrading board: the kurtosis alarm latches, the machine eases,
+    `cmsensord ack --all` clears it; `cmsensord status` shows the table before and after."""
+    rule = ("alarms:\n  rules:\n    - {name: de_kurtosis, indicator: kurtosis, alert: 10, latch: true}\n")
+    cfg = tmp_path / "cmsensord.yaml"
+    with board_on_pty("--scenario", "degrading", "--mode", "raw", "--tacho", "--duration", "24",
+                      "--speed", "4") as port:
+        d = start_daemon(tmp_path, port, config=rule)
+        try:
+            deadline = time.monotonic() + 60
+            row: dict = {}
+            while time.monotonic() < deadline:
+                time.sleep(1.0)
+                if (tmp_path / "logs" / SOCKET_NAME).exists():
+                    t = status(cfg)
+                    row = t["alarms"][0] if t.get("alarms") else {}
+                    if row.get("latched") and row.get("live") == "normal":
+                        break
+            assert row.get("level") == "alert" and row["live"] == "normal" and row["latched"], row
+            text = run_module("cmsensord", "status", "--config", str(cfg))
+            assert "de_kurtosis/ch0" in text.stdout and "latched" in text.stdout, text.stdout
+            assert "ALARM alert de_kurtosis/ch0" in text.stdout             # the status line
+            p = run_module("cmsensord", "ack", "--all", "--config", str(cfg))
+            assert p.returncode == 0 and p.stdout.strip() == "acknowledged 1 alarm(s)", p.stdout + p.stderr
+            after = status(cfg)
+            assert after["alarms"][0]["level"] == "normal" and after["worst"] == "normal"
+            bad = run_module("cmsensord", "ack", "nope", "--config", str(cfg))
+            assert bad.returncode == 1 and "no alarm named 'nope'" in bad.stderr
+        finally:
+            err = stop(d)
+    assert "WARNING alarm_ack: de_kurtosis/ch0 acknowledged (alert, now normal)" in err
+    assert "WARNING alarm_clear: de_kurtosis/ch0: alert cleared" in err
+    events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap")))
+              if t == "/cm/events" and m["kind"].startswith("alarm_")]
+    assert [(m["kind"], m["level"]) for m in events] == [("alarm_alert", "alert"), ("alarm_ack", "normal"),
+                                                         ("alarm_clear", "normal")]
+    assert not (tmp_path / "logs" / SOCKET_NAME).exists()               # removed at exit
+
+
+def test_ack_without_a_daemon_is_a_one_line_error(tmp_path):
+    p = run_module("cmsensord", "ack", "--all", "--socket", str(tmp_path / "none.sock"))
+    assert p.returncode == 1 and p.stderr.count("\n") == 1
+    assert p.stderr.startswith(f"cmsensord: no daemon answers on {tmp_path / 'none.sock'}")

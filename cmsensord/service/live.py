@@ -13,6 +13,7 @@ from cmsensord.config import Config, config_to_dict
 from cmsensord.errors import SinkError
 from cmsensord.monitor.processor import Processor
 from cmsensord.sdnotify import Notifier
+from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary, status_line
@@ -118,11 +119,12 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
+    control = _control(cfg, proc)           # cmsensord ack / status
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
     status = 0
     with source:
         try:
-            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done))
+            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done), control)
         except ReaderDied as died:
             proc.event("reader_died", None, str(died), log_level=logging.ERROR)
             status = EXIT_READER_DIED
@@ -132,6 +134,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
             source.stop()
             for frames in source:       # what the reader queued before it stopped
                 proc.handle(frames)
+            if control is not None:
+                control.close()
             proc.finish()
             proc.event("stop", None, f"cmsensord stopping ({stop.why()})")
             sink.close()
@@ -143,8 +147,19 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     return status
 
 
+def _control(cfg: Config, proc: Processor) -> ControlServer | None:
+    """The control socket in the output directory (None, with a config event, if it cannot be made)."""
+    path = socket_path(cfg.output.dir)
+    try:
+        return ControlServer(path)
+    except OSError as exc:
+        proc.event("config", None, f"control socket {path} not started ({exc.strerror or exc}): "
+                   "cmsensord ack and status cannot reach this daemon")
+        return None
+
+
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
-          watch: _Watch) -> None:
+          watch: _Watch, control: ControlServer | None = None) -> None:
     notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
     reader = source.reader
 
@@ -165,6 +180,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                                  f"{EXIT_READER_DIED} for the service manager to restart the daemon")
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
             proc.handle(frames)
+            if control is not None:
+                control.apply(proc)     # acks and status requests, between batches
             if (frames and cfg.link.max_drift_s and watch.sim_done is None
                     and len(source.queue) < DRIFT_QUEUE_MAX):
                 proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
