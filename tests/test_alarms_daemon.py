@@ -145,3 +145,32 @@ def test_ack_without_a_daemon_is_a_one_line_error(tmp_path):
     p = run_module("cmsensord", "ack", "--all", "--socket", str(tmp_path / "none.sock"))
     assert p.returncode == 1 and p.stderr.count("\n") == 1
     assert p.stderr.startswith(f"cmsensord: no daemon answers on {tmp_path / 'none.sock'}")
+
+
+def test_calibrate_learns_indicator_baselines_that_relative_alarms_use(tmp_path):
+    """`cmsensord calibrate` of a healthy RAW capture writes alarms.baselines (keeping BASE's
+    rules); replaying the faulty motor with that site file raises the k x baseline alarm."""
+    base = tmp_path / "base.yaml"
+    base.write_text("output:\n  status_line: false\nalarms:\n  rules:\n"
+                    "    - {name: vel, indicator: velocity_rms_mm_s, alert_x_baseline: 2.0, danger_x_baseline: 4.0}\n")
+    for sc in ("healthy", "faulty"):
+        ok("firmware_sim", "--scenario", sc, "--mode", "raw", "--tacho", "--duration", "6",
+           "--out", str(tmp_path / f"{sc}.bin"))
+    site = tmp_path / "site.yaml"
+    ok("cmsensord", "calibrate", str(tmp_path / "healthy.bin"), "--to", "5", "--config", str(base),
+       "--out", str(site))
+    import yaml
+    alarms = yaml.safe_load(site.read_text())["alarms"]
+    assert alarms["rules"][0]["name"] == "vel"
+    learned = {b["indicator"]: b["value"] for b in alarms["baselines"] if b["channel"] == "ch0"}
+    assert learned["velocity_rms_mm_s"] == pytest.approx(1.8, rel=0.1)    # the healthy motor (zone B)
+    assert learned["kurtosis"] == pytest.approx(3.0, abs=0.4)
+    got = {}
+    for sc in ("healthy", "faulty"):
+        ok("cmsensord", "replay", str(tmp_path / f"{sc}.bin"), "--config", str(site), "--out", str(tmp_path / sc))
+        msgs = list(read_messages(next((tmp_path / sc).glob("*.mcap"))))
+        got[sc] = [m for t, _, m in msgs if t == "/cm/events" and m["kind"].startswith("alarm_")]
+        table = [m for t, _, m in msgs if t == "/cm/alarms"][-1]["alarms"][0]
+        assert table["alert_level"] == pytest.approx(2 * learned["velocity_rms_mm_s"], rel=1e-6)
+    assert got["healthy"] == []
+    assert [m["kind"] for m in got["faulty"]] == ["alarm_danger"]         # ~8.3 mm/s > 4 x 1.8

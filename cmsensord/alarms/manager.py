@@ -190,9 +190,11 @@ class AlarmManager:
         return [a.row() for a in self.alarms.values()]
 
     def signature(self) -> tuple:
-        """What a change of the table is: each alarm's levels and flags, and the operating state."""
+        """What a change of the table is: each alarm's shown and live level, flags and levels in
+        force (a speed band, a first value), and the operating state; not the values."""
         return (self.operating.state,) + tuple(
-            (a.state.level, a.state.live, a.state.latched, a.state.acknowledged) for a in self.alarms.values())
+            (a.state.level, a.state.live, a.state.latched, a.state.acknowledged, a.levels)
+            for a in self.alarms.values())
 
     def worst(self) -> Alarm | None:
         """The alarm showing the highest level (the first of them), None when all are normal."""

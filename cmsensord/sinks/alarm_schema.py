@@ -1,7 +1,8 @@
 """The JSON schema of ``/cm/alarms`` (cmsensord.Alarms): the alarm table whenever it changes.
 
 Written by :mod:`cmsensord.monitor.alarms` when an alarm's shown or live level,
-its latch or acknowledgement, or the machine's operating state changes.  No
+its latch or acknowledgement, the levels in force (a speed band, the first value)
+or the machine's operating state changes.  No
 union types: a value not known (no value seen yet, a level not given, a baseline
 not learned, a voting alarm's channel) is absent.  :mod:`.schemas` registers it.
 """
