@@ -164,3 +164,19 @@ def test_alarms_config_errors_are_one_line():
             config_from_dict({"alarms": alarms}, source="m.yaml")
         text = str(err.value)
         assert "\n" not in text and text.startswith("m.yaml: " + expected), text
+
+
+def test_the_readme_motor_example_loads_with_the_iso_group_2_rigid_levels():
+    from pathlib import Path
+
+    import yaml
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    block = text.split("`motor.yaml`:\n\n```yaml\n", 1)[1].split("```", 1)[0]
+    cfg = config_from_dict(yaml.safe_load(block))
+    assert [r.name for r in cfg.alarms.rules][:3] == ["de_velocity", "de_velocity_trend", "de_envelope"]
+    from cmsensord.dsp.indicators.iso_zones import boundaries
+    m = AlarmManager(cfg.alarms, ("ch0",), boundaries(cfg.indicators.machine_group, cfg.indicators.foundation))
+    m.record(0, "ch0", {"velocity_rms_mm_s": 1.0}, 1500.0)
+    row = m.alarms["de_velocity/ch0"].row()
+    assert (row["alert_level"], row["danger_level"]) == (2.8, 4.5)
