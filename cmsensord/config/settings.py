@@ -219,8 +219,8 @@ class ComponentConfig:
     bandwidth_hz: float | None = setting(None, "-3 dB bandwidth [Hz] instead of r", gt=0)
     bandwidth_pct: float | None = setting(None, "-3 dB bandwidth in % of the component's "
                                            "frequency instead of r", gt=0, le=100)
-    alarm_rms: float | None = setting(None, "order alarm: event when the RMS rises above this "
-                                       "[m/s^2] (and when it falls below alarm_clear of it)", gt=0)
+    alarm_rms: float | None = setting(None, "order alarm (the alarm manager's rule order_<name>): "
+                                       "alert when the RMS rises above this [m/s^2]", gt=0)
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_one_frequency,)
 
@@ -251,6 +251,9 @@ class OrdersConfig:
                           "speed, smoothing_revs + 1 pulse later)", choices=("causal", "final"))
     alarm_clear: float = setting(0.8, "an order alarm clears below alarm_clear x alarm_rms",
                                   gt=0, lt=1)
+    alarm_on_delay_s: float = setting(1.0, "an order alarm needs its level exceeded this long [s]", ge=0)
+    alarm_off_delay_s: float = setting(1.0, "and clears after this long below alarm_clear x alarm_rms [s]",
+                                       ge=0)
     components: tuple[ComponentConfig, ...] = field(
         default_factory=_default_components,
         metadata={"help": "components to track (default: orders 1, 2, 3, 4)"})

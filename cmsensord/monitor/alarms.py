@@ -4,8 +4,11 @@
 ``/cm/<ch>/indicators`` record (its values under the stable names of
 :meth:`cmsensord.dsp.indicators.IndicatorRecord.values`, its shaft speed, which
 also sets the operating state), each ``/cm/<ch>/severity`` decision
-(``severity_index``) and each ``/cm/<ch>/orders`` block (``order.<name>``: the
-order's RMS).  What they change comes back as events (``alarm_alert``,
+(``severity_index``) and each recursive ``/cm/<ch>/orders`` block
+(``order.<name>``: the order's RMS, valid blocks only).  Each order component with
+``alarm_rms`` is a rule ``order_<name>`` (:func:`order_rules`): alert at
+``alarm_rms``, deadband ``1 - orders.alarm_clear``, ``orders.alarm_on_delay_s`` and
+``alarm_off_delay_s``.  What they change comes back as events (``alarm_alert``,
 ``alarm_danger``, ``alarm_clear``, ``alarm_ack``) and, whenever the alarm table
 changes, one ``/cm/alarms`` message — all stamped with the stamp of the message
 that caused them (an acknowledgement: the newest stamp), so a replay gives what
@@ -14,16 +17,19 @@ the live run gave.
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from collections.abc import Callable
 from typing import Any
 
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
 from cmsensord.config import Config
+from cmsensord.config.alarms import AlarmRuleConfig
 from cmsensord.dsp.indicators.iso_zones import boundaries
 from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 
-__all__ = ["Alarms", "indicator_values"]
+__all__ = ["Alarms", "indicator_values", "order_rules"]
 
 #: the message kinds the alarm manager reads
 WATCHED = frozenset({"indicators", "severity", "orders"})
@@ -42,7 +48,24 @@ def indicator_values(msg: dict) -> dict[str, float]:
 
 
 def _order_values(msg: dict) -> dict[str, float]:
+    if msg.get("method") != "recursive" or not msg.get("valid"):
+        return {}
     return {f"order.{o['name']}": float(o["rms"]) for o in msg.get("orders", ()) if o.get("rms") is not None}
+
+
+def order_rules(cfg: Config) -> tuple[AlarmRuleConfig, ...]:
+    """The order tracker's alarms as rules: one per component with ``alarm_rms`` (a rule of
+    the same name in ``alarms.rules`` replaces it)."""
+    o = cfg.orders
+    taken = {r.name for r in cfg.alarms.rules}
+    out = []
+    for c in o.components:
+        name = "order_" + re.sub(r"[^A-Za-z0-9_]", "_", c.name)
+        if c.alarm_rms is not None and name not in taken:
+            out.append(AlarmRuleConfig(name=name, indicator=f"order.{c.name}", alert=c.alarm_rms,
+                                       on_delay_s=o.alarm_on_delay_s, off_delay_s=o.alarm_off_delay_s,
+                                       deadband_pct=round(100.0 * (1.0 - o.alarm_clear), 9)))
+    return tuple(out)
 
 
 class Alarms:
@@ -52,14 +75,15 @@ class Alarms:
     def __init__(self, cfg: Config, channels: Callable[[], tuple[str, ...]]):
         self.cfg, self.channels = cfg, channels
         self.manager: AlarmManager | None = None
-        self.active = cfg.alarms.enabled and bool(cfg.alarms.rules)
+        self.rules = dataclasses.replace(cfg.alarms, rules=cfg.alarms.rules + order_rules(cfg))
+        self.active = cfg.alarms.enabled and bool(self.rules.rules)
         self.newest_ns = 0
         self._signature: tuple = ()
 
     def _manager(self) -> AlarmManager:
         if self.manager is None:
             ic = self.cfg.indicators
-            self.manager = AlarmManager(self.cfg.alarms, self.channels(), boundaries(ic.machine_group, ic.foundation))
+            self.manager = AlarmManager(self.rules, self.channels(), boundaries(ic.machine_group, ic.foundation))
         return self.manager
 
     def see(self, m: messages.Message) -> list:
