@@ -111,7 +111,10 @@ class ControlServer:
                 req.done.set()
 
     def close(self) -> None:
+        """Stop accepting (at once: shutdown wakes the thread's accept) and remove the socket."""
         self._stop.set()
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
         self.sock.close()
         self.thread.join(timeout=2.0)
         with contextlib.suppress(OSError):
