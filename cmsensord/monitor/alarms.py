@@ -104,10 +104,13 @@ class Alarms:
         return self._after(stamp, tr)
 
     def ack(self, which: str | None) -> list:
-        """Acknowledge alarm ``which`` (None: all); KeyError for an unknown alarm."""
-        if not self.active:
+        """Acknowledge alarm ``which`` (None: all); KeyError for an unknown alarm (and for any
+        before the first value: the alarms are made with the channels the stream brings)."""
+        if not self.active or (self.manager is None and which is not None):
             raise KeyError(which or "all")
-        return self._after(self.newest_ns, self._manager().ack(self.newest_ns, which))
+        if self.manager is None:
+            return []
+        return self._after(self.newest_ns, self.manager.ack(self.newest_ns, which))
 
     def _after(self, stamp: int, tr: list[Transition]) -> list:
         out: list[Any] = [Event(t.kind, t.channel, t.message, t.stamp_ns,
@@ -121,8 +124,12 @@ class Alarms:
         return out
 
     def table(self) -> dict:
-        """The /cm/alarms message body: operating state, worst level, every alarm's row."""
-        mgr = self._manager()
+        """The /cm/alarms message body: operating state, worst level, every alarm's row (none
+        before the first value)."""
+        if self.manager is None:
+            return {"operating_state": "running" if self.rules.operating.source == "none" else "stopped",
+                    "worst": "normal", "alarms": []}
+        mgr = self.manager
         worst = mgr.worst()
         out: dict[str, Any] = {"operating_state": mgr.operating.state,
                                "worst": LEVELS[worst.state.level] if worst else "normal",
