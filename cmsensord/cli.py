@@ -77,7 +77,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=(_scenarios_help() if with_scenarios else "")
-        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary, report (see "
+        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary, report, ack, status (see "
                                    "`cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (`cmsensord config --default` "
@@ -106,8 +106,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", metavar="{replay,record,import,calibrate,vkf,config,summary,report}",
-                           parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", parser_class=_Parser,
+                           metavar="{replay,record,import,calibrate,vkf,config,summary,report,ack,status}")
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
@@ -140,6 +140,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                    help="print config/default.yaml: start a site file from it")
     from cmsensord.report.command import add_report_parser
     add_report_parser(sub)
+    from cmsensord.service.operator import add_operator_parsers
+    add_operator_parsers(sub)
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -210,6 +212,9 @@ def _dispatch(args: argparse.Namespace) -> int:
         return run_report(args)
     if args.command == "calibrate":
         return run_calibrate(args)
+    if args.command in ("ack", "status"):
+        from cmsensord.service.operator import run_ack, run_status
+        return (run_ack if args.command == "ack" else run_status)(args)
     if args.command == "record":
         return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
     if args.command == "vkf":

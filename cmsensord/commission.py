@@ -112,6 +112,7 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
               base: dict[str, Any] | None = None, base_path: str | None = None) -> str:
     """SITE.yaml text: BASE's settings (if any) with the learned channels, commented."""
     base = dict(base or {})
+    base_alarms = base.pop("alarms", None) or {}
     base_channels = {ch.get("name"): ch for ch in base.pop("channels", None) or [] if isinstance(ch, dict)}
     out = [
         "# cmsensord site configuration written by `cmsensord calibrate`; re-run it to regenerate.",
@@ -137,7 +138,22 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         out += [f"    {(k + ': ' + _g(v)):<28}# {why}" for k, v, why in rows]
         for k, v in entry.items():
             out.append(f"    {k}: {yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}")
-    return "\n".join(out) + "\n"
+    return "\n".join(out + _alarms_yaml(obs, base_alarms)) + "\n"
+
+
+def _alarms_yaml(obs: Observations, base_alarms: Any) -> list[str]:
+    """The ``alarms`` section: BASE's, with ``baselines`` = each indicator's median over the
+    healthy period (rules with ``alert_x_baseline`` / ``danger_x_baseline`` use them)."""
+    rows = [{"channel": ch, "indicator": k, "value": float(_g(v))}
+            for ch in obs.names for k, v in sorted(obs.indicators.get(ch, {}).items())]
+    if not rows and not base_alarms:
+        return []
+    rest = {k: v for k, v in (base_alarms if isinstance(base_alarms, dict) else {}).items() if k != "baselines"}
+    out = ["# Indicator baselines: the median of each /cm/<ch>/indicators value over the healthy period",
+           "# (alarm levels given as alert_x_baseline / danger_x_baseline are k x these)."]
+    out += yaml.safe_dump({"alarms": {**rest, "baselines": rows}}, sort_keys=False,
+                          default_flow_style=None, width=110).rstrip().splitlines()
+    return out
 
 
 def add_calibrate_parser(sub) -> argparse.ArgumentParser:

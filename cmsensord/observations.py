@@ -4,8 +4,10 @@
 as ``cmsensord replay`` (RAW blocks -> physical values -> block RMS, the block
 clock with its missing slots, the tacho) and keeps, per channel, the block RMS of
 every observation slot in [from, to] board seconds (NaN where an observation is
-missing), the board's block rate and the shaft speed.  Commissioning learns from
-exactly what the daemon will see.
+missing), the board's block rate and the shaft speed, and the median of each
+indicator (``/cm/<ch>/indicators``, under the alarm manager's names) over the
+records inside the window.  Commissioning learns from exactly what the daemon
+will see.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import contextlib
 import json
 import logging
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +41,7 @@ class Observations:
     start_s: float                # board seconds of the first slot kept
     shaft_hz: float | None        # median tacho speed over the window (None: no tacho)
     rpm: float | None             # the capture's nominal speed (import sidecar), if any
+    indicators: dict[str, dict[str, float]] = field(default_factory=dict)  # channel -> name -> median
 
     @property
     def end_s(self) -> float:
@@ -116,7 +119,30 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     rpm = meta.get("rpm")
     return Observations(names=_names(meta, proc, auto_channels), indices=[ch.index for ch in proc.channels],
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
-                        rpm=float(rpm) if rpm else None)
+                        rpm=float(rpm) if rpm else None,
+                        indicators=_indicator_medians(sink, proc, first / rate, last / rate))
+
+
+def _indicator_medians(sink: ListSink, proc: Processor, start: float, end: float) -> dict[str, dict[str, float]]:
+    """Per channel, the median of each indicator over the complete records in [start, end]
+    board seconds (the zone left out: it is graded, not measured)."""
+    from cmsensord.monitor.alarms import indicator_values
+
+    if proc.clock.slot0_t0 is None:
+        return {}
+    t0 = proc.clock.slot_stamp_ns(0)
+    seen: dict[str, dict[str, list[float]]] = {}
+    for topic, stamp, m in sink.messages:
+        if not topic.endswith("/indicators") or m.get("missing_fraction", 1.0) > 0:
+            continue
+        t_end = (stamp - t0) / 1e9
+        if t_end - m["interval_s"] < start - 1e-3 or t_end > end + 1e-3:
+            continue
+        per = seen.setdefault(m["channel"], {})
+        for k, v in indicator_values(m).items():
+            if k != "zone":
+                per.setdefault(k, []).append(v)
+    return {ch: {k: float(np.median(v)) for k, v in per.items()} for ch, per in seen.items()}
 
 
 def _shaft_hz(sink: ListSink, proc: Processor, start: float, end: float) -> float | None:

@@ -81,10 +81,20 @@ def test_speed_in_the_orders_follows_the_tacho(close_orders_run):
 
 
 def test_whirl_alarm_fires_near_3000_rpm():
+    """The order alarm is the alarm manager's rule order_whirl: one alert, orders.alarm_on_delay_s
+    (1 s) after the whirl's RMS first holds above alarm_rms (near 3000 rpm; this run-up gains
+    190 rpm in that second), and one clear."""
     sc, sink = run_chain("whirl", 40.0, runup_s=36.0)
-    alarms = [m for t, _, m in sink.messages if t == "/cm/events" and m["kind"] == "order_alarm"]
-    assert len(alarms) == 1 and alarms[0]["component"] == "whirl"
-    assert abs(alarms[0]["rpm"] - 3000) <= 100, alarms[0]
+    alarms = [(s, m) for t, s, m in sink.messages if t == "/cm/events" and m["kind"].startswith("alarm_")]
+    assert [(m["kind"], m["alarm"]) for _, m in alarms] == [("alarm_alert", "order_whirl/ch0"),
+                                                            ("alarm_clear", "order_whirl/ch0")]   # whip takes over
+    blocks = [(s, m) for t, s, m in sink.messages if t == "/cm/ch0/orders" and m["method"] == "recursive"]
+    whirl = [(s, next(o["rms"] for o in m["orders"] if o["name"] == "whirl"), m) for s, m in blocks if m["valid"]]
+    last_below = max(s for s, rms, _ in whirl if s < alarms[0][0] and rms < 0.7)
+    first_held = min(s for s, _, _ in whirl if s > last_below)
+    assert alarms[0][0] - first_held == 1_000_000_000
+    rpm = next(m["speed_rpm"] for s, _, m in whirl if s == first_held)     # the whirl's onset: 3000 rpm
+    assert abs(rpm - 3000) <= 100, rpm
 
 
 def test_vkf_subcommand_writes_batch_orders_beside_the_recursive_ones(tmp_path):

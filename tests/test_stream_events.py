@@ -211,6 +211,7 @@ def test_a_link_sending_only_garbage_is_link_stalled_with_diagnostics(tmp_path):
     """A board at the wrong baud rate: bytes, never a valid frame."""
     master, slave = pty.openpty()
     port = os.ttyname(slave)
+    os.set_blocking(master, False)      # once the daemon has stopped reading, a full pty must not block the writer
     stop_writing = threading.Event()
 
     def garbage():

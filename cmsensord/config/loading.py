@@ -22,6 +22,7 @@ from typing import Any
 
 import yaml
 
+from .alarms import AlarmRuleConfig, AlarmsConfig, BaselineConfig, OperatingConfig, SpeedBandConfig
 from .capture import CaptureConfig
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .mqtt import MqttConfig
@@ -129,6 +130,7 @@ def config_from_dict(
     sections["bearings"] = _build_list(BearingConfig, d.get("bearings"), source, "bearings",
                                        "(name: ..., channel: ..., elements: ...)")
     sections["mqtt"] = _build_mqtt(d.get("mqtt"), source)
+    sections["alarms"] = _build_alarms(d.get("alarms"), source)
 
     channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
@@ -249,6 +251,22 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
     if importlib.util.find_spec("paho") is None or importlib.util.find_spec("paho.mqtt") is None:
         raise ConfigError(source, "mqtt", "publishing needs paho-mqtt: pip install 'cmsensord[mqtt]'")
     return cfg
+def _build_alarms(raw: Any, source: str) -> AlarmsConfig:
+    values = dict(_mapping(raw, source, "alarms"))
+    _reject_unknown(values, [f.name for f in dataclasses.fields(AlarmsConfig)], source, "alarms")
+    op = _mapping(values.get("operating"), source, "alarms.operating")
+    _reject_unknown(op, [f.name for f in dataclasses.fields(OperatingConfig)], source, "alarms.operating")
+    values["operating"] = _build(OperatingConfig, op, source, "alarms.operating")
+    rules = values.get("rules")
+    if isinstance(rules, list):
+        rules = [{**r, "bands": _build_list(SpeedBandConfig, r["bands"], source, f"alarms.rules[{i}].bands",
+                                            "(below_rpm: ..., alert: ..., danger: ...)")}
+                 if isinstance(r, dict) and "bands" in r else r for i, r in enumerate(rules)]
+    values["rules"] = _build_list(AlarmRuleConfig, rules, source, "alarms.rules",
+                                  "(name: ..., indicator: ..., alert: ..., danger: ...)")
+    values["baselines"] = _build_list(BaselineConfig, values.get("baselines"), source, "alarms.baselines",
+                                      "(channel: ..., indicator: ..., value: ...)")
+    return _build(AlarmsConfig, values, source, "alarms")
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -455,7 +473,19 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
         "capture": {**dataclasses.asdict(cfg.capture), "triggers": list(cfg.capture.triggers)},
         **({"mqtt": {**dataclasses.asdict(cfg.mqtt), "publish": list(cfg.mqtt.publish)}}
            if cfg.mqtt is not None else {}),
+        "alarms": _alarms_dict(cfg.alarms),
     }
+
+
+def _alarms_dict(a: AlarmsConfig) -> dict:
+    def rule(r: AlarmRuleConfig) -> dict:
+        d = {k: v for k, v in dataclasses.asdict(r).items() if v is not None and k != "bands"}
+        d["channels"] = list(r.channels)
+        if r.bands:
+            d["bands"] = [{k: v for k, v in dataclasses.asdict(b).items() if v is not None} for b in r.bands]
+        return d
+    return {"enabled": a.enabled, "operating": dataclasses.asdict(a.operating),
+            "rules": [rule(r) for r in a.rules], "baselines": [dataclasses.asdict(b) for b in a.baselines]}
 
 
 def _as_list(v: tuple | None) -> list | None:

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from .alarms import AlarmsConfig, alarms_see_channels
 from .capture import CaptureConfig
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .mqtt import MqttConfig
@@ -227,8 +228,8 @@ class ComponentConfig:
     bandwidth_hz: float | None = setting(None, "-3 dB bandwidth [Hz] instead of r", gt=0)
     bandwidth_pct: float | None = setting(None, "-3 dB bandwidth in % of the component's "
                                            "frequency instead of r", gt=0, le=100)
-    alarm_rms: float | None = setting(None, "order alarm: event when the RMS rises above this "
-                                       "[m/s^2] (and when it falls below alarm_clear of it)", gt=0)
+    alarm_rms: float | None = setting(None, "order alarm (the alarm manager's rule order_<name>): "
+                                       "alert when the RMS rises above this [m/s^2]", gt=0)
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_one_frequency,)
 
@@ -259,6 +260,9 @@ class OrdersConfig:
                           "speed, smoothing_revs + 1 pulse later)", choices=("causal", "final"))
     alarm_clear: float = setting(0.8, "an order alarm clears below alarm_clear x alarm_rms",
                                   gt=0, lt=1)
+    alarm_on_delay_s: float = setting(1.0, "an order alarm needs its level exceeded this long [s]", ge=0)
+    alarm_off_delay_s: float = setting(1.0, "and clears after this long below alarm_clear x alarm_rms [s]",
+                                       ge=0)
     components: tuple[ComponentConfig, ...] = field(
         default_factory=_default_components,
         metadata={"help": "components to track (default: orders 1, 2, 3, 4)"})
@@ -379,8 +383,9 @@ class Config:
     capture: CaptureConfig = field(default_factory=CaptureConfig,
                                    metadata={"help": "event-triggered captures of the signal"})
     mqtt: MqttConfig | None = field(default=None, metadata={"help": "publishing to an MQTT broker"})
+    alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels, alarms_see_channels)
 
     def __post_init__(self) -> None:
         validate(self)

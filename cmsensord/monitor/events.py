@@ -15,7 +15,8 @@ with the next event of that kind after the interval, or at the end of the run
 only, not on how it was read (live and replay write the same).  Every occurrence
 stays in :attr:`EventLog.counts`.  Kinds in
 ``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears,
-failures and decisions' notes) are never held back.
+failures and decisions' notes, the alarm manager's transitions, which its
+delays already bound) are never held back.
 
 ``/cm/events`` goes forward in time: an event carries the stamp of what it is
 about (a frame, a tacho edge, a decision), and parts of the chain report late
@@ -53,6 +54,8 @@ LOG_LEVEL = {
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
     "decision_rule": logging.WARNING, "time_base": logging.WARNING, "anomaly_held": logging.WARNING,
+    "alarm_alert": logging.WARNING, "alarm_danger": logging.ERROR, "alarm_clear": logging.WARNING,
+    "alarm_ack": logging.WARNING,
 }
 
 #: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
@@ -60,7 +63,8 @@ RATE_S = 1.0
 RATE_BURST = 5
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
-                       "decision_rule", "anomaly_held", "severity_change"})
+                       "decision_rule", "anomaly_held", "severity_change",
+                       "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack"})
 #: records wait until the processed stream is this far past them (events reported late)
 HOLD_S = 10.0
 #: events of the daemon and its surroundings, stamped by the wall clock: written at once

@@ -14,6 +14,7 @@ import numpy as np
 
 from cmsensord.sinks.schemas import (
     LOG_LEVELS,
+    TOPIC_ALARMS,
     TOPIC_DIAGNOSTICS,
     TOPIC_EVENTS,
     TOPIC_LOG,
@@ -131,3 +132,8 @@ def orders(stamp_ns: int, channel: str, speed_rpm: float, valid: bool, method: s
 def indicators(stamp_ns: int, channel: str, fields: dict) -> Message:
     """One /cm/<channel>/indicators record (:mod:`cmsensord.monitor.indicators` builds the fields)."""
     return Message(indicators_topic(channel), "indicators", stamp_ns, {"channel": channel, **fields})
+
+
+def alarms(stamp_ns: int, table: dict) -> Message:
+    """The alarm table on /cm/alarms (:mod:`cmsensord.monitor.alarms` builds it)."""
+    return Message(TOPIC_ALARMS, "alarms", stamp_ns, table)

@@ -21,7 +21,8 @@ at low speed and later.  Samples wait in a bounded
 tacho whose TACHO frames never come cannot make the chain grow without limit.
 Output, returned in order to the caller as :class:`~cmsensord.monitor.messages.Message`
 and :class:`~cmsensord.monitor.events.Event` items: ``/cm/<channel>/orders`` per
-output block (10 Hz by default) and the order alarms.
+output block (10 Hz by default).  The order alarms (``alarm_rms``) are the alarm manager's
+(:mod:`cmsensord.monitor.alarms` reads these messages): delays, latching, suppression.
 
 Missing samples: a lost RAW frame (one channel's block) and a gap in the RAW
 stream of at most ``MAX_FILL_S`` reach the tracker as NaN, which it treats as
@@ -55,7 +56,7 @@ import math
 import numpy as np
 
 from cmsensord.config import ChannelConfig, Config
-from cmsensord.dsp.order_tracker import OrderAlarm, OrderTracker, TrackedComponent
+from cmsensord.dsp.order_tracker import OrderTracker, TrackedComponent
 from cmsensord.dsp.tacho import TachoTracker
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
@@ -98,9 +99,6 @@ class OrderChain:
                                     n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
                                     smoother_lag_s=o.smoother_lag_s or None,
                                     output_rate_hz=o.output_rate_hz)
-        levels = {c.name: c.alarm_rms for c in o.components if c.alarm_rms is not None}
-        self.alarm = OrderAlarm(self.components, levels, n_channels=len(channels),
-                                hysteresis=1.0 - o.alarm_clear)
         tr = self.tracker
         self.causal = o.speed == "causal"
         if self.causal:     # the speed at a sample comes from the edges up to it: no wait
@@ -181,28 +179,12 @@ class OrderChain:
         out: Out = self._blocks(res.blocks, "recursive")
         if res.smoothed_blocks is not None:
             out += self._blocks(res.smoothed_blocks, "smoothed")
-        return out + self._alarms(res.blocks)
+        return out
 
     def _input_sample(self, i: int) -> int:
         """Board sample index of the tracker's input sample ``i`` (since its first input)."""
         assert self.sample0 is not None, "no samples yet"
         return self.sample0 + i
-
-    def _alarms(self, blocks) -> Out:
-        out: Out = []
-        for a in self.alarm.update(blocks):
-            ch = self.channels[a.channel].name
-            sample = self._input_sample(int(a.block_start) * self.tracker.decimate)
-            fields = {"component": a.component, "rpm": round(a.rpm, 1), "rms": a.rms}
-            if a.kind == "onset":
-                out.append(self._event("order_alarm", ch, f"{ch}: {a.component} RMS {a.rms:.3g} m/s² "
-                                       f"reached the alarm level {a.level:.3g} at {a.rpm:.0f} rpm",
-                                       sample, **fields))
-            else:
-                out.append(self._event("order_alarm_clear", ch, f"{ch}: {a.component} RMS {a.rms:.3g} "
-                                       f"m/s² back below {self.cfg.orders.alarm_clear:g} x {a.level:.3g} "
-                                       f"at {a.rpm:.0f} rpm", sample, **fields))
-        return out
 
     def _blocks(self, blocks, method: str) -> Out:
         comps = self.components

@@ -13,7 +13,9 @@ hand it the same :class:`~cmsensord.protocol.Frame` batches
 * RAW samples of the vibration channels -> order chain (:mod:`.orders`);
 * TACHO -> shaft speed (:mod:`.shaft`);
 * RAW samples (or RMS values) of the vibration channels -> indicator records per interval
-  (:mod:`.indicators`), written just before the decision of their stamp.
+  (:mod:`.indicators`), written just before the decision of their stamp;
+* indicator records, decisions and order blocks -> the alarm manager (:mod:`.alarms`):
+  alarm events and /cm/alarms right after the message that caused them.
 
 Every message is built in :mod:`.messages`; every event goes through the
 :class:`~cmsensord.monitor.events.EventLog`.
@@ -30,6 +32,7 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.monitor import messages
+from cmsensord.monitor.alarms import WATCHED, Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
@@ -79,6 +82,7 @@ class Processor:
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
         self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho)
+        self.alarms = Alarms(cfg, lambda: tuple(ch.name for ch in self.channels if ch.kind != "microphone"))
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -124,6 +128,13 @@ class Processor:
                 self.log.add((it,))
             else:
                 write(*it)
+                if it.schema in WATCHED:        # the alarm manager reads it
+                    self._out(self.alarms.see(it))
+
+    def ack(self, which: str | None) -> None:
+        """Acknowledge alarm ``which`` (None: all), stamped with the newest alarm input's stamp;
+        KeyError for an unknown alarm."""
+        self._out(self.alarms.ack(which))
 
     # ---- frames ------------------------------------------------------------
     def handle(self, frames: Sequence[Frame]) -> None:

@@ -15,6 +15,7 @@ from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame
 from cmsensord.sdnotify import Notifier
+from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
@@ -141,6 +142,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
+    control = _control(cfg, proc)           # cmsensord ack / status
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
     warning = fallback_warning()
     if warning:
@@ -148,7 +150,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     status = 0
     with source:
         try:
-            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done))
+            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done), control)
         except ReaderDied as died:
             proc.event("reader_died", None, str(died), log_level=logging.ERROR)
             status = EXIT_READER_DIED
@@ -158,6 +160,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
             source.stop()
             for frames in source:       # what the reader queued before it stopped
                 proc.handle(frames)
+            if control is not None:
+                control.close()
             proc.finish()
             proc.event("stop", None, f"cmsensord stopping ({stop.why()})")
             sink.close()
@@ -169,8 +173,35 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     return status
 
 
+def _control(cfg: Config, proc: Processor) -> ControlServer | None:
+    """The control socket in the output directory (None, with a config event, if it cannot be made)."""
+    path = socket_path(cfg.output.dir)
+    try:
+        return ControlServer(path)
+    except OSError as exc:
+        proc.event("config", None, f"control socket {path} not started ({exc.strerror or exc}): "
+                   "cmsensord ack and status cannot reach this daemon")
+        return None
+
+
+def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
+             control: ControlServer | None, frames: list) -> None:
+    """One batch of frames through the Processor, then what comes between batches."""
+    for part in board_time_parts(frames, round(BATCH_S * proc.fs)):
+        proc.handle(part)
+    source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block does
+    if control is not None:
+        control.apply(proc)                 # acks and status requests, between batches
+    if (frames and cfg.link.max_drift_s and watch.sim_done is None
+            and len(source.queue) < DRIFT_QUEUE_MAX):
+        proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
+    watch.link_events()
+    if not frames:                          # no data moves the events' release on: the wall clock does
+        proc.log.release(time.time_ns())
+
+
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
-          watch: _Watch) -> None:
+          watch: _Watch, control: ControlServer | None = None) -> None:
     notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
     reader = source.reader
 
@@ -199,15 +230,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 raise ReaderDied(f"the serial reader thread has ended; exiting with status "
                                  f"{EXIT_READER_DIED} for the service manager to restart the daemon")
             notify.watchdog()           # only here: a loop stuck anywhere below stops the pings
-            for part in board_time_parts(frames, round(BATCH_S * proc.fs)):
-                proc.handle(part)
-            source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block does
-            if (frames and cfg.link.max_drift_s and watch.sim_done is None
-                    and len(source.queue) < DRIFT_QUEUE_MAX):
-                proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
-            watch.link_events()
-            if not frames:              # no data moves the events' release on: the wall clock does
-                proc.log.release(time.time_ns())
+            _process(cfg, proc, source, watch, control, frames)
             now = time.monotonic()
             if stop.reopen:             # SIGHUP: finish the current file, start a new one
                 stop.reopen = False

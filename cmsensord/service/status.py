@@ -6,11 +6,15 @@ from pathlib import Path
 
 
 def status_line(proc, source=None) -> str:
-    """ADC time, each channel's severity and flags, and (live) the link and queue counters."""
+    """ADC time, each channel's severity and flags, the worst active alarm, and (live) the link
+    and queue counters."""
     parts = [f"[{proc.adc_seconds:8.1f} s]"]
     for v in proc.views:
         flags = "".join(str(a) for a in v.anomaly)
         parts.append(f"{v.name} S={v.severity:.1f} out/s={v.outliers_first:3d} F={flags}")
+    alarm = proc.alarms.summary() if getattr(proc, "alarms", None) is not None else None
+    if alarm:
+        parts.append(alarm)
     if source is not None:
         c = source.counters
         parts.append(f"| rx {c.bytes_received} B, frames {sum(c.frames.values())}, "

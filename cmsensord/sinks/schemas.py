@@ -43,6 +43,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from cmsensord.sinks.alarm_schema import TOPIC_ALARMS, alarms_schema
 from cmsensord.sinks.capture_schema import capture_spectrum_schema, capture_waveform_schema
 from cmsensord.sinks.indicator_schema import indicators_schema
 
@@ -57,6 +58,7 @@ __all__ = [
     "TOPIC_DIAGNOSTICS",
     "TOPIC_LOG",
     "LOG_LEVELS",
+    "TOPIC_ALARMS",
     "severity_topic",
     "akf_topic",
     "orders_topic",
@@ -130,6 +132,10 @@ EVENT_KINDS: tuple[str, ...] = (
     "capture_skipped",
     "mqtt_link",
     "mqtt_queue",
+    "alarm_alert",
+    "alarm_danger",
+    "alarm_clear",
+    "alarm_ack",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -510,6 +516,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "indicators": indicators_schema(_time(), _obj),
     "capture_waveform": capture_waveform_schema(_time, _obj),
     "capture_spectrum": capture_spectrum_schema(_time, _obj),
+    "alarms": alarms_schema(_time(), _obj),
 }
 
 #: kind key -> MCAP schema name.

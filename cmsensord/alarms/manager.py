@@ -1,0 +1,202 @@
+"""The alarm manager: the configured rules over the channels, the alarm table, acknowledgements.
+
+Each rule watches one indicator on its channels (default: every vibration
+channel given).  With ``vote: 1`` each channel has its own alarm, named
+``<rule>/<channel>``; with ``vote: N`` the rule is one alarm, named ``<rule>``,
+whose input is the highest level that at least N of its channels exceed.  Per
+channel the value is compared with the rule's levels at the current speed
+(:mod:`.levels`) with the rule's deadband (:mod:`.exceedance`); the alarm applies
+the delays and the latch (:mod:`.state`).  Alarms are evaluated while the
+machine is running (:mod:`.operating`); when it leaves that state each alarm is
+suppressed (non-latched ones clear).
+
+Every call returns the :class:`Transition` records it caused, stamped with the
+stream time it was given; :meth:`AlarmManager.table` is the alarm table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from cmsensord.config.alarms import AlarmRuleConfig, AlarmsConfig
+
+from .exceedance import Exceedance
+from .levels import rule_levels
+from .operating import Operating
+from .state import LEVELS, AlarmState
+
+__all__ = ["AlarmManager", "Transition", "Alarm"]
+
+#: the event kind of a change of the shown level to this level
+KIND = {0: "alarm_clear", 1: "alarm_alert", 2: "alarm_danger"}
+
+
+@dataclass(frozen=True)
+class Transition:
+    """An alarm's shown level changed (or it was acknowledged) at ``stamp_ns``."""
+
+    kind: str               # alarm_alert, alarm_danger, alarm_clear, alarm_ack
+    alarm: str
+    channel: str | None     # None for a voting alarm
+    level: int
+    previous: int
+    stamp_ns: int
+    message: str
+
+
+@dataclass
+class Alarm:
+    """One row of the alarm table."""
+
+    id: str
+    rule: AlarmRuleConfig
+    channels: tuple[str, ...]
+    channel: str | None
+    state: AlarmState
+    value: float | None = None
+    levels: tuple[float | None, float | None] = (None, None)
+    inputs: dict[str, int] = field(default_factory=dict)   # voting: each channel's exceedance
+    latest: dict[str, float] = field(default_factory=dict)  # each channel's newest value (shown: the highest)
+
+    def row(self) -> dict:
+        """The table row (absent fields: not known)."""
+        s = self.state
+        out: dict = {"id": self.id, "rule": self.rule.name, "indicator": self.rule.indicator,
+                     "channels": list(self.channels), "level": LEVELS[s.level], "live": LEVELS[s.live],
+                     "latched": s.latched > 0, "acknowledged": s.acknowledged}
+        if self.channel is not None:
+            out["channel"] = self.channel
+        if self.value is not None:
+            out["value"] = round(self.value, 9)
+        for name, lv in zip(("alert_level", "danger_level"), self.levels):
+            if lv is not None:
+                out[name] = round(lv, 9)
+        if s.changed_ns is not None:
+            out["since"] = {"sec": s.changed_ns // 1_000_000_000, "nsec": s.changed_ns % 1_000_000_000}
+        return out
+
+
+class AlarmManager:
+    """Rules over channels (see module docstring).  ``channels``: the vibration channels'
+    names (the default set of each rule); ``zones``: the ISO 10816-3 boundaries A/B, B/C,
+    C/D of the configured machine [mm/s]."""
+
+    def __init__(self, cfg: AlarmsConfig, channels: tuple[str, ...], zones: tuple[float, float, float]):
+        self.cfg, self.zones = cfg, zones
+        self.operating = Operating(cfg.operating)
+        self.speed_rpm: float | None = None
+        self.levels_seen: dict[str, float] = {}          # channel -> the level indicator's newest value
+        self.alarms: dict[str, Alarm] = {}
+        self.exceed: dict[tuple[str, str], Exceedance] = {}
+        self.by_indicator: dict[str, list[AlarmRuleConfig]] = {}
+        for r in cfg.rules:
+            watched = r.channels or channels
+            self.by_indicator.setdefault(r.indicator, []).append(r)
+            if r.vote > 1:
+                self._add(r.name, r, tuple(watched), None)
+            else:
+                for ch in watched:
+                    self._add(f"{r.name}/{ch}", r, (ch,), ch)
+
+    def _add(self, aid: str, r: AlarmRuleConfig, chans: tuple[str, ...], ch: str | None) -> None:
+        self.alarms[aid] = Alarm(aid, r, chans, ch, AlarmState(r.on_delay_s, r.off_delay_s, r.latch))
+        for c in chans:
+            self.exceed[(r.name, c)] = Exceedance(r.deadband_pct / 100.0)
+
+    # ---------------------------------------------------------------- input
+    def record(self, t_ns: int, channel: str, values: dict[str, float],
+               speed_rpm: float | None = None) -> list[Transition]:
+        """One indicator record of ``channel`` at ``t_ns``: the operating state, then the rules."""
+        out = self._operate(t_ns, channel, values, speed_rpm)
+        return out + self.values(t_ns, channel, values)
+
+    def values(self, t_ns: int, channel: str, values: dict[str, float]) -> list[Transition]:
+        """Values (by indicator name) of ``channel`` at ``t_ns`` against the rules watching them."""
+        out: list[Transition] = []
+        running = self.operating.running
+        for name, value in values.items():
+            for r in self.by_indicator.get(name, ()):
+                a = self.alarms.get(f"{r.name}/{channel}") if r.vote == 1 else self.alarms[r.name]
+                if a is None or channel not in a.channels:
+                    continue
+                levels = rule_levels(r, self.speed_rpm, self.zones, self.cfg.baseline(channel, name))
+                a.latest[channel] = value
+                a.value, a.levels = max(a.latest.values()), levels
+                if not running:
+                    continue
+                x = self.exceed[(r.name, channel)].step(value, *levels)
+                if a.channel is None:
+                    a.inputs[channel] = x
+                    x = max((lv for lv in (2, 1) if sum(v >= lv for v in a.inputs.values()) >= r.vote), default=0)
+                before = a.state.level
+                out += self._apply(a, t_ns, before, a.state.step(t_ns, x))
+        return out
+
+    def _operate(self, t_ns: int, channel: str, values: dict[str, float],
+                 speed_rpm: float | None) -> list[Transition]:
+        if speed_rpm is not None:
+            self.speed_rpm = speed_rpm
+        op = self.cfg.operating
+        if op.source == "level" and op.level_indicator in values:
+            self.levels_seen[channel] = values[op.level_indicator]
+        reading = {"speed": speed_rpm, "level": max(self.levels_seen.values(), default=None)}.get(op.source)
+        was = self.operating.running
+        self.operating.step(t_ns, reading)
+        if not was or self.operating.running:
+            return []
+        out: list[Transition] = []
+        for a in self.alarms.values():
+            before = a.state.level
+            a.inputs.clear()
+            out += self._apply(a, t_ns, before, a.state.suppress(t_ns))
+        for e in self.exceed.values():
+            e.reset()
+        return out
+
+    def ack(self, t_ns: int, which: str | None = None) -> list[Transition]:
+        """Acknowledge alarm ``which`` (None: every alarm showing a level) at ``t_ns``.
+        Raises KeyError for an unknown alarm."""
+        if which is not None and which not in self.alarms:
+            raise KeyError(which)
+        targets = [self.alarms[which]] if which is not None else \
+            [a for a in self.alarms.values() if a.state.level > 0]
+        out: list[Transition] = []
+        for a in targets:
+            before = a.state.level
+            after = a.state.ack(t_ns)
+            out.append(Transition("alarm_ack", a.id, a.channel, after, before, t_ns,
+                                  f"{a.id} acknowledged ({LEVELS[before]}"
+                                  + (f", now {LEVELS[after]})" if after != before else ")")))
+            out += self._apply(a, t_ns, before, after)
+        return out
+
+    def _apply(self, a: Alarm, t_ns: int, prev: int, after: int) -> list[Transition]:
+        """The transition of ``a`` from the shown level ``prev`` to ``after`` (none if equal)."""
+        if after == prev:
+            return []
+        what = f"{a.rule.indicator} {a.value:.4g}" if a.value is not None else a.rule.indicator
+        lv = a.levels[after - 1] if after > 0 else a.levels[prev - 1]
+        if after > prev:
+            msg = f"{a.id}: {what} reached the {LEVELS[after]} level" + (f" {lv:.4g}" if lv is not None else "")
+        elif after == 0:
+            msg = f"{a.id}: {LEVELS[prev]} cleared ({what})"
+        else:
+            msg = f"{a.id}: eased from {LEVELS[prev]} to {LEVELS[after]} ({what})"
+        return [Transition(KIND[after], a.id, a.channel, after, prev, t_ns, msg)]
+
+    # ---------------------------------------------------------------- output
+    def table(self) -> list[dict]:
+        """Every alarm's row, in configuration order."""
+        return [a.row() for a in self.alarms.values()]
+
+    def signature(self) -> tuple:
+        """What a change of the table is: each alarm's shown and live level, flags and levels in
+        force (a speed band, a first value), and the operating state; not the values."""
+        return (self.operating.state,) + tuple(
+            (a.state.level, a.state.live, a.state.latched, a.state.acknowledged, a.levels)
+            for a in self.alarms.values())
+
+    def worst(self) -> Alarm | None:
+        """The alarm showing the highest level (the first of them), None when all are normal."""
+        top = max(self.alarms.values(), key=lambda a: a.state.level, default=None)
+        return top if top is not None and top.state.level > 0 else None

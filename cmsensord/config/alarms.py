@@ -1,0 +1,188 @@
+"""Settings of the alarm manager (``alarms``): operating states, alarm rules, learned baselines.
+
+:class:`AlarmsConfig` holds the machine's :class:`OperatingConfig` (running or
+stopped, from the shaft speed or an indicator's level, with start-up and
+coast-down suppression), the :class:`AlarmRuleConfig` list (per indicator: alert
+and danger levels, absolute, at an ISO 10816-3 zone boundary or k x a learned
+baseline; delays, deadband, latching, N-of-M voting, level sets per speed band)
+and the :class:`BaselineConfig` list that ``cmsensord calibrate`` writes.  The
+manager is :mod:`cmsensord.alarms`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from .validation import Rule, setting, validate
+
+__all__ = ["AlarmsConfig", "AlarmRuleConfig", "BaselineConfig", "OperatingConfig", "SpeedBandConfig",
+           "LEVEL_KEYS", "alarms_see_channels"]
+
+_NAME: dict[str, Any] = {"pattern": r"[A-Za-z0-9_]+", "pattern_reason": "must contain only letters, digits and _"}
+_INDICATOR: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+",
+                              "pattern_reason": "must be an indicator name (letters, digits, _ and .)"}
+#: the three ways to give each level; at most one per level
+LEVEL_KEYS = {"alert": ("alert", "alert_zone", "alert_x_baseline"),
+              "danger": ("danger", "danger_zone", "danger_x_baseline")}
+_ZONE = {"choices": ("B", "C", "D")}
+
+
+def _levels(need: bool) -> Rule:
+    """Rule: each level given at most one way; with ``need``, at least one level given."""
+
+    def rule(obj: Any) -> tuple[str, str, Any] | None:
+        given = 0
+        for keys in LEVEL_KEYS.values():
+            set_ = [k for k in keys if getattr(obj, k) is not None]
+            if len(set_) > 1:
+                return set_[1], f"give {keys[0]} one way only (also {set_[0]} is set)", getattr(obj, set_[1])
+            given += len(set_)
+        if need and not given:
+            return "alert", "give an alert or a danger level (alert, alert_zone, alert_x_baseline, ...)", None
+        return None
+
+    return rule
+
+
+def _zone_needs_velocity(obj: Any) -> tuple[str, str, Any] | None:
+    for key in ("alert_zone", "danger_zone"):
+        if getattr(obj, key) is not None and obj.indicator != "velocity_rms_mm_s":
+            return key, "an ISO zone boundary is a level of velocity_rms_mm_s only", getattr(obj, key)
+    for b in obj.bands:
+        for key in ("alert_zone", "danger_zone"):
+            if getattr(b, key) is not None and obj.indicator != "velocity_rms_mm_s":
+                return "bands", "an ISO zone boundary is a level of velocity_rms_mm_s only", getattr(b, key)
+    return None
+
+
+def _vote_fits(obj: Any) -> tuple[str, str, Any] | None:
+    if obj.vote > 1 and obj.channels and obj.vote > len(obj.channels):
+        return "vote", f"must be at most the {len(obj.channels)} channel(s) listed", obj.vote
+    return None
+
+
+@dataclass(frozen=True)
+class SpeedBandConfig:
+    """The alarm levels of a rule below a shaft speed (the rule's own levels apply above
+    its highest band)."""
+
+    below_rpm: float = setting(dataclasses.MISSING, "these levels apply while the speed is below this [rpm]", gt=0)
+    alert: float | None = setting(None, "alert level [the indicator's unit]")
+    danger: float | None = setting(None, "danger level [the indicator's unit]")
+    alert_zone: str | None = setting(None, "alert at the lower boundary of this ISO zone (B, C or D)", **_ZONE)
+    danger_zone: str | None = setting(None, "danger at the lower boundary of this ISO zone", **_ZONE)
+    alert_x_baseline: float | None = setting(None, "alert at k x the learned baseline", gt=0)
+    danger_x_baseline: float | None = setting(None, "danger at k x the learned baseline", gt=0)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True),)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class AlarmRuleConfig:
+    """One alarm: an indicator watched on some channels against alert and danger levels."""
+
+    name: str = setting(dataclasses.MISSING, "alarm name (in /cm/alarms and the events)", **_NAME)
+    indicator: str = setting(dataclasses.MISSING, "indicator: a /cm/<ch>/indicators name (velocity_rms_mm_s, "
+                             "accel_rms, kurtosis, envelope_rms, zone, <bearing>.bpfo, band.<name>, ...), "
+                             "severity_index, or order.<component> (order RMS)", **_INDICATOR)
+    channels: tuple[str, ...] = setting((), "channels watched (default: every vibration channel)")
+    alert: float | None = setting(None, "alert level [the indicator's unit]")
+    danger: float | None = setting(None, "danger level [the indicator's unit]")
+    alert_zone: str | None = setting(None, "alert at the lower boundary of this ISO zone (B, C or D)", **_ZONE)
+    danger_zone: str | None = setting(None, "danger at the lower boundary of this ISO zone", **_ZONE)
+    alert_x_baseline: float | None = setting(None, "alert at k x the learned baseline", gt=0)
+    danger_x_baseline: float | None = setting(None, "danger at k x the learned baseline", gt=0)
+    on_delay_s: float = setting(0.0, "the level must be exceeded this long before the alarm [s]", ge=0)
+    off_delay_s: float = setting(0.0, "the value must stay below this long before it clears [s]", ge=0)
+    deadband_pct: float = setting(5.0, "hysteresis: exceeded until below level x (1 - pct/100) [%]",
+                                  ge=0, lt=100)
+    latch: bool = setting(False, "the alarm stays until acknowledged (cmsensord ack)")
+    vote: int = setting(1, "1: one alarm per channel; N > 1: one alarm, raised when N of the channels "
+                        "exceed the level", ge=1, le=8)
+    bands: tuple[SpeedBandConfig, ...] = field(default=(), metadata={"help": "level sets per speed band"})
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True), _zone_needs_velocity, _vote_fits)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class OperatingConfig:
+    """Running or stopped, and when alarms are suppressed."""
+
+    source: str = setting("none", "none (always running), speed (the shaft speed of the indicator "
+                          "records) or level (an indicator's value)", choices=("none", "speed", "level"))
+    running_above: float | None = setting(None, "running at or above this [rpm, or the level indicator's unit]",
+                                          ge=0)
+    stopped_below: float | None = setting(None, "stopped below this (default: running_above)", ge=0)
+    level_indicator: str = setting("accel_rms", "the indicator of source: level", **_INDICATOR)
+    startup_suppress_s: float = setting(0.0, "alarms suppressed this long after the machine starts [s]", ge=0)
+    coastdown_suppress_s: float = setting(0.0, "alarms suppressed this long once the speed falls "
+                                          "coastdown_drop_pct below its running value [s]", ge=0)
+    coastdown_drop_pct: float = setting(10.0, "a speed drop that starts a coast-down [%]", gt=0, lt=100)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (lambda o: _operating(o),)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def _operating(obj: Any) -> tuple[str, str, Any] | None:
+    if obj.source != "none" and obj.running_above is None:
+        return "running_above", f"needed with source: {obj.source}", None
+    if obj.stopped_below is not None and obj.running_above is not None and obj.stopped_below > obj.running_above:
+        return "stopped_below", f"must be <= running_above = {obj.running_above:g}", obj.stopped_below
+    return None
+
+
+@dataclass(frozen=True)
+class BaselineConfig:
+    """A healthy value of an indicator on a channel (``cmsensord calibrate`` writes them)."""
+
+    channel: str = setting(dataclasses.MISSING, "channel name", **_NAME)
+    indicator: str = setting(dataclasses.MISSING, "indicator name", **_INDICATOR)
+    value: float = setting(dataclasses.MISSING, "its healthy value [the indicator's unit]", ge=0)
+
+
+def _unique_rules(obj: Any) -> tuple[str, str, Any] | None:
+    names = [r.name for r in obj.rules]
+    for i, n in enumerate(names):
+        if n in names[:i]:
+            return f"rules[{i}].name", "duplicate alarm name", n
+    return None
+
+
+@dataclass(frozen=True)
+class AlarmsConfig:
+    """The alarm manager: /cm/alarms, alarm events, ``cmsensord ack`` and ``status``."""
+
+    enabled: bool = setting(True, "run the alarm manager (it does nothing without rules)")
+    operating: OperatingConfig = field(default_factory=OperatingConfig, metadata={"help": "operating states"})
+    rules: tuple[AlarmRuleConfig, ...] = field(default=(), metadata={"help": "alarm rules"})
+    baselines: tuple[BaselineConfig, ...] = field(default=(), metadata={"help": "learned baselines"})
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_unique_rules,)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def baseline(self, channel: str, indicator: str) -> float | None:
+        """The learned baseline of ``indicator`` on ``channel`` (None: not learned)."""
+        return next((b.value for b in self.baselines if b.channel == channel and b.indicator == indicator), None)
+
+
+def alarms_see_channels(cfg: Any) -> tuple[str, str, Any] | None:
+    """Config rule: every channel an alarm rule names is a configured one (or ch<k>)."""
+    import re
+    names = {ch.name for ch in cfg.channels}
+    for i, r in enumerate(cfg.alarms.rules):
+        for c in r.channels:
+            if c not in names and not re.fullmatch(r"ch[0-7]", c):
+                return (f"alarms.rules[{i}].channels", f"names no channel (channels: {', '.join(sorted(names))})", c)
+    return None

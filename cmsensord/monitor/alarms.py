@@ -1,0 +1,151 @@
+"""The chain's messages -> the alarm manager -> alarm events and ``/cm/alarms``.
+
+:class:`Alarms` reads the messages the Processor writes: each
+``/cm/<ch>/indicators`` record (its values under the stable names of
+:meth:`cmsensord.dsp.indicators.IndicatorRecord.values`, its shaft speed, which
+also sets the operating state), each ``/cm/<ch>/severity`` decision
+(``severity_index``) and each recursive ``/cm/<ch>/orders`` block
+(``order.<name>``: the order's RMS, valid blocks only).  Each order component with
+``alarm_rms`` is a rule ``order_<name>`` (:func:`order_rules`): alert at
+``alarm_rms``, deadband ``1 - orders.alarm_clear``, ``orders.alarm_on_delay_s`` and
+``alarm_off_delay_s``.  What they change comes back as events (``alarm_alert``,
+``alarm_danger``, ``alarm_clear``, ``alarm_ack``) and, whenever the alarm table
+changes, one ``/cm/alarms`` message — all stamped with the stamp of the message
+that caused them (an acknowledgement: the newest stamp), so a replay gives what
+the live run gave.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Callable
+from typing import Any
+
+from cmsensord.alarms import LEVELS, AlarmManager, Transition
+from cmsensord.config import Config
+from cmsensord.config.alarms import AlarmRuleConfig
+from cmsensord.dsp.indicators.iso_zones import boundaries
+from cmsensord.monitor import messages
+from cmsensord.monitor.events import Event
+
+__all__ = ["Alarms", "indicator_values", "order_rules"]
+
+#: the message kinds the alarm manager reads
+WATCHED = frozenset({"indicators", "severity", "orders"})
+_SCALARS = ("accel_rms", "accel_peak", "crest_factor", "kurtosis", "velocity_rms_mm_s", "envelope_rms")
+
+
+def indicator_values(msg: dict) -> dict[str, float]:
+    """The values of an indicators message under the stable names (zone A-D as 0-3)."""
+    out = {k: float(msg[k]) for k in _SCALARS if k in msg}
+    if "zone" in msg:
+        out["zone"] = float("ABCD".index(msg["zone"]))
+    for b in msg.get("bearings", ()):
+        out.update({f"{b['name']}.{k}": float(p["amplitude"]) for k, p in b.get("lines", {}).items()})
+    out.update({f"band.{b['name']}": float(b["rms"]) for b in msg.get("bands", ())})
+    return out
+
+
+def _order_values(msg: dict) -> dict[str, float]:
+    if msg.get("method") != "recursive" or not msg.get("valid"):
+        return {}
+    return {f"order.{o['name']}": float(o["rms"]) for o in msg.get("orders", ()) if o.get("rms") is not None}
+
+
+def order_rules(cfg: Config) -> tuple[AlarmRuleConfig, ...]:
+    """The order tracker's alarms as rules: one per component with ``alarm_rms`` (a rule of
+    the same name in ``alarms.rules`` replaces it)."""
+    o = cfg.orders
+    taken = {r.name for r in cfg.alarms.rules}
+    out = []
+    for c in o.components:
+        name = "order_" + re.sub(r"[^A-Za-z0-9_]", "_", c.name)
+        if c.alarm_rms is not None and name not in taken:
+            out.append(AlarmRuleConfig(name=name, indicator=f"order.{c.name}", alert=c.alarm_rms,
+                                       on_delay_s=o.alarm_on_delay_s, off_delay_s=o.alarm_off_delay_s,
+                                       deadband_pct=round(100.0 * (1.0 - o.alarm_clear), 9)))
+    return tuple(out)
+
+
+class Alarms:
+    """Messages -> alarm events and /cm/alarms (see module docstring).  ``channels``: the
+    vibration channels' names when the first watched message comes."""
+
+    def __init__(self, cfg: Config, channels: Callable[[], tuple[str, ...]]):
+        self.cfg, self.channels = cfg, channels
+        self.manager: AlarmManager | None = None
+        self.rules = dataclasses.replace(cfg.alarms, rules=cfg.alarms.rules + order_rules(cfg))
+        self.active = cfg.alarms.enabled and bool(self.rules.rules)
+        self.newest_ns = 0
+        self._signature: tuple = ()
+
+    def _manager(self) -> AlarmManager:
+        if self.manager is None:
+            ic = self.cfg.indicators
+            self.manager = AlarmManager(self.rules, self.channels(), boundaries(ic.machine_group, ic.foundation))
+        return self.manager
+
+    def see(self, m: messages.Message) -> list:
+        """The events and the /cm/alarms message that message ``m`` causes (often none)."""
+        if m.schema not in WATCHED or not self.active:
+            return []
+        msg, stamp = m.msg, m.stamp_ns
+        self.newest_ns = max(self.newest_ns, stamp)
+        mgr = self._manager()
+        ch = msg["channel"]
+        if m.schema == "indicators":
+            speed = msg.get("speed_rpm")
+            tr = mgr.record(stamp, ch, indicator_values(msg), None if speed is None else float(speed))
+        elif m.schema == "severity":
+            tr = mgr.values(stamp, ch, {"severity_index": float(msg["severity_index"])})
+        else:
+            tr = mgr.values(stamp, ch, _order_values(msg))
+        return self._after(stamp, tr)
+
+    def ack(self, which: str | None) -> list:
+        """Acknowledge alarm ``which`` (None: all); KeyError for an unknown alarm (and for any
+        before the first value: the alarms are made with the channels the stream brings)."""
+        if not self.active or (self.manager is None and which is not None):
+            raise KeyError(which or "all")
+        if self.manager is None:
+            return []
+        return self._after(self.newest_ns, self.manager.ack(self.newest_ns, which))
+
+    def _after(self, stamp: int, tr: list[Transition]) -> list:
+        out: list[Any] = [Event(t.kind, t.channel, t.message, t.stamp_ns,
+                                {"alarm": t.alarm, "level": LEVELS[t.level], "previous": LEVELS[t.previous]})
+                          for t in tr]
+        mgr = self._manager()
+        sig = mgr.signature()
+        if sig != self._signature:
+            self._signature = sig
+            out.append(messages.alarms(stamp, self.table()))
+        return out
+
+    def table(self) -> dict:
+        """The /cm/alarms message body: operating state, worst level, every alarm's row (none
+        before the first value)."""
+        if self.manager is None:
+            return {"operating_state": "running" if self.rules.operating.source == "none" else "stopped",
+                    "worst": "normal", "alarms": []}
+        mgr = self.manager
+        worst = mgr.worst()
+        out: dict[str, Any] = {"operating_state": mgr.operating.state,
+                               "worst": LEVELS[worst.state.level] if worst else "normal",
+                               "alarms": mgr.table()}
+        if worst is not None:
+            out["worst_alarm"] = worst.id
+        if mgr.speed_rpm is not None:
+            out["speed_rpm"] = round(mgr.speed_rpm, 6)
+        return out
+
+    def summary(self) -> str | None:
+        """The worst active alarm for the status line ("ALARM danger vel/ch0 +1"), None if none."""
+        if self.manager is None:
+            return None
+        worst = self.manager.worst()
+        if worst is None:
+            return None
+        n = sum(a.state.level > 0 for a in self.manager.alarms.values())
+        return f"ALARM {LEVELS[worst.state.level]} {worst.id}" + (f" +{n - 1}" if n > 1 else "")

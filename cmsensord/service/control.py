@@ -1,0 +1,179 @@
+"""The daemon's control socket: ``cmsensord ack`` and ``cmsensord status`` talk to it.
+
+A Unix stream socket ``cmsensord.sock`` in the output directory (the systemd
+unit's state directory, ``/var/lib/cmsensord``; the unit allows AF_UNIX only).
+One request per connection, one JSON line each way::
+
+    {"cmd": "ack", "alarm": "de_velocity/ch0"}   ("alarm": null or absent: every alarm)
+    {"cmd": "status"}
+
+A small thread (:class:`ControlServer`) accepts connections and queues the
+requests; the processing loop answers them between batches
+(:meth:`ControlServer.apply`), so an acknowledgement is applied in the stream's
+order, stamped with stream time, and nothing else touches the Processor from
+another thread.  The thread waits at most ``REPLY_S`` for the loop.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import queue
+import socket
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["ControlServer", "SOCKET_NAME", "socket_path", "request"]
+
+SOCKET_NAME = "cmsensord.sock"
+#: the unit's state directory: where the client looks without --config or --socket
+STATE_DIR = Path("/var/lib/cmsensord")
+#: seconds the server thread waits for the loop's answer, and a client for the server's
+REPLY_S = 5.0
+MAX_REQUEST = 4096
+
+
+def socket_path(output_dir: str | os.PathLike) -> Path:
+    """The control socket of a daemon writing to ``output_dir``."""
+    return Path(output_dir).resolve() / SOCKET_NAME
+
+
+@dataclass
+class _Request:
+    body: dict
+    done: threading.Event = field(default_factory=threading.Event)
+    reply: dict | None = None
+
+
+class ControlServer:
+    """The socket and its accepting thread (see module docstring)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.requests: queue.Queue[_Request] = queue.Queue(maxsize=16)
+        self._stop = threading.Event()
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            if path.is_socket() and not _answers(path):      # left by a daemon that died
+                path.unlink()
+            self.sock.bind(str(path))
+            self.sock.listen(4)
+            self.sock.settimeout(0.5)
+        except OSError:
+            self.sock.close()
+            raise
+        self.thread = threading.Thread(target=self._serve, name="cmsensord-control", daemon=True)
+        self.thread.start()
+
+    # ---------------------------------------------------------- server thread
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self.sock.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            with conn, contextlib.suppress(OSError):
+                conn.settimeout(REPLY_S)
+                conn.sendall(json.dumps(self._answer(_read_line(conn))).encode() + b"\n")
+
+    def _answer(self, line: bytes) -> dict:
+        try:
+            body = json.loads(line)
+        except ValueError:
+            return {"ok": False, "error": "the request is not one JSON line"}
+        if not isinstance(body, dict) or body.get("cmd") not in ("ack", "status"):
+            return {"ok": False, "error": "unknown request (cmd: ack or status)"}
+        req = _Request(body)
+        try:
+            self.requests.put_nowait(req)
+        except queue.Full:
+            return {"ok": False, "error": "busy: too many requests waiting"}
+        if not req.done.wait(REPLY_S):
+            return {"ok": False, "error": f"the processing loop did not answer within {REPLY_S:g} s"}
+        return req.reply or {"ok": False, "error": "no answer"}
+
+    # ---------------------------------------------------------- processing loop
+    def apply(self, proc) -> None:
+        """In the processing loop, between batches: answer every waiting request."""
+        while True:
+            try:
+                req = self.requests.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                req.reply = handle(proc, req.body)
+            finally:
+                req.done.set()
+
+    def close(self) -> None:
+        """Stop accepting (at once: shutdown wakes the thread's accept) and remove the socket."""
+        self._stop.set()
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
+        self.sock.close()
+        self.thread.join(timeout=2.0)
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+
+
+def handle(proc, body: dict) -> dict:
+    """The answer to one request, from the Processor (the loop's thread)."""
+    from cmsensord.service.status import status_line
+
+    alarms = proc.alarms
+    if body["cmd"] == "status":
+        out: dict[str, Any] = {"ok": True, "status": status_line(proc)}
+        if alarms.active:
+            out.update(alarms.table())
+        return out
+    which = body.get("alarm")
+    if which is not None and not isinstance(which, str):
+        return {"ok": False, "error": "alarm must be a name or null"}
+    if not alarms.active:
+        return {"ok": False, "error": "no alarm rules are configured (alarms.rules)"}
+    before = proc.event_counts.get("alarm_ack", 0)
+    try:
+        proc.ack(which)
+    except KeyError:
+        names = ", ".join(alarms.manager.alarms) if alarms.manager else ""
+        return {"ok": False, "error": f"no alarm named {which!r} (alarms: {names})"}
+    return {"ok": True, "acknowledged": proc.event_counts.get("alarm_ack", 0) - before}
+
+
+def _read_line(conn: socket.socket) -> bytes:
+    buf = b""
+    while b"\n" not in buf and len(buf) < MAX_REQUEST:
+        chunk = conn.recv(MAX_REQUEST)
+        if not chunk:
+            break
+        buf += chunk
+    return buf.split(b"\n", 1)[0]
+
+
+def _answers(path: Path) -> bool:
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        try:
+            s.connect(str(path))
+        except OSError:
+            return False
+    return True
+
+
+def request(path: Path, body: dict, timeout: float = REPLY_S + 2.0) -> dict:
+    """Send one request to the daemon at ``path``; its answer.  OSError when none answers."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(timeout)
+        s.connect(str(path))
+        s.sendall(json.dumps(body).encode() + b"\n")
+        buf = b""
+        while not buf.endswith(b"\n"):
+            chunk = s.recv(65536)
+            if not chunk:
+                break
+            buf += chunk
+    return json.loads(buf)

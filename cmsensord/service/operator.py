@@ -1,0 +1,96 @@
+"""``cmsensord ack`` and ``cmsensord status``: an operator's commands to the running daemon.
+
+Both talk to the daemon's control socket (:mod:`.control`): the one in the
+output directory of ``--config FILE``, the one given by ``--socket``, or by
+default the systemd unit's ``/var/lib/cmsensord/cmsensord.sock`` (root only:
+the state directory is mode 0700).  ``status`` prints the daemon's status line
+and its alarm table; ``ack ALARM`` acknowledges one alarm, ``ack --all`` every
+alarm showing a level.  No daemon answering: a one-line error, exit 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from cmsensord.service.control import SOCKET_NAME, STATE_DIR, request, socket_path
+
+__all__ = ["add_operator_parsers", "run_ack", "run_status", "format_table"]
+
+EXIT_NO_DAEMON = 1
+
+
+def add_operator_parsers(sub) -> None:
+    """The ``ack`` and ``status`` subcommands."""
+    a = sub.add_parser("ack", help="acknowledge an alarm of the running daemon (latched alarms clear)")
+    a.add_argument("alarm", nargs="?", help="alarm name as `cmsensord status` lists it, e.g. de_velocity/ch0")
+    a.add_argument("--all", action="store_true", help="every alarm showing a level")
+    s = sub.add_parser("status", help="the running daemon's status line and alarm table")
+    s.add_argument("--json", action="store_true", help="print the answer as JSON")
+    for p in (a, s):
+        p.add_argument("--config", dest="sub_config", metavar="FILE",
+                       help="the daemon's configuration (its socket is in output.dir)")
+        p.add_argument("--socket", metavar="PATH", help=f"the control socket (default {STATE_DIR / SOCKET_NAME})")
+
+
+def _path(args: argparse.Namespace) -> Path:
+    if args.socket:
+        return Path(args.socket)
+    if args.sub_config:
+        from cmsensord.config import load_config
+        return socket_path(load_config(args.sub_config).output.dir)
+    return STATE_DIR / SOCKET_NAME
+
+
+def _ask(args: argparse.Namespace, body: dict) -> dict | None:
+    path = _path(args)
+    try:
+        return request(path, body)
+    except (OSError, ValueError) as exc:
+        print(f"cmsensord: no daemon answers on {path}: {getattr(exc, 'strerror', None) or exc} "
+              "(is it running? give --config FILE or --socket PATH)", file=sys.stderr)
+        return None
+
+
+def run_ack(args: argparse.Namespace) -> int:
+    if bool(args.alarm) == bool(args.all):
+        print("cmsensord: ack: give an alarm name or --all (see cmsensord ack --help)", file=sys.stderr)
+        return 2
+    answer = _ask(args, {"cmd": "ack", "alarm": None if args.all else args.alarm})
+    if answer is None:
+        return EXIT_NO_DAEMON
+    if not answer.get("ok"):
+        print(f"cmsensord: ack: {answer.get('error')}", file=sys.stderr)
+        return EXIT_NO_DAEMON
+    print(f"acknowledged {answer['acknowledged']} alarm(s)")
+    return 0
+
+
+def run_status(args: argparse.Namespace) -> int:
+    answer = _ask(args, {"cmd": "status"})
+    if answer is None:
+        return EXIT_NO_DAEMON
+    if args.json:
+        print(json.dumps(answer, indent=1))
+    else:
+        print(answer.get("status", ""))
+        if "alarms" in answer:
+            print(format_table(answer))
+    return 0 if answer.get("ok") else EXIT_NO_DAEMON
+
+
+def format_table(t: dict) -> str:
+    """The alarm table as text, one alarm a line."""
+    head = f"operating state: {t['operating_state']}, worst: {t['worst']}"
+    if "worst_alarm" in t:
+        head += f" ({t['worst_alarm']})"
+    if "speed_rpm" in t:
+        head += f", speed {t['speed_rpm']:.0f} rpm"
+    lines = [head, f"{'ALARM':24} {'LEVEL':7} {'LIVE':7} {'VALUE':>10} {'ALERT':>8} {'DANGER':>8}  FLAGS"]
+    for a in t["alarms"]:
+        num = [f"{a[k]:.4g}" if k in a else "-" for k in ("value", "alert_level", "danger_level")]
+        flags = " ".join(f for f, on in (("latched", a["latched"]), ("acknowledged", a["acknowledged"])) if on)
+        lines.append(f"{a['id']:24} {a['level']:7} {a['live']:7} {num[0]:>10} {num[1]:>8} {num[2]:>8}  {flags}")
+    return "\n".join(lines)
