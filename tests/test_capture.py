@@ -74,6 +74,14 @@ def test_capture_holds_exactly_pre_plus_post_seconds_of_the_input_samples(raw_ca
     assert kept[0]["message"] == f"ch0: captured 3.5 s around {waves[0]['trigger']['kind']} (87500 samples, 0 lost)"
 
 
+def test_each_replayed_capture_is_one_chunk_of_the_log(raw_cap, tmp_path):
+    from test_capture_chunk import CAPTURE, chunk_topics
+    _replay(raw_cap, tmp_path, "every_s: 4\npre_s: 1\npost_s: 1\nmin_interval_s: 0")
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    holding = [names for _, _, names in chunk_topics(log) if set(names) & set(CAPTURE)]
+    assert len(holding) == 4 and all(names == list(CAPTURE) for names in holding)   # at 4, 8, 12, 16 s
+
+
 def test_rate_limit_and_hourly_budget(raw_cap, tmp_path):
     msgs = _replay(raw_cap, tmp_path, "every_s: 1\npre_s: 0.5\npost_s: 0.5\nmin_interval_s: 4\n"
                                       "max_mb_per_hour: 1")

@@ -9,7 +9,8 @@ tick every ``capture.every_s`` of board time starts a capture of its channel (of
 every channel for an event without one): the samples from ``pre_s`` before the
 trigger's board sample to ``post_s`` after it, written once the stream has passed
 its end (:meth:`raw`, :meth:`rms`), as three messages stamped at the trigger
-(:mod:`cmsensord.sinks.capture_schema`). A capture starting within
+(:mod:`cmsensord.sinks.capture_schema`) in one :class:`MessageGroup` (one chunk of the log:
+after a crash the capture is complete or absent). A capture starting within
 ``min_interval_s`` of the channel's last one, one whose size would exceed
 ``max_mb_per_hour`` in the hour of board time, one whose first samples have left
 the ring, and one still open at the end of the stream are not written: a
@@ -30,7 +31,7 @@ from cmsensord.config.capture import CaptureConfig
 from cmsensord.dsp.capture_spectra import amplitude_spectrum
 from cmsensord.dsp.indicators.envelope import default_band, envelope, envelope_spectrum
 from cmsensord.monitor.events import Event
-from cmsensord.monitor.messages import Message
+from cmsensord.monitor.messages import Message, MessageGroup
 from cmsensord.sinks.capture_schema import capture_topics
 
 __all__ = ["Captures"]
@@ -229,22 +230,23 @@ class Captures:
         lost = ~np.isfinite(x)
         samples = [None if m else round(float(v), 6) for v, m in zip(x, lost)]
         filled = np.where(lost, 0.0, x)
-        out: list[Any] = [Message(wave_t, "capture_waveform", p.stamp_ns, {
+        group: list[Message] = [Message(wave_t, "capture_waveform", p.stamp_ns, {
             **head, "source": self.source, "sample_rate_hz": self.rate, "first_sample": p.start,
             "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s, "unit": "m/s^2", "missing": int(lost.sum()),
             "samples": samples})]
         f, A = amplitude_spectrum(filled, self.rate)
-        out.append(Message(spec_t, "capture_spectrum", p.stamp_ns, {
+        group.append(Message(spec_t, "capture_spectrum", p.stamp_ns, {
             **head, "kind": "spectrum", "freq_start_hz": 0.0, "freq_step_hz": float(f[1] - f[0]),
             "unit": "m/s^2", "amplitude": np.round(A, 6).tolist()}))
         if self.source == "raw":
             env = envelope(filled, self.rate, default_band(self.rate))
             fe, Ae = envelope_spectrum(env.env, env.fs_env)
             keep = fe <= 1000.0
-            out.append(Message(env_t, "capture_spectrum", p.stamp_ns, {
+            group.append(Message(env_t, "capture_spectrum", p.stamp_ns, {
                 **head, "kind": "envelope", "freq_start_hz": 0.0, "freq_step_hz": float(fe[1] - fe[0]),
                 "band_hz": [float(env.band[0]), float(env.band[1])], "unit": "m/s^2",
                 "amplitude": np.round(Ae[keep], 6).tolist()}))
+        out: list[Any] = [MessageGroup(tuple(group))]
         out.append(Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "
                          f"{p.trigger['kind']} ({len(x)} samples, {int(lost.sum())} lost)", p.stamp_ns,
                          {"samples": len(x)}))

@@ -33,6 +33,12 @@ class Message(NamedTuple):
     msg: dict
 
 
+class MessageGroup(NamedTuple):
+    """Messages written whole or not at all, even by a crash (a capture): a sink's
+    ``write_group`` takes them in one call."""
+    messages: tuple[Message, ...]
+
+
 def num(x: float):
     """A float for JSON: None when it is NaN."""
     return None if x != x else x

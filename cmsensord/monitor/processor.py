@@ -126,6 +126,8 @@ class Processor:
         for it in items:
             if type(it) is Event:
                 self.log.add((it,))
+            elif type(it) is messages.MessageGroup:      # a capture: one chunk of the log
+                self.sink.write_group(list(it.messages))
             else:
                 write(*it)
                 if it.schema in WATCHED:        # the alarm manager reads it

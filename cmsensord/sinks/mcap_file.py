@@ -36,7 +36,7 @@ from cmsensord import __version__
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import ChannelRegistry, encode_message
-from cmsensord.sinks.reorder import MAX_S, ReorderWindow
+from cmsensord.sinks.reorder import GROUP, MAX_S, Payload, ReorderWindow
 
 __all__ = [
     "McapSink",
@@ -320,13 +320,41 @@ class McapSink:
             raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
         data = encode_message(topic, stamp_ns, msg)
         self.messages_written += 1  # before: if its chunk cannot be written it is lost
+        self._put(self.reorder.push(stamp_ns, entry[0], data))
+
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
+        """Append messages ``(topic, schema, stamp_ns, msg)`` that are whole or absent after a
+        crash (a capture's waveform and spectra): they are held in the reorder window as one
+        entry (stamped with the first one's stamp) and written as a chunk of their own
+        (:meth:`~cmsensord.sinks.mcap_chunks.ChunkWriter.add_group`), all with that log time."""
+        if not messages:
+            return
+        encoded = []
+        for topic, schema, stamp_ns, msg in messages:
+            entry = self._channels.get(topic)
+            if entry is None or entry[1] != schema:
+                entry = self._register(topic, schema)
+            if int(stamp_ns) < 0:
+                raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
+            encoded.append((entry[0], encode_message(topic, int(stamp_ns), msg)))
+        self.messages_written += len(encoded)
+        self._put(self.reorder.push(int(messages[0][2]), GROUP, tuple(encoded)))
+
+    def _put(self, released: list[tuple[int, int, int, Payload]]) -> None:
+        """Messages (and groups) released by the reorder window into the chunk writer."""
         try:
-            for log_time, publish_time, channel_id, body in self.reorder.push(stamp_ns, entry[0], data):
-                self._writer.add_message(channel_id, log_time, body, publish_time)
+            self._add(released)
         except OSError as err:  # a chunk got full and could not be written
             raise self._fail("write", err) from None
         if self._clock() - self._last_flush >= self._flush_s:
             self.flush()
+
+    def _add(self, released: list[tuple[int, int, int, Payload]]) -> None:
+        for log_time, publish_time, channel_id, body in released:
+            if isinstance(body, bytes):
+                self._writer.add_message(channel_id, log_time, body, publish_time)
+            else:
+                self._writer.add_group(body, log_time, publish_time)
 
     def _register(self, topic: str, kind: str) -> tuple[int, str]:
         if self._failed:
@@ -442,8 +470,7 @@ class McapSink:
         self._channels = {}  # any later write() goes through _register(), which refuses
         op = "close"
         try:
-            for log_time, publish_time, channel_id, body in self.reorder.drain():
-                self._writer.add_message(channel_id, log_time, body, publish_time)
+            self._add(self.reorder.drain())
             self._writer.finish()
             op = "fsync"
             os.fsync(self._fh.fileno())

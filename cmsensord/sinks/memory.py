@@ -8,6 +8,8 @@ from typing import Protocol
 class Sink(Protocol):
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
 
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None: ...
+
 
 class ListSink:
     """A sink that keeps messages in memory (tests, the simulate summary)."""
@@ -17,6 +19,11 @@ class ListSink:
 
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None:
         self.messages.append((topic, stamp_ns, msg))
+
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
+        """Each message in turn (in memory a group cannot be split by a crash)."""
+        for m in messages:
+            self.write(*m)
 
     def topic(self, name: str) -> list[dict]:
         return [m for t, _, m in self.messages if t == name]

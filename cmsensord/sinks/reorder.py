@@ -21,6 +21,10 @@ released log time; its ``publish_time`` and its ``timestamp`` field keep its
 own stamp, so log times never go back within a file and nothing is lost.
 :attr:`ReorderWindow.clamped` counts these.
 
+A *group* (:data:`GROUP` as its channel id, ``((channel_id, data), ...)`` as its data: the
+three messages of a capture) is held and released as one entry, so no message of the file
+comes between its messages.
+
 At most ``max_held`` messages and ``max_bytes`` of them (8 MB) are held (the
 oldest are released beyond it), so memory stays bounded whatever the stamps do.
 """
@@ -29,15 +33,23 @@ from __future__ import annotations
 
 import heapq
 
-__all__ = ["MAX_S", "ReorderWindow"]
+__all__ = ["GROUP", "MAX_S", "Payload", "ReorderWindow"]
 
 #: the longest a message is held (seconds of stamp time): the cap of the horizon
 MAX_S = 10.0
 _NS = 1_000_000_000
+#: the channel id of a group entry, whose data is ``((channel_id, data), ...)``
+GROUP = -1
+#: a message's encoded data, or a group's messages
+Payload = bytes | tuple[tuple[int, bytes], ...]
+
+
+def _size(data: Payload) -> int:
+    return len(data) if isinstance(data, bytes) else sum(len(d) for _, d in data)
 
 
 class ReorderWindow:
-    """A heap of ``(stamp, seq, channel_id, data)`` released in stamp order (see the module)."""
+    """A heap of ``(stamp, seq, channel_id, data)`` (a :data:`Payload`) released in stamp order."""
 
     def __init__(self, max_s: float = MAX_S, *, horizon_ns: int = 0, max_held: int = 200_000,
                  max_bytes: int = 8 << 20):
@@ -46,7 +58,7 @@ class ReorderWindow:
         self.max_held, self.max_bytes = max_held, max_bytes
         self._bytes = 0                # of the messages held
         self.clamped = 0
-        self._heap: list[tuple[int, int, int, bytes]] = []
+        self._heap: list[tuple[int, int, int, Payload]] = []
         self._seq = 0
         self._newest = -1          # newest stamp pushed
         self._released = -1        # newest log time released
@@ -59,7 +71,7 @@ class ReorderWindow:
     def __len__(self) -> int:
         return len(self._heap)
 
-    def push(self, stamp_ns: int, channel_id: int, data: bytes) -> list[tuple[int, int, int, bytes]]:
+    def push(self, stamp_ns: int, channel_id: int, data: Payload) -> list[tuple[int, int, int, Payload]]:
         """Add one message; returns the messages now due, each ``(log_time, publish_time,
         channel_id, data)``, in log-time order."""
         if stamp_ns < self._newest:
@@ -76,19 +88,19 @@ class ReorderWindow:
             return [(stamp_ns, stamp_ns, channel_id, data)]
         self._seq += 1
         heapq.heappush(self._heap, (stamp_ns, self._seq, channel_id, data))
-        self._bytes += len(data)
+        self._bytes += _size(data)
         return self._due(self._newest - self.horizon_ns)
 
-    def _due(self, upto_ns: int) -> list[tuple[int, int, int, bytes]]:
+    def _due(self, upto_ns: int) -> list[tuple[int, int, int, Payload]]:
         out = []
         heap = self._heap
         while heap and (heap[0][0] <= upto_ns or len(heap) > self.max_held or self._bytes > self.max_bytes):
             stamp, _, channel_id, data = heapq.heappop(heap)
-            self._bytes -= len(data)
+            self._bytes -= _size(data)
             self._released = max(self._released, stamp)
             out.append((stamp, stamp, channel_id, data))
         return out
 
-    def drain(self) -> list[tuple[int, int, int, bytes]]:
+    def drain(self) -> list[tuple[int, int, int, Payload]]:
         """Every message held, in log-time order (the end of a file)."""
         return self._due(1 << 63)

@@ -292,6 +292,31 @@ class RotatingSink:
         elif self._pending:
             self._deliver()
 
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
+        """Append messages ``(topic, schema, stamp_ns, msg)`` that are whole or absent after a
+        crash (:meth:`McapSink.write_group`); like :meth:`write` otherwise (a rotation comes
+        after the group, never inside it)."""
+        self.messages_written += len(messages)
+        cur = self._current
+        if cur is None:
+            self._retry_if_due()
+            cur = self._current
+            if cur is None:
+                self._drop(len(messages))
+                self._deliver()
+                return
+        try:
+            cur.write_group(messages)
+        except SinkIOError as err:
+            self._failed(err, cur)
+            self._deliver()
+            return
+        if (self.clock() - self._opened >= self.output.rotate_s
+                or cur.bytes_written >= self._rotate_bytes):
+            self.rotate()
+        elif self._pending:
+            self._deliver()
+
     def expect_lag(self, seconds: float = REORDER_MAX_S) -> None:
         """Messages will come up to ``seconds`` late (the order chain has started): the
         reorder window holds that long from now on, instead of learning it from the first
