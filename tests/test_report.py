@@ -92,11 +92,21 @@ def test_raw_report_has_severity_indicators_with_zones_and_orders(logs, tmp_path
 
 def test_rms_report_and_a_run_up(logs, tmp_path):
     _, page, metas = _report(tmp_path, logs["degrading_rms"], logs["close_orders"])
-    assert set(metas) == {"ch0-severity", "ch0-indicators", "ch0-orders"}   # one channel name in both logs
+    assert set(metas) == {"ch0-severity", "ch0-indicators", "ch0-orders", "ch0-campbell"}   # one channel in both
     assert metas["ch0-indicators"]["main"] == "velocity_rms_mm_s"           # the RAW log gives velocity
     orders = metas["ch0-orders"]["axes"][0]            # close_orders: a run-up 0 -> 3000 rpm
     assert orders["xlabel"] == "shaft speed [rpm]" and orders["xlim"][0] < 500 and orders["xlim"][1] > 2500
     assert orders["lines"] == ["order 1x", "order 2x", "order 3x", "order 4x"]   # the default orders
+    campbell = metas["ch0-campbell"]                   # order frequency over speed, coloured by order RMS
+    ax = campbell["axes"][0]
+    assert ax["xlabel"] == "shaft speed [rpm]" and ax["ylabel"] == "frequency [Hz]"
+    assert ax["xlim"][0] < 500 and ax["xlim"][1] > 2500 and campbell["orders"] == ["1x", "2x", "3x", "4x"]
+    lo, hi = campbell["speed_rpm"]                     # 4x at the top speed: 4 x rpm / 60 Hz, within the y axis
+    assert 4 * 2500 / 60 < campbell["freq_hz"][1] <= 4 * hi / 60 + 1 and ax["ylim"][1] >= campbell["freq_hz"][1]
+    assert campbell["rms"][1] > campbell["rms"][0] >= 0
+    png = Image.open(tmp_path / "png" / "ch0-campbell.png")
+    png.load()
+    assert json.loads(png.text["Description"]) == campbell
     assert "failure" in page and "<th>local time</th>" in page
     (tmp_path / "rms").mkdir()
     rms_only = _report(tmp_path / "rms", logs["degrading_rms"])[2]

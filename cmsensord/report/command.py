@@ -68,7 +68,7 @@ def _draw(data: Any) -> list[tuple[str, list[Any]]]:
         figs = []
         if ch.severity:
             figs.append(figures.severity_figure(data, ch))
-        for make in (figures.indicators_figure, figures.orders_figure):
+        for make in (figures.indicators_figure, figures.orders_figure, figures.campbell_figure):
             fig = make(ch)
             if fig is not None:
                 figs.append(fig)

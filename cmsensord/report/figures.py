@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from cmsensord.report.localtime import local_datetime  # noqa: E402
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
 
-__all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "capture_figure"]
+__all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
 
 #: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
 MIN_SPEED_BINS = 5
@@ -189,6 +189,38 @@ def orders_figure(ch: ChannelData) -> Figure | None:
     ax.grid(alpha=0.3)
     meta = {"id": f"{ch.name}-orders", "kind": "orders", "channel": ch.name,
             "title": f"{ch.name}: order RMS versus speed", "speed_rpm": [lo, hi], "orders": list(ch.orders)}
+    return _finish(fig, meta, [ax])
+
+
+def campbell_figure(ch: ChannelData) -> Figure | None:
+    """A Campbell diagram of the channel's tracked orders: each order's frequency over shaft speed
+    (mean per 10-rpm bin), coloured by its mean order RMS. Only over a speed range of at least
+    ``MIN_SPEED_BINS`` bins (a run-up or coast-down): at a constant speed it is one vertical line."""
+    keys_all = sorted({k for bins in ch.campbell.values() for k in bins})
+    if len(keys_all) < MIN_SPEED_BINS:
+        return None
+    rpm, freq, rms = [], [], []
+    fig, ax = plt.subplots(figsize=(11, 4.2), layout="constrained")
+    for name, bins in ch.campbell.items():
+        keys = sorted(bins)
+        f = [bins[k][0] / bins[k][2] for k in keys]
+        rpm += [(k + 0.5) * SPEED_BIN_RPM for k in keys]
+        freq += f
+        rms += [bins[k][1] / bins[k][2] for k in keys]
+        ax.annotate(f"{name}", ((keys[-1] + 0.5) * SPEED_BIN_RPM, f[-1]), xytext=(4, 0),
+                    textcoords="offset points", fontsize=8, va="center")
+    dots = ax.scatter(rpm, freq, c=rms, s=14, cmap="viridis", edgecolors="none")
+    fig.colorbar(dots, ax=ax, label="order RMS [m/s²]")
+    ax.set_xlabel("shaft speed [rpm]")
+    ax.set_ylabel("frequency [Hz]")
+    ax.set_ylim(0, max(freq) * 1.08 if freq else 1.0)
+    ax.set_title(f"{ch.name}: Campbell diagram, order frequency over speed coloured by order RMS")
+    ax.grid(alpha=0.3)
+    lo, hi = keys_all[0] * SPEED_BIN_RPM, (keys_all[-1] + 1) * SPEED_BIN_RPM
+    meta = {"id": f"{ch.name}-campbell", "kind": "campbell", "channel": ch.name,
+            "title": f"{ch.name}: Campbell diagram (order RMS over speed and frequency)",
+            "speed_rpm": [lo, hi], "freq_hz": [min(freq), max(freq)], "rms": [min(rms), max(rms)],
+            "orders": list(ch.campbell), "points": len(rpm)}
     return _finish(fig, meta, [ax])
 
 

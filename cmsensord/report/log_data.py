@@ -64,6 +64,8 @@ class ChannelData:
     zone_boundaries: list[float] | None = None
     velocity_alarm: float | None = None
     orders: dict[str, dict[int, list[float]]] = field(default_factory=dict)   # name -> bin -> [sum, n]
+    # name -> speed bin -> [sum of freq_hz, sum of rms, n]: the Campbell diagram
+    campbell: dict[str, dict[int, list[float]]] = field(default_factory=dict)
     captures: list[Capture] = field(default_factory=list)
     captures_omitted: int = 0
 
@@ -220,6 +222,12 @@ class LogData:
                 acc = bins.setdefault(b, [0.0, 0.0])
                 acc[0] += rms
                 acc[1] += 1
+                freq = order.get("freq_hz")
+                if isinstance(freq, int | float):
+                    cell = ch.campbell.setdefault(str(order.get("name")), {}).setdefault(b, [0.0, 0.0, 0.0])
+                    cell[0] += freq
+                    cell[1] += rms
+                    cell[2] += 1
 
     @staticmethod
     def _capture(ch: ChannelData, part: str, t_ns: int, msg: dict[str, Any]) -> None:
