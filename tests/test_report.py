@@ -22,7 +22,7 @@ from cmsensord.sinks.mcap_read import read_messages
 from processes import ENV, cmsensord, run_module
 
 SCHEMA_OF = {"events": "event", "diagnostics": "diagnostics", "severity": "severity", "orders": "orders",
-             "indicators": "indicators"}
+             "indicators": "indicators", "log": "log", "alarms": "alarms"}
 
 Image = pytest.importorskip("PIL.Image", reason="Pillow comes with matplotlib, the report extra")
 
