@@ -276,10 +276,16 @@ def test_mqtt_without_paho_is_a_config_error_and_without_mqtt_paho_is_not_import
                           env=ENV).stdout.strip() == "[]"
 
 
+#: two rules on the simulated motor: an alert at once, a danger while the severity is over 0.5
+FIRING = ("alarms:\n  rules:\n    - {name: rms, indicator: accel_rms, alert: 0.000001}\n"
+          "    - {name: sev, indicator: severity_index, danger: 0.5}\n")
+
+
 def test_status_line_diagnostics_and_home_assistant_discovery(tmp_path, broker):
     sub = Subscriber(broker.port)
     try:
-        cmd = simulate(tmp_path, mqtt_yaml(broker.port, "discovery: true"), duration=30)
+        yaml = mqtt_yaml(broker.port, "discovery: true", publish=(*PUBLISHED, "alarms")) + FIRING
+        cmd = simulate(tmp_path, yaml, duration=30)
         (tmp_path / "site.yaml").write_text((tmp_path / "site.yaml").read_text().replace(
             "status_line: false", "status_line: true"))
         p = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=120)
@@ -292,5 +298,29 @@ def test_status_line_diagnostics_and_home_assistant_discovery(tmp_path, broker):
         config = next(json.loads(body) for t, body, _ in sub.got if t == topic)
         assert (config["state_topic"], config["value_template"], config["availability_topic"]) == (
             "cmsensord/rig1/ch0/severity", "{{ value_json.severity_index }}", "cmsensord/rig1/status")
+        topic = "homeassistant/sensor/rig1_ch0_worst_alarm/config"
+        assert sub.wait_for(lambda: any(t == topic for t, _, _ in sub.got))
+        config = next(json.loads(body) for t, body, _ in sub.got if t == topic)
+        assert (config["state_topic"], config["value_template"], config["options"]) == (
+            "cmsensord/rig1/ch0/worst_alarm", "{{ value_json.level }}", ["normal", "alert", "danger"])
+        # ch0's worst alarm at each change of the logged tables (one channel: the table's worst)
+        tables = [m for t, m in expected(tmp_path / "logs", ("alarms",))]
+        worst = [(t["worst"], t.get("worst_alarm")) for t in tables]
+        changed = [t for i, t in enumerate(tables) if i == 0 or worst[i] != worst[i - 1]]
+        changes = [(t["worst"], t.get("worst_alarm"), t["timestamp"]) for t in changed]
+        assert [c[:2] for c in changes[:2]] == [("alert", "rms/ch0"), ("danger", "sev/ch0")]
+        assert sub.wait_for(lambda: len(sub.messages("/ch0/worst_alarm")) >= len(changes))
+        states = [m for _, m in sub.messages("/ch0/worst_alarm")]
+        assert [(m["level"], m.get("alarm"), m["timestamp"]) for m in states] == changes
+        assert {k for m in states for k in m} == {"timestamp", "seq", "level", "alarm"}
     finally:
         sub.close()
+    # a dashboard that subscribes later gets ch0's worst alarm of the last table, retained
+    late = Subscriber(broker.port, "cmsensord/rig1/ch0/worst_alarm", client_id="late")
+    try:
+        assert late.wait_for(lambda: late.got)
+        topic, body, retained = late.got[0]
+        state = json.loads(body)
+        assert retained and (state["level"], state.get("alarm"), state["timestamp"]) == changes[-1]
+    finally:
+        late.close()

@@ -22,8 +22,10 @@ import time
 from typing import Any
 
 from cmsensord.config.mqtt import MqttConfig
+from cmsensord.publish.discovery import WorstAlarms, discovery_messages
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.publish.topics import TopicMap, payload
+from cmsensord.sinks.alarm_schema import TOPIC_ALARMS
 from cmsensord.sinks.mcap_encoding import ns_to_stamp
 
 #: messages sent and not yet acknowledged (paho's own default window)
@@ -69,6 +71,9 @@ class Publisher:
         self._dial_error = ""
         self._last_send = 0.0
         self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
+        self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
+        if cfg.discovery and "alarms" in cfg.publish:
+            self._worst = WorstAlarms(channels)
         if self.queue.truncated_bytes:
             self._event("mqtt_queue", f"store-and-forward queue: cut {self.queue.truncated_bytes} "
                         "byte(s) of a torn record at its end (a crash while writing)",
@@ -87,6 +92,12 @@ class Publisher:
         route = self.topics.route(topic)
         if route is None:
             return
+        self._hand(route, topic, stamp_ns, msg)
+        if self._worst is not None and topic == TOPIC_ALARMS:
+            for ch, state in self._worst.changed(msg):
+                self._hand((self.topics.worst_alarm(ch), True), f"/cm/{ch}/worst_alarm", stamp_ns, state)
+
+    def _hand(self, route: tuple[str, bool], topic: str, stamp_ns: int, msg: dict) -> None:
         if len(self.handover) == self.handover.maxlen:
             self.handover_drops += 1
         self.handover.append((route, topic, stamp_ns, msg))
@@ -211,8 +222,6 @@ class Publisher:
                     queued=self.queue.depth)
         client.publish(self.topics.status, "online", qos=1, retain=True)
         if self.cfg.discovery:
-            from cmsensord.publish.discovery import discovery_messages
-
             for topic, body in discovery_messages(self.cfg, self.channels):
                 client.publish(topic, body, qos=1, retain=True)
 

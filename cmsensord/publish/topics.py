@@ -38,6 +38,10 @@ class TopicMap:
         """The retained ``online`` / ``offline`` (last will) topic."""
         return f"{self.prefix}/status"
 
+    def worst_alarm(self, channel: str) -> str:
+        """The retained topic of a channel's worst alarm (Home Assistant discovery only)."""
+        return f"{self.prefix}/{channel}/worst_alarm"
+
     @property
     def heartbeat(self) -> str:
         return f"{self.prefix}/heartbeat"
