@@ -125,11 +125,16 @@ SAMPLES = [
     ("/cm/ch0/capture_waveform", "capture_waveform", {
         "channel": "ch0", "trigger": {"kind": "alarm_danger", "message": "ch0: danger"}, "source": "raw",
         "sample_rate_hz": 25000.0, "first_sample": 250000, "pre_s": 10.0, "post_s": 10.0, "unit": "m/s^2",
-        "missing": 1, "samples": [0.1, None, -0.2]}),
+        "missing": 1, "samples": [0.1, 0.0, -0.2], "lost": [1]}),
     ("/cm/ch0/capture_envelope", "capture_spectrum", {
         "channel": "ch0", "trigger": {"kind": "periodic", "message": "every 600 s"}, "kind": "envelope",
         "freq_start_hz": 0.0, "freq_step_hz": 0.05, "band_hz": [2000.0, 10000.0], "unit": "m/s^2",
         "amplitude": [0.0, 0.3, 0.1]}),
+    ("/cm/alarms", "alarms", {
+        "operating_state": "running", "worst": "alert", "worst_alarm": "de_velocity/ch0", "speed_rpm": 1480.0,
+        "alarms": [{"id": "de_velocity/ch0", "rule": "de_velocity", "indicator": "velocity_rms_mm_s",
+                    "channel": "ch0", "channels": ["ch0"], "level": "alert", "live": "alert", "latched": False,
+                    "acknowledged": False, "value": 3.1, "alert_level": 2.8, "danger_level": 4.5}]}),
 ]
 SCHEMA_NAMES = {
     "severity": "cmsensord.Severity",
@@ -140,6 +145,7 @@ SCHEMA_NAMES = {
     "vibration_estimate": "cmsensord.VibrationEstimate",
     "log": "foxglove.Log",
     "indicators": "cmsensord.Indicators",
+    "alarms": "cmsensord.Alarms",
     "capture_waveform": "cmsensord.CaptureWaveform",
     "capture_spectrum": "cmsensord.CaptureSpectrum",
 }

@@ -228,12 +228,12 @@ class Captures:
         wave_t, spec_t, env_t = capture_topics(p.channel)
         head = {"channel": p.channel, "trigger": p.trigger}
         lost = ~np.isfinite(x)
-        samples = [None if m else round(float(v), 6) for v, m in zip(x, lost)]
         filled = np.where(lost, 0.0, x)
+        samples = [round(v, 6) for v in filled.tolist()]
         group: list[Message] = [Message(wave_t, "capture_waveform", p.stamp_ns, {
             **head, "source": self.source, "sample_rate_hz": self.rate, "first_sample": p.start,
             "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s, "unit": "m/s^2", "missing": int(lost.sum()),
-            "samples": samples})]
+            "samples": samples, **({"lost": np.flatnonzero(lost).tolist()} if lost.any() else {})})]
         f, A = amplitude_spectrum(filled, self.rate)
         group.append(Message(spec_t, "capture_spectrum", p.stamp_ns, {
             **head, "kind": "spectrum", "freq_start_hz": 0.0, "freq_step_hz": float(f[1] - f[0]),

@@ -69,7 +69,8 @@ UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failu
 HOLD_S = 10.0
 #: events of the daemon and its surroundings, stamped by the wall clock: written at once
 WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_stalled", "reader_error",
-                        "reader_recovered", "reader_died", "queue_overflow", "disk_error", "salvage"})
+                        "reader_recovered", "reader_died", "queue_overflow", "disk_error", "salvage",
+                        "mqtt_link", "mqtt_queue"})
 #: most records waiting (a stream with no decisions)
 MAX_PENDING = 1000
 #: a record stamped further than this past the processed stream waits as if stamped there

@@ -247,6 +247,7 @@ def capture_figure(cap: Capture, index: int) -> Figure:
         msg = cap.parts[part]
         if part == "waveform":
             y = np.asarray(msg.get("samples", []), dtype=float)
+            y[np.asarray(msg.get("lost", []), dtype=int)] = np.nan    # lost samples are gaps
             rate = float(msg.get("sample_rate_hz") or 1.0)
             x = -float(msg.get("pre_s") or 0.0) + np.arange(y.size) / rate
             ax.plot(x, y, lw=0.5, color="#1f4e99")

@@ -2,8 +2,7 @@
 ``/cm/<channel>/capture_spectrum``, ``/cm/<channel>/capture_envelope`` (cmsensord.CaptureSpectrum).
 
 One message of each per channel and capture, all stamped at the trigger; arrays of
-plain numbers (a lost sample is ``null``), no union types beyond the nullable
-numbers every schema of the output uses.
+plain numbers (a lost sample is 0 and its index is in ``lost``), no union types.
 """
 
 from __future__ import annotations
@@ -43,9 +42,11 @@ def capture_waveform_schema(time: Callable[[], dict], obj: Callable[..., dict]) 
             "pre_s": {"type": "number", "description": "seconds before the trigger", "minimum": 0},
             "post_s": {"type": "number", "description": "seconds after the trigger", "minimum": 0},
             "unit": {"type": "string", "description": "unit of samples"},
-            "missing": {"type": "integer", "description": "samples lost (null)", "minimum": 0},
-            "samples": {"type": "array", "items": {"type": ["number", "null"]},
-                        "description": "the signal, pre_s + post_s seconds"},
+            "missing": {"type": "integer", "description": "samples lost", "minimum": 0},
+            "samples": {"type": "array", "items": {"type": "number"},
+                        "description": "the signal, pre_s + post_s seconds (0 where a sample was lost)"},
+            "lost": {"type": "array", "items": {"type": "integer"},
+                     "description": "indices of the lost samples in samples (absent: none)"},
         },
         ["timestamp", "channel", "trigger", "source", "sample_rate_hz", "first_sample", "pre_s", "post_s",
          "unit", "samples"],

@@ -378,9 +378,13 @@ DIAGNOSTICS = _obj(
         "observations": _int("observations processed since start"),
         "uptime_s": _num("seconds since the daemon started", nullable=False),
         "mqtt": {"type": "object", "description": "the link to the MQTT broker (only with an mqtt "
-                 "section): state (connecting, connected, disconnected, refused), messages queued "
-                 "and not yet acknowledged, the queue's bytes on disk, dropped, sent and acknowledged "
-                 "since start"},
+                 "section)", "properties": {
+                     "state": {"type": "string", "description": "connecting, connected, disconnected, refused"},
+                     "queued": {"type": "integer", "description": "messages queued, not yet acknowledged"},
+                     "queue_bytes": {"type": "integer", "description": "the disk queue's size [bytes]"},
+                     "dropped": {"type": "integer", "description": "messages dropped since start (queue bound)"},
+                     "sent": {"type": "integer", "description": "messages sent since start"},
+                     "acked": {"type": "integer", "description": "messages the broker acknowledged since start"}}},
     },
     ["timestamp", "link", "queue_depth", "queue_drops", "observations", "uptime_s"],
 )
