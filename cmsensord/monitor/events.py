@@ -65,8 +65,9 @@ RATE_BURST = 5
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change",
                        "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack"})
-#: records wait until the processed stream is this far past them (events reported late)
-HOLD_S = 10.0
+#: records wait until the processed stream is this far past them (events reported late; the
+#: sink's log-time window learns this lateness, so it is also what a kill -9 may cost the log)
+HOLD_S = 1.0
 #: events of the daemon and its surroundings, stamped by the wall clock: written at once
 WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_stalled", "reader_error",
                         "reader_recovered", "reader_died", "queue_overflow", "disk_error", "salvage",
