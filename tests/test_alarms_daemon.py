@@ -174,3 +174,27 @@ def test_calibrate_learns_indicator_baselines_that_relative_alarms_use(tmp_path)
         assert table["alert_level"] == pytest.approx(2 * learned["velocity_rms_mm_s"], rel=1e-6)
     assert got["healthy"] == []
     assert [m["kind"] for m in got["faulty"]] == ["alarm_danger"]         # ~8.3 mm/s > 4 x 1.8
+
+
+def test_the_control_socket_works_in_a_deep_output_directory(tmp_path):
+    """A socket path longer than sun_path's 108 bytes (a deep output.dir) still binds and answers."""
+    import socket
+
+    from cmsensord.service.control import ControlServer, _answers
+
+    deep = tmp_path / ("d" * 80) / ("e" * 80)
+    deep.mkdir(parents=True)
+    server = ControlServer(deep / "cmsensord.sock")
+    try:
+        assert len(str(deep / "cmsensord.sock")) > 108 and (deep / "cmsensord.sock").is_socket()
+        with socket.socket(socket.AF_UNIX) as s:       # the plain path is too long for connect()
+            try:
+                s.connect(str(deep / "cmsensord.sock"))
+                too_long = False
+            except OSError:
+                too_long = True
+        assert too_long
+        assert _answers(deep / "cmsensord.sock")          # connect() through the short name
+    finally:
+        server.close()
+    assert not (deep / "cmsensord.sock").exists()

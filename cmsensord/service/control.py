@@ -22,6 +22,7 @@ import os
 import queue
 import socket
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -59,7 +60,8 @@ class ControlServer:
         try:
             if path.is_socket() and not _answers(path):      # left by a daemon that died
                 path.unlink()
-            self.sock.bind(str(path))
+            with _short(path) as name:
+                self.sock.bind(name)
             self.sock.listen(4)
             self.sock.settimeout(0.5)
         except OSError:
@@ -155,10 +157,29 @@ def _read_line(conn: socket.socket) -> bytes:
     return buf.split(b"\n", 1)[0]
 
 
+#: longest socket path bind() and connect() take as it is (sun_path holds 108 bytes)
+_SUN_PATH = 100
+
+
+@contextlib.contextmanager
+def _short(path: Path) -> Iterator[str]:
+    """A name of ``path`` short enough for a Unix socket address: itself, or (a deep output
+    directory) the same file through an open descriptor of its directory."""
+    if len(os.fsencode(str(path))) < _SUN_PATH:
+        yield str(path)
+        return
+    fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        yield f"/proc/self/fd/{fd}/{path.name}"
+    finally:
+        os.close(fd)
+
+
 def _answers(path: Path) -> bool:
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         try:
-            s.connect(str(path))
+            with _short(path) as name:
+                s.connect(name)
         except OSError:
             return False
     return True
@@ -168,7 +189,8 @@ def request(path: Path, body: dict, timeout: float = REPLY_S + 2.0) -> dict:
     """Send one request to the daemon at ``path``; its answer.  OSError when none answers."""
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(timeout)
-        s.connect(str(path))
+        with _short(path) as name:
+            s.connect(name)
         s.sendall(json.dumps(body).encode() + b"\n")
         buf = b""
         while not buf.endswith(b"\n"):
