@@ -26,12 +26,12 @@ sys.path.insert(0, str(ROOT))
 from cmsensord.config import config_from_dict  # noqa: E402
 from cmsensord.monitor import messages  # noqa: E402
 from cmsensord.monitor.alarms import Alarms  # noqa: E402
-from cmsensord.monitor.processor import Processor  # noqa: E402
-from cmsensord.protocol import Decoder  # noqa: E402
 from firmware_sim.board import Board, BoardConfig  # noqa: E402
 from firmware_sim.scenarios import make_scenario  # noqa: E402
 
-BEARING = {"name": "de", "channel": "ch0", "elements": 9, "ball_diameter": 9.525, "pitch_diameter": 46.0}
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_indicators import BEARING, processing_cpu  # noqa: E402
+
 ALARMS = {
     "operating": {"source": "speed", "running_above": 600, "startup_suppress_s": 5},
     "rules": [
@@ -43,11 +43,6 @@ ALARMS = {
         {"name": "accel", "indicator": "accel_rms", "alert": 3.0, "danger": 6.0},
         {"name": "severity", "indicator": "severity_index", "alert": 0.5, "danger": 0.9, "on_delay_s": 3},
     ]}
-
-
-class NullSink:
-    def write(self, topic, schema, stamp_ns, msg) -> None:
-        pass
 
 
 def record(k: int, v: float) -> messages.Message:
@@ -74,14 +69,7 @@ def manager_us(n: int) -> float:
 
 
 def chain_cpu(data: bytes, rules: bool) -> float:
-    cfg = config_from_dict({"bearings": [BEARING], **({"alarms": ALARMS} if rules else {})})
-    frames = Decoder().feed(data)
-    proc = Processor(cfg, NullSink(), clock_ns=lambda: 0)
-    t = time.process_time()
-    for i in range(0, len(frames), 500):
-        proc.handle(frames[i:i + 500])
-    proc.finish()
-    return time.process_time() - t
+    return processing_cpu({"bearings": [BEARING], **({"alarms": ALARMS} if rules else {})}, data)
 
 
 def main() -> int:
