@@ -26,6 +26,7 @@ import argparse
 import ast
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -266,12 +267,7 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
                flow_control: bool = False) -> int:
     from .pty_link import PtyEndpoint
 
-    stop = threading.Event()
-
-    def _on_signal(signum, frame):
-        stop.set()
-
-    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    stop = _stop_on_signals()
     try:
         with PtyEndpoint(link=link, injector=injector, flow_control=flow_control) as ep:
             print(ep.path, flush=True)
@@ -284,7 +280,27 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
     except OSError as exc:
         print(f"firmware_sim: error: pty: {exc}", file=sys.stderr)
         return 1
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
     return 0
+
+
+def _stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM, from a thread that reads the signal wakeup fd.
+
+    The Python handler does nothing: a handler calling ``Event.set`` in the main thread
+    could deadlock when the signal lands while that thread holds the event's own lock
+    (inside ``wait``, which the paced stream calls a thousand times a second at 10x).
+    """
+    stop = threading.Event()
+    rfd, wfd = os.pipe()
+    os.set_blocking(wfd, False)
+    signal.set_wakeup_fd(wfd, warn_on_full_buffer=False)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda _signum, _frame: None)
+
+    def _wait() -> None:
+        while not set(os.read(rfd, 64)) & {signal.SIGINT, signal.SIGTERM}:
+            pass
+        stop.set()
+
+    threading.Thread(target=_wait, name="signals", daemon=True).start()
+    return stop

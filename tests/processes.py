@@ -41,7 +41,12 @@ def board_on_pty(*args):
         yield sim.stdout.readline().strip()
     finally:
         sim.terminate()
-        sim.wait(timeout=5)
+        try:
+            sim.wait(timeout=5)
+        except subprocess.TimeoutExpired:   # fail, but leave no board running
+            sim.kill()
+            sim.wait()
+            raise
 
 
 def start_board(*args) -> subprocess.Popen:

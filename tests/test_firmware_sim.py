@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -27,6 +29,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import inject
 from firmware_sim.pty_link import PtyEndpoint
 from firmware_sim.scenarios import SCENARIOS, Scenario, make_scenario
+from processes import ENV
 
 FS = 25000
 L = 250
@@ -376,6 +379,31 @@ def test_pty_with_flow_control_waits_for_a_slow_reader_and_drops_nothing():
     assert ep.stats.dropped_bytes == 0 and ep.stats.blocks == 300
     assert ep.stats.stalled_s > 0.3                       # it did wait for the reader
     assert bytes(got) == board().generate(3.0)
+
+
+def test_pty_board_with_hold_stops_at_sigterm_whenever_it_lands():
+    """SIGTERM at any moment of a 10x stream (the pacing waits on the stop event a
+    thousand times a second) ends the board at once; a signal handler setting that
+    event could deadlock on the event's own lock (about 1 in 40 kills hung)."""
+    for delay in np.linspace(0.05, 0.6, 12):
+        sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
+                                "healthy", "--speed", "10"], stdout=subprocess.PIPE, text=True, env=ENV)
+        assert sim.stdout is not None
+        port = sim.stdout.readline().strip()
+        fd = os.open(port, os.O_RDONLY | os.O_NOCTTY)
+        try:
+            time.sleep(delay)
+            sim.terminate()
+            try:
+                code = sim.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                sim.kill()
+                sim.wait()
+                code = None
+        finally:
+            os.close(fd)
+            sim.stdout.close()
+        assert code == 0, f"the board did not stop within 5 s of SIGTERM {delay:.2f} s in"
 
 
 # --------------------------------------------------------------------------- faults
