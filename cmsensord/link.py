@@ -31,6 +31,7 @@ log = logging.getLogger("cmsensord")
 
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
+PLUG_POLL_S = 0.2          # how often an absent port's device name is checked during a back-off
 
 
 class FrameQueue:
@@ -273,7 +274,17 @@ class SerialReader(threading.Thread):
         return None
 
     def _wait_backoff(self) -> None:
-        self._stop_event.wait(self._backoff)
+        """Wait the back-off (doubling up to ``reconnect_max_s``) before the next open.  A
+        port whose device name is absent is checked every ``PLUG_POLL_S`` meanwhile (a stat)
+        and the wait ends when it appears: a board plugged back in is read at once, not
+        after up to ``reconnect_max_s``."""
+        absent = not os.path.exists(self.port)
+        end = time.monotonic() + self._backoff
+        while (left := end - time.monotonic()) > 0:
+            if self._stop_event.wait(min(left, PLUG_POLL_S) if absent else left):
+                break
+            if absent and os.path.exists(self.port):
+                break
         self._backoff = min(self._backoff * 2, self.reconnect_max_s)
 
 
