@@ -12,8 +12,10 @@ its end (:meth:`raw`, :meth:`rms`), as three messages stamped at the trigger
 (:mod:`cmsensord.sinks.capture_schema`) in one :class:`MessageGroup` (one chunk of the log:
 after a crash the capture is complete or absent). A capture starting within
 ``min_interval_s`` of the channel's last one, one whose size would exceed
-``max_mb_per_hour`` in the hour of board time, one whose first samples have left
-the ring, and one still open at the end of the stream are not written: a
+``max_mb_per_hour`` in the hour of board time, one whose ``pre_s`` reaches back
+before the stream's first sample (refused at once: it does not count as the
+channel's last capture), one whose first samples have left the ring, and one still
+open at the end of the stream are not written: a
 ``capture_skipped`` event says which and why; a written one has its ``capture``
 event. A capture is written whole or not at all.
 
@@ -176,7 +178,9 @@ class Captures:
         for col, name in enumerate(self.channels):
             if channel not in (None, name):
                 continue
-            why = self._refusal(name, stamp_ns, pre + post, trigger["kind"] == "manual")
+            why = "its pre_s reaches back before the stream's start" \
+                if self.first_idx is not None and idx - pre < self.first_idx \
+                else self._refusal(name, stamp_ns, pre + post, trigger["kind"] == "manual")
             if why is not None:
                 self._event("capture_skipped", name, f"{name}: capture on {trigger['kind']} skipped: {why}",
                             stamp_ns)

@@ -277,7 +277,8 @@ def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = Non
     ax.set_xlabel("frequency [Hz]")
     speed = f", shaft {msg['shaft_speed_rpm']:.0f} rpm from the {msg.get('speed_source', '?')}" \
         if "shaft_speed_rpm" in msg else ""
-    ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed})" if f.size else label,
+    dotted = "; dotted: 2x and 3x of each line" if fmax is not None and marks else ""
+    ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed}{dotted})" if f.size else label,
                  fontsize=9, loc="left")
     ax.set_ylabel(f"{label.split(',')[0]} [{msg.get('unit', 'm/s²')}]")
     ax.grid(alpha=0.3, which="both" if log_f else "major")
