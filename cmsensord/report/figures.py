@@ -318,7 +318,8 @@ def capture_figure(cap: Capture, index: int) -> Figure:
     fig.suptitle(f"{cap.channel}: capture at {local_datetime(cap.time_ns).isoformat(timespec='seconds')}"
                  f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}", fontsize=11)
     meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
-            "title": f"{cap.channel}: capture {index}", "trigger": trigger.get("kind"), "parts": parts,
+            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "trigger": trigger.get("kind"),
+            "parts": parts,
             "marks": [m["label"] for m in cap.parts.get("spectrum", {}).get("marks", [])]}
     return _finish(fig, meta, [a[0] for a in axes], boxes=True)
 
