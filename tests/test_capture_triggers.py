@@ -176,6 +176,27 @@ def test_every_operating_state_change_without_a_filter(starting, tmp_path):
     assert kept == ["operating state starting -> running (speed 1720 rpm)"]
 
 
+def test_a_run_up_is_captured_as_it_reaches_running_speed(tmp_path):
+    """close_orders runs up 0 -> 3000 rpm in 5 s (600 rpm a second): with running_above 1500 it
+    starts running at the indicator record of 2-3 s; the capture of 2 s around it has the 1x
+    mark at the tacho's speed during the capture, within the run-up's 1200-2400 rpm."""
+    cap = tmp_path / "runup.cap"
+    assert run_module("firmware_sim", "--out", str(cap), "--scenario", "close_orders", "--mode", "raw",
+                      "--tacho").returncode == 0
+    msgs = _replay(cap, tmp_path, "alarms:\n  operating: {source: speed, running_above: 1500}\n"
+                   "capture: {triggers: [operating_state], pre_s: 1, post_s: 1, min_interval_s: 0}\n")
+    (state,) = [x for t, _, x in msgs if t == "/cm/events" and x["kind"] == "operating_state"]
+    assert state["message"] == "operating state stopped -> running (speed 1500 rpm)"
+    first = next(_stamp(x) for t, _, x in msgs if t == "/cm/ch0/indicators")        # the record of 0-1 s
+    assert _stamp(state) == first + 2 * S
+    (wave,) = [x for t, _, x in msgs if t == "/cm/ch0/capture_waveform"]
+    (spectrum,) = [x for t, _, x in msgs if t == "/cm/ch0/capture_spectrum"]
+    assert _stamp(wave) == _stamp(spectrum) == _stamp(state) and len(wave["samples"]) == 2 * FS
+    assert spectrum["speed_source"] == "tacho" and 1200 < spectrum["shaft_speed_rpm"] < 2400
+    assert spectrum["marks"] == [{"label": "1x", "kind": "shaft",
+                                  "freq_hz": pytest.approx(spectrum["shaft_speed_rpm"] / 60, abs=1e-5)}]
+
+
 def test_an_operating_state_trigger_needs_an_operating_source(starting, tmp_path):
     (tmp_path / "c.yaml").write_text("capture:\n  triggers: [operating_state]\n")
     p = cmsensord("replay", str(starting), "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "logs"))
