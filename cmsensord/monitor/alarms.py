@@ -114,7 +114,7 @@ class Alarms:
         op = self.rules.operating
         why = f"speed {float(speed):.0f} rpm" if op.source == "speed" and speed is not None else \
             f"{op.level_indicator} {self.manager.operating.reading:.4g}" if self.manager and \
-            self.manager.operating.reading is not None and op.source == "level" else "timeout"
+            self.manager.operating.reading is not None and op.source == "level" else "suppression time over"
         return Event("operating_state", None, f"operating state {was} -> {now} ({why})", stamp,
                      {"details": {"state": now, "previous": was}})
 
