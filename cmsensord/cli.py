@@ -6,6 +6,7 @@
     cmsensord record --port DEV --out FILE [--duration S]
     cmsensord summary FILE.mcap
     cmsensord report LOG_OR_DIR... --out report.html [--png DIR]
+    cmsensord ack | status | capture-now [--config FILE]   (to the running daemon)
 
 Errors a user can cause (bad arguments, a bad configuration value, a missing
 device or capture, an unwritable log directory) end in one line on stderr and
@@ -77,8 +78,8 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                     "adaptive Kalman filters -> severity indices and events in MCAP logs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=(_scenarios_help() if with_scenarios else "")
-        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary, report, ack, status (see "
-                                   "`cmsensord SUBCOMMAND --help`)")
+        + "\n\nsubcommands: replay, record, import, calibrate, vkf, config, summary, report, ack, status, "
+          "capture-now (see `cmsensord SUBCOMMAND --help`)")
     p.add_argument("--version", action="version", version=f"cmsensord {__version__}")
     p.add_argument("--config", metavar="FILE", help="YAML configuration (`cmsensord config --default` "
                    "prints every key with its default and meaning)")
@@ -107,7 +108,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
     sub = p.add_subparsers(dest="command", parser_class=_Parser,
-                           metavar="{replay,record,import,calibrate,vkf,config,summary,report,ack,status}")
+                           metavar="{replay,record,import,calibrate,vkf,config,summary,report,ack,status,capture-now}")
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
@@ -212,9 +213,9 @@ def _dispatch(args: argparse.Namespace) -> int:
         return run_report(args)
     if args.command == "calibrate":
         return run_calibrate(args)
-    if args.command in ("ack", "status"):
-        from cmsensord.service.operator import run_ack, run_status
-        return (run_ack if args.command == "ack" else run_status)(args)
+    if args.command in ("ack", "status", "capture-now"):
+        from cmsensord.service.operator import run_ack, run_capture_now, run_status
+        return {"ack": run_ack, "status": run_status, "capture-now": run_capture_now}[args.command](args)
     if args.command == "record":
         return record(args.port, args.sub_out, baud=args.baud, duration_s=args.sub_duration)
     if args.command == "vkf":

@@ -29,6 +29,7 @@ from fakes import FakeClock
 PROCESS_MODULES = frozenset({
     "test_report.py",
     "test_capture.py",
+    "test_capture_triggers.py",
     "test_alarms_daemon.py",
     "test_calibrate.py",
     "test_cli.py",

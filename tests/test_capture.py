@@ -119,5 +119,5 @@ def test_a_bad_capture_setting_is_one_line(raw_cap, tmp_path):
     assert p.returncode == 78                            # EXIT_CONFIG
     assert p.stderr.strip().splitlines() == [
         f"cmsensord: configuration error: {cfg}: capture.triggers: unknown trigger 'alarm' (one of alarm_alert, "
-        "alarm_danger, alarm_clear, severity_change, anomaly_onset, failure, order_alarm, time_base, tacho_lost) "
-        "(got 'alarm')"]
+        "alarm_danger, alarm_clear, severity_change, anomaly_onset, failure, order_alarm, time_base, tacho_lost, "
+        "operating_state, manual) (got 'alarm')"]

@@ -2,7 +2,9 @@
 
 A capture keeps ``pre_s`` seconds before and ``post_s`` seconds after its trigger of
 each channel's RAW samples (RMS mode: the 100 Hz block RMS), written to the log with
-its spectrum and envelope spectrum (:mod:`cmsensord.monitor.capture`).
+its spectrum and envelope spectrum (:mod:`cmsensord.monitor.capture`).  ``cmsensord
+capture-now`` asks the running daemon for one (trigger ``manual``) whenever captures are
+on (any trigger, ``manual`` alone included, or ``every_s``).
 """
 
 from __future__ import annotations
@@ -12,17 +14,24 @@ from typing import Any, ClassVar
 
 from .validation import Rule, setting, validate
 
-__all__ = ["CaptureConfig", "TRIGGER_KINDS"]
+__all__ = ["CaptureConfig", "TRIGGER_KINDS", "OPERATING_STATES", "capture_sees_operating"]
 
-#: event kinds that can trigger a capture (the alarm manager's kinds included)
+#: event kinds that can trigger a capture (the alarm manager's kinds included), and ``manual``
+#: (only ``cmsensord capture-now``: it keeps the ring without any event triggering)
 TRIGGER_KINDS = ("alarm_alert", "alarm_danger", "alarm_clear", "severity_change", "anomaly_onset",
-                 "failure", "order_alarm", "time_base", "tacho_lost")
+                 "failure", "order_alarm", "time_base", "tacho_lost", "operating_state", "manual")
+#: the operating states an ``operating_state`` trigger may be restricted to
+OPERATING_STATES = ("stopped", "starting", "running", "coasting")
 
 
 def _known_triggers(obj: Any) -> tuple[str, str, Any] | None:
     for kind in obj.triggers:
         if kind not in TRIGGER_KINDS:
             return "triggers", f"unknown trigger {kind!r} (one of {', '.join(TRIGGER_KINDS)})", kind
+    for state in obj.operating_states:
+        if state not in OPERATING_STATES:
+            return ("operating_states", f"unknown operating state {state!r} (one of "
+                    f"{', '.join(OPERATING_STATES)})", state)
     return None
 
 
@@ -32,6 +41,9 @@ class CaptureConfig:
 
     triggers: tuple[str, ...] = setting((), "event kinds that trigger a capture (none: only every_s)")
     anomaly_akf: int = setting(0, "anomaly_onset triggers only for this AKF_n (1..n); 0: any", ge=0)
+    operating_states: tuple[str, ...] = setting(
+        (), "operating_state triggers only on entering these states (stopped, starting, running, "
+        "coasting); none: every change")
     every_s: float = setting(0.0, "also a periodic capture every this many seconds of board time; 0: none",
                              ge=0)
     pre_s: float = setting(10.0, "seconds kept before the trigger", gt=0, le=120)
@@ -47,3 +59,13 @@ class CaptureConfig:
     @property
     def enabled(self) -> bool:
         return bool(self.triggers) or self.every_s > 0
+
+
+def capture_sees_operating(cfg: Any) -> tuple[str, str, Any] | None:
+    """Config rule: an ``operating_state`` trigger needs an operating state to change
+    (``alarms.operating.source`` speed or level, the alarm manager enabled)."""
+    if "operating_state" in cfg.capture.triggers and (cfg.alarms.operating.source == "none"
+                                                       or not cfg.alarms.enabled):
+        return ("capture.triggers", "operating_state needs alarms.operating.source speed or level "
+                "(and alarms.enabled)", "operating_state")
+    return None

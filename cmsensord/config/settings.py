@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from .alarms import AlarmsConfig, alarms_see_channels
-from .capture import CaptureConfig
+from .capture import CaptureConfig, capture_sees_operating
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .mqtt import MqttConfig
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
@@ -385,7 +385,8 @@ class Config:
     mqtt: MqttConfig | None = field(default=None, metadata={"help": "publishing to an MQTT broker"})
     alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels, alarms_see_channels)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels, alarms_see_channels,
+                                          capture_sees_operating)
 
     def __post_init__(self) -> None:
         validate(self)

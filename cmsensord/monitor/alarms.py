@@ -12,7 +12,9 @@ also sets the operating state), each ``/cm/<ch>/severity`` decision
 ``alarm_danger``, ``alarm_clear``, ``alarm_ack``) and, whenever the alarm table
 changes, one ``/cm/alarms`` message — all stamped with the stamp of the message
 that caused them (an acknowledgement: the newest stamp), so a replay gives what
-the live run gave.
+the live run gave.  A change of the machine's operating state is an
+``operating_state`` event (details: ``state``, ``previous``); with an
+``alarms.operating`` source the manager runs for it even without rules.
 """
 
 from __future__ import annotations
@@ -77,6 +79,8 @@ class Alarms:
         self.manager: AlarmManager | None = None
         self.rules = dataclasses.replace(cfg.alarms, rules=cfg.alarms.rules + order_rules(cfg))
         self.active = cfg.alarms.enabled and bool(self.rules.rules)
+        #: the manager runs: for the rules, or for the operating state alone
+        self.watching = self.active or (cfg.alarms.enabled and cfg.alarms.operating.source != "none")
         self.newest_ns = 0
         self._signature: tuple = ()
 
@@ -88,7 +92,7 @@ class Alarms:
 
     def see(self, m: messages.Message) -> list:
         """The events and the /cm/alarms message that message ``m`` causes (often none)."""
-        if m.schema not in WATCHED or not self.active:
+        if m.schema not in WATCHED or not self.watching:
             return []
         msg, stamp = m.msg, m.stamp_ns
         self.newest_ns = max(self.newest_ns, stamp)
@@ -96,12 +100,23 @@ class Alarms:
         ch = msg["channel"]
         if m.schema == "indicators":
             speed = msg.get("speed_rpm")
+            was = mgr.operating.state
             tr = mgr.record(stamp, ch, indicator_values(msg), None if speed is None else float(speed))
+            if mgr.operating.state != was:
+                return [self._state_event(stamp, was, mgr.operating.state, speed)] + self._after(stamp, tr)
         elif m.schema == "severity":
             tr = mgr.values(stamp, ch, {"severity_index": float(msg["severity_index"])})
         else:
             tr = mgr.values(stamp, ch, _order_values(msg))
         return self._after(stamp, tr)
+
+    def _state_event(self, stamp: int, was: str, now: str, speed: float | None) -> Event:
+        op = self.rules.operating
+        why = f"speed {float(speed):.0f} rpm" if op.source == "speed" and speed is not None else \
+            f"{op.level_indicator} {self.manager.operating.reading:.4g}" if self.manager and \
+            self.manager.operating.reading is not None and op.source == "level" else "suppression time over"
+        return Event("operating_state", None, f"operating state {was} -> {now} ({why})", stamp,
+                     {"details": {"state": now, "previous": was}})
 
     def ack(self, which: str | None) -> list:
         """Acknowledge alarm ``which`` (None: all); KeyError for an unknown alarm (and for any

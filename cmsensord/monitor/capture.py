@@ -12,10 +12,21 @@ its end (:meth:`raw`, :meth:`rms`), as three messages stamped at the trigger
 (:mod:`cmsensord.sinks.capture_schema`) in one :class:`MessageGroup` (one chunk of the log:
 after a crash the capture is complete or absent). A capture starting within
 ``min_interval_s`` of the channel's last one, one whose size would exceed
-``max_mb_per_hour`` in the hour of board time, one whose first samples have left
-the ring, and one still open at the end of the stream are not written: a
+``max_mb_per_hour`` in the hour of board time, one whose ``pre_s`` reaches back
+before the stream's first sample (refused at once: it does not count as the
+channel's last capture), one whose first samples have left the ring, and one still
+open at the end of the stream are not written: a
 ``capture_skipped`` event says which and why; a written one has its ``capture``
 event. A capture is written whole or not at all.
+
+An ``operating_state`` trigger may be restricted to the states entered
+(``capture.operating_states``).  :meth:`manual` (``cmsensord capture-now`` over the
+control socket) starts a capture with trigger ``manual`` at the newest sample
+received: ``pre_s`` from the ring, ``post_s`` still to come; it is not held back
+by ``min_interval_s`` (an operator asked for it) but counts against the hourly
+budget.  In RAW mode the spectrum and the envelope spectrum carry the shaft speed
+over the capture and the lines at it (1x, each bearing's defect frequencies:
+:mod:`.capture_marks`).
 """
 
 from __future__ import annotations
@@ -30,6 +41,7 @@ import numpy as np
 from cmsensord.config.capture import CaptureConfig
 from cmsensord.dsp.capture_spectra import amplitude_spectrum
 from cmsensord.dsp.indicators.envelope import default_band, envelope, envelope_spectrum
+from cmsensord.monitor.capture_marks import CaptureMarks
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.messages import Message, MessageGroup
 from cmsensord.sinks.capture_schema import capture_topics
@@ -40,6 +52,8 @@ __all__ = ["Captures"]
 HOLD_S = 20.0
 #: JSON bytes per sample counted against max_mb_per_hour
 BYTES_PER_SAMPLE = 12
+#: the envelope spectrum is kept up to this frequency [Hz]
+ENVELOPE_MAX_HZ = 1000.0
 
 
 @dataclass
@@ -87,8 +101,10 @@ class _Ring:
 class Captures:
     """Triggers -> captures of the channels' signal (see the module docstring)."""
 
-    def __init__(self, cfg: CaptureConfig, stamp_of: Callable[[int], int]) -> None:
+    def __init__(self, cfg: CaptureConfig, stamp_of: Callable[[int], int],
+                 marks: CaptureMarks | None = None) -> None:
         self.cfg = cfg
+        self.marks = marks
         self.stamp_of = stamp_of            # board t0 -> stamp [ns]
         self.source = ""
         self.rate = 0.0
@@ -100,6 +116,7 @@ class Captures:
         self.last_ns: dict[str, int] = {}
         self.budget: deque[tuple[int, int]] = deque()             # (stamp_ns, bytes) of the last hour
         self.next_tick: int | None = None
+        self.first_idx: int | None = None                         # the stream's first index
         self.out: list[Any] = []
 
     # ---- triggers ------------------------------------------------------------
@@ -109,9 +126,40 @@ class Captures:
             return
         if kind == "anomaly_onset" and self.cfg.anomaly_akf and fields.get("filter") != self.cfg.anomaly_akf:
             return
+        if kind == "operating_state" and self.cfg.operating_states and \
+                (fields.get("details") or {}).get("state") not in self.cfg.operating_states:
+            return
         idx = self._index_of(stamp_ns)
         if idx is not None:
             self._trigger(channel, idx, stamp_ns, {"kind": kind, "message": message})
+
+    def manual(self, channel: str | None) -> dict[str, Any]:
+        """``cmsensord capture-now``: a capture of ``channel`` (None: every channel) around the
+        newest sample received; the control socket's answer (``ok``, and ``captures``: per
+        channel its trigger stamp, first board index, seconds kept, or why it was skipped)."""
+        ring = self.ring
+        if ring is None or ring.newest_end is None:
+            return {"ok": False, "error": "no samples received yet: nothing to capture"}
+        if channel is not None and channel not in self.channels:
+            return {"ok": False, "error": f"no channel named {channel!r} (channels: {', '.join(self.channels)})"}
+        idx = ring.newest_end
+        stamp = self.stamp_of(idx * self.ticks)
+        before = len(self.pending)
+        self._trigger(channel, idx, stamp, {"kind": "manual", "message": "cmsensord capture-now"})
+        started = {p.channel: p for p in self.pending[before:]}
+        rows: list[dict[str, Any]] = []
+        for name in self.channels:
+            if channel not in (None, name):
+                continue
+            p = started.get(name)
+            if p is None:
+                why = next((e.message for e in reversed(self.out) if e.kind == "capture_skipped"
+                            and e.channel == name), "skipped")
+                rows.append({"channel": name, "skipped": why})
+            else:
+                rows.append({"channel": name, "stamp_ns": stamp, "first_sample": p.start,
+                             "source": self.source, "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s})
+        return {"ok": True, "captures": rows}
 
     def _index_of(self, stamp_ns: int) -> int | None:
         """The board index at ``stamp_ns`` (from the last block stamped at or before it)."""
@@ -130,7 +178,9 @@ class Captures:
         for col, name in enumerate(self.channels):
             if channel not in (None, name):
                 continue
-            why = self._refusal(name, stamp_ns, pre + post)
+            why = "its pre_s reaches back before the stream's start" \
+                if self.first_idx is not None and idx - pre < self.first_idx \
+                else self._refusal(name, stamp_ns, pre + post, trigger["kind"] == "manual")
             if why is not None:
                 self._event("capture_skipped", name, f"{name}: capture on {trigger['kind']} skipped: {why}",
                             stamp_ns)
@@ -139,9 +189,9 @@ class Captures:
             self.budget.append((stamp_ns, (pre + post) * BYTES_PER_SAMPLE))
             self.pending.append(_Pending(name, col, idx - pre, idx + post, idx, stamp_ns, trigger))
 
-    def _refusal(self, name: str, stamp_ns: int, n: int) -> str | None:
+    def _refusal(self, name: str, stamp_ns: int, n: int, manual: bool = False) -> str | None:
         last = self.last_ns.get(name)
-        if last is not None and stamp_ns - last < self.cfg.min_interval_s * 1e9:
+        if not manual and last is not None and stamp_ns - last < self.cfg.min_interval_s * 1e9:
             return f"{(stamp_ns - last) / 1e9:.3g} s after the last one (capture.min_interval_s " \
                    f"{self.cfg.min_interval_s:g})"
         while self.budget and stamp_ns - self.budget[0][0] >= 3600e9:
@@ -177,6 +227,7 @@ class Captures:
         self.ring = _Ring(int((self.cfg.pre_s + self.cfg.post_s + HOLD_S) * rate))
         self.anchors.clear()
         self.next_tick = None
+        self.first_idx = None
         for p in self.pending:
             self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} skipped: "
                         "the stream changed (mode, rate or channels)", p.stamp_ns)
@@ -185,6 +236,8 @@ class Captures:
     def _add(self, idx: int, x: np.ndarray) -> None:
         assert self.ring is not None
         stamp = self.stamp_of(idx * self.ticks)
+        if self.first_idx is None:
+            self.first_idx = idx
         self.anchors.append((idx, stamp))
         self.ring.add(idx, x)
         if self.cfg.every_s > 0:
@@ -204,8 +257,10 @@ class Captures:
         still = []
         for p in self.pending:
             if oldest is not None and p.start < oldest:
+                why = "its pre_s reaches back before the stream's start" if p.start < (self.first_idx or 0) else \
+                    "its first samples are no longer held"
                 self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} "
-                            "skipped: its first samples are no longer held", p.stamp_ns)
+                            f"skipped: {why}", p.stamp_ns)
             elif end is not None and end >= p.end:
                 self.out.extend(self._messages(p, ring.window(p.start, p.end, p.column)))
             else:
@@ -235,17 +290,21 @@ class Captures:
             "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s, "unit": "m/s^2", "missing": int(lost.sum()),
             "samples": samples, **({"lost": np.flatnonzero(lost).tolist()} if lost.any() else {})})]
         f, A = amplitude_spectrum(filled, self.rate)
+        marks = self.marks.fields(p.channel, p.start, p.end, self.rate / 2) \
+            if self.source == "raw" and self.marks is not None else {}
         group.append(Message(spec_t, "capture_spectrum", p.stamp_ns, {
             **head, "kind": "spectrum", "freq_start_hz": 0.0, "freq_step_hz": float(f[1] - f[0]),
-            "unit": "m/s^2", "amplitude": np.round(A, 6).tolist()}))
+            "unit": "m/s^2", "amplitude": np.round(A, 6).tolist(), **marks}))
         if self.source == "raw":
             env = envelope(filled, self.rate, default_band(self.rate))
             fe, Ae = envelope_spectrum(env.env, env.fs_env)
-            keep = fe <= 1000.0
+            keep = fe <= ENVELOPE_MAX_HZ
+            if "marks" in marks:
+                marks = {**marks, "marks": [m for m in marks["marks"] if m["freq_hz"] <= ENVELOPE_MAX_HZ]}
             group.append(Message(env_t, "capture_spectrum", p.stamp_ns, {
                 **head, "kind": "envelope", "freq_start_hz": 0.0, "freq_step_hz": float(fe[1] - fe[0]),
                 "band_hz": [float(env.band[0]), float(env.band[1])], "unit": "m/s^2",
-                "amplitude": np.round(Ae[keep], 6).tolist()}))
+                "amplitude": np.round(Ae[keep], 6).tolist(), **marks}))
         out: list[Any] = [MessageGroup(tuple(group))]
         out.append(Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "
                          f"{p.trigger['kind']} ({len(x)} samples, {int(lost.sum())} lost)", p.stamp_ns,

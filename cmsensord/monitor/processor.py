@@ -90,7 +90,8 @@ class Processor:
         self.captures: Captures | None = None
         if cfg.capture.enabled:
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
-            self.captures = Captures(cfg.capture, self.clock.stamp_ns)
+            from cmsensord.monitor.capture_marks import CaptureMarks
+            self.captures = Captures(cfg.capture, self.clock.stamp_ns, CaptureMarks(cfg, lambda: self.shaft.tacho))
             self.log.watch = self.captures.watch
 
     # ---- the parts' figures, for the status line, the summary and the tools --

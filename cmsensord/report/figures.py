@@ -27,6 +27,8 @@ from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogDa
 
 __all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
 
+#: PNG resolution [dots per inch]
+SAVE_DPI = 100
 #: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
 MIN_SPEED_BINS = 5
 _ZONE_COLOURS = ("#cfeccf", "#f4f1c0", "#f8d9b0", "#f4b8b8")
@@ -52,14 +54,17 @@ def _times(t_ns: np.ndarray) -> np.ndarray:
 def _axes_meta(ax: Any, time_axis: bool = False) -> dict[str, Any]:
     xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
     out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
-                           "xlim": xlim, "ylim": ylim, "lines": [ln.get_label() for ln in ax.get_lines()
-                                                                 if not ln.get_label().startswith("_")]}
+                           "xlim": xlim, "ylim": ylim, "xscale": ax.get_xscale(),
+                           "lines": [ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")]}
     if time_axis:
         out["xlim_local"] = [mdates.num2date(x).replace(tzinfo=None).isoformat(timespec="seconds") for x in xlim]
     return out
 
 
-def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: bool = False) -> Figure:
+def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: bool = False,
+            boxes: bool = False) -> Figure:
+    """The PNG and its metadata; with ``boxes`` each axes' box in the PNG too (``box_px``: left,
+    top, right, bottom pixels, laid out as saved), so a test can find a line's pixel column."""
     if time_axis:
         offset = datetime.now().astimezone().strftime("%z")
         axes[-1].set_xlabel(f"local time (UTC{offset[:3]}:{offset[3:]})")
@@ -68,8 +73,14 @@ def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: bool = F
             ax.xaxis.set_major_locator(locator)
             ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
     meta["axes"] = [_axes_meta(ax, time_axis) for ax in axes]
+    if boxes:
+        fig.draw_without_rendering()            # the constrained layout as savefig makes it
+        w, h = fig.get_size_inches() * SAVE_DPI
+        for ax, m in zip(axes, meta["axes"]):
+            x0, y0, x1, y1 = ax.get_position().extents
+            m["box_px"] = [round(x0 * w, 1), round((1 - y1) * h, 1), round(x1 * w, 1), round((1 - y0) * h, 1)]
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, metadata={"Title": meta["title"],
+    fig.savefig(buf, format="png", dpi=SAVE_DPI, metadata={"Title": meta["title"],
                                                       "Description": json.dumps(meta)})
     plt.close(fig)
     return Figure(meta, buf.getvalue())
@@ -224,42 +235,105 @@ def campbell_figure(ch: ChannelData) -> Figure | None:
     return _finish(fig, meta, [ax])
 
 
-def _spectrum(ax: Any, msg: dict[str, Any], label: str) -> None:
+#: colours of the marked lines, by kind (the shaft's 1x, the bearing defects)
+MARK_COLOURS = {"shaft": "#424242", "ftf": "#2e7d32", "bpfo": "#c62828", "bpfi": "#ef6c00", "bsf": "#6a1b9a"}
+#: the zoomed envelope spectrum shows up to this many times its highest bearing line
+ZOOM_LINES = 3.5
+
+
+def _marks(ax: Any, marks: list[dict[str, Any]], fmax: float, text: bool, harmonics: bool) -> None:
+    """The marked frequencies up to ``fmax`` as vertical dashed lines (legend: label and Hz);
+    with ``text`` each also labelled at the top of the axes, with ``harmonics`` its 2x and 3x dotted."""
+    for m in sorted(marks, key=lambda m: m["freq_hz"]):
+        hz, colour = float(m["freq_hz"]), MARK_COLOURS.get(m.get("kind", ""), "#424242")
+        if not 0 < hz <= fmax:
+            continue
+        ax.axvline(hz, color=colour, ls="--", lw=1.1, label=f"{m['label']} {hz:.1f} Hz")
+        if text:
+            ax.text(hz, 0.98, f"{m['label']} ", transform=ax.get_xaxis_transform(), rotation=90,
+                    va="top", ha="right", fontsize=7.5, color=colour)
+        for h in (2, 3) if harmonics else ():
+            if h * hz <= fmax:
+                ax.axvline(h * hz, color=colour, ls=":", lw=0.9, alpha=0.7)
+
+
+def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = None, *,
+              log_f: bool = False, legend: bool = True) -> None:
+    """An amplitude spectrum with its marks: up to ``fmax`` (a zoom: the lines labelled, their
+    2x and 3x dotted), or whole, on a log frequency axis with ``log_f`` (the lines labelled)."""
     amp = np.asarray(msg.get("amplitude", []), dtype=float)
     f = float(msg.get("freq_start_hz") or 0.0) + float(msg.get("freq_step_hz") or 1.0) * np.arange(amp.size)
+    if fmax is not None:
+        keep = f <= fmax
+        f, amp = f[keep], amp[keep]
+    if log_f:                                   # DC off the log axis
+        f, amp = f[f > 0], amp[f > 0]
+        ax.set_xscale("log")
     ax.plot(f, amp, lw=0.8, color="#1f4e99")
-    for i, (name, hz) in enumerate(sorted((msg.get("defect_hz") or {}).items())):
-        if isinstance(hz, int | float) and f.size and hz <= f[-1]:
-            ax.axvline(hz, color=f"C{i + 1}", ls="--", lw=1, label=f"{name} {hz:.1f} Hz")
+    marks = msg.get("marks") or []
+    if f.size:
+        ax.set_xlim(float(f[0]) if log_f else 0.0, float(f[-1]))
+        _marks(ax, marks, float(f[-1]), text=fmax is not None or log_f, harmonics=fmax is not None)
     ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel(f"{label} [{msg.get('unit', 'm/s²')}]")
-    ax.grid(alpha=0.3)
-    if msg.get("defect_hz"):
-        ax.legend(loc="upper right", fontsize=8, ncols=2)
+    speed = f", shaft {msg['shaft_speed_rpm']:.0f} rpm from the {msg.get('speed_source', '?')}" \
+        if "shaft_speed_rpm" in msg else ""
+    dotted = "; dotted: 2x and 3x of each line" if fmax is not None and marks else ""
+    ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed}{dotted})" if f.size else label,
+                 fontsize=9, loc="left")
+    ax.set_ylabel(f"{label.split(',')[0]} [{msg.get('unit', 'm/s²')}]")
+    ax.grid(alpha=0.3, which="both" if log_f else "major")
+    if marks and legend:
+        ax.legend(loc="upper right", fontsize=7.5, ncols=3 if fmax is None else 2, framealpha=0.85)
+
+
+def _zoom_to(msg: dict[str, Any]) -> float | None:
+    """The zoomed envelope spectrum's top frequency: ZOOM_LINES x its highest bearing line
+    (None: no bearing line to zoom on)."""
+    lines = [float(m["freq_hz"]) for m in msg.get("marks") or [] if m.get("kind") != "shaft"]
+    if not lines:
+        return None
+    top = float(msg.get("freq_start_hz") or 0.0) + float(msg.get("freq_step_hz") or 1.0) * \
+        (len(msg.get("amplitude", [])) - 1)
+    return min(ZOOM_LINES * max(lines), top)
 
 
 def capture_figure(cap: Capture, index: int) -> Figure:
-    """A captured waveform (seconds from its trigger), its spectrum and its envelope spectrum."""
-    parts = [p for p in ("waveform", "spectrum", "envelope") if p in cap.parts]
+    """A captured waveform (seconds from its trigger), its spectrum and its envelope spectrum,
+    the marked lines on both; with bearing lines also the envelope spectrum zoomed on them."""
+    parts: list[str] = [p for p in ("waveform", "spectrum", "envelope") if p in cap.parts]
+    zoom = _zoom_to(cap.parts["envelope"]) if "envelope" in cap.parts else None
+    if zoom is not None:
+        parts.append("envelope_zoom")
     fig, axes = plt.subplots(len(parts), 1, figsize=(11, 2.6 * len(parts)), layout="constrained", squeeze=False)
     trigger = cap.parts.get("waveform", next(iter(cap.parts.values()))).get("trigger") or {}
     for ax, part in zip((a[0] for a in axes), parts):
-        msg = cap.parts[part]
         if part == "waveform":
-            y = np.asarray(msg.get("samples", []), dtype=float)
-            y[np.asarray(msg.get("lost", []), dtype=int)] = np.nan    # lost samples are gaps
-            rate = float(msg.get("sample_rate_hz") or 1.0)
-            x = -float(msg.get("pre_s") or 0.0) + np.arange(y.size) / rate
-            ax.plot(x, y, lw=0.5, color="#1f4e99")
-            ax.axvline(0.0, color="#b00020", lw=1, ls="--", label="trigger")
-            ax.set_xlabel("time from trigger [s]")
-            ax.set_ylabel(f"waveform [{msg.get('unit', 'm/s²')}]")
-            ax.grid(alpha=0.3)
-            ax.legend(loc="upper right", fontsize=8)
-        else:
-            _spectrum(ax, msg, "spectrum" if part == "spectrum" else "envelope spectrum")
-    axes[0][0].set_title(f"{cap.channel}: capture at {local_datetime(cap.time_ns).isoformat(timespec='seconds')}"
-                         f" — trigger {trigger.get('kind', '?')}")
+            _waveform(ax, cap.parts[part])
+        elif part == "envelope_zoom":
+            _spectrum(ax, cap.parts["envelope"], "envelope spectrum, bearing lines", zoom)
+        elif part == "spectrum":
+            _spectrum(ax, cap.parts[part], "spectrum", log_f="envelope" in cap.parts, legend=False)  # RAW
+        else:                                   # with a zoom below, its legend says what the lines are
+            _spectrum(ax, cap.parts[part], "envelope spectrum", legend=zoom is None)
+    fig.suptitle(f"{cap.channel}: capture at {local_datetime(cap.time_ns).isoformat(timespec='seconds')}"
+                 f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}", fontsize=11)
     meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
-            "title": f"{cap.channel}: capture {index}", "trigger": trigger.get("kind"), "parts": parts}
-    return _finish(fig, meta, [a[0] for a in axes])
+            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "trigger": trigger.get("kind"),
+            "parts": parts,
+            "marks": [m["label"] for m in cap.parts.get("spectrum", {}).get("marks", [])]}
+    return _finish(fig, meta, [a[0] for a in axes], boxes=True)
+
+
+def _waveform(ax: Any, msg: dict[str, Any]) -> None:
+    y = np.asarray(msg.get("samples", []), dtype=float)
+    y[np.asarray(msg.get("lost", []), dtype=int)] = np.nan    # lost samples are gaps
+    rate = float(msg.get("sample_rate_hz") or 1.0)
+    x = -float(msg.get("pre_s") or 0.0) + np.arange(y.size) / rate
+    ax.plot(x, y, lw=0.5, color="#1f4e99")
+    ax.axvline(0.0, color="#b00020", lw=1, ls="--", label="trigger")
+    ax.set_xlabel("time from trigger [s]")
+    ax.set_title(f"waveform ({msg.get('source', 'raw').upper()}, {rate:g} samples/s, "
+                 f"{msg.get('missing', 0)} lost)", fontsize=9, loc="left")
+    ax.set_ylabel(f"waveform [{msg.get('unit', 'm/s²')}]")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)

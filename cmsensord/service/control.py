@@ -1,4 +1,4 @@
-"""The daemon's control socket: ``cmsensord ack`` and ``cmsensord status`` talk to it.
+"""The daemon's control socket: ``cmsensord ack``, ``status`` and ``capture-now`` talk to it.
 
 A Unix stream socket ``cmsensord.sock`` in the output directory (the systemd
 unit's state directory, ``/var/lib/cmsensord``; the unit allows AF_UNIX only).
@@ -6,6 +6,7 @@ One request per connection, one JSON line each way::
 
     {"cmd": "ack", "alarm": "de_velocity/ch0"}   ("alarm": null or absent: every alarm)
     {"cmd": "status"}
+    {"cmd": "capture", "channel": "ch0"}       ("channel": null or absent: every channel)
 
 A small thread (:class:`ControlServer`) accepts connections and queues the
 requests; the processing loop answers them between batches
@@ -88,8 +89,8 @@ class ControlServer:
             body = json.loads(line)
         except ValueError:
             return {"ok": False, "error": "the request is not one JSON line"}
-        if not isinstance(body, dict) or body.get("cmd") not in ("ack", "status"):
-            return {"ok": False, "error": "unknown request (cmd: ack or status)"}
+        if not isinstance(body, dict) or body.get("cmd") not in ("ack", "status", "capture"):
+            return {"ok": False, "error": "unknown request (cmd: ack, status or capture)"}
         req = _Request(body)
         try:
             self.requests.put_nowait(req)
@@ -127,6 +128,8 @@ def handle(proc, body: dict) -> dict:
     """The answer to one request, from the Processor (the loop's thread)."""
     from cmsensord.service.status import status_line
 
+    if body["cmd"] == "capture":
+        return _capture(proc, body)
     alarms = proc.alarms
     if body["cmd"] == "status":
         out: dict[str, Any] = {"ok": True, "status": status_line(proc)}
@@ -145,6 +148,17 @@ def handle(proc, body: dict) -> dict:
         names = ", ".join(alarms.manager.alarms) if alarms.manager else ""
         return {"ok": False, "error": f"no alarm named {which!r} (alarms: {names})"}
     return {"ok": True, "acknowledged": proc.event_counts.get("alarm_ack", 0) - before}
+
+
+def _capture(proc, body: dict) -> dict:
+    """``cmsensord capture-now``: a manual capture (:meth:`Captures.manual`)."""
+    channel = body.get("channel")
+    if channel is not None and not isinstance(channel, str):
+        return {"ok": False, "error": "channel must be a name or null"}
+    if proc.captures is None:
+        return {"ok": False, "error": "captures are off in this daemon's configuration: give capture.triggers "
+                "(e.g. [manual]) or capture.every_s"}
+    return proc.captures.manual(channel)
 
 
 def _read_line(conn: socket.socket) -> bytes:

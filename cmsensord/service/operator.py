@@ -1,11 +1,14 @@
-"""``cmsensord ack`` and ``cmsensord status``: an operator's commands to the running daemon.
+"""``cmsensord ack``, ``status`` and ``capture-now``: an operator's commands to the running daemon.
 
-Both talk to the daemon's control socket (:mod:`.control`): the one in the
+They talk to the daemon's control socket (:mod:`.control`): the one in the
 output directory of ``--config FILE``, the one given by ``--socket``, or by
 default the systemd unit's ``/var/lib/cmsensord/cmsensord.sock`` (root only:
 the state directory is mode 0700).  ``status`` prints the daemon's status line
 and its alarm table; ``ack ALARM`` acknowledges one alarm, ``ack --all`` every
-alarm showing a level.  No daemon answering: a one-line error, exit 1.
+alarm showing a level.  ``capture-now [--channel CH]`` has the daemon keep a capture
+(trigger ``manual``) of the channel, or of every channel, around the newest sample it
+has: ``capture.pre_s`` from its ring, ``capture.post_s`` still to come; it prints per
+channel what will be kept (or why not).  No daemon answering: a one-line error, exit 1.
 """
 
 from __future__ import annotations
@@ -13,23 +16,27 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from datetime import datetime
 from pathlib import Path
 
 from cmsensord.service.control import SOCKET_NAME, STATE_DIR, request, socket_path
 
-__all__ = ["add_operator_parsers", "run_ack", "run_status", "format_table"]
+__all__ = ["add_operator_parsers", "run_ack", "run_status", "run_capture_now", "format_table"]
 
 EXIT_NO_DAEMON = 1
 
 
 def add_operator_parsers(sub) -> None:
-    """The ``ack`` and ``status`` subcommands."""
+    """The ``ack``, ``status`` and ``capture-now`` subcommands."""
     a = sub.add_parser("ack", help="acknowledge an alarm of the running daemon (latched alarms clear)")
     a.add_argument("alarm", nargs="?", help="alarm name as `cmsensord status` lists it, e.g. de_velocity/ch0")
     a.add_argument("--all", action="store_true", help="every alarm showing a level")
     s = sub.add_parser("status", help="the running daemon's status line and alarm table")
     s.add_argument("--json", action="store_true", help="print the answer as JSON")
-    for p in (a, s):
+    c = sub.add_parser("capture-now", help="the running daemon keeps a capture now (trigger manual): "
+                       "capture.pre_s before, capture.post_s after")
+    c.add_argument("--channel", metavar="CH", help="only this channel (default: every channel)")
+    for p in (a, s, c):
         p.add_argument("--config", dest="sub_config", metavar="FILE",
                        help="the daemon's configuration (its socket is in output.dir)")
         p.add_argument("--socket", metavar="PATH", help=f"the control socket (default {STATE_DIR / SOCKET_NAME})")
@@ -79,6 +86,26 @@ def run_status(args: argparse.Namespace) -> int:
         if "alarms" in answer:
             print(format_table(answer))
     return 0 if answer.get("ok") else EXIT_NO_DAEMON
+
+
+def run_capture_now(args: argparse.Namespace) -> int:
+    answer = _ask(args, {"cmd": "capture", "channel": args.channel})
+    if answer is None:
+        return EXIT_NO_DAEMON
+    if not answer.get("ok"):
+        print(f"cmsensord: capture-now: {answer.get('error')}", file=sys.stderr)
+        return EXIT_NO_DAEMON
+    kept = 0
+    for row in answer["captures"]:
+        if "skipped" in row:
+            print(f"{row['channel']}: not captured: {row['skipped']}")
+            continue
+        kept += 1
+        at = datetime.fromtimestamp(row["stamp_ns"] / 1e9).isoformat(timespec="milliseconds")
+        print(f"{row['channel']}: capturing {row['pre_s']:g} s before and {row['post_s']:g} s after {at} "
+              f"({row['source'].upper()}, from board index {row['first_sample']}); written to the log "
+              f"in {row['post_s']:g} s")
+    return 0 if kept else EXIT_NO_DAEMON
 
 
 def format_table(t: dict) -> str:

@@ -2,7 +2,9 @@
 ``/cm/<channel>/capture_spectrum``, ``/cm/<channel>/capture_envelope`` (cmsensord.CaptureSpectrum).
 
 One message of each per channel and capture, all stamped at the trigger; arrays of
-plain numbers (a lost sample is 0 and its index is in ``lost``), no union types.
+plain numbers (a lost sample is 0 and its index is in ``lost``), no union types.  A RAW
+capture's spectra carry the shaft speed and the frequencies to mark (``marks``: 1x and
+the bearings' defect lines, :mod:`cmsensord.monitor.capture_marks`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,17 @@ def _trigger() -> dict[str, Any]:
             "properties": {"kind": {"type": "string", "description": "event kind, or periodic"},
                            "message": {"type": "string", "description": "the event's message"}},
             "required": ["kind", "message"]}
+
+
+def _mark() -> dict[str, Any]:
+    return {"type": "object", "description": "a frequency marked on the spectrum",
+            "properties": {
+                "label": {"type": "string", "description": "1x, or <bearing> FTF / BPFO / BPFI / BSF"},
+                "kind": {"type": "string", "enum": ["shaft", "ftf", "bpfo", "bpfi", "bsf"],
+                         "description": "shaft speed, or which defect frequency"},
+                "bearing": {"type": "string", "description": "the bearing's name (absent for the shaft)"},
+                "freq_hz": {"type": "number", "minimum": 0, "description": "the line's frequency [Hz]"}},
+            "required": ["label", "kind", "freq_hz"]}
 
 
 def capture_waveform_schema(time: Callable[[], dict], obj: Callable[..., dict]) -> dict[str, Any]:
@@ -69,6 +82,13 @@ def capture_spectrum_schema(time: Callable[[], dict], obj: Callable[..., dict]) 
                         "description": "envelope: the band demodulated [Hz]"},
             "unit": {"type": "string", "description": "unit of amplitude"},
             "amplitude": {"type": "array", "items": {"type": "number"}, "description": "RMS amplitude per bin"},
+            "shaft_speed_rpm": {"type": "number", "minimum": 0,
+                                "description": "RAW: mean shaft speed over the capture [rpm] (absent: unknown)"},
+            "speed_source": {"type": "string", "enum": ["tacho", "config"],
+                             "description": "where the shaft speed came from (indicators.rpm: config)"},
+            "marks": {"type": "array", "items": _mark(),
+                      "description": "RAW: the shaft's 1x and each bearing's defect lines at shaft_speed_rpm "
+                                     "within the spectrum's range (absent: the speed is unknown)"},
         },
         ["timestamp", "channel", "trigger", "kind", "freq_start_hz", "freq_step_hz", "unit", "amplitude"],
     )

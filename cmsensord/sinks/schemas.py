@@ -136,6 +136,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "alarm_danger",
     "alarm_clear",
     "alarm_ack",
+    "operating_state",
 )
 
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
@@ -234,6 +235,9 @@ _DETAILS: dict[str, Any] = {
         "reason": _str("time_base: reset (the board's clock restarted) or drift"),
         "offset_s": {"type": "number", "description": "time_base (drift): board clock minus wall clock [s]"},
         "rate_hz": _int("time_base (drift): the board clock's measured rate [Hz]"),
+        "state": _str("operating_state: the machine's new operating state (stopped, starting, running, "
+                      "coasting)"),
+        "previous": _str("operating_state: the state before"),
     },
 }
 
