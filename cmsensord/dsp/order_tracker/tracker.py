@@ -18,6 +18,7 @@ from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_
 from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
 from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
+from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
 from cmsensord.dsp.order_tracker.recursions import (
     CHUNK,
     backward_numpy,
@@ -42,7 +43,6 @@ except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
 _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
-_TABLE_SEG = 64   # the gain table is computed in segments of this many speeds
 
 
 def have_kernel() -> bool:
@@ -67,7 +67,8 @@ class OrderTracker:
     smoother_lag_s : None (causal only) or the fixed lag L [s] of the smoother.
     output_rate_hz : rate of the per-block outputs (block = fs_track/rate samples).
     backend : "auto", "c" or "numpy".
-    table_step_rpm : grid step of the gain table (None: about 1 rpm, <= 8192 points).
+    table_step_rpm : step of the gain table's speed grid at min_rpm (None: min_rpm/300); the
+        grid is geometric (see gain_table.py), coarser if the table would exceed 16 MB.
     horizon_s : horizon of the doubling solver for the table.
     """
 
@@ -158,28 +159,28 @@ class OrderTracker:
                           + self.block / self.fs_track)
 
     def _setup_table(self, horizon_s: float, table_step_rpm: float | None) -> None:
-        """The doubling horizon and the (empty) gain table over [min_rpm, 1.1 max_rpm]."""
+        """The doubling horizon and the (empty) gain table over [min_rpm, 1.1 max_rpm]
+        (P only with the smoother, which alone uses it)."""
         self.horizon_s = float(horizon_s)
         self._n_double = max(1, math.ceil(math.log2(max(2.0, horizon_s * self.fs_track))))
+        self.table: GainTable | None = None
         if self.gains == "table":
             top = 1.1 * self.max_rpm
-            if table_step_rpm is None:
-                table_step_rpm = max(1.0, (top - self.min_rpm) / 8191)
-            n = math.ceil((top - self.min_rpm) / table_step_rpm) + 1
-            self._grid0 = self.min_rpm
-            self._grid_step = (top - self.min_rpm) / (n - 1)
-            # filled in segments of _TABLE_SEG speeds when first needed (see _fill_table);
-            # np.zeros: pages never touched cost no memory
+            want_p = self.lag is not None
             # r on the bandwidth grid over the table's speeds, in one batch (the table
             # segments, filled as the speed goes, then find it there)
             component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
-            d = 2 * self.K
-            self._tab_n = n
-            self._tab_have = np.zeros(-(-n // _TABLE_SEG), dtype=bool)
-            self._kS = np.zeros((n, d + 1))
-            self._dkS = np.zeros((n - 1, d + 1))
-            self._P = np.zeros((n, d, d))
-            self._dP = np.zeros((n - 1, d, d))
+            grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
+                               GainTable.bytes_per_point(self.K, want_p))
+            self.table = GainTable(grid, self.K, want_p, self._steady_state)
+
+    def _crossing_cap(self, top: float) -> float | None:
+        """1 rpm when a fixed-frequency component crosses an order's frequency between
+        min_rpm and ``top`` (the gains change within a few rpm there), else None."""
+        fixed = [c.freq_hz for c in self.components if c.freq_hz is not None]
+        orders = [c.order for c in self.components if c.order]
+        cross = [60.0 * f / o for f in fixed for o in orders]
+        return 1.0 if any(self.min_rpm <= s <= top for s in cross) else None
 
     def _coeffs(self, speed: np.ndarray):
         """c_k(n) (T, K), Q1 diagonal (T, 2K) and Q2 (T,) at model speeds."""
@@ -199,28 +200,6 @@ class OrderTracker:
             ks.append(np.concatenate([ph / S[:, None], S[:, None]], axis=1))
             Ps.append(P)
         return np.concatenate(ks), np.concatenate(Ps)
-
-    def _fill_table(self, i: np.ndarray) -> None:
-        """Compute the gain-table segments that hold grid points i or i + 1 and are
-        not there yet (each point is the same whenever it is computed)."""
-        seg = _TABLE_SEG
-        need = np.zeros_like(self._tab_have)
-        need[i // seg] = True
-        need[(i + 1) // seg] = True
-        miss = np.flatnonzero(need & ~self._tab_have)
-        if not miss.size:
-            return
-        n = self._tab_n
-        pts = np.concatenate([np.arange(m * seg, min((m + 1) * seg, n)) for m in miss])
-        grid = self._grid0 + self._grid_step * pts
-        self._kS[pts], self._P[pts] = self._steady_state(grid)
-        self._tab_have[miss] = True
-        # differences to the next point, where both ends are there now
-        j = np.unique(np.concatenate([pts - 1, pts]))
-        j = j[(j >= 0) & (j < n - 1)]
-        j = j[self._tab_have[j // seg] & self._tab_have[(j + 1) // seg]]
-        self._dkS[j] = self._kS[j + 1] - self._kS[j]
-        self._dP[j] = self._P[j + 1] - self._P[j]
 
     def initial_state(self) -> TrackerState:
         d = 2 * self.K
@@ -362,18 +341,8 @@ class OrderTracker:
         the table's steady-state gains do not depend on it (the forward and backward
         passes zero k per channel)."""
         want_p = self.lag is not None
-        if self.gains == "table":           # linear interpolation in the speed
-            x = (np.clip(speed, self._grid0, None) - self._grid0) / self._grid_step
-            n = self._tab_n
-            i = np.minimum(x.astype(np.int64), n - 2)
-            f = np.clip(x - i, 0.0, 1.0)
-            if i.size:
-                self._fill_table(i)
-            kS = self._kS[i] + self._dkS[i] * f[:, None]
-            P = None
-            if want_p:
-                P = self._P[i] + self._dP[i] * f[:, None, None]
-            return np.ascontiguousarray(kS[:, :-1]), kS[:, -1].copy(), P
+        if self.table is not None:          # linear interpolation in the grid coordinate
+            return self.table.lookup(speed)
         _, qd, q2 = self._coeffs(speed)
         st = self.state
         if self.backend == "c":
