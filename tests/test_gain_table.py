@@ -97,3 +97,31 @@ def test_interpolated_gains_against_the_steady_state_at_that_speed():
     assert (np.abs(P - Pt).max(axis=(1, 2)) / np.abs(Pt).max(axis=(1, 2))).max() <= 1e-4
     np.testing.assert_allclose(S, kS[:, -1], rtol=1e-4)
     assert np.abs(k - kS[:, :-1]).max() > 0                  # they are interpolated, not solved
+
+
+def test_a_long_call_is_tracked_in_bounded_pieces():
+    """A 1.2-s call at 16 orders with the smoother (6050 tracker samples; the smoother's P
+    alone is 8 kB a sample): the memory the call allocates at its peak stays <= 50 MB
+    (151 MB when the call was tracked in one piece), and its outputs are those of the
+    same input in 0.1-s calls."""
+    y, rpm = _runup(25000.0, 2.5, 900.0, 1300.0)
+    n = 30250
+    a = OrderTracker(ORDERS16, fs_in=25000.0, max_rpm=3600.0, smoother_lag_s=0.1)
+    a.process(y[:n, None], rpm[:n])                          # the table for these speeds
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        out = a.process(y[n:2 * n, None], rpm[n:2 * n])
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert peak <= 50e6, peak
+    b = OrderTracker(ORDERS16, fs_in=25000.0, max_rpm=3600.0, smoother_lag_s=0.1)
+    parts = [b.process(y[i:i + 2500, None], rpm[i:i + 2500]) for i in range(0, 2 * n, 2500)]
+    wave = np.concatenate([p.waveform for p in parts])
+    swave = np.concatenate([p.smoothed_waveform for p in parts])
+    sidx = np.concatenate([p.smoothed_index for p in parts])
+    assert len(out.waveform) == 6050 and len(out.blocks.rms) >= 10 and len(out.smoothed_index) >= 5000
+    np.testing.assert_array_equal(out.waveform, wave[out.index])            # index: from the start
+    np.testing.assert_array_equal(out.smoothed_waveform, swave[out.smoothed_index - sidx[0]])

@@ -142,8 +142,12 @@ class GainTable:
         f = np.clip(x - i, 0.0, 1.0)
         if i.size:
             self.fill(i)
-        kS = self.kS[i] + self.dkS[i] * f[:, None]
+        kS = self.dkS[i]
+        kS *= f[:, None]
+        kS += self.kS[i]
         P = None
-        if self.P is not None and self.dP is not None:
-            P = self.P[i] + self.dP[i] * f[:, None, None]
+        if self.P is not None and self.dP is not None:      # in place: one (N, 2K, 2K) array less
+            P = self.dP[i]
+            P *= f[:, None, None]
+            P += self.P[i]
         return np.ascontiguousarray(kS[:, :-1]), kS[:, -1].copy(), P

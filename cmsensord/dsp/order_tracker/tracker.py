@@ -33,6 +33,7 @@ from cmsensord.dsp.order_tracker.state import (
     TrackerOutput,
     TrackerState,
     cat_miss,
+    join_outputs,
     miss_blocks,
     with_carry,
 )
@@ -43,6 +44,7 @@ except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
 _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
+PIECE = 1024            # a call is tracked in pieces of at most this many tracker samples
 
 
 def have_kernel() -> bool:
@@ -253,6 +255,17 @@ class OrderTracker:
         rpm = np.asarray(rpm, dtype=np.float64)
         if rpm.shape != (y.shape[0],):
             raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
+        step = PIECE * self.decimate
+        if self.gains == "table" and y.shape[0] > step:
+            # pieces of at most PIECE tracker samples: the per-sample arrays (P of the
+            # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
+            # gives the same outputs, so the joined pieces are those of one call
+            return join_outputs([self._process(y[a:a + step], rpm[a:a + step])
+                                 for a in range(0, y.shape[0], step)])
+        return self._process(y, rpm)
+
+    def _process(self, y: np.ndarray, rpm: np.ndarray) -> TrackerOutput:
+        """:meth:`process` of checked arrays."""
         st = self.state
         gone_in = None
         if y.size and np.isnan(y.min()):               # min() propagates NaN; cheaper than isnan
