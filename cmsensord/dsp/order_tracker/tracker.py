@@ -44,7 +44,7 @@ except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
 _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
-PIECE = 1024            # a call is tracked in pieces of at most this many tracker samples
+PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays take about this
 
 
 def have_kernel() -> bool:
@@ -159,6 +159,11 @@ class OrderTracker:
         self.lag = None if smoother_lag_s is None else round(smoother_lag_s * self.fs_track)
         self.latency_s = (self.filter_delay_s + (self.lag or 0) / self.fs_track
                           + self.block / self.fs_track)
+        # tracker samples per piece of a long call: P (2K x 2K) with the smoother, the
+        # states (C x 2K, a few of them) always; 1024 (8 MB of P) at 16 orders
+        d = 2 * len(self.components)
+        per_sample = 8 * (d * d * (self.lag is not None) + 4 * self.C * d)
+        self.piece = int(min(1 << 16, max(1024, PIECE_BYTES // per_sample)))
 
     def _setup_table(self, horizon_s: float, table_step_rpm: float | None) -> None:
         """The doubling horizon and the (empty) gain table over [min_rpm, 1.1 max_rpm]
@@ -255,9 +260,9 @@ class OrderTracker:
         rpm = np.asarray(rpm, dtype=np.float64)
         if rpm.shape != (y.shape[0],):
             raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
-        step = PIECE * self.decimate
+        step = self.piece * self.decimate
         if self.gains == "table" and y.shape[0] > step:
-            # pieces of at most PIECE tracker samples: the per-sample arrays (P of the
+            # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
             # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
             # gives the same outputs, so the joined pieces are those of one call
             return join_outputs([self._process(y[a:a + step], rpm[a:a + step])
