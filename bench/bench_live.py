@@ -45,7 +45,11 @@ CONFIGS = {
              "RAW 1 ch + tacho + 4 orders"),
     "raw4": (["--scenario", "faulty", "--mode", "raw", "--tacho", "--channels", "4"],
              "RAW 4 ch + tacho + 4 orders"),
+    "raw1ll": (["--scenario", "faulty", "--mode", "raw", "--tacho", "--channels", "1"],
+               "RAW 1 ch + tacho + 4 orders, low latency (orders.output_rate_hz: 50)"),
 }
+#: name -> more daemon configuration (YAML)
+MORE_CONFIG = {"raw1ll": "orders:\n  output_rate_hz: 50\n"}
 
 
 def cpu_s(pid: int) -> float:
@@ -72,14 +76,14 @@ def tree_env(tree: Path) -> dict[str, str]:
 
 
 def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: float,
-         env: dict[str, str]) -> dict:
+         env: dict[str, str], more: str = "") -> dict:
     """The daemon at 1x on a simulated board: CPU over the window, memory, latency, capture."""
     sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--speed", "1",
                             "--seed", "1", *sim_args], stdout=subprocess.PIPE, text=True, env=env)
     assert sim.stdout is not None
     port = sim.stdout.readline().strip()
     cfg = tmp / "cmsensord.yaml"
-    cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp / 'logs'}\n  status_line: false\n")
+    cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp / 'logs'}\n  status_line: false\n{more}")
     report = tmp / "live.json"
     cap = tmp / "cap.bin"
     daemon = subprocess.Popen([sys.executable, PROBE, str(report), *([] if kernels else ["--no-kernels"]),
@@ -100,9 +104,11 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
         raise SystemExit(f"daemon failed ({daemon.returncode}): {err}")
     r = json.loads(report.read_text())
     lat = r["latency_ms"][int(len(r["latency_ms"]) * warmup / (warmup + seconds)):]
+    blat = r["board_latency_ms"][int(len(r["board_latency_ms"]) * warmup / (warmup + seconds)):]
     return {"cpu_pct": 100 * (c1 - c0) / (t1 - t0), "rss_mb": rss, "hwm_mb": hwm, "scipy": r["scipy"],
             "lat_med": statistics.median(lat) if lat else None,
-            "lat_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None, "capture": cap}
+            "lat_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None,
+            "board_med": statistics.median(blat) if blat else None, "capture": cap}
 
 
 def replay(tmp: Path, cap: Path, kernels: bool, env: dict[str, str]) -> dict:
@@ -135,7 +141,8 @@ def main() -> int:
             for tree_label, tree in trees:
                 env = tree_env(tree)
                 with tempfile.TemporaryDirectory(prefix="bench_live") as tmp:
-                    lv = live(Path(tmp), sim_args, kernels, args.warmup, args.seconds, env)
+                    lv = live(Path(tmp), sim_args, kernels, args.warmup, args.seconds, env,
+                              MORE_CONFIG.get(name, ""))
                     rp = replay(Path(tmp), lv["capture"], kernels, env)
                 rep_pct = 100 * rp["cpu_s"] / rp["board_s"]
                 row_label = f"{label} ({tree_label})" if tree_label else label
@@ -143,11 +150,13 @@ def main() -> int:
                 print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
     print(f"# live daemon at 1x, {args.seconds:g} s window after {args.warmup:g} s warm-up; "
           "replay of the same capture\n")
-    print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95) "
+    print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95; "
+          "board time, median) "
           "| scipy loaded | replay CPU s / board s | replay % | x real time | live / replay |")
     print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |")
     for label, k, lv, rp, rep_pct in rows:
-        lat = f"{lv['lat_med']:.0f} / {lv['lat_p95']:.0f}" if lv["lat_med"] is not None else "-"
+        lat = (f"{lv['lat_med']:.0f} / {lv['lat_p95']:.0f}; {lv['board_med']:.0f}"
+               if lv["lat_med"] is not None else "-")
         print(f"| {label} | {k} | {lv['cpu_pct']:.2f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
               f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.2f} / {rp['board_s']:.0f} | {rep_pct:.2f} "
               f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} |")

@@ -14,7 +14,10 @@
    and whirl (180 s) at 2 kHz: time, throughput ratio, eq. (26) errors of
    both, and latency (ours: recursive; theirs: the whole record).
 
-    python bench/bench_tracker.py [--seconds 60] [--repeats 3] [--no-peer]
+    python bench/bench_tracker.py [--seconds 60] [--repeats 3] [--no-peer] [--only-daemon] [--root DIR]
+
+0. The daemon's orders (K = 4 and 16, bandwidth 5 %, 25 kHz, a full run-up): the gain
+   table's memory and the cold start (CPU of a fresh tracker's first pass).
 
 Figures are ratios measured side by side in one run; machines here are noisy.
 """
@@ -30,6 +33,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+if "--root" in sys.argv:      # the code of another checkout (before/after figures)
+    ROOT = Path(sys.argv[sys.argv.index("--root") + 1]).resolve()
 sys.path.insert(0, str(ROOT))
 
 from cmsensord.dsp.order_tracker import OrderTracker, TrackedComponent, have_kernel
@@ -39,12 +44,14 @@ ORDERS4 = [TrackedComponent(f"order {o:g}", order=o) for o in (1.0, 2.0, 4.0, 4.
 
 
 def _rtf(make, y, rpm, fs, repeats, chunk_s=1.0):
-    """Real-time factors of streaming y in chunk_s calls: (warm, cold).
+    """Real-time factors of streaming y in chunk_s calls: (warm, cold, cold CPU s, table MB).
 
     cold: a fresh tracker, whose first pass also fills the gain table for the speeds
     it meets (a one-time cost per machine: the daemon pays it once, at the first
     pass through each speed range); warm: the best of ``repeats`` passes after
-    ``reset()``, which keeps the table (the daemon's steady state)."""
+    ``reset()``, which keeps the table (the daemon's steady state).  Cold CPU s: the
+    process CPU time of making the tracker and of that first pass; table MB: the gain
+    table's arrays after it (0 with exact gains)."""
     n = round(chunk_s * fs)
 
     def stream(tr):
@@ -53,13 +60,62 @@ def _rtf(make, y, rpm, fs, repeats, chunk_s=1.0):
             tr.process(y[i:i + n], rpm[i:i + n])
         return time.perf_counter() - t0
 
+    c0 = time.process_time()
     tr = make()
     cold = stream(tr)
+    cold_cpu = time.process_time() - c0
     best = float("inf")
     for _ in range(repeats):
         tr.reset()
         best = min(best, stream(tr))
-    return len(y) / fs / best, len(y) / fs / cold
+    mb = _table_bytes(tr) / 1e6
+    return len(y) / fs / best, len(y) / fs / cold, cold_cpu, mb
+
+
+def _table_bytes(tr) -> int:
+    """The gain table's bytes filled (the code before the table had its own module:
+    its four arrays, whose untouched pages cost nothing, as if full)."""
+    table = getattr(tr, "table", None)
+    if table is not None:
+        return table.filled_bytes
+    arrays = [getattr(tr, a, None) for a in ("_kS", "_dkS", "_P", "_dP")]
+    return sum(a.nbytes for a in arrays if a is not None)
+
+
+def daemon_orders(repeats: int) -> None:
+    """The daemon's orders (bandwidth 5 %, 25 kHz, max_rpm 3600: the table over
+    300-3960 rpm) at K = 4 and 16, on a 20-s run-up 250 -> 4000 rpm in 1-s calls."""
+    import cmsensord.dsp.order_tracker.bandwidth as bw
+
+    fs, T = 25000.0, 20.0
+    t = np.arange(round(fs * T)) / fs
+    rpm = 250.0 + (4000.0 - 250.0) * t / T
+    y = np.sin(2 * np.pi * np.cumsum(rpm / 60.0) / fs)[:, None]
+    print(f"\n### The daemon's orders: bandwidth 5 %, {fs:g} Hz in, max_rpm 3600, a {T:g}-s run-up "
+          "250 -> 4000 rpm in 1-s calls, C kernel if built\n")
+    print("Cold CPU s: a fresh process's first tracker (the r grid of the bandwidths and the "
+          "gain table filled as the speed goes); table MB: the gain table at the end (all "
+          "of it visited).\n")
+    print("| orders K | smoother | D | grid points | table MB | cold CPU s | warm x real time |")
+    print("| ---: | --- | ---: | ---: | ---: | ---: | ---: |")
+    for K in (4, 16):
+        comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in range(1, K + 1)]
+        for lag in (None, 0.1):
+            bw._R_CACHE.clear()
+            def make(comps=comps, lag=lag):
+                return OrderTracker(comps, fs_in=fs, max_rpm=3600.0, smoother_lag_s=lag)
+            warm, _, cold_cpu, mb = _rtf(make, y, rpm, fs, repeats)
+            tr = OrderTracker(comps, fs_in=fs, max_rpm=3600.0, smoother_lag_s=lag)
+            table = getattr(tr, "table", None)
+            n = table.grid.n if table is not None else tr._tab_n
+            sm = "-" if lag is None else f"lag {lag:g} s"
+            print(f"| {K} | {sm} | {tr.decimate} | {n} | {mb:.1f} | {cold_cpu:.2f} | {warm:,.0f} |")
+
+
+def _cells(row) -> str:
+    """'warm (cold) | ...' for each channel count, then table MB and cold CPU s (1 channel)."""
+    rt = " | ".join(f"{w:,.0f} ({c:,.0f})" for w, c, _, _ in row)
+    return f"{rt} | {row[0][3]:.1f} | {row[0][2]:.2f}"
 
 
 def tracker_alone(seconds: float, repeats: int) -> None:
@@ -71,8 +127,11 @@ def tracker_alone(seconds: float, repeats: int) -> None:
           "run-up streamed in 1-s calls\n")
     print("x real time, warm (the gain table filled: the daemon's steady state) and, in brackets, "
           "cold (a fresh tracker, whose first pass fills the table for the speeds it meets).\n")
-    print("| backend | gains | smoother | 1 channel [x real time] | 4 channels [x real time] |")
-    print("| --- | --- | --- | ---: | ---: |")
+    print("Table MB: the gain table's arrays; cold CPU s: making the tracker and its first pass "
+          "(1 channel), the table's fill included.\n")
+    print("| backend | gains | smoother | 1 channel [x real time] | 4 channels [x real time] "
+          "| table MB | cold CPU s |")
+    print("| --- | --- | --- | ---: | ---: | ---: | ---: |")
     for backend in backends:
         for gains in ("table", "exact"):
             for lag in (None, 0.1):
@@ -86,8 +145,7 @@ def tracker_alone(seconds: float, repeats: int) -> None:
                     yy = sig.y[:, None] if C == 1 else y4
                     row.append(_rtf(make, yy, sig.rpm, fs, repeats))
                 sm = "-" if lag is None else f"lag {lag:g} s"
-                print(f"| {backend} | {gains} | {sm} | {row[0][0]:,.0f} ({row[0][1]:,.0f}) | "
-                      f"{row[1][0]:,.0f} ({row[1][1]:,.0f}) |")
+                print(f"| {backend} | {gains} | {sm} | {_cells(row)} |")
 
 
 def chain_25k(seconds: float, repeats: int) -> None:
@@ -99,8 +157,9 @@ def chain_25k(seconds: float, repeats: int) -> None:
     print(f"\n### From {fs:g} Hz: decimation by D = {probe.decimate} (tracker at {probe.fs_track:g} Hz, "
           f"filter delay {probe.filter_delay_s * 1e3:.2f} ms) + tracker, table gains\n")
     print("x real time, warm (cold) as above.\n")
-    print("| backend | smoother | 1 channel [x real time] | 4 channels [x real time] |")
-    print("| --- | --- | ---: | ---: |")
+    print("| backend | smoother | 1 channel [x real time] | 4 channels [x real time] "
+          "| table MB | cold CPU s |")
+    print("| --- | --- | ---: | ---: | ---: | ---: |")
     for backend in backends:
         for lag in (None, 0.1):
             row = []
@@ -111,8 +170,7 @@ def chain_25k(seconds: float, repeats: int) -> None:
                 yy = sig.y[:, None] if C == 1 else y4
                 row.append(_rtf(make, yy, sig.rpm, fs, repeats))
             sm = "-" if lag is None else f"lag {lag:g} s"
-            print(f"| {backend} | {sm} | {row[0][0]:,.0f} ({row[0][1]:,.0f}) | "
-                  f"{row[1][0]:,.0f} ({row[1][1]:,.0f}) |")
+            print(f"| {backend} | {sm} | {_cells(row)} |")
 
 
 # ------------------------------------------------------------------ accuracy and the peer
@@ -213,8 +271,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="signal length for the throughput tables")
     ap.add_argument("--repeats", type=int, default=3, help="runs per figure (the best is shown)")
     ap.add_argument("--no-peer", action="store_true", help="skip the sdynpy comparison")
+    ap.add_argument("--root", help="run the code of this checkout instead (before/after figures)")
+    ap.add_argument("--only-daemon", action="store_true", help="only the daemon's orders table")
     args = ap.parse_args(argv)
-    print(f"compiled kernel: {'yes' if have_kernel() else 'no (numpy only)'}")
+    print(f"compiled kernel: {'yes' if have_kernel() else 'no (numpy only)'}; code of {ROOT}")
+    daemon_orders(args.repeats)
+    if args.only_daemon:
+        return 0
     tracker_alone(args.seconds, args.repeats)
     chain_25k(args.seconds, args.repeats)
     if not args.no_peer:

@@ -8,7 +8,9 @@ None``), as on a board without a C compiler: the numpy fallbacks run.  The probe
 change nothing the daemon computes:
 
 * order latency: for every ``/cm/<ch>/orders`` message, the wall clock at its write
-  minus the time the frame holding the block's first sample arrived.  Stamps are the board clock anchored
+  minus the time the frame holding the block's first sample arrived; and in board
+  time (``board_latency_ms``): the end of the newest frame in at its write minus the
+  start of the frame holding the block's first sample.  Stamps are the board clock anchored
   to the wall clock when the Processor first sees a frame (possibly bytes the pty held
   since before the daemon opened it); the probe notes when the reader thread received
   each frame and takes the board clock's earliest arrival (the least arrival time minus
@@ -45,13 +47,15 @@ def main() -> int:
     from cmsensord.monitor import clock, processor
     from cmsensord.service import live
 
-    state: dict = {"arrivals": [], "anchor": None, "writes": [], "procs": []}
+    state: dict = {"arrivals": [], "anchor": None, "writes": [], "procs": [], "newest": None}
 
     put = link.FrameQueue.put
 
     def probed_put(self, frames):
         if frames:
             state["arrivals"].append((time.time_ns(), frames[-1].t0_unwrapped))
+            t0 = max(f.t0_unwrapped for f in frames)
+            state["newest"] = t0 if state["newest"] is None else max(state["newest"], t0)
         return put(self, frames)
 
     anchor = clock.BlockClock.anchor
@@ -75,7 +79,7 @@ def main() -> int:
 
         def probed_write(topic, schema, stamp_ns, msg):
             if topic.endswith("/orders"):
-                state["writes"].append((time.time_ns(), stamp_ns))
+                state["writes"].append((time.time_ns(), stamp_ns, state["newest"]))
             return write(topic, schema, stamp_ns, msg)
 
         sink.write = probed_write
@@ -91,19 +95,23 @@ def main() -> int:
     cpu = _cpu() - c0
     hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM")).split()[1]
     procs = state["procs"]
-    latency = []
+    latency, board_latency = [], []
     if state["anchor"] is not None and state["arrivals"] and procs:
         fs, bl, rate = procs[-1].fs, procs[-1].block_len, procs[-1].cfg.orders.output_rate_hz
         t0_first, anchor_ns = state["anchor"]
         # wall time at which the frame of board sample t0_first arrived, at the earliest
         first_ns = min(a - (t0 - t0_first) * 1e9 / fs for a, t0 in state["arrivals"])
-        for w, s in state["writes"]:
+        for w, s, newest in state["writes"]:
             # a block's stamp is its last sample; its first sample waits longest
             first = round((s - anchor_ns) * fs / 1e9 - fs / rate + 1)
             latency.append((w - first_ns - (first // bl) * bl * 1e9 / fs) / 1e6)
+            # in board time: the newest sample in when written, minus the block's first
+            # (the frame holding it): free of this machine's speed
+            if newest is not None:
+                board_latency.append((newest - t0_first + bl - (first // bl) * bl) * 1e3 / fs)
     with open(report_path, "w") as f:
         json.dump({"rc": rc, "cpu_s": cpu, "board_s": procs[-1].board_seconds if procs else 0.0,
-                   "latency_ms": latency, "scipy": "scipy" in sys.modules,
+                   "latency_ms": latency, "board_latency_ms": board_latency, "scipy": "scipy" in sys.modules,
                    "peak_rss_mb": int(hwm) / 1024}, f)
     return rc
 

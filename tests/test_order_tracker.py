@@ -473,20 +473,40 @@ def test_gain_table_filled_piecewise_equals_one_pass():
     import cmsensord.dsp.order_tracker.bandwidth as ot
 
     comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in (1, 2, 3, 4)]
-    kw = {"fs_in": 25000.0, "max_rpm": 3000.0}
+    kw = {"fs_in": 25000.0, "max_rpm": 3000.0, "smoother_lag_s": 0.1}   # P is kept for the smoother
     ot._R_CACHE.clear()
     a = OrderTracker(comps, **kw)
-    n = a._tab_n
+    ta = a.table
+    n = ta.grid.n
     for i in np.random.default_rng(3).permutation(np.arange(0, n - 1, 37)):
-        a._fill_table(np.array([i]))
-    a._fill_table(np.arange(n - 1))
+        ta.fill(np.array([i]))
+    ta.fill(np.arange(n - 1))
     ot._R_CACHE.clear()
     b = OrderTracker(comps, **kw)
-    grid = b._grid0 + b._grid_step * np.arange(n)
+    grid = b.table.grid.speeds(np.arange(n))
     r_one = ot.component_r(b.components, grid, b.fs_track)         # the r grid in one batch
     kS, P = b._steady_state(grid)                                  # the table in one batch
     ot._R_CACHE.clear()                                            # r in pieces, top down
     pieces = {i: ot.component_r(b.components, grid[i:i + 50], b.fs_track) for i in range(0, n, 50)[::-1]}
     assert np.array_equal(np.concatenate([pieces[i] for i in range(0, n, 50)]), r_one)
-    assert np.array_equal(a._kS, kS) and np.array_equal(a._P, P)
-    assert np.array_equal(a._dkS, np.diff(kS, axis=0)) and np.array_equal(a._dP, np.diff(P, axis=0))
+    assert np.array_equal(ta.kS, kS) and np.array_equal(ta.P, P)
+    assert np.array_equal(ta.dkS, np.diff(kS, axis=0)) and np.array_equal(ta.dP, np.diff(P, axis=0))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_call_tracked_in_pieces_equals_one_piece(backend):
+    """A long call runs in pieces of ``piece`` tracker samples (bounded memory): every
+    output, causal, smoothed and per block, is that of the call in one piece."""
+    sig = close_orders(seed=2)
+    outs = []
+    for piece in (10**9, 333):
+        tr = OrderTracker(CLOSE, fs_in=2000.0, max_rpm=3000.0, smoother_lag_s=0.1, backend=backend)
+        tr.piece = piece
+        outs.append(tr.process(sig.y, sig.rpm))
+    one, pieces = outs
+    assert len(one.blocks.rms) == 50 and len(one.smoothed_blocks.rms) == 49
+    for attr in ("index", "t_in", "rpm", "waveform", "missing", "smoothed_index", "smoothed_waveform"):
+        np.testing.assert_array_equal(getattr(pieces, attr), getattr(one, attr))
+    for attr in ("start", "t_in", "rpm", "rms", "amplitude", "valid", "missing"):
+        np.testing.assert_array_equal(getattr(pieces.blocks, attr), getattr(one.blocks, attr))
+        np.testing.assert_array_equal(getattr(pieces.smoothed_blocks, attr), getattr(one.smoothed_blocks, attr))

@@ -8,7 +8,8 @@ derivations, the choices made where the paper is silent, the handling of
 missing samples and the measured accuracy are in docs/order_tracker.md.
 
 Modules: :mod:`.components` (what is tracked), :mod:`.antialias` (the
-decimator's low-pass), :mod:`.design` (model matrices, steady-state gains),
+decimator's low-pass), :mod:`.design` (model matrices, steady-state gains), :mod:`.gain_table` (those
+gains tabulated against speed),
 :mod:`.bandwidth` (r <-> bandwidth), :mod:`.reference` (the per-sample
 reference), :mod:`.recursions` (the numpy recursions), :mod:`.state` (outputs
 and carried state), :mod:`.tracker` (:class:`OrderTracker`), :mod:`.alarm`

@@ -81,6 +81,21 @@ class TrackerState:
         return TrackerState(**out)
 
 
+def _join(parts: list):
+    """Arrays (or None throughout) joined along the first axis; dataclasses field by field."""
+    first = parts[0]
+    if first is None:
+        return None
+    if isinstance(first, np.ndarray):
+        return np.concatenate(parts)
+    return type(first)(**{f.name: _join([getattr(p, f.name) for p in parts]) for f in fields(first)})
+
+
+def join_outputs(outs: list[TrackerOutput]) -> TrackerOutput:
+    """The outputs of consecutive calls as the one output of a call on their joined inputs."""
+    return outs[0] if len(outs) == 1 else _join(outs)
+
+
 def cat_miss(before, n_before, now, n_now, C):
     """Missing-sample masks of kept samples (``before``, n_before rows) and new ones
     (``now``), either None for none missing: the concatenation, or None."""

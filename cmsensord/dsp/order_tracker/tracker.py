@@ -18,6 +18,7 @@ from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_
 from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
 from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
+from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
 from cmsensord.dsp.order_tracker.recursions import (
     CHUNK,
     backward_numpy,
@@ -32,6 +33,7 @@ from cmsensord.dsp.order_tracker.state import (
     TrackerOutput,
     TrackerState,
     cat_miss,
+    join_outputs,
     miss_blocks,
     with_carry,
 )
@@ -42,7 +44,7 @@ except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
 _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
-_TABLE_SEG = 64   # the gain table is computed in segments of this many speeds
+PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays take about this
 
 
 def have_kernel() -> bool:
@@ -67,7 +69,8 @@ class OrderTracker:
     smoother_lag_s : None (causal only) or the fixed lag L [s] of the smoother.
     output_rate_hz : rate of the per-block outputs (block = fs_track/rate samples).
     backend : "auto", "c" or "numpy".
-    table_step_rpm : grid step of the gain table (None: about 1 rpm, <= 8192 points).
+    table_step_rpm : step of the gain table's speed grid at min_rpm (None: min_rpm/300); the
+        grid is geometric (see gain_table.py), coarser if the table would exceed 16 MB.
     horizon_s : horizon of the doubling solver for the table.
     """
 
@@ -156,30 +159,35 @@ class OrderTracker:
         self.lag = None if smoother_lag_s is None else round(smoother_lag_s * self.fs_track)
         self.latency_s = (self.filter_delay_s + (self.lag or 0) / self.fs_track
                           + self.block / self.fs_track)
+        # tracker samples per piece of a long call: P (2K x 2K) with the smoother, the
+        # states (C x 2K, a few of them) always; 1024 (8 MB of P) at 16 orders
+        d = 2 * len(self.components)
+        per_sample = 8 * (d * d * (self.lag is not None) + 4 * self.C * d)
+        self.piece = int(min(1 << 16, max(1024, PIECE_BYTES // per_sample)))
 
     def _setup_table(self, horizon_s: float, table_step_rpm: float | None) -> None:
-        """The doubling horizon and the (empty) gain table over [min_rpm, 1.1 max_rpm]."""
+        """The doubling horizon and the (empty) gain table over [min_rpm, 1.1 max_rpm]
+        (P only with the smoother, which alone uses it)."""
         self.horizon_s = float(horizon_s)
         self._n_double = max(1, math.ceil(math.log2(max(2.0, horizon_s * self.fs_track))))
+        self.table: GainTable | None = None
         if self.gains == "table":
             top = 1.1 * self.max_rpm
-            if table_step_rpm is None:
-                table_step_rpm = max(1.0, (top - self.min_rpm) / 8191)
-            n = math.ceil((top - self.min_rpm) / table_step_rpm) + 1
-            self._grid0 = self.min_rpm
-            self._grid_step = (top - self.min_rpm) / (n - 1)
-            # filled in segments of _TABLE_SEG speeds when first needed (see _fill_table);
-            # np.zeros: pages never touched cost no memory
+            want_p = self.lag is not None
             # r on the bandwidth grid over the table's speeds, in one batch (the table
             # segments, filled as the speed goes, then find it there)
             component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
-            d = 2 * self.K
-            self._tab_n = n
-            self._tab_have = np.zeros(-(-n // _TABLE_SEG), dtype=bool)
-            self._kS = np.zeros((n, d + 1))
-            self._dkS = np.zeros((n - 1, d + 1))
-            self._P = np.zeros((n, d, d))
-            self._dP = np.zeros((n - 1, d, d))
+            grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
+                               GainTable.bytes_per_point(self.K, want_p))
+            self.table = GainTable(grid, self.K, want_p, self._steady_state)
+
+    def _crossing_cap(self, top: float) -> float | None:
+        """1 rpm when a fixed-frequency component crosses an order's frequency between
+        min_rpm and ``top`` (the gains change within a few rpm there), else None."""
+        fixed = [c.freq_hz for c in self.components if c.freq_hz is not None]
+        orders = [c.order for c in self.components if c.order]
+        cross = [60.0 * f / o for f in fixed for o in orders]
+        return 1.0 if any(self.min_rpm <= s <= top for s in cross) else None
 
     def _coeffs(self, speed: np.ndarray):
         """c_k(n) (T, K), Q1 diagonal (T, 2K) and Q2 (T,) at model speeds."""
@@ -199,28 +207,6 @@ class OrderTracker:
             ks.append(np.concatenate([ph / S[:, None], S[:, None]], axis=1))
             Ps.append(P)
         return np.concatenate(ks), np.concatenate(Ps)
-
-    def _fill_table(self, i: np.ndarray) -> None:
-        """Compute the gain-table segments that hold grid points i or i + 1 and are
-        not there yet (each point is the same whenever it is computed)."""
-        seg = _TABLE_SEG
-        need = np.zeros_like(self._tab_have)
-        need[i // seg] = True
-        need[(i + 1) // seg] = True
-        miss = np.flatnonzero(need & ~self._tab_have)
-        if not miss.size:
-            return
-        n = self._tab_n
-        pts = np.concatenate([np.arange(m * seg, min((m + 1) * seg, n)) for m in miss])
-        grid = self._grid0 + self._grid_step * pts
-        self._kS[pts], self._P[pts] = self._steady_state(grid)
-        self._tab_have[miss] = True
-        # differences to the next point, where both ends are there now
-        j = np.unique(np.concatenate([pts - 1, pts]))
-        j = j[(j >= 0) & (j < n - 1)]
-        j = j[self._tab_have[j // seg] & self._tab_have[(j + 1) // seg]]
-        self._dkS[j] = self._kS[j + 1] - self._kS[j]
-        self._dP[j] = self._P[j + 1] - self._P[j]
 
     def initial_state(self) -> TrackerState:
         d = 2 * self.K
@@ -274,6 +260,17 @@ class OrderTracker:
         rpm = np.asarray(rpm, dtype=np.float64)
         if rpm.shape != (y.shape[0],):
             raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
+        step = self.piece * self.decimate
+        if self.gains == "table" and y.shape[0] > step:
+            # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
+            # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
+            # gives the same outputs, so the joined pieces are those of one call
+            return join_outputs([self._process(y[a:a + step], rpm[a:a + step])
+                                 for a in range(0, y.shape[0], step)])
+        return self._process(y, rpm)
+
+    def _process(self, y: np.ndarray, rpm: np.ndarray) -> TrackerOutput:
+        """:meth:`process` of checked arrays."""
         st = self.state
         gone_in = None
         if y.size and np.isnan(y.min()):               # min() propagates NaN; cheaper than isnan
@@ -362,18 +359,8 @@ class OrderTracker:
         the table's steady-state gains do not depend on it (the forward and backward
         passes zero k per channel)."""
         want_p = self.lag is not None
-        if self.gains == "table":           # linear interpolation in the speed
-            x = (np.clip(speed, self._grid0, None) - self._grid0) / self._grid_step
-            n = self._tab_n
-            i = np.minimum(x.astype(np.int64), n - 2)
-            f = np.clip(x - i, 0.0, 1.0)
-            if i.size:
-                self._fill_table(i)
-            kS = self._kS[i] + self._dkS[i] * f[:, None]
-            P = None
-            if want_p:
-                P = self._P[i] + self._dP[i] * f[:, None, None]
-            return np.ascontiguousarray(kS[:, :-1]), kS[:, -1].copy(), P
+        if self.table is not None:          # linear interpolation in the grid coordinate
+            return self.table.lookup(speed)
         _, qd, q2 = self._coeffs(speed)
         st = self.state
         if self.backend == "c":
