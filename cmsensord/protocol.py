@@ -44,7 +44,7 @@ __all__ = [
     "FrameType", "FLAG_OVERRUN", "FLAG_CLIPPED", "MODE_RMS", "MODE_RAW",
     "Frame", "Status", "ProtocolError", "LinkCounters", "Decoder", "iter_frames",
     "encode_frame", "encode_status", "encode_rms", "encode_raw", "encode_tacho",
-    "decode_status", "decode_rms", "decode_raw", "decode_tacho",
+    "decode_status", "decode_rms", "decode_raw", "decode_tacho", "decode_tacho_many",
 ]
 
 SYNC = b"\xa5\x5a"
@@ -267,6 +267,35 @@ def decode_tacho(payload: bytes) -> np.ndarray:
         raise ProtocolError(
             f"TACHO payload: expected {expected} bytes (2 + 4 x N={count} edges), got {n}")
     return np.frombuffer(payload, dtype="<u4", offset=2).astype(np.uint32)
+
+
+def decode_tacho_many(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, list[tuple[int, str]]]:
+    """The TACHO payloads of many frames in one pass: (edges per payload (F,) int64, all
+    edge offsets in payload order (sum,) uint32, [(index, message)] of the malformed ones).
+
+    Each payload is what :func:`decode_tacho` would give (a malformed one has no edges and
+    its message is that ProtocolError's)."""
+    F = len(payloads)
+    lens = np.fromiter(map(len, payloads), dtype=np.int64, count=F)
+    blob = np.frombuffer(b"".join(payloads), dtype=np.uint8).astype(np.int64)
+    starts = np.cumsum(lens) - lens
+    count = np.zeros(F, dtype=np.int64)
+    has = np.flatnonzero(lens >= 2)
+    count[has] = blob[starts[has]] | (blob[starts[has] + 1] << 8)
+    good = (lens >= 2) & (lens == 2 + 4 * count)
+    bad = []
+    for i in np.flatnonzero(~good).tolist():
+        try:
+            decode_tacho(payloads[i])
+        except ProtocolError as exc:
+            bad.append((i, str(exc)))
+    count[~good] = 0
+    total = int(count.sum())
+    frame = np.repeat(np.arange(F), count)
+    k = np.arange(total) - np.repeat(np.cumsum(count) - count, count)     # edge index in its frame
+    at = starts[frame] + 2 + 4 * k
+    offsets = (blob[at] | (blob[at + 1] << 8) | (blob[at + 2] << 16) | (blob[at + 3] << 24)).astype(np.uint32)
+    return count, offsets, bad
 
 
 # ---------------------------------------------------------------------------

@@ -114,3 +114,30 @@ def test_a_capture_in_replay_reads_decodes_mostly_in_runs():
     reads = len(data) // 65536 + 1
     # all but the frame cut by each read's end (finished in a few bytes, frame by frame)
     assert 5000 - reads <= sum(taken) <= 5000 and len(taken) <= 2 * reads
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_tacho_payloads_in_one_pass_equal_decode_tacho_one_by_one(seed):
+    rnd = random.Random(seed)
+    payloads = []
+    for _ in range(400):
+        n = rnd.choice([0, 0, 1, 1, 2, 4])
+        p = struct.pack("<H", n) + b"".join(struct.pack("<I", rnd.randrange(2**32)) for _ in range(n))
+        e = rnd.random()
+        if e < 0.05:
+            p = p[:rnd.randrange(len(p))]                 # short, even empty or a lone byte
+        elif e < 0.1:
+            p += rnd.randbytes(rnd.randrange(1, 5))       # too long for its N
+        payloads.append(p)
+    counts, offsets, bad = protocol.decode_tacho_many(payloads)
+    want_edges, want_bad = [], []
+    for i, p in enumerate(payloads):
+        try:
+            want_edges.append(protocol.decode_tacho(p))
+        except protocol.ProtocolError as exc:
+            want_bad.append((i, str(exc)))
+            want_edges.append(protocol.decode_tacho(b"\0\0"))
+    assert bad == want_bad and len(bad) > 5
+    assert counts.tolist() == [len(e) for e in want_edges]
+    assert offsets.dtype == "uint32" and offsets.tolist() == [int(x) for e in want_edges for x in e]
+    assert protocol.decode_tacho_many([])[0].size == 0
