@@ -426,8 +426,9 @@ class Decoder:
                     frames, last_seq, last_t0, last_unw = _run_frames(run, runs.data, base, last_seq,
                                                                       last_t0, last_unw)
                     out += frames
-                    for code, k in zip(*np.unique(run.code, return_counts=True)):
-                        counts[names[types[int(code)]]] += int(k)
+                    for code, k in enumerate(np.bincount(run.code).tolist()):
+                        if k:
+                            counts[names[types[code]]] += k
                     lost_total += sum(f.lost_before for f in frames)
                     overruns += int(np.count_nonzero(run.flags & FLAG_OVERRUN))
                     pos = int(run.end_payload[-1]) + CRC_LEN
