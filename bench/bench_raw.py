@@ -8,15 +8,18 @@ and smoothed outputs) and prints real-time factor, throughput, CPU and peak
 RSS.  Figures are ratios measured side by side in one run.
 
     python bench/bench_raw.py [--seconds 120] [--only faulty1] [--kernels both] [--tree before=DIR]
+                              [--repeat 3]
 
 ``--kernels off`` (or ``both``) also replays with the compiled kernels unimportable (the
 numpy fallbacks, as without a C compiler); ``--tree LABEL=DIR`` (repeatable) replays with
-another checkout's code too, interleaved with this one: before/after figures of one run.
+another checkout's code too, interleaved with this one: before/after figures of one run;
+``--repeat N`` replays each capture N times per code and shows the best.
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -25,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_rms import replay_in_subprocess, trees  # noqa: E402  (one way to run and measure a replay)
+from bench_rms import best_of, replay_in_subprocess, trees  # noqa: E402  (one way to run and measure a replay)
 
 
 def make_capture(path: Path, scenario: str, channels: int, seconds: float) -> None:
@@ -46,6 +49,7 @@ def main() -> int:
     ap.add_argument("--kernels", choices=("on", "off", "both"), default="on")
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also replay with the code of another checkout, interleaved (e.g. before=/tmp/before)")
+    ap.add_argument("--repeat", type=int, default=1, help="replays of each capture per code (the best is shown)")
     args = ap.parse_args()
     kernel_runs = {"both": (True, False), "on": (True,), "off": (False,)}[args.kernels]
     rows = []
@@ -56,9 +60,15 @@ def main() -> int:
             cap = tmp / f"{scenario}{C}.bin"
             make_capture(cap, scenario, C, args.seconds)
             for kernels in kernel_runs:
-                for label, tree in trees(args.tree):
-                    r = replay_in_subprocess(cap, tmp / f"out{scenario}{C}{label}{kernels}", trace=False,
-                                             tree=tree, kernels=kernels)
+                runs: dict[str, list[dict]] = {}
+                for _ in range(args.repeat):          # interleaved: each code sees the same machine
+                    for label, tree in trees(args.tree):
+                        out = tmp / f"out{scenario}{C}{label}{kernels}"
+                        shutil.rmtree(out, ignore_errors=True)
+                        runs.setdefault(label, []).append(
+                            replay_in_subprocess(cap, out, trace=False, tree=tree, kernels=kernels))
+                for label, _ in trees(args.tree):
+                    r = best_of(runs[label])
                     rows.append((scenario, C, "yes" if kernels else "no", label, args.seconds / r["wall_s"],
                                  cap.stat().st_size / r["wall_s"] / 1e6, args.seconds / r["cpu_s"],
                                  r["peak_rss_mb"]))
