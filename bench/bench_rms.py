@@ -71,7 +71,8 @@ def replay_in_subprocess(capture: Path, out: Path, trace: bool, tree: Path = ROO
         "print(json.dumps({'rc': rc, 'wall_s': wall, 'cpu_s': c1 - c0, 'peak_rss_mb': int(hwm) / 1024}))\n"
     )
     env = dict(os.environ, PYTHONPATH=str(tree))
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    # run in the tree: `python -c` puts the working directory before PYTHONPATH on sys.path
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tree)
     if p.returncode != 0:
         raise SystemExit(f"replay failed: {p.stderr}")
     r = json.loads(p.stdout.strip().splitlines()[-1])
