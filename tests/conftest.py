@@ -37,6 +37,7 @@ PROCESS_MODULES = frozenset({
     "test_link_faults.py",
     "test_output_trust.py",
     "test_replay.py",
+    "test_replay_one_pass.py",
     "test_systemd.py",
     "test_traps.py",
     "test_stream_random.py",
