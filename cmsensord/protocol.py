@@ -32,16 +32,19 @@ import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import repeat
 from typing import NamedTuple
 
 import numpy as np
+
+from cmsensord.frame_runs import MIN_BYTES, FrameRuns, RunFields
 
 __all__ = [
     "SYNC", "VERSION", "HEADER_LEN", "CRC_LEN", "OVERHEAD", "MAX_PAYLOAD", "MAX_FRAME",
     "FrameType", "FLAG_OVERRUN", "FLAG_CLIPPED", "MODE_RMS", "MODE_RAW",
     "Frame", "Status", "ProtocolError", "LinkCounters", "Decoder", "iter_frames",
     "encode_frame", "encode_status", "encode_rms", "encode_raw", "encode_tacho",
-    "decode_status", "decode_rms", "decode_raw", "decode_tacho",
+    "decode_status", "decode_rms", "decode_raw", "decode_tacho", "decode_tacho_many",
 ]
 
 SYNC = b"\xa5\x5a"
@@ -266,6 +269,35 @@ def decode_tacho(payload: bytes) -> np.ndarray:
     return np.frombuffer(payload, dtype="<u4", offset=2).astype(np.uint32)
 
 
+def decode_tacho_many(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, list[tuple[int, str]]]:
+    """The TACHO payloads of many frames in one pass: (edges per payload (F,) int64, all
+    edge offsets in payload order (sum,) uint32, [(index, message)] of the malformed ones).
+
+    Each payload is what :func:`decode_tacho` would give (a malformed one has no edges and
+    its message is that ProtocolError's)."""
+    F = len(payloads)
+    lens = np.fromiter(map(len, payloads), dtype=np.int64, count=F)
+    blob = np.frombuffer(b"".join(payloads), dtype=np.uint8).astype(np.int64)
+    starts = np.cumsum(lens) - lens
+    count = np.zeros(F, dtype=np.int64)
+    has = np.flatnonzero(lens >= 2)
+    count[has] = blob[starts[has]] | (blob[starts[has] + 1] << 8)
+    good = (lens >= 2) & (lens == 2 + 4 * count)
+    bad = []
+    for i in np.flatnonzero(~good).tolist():
+        try:
+            decode_tacho(payloads[i])
+        except ProtocolError as exc:
+            bad.append((i, str(exc)))
+    count[~good] = 0
+    total = int(count.sum())
+    frame = np.repeat(np.arange(F), count)
+    k = np.arange(total) - np.repeat(np.cumsum(count) - count, count)     # edge index in its frame
+    at = starts[frame] + 2 + 4 * k
+    offsets = (blob[at] | (blob[at + 1] << 8) | (blob[at + 2] << 16) | (blob[at + 3] << 24)).astype(np.uint32)
+    return count, offsets, bad
+
+
 # ---------------------------------------------------------------------------
 # Receiving
 # ---------------------------------------------------------------------------
@@ -306,14 +338,18 @@ class Decoder:
     Holds at most ``max_buffer`` bytes at any time (a large ``feed`` is processed
     in slices). After scanning, what stays buffered is either an incomplete
     candidate frame (< MAX_FRAME bytes) or, if no sync is present, at most the
-    last byte when it is 0xA5.
+    last byte when it is 0xA5.  With ``runs`` (the default), a buffer of at least
+    :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
+    frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
+    frame-by-frame receiver, the reference it equals (same frames, same counters).
     """
 
-    def __init__(self, max_buffer: int = 65536):
+    def __init__(self, max_buffer: int = 65536, runs: bool = True):
         if max_buffer < MAX_FRAME:
             raise ValueError(
                 f"max_buffer must hold the largest frame ({MAX_FRAME} bytes), got {max_buffer}")
         self.max_buffer = max_buffer
+        self.runs = runs  # the one-pass path for runs of back-to-back frames (False: frame by frame)
         self.counters = LinkCounters()
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
@@ -373,6 +409,7 @@ class Decoder:
         discarded = rejects = crc_fail = lost_total = overruns = 0
         out: list[Frame] = []
         pos = 0
+        runs = FrameRuns(bytes(buf), VERSION, len(types), MAX_PAYLOAD) if self.runs and n >= MIN_BYTES else None
         with memoryview(buf) as mv:
             while True:
                 i = find(SYNC, pos)
@@ -384,6 +421,18 @@ class Decoder:
                     break
                 discarded += i - pos
                 pos = i
+                if runs is not None and (run := runs.take(pos)) is not None:
+                    # good frames back to back: in one pass (cmsensord/frame_runs.py)
+                    frames, last_seq, last_t0, last_unw = _run_frames(run, runs.data, base, last_seq,
+                                                                      last_t0, last_unw)
+                    out += frames
+                    for code, k in enumerate(np.bincount(run.code).tolist()):
+                        if k:
+                            counts[names[types[code]]] += k
+                    lost_total += sum(f.lost_before for f in frames)
+                    overruns += int(np.count_nonzero(run.flags & FLAG_OVERRUN))
+                    pos = int(run.end_payload[-1]) + CRC_LEN
+                    continue
                 if n - pos < HEADER_LEN:
                     if final:  # truncated header at end of stream: not a frame
                         discarded += 1
@@ -439,6 +488,32 @@ class Decoder:
         c.frames_lost += lost_total
         c.overruns += overruns
         return out
+
+
+def _run_frames(run: RunFields, data: bytes, base: int, last_seq: int | None, last_t0: int,
+                last_unw: int) -> tuple[list[Frame], int, int, int]:
+    """The frames of a run of good back-to-back frames (receiver rules 3 and 4 as in the
+    frame-by-frame loop: seq gaps, t0 unwrapped), and the new last seq, t0, unwrapped t0."""
+    seq, t0 = run.seq, run.t0
+    lost = np.empty(seq.size, dtype=np.int64)
+    lost[1:] = (seq[1:] - seq[:-1] - 1) & 0xFFFF
+    step = np.empty(seq.size, dtype=np.int64)
+    step[1:] = ((t0[1:] - t0[:-1] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+    if last_seq is None:
+        lost[0] = 0
+        step[0] = 0
+        first = int(t0[0])
+    else:
+        lost[0] = (int(seq[0]) - last_seq - 1) & 0xFFFF
+        first = last_unw + (((int(t0[0]) - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
+        step[0] = 0
+    unw = (np.cumsum(step) + first).tolist()
+    types = list(map(_TYPE_BY_CODE.__getitem__, run.code.tolist()))
+    payloads = list(map(data.__getitem__, map(slice, (run.pos + HEADER_LEN).tolist(), run.end_payload.tolist())))
+    frames = list(map(tuple.__new__, repeat(Frame), zip(types, seq.tolist(), t0.tolist(), run.chan.tolist(),
+                                                        run.flags.tolist(), payloads, unw,
+                                                        (run.pos + base).tolist(), lost.tolist())))
+    return frames, int(seq[-1]), int(t0[-1]), unw[-1]
 
 
 def iter_frames(data: bytes | bytearray | memoryview,

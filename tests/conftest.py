@@ -39,6 +39,7 @@ PROCESS_MODULES = frozenset({
     "test_output_trust.py",
     "test_replay.py",
     "test_orders_latency.py",
+    "test_replay_one_pass.py",
     "test_systemd.py",
     "test_traps.py",
     "test_stream_random.py",

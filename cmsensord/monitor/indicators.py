@@ -225,24 +225,42 @@ class RmsIndicators:
         self.n = np.zeros(len(channels), dtype=np.int64)
 
     def add(self, t0: np.ndarray, vals: np.ndarray) -> list:
-        """Block RMS (B, C_board) of the blocks starting at board samples t0."""
+        """Block RMS (B, C_board) of the blocks starting at board samples t0.
+
+        Block by block, an interval opens at a block before its start or past its end and
+        closes after a block reaching its end; the blocks of one interval are summed in one
+        pass, a running sum in block order (the same sums as one block at a time)."""
         out: list = []
         idx = [ch.index for ch in self.channels]
         v = np.full((len(t0), len(idx)), np.nan)
         have = [i for i, j in enumerate(idx) if j < vals.shape[1]]
         v[:, have] = vals[:, [idx[i] for i in have]]
-        for k, t in enumerate(t0.tolist()):
-            if self.start is None or t < self.start:
+        ok = np.isfinite(v)
+        sq = np.where(ok, v, 0.0) ** 2
+        t = np.asarray(t0, dtype=np.int64)
+        B, N, L = len(t), self.N, self.L
+        k = 0
+        while k < B:
+            tk = int(t[k])
+            if self.start is None or tk < self.start:
                 out += self._close()
-                self.start = t
-            elif t >= self.start + self.N:
+                self.start = tk
+            elif tk >= self.start + N:
                 out += self._close()
-                self.start += (t - self.start) // self.N * self.N
-            ok = np.isfinite(v[k])
-            self.sq[ok] += v[k, ok].astype(np.float64) ** 2
-            self.n += ok
-            if t + self.L >= self.start + self.N:
+                self.start += (tk - self.start) // N * N
+            end = self.start + N
+            # the blocks after k in this interval, up to the first one reaching its end
+            nxt = t[k + 1:]
+            leave = np.flatnonzero((nxt < self.start) | (nxt >= end))
+            e = k + 1 + int(leave[0]) if leave.size else B
+            close = np.flatnonzero(t[k:e] + L >= end)
+            if close.size:
+                e = k + int(close[0]) + 1
+            self.sq = np.add.accumulate(np.vstack((self.sq[None, :], sq[k:e])), axis=0)[-1]
+            self.n += ok[k:e].sum(axis=0)
+            if close.size:
                 out += self._close()
+            k = e
         return out
 
     def finish(self) -> list:

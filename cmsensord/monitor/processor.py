@@ -148,8 +148,8 @@ class Processor:
             self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
         rms: list[Frame] = []
         raw: list[Frame] = []
-        for f in frames:
-            if self.segments.check(f) or f.lost_before:   # a reset, the other mode, a loss
+        for f, passed in self.segments.scan(frames):      # long batches checked in one pass
+            if not passed and (self.segments.check(f) or f.lost_before):   # a reset, the other mode, a loss
                 rms, raw = self._flush(rms, raw)
                 if self._break(f):
                     continue

@@ -15,7 +15,10 @@ are ignored: each run of them is counted in one ``decode_error`` event when it e
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from typing import NamedTuple
+
+import numpy as np
 
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import MAX_GAP_S, BlockClock
@@ -25,6 +28,26 @@ from cmsensord.protocol import Frame, FrameType
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
+#: batches at least this long are checked in one pass (:meth:`Segments.scan`)
+SCAN_MIN = 32
+#: after a frame that does not pass, this many frames are checked one by one before the next pass
+SCAN_RETRY = 8
+
+
+class FrameColumns(NamedTuple):
+    """What :meth:`Segments.check` reads of each frame of a batch, as arrays."""
+
+    code: np.ndarray    # the type code; -1 for a type that is not a FrameType (a frame built by hand)
+    t0: np.ndarray      # t0_unwrapped
+    lost: np.ndarray    # a seq gap in front of it
+
+
+def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
+    n = len(frames)
+    code = np.fromiter((f.type if type(f.type) is FrameType else -1 for f in frames), dtype=np.int64, count=n)
+    t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=n)
+    lost = np.fromiter((f.lost_before for f in frames), dtype=np.int64, count=n) != 0
+    return FrameColumns(code, t0, lost)
 
 
 class Segments:
@@ -50,6 +73,58 @@ class Segments:
         (:meth:`pending` says so until the next check)."""
         self.hit = self._check(f)
         return self.hit
+
+    def scan(self, frames: Sequence[Frame]) -> Iterator[tuple[Frame, bool]]:
+        """The frames in order, each with True when it is known to pass :meth:`check` with no
+        seq gap in front of it (:meth:`check`'s effects applied: the caller takes it as it is),
+        False when the caller is to :meth:`check` it.  A long batch is checked in one pass up
+        to its first frame that does not pass or its first STATUS frame (which may change the
+        mode and fs the check reads), then on from there, lazily: each pass sees the state
+        the frames before it left."""
+        if len(frames) < SCAN_MIN:
+            for f in frames:
+                yield f, False
+            return
+        cols = frame_columns(frames)
+        k, n, wait = 0, len(frames), 0
+        while k < n:
+            p = 0
+            if wait:
+                wait -= 1
+            else:
+                p = self._passing(cols, k)
+                wait = 0 if p else SCAN_RETRY
+            if p:
+                for f in frames[k:k + p]:
+                    yield f, True
+                k += p
+            else:
+                yield frames[k], False
+                k += 1
+
+    def _passing(self, cols: FrameColumns, start: int) -> int:
+        """How many frames from ``start`` pass :meth:`check` with no seq gap, up to and
+        including the first STATUS frame; applies :meth:`check`'s effects for them."""
+        st = self.setup.status
+        other = _OTHER.get(st.mode) if st is not None else None
+        code, t, lost = cols.code[start:], cols.t0[start:], cols.lost[start:]
+        prev = np.empty_like(t)
+        prev[0] = t[0] if self.last_t0 is None else self.last_t0
+        prev[1:] = t[:-1]
+        bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * self.clock.fs)
+        if other is not None:
+            bad |= code == int(other)
+        b = np.flatnonzero(bad)
+        k = int(b[0]) if b.size else t.size
+        status = np.flatnonzero(code[:k] == FrameType.STATUS)
+        if status.size:
+            k = int(status[0]) + 1
+        if k:
+            if self.ignored:
+                self._report()
+            self.last_t0 = int(t[k - 1])
+            self.hit = False
+        return k
 
     def pending(self, f: Frame) -> bool:
         """True when the last :meth:`check` (of ``f``) found a reset or the other mode."""

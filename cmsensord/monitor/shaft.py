@@ -22,7 +22,7 @@ import numpy as np
 from cmsensord.config import Config
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
-from cmsensord.protocol import Frame, Status, decode_tacho
+from cmsensord.protocol import Frame, Status, decode_tacho_many
 
 if TYPE_CHECKING:
     from cmsensord.dsp.tacho import TachoTracker
@@ -86,15 +86,11 @@ class Shaft:
             events.append(Event("decode_error", None, f"{dropped} TACHO frame(s) before the newest one "
                                 "in board time dropped (the tacho needs time order)"))
         t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        edges = []
-        for f in frames:
-            try:
-                edges.append(decode_tacho(f.payload))
-            except ValueError as exc:
-                events.append(Event("decode_error", None, f"bad TACHO payload at byte {f.offset}: {exc}"))
-                edges.append(np.empty(0, dtype=np.uint32))
+        counts, offsets, bad = decode_tacho_many([f.payload for f in frames])
+        for i, message in bad:
+            events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
         self._note_gaps(t0, clock.block_len)
-        u = self.tracker().update(t0, edges)
+        u = self.tracker().update_flat(t0, counts, offsets)
         for ev in u.events:
             if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
                 self.missed_in_lost_frames += int(ev.count)
@@ -105,13 +101,20 @@ class Shaft:
 
     def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int]:
         """The frames at or after the newest t0 fed so far, and how many stepped back (dropped)."""
-        kept = []
-        last = self._fed_t0
-        for f in frames:
-            if last is None or f.t0_unwrapped >= last:
-                kept.append(f)
-                last = f.t0_unwrapped
-        self._fed_t0 = last
+        if not frames:
+            return frames, 0
+        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
+        newest = np.maximum.accumulate(t0)          # the newest t0 before each (kept or not: the same)
+        before = np.empty_like(newest)
+        before[0] = t0[0] if self._fed_t0 is None else self._fed_t0
+        before[1:] = newest[:-1]
+        if self._fed_t0 is not None:
+            before = np.maximum(before, self._fed_t0)
+        keep = t0 >= before
+        self._fed_t0 = int(max(before[-1], t0[-1]))
+        if keep.all():
+            return frames, 0
+        kept = [frames[i] for i in np.flatnonzero(keep).tolist()]
         return kept, len(frames) - len(kept)
 
     def _note_gaps(self, t0: np.ndarray, L: int) -> None:

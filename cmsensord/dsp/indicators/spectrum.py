@@ -14,14 +14,20 @@ counted on the other side.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 __all__ = ["hann", "power_spectrum", "band_mask"]
 
 
+@lru_cache(maxsize=8)
 def hann(N: int) -> np.ndarray:
-    """The periodic Hann window of N samples (``0.5 - 0.5 cos(2 pi n / N)``)."""
-    return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(N) / N)
+    """The periodic Hann window of N samples (``0.5 - 0.5 cos(2 pi n / N)``), read-only: the
+    same few lengths come every interval, so each is computed once."""
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(N) / N)
+    w.setflags(write=False)
+    return w
 
 
 def power_spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from cmsensord.dsp.tacho.regular import MIN_EDGES, RegularState, regular_prefix
+
 if TYPE_CHECKING:
     from cmsensord.protocol import Frame
 
@@ -184,7 +186,10 @@ class TachoState(ABC):
 class EdgeRuns(TachoState):
     """The edge part of :class:`~cmsensord.dsp.tacho.TachoTracker`: coverage and
     timeouts, runs, the look-ahead classification of each edge and its commitment
-    as pulses."""
+    as pulses.  ``batch_edges`` False: every edge by the edge-by-edge path (the reference
+    that the one-pass path for regular edges equals)."""
+
+    batch_edges = True
 
     def _advance(self, end: int) -> None:
         """The frames so far cover up to ``end`` (exclusive): coverage and timeout check."""
@@ -209,6 +214,69 @@ class EdgeRuns(TachoState):
         stop_q = run.last_raw_q + self._timeout_q(run)
         if q_now > stop_q:
             self._end_run(run, stop_q)
+
+    def _edges(self, q: IntArray, adv: IntArray) -> None:
+        """The edges q (1/256 sample) in arrival order, each after advancing the coverage to
+        adv (samples; -1: no advance before it), as :meth:`_advance` and :meth:`_edge` one
+        after the other would; runs of regular edges are committed in one pass
+        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge."""
+        ql, al = q.tolist(), adv.tolist()
+        j, m = 0, len(ql)
+        while j < m:
+            n_scalar = 1
+            st = self._regular_state() if self.batch_edges and m - j >= MIN_EDGES else None
+            if st is not None:
+                now = self._now if self._now is not None else 0
+                a = adv[j:]
+                adv_q = np.where(a >= 0, np.maximum(a, now) * SUB, -1)
+                k = regular_prefix(st, q[j:], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
+                                   self._timeout_hi)
+                if k:
+                    self._commit_regular(q[j:j + k], a[:k])
+                    j += k
+                else:
+                    n_scalar = MIN_EDGES            # not worth trying again at once
+            for i in range(j, min(m, j + n_scalar)):
+                if al[i] >= 0:
+                    self._advance(al[i])
+                self._edge(ql[i])
+            j += n_scalar
+
+    def _regular_state(self) -> RegularState | None:
+        """The state :func:`~cmsensord.dsp.tacho.regular.regular_prefix` starts from, or None
+        when the run is not in the steady state it assumes (a full history, nothing pending)."""
+        run = self._run
+        if (run is None or self._pending or len(self._hist) < PREDICT_INTERVALS or self._now is None
+                or run.prev_prev_raw_q is None or run.prev_raw_q is None or run.committed < 2
+                or self._cq_last != run.last_raw_q):
+            return None
+        mid, rate = zip(*self._hist)
+        return RegularState(list(mid), list(rate), (run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q))
+
+    def _commit_regular(self, q: IntArray, adv: IntArray) -> None:
+        """Edges q that :func:`~cmsensord.dsp.tacho.regular.regular_prefix` found regular:
+        what :meth:`_advance` and :meth:`_edge` do for each, done once for all."""
+        run = self._run
+        assert run is not None and self._cq_last is not None
+        m = q.size
+        ql = q.tolist()
+        if (adv >= 0).any() and self._now is not None:
+            self._now = max(self._now, int(adv.max()))
+        d = np.diff(q, prepend=self._cq_last)
+        prev = np.concatenate(([self._cq_last], q[:-1]))
+        self._hist.extend(zip((prev + 0.5 * d).tolist(), (1.0 / d).tolist()))
+        T = (q / SUB).tolist()
+        i0 = self._c0 + len(self._cT)
+        self._cT.extend(T)
+        self._cn.extend(range(self._n_last + 1, self._n_last + m + 1))
+        self._n_last += m
+        self._seg_todo.extend(zip(range(i0, i0 + m), T))
+        raw = [run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q] + ql
+        run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = raw[-3:]
+        run.committed += m
+        self._cq_last = self._last_q = self._known_q = ql[-1]
+        self.counters.edges += m
+        self.counters.pulses += m
 
     def _edge(self, q: int) -> None:
         c = self.counters

@@ -150,6 +150,42 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         t0 = np.asarray(t0_unwrapped, dtype=np.int64).reshape(-1)
         if len(edges) != t0.size:
             raise ValueError(f"expected one edge array per frame: {t0.size} t0 values, {len(edges)} edge arrays")
+        n_ok = self._in_order(t0)
+        sizes = np.fromiter((len(e) for e in edges[:n_ok]), dtype=np.int64, count=n_ok)
+        full = np.flatnonzero(sizes)
+        off = np.concatenate([edges[i] for i in full.tolist()], axis=None).astype(np.int64) if full.size \
+            else np.empty(0, dtype=np.int64)
+        return self._update(t0, n_ok, sizes, off)
+
+    def update_flat(self, t0_unwrapped: Sequence[int] | np.ndarray, counts: npt.ArrayLike,
+                    offsets: npt.ArrayLike) -> TachoUpdate:
+        """:meth:`update` with the edges of all frames in one array: ``counts`` (F,) edges per
+        frame and ``offsets`` (sum of counts,) their offsets from their frame's t0, frame by
+        frame (what :func:`cmsensord.protocol.decode_tacho_many` gives).  The same results as
+        :meth:`update` with ``offsets`` split by ``counts``, without a Python object per frame."""
+        t0 = np.asarray(t0_unwrapped, dtype=np.int64).reshape(-1)
+        counts = np.asarray(counts, dtype=np.int64).reshape(-1)
+        off = np.asarray(offsets).reshape(-1).astype(np.int64)
+        if counts.size != t0.size or int(counts.sum()) != off.size or (counts < 0).any():
+            raise ValueError(f"expected one edge count per frame summing to the offsets: {t0.size} t0 values, "
+                             f"{counts.size} counts summing to {int(counts.sum())}, {off.size} offsets")
+        n_ok = self._in_order(t0)
+        sizes = counts[:n_ok]
+        return self._update(t0, n_ok, sizes, off[:int(sizes.sum())])
+
+    def _in_order(self, t0: np.ndarray) -> int:
+        """How many frames come before the first one stepping back in time."""
+        if not t0.size:
+            return 0
+        prev = np.empty(t0.size, dtype=np.int64)
+        prev[0] = t0[0] if self._last_t0 is None else self._last_t0
+        prev[1:] = t0[:-1]
+        back = np.flatnonzero(t0 < prev)
+        return int(back[0]) if back.size else t0.size
+
+    def _update(self, t0: np.ndarray, n_ok: int, sizes: np.ndarray, off: np.ndarray) -> TachoUpdate:
+        """The frames t0 (F,), of which the first n_ok are in time order, with ``sizes`` (n_ok,)
+        edges each, their offsets ``off`` frame after frame."""
         self._events = []
         F = t0.size
         if F == 0:
@@ -161,19 +197,12 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         # before the next edge (the run's timeout changes only with an edge, and the
         # checks see a non-decreasing time).  So: one running maximum of the frame
         # ends, and the frames with edges one by one.
-        prev = np.empty(F, dtype=np.int64)
-        prev[0] = t0[0] if self._last_t0 is None else self._last_t0
-        prev[1:] = t0[:-1]
-        back = np.flatnonzero(t0 < prev)
-        n_ok = int(back[0]) if back.size else F      # frames before the first error
         err, bad_offsets = None, False
-        if back.size:
-            err = ValueError(f"TACHO frames must come in time order: t0 {int(t0[n_ok])} after "
-                             f"t0 {int(prev[n_ok])}")
-        sizes = np.fromiter((len(e) for e in edges[:n_ok]), dtype=np.int64, count=n_ok)
+        if n_ok < F:
+            prev = int(t0[n_ok - 1]) if n_ok else self._last_t0
+            err = ValueError(f"TACHO frames must come in time order: t0 {int(t0[n_ok])} after t0 {prev}")
         full = np.flatnonzero(sizes)
         if full.size:                                # all edges at once: q in 1/256 sample
-            off = np.concatenate([edges[i] for i in full.tolist()], axis=None).astype(np.int64)
             frame = np.repeat(full, sizes[full])
             out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
             if out.any():
@@ -186,16 +215,12 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
                 full = full[full < f_bad]
             q = off + t0[frame] * SUB
             order = np.lexsort((q, frame))           # time order within each frame
-            qs = q[order].tolist()
-            stop = np.cumsum(sizes[full]).tolist()
+            ends = np.maximum.accumulate(t0[:n_ok] + self.block_len)
+            first = np.cumsum(sizes[full]) - sizes[full]     # the first edge of each frame
+            adv = np.full(q.size, -1, dtype=np.int64)        # the coverage before it: the frames before
+            adv[first] = np.where(full > 0, ends[np.maximum(full - 1, 0)], -1)
+            self._edges(q[order], adv)
         ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
-        k = 0
-        for i, e in zip(full.tolist(), stop if full.size else ()):
-            if i > 0:
-                self._advance(int(ends[i - 1]))
-            for j in range(k, e):
-                self._edge(qs[j])
-            k = e
         if n_ok:
             self._advance(int(ends[n_ok - 1]))
             self._last_t0 = int(t0[n_ok - 1])

@@ -1,0 +1,57 @@
+"""The Processor checks long batches in one pass (Segments.scan, issue 13): the same
+messages and events as checking every frame (the reference: ``SCAN_MIN`` out of reach), on
+random streams with odd frames, stuck t0, resets, far jumps, steps back, seq gaps and
+restarts, mode changes by STATUS, and on a RAW capture with a tacho."""
+
+from __future__ import annotations
+
+import pytest
+
+import cmsensord.monitor.segments as segments
+from cmsensord.config import default_config
+from stream import run_processor
+from test_stream_random import random_stream
+
+
+def run(data: bytes, monkeypatch, one_pass: bool, chunk: int):
+    passed = []
+    passing = segments.Segments._passing
+
+    def spy(self, cols, start):
+        k = passing(self, cols, start)
+        passed.append(k)
+        return k
+
+    with monkeypatch.context() as m:
+        m.setattr(segments.Segments, "_passing", spy)
+        if not one_pass:
+            m.setattr(segments, "SCAN_MIN", 1 << 60)
+        sink, proc, _ = run_processor(data, default_config(4), chunk=chunk)
+    # the diagnostics' uptime is the process's own clock: all else is compared
+    msgs = [(t, st, {k: v for k, v in msg.items() if k != "uptime_s"} if t == "/cm/diagnostics" else msg)
+            for t, st, msg in sink.messages]
+    return repr(msgs), proc.event_counts, passed
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_one_pass_checks_give_the_messages_of_frame_by_frame_checks(seed, monkeypatch):
+    data = random_stream(seed, 6000)
+    ref, ref_counts, none = run(data, monkeypatch, one_pass=False, chunk=1 << 16)
+    assert not none
+    got, counts, passed = run(data, monkeypatch, one_pass=True, chunk=1 << 16)
+    assert sum(passed) > 1000 and 0 in passed           # many frames in passes; some checked one by one
+    assert got == ref and counts == ref_counts
+    assert ref_counts.get("time_base", 0) > 0 and ref_counts.get("frames_lost", 0) > 0
+
+
+def test_one_pass_checks_on_a_raw_capture_with_a_tacho(monkeypatch):
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    sc = make_scenario("faulty", n_channels=1, duration_s=12.0, seed=1)
+    board = Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=True))
+    data = b"".join(d for d, _ in board.iter_blocks(board.n_blocks_for(12.0)))
+    ref, ref_counts, _ = run(data, monkeypatch, one_pass=False, chunk=1 << 16)
+    got, counts, passed = run(data, monkeypatch, one_pass=True, chunk=1 << 16)
+    assert sum(passed) > 0.9 * 2 * 1200
+    assert got == ref and counts == ref_counts and "/cm/ch0/orders" in ref
