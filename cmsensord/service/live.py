@@ -189,14 +189,14 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
     """One batch of frames through the Processor, then what comes between batches."""
     for part in board_time_parts(frames, round(BATCH_S * proc.fs)):
         proc.handle(part)
-    source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block does
+    source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block or a decision does
     if control is not None:
         control.apply(proc)                 # acks and status requests, between batches
     if (frames and cfg.link.max_drift_s and watch.sim_done is None
             and len(source.queue) < DRIFT_QUEUE_MAX):
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
-    if not frames:                          # no data moves the events' release on: the wall clock does
+    if not frames and not len(source.queue):    # no data moves the events' release on: the wall clock does
         proc.log.release(time.time_ns())
 
 
@@ -236,7 +236,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 stop.reopen = False
                 sink.reopen()
             sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
-            if watch.done(bool(frames), now) or stop.event.is_set():
+            # frames held for the block completing the next output are frames that came
+            if watch.done(bool(frames) or bool(len(source.queue)), now) or stop.event.is_set():
                 break
             if now >= next_status:
                 next_status = now + 1.0
