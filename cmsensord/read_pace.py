@@ -45,12 +45,15 @@ class ReadPace:
         self.byte_rate: float | None = None
         self._base: float | None = None     # arrival of the window's first t0: the last window's
         self._win: float | None = None      # ... and this window's estimate
+        self.late_s = 0.0                   # the newest frame came this long after it was due
 
     def arrived(self, now: float, nbytes: int, t0: int | None) -> None:
         """A read of ``nbytes`` at ``now``; ``t0``: the newest frame's t0_unwrapped (None: none)."""
         self._bytes += nbytes
         if t0 is None:
             return
+        # how late it came, by the rates as they were (a late read's own arrival skews them)
+        self.late_s = now - self._due(t0) if self._win is not None and self.rate else 0.0
         if self.last is not None and t0 < self.last[1]:     # the board's clock went back: start over
             self._ref, self.rate, self._base, self._win = None, None, None, None
         self.last = (now, t0)
@@ -104,4 +107,4 @@ class ReadPace:
 
     def _behind(self, now: float) -> bool:
         """The newest frame read came more than ``behind_s`` after it was due: more wait."""
-        return self._win is not None and self.last is not None and now - self._due(self.last[1]) > self.behind_s
+        return self.late_s > self.behind_s
