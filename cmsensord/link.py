@@ -29,6 +29,8 @@ from cmsensord.read_pace import ReadPace
 
 log = logging.getLogger("cmsensord")
 
+#: how often the reader looks for a port's device to come back while it waits to reconnect
+REAPPEAR_POLL_S = 0.1
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 
@@ -305,7 +307,17 @@ class SerialReader(threading.Thread):
         return None
 
     def _wait_backoff(self) -> None:
-        self._stop_event.wait(self._backoff)
+        """Wait the back-off (doubling up to ``reconnect_max_s``) before the next attempt; when
+        the port's device is gone, only until it is there again (checked every
+        ``REAPPEAR_POLL_S``): a board plugged back in is reopened at once, not seconds later."""
+        gone = not os.path.exists(self.port)
+        end = time.monotonic() + self._backoff
+        while not self._stop_event.is_set():
+            left = end - time.monotonic()
+            if left <= 0 or self._stop_event.wait(min(left, REAPPEAR_POLL_S) if gone else left):
+                break
+            if gone and os.path.exists(self.port):
+                break
         self._backoff = min(self._backoff * 2, self.reconnect_max_s)
 
 

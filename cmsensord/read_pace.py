@@ -2,9 +2,9 @@
 
 The board sends a block's frames every 10 ms; read as they come, that is ~100 thread
 wake-ups, reads and decoder calls a second, which cost more than processing an RMS
-stream (issue 13).  The live loop takes the frames only every ``BATCH_S`` or when the
-block completing the next /orders block is in (:meth:`FrameQueue.wake_at`), so the
-reader may let bytes gather in the port's kernel buffer meanwhile:
+stream (issue 13).  The live loop takes the frames only when the block completing the
+next /orders block or decision is in (:meth:`FrameQueue.wake_at`), so the reader may let
+bytes gather in the port's kernel buffer meanwhile:
 
 * with a block to wake at (``wake_t0``), until shortly (``margin_s``) before that
   block is due: its arrival time extrapolated from the board's clock as measured
@@ -16,12 +16,13 @@ reader may let bytes gather in the port's kernel buffer meanwhile:
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
   due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
   and a tty's input buffer shows only part of what waits), and the rest is read at once;
-* with no block to wake at (no order chain), ``idle_hold_s``;
+* with no block to wake at (no output chain yet), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
   link, a sped-up simulator: the kernel's buffer must not fill), and not before the
   rates are measured (``min_span_s`` of arrivals).
 
-Pure arithmetic over the times and counts it is given (:meth:`arrived`, :meth:`hold`).
+Pure arithmetic over the times and counts it is given (:meth:`arrived`, :meth:`hold`,
+:meth:`named_wait`).
 """
 
 from __future__ import annotations

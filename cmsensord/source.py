@@ -13,8 +13,9 @@ reads frames this way, so they all decode bytes the same way:
 * :class:`SerialSource` — the serial port: a reader thread (reconnecting with
   back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
   yields what is queued every ``timeout`` seconds, or as soon as ``batch_frames``
-  wait (empty batches included, so the loop can do its periodic work), until
-  :meth:`SerialSource.stop`, then what is left, then ends;
+  wait or the block the loop named (``queue.wake_at``) is in (empty batches included,
+  so the loop can do its periodic work; while that block is still to come, frames wait
+  for it up to ``hold_s``), until :meth:`SerialSource.stop`, then what is left, then ends;
 * :class:`Paced` — wraps any source and paces it at ``speed`` times the
   board's clock (the frames' own t0), with an injectable clock and sleep.
 
