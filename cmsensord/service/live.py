@@ -210,7 +210,11 @@ def _control(cfg: Config, proc: Processor) -> ControlServer | None:
 def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
              control: ControlServer | None, frames: list) -> None:
     """One batch of frames through the Processor, then what comes between batches."""
-    for part in output_parts(frames, proc.wake_t0, round(BATCH_S * proc.fs), round(HOLD_S * proc.fs)):
+    span = round(BATCH_S * proc.fs)
+    # with the AKF trace (~100 messages a slot's second, the sink's reorder window holding some),
+    # parts of BATCH_S as before: longer ones kept a decision's messages unflushed ~0.1 s longer
+    longest = span if cfg.output.akf_trace else round(HOLD_S * proc.fs)
+    for part in output_parts(frames, proc.wake_t0, span, longest):
         proc.handle(part)
     source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block or a decision does
     if control is not None:
