@@ -29,9 +29,10 @@ from cmsensord.read_pace import ReadPace
 
 log = logging.getLogger("cmsensord")
 
+#: how often the reader looks for a port's device to come back while it waits to reconnect
+REAPPEAR_POLL_S = 0.1
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
-PLUG_POLL_S = 0.2          # how often an absent port's device name is checked during a back-off
 
 
 class FrameQueue:
@@ -48,7 +49,14 @@ class FrameQueue:
     ``timeout`` has passed, so the loop can hand the Processor many frames per call
     (its cost is mostly per call, not per frame) while waking at a steady pace; and
     as soon as the frames of the block :meth:`wake_at` names are in (the block that
-    completes the next output: batching adds no latency to it).
+    completes the next output: batching adds no latency to it).  While that block is still
+    to come, a ``get`` given ``hold_s`` keeps the queued frames at its timeout (it returns
+    none, for the loop's periodic work) until the oldest has waited ``hold_s``: a board whose
+    block comes a little late is not handled in two calls, and the loop can wake at its
+    pace for its timers while the Processor is called once per output.
+
+    ``named`` is set by every :meth:`wake_at` (the reader waits for it when the block named
+    last is in: the loop names the next one once it has handled that block).
     """
 
     def __init__(self, maxlen: int):
@@ -62,11 +70,15 @@ class FrameQueue:
         self._wake_t0: int | None = None    # get() returns once this block's frames are in
         self.hint: int | None = None        # the last wake_at() block, kept after the get (reader)
         self._woken = False
+        self._since = 0.0                   # monotonic time the oldest queued frame came
+        self.named = threading.Event()
 
     def put(self, frames: list[Frame]) -> None:
         if not frames:
             return
         with self._cond:
+            if not self._q:
+                self._since = time.monotonic()
             self._q.extend(frames)
             over = len(self._q) - self.maxlen
             if over > 0:
@@ -102,6 +114,7 @@ class FrameQueue:
         with self._cond:
             self._wake_t0 = self.hint = t0
             self._woken = t0 is not None and bool(self._q) and _completes(self._q[-1], t0)
+        self.named.set()
 
     def poke(self) -> None:
         """The waiting :meth:`get` returns now (something besides frames wants the loop)."""
@@ -109,17 +122,21 @@ class FrameQueue:
             self._woken = True
             self._cond.notify()
 
-    def get(self, timeout: float, enough: int = 1) -> list[Frame]:
+    def get(self, timeout: float, enough: int = 1, hold_s: float = 0.0) -> list[Frame]:
         """All queued frames, once at least ``enough`` wait (at once if they already do),
         the block of :meth:`wake_at` is in, ``timeout`` seconds have passed (then possibly
-        none) or the queue is closed."""
+        none) or the queue is closed.  At the timeout, with a block of :meth:`wake_at` still
+        to come and the oldest frame queued less than ``hold_s`` ago: none (they stay)."""
         deadline = time.monotonic() + timeout
         with self._cond:
             self._enough = max(1, min(enough, self.maxlen))
             try:
                 while len(self._q) < self._enough and not self._woken and not self.closed:
-                    left = deadline - time.monotonic()
+                    now = time.monotonic()
+                    left = deadline - now
                     if left <= 0:
+                        if self._wake_t0 is not None and self._q and now - self._since < hold_s:
+                            return []
                         break
                     self._cond.wait(left)
             finally:
@@ -180,6 +197,7 @@ class SerialReader(threading.Thread):
 
     def stop(self) -> None:
         self._stop_event.set()
+        self.queue.named.set()
 
     def _event(self, kind: str, message: str) -> None:
         self.events.append((time.time_ns(), kind, message))
@@ -238,15 +256,30 @@ class SerialReader(threading.Thread):
                 self._event("disk_error", self.capture_error + "; capture stopped")
         frames = self.decoder.feed(data)
         self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None)
+        self.queue.named.clear()                # a wake_at from now on ends a named_wait
         self.queue.put(frames)
         if self.errors:
             self._event("reader_recovered", f"{self.port}: reading again after {self.errors} "
                         "reader error(s)")
             self.errors, self.error = 0, None
-        hold = self.pace.hold(now, self.queue.hint)
-        if hold > 0.001:            # bytes gather in the port's buffer meanwhile
-            self._stop_event.wait(hold)
+        if not ser.in_waiting:                  # never while bytes wait (a backlog of reads)
+            self._pause(now)
         return ser
+
+    def _pause(self, now: float) -> None:
+        """Wait as the pace allows (bytes gather in the port's buffer meanwhile): until shortly
+        before the block the loop waits for is due, or, when it is in, until the loop names
+        the next; :meth:`stop` ends the wait."""
+        hint = self.queue.hint
+        hold = self.pace.hold(now, hint)
+        if hold > 0.001:
+            self._stop_event.wait(hold)
+            return
+        wait = self.pace.named_wait(now, hint)
+        if wait > 0.001 and self.queue.named.wait(wait) and not self._stop_event.is_set():
+            hold = self.pace.hold(time.monotonic(), self.queue.hint)    # the block named now
+            if hold > 0.001:
+                self._stop_event.wait(hold)
 
     def _read(self, ser) -> bytes:
         """What the port has (up to ``read_size`` bytes), waiting up to the port's timeout for
@@ -274,16 +307,16 @@ class SerialReader(threading.Thread):
         return None
 
     def _wait_backoff(self) -> None:
-        """Wait the back-off (doubling up to ``reconnect_max_s``) before the next open.  A
-        port whose device name is absent is checked every ``PLUG_POLL_S`` meanwhile (a stat)
-        and the wait ends when it appears: a board plugged back in is read at once, not
-        after up to ``reconnect_max_s``."""
-        absent = not os.path.exists(self.port)
+        """Wait the back-off (doubling up to ``reconnect_max_s``) before the next attempt; when
+        the port's device is gone, only until it is there again (checked every
+        ``REAPPEAR_POLL_S``): a board plugged back in is reopened at once, not seconds later."""
+        gone = not os.path.exists(self.port)
         end = time.monotonic() + self._backoff
-        while (left := end - time.monotonic()) > 0:
-            if self._stop_event.wait(min(left, PLUG_POLL_S) if absent else left):
+        while not self._stop_event.is_set():
+            left = end - time.monotonic()
+            if left <= 0 or self._stop_event.wait(min(left, REAPPEAR_POLL_S) if gone else left):
                 break
-            if absent and os.path.exists(self.port):
+            if gone and os.path.exists(self.port):
                 break
         self._backoff = min(self._backoff * 2, self.reconnect_max_s)
 

@@ -2,22 +2,27 @@
 
 The board sends a block's frames every 10 ms; read as they come, that is ~100 thread
 wake-ups, reads and decoder calls a second, which cost more than processing an RMS
-stream (issue 13).  The live loop takes the frames only every ``BATCH_S`` or when the
-block completing the next /orders block is in (:meth:`FrameQueue.wake_at`), so the
-reader may let bytes gather in the port's kernel buffer meanwhile:
+stream (issue 13).  The live loop takes the frames only when the block completing the
+next /orders block or decision is in (:meth:`FrameQueue.wake_at`), so the reader may let
+bytes gather in the port's kernel buffer meanwhile:
 
 * with a block to wake at (``wake_t0``), until shortly (``margin_s``) before that
   block is due: its arrival time extrapolated from the board's clock as measured
   (board samples per wall second over the last ``window_s``, from the frames' t0 and
   arrival times; the earliest arrivals, as a read after a wait comes late), so the
   reader waits in its read when that block comes and the orders are not delayed;
-* when that block is already in (the loop has not named the next yet), not at all;
-* with no block to wake at (no order chain), ``idle_hold_s``;
+* when that block is already in (the loop has not named the next yet), not at all
+  (:meth:`named_wait`: until the loop names the next);
+* not while behind: when the newest frame read came more than ``behind_s`` after it was
+  due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
+  and a tty's input buffer shows only part of what waits), and the rest is read at once;
+* with no block to wake at (no output chain yet), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
   link, a sped-up simulator: the kernel's buffer must not fill), and not before the
   rates are measured (``min_span_s`` of arrivals).
 
-Pure arithmetic over the times and counts it is given (:meth:`arrived`, :meth:`hold`).
+Pure arithmetic over the times and counts it is given (:meth:`arrived`, :meth:`hold`,
+:meth:`named_wait`).
 """
 
 from __future__ import annotations
@@ -30,8 +35,9 @@ class ReadPace:
     """The reader's wait before its next read (see module docstring)."""
 
     def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = 0.01,
-                 window_s: float = 10.0, min_span_s: float = 1.0):
+                 window_s: float = 10.0, min_span_s: float = 1.0, behind_s: float = 0.02):
         self.buffer_bytes, self.idle_hold_s, self.margin_s = buffer_bytes, idle_hold_s, margin_s
+        self.behind_s = behind_s
         self.window_s, self.min_span_s = window_s, min_span_s
         self._ref: tuple[float, int, int] | None = None     # (wall, t0, bytes so far) at the window's start
         self._bytes = 0
@@ -40,12 +46,15 @@ class ReadPace:
         self.byte_rate: float | None = None
         self._base: float | None = None     # arrival of the window's first t0: the last window's
         self._win: float | None = None      # ... and this window's estimate
+        self.late_s = 0.0                   # the newest frame came this long after it was due
 
     def arrived(self, now: float, nbytes: int, t0: int | None) -> None:
         """A read of ``nbytes`` at ``now``; ``t0``: the newest frame's t0_unwrapped (None: none)."""
         self._bytes += nbytes
         if t0 is None:
             return
+        # how late it came, by the rates as they were (a late read's own arrival skews them)
+        self.late_s = now - self._due(t0) if self._win is not None and self.rate else 0.0
         if self.last is not None and t0 < self.last[1]:     # the board's clock went back: start over
             self._ref, self.rate, self._base, self._win = None, None, None, None
         self.last = (now, t0)
@@ -73,12 +82,30 @@ class ReadPace:
         """Seconds the reader may wait before its next read (0: read now)."""
         if self.rate is None or self.last is None or not self.byte_rate:
             return 0.0
+        if self._behind(now):
+            return 0.0
         cap = self.buffer_bytes / self.byte_rate
         if wake_t0 is None:
             return min(cap, self.idle_hold_s)
         if wake_t0 <= self.last[1] or self._win is None:
             return 0.0
-        assert self._ref is not None                # set with the rate
+        return max(0.0, min(cap, MAX_HOLD_S, self._due(wake_t0) - self.margin_s - now))
+
+    def named_wait(self, now: float, wake_t0: int | None) -> float:
+        """Seconds the reader may wait for the loop to name its next block, when the block it
+        named last is in (0 otherwise): the loop handles that block first, and no block it
+        waits for comes meanwhile."""
+        if (wake_t0 is None or self.rate is None or self.last is None or not self.byte_rate
+                or wake_t0 > self.last[1] or self._behind(now)):
+            return 0.0
+        return min(self.buffer_bytes / self.byte_rate, MAX_HOLD_S)
+
+    def _due(self, t0: int) -> float:
+        """When board sample ``t0`` arrives at the earliest (the rates are measured)."""
+        assert self._ref is not None and self._win is not None and self.rate
         base = self._win if self._base is None else min(self._base, self._win)
-        due = base + (wake_t0 - self._ref[1]) / self.rate - self.margin_s
-        return max(0.0, min(cap, MAX_HOLD_S, due - now))
+        return base + (t0 - self._ref[1]) / self.rate
+
+    def _behind(self, now: float) -> bool:
+        """The newest frame read came more than ``behind_s`` after it was due: more wait."""
+        return self.late_s > self.behind_s

@@ -13,8 +13,9 @@ reads frames this way, so they all decode bytes the same way:
 * :class:`SerialSource` — the serial port: a reader thread (reconnecting with
   back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
   yields what is queued every ``timeout`` seconds, or as soon as ``batch_frames``
-  wait (empty batches included, so the loop can do its periodic work), until
-  :meth:`SerialSource.stop`, then what is left, then ends;
+  wait or the block the loop named (``queue.wake_at``) is in (empty batches included,
+  so the loop can do its periodic work; while that block is still to come, frames wait
+  for it up to ``hold_s``), until :meth:`SerialSource.stop`, then what is left, then ends;
 * :class:`Paced` — wraps any source and paces it at ``speed`` times the
   board's clock (the frames' own t0), with an injectable clock and sleep.
 
@@ -43,6 +44,9 @@ Batch = list[Frame]
 #: /orders block is in (FrameQueue.wake_at)
 BATCH_S = 0.1
 BATCH_FRAMES = 1000
+#: ... but while the block the Processor waits for (its next /orders block or decision) is still
+#: to come, frames wait for it up to HOLD_S (RMS mode: one call per decision, not per BATCH_S)
+HOLD_S = 1.5
 
 
 class FrameSource:
@@ -135,7 +139,9 @@ class SerialSource(FrameSource):
 
     Entering starts the reader thread.  Iteration yields the queued frames every
     ``timeout`` seconds (an empty batch when none came), or sooner once ``batch_frames``
-    wait, until :meth:`stop`; then it yields the frames still queued once and ends.
+    wait or the block named by ``queue.wake_at`` is in, until :meth:`stop`; then it yields
+    the frames still queued once and ends.  While a named block is still to come, frames
+    stay queued (empty batches) until it is in or the oldest has waited ``hold_s``.
     Batching by time is what keeps the live daemon's cost near a replay's: the
     Processor's work is mostly per call, and one call per 10-ms block costs ~3x the
     work of its frames (issue 13).  ``batch_frames=1`` yields as soon as any frame is
@@ -146,7 +152,7 @@ class SerialSource(FrameSource):
     def __init__(self, port: str, *, baud: int, read_size: int = 4096, queue_frames: int = 20000,
                  capture: BinaryIO | None = None, reconnect_min_s: float = 0.5,
                  reconnect_max_s: float = 5.0, open_port: Callable | None = None,
-                 timeout: float = BATCH_S, batch_frames: int = BATCH_FRAMES):
+                 timeout: float = BATCH_S, batch_frames: int = BATCH_FRAMES, hold_s: float = HOLD_S):
         self.queue = FrameQueue(queue_frames)
         self.reader = SerialReader(port, baud=baud, read_size=read_size, queue=self.queue,
                                    capture=capture, reconnect_min_s=reconnect_min_s,
@@ -154,6 +160,7 @@ class SerialSource(FrameSource):
         self.decoder = self.reader.decoder
         self.timeout = timeout
         self.batch_frames = batch_frames
+        self.hold_s = hold_s
         self._stopped = False
 
     @classmethod
@@ -173,7 +180,7 @@ class SerialSource(FrameSource):
 
     def __iter__(self) -> Iterator[Batch]:
         while not self._stopped:
-            yield self.queue.get(timeout=self.timeout, enough=self.batch_frames)
+            yield self.queue.get(timeout=self.timeout, enough=self.batch_frames, hold_s=self.hold_s)
         yield self.queue.get(timeout=0)
 
     def stop(self) -> None:

@@ -111,3 +111,42 @@ def test_a_stalled_loop_loses_raw_blocks_but_no_rms_frame_and_memory_stays_bound
     # the RAW frames kept are the newest of each burst
     raw_t0 = [f.t0 // 250 for f in got if f.type == FrameType.RAW]
     assert raw_t0[:56] == list(range(44, 100))
+
+
+def test_a_port_whose_device_comes_back_is_reopened_at_once_not_after_the_back_off(tmp_path):
+    """The device is gone (cannot open); it appears 0.3 s later: the reader tries again then,
+    not when its 5-s back-off ends, and says link_lost, then link_restored."""
+    import serial
+
+    port = tmp_path / "ttyBOARD"
+    opened = threading.Event()
+
+    class Port:
+        in_waiting = 0
+
+        def read(self, n):
+            time.sleep(0.01)
+            return b""
+
+        def close(self):
+            pass
+
+    def open_port():
+        if not port.exists():
+            raise serial.SerialException(f"could not open port {port}: No such file or directory")
+        opened.set()
+        return Port()
+
+    q = FrameQueue(100)
+    reader = SerialReader(str(port), baud=921600, read_size=4096, queue=q, open_port=open_port,
+                          reconnect_min_s=5.0, reconnect_max_s=5.0)
+    reader.start()
+    try:
+        time.sleep(0.3)
+        port.write_bytes(b"")
+        t = time.monotonic()
+        assert opened.wait(4.0) and time.monotonic() - t < 4.0
+        assert [kind for _, kind, _ in reader.events] == ["link_lost", "link_restored"]
+    finally:
+        reader.stop()
+        reader.join(timeout=2)

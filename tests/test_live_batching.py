@@ -18,9 +18,10 @@ from cmsensord.config import default_config
 from cmsensord.link import FrameQueue
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, FrameType, iter_frames
+from cmsensord.service.live import output_parts
 from cmsensord.sinks.mcap_sink import read_messages
 from cmsensord.sinks.memory import ListSink
-from cmsensord.source import BATCH_FRAMES, BATCH_S, SerialSource
+from cmsensord.source import BATCH_FRAMES, BATCH_S, HOLD_S, SerialSource
 from messages import comparable
 from processes import cmsensord, start_board, start_daemon, stop
 
@@ -32,6 +33,15 @@ def raw_capture(seconds: float, channels: int = 1) -> bytes:
 
     sc = make_scenario("faulty", n_channels=channels, duration_s=seconds, seed=3)
     return Board(sc, BoardConfig(n_channels=channels, mode="raw", tacho=True)).generate(seconds)
+
+
+def rms_capture(seconds: float, channels: int = 4) -> bytes:
+    """RMS frames of the faulty motor, 100 a second."""
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    sc = make_scenario("faulty", n_channels=channels, duration_s=seconds, seed=3)
+    return Board(sc, BoardConfig(n_channels=channels, mode="rms")).generate(seconds)
 
 
 def by_topic(messages) -> dict[str, list]:
@@ -175,3 +185,63 @@ def test_a_queue_told_the_block_to_wake_at_returns_when_its_tacho_frame_is_in():
     q.put([Frame(FrameType.TACHO, 3, 750, 0, 0, b"\0\0")])  # the wish was used: a get waits again
     t = time.monotonic()
     assert len(q.get(timeout=0.2, enough=1000)) == 1 and time.monotonic() - t >= 0.15
+
+
+def test_rms_batches_take_one_call_per_decision_and_give_the_messages_of_one_frame_per_call():
+    """The loop's way with RMS frames (issue 13): frames wait in the queue for the block that
+    completes the next decision, and a batch is handled in parts ending with such blocks: one
+    Processor call per decision instead of one per 0.1 s, the messages (and their order in the
+    file) those of one frame per call."""
+    data = rms_capture(8.0)
+    cfg = default_config(4)
+    frames, _ = iter_frames(data)
+    one = ListSink()
+    proc = Processor(cfg, one, clock_ns=lambda: 10**18)
+    for f in frames:
+        proc.handle([f])
+    proc.finish()
+
+    batched, parts = ListSink(), []
+    proc = Processor(cfg, batched, clock_ns=lambda: 10**18)
+    port = PacedPort([data[k:k + 280] for k in range(0, len(data), 280)], pause=0.002)   # 0.1 s each
+    with SerialSource("/dev/fake", baud=921600, open_port=lambda: port) as src:
+        for batch in src:
+            for part in output_parts(batch, proc.wake_t0, round(BATCH_S * 25000), round(HOLD_S * 25000)):
+                parts.append(part)
+                proc.handle(part)
+            src.queue.wake_at(proc.wake_t0())
+            if not port.reads and not batch and not len(src.queue):
+                break
+        src.stop()
+        for batch in src:
+            parts.append(batch)
+            proc.handle(batch)
+    proc.finish()
+
+    assert sum(len(p) for p in parts) == len(frames)
+    decisions = len(one.topic("/cm/ch0/severity"))
+    assert decisions >= 6
+    # one part per decision, and one more for a batch's frames past it (this port runs at ~50x;
+    # at 1x a batch ends with the block completing the decision): not one per 0.1 s (80)
+    assert len([p for p in parts if p]) <= 2 * decisions + 3, [len(p) for p in parts]
+    assert by_topic(one.messages) == by_topic(batched.messages)
+    assert [(t, s) for t, s, _ in one.messages] == [(t, s) for t, s, _ in batched.messages]
+
+
+def test_a_queue_keeps_its_frames_at_the_timeout_while_the_block_to_wake_at_is_to_come():
+    q = FrameQueue(100)
+    q.wake_at(500)
+    q.put([Frame(FrameType.RMS, 1, 250, 0, 0, b"")])
+    t = time.monotonic()
+    assert q.get(timeout=0.05, enough=1000, hold_s=5.0) == [] and len(q) == 1 and time.monotonic() - t >= 0.04
+    assert q.hint == 500
+    q.wake_at(500)                                  # the loop names it again after its work
+    threading.Timer(0.05, lambda: q.put([Frame(FrameType.RMS, 2, 750, 0, 0, b"")])).start()
+    got = q.get(timeout=5.0, enough=1000, hold_s=5.0)            # a later block: that one is in
+    assert [f.seq for f in got] == [1, 2]
+    q.put([Frame(FrameType.RMS, 3, 1000, 0, 0, b"")])
+    assert [f.seq for f in q.get(timeout=0.05, enough=1000, hold_s=5.0)] == [3]      # no block named: at the timeout
+    q.wake_at(2000)
+    q.put([Frame(FrameType.RMS, 4, 1250, 0, 0, b"")])
+    time.sleep(0.06)
+    assert [f.seq for f in q.get(timeout=0.01, enough=1000, hold_s=0.05)] == [4]     # waited hold_s: out

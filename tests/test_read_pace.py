@@ -43,3 +43,22 @@ def test_a_board_clock_going_back_starts_the_measurement_over():
     pace, now = paced(3.0)
     pace.arrived(now + 0.01, 600, 0)
     assert pace.rate is None and pace.hold(now + 0.01, 250) == 0.0
+
+
+def test_behind_a_backlog_it_reads_again_at_once():
+    """The newest frame read came 40 ms after it was due (a read took only part of what waits):
+    no wait, whatever the block to wake at; in time again, the wait is back."""
+    pace, now = paced(3.0)
+    late = now + 0.05                           # t0 250 x 300 was due at ~3.01 s
+    pace.arrived(late, 600, 250 * 300)
+    assert pace.hold(late, 250 * 310) == 0.0 and pace.hold(late, None) == 0.0
+    assert pace.named_wait(late, 250 * 300) == 0.0
+    pace.arrived(late + 0.001, 3000, 250 * 304)  # the rest of the backlog: due at ~3.05 s
+    assert pace.hold(late + 0.001, 250 * 310) > 0.0
+
+
+def test_with_the_block_to_wake_at_in_it_waits_for_the_loop_to_name_the_next():
+    pace, now = paced(3.0)
+    assert pace.named_wait(now, 250 * 299) == MAX_HOLD_S      # in: wait (at most MAX_HOLD_S)
+    assert pace.named_wait(now, 250 * 305) == 0.0             # to come: hold() says how long
+    assert pace.named_wait(now, None) == 0.0

@@ -406,13 +406,21 @@ class Processor:
             self.segments.drifted(now, *drift)
 
     def wake_t0(self) -> int | None:
-        """t0 of the board block whose frames complete the next /orders block (None without
-        an order chain): the live loop processes as soon as it is in."""
-        s = self.orders.next_output_sample() if self.orders is not None else None
-        if s is None or self.clock.slot0_t0 is None:
+        """t0 of the board block whose frames complete the next output (None: none known):
+        the next /orders block's last block, or the last block of the next decision period
+        still to come, whichever is first.  The live loop processes as soon as it is in."""
+        s0, L = self.clock.slot0_t0, self.clock.block_len
+        if s0 is None:
             return None
-        L = self.clock.block_len
-        return s - (s - self.clock.slot0_t0) % L
+        s = self.orders.next_output_sample() if self.orders is not None else None
+        wake = None if s is None else s - (s - s0) % L
+        sev = self.severity
+        if sev is not None and sev.gate.end is not None:
+            last = sev.gate.first + sev.decider.period - sev.decider.phase - 1
+            if last >= self.clock.next_slot:        # a decision waiting for the tacho: not a block to come
+                t0 = self.clock.slot_t0(last)
+                wake = t0 if wake is None else min(wake, t0)
+        return wake
 
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""

@@ -44,17 +44,19 @@ class RawBlocks:
     def samples(self, index: list[int]) -> np.ndarray:
         """float64 (B, block_len, len(index)): the board channels ``index``, NaN where lost."""
         L = self.x.shape[1]
-        sel = np.isin(self.chan, index)
-        pos = {int(b): i for i, b in enumerate(index)}
+        where = np.full(max(self.n_channels, max(index, default=0) + 1), -1)
+        where[index] = np.arange(len(index))          # board channel -> column (-1: not asked)
+        pos = where[self.chan]
+        sel = pos >= 0
         y = np.full((len(self.t0), L, len(index)), np.nan)
-        y[self.row[sel], :, [pos[int(c)] for c in self.chan[sel]]] = self.x[sel]
+        y[self.row[sel], :, pos[sel]] = self.x[sel]
         return y
 
     def runs(self) -> list[tuple[int, int]]:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
         L = self.x.shape[1]
-        cuts = np.flatnonzero(np.diff(self.t0) != L) + 1
-        return list(zip(np.r_[0, cuts].tolist(), np.r_[cuts, len(self.t0)].tolist()))
+        cuts = (np.flatnonzero(np.diff(self.t0) != L) + 1).tolist()
+        return list(zip([0, *cuts], [*cuts, len(self.t0)]))
 
 
 class RawInput:

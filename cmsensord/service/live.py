@@ -7,6 +7,7 @@ import logging
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict
@@ -19,7 +20,7 @@ from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
-from cmsensord.source import BATCH_S, SerialSource
+from cmsensord.source import BATCH_S, HOLD_S, SerialSource
 
 log = logging.getLogger("cmsensord")
 
@@ -118,6 +119,28 @@ def board_time_parts(frames: list[Frame], span: int) -> list[list[Frame]]:
     return parts
 
 
+def output_parts(frames: list[Frame], wake_t0: Callable[[], int | None], span: int,
+                 longest: int) -> Iterator[list[Frame]]:
+    """``frames`` in the parts to handle one after the other: each ends with the block that
+    completes the next output (``wake_t0()``, asked again after each part is handled) and
+    spans less than ``longest`` board samples; without such a block, :func:`board_time_parts`
+    of ``span``.  A part then holds at most one decision period or /orders block, so what it
+    writes is in log-time order as with parts of ``span`` (an AKF trace's slots before the
+    decision of their period), while a slow stream (RMS: 1 s a decision) takes one call per
+    output instead of one per ``span``."""
+    rest = frames
+    while rest:
+        wake, first = wake_t0(), rest[0].t0_unwrapped
+        if wake is None or wake < first:    # none, or one waiting for more than its frames
+            part = board_time_parts(rest, span)[0]
+        else:                               # up to that block's last frame
+            end = next((i for i, f in enumerate(rest) if f.t0_unwrapped > wake or f.t0_unwrapped < first
+                        or f.t0_unwrapped - first >= longest), len(rest))
+            part = rest[:max(end, 1)]
+        yield part
+        rest = rest[len(part):]
+
+
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None) -> int:
@@ -187,16 +210,20 @@ def _control(cfg: Config, proc: Processor) -> ControlServer | None:
 def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
              control: ControlServer | None, frames: list) -> None:
     """One batch of frames through the Processor, then what comes between batches."""
-    for part in board_time_parts(frames, round(BATCH_S * proc.fs)):
+    span = round(BATCH_S * proc.fs)
+    # with the AKF trace (~100 messages a slot's second, the sink's reorder window holding some),
+    # parts of BATCH_S as before: longer ones kept a decision's messages unflushed ~0.1 s longer
+    longest = span if cfg.output.akf_trace else round(HOLD_S * proc.fs)
+    for part in output_parts(frames, proc.wake_t0, span, longest):
         proc.handle(part)
-    source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block does
+    source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block or a decision does
     if control is not None:
         control.apply(proc)                 # acks and status requests, between batches
     if (frames and cfg.link.max_drift_s and watch.sim_done is None
             and len(source.queue) < DRIFT_QUEUE_MAX):
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
-    if not frames:                          # no data moves the events' release on: the wall clock does
+    if not frames and not len(source.queue):    # no data moves the events' release on: the wall clock does
         proc.log.release(time.time_ns())
 
 
@@ -236,7 +263,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 stop.reopen = False
                 sink.reopen()
             sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
-            if watch.done(bool(frames), now) or stop.event.is_set():
+            # frames held for the block completing the next output are frames that came
+            if watch.done(bool(frames) or bool(len(source.queue)), now) or stop.event.is_set():
                 break
             if now >= next_status:
                 next_status = now + 1.0
