@@ -94,6 +94,9 @@ class OrderChain:
         self.clock = clock
         o = cfg.orders
         self.components = tuple(_tracked(c, o.bandwidth_pct) for c in o.components)
+        self._by_order = np.array([c.order is not None for c in self.components])
+        self._orders = np.array([c.order or 0.0 for c in self.components], dtype=np.float64)
+        self._fixed_hz = np.array([c.freq_hz or 0.0 for c in self.components], dtype=np.float64)
         self.tacho = tacho
         self.tracker = OrderTracker(self.components, fs_in=fs, max_rpm=o.max_rpm,
                                     n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
@@ -194,7 +197,8 @@ class OrderChain:
         base = self.sample0
         stamp_ns = self.clock.stamp_ns
         rpms = blocks.rpm.tolist()
-        freqs = np.stack([np.broadcast_to(c.freq(blocks.rpm), (n,)) for c in comps], axis=-1).tolist()
+        # TrackedComponent.freq of every block: order * rpm / 60 (the same operations), or freq_hz
+        freqs = np.where(self._by_order, self._orders * blocks.rpm[:, None] / 60.0, self._fixed_hz).tolist()
         valid = blocks.valid.tolist()
         t_in = blocks.t_in.tolist()
         rms, amp, missing = blocks.rms.tolist(), blocks.amplitude.tolist(), blocks.missing.tolist()
