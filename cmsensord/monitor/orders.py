@@ -94,6 +94,9 @@ class OrderChain:
         self.clock = clock
         o = cfg.orders
         self.components = tuple(_tracked(c, o.bandwidth_pct) for c in o.components)
+        self._by_order = np.array([c.order is not None for c in self.components])
+        self._orders = np.array([c.order or 0.0 for c in self.components], dtype=np.float64)
+        self._fixed_hz = np.array([c.freq_hz or 0.0 for c in self.components], dtype=np.float64)
         self.tacho = tacho
         self.tracker = OrderTracker(self.components, fs_in=fs, max_rpm=o.max_rpm,
                                     n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
@@ -181,23 +184,30 @@ class OrderChain:
             out += self._blocks(res.smoothed_blocks, "smoothed")
         return out
 
-    def _input_sample(self, i: int) -> int:
-        """Board sample index of the tracker's input sample ``i`` (since its first input)."""
-        assert self.sample0 is not None, "no samples yet"
-        return self.sample0 + i
-
     def _blocks(self, blocks, method: str) -> Out:
+        """The /orders messages of tracker blocks: the per-block numbers converted to Python
+        once for all blocks (tolist), the frequencies of all blocks per component in one
+        array operation (the same values as one block at a time)."""
+        n = len(blocks.start)
+        if not n:
+            return []
         comps = self.components
         B = self.tracker.block
+        assert self.sample0 is not None, "no samples yet"
+        base = self.sample0
+        stamp_ns = self.clock.stamp_ns
+        rpms = blocks.rpm.tolist()
+        # TrackedComponent.freq of every block: order * rpm / 60 (the same operations), or freq_hz
+        freqs = np.where(self._by_order, self._orders * blocks.rpm[:, None] / 60.0, self._fixed_hz).tolist()
+        valid = blocks.valid.tolist()
+        t_in = blocks.t_in.tolist()
+        rms, amp, missing = blocks.rms.tolist(), blocks.amplitude.tolist(), blocks.missing.tolist()
+        names = [ch.name for ch in self.channels]
         out: Out = []
-        for e in range(len(blocks.start)):
-            stamp = self.clock.stamp_ns(self._input_sample(int(blocks.t_in[e])))
-            rpm = float(blocks.rpm[e])
-            ok = bool(blocks.valid[e])
-            freqs = [float(c.freq(rpm)) for c in comps]
-            for ci, ch in enumerate(self.channels):
-                entries = messages.order_entries(comps, freqs, blocks.rms[e, ci].tolist(),
-                                                 blocks.amplitude[e, ci].tolist(), ok)
-                out.append(messages.orders(stamp, ch.name, rpm, ok, method, entries,
-                                           int(blocks.missing[e, ci]) / B))
+        for e in range(n):
+            stamp = stamp_ns(base + int(t_in[e]))
+            rpm, ok = rpms[e], bool(valid[e])
+            for ci, name in enumerate(names):
+                entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
+                out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
         return out

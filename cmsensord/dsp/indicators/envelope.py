@@ -27,13 +27,15 @@ Default band: 0.08 fs .. 0.4 fs (2-10 kHz at 25 kHz), :func:`default_band`.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
-from .spectrum import hann
+from .spectrum import hann, hann_sums, rfft_freqs
 
-__all__ = ["default_band", "Envelope", "envelope", "envelope_spectrum", "LinePeak", "line_peak"]
+__all__ = ["default_band", "Envelope", "envelope", "envelope_spectrum", "centred_envelope_spectrum",
+           "LinePeak", "line_peak"]
 
 
 def default_band(fs: float) -> tuple[float, float]:
@@ -41,6 +43,7 @@ def default_band(fs: float) -> tuple[float, float]:
     return 0.08 * fs, 0.4 * fs
 
 
+@lru_cache(maxsize=32)
 def _fast_len(n: int) -> int:
     """The smallest 2^a 3^b 5^c >= n (a fast FFT length)."""
     best = 1 << max(0, (n - 1).bit_length())
@@ -81,10 +84,16 @@ def envelope(x: np.ndarray, fs: float, band: tuple[float, float]) -> Envelope:
 
 def envelope_spectrum(env: np.ndarray, fs_env: float) -> tuple[np.ndarray, np.ndarray]:
     """(f, A): the amplitude spectrum of the envelope minus its mean (step 4)."""
-    e = env - env.mean()
+    return centred_envelope_spectrum(env - env.mean(), fs_env)
+
+
+def centred_envelope_spectrum(e: np.ndarray, fs_env: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`envelope_spectrum` of an envelope whose mean is already removed (e = env - mean);
+    f is read-only (shared between calls of one length)."""
     w = hann(e.size)
-    A = np.abs(np.fft.rfft(e * w)) * (2.0 / w.sum())
-    return np.fft.rfftfreq(e.size, 1.0 / fs_env), A
+    A = np.abs(np.fft.rfft(e * w))
+    A *= 2.0 / hann_sums(e.size)[0]
+    return rfft_freqs(e.size, float(fs_env)), A
 
 
 class LinePeak(NamedTuple):

@@ -20,7 +20,7 @@ import numpy as np
 
 from .bands import band_rms, order_band_hz
 from .bearings import DEFECTS, DefectFrequencies, Geometry, defect_frequencies
-from .envelope import LinePeak, envelope, envelope_spectrum, line_peak
+from .envelope import LinePeak, centred_envelope_spectrum, envelope, line_peak
 from .iso_zones import ZONES, baseline_alarm_mm_s, boundaries, zone_index
 from .spectrum import power_spectrum
 from .statistics import WaveformStats, waveform_stats
@@ -120,7 +120,7 @@ def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> Indic
              if setup.velocity_baseline_mm_s is not None else None)
     env = envelope(x, setup.fs, setup.envelope_band)
     e = env.env - env.env.mean()
-    fe, A = envelope_spectrum(env.env, env.fs_env)
+    fe, A = centred_envelope_spectrum(e, env.fs_env)
     bearings = [_bearing_lines(setup, b, shaft_hz, fe, A) for b in setup.bearings]
     bands = []
     for band in setup.bands:

@@ -18,7 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["hann", "power_spectrum", "band_mask"]
+__all__ = ["hann", "hann_sums", "rfft_freqs", "power_spectrum", "band_mask"]
 
 
 @lru_cache(maxsize=8)
@@ -30,16 +30,35 @@ def hann(N: int) -> np.ndarray:
     return w
 
 
+@lru_cache(maxsize=8)
+def hann_sums(N: int) -> tuple[float, float]:
+    """``(sum(w), sum(w^2))`` of :func:`hann` (N), computed once per length."""
+    w = hann(N)
+    return float(w.sum()), float((w * w).sum())
+
+
+@lru_cache(maxsize=16)
+def rfft_freqs(N: int, fs: float) -> np.ndarray:
+    """``np.fft.rfftfreq(N, 1 / fs)``, read-only, computed once per (N, fs)."""
+    f = np.fft.rfftfreq(N, 1.0 / fs)
+    f.setflags(write=False)
+    return f
+
+
 def power_spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """x (..., N) -> (f (N // 2 + 1,) Hz, P (..., N // 2 + 1) in x's unit squared): the
     one-sided Hann power per bin, ``P.sum(-1)`` = the mean square of a stationary x."""
     x = np.asarray(x, dtype=np.float64)
     N = x.shape[-1]
     w = hann(N)
-    X = np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * w, axis=-1)
-    P = (X.real ** 2 + X.imag ** 2) / (N * float((w * w).sum()))
+    d = x - x.mean(axis=-1, keepdims=True)
+    d *= w
+    X = np.fft.rfft(d, axis=-1)
+    P = X.real ** 2
+    P += X.imag ** 2                        # in place: the same sums, fewer temporaries
+    P /= N * hann_sums(N)[1]
     P[..., 1:(N + 1) // 2] *= 2.0          # the negative frequencies (not DC, not Nyquist)
-    return np.fft.rfftfreq(N, 1.0 / fs), P
+    return rfft_freqs(N, float(fs)), P
 
 
 def band_mask(f: np.ndarray, lo: float, hi: float) -> np.ndarray:

@@ -115,6 +115,8 @@ class GainTable:
     def fill(self, i: np.ndarray) -> None:
         """Compute the segments that hold grid points i or i + 1 and are not there yet."""
         seg, n = SEGMENT, self.grid.n
+        if i.size and self.have[int(i.min()) // seg:(int(i.max()) + 1) // seg + 1].all():
+            return                                  # the common case: every segment there
         need = np.zeros_like(self.have)
         need[i // seg] = True
         need[(i + 1) // seg] = True

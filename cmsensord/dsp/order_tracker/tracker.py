@@ -109,6 +109,7 @@ class OrderTracker:
         self.min_rpm = float(min_rpm)
         self.C = int(n_channels)
         self.K = len(self.components)
+        self._top_order = max((c.order or 0.0) for c in self.components)     # for _block_stats
         self.q1 = float(q1)
         self.gains = gains
         self.f_hi = max(float(c.freq(self.max_rpm)) for c in self.components)
@@ -440,7 +441,7 @@ class OrderTracker:
         amp = np.mean(env, axis=1)
         rmean = np.mean(rpm, axis=1)
         speed_ok = np.all(np.abs(rpm) >= self.min_rpm, axis=1)          # NaN -> False
-        f_hi = np.max(np.abs(rpm), axis=1) / 60.0 * max((c.order or 0.0) for c in self.components)
+        f_hi = np.max(np.abs(rpm), axis=1) / 60.0 * self._top_order
         valid = speed_ok & (f_hi < 0.5 * self.fs_track)
         rms[~valid] = np.nan
         amp[~valid] = np.nan

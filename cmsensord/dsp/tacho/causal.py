@@ -102,23 +102,32 @@ class CausalSpeed(TachoState):
         counts = np.diff(edges)
         seg = np.arange(first, first + counts.size) + lo
         x = np.arange(start + head, stop, dtype=np.float64)
-        T, w, acc, v = (np.repeat(self._sbuf[r, seg], counts) for r in (1, 2, 3, 4))
-        sp, valid = self._causal_speed(x - T, w, acc, v, np.zeros(x.size, dtype=bool))
+        T, w, acc, v = np.repeat(self._sbuf[1:5, seg], counts, axis=1)    # one gather for the 4 rows
+        x -= T
+        sp, valid = self._causal_speed(x, w, acc, v, None)
         if head:
             sp = np.concatenate((np.full(head, np.nan if self._pruned else 0.0), sp))
             valid = np.concatenate((np.zeros(head, dtype=bool), valid))
         return sp * self.fs, valid
 
     def _causal_speed(self, tau: FloatArray, w: FloatArray, a: FloatArray, v: FloatArray,
-                      before: BoolArray) -> tuple[FloatArray, BoolArray]:
-        """Speed (turns/sample) and validity tau samples after a segment's edge (docs/tacho.md, "Causal speed")."""
-        sp = w + a * tau
-        with np.errstate(divide="ignore", invalid="ignore"):
-            late = tau * w > _CAUSAL_SLACK / self.ppr   # edges overdue: the shaft slows
-            cap = np.where(late, (_CAUSAL_SLACK / self.ppr) / np.where(late, tau, 1.0), np.inf)
-        sp = np.clip(np.minimum(sp, cap), 0.0, None)
-        valid = (v > 0) & (sp > 0) & ~before
+                      before: BoolArray | None) -> tuple[FloatArray, BoolArray]:
+        """Speed (turns/sample) and validity tau samples after a segment's edge (docs/tacho.md,
+        "Causal speed"); ``before`` (None: none) marks samples before the first segment."""
+        sp = a * tau
+        sp += w                                         # w + a tau
+        slack = _CAUSAL_SLACK / self.ppr
+        with np.errstate(invalid="ignore"):
+            late = tau * w > slack                      # edges overdue
+        if late.any():                                  # the shaft slows: capped
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cap = np.where(late, slack / np.where(late, tau, 1.0), np.inf)
+            np.minimum(sp, cap, out=sp)
+        valid = v > 0
+        valid &= sp > 0                                 # NaN -> False; so is a clip at 0
+        if before is not None:
+            valid &= ~before
         sp = np.where(valid, sp, 0.0)
-        if before.any() and self._pruned:
+        if before is not None and before.any() and self._pruned:
             sp[before] = np.nan
         return sp, valid
