@@ -16,9 +16,9 @@ Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
 
 * the open chunk is written to the kernel at least every ``flush_s`` (the
-  tick flushes when the next tick would be late even if it came one interval
-  later than the last: a loaded machine delays ticks), so a kill -9 loses at
-  most the messages of the last ``flush_s``;
+  tick flushes when the next tick would be late even if it came one more
+  interval, at most ``flush_s / 4``, later: a loaded machine delays ticks), so a
+  kill -9 loses at most the messages of the last ``flush_s``;
 * the file is fsynced every ``fsync_s``, and at the first tick after any
   message on ``/cm/events``: an event is on stable storage by the end of the
   loop iteration that wrote it, or of the next one when it was raised after
@@ -357,9 +357,14 @@ class RotatingSink:
             elif (self._event_dirty or self._need_sync
                   or now - self._last_sync >= self.output.fsync_s):
                 self._sync(cur)
-            elif now - cur.last_flush + 2 * self._tick_dt >= self.output.flush_s:
-                self._flush(cur)             # the next tick, if one interval late, would be past flush_s
+            elif now - cur.last_flush + self._tick_dt + self._late() >= self.output.flush_s:
+                self._flush(cur)             # the next tick, however late, would be past flush_s
         self._deliver()
+
+    def _late(self) -> float:
+        """How late the next tick may come: one more interval (a loaded machine), at most a
+        quarter of ``flush_s`` (slow ticks alone must not make every tick flush)."""
+        return min(self._tick_dt, self.output.flush_s / 4)
 
     def flush(self) -> None:
         """Write the open chunk; fsync when fsync_s has passed or an event is pending."""
