@@ -148,37 +148,67 @@ class Processor:
             self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
         rms: list[Frame] = []
         raw: list[Frame] = []
-        for f, passed in self.segments.scan(frames):      # long batches checked in one pass
-            if not passed and (self.segments.check(f) or f.lost_before):   # a reset, the other mode, a loss
-                rms, raw = self._flush(rms, raw)
-                if self._break(f):
-                    continue
-            if f.type == FrameType.RMS:
-                rms.append(f)
-                if len(rms) >= MAX_BATCH:          # bounded memory per bank call
-                    rms = self._flush(rms, [])[0]
-            elif f.type == FrameType.RAW:
-                raw.append(f)
-                if len(raw) >= MAX_BATCH:
-                    raw = self._flush([], raw)[1]
-            elif f.type == FrameType.TACHO:
-                self.shaft.add(f)
-            elif f.type == FrameType.STATUS:
-                st, news = self.setup.decode(f)
-                if st is not None and news:     # it changes the time base or the channels:
-                    rms, raw = self._flush(rms, raw)    # the frames before it go first,
-                    self._release_decisions(final=True)  # decided on the old time base
-                    self.indicators.finish()             # intervals stamped on it too
-                    self.setup.apply(f, st)
-                self.setup.status = st or self.setup.status
-                if self.status is not None:
-                    self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
-                    self._out(self.shaft.notes)
-                    self.shaft.notes.clear()
-                    if self.raw.waiting:
-                        self._flush_raw([])
+        for a, b, codes in self.segments.runs(frames):     # long batches checked in one pass
+            if codes is None:
+                f = frames[a]
+                if self.segments.check(f) or f.lost_before:   # a reset, the other mode, a loss
+                    rms, raw = self._flush(rms, raw)
+                    if self._break(f):
+                        continue
+                rms, raw = self._frame(f, rms, raw)
+                continue
+            cuts = np.flatnonzero(codes[1:] != codes[:-1]) + 1
+            for i, j in zip([0, *cuts.tolist()], [*cuts.tolist(), b - a]):   # runs of one type
+                kind = codes[i]
+                if kind == FrameType.RMS:
+                    rms = self._extend(rms, frames[a + i:a + j], True)
+                elif kind == FrameType.RAW:
+                    raw = self._extend(raw, frames[a + i:a + j], False)
+                else:
+                    for f in frames[a + i:a + j]:
+                        rms, raw = self._frame(f, rms, raw)
         self._flush(rms, raw)
         self._feed_tacho()
+
+    def _extend(self, batch: list[Frame], frames: Sequence[Frame], rms: bool) -> list[Frame]:
+        """``frames`` (all RMS, or all RAW) appended to the waiting ``batch``, run through the
+        chain whenever it reaches ``MAX_BATCH``, as one frame at a time would be; what waits."""
+        k, n = 0, len(frames)
+        while k < n:
+            take = MAX_BATCH - len(batch)
+            batch.extend(frames[k:k + take])
+            k += take
+            if len(batch) >= MAX_BATCH:          # bounded memory per bank call
+                batch = self._flush(batch, [])[0] if rms else self._flush([], batch)[1]
+        return batch
+
+    def _frame(self, f: Frame, rms: list[Frame], raw: list[Frame]) -> tuple[list[Frame], list[Frame]]:
+        """One frame that passed the segment check into the waiting batches (or handled)."""
+        if f.type == FrameType.RMS:
+            rms.append(f)
+            if len(rms) >= MAX_BATCH:          # bounded memory per bank call
+                rms = self._flush(rms, [])[0]
+        elif f.type == FrameType.RAW:
+            raw.append(f)
+            if len(raw) >= MAX_BATCH:
+                raw = self._flush([], raw)[1]
+        elif f.type == FrameType.TACHO:
+            self.shaft.add(f)
+        elif f.type == FrameType.STATUS:
+            st, news = self.setup.decode(f)
+            if st is not None and news:     # it changes the time base or the channels:
+                rms, raw = self._flush(rms, raw)    # the frames before it go first,
+                self._release_decisions(final=True)  # decided on the old time base
+                self.indicators.finish()             # intervals stamped on it too
+                self.setup.apply(f, st)
+            self.setup.status = st or self.setup.status
+            if self.status is not None:
+                self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
+                self._out(self.shaft.notes)
+                self.shaft.notes.clear()
+                if self.raw.waiting:
+                    self._flush_raw([])
+        return rms, raw
 
     def _break(self, f: Frame) -> bool:
         """A break in the stream in front of ``f`` (the frames before it are processed): a
