@@ -16,8 +16,9 @@ Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
 
 * the open chunk is written to the kernel at least every ``flush_s`` (the
-  tick flushes when the next tick would be late), so a kill -9 loses at most
-  the messages of the last ``flush_s``;
+  tick flushes when the next tick would be late even if it came one interval
+  later than the last: a loaded machine delays ticks), so a kill -9 loses at
+  most the messages of the last ``flush_s``;
 * the file is fsynced every ``fsync_s``, and at the first tick after any
   message on ``/cm/events``: an event is on stable storage by the end of the
   loop iteration that wrote it, or of the next one when it was raised after
@@ -356,8 +357,8 @@ class RotatingSink:
             elif (self._event_dirty or self._need_sync
                   or now - self._last_sync >= self.output.fsync_s):
                 self._sync(cur)
-            elif now - cur.last_flush + self._tick_dt >= self.output.flush_s:
-                self._flush(cur)             # the next tick would be later than flush_s
+            elif now - cur.last_flush + 2 * self._tick_dt >= self.output.flush_s:
+                self._flush(cur)             # the next tick, if one interval late, would be past flush_s
         self._deliver()
 
     def flush(self) -> None:
