@@ -276,6 +276,9 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
     Nmax = s.res2.shape[2]
     chan = np.arange(bank.C)
     slot_mask = np.arange(Nmax)[None, :] < N[:, None]          # (C, Nmax) slots in use
+    slots = np.arange(Nmax)[None, :]
+    full = bool((N == Nmax).all())            # every ring as long as the longest: once filled, all in use
+    ci, ni = chan[:, None, None], np.arange(bank.n)[None, :, None]     # ring[ci, ni, order]: (C, n, Nmax)
     all_valid = valid.all(axis=1).tolist()
     any_valid = valid.any(axis=1).tolist()
     for k in range(y.shape[0]):
@@ -322,9 +325,11 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
             s.fill = np.where(v, np.minimum(s.fill + 1, N), s.fill)
         cnt = np.maximum(s.fill[:, None].astype(np.float64), 1)
         # sum in chronological order, like the reference and the C kernel
-        order, take = _window_order(s.pos, s.fill, N, slot_mask)
-        M = _window_sum(s.res2, order, take) / cnt             # (11)
-        G_hat = _window_sum(s.dx2, order, take) / cnt          # (14)
+        order = ((s.pos - s.fill)[:, None] + slots) % N[:, None]      # each ring's slots, oldest first
+        order = order[:, None, :]
+        take = None if full and (s.fill == N).all() else ((slots < s.fill[:, None]) & slot_mask)[:, None, :]
+        M = _window_sum(s.res2[ci, ni, order], take) / cnt             # (11)
+        G_hat = _window_sum(s.dx2[ci, ni, order], take) / cnt          # (14)
         G_tilde = K * K * Y                                    # (13)
         S = np.maximum(1.0, G_hat / G_tilde) if bank.scaling else 1.0   # (12)
         s.Q = S * M if every else np.where(vv, S * M, s.Q)     # (10)
@@ -333,18 +338,10 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
         out.outlier[k] = (np.abs(z) > zc) & vv
 
 
-def _window_order(pos, fill, N, slot_mask):
-    """Of each channel's ring: the slots oldest first (from pos - fill, mod N), and which of
-    them hold an entry."""
-    Nmax = slot_mask.shape[1]
-    order = (pos[:, None] - fill[:, None] + np.arange(Nmax)[None, :]) % N[:, None]
-    take = (np.arange(Nmax)[None, :] < fill[:, None]) & slot_mask
-    return order[:, None, :], take[:, None, :]
-
-
-def _window_sum(ring, order, take):
-    """Sum of the last `fill` entries of each ring, oldest first (chronological)."""
-    vals = np.where(take, np.take_along_axis(ring, order, axis=2), 0.0)
+def _window_sum(ordered, take):
+    """Sum of the last `fill` entries of each ring (``ordered``: its slots oldest first,
+    ``take``: those that hold an entry, None: all), oldest first (chronological)."""
+    vals = ordered if take is None else np.where(take, ordered, 0.0)
     # cumulative left-to-right addition = chronological order (np.add.accumulate is
     # sequential: its last entry is the loop 0 + v0 + v1 + ..., bit for bit)
     return np.add.accumulate(vals, axis=2)[:, :, -1]
