@@ -279,8 +279,8 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
     slots = np.arange(Nmax)[None, :]
     full = bool((N == Nmax).all())            # every ring as long as the longest: once filled, all in use
     ci, ni = chan[:, None, None], np.arange(bank.n)[None, :, None]     # ring[ci, ni, order]: (C, n, Nmax)
-    all_valid = list(valid.all(axis=1).tolist())
-    any_valid = list(valid.any(axis=1).tolist())
+    all_valid = np.asarray(valid.all(axis=1)).tolist()
+    any_valid = np.asarray(valid.any(axis=1)).tolist()
     for k in range(y.shape[0]):
         v = valid[k]
         yk = y[k][:, None]
