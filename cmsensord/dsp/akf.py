@@ -266,13 +266,21 @@ class AkfBank:
 
 
 def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> None:
-    """Eqs. (3)-(15) looping over time, vectorised over (channel, filter)."""
+    """Eqs. (3)-(15) looping over time, vectorised over (channel, filter).
+
+    Once every channel has started, and at a step where every channel has its observation,
+    the masks select everything and are skipped: the same arithmetic, fewer array passes."""
     s = bank.state
     R, zc = bank.R, bank.z_c[:, None]
     N = bank.N
     Nmax = s.res2.shape[2]
     chan = np.arange(bank.C)
     slot_mask = np.arange(Nmax)[None, :] < N[:, None]          # (C, Nmax) slots in use
+    slots = np.arange(Nmax)[None, :]
+    full = bool((N == Nmax).all())            # every ring as long as the longest: once filled, all in use
+    ci, ni = chan[:, None, None], np.arange(bank.n)[None, :, None]     # ring[ci, ni, order]: (C, n, Nmax)
+    all_valid = np.asarray(valid.all(axis=1)).tolist()
+    any_valid = np.asarray(valid.any(axis=1)).tolist()
     for k in range(y.shape[0]):
         v = valid[k]
         yk = y[k][:, None]
@@ -280,55 +288,60 @@ def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -
         if first.any():                       # x̂(0) = first observation
             s.x[first] = yk[first]
             s.started[first] = 1
+        all_on = bool(s.started.all())
         on = (s.started == 1)[:, None]        # nothing happens before the first observation
-        x_prior = s.x.copy()                                   # (3)
-        P_prior = np.where(on, s.P + s.Q, s.P)                 # (4)
+        x_prior = s.x                                          # (3) (s.x is replaced, never changed in place, below)
+        P_prior = s.P + s.Q if all_on else np.where(on, s.P + s.Q, s.P)   # (4)
         Y = P_prior + R                                        # (6)
-        out.x_prior[k] = np.where(on, x_prior, np.nan)
-        out.Y[k] = np.where(on, Y, np.nan)
-        if not v.any():
+        out.x_prior[k] = x_prior if all_on else np.where(on, x_prior, np.nan)
+        out.Y[k] = Y if all_on else np.where(on, Y, np.nan)
+        if not any_valid[k]:
             s.P = P_prior
             out.x_hat[k] = out.x_prior[k]
-            out.Q[k] = np.where(on, s.Q, np.nan)
+            out.Q[k] = s.Q if all_on else np.where(on, s.Q, np.nan)
             continue
         innov = yk - x_prior                                   # (5)
         K = P_prior / Y                                        # (7)
         dx = K * innov
         x = x_prior + dx                                       # (8)
         P = (1.0 - K) * P_prior                                # (9)
+        every = all_valid[k]
         vv = v[:, None]
-        s.x = np.where(vv, x, x_prior)
-        s.P = np.where(vv, P, P_prior)
-        out.x_hat[k] = np.where(on, s.x, np.nan)
+        s.x = x if every else np.where(vv, x, x_prior)
+        s.P = P if every else np.where(vv, P, P_prior)
+        out.x_hat[k] = s.x if all_on else np.where(on, s.x, np.nan)
         # windows of eqs. (11) and (14): ring buffers, per-channel slot
-        slot = s.pos
-        vc = chan[v]
-        s.res2[vc, :, slot[v]] = ((yk - x) ** 2)[v]
-        s.dx2[vc, :, slot[v]] = (dx * dx)[v]
-        s.pos = np.where(v, (s.pos + 1) % N, s.pos)
-        s.fill = np.where(v, np.minimum(s.fill + 1, N), s.fill)
-        cnt = s.fill[:, None].astype(np.float64)
+        if every:
+            s.res2[chan, :, s.pos] = (yk - x) ** 2
+            s.dx2[chan, :, s.pos] = dx * dx
+            s.pos = (s.pos + 1) % N
+            s.fill = np.minimum(s.fill + 1, N)
+        else:
+            slot = s.pos
+            vc = chan[v]
+            s.res2[vc, :, slot[v]] = ((yk - x) ** 2)[v]
+            s.dx2[vc, :, slot[v]] = (dx * dx)[v]
+            s.pos = np.where(v, (s.pos + 1) % N, s.pos)
+            s.fill = np.where(v, np.minimum(s.fill + 1, N), s.fill)
+        cnt = np.maximum(s.fill[:, None].astype(np.float64), 1)
         # sum in chronological order, like the reference and the C kernel
-        M = _window_mean(s.res2, s.pos, s.fill, N, slot_mask) / np.maximum(cnt, 1)   # (11)
-        G_hat = _window_mean(s.dx2, s.pos, s.fill, N, slot_mask) / np.maximum(cnt, 1)  # (14)
+        order = ((s.pos - s.fill)[:, None] + slots) % N[:, None]      # each ring's slots, oldest first
+        order = order[:, None, :]
+        take = None if full and (s.fill == N).all() else ((slots < s.fill[:, None]) & slot_mask)[:, None, :]
+        M = _window_sum(s.res2[ci, ni, order], take) / cnt             # (11)
+        G_hat = _window_sum(s.dx2[ci, ni, order], take) / cnt          # (14)
         G_tilde = K * K * Y                                    # (13)
         S = np.maximum(1.0, G_hat / G_tilde) if bank.scaling else 1.0   # (12)
-        s.Q = np.where(vv, S * M, s.Q)                         # (10)
-        out.Q[k] = np.where(on, s.Q, np.nan)
+        s.Q = S * M if every else np.where(vv, S * M, s.Q)     # (10)
+        out.Q[k] = s.Q if all_on else np.where(on, s.Q, np.nan)
         z = innov / np.sqrt(Y)                                 # (15)
         out.outlier[k] = (np.abs(z) > zc) & vv
 
 
-def _window_mean(ring, pos, fill, N, slot_mask):
-    """Sum of the last `fill` entries of each ring, oldest first (chronological)."""
-    C, n, Nmax = ring.shape
-    # index of the oldest entry: pos - fill (mod N)
-    order = (pos[:, None] - fill[:, None] + np.arange(Nmax)[None, :]) % N[:, None]
-    take = np.arange(Nmax)[None, :] < fill[:, None]
-    vals = np.take_along_axis(ring, order[:, None, :], axis=2)
-    vals = np.where((take & slot_mask)[:, None, :], vals, 0.0)
-    # cumulative left-to-right addition = chronological order
-    acc = np.zeros((C, n))
-    for j in range(Nmax):
-        acc = acc + vals[:, :, j]
-    return acc
+def _window_sum(ordered, take):
+    """Sum of the last `fill` entries of each ring (``ordered``: its slots oldest first,
+    ``take``: those that hold an entry, None: all), oldest first (chronological)."""
+    vals = ordered if take is None else np.where(take, ordered, 0.0)
+    # cumulative left-to-right addition = chronological order (np.add.accumulate is
+    # sequential: its last entry is the loop 0 + v0 + v1 + ..., bit for bit)
+    return np.add.accumulate(vals, axis=2)[:, :, -1]

@@ -77,16 +77,25 @@ class Segments:
     def scan(self, frames: Sequence[Frame]) -> Iterator[tuple[Frame, bool]]:
         """The frames in order, each with True when it is known to pass :meth:`check` with no
         seq gap in front of it (:meth:`check`'s effects applied: the caller takes it as it is),
-        False when the caller is to :meth:`check` it.  A long batch is checked in one pass up
-        to its first frame that does not pass or its first STATUS frame (which may change the
-        mode and fs the check reads), then on from there, lazily: each pass sees the state
-        the frames before it left."""
-        if len(frames) < SCAN_MIN:
-            for f in frames:
-                yield f, False
+        False when the caller is to :meth:`check` it (:meth:`runs`, frame by frame)."""
+        for a, b, codes in self.runs(frames):
+            for f in frames[a:b]:
+                yield f, codes is not None
+
+    def runs(self, frames: Sequence[Frame]) -> Iterator[tuple[int, int, np.ndarray | None]]:
+        """The frames in order as runs ``frames[a:b]``: with their type codes when every one is
+        known to pass :meth:`check` with no seq gap in front of it (:meth:`check`'s effects
+        applied: the caller takes them as they are), with None for one frame the caller is to
+        :meth:`check`.  A long batch is checked in one pass up to its first frame that does not
+        pass or its first STATUS frame (which may change the mode and fs the check reads), then
+        on from there, lazily: each pass sees the state the frames before it left."""
+        n = len(frames)
+        if n < SCAN_MIN:
+            for k in range(n):
+                yield k, k + 1, None
             return
         cols = frame_columns(frames)
-        k, n, wait = 0, len(frames), 0
+        k, wait = 0, 0
         while k < n:
             p = 0
             if wait:
@@ -95,11 +104,10 @@ class Segments:
                 p = self._passing(cols, k)
                 wait = 0 if p else SCAN_RETRY
             if p:
-                for f in frames[k:k + p]:
-                    yield f, True
+                yield k, k + p, cols.code[k:k + p]
                 k += p
             else:
-                yield frames[k], False
+                yield k, k + 1, None
                 k += 1
 
     def _passing(self, cols: FrameColumns, start: int) -> int:
