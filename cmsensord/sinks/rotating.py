@@ -362,8 +362,7 @@ class RotatingSink:
         self._deliver()
 
     def _late(self) -> float:
-        """How late the next tick may come: one more interval (a loaded machine), at most a
-        quarter of ``flush_s`` (slow ticks alone must not make every tick flush)."""
+        """How late the next tick may come: one more interval, at most ``flush_s / 4``."""
         return min(self._tick_dt, self.output.flush_s / 4)
 
     def flush(self) -> None:
