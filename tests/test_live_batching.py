@@ -44,6 +44,16 @@ def rms_capture(seconds: float, channels: int = 4) -> bytes:
     return Board(sc, BoardConfig(n_channels=channels, mode="rms")).generate(seconds)
 
 
+def one_frame_per_call(frames, cfg) -> ListSink:
+    """The messages of a Processor handed ``frames`` one per call."""
+    one = ListSink()
+    proc = Processor(cfg, one, clock_ns=lambda: 10**18)
+    for f in frames:
+        proc.handle([f])
+    proc.finish()
+    return one
+
+
 def by_topic(messages) -> dict[str, list]:
     """comparable() messages per topic, each in its own order; events as a sorted list (the
     tacho's events and the frames' interleave by call, each one's stamp is its own)."""
@@ -78,11 +88,7 @@ def test_the_loops_batches_give_the_messages_of_one_frame_per_call():
     data = raw_capture(4.0)
     cfg = default_config(1)
     frames, _ = iter_frames(data)
-    one = ListSink()
-    proc = Processor(cfg, one, clock_ns=lambda: 10**18)
-    for f in frames:
-        proc.handle([f])
-    proc.finish()
+    one = one_frame_per_call(frames, cfg)
 
     batched, sizes = ListSink(), []
     proc = Processor(cfg, batched, clock_ns=lambda: 10**18)
@@ -195,11 +201,7 @@ def test_rms_batches_take_one_call_per_decision_and_give_the_messages_of_one_fra
     data = rms_capture(8.0)
     cfg = default_config(4)
     frames, _ = iter_frames(data)
-    one = ListSink()
-    proc = Processor(cfg, one, clock_ns=lambda: 10**18)
-    for f in frames:
-        proc.handle([f])
-    proc.finish()
+    one = one_frame_per_call(frames, cfg)
 
     batched, parts = ListSink(), []
     proc = Processor(cfg, batched, clock_ns=lambda: 10**18)
