@@ -28,7 +28,7 @@ from cmsensord.protocol import Frame, FrameType
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
-#: batches at least this long are checked in one pass (:meth:`Segments.scan`)
+#: batches at least this long are checked in one pass (:meth:`Segments.runs`)
 SCAN_MIN = 32
 #: after a frame that does not pass, this many frames are checked one by one before the next pass
 SCAN_RETRY = 8
@@ -73,14 +73,6 @@ class Segments:
         (:meth:`pending` says so until the next check)."""
         self.hit = self._check(f)
         return self.hit
-
-    def scan(self, frames: Sequence[Frame]) -> Iterator[tuple[Frame, bool]]:
-        """The frames in order, each with True when it is known to pass :meth:`check` with no
-        seq gap in front of it (:meth:`check`'s effects applied: the caller takes it as it is),
-        False when the caller is to :meth:`check` it (:meth:`runs`, frame by frame)."""
-        for a, b, codes in self.runs(frames):
-            for f in frames[a:b]:
-                yield f, codes is not None
 
     def runs(self, frames: Sequence[Frame]) -> Iterator[tuple[int, int, np.ndarray | None]]:
         """The frames in order as runs ``frames[a:b]``: with their type codes when every one is
