@@ -191,13 +191,9 @@ class Processor:
     def _frame(self, f: Frame, rms: list[Frame], raw: list[Frame]) -> tuple[list[Frame], list[Frame]]:
         """One frame that passed the segment check into the waiting batches (or handled)."""
         if f.type == _RMS:
-            rms.append(f)
-            if len(rms) >= MAX_BATCH:          # bounded memory per bank call
-                rms = self._flush(rms, [])[0]
+            rms = self._extend(rms, (f,), True)
         elif f.type == _RAW:
-            raw.append(f)
-            if len(raw) >= MAX_BATCH:
-                raw = self._flush([], raw)[1]
+            raw = self._extend(raw, (f,), False)
         elif f.type == _TACHO:
             self.shaft.add(f)
         elif f.type == _STATUS:
