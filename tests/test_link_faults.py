@@ -22,7 +22,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import frames_hit, read_records
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, cmsensord, drain, fill, start_board, start_daemon, stop
+from processes import ENV, board_on_pty, cmsensord, drain, fill, start_board, start_daemon, stop
 from stream import run_processor
 
 
@@ -114,6 +114,25 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
     # the second board's data was processed after the gap
     sev = [s for t, s, _ in msgs if t == "/cm/ch0/severity"]
     assert len(sev) >= 8
+
+
+def test_a_stalled_link_reports_the_last_partial_interval_at_once(tmp_path):
+    """The board stops sending mid-interval and stays connected: at link_stalled the daemon
+    writes the open indicator interval (partial) and the ones waiting for the tacho, so they
+    are on disk before any stop (the daemon is then killed with SIGKILL, which finishes nothing)."""
+    with board_on_pty("--scenario", "healthy", "--mode", "raw", "--tacho", "--duration", "3.5") as port:
+        d = start_daemon(tmp_path, port)
+        stalled, err = _seconds_until_logged(d, "link_stalled", time.monotonic(), 30.0)
+        time.sleep(2.0)                          # the sink's flush (flush_s: 1 s)
+        d.send_signal(signal.SIGKILL)
+        d.wait(timeout=10)
+    assert stalled is not None, err
+    recs = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap.part")), lenient=True)
+            if t == "/cm/ch0/indicators"]
+    assert len(recs) >= 3, recs
+    assert all(r["missing_fraction"] == 0 and r["speed_source"] == "tacho" for r in recs[1:-1]), recs
+    last = recs[-1]
+    assert 0 < last["missing_fraction"] < 1 and last["speed_source"] == "tacho", last
 
 
 def _seconds_until_logged(d: subprocess.Popen, text: str, since: float,

@@ -154,6 +154,12 @@ class IndicatorChain:
             self.start += self.N
         self.buf[:] = np.nan
 
+    def close_open(self) -> list:
+        """The open interval (partial) closed, if it has a sample, and every waiting one."""
+        if self.start is not None and np.isfinite(self.buf).any():
+            self._close()
+        return self.release(final=True)
+
     def finish(self) -> list:
         """End of the stream or of a time segment: the open interval (partial) and every waiting
         one; the next samples start a new interval."""
@@ -263,6 +269,10 @@ class RmsIndicators:
             k = e
         return out
 
+    def close_open(self) -> list:
+        """The open interval (partial), if it has a block."""
+        return self._close() if self.n.any() else []
+
     def finish(self) -> list:
         """End of the stream or of a time segment: the open interval; the next block starts anew."""
         out = self._close()
@@ -331,6 +341,18 @@ class Indicators:
         """After a tacho feed: the intervals it covers."""
         if self.raw_chain is not None:
             self.records += self.raw_chain.release()
+
+    def quiet(self) -> None:
+        """The link went quiet: the open intervals go out as they are (partial, with their
+        ``missing_fraction``) and every waiting one with the speed as known.  The grid of
+        intervals stays, so samples after a gap (the frames the board could not send) fall
+        in the intervals a replay puts them in.  Only a board that resumes with no frame
+        lost (its bytes were late, not lost) gives records a replay would not: the interval
+        it was in, closed here, and a new grid from its next sample on."""
+        if self.raw_chain is not None:
+            self.records += self.raw_chain.close_open()
+        if self.rms_chain is not None:
+            self.records += self.rms_chain.close_open()
 
     def finish(self) -> None:
         """End of the stream or of a time segment: every open and waiting interval."""

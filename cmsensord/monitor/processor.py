@@ -241,6 +241,19 @@ class Processor:
         self.log.flush()
         self.log.hold = False
 
+    def link_quiet(self) -> None:
+        """The link went quiet (``link_stalled``): what the board sent is reported now rather
+        than when it resumes or the daemon stops: the open indicator intervals (partial) and
+        the intervals and decisions waiting for the shaft speed, with the speed known so far
+        (:meth:`Indicators.quiet`).  The order chain's samples wait on: its filter state
+        carries on when the board resumes.  The sink writes what its reorder window holds."""
+        self.indicators.quiet()
+        self._release_decisions(final=True)
+        self._out(self.indicators.take(None))
+        release_held = getattr(self.sink, "release_held", None)
+        if release_held is not None:
+            release_held()
+
     def _segment_ends(self) -> None:
         """Before a new time segment: what waits of the old one (the last RAW block, the
         indicator intervals, stamped in their own segment)."""

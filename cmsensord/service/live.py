@@ -93,6 +93,8 @@ class _Watch:
                             f"{now - self.last_frame:.1f} s (wrong baud rate, or line noise?)",
                             time.time_ns())
             self.proc.write_diagnostics(time.time_ns())
+        if self.stalled:
+            self.proc.link_quiet()
         return False
 
     def diagnostics(self, now: float) -> None:

@@ -340,6 +340,11 @@ class McapSink:
         self.messages_written += len(encoded)
         self._put(self.reorder.push(int(messages[0][2]), GROUP, tuple(encoded)))
 
+    def release_held(self) -> None:
+        """Every message the reorder window holds into the chunk writer (the stream paused:
+        messages that come later than them are written with a clamped log time)."""
+        self._put(self.reorder.drain())
+
     def _put(self, released: list[tuple[int, int, int, Payload]]) -> None:
         """Messages (and groups) released by the reorder window into the chunk writer."""
         try:

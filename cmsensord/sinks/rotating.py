@@ -327,6 +327,19 @@ class RotatingSink:
             window = self._current.reorder
             window.horizon_ns = max(window.horizon_ns, min(self._horizon_ns, window.max_ns))
 
+    def release_held(self) -> None:
+        """The stream paused (the link went quiet): what the reorder window holds is written
+        and flushed, so a crash during the pause loses none of it."""
+        cur = self._current
+        if cur is None or self._hold_all:
+            return
+        try:
+            cur.release_held()
+        except SinkIOError as err:
+            self._failed(err, cur)
+            return
+        self.flush()
+
     def hold_all(self) -> None:
         """Every message is held until its file is finished (at most 200,000, then the oldest
         go): ``cmsensord vkf`` writes the batch orders of the whole run after it, in order."""
