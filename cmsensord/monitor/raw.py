@@ -113,9 +113,15 @@ class RawInput:
         t0 = np.fromiter((f.t0_unwrapped for f in good), dtype=np.int64, count=len(good))
         chan = np.fromiter((f.chan for f in good), dtype=np.int64, count=len(good))
         counts = decode_raw(b"".join(f.payload for f in good)).reshape(len(good), L)
-        blocks, row = np.unique(t0, return_inverse=True)
-        if np.any(np.diff(t0) < 0):             # out of order: a board reset; keep arrival order
-            blocks, first = np.unique(t0, return_index=True)
+        step = np.diff(t0)
+        if not (step < 0).any():                # in order (as sent): the blocks where t0 steps
+            new = np.flatnonzero(step) + 1
+            blocks = t0[np.concatenate(([0], new))]
+            row = np.zeros(len(t0), dtype=np.int64)
+            row[new] = 1
+            np.cumsum(row, out=row)
+        else:                                   # out of order: a board reset; keep arrival order
+            blocks, first, row = np.unique(t0, return_index=True, return_inverse=True)
             order = np.argsort(first)
             blocks = blocks[order]
             row = np.argsort(order)[row]
