@@ -16,6 +16,7 @@ are ignored: each run of them is counted in one ``decode_error`` event when it e
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from operator import attrgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -28,6 +29,7 @@ from cmsensord.protocol import Frame, FrameType
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
+_TYPE, _T0, _LOST = attrgetter("type"), attrgetter("t0_unwrapped"), attrgetter("lost_before")
 #: batches at least this long are checked in one pass (:meth:`Segments.runs`)
 SCAN_MIN = 32
 #: after a frame that does not pass, this many frames are checked one by one before the next pass
@@ -44,9 +46,13 @@ class FrameColumns(NamedTuple):
 
 def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
     n = len(frames)
-    code = np.fromiter((f.type if type(f.type) is FrameType else -1 for f in frames), dtype=np.int64, count=n)
-    t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=n)
-    lost = np.fromiter((f.lost_before for f in frames), dtype=np.int64, count=n) != 0
+    types = list(map(_TYPE, frames))
+    if set(map(type, types)) == {FrameType}:    # decoded frames (C-level passes, no generator)
+        code = np.fromiter(types, dtype=np.int64, count=n)
+    else:
+        code = np.fromiter((t if type(t) is FrameType else -1 for t in types), dtype=np.int64, count=n)
+    t0 = np.fromiter(map(_T0, frames), dtype=np.int64, count=n)
+    lost = np.fromiter(map(_LOST, frames), dtype=np.int64, count=n) != 0
     return FrameColumns(code, t0, lost)
 
 
