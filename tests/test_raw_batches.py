@@ -108,3 +108,29 @@ def test_rows_physical_equals_the_plain_formula_bit_for_bit():
     ref = (counts.astype(np.float64) - offset.astype(np.float64)[:, None]) * scale.astype(np.float64)[:, None]
     assert np.array_equal(rows_physical(counts, scale, offset), ref)
     assert np.array_equal(rows_physical(counts.astype(np.int64), scale, offset), ref)
+
+
+def test_samples_of_complete_blocks_equal_the_plain_scatter():
+    rng = np.random.default_rng(9)
+    L = 6
+    for C in (1, 2, 4):
+        status = Status(fw_version=256, mode=2, n_channels=C, fs=25000, block_len=L, tacho_inputs=0, tacho_ppr=1,
+                        overruns=0, uptime_s=0, scale=(0.5,) * C, offset=(1.0,) * C)
+        raw = RawInput(default_config(C))
+        for trial in range(30):
+            B = int(rng.integers(1, 12))
+            pairs = [(1000 + L * b, c) for b in range(B) for c in range(C)]
+            if trial % 3 == 1:                       # a lost frame
+                del pairs[int(rng.integers(len(pairs)))]
+            elif trial % 3 == 2 and C > 1:           # channels out of order in a block
+                pairs[0], pairs[1] = pairs[1], pairs[0]
+            if not pairs:
+                continue
+            blocks, _ = raw.blocks([raw_frame(t, c, L) for t, c in pairs], C, L, status)
+            for index in ([*range(C)], [C - 1], [*range(C)][::-1]):
+                ref = np.full((len(blocks.t0), L, len(index)), np.nan)
+                for i, (r, c) in enumerate(zip(blocks.row, blocks.chan)):
+                    if c in index:
+                        ref[r, :, index.index(c)] = blocks.x[i]
+                got = blocks.samples(index)
+                assert got.flags.c_contiguous and np.array_equal(got, ref, equal_nan=True), (C, trial, index)

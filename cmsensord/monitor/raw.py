@@ -48,6 +48,9 @@ class RawBlocks:
     def samples(self, index: list[int]) -> np.ndarray:
         """float64 (B, block_len, len(index)): the board channels ``index``, NaN where lost."""
         L = self.x.shape[1]
+        B, C = len(self.t0), self.n_channels
+        if index == list(range(C)) and self._complete():   # every channel of every block, in order
+            return self.x.reshape(B, C, L).transpose(0, 2, 1).copy()
         where = np.full(max(self.n_channels, max(index, default=0) + 1), -1)
         where[index] = np.arange(len(index))          # board channel -> column (-1: not asked)
         pos = where[self.chan]
@@ -55,6 +58,13 @@ class RawBlocks:
         y = np.full((len(self.t0), L, len(index)), np.nan)
         y[self.row[sel], :, pos[sel]] = self.x[sel]
         return y
+
+    def _complete(self) -> bool:
+        """Frame i is block i // C, channel i % C (no frame lost, channels in order)."""
+        C = self.n_channels
+        n = len(self.row)
+        return n == len(self.t0) * C and bool((self.row == np.arange(n) // C).all()) \
+            and bool((self.chan == np.arange(n) % C).all())
 
     def runs(self) -> list[tuple[int, int]]:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
