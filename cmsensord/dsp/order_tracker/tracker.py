@@ -337,11 +337,10 @@ class OrderTracker:
             yd = np.empty((len(take), self.C))
             _trackerkernel.sosfilt(self.sos, np.ascontiguousarray(y), st.zi, yd, st.skip,
                                    self.decimate)
-        else:                             # the numpy path: sosfilt by blocks, no scipy
+        else:                             # the numpy path: the kept outputs by blocks, no scipy
             if self._sos_blocks is None:
-                self._sos_blocks = SosBlocks(self.sos)
-            yf, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
-            yd = np.ascontiguousarray(yf[take])
+                self._sos_blocks = SosBlocks(self.sos, self.decimate)
+            yd, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
         if self.delay_in:
             if st.n_in == 0 and rpm.size:        # the line starts filled with the first speed
                 st.rpm_line[:] = rpm[0]
