@@ -1,8 +1,9 @@
 """The tracker's recursions in numpy, without a numpy call per sample.
 
-The linear time-varying recursions of the forward filter and of the fixed-lag
-smoother (modified Bryson-Frazier form) run as a two-level chunked scan
-(:func:`_scan`); the exact Riccati gains loop over samples (for tests).  Also
+The linear time-varying recursions of the forward filter (chunk starts from the
+chunk maps, :func:`_chunk_starts`, then the chunks run side by side) and of the
+fixed-lag smoother (modified Bryson-Frazier form, a two-level chunked scan,
+:func:`_scan`); the exact Riccati gains loop over samples (for tests).  Also
 the envelope of the tracked components.  The compiled kernel
 (``cmsensord.dsp._trackerkernel``) runs the same loops in C.  See
 docs/order_tracker.md (§4 Smoother, §5, §7).
