@@ -49,6 +49,44 @@ def _single_response(filt, nu: np.ndarray) -> np.ndarray:
     return np.abs(T) ** 2
 
 
+_WINDOW = 8     # offsets of the grid tried first, around the narrow-band estimate of the edge
+
+
+def _scan_rows(filt, th2, sgn, off, idx):
+    """(g < 1/2) & inside (0, π) at the offsets ``off[idx]`` (rows, n) of each row's side."""
+    nu = th2[:, None] + sgn[:, None] * off[idx]
+    inside = (nu > 1e-9) & (nu < np.pi - 1e-9)
+    return (_single_response(filt, np.clip(nu, 1e-9, np.pi - 1e-9)) < 0.5) & inside
+
+
+def _first_below(filt, th2, sgn, r, off):
+    """Per row, whether |T|² drops below 1/2 on the offset grid ``off`` out from θ on its
+    side, and the first offset where it does: (has, i).
+
+    |T|² decreases from 1 at θ to each edge (|T|² - 1/2 is a quadratic in cos ν over a
+    positive one: two roots, one each side), so the first offset below 1/2 is found in a
+    window of _WINDOW offsets around the narrow-band estimate 1/(√2 r sin θ) when the
+    window's first offset is inside and not below (else, and when none in it is below,
+    the row's whole grid is scanned).  Each value is computed as over the whole grid."""
+    n = len(off)
+    est = 1.0 / (np.sqrt(2.0) * r * np.maximum(np.abs(np.sin(th2)), 1e-12))
+    start = np.clip(np.searchsorted(off, est) - _WINDOW // 2, 0, n - _WINDOW)
+    idx = start[:, None] + np.arange(_WINDOW)[None, :]
+    below = _scan_rows(filt, th2, sgn, off, idx)
+    nu0 = th2 + sgn * off[start]
+    first_ok = (start == 0) | (~below[:, 0] & (nu0 > 1e-9) & (nu0 < np.pi - 1e-9))
+    ok = first_ok & below.any(axis=1)
+    has = ok.copy()
+    i = np.where(ok, start + below.argmax(axis=1), 0)
+    redo = np.flatnonzero(~ok)
+    if redo.size:
+        sub = tuple(a[redo] for a in filt)
+        full = _scan_rows(sub, th2[redo], sgn[redo], off, np.broadcast_to(np.arange(n), (redo.size, n)))
+        has[redo] = full.any(axis=1)
+        i[redo] = np.where(has[redo], full.argmax(axis=1), 0)
+    return has, i
+
+
 def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
     """-3 dB bandwidth [Hz] of the isolated steady-state tracker with weighting factor r.
 
@@ -80,12 +118,7 @@ def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
     th2 = np.concatenate([theta, theta])
     sgn = np.repeat([-1.0, 1.0], G)
     limit = np.repeat([0.0, np.pi], G)
-    nu = th2[:, None] + sgn[:, None] * off[None, :]
-    inside = (nu > 1e-9) & (nu < np.pi - 1e-9)
-    g = _single_response(filt, np.clip(nu, 1e-9, np.pi - 1e-9))
-    below = (g < 0.5) & inside
-    has = below.any(axis=1)
-    i = np.where(has, below.argmax(axis=1), 0)
+    has, i = _first_below(filt, th2, sgn, np.tile(r, 2), off)
     lo = np.where(i > 0, off[np.maximum(i - 1, 0)], 0.0)
     hi = off[i]
     for _ in range(48):
