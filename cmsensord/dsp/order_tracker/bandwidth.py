@@ -207,13 +207,10 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
         j = np.clip(np.searchsorted(_R_SPEEDS, s, side="right") - 1, 0, _R_N - 2)
         j0, j1 = int(j.min()), int(j.max()) + 1
         span = (j0, j1 + 1)                          # grid points [j0, j1] bracket every speed
-        # computed: the points either side of each speed and a margin (a batch costs
-        # ~20 ms plus ~0.2 ms a value, so a speed that moves on finds its next points
-        # there; one more each way also covers a speed whose log rounds onto a grid
-        # point); the rest is computed only when a speed comes near
-        pad = max(2, _R_BATCH // len(grid_comps))
-        near = np.unique(j)[:, None] + np.arange(-pad, pad + 2)[None, :]
-        _fill_r_grid(grid_comps, fs, np.unique(np.clip(near, 0, _R_N - 1)))
+        # computed: the points either side of each speed (and one more each way, for a
+        # speed whose log rounds onto a grid point); the others are never read
+        near = np.unique(j)[:, None] + np.arange(-1, 3)[None, :]
+        _fill_r_grid(grid_comps, fs, np.unique(np.clip(near, j0, j1)))
     for i, c in enumerate(components):
         if c.bandwidth_hz is None and c.bandwidth_pct is None:
             out[..., i] = DEFAULT_R if c.r is None else c.r
@@ -268,5 +265,4 @@ _R_GRID = (10.0, 100_000.0)   # rpm range of the bandwidth -> r grid
 _R_N = 256                    # its points (geometric)
 _R_SPEEDS = np.geomspace(_R_GRID[0], _R_GRID[1], _R_N)
 _R_LOG = np.log(_R_SPEEDS)
-_R_BATCH = 48                 # grid points computed beyond the speeds, over the components
 _R_CACHE: dict = {}           # (component, fs) -> log r on the grid (NaN: not computed yet)
