@@ -204,13 +204,11 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
     finite = speed[np.isfinite(speed)] if grid_comps else speed[:0]
     if finite.size:
         s = np.clip(finite, _R_SPEEDS[0], _R_SPEEDS[-1])
-        j = np.clip(np.searchsorted(_R_SPEEDS, s, side="right") - 1, 0, _R_N - 2)
-        j0, j1 = int(j.min()), int(j.max()) + 1
+        lo, hi = float(np.min(s)), float(np.max(s))
+        j0 = min(max(int(np.searchsorted(_R_SPEEDS, lo, side="right")) - 1, 0), _R_N - 2)
+        j1 = min(max(int(np.searchsorted(_R_SPEEDS, hi, side="right")) - 1, 0), _R_N - 2) + 1
         span = (j0, j1 + 1)                          # grid points [j0, j1] bracket every speed
-        # computed: the points either side of each speed (and one more each way, for a
-        # speed whose log rounds onto a grid point); the others are never read
-        near = np.unique(j)[:, None] + np.arange(-1, 3)[None, :]
-        _fill_r_grid(grid_comps, fs, np.unique(np.clip(near, j0, j1)))
+        _fill_r_grid(grid_comps, fs, *span)
     for i, c in enumerate(components):
         if c.bandwidth_hz is None and c.bandwidth_pct is None:
             out[..., i] = DEFAULT_R if c.r is None else c.r
@@ -229,8 +227,8 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
     return out
 
 
-def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, points: np.ndarray) -> None:
-    """Compute the log r of the grid points ``points`` not yet cached, for all these
+def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, j0: int, j1: int) -> None:
+    """Compute the log r of grid points [j0, j1) not yet cached, for all these
     (bandwidth-given order) components in one batch."""
     idx, bws, fs_, dest = [], [], [], []
     for c in components:
@@ -238,7 +236,7 @@ def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, points: np.n
         lr = _R_CACHE.get(key)
         if lr is None:
             lr = _R_CACHE[key] = np.full(_R_N, np.nan)
-        miss = points[np.isnan(lr[points])]
+        miss = j0 + np.flatnonzero(np.isnan(lr[j0:j1]))
         if not miss.size:
             continue
         grid = _R_SPEEDS[miss]
