@@ -60,7 +60,7 @@ class TrackerState:
     zi: np.ndarray | None      # (sections, 2, C) sosfilt state
     rpm_line: np.ndarray       # (delay_in,) delayed speed samples (oldest first)
     z: np.ndarray              # (C, 2K) predicted state X̂(n|n-1)
-    P: np.ndarray              # (2K, 2K) predicted covariance (exact gains; (0, 0) with the table)
+    P: np.ndarray              # (2K, 2K) predicted covariance (exact gains)
     z0: np.ndarray | None = None   # numpy path: X̂ at the start of the current chunk
     aa_part: np.ndarray | None = None   # numpy path: inputs of the anti-alias filter's current block
     last_miss: np.ndarray | None = None   # (C,) input index of the last missing input

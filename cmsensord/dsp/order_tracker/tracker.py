@@ -209,20 +209,14 @@ class OrderTracker:
         return np.concatenate(ks), np.concatenate(Ps)
 
     def initial_state(self) -> TrackerState:
-        """The state before the first sample.  P(0|-1) = Q2(min_rpm) I only with the exact
-        gains, which alone carry P (with the table it stays empty, and r at min_rpm, a
-        batch of the bandwidth grid, is not computed for it)."""
         d = 2 * self.K
-        P0 = np.zeros((0, 0))
-        if self.gains == "exact":
-            _, _, q2 = self._coeffs(np.array([self.min_rpm]))
-            P0 = q2[0] * np.eye(d)
+        _, _, q2 = self._coeffs(np.array([self.min_rpm]))
         zi = None
         if self.sos is not None:
             zi = np.zeros((self.sos.shape[0], 2, self.C))
         return TrackerState(n_in=0, n_track=0, skip=0, zi=zi,
                             rpm_line=np.full(self.delay_in, np.nan),
-                            z=np.zeros((self.C, d)), P=P0,
+                            z=np.zeros((self.C, d)), P=q2[0] * np.eye(d),
                             z0=np.zeros((self.C, d)),
                             last_miss=np.full(self.C, _NO_MISS, dtype=np.int64))
 
