@@ -175,8 +175,9 @@ class OrderTracker:
         if self.gains == "table":
             top = 1.1 * self.max_rpm
             want_p = self.lag is not None
-            # r on the bandwidth grid is computed with the table's segments, around the
-            # speeds they hold (a steady machine needs a few grid points, not all of them)
+            # r on the bandwidth grid over the table's speeds, in one batch (the table
+            # segments, filled as the speed goes, then find it there)
+            component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
             grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
                                GainTable.bytes_per_point(self.K, want_p))
             self.table = GainTable(grid, self.K, want_p, self._steady_state)
