@@ -33,7 +33,7 @@ def test_line_noise_loses_only_the_frames_it_hits_and_replay_matches_live(tmp_pa
     link = tmp_path / "ttyBOARD"
     args = ["--scenario", "faulty", "--channels", "2", "--duration", "30", "--speed", "5",
             "--seed", "3", "--byte-error-rate", "1e-3", "--faults-out", str(tmp_path / "faults.jsonl"),
-            "--link", str(link)]
+            "--link", str(link), "--flow-control"]     # a daemon slow to start loses no byte either
     sim = start_board(*args)
     d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
     stats = json.loads(sim.stdout.readline())["stats"]          # the board has sent everything
@@ -87,7 +87,7 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
     later on a new pty under the same name: link_lost, link_restored within 5 s of the
     return, the daemon never stops and monitors the second board."""
     link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link))
+    sim = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link), "--flow-control")
     d = start_daemon(tmp_path, link)
     time.sleep(3.0)
     sim.terminate()                     # unplugged
@@ -96,7 +96,8 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
     time.sleep(3.0)
     assert d.poll() is None             # still running, waiting for the port
     back = time.monotonic()
-    sim = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link), "--seed", "1")
+    sim = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link), "--seed", "1",
+                      "--flow-control")
     restored_after, err = _seconds_until_logged(d, "link_restored", back, 8.0)
     time.sleep(max(0.0, back + 5.0 - time.monotonic()))
     err += stop(d)

@@ -77,7 +77,7 @@ def test_raw_capture_with_line_noise_replays_to_the_live_messages(tmp_path):
     daemon's live messages and a replay of its capture are field for field the same."""
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "close_orders", "--mode", "raw", "--tacho", "--duration", "6",
-                      "--speed", "1", "--byte-error-rate", "1e-3", "--link", str(link))
+                      "--speed", "1", "--byte-error-rate", "1e-3", "--link", str(link), "--flow-control")
     orders = "orders:\n" + "".join(f"  {k}: {json.dumps(v)}\n" for k, v in RUNUP_ORDERS["close_orders"].items())
     d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"), config=orders)
     stats = json.loads(sim.stdout.readline())["stats"]

@@ -24,7 +24,7 @@ import stat
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Metadata, Schema
@@ -72,6 +72,18 @@ class SalvageResult:
     lost_chunks: int = 0  # damaged chunks skipped
     lost_messages: int = 0  # messages known lost (damaged chunks' indexes, undefined channels)
     kept: Path | None = None  # the damaged .part, kept under this name
+
+    def event_details(self) -> dict[str, Any]:
+        """The ``details`` of this salvage's event."""
+        details: dict[str, Any] = {"action": self.action, "source": str(self.source),
+                                   "chunks": self.chunks, "dropped_bytes": self.dropped_bytes}
+        if self.path is not None:
+            details["file"] = str(self.path)
+        if self.damaged:
+            details.update(lost_chunks=self.lost_chunks, lost_messages=self.lost_messages)
+        if self.kept is not None:
+            details["kept"] = str(self.kept)
+        return details
 
     def message(self) -> str:
         """One line for the event."""

@@ -10,7 +10,8 @@ back up to the lag they come with, at most 10 s; the learnt lag carries over
 to the next file). Messages held there are not yet in the file: what the
 durability rules below say of "the messages of the last second" covers them
 only in a stream that comes in order (RMS mode); in RAW mode with order
-tracking add the orders' lag (a few seconds).
+tracking add the orders' lag (a few seconds), except while the link is quiet
+(:meth:`RotatingSink.release_held`).
 
 Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
@@ -41,23 +42,19 @@ more than ``retain_mb`` or the file system has less than ``min_free_mb``
 free; never the file being written, never a ``.part`` file, never another
 prefix's file.
 
-Disk errors: no OSError ever leaves this class. A failing operation (open,
-write, flush, fsync, close) abandons the file: it is closed without another
-byte, and kept as ``.part`` when it holds complete chunks (salvaged when
-logging is back, or at the next start), deleted when it holds none. A failed
-fsync is never retried on the same file. A new file is tried at once, then
-every ``retry_s``; messages written while no file is open, and those of the
-chunk that could not be written, are counted in :attr:`dropped`. Logging
-counts as back when a new file has been fsynced. One ``disk_error`` event
-per outage, and one when logging resumes (with the count of dropped
-messages).
+Disk errors: no OSError ever leaves this class. A failing operation (open, write, flush,
+fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
+holds complete chunks (salvaged when logging is back, or at the next start), else deleted.
+A failed fsync is never retried on the same file. A new file is tried at once, then every
+``retry_s``; messages written while no file is open, and those of the chunk that could
+not be written, are counted in :attr:`dropped`. Logging counts as back when a new file
+has been fsynced. One ``disk_error`` event per outage, one when logging resumes (the count).
 
-Events go to :attr:`RotatingSink.on_event` (``on_event(kind, message,
-**fields)``, settable after construction: the Processor that turns them into
-``/cm/events`` messages and journal lines is created after the sink); until
-it is set they are queued. They are delivered at the end of the public call
-that raised them, never from inside another delivery, so an event written
-while the disk fails cannot loop: it is just counted as dropped.
+Events go to :attr:`RotatingSink.on_event` (``on_event(kind, message, **fields)``,
+settable after construction: the Processor that turns them into ``/cm/events`` messages
+and journal lines is created after the sink); until it is set they are queued. They are
+delivered at the end of the public call that raised them, never from inside another
+delivery, so an event written while the disk fails cannot loop: it is counted as dropped.
 """
 
 from __future__ import annotations
@@ -90,7 +87,6 @@ SALVAGE_EVENT = "salvage"
 #: start the sink then runs without a file and retries (at run time every error does)
 _TRANSIENT = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO})
 _FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
-_MB = MB
 _QUEUED_EVENTS = 1000
 
 
@@ -131,7 +127,7 @@ class RotatingSink:
         self.messages_written = 0            # messages handed to write()
         self.dropped = 0                     # ... of which not in any file (disk errors)
         self.disk_errors = 0                 # failed operations, retries included
-        self._rotate_bytes = int(output.rotate_mb * _MB)
+        self._rotate_bytes = int(output.rotate_mb * MB)
         self._pending: collections.deque[tuple[str, str, dict]] = collections.deque(
             maxlen=_QUEUED_EVENTS)
         self._on_event = on_event
@@ -224,15 +220,7 @@ class RotatingSink:
             log.info("%s", result.message())
             return
         self.salvaged.append(result)
-        details: dict[str, Any] = {"action": result.action, "source": str(result.source),
-                                   "chunks": result.chunks, "dropped_bytes": result.dropped_bytes}
-        if result.path is not None:
-            details["file"] = str(result.path)
-        if result.damaged:
-            details.update(lost_chunks=result.lost_chunks, lost_messages=result.lost_messages)
-        if result.kept is not None:
-            details["kept"] = str(result.kept)
-        self._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=details)
+        self._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=result.event_details())
 
     # -- files -------------------------------------------------------------
 
@@ -331,14 +319,13 @@ class RotatingSink:
         """The stream paused (the link went quiet): what the reorder window holds is written
         and flushed, so a crash during the pause loses none of it."""
         cur = self._current
-        if cur is None or self._hold_all:
-            return
-        try:
-            cur.release_held()
-        except SinkIOError as err:
-            self._failed(err, cur)
-            return
-        self.flush()
+        if cur is not None and not self._hold_all:
+            try:
+                cur.release_held()
+            except SinkIOError as err:
+                self._failed(err, cur)
+                return
+            self.flush()
 
     def hold_all(self) -> None:
         """Every message is held until its file is finished (at most 200,000, then the oldest

@@ -16,9 +16,12 @@ from cmsensord.dsp.order_tracker.components import DEFAULT_R, TrackedComponent
 from cmsensord.dsp.order_tracker.design import f_matrices, q_diag, riccati_doubling
 
 
-def _single_filter(r: np.ndarray, theta: np.ndarray):
+def _single_filter(r: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
     """The isolated steady-state one-component filter for r, θ (G,): the pieces of
-    X̂(n+1) = A X̂(n) + F k y(n),  x̂(n|n) = e₂ᵀ(I - k h) X̂(n) + k₂ y(n)."""
+    X̂(n+1) = A X̂(n) + F k y(n),  x̂(n|n) = e₂ᵀ(I - k h) X̂(n) + k₂ y(n), as the
+    columns (G, 1) :func:`_single_response` takes: A's four entries a b c d, F k,
+    the row e₂ᵀ(I - k h), k₂, and the products b c, b (F k)₂, c (F k)₁ that do not
+    depend on the frequency."""
     c = 2.0 * np.cos(theta)[:, None]
     qd, q2 = q_diag(np.asarray(r, dtype=np.float64)[:, None], 1.0)
     P = riccati_doubling(c, qd, q2, 40)
@@ -28,20 +31,60 @@ def _single_filter(r: np.ndarray, theta: np.ndarray):
     IKh = np.eye(2) - k[:, :, None] * np.array([0.0, 1.0])[None, None, :]
     A = F @ IKh
     Fk = (F @ k[:, :, None])[:, :, 0]                 # (G, 2)
-    return A, Fk, IKh[:, 1, :], k[:, 1]
+    a, b, cc, dd = A[:, 0, 0, None], A[:, 0, 1, None], A[:, 1, 0, None], A[:, 1, 1, None]
+    f0, f1 = Fk[:, 0, None], Fk[:, 1, None]
+    return a, b, cc, dd, f0, f1, IKh[:, 1, 0, None], IKh[:, 1, 1, None], k[:, 1, None], b * cc, b * f1, cc * f0
 
 
 def _single_response(filt, nu: np.ndarray) -> np.ndarray:
     """|T(e^{jν})|² of :func:`_single_filter`'s filters at ν (G, M) rad/sample:
     T(z) = e₂ᵀ(I - k h)(zI - A)⁻¹ F k + k₂."""
-    A, Fk, row, k2 = filt
+    a, _, _, dd, f0, f1, row0, row1, k2, bc, bf1, cf0 = filt
     z = np.exp(1j * nu)
-    a, b, cc, dd = A[:, 0, 0, None], A[:, 0, 1, None], A[:, 1, 0, None], A[:, 1, 1, None]
-    det = (z - a) * (z - dd) - b * cc
-    u0 = ((z - dd) * Fk[:, 0, None] + b * Fk[:, 1, None]) / det
-    u1 = (cc * Fk[:, 0, None] + (z - a) * Fk[:, 1, None]) / det
-    T = row[:, 0, None] * u0 + row[:, 1, None] * u1 + k2[:, None]
+    za, zd = z - a, z - dd
+    det = za * zd - bc
+    u0 = (zd * f0 + bf1) / det
+    u1 = (cf0 + za * f1) / det
+    T = row0 * u0 + row1 * u1 + k2
     return np.abs(T) ** 2
+
+
+_WINDOW = 8     # offsets of the grid tried first, around the narrow-band estimate of the edge
+
+
+def _scan_rows(filt, th2, sgn, off, idx):
+    """(g < 1/2) & inside (0, π) at the offsets ``off[idx]`` (rows, n) of each row's side."""
+    nu = th2[:, None] + sgn[:, None] * off[idx]
+    inside = (nu > 1e-9) & (nu < np.pi - 1e-9)
+    return (_single_response(filt, np.clip(nu, 1e-9, np.pi - 1e-9)) < 0.5) & inside
+
+
+def _first_below(filt, th2, sgn, r, off):
+    """Per row, whether |T|² drops below 1/2 on the offset grid ``off`` out from θ on its
+    side, and the first offset where it does: (has, i).
+
+    |T|² decreases from 1 at θ to each edge (|T|² - 1/2 is a quadratic in cos ν over a
+    positive one: two roots, one each side), so the first offset below 1/2 is found in a
+    window of _WINDOW offsets around the narrow-band estimate 1/(√2 r sin θ) when the
+    window's first offset is inside and not below (else, and when none in it is below,
+    the row's whole grid is scanned).  Each value is computed as over the whole grid."""
+    n = len(off)
+    est = 1.0 / (np.sqrt(2.0) * r * np.maximum(np.abs(np.sin(th2)), 1e-12))
+    start = np.clip(np.searchsorted(off, est) - _WINDOW // 2, 0, n - _WINDOW)
+    idx = start[:, None] + np.arange(_WINDOW)[None, :]
+    below = _scan_rows(filt, th2, sgn, off, idx)
+    nu0 = th2 + sgn * off[start]
+    first_ok = (start == 0) | (~below[:, 0] & (nu0 > 1e-9) & (nu0 < np.pi - 1e-9))
+    ok = first_ok & below.any(axis=1)
+    has = ok.copy()
+    i = np.where(ok, start + below.argmax(axis=1), 0)
+    redo = np.flatnonzero(~ok)
+    if redo.size:
+        sub = tuple(a[redo] for a in filt)
+        full = _scan_rows(sub, th2[redo], sgn[redo], off, np.broadcast_to(np.arange(n), (redo.size, n)))
+        has[redo] = full.any(axis=1)
+        i[redo] = np.where(has[redo], full.argmax(axis=1), 0)
+    return has, i
 
 
 def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
@@ -68,23 +111,22 @@ def r_to_bandwidth(r, freq_hz, fs: float) -> np.ndarray:
     # geometric grid of offsets (rad/sample) outwards from θ (ratio 1.2 between
     # neighbours), then bisection to double precision
     off = np.geomspace(1e-7, np.pi, 100)
-    filt = _single_filter(r, theta)
-    edges = []
-    for sgn, limit in ((-1.0, 0.0), (1.0, np.pi)):
-        nu = theta[:, None] + sgn * off[None, :]
-        inside = (nu > 1e-9) & (nu < np.pi - 1e-9)
-        g = _single_response(filt, np.clip(nu, 1e-9, np.pi - 1e-9))
-        below = (g < 0.5) & inside
-        has = below.any(axis=1)
-        i = np.where(has, below.argmax(axis=1), 0)
-        lo = np.where(i > 0, off[np.maximum(i - 1, 0)], 0.0)
-        hi = off[i]
-        for _ in range(48):
-            mid = 0.5 * (lo + hi)
-            gm = _single_response(filt, (theta + sgn * mid)[:, None])[:, 0]
-            lo, hi = np.where(gm < 0.5, lo, mid), np.where(gm < 0.5, mid, hi)
-        edge = theta + sgn * 0.5 * (lo + hi)
-        edges.append(np.where(has, edge, limit))
+    # both edges in one batch: rows [0, G) search below θ, rows [G, 2G) above
+    # (elementwise the same operations as one side at a time)
+    filt = tuple(np.concatenate([a, a]) for a in _single_filter(r, theta))
+    G = theta.size
+    th2 = np.concatenate([theta, theta])
+    sgn = np.repeat([-1.0, 1.0], G)
+    limit = np.repeat([0.0, np.pi], G)
+    has, i = _first_below(filt, th2, sgn, np.tile(r, 2), off)
+    lo = np.where(i > 0, off[np.maximum(i - 1, 0)], 0.0)
+    hi = off[i]
+    for _ in range(48):
+        mid = 0.5 * (lo + hi)
+        gm = _single_response(filt, (th2 + sgn * mid)[:, None])[:, 0]
+        lo, hi = np.where(gm < 0.5, lo, mid), np.where(gm < 0.5, mid, hi)
+    edge = np.where(has, th2 + sgn * 0.5 * (lo + hi), limit)
+    edges = (edge[:G], edge[G:])
     return ((edges[1] - edges[0]) * fs / (2.0 * np.pi)).reshape(shape)
 
 

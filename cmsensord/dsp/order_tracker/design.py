@@ -14,12 +14,13 @@ import numpy as np
 def f_matrices(c: np.ndarray) -> np.ndarray:
     """F(n) of eq. (13) for coefficients c (..., K) = 2cos(ω ΔT): (..., 2K, 2K)."""
     K = c.shape[-1]
-    F = np.zeros(c.shape[:-1] + (2 * K, 2 * K))
-    i = np.arange(K)
-    F[..., 2 * i, 2 * i + 1] = 1.0
-    F[..., 2 * i + 1, 2 * i] = -1.0
-    F[..., 2 * i + 1, 2 * i + 1] = c
-    return F
+    d = 2 * K
+    F = np.zeros(c.shape[:-1] + (d * d,))
+    step = 2 * d + 2                      # from the block of pair i to that of pair i + 1
+    F[..., 1::step] = 1.0                 # (2i, 2i+1): strided slices of the flat matrix,
+    F[..., d::step] = -1.0                # (2i+1, 2i)   not fancy indexing
+    F[..., d + 1::step] = c               # (2i+1, 2i+1)
+    return F.reshape(c.shape[:-1] + (d, d))
 
 
 def q_diag(rk: np.ndarray, q1: float) -> tuple[np.ndarray, np.ndarray]:

@@ -1,8 +1,9 @@
 """The tracker's recursions in numpy, without a numpy call per sample.
 
-The linear time-varying recursions of the forward filter and of the fixed-lag
-smoother (modified Bryson-Frazier form) run as a two-level chunked scan
-(:func:`_scan`); the exact Riccati gains loop over samples (for tests).  Also
+The linear time-varying recursions of the forward filter (chunk starts from the
+chunk maps, :func:`_chunk_starts`, then the chunks run side by side) and of the
+fixed-lag smoother (modified Bryson-Frazier form, a two-level chunked scan,
+:func:`_scan`); the exact Riccati gains loop over samples (for tests).  Also
 the envelope of the tracked components.  The compiled kernel
 (``cmsensord.dsp._trackerkernel``) runs the same loops in C.  See
 docs/order_tracker.md (§4 Smoother, §5, §7).
@@ -77,20 +78,78 @@ def _a_matrices(c: np.ndarray, k: np.ndarray) -> np.ndarray:
 CHUNK = 32       # chunk length of the forward scan (numpy path)
 
 
+def _chunk_starts(A: np.ndarray, b: np.ndarray, u0: np.ndarray, m: int) -> np.ndarray:
+    """The states at t = 0, m, 2m, .. <= T of u(t+1) = A(t) u(t) + b(t): A (T, d, d),
+    b (T, d, C), u0 (d, C) -> (T // m + 1, d, C).
+
+    The maps [Φ | z] of the whole chunks of m steps come from m batched products (all
+    chunks at once, from Φ = I, z = 0); then the starts are joined in sequence,
+    s(j+1) = Φ(j) s(j) + z(j).  Each chunk's map is a product of the same shape per
+    chunk, so it is the same bits whatever else is computed beside it."""
+    T, d = A.shape[0], A.shape[1]
+    C = b.shape[-1]
+    J = T // m
+    s = np.empty((J + 1, d, C))
+    s[0] = u0
+    if J == 0:
+        return s
+    Ab = A[:J * m].reshape(J, m, d, d)
+    bb = b[:J * m].reshape(J, m, d, C)
+    M = np.concatenate([Ab[:, 0], bb[:, 0]], axis=-1)         # after the first step
+    for t in range(1, m):
+        M = Ab[:, t] @ M
+        M[..., d:] += bb[:, t]
+    for j in range(J):
+        s[j + 1] = M[j, :, :d] @ s[j] + M[j, :, d:]
+    return s
+
+
 def forward_numpy(y, c, k, z0):
     """Filter a block that starts at a chunk boundary: y (T, C), c (T, K), k (T, 2K),
     z0 (C, 2K) the predicted state at its start.
 
     Returns predicted states (T+1, C, 2K) (the last one after the block),
     innovations (T, C), filtered states (T, C, 2K).
+
+    Chunks of CHUNK samples: their start states from the chunk maps
+    (:func:`_chunk_starts`), then every chunk runs its samples at once from its start,
+    e = y - h X̂, x̂ = X̂ + k e, X̂' = F x̂ (F pair by pair: x1' = x2, x2' = c x2 - x1),
+    a few elementwise operations per sample step for all chunks together.
     """
-    A = _a_matrices(c, k)
-    b = _fk(c, k)[:, :, None] * y[:, None, :]                       # F k y: (T, 2K, C)
-    u = _scan(A, b, z0.T, CHUNK)                                   # (T+1, 2K, C)
-    zp = np.ascontiguousarray(np.swapaxes(u, 1, 2))                 # (T+1, C, 2K)
-    e = y - zp[:-1, :, 1::2].sum(axis=2)
-    xf = zp[:-1] + k[:, None, :] * e[:, :, None]
-    return zp, e, xf
+    T, K = c.shape
+    C = y.shape[1]
+    d = 2 * K
+    m = CHUNK
+    fk = _fk(c, k)
+    s = _chunk_starts(_a_matrices(c, k), fk[:, :, None] * y[:, None, :], z0.T, m)
+    J = -(-T // m)
+    pad = J * m - T
+    if pad:
+        y = np.concatenate([y, np.zeros((pad, C))])
+        c = np.concatenate([c, np.zeros((pad, K))])
+        k = np.concatenate([k, np.zeros((pad, d))])
+    yb = y.reshape(J, m, C)
+    cb = c.reshape(J, m, 1, K)
+    kb = k.reshape(J, m, 1, d)
+    zp = np.empty((J, m, C, d))
+    e = np.empty((J, m, C))
+    xf = np.empty((J, m, C, d))
+    u = np.ascontiguousarray(np.swapaxes(s[:J], 1, 2))           # (J, C, d)
+    for t in range(m):
+        zp[:, t] = u
+        et = yb[:, t] - u[..., 1::2].sum(axis=-1)
+        e[:, t] = et
+        v = u + kb[:, t] * et[..., None]
+        xf[:, t] = v
+        u = np.empty_like(v)
+        u[..., 0::2] = v[..., 1::2]
+        u[..., 1::2] = cb[:, t] * v[..., 1::2] - v[..., 0::2]
+    zp = zp.reshape(J * m, C, d)
+    # the state after the block: at a chunk boundary the joined start of the next chunk
+    # (what a longer call would start that chunk from), else the last step's
+    end = np.swapaxes(s[J:], 1, 2) if not pad else zp[T:T + 1]
+    return (np.concatenate([zp[:T], end]), e.reshape(J * m, C)[:T],
+            xf.reshape(J * m, C, d)[:T])
 
 
 def backward_numpy(c, k, S, P, zp, e, starts, W, nout):

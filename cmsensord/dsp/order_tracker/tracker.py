@@ -337,22 +337,27 @@ class OrderTracker:
             yd = np.empty((len(take), self.C))
             _trackerkernel.sosfilt(self.sos, np.ascontiguousarray(y), st.zi, yd, st.skip,
                                    self.decimate)
-        else:                             # the numpy path: sosfilt by blocks, no scipy
+        else:                             # the numpy path: the kept outputs by blocks, no scipy
             if self._sos_blocks is None:
-                self._sos_blocks = SosBlocks(self.sos)
-            yf, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
-            yd = np.ascontiguousarray(yf[take])
-        if self.delay_in:
-            if st.n_in == 0 and rpm.size:        # the line starts filled with the first speed
-                st.rpm_line[:] = rpm[0]
-            line = np.concatenate([st.rpm_line, rpm])
-            st.rpm_line = line[len(line) - self.delay_in:].copy()
-            rdel = line[:len(rpm)]
-        else:
-            rdel = rpm
+                self._sos_blocks = SosBlocks(self.sos, self.decimate)
+            yd, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
+        rd = self._delayed(rpm, take) if self.delay_in else rpm[take]
         st.skip = int((st.skip - y.shape[0]) % self.decimate)
         st.n_in += y.shape[0]
-        return yd, rdel[take]
+        return yd, rd
+
+    def _delayed(self, rpm: np.ndarray, take: np.ndarray) -> np.ndarray:
+        """The speed ``delay_in`` input samples earlier at the kept samples ``take`` of this
+        call (the delay line [rpm_line, rpm] read there, without joining the whole call),
+        and the line moved on."""
+        st, n = self.state, self.delay_in
+        if st.n_in == 0 and rpm.size:            # the line starts filled with the first speed
+            st.rpm_line[:] = rpm[0]
+        k = int(np.searchsorted(take, n))        # kept samples still in the old line
+        rd = np.concatenate([st.rpm_line[take[:k]], rpm[take[k:] - n]])
+        st.rpm_line = (rpm[len(rpm) - n:].copy() if len(rpm) >= n
+                       else np.concatenate([st.rpm_line[len(rpm):], rpm]))
+        return rd
 
     def _gains(self, speed, c, gone=None):
         """k (N, 2K), S (N,), P (N, 2K, 2K) or None.  ``gone`` (N,) bool or None: samples
