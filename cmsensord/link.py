@@ -12,6 +12,7 @@ import contextlib
 import errno
 import logging
 import os
+import select
 import sys
 import termios
 import threading
@@ -31,6 +32,13 @@ log = logging.getLogger("cmsensord")
 
 #: how often the reader looks for a port's device to come back while it waits to reconnect
 REAPPEAR_POLL_S = 0.1
+#: the longest wait for bytes of a port opened without a timeout
+READ_WAIT_S = 0.05
+#: the most one read of a tty returns (its line discipline's buffer): a read this long may have
+#: left more behind, though the port shows none waiting yet
+TTY_READ_MAX = 4095
+#: the most bytes one step of the reader takes from the port before decoding them
+STEP_BYTES = 1 << 16
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 
@@ -238,7 +246,7 @@ class SerialReader(threading.Thread):
             self._backoff = self.reconnect_min_s
             self.connected.set()
         try:
-            data = self._read(ser)
+            data, more = self._read(ser)
             if not data:
                 return ser
         except PORT_ERRORS as exc:
@@ -262,7 +270,7 @@ class SerialReader(threading.Thread):
             self._event("reader_recovered", f"{self.port}: reading again after {self.errors} "
                         "reader error(s)")
             self.errors, self.error = 0, None
-        if not ser.in_waiting:                  # never while bytes wait (a backlog of reads)
+        if not more:                            # never while bytes wait (a backlog of reads)
             self._pause(now)
         return ser
 
@@ -281,14 +289,30 @@ class SerialReader(threading.Thread):
             if hold > 0.001:
                 self._stop_event.wait(hold)
 
-    def _read(self, ser) -> bytes:
-        """What the port has (up to ``read_size`` bytes), waiting up to the port's timeout for
-        the first byte: b"" if nothing came.  One result per arrival (the byte that woke the
-        read and the rest), so the decoder is fed once."""
-        data = ser.read(max(1, min(self.read_size, ser.in_waiting or 1)))
-        if data and len(data) < self.read_size and ser.in_waiting:
-            data += ser.read(min(self.read_size - len(data), ser.in_waiting))
-        return data
+    def _read(self, ser) -> tuple[bytes, bool]:
+        """What the port has, waiting up to the port's timeout for the first byte (b"" if
+        nothing came), and whether more may wait.  One result per arrival, so the decoder is
+        fed once.  A port with a file descriptor (a real one) is waited on with ``select``,
+        then read while it shows bytes waiting (``read_size`` at a time, a tty's 4 kB at
+        most, up to ``STEP_BYTES``), not its first byte and then the rest."""
+        n = ser.in_waiting
+        if not n:
+            fileno = getattr(ser, "fileno", None)
+            if fileno is None:
+                data = ser.read(1)
+                if data and len(data) < self.read_size and ser.in_waiting:
+                    data += ser.read(min(self.read_size - len(data), ser.in_waiting))
+                return data, len(data) >= min(self.read_size, TTY_READ_MAX) or bool(ser.in_waiting)
+            timeout = ser.timeout
+            if not select.select([fileno()], [], [], READ_WAIT_S if timeout is None else timeout)[0]:
+                return b"", False
+            n = ser.in_waiting or 1
+        data = ser.read(min(self.read_size, n))
+        last = len(data)
+        while len(data) < STEP_BYTES and last and (n := ser.in_waiting):
+            chunk = ser.read(min(self.read_size, n))
+            data, last = data + chunk, len(chunk)
+        return data, last >= min(self.read_size, TTY_READ_MAX) or len(data) >= STEP_BYTES
 
     def _unexpected(self, exc: Exception, ser) -> None:
         """An exception that is not a port error: report it (once while it repeats), close the

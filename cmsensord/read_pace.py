@@ -7,10 +7,13 @@ next /orders block or decision is in (:meth:`FrameQueue.wake_at`), so the reader
 bytes gather in the port's kernel buffer meanwhile:
 
 * with a block to wake at (``wake_t0``), until shortly (``margin_s``) before that
-  block is due: its arrival time extrapolated from the board's clock as measured
-  (board samples per wall second over the last ``window_s``, from the frames' t0 and
-  arrival times; the earliest arrivals, as a read after a wait comes late), so the
-  reader waits in its read when that block comes and the orders are not delayed;
+  block is due: its arrival time extrapolated from the earliest arrival of the last
+  ``recent_s`` (a read after a wait comes late; the one waiting for the next block does not)
+  at the board's rate as measured (board samples per wall second between reads
+  ``window_s`` to twice that apart, from the frames' t0 and arrival times), so the reader
+  waits in its read when that block comes and the orders are not delayed.  The earliest
+  of a short span, not of the whole window: on a loaded machine the arrivals jitter by
+  tens of ms, and a rare early one long ago would make every block look late ever after;
 * when that block is already in (the loop has not named the next yet), not at all
   (:meth:`named_wait`: until the loop names the next);
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
@@ -27,6 +30,8 @@ Pure arithmetic over the times and counts it is given (:meth:`arrived`, :meth:`h
 
 from __future__ import annotations
 
+from collections import deque
+
 #: the longest wait for a block to wake at (the live loop's period)
 MAX_HOLD_S = 0.1
 
@@ -34,18 +39,19 @@ MAX_HOLD_S = 0.1
 class ReadPace:
     """The reader's wait before its next read (see module docstring)."""
 
-    def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = 0.01,
-                 window_s: float = 10.0, min_span_s: float = 1.0, behind_s: float = 0.02):
+    def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = 0.005,
+                 window_s: float = 10.0, min_span_s: float = 1.0, behind_s: float = 0.02,
+                 recent_s: float = 1.0):
         self.buffer_bytes, self.idle_hold_s, self.margin_s = buffer_bytes, idle_hold_s, margin_s
-        self.behind_s = behind_s
+        self.behind_s, self.recent_s = behind_s, recent_s
         self.window_s, self.min_span_s = window_s, min_span_s
-        self._ref: tuple[float, int, int] | None = None     # (wall, t0, bytes so far) at the window's start
+        self._refs: deque[tuple[float, int, int]] = deque()  # (wall, t0, bytes so far), window_s apart
+        self._recent: deque[tuple[float, int]] = deque()     # (wall, t0) of the reads of the last recent_s
+        self._earliest: tuple[float, int] | None = None      # the one of them that came earliest
         self._bytes = 0
         self.last: tuple[float, int] | None = None           # (wall, t0) of the newest frame
         self.rate: float | None = None                       # board samples per wall second
         self.byte_rate: float | None = None
-        self._base: float | None = None     # arrival of the window's first t0: the last window's
-        self._win: float | None = None      # ... and this window's estimate
         self.late_s = 0.0                   # the newest frame came this long after it was due
 
     def arrived(self, now: float, nbytes: int, t0: int | None) -> None:
@@ -53,30 +59,28 @@ class ReadPace:
         self._bytes += nbytes
         if t0 is None:
             return
-        # how late it came, by the rates as they were (a late read's own arrival skews them)
-        self.late_s = now - self._due(t0) if self._win is not None and self.rate else 0.0
         if self.last is not None and t0 < self.last[1]:     # the board's clock went back: start over
-            self._ref, self.rate, self._base, self._win = None, None, None, None
+            self._refs.clear()
+            self._recent.clear()
+            self.rate, self._earliest = None, None
+        # how late it came, by the arrivals before it (a late read's own arrival skews them)
+        self.late_s = now - self._due(t0) if self.rate and self._recent else 0.0
         self.last = (now, t0)
-        if self._ref is None:
-            self._ref = (now, t0, self._bytes)
-            return
-        w0, t00, b0 = self._ref
+        recent = self._recent
+        recent.append((now, t0))
+        while now - recent[0][0] > self.recent_s:
+            recent.popleft()
+        self._earliest = None
+        refs = self._refs
+        if not refs or now - refs[-1][0] >= self.window_s:
+            refs.append((now, t0, self._bytes))
+            if len(refs) > 2:
+                refs.popleft()
+        w0, t00, b0 = refs[0]
         span = now - w0
         if span >= self.min_span_s:
             self.rate = (t0 - t00) / span if t0 > t00 else None
             self.byte_rate = (self._bytes - b0) / span
-        if not self.rate:
-            return
-        # when the window's first t0 arrived, from the earliest arrival (a read after a wait
-        # is late; the one waiting for the block to wake at is not): this window's and the
-        # last one's, so an estimate is never older than two windows
-        base = now - (t0 - t00) / self.rate
-        self._win = base if self._win is None else min(self._win, base)
-        if span >= self.window_s:
-            shift = (t0 - t00) / self.rate
-            self._ref = (now, t0, self._bytes)
-            self._base, self._win = self._win + shift, now
 
     def hold(self, now: float, wake_t0: int | None) -> float:
         """Seconds the reader may wait before its next read (0: read now)."""
@@ -87,7 +91,7 @@ class ReadPace:
         cap = self.buffer_bytes / self.byte_rate
         if wake_t0 is None:
             return min(cap, self.idle_hold_s)
-        if wake_t0 <= self.last[1] or self._win is None:
+        if wake_t0 <= self.last[1]:
             return 0.0
         return max(0.0, min(cap, MAX_HOLD_S, self._due(wake_t0) - self.margin_s - now))
 
@@ -101,10 +105,15 @@ class ReadPace:
         return min(self.buffer_bytes / self.byte_rate, MAX_HOLD_S)
 
     def _due(self, t0: int) -> float:
-        """When board sample ``t0`` arrives at the earliest (the rates are measured)."""
-        assert self._ref is not None and self._win is not None and self.rate
-        base = self._win if self._base is None else min(self._base, self._win)
-        return base + (t0 - self._ref[1]) / self.rate
+        """When board sample ``t0`` arrives at the earliest, by the reads of the last
+        ``recent_s`` (the rate is measured)."""
+        rate = self.rate
+        assert rate and self._recent
+        if self._earliest is None:          # the read whose frame came earliest: once per read
+            w1, t1 = self._recent[-1]
+            self._earliest = min(self._recent, key=lambda a: a[0] - w1 + (t1 - a[1]) / rate)
+        w, t = self._earliest
+        return w + (t0 - t) / rate
 
     def _behind(self, now: float) -> bool:
         """The newest frame read came more than ``behind_s`` after it was due: more wait."""

@@ -150,3 +150,34 @@ def test_a_port_whose_device_comes_back_is_reopened_at_once_not_after_the_back_o
     finally:
         reader.stop()
         reader.join(timeout=2)
+
+
+def test_a_tty_backlog_is_read_before_the_reader_waits_and_a_block_in_one_read():
+    """A tty shows at most 4095 bytes at a time: of 6 kB waiting, a read that got that much says
+    more may wait (so the reader does not hold before the rest), the read of the rest says no
+    more; a block that comes while the reader waits is one read of the whole block (select on
+    the port), not its first byte and then the rest."""
+    import serial
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    ser = serial.Serial(os.ttyname(slave), 921600, timeout=0.5)
+    reader = SerialReader(ser.port, baud=921600, read_size=4096, queue=FrameQueue(100))
+    try:
+        data = bytes(range(256)) * 24
+        assert os.write(master, data) == len(data)
+        got, steps = b"", []
+        while len(got) < len(data):
+            chunk, more = reader._read(ser)
+            got += chunk
+            steps.append((len(chunk), more))
+        assert got == data
+        # the first read stopped at the tty's 4095 bytes: more may wait (the rest came in the
+        # same step when the tty showed it at once)
+        assert steps in ([(4095, True), (len(data) - 4095, False)], [(len(data), False)]), steps
+        threading.Timer(0.1, os.write, (master, data[:600])).start()
+        assert reader._read(ser) == (data[:600], False)
+    finally:
+        ser.close()
+        os.close(master)
+        os.close(slave)

@@ -62,3 +62,15 @@ def test_with_the_block_to_wake_at_in_it_waits_for_the_loop_to_name_the_next():
     assert pace.named_wait(now, 250 * 299) == MAX_HOLD_S      # in: wait (at most MAX_HOLD_S)
     assert pace.named_wait(now, 250 * 305) == 0.0             # to come: hold() says how long
     assert pace.named_wait(now, None) == 0.0
+
+
+def test_one_early_arrival_does_not_make_every_later_block_look_late():
+    """A loaded machine: the blocks come ~25 ms after their time, one of them once on time.
+    Seconds later the blocks are on time again by the arrivals of the last second (``recent_s``),
+    and the reader holds for the block to wake at instead of reading every block as it comes."""
+    pace = ReadPace()
+    for k in range(500):                        # 5 s of blocks, block 200 on time, the rest 25 ms late
+        t = 0.01 * (k + 1) + (0.0 if k == 200 else 0.025)
+        pace.arrived(t, 600, 250 * k)
+    assert pace.late_s < pace.behind_s
+    assert pace.hold(t, 250 * 505) == pytest.approx(0.06 - pace.margin_s, abs=0.002)   # 6 blocks on
