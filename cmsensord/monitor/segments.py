@@ -16,6 +16,7 @@ are ignored: each run of them is counted in one ``decode_error`` event when it e
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from operator import attrgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -30,6 +31,8 @@ _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
 #: batches at least this long are checked in one pass (:meth:`Segments.runs`)
 SCAN_MIN = 32
+#: a field of every frame of a batch, in one C-level pass
+_TYPE, _T0, _LOST = attrgetter("type"), attrgetter("t0_unwrapped"), attrgetter("lost_before")
 #: after a frame that does not pass, this many frames are checked one by one before the next pass
 SCAN_RETRY = 8
 
@@ -43,10 +46,20 @@ class FrameColumns(NamedTuple):
 
 
 def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
+    """The columns of a batch: read from a :class:`~cmsensord.protocol.FrameBatch` as they are,
+    else one C-level pass (``map``) per field."""
+    cols = getattr(frames, "columns", None)
+    if cols is not None:
+        code, t0, lost = cols()
+        return FrameColumns(code, t0, lost != 0)
     n = len(frames)
-    code = np.fromiter((f.type if type(f.type) is FrameType else -1 for f in frames), dtype=np.int64, count=n)
-    t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=n)
-    lost = np.fromiter((f.lost_before for f in frames), dtype=np.int64, count=n) != 0
+    types = list(map(_TYPE, frames))
+    if set(map(type, types)) <= {FrameType}:
+        code = np.fromiter(types, dtype=np.int64, count=n)
+    else:                               # a frame built by hand with a type that is no FrameType
+        code = np.fromiter((t if type(t) is FrameType else -1 for t in types), dtype=np.int64, count=n)
+    t0 = np.fromiter(map(_T0, frames), dtype=np.int64, count=n)
+    lost = np.fromiter(map(_LOST, frames), dtype=np.int64, count=n) != 0
     return FrameColumns(code, t0, lost)
 
 
@@ -67,6 +80,7 @@ class Segments:
         self.ignored_total = 0
         self.hit = False                    # the last frame checked needs :meth:`start`
         self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
+        self._marked: tuple | None = None   # (cols, other, fs, bad, status) of :meth:`_marks`
 
     def check(self, f: Frame) -> bool:
         """True when ``f`` is a board reset or a frame of the other mode: call :meth:`start`
@@ -104,27 +118,49 @@ class Segments:
 
     def _passing(self, cols: FrameColumns, start: int) -> int:
         """How many frames from ``start`` pass :meth:`check` with no seq gap, up to and
-        including the first STATUS frame; applies :meth:`check`'s effects for them."""
+        including the first STATUS frame; applies :meth:`check`'s effects for them.
+
+        The frames that fail against the frame before them and the STATUS frames of the batch
+        are found once per batch, mode and rate (:meth:`_marks`); only the frame at ``start``
+        is checked against :attr:`last_t0` here."""
         st = self.setup.status
         other = _OTHER.get(st.mode) if st is not None else None
-        code, t, lost = cols.code[start:], cols.t0[start:], cols.lost[start:]
+        bad, status = self._marks(cols, other)
+        code, t, lost = cols
+        t_s, last = int(t[start]), self.last_t0
+        if lost[start] or code[start] < 0 or (other is not None and code[start] == other) \
+                or (last is not None and (t_s < last or t_s - last > MAX_GAP_S * self.clock.fs)):
+            return 0
+        j = int(np.searchsorted(bad, start + 1))
+        end = int(bad[j]) if j < bad.size else t.size
+        j = int(np.searchsorted(status, start))
+        if j < status.size and status[j] < end:
+            end = int(status[j]) + 1
+        k = end - start
+        if self.ignored:
+            self._report()
+        self.last_t0 = int(t[end - 1])
+        self.hit = False
+        return k
+
+    def _marks(self, cols: FrameColumns, other: FrameType | None) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of the frames of ``cols`` that fail :meth:`check` against the frame before
+        them or are of the ``other`` mode or follow a seq gap, indices of its STATUS frames),
+        kept while the batch, the mode and the rate stay."""
+        fs = self.clock.fs
+        m = self._marked
+        if m is not None and m[0] is cols and m[1] == other and m[2] == fs:
+            return m[3], m[4]
+        code, t, lost = cols
         prev = np.empty_like(t)
-        prev[0] = t[0] if self.last_t0 is None else self.last_t0
+        prev[:1] = t[:1]
         prev[1:] = t[:-1]
-        bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * self.clock.fs)
+        bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * fs)
         if other is not None:
             bad |= code == int(other)
-        b = np.flatnonzero(bad)
-        k = int(b[0]) if b.size else t.size
-        status = np.flatnonzero(code[:k] == FrameType.STATUS)
-        if status.size:
-            k = int(status[0]) + 1
-        if k:
-            if self.ignored:
-                self._report()
-            self.last_t0 = int(t[k - 1])
-            self.hit = False
-        return k
+        marks = np.flatnonzero(bad), np.flatnonzero(code == FrameType.STATUS)
+        self._marked = (cols, other, fs, *marks)
+        return marks
 
     def pending(self, f: Frame) -> bool:
         """True when the last :meth:`check` (of ``f``) found a reset or the other mode."""
