@@ -70,12 +70,14 @@ class FrameRuns:
         j = np.searchsorted(self.pos, end)
         jj = np.minimum(j, max(self.pos.size - 1, 0))
         hit = (j < self.pos.size) & (self.pos[jj] == end) if self.pos.size else np.zeros(0, dtype=bool)
-        self._next = np.where(hit, j, -1).tolist()          # the candidate starting where one ends
+        nxt = np.where(hit, j, -1)                  # the candidate starting where one ends
+        self._next = nxt.tolist()
+        self._breaks = np.flatnonzero(nxt != np.arange(1, nxt.size + 1))  # chains leave c -> c + 1 there
         self._crc = (a[end[:, None] - 4 + np.arange(4)].astype(np.int64) << np.array([0, 8, 16, 24])).sum(axis=1) \
             if self.pos.size else np.empty(0, dtype=np.int64)
         self._pos = self.pos.tolist()
+        self._body = (self.pos + 2).tolist()                # each frame's CRC covers body .. endp
         self._endp = self.end_payload.tolist()
-        self._crc_list = self._crc.tolist()
 
     def take(self, start: int) -> RunFields | None:
         """The good frames back to back from buffer offset ``start`` (None when there is
@@ -84,13 +86,21 @@ class FrameRuns:
         pos = self._pos
         if c >= len(pos) or pos[c] != start:
             return None
-        nxt, endp, crcs, data, crc32 = self._next, self._endp, self._crc_list, self.data, zlib.crc32
-        chain = []
-        while c >= 0 and crc32(data[pos[c] + 2:endp[c]]) == crcs[c]:
-            chain.append(c)
-            c = nxt[c]
-        if not chain:
+        nxt, breaks, data = self._next, self._breaks, self.data
+        get, crc32 = data.__getitem__, zlib.crc32
+        spans = []
+        while c >= 0:   # the chain goes c, c + 1, ... up to a break, then jumps (or ends)
+            e = int(breaks[np.searchsorted(breaks, c)]) + 1
+            crcs = np.fromiter(map(crc32, map(get, map(slice, self._body[c:e], self._endp[c:e]))),
+                               dtype=np.int64, count=e - c)
+            bad = np.flatnonzero(crcs != self._crc[c:e])
+            if bad.size:
+                spans.append(np.arange(c, c + int(bad[0])))
+                break
+            spans.append(np.arange(c, e))
+            c = nxt[e - 1]
+        k = np.concatenate(spans)
+        if not k.size:
             return None
-        k = np.array(chain, dtype=np.int64)
         return RunFields(self.pos[k], self.code[k], self.seq[k], self.t0[k], self.chan[k], self.flags[k],
                          self.end_payload[k])
