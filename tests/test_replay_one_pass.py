@@ -1,6 +1,7 @@
 """`cmsensord replay` with the one-pass paths of issue 13 (runs of frames decoded at once,
 regular tacho edges committed at once, long batches checked at once, RMS interval sums at
-once) writes what the frame-by-frame, edge-by-edge daemon writes, message for message, on
+once, frames as columns (FrameBatch) from the decoder to the banks, flat messages encoded
+from cached key and list JSON) writes what the frame-by-frame, edge-by-edge daemon writes, message for message, on
 a RAW capture with a tacho and on an RMS capture, both with line noise in them."""
 
 from __future__ import annotations
@@ -19,10 +20,14 @@ REFERENCE = """
 import sys
 import cmsensord.monitor.segments as segments
 import cmsensord.protocol as protocol
+import cmsensord.service.replay as replay
+import cmsensord.sinks.mcap_encoding as encoding
 from cmsensord.dsp.tacho.edges import EdgeRuns
 protocol.MIN_BYTES = 1 << 60
 segments.SCAN_MIN = 1 << 60
 EdgeRuns.batch_edges = False
+replay.Decoder = lambda **kw: protocol.Decoder(**{**kw, "batches": False})
+encoding._fast_body = lambda msg: None
 from cmsensord.cli import main
 sys.exit(main(sys.argv[1:]))
 """
