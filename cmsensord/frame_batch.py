@@ -67,11 +67,28 @@ class FrameBatch(Sequence):
     that this module needs nothing of the protocol's).
     """
 
-    __slots__ = ("cols", "data", "_make", "_frames")
+    __slots__ = ("data", "_make", "_frames", "_base", "_lo", "_hi", "_cols")
 
     def __init__(self, cols: Columns, data: bytes, make):
-        self.cols, self.data, self._make = cols, data, make
+        self.data, self._make = data, make
         self._frames: list | None = None
+        self._base, self._lo, self._hi = cols, 0, len(cols.code)   # a view: base[lo:hi]
+        self._cols: Columns | None = cols
+
+    def _view(self, lo: int, hi: int) -> FrameBatch:
+        """Frames lo .. hi - 1 of the base columns (sliced when read)."""
+        view = FrameBatch.__new__(FrameBatch)
+        view.data, view._make, view._frames = self.data, self._make, None
+        view._base, view._lo, view._hi, view._cols = self._base, lo, hi, None
+        return view
+
+    @property
+    def cols(self) -> Columns:
+        """The frames' columns."""
+        if self._cols is None:
+            lo, hi = self._lo, self._hi
+            self._cols = Columns(*(a[lo:hi] for a in self._base))
+        return self._cols
 
     @classmethod
     def of(cls, frames: Sequence[Any], make) -> FrameBatch:
@@ -97,6 +114,12 @@ class FrameBatch(Sequence):
         not all of one buffer)."""
         if len(batches) == 1:
             return batches[0]
+        first = batches[0]
+        if all(b._base is first._base and b.data is first.data for b in batches):   # views of one batch
+            if all(a._hi == b._lo for a, b in zip(batches, batches[1:])):
+                return first._view(first._lo, batches[-1]._hi)
+            idx = np.concatenate([np.arange(b._lo, b._hi) for b in batches])
+            return cls(first._base.take(idx), first.data, first._make)
         blobs: list[bytes] = []
         at: dict[int, int] = {}
         cols = []
@@ -112,7 +135,7 @@ class FrameBatch(Sequence):
         return cls(Columns.join(cols), data, batches[0]._make)
 
     def __len__(self) -> int:
-        return len(self.cols.code)
+        return self._hi - self._lo
 
     @overload
     def __getitem__(self, key: int) -> Any: ...
@@ -121,16 +144,17 @@ class FrameBatch(Sequence):
 
     def __getitem__(self, key):
         if isinstance(key, slice):
-            if key.step not in (None, 1):
+            start, stop, step = key.indices(len(self))
+            if step != 1:
                 return self.frames()[key]
-            return FrameBatch(self.cols.take(key), self.data, self._make)
+            return self._view(self._lo + start, self._lo + max(start, stop))
         if self._frames is not None:
             return self._frames[key]
         n = len(self)
         if not -n <= key < n:
             raise IndexError("frame index out of range")
-        i = key % n
-        return self._make(Columns(*(a[i:i + 1] for a in self.cols)), self.data)[0]
+        i = self._lo + key % n
+        return self._make(Columns(*(a[i:i + 1] for a in self._base)), self.data)[0]
 
     def __iter__(self) -> Iterator:
         return iter(self.frames())

@@ -160,7 +160,7 @@ def test_batches_equal_the_frame_by_frame_decoder(seed):
     """``Decoder(batches=True)`` (frames as columns, what a replay reads) gives the frames of the
     plain receiver: indexed, iterated, sliced, and its columns and RMS values read as arrays
     are those of the frames."""
-    from cmsensord.frame_batch import FrameBatch, rms_fields
+    from cmsensord.frame_batch import FrameBatch, Pending, rms_fields
     from cmsensord.protocol import decode_rms_rows
 
     rnd = random.Random(seed)
@@ -178,7 +178,12 @@ def test_batches_equal_the_frame_by_frame_decoder(seed):
         assert whole[i] == ref[i]
     a, b = sorted(rnd.sample(range(len(ref)), 2))
     view = whole[a:b]
-    assert list(view) == ref[a:b] and view == ref[a:b]
+    assert list(view) == ref[a:b] and view == ref[a:b] and view[1:4] == ref[a:b][1:4]
+    pending = Pending()                                     # the Processor's waiting batch
+    for lo, hi in ((a, b), (b, b + 5), (b + 7, b + 9)):
+        pending.extend(whole[lo:hi])
+    assert pending.joined() == ref[a:b] + ref[b:b + 5] + ref[b + 7:b + 9]
+    assert type(pending.joined()) is FrameBatch and len(pending) == len(pending.joined())
     code, t0, lost = view.columns()
     assert code.tolist() == [int(f.type) for f in ref[a:b]]
     assert t0.tolist() == [f.t0_unwrapped for f in ref[a:b]]
