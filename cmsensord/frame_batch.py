@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from itertools import repeat
 from operator import attrgetter
-from typing import Any, NamedTuple, overload
+from typing import Any, NamedTuple, cast, overload
 
 import numpy as np
 
@@ -211,7 +211,7 @@ class Pending:
         if len(parts) == 1:
             return parts[0]
         if parts and all(type(p) is FrameBatch for p in parts):
-            return FrameBatch.join(parts)
+            return FrameBatch.join(cast(list[FrameBatch], parts))
         out: list = []
         for p in parts:
             out += p

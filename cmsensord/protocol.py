@@ -348,18 +348,17 @@ class Decoder:
     :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
     frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
     frame-by-frame receiver, the reference it equals (same frames, same counters).
-    With ``batches``, :meth:`feed` and :meth:`flush` return the frames as a
-    :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames when indexed or
-    iterated) instead of a list: a replay's RMS frames reach the banks as arrays.
+:meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
+    :meth:`flush` as a :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames
+    when indexed or iterated): a replay's RMS frames reach the banks as arrays.
     """
 
-    def __init__(self, max_buffer: int = 65536, runs: bool = True, batches: bool = False):
+    def __init__(self, max_buffer: int = 65536, runs: bool = True):
         if max_buffer < MAX_FRAME:
             raise ValueError(
                 f"max_buffer must hold the largest frame ({MAX_FRAME} bytes), got {max_buffer}")
         self.max_buffer = max_buffer
         self.runs = runs  # the one-pass path for runs of back-to-back frames (False: frame by frame)
-        self.batches = batches  # frames as columns (FrameBatch), not a list
         self.counters = LinkCounters()
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
@@ -370,7 +369,27 @@ class Decoder:
     def buffered(self) -> int:
         return len(self._buf)
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[Frame] | FrameBatch:
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
+        frames: list[Frame] = []
+        for out, data_ in self._feed(data):
+            frames += _frames(out, data_)
+        return frames
+
+    def feed_batch(self, data: bytes | bytearray | memoryview) -> FrameBatch:
+        """:meth:`feed`'s frames as one batch of columns."""
+        return FrameBatch.join([_batch(out, data_) for out, data_ in self._feed(data)])
+
+    def flush(self) -> list[Frame]:
+        """End of stream: incomplete candidates are not frames (drop their first sync
+        byte and hunt on through the rest); whatever is left is discarded."""
+        return _frames(*self._scan(final=True))
+
+    def flush_batch(self) -> FrameBatch:
+        """:meth:`flush`'s frames as a batch of columns."""
+        return _batch(*self._scan(final=True))
+
+    def _feed(self, data: bytes | bytearray | memoryview) -> list[tuple[list, bytes]]:
+        """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""
         view = memoryview(data).cast("B")
         total = len(view)
         self.counters.bytes_received += total
@@ -378,29 +397,21 @@ class Decoder:
         room = self.max_buffer - len(buf)
         if total <= room:  # the common case: one append, one scan
             buf += view
-            return self._scan(final=False)
-        frames: list[Frame] = []
-        parts = []
+            return [self._scan(final=False)]
+        scans = []
         start = 0
         while start < total:
             room = self.max_buffer - len(buf)
             buf += view[start:start + room]
             start += room
-            scanned = self._scan(final=False)
-            if self.batches:
-                parts.append(scanned)
-            else:
-                frames += scanned
-        return FrameBatch.join(parts) if self.batches else frames
+            scans.append(self._scan(final=False))
+        return scans
 
-    def flush(self) -> list[Frame] | FrameBatch:
-        """End of stream: incomplete candidates are not frames (drop their first sync
-        byte and hunt on through the rest); whatever is left is discarded."""
-        return self._scan(final=True)
-
-    def _scan(self, final: bool) -> list[Frame] | FrameBatch:
+    def _scan(self, final: bool) -> tuple[list, bytes]:
         """Frame every complete candidate in the buffer (docs/PROTOCOL.md receiver rules 1-3);
-        with ``final``, incomplete candidates are dropped byte by byte.
+        with ``final``, incomplete candidates are dropped byte by byte.  Returns the frames,
+        with the columns of each run of good back-to-back frames in their place, and the
+        bytes of the buffer the runs' payloads are in.
 
         The receiver's hot loop, every byte of the link passes through it: one function, the
         lookups bound to locals and the counters summed locally, so it stays whole on purpose.
@@ -501,7 +512,7 @@ class Decoder:
         c.crc_failures += crc_fail
         c.frames_lost += lost_total
         c.overruns += overruns
-        return _scanned(out, runs.data if runs is not None else b"", self.batches)
+        return out, runs.data if runs is not None else b""
 
 
 def _run_columns(run: RunFields, base: int, last_seq: int | None, last_t0: int,
@@ -530,17 +541,11 @@ def _make(cols: Columns, data: bytes) -> list[Frame]:
     return build(cols, data, Frame, _TYPE_BY_CODE)
 
 
-def _scanned(out: list, data: bytes, batches: bool) -> list[Frame] | FrameBatch:
-    """What a scan returns: its frames and run columns (``data``: the scanned buffer, where
-    the runs' payloads are) as a batch or as a list of frames."""
-    if batches:
-        return _batch(out, data)
-    return out if not any(type(item) is Columns for item in out) else _frames(out, data)
-
-
 def _frames(out: list, data: bytes) -> list[Frame]:
     """The frames and run columns of one scan (in stream order) as a list of frames (the
     runs' payloads in ``data``, the scanned buffer)."""
+    if not data:                        # no runs: frames only
+        return out
     frames: list[Frame] = []
     for item in out:
         if type(item) is Columns:

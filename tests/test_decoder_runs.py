@@ -145,19 +145,19 @@ def test_tacho_payloads_in_one_pass_equal_decode_tacho_one_by_one(seed):
 
 
 def decode_batches(data: bytes, reads: list[int]):
-    dec = Decoder(batches=True)
+    dec = Decoder()
     batches, at = [], 0
     for size in reads:
-        batches.append(dec.feed(data[at:at + size]))
+        batches.append(dec.feed_batch(data[at:at + size]))
         at += size
-    batches.append(dec.feed(data[at:]))
-    batches.append(dec.flush())
+    batches.append(dec.feed_batch(data[at:]))
+    batches.append(dec.flush_batch())
     return batches, dec.counters, dec.buffered()
 
 
 @pytest.mark.parametrize("seed", range(12))
 def test_batches_equal_the_frame_by_frame_decoder(seed):
-    """``Decoder(batches=True)`` (frames as columns, what a replay reads) gives the frames of the
+    """``Decoder.feed_batch`` (frames as columns, what a replay reads) gives the frames of the
     plain receiver: indexed, iterated, sliced, and its columns and RMS values read as arrays
     are those of the frames."""
     from cmsensord.frame_batch import FrameBatch, Pending, rms_fields

@@ -20,13 +20,14 @@ REFERENCE = """
 import sys
 import cmsensord.monitor.segments as segments
 import cmsensord.protocol as protocol
-import cmsensord.service.replay as replay
+import cmsensord.source as source
 import cmsensord.sinks.mcap_encoding as encoding
 from cmsensord.dsp.tacho.edges import EdgeRuns
 protocol.MIN_BYTES = 1 << 60
 segments.SCAN_MIN = 1 << 60
 EdgeRuns.batch_edges = False
-replay.Decoder = lambda **kw: protocol.Decoder(**{**kw, "batches": False})
+source.Decoder.feed_batch = source.Decoder.feed
+source.Decoder.flush_batch = source.Decoder.flush
 encoding._fast_body = lambda msg: None
 from cmsensord.cli import main
 sys.exit(main(sys.argv[1:]))

@@ -72,10 +72,11 @@ def severity(stamp_ns: int, channel: str, d, c: int, R: np.ndarray, **extra: Any
     })
 
 
-def severities(stamp_ns: int, channels: Sequence[str], d, R: Sequence[np.ndarray],
+def severities(stamp_ns: int, channels: Sequence[str], d, R: np.ndarray,
                extras: Sequence[dict[str, Any]]) -> list[Message]:
     """:func:`severity` of every channel column of the decision ``d`` (channel ``c``'s name
-    ``channels[c]``, its bank's noise variances ``R[c]``, its further fields ``extras[c]``),
+    ``channels[c]``, its bank's noise variances ``R[c]`` (a row of ``R``), its further fields
+    ``extras[c]``),
     with the decision's arrays converted to Python values once for all channels."""
     sev, anomaly, cnt = d.severity.tolist(), d.anomaly.tolist(), d.cnt.tolist()
     f_r, missing, transient = d.f_r.tolist(), d.missing.tolist(), d.transient

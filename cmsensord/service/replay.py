@@ -9,7 +9,6 @@ from pathlib import Path
 from cmsensord.config import Config
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
-from cmsensord.protocol import Decoder
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
@@ -21,7 +20,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     or paced at ``speed`` x the board's clock (1: real time).  Returns (exit status, the last
     MCAP file or None if it could not be finished, the Processor)."""
     capture = CaptureSource(path, chunk=1 << 16 if speed is None else 1 << 12,   # LinkError before any output
-                            decoder=Decoder(batches=True))       # frames as columns (FrameBatch)
+                            batches=True)                        # frames as columns (FrameBatch)
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     route_sink_events(sink, proc.log)

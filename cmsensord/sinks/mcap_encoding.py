@@ -109,6 +109,7 @@ def _fast_body(msg: dict) -> str | None:
     the encoder); None when the message must take the encoder's path (a None, a NaN, a key
     that is not a string)."""
     parts = []
+    s: str | None
     for k, v in msg.items():
         t = type(v)
         if t is str:
