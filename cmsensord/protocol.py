@@ -219,8 +219,8 @@ def decode_status(payload: bytes) -> Status:
     return Status(
         fw_version=fw, mode=mode, n_channels=c, fs=fs, block_len=block_len,
         tacho_inputs=tacho, tacho_ppr=ppr, overruns=overruns, uptime_s=uptime,
-        scale=tuple(float(x) for x in per_chan[0::2]),
-        offset=tuple(float(x) for x in per_chan[1::2]),
+        scale=tuple(per_chan[0::2].tolist()),          # Python floats, as float(x) of each
+        offset=tuple(per_chan[1::2].tolist()),
     )
 
 
