@@ -215,12 +215,12 @@ def decode_status(payload: bytes) -> Status:
     if n != expected:
         raise ProtocolError(
             f"STATUS payload: expected {expected} bytes (20 + 8 x {c} channels), got {n}")
-    per_chan = np.frombuffer(payload, dtype="<f4", count=2 * c, offset=_STATUS.size)
+    per_chan = struct.unpack_from(f"<{2 * c}f", payload, _STATUS.size)   # float32 -> Python floats
     return Status(
         fw_version=fw, mode=mode, n_channels=c, fs=fs, block_len=block_len,
         tacho_inputs=tacho, tacho_ppr=ppr, overruns=overruns, uptime_s=uptime,
-        scale=tuple(per_chan[0::2].tolist()),          # Python floats, as float(x) of each
-        offset=tuple(per_chan[1::2].tolist()),
+        scale=per_chan[0::2],
+        offset=per_chan[1::2],
     )
 
 
