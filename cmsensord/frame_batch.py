@@ -7,11 +7,12 @@ code, seq, t0, chan, flags, unwrapped t0, stream offset, seq gap) and the buffer
 bytes, with each frame's payload as a slice of them.  It is a ``Sequence[Frame]``:
 indexing, iterating or comparing builds the very :class:`~cmsensord.protocol.Frame`
 tuples the frame-by-frame decoder makes, so any consumer may take it as a list of
-frames; a slice is a batch of the same buffer (views of the columns).  What reads
-columns (:meth:`columns`, :meth:`rms_values`) never builds a frame.
+frames; a slice is a view of the same columns (a range, sliced when read).  What reads
+columns (:meth:`~FrameBatch.columns`, :meth:`~FrameBatch.rms_values`, :func:`rms_fields`)
+never builds a frame.
 
 :class:`Pending` is the Processor's waiting batch: the parts it was extended with,
-joined when it is processed (one batch when every part is of one buffer, else a list).
+joined when it is processed (one batch when every part is one, else a list).
 """
 
 from __future__ import annotations
@@ -63,8 +64,8 @@ def _shift(cols: Columns, by: int) -> Columns:
 class FrameBatch(Sequence):
     """Frames as columns over the bytes ``data`` of their receive buffer (see module docstring).
 
-    ``make``: builds the frames of columns (:func:`cmsensord.protocol.frames_of`, passed in so
-    that this module needs nothing of the protocol's).
+    ``make(cols, data)``: the frames of columns (the decoder's, passed in so that this module
+    needs nothing of the protocol's: :func:`build` with its Frame class and type codes).
     """
 
     __slots__ = ("data", "_make", "_frames", "_base", "_lo", "_hi", "_cols")
