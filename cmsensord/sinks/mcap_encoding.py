@@ -6,10 +6,7 @@ Messages are JSON (``MESSAGE_ENCODING``) described by jsonschema schemas
 * :func:`encode_message` turns a message dict into the bytes of a message
   record: compact JSON, with ``"timestamp": {"sec", "nsec"}`` put first
   unless the message has a ``timestamp`` field. numpy scalars and arrays
-  become Python numbers and lists.  A message of plain values is built from
-  its keys' JSON (kept once seen) and its values by type, lists of floats or
-  strings kept once seen too (a severity message's noise variances are the
-  same every time): the same text as the encoder's, at a third of the cost.
+  become Python numbers and lists.
 * JSON never carries NaN, infinity or ``null``: a field whose value is
   ``None`` or not finite is left out (a missing value is an absent field,
   :mod:`cmsensord.sinks.schemas`); in an array, where nothing can be left
@@ -26,8 +23,6 @@ from __future__ import annotations
 
 import json
 import math
-import struct
-from json.encoder import encode_basestring_ascii
 from typing import Any
 
 from cmsensord.errors import SinkError
@@ -63,84 +58,6 @@ def _default(obj: Any) -> Any:
 _encode = json.JSONEncoder(
     allow_nan=False, separators=(",", ":"), default=_default, check_circular=False
 ).encode
-
-
-_float_repr, _int_repr = float.__repr__, int.__repr__
-#: '"key":' of each key seen, and the JSON of float, int and string lists seen (keyed by the
-#: floats' bits: 0.0 and -0.0 are equal keys of a dict but not the same JSON), at most _CACHE_MAX each
-_KEYS: dict[str, str] = {}
-_LISTS: dict[Any, str] = {}
-_CACHE_MAX = 4096
-
-
-def _list_json(v: list) -> str | None:
-    """The JSON of a list as the encoder writes it (lists of floats, ints or strings cached), None when
-    the message must take the encoder's path (a NaN, a None)."""
-    kinds = set(map(type, v))
-    if kinds == {float}:
-        key: Any = struct.pack(f"{len(v)}d", *v)
-    elif kinds == {int} or kinds == {str}:
-        key = tuple(v)
-    elif not v:
-        return "[]"
-    else:
-        return _value_json(v)
-    s = _LISTS.get(key)
-    if s is None:
-        s = _value_json(v)
-        if s is not None:
-            if len(_LISTS) >= _CACHE_MAX:
-                _LISTS.clear()
-            _LISTS[key] = s
-    return s
-
-
-def _value_json(v: Any) -> str | None:
-    try:
-        s = _encode(v)
-    except (ValueError, TypeError, RecursionError):
-        return None
-    return None if "null" in s else s
-
-
-def _fast_body(msg: dict) -> str | None:
-    """The JSON of a flat message as :data:`_encode` writes it, built from its keys' cached
-    prefixes and its values by type (str, float, int, bool, lists of them; anything else by
-    the encoder); None when the message must take the encoder's path (a None, a NaN, a key
-    that is not a string)."""
-    parts = []
-    s: str | None
-    for k, v in msg.items():
-        t = type(v)
-        if t is str:
-            s = encode_basestring_ascii(v)
-        elif t is float:
-            if v - v != 0.0:            # inf or NaN
-                return None
-            s = _float_repr(v)
-        elif t is int:
-            s = _int_repr(v)
-        elif t is bool:
-            s = "true" if v else "false"
-        elif t is list:
-            s = _list_json(v)
-            if s is None:
-                return None
-        elif v is None:
-            return None
-        else:
-            s = _value_json(v)
-            if s is None:
-                return None
-        head = _KEYS.get(k)
-        if head is None:
-            if type(k) is not str:
-                return None
-            if len(_KEYS) >= _CACHE_MAX:
-                _KEYS.clear()
-            head = _KEYS[k] = encode_basestring_ascii(k) + ":"
-        parts.append(head + s)
-    return "{" + ",".join(parts) + "}"
 
 
 def _sanitize(obj: Any) -> Any:
@@ -183,15 +100,13 @@ def encode_message(topic: str, stamp_ns: int, msg: dict) -> bytes:
     ``timestamp``; ``msg`` itself is not modified. Raises SinkError (naming
     the topic) for a message JSON cannot represent even after sanitising.
     """
-    body = _fast_body(msg)
-    if body is None:
-        try:
-            body = _encode(msg)
-        except (ValueError, TypeError, RecursionError):  # NaN/inf (allow_nan=False), bad type
+    try:
+        body = _encode(msg)
+    except (ValueError, TypeError, RecursionError):  # NaN/inf (allow_nan=False), bad type
+        body = _encode_sanitized(topic, msg)
+    else:
+        if "null" in body:                           # a None (or the word in a string)
             body = _encode_sanitized(topic, msg)
-        else:
-            if "null" in body:                           # a None (or the word in a string)
-                body = _encode_sanitized(topic, msg)
     if "timestamp" not in msg:
         sec, nsec = divmod(stamp_ns, NS)
         if len(body) > 2:
