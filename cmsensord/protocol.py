@@ -348,7 +348,7 @@ class Decoder:
     :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
     frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
     frame-by-frame receiver, the reference it equals (same frames, same counters).
-:meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
+    :meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
     :meth:`flush` as a :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames
     when indexed or iterated): a replay's RMS frames reach the banks as arrays.
     """
@@ -433,7 +433,7 @@ class Decoder:
         last_t0 = self._last_t0
         last_unw = self._last_t0_unwrapped
         discarded = rejects = crc_fail = lost_total = overruns = 0
-        out: list = []      # frames, and with batches the Columns of runs
+        out: list = []      # frames, and the Columns of each run of good frames in its place
         pos = 0
         runs = FrameRuns(bytes(buf), VERSION, len(types), MAX_PAYLOAD) if self.runs and n >= MIN_BYTES else None
         with memoryview(buf) as mv:
