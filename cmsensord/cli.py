@@ -109,17 +109,7 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
     sub = p.add_subparsers(dest="command", parser_class=_Parser,
                            metavar="{replay,record,import,calibrate,vkf,config,summary,report,ack,status,capture-now}")
-    r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
-    r.add_argument("capture", help="capture file (the bytes as read from the port)")
-    r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
-    r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
-    r.add_argument("--akf-trace", dest="sub_trace", action="store_true",
-                   help="write /cm/<ch>/akf per observation")
-    pace = r.add_mutually_exclusive_group()
-    pace.add_argument("--realtime", action="store_const", const=1.0, dest="sub_speed",
-                      help="pace the replay at the board's clock (default: as fast as possible)")
-    pace.add_argument("--speed", type=positive, dest="sub_speed", metavar="X",
-                      help="pace the replay at X times the board's clock")
+    _add_replay_parser(sub)
     rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
@@ -146,6 +136,32 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
+    return p
+
+
+def _add_replay_parser(sub) -> None:
+    r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
+    r.add_argument("capture", help="capture file (the bytes as read from the port)")
+    r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
+    r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
+    r.add_argument("--akf-trace", dest="sub_trace", action="store_true",
+                   help="write /cm/<ch>/akf per observation")
+    pace = r.add_mutually_exclusive_group()
+    pace.add_argument("--realtime", action="store_const", const=1.0, dest="sub_speed",
+                      help="pace the replay at the board's clock (default: as fast as possible)")
+    pace.add_argument("--speed", type=positive, dest="sub_speed", metavar="X",
+                      help="pace the replay at X times the board's clock")
+
+
+def replay_parser() -> argparse.ArgumentParser:
+    """The parser :func:`main` uses for ``cmsensord replay ...`` (no help asked): the replay
+    subcommand alone, the same options, errors and namespace as :func:`build_parser` gives
+    it, without building (and importing the modules of) every other subcommand, a fixed
+    cost of every replay."""
+    p = _Parser(prog="cmsensord")
+    p.add_argument("-v", "--verbose", action="count", default=0)
+    sub = p.add_subparsers(dest="command", parser_class=_Parser)
+    _add_replay_parser(sub)
     return p
 
 
@@ -239,7 +255,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if under_journal() and not isinstance(sys.stderr, JournalStream):
         sys.stderr = JournalStream(sys.stderr)
-    parser = build_parser(with_scenarios="-h" in argv or "--help" in argv)
+    helping = "-h" in argv or "--help" in argv
+    parser = replay_parser() if argv[:1] == ["replay"] and not helping else build_parser(with_scenarios=helping)
     args = parser.parse_args(argv)
     setup_logging(args.verbose, daemon=args.command is None)
     try:

@@ -24,7 +24,9 @@ def rows_physical(counts: np.ndarray, scale, offset) -> np.ndarray:
     row i calibrated with scale[i], offset[i] (float32 values, as STATUS carries them)."""
     scale = np.asarray(scale, dtype=np.float32).astype(np.float64)
     offset = np.asarray(offset, dtype=np.float32).astype(np.float64)
-    return (np.asarray(counts).astype(np.float64) - offset[:, None]) * scale[:, None]
+    x = np.subtract(counts, offset[:, None], dtype=np.float64)   # counts to float64 inside: one pass
+    x *= scale[:, None]
+    return x
 
 
 def physical_rms(x: np.ndarray) -> np.ndarray:

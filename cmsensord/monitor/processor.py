@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
+from itertools import compress
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -159,19 +160,41 @@ class Processor:
                         continue
                 rms, raw = self._frame(f, rms, raw)
                 continue
-            cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
-            starts = [0, *cuts]
-            # plain ints: numpy comparing its int64 with an IntEnum looks up dunders on the enum
-            for i, j, kind in zip(starts, [*cuts, b - a], codes[starts].tolist()):   # runs of one type
-                if kind == _RMS:
-                    rms = self._extend(rms, frames[a + i:a + j], True)
-                elif kind == _RAW:
-                    raw = self._extend(raw, frames[a + i:a + j], False)
-                else:
-                    for f in frames[a + i:a + j]:
-                        rms, raw = self._frame(f, rms, raw)
+            rms, raw = self._passed(frames[a:b], codes, rms, raw)
         self._flush(rms, raw)
         self._feed_tacho()
+
+    def _passed(self, frames: Sequence[Frame], codes: np.ndarray, rms: Pending,
+                raw: Pending) -> tuple[Pending, Pending]:
+        """A run of frames that passed the segment check, by type: its TACHO frames to the shaft
+        first (they wait there for :meth:`_feed_tacho`, whatever comes between them), then the
+        others in order, each run of RMS or RAW frames in one call, as one frame at a time would.
+        A STATUS frame (which may make the tracker) ends a part: TACHO frames go first within
+        their part only."""
+        tacho = codes == _TACHO
+        if tacho.any():
+            cut = (np.flatnonzero(codes[:-1] == _STATUS) + 1).tolist()
+            if cut:
+                for i, j in zip([0, *cut], [*cut, len(codes)]):
+                    rms, raw = self._passed(frames[i:j], codes[i:j], rms, raw)
+                return rms, raw
+            self.shaft.add_many(list(compress(frames, tacho.tolist())))
+            keep = ~tacho
+            frames, codes = list(compress(frames, keep.tolist())), codes[keep]
+            if not len(codes):
+                return rms, raw
+        cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
+        starts = [0, *cuts]
+        # plain ints: numpy comparing its int64 with an IntEnum looks up dunders on the enum
+        for i, j, kind in zip(starts, [*cuts, len(codes)], codes[starts].tolist()):   # runs of one type
+            if kind == _RMS:
+                rms = self._extend(rms, frames[i:j], True)
+            elif kind == _RAW:
+                raw = self._extend(raw, frames[i:j], False)
+            else:
+                for f in frames[i:j]:
+                    rms, raw = self._frame(f, rms, raw)
+        return rms, raw
 
     def _extend(self, batch: Pending, frames: Sequence[Frame], rms: bool) -> Pending:
         """``frames`` (all RMS, or all RAW) appended to the waiting ``batch``, run through the

@@ -54,6 +54,14 @@ class Shaft:
             if len(self.waiting) > TACHO_WAIT_FRAMES and self.tacho is None:
                 del self.waiting[0]             # no STATUS yet: keep only the newest
 
+    def add_many(self, frames: list[Frame]) -> None:
+        """TACHO frames in order, as :meth:`add` of each (the tracker cannot appear between
+        them: only :meth:`ensure` makes it)."""
+        inp = self.cfg.tacho.input
+        self.waiting += [f for f in frames if f.chan == inp]
+        if self.tacho is None and len(self.waiting) > TACHO_WAIT_FRAMES:
+            del self.waiting[:-TACHO_WAIT_FRAMES]   # no STATUS yet: keep only the newest
+
     def ensure(self, status: Status | None, clock: BlockClock) -> bool:
         """Create the tracker once the board has said it has a tacho; True when there is one."""
         if self.tacho is None and status is not None and status.tacho_inputs > 0:

@@ -32,10 +32,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .spectrum import hann, hann_sums, rfft_freqs
+from .spectrum import bin_range, hann, hann_sums, rfft_freqs
 
-__all__ = ["default_band", "Envelope", "envelope", "envelope_spectrum", "centred_envelope_spectrum",
-           "LinePeak", "line_peak"]
+__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelope_spectrum",
+           "centred_envelope_spectrum", "LinePeak", "line_peak"]
 
 
 def default_band(fs: float) -> tuple[float, float]:
@@ -66,20 +66,37 @@ class Envelope(NamedTuple):
     band: tuple[float, float]   # the band demodulated [Hz] (within 0 .. fs/2)
 
 
+def _band_bins(n_bins: int, N: int, fs: float, band: tuple[float, float]) -> tuple[int, int, int, float]:
+    """(lo, hi, M, T): the bins lo..hi of the band, the inverse transform's length, the record's."""
+    T = N / fs
+    lo = max(1, int(np.ceil(band[0] * T)))
+    hi = min(n_bins - 1, int(np.floor(band[1] * T)))
+    return lo, hi, _fast_len(max(2 * max(0, hi - lo + 1), 2)), T
+
+
 def envelope(x: np.ndarray, fs: float, band: tuple[float, float]) -> Envelope:
     """The decimated envelope of the band [lo, hi] Hz of the 1-D record x (steps 1-2)."""
     x = np.asarray(x, dtype=np.float64)
     N = x.size
-    T = N / fs
     X = np.fft.rfft(x)
-    lo = max(1, int(np.ceil(band[0] * T)))
-    hi = min(len(X) - 1, int(np.floor(band[1] * T)))
+    lo, hi, M, T = _band_bins(len(X), N, fs, band)
     K = max(0, hi - lo + 1)
-    M = _fast_len(max(2 * K, 2))
     Z = np.zeros(M, dtype=np.complex128)
     Z[:K] = X[lo:hi + 1]
     z = np.fft.ifft(Z) * (2.0 * M / N)       # the analytic signal of the band, shifted to 0 Hz
     return Envelope(np.abs(z), M / T, (lo / T, hi / T))
+
+
+def envelope_of_rfft(X: np.ndarray, N: int, fs: float, band: tuple[float, float]) -> Envelope:
+    """:func:`envelope` of the record of N samples whose ``np.fft.rfft`` is X (the same
+    numbers up to rounding): the inverse transform unscaled and padded by numpy, the scale
+    applied to the magnitude, fewer passes over the M points."""
+    lo, hi, M, T = _band_bins(X.shape[-1], N, fs, band)
+    if hi < lo:
+        return Envelope(np.zeros(M), M / T, (lo / T, hi / T))
+    env = np.abs(np.fft.ifft(X[lo:hi + 1], n=M, norm="forward"))
+    env *= 2.0 / N
+    return Envelope(env, M / T, (lo / T, hi / T))
 
 
 def envelope_spectrum(env: np.ndarray, fs_env: float) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +126,8 @@ def line_peak(f: np.ndarray, A: np.ndarray, f0: float, slip: float) -> LinePeak 
     half = max(slip * f0, df)
     if not (f0 > 0 and df > 0 and f0 + half <= f[-1]):
         return None
-    win = (f >= f0 - half) & (f <= f0 + half)
-    i = int(np.flatnonzero(win)[np.argmax(A[win])])
-    floor = float(np.median(A[(f >= 0.5 * f0) & (f <= 1.5 * f0)]))
+    a, b = bin_range(f, f0 - half, f0 + half)        # f ascending: the bins of the window
+    i = a + int(np.argmax(A[a:b]))
+    lo, hi = bin_range(f, 0.5 * f0, 1.5 * f0)
+    floor = float(np.median(A[lo:hi]))
     return LinePeak(float(A[i]), float(f[i]), float(A[i]) / floor if floor > 0 else float("nan"))

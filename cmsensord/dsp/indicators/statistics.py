@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["WaveformStats", "waveform_stats"]
+__all__ = ["WaveformStats", "waveform_stats", "centred_stats"]
 
 
 class WaveformStats(NamedTuple):
@@ -29,16 +29,25 @@ def waveform_stats(x: np.ndarray) -> WaveformStats:
     """The statistics of the finite samples of x (1-D); NaN for all four when fewer than
     2 samples or a zero signal."""
     x = np.asarray(x, dtype=np.float64)
-    x = x[np.isfinite(x)]
+    ok = np.isfinite(x)
+    if not ok.all():
+        x = x[ok]
     if x.size < 2:
         nan = float("nan")
         return WaveformStats(nan, nan, nan, nan)
-    d = x - x.mean()
+    return centred_stats(x - x.mean())
+
+
+def centred_stats(d: np.ndarray) -> WaveformStats:
+    """The statistics of finite samples d (1-D, at least 2) whose mean is already removed
+    (``d = x - x.mean()``): the numbers of :func:`waveform_stats` (x), bit for bit, in
+    fewer passes (the peak from the largest and smallest sample, not from ``|d|``)."""
     d2 = d * d                  # sums, not np.dot: BLAS threads stall on a busy machine
     m2 = float(d2.sum()) / d.size
     if m2 <= 0.0:
         return WaveformStats(0.0, 0.0, float("nan"), float("nan"))
-    m4 = float((d2 * d2).sum()) / d.size
+    d2 *= d2
+    m4 = float(d2.sum()) / d.size
     rms = m2 ** 0.5
-    peak = float(np.max(np.abs(d)))
+    peak = max(float(d.max()), -float(d.min()))
     return WaveformStats(rms, peak, peak / rms, m4 / (m2 * m2))

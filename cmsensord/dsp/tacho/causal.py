@@ -102,13 +102,32 @@ class CausalSpeed(TachoState):
         counts = np.diff(edges)
         seg = np.arange(first, first + counts.size) + lo
         x = np.arange(start + head, stop, dtype=np.float64)
-        T, w, acc, v = np.repeat(self._sbuf[1:5, seg], counts, axis=1)    # one gather for the 4 rows
+        T, w, acc = np.repeat(self._sbuf[1:4, seg], counts, axis=1)    # one gather for the 3 rows
         x -= T
-        sp, valid = self._causal_speed(x, w, acc, v, None)
+        if self._overdue(seg, edges, counts):
+            sp, valid = self._causal_speed(x, w, acc, np.repeat(self._sbuf[4, seg], counts), None)
+        else:                                   # _causal_speed without a cap: the same values
+            sp = acc * x
+            sp += w
+            valid = np.repeat(self._sbuf[4, seg] > 0, counts)
+            valid &= sp > 0
+            np.copyto(sp, 0.0, where=~valid)
         if head:
             sp = np.concatenate((np.full(head, np.nan if self._pruned else 0.0), sp))
             valid = np.concatenate((np.zeros(head, dtype=bool), valid))
-        return sp * self.fs, valid
+        sp *= self.fs
+        return sp, valid
+
+    def _overdue(self, seg: npt.NDArray[np.int64], edges: npt.NDArray[np.int64], counts: npt.NDArray[np.int64]
+                 ) -> bool:
+        """Whether any sample edges[i] .. edges[i + 1] - 1 of segment seg[i] is past the
+        causal slack (:meth:`_causal_speed`'s ``late``).  ``tau w`` grows with tau within a
+        segment (tau >= 0 from its key on, rounding is monotonic; NaN or w <= 0 is never
+        late), so the segment's last sample decides, with the same arithmetic."""
+        full = counts > 0
+        tau = (edges[1:][full] - 1).astype(np.float64) - self._sbuf[1, seg[full]]
+        with np.errstate(invalid="ignore"):
+            return bool((tau * self._sbuf[2, seg[full]] > _CAUSAL_SLACK / self.ppr).any())
 
     def _causal_speed(self, tau: FloatArray, w: FloatArray, a: FloatArray, v: FloatArray,
                       before: BoolArray | None) -> tuple[FloatArray, BoolArray]:
