@@ -48,9 +48,10 @@ def make_capture(path: Path, channels: int, seconds: float, scenario: str = "deg
     Board(sc, BoardConfig(n_channels=channels)).write_capture(path, seconds)
 
 
-#: what the command line's parser imports on every command (the import, report and operator
-#: commands' modules): with ``preload``, loaded before the replay is timed, as the rest of the
-#: imports are (without .pyc files, PYTHONDONTWRITEBYTECODE=1, each is compiled: ~0.05 s)
+#: what the command line's parser imported on every command before `cmsensord replay` had a
+#: parser of its own (the import, report and operator commands' modules): with ``preload``,
+#: loaded before the replay is timed, as the rest of the imports are (without .pyc files,
+#: PYTHONDONTWRITEBYTECODE=1, each is compiled: ~0.05 s); for older code in ``--tree``
 PRELOAD = "import cmsensord.importing.command, cmsensord.report.command, cmsensord.service.operator\n"
 #: makes the compiled kernels unimportable in the replay's interpreter (tests/test_no_compiler.py)
 NO_KERNELS = "for m in ('cmsensord.dsp._akfkernel', 'cmsensord.dsp._trackerkernel'): sys.modules[m] = None\n"
