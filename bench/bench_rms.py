@@ -10,7 +10,8 @@ per filter (the peer; `pip install filterpy` in the benchmark's environment
 only) on the same input, and checks both give the same estimates.
 
     python bench/bench_rms.py [--seconds 600] [--peer-seconds 60] [--channels 4] [--no-trace]
-                              [--no-peer] [--tree before=DIR] [--repeat 3]
+                              [--no-peer] [--tree before=DIR] [--repeat 3] [--scenario healthy]
+                              [--preload]
 
 ``--tree LABEL=DIR`` (repeatable) replays each capture with another checkout's code too
 (its C kernels built in place), interleaved with this one: before/after figures of one run.
@@ -39,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def make_capture(path: Path, channels: int, seconds: float, scenario: str = "degrading") -> None:
+    """An RMS capture of ``seconds`` of firmware_sim's ``scenario`` (seed 1)."""
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario
 
@@ -46,23 +48,31 @@ def make_capture(path: Path, channels: int, seconds: float, scenario: str = "deg
     Board(sc, BoardConfig(n_channels=channels)).write_capture(path, seconds)
 
 
+#: what the command line's parser imported on every command before `cmsensord replay` had a
+#: parser of its own (the import, report and operator commands' modules): with ``preload``,
+#: loaded before the replay is timed, as the rest of the imports are (without .pyc files,
+#: PYTHONDONTWRITEBYTECODE=1, each is compiled: ~0.05 s); for older code in ``--tree``
+PRELOAD = "import cmsensord.importing.command, cmsensord.report.command, cmsensord.service.operator\n"
 #: makes the compiled kernels unimportable in the replay's interpreter (tests/test_no_compiler.py)
 NO_KERNELS = "for m in ('cmsensord.dsp._akfkernel', 'cmsensord.dsp._trackerkernel'): sys.modules[m] = None\n"
 
 
-def replay_in_subprocess(capture: Path, out: Path, trace: bool, tree: Path = ROOT, kernels: bool = True) -> dict:
+def replay_in_subprocess(capture: Path, out: Path, trace: bool, tree: Path = ROOT, kernels: bool = True,
+                         preload: bool = False) -> dict:
     """Run `cmsensord replay` in a fresh interpreter; time the replay itself (not the imports).
 
     ``tree``: the checkout whose code runs (another one for before/after figures of one run);
     ``kernels`` False: the compiled kernels unimportable, as when pip found no compiler.
     Peak RSS is VmHWM of /proc/self/status: ru_maxrss survives exec on Linux and
-    would report the benchmark's own (forked) high-water mark.
+    would report the benchmark's own (forked) high-water mark.  ``preload``: the command
+    line's own imports (:data:`PRELOAD`) are done before the timing starts too.
     """
     code = (
         "import json,resource,time,sys\n"
         + ("" if kernels else NO_KERNELS)
         + "from cmsensord.cli import main\n"
-        "def cpu():\n"
+        + (PRELOAD if preload else "")
+        + "def cpu():\n"
         "    r = resource.getrusage(resource.RUSAGE_SELF); return r.ru_utime + r.ru_stime\n"
         "c0, t0 = cpu(), time.perf_counter()\n"
         f"rc = main(['replay', {str(capture)!r}, '--out', {str(out)!r}] + (['--akf-trace'] if {trace} else []))\n"
@@ -185,17 +195,20 @@ def main() -> int:
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also replay with the code of another checkout, interleaved (e.g. before=/tmp/before)")
     ap.add_argument("--repeat", type=int, default=1, help="replays of each capture per code (the best is shown)")
+    ap.add_argument("--scenario", default="degrading", help="firmware_sim scenario of the captures")
+    ap.add_argument("--preload", action="store_true",
+                    help="load the command line's own imports before timing (all imports excluded)")
     args = ap.parse_args()
     from cmsensord.dsp.akf import have_kernel
 
-    print(f"# RMS chain benchmark: {args.seconds:g} s simulated per capture, degrading scenario; "
+    print(f"# RMS chain benchmark: {args.seconds:g} s simulated per capture, {args.scenario} scenario; "
           f"compiled AKF kernel: {'yes' if have_kernel() else 'NO (numpy fallback)'}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for C in args.channels or (1, 4, 8):
             cap = tmp / f"rms{C}.bin"
-            make_capture(cap, C, args.seconds)
+            make_capture(cap, C, args.seconds, args.scenario)
             size = cap.stat().st_size
             for trace in (False,) if args.no_trace else (False, True):
                 runs: dict[str, list[dict]] = {}
@@ -203,7 +216,8 @@ def main() -> int:
                     for label, tree in trees(args.tree):
                         out = tmp / f"out{C}{int(trace)}{label}"
                         shutil.rmtree(out, ignore_errors=True)
-                        runs.setdefault(label, []).append(replay_in_subprocess(cap, out, trace, tree))
+                        runs.setdefault(label, []).append(replay_in_subprocess(cap, out, trace, tree,
+                                                                                preload=args.preload))
                 for label, _ in trees(args.tree):
                     out = tmp / f"out{C}{int(trace)}{label}"
                     r = best_of(runs[label])

@@ -45,6 +45,15 @@ class RunFields(NamedTuple):
     end_payload: IntArray   # buffer offset of each frame's CRC
 
 
+def _every_offset(data: bytes, dtype: str) -> np.ndarray:
+    """The little-endian integers of ``dtype`` starting at every byte offset of ``data`` (a
+    read-only strided view: element i is bytes i .. i + size - 1)."""
+    size = np.dtype(dtype).itemsize
+    if len(data) < size:
+        return np.empty(0, dtype=dtype)
+    return np.ndarray((len(data) - size + 1,), dtype=dtype, buffer=data, strides=(1,))
+
+
 class FrameRuns:
     """The candidate frames of ``data`` (a snapshot of the decoder's buffer), found once."""
 
@@ -54,28 +63,29 @@ class FrameRuns:
         n = a.size
         p = np.flatnonzero((a[:-1] == 0xA5) & (a[1:] == 0x5A)) if n >= 2 else np.empty(0, dtype=np.int64)
         p = p[p + _HEADER <= n]
-        h = a[p[:, None] + np.arange(2, _HEADER)].astype(np.int64)   # header bytes 2 .. 13
-        ln = h[:, 10] | (h[:, 11] << 8)
-        good = (h[:, 0] == version) & (h[:, 1] >= 1) & (h[:, 1] <= max_type) & (ln <= max_payload) \
+        u16, u32 = _every_offset(data, "<u2"), _every_offset(data, "<u4")   # a field at any byte offset
+        ver, code = a[p + 2].astype(np.int64), a[p + 3].astype(np.int64)
+        ln = u16[p + 12].astype(np.int64)
+        good = (ver == version) & (code >= 1) & (code <= max_type) & (ln <= max_payload) \
             & (p + _OVERHEAD + ln <= n)
-        self.pos = p[good]
-        h, ln = h[good], ln[good]
-        self.code = h[:, 1]
-        self.seq = h[:, 2] | (h[:, 3] << 8)
-        self.t0 = h[:, 4] | (h[:, 5] << 8) | (h[:, 6] << 16) | (h[:, 7] << 24)
-        self.chan = h[:, 8]
-        self.flags = h[:, 9]
-        self.end_payload = self.pos + _HEADER + ln
+        self.pos = p = p[good]
+        self.code = code[good]
+        self.seq = u16[p + 4].astype(np.int64)
+        self.t0 = u32[p + 6].astype(np.int64)
+        self.chan = a[p + 10].astype(np.int64)
+        self.flags = a[p + 11].astype(np.int64)
+        self.end_payload = p + _HEADER + ln[good]
         end = self.end_payload + 4
-        j = np.searchsorted(self.pos, end)
-        jj = np.minimum(j, max(self.pos.size - 1, 0))
-        hit = (j < self.pos.size) & (self.pos[jj] == end) if self.pos.size else np.zeros(0, dtype=bool)
-        self._next = np.where(hit, j, -1).tolist()          # the candidate starting where one ends
-        self._crc = (a[end[:, None] - 4 + np.arange(4)].astype(np.int64) << np.array([0, 8, 16, 24])).sum(axis=1) \
-            if self.pos.size else np.empty(0, dtype=np.int64)
+        j = np.searchsorted(p, end)
+        jj = np.minimum(j, max(p.size - 1, 0))
+        hit = (j < p.size) & (p[jj] == end) if p.size else np.zeros(0, dtype=bool)
+        nxt = np.where(hit, j, -1)                  # the candidate starting where one ends
+        self._next = nxt.tolist()
+        self._breaks = np.flatnonzero(nxt != np.arange(1, nxt.size + 1))  # chains leave c -> c + 1 there
+        self._crc = u32[end - 4].astype(np.int64)
         self._pos = self.pos.tolist()
+        self._body = (self.pos + 2).tolist()                # each frame's CRC covers body .. endp
         self._endp = self.end_payload.tolist()
-        self._crc_list = self._crc.tolist()
 
     def take(self, start: int) -> RunFields | None:
         """The good frames back to back from buffer offset ``start`` (None when there is
@@ -84,13 +94,21 @@ class FrameRuns:
         pos = self._pos
         if c >= len(pos) or pos[c] != start:
             return None
-        nxt, endp, crcs, data, crc32 = self._next, self._endp, self._crc_list, self.data, zlib.crc32
-        chain = []
-        while c >= 0 and crc32(data[pos[c] + 2:endp[c]]) == crcs[c]:
-            chain.append(c)
-            c = nxt[c]
-        if not chain:
+        nxt, breaks, data = self._next, self._breaks, self.data
+        get, crc32 = data.__getitem__, zlib.crc32
+        spans = []
+        while c >= 0:   # the chain goes c, c + 1, ... up to a break, then jumps (or ends)
+            e = int(breaks[np.searchsorted(breaks, c)]) + 1
+            crcs = np.fromiter(map(crc32, map(get, map(slice, self._body[c:e], self._endp[c:e]))),
+                               dtype=np.int64, count=e - c)
+            bad = np.flatnonzero(crcs != self._crc[c:e])
+            if bad.size:
+                spans.append(np.arange(c, c + int(bad[0])))
+                break
+            spans.append(np.arange(c, e))
+            c = nxt[e - 1]
+        k = np.concatenate(spans)
+        if not k.size:
             return None
-        k = np.array(chain, dtype=np.int64)
         return RunFields(self.pos[k], self.code[k], self.seq[k], self.t0[k], self.chan[k], self.flags[k],
                          self.end_payload[k])

@@ -32,11 +32,11 @@ import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from itertools import repeat
 from typing import NamedTuple
 
 import numpy as np
 
+from cmsensord.frame_batch import Columns, FrameBatch, build
 from cmsensord.frame_runs import MIN_BYTES, FrameRuns, RunFields
 
 __all__ = [
@@ -215,12 +215,12 @@ def decode_status(payload: bytes) -> Status:
     if n != expected:
         raise ProtocolError(
             f"STATUS payload: expected {expected} bytes (20 + 8 x {c} channels), got {n}")
-    per_chan = np.frombuffer(payload, dtype="<f4", count=2 * c, offset=_STATUS.size)
+    per_chan = struct.unpack_from(f"<{2 * c}f", payload, _STATUS.size)   # float32 -> Python floats
     return Status(
         fw_version=fw, mode=mode, n_channels=c, fs=fs, block_len=block_len,
         tacho_inputs=tacho, tacho_ppr=ppr, overruns=overruns, uptime_s=uptime,
-        scale=tuple(float(x) for x in per_chan[0::2]),
-        offset=tuple(float(x) for x in per_chan[1::2]),
+        scale=per_chan[0::2],
+        offset=per_chan[1::2],
     )
 
 
@@ -238,6 +238,12 @@ def decode_rms_rows(frames: Sequence[Frame], n_channels: int) -> np.ndarray:
     """float32 array (len(frames), n_channels), m/s^2: the RMS frames of one channel count in
     one pass (:func:`decode_rms` of each, stacked)."""
     expected = 4 * n_channels
+    if type(frames) is FrameBatch:          # the payloads are in the batch's bytes
+        lengths = set(frames.payload_lengths().tolist())
+        if lengths - {expected}:
+            raise ProtocolError(f"RMS payload: expected {expected} bytes (4 x {n_channels} channels), "
+                                f"got {max(lengths - {expected})}")
+        return frames.rms_values(n_channels)
     payloads = [f.payload for f in frames]
     lengths = set(map(len, payloads))
     if lengths - {expected}:
@@ -342,6 +348,9 @@ class Decoder:
     :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
     frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
     frame-by-frame receiver, the reference it equals (same frames, same counters).
+    :meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
+    :meth:`flush` as a :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames
+    when indexed or iterated): a replay's RMS frames reach the banks as arrays.
     """
 
     def __init__(self, max_buffer: int = 65536, runs: bool = True):
@@ -361,6 +370,26 @@ class Decoder:
         return len(self._buf)
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
+        frames: list[Frame] = []
+        for out, data_ in self._feed(data):
+            frames += _frames(out, data_)
+        return frames
+
+    def feed_batch(self, data: bytes | bytearray | memoryview) -> FrameBatch:
+        """:meth:`feed`'s frames as one batch of columns."""
+        return FrameBatch.join([_batch(out, data_) for out, data_ in self._feed(data)])
+
+    def flush(self) -> list[Frame]:
+        """End of stream: incomplete candidates are not frames (drop their first sync
+        byte and hunt on through the rest); whatever is left is discarded."""
+        return _frames(*self._scan(final=True))
+
+    def flush_batch(self) -> FrameBatch:
+        """:meth:`flush`'s frames as a batch of columns."""
+        return _batch(*self._scan(final=True))
+
+    def _feed(self, data: bytes | bytearray | memoryview) -> list[tuple[list, bytes]]:
+        """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""
         view = memoryview(data).cast("B")
         total = len(view)
         self.counters.bytes_received += total
@@ -368,24 +397,21 @@ class Decoder:
         room = self.max_buffer - len(buf)
         if total <= room:  # the common case: one append, one scan
             buf += view
-            return self._scan(final=False)
-        frames: list[Frame] = []
+            return [self._scan(final=False)]
+        scans = []
         start = 0
         while start < total:
             room = self.max_buffer - len(buf)
             buf += view[start:start + room]
             start += room
-            frames += self._scan(final=False)
-        return frames
+            scans.append(self._scan(final=False))
+        return scans
 
-    def flush(self) -> list[Frame]:
-        """End of stream: incomplete candidates are not frames (drop their first sync
-        byte and hunt on through the rest); whatever is left is discarded."""
-        return self._scan(final=True)
-
-    def _scan(self, final: bool) -> list[Frame]:
+    def _scan(self, final: bool) -> tuple[list, bytes]:
         """Frame every complete candidate in the buffer (docs/PROTOCOL.md receiver rules 1-3);
-        with ``final``, incomplete candidates are dropped byte by byte.
+        with ``final``, incomplete candidates are dropped byte by byte.  Returns the frames,
+        with the columns of each run of good back-to-back frames in their place, and the
+        bytes of the buffer the runs' payloads are in.
 
         The receiver's hot loop, every byte of the link passes through it: one function, the
         lookups bound to locals and the counters summed locally, so it stays whole on purpose.
@@ -407,7 +433,7 @@ class Decoder:
         last_t0 = self._last_t0
         last_unw = self._last_t0_unwrapped
         discarded = rejects = crc_fail = lost_total = overruns = 0
-        out: list[Frame] = []
+        out: list = []      # frames, and the Columns of each run of good frames in its place
         pos = 0
         runs = FrameRuns(bytes(buf), VERSION, len(types), MAX_PAYLOAD) if self.runs and n >= MIN_BYTES else None
         with memoryview(buf) as mv:
@@ -423,13 +449,12 @@ class Decoder:
                 pos = i
                 if runs is not None and (run := runs.take(pos)) is not None:
                     # good frames back to back: in one pass (cmsensord/frame_runs.py)
-                    frames, last_seq, last_t0, last_unw = _run_frames(run, runs.data, base, last_seq,
-                                                                      last_t0, last_unw)
-                    out += frames
+                    cols, last_seq, last_t0, last_unw = _run_columns(run, base, last_seq, last_t0, last_unw)
+                    out.append(cols)
                     for code, k in enumerate(np.bincount(run.code).tolist()):
                         if k:
                             counts[names[types[code]]] += k
-                    lost_total += sum(f.lost_before for f in frames)
+                    lost_total += int(cols.lost.sum())
                     overruns += int(np.count_nonzero(run.flags & FLAG_OVERRUN))
                     pos = int(run.end_payload[-1]) + CRC_LEN
                     continue
@@ -487,12 +512,12 @@ class Decoder:
         c.crc_failures += crc_fail
         c.frames_lost += lost_total
         c.overruns += overruns
-        return out
+        return out, runs.data if runs is not None else b""
 
 
-def _run_frames(run: RunFields, data: bytes, base: int, last_seq: int | None, last_t0: int,
-                last_unw: int) -> tuple[list[Frame], int, int, int]:
-    """The frames of a run of good back-to-back frames (receiver rules 3 and 4 as in the
+def _run_columns(run: RunFields, base: int, last_seq: int | None, last_t0: int,
+                 last_unw: int) -> tuple[Columns, int, int, int]:
+    """The columns of a run of good back-to-back frames (receiver rules 3 and 4 as in the
     frame-by-frame loop: seq gaps, t0 unwrapped), and the new last seq, t0, unwrapped t0."""
     seq, t0 = run.seq, run.t0
     lost = np.empty(seq.size, dtype=np.int64)
@@ -501,19 +526,51 @@ def _run_frames(run: RunFields, data: bytes, base: int, last_seq: int | None, la
     step[1:] = ((t0[1:] - t0[:-1] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
     if last_seq is None:
         lost[0] = 0
-        step[0] = 0
         first = int(t0[0])
     else:
         lost[0] = (int(seq[0]) - last_seq - 1) & 0xFFFF
         first = last_unw + (((int(t0[0]) - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
-        step[0] = 0
-    unw = (np.cumsum(step) + first).tolist()
-    types = list(map(_TYPE_BY_CODE.__getitem__, run.code.tolist()))
-    payloads = list(map(data.__getitem__, map(slice, (run.pos + HEADER_LEN).tolist(), run.end_payload.tolist())))
-    frames = list(map(tuple.__new__, repeat(Frame), zip(types, seq.tolist(), t0.tolist(), run.chan.tolist(),
-                                                        run.flags.tolist(), payloads, unw,
-                                                        (run.pos + base).tolist(), lost.tolist())))
-    return frames, int(seq[-1]), int(t0[-1]), unw[-1]
+    step[0] = first
+    unw = np.cumsum(step)
+    cols = Columns(run.code, seq, t0, run.chan, run.flags, run.pos + HEADER_LEN, run.end_payload, unw,
+                   run.pos + base, lost)
+    return cols, int(seq[-1]), int(t0[-1]), int(unw[-1])
+
+
+def _make(cols: Columns, data: bytes) -> list[Frame]:
+    return build(cols, data, Frame, _TYPE_BY_CODE)
+
+
+def _frames(out: list, data: bytes) -> list[Frame]:
+    """The frames and run columns of one scan (in stream order) as a list of frames (the
+    runs' payloads in ``data``, the scanned buffer)."""
+    if not data:                        # no runs: frames only
+        return out
+    frames: list[Frame] = []
+    for item in out:
+        if type(item) is Columns:
+            frames += _make(item, data)
+        else:
+            frames.append(item)
+    return frames
+
+
+def _batch(out: list, data: bytes) -> FrameBatch:
+    """The frames and run columns of one scan (in stream order) as one batch (the runs'
+    payloads in ``data``, the scanned buffer)."""
+    parts: list[FrameBatch] = []
+    singles: list[Frame] = []
+    for item in out:
+        if type(item) is Columns:
+            if singles:
+                parts.append(FrameBatch.of(singles, _make))
+                singles = []
+            parts.append(FrameBatch(item, data, _make))
+        else:
+            singles.append(item)
+    if singles or not parts:
+        parts.append(FrameBatch.of(singles, _make))
+    return FrameBatch.join(parts)
 
 
 def iter_frames(data: bytes | bytearray | memoryview,

@@ -6,7 +6,8 @@ a context manager.  Every consumer — the daemon's live loop, ``replay``,
 reads frames this way, so they all decode bytes the same way:
 
 * :class:`ByteStreamSource` — any iterable of byte chunks through one
-  :class:`~cmsensord.protocol.Decoder`, flushed at the end;
+  :class:`~cmsensord.protocol.Decoder`, flushed at the end (with ``batches``, each
+  batch a :class:`~cmsensord.frame_batch.FrameBatch`: the frames as columns);
 * :class:`CaptureSource` — a capture file (docs/PROTOCOL.md, "A captured
   serial log"), read in chunks; a missing or unreadable file raises
   :class:`~cmsensord.errors.LinkError` when the source is made;
@@ -26,7 +27,7 @@ every source.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
@@ -36,7 +37,7 @@ from cmsensord.protocol import Decoder, Frame, FrameType, LinkCounters, decode_s
 
 __all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced"]
 
-Batch = list[Frame]
+Batch = Sequence[Frame]
 
 #: the live loop's batching: the queued frames every BATCH_S seconds (the loop's period,
 #: also for the watchdog and the status), as soon as BATCH_FRAMES wait (the Processor's
@@ -77,9 +78,10 @@ class ByteStreamSource(FrameSource):
     ``bytes_read`` counts the bytes decoded so far.
     """
 
-    def __init__(self, chunks: Iterable[bytes], decoder: Decoder | None = None):
+    def __init__(self, chunks: Iterable[bytes], decoder: Decoder | None = None, batches: bool = False):
         self._chunks = chunks
         self.decoder = decoder or Decoder()
+        self.batches = batches
         self.bytes_read = 0
 
     @classmethod
@@ -88,10 +90,11 @@ class ByteStreamSource(FrameSource):
         return cls(data[k:k + chunk] for k in range(0, len(data), chunk))
 
     def __iter__(self) -> Iterator[Batch]:
+        dec = self.decoder
         for data in self._chunks:
             self.bytes_read += len(data)
-            yield self.decoder.feed(data)
-        yield self.decoder.flush()
+            yield dec.feed_batch(data) if self.batches else dec.feed(data)
+        yield dec.flush_batch() if self.batches else dec.flush()
 
 
 class CaptureSource(ByteStreamSource):
@@ -101,12 +104,13 @@ class CaptureSource(ByteStreamSource):
     with a one-line reason before the caller creates any output.
     """
 
-    def __init__(self, path: str | Path, chunk: int = 1 << 16, decoder: Decoder | None = None):
+    def __init__(self, path: str | Path, chunk: int = 1 << 16, decoder: Decoder | None = None,
+                 batches: bool = False):
         self.path = Path(path)
         self.size = self.path.stat().st_size if self.path.is_file() else 0
         self._file = _open_capture(self.path)
         self.chunk = chunk
-        super().__init__(self._read(), decoder)
+        super().__init__(self._read(), decoder, batches)
 
     def _read(self) -> Iterator[bytes]:
         f = self._file
@@ -178,7 +182,7 @@ class SerialSource(FrameSource):
         self.reader.start()
         return self
 
-    def __iter__(self) -> Iterator[Batch]:
+    def __iter__(self) -> Iterator[list[Frame]]:
         while not self._stopped:
             yield self.queue.get(timeout=self.timeout, enough=self.batch_frames, hold_s=self.hold_s)
         yield self.queue.get(timeout=0)

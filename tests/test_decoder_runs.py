@@ -8,6 +8,7 @@ from __future__ import annotations
 import random
 import struct
 
+import numpy as np
 import pytest
 
 import cmsensord.protocol as protocol
@@ -141,3 +142,58 @@ def test_tacho_payloads_in_one_pass_equal_decode_tacho_one_by_one(seed):
     assert counts.tolist() == [len(e) for e in want_edges]
     assert offsets.dtype == "uint32" and offsets.tolist() == [int(x) for e in want_edges for x in e]
     assert protocol.decode_tacho_many([])[0].size == 0
+
+
+def decode_batches(data: bytes, reads: list[int]):
+    dec = Decoder()
+    batches, at = [], 0
+    for size in reads:
+        batches.append(dec.feed_batch(data[at:at + size]))
+        at += size
+    batches.append(dec.feed_batch(data[at:]))
+    batches.append(dec.flush_batch())
+    return batches, dec.counters, dec.buffered()
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_batches_equal_the_frame_by_frame_decoder(seed):
+    """``Decoder.feed_batch`` (frames as columns, what a replay reads) gives the frames of the
+    plain receiver: indexed, iterated, sliced, and its columns and RMS values read as arrays
+    are those of the frames."""
+    from cmsensord.frame_batch import FrameBatch, Pending, rms_fields
+    from cmsensord.protocol import decode_rms_rows
+
+    rnd = random.Random(seed)
+    data = random_stream(rnd, 3000)
+    reads = [rnd.choice([1, 7, 100, 5000, 20000, 70000]) for _ in range(rnd.randrange(0, 8))]
+    ref, ref_counters, ref_left = decode(data, runs=False, reads=reads)
+    batches, counters, left = decode_batches(data, reads)
+    assert all(type(b) is FrameBatch for b in batches)
+    got = [f for b in batches for f in b]
+    assert got == ref and len(ref) > 2000
+    assert counters == ref_counters and left == ref_left
+    whole = FrameBatch.join(batches)
+    assert len(whole) == len(ref) and whole == ref
+    for i in (0, 1, len(ref) // 2, -1):
+        assert whole[i] == ref[i]
+    a, b = sorted(rnd.sample(range(len(ref)), 2))
+    view = whole[a:b]
+    assert list(view) == ref[a:b] and view == ref[a:b] and view[1:4] == ref[a:b][1:4]
+    pending = Pending()                                     # the Processor's waiting batch
+    for lo, hi in ((a, b), (b, b + 5), (b + 7, b + 9)):
+        pending.extend(whole[lo:hi])
+    assert pending.joined() == ref[a:b] + ref[b:b + 5] + ref[b + 7:b + 9]
+    assert type(pending.joined()) is FrameBatch and len(pending) == len(pending.joined())
+    code, t0, lost = view.columns()
+    assert code.tolist() == [int(f.type) for f in ref[a:b]]
+    assert t0.tolist() == [f.t0_unwrapped for f in ref[a:b]]
+    assert lost.tolist() == [f.lost_before for f in ref[a:b]]
+    rms = [i for i, f in enumerate(ref) if f.type == FrameType.RMS and len(f.payload) == 4 * f.chan]
+    by_c = [i for i in rms if ref[i].chan == ref[rms[0]].chan]
+    sel = whole.cols.take(np.array(by_c))
+    batch = FrameBatch(sel, whole.data, whole._make)
+    C = ref[by_c[0]].chan
+    assert np.array_equal(decode_rms_rows(batch, C).view(np.uint32),
+                          decode_rms_rows([ref[i] for i in by_c], C).view(np.uint32))
+    for x, y in zip(rms_fields(batch), rms_fields([ref[i] for i in by_c])):
+        assert x.tolist() == y.tolist()

@@ -533,3 +533,19 @@ def test_numbering_goes_on_after_the_newest_file_of_the_same_second(tmp_path):
     paths[1].unlink()
     newest = McapSink(tmp_path, wall_clock=clock).close()
     assert newest.name == "cmsensord-20231114T221320Z-3.mcap"   # sorts after -2, not before
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 500])
+def test_message_index_is_the_record_the_mcap_library_builds(n):
+    """The chunk writer packs each MessageIndex in one call (issue 13): the same bytes as
+    ``mcap.records.MessageIndex.write``."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import MessageIndex
+
+    from cmsensord.sinks.mcap_chunks import message_index
+
+    rnd = random.Random(n)
+    records = [(rnd.randrange(1 << 63), rnd.randrange(1 << 40)) for _ in range(n)]
+    builder = RecordBuilder()
+    MessageIndex(channel_id=n % 65536 + 3, records=records).write(builder)
+    assert message_index(n % 65536 + 3, records) == builder.end()

@@ -1,7 +1,8 @@
 """`cmsensord replay` with the one-pass paths of issue 13 (runs of frames decoded at once,
 regular tacho edges committed at once, long batches checked at once, RMS interval sums at
-once) writes what the frame-by-frame, edge-by-edge daemon writes, message for message, on
-a RAW capture with a tacho and on an RMS capture, both with line noise in them."""
+once, frames as columns (FrameBatch) from the decoder to the banks) writes what the
+frame-by-frame, edge-by-edge daemon writes, message for message, on a RAW capture with a
+tacho and on an RMS capture, both with line noise in them."""
 
 from __future__ import annotations
 
@@ -19,10 +20,13 @@ REFERENCE = """
 import sys
 import cmsensord.monitor.segments as segments
 import cmsensord.protocol as protocol
+import cmsensord.source as source
 from cmsensord.dsp.tacho.edges import EdgeRuns
 protocol.MIN_BYTES = 1 << 60
 segments.SCAN_MIN = 1 << 60
 EdgeRuns.batch_edges = False
+source.Decoder.feed_batch = source.Decoder.feed
+source.Decoder.flush_batch = source.Decoder.flush
 from cmsensord.cli import main
 sys.exit(main(sys.argv[1:]))
 """

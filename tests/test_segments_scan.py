@@ -55,3 +55,37 @@ def test_one_pass_checks_on_a_raw_capture_with_a_tacho(monkeypatch):
     got, counts, passed = run(data, monkeypatch, one_pass=True, chunk=1 << 16)
     assert sum(passed) > 0.9 * 2 * 1200
     assert got == ref and counts == ref_counts and "/cm/ch0/orders" in ref
+
+
+def status_frame(seq: int, t0: int, mode: int = 1, fs: int = 25000) -> bytes:
+    from cmsensord.protocol import Status, encode_status
+
+    return encode_status(seq, t0, Status(fw_version=0x0100, mode=mode, n_channels=4, fs=fs, block_len=250,
+                                         tacho_inputs=0, tacho_ppr=0, overruns=0, uptime_s=seq,
+                                         scale=(1.0,) * 4, offset=(0.0,) * 4))
+
+
+def test_one_pass_runs_through_status_frames_that_name_the_mode_and_fs_in_force(monkeypatch):
+    """A STATUS frame each second naming the mode and fs in force does not end a pass; one
+    that changes the fs (frame 1500) or the mode (frame 2500, to RAW: the RMS frames after it
+    are the other mode's) does, and the messages are those of frame-by-frame checks."""
+    import numpy as np
+
+    from cmsensord.protocol import encode_rms
+
+    rng = np.random.default_rng(1)
+    out, t0, seq = [], 0, 0
+    for k in range(3200):
+        fs = 25000 if k < 1500 else 20000
+        if k % 100 == 0 or k in (1500, 2500):
+            out.append(status_frame(seq, t0, mode=2 if k >= 2500 else 1, fs=fs))
+            seq += 1
+        out.append(encode_rms(seq, t0, rng.uniform(0.5, 1.5, 4)))
+        seq += 1
+        t0 += 250
+    data = b"".join(out)
+    ref, ref_counts, _ = run(data, monkeypatch, one_pass=False, chunk=1 << 16)
+    got, counts, passed = run(data, monkeypatch, one_pass=True, chunk=1 << 16)
+    assert got == ref and counts == ref_counts
+    assert max(passed) > 300                # through many STATUS frames at a time
+    assert ref_counts.get("decode_error", 0) >= 1 and "/cm/ch0/severity" in ref

@@ -23,6 +23,7 @@ chain is made, or a ``channels`` event names the board channels not monitored.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
 from cmsensord.monitor.clock import BlockClock
@@ -79,7 +80,7 @@ class ChannelSetup:
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
                       self.clock.stamp_ns(f.t0_unwrapped))
 
-    def accept(self, n: int, frames: list[Frame]) -> bool:
+    def accept(self, n: int, frames: Sequence[Frame]) -> bool:
         """Data frames in a row of ``n`` channels: True to process them (the board's count, or a
         change of the board), False when they are dropped as odd frames."""
         n_frames = len(frames)

@@ -27,12 +27,12 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from itertools import compress
-from operator import attrgetter
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cmsensord.config import Config
+from cmsensord.frame_batch import Pending, rms_fields
 from cmsensord.monitor import messages
 from cmsensord.monitor.alarms import WATCHED, Alarms
 from cmsensord.monitor.channels import ChannelSetup
@@ -50,8 +50,6 @@ if TYPE_CHECKING:
 
 #: the frame types as plain names: a FrameType.X lookup goes through the enum's __getattr__ (~1 µs per frame)
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
-#: a field of every frame of a batch, in one C-level pass (map) rather than a generator
-_CHAN, _PAYLOAD, _T0 = attrgetter("chan"), attrgetter("payload"), attrgetter("t0_unwrapped")
 #: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
@@ -152,8 +150,7 @@ class Processor:
             return
         if self.clock.anchor_ns is None:
             self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
-        rms: list[Frame] = []
-        raw: list[Frame] = []
+        rms, raw = Pending(), Pending()
         for a, b, codes in self.segments.runs(frames):     # long batches checked in one pass
             if codes is None:
                 f = frames[a]
@@ -167,14 +164,20 @@ class Processor:
         self._flush(rms, raw)
         self._feed_tacho()
 
-    def _passed(self, frames: Sequence[Frame], codes: np.ndarray, rms: list[Frame],
-                raw: list[Frame]) -> tuple[list[Frame], list[Frame]]:
-        """A run of frames that passed the segment check (a STATUS only last), by type: its
-        TACHO frames to the shaft first (they wait there for :meth:`_feed_tacho`, whatever
-        comes between them), then the others in order, each run of RMS or RAW frames in one
-        call, as one frame at a time would."""
+    def _passed(self, frames: Sequence[Frame], codes: np.ndarray, rms: Pending,
+                raw: Pending) -> tuple[Pending, Pending]:
+        """A run of frames that passed the segment check, by type: its TACHO frames to the shaft
+        first (they wait there for :meth:`_feed_tacho`, whatever comes between them), then the
+        others in order, each run of RMS or RAW frames in one call, as one frame at a time would.
+        A STATUS frame (which may make the tracker) ends a part: TACHO frames go first within
+        their part only."""
         tacho = codes == _TACHO
         if tacho.any():
+            cut = (np.flatnonzero(codes[:-1] == _STATUS) + 1).tolist()
+            if cut:
+                for i, j in zip([0, *cut], [*cut, len(codes)]):
+                    rms, raw = self._passed(frames[i:j], codes[i:j], rms, raw)
+                return rms, raw
             self.shaft.add_many(list(compress(frames, tacho.tolist())))
             keep = ~tacho
             frames, codes = list(compress(frames, keep.tolist())), codes[keep]
@@ -193,7 +196,7 @@ class Processor:
                     rms, raw = self._frame(f, rms, raw)
         return rms, raw
 
-    def _extend(self, batch: list[Frame], frames: Sequence[Frame], rms: bool) -> list[Frame]:
+    def _extend(self, batch: Pending, frames: Sequence[Frame], rms: bool) -> Pending:
         """``frames`` (all RMS, or all RAW) appended to the waiting ``batch``, run through the
         chain whenever it reaches ``MAX_BATCH``, as one frame at a time would be; what waits."""
         k, n = 0, len(frames)
@@ -202,10 +205,10 @@ class Processor:
             batch.extend(frames[k:k + take])
             k += take
             if len(batch) >= MAX_BATCH:          # bounded memory per bank call
-                batch = self._flush(batch, [])[0] if rms else self._flush([], batch)[1]
+                batch = self._flush(batch, Pending())[0] if rms else self._flush(Pending(), batch)[1]
         return batch
 
-    def _frame(self, f: Frame, rms: list[Frame], raw: list[Frame]) -> tuple[list[Frame], list[Frame]]:
+    def _frame(self, f: Frame, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
         """One frame that passed the segment check into the waiting batches (or handled)."""
         if f.type == _RMS:
             rms = self._extend(rms, (f,), True)
@@ -277,27 +280,28 @@ class Processor:
         self._flush_raw([], final=True)
         self.indicators.finish()
 
-    def _flush(self, rms: list[Frame], raw: list[Frame]) -> tuple[list, list]:
-        self._flush_rms(rms)
-        self._flush_raw(raw)
-        return [], []
+    def _flush(self, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
+        self._flush_rms(rms.joined())
+        self._flush_raw(list(raw.joined()))
+        return Pending(), Pending()
 
-    def _flush_rms(self, frames: list[Frame]) -> None:
-        """RMS frames -> observations on the block clock."""
+    def _flush_rms(self, frames: Sequence[Frame]) -> None:
+        """RMS frames (a list or a :class:`~cmsensord.frame_batch.FrameBatch`) -> observations
+        on the block clock."""
         if not frames:
             return
-        C = frames[0].chan
-        chans = list(map(_CHAN, frames))
-        if chans.count(C) != len(chans):            # channel count changed mid-batch: split
-            cut = next(i for i, c in enumerate(chans) if c != C)
+        chans, lengths, t0 = rms_fields(frames)
+        C = int(chans[0])
+        other = np.flatnonzero(chans != C)
+        if other.size:                          # channel count changed mid-batch: split
+            cut = int(other[0])
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
         if not (self.setup.ready(C) and self.setup.accept(C, frames)):
             return
         self._board_channels(C)
-        lengths = list(map(len, map(_PAYLOAD, frames)))
-        good = frames if lengths.count(4 * C) == len(frames) else [f for f in frames if len(f.payload) == 4 * C]
+        good = frames if np.all(lengths == 4 * C) else [f for f in frames if len(f.payload) == 4 * C]
         if len(good) < len(frames):             # only those frames are lost
             n = len(frames) - len(good)
             first = next(f for f in frames if len(f.payload) != 4 * C)
@@ -306,7 +310,7 @@ class Processor:
             if not good:
                 return
             frames = good
-        t0 = np.fromiter(map(_T0, frames), dtype=np.int64, count=len(frames))
+            t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.indicators.rms(self.channels, t0, vals)
         self._observe(t0, vals)

@@ -29,9 +29,10 @@ from cmsensord.protocol import Frame, FrameType
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
-_TYPE, _T0, _LOST = attrgetter("type"), attrgetter("t0_unwrapped"), attrgetter("lost_before")
 #: batches at least this long are checked in one pass (:meth:`Segments.runs`)
 SCAN_MIN = 32
+#: a field of every frame of a batch, in one C-level pass
+_TYPE, _T0, _LOST = attrgetter("type"), attrgetter("t0_unwrapped"), attrgetter("lost_before")
 #: after a frame that does not pass, this many frames are checked one by one before the next pass
 SCAN_RETRY = 8
 
@@ -42,18 +43,31 @@ class FrameColumns(NamedTuple):
     code: np.ndarray    # the type code; -1 for a type that is not a FrameType (a frame built by hand)
     t0: np.ndarray      # t0_unwrapped
     lost: np.ndarray    # a seq gap in front of it
+    frames: Sequence[Frame]     # the batch (a STATUS frame's payload is read from it)
 
 
 def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
+    """The columns of a batch: read from a :class:`~cmsensord.protocol.FrameBatch` as they are,
+    else one C-level pass (``map``) per field."""
+    cols = getattr(frames, "columns", None)
+    if cols is not None:
+        code, t0, lost = cols()
+        return FrameColumns(code, t0, lost != 0, frames)
     n = len(frames)
     types = list(map(_TYPE, frames))
-    if set(map(type, types)) == {FrameType}:    # decoded frames (C-level passes, no generator)
+    if set(map(type, types)) <= {FrameType}:
         code = np.fromiter(types, dtype=np.int64, count=n)
-    else:
+    else:                               # a frame built by hand with a type that is no FrameType
         code = np.fromiter((t if type(t) is FrameType else -1 for t in types), dtype=np.int64, count=n)
     t0 = np.fromiter(map(_T0, frames), dtype=np.int64, count=n)
     lost = np.fromiter(map(_LOST, frames), dtype=np.int64, count=n) != 0
-    return FrameColumns(code, t0, lost)
+    return FrameColumns(code, t0, lost, frames)
+
+
+def _names(payload: bytes, mode: int, fs: int) -> bool:
+    """True when a STATUS payload names board mode ``mode`` and rate ``fs`` (docs/PROTOCOL.md,
+    STATUS: mode u8 at byte 2, fs u32 at bytes 4 .. 7): taken or refused, it changes neither."""
+    return len(payload) >= 8 and payload[2] == mode and int.from_bytes(payload[4:8], "little") == fs
 
 
 class Segments:
@@ -73,6 +87,7 @@ class Segments:
         self.ignored_total = 0
         self.hit = False                    # the last frame checked needs :meth:`start`
         self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
+        self._marked: tuple | None = None   # (cols, mode, fs, bad, status) of :meth:`_marks`
 
     def check(self, f: Frame) -> bool:
         """True when ``f`` is a board reset or a frame of the other mode: call :meth:`start`
@@ -85,8 +100,9 @@ class Segments:
         known to pass :meth:`check` with no seq gap in front of it (:meth:`check`'s effects
         applied: the caller takes them as they are), with None for one frame the caller is to
         :meth:`check`.  A long batch is checked in one pass up to its first frame that does not
-        pass or its first STATUS frame (which may change the mode and fs the check reads), then
-        on from there, lazily: each pass sees the state the frames before it left."""
+        pass or its first STATUS frame that may change the mode or fs the check reads (one that
+        names the mode and fs in force cannot), then on from there, lazily: each pass sees the
+        state the frames before it left."""
         n = len(frames)
         if n < SCAN_MIN:
             for k in range(n):
@@ -110,27 +126,57 @@ class Segments:
 
     def _passing(self, cols: FrameColumns, start: int) -> int:
         """How many frames from ``start`` pass :meth:`check` with no seq gap, up to and
-        including the first STATUS frame; applies :meth:`check`'s effects for them."""
+        including the first STATUS frame that may change the mode or fs; applies :meth:`check`'s
+        effects for them.
+
+        The frames that fail against the frame before them and the STATUS frames of the batch
+        are found once per batch, mode and rate (:meth:`_marks`); only the frame at ``start``
+        is checked against :attr:`last_t0` here."""
         st = self.setup.status
-        other = _OTHER.get(st.mode) if st is not None else None
-        code, t, lost = cols.code[start:], cols.t0[start:], cols.lost[start:]
+        mode = st.mode if st is not None else None
+        other = _OTHER.get(mode) if mode is not None else None
+        bad, status = self._marks(cols, mode)
+        code, t, lost, _ = cols
+        t_s, last = int(t[start]), self.last_t0
+        if lost[start] or code[start] < 0 or (other is not None and code[start] == other) \
+                or (last is not None and (t_s < last or t_s - last > MAX_GAP_S * self.clock.fs)):
+            return 0
+        j = int(np.searchsorted(bad, start + 1))
+        end = int(bad[j]) if j < bad.size else t.size
+        j = int(np.searchsorted(status, start))
+        if j < status.size and status[j] < end:
+            end = int(status[j]) + 1
+        k = end - start
+        if self.ignored:
+            self._report()
+        self.last_t0 = int(t[end - 1])
+        self.hit = False
+        return k
+
+    def _marks(self, cols: FrameColumns, mode: int | None) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of the frames of ``cols`` that fail :meth:`check` against the frame before
+        them or are of the other mode than ``mode`` or follow a seq gap, indices of its STATUS
+        frames that may change the mode or the fs), kept while the batch, the mode and the
+        rate stay."""
+        fs = self.clock.fs
+        m = self._marked
+        if m is not None and m[0] is cols and m[1] == mode and m[2] == fs:
+            return m[3], m[4]
+        other = _OTHER.get(mode) if mode is not None else None
+        code, t, lost, frames = cols
         prev = np.empty_like(t)
-        prev[0] = t[0] if self.last_t0 is None else self.last_t0
+        prev[:1] = t[:1]
         prev[1:] = t[:-1]
-        bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * self.clock.fs)
+        bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * fs)
         if other is not None:
             bad |= code == int(other)
-        b = np.flatnonzero(bad)
-        k = int(b[0]) if b.size else t.size
-        status = np.flatnonzero(code[:k] == FrameType.STATUS)
-        if status.size:
-            k = int(status[0]) + 1
-        if k:
-            if self.ignored:
-                self._report()
-            self.last_t0 = int(t[k - 1])
-            self.hit = False
-        return k
+        status = np.flatnonzero(code == FrameType.STATUS)
+        if mode is not None and status.size:    # one naming the mode and fs in force changes neither
+            status = np.array([i for i in status.tolist() if not _names(frames[i].payload, mode, fs)],
+                              dtype=np.int64)
+        marks = np.flatnonzero(bad), status
+        self._marked = (cols, mode, fs, *marks)
+        return marks
 
     def pending(self, f: Frame) -> bool:
         """True when the last :meth:`check` (of ``f``) found a reset or the other mode."""

@@ -161,13 +161,16 @@ class SeverityChain:
     def decision(self, d: Decision, stamp: int) -> list:
         """Per channel: its severity message, then the events of what changed."""
         out: list = []
-        for c, ch in enumerate(self.channels):
+        extras: list[dict] = []
+        for c in range(len(self.channels)):
             extra = {}
             if self.combined is not None and self.combined[c]:
                 extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c])}
                 if np.isfinite(d.level[c]):
                     extra["level_ratio"] = float(d.level[c])
-            m = messages.severity(stamp, ch.name, d, c, self.R[c], **extra)
+            extras.append(extra)
+        msgs = messages.severities(stamp, [ch.name for ch in self.channels], d, self.R, extras)
+        for c, m in enumerate(msgs):
             out.append(m)
             out += self._note(c, d, m.msg, stamp)
         return out

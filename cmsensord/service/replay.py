@@ -24,8 +24,9 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     MCAP file or None if it could not be finished, the Processor)."""
     # as fast as possible: 128-KiB reads (2.6 s of 1 RAW channel), so each of the chain's per-call
     # costs (tacho, orders, indicators) comes a few times fewer; the messages are the same for
-    # any split of the stream
-    capture = CaptureSource(path, chunk=REPLAY_CHUNK if speed is None else 1 << 12)  # LinkError before any output
+    # any split of the stream; the frames as columns (FrameBatch)
+    capture = CaptureSource(path, chunk=REPLAY_CHUNK if speed is None else 1 << 12,   # LinkError before any output
+                            batches=True)
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     route_sink_events(sink, proc.log)

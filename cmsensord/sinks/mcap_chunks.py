@@ -14,6 +14,7 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Iterable
+from itertools import chain
 from typing import Any
 
 import zstandard
@@ -26,7 +27,6 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
-    MessageIndex,
     Metadata,
     MetadataIndex,
     Schema,
@@ -55,8 +55,17 @@ def build_records(*records: Any) -> bytes:
 
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, records' byte length
 MESSAGE_FIXED = 2 + 4 + 8 + 8  # body bytes of a message record before its data
 OP_MESSAGE = int(Opcode.MESSAGE)
+
+
+def message_index(channel_id: int, records: list[tuple[int, int]]) -> bytes:
+    """The MessageIndex record of ``records`` (log time, offset in the chunk) of one channel,
+    the bytes ``mcap.records.MessageIndex(...).write`` builds, packed in one call."""
+    n = len(records)
+    return _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * n, channel_id, 16 * n) + \
+        struct.pack(f"<{2 * n}Q", *chain.from_iterable(records))
 
 
 class ChunkWriter:
@@ -236,13 +245,15 @@ class ChunkWriter:
         t0, t1 = chunk.message_start_time, chunk.message_end_time
         chunk_start = self.pos
         index_start = chunk_start + len(chunk_raw)
-        builder = RecordBuilder()
+        parts: list[bytes] = []
+        size = 0
         offsets: dict[int, int] = {}
         for channel_id, records in index.items():
-            offsets[channel_id] = index_start + builder.count
-            MessageIndex(channel_id=channel_id, records=records).write(builder)
+            offsets[channel_id] = index_start + size
+            parts.append(message_index(channel_id, records))
+            size += len(parts[-1])
             self._channel_counts[channel_id] = self._channel_counts.get(channel_id, 0) + len(records)
-        index_raw = builder.end()
+        index_raw = b"".join(parts)
         self._chunk_indexes.append(
             ChunkIndex(
                 message_start_time=t0,
