@@ -34,21 +34,31 @@ class CausalSpeed(TachoState):
         c0 = self._c0
         k = np.fromiter((t[0] for t in todo), dtype=np.int64, count=len(todo))
         known = np.fromiter((t[1] for t in todo), dtype=np.float64, count=len(todo))
-        idx = k[:, None] - np.arange(self.causal_window)[None, :]
-        use = idx >= c0
-        idx = np.where(use, idx, k[:, None]) - c0
+        m = self.causal_window
         kr = k - c0
-        dx = np.where(use, Tc[idx] - Tc[kr][:, None], 0.0)
+        Tk = Tc[kr]
+        if int(kr.min()) >= m - 1:
+            # every window complete (the usual case): no masks, the same values
+            idx = kr[:, None] - self._cback[None, :]
+            dx = Tc[idx] - Tk[:, None]
+            y = nc[idx] - nc[kr][:, None]
+            wgt = np.broadcast_to(self._ckernel, dx.shape)
+            npts = np.full(k.size, m)
+        else:
+            idx = k[:, None] - self._cback[None, :]
+            use = idx >= c0
+            idx = np.where(use, idx, k[:, None]) - c0
+            dx = np.where(use, Tc[idx] - Tk[:, None], 0.0)
+            y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
+            wgt = use * self._ckernel[None, :]
+            npts = use.sum(axis=1)
         S = np.abs(dx).max(axis=1)
         S = np.where(S > 0, S, 1.0)
         x = dx / S[:, None]
-        y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
-        wgt = use * self._ckernel[None, :]
-        npts = use.sum(axis=1)
         coef = weighted_quadratic(x, y, wgt, npts)
         speed = coef[:, 1] / (S * self.ppr)
         acc = 2.0 * coef[:, 2] / (S * S * self.ppr)
-        self._append_segments(np.maximum(known, Tc[kr]), Tc[kr], speed, acc,
+        self._append_segments(np.maximum(known, Tk), Tk, speed, acc,
                               (npts >= 2).astype(np.float64))
 
     def _append_segments(self, key: FloatArray, T: FloatArray, speed: FloatArray, acc: FloatArray,

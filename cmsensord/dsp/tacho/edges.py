@@ -119,6 +119,7 @@ class TachoState(ABC):
     _kernel: FloatArray  # tricube weights of the smoothing window
     _offsets: npt.NDArray[np.signedinteger]  # pulse positions -h .. h of the window
     _ckernel: FloatArray  # weights of the causal window
+    _cback: IntArray  # 0 .. causal_window - 1
     # coverage, runs and events
     counters: TachoCounters
     _now: int | None  # coverage end, samples (exclusive)

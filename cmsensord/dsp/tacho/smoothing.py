@@ -241,18 +241,27 @@ class KnotSmoothing(TachoState):
         h = self.half_window
         Tc, nc = self._committed()
         c0 = self._c0
-        lo = np.maximum(centres - h, 0)
-        hi = np.minimum(centres + h, K - 1)
-        idx = centres[:, None] + self._offsets[None, :]
-        use = (idx >= lo[:, None]) & (idx <= hi[:, None])
-        idx = np.where(use, idx, centres[:, None]) - c0
         k = centres - c0
-        dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
+        if centres.size and int(centres[0]) >= h and int(centres[-1]) + h <= K - 1:
+            # every window complete (the usual case): no masks, the same values
+            idx = k[:, None] + self._offsets[None, :]
+            Tk = Tc[k]
+            dx = Tc[idx] - Tk[:, None]
+            y = nc[idx] - nc[k][:, None]
+            wgt = np.broadcast_to(self._kernel, dx.shape)
+            npts = np.full(k.size, 2 * h + 1)
+        else:
+            lo = np.maximum(centres - h, 0)
+            hi = np.minimum(centres + h, K - 1)
+            idx = centres[:, None] + self._offsets[None, :]
+            use = (idx >= lo[:, None]) & (idx <= hi[:, None])
+            idx = np.where(use, idx, centres[:, None]) - c0
+            dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
+            y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
+            wgt = use * self._kernel[None, :]
+            npts = use.sum(axis=1)
         S = np.abs(dx).max(axis=1)
         x = dx / S[:, None]
-        y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
-        wgt = use * self._kernel[None, :]
-        npts = use.sum(axis=1)
         coef = weighted_quadratic(x, y, wgt, npts)
         T = Tc[k]
         th = run.base + (nc[k] + coef[:, 0]) / self.ppr

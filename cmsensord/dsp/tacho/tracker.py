@@ -8,10 +8,10 @@ measured accuracy: docs/tacho.md.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -133,6 +133,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         # causal segments (see "Causal speed"): rows key, T, speed, acceleration, valid
         u = np.arange(self.causal_window) / self.causal_window
         self._ckernel = (1.0 - u ** 3) ** 3          # weight of the edge j places back
+        self._cback = np.arange(self.causal_window)  # j: the edges of a causal window
         self._sbuf = np.empty((5, 1024))
         self._slo = 0
         self._shi = 0
@@ -191,7 +192,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         if F == 0:
             self._finalise(ended=False)
             self._prune()
-            return TachoUpdate([], self.final_until, self.valid, replace(self.counters))
+            return TachoUpdate([], self.final_until, self.valid, copy.copy(self.counters))
         # Frames without edges only advance the coverage, and a timeout check at the
         # end of each of them is the same as one check at the end of the last one
         # before the next edge (the run's timeout changes only with an edge, and the
@@ -202,6 +203,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
             prev = int(t0[n_ok - 1]) if n_ok else self._last_t0
             err = ValueError(f"TACHO frames must come in time order: t0 {int(t0[n_ok])} after t0 {prev}")
         full = np.flatnonzero(sizes)
+        ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
         if full.size:                                # all edges at once: q in 1/256 sample
             frame = np.repeat(full, sizes[full])
             out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
@@ -215,12 +217,10 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
                 full = full[full < f_bad]
             q = off + t0[frame] * SUB
             order = np.lexsort((q, frame))           # time order within each frame
-            ends = np.maximum.accumulate(t0[:n_ok] + self.block_len)
             first = np.cumsum(sizes[full]) - sizes[full]     # the first edge of each frame
             adv = np.full(q.size, -1, dtype=np.int64)        # the coverage before it: the frames before
             adv[first] = np.where(full > 0, ends[np.maximum(full - 1, 0)], -1)
             self._edges(q[order], adv)
-        ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
         if n_ok:
             self._advance(int(ends[n_ok - 1]))
             self._last_t0 = int(t0[n_ok - 1])
@@ -232,7 +232,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._prune()
         ev = self._events
         self._events = []
-        return TachoUpdate(ev, self.final_until, self.valid, replace(self.counters))
+        return TachoUpdate(ev, self.final_until, self.valid, copy.copy(self.counters))
 
     def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
         """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
