@@ -43,16 +43,16 @@ def weighted_quadratic(x: FloatArray, y: FloatArray, wgt: FloatArray, npts: IntA
     np.multiply(wx2, y, out=terms[:, 7])
     mom = terms.sum(axis=2)
     if rows <= _SCALAR_ROWS:
-        return np.array([_solve_normal(*m, n) for m, n in zip(mom.tolist(), npts.tolist())],
+        return np.array([_solve_normal(m, n) for m, n in zip(mom.tolist(), npts.tolist())],
                         dtype=np.float64).reshape(rows, 3)
     return solve_normal_rows(mom, npts)
 
 
-def _solve_normal(s0: float, s1: float, s2: float, s3: float, s4: float, b0: float, b1: float, b2: float,
-                  n: int) -> tuple[float, float, float]:
+def _solve_normal(mom: list[float], n: int) -> tuple[float, float, float]:
     """One row of :func:`solve_normal_rows` on Python floats (the same operations, so the same bits)."""
     if n < 2:
         return 0.0, 0.0, 0.0
+    s0, s1, s2, s3, s4, b0, b1, b2 = mom
     a02, a12, a22 = (s2, s3, s4) if n >= 3 else (0.0, 0.0, 1.0)
     if n < 3:
         b2 = 0.0
