@@ -27,8 +27,8 @@ _SCALAR_ROWS = 8  # up to this many rows the 3x3 solves run on Python floats (th
 
 def weighted_quadratic(x: FloatArray, y: FloatArray, wgt: FloatArray, npts: IntArray) -> FloatArray:
     """Per row, the weighted least-squares quadratic y = c0 + c1 x + c2 x^2 over its
-    points (weights ``wgt``, 0 for unused ones): (rows, 3).  A straight line where a
-    row has two points, zeros where it has fewer."""
+    points (weights ``wgt``, 0 for unused ones; a single row of weights serves every row):
+    (rows, 3).  A straight line where a row has two points, zeros where it has fewer."""
     rows, width = x.shape
     # the weighted moments s0..s4 and right-hand sides b0..b2 (each a sum over its
     # window, the same products as written out term by term), in one reduction
@@ -248,7 +248,7 @@ class KnotSmoothing(TachoState):
             Tk = Tc[k]
             dx = Tc[idx] - Tk[:, None]
             y = nc[idx] - nc[k][:, None]
-            wgt = np.broadcast_to(self._kernel, dx.shape)
+            wgt = self._kernel                   # broadcast over the rows
             npts = np.full(k.size, 2 * h + 1)
         else:
             lo = np.maximum(centres - h, 0)
