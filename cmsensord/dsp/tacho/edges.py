@@ -64,6 +64,10 @@ class TachoCounters:
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
 
+    def snapshot(self) -> TachoCounters:
+        """A copy (what dataclasses.replace gives, without its per-field work: every update)."""
+        return TachoCounters(**vars(self))
+
 
 class TachoUpdate(NamedTuple):
     """What one :meth:`TachoTracker.update` produced."""

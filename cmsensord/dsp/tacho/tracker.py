@@ -8,7 +8,6 @@ measured accuracy: docs/tacho.md.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections import deque
 from collections.abc import Iterable, Sequence
@@ -192,7 +191,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         if F == 0:
             self._finalise(ended=False)
             self._prune()
-            return TachoUpdate([], self.final_until, self.valid, copy.copy(self.counters))
+            return TachoUpdate([], self.final_until, self.valid, self.counters.snapshot())
         # Frames without edges only advance the coverage, and a timeout check at the
         # end of each of them is the same as one check at the end of the last one
         # before the next edge (the run's timeout changes only with an edge, and the
@@ -232,7 +231,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._prune()
         ev = self._events
         self._events = []
-        return TachoUpdate(ev, self.final_until, self.valid, copy.copy(self.counters))
+        return TachoUpdate(ev, self.final_until, self.valid, self.counters.snapshot())
 
     def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
         """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
