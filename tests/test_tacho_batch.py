@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from cmsensord.dsp.tacho import TachoTracker
+from cmsensord.dsp.tacho import tracker as tacho_tracker
 from cmsensord.dsp.tacho.edges import EdgeRuns
 
 L = 250
@@ -107,3 +108,29 @@ def test_update_flat_checks_its_arguments_and_raises_like_update_on_a_step_back(
         ref.update([0, 250, 0, 500], [[5], [], [7], []])
     assert str(a.value) == str(b.value) and "time order" in str(a.value)
     assert tr.counters == ref.counters and tr.covered_until == ref.covered_until
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_few_frames_on_python_ints_equal_the_array_code(seed, monkeypatch):
+    """A live call's ten or so frames take the Python-int path of _update (tracker._few_frames):
+    the same events, counters and values as the array code, bit for bit."""
+    rnd = random.Random(200 + seed)
+    t0, edges = random_edges(rnd, 30.0)
+    cuts = sorted(rnd.sample(range(1, len(t0)), 300))         # about ten frames a call
+    calls = []
+    few = TachoTracker._few_frames
+
+    def spy(self, *args):
+        calls.append(few(self, *args))
+        return calls[-1]
+
+    monkeypatch.setattr(TachoTracker, "_few_frames", spy)
+    got = run(t0, edges, cuts, batch=True, flat=True)
+    assert len(calls) > 250 and all(calls)
+    monkeypatch.setattr(tacho_tracker, "_FEW_FRAMES", 0)     # every call by the array code
+    calls.clear()
+    ref = run(t0, edges, cuts, batch=True, flat=True)
+    assert not calls
+    same(got, ref)
+    c = ref[1][-1][2]
+    assert c.missed + c.extra > 0 and c.lost > 0              # the stream had repairs and stops

@@ -12,7 +12,7 @@ come.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from operator import attrgetter
 
 import numpy as np
@@ -38,6 +38,9 @@ class RawBlocks:
     chan: np.ndarray        # (F,) the board channel of each frame
     x: np.ndarray           # (F, block_len) float64 m/s²
     n_channels: int         # C of the board
+    # worked out once (the arrays are not changed after construction; each chain asks)
+    _complete_memo: bool | None = field(default=None, init=False, repr=False, compare=False)
+    _runs_memo: list[tuple[int, int]] | None = field(default=None, init=False, repr=False, compare=False)
 
     def rms(self) -> np.ndarray:
         """float32 (B, C): the block RMS per board channel, NaN where a frame is missing."""
@@ -61,6 +64,11 @@ class RawBlocks:
 
     def _complete(self) -> bool:
         """Frame i is block i // C, channel i % C (no frame lost, channels in order)."""
+        if self._complete_memo is None:
+            self._complete_memo = self._check_complete()
+        return self._complete_memo
+
+    def _check_complete(self) -> bool:
         C = self.n_channels
         n = len(self.row)
         return n == len(self.t0) * C and bool((self.row == np.arange(n) // C).all()) \
@@ -68,9 +76,11 @@ class RawBlocks:
 
     def runs(self) -> list[tuple[int, int]]:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
-        L = self.x.shape[1]
-        cuts = (np.flatnonzero(np.diff(self.t0) != L) + 1).tolist()
-        return list(zip([0, *cuts], [*cuts, len(self.t0)]))
+        if self._runs_memo is None:
+            L = self.x.shape[1]
+            cuts = (np.flatnonzero(np.diff(self.t0) != L) + 1).tolist()
+            self._runs_memo = list(zip([0, *cuts], [*cuts, len(self.t0)]))
+        return list(self._runs_memo)
 
 
 class RawInput:

@@ -88,16 +88,16 @@ class Shaft:
 
     def feed(self, clock: BlockClock) -> list[Event]:
         """The waiting TACHO frames -> the tracker; its events (and bad payloads)."""
-        frames, dropped = self._in_time_order(self.waiting)
+        frames, dropped, t0s = self._in_time_order(self.waiting)
         self.waiting, events = [], []
         if dropped:
             events.append(Event("decode_error", None, f"{dropped} TACHO frame(s) before the newest one "
                                 "in board time dropped (the tacho needs time order)"))
-        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
+        t0 = np.array(t0s, dtype=np.int64)
         counts, offsets, bad = decode_tacho_many([f.payload for f in frames])
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
-        self._note_gaps(t0, clock.block_len)
+        self._note_gaps(t0s, clock.block_len)
         u = self.tracker().update_flat(t0, counts, offsets)
         for ev in u.events:
             if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
@@ -107,32 +107,35 @@ class Shaft:
                                 {"count": int(ev.count)}))
         return events
 
-    def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int]:
-        """The frames at or after the newest t0 fed so far, and how many stepped back (dropped)."""
-        if not frames:
-            return frames, 0
-        t0 = np.fromiter((f.t0_unwrapped for f in frames), dtype=np.int64, count=len(frames))
-        newest = np.maximum.accumulate(t0)          # the newest t0 before each (kept or not: the same)
-        before = np.empty_like(newest)
-        before[0] = t0[0] if self._fed_t0 is None else self._fed_t0
-        before[1:] = newest[:-1]
-        if self._fed_t0 is not None:
-            before = np.maximum(before, self._fed_t0)
-        keep = t0 >= before
-        self._fed_t0 = int(max(before[-1], t0[-1]))
-        if keep.all():
-            return frames, 0
-        kept = [frames[i] for i in np.flatnonzero(keep).tolist()]
-        return kept, len(frames) - len(kept)
+    def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int, list[int]]:
+        """The frames at or after the newest t0 fed so far, how many stepped back (dropped),
+        and the t0 of those kept.  On Python ints: a live call brings about ten frames."""
+        fed = self._fed_t0
+        kept: list[Frame] = []
+        t0s: list[int] = []
+        newest = before = None                      # the newest t0 before each (kept or not)
+        for f in frames:
+            t = f.t0_unwrapped
+            before = (t if fed is None else fed) if newest is None else \
+                (newest if fed is None else max(newest, fed))
+            if t >= before:
+                kept.append(f)
+                t0s.append(t)
+            newest = t if newest is None else max(newest, t)
+        if newest is not None and before is not None:
+            self._fed_t0 = max(before, frames[-1].t0_unwrapped)
+        return kept, len(frames) - len(kept), t0s
 
-    def _note_gaps(self, t0: np.ndarray, L: int) -> None:
+    def _note_gaps(self, t0: list[int], L: int) -> None:
         """Gaps between consecutive TACHO frames (one per block): lost frames."""
-        if not len(t0):
+        if not t0:
             return
-        prev = np.concatenate(([t0[0] if self._prev_t0 is None else self._prev_t0], t0[:-1]))
-        for a, b in zip(prev[(t0 - prev) > L].tolist(), t0[(t0 - prev) > L].tolist()):
-            self._gaps.append((a + L, b))
-        self._prev_t0 = int(t0[-1])
+        prev = t0[0] if self._prev_t0 is None else self._prev_t0
+        for t in t0:
+            if t - prev > L:
+                self._gaps.append((prev + L, t))
+            prev = t
+        self._prev_t0 = t0[-1]
 
     def _in_gap(self, sample: float, L: int) -> bool:
         """True when ``sample`` is in (or within a block of) a gap of lost TACHO frames."""

@@ -442,14 +442,20 @@ class OrderTracker:
     def _block_stats(self, starts, wave, env, rpm, miss) -> BlockStats:
         """Statistics of whole blocks: wave/env (E, B, C, K), rpm (E, B), miss (E, B, C)
         or None (none missing)."""
-        rms = np.sqrt(np.mean(wave * wave, axis=1))
-        amp = np.mean(env, axis=1)
-        rmean = np.mean(rpm, axis=1)
-        speed_ok = np.all(np.abs(rpm) >= self.min_rpm, axis=1)          # NaN -> False
-        f_hi = np.max(np.abs(rpm), axis=1) / 60.0 * self._top_order
+        # np.mean is the sum over the axis divided by its length: the same operations, without
+        # its Python wrapper (this runs at every live call)
+        n = wave.shape[1]
+        rms = wave * wave
+        rms = np.sqrt(rms.sum(axis=1) / n)
+        amp = env.sum(axis=1) / n
+        rmean = rpm.sum(axis=1) / n
+        arpm = np.abs(rpm)
+        speed_ok = (arpm >= self.min_rpm).all(axis=1)                   # NaN -> False
+        f_hi = arpm.max(axis=1) / 60.0 * self._top_order
         valid = speed_ok & (f_hi < 0.5 * self.fs_track)
-        rms[~valid] = np.nan
-        amp[~valid] = np.nan
+        if not valid.all():
+            rms[~valid] = np.nan
+            amp[~valid] = np.nan
         starts = np.asarray(starts, dtype=np.int64)
         t_in = (starts + self.block - 1) * self.decimate - self.delay_in
         if miss is None:

@@ -9,6 +9,8 @@ invalid after the run's timeout.  Any split of the frames gives the same values.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -34,21 +36,31 @@ class CausalSpeed(TachoState):
         c0 = self._c0
         k = np.fromiter((t[0] for t in todo), dtype=np.int64, count=len(todo))
         known = np.fromiter((t[1] for t in todo), dtype=np.float64, count=len(todo))
-        idx = k[:, None] - np.arange(self.causal_window)[None, :]
-        use = idx >= c0
-        idx = np.where(use, idx, k[:, None]) - c0
+        m = self.causal_window
         kr = k - c0
-        dx = np.where(use, Tc[idx] - Tc[kr][:, None], 0.0)
+        Tk = Tc[kr]
+        if int(kr.min()) >= m - 1:
+            # every window complete (the usual case): no masks, the same values
+            idx = kr[:, None] - self._cback[None, :]
+            dx = Tc[idx] - Tk[:, None]
+            y = nc[idx] - nc[kr][:, None]
+            wgt = self._ckernel                  # broadcast over the rows
+            npts = np.full(k.size, m)
+        else:
+            idx = k[:, None] - self._cback[None, :]
+            use = idx >= c0
+            idx = np.where(use, idx, k[:, None]) - c0
+            dx = np.where(use, Tc[idx] - Tk[:, None], 0.0)
+            y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
+            wgt = use * self._ckernel[None, :]
+            npts = use.sum(axis=1)
         S = np.abs(dx).max(axis=1)
         S = np.where(S > 0, S, 1.0)
         x = dx / S[:, None]
-        y = np.where(use, nc[idx] - nc[kr][:, None], 0.0)
-        wgt = use * self._ckernel[None, :]
-        npts = use.sum(axis=1)
         coef = weighted_quadratic(x, y, wgt, npts)
         speed = coef[:, 1] / (S * self.ppr)
         acc = 2.0 * coef[:, 2] / (S * S * self.ppr)
-        self._append_segments(np.maximum(known, Tc[kr]), Tc[kr], speed, acc,
+        self._append_segments(np.maximum(known, Tk), Tk, speed, acc,
                               (npts >= 2).astype(np.float64))
 
     def _append_segments(self, key: FloatArray, T: FloatArray, speed: FloatArray, acc: FloatArray,
@@ -93,18 +105,18 @@ class CausalSpeed(TachoState):
         a = int(np.searchsorted(keys, start, side="right")) - 1       # segment of the first sample
         b = int(np.searchsorted(keys, stop - 1, side="right")) - 1    # ... and of the last
         first = max(a, 0)
-        # sample s is in segment k when keys[k] <= s < keys[k + 1]: cut at ceil(keys)
-        cuts = np.clip(np.ceil(keys[first + 1:b + 1]), start, stop).astype(np.int64) if b > first else \
-            np.empty(0, dtype=np.int64)
+        # sample s is in segment k when keys[k] <= s < keys[k + 1]: cut at ceil(keys); the few
+        # cuts of a call on Python ints (np.clip(np.ceil(...)) gave the same ones)
+        cuts = [min(max(math.ceil(v), start), stop) for v in keys[first + 1:b + 1].tolist()]
         # samples before the first segment
         head = int(min(max(np.ceil(keys[0]), start), stop)) - start if a < 0 else 0
-        edges = np.concatenate(([start + head], cuts, [stop]))
-        counts = np.diff(edges)
-        seg = np.arange(first, first + counts.size) + lo
+        edges = [start + head, *cuts, stop]
+        counts = [e1 - e0 for e0, e1 in zip(edges, edges[1:])]
+        seg = slice(lo + first, lo + first + len(counts))              # consecutive segments
         x = np.arange(start + head, stop, dtype=np.float64)
         T, w, acc = np.repeat(self._sbuf[1:4, seg], counts, axis=1)    # one gather for the 3 rows
         x -= T
-        if self._overdue(seg, edges, counts):
+        if self._overdue(seg, edges):
             sp, valid = self._causal_speed(x, w, acc, np.repeat(self._sbuf[4, seg], counts), None)
         else:                                   # _causal_speed without a cap: the same values
             sp = acc * x
@@ -118,16 +130,16 @@ class CausalSpeed(TachoState):
         sp *= self.fs
         return sp, valid
 
-    def _overdue(self, seg: npt.NDArray[np.int64], edges: npt.NDArray[np.int64], counts: npt.NDArray[np.int64]
-                 ) -> bool:
-        """Whether any sample edges[i] .. edges[i + 1] - 1 of segment seg[i] is past the
-        causal slack (:meth:`_causal_speed`'s ``late``).  ``tau w`` grows with tau within a
+    def _overdue(self, seg: slice, edges: list[int]) -> bool:
+        """Whether any sample edges[i] .. edges[i + 1] - 1 of the i-th segment of ``seg`` is past
+        the causal slack (:meth:`_causal_speed`'s ``late``).  ``tau w`` grows with tau within a
         segment (tau >= 0 from its key on, rounding is monotonic; NaN or w <= 0 is never
-        late), so the segment's last sample decides, with the same arithmetic."""
-        full = counts > 0
-        tau = (edges[1:][full] - 1).astype(np.float64) - self._sbuf[1, seg[full]]
-        with np.errstate(invalid="ignore"):
-            return bool((tau * self._sbuf[2, seg[full]] > _CAUSAL_SLACK / self.ppr).any())
+        late), so the segment's last sample decides, with the same arithmetic (on Python
+        floats: a call has a few segments)."""
+        slack = _CAUSAL_SLACK / self.ppr
+        T, w = self._sbuf[1, seg].tolist(), self._sbuf[2, seg].tolist()
+        return any(e1 > e0 and (float(e1 - 1) - t) * wi > slack
+                   for e0, e1, t, wi in zip(edges, edges[1:], T, w))
 
     def _causal_speed(self, tau: FloatArray, w: FloatArray, a: FloatArray, v: FloatArray,
                       before: BoolArray | None) -> tuple[FloatArray, BoolArray]:

@@ -64,6 +64,10 @@ class TachoCounters:
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
 
+    def snapshot(self) -> TachoCounters:
+        """A copy (what dataclasses.replace gives, without its per-field work: every update)."""
+        return TachoCounters(**vars(self))
+
 
 class TachoUpdate(NamedTuple):
     """What one :meth:`TachoTracker.update` produced."""
@@ -119,6 +123,7 @@ class TachoState(ABC):
     _kernel: FloatArray  # tricube weights of the smoothing window
     _offsets: npt.NDArray[np.signedinteger]  # pulse positions -h .. h of the window
     _ckernel: FloatArray  # weights of the causal window
+    _cback: IntArray  # 0 .. causal_window - 1
     # coverage, runs and events
     counters: TachoCounters
     _now: int | None  # coverage end, samples (exclusive)

@@ -22,31 +22,82 @@ try:  # the compiled loop of evaluate() is optional: numpy is the fallback (same
 except ImportError:  # pragma: no cover - depends on the build
     _kernel = None
 
-_HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])  # moments s0..s4 -> normal equations
+_SCALAR_ROWS = 8  # up to this many rows the 3x3 solves run on Python floats (the same arithmetic)
 
 
 def weighted_quadratic(x: FloatArray, y: FloatArray, wgt: FloatArray, npts: IntArray) -> FloatArray:
     """Per row, the weighted least-squares quadratic y = c0 + c1 x + c2 x^2 over its
-    points (weights ``wgt``, 0 for unused ones): (rows, 3).  A straight line where a
-    row has two points, zeros where it has fewer."""
-    x2 = x * x
-    wx, wx2 = wgt * x, wgt * x2
+    points (weights ``wgt``, 0 for unused ones; a single row of weights serves every row):
+    (rows, 3).  A straight line where a row has two points, zeros where it has fewer."""
+    rows, width = x.shape
     # the weighted moments s0..s4 and right-hand sides b0..b2 (each a sum over its
     # window, the same products as written out term by term), in one reduction
-    mom = np.stack([wgt, wx, wx2, wx2 * x, wx2 * x2, wgt * y, wx * y, wx2 * y], axis=1).sum(axis=2)
-    A = mom[:, _HANKEL]                  # [[s0 s1 s2] [s1 s2 s3] [s2 s3 s4]]
-    b = mom[:, 5:]
-    lin = npts < 3                       # two points: a straight line; one: no speed
-    if lin.any():
-        A[lin, 2, :] = 0.0
-        A[lin, :, 2] = 0.0
-        A[lin, 2, 2] = 1.0
-        b[lin, 2] = 0.0
+    terms = np.empty((rows, 8, width))
+    terms[:, 0] = wgt
+    x2 = x * x
+    wx, wx2 = np.multiply(wgt, x, out=terms[:, 1]), np.multiply(wgt, x2, out=terms[:, 2])
+    np.multiply(wx2, x, out=terms[:, 3])
+    np.multiply(wx2, x2, out=terms[:, 4])
+    np.multiply(wgt, y, out=terms[:, 5])
+    np.multiply(wx, y, out=terms[:, 6])
+    np.multiply(wx2, y, out=terms[:, 7])
+    mom = terms.sum(axis=2)
+    if rows <= _SCALAR_ROWS:
+        return np.array([_solve_normal(m, n) for m, n in zip(mom.tolist(), npts.tolist())],
+                        dtype=np.float64).reshape(rows, 3)
+    return solve_normal_rows(mom, npts)
+
+
+def _solve_normal(mom: list[float], n: int) -> tuple[float, float, float]:
+    """One row of :func:`solve_normal_rows` on Python floats (the same operations, so the same bits)."""
+    if n < 2:
+        return 0.0, 0.0, 0.0
+    s0, s1, s2, s3, s4, b0, b1, b2 = mom
+    a02, a12, a22 = (s2, s3, s4) if n >= 3 else (0.0, 0.0, 1.0)
+    if n < 3:
+        b2 = 0.0
+    m1 = s1 / s0
+    d11 = s2 - m1 * s1
+    d12 = a12 - m1 * a02
+    e1 = b1 - m1 * b0
+    m2 = a02 / s0
+    d22 = a22 - m2 * a02
+    e2 = b2 - m2 * b0
+    m3 = d12 / d11
+    c2 = (e2 - m3 * e1) / (d22 - m3 * d12)
+    c1 = (e1 - d12 * c2) / d11
+    c0 = (b0 - s1 * c1 - a02 * c2) / s0
+    return c0, c1, c2
+
+
+def solve_normal_rows(mom: FloatArray, npts: IntArray) -> FloatArray:
+    """Per row of moments ``mom`` (rows, 8) = s0..s4, b0..b2, the solution c of the normal
+    equations [[s0 s1 s2] [s1 s2 s3] [s2 s3 s4]] c = b by symmetric Gaussian elimination
+    (closed form, no pivoting: s0 >= |s1|, s2 when |x| <= 1): (rows, 3).  Rows with
+    ``npts`` 2 solve for a straight line (c2 = 0), rows with fewer give zeros."""
+    s0, s1, s2, s3, s4, b0, b1, b2 = mom.T
+    lin = npts < 3
     one = npts < 2
+    a02 = np.where(lin, 0.0, s2)
+    a12 = np.where(lin, 0.0, s3)
+    a22 = np.where(lin, 1.0, s4)
+    b2 = np.where(lin, 0.0, b2)
     if one.any():
-        A[one] = np.eye(3)
-        b[one] = 0.0
-    return np.linalg.solve(A, b[..., None])[..., 0]
+        s0, s1, s2, b0, b1 = (np.where(one, v, r) for v, r in
+                              ((1.0, s0), (0.0, s1), (1.0, s2), (0.0, b0), (0.0, b1)))
+    m1 = s1 / s0
+    d11 = s2 - m1 * s1
+    d12 = a12 - m1 * a02
+    e1 = b1 - m1 * b0
+    m2 = a02 / s0
+    d22 = a22 - m2 * a02
+    e2 = b2 - m2 * b0
+    m3 = d12 / d11
+    out = np.empty((mom.shape[0], 3))
+    c2 = np.divide(e2 - m3 * e1, d22 - m3 * d12, out=out[:, 2])
+    c1 = np.divide(e1 - d12 * c2, d11, out=out[:, 1])
+    np.divide(b0 - s1 * c1 - a02 * c2, s0, out=out[:, 0])
+    return out
 
 
 def make_room(buf: FloatArray, lo: int, hi: int, n: int) -> tuple[FloatArray, int, int]:
@@ -190,18 +241,27 @@ class KnotSmoothing(TachoState):
         h = self.half_window
         Tc, nc = self._committed()
         c0 = self._c0
-        lo = np.maximum(centres - h, 0)
-        hi = np.minimum(centres + h, K - 1)
-        idx = centres[:, None] + self._offsets[None, :]
-        use = (idx >= lo[:, None]) & (idx <= hi[:, None])
-        idx = np.where(use, idx, centres[:, None]) - c0
         k = centres - c0
-        dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
+        if centres.size and int(centres[0]) >= h and int(centres[-1]) + h <= K - 1:
+            # every window complete (the usual case): no masks, the same values
+            idx = k[:, None] + self._offsets[None, :]
+            Tk = Tc[k]
+            dx = Tc[idx] - Tk[:, None]
+            y = nc[idx] - nc[k][:, None]
+            wgt = self._kernel                   # broadcast over the rows
+            npts = np.full(k.size, 2 * h + 1)
+        else:
+            lo = np.maximum(centres - h, 0)
+            hi = np.minimum(centres + h, K - 1)
+            idx = centres[:, None] + self._offsets[None, :]
+            use = (idx >= lo[:, None]) & (idx <= hi[:, None])
+            idx = np.where(use, idx, centres[:, None]) - c0
+            dx = np.where(use, Tc[idx] - Tc[k][:, None], 0.0)
+            y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
+            wgt = use * self._kernel[None, :]
+            npts = use.sum(axis=1)
         S = np.abs(dx).max(axis=1)
         x = dx / S[:, None]
-        y = np.where(use, nc[idx] - nc[k][:, None], 0.0)
-        wgt = use * self._kernel[None, :]
-        npts = use.sum(axis=1)
         coef = weighted_quadratic(x, y, wgt, npts)
         T = Tc[k]
         th = run.base + (nc[k] + coef[:, 0]) / self.ppr

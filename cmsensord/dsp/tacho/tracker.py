@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -31,6 +30,9 @@ from cmsensord.dsp.tacho.smoothing import KnotSmoothing
 
 if TYPE_CHECKING:
     from cmsensord.protocol import Frame
+
+
+_FEW_FRAMES = 64  # up to this many frames an update prepares its edges on Python ints
 
 
 class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
@@ -133,6 +135,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         # causal segments (see "Causal speed"): rows key, T, speed, acceleration, valid
         u = np.arange(self.causal_window) / self.causal_window
         self._ckernel = (1.0 - u ** 3) ** 3          # weight of the edge j places back
+        self._cback = np.arange(self.causal_window)  # j: the edges of a causal window
         self._sbuf = np.empty((5, 1024))
         self._slo = 0
         self._shi = 0
@@ -191,7 +194,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         if F == 0:
             self._finalise(ended=False)
             self._prune()
-            return TachoUpdate([], self.final_until, self.valid, replace(self.counters))
+            return TachoUpdate([], self.final_until, self.valid, self.counters.snapshot())
         # Frames without edges only advance the coverage, and a timeout check at the
         # end of each of them is the same as one check at the end of the last one
         # before the next edge (the run's timeout changes only with an edge, and the
@@ -201,38 +204,63 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         if n_ok < F:
             prev = int(t0[n_ok - 1]) if n_ok else self._last_t0
             err = ValueError(f"TACHO frames must come in time order: t0 {int(t0[n_ok])} after t0 {prev}")
-        full = np.flatnonzero(sizes)
-        if full.size:                                # all edges at once: q in 1/256 sample
-            frame = np.repeat(full, sizes[full])
-            out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
-            if out.any():
-                f_bad = int(frame[int(np.argmax(out))])
-                o = off[frame == f_bad]
-                err = ValueError(f"edge offsets must be u32, got {o.min()}..{o.max()}")
-                bad_offsets = True
-                n_ok = f_bad
-                off, frame = off[frame < f_bad], frame[frame < f_bad]
-                full = full[full < f_bad]
-            q = off + t0[frame] * SUB
-            order = np.lexsort((q, frame))           # time order within each frame
-            ends = np.maximum.accumulate(t0[:n_ok] + self.block_len)
-            first = np.cumsum(sizes[full]) - sizes[full]     # the first edge of each frame
-            adv = np.full(q.size, -1, dtype=np.int64)        # the coverage before it: the frames before
-            adv[first] = np.where(full > 0, ends[np.maximum(full - 1, 0)], -1)
-            self._edges(q[order], adv)
-        ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
-        if n_ok:
-            self._advance(int(ends[n_ok - 1]))
-            self._last_t0 = int(t0[n_ok - 1])
-        if err is not None:
-            if bad_offsets:                          # the frame's t0 was taken, as before
-                self._last_t0 = int(t0[n_ok])
-            raise err
+        few = err is None and F <= _FEW_FRAMES
+        if not (few and self._few_frames(t0.tolist(), sizes.tolist(), off.tolist())):
+            full = np.flatnonzero(sizes)
+            ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
+            if full.size:                                # all edges at once: q in 1/256 sample
+                frame = np.repeat(full, sizes[full])
+                out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
+                if out.any():
+                    f_bad = int(frame[int(np.argmax(out))])
+                    o = off[frame == f_bad]
+                    err = ValueError(f"edge offsets must be u32, got {o.min()}..{o.max()}")
+                    bad_offsets = True
+                    n_ok = f_bad
+                    off, frame = off[frame < f_bad], frame[frame < f_bad]
+                    full = full[full < f_bad]
+                q = off + t0[frame] * SUB
+                order = np.lexsort((q, frame))           # time order within each frame
+                first = np.cumsum(sizes[full]) - sizes[full]     # the first edge of each frame
+                adv = np.full(q.size, -1, dtype=np.int64)        # the coverage before it: the frames before
+                adv[first] = np.where(full > 0, ends[np.maximum(full - 1, 0)], -1)
+                self._edges(q[order], adv)
+            if n_ok:
+                self._advance(int(ends[n_ok - 1]))
+                self._last_t0 = int(t0[n_ok - 1])
+            if err is not None:
+                if bad_offsets:                          # the frame's t0 was taken, as before
+                    self._last_t0 = int(t0[n_ok])
+                raise err
         self._finalise(ended=False)
         self._prune()
         ev = self._events
         self._events = []
-        return TachoUpdate(ev, self.final_until, self.valid, replace(self.counters))
+        return TachoUpdate(ev, self.final_until, self.valid, self.counters.snapshot())
+
+    def _few_frames(self, t0: list[int], sizes: list[int], off: list[int]) -> bool:
+        """What the array code of :meth:`_update` does with frames all in time order, on Python
+        ints (a live call brings about ten frames): False, changing nothing, when an offset is
+        not u32 (the array code reports it)."""
+        if off and (min(off) < 0 or max(off) > 0xFFFFFFFF):
+            return False
+        L = self.block_len
+        q: list[int] = []
+        adv: list[int] = []
+        pos, end = 0, None               # end: the coverage of the frames before
+        for t, n in zip(t0, sizes):
+            if n:
+                base = t * SUB
+                q += sorted([o + base for o in off[pos:pos + n]])    # time order within the frame
+                adv += [-1 if end is None else end] + [-1] * (n - 1)
+                pos += n
+            end = t + L if end is None else max(end, t + L)
+        assert end is not None, "at least one frame"
+        if q:
+            self._edges(np.array(q, dtype=np.int64), np.array(adv, dtype=np.int64))
+        self._advance(end)
+        self._last_t0 = t0[-1]
+        return True
 
     def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
         """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
