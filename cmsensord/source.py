@@ -168,11 +168,13 @@ class SerialSource(FrameSource):
         self._stopped = False
 
     @classmethod
-    def from_link(cls, link, capture: BinaryIO | None = None) -> SerialSource:
-        """A source on the port of a :class:`~cmsensord.config.LinkConfig`."""
+    def from_link(cls, link, capture: BinaryIO | None = None,
+                  open_port: Callable | None = None) -> SerialSource:
+        """A source on the port of a :class:`~cmsensord.config.LinkConfig` (``open_port``:
+        how to open it, default pyserial's ``Serial``)."""
         return cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
                    capture=capture, reconnect_min_s=link.reconnect_min_s,
-                   reconnect_max_s=link.reconnect_max_s)
+                   reconnect_max_s=link.reconnect_max_s, open_port=open_port)
 
     @property
     def events(self):

@@ -27,6 +27,7 @@ import ast
 import json
 import math
 import os
+import select
 import signal
 import sys
 import threading
@@ -123,6 +124,9 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flow-control", action="store_true",
                    help="with --pty: wait for a slow reader (hardware handshake) instead of dropping "
                         "the bytes that do not fit, as a UART without flow control does (default)")
+    p.add_argument("--start-on-stdin", action="store_true",
+                   help="with --pty: start the stream when a line (or EOF) comes on stdin, e.g. once "
+                        "the reader has opened the port (pyserial discards what waits at its open)")
     return p
 
 
@@ -203,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
         return _write_out(board, args, span, injector)
     return _serve_pty(board, speed=args.speed, duration=duration, hold=args.hold,
                       link=args.link, injector=injector, faults_out=args.faults_out,
-                      flow_control=args.flow_control)
+                      flow_control=args.flow_control, start_on_stdin=args.start_on_stdin)
 
 
 def _write_truth(scenario, path: str, duration: float, *, rate) -> int:
@@ -264,13 +268,15 @@ def _tacho_edges_per_block(scenario, config: BoardConfig, duration: float | None
 
 def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool = False,
                link: str | None = None, injector=None, faults_out: str | None = None,
-               flow_control: bool = False) -> int:
+               flow_control: bool = False, start_on_stdin: bool = False) -> int:
     from .pty_link import PtyEndpoint
 
     stop = _stop_on_signals()
     try:
         with PtyEndpoint(link=link, injector=injector, flow_control=flow_control) as ep:
             print(ep.path, flush=True)
+            if start_on_stdin and not _wait_for_stdin(stop):
+                return 0
             stats = ep.run(board, speed=speed, duration_s=duration, stop=stop)
             if injector is not None and faults_out:
                 injector.write_records(faults_out)
@@ -281,6 +287,15 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
         print(f"firmware_sim: error: pty: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _wait_for_stdin(stop: threading.Event) -> bool:
+    """Wait for a line (or EOF) on stdin; False when ``stop`` is set first."""
+    while not stop.is_set():
+        if select.select([sys.stdin], [], [], 0.1)[0]:
+            sys.stdin.readline()
+            return True
+    return False
 
 
 def _stop_on_signals() -> threading.Event:

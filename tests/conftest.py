@@ -68,6 +68,7 @@ PROCESS_TESTS = frozenset({
     "test_firmware_sim.py::test_pty_without_reader_drops_bytes_and_never_blocks",
     "test_firmware_sim.py::test_pty_with_flow_control_waits_for_a_slow_reader_and_drops_nothing",
     "test_firmware_sim.py::test_pty_board_with_hold_stops_at_sigterm_whenever_it_lands",
+    "test_firmware_sim.py::test_pty_board_with_start_on_stdin_sends_nothing_before_its_stdin_ends",
     "test_firmware_sim_raw.py::test_cli_warns_when_the_uart_cannot_carry_the_stream",
     "test_link.py::test_reader_thread_decodes_a_pty_and_tees_the_capture",
     "test_link.py::test_a_stalled_loop_loses_raw_blocks_but_no_rms_frame_and_memory_stays_bounded",

@@ -487,3 +487,26 @@ def test_cli_out_list_and_errors(tmp_path, capsys):
         assert cli.main(argv) == 2
         err = capsys.readouterr().err
         assert err.startswith("firmware_sim: error:") and err.count("\n") == 1
+
+
+def test_pty_board_with_start_on_stdin_sends_nothing_before_its_stdin_ends():
+    """--start-on-stdin (how --simulate starts the board once its reader has opened the port):
+    no byte before EOF on stdin, the stream after it; SIGTERM while it waits ends it (status 0)."""
+    cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", "healthy", "--start-on-stdin",
+           "--duration", "1", "--speed", "5", "--hold"]
+    sim = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        ser = serial.Serial(sim.stdout.readline().strip(), timeout=0.5)
+        assert ser.read(1) == b""                    # waits: nothing in 0.5 s
+        sim.stdin.close()
+        assert len(ser.read(4096)) > 100             # and streams after EOF
+        ser.close()
+        sim.terminate()
+        assert sim.wait(timeout=10) == 0
+    finally:
+        if sim.poll() is None:
+            sim.kill()
+    waiting = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
+    waiting.stdout.readline()
+    waiting.terminate()
+    assert waiting.wait(timeout=5) == 0

@@ -145,8 +145,9 @@ def output_parts(frames: list[Frame], wake_t0: Callable[[], int | None], span: i
 
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
-             metadata: dict[str, str] | None = None) -> int:
-    """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP."""
+             metadata: dict[str, str] | None = None, open_port: Callable | None = None) -> int:
+    """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
+    how the reader opens the port, default pyserial's ``Serial``)."""
     stop = StopFlag()
     stop.install()
     stop.install_reopen()
@@ -155,7 +156,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     except OSError as exc:
         raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
     sink = open_sink(cfg, metadata or {}, background_salvage=True)
-    source = SerialSource.from_link(cfg.link, capture=capture)
+    source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
     queue = source.queue
     sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
     proc: Processor

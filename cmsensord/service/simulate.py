@@ -7,13 +7,17 @@ control, so a daemon that falls behind slows the board down and no byte is dropp
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+
+import serial
 
 from cmsensord.config import config_from_dict, default_config, load_config
 from cmsensord.errors import ConfigError, SinkError
@@ -121,10 +125,10 @@ def simulate(opt: SimulateOptions) -> int:
                                                               akf_trace=cfg.output.akf_trace or opt.akf_trace))
     cmd = [sys.executable, "-P", "-m", "firmware_sim", "--pty", "--scenario", opt.scenario,
            "--duration", str(opt.duration), "--speed", str(opt.speed), "--seed", str(opt.seed),
-           "--channels", str(opt.channels), "--mode", mode, "--hold", "--flow-control"] + \
-        (["--tacho"] if tacho else [])
-    sim = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           start_new_session=True, env=_sim_env())
+           "--channels", str(opt.channels), "--mode", mode, "--hold", "--flow-control",
+           "--start-on-stdin"] + (["--tacho"] if tacho else [])
+    sim = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True, start_new_session=True, env=_sim_env())
     assert sim.stdout is not None and sim.stderr is not None    # both piped above
     try:
         line = sim.stdout.readline().strip()
@@ -137,7 +141,7 @@ def simulate(opt: SimulateOptions) -> int:
               f"{line}; {opt.duration:g} s at {opt.speed:g}x real time", file=sys.stderr)
         cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, port=line))
         return run_live(cfg, auto_channels=False, duration_s=opt.duration, sim_done=_watch(sim),
-                        capture_path=opt.capture,
+                        capture_path=opt.capture, open_port=_start_on_open(sim, line, cfg.link.baud),
                         metadata={"scenario": opt.scenario, "seed": str(opt.seed),
                                   "duration_s": str(opt.duration)})
     finally:
@@ -155,6 +159,21 @@ def _sim_env() -> dict[str, str]:
     else:
         env.pop("PYTHONPATH", None)
     return env
+
+
+def _start_on_open(sim: subprocess.Popen, port: str, baud: int) -> Callable[[], serial.Serial]:
+    """How the reader opens the simulator's pty: then the simulator starts its stream
+    (``--start-on-stdin``: EOF on its stdin), so none of it is written before pyserial's
+    open, which discards what waits in the port, and a simulated run is whole from its
+    first block."""
+    def open_port() -> serial.Serial:
+        ser = serial.Serial(port, baud, timeout=0.05)
+        if sim.stdin is not None and not sim.stdin.closed:
+            with contextlib.suppress(OSError):      # the simulator has gone: the reader sees it
+                sim.stdin.close()
+        return ser
+
+    return open_port
 
 
 def _watch(sim: subprocess.Popen) -> threading.Event:
