@@ -49,14 +49,12 @@ class Shaft:
 
     def add(self, f: Frame) -> None:
         """A TACHO frame of any input; only the configured one is kept."""
-        if f.chan == self.cfg.tacho.input:
-            self.waiting.append(f)
-            if len(self.waiting) > TACHO_WAIT_FRAMES and self.tacho is None:
-                del self.waiting[0]             # no STATUS yet: keep only the newest
+        self.add_many([f])
 
     def add_many(self, frames: list[Frame]) -> None:
-        """TACHO frames in order, as :meth:`add` of each (the tracker cannot appear between
-        them: only :meth:`ensure` makes it)."""
+        """TACHO frames of any input, in order; only the configured one's are kept (at most
+        ``TACHO_WAIT_FRAMES``, the newest, until the tracker exists: only :meth:`ensure`
+        makes it, so it cannot appear between them)."""
         inp = self.cfg.tacho.input
         self.waiting += [f for f in frames if f.chan == inp]
         if self.tacho is None and len(self.waiting) > TACHO_WAIT_FRAMES:
