@@ -24,7 +24,7 @@ import numpy as np
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import MAX_GAP_S, BlockClock
 from cmsensord.monitor.events import EventLog
-from cmsensord.protocol import Frame, FrameType
+from cmsensord.protocol import Frame, FrameType, status_mode_fs
 
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
@@ -65,9 +65,9 @@ def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
 
 
 def _names(payload: bytes, mode: int, fs: int) -> bool:
-    """True when a STATUS payload names board mode ``mode`` and rate ``fs`` (docs/PROTOCOL.md,
-    STATUS: mode u8 at byte 2, fs u32 at bytes 4 .. 7): taken or refused, it changes neither."""
-    return len(payload) >= 8 and payload[2] == mode and int.from_bytes(payload[4:8], "little") == fs
+    """True when a STATUS payload names board mode ``mode`` and rate ``fs``: taken or refused,
+    it changes neither."""
+    return status_mode_fs(payload) == (mode, fs)
 
 
 class Segments:
