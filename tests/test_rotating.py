@@ -111,6 +111,30 @@ def test_ticks_every_100_ms_keep_everything_older_than_flush_s_in_the_file(tmp_p
     sink.close()
 
 
+@pytest.mark.parametrize("tick_s", [(0.1,), (0.1, 0.006), (0.1, 0.1, 0.1, 0.006, 0.3)])
+def test_a_held_stream_and_uneven_ticks_keep_everything_older_than_flush_s(tmp_path, clock, tick_s):
+    """A board at 10x (1 s of stamps per 0.1 s) whose first event came 1.3 s of stamps late:
+    the reorder window holds every message ~0.13 s; the live loop's ticks alternate long
+    and short, with a late one now and then."""
+    sink = RotatingSink(output(tmp_path, flush_s=1.0), clock=clock)
+    written = []                                         # clock time of each message
+    stamp = 10**18
+    sink.write(TOPIC_EVENTS, "event", stamp + 2 * 10**9, {"kind": "start", "message": "x"})
+    sink.write(TOPIC_EVENTS, "event", stamp + 7 * 10**8, {"kind": "config", "message": "late"})
+    written += [clock.t, clock.t]
+    for k in range(150):
+        dt = tick_s[k % len(tick_s)]
+        for _ in range(3):
+            stamp += int(dt * 10**10 / 3)                # 10x: dt of wall is 10 dt of stamps
+            sink.write("/cm/ch0/severity", "severity", stamp + 2 * 10**9, {"severity_index": 0.1})
+            written.append(clock.t)
+        clock.t += dt                                    # a kill just before the tick
+        on_disk = summarize(sink.current.part_path)["messages"]
+        assert on_disk >= sum(t <= clock.t - 1.0 for t in written), k
+        sink.tick()
+    sink.close()
+
+
 def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, clock):
     (tmp_path / "other-20200101T000000Z.mcap").write_bytes(b"x" * 50_000)    # not our prefix
     (tmp_path / "cmsensord-20200101T000000Z.mcap.part").write_bytes(b"")    # a leftover: salvaged

@@ -71,6 +71,11 @@ class ReorderWindow:
     def __len__(self) -> int:
         return len(self._heap)
 
+    @property
+    def newest_ns(self) -> int:
+        """The newest stamp pushed (-1 before the first)."""
+        return self._newest
+
     def push(self, stamp_ns: int, channel_id: int, data: Payload) -> list[tuple[int, int, int, Payload]]:
         """Add one message; returns the messages now due, each ``(log_time, publish_time,
         channel_id, data)``, in log-time order."""

@@ -16,10 +16,9 @@ tracking add the orders' lag (a few seconds), except while the link is quiet
 Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
 
-* the open chunk is written to the kernel at least every ``flush_s`` (the
-  tick flushes when the next tick would be late even if it came one more
-  interval, at most ``flush_s / 4``, later: a loaded machine delays ticks), so a
-  kill -9 loses at most the messages of the last ``flush_s``;
+* the open chunk is written to the kernel early enough that a kill -9 loses at
+  most the messages of the last ``flush_s``, though a loaded machine delays ticks
+  and the reorder window holds messages (:mod:`cmsensord.sinks.flush_margin`);
 * the file is fsynced every ``fsync_s``, and at the first tick after any
   message on ``/cm/events``: an event is on stable storage by the end of the
   loop iteration that wrote it, or of the next one when it was raised after
@@ -71,6 +70,7 @@ from pathlib import Path
 from typing import Any
 
 from cmsensord.config import OutputConfig
+from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
 from cmsensord.sinks.reorder import MAX_S as REORDER_MAX_S
@@ -140,8 +140,7 @@ class RotatingSink:
         self._need_sync = False              # fsync at the next tick (a new file after an error)
         now = clock()
         self._last_sync = now
-        self._last_tick = now
-        self._tick_dt = 0.0                  # the last interval between ticks
+        self._margin = FlushMargin(output.flush_s, now)
         self._opened = now
         # outage state
         self._outage: dict[str, Any] | None = None
@@ -346,8 +345,7 @@ class RotatingSink:
         Cheap when there is nothing to do; at most one fsync per call.
         """
         now = self.clock()
-        self._tick_dt = min(max(now - self._last_tick, 0.0), self.output.flush_s / 2)
-        self._last_tick = now
+        self._margin.tick(now, self._current.reorder if self._current is not None else None)
         if self._current is None:
             self._retry_if_due()
         cur = self._current
@@ -357,13 +355,9 @@ class RotatingSink:
             elif (self._event_dirty or self._need_sync
                   or now - self._last_sync >= self.output.fsync_s):
                 self._sync(cur)
-            elif now - cur.last_flush + self._tick_dt + self._late() >= self.output.flush_s:
+            elif now - cur.last_flush + self._margin.margin(cur.reorder) >= self.output.flush_s:
                 self._flush(cur)             # the next tick, however late, would be past flush_s
         self._deliver()
-
-    def _late(self) -> float:
-        """How late the next tick may come: one more interval, at most ``flush_s / 4``."""
-        return min(self._tick_dt, self.output.flush_s / 4)
 
     def flush(self) -> None:
         """Write the open chunk; fsync when fsync_s has passed or an event is pending."""
