@@ -76,6 +76,8 @@ class Processor:
                  on_event: Callable[[dict], None] | None = None,
                  observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
         self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
+        # a sink's own write_many (not one a wrapper's __getattr__ hands on from what it wraps)
+        self._write_many = sink.write_many if hasattr(type(sink), "write_many") else None
         self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
@@ -126,17 +128,35 @@ class Processor:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
 
     def _out(self, items) -> None:
-        """Messages to the sink and events to the log, in their order."""
-        write = self.sink.write
+        """Messages to the sink and events to the log, in their order: each run of messages
+        in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one."""
+        run: list = []
         for it in items:
-            if type(it) is Event:
-                self.log.add((it,))
-            elif type(it) is messages.MessageGroup:      # a capture: one chunk of the log
-                self.sink.write_group(list(it.messages))
+            if type(it) is Event or type(it) is messages.MessageGroup:
+                if run:
+                    run = self._write_run(run)
+                if type(it) is Event:
+                    self.log.add((it,))
+                else:                           # a capture: one chunk of the log
+                    self.sink.write_group(list(it.messages))
             else:
-                write(*it)
+                run.append(it)
                 if it.schema in WATCHED:        # the alarm manager reads it
-                    self._out(self.alarms.see(it))
+                    more = self.alarms.see(it)
+                    if more:
+                        run = self._write_run(run)
+                        self._out(more)
+        if run:
+            self._write_run(run)
+
+    def _write_run(self, run: list) -> list:
+        """Messages to the sink, in one call if it takes many; returns a new empty run."""
+        if self._write_many is not None:
+            self._write_many(run)
+        else:
+            for m in run:
+                self.sink.write(*m)
+        return []
 
     def ack(self, which: str | None) -> None:
         """Acknowledge alarm ``which`` (None: all), stamped with the newest alarm input's stamp;
@@ -445,8 +465,7 @@ class Processor:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
             self.log.release(stamp)             # events well before it, at a point set by the stream
-            self._out(self.indicators.take(stamp))
-            self._out(sev.decision(d, stamp))
+            self._out(self.indicators.take(stamp) + sev.decision(d, stamp))
             self.write_diagnostics(stamp)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
