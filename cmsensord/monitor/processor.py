@@ -132,13 +132,12 @@ class Processor:
         in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one."""
         run: list = []
         for it in items:
-            if type(it) is Event or type(it) is messages.MessageGroup:
-                if run:
-                    run = self._write_run(run)
-                if type(it) is Event:
-                    self.log.add((it,))
-                else:                           # a capture: one chunk of the log
-                    self.sink.write_group(list(it.messages))
+            if type(it) is Event:
+                run = self._write_run(run)
+                self.log.add((it,))
+            elif type(it) is messages.MessageGroup:      # a capture: one chunk of the log
+                run = self._write_run(run)
+                self.sink.write_group(list(it.messages))
             else:
                 run.append(it)
                 if it.schema in WATCHED:        # the alarm manager reads it
@@ -146,12 +145,11 @@ class Processor:
                     if more:
                         run = self._write_run(run)
                         self._out(more)
-        if run:
-            self._write_run(run)
+        self._write_run(run)
 
     def _write_run(self, run: list) -> list:
         """Messages to the sink, in one call if it takes many; returns a new empty run."""
-        if self._write_many is not None:
+        if len(run) > 1 and self._write_many is not None:
             self._write_many(run)
         else:
             for m in run:
