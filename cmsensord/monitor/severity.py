@@ -135,6 +135,8 @@ class SeverityChain:
         level = lv[0] if lv else None
         n = outl.shape[0]
         d = self.decider
+        if f_r is None:                         # the configured f_r: every period in one call
+            return d.update(outl, valid, level=level)
         decisions = []
         pos = 0
         while pos < n:                          # one call per decision period: its own f_r
