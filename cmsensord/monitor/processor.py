@@ -140,7 +140,7 @@ class Processor:
                 self.sink.write_group(list(it.messages))
             else:
                 run.append(it)
-                if it.schema in WATCHED:        # the alarm manager reads it
+                if it.schema in WATCHED and self.alarms.watching:     # the alarm manager reads it
                     more = self.alarms.see(it)
                     if more:
                         run = self._write_run(run)

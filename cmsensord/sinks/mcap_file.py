@@ -351,7 +351,11 @@ class McapSink:
             data = encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
             self.messages_written += 1
             try:
-                self._add(push(stamp_ns, entry[0], data))
+                for log_time, publish_time, channel_id, body in push(stamp_ns, entry[0], data):
+                    if isinstance(body, bytes):
+                        writer.add_message(channel_id, log_time, body, publish_time)
+                    else:
+                        writer.add_group(body, log_time, publish_time)
             except OSError as err:
                 raise self._fail("write", err) from None
             k += 1

@@ -257,31 +257,33 @@ class RotatingSink:
 
     def write_many(self, messages: Sequence[tuple[str, str, int, dict]]) -> None:
         """:meth:`write` of each of ``messages`` in turn, in fewer calls (McapSink.write_many
-        from chunk to chunk): the same files, bytes and counts. Rotation, flushes and the
-        sink's events are looked at after the first message, each chunk and the last (write():
+        from chunk to chunk): the same files, bytes and counts. Rotation and the sink's events
+        are looked at before the first message, after each chunk and after the last (write():
         after each message), so at the same messages if the clock stands still meanwhile."""
         i, n = 0, len(messages)
         while i < n:
-            self.write(*messages[i])    # the first, and the first after a rotation or an error
-            i += 1
             cur = self._current
-            while i < n and cur is not None and cur is self._current and not self._pending:
-                try:
-                    j = cur.write_many(messages, i)
-                except SinkError as err:    # counted as write() counts, the failing one too
-                    j = cur.batch_at
-                    self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
-                    self.messages_written += j + 1 - i
-                    if not isinstance(err, SinkIOError):
-                        raise
-                    self._failed(err, cur)
-                    self._deliver()
-                    i = j + 1
-                    break
+            if (cur is None or self._pending or self.clock() - self._opened >= self.output.rotate_s
+                    or cur.bytes_written >= self._rotate_bytes):
+                self.write(*messages[i])    # a rotation, a retry or events due after it
+                i += 1
+                continue
+            try:
+                j = cur.write_many(messages, i)
+            except SinkError as err:        # counted as write() counts, the failing one too
+                j = cur.batch_at
                 self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
-                self.messages_written += j - i
-                i = j
-                self._written(cur)
+                self.messages_written += j + 1 - i
+                if not isinstance(err, SinkIOError):
+                    raise
+                self._failed(err, cur)
+                self._deliver()
+                i = j + 1
+                continue
+            self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+            self.messages_written += j - i
+            i = j
+            self._written(cur)
 
     def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
         """Append messages ``(topic, schema, stamp_ns, msg)`` that are whole or absent after a
