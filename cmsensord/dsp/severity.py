@@ -204,17 +204,20 @@ class AnomalyDecider:
         the same products and maxima)."""
         P, C, n = self.period, self.C, self.n
         K = outlier.shape[0] // P
-        cnt = outlier.reshape(K, P, C, n).sum(axis=1, dtype=np.int64)
-        missing = (~valid).reshape(K, P, C).sum(axis=1)
+        # counts in a narrow type (faster), exact while a period has fewer than 65536 slots
+        cnt = outlier.reshape(K, P, C * n).sum(axis=1, dtype=np.uint16 if P < 1 << 16 else np.int64)
+        cnt = cnt.astype(np.int64).reshape(K, C, n)
+        missing = np.zeros((K, C), dtype=np.int64) if valid.all() else \
+            (~valid).reshape(K, P, C).sum(axis=1, dtype=np.int64)
         fr = self.f_r[:, None]
         set_ = cnt >= fr
         decided = set_ | (cnt < self.c[:, None] * fr)
-        # F_a: set or cleared where decided, else the previous period's (the last decided one)
+        # F_a: set or cleared where decided (set if the last decided period set it), else kept
         ks = np.arange(K)[:, None, None]
         last = np.maximum.accumulate(np.where(decided, ks, -1), axis=0)
+        last_set = np.maximum.accumulate(np.where(set_, ks, -1), axis=0)
         prev0 = self.anomaly
-        anomaly = np.where(last >= 0, np.take_along_axis(set_, np.maximum(last, 0), axis=0), prev0[None])
-        anomaly = anomaly.astype(np.uint8)
+        anomaly = np.where(last >= 0, (last_set == last) & (last >= 0), prev0[None] == 1).astype(np.uint8)
         # held: decisions in a row that kept a flag by the hysteresis alone
         kept = (anomaly == 1) & ~set_
         reset = np.maximum.accumulate(np.where(kept, -1, ks), axis=0)

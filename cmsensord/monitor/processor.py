@@ -463,16 +463,23 @@ class Processor:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
             self.log.release(stamp)             # events well before it, at a point set by the stream
-            self._out(self.indicators.take(stamp) + sev.decision(d, stamp))
-            self.write_diagnostics(stamp)
+            out = self.indicators.take(stamp) + sev.decision(d, stamp)
+            if self.diagnostics is None:        # nothing in it depends on what is written: one run
+                self._out([*out, self._diagnostics_message(stamp)])
+            else:                               # the live loop's figures after the writes
+                self._out(out)
+                self.write_diagnostics(stamp)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
         when none came for a while)."""
+        self._out([self._diagnostics_message(stamp_ns)])
+
+    def _diagnostics_message(self, stamp_ns: int) -> messages.Message:
         self.diagnostics_at = time.monotonic()
-        self._out([messages.diagnostics(
-            stamp_ns, self.link(), self.observations,
-            round(self.diagnostics_at - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+        return messages.diagnostics(stamp_ns, self.link(), self.observations,
+                                    round(self.diagnostics_at - self.started_wall, 3),
+                                    self.diagnostics() if self.diagnostics else None)
 
     def link(self) -> dict:
         """The link's counters; a seq gap in front of a board reset is no loss (the board
