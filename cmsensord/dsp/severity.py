@@ -49,6 +49,10 @@ import numpy as np
 
 __all__ = ["HOLD_EVENT_DECISIONS", "AnomalyDecider", "Decision", "level_severity"]
 
+#: whole periods in one :meth:`AnomalyDecider.update` call from which they are decided in one
+#: pass (:meth:`AnomalyDecider._decide_many`; the same decisions as one period at a time)
+ONE_PASS_PERIODS = 1
+
 #: consecutive decisions a flag may be held by the hysteresis alone
 #: (c f_r <= cnt < f_r) before the monitor reports it
 HOLD_EVENT_DECISIONS = 60
@@ -148,8 +152,8 @@ class AnomalyDecider:
         decisions: list[Decision] = []
         start = 0
         while start < T:
-            if self.phase == 0 and T - start >= self.period and level is None and not self.combined \
-                    and self.periods >= self.transient_periods:
+            if self.phase == 0 and (T - start) // self.period >= ONE_PASS_PERIODS and level is None \
+                    and not self.combined and self.periods >= self.transient_periods:
                 k = (T - start) // self.period          # whole periods: decided in one pass
                 decisions += self._decide_many(outlier[start:start + k * self.period],
                                                np.asarray(valid[start:start + k * self.period], dtype=bool))

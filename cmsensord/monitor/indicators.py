@@ -52,6 +52,9 @@ if TYPE_CHECKING:
 MAX_WAIT_S = 10.0
 #: points of the interval at which the tacho speed is read
 SPEED_POINTS = 16
+#: RMS mode: whole intervals of back-to-back blocks from which they are summed in one pass
+#: (:meth:`RmsIndicators._whole`; the same sums as block by block)
+ONE_PASS_INTERVALS = 1
 #: every indicator a RAW record can carry, for ``unavailable``
 SPECTRAL = ("velocity_rms_mm_s", "zone", "envelope_rms", "bearings", "bands")
 WAVEFORM = ("accel_peak", "crest_factor", "kurtosis")
@@ -258,7 +261,7 @@ class RmsIndicators:
             if tk == self.start and not self.n.any():   # whole intervals of back-to-back blocks
                 i = int(np.searchsorted(steps, k))
                 K = ((int(steps[i]) + 1 if i < len(steps) else B) - k) // per
-                if K:
+                if K >= ONE_PASS_INTERVALS:
                     out += self._whole(sq[k:k + K * per], ok[k:k + K * per], K)
                     k += K * per
                     continue
