@@ -95,9 +95,12 @@ def rnd_chunk(seed: int) -> int:
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_rotating_write_many_writes_the_files_of_one_write_per_message(tmp_path, seed):
-    out = dataclasses.replace(OutputConfig(), rotate_mb=0.004, rotate_s=7.0, flush_s=1.0, fsync_s=2.0,
-                              compression="none", retain_mb=0.0, min_free_mb=0.0)
+@pytest.mark.parametrize("files_by", ["size", "time"])
+def test_rotating_write_many_writes_the_files_of_one_write_per_message(tmp_path, seed, files_by):
+    """Rotations by size (flushed chunks) and by time (rotate_s shorter than flush_s)."""
+    by = {"size": {"rotate_mb": 0.004, "rotate_s": 7.0, "flush_s": 1.0, "fsync_s": 2.0},
+          "time": {"rotate_s": 2.0, "flush_s": 30.0, "fsync_s": 60.0}}[files_by]
+    out = dataclasses.replace(OutputConfig(), **by, compression="none", retain_mb=0.0, min_free_mb=0.0)
     sinks, clocks = [], []
     for name in ("one", "many"):
         clocks.append(FakeClock())
