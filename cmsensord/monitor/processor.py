@@ -50,9 +50,12 @@ if TYPE_CHECKING:
 
 #: the frame types as plain names: a FrameType.X lookup goes through the enum's __getattr__ (~1 µs per frame)
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
-#: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
+#: most RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
+#: most RMS frames in one call (an observation each, no samples: 4 x (T, C, n) float64 =
+#: 5.1 MB for T = 4000, C = 4, n = 10); a replay's 128-KiB read of 4 channels in one call
+MAX_RMS_BATCH = 4000
 #: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
 MAX_RUN_SLOTS = 2 * MAX_BATCH
 #: indicator records waiting for the decision of their stamp at most (then written anyway)
@@ -216,13 +219,14 @@ class Processor:
 
     def _extend(self, batch: Pending, frames: Sequence[Frame], rms: bool) -> Pending:
         """``frames`` (all RMS, or all RAW) appended to the waiting ``batch``, run through the
-        chain whenever it reaches ``MAX_BATCH``, as one frame at a time would be; what waits."""
-        k, n = 0, len(frames)
+        chain whenever it reaches ``MAX_RMS_BATCH`` or ``MAX_BATCH``, as one frame at a time
+        would be; what waits."""
+        k, n, most = 0, len(frames), MAX_RMS_BATCH if rms else MAX_BATCH
         while k < n:
-            take = MAX_BATCH - len(batch)
+            take = most - len(batch)
             batch.extend(frames[k:k + take])
             k += take
-            if len(batch) >= MAX_BATCH:          # bounded memory per bank call
+            if len(batch) >= most:               # bounded memory per bank call
                 batch = self._flush(batch, Pending())[0] if rms else self._flush(Pending(), batch)[1]
         return batch
 
@@ -331,7 +335,7 @@ class Processor:
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.indicators.rms(self.channels, t0, vals)
-        self._observe(t0, vals)
+        self._observe(t0, vals, 2 * MAX_RMS_BATCH)
         if self.captures is not None:
             vib = [ch for ch in self.channels if ch.index < C]
             self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
@@ -402,13 +406,14 @@ class Processor:
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------
-    def _observe(self, t0: np.ndarray, vals: np.ndarray) -> None:
-        """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain."""
+    def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS) -> None:
+        """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain, at
+        most ``max_slots`` slots (received or missing) a call."""
         while len(t0):
             slots, n = self.clock.place(t0)
             a = 0
-            while a < n:                        # bounded memory: at most MAX_RUN_SLOTS slots a run
-                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + MAX_RUN_SLOTS))
+            while a < n:                        # bounded memory: at most max_slots slots a run
+                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + max_slots))
                 self._run(slots[a:b], vals[a:b])
                 a = b
             if n == len(t0):
