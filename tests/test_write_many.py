@@ -143,6 +143,17 @@ def test_a_message_that_cannot_be_encoded_fails_the_run_where_write_would(tmp_pa
     assert files(tmp_path / "one") == files(tmp_path / "many")
 
 
+def test_a_long_message_encodes_whole_as_the_json_module_does():
+    """The C encoder built once returns a long text in pieces: all of them are written
+    (a capture's waveform, 500,000 values)."""
+    import json
+
+    msg = {"channel": "ch0", "samples": np.random.default_rng(0).standard_normal(500_000).round(6).tolist()}
+    body = encode_message("/cm/ch0/capture", 10**9, msg)
+    assert json.loads(body)["samples"] == msg["samples"]
+    assert body == json.dumps({"timestamp": {"sec": 1, "nsec": 0}, **msg}, separators=(",", ":")).encode()
+
+
 def plain(topic: str, stamp: int, msg: dict) -> bytes | str:
     try:
         return encode_message(topic, stamp, msg)

@@ -68,8 +68,9 @@ _encoder = json.JSONEncoder(
 def _c_encode(obj: Any) -> str:
     """What ``_encoder.encode`` gives, by the C encoder it builds on every call built once
     (``JSONEncoder.iterencode`` with ``_one_shot``: no markers, ASCII strings, no indent):
-    ~1.4 µs a message less."""
-    return _c_encoder(obj, 0)[0]
+    ~2-3 µs a message less. The C encoder returns the text in pieces (one for a short
+    message, several for a long one, e.g. a capture's waveform): joined as ``encode`` does."""
+    return "".join(_c_encoder(obj, 0))
 
 
 try:    # the C encoder's arguments as json.encoder passes them (CPython 3.8-3.13)
