@@ -43,6 +43,7 @@ from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.dsp.indicators.velocity import velocity_band
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.sinks.schemas import indicators_topic
 
 if TYPE_CHECKING:
     from cmsensord.dsp.tacho import TachoTracker
@@ -292,15 +293,17 @@ class RmsIndicators:
         missing = (1.0 - n / self.per).tolist()
         have = (n > 0).tolist()
         names = [ch.name for ch in self.channels]
-        interval_s, unavailable = self.N / self.fs, self.UNAVAILABLE
+        topics = [indicators_topic(name) for name in names]
+        interval_s, unavailable, Message = self.N / self.fs, self.UNAVAILABLE, messages.Message
         out = []
         assert self.start is not None
         for j in range(K):
             self.start += self.N
             stamp = self.clock.stamp_ns(self.start)
-            out += [messages.indicators(stamp, names[c], {
-                "mode": "rms", "interval_s": interval_s, "missing_fraction": round(missing[j][c], 9),
-                "accel_rms": round(rms[j][c], 9), "unavailable": unavailable}) for c in range(C) if have[j][c]]
+            out += [Message(topics[c], "indicators", stamp, {   # what messages.indicators makes
+                "channel": names[c], "mode": "rms", "interval_s": interval_s,
+                "missing_fraction": round(missing[j][c], 9), "accel_rms": round(rms[j][c], 9),
+                "unavailable": unavailable}) for c in range(C) if have[j][c]]
         return out
 
     def close_open(self) -> list:

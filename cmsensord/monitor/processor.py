@@ -138,16 +138,18 @@ class Processor:
         """Messages to the sink and events to the log, in their order: each run of messages
         in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one."""
         run: list = []
+        watching = self.alarms.watching
         for it in items:
-            if type(it) is Event:
+            kind = type(it)
+            if kind is Event:
                 run = self._write_run(run)
                 self.log.add((it,))
-            elif type(it) is messages.MessageGroup:      # a capture: one chunk of the log
+            elif kind is messages.MessageGroup:         # a capture: one chunk of the log
                 run = self._write_run(run)
                 self.sink.write_group(list(it.messages))
             else:
                 run.append(it)
-                if it.schema in WATCHED and self.alarms.watching:     # the alarm manager reads it
+                if watching and it.schema in WATCHED:   # the alarm manager reads it
                     more = self.alarms.see(it)
                     if more:
                         run = self._write_run(run)
