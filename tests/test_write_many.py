@@ -244,3 +244,26 @@ def test_the_processor_writes_the_files_a_one_message_sink_gets(tmp_path, monkey
     assert files(tmp_path / "one") == files(tmp_path / "many")
     kinds = {m["kind"] for p in sinks[1].paths for t, _, m in read_messages(p) if t == "/cm/events"}
     assert {"anomaly_onset", "failure", "frames_lost"} <= kinds
+
+
+def test_a_message_passing_the_reorder_window_is_what_push_releases():
+    """ReorderWindow.passes (write_many's way for a message in order) notes and releases
+    what push would, message for message, on stamps late and in order."""
+    from cmsensord.sinks.reorder import ReorderWindow
+
+    rnd = random.Random(7)
+    a, b = ReorderWindow(), ReorderWindow()
+    stamp, passed = 10**9, 0
+    for k in range(3000):
+        stamp += rnd.randrange(0, 10**8)
+        s = stamp - (rnd.randrange(1, 2 * 10**9) if k > 1000 and rnd.random() < 0.03 else 0)
+        want = a.push(s, 1, b"%d" % k)
+        if b.passes(s):
+            got = [(s, s, 1, b"%d" % k)]
+            passed += 1
+        else:
+            got = b.push(s, 1, b"%d" % k)
+        assert got == want
+        assert (b.newest_ns, b.horizon_ns, b.clamped, len(b)) == (a.newest_ns, a.horizon_ns, a.clamped, len(a))
+    assert a.drain() == b.drain()
+    assert 900 < passed < 3000                  # in order at first; held once the window learnt

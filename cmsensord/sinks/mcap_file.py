@@ -336,7 +336,7 @@ class McapSink:
         of the message being written (after an exception, the one that failed)."""
         n = len(messages)
         k = start
-        writer, push = self._writer, self.reorder.push
+        writer, push, passes = self._writer, self.reorder.push, self.reorder.passes
         pos = writer.pos
         while k < n:
             self.batch_at = k
@@ -351,11 +351,10 @@ class McapSink:
             data = encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
             self.messages_written += 1
             try:
-                for log_time, publish_time, channel_id, body in push(stamp_ns, entry[0], data):
-                    if isinstance(body, bytes):
-                        writer.add_message(channel_id, log_time, body, publish_time)
-                    else:
-                        writer.add_group(body, log_time, publish_time)
+                if passes(stamp_ns):                    # what push() would give, without a list
+                    writer.add_message(entry[0], stamp_ns, data, stamp_ns)
+                else:
+                    self._add(push(stamp_ns, entry[0], data))
             except OSError as err:
                 raise self._fail("write", err) from None
             k += 1
