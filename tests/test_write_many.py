@@ -267,3 +267,43 @@ def test_a_message_passing_the_reorder_window_is_what_push_releases():
         assert (b.newest_ns, b.horizon_ns, b.clamped, len(b)) == (a.newest_ns, a.horizon_ns, a.clamped, len(a))
     assert a.drain() == b.drain()
     assert 900 < passed < 3000                  # in order at first; held once the window learnt
+
+
+def test_the_publishing_sink_writes_a_run_in_one_call_and_offers_every_message(tmp_path):
+    """TeeSink.write_many: the MCAP sink's write_many (the same file as one write each),
+    then each message offered to the publisher, in order; its events handed on after."""
+    from collections import deque
+
+    from cmsensord.sinks.tee import TeeSink
+
+    class Publisher:
+        def __init__(self) -> None:
+            self.offered: list = []
+            self.events: deque = deque()
+
+        def offer(self, topic: str, stamp_ns: int, msg: dict) -> None:
+            self.offered.append((topic, stamp_ns, msg))
+            if len(self.offered) == 3:
+                self.events.append(("mqtt_link", "connected", 20, {}))
+
+        def close(self) -> None:
+            """Nothing to send."""
+
+    out = dataclasses.replace(OutputConfig(), compression="none", retain_mb=0.0, min_free_mb=0.0)
+    sinks, publishers, told = [], [], []
+    for name in ("one", "many"):
+        inner = RotatingSink(dataclasses.replace(out, dir=str(tmp_path / name)), clock=FakeClock(),
+                             wall_clock=lambda: WALL, salvage=False)
+        publishers.append(Publisher())
+        sinks.append(TeeSink(inner, publishers[-1]))
+        sinks[-1].on_publisher_event = lambda *ev: told.append(ev)
+    rnd = random.Random(2)
+    run = [message(rnd, k, 10**9 * (k + 5)) for k in range(9)]
+    for m in run:
+        sinks[0].write(*m)
+    sinks[1].write_many(run)
+    assert publishers[0].offered == publishers[1].offered == [(t, s, m) for t, _, s, m in run]
+    assert told == [("mqtt_link", "connected", 20, {})] * 2
+    for s in sinks:
+        s.close()
+    assert files(tmp_path / "one") == files(tmp_path / "many")
