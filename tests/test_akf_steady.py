@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cmsensord.dsp import akf
-from cmsensord.dsp.akf import AkfBank, bank_r, have_kernel
+from cmsensord.dsp.akf import AkfBank, ScalarAKF, bank_r, have_kernel
 
 FIELDS = ("x_prior", "x_hat", "Y", "Q", "outlier")
 STATE = ("x", "P", "Q", "res2", "dx2", "pos", "fill", "started")
@@ -77,3 +77,21 @@ def test_steady_runs_give_the_bits_of_the_c_kernel(window):
     b, _ = run(R, y, valid, window, True, [100, 450], backend="c")
     for f in FIELDS:
         assert np.array_equal(a[f], b[f], equal_nan=True), f
+
+
+def test_steady_runs_equal_the_scalar_reference():
+    """A uniform window (the steady runs' case) against ScalarAKF, the equations one to one."""
+    rng = np.random.default_rng(5)
+    y, valid = gappy_stream(rng, 700, 2)
+    R = np.stack([bank_r(4e-3, 0.13, 6), bank_r(1e-3, 0.5, 6)])
+    got, _ = run(R, y, valid, 10, True, [250])
+    for c in range(2):
+        for i in range(6):
+            f = ScalarAKF(R[c, i], window=10, z_c=2.8)
+            ref = [f.step(float(y[k, c]) if valid[k, c] else None) for k in range(len(y))]
+            np.testing.assert_allclose(got["x_hat"][:, c, i], [r["x_hat"] for r in ref],
+                                       rtol=0, atol=1e-12, equal_nan=True)
+            np.testing.assert_allclose(got["Q"][:, c, i], [r["Q"] for r in ref],
+                                       rtol=1e-12, atol=1e-15, equal_nan=True)
+            assert np.array_equal(got["outlier"][:, c, i], [r["outlier"] for r in ref])
+    assert got["outlier"].sum() > 30
