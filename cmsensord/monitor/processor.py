@@ -436,6 +436,8 @@ class Processor:
         if sev is None or not sev.gate.waiting:
             return
         tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
+        if tacho and not final and not self._decision_due(bounded):
+            return
         upto = self.shaft.final_slot(self.clock) if tacho and not final else self.clock.next_slot
         cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
@@ -448,6 +450,19 @@ class Processor:
             self._out(self.indicators.take(stamp))
             self._out(sev.decision(d, stamp))
             self.write_diagnostics(stamp)
+
+    def _decision_due(self, bounded: bool) -> bool:
+        """Whether a release may bring a decision: the tacho covers the waiting period's last
+        slot (its speed cannot be final before), or the gate is over its bound.  False skips
+        a release of part of a period, which decides nothing (the decider takes a period in
+        any number of parts) and would have the tacho fit its smoothed speed at every call."""
+        sev, clock = self.severity, self.clock
+        assert sev is not None and self.shaft.tacho is not None
+        gate = sev.gate
+        if (bounded and gate.waiting > gate.max_rows) or clock.slot0_t0 is None:
+            return True
+        last = gate.first + sev.decider.period - sev.decider.phase - 1     # the period's last slot
+        return last < gate.first + gate.waiting and self.shaft.tacho.covered_until >= clock.slot_t0(last + 1)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one

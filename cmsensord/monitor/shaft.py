@@ -96,8 +96,7 @@ class Shaft:
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
         self._note_gaps(t0s, clock.block_len)
-        u = self.tracker().update_flat(t0, counts, offsets)
-        for ev in u.events:
+        for ev in self.tracker().feed_flat(t0, counts, offsets):    # the smoothed speed: when asked
             if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
                 self.missed_in_lost_frames += int(ev.count)
                 continue
