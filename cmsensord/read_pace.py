@@ -17,8 +17,10 @@ bytes gather in the port's kernel buffer meanwhile:
   not delayed by more than those 2 ms.  Only a read that waited for its bytes tells when a
   block arrived (``exact``): one after such a hold found them waiting, and taken as arrivals
   they would put the due time later at every read.  So when no read has waited for ``probe_s``,
-  the hold ends ``probe_margin_s`` (5 ms) before the block is due instead: the backlog is
-  read, then the block as it comes, which measures its arrival.  The earliest
+  or when more than half of ``buffer_bytes`` come between the newest read and that block (a
+  fast stream, RAW 4 channels: the port's buffer overflowed with the later read), the hold
+  ends ``probe_margin_s`` (5 ms) before the block is due instead: the backlog is read, then
+  the block as it comes, which measures its arrival.  The earliest
   of a short span, not of the whole window: on a loaded machine the arrivals jitter by
   tens of ms, and a rare early one long ago would make every block look late ever after
   (the newest exact arrival is kept however old);
@@ -107,9 +109,10 @@ class ReadPace:
             return min(cap, self.idle_hold_s)
         if wake_t0 <= self.last[1]:
             return 0.0
-        exact = self._exact_at is not None and now - self._exact_at < self.probe_s
-        margin = self.margin_s if exact else self.probe_margin_s
-        return max(0.0, min(cap, MAX_HOLD_S, self._due(wake_t0) - margin - now))
+        due = self._due(wake_t0)
+        late = (self._exact_at is not None and now - self._exact_at < self.probe_s
+                and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
+        return max(0.0, min(cap, MAX_HOLD_S, due - (self.margin_s if late else self.probe_margin_s) - now))
 
     def named_wait(self, now: float, wake_t0: int | None) -> float:
         """Seconds the reader may wait for the loop to name its next block, when the block it

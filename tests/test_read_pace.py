@@ -112,3 +112,13 @@ def one_read_per_block(probe_s: float) -> tuple[list[float], int]:
         k += 10
     return holds, probes
     assert 300 / 6 <= probes <= 300 / 4                      # one probe every probe_s = 5 /orders blocks
+
+
+def test_a_fast_stream_reads_the_backlog_before_the_block_so_the_port_buffer_never_fills():
+    """RAW 4 channels send ~2.1 kB a block: between the newest read and the block to wake at
+    more than half the buffer would wait, so the hold ends 5 ms before that block is due (the
+    backlog, then the block as it comes), not after it."""
+    pace, now = paced(3.0, bytes_per_block=2100)
+    due = (250 * 305 - 250 * 299) / 25000.0     # 6 blocks on: 12.6 kB, over half of 16 kB
+    assert pace.hold(now, 250 * 305) == pytest.approx(due - pace.probe_margin_s)
+    assert pace.hold(now, 250 * 302) == pytest.approx(0.03 - pace.margin_s)   # 6.3 kB: after it
