@@ -171,11 +171,9 @@ class Processor:
         self._feed_tacho()
 
     def _few(self, frames: Sequence[Frame], rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
-        """A short batch frame by frame, as :meth:`handle`'s loop of :meth:`Segments.runs` with one
-        frame each: a run of RAW frames that pass the segment check extends the waiting batch at
-        once and TACHO frames go to the shaft together (they wait there for :meth:`_feed_tacho`),
-        both before any other frame, which goes through :meth:`_frame` (a live call at 1x: ten
-        blocks of RAW and TACHO frames, no Python call per frame but the check)."""
+        """A short batch (a live call) as one frame at a time, with no call per frame but the
+        segment check: RAW frames extend the waiting batch and TACHO frames go to the shaft (to
+        wait for :meth:`_feed_tacho`) together, before any other frame (:meth:`_frame`)."""
         check = self.segments.check
         raws: list[Frame] = []
         tachos: list[Frame] = []
@@ -504,10 +502,9 @@ class Processor:
             self.write_diagnostics(stamp)
 
     def _decision_due(self, bounded: bool) -> bool:
-        """Whether a release may bring a decision: the tacho covers the waiting period's last
-        slot (its speed cannot be final before), or the gate is over its bound.  False skips
-        a release of part of a period, which decides nothing (the decider takes a period in
-        any number of parts) and would have the tacho fit its smoothed speed at every call."""
+        """Whether a release may bring a decision: the tacho covers the waiting period's last slot,
+        or the gate is over its bound.  Else a release of part of a period decides nothing (the
+        decider takes any parts) and would have the tacho fit its smoothed speed at every call."""
         sev, clock = self.severity, self.clock
         assert sev is not None and self.shaft.tacho is not None
         gate = sev.gate
@@ -518,9 +515,8 @@ class Processor:
         return last < gate.first + waiting and self.shaft.tacho.covered_until >= clock.slot_t0(last + 1)
 
     def _holding(self, plain: bool) -> bool:
-        """Whether a call's observations wait in :attr:`held` (``plain``: no microphone
-        estimator or AKF trace wants them now): RAW with orders and the tacho's f_r (decisions
-        wait for the tacho), no observer or captures, and the banks started."""
+        """Whether a call's observations wait in :attr:`held` (``plain``: no microphone or AKF
+        trace): RAW with orders and the tacho's f_r, no observer or captures, the banks started."""
         sev = self.severity
         return (plain and self.orders is not None and self.observe is None and self.captures is None
                 and self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
