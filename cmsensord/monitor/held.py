@@ -12,9 +12,18 @@ a quiet link, the end).  What the slots' stamps depend on (the block clock) is n
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from cmsensord.monitor.raw import RawBlocks
+
+if TYPE_CHECKING:
+    from cmsensord.config import ChannelConfig
+    from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.monitor.clock import BlockClock
+    from cmsensord.monitor.indicators import Indicators
+    from cmsensord.monitor.severity import SeverityChain
 
 #: most slots held (then handed over whatever waits): bounds the memory, ~10 s at 100 blocks a second
 MAX_HELD_SLOTS = 1000
@@ -40,6 +49,30 @@ class Held:
         assert not self.rows or self.rows[-1][0] + len(self.rows[-1][1]) == first, "slots in order"
         self.rows.append((first, y, valid))
         self.n_rows += len(y)
+
+    def decision_due(self, sev: SeverityChain, tacho: TachoTracker, clock: BlockClock, bounded: bool) -> bool:
+        """Whether a release may bring a decision: the tacho covers the waiting period's last
+        slot (its speed cannot be final before), or the gate (with the rows held here) is over
+        its bound, or this is full.  Else a release of part of a period decides nothing (the
+        decider takes a period in any parts) and would have the tacho fit its smoothed speed."""
+        gate = sev.gate
+        waiting = gate.waiting + self.n_rows        # the held rows follow the gate's
+        if (bounded and waiting > gate.max_rows) or clock.slot0_t0 is None or self.full():
+            return True
+        last = gate.first + sev.decider.period - sev.decider.phase - 1     # the period's last slot
+        return last < gate.first + waiting and tacho.covered_until >= clock.slot_t0(last + 1)
+
+    def hand_over(self, sev: SeverityChain | None, indicators: Indicators,
+                  channels: tuple[ChannelConfig, ...]) -> None:
+        """What is held to the banks and the indicator intervals (before anything reads them, or
+        changes the channels or the time segment)."""
+        rows = self.take_rows()
+        if rows is not None:
+            assert sev is not None
+            sev.observe(*rows)
+        blocks = self.take_blocks()
+        if blocks is not None:
+            indicators.raw(channels, blocks)
 
     def take_rows(self) -> tuple[int, np.ndarray, np.ndarray] | None:
         """The rows held, joined (None: none)."""

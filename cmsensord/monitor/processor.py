@@ -93,6 +93,7 @@ class Processor:
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
         self.held = Held()          # live RAW: what waits for the next decision (monitor/held.py)
+        self._hand_over = lambda: self.held.hand_over(self.severity, self.indicators, self.channels)
         self.captures: Captures | None = None
         if cfg.capture.enabled:
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
@@ -485,7 +486,7 @@ class Processor:
         if sev is None or not (sev.gate.waiting or self.held.rows):
             return
         tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
-        if tacho and not final and not self._decision_due(bounded):
+        if tacho and not final and not self.held.decision_due(sev, self.shaft.tracker(), self.clock, bounded):
             return
         self._hand_over()
         upto = self.shaft.final_slot(self.clock) if tacho and not final else self.clock.next_slot
@@ -501,19 +502,6 @@ class Processor:
             self._out(sev.decision(d, stamp))
             self.write_diagnostics(stamp)
 
-    def _decision_due(self, bounded: bool) -> bool:
-        """Whether a release may bring a decision: the tacho covers the waiting period's last slot,
-        or the gate is over its bound.  Else a release of part of a period decides nothing (the
-        decider takes any parts) and would have the tacho fit its smoothed speed at every call."""
-        sev, clock = self.severity, self.clock
-        assert sev is not None and self.shaft.tacho is not None
-        gate = sev.gate
-        waiting = gate.waiting + self.held.n_rows       # the held rows follow the gate's
-        if (bounded and waiting > gate.max_rows) or clock.slot0_t0 is None or self.held.full():
-            return True
-        last = gate.first + sev.decider.period - sev.decider.phase - 1     # the period's last slot
-        return last < gate.first + waiting and self.shaft.tacho.covered_until >= clock.slot_t0(last + 1)
-
     def _holding(self, plain: bool) -> bool:
         """Whether a call's observations wait in :attr:`held` (``plain``: no microphone or AKF
         trace): RAW with orders and the tacho's f_r, no observer or captures, the banks started."""
@@ -522,18 +510,6 @@ class Processor:
                 and self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
                 and sev is not None and sev.gate.end is not None)
 
-    def _hand_over(self) -> None:
-        """What :attr:`held` holds to the banks and the indicator intervals (before anything
-        reads them, or changes the channels or the time segment)."""
-        if not self.held:
-            return
-        rows = self.held.take_rows()
-        if rows is not None:
-            assert self.severity is not None
-            self.severity.observe(*rows)
-        blocks = self.held.take_blocks()
-        if blocks is not None:
-            self.indicators.raw(self.channels, blocks)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
