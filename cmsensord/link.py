@@ -202,6 +202,7 @@ class SerialReader(threading.Thread):
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
         self.pace = ReadPace()
+        self.waited = False     # the last read waited for its first byte (it timed the arrival)
 
     def stop(self) -> None:
         self._stop_event.set()
@@ -263,7 +264,7 @@ class SerialReader(threading.Thread):
                 self.capture_error = f"capture file: {exc.strerror or exc}"
                 self._event("disk_error", self.capture_error + "; capture stopped")
         frames = self.decoder.feed(data)
-        self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None)
+        self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None, exact=self.waited)
         self.queue.named.clear()                # a wake_at from now on ends a named_wait
         self.queue.put(frames)
         if self.errors:
@@ -296,6 +297,7 @@ class SerialReader(threading.Thread):
         then read while it shows bytes waiting (``read_size`` at a time, a tty's 4 kB at
         most, up to ``STEP_BYTES``), not its first byte and then the rest."""
         n = ser.in_waiting
+        self.waited = not n
         if not n:
             fileno = getattr(ser, "fileno", None)
             if fileno is None:

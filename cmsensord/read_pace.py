@@ -6,14 +6,24 @@ stream (issue 13).  The live loop takes the frames only when the block completin
 next /orders block or decision is in (:meth:`FrameQueue.wake_at`), so the reader may let
 bytes gather in the port's kernel buffer meanwhile:
 
-* with a block to wake at (``wake_t0``), until shortly (``margin_s``) before that
-  block is due: its arrival time extrapolated from the earliest arrival of the last
+* with a block to wake at (``wake_t0``), until ``-margin_s`` (2 ms) after that block is
+  due: its arrival time extrapolated from the earliest arrival of the last
   ``recent_s`` (a read after a wait comes late; the one waiting for the next block does not)
   at the board's rate as measured (board samples per wall second between reads
-  ``window_s`` to twice that apart, from the frames' t0 and arrival times), so the reader
-  waits in its read when that block comes and the orders are not delayed.  The earliest
+  ``window_s`` to twice that apart, from the frames' t0 and arrival times).  A block that
+  comes by then is read with the backlog before it, in one read (one wake-up of the reader
+  per /orders block at 1x, not two: issue 13), at most 2 ms after it came at its earliest;
+  one that comes later is waited for in the read after the backlog's, so the orders are
+  not delayed by more than those 2 ms.  Only a read that waited for its bytes tells when a
+  block arrived (``exact``): one after such a hold found them waiting, and taken as arrivals
+  they would put the due time later at every read.  So when no read has waited for ``probe_s``,
+  or when more than half of ``buffer_bytes`` come between the newest read and that block (a
+  fast stream, RAW 4 channels: the port's buffer overflowed with the later read), the hold
+  ends ``probe_margin_s`` (5 ms) before the block is due instead: the backlog is read, then
+  the block as it comes, which measures its arrival.  The earliest
   of a short span, not of the whole window: on a loaded machine the arrivals jitter by
-  tens of ms, and a rare early one long ago would make every block look late ever after;
+  tens of ms, and a rare early one long ago would make every block look late ever after
+  (the newest exact arrival is kept however old);
 * when that block is already in (the loop has not named the next yet), not at all
   (:meth:`named_wait`: until the loop names the next);
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
@@ -39,11 +49,13 @@ MAX_HOLD_S = 0.1
 class ReadPace:
     """The reader's wait before its next read (see module docstring)."""
 
-    def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = 0.005,
+    def __init__(self, *, buffer_bytes: int = 16384, idle_hold_s: float = 0.05, margin_s: float = -0.002,
                  window_s: float = 10.0, min_span_s: float = 1.0, behind_s: float = 0.02,
-                 recent_s: float = 1.0):
+                 recent_s: float = 1.0, probe_s: float = 0.5, probe_margin_s: float = 0.005):
         self.buffer_bytes, self.idle_hold_s, self.margin_s = buffer_bytes, idle_hold_s, margin_s
         self.behind_s, self.recent_s = behind_s, recent_s
+        self.probe_s, self.probe_margin_s = probe_s, probe_margin_s
+        self._exact_at: float | None = None                  # the newest read that waited for its bytes
         self.window_s, self.min_span_s = window_s, min_span_s
         self._refs: deque[tuple[float, int, int]] = deque()  # (wall, t0, bytes so far), window_s apart
         self._recent: deque[tuple[float, int]] = deque()     # (wall, t0) of the reads of the last recent_s
@@ -54,8 +66,10 @@ class ReadPace:
         self.byte_rate: float | None = None
         self.late_s = 0.0                   # the newest frame came this long after it was due
 
-    def arrived(self, now: float, nbytes: int, t0: int | None) -> None:
-        """A read of ``nbytes`` at ``now``; ``t0``: the newest frame's t0_unwrapped (None: none)."""
+    def arrived(self, now: float, nbytes: int, t0: int | None, exact: bool = True) -> None:
+        """A read of ``nbytes`` at ``now``; ``t0``: the newest frame's t0_unwrapped (None: none);
+        ``exact``: the read waited for its bytes (so ``now`` is when the newest frame came),
+        else they were waiting (it came before)."""
         self._bytes += nbytes
         if t0 is None:
             return
@@ -67,8 +81,10 @@ class ReadPace:
         self.late_s = now - self._due(t0) if self.rate and self._recent else 0.0
         self.last = (now, t0)
         recent = self._recent
-        recent.append((now, t0))
-        while now - recent[0][0] > self.recent_s:
+        if exact or not recent:
+            recent.append((now, t0))
+            self._exact_at = now if exact else self._exact_at
+        while len(recent) > 1 and now - recent[0][0] > self.recent_s:
             recent.popleft()
         self._earliest = None
         refs = self._refs
@@ -93,7 +109,10 @@ class ReadPace:
             return min(cap, self.idle_hold_s)
         if wake_t0 <= self.last[1]:
             return 0.0
-        return max(0.0, min(cap, MAX_HOLD_S, self._due(wake_t0) - self.margin_s - now))
+        due = self._due(wake_t0)
+        late = (self._exact_at is not None and now - self._exact_at < self.probe_s
+                and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
+        return max(0.0, min(cap, MAX_HOLD_S, due - (self.margin_s if late else self.probe_margin_s) - now))
 
     def named_wait(self, now: float, wake_t0: int | None) -> float:
         """Seconds the reader may wait for the loop to name its next block, when the block it

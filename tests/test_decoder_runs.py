@@ -197,3 +197,27 @@ def test_batches_equal_the_frame_by_frame_decoder(seed):
                           decode_rms_rows([ref[i] for i in by_c], C).view(np.uint32))
     for x, y in zip(rms_fields(batch), rms_fields([ref[i] for i in by_c])):
         assert x.tolist() == y.tolist()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_few_tacho_payloads_one_by_one_equal_the_one_pass(seed):
+    """The Shaft reads a live call's ten or so TACHO payloads with struct (monitor/shaft.py):
+    the same counts, offsets and messages as decode_tacho_many's array code."""
+    from cmsensord.monitor.shaft import FEW_TACHO, decode_tacho_few
+
+    rnd = random.Random(50 + seed)
+    for _ in range(200):
+        payloads = []
+        for _ in range(rnd.randrange(FEW_TACHO + 1)):
+            n = rnd.choice([0, 0, 1, 1, 2, 4])
+            p = struct.pack("<H", n) + b"".join(struct.pack("<I", rnd.randrange(2**32)) for _ in range(n))
+            e = rnd.random()
+            if e < 0.05:
+                p = p[:rnd.randrange(len(p))]
+            elif e < 0.1:
+                p += rnd.randbytes(rnd.randrange(1, 5))
+            payloads.append(p)
+        got, want = decode_tacho_few(payloads), protocol.decode_tacho_many(payloads)
+        assert got[0].dtype == want[0].dtype and got[1].dtype == want[1].dtype == "uint32"
+        assert got[0].tolist() == want[0].tolist() and got[1].tolist() == want[1].tolist()
+        assert got[2] == want[2]

@@ -74,3 +74,51 @@ def test_one_early_arrival_does_not_make_every_later_block_look_late():
         pace.arrived(t, 600, 250 * k)
     assert pace.late_s < pace.behind_s
     assert pace.hold(t, 250 * 505) == pytest.approx(0.06 - pace.margin_s, abs=0.002)   # 6 blocks on
+
+
+def test_reads_that_found_their_bytes_waiting_do_not_move_the_due_time_and_a_probe_measures_it():
+    """At 1x the reader holds until 2 ms after the block to wake at is due and reads it with the
+    backlog (one read per /orders block): such a read found its bytes waiting, so its time is
+    no arrival (taken as one, the due time would move 2 ms later at every read).  Every
+    ``probe_s`` without a read that waited, the hold ends 5 ms before the block is due, and the
+    block is read as it comes: its arrival keeps the due time measured."""
+    holds, probes = one_read_per_block(0.5)
+    assert max(holds) <= 0.002 + 1e-6                       # never later than 2 ms after: no drift
+    assert sum(e >= 0 for e in holds) >= 0.75 * len(holds)  # mostly one read per /orders block
+    assert min(holds) == pytest.approx(-0.005, abs=1e-6)
+    assert 300 / 6 <= probes <= 300 / 4                     # one every probe_s = 5 /orders blocks
+
+
+def one_read_per_block(probe_s: float) -> tuple[list[float], int]:
+    """30 s of /orders blocks (ten blocks each) read as the reader does: (when each hold ended,
+    from its block's due time; how many were probes)."""
+    pace, now = paced(3.0)                      # blocks on time: block k comes at 0.01 (k + 1)
+    pace.probe_s = probe_s
+    holds, probes = [], 0
+    k = 299
+    for _ in range(300):                        # 30 s of /orders blocks, ten blocks each
+        wake = 250 * (k + 10)
+        hold = pace.hold(now, wake)
+        due = 0.01 * (k + 11)
+        holds.append(now + hold - due)
+        if now + hold < due:                    # a probe: the backlog, then the block as it comes
+            probes += 1
+            pace.arrived(now + hold, 5400, 250 * (k + 9), exact=False)
+            now = due
+            pace.arrived(now, 600, wake, exact=True)
+        else:                                   # the block was in: one read, found waiting
+            now += hold
+            pace.arrived(now, 6000, wake, exact=False)
+        k += 10
+    return holds, probes
+    assert 300 / 6 <= probes <= 300 / 4                      # one probe every probe_s = 5 /orders blocks
+
+
+def test_a_fast_stream_reads_the_backlog_before_the_block_so_the_port_buffer_never_fills():
+    """RAW 4 channels send ~2.1 kB a block: between the newest read and the block to wake at
+    more than half the buffer would wait, so the hold ends 5 ms before that block is due (the
+    backlog, then the block as it comes), not after it."""
+    pace, now = paced(3.0, bytes_per_block=2100)
+    due = (250 * 305 - 250 * 299) / 25000.0     # 6 blocks on: 12.6 kB, over half of 16 kB
+    assert pace.hold(now, 250 * 305) == pytest.approx(due - pace.probe_margin_s)
+    assert pace.hold(now, 250 * 302) == pytest.approx(0.03 - pace.margin_s)   # 6.3 kB: after it

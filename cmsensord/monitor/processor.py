@@ -38,9 +38,10 @@ from cmsensord.monitor.alarms import WATCHED, Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
+from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.raw import RawInput
-from cmsensord.monitor.segments import Segments
+from cmsensord.monitor.segments import SCAN_MIN, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
@@ -100,6 +101,8 @@ class Processor:
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
+        self.held = Held()          # live RAW: what waits for the next decision (monitor/held.py)
+        self._hand_over = lambda: self.held.hand_over(self.severity, self.indicators, self.channels)
         self.captures: Captures | None = None
         if cfg.capture.enabled:
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
@@ -178,6 +181,10 @@ class Processor:
         if self.clock.anchor_ns is None:
             self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
         rms, raw = Pending(), Pending()
+        if len(frames) < SCAN_MIN:                          # a live call's few frames
+            self._flush(*self._few(frames, rms, raw))
+            self._feed_tacho()
+            return
         for a, b, codes in self.segments.runs(frames):     # long batches checked in one pass
             if codes is None:
                 f = frames[a]
@@ -190,6 +197,36 @@ class Processor:
             rms, raw = self._passed(frames[a:b], codes, rms, raw)
         self._flush(rms, raw)
         self._feed_tacho()
+
+    def _few(self, frames: Sequence[Frame], rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
+        """A short batch (a live call) as one frame at a time, with no call per frame but the
+        segment check: RAW frames extend the waiting batch and TACHO frames go to the shaft (to
+        wait for :meth:`_feed_tacho`) together, before any other frame (:meth:`_frame`)."""
+        check = self.segments.check
+        raws: list[Frame] = []
+        tachos: list[Frame] = []
+        for f in frames:
+            hit = check(f) or f.lost_before
+            if not hit and f.type is _RAW:
+                raws.append(f)
+            elif not hit and f.type is _TACHO:
+                tachos.append(f)
+            else:
+                if raws:
+                    raw, raws = self._extend(raw, raws, False), []
+                if tachos:
+                    self.shaft.add_many(tachos)
+                    tachos = []
+                if hit:
+                    rms, raw = self._flush(rms, raw)
+                    if self._break(f):
+                        continue
+                rms, raw = self._frame(f, rms, raw)
+        if raws:
+            raw = self._extend(raw, raws, False)
+        if tachos:
+            self.shaft.add_many(tachos)
+        return rms, raw
 
     def _passed(self, frames: Sequence[Frame], codes: np.ndarray, rms: Pending,
                 raw: Pending) -> tuple[Pending, Pending]:
@@ -280,6 +317,7 @@ class Processor:
         self._feed_tacho(end=True)
         if self.orders is not None:
             self._out(self.orders.finish())
+        self._hand_over()
         self.indicators.finish()
         self._release_decisions(final=True)
         self._out(self.indicators.take(None))
@@ -295,6 +333,7 @@ class Processor:
         the intervals and decisions waiting for the shaft speed, with the speed known so far
         (:meth:`Indicators.quiet`).  The order chain's samples wait on: its filter state
         carries on when the board resumes.  The sink writes what its reorder window holds."""
+        self._hand_over()
         self.indicators.quiet()
         self._release_decisions(final=True)
         self._out(self.indicators.take(None))
@@ -306,6 +345,7 @@ class Processor:
         """Before a new time segment: what waits of the old one (the last RAW block, the
         indicator intervals, stamped in their own segment)."""
         self._flush_raw([], final=True)
+        self._hand_over()
         self.indicators.finish()
 
     def _flush(self, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
@@ -360,7 +400,10 @@ class Processor:
         if blocks is None:
             return
         self._observe(blocks.t0, blocks.rms())
-        self.indicators.raw(self.channels, blocks)
+        if self.held.rows:                      # the banks wait for a decision: so do the indicators
+            self.held.blocks.append(blocks)
+        else:
+            self.indicators.raw(self.channels, blocks)
         if self.captures is not None:
             self._out(self.captures.raw([ch.name for ch in self.channels], blocks.t0,
                                         blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
@@ -376,6 +419,7 @@ class Processor:
         if self.setup.changed(C):
             if C > self.setup.n_board:
                 self._release_decisions(final=True)
+            self._hand_over()
             self.setup.change(C)
 
     def _order_chain(self) -> OrderChain | None:
@@ -447,10 +491,16 @@ class Processor:
             self._out(mics.step(y, valid, stamps))
         if self.observe is not None:
             self.observe(first, y, valid)
-        y, out = self.severity.observe(first, y, valid)
         self.clock.advance(T)
-        self.observations += int(valid.sum())
-        self.missing_observations += int((~valid).sum())
+        n_valid = int(np.count_nonzero(valid))
+        self.observations += n_valid
+        self.missing_observations += valid.size - n_valid
+        if self._holding(mics is None and not trace):
+            self.held.add_rows(first, y, valid)
+            self._release_decisions(final=False)
+            return
+        self._hand_over()
+        y, out = self.severity.observe(first, y, valid)
         if trace:
             self._out(self.severity.trace(stamps, y, valid, out))
         self._release_decisions(final=False)
@@ -462,9 +512,12 @@ class Processor:
         waiting = self.indicators.records
         if sev is None or len(waiting) > MAX_RECORDS:       # no decision to wait for / bounded
             self._out(self.indicators.take(None if sev is None else waiting[-MAX_RECORDS].stamp_ns))
-        if sev is None or not sev.gate.waiting:
+        if sev is None or not (sev.gate.waiting or self.held.rows):
             return
         tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
+        if tacho and not final and not self.held.decision_due(sev, self.shaft.tracker(), self.clock, bounded):
+            return
+        self._hand_over()
         upto = self.shaft.final_slot(self.clock) if tacho and not final else self.clock.next_slot
         cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
@@ -480,6 +533,15 @@ class Processor:
             else:                               # the live loop's figures after the writes
                 self._out(out)
                 self.write_diagnostics(stamp)
+
+    def _holding(self, plain: bool) -> bool:
+        """Whether a call's observations wait in :attr:`held` (``plain``: no microphone or AKF
+        trace): RAW with orders and the tacho's f_r, no observer or captures, the banks started."""
+        sev = self.severity
+        return (plain and self.orders is not None and self.observe is None and self.captures is None
+                and self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
+                and sev is not None and sev.gate.end is not None)
+
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
@@ -506,6 +568,7 @@ class Processor:
         now = self.clock_ns()
         drift = self.clock.drift(now, max_drift_s)
         if drift is not None:
+            self._hand_over()                   # stamped in the segment they came in
             self.segments.drifted(now, *drift)
 
     def wake_t0(self) -> int | None:

@@ -173,6 +173,10 @@ class TachoState(ABC):
     def _finalise(self, ended: bool) -> None:
         """Fit the knots whose windows are complete (``KnotSmoothing``)."""
 
+    @abstractmethod
+    def _settle(self) -> None:
+        """Fit the knots the updates since the last call left to fit (``TachoTracker``)."""
+
     @staticmethod
     @abstractmethod
     def _tail(w0: FloatArray, tau: FloatArray, c: float) -> tuple[FloatArray, FloatArray]:

@@ -126,6 +126,7 @@ class KnotSmoothing(TachoState):
         Before the first edge, after a loss and behind the kept history the
         speed is 0 and invalid (NaN behind the history); see docs/tacho.md.
         """
+        self._settle()
         s = np.asarray(samples, dtype=np.float64)
         flat = s.reshape(-1)
         if flat.size:

@@ -23,6 +23,7 @@ from cmsensord.dsp.tacho.edges import (
     EdgeRuns,
     FloatArray,
     TachoCounters,
+    TachoEvent,
     TachoUpdate,
     tacho_frames_to_arrays,
 )
@@ -141,6 +142,8 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._shi = 0
         self._seg_todo = []  # (committed index, known at) to fit
         self._known_q = 0                             # the edge (or time) being handled
+        self._unsettled = False     # knots to fit before the smoothed speed is read (_settle)
+        self._lazy = False          # in feed_flat: the update leaves them
 
     # ------------------------------------------------------------------ input
     def update(self, t0_unwrapped: Sequence[int] | np.ndarray,
@@ -176,6 +179,19 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         sizes = counts[:n_ok]
         return self._update(t0, n_ok, sizes, off[:int(sizes.sum())])
 
+    def feed_flat(self, t0_unwrapped: Sequence[int] | np.ndarray, counts: npt.ArrayLike,
+                  offsets: npt.ArrayLike) -> list[TachoEvent]:
+        """:meth:`update_flat` returning only the events: the knots of the smoothed speed are
+        fitted when it is next asked for (:meth:`evaluate`, :attr:`final_until`), not now.  The
+        same knots, so the same values: the fit of a knot waits for its complete window
+        whenever it is made.  For a caller feeding ten times a second that asks for the
+        smoothed speed about once a second (the live daemon's Processor): one fit, not ten."""
+        self._lazy = True
+        try:
+            return self.update_flat(t0_unwrapped, counts, offsets).events
+        finally:
+            self._lazy = False
+
     def _in_order(self, t0: np.ndarray) -> int:
         """How many frames come before the first one stepping back in time."""
         if not t0.size:
@@ -192,9 +208,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._events = []
         F = t0.size
         if F == 0:
-            self._finalise(ended=False)
-            self._prune()
-            return TachoUpdate([], self.final_until, self.valid, self.counters.snapshot())
+            return self._settled([])
         # Frames without edges only advance the coverage, and a timeout check at the
         # end of each of them is the same as one check at the end of the last one
         # before the next edge (the run's timeout changes only with an edge, and the
@@ -232,11 +246,25 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
                 if bad_offsets:                          # the frame's t0 was taken, as before
                     self._last_t0 = int(t0[n_ok])
                 raise err
-        self._finalise(ended=False)
-        self._prune()
         ev = self._events
         self._events = []
-        return TachoUpdate(ev, self.final_until, self.valid, self.counters.snapshot())
+        return self._settled(ev)
+
+    def _settled(self, events: list[TachoEvent]) -> TachoUpdate:
+        """The end of an update: the knots fitted (or, for :meth:`feed_flat`, left to
+        :meth:`_settle`), and what the update returns."""
+        self._unsettled = True
+        if self._lazy:
+            return TachoUpdate(events, math.nan, self.valid, self.counters)
+        self._settle()
+        return TachoUpdate(events, self.final_until, self.valid, self.counters.snapshot())
+
+    def _settle(self) -> None:
+        """Fit the knots whose windows the updates since the last call completed, and prune."""
+        if self._unsettled:
+            self._unsettled = False
+            self._finalise(ended=False)
+            self._prune()
 
     def _few_frames(self, t0: list[int], sizes: list[int], off: list[int]) -> bool:
         """What the array code of :meth:`_update` does with frames all in time order, on Python
@@ -275,6 +303,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
     @property
     def final_until(self) -> float:
         """Sample index (float) below which speed, angle and validity are final."""
+        self._settle()
         run = self._run
         if run is None:
             return float(self._now) if self._now is not None else 0.0
