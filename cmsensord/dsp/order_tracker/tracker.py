@@ -10,7 +10,7 @@ docs/order_tracker.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -43,6 +43,9 @@ try:  # the compiled kernel is optional: numpy is the fallback
 except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
+#: the speed [rpm] at input samples i (counted from the call's first sample), for process()
+SpeedAt = Callable[[np.ndarray], np.ndarray]
+
 _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
 PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays take about this
 
@@ -50,6 +53,14 @@ PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays ta
 def have_kernel() -> bool:
     """True when the compiled kernel is importable."""
     return _trackerkernel is not None
+
+
+def _piece_of(rpm: np.ndarray | SpeedAt, a: int, n: int) -> np.ndarray | SpeedAt:
+    """The speed of the input samples a .. a + n - 1 of a call, as :meth:`OrderTracker.process`
+    takes it for a call of those samples alone."""
+    if callable(rpm):
+        return lambda i: rpm(i + a)
+    return rpm[a:a + n]
 
 
 class OrderTracker:
@@ -246,8 +257,14 @@ class OrderTracker:
         return out
 
     # ---------------------------------------------------------------- process
-    def process(self, y, rpm) -> TrackerOutput:
+    def process(self, y, rpm: np.ndarray | SpeedAt) -> TrackerOutput:
         """Track a block: y (T, C) (or (T,) for one channel) at fs_in, rpm (T,) at fs_in.
+
+        ``rpm`` may instead be a function giving the speed at input samples ``i`` (an int
+        array, ascending, counted from this call's first sample, within 0..T-1): the
+        tracker then asks only for the speeds it reads (one input sample in D, delayed
+        by the anti-alias filter; :meth:`_delayed_at`), each sample once, in the call it
+        comes in, and gives the same outputs as with the array of them all.
 
         NaN in y is a missing sample of that channel (a lost frame, a gap): see
         docs/order_tracker.md §5.  With ``gains="exact"`` the
@@ -258,19 +275,20 @@ class OrderTracker:
             y = y[:, None]
         if y.ndim != 2 or y.shape[1] != self.C:
             raise ValueError(f"y: expected shape (T, {self.C}), got {y.shape}")
-        rpm = np.asarray(rpm, dtype=np.float64)
-        if rpm.shape != (y.shape[0],):
-            raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
+        if not callable(rpm):
+            rpm = np.asarray(rpm, dtype=np.float64)
+            if rpm.shape != (y.shape[0],):
+                raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
         step = self.piece * self.decimate
         if self.gains == "table" and y.shape[0] > step:
             # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
             # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
             # gives the same outputs, so the joined pieces are those of one call
-            return join_outputs([self._process(y[a:a + step], rpm[a:a + step])
+            return join_outputs([self._process(y[a:a + step], _piece_of(rpm, a, step))
                                  for a in range(0, y.shape[0], step)])
         return self._process(y, rpm)
 
-    def _process(self, y: np.ndarray, rpm: np.ndarray) -> TrackerOutput:
+    def _process(self, y: np.ndarray, rpm: np.ndarray | SpeedAt) -> TrackerOutput:
         """:meth:`process` of checked arrays."""
         st = self.state
         gone_in = None
@@ -327,6 +345,8 @@ class OrderTracker:
 
     def _decimate(self, y, rpm):
         st = self.state
+        if callable(rpm) and (self.sos is None or y.shape[0] == 0):
+            rpm = np.asarray(rpm(np.arange(y.shape[0])), dtype=np.float64)
         if self.sos is None:
             st.n_in += y.shape[0]
             return y, rpm
@@ -341,7 +361,10 @@ class OrderTracker:
             if self._sos_blocks is None:
                 self._sos_blocks = SosBlocks(self.sos, self.decimate)
             yd, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
-        rd = self._delayed(rpm, take) if self.delay_in else rpm[take]
+        if callable(rpm):
+            rd = self._delayed_at(rpm, y.shape[0], take)
+        else:
+            rd = self._delayed(rpm, take) if self.delay_in else rpm[take]
         st.skip = int((st.skip - y.shape[0]) % self.decimate)
         st.n_in += y.shape[0]
         return yd, rd
@@ -357,6 +380,30 @@ class OrderTracker:
         rd = np.concatenate([st.rpm_line[take[:k]], rpm[take[k:] - n]])
         st.rpm_line = (rpm[len(rpm) - n:].copy() if len(rpm) >= n
                        else np.concatenate([st.rpm_line[len(rpm):], rpm]))
+        return rd
+
+    def _delayed_at(self, speed_at: SpeedAt, T: int, take: np.ndarray) -> np.ndarray:
+        """:meth:`_delayed` of a call of T input samples whose speed comes from ``speed_at``,
+        asked only where it is read: the input samples n with n + delay_in a multiple of D
+        (every kept sample is, counted from the first input), and the first input's (the
+        line starts filled with it).  The line keeps those only (its other entries NaN,
+        never read); its entries, and so the outputs, are those of :meth:`_delayed`."""
+        st, n, D = self.state, self.delay_in, self.decimate
+        p0 = -(st.n_in + n) % D
+        pos = np.arange(p0, T, D)
+        first = st.n_in == 0 and p0 > 0            # the first input's speed fills the line
+        if first:
+            pos = np.concatenate(([0], pos))
+        vals = np.asarray(speed_at(pos), dtype=np.float64)
+        if st.n_in == 0:
+            st.rpm_line[:] = vals[0]
+        k = int(np.searchsorted(take, n))           # kept samples still in the old line
+        rd = np.concatenate([st.rpm_line[take[:k]], vals[(take[k:] - n - p0) // D + first]])
+        tail = max(T - n, 0)                        # the line: positions tail .. T - 1 of this call
+        new = np.full(T - tail, np.nan)
+        at = int(np.searchsorted(pos, tail))
+        new[pos[at:] - tail] = vals[at:]
+        st.rpm_line = np.concatenate([st.rpm_line[T:], new]) if T < n else new
         return rd
 
     def _gains(self, speed, c, gone=None):
