@@ -191,7 +191,7 @@ class OrderTracker:
             component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
             grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
                                GainTable.bytes_per_point(self.K, want_p))
-            self.table = GainTable(grid, self.K, want_p, self._steady_state)
+            self.table = GainTable(grid, self.K, want_p, self._steady_state, kernel=self.backend == "c")
 
     def _crossing_cap(self, top: float) -> float | None:
         """1 rpm when a fixed-frequency component crosses an order's frequency between

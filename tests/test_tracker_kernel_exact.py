@@ -1,0 +1,88 @@
+"""The order tracker's compiled loops against plain references, bit for bit: the anti-alias
+cascade (its state in registers for cascades of up to 8 sections, the general loop beyond)
+against the direct form II transposed written out per sample in Python floats, and the gain
+table's interpolation in the kernel against its numpy lookup."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cmsensord.dsp.order_tracker import OrderTracker, TrackedComponent, have_kernel
+from cmsensord.dsp.order_tracker.gain_table import GainTable
+
+pytestmark = pytest.mark.skipif(not have_kernel(), reason="the compiled tracker kernel is not built")
+
+
+def sosfilt_reference(sos, x, zi, skip, D):
+    """scipy.signal.sosfilt's arithmetic, one sample, channel and section at a time (Python
+    floats are IEEE doubles: the same roundings), every D-th output from ``skip`` on."""
+    T, C = x.shape
+    z = zi.copy()
+    out = []
+    for n in range(T):
+        row = []
+        for ch in range(C):
+            v = float(x[n, ch])
+            for s, (b0, b1, b2, _, a1, a2) in enumerate(sos.tolist()):
+                new = b0 * v + z[s, 0, ch]
+                z[s, 0, ch] = b1 * v - a1 * new + z[s, 1, ch]
+                z[s, 1, ch] = b2 * v - a2 * new
+                v = new
+            row.append(v)
+        if n >= skip and (n - skip) % D == 0:
+            out.append(row)
+    return np.array(out).reshape(-1, C), z
+
+
+@pytest.mark.parametrize("S", [1, 2, 3, 4, 5, 8, 9, 11])
+@pytest.mark.parametrize("C", [1, 3])
+def test_the_kernels_cascade_equals_the_per_sample_reference(S, C):
+    from cmsensord.dsp import _trackerkernel
+
+    rng = np.random.default_rng(S * 10 + C)
+    sos = np.empty((S, 6))
+    sos[:, :3] = rng.uniform(-1, 1, (S, 3))
+    sos[:, 3] = 1.0
+    sos[:, 4:] = rng.uniform(-0.4, 0.4, (S, 2))          # stable sections
+    x = rng.standard_normal((500, C))
+    zi = rng.standard_normal((S, 2, C))
+    for skip, D in ((0, 1), (3, 7), (499, 5), (600, 4)):
+        want, z_want = sosfilt_reference(sos, x, zi, skip, D)
+        out = np.full((len(want), C), np.nan)
+        z = zi.copy()
+        _trackerkernel.sosfilt(sos, x, z, out, skip, D)
+        assert np.array_equal(out, want) and np.array_equal(z, z_want), (skip, D)
+
+
+@pytest.mark.parametrize("lag", [None, 0.05])
+def test_the_kernels_table_lookup_equals_the_numpy_one(lag):
+    """Random speeds over the whole grid, below it and at its top (the last interval, f
+    clipped to 1): k, S and P are the numpy lookup's, bit for bit."""
+    comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in (1, 2, 3)]
+    tr = OrderTracker(comps, fs_in=25000.0, max_rpm=3600.0, smoother_lag_s=lag, backend="c")
+    t = tr.table
+    assert t is not None and t._lerp is not None
+    plain = GainTable(t.grid, tr.K, lag is not None, tr._steady_state, kernel=False)
+    assert plain._lerp is None
+    rng = np.random.default_rng(1)
+    speed = np.concatenate([rng.uniform(100.0, 4200.0, 3000), [300.0, 3960.0, 5000.0, 250.0]])
+    got, want = t.lookup(speed), plain.lookup(speed)
+    for a, b in zip(got, want):
+        if b is None:
+            assert a is None
+        else:
+            assert a.shape == b.shape and a.flags.c_contiguous and np.array_equal(a, b)
+    assert got[2] is None or got[2].shape == (len(speed), 6, 6)
+
+
+def test_the_kernels_lookup_refuses_rows_outside_the_table():
+    from cmsensord.dsp import _trackerkernel
+
+    tab, dtab = np.zeros((4, 3)), np.zeros((3, 3))
+    a, b = np.empty((2, 2)), np.empty(2)
+    for bad in ([0, 3], [-1, 0]):
+        with pytest.raises(ValueError, match="outside"):
+            _trackerkernel.lerp_rows(tab, dtab, np.array(bad, dtype=np.int64), np.zeros(2), a, b, 3, 2)
+    with pytest.raises(ValueError, match="expected"):
+        _trackerkernel.lerp_rows(tab, dtab, np.zeros(3, dtype=np.int64), np.zeros(2), a, b, 3, 2)
