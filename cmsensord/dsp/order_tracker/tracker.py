@@ -183,12 +183,12 @@ class OrderTracker:
         self.horizon_s = float(horizon_s)
         self._n_double = max(1, math.ceil(math.log2(max(2.0, horizon_s * self.fs_track))))
         self.table: GainTable | None = None
+        self._fills = 0                 # fills of the table so far (_steady_state)
         if self.gains == "table":
             top = 1.1 * self.max_rpm
             want_p = self.lag is not None
-            # r on the bandwidth grid over the table's speeds, in one batch (the table
-            # segments, filled as the speed goes, then find it there)
-            component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
+            # r on the bandwidth grid is computed when the table's segments need it
+            # (_steady_state): a machine at one speed pays for a few grid points only
             grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
                                GainTable.bytes_per_point(self.K, want_p))
             self.table = GainTable(grid, self.K, want_p, self._steady_state, kernel=self.backend == "c")
@@ -209,7 +209,14 @@ class OrderTracker:
         return c, qd, q2
 
     def _steady_state(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Steady-state [k | S] (G, 2K+1) and P(n|n-1) (G, 2K, 2K) at the grid speeds."""
+        """Steady-state [k | S] (G, 2K+1) and P(n|n-1) (G, 2K, 2K) at the grid speeds.
+
+        The table's first fill computes r only around its speeds (a bandwidth solve is a
+        few ms a batch, whatever its size); from the second on the speed moves, so r is
+        computed over the table's whole range in one batch (each value the same)."""
+        if self._fills == 1 and self.table is not None:
+            component_r(self.components, np.array([self.min_rpm, self.table.grid.top]), self.fs_track)
+        self._fills += 1
         ks, Ps = [], []
         for i in range(0, len(grid), 1024):
             c, qd, q2 = self._coeffs(grid[i:i + 1024])
@@ -221,8 +228,11 @@ class OrderTracker:
         return np.concatenate(ks), np.concatenate(Ps)
 
     def initial_state(self) -> TrackerState:
+        """The state before the first input: P = Q2 I at min_rpm for the exact gains (the
+        Riccati recursion starts from it); the table's gains never read P, so with them it is
+        I and r needs no bandwidth solve before the first segment of the table does."""
         d = 2 * self.K
-        _, _, q2 = self._coeffs(np.array([self.min_rpm]))
+        q2 = self._coeffs(np.array([self.min_rpm]))[2] if self.gains == "exact" else np.ones(1)
         zi = None
         if self.sos is not None:
             zi = np.zeros((self.sos.shape[0], 2, self.C))
