@@ -1,7 +1,8 @@
 """The order tracker's compiled loops against plain references, bit for bit: the anti-alias
 cascade (its state in registers for cascades of up to 8 sections, the general loop beyond)
-against the direct form II transposed written out per sample in Python floats, and the gain
-table's interpolation in the kernel against its numpy lookup."""
+against the direct form II transposed written out per sample in Python floats, the gain
+table's interpolation in the kernel against its numpy lookup, and the peak amplitudes of the
+state pairs against recursions.envelope."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 
 from cmsensord.dsp.order_tracker import OrderTracker, TrackedComponent, have_kernel
 from cmsensord.dsp.order_tracker.gain_table import GainTable
+from cmsensord.dsp.order_tracker.recursions import envelope
 
 pytestmark = pytest.mark.skipif(not have_kernel(), reason="the compiled tracker kernel is not built")
 
@@ -86,3 +88,30 @@ def test_the_kernels_lookup_refuses_rows_outside_the_table():
             _trackerkernel.lerp_rows(tab, dtab, np.array(bad, dtype=np.int64), np.zeros(2), a, b, 3, 2)
     with pytest.raises(ValueError, match="expected"):
         _trackerkernel.lerp_rows(tab, dtab, np.zeros(3, dtype=np.int64), np.zeros(2), a, b, 3, 2)
+
+
+@pytest.mark.parametrize("C,K", [(1, 1), (1, 4), (3, 2)])
+def test_the_kernels_envelope_equals_the_numpy_one(C, K):
+    """Random states and coefficients, c near +-2 (1 - c^2/4 at the 1e-300 floor), zeros,
+    NaN and inf: the same numbers, bit for bit (NaN where numpy gives NaN)."""
+    from cmsensord.dsp import _trackerkernel
+
+    rng = np.random.default_rng(C * 7 + K)
+    N = 500
+    xs = rng.standard_normal((N, C, 2 * K)) * rng.choice([1e-3, 1.0, 1e3], (N, C, 2 * K))
+    c = rng.uniform(-2.0, 2.0, (N, K))
+    c[:20] = 2.0
+    c[20:40] = -2.0
+    c[40:60] = 2.0 - 1e-17
+    xs[60:70] = 0.0
+    xs[70, 0, 0] = np.nan
+    xs[71, 0, 1] = np.inf
+    c[72, 0] = np.nan
+    with np.errstate(invalid="ignore"):                   # inf - inf: NaN, as in the kernel
+        want = envelope(xs, c)
+    got = np.empty((N, C, K))
+    _trackerkernel.envelope(xs, c, got, K)
+    assert np.array_equal(got, want, equal_nan=True)
+    assert np.isnan(want).any()
+    with pytest.raises(ValueError, match="expected"):
+        _trackerkernel.envelope(xs[:, :, :-1].copy(), c, got, K)

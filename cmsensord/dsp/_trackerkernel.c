@@ -22,9 +22,11 @@
  *   tacho_eval(s, kT, kth, kw, kr, speed, turns, j, code)
  *                                                  tacho.py: speed and angle between knots
  *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
+ *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <math.h>
 #include <stdlib.h>
 
 static int need(Py_buffer *b, Py_ssize_t n_doubles, const char *name) {
@@ -481,7 +483,52 @@ done:
     return ret;
 }
 
+/* Peak amplitude from the state pairs (recursions.py's envelope, the same operations in its
+ * order): xs (N x C x 2K), c (N x K) -> env (N x C x K),
+ *   env = sqrt(max((x1 x1 - (c x1) x2 + x2 x2) / max(1 - (0.25 c) c, 1e-300), 0))
+ * with x1, x2 the pair's entries; NaN passes through as np.maximum passes it. */
+static PyObject *envelope(PyObject *self, PyObject *args) {
+    Py_buffer bx, bc, be;
+    Py_ssize_t K;
+    if (!PyArg_ParseTuple(args, "y*y*w*n", &bx, &bc, &be, &K))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = K > 0 ? bc.len / (Py_ssize_t)sizeof(double) / K : 0;
+    const Py_ssize_t C = N > 0 ? bx.len / (Py_ssize_t)sizeof(double) / (N * 2 * K) : 0;
+    if (K <= 0 || bc.len != N * K * (Py_ssize_t)sizeof(double) ||
+        bx.len != N * C * 2 * K * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "envelope: expected xs (N x C x 2K) and c (N x K)");
+        goto done;
+    }
+    if (!need(&be, N * C * K, "env"))
+        goto done;
+    const double *xs = bx.buf, *c = bc.buf;
+    double *env = be.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t n = 0; n < N; n++) {
+        for (Py_ssize_t a = 0; a < K; a++) {
+            const double cc = c[n * K + a];
+            double s2 = 1.0 - 0.25 * cc * cc;
+            if (!(s2 >= 1e-300)) s2 = (s2 != s2) ? s2 : 1e-300;     /* np.maximum(., 1e-300) */
+            for (Py_ssize_t ch = 0; ch < C; ch++) {
+                const double *p = xs + ((n * C + ch) * K + a) * 2;
+                const double x1 = p[0], x2 = p[1];
+                double a2 = (x1 * x1 - cc * x1 * x2 + x2 * x2) / s2;
+                if (a2 < 0.0) a2 = 0.0;                                 /* np.maximum(., 0); NaN stays */
+                env[(n * C + ch) * K + a] = sqrt(a2);
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&bx); PyBuffer_Release(&bc); PyBuffer_Release(&be);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
+    {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
     {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},

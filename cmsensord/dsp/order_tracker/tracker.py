@@ -320,7 +320,7 @@ class OrderTracker:
         t_in = index * self.decimate - self.delay_in
         xf, zp, e, c, k, S, P = self._filter(yd, rd, miss)
         wave = np.ascontiguousarray(xf[:, :, 1::2])
-        env = envelope(xf, c)
+        env = self._envelope(xf, c)
         blocks = self._causal_blocks(n0, wave, env, rd, miss)
         out = TrackerOutput(index=index, t_in=t_in, rpm=rd, waveform=wave, blocks=blocks,
                             missing=miss if miss is not None else np.zeros((N, self.C), dtype=bool))
@@ -391,6 +391,16 @@ class OrderTracker:
         st.rpm_line = (rpm[len(rpm) - n:].copy() if len(rpm) >= n
                        else np.concatenate([st.rpm_line[len(rpm):], rpm]))
         return rd
+
+    def _envelope(self, xs: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """:func:`envelope` (N, C, K) of the states xs (N, C, 2K) at c (N, K): in the compiled
+        kernel with the C backend when it has it (the same operations, one pass)."""
+        kernel = getattr(_trackerkernel, "envelope", None) if self.backend == "c" else None
+        if kernel is None:
+            return envelope(xs, c)
+        env = np.empty((xs.shape[0], self.C, self.K))
+        kernel(np.ascontiguousarray(xs), np.ascontiguousarray(c), env, self.K)
+        return env
 
     def _delayed_at(self, speed_at: SpeedAt, T: int, take: np.ndarray) -> np.ndarray:
         """:meth:`_delayed` of a call of T input samples whose speed comes from ``speed_at``,
@@ -581,7 +591,7 @@ class OrderTracker:
             used = n_emit * B
             cb = cur["c"][:used].reshape(n_emit, B, self.K)
             wave = xs[..., 1::2]
-            env = envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
+            env = self._envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
                 n_emit, B, self.C, self.K)
             out.smoothed_index = h0 + np.arange(used)
             out.smoothed_waveform = np.ascontiguousarray(wave.reshape(used, self.C, self.K))
