@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict
 
 import numpy as np
+import pytest
 
 from cmsensord.dsp.indicators import Band, Bearing, Setup, compute, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
@@ -49,12 +50,23 @@ def test_many_records_at_once_equal_one_at_a_time_bit_for_bit():
     assert any(b.lines for r in got for b in r.bearings)           # the lines were read
 
 
-def test_several_intervals_released_together_give_the_messages_of_one_at_a_time():
+@pytest.mark.parametrize("with_tacho", [False, True])
+def test_several_intervals_released_together_give_the_messages_of_one_at_a_time(with_tacho):
     """The RAW chain's intervals released in one call (a replay's read brings ~2.6 s) and one
-    per call (a live call): the same /indicators messages."""
+    per call (a live call): the same /indicators messages (with a tacho: their speeds read
+    in one call, the same as one interval at a time)."""
     from cmsensord.config import default_config
+    from cmsensord.dsp.tacho import TachoTracker
     from cmsensord.monitor.clock import BlockClock
     from cmsensord.monitor.indicators import IndicatorChain
+
+    tacho = None
+    if with_tacho:                                  # 1500-1900 rpm, ppr 1, covering the record
+        tacho = TachoTracker(25000.0, 1, block_len=250)
+        t = np.cumsum(25000 * 60 / np.linspace(1500.0, 1900.0, 200))
+        t0 = np.arange(0, int(t[-1]) + 250, 250)
+        edges = [(t[(t >= a) & (t < a + 250)] - a) * 256 for a in t0]     # 1/256 sample
+        tacho.update(t0, [e.astype(np.uint32) for e in edges])
 
     cfg = default_config(2)
     clock = BlockClock()
@@ -65,7 +77,7 @@ def test_several_intervals_released_together_give_the_messages_of_one_at_a_time(
     y[60000:60250, 1] = np.nan                                   # a lost frame: partial stats
     outs = []
     for step in (len(y), 2500):
-        chain = IndicatorChain(cfg, cfg.channels, fs=25000, clock=clock, tacho=lambda: None)
+        chain = IndicatorChain(cfg, cfg.channels, fs=25000, clock=clock, tacho=lambda: tacho)
         got = []
         for a in range(0, len(y), step):
             got += chain.add_samples(a, y[a:a + step])
@@ -73,3 +85,6 @@ def test_several_intervals_released_together_give_the_messages_of_one_at_a_time(
         outs.append(got)
     assert len(outs[0]) >= 10 and outs[0] == outs[1]
     assert any("unavailable" in m.msg for m in outs[0])
+    assert all(("speed_rpm" in m.msg) == with_tacho for m in outs[0])
+    if with_tacho:
+        assert all(1450 < m.msg["speed_rpm"] < 1950 for m in outs[0])

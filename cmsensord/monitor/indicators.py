@@ -182,14 +182,16 @@ class IndicatorChain:
             ready.append(self.pending.pop(0))
         return self._records(ready, tacho) if ready else []
 
-    def _speed(self, s: int, tacho: TachoTracker | None) -> tuple[float | None, str | None]:
+    def _speeds(self, starts: list[int], tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
+        """(shaft speed [Hz] or None, its source) of the intervals starting at ``starts``: the
+        mean of the tacho's causal speed at SPEED_POINTS points of each (None when fewer than
+        half are valid), all read in one call; without a tacho, ``indicators.rpm``."""
         if tacho is None:
             rpm = self.cfg.indicators.rpm
-            return (rpm / 60.0, "config") if rpm else (None, None)
-        hz, ok = tacho.evaluate_causal(s + (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS)
-        if ok.mean() < 0.5:
-            return None, None
-        return float(np.mean(hz[ok])), "tacho"
+            return [(rpm / 60.0, "config") if rpm else (None, None)] * len(starts)
+        at = (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS
+        hz, ok = tacho.evaluate_causal(np.array(starts)[:, None] + at[None, :])
+        return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
 
     def _records(self, ready: list[tuple[int, np.ndarray, int]], tacho: TachoTracker | None) -> list:
         """The messages of the intervals ``ready`` (start, samples, stamp), in order, channel by
@@ -197,8 +199,7 @@ class IndicatorChain:
         the numbers of one :func:`compute` per record)."""
         rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
         todo: list = []                 # (x, setup, shaft_hz) of the complete records
-        for s, x, stamp in ready:
-            shaft_hz, source = self._speed(s, tacho)
+        for (_, x, stamp), (shaft_hz, source) in zip(ready, self._speeds([s for s, _, _ in ready], tacho)):
             head = {"mode": "raw", "interval_s": self.N / self.fs}
             if shaft_hz is not None:
                 head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
