@@ -115,3 +115,18 @@ def test_the_kernels_envelope_equals_the_numpy_one(C, K):
     assert np.isnan(want).any()
     with pytest.raises(ValueError, match="expected"):
         _trackerkernel.envelope(xs[:, :, :-1].copy(), c, got, K)
+
+
+@pytest.mark.parametrize("fs,f_hi", [(25000.0, 240.0), (25000.0, 1000.0), (2000.0, 80.0)])
+def test_the_impulse_response_from_the_kernel_equals_the_python_loop(monkeypatch, fs, f_hi):
+    """missing_window_of reads the anti-alias filter's impulse response: from the kernel's
+    cascade, the Python loop's numbers bit for bit, so the same window W."""
+    from cmsensord.dsp.order_tracker import antialias
+
+    order, fc = antialias.cheb2ord(f_hi, fs / 10 - f_hi, 0.001, 80.0, fs)
+    sos = antialias.cheby2_sos(order, 80.0, fc, fs)
+    fast = antialias._sos_impulse(sos)
+    w_fast = antialias.missing_window_of(sos)
+    monkeypatch.setattr(antialias, "_trackerkernel", None)
+    assert np.array_equal(fast, antialias._sos_impulse(sos)) and len(fast) > 500
+    assert antialias.missing_window_of(sos) == w_fast
