@@ -196,10 +196,10 @@ def _sos_impulse(sos: np.ndarray) -> np.ndarray:
     rho = max(float(np.max(np.abs(np.roots(s[3:])))) if np.any(s[4:]) else 0.0 for s in sos)
     n = 64 if rho <= 0.0 else min(1 << 20, math.ceil(math.log(1e-17) / math.log(rho)) + 64)
     if _trackerkernel is not None:          # the decimator's own loop: the same operations
-        x = np.zeros((n, 1))
-        x[0, 0] = 1.0
+        unit = np.zeros((n, 1))
+        unit[0, 0] = 1.0
         out = np.empty((n, 1))
-        _trackerkernel.sosfilt(np.ascontiguousarray(sos, dtype=np.float64), x,
+        _trackerkernel.sosfilt(np.ascontiguousarray(sos, dtype=np.float64), unit,
                                np.zeros((len(sos), 2, 1)), out, 0, 1)
         return out[:, 0]
     rows = [tuple(float(v) for v in s) for s in sos]
