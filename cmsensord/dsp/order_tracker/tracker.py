@@ -10,7 +10,7 @@ docs/order_tracker.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -28,6 +28,7 @@ from cmsensord.dsp.order_tracker.recursions import (
     riccati_numpy,
 )
 from cmsensord.dsp.order_tracker.sos_blocks import SosBlocks
+from cmsensord.dsp.order_tracker.speed_line import SpeedAt, delayed, delayed_at, piece_of
 from cmsensord.dsp.order_tracker.state import (
     BlockStats,
     TrackerOutput,
@@ -43,9 +44,6 @@ try:  # the compiled kernel is optional: numpy is the fallback
 except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
-#: the speed [rpm] at input samples i (counted from the call's first sample), for process()
-SpeedAt = Callable[[np.ndarray], np.ndarray]
-
 _NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
 PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays take about this
 
@@ -53,14 +51,6 @@ PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays ta
 def have_kernel() -> bool:
     """True when the compiled kernel is importable."""
     return _trackerkernel is not None
-
-
-def _piece_of(rpm: np.ndarray | SpeedAt, a: int, n: int) -> np.ndarray | SpeedAt:
-    """The speed of the input samples a .. a + n - 1 of a call, as :meth:`OrderTracker.process`
-    takes it for a call of those samples alone."""
-    if callable(rpm):
-        return lambda i: rpm(i + a)
-    return rpm[a:a + n]
 
 
 class OrderTracker:
@@ -273,7 +263,7 @@ class OrderTracker:
         ``rpm`` may instead be a function giving the speed at input samples ``i`` (an int
         array, ascending, counted from this call's first sample, within 0..T-1): the
         tracker then asks only for the speeds it reads (one input sample in D, delayed
-        by the anti-alias filter; :meth:`_delayed_at`), each sample once, in the call it
+        by the anti-alias filter; :func:`~.speed_line.delayed_at`), each sample once, in the call it
         comes in, and gives the same outputs as with the array of them all.
 
         NaN in y is a missing sample of that channel (a lost frame, a gap): see
@@ -294,7 +284,7 @@ class OrderTracker:
             # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
             # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
             # gives the same outputs, so the joined pieces are those of one call
-            return join_outputs([self._process(y[a:a + step], _piece_of(rpm, a, step))
+            return join_outputs([self._process(y[a:a + step], piece_of(rpm, a, step))
                                  for a in range(0, y.shape[0], step)])
         return self._process(y, rpm)
 
@@ -372,25 +362,12 @@ class OrderTracker:
                 self._sos_blocks = SosBlocks(self.sos, self.decimate)
             yd, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
         if callable(rpm):
-            rd = self._delayed_at(rpm, y.shape[0], take)
+            rd = delayed_at(st, self.delay_in, self.decimate, rpm, y.shape[0], take)
         else:
-            rd = self._delayed(rpm, take) if self.delay_in else rpm[take]
+            rd = delayed(st, self.delay_in, rpm, take) if self.delay_in else rpm[take]
         st.skip = int((st.skip - y.shape[0]) % self.decimate)
         st.n_in += y.shape[0]
         return yd, rd
-
-    def _delayed(self, rpm: np.ndarray, take: np.ndarray) -> np.ndarray:
-        """The speed ``delay_in`` input samples earlier at the kept samples ``take`` of this
-        call (the delay line [rpm_line, rpm] read there, without joining the whole call),
-        and the line moved on."""
-        st, n = self.state, self.delay_in
-        if st.n_in == 0 and rpm.size:            # the line starts filled with the first speed
-            st.rpm_line[:] = rpm[0]
-        k = int(np.searchsorted(take, n))        # kept samples still in the old line
-        rd = np.concatenate([st.rpm_line[take[:k]], rpm[take[k:] - n]])
-        st.rpm_line = (rpm[len(rpm) - n:].copy() if len(rpm) >= n
-                       else np.concatenate([st.rpm_line[len(rpm):], rpm]))
-        return rd
 
     def _envelope(self, xs: np.ndarray, c: np.ndarray) -> np.ndarray:
         """:func:`envelope` (N, C, K) of the states xs (N, C, 2K) at c (N, K): in the compiled
@@ -401,30 +378,6 @@ class OrderTracker:
         env = np.empty((xs.shape[0], self.C, self.K))
         kernel(np.ascontiguousarray(xs), np.ascontiguousarray(c), env, self.K)
         return env
-
-    def _delayed_at(self, speed_at: SpeedAt, T: int, take: np.ndarray) -> np.ndarray:
-        """:meth:`_delayed` of a call of T input samples whose speed comes from ``speed_at``,
-        asked only where it is read: the input samples n with n + delay_in a multiple of D
-        (every kept sample is, counted from the first input), and the first input's (the
-        line starts filled with it).  The line keeps those only (its other entries NaN,
-        never read); its entries, and so the outputs, are those of :meth:`_delayed`."""
-        st, n, D = self.state, self.delay_in, self.decimate
-        p0 = -(st.n_in + n) % D
-        pos = np.arange(p0, T, D)
-        first = st.n_in == 0 and p0 > 0            # the first input's speed fills the line
-        if first:
-            pos = np.concatenate(([0], pos))
-        vals = np.asarray(speed_at(pos), dtype=np.float64)
-        if st.n_in == 0:
-            st.rpm_line[:] = vals[0]
-        k = int(np.searchsorted(take, n))           # kept samples still in the old line
-        rd = np.concatenate([st.rpm_line[take[:k]], vals[(take[k:] - n - p0) // D + first]])
-        tail = max(T - n, 0)                        # the line: positions tail .. T - 1 of this call
-        new = np.full(T - tail, np.nan)
-        at = int(np.searchsorted(pos, tail))
-        new[pos[at:] - tail] = vals[at:]
-        st.rpm_line = np.concatenate([st.rpm_line[T:], new]) if T < n else new
-        return rd
 
     def _gains(self, speed, c, gone=None):
         """k (N, 2K), S (N,), P (N, 2K, 2K) or None.  ``gone`` (N,) bool or None: samples
