@@ -268,74 +268,171 @@ class AkfBank:
 def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> None:
     """Eqs. (3)-(15) looping over time, vectorised over (channel, filter).
 
-    Once every channel has started, and at a step where every channel has its observation,
-    the masks select everything and are skipped: the same arithmetic, fewer array passes."""
+    A run of steps where every channel has started and has its observation goes to
+    :func:`_run_steady` when every channel has the same window; the other steps run one by
+    one in :func:`_step`, with the masks.  The same arithmetic either way, bit for bit."""
     s = bank.state
-    R, zc = bank.R, bank.z_c[:, None]
-    N = bank.N
-    Nmax = s.res2.shape[2]
-    chan = np.arange(bank.C)
-    slot_mask = np.arange(Nmax)[None, :] < N[:, None]          # (C, Nmax) slots in use
-    slots = np.arange(Nmax)[None, :]
-    full = bool((N == Nmax).all())            # every ring as long as the longest: once filled, all in use
-    ci, ni = chan[:, None, None], np.arange(bank.n)[None, :, None]     # ring[ci, ni, order]: (C, n, Nmax)
-    all_valid = np.asarray(valid.all(axis=1)).tolist()
+    uniform = bool((bank.N == bank.N[0]).all())
+    all_valid = np.asarray(valid.all(axis=1))
     any_valid = np.asarray(valid.any(axis=1)).tolist()
-    for k in range(y.shape[0]):
-        v = valid[k]
-        yk = y[k][:, None]
-        first = v & (s.started == 0)
-        if first.any():                       # x̂(0) = first observation
-            s.x[first] = yk[first]
-            s.started[first] = 1
-        all_on = bool(s.started.all())
-        on = (s.started == 1)[:, None]        # nothing happens before the first observation
-        x_prior = s.x                                          # (3) (s.x is replaced, never changed in place, below)
-        P_prior = s.P + s.Q if all_on else np.where(on, s.P + s.Q, s.P)   # (4)
-        Y = P_prior + R                                        # (6)
-        out.x_prior[k] = x_prior if all_on else np.where(on, x_prior, np.nan)
-        out.Y[k] = Y if all_on else np.where(on, Y, np.nan)
-        if not any_valid[k]:
-            s.P = P_prior
-            out.x_hat[k] = out.x_prior[k]
-            out.Q[k] = s.Q if all_on else np.where(on, s.Q, np.nan)
-            continue
-        innov = yk - x_prior                                   # (5)
-        K = P_prior / Y                                        # (7)
-        dx = K * innov
-        x = x_prior + dx                                       # (8)
-        P = (1.0 - K) * P_prior                                # (9)
-        every = all_valid[k]
-        vv = v[:, None]
-        s.x = x if every else np.where(vv, x, x_prior)
-        s.P = P if every else np.where(vv, P, P_prior)
-        out.x_hat[k] = s.x if all_on else np.where(on, s.x, np.nan)
-        # windows of eqs. (11) and (14): ring buffers, per-channel slot
-        if every:
-            s.res2[chan, :, s.pos] = (yk - x) ** 2
-            s.dx2[chan, :, s.pos] = dx * dx
-            s.pos = (s.pos + 1) % N
-            s.fill = np.minimum(s.fill + 1, N)
+    T = y.shape[0]
+    gaps = np.flatnonzero(~all_valid)           # run_end[k]: the first step >= k without every observation
+    run_end = np.append(gaps, T)[np.searchsorted(gaps, np.arange(T))].tolist()
+    rings = _Rings(bank)
+    k = 0
+    while k < T:
+        if uniform and run_end[k] > k and bool(s.started.all()):
+            _run_steady(bank, y, out, k, run_end[k])
+            k = run_end[k]
         else:
-            slot = s.pos
-            vc = chan[v]
-            s.res2[vc, :, slot[v]] = ((yk - x) ** 2)[v]
-            s.dx2[vc, :, slot[v]] = (dx * dx)[v]
-            s.pos = np.where(v, (s.pos + 1) % N, s.pos)
-            s.fill = np.where(v, np.minimum(s.fill + 1, N), s.fill)
-        cnt = np.maximum(s.fill[:, None].astype(np.float64), 1)
-        # sum in chronological order, like the reference and the C kernel
-        order = ((s.pos - s.fill)[:, None] + slots) % N[:, None]      # each ring's slots, oldest first
-        order = order[:, None, :]
-        take = None if full and (s.fill == N).all() else ((slots < s.fill[:, None]) & slot_mask)[:, None, :]
-        M = _window_sum(s.res2[ci, ni, order], take) / cnt             # (11)
-        G_hat = _window_sum(s.dx2[ci, ni, order], take) / cnt          # (14)
-        G_tilde = K * K * Y                                    # (13)
-        S = np.maximum(1.0, G_hat / G_tilde) if bank.scaling else 1.0   # (12)
-        s.Q = S * M if every else np.where(vv, S * M, s.Q)     # (10)
+            _step(bank, rings, y, valid, out, k, any_valid[k], run_end[k] > k)
+            k += 1
+
+
+class _Rings:
+    """Index arrays of a bank's ring buffers (per call of :func:`_run_numpy`)."""
+
+    def __init__(self, bank: AkfBank):
+        Nmax = bank.state.res2.shape[2]
+        self.chan = np.arange(bank.C)
+        self.slots = np.arange(Nmax)[None, :]
+        self.slot_mask = self.slots < bank.N[:, None]           # (C, Nmax) slots in use
+        self.full = bool((bank.N == Nmax).all())   # every ring as long as the longest: once filled, all in use
+        self.ci, self.ni = self.chan[:, None, None], np.arange(bank.n)[None, :, None]   # ring[ci, ni, order]
+
+
+def _step(bank: AkfBank, g: _Rings, y: np.ndarray, valid: np.ndarray, out: AkfBlock, k: int,
+          any_v: bool, every: bool) -> None:
+    """Step k of every (channel, filter), masked for the channels not started or without their
+    observation (the masks are skipped once every channel has started, and at a step where
+    every channel has its observation)."""
+    s = bank.state
+    R, zc, N = bank.R, bank.z_c[:, None], bank.N
+    v = valid[k]
+    yk = y[k][:, None]
+    first = v & (s.started == 0)
+    if first.any():                       # x̂(0) = first observation
+        s.x[first] = yk[first]
+        s.started[first] = 1
+    all_on = bool(s.started.all())
+    on = (s.started == 1)[:, None]        # nothing happens before the first observation
+    x_prior = s.x                                          # (3) (s.x is replaced, never changed in place, below)
+    P_prior = s.P + s.Q if all_on else np.where(on, s.P + s.Q, s.P)   # (4)
+    Y = P_prior + R                                        # (6)
+    out.x_prior[k] = x_prior if all_on else np.where(on, x_prior, np.nan)
+    out.Y[k] = Y if all_on else np.where(on, Y, np.nan)
+    if not any_v:
+        s.P = P_prior
+        out.x_hat[k] = out.x_prior[k]
         out.Q[k] = s.Q if all_on else np.where(on, s.Q, np.nan)
-        z = innov / np.sqrt(Y)                                 # (15)
-        out.outlier[k] = (np.abs(z) > zc) & vv
+        return
+    innov = yk - x_prior                                   # (5)
+    K = P_prior / Y                                        # (7)
+    dx = K * innov
+    x = x_prior + dx                                       # (8)
+    P = (1.0 - K) * P_prior                                # (9)
+    vv = v[:, None]
+    s.x = x if every else np.where(vv, x, x_prior)
+    s.P = P if every else np.where(vv, P, P_prior)
+    out.x_hat[k] = s.x if all_on else np.where(on, s.x, np.nan)
+    # windows of eqs. (11) and (14): ring buffers, per-channel slot
+    if every:
+        s.res2[g.chan, :, s.pos] = (yk - x) ** 2
+        s.dx2[g.chan, :, s.pos] = dx * dx
+        s.pos = (s.pos + 1) % N
+        s.fill = np.minimum(s.fill + 1, N)
+    else:
+        slot = s.pos
+        vc = g.chan[v]
+        s.res2[vc, :, slot[v]] = ((yk - x) ** 2)[v]
+        s.dx2[vc, :, slot[v]] = (dx * dx)[v]
+        s.pos = np.where(v, (s.pos + 1) % N, s.pos)
+        s.fill = np.where(v, np.minimum(s.fill + 1, N), s.fill)
+    cnt = np.maximum(s.fill[:, None].astype(np.float64), 1)
+    # sum in chronological order, like the reference and the C kernel
+    order = (((s.pos - s.fill)[:, None] + g.slots) % N[:, None])[:, None, :]   # each ring's slots, oldest first
+    take = (None if g.full and (s.fill == N).all()
+            else ((g.slots < s.fill[:, None]) & g.slot_mask)[:, None, :])
+    M = _window_sum(s.res2[g.ci, g.ni, order], take) / cnt         # (11)
+    G_hat = _window_sum(s.dx2[g.ci, g.ni, order], take) / cnt      # (14)
+    G_tilde = K * K * Y                                    # (13)
+    S = np.maximum(1.0, G_hat / G_tilde) if bank.scaling else 1.0   # (12)
+    s.Q = S * M if every else np.where(vv, S * M, s.Q)     # (10)
+    out.Q[k] = s.Q if all_on else np.where(on, s.Q, np.nan)
+    z = innov / np.sqrt(Y)                                 # (15)
+    out.outlier[k] = (np.abs(z) > zc) & vv
+
+
+def _run_steady(bank: AkfBank, y: np.ndarray, out: AkfBlock, k0: int, k1: int) -> None:
+    """Steps k0..k1-1, where every channel has started and has its observation, of a bank
+    whose channels all have the same window N.
+
+    The windows of eqs. (11) and (14) are laid out in time rather than in rings, both in one
+    array ``h`` (steps, 2, C, n): the N-1 entries before the run (zeros where a window is not
+    yet full; 0 + v is v, so a zero prefix leaves the bits of the chronological sum as they
+    are), then one row per step, so that each step sums one contiguous slice, oldest first.
+    Only x̂, P, Q̂ and the windows feed back; x̂⁻ (the previous x̂), z and the outlier test
+    are formed for the whole run afterwards, and the rings are updated at the end.  Every
+    value is the operation :func:`_step` does on the same operands: the same bits."""
+    s = bank.state
+    N, L = int(bank.N[0]), k1 - k0
+    R = bank.R
+    h = _window_history(s, N, L)
+    cnts = np.minimum(s.fill[None, :, None] + np.arange(1, L + 1)[:, None, None], N).astype(np.float64)
+    x, P, Q = s.x, s.P, s.Q
+    x_hat, Yo, Qo = out.x_hat, out.Y, out.Q
+    ys = y[k0:k1, :, None]                                             # (L, C, 1)
+    scaling = bank.scaling
+    acc = np.add.accumulate
+    for j in range(L):
+        k = k0 + j
+        yk, row = ys[j], h[N - 1 + j]
+        P_prior = P + Q                                                # (4)
+        Y = np.add(P_prior, R, out=Yo[k])                              # (6)
+        K = P_prior / Y                                                # (7)
+        dx = np.multiply(K, yk - x, out=row[1])                        # (5), K ỹ
+        x = np.add(x, dx, out=x_hat[k])                                # (8)
+        P = (1.0 - K) * P_prior                                        # (9)
+        np.subtract(yk, x, out=row[0])
+        np.multiply(row, row, out=row)                                 # (y - x̂)², Δx̂²
+        MG = acc(h[j:j + N], axis=0)[-1] / cnts[j]                     # (11), (14)
+        S = np.maximum(1.0, MG[1] / (K * K * Y)) if scaling else 1.0   # (12), (13)
+        Q = np.multiply(S, MG[0], out=Qo[k])                           # (10)
+    out.x_prior[k0] = s.x                                              # (3): x̂⁻(k) = x̂(k-1)
+    out.x_prior[k0 + 1:k1] = x_hat[k0:k1 - 1]
+    s.x, s.P, s.Q = x_hat[k1 - 1].copy(), P, Q.copy()
+    z = (ys - out.x_prior[k0:k1]) / np.sqrt(Yo[k0:k1])                # (15)
+    out.outlier[k0:k1] = np.abs(z) > bank.z_c[:, None]
+    _store_history(s, h, N, L)
+
+
+def _window_history(s: AkfState, N: int, L: int) -> np.ndarray:
+    """(N-1+L, 2, C, n) array whose first N-1 rows are the rings' last N-1 entries of
+    (y - x̂)² and Δx̂², oldest first (zeros beyond a ring's fill)."""
+    C, n = s.x.shape
+    h = np.empty((N - 1 + L, 2, C, n))
+    if N > 1:
+        age = np.arange(N - 1, 0, -1)[:, None]                       # N-1 .. 1 steps before the run
+        slot = (s.pos[None, :] - age) % N                            # (N-1, C)
+        chan = np.arange(C)[None, :]
+        keep = (age <= s.fill[None, :])[:, :, None]
+        h[:N - 1, 0] = np.where(keep, s.res2[chan, :, slot], 0.0)   # (N-1, C, n)
+        h[:N - 1, 1] = np.where(keep, s.dx2[chan, :, slot], 0.0)
+    return h
+
+
+def _store_history(s: AkfState, h: np.ndarray, N: int, L: int) -> None:
+    """Write a run's last min(L, N) window entries back to the rings; advance pos and fill."""
+    m = min(L, N)
+    age = np.arange(m, 0, -1)[:, None]                               # m .. 1
+    pos = (s.pos + L) % N
+    slot = (pos[None, :] - age) % N                                  # (m, C)
+    chan = np.arange(s.x.shape[0])[None, :]
+    rows = h[N - 1 + L - m:]                                         # (m, 2, C, n), oldest first
+    s.res2[chan, :, slot] = rows[:, 0]
+    s.dx2[chan, :, slot] = rows[:, 1]
+    s.pos = pos
+    s.fill = np.minimum(s.fill + L, N)
 
 
 def _window_sum(ordered, take):

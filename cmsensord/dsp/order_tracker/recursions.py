@@ -68,10 +68,11 @@ def _fk(c: np.ndarray, k: np.ndarray) -> np.ndarray:
     return out
 
 
-def _a_matrices(c: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """A(n) = F(n)(I - k(n) h) = F(n) - (F(n) k(n)) h: (T, 2K, 2K)."""
+def _a_matrices(c: np.ndarray, k: np.ndarray, fk: np.ndarray | None = None) -> np.ndarray:
+    """A(n) = F(n)(I - k(n) h) = F(n) - (F(n) k(n)) h: (T, 2K, 2K) (``fk``: F(n) k(n) if
+    the caller has it)."""
     F = f_matrices(c)
-    F[:, :, 1::2] -= _fk(c, k)[:, :, None]
+    F[:, :, 1::2] -= (_fk(c, k) if fk is None else fk)[:, :, None]
     return F
 
 
@@ -99,8 +100,9 @@ def _chunk_starts(A: np.ndarray, b: np.ndarray, u0: np.ndarray, m: int) -> np.nd
     for t in range(1, m):
         M = Ab[:, t] @ M
         M[..., d:] += bb[:, t]
-    for j in range(J):
-        s[j + 1] = M[j, :, :d] @ s[j] + M[j, :, d:]
+    rows = list(s)                                            # views, made once
+    for Phi, z, cur, nxt in zip(M[:, :, :d], M[:, :, d:], rows, rows[1:]):
+        np.add(Phi @ cur, z, out=nxt)
     return s
 
 
@@ -121,7 +123,8 @@ def forward_numpy(y, c, k, z0):
     d = 2 * K
     m = CHUNK
     fk = _fk(c, k)
-    s = _chunk_starts(_a_matrices(c, k), fk[:, :, None] * y[:, None, :], z0.T, m)
+    w = T // m * m                                            # the whole chunks' maps
+    s = _chunk_starts(_a_matrices(c[:w], k[:w], fk[:w]), fk[:w, :, None] * y[:w, None, :], z0.T, m)
     J = -(-T // m)
     pad = J * m - T
     if pad:

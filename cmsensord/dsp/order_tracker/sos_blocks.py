@@ -90,12 +90,13 @@ class SosBlocks:
         same bits."""
         nb, C = xb.shape[0], xb.shape[2]
         drive = self.ctrl @ xb                         # (nb, 2S, C)
-        Z = np.empty((nb, 2 * self.S, C))
+        Z = np.empty((nb + 1, 2 * self.S, C))              # the state at each block's start
+        Z[0] = z
         A_M = self.A_M
-        for b in range(nb):
-            Z[b] = z
-            z = A_M @ z + drive[b]
-        return self.toeplitz @ xb + self.obs @ Z, z
+        rows = list(Z)                                 # views, made once
+        for d, cur, nxt in zip(drive, rows, rows[1:]):
+            np.add(A_M @ cur, d, out=nxt)
+        return self.toeplitz @ xb + self.obs @ Z[:nb], Z[nb].copy()
 
     def __call__(self, x: np.ndarray, zi: np.ndarray, part: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
