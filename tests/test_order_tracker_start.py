@@ -1,5 +1,6 @@
 """The order tracker's start (issue 13: a replay's fixed cost): with the table's gains it
-solves no bandwidth -> r at construction, and its first fill only around the first speed;
+solves no bandwidth -> r at construction, and its first fill only at the grid points around
+its speeds (min_rpm, where the speed is not known yet, and the running speed, none between);
 once the speed moves to another segment the table's whole range comes in one batch.  The
 outputs are those of a tracker whose r grid was computed over the whole range up front (as
 it was before), bit for bit."""
@@ -30,9 +31,10 @@ def test_the_r_grid_is_solved_where_the_table_needs_it_with_the_same_outputs():
     rng = np.random.default_rng(2)
     y = rng.standard_normal(60000)
     steady = np.full(30000, 1720.0)
+    steady[:5000] = 0.0                                 # no speed yet: the model runs at min_rpm
     first = tr.process(y[:30000], steady)
     at_one_speed = computed(late)
-    assert 0 < at_one_speed <= 4 * 16                   # a few grid points around 1720 rpm
+    assert 0 < at_one_speed <= 4 * 16                   # a few grid points around 300 and 1720 rpm
     ramp = np.linspace(1720.0, 3500.0, 30000)
     second = tr.process(y[30000:], ramp)
     assert computed(late) >= 4 * 60                     # then the whole 300-3960 rpm range
@@ -43,7 +45,7 @@ def test_the_r_grid_is_solved_where_the_table_needs_it_with_the_same_outputs():
     bandwidth._R_CACHE.update({k: np.full_like(v, np.nan) for k, v in bandwidth._R_CACHE.items() if k[0] in same})
     b = OrderTracker(same, **kw)
     assert b.table is not None
-    bandwidth.component_r(same, np.array([300.0, b.table.grid.top]), b.fs_track)   # one batch
+    bandwidth.component_r(same, b.table.grid.speeds(np.arange(b.table.grid.n)), b.fs_track)   # one batch
     outs_b = [b.process(y[:30000], steady), b.process(y[30000:], ramp)]
     for oa, ob in zip(outs_a, outs_b):
         for attr in ("waveform", "smoothed_waveform"):

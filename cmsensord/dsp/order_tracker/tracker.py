@@ -204,8 +204,8 @@ class OrderTracker:
         The table's first fill computes r only around its speeds (a bandwidth solve is a
         few ms a batch, whatever its size); from the second on the speed moves, so r is
         computed over the table's whole range in one batch (each value the same)."""
-        if self._fills == 1 and self.table is not None:
-            component_r(self.components, np.array([self.min_rpm, self.table.grid.top]), self.fs_track)
+        if self._fills == 1 and self.table is not None:       # every grid speed's r
+            component_r(self.components, self.table.grid.speeds(np.arange(self.table.grid.n)), self.fs_track)
         self._fills += 1
         ks, Ps = [], []
         for i in range(0, len(grid), 1024):
