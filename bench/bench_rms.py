@@ -203,6 +203,10 @@ def main() -> int:
 
     print(f"# RMS chain benchmark: {args.seconds:g} s simulated per capture, {args.scenario} scenario; "
           f"compiled AKF kernel: {'yes' if have_kernel() else 'NO (numpy fallback)'}")
+    print("# timed: main(['replay', ...]) in a fresh interpreter, after `import cmsensord.cli`"
+          + (" and the command modules (--preload)" if args.preload else "")
+          + ": the interpreter's start and those imports not counted; the configuration, the sink's"
+          " open and close and the summary counted")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -1,8 +1,10 @@
 """`cmsensord replay` with the one-pass paths of issue 13 (runs of frames decoded at once,
 regular tacho edges committed at once, long batches checked at once, RMS interval sums at
-once, frames as columns (FrameBatch) from the decoder to the banks) writes what the
-frame-by-frame, edge-by-edge daemon writes, message for message, on a RAW capture with a
-tacho and on an RMS capture, both with line noise in them."""
+once, frames as columns (FrameBatch) from the decoder to the banks, whole RMS intervals and
+decision periods at once, messages written in runs with a severity message's r encoded
+once) writes what the frame-by-frame, edge-by-edge, message-by-message daemon writes,
+message for message, on a RAW capture with a tacho and on an RMS capture, both with line
+noise in them."""
 
 from __future__ import annotations
 
@@ -27,6 +29,13 @@ segments.SCAN_MIN = 1 << 60
 EdgeRuns.batch_edges = False
 source.Decoder.feed_batch = source.Decoder.feed
 source.Decoder.flush_batch = source.Decoder.flush
+import cmsensord.dsp.severity as severity
+import cmsensord.monitor.indicators as indicators
+import cmsensord.sinks.mcap_encoding as encoding
+from cmsensord.sinks.rotating import RotatingSink
+severity.ONE_PASS_PERIODS = indicators.ONE_PASS_INTERVALS = 1 << 60
+encoding.REPEATED.clear()
+del RotatingSink.write_many
 from cmsensord.cli import main
 sys.exit(main(sys.argv[1:]))
 """

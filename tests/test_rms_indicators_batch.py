@@ -72,3 +72,31 @@ def test_one_pass_sums_equal_the_block_by_block_loop(seed):
     out_ref += ref.finish()
     assert len(out_ref) > 10
     assert out_got == out_ref
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_whole_intervals_in_one_pass_equal_the_block_by_block_loop(monkeypatch, seed):
+    """Long runs of back-to-back blocks (whole intervals summed in one pass, issue 13), broken
+    now and then by a gap, a step back or a misaligned block: the same records and state."""
+    from cmsensord.monitor import indicators
+
+    rnd = random.Random(100 + seed)
+    t, t0 = rnd.randrange(0, 100), []
+    for _ in range(3000):
+        t0.append(t)
+        t += 25 if rnd.random() < 0.995 else rnd.choice([0, 7, 50, 250, 1000, -25, -600])
+    t0_arr = np.array(t0, dtype=np.int64)
+    vals = np.asarray([[rnd.choice([rnd.uniform(0, 3)] * 20 + [np.nan]) for _ in range(4)] for _ in t0],
+                      dtype=np.float32)
+    channels = rnd.choice([(0, 1, 2, 3), (1, 3), (0, 5)])
+    cuts = sorted(rnd.sample(range(1, len(t0)), rnd.randrange(0, 8)))
+    outs = []
+    for one_pass in (1, 1 << 60):
+        monkeypatch.setattr(indicators, "ONE_PASS_INTERVALS", one_pass)
+        ind, out = make(RmsIndicators, channels), []
+        for a, b in zip([0, *cuts], [*cuts, len(t0)]):
+            out += ind.add(t0_arr[a:b], vals[a:b])
+        out += ind.finish()
+        outs.append((out, ind.sq.tobytes(), ind.n.tolist(), ind.start))
+    assert len(outs[0][0]) > 200
+    assert outs[0] == outs[1]

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+import pytest
 
 from cmsensord.dsp.severity import AnomalyDecider
 
@@ -51,3 +54,45 @@ def test_missing_slots_count_toward_the_period_and_are_reported():
     ds = d.update(flags, valid)
     assert [x.slot for x in ds] == [10, 20]
     assert ds[1].missing[0] == 3 and ds[0].missing[0] == 0
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_whole_periods_in_one_pass_decide_as_one_period_at_a_time(monkeypatch, seed):
+    """AnomalyDecider.update decides a run of whole periods in one pass (issue 13): every
+    decision, field for field and type for type, and the state after, as the period-by-period
+    loop gives; with hysteresis (set, kept, cleared), held flags, missing slots, the transient,
+    a new f_r in some calls and blocks cut anywhere."""
+    from cmsensord.dsp import severity
+
+    rnd = np.random.default_rng(seed)
+    C, n, P = 3, 5, 20
+    T = 40 * P + int(rnd.integers(0, P))
+    rate = np.repeat(rnd.choice([0.05, 0.3, 0.45, 0.8], size=(T // P + 1, C, n)), P, axis=0)[:T]
+    flags = (rnd.random((T, C, n)) < rate).astype(np.uint8)
+    valid = rnd.random((T, C)) > rnd.choice([0.0, 0.05])
+    flags[~valid] = 0
+    cuts = np.sort(rnd.choice(np.arange(1, T), size=int(rnd.integers(0, 6)), replace=False)).tolist()
+    f_rs = [None if rnd.random() < 0.6 else rnd.uniform(3.0, 12.0, size=C) for _ in range(len(cuts) + 1)]
+
+    def decide(one_pass: int):
+        monkeypatch.setattr(severity, "ONE_PASS_PERIODS", one_pass)
+        d = AnomalyDecider(C, n, f_r=[6.0, 8.0, 10.0], c=0.4, period=P)
+        got = []
+        for (a, b), fr in zip(zip([0, *cuts], [*cuts, T]), f_rs):
+            got += d.update(flags[a:b], valid[a:b], f_r=fr)
+        return d, got
+
+    (d1, got), (d0, ref) = decide(1), decide(1 << 60)
+    assert len(got) == len(ref) == T // P
+    for a, b in zip(got, ref):
+        for f in dataclasses.fields(a):
+            x, y = getattr(a, f.name), getattr(b, f.name)
+            if isinstance(y, np.ndarray):
+                assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True), f.name
+            else:
+                assert type(x) is type(y) and x == y, f.name
+    for name in ("anomaly", "held", "_last_severity", "cnt", "missing"):
+        assert np.array_equal(getattr(d1, name), getattr(d0, name)), name
+    assert (d1.periods, d1.slot, d1.phase) == (d0.periods, d0.slot, d0.phase)
+    assert {0, 1} <= {int(v) for x in ref for v in x.anomaly.ravel()}          # flags set and clear
+    assert any(x.held_max > 0 for x in ref)                                    # kept by hysteresis

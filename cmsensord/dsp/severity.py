@@ -49,6 +49,10 @@ import numpy as np
 
 __all__ = ["HOLD_EVENT_DECISIONS", "AnomalyDecider", "Decision", "level_severity"]
 
+#: whole periods in one :meth:`AnomalyDecider.update` call from which they are decided in one
+#: pass (:meth:`AnomalyDecider._decide_many`; the same decisions as one period at a time)
+ONE_PASS_PERIODS = 1
+
 #: consecutive decisions a flag may be held by the hysteresis alone
 #: (c f_r <= cnt < f_r) before the monitor reports it
 HOLD_EVENT_DECISIONS = 60
@@ -148,6 +152,13 @@ class AnomalyDecider:
         decisions: list[Decision] = []
         start = 0
         while start < T:
+            if self.phase == 0 and (T - start) // self.period >= ONE_PASS_PERIODS and level is None \
+                    and not self.combined and self.periods >= self.transient_periods:
+                k = (T - start) // self.period          # whole periods: decided in one pass
+                decisions += self._decide_many(outlier[start:start + k * self.period],
+                                               np.asarray(valid[start:start + k * self.period], dtype=bool))
+                start += k * self.period
+                continue
             take = min(T - start, self.period - self.phase)
             seg = slice(start, start + take)
             self.cnt += outlier[seg].sum(axis=0, dtype=np.int64)
@@ -189,6 +200,49 @@ class AnomalyDecider:
         self.phase = 0
         self.periods += 1
         return d
+
+    def _decide_many(self, outlier: np.ndarray, valid: np.ndarray) -> list[Decision]:
+        """The decisions of K whole periods (outlier (K period, C, n), valid (K period, C)),
+        after the transient and without the level part, in one pass: what K calls of
+        :meth:`_decide` give, array for array (integer counts and flags; the severity index
+        the same products and maxima)."""
+        P, C, n = self.period, self.C, self.n
+        K = outlier.shape[0] // P
+        # counts in a narrow type (faster), exact while a period has fewer than 65536 slots
+        cnt = outlier.reshape(K, P, C * n).sum(axis=1, dtype=np.uint16 if P < 1 << 16 else np.int64)
+        cnt = cnt.astype(np.int64).reshape(K, C, n)
+        missing = np.zeros((K, C), dtype=np.int64) if valid.all() else \
+            (~valid).reshape(K, P, C).sum(axis=1, dtype=np.int64)
+        fr = self.f_r[:, None]
+        set_ = cnt >= fr
+        decided = set_ | (cnt < self.c[:, None] * fr)
+        # F_a: set or cleared where decided (set if the last decided period set it), else kept
+        ks = np.arange(K)[:, None, None]
+        last = np.maximum.accumulate(np.where(decided, ks, -1), axis=0)
+        last_set = np.maximum.accumulate(np.where(set_, ks, -1), axis=0)
+        prev0 = self.anomaly
+        anomaly = np.where(last >= 0, (last_set == last) & (last >= 0), prev0[None] == 1).astype(np.uint8)
+        # held: decisions in a row that kept a flag by the hysteresis alone
+        kept = (anomaly == 1) & ~set_
+        reset = np.maximum.accumulate(np.where(kept, -1, ks), axis=0)
+        held = np.where(kept, np.where(reset >= 0, ks - reset, ks + 1 + self.held[None]), 0)
+        s_akf = (anomaly * self.level_weights).max(axis=-1)
+        prev_anomaly = np.concatenate((prev0[None], anomaly[:-1]))
+        prev_sev = np.concatenate((self._last_severity[None], s_akf[:-1]))
+        held_max = held.reshape(K, -1).max(axis=1).tolist()
+        nan = np.full(C, np.nan)
+        f_r = self.f_r.copy()
+        out = []
+        for k in range(K):
+            self.slot += P
+            out.append(Decision(slot=self.slot, period=self.periods + k, transient=False, cnt=cnt[k],
+                                anomaly=anomaly[k], prev_anomaly=prev_anomaly[k], severity=s_akf[k],
+                                prev_severity=prev_sev[k], f_r=f_r, missing=missing[k], severity_akf=s_akf[k],
+                                level=nan, severity_level=nan, held=held[k], held_max=held_max[k]))
+        self.periods += K
+        self.anomaly, self.held = anomaly[-1].copy(), held[-1].copy()
+        self._last_severity = s_akf[-1].copy()
+        return out
 
     def _level_part(self, transient: bool) -> tuple[np.ndarray, np.ndarray]:
         """(median level ratio, S_level) of the period; NaN in the paper's mode."""

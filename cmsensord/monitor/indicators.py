@@ -43,6 +43,7 @@ from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.dsp.indicators.velocity import velocity_band
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.sinks.schemas import indicators_topic
 
 if TYPE_CHECKING:
     from cmsensord.dsp.tacho import TachoTracker
@@ -52,6 +53,9 @@ if TYPE_CHECKING:
 MAX_WAIT_S = 10.0
 #: points of the interval at which the tacho speed is read
 SPEED_POINTS = 16
+#: RMS mode: whole intervals of back-to-back blocks from which they are summed in one pass
+#: (:meth:`RmsIndicators._whole`; the same sums as block by block)
+ONE_PASS_INTERVALS = 1
 #: every indicator a RAW record can carry, for ``unavailable``
 SPECTRAL = ("velocity_rms_mm_s", "zone", "envelope_rms", "bearings", "bands")
 WAVEFORM = ("accel_peak", "crest_factor", "kurtosis")
@@ -256,7 +260,8 @@ class RmsIndicators:
         ok = np.isfinite(v)
         sq = np.where(ok, v, 0.0) ** 2
         t = np.asarray(t0, dtype=np.int64)
-        B, N, L = len(t), self.N, self.L
+        B, N, L, per = len(t), self.N, self.L, self.per
+        steps = np.flatnonzero(np.diff(t) != L)     # block i to i + 1 is not the next block
         k = 0
         while k < B:
             tk = int(t[k])
@@ -266,6 +271,13 @@ class RmsIndicators:
             elif tk >= self.start + N:
                 out += self._close()
                 self.start += (tk - self.start) // N * N
+            if tk == self.start and not self.n.any():   # whole intervals of back-to-back blocks
+                i = int(np.searchsorted(steps, k))
+                K = ((int(steps[i]) + 1 if i < len(steps) else B) - k) // per
+                if K >= ONE_PASS_INTERVALS:
+                    out += self._whole(sq[k:k + K * per], ok[k:k + K * per], K)
+                    k += K * per
+                    continue
             end = self.start + N
             # the blocks after k in this interval, up to the first one reaching its end
             nxt = t[k + 1:]
@@ -279,6 +291,31 @@ class RmsIndicators:
             if close.size:
                 out += self._close()
             k = e
+        return out
+
+    def _whole(self, sq: np.ndarray, ok: np.ndarray, K: int) -> list:
+        """The records of K whole intervals from the empty one at ``start`` on, of their
+        blocks' squares ``sq`` and finite flags ``ok`` (K per, C): what K times the blocks of
+        one interval summed in block order and :meth:`_close` give, value for value."""
+        C = len(self.channels)
+        total = np.add.accumulate(sq.reshape(K, self.per, C), axis=1)[:, -1]   # in block order
+        n = ok.reshape(K, self.per, C).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rms = np.sqrt(total / n).tolist()
+        missing = (1.0 - n / self.per).tolist()
+        have = (n > 0).tolist()
+        names = [ch.name for ch in self.channels]
+        topics = [indicators_topic(name) for name in names]
+        interval_s, unavailable, Message = self.N / self.fs, self.UNAVAILABLE, messages.Message
+        out = []
+        assert self.start is not None
+        for j in range(K):
+            self.start += self.N
+            stamp = self.clock.stamp_ns(self.start)
+            out += [Message(topics[c], "indicators", stamp, {   # what messages.indicators makes
+                "channel": names[c], "mode": "rms", "interval_s": interval_s,
+                "missing_fraction": round(missing[j][c], 9), "accel_rms": round(rms[j][c], 9),
+                "unavailable": unavailable}) for c in range(C) if have[j][c]]
         return out
 
     def close_open(self) -> list:

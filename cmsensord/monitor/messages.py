@@ -72,23 +72,28 @@ def severity(stamp_ns: int, channel: str, d, c: int, R: np.ndarray, **extra: Any
     })
 
 
-def severities(stamp_ns: int, channels: Sequence[str], d, R: np.ndarray,
-               extras: Sequence[dict[str, Any]]) -> list[Message]:
+def severities(stamp_ns: int, channels: Sequence[str], d, R: np.ndarray | Sequence[list[float]],
+               extras: Sequence[dict[str, Any]], topics: Sequence[str] | None = None) -> list[Message]:
     """:func:`severity` of every channel column of the decision ``d`` (channel ``c``'s name
-    ``channels[c]``, its bank's noise variances ``R[c]`` (a row of ``R``), its further fields
-    ``extras[c]``),
+    ``channels[c]``, its bank's noise variances ``R[c]`` (a row of ``R``, or a list), its further
+    fields ``extras[c]``, its topic ``topics[c]``, by default made from the name),
     with the decision's arrays converted to Python values once for all channels."""
-    sev, anomaly, cnt = d.severity.tolist(), d.anomaly.tolist(), d.cnt.tolist()
-    f_r, missing, transient = d.f_r.tolist(), d.missing.tolist(), d.transient
+    # tolist(): Python floats and ints already (what float() and int() of each would give)
+    sev, anomaly = np.asarray(d.severity, dtype=np.float64).tolist(), d.anomaly.tolist()
+    cnt, missing, transient = d.cnt.tolist(), np.asarray(d.missing, dtype=np.int64).tolist(), d.transient
+    f_r = np.asarray(d.f_r, dtype=np.float64).tolist()
+    if topics is None:
+        topics = [severity_topic(ch) for ch in channels]
     out = []
     for c, channel in enumerate(channels):
-        s, a, r = float(sev[c]), anomaly[c], R[c]
-        out.append(Message(severity_topic(channel), "severity", stamp_ns, {
-            "channel": channel, "severity_index": s, "level": int(round(s * len(r))),
-            "anomaly": a, "outliers": cnt[c], "f_r": float(f_r[c]), "r": r.tolist(),
-            "failure": bool(a[-1]) or s >= 1.0, "missing": int(missing[c]), "transient": transient,
-            **extras[c],
-        }))
+        s, a, r = sev[c], anomaly[c], R[c]
+        n = len(r)
+        msg = {"channel": channel, "severity_index": s, "level": round(s * n), "anomaly": a,
+               "outliers": cnt[c], "f_r": f_r[c], "r": r.tolist() if isinstance(r, np.ndarray) else list(r),
+               "failure": bool(a[-1]) or s >= 1.0, "missing": missing[c], "transient": transient}
+        if extras[c]:
+            msg.update(extras[c])
+        out.append(Message(topics[c], "severity", stamp_ns, msg))
     return out
 
 

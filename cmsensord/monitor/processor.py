@@ -50,9 +50,16 @@ if TYPE_CHECKING:
 
 #: the frame types as plain names: a FrameType.X lookup goes through the enum's __getattr__ (~1 µs per frame)
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
-#: most RMS or RAW frames run through the chain in one call (bounds the per-call arrays:
+#: most RAW frames run through the chain in one call (bounds the per-call arrays:
 #: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
 MAX_BATCH = 1000
+#: most RMS frames in one call (an observation each, no samples): a replay's 128-KiB read of
+#: 4 channels in one call
+MAX_RMS_BATCH = 4000
+#: most observations (slots x channels) in one call of the banks from RMS frames: 4 x (T, C, n)
+#: float64 = 2.6 MB; the bank runs 1.8x slower per observation on arrays twice as long (their
+#: memory comes and goes: measured at 10,000-12,000 observations on this project's machine)
+MAX_RMS_RUN = 8000
 #: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
 MAX_RUN_SLOTS = 2 * MAX_BATCH
 #: indicator records waiting for the decision of their stamp at most (then written anyway)
@@ -83,6 +90,8 @@ class Processor:
                  on_event: Callable[[dict], None] | None = None,
                  observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
         self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
+        # a sink's own write_many (not one a wrapper's __getattr__ hands on from what it wraps)
+        self._write_many = sink.write_many if hasattr(type(sink), "write_many") else None
         self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
@@ -133,17 +142,35 @@ class Processor:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
 
     def _out(self, items) -> None:
-        """Messages to the sink and events to the log, in their order."""
-        write = self.sink.write
+        """Messages to the sink and events to the log, in their order: each run of messages
+        in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one."""
+        run: list = []
+        watching = self.alarms.watching
         for it in items:
-            if type(it) is Event:
+            kind = type(it)
+            if kind is Event:
+                run = self._write_run(run)
                 self.log.add((it,))
-            elif type(it) is messages.MessageGroup:      # a capture: one chunk of the log
+            elif kind is messages.MessageGroup:         # a capture: one chunk of the log
+                run = self._write_run(run)
                 self.sink.write_group(list(it.messages))
             else:
-                write(*it)
-                if it.schema in WATCHED:        # the alarm manager reads it
-                    self._out(self.alarms.see(it))
+                run.append(it)
+                if watching and it.schema in WATCHED:   # the alarm manager reads it
+                    more = self.alarms.see(it)
+                    if more:
+                        run = self._write_run(run)
+                        self._out(more)
+        self._write_run(run)
+
+    def _write_run(self, run: list) -> list:
+        """Messages to the sink, in one call if it takes many; returns a new empty run."""
+        if len(run) > 1 and self._write_many is not None:
+            self._write_many(run)
+        else:
+            for m in run:
+                self.sink.write(*m)
+        return []
 
     def ack(self, which: str | None) -> None:
         """Acknowledge alarm ``which`` (None: all), stamped with the newest alarm input's stamp;
@@ -205,13 +232,14 @@ class Processor:
 
     def _extend(self, batch: Pending, frames: Sequence[Frame], rms: bool) -> Pending:
         """``frames`` (all RMS, or all RAW) appended to the waiting ``batch``, run through the
-        chain whenever it reaches ``MAX_BATCH``, as one frame at a time would be; what waits."""
-        k, n = 0, len(frames)
+        chain whenever it reaches ``MAX_RMS_BATCH`` or ``MAX_BATCH``, as one frame at a time
+        would be; what waits."""
+        k, n, most = 0, len(frames), MAX_RMS_BATCH if rms else MAX_BATCH
         while k < n:
-            take = MAX_BATCH - len(batch)
+            take = most - len(batch)
             batch.extend(frames[k:k + take])
             k += take
-            if len(batch) >= MAX_BATCH:          # bounded memory per bank call
+            if len(batch) >= most:               # bounded memory per bank call
                 batch = self._flush(batch, Pending())[0] if rms else self._flush(Pending(), batch)[1]
         return batch
 
@@ -320,7 +348,7 @@ class Processor:
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.indicators.rms(self.channels, t0, vals)
-        self._observe(t0, vals)
+        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)))
         if self.captures is not None:
             vib = [ch for ch in self.channels if ch.index < C]
             self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
@@ -391,13 +419,14 @@ class Processor:
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------
-    def _observe(self, t0: np.ndarray, vals: np.ndarray) -> None:
-        """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain."""
+    def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS) -> None:
+        """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain, at
+        most ``max_slots`` slots (received or missing) a call."""
         while len(t0):
             slots, n = self.clock.place(t0)
             a = 0
-            while a < n:                        # bounded memory: at most MAX_RUN_SLOTS slots a run
-                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + MAX_RUN_SLOTS))
+            while a < n:                        # bounded memory: at most max_slots slots a run
+                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + max_slots))
                 self._run(slots[a:b], vals[a:b])
                 a = b
             if n == len(t0):
@@ -452,17 +481,23 @@ class Processor:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
             self.log.release(stamp)             # events well before it, at a point set by the stream
-            self._out(self.indicators.take(stamp))
-            self._out(sev.decision(d, stamp))
-            self.write_diagnostics(stamp)
+            out = self.indicators.take(stamp) + sev.decision(d, stamp)
+            if self.diagnostics is None:        # nothing in it depends on what is written: one run
+                self._out([*out, self._diagnostics_message(stamp)])
+            else:                               # the live loop's figures after the writes
+                self._out(out)
+                self.write_diagnostics(stamp)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
         when none came for a while)."""
+        self._out([self._diagnostics_message(stamp_ns)])
+
+    def _diagnostics_message(self, stamp_ns: int) -> messages.Message:
         self.diagnostics_at = time.monotonic()
-        self._out([messages.diagnostics(
-            stamp_ns, self.link(), self.observations,
-            round(self.diagnostics_at - self.started_wall, 3), self.diagnostics() if self.diagnostics else None)])
+        return messages.diagnostics(stamp_ns, self.link(), self.observations,
+                                    round(self.diagnostics_at - self.started_wall, 3),
+                                    self.diagnostics() if self.diagnostics else None)
 
     def link(self) -> dict:
         """The link's counters; a seq gap in front of a board reset is no loss (the board

@@ -28,6 +28,7 @@ from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.speed_gate import SpeedGate
 from cmsensord.monitor.timeline import SeverityTimeline
+from cmsensord.sinks.schemas import severity_topic
 
 #: observation slots whose decisions may wait for a final tacho speed (5 s at 100 Hz)
 PENDING_DECISION_SLOTS = 500
@@ -76,6 +77,10 @@ class SeverityChain:
         self.cfg_f_r = np.array([m.f_r for m in mons])
         self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
         self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
+        # what every severity message of a channel repeats: its name, topic and the bank's R
+        self._names = [ch.name for ch in channels]
+        self._topics = [severity_topic(ch.name) for ch in channels]
+        self._r_rows = self.R.tolist()
 
     def _rate_notes(self, fs: int, block_len: int) -> list[Event]:
         """What the decision rule means at this block rate, when it is not the nominal one, and
@@ -135,6 +140,8 @@ class SeverityChain:
         level = lv[0] if lv else None
         n = outl.shape[0]
         d = self.decider
+        if f_r is None:                         # the configured f_r: every period in one call
+            return d.update(outl, valid, level=level)
         decisions = []
         pos = 0
         while pos < n:                          # one call per decision period: its own f_r
@@ -160,20 +167,35 @@ class SeverityChain:
 
     def decision(self, d: Decision, stamp: int) -> list:
         """Per channel: its severity message, then the events of what changed."""
+        C = len(self.channels)
+        extras = [self._extra(d, c) for c in range(C)] if self.combined is not None else [{}] * C
+        msgs = messages.severities(stamp, self._names, d, self._r_rows, extras, self._topics)
+        prev, prev_sev = d.prev_anomaly.tolist(), d.prev_severity.tolist()
+        t_s, judged, held = d.slot / self.rate, not d.transient, d.held_max >= HOLD_EVENT_DECISIONS
         out: list = []
-        extras: list[dict] = []
-        for c in range(len(self.channels)):
-            extra = {}
-            if self.combined is not None and self.combined[c]:
-                extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c])}
-                if np.isfinite(d.level[c]):
-                    extra["level_ratio"] = float(d.level[c])
-            extras.append(extra)
-        msgs = messages.severities(stamp, [ch.name for ch in self.channels], d, self.R, extras)
         for c, m in enumerate(msgs):
             out.append(m)
-            out += self._note(c, d, m.msg, stamp)
+            msg = m.msg
+            sev, anomaly = msg["severity_index"], msg["anomaly"]
+            v = self.views[c]                   # the channel's view, from its message
+            v.severity, v.anomaly, v.outliers_first = sev, anomaly, msg["outliers"][0]
+            v.max_severity = max(v.max_severity, sev)
+            v.decisions += 1
+            if judged:
+                v.judged += 1
+                v.timeline.add(t_s, sev)
+            if held or anomaly != prev[c] or sev != prev_sev[c]:    # else no event (no failure change)
+                out += self._note(c, d, msg, stamp, prev[c], prev_sev[c])
         return out
+
+    def _extra(self, d: Decision, c: int) -> dict:
+        """The combined severity's fields of channel ``c``'s message (none in the paper's mode)."""
+        if self.combined is None or not self.combined[c]:
+            return {}
+        extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c])}
+        if np.isfinite(d.level[c]):
+            extra["level_ratio"] = float(d.level[c])
+        return extra
 
     def _held(self, c: int, d: Decision, stamp: int) -> list[Event]:
         """An event when a flag has been kept HOLD_EVENT_DECISIONS decisions by the hysteresis alone."""
@@ -188,19 +210,12 @@ class SeverityChain:
             f"({lo:.3g} <= outliers < f_r {f_r:.3g}): it neither sets anew nor clears; if the machine "
             "is healthy, commission it (cmsensord calibrate)"), stamp, {"filters": [int(i + 1) for i in held]})]
 
-    def _note(self, c: int, d: Decision, msg: dict, stamp: int) -> list[Event]:
-        """Update channel ``c``'s view from its severity message ``msg``; the events of what
-        changed with the decision."""
+    def _note(self, c: int, d: Decision, msg: dict, stamp: int, prev: list[int], prev_sev: float) -> list[Event]:
+        """The events of what changed for channel ``c`` with the decision (its severity message
+        ``msg``; its flags ``prev`` and severity index ``prev_sev`` before)."""
         name, n, R = self.channels[c].name, self.bank.n, self.R[c]
         sev, level, anomaly, failure = msg["severity_index"], msg["level"], msg["anomaly"], msg["failure"]
         v = self.views[c]
-        v.severity, v.anomaly, v.outliers_first = sev, anomaly, msg["outliers"][0]
-        v.max_severity = max(v.max_severity, sev)
-        v.decisions += 1
-        if not d.transient:
-            v.judged += 1
-            v.timeline.add(d.slot / self.rate, sev)
-        prev = d.prev_anomaly[c].tolist()
         events = self._held(c, d, stamp) if d.held_max >= HOLD_EVENT_DECISIONS else []
         if anomaly == prev:
             changed: list[int] = []
@@ -215,7 +230,6 @@ class SeverityChain:
             else:
                 events.append(Event("anomaly_clear", name, f"{name}: AKF_{i + 1} (R={R[i]:.4g}) anomaly "
                                     f"cleared: {cnt} outliers < c*f_r", stamp, what))
-        prev_sev = float(d.prev_severity[c])
         where = {"severity_index": sev, "level": level}
         if sev != prev_sev:
             events.append(Event("severity_change", name, f"{name}: severity index {prev_sev:.2f} -> "

@@ -166,24 +166,10 @@ class ChunkWriter:
         return channel.id
 
     def add_message(self, channel_id: int, log_time: int, data: bytes,
-                    publish_time: int | None = None) -> None:
+                    publish_time: int | None = None, split: bool = True) -> None:
         """A Message record (sequence 0, publish time = ``publish_time`` or ``log_time``, ns)
-        into the open chunk; the chunk is finished when it passes ``chunk_size`` bytes."""
-        self._append(channel_id, log_time, data, publish_time)
-        if len(self._chunk) > self._chunk_size:
-            self.finish_chunk()
-
-    def add_group(self, messages: Iterable[tuple[int, bytes]], log_time: int,
-                  publish_time: int | None = None) -> None:
-        """Messages ``(channel_id, data)`` that must be whole or absent after a crash (a
-        capture): the open chunk is written first, then the group alone in one chunk (whatever
-        ``chunk_size``), written at once. A file cut anywhere in it holds all or none of them."""
-        self.finish_chunk()
-        for channel_id, data in messages:
-            self._append(channel_id, log_time, data, publish_time)
-        self.finish_chunk()
-
-    def _append(self, channel_id: int, log_time: int, data: bytes, publish_time: int | None) -> None:
+        into the open chunk; the chunk is finished when it passes ``chunk_size`` bytes (unless
+        ``split`` is False: :meth:`add_group`)."""
         chunk = self._chunk
         records = self._index.get(channel_id)
         if records is None:
@@ -202,6 +188,18 @@ class ChunkWriter:
         else:
             self._t0 = self._t1 = log_time
         self._n += 1
+        if split and len(chunk) > self._chunk_size:
+            self.finish_chunk()
+
+    def add_group(self, messages: Iterable[tuple[int, bytes]], log_time: int,
+                  publish_time: int | None = None) -> None:
+        """Messages ``(channel_id, data)`` that must be whole or absent after a crash (a
+        capture): the open chunk is written first, then the group alone in one chunk (whatever
+        ``chunk_size``), written at once. A file cut anywhere in it holds all or none of them."""
+        self.finish_chunk()
+        for channel_id, data in messages:
+            self.add_message(channel_id, log_time, data, publish_time, split=False)
+        self.finish_chunk()
 
     def finish_chunk(self) -> None:
         """Compress the open chunk and write it with its message indexes."""

@@ -29,13 +29,13 @@ import fcntl
 import os
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from cmsensord import __version__
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunks import ChunkWriter
-from cmsensord.sinks.mcap_encoding import ChannelRegistry, encode_message
+from cmsensord.sinks.mcap_encoding import REPEATED, ChannelRegistry, encode_message
 from cmsensord.sinks.reorder import GROUP, MAX_S, Payload, ReorderWindow
 
 __all__ = [
@@ -216,6 +216,7 @@ class McapSink:
         self._clock = clock
         self._flush_s = float(flush_s)
         self.messages_written = 0
+        self.batch_at = 0  # write_many(): the index of the message being written
         self._synced = 0  # persisted messages at the last successful fsync
         self._closed = False
         self._failed = False
@@ -318,9 +319,51 @@ class McapSink:
             stamp_ns = int(stamp_ns)
         if stamp_ns < 0:
             raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
-        data = encode_message(topic, stamp_ns, msg)
+        data = encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
         self.messages_written += 1  # before: if its chunk cannot be written it is lost
         self._put(self.reorder.push(stamp_ns, entry[0], data))
+
+    def write_many(self, messages: Sequence[tuple[str, str, int, dict]], start: int = 0) -> int:
+        """:meth:`write` of ``messages[start:]`` in turn, in one call, up to and including the
+        first one after which a chunk went to the file (a flush, or a full chunk); returns the
+        index after the last one written, so that a caller sees the file between chunks
+        (:meth:`~cmsensord.sinks.rotating.RotatingSink.write_many` rotates there).
+
+        The bytes are those of one write() per message; only the clock is read after the
+        first message and the last (write() reads it after each): a flush falling due during
+        the call comes at its end, the call's microseconds late, and at the same message as
+        write()'s when the clock does not move during the call. :attr:`batch_at`: the index
+        of the message being written (after an exception, the one that failed)."""
+        n = len(messages)
+        k = start
+        writer, push, passes = self._writer, self.reorder.push, self.reorder.passes
+        pos = writer.pos
+        while k < n:
+            self.batch_at = k
+            topic, schema, stamp_ns, msg = messages[k]
+            entry = self._channels.get(topic)
+            if entry is None or entry[1] != schema:
+                entry = self._register(topic, schema)
+            if type(stamp_ns) is not int:
+                stamp_ns = int(stamp_ns)
+            if stamp_ns < 0:
+                raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
+            data = encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
+            self.messages_written += 1
+            try:
+                if passes(stamp_ns):                    # what push() would give, without a list
+                    writer.add_message(entry[0], stamp_ns, data, stamp_ns)
+                else:
+                    self._add(push(stamp_ns, entry[0], data))
+            except OSError as err:
+                raise self._fail("write", err) from None
+            k += 1
+            if k == start + 1 or k == n or writer.pos != pos:
+                if self._clock() - self._last_flush >= self._flush_s:
+                    self.flush()
+                if writer.pos != pos:
+                    break
+        return k
 
     def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
         """Append messages ``(topic, schema, stamp_ns, msg)`` that are whole or absent after a
@@ -336,7 +379,7 @@ class McapSink:
                 entry = self._register(topic, schema)
             if int(stamp_ns) < 0:
                 raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
-            encoded.append((entry[0], encode_message(topic, int(stamp_ns), msg)))
+            encoded.append((entry[0], encode_message(topic, int(stamp_ns), msg, REPEATED.get(schema))))
         self.messages_written += len(encoded)
         self._put(self.reorder.push(int(messages[0][2]), GROUP, tuple(encoded)))
 
@@ -355,11 +398,12 @@ class McapSink:
             self.flush()
 
     def _add(self, released: list[tuple[int, int, int, Payload]]) -> None:
+        writer = self._writer
         for log_time, publish_time, channel_id, body in released:
             if isinstance(body, bytes):
-                self._writer.add_message(channel_id, log_time, body, publish_time)
+                writer.add_message(channel_id, log_time, body, publish_time)
             else:
-                self._writer.add_group(body, log_time, publish_time)
+                writer.add_group(body, log_time, publish_time)
 
     def _register(self, topic: str, kind: str) -> tuple[int, str]:
         if self._failed:

@@ -76,6 +76,15 @@ class ReorderWindow:
         """The newest stamp pushed (-1 before the first)."""
         return self._newest
 
+    def passes(self, stamp_ns: int) -> bool:
+        """True when a message stamped ``stamp_ns`` goes straight through (nothing held, the
+        horizon 0, in order): it is noted as released, as :meth:`push` notes it; False, and
+        nothing noted, otherwise (the message is then to be pushed)."""
+        if self.horizon_ns or self._heap or stamp_ns < self._newest or stamp_ns < self._released:
+            return False
+        self._newest = self._released = stamp_ns
+        return True
+
     def push(self, stamp_ns: int, channel_id: int, data: Payload) -> list[tuple[int, int, int, Payload]]:
         """Add one message; returns the messages now due, each ``(log_time, publish_time,
         channel_id, data)``, in log-time order."""

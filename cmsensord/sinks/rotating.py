@@ -65,23 +65,22 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from cmsensord.config import OutputConfig
+from cmsensord.errors import SinkError
+from cmsensord.sinks import disk_events
+from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event kinds: disk_events)
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
 from cmsensord.sinks.reorder import MAX_S as REORDER_MAX_S
-from cmsensord.sinks.retention import DISK_EVENT, MB, apply_retention, errno_name
+from cmsensord.sinks.retention import DISK_EVENT, MB, apply_retention
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 log = logging.getLogger("cmsensord")
-
-#: Event kinds (values of ``schemas.EVENT_KINDS``). Outages, their end and retention
-#: deletions are ``disk_error`` events told apart by ``details["action"]``.
-SALVAGE_EVENT = "salvage"
 
 #: errno values that mean the disk is full or failing rather than misconfigured: at
 #: start the sink then runs without a file and retries (at run time every error does)
@@ -172,7 +171,7 @@ class RotatingSink:
         """Salvage the leftover ``.part`` files; their events are queued (thread-safe)."""
         for result in salvage_leftovers(self.output.dir, self.output.prefix,
                                         stop=self._salvage_stop):
-            self._salvage_event(result)
+            disk_events.salvage_result(self, result)
 
     # -- events ------------------------------------------------------------
 
@@ -205,21 +204,6 @@ class RotatingSink:
                 self._on_event(kind, message, **fields)
         finally:
             self._delivering = False
-
-    def _salvage_event(self, result: SalvageResult | SinkIOError) -> None:
-        if isinstance(result, SinkIOError):
-            self.disk_errors += 1
-            self._emit(DISK_EVENT, f"{result}; left for the next start", details={
-                "action": "salvage_failed", "op": result.op, "errno": errno_name(result.errno),
-                "file": str(result.path)})
-            return
-        if result.action == "busy":
-            return                           # another writer's open file
-        if result.action == "interrupted":   # stopping: the journal says so, the file is intact
-            log.info("%s", result.message())
-            return
-        self.salvaged.append(result)
-        self._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=result.event_details())
 
     # -- files -------------------------------------------------------------
 
@@ -258,14 +242,9 @@ class RotatingSink:
         (wrong schema for a topic), as McapSink does; never for the disk.
         """
         self.messages_written += 1
-        cur = self._current
+        cur = self._file(1)
         if cur is None:
-            self._retry_if_due()
-            cur = self._current
-            if cur is None:
-                self._drop(1)
-                self._deliver()
-                return
+            return
         try:
             cur.write(topic, schema, stamp_ns, msg)
         except SinkIOError as err:
@@ -274,31 +253,67 @@ class RotatingSink:
             return
         if topic == TOPIC_EVENTS:
             self._event_dirty = True
-        if (self.clock() - self._opened >= self.output.rotate_s
-                or cur.bytes_written >= self._rotate_bytes):
-            self.rotate()
-        elif self._pending:
-            self._deliver()
+        self._written(cur)
+
+    def write_many(self, messages: Sequence[tuple[str, str, int, dict]]) -> None:
+        """:meth:`write` of each of ``messages`` in turn, in fewer calls (McapSink.write_many
+        from chunk to chunk): the same files, bytes and counts. Rotation and the sink's events
+        are looked at before the first message, after each chunk and after the last (write():
+        after each message), so at the same messages if the clock stands still meanwhile."""
+        i, n = 0, len(messages)
+        while i < n:
+            cur = self._current
+            if (cur is None or self._pending or self.clock() - self._opened >= self.output.rotate_s
+                    or cur.bytes_written >= self._rotate_bytes):
+                self.write(*messages[i])    # a rotation, a retry or events due after it
+                i += 1
+                continue
+            try:
+                j = cur.write_many(messages, i)
+            except SinkError as err:        # counted as write() counts, the failing one too
+                j = cur.batch_at
+                self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+                self.messages_written += j + 1 - i
+                if not isinstance(err, SinkIOError):
+                    raise
+                self._failed(err, cur)
+                self._deliver()
+                i = j + 1
+                continue
+            self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+            self.messages_written += j - i
+            i = j
+            self._written(cur)
 
     def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
         """Append messages ``(topic, schema, stamp_ns, msg)`` that are whole or absent after a
         crash (:meth:`McapSink.write_group`); like :meth:`write` otherwise (a rotation comes
         after the group, never inside it)."""
         self.messages_written += len(messages)
-        cur = self._current
+        cur = self._file(len(messages))
         if cur is None:
-            self._retry_if_due()
-            cur = self._current
-            if cur is None:
-                self._drop(len(messages))
-                self._deliver()
-                return
+            return
         try:
             cur.write_group(messages)
         except SinkIOError as err:
             self._failed(err, cur)
             self._deliver()
             return
+        self._written(cur)
+
+    def _file(self, n: int) -> McapSink | None:
+        """The file to write ``n`` messages to; None while there is none (they are dropped)."""
+        cur = self._current
+        if cur is None:
+            self._retry_if_due()
+            cur = self._current
+            if cur is None:
+                self._drop(n)
+                self._deliver()
+        return cur
+
+    def _written(self, cur: McapSink) -> None:
+        """After messages went to ``cur``: rotate by time or size, or deliver the sink's events."""
         if (self.clock() - self._opened >= self.output.rotate_s
                 or cur.bytes_written >= self._rotate_bytes):
             self.rotate()
@@ -459,9 +474,7 @@ class RotatingSink:
             if cur.path.exists() and not cur.part_path.exists():
                 done = cur.path              # finished and renamed; the directory fsync failed
                 self.disk_errors += 1
-                self._emit(DISK_EVENT, str(err), details={
-                    "action": "dir_fsync_failed", "op": err.op, "errno": errno_name(err.errno),
-                    "file": str(done)})
+                self._emit(DISK_EVENT, str(err), details=disk_events.error_details("dir_fsync_failed", err, done))
             else:
                 self._failed(err, cur)
                 return None
@@ -490,9 +503,8 @@ class RotatingSink:
         self._current = None
         self._drop(lost)
         self._event_dirty = self._need_sync = False
-        self._emit(DISK_EVENT, f"{cur.part_path} was removed while open (output directory "
-                   f"deleted?): {lost} message(s) written to it lost; logging goes on in a new file",
-                   count=lost, details={"action": "removed", "file": str(cur.part_path)})
+        text, fields = disk_events.removed(cur.part_path, lost)
+        self._emit(DISK_EVENT, text, **fields)
         self._next_retry = self.clock()
         self._retry_if_due()
         return False
@@ -527,15 +539,8 @@ class RotatingSink:
         self._drop(lost)
         outage["errors"] += 1
         if first:
-            what = (f"file kept as {kept.name} for salvage" if kept is not None
-                    else "no file open" if cur is None else "file removed (no complete chunk)")
-            unsure_text = (f" ({unsure} more written since the last good fsync may not be on "
-                           f"the disk)" if unsure else "")
-            self._emit(DISK_EVENT, f"{err}; {what}; {lost} message(s) lost{unsure_text}; "
-                       f"trying a new file at once, then every {self.output.retry_s:g} s",
-                       count=lost, details={"action": "abandoned", "op": err.op,
-                                            "errno": errno_name(err.errno), "unsynced": unsure,
-                                            "file": str(kept or err.path)})
+            text, fields = disk_events.abandoned(err, kept, cur is not None, lost, unsure, self.output.retry_s)
+            self._emit(DISK_EVENT, text, **fields)
         if err.errno in _FULL:
             self._retention()
         # a new file at once at the start of an outage (a failed fsync needs nothing
@@ -569,19 +574,15 @@ class RotatingSink:
         assert outage is not None
         self._last_errno = None
         where = self.path.name if self.path is not None else "the log"
-        self._emit(DISK_EVENT, f"logging resumed in {where} after "
-                   f"{self.clock() - outage['start']:.1f} s: {outage['dropped']} message(s) "
-                   f"could not be logged ({outage['errors']} failed disk operation(s); "
-                   f"first: {outage['error']})",
-                   count=outage["dropped"], details={"action": "resumed",
-                                                     "errors": outage["errors"]})
+        text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
+        self._emit(DISK_EVENT, text, **fields)
         abandoned, self._abandoned = self._abandoned, []
         for part in abandoned:
             try:
                 result: SalvageResult | SinkIOError = salvage(part)
             except SinkIOError as err:
                 result = err
-            self._salvage_event(result)
+            disk_events.salvage_result(self, result)
             if isinstance(result, SalvageResult) and result.path is not None \
                     and result.action == "salvaged":
                 self.paths.append(result.path)

@@ -32,6 +32,20 @@ class TeeSink:
         if self.publisher.events:
             self.drain_events()
 
+    def write_many(self, messages: list[tuple[str, str, int, dict]]) -> None:
+        """:meth:`write` of each message: to the MCAP sink in one call (its ``write_many``, if
+        it has one), then each offered to the publisher; its events after the last."""
+        inner = self.inner
+        if hasattr(type(inner), "write_many"):
+            inner.write_many(messages)
+        else:
+            for m in messages:
+                inner.write(*m)
+        for topic, _, stamp_ns, msg in messages:
+            self.publisher.offer(topic, stamp_ns, msg)
+        if self.publisher.events:
+            self.drain_events()
+
     def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
         """Write the group to the MCAP sink (whole or absent after a crash), then offer each
         message to the publisher."""

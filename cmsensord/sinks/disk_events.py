@@ -1,0 +1,76 @@
+"""What the rotating sink's disk and salvage events say (:class:`~cmsensord.sinks.rotating.RotatingSink`):
+the text and fields of a file abandoned after an error, a file removed while open, logging
+resumed, a failed disk operation and a salvage's result; retention's are
+:mod:`cmsensord.sinks.retention`'s.
+
+A disk event is a ``disk_error`` event (:data:`~cmsensord.sinks.retention.DISK_EVENT`) told
+apart by ``details["action"]``; a function here returns ``(message, fields)`` for the sink's
+``_emit``, but :func:`salvage_result`, which queues its event on the sink itself.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cmsensord.sinks.mcap_file import SinkIOError
+from cmsensord.sinks.mcap_salvage import SalvageResult
+from cmsensord.sinks.retention import DISK_EVENT, errno_name
+
+if TYPE_CHECKING:
+    from cmsensord.sinks.rotating import RotatingSink
+
+log = logging.getLogger("cmsensord")
+#: the kind of a salvage's event (a value of ``schemas.EVENT_KINDS``); outages, their end and
+#: retention's deletions are ``disk_error`` events told apart by ``details["action"]``
+SALVAGE_EVENT = "salvage"
+
+
+def error_details(action: str, err: SinkIOError, file: Path | str, **more: Any) -> dict[str, Any]:
+    """``details`` of an event about the failed operation ``err`` on ``file``."""
+    return {"action": action, "op": err.op, "errno": errno_name(err.errno), **more, "file": str(file)}
+
+
+def abandoned(err: SinkIOError, kept: Path | None, had_file: bool, lost: int, unsure: int,
+              retry_s: float) -> tuple[str, dict[str, Any]]:
+    """The first error of an outage: the file kept for salvage (``kept``), none open
+    (``had_file`` False) or removed; ``lost`` messages, ``unsure`` more maybe not on disk."""
+    what = (f"file kept as {kept.name} for salvage" if kept is not None
+            else "file removed (no complete chunk)" if had_file else "no file open")
+    unsure_text = f" ({unsure} more written since the last good fsync may not be on the disk)" if unsure else ""
+    return (f"{err}; {what}; {lost} message(s) lost{unsure_text}; trying a new file at once, then "
+            f"every {retry_s:g} s",
+            {"count": lost, "details": error_details("abandoned", err, kept or err.path, unsynced=unsure)})
+
+
+def removed(part: Path, lost: int) -> tuple[str, dict[str, Any]]:
+    """The open file was removed under the sink, with the ``lost`` messages written to it."""
+    return (f"{part} was removed while open (output directory deleted?): {lost} message(s) written to "
+            "it lost; logging goes on in a new file", {"count": lost, "details": {"action": "removed",
+                                                                                 "file": str(part)}})
+
+
+def resumed(where: str, outage: dict[str, Any], seconds: float) -> tuple[str, dict[str, Any]]:
+    """Logging is back in ``where`` after an outage of ``seconds``."""
+    return (f"logging resumed in {where} after {seconds:.1f} s: {outage['dropped']} message(s) could "
+            f"not be logged ({outage['errors']} failed disk operation(s); first: {outage['error']})",
+            {"count": outage["dropped"], "details": {"action": "resumed", "errors": outage["errors"]}})
+
+
+def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> None:
+    """A salvage's result as the ``sink``'s event (queued, thread-safe): a ``salvage`` event
+    (the result joins ``sink.salvaged``) or a ``disk_error`` one; none for a file another
+    writer has open, nor for a salvage a stop interrupted (the journal says so)."""
+    if isinstance(result, SinkIOError):
+        sink.disk_errors += 1
+        sink._emit(DISK_EVENT, f"{result}; left for the next start",
+                   details=error_details("salvage_failed", result, result.path))
+        return
+    if result.action == "busy":
+        return                           # another writer's open file
+    if result.action == "interrupted":   # stopping: the journal says so, the file is intact
+        log.info("%s", result.message())
+        return
+    sink.salvaged.append(result)
+    sink._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=result.event_details())
