@@ -173,6 +173,16 @@ class FrameBatch(Sequence):
             self._frames = self._make(self.cols, self.data)
         return self._frames
 
+    def take(self, idx: np.ndarray) -> FrameBatch:
+        """The frames at positions ``idx`` (ascending), as a batch of their columns (no frame
+        is built)."""
+        return FrameBatch(self.cols.take(idx), self.data, self._make)
+
+    def payloads(self) -> list[bytes]:
+        """Each frame's payload (the bytes a built frame would hold), without building the frames."""
+        c = self.cols
+        return list(map(self.data.__getitem__, map(slice, c.start.tolist(), c.end.tolist())))
+
     def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(type codes, unwrapped t0, seq gaps in front) of the frames."""
         return self.cols.code, self.cols.t0_unwrapped, self.cols.lost

@@ -16,10 +16,11 @@ import pytest
 
 from cmsensord.config import default_config
 from cmsensord.dsp.rms import rows_physical
+from cmsensord.frame_batch import FrameBatch
 from cmsensord.monitor.processor import Processor
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.shaft import TACHO_WAIT_FRAMES, Shaft
-from cmsensord.protocol import Frame, FrameType, Status, iter_frames
+from cmsensord.protocol import Frame, FrameType, Status, _make, iter_frames
 from cmsensord.sinks.memory import ListSink
 from test_live_batching import by_topic, one_frame_per_call, raw_capture
 
@@ -54,7 +55,9 @@ def tacho_frame(k: int, chan: int = 0) -> Frame:
 
 
 @pytest.mark.parametrize("tracker", [False, True])
-def test_add_many_keeps_what_add_of_each_frame_keeps(tracker):
+@pytest.mark.parametrize("as_batch", [False, True])
+def test_add_many_keeps_what_add_of_each_frame_keeps(tracker, as_batch):
+    """Also when the frames come as batches of columns (a replay's), kept as such."""
     frames = [tacho_frame(k, chan=k % 3 == 2) for k in range(3 * TACHO_WAIT_FRAMES)]
     one, many = Shaft(default_config(1)), Shaft(default_config(1))
     if tracker:                         # a tracker: nothing is dropped
@@ -62,9 +65,11 @@ def test_add_many_keeps_what_add_of_each_frame_keeps(tracker):
     for f in frames:
         one.add(f)
     for k in range(0, len(frames), 77):
-        many.add_many(frames[k:k + 77])
-    assert many.waiting == one.waiting
+        many.add_many(FrameBatch.of(frames[k:k + 77], _make) if as_batch else frames[k:k + 77])
+    assert list(many.waiting.joined()) == list(one.waiting.joined())
     assert len(one.waiting) == (2 * TACHO_WAIT_FRAMES if tracker else TACHO_WAIT_FRAMES)
+    if as_batch and tracker:
+        assert all(type(p) is FrameBatch for p in many.waiting.parts)
 
 
 def raw_frame(t0: int, chan: int, L: int) -> Frame:

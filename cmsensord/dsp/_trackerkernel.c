@@ -21,9 +21,12 @@
  * λ(n) = F(n)ᵀ λ(n+1) (the MBF recursion with k = 0 and no innovation term).
  *   tacho_eval(s, kT, kth, kw, kr, speed, turns, j, code)
  *                                                  tacho.py: speed and angle between knots
+ *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
+ *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <math.h>
 #include <stdlib.h>
 
 static int need(Py_buffer *b, Py_ssize_t n_doubles, const char *name) {
@@ -34,6 +37,63 @@ static int need(Py_buffer *b, Py_ssize_t n_doubles, const char *name) {
     }
     return 1;
 }
+
+/* One channel (column ch of x, T x C) through the S sections, every D-th output from skip
+ * on into column ch of out; the state (zi, S x 2 x C) read and written back.  Section by
+ * section the arithmetic of scipy.signal.sosfilt (direct form II transposed), in its order. */
+static void sos_channel_any(const double *sos, Py_ssize_t S, const double *x, Py_ssize_t T,
+                            Py_ssize_t C, Py_ssize_t ch, double *zi, double *out,
+                            Py_ssize_t skip, Py_ssize_t D) {
+    Py_ssize_t next = skip, j = 0;
+    for (Py_ssize_t n = 0; n < T; n++) {
+        double x_cur = x[n * C + ch];
+        for (Py_ssize_t s = 0; s < S; s++) {
+            const double *q = sos + 6 * s;
+            double *z0 = zi + (2 * s) * C + ch, *z1 = zi + (2 * s + 1) * C + ch;
+            const double x_new = q[0] * x_cur + *z0;
+            *z0 = q[1] * x_cur - q[4] * x_new + *z1;
+            *z1 = q[2] * x_cur - q[5] * x_new;
+            x_cur = x_new;
+        }
+        if (n == next) { out[j * C + ch] = x_cur; j++; next += D; }
+    }
+}
+
+/* sos_channel_any for a cascade of NS sections (a constant): the loop over the sections
+ * unrolled, the state in locals (registers) for the whole call, not loaded and stored at
+ * every sample; the same operations in the same order, so the same bits. */
+#define SOS_CHANNEL(NS)                                                                      \
+static void sos_channel_##NS(const double *sos, const double *x, Py_ssize_t T, Py_ssize_t C, \
+                             Py_ssize_t ch, double *zi, double *out, Py_ssize_t skip,       \
+                             Py_ssize_t D) {                                                \
+    double z0[NS], z1[NS], q[NS][6];                                                        \
+    _Pragma("GCC unroll 8") for (int s = 0; s < NS; s++) {                                  \
+        z0[s] = zi[(2 * s) * C + ch]; z1[s] = zi[(2 * s + 1) * C + ch];                     \
+        _Pragma("GCC unroll 6") for (int i = 0; i < 6; i++) q[s][i] = sos[6 * s + i];       \
+    }                                                                                       \
+    Py_ssize_t next = skip, j = 0;                                                          \
+    for (Py_ssize_t n = 0; n < T; n++) {                                                    \
+        double x_cur = x[n * C + ch];                                                       \
+        _Pragma("GCC unroll 8") for (int s = 0; s < NS; s++) {                              \
+            const double x_new = q[s][0] * x_cur + z0[s];                                   \
+            z0[s] = q[s][1] * x_cur - q[s][4] * x_new + z1[s];                              \
+            z1[s] = q[s][2] * x_cur - q[s][5] * x_new;                                      \
+            x_cur = x_new;                                                                  \
+        }                                                                                   \
+        if (n == next) { out[j * C + ch] = x_cur; j++; next += D; }                         \
+    }                                                                                       \
+    _Pragma("GCC unroll 8") for (int s = 0; s < NS; s++) {                                  \
+        zi[(2 * s) * C + ch] = z0[s]; zi[(2 * s + 1) * C + ch] = z1[s];                     \
+    }                                                                                       \
+}
+SOS_CHANNEL(1)
+SOS_CHANNEL(2)
+SOS_CHANNEL(3)
+SOS_CHANNEL(4)
+SOS_CHANNEL(5)
+SOS_CHANNEL(6)
+SOS_CHANNEL(7)
+SOS_CHANNEL(8)
 
 /* The decimator's low-pass: S second-order sections (rows b0 b1 b2 1 a1 a2) in
  * direct form II transposed, the same arithmetic in the same order as
@@ -64,22 +124,18 @@ static PyObject *sosfilt(PyObject *self, PyObject *args) {
     const double *sos = bsos.buf, *x = bx.buf;
     double *zi = bzi.buf, *out = bout.buf;
     Py_BEGIN_ALLOW_THREADS
-    Py_ssize_t next = skip, j = 0;
-    for (Py_ssize_t n = 0; n < T; n++) {
-        const int keep = (n == next);
-        for (Py_ssize_t ch = 0; ch < C; ch++) {
-            double x_cur = x[n * C + ch];
-            for (Py_ssize_t s = 0; s < S; s++) {
-                const double *q = sos + 6 * s;
-                double *z0 = zi + (2 * s) * C + ch, *z1 = zi + (2 * s + 1) * C + ch;
-                const double x_new = q[0] * x_cur + *z0;
-                *z0 = q[1] * x_cur - q[4] * x_new + *z1;
-                *z1 = q[2] * x_cur - q[5] * x_new;
-                x_cur = x_new;
-            }
-            if (keep) out[j * C + ch] = x_cur;
+    for (Py_ssize_t ch = 0; ch < C; ch++) {
+        switch (S) {        /* the state in registers for the usual cascades (S a constant) */
+        case 1: sos_channel_1(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 2: sos_channel_2(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 3: sos_channel_3(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 4: sos_channel_4(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 5: sos_channel_5(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 6: sos_channel_6(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 7: sos_channel_7(sos, x, T, C, ch, zi, out, skip, D); break;
+        case 8: sos_channel_8(sos, x, T, C, ch, zi, out, skip, D); break;
+        default: sos_channel_any(sos, S, x, T, C, ch, zi, out, skip, D);
         }
-        if (keep) { j++; next += D; }
     }
     Py_END_ALLOW_THREADS
     Py_INCREF(Py_None);
@@ -382,7 +438,98 @@ done:
     return ret;
 }
 
+/* Rows of a table interpolated: row n is dtab[i[n]] * f[n] + tab[i[n]] (tab n_rows x w, dtab
+ * (n_rows - 1) x w, 0 <= i[n] < n_rows - 1), the arithmetic of gain_table.py's numpy lookup;
+ * its first m columns go to a (N x m), the rest to b (N x (w - m)), both contiguous. */
+static PyObject *lerp_rows(PyObject *self, PyObject *args) {
+    Py_buffer btab, bdtab, bi, bf, ba, bb;
+    Py_ssize_t w, m;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*w*w*nn", &btab, &bdtab, &bi, &bf, &ba, &bb, &w, &m))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = bf.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t rows = w > 0 ? btab.len / (Py_ssize_t)sizeof(double) / w : 0;
+    if (w <= 0 || m < 0 || m > w || rows < 2 || bdtab.len < (rows - 1) * w * (Py_ssize_t)sizeof(double)
+        || bi.len != N * (Py_ssize_t)sizeof(long long)) {
+        PyErr_SetString(PyExc_ValueError, "lerp_rows: expected tab (rows >= 2, w), dtab (rows - 1, w), "
+                        "i and f of N entries, 0 <= m <= w");
+        goto done;
+    }
+    if (!need(&ba, N * m, "a") || !need(&bb, N * (w - m), "b"))
+        goto done;
+    const double *tab = btab.buf, *dtab = bdtab.buf, *f = bf.buf;
+    const long long *idx = bi.buf;
+    double *a = ba.buf, *b = bb.buf;
+    for (Py_ssize_t n = 0; n < N; n++) {
+        if (idx[n] < 0 || idx[n] >= rows - 1) {
+            PyErr_Format(PyExc_ValueError, "lerp_rows: row %lld outside 0..%zd", idx[n], rows - 2);
+            goto done;
+        }
+    }
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t n = 0; n < N; n++) {
+        const double *t = tab + idx[n] * w, *dt = dtab + idx[n] * w;
+        const double fn = f[n];
+        double *an = a + n * m, *bn = b + n * (w - m);
+        for (Py_ssize_t j = 0; j < m; j++) an[j] = dt[j] * fn + t[j];
+        for (Py_ssize_t j = m; j < w; j++) bn[j - m] = dt[j] * fn + t[j];
+    }
+    Py_END_ALLOW_THREADS
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&btab); PyBuffer_Release(&bdtab); PyBuffer_Release(&bi); PyBuffer_Release(&bf);
+    PyBuffer_Release(&ba); PyBuffer_Release(&bb);
+    return ret;
+}
+
+/* Peak amplitude from the state pairs (recursions.py's envelope, the same operations in its
+ * order): xs (N x C x 2K), c (N x K) -> env (N x C x K),
+ *   env = sqrt(max((x1 x1 - (c x1) x2 + x2 x2) / max(1 - (0.25 c) c, 1e-300), 0))
+ * with x1, x2 the pair's entries; NaN passes through as np.maximum passes it. */
+static PyObject *envelope(PyObject *self, PyObject *args) {
+    Py_buffer bx, bc, be;
+    Py_ssize_t K;
+    if (!PyArg_ParseTuple(args, "y*y*w*n", &bx, &bc, &be, &K))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = K > 0 ? bc.len / (Py_ssize_t)sizeof(double) / K : 0;
+    const Py_ssize_t C = N > 0 ? bx.len / (Py_ssize_t)sizeof(double) / (N * 2 * K) : 0;
+    if (K <= 0 || bc.len != N * K * (Py_ssize_t)sizeof(double) ||
+        bx.len != N * C * 2 * K * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "envelope: expected xs (N x C x 2K) and c (N x K)");
+        goto done;
+    }
+    if (!need(&be, N * C * K, "env"))
+        goto done;
+    const double *xs = bx.buf, *c = bc.buf;
+    double *env = be.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t n = 0; n < N; n++) {
+        for (Py_ssize_t a = 0; a < K; a++) {
+            const double cc = c[n * K + a];
+            double s2 = 1.0 - 0.25 * cc * cc;
+            if (!(s2 >= 1e-300)) s2 = (s2 != s2) ? s2 : 1e-300;     /* np.maximum(., 1e-300) */
+            for (Py_ssize_t ch = 0; ch < C; ch++) {
+                const double *p = xs + ((n * C + ch) * K + a) * 2;
+                const double x1 = p[0], x2 = p[1];
+                double a2 = (x1 * x1 - cc * x1 * x2 + x2 * x2) / s2;
+                if (a2 < 0.0) a2 = 0.0;                                 /* np.maximum(., 0); NaN stays */
+                env[(n * C + ch) * K + a] = sqrt(a2);
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&bx); PyBuffer_Release(&bc); PyBuffer_Release(&be);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
+    {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
+    {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},

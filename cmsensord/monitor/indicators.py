@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cmsensord.config import ChannelConfig, Config
-from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute
+from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
 from cmsensord.dsp.indicators.envelope import default_band
 from cmsensord.dsp.indicators.statistics import waveform_stats
@@ -175,7 +175,7 @@ class IndicatorChain:
     def release(self, *, final: bool = False, bounded: bool = True) -> list:
         """Records of the waiting intervals whose speed is known (all with ``final``; with
         ``bounded``, also those waiting longer than MAX_WAIT_S)."""
-        out: list = []
+        ready = []
         tacho = self.tacho()
         while self.pending:
             s, x, stamp = self.pending[0]
@@ -183,40 +183,52 @@ class IndicatorChain:
             late = bounded and self.newest - end > MAX_WAIT_S * self.fs
             if tacho is not None and tacho.covered_until < end and not (final or late):
                 break
-            self.pending.pop(0)
-            out += self._records(s, x, stamp, tacho)
-        return out
+            ready.append(self.pending.pop(0))
+        return self._records(ready, tacho) if ready else []
 
-    def _speed(self, s: int, tacho: TachoTracker | None) -> tuple[float | None, str | None]:
+    def _speeds(self, starts: list[int], tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
+        """(shaft speed [Hz] or None, its source) of the intervals starting at ``starts``: the
+        mean of the tacho's causal speed at SPEED_POINTS points of each (None when fewer than
+        half are valid), all read in one call; without a tacho, ``indicators.rpm``."""
         if tacho is None:
             rpm = self.cfg.indicators.rpm
-            return (rpm / 60.0, "config") if rpm else (None, None)
-        hz, ok = tacho.evaluate_causal(s + (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS)
-        if ok.mean() < 0.5:
-            return None, None
-        return float(np.mean(hz[ok])), "tacho"
+            return [(rpm / 60.0, "config") if rpm else (None, None)] * len(starts)
+        at = (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS
+        hz, ok = tacho.evaluate_causal(np.array(starts)[:, None] + at[None, :])
+        return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
 
-    def _records(self, s: int, x: np.ndarray, stamp: int, tacho: TachoTracker | None) -> list:
-        shaft_hz, source = self._speed(s, tacho)
-        head = {"mode": "raw", "interval_s": self.N / self.fs}
-        if shaft_hz is not None:
-            head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
+    def _records(self, ready: list[tuple[int, np.ndarray, int]], tacho: TachoTracker | None) -> list:
+        """The messages of the intervals ``ready`` (start, samples, stamp), in order, channel by
+        channel; the complete records' indicators computed together (:func:`compute_many`:
+        the numbers of one :func:`compute` per record)."""
+        rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
+        todo: list = []                 # (x, setup, shaft_hz) of the complete records
+        for (_, x, stamp), (shaft_hz, source) in zip(ready, self._speeds([s for s, _, _ in ready], tacho)):
+            head = {"mode": "raw", "interval_s": self.N / self.fs}
+            if shaft_hz is not None:
+                head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
+            for c, ch in enumerate(self.channels):
+                xc = x[:, c]
+                ok = np.isfinite(xc)
+                missing = 1.0 - float(ok.mean())
+                fields: dict | None = None
+                if missing == 0.0:
+                    todo.append((xc, self.setups[c], shaft_hz))
+                elif ok.any():
+                    st = waveform_stats(xc)
+                    fields = {k: _num(v) for k, v in zip(("accel_rms",) + WAVEFORM, st) if v == v}
+                    fields["unavailable"] = list(SPECTRAL)
+                else:
+                    continue
+                rows.append((stamp, ch.name, head, missing, fields, self.setups[c], shaft_hz))
+        records = iter(compute_many(todo))
         out = []
-        for c, ch in enumerate(self.channels):
-            xc = x[:, c]
-            ok = np.isfinite(xc)
-            missing = 1.0 - float(ok.mean())
-            if missing == 0.0:
-                fields = record_fields(compute(xc, self.setups[c], shaft_hz))
-                if shaft_hz is None and (self.setups[c].bearings or any(b.orders for b in self.setups[c].bands)):
+        for stamp, name, head, missing, fields, setup, shaft_hz in rows:
+            if fields is None:
+                fields = record_fields(next(records))
+                if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
                     fields["unavailable"] = ["speed"]
-            elif ok.any():
-                st = waveform_stats(xc)
-                fields = {k: _num(v) for k, v in zip(("accel_rms",) + WAVEFORM, st) if v == v}
-                fields["unavailable"] = list(SPECTRAL)
-            else:
-                continue
-            out.append(messages.indicators(stamp, ch.name, {**head, "missing_fraction": _num(missing), **fields}))
+            out.append(messages.indicators(stamp, name, {**head, "missing_fraction": _num(missing), **fields}))
         return out
 
 

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cmsensord.config import Config
-from cmsensord.frame_batch import Pending, rms_fields
+from cmsensord.frame_batch import FrameBatch, Pending, rms_fields
 from cmsensord.monitor import messages
 from cmsensord.monitor.alarms import WATCHED, Alarms
 from cmsensord.monitor.channels import ChannelSetup
@@ -65,6 +65,13 @@ MAX_RMS_RUN = 8000
 MAX_RUN_SLOTS = 2 * MAX_BATCH
 #: indicator records waiting for the decision of their stamp at most (then written anyway)
 MAX_RECORDS = 1000
+
+
+def _select(frames: Sequence[Frame], mask: np.ndarray) -> Sequence[Frame]:
+    """The frames where ``mask``: a batch's columns taken (no frame built), else a list."""
+    if type(frames) is FrameBatch:
+        return frames if mask.all() else frames.take(np.flatnonzero(mask))
+    return list(compress(frames, mask.tolist()))
 
 
 class Processor:
@@ -242,9 +249,9 @@ class Processor:
                 for i, j in zip([0, *cut], [*cut, len(codes)]):
                     rms, raw = self._passed(frames[i:j], codes[i:j], rms, raw)
                 return rms, raw
-            self.shaft.add_many(list(compress(frames, tacho.tolist())))
+            self.shaft.add_many(_select(frames, tacho))
             keep = ~tacho
-            frames, codes = list(compress(frames, keep.tolist())), codes[keep]
+            frames, codes = _select(frames, keep), codes[keep]
             if not len(codes):
                 return rms, raw
         cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
@@ -350,7 +357,7 @@ class Processor:
 
     def _flush(self, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
         self._flush_rms(rms.joined())
-        self._flush_raw(list(raw.joined()))
+        self._flush_raw(raw.joined())
         return Pending(), Pending()
 
     def _flush_rms(self, frames: Sequence[Frame]) -> None:
@@ -387,7 +394,7 @@ class Processor:
             self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
                                         self.clock.fs, self.clock.block_len))
 
-    def _flush_raw(self, frames: list[Frame], final: bool = False) -> None:
+    def _flush_raw(self, frames: Sequence[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
         self.raw.add(frames)
         ready, C, events = self.raw.ready(self.status, final)

@@ -12,6 +12,7 @@ come.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from operator import attrgetter
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.dsp.rms import physical_rms, rows_physical
+from cmsensord.frame_batch import FrameBatch, Pending
 from cmsensord.monitor.events import Event
 from cmsensord.protocol import Frame, Status
 
@@ -88,56 +90,78 @@ class RawInput:
 
     def __init__(self, cfg: Config):
         self.cfg = cfg
-        self.waiting: list[Frame] = []
+        self.waiting = Pending()        # RAW frames in order (lists, or batches kept as columns)
         self.dropped = 0
 
-    def add(self, frames: list[Frame]) -> None:
+    def add(self, frames: Sequence[Frame]) -> None:
         self.waiting.extend(frames)
 
     def _overrides_complete(self) -> bool:
         return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)
 
-    def ready(self, status: Status | None, final: bool) -> tuple[list[Frame], int, list[Event]]:
+    def ready(self, status: Status | None, final: bool) -> tuple[Sequence[Frame], int, list[Event]]:
         """The frames that can be converted now and the board's channel count C (with
         ``final``, also the newest block's however many channels came)."""
         if not self.waiting:
             return [], 0, []
+        frames = self.waiting.joined()
+        self.waiting = Pending()
         if status is None and not self._overrides_complete():
-            over = len(self.waiting) - RAW_WAIT_FRAMES
+            over = len(frames) - RAW_WAIT_FRAMES
+            self.waiting.extend(frames[max(over, 0):])
             if over <= 0:
                 return [], 0, []
-            del self.waiting[:over]
             self.dropped += over
             return [], 0, [Event("decode_error", None, f"{over} RAW frame(s) dropped: no STATUS "
                                  "(scale/offset) from the board yet")]
-        frames, self.waiting = self.waiting, []
-        C = status.n_channels if status is not None else 1 + max(f.chan for f in frames)
+        cols = frames.cols if type(frames) is FrameBatch else None     # a batch: its columns
+        if status is not None:
+            C = status.n_channels
+        else:
+            C = 1 + (int(cols.chan.max()) if cols is not None else max(f.chan for f in frames))
         if not final:
             # the newest block may still be missing channels (its frames can straddle a
             # read or a batch): it waits for a frame of a later block, or for the end
-            last = frames[-1].t0_unwrapped
-            k = len(frames)
-            while k > 0 and frames[k - 1].t0_unwrapped == last:
-                k -= 1
+            if cols is not None:
+                t0 = cols.t0_unwrapped
+                other = np.flatnonzero(t0 != t0[-1])
+                k = int(other[-1]) + 1 if other.size else 0
+            else:
+                last = frames[-1].t0_unwrapped
+                k = len(frames)
+                while k > 0 and frames[k - 1].t0_unwrapped == last:
+                    k -= 1
             if len(frames) - k < C:
-                frames, self.waiting = frames[:k], frames[k:]
+                frames, rest = frames[:k], frames[k:]
+                self.waiting.extend(rest)
         return frames, C, []
 
-    def blocks(self, frames: list[Frame], C: int, L: int,
+    def blocks(self, frames: Sequence[Frame], C: int, L: int,
                status: Status | None) -> tuple[RawBlocks | None, list[Event]]:
         """Frames of ``L`` samples -> :class:`RawBlocks` (frames of another length or a channel
-        >= C are skipped with a decode_error event)."""
-        good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
+        >= C are skipped with a decode_error event).  A batch is read from its columns (no
+        frame built): the same blocks."""
+        if type(frames) is FrameBatch:
+            cols = frames.cols
+            ok = (cols.chan < C) & (cols.end - cols.start == 2 * L)
+            good_batch = frames if ok.all() else frames.take(np.flatnonzero(ok))
+            n = len(good_batch)
+            t0, chan = good_batch.cols.t0_unwrapped, good_batch.cols.chan
+            payloads = good_batch.payloads()
+        else:
+            good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
+            n = len(good)
+            t0 = np.fromiter(map(_T0, good), dtype=np.int64, count=n)
+            chan = np.fromiter(map(_CHAN, good), dtype=np.int64, count=n)
+            payloads = list(map(_PAYLOAD, good))
         events = []
-        if len(good) < len(frames):
-            events.append(Event("decode_error", None, f"{len(frames) - len(good)} RAW frame(s) with "
+        if n < len(frames):
+            events.append(Event("decode_error", None, f"{len(frames) - n} RAW frame(s) with "
                                 f"a channel >= {C} or a payload that is not {L} samples skipped"))
-        if not good:
+        if not n:
             return None, events
-        t0 = np.fromiter(map(_T0, good), dtype=np.int64, count=len(good))
-        chan = np.fromiter(map(_CHAN, good), dtype=np.int64, count=len(good))
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
-        counts = np.frombuffer(b"".join(map(_PAYLOAD, good)), dtype="<u2").reshape(len(good), L)
+        counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
         step = np.diff(t0)
         if not (step < 0).any():                # in order (as sent): the blocks where t0 steps
             new = np.flatnonzero(step) + 1

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cmsensord.config import Config
+from cmsensord.frame_batch import FrameBatch, Pending
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
 from cmsensord.protocol import Frame, ProtocolError, Status, decode_tacho, decode_tacho_many
@@ -31,6 +32,8 @@ if TYPE_CHECKING:
 
 #: TACHO frames kept while no tacho tracker exists (no STATUS announcing one yet)
 TACHO_WAIT_FRAMES = 200
+#: up to this many waiting TACHO frames are checked on Python ints (a live call), more on columns
+_FEW_FRAMES = 64
 #: gaps of lost TACHO frames remembered (the tracker reports a missed pulse a few frames late)
 LOST_GAPS = 64
 
@@ -67,7 +70,7 @@ class Shaft:
 
     def __init__(self, cfg: Config):
         self.cfg = cfg
-        self.waiting: list[Frame] = []
+        self.waiting = Pending()                 # TACHO frames of the input, in order (lists or batches)
         self.tacho: TachoTracker | None = None  # once STATUS announces a tacho
         self._prev_t0: int | None = None         # t0 of the last TACHO frame fed
         self._fed_t0: int | None = None          # newest t0 given to the tracker
@@ -80,14 +83,20 @@ class Shaft:
         """A TACHO frame of any input; only the configured one is kept."""
         self.add_many([f])
 
-    def add_many(self, frames: list[Frame]) -> None:
+    def add_many(self, frames: Sequence[Frame]) -> None:
         """TACHO frames of any input, in order; only the configured one's are kept (at most
         ``TACHO_WAIT_FRAMES``, the newest, until the tracker exists: only :meth:`ensure`
-        makes it, so it cannot appear between them)."""
+        makes it, so it cannot appear between them).  A batch's frames stay columns."""
         inp = self.cfg.tacho.input
-        self.waiting += [f for f in frames if f.chan == inp]
+        if type(frames) is FrameBatch:
+            mine = frames.cols.chan == inp
+            self.waiting.extend(frames if mine.all() else frames.take(np.flatnonzero(mine)))
+        else:
+            self.waiting.extend([f for f in frames if f.chan == inp])
         if self.tacho is None and len(self.waiting) > TACHO_WAIT_FRAMES:
-            del self.waiting[:-TACHO_WAIT_FRAMES]   # no STATUS yet: keep only the newest
+            newest = self.waiting.joined()[-TACHO_WAIT_FRAMES:]   # no STATUS yet: keep only the newest
+            self.waiting = Pending()
+            self.waiting.extend(newest)
 
     def ensure(self, status: Status | None, clock: BlockClock) -> bool:
         """Create the tracker once the board has said it has a tacho; True when there is one."""
@@ -115,13 +124,19 @@ class Shaft:
 
     def feed(self, clock: BlockClock) -> list[Event]:
         """The waiting TACHO frames -> the tracker; its events (and bad payloads)."""
-        frames, dropped, t0s = self._in_time_order(self.waiting)
-        self.waiting, events = [], []
+        waiting = self.waiting.joined()
+        self.waiting, events = Pending(), []
+        frames: Sequence[Frame]
+        if type(waiting) is FrameBatch and len(waiting) > _FEW_FRAMES:
+            frames, dropped, t0s = self._in_time_order_columns(waiting)
+            payloads = frames.payloads()
+        else:
+            frames, dropped, t0s = self._in_time_order(list(waiting))
+            payloads = [f.payload for f in frames]
         if dropped:
             events.append(Event("decode_error", None, f"{dropped} TACHO frame(s) before the newest one "
                                 "in board time dropped (the tacho needs time order)"))
         t0 = np.array(t0s, dtype=np.int64)
-        payloads = [f.payload for f in frames]
         counts, offsets, bad = (decode_tacho_few if len(payloads) <= FEW_TACHO else decode_tacho_many)(payloads)
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
@@ -152,6 +167,24 @@ class Shaft:
         if newest is not None and before is not None:
             self._fed_t0 = max(before, frames[-1].t0_unwrapped)
         return kept, len(frames) - len(kept), t0s
+
+    def _in_time_order_columns(self, frames: FrameBatch) -> tuple[FrameBatch, int, list[int]]:
+        """:meth:`_in_time_order` of a batch, on its t0 column (a replay's reads bring hundreds
+        of frames): frame i is kept when its t0 is at or after the newest one before it (and
+        the newest fed so far); the same frames, count and ``_fed_t0``."""
+        t0 = frames.cols.t0_unwrapped
+        fed = self._fed_t0
+        before = np.empty_like(t0)
+        before[0] = t0[0] if fed is None else fed
+        np.maximum.accumulate(t0[:-1], out=before[1:])
+        if fed is not None:
+            np.maximum(before, fed, out=before)
+        keep = t0 >= before
+        self._fed_t0 = max(int(before[-1]), int(t0[-1]))
+        if keep.all():
+            return frames, 0, t0.tolist()
+        kept = np.flatnonzero(keep)
+        return frames.take(kept), len(t0) - kept.size, t0[kept].tolist()
 
     def _note_gaps(self, t0: list[int], L: int) -> None:
         """Gaps between consecutive TACHO frames (one per block): lost frames."""

@@ -14,6 +14,6 @@ Per channel and interval (:mod:`.interval` puts them together):
 numpy only (no scipy): the daemon imports this.
 """
 
-from .interval import Band, Bearing, IndicatorRecord, Setup, compute
+from .interval import Band, Bearing, IndicatorRecord, Setup, compute, compute_many
 
-__all__ = ["Band", "Bearing", "IndicatorRecord", "Setup", "compute"]
+__all__ = ["Band", "Bearing", "IndicatorRecord", "Setup", "compute", "compute_many"]

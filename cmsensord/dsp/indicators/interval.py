@@ -14,7 +14,9 @@ bearing) is absent, never NaN.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -25,7 +27,7 @@ from .iso_zones import ZONES, baseline_alarm_mm_s, boundaries, zone_index
 from .spectrum import bin_range, hann_power_bins, rfft_freqs
 from .statistics import WaveformStats, centred_stats
 
-__all__ = ["Band", "Bearing", "Setup", "BearingLines", "IndicatorRecord", "compute"]
+__all__ = ["Band", "Bearing", "Setup", "BearingLines", "IndicatorRecord", "compute", "compute_many"]
 
 #: harmonics of each defect frequency read from the envelope spectrum
 HARMONICS = (1, 2)
@@ -150,11 +152,40 @@ def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> Indic
     bearing's lines are read.  The numbers are those of :func:`~.statistics.waveform_stats`,
     :func:`~.spectrum.power_spectrum`, :func:`~.envelope.envelope` and
     :func:`~.envelope.envelope_spectrum` up to rounding (~1e-16 of the largest spectral bins)."""
+    d = _centred(x)
+    return _record(d, np.fft.rfft(d), setup, shaft_hz)
+
+
+def compute_many(items: Sequence[tuple[np.ndarray, Setup, float | None]]) -> list[IndicatorRecord]:
+    """:func:`compute` of each (x, setup, shaft_hz): the same records, bit for bit, with the
+    real transforms of the records of one length in one call (numpy's rfft costs ~0.2 ms a
+    call at 25 000 points on top of the transform itself; row by row in one call it gives
+    the numbers of one call per row)."""
+    ds = [_centred(x) for x, _, _ in items]
+    X: list[np.ndarray | None] = [None] * len(ds)
+    by_len: dict[int, list[int]] = {}
+    for i, d in enumerate(ds):
+        by_len.setdefault(d.size, []).append(i)
+    for rows in by_len.values():
+        if len(rows) == 1:
+            X[rows[0]] = np.fft.rfft(ds[rows[0]])
+        else:
+            for i, Xi in zip(rows, np.fft.rfft(np.stack([ds[i] for i in rows]), axis=-1)):
+                X[i] = Xi
+    return [_record(d, cast(np.ndarray, Xi), setup, shaft_hz)
+            for d, Xi, (_, setup, shaft_hz) in zip(ds, X, items)]
+
+
+def _centred(x: np.ndarray) -> np.ndarray:
+    """The record minus its mean (float64, contiguous)."""
     x = np.asarray(x, dtype=np.float64)
-    N = x.size
-    d = x - x.mean()
+    return x - x.mean()
+
+
+def _record(d: np.ndarray, X: np.ndarray, setup: Setup, shaft_hz: float | None) -> IndicatorRecord:
+    """:func:`compute`'s record from the centred record d and its ``np.fft.rfft`` X."""
+    N = d.size
     stats = centred_stats(d)
-    X = np.fft.rfft(d)
     bands = _hz_bands(setup, shaft_hz)
     v, band_values = _spectral_sums(X, N, rfft_freqs(N, float(setup.fs)), setup, bands)
     bounds = boundaries(setup.group, setup.foundation)

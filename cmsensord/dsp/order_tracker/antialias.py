@@ -17,6 +17,11 @@ import math
 
 import numpy as np
 
+try:  # the compiled kernel is optional: the impulse response then comes from a Python loop
+    from cmsensord.dsp import _trackerkernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _trackerkernel = None
+
 
 def cheb2ord(f_pass: float, f_stop: float, gpass: float, gstop: float, fs: float) -> tuple[int, float]:
     """Lowest order and stop-band edge [Hz] of the digital Chebyshev type II low-pass
@@ -190,6 +195,13 @@ def _sos_impulse(sos: np.ndarray) -> np.ndarray:
     radius ρ sets the length, log(1e-17)/log ρ + 64 samples (at most 2^20)."""
     rho = max(float(np.max(np.abs(np.roots(s[3:])))) if np.any(s[4:]) else 0.0 for s in sos)
     n = 64 if rho <= 0.0 else min(1 << 20, math.ceil(math.log(1e-17) / math.log(rho)) + 64)
+    if _trackerkernel is not None:          # the decimator's own loop: the same operations
+        unit = np.zeros((n, 1))
+        unit[0, 0] = 1.0
+        out = np.empty((n, 1))
+        _trackerkernel.sosfilt(np.ascontiguousarray(sos, dtype=np.float64), unit,
+                               np.zeros((len(sos), 2, 1)), out, 0, 1)
+        return out[:, 0]
     rows = [tuple(float(v) for v in s) for s in sos]
     z = [[0.0, 0.0] for _ in rows]
     h = np.empty(n)

@@ -204,11 +204,14 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
     finite = speed[np.isfinite(speed)] if grid_comps else speed[:0]
     if finite.size:
         s = np.clip(finite, _R_SPEEDS[0], _R_SPEEDS[-1])
-        lo, hi = float(np.min(s)), float(np.max(s))
-        j0 = min(max(int(np.searchsorted(_R_SPEEDS, lo, side="right")) - 1, 0), _R_N - 2)
-        j1 = min(max(int(np.searchsorted(_R_SPEEDS, hi, side="right")) - 1, 0), _R_N - 2) + 1
-        span = (j0, j1 + 1)                          # grid points [j0, j1] bracket every speed
-        _fill_r_grid(grid_comps, fs, *span)
+        j = np.minimum(np.maximum(np.searchsorted(_R_SPEEDS, s, side="right") - 1, 0), _R_N - 2)
+        span = (int(j.min()), int(j.max()) + 2)      # grid points [j0, j1] bracket every speed
+        # only the two points around each speed are solved (np.interp reads no others): a
+        # table filled at min_rpm and at the running speed needs no r in between
+        need = np.zeros(_R_N, dtype=bool)
+        need[j] = True
+        need[j + 1] = True
+        _fill_r_grid(grid_comps, fs, need)
     for i, c in enumerate(components):
         if c.bandwidth_hz is None and c.bandwidth_pct is None:
             out[..., i] = DEFAULT_R if c.r is None else c.r
@@ -227,16 +230,16 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
     return out
 
 
-def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, j0: int, j1: int) -> None:
-    """Compute the log r of grid points [j0, j1) not yet cached, for all these
-    (bandwidth-given order) components in one batch."""
+def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, need: np.ndarray) -> None:
+    """Compute the log r of the grid points ``need`` (bool, _R_N) not yet cached, for all
+    these (bandwidth-given order) components in one batch."""
     idx, bws, fs_, dest = [], [], [], []
     for c in components:
         key = (c, fs)
         lr = _R_CACHE.get(key)
         if lr is None:
             lr = _R_CACHE[key] = np.full(_R_N, np.nan)
-        miss = j0 + np.flatnonzero(np.isnan(lr[j0:j1]))
+        miss = np.flatnonzero(need & np.isnan(lr))
         if not miss.size:
             continue
         grid = _R_SPEEDS[miss]

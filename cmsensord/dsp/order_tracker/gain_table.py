@@ -17,6 +17,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+try:  # the compiled kernel is optional (and an older build may lack lerp_rows): numpy is the fallback
+    from cmsensord.dsp import _trackerkernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _trackerkernel = None
+
 SEGMENT = 64                 # the table is computed in segments of this many speeds
 REL_STEP = 1.0 / 300.0       # default relative step of the grid (1 rpm at 300 rpm)
 BUDGET_BYTES = 16_000_000    # the most the filled table may hold (the grid coarsens to fit)
@@ -81,15 +86,18 @@ class GainTable:
 
     ``lookup`` interpolates linearly in the grid coordinate (the differences to the
     next point are stored beside the values, so that a lookup is a gather and a
-    multiply-add).  ``nbytes`` is the memory of the arrays (allocated as zeros:
+    multiply-add; in the compiled kernel when ``kernel`` and it is built, else numpy:
+    the same numbers).  ``nbytes`` is the memory of the arrays (allocated as zeros:
     pages never filled take none).
     """
 
     def __init__(self, grid: SpeedGrid, K: int, want_p: bool,
-                 solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]):
+                 solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], kernel: bool = True):
         self.grid = grid
         self.want_p = want_p
         self._solve = solve
+        # ``kernel``: interpolate in the compiled kernel when it is built (the same numbers)
+        self._lerp = getattr(_trackerkernel, "lerp_rows", None) if kernel else None
         n, d = grid.n, 2 * K
         self.have = np.zeros(-(-n // SEGMENT), dtype=bool)
         self.kS = np.zeros((n, d + 1))
@@ -130,7 +138,9 @@ class GainTable:
             self.P[pts] = P
         self.have[miss] = True
         # differences to the next point, where both ends are there now
-        j = np.unique(np.concatenate([pts - 1, pts]))
+        j = np.concatenate([pts - 1, pts])
+        j.sort()                                    # np.unique's values (it imports numpy.ma: ~20 ms)
+        j = j[np.concatenate(([True], j[1:] != j[:-1]))]
         j = j[(j >= 0) & (j < n - 1)]
         j = j[self.have[j // seg] & self.have[(j + 1) // seg]]
         self.dkS[j] = self.kS[j + 1] - self.kS[j]
@@ -144,6 +154,16 @@ class GainTable:
         f = np.clip(x - i, 0.0, 1.0)
         if i.size:
             self.fill(i)
+        if self._lerp is not None:            # the same operations per entry, in one pass
+            N, w = i.size, self.kS.shape[1]
+            k, S = np.empty((N, w - 1)), np.empty(N)
+            self._lerp(self.kS, self.dkS, i, f, k, S, w, w - 1)
+            P = None
+            if self.P is not None and self.dP is not None:
+                d = self.P.shape[1]
+                P = np.empty((N, d, d))
+                self._lerp(self.P, self.dP, i, f, P, P[:0], d * d, d * d)
+            return k, S, P
         kS = self.dkS[i]
         kS *= f[:, None]
         kS += self.kS[i]

@@ -28,6 +28,7 @@ from cmsensord.dsp.order_tracker.recursions import (
     riccati_numpy,
 )
 from cmsensord.dsp.order_tracker.sos_blocks import SosBlocks
+from cmsensord.dsp.order_tracker.speed_line import SpeedAt, delayed, delayed_at, piece_of
 from cmsensord.dsp.order_tracker.state import (
     BlockStats,
     TrackerOutput,
@@ -172,15 +173,15 @@ class OrderTracker:
         self.horizon_s = float(horizon_s)
         self._n_double = max(1, math.ceil(math.log2(max(2.0, horizon_s * self.fs_track))))
         self.table: GainTable | None = None
+        self._fills = 0                 # fills of the table so far (_steady_state)
         if self.gains == "table":
             top = 1.1 * self.max_rpm
             want_p = self.lag is not None
-            # r on the bandwidth grid over the table's speeds, in one batch (the table
-            # segments, filled as the speed goes, then find it there)
-            component_r(self.components, np.array([self.min_rpm, top]), self.fs_track)
+            # r on the bandwidth grid is computed when the table's segments need it
+            # (_steady_state): a machine at one speed pays for a few grid points only
             grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
                                GainTable.bytes_per_point(self.K, want_p))
-            self.table = GainTable(grid, self.K, want_p, self._steady_state)
+            self.table = GainTable(grid, self.K, want_p, self._steady_state, kernel=self.backend == "c")
 
     def _crossing_cap(self, top: float) -> float | None:
         """1 rpm when a fixed-frequency component crosses an order's frequency between
@@ -198,7 +199,14 @@ class OrderTracker:
         return c, qd, q2
 
     def _steady_state(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Steady-state [k | S] (G, 2K+1) and P(n|n-1) (G, 2K, 2K) at the grid speeds."""
+        """Steady-state [k | S] (G, 2K+1) and P(n|n-1) (G, 2K, 2K) at the grid speeds.
+
+        The table's first fill computes r only around its speeds (a bandwidth solve is a
+        few ms a batch, whatever its size); from the second on the speed moves, so r is
+        computed over the table's whole range in one batch (each value the same)."""
+        if self._fills == 1 and self.table is not None:       # every grid speed's r
+            component_r(self.components, self.table.grid.speeds(np.arange(self.table.grid.n)), self.fs_track)
+        self._fills += 1
         ks, Ps = [], []
         for i in range(0, len(grid), 1024):
             c, qd, q2 = self._coeffs(grid[i:i + 1024])
@@ -210,8 +218,11 @@ class OrderTracker:
         return np.concatenate(ks), np.concatenate(Ps)
 
     def initial_state(self) -> TrackerState:
+        """The state before the first input: P = Q2 I at min_rpm for the exact gains (the
+        Riccati recursion starts from it); the table's gains never read P, so with them it is
+        I and r needs no bandwidth solve before the first segment of the table does."""
         d = 2 * self.K
-        _, _, q2 = self._coeffs(np.array([self.min_rpm]))
+        q2 = self._coeffs(np.array([self.min_rpm]))[2] if self.gains == "exact" else np.ones(1)
         zi = None
         if self.sos is not None:
             zi = np.zeros((self.sos.shape[0], 2, self.C))
@@ -246,8 +257,14 @@ class OrderTracker:
         return out
 
     # ---------------------------------------------------------------- process
-    def process(self, y, rpm) -> TrackerOutput:
+    def process(self, y, rpm: np.ndarray | SpeedAt) -> TrackerOutput:
         """Track a block: y (T, C) (or (T,) for one channel) at fs_in, rpm (T,) at fs_in.
+
+        ``rpm`` may instead be a function giving the speed at input samples ``i`` (an int
+        array, ascending, counted from this call's first sample, within 0..T-1): the
+        tracker then asks only for the speeds it reads (one input sample in D, delayed
+        by the anti-alias filter; :func:`~.speed_line.delayed_at`), each sample once, in the call it
+        comes in, and gives the same outputs as with the array of them all.
 
         NaN in y is a missing sample of that channel (a lost frame, a gap): see
         docs/order_tracker.md §5.  With ``gains="exact"`` the
@@ -258,19 +275,20 @@ class OrderTracker:
             y = y[:, None]
         if y.ndim != 2 or y.shape[1] != self.C:
             raise ValueError(f"y: expected shape (T, {self.C}), got {y.shape}")
-        rpm = np.asarray(rpm, dtype=np.float64)
-        if rpm.shape != (y.shape[0],):
-            raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
+        if not callable(rpm):
+            rpm = np.asarray(rpm, dtype=np.float64)
+            if rpm.shape != (y.shape[0],):
+                raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
         step = self.piece * self.decimate
         if self.gains == "table" and y.shape[0] > step:
             # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
             # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
             # gives the same outputs, so the joined pieces are those of one call
-            return join_outputs([self._process(y[a:a + step], rpm[a:a + step])
+            return join_outputs([self._process(y[a:a + step], piece_of(rpm, a, step))
                                  for a in range(0, y.shape[0], step)])
         return self._process(y, rpm)
 
-    def _process(self, y: np.ndarray, rpm: np.ndarray) -> TrackerOutput:
+    def _process(self, y: np.ndarray, rpm: np.ndarray | SpeedAt) -> TrackerOutput:
         """:meth:`process` of checked arrays."""
         st = self.state
         gone_in = None
@@ -292,7 +310,7 @@ class OrderTracker:
         t_in = index * self.decimate - self.delay_in
         xf, zp, e, c, k, S, P = self._filter(yd, rd, miss)
         wave = np.ascontiguousarray(xf[:, :, 1::2])
-        env = envelope(xf, c)
+        env = self._envelope(xf, c)
         blocks = self._causal_blocks(n0, wave, env, rd, miss)
         out = TrackerOutput(index=index, t_in=t_in, rpm=rd, waveform=wave, blocks=blocks,
                             missing=miss if miss is not None else np.zeros((N, self.C), dtype=bool))
@@ -327,6 +345,8 @@ class OrderTracker:
 
     def _decimate(self, y, rpm):
         st = self.state
+        if callable(rpm) and (self.sos is None or y.shape[0] == 0):
+            rpm = np.asarray(rpm(np.arange(y.shape[0])), dtype=np.float64)
         if self.sos is None:
             st.n_in += y.shape[0]
             return y, rpm
@@ -341,23 +361,23 @@ class OrderTracker:
             if self._sos_blocks is None:
                 self._sos_blocks = SosBlocks(self.sos, self.decimate)
             yd, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
-        rd = self._delayed(rpm, take) if self.delay_in else rpm[take]
+        if callable(rpm):
+            rd = delayed_at(st, self.delay_in, self.decimate, rpm, y.shape[0], take)
+        else:
+            rd = delayed(st, self.delay_in, rpm, take) if self.delay_in else rpm[take]
         st.skip = int((st.skip - y.shape[0]) % self.decimate)
         st.n_in += y.shape[0]
         return yd, rd
 
-    def _delayed(self, rpm: np.ndarray, take: np.ndarray) -> np.ndarray:
-        """The speed ``delay_in`` input samples earlier at the kept samples ``take`` of this
-        call (the delay line [rpm_line, rpm] read there, without joining the whole call),
-        and the line moved on."""
-        st, n = self.state, self.delay_in
-        if st.n_in == 0 and rpm.size:            # the line starts filled with the first speed
-            st.rpm_line[:] = rpm[0]
-        k = int(np.searchsorted(take, n))        # kept samples still in the old line
-        rd = np.concatenate([st.rpm_line[take[:k]], rpm[take[k:] - n]])
-        st.rpm_line = (rpm[len(rpm) - n:].copy() if len(rpm) >= n
-                       else np.concatenate([st.rpm_line[len(rpm):], rpm]))
-        return rd
+    def _envelope(self, xs: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """:func:`envelope` (N, C, K) of the states xs (N, C, 2K) at c (N, K): in the compiled
+        kernel with the C backend when it has it (the same operations, one pass)."""
+        kernel = getattr(_trackerkernel, "envelope", None) if self.backend == "c" else None
+        if kernel is None:
+            return envelope(xs, c)
+        env = np.empty((xs.shape[0], self.C, self.K))
+        kernel(np.ascontiguousarray(xs), np.ascontiguousarray(c), env, self.K)
+        return env
 
     def _gains(self, speed, c, gone=None):
         """k (N, 2K), S (N,), P (N, 2K, 2K) or None.  ``gone`` (N,) bool or None: samples
@@ -524,7 +544,7 @@ class OrderTracker:
             used = n_emit * B
             cb = cur["c"][:used].reshape(n_emit, B, self.K)
             wave = xs[..., 1::2]
-            env = envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
+            env = self._envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
                 n_emit, B, self.C, self.K)
             out.smoothed_index = h0 + np.arange(used)
             out.smoothed_waveform = np.ascontiguousarray(wave.reshape(used, self.C, self.K))

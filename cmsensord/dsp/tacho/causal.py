@@ -87,9 +87,10 @@ class CausalSpeed(TachoState):
             return np.zeros(s.shape), np.zeros(s.shape, dtype=bool)
         j = np.searchsorted(keys, flat, side="right") - 1
         before = j < 0
-        jj = np.clip(j, 0, None) + self._slo
-        T, w, a, v = (self._sbuf[r, jj] for r in (1, 2, 3, 4))
-        sp, valid = self._causal_speed(flat - T, w, a, v, before)
+        jj = np.maximum(j, 0)
+        jj += self._slo
+        T, w, a, v = self._sbuf[1:5].take(jj, axis=1)       # one gather for the four rows
+        sp, valid = self._causal_speed(flat - T, w, a, v, before if before.any() else None)
         return (sp * self.fs).reshape(s.shape), valid.reshape(s.shape)
 
     def causal_range(self, start: int, stop: int) -> tuple[FloatArray, BoolArray]:
