@@ -18,13 +18,13 @@ joined when it is processed (one batch when every part is one, else a list).
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from itertools import repeat
+from itertools import compress, repeat
 from operator import attrgetter
 from typing import Any, NamedTuple, cast, overload
 
 import numpy as np
 
-__all__ = ["Columns", "FrameBatch", "Pending", "rms_fields", "build"]
+__all__ = ["Columns", "FrameBatch", "Pending", "rms_fields", "build", "select"]
 
 #: the fields of a frame as columns, in the order of :class:`~cmsensord.protocol.Frame`'s
 #: fields (``start``/``end``: the payload's bytes in the buffer instead of the payload)
@@ -248,3 +248,10 @@ def build(cols: Columns, data: bytes, frame_cls: type, types: dict) -> list:
     return list(map(tuple.__new__, repeat(frame_cls), zip(
         map(types.__getitem__, cols.code.tolist()), cols.seq.tolist(), cols.t0.tolist(), cols.chan.tolist(),
         cols.flags.tolist(), payloads, cols.t0_unwrapped.tolist(), cols.offset.tolist(), cols.lost.tolist())))
+
+
+def select(frames: Sequence[Any], mask: np.ndarray) -> Sequence[Any]:
+    """The frames where ``mask``: a batch's columns taken (no frame built), else a list."""
+    if type(frames) is FrameBatch:
+        return frames if mask.all() else frames.take(np.flatnonzero(mask))
+    return list(compress(frames, mask.tolist()))

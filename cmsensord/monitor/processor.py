@@ -26,13 +26,12 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
-from itertools import compress
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cmsensord.config import Config
-from cmsensord.frame_batch import FrameBatch, Pending, rms_fields
+from cmsensord.frame_batch import Pending, rms_fields, select
 from cmsensord.monitor import messages
 from cmsensord.monitor.alarms import WATCHED, Alarms
 from cmsensord.monitor.channels import ChannelSetup
@@ -65,13 +64,6 @@ MAX_RMS_RUN = 8000
 MAX_RUN_SLOTS = 2 * MAX_BATCH
 #: indicator records waiting for the decision of their stamp at most (then written anyway)
 MAX_RECORDS = 1000
-
-
-def _select(frames: Sequence[Frame], mask: np.ndarray) -> Sequence[Frame]:
-    """The frames where ``mask``: a batch's columns taken (no frame built), else a list."""
-    if type(frames) is FrameBatch:
-        return frames if mask.all() else frames.take(np.flatnonzero(mask))
-    return list(compress(frames, mask.tolist()))
 
 
 class Processor:
@@ -249,9 +241,9 @@ class Processor:
                 for i, j in zip([0, *cut], [*cut, len(codes)]):
                     rms, raw = self._passed(frames[i:j], codes[i:j], rms, raw)
                 return rms, raw
-            self.shaft.add_many(_select(frames, tacho))
+            self.shaft.add_many(select(frames, tacho))
             keep = ~tacho
-            frames, codes = _select(frames, keep), codes[keep]
+            frames, codes = select(frames, keep), codes[keep]
             if not len(codes):
                 return rms, raw
         cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
