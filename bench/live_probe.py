@@ -35,6 +35,31 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def _probe_sink(sink, state: dict):
+    """``sink`` with its writes of ``/orders`` messages noted in ``state["writes"]``:
+    (wall ns at the write, stamp, the newest frame's end)."""
+    write = sink.write
+
+    def probed_write(topic, schema, stamp_ns, msg):
+        if topic.endswith("/orders"):
+            state["writes"].append((time.time_ns(), stamp_ns, state["newest"]))
+        return write(topic, schema, stamp_ns, msg)
+
+    sink.write = probed_write
+    write_many = getattr(sink, "write_many", None)
+    if write_many is not None:              # a decision's or a block's messages in one call
+
+        def probed_write_many(messages):
+            now = time.time_ns()
+            state["writes"].extend((now, stamp_ns, state["newest"])
+                                   for topic, _schema, stamp_ns, _msg in messages
+                                   if topic.endswith("/orders"))
+            return write_many(messages)
+
+        sink.write_many = probed_write_many
+    return sink
+
+
 def main() -> int:
     report_path, rest = sys.argv[1], sys.argv[2:]
     no_kernels = "--no-kernels" in rest[:rest.index("--")]
@@ -74,16 +99,7 @@ def main() -> int:
     open_sink = live.open_sink
 
     def probed_open_sink(*a, **kw):
-        sink = open_sink(*a, **kw)
-        write = sink.write
-
-        def probed_write(topic, schema, stamp_ns, msg):
-            if topic.endswith("/orders"):
-                state["writes"].append((time.time_ns(), stamp_ns, state["newest"]))
-            return write(topic, schema, stamp_ns, msg)
-
-        sink.write = probed_write
-        return sink
+        return _probe_sink(open_sink(*a, **kw), state)
 
     link.FrameQueue.put = probed_put            # type: ignore[method-assign]
     clock.BlockClock.anchor = probed_anchor     # type: ignore[method-assign]
