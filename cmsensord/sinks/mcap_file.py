@@ -312,6 +312,13 @@ class McapSink:
         ``stamp_ns``; log_time too, unless the message comes after later ones were
         written (then the newest log time written: :mod:`cmsensord.sinks.reorder`).
         """
+        channel_id, stamp_ns, data = self._encoded(topic, schema, stamp_ns, msg)
+        self.messages_written += 1  # before: if its chunk cannot be written it is lost
+        self._put(self.reorder.push(stamp_ns, channel_id, data))
+
+    def _encoded(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> tuple[int, int, bytes]:
+        """A message's channel id (registered at its first message), stamp as an int, and
+        encoded bytes; SinkError for a negative stamp."""
         entry = self._channels.get(topic)
         if entry is None or entry[1] != schema:
             entry = self._register(topic, schema)
@@ -319,9 +326,7 @@ class McapSink:
             stamp_ns = int(stamp_ns)
         if stamp_ns < 0:
             raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
-        data = encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
-        self.messages_written += 1  # before: if its chunk cannot be written it is lost
-        self._put(self.reorder.push(stamp_ns, entry[0], data))
+        return entry[0], stamp_ns, encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
 
     def write_many(self, messages: Sequence[tuple[str, str, int, dict]], start: int = 0) -> int:
         """:meth:`write` of ``messages[start:]`` in turn, in one call, up to and including the
@@ -340,21 +345,13 @@ class McapSink:
         pos = writer.pos
         while k < n:
             self.batch_at = k
-            topic, schema, stamp_ns, msg = messages[k]
-            entry = self._channels.get(topic)
-            if entry is None or entry[1] != schema:
-                entry = self._register(topic, schema)
-            if type(stamp_ns) is not int:
-                stamp_ns = int(stamp_ns)
-            if stamp_ns < 0:
-                raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
-            data = encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
+            channel_id, stamp_ns, data = self._encoded(*messages[k])
             self.messages_written += 1
             try:
                 if passes(stamp_ns):                    # what push() would give, without a list
-                    writer.add_message(entry[0], stamp_ns, data, stamp_ns)
+                    writer.add_message(channel_id, stamp_ns, data, stamp_ns)
                 else:
-                    self._add(push(stamp_ns, entry[0], data))
+                    self._add(push(stamp_ns, channel_id, data))
             except OSError as err:
                 raise self._fail("write", err) from None
             k += 1
@@ -373,13 +370,9 @@ class McapSink:
         if not messages:
             return
         encoded = []
-        for topic, schema, stamp_ns, msg in messages:
-            entry = self._channels.get(topic)
-            if entry is None or entry[1] != schema:
-                entry = self._register(topic, schema)
-            if int(stamp_ns) < 0:
-                raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
-            encoded.append((entry[0], encode_message(topic, int(stamp_ns), msg, REPEATED.get(schema))))
+        for m in messages:
+            channel_id, _stamp, data = self._encoded(*m)
+            encoded.append((channel_id, data))
         self.messages_written += len(encoded)
         self._put(self.reorder.push(int(messages[0][2]), GROUP, tuple(encoded)))
 
