@@ -11,6 +11,7 @@ knots also runs in the compiled ``cmsensord.dsp._trackerkernel`` (bit for bit).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -56,18 +57,7 @@ def _solve_normal(mom: list[float], n: int) -> tuple[float, float, float]:
     a02, a12, a22 = (s2, s3, s4) if n >= 3 else (0.0, 0.0, 1.0)
     if n < 3:
         b2 = 0.0
-    m1 = s1 / s0
-    d11 = s2 - m1 * s1
-    d12 = a12 - m1 * a02
-    e1 = b1 - m1 * b0
-    m2 = a02 / s0
-    d22 = a22 - m2 * a02
-    e2 = b2 - m2 * b0
-    m3 = d12 / d11
-    c2 = (e2 - m3 * e1) / (d22 - m3 * d12)
-    c1 = (e1 - d12 * c2) / d11
-    c0 = (b0 - s1 * c1 - a02 * c2) / s0
-    return c0, c1, c2
+    return _eliminate(s0, s1, s2, a02, a12, a22, b0, b1, b2)
 
 
 def solve_normal_rows(mom: FloatArray, npts: IntArray) -> FloatArray:
@@ -85,6 +75,13 @@ def solve_normal_rows(mom: FloatArray, npts: IntArray) -> FloatArray:
     if one.any():
         s0, s1, s2, b0, b1 = (np.where(one, v, r) for v, r in
                               ((1.0, s0), (0.0, s1), (1.0, s2), (0.0, b0), (0.0, b1)))
+    return np.stack(_eliminate(s0, s1, s2, a02, a12, a22, b0, b1, b2), axis=1)
+
+
+def _eliminate(s0: Any, s1: Any, s2: Any, a02: Any, a12: Any, a22: Any, b0: Any, b1: Any,
+               b2: Any) -> tuple[Any, Any, Any]:
+    """c of [[s0 s1 a02] [s1 s2 a12] [a02 a12 a22]] c = [b0 b1 b2] by symmetric Gaussian
+    elimination, on Python floats or on arrays of rows (the same operations: the same bits)."""
     m1 = s1 / s0
     d11 = s2 - m1 * s1
     d12 = a12 - m1 * a02
@@ -93,11 +90,10 @@ def solve_normal_rows(mom: FloatArray, npts: IntArray) -> FloatArray:
     d22 = a22 - m2 * a02
     e2 = b2 - m2 * b0
     m3 = d12 / d11
-    out = np.empty((mom.shape[0], 3))
-    c2 = np.divide(e2 - m3 * e1, d22 - m3 * d12, out=out[:, 2])
-    c1 = np.divide(e1 - d12 * c2, d11, out=out[:, 1])
-    np.divide(b0 - s1 * c1 - a02 * c2, s0, out=out[:, 0])
-    return out
+    c2 = (e2 - m3 * e1) / (d22 - m3 * d12)
+    c1 = (e1 - d12 * c2) / d11
+    c0 = (b0 - s1 * c1 - a02 * c2) / s0
+    return c0, c1, c2
 
 
 def make_room(buf: FloatArray, lo: int, hi: int, n: int) -> tuple[FloatArray, int, int]:
