@@ -37,7 +37,8 @@ from typing import NamedTuple
 import numpy as np
 
 from cmsensord.frame_batch import Columns, FrameBatch, build
-from cmsensord.frame_runs import MIN_BYTES, FrameRuns, RunFields
+from cmsensord.frame_runs import MIN_BYTES, FrameRuns, run_columns
+from cmsensord.wire_scan import WireScanner, have_kernel
 
 __all__ = [
     "SYNC", "VERSION", "HEADER_LEN", "CRC_LEN", "OVERHEAD", "MAX_PAYLOAD", "MAX_FRAME",
@@ -354,18 +355,23 @@ class Decoder:
     last byte when it is 0xA5.  With ``runs`` (the default), a buffer of at least
     :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
     frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
-    frame-by-frame receiver, the reference it equals (same frames, same counters).
+    frame-by-frame receiver, the reference it equals (same frames, same counters).  With
+    ``kernel`` (None: when it is built; :mod:`cmsensord.wire_scan`) the compiled wire kernel
+    scans every buffer, of any size, in one call instead: the same frames and counters again.
     :meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
     :meth:`flush` as a :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames
     when indexed or iterated): a replay's RMS frames reach the banks as arrays.
     """
 
-    def __init__(self, max_buffer: int = 65536, runs: bool = True):
+    def __init__(self, max_buffer: int = 65536, runs: bool = True, kernel: bool | None = None):
         if max_buffer < MAX_FRAME:
             raise ValueError(
                 f"max_buffer must hold the largest frame ({MAX_FRAME} bytes), got {max_buffer}")
         self.max_buffer = max_buffer
         self.runs = runs  # the one-pass path for runs of back-to-back frames (False: frame by frame)
+        use_kernel = runs and (have_kernel() if kernel is None else kernel)   # True without it: ImportError
+        self._kernel = WireScanner(VERSION, max(_TYPE_BY_CODE), MAX_PAYLOAD) if use_kernel else None
+        self._scanner = self._scan_kernel if use_kernel else self._scan
         self.counters = LinkCounters()
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
@@ -389,11 +395,11 @@ class Decoder:
     def flush(self) -> list[Frame]:
         """End of stream: incomplete candidates are not frames (drop their first sync
         byte and hunt on through the rest); whatever is left is discarded."""
-        return _frames(*self._scan(final=True))
+        return _frames(*self._scanner(final=True))
 
     def flush_batch(self) -> FrameBatch:
         """:meth:`flush`'s frames as a batch of columns."""
-        return _batch(*self._scan(final=True))
+        return _batch(*self._scanner(final=True))
 
     def _feed(self, data: bytes | bytearray | memoryview) -> list[tuple[list, bytes]]:
         """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""
@@ -404,14 +410,14 @@ class Decoder:
         room = self.max_buffer - len(buf)
         if total <= room:  # the common case: one append, one scan
             buf += view
-            return [self._scan(final=False)]
+            return [self._scanner(final=False)]
         scans = []
         start = 0
         while start < total:
             room = self.max_buffer - len(buf)
             buf += view[start:start + room]
             start += room
-            scans.append(self._scan(final=False))
+            scans.append(self._scanner(final=False))
         return scans
 
     def _scan(self, final: bool) -> tuple[list, bytes]:
@@ -420,7 +426,8 @@ class Decoder:
         with the columns of each run of good back-to-back frames in their place, and the
         bytes of the buffer the runs' payloads are in.
 
-        The receiver's hot loop, every byte of the link passes through it: one function, the
+        The receiver's hot loop without the compiled kernel (with it, :meth:`_scan_kernel`),
+        every byte of the link passes through it: one function, the
         lookups bound to locals and the counters summed locally, so it stays whole on purpose.
         """
         buf = self._buf
@@ -433,8 +440,7 @@ class Decoder:
         names = _TYPE_NAMES
         frame_cls = Frame
         new = tuple.__new__
-        c = self.counters
-        counts = c.frames
+        counts = self.counters.frames
         base = self._base
         last_seq = self._last_seq
         last_t0 = self._last_t0
@@ -456,7 +462,7 @@ class Decoder:
                 pos = i
                 if runs is not None and (run := runs.take(pos)) is not None:
                     # good frames back to back: in one pass (cmsensord/frame_runs.py)
-                    cols, last_seq, last_t0, last_unw = _run_columns(run, base, last_seq, last_t0, last_unw)
+                    cols, last_seq, last_t0, last_unw = run_columns(run, base, last_seq, last_t0, last_unw)
                     out.append(cols)
                     for code, k in enumerate(np.bincount(run.code).tolist()):
                         if k:
@@ -508,40 +514,42 @@ class Decoder:
                                            bytes(mv[pos + HEADER_LEN:end_payload]),
                                            unw, base + pos, lost)))
                 pos = end
+        self._done(pos, last_seq, last_t0, last_unw, discarded, rejects, crc_fail, lost_total, overruns)
+        return out, runs.data if runs is not None else b""
+
+    def _scan_kernel(self, final: bool) -> tuple[list, bytes]:
+        """:meth:`_scan` in one call of the compiled wire kernel: the good frames as one
+        :class:`~cmsensord.frame_batch.Columns` over the bytes scanned."""
+        assert self._kernel is not None
+        buf = self._buf
+        r = self._kernel.scan(buf, final, self._base, self._last_seq, self._last_t0, self._last_t0_unwrapped)
+        data = b""
+        if r.cols is not None:
+            with memoryview(buf) as mv:
+                data = bytes(mv[:r.consumed])
+        counts = self.counters.frames
+        for code, k in enumerate(r.by_code):
+            if k:
+                counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
+        self._done(r.consumed, r.last_seq, r.last_t0, r.last_unw, r.discarded, r.header_rejects,
+                   r.crc_failures, r.lost, r.overruns)
+        return ([r.cols] if r.cols is not None else []), data
+
+    def _done(self, pos: int, last_seq: int | None, last_t0: int, last_unw: int, discarded: int,
+              rejects: int, crc_fail: int, lost: int, overruns: int) -> None:
+        """A scan's end: its ``pos`` bytes leave the buffer; the receiver's state and counters."""
         if pos:
-            del buf[:pos]
-        self._base = base + pos
+            del self._buf[:pos]
+        self._base += pos
         self._last_seq = last_seq
         self._last_t0 = last_t0
         self._last_t0_unwrapped = last_unw
+        c = self.counters
         c.bytes_discarded += discarded
         c.header_rejects += rejects
         c.crc_failures += crc_fail
-        c.frames_lost += lost_total
+        c.frames_lost += lost
         c.overruns += overruns
-        return out, runs.data if runs is not None else b""
-
-
-def _run_columns(run: RunFields, base: int, last_seq: int | None, last_t0: int,
-                 last_unw: int) -> tuple[Columns, int, int, int]:
-    """The columns of a run of good back-to-back frames (receiver rules 3 and 4 as in the
-    frame-by-frame loop: seq gaps, t0 unwrapped), and the new last seq, t0, unwrapped t0."""
-    seq, t0 = run.seq, run.t0
-    lost = np.empty(seq.size, dtype=np.int64)
-    lost[1:] = (seq[1:] - seq[:-1] - 1) & 0xFFFF
-    step = np.empty(seq.size, dtype=np.int64)
-    step[1:] = ((t0[1:] - t0[:-1] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-    if last_seq is None:
-        lost[0] = 0
-        first = int(t0[0])
-    else:
-        lost[0] = (int(seq[0]) - last_seq - 1) & 0xFFFF
-        first = last_unw + (((int(t0[0]) - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
-    step[0] = first
-    unw = np.cumsum(step)
-    cols = Columns(run.code, seq, t0, run.chan, run.flags, run.pos + HEADER_LEN, run.end_payload, unw,
-                   run.pos + base, lost)
-    return cols, int(seq[-1]), int(t0[-1]), int(unw[-1])
 
 
 def _make(cols: Columns, data: bytes) -> list[Frame]:
