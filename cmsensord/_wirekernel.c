@@ -91,14 +91,43 @@ typedef struct {
     /* receiver state (rules 3 and 4); has_seq 0: no frame yet */
     int has_seq;
     long long last_seq, last_t0, last_unw;
-    /* results */
+    /* results: columns in out, or (frame_cls not NULL) Frame tuples appended to list */
+    PyTypeObject *frame_cls;
+    PyObject *types, *list;
+    int failed;
     int64_t *out;
     Py_ssize_t cap, k, pos;
     long long discarded, rejects, crc_fail, lost, overruns;
     long long by_type[256];
 } Scan;
 
-/* one good frame at s->pos with these header fields: its column, the counters, the state */
+/* a frame_cls tuple of the 9 Frame fields (NULL and an exception when out of memory) */
+static PyObject *make_frame(Scan *s, uint32_t code, uint32_t seq, uint32_t t0, uint32_t chan, uint32_t flags,
+                            Py_ssize_t end_payload, long long unw, long long lost) {
+    PyObject *f = s->frame_cls->tp_alloc(s->frame_cls, 9);
+    if (f == NULL)
+        return NULL;
+    PyObject *type = PyTuple_GET_ITEM(s->types, code);
+    Py_INCREF(type);
+    PyTuple_SET_ITEM(f, 0, type);
+    PyObject *v[8] = {
+        PyLong_FromUnsignedLong(seq), PyLong_FromUnsignedLong(t0), PyLong_FromUnsignedLong(chan),
+        PyLong_FromUnsignedLong(flags),
+        PyBytes_FromStringAndSize((const char *)s->buf + s->pos + HEADER_LEN, end_payload - s->pos - HEADER_LEN),
+        PyLong_FromLongLong(unw), PyLong_FromLongLong(s->base + s->pos), PyLong_FromLongLong(lost)};
+    int ok = 1;
+    for (int i = 0; i < 8; i++) {
+        PyTuple_SET_ITEM(f, i + 1, v[i]);
+        ok = ok && v[i] != NULL;
+    }
+    if (!ok) {
+        Py_DECREF(f);
+        return NULL;
+    }
+    return f;
+}
+
+/* one good frame at s->pos with these header fields: its column (or Frame), the counters, the state */
 static void take_frame(Scan *s, uint32_t code, uint32_t seq, uint32_t t0, uint32_t chan, uint32_t flags,
                        Py_ssize_t end_payload) {
     long long lost, unw;
@@ -117,6 +146,14 @@ static void take_frame(Scan *s, uint32_t code, uint32_t seq, uint32_t t0, uint32
     if (flags & 1)                      /* FLAG_OVERRUN */
         s->overruns++;
     s->by_type[code]++;
+    if (s->frame_cls != NULL) {
+        PyObject *f = make_frame(s, code, seq, t0, chan, flags, end_payload, unw, lost);
+        if (f == NULL || PyList_Append(s->list, f) < 0)
+            s->failed = 1;
+        Py_XDECREF(f);
+        s->k++;
+        return;
+    }
     int64_t *col = s->out + s->k;
     const Py_ssize_t cap = s->cap;
     col[0] = code;
@@ -183,42 +220,62 @@ static void run_scan(Scan *s) {
         s->pos = pos;
         take_frame(s, code, le16(h + 2), le32(h + 4), h[8], h[9], end_payload);
         pos = end;
+        if (s->failed)
+            return;
     }
     s->pos = pos;
 }
 
 PyDoc_STRVAR(scan_doc,
-"scan(buf, final, version, max_type, max_payload, base, last_seq, last_t0, last_unw, out)\n"
+"scan(buf, final, version, max_type, max_payload, base, last_seq, last_t0, last_unw, out, frame_cls, types)\n"
 "\n"
 "Frame every complete candidate of ``buf`` as Decoder._scan does (receiver rules 1-4).\n"
-"``last_seq`` -1: no frame yet.  ``out``: int64, 10 rows of ``cap`` columns, C order,\n"
-"cap >= len(buf) // 18.  Returns (frames, bytes consumed, discarded, header rejects,\n"
-"CRC failures, frames lost, overruns, (frames of type 0 .. max_type), last_seq, last_t0,\n"
-"last_unw).");
+"``last_seq`` -1: no frame yet.  ``frame_cls`` None: the frames go into ``out`` (int64, 10 rows\n"
+"of ``cap`` columns, C order, cap >= len(buf) // 18); else they are made as ``frame_cls`` tuples\n"
+"(``types[code]`` their type, ``out`` unused).  Returns (frames: their number or their list,\n"
+"bytes consumed, discarded, header rejects, CRC failures, frames lost, overruns,\n"
+"(frames of type 0 .. max_type), last_seq or None, last_t0, last_unw).");
 
 static PyObject *scan(PyObject *self, PyObject *args) {
-    Py_buffer bbuf, bout;
+    Py_buffer bbuf, bout = {0};
     int final;
     long version, max_type, max_payload;
     long long base, last_seq, last_t0, last_unw;
-    if (!PyArg_ParseTuple(args, "y*plllLLLLw*", &bbuf, &final, &version, &max_type, &max_payload, &base,
-                          &last_seq, &last_t0, &last_unw, &bout))
+    PyObject *out, *frame_cls, *types;
+    if (!PyArg_ParseTuple(args, "y*plllLLLLOOO", &bbuf, &final, &version, &max_type, &max_payload, &base,
+                          &last_seq, &last_t0, &last_unw, &out, &frame_cls, &types))
         return NULL;
-    PyObject *ret = NULL;
+    PyObject *ret = NULL, *found = NULL;
     Scan *s = PyMem_Calloc(1, sizeof(Scan));
     if (s == NULL) {
         PyErr_NoMemory();
         goto done;
     }
-    const Py_ssize_t cap = bout.len / (Py_ssize_t)(N_ROWS * sizeof(int64_t));
-    if (cap < bbuf.len / (HEADER_LEN + CRC_LEN)) {
-        PyErr_Format(PyExc_ValueError, "out holds %zd frames, a buffer of %zd bytes may hold %zd",
-                     cap, bbuf.len, bbuf.len / (HEADER_LEN + CRC_LEN));
-        goto done;
-    }
     if (max_type < 1 || max_type > 255 || max_payload < 0) {
         PyErr_SetString(PyExc_ValueError, "max_type must be 1..255 and max_payload >= 0");
         goto done;
+    }
+    if (frame_cls != Py_None) {
+        if (!PyType_Check(frame_cls) || !PyType_IsSubtype((PyTypeObject *)frame_cls, &PyTuple_Type) ||
+            !PyTuple_Check(types) || PyTuple_GET_SIZE(types) <= max_type) {
+            PyErr_SetString(PyExc_TypeError, "frame_cls must be a tuple subclass and types a tuple of max_type + 1");
+            goto done;
+        }
+        s->frame_cls = (PyTypeObject *)frame_cls;
+        s->types = types;
+        found = s->list = PyList_New(0);
+        if (found == NULL)
+            goto done;
+    } else {
+        if (PyObject_GetBuffer(out, &bout, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0)
+            goto done;
+        s->out = bout.buf;
+        s->cap = bout.len / (Py_ssize_t)(N_ROWS * sizeof(int64_t));
+        if (s->cap < bbuf.len / (HEADER_LEN + CRC_LEN)) {
+            PyErr_Format(PyExc_ValueError, "out holds %zd frames, a buffer of %zd bytes may hold %zd",
+                         s->cap, bbuf.len, bbuf.len / (HEADER_LEN + CRC_LEN));
+            goto done;
+        }
     }
     s->buf = bbuf.buf;
     s->n = bbuf.len;
@@ -231,33 +288,37 @@ static PyObject *scan(PyObject *self, PyObject *args) {
     s->last_seq = last_seq;
     s->last_t0 = last_t0;
     s->last_unw = last_unw;
-    s->out = bout.buf;
-    s->cap = cap;
-    if (s->n >= RELEASE_GIL_BYTES) {
+    if (s->frame_cls == NULL && s->n >= RELEASE_GIL_BYTES) {   /* columns only: no object made */
         Py_BEGIN_ALLOW_THREADS
         run_scan(s);
         Py_END_ALLOW_THREADS
     } else {
         run_scan(s);
     }
-    PyObject *types = PyTuple_New(max_type + 1);
-    if (types == NULL)
+    if (s->failed)
+        goto done;
+    if (found == NULL && (found = PyLong_FromSsize_t(s->k)) == NULL)
+        goto done;
+    PyObject *counts = PyTuple_New(max_type + 1);
+    if (counts == NULL)
         goto done;
     for (long t = 0; t <= max_type; t++) {
         PyObject *v = PyLong_FromLongLong(s->by_type[t]);
         if (v == NULL) {
-            Py_DECREF(types);
+            Py_DECREF(counts);
             goto done;
         }
-        PyTuple_SET_ITEM(types, t, v);
+        PyTuple_SET_ITEM(counts, t, v);
     }
-    ret = Py_BuildValue("nnLLLLLNNLL", s->k, s->pos, s->discarded, s->rejects, s->crc_fail, s->lost,
-                        s->overruns, types, s->has_seq ? PyLong_FromLongLong(s->last_seq) : Py_NewRef(Py_None),
+    ret = Py_BuildValue("OnLLLLLNNLL", found, s->pos, s->discarded, s->rejects, s->crc_fail, s->lost,
+                        s->overruns, counts, s->has_seq ? PyLong_FromLongLong(s->last_seq) : Py_NewRef(Py_None),
                         s->last_t0, s->last_unw);
 done:
+    Py_XDECREF(found);
     PyMem_Free(s);
     PyBuffer_Release(&bbuf);
-    PyBuffer_Release(&bout);
+    if (bout.obj != NULL)
+        PyBuffer_Release(&bout);
     return ret;
 }
 

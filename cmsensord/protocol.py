@@ -36,7 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cmsensord.frame_batch import Columns, FrameBatch, build
+from cmsensord.frame_batch import Columns, FrameBatch, build, scanned_batch, scanned_frames
 from cmsensord.frame_runs import MIN_BYTES, FrameRuns, run_columns
 from cmsensord.wire_scan import WireScanner, have_kernel
 
@@ -85,6 +85,7 @@ _STATUS_MODE_FS = struct.Struct("<2xB1xI")  # mode and fs of the fixed part
 _U16 = struct.Struct("<H")
 
 _TYPE_BY_CODE = {int(t): t for t in FrameType}
+_TYPES = tuple(map(_TYPE_BY_CODE.get, range(max(_TYPE_BY_CODE) + 1)))   # by code (the wire kernel's)
 _TYPE_NAMES = {t: t.name.lower() for t in FrameType}
 
 
@@ -371,7 +372,8 @@ class Decoder:
         self.runs = runs  # the one-pass path for runs of back-to-back frames (False: frame by frame)
         use_kernel = runs and (have_kernel() if kernel is None else kernel)   # True without it: ImportError
         self._kernel = WireScanner(VERSION, max(_TYPE_BY_CODE), MAX_PAYLOAD) if use_kernel else None
-        self._scanner = self._scan_kernel if use_kernel else self._scan
+        self._scanner = self._scan_kernel if use_kernel else self._scan     # for batches
+        self._scan_frames = self._kernel_frames if use_kernel else self._scan   # for lists of frames
         self.counters = LinkCounters()
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
@@ -384,24 +386,24 @@ class Decoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
         frames: list[Frame] = []
-        for out, data_ in self._feed(data):
+        for out, data_ in self._feed(data, self._scan_frames):
             frames += _frames(out, data_)
         return frames
 
     def feed_batch(self, data: bytes | bytearray | memoryview) -> FrameBatch:
         """:meth:`feed`'s frames as one batch of columns."""
-        return FrameBatch.join([_batch(out, data_) for out, data_ in self._feed(data)])
+        return FrameBatch.join([_batch(out, data_) for out, data_ in self._feed(data, self._scanner)])
 
     def flush(self) -> list[Frame]:
         """End of stream: incomplete candidates are not frames (drop their first sync
         byte and hunt on through the rest); whatever is left is discarded."""
-        return _frames(*self._scanner(final=True))
+        return _frames(*self._scan_frames(final=True))
 
     def flush_batch(self) -> FrameBatch:
         """:meth:`flush`'s frames as a batch of columns."""
         return _batch(*self._scanner(final=True))
 
-    def _feed(self, data: bytes | bytearray | memoryview) -> list[tuple[list, bytes]]:
+    def _feed(self, data: bytes | bytearray | memoryview, scan) -> list[tuple[list, bytes]]:
         """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""
         view = memoryview(data).cast("B")
         total = len(view)
@@ -410,14 +412,14 @@ class Decoder:
         room = self.max_buffer - len(buf)
         if total <= room:  # the common case: one append, one scan
             buf += view
-            return [self._scanner(final=False)]
+            return [scan(final=False)]
         scans = []
         start = 0
         while start < total:
             room = self.max_buffer - len(buf)
             buf += view[start:start + room]
             start += room
-            scans.append(self._scanner(final=False))
+            scans.append(scan(final=False))
         return scans
 
     def _scan(self, final: bool) -> tuple[list, bytes]:
@@ -517,14 +519,19 @@ class Decoder:
         self._done(pos, last_seq, last_t0, last_unw, discarded, rejects, crc_fail, lost_total, overruns)
         return out, runs.data if runs is not None else b""
 
-    def _scan_kernel(self, final: bool) -> tuple[list, bytes]:
+    def _kernel_frames(self, final: bool) -> tuple[list, bytes]:
+        """:meth:`_scan_kernel` with the frames made by the kernel, as :meth:`_scan` returns them."""
+        return self._scan_kernel(final, (Frame, _TYPES))
+
+    def _scan_kernel(self, final: bool, make: tuple[type, tuple] | None = None) -> tuple[list, bytes]:
         """:meth:`_scan` in one call of the compiled wire kernel: the good frames as one
-        :class:`~cmsensord.frame_batch.Columns` over the bytes scanned."""
+        :class:`~cmsensord.frame_batch.Columns` over the bytes scanned (``make``: as frames)."""
         assert self._kernel is not None
         buf = self._buf
-        r = self._kernel.scan(buf, final, self._base, self._last_seq, self._last_t0, self._last_t0_unwrapped)
-        data = b""
-        if r.cols is not None:
+        r = self._kernel.scan(buf, final, self._base, self._last_seq, self._last_t0, self._last_t0_unwrapped,
+                              make)
+        found, data = r.frames, b""
+        if isinstance(found, Columns):          # their payloads: in the bytes scanned
             with memoryview(buf) as mv:
                 data = bytes(mv[:r.consumed])
         counts = self.counters.frames
@@ -533,7 +540,9 @@ class Decoder:
                 counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
         self._done(r.consumed, r.last_seq, r.last_t0, r.last_unw, r.discarded, r.header_rejects,
                    r.crc_failures, r.lost, r.overruns)
-        return ([r.cols] if r.cols is not None else []), data
+        if isinstance(found, Columns):
+            return [found], data
+        return found or [], data
 
     def _done(self, pos: int, last_seq: int | None, last_t0: int, last_unw: int, discarded: int,
               rejects: int, crc_fail: int, lost: int, overruns: int) -> None:
@@ -557,35 +566,11 @@ def _make(cols: Columns, data: bytes) -> list[Frame]:
 
 
 def _frames(out: list, data: bytes) -> list[Frame]:
-    """The frames and run columns of one scan (in stream order) as a list of frames (the
-    runs' payloads in ``data``, the scanned buffer)."""
-    if not data:                        # no runs: frames only
-        return out
-    frames: list[Frame] = []
-    for item in out:
-        if type(item) is Columns:
-            frames += _make(item, data)
-        else:
-            frames.append(item)
-    return frames
+    return scanned_frames(out, data, _make)
 
 
 def _batch(out: list, data: bytes) -> FrameBatch:
-    """The frames and run columns of one scan (in stream order) as one batch (the runs'
-    payloads in ``data``, the scanned buffer)."""
-    parts: list[FrameBatch] = []
-    singles: list[Frame] = []
-    for item in out:
-        if type(item) is Columns:
-            if singles:
-                parts.append(FrameBatch.of(singles, _make))
-                singles = []
-            parts.append(FrameBatch(item, data, _make))
-        else:
-            singles.append(item)
-    if singles or not parts:
-        parts.append(FrameBatch.of(singles, _make))
-    return FrameBatch.join(parts)
+    return scanned_batch(out, data, _make)
 
 
 def iter_frames(data: bytes | bytearray | memoryview,

@@ -196,7 +196,7 @@ def test_the_kernel_refuses_rows_too_small_for_the_buffer():
     buf = bytearray(encode_frame(FrameType.RMS, 0, 0, 1, 0, bytes(4)) * 10)
     rows = np.empty((10, len(buf) // 18 - 1), dtype=np.int64)
     with pytest.raises(ValueError, match="out holds"):
-        _wirekernel.scan(buf, False, 1, 4, 4096, 0, -1, 0, 0, rows)
+        _wirekernel.scan(buf, False, 1, 4, 4096, 0, -1, 0, 0, rows, None, None)
 
 
 def test_decoder_kernel_true_without_the_kernel_raises(monkeypatch):
