@@ -4,8 +4,8 @@ Three optional C extensions are built by ``pip install`` when a C compiler is pr
 (``setup.py``): ``cmsensord.dsp._akfkernel`` (the AKF bank's per-sample loop),
 ``cmsensord.dsp._trackerkernel`` (the order tracker's loops) and ``cmsensord._wirekernel``
 (the wire decoder's scan of a receive buffer, :mod:`cmsensord.wire_scan`). Without one the
-identical Python/numpy implementation runs, slower. The daemon says so at start (one log line) and in its
-status (:func:`fallback_note`).
+identical Python/numpy implementation runs, slower. The daemon says so at start (one log
+line) and in its status (:func:`fallback_note`).
 """
 
 from __future__ import annotations
@@ -40,5 +40,5 @@ def fallback_warning() -> str | None:
         return None
     what = ", ".join(f"{m} ({KERNELS[m]})" for m in missing)
     return (f"C kernel(s) not built: {what}; the numpy fallback runs instead (same results, the AKF "
-            f"bank ~200x slower, the decoder ~10x): install a C compiler and the Python headers (apt install gcc "
-            f"python3-dev) and reinstall cmsensord")
+            f"bank ~200x slower, the wire decoder 3-16x): install a C compiler and the Python headers "
+            f"(apt install gcc python3-dev) and reinstall cmsensord")
