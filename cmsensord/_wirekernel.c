@@ -11,7 +11,8 @@
  * unwrap t0 across 2^32 (rule 4).  Instead of a frame object per good frame it writes the
  * frame's fields into ten int64 rows of `out` (the order of cmsensord.frame_batch.Columns:
  * type code, seq, t0, chan, flags, payload start, payload end, unwrapped t0, stream offset,
- * seq gap), one column per frame.
+ * seq gap), one column per frame; or, given the Frame class, it makes the Frame tuples itself
+ * (a live read of a few frames, where building them from columns would cost more than the scan).
  *
  * The CRC is zlib's (IEEE 802.3, reflected, polynomial 0xEDB88320, initial and final
  * value 0xFFFFFFFF), computed slice-by-8 from tables made at import, so the module needs
