@@ -428,9 +428,9 @@ class Decoder:
         with the columns of each run of good back-to-back frames in their place, and the
         bytes of the buffer the runs' payloads are in.
 
-        The receiver's hot loop without the compiled kernel (with it, :meth:`_scan_kernel`),
-        every byte of the link passes through it: one function, the
-        lookups bound to locals and the counters summed locally, so it stays whole on purpose.
+        The receiver's loop without the compiled kernel (with it, :meth:`_scan_kernel`): every
+        byte of the link passes through it, so the lookups are bound to locals and the counters
+        summed locally.
         """
         buf = self._buf
         n = len(buf)
@@ -440,13 +440,10 @@ class Decoder:
         crc32 = zlib.crc32
         types = _TYPE_BY_CODE
         names = _TYPE_NAMES
-        frame_cls = Frame
         new = tuple.__new__
         counts = self.counters.frames
         base = self._base
-        last_seq = self._last_seq
-        last_t0 = self._last_t0
-        last_unw = self._last_t0_unwrapped
+        last_seq, last_t0, last_unw = self._last_seq, self._last_t0, self._last_t0_unwrapped
         discarded = rejects = crc_fail = lost_total = overruns = 0
         out: list = []      # frames, and the Columns of each run of good frames in its place
         pos = 0
@@ -466,58 +463,52 @@ class Decoder:
                     # good frames back to back: in one pass (cmsensord/frame_runs.py)
                     cols, last_seq, last_t0, last_unw = run_columns(run, base, last_seq, last_t0, last_unw)
                     out.append(cols)
-                    for code, k in enumerate(np.bincount(run.code).tolist()):
-                        if k:
-                            counts[names[types[code]]] += k
-                    lost_total += int(cols.lost.sum())
-                    overruns += int(np.count_nonzero(run.flags & FLAG_OVERRUN))
+                    lost_total, overruns = self._count_run(cols, lost_total, overruns)
                     pos = int(run.end_payload[-1]) + CRC_LEN
                     continue
                 if n - pos < HEADER_LEN:
-                    if final:  # truncated header at end of stream: not a frame
-                        discarded += 1
-                        pos += 1
-                        continue
-                    break
-                ver, code, seq, t0, chan, flags, ln = unpack_hdr(buf, pos + 2)
-                ftype = types.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
-                if ftype is None:  # rule 1
-                    rejects += 1
-                    discarded += 1
-                    pos += 1
-                    continue
-                end_payload = pos + HEADER_LEN + ln
-                end = end_payload + CRC_LEN
-                if end > n:
-                    if final:  # truncated frame at end of stream: not a frame
-                        discarded += 1
-                        pos += 1
-                        continue
-                    break  # rule 2: wait for the whole frame
-                if crc32(mv[pos + 2:end_payload]) != unpack_crc(buf, end_payload)[0]:
-                    crc_fail += 1  # rule 2: drop only the first sync byte
-                    discarded += 1
-                    pos += 1
-                    continue
-                if last_seq is None:
-                    lost = 0
-                    unw = t0
+                    if not final:
+                        break
+                    # a truncated header at the end of the stream: not a frame (dropped below)
                 else:
-                    lost = (seq - last_seq - 1) & 0xFFFF  # rule 3
-                    unw = last_unw + (((t0 - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
-                last_seq = seq
-                last_t0 = t0
-                last_unw = unw
-                lost_total += lost
-                if flags & FLAG_OVERRUN:
-                    overruns += 1
-                counts[names[ftype]] += 1
-                out.append(new(frame_cls, (ftype, seq, t0, chan, flags,
-                                           bytes(mv[pos + HEADER_LEN:end_payload]),
-                                           unw, base + pos, lost)))
-                pos = end
+                    ver, code, seq, t0, chan, flags, ln = unpack_hdr(buf, pos + 2)
+                    ftype = types.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
+                    end_payload = pos + HEADER_LEN + ln
+                    end = end_payload + CRC_LEN
+                    if ftype is None:  # rule 1
+                        rejects += 1
+                    elif end > n:
+                        if not final:
+                            break  # rule 2: wait for the whole frame (at the end: not a frame)
+                    elif crc32(mv[pos + 2:end_payload]) != unpack_crc(buf, end_payload)[0]:
+                        crc_fail += 1  # rule 2: drop only the first sync byte
+                    else:
+                        if last_seq is None:
+                            lost, unw = 0, t0
+                        else:
+                            lost = (seq - last_seq - 1) & 0xFFFF  # rule 3
+                            unw = last_unw + (((t0 - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
+                        last_seq, last_t0, last_unw = seq, t0, unw
+                        lost_total += lost
+                        if flags & FLAG_OVERRUN:
+                            overruns += 1
+                        counts[names[ftype]] += 1
+                        out.append(new(Frame, (ftype, seq, t0, chan, flags, bytes(mv[pos + HEADER_LEN:end_payload]),
+                                               unw, base + pos, lost)))
+                        pos = end
+                        continue
+                discarded += 1  # not a frame: drop its first sync byte and hunt on
+                pos += 1
         self._done(pos, last_seq, last_t0, last_unw, discarded, rejects, crc_fail, lost_total, overruns)
         return out, runs.data if runs is not None else b""
+
+    def _count_run(self, cols: Columns, lost_total: int, overruns: int) -> tuple[int, int]:
+        """A run's frames counted by type; ``lost_total`` and ``overruns`` with its own added."""
+        counts = self.counters.frames
+        for code, k in enumerate(np.bincount(cols.code).tolist()):
+            if k:
+                counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
+        return lost_total + int(cols.lost.sum()), overruns + int(np.count_nonzero(cols.flags & FLAG_OVERRUN))
 
     def _kernel_frames(self, final: bool) -> tuple[list, bytes]:
         """:meth:`_scan_kernel` with the frames made by the kernel, as :meth:`_scan` returns them."""
