@@ -357,8 +357,9 @@ class Decoder:
     :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
     frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
     frame-by-frame receiver, the reference it equals (same frames, same counters).  With
-    ``kernel`` (None: when it is built; :mod:`cmsensord.wire_scan`) the compiled wire kernel
-    scans every buffer, of any size, in one call instead: the same frames and counters again.
+    ``kernel`` (None: when it is built; True: ImportError when it is not;
+    :mod:`cmsensord.wire_scan`) the compiled wire kernel scans every buffer, of any size, in
+    one call instead: the same frames and counters again (``runs=False`` never uses it).
     :meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
     :meth:`flush` as a :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames
     when indexed or iterated): a replay's RMS frames reach the banks as arrays.

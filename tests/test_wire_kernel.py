@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 import cmsensord.protocol as protocol
 from cmsensord import wire_scan
 from cmsensord.frame_batch import FrameBatch
-from cmsensord.protocol import MAX_FRAME, SYNC, Decoder, FrameType, encode_frame
+from cmsensord.protocol import MAX_FRAME, SYNC, Decoder, Frame, FrameType, encode_frame
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
@@ -104,7 +104,7 @@ def same_read_by_read(data: bytes, reads: list[int], max_buffer: int, batches: b
         for name in ("kernel", "numpy"):
             frames = list(got[name])
             assert frames == ref, name
-            assert [type(f.type) for f in frames] == [FrameType] * len(ref)
+            assert [(type(f), type(f.type)) for f in frames] == [(Frame, FrameType)] * len(ref)
             assert decs[name].counters == decs["reference"].counters, name
             assert decs[name].buffered() == decs["reference"].buffered() <= max_buffer, name
             if batches:
