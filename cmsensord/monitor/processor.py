@@ -499,8 +499,8 @@ class Processor:
             self._release_decisions(final=False)
             return
         self._hand_over()
-        y, out = self.severity.observe(first, y, valid)
-        if trace:
+        y, out = self.severity.observe(first, y, valid, full=trace)
+        if out is not None:
             self._out(self.severity.trace(stamps, y, valid, out))
         self._release_decisions(final=False)
 
