@@ -34,6 +34,7 @@ from pathlib import Path
 
 from cmsensord import __version__
 from cmsensord.errors import SinkError
+from cmsensord.sinks.json_templates import TEMPLATES
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import REPEATED, ChannelRegistry, encode_message
 from cmsensord.sinks.reorder import GROUP, MAX_S, Payload, ReorderWindow
@@ -326,6 +327,10 @@ class McapSink:
             stamp_ns = int(stamp_ns)
         if stamp_ns < 0:
             raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
+        template = TEMPLATES.get(schema)          # a decision's messages: the same bytes, formatted
+        body = None if template is None else template(stamp_ns, msg)
+        if body is not None:
+            return entry[0], stamp_ns, body.encode()
         return entry[0], stamp_ns, encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
 
     def write_many(self, messages: Sequence[tuple[str, str, int, dict]], start: int = 0) -> int:
