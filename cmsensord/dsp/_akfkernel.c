@@ -92,11 +92,15 @@ static inline void step2(double yk, double *xc, double *Pc, double *Qc, const do
     _mm_storel_pd(ra + slot, e2); _mm_storeh_pd(rb + slot, e2);
     _mm_storel_pd(da + slot, dx2); _mm_storeh_pd(db + slot, dx2);
     __m128d sm = _mm_setzero_pd(), sg = _mm_setzero_pd();
-    int64_t idx = oldest;
-    for (int64_t j = 0; j < f; j++) {                                     /* chronological */
+    /* chronological: from the oldest entry to the ring's end, then on from its start */
+    const int64_t first = oldest + f <= Nc ? oldest + f : Nc, wrapped = f - (first - oldest);
+    for (int64_t idx = oldest; idx < first; idx++) {
         sm = _mm_add_pd(sm, _mm_loadh_pd(_mm_load_sd(ra + idx), rb + idx));
         sg = _mm_add_pd(sg, _mm_loadh_pd(_mm_load_sd(da + idx), db + idx));
-        if (++idx == Nc) idx = 0;
+    }
+    for (int64_t idx = 0; idx < wrapped; idx++) {
+        sm = _mm_add_pd(sm, _mm_loadh_pd(_mm_load_sd(ra + idx), rb + idx));
+        sg = _mm_add_pd(sg, _mm_loadh_pd(_mm_load_sd(da + idx), db + idx));
     }
     const __m128d fd = _mm_set1_pd((double)f);
     const __m128d M = _mm_div_pd(sm, fd);                                 /* (11) */
