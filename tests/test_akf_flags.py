@@ -65,3 +65,42 @@ def test_outliers_of_no_observations():
     assert outlier.shape == (0, 2, 4) and valid.shape == (0, 2)
     with pytest.raises(ValueError, match=r"expected shape \(T, 2\)"):
         bank.outliers(np.zeros((5, 3)))
+
+
+@pytest.mark.skipif(not have_kernel(), reason="the compiled kernel is not built")
+@pytest.mark.parametrize("z_c", [2.8, 1.0, 3.0000000000000004, 1e-90, 1e90])
+def test_the_outlier_test_at_its_threshold_flags_as_the_division_does(z_c):
+    """The kernel decides |z| > z_c from the squares where they are clearly apart and by the
+    division otherwise: observations whose z lies within a few ulps of z_c, and far from it,
+    on tiny and huge scales, are flagged as the numpy loop's division flags them."""
+    rng = np.random.default_rng(7)
+    n, C = 4, 2
+    R = np.stack([bank_r(4e-3, 0.13, n)] * C)
+    template = AkfBank(R, window=3, z_c=z_c, backend="numpy")
+    template.process(rng.normal(1.0, 0.1, (5, C)))             # started, rings in use
+    s = template.state
+    flagged = cases = 0
+    for scale in (1e-120, 1e-3, 1.0, 1e100):
+        for _ in range(60):
+            x0 = float(rng.choice([0.0, rng.normal(1.0, 0.2)])) * scale   # 0: y - x0 is the innovation exactly
+            P, Q = float(rng.uniform(0.01, 1)) * scale ** 2, float(rng.uniform(0.001, 0.1)) * scale ** 2
+            Rs = R * scale ** 2
+            Yv = P + Q + Rs[0, 0]                              # filter 1's Y, as the kernel forms it
+            for k in rng.integers(-40, 40, 6).tolist() + [0, 1, -1]:
+                innov = z_c * np.sqrt(Yv) * (1.0 + k * 2.0 ** -52) * rng.choice([-1.0, 1.0])
+                y = np.full((1, C), x0 + innov)
+                out = []
+                for backend in ("numpy", "c"):
+                    bank = AkfBank(Rs, window=3, z_c=z_c, backend=backend)
+                    bank.state = s.copy()
+                    bank.state.x[:] = x0
+                    bank.state.P[:] = P
+                    bank.state.Q[:] = Q
+                    bank.state.res2 *= scale ** 2
+                    bank.state.dx2 *= scale ** 2
+                    with np.errstate(over="ignore", invalid="ignore"):     # squares past 1e308: inf
+                        out.append(bank.outliers(y)[0])
+                assert np.array_equal(out[0], out[1]), (scale, k)
+                flagged += int(out[0][0, 0, 0])
+                cases += 1
+    assert 0 < flagged < cases                                 # both sides of the threshold seen
