@@ -347,10 +347,19 @@ class McapSink:
         n = len(messages)
         k = start
         writer, push, passes = self._writer, self.reorder.push, self.reorder.passes
+        channels, templates = self._channels, TEMPLATES
         pos = writer.pos
         while k < n:
             self.batch_at = k
-            channel_id, stamp_ns, data = self._encoded(*messages[k])
+            topic, schema, stamp_ns, msg = messages[k]
+            entry = channels.get(topic)         # _encoded's way for a decision's message, inline
+            template = templates.get(schema)
+            body = template(stamp_ns, msg) if (template is not None and entry is not None and entry[1] == schema
+                                               and type(stamp_ns) is int and stamp_ns >= 0) else None
+            if body is None:
+                channel_id, stamp_ns, data = self._encoded(topic, schema, stamp_ns, msg)
+            else:
+                channel_id, data = entry[0], body.encode()   # type: ignore[index]
             self.messages_written += 1
             try:
                 if passes(stamp_ns):                    # what push() would give, without a list
