@@ -247,6 +247,7 @@ class Processor:
                 return rms, raw
         cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
         starts = [0, *cuts]
+        single = iter(select(frames, (codes != _RMS) & (codes != _RAW)))   # one at a time: built at once
         # plain ints: numpy comparing its int64 with an IntEnum looks up dunders on the enum
         for i, j, kind in zip(starts, [*cuts, len(codes)], codes[starts].tolist()):   # runs of one type
             if kind == _RMS:
@@ -254,8 +255,8 @@ class Processor:
             elif kind == _RAW:
                 raw = self._extend(raw, frames[i:j], False)
             else:
-                for f in frames[i:j]:
-                    rms, raw = self._frame(f, rms, raw)
+                for _ in range(j - i):
+                    rms, raw = self._frame(next(single), rms, raw)
         return rms, raw
 
     def _extend(self, batch: Pending, frames: Sequence[Frame], rms: bool) -> Pending:
