@@ -4,6 +4,7 @@ filters in pairs: the same flags, state and bits as the plain path (`process`, t
 import numpy as np
 import pytest
 
+from cmsensord.dsp import akf
 from cmsensord.dsp.akf import AkfBank, bank_r, have_kernel
 
 BACKENDS = ["numpy"] + (["c"] if have_kernel() else [])
@@ -104,3 +105,15 @@ def test_the_outlier_test_at_its_threshold_flags_as_the_division_does(z_c):
                 flagged += int(out[0][0, 0, 0])
                 cases += 1
     assert 0 < flagged < cases                                 # both sides of the threshold seen
+
+
+@pytest.mark.skipif(not have_kernel(), reason="the compiled kernel is not built")
+def test_a_kernel_built_before_the_flags_entry_serves_outliers_through_process(monkeypatch):
+    """An installed kernel without ``flags`` (built from older sources): outliers() takes
+    process()'s flags, the same."""
+    y = _gappy(400, 3, seed=3)
+    R = np.stack([bank_r(4e-3, 0.13, 10)] * 3)
+    want = AkfBank(R, window=10, z_c=2.8).outliers(y)[0]
+    monkeypatch.setattr(akf, "_flags", None)
+    got = AkfBank(R, window=10, z_c=2.8).outliers(y)[0]
+    assert np.array_equal(got, want) and want.sum() > 0

@@ -69,6 +69,8 @@ try:  # the compiled kernel is optional: the numpy loop is the fallback
     from cmsensord.dsp import _akfkernel  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the build
     _akfkernel = None
+#: the kernel's flags-only entry (None: no kernel, or one built before it had it: process() serves)
+_flags = getattr(_akfkernel, "flags", None)
 
 __all__ = [
     "ScalarAKF",
@@ -276,7 +278,7 @@ class AkfBank:
         """The outlier flags (T, C, n) uint8 and the valid mask (T, C) that :meth:`process`
         gives for the same input, with the same change of state, without its other outputs
         (the compiled kernel then writes only the flags: what a decision needs)."""
-        if self.backend != "c":
+        if self.backend != "c" or _flags is None:
             out = self.process(y, valid)
             return out.outlier, out.valid
         y, valid = self._inputs(y, valid)
@@ -284,7 +286,7 @@ class AkfBank:
         outlier = np.zeros((T, self.C, self.n), dtype=np.uint8)
         if T:
             s = self.state
-            _akfkernel.flags(
+            _flags(
                 y, np.ascontiguousarray(valid, dtype=np.uint8), self.R, self.z_c, self.N,
                 int(self.scaling), s.x, s.P, s.Q, s.res2, s.dx2, s.pos, s.fill, s.started, outlier,
             )
