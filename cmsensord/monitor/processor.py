@@ -52,14 +52,14 @@ if TYPE_CHECKING:
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
 #: most RAW frames run through the chain in one call (bounds the per-call arrays)
 MAX_BATCH = 1000
-#: most RMS frames in one call (an observation each, no samples): a replay's 128-KiB read of
-#: 4 channels in one call
+#: most RMS frames in one call (an observation each, no samples): a replay's 128-KiB read of 4 channels
 MAX_RMS_BATCH = 4000
-#: most observations (slots x channels) in one call of the banks from RMS frames (it was the
-#: bank's outputs' size, 4 x (T, C, n) float64 = 2.6 MB; the diagnostics count in these calls)
+#: most observations (slots x channels) in one call of the banks from RMS frames (diagnostics count in these)
 MAX_RMS_RUN = 8000
 #: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
 MAX_RUN_SLOTS = 2 * MAX_BATCH
+#: most messages of a replay's decisions handed to the sink together (a release may hold thousands)
+MAX_RUN_MESSAGES = 256
 #: indicator records waiting for the decision of their stamp at most (then written anyway)
 MAX_RECORDS = 1000
 
@@ -534,7 +534,7 @@ class Processor:
             run += self.indicators.take(stamp) + out
             if self.diagnostics is None:        # nothing in it depends on what is written
                 run.append(self._diagnostics_message(stamp))
-            if not together or Event in map(type, out):     # events: to the log before the next release
+            if not together or len(run) >= MAX_RUN_MESSAGES or Event in map(type, out):   # events: to the log first
                 run = self._out(run)
             if self.diagnostics is not None:    # the live loop's figures after the writes
                 self.write_diagnostics(stamp)
