@@ -219,10 +219,12 @@ class IndicatorChain:
             head = {"mode": "raw", "interval_s": self.N / self.fs}
             if shaft_hz is not None:
                 head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
+            finite = np.isfinite(x)
+            whole = finite.all(axis=0).tolist()         # the channels with every sample
             for c, ch in enumerate(self.channels):
                 xc = x[:, c]
-                ok = np.isfinite(xc)
-                missing = 1.0 - float(ok.mean())
+                ok = finite[:, c]
+                missing = 0.0 if whole[c] else 1.0 - float(ok.mean())
                 fields: dict | None = None
                 if missing == 0.0:
                     todo.append((xc, self.setups[c], shaft_hz))

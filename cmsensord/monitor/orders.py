@@ -64,6 +64,7 @@ from cmsensord.monitor.events import Event
 from cmsensord.monitor.speed_gate import SpeedGate
 from cmsensord.sinks.encoded import EncodedMessage
 from cmsensord.sinks.orders_encoding import OrdersTemplate
+from cmsensord.sinks.schemas import orders_topic
 
 #: a gap in the RAW stream up to this long is filled; a longer one restarts the tracker
 MAX_FILL_S = 1.0
@@ -199,7 +200,9 @@ class OrderChain:
         """The /orders messages of tracker blocks: the per-block numbers converted to Python
         once for all blocks (tolist), the frequencies of all blocks per component in one
         array operation (the same values as one block at a time); each message with its
-        JSON text where every number is there (:meth:`_texts`)."""
+        JSON text where every number is there (:meth:`_texts`), its dict what
+        :func:`~cmsensord.monitor.messages.orders` makes (that function builds them without
+        ``PRE_ENCODED``: the reference)."""
         n = len(blocks.start)
         if not n:
             return []
@@ -216,17 +219,30 @@ class OrderChain:
         t_in = blocks.t_in.tolist()
         rms, amp, missing = blocks.rms.tolist(), blocks.amplitude.tolist(), blocks.missing.tolist()
         names = [ch.name for ch in self.channels]
-        C = len(names)
-        texts = self._texts(blocks, freq, method) if PRE_ENCODED else [None] * (n * C)
         out: Out = []
+        if not PRE_ENCODED:
+            for e in range(n):
+                stamp = stamp_ns(base + int(t_in[e]))
+                rpm, ok = rpms[e], bool(valid[e])
+                for ci, name in enumerate(names):
+                    entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
+                    out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
+            return out
+        C = len(names)
+        texts = self._texts(blocks, freq, method)
+        topics = [orders_topic(name) for name in names]
+        Message = messages.Message
         for e in range(n):
             stamp = stamp_ns(base + int(t_in[e]))
             rpm, ok = rpms[e], bool(valid[e])
+            speed = messages.num(rpm)
             for ci, name in enumerate(names):
-                entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
-                m = messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B)
+                fields = {"channel": name, "speed_rpm": speed, "valid": ok, "method": method,   # messages.orders
+                          "orders": messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok),
+                          "missing_fraction": missing[e][ci] / B}
                 text = texts[e * C + ci]
-                out.append(m if text is None else m._replace(msg=EncodedMessage(m.msg, text)))
+                out.append(Message(topics[ci], "orders", stamp,
+                                   fields if text is None else EncodedMessage(fields, text)))
         return out
 
     def _texts(self, blocks, freq: np.ndarray, method: str) -> list[str | None]:
