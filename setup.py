@@ -42,6 +42,7 @@ setup(
     ext_modules=[Extension("cmsensord.dsp._akfkernel", ["cmsensord/dsp/_akfkernel.c"],
                            extra_compile_args=["-O2", "-ffp-contract=off"]),
                  Extension("cmsensord.dsp._trackerkernel", ["cmsensord/dsp/_trackerkernel.c"],
-                           extra_compile_args=["-O2", "-ffp-contract=off"])],
+                           extra_compile_args=["-O2", "-ffp-contract=off"]),
+                 Extension("cmsensord._wirekernel", ["cmsensord/_wirekernel.c"], extra_compile_args=["-O2"])],
     cmdclass={"build_ext": OptionalBuildExt, "build_py": BuildPyWithDefaultConfig},
 )

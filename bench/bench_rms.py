@@ -54,7 +54,8 @@ def make_capture(path: Path, channels: int, seconds: float, scenario: str = "deg
 #: PYTHONDONTWRITEBYTECODE=1, each is compiled: ~0.05 s); for older code in ``--tree``
 PRELOAD = "import cmsensord.importing.command, cmsensord.report.command, cmsensord.service.operator\n"
 #: makes the compiled kernels unimportable in the replay's interpreter (tests/test_no_compiler.py)
-NO_KERNELS = "for m in ('cmsensord.dsp._akfkernel', 'cmsensord.dsp._trackerkernel'): sys.modules[m] = None\n"
+NO_KERNELS = ("for m in ('cmsensord.dsp._akfkernel', 'cmsensord.dsp._trackerkernel', 'cmsensord._wirekernel'): "
+              "sys.modules[m] = None\n")
 
 
 def replay_in_subprocess(capture: Path, out: Path, trace: bool, tree: Path = ROOT, kernels: bool = True,

@@ -65,7 +65,7 @@ def main() -> int:
     no_kernels = "--no-kernels" in rest[:rest.index("--")]
     args = rest[rest.index("--") + 1:]
     if no_kernels:
-        for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel"):
+        for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel", "cmsensord._wirekernel"):
             sys.modules[name] = None  # type: ignore[assignment]  # import raises ImportError
     from cmsensord import link, service
     from cmsensord.cli import main as cli_main

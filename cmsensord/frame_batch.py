@@ -24,7 +24,7 @@ from typing import Any, NamedTuple, cast, overload
 
 import numpy as np
 
-__all__ = ["Columns", "FrameBatch", "Pending", "rms_fields", "build", "select"]
+__all__ = ["Columns", "FrameBatch", "Pending", "rms_fields", "build", "select", "scanned_frames", "scanned_batch"]
 
 #: the fields of a frame as columns, in the order of :class:`~cmsensord.protocol.Frame`'s
 #: fields (``start``/``end``: the payload's bytes in the buffer instead of the payload)
@@ -255,3 +255,35 @@ def select(frames: Sequence[Any], mask: np.ndarray) -> Sequence[Any]:
     if type(frames) is FrameBatch:
         return frames if mask.all() else frames.take(np.flatnonzero(mask))
     return list(compress(frames, mask.tolist()))
+
+
+def scanned_frames(out: list, data: bytes, make) -> list:
+    """The frames and run columns of one decoder scan (in stream order) as a list of frames (the
+    columns' payloads in ``data``, the scanned buffer; ``make`` as for :class:`FrameBatch`)."""
+    if not data:                        # no columns: frames only
+        return out
+    frames: list = []
+    for item in out:
+        if type(item) is Columns:
+            frames += make(item, data)
+        else:
+            frames.append(item)
+    return frames
+
+
+def scanned_batch(out: list, data: bytes, make) -> FrameBatch:
+    """The frames and run columns of one decoder scan (in stream order) as one batch (the
+    columns' payloads in ``data``, the scanned buffer)."""
+    parts: list[FrameBatch] = []
+    singles: list = []
+    for item in out:
+        if type(item) is Columns:
+            if singles:
+                parts.append(FrameBatch.of(singles, make))
+                singles = []
+            parts.append(FrameBatch(item, data, make))
+        else:
+            singles.append(item)
+    if singles or not parts:
+        parts.append(FrameBatch.of(singles, make))
+    return FrameBatch.join(parts)

@@ -21,7 +21,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["FrameRuns", "RunFields", "MIN_BYTES"]
+from cmsensord.frame_batch import Columns
+
+__all__ = ["FrameRuns", "RunFields", "MIN_BYTES", "run_columns"]
 
 #: buffers shorter than this are left to the frame-by-frame loop (the numpy pass costs
 #: tens of microseconds: worth it for a replay's 64-KiB reads, not for a few live frames)
@@ -112,3 +114,25 @@ class FrameRuns:
             return None
         return RunFields(self.pos[k], self.code[k], self.seq[k], self.t0[k], self.chan[k], self.flags[k],
                          self.end_payload[k])
+
+
+def run_columns(run: RunFields, base: int, last_seq: int | None, last_t0: int,
+                last_unw: int) -> tuple[Columns, int, int, int]:
+    """The columns of a run of good back-to-back frames (receiver rules 3 and 4 as in the
+    frame-by-frame loop: seq gaps, t0 unwrapped), and the new last seq, t0, unwrapped t0."""
+    seq, t0 = run.seq, run.t0
+    lost = np.empty(seq.size, dtype=np.int64)
+    lost[1:] = (seq[1:] - seq[:-1] - 1) & 0xFFFF
+    step = np.empty(seq.size, dtype=np.int64)
+    step[1:] = ((t0[1:] - t0[:-1] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+    if last_seq is None:
+        lost[0] = 0
+        first = int(t0[0])
+    else:
+        lost[0] = (int(seq[0]) - last_seq - 1) & 0xFFFF
+        first = last_unw + (((int(t0[0]) - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
+    step[0] = first
+    unw = np.cumsum(step)
+    cols = Columns(run.code, seq, t0, run.chan, run.flags, run.pos + _HEADER, run.end_payload, unw,
+                   run.pos + base, lost)
+    return cols, int(seq[-1]), int(t0[-1]), int(unw[-1])

@@ -1,10 +1,11 @@
 """Which compiled kernels this installation has, and what it means when one is missing.
 
-Two optional C extensions are built by ``pip install`` when a C compiler is present
-(``setup.py``): ``cmsensord.dsp._akfkernel`` (the AKF bank's per-sample loop) and
-``cmsensord.dsp._trackerkernel`` (the order tracker's loops). Without one the identical
-numpy implementation runs, slower. The daemon says so at start (one log line) and in its
-status (:func:`fallback_note`).
+Three optional C extensions are built by ``pip install`` when a C compiler is present
+(``setup.py``): ``cmsensord.dsp._akfkernel`` (the AKF bank's per-sample loop),
+``cmsensord.dsp._trackerkernel`` (the order tracker's loops) and ``cmsensord._wirekernel``
+(the wire decoder's scan of a receive buffer, :mod:`cmsensord.wire_scan`). Without one the
+identical Python/numpy implementation runs, slower. The daemon says so at start (one log
+line) and in its status (:func:`fallback_note`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ __all__ = ["KERNELS", "missing_kernels", "fallback_note", "fallback_warning"]
 KERNELS = {
     "cmsensord.dsp._akfkernel": "the AKF bank",
     "cmsensord.dsp._trackerkernel": "the order tracker",
+    "cmsensord._wirekernel": "the wire decoder",
 }
 
 
@@ -38,5 +40,5 @@ def fallback_warning() -> str | None:
         return None
     what = ", ".join(f"{m} ({KERNELS[m]})" for m in missing)
     return (f"C kernel(s) not built: {what}; the numpy fallback runs instead (same results, the AKF "
-            f"bank ~200x slower): install a C compiler and the Python headers (apt install gcc "
-            f"python3-dev) and reinstall cmsensord")
+            f"bank ~200x slower, the wire decoder 3-16x): install a C compiler and the Python headers "
+            f"(apt install gcc python3-dev) and reinstall cmsensord")

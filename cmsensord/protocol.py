@@ -36,8 +36,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cmsensord.frame_batch import Columns, FrameBatch, build
-from cmsensord.frame_runs import MIN_BYTES, FrameRuns, RunFields
+from cmsensord.frame_batch import Columns, FrameBatch, build, scanned_batch, scanned_frames
+from cmsensord.frame_runs import MIN_BYTES, FrameRuns, run_columns
+from cmsensord.wire_scan import WireScanner, have_kernel
 
 __all__ = [
     "SYNC", "VERSION", "HEADER_LEN", "CRC_LEN", "OVERHEAD", "MAX_PAYLOAD", "MAX_FRAME",
@@ -84,6 +85,7 @@ _STATUS_MODE_FS = struct.Struct("<2xB1xI")  # mode and fs of the fixed part
 _U16 = struct.Struct("<H")
 
 _TYPE_BY_CODE = {int(t): t for t in FrameType}
+_TYPES = tuple(map(_TYPE_BY_CODE.get, range(max(_TYPE_BY_CODE) + 1)))   # by code (the wire kernel's)
 _TYPE_NAMES = {t: t.name.lower() for t in FrameType}
 
 
@@ -354,18 +356,25 @@ class Decoder:
     last byte when it is 0xA5.  With ``runs`` (the default), a buffer of at least
     :data:`~cmsensord.frame_runs.MIN_BYTES` decodes its runs of good back-to-back
     frames in one pass (:mod:`cmsensord.frame_runs`); ``runs=False`` is the plain
-    frame-by-frame receiver, the reference it equals (same frames, same counters).
+    frame-by-frame receiver, the reference it equals (same frames, same counters).  With
+    ``kernel`` (None: when it is built; True: ImportError when it is not;
+    :mod:`cmsensord.wire_scan`) the compiled wire kernel scans every buffer, of any size, in
+    one call instead: the same frames and counters again (``runs=False`` never uses it).
     :meth:`feed_batch` and :meth:`flush_batch` return the frames of :meth:`feed` and
     :meth:`flush` as a :class:`~cmsensord.frame_batch.FrameBatch` (columns; the same frames
     when indexed or iterated): a replay's RMS frames reach the banks as arrays.
     """
 
-    def __init__(self, max_buffer: int = 65536, runs: bool = True):
+    def __init__(self, max_buffer: int = 65536, runs: bool = True, kernel: bool | None = None):
         if max_buffer < MAX_FRAME:
             raise ValueError(
                 f"max_buffer must hold the largest frame ({MAX_FRAME} bytes), got {max_buffer}")
         self.max_buffer = max_buffer
         self.runs = runs  # the one-pass path for runs of back-to-back frames (False: frame by frame)
+        use_kernel = runs and (have_kernel() if kernel is None else kernel)   # True without it: ImportError
+        self._kernel = WireScanner(VERSION, max(_TYPE_BY_CODE), MAX_PAYLOAD) if use_kernel else None
+        self._scanner = self._scan_kernel if use_kernel else self._scan     # for batches
+        self._scan_frames = self._kernel_frames if use_kernel else self._scan   # for lists of frames
         self.counters = LinkCounters()
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
@@ -378,24 +387,24 @@ class Decoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Frame]:
         frames: list[Frame] = []
-        for out, data_ in self._feed(data):
+        for out, data_ in self._feed(data, self._scan_frames):
             frames += _frames(out, data_)
         return frames
 
     def feed_batch(self, data: bytes | bytearray | memoryview) -> FrameBatch:
         """:meth:`feed`'s frames as one batch of columns."""
-        return FrameBatch.join([_batch(out, data_) for out, data_ in self._feed(data)])
+        return FrameBatch.join([_batch(out, data_) for out, data_ in self._feed(data, self._scanner)])
 
     def flush(self) -> list[Frame]:
         """End of stream: incomplete candidates are not frames (drop their first sync
         byte and hunt on through the rest); whatever is left is discarded."""
-        return _frames(*self._scan(final=True))
+        return _frames(*self._scan_frames(final=True))
 
     def flush_batch(self) -> FrameBatch:
         """:meth:`flush`'s frames as a batch of columns."""
-        return _batch(*self._scan(final=True))
+        return _batch(*self._scanner(final=True))
 
-    def _feed(self, data: bytes | bytearray | memoryview) -> list[tuple[list, bytes]]:
+    def _feed(self, data: bytes | bytearray | memoryview, scan) -> list[tuple[list, bytes]]:
         """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""
         view = memoryview(data).cast("B")
         total = len(view)
@@ -404,14 +413,14 @@ class Decoder:
         room = self.max_buffer - len(buf)
         if total <= room:  # the common case: one append, one scan
             buf += view
-            return [self._scan(final=False)]
+            return [scan(final=False)]
         scans = []
         start = 0
         while start < total:
             room = self.max_buffer - len(buf)
             buf += view[start:start + room]
             start += room
-            scans.append(self._scan(final=False))
+            scans.append(scan(final=False))
         return scans
 
     def _scan(self, final: bool) -> tuple[list, bytes]:
@@ -420,8 +429,9 @@ class Decoder:
         with the columns of each run of good back-to-back frames in their place, and the
         bytes of the buffer the runs' payloads are in.
 
-        The receiver's hot loop, every byte of the link passes through it: one function, the
-        lookups bound to locals and the counters summed locally, so it stays whole on purpose.
+        The receiver's loop without the compiled kernel (with it, :meth:`_scan_kernel`): every
+        byte of the link passes through it, so the lookups are bound to locals and the counters
+        summed locally.
         """
         buf = self._buf
         n = len(buf)
@@ -431,14 +441,10 @@ class Decoder:
         crc32 = zlib.crc32
         types = _TYPE_BY_CODE
         names = _TYPE_NAMES
-        frame_cls = Frame
         new = tuple.__new__
-        c = self.counters
-        counts = c.frames
+        counts = self.counters.frames
         base = self._base
-        last_seq = self._last_seq
-        last_t0 = self._last_t0
-        last_unw = self._last_t0_unwrapped
+        last_seq, last_t0, last_unw = self._last_seq, self._last_t0, self._last_t0_unwrapped
         discarded = rejects = crc_fail = lost_total = overruns = 0
         out: list = []      # frames, and the Columns of each run of good frames in its place
         pos = 0
@@ -456,92 +462,95 @@ class Decoder:
                 pos = i
                 if runs is not None and (run := runs.take(pos)) is not None:
                     # good frames back to back: in one pass (cmsensord/frame_runs.py)
-                    cols, last_seq, last_t0, last_unw = _run_columns(run, base, last_seq, last_t0, last_unw)
+                    cols, last_seq, last_t0, last_unw = run_columns(run, base, last_seq, last_t0, last_unw)
                     out.append(cols)
-                    for code, k in enumerate(np.bincount(run.code).tolist()):
-                        if k:
-                            counts[names[types[code]]] += k
-                    lost_total += int(cols.lost.sum())
-                    overruns += int(np.count_nonzero(run.flags & FLAG_OVERRUN))
+                    lost_total, overruns = self._count_run(cols, lost_total, overruns)
                     pos = int(run.end_payload[-1]) + CRC_LEN
                     continue
                 if n - pos < HEADER_LEN:
-                    if final:  # truncated header at end of stream: not a frame
-                        discarded += 1
-                        pos += 1
-                        continue
-                    break
-                ver, code, seq, t0, chan, flags, ln = unpack_hdr(buf, pos + 2)
-                ftype = types.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
-                if ftype is None:  # rule 1
-                    rejects += 1
-                    discarded += 1
-                    pos += 1
-                    continue
-                end_payload = pos + HEADER_LEN + ln
-                end = end_payload + CRC_LEN
-                if end > n:
-                    if final:  # truncated frame at end of stream: not a frame
-                        discarded += 1
-                        pos += 1
-                        continue
-                    break  # rule 2: wait for the whole frame
-                if crc32(mv[pos + 2:end_payload]) != unpack_crc(buf, end_payload)[0]:
-                    crc_fail += 1  # rule 2: drop only the first sync byte
-                    discarded += 1
-                    pos += 1
-                    continue
-                if last_seq is None:
-                    lost = 0
-                    unw = t0
+                    if not final:
+                        break
+                    # a truncated header at the end of the stream: not a frame (dropped below)
                 else:
-                    lost = (seq - last_seq - 1) & 0xFFFF  # rule 3
-                    unw = last_unw + (((t0 - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
-                last_seq = seq
-                last_t0 = t0
-                last_unw = unw
-                lost_total += lost
-                if flags & FLAG_OVERRUN:
-                    overruns += 1
-                counts[names[ftype]] += 1
-                out.append(new(frame_cls, (ftype, seq, t0, chan, flags,
-                                           bytes(mv[pos + HEADER_LEN:end_payload]),
-                                           unw, base + pos, lost)))
-                pos = end
+                    ver, code, seq, t0, chan, flags, ln = unpack_hdr(buf, pos + 2)
+                    ftype = types.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
+                    end_payload = pos + HEADER_LEN + ln
+                    end = end_payload + CRC_LEN
+                    if ftype is None:  # rule 1
+                        rejects += 1
+                    elif end > n:
+                        if not final:
+                            break  # rule 2: wait for the whole frame (at the end: not a frame)
+                    elif crc32(mv[pos + 2:end_payload]) != unpack_crc(buf, end_payload)[0]:
+                        crc_fail += 1  # rule 2: drop only the first sync byte
+                    else:
+                        if last_seq is None:
+                            lost, unw = 0, t0
+                        else:
+                            lost = (seq - last_seq - 1) & 0xFFFF  # rule 3
+                            unw = last_unw + (((t0 - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
+                        last_seq, last_t0, last_unw = seq, t0, unw
+                        lost_total += lost
+                        if flags & FLAG_OVERRUN:
+                            overruns += 1
+                        counts[names[ftype]] += 1
+                        out.append(new(Frame, (ftype, seq, t0, chan, flags, bytes(mv[pos + HEADER_LEN:end_payload]),
+                                               unw, base + pos, lost)))
+                        pos = end
+                        continue
+                discarded += 1  # not a frame: drop its first sync byte and hunt on
+                pos += 1
+        self._done(pos, last_seq, last_t0, last_unw, discarded, rejects, crc_fail, lost_total, overruns)
+        return out, runs.data if runs is not None else b""
+
+    def _count_run(self, cols: Columns, lost_total: int, overruns: int) -> tuple[int, int]:
+        """A run's frames counted by type; ``lost_total`` and ``overruns`` with its own added."""
+        counts = self.counters.frames
+        for code, k in enumerate(np.bincount(cols.code).tolist()):
+            if k:
+                counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
+        return lost_total + int(cols.lost.sum()), overruns + int(np.count_nonzero(cols.flags & FLAG_OVERRUN))
+
+    def _kernel_frames(self, final: bool) -> tuple[list, bytes]:
+        """:meth:`_scan_kernel` with the frames made by the kernel, as :meth:`_scan` returns them."""
+        return self._scan_kernel(final, (Frame, _TYPES))
+
+    def _scan_kernel(self, final: bool, make: tuple[type, tuple] | None = None) -> tuple[list, bytes]:
+        """:meth:`_scan` in one call of the compiled wire kernel: the good frames as one
+        :class:`~cmsensord.frame_batch.Columns` over the bytes scanned (``make``: as frames)."""
+        assert self._kernel is not None
+        buf = self._buf
+        r = self._kernel.scan(buf, final, self._base, self._last_seq, self._last_t0, self._last_t0_unwrapped,
+                              make)
+        found, data = r.frames, b""
+        if isinstance(found, Columns):          # their payloads: in the bytes scanned
+            with memoryview(buf) as mv:
+                data = bytes(mv[:r.consumed])
+        counts = self.counters.frames
+        for code, k in enumerate(r.by_code):
+            if k:
+                counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
+        self._done(r.consumed, r.last_seq, r.last_t0, r.last_unw, r.discarded, r.header_rejects,
+                   r.crc_failures, r.lost, r.overruns)
+        if isinstance(found, Columns):
+            return [found], data
+        return found or [], data
+
+    def _done(self, pos: int, last_seq: int | None, last_t0: int, last_unw: int, discarded: int,
+              rejects: int, crc_fail: int, lost: int, overruns: int) -> None:
+        """A scan's end: its ``pos`` bytes leave the buffer; the receiver's state and counters."""
         if pos:
-            del buf[:pos]
-        self._base = base + pos
+            del self._buf[:pos]
+        self._base += pos
         self._last_seq = last_seq
         self._last_t0 = last_t0
         self._last_t0_unwrapped = last_unw
+        c = self.counters
         c.bytes_discarded += discarded
         c.header_rejects += rejects
         c.crc_failures += crc_fail
-        c.frames_lost += lost_total
+        c.frames_lost += lost
         c.overruns += overruns
-        return out, runs.data if runs is not None else b""
-
-
-def _run_columns(run: RunFields, base: int, last_seq: int | None, last_t0: int,
-                 last_unw: int) -> tuple[Columns, int, int, int]:
-    """The columns of a run of good back-to-back frames (receiver rules 3 and 4 as in the
-    frame-by-frame loop: seq gaps, t0 unwrapped), and the new last seq, t0, unwrapped t0."""
-    seq, t0 = run.seq, run.t0
-    lost = np.empty(seq.size, dtype=np.int64)
-    lost[1:] = (seq[1:] - seq[:-1] - 1) & 0xFFFF
-    step = np.empty(seq.size, dtype=np.int64)
-    step[1:] = ((t0[1:] - t0[:-1] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-    if last_seq is None:
-        lost[0] = 0
-        first = int(t0[0])
-    else:
-        lost[0] = (int(seq[0]) - last_seq - 1) & 0xFFFF
-        first = last_unw + (((int(t0[0]) - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
-    step[0] = first
-    unw = np.cumsum(step)
-    cols = Columns(run.code, seq, t0, run.chan, run.flags, run.pos + HEADER_LEN, run.end_payload, unw,
-                   run.pos + base, lost)
-    return cols, int(seq[-1]), int(t0[-1]), int(unw[-1])
 
 
 def _make(cols: Columns, data: bytes) -> list[Frame]:
@@ -549,35 +558,11 @@ def _make(cols: Columns, data: bytes) -> list[Frame]:
 
 
 def _frames(out: list, data: bytes) -> list[Frame]:
-    """The frames and run columns of one scan (in stream order) as a list of frames (the
-    runs' payloads in ``data``, the scanned buffer)."""
-    if not data:                        # no runs: frames only
-        return out
-    frames: list[Frame] = []
-    for item in out:
-        if type(item) is Columns:
-            frames += _make(item, data)
-        else:
-            frames.append(item)
-    return frames
+    return scanned_frames(out, data, _make)
 
 
 def _batch(out: list, data: bytes) -> FrameBatch:
-    """The frames and run columns of one scan (in stream order) as one batch (the runs'
-    payloads in ``data``, the scanned buffer)."""
-    parts: list[FrameBatch] = []
-    singles: list[Frame] = []
-    for item in out:
-        if type(item) is Columns:
-            if singles:
-                parts.append(FrameBatch.of(singles, _make))
-                singles = []
-            parts.append(FrameBatch(item, data, _make))
-        else:
-            singles.append(item)
-    if singles or not parts:
-        parts.append(FrameBatch.of(singles, _make))
-    return FrameBatch.join(parts)
+    return scanned_batch(out, data, _make)
 
 
 def iter_frames(data: bytes | bytearray | memoryview,

@@ -29,6 +29,8 @@ bytes gather in the port's kernel buffer meanwhile:
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
   due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
   and a tty's input buffer shows only part of what waits), and the rest is read at once;
+* with the block to wake at more than ``2 MAX_HOLD_S`` off (RMS mode's next decision), until
+  ``MAX_HOLD_S`` before it is due, at most ``FAR_HOLD_S``: then as above;
 * with no block to wake at (no output chain yet), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
   link, a sped-up simulator: the kernel's buffer must not fill), and not before the
@@ -44,6 +46,10 @@ from collections import deque
 
 #: the longest wait for a block to wake at (the live loop's period)
 MAX_HOLD_S = 0.1
+#: ... when that block is more than 2 MAX_HOLD_S off (a decision, RMS mode: once a second), the
+#: longest wait for the bytes before it, read until MAX_HOLD_S before it is due, then held for
+#: as above (three reads a second, not ten: issue 13)
+FAR_HOLD_S = 0.5
 
 
 class ReadPace:
@@ -110,6 +116,8 @@ class ReadPace:
         if wake_t0 <= self.last[1]:
             return 0.0
         due = self._due(wake_t0)
+        if due - now > 2 * MAX_HOLD_S:
+            return min(cap, FAR_HOLD_S, due - now - MAX_HOLD_S)
         late = (self._exact_at is not None and now - self._exact_at < self.probe_s
                 and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
         return max(0.0, min(cap, MAX_HOLD_S, due - (self.margin_s if late else self.probe_margin_s) - now))

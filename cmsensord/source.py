@@ -39,10 +39,13 @@ __all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "
 
 Batch = Sequence[Frame]
 
-#: the live loop's batching: the queued frames every BATCH_S seconds (the loop's period,
-#: also for the watchdog and the status), as soon as BATCH_FRAMES wait (the Processor's
-#: MAX_BATCH: a fast board is not held back), or when the block completing the next
-#: /orders block is in (FrameQueue.wake_at)
+#: the live loop's batching: the queued frames as soon as the block completing the next /orders
+#: block or decision is in (FrameQueue.wake_at), as soon as BATCH_FRAMES wait (the Processor's
+#: MAX_BATCH: a fast board is not held back), or every WAKE_S seconds (the loop's longest sleep,
+#: for the watchdog, the status line, the sink's flush and a signal; an RMS stream's decision
+#: comes once a second, and ten empty wake-ups a second cost as much as its processing);
+#: BATCH_S: the board time of one Processor call (live.output_parts)
+WAKE_S = 0.5
 BATCH_S = 0.1
 BATCH_FRAMES = 1000
 #: ... but while the block the Processor waits for (its next /orders block or decision) is still
@@ -156,7 +159,7 @@ class SerialSource(FrameSource):
     def __init__(self, port: str, *, baud: int, read_size: int = 4096, queue_frames: int = 20000,
                  capture: BinaryIO | None = None, reconnect_min_s: float = 0.5,
                  reconnect_max_s: float = 5.0, open_port: Callable | None = None,
-                 timeout: float = BATCH_S, batch_frames: int = BATCH_FRAMES, hold_s: float = HOLD_S):
+                 timeout: float = WAKE_S, batch_frames: int = BATCH_FRAMES, hold_s: float = HOLD_S):
         self.queue = FrameQueue(queue_frames)
         self.reader = SerialReader(port, baud=baud, read_size=read_size, queue=self.queue,
                                    capture=capture, reconnect_min_s=reconnect_min_s,

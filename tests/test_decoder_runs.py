@@ -1,7 +1,8 @@
 """The decoder's one-pass path for runs of back-to-back frames (cmsensord/frame_runs.py)
 equals the plain frame-by-frame receiver (``Decoder(runs=False)``, the reference) on random
 streams of valid and invalid frames: the same frames, offsets, seq gaps, unwrapped t0 and
-counters, whatever the reads (issue 13)."""
+counters, whatever the reads (issue 13).  The numpy runs are the path without the compiled wire
+kernel (``kernel=False``); tests/test_wire_kernel.py holds the kernel to the same reference."""
 
 from __future__ import annotations
 
@@ -48,8 +49,8 @@ def random_stream(rnd: random.Random, n: int) -> bytes:
     return bytes(out)
 
 
-def decode(data: bytes, runs: bool, reads: list[int], max_buffer: int = 65536):
-    dec = Decoder(max_buffer=max_buffer, runs=runs)
+def decode(data: bytes, runs: bool, reads: list[int], max_buffer: int = 65536, kernel: bool = False):
+    dec = Decoder(max_buffer=max_buffer, runs=runs, kernel=kernel)
     frames, at = [], 0
     for size in reads:
         frames += dec.feed(data[at:at + size])
@@ -93,7 +94,7 @@ def test_a_capture_in_replay_reads_decodes_mostly_in_runs():
     frames = [encode_frame(FrameType.RMS, k, 250 * k, 4, 0, rnd.randbytes(16)) for k in range(5000)]
     data = b"".join(frames)
     taken = []
-    dec = Decoder()
+    dec = Decoder(kernel=False)
     runs_take = FrameRuns.take
 
     class Counting(FrameRuns):
@@ -144,8 +145,8 @@ def test_tacho_payloads_in_one_pass_equal_decode_tacho_one_by_one(seed):
     assert protocol.decode_tacho_many([])[0].size == 0
 
 
-def decode_batches(data: bytes, reads: list[int]):
-    dec = Decoder()
+def decode_batches(data: bytes, reads: list[int], kernel: bool):
+    dec = Decoder(kernel=kernel)
     batches, at = [], 0
     for size in reads:
         batches.append(dec.feed_batch(data[at:at + size]))
@@ -155,11 +156,12 @@ def decode_batches(data: bytes, reads: list[int]):
     return batches, dec.counters, dec.buffered()
 
 
+@pytest.mark.parametrize("kernel", [False, True], ids=["numpy", "kernel"])
 @pytest.mark.parametrize("seed", range(12))
-def test_batches_equal_the_frame_by_frame_decoder(seed):
+def test_batches_equal_the_frame_by_frame_decoder(seed, kernel):
     """``Decoder.feed_batch`` (frames as columns, what a replay reads) gives the frames of the
     plain receiver: indexed, iterated, sliced, and its columns and RMS values read as arrays
-    are those of the frames."""
+    are those of the frames; with the numpy runs and with the compiled wire kernel."""
     from cmsensord.frame_batch import FrameBatch, Pending, rms_fields
     from cmsensord.protocol import decode_rms_rows
 
@@ -167,7 +169,7 @@ def test_batches_equal_the_frame_by_frame_decoder(seed):
     data = random_stream(rnd, 3000)
     reads = [rnd.choice([1, 7, 100, 5000, 20000, 70000]) for _ in range(rnd.randrange(0, 8))]
     ref, ref_counters, ref_left = decode(data, runs=False, reads=reads)
-    batches, counters, left = decode_batches(data, reads)
+    batches, counters, left = decode_batches(data, reads, kernel)
     assert all(type(b) is FrameBatch for b in batches)
     got = [f for b in batches for f in b]
     assert got == ref and len(ref) > 2000

@@ -8,8 +8,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("cmsensord", "firmware_sim")
-#: functions allowed over 80 lines, each a hot loop whose docstring says why
-LONG_FUNCTIONS = {"cmsensord/protocol.py::_scan"}
+#: functions allowed over 80 lines, each a hot loop whose docstring says why (none now: the
+#: decoder's loop, the last one, was split when the wire kernel took its place)
+LONG_FUNCTIONS: set[str] = set()
 
 
 def _sources() -> dict[str, Path]:

@@ -13,12 +13,14 @@ from processes import ENV
 #: (as when `pip install` found no compiler); prints what it imported
 CODE = """
 import json, sys
-for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel"):
+for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel", "cmsensord._wirekernel"):
     sys.modules[name] = None
 from cmsensord.cli import main
 rc = main(sys.argv[1:])
+from cmsensord import wire_scan
 from cmsensord.dsp import akf, order_tracker
 print(json.dumps({"rc": rc, "akf_kernel": akf.have_kernel(), "tracker_kernel": order_tracker.have_kernel(),
+                  "wire_kernel": wire_scan.have_kernel(),
                   "scipy": sorted(m for m in sys.modules if m == "scipy" or m.startswith("scipy."))}))
 """
 
@@ -29,7 +31,7 @@ def test_the_daemon_without_the_kernels_tracks_orders_and_imports_no_scipy(tmp_p
                        capture_output=True, text=True, env=ENV, timeout=120)
     assert p.returncode == 0, p.stderr
     got = json.loads(p.stdout.strip().splitlines()[-1])
-    assert got == {"rc": 0, "akf_kernel": False, "tracker_kernel": False, "scipy": []}
+    assert got == {"rc": 0, "akf_kernel": False, "tracker_kernel": False, "wire_kernel": False, "scipy": []}
     from cmsensord.sinks.mcap_sink import read_messages
 
     orders = [m for t, _, m in read_messages(next(tmp_path.glob("*.mcap"))) if t == "/cm/ch0/orders"]

@@ -22,7 +22,8 @@ from cmsensord import __version__
 from processes import ENV, ROOT, run_module
 
 KERNEL_LINE = ("WARNING C kernel(s) not built: cmsensord.dsp._akfkernel (the AKF bank), "
-               "cmsensord.dsp._trackerkernel (the order tracker); the numpy fallback runs instead")
+               "cmsensord.dsp._trackerkernel (the order tracker), cmsensord._wirekernel (the wire decoder); "
+               "the numpy fallback runs instead")
 
 
 def _env(path: Path | None = None) -> dict[str, str]:
@@ -76,7 +77,8 @@ def test_without_a_compiler_the_daemon_names_the_missing_kernels(no_compiler_ins
     assert [line for line in lines if "kernel" in line and not line.startswith("[")] == [
         next(line for line in lines if line.startswith(KERNEL_LINE))]
     status = [line for line in lines if line.startswith("[")]
-    assert status and all(line.endswith("| numpy fallback: no _akfkernel, _trackerkernel") for line in status)
+    assert status and all(line.endswith("| numpy fallback: no _akfkernel, _trackerkernel, _wirekernel")
+                          for line in status)
 
 
 def test_the_built_daemon_says_nothing_of_kernels(tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from cmsensord.read_pace import MAX_HOLD_S, ReadPace
+from cmsensord.read_pace import FAR_HOLD_S, MAX_HOLD_S, ReadPace
 
 
 def paced(seconds: float, bytes_per_block: int = 600) -> tuple[ReadPace, float]:
@@ -28,7 +28,21 @@ def test_waits_until_shortly_before_the_block_to_wake_at_is_due():
     due = (250 * 305 - 250 * 299) / 25000.0     # 6 blocks later: 60 ms
     assert pace.hold(now, 250 * 305) == pytest.approx(due - pace.margin_s)
     assert pace.hold(now, 250 * 299) == 0.0     # that block is in: the loop names the next soon
-    assert pace.hold(now, 250 * 400) == MAX_HOLD_S
+    assert pace.hold(now, 250 * 312) == MAX_HOLD_S     # 130 ms off: the last 0.1 s as above
+
+
+def test_a_decision_further_off_is_read_towards_in_long_holds_then_held_for_as_a_block():
+    """RMS mode wakes at its 1-s decisions: the reader takes the bytes before one in holds of
+    up to FAR_HOLD_S until MAX_HOLD_S before it is due, then holds for it as for an /orders
+    block: three reads a second, not ten."""
+    pace, now = paced(3.0, bytes_per_block=40)  # 4 channels' RMS frame per 10 ms
+    cap = pace.buffer_bytes / pace.byte_rate
+    assert cap > FAR_HOLD_S
+    assert pace.hold(now, 250 * 400) == FAR_HOLD_S                              # 1.01 s off
+    assert pace.hold(now, 250 * 340) == pytest.approx(0.41 - MAX_HOLD_S)       # 0.41 s off
+    assert pace.hold(now, 250 * 318) == MAX_HOLD_S                              # 0.19 s: as a block
+    fast, now = paced(3.0)                      # RAW: the buffer fills in 0.27 s, sooner than that
+    assert fast.hold(now, 250 * 400) == pytest.approx(fast.buffer_bytes / fast.byte_rate)
 
 
 def test_without_a_block_to_wake_at_it_waits_the_idle_hold_but_never_fills_the_buffer():

@@ -1,10 +1,10 @@
-"""`cmsensord replay` with the one-pass paths of issue 13 (runs of frames decoded at once,
-regular tacho edges committed at once, long batches checked at once, RMS interval sums at
-once, frames as columns (FrameBatch) from the decoder to the banks, whole RMS intervals and
-decision periods at once, messages written in runs with a severity message's r encoded
-once) writes what the frame-by-frame, edge-by-edge, message-by-message daemon writes,
-message for message, on a RAW capture with a tacho and on an RMS capture, both with line
-noise in them."""
+"""`cmsensord replay` with the one-pass paths of issue 13 (the wire kernel's scan of a read,
+runs of frames decoded at once, regular tacho edges committed at once, long batches checked
+at once, RMS interval sums at once, frames as columns (FrameBatch) from the decoder to the
+banks, whole RMS intervals and decision periods at once, messages written in runs with a
+severity message's r encoded once) writes what the frame-by-frame, edge-by-edge,
+message-by-message daemon writes, message for message, on a RAW capture with a tacho and on
+an RMS capture, both with line noise in them."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from processes import ENV, cmsensord
 #: `cmsensord replay` with every one-pass path turned off: the reference
 REFERENCE = """
 import sys
+sys.modules["cmsensord._wirekernel"] = None         # the decoder's Python loop, not the C scan
 import cmsensord.monitor.segments as segments
 import cmsensord.protocol as protocol
 import cmsensord.source as source

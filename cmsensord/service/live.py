@@ -159,6 +159,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
     queue = source.queue
     sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
+    stop.wake = queue.poke              # SIGTERM ends the wait for frames
     proc: Processor
     publisher = publisher_of(sink)
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
@@ -250,6 +251,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             return f"reader error x{reader.errors}: {reader.error} | {line}"
         return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
 
+    if notify.watchdog_interval_s:      # the loop wakes twice per ping interval: a ping is never late
+        source.timeout = min(source.timeout, notify.watchdog_interval_s / 2)
     if notify.enabled:
         reader.connected.wait(0.2)      # a present port opens within ms: READY's STATUS says which
     notify.ready(service_state())
@@ -269,8 +272,8 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             # frames held for the block completing the next output are frames that came
             if watch.done(bool(frames) or bool(len(source.queue)), now) or stop.event.is_set():
                 break
-            if now >= next_status:
-                next_status = now + 1.0
+            if now >= next_status:      # once a second on average, though the loop wakes every WAKE_S
+                next_status = max(next_status + 1.0, now + 0.5)
                 watch.diagnostics(now)
                 if cfg.output.status_line:
                     print(line_now(), file=sys.stderr, flush=True)

@@ -9,6 +9,7 @@ from pathlib import Path
 from cmsensord.config import Config
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
+from cmsensord.protocol import MAX_FRAME, Decoder
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
@@ -24,9 +25,10 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     MCAP file or None if it could not be finished, the Processor)."""
     # as fast as possible: 128-KiB reads (2.6 s of 1 RAW channel), so each of the chain's per-call
     # costs (tacho, orders, indicators) comes a few times fewer; the messages are the same for
-    # any split of the stream; the frames as columns (FrameBatch)
+    # any split of the stream; the frames as columns (FrameBatch); the decoder holds a read and
+    # the partial frame before it, so each read is one scan (one batch, nothing joined)
     capture = CaptureSource(path, chunk=REPLAY_CHUNK if speed is None else 1 << 12,   # LinkError before any output
-                            batches=True)
+                            decoder=Decoder(max_buffer=REPLAY_CHUNK + MAX_FRAME), batches=True)
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     route_sink_events(sink, proc.log)

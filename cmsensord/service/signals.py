@@ -4,15 +4,19 @@ from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Callable
 
 
 class StopFlag:
-    """SIGINT/SIGTERM set a flag the loop checks; a second signal is not needed."""
+    """SIGINT/SIGTERM set a flag the loop checks, and call ``wake`` (if set: what ends the
+    loop's wait for frames, so it stops at once, not at its next wake-up); a second signal
+    is not needed."""
 
     def __init__(self) -> None:
         self.event = threading.Event()
         self.signal: int | None = None
         self.reopen = False
+        self.wake: Callable[[], None] | None = None
 
     def install(self) -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -29,6 +33,8 @@ class StopFlag:
     def _handler(self, signum, _frame) -> None:
         self.signal = signum
         self.event.set()
+        if self.wake is not None:
+            self.wake()
 
     def _hup(self, _signum, _frame) -> None:
         self.reopen = True              # only a flag: the loop does the work
