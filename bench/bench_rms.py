@@ -75,11 +75,13 @@ def replay_in_subprocess(capture: Path, out: Path, trace: bool, tree: Path = ROO
         + (PRELOAD if preload else "")
         + "def cpu():\n"
         "    r = resource.getrusage(resource.RUSAGE_SELF); return r.ru_utime + r.ru_stime\n"
+        "m0 = set(sys.modules)\n"
         "c0, t0 = cpu(), time.perf_counter()\n"
         f"rc = main(['replay', {str(capture)!r}, '--out', {str(out)!r}] + (['--akf-trace'] if {trace} else []))\n"
         "wall, c1 = time.perf_counter() - t0, cpu()\n"
         "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]\n"
-        "print(json.dumps({'rc': rc, 'wall_s': wall, 'cpu_s': c1 - c0, 'peak_rss_mb': int(hwm) / 1024}))\n"
+        "print(json.dumps({'rc': rc, 'wall_s': wall, 'cpu_s': c1 - c0, 'peak_rss_mb': int(hwm) / 1024,\n"
+        "                  'imports': len(set(sys.modules) - m0)}))\n"
     )
     env = dict(os.environ, PYTHONPATH=str(tree))
     # run in the tree: `python -c` puts the working directory before PYTHONPATH on sys.path
@@ -96,7 +98,7 @@ def best_of(runs: list[dict]) -> dict:
     """Of repeated replays of one capture: the shortest wall and CPU times, the largest peak RSS
     (a shared machine only ever slows a run down)."""
     return {"wall_s": min(r["wall_s"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs),
-            "peak_rss_mb": max(r["peak_rss_mb"] for r in runs)}
+            "peak_rss_mb": max(r["peak_rss_mb"] for r in runs), "imports": max(r.get("imports", 0) for r in runs)}
 
 
 def trees(specs: list[str]) -> list[tuple[str, Path]]:
@@ -174,6 +176,12 @@ def bank_vs_filterpy(seconds: float, channels: int = 4) -> dict | None:
             out = bank.process(y)
         res[f"bank_{backend}_s"] = (time.perf_counter() - t0) / reps
         res["x_hat"] = out.x_hat
+        if backend == "c":      # only the outlier flags, as a decision takes them
+            t0 = time.perf_counter()
+            for _ in range(reps):
+                flags = AkfBank(R, window=10, z_c=2.8, backend=backend).outliers(y)[0]
+            res["bank_c_flags_s"] = (time.perf_counter() - t0) / reps
+            assert np.array_equal(flags, out.outlier)
     try:
         import filterpy  # noqa: F401
     except ImportError:
@@ -207,7 +215,8 @@ def main() -> int:
     print("# timed: main(['replay', ...]) in a fresh interpreter, after `import cmsensord.cli`"
           + (" and the command modules (--preload)" if args.preload else "")
           + ": the interpreter's start and those imports not counted; the configuration, the sink's"
-          " open and close and the summary counted")
+          " open and close, the summary and the first use of every code path counted (modules the"
+          " replay imports while timed, compiled then without .pyc files, are counted under 'imports')")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -229,13 +238,14 @@ def main() -> int:
                     rss = r["peak_rss_mb"]
                     mcap = sum(p.stat().st_size for p in out.glob("*.mcap"))
                     rows.append((C, "akf trace" if trace else "default", label, args.seconds / r["wall_s"],
-                                 size / r["wall_s"] / 1e6, args.seconds / r["cpu_s"], rss, mcap / 1e6))
+                                 size / r["wall_s"] / 1e6, args.seconds / r["cpu_s"], rss, mcap / 1e6,
+                                 r["imports"]))
     print()
     print("| channels | logging | code | real-time factor | decode MB/s | RT factor per CPU-s | peak RSS MB "
-          "| MCAP MB |")
-    print("| ---: | --- | --- | ---: | ---: | ---: | ---: | ---: |")
-    for C, mode, label, rtf, mbs, cpu, rss, mc in rows:
-        print(f"| {C} | {mode} | {label} | {rtf:,.0f}x | {mbs:.2f} | {cpu:,.0f}x | {rss:.0f} | {mc:.2f} |")
+          "| MCAP MB | imports |")
+    print("| ---: | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for C, mode, label, rtf, mbs, cpu, rss, mc, imp in rows:
+        print(f"| {C} | {mode} | {label} | {rtf:,.0f}x | {mbs:.2f} | {cpu:,.0f}x | {rss:.0f} | {mc:.2f} | {imp} |")
     if args.no_peer:
         return 0
 
@@ -245,7 +255,9 @@ def main() -> int:
           f"| seconds | vs filterpy |")
     print("| --- | ---: | ---: |")
     fp = peer.get("filterpy_s")
-    for key, label in (("bank_c_s", "cmsensord bank, C kernel"), ("bank_numpy_s", "cmsensord bank, numpy loop"),
+    for key, label in (("bank_c_s", "cmsensord bank, C kernel"),
+                       ("bank_c_flags_s", "cmsensord bank, C kernel, outlier flags only (AkfBank.outliers)"),
+                       ("bank_numpy_s", "cmsensord bank, numpy loop"),
                        ("filterpy_s", "filterpy, one KalmanFilter per filter")):
         if peer.get(key) is None:
             if key == "filterpy_s":

@@ -48,7 +48,10 @@ Three implementations with identical semantics:
 * :func:`_run_numpy` — the bank vectorised over (channels, filters), looping over
   time in Python; the fallback when the compiled kernel is unavailable.
 * ``cmsensord.dsp._akfkernel`` — the same loop in C (built by ``pip install``);
-  about 100x faster than the numpy loop, which matters at 1000x real time.
+  about 100x faster than the numpy loop, which matters at 1000x real time.  It runs a
+  channel's filters two at a time in SSE2 registers where there are (the same IEEE
+  operations in the same order per filter: the same bits), and its ``flags`` entry writes
+  only the outlier flags (:meth:`AkfBank.outliers`, what a decision needs).
 
 State lives in arrays with leading (channel, filter) axes (:class:`AkfState`)
 and is carried between calls, so a stream can be split anywhere.
@@ -66,6 +69,8 @@ try:  # the compiled kernel is optional: the numpy loop is the fallback
     from cmsensord.dsp import _akfkernel  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the build
     _akfkernel = None
+#: the kernel's flags-only entry (None: no kernel, or one built before it had it: process() serves)
+_flags = getattr(_akfkernel, "flags", None)
 
 __all__ = [
     "ScalarAKF",
@@ -222,12 +227,9 @@ class AkfBank:
             started=np.zeros(C, dtype=np.uint8),
         )
 
-    def process(self, y: np.ndarray, valid: np.ndarray | None = None) -> AkfBlock:
-        """Run T observations of every channel through the bank.
-
-        y: (T, C) observations; valid: (T, C) bool, False marks a missing
-        observation (its y value is ignored).  NaN in y is treated as missing.
-        """
+    def _inputs(self, y: np.ndarray, valid: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Observations (T, C) with 0.0 where missing, C-contiguous, and the valid mask (T, C)
+        (``valid`` and finite); ValueError for a shape that is not the bank's."""
         y = np.asarray(y, dtype=np.float64)
         if y.ndim == 1 and self.C == 1:
             y = y[:, None]
@@ -241,7 +243,15 @@ class AkfBank:
             if valid.shape != y.shape:
                 raise ValueError(f"valid: expected shape {y.shape}, got {valid.shape}")
             valid = valid & finite
-        y = np.ascontiguousarray(np.where(valid, y, 0.0))
+        return np.ascontiguousarray(np.where(valid, y, 0.0)), valid
+
+    def process(self, y: np.ndarray, valid: np.ndarray | None = None) -> AkfBlock:
+        """Run T observations of every channel through the bank.
+
+        y: (T, C) observations; valid: (T, C) bool, False marks a missing
+        observation (its y value is ignored).  NaN in y is treated as missing.
+        """
+        y, valid = self._inputs(y, valid)
         T = y.shape[0]
         out = AkfBlock(
             x_prior=np.empty((T, self.C, self.n)),
@@ -263,6 +273,24 @@ class AkfBank:
         else:
             _run_numpy(self, y, valid, out)
         return out
+
+    def outliers(self, y: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The outlier flags (T, C, n) uint8 and the valid mask (T, C) that :meth:`process`
+        gives for the same input, with the same change of state, without its other outputs
+        (the compiled kernel then writes only the flags: what a decision needs)."""
+        if self.backend != "c" or _flags is None:
+            out = self.process(y, valid)
+            return out.outlier, out.valid
+        y, valid = self._inputs(y, valid)
+        T = y.shape[0]
+        outlier = np.zeros((T, self.C, self.n), dtype=np.uint8)
+        if T:
+            s = self.state
+            _flags(
+                y, np.ascontiguousarray(valid, dtype=np.uint8), self.R, self.z_c, self.N,
+                int(self.scaling), s.x, s.P, s.Q, s.res2, s.dx2, s.pos, s.fill, s.started, outlier,
+            )
+        return outlier, valid
 
 
 def _run_numpy(bank: AkfBank, y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> None:

@@ -233,12 +233,16 @@ class AnomalyDecider:
         nan = np.full(C, np.nan)
         f_r = self.f_r.copy()
         out = []
-        for k in range(K):
-            self.slot += P
-            out.append(Decision(slot=self.slot, period=self.periods + k, transient=False, cnt=cnt[k],
-                                anomaly=anomaly[k], prev_anomaly=prev_anomaly[k], severity=s_akf[k],
-                                prev_severity=prev_sev[k], f_r=f_r, missing=missing[k], severity_akf=s_akf[k],
-                                level=nan, severity_level=nan, held=held[k], held_max=held_max[k]))
+        slot, period = self.slot, self.periods
+        # the periods' rows as views, by list() (one call each instead of one index per period)
+        for k, (c_k, a_k, pa_k, s_k, ps_k, m_k, h_k, hm_k) in enumerate(zip(
+                list(cnt), list(anomaly), list(prev_anomaly), list(s_akf), list(prev_sev), list(missing),
+                list(held), held_max)):
+            slot += P
+            out.append(Decision(slot=slot, period=period + k, transient=False, cnt=c_k, anomaly=a_k,
+                                prev_anomaly=pa_k, severity=s_k, prev_severity=ps_k, f_r=f_r, missing=m_k,
+                                severity_akf=s_k, level=nan, severity_level=nan, held=h_k, held_max=hm_k))
+        self.slot = slot
         self.periods += K
         self.anomaly, self.held = anomaly[-1].copy(), held[-1].copy()
         self._last_severity = s_akf[-1].copy()

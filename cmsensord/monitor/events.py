@@ -203,6 +203,10 @@ class EventLog:
         stamp; live, the wall clock while no frames come), in stamp order."""
         self._write_upto(processed_ns - int(HOLD_S * 1e9))
 
+    def due(self, processed_ns: int) -> bool:
+        """Whether :meth:`release` at ``processed_ns`` would write a record."""
+        return bool(self._pending) and self._pending[0][0] <= processed_ns - int(HOLD_S * 1e9)
+
     def flush(self) -> None:
         """Write every waiting record, in stamp order."""
         self._write_upto(None)

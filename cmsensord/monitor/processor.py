@@ -50,15 +50,13 @@ if TYPE_CHECKING:
 
 #: the frame types as plain names: a FrameType.X lookup goes through the enum's __getattr__ (~1 µs per frame)
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
-#: most RAW frames run through the chain in one call (bounds the per-call arrays:
-#: 4 x (T, C, n) float64 = 1.3 MB for T = 1000, C = 4, n = 10)
+#: most RAW frames run through the chain in one call (bounds the per-call arrays)
 MAX_BATCH = 1000
 #: most RMS frames in one call (an observation each, no samples): a replay's 128-KiB read of
 #: 4 channels in one call
 MAX_RMS_BATCH = 4000
-#: most observations (slots x channels) in one call of the banks from RMS frames: 4 x (T, C, n)
-#: float64 = 2.6 MB; the bank runs 1.8x slower per observation on arrays twice as long (their
-#: memory comes and goes: measured at 10,000-12,000 observations on this project's machine)
+#: most observations (slots x channels) in one call of the banks from RMS frames (it was the
+#: bank's outputs' size, 4 x (T, C, n) float64 = 2.6 MB; the diagnostics count in these calls)
 MAX_RMS_RUN = 8000
 #: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
 MAX_RUN_SLOTS = 2 * MAX_BATCH
@@ -136,9 +134,10 @@ class Processor:
               **extra: Any) -> None:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
 
-    def _out(self, items) -> None:
+    def _out(self, items) -> list:
         """Messages to the sink and events to the log, in their order: each run of messages
-        in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one."""
+        in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one.
+        Returns a new empty list."""
         run: list = []
         watching = self.alarms.watching
         for it in items:
@@ -156,7 +155,7 @@ class Processor:
                     if more:
                         run = self._write_run(run)
                         self._out(more)
-        self._write_run(run)
+        return self._write_run(run)
 
     def _write_run(self, run: list) -> list:
         """Messages to the sink, in one call if it takes many; returns a new empty run."""
@@ -248,6 +247,7 @@ class Processor:
                 return rms, raw
         cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
         starts = [0, *cuts]
+        single = iter(select(frames, (codes != _RMS) & (codes != _RAW)))   # one at a time: built at once
         # plain ints: numpy comparing its int64 with an IntEnum looks up dunders on the enum
         for i, j, kind in zip(starts, [*cuts, len(codes)], codes[starts].tolist()):   # runs of one type
             if kind == _RMS:
@@ -255,8 +255,8 @@ class Processor:
             elif kind == _RAW:
                 raw = self._extend(raw, frames[i:j], False)
             else:
-                for f in frames[i:j]:
-                    rms, raw = self._frame(f, rms, raw)
+                for _ in range(j - i):
+                    rms, raw = self._frame(next(single), rms, raw)
         return rms, raw
 
     def _extend(self, batch: Pending, frames: Sequence[Frame], rms: bool) -> Pending:
@@ -499,8 +499,8 @@ class Processor:
             self._release_decisions(final=False)
             return
         self._hand_over()
-        y, out = self.severity.observe(first, y, valid)
-        if trace:
+        y, out = self.severity.observe(first, y, valid, full=trace)
+        if out is not None:
             self._out(self.severity.trace(stamps, y, valid, out))
         self._release_decisions(final=False)
 
@@ -520,18 +520,25 @@ class Processor:
         upto = self.shaft.final_slot(self.clock) if tacho and not final else self.clock.next_slot
         cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
         f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
+        run: list = []      # a replay's decisions (nothing watching the writes) go out together up to events
+        together = self.diagnostics is None and not self.alarms.watching and self.captures is None
         for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
             stamp = self.clock.slot_end_ns((sev.start_slot or 0) + d.slot - 1)   # d.slot: from the chain's start
+            if run and (sev.notes or self.log.due(stamp)):    # events to write before it
+                run = self._out(run)
             if sev.notes:
                 self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
                 sev.notes.clear()
             self.log.release(stamp)             # events well before it, at a point set by the stream
-            out = self.indicators.take(stamp) + sev.decision(d, stamp)
-            if self.diagnostics is None:        # nothing in it depends on what is written: one run
-                self._out([*out, self._diagnostics_message(stamp)])
-            else:                               # the live loop's figures after the writes
-                self._out(out)
+            out = sev.decision(d, stamp)
+            run += self.indicators.take(stamp) + out
+            if self.diagnostics is None:        # nothing in it depends on what is written
+                run.append(self._diagnostics_message(stamp))
+            if not together or Event in map(type, out):     # events: to the log before the next release
+                run = self._out(run)
+            if self.diagnostics is not None:    # the live loop's figures after the writes
                 self.write_diagnostics(stamp)
+        self._out(run)
 
     def _holding(self, plain: bool) -> bool:
         """Whether a call's observations wait in :attr:`held` (``plain``: no microphone or AKF
@@ -540,7 +547,6 @@ class Processor:
         return (plain and self.orders is not None and self.observe is None and self.captures is None
                 and self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
                 and sev is not None and sev.gate.end is not None)
-
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one

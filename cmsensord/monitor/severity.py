@@ -114,19 +114,26 @@ class SeverityChain:
         self._tacho_too_fast = fast
         return np.where(fast, self.cfg_f_r, f_r)
 
-    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, AkfBlock]:
+    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray,
+                full: bool = False) -> tuple[np.ndarray, AkfBlock | None]:
         """Observations (T, C) of slots first_slot.. / baseline through the banks; their flags
-        (and level ratios, combined severity) wait. Returns what the banks watched, and their output."""
+        (and level ratios, combined severity) wait. Returns what the banks watched, and with
+        ``full`` their every output (for the AKF trace; else None: only the flags are formed)."""
         y = y / self.baseline
-        out = self.bank.process(y, valid)
+        out = None
+        if full:
+            out = self.bank.process(y, valid)
+            outlier = out.outlier
+        else:
+            outlier = self.bank.outliers(y, valid)[0]
         if self.gate.end is None:
             self.gate.restart(first_slot)
         if self.start_slot is None:
             self.start_slot = first_slot
         if self.combined is None:
-            self.gate.push(out.outlier, valid)
+            self.gate.push(outlier, valid)
         else:
-            self.gate.push(out.outlier, valid, np.where(self.combined, y, np.nan))
+            self.gate.push(outlier, valid, np.where(self.combined, y, np.nan))
         return y, out
 
     def release(self, upto: int, *, final: bool, bounded: bool,

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from cmsensord import __version__
 from cmsensord.errors import SinkError
+from cmsensord.sinks.json_templates import TEMPLATES
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import REPEATED, ChannelRegistry, encode_message
 from cmsensord.sinks.reorder import GROUP, MAX_S, Payload, ReorderWindow
@@ -326,6 +327,10 @@ class McapSink:
             stamp_ns = int(stamp_ns)
         if stamp_ns < 0:
             raise SinkError(f"{topic}: negative timestamp {stamp_ns} ns")
+        template = TEMPLATES.get(schema)          # a decision's messages: the same bytes, formatted
+        body = None if template is None else template(stamp_ns, msg)
+        if body is not None:
+            return entry[0], stamp_ns, body.encode()
         return entry[0], stamp_ns, encode_message(topic, stamp_ns, msg, REPEATED.get(schema))
 
     def write_many(self, messages: Sequence[tuple[str, str, int, dict]], start: int = 0) -> int:
@@ -342,10 +347,19 @@ class McapSink:
         n = len(messages)
         k = start
         writer, push, passes = self._writer, self.reorder.push, self.reorder.passes
+        channels, templates = self._channels, TEMPLATES
         pos = writer.pos
         while k < n:
             self.batch_at = k
-            channel_id, stamp_ns, data = self._encoded(*messages[k])
+            topic, schema, stamp_ns, msg = messages[k]
+            entry = channels.get(topic)         # _encoded's way for a decision's message, inline
+            template = templates.get(schema)
+            body = template(stamp_ns, msg) if (template is not None and entry is not None and entry[1] == schema
+                                               and type(stamp_ns) is int and stamp_ns >= 0) else None
+            if body is None:
+                channel_id, stamp_ns, data = self._encoded(topic, schema, stamp_ns, msg)
+            else:
+                channel_id, data = entry[0], body.encode()   # type: ignore[index]
             self.messages_written += 1
             try:
                 if passes(stamp_ns):                    # what push() would give, without a list
