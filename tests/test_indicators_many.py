@@ -50,6 +50,25 @@ def test_many_records_at_once_equal_one_at_a_time_bit_for_bit():
     assert any(b.lines for r in got for b in r.bearings)           # the lines were read
 
 
+def test_envelopes_of_one_band_in_one_call_equal_one_at_a_time_bit_for_bit():
+    """Rows of one length and one envelope band (the daemon's intervals of one channel, a
+    replay's read bringing several): their envelopes' inverse transforms in one call, and a
+    band with no bin (beyond Nyquist): the records of compute(), field for field."""
+    rng = np.random.default_rng(5)
+    t = np.arange(25000) / FS
+    burst = (1.0 + 0.5 * np.cos(2 * np.pi * 87.0 * t)) * np.sin(2 * np.pi * 4000.0 * t)
+    empty = Setup(FS, (10.0, 1000.0), (13000.0, 14000.0))       # beyond fs / 2: no bin
+    items = [(rng.standard_normal(25000) * k + burst, s, f)
+             for k, s, f in ((1.0, PLAIN, 28.7), (2.0, PLAIN, None), (0.5, PLAIN, 30.0),
+                             (1.0, RICH, 28.7), (3.0, empty, 28.7), (1.0, empty, None))]
+    for some in (items[:3], items[3:], items):
+        got = compute_many(some)
+        for g, (x, s, f) in zip(got, some):
+            w = compute(x, s, f)
+            assert same(g, w) and g.values() == w.values()
+    assert compute_many(items[4:5])[0].envelope_rms == 0.0
+
+
 @pytest.mark.parametrize("with_tacho", [False, True])
 def test_several_intervals_released_together_give_the_messages_of_one_at_a_time(with_tacho):
     """The RAW chain's intervals released in one call (a replay's read brings ~2.6 s) and one
@@ -76,14 +95,14 @@ def test_several_intervals_released_together_give_the_messages_of_one_at_a_time(
     y = rng.standard_normal((25000 * 5 + 3000, 2))
     y[60000:60250, 1] = np.nan                                   # a lost frame: partial stats
     outs = []
-    for step in (len(y), 2500):
+    for step in (len(y), 2500, 37_500):        # whole intervals kept as given, or gathered
         chain = IndicatorChain(cfg, cfg.channels, fs=25000, clock=clock, tacho=lambda: tacho)
         got = []
         for a in range(0, len(y), step):
             got += chain.add_samples(a, y[a:a + step])
         got += chain.finish()
         outs.append(got)
-    assert len(outs[0]) >= 10 and outs[0] == outs[1]
+    assert len(outs[0]) >= 10 and outs[0] == outs[1] == outs[2]
     assert any("unavailable" in m.msg for m in outs[0])
     assert all(("speed_rpm" in m.msg) == with_tacho for m in outs[0])
     if with_tacho:

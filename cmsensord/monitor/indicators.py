@@ -124,13 +124,15 @@ class IndicatorChain:
         self.index = [ch.index for ch in channels]
         self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
         self.buf = np.full((self.N, len(channels)), np.nan)
+        self._dirty = False                     # samples written to buf since it was last NaN
         self.start: int | None = None          # board sample of the open interval's first sample
         self.pending: list[tuple[int, np.ndarray, int]] = []   # (start, samples, stamp) waiting for a speed
         self.newest = 0                        # board sample after the newest one given
 
     # ---------------------------------------------------------------- input
     def add_samples(self, start: int, y: np.ndarray) -> list:
-        """m/s² samples (n, C) from board sample ``start`` on; NaN where lost."""
+        """m/s² samples (n, C) from board sample ``start`` on; NaN where lost.  The rows of a
+        whole interval in ``y`` wait as they are (not copied): ``y`` is not to be written after."""
         pos = start
         while len(y):
             if self.start is None or pos < self.start:          # the first, or the clock stepped back
@@ -141,22 +143,32 @@ class IndicatorChain:
                 self.start += (pos - self.start) // self.N * self.N
             off = pos - self.start
             take = min(self.N - off, len(y))
-            self.buf[off:off + take] = y[:take]
+            if take == self.N:                  # a whole interval in y: it waits as it is
+                self._close(np.ascontiguousarray(y[:take], dtype=np.float64))
+            else:
+                self.buf[off:off + take] = y[:take]
+                self._dirty = True
+                if off + take == self.N:
+                    self._close()
             pos += take
             y = y[take:]
-            if off + take == self.N:
-                self._close()
         self.newest = max(self.newest, pos)
         return self.release()
 
-    def _close(self) -> None:
+    def _close(self, whole: np.ndarray | None = None) -> None:
         """The open interval is done: to the waiting list if it has any sample, with the stamp
-        of its end taken now, in the time segment its samples came in."""
-        if self.start is not None and np.isfinite(self.buf).any():
-            self.pending.append((self.start, self.buf.copy(), self.clock.stamp_ns(self.start + self.N)))
+        of its end taken now, in the time segment its samples came in.  ``whole``: all its
+        samples, given at once (they wait as given, not copied: the caller's array is not
+        written again); else those gathered in the buffer."""
+        x = self.buf if whole is None else whole
+        if self.start is not None and np.isfinite(x).any():
+            self.pending.append((self.start, x.copy() if whole is None else x,
+                                 self.clock.stamp_ns(self.start + self.N)))
         if self.start is not None:
             self.start += self.N
-        self.buf[:] = np.nan
+        if self._dirty:
+            self.buf[:] = np.nan
+            self._dirty = False
 
     def close_open(self) -> list:
         """The open interval (partial) closed, if it has a sample, and every waiting one."""
@@ -207,10 +219,12 @@ class IndicatorChain:
             head = {"mode": "raw", "interval_s": self.N / self.fs}
             if shaft_hz is not None:
                 head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
+            finite = np.isfinite(x)
+            whole = finite.all(axis=0).tolist()         # the channels with every sample
             for c, ch in enumerate(self.channels):
                 xc = x[:, c]
-                ok = np.isfinite(xc)
-                missing = 1.0 - float(ok.mean())
+                ok = finite[:, c]
+                missing = 0.0 if whole[c] else 1.0 - float(ok.mean())
                 fields: dict | None = None
                 if missing == 0.0:
                     todo.append((xc, self.setups[c], shaft_hz))

@@ -62,11 +62,17 @@ from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.speed_gate import SpeedGate
+from cmsensord.sinks.encoded import EncodedMessage
+from cmsensord.sinks.orders_encoding import OrdersTemplate
+from cmsensord.sinks.schemas import orders_topic
 
 #: a gap in the RAW stream up to this long is filled; a longer one restarts the tracker
 MAX_FILL_S = 1.0
 #: samples wait at most this long for a final speed (then go with the speed as it is)
 MAX_WAIT_S = 10.0
+#: /orders messages carry their JSON text, made from the arrays (:meth:`OrderChain._texts`, the
+#: plain encoder's bytes); False: plain dicts, encoded by the sink (the reference of the tests)
+PRE_ENCODED = True
 
 Out = list  # of messages.Message and Event, in the order they happened
 
@@ -118,6 +124,7 @@ class OrderChain:
                        f"{1000 * self.latency_s:.0f} ms ({how}, tracker {1000 * tr.latency_s:.0f} ms)")
         self.gate = SpeedGate(round(MAX_WAIT_S * fs))   # samples (n, C) waiting for a final speed
         self.sample0: int | None = None         # board sample index of the tracker's first input
+        self._templates: dict[tuple[int, str], str | None] = {}   # (channel, method) -> template
 
     def _event(self, kind: str, channel: str | None, message: str, sample: int, **fields) -> Event:
         return Event(kind, channel, message, self.clock.stamp_ns(sample), fields)
@@ -192,7 +199,10 @@ class OrderChain:
     def _blocks(self, blocks, method: str) -> Out:
         """The /orders messages of tracker blocks: the per-block numbers converted to Python
         once for all blocks (tolist), the frequencies of all blocks per component in one
-        array operation (the same values as one block at a time)."""
+        array operation (the same values as one block at a time); each message with its
+        JSON text where every number is there (:meth:`_texts`), its dict what
+        :func:`~cmsensord.monitor.messages.orders` makes (that function builds them without
+        ``PRE_ENCODED``: the reference)."""
         n = len(blocks.start)
         if not n:
             return []
@@ -203,16 +213,61 @@ class OrderChain:
         stamp_ns = self.clock.stamp_ns
         rpms = blocks.rpm.tolist()
         # TrackedComponent.freq of every block: order * rpm / 60 (the same operations), or freq_hz
-        freqs = np.where(self._by_order, self._orders * blocks.rpm[:, None] / 60.0, self._fixed_hz).tolist()
+        freq = np.where(self._by_order, self._orders * blocks.rpm[:, None] / 60.0, self._fixed_hz)
+        freqs = freq.tolist()
         valid = blocks.valid.tolist()
         t_in = blocks.t_in.tolist()
         rms, amp, missing = blocks.rms.tolist(), blocks.amplitude.tolist(), blocks.missing.tolist()
         names = [ch.name for ch in self.channels]
         out: Out = []
+        if not PRE_ENCODED:
+            for e in range(n):
+                stamp = stamp_ns(base + int(t_in[e]))
+                rpm, ok = rpms[e], bool(valid[e])
+                for ci, name in enumerate(names):
+                    entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
+                    out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
+            return out
+        C = len(names)
+        texts = self._texts(blocks, freq, method)
+        topics = [orders_topic(name) for name in names]
+        Message = messages.Message
         for e in range(n):
             stamp = stamp_ns(base + int(t_in[e]))
             rpm, ok = rpms[e], bool(valid[e])
+            speed = messages.num(rpm)
             for ci, name in enumerate(names):
-                entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
-                out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
+                fields = {"channel": name, "speed_rpm": speed, "valid": ok, "method": method,   # messages.orders
+                          "orders": messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok),
+                          "missing_fraction": missing[e][ci] / B}
+                text = texts[e * C + ci]
+                out.append(Message(topics[ci], "orders", stamp,
+                                   fields if text is None else EncodedMessage(fields, text)))
         return out
+
+    def _texts(self, blocks, freq: np.ndarray, method: str) -> list[str | None]:
+        """Per block and channel (block by block), the JSON text of its /orders message by the
+        template of its channel and method (:class:`~cmsensord.sinks.orders_encoding.OrdersTemplate`),
+        all numbers laid out in one array, converted and formatted in one call; None where the
+        block is not valid or a number is not finite (that message is encoded plain: such
+        fields are left out of it)."""
+        n, C, K = blocks.rms.shape
+        V = np.empty((n, C, 3 * K + 2))         # the numbers in the message's order
+        V[:, :, 0] = blocks.rpm[:, None]
+        V[:, :, 1:-1:3] = freq[:, None, :]
+        V[:, :, 2:-1:3] = blocks.rms
+        V[:, :, 3:-1:3] = blocks.amplitude
+        V[:, :, -1] = blocks.missing / self.tracker.block     # int / int, as in the message
+        ok = (np.isfinite(V).all(axis=2) & blocks.valid[:, None]).ravel().tolist()
+        fills = []
+        for ci, ch in enumerate(self.channels):
+            if (ci, method) not in self._templates:
+                self._templates[(ci, method)] = OrdersTemplate(
+                    ch.name, method, [(c.name, c.order) for c in self.components]).text
+            fills.append(self._templates[(ci, method)])
+        if None in fills:                       # a name made of the markers' characters
+            return [None] * (n * C)
+        # the templates one after the other, a line each (JSON text holds no raw line break),
+        # filled in one call, cut at the line breaks
+        texts = ("\n".join(fills * n) % tuple(V.ravel().tolist())).split("\n")
+        return [t if o else None for t, o in zip(texts, ok)]

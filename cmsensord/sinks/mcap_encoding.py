@@ -31,6 +31,7 @@ from json.encoder import c_make_encoder, encode_basestring_ascii  # type: ignore
 from typing import Any
 
 from cmsensord.errors import SinkError
+from cmsensord.sinks.encoded import EncodedMessage
 from cmsensord.sinks.schemas import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
@@ -159,10 +160,13 @@ def encode_message(topic: str, stamp_ns: int, msg: dict, repeat: str | None = No
     ``timestamp``; ``msg`` itself is not modified. Raises SinkError (naming
     the topic) for a message JSON cannot represent even after sanitising.
     ``repeat``: a field whose value (a list of numbers) repeats from message to message
-    (:data:`REPEATED`): its JSON is taken from a cache; the bytes are the same.
+    (:data:`REPEATED`): its JSON is taken from a cache; the bytes are the same.  An
+    :class:`~cmsensord.sinks.encoded.EncodedMessage` with its text: the text is the body.
     """
     try:
-        body = None if repeat is None else _with_repeat(msg, repeat)
+        body = msg.text if type(msg) is EncodedMessage else None     # its text, made with it
+        if body is None and repeat is not None:
+            body = _with_repeat(msg, repeat)
         if body is None:
             body = _encode(msg)
     except (ValueError, TypeError, RecursionError):  # NaN/inf (allow_nan=False), bad type

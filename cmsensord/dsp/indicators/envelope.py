@@ -34,7 +34,7 @@ import numpy as np
 
 from .spectrum import bin_range, hann, hann_sums, rfft_freqs
 
-__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelope_spectrum",
+__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft", "envelope_spectrum",
            "centred_envelope_spectrum", "LinePeak", "line_peak"]
 
 
@@ -97,6 +97,19 @@ def envelope_of_rfft(X: np.ndarray, N: int, fs: float, band: tuple[float, float]
     env = np.abs(np.fft.ifft(X[lo:hi + 1], n=M, norm="forward"))
     env *= 2.0 / N
     return Envelope(env, M / T, (lo / T, hi / T))
+
+
+def envelopes_of_rfft(X: np.ndarray, N: int, fs: float, band: tuple[float, float]) -> list[Envelope]:
+    """:func:`envelope_of_rfft` of each row of X (R, K), the ``np.fft.rfft`` of records of N
+    samples: the same envelopes bit for bit, their inverse transforms in one call (numpy
+    transforms the rows one by one, each as a call of its own would)."""
+    lo, hi, M, T = _band_bins(X.shape[-1], N, fs, band)
+    edges = (lo / T, hi / T)
+    if hi < lo:
+        return [Envelope(np.zeros(M), M / T, edges) for _ in range(len(X))]
+    env = np.abs(np.fft.ifft(X[:, lo:hi + 1], n=M, axis=-1, norm="forward"))
+    env *= 2.0 / N
+    return [Envelope(e, M / T, edges) for e in env]
 
 
 def envelope_spectrum(env: np.ndarray, fs_env: float) -> tuple[np.ndarray, np.ndarray]:

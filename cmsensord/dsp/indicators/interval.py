@@ -16,13 +16,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import cast
+from functools import lru_cache
 
 import numpy as np
 
 from .bands import order_band_hz
 from .bearings import DEFECTS, DefectFrequencies, Geometry, defect_frequencies
-from .envelope import LinePeak, centred_envelope_spectrum, envelope_of_rfft, line_peak
+from .envelope import Envelope, LinePeak, centred_envelope_spectrum, envelope_of_rfft, envelopes_of_rfft, line_peak
 from .iso_zones import ZONES, baseline_alarm_mm_s, boundaries, zone_index
 from .spectrum import bin_range, hann_power_bins, rfft_freqs
 from .statistics import WaveformStats, centred_stats
@@ -133,13 +133,17 @@ def _spectral_sums(X: np.ndarray, N: int, f: np.ndarray, setup: Setup,
     used = [r for r in [(va, vb)] + ranges if r[1] > r[0]]
     k0 = min((a for a, _ in used), default=0)
     P = hann_power_bins(X, N, k0, max((b for _, b in used), default=0))
-    v = 1000.0 * np.sqrt((P[va - k0:vb - k0] * _velocity_weights(f, va, vb)).sum()) if vb > va else 0.0
+    v = 1000.0 * np.sqrt((P[va - k0:vb - k0] * _velocity_weights(N, float(setup.fs), va, vb)).sum()) if vb > va else 0.0
     return float(v), [float(np.sqrt(P[a - k0:b - k0].sum())) if b > a else 0.0 for a, b in ranges]
 
 
-def _velocity_weights(f: np.ndarray, a: int, b: int) -> np.ndarray:
-    """1 / (2 pi f)^2 of the bins a..b-1 (as :func:`~.velocity.velocity_rms_mm_s`)."""
-    return 1.0 / (2.0 * np.pi * f[a:b]) ** 2
+@lru_cache(maxsize=16)
+def _velocity_weights(N: int, fs: float, a: int, b: int) -> np.ndarray:
+    """1 / (2 pi f)^2 of the bins a..b-1 of :func:`~.spectrum.rfft_freqs` (N, fs) (as
+    :func:`~.velocity.velocity_rms_mm_s`), read-only: computed once per (N, fs, band)."""
+    w = 1.0 / (2.0 * np.pi * rfft_freqs(N, fs)[a:b]) ** 2
+    w.setflags(write=False)
+    return w
 
 
 def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> IndicatorRecord:
@@ -158,22 +162,37 @@ def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> Indic
 
 def compute_many(items: Sequence[tuple[np.ndarray, Setup, float | None]]) -> list[IndicatorRecord]:
     """:func:`compute` of each (x, setup, shaft_hz): the same records, bit for bit, with the
-    real transforms of the records of one length in one call (numpy's rfft costs ~0.2 ms a
-    call at 25 000 points on top of the transform itself; row by row in one call it gives
-    the numbers of one call per row)."""
-    ds = [_centred(x) for x, _, _ in items]
-    X: list[np.ndarray | None] = [None] * len(ds)
+    transforms of the records of one length in one call each: the real transforms, and the
+    envelopes' inverse transforms of those with one envelope band (numpy's transforms cost
+    ~0.1-0.2 ms a call on top of the transform itself at these lengths; row by row in one
+    call they give the numbers of one call per row).  The records of one length are
+    centred into the rows of one array (no copy to stack them)."""
+    n = len(items)
+    ds: list = [None] * n                       # centred records
+    Xs: list = [None] * n                       # their real transforms
+    envs: list = [None] * n                     # their envelopes
     by_len: dict[int, list[int]] = {}
-    for i, d in enumerate(ds):
-        by_len.setdefault(d.size, []).append(i)
-    for rows in by_len.values():
-        if len(rows) == 1:
-            X[rows[0]] = np.fft.rfft(ds[rows[0]])
-        else:
-            for i, Xi in zip(rows, np.fft.rfft(np.stack([ds[i] for i in rows]), axis=-1)):
-                X[i] = Xi
-    return [_record(d, cast(np.ndarray, Xi), setup, shaft_hz)
-            for d, Xi, (_, setup, shaft_hz) in zip(ds, X, items)]
+    xs = [np.asarray(x, dtype=np.float64) for x, _, _ in items]
+    for i, x in enumerate(xs):
+        by_len.setdefault(x.size, []).append(i)
+    for N, rows in by_len.items():
+        D = np.empty((len(rows), N))
+        for j, i in enumerate(rows):            # _centred, into the row
+            np.subtract(xs[i], xs[i].mean(), out=D[j])
+            ds[i] = D[j]
+        X = np.fft.rfft(D, axis=-1)
+        by_band: dict[tuple[float, tuple[float, float]], list[int]] = {}
+        for j, i in enumerate(rows):
+            setup = items[i][1]
+            by_band.setdefault((float(setup.fs), setup.envelope_band), []).append(j)
+        for (fs, band), js in by_band.items():
+            Xb = X if len(js) == len(rows) else X[js]
+            for j, env in zip(js, envelopes_of_rfft(Xb, N, fs, band)):
+                envs[rows[j]] = env
+        for j, i in enumerate(rows):
+            Xs[i] = X[j]
+    return [_record(d, Xi, setup, shaft_hz, env)
+            for d, Xi, env, (_, setup, shaft_hz) in zip(ds, Xs, envs, items)]
 
 
 def _centred(x: np.ndarray) -> np.ndarray:
@@ -182,8 +201,10 @@ def _centred(x: np.ndarray) -> np.ndarray:
     return x - x.mean()
 
 
-def _record(d: np.ndarray, X: np.ndarray, setup: Setup, shaft_hz: float | None) -> IndicatorRecord:
-    """:func:`compute`'s record from the centred record d and its ``np.fft.rfft`` X."""
+def _record(d: np.ndarray, X: np.ndarray, setup: Setup, shaft_hz: float | None,
+            env: Envelope | None = None) -> IndicatorRecord:
+    """:func:`compute`'s record from the centred record d, its ``np.fft.rfft`` X and its
+    envelope (:func:`~.envelope.envelope_of_rfft`, computed here when not given)."""
     N = d.size
     stats = centred_stats(d)
     bands = _hz_bands(setup, shaft_hz)
@@ -191,7 +212,8 @@ def _record(d: np.ndarray, X: np.ndarray, setup: Setup, shaft_hz: float | None) 
     bounds = boundaries(setup.group, setup.foundation)
     alarm = (baseline_alarm_mm_s(setup.velocity_baseline_mm_s, setup.group, setup.foundation)
              if setup.velocity_baseline_mm_s is not None else None)
-    env = envelope_of_rfft(X, N, setup.fs, setup.envelope_band)
+    if env is None:
+        env = envelope_of_rfft(X, N, setup.fs, setup.envelope_band)
     e = env.env
     e -= e.mean()
     bearings = [BearingLines(b.name, None) for b in setup.bearings]
