@@ -23,6 +23,9 @@
  *                                                  tacho.py: speed and angle between knots
  *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
+ *   causal_fit(Tc, nc, k, known, ck, c0, ppr, seg)  tacho causal.py: the segments of new edges
+ *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
+ *                                                  orders.py: the causal speed [rpm] at samples
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -527,6 +530,188 @@ done:
     return ret;
 }
 
+/* numpy's pairwise sum of n doubles a[0], a[stride], ... (numpy/_core/src/umath/loops_utils.h:
+ * below 8 one by one from 0., up to 128 in 8 accumulators, above halves), the order in which
+ * ndarray.sum adds a contiguous row: the same bits. */
+static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride) {
+    if (n < 8) {
+        double res = 0.;
+        for (Py_ssize_t i = 0; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        Py_ssize_t i;
+        for (int j = 0; j < 8; j++) r[j] = a[j * stride];
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int j = 0; j < 8; j++) r[j] += a[(i + j) * stride];
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
+}
+
+/* The causal segment of each new committed edge (tacho causal.py's _flush_segments and
+ * smoothing.py's weighted_quadratic, the same operations in their order): edge k[r]
+ * (committed index; Tc, nc hold the run's committed edges from index c0 on) is fitted
+ * with the weighted quadratic over the edges k[r], k[r] - 1, ... back to m = len(ck)
+ * of them (weights ck, those before c0 left out), x scaled by the largest |dx|.
+ * seg (5 x R): key = max(known, T), T, speed, acceleration, valid (1.0: two points or more). */
+static PyObject *causal_fit(PyObject *self, PyObject *args) {
+    Py_buffer bT, bn, bk, bkn, bck, bseg;
+    long long c0;
+    double ppr;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*Ldw*", &bT, &bn, &bk, &bkn, &bck, &c0, &ppr, &bseg))
+        return NULL;
+    PyObject *ret = NULL;
+    double *terms = NULL;
+    const Py_ssize_t nT = bT.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t R = bkn.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bck.len / (Py_ssize_t)sizeof(double);
+    if (bn.len != bT.len || bk.len != R * (Py_ssize_t)sizeof(long long) || m < 1) {
+        PyErr_SetString(PyExc_ValueError, "causal_fit: expected Tc and nc of one length, k and "
+                        "known of R entries, ck of at least one");
+        goto done;
+    }
+    if (!need(&bseg, 5 * R, "seg"))
+        goto done;
+    const double *Tc = bT.buf, *nc = bn.buf, *known = bkn.buf, *ck = bck.buf;
+    const long long *k = bk.buf;
+    double *seg = bseg.buf;
+    for (Py_ssize_t r = 0; r < R; r++) {
+        if (k[r] - c0 < 0 || k[r] - c0 >= nT) {
+            PyErr_Format(PyExc_ValueError, "causal_fit: edge %lld outside the committed %lld..%lld",
+                         k[r], c0, c0 + (long long)nT - 1);
+            goto done;
+        }
+    }
+    terms = malloc(sizeof(double) * 8 * (size_t)m);
+    if (terms == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t r = 0; r < R; r++) {
+        const Py_ssize_t kr = (Py_ssize_t)(k[r] - c0);
+        const double Tk = Tc[kr], nk = nc[kr];
+        double S = 0.0;
+        Py_ssize_t npts = 0;
+        for (Py_ssize_t j = 0; j < m; j++) {       /* S: np.abs(dx).max(), NaN propagating */
+            const double dx = kr - j >= 0 ? Tc[kr - j] - Tk : 0.0;
+            const double a = fabs(dx);
+            if (j == 0 || (S == S && (a > S || a != a))) S = a;
+            npts += kr - j >= 0;
+        }
+        if (!(S > 0)) S = 1.0;
+        for (Py_ssize_t j = 0; j < m; j++) {
+            const int use = kr - j >= 0;
+            const double w = use ? ck[j] : 0.0 * ck[j];
+            const double x = (use ? Tc[kr - j] - Tk : 0.0) / S;
+            const double y = use ? nc[kr - j] - nk : 0.0;
+            const double x2 = x * x, wx = w * x, wx2 = w * x2;
+            double *t = terms + j;
+            t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
+            t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+        }
+        double mom[8];
+        for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
+        double c1 = 0.0, c2 = 0.0;
+        if (npts >= 2) {                            /* smoothing.py's _solve_normal, _eliminate */
+            const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
+            const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
+            const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
+            const double m1 = s1 / s0;
+            const double d11 = s2 - m1 * s1;
+            const double d12 = a12 - m1 * a02;
+            const double e1 = b1 - m1 * b0;
+            const double m2 = a02 / s0;
+            const double d22 = a22 - m2 * a02;
+            const double e2 = b2 - m2 * b0;
+            const double m3 = d12 / d11;
+            c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
+            c1 = (e1 - d12 * c2) / d11;
+        }
+        const double kn = known[r];
+        seg[r] = (kn >= Tk || kn != kn) ? kn : Tk;             /* np.maximum(known, Tk) */
+        seg[R + r] = Tk;
+        seg[2 * R + r] = c1 / (S * ppr);
+        seg[3 * R + r] = 2.0 * c2 / (S * S * ppr);
+        seg[4 * R + r] = npts >= 2 ? 1.0 : 0.0;
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(terms);
+    PyBuffer_Release(&bT); PyBuffer_Release(&bn); PyBuffer_Release(&bk); PyBuffer_Release(&bkn);
+    PyBuffer_Release(&bck); PyBuffer_Release(&bseg);
+    return ret;
+}
+
+/* The order tracker's speed [rpm] at board samples base + pos[i] (orders.py's _rpm of tacho
+ * causal.py's evaluate_causal, the same operations in their order): the segment is the last
+ * one whose key <= s among columns lo..hi-1 of sbuf (5 x cap: key, T, w, a, valid; numpy's
+ * searchsorted, NaN sorting last), then sp = a tau + w with tau = s - T, capped at slack / tau
+ * when tau w > slack, 0 unless valid > 0 and sp > 0 (and 0 before the first segment);
+ * rpm = 60 (sp fs) where that is finite, else 0. */
+static PyObject *causal_rpm(PyObject *self, PyObject *args) {
+    Py_buffer bbuf, bpos, brpm;
+    Py_ssize_t lo, hi;
+    long long base;
+    double fs, slack;
+    if (!PyArg_ParseTuple(args, "y*nnLy*ddw*", &bbuf, &lo, &hi, &base, &bpos, &fs, &slack, &brpm))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t cap = bbuf.len / (Py_ssize_t)sizeof(double) / 5;
+    const Py_ssize_t N = bpos.len / (Py_ssize_t)sizeof(long long);
+    if (bbuf.len != 5 * cap * (Py_ssize_t)sizeof(double) || lo < 0 || hi < lo || hi > cap) {
+        PyErr_SetString(PyExc_ValueError, "causal_rpm: expected sbuf (5 x cap), 0 <= lo <= hi <= cap");
+        goto done;
+    }
+    if (!need(&brpm, N, "rpm"))
+        goto done;
+    const double *keys = (const double *)bbuf.buf + lo;
+    const double *T = keys + cap, *w = keys + 2 * cap, *a = keys + 3 * cap, *v = keys + 4 * cap;
+    const long long *pos = bpos.buf;
+    double *rpm = brpm.buf;
+    const Py_ssize_t n = hi - lo;
+    Py_ssize_t j = -1;                  /* last key <= s; a hint carried from the previous sample */
+    for (Py_ssize_t i = 0; i < N; i++) {
+        const double s = (double)(base + pos[i]);
+        /* numpy's s < key: true also when key is NaN (and s is not) */
+#define KEY_AFTER(q) (s < keys[q] || (keys[q] != keys[q] && s == s))
+        if (!((j < 0 || !KEY_AFTER(j)) && (j + 1 >= n || KEY_AFTER(j + 1)))) {
+            Py_ssize_t l = 0, h = n;    /* count of keys not after s */
+            while (l < h) {
+                const Py_ssize_t mid = l + (h - l) / 2;
+                if (KEY_AFTER(mid)) h = mid; else l = mid + 1;
+            }
+            j = l - 1;
+        }
+#undef KEY_AFTER
+        if (j < 0) {                    /* before the first segment: not valid */
+            rpm[i] = 0.0;
+            continue;
+        }
+        const double tau = s - T[j];
+        double sp = a[j] * tau;
+        sp += w[j];
+        if (tau * w[j] > slack) {       /* edges overdue: capped (np.minimum, NaN propagating) */
+            const double c = slack / tau;
+            if (!(sp <= c || sp != sp)) sp = c;
+        }
+        if (!(v[j] > 0 && sp > 0)) sp = 0.0;
+        const double hz = sp * fs;
+        rpm[i] = isfinite(hz) && sp != 0.0 ? 60.0 * hz : 0.0;
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&bbuf); PyBuffer_Release(&bpos); PyBuffer_Release(&brpm);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
     {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
     {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
@@ -535,6 +720,8 @@ static PyMethodDef methods[] = {
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
     {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},
+    {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
+    {"causal_rpm", causal_rpm, METH_VARARGS, "The causal speed [rpm] at samples (orders.py)."},
     {NULL, NULL, 0, NULL},
 };
 
