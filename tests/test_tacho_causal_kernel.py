@@ -5,7 +5,7 @@ speed at its samples (``_trackerkernel.causal_rpm``: the search, the extrapolati
 overdue edges, 60 x Hz where valid), on random edge streams with missed, spurious and
 duplicated pulses and stops, fed in random splits, at causal windows below, at and above the
 8 accumulators of numpy's pairwise sum; and the daemon's /orders with the kernel's causal
-speed equal those of the numpy path, through ``cmsensord --simulate``."""
+speed equal those of the numpy path, through ``cmsensord replay``."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from cmsensord.dsp.order_tracker import have_kernel
 from cmsensord.dsp.tacho import TachoTracker
 from cmsensord.dsp.tacho.causal import CausalSpeed
 from processes import ENV
+from test_live_batching import raw_capture
 from test_tacho_batch import L, random_edges
 
 pytestmark = pytest.mark.skipif(not have_kernel(), reason="the compiled tracker kernel is not built")
@@ -81,7 +82,7 @@ def test_the_kernels_causal_speed_is_zero_before_the_first_segment_and_without_e
     assert np.array_equal(rpm, ref.causal_rpm(0, np.arange(0, 10000, 10, dtype=np.int64)))
 
 
-#: the daemon on a simulated board, the kernel's causal speed off when the first argument is "off";
+#: cmsensord with the kernel's causal speed off when the first argument is "off";
 #: prints the /orders messages of its log (their stamps, from the wall clock at the start, left out)
 CODE = """
 import json, sys
@@ -99,14 +100,15 @@ print(json.dumps([{k: v for k, v in m.items() if k != "timestamp"}
 
 @pytest.mark.process
 def test_the_daemons_orders_with_the_kernels_causal_speed_equal_the_numpy_paths(tmp_path):
+    cap = tmp_path / "faulty.cap"
+    cap.write_bytes(raw_capture(12.0))
     got = []
     for kernel in ("on", "off"):
         out = tmp_path / kernel
-        p = subprocess.run([sys.executable, "-c", CODE, kernel, "--simulate", "--scenario", "faulty",
-                            "--mode", "raw", "--tacho", "--duration", "6", "--speed", "6", "--out",
-                            str(out)], capture_output=True, text=True, env=ENV, timeout=120)
+        p = subprocess.run([sys.executable, "-c", CODE, kernel, "replay", str(cap), "--out", str(out)],
+                           capture_output=True, text=True, env=ENV, timeout=120)
         assert p.returncode == 0, p.stderr
         got.append(json.loads(p.stdout.strip().splitlines()[-1]))
-    assert len(got[0]) >= 40 and sum(m["valid"] for m in got[0]) >= 20
+    assert len(got[0]) >= 100 and sum(m["valid"] for m in got[0]) >= 50
     assert got[0] == got[1]
     assert CausalSpeed.causal_kernel        # the class default: the kernel where it is built

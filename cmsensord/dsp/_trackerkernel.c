@@ -22,6 +22,7 @@
  *   tacho_eval(s, kT, kth, kw, kr, speed, turns, j, code)
  *                                                  tacho.py: speed and angle between knots
  *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
+ *   lerp_at(tab, dtab, x, have, seg, a, b, w, m)   gain_table.py: the same at grid coordinates
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
  *   causal_fit(Tc, nc, k, known, ck, c0, ppr, seg)  tacho causal.py: the segments of new edges
  *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
@@ -486,6 +487,61 @@ done:
     return ret;
 }
 
+/* lerp_rows at grid coordinates x (N): i = min(int(x), rows - 2), f = clip(x - i, 0, 1), as
+ * gain_table.py's lookup computes them, when the table has the rows i and i + 1 of every x
+ * (have: one byte per segment of seg rows).  Returns True when done; False, writing nothing,
+ * when a row is not there yet or an x is not a coordinate >= 0 (the caller's numpy path). */
+static PyObject *lerp_at(PyObject *self, PyObject *args) {
+    Py_buffer btab, bdtab, bx, bhave, ba, bb;
+    Py_ssize_t seg, w, m;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*nw*w*nn", &btab, &bdtab, &bx, &bhave, &seg, &ba, &bb, &w, &m))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = bx.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t rows = w > 0 ? btab.len / (Py_ssize_t)sizeof(double) / w : 0;
+    if (w <= 0 || m < 0 || m > w || rows < 2 || seg < 1 || bdtab.len < (rows - 1) * w * (Py_ssize_t)sizeof(double)
+        || bhave.len < (rows + seg - 1) / seg) {
+        PyErr_SetString(PyExc_ValueError, "lerp_at: expected tab (rows >= 2, w), dtab (rows - 1, w), "
+                        "have of a byte per segment, 0 <= m <= w");
+        goto done;
+    }
+    if (!need(&ba, N * m, "a") || !need(&bb, N * (w - m), "b"))
+        goto done;
+    const double *tab = btab.buf, *dtab = bdtab.buf, *x = bx.buf;
+    const unsigned char *have = bhave.buf;
+    double *a = ba.buf, *b = bb.buf;
+    for (Py_ssize_t n = 0; n < N; n++) {
+        if (!(x[n] >= 0.0 && x[n] < 9.0e15)) {
+            ret = Py_False;
+            goto found;
+        }
+        long long i = (long long)x[n];
+        if (i > rows - 2) i = rows - 2;
+        if (!have[i / seg] || !have[(i + 1) / seg]) {
+            ret = Py_False;
+            goto found;
+        }
+    }
+    for (Py_ssize_t n = 0; n < N; n++) {
+        long long i = (long long)x[n];
+        if (i > rows - 2) i = rows - 2;
+        double fn = x[n] - (double)i;
+        if (fn < 0.0) fn = 0.0;
+        if (fn > 1.0) fn = 1.0;
+        const double *t = tab + i * w, *dt = dtab + i * w;
+        double *an = a + n * m, *bn = b + n * (w - m);
+        for (Py_ssize_t j = 0; j < m; j++) an[j] = dt[j] * fn + t[j];
+        for (Py_ssize_t j = m; j < w; j++) bn[j - m] = dt[j] * fn + t[j];
+    }
+    ret = Py_True;
+found:
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&btab); PyBuffer_Release(&bdtab); PyBuffer_Release(&bx); PyBuffer_Release(&bhave);
+    PyBuffer_Release(&ba); PyBuffer_Release(&bb);
+    return ret;
+}
+
 /* Peak amplitude from the state pairs (recursions.py's envelope, the same operations in its
  * order): xs (N x C x 2K), c (N x K) -> env (N x C x K),
  *   env = sqrt(max((x1 x1 - (c x1) x2 + x2 x2) / max(1 - (0.25 c) c, 1e-300), 0))
@@ -715,6 +771,7 @@ done:
 static PyMethodDef methods[] = {
     {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
     {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
+    {"lerp_at", lerp_at, METH_VARARGS, "Table rows interpolated at grid coordinates (gain table)."},
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},

@@ -172,21 +172,21 @@ class OrderChain:
         if got is None:
             return []
         first, (take,) = got
-        res = self.tracker.process(take, lambda i: self._rpm(first, i))
+        res = self.tracker.process(take, lambda i: self._rpm(first + i))
         out: Out = self._blocks(res.blocks, "recursive")
         if res.smoothed_blocks is not None:
             out += self._blocks(res.smoothed_blocks, "smoothed")
         return out
 
-    def _rpm(self, first: int, i: np.ndarray) -> np.ndarray:
-        """The speed [rpm] the tracker runs on at board samples ``first + i`` (ascending): the
-        tacho's causal speed (:meth:`TachoTracker.causal_rpm`), or its final one
-        (``orders.speed``); 0 where it is not valid.  The tracker asks only for the samples it
-        reads (one in its decimation, in the call they come in), each the value it has at every
-        sample (:meth:`TachoTracker.causal_range`)."""
+    def _rpm(self, samples: np.ndarray) -> np.ndarray:
+        """The speed [rpm] the tracker runs on at board samples (ascending): the tacho's causal
+        speed (:meth:`TachoTracker.causal_rpm`), or its final one (``orders.speed``); 0 where
+        it is not valid.  The tracker asks only for the samples it reads (one in its
+        decimation, in the call they come in), each the value it has at every sample
+        (:meth:`TachoTracker.causal_range`)."""
         if self.causal:
-            return self.tacho.causal_rpm(first, i)
-        hz, _, valid = self.tacho.evaluate(first + i)
+            return self.tacho.causal_rpm(0, samples)
+        hz, _, valid = self.tacho.evaluate(samples)
         return np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
 
     def _blocks(self, blocks, method: str) -> Out:

@@ -16,7 +16,7 @@ import numpy as np
 
 from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
 from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
-from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
+from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
 from cmsensord.dsp.order_tracker.recursions import (
@@ -111,6 +111,7 @@ class OrderTracker:
         self.C = int(n_channels)
         self.K = len(self.components)
         self._top_order = max((c.order or 0.0) for c in self.components)     # for _block_stats
+        self._omegas = Omegas(self.components)                              # omega() in one operation
         self.q1 = float(q1)
         self.gains = gains
         self.f_hi = max(float(c.freq(self.max_rpm)) for c in self.components)
@@ -407,7 +408,10 @@ class OrderTracker:
         st = self.state
         N, d = yd.shape[0], 2 * self.K
         speed = model_speed(rd, self.min_rpm)
-        c = 2.0 * np.cos(omega(self.components, speed) / self.fs_track)
+        c = self._omegas(speed)             # 2 cos(omega / fs_track), in place
+        c /= self.fs_track
+        np.cos(c, out=c)
+        c *= 2.0
         any_miss = miss is not None
         k, S, P = self._gains(speed, c, miss[:, 0] if any_miss and self.gains == "exact" else None)
         if N == 0:

@@ -107,10 +107,11 @@ class CausalSpeed(TachoState):
         sp, valid = self._causal_speed(flat - T, w, a, v, before if before.any() else None)
         return (sp * self.fs).reshape(s.shape), valid.reshape(s.shape)
 
-    def causal_rpm(self, base: int, pos: npt.NDArray[np.int64]) -> FloatArray:
+    def causal_rpm(self, base: int, pos: npt.ArrayLike) -> FloatArray:
         """The order tracker's speed [rpm] at the samples ``base + pos``: 60 x the speed of
         :meth:`evaluate_causal` where it is valid and finite, else 0 (the same values, bit for
         bit; in the compiled kernel when it is built, one call for the search and the speed)."""
+        pos = np.asarray(pos, dtype=np.int64)
         if _kernel is None or not self.causal_kernel:
             hz, valid = self.evaluate_causal(base + pos)
             return np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
