@@ -24,7 +24,7 @@
  *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
  *   lerp_at(tab, dtab, x, have, seg, a, b, w, m)   gain_table.py: the same at grid coordinates
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
- *   causal_fit(Tc, nc, k, known, ck, c0, ppr, seg)  tacho causal.py: the segments of new edges
+ *   causal_fit(Tc, nc, todo, ck, c0, ppr, sbuf, col) tacho causal.py: the segments of new edges
  *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
  *                                                  orders.py: the causal speed [rpm] at samples
  */
@@ -611,46 +611,64 @@ static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride) {
 }
 
 /* The causal segment of each new committed edge (tacho causal.py's _flush_segments and
- * smoothing.py's weighted_quadratic, the same operations in their order): edge k[r]
- * (committed index; Tc, nc hold the run's committed edges from index c0 on) is fitted
- * with the weighted quadratic over the edges k[r], k[r] - 1, ... back to m = len(ck)
- * of them (weights ck, those before c0 left out), x scaled by the largest |dx|.
- * seg (5 x R): key = max(known, T), T, speed, acceleration, valid (1.0: two points or more). */
+ * smoothing.py's weighted_quadratic, the same operations in their order): edge k (committed
+ * index; Tc, nc: the run's committed edge times and pulse counts from index c0 on, Python
+ * lists of numbers) of each (k, known) in todo is fitted with the weighted quadratic over the
+ * edges k, k - 1, ... back to m = len(ck) of them (weights ck, those before c0 left out), x
+ * scaled by the largest |dx|.  Its segment goes to column col + r of sbuf (5 x cap): key =
+ * max(known, T), T, speed, acceleration, valid (1.0: two points or more). */
 static PyObject *causal_fit(PyObject *self, PyObject *args) {
-    Py_buffer bT, bn, bk, bkn, bck, bseg;
+    PyObject *oT, *on, *otodo;
+    Py_buffer bck, bbuf;
     long long c0;
     double ppr;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*Ldw*", &bT, &bn, &bk, &bkn, &bck, &c0, &ppr, &bseg))
+    Py_ssize_t col;
+    if (!PyArg_ParseTuple(args, "OOOy*Ldw*n", &oT, &on, &otodo, &bck, &c0, &ppr, &bbuf, &col))
         return NULL;
-    PyObject *ret = NULL;
-    double *terms = NULL;
-    const Py_ssize_t nT = bT.len / (Py_ssize_t)sizeof(double);
-    const Py_ssize_t R = bkn.len / (Py_ssize_t)sizeof(double);
+    PyObject *ret = NULL, *fT = NULL, *fn = NULL, *ftodo = NULL;
+    double *Tc = NULL, *terms = NULL;
     const Py_ssize_t m = bck.len / (Py_ssize_t)sizeof(double);
-    if (bn.len != bT.len || bk.len != R * (Py_ssize_t)sizeof(long long) || m < 1) {
-        PyErr_SetString(PyExc_ValueError, "causal_fit: expected Tc and nc of one length, k and "
-                        "known of R entries, ck of at least one");
+    const Py_ssize_t cap = bbuf.len / (Py_ssize_t)sizeof(double) / 5;
+    fT = PySequence_Fast(oT, "causal_fit: Tc must be a sequence");
+    fn = fT ? PySequence_Fast(on, "causal_fit: nc must be a sequence") : NULL;
+    ftodo = fn ? PySequence_Fast(otodo, "causal_fit: todo must be a sequence") : NULL;
+    if (ftodo == NULL)
+        goto done;
+    const Py_ssize_t nT = PySequence_Fast_GET_SIZE(fT);
+    const Py_ssize_t R = PySequence_Fast_GET_SIZE(ftodo);
+    if (PySequence_Fast_GET_SIZE(fn) != nT || m < 1 || bbuf.len != 5 * cap * (Py_ssize_t)sizeof(double)
+        || col < 0 || col + R > cap) {
+        PyErr_SetString(PyExc_ValueError, "causal_fit: expected Tc and nc of one length, ck of at "
+                        "least one weight, sbuf (5 x cap) with room for todo at col");
         goto done;
     }
-    if (!need(&bseg, 5 * R, "seg"))
-        goto done;
-    const double *Tc = bT.buf, *nc = bn.buf, *known = bkn.buf, *ck = bck.buf;
-    const long long *k = bk.buf;
-    double *seg = bseg.buf;
-    for (Py_ssize_t r = 0; r < R; r++) {
-        if (k[r] - c0 < 0 || k[r] - c0 >= nT) {
-            PyErr_Format(PyExc_ValueError, "causal_fit: edge %lld outside the committed %lld..%lld",
-                         k[r], c0, c0 + (long long)nT - 1);
-            goto done;
-        }
-    }
-    terms = malloc(sizeof(double) * 8 * (size_t)m);
-    if (terms == NULL) {
+    Tc = malloc(sizeof(double) * (size_t)(2 * nT + 8 * m + 1));
+    if (Tc == NULL) {
         PyErr_NoMemory();
         goto done;
     }
+    double *nc = Tc + nT;
+    terms = nc + nT;
+    for (Py_ssize_t i = 0; i < nT; i++) {                 /* np.asarray(..., float64) of the lists */
+        Tc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fT, i));
+        nc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fn, i));
+    }
+    if (PyErr_Occurred())
+        goto done;
+    const double *ck = bck.buf;
+    double *seg = (double *)bbuf.buf + col;
     for (Py_ssize_t r = 0; r < R; r++) {
-        const Py_ssize_t kr = (Py_ssize_t)(k[r] - c0);
+        PyObject *item = PySequence_Fast_GET_ITEM(ftodo, r);
+        long long k;
+        double kn;
+        if (!PyArg_ParseTuple(item, "Ld", &k, &kn))
+            goto done;
+        if (k - c0 < 0 || k - c0 >= nT) {
+            PyErr_Format(PyExc_ValueError, "causal_fit: edge %lld outside the committed %lld..%lld",
+                         k, c0, c0 + (long long)nT - 1);
+            goto done;
+        }
+        const Py_ssize_t kr = (Py_ssize_t)(k - c0);
         const double Tk = Tc[kr], nk = nc[kr];
         double S = 0.0;
         Py_ssize_t npts = 0;
@@ -689,19 +707,18 @@ static PyObject *causal_fit(PyObject *self, PyObject *args) {
             c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
             c1 = (e1 - d12 * c2) / d11;
         }
-        const double kn = known[r];
         seg[r] = (kn >= Tk || kn != kn) ? kn : Tk;             /* np.maximum(known, Tk) */
-        seg[R + r] = Tk;
-        seg[2 * R + r] = c1 / (S * ppr);
-        seg[3 * R + r] = 2.0 * c2 / (S * S * ppr);
-        seg[4 * R + r] = npts >= 2 ? 1.0 : 0.0;
+        seg[cap + r] = Tk;
+        seg[2 * cap + r] = c1 / (S * ppr);
+        seg[3 * cap + r] = 2.0 * c2 / (S * S * ppr);
+        seg[4 * cap + r] = npts >= 2 ? 1.0 : 0.0;
     }
     Py_INCREF(Py_None);
     ret = Py_None;
 done:
-    free(terms);
-    PyBuffer_Release(&bT); PyBuffer_Release(&bn); PyBuffer_Release(&bk); PyBuffer_Release(&bkn);
-    PyBuffer_Release(&bck); PyBuffer_Release(&bseg);
+    free(Tc);
+    Py_XDECREF(fT); Py_XDECREF(fn); Py_XDECREF(ftodo);
+    PyBuffer_Release(&bck); PyBuffer_Release(&bbuf);
     return ret;
 }
 

@@ -41,15 +41,17 @@ class CausalSpeed(TachoState):
         if not todo:
             return
         self._seg_todo = []
+        if _kernel is not None and self.causal_kernel:     # the same operations, in C, into the buffer
+            buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, len(todo))
+            self._sbuf = buf
+            _kernel.causal_fit(self._cT, self._cn, todo, self._ckernel, self._c0, float(self.ppr), buf,
+                               self._shi)
+            self._shi += len(todo)
+            return
         Tc, nc = self._committed()
         c0 = self._c0
         k = np.fromiter((t[0] for t in todo), dtype=np.int64, count=len(todo))
         known = np.fromiter((t[1] for t in todo), dtype=np.float64, count=len(todo))
-        if _kernel is not None and self.causal_kernel:     # the same operations, in C
-            seg = np.empty((5, k.size))
-            _kernel.causal_fit(Tc, nc, k, known, self._ckernel, c0, float(self.ppr), seg)
-            self._append_segments(*seg)
-            return
         m = self.causal_window
         kr = k - c0
         Tk = Tc[kr]
