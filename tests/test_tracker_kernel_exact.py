@@ -179,3 +179,30 @@ def test_the_impulse_response_from_the_kernel_equals_the_python_loop(monkeypatch
     monkeypatch.setattr(antialias, "_trackerkernel", None)
     assert np.array_equal(fast, antialias._sos_impulse(sos)) and len(fast) > 500
     assert antialias.missing_window_of(sos) == w_fast
+
+
+@pytest.mark.parametrize("C", [1, 2, 3])
+@pytest.mark.parametrize("K", [1, 2, 4])
+def test_the_kernels_block_statistics_equal_the_numpy_ones(C, K):
+    """Random blocks of every length around numpy's 8 accumulators and the live 125 samples,
+    speeds below min_rpm, above the tracker's Nyquist and NaN (invalid blocks, NaN statistics):
+    rms, amplitude, mean speed and validity are numpy's, bit for bit, and the kernel runs."""
+    comps = [TrackedComponent(f"{k}x", order=float(k)) for k in range(1, K + 1)]
+    tr = OrderTracker(comps, fs_in=25000.0, max_rpm=3600.0, n_channels=C, backend="c")
+    calls = []
+    kernel = tr._stats_kernel
+    assert kernel is not None
+    tr._stats_kernel = lambda *a: calls.append(1) or kernel(*a)
+    rng = np.random.default_rng(10 * C + K)
+    for E in (1, 2, 5):
+        for B in (1, 3, 7, 8, 9, 17, 125, 200):
+            wave = rng.standard_normal((E, B, C, K)) * 10.0 ** rng.uniform(-3, 3)
+            env = np.abs(rng.standard_normal((E, B, C, K)))
+            rpm = rng.uniform(200.0, 4000.0, (E, B))
+            rpm[0, rng.integers(B)] = [np.nan, 100.0, 1e5, -1500.0][rng.integers(4)]
+            got = tr._block_stats(np.arange(E) * B, wave, env, rpm, None)
+            want = tr._block_stats_numpy(wave, env, rpm)
+            for a, b in zip((got.rms, got.amplitude, got.rpm, got.valid), want):
+                assert a.shape == b.shape and a.dtype == b.dtype
+                assert np.array_equal(a, b, equal_nan=True)
+    assert len(calls) == 3 * 8

@@ -23,6 +23,8 @@
  *                                                  tacho.py: speed and angle between knots
  *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
  *   lerp_at(tab, dtab, x, have, seg, a, b, w, m)   gain_table.py: the same at grid coordinates
+ *   block_stats(wave, env, rpm, K, min_rpm, top, half_fs, rms, amp, rmean, valid)
+ *                                                  tracker.py: per-block statistics
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
  *   causal_fit(Tc, nc, todo, ck, c0, ppr, sbuf, col) tacho causal.py: the segments of new edges
  *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
@@ -40,6 +42,30 @@ static int need(Py_buffer *b, Py_ssize_t n_doubles, const char *name) {
         return 0;
     }
     return 1;
+}
+
+/* numpy's pairwise sum of n doubles a[0], a[stride], ... (numpy/_core/src/umath/loops_utils.h:
+ * below 8 one by one from 0., up to 128 in 8 accumulators, above halves), the order in which
+ * ndarray.sum adds a contiguous row: the same bits. */
+static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride) {
+    if (n < 8) {
+        double res = 0.;
+        for (Py_ssize_t i = 0; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        Py_ssize_t i;
+        for (int j = 0; j < 8; j++) r[j] = a[j * stride];
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int j = 0; j < 8; j++) r[j] += a[(i + j) * stride];
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
 }
 
 /* One channel (column ch of x, T x C) through the S sections, every D-th output from skip
@@ -542,6 +568,75 @@ done:
     return ret;
 }
 
+/* The order tracker's per-block statistics (tracker.py's _block_stats, the same operations in
+ * numpy's order) of contiguous wave, env (E x B x C x K) and rpm (E x B): rms = sqrt(sum(wave^2)
+ * / B) and amp = sum(env) / B over each block's samples (numpy sums a block's column one sample
+ * after the other when C K > 1, pairwise when it is 1: the column is then contiguous), rmean =
+ * sum(rpm) / B (pairwise), valid = every |rpm| >= min_rpm and max |rpm| / 60 top < half_fs;
+ * rms and amp NaN where not valid. */
+static PyObject *block_stats(PyObject *self, PyObject *args) {
+    Py_buffer bw, be, br, brms, bamp, bmean, bvalid;
+    Py_ssize_t K;
+    double min_rpm, top, half_fs;
+    if (!PyArg_ParseTuple(args, "y*y*y*ndddw*w*w*w*", &bw, &be, &br, &K, &min_rpm, &top, &half_fs,
+                          &brms, &bamp, &bmean, &bvalid))
+        return NULL;
+    PyObject *ret = NULL;
+    double *sq = NULL;
+    const Py_ssize_t E = bmean.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t B = E > 0 ? br.len / (Py_ssize_t)sizeof(double) / E : 0;
+    const Py_ssize_t CK = B > 0 ? bw.len / (Py_ssize_t)sizeof(double) / (E * B) : 0;
+    if (E <= 0 || B <= 0 || K <= 0 || CK <= 0 || CK % K || br.len != E * B * (Py_ssize_t)sizeof(double)
+        || bw.len != E * B * CK * (Py_ssize_t)sizeof(double) || be.len != bw.len || bvalid.len < E) {
+        PyErr_SetString(PyExc_ValueError, "block_stats: expected wave and env (E x B x C x K), rpm "
+                        "(E x B), rmean and valid of E entries");
+        goto done;
+    }
+    if (!need(&brms, E * CK, "rms") || !need(&bamp, E * CK, "amp"))
+        goto done;
+    sq = malloc(sizeof(double) * (size_t)(B * CK));
+    if (sq == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const double *wave = bw.buf, *env = be.buf, *rpm = br.buf;
+    double *rms = brms.buf, *amp = bamp.buf, *rmean = bmean.buf;
+    unsigned char *valid = bvalid.buf;
+    const double n = (double)B;
+    for (Py_ssize_t e = 0; e < E; e++) {
+        const double *we = wave + e * B * CK, *ee = env + e * B * CK, *re = rpm + e * B;
+        double *rs = rms + e * CK, *am = amp + e * CK;
+        for (Py_ssize_t i = 0; i < B * CK; i++) sq[i] = we[i] * we[i];
+        if (CK == 1) {
+            rs[0] = pairwise_sum(sq, B, 1);
+            am[0] = pairwise_sum(ee, B, 1);
+        } else {
+            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sq[j]; am[j] = ee[j]; }
+            for (Py_ssize_t b = 1; b < B; b++)
+                for (Py_ssize_t j = 0; j < CK; j++) { rs[j] += sq[b * CK + j]; am[j] += ee[b * CK + j]; }
+        }
+        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sqrt(rs[j] / n); am[j] = am[j] / n; }
+        rmean[e] = pairwise_sum(re, B, 1) / n;
+        int ok = 1;
+        double hi = 0.0;
+        for (Py_ssize_t b = 0; b < B; b++) {
+            const double a = fabs(re[b]);
+            ok &= a >= min_rpm;                             /* NaN: not valid */
+            if (b == 0 || (hi == hi && (a > hi || a != a))) hi = a;
+        }
+        valid[e] = ok && hi / 60.0 * top < half_fs;
+        if (!valid[e])
+            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = NAN; am[j] = NAN; }
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(sq);
+    PyBuffer_Release(&bw); PyBuffer_Release(&be); PyBuffer_Release(&br); PyBuffer_Release(&brms);
+    PyBuffer_Release(&bamp); PyBuffer_Release(&bmean); PyBuffer_Release(&bvalid);
+    return ret;
+}
+
 /* Peak amplitude from the state pairs (recursions.py's envelope, the same operations in its
  * order): xs (N x C x 2K), c (N x K) -> env (N x C x K),
  *   env = sqrt(max((x1 x1 - (c x1) x2 + x2 x2) / max(1 - (0.25 c) c, 1e-300), 0))
@@ -584,30 +679,6 @@ static PyObject *envelope(PyObject *self, PyObject *args) {
 done:
     PyBuffer_Release(&bx); PyBuffer_Release(&bc); PyBuffer_Release(&be);
     return ret;
-}
-
-/* numpy's pairwise sum of n doubles a[0], a[stride], ... (numpy/_core/src/umath/loops_utils.h:
- * below 8 one by one from 0., up to 128 in 8 accumulators, above halves), the order in which
- * ndarray.sum adds a contiguous row: the same bits. */
-static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride) {
-    if (n < 8) {
-        double res = 0.;
-        for (Py_ssize_t i = 0; i < n; i++) res += a[i * stride];
-        return res;
-    }
-    if (n <= 128) {
-        double r[8];
-        Py_ssize_t i;
-        for (int j = 0; j < 8; j++) r[j] = a[j * stride];
-        for (i = 8; i < n - (n % 8); i += 8)
-            for (int j = 0; j < 8; j++) r[j] += a[(i + j) * stride];
-        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
-        for (; i < n; i++) res += a[i * stride];
-        return res;
-    }
-    Py_ssize_t n2 = n / 2;
-    n2 -= n2 % 8;
-    return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
 }
 
 /* The causal segment of each new committed edge (tacho causal.py's _flush_segments and
@@ -789,6 +860,7 @@ static PyMethodDef methods[] = {
     {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
     {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
     {"lerp_at", lerp_at, METH_VARARGS, "Table rows interpolated at grid coordinates (gain table)."},
+    {"block_stats", block_stats, METH_VARARGS, "The order tracker's per-block statistics (tracker.py)."},
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},

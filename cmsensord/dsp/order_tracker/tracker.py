@@ -112,6 +112,8 @@ class OrderTracker:
         self.K = len(self.components)
         self._top_order = max((c.order or 0.0) for c in self.components)     # for _block_stats
         self._omegas = Omegas(self.components)                              # omega() in one operation
+        # the block statistics in the compiled kernel with the C backend (the same numbers)
+        self._stats_kernel = getattr(_trackerkernel, "block_stats", None) if backend == "c" else None
         self.q1 = float(q1)
         self.gains = gains
         self.f_hi = max(float(c.freq(self.max_rpm)) for c in self.components)
@@ -466,6 +468,27 @@ class OrderTracker:
     def _block_stats(self, starts, wave, env, rpm, miss) -> BlockStats:
         """Statistics of whole blocks: wave/env (E, B, C, K), rpm (E, B), miss (E, B, C)
         or None (none missing)."""
+        E = wave.shape[0]
+        kernel = self._stats_kernel
+        if (kernel is not None and E and wave.flags.c_contiguous and env.flags.c_contiguous
+                and rpm.flags.c_contiguous):        # the same operations in one pass
+            rms, amp = np.empty((E, self.C, self.K)), np.empty((E, self.C, self.K))
+            rmean, valid = np.empty(E), np.empty(E, dtype=bool)
+            kernel(wave, env, rpm, self.K, self.min_rpm, self._top_order, 0.5 * self.fs_track, rms, amp,
+                   rmean, valid.view(np.uint8))
+        else:
+            rms, amp, rmean, valid = self._block_stats_numpy(wave, env, rpm)
+        starts = np.asarray(starts, dtype=np.int64)
+        t_in = (starts + self.block - 1) * self.decimate - self.delay_in
+        if miss is None:
+            missing = np.zeros((len(starts), self.C), dtype=np.int64)
+        else:
+            missing = np.count_nonzero(miss, axis=1).astype(np.int64)
+        return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
+                          missing=missing)
+
+    def _block_stats_numpy(self, wave, env, rpm):
+        """rms, amplitude (E, C, K), mean speed and validity (E,) of whole blocks."""
         # np.mean is the sum over the axis divided by its length: the same operations, without
         # its Python wrapper (this runs at every live call)
         n = wave.shape[1]
@@ -480,14 +503,7 @@ class OrderTracker:
         if not valid.all():
             rms[~valid] = np.nan
             amp[~valid] = np.nan
-        starts = np.asarray(starts, dtype=np.int64)
-        t_in = (starts + self.block - 1) * self.decimate - self.delay_in
-        if miss is None:
-            missing = np.zeros((len(starts), self.C), dtype=np.int64)
-        else:
-            missing = np.count_nonzero(miss, axis=1).astype(np.int64)
-        return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
-                          missing=missing)
+        return rms, amp, rmean, valid
 
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state
