@@ -112,3 +112,36 @@ def test_the_daemons_orders_with_the_kernels_causal_speed_equal_the_numpy_paths(
     assert len(got[0]) >= 100 and sum(m["valid"] for m in got[0]) >= 50
     assert got[0] == got[1]
     assert CausalSpeed.causal_kernel        # the class default: the kernel where it is built
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_few_frames_fed_as_lists_give_what_feed_flat_gives(seed):
+    """``feed_few`` (a live call's frames as Python lists, what Shaft.feed decodes) against
+    ``feed_flat`` (arrays): the same events, speeds and causal speeds, bit for bit, on random
+    edge streams in random splits (most calls of a few frames, some of more than 64, some
+    stepping back in time, which both reject the same way)."""
+    rnd = random.Random(500 + seed)
+    t0, edges = random_edges(rnd, 30.0)
+    cuts = sorted(rnd.sample(range(1, len(t0)), 250))
+    few, flat = TachoTracker(25000, ppr=1, block_len=L), TachoTracker(25000, ppr=1, block_len=L)
+    fed = 0
+    for a, b in zip([0, *cuts], [*cuts, len(t0)]):
+        t, counts = t0[a:b].tolist(), [len(e) for e in edges[a:b]]
+        off = np.concatenate(edges[a:b]).tolist() if b > a else []
+        if rnd.random() < 0.03 and t:                      # a frame from the past
+            t[0] = max(0, t[0] - 3 * L)
+        got, want = [], []
+        for tr, out, args in ((few, got, (t, counts, off)),
+                              (flat, want, (np.array(t, dtype=np.int64), counts, np.array(off)))):
+            try:
+                out += (tr.feed_few if tr is few else tr.feed_flat)(*args)
+            except ValueError as exc:
+                out.append(str(exc))
+        assert got == want
+        fed += len(t)
+        s = np.arange(max(0, few.covered_until - 5000), few.covered_until + 500)
+        for x, y in zip(few.evaluate_causal(s) + few.evaluate(s), flat.evaluate_causal(s) + flat.evaluate(s)):
+            assert np.array_equal(x, y, equal_nan=True)
+    assert fed > 1000 and few.counters == flat.counters and few.final_until == flat.final_until
+    with pytest.raises(ValueError, match="one edge count per frame"):
+        few.feed_few([few.covered_until], [2], [1])

@@ -508,6 +508,12 @@ class OrderTracker:
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state
         B = self.block
+        C, K = self.C, self.K
+        if miss is None and not (len(st.pend["rpm"]) if st.pend else 0) and not len(rd) % B:
+            nb = len(rd) // B                   # whole blocks, nothing carried (a live call): as below
+            st.pend = {}
+            return self._block_stats(n0 + B * np.arange(nb), wave.reshape(nb, B, C, K),
+                                     env.reshape(nb, B, C, K), rd.reshape(nb, B), None)
         cur = with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
         first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
         nb = len(cur["rpm"]) // B
@@ -515,7 +521,6 @@ class OrderTracker:
         st.pend = {k: v[used:].copy() for k, v in cur.items()}
         if "miss" in st.pend and not st.pend["miss"].any():
             del st.pend["miss"]
-        C, K = self.C, self.K
         return self._block_stats(first + B * np.arange(nb),
                                  cur["wave"][:used].reshape(nb, B, C, K),
                                  cur["env"][:used].reshape(nb, B, C, K),
