@@ -163,34 +163,6 @@ class FrameQueue:
         return len(self._q)
 
 
-def _waiting_reader(ser) -> Callable[[int], bytes]:
-    """How the reader takes up to n bytes the port shows waiting: a port with a file
-    descriptor (pyserial's on POSIX, opened non-blocking) by one ``os.read`` of them, without
-    the ``select`` and the loop of ``Serial.read`` (which would also wait out the port's timeout
-    for bytes a pty shows but returns in a later read); its errors as ``Serial.read`` raises
-    them.  Any other port (no descriptor) by its ``read``."""
-    fileno = getattr(ser, "fileno", None)
-    if fileno is None:
-        return ser.read
-    fd = fileno()
-
-    def read(n: int) -> bytes:
-        try:
-            data = os.read(fd, n)
-        except BlockingIOError:             # nothing after all: as Serial.read at its timeout
-            return b""
-        except InterruptedError:
-            return b""
-        except OSError as exc:
-            raise serial.SerialException(f"read failed: {exc}") from None
-        if not data:                        # what Serial.read says of a device gone
-            raise serial.SerialException("device reports readiness to read but returned no data "
-                                         "(device disconnected or multiple access on port?)")
-        return data
-
-    return read
-
-
 def _completes(f: Frame, t0: int) -> bool:
     """``f`` shows the block at ``t0`` is in: its TACHO frame, or a frame of a later block."""
     return f.t0_unwrapped > t0 or (f.t0_unwrapped == t0 and f.type == FrameType.TACHO)
@@ -337,11 +309,10 @@ class SerialReader(threading.Thread):
             if not select.select([fileno()], [], [], READ_WAIT_S if timeout is None else timeout)[0]:
                 return b"", False
             n = ser.in_waiting or 1
-        read = _waiting_reader(ser)
-        data = read(min(self.read_size, n))
+        data = ser.read(min(self.read_size, n))
         last = len(data)
         while len(data) < STEP_BYTES and last and (n := ser.in_waiting):
-            chunk = read(min(self.read_size, n))
+            chunk = ser.read(min(self.read_size, n))
             data, last = data + chunk, len(chunk)
         return data, last >= min(self.read_size, TTY_READ_MAX) or len(data) >= STEP_BYTES
 
