@@ -78,6 +78,55 @@ def test_the_kernels_table_lookup_equals_the_numpy_one(lag):
     assert got[2] is None or got[2].shape == (len(speed), 6, 6)
 
 
+def test_the_kernels_lookup_at_grid_coordinates_equals_the_numpy_one(monkeypatch):
+    """Once the table holds the rows, the kernel's lookup at grid coordinates (index, fraction
+    and rows in one pass, ``lerp_at``) gives the numpy lookup's k and S, bit for bit; a speed
+    whose rows are not there yet goes the way that fills them (lerp_at says so, writing
+    nothing), also when it comes among speeds whose rows are."""
+    from cmsensord.dsp import _trackerkernel
+
+    comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in (1, 2, 4)]
+    tr = OrderTracker(comps, fs_in=25000.0, max_rpm=3600.0, backend="c")
+    t = tr.table
+    assert t is not None and t._lerp_at is not None
+    plain = GainTable(t.grid, tr.K, False, tr._steady_state, kernel=False)
+    answers = []
+    lerp_at = t._lerp_at
+
+    def spy(*args):
+        answers.append(lerp_at(*args))
+        return answers[-1]
+
+    monkeypatch.setattr(t, "_lerp_at", spy)
+    rng = np.random.default_rng(2)
+    low = rng.uniform(250.0, 1500.0, 2000)
+    t.lookup(low)                                               # fills the rows of these speeds
+    assert answers == [False]
+    for speed in (low, np.concatenate([low[::-7], [300.0, 299.0, 250.0]]), low[:0]):
+        got, want = t.lookup(speed), plain.lookup(speed)
+        assert answers[-1] is True and got[2] is None and want[2] is None
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    high = np.concatenate([low[:50], [3900.0]])                 # a row not there yet
+    got, want = t.lookup(high), plain.lookup(high)
+    assert answers[-1] is False
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    k, S = np.empty((1, 6)), np.empty(1)
+    for bad in (np.nan, -1.0):                                  # not a grid coordinate: numpy's way
+        assert _trackerkernel.lerp_at(t.kS, t.dkS, np.array([bad]), t.have.view(np.uint8), 64, k, S,
+                                      7, 6) is False
+
+
+def test_omegas_in_one_operation_equal_omega():
+    from cmsensord.dsp.order_tracker.components import Omegas, omega
+
+    rng = np.random.default_rng(3)
+    speed = np.concatenate([rng.uniform(300.0, 4000.0, 500), [300.0, 1e-3, 1e9]])
+    for comps in ([TrackedComponent(f"{k}x", order=k) for k in (1.0, 2.0, 3.7, 4.0)],
+                  [TrackedComponent("1x", order=1.0), TrackedComponent("mains", freq_hz=50.0),
+                   TrackedComponent("bpfo", order=3.58)]):
+        assert np.array_equal(Omegas(comps)(speed), omega(comps, speed))
+
+
 def test_the_kernels_lookup_refuses_rows_outside_the_table():
     from cmsensord.dsp import _trackerkernel
 
@@ -130,3 +179,30 @@ def test_the_impulse_response_from_the_kernel_equals_the_python_loop(monkeypatch
     monkeypatch.setattr(antialias, "_trackerkernel", None)
     assert np.array_equal(fast, antialias._sos_impulse(sos)) and len(fast) > 500
     assert antialias.missing_window_of(sos) == w_fast
+
+
+@pytest.mark.parametrize("C", [1, 2, 3])
+@pytest.mark.parametrize("K", [1, 2, 4])
+def test_the_kernels_block_statistics_equal_the_numpy_ones(C, K):
+    """Random blocks of every length around numpy's 8 accumulators and the live 125 samples,
+    speeds below min_rpm, above the tracker's Nyquist and NaN (invalid blocks, NaN statistics):
+    rms, amplitude, mean speed and validity are numpy's, bit for bit, and the kernel runs."""
+    comps = [TrackedComponent(f"{k}x", order=float(k)) for k in range(1, K + 1)]
+    tr = OrderTracker(comps, fs_in=25000.0, max_rpm=3600.0, n_channels=C, backend="c")
+    calls = []
+    kernel = tr._stats_kernel
+    assert kernel is not None
+    tr._stats_kernel = lambda *a: calls.append(1) or kernel(*a)
+    rng = np.random.default_rng(10 * C + K)
+    for E in (1, 2, 5):
+        for B in (1, 3, 7, 8, 9, 17, 125, 200):
+            wave = rng.standard_normal((E, B, C, K)) * 10.0 ** rng.uniform(-3, 3)
+            env = np.abs(rng.standard_normal((E, B, C, K)))
+            rpm = rng.uniform(200.0, 4000.0, (E, B))
+            rpm[0, rng.integers(B)] = [np.nan, 100.0, 1e5, -1500.0][rng.integers(4)]
+            got = tr._block_stats(np.arange(E) * B, wave, env, rpm, None)
+            want = tr._block_stats_numpy(wave, env, rpm)
+            for a, b in zip((got.rms, got.amplitude, got.rpm, got.valid), want):
+                assert a.shape == b.shape and a.dtype == b.dtype
+                assert np.array_equal(a, b, equal_nan=True)
+    assert len(calls) == 3 * 8

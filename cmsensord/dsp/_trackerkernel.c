@@ -22,7 +22,13 @@
  *   tacho_eval(s, kT, kth, kw, kr, speed, turns, j, code)
  *                                                  tacho.py: speed and angle between knots
  *   lerp_rows(tab, dtab, i, f, a, b, w, m)         gain_table.py: the table's rows interpolated
+ *   lerp_at(tab, dtab, x, have, seg, a, b, w, m)   gain_table.py: the same at grid coordinates
+ *   block_stats(wave, env, rpm, K, min_rpm, top, half_fs, rms, amp, rmean, valid)
+ *                                                  tracker.py: per-block statistics
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
+ *   causal_fit(Tc, nc, todo, ck, c0, ppr, sbuf, col) tacho causal.py: the segments of new edges
+ *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
+ *                                                  orders.py: the causal speed [rpm] at samples
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -36,6 +42,30 @@ static int need(Py_buffer *b, Py_ssize_t n_doubles, const char *name) {
         return 0;
     }
     return 1;
+}
+
+/* numpy's pairwise sum of n doubles a[0], a[stride], ... (numpy/_core/src/umath/loops_utils.h:
+ * below 8 one by one from 0., up to 128 in 8 accumulators, above halves), the order in which
+ * ndarray.sum adds a contiguous row: the same bits. */
+static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride) {
+    if (n < 8) {
+        double res = 0.;
+        for (Py_ssize_t i = 0; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        Py_ssize_t i;
+        for (int j = 0; j < 8; j++) r[j] = a[j * stride];
+        for (i = 8; i < n - (n % 8); i += 8)
+            for (int j = 0; j < 8; j++) r[j] += a[(i + j) * stride];
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
 }
 
 /* One channel (column ch of x, T x C) through the S sections, every D-th output from skip
@@ -483,6 +513,130 @@ done:
     return ret;
 }
 
+/* lerp_rows at grid coordinates x (N): i = min(int(x), rows - 2), f = clip(x - i, 0, 1), as
+ * gain_table.py's lookup computes them, when the table has the rows i and i + 1 of every x
+ * (have: one byte per segment of seg rows).  Returns True when done; False, writing nothing,
+ * when a row is not there yet or an x is not a coordinate >= 0 (the caller's numpy path). */
+static PyObject *lerp_at(PyObject *self, PyObject *args) {
+    Py_buffer btab, bdtab, bx, bhave, ba, bb;
+    Py_ssize_t seg, w, m;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*nw*w*nn", &btab, &bdtab, &bx, &bhave, &seg, &ba, &bb, &w, &m))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = bx.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t rows = w > 0 ? btab.len / (Py_ssize_t)sizeof(double) / w : 0;
+    if (w <= 0 || m < 0 || m > w || rows < 2 || seg < 1 || bdtab.len < (rows - 1) * w * (Py_ssize_t)sizeof(double)
+        || bhave.len < (rows + seg - 1) / seg) {
+        PyErr_SetString(PyExc_ValueError, "lerp_at: expected tab (rows >= 2, w), dtab (rows - 1, w), "
+                        "have of a byte per segment, 0 <= m <= w");
+        goto done;
+    }
+    if (!need(&ba, N * m, "a") || !need(&bb, N * (w - m), "b"))
+        goto done;
+    const double *tab = btab.buf, *dtab = bdtab.buf, *x = bx.buf;
+    const unsigned char *have = bhave.buf;
+    double *a = ba.buf, *b = bb.buf;
+    for (Py_ssize_t n = 0; n < N; n++) {
+        if (!(x[n] >= 0.0 && x[n] < 9.0e15)) {
+            ret = Py_False;
+            goto found;
+        }
+        long long i = (long long)x[n];
+        if (i > rows - 2) i = rows - 2;
+        if (!have[i / seg] || !have[(i + 1) / seg]) {
+            ret = Py_False;
+            goto found;
+        }
+    }
+    for (Py_ssize_t n = 0; n < N; n++) {
+        long long i = (long long)x[n];
+        if (i > rows - 2) i = rows - 2;
+        double fn = x[n] - (double)i;
+        if (fn < 0.0) fn = 0.0;
+        if (fn > 1.0) fn = 1.0;
+        const double *t = tab + i * w, *dt = dtab + i * w;
+        double *an = a + n * m, *bn = b + n * (w - m);
+        for (Py_ssize_t j = 0; j < m; j++) an[j] = dt[j] * fn + t[j];
+        for (Py_ssize_t j = m; j < w; j++) bn[j - m] = dt[j] * fn + t[j];
+    }
+    ret = Py_True;
+found:
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&btab); PyBuffer_Release(&bdtab); PyBuffer_Release(&bx); PyBuffer_Release(&bhave);
+    PyBuffer_Release(&ba); PyBuffer_Release(&bb);
+    return ret;
+}
+
+/* The order tracker's per-block statistics (tracker.py's _block_stats, the same operations in
+ * numpy's order) of contiguous wave, env (E x B x C x K) and rpm (E x B): rms = sqrt(sum(wave^2)
+ * / B) and amp = sum(env) / B over each block's samples (numpy sums a block's column one sample
+ * after the other when C K > 1, pairwise when it is 1: the column is then contiguous), rmean =
+ * sum(rpm) / B (pairwise), valid = every |rpm| >= min_rpm and max |rpm| / 60 top < half_fs;
+ * rms and amp NaN where not valid. */
+static PyObject *block_stats(PyObject *self, PyObject *args) {
+    Py_buffer bw, be, br, brms, bamp, bmean, bvalid;
+    Py_ssize_t K;
+    double min_rpm, top, half_fs;
+    if (!PyArg_ParseTuple(args, "y*y*y*ndddw*w*w*w*", &bw, &be, &br, &K, &min_rpm, &top, &half_fs,
+                          &brms, &bamp, &bmean, &bvalid))
+        return NULL;
+    PyObject *ret = NULL;
+    double *sq = NULL;
+    const Py_ssize_t E = bmean.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t B = E > 0 ? br.len / (Py_ssize_t)sizeof(double) / E : 0;
+    const Py_ssize_t CK = B > 0 ? bw.len / (Py_ssize_t)sizeof(double) / (E * B) : 0;
+    if (E <= 0 || B <= 0 || K <= 0 || CK <= 0 || CK % K || br.len != E * B * (Py_ssize_t)sizeof(double)
+        || bw.len != E * B * CK * (Py_ssize_t)sizeof(double) || be.len != bw.len || bvalid.len < E) {
+        PyErr_SetString(PyExc_ValueError, "block_stats: expected wave and env (E x B x C x K), rpm "
+                        "(E x B), rmean and valid of E entries");
+        goto done;
+    }
+    if (!need(&brms, E * CK, "rms") || !need(&bamp, E * CK, "amp"))
+        goto done;
+    sq = malloc(sizeof(double) * (size_t)(B * CK));
+    if (sq == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const double *wave = bw.buf, *env = be.buf, *rpm = br.buf;
+    double *rms = brms.buf, *amp = bamp.buf, *rmean = bmean.buf;
+    unsigned char *valid = bvalid.buf;
+    const double n = (double)B;
+    for (Py_ssize_t e = 0; e < E; e++) {
+        const double *we = wave + e * B * CK, *ee = env + e * B * CK, *re = rpm + e * B;
+        double *rs = rms + e * CK, *am = amp + e * CK;
+        for (Py_ssize_t i = 0; i < B * CK; i++) sq[i] = we[i] * we[i];
+        if (CK == 1) {
+            rs[0] = pairwise_sum(sq, B, 1);
+            am[0] = pairwise_sum(ee, B, 1);
+        } else {
+            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sq[j]; am[j] = ee[j]; }
+            for (Py_ssize_t b = 1; b < B; b++)
+                for (Py_ssize_t j = 0; j < CK; j++) { rs[j] += sq[b * CK + j]; am[j] += ee[b * CK + j]; }
+        }
+        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sqrt(rs[j] / n); am[j] = am[j] / n; }
+        rmean[e] = pairwise_sum(re, B, 1) / n;
+        int ok = 1;
+        double hi = 0.0;
+        for (Py_ssize_t b = 0; b < B; b++) {
+            const double a = fabs(re[b]);
+            ok &= a >= min_rpm;                             /* NaN: not valid */
+            if (b == 0 || (hi == hi && (a > hi || a != a))) hi = a;
+        }
+        valid[e] = ok && hi / 60.0 * top < half_fs;
+        if (!valid[e])
+            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = NAN; am[j] = NAN; }
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(sq);
+    PyBuffer_Release(&bw); PyBuffer_Release(&be); PyBuffer_Release(&br); PyBuffer_Release(&brms);
+    PyBuffer_Release(&bamp); PyBuffer_Release(&bmean); PyBuffer_Release(&bvalid);
+    return ret;
+}
+
 /* Peak amplitude from the state pairs (recursions.py's envelope, the same operations in its
  * order): xs (N x C x 2K), c (N x K) -> env (N x C x K),
  *   env = sqrt(max((x1 x1 - (c x1) x2 + x2 x2) / max(1 - (0.25 c) c, 1e-300), 0))
@@ -527,14 +681,193 @@ done:
     return ret;
 }
 
+/* The causal segment of each new committed edge (tacho causal.py's _flush_segments and
+ * smoothing.py's weighted_quadratic, the same operations in their order): edge k (committed
+ * index; Tc, nc: the run's committed edge times and pulse counts from index c0 on, Python
+ * lists of numbers) of each (k, known) in todo is fitted with the weighted quadratic over the
+ * edges k, k - 1, ... back to m = len(ck) of them (weights ck, those before c0 left out), x
+ * scaled by the largest |dx|.  Its segment goes to column col + r of sbuf (5 x cap): key =
+ * max(known, T), T, speed, acceleration, valid (1.0: two points or more). */
+static PyObject *causal_fit(PyObject *self, PyObject *args) {
+    PyObject *oT, *on, *otodo;
+    Py_buffer bck, bbuf;
+    long long c0;
+    double ppr;
+    Py_ssize_t col;
+    if (!PyArg_ParseTuple(args, "OOOy*Ldw*n", &oT, &on, &otodo, &bck, &c0, &ppr, &bbuf, &col))
+        return NULL;
+    PyObject *ret = NULL, *fT = NULL, *fn = NULL, *ftodo = NULL;
+    double *Tc = NULL, *terms = NULL;
+    const Py_ssize_t m = bck.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t cap = bbuf.len / (Py_ssize_t)sizeof(double) / 5;
+    fT = PySequence_Fast(oT, "causal_fit: Tc must be a sequence");
+    fn = fT ? PySequence_Fast(on, "causal_fit: nc must be a sequence") : NULL;
+    ftodo = fn ? PySequence_Fast(otodo, "causal_fit: todo must be a sequence") : NULL;
+    if (ftodo == NULL)
+        goto done;
+    const Py_ssize_t nT = PySequence_Fast_GET_SIZE(fT);
+    const Py_ssize_t R = PySequence_Fast_GET_SIZE(ftodo);
+    if (PySequence_Fast_GET_SIZE(fn) != nT || m < 1 || bbuf.len != 5 * cap * (Py_ssize_t)sizeof(double)
+        || col < 0 || col + R > cap) {
+        PyErr_SetString(PyExc_ValueError, "causal_fit: expected Tc and nc of one length, ck of at "
+                        "least one weight, sbuf (5 x cap) with room for todo at col");
+        goto done;
+    }
+    Tc = malloc(sizeof(double) * (size_t)(2 * nT + 8 * m + 1));
+    if (Tc == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *nc = Tc + nT;
+    terms = nc + nT;
+    for (Py_ssize_t i = 0; i < nT; i++) {                 /* np.asarray(..., float64) of the lists */
+        Tc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fT, i));
+        nc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fn, i));
+    }
+    if (PyErr_Occurred())
+        goto done;
+    const double *ck = bck.buf;
+    double *seg = (double *)bbuf.buf + col;
+    for (Py_ssize_t r = 0; r < R; r++) {
+        PyObject *item = PySequence_Fast_GET_ITEM(ftodo, r);
+        long long k;
+        double kn;
+        if (!PyArg_ParseTuple(item, "Ld", &k, &kn))
+            goto done;
+        if (k - c0 < 0 || k - c0 >= nT) {
+            PyErr_Format(PyExc_ValueError, "causal_fit: edge %lld outside the committed %lld..%lld",
+                         k, c0, c0 + (long long)nT - 1);
+            goto done;
+        }
+        const Py_ssize_t kr = (Py_ssize_t)(k - c0);
+        const double Tk = Tc[kr], nk = nc[kr];
+        double S = 0.0;
+        Py_ssize_t npts = 0;
+        for (Py_ssize_t j = 0; j < m; j++) {       /* S: np.abs(dx).max(), NaN propagating */
+            const double dx = kr - j >= 0 ? Tc[kr - j] - Tk : 0.0;
+            const double a = fabs(dx);
+            if (j == 0 || (S == S && (a > S || a != a))) S = a;
+            npts += kr - j >= 0;
+        }
+        if (!(S > 0)) S = 1.0;
+        for (Py_ssize_t j = 0; j < m; j++) {
+            const int use = kr - j >= 0;
+            const double w = use ? ck[j] : 0.0 * ck[j];
+            const double x = (use ? Tc[kr - j] - Tk : 0.0) / S;
+            const double y = use ? nc[kr - j] - nk : 0.0;
+            const double x2 = x * x, wx = w * x, wx2 = w * x2;
+            double *t = terms + j;
+            t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
+            t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+        }
+        double mom[8];
+        for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
+        double c1 = 0.0, c2 = 0.0;
+        if (npts >= 2) {                            /* smoothing.py's _solve_normal, _eliminate */
+            const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
+            const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
+            const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
+            const double m1 = s1 / s0;
+            const double d11 = s2 - m1 * s1;
+            const double d12 = a12 - m1 * a02;
+            const double e1 = b1 - m1 * b0;
+            const double m2 = a02 / s0;
+            const double d22 = a22 - m2 * a02;
+            const double e2 = b2 - m2 * b0;
+            const double m3 = d12 / d11;
+            c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
+            c1 = (e1 - d12 * c2) / d11;
+        }
+        seg[r] = (kn >= Tk || kn != kn) ? kn : Tk;             /* np.maximum(known, Tk) */
+        seg[cap + r] = Tk;
+        seg[2 * cap + r] = c1 / (S * ppr);
+        seg[3 * cap + r] = 2.0 * c2 / (S * S * ppr);
+        seg[4 * cap + r] = npts >= 2 ? 1.0 : 0.0;
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(Tc);
+    Py_XDECREF(fT); Py_XDECREF(fn); Py_XDECREF(ftodo);
+    PyBuffer_Release(&bck); PyBuffer_Release(&bbuf);
+    return ret;
+}
+
+/* The order tracker's speed [rpm] at board samples base + pos[i] (orders.py's _rpm of tacho
+ * causal.py's evaluate_causal, the same operations in their order): the segment is the last
+ * one whose key <= s among columns lo..hi-1 of sbuf (5 x cap: key, T, w, a, valid; numpy's
+ * searchsorted, NaN sorting last), then sp = a tau + w with tau = s - T, capped at slack / tau
+ * when tau w > slack, 0 unless valid > 0 and sp > 0 (and 0 before the first segment);
+ * rpm = 60 (sp fs) where that is finite, else 0. */
+static PyObject *causal_rpm(PyObject *self, PyObject *args) {
+    Py_buffer bbuf, bpos, brpm;
+    Py_ssize_t lo, hi;
+    long long base;
+    double fs, slack;
+    if (!PyArg_ParseTuple(args, "y*nnLy*ddw*", &bbuf, &lo, &hi, &base, &bpos, &fs, &slack, &brpm))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t cap = bbuf.len / (Py_ssize_t)sizeof(double) / 5;
+    const Py_ssize_t N = bpos.len / (Py_ssize_t)sizeof(long long);
+    if (bbuf.len != 5 * cap * (Py_ssize_t)sizeof(double) || lo < 0 || hi < lo || hi > cap) {
+        PyErr_SetString(PyExc_ValueError, "causal_rpm: expected sbuf (5 x cap), 0 <= lo <= hi <= cap");
+        goto done;
+    }
+    if (!need(&brpm, N, "rpm"))
+        goto done;
+    const double *keys = (const double *)bbuf.buf + lo;
+    const double *T = keys + cap, *w = keys + 2 * cap, *a = keys + 3 * cap, *v = keys + 4 * cap;
+    const long long *pos = bpos.buf;
+    double *rpm = brpm.buf;
+    const Py_ssize_t n = hi - lo;
+    Py_ssize_t j = -1;                  /* last key <= s; a hint carried from the previous sample */
+    for (Py_ssize_t i = 0; i < N; i++) {
+        const double s = (double)(base + pos[i]);
+        /* numpy's s < key: true also when key is NaN (and s is not) */
+#define KEY_AFTER(q) (s < keys[q] || (keys[q] != keys[q] && s == s))
+        if (!((j < 0 || !KEY_AFTER(j)) && (j + 1 >= n || KEY_AFTER(j + 1)))) {
+            Py_ssize_t l = 0, h = n;    /* count of keys not after s */
+            while (l < h) {
+                const Py_ssize_t mid = l + (h - l) / 2;
+                if (KEY_AFTER(mid)) h = mid; else l = mid + 1;
+            }
+            j = l - 1;
+        }
+#undef KEY_AFTER
+        if (j < 0) {                    /* before the first segment: not valid */
+            rpm[i] = 0.0;
+            continue;
+        }
+        const double tau = s - T[j];
+        double sp = a[j] * tau;
+        sp += w[j];
+        if (tau * w[j] > slack) {       /* edges overdue: capped (np.minimum, NaN propagating) */
+            const double c = slack / tau;
+            if (!(sp <= c || sp != sp)) sp = c;
+        }
+        if (!(v[j] > 0 && sp > 0)) sp = 0.0;
+        const double hz = sp * fs;
+        rpm[i] = isfinite(hz) && sp != 0.0 ? 60.0 * hz : 0.0;
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&bbuf); PyBuffer_Release(&bpos); PyBuffer_Release(&brpm);
+    return ret;
+}
+
 static PyMethodDef methods[] = {
     {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
     {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
+    {"lerp_at", lerp_at, METH_VARARGS, "Table rows interpolated at grid coordinates (gain table)."},
+    {"block_stats", block_stats, METH_VARARGS, "The order tracker's per-block statistics (tracker.py)."},
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
     {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},
+    {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
+    {"causal_rpm", causal_rpm, METH_VARARGS, "The causal speed [rpm] at samples (orders.py)."},
     {NULL, NULL, 0, NULL},
 };
 

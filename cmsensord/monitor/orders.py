@@ -187,13 +187,13 @@ class OrderChain:
 
     def _rpm(self, samples: np.ndarray) -> np.ndarray:
         """The speed [rpm] the tracker runs on at board samples (ascending): the tacho's causal
-        speed, or its final one (``orders.speed``); 0 where it is not valid.  The tracker asks
-        only for the samples it reads (one in its decimation, in the call they come in), each
-        the value it has at every sample (:meth:`TachoTracker.causal_range`)."""
+        speed (:meth:`TachoTracker.causal_rpm`), or its final one (``orders.speed``); 0 where
+        it is not valid.  The tracker asks only for the samples it reads (one in its
+        decimation, in the call they come in), each the value it has at every sample
+        (:meth:`TachoTracker.causal_range`)."""
         if self.causal:
-            hz, valid = self.tacho.evaluate_causal(samples)
-        else:
-            hz, _, valid = self.tacho.evaluate(samples)
+            return self.tacho.causal_rpm(0, samples)
+        hz, _, valid = self.tacho.evaluate(samples)
         return np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
 
     def _blocks(self, blocks, method: str) -> Out:

@@ -45,6 +45,12 @@ FEW_TACHO = 32
 def decode_tacho_few(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, list[tuple[int, str]]]:
     """:func:`~cmsensord.protocol.decode_tacho_many` payload by payload (the same numbers and
     messages): for a few payloads, cheaper than its array operations."""
+    counts, offsets, bad = decode_tacho_lists(payloads)
+    return np.array(counts, dtype=np.int64), np.array(offsets, dtype=np.uint32), bad
+
+
+def decode_tacho_lists(payloads: Sequence[bytes]) -> tuple[list[int], list[int], list[tuple[int, str]]]:
+    """:func:`decode_tacho_few` as Python lists (what a live call feeds the tracker)."""
     counts: list[int] = []
     offsets: list[int] = []
     bad = []
@@ -62,7 +68,7 @@ def decode_tacho_few(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray,
         except ProtocolError as exc:
             bad.append((i, str(exc)))
         counts.append(0)
-    return np.array(counts, dtype=np.int64), np.array(offsets, dtype=np.uint32), bad
+    return counts, offsets, bad
 
 
 class Shaft:
@@ -136,12 +142,17 @@ class Shaft:
         if dropped:
             events.append(Event("decode_error", None, f"{dropped} TACHO frame(s) before the newest one "
                                 "in board time dropped (the tacho needs time order)"))
-        t0 = np.array(t0s, dtype=np.int64)
-        counts, offsets, bad = (decode_tacho_few if len(payloads) <= FEW_TACHO else decode_tacho_many)(payloads)
+        tracker = self.tracker()                # the smoothed speed: fitted when asked for
+        if len(payloads) <= FEW_TACHO:          # a live call's few: on Python ints
+            counts, offsets, bad = decode_tacho_lists(payloads)
+            fed = tracker.feed_few(t0s, counts, offsets)
+        else:
+            counts_a, offsets_a, bad = decode_tacho_many(payloads)
+            fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
         self._note_gaps(t0s, clock.block_len)
-        for ev in self.tracker().feed_flat(t0, counts, offsets):    # the smoothed speed: when asked
+        for ev in fed:
             if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
                 self.missed_in_lost_frames += int(ev.count)
                 continue

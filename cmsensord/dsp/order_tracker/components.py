@@ -65,6 +65,25 @@ def omega(components: Sequence[TrackedComponent], speed: np.ndarray) -> np.ndarr
     return np.stack([2.0 * np.pi * c.freq(speed) for c in components], axis=-1)
 
 
+class Omegas:
+    """:func:`omega` of ``components`` as one array operation (the same operations per entry:
+    order x rpm / 60 or the fixed frequency, times 2 pi; the same values, bit for bit), for
+    a tracker asking at every call."""
+
+    def __init__(self, components: Sequence[TrackedComponent]):
+        self.orders = np.array([c.order or 0.0 for c in components], dtype=np.float64)
+        self.by_order = np.array([c.order is not None for c in components])
+        self.all_orders = bool(self.by_order.all())
+        self.fixed = np.array([2.0 * np.pi * float(c.freq_hz or 0.0) for c in components])
+
+    def __call__(self, speed: np.ndarray) -> np.ndarray:
+        """ω_k(n) [rad/s] at model speeds ``speed`` (T,): (T, K)."""
+        w = self.orders * speed[:, None]
+        w /= 60.0
+        w *= 2.0 * np.pi
+        return w if self.all_orders else np.where(self.by_order, w, self.fixed)
+
+
 def model_speed(rpm: np.ndarray, min_rpm: float) -> np.ndarray:
     """The speed the model uses: |rpm| clamped from below at min_rpm (NaN -> min_rpm)."""
     s = np.abs(np.asarray(rpm, dtype=np.float64))

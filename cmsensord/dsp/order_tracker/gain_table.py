@@ -98,6 +98,7 @@ class GainTable:
         self._solve = solve
         # ``kernel``: interpolate in the compiled kernel when it is built (the same numbers)
         self._lerp = getattr(_trackerkernel, "lerp_rows", None) if kernel else None
+        self._lerp_at = getattr(_trackerkernel, "lerp_at", None) if kernel and not want_p else None
         n, d = grid.n, 2 * K
         self.have = np.zeros(-(-n // SEGMENT), dtype=bool)
         self.kS = np.zeros((n, d + 1))
@@ -150,6 +151,11 @@ class GainTable:
     def lookup(self, speed: np.ndarray):
         """k (N, 2K), S (N,) and P (N, 2K, 2K) (None without ``want_p``) at model speeds."""
         x = self.grid.coord(speed)
+        if self._lerp_at is not None:       # the rows there: index, fraction and rows in one pass
+            N, w = x.size, self.kS.shape[1]
+            k, S = np.empty((N, w - 1)), np.empty(N)
+            if self._lerp_at(self.kS, self.dkS, x, self.have.view(np.uint8), SEGMENT, k, S, w, w - 1):
+                return k, S, None
         i = np.minimum(x.astype(np.int64), self.grid.n - 2)
         f = np.clip(x - i, 0.0, 1.0)
         if i.size:

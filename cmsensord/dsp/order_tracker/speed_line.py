@@ -48,6 +48,8 @@ def delayed_at(st: TrackerState, n: int, D: int, speed_at: SpeedAt, T: int, take
     with it).  The line keeps those only (its other entries NaN, never read); its entries,
     and so the speeds read, are those of :func:`delayed`."""
     p0 = -(st.n_in + n) % D
+    if st.n_in and T >= n:
+        return _delayed_at_steady(st, n, D, speed_at, T, take, p0)
     pos = np.arange(p0, T, D)
     first = st.n_in == 0 and p0 > 0            # the first input's speed fills the line
     if first:
@@ -62,4 +64,21 @@ def delayed_at(st: TrackerState, n: int, D: int, speed_at: SpeedAt, T: int, take
     at = int(np.searchsorted(pos, tail))
     new[pos[at:] - tail] = vals[at:]
     st.rpm_line = np.concatenate([st.rpm_line[T:], new]) if T < n else new
+    return rd
+
+
+def _delayed_at_steady(st: TrackerState, n: int, D: int, speed_at: SpeedAt, T: int, take: np.ndarray,
+                       p0: int) -> np.ndarray:
+    """:func:`delayed_at` of a call after the first one and at least as long as the line (the
+    live calls): the same entries read and kept, by slices (the kept samples ``take`` and the
+    positions asked are steps of D, the kept ones at multiples of D from the first input)."""
+    vals = np.asarray(speed_at(np.arange(p0, T, D)), dtype=np.float64)
+    k = len(range(int(take[0]), n, D)) if take.size else 0      # kept samples still in the old line
+    j0 = (int(take[k]) - n - p0) // D if k < take.size else 0
+    rd = np.concatenate([st.rpm_line[int(take[0]) if k else n:n:D], vals[j0:j0 + take.size - k]])
+    tail = T - n                                # the line: positions tail .. T - 1 of this call
+    at = len(range(p0, tail, D))                # positions asked before it
+    new = np.full(n, np.nan)
+    new[p0 + at * D - tail::D] = vals[at:]
+    st.rpm_line = new
     return rd

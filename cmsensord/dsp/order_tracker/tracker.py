@@ -16,7 +16,7 @@ import numpy as np
 
 from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
 from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
-from cmsensord.dsp.order_tracker.components import TrackedComponent, model_speed, omega
+from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
 from cmsensord.dsp.order_tracker.recursions import (
@@ -111,6 +111,9 @@ class OrderTracker:
         self.C = int(n_channels)
         self.K = len(self.components)
         self._top_order = max((c.order or 0.0) for c in self.components)     # for _block_stats
+        self._omegas = Omegas(self.components)                              # omega() in one operation
+        # the block statistics in the compiled kernel with the C backend (the same numbers)
+        self._stats_kernel = getattr(_trackerkernel, "block_stats", None) if backend == "c" else None
         self.q1 = float(q1)
         self.gains = gains
         self.f_hi = max(float(c.freq(self.max_rpm)) for c in self.components)
@@ -407,7 +410,10 @@ class OrderTracker:
         st = self.state
         N, d = yd.shape[0], 2 * self.K
         speed = model_speed(rd, self.min_rpm)
-        c = 2.0 * np.cos(omega(self.components, speed) / self.fs_track)
+        c = self._omegas(speed)             # 2 cos(omega / fs_track), in place
+        c /= self.fs_track
+        np.cos(c, out=c)
+        c *= 2.0
         any_miss = miss is not None
         k, S, P = self._gains(speed, c, miss[:, 0] if any_miss and self.gains == "exact" else None)
         if N == 0:
@@ -462,6 +468,27 @@ class OrderTracker:
     def _block_stats(self, starts, wave, env, rpm, miss) -> BlockStats:
         """Statistics of whole blocks: wave/env (E, B, C, K), rpm (E, B), miss (E, B, C)
         or None (none missing)."""
+        E = wave.shape[0]
+        kernel = self._stats_kernel
+        if (kernel is not None and E and wave.flags.c_contiguous and env.flags.c_contiguous
+                and rpm.flags.c_contiguous):        # the same operations in one pass
+            rms, amp = np.empty((E, self.C, self.K)), np.empty((E, self.C, self.K))
+            rmean, valid = np.empty(E), np.empty(E, dtype=bool)
+            kernel(wave, env, rpm, self.K, self.min_rpm, self._top_order, 0.5 * self.fs_track, rms, amp,
+                   rmean, valid.view(np.uint8))
+        else:
+            rms, amp, rmean, valid = self._block_stats_numpy(wave, env, rpm)
+        starts = np.asarray(starts, dtype=np.int64)
+        t_in = (starts + self.block - 1) * self.decimate - self.delay_in
+        if miss is None:
+            missing = np.zeros((len(starts), self.C), dtype=np.int64)
+        else:
+            missing = np.count_nonzero(miss, axis=1).astype(np.int64)
+        return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
+                          missing=missing)
+
+    def _block_stats_numpy(self, wave, env, rpm):
+        """rms, amplitude (E, C, K), mean speed and validity (E,) of whole blocks."""
         # np.mean is the sum over the axis divided by its length: the same operations, without
         # its Python wrapper (this runs at every live call)
         n = wave.shape[1]
@@ -476,18 +503,17 @@ class OrderTracker:
         if not valid.all():
             rms[~valid] = np.nan
             amp[~valid] = np.nan
-        starts = np.asarray(starts, dtype=np.int64)
-        t_in = (starts + self.block - 1) * self.decimate - self.delay_in
-        if miss is None:
-            missing = np.zeros((len(starts), self.C), dtype=np.int64)
-        else:
-            missing = np.count_nonzero(miss, axis=1).astype(np.int64)
-        return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
-                          missing=missing)
+        return rms, amp, rmean, valid
 
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state
         B = self.block
+        C, K = self.C, self.K
+        if miss is None and not (len(st.pend["rpm"]) if st.pend else 0) and not len(rd) % B:
+            nb = len(rd) // B                   # whole blocks, nothing carried (a live call): as below
+            st.pend = {}
+            return self._block_stats(n0 + B * np.arange(nb), wave.reshape(nb, B, C, K),
+                                     env.reshape(nb, B, C, K), rd.reshape(nb, B), None)
         cur = with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
         first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
         nb = len(cur["rpm"]) // B
@@ -495,7 +521,6 @@ class OrderTracker:
         st.pend = {k: v[used:].copy() for k, v in cur.items()}
         if "miss" in st.pend and not st.pend["miss"].any():
             del st.pend["miss"]
-        C, K = self.C, self.K
         return self._block_stats(first + B * np.arange(nb),
                                  cur["wave"][:used].reshape(nb, B, C, K),
                                  cur["env"][:used].reshape(nb, B, C, K),

@@ -5,6 +5,8 @@ speed" in docs/tacho.md): at every committed edge a one-sided weighted
 quadratic over the last ``causal_window`` edges of the run gives the speed and
 acceleration, extrapolated from there; capped when edges are overdue, 0 and
 invalid after the run's timeout.  Any split of the frames gives the same values.
+The fit of new edges and the order tracker's speed at its samples (:meth:`CausalSpeed.causal_rpm`)
+also run in the compiled ``cmsensord.dsp._trackerkernel`` (bit for bit).
 """
 
 from __future__ import annotations
@@ -17,12 +19,19 @@ import numpy.typing as npt
 from cmsensord.dsp.tacho.edges import BoolArray, FloatArray, TachoState
 from cmsensord.dsp.tacho.smoothing import make_room, weighted_quadratic
 
+try:  # the compiled fit and speed are optional: numpy is the fallback (same results)
+    from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _kernel = None
+
 _CAUSAL_SLACK = 2.5  # causal speed: pulse periods without an edge before it is capped (a missed pulse is 2)
 
 
 class CausalSpeed(TachoState):
     """The causal part of :class:`~cmsensord.dsp.tacho.TachoTracker`: one segment
     (speed, acceleration) per committed edge."""
+
+    causal_kernel = True  # the fit of new edges and causal_rpm in the compiled kernel when it is built
 
     def _flush_segments(self) -> None:
         """Fit the causal segments of the edges committed since the last call (see
@@ -32,6 +41,13 @@ class CausalSpeed(TachoState):
         if not todo:
             return
         self._seg_todo = []
+        if _kernel is not None and self.causal_kernel:     # the same operations, in C, into the buffer
+            buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, len(todo))
+            self._sbuf = buf
+            _kernel.causal_fit(self._cT, self._cn, todo, self._ckernel, self._c0, float(self.ppr), buf,
+                               self._shi)
+            self._shi += len(todo)
+            return
         Tc, nc = self._committed()
         c0 = self._c0
         k = np.fromiter((t[0] for t in todo), dtype=np.int64, count=len(todo))
@@ -92,6 +108,20 @@ class CausalSpeed(TachoState):
         T, w, a, v = self._sbuf[1:5].take(jj, axis=1)       # one gather for the four rows
         sp, valid = self._causal_speed(flat - T, w, a, v, before if before.any() else None)
         return (sp * self.fs).reshape(s.shape), valid.reshape(s.shape)
+
+    def causal_rpm(self, base: int, pos: npt.ArrayLike) -> FloatArray:
+        """The order tracker's speed [rpm] at the samples ``base + pos``: 60 x the speed of
+        :meth:`evaluate_causal` where it is valid and finite, else 0 (the same values, bit for
+        bit; in the compiled kernel when it is built, one call for the search and the speed)."""
+        pos = np.asarray(pos, dtype=np.int64)
+        if _kernel is None or not self.causal_kernel:
+            hz, valid = self.evaluate_causal(base + pos)
+            return np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
+        self._flush_segments()
+        out = np.empty(pos.shape[0])
+        _kernel.causal_rpm(self._sbuf, self._slo, self._shi, base, pos, self.fs,
+                           _CAUSAL_SLACK / self.ppr, out)
+        return out
 
     def causal_range(self, start: int, stop: int) -> tuple[FloatArray, BoolArray]:
         """:meth:`evaluate_causal` at the samples start .. stop - 1 (the same values, bit

@@ -192,6 +192,32 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         finally:
             self._lazy = False
 
+    def feed_few(self, t0_unwrapped: list[int], counts: list[int], offsets: list[int]) -> list[TachoEvent]:
+        """:meth:`feed_flat` of a few frames given as Python lists (a live call's ten or so):
+        the same checks and results, on Python ints, without arrays of them; any other case
+        (frames out of time order, many frames, offsets not u32) through :meth:`feed_flat`."""
+        if len(counts) != len(t0_unwrapped) or sum(counts) != len(offsets) or min(counts, default=0) < 0:
+            return self.feed_flat(t0_unwrapped, counts, offsets)            # raises as it does
+        prev = self._last_t0
+        for t in t0_unwrapped:
+            if prev is not None and t < prev:
+                break
+            prev = t
+        else:
+            if len(t0_unwrapped) <= _FEW_FRAMES and not (offsets and (min(offsets) < 0 or max(offsets) > 0xFFFFFFFF)):
+                self._lazy = True
+                try:
+                    self._events = []
+                    if t0_unwrapped:
+                        self._few_frames(t0_unwrapped, counts, offsets)
+                    ev = self._events
+                    self._events = []
+                    return self._settled(ev).events
+                finally:
+                    self._lazy = False
+        return self.feed_flat(np.asarray(t0_unwrapped, dtype=np.int64), counts,
+                              np.asarray(offsets, dtype=np.int64))
+
     def _in_order(self, t0: np.ndarray) -> int:
         """How many frames come before the first one stepping back in time."""
         if not t0.size:
