@@ -15,7 +15,7 @@ from cmsensord.config import OutputConfig
 from cmsensord.monitor.events import EventLog
 from cmsensord.sinks.mcap_sink import read_messages
 from cmsensord.sinks.rotating import RotatingSink
-from fakes import FakeClock
+from fakes import FakeClock, replay_ticking
 
 WALL = 1_790_000_000.0
 
@@ -36,7 +36,6 @@ def damaged(path, seconds: float, seed: int) -> None:
 def replay(cap, out_dir, cfg) -> tuple[RotatingSink, list[int]]:
     """The capture through the Processor into a rotating sink; the sizes of its write_many runs."""
     from cmsensord.monitor.processor import Processor
-    from cmsensord.source import CaptureSource
 
     out = dataclasses.replace(OutputConfig(), dir=str(out_dir), rotate_mb=0.05, flush_s=1.0,
                               compression="none", retain_mb=0.0, min_free_mb=0.0)
@@ -45,15 +44,8 @@ def replay(cap, out_dir, cfg) -> tuple[RotatingSink, list[int]]:
     sizes: list[int] = []
     write_many = sink.write_many
     sink.write_many = lambda messages: (sizes.append(len(messages)), write_many(messages))[1]  # type: ignore[method-assign]
-    source = CaptureSource(cap, batches=True)
-    proc = Processor(cfg, sink, clock_ns=lambda: 1_790_000_000 * 10**9, link_counters=source.counters.as_dict)
-    with source:
-        for frames in source:
-            proc.handle(frames)
-            clock.t += 0.3
-            sink.tick()
-    proc.finish()
-    sink.close()
+    replay_ticking(cap, lambda source: Processor(cfg, sink, clock_ns=lambda: 1_790_000_000 * 10**9,
+                                                 link_counters=source.counters.as_dict), sink, clock, 0.3)
     return sink, sizes
 
 

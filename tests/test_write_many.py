@@ -21,7 +21,7 @@ from cmsensord.sinks.mcap_encoding import encode_message
 from cmsensord.sinks.mcap_file import McapSink
 from cmsensord.sinks.mcap_sink import read_messages
 from cmsensord.sinks.rotating import RotatingSink
-from fakes import FakeClock
+from fakes import FakeClock, replay_ticking
 
 WALL = 1_790_000_000.0          # the files' names
 
@@ -207,7 +207,6 @@ def test_the_processor_writes_the_files_a_one_message_sink_gets(tmp_path, monkey
     from cmsensord.config.loading import default_config
     from cmsensord.monitor import processor
     from cmsensord.monitor.processor import Processor
-    from cmsensord.source import CaptureSource
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario
 
@@ -228,17 +227,15 @@ def test_the_processor_writes_the_files_a_one_message_sink_gets(tmp_path, monkey
         sink = RotatingSink(dataclasses.replace(out, dir=str(tmp_path / name)), clock=clock,
                             wall_clock=lambda: WALL, salvage=False)
         sinks.append(sink)
-        source = CaptureSource(cap, chunk=1 << 15, batches=True)
-        proc = Processor(default_config(4), wrap(sink), clock_ns=lambda: 1_790_000_000 * 10**9,
-                         link_counters=source.counters.as_dict)
-        assert (proc._write_many is None) == (name == "one")
-        with source:
-            for frames in source:
-                proc.handle(frames)
-                clock.t += 0.4
-                sink.tick()
-        proc.finish()
-        sink.close()
+        procs: list = []
+
+        def proc_of(source, wrap=wrap, sink=sink, procs=procs):
+            procs.append(Processor(default_config(4), wrap(sink), clock_ns=lambda: 1_790_000_000 * 10**9,
+                                   link_counters=source.counters.as_dict))
+            return procs[-1]
+
+        replay_ticking(cap, proc_of, sink, clock, 0.4, chunk=1 << 15)
+        assert (procs[0]._write_many is None) == (name == "one")
     assert sinks[0].messages_written == sinks[1].messages_written > 1000
     assert len(sinks[1].paths) >= 3
     assert files(tmp_path / "one") == files(tmp_path / "many")

@@ -468,6 +468,24 @@ done:
     return ret;
 }
 
+/* Whether tab holds rows >= 2 rows of w doubles (their number to *rows), dtab rows - 1, and
+ * 0 <= m <= w. */
+static int table_shape(const Py_buffer *tab, const Py_buffer *dtab, Py_ssize_t w, Py_ssize_t m,
+                       Py_ssize_t *rows) {
+    *rows = w > 0 ? tab->len / (Py_ssize_t)sizeof(double) / w : 0;
+    return w > 0 && m >= 0 && m <= w && *rows >= 2
+        && dtab->len >= (*rows - 1) * w * (Py_ssize_t)sizeof(double);
+}
+
+/* Row i of the table interpolated at fraction fn, tab[i] + fn dtab[i]: its first m entries
+ * to an, the other w - m to bn. */
+static inline void lerp_row(const double *tab, const double *dtab, long long i, double fn,
+                            double *an, double *bn, Py_ssize_t w, Py_ssize_t m) {
+    const double *t = tab + i * w, *dt = dtab + i * w;
+    for (Py_ssize_t j = 0; j < m; j++) an[j] = dt[j] * fn + t[j];
+    for (Py_ssize_t j = m; j < w; j++) bn[j - m] = dt[j] * fn + t[j];
+}
+
 /* Rows of a table interpolated: row n is dtab[i[n]] * f[n] + tab[i[n]] (tab n_rows x w, dtab
  * (n_rows - 1) x w, 0 <= i[n] < n_rows - 1), the arithmetic of gain_table.py's numpy lookup;
  * its first m columns go to a (N x m), the rest to b (N x (w - m)), both contiguous. */
@@ -478,9 +496,8 @@ static PyObject *lerp_rows(PyObject *self, PyObject *args) {
         return NULL;
     PyObject *ret = NULL;
     const Py_ssize_t N = bf.len / (Py_ssize_t)sizeof(double);
-    const Py_ssize_t rows = w > 0 ? btab.len / (Py_ssize_t)sizeof(double) / w : 0;
-    if (w <= 0 || m < 0 || m > w || rows < 2 || bdtab.len < (rows - 1) * w * (Py_ssize_t)sizeof(double)
-        || bi.len != N * (Py_ssize_t)sizeof(long long)) {
+    Py_ssize_t rows;
+    if (!table_shape(&btab, &bdtab, w, m, &rows) || bi.len != N * (Py_ssize_t)sizeof(long long)) {
         PyErr_SetString(PyExc_ValueError, "lerp_rows: expected tab (rows >= 2, w), dtab (rows - 1, w), "
                         "i and f of N entries, 0 <= m <= w");
         goto done;
@@ -497,13 +514,8 @@ static PyObject *lerp_rows(PyObject *self, PyObject *args) {
         }
     }
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t n = 0; n < N; n++) {
-        const double *t = tab + idx[n] * w, *dt = dtab + idx[n] * w;
-        const double fn = f[n];
-        double *an = a + n * m, *bn = b + n * (w - m);
-        for (Py_ssize_t j = 0; j < m; j++) an[j] = dt[j] * fn + t[j];
-        for (Py_ssize_t j = m; j < w; j++) bn[j - m] = dt[j] * fn + t[j];
-    }
+    for (Py_ssize_t n = 0; n < N; n++)
+        lerp_row(tab, dtab, idx[n], f[n], a + n * m, b + n * (w - m), w, m);
     Py_END_ALLOW_THREADS
     Py_INCREF(Py_None);
     ret = Py_None;
@@ -524,9 +536,8 @@ static PyObject *lerp_at(PyObject *self, PyObject *args) {
         return NULL;
     PyObject *ret = NULL;
     const Py_ssize_t N = bx.len / (Py_ssize_t)sizeof(double);
-    const Py_ssize_t rows = w > 0 ? btab.len / (Py_ssize_t)sizeof(double) / w : 0;
-    if (w <= 0 || m < 0 || m > w || rows < 2 || seg < 1 || bdtab.len < (rows - 1) * w * (Py_ssize_t)sizeof(double)
-        || bhave.len < (rows + seg - 1) / seg) {
+    Py_ssize_t rows;
+    if (!table_shape(&btab, &bdtab, w, m, &rows) || seg < 1 || bhave.len < (rows + seg - 1) / seg) {
         PyErr_SetString(PyExc_ValueError, "lerp_at: expected tab (rows >= 2, w), dtab (rows - 1, w), "
                         "have of a byte per segment, 0 <= m <= w");
         goto done;
@@ -554,10 +565,7 @@ static PyObject *lerp_at(PyObject *self, PyObject *args) {
         double fn = x[n] - (double)i;
         if (fn < 0.0) fn = 0.0;
         if (fn > 1.0) fn = 1.0;
-        const double *t = tab + i * w, *dt = dtab + i * w;
-        double *an = a + n * m, *bn = b + n * (w - m);
-        for (Py_ssize_t j = 0; j < m; j++) an[j] = dt[j] * fn + t[j];
-        for (Py_ssize_t j = m; j < w; j++) bn[j - m] = dt[j] * fn + t[j];
+        lerp_row(tab, dtab, i, fn, a + n * m, b + n * (w - m), w, m);
     }
     ret = Py_True;
 found:
