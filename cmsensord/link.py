@@ -37,6 +37,8 @@ READ_WAIT_S = 0.05
 #: the most one read of a tty returns (its line discipline's buffer): a read this long may have
 #: left more behind, though the port shows none waiting yet
 TTY_READ_MAX = 4095
+#: after a read that emptied a full tty buffer, how long the reader waits for the rest of the burst
+TTY_REFILL_S = 0.005
 #: the most bytes one step of the reader takes from the port before decoding them
 STEP_BYTES = 1 << 16
 #: what pyserial and the OS really raise when a port goes away
@@ -64,7 +66,10 @@ class FrameQueue:
     pace for its timers while the Processor is called once per output.
 
     ``named`` is set by every :meth:`wake_at` (the reader waits for it when the block named
-    last is in: the loop names the next one once it has handled that block).
+    last is in: the loop names the next one once it has handled that block), but one naming the
+    block the reader said it expects next (``expect``): the reader then sleeps until that block
+    is due, and a naming that tells it nothing new does not wake it (one wake-up of the reader
+    per /orders block less at 1x, issue 13).
     """
 
     def __init__(self, maxlen: int):
@@ -77,6 +82,7 @@ class FrameQueue:
         self._enough = 1        # frames the waiting get() wants before it returns early
         self._wake_t0: int | None = None    # get() returns once this block's frames are in
         self.hint: int | None = None        # the last wake_at() block, kept after the get (reader)
+        self.expect: int | None = None      # the block the reader expects named next (used once)
         self._woken = False
         self._since = 0.0                   # monotonic time the oldest queued frame came
         self.named = threading.Event()
@@ -122,7 +128,10 @@ class FrameQueue:
         with self._cond:
             self._wake_t0 = self.hint = t0
             self._woken = t0 is not None and bool(self._q) and _completes(self._q[-1], t0)
-        self.named.set()
+            expected = t0 is not None and t0 == self.expect
+            self.expect = None
+        if not expected:
+            self.named.set()
 
     def poke(self) -> None:
         """The waiting :meth:`get` returns now (something besides frames wants the loop)."""
@@ -203,6 +212,8 @@ class SerialReader(threading.Thread):
         self.capture_error: str | None = None
         self.pace = ReadPace()
         self.waited = False     # the last read waited for its first byte (it timed the arrival)
+        self._named_last: int | None = None     # the block named last, and the step to it
+        self._named_step = 0
 
     def stop(self) -> None:
         self._stop_event.set()
@@ -278,17 +289,37 @@ class SerialReader(threading.Thread):
     def _pause(self, now: float) -> None:
         """Wait as the pace allows (bytes gather in the port's buffer meanwhile): until shortly
         before the block the loop waits for is due, or, when it is in, until the loop names
-        the next; :meth:`stop` ends the wait."""
+        the next, or until the next it expects is due when the loop names that one (see
+        :class:`FrameQueue`); :meth:`stop` ends the wait."""
         hint = self.queue.hint
         hold = self.pace.hold(now, hint)
         if hold > 0.001:
             self._stop_event.wait(hold)
             return
         wait = self.pace.named_wait(now, hint)
-        if wait > 0.001 and self.queue.named.wait(wait) and not self._stop_event.is_set():
+        if wait <= 0.001:
+            return
+        expect = self._expected(hint)
+        until = self.pace.hold(now, expect) if expect is not None else 0.0
+        if until > 0.001:                       # named as expected, it is read when it is due
+            wait = until
+            self.queue.expect = expect
+        if self.queue.named.wait(wait) and not self._stop_event.is_set():
             hold = self.pace.hold(time.monotonic(), self.queue.hint)    # the block named now
             if hold > 0.001:
                 self._stop_event.wait(hold)
+
+    def _expected(self, hint: int | None) -> int | None:
+        """The block the loop will name after ``hint`` (named last), by the step between the
+        last two named: the next /orders block of a steady stream (None before a step is known)."""
+        if hint is None:
+            return None
+        last = self._named_last
+        if hint != last:
+            if last is not None and hint > last:
+                self._named_step = hint - last
+            self._named_last = hint
+        return hint + self._named_step if self._named_step else None
 
     def _read(self, ser) -> tuple[bytes, bool]:
         """What the port has, waiting up to the port's timeout for the first byte (b"" if
@@ -311,10 +342,23 @@ class SerialReader(threading.Thread):
             n = ser.in_waiting or 1
         data = ser.read(min(self.read_size, n))
         last = len(data)
-        while len(data) < STEP_BYTES and last and (n := ser.in_waiting):
+        while len(data) < STEP_BYTES and last and (n := self._waiting(ser, last)):
             chunk = ser.read(min(self.read_size, n))
             data, last = data + chunk, len(chunk)
         return data, last >= min(self.read_size, TTY_READ_MAX) or len(data) >= STEP_BYTES
+
+    def _waiting(self, ser, last: int) -> int:
+        """The bytes the port shows waiting after a read of ``last`` bytes; after a read that
+        emptied a full tty buffer (TTY_READ_MAX) with none shown yet, those that come within
+        TTY_REFILL_S (a pty moves the rest of a burst in as its buffer drains, ~0.2 ms later):
+        one read and one decoder call for the burst, not two steps of the reader."""
+        n = ser.in_waiting
+        if n or last < min(self.read_size, TTY_READ_MAX):
+            return n
+        fileno = getattr(ser, "fileno", None)
+        if fileno is None or not select.select([fileno()], [], [], TTY_REFILL_S)[0]:
+            return 0
+        return ser.in_waiting
 
     def _unexpected(self, exc: Exception, ser) -> None:
         """An exception that is not a port error: report it (once while it repeats), close the
