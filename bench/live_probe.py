@@ -17,7 +17,14 @@ change nothing the daemon computes:
   the frame's board time) as the time a board sample arrives, so a loop that waits
   before processing shows its wait in the latency;
 * the CPU seconds of ``main`` alone (imports excluded) and the board seconds processed;
-* whether scipy was imported, and the peak RSS (VmHWM).
+* whether scipy was imported, and the peak RSS (VmHWM);
+* with ``LIVE_PROBE_THREADS=FILE`` in the environment, the wake-ups of the daemon's threads:
+  every ``SAMPLE_S`` the voluntary context switches (each a wait the thread went into) and
+  CPU ticks of each thread by its Python name (/proc/self/task/<tid>/status and stat); at
+  exit one JSON line is appended to FILE: ``{"path": cmsensord's directory, "argv": ...,
+  "window_s": ..., "threads": {name: [wake-ups a second, CPU % of one core]}}`` over the
+  last ``LIVE_PROBE_WINDOW_S`` (default 20) seconds sampled before the daemon was stopped
+  (bench/bench_live.py stops it at the end of its window).
 
 At exit the figures go to REPORT.json.
 """
@@ -25,9 +32,14 @@ At exit the figures go to REPORT.json.
 from __future__ import annotations
 
 import json
+import os
 import resource
 import sys
+import threading
 import time
+
+#: seconds between two samples of the threads' wake-ups (LIVE_PROBE_THREADS)
+SAMPLE_S = 1.0
 
 
 def _cpu() -> float:
@@ -58,6 +70,40 @@ def _probe_sink(sink, state: dict):
 
         sink.write_many = probed_write_many
     return sink
+
+
+def _thread_counts() -> dict[str, list[int]]:
+    """{thread name: [voluntary context switches, utime + stime ticks]} of this process."""
+    names = {t.native_id: t.name for t in threading.enumerate()}
+    out = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/status") as f:
+                vol = next(int(line.split()[1]) for line in f if line.startswith("voluntary_ctxt_switches"))
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except (OSError, StopIteration):
+            continue                                # the thread ended meanwhile
+        out[names.get(int(tid), f"tid{tid}")] = [vol, int(fields[11]) + int(fields[12])]
+    return out
+
+
+def _sample_threads(samples: list, stop: threading.Event) -> None:
+    while not stop.wait(SAMPLE_S):
+        samples.append([time.monotonic(), _thread_counts()])
+
+
+def _thread_rates(samples: list, window: float) -> dict:
+    """Wake-ups a second and CPU % of each thread over the last ``window`` seconds sampled."""
+    if len(samples) < 2:
+        return {"window_s": 0.0, "threads": {}}
+    tb, b = samples[-1]
+    ta, a = min(samples[:-1], key=lambda s: abs(tb - s[0] - window))
+    tick = os.sysconf("SC_CLK_TCK")
+    return {"window_s": tb - ta, "threads": {
+        name: [round((b[name][0] - a[name][0]) / (tb - ta), 1),
+               round(100 * (b[name][1] - a[name][1]) / tick / (tb - ta), 2)]
+        for name in sorted(set(a) & set(b)) if name != "probe"}}
 
 
 def main() -> int:
@@ -106,9 +152,18 @@ def main() -> int:
     processor.Processor.__init__ = probed_init  # type: ignore[method-assign]
     live.open_sink = probed_open_sink           # type: ignore[attr-defined]
     del service
+    threads_out, samples, stop = os.environ.get("LIVE_PROBE_THREADS"), [], threading.Event()
+    if threads_out:
+        threading.Thread(target=_sample_threads, args=(samples, stop), name="probe", daemon=True).start()
     c0 = _cpu()
     rc = cli_main(args)
     cpu = _cpu() - c0
+    if threads_out:
+        stop.set()
+        window = float(os.environ.get("LIVE_PROBE_WINDOW_S", "20"))
+        with open(threads_out, "a") as f:
+            f.write(json.dumps({"path": os.path.dirname(link.__file__), "argv": args,
+                                **_thread_rates(samples, window)}) + "\n")
     hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM")).split()[1]
     procs = state["procs"]
     latency, board_latency = [], []

@@ -325,8 +325,7 @@ class SerialReader(threading.Thread):
         """What the port has, waiting up to the port's timeout for the first byte (b"" if
         nothing came), and whether more may wait.  One result per arrival, so the decoder is
         fed once.  A port with a file descriptor (a real one) is waited on with ``select``,
-        then read while it shows bytes waiting (``read_size`` at a time, a tty's 4 kB at
-        most, up to ``STEP_BYTES``), not its first byte and then the rest."""
+        then read as :meth:`_burst` says, not its first byte and then the rest."""
         n = ser.in_waiting
         self.waited = not n
         if not n:
@@ -341,20 +340,43 @@ class SerialReader(threading.Thread):
                 return b"", False
             n = ser.in_waiting or 1
         data = ser.read(min(self.read_size, n))
-        last = len(data)
-        while len(data) < STEP_BYTES and last and (n := self._waiting(ser, last)):
-            chunk = ser.read(min(self.read_size, n))
-            data, last = data + chunk, len(chunk)
-        return data, last >= min(self.read_size, TTY_READ_MAX) or len(data) >= STEP_BYTES
+        return self._burst(ser, data) if data else (data, False)
 
-    def _waiting(self, ser, last: int) -> int:
-        """The bytes the port shows waiting after a read of ``last`` bytes; after a read that
-        emptied a full tty buffer (TTY_READ_MAX) with none shown yet, those that come within
-        TTY_REFILL_S (a pty moves the rest of a burst in as its buffer drains, ~0.2 ms later):
-        one read and one decoder call for the burst, not two steps of the reader."""
-        n = ser.in_waiting
-        if n or last < min(self.read_size, TTY_READ_MAX):
-            return n
+    def _burst(self, ser, first: bytes) -> tuple[bytes, bool]:
+        """``first`` (a read) and the rest of its burst, and whether more may wait: read while
+        the port shows bytes waiting (``read_size`` at a time, a tty's 4 kB at most, up to
+        ``STEP_BYTES``) and, after a read that emptied a full tty buffer with none shown yet,
+        as :meth:`_refilled` says.  Each read asks for the bytes the port shows, never more
+        (pyserial's read of more than come waits the port's timeout for them, for ever on a
+        port opened without one).  A port that fails after ``first`` (unplugged, hung up, read
+        by another process too) ends the burst with the bytes read and more=True: they are
+        decoded and captured, and the next read meets the error (link_lost)."""
+        chunks, size, last = [first], len(first), len(first)
+        full = min(self.read_size, TTY_READ_MAX)
+        try:
+            while size < STEP_BYTES:
+                n = ser.in_waiting
+                if not n and last >= full:
+                    n = self._refilled(ser)
+                if not n:
+                    break
+                chunk = ser.read(min(self.read_size, n))
+                if not chunk:                   # shown but gone (another reader): not waited for
+                    last = 0
+                    break
+                chunks.append(chunk)
+                size, last = size + len(chunk), len(chunk)
+        except PORT_ERRORS:
+            return b"".join(chunks), True
+        return b"".join(chunks) if len(chunks) > 1 else first, last >= full or size >= STEP_BYTES
+
+    @staticmethod
+    def _refilled(ser) -> int:
+        """After a read that emptied a full tty buffer with none shown yet: the bytes the port
+        shows once some come within ``TTY_REFILL_S`` (a pty moves the rest of a burst in as its
+        buffer drains, ~0.2 ms later: one read and one decoder call for the burst, not two
+        steps of the reader); 0 when none came (a board that stopped mid-burst, a flow-control
+        stall: the reader reads again at once, without its pause)."""
         fileno = getattr(ser, "fileno", None)
         if fileno is None or not select.select([fileno()], [], [], TTY_REFILL_S)[0]:
             return 0
