@@ -39,6 +39,9 @@ READ_WAIT_S = 0.05
 TTY_READ_MAX = 4095
 #: after a read that emptied a full tty buffer, how long the reader waits for the rest of the burst
 TTY_REFILL_S = 0.005
+#: the pieces a tty's writer hands a long write to the line discipline in (the kernel's write
+#: chunk): a read of a multiple of it may have stopped between two pieces of one write
+TTY_WRITE_CHUNK = 2048
 #: the most bytes one step of the reader takes from the port before decoding them
 STEP_BYTES = 1 << 16
 #: what pyserial and the OS really raise when a port goes away
@@ -345,7 +348,8 @@ class SerialReader(threading.Thread):
     def _burst(self, ser, first: bytes) -> tuple[bytes, bool]:
         """``first`` (a read) and the rest of its burst, and whether more may wait: read while
         the port shows bytes waiting (``read_size`` at a time, a tty's 4 kB at most, up to
-        ``STEP_BYTES``) and, after a read that emptied a full tty buffer with none shown yet,
+        ``STEP_BYTES``) and, after a read that emptied a full tty buffer with none shown yet
+        (or took a multiple of ``TTY_WRITE_CHUNK``: the rest of a write may be on its way),
         as :meth:`_refilled` says.  Each read asks for the bytes the port shows, never more
         (pyserial's read of more than come waits the port's timeout for them, for ever on a
         port opened without one).  A port that fails after ``first`` (unplugged, hung up, read
@@ -356,7 +360,7 @@ class SerialReader(threading.Thread):
         try:
             while size < STEP_BYTES:
                 n = ser.in_waiting
-                if not n and last >= full:
+                if not n and (last >= full or last % TTY_WRITE_CHUNK == 0):
                     n = self._refilled(ser)
                 if not n:
                     break
@@ -372,10 +376,11 @@ class SerialReader(threading.Thread):
 
     @staticmethod
     def _refilled(ser) -> int:
-        """After a read that emptied a full tty buffer with none shown yet: the bytes the port
-        shows once some come within ``TTY_REFILL_S`` (a pty moves the rest of a burst in as its
-        buffer drains, ~0.2 ms later: one read and one decoder call for the burst, not two
-        steps of the reader); 0 when none came (a board that stopped mid-burst, a flow-control
+        """After a read that emptied a full tty buffer (or took a multiple of ``TTY_WRITE_CHUNK``)
+        with none shown yet: the bytes the port shows once some come within ``TTY_REFILL_S``
+        (a pty moves the rest of a burst in as its buffer drains, ~0.2 ms later, the next piece
+        of a long write microseconds later: one read and one decoder call for the burst, not
+        two steps of the reader); 0 when none came (a board that stopped mid-burst, a flow-control
         stall: the reader reads again at once, without its pause)."""
         fileno = getattr(ser, "fileno", None)
         if fileno is None or not select.select([fileno()], [], [], TTY_REFILL_S)[0]:
