@@ -9,12 +9,8 @@ through a burst (unplugged) keeps the bytes read before, and a board that stops 
 from __future__ import annotations
 
 import errno
-import fcntl
 import io
 import os
-import struct
-import termios
-import threading
 import time
 
 import serial
@@ -50,159 +46,123 @@ def test_the_reader_expects_the_next_block_one_step_after_the_last_named():
     assert r._expected(100) == 1100             # a board clock gone back: the step is kept
 
 
-class PipePort:
-    """The read end of a pipe as a port: a descriptor, bytes waiting by FIONREAD."""
+class TtyPort:
+    """A tty as the reader sees it, with no timing to it: its line discipline shows one piece
+    of what came at a time (a full tty buffer, or a 2-kB piece of a long write); the next one
+    that has come (:meth:`come`) moves in when the reader waits on the port's descriptor
+    (``select`` is readable at once), and a wait with none come lasts its timeout.  Like
+    pyserial's read, a read of more than it shows would wait for the rest: refused here."""
 
-    timeout = 0.05
+    timeout: float | None = 0.05
 
-    def __init__(self, fd: int):
-        self.fd = fd
+    def __init__(self, *pieces: bytes):
+        self.shown, self.waiting = b"", list(pieces)
+        self.came = len(pieces)
+        self.reads: list[int] = []
+        self.failing = False                      # unplugged: every call fails as a gone tty's
+        self._ready, ready_w = os.pipe()          # readable: the next piece moved in
+        os.write(ready_w, b"x")
+        self._idle, self._idle_w = os.pipe()      # never readable
+        self._fds = [self._ready, ready_w, self._idle, self._idle_w]
+        self._next()
+
+    def come(self, *pieces: bytes) -> None:
+        self.waiting += pieces
+        self.came += len(pieces)
+
+    def _next(self) -> bool:
+        if self.shown or not self.came:
+            return False
+        self.shown, self.came = self.waiting.pop(0), self.came - 1
+        return True
 
     def fileno(self) -> int:
-        return self.fd
+        self._check()
+        return self._ready if self._next() else self._idle
+
+    def _check(self) -> None:
+        if self.failing:
+            raise OSError(errno.EIO, "Input/output error")
 
     @property
     def in_waiting(self) -> int:
-        return struct.unpack("I", fcntl.ioctl(self.fd, termios.FIONREAD, b"\0\0\0\0"))[0]
+        self._check()
+        return len(self.shown)
 
     def read(self, n: int) -> bytes:
-        return os.read(self.fd, n)
+        self._check()
+        assert n <= len(self.shown), f"read({n}) of a port showing {len(self.shown)}: it would wait"
+        self.reads.append(n)
+        data, self.shown = self.shown[:n], self.shown[n:]
+        return data
+
+    def close(self) -> None:
+        for fd in self._fds:
+            os.close(fd)
+        self._fds = []
 
 
 def test_a_burst_beyond_a_full_tty_buffer_is_read_in_one_step():
-    r_fd, w_fd = os.pipe()
+    reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
+    port = TtyPort(b"a" * TTY_READ_MAX, b"b" * 1297)      # a full tty buffer, then the rest
     try:
-        reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
-        port = PipePort(r_fd)
-        os.write(w_fd, b"a" * TTY_READ_MAX)     # a full tty buffer; the rest comes 1 ms later
-
-        def rest():
-            time.sleep(0.001)
-            os.write(w_fd, b"b" * 1297)
-
-        t = threading.Thread(target=rest)
-        t.start()
-        data, more = reader._read(port)
-        t.join()
-        assert data == b"a" * TTY_READ_MAX + b"b" * 1297 and not more
-        os.write(w_fd, b"c" * TTY_READ_MAX)     # a full buffer and nothing after it
+        assert reader._read(port) == (b"a" * TTY_READ_MAX + b"b" * 1297, False)
+        port.come(b"c" * TTY_READ_MAX)                    # a full buffer and nothing after it
         t0 = time.monotonic()
-        data, more = reader._read(port)
-        assert data == b"c" * TTY_READ_MAX and more                 # more may wait: read again
-        assert time.monotonic() - t0 < 0.05
-        os.write(w_fd, b"d" * 100)              # a short read: nothing waited for
+        assert reader._read(port) == (b"c" * TTY_READ_MAX, True)   # more may wait: read again
+        assert time.monotonic() - t0 >= TTY_REFILL_S                # it waited for the rest
+        port.come(b"d" * 100)                             # a short read: nothing waited for
+        t0 = time.monotonic()
         assert reader._read(port) == (b"d" * 100, False)
+        assert time.monotonic() - t0 < TTY_REFILL_S or port.reads[-1] == 100
+        assert port.reads == [TTY_READ_MAX, 1297, TTY_READ_MAX, 100]
     finally:
-        os.close(r_fd)
-        os.close(w_fd)
-
-
-class StrictPort(PipePort):
-    """A pipe port with pyserial's read: a read of more bytes than come waits for them, for
-    ever here (a port opened without a timeout); asking for more than it shows is refused."""
-
-    timeout = None
-
-    def __init__(self, fd: int):
-        super().__init__(fd)
-        self.reads: list[int] = []
-
-    def read(self, n: int) -> bytes:
-        shown = self.in_waiting
-        assert n <= shown, f"read({n}) of a port showing {shown}: it would wait for the rest"
-        self.reads.append(n)
-        return os.read(self.fd, n)
-
-
-def _later(delay: float, fd: int, data: bytes) -> threading.Thread:
-    def write():
-        time.sleep(delay)
-        os.write(fd, data)
-    t = threading.Thread(target=write)
-    t.start()
-    return t
+        port.close()
 
 
 def test_a_burst_is_read_asking_for_no_more_than_the_port_shows():
-    """A tty's full buffer, the rest 1 ms later, 4096-byte reads of a longer backlog: every
-    read asks for what the port shows (a port without a timeout never waits in a read)."""
-    r_fd, w_fd = os.pipe()
+    """A long backlog (a port with a larger buffer than a tty's) and a full tty buffer with
+    the rest after it: 4096-byte reads of at most what the port shows (a port opened without a
+    timeout never waits in a read)."""
+    reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
+    port = TtyPort(b"a" * 10000)
+    port.timeout = None
     try:
-        reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
-        port = StrictPort(r_fd)
-        os.write(w_fd, b"a" * TTY_READ_MAX)
-        t = _later(0.001, w_fd, b"b" * 3 * 4096 + b"c" * 7)
-        data, more = reader._read(port)
-        t.join()
-        assert data == b"a" * TTY_READ_MAX + b"b" * 3 * 4096 + b"c" * 7 and not more
-        assert port.reads[0] == TTY_READ_MAX and sum(port.reads) == len(data), port.reads
+        assert reader._read(port) == (b"a" * 10000, False)
+        port.come(b"b" * TTY_READ_MAX, b"c" * 7)
+        assert reader._read(port) == (b"b" * TTY_READ_MAX + b"c" * 7, False)
+        assert port.reads == [4096, 4096, 1808, TTY_READ_MAX, 7]
     finally:
-        os.close(r_fd)
-        os.close(w_fd)
+        port.close()
 
 
 def test_a_board_that_stalls_longer_than_the_refill_wait_is_read_in_the_next_step():
-    """The rest of the burst comes 40 ms after a full tty buffer (the board stopped, or its
-    flow control held it): the step ends after the refill wait with more to read, and the
-    next read takes the rest when it comes."""
-    r_fd, w_fd = os.pipe()
+    """The rest of the burst has not come by the end of the refill wait after a full tty
+    buffer (the board stopped, or its flow control held it): the step ends with more to
+    read, and the next read takes the rest once it comes."""
+    reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
+    port = TtyPort(b"a" * TTY_READ_MAX)
     try:
-        reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
-        port = PipePort(r_fd)
-        port.timeout = 1.0
-        os.write(w_fd, b"a" * TTY_READ_MAX)
-        t = _later(0.04, w_fd, b"b" * 500)
-        t0 = time.monotonic()
         assert reader._read(port) == (b"a" * TTY_READ_MAX, True)
-        took = time.monotonic() - t0
+        assert reader._read(port) == (b"", False)         # nothing within the port's timeout
+        port.come(b"b" * 500)
         assert reader._read(port) == (b"b" * 500, False)
-        t.join()
-        assert TTY_REFILL_S <= took < 0.04
     finally:
-        os.close(r_fd)
-        os.close(w_fd)
+        port.close()
 
 
 def test_a_write_the_tty_hands_over_in_pieces_is_read_in_one_step():
     """A tty's writer hands a long write over 2 kB at a time: a read that took one piece waits
-    the moment the next takes (one step for the write), a read of another size does not."""
-    r_fd, w_fd = os.pipe()
+    the moment the next takes (one step for the write); a read of another size does not."""
+    reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
+    port = TtyPort(b"a" * TTY_WRITE_CHUNK, b"a" * TTY_WRITE_CHUNK, b"b" * 1000)
     try:
-        reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
-        port = PipePort(r_fd)
-        os.write(w_fd, b"a" * TTY_WRITE_CHUNK)
-        t = _later(0.001, w_fd, b"b" * 1000)
-        assert reader._read(port) == (b"a" * TTY_WRITE_CHUNK + b"b" * 1000, False)
-        t.join()
-        os.write(w_fd, b"c" * 2047)
-        t = _later(0.02, w_fd, b"d" * 1000)
+        assert reader._read(port) == (b"a" * 2 * TTY_WRITE_CHUNK + b"b" * 1000, False)
+        port.come(b"c" * 2047, b"d" * 1000)
         assert reader._read(port) == (b"c" * 2047, False)
-        t.join()
         assert reader._read(port) == (b"d" * 1000, False)
     finally:
-        os.close(r_fd)
-        os.close(w_fd)
-
-
-class UnpluggedPort(PipePort):
-    """A pipe port unplugged after its first read: from then on it fails as a gone tty does."""
-
-    def __init__(self, fd: int):
-        super().__init__(fd)
-        self.reads = 0
-
-    @property
-    def in_waiting(self) -> int:
-        if self.reads:
-            raise OSError(errno.EIO, "Input/output error")
-        return super().in_waiting
-
-    def read(self, n: int) -> bytes:
-        self.reads += 1
-        return super().read(n)
-
-    def close(self) -> None:
-        pass
+        port.close()
 
 
 def test_bytes_read_before_the_port_fails_mid_burst_are_decoded_and_captured_then_link_lost():
@@ -210,9 +170,15 @@ def test_bytes_read_before_the_port_fails_mid_burst_are_decoded_and_captured_the
     (unplugged part way through a burst): the frames of that read reach the queue and the
     capture, then link_lost is reported and the reader waits for the device to come back."""
     data = b"".join(encode_rms(i, i * 250, [1.0, 2.0, 3.0, 4.0]) for i in range(200))[:TTY_READ_MAX]
-    r_fd, w_fd = os.pipe()
-    os.write(w_fd, data)
-    ports = [UnpluggedPort(r_fd)]
+    port = TtyPort(data, b"lost")
+
+    def read(n: int, read=port.read) -> bytes:
+        got = read(n)
+        port.failing = True                             # unplugged right after this read
+        return got
+
+    port.read = read  # type: ignore[method-assign]
+    ports = [port]
 
     def open_port():
         if not ports:
@@ -222,6 +188,8 @@ def test_bytes_read_before_the_port_fails_mid_burst_are_decoded_and_captured_the
     q, cap = FrameQueue(1000), io.BytesIO()
     reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=q, capture=cap, open_port=open_port,
                           reconnect_min_s=0.05, reconnect_max_s=0.05)
+    port_close = port.close
+    port.close = lambda: None  # type: ignore[method-assign]
     reader.start()
     try:
         deadline = time.monotonic() + 5.0
@@ -230,8 +198,7 @@ def test_bytes_read_before_the_port_fails_mid_burst_are_decoded_and_captured_the
     finally:
         reader.stop()
         reader.join(timeout=2.0)
-        os.close(r_fd)
-        os.close(w_fd)
+        port_close()
     assert [kind for _, kind, _ in reader.events][:1] == ["link_lost"]
     assert "/dev/fake: EIO Input/output error; reconnecting" in reader.events[0][2]
     assert cap.getvalue() == data
