@@ -39,9 +39,6 @@ READ_WAIT_S = 0.05
 TTY_READ_MAX = 4095
 #: after a read that emptied a full tty buffer, how long the reader waits for the rest of the burst
 TTY_REFILL_S = 0.005
-#: the pieces a tty's writer hands a long write to the line discipline in (the kernel's write
-#: chunk): a read of a multiple of it may have stopped between two pieces of one write
-TTY_WRITE_CHUNK = 2048
 #: the most bytes one step of the reader takes from the port before decoding them
 STEP_BYTES = 1 << 16
 #: what pyserial and the OS really raise when a port goes away
@@ -348,20 +345,19 @@ class SerialReader(threading.Thread):
     def _burst(self, ser, first: bytes) -> tuple[bytes, bool]:
         """``first`` (a read) and the rest of its burst, and whether more may wait: read while
         the port shows bytes waiting (``read_size`` at a time, a tty's 4 kB at most, up to
-        ``STEP_BYTES``) and, after a read that emptied a full tty buffer with none shown yet
-        (or took a multiple of ``TTY_WRITE_CHUNK``: the rest of a write may be on its way),
-        as :meth:`_refilled` says.  Each read asks for the bytes the port shows, never more
-        (pyserial's read of more than come waits the port's timeout for them, for ever on a
-        port opened without one).  A port that fails after ``first`` (unplugged, hung up, read
-        by another process too) ends the burst with the bytes read and more=True: they are
-        decoded and captured, and the next read meets the error (link_lost)."""
+        ``STEP_BYTES``), and when it shows none, as :meth:`_refilled` says.  Each read asks for
+        the bytes the port shows, never more (pyserial's read of more than come waits the
+        port's timeout for them, for ever on a port opened without one).  A port that fails
+        after ``first`` (unplugged, hung up, read by another process too) ends the burst with
+        the bytes read and more=True: they are decoded and captured, and the next read meets
+        the error (link_lost)."""
         chunks, size, last = [first], len(first), len(first)
         full = min(self.read_size, TTY_READ_MAX)
         try:
             while size < STEP_BYTES:
                 n = ser.in_waiting
-                if not n and (last >= full or last % TTY_WRITE_CHUNK == 0):
-                    n = self._refilled(ser)
+                if not n:
+                    n = self._refilled(ser, TTY_REFILL_S if last >= full else 0.0)
                 if not n:
                     break
                 chunk = ser.read(min(self.read_size, n))
@@ -375,15 +371,18 @@ class SerialReader(threading.Thread):
         return b"".join(chunks) if len(chunks) > 1 else first, last >= full or size >= STEP_BYTES
 
     @staticmethod
-    def _refilled(ser) -> int:
-        """After a read that emptied a full tty buffer (or took a multiple of ``TTY_WRITE_CHUNK``)
-        with none shown yet: the bytes the port shows once some come within ``TTY_REFILL_S``
-        (a pty moves the rest of a burst in as its buffer drains, ~0.2 ms later, the next piece
-        of a long write microseconds later: one read and one decoder call for the burst, not
-        two steps of the reader); 0 when none came (a board that stopped mid-burst, a flow-control
-        stall: the reader reads again at once, without its pause)."""
+    def _refilled(ser, wait: float) -> int:
+        """The bytes the port shows once some come within ``wait`` seconds (0: none came).
+        ``select`` on a tty first lets it move into its buffer what it holds already (the
+        kernel's buffer work, pending while a writer hands a long write over 2 kB at a time);
+        so with no wait, after a read that emptied the port, it finds the rest of a write
+        that is in, not bytes still on the line.  After a read that emptied a full tty buffer
+        it waits ``TTY_REFILL_S`` (the rest of a burst comes as the buffer drains, ~0.2 ms
+        later on a pty: one read and one decoder call for the burst, not two steps of the
+        reader); none by then (a board that stopped mid-burst, a flow-control stall): the
+        reader reads again at once, without its pause."""
         fileno = getattr(ser, "fileno", None)
-        if fileno is None or not select.select([fileno()], [], [], TTY_REFILL_S)[0]:
+        if fileno is None or not select.select([fileno()], [], [], wait)[0]:
             return 0
         return ser.in_waiting
 

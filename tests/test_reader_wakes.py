@@ -13,9 +13,11 @@ import io
 import os
 import time
 
+import pytest
 import serial
 
-from cmsensord.link import TTY_READ_MAX, TTY_REFILL_S, TTY_WRITE_CHUNK, FrameQueue, SerialReader
+from cmsensord import link
+from cmsensord.link import TTY_READ_MAX, TTY_REFILL_S, FrameQueue, SerialReader
 from cmsensord.protocol import encode_rms
 
 
@@ -102,19 +104,34 @@ class TtyPort:
         self._fds = []
 
 
-def test_a_burst_beyond_a_full_tty_buffer_is_read_in_one_step():
+@pytest.fixture
+def waits(monkeypatch) -> list[float]:
+    """The timeouts of the reader's waits on a port's descriptor (``select``), in order."""
+    got: list[float] = []
+    real = link.select.select
+
+    def select(r, w, x, timeout):
+        got.append(timeout)
+        return real(r, w, x, timeout)
+
+    monkeypatch.setattr(link.select, "select", select)
+    return got
+
+
+def test_a_burst_beyond_a_full_tty_buffer_is_read_in_one_step(waits):
     reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
     port = TtyPort(b"a" * TTY_READ_MAX, b"b" * 1297)      # a full tty buffer, then the rest
     try:
         assert reader._read(port) == (b"a" * TTY_READ_MAX + b"b" * 1297, False)
+        assert waits == [TTY_REFILL_S, 0.0]           # for the rest; then a look, no wait
         port.come(b"c" * TTY_READ_MAX)                    # a full buffer and nothing after it
         t0 = time.monotonic()
         assert reader._read(port) == (b"c" * TTY_READ_MAX, True)   # more may wait: read again
         assert time.monotonic() - t0 >= TTY_REFILL_S                # it waited for the rest
         port.come(b"d" * 100)                             # a short read: nothing waited for
-        t0 = time.monotonic()
+        del waits[:]
         assert reader._read(port) == (b"d" * 100, False)
-        assert time.monotonic() - t0 < TTY_REFILL_S or port.reads[-1] == 100
+        assert waits == [port.timeout, 0.0]               # for its first byte; then a look
         assert port.reads == [TTY_READ_MAX, 1297, TTY_READ_MAX, 100]
     finally:
         port.close()
@@ -151,16 +168,21 @@ def test_a_board_that_stalls_longer_than_the_refill_wait_is_read_in_the_next_ste
         port.close()
 
 
-def test_a_write_the_tty_hands_over_in_pieces_is_read_in_one_step():
-    """A tty's writer hands a long write over 2 kB at a time: a read that took one piece waits
-    the moment the next takes (one step for the write); a read of another size does not."""
+def test_a_write_the_tty_hands_over_in_pieces_is_read_in_one_step(waits):
+    """A tty's writer hands a long write over 2 kB at a time, and the tty moves each piece
+    into its buffer a moment later: after a read that emptied the port, the reader looks once
+    more without waiting (``select`` lets the tty move in what it holds), so the pieces in
+    are one step; a piece not in yet is the next step's, not waited for."""
     reader = SerialReader("/dev/fake", baud=921600, read_size=4096, queue=FrameQueue(10))
-    port = TtyPort(b"a" * TTY_WRITE_CHUNK, b"a" * TTY_WRITE_CHUNK, b"b" * 1000)
+    port = TtyPort(b"a" * 2048, b"a" * 2048, b"b" * 1000)
     try:
-        assert reader._read(port) == (b"a" * 2 * TTY_WRITE_CHUNK + b"b" * 1000, False)
-        port.come(b"c" * 2047, b"d" * 1000)
-        assert reader._read(port) == (b"c" * 2047, False)
+        assert reader._read(port) == (b"a" * 4096 + b"b" * 1000, False)
+        assert waits == [0.0, 0.0, 0.0]
+        port.come(b"c" * 1500)
+        assert reader._read(port) == (b"c" * 1500, False)
+        port.come(b"d" * 1000)
         assert reader._read(port) == (b"d" * 1000, False)
+        assert waits == [0.0] * 3 + [port.timeout, 0.0] * 2     # each: its first byte, a look
     finally:
         port.close()
 
