@@ -126,15 +126,21 @@ def _spectral_sums(X: np.ndarray, N: int, f: np.ndarray, setup: Setup,
                    bands: list[tuple[Band, tuple[float, float]]]) -> tuple[float, list[float]]:
     """Velocity RMS [mm/s] and band RMS from the Hann power of the bins they read, computed
     once over the span of those bins (:func:`~.spectrum.hann_power_bins`)."""
-    lo, hi = setup.velocity_band
-    va, vb = bin_range(f, lo, hi)
-    va = min(max(va, 1), vb)                       # f > 0
+    va, vb = _velocity_bins(N, float(setup.fs), *setup.velocity_band)
     ranges = [bin_range(f, *edges) for _, edges in bands]
     used = [r for r in [(va, vb)] + ranges if r[1] > r[0]]
     k0 = min((a for a, _ in used), default=0)
     P = hann_power_bins(X, N, k0, max((b for _, b in used), default=0))
     v = 1000.0 * np.sqrt((P[va - k0:vb - k0] * _velocity_weights(N, float(setup.fs), va, vb)).sum()) if vb > va else 0.0
     return float(v), [float(np.sqrt(P[a - k0:b - k0].sum())) if b > a else 0.0 for a, b in ranges]
+
+
+@lru_cache(maxsize=16)
+def _velocity_bins(N: int, fs: float, lo: float, hi: float) -> tuple[int, int]:
+    """The bins a..b-1 of the velocity band [lo, hi] in :func:`~.spectrum.rfft_freqs` (N, fs),
+    DC left out (f > 0): found once per (N, fs, band)."""
+    a, b = bin_range(rfft_freqs(N, fs), lo, hi)
+    return min(max(a, 1), b), b
 
 
 @lru_cache(maxsize=16)
