@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
 #: most RAW frames run through the chain in one call (bounds the per-call arrays)
 MAX_BATCH = 1000
-#: most RMS frames in one call (an observation each, no samples): a replay's 128-KiB read of 4 channels
+#: most RMS frames in one call (an observation each, no samples): ~70 % of a replay read of 4 channels
 MAX_RMS_BATCH = 4000
 #: most observations (slots x channels) in one call of the banks from RMS frames (diagnostics count in these)
 MAX_RMS_RUN = 8000
