@@ -30,7 +30,10 @@ bytes gather in the port's kernel buffer meanwhile:
   due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
   and a tty's input buffer shows only part of what waits), and the rest is read at once;
 * with the block to wake at more than ``2 MAX_HOLD_S`` off (RMS mode's next decision), until
-  ``MAX_HOLD_S`` before it is due, at most ``FAR_HOLD_S``: then as above;
+  ``MAX_HOLD_S`` before it is due, at most ``far_hold_s`` (``FAR_HOLD_S``); then, as a late
+  block, until ``-margin_s`` after it is due (two reads a decision: the backlog, the block),
+  unless no read has waited for ``far_probe_s`` (``FAR_PROBE_S``): then the read after the
+  backlog's is the probe, at once (it waits for the next frame, whenever the block is due);
 * with no block to wake at (no output chain yet), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
   link, a sped-up simulator: the kernel's buffer must not fill), and not before the
@@ -48,8 +51,14 @@ from collections import deque
 MAX_HOLD_S = 0.1
 #: ... when that block is more than 2 MAX_HOLD_S off (a decision, RMS mode: once a second), the
 #: longest wait for the bytes before it, read until MAX_HOLD_S before it is due, then held for
-#: as above (three reads a second, not ten: issue 13)
-FAR_HOLD_S = 0.5
+#: as above (a 1-s decision's bytes in one hold, then the block: issue 13); the daemon makes it
+#: no longer than half the link's stall_s (a hold must not look like a silent link)
+FAR_HOLD_S = 1.0
+#: ... and a block read towards that way is held for as a late one (one read for it after the
+#: backlog's) while a read waited for its bytes in the last FAR_PROBE_S; else the probe is the
+#: read right after the backlog's, which waits for the next frame whenever the block is due
+#: (so the due time cannot drift off unmeasured): a probe every third 1-s decision, not at each
+FAR_PROBE_S = 2.5
 
 
 class ReadPace:
@@ -62,6 +71,8 @@ class ReadPace:
         self.behind_s, self.recent_s = behind_s, recent_s
         self.probe_s, self.probe_margin_s = probe_s, probe_margin_s
         self._exact_at: float | None = None                  # the newest read that waited for its bytes
+        self.far_hold_s, self.far_probe_s = FAR_HOLD_S, FAR_PROBE_S
+        self._far: int | None = None                         # the block last read towards in far holds
         self.window_s, self.min_span_s = window_s, min_span_s
         self._refs: deque[tuple[float, int, int]] = deque()  # (wall, t0, bytes so far), window_s apart
         self._recent: deque[tuple[float, int]] = deque()     # (wall, t0) of the reads of the last recent_s
@@ -117,9 +128,15 @@ class ReadPace:
             return 0.0
         due = self._due(wake_t0)
         if due - now > 2 * MAX_HOLD_S:
-            return min(cap, FAR_HOLD_S, due - now - MAX_HOLD_S)
-        late = (self._exact_at is not None and now - self._exact_at < self.probe_s
-                and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
+            self._far = wake_t0
+            return min(cap, self.far_hold_s, due - now - MAX_HOLD_S)
+        if wake_t0 == self._far:            # read towards in far holds: a probe is a read now
+            if self._exact_at is None or now - self._exact_at >= self.far_probe_s:
+                return 0.0                  # (it waits for the next frame: an exact arrival)
+            late = True
+        else:
+            late = (self._exact_at is not None and now - self._exact_at < self.probe_s
+                    and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
         return max(0.0, min(cap, MAX_HOLD_S, due - (self.margin_s if late else self.probe_margin_s) - now))
 
     def named_wait(self, now: float, wake_t0: int | None) -> float:

@@ -51,6 +51,11 @@ BATCH_FRAMES = 1000
 #: ... but while the block the Processor waits for (its next /orders block or decision) is still
 #: to come, frames wait for it up to HOLD_S (RMS mode: one call per decision, not per BATCH_S)
 HOLD_S = 1.5
+#: with a block named (:meth:`SerialSource.wake_at`) that is due in more than WAKE_S (RMS mode's
+#: next decision, a second off), the loop sleeps until WAKE_S / 2 after it is due, at most
+#: FAR_WAKE_S: it wakes once a decision, not also at a timeout that falls about when the
+#: decision comes (two wake-ups a second instead of one)
+FAR_WAKE_S = 1.5
 
 
 class FrameSource:
@@ -169,15 +174,23 @@ class SerialSource(FrameSource):
         self.batch_frames = batch_frames
         self.hold_s = hold_s
         self._stopped = False
+        self._kept: list[Frame] = []         # frames the loop left for the next output (keep)
+        self._kept_at = 0.0
+        self.far_timeout = FAR_WAKE_S
+        self._due: float | None = None       # when the block named last is due (monotonic)
+        self._newest: tuple[float, int] | None = None   # (when, t0) of the newest frame yielded
 
     @classmethod
     def from_link(cls, link, capture: BinaryIO | None = None,
                   open_port: Callable | None = None) -> SerialSource:
         """A source on the port of a :class:`~cmsensord.config.LinkConfig` (``open_port``:
         how to open it, default pyserial's ``Serial``)."""
-        return cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
-                   capture=capture, reconnect_min_s=link.reconnect_min_s,
-                   reconnect_max_s=link.reconnect_max_s, open_port=open_port)
+        source = cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
+                     capture=capture, reconnect_min_s=link.reconnect_min_s,
+                     reconnect_max_s=link.reconnect_max_s, open_port=open_port)
+        pace = source.reader.pace           # a hold must not look like a silent link (link_stalled)
+        pace.far_hold_s = min(pace.far_hold_s, link.stall_s / 2)
+        return source
 
     @property
     def events(self):
@@ -189,8 +202,44 @@ class SerialSource(FrameSource):
 
     def __iter__(self) -> Iterator[list[Frame]]:
         while not self._stopped:
-            yield self.queue.get(timeout=self.timeout, enough=self.batch_frames, hold_s=self.hold_s)
-        yield self.queue.get(timeout=0)
+            timeout, due = self.timeout, self._due
+            if due is not None:                 # a named block far off: sleep until just after it is due
+                timeout = max(timeout, min(self.far_timeout, due - time.monotonic() + self.timeout / 2))
+            got = self.queue.get(timeout=timeout, enough=self.batch_frames, hold_s=self.hold_s)
+            if got:
+                self._newest = (time.monotonic(), got[-1].t0_unwrapped)
+            if self._kept and (got or self.queue.hint is None
+                               or time.monotonic() - self._kept_at >= self.hold_s):
+                got, self._kept = self._kept + got, []
+            yield got
+        got, self._kept = self._kept + self.queue.get(timeout=0), []
+        yield got
+
+    def wake_at(self, t0: int | None, fs: float) -> None:
+        """The next batch comes as soon as the block at board sample ``t0`` is in
+        (:meth:`FrameQueue.wake_at`); when it is due more than ``timeout`` after the newest frame
+        yielded (at ``fs`` samples a second), the wait for it is not cut short by ``timeout``
+        but lasts until ``timeout / 2`` after it is due (``far_timeout`` at most)."""
+        self.queue.wake_at(t0)
+        newest, self._due = self._newest, None
+        if t0 is not None and newest is not None and fs > 0:
+            due = newest[0] + (t0 - newest[1]) / fs
+            if due - time.monotonic() > self.timeout:
+                self._due = due
+
+    def keep(self, frames: list[Frame]) -> None:
+        """``frames`` (taken from the last batch, not handled) come first in the next batch
+        that has frames, and wait for it as queued frames wait (``hold_s`` at most, and only
+        while the loop names a block to wake at): the frames past the block that completed an
+        output, when the next output is far off (RMS mode's decisions), are handled with the
+        block completing that one, in one Processor call, not in a call of their own."""
+        if frames:
+            self._kept, self._kept_at = frames + self._kept, time.monotonic()
+
+    @property
+    def waiting(self) -> int:
+        """Frames waiting: queued, and kept by :meth:`keep`."""
+        return len(self.queue) + len(self._kept)
 
     def stop(self) -> None:
         """Stop the reader thread (waits up to 2 s for it); iteration then drains and ends."""
