@@ -177,7 +177,8 @@ class SerialSource(FrameSource):
         self._kept: list[Frame] = []         # frames the loop left for the next output (keep)
         self._kept_at = 0.0
         self.far_timeout = FAR_WAKE_S
-        self._due: float | None = None       # when the block named last is due (monotonic)
+        self._due: float | None = None       # when the far block named last is due (monotonic)
+        self._far: int | None = None          # ... and its t0
         self._newest: tuple[float, int] | None = None   # (when, t0) of the newest frame yielded
 
     @classmethod
@@ -202,14 +203,17 @@ class SerialSource(FrameSource):
 
     def __iter__(self) -> Iterator[list[Frame]]:
         while not self._stopped:
-            timeout, due = self.timeout, self._due
-            if due is not None:                 # a named block far off: sleep until just after it is due
-                timeout = max(timeout, min(self.far_timeout, due - time.monotonic() + self.timeout / 2))
-            got = self.queue.get(timeout=timeout, enough=self.batch_frames, hold_s=self.hold_s)
+            timeout, hold_s = self.timeout, self.hold_s
+            if self._due is not None:           # a named block far off: sleep until just after it is due
+                until = self._due - time.monotonic() + self.timeout / 2
+                timeout = max(timeout, min(self.far_timeout, until))
+                if until <= timeout:            # it is overdue when the wait ends (the board
+                    hold_s = 0.0                # stopped?): what came waits no longer
+            got = self.queue.get(timeout=timeout, enough=self.batch_frames, hold_s=hold_s)
+            now = time.monotonic()
             if got:
-                self._newest = (time.monotonic(), got[-1].t0_unwrapped)
-            if self._kept and (got or self.queue.hint is None
-                               or time.monotonic() - self._kept_at >= self.hold_s):
+                self._newest = (now, got[-1].t0_unwrapped)
+            if self._kept and (got or self.queue.hint is None or now - self._kept_at >= hold_s):
                 got, self._kept = self._kept + got, []
             yield got
         got, self._kept = self._kept + self.queue.get(timeout=0), []
@@ -219,13 +223,16 @@ class SerialSource(FrameSource):
         """The next batch comes as soon as the block at board sample ``t0`` is in
         (:meth:`FrameQueue.wake_at`); when it is due more than ``timeout`` after the newest frame
         yielded (at ``fs`` samples a second), the wait for it is not cut short by ``timeout``
-        but lasts until ``timeout / 2`` after it is due (``far_timeout`` at most)."""
+        but lasts until ``timeout / 2`` after it is due (``far_timeout`` at most), and when it
+        is overdue then, the frames that came are yielded (not held for ``hold_s``)."""
         self.queue.wake_at(t0)
-        newest, self._due = self._newest, None
+        if t0 == self._far:                 # named again (not in yet): as it was due then
+            return
+        newest, self._due, self._far = self._newest, None, None
         if t0 is not None and newest is not None and fs > 0:
             due = newest[0] + (t0 - newest[1]) / fs
             if due - time.monotonic() > self.timeout:
-                self._due = due
+                self._due, self._far = due, t0
 
     def keep(self, frames: list[Frame]) -> None:
         """``frames`` (taken from the last batch, not handled) come first in the next batch
@@ -235,6 +242,14 @@ class SerialSource(FrameSource):
         block completing that one, in one Processor call, not in a call of their own."""
         if frames:
             self._kept, self._kept_at = frames + self._kept, time.monotonic()
+
+    @property
+    def last_bytes(self) -> float:
+        """When the newest bytes came (monotonic), at the latest: the reader's last read that got
+        any, less how late that read came for its newest frame (a hold lets bytes wait in the
+        port: a stream that stopped during one stopped when its last frame came, not when it
+        was read)."""
+        return self.reader.last_data - max(0.0, self.reader.pace.late_s)
 
     @property
     def waiting(self) -> int:

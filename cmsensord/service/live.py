@@ -85,12 +85,13 @@ class _Watch:
             return False
         # link_quiet first: what the board sent is in the file before the event (and its journal
         # line) says the link stalled; the one after the event makes the event durable too
-        if now - reader.last_data > link.stall_s and self.proc.anchor_ns is not None:
+        last_bytes = self.source.last_bytes
+        if now - last_bytes > link.stall_s and self.proc.anchor_ns is not None:
             self.stalled = True
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
                             time.time_ns())
-        elif now - self.last_frame > link.stall_s and now - reader.last_data <= link.stall_s:
+        elif now - self.last_frame > link.stall_s and now - last_bytes <= link.stall_s:
             self.stalled = True
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: bytes but no valid frame for "
