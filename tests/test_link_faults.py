@@ -136,6 +136,48 @@ def test_a_stalled_link_reports_the_last_partial_interval_at_once(tmp_path):
     assert 0 < last["missing_fraction"] < 1 and last["speed_source"] == "tacho", last
 
 
+def test_the_partial_interval_is_in_the_file_when_link_stalled_is_logged(tmp_path):
+    """The loop notices the stall (_Watch.done): the open indicator interval (partial) is in the
+    file before the link_stalled event and its journal line are written, so a daemon killed as
+    soon as the line appears has it.  Checked at the moment the line is logged."""
+    import logging
+    import threading
+    from types import SimpleNamespace
+
+    from cmsensord.monitor.processor import Processor
+    from cmsensord.service.live import _Watch
+    from cmsensord.service.sink import open_sink
+
+    cfg = config_from_dict({"output": {"dir": str(tmp_path / "logs")}})
+    sc = make_scenario("healthy", n_channels=1, duration_s=3.5, seed=0)
+    frames, _ = iter_frames(Board(sc, BoardConfig(n_channels=1, mode="rms")).generate(3.5))
+    sink = open_sink(cfg, {})
+    proc = Processor(cfg, sink)
+    proc.handle(frames)                             # the board stops 0.5 s into an interval
+    reader = SimpleNamespace(connected=threading.Event())
+    reader.connected.set()
+    source = SimpleNamespace(reader=reader, last_bytes=time.monotonic() - 5.0)
+    seen: list[list[dict]] = []
+
+    class AtTheLine(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if "link_stalled" in record.getMessage():
+                path = next((tmp_path / "logs").glob("*.mcap.part"))
+                seen.append([m for t, _, m in read_messages(path, lenient=True) if t == "/cm/ch0/indicators"])
+
+    handler = AtTheLine()
+    logging.getLogger("cmsensord").addHandler(handler)
+    try:
+        assert _Watch(cfg, proc, source, None, None).done(False, time.monotonic()) is False
+    finally:
+        logging.getLogger("cmsensord").removeHandler(handler)
+        proc.finish()
+        sink.close()
+    assert len(seen) == 1 and len(seen[0]) >= 3, seen
+    assert 0 < seen[0][-1]["missing_fraction"] < 1, seen[0][-1]
+    assert all(r["missing_fraction"] == 0 for r in seen[0][1:-1]), seen[0]
+
+
 def _seconds_until_logged(d: subprocess.Popen, text: str, since: float,
                           timeout: float) -> tuple[float | None, str]:
     """Seconds from ``since`` (monotonic) until ``text`` appears on the daemon's stderr (None:
