@@ -25,7 +25,10 @@ bytes gather in the port's kernel buffer meanwhile:
   tens of ms, and a rare early one long ago would make every block look late ever after
   (the newest exact arrival is kept however old);
 * when that block is already in (the loop has not named the next yet), not at all
-  (:meth:`named_wait`: until the loop names the next);
+  (:meth:`named_wait`: until the loop names the next), unless it was read towards in far
+  holds (below) and the two before it were as far apart as it is from the one before: then
+  as for the block that far after it (the next decision: the reader does not wake when the
+  loop names it);
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
   due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
   and a tty's input buffer shows only part of what waits), and the rest is read at once;
@@ -73,6 +76,7 @@ class ReadPace:
         self._exact_at: float | None = None                  # the newest read that waited for its bytes
         self.far_hold_s, self.far_probe_s = FAR_HOLD_S, FAR_PROBE_S
         self._far: int | None = None                         # the block last read towards in far holds
+        self._step = self._far_step = 0     # the distance from the one before; twice the same: a period
         self.window_s, self.min_span_s = window_s, min_span_s
         self._refs: deque[tuple[float, int, int]] = deque()  # (wall, t0, bytes so far), window_s apart
         self._recent: deque[tuple[float, int]] = deque()     # (wall, t0) of the reads of the last recent_s
@@ -125,10 +129,15 @@ class ReadPace:
         if wake_t0 is None:
             return min(cap, self.idle_hold_s)
         if wake_t0 <= self.last[1]:
-            return 0.0
+            if wake_t0 != self._far or not self._far_step:
+                return 0.0
+            wake_t0 += self._far_step       # a far block in: the next, one period on (no named_wait)
         due = self._due(wake_t0)
         if due - now > 2 * MAX_HOLD_S:
-            self._far = wake_t0
+            if wake_t0 != self._far:        # the period: two far blocks the same distance apart
+                step = wake_t0 - self._far if self._far is not None and wake_t0 > self._far else 0
+                self._far_step = step if step == self._step else 0
+                self._far, self._step = wake_t0, step
             return min(cap, self.far_hold_s, due - now - MAX_HOLD_S)
         if wake_t0 == self._far:            # read towards in far holds: a probe is a read now
             if self._exact_at is None or now - self._exact_at >= self.far_probe_s:

@@ -57,6 +57,22 @@ def test_a_decision_further_off_is_read_towards_in_one_hold_then_held_for_as_a_l
     assert fast.hold(now, 250 * 400) == pytest.approx(fast.buffer_bytes / fast.byte_rate)
 
 
+def test_a_far_block_in_is_followed_by_a_hold_for_the_next_one_period_on():
+    """Decisions named a period apart (twice the same distance): with the one named in, the
+    reader holds for the next right away (as far off as the period), not waiting for the loop
+    to name it; without that period known, it waits for the naming (hold 0: named_wait)."""
+    pace, now = paced(3.0, bytes_per_block=40)
+    assert pace.hold(now, 250 * 400) == pytest.approx(1.01 - MAX_HOLD_S)
+    assert pace.hold(now, 250 * 500) == FAR_HOLD_S
+    one, _ = paced(3.0, bytes_per_block=40)
+    one.hold(now, 250 * 600)
+    for p in (pace, one):
+        p.hold(now, 250 * 600)
+        p.arrived(now + 3.01, 301 * 40, 250 * 600)          # that block is in
+    assert pace.hold(now + 3.01, 250 * 600) == pytest.approx(1.0 - MAX_HOLD_S)
+    assert one.hold(now + 3.01, 250 * 600) == 0.0 and one.named_wait(now + 3.01, 250 * 600) > 0
+
+
 def test_without_a_block_to_wake_at_it_waits_the_idle_hold_but_never_fills_the_buffer():
     pace, now = paced(3.0)
     assert pace.hold(now, None) == pace.idle_hold_s
