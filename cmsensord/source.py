@@ -14,7 +14,7 @@ reads frames this way, so they all decode bytes the same way:
 * :class:`SerialSource` — the serial port: a reader thread (reconnecting with
   back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
   yields what is queued every ``timeout`` seconds, or as soon as ``batch_frames``
-  wait or the block the loop named (``queue.wake_at``) is in (empty batches included,
+  wait or the block the loop named (``wake_at``) is in (empty batches included,
   so the loop can do its periodic work; while that block is still to come, frames wait
   for it up to ``hold_s``), until :meth:`SerialSource.stop`, then what is left, then ends;
 * :class:`Paced` — wraps any source and paces it at ``speed`` times the
@@ -157,8 +157,11 @@ class SerialSource(FrameSource):
     Batching by time is what keeps the live daemon's cost near a replay's: the
     Processor's work is mostly per call, and one call per 10-ms block costs ~3x the
     work of its frames (issue 13).  ``batch_frames=1`` yields as soon as any frame is
-    queued.  ``events`` holds the reader's
-    link events as (wall_ns, kind, message); ``capture`` tees the bytes to a file.
+    queued.  The loop names the block it waits for with :meth:`wake_at` (one far off, RMS
+    mode's next decision: the wait lasts until just after it is due, one wake-up a decision)
+    and leaves the frames past an output's block for the next batch with :meth:`keep`.
+    ``events`` holds the reader's link events as (wall_ns, kind, message); ``capture`` tees
+    the bytes to a file.
     """
 
     def __init__(self, port: str, *, baud: int, read_size: int = 4096, queue_frames: int = 20000,

@@ -296,7 +296,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
             if over:
                 break
-            if now >= next_status:      # once a second on average, though the loop wakes every WAKE_S
+            if now >= next_status:      # once a second on average (the loop wakes every WAKE_S, or each decision)
                 next_status = max(next_status + 1.0, now + 0.5)
                 watch.diagnostics(now)
                 _status(cfg, notify, line_now, service_state)
