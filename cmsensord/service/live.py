@@ -148,14 +148,14 @@ def output_parts(frames: list[Frame], wake_t0: Callable[[], int | None], span: i
         rest = rest[len(part):]
 
 
-def can_wait(rest: list[Frame], wake: int | None, far: int) -> bool:
-    """Whether the frames ``rest`` (past the block that completed an output) may wait for the
+def can_wait(frames: list[Frame], start: int, wake: int | None, far: int) -> bool:
+    """Whether ``frames[start:]`` (past the block that completed an output) may wait for the
     block completing the next one, ``wake``: all RMS frames of one stretch of the board's clock
     (nothing in them is written before that output: a STATUS frame, a loss or a reset is handled
     at once), and that block more than ``far`` board samples past the newest of them."""
-    first, last = rest[0].t0_unwrapped, rest[-1].t0_unwrapped
+    first, last = frames[start].t0_unwrapped, frames[-1].t0_unwrapped
     return (wake is not None and wake - last > far and last >= first
-            and all(f.type is FrameType.RMS and not f.lost_before for f in rest))
+            and all(f.type is FrameType.RMS and not f.lost_before for f in frames[start:]))
 
 
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
@@ -239,7 +239,7 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
     for part in output_parts(frames, proc.wake_t0, span, longest):
         proc.handle(part)
         done += len(part)
-        if done < len(frames) and not cfg.output.akf_trace and can_wait(frames[done:], proc.wake_t0(), 2 * span):
+        if done < len(frames) and not cfg.output.akf_trace and can_wait(frames, done, proc.wake_t0(), 2 * span):
             source.keep(frames[done:])      # handled with the block completing the next output
             break
     source.wake_at(proc.wake_t0(), proc.fs)     # batches end where an /orders block or a decision does
