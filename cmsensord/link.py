@@ -123,7 +123,8 @@ class FrameQueue:
 
     def wake_at(self, t0: int | None) -> None:
         """The next :meth:`get` returns as soon as the block starting at board sample ``t0``
-        is in: its TACHO frame (the last of a block), or any frame of a later block.  None:
+        is in: its TACHO frame (the last of a block), its RMS frame (the whole of an RMS block
+        without a tacho), or any frame of a later block.  None:
         no such wish.  Used once: a get clears it."""
         with self._cond:
             self._wake_t0 = self.hint = t0
@@ -173,8 +174,12 @@ class FrameQueue:
 
 
 def _completes(f: Frame, t0: int) -> bool:
-    """``f`` shows the block at ``t0`` is in: its TACHO frame, or a frame of a later block."""
-    return f.t0_unwrapped > t0 or (f.t0_unwrapped == t0 and f.type == FrameType.TACHO)
+    """``f`` shows the block at ``t0`` is in: its TACHO frame (the last of a block), its RMS
+    frame (the whole of an RMS block without a tacho), or a frame of a later block."""
+    return f.t0_unwrapped > t0 or (f.t0_unwrapped == t0 and f.type in _LAST)
+
+
+_LAST = (FrameType.TACHO, FrameType.RMS)
 
 
 class SerialReader(threading.Thread):

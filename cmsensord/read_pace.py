@@ -25,12 +25,18 @@ bytes gather in the port's kernel buffer meanwhile:
   tens of ms, and a rare early one long ago would make every block look late ever after
   (the newest exact arrival is kept however old);
 * when that block is already in (the loop has not named the next yet), not at all
-  (:meth:`named_wait`: until the loop names the next);
+  (:meth:`named_wait`: until the loop names the next), unless it was read towards in far
+  holds (below) and the two before it were as far apart as it is from the one before: then
+  as for the block that far after it (the next decision: the reader does not wake when the
+  loop names it);
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
   due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
   and a tty's input buffer shows only part of what waits), and the rest is read at once;
 * with the block to wake at more than ``2 MAX_HOLD_S`` off (RMS mode's next decision), until
-  ``MAX_HOLD_S`` before it is due, at most ``FAR_HOLD_S``: then as above;
+  ``MAX_HOLD_S`` before it is due, at most ``far_hold_s`` (``FAR_HOLD_S``); then, as a late
+  block, until ``-margin_s`` after it is due (two reads a decision: the backlog, the block),
+  unless no read has waited for ``far_probe_s`` (``FAR_PROBE_S``): then the read after the
+  backlog's is the probe, at once (it waits for the next frame, whenever the block is due);
 * with no block to wake at (no output chain yet), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
   link, a sped-up simulator: the kernel's buffer must not fill), and not before the
@@ -48,8 +54,14 @@ from collections import deque
 MAX_HOLD_S = 0.1
 #: ... when that block is more than 2 MAX_HOLD_S off (a decision, RMS mode: once a second), the
 #: longest wait for the bytes before it, read until MAX_HOLD_S before it is due, then held for
-#: as above (three reads a second, not ten: issue 13)
-FAR_HOLD_S = 0.5
+#: as above (a 1-s decision's bytes in one hold, then the block: issue 13); the daemon makes it
+#: no longer than half the link's stall_s (a hold must not look like a silent link)
+FAR_HOLD_S = 1.0
+#: ... and a block read towards that way is held for as a late one (one read for it after the
+#: backlog's) while a read waited for its bytes in the last FAR_PROBE_S; else the probe is the
+#: read right after the backlog's, which waits for the next frame whenever the block is due
+#: (so the due time cannot drift off unmeasured): a probe every third 1-s decision, not at each
+FAR_PROBE_S = 2.5
 
 
 class ReadPace:
@@ -62,6 +74,9 @@ class ReadPace:
         self.behind_s, self.recent_s = behind_s, recent_s
         self.probe_s, self.probe_margin_s = probe_s, probe_margin_s
         self._exact_at: float | None = None                  # the newest read that waited for its bytes
+        self.far_hold_s, self.far_probe_s = FAR_HOLD_S, FAR_PROBE_S
+        self._far: int | None = None                         # the block last read towards in far holds
+        self._step = self._far_step = 0     # the distance from the one before; twice the same: a period
         self.window_s, self.min_span_s = window_s, min_span_s
         self._refs: deque[tuple[float, int, int]] = deque()  # (wall, t0, bytes so far), window_s apart
         self._recent: deque[tuple[float, int]] = deque()     # (wall, t0) of the reads of the last recent_s
@@ -114,12 +129,23 @@ class ReadPace:
         if wake_t0 is None:
             return min(cap, self.idle_hold_s)
         if wake_t0 <= self.last[1]:
-            return 0.0
+            if wake_t0 != self._far or not self._far_step:
+                return 0.0
+            wake_t0 += self._far_step       # a far block in: the next, one period on (no named_wait)
         due = self._due(wake_t0)
         if due - now > 2 * MAX_HOLD_S:
-            return min(cap, FAR_HOLD_S, due - now - MAX_HOLD_S)
-        late = (self._exact_at is not None and now - self._exact_at < self.probe_s
-                and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
+            if wake_t0 != self._far:        # the period: two far blocks the same distance apart
+                step = wake_t0 - self._far if self._far is not None and wake_t0 > self._far else 0
+                self._far_step = step if step == self._step else 0
+                self._far, self._step = wake_t0, step
+            return min(cap, self.far_hold_s, due - now - MAX_HOLD_S)
+        if wake_t0 == self._far:            # read towards in far holds: a probe is a read now
+            if self._exact_at is None or now - self._exact_at >= self.far_probe_s:
+                return 0.0                  # (it waits for the next frame: an exact arrival)
+            late = True
+        else:
+            late = (self._exact_at is not None and now - self._exact_at < self.probe_s
+                    and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
         return max(0.0, min(cap, MAX_HOLD_S, due - (self.margin_s if late else self.probe_margin_s) - now))
 
     def named_wait(self, now: float, wake_t0: int | None) -> float:

@@ -14,7 +14,7 @@ reads frames this way, so they all decode bytes the same way:
 * :class:`SerialSource` — the serial port: a reader thread (reconnecting with
   back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
   yields what is queued every ``timeout`` seconds, or as soon as ``batch_frames``
-  wait or the block the loop named (``queue.wake_at``) is in (empty batches included,
+  wait or the block the loop named (``wake_at``) is in (empty batches included,
   so the loop can do its periodic work; while that block is still to come, frames wait
   for it up to ``hold_s``), until :meth:`SerialSource.stop`, then what is left, then ends;
 * :class:`Paced` — wraps any source and paces it at ``speed`` times the
@@ -51,6 +51,11 @@ BATCH_FRAMES = 1000
 #: ... but while the block the Processor waits for (its next /orders block or decision) is still
 #: to come, frames wait for it up to HOLD_S (RMS mode: one call per decision, not per BATCH_S)
 HOLD_S = 1.5
+#: with a block named (:meth:`SerialSource.wake_at`) that is due in more than WAKE_S (RMS mode's
+#: next decision, a second off), the loop sleeps until WAKE_S / 2 after it is due, at most
+#: FAR_WAKE_S: it wakes once a decision, not also at a timeout that falls about when the
+#: decision comes (two wake-ups a second instead of one)
+FAR_WAKE_S = 1.5
 
 
 class FrameSource:
@@ -152,8 +157,11 @@ class SerialSource(FrameSource):
     Batching by time is what keeps the live daemon's cost near a replay's: the
     Processor's work is mostly per call, and one call per 10-ms block costs ~3x the
     work of its frames (issue 13).  ``batch_frames=1`` yields as soon as any frame is
-    queued.  ``events`` holds the reader's
-    link events as (wall_ns, kind, message); ``capture`` tees the bytes to a file.
+    queued.  The loop names the block it waits for with :meth:`wake_at` (one far off, RMS
+    mode's next decision: the wait lasts until just after it is due, one wake-up a decision)
+    and leaves the frames past an output's block for the next batch with :meth:`keep`.
+    ``events`` holds the reader's link events as (wall_ns, kind, message); ``capture`` tees
+    the bytes to a file.
     """
 
     def __init__(self, port: str, *, baud: int, read_size: int = 4096, queue_frames: int = 20000,
@@ -169,15 +177,24 @@ class SerialSource(FrameSource):
         self.batch_frames = batch_frames
         self.hold_s = hold_s
         self._stopped = False
+        self._kept: list[Frame] = []         # frames the loop left for the next output (keep)
+        self._kept_at = 0.0
+        self.far_timeout = FAR_WAKE_S
+        self._due: float | None = None       # when the far block named last is due (monotonic)
+        self._far: int | None = None          # ... and its t0
+        self._newest: tuple[float, int] | None = None   # (when, t0) of the newest frame yielded
 
     @classmethod
     def from_link(cls, link, capture: BinaryIO | None = None,
                   open_port: Callable | None = None) -> SerialSource:
         """A source on the port of a :class:`~cmsensord.config.LinkConfig` (``open_port``:
         how to open it, default pyserial's ``Serial``)."""
-        return cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
-                   capture=capture, reconnect_min_s=link.reconnect_min_s,
-                   reconnect_max_s=link.reconnect_max_s, open_port=open_port)
+        source = cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
+                     capture=capture, reconnect_min_s=link.reconnect_min_s,
+                     reconnect_max_s=link.reconnect_max_s, open_port=open_port)
+        pace = source.reader.pace           # a hold must not look like a silent link (link_stalled)
+        pace.far_hold_s = min(pace.far_hold_s, link.stall_s / 2)
+        return source
 
     @property
     def events(self):
@@ -189,8 +206,58 @@ class SerialSource(FrameSource):
 
     def __iter__(self) -> Iterator[list[Frame]]:
         while not self._stopped:
-            yield self.queue.get(timeout=self.timeout, enough=self.batch_frames, hold_s=self.hold_s)
-        yield self.queue.get(timeout=0)
+            timeout, hold_s = self.timeout, self.hold_s
+            if self._due is not None:           # a named block far off: sleep until just after it is due
+                until = self._due - time.monotonic() + self.timeout / 2
+                timeout = max(timeout, min(self.far_timeout, until))
+                if until <= timeout:            # it is overdue when the wait ends (the board
+                    hold_s = 0.0                # stopped?): what came waits no longer
+            got = self.queue.get(timeout=timeout, enough=self.batch_frames, hold_s=hold_s)
+            now = time.monotonic()
+            if got:
+                self._newest = (now, got[-1].t0_unwrapped)
+            if self._kept and (got or self.queue.hint is None or now - self._kept_at >= hold_s):
+                got, self._kept = self._kept + got, []
+            yield got
+        got, self._kept = self._kept + self.queue.get(timeout=0), []
+        yield got
+
+    def wake_at(self, t0: int | None, fs: float) -> None:
+        """The next batch comes as soon as the block at board sample ``t0`` is in
+        (:meth:`FrameQueue.wake_at`); when it is due more than ``timeout`` after the newest frame
+        yielded (at ``fs`` samples a second), the wait for it is not cut short by ``timeout``
+        but lasts until ``timeout / 2`` after it is due (``far_timeout`` at most), and when it
+        is overdue then, the frames that came are yielded (not held for ``hold_s``)."""
+        self.queue.wake_at(t0)
+        if t0 == self._far:                 # named again (not in yet): as it was due then
+            return
+        newest, self._due, self._far = self._newest, None, None
+        if t0 is not None and newest is not None and fs > 0:
+            due = newest[0] + (t0 - newest[1]) / fs
+            if due - time.monotonic() > self.timeout:
+                self._due, self._far = due, t0
+
+    def keep(self, frames: list[Frame]) -> None:
+        """``frames`` (taken from the last batch, not handled) come first in the next batch
+        that has frames, and wait for it as queued frames wait (``hold_s`` at most, and only
+        while the loop names a block to wake at): the frames past the block that completed an
+        output, when the next output is far off (RMS mode's decisions), are handled with the
+        block completing that one, in one Processor call, not in a call of their own."""
+        if frames:
+            self._kept, self._kept_at = frames + self._kept, time.monotonic()
+
+    @property
+    def last_bytes(self) -> float:
+        """When the newest bytes came (monotonic), at the latest: the reader's last read that got
+        any, less how late that read came for its newest frame (a hold lets bytes wait in the
+        port: a stream that stopped during one stopped when its last frame came, not when it
+        was read)."""
+        return self.reader.last_data - max(0.0, self.reader.pace.late_s)
+
+    @property
+    def waiting(self) -> int:
+        """Frames waiting: queued, and kept by :meth:`keep`."""
+        return len(self.queue) + len(self._kept)
 
     def stop(self) -> None:
         """Stop the reader thread (waits up to 2 s for it); iteration then drains and ends."""

@@ -69,6 +69,33 @@ def test_envelopes_of_one_band_in_one_call_equal_one_at_a_time_bit_for_bit():
     assert compute_many(items[4:5])[0].envelope_rms == 0.0
 
 
+@pytest.mark.parametrize("N", [2, 3, 777, 12500, 25000])
+def test_row_statistics_and_centred_envelopes_equal_the_per_row_ones_bit_for_bit(N):
+    """The passes over all rows of one length (compute_many's): each row's waveform
+    statistics, envelope with its mean removed and envelope RMS are those of the row alone,
+    bit for bit, whatever the rows' count, scale and offset; a zero row and a band with no
+    bin give the per-row numbers too."""
+    from cmsensord.dsp.indicators.envelope import centred_envelopes, envelopes_of_rfft
+    from cmsensord.dsp.indicators.statistics import centred_stats, centred_stats_rows
+
+    rng = np.random.default_rng(N)
+    for R in (1, 2, 3, 5):
+        x = rng.standard_normal((R, N)) * rng.uniform(1e-3, 1e3, (R, 1)) + rng.uniform(-50, 50, (R, 1))
+        if R == 5:
+            x[2] = 4.0                                   # a constant row: zero once centred
+        D = np.ascontiguousarray(x - x.mean(axis=1, keepdims=True))
+        assert repr(centred_stats_rows(D)) == repr([centred_stats(D[i].copy()) for i in range(R)])
+        X = np.fft.rfft(D, axis=-1)
+        for band in (default_band(FS), (1500.0, 9000.0), (13000.0, 14000.0)):
+            envs, rms = centred_envelopes(X, N, FS, band)
+            want = envelopes_of_rfft(X, N, FS, band)
+            assert len(envs) == len(rms) == R
+            for e, r, w in zip(envs, rms, want):
+                ref = w.env - w.env.mean()
+                assert e.env.tobytes() == ref.tobytes() and (e.fs_env, e.band) == (w.fs_env, w.band)
+                assert repr(r) == repr(float(np.sqrt(np.mean(ref * ref))))
+
+
 @pytest.mark.parametrize("with_tacho", [False, True])
 def test_several_intervals_released_together_give_the_messages_of_one_at_a_time(with_tacho):
     """The RAW chain's intervals released in one call (a replay's read brings ~2.6 s) and one

@@ -22,7 +22,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import frames_hit, read_records
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, board_on_pty, cmsensord, drain, fill, start_board, start_daemon, stop
+from processes import ENV, cmsensord, drain, fill, start_board, start_daemon, stop
 from stream import run_processor
 
 
@@ -120,13 +120,27 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
 def test_a_stalled_link_reports_the_last_partial_interval_at_once(tmp_path):
     """The board stops sending mid-interval and stays connected: at link_stalled the daemon
     writes the open indicator interval (partial) and the ones waiting for the tacho, so they
-    are on disk before any stop (the daemon is then killed with SIGKILL, which finishes nothing)."""
-    with board_on_pty("--scenario", "healthy", "--mode", "raw", "--tacho", "--duration", "3.5") as port:
+    are on disk before any stop (the daemon is then killed with SIGKILL, which finishes nothing).
+    The board starts once the daemon has the port open: the intervals count from the first
+    sample the daemon sees, and with a board already sending, a daemon that opened the port
+    at 0.5 s (of 3.5) would have seen the data end with an interval (complete)."""
+    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--start-on-stdin",
+                            "--scenario", "healthy", "--mode", "raw", "--tacho", "--duration", "3.5"],
+                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        port = sim.stdout.readline().strip()
         d = start_daemon(tmp_path, port)
+        assert _opened(d, port, 30.0), "the daemon did not open the port"
+        time.sleep(0.2)                          # pyserial discards what waits at its open
+        sim.stdin.write("\n")
+        sim.stdin.flush()
         stalled, err = _seconds_until_logged(d, "link_stalled", time.monotonic(), 30.0)
         time.sleep(2.0)                          # the sink's flush (flush_s: 1 s)
         d.send_signal(signal.SIGKILL)
         d.wait(timeout=10)
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
     assert stalled is not None, err
     recs = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap.part")), lenient=True)
             if t == "/cm/ch0/indicators"]
@@ -134,6 +148,66 @@ def test_a_stalled_link_reports_the_last_partial_interval_at_once(tmp_path):
     assert all(r["missing_fraction"] == 0 and r["speed_source"] == "tacho" for r in recs[1:-1]), recs
     last = recs[-1]
     assert 0 < last["missing_fraction"] < 1 and last["speed_source"] == "tacho", last
+
+
+def _opened(d: subprocess.Popen, port: str, timeout: float) -> bool:
+    """Whether process ``d`` has ``port`` open within ``timeout`` seconds."""
+    real, end = os.path.realpath(port), time.monotonic() + timeout
+    while time.monotonic() < end and d.poll() is None:
+        try:
+            fds = os.listdir(f"/proc/{d.pid}/fd")
+        except OSError:
+            fds = []
+        for fd in fds:
+            try:
+                if os.readlink(f"/proc/{d.pid}/fd/{fd}") == real:
+                    return True
+            except OSError:
+                continue
+        time.sleep(0.02)
+    return False
+
+
+def test_the_partial_interval_is_in_the_file_when_link_stalled_is_logged(tmp_path):
+    """The loop notices the stall (_Watch.done): the open indicator interval (partial) is in the
+    file before the link_stalled event and its journal line are written, so a daemon killed as
+    soon as the line appears has it.  Checked at the moment the line is logged."""
+    import logging
+    import threading
+    from types import SimpleNamespace
+
+    from cmsensord.monitor.processor import Processor
+    from cmsensord.service.live import _Watch
+    from cmsensord.service.sink import open_sink
+
+    cfg = config_from_dict({"output": {"dir": str(tmp_path / "logs")}})
+    sc = make_scenario("healthy", n_channels=1, duration_s=3.5, seed=0)
+    frames, _ = iter_frames(Board(sc, BoardConfig(n_channels=1, mode="rms")).generate(3.5))
+    sink = open_sink(cfg, {})
+    proc = Processor(cfg, sink)
+    proc.handle(frames)                             # the board stops 0.5 s into an interval
+    reader = SimpleNamespace(connected=threading.Event())
+    reader.connected.set()
+    source = SimpleNamespace(reader=reader, last_bytes=time.monotonic() - 5.0)
+    seen: list[list[dict]] = []
+
+    class AtTheLine(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if "link_stalled" in record.getMessage():
+                path = next((tmp_path / "logs").glob("*.mcap.part"))
+                seen.append([m for t, _, m in read_messages(path, lenient=True) if t == "/cm/ch0/indicators"])
+
+    handler = AtTheLine()
+    logging.getLogger("cmsensord").addHandler(handler)
+    try:
+        assert _Watch(cfg, proc, source, None, None).done(False, time.monotonic()) is False
+    finally:
+        logging.getLogger("cmsensord").removeHandler(handler)
+        proc.finish()
+        sink.close()
+    assert len(seen) == 1 and len(seen[0]) >= 3, seen
+    assert 0 < seen[0][-1]["missing_fraction"] < 1, seen[0][-1]
+    assert all(r["missing_fraction"] == 0 for r in seen[0][1:-1]), seen[0]
 
 
 def _seconds_until_logged(d: subprocess.Popen, text: str, since: float,

@@ -247,3 +247,105 @@ def test_a_queue_keeps_its_frames_at_the_timeout_while_the_block_to_wake_at_is_t
     q.put([Frame(FrameType.RMS, 4, 1250, 0, 0, b"")])
     time.sleep(0.06)
     assert [f.seq for f in q.get(timeout=0.01, enough=1000, hold_s=0.05)] == [4]     # waited hold_s: out
+
+
+def test_a_queue_told_the_block_to_wake_at_returns_when_its_rms_frame_is_in():
+    """An RMS block is one frame (without a tacho): it completes its block, so the decision it
+    ends is handled when it comes, not with the next block's frame."""
+    q = FrameQueue(100)
+    q.wake_at(500)
+    threading.Timer(0.05, lambda: q.put([Frame(FrameType.RMS, 1, 250, 0, 0, b"")])).start()
+    threading.Timer(0.1, lambda: q.put([Frame(FrameType.RMS, 2, 500, 0, 0, b"")])).start()
+    t = time.monotonic()
+    got = q.get(timeout=5.0, enough=1000, hold_s=5.0)
+    assert [f.seq for f in got] == [1, 2] and time.monotonic() - t < 4.0
+
+
+def test_frames_the_loop_keeps_come_first_in_the_next_batch_and_wait_as_queued_ones():
+    """SerialSource.keep: the frames past the block that completed a decision wait for the block
+    completing the next, with the frames queued meanwhile; at a timeout while a block is named
+    they stay (hold_s at most); with none named they come out."""
+    def rms(seq: int, t0: int) -> Frame:
+        return Frame(FrameType.RMS, seq, t0, 0, 0, b"")
+
+    src = SerialSource("/dev/fake", baud=921600, timeout=0.05, hold_s=0.3)
+    batches = iter(src)
+    src.keep([rms(1, 250)])
+    src.wake_at(1000, 25000.0)
+    assert next(batches) == [] and src.waiting == 1                  # the timeout: kept
+    threading.Timer(0.02, lambda: src.queue.put([rms(2, 500), rms(3, 1000)])).start()
+    assert [f.seq for f in next(batches)] == [1, 2, 3] and src.waiting == 0
+    src.keep([rms(4, 1250)])
+    src.wake_at(None, 25000.0)
+    assert [f.seq for f in next(batches)] == [4]                      # none named: at the timeout
+    src.keep([rms(5, 1500)])
+    src.wake_at(5000, 25000.0)
+    time.sleep(0.3)
+    assert [f.seq for f in next(batches)] == [5]                      # waited hold_s: out
+    src.keep([rms(6, 1750)])
+    src._stopped = True                                               # stopped: what waits, once
+    assert [[f.seq for f in b] for b in batches] == [[6]]
+
+
+def test_the_loop_takes_one_call_per_rms_decision_and_gives_the_messages_of_one_frame_per_call():
+    """The daemon's own batch step (live._process) on RMS frames: one Processor call per
+    decision (the frames past its block wait for the next decision's, source.keep), the
+    messages and their order in the file those of one frame per call."""
+    from cmsensord.config import config_from_dict
+    from cmsensord.service.live import _process, _Watch
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    sc = make_scenario("faulty", n_channels=4, duration_s=8.0, seed=3)   # one STATUS frame, at boot:
+    data = Board(sc, BoardConfig(n_channels=4, mode="rms", status_every_s=60.0)).generate(8.0)  # RMS only
+    cfg = config_from_dict({"link": {"max_drift_s": 0.0}, "channels": [{"name": f"ch{i}", "index": i}
+                                                                       for i in range(4)]})
+    frames, _ = iter_frames(data)
+    one = one_frame_per_call(frames, cfg)
+
+    batched, calls = ListSink(), []
+    proc = Processor(cfg, batched, clock_ns=lambda: 10**18)
+    handle = proc.handle
+    proc.handle = lambda part: (calls.append(len(part)), handle(part))   # type: ignore[method-assign]
+    step = len(data) // 23                          # reads of ~0.35 s, cut anywhere
+    port = PacedPort([data[k:k + step] for k in range(0, len(data), step)], pause=0.05)
+    with SerialSource("/dev/fake", baud=921600, open_port=lambda: port) as src:
+        watch = _Watch(cfg, proc, src, None, None)
+        for batch in src:
+            _process(cfg, proc, src, watch, None, batch)
+            if not port.reads and not batch and not src.waiting:
+                break
+        src.stop()
+        for batch in src:
+            proc.handle(batch)
+    proc.finish()
+
+    assert sum(calls) == len(frames)
+    decisions = len(one.topic("/cm/ch0/severity"))
+    assert decisions >= 6
+    assert len([n for n in calls if n]) <= decisions + 2, calls     # not two a decision (output_parts)
+    assert by_topic(one.messages) == by_topic(batched.messages)
+    assert [(t, s) for t, s, _ in one.messages] == [(t, s) for t, s, _ in batched.messages]
+
+
+def test_live_rms_on_a_pty_equals_the_replay_of_its_capture(tmp_path):
+    """The daemon at 1x in RMS mode (one wake-up a decision, the frames past a decision's block
+    kept for the next, the reader's 1-s holds) writes the messages a replay of its capture writes."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "faulty", "--mode", "rms", "--channels", "4", "--duration", "6",
+                      "--speed", "1", "--seed", "2", "--link", str(link))
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"),
+                     config="channels:\n" + "".join(f"  - {{name: ch{i}, index: {i}}}\n" for i in range(4)))
+    sim.stdout.readline()                            # the board's stats: all is sent
+    time.sleep(1.5)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    live = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    r = cmsensord("replay", str(tmp_path / "cap.bin"), "--config", str(tmp_path / "cmsensord.yaml"),
+                  "--out", str(tmp_path / "replay"))
+    assert r.returncode == 0, r.stderr
+    a, b = by_topic(live), by_topic(read_messages(next((tmp_path / "replay").glob("*.mcap"))))
+    assert len(a["/cm/ch3/severity"]) >= 3
+    assert a == b

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cmsensord.config import default_config
-from cmsensord.dsp.rms import rows_physical
+from cmsensord.dsp.rms import physical_rms, rows_physical
 from cmsensord.frame_batch import FrameBatch
 from cmsensord.monitor.processor import Processor
 from cmsensord.monitor.raw import RawInput
@@ -113,6 +113,20 @@ def test_rows_physical_equals_the_plain_formula_bit_for_bit():
     ref = (counts.astype(np.float64) - offset.astype(np.float64)[:, None]) * scale.astype(np.float64)[:, None]
     assert np.array_equal(rows_physical(counts, scale, offset), ref)
     assert np.array_equal(rows_physical(counts.astype(np.int64), scale, offset), ref)
+    one_s, one_o = np.full(50, scale[3]), np.full(50, offset[3])    # one channel: one calibration
+    ref1 = (counts.astype(np.float64) - np.float64(offset[3])) * np.float64(scale[3])
+    assert np.array_equal(rows_physical(counts, one_s, one_o), ref1)
+    assert np.array_equal(rows_physical(counts[:, ::2], one_s, one_o), ref1[:, ::2])    # strided counts
+    assert rows_physical(counts[:0], scale[:0], offset[:0]).shape == (0, 250)
+
+
+def test_block_rms_of_physical_values_is_the_plain_formula_bit_for_bit():
+    rng = np.random.default_rng(12)
+    for L in (1, 7, 250, 1000):
+        x = rng.standard_normal((40, L)) * rng.uniform(1e-3, 1e3, (40, 1))
+        ref = np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+        got = physical_rms(x)
+        assert got.dtype == np.float32 and got.tobytes() == ref.tobytes()
 
 
 def test_samples_of_complete_blocks_equal_the_plain_scatter():

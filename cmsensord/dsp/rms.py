@@ -24,6 +24,13 @@ def rows_physical(counts: np.ndarray, scale, offset) -> np.ndarray:
     row i calibrated with scale[i], offset[i] (float32 values, as STATUS carries them)."""
     scale = np.asarray(scale, dtype=np.float32).astype(np.float64)
     offset = np.asarray(offset, dtype=np.float32).astype(np.float64)
+    if scale.size and (scale == scale[0]).all() and (offset == offset[0]).all():
+        # one calibration for every row (one channel): the same numbers, by scalars, in flat
+        # passes (a column broadcast over rows runs ~2.5x slower)
+        x = np.asarray(counts).astype(np.float64)
+        x -= offset[0]
+        x *= scale[0]
+        return x
     x = np.subtract(counts, offset[:, None], dtype=np.float64)   # counts to float64 inside: one pass
     x *= scale[:, None]
     return x
@@ -31,7 +38,9 @@ def rows_physical(counts: np.ndarray, scale, offset) -> np.ndarray:
 
 def physical_rms(x: np.ndarray) -> np.ndarray:
     """float32 (n,): the RMS of n blocks of physical values (n, block_len) from rows_physical."""
-    return np.sqrt(np.mean(x * x, axis=-1)).astype(np.float32)
+    ms = np.square(x).sum(axis=-1)         # np.mean's sum and division, without its wrapper
+    ms /= x.shape[-1]
+    return np.sqrt(ms).astype(np.float32)
 
 
 def rows_rms(counts: np.ndarray, scale, offset) -> np.ndarray:

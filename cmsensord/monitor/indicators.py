@@ -126,7 +126,8 @@ class IndicatorChain:
         self.buf = np.full((self.N, len(channels)), np.nan)
         self._dirty = False                     # samples written to buf since it was last NaN
         self.start: int | None = None          # board sample of the open interval's first sample
-        self.pending: list[tuple[int, np.ndarray, int]] = []   # (start, samples, stamp) waiting for a speed
+        # (start, samples, stamp, their finite mask or None: all finite) waiting for a speed
+        self.pending: list[tuple[int, np.ndarray, int, np.ndarray | None]] = []
         self.newest = 0                        # board sample after the newest one given
 
     # ---------------------------------------------------------------- input
@@ -161,9 +162,12 @@ class IndicatorChain:
         samples, given at once (they wait as given, not copied: the caller's array is not
         written again); else those gathered in the buffer."""
         x = self.buf if whole is None else whole
-        if self.start is not None and np.isfinite(x).any():
-            self.pending.append((self.start, x.copy() if whole is None else x,
-                                 self.clock.stamp_ns(self.start + self.N)))
+        if self.start is not None:
+            finite = np.isfinite(x)
+            full = bool(finite.all())
+            if full or finite.any():
+                self.pending.append((self.start, x.copy() if whole is None else x,
+                                     self.clock.stamp_ns(self.start + self.N), None if full else finite))
         if self.start is not None:
             self.start += self.N
         if self._dirty:
@@ -190,7 +194,7 @@ class IndicatorChain:
         ready = []
         tacho = self.tacho()
         while self.pending:
-            s, x, stamp = self.pending[0]
+            s = self.pending[0][0]
             end = s + self.N
             late = bounded and self.newest - end > MAX_WAIT_S * self.fs
             if tacho is not None and tacho.covered_until < end and not (final or late):
@@ -209,32 +213,33 @@ class IndicatorChain:
         hz, ok = tacho.evaluate_causal(np.array(starts)[:, None] + at[None, :])
         return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
 
-    def _records(self, ready: list[tuple[int, np.ndarray, int]], tacho: TachoTracker | None) -> list:
-        """The messages of the intervals ``ready`` (start, samples, stamp), in order, channel by
-        channel; the complete records' indicators computed together (:func:`compute_many`:
-        the numbers of one :func:`compute` per record)."""
+    def _records(self, ready: list[tuple[int, np.ndarray, int, np.ndarray | None]],
+                 tacho: TachoTracker | None) -> list:
+        """The messages of the intervals ``ready`` (start, samples, stamp, finite mask or None),
+        in order, channel by channel; the complete records' indicators computed together
+        (:func:`compute_many`: the numbers of one :func:`compute` per record)."""
         rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
         todo: list = []                 # (x, setup, shaft_hz) of the complete records
-        for (_, x, stamp), (shaft_hz, source) in zip(ready, self._speeds([s for s, _, _ in ready], tacho)):
+        for (_, x, stamp, finite), (shaft_hz, source) in zip(ready, self._speeds([r[0] for r in ready], tacho)):
             head = {"mode": "raw", "interval_s": self.N / self.fs}
             if shaft_hz is not None:
                 head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
-            finite = np.isfinite(x)
-            whole = finite.all(axis=0).tolist()         # the channels with every sample
+            # the channels with every sample (a mask kept only when a sample is missing)
+            whole = [True] * len(self.channels) if finite is None else np.logical_and.reduce(finite, axis=0).tolist()
             for c, ch in enumerate(self.channels):
                 xc = x[:, c]
-                ok = finite[:, c]
-                missing = 0.0 if whole[c] else 1.0 - float(ok.mean())
-                fields: dict | None = None
-                if missing == 0.0:
+                if whole[c]:
                     todo.append((xc, self.setups[c], shaft_hz))
-                elif ok.any():
-                    st = waveform_stats(xc)
-                    fields = {k: _num(v) for k, v in zip(("accel_rms",) + WAVEFORM, st) if v == v}
-                    fields["unavailable"] = list(SPECTRAL)
-                else:
+                    rows.append((stamp, ch.name, head, 0.0, None, self.setups[c], shaft_hz))
                     continue
-                rows.append((stamp, ch.name, head, missing, fields, self.setups[c], shaft_hz))
+                assert finite is not None
+                ok = finite[:, c]
+                if not ok.any():
+                    continue
+                st = waveform_stats(xc)
+                fields: dict = {k: _num(v) for k, v in zip(("accel_rms",) + WAVEFORM, st) if v == v}
+                fields["unavailable"] = list(SPECTRAL)
+                rows.append((stamp, ch.name, head, 1.0 - float(ok.mean()), fields, self.setups[c], shaft_hz))
         records = iter(compute_many(todo))
         out = []
         for stamp, name, head, missing, fields, setup, shaft_hz in rows:

@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 _RMS, _RAW, _TACHO, _STATUS = FrameType.RMS, FrameType.RAW, FrameType.TACHO, FrameType.STATUS
 #: most RAW frames run through the chain in one call (bounds the per-call arrays)
 MAX_BATCH = 1000
-#: most RMS frames in one call (an observation each, no samples): a replay's 128-KiB read of 4 channels
+#: most RMS frames in one call (an observation each, no samples): ~70 % of a replay read of 4 channels
 MAX_RMS_BATCH = 4000
 #: most observations (slots x channels) in one call of the banks from RMS frames (diagnostics count in these)
 MAX_RMS_RUN = 8000
@@ -233,9 +233,9 @@ class Processor:
         others in order, each run of RMS or RAW frames in one call, as one frame at a time would.
         A STATUS frame (which may make the tracker) ends a part: TACHO frames go first within
         their part only."""
-        tacho = codes == _TACHO
+        tacho = codes == int(_TACHO)            # an int: numpy looks up no dunders on the enum
         if tacho.any():
-            cut = (np.flatnonzero(codes[:-1] == _STATUS) + 1).tolist()
+            cut = (np.flatnonzero(codes[:-1] == int(_STATUS)) + 1).tolist()
             if cut:
                 for i, j in zip([0, *cut], [*cut, len(codes)]):
                     rms, raw = self._passed(frames[i:j], codes[i:j], rms, raw)
@@ -247,7 +247,7 @@ class Processor:
                 return rms, raw
         cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
         starts = [0, *cuts]
-        single = iter(select(frames, (codes != _RMS) & (codes != _RAW)))   # one at a time: built at once
+        single = iter(select(frames, (codes != int(_RMS)) & (codes != int(_RAW))))   # one at a time: built at once
         # plain ints: numpy comparing its int64 with an IntEnum looks up dunders on the enum
         for i, j, kind in zip(starts, [*cuts, len(codes)], codes[starts].tolist()):   # runs of one type
             if kind == _RMS:

@@ -51,10 +51,16 @@ class RawBlocks:
         return vals
 
     def samples(self, index: list[int]) -> np.ndarray:
-        """float64 (B, block_len, len(index)): the board channels ``index``, NaN where lost."""
+        """float64 (B, block_len, len(index)): the board channels ``index``, NaN where lost;
+        of a board with one channel and no frame lost, a read-only view of :attr:`x` (no copy:
+        the chains read their samples, none writes them)."""
         L = self.x.shape[1]
         B, C = len(self.t0), self.n_channels
         if index == list(range(C)) and self._complete():   # every channel of every block, in order
+            if C == 1:
+                y = self.x.reshape(B, L, 1)
+                y.flags.writeable = False
+                return y
             return self.x.reshape(B, C, L).transpose(0, 2, 1).copy()
         where = np.full(max(self.n_channels, max(index, default=0) + 1), -1)
         where[index] = np.arange(len(index))          # board channel -> column (-1: not asked)

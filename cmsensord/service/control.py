@@ -23,7 +23,7 @@ import os
 import queue
 import socket
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,6 +56,7 @@ class ControlServer:
     def __init__(self, path: Path):
         self.path = path
         self.requests: queue.Queue[_Request] = queue.Queue(maxsize=16)
+        self.wake: Callable[[], None] | None = None     # wakes the processing loop for a request
         self._stop = threading.Event()
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
@@ -63,8 +64,7 @@ class ControlServer:
                 path.unlink()
             with _short(path) as name:
                 self.sock.bind(name)
-            self.sock.listen(4)
-            self.sock.settimeout(0.5)
+            self.sock.listen(4)     # accept blocks: close's shutdown wakes it (no wake-ups when idle)
         except OSError:
             self.sock.close()
             raise
@@ -76,8 +76,6 @@ class ControlServer:
         while not self._stop.is_set():
             try:
                 conn, _ = self.sock.accept()
-            except TimeoutError:
-                continue
             except OSError:
                 return
             with conn, contextlib.suppress(OSError):
@@ -96,6 +94,8 @@ class ControlServer:
             self.requests.put_nowait(req)
         except queue.Full:
             return {"ok": False, "error": "busy: too many requests waiting"}
+        if self.wake is not None:
+            self.wake()
         if not req.done.wait(REPLY_S):
             return {"ok": False, "error": f"the processing loop did not answer within {REPLY_S:g} s"}
         return req.reply or {"ok": False, "error": "no answer"}

@@ -14,7 +14,7 @@ from cmsensord.config import Config, config_to_dict
 from cmsensord.errors import SinkError
 from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
-from cmsensord.protocol import Frame
+from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.signals import StopFlag
@@ -83,12 +83,17 @@ class _Watch:
         reader, link = self.source.reader, self.cfg.link
         if self.stalled or not reader.connected.is_set():
             return False
-        if now - reader.last_data > link.stall_s and self.proc.anchor_ns is not None:
+        # link_quiet first: what the board sent is in the file before the event (and its journal
+        # line) says the link stalled; the one after the event makes the event durable too
+        last_bytes = self.source.last_bytes
+        if now - last_bytes > link.stall_s and self.proc.anchor_ns is not None:
             self.stalled = True
+            self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
                             time.time_ns())
-        elif now - self.last_frame > link.stall_s and now - reader.last_data <= link.stall_s:
+        elif now - self.last_frame > link.stall_s and now - last_bytes <= link.stall_s:
             self.stalled = True
+            self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: bytes but no valid frame for "
                             f"{now - self.last_frame:.1f} s (wrong baud rate, or line noise?)",
                             time.time_ns())
@@ -143,6 +148,16 @@ def output_parts(frames: list[Frame], wake_t0: Callable[[], int | None], span: i
         rest = rest[len(part):]
 
 
+def can_wait(frames: list[Frame], start: int, wake: int | None, far: int) -> bool:
+    """Whether ``frames[start:]`` (past the block that completed an output) may wait for the
+    block completing the next one, ``wake``: all RMS frames of one stretch of the board's clock
+    (nothing in them is written before that output: a STATUS frame, a loss or a reset is handled
+    at once), and that block more than ``far`` board samples past the newest of them."""
+    first, last = frames[start].t0_unwrapped, frames[-1].t0_unwrapped
+    return (wake is not None and wake - last > far and last >= first
+            and all(f.type is FrameType.RMS and not f.lost_before for f in frames[start:]))
+
+
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None, open_port: Callable | None = None) -> int:
@@ -170,6 +185,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
     control = _control(cfg, proc)           # cmsensord ack / status
+    if control is not None:
+        control.wake = queue.poke           # a request is answered at once, not at the loop's next wake-up
     log.info("effective settings: %s", json.dumps(config_to_dict(cfg), default=str))
     warning = fallback_warning()
     if warning:
@@ -218,16 +235,21 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
     # with the AKF trace (~100 messages a slot's second, the sink's reorder window holding some),
     # parts of BATCH_S as before: longer ones kept a decision's messages unflushed ~0.1 s longer
     longest = span if cfg.output.akf_trace else round(HOLD_S * proc.fs)
+    done = 0
     for part in output_parts(frames, proc.wake_t0, span, longest):
         proc.handle(part)
-    source.queue.wake_at(proc.wake_t0())    # batches end where an /orders block or a decision does
+        done += len(part)
+        if done < len(frames) and not cfg.output.akf_trace and can_wait(frames, done, proc.wake_t0(), 2 * span):
+            source.keep(frames[done:])      # handled with the block completing the next output
+            break
+    source.wake_at(proc.wake_t0(), proc.fs)     # batches end where an /orders block or a decision does
     if control is not None:
         control.apply(proc)                 # acks and status requests, between batches
     if (frames and cfg.link.max_drift_s and watch.sim_done is None
             and len(source.queue) < DRIFT_QUEUE_MAX):
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
-    if not frames and not len(source.queue):    # no data moves the events' release on: the wall clock does
+    if not frames and not source.waiting:       # no data moves the events' release on: the wall clock does
         proc.log.release(time.time_ns())
 
 
@@ -245,17 +267,17 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             line = f"{line} | {fallback}"
         return f"{line} | {publisher.status()}" if publisher is not None else line
 
-    def service_state() -> str:         # STATUS=: the status line, and what the daemon waits for
-        line = line_now()
+    def service_state(line: str) -> str:    # STATUS=: the status line, and what the daemon waits for
         if reader.error is not None:
             return f"reader error x{reader.errors}: {reader.error} | {line}"
         return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
 
     if notify.watchdog_interval_s:      # the loop wakes twice per ping interval: a ping is never late
         source.timeout = min(source.timeout, notify.watchdog_interval_s / 2)
+        source.far_timeout = min(source.far_timeout, notify.watchdog_interval_s / 2)
     if notify.enabled:
         reader.connected.wait(0.2)      # a present port opens within ms: READY's STATUS says which
-    notify.ready(service_state())
+    notify.ready(service_state(line_now()))
     next_status = time.monotonic() + 1.0
     try:
         for frames in source:
@@ -268,17 +290,31 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             if stop.reopen:             # SIGHUP: finish the current file, start a new one
                 stop.reopen = False
                 sink.reopen()
+            # frames held for the block completing the next output are frames that came; a stall
+            # noticed here (its partial interval written) is made durable by this tick, not the next
+            over = watch.done(bool(frames) or bool(source.waiting), now) or stop.event.is_set()
             sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
-            # frames held for the block completing the next output are frames that came
-            if watch.done(bool(frames) or bool(len(source.queue)), now) or stop.event.is_set():
+            if over:
                 break
-            if now >= next_status:      # once a second on average, though the loop wakes every WAKE_S
+            if now >= next_status:      # once a second on average (the loop wakes every WAKE_S, or each decision)
                 next_status = max(next_status + 1.0, now + 0.5)
                 watch.diagnostics(now)
-                if cfg.output.status_line:
-                    print(line_now(), file=sys.stderr, flush=True)
-                else:
-                    log.debug("status: %s", line_now())
-                notify.status(service_state())
+                _status(cfg, notify, line_now, service_state)
     finally:
         notify.stopping("stopping: closing the MCAP log")
+
+
+def _status(cfg: Config, notify: Notifier, line_now: Callable[[], str],
+            service_state: Callable[[str], str]) -> None:
+    """The status line (stderr, or the debug log) and systemd's STATUS=, made once and only when
+    one of them is wanted."""
+    wanted = cfg.output.status_line or log.isEnabledFor(logging.DEBUG)
+    if not (wanted or notify.enabled):
+        return
+    line = line_now()
+    if cfg.output.status_line:
+        print(line, file=sys.stderr, flush=True)
+    else:
+        log.debug("status: %s", line)
+    if notify.enabled:
+        notify.status(service_state(line))

@@ -23,7 +23,8 @@ class StopFlag:
             signal.signal(sig, self._handler)
 
     def install_reopen(self) -> None:
-        """SIGHUP sets ``reopen``; the loop then reopens the logs (for log rotation tools)."""
+        """SIGHUP sets ``reopen`` and calls ``wake``; the loop then reopens the logs at once
+        (for log rotation tools), not at its next wake-up."""
         signal.signal(signal.SIGHUP, self._hup)
 
     def why(self) -> str:
@@ -38,3 +39,5 @@ class StopFlag:
 
     def _hup(self, _signum, _frame) -> None:
         self.reopen = True              # only a flag: the loop does the work
+        if self.wake is not None:
+            self.wake()

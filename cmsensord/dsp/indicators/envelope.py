@@ -34,7 +34,8 @@ import numpy as np
 
 from .spectrum import bin_range, hann, hann_sums, rfft_freqs
 
-__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft", "envelope_spectrum",
+__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft", "centred_envelopes",
+           "envelope_spectrum",
            "centred_envelope_spectrum", "LinePeak", "line_peak"]
 
 
@@ -110,6 +111,23 @@ def envelopes_of_rfft(X: np.ndarray, N: int, fs: float, band: tuple[float, float
     env = np.abs(np.fft.ifft(X[:, lo:hi + 1], n=M, axis=-1, norm="forward"))
     env *= 2.0 / N
     return [Envelope(e, M / T, edges) for e in env]
+
+
+def centred_envelopes(X: np.ndarray, N: int, fs: float,
+                      band: tuple[float, float]) -> tuple[list[Envelope], list[float]]:
+    """:func:`envelopes_of_rfft` of the rows of X with each envelope's mean removed
+    (``env - env.mean()``), and each one's RMS (``sqrt(mean(e * e))``, the envelope RMS of
+    step 3): the numbers of those two steps row by row, bit for bit (each row's sums are
+    numpy's pairwise sums of that row), in one pass over all rows each."""
+    lo, hi, M, T = _band_bins(X.shape[-1], N, fs, band)
+    edges = (lo / T, hi / T)
+    if hi < lo:
+        return [Envelope(np.zeros(M), M / T, edges) for _ in range(len(X))], [0.0] * len(X)
+    env = np.abs(np.fft.ifft(X[:, lo:hi + 1], n=M, axis=-1, norm="forward"))
+    env *= 2.0 / N
+    env -= env.mean(axis=1, keepdims=True)
+    rms = np.sqrt(np.mean(env * env, axis=1)).tolist()
+    return [Envelope(e, M / T, edges) for e in env], rms
 
 
 def envelope_spectrum(env: np.ndarray, fs_env: float) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ above 1.25 x the B/C boundary.
 
 from __future__ import annotations
 
-import numpy as np
+from bisect import bisect_right
 
 __all__ = ["ZONES", "BOUNDARIES_MM_S", "boundaries", "zone", "zone_index", "baseline_alarm_mm_s"]
 
@@ -45,7 +45,7 @@ def boundaries(group: int, foundation: str) -> tuple[float, float, float]:
 
 def zone_index(v_mm_s: float, group: int, foundation: str) -> int:
     """0..3 for zone A..D (a value on a boundary is in the higher zone)."""
-    return int(np.searchsorted(boundaries(group, foundation), v_mm_s, side="right"))
+    return bisect_right(boundaries(group, foundation), v_mm_s)   # NaN: 3, as np.searchsorted
 
 
 def zone(v_mm_s: float, group: int, foundation: str) -> str:
