@@ -282,33 +282,44 @@ class SerialReader(threading.Thread):
         frames = self.decoder.feed(data)
         self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None, exact=self.waited)
         self.queue.named.clear()                # a wake_at from now on ends a named_wait
+        # the pause is planned before the loop gets the frames (it wakes on them, and would wait
+        # for the interpreter while the reader planned), never while bytes wait (a backlog)
+        pause = (0.0, False) if more else self._plan(now)
         self.queue.put(frames)
         if self.errors:
             self._event("reader_recovered", f"{self.port}: reading again after {self.errors} "
                         "reader error(s)")
             self.errors, self.error = 0, None
-        if not more:                            # never while bytes wait (a backlog of reads)
-            self._pause(now)
+        self._pause(*pause)
         return ser
 
-    def _pause(self, now: float) -> None:
-        """Wait as the pace allows (bytes gather in the port's buffer meanwhile): until shortly
-        before the block the loop waits for is due, or, when it is in, until the loop names
-        the next, or until the next it expects is due when the loop names that one (see
-        :class:`FrameQueue`); :meth:`stop` ends the wait."""
+    def _plan(self, now: float) -> tuple[float, bool]:
+        """How long to wait as the pace allows (bytes gather in the port's buffer meanwhile),
+        and whether :meth:`stop` alone ends the wait (False) or the loop's naming a block does
+        too (True): until shortly before the block the loop waits for is due, or, when it is
+        in, until the loop names the next, or until the next it expects is due when the loop
+        names that one (see :class:`FrameQueue`)."""
         hint = self.queue.hint
         hold = self.pace.hold(now, hint)
         if hold > 0.001:
-            self._stop_event.wait(hold)
-            return
+            return hold, False
         wait = self.pace.named_wait(now, hint)
         if wait <= 0.001:
-            return
+            return 0.0, False
         expect = self._expected(hint)
         until = self.pace.hold(now, expect) if expect is not None else 0.0
         if until > 0.001:                       # named as expected, it is read when it is due
             wait = until
             self.queue.expect = expect
+        return wait, True
+
+    def _pause(self, wait: float, named: bool) -> None:
+        """Wait as :meth:`_plan` said; :meth:`stop` ends the wait, and with ``named`` the loop's
+        naming a block it did not expect: then until shortly before that block is due."""
+        if not named:
+            if wait > 0.001:
+                self._stop_event.wait(wait)
+            return
         if self.queue.named.wait(wait) and not self._stop_event.is_set():
             hold = self.pace.hold(time.monotonic(), self.queue.hint)    # the block named now
             if hold > 0.001:
