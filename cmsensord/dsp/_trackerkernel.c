@@ -12,6 +12,8 @@
  *   riccati(c, qd, q2, P, k, S, Pout, want_p[, miss])
  *                                                  exact gains, P carried (d x d)
  *   forward(y, c, k, z, zp, e, xf, K[, miss])      the filter for C channels
+ *   forward_blocks(y, c, k, z, rpm, K, B, p, cw, ce, min_rpm, top, half_fs, rms, amp, rmean, valid, tw, te)
+ *                                                  forward + envelope + block_stats, a partial block carried
  *   backward(c, k, S, P, zp, e, xs, K[, miss])     MBF smoother over one window
  *
  * miss (optional; uint8, 1 = missing, empty = none missing) marks samples without a
@@ -582,6 +584,35 @@ done:
  * after the other when C K > 1, pairwise when it is 1: the column is then contiguous), rmean =
  * sum(rpm) / B (pairwise), valid = every |rpm| >= min_rpm and max |rpm| / 60 top < half_fs;
  * rms and amp NaN where not valid. */
+/* The statistics of one block (B samples): wave, env (B x CK), rpm (B), sq scratch (B x CK);
+ * rms and amp (CK), rmean and valid (one each). */
+static void stats_of_block(const double *we, const double *ee, const double *re, Py_ssize_t B,
+                           Py_ssize_t CK, double min_rpm, double top, double half_fs, double *sq,
+                           double *rs, double *am, double *rmean, unsigned char *valid) {
+    const double n = (double)B;
+    for (Py_ssize_t i = 0; i < B * CK; i++) sq[i] = we[i] * we[i];
+    if (CK == 1) {
+        rs[0] = pairwise_sum(sq, B, 1);
+        am[0] = pairwise_sum(ee, B, 1);
+    } else {
+        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sq[j]; am[j] = ee[j]; }
+        for (Py_ssize_t b = 1; b < B; b++)
+            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] += sq[b * CK + j]; am[j] += ee[b * CK + j]; }
+    }
+    for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sqrt(rs[j] / n); am[j] = am[j] / n; }
+    *rmean = pairwise_sum(re, B, 1) / n;
+    int ok = 1;
+    double hi = 0.0;
+    for (Py_ssize_t b = 0; b < B; b++) {
+        const double a = fabs(re[b]);
+        ok &= a >= min_rpm;                             /* NaN: not valid */
+        if (b == 0 || (hi == hi && (a > hi || a != a))) hi = a;
+    }
+    *valid = ok && hi / 60.0 * top < half_fs;
+    if (!*valid)
+        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = NAN; am[j] = NAN; }
+}
+
 static PyObject *block_stats(PyObject *self, PyObject *args) {
     Py_buffer bw, be, br, brms, bamp, bmean, bvalid;
     Py_ssize_t K;
@@ -610,38 +641,103 @@ static PyObject *block_stats(PyObject *self, PyObject *args) {
     const double *wave = bw.buf, *env = be.buf, *rpm = br.buf;
     double *rms = brms.buf, *amp = bamp.buf, *rmean = bmean.buf;
     unsigned char *valid = bvalid.buf;
-    const double n = (double)B;
-    for (Py_ssize_t e = 0; e < E; e++) {
-        const double *we = wave + e * B * CK, *ee = env + e * B * CK, *re = rpm + e * B;
-        double *rs = rms + e * CK, *am = amp + e * CK;
-        for (Py_ssize_t i = 0; i < B * CK; i++) sq[i] = we[i] * we[i];
-        if (CK == 1) {
-            rs[0] = pairwise_sum(sq, B, 1);
-            am[0] = pairwise_sum(ee, B, 1);
-        } else {
-            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sq[j]; am[j] = ee[j]; }
-            for (Py_ssize_t b = 1; b < B; b++)
-                for (Py_ssize_t j = 0; j < CK; j++) { rs[j] += sq[b * CK + j]; am[j] += ee[b * CK + j]; }
-        }
-        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sqrt(rs[j] / n); am[j] = am[j] / n; }
-        rmean[e] = pairwise_sum(re, B, 1) / n;
-        int ok = 1;
-        double hi = 0.0;
-        for (Py_ssize_t b = 0; b < B; b++) {
-            const double a = fabs(re[b]);
-            ok &= a >= min_rpm;                             /* NaN: not valid */
-            if (b == 0 || (hi == hi && (a > hi || a != a))) hi = a;
-        }
-        valid[e] = ok && hi / 60.0 * top < half_fs;
-        if (!valid[e])
-            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = NAN; am[j] = NAN; }
-    }
+    for (Py_ssize_t e = 0; e < E; e++)
+        stats_of_block(wave + e * B * CK, env + e * B * CK, rpm + e * B, B, CK, min_rpm, top, half_fs,
+                       sq, rms + e * CK, amp + e * CK, rmean + e, valid + e);
     Py_INCREF(Py_None);
     ret = Py_None;
 done:
     free(sq);
     PyBuffer_Release(&bw); PyBuffer_Release(&be); PyBuffer_Release(&br); PyBuffer_Release(&brms);
     PyBuffer_Release(&bamp); PyBuffer_Release(&bmean); PyBuffer_Release(&bvalid);
+    return ret;
+}
+
+/* forward, envelope and block_stats in one pass (tracker.py's causal path of a call without a
+ * missing sample, without the smoother): the T new samples y (T x C), c (T x K), k (T x 2K) from
+ * the state z (C x 2K, updated) follow the p samples carried from the last call (their wave and
+ * env cw, ce: p x C x K); rpm (p + T) is the speed of them all.  The E = (p + T) / B whole blocks
+ * give rms, amp (E x C x K), rmean and valid (E); the samples after them go to tw, te
+ * ((p + T - E B) x C x K), to be carried.  The same operations as forward, envelope and
+ * block_stats in their order (a block's waveform and envelope are kept only while its
+ * statistics are made). */
+static PyObject *forward_blocks(PyObject *self, PyObject *args) {
+    Py_buffer by, bc, bk, bz, br, bcw, bce, brms, bamp, bmean, bvalid, btw, bte;
+    Py_ssize_t K, B, p;
+    double min_rpm, top, half_fs;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*y*nnny*y*dddw*w*w*w*w*w*", &by, &bc, &bk, &bz, &br, &K, &B, &p,
+                          &bcw, &bce, &min_rpm, &top, &half_fs, &brms, &bamp, &bmean, &bvalid, &btw, &bte))
+        return NULL;
+    PyObject *ret = NULL;
+    double *scratch = NULL;
+    const Py_ssize_t d = 2 * K;
+    const Py_ssize_t C = K > 0 ? bz.len / (Py_ssize_t)sizeof(double) / d : 0;
+    const Py_ssize_t T = K > 0 ? bc.len / (Py_ssize_t)sizeof(double) / K : 0;
+    const Py_ssize_t E = B > 0 && p >= 0 ? (p + T) / B : 0;
+    const Py_ssize_t CK = C * K, tail = p + T - E * B;
+    if (K <= 0 || C <= 0 || B <= 0 || p < 0 || bc.len != T * K * (Py_ssize_t)sizeof(double)
+        || br.len != (p + T) * (Py_ssize_t)sizeof(double) || bmean.len != E * (Py_ssize_t)sizeof(double)
+        || bvalid.len != E) {
+        PyErr_SetString(PyExc_ValueError, "forward_blocks: expected c (T x K), rpm (p + T), rmean and "
+                        "valid of (p + T) / B entries");
+        goto done;
+    }
+    if (!need(&by, T * C, "y") || !need(&bk, T * d, "k") || !need(&bcw, p * CK, "cw") ||
+        !need(&bce, p * CK, "ce") || !need(&brms, E * CK, "rms") || !need(&bamp, E * CK, "amp") ||
+        !need(&btw, tail * CK, "tw") || !need(&bte, tail * CK, "te"))
+        goto done;
+    scratch = malloc(sizeof(double) * (size_t)(3 * B * CK + d));
+    if (scratch == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const double *y = by.buf, *c = bc.buf, *k = bk.buf, *rpm = br.buf, *cw = bcw.buf, *ce = bce.buf;
+    double *z = bz.buf, *rms = brms.buf, *amp = bamp.buf, *rmean = bmean.buf, *tw = btw.buf, *te = bte.buf;
+    unsigned char *valid = bvalid.buf;
+    double *wave = scratch, *env = scratch + B * CK, *sq = scratch + 2 * B * CK, *xo = scratch + 3 * B * CK;
+    for (Py_ssize_t i = 0; i < p + T; i++) {
+        const Py_ssize_t e = i / B, b = i % B;
+        double *wo = e < E ? wave + b * CK : tw + (i - E * B) * CK;   /* this sample's place */
+        double *eo = e < E ? env + b * CK : te + (i - E * B) * CK;
+        if (i < p) {                                                 /* carried */
+            for (Py_ssize_t j = 0; j < CK; j++) { wo[j] = cw[i * CK + j]; eo[j] = ce[i * CK + j]; }
+        } else {
+            const Py_ssize_t n = i - p;
+            const double *cn = c + n * K, *kn = k + n * d;
+            for (Py_ssize_t ch = 0; ch < C; ch++) {
+                double *zc = z + ch * d;
+                double s = 0.0;                                      /* forward */
+                for (Py_ssize_t a = 0; a < K; a++) s += zc[2 * a + 1];
+                const double en = y[n * C + ch] - s;
+                for (Py_ssize_t j = 0; j < d; j++) xo[j] = zc[j] + kn[j] * en;
+                for (Py_ssize_t a = 0; a < K; a++) {
+                    zc[2 * a] = xo[2 * a + 1];
+                    zc[2 * a + 1] = -xo[2 * a] + cn[a] * xo[2 * a + 1];
+                }
+                for (Py_ssize_t a = 0; a < K; a++) {                 /* envelope */
+                    const double cc = cn[a];
+                    double s2 = 1.0 - 0.25 * cc * cc;
+                    if (!(s2 >= 1e-300)) s2 = (s2 != s2) ? s2 : 1e-300;
+                    const double x1 = xo[2 * a], x2 = xo[2 * a + 1];
+                    double a2 = (x1 * x1 - cc * x1 * x2 + x2 * x2) / s2;
+                    if (a2 < 0.0) a2 = 0.0;
+                    wo[ch * K + a] = x2;
+                    eo[ch * K + a] = sqrt(a2);
+                }
+            }
+        }
+        if (e < E && b == B - 1)
+            stats_of_block(wave, env, rpm + e * B, B, CK, min_rpm, top, half_fs, sq, rms + e * CK,
+                           amp + e * CK, rmean + e, valid + e);
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(scratch);
+    PyBuffer_Release(&by); PyBuffer_Release(&bc); PyBuffer_Release(&bk); PyBuffer_Release(&bz);
+    PyBuffer_Release(&br); PyBuffer_Release(&bcw); PyBuffer_Release(&bce); PyBuffer_Release(&brms);
+    PyBuffer_Release(&bamp); PyBuffer_Release(&bmean); PyBuffer_Release(&bvalid); PyBuffer_Release(&btw);
+    PyBuffer_Release(&bte);
     return ret;
 }
 
@@ -872,6 +968,8 @@ static PyMethodDef methods[] = {
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
+    {"forward_blocks", forward_blocks, METH_VARARGS,
+     "forward, envelope and block_stats in one pass, a partial block carried (tracker.py)."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
     {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},
     {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
