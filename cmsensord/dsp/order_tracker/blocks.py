@@ -3,15 +3,20 @@ of each component's waveform, the mean speed and whether the block is valid.
 
 :func:`stats_numpy` is the reference; the compiled kernel's ``block_stats`` makes the same
 numbers (the same operations in numpy's order), and its ``forward_blocks`` runs the filter,
-the envelope and these statistics of a call in one pass (:func:`fused_stats`): the same
+the envelope and these statistics of a call in one pass (:func:`fused_blocks`): the same
 numbers again, without the per-sample arrays in between.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from cmsensord.dsp.order_tracker.state import BlockStats
+from cmsensord.dsp.order_tracker.state import BlockStats, TrackerState
+
+if TYPE_CHECKING:
+    from cmsensord.dsp.order_tracker.tracker import OrderTracker
 
 
 def stats_numpy(wave: np.ndarray, env: np.ndarray, rpm: np.ndarray, min_rpm: float, top_order: float,
@@ -37,29 +42,32 @@ def stats_numpy(wave: np.ndarray, env: np.ndarray, rpm: np.ndarray, min_rpm: flo
     return rms, amp, rmean, valid
 
 
-def fused_stats(kernel, yd: np.ndarray, c: np.ndarray, k: np.ndarray, z: np.ndarray, rd: np.ndarray,
-                pend: dict, K: int, B: int, min_rpm: float, top_order: float,
-                fs_track: float) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], dict]:
-    """The kernel's ``forward_blocks``: the filter over the tracker samples yd (T, C) from the
-    state z (C, 2K; updated) and their envelope, after the samples ``pend`` carried from the
-    last call (the tracker state's partial block: "wave", "env", "rpm"; none missing), and
-    the statistics of each whole block: (rms, amplitude, mean speed, validity) as
-    :func:`stats_numpy` gives them of the filter's waveform and envelope, and the new carry
-    (``{}`` when nothing is carried and the call is whole blocks, as the numpy path has it)."""
+def fused_blocks(kernel, st: TrackerState, n0: int, yd: np.ndarray, c: np.ndarray, k: np.ndarray,
+                 rd: np.ndarray, tr: OrderTracker) -> BlockStats:
+    """The kernel's ``forward_blocks`` for tracker ``tr`` (its state ``st``): the filter over
+    the tracker samples n0 .. of yd (N, C) with coefficients c and gains k from the state's z
+    (updated) and their envelope, after the samples carried in the state's partial block
+    (``pend``: "wave", "env", "rpm"; none missing), and the statistics of each whole block,
+    as :func:`stats_numpy` gives them of the filter's waveform and envelope; the new
+    partial block carried (``{}`` when there was none and the call is whole blocks, as the
+    numpy path has it)."""
+    K, B, pend = tr.K, tr.block, st.pend
     p = len(pend["rpm"]) if pend else 0
     rpm = np.concatenate([pend["rpm"], rd]) if p else np.ascontiguousarray(rd)
-    C = z.shape[0]
+    C = st.z.shape[0]
     E = len(rpm) // B
     tail = len(rpm) - E * B
     rms, amp = np.empty((E, C, K)), np.empty((E, C, K))
     rmean, valid = np.empty(E), np.empty(E, dtype=bool)
     tw, te = np.empty((tail, C, K)), np.empty((tail, C, K))
     cw, ce = (pend["wave"], pend["env"]) if p else (tw[:0], te[:0])
-    kernel(np.ascontiguousarray(yd), np.ascontiguousarray(c), np.ascontiguousarray(k), z, rpm, K, B, p,
-           np.ascontiguousarray(cw), np.ascontiguousarray(ce), min_rpm, top_order, 0.5 * fs_track, rms, amp,
-           rmean, valid.view(np.uint8), tw, te)
-    carry = {"wave": tw, "env": te, "rpm": rpm[E * B:].copy()} if p or tail else {}
-    return (rms, amp, rmean, valid), carry
+    kernel(np.ascontiguousarray(yd), np.ascontiguousarray(c), np.ascontiguousarray(k), st.z, rpm, K, B, p,
+           np.ascontiguousarray(cw), np.ascontiguousarray(ce), tr.min_rpm, tr._top_order, 0.5 * tr.fs_track,
+           rms, amp, rmean, valid.view(np.uint8), tw, te)
+    st.pend = {"wave": tw, "env": te, "rpm": rpm[E * B:].copy()} if p or tail else {}
+    st.n_track = n0 + yd.shape[0]
+    starts = (n0 - p) + B * np.arange(E)           # the first carried sample is a block start
+    return block_stats(starts, rms, amp, rmean, valid, None, B, tr.decimate, tr.delay_in)
 
 
 def block_stats(starts, rms: np.ndarray, amp: np.ndarray, rmean: np.ndarray, valid: np.ndarray,

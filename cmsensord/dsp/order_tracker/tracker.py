@@ -16,7 +16,7 @@ import numpy as np
 
 from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
 from cmsensord.dsp.order_tracker.bandwidth import component_r, describe
-from cmsensord.dsp.order_tracker.blocks import block_stats, fused_stats, stats_numpy
+from cmsensord.dsp.order_tracker.blocks import block_stats, fused_blocks, stats_numpy
 from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
@@ -280,10 +280,10 @@ class OrderTracker:
         """The causal and the smoothed blocks (None without the smoother) of :meth:`process`:
         the same numbers and the same state after it.  A call without a missing sample,
         without the smoother (a live call), runs the filter, the envelope and the statistics in
-        one kernel pass when the kernel has it (:func:`~.blocks.fused_stats`), without the
+        one kernel pass when the kernel has it (:func:`~.blocks.fused_blocks`), without the
         per-sample outputs."""
         y, rpm = self._checked(y, rpm)
-        st, B = self.state, self.block
+        st = self.state
         if self._fused_kernel is None or self.lag is not None or y.shape[0] > self.piece * self.decimate:
             out = self.process(y, rpm)
         else:
@@ -291,12 +291,7 @@ class OrderTracker:
             N = yd.shape[0]
             if miss is None and "miss" not in st.pend and N:
                 c, k, _, _ = self._coeffs_gains(rd, None)
-                first = n0 - (len(st.pend["rpm"]) if st.pend else 0)      # a block start
-                stats, st.pend = fused_stats(self._fused_kernel, yd, c, k, st.z, rd, st.pend, self.K, B,
-                                             self.min_rpm, self._top_order, self.fs_track)
-                st.n_track = n0 + N
-                starts = first + B * np.arange(len(stats[2]))
-                return block_stats(starts, *stats, None, B, self.decimate, self.delay_in), None
+                return fused_blocks(self._fused_kernel, st, n0, yd, c, k, rd, self), None
             out = self._track(n0, yd, rd, miss)
         return out.blocks, out.smoothed_blocks
 
