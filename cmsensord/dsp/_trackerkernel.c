@@ -29,6 +29,7 @@
  *                                                  tracker.py: per-block statistics
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
  *   causal_fit(Tc, nc, todo, ck, c0, ppr, sbuf, col) tacho causal.py: the segments of new edges
+ *   knot_fit(Tc, nc, c0, first, K, wk, base, ppr, out) tacho smoothing.py: the knots of the smoothed speed
  *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
  *                                                  orders.py: the causal speed [rpm] at samples
  */
@@ -897,6 +898,113 @@ done:
     return ret;
 }
 
+/* The knots of the smoothed speed (tacho smoothing.py's _fit and weighted_quadratic, the same
+ * operations in their order): at each centre k = first .. first + R - 1 (committed indices; Tc,
+ * nc: the run's committed edge times and pulse counts from index c0 on, Python lists of
+ * numbers; K committed edges in all) the weighted quadratic of pulse count vs edge time over
+ * the edges k - h .. k + h within 0 .. K - 1 (weights wk, 2h + 1 of them, the others left out),
+ * x scaled by the largest |dx|; the knot goes to column r of out (3 x R): its time, angle base +
+ * (n + c0) / ppr and speed c1 / (S ppr). */
+static PyObject *knot_fit(PyObject *self, PyObject *args) {
+    PyObject *oT, *on;
+    Py_buffer bwk, bout;
+    long long c0, first, K;
+    double base, ppr;
+    if (!PyArg_ParseTuple(args, "OOLLLy*ddw*", &oT, &on, &c0, &first, &K, &bwk, &base, &ppr, &bout))
+        return NULL;
+    PyObject *ret = NULL, *fT = NULL, *fn = NULL;
+    double *Tc = NULL;
+    const Py_ssize_t m = bwk.len / (Py_ssize_t)sizeof(double), h = (m - 1) / 2;
+    const Py_ssize_t R = bout.len / (Py_ssize_t)sizeof(double) / 3;
+    fT = PySequence_Fast(oT, "knot_fit: Tc must be a sequence");
+    fn = fT ? PySequence_Fast(on, "knot_fit: nc must be a sequence") : NULL;
+    if (fn == NULL)
+        goto done;
+    const Py_ssize_t nT = PySequence_Fast_GET_SIZE(fT);
+    if (PySequence_Fast_GET_SIZE(fn) != nT || m < 3 || m % 2 == 0 || bout.len != 3 * R * (Py_ssize_t)sizeof(double)
+        || K > c0 + nT || first < c0 || first + R > K) {
+        PyErr_SetString(PyExc_ValueError, "knot_fit: expected Tc and nc of one length, 2h + 1 >= 3 weights, "
+                        "out (3 x R) and centres among the committed edges");
+        goto done;
+    }
+    for (Py_ssize_t r = 0; r < R; r++) {            /* every window's edges must be there */
+        const long long lo = first + r - h > 0 ? first + r - h : 0;
+        if (lo < c0) {
+            PyErr_SetString(PyExc_ValueError, "knot_fit: a window reaches before the kept edges");
+            goto done;
+        }
+    }
+    Tc = malloc(sizeof(double) * (size_t)(2 * nT + 8 * m + 1));
+    if (Tc == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *nc = Tc + nT, *terms = nc + nT;
+    for (Py_ssize_t i = 0; i < nT; i++) {                 /* np.asarray(..., float64) of the lists */
+        Tc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fT, i));
+        nc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fn, i));
+    }
+    if (PyErr_Occurred())
+        goto done;
+    const double *wk = bwk.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t r = 0; r < R; r++) {
+        const long long k = first + r;
+        const long long lo = k - h > 0 ? k - h : 0, hi = k + h < K - 1 ? k + h : K - 1;
+        const Py_ssize_t kr = (Py_ssize_t)(k - c0);
+        const double Tk = Tc[kr], nk = nc[kr];
+        double S = 0.0;
+        Py_ssize_t npts = 0;
+        for (Py_ssize_t j = 0; j < m; j++) {       /* S: np.abs(dx).max(), NaN propagating */
+            const long long i = k - h + j;
+            const int use = i >= lo && i <= hi;
+            const double a = fabs(use ? Tc[i - c0] - Tk : 0.0);
+            if (j == 0 || (S == S && (a > S || a != a))) S = a;
+            npts += use;
+        }
+        for (Py_ssize_t j = 0; j < m; j++) {
+            const long long i = k - h + j;
+            const int use = i >= lo && i <= hi;
+            const double w = use ? wk[j] : 0.0 * wk[j];
+            const double x = (use ? Tc[i - c0] - Tk : 0.0) / S;
+            const double y = use ? nc[i - c0] - nk : 0.0;
+            const double x2 = x * x, wx = w * x, wx2 = w * x2;
+            double *t = terms + j;
+            t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
+            t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+        }
+        double mom[8];
+        for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
+        double c0f = 0.0, c1 = 0.0;
+        if (npts >= 2) {                            /* smoothing.py's _solve_normal, _eliminate */
+            const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
+            const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
+            const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
+            const double m1 = s1 / s0;
+            const double d11 = s2 - m1 * s1;
+            const double d12 = a12 - m1 * a02;
+            const double e1 = b1 - m1 * b0;
+            const double m2 = a02 / s0;
+            const double d22 = a22 - m2 * a02;
+            const double e2 = b2 - m2 * b0;
+            const double m3 = d12 / d11;
+            const double c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
+            c1 = (e1 - d12 * c2) / d11;
+            c0f = (b0 - s1 * c1 - a02 * c2) / s0;
+        }
+        out[r] = Tk;
+        out[R + r] = base + (nk + c0f) / ppr;
+        out[2 * R + r] = c1 / (S * ppr);
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(Tc);
+    Py_XDECREF(fT); Py_XDECREF(fn);
+    PyBuffer_Release(&bwk); PyBuffer_Release(&bout);
+    return ret;
+}
+
 /* The order tracker's speed [rpm] at board samples base + pos[i] (orders.py's _rpm of tacho
  * causal.py's evaluate_causal, the same operations in their order): the segment is the last
  * one whose key <= s among columns lo..hi-1 of sbuf (5 x cap: key, T, w, a, valid; numpy's
@@ -973,6 +1081,7 @@ static PyMethodDef methods[] = {
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
     {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},
     {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
+    {"knot_fit", knot_fit, METH_VARARGS, "The tacho's knots of the smoothed speed (smoothing.py)."},
     {"causal_rpm", causal_rpm, METH_VARARGS, "The causal speed [rpm] at samples (orders.py)."},
     {NULL, NULL, 0, NULL},
 };

@@ -22,6 +22,7 @@ try:  # the compiled loop of evaluate() is optional: numpy is the fallback (same
     from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the build
     _kernel = None
+_knot_fit = getattr(_kernel, "knot_fit", None)     # (an older build lacks it)
 
 _SCALAR_ROWS = 8  # up to this many rows the 3x3 solves run on Python floats (the same arithmetic)
 
@@ -114,6 +115,8 @@ def make_room(buf: FloatArray, lo: int, hi: int, n: int) -> tuple[FloatArray, in
 class KnotSmoothing(TachoState):
     """The smoothing part of :class:`~cmsensord.dsp.tacho.TachoTracker`: knots of
     the committed edges and the speed and angle at any sample."""
+
+    smooth_kernel = True  # the knots' fit in the compiled kernel when it is built
 
     def evaluate(self, samples: npt.ArrayLike) -> tuple[FloatArray, FloatArray, BoolArray]:
         """(speed in Hz, angle in turns, valid) at unwrapped sample indices (any shape, int or float).
@@ -233,8 +236,15 @@ class KnotSmoothing(TachoState):
         """Local least-squares quadratic of pulse count vs edge time at each centre (docs/tacho.md, step 4).
 
         Windows [k - h, k + h] clipped to the committed edges [0, K) of ``run`` (the current one).
-        Returns the knot times (samples), angles (turns) and speeds (turns/sample).
+        Returns the knot times (samples), angles (turns) and speeds (turns/sample).  The centres
+        are consecutive; in the compiled kernel when it is built (``smooth_kernel``: the same
+        operations, from the committed edges as the Python lists they are).
         """
+        if _knot_fit is not None and self.smooth_kernel and centres.size:
+            out = np.empty((3, centres.size))
+            _knot_fit(self._cT, self._cn, self._c0, int(centres[0]), K, self._kernel, run.base,
+                             float(self.ppr), out)
+            return out[0], out[1], out[2]
         h = self.half_window
         Tc, nc = self._committed()
         c0 = self._c0
