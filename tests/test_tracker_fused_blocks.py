@@ -146,3 +146,32 @@ def test_the_kernel_checks_its_buffers():
     with pytest.raises(ValueError, match="tw"):
         _trackerkernel.forward_blocks(y, c, k, z, np.zeros(12), K, B, 2, np.zeros((2, C, K)), np.zeros((2, C, K)),
                                       300.0, 2.0, 100.0, *out)
+
+
+@pytest.mark.parametrize("K", [1, 3, 5])
+def test_the_kernels_model_speed_and_omega_equal_numpys(K):
+    """``Omegas.scaled`` (the model speed and omega / fs of every tracker call) in the kernel and
+    in numpy: the same bits, with speeds negative, below min_rpm, at it, huge, NaN and infinite,
+    orders and fixed frequencies mixed."""
+    from cmsensord.dsp.order_tracker import components
+
+    comps = [TrackedComponent(f"c{k}", order=0.37 + 1.3 * k) if k % 2 == 0 else
+             TrackedComponent(f"c{k}", freq_hz=47.0 + 11.1 * k) for k in range(K)]
+    om = components.Omegas(comps)
+    rng = np.random.default_rng(K)
+    rpm = np.concatenate([rng.uniform(-4000.0, 4000.0, 500), [0.0, -0.0, 300.0, 299.99, 1e300, -1e300,
+                                                              np.nan, np.inf, -np.inf, 5e-324]])
+    calls = []
+    kernel = components._model_omega
+    assert kernel is not None
+    components._model_omega = lambda *a: calls.append(1) or kernel(*a)
+    try:
+        for fs in (1250.0, 2000.0 / 3.0):
+            got = om.scaled(rpm, 300.0, fs)
+            want = om.scaled(rpm, 300.0, fs, kernel=False)
+            for a, b in zip(got, want):
+                assert a.shape == b.shape and np.array_equal(a, b)
+            assert np.array_equal(want[0], components.model_speed(rpm, 300.0))
+    finally:
+        components._model_omega = kernel
+    assert len(calls) == 2

@@ -12,6 +12,8 @@
  *   riccati(c, qd, q2, P, k, S, Pout, want_p[, miss])
  *                                                  exact gains, P carried (d x d)
  *   forward(y, c, k, z, zp, e, xf, K[, miss])      the filter for C channels
+ *   model_omega(rpm, min_rpm, orders, fixed, by_order, two_pi, fs, speed, w)
+ *                                                  components.py: model speed and omega / fs
  *   forward_blocks(y, c, k, z, rpm, K, B, p, cw, ce, min_rpm, top, half_fs, rms, amp, rmean, valid, tw, te)
  *                                                  forward + envelope + block_stats, a partial block carried
  *   backward(c, k, S, P, zp, e, xs, K[, miss])     MBF smoother over one window
@@ -654,6 +656,42 @@ done:
     return ret;
 }
 
+/* The model speed and omega / fs of the components (components.py's model_speed and Omegas,
+ * then / fs, the same operations): rpm (N) -> speed (N) = max(|rpm| or 0 where not finite,
+ * min_rpm); w (N x K) = order x speed / 60 x two_pi / fs, or fixed / fs (fixed = 2 pi f of a
+ * fixed-frequency component, by_order[k] = 0). */
+static PyObject *model_omega(PyObject *self, PyObject *args) {
+    Py_buffer br, bo, bf, bb, bs, bw;
+    double min_rpm, two_pi, fs;
+    if (!PyArg_ParseTuple(args, "y*dy*y*y*ddw*w*", &br, &min_rpm, &bo, &bf, &bb, &two_pi, &fs, &bs, &bw))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = br.len / (Py_ssize_t)sizeof(double), K = bo.len / (Py_ssize_t)sizeof(double);
+    if (K <= 0 || bf.len != K * (Py_ssize_t)sizeof(double) || bb.len != K) {
+        PyErr_SetString(PyExc_ValueError, "model_omega: expected orders and fixed of K doubles, by_order of K bytes");
+        goto done;
+    }
+    if (!need(&bs, N, "speed") || !need(&bw, N * K, "w"))
+        goto done;
+    const double *rpm = br.buf, *orders = bo.buf, *fixed = bf.buf;
+    const unsigned char *by_order = bb.buf;
+    double *speed = bs.buf, *w = bw.buf;
+    for (Py_ssize_t n = 0; n < N; n++) {
+        double a = fabs(rpm[n]);
+        if (!isfinite(a)) a = 0.0;
+        const double sp = a >= min_rpm ? a : min_rpm;
+        speed[n] = sp;
+        for (Py_ssize_t k = 0; k < K; k++)
+            w[n * K + k] = by_order[k] ? orders[k] * sp / 60.0 * two_pi / fs : fixed[k] / fs;
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&br); PyBuffer_Release(&bo); PyBuffer_Release(&bf); PyBuffer_Release(&bb);
+    PyBuffer_Release(&bs); PyBuffer_Release(&bw);
+    return ret;
+}
+
 /* forward, envelope and block_stats in one pass (tracker.py's causal path of a call without a
  * missing sample, without the smoother): the T new samples y (T x C), c (T x K), k (T x 2K) from
  * the state z (C x 2K, updated) follow the p samples carried from the last call (their wave and
@@ -1076,6 +1114,7 @@ static PyMethodDef methods[] = {
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
+    {"model_omega", model_omega, METH_VARARGS, "Model speed and omega / fs of the components (components.py)."},
     {"forward_blocks", forward_blocks, METH_VARARGS,
      "forward, envelope and block_stats in one pass, a partial block carried (tracker.py)."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},

@@ -430,10 +430,8 @@ class OrderTracker:
     def _coeffs_gains(self, rd: np.ndarray, miss: np.ndarray | None):
         """c (N, K) = 2 cos(omega / fs_track) at the model speeds of rd, and the gains there
         (:meth:`_gains`): c, k, S, P."""
-        speed = model_speed(rd, self.min_rpm)
-        c = self._omegas(speed)             # 2 cos(omega / fs_track), in place
-        c /= self.fs_track
-        np.cos(c, out=c)
+        speed, c = self._omegas.scaled(rd, self.min_rpm, self.fs_track, self.backend == "c")
+        np.cos(c, out=c)                    # 2 cos(omega / fs_track), in place
         c *= 2.0
         k, S, P = self._gains(speed, c, miss[:, 0] if miss is not None and self.gains == "exact" else None)
         return c, k, S, P
