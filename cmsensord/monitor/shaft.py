@@ -162,8 +162,13 @@ class Shaft:
 
     def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int, list[int]]:
         """The frames at or after the newest t0 fed so far, how many stepped back (dropped),
-        and the t0 of those kept.  On Python ints: a live call brings about ten frames."""
+        and the t0 of those kept.  On Python ints: a live call brings about ten frames, in time
+        order and after those fed (then all of them are kept, at once)."""
         fed = self._fed_t0
+        t0s = [f.t0_unwrapped for f in frames]
+        if t0s and (fed is None or t0s[0] >= fed) and sorted(t0s) == t0s:
+            self._fed_t0 = t0s[-1]
+            return frames, 0, t0s
         kept: list[Frame] = []
         t0s: list[int] = []
         newest = before = None                      # the newest t0 before each (kept or not)

@@ -224,24 +224,30 @@ class EdgeRuns(TachoState):
         if q_now > stop_q:
             self._end_run(run, stop_q)
 
-    def _edges(self, q: IntArray, adv: IntArray) -> None:
+    def _edges(self, q: IntArray | list[int], adv: IntArray | list[int]) -> None:
         """The edges q (1/256 sample) in arrival order, each after advancing the coverage to
         adv (samples; -1: no advance before it), as :meth:`_advance` and :meth:`_edge` one
         after the other would; runs of regular edges are committed in one pass
-        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge."""
-        ql, al = q.tolist(), adv.tolist()
+        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge.  q and adv: arrays or
+        Python lists (a live call's few edges: arrays only when there are enough for the pass)."""
+        ql = q if isinstance(q, list) else q.tolist()
+        al = adv if isinstance(adv, list) else adv.tolist()
         j, m = 0, len(ql)
+        qa: IntArray | None = None
+        aa: IntArray | None = None
         while j < m:
             n_scalar = 1
             st = self._regular_state() if self.batch_edges and m - j >= MIN_EDGES else None
             if st is not None:
+                if qa is None or aa is None:
+                    qa, aa = np.asarray(q, dtype=np.int64), np.asarray(adv, dtype=np.int64)
                 now = self._now if self._now is not None else 0
-                a = adv[j:]
+                a = aa[j:]
                 adv_q = np.where(a >= 0, np.maximum(a, now) * SUB, -1)
-                k = regular_prefix(st, q[j:], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
+                k = regular_prefix(st, qa[j:], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
                                    self._timeout_hi)
                 if k:
-                    self._commit_regular(q[j:j + k], a[:k])
+                    self._commit_regular(qa[j:j + k], a[:k])
                     j += k
                 else:
                     n_scalar = MIN_EDGES            # not worth trying again at once
@@ -352,8 +358,8 @@ class EdgeRuns(TachoState):
         xs = [h[0] - t_ref for h in hist]
         rt = [h[1] for h in hist]
         xm, ym = sum(xs) / n, sum(rt) / n
-        sxx = sum((x - xm) ** 2 for x in xs)
-        slope = sum((x - xm) * (r - ym) for x, r in zip(xs, rt)) / sxx if sxx > 0 else 0.0
+        sxx = sum([(x - xm) ** 2 for x in xs])          # lists: the values sum() adds, sooner
+        slope = sum([(x - xm) * (r - ym) for x, r in zip(xs, rt)]) / sxx if sxx > 0 else 0.0
         r0 = ym + slope * (cq_last - t_ref - xm)  # pulse rate at the last committed edge
         d_last = 1.0 / rt[-1]
         disc = r0 * r0 + 2.0 * slope
