@@ -165,10 +165,10 @@ class Shaft:
         and the t0 of those kept.  On Python ints: a live call brings about ten frames, in time
         order and after those fed (then all of them are kept, at once)."""
         fed = self._fed_t0
-        t0s = [f.t0_unwrapped for f in frames]
-        if t0s and (fed is None or t0s[0] >= fed) and sorted(t0s) == t0s:
-            self._fed_t0 = t0s[-1]
-            return frames, 0, t0s
+        ts = [f.t0_unwrapped for f in frames]
+        if ts and (fed is None or ts[0] >= fed) and sorted(ts) == ts:
+            self._fed_t0 = ts[-1]
+            return frames, 0, ts
         kept: list[Frame] = []
         t0s: list[int] = []
         newest = before = None                      # the newest t0 before each (kept or not)
