@@ -252,10 +252,41 @@ class EdgeRuns(TachoState):
                 else:
                     n_scalar = MIN_EDGES            # not worth trying again at once
             for i in range(j, min(m, j + n_scalar)):
-                if al[i] >= 0:
-                    self._advance(al[i])
-                self._edge(ql[i])
+                if not (self.batch_edges and self._regular_edge(ql[i], al[i])):
+                    if al[i] >= 0:
+                        self._advance(al[i])
+                    self._edge(ql[i])
             j += n_scalar
+
+    def _regular_edge(self, q: int, adv: int) -> bool:
+        """:meth:`_advance` (``adv`` >= 0) and :meth:`_edge` of edge q in one step when the
+        repair simply commits it as one pulse: the run goes on (no timeout at the coverage
+        or at q), q is after the last edge received, nothing is pending, and its interval
+        ratio to the prediction is within 1 +- tol.  The same checks and arithmetic, so the
+        same state after it; False, having changed nothing, for any other edge (a live
+        call's few edges go one by one: this saves the calls of the general path)."""
+        run = self._run
+        last, cq_last, now = self._last_q, self._cq_last, self._now
+        if (run is None or last is None or q <= last or cq_last is None or now is None or self._pending
+                or len(self._hist) < 2):
+            return False
+        stop_q = run.last_raw_q + self._timeout_q(run)      # EdgeRuns._check_timeout's, before the edge
+        if adv >= 0 and adv > now:
+            now = adv
+        if now * SUB > stop_q or q > stop_q:
+            return False
+        P = self._predict()
+        if P is None or not P > 0:
+            return False
+        r = (q - cq_last) / P                               # _classify's ratio
+        if not 1.0 - self.tol <= r <= 1.0 + self.tol:
+            return False
+        self._now = now
+        self.counters.edges += 1
+        self._last_q = self._known_q = q
+        run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = run.prev_raw_q, run.last_raw_q, q
+        self._commit(run, q, 1)
+        return True
 
     def _regular_state(self) -> RegularState | None:
         """The state :func:`~cmsensord.dsp.tacho.regular.regular_prefix` starts from, or None

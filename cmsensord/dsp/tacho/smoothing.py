@@ -4,8 +4,9 @@ Steps 4-5 of docs/tacho.md: at every committed edge a local weighted
 least-squares quadratic of pulse count vs edge time gives a knot (time, angle,
 speed); between knots the speed is interpolated linearly and the angle by a
 cubic Hermite; after a run's last edge the speed decays as one pulse over the
-elapsed time.  Knots older than ``history_s`` are dropped.  The loop between
-knots also runs in the compiled ``cmsensord.dsp._trackerkernel`` (bit for bit).
+elapsed time.  Knots older than ``history_s`` are dropped.  The fit of the knots
+and the loop between them also run in the compiled ``cmsensord.dsp._trackerkernel``
+(bit for bit).
 """
 
 from __future__ import annotations
