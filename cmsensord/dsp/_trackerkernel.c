@@ -158,7 +158,9 @@ static PyObject *sosfilt(PyObject *self, PyObject *args) {
         goto done;
     const double *sos = bsos.buf, *x = bx.buf;
     double *zi = bzi.buf, *out = bout.buf;
-    Py_BEGIN_ALLOW_THREADS
+    /* other threads run meanwhile only when the call is long (a replay's read): a live call's
+     * tenth of a second is some microseconds, less than handing the interpreter over costs */
+    PyThreadState *save = T * C * S > (1 << 17) ? PyEval_SaveThread() : NULL;
     for (Py_ssize_t ch = 0; ch < C; ch++) {
         switch (S) {        /* the state in registers for the usual cascades (S a constant) */
         case 1: sos_channel_1(sos, x, T, C, ch, zi, out, skip, D); break;
@@ -172,7 +174,8 @@ static PyObject *sosfilt(PyObject *self, PyObject *args) {
         default: sos_channel_any(sos, S, x, T, C, ch, zi, out, skip, D);
         }
     }
-    Py_END_ALLOW_THREADS
+    if (save != NULL)
+        PyEval_RestoreThread(save);
     Py_INCREF(Py_None);
     ret = Py_None;
 done:

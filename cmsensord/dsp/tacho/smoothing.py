@@ -243,8 +243,10 @@ class KnotSmoothing(TachoState):
         """
         if _knot_fit is not None and self.smooth_kernel and centres.size:
             out = np.empty((3, centres.size))
-            _knot_fit(self._cT, self._cn, self._c0, int(centres[0]), K, self._kernel, run.base,
-                             float(self.ppr), out)
+            first = int(centres[0])
+            at = max(self._c0, first - self.half_window)     # the edges of the windows, not the whole list
+            _knot_fit(self._cT[at - self._c0:], self._cn[at - self._c0:], at, first, K, self._kernel, run.base,
+                      float(self.ppr), out)
             return out[0], out[1], out[2]
         h = self.half_window
         Tc, nc = self._committed()
