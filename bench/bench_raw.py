@@ -3,8 +3,8 @@
 
 Builds RAW-mode captures with a tacho (the `faulty` motor at 1720 rpm, and the
 `close_orders` run-up of Yeh, Pan & Le) with firmware_sim, replays each in a fresh
-process through `cmsensord replay` (default config: orders 1x-4x, recursive
-and smoothed outputs) and prints real-time factor, throughput, CPU and peak
+process through `cmsensord replay` (default config: orders 1x-4x from the
+recursive tracker; the fixed-lag smoother is off by default) and prints real-time factor, throughput, CPU and peak
 RSS.  Figures are ratios measured side by side in one run.
 
     python bench/bench_raw.py [--seconds 120] [--only faulty1] [--kernels both] [--tree before=DIR]
@@ -73,7 +73,7 @@ def main() -> int:
                                  cap.stat().st_size / r["wall_s"] / 1e6, args.seconds / r["cpu_s"],
                                  r["peak_rss_mb"]))
     print(f"# RAW chain benchmark: {args.seconds:g} s simulated per capture, 25 kHz RAW + tacho, "
-          "orders 1x-4x (recursive + smoothed)\n")
+          "orders 1x-4x (recursive, the default config)\n")
     print("| scenario | channels | kernels | code | real-time factor | MB/s | RT factor per CPU-s | peak RSS MB |")
     print("| --- | ---: | --- | --- | ---: | ---: | ---: | ---: |")
     for sc, C, kern, label, rtf, mbs, cpu, rss in rows:

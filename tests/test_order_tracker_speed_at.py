@@ -124,12 +124,16 @@ def test_the_order_chain_writes_what_the_speed_of_every_sample_gives(monkeypatch
     stream = data[:frames[0].offset] + cut
     got, proc, _ = run_processor(stream, cfg, chunk=9_001)
     assert proc.frames_lost > 5
-    orig = OrderTracker.process
+    orig, orig_blocks = OrderTracker.process, OrderTracker.process_blocks
 
     def every_sample(self, y, rpm):
         return orig(self, y, rpm(np.arange(len(y))) if callable(rpm) else rpm)
 
+    def every_sample_blocks(self, y, rpm):     # what the chain calls
+        return orig_blocks(self, y, rpm(np.arange(len(y))) if callable(rpm) else rpm)
+
     monkeypatch.setattr(OrderTracker, "process", every_sample)
+    monkeypatch.setattr(OrderTracker, "process_blocks", every_sample_blocks)
     asked = []
     rpm_of = OrderChain._rpm
     monkeypatch.setattr(OrderChain, "_rpm", lambda self, s: asked.append(len(s)) or rpm_of(self, s))

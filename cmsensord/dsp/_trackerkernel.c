@@ -12,6 +12,10 @@
  *   riccati(c, qd, q2, P, k, S, Pout, want_p[, miss])
  *                                                  exact gains, P carried (d x d)
  *   forward(y, c, k, z, zp, e, xf, K[, miss])      the filter for C channels
+ *   model_omega(rpm, min_rpm, orders, fixed, by_order, two_pi, fs, speed, w)
+ *                                                  components.py: model speed and omega / fs
+ *   forward_blocks(y, c, k, z, rpm, K, B, p, cw, ce, min_rpm, top, half_fs, rms, amp, rmean, valid, tw, te)
+ *                                                  forward + envelope + block_stats, a partial block carried
  *   backward(c, k, S, P, zp, e, xs, K[, miss])     MBF smoother over one window
  *
  * miss (optional; uint8, 1 = missing, empty = none missing) marks samples without a
@@ -27,6 +31,7 @@
  *                                                  tracker.py: per-block statistics
  *   envelope(xs, c, env, K)                        recursions.py: peak amplitudes of the state pairs
  *   causal_fit(Tc, nc, todo, ck, c0, ppr, sbuf, col) tacho causal.py: the segments of new edges
+ *   knot_fit(Tc, nc, c0, first, K, wk, base, ppr, out) tacho smoothing.py: the knots of the smoothed speed
  *   causal_rpm(sbuf, lo, hi, base, pos, fs, slack, rpm)
  *                                                  orders.py: the causal speed [rpm] at samples
  */
@@ -153,7 +158,9 @@ static PyObject *sosfilt(PyObject *self, PyObject *args) {
         goto done;
     const double *sos = bsos.buf, *x = bx.buf;
     double *zi = bzi.buf, *out = bout.buf;
-    Py_BEGIN_ALLOW_THREADS
+    /* other threads run meanwhile only when the call is long (a replay's read): a live call's
+     * tenth of a second is some microseconds, less than handing the interpreter over costs */
+    PyThreadState *save = T * C * S > (1 << 17) ? PyEval_SaveThread() : NULL;
     for (Py_ssize_t ch = 0; ch < C; ch++) {
         switch (S) {        /* the state in registers for the usual cascades (S a constant) */
         case 1: sos_channel_1(sos, x, T, C, ch, zi, out, skip, D); break;
@@ -167,7 +174,8 @@ static PyObject *sosfilt(PyObject *self, PyObject *args) {
         default: sos_channel_any(sos, S, x, T, C, ch, zi, out, skip, D);
         }
     }
-    Py_END_ALLOW_THREADS
+    if (save != NULL)
+        PyEval_RestoreThread(save);
     Py_INCREF(Py_None);
     ret = Py_None;
 done:
@@ -582,6 +590,35 @@ done:
  * after the other when C K > 1, pairwise when it is 1: the column is then contiguous), rmean =
  * sum(rpm) / B (pairwise), valid = every |rpm| >= min_rpm and max |rpm| / 60 top < half_fs;
  * rms and amp NaN where not valid. */
+/* The statistics of one block (B samples): wave, env (B x CK), rpm (B), sq scratch (B x CK);
+ * rms and amp (CK), rmean and valid (one each). */
+static void stats_of_block(const double *we, const double *ee, const double *re, Py_ssize_t B,
+                           Py_ssize_t CK, double min_rpm, double top, double half_fs, double *sq,
+                           double *rs, double *am, double *rmean, unsigned char *valid) {
+    const double n = (double)B;
+    for (Py_ssize_t i = 0; i < B * CK; i++) sq[i] = we[i] * we[i];
+    if (CK == 1) {
+        rs[0] = pairwise_sum(sq, B, 1);
+        am[0] = pairwise_sum(ee, B, 1);
+    } else {
+        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sq[j]; am[j] = ee[j]; }
+        for (Py_ssize_t b = 1; b < B; b++)
+            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] += sq[b * CK + j]; am[j] += ee[b * CK + j]; }
+    }
+    for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sqrt(rs[j] / n); am[j] = am[j] / n; }
+    *rmean = pairwise_sum(re, B, 1) / n;
+    int ok = 1;
+    double hi = 0.0;
+    for (Py_ssize_t b = 0; b < B; b++) {
+        const double a = fabs(re[b]);
+        ok &= a >= min_rpm;                             /* NaN: not valid */
+        if (b == 0 || (hi == hi && (a > hi || a != a))) hi = a;
+    }
+    *valid = ok && hi / 60.0 * top < half_fs;
+    if (!*valid)
+        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = NAN; am[j] = NAN; }
+}
+
 static PyObject *block_stats(PyObject *self, PyObject *args) {
     Py_buffer bw, be, br, brms, bamp, bmean, bvalid;
     Py_ssize_t K;
@@ -610,38 +647,139 @@ static PyObject *block_stats(PyObject *self, PyObject *args) {
     const double *wave = bw.buf, *env = be.buf, *rpm = br.buf;
     double *rms = brms.buf, *amp = bamp.buf, *rmean = bmean.buf;
     unsigned char *valid = bvalid.buf;
-    const double n = (double)B;
-    for (Py_ssize_t e = 0; e < E; e++) {
-        const double *we = wave + e * B * CK, *ee = env + e * B * CK, *re = rpm + e * B;
-        double *rs = rms + e * CK, *am = amp + e * CK;
-        for (Py_ssize_t i = 0; i < B * CK; i++) sq[i] = we[i] * we[i];
-        if (CK == 1) {
-            rs[0] = pairwise_sum(sq, B, 1);
-            am[0] = pairwise_sum(ee, B, 1);
-        } else {
-            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sq[j]; am[j] = ee[j]; }
-            for (Py_ssize_t b = 1; b < B; b++)
-                for (Py_ssize_t j = 0; j < CK; j++) { rs[j] += sq[b * CK + j]; am[j] += ee[b * CK + j]; }
-        }
-        for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = sqrt(rs[j] / n); am[j] = am[j] / n; }
-        rmean[e] = pairwise_sum(re, B, 1) / n;
-        int ok = 1;
-        double hi = 0.0;
-        for (Py_ssize_t b = 0; b < B; b++) {
-            const double a = fabs(re[b]);
-            ok &= a >= min_rpm;                             /* NaN: not valid */
-            if (b == 0 || (hi == hi && (a > hi || a != a))) hi = a;
-        }
-        valid[e] = ok && hi / 60.0 * top < half_fs;
-        if (!valid[e])
-            for (Py_ssize_t j = 0; j < CK; j++) { rs[j] = NAN; am[j] = NAN; }
-    }
+    for (Py_ssize_t e = 0; e < E; e++)
+        stats_of_block(wave + e * B * CK, env + e * B * CK, rpm + e * B, B, CK, min_rpm, top, half_fs,
+                       sq, rms + e * CK, amp + e * CK, rmean + e, valid + e);
     Py_INCREF(Py_None);
     ret = Py_None;
 done:
     free(sq);
     PyBuffer_Release(&bw); PyBuffer_Release(&be); PyBuffer_Release(&br); PyBuffer_Release(&brms);
     PyBuffer_Release(&bamp); PyBuffer_Release(&bmean); PyBuffer_Release(&bvalid);
+    return ret;
+}
+
+/* The model speed and omega / fs of the components (components.py's model_speed and Omegas,
+ * then / fs, the same operations): rpm (N) -> speed (N) = max(|rpm| or 0 where not finite,
+ * min_rpm); w (N x K) = order x speed / 60 x two_pi / fs, or fixed / fs (fixed = 2 pi f of a
+ * fixed-frequency component, by_order[k] = 0). */
+static PyObject *model_omega(PyObject *self, PyObject *args) {
+    Py_buffer br, bo, bf, bb, bs, bw;
+    double min_rpm, two_pi, fs;
+    if (!PyArg_ParseTuple(args, "y*dy*y*y*ddw*w*", &br, &min_rpm, &bo, &bf, &bb, &two_pi, &fs, &bs, &bw))
+        return NULL;
+    PyObject *ret = NULL;
+    const Py_ssize_t N = br.len / (Py_ssize_t)sizeof(double), K = bo.len / (Py_ssize_t)sizeof(double);
+    if (K <= 0 || bf.len != K * (Py_ssize_t)sizeof(double) || bb.len != K) {
+        PyErr_SetString(PyExc_ValueError, "model_omega: expected orders and fixed of K doubles, by_order of K bytes");
+        goto done;
+    }
+    if (!need(&bs, N, "speed") || !need(&bw, N * K, "w"))
+        goto done;
+    const double *rpm = br.buf, *orders = bo.buf, *fixed = bf.buf;
+    const unsigned char *by_order = bb.buf;
+    double *speed = bs.buf, *w = bw.buf;
+    for (Py_ssize_t n = 0; n < N; n++) {
+        double a = fabs(rpm[n]);
+        if (!isfinite(a)) a = 0.0;
+        const double sp = a >= min_rpm ? a : min_rpm;
+        speed[n] = sp;
+        for (Py_ssize_t k = 0; k < K; k++)
+            w[n * K + k] = by_order[k] ? orders[k] * sp / 60.0 * two_pi / fs : fixed[k] / fs;
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    PyBuffer_Release(&br); PyBuffer_Release(&bo); PyBuffer_Release(&bf); PyBuffer_Release(&bb);
+    PyBuffer_Release(&bs); PyBuffer_Release(&bw);
+    return ret;
+}
+
+/* forward, envelope and block_stats in one pass (tracker.py's causal path of a call without a
+ * missing sample, without the smoother): the T new samples y (T x C), c (T x K), k (T x 2K) from
+ * the state z (C x 2K, updated) follow the p samples carried from the last call (their wave and
+ * env cw, ce: p x C x K); rpm (p + T) is the speed of them all.  The E = (p + T) / B whole blocks
+ * give rms, amp (E x C x K), rmean and valid (E); the samples after them go to tw, te
+ * ((p + T - E B) x C x K), to be carried.  The same operations as forward, envelope and
+ * block_stats in their order (a block's waveform and envelope are kept only while its
+ * statistics are made). */
+static PyObject *forward_blocks(PyObject *self, PyObject *args) {
+    Py_buffer by, bc, bk, bz, br, bcw, bce, brms, bamp, bmean, bvalid, btw, bte;
+    Py_ssize_t K, B, p;
+    double min_rpm, top, half_fs;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*y*nnny*y*dddw*w*w*w*w*w*", &by, &bc, &bk, &bz, &br, &K, &B, &p,
+                          &bcw, &bce, &min_rpm, &top, &half_fs, &brms, &bamp, &bmean, &bvalid, &btw, &bte))
+        return NULL;
+    PyObject *ret = NULL;
+    double *scratch = NULL;
+    const Py_ssize_t d = 2 * K;
+    const Py_ssize_t C = K > 0 ? bz.len / (Py_ssize_t)sizeof(double) / d : 0;
+    const Py_ssize_t T = K > 0 ? bc.len / (Py_ssize_t)sizeof(double) / K : 0;
+    const Py_ssize_t E = B > 0 && p >= 0 ? (p + T) / B : 0;
+    const Py_ssize_t CK = C * K, tail = p + T - E * B;
+    if (K <= 0 || C <= 0 || B <= 0 || p < 0 || bc.len != T * K * (Py_ssize_t)sizeof(double)
+        || br.len != (p + T) * (Py_ssize_t)sizeof(double) || bmean.len != E * (Py_ssize_t)sizeof(double)
+        || bvalid.len != E) {
+        PyErr_SetString(PyExc_ValueError, "forward_blocks: expected c (T x K), rpm (p + T), rmean and "
+                        "valid of (p + T) / B entries");
+        goto done;
+    }
+    if (!need(&by, T * C, "y") || !need(&bk, T * d, "k") || !need(&bcw, p * CK, "cw") ||
+        !need(&bce, p * CK, "ce") || !need(&brms, E * CK, "rms") || !need(&bamp, E * CK, "amp") ||
+        !need(&btw, tail * CK, "tw") || !need(&bte, tail * CK, "te"))
+        goto done;
+    scratch = malloc(sizeof(double) * (size_t)(3 * B * CK + d));
+    if (scratch == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const double *y = by.buf, *c = bc.buf, *k = bk.buf, *rpm = br.buf, *cw = bcw.buf, *ce = bce.buf;
+    double *z = bz.buf, *rms = brms.buf, *amp = bamp.buf, *rmean = bmean.buf, *tw = btw.buf, *te = bte.buf;
+    unsigned char *valid = bvalid.buf;
+    double *wave = scratch, *env = scratch + B * CK, *sq = scratch + 2 * B * CK, *xo = scratch + 3 * B * CK;
+    for (Py_ssize_t i = 0; i < p + T; i++) {
+        const Py_ssize_t e = i / B, b = i % B;
+        double *wo = e < E ? wave + b * CK : tw + (i - E * B) * CK;   /* this sample's place */
+        double *eo = e < E ? env + b * CK : te + (i - E * B) * CK;
+        if (i < p) {                                                 /* carried */
+            for (Py_ssize_t j = 0; j < CK; j++) { wo[j] = cw[i * CK + j]; eo[j] = ce[i * CK + j]; }
+        } else {
+            const Py_ssize_t n = i - p;
+            const double *cn = c + n * K, *kn = k + n * d;
+            for (Py_ssize_t ch = 0; ch < C; ch++) {
+                double *zc = z + ch * d;
+                double s = 0.0;                                      /* forward */
+                for (Py_ssize_t a = 0; a < K; a++) s += zc[2 * a + 1];
+                const double en = y[n * C + ch] - s;
+                for (Py_ssize_t j = 0; j < d; j++) xo[j] = zc[j] + kn[j] * en;
+                for (Py_ssize_t a = 0; a < K; a++) {
+                    zc[2 * a] = xo[2 * a + 1];
+                    zc[2 * a + 1] = -xo[2 * a] + cn[a] * xo[2 * a + 1];
+                }
+                for (Py_ssize_t a = 0; a < K; a++) {                 /* envelope */
+                    const double cc = cn[a];
+                    double s2 = 1.0 - 0.25 * cc * cc;
+                    if (!(s2 >= 1e-300)) s2 = (s2 != s2) ? s2 : 1e-300;
+                    const double x1 = xo[2 * a], x2 = xo[2 * a + 1];
+                    double a2 = (x1 * x1 - cc * x1 * x2 + x2 * x2) / s2;
+                    if (a2 < 0.0) a2 = 0.0;
+                    wo[ch * K + a] = x2;
+                    eo[ch * K + a] = sqrt(a2);
+                }
+            }
+        }
+        if (e < E && b == B - 1)
+            stats_of_block(wave, env, rpm + e * B, B, CK, min_rpm, top, half_fs, sq, rms + e * CK,
+                           amp + e * CK, rmean + e, valid + e);
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(scratch);
+    PyBuffer_Release(&by); PyBuffer_Release(&bc); PyBuffer_Release(&bk); PyBuffer_Release(&bz);
+    PyBuffer_Release(&br); PyBuffer_Release(&bcw); PyBuffer_Release(&bce); PyBuffer_Release(&brms);
+    PyBuffer_Release(&bamp); PyBuffer_Release(&bmean); PyBuffer_Release(&bvalid); PyBuffer_Release(&btw);
+    PyBuffer_Release(&bte);
     return ret;
 }
 
@@ -801,6 +939,113 @@ done:
     return ret;
 }
 
+/* The knots of the smoothed speed (tacho smoothing.py's _fit and weighted_quadratic, the same
+ * operations in their order): at each centre k = first .. first + R - 1 (committed indices; Tc,
+ * nc: the run's committed edge times and pulse counts from index c0 on, Python lists of
+ * numbers; K committed edges in all) the weighted quadratic of pulse count vs edge time over
+ * the edges k - h .. k + h within 0 .. K - 1 (weights wk, 2h + 1 of them, the others left out),
+ * x scaled by the largest |dx|; the knot goes to column r of out (3 x R): its time, angle base +
+ * (n + c0) / ppr and speed c1 / (S ppr). */
+static PyObject *knot_fit(PyObject *self, PyObject *args) {
+    PyObject *oT, *on;
+    Py_buffer bwk, bout;
+    long long c0, first, K;
+    double base, ppr;
+    if (!PyArg_ParseTuple(args, "OOLLLy*ddw*", &oT, &on, &c0, &first, &K, &bwk, &base, &ppr, &bout))
+        return NULL;
+    PyObject *ret = NULL, *fT = NULL, *fn = NULL;
+    double *Tc = NULL;
+    const Py_ssize_t m = bwk.len / (Py_ssize_t)sizeof(double), h = (m - 1) / 2;
+    const Py_ssize_t R = bout.len / (Py_ssize_t)sizeof(double) / 3;
+    fT = PySequence_Fast(oT, "knot_fit: Tc must be a sequence");
+    fn = fT ? PySequence_Fast(on, "knot_fit: nc must be a sequence") : NULL;
+    if (fn == NULL)
+        goto done;
+    const Py_ssize_t nT = PySequence_Fast_GET_SIZE(fT);
+    if (PySequence_Fast_GET_SIZE(fn) != nT || m < 3 || m % 2 == 0 || bout.len != 3 * R * (Py_ssize_t)sizeof(double)
+        || K > c0 + nT || first < c0 || first + R > K) {
+        PyErr_SetString(PyExc_ValueError, "knot_fit: expected Tc and nc of one length, 2h + 1 >= 3 weights, "
+                        "out (3 x R) and centres among the committed edges");
+        goto done;
+    }
+    for (Py_ssize_t r = 0; r < R; r++) {            /* every window's edges must be there */
+        const long long lo = first + r - h > 0 ? first + r - h : 0;
+        if (lo < c0) {
+            PyErr_SetString(PyExc_ValueError, "knot_fit: a window reaches before the kept edges");
+            goto done;
+        }
+    }
+    Tc = malloc(sizeof(double) * (size_t)(2 * nT + 8 * m + 1));
+    if (Tc == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *nc = Tc + nT, *terms = nc + nT;
+    for (Py_ssize_t i = 0; i < nT; i++) {                 /* np.asarray(..., float64) of the lists */
+        Tc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fT, i));
+        nc[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fn, i));
+    }
+    if (PyErr_Occurred())
+        goto done;
+    const double *wk = bwk.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t r = 0; r < R; r++) {
+        const long long k = first + r;
+        const long long lo = k - h > 0 ? k - h : 0, hi = k + h < K - 1 ? k + h : K - 1;
+        const Py_ssize_t kr = (Py_ssize_t)(k - c0);
+        const double Tk = Tc[kr], nk = nc[kr];
+        double S = 0.0;
+        Py_ssize_t npts = 0;
+        for (Py_ssize_t j = 0; j < m; j++) {       /* S: np.abs(dx).max(), NaN propagating */
+            const long long i = k - h + j;
+            const int use = i >= lo && i <= hi;
+            const double a = fabs(use ? Tc[i - c0] - Tk : 0.0);
+            if (j == 0 || (S == S && (a > S || a != a))) S = a;
+            npts += use;
+        }
+        for (Py_ssize_t j = 0; j < m; j++) {
+            const long long i = k - h + j;
+            const int use = i >= lo && i <= hi;
+            const double w = use ? wk[j] : 0.0 * wk[j];
+            const double x = (use ? Tc[i - c0] - Tk : 0.0) / S;
+            const double y = use ? nc[i - c0] - nk : 0.0;
+            const double x2 = x * x, wx = w * x, wx2 = w * x2;
+            double *t = terms + j;
+            t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
+            t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+        }
+        double mom[8];
+        for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
+        double c0f = 0.0, c1 = 0.0;
+        if (npts >= 2) {                            /* smoothing.py's _solve_normal, _eliminate */
+            const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
+            const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
+            const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
+            const double m1 = s1 / s0;
+            const double d11 = s2 - m1 * s1;
+            const double d12 = a12 - m1 * a02;
+            const double e1 = b1 - m1 * b0;
+            const double m2 = a02 / s0;
+            const double d22 = a22 - m2 * a02;
+            const double e2 = b2 - m2 * b0;
+            const double m3 = d12 / d11;
+            const double c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
+            c1 = (e1 - d12 * c2) / d11;
+            c0f = (b0 - s1 * c1 - a02 * c2) / s0;
+        }
+        out[r] = Tk;
+        out[R + r] = base + (nk + c0f) / ppr;
+        out[2 * R + r] = c1 / (S * ppr);
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    free(Tc);
+    Py_XDECREF(fT); Py_XDECREF(fn);
+    PyBuffer_Release(&bwk); PyBuffer_Release(&bout);
+    return ret;
+}
+
 /* The order tracker's speed [rpm] at board samples base + pos[i] (orders.py's _rpm of tacho
  * causal.py's evaluate_causal, the same operations in their order): the segment is the last
  * one whose key <= s among columns lo..hi-1 of sbuf (5 x cap: key, T, w, a, valid; numpy's
@@ -872,9 +1117,13 @@ static PyMethodDef methods[] = {
     {"sosfilt", sosfilt, METH_VARARGS, "Anti-alias SOS cascade with carried state, decimating."},
     {"riccati", riccati, METH_VARARGS, "Exact Kalman gains per sample (Yeh, Pan & Le, eqs. 19-25)."},
     {"forward", forward, METH_VARARGS, "The tracker's filter recursion for C channels."},
+    {"model_omega", model_omega, METH_VARARGS, "Model speed and omega / fs of the components (components.py)."},
+    {"forward_blocks", forward_blocks, METH_VARARGS,
+     "forward, envelope and block_stats in one pass, a partial block carried (tracker.py)."},
     {"backward", backward, METH_VARARGS, "Modified Bryson-Frazier smoothing of one window."},
     {"tacho_eval", tacho_eval, METH_VARARGS, "Tacho speed and angle between knots (tacho.py)."},
     {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
+    {"knot_fit", knot_fit, METH_VARARGS, "The tacho's knots of the smoothed speed (smoothing.py)."},
     {"causal_rpm", causal_rpm, METH_VARARGS, "The causal speed [rpm] at samples (orders.py)."},
     {NULL, NULL, 0, NULL},
 };

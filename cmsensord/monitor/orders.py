@@ -52,6 +52,7 @@ Limitations (documented, not hidden):
 from __future__ import annotations
 
 import math
+from math import isfinite
 
 import numpy as np
 
@@ -103,6 +104,9 @@ class OrderChain:
         self._by_order = np.array([c.order is not None for c in self.components])
         self._orders = np.array([c.order or 0.0 for c in self.components], dtype=np.float64)
         self._fixed_hz = np.array([c.freq_hz or 0.0 for c in self.components], dtype=np.float64)
+        # per component (order, 0.0) or (None, fixed frequency), as Python floats
+        self._freq_spec = [(None if c.order is None else float(c.order), float(c.freq_hz or 0.0))
+                           for c in self.components]
         self.tacho = tacho
         self.tracker = OrderTracker(self.components, fs_in=fs, max_rpm=o.max_rpm,
                                     n_channels=len(channels), q1=o.q1, min_rpm=o.min_rpm,
@@ -179,10 +183,10 @@ class OrderChain:
         if got is None:
             return []
         first, (take,) = got
-        res = self.tracker.process(take, lambda i: self._rpm(first + i))
-        out: Out = self._blocks(res.blocks, "recursive")
-        if res.smoothed_blocks is not None:
-            out += self._blocks(res.smoothed_blocks, "smoothed")
+        blocks, smoothed = self.tracker.process_blocks(take, lambda i: self._rpm(first + i))
+        out: Out = self._blocks(blocks, "recursive")
+        if smoothed is not None:
+            out += self._blocks(smoothed, "smoothed")
         return out
 
     def _rpm(self, samples: np.ndarray) -> np.ndarray:
@@ -198,11 +202,15 @@ class OrderChain:
 
     def _blocks(self, blocks, method: str) -> Out:
         """The /orders messages of tracker blocks: the per-block numbers converted to Python
-        once for all blocks (tolist), the frequencies of all blocks per component in one
-        array operation (the same values as one block at a time); each message with its
-        JSON text where every number is there (:meth:`_texts`), its dict what
+        once for all blocks (tolist); each message with its JSON text where every number is
+        there, made by the template of its channel and method
+        (:class:`~cmsensord.sinks.orders_encoding.OrdersTemplate`), its dict what
         :func:`~cmsensord.monitor.messages.orders` makes (that function builds them without
-        ``PRE_ENCODED``: the reference)."""
+        ``PRE_ENCODED``: the reference, with the frequencies of all blocks in one array
+        operation).  A component's frequency is order x rpm / 60 (the operations of
+        :meth:`TrackedComponent.freq`) or its fixed one; a message whose block is not valid
+        or has a number that is not finite has no text (it is encoded plain: such fields are
+        left out of it)."""
         n = len(blocks.start)
         if not n:
             return []
@@ -212,15 +220,14 @@ class OrderChain:
         base = self.sample0
         stamp_ns = self.clock.stamp_ns
         rpms = blocks.rpm.tolist()
-        # TrackedComponent.freq of every block: order * rpm / 60 (the same operations), or freq_hz
-        freq = np.where(self._by_order, self._orders * blocks.rpm[:, None] / 60.0, self._fixed_hz)
-        freqs = freq.tolist()
         valid = blocks.valid.tolist()
         t_in = blocks.t_in.tolist()
         rms, amp, missing = blocks.rms.tolist(), blocks.amplitude.tolist(), blocks.missing.tolist()
         names = [ch.name for ch in self.channels]
         out: Out = []
         if not PRE_ENCODED:
+            # TrackedComponent.freq of every block: order * rpm / 60 (the same operations), or freq_hz
+            freqs = np.where(self._by_order, self._orders * blocks.rpm[:, None] / 60.0, self._fixed_hz).tolist()
             for e in range(n):
                 stamp = stamp_ns(base + int(t_in[e]))
                 rpm, ok = rpms[e], bool(valid[e])
@@ -228,46 +235,38 @@ class OrderChain:
                     entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
                     out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
             return out
-        C = len(names)
-        texts = self._texts(blocks, freq, method)
+        fills = [self._template(ci, method) for ci in range(len(names))]
         topics = [orders_topic(name) for name in names]
+        spec = self._freq_spec
         Message = messages.Message
+        order_entries = messages.order_entries
         for e in range(n):
             stamp = stamp_ns(base + int(t_in[e]))
             rpm, ok = rpms[e], bool(valid[e])
+            freq = [f if o is None else o * rpm / 60.0 for o, f in spec]
             speed = messages.num(rpm)
             for ci, name in enumerate(names):
+                r, a, mf = rms[e][ci], amp[e][ci], missing[e][ci] / B
                 fields = {"channel": name, "speed_rpm": speed, "valid": ok, "method": method,   # messages.orders
-                          "orders": messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok),
-                          "missing_fraction": missing[e][ci] / B}
-                text = texts[e * C + ci]
+                          "orders": order_entries(comps, freq, r, a, ok), "missing_fraction": mf}
+                text = None
+                fill = fills[ci]
+                if ok and fill is not None:
+                    nums = [rpm]
+                    for fk, rk, ak in zip(freq, r, a):
+                        nums += (fk, rk, ak)
+                    nums.append(mf)
+                    if all(map(isfinite, nums)):
+                        text = fill % tuple(nums)
                 out.append(Message(topics[ci], "orders", stamp,
                                    fields if text is None else EncodedMessage(fields, text)))
         return out
 
-    def _texts(self, blocks, freq: np.ndarray, method: str) -> list[str | None]:
-        """Per block and channel (block by block), the JSON text of its /orders message by the
-        template of its channel and method (:class:`~cmsensord.sinks.orders_encoding.OrdersTemplate`),
-        all numbers laid out in one array, converted and formatted in one call; None where the
-        block is not valid or a number is not finite (that message is encoded plain: such
-        fields are left out of it)."""
-        n, C, K = blocks.rms.shape
-        V = np.empty((n, C, 3 * K + 2))         # the numbers in the message's order
-        V[:, :, 0] = blocks.rpm[:, None]
-        V[:, :, 1:-1:3] = freq[:, None, :]
-        V[:, :, 2:-1:3] = blocks.rms
-        V[:, :, 3:-1:3] = blocks.amplitude
-        V[:, :, -1] = blocks.missing / self.tracker.block     # int / int, as in the message
-        ok = (np.isfinite(V).all(axis=2) & blocks.valid[:, None]).ravel().tolist()
-        fills = []
-        for ci, ch in enumerate(self.channels):
-            if (ci, method) not in self._templates:
-                self._templates[(ci, method)] = OrdersTemplate(
-                    ch.name, method, [(c.name, c.order) for c in self.components]).text
-            fills.append(self._templates[(ci, method)])
-        if None in fills:                       # a name made of the markers' characters
-            return [None] * (n * C)
-        # the templates one after the other, a line each (JSON text holds no raw line break),
-        # filled in one call, cut at the line breaks
-        texts = ("\n".join(fills * n) % tuple(V.ravel().tolist())).split("\n")
-        return [t if o else None for t, o in zip(texts, ok)]
+    def _template(self, ci: int, method: str) -> str | None:
+        """The text template of channel ``ci``'s /orders messages of ``method``, made once (None:
+        that shape has none; a name made of the markers' characters)."""
+        key = (ci, method)
+        if key not in self._templates:
+            self._templates[key] = OrdersTemplate(self.channels[ci].name, method,
+                                                  [(c.name, c.order) for c in self.components]).text
+        return self._templates[key]

@@ -162,8 +162,13 @@ class Shaft:
 
     def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int, list[int]]:
         """The frames at or after the newest t0 fed so far, how many stepped back (dropped),
-        and the t0 of those kept.  On Python ints: a live call brings about ten frames."""
+        and the t0 of those kept.  On Python ints: a live call brings about ten frames, in time
+        order and after those fed (then all of them are kept, at once)."""
         fed = self._fed_t0
+        ts = [f.t0_unwrapped for f in frames]
+        if ts and (fed is None or ts[0] >= fed) and sorted(ts) == ts:
+            self._fed_t0 = ts[-1]
+            return frames, 0, ts
         kept: list[Frame] = []
         t0s: list[int] = []
         newest = before = None                      # the newest t0 before each (kept or not)

@@ -267,3 +267,16 @@ _R_N = 256                    # its points (geometric)
 _R_SPEEDS = np.geomspace(_R_GRID[0], _R_GRID[1], _R_N)
 _R_LOG = np.log(_R_SPEEDS)
 _R_CACHE: dict = {}           # (component, fs) -> log r on the grid (NaN: not computed yet)
+
+
+def describe(components: Sequence[TrackedComponent], speed: np.ndarray, fs: float) -> list[dict]:
+    """Per component at the model speed ``speed`` (1,): frequency, r, -3 dB bandwidth [Hz and
+    %], time constant [s] (of the isolated steady-state filter at the tracker rate ``fs``)."""
+    rk = component_r(components, speed, fs)[0]
+    out = []
+    for c, r in zip(components, rk):
+        f = float(c.freq(speed)[0])
+        bw = float(r_to_bandwidth(r, f, fs))
+        out.append({"name": c.name, "freq_hz": f, "r": float(r), "bandwidth_hz": bw,
+                    "bandwidth_pct": 100.0 * bw / f, "time_constant_s": float(time_constant(r, f, fs))})
+    return out

@@ -10,6 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+try:  # the compiled kernel is optional (and an older build may lack model_omega): numpy is the fallback
+    from cmsensord.dsp import _trackerkernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _trackerkernel = None
+_model_omega = getattr(_trackerkernel, "model_omega", None)
+
 DEFAULT_R = 50.0
 """Default weighting factor.  At a 2-kHz tracker rate its -3 dB bandwidth is
 15 Hz at 200 Hz, 29 Hz at 100 Hz (see :func:`r_to_bandwidth`; time constant
@@ -75,6 +81,7 @@ class Omegas:
         self.by_order = np.array([c.order is not None for c in components])
         self.all_orders = bool(self.by_order.all())
         self.fixed = np.array([2.0 * np.pi * float(c.freq_hz or 0.0) for c in components])
+        self._by_order_u8 = self.by_order.astype(np.uint8)
 
     def __call__(self, speed: np.ndarray) -> np.ndarray:
         """ω_k(n) [rad/s] at model speeds ``speed`` (T,): (T, K)."""
@@ -82,6 +89,20 @@ class Omegas:
         w /= 60.0
         w *= 2.0 * np.pi
         return w if self.all_orders else np.where(self.by_order, w, self.fixed)
+
+    def scaled(self, rpm: np.ndarray, min_rpm: float, fs: float, kernel: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """The model speed (T,) at speeds ``rpm`` (T,) (:func:`model_speed`) and ω / ``fs`` (T, K)
+        there: in the compiled kernel when ``kernel`` and it is built (the same operations)."""
+        if kernel and _model_omega is not None:
+            rpm = np.ascontiguousarray(rpm, dtype=np.float64)
+            speed, w = np.empty(rpm.shape[0]), np.empty((rpm.shape[0], self.orders.size))
+            _model_omega(rpm, float(min_rpm), self.orders, self.fixed, self._by_order_u8, 2.0 * np.pi, float(fs),
+                         speed, w)
+            return speed, w
+        speed = model_speed(rpm, min_rpm)
+        w = self(speed)
+        w /= fs
+        return speed, w
 
 
 def model_speed(rpm: np.ndarray, min_rpm: float) -> np.ndarray:

@@ -78,7 +78,8 @@ def _delayed_at_steady(st: TrackerState, n: int, D: int, speed_at: SpeedAt, T: i
     rd = np.concatenate([st.rpm_line[int(take[0]) if k else n:n:D], vals[j0:j0 + take.size - k]])
     tail = T - n                                # the line: positions tail .. T - 1 of this call
     at = len(range(p0, tail, D))                # positions asked before it
-    new = np.full(n, np.nan)
+    new = np.empty(n)
+    new.fill(np.nan)                            # np.full's values, without its Python wrapper
     new[p0 + at * D - tail::D] = vals[at:]
     st.rpm_line = new
     return rd

@@ -15,7 +15,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
-from cmsensord.dsp.order_tracker.bandwidth import component_r, r_to_bandwidth, time_constant
+from cmsensord.dsp.order_tracker.bandwidth import component_r, describe
+from cmsensord.dsp.order_tracker.blocks import block_stats, fused_blocks, stats_numpy
 from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
@@ -112,8 +113,9 @@ class OrderTracker:
         self.K = len(self.components)
         self._top_order = max((c.order or 0.0) for c in self.components)     # for _block_stats
         self._omegas = Omegas(self.components)                              # omega() in one operation
-        # the block statistics in the compiled kernel with the C backend (the same numbers)
+        # in the kernel with the C backend (the same numbers): block statistics; filter + stats (process_blocks)
         self._stats_kernel = getattr(_trackerkernel, "block_stats", None) if backend == "c" else None
+        self._fused_kernel = getattr(_trackerkernel, "forward_blocks", None) if backend == "c" else None
         self.q1 = float(q1)
         self.gains = gains
         self.f_hi = max(float(c.freq(self.max_rpm)) for c in self.components)
@@ -248,16 +250,7 @@ class OrderTracker:
     def describe(self, rpm: float) -> list[dict]:
         """Per component at speed ``rpm``: frequency, r, -3 dB bandwidth [Hz and %],
         time constant [s] (of the isolated steady-state filter at the tracker rate)."""
-        speed = model_speed(np.array([rpm]), self.min_rpm)
-        rk = component_r(self.components, speed, self.fs_track)[0]
-        out = []
-        for c, r in zip(self.components, rk):
-            f = float(c.freq(speed)[0])
-            bw = float(r_to_bandwidth(r, f, self.fs_track))
-            out.append({"name": c.name, "freq_hz": f, "r": float(r), "bandwidth_hz": bw,
-                        "bandwidth_pct": 100.0 * bw / f,
-                        "time_constant_s": float(time_constant(r, f, self.fs_track))})
-        return out
+        return describe(self.components, model_speed(np.array([rpm]), self.min_rpm), self.fs_track)
 
     # ---------------------------------------------------------------- process
     def process(self, y, rpm: np.ndarray | SpeedAt) -> TrackerOutput:
@@ -273,6 +266,37 @@ class OrderTracker:
         docs/order_tracker.md §5.  With ``gains="exact"`` the
         channels must miss the same samples (ValueError otherwise, before any
         state changes): the exact Riccati recursion is shared by the channels."""
+        y, rpm = self._checked(y, rpm)
+        step = self.piece * self.decimate
+        if self.gains == "table" and y.shape[0] > step:
+            # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
+            # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
+            # gives the same outputs, so the joined pieces are those of one call
+            return join_outputs([self._track(*self._prepare(y[a:a + step], piece_of(rpm, a, step)))
+                                 for a in range(0, y.shape[0], step)])
+        return self._track(*self._prepare(y, rpm))
+
+    def process_blocks(self, y, rpm: np.ndarray | SpeedAt) -> tuple[BlockStats, BlockStats | None]:
+        """The causal and the smoothed blocks (None without the smoother) of :meth:`process`:
+        the same numbers and the same state after it.  A call without a missing sample,
+        without the smoother (a live call), runs the filter, the envelope and the statistics in
+        one kernel pass when the kernel has it (:func:`~.blocks.fused_blocks`), without the
+        per-sample outputs."""
+        y, rpm = self._checked(y, rpm)
+        st = self.state
+        if self._fused_kernel is None or self.lag is not None or y.shape[0] > self.piece * self.decimate:
+            out = self.process(y, rpm)
+        else:
+            n0, yd, rd, miss = self._prepare(y, rpm)
+            N = yd.shape[0]
+            if miss is None and "miss" not in st.pend and N:
+                c, k, _, _ = self._coeffs_gains(rd, None)
+                return fused_blocks(self._fused_kernel, st, n0, yd, c, k, rd, self), None
+            out = self._track(n0, yd, rd, miss)
+        return out.blocks, out.smoothed_blocks
+
+    def _checked(self, y, rpm: np.ndarray | SpeedAt) -> tuple[np.ndarray, np.ndarray | SpeedAt]:
+        """y as (T, C) float64 and rpm as (T,) float64 (or the function), or ValueError."""
         y = np.asarray(y, dtype=np.float64)
         if y.ndim == 1 and self.C == 1:
             y = y[:, None]
@@ -282,17 +306,11 @@ class OrderTracker:
             rpm = np.asarray(rpm, dtype=np.float64)
             if rpm.shape != (y.shape[0],):
                 raise ValueError(f"rpm: expected shape ({y.shape[0]},), got {rpm.shape}")
-        step = self.piece * self.decimate
-        if self.gains == "table" and y.shape[0] > step:
-            # pieces of at most ``piece`` tracker samples: the per-sample arrays (P of the
-            # smoother: 8 kB a sample at 16 orders) stay bounded for any call; any split
-            # gives the same outputs, so the joined pieces are those of one call
-            return join_outputs([self._process(y[a:a + step], piece_of(rpm, a, step))
-                                 for a in range(0, y.shape[0], step)])
-        return self._process(y, rpm)
+        return y, rpm
 
-    def _process(self, y: np.ndarray, rpm: np.ndarray | SpeedAt) -> TrackerOutput:
-        """:meth:`process` of checked arrays."""
+    def _prepare(self, y: np.ndarray, rpm: np.ndarray | SpeedAt):
+        """The first steps of :meth:`process`: the call's tracker samples (n0: the first one's
+        index; yd (N, C); rd (N,) their speeds), which miss a measurement ((N, C) bool or None)."""
         st = self.state
         gone_in = None
         if y.size and np.isnan(y.min()):               # min() propagates NaN; cheaper than isnan
@@ -307,7 +325,11 @@ class OrderTracker:
             y = np.where(gone_in, 0.0, y)                # the anti-alias filter takes zeros
         yd, rd = self._decimate(y, rpm)
         st.last_miss = last_miss
-        n0 = st.n_track
+        return st.n_track, yd, rd, miss
+
+    def _track(self, n0: int, yd: np.ndarray, rd: np.ndarray, miss: np.ndarray | None) -> TrackerOutput:
+        """The rest of :meth:`process`: filter, envelope, blocks, smoother."""
+        st = self.state
         N = yd.shape[0]
         index = n0 + np.arange(N)
         t_in = index * self.decimate - self.delay_in
@@ -405,17 +427,21 @@ class OrderTracker:
         k, S, P, st.P = riccati_numpy(c, qd, q2, st.P, want_p, gone)
         return k, S, P
 
+    def _coeffs_gains(self, rd: np.ndarray, miss: np.ndarray | None):
+        """c (N, K) = 2 cos(omega / fs_track) at the model speeds of rd, and the gains there
+        (:meth:`_gains`): c, k, S, P."""
+        speed, c = self._omegas.scaled(rd, self.min_rpm, self.fs_track, self.backend == "c")
+        np.cos(c, out=c)                    # 2 cos(omega / fs_track), in place
+        c *= 2.0
+        k, S, P = self._gains(speed, c, miss[:, 0] if miss is not None and self.gains == "exact" else None)
+        return c, k, S, P
+
     def _filter(self, yd, rd, miss):
         """miss: (N, C) bool with a True somewhere, or None."""
         st = self.state
         N, d = yd.shape[0], 2 * self.K
-        speed = model_speed(rd, self.min_rpm)
-        c = self._omegas(speed)             # 2 cos(omega / fs_track), in place
-        c /= self.fs_track
-        np.cos(c, out=c)
-        c *= 2.0
         any_miss = miss is not None
-        k, S, P = self._gains(speed, c, miss[:, 0] if any_miss and self.gains == "exact" else None)
+        c, k, S, P = self._coeffs_gains(rd, miss)
         if N == 0:
             return (np.zeros((0, self.C, d)), np.zeros((0, self.C, d)), np.zeros((0, self.C)),
                     c, k, S, P)
@@ -478,32 +504,11 @@ class OrderTracker:
                    rmean, valid.view(np.uint8))
         else:
             rms, amp, rmean, valid = self._block_stats_numpy(wave, env, rpm)
-        starts = np.asarray(starts, dtype=np.int64)
-        t_in = (starts + self.block - 1) * self.decimate - self.delay_in
-        if miss is None:
-            missing = np.zeros((len(starts), self.C), dtype=np.int64)
-        else:
-            missing = np.count_nonzero(miss, axis=1).astype(np.int64)
-        return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
-                          missing=missing)
+        return block_stats(starts, rms, amp, rmean, valid, miss, self.block, self.decimate, self.delay_in)
 
     def _block_stats_numpy(self, wave, env, rpm):
         """rms, amplitude (E, C, K), mean speed and validity (E,) of whole blocks."""
-        # np.mean is the sum over the axis divided by its length: the same operations, without
-        # its Python wrapper (this runs at every live call)
-        n = wave.shape[1]
-        rms = wave * wave
-        rms = np.sqrt(rms.sum(axis=1) / n)
-        amp = env.sum(axis=1) / n
-        rmean = rpm.sum(axis=1) / n
-        arpm = np.abs(rpm)
-        speed_ok = (arpm >= self.min_rpm).all(axis=1)                   # NaN -> False
-        f_hi = arpm.max(axis=1) / 60.0 * self._top_order
-        valid = speed_ok & (f_hi < 0.5 * self.fs_track)
-        if not valid.all():
-            rms[~valid] = np.nan
-            amp[~valid] = np.nan
-        return rms, amp, rmean, valid
+        return stats_numpy(wave, env, rpm, self.min_rpm, self._top_order, self.fs_track)
 
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state

@@ -44,8 +44,10 @@ class CausalSpeed(TachoState):
         if _kernel is not None and self.causal_kernel:     # the same operations, in C, into the buffer
             buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, len(todo))
             self._sbuf = buf
-            _kernel.causal_fit(self._cT, self._cn, todo, self._ckernel, self._c0, float(self.ppr), buf,
-                               self._shi)
+            # the committed edges from the first window's on (not the run's whole list)
+            lo = max(self._c0, todo[0][0] - self.causal_window + 1)
+            _kernel.causal_fit(self._cT[lo - self._c0:], self._cn[lo - self._c0:], todo, self._ckernel, lo,
+                               float(self.ppr), buf, self._shi)
             self._shi += len(todo)
             return
         Tc, nc = self._committed()

@@ -224,32 +224,69 @@ class EdgeRuns(TachoState):
         if q_now > stop_q:
             self._end_run(run, stop_q)
 
-    def _edges(self, q: IntArray, adv: IntArray) -> None:
+    def _edges(self, q: IntArray | list[int], adv: IntArray | list[int]) -> None:
         """The edges q (1/256 sample) in arrival order, each after advancing the coverage to
         adv (samples; -1: no advance before it), as :meth:`_advance` and :meth:`_edge` one
         after the other would; runs of regular edges are committed in one pass
-        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge."""
-        ql, al = q.tolist(), adv.tolist()
+        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge.  q and adv: arrays or
+        Python lists (a live call's few edges: arrays only when there are enough for the pass)."""
+        ql = q if isinstance(q, list) else q.tolist()
+        al = adv if isinstance(adv, list) else adv.tolist()
         j, m = 0, len(ql)
+        qa: IntArray | None = None
+        aa: IntArray | None = None
         while j < m:
             n_scalar = 1
             st = self._regular_state() if self.batch_edges and m - j >= MIN_EDGES else None
             if st is not None:
+                if qa is None or aa is None:
+                    qa, aa = np.asarray(q, dtype=np.int64), np.asarray(adv, dtype=np.int64)
                 now = self._now if self._now is not None else 0
-                a = adv[j:]
+                a = aa[j:]
                 adv_q = np.where(a >= 0, np.maximum(a, now) * SUB, -1)
-                k = regular_prefix(st, q[j:], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
+                k = regular_prefix(st, qa[j:], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
                                    self._timeout_hi)
                 if k:
-                    self._commit_regular(q[j:j + k], a[:k])
+                    self._commit_regular(qa[j:j + k], a[:k])
                     j += k
                 else:
                     n_scalar = MIN_EDGES            # not worth trying again at once
             for i in range(j, min(m, j + n_scalar)):
-                if al[i] >= 0:
-                    self._advance(al[i])
-                self._edge(ql[i])
+                if not (self.batch_edges and self._regular_edge(ql[i], al[i])):
+                    if al[i] >= 0:
+                        self._advance(al[i])
+                    self._edge(ql[i])
             j += n_scalar
+
+    def _regular_edge(self, q: int, adv: int) -> bool:
+        """:meth:`_advance` (``adv`` >= 0) and :meth:`_edge` of edge q in one step when the
+        repair simply commits it as one pulse: the run goes on (no timeout at the coverage
+        or at q), q is after the last edge received, nothing is pending, and its interval
+        ratio to the prediction is within 1 +- tol.  The same checks and arithmetic, so the
+        same state after it; False, having changed nothing, for any other edge (a live
+        call's few edges go one by one: this saves the calls of the general path)."""
+        run = self._run
+        last, cq_last, now = self._last_q, self._cq_last, self._now
+        if (run is None or last is None or q <= last or cq_last is None or now is None or self._pending
+                or len(self._hist) < 2):
+            return False
+        stop_q = run.last_raw_q + self._timeout_q(run)      # EdgeRuns._check_timeout's, before the edge
+        if adv >= 0 and adv > now:
+            now = adv
+        if now * SUB > stop_q or q > stop_q:
+            return False
+        P = self._predict()
+        if P is None or not P > 0:
+            return False
+        r = (q - cq_last) / P                               # _classify's ratio
+        if not 1.0 - self.tol <= r <= 1.0 + self.tol:
+            return False
+        self._now = now
+        self.counters.edges += 1
+        self._last_q = self._known_q = q
+        run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = run.prev_raw_q, run.last_raw_q, q
+        self._commit(run, q, 1)
+        return True
 
     def _regular_state(self) -> RegularState | None:
         """The state :func:`~cmsensord.dsp.tacho.regular.regular_prefix` starts from, or None
@@ -352,8 +389,8 @@ class EdgeRuns(TachoState):
         xs = [h[0] - t_ref for h in hist]
         rt = [h[1] for h in hist]
         xm, ym = sum(xs) / n, sum(rt) / n
-        sxx = sum((x - xm) ** 2 for x in xs)
-        slope = sum((x - xm) * (r - ym) for x, r in zip(xs, rt)) / sxx if sxx > 0 else 0.0
+        sxx = sum([(x - xm) ** 2 for x in xs])          # lists: the values sum() adds, sooner
+        slope = sum([(x - xm) * (r - ym) for x, r in zip(xs, rt)]) / sxx if sxx > 0 else 0.0
         r0 = ym + slope * (cq_last - t_ref - xm)  # pulse rate at the last committed edge
         d_last = 1.0 / rt[-1]
         disc = r0 * r0 + 2.0 * slope

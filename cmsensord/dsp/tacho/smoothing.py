@@ -4,8 +4,9 @@ Steps 4-5 of docs/tacho.md: at every committed edge a local weighted
 least-squares quadratic of pulse count vs edge time gives a knot (time, angle,
 speed); between knots the speed is interpolated linearly and the angle by a
 cubic Hermite; after a run's last edge the speed decays as one pulse over the
-elapsed time.  Knots older than ``history_s`` are dropped.  The loop between
-knots also runs in the compiled ``cmsensord.dsp._trackerkernel`` (bit for bit).
+elapsed time.  Knots older than ``history_s`` are dropped.  The fit of the knots
+and the loop between them also run in the compiled ``cmsensord.dsp._trackerkernel``
+(bit for bit).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ try:  # the compiled loop of evaluate() is optional: numpy is the fallback (same
     from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the build
     _kernel = None
+_knot_fit = getattr(_kernel, "knot_fit", None)     # (an older build lacks it)
 
 _SCALAR_ROWS = 8  # up to this many rows the 3x3 solves run on Python floats (the same arithmetic)
 
@@ -114,6 +116,8 @@ def make_room(buf: FloatArray, lo: int, hi: int, n: int) -> tuple[FloatArray, in
 class KnotSmoothing(TachoState):
     """The smoothing part of :class:`~cmsensord.dsp.tacho.TachoTracker`: knots of
     the committed edges and the speed and angle at any sample."""
+
+    smooth_kernel = True  # the knots' fit in the compiled kernel when it is built
 
     def evaluate(self, samples: npt.ArrayLike) -> tuple[FloatArray, FloatArray, BoolArray]:
         """(speed in Hz, angle in turns, valid) at unwrapped sample indices (any shape, int or float).
@@ -233,8 +237,17 @@ class KnotSmoothing(TachoState):
         """Local least-squares quadratic of pulse count vs edge time at each centre (docs/tacho.md, step 4).
 
         Windows [k - h, k + h] clipped to the committed edges [0, K) of ``run`` (the current one).
-        Returns the knot times (samples), angles (turns) and speeds (turns/sample).
+        Returns the knot times (samples), angles (turns) and speeds (turns/sample).  The centres
+        are consecutive; in the compiled kernel when it is built (``smooth_kernel``: the same
+        operations, from the committed edges as the Python lists they are).
         """
+        if _knot_fit is not None and self.smooth_kernel and centres.size:
+            out = np.empty((3, centres.size))
+            first = int(centres[0])
+            at = max(self._c0, first - self.half_window)     # the edges of the windows, not the whole list
+            _knot_fit(self._cT[at - self._c0:], self._cn[at - self._c0:], at, first, K, self._kernel, run.base,
+                      float(self.ppr), out)
+            return out[0], out[1], out[2]
         h = self.half_window
         Tc, nc = self._committed()
         c0 = self._c0

@@ -311,7 +311,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
             end = t + L if end is None else max(end, t + L)
         assert end is not None, "at least one frame"
         if q:
-            self._edges(np.array(q, dtype=np.int64), np.array(adv, dtype=np.int64))
+            self._edges(q, adv)                 # lists: arrays only for enough edges
         self._advance(end)
         self._last_t0 = t0[-1]
         return True
