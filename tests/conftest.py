@@ -23,10 +23,12 @@ import subprocess
 
 import pytest
 
+import processes
 from fakes import FakeClock
 
 #: Modules whose every test starts processes or opens ptys.
 PROCESS_MODULES = frozenset({
+    "test_test_processes.py",
     "test_report.py",
     "test_capture.py",
     "test_capture_triggers.py",
@@ -114,6 +116,14 @@ def _process_mark_check(request, monkeypatch):
     monkeypatch.setattr(subprocess.Popen, "__init__", refuse)
     monkeypatch.setattr(os, "openpty", refuse)
     monkeypatch.setattr(pty, "openpty", refuse)
+
+
+@pytest.fixture(autouse=True)
+def _stop_what_the_test_left():
+    """After each test: no daemon or board of start_daemon/start_board is left running, even
+    when the test failed before stopping it."""
+    yield
+    processes.stop_left_running()
 
 
 @pytest.fixture

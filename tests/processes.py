@@ -18,6 +18,23 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
+#: the boards and daemons start_board and start_daemon started (conftest stops what a test left)
+STARTED: list[subprocess.Popen] = []
+
+
+def stop_left_running() -> list[str]:
+    """Kill every process of STARTED still running (a test that failed before stopping its
+    daemon or board, whose daemon would otherwise reopen its pty's number and steal bytes from
+    a later test's pty); their command lines."""
+    left = []
+    while STARTED:
+        proc = STARTED.pop()
+        if proc.poll() is None:
+            left.append(" ".join(map(str, proc.args)))
+            proc.kill()
+            proc.communicate()
+    return left
+
 
 def cmsensord(*args, timeout=120, env=None, **kw) -> subprocess.CompletedProcess:
     """Run ``python -m cmsensord ARGS`` to completion, output captured as text (``env``: the
@@ -53,6 +70,7 @@ def start_board(*args) -> subprocess.Popen:
     """``python -m firmware_sim --pty --hold ARGS``, returned once the pty is up; the caller stops it."""
     sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
                            stdout=subprocess.PIPE, text=True, env=ENV)
+    STARTED.append(sim)
     sim.stdout.readline()                      # the pty's path: the board is up
     return sim
 
@@ -64,8 +82,10 @@ def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subproce
     cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
                    f"  max_drift_s: {max_drift_s}\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
-    return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
-                            stderr=subprocess.PIPE, text=True, env=ENV)
+    daemon = subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
+                              stderr=subprocess.PIPE, text=True, env=ENV)
+    STARTED.append(daemon)
+    return daemon
 
 
 def stop(proc, timeout=10) -> str:
