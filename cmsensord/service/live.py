@@ -17,6 +17,7 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.control import ControlServer, socket_path
+from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
@@ -163,6 +164,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
              metadata: dict[str, str] | None = None, open_port: Callable | None = None) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
     how the reader opens the port, default pyserial's ``Serial``)."""
+    keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
     stop.install_reopen()
