@@ -143,12 +143,20 @@ def test_the_serial_source_wakes_every_batch_period_or_when_enough_frames_wait()
 def test_live_raw_with_orders_on_a_pty_equals_the_replay_of_its_capture(tmp_path):
     """The daemon at 1x on a pty (batches of ~5 blocks, cut wherever the timing fell) writes
     the messages a replay of its capture writes (one read of 64 kB per call)."""
+    a, b = _live_and_replay(tmp_path, ("--mode", "raw", "--tacho", "--duration", "5"), 1.0)
+    assert len(a["/cm/ch0/orders recursive"]) >= 30
+    assert a == b
+
+
+def _live_and_replay(tmp_path, board: tuple[str, ...], settle_s: float, config: str = "") -> tuple[dict, dict]:
+    """The faulty motor's board (``board``: more firmware_sim arguments) at 1x on a pty, the
+    daemon on it with ``--capture`` stopped ``settle_s`` after the board has sent all, then a
+    replay of the capture with the daemon's configuration: both runs' messages by topic."""
     link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "faulty", "--mode", "raw", "--tacho", "--duration", "5",
-                      "--speed", "1", "--seed", "2", "--link", str(link))
-    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
+    sim = start_board("--scenario", "faulty", *board, "--speed", "1", "--seed", "2", "--link", str(link))
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"), config=config)
     sim.stdout.readline()                            # the board's stats: all is sent
-    time.sleep(1.0)
+    time.sleep(settle_s)
     err = stop(d)
     sim.terminate()
     sim.wait(timeout=5)
@@ -157,9 +165,7 @@ def test_live_raw_with_orders_on_a_pty_equals_the_replay_of_its_capture(tmp_path
     r = cmsensord("replay", str(tmp_path / "cap.bin"), "--config", str(tmp_path / "cmsensord.yaml"),
                   "--out", str(tmp_path / "replay"))
     assert r.returncode == 0, r.stderr
-    a, b = by_topic(live), by_topic(read_messages(next((tmp_path / "replay").glob("*.mcap"))))
-    assert len(a["/cm/ch0/orders recursive"]) >= 30
-    assert a == b
+    return by_topic(live), by_topic(read_messages(next((tmp_path / "replay").glob("*.mcap"))))
 
 
 def test_the_loop_wakes_with_the_frame_that_completes_an_orders_block():
@@ -331,21 +337,7 @@ def test_the_loop_takes_one_call_per_rms_decision_and_gives_the_messages_of_one_
 def test_live_rms_on_a_pty_equals_the_replay_of_its_capture(tmp_path):
     """The daemon at 1x in RMS mode (one wake-up a decision, the frames past a decision's block
     kept for the next, the reader's 1-s holds) writes the messages a replay of its capture writes."""
-    link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "faulty", "--mode", "rms", "--channels", "4", "--duration", "6",
-                      "--speed", "1", "--seed", "2", "--link", str(link))
-    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"),
-                     config="channels:\n" + "".join(f"  - {{name: ch{i}, index: {i}}}\n" for i in range(4)))
-    sim.stdout.readline()                            # the board's stats: all is sent
-    time.sleep(1.5)
-    err = stop(d)
-    sim.terminate()
-    sim.wait(timeout=5)
-    assert d.returncode == 0, err
-    live = read_messages(next((tmp_path / "logs").glob("*.mcap")))
-    r = cmsensord("replay", str(tmp_path / "cap.bin"), "--config", str(tmp_path / "cmsensord.yaml"),
-                  "--out", str(tmp_path / "replay"))
-    assert r.returncode == 0, r.stderr
-    a, b = by_topic(live), by_topic(read_messages(next((tmp_path / "replay").glob("*.mcap"))))
+    a, b = _live_and_replay(tmp_path, ("--mode", "rms", "--channels", "4", "--duration", "6"), 1.5,
+                            config="channels:\n" + "".join(f"  - {{name: ch{i}, index: {i}}}\n" for i in range(4)))
     assert len(a["/cm/ch3/severity"]) >= 3
     assert a == b
