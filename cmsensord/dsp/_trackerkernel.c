@@ -73,6 +73,38 @@ static double pairwise_sum(const double *a, Py_ssize_t n, Py_ssize_t stride) {
     return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
 }
 
+/* One edge's column of the weighted quadratic fit's moment terms (w, wx, wx^2, wx^3, wx^4,
+   wy, wxy, wx^2 y), stride m: what smoothing.py's weighted sums add. */
+static void fit_terms(double *t, Py_ssize_t m, double w, double x, double y) {
+    const double x2 = x * x, wx = w * x, wx2 = w * x2;
+    t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
+    t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+}
+
+/* The fit's coefficients c[0..2] from its m columns of terms (pairwise sums, as numpy's),
+   solved as smoothing.py's _solve_normal and _eliminate do: a line with 2 points, 0 below. */
+static void solve_fit(const double *terms, Py_ssize_t m, Py_ssize_t npts, double c[3]) {
+    double mom[8];
+    for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
+    c[0] = c[1] = c[2] = 0.0;
+    if (npts < 2)
+        return;
+    const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
+    const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
+    const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
+    const double m1 = s1 / s0;
+    const double d11 = s2 - m1 * s1;
+    const double d12 = a12 - m1 * a02;
+    const double e1 = b1 - m1 * b0;
+    const double m2 = a02 / s0;
+    const double d22 = a22 - m2 * a02;
+    const double e2 = b2 - m2 * b0;
+    const double m3 = d12 / d11;
+    c[2] = (e2 - m3 * e1) / (d22 - m3 * d12);
+    c[1] = (e1 - d12 * c[2]) / d11;
+    c[0] = (b0 - s1 * c[1] - a02 * c[2]) / s0;
+}
+
 /* One channel (column ch of x, T x C) through the S sections, every D-th output from skip
  * on into column ch of out; the state (zi, S x 2 x C) read and written back.  Section by
  * section the arithmetic of scipy.signal.sosfilt (direct form II transposed), in its order. */
@@ -901,29 +933,11 @@ static PyObject *causal_fit(PyObject *self, PyObject *args) {
             const double w = use ? ck[j] : 0.0 * ck[j];
             const double x = (use ? Tc[kr - j] - Tk : 0.0) / S;
             const double y = use ? nc[kr - j] - nk : 0.0;
-            const double x2 = x * x, wx = w * x, wx2 = w * x2;
-            double *t = terms + j;
-            t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
-            t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+            fit_terms(terms + j, m, w, x, y);
         }
-        double mom[8];
-        for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
-        double c1 = 0.0, c2 = 0.0;
-        if (npts >= 2) {                            /* smoothing.py's _solve_normal, _eliminate */
-            const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
-            const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
-            const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
-            const double m1 = s1 / s0;
-            const double d11 = s2 - m1 * s1;
-            const double d12 = a12 - m1 * a02;
-            const double e1 = b1 - m1 * b0;
-            const double m2 = a02 / s0;
-            const double d22 = a22 - m2 * a02;
-            const double e2 = b2 - m2 * b0;
-            const double m3 = d12 / d11;
-            c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
-            c1 = (e1 - d12 * c2) / d11;
-        }
+        double c[3];
+        solve_fit(terms, m, npts, c);
+        const double c1 = c[1], c2 = c[2];
         seg[r] = (kn >= Tk || kn != kn) ? kn : Tk;             /* np.maximum(known, Tk) */
         seg[cap + r] = Tk;
         seg[2 * cap + r] = c1 / (S * ppr);
@@ -1009,30 +1023,11 @@ static PyObject *knot_fit(PyObject *self, PyObject *args) {
             const double w = use ? wk[j] : 0.0 * wk[j];
             const double x = (use ? Tc[i - c0] - Tk : 0.0) / S;
             const double y = use ? nc[i - c0] - nk : 0.0;
-            const double x2 = x * x, wx = w * x, wx2 = w * x2;
-            double *t = terms + j;
-            t[0] = w; t[m] = wx; t[2 * m] = wx2; t[3 * m] = wx2 * x; t[4 * m] = wx2 * x2;
-            t[5 * m] = w * y; t[6 * m] = wx * y; t[7 * m] = wx2 * y;
+            fit_terms(terms + j, m, w, x, y);
         }
-        double mom[8];
-        for (int q = 0; q < 8; q++) mom[q] = pairwise_sum(terms + q * m, m, 1);
-        double c0f = 0.0, c1 = 0.0;
-        if (npts >= 2) {                            /* smoothing.py's _solve_normal, _eliminate */
-            const double s0 = mom[0], s1 = mom[1], s2 = mom[2], b0 = mom[5], b1 = mom[6];
-            const double a02 = npts >= 3 ? mom[2] : 0.0, a12 = npts >= 3 ? mom[3] : 0.0;
-            const double a22 = npts >= 3 ? mom[4] : 1.0, b2 = npts >= 3 ? mom[7] : 0.0;
-            const double m1 = s1 / s0;
-            const double d11 = s2 - m1 * s1;
-            const double d12 = a12 - m1 * a02;
-            const double e1 = b1 - m1 * b0;
-            const double m2 = a02 / s0;
-            const double d22 = a22 - m2 * a02;
-            const double e2 = b2 - m2 * b0;
-            const double m3 = d12 / d11;
-            const double c2 = (e2 - m3 * e1) / (d22 - m3 * d12);
-            c1 = (e1 - d12 * c2) / d11;
-            c0f = (b0 - s1 * c1 - a02 * c2) / s0;
-        }
+        double c[3];
+        solve_fit(terms, m, npts, c);
+        const double c0f = c[0], c1 = c[1];
         out[r] = Tk;
         out[R + r] = base + (nk + c0f) / ppr;
         out[2 * R + r] = c1 / (S * ppr);
