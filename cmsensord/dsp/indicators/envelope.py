@@ -104,13 +104,8 @@ def envelopes_of_rfft(X: np.ndarray, N: int, fs: float, band: tuple[float, float
     """:func:`envelope_of_rfft` of each row of X (R, K), the ``np.fft.rfft`` of records of N
     samples: the same envelopes bit for bit, their inverse transforms in one call (numpy
     transforms the rows one by one, each as a call of its own would)."""
-    lo, hi, M, T = _band_bins(X.shape[-1], N, fs, band)
-    edges = (lo / T, hi / T)
-    if hi < lo:
-        return [Envelope(np.zeros(M), M / T, edges) for _ in range(len(X))]
-    env = np.abs(np.fft.ifft(X[:, lo:hi + 1], n=M, axis=-1, norm="forward"))
-    env *= 2.0 / N
-    return [Envelope(e, M / T, edges) for e in env]
+    env, fs_env, edges = _envelope_rows(X, N, fs, band)
+    return [Envelope(e, fs_env, edges) for e in env]
 
 
 def centred_envelopes(X: np.ndarray, N: int, fs: float,
@@ -119,15 +114,24 @@ def centred_envelopes(X: np.ndarray, N: int, fs: float,
     (``env - env.mean()``), and each one's RMS (``sqrt(mean(e * e))``, the envelope RMS of
     step 3): the numbers of those two steps row by row, bit for bit (each row's sums are
     numpy's pairwise sums of that row), in one pass over all rows each."""
+    env, fs_env, edges = _envelope_rows(X, N, fs, band)
+    env -= env.mean(axis=1, keepdims=True)
+    rms = np.sqrt(np.mean(env * env, axis=1)).tolist()
+    return [Envelope(e, fs_env, edges) for e in env], rms
+
+
+def _envelope_rows(X: np.ndarray, N: int, fs: float,
+                   band: tuple[float, float]) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """The envelopes (R, M) of the rows of X (R, K) in one inverse transform, as
+    :func:`envelope_of_rfft` makes each (zeros when the band holds no bin), their rate and
+    the band's edges [Hz]."""
     lo, hi, M, T = _band_bins(X.shape[-1], N, fs, band)
     edges = (lo / T, hi / T)
     if hi < lo:
-        return [Envelope(np.zeros(M), M / T, edges) for _ in range(len(X))], [0.0] * len(X)
+        return np.zeros((len(X), M)), M / T, edges
     env = np.abs(np.fft.ifft(X[:, lo:hi + 1], n=M, axis=-1, norm="forward"))
     env *= 2.0 / N
-    env -= env.mean(axis=1, keepdims=True)
-    rms = np.sqrt(np.mean(env * env, axis=1)).tolist()
-    return [Envelope(e, M / T, edges) for e in env], rms
+    return env, M / T, edges
 
 
 def envelope_spectrum(env: np.ndarray, fs_env: float) -> tuple[np.ndarray, np.ndarray]:
