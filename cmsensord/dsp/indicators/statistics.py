@@ -44,13 +44,8 @@ def centred_stats(d: np.ndarray) -> WaveformStats:
     fewer passes (the peak from the largest and smallest sample, not from ``|d|``)."""
     d2 = d * d                  # sums, not np.dot: BLAS threads stall on a busy machine
     m2 = float(d2.sum()) / d.size
-    if m2 <= 0.0:
-        return WaveformStats(0.0, 0.0, float("nan"), float("nan"))
     d2 *= d2
-    m4 = float(d2.sum()) / d.size
-    rms = m2 ** 0.5
-    peak = max(float(d.max()), -float(d.min()))
-    return WaveformStats(rms, peak, peak / rms, m4 / (m2 * m2))
+    return _of_sums(m2, float(d2.sum()) / d.size, float(d.max()), float(d.min()))
 
 
 def centred_stats_rows(D: np.ndarray) -> list[WaveformStats]:
@@ -62,14 +57,15 @@ def centred_stats_rows(D: np.ndarray) -> list[WaveformStats]:
     s2 = D2.sum(axis=1).tolist()
     D2 *= D2
     s4 = D2.sum(axis=1).tolist()
-    out = []
-    for sum2, sum4, hi, lo in zip(s2, s4, D.max(axis=1).tolist(), D.min(axis=1).tolist()):
-        m2 = sum2 / N
-        if m2 <= 0.0:
-            out.append(WaveformStats(0.0, 0.0, float("nan"), float("nan")))
-            continue
-        m4 = sum4 / N
-        rms = m2 ** 0.5
-        peak = max(hi, -lo)
-        out.append(WaveformStats(rms, peak, peak / rms, m4 / (m2 * m2)))
-    return out
+    return [_of_sums(sum2 / N, sum4 / N, hi, lo)
+            for sum2, sum4, hi, lo in zip(s2, s4, D.max(axis=1).tolist(), D.min(axis=1).tolist())]
+
+
+def _of_sums(m2: float, m4: float, hi: float, lo: float) -> WaveformStats:
+    """The statistics of centred samples from their mean square m2, mean fourth power m4,
+    largest and smallest value (a silent record, m2 0: rms and peak 0, the ratios NaN)."""
+    if m2 <= 0.0:
+        return WaveformStats(0.0, 0.0, float("nan"), float("nan"))
+    rms = m2 ** 0.5
+    peak = max(hi, -lo)
+    return WaveformStats(rms, peak, peak / rms, m4 / (m2 * m2))
