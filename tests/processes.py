@@ -36,6 +36,14 @@ def stop_left_running() -> list[str]:
     return left
 
 
+def spawn(args, **kw) -> subprocess.Popen:
+    """``subprocess.Popen(args, **kw)`` (``env``: default ENV), kept in STARTED: a test that fails
+    before stopping it leaves it to conftest to stop, not running on into later tests."""
+    proc = subprocess.Popen(args, **{"env": ENV, **kw})
+    STARTED.append(proc)
+    return proc
+
+
 def cmsensord(*args, timeout=120, env=None, **kw) -> subprocess.CompletedProcess:
     """Run ``python -m cmsensord ARGS`` to completion, output captured as text (``env``: the
     environment, default ENV)."""
@@ -52,8 +60,7 @@ def run_module(module: str, *args, timeout=120) -> subprocess.CompletedProcess:
 @contextlib.contextmanager
 def board_on_pty(*args):
     """A simulated board serving a pty (``python -m firmware_sim --pty --hold ARGS``): its path."""
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
-                           stdout=subprocess.PIPE, text=True, env=ENV)
+    sim = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args], stdout=subprocess.PIPE, text=True)
     try:
         yield sim.stdout.readline().strip()
     finally:
@@ -68,9 +75,7 @@ def board_on_pty(*args):
 
 def start_board(*args) -> subprocess.Popen:
     """``python -m firmware_sim --pty --hold ARGS``, returned once the pty is up; the caller stops it."""
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args],
-                           stdout=subprocess.PIPE, text=True, env=ENV)
-    STARTED.append(sim)
+    sim = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", *args], stdout=subprocess.PIPE, text=True)
     sim.stdout.readline()                      # the pty's path: the board is up
     return sim
 
@@ -82,10 +87,8 @@ def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subproce
     cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.5\n  reconnect_max_s: 5.0\n"
                    f"  max_drift_s: {max_drift_s}\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
-    daemon = subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
-                              stderr=subprocess.PIPE, text=True, env=ENV)
-    STARTED.append(daemon)
-    return daemon
+    return spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
+                 stderr=subprocess.PIPE, text=True)
 
 
 def stop(proc, timeout=10) -> str:

@@ -12,7 +12,7 @@ import pytest
 from cmsensord.protocol import iter_frames
 from cmsensord.sinks.mcap_sink import read_messages
 from messages import comparable
-from processes import ENV, board_on_pty, cmsensord
+from processes import ENV, board_on_pty, cmsensord, spawn
 
 
 def assert_messages_match_their_schemas(path):
@@ -88,7 +88,7 @@ def test_simulate_help_lists_the_scenarios():
 
 
 def test_sigterm_finishes_the_mcap_file_promptly(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "cmsensord", "--simulate", "--duration", "3600",
+    proc = spawn([sys.executable, "-m", "cmsensord", "--simulate", "--duration", "3600",
                              "--speed", "5", "--out", str(tmp_path)], stderr=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True, env=ENV)
     deadline = time.monotonic() + 30
@@ -124,7 +124,7 @@ def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
         cfg = tmp_path / "cmsensord.yaml"
         cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp_path / 'logs'}\n"
                        "  akf_trace: true\n  status_line: false\n")
-        d = subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
+        d = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
                              stderr=subprocess.PIPE, text=True, env=ENV)
         time.sleep(4.0)
         d.send_signal(signal.SIGTERM)

@@ -27,7 +27,7 @@ from mcap.reader import make_reader
 
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, log_files, summarize
 from cmsensord.sinks.schemas import TOPIC_DIAGNOSTICS, TOPIC_EVENTS
-from processes import ENV, board_on_pty
+from processes import ENV, board_on_pty, spawn
 
 NS = 1_000_000_000
 
@@ -51,7 +51,7 @@ def assert_every_finished_file_is_whole(logs: Path) -> list[Path]:
 
 def start_daemon(cfg: Path, err: Path) -> subprocess.Popen:
     with open(err, "ab") as f:
-        return subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
+        return spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
                                 stdout=subprocess.DEVNULL, stderr=f, env=ENV)
 
 

@@ -26,7 +26,7 @@ from cmsensord.sinks.mcap_sink import log_files, read_messages, summarize
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 from fakes import FakeClock
-from processes import ENV
+from processes import ENV, spawn
 
 T0 = 1_700_000_000_000_000_000
 PAD = "v" * 400
@@ -281,7 +281,7 @@ def test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging(small_fs, t
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text("output:\n  retry_s: 1.0\n  retain_mb: 0\n  min_free_mb: 0\n"
                    "  akf_trace: true\n  status_line: false\n")
-    d = subprocess.Popen([sys.executable, "-m", "cmsensord", "--simulate", "--config", str(cfg),
+    d = spawn([sys.executable, "-m", "cmsensord", "--simulate", "--config", str(cfg),
                           "--out", str(logs), "--duration", "3600", "--speed", "5"],
                          stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=ENV)
     try:

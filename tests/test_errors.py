@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 
-from processes import cmsensord
+from processes import cmsensord, spawn
 
 USAGE, CONFIG = 2, 78
 
@@ -92,7 +92,7 @@ def test_summary_into_a_closed_pipe_is_quiet(scratch):
     r = cmsensord("replay", "capture.bin", "--out", str(out), cwd=scratch)
     assert r.returncode == 0, r.stderr
     mcap = next(out.glob("*.mcap"))
-    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "summary", "--json", str(mcap)],
+    p = spawn([sys.executable, "-m", "cmsensord", "summary", "--json", str(mcap)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
     p.stdout.read(10)
     p.stdout.close()                    # like head: stop reading

@@ -29,7 +29,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import inject
 from firmware_sim.pty_link import PtyEndpoint
 from firmware_sim.scenarios import SCENARIOS, Scenario, make_scenario
-from processes import ENV
+from processes import ENV, spawn
 
 FS = 25000
 L = 250
@@ -386,7 +386,7 @@ def test_pty_board_with_hold_stops_at_sigterm_whenever_it_lands():
     thousand times a second) ends the board at once; a signal handler setting that
     event could deadlock on the event's own lock (about 1 in 40 kills hung)."""
     for delay in np.linspace(0.05, 0.6, 6):
-        sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
+        sim = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
                                 "healthy", "--speed", "10"], stdout=subprocess.PIPE, text=True, env=ENV)
         assert sim.stdout is not None
         port = sim.stdout.readline().strip()
@@ -494,7 +494,7 @@ def test_pty_board_with_start_on_stdin_sends_nothing_before_its_stdin_ends():
     no byte before EOF on stdin, the stream after it; SIGTERM while it waits ends it (status 0)."""
     cmd = [sys.executable, "-m", "firmware_sim", "--pty", "--scenario", "healthy", "--start-on-stdin",
            "--duration", "1", "--speed", "5", "--hold"]
-    sim = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
+    sim = spawn(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
     try:
         ser = serial.Serial(sim.stdout.readline().strip(), timeout=0.5)
         assert ser.read(1) == b""                    # waits: nothing in 0.5 s
@@ -506,7 +506,7 @@ def test_pty_board_with_start_on_stdin_sends_nothing_before_its_stdin_ends():
     finally:
         if sim.poll() is None:
             sim.kill()
-    waiting = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
+    waiting = spawn(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
     waiting.stdout.readline()
     waiting.terminate()
     assert waiting.wait(timeout=5) == 0

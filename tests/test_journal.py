@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from processes import ENV
+from processes import ENV, spawn
 
 PREFIX = re.compile(r"<[0-7]>")
 #: a degrading motor squeezed into 60 simulated seconds: severity changes, a failure (a warning)
@@ -29,7 +29,7 @@ def _run(args, *, journal: bool = True, stream: str | None = None, timeout=120) 
     env.pop("JOURNAL_STREAM", None)
     if journal:
         env["JOURNAL_STREAM"] = stream or f"{st.st_dev}:{st.st_ino}"
-    proc = subprocess.Popen([sys.executable, "-m", "cmsensord", *args], stderr=w,
+    proc = spawn([sys.executable, "-m", "cmsensord", *args], stderr=w,
                             stdout=subprocess.DEVNULL, env=env)
     os.close(w)
     with os.fdopen(r, "rb") as f:

@@ -22,7 +22,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import frames_hit, read_records
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, cmsensord, drain, fill, start_board, start_daemon, stop
+from processes import ENV, cmsensord, drain, fill, spawn, start_board, start_daemon, stop
 from stream import run_processor
 
 
@@ -124,7 +124,7 @@ def test_a_stalled_link_reports_the_last_partial_interval_at_once(tmp_path):
     The board starts once the daemon has the port open: the intervals count from the first
     sample the daemon sees, and with a board already sending, a daemon that opened the port
     at 0.5 s (of 3.5) would have seen the data end with an interval (complete)."""
-    sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--start-on-stdin",
+    sim = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--start-on-stdin",
                             "--scenario", "healthy", "--mode", "raw", "--tacho", "--duration", "3.5"],
                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
     try:
@@ -287,7 +287,7 @@ def test_a_throttled_loop_sheds_raw_blocks_and_keeps_the_tacho(tmp_path):
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text(f"link:\n  port: {link}\n  queue_frames: 512\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: true\n")
-    d = subprocess.Popen([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
+    d = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)],
                          stderr=w, env=ENV)
     os.close(w)
     try:

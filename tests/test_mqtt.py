@@ -18,7 +18,7 @@ import pytest
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, read_messages
 from mosquitto import Broker, Subscriber, free_port, needs_mosquitto
-from processes import ENV, cmsensord, start_daemon
+from processes import ENV, cmsensord, spawn, start_daemon
 
 pytestmark = needs_mosquitto
 PUBLISHED = ("severity", "indicators", "events", "diagnostics")
@@ -93,7 +93,7 @@ def test_every_configured_topic_arrives_with_the_payload_of_its_mcap_message(tmp
 
 def test_a_broker_outage_loses_nothing_and_delivers_in_order(tmp_path, broker):
     sub = Subscriber(broker.port)
-    daemon = subprocess.Popen(simulate(tmp_path, mqtt_yaml(broker.port), duration=300),
+    daemon = spawn(simulate(tmp_path, mqtt_yaml(broker.port), duration=300),
                               stderr=subprocess.PIPE, text=True, env=ENV)
     try:
         assert sub.wait_for(lambda: len(seqs(sub)) >= 20)
@@ -118,7 +118,7 @@ def test_a_broker_outage_loses_nothing_and_delivers_in_order(tmp_path, broker):
 def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
     broker = Broker(tmp_path / "broker")           # not started: the broker is down
     yaml = mqtt_yaml(broker.port, f"queue_dir: {tmp_path / 'queue'}")
-    with_board = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
+    with_board = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
                                    "degrading", "--speed", str(SPEED), "--duration", "600"],
                                   stdout=subprocess.PIPE, text=True, env=ENV)
     pty = with_board.stdout.readline().strip()
@@ -145,7 +145,7 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
     assert all(s >= logged[-1][1] - SPEED * 1e9 for s in missing), (len(missing), len(logged))
     broker.start()
     sub = Subscriber(broker.port)
-    board2 = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
+    board2 = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--scenario",
                                "healthy", "--speed", "20", "--duration", "600"],
                               stdout=subprocess.PIPE, text=True, env=ENV)
     daemon = start_daemon(tmp_path, board2.stdout.readline().strip(), config=yaml)

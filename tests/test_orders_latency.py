@@ -17,7 +17,7 @@ import subprocess
 import sys
 import time
 
-from processes import ENV, ROOT, start_board, stop
+from processes import ENV, ROOT, spawn, start_board, stop
 
 PROBE = ROOT / "bench" / "live_probe.py"
 ONE_REV_PLUS_10_MS = 60.0 / 1720.0 + 0.010     # 44.9 ms: one revolution at 1720 rpm + 10 ms
@@ -34,7 +34,7 @@ def _latencies(tmp_path, orders_yaml: str, per_s: int) -> tuple[list[float], str
     cfg.write_text(f"link:\n  port: {link}\n  max_drift_s: 0.0\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{orders_yaml}")
     report = tmp_path / "probe.json"
-    d = subprocess.Popen([sys.executable, str(PROBE), str(report), "--", "--config", str(cfg)],
+    d = spawn([sys.executable, str(PROBE), str(report), "--", "--config", str(cfg)],
                          stderr=subprocess.PIPE, text=True, env=ENV)
     try:
         sim.stdout.readline()                      # the board's stats: all is sent

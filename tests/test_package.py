@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from cmsensord import __version__
-from processes import ENV, ROOT, run_module
+from processes import ENV, ROOT, run_module, spawn
 
 KERNEL_LINE = ("WARNING C kernel(s) not built: cmsensord.dsp._akfkernel (the AKF bank), "
                "cmsensord.dsp._trackerkernel (the order tracker), cmsensord._wirekernel (the wire decoder); "
@@ -119,7 +119,7 @@ def test_simulate_into_a_closed_pipe_exits_quietly(tmp_path):
     """``cmsensord --simulate 2>&1 | head -1``: the status lines meet a closed pipe; the run
     ends with the MCAP file finished and exit status 141, as after SIGPIPE, no traceback."""
     r_fd, w_fd = os.pipe()
-    proc = subprocess.Popen([sys.executable, "-m", "cmsensord", "--simulate", "--duration", "60",
+    proc = spawn([sys.executable, "-m", "cmsensord", "--simulate", "--duration", "60",
                              "--out", str(tmp_path)], stdout=w_fd, stderr=w_fd, env=ENV)
     os.close(w_fd)
     with os.fdopen(r_fd, "rb") as pipe:

@@ -16,7 +16,7 @@ import sys
 from cmsensord.errors import EXIT_CONFIG
 from cmsensord.sinks.mcap_sink import read_messages
 from cmsensord.sinks.schemas import EVENT_KINDS
-from processes import ENV, board_on_pty, stop
+from processes import ENV, board_on_pty, spawn, stop
 
 INJECT = '''\
 import sys
@@ -50,7 +50,7 @@ def _daemon(tmp_path, port, fail_at: int, mode: str) -> subprocess.Popen:
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text(f"link:\n  port: {port}\n  reconnect_min_s: 0.05\n  reconnect_max_s: 0.1\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n")
-    return subprocess.Popen([sys.executable, str(tmp_path / "inject.py"), str(fail_at), mode,
+    return spawn([sys.executable, str(tmp_path / "inject.py"), str(fail_at), mode,
                              "--config", str(cfg)], stderr=subprocess.PIPE, text=True, env=ENV,
                             cwd=tmp_path)
 

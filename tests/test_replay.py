@@ -15,7 +15,7 @@ from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, cmsensord, start_board, start_daemon, stop
+from processes import ENV, cmsensord, spawn, start_board, start_daemon, stop
 
 
 def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
@@ -30,7 +30,7 @@ def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
 
     master, slave = pty.openpty()                        # stderr on a terminal
     t = time.monotonic()
-    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "8",
+    p = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "8",
                           "--out", str(tmp_path / "paced")], stderr=slave, stdout=subprocess.DEVNULL,
                          env=ENV)
     os.close(slave)

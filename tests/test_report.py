@@ -19,7 +19,7 @@ import pytest
 
 from cmsensord.sinks.mcap_file import McapSink
 from cmsensord.sinks.mcap_read import read_messages
-from processes import ENV, cmsensord, run_module
+from processes import ENV, cmsensord, run_module, spawn
 
 SCHEMA_OF = {"events": "event", "diagnostics": "diagnostics", "severity": "severity", "orders": "orders",
              "indicators": "indicators", "log": "log", "alarms": "alarms"}
@@ -207,7 +207,7 @@ def test_headless_chromium_renders_the_report(logs, tmp_path):
 
 def test_progress_bar_on_a_terminal_only(logs, tmp_path):
     master, slave = pty.openpty()
-    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "report", str(logs["faulty_raw"]), "--out",
+    p = spawn([sys.executable, "-m", "cmsensord", "report", str(logs["faulty_raw"]), "--out",
                           str(tmp_path / "r.html")], stdout=subprocess.PIPE, stderr=slave, env=ENV)
     os.close(slave)
     seen = b""

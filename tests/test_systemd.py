@@ -27,7 +27,7 @@ import uuid
 
 import pytest
 
-from processes import ENV, board_on_pty, drain, fill
+from processes import ENV, board_on_pty, drain, fill, spawn
 
 WATCHDOG_USEC = 1_000_000
 WATCHDOG_S = WATCHDOG_USEC / 1e6
@@ -102,7 +102,7 @@ def start_daemon(config, manager: FakeManager, stderr) -> tuple[subprocess.Popen
     env.pop("WATCHDOG_PID", None)
     t0 = time.monotonic()
     # exec keeps the shell's pid, so WATCHDOG_PID=$$ is the daemon's pid, as systemd sets it
-    d = subprocess.Popen(["/bin/sh", "-c", 'WATCHDOG_PID=$$ exec "$0" "$@"', sys.executable, "-m",
+    d = spawn(["/bin/sh", "-c", 'WATCHDOG_PID=$$ exec "$0" "$@"', sys.executable, "-m",
                           "cmsensord", "--config", str(config)],
                          stdout=subprocess.DEVNULL, stderr=stderr, env=env)
     return d, t0
