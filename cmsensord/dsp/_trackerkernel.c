@@ -1104,6 +1104,9 @@ done:
     return ret;
 }
 
+/* tacho edges.py (defined at the end of this file) */
+static PyObject *regular_edges(PyObject *self, PyObject *args);
+
 static PyMethodDef methods[] = {
     {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
     {"lerp_rows", lerp_rows, METH_VARARGS, "Table rows interpolated at fractional positions (gain table)."},
@@ -1120,6 +1123,8 @@ static PyMethodDef methods[] = {
     {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
     {"knot_fit", knot_fit, METH_VARARGS, "The tacho's knots of the smoothed speed (smoothing.py)."},
     {"causal_rpm", causal_rpm, METH_VARARGS, "The causal speed [rpm] at samples (orders.py)."},
+    {"regular_edges", regular_edges, METH_VARARGS,
+     "A live call's regular tacho edges committed in one step (tacho edges.py)."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -1127,3 +1132,152 @@ static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_trackerkernel",
                                      "Compiled order-tracker loops (see order_tracker.py).", -1, methods};
 
 PyMODINIT_FUNC PyInit__trackerkernel(void) { return PyModule_Create(&module); }
+
+/* ---------------------------------------------------------------- tacho edges (edges.py)
+ *
+ *   regular_edges(q, adv, j, hist, cT, cn, todo, pp, p, l, last_q, cq_last, now, n_last, i0,
+ *                 tol, periods, lo, hi, margin) -> (k, now, pp, p, l)
+ *
+ * EdgeRuns._regular_edge of the edges q[j], q[j + 1], ... one after the other, as long as
+ * each is regular: the same checks (the run's timeout before the edge, at the coverage end
+ * adv[i] when >= 0 and at the edge; the edge after the last one received; its interval ratio
+ * to EdgeRuns._predict's interval within 1 +- tol) and the same commitment (EdgeRuns._commit
+ * of one pulse: (mid, rate) appended to hist, the deque of the predictor's last intervals,
+ * the edge time and pulse count to cT and cn, (committed index, time) to todo, committed
+ * indices from i0 on).  A ratio within margin of 1 +- tol stops it too: whatever an ulp
+ * of difference in the prediction (Python's sum() of floats), the edge then goes through
+ * the Python path, which decides.  q, adv: lists of ints (1/256 sample; samples, -1: no
+ * advance); pp, p, l: the run's last three edges received; last_q: the last edge received;
+ * cq_last: the last committed edge; now: the coverage end (samples).  Returns k, the edges
+ * committed, and the state after them (coverage end, last three edges). */
+
+#define TACHO_SUB 256
+#define TACHO_MAX_HIST 64
+
+/* EdgeRuns._predict over the n (mid, rate) entries, oldest first: Python's arithmetic, in
+ * its order (sum() from 0.0 left to right, x ** 2 as pow(x, 2)). */
+static double tacho_predict(const double *mid, const double *rate, int n, long long cq_last) {
+    const double t_ref = mid[n - 1];
+    double xs[TACHO_MAX_HIST];
+    double sx = 0.0, sy = 0.0;
+    for (int i = 0; i < n; i++) {
+        xs[i] = mid[i] - t_ref;
+        sx += xs[i];
+        sy += rate[i];
+    }
+    const double xm = sx / (double)n, ym = sy / (double)n;
+    double sxx = 0.0, sxy = 0.0;
+    for (int i = 0; i < n; i++) sxx += pow(xs[i] - xm, 2.0);
+    for (int i = 0; i < n; i++) sxy += (xs[i] - xm) * (rate[i] - ym);
+    const double slope = sxx > 0 ? sxy / sxx : 0.0;
+    const double r0 = ym + slope * (((double)cq_last - t_ref) - xm);
+    const double d_last = 1.0 / rate[n - 1];
+    const double disc = r0 * r0 + 2.0 * slope;
+    if (r0 <= 0 || disc <= 0)
+        return d_last;
+    const double d = 2.0 / (r0 + sqrt(disc));
+    const double lo = 0.5 * d_last, hi = 2.0 * d_last;
+    const double m1 = lo > d ? lo : d;                    /* max(d, lo), min(m1, hi) as Python's */
+    return hi < m1 ? hi : m1;
+}
+
+/* EdgeRuns._timeout_q of a run whose last three edges received are pp, p, l. */
+static long long tacho_timeout_q(long long pp, long long p, long long l, double periods, long long lo,
+                                 long long hi) {
+    long long d = l - p;
+    if (p - pp > d) d = p - pp;
+    const long long t = (long long)ceil(periods * (double)d);
+    const long long u = lo > t ? lo : t;
+    return hi < u ? hi : u;
+}
+
+static int tacho_append(PyObject *list, PyObject *item) {
+    if (item == NULL) return -1;
+    const int rc = PyList_Append(list, item);
+    Py_DECREF(item);
+    return rc;
+}
+
+static PyObject *regular_edges(PyObject *self, PyObject *args) {
+    PyObject *oq, *oadv, *hist, *cT, *cn, *todo;
+    Py_ssize_t j;
+    long long pp, p, l, last_q, cq_last, now, n_last, i0, lo, hi;
+    double tol, periods, margin;
+    if (!PyArg_ParseTuple(args, "O!O!nOO!O!O!LLLLLLLLddLLd", &PyList_Type, &oq, &PyList_Type, &oadv, &j,
+                          &hist, &PyList_Type, &cT, &PyList_Type, &cn, &PyList_Type, &todo, &pp, &p, &l,
+                          &last_q, &cq_last, &now, &n_last, &i0, &tol, &periods, &lo, &hi, &margin))
+        return NULL;
+    const Py_ssize_t m = PyList_GET_SIZE(oq);
+    if (PyList_GET_SIZE(oadv) != m || j < 0 || j > m) {
+        PyErr_SetString(PyExc_ValueError, "regular_edges: expected q and adv of one length, 0 <= j <= len(q)");
+        return NULL;
+    }
+    PyObject *maxlen = PyObject_GetAttrString(hist, "maxlen");
+    if (maxlen == NULL) return NULL;
+    const long w = maxlen == Py_None ? -1 : PyLong_AsLong(maxlen);
+    Py_DECREF(maxlen);
+    PyObject *fh = PySequence_Fast(hist, "regular_edges: hist must be a sequence");
+    if (fh == NULL) return NULL;
+    const Py_ssize_t nh = PySequence_Fast_GET_SIZE(fh);
+    if (w < 2 || w > TACHO_MAX_HIST || nh < 2 || nh > w) {
+        Py_DECREF(fh);
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "regular_edges: expected a deque of 2..maxlen (2..64) intervals");
+        return NULL;
+    }
+    double mid[TACHO_MAX_HIST], rate[TACHO_MAX_HIST];
+    int n = (int)nh;
+    for (Py_ssize_t i = 0; i < nh; i++) {
+        PyObject *e = PySequence_Fast_GET_ITEM(fh, i);
+        if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 2) {
+            PyErr_SetString(PyExc_ValueError, "regular_edges: hist entries must be (mid, rate) tuples");
+            break;
+        }
+        mid[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(e, 0));
+        rate[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(e, 1));
+    }
+    Py_DECREF(fh);
+    if (PyErr_Occurred()) return NULL;
+    const double r_lo = 1.0 - tol + margin, r_hi = 1.0 + tol - margin;
+    Py_ssize_t k = 0;
+    for (Py_ssize_t i = j; i < m; i++) {
+        const long long q = PyLong_AsLongLong(PyList_GET_ITEM(oq, i));
+        const long long a = PyLong_AsLongLong(PyList_GET_ITEM(oadv, i));
+        if (PyErr_Occurred()) return NULL;
+        if (q <= last_q) break;
+        const long long stop_q = l + tacho_timeout_q(pp, p, l, periods, lo, hi);
+        const long long now_i = a >= 0 && a > now ? a : now;
+        if (now_i * TACHO_SUB > stop_q || q > stop_q) break;
+        const double P = tacho_predict(mid, rate, n, cq_last);
+        if (!(P > 0)) break;
+        const double r = (double)(q - cq_last) / P;
+        if (!(r > r_lo && r < r_hi)) break;
+        /* commit: EdgeRuns._commit(run, q, 1) after _regular_edge's updates */
+        const long long d = q - cq_last;
+        const double md = (double)cq_last + 0.5 * (double)d, rt = 1.0 / (double)d;
+        const double T = (double)q / (double)TACHO_SUB;
+        PyObject *entry = Py_BuildValue("(dd)", md, rt);
+        if (entry == NULL) return NULL;
+        PyObject *res = PyObject_CallMethod(hist, "append", "(O)", entry);
+        Py_DECREF(entry);
+        if (res == NULL) return NULL;
+        Py_DECREF(res);
+        if (tacho_append(cT, PyFloat_FromDouble(T)) < 0 || tacho_append(cn, PyLong_FromLongLong(n_last + 1)) < 0
+            || tacho_append(todo, Py_BuildValue("(Ld)", i0 + k, T)) < 0)
+            return NULL;
+        if (n == w) {                                  /* the deque's oldest entry drops out */
+            memmove(mid, mid + 1, sizeof(double) * (size_t)(n - 1));
+            memmove(rate, rate + 1, sizeof(double) * (size_t)(n - 1));
+            n--;
+        }
+        mid[n] = md;
+        rate[n] = rt;
+        n++;
+        n_last++;
+        cq_last = last_q = q;
+        pp = p; p = l; l = q;
+        now = now_i;
+        k++;
+    }
+    return Py_BuildValue("(nLLLL)", k, now, pp, p, l);
+}

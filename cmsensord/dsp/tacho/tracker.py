@@ -205,16 +205,12 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
             prev = t
         else:
             if len(t0_unwrapped) <= _FEW_FRAMES and not (offsets and (min(offsets) < 0 or max(offsets) > 0xFFFFFFFF)):
-                self._lazy = True
-                try:
-                    self._events = []
-                    if t0_unwrapped:
-                        self._few_frames(t0_unwrapped, counts, offsets)
-                    ev = self._events
-                    self._events = []
-                    return self._settled(ev).events
-                finally:
-                    self._lazy = False
+                self._events = []
+                if t0_unwrapped:
+                    self._few_frames(t0_unwrapped, counts, offsets, one_step=True)
+                ev, self._events = self._events, []
+                self._unsettled = True          # as _settled in feed_flat: the knots fitted when asked for
+                return ev
         return self.feed_flat(np.asarray(t0_unwrapped, dtype=np.int64), counts,
                               np.asarray(offsets, dtype=np.int64))
 
@@ -292,26 +288,33 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
             self._finalise(ended=False)
             self._prune()
 
-    def _few_frames(self, t0: list[int], sizes: list[int], off: list[int]) -> bool:
+    def _few_frames(self, t0: list[int], sizes: list[int], off: list[int], one_step: bool = False) -> bool:
         """What the array code of :meth:`_update` does with frames all in time order, on Python
         ints (a live call brings about ten frames): False, changing nothing, when an offset is
-        not u32 (the array code reports it)."""
-        if off and (min(off) < 0 or max(off) > 0xFFFFFFFF):
+        not u32 (the array code reports it).  ``one_step`` (:meth:`feed_few`, offsets checked):
+        the regular edges through :meth:`_few_edges`, else :meth:`_edges` (the same state)."""
+        if not one_step and off and (min(off) < 0 or max(off) > 0xFFFFFFFF):
             return False
         L = self.block_len
         q: list[int] = []
         adv: list[int] = []
-        pos, end = 0, None               # end: the coverage of the frames before
+        pos, end = 0, -1                 # end: the coverage of the frames before (in time order: the last one's)
         for t, n in zip(t0, sizes):
-            if n:
+            if n == 1:
+                q.append(off[pos] + t * SUB)
+                adv.append(end)
+                pos += 1
+            elif n:
                 base = t * SUB
                 q += sorted([o + base for o in off[pos:pos + n]])    # time order within the frame
-                adv += [-1 if end is None else end] + [-1] * (n - 1)
+                adv += [end] + [-1] * (n - 1)
                 pos += n
-            end = t + L if end is None else max(end, t + L)
-        assert end is not None, "at least one frame"
+            end = t + L
         if q:
-            self._edges(q, adv)                 # lists: arrays only for enough edges
+            if one_step:
+                self._few_edges(q, adv)
+            else:
+                self._edges(q, adv)             # lists: arrays only for enough edges
         self._advance(end)
         self._last_t0 = t0[-1]
         return True
