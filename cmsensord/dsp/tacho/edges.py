@@ -208,8 +208,10 @@ class EdgeRuns(TachoState):
 
     def _advance(self, end: int) -> None:
         """The frames so far cover up to ``end`` (exclusive): coverage and timeout check."""
-        self._now = end if self._now is None else max(self._now, end)
-        self._check_timeout(self._now * SUB)
+        now = self._now
+        if now is None or end > now:
+            self._now = now = end
+        self._check_timeout(now * SUB)
 
     def _timeout_q(self, run: Run) -> int:
         """The current run's timeout in 1/256 sample (integer arithmetic: deterministic)."""
@@ -224,7 +226,7 @@ class EdgeRuns(TachoState):
     def _check_timeout(self, q_now: int) -> None:
         """End the current run if no edge came within its timeout before q_now (exclusive)."""
         run = self._run
-        if run is None:
+        if run is None or q_now <= run.last_raw_q + self._timeout_lo:    # the timeout is at least _timeout_lo
             return
         stop_q = run.last_raw_q + self._timeout_q(run)
         if q_now > stop_q:
