@@ -15,7 +15,8 @@ import pytest
 
 from cmsensord.dsp.order_tracker import have_kernel
 from cmsensord.dsp.tacho import TachoTracker
-from cmsensord.dsp.tacho.edges import EdgeRuns
+from cmsensord.dsp.tacho import tracker as tacho_tracker
+from cmsensord.dsp.tacho.edges import EdgeRuns, _kernel
 from test_tacho_batch import L, random_edges
 
 pytestmark = pytest.mark.skipif(not have_kernel(), reason="the compiled tracker kernel is not built")
@@ -37,15 +38,26 @@ def ragged_edges(rnd: random.Random, seconds: float, fs: int = 25000) -> tuple[n
     return t0, [(qq[frame == k] - t0[k] * 256).astype(np.uint32) for k in range(n)]
 
 
-def feed(t0, edges, cuts, batch: bool = True, kernel: bool = True):
-    """Feed the frames in calls split at ``cuts`` through ``feed_few``; what each call gave."""
+def feed(t0, edges, cuts, batch: bool = True, kernel: bool = True, seed: int = 0):
+    """Feed the frames in calls split at ``cuts`` through ``feed_few`` (a frame's edges in
+    random order, now and then a call with a frame from the past or an offset past u32, which
+    feed_few passes to feed_flat: it raises); what each call gave."""
+    rnd = random.Random(seed)
     tr = TachoTracker(25000, ppr=1, block_len=L)
     tr.batch_edges, tr.edge_kernel = batch, kernel
     out = []
     for a, b in zip([0, *cuts], [*cuts, len(t0)]):
-        counts = [len(e) for e in edges[a:b]]
-        off = np.concatenate(edges[a:b]).tolist() if b > a else []
-        ev = tr.feed_few(t0[a:b].tolist(), counts, off)
+        t, counts = t0[a:b].tolist(), [len(e) for e in edges[a:b]]
+        off = [o for e in edges[a:b] for o in rnd.sample(e.tolist(), len(e))]
+        e = rnd.random()
+        if e < 0.02 and t:
+            t[0] = max(0, t[0] - 3 * L)                        # a frame from the past
+        elif e < 0.04 and off:
+            off[-1] += 2**32                                   # not a u32
+        try:
+            ev = tr.feed_few(t, counts, off)
+        except ValueError as exc:
+            ev = [str(exc)]
         s = np.arange(max(0, tr.covered_until - 3000), tr.covered_until + 200)
         out.append((ev, tr.counters.snapshot(), tr.final_until, tr.valid, tr.evaluate(s), tr.evaluate_causal(s)))
     return out
@@ -78,17 +90,18 @@ def test_a_live_calls_edges_in_one_step_equal_the_edge_by_edge_repair(seed, monk
     t0, edges = random_edges(rnd, 40.0)
     cuts = list(range(rnd.randrange(1, 12), len(t0), rnd.choice([8, 10, 12])))
     taken = _spy(monkeypatch)
-    ref = feed(t0, edges, cuts, batch=False)
+    ref = feed(t0, edges, cuts, batch=False, seed=seed)
     assert not taken
-    py = feed(t0, edges, cuts, kernel=False)
+    py = feed(t0, edges, cuts, kernel=False, seed=seed)
     assert not taken
-    got = feed(t0, edges, cuts)
+    got = feed(t0, edges, cuts, seed=seed)
     n_edges = sum(map(len, edges))
     assert sum(taken) > 0.5 * n_edges and 0 in taken            # most edges in the step, not all
     same(got, ref)
     same(py, ref)
     c = ref[-1][1]
     assert c.missed + c.extra > 0 and c.lost > 0                 # the stream had repairs and stops
+    assert any(isinstance(x, str) for r in ref for x in r[0])    # some calls raised
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -97,9 +110,41 @@ def test_the_steps_decisions_at_the_tolerance_edges_are_the_edge_by_edge_ones(se
     t0, edges = ragged_edges(rnd, 30.0)
     cuts = list(range(rnd.randrange(1, 12), len(t0), 10))
     taken = _spy(monkeypatch)
-    ref = feed(t0, edges, cuts, batch=False)
-    got = feed(t0, edges, cuts)
+    ref = feed(t0, edges, cuts, batch=False, seed=seed)
+    got = feed(t0, edges, cuts, seed=seed)
     assert sum(taken) > 0.2 * sum(map(len, edges))
     same(got, ref)
     c = ref[-1][1]
     assert c.irregular > 50 and c.missed + c.extra > 0           # many ratios outside 1 +- tol
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_kernels_edge_lists_are_feed_fews_checks_and_lists(seed):
+    """``_trackerkernel.edge_lists``: TachoTracker._edge_lists of frames feed_few takes on
+    Python ints (TachoTracker._few_ok), None for any other (stepping back in time, a count
+    below 0 or not adding up, an offset not u32, more than 64 frames, none)."""
+    rnd = random.Random(900 + seed)
+    tr = TachoTracker(25000, ppr=1, block_len=L)
+    taken = refused = 0
+    for _ in range(3000):
+        F = rnd.choice([0, 1, 3, 10, 64, 65])
+        last = rnd.choice([None, 1000, 10**6])
+        t = sorted(rnd.randrange(1000, 2000) for _ in range(F))
+        counts = [rnd.choice([0, 0, 1, 1, 2, 5]) for _ in range(F)]
+        off = [rnd.randrange(2**32) for _ in range(sum(counts))]
+        e = rnd.random()
+        if e < 0.1 and F > 1:
+            t[rnd.randrange(1, F)] -= rnd.randrange(1, 300)     # a step back in time (or not)
+        elif e < 0.15 and off:
+            off[rnd.randrange(len(off))] = rnd.choice([-1, 2**32, 2**70])
+        elif e < 0.2 and F:
+            counts[rnd.randrange(F)] += rnd.choice([-3, 1])
+        tr._last_t0 = last
+        got = _kernel.edge_lists(t, counts, off, L, last, tacho_tracker._FEW_FRAMES)
+        if t and tr._few_ok(t, counts, off):
+            assert got == tr._edge_lists(t, counts, off)
+            taken += 1
+        else:
+            assert got is None
+            refused += 1
+    assert taken > 1000 and refused > 500

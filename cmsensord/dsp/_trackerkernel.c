@@ -1104,8 +1104,8 @@ done:
     return ret;
 }
 
-/* tacho edges.py (defined at the end of this file) */
-static PyObject *regular_edges(PyObject *self, PyObject *args);
+/* tacho edges.py: the functions at the end of this file, added at the module's creation */
+static int add_tacho_edge_functions(PyObject *m);
 
 static PyMethodDef methods[] = {
     {"envelope", envelope, METH_VARARGS, "Peak amplitudes of the tracker's state pairs (recursions.py)."},
@@ -1123,17 +1123,33 @@ static PyMethodDef methods[] = {
     {"causal_fit", causal_fit, METH_VARARGS, "The tacho's causal segments of new edges (causal.py)."},
     {"knot_fit", knot_fit, METH_VARARGS, "The tacho's knots of the smoothed speed (smoothing.py)."},
     {"causal_rpm", causal_rpm, METH_VARARGS, "The causal speed [rpm] at samples (orders.py)."},
-    {"regular_edges", regular_edges, METH_VARARGS,
-     "A live call's regular tacho edges committed in one step (tacho edges.py)."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_trackerkernel",
                                      "Compiled order-tracker loops (see order_tracker.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__trackerkernel(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__trackerkernel(void) {
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && add_tacho_edge_functions(m) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
 
 /* ---------------------------------------------------------------- tacho edges (edges.py)
+ *
+ *   edge_lists(t0, counts, offsets, L, last_t0, max_frames) -> (q, adv, end) or None
+ *
+ * tracker.py's _few_frames lists of a live call's TACHO frames (t0, counts: one per frame;
+ * offsets: the frames' edge offsets, frame after frame; Python lists of ints): the edges
+ * q = t0 * 256 + offset (1/256 sample) in time order within each frame, adv (at each frame's
+ * first edge the coverage end of the frames before, t0 + L of the previous frame; -1 at the
+ * first frame's and at every other edge) and end (the last frame's t0 + L).  None when the
+ * frames need feed_few's checks in Python: none or more than max_frames of them, one
+ * stepping back in time (from last_t0 on; None: none yet), a count below 0 or counts not
+ * summing to len(offsets), an offset not u32, values near 2^53 (1/256 sample) or not ints.
  *
  *   regular_edges(q, adv, j, hist, cT, cn, todo, pp, p, l, last_q, cq_last, now, n_last, i0,
  *                 tol, periods, lo, hi, margin) -> (k, now, pp, p, l)
@@ -1153,6 +1169,92 @@ PyMODINIT_FUNC PyInit__trackerkernel(void) { return PyModule_Create(&module); }
 
 #define TACHO_SUB 256
 #define TACHO_MAX_HIST 64
+#define TACHO_MAX_T ((1LL << 44) - 1)                 /* samples: 2^52 in 1/256 sample */
+
+static PyObject *tacho_s_append, *tacho_s_maxlen;     /* interned method and attribute names */
+
+/* o as an int in [lo, hi] into *v: 1, else 0 (no exception set: not an int, or outside). */
+static int tacho_int(PyObject *o, long long lo, long long hi, long long *v) {
+    if (!PyLong_Check(o)) return 0;
+    int overflow;
+    *v = PyLong_AsLongLongAndOverflow(o, &overflow);
+    if (overflow || (*v == -1 && PyErr_Occurred())) {
+        PyErr_Clear();
+        return 0;
+    }
+    return lo <= *v && *v <= hi;
+}
+
+static PyObject *edge_lists(PyObject *self, PyObject *args) {
+    PyObject *ot0, *ocounts, *ooff, *olast;
+    long long L;
+    Py_ssize_t max_frames;
+    if (!PyArg_ParseTuple(args, "OOOLOn", &ot0, &ocounts, &ooff, &L, &olast, &max_frames))
+        return NULL;
+    if (!PyList_CheckExact(ot0) || !PyList_CheckExact(ocounts) || !PyList_CheckExact(ooff) || L < 0
+        || L > TACHO_MAX_T)
+        Py_RETURN_NONE;
+    const Py_ssize_t F = PyList_GET_SIZE(ot0), E = PyList_GET_SIZE(ooff);
+    long long prev = 0, t = 0, n = 0, total = 0, o;
+    if (F < 1 || F > max_frames || PyList_GET_SIZE(ocounts) != F
+        || (olast != Py_None && !tacho_int(olast, -TACHO_MAX_T, TACHO_MAX_T, &prev)))
+        Py_RETURN_NONE;
+    for (Py_ssize_t f = 0; f < F; f++) {              /* in time order, counts >= 0 adding up */
+        if (!tacho_int(PyList_GET_ITEM(ot0, f), -TACHO_MAX_T, TACHO_MAX_T, &t)
+            || !tacho_int(PyList_GET_ITEM(ocounts, f), 0, E, &n) || ((olast != Py_None || f > 0) && t < prev))
+            Py_RETURN_NONE;
+        prev = t;
+        total += n;
+    }
+    if (total != E)
+        Py_RETURN_NONE;
+    long long *q = malloc(sizeof(long long) * (size_t)(E + 1));
+    if (q == NULL)
+        return PyErr_NoMemory();
+    PyObject *lq = NULL, *ladv = NULL, *ret = NULL;
+    Py_ssize_t pos = 0;
+    for (Py_ssize_t f = 0; f < F; f++) {
+        tacho_int(PyList_GET_ITEM(ot0, f), -TACHO_MAX_T, TACHO_MAX_T, &t);
+        tacho_int(PyList_GET_ITEM(ocounts, f), 0, E, &n);
+        for (Py_ssize_t e = pos; e < pos + n; e++) {
+            if (!tacho_int(PyList_GET_ITEM(ooff, e), 0, 0xFFFFFFFFLL, &o)) {
+                free(q);
+                Py_RETURN_NONE;
+            }
+            const long long x = o + t * TACHO_SUB;
+            Py_ssize_t i = e;
+            for (; i > pos && q[i - 1] > x; i--) q[i] = q[i - 1];   /* sorted within the frame */
+            q[i] = x;
+        }
+        pos += (Py_ssize_t)n;
+    }
+    lq = PyList_New(E);
+    ladv = lq ? PyList_New(E) : NULL;
+    if (ladv == NULL)
+        goto done;
+    pos = 0;
+    long long end = -1;
+    for (Py_ssize_t f = 0; f < F; f++) {
+        tacho_int(PyList_GET_ITEM(ot0, f), -TACHO_MAX_T, TACHO_MAX_T, &t);
+        tacho_int(PyList_GET_ITEM(ocounts, f), 0, E, &n);
+        for (Py_ssize_t e = pos; e < pos + n; e++) {
+            PyObject *a = PyLong_FromLongLong(q[e]), *b = PyLong_FromLongLong(e == pos ? end : -1);
+            if (a == NULL || b == NULL) {
+                Py_XDECREF(a); Py_XDECREF(b);
+                goto done;
+            }
+            PyList_SET_ITEM(lq, e, a);
+            PyList_SET_ITEM(ladv, e, b);
+        }
+        pos += (Py_ssize_t)n;
+        end = t + L;
+    }
+    ret = Py_BuildValue("(OOL)", lq, ladv, end);
+done:
+    free(q);
+    Py_XDECREF(lq); Py_XDECREF(ladv);
+    return ret;
+}
 
 /* EdgeRuns._predict over the n (mid, rate) entries, oldest first: Python's arithmetic, in
  * its order (sum() from 0.0 left to right, x ** 2 as pow(x, 2)). */
@@ -1191,11 +1293,34 @@ static long long tacho_timeout_q(long long pp, long long p, long long l, double 
     return hi < u ? hi : u;
 }
 
+/* list.append(item), releasing item: -1 on an error (item NULL: its allocation failed). */
 static int tacho_append(PyObject *list, PyObject *item) {
     if (item == NULL) return -1;
     const int rc = PyList_Append(list, item);
     Py_DECREF(item);
     return rc;
+}
+
+/* (a, b) of new references (released on a failure). */
+static PyObject *tacho_pair(PyObject *a, PyObject *b) {
+    PyObject *t = a && b ? PyTuple_New(2) : NULL;
+    if (t == NULL) {
+        Py_XDECREF(a); Py_XDECREF(b);
+        return NULL;
+    }
+    PyTuple_SET_ITEM(t, 0, a);
+    PyTuple_SET_ITEM(t, 1, b);
+    return t;
+}
+
+/* hist.append(entry) (a deque), releasing entry: -1 on an error. */
+static int tacho_hist_append(PyObject *hist, PyObject *entry) {
+    if (entry == NULL) return -1;
+    PyObject *res = PyObject_CallMethodObjArgs(hist, tacho_s_append, entry, NULL);
+    Py_DECREF(entry);
+    if (res == NULL) return -1;
+    Py_DECREF(res);
+    return 0;
 }
 
 static PyObject *regular_edges(PyObject *self, PyObject *args) {
@@ -1212,7 +1337,7 @@ static PyObject *regular_edges(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "regular_edges: expected q and adv of one length, 0 <= j <= len(q)");
         return NULL;
     }
-    PyObject *maxlen = PyObject_GetAttrString(hist, "maxlen");
+    PyObject *maxlen = PyObject_GetAttr(hist, tacho_s_maxlen);
     if (maxlen == NULL) return NULL;
     const long w = maxlen == Py_None ? -1 : PyLong_AsLong(maxlen);
     Py_DECREF(maxlen);
@@ -1256,14 +1381,9 @@ static PyObject *regular_edges(PyObject *self, PyObject *args) {
         const long long d = q - cq_last;
         const double md = (double)cq_last + 0.5 * (double)d, rt = 1.0 / (double)d;
         const double T = (double)q / (double)TACHO_SUB;
-        PyObject *entry = Py_BuildValue("(dd)", md, rt);
-        if (entry == NULL) return NULL;
-        PyObject *res = PyObject_CallMethod(hist, "append", "(O)", entry);
-        Py_DECREF(entry);
-        if (res == NULL) return NULL;
-        Py_DECREF(res);
-        if (tacho_append(cT, PyFloat_FromDouble(T)) < 0 || tacho_append(cn, PyLong_FromLongLong(n_last + 1)) < 0
-            || tacho_append(todo, Py_BuildValue("(Ld)", i0 + k, T)) < 0)
+        if (tacho_hist_append(hist, tacho_pair(PyFloat_FromDouble(md), PyFloat_FromDouble(rt))) < 0
+            || tacho_append(cT, PyFloat_FromDouble(T)) < 0 || tacho_append(cn, PyLong_FromLongLong(n_last + 1)) < 0
+            || tacho_append(todo, tacho_pair(PyLong_FromLongLong(i0 + k), PyFloat_FromDouble(T))) < 0)
             return NULL;
         if (n == w) {                                  /* the deque's oldest entry drops out */
             memmove(mid, mid + 1, sizeof(double) * (size_t)(n - 1));
@@ -1280,4 +1400,20 @@ static PyObject *regular_edges(PyObject *self, PyObject *args) {
         k++;
     }
     return Py_BuildValue("(nLLLL)", k, now, pp, p, l);
+}
+
+/* The tacho edge functions, added to the module when it is created. */
+static PyMethodDef tacho_edge_methods[] = {
+    {"edge_lists", edge_lists, METH_VARARGS, "A live call's tacho edges as lists, or None (tacho tracker.py)."},
+    {"regular_edges", regular_edges, METH_VARARGS,
+     "A live call's regular tacho edges committed in one step (tacho edges.py)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static int add_tacho_edge_functions(PyObject *m) {
+    tacho_s_append = PyUnicode_InternFromString("append");
+    tacho_s_maxlen = PyUnicode_InternFromString("maxlen");
+    if (tacho_s_append == NULL || tacho_s_maxlen == NULL)
+        return -1;
+    return PyModule_AddFunctions(m, tacho_edge_methods);
 }
