@@ -1,14 +1,17 @@
-"""A live call's regular tacho edges in one compiled step (``_trackerkernel.regular_edges``,
-EdgeRuns._few_edges, what ``feed_few`` takes) equal the edge-by-edge repair
-(``batch_edges = False``) and the Python path without the kernel (``edge_kernel = False``):
-the same events, counters, finality, smoothed and causal speeds, bit for bit, on random edge
-streams with missed, spurious and duplicated pulses and stops, and on streams whose interval
-ratios fall all over 1 +- tol (the decisions at the tolerance edges), fed about ten frames a
-call."""
+"""A live call's tacho path in compiled steps equals the Python one, bit for bit: its regular
+edges in one step (``_trackerkernel.regular_edges``, EdgeRuns._few_edges, what ``feed_few``
+takes) against the edge-by-edge repair (``batch_edges = False``) and the Python path without
+the kernel (``edge_kernel = False``): the same events, counters, finality, smoothed and causal
+speeds, on random edge streams with missed, spurious and duplicated pulses and stops, and on
+streams whose interval ratios fall all over 1 +- tol (the decisions at the tolerance edges),
+fed about ten frames a call; the edge lists of a call (``edge_lists``) against
+TachoTracker._edge_lists and feed_few's checks; the payloads (``tacho_payloads``) against
+Shaft's struct reading."""
 
 from __future__ import annotations
 
 import random
+import struct
 
 import numpy as np
 import pytest
@@ -17,6 +20,7 @@ from cmsensord.dsp.order_tracker import have_kernel
 from cmsensord.dsp.tacho import TachoTracker
 from cmsensord.dsp.tacho import tracker as tacho_tracker
 from cmsensord.dsp.tacho.edges import EdgeRuns, _kernel
+from cmsensord.monitor.shaft import FEW_TACHO, decode_tacho_lists, read_tacho_payloads
 from test_tacho_batch import L, random_edges
 
 pytestmark = pytest.mark.skipif(not have_kernel(), reason="the compiled tracker kernel is not built")
@@ -148,3 +152,34 @@ def test_the_kernels_edge_lists_are_feed_fews_checks_and_lists(seed):
             assert got is None
             refused += 1
     assert taken > 1000 and refused > 500
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_kernels_tacho_payloads_are_the_struct_reading(seed):
+    """``_trackerkernel.tacho_payloads`` (Shaft's decode_tacho_lists of a list of payloads): the
+    counts and offsets read_tacho_payloads gives when every payload is well formed, None when
+    one is not (too short, too long, not bytes: read_tacho_payloads gives its message)."""
+    rnd = random.Random(950 + seed)
+    taken = refused = 0
+    for _ in range(2000):
+        payloads: list = []
+        for _ in range(rnd.randrange(FEW_TACHO + 1)):
+            n = rnd.choice([0, 0, 1, 1, 2, 300])
+            p = struct.pack("<H", n) + b"".join(struct.pack("<I", rnd.randrange(2**32)) for _ in range(n))
+            e = rnd.random()
+            if e < 0.01:
+                p = p[:rnd.randrange(len(p))]
+            elif e < 0.02:
+                p += rnd.randbytes(rnd.randrange(1, 5))
+            elif e < 0.03:
+                p = bytearray(p)
+            payloads.append(p)
+        got, want = _kernel.tacho_payloads(payloads), read_tacho_payloads(payloads)
+        assert decode_tacho_lists(payloads) == want
+        if want[2] or any(type(p) is not bytes for p in payloads):
+            assert got is None
+            refused += 1
+        else:
+            assert got == want[:2]
+            taken += 1
+    assert taken > 500 and refused > 500

@@ -1151,6 +1151,13 @@ PyMODINIT_FUNC PyInit__trackerkernel(void) {
  * stepping back in time (from last_t0 on; None: none yet), a count below 0 or counts not
  * summing to len(offsets), an offset not u32, values near 2^53 (1/256 sample) or not ints.
  *
+ *   tacho_payloads(payloads) -> (counts, offsets) or None
+ *
+ * monitor/shaft.py's decode_tacho_lists of TACHO payloads (docs/PROTOCOL.md: u16 N, then N
+ * u32 edge offsets, little-endian; a list of bytes): the edge counts and all offsets, as
+ * lists of ints; None when a payload is not bytes or not 2 + 4 N bytes long (Python then
+ * gives each malformed one's message).
+ *
  *   regular_edges(q, adv, j, hist, cT, cn, todo, pp, p, l, last_q, cq_last, now, n_last, i0,
  *                 tol, periods, lo, hi, margin) -> (k, now, pp, p, l)
  *
@@ -1254,6 +1261,50 @@ done:
     free(q);
     Py_XDECREF(lq); Py_XDECREF(ladv);
     return ret;
+}
+
+static PyObject *tacho_payloads(PyObject *self, PyObject *args) {
+    PyObject *opay;
+    if (!PyArg_ParseTuple(args, "O!", &PyList_Type, &opay))
+        return NULL;
+    const Py_ssize_t F = PyList_GET_SIZE(opay);
+    Py_ssize_t E = 0;
+    for (Py_ssize_t f = 0; f < F; f++) {               /* all well formed, or None */
+        PyObject *p = PyList_GET_ITEM(opay, f);
+        if (!PyBytes_CheckExact(p) || PyBytes_GET_SIZE(p) < 2)
+            Py_RETURN_NONE;
+        const unsigned char *b = (const unsigned char *)PyBytes_AS_STRING(p);
+        const Py_ssize_t c = b[0] | (Py_ssize_t)b[1] << 8;
+        if (PyBytes_GET_SIZE(p) != 2 + 4 * c)
+            Py_RETURN_NONE;
+        E += c;
+    }
+    PyObject *counts = PyList_New(F), *offsets = counts ? PyList_New(E) : NULL;
+    if (offsets == NULL) {
+        Py_XDECREF(counts);
+        return NULL;
+    }
+    Py_ssize_t e = 0;
+    for (Py_ssize_t f = 0; f < F; f++) {
+        const unsigned char *b = (const unsigned char *)PyBytes_AS_STRING(PyList_GET_ITEM(opay, f));
+        const Py_ssize_t c = b[0] | (Py_ssize_t)b[1] << 8;
+        PyObject *oc = PyLong_FromSsize_t(c);
+        if (oc == NULL) goto fail;
+        PyList_SET_ITEM(counts, f, oc);
+        for (Py_ssize_t i = 0; i < c; i++, e++) {
+            const unsigned char *u = b + 2 + 4 * i;
+            PyObject *oo = PyLong_FromUnsignedLong((unsigned long)u[0] | (unsigned long)u[1] << 8
+                                                   | (unsigned long)u[2] << 16 | (unsigned long)u[3] << 24);
+            if (oo == NULL) goto fail;
+            PyList_SET_ITEM(offsets, e, oo);
+        }
+    }
+    PyObject *ret = PyTuple_Pack(2, counts, offsets);
+    Py_DECREF(counts); Py_DECREF(offsets);
+    return ret;
+fail:
+    Py_DECREF(counts); Py_DECREF(offsets);
+    return NULL;
 }
 
 /* EdgeRuns._predict over the n (mid, rate) entries, oldest first: Python's arithmetic, in
@@ -1404,6 +1455,7 @@ static PyObject *regular_edges(PyObject *self, PyObject *args) {
 
 /* The tacho edge functions, added to the module when it is created. */
 static PyMethodDef tacho_edge_methods[] = {
+    {"tacho_payloads", tacho_payloads, METH_VARARGS, "TACHO payloads as lists, or None (monitor/shaft.py)."},
     {"edge_lists", edge_lists, METH_VARARGS, "A live call's tacho edges as lists, or None (tacho tracker.py)."},
     {"regular_edges", regular_edges, METH_VARARGS,
      "A live call's regular tacho edges committed in one step (tacho edges.py)."},
