@@ -1414,12 +1414,16 @@ static PyObject *regular_edges(PyObject *self, PyObject *args) {
     }
     Py_DECREF(fh);
     if (PyErr_Occurred()) return NULL;
+    for (Py_ssize_t i = j; i < m; i++) {            /* ints, or an error before any change */
+        PyLong_AsLongLong(PyList_GET_ITEM(oq, i));
+        PyLong_AsLongLong(PyList_GET_ITEM(oadv, i));
+        if (PyErr_Occurred()) return NULL;
+    }
     const double r_lo = 1.0 - tol + margin, r_hi = 1.0 + tol - margin;
     Py_ssize_t k = 0;
     for (Py_ssize_t i = j; i < m; i++) {
         const long long q = PyLong_AsLongLong(PyList_GET_ITEM(oq, i));
         const long long a = PyLong_AsLongLong(PyList_GET_ITEM(oadv, i));
-        if (PyErr_Occurred()) return NULL;
         if (q <= last_q) break;
         const long long stop_q = l + tacho_timeout_q(pp, p, l, periods, lo, hi);
         const long long now_i = a >= 0 && a > now ? a : now;
