@@ -27,6 +27,11 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
 from cmsensord.protocol import Frame, ProtocolError, Status, decode_tacho, decode_tacho_many
 
+try:  # the compiled reading of a live call's payloads is optional: read_tacho_payloads is the same
+    from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _kernel = None
+
 if TYPE_CHECKING:
     from cmsensord.dsp.tacho import TachoTracker
 
@@ -50,7 +55,19 @@ def decode_tacho_few(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray,
 
 
 def decode_tacho_lists(payloads: Sequence[bytes]) -> tuple[list[int], list[int], list[tuple[int, str]]]:
-    """:func:`decode_tacho_few` as Python lists (what a live call feeds the tracker)."""
+    """:func:`decode_tacho_few` as Python lists (what a live call feeds the tracker): a list of
+    well-formed payloads in one compiled step (``_trackerkernel.tacho_payloads``) when the
+    kernel is built, any other payload by payload (:func:`read_tacho_payloads`)."""
+    if _kernel is not None and type(payloads) is list:
+        got = _kernel.tacho_payloads(payloads)
+        if got is not None:
+            return got[0], got[1], []
+    return read_tacho_payloads(payloads)
+
+
+def read_tacho_payloads(payloads: Sequence[bytes]) -> tuple[list[int], list[int], list[tuple[int, str]]]:
+    """:func:`decode_tacho_lists` payload by payload with struct, a malformed one with
+    :func:`~cmsensord.protocol.decode_tacho`'s message."""
     counts: list[int] = []
     offsets: list[int] = []
     bad = []

@@ -21,7 +21,12 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from cmsensord.dsp.tacho.regular import MIN_EDGES, RegularState, regular_prefix
+from cmsensord.dsp.tacho.regular import MARGIN, MIN_EDGES, RegularState, regular_prefix
+
+try:  # the compiled step of a live call's regular edges is optional: the Python path gives the same
+    from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _kernel = None
 
 if TYPE_CHECKING:
     from cmsensord.protocol import Frame
@@ -199,11 +204,14 @@ class EdgeRuns(TachoState):
     that the one-pass path for regular edges equals)."""
 
     batch_edges = True
+    edge_kernel = True  # a live call's regular edges in one compiled step when the kernel is built
 
     def _advance(self, end: int) -> None:
         """The frames so far cover up to ``end`` (exclusive): coverage and timeout check."""
-        self._now = end if self._now is None else max(self._now, end)
-        self._check_timeout(self._now * SUB)
+        now = self._now
+        if now is None or end > now:
+            self._now = now = end
+        self._check_timeout(now * SUB)
 
     def _timeout_q(self, run: Run) -> int:
         """The current run's timeout in 1/256 sample (integer arithmetic: deterministic)."""
@@ -218,7 +226,7 @@ class EdgeRuns(TachoState):
     def _check_timeout(self, q_now: int) -> None:
         """End the current run if no edge came within its timeout before q_now (exclusive)."""
         run = self._run
-        if run is None:
+        if run is None or q_now <= run.last_raw_q + self._timeout_lo:    # the timeout is at least _timeout_lo
             return
         stop_q = run.last_raw_q + self._timeout_q(run)
         if q_now > stop_q:
@@ -257,6 +265,48 @@ class EdgeRuns(TachoState):
                         self._advance(al[i])
                     self._edge(ql[i])
             j += n_scalar
+
+    def _few_edges(self, q: list[int], adv: list[int]) -> None:
+        """:meth:`_edges` of a live call's few edges (Python lists): with the compiled kernel,
+        each stretch of regular edges in one step (:meth:`_regular_run`), the edge that stops
+        it as :meth:`_edges` takes it; without the kernel (or ``edge_kernel`` False),
+        :meth:`_edges`.  The same state after it either way."""
+        if _kernel is None or not (self.edge_kernel and self.batch_edges):
+            self._edges(q, adv)
+            return
+        j, m = 0, len(q)
+        while j < m:
+            j += self._regular_run(q, adv, j)
+            if j < m:
+                if not self._regular_edge(q[j], adv[j]):
+                    if adv[j] >= 0:
+                        self._advance(adv[j])
+                    self._edge(q[j])
+                j += 1
+
+    def _regular_run(self, q: list[int], adv: list[int], j: int) -> int:
+        """:meth:`_regular_edge` of the edges q[j], q[j + 1], ... as long as each is regular,
+        in one call of the compiled ``regular_edges`` (the same checks and arithmetic; a ratio
+        within ``MARGIN`` of 1 +- tol stops it, leaving that edge to the Python path): how
+        many edges it committed."""
+        run = self._run
+        last, cq_last, now = self._last_q, self._cq_last, self._now
+        if (run is None or last is None or cq_last is None or now is None or self._pending
+                or len(self._hist) < 2 or run.prev_raw_q is None or run.prev_prev_raw_q is None):
+            return 0
+        k, self._now, pp, p, q_last = _kernel.regular_edges(
+            q, adv, j, self._hist, self._cT, self._cn, self._seg_todo, run.prev_prev_raw_q, run.prev_raw_q,
+            run.last_raw_q, last, cq_last, now, self._n_last, self._c0 + len(self._cT), self.tol,
+            self.timeout_periods, self._timeout_lo, self._timeout_hi, MARGIN)
+        if k:
+            run.prev_prev_raw_q, run.prev_raw_q, run.last_raw_q = pp, p, q_last
+            run.committed += k
+            self._n_last += k
+            self._cq_last = self._last_q = self._known_q = q_last
+            c = self.counters
+            c.edges += k
+            c.pulses += k
+        return k
 
     def _regular_edge(self, q: int, adv: int) -> bool:
         """:meth:`_advance` (``adv`` >= 0) and :meth:`_edge` of edge q in one step when the

@@ -25,6 +25,7 @@ from cmsensord.dsp.tacho.edges import (
     TachoCounters,
     TachoEvent,
     TachoUpdate,
+    _kernel,
     tacho_frames_to_arrays,
 )
 from cmsensord.dsp.tacho.smoothing import KnotSmoothing
@@ -195,28 +196,40 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
     def feed_few(self, t0_unwrapped: list[int], counts: list[int], offsets: list[int]) -> list[TachoEvent]:
         """:meth:`feed_flat` of a few frames given as Python lists (a live call's ten or so):
         the same checks and results, on Python ints, without arrays of them; any other case
-        (frames out of time order, many frames, offsets not u32) through :meth:`feed_flat`."""
-        if len(counts) != len(t0_unwrapped) or sum(counts) != len(offsets) or min(counts, default=0) < 0:
-            return self.feed_flat(t0_unwrapped, counts, offsets)            # raises as it does
+        (frames out of time order, many frames, offsets not u32) through :meth:`feed_flat`.
+        With the compiled kernel (``edge_kernel``), the checks and the edges' lists in one
+        step (``edge_lists``: None for the frames that need the checks in Python) and the
+        regular edges in another (:meth:`_few_edges`)."""
+        lists: tuple[list[int], list[int], int] | None = None
+        if _kernel is not None and self.edge_kernel and self.batch_edges:
+            lists = _kernel.edge_lists(t0_unwrapped, counts, offsets, self.block_len, self._last_t0, _FEW_FRAMES)
+        if lists is None:
+            if not self._few_ok(t0_unwrapped, counts, offsets):
+                return self.feed_flat(np.asarray(t0_unwrapped, dtype=np.int64), counts,
+                                      np.asarray(offsets, dtype=np.int64))      # raises as it does
+            if t0_unwrapped:
+                lists = self._edge_lists(t0_unwrapped, counts, offsets)
+        self._events = []
+        if lists is not None:
+            q, adv, end = lists
+            self._take_edges(q, adv, end, t0_unwrapped[-1], one_step=True)
+        ev, self._events = self._events, []
+        self._unsettled = True          # as _settled in feed_flat: the knots fitted when asked for
+        return ev
+
+    def _few_ok(self, t0: list[int], counts: list[int], offsets: list[int]) -> bool:
+        """Whether :meth:`feed_few` takes the frames on Python ints: a count >= 0 per frame, the
+        counts adding up to the offsets, at most ``_FEW_FRAMES`` frames in time order (after
+        those fed before), u32 offsets."""
+        if (len(counts) != len(t0) or sum(counts) != len(offsets) or min(counts, default=0) < 0
+                or len(t0) > _FEW_FRAMES):
+            return False
         prev = self._last_t0
-        for t in t0_unwrapped:
+        for t in t0:
             if prev is not None and t < prev:
-                break
+                return False
             prev = t
-        else:
-            if len(t0_unwrapped) <= _FEW_FRAMES and not (offsets and (min(offsets) < 0 or max(offsets) > 0xFFFFFFFF)):
-                self._lazy = True
-                try:
-                    self._events = []
-                    if t0_unwrapped:
-                        self._few_frames(t0_unwrapped, counts, offsets)
-                    ev = self._events
-                    self._events = []
-                    return self._settled(ev).events
-                finally:
-                    self._lazy = False
-        return self.feed_flat(np.asarray(t0_unwrapped, dtype=np.int64), counts,
-                              np.asarray(offsets, dtype=np.int64))
+        return not (offsets and (min(offsets) < 0 or max(offsets) > 0xFFFFFFFF))
 
     def _in_order(self, t0: np.ndarray) -> int:
         """How many frames come before the first one stepping back in time."""
@@ -298,23 +311,42 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         not u32 (the array code reports it)."""
         if off and (min(off) < 0 or max(off) > 0xFFFFFFFF):
             return False
+        self._take_edges(*self._edge_lists(t0, sizes, off), t0[-1])
+        return True
+
+    def _edge_lists(self, t0: list[int], sizes: list[int], off: list[int]) -> tuple[list[int], list[int], int]:
+        """The edges of frames in time order (at least one; ``sizes`` edges each, their offsets
+        ``off`` frame after frame): q (1/256 sample, in time order within each frame), the
+        coverage end before each (samples: the frames before; -1: none, or not a frame's first
+        edge), and the coverage end after them all (``edge_lists`` of the kernel is the same)."""
         L = self.block_len
         q: list[int] = []
         adv: list[int] = []
-        pos, end = 0, None               # end: the coverage of the frames before
+        pos, end = 0, -1                 # end: the coverage of the frames before (in time order: the last one's)
         for t, n in zip(t0, sizes):
-            if n:
+            if n == 1:
+                q.append(off[pos] + t * SUB)
+                adv.append(end)
+                pos += 1
+            elif n:
                 base = t * SUB
                 q += sorted([o + base for o in off[pos:pos + n]])    # time order within the frame
-                adv += [-1 if end is None else end] + [-1] * (n - 1)
+                adv += [end] + [-1] * (n - 1)
                 pos += n
-            end = t + L if end is None else max(end, t + L)
-        assert end is not None, "at least one frame"
+            end = t + L
+        return q, adv, end
+
+    def _take_edges(self, q: list[int], adv: list[int], end: int, t0_last: int, one_step: bool = False) -> None:
+        """The edges of :meth:`_edge_lists`, then the coverage up to ``end`` (the last frame's
+        t0 ``t0_last``); ``one_step`` (:meth:`feed_few`): through :meth:`_few_edges`, else
+        :meth:`_edges` (the same state)."""
         if q:
-            self._edges(q, adv)                 # lists: arrays only for enough edges
+            if one_step:
+                self._few_edges(q, adv)
+            else:
+                self._edges(q, adv)             # lists: arrays only for enough edges
         self._advance(end)
-        self._last_t0 = t0[-1]
-        return True
+        self._last_t0 = t0_last
 
     def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
         """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
