@@ -91,7 +91,7 @@ def run_both(comps, C: int, fs: float, sizes: list[int], nan_calls: set[int], se
 def test_the_live_path_equals_the_general_path(C):
     comps = [TrackedComponent(f"{k}x", order=float(k), bandwidth_pct=5.0) for k in range(1, 5)]
     rng = np.random.default_rng(C)
-    sizes = [2500, 1, 7, 30, 2499, 2501, 2500, 7000, 5]
+    sizes = [2500, 1, 7, 30, 2499, 2501, 2500, 7000, 5, 100_000]     # 100 000: more than SCRATCH
     sizes += [int(n) for n in rng.integers(1, 6000, 40)] + [2500] * 60
     nan_calls = {15, 16, 30}
     lc, n_blocks = run_both(comps, C, 25_000.0, sizes, nan_calls, seed=C, output_rate_hz=10.0)

@@ -52,6 +52,7 @@ Limitations (documented, not hidden):
 from __future__ import annotations
 
 import math
+from itertools import chain
 from math import isfinite
 
 import numpy as np
@@ -257,12 +258,9 @@ class OrderChain:
                           "orders": order_entries(comps, freq, r, a, ok), "missing_fraction": mf}
                 text = None
                 if ok and fill is not None:
-                    nums = [rpm]
-                    for fk, rk, ak in zip(freq, r, a):
-                        nums += (fk, rk, ak)
-                    nums.append(mf)
+                    nums = (rpm, *chain.from_iterable(zip(freq, r, a)), mf)
                     if all(map(isfinite, nums)):
-                        text = fill % tuple(nums)
+                        text = fill % nums
                 out.append(Message(topic, "orders", stamp, fields if text is None else EncodedMessage(fields, text)))
         return out
 

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from cmsensord.dsp.order_tracker.tracker import OrderTracker
 
 TWO_PI = 2.0 * np.pi        # components.Omegas's factor
+SCRATCH = 4096              # a call of up to this many tracker samples works in kept arrays
 
 
 class LiveCall:
@@ -49,6 +50,7 @@ class LiveCall:
         # where the grid starts at min_rpm (the model speed is never below it) and is geometric
         self._direct = not grid.linear and grid.lo == tr.min_rpm and tr.table.P is None
         self._stats = (tr.min_rpm, tr._top_order, 0.5 * tr.fs_track)
+        self._kept: tuple[np.ndarray, ...] | None = None     # _scratch's arrays
 
     @classmethod
     def of(cls, tr: OrderTracker, kernel) -> LiveCall | None:
@@ -72,7 +74,7 @@ class LiveCall:
         asked = np.arange(p0, T, D)
         vals = np.ascontiguousarray(speed_at(asked), dtype=np.float64)
         N = (T - skip + D - 1) // D
-        yd, rd, speed, u, c = np.empty((N, tr.C)), np.empty(N), np.empty(N), np.empty(N), np.empty((N, tr.K))
+        yd, rd, speed, u, c = self._scratch(N)
         if not y.flags.c_contiguous:
             y = np.ascontiguousarray(y)
         if not self._live_in(tr.sos, y, st.zi, skip, D, st.last_miss, st.n_in + skip, tr.missing_window,
@@ -91,6 +93,17 @@ class LiveCall:
         k = tr.table.lookup(speed)[0]
         return fused_blocks(self._forward_blocks, st, st.n_track, yd, c, k, rd, tr), speed_at
 
+    def _scratch(self, N: int) -> tuple[np.ndarray, ...]:
+        """yd (N, C), rd, speed, u (N) and c (N, K) of a call: views of arrays kept for the calls
+        of up to SCRATCH samples (what a call leaves in them is read by no one after it)."""
+        if N > SCRATCH:
+            return np.empty((N, self.tr.C)), np.empty(N), np.empty(N), np.empty(N), np.empty((N, self.tr.K))
+        if self._kept is None:
+            self._kept = (np.empty((SCRATCH, self.tr.C)), np.empty(SCRATCH), np.empty(SCRATCH), np.empty(SCRATCH),
+                          np.empty((SCRATCH, self.tr.K)))
+        yd, rd, speed, u, c = self._kept
+        return yd[:N], rd[:N], speed[:N], u[:N], c[:N]
+
     def _blocks(self, yd: np.ndarray, rd: np.ndarray, logu: np.ndarray, cosw: np.ndarray) -> BlockStats | None:
         """:func:`~.blocks.fused_blocks` of the call with the gains at grid coordinates logu /
         log1p(q) and c = 2 cosw, in ``live_out``; None (nothing done) where the table lacks rows."""
@@ -102,9 +115,9 @@ class LiveCall:
         p = len(pend["rpm"]) if pend else 0
         E = (p + N) // B
         tail = p + N - E * B
-        rms, amp, rmean, valid = np.empty((E, C, K)), np.empty((E, C, K)), np.empty(E), np.empty(E, dtype=bool)
-        tw, te, rt = np.empty((tail, C, K)), np.empty((tail, C, K)), np.empty(tail)
-        starts, t_in = np.empty(E, dtype=np.int64), np.empty(E, dtype=np.int64)
+        ra, tt, si = np.empty((2, E, C, K)), np.empty((2, tail, C, K)), np.empty((2, E), dtype=np.int64)
+        rms, amp, tw, te, starts, t_in = ra[0], ra[1], tt[0], tt[1], si[0], si[1]      # each contiguous
+        rmean, valid, rt = np.empty(E), np.empty(E, dtype=bool), np.empty(tail)
         cw, ce, pr = (pend["wave"], pend["env"], pend["rpm"]) if p else (tw[:0], te[:0], rt[:0])
         n0 = st.n_track
         if not self._live_out(logu, table.grid._lq, table.kS, table.dkS, table.have, SEGMENT, table.kS.shape[1],
