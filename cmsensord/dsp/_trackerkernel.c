@@ -939,7 +939,10 @@ static PyObject *live_in(PyObject *self, PyObject *args) {
         goto found;
     ret = Py_True;
     double *yd = byd.buf, *rd = brd.buf, *speed = bsp.buf, *u = bu.buf, *w = bw.buf;
+    PyThreadState *save = T * C * S > (1 << 17) ? PyEval_SaveThread() : NULL;   /* as sosfilt */
     sos_all(sos, S, y, T, C, bzi.buf, yd, skip, D);
+    if (save != NULL)
+        PyEval_RestoreThread(save);
     for (Py_ssize_t i = 0; i < N; i++) {
         rd[i] = i < k ? line[skip + i * D] : vals[j0 + i - k];
         omega_row(rd[i], min_rpm, bo.buf, bf.buf, bb.buf, K, two_pi, fs, speed + i, w + i * K);
