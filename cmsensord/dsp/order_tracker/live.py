@@ -37,10 +37,11 @@ SCRATCH = 4096              # a call of up to this many tracker samples works in
 
 
 class LiveCall:
-    """The live path of tracker ``tr`` (built by :meth:`of` where it applies)."""
+    """The live path of tracker ``tr`` (built by :meth:`of` where it applies; called with the
+    tracker, which holds it: no reference cycle)."""
 
     def __init__(self, tr: OrderTracker, kernel):
-        self.tr = tr
+        self.C, self.K = tr.C, tr.K
         self._live_in, self._live_out, self._forward_blocks = kernel.live_in, kernel.live_out, kernel.forward_blocks
         om = tr._omegas
         assert tr.table is not None
@@ -61,11 +62,10 @@ class LiveCall:
             return None
         return cls(tr, kernel)
 
-    def __call__(self, y: np.ndarray, speed_at: SpeedAt) -> tuple[BlockStats | None, SpeedAt]:
-        """The causal blocks of the call of y (T, C) whose speed comes from ``speed_at``, and
-        ``speed_at``; or (None, a function giving the speeds already asked) where the general
-        path must run: it asks for the same samples (each is asked for once)."""
-        tr = self.tr
+    def __call__(self, tr: OrderTracker, y: np.ndarray, speed_at: SpeedAt) -> tuple[BlockStats | None, SpeedAt]:
+        """The causal blocks of tracker ``tr``'s call of y (T, C) whose speed comes from
+        ``speed_at``, and ``speed_at``; or (None, a function giving the speeds already asked)
+        where the general path must run: it asks for the same samples (each is asked for once)."""
         st = tr.state
         T, n, D, skip = y.shape[0], tr.delay_in, tr.decimate, st.skip
         if not st.n_in or T < n or skip >= T or "miss" in st.pend:
@@ -85,7 +85,7 @@ class LiveCall:
         np.cos(c, out=c)                    # cos(omega / fs_track), as _coeffs_gains
         if self._direct:
             np.log(u, out=u)                # the grid coordinate times log1p(q) (GainTable.lookup)
-            got = self._blocks(yd, rd, u, c)
+            got = self._blocks(tr, yd, rd, u, c)
             if got is not None:
                 return got, speed_at
         c *= 2.0
@@ -97,17 +97,17 @@ class LiveCall:
         """yd (N, C), rd, speed, u (N) and c (N, K) of a call: views of arrays kept for the calls
         of up to SCRATCH samples (what a call leaves in them is read by no one after it)."""
         if N > SCRATCH:
-            return np.empty((N, self.tr.C)), np.empty(N), np.empty(N), np.empty(N), np.empty((N, self.tr.K))
+            return np.empty((N, self.C)), np.empty(N), np.empty(N), np.empty(N), np.empty((N, self.K))
         if self._kept is None:
-            self._kept = (np.empty((SCRATCH, self.tr.C)), np.empty(SCRATCH), np.empty(SCRATCH), np.empty(SCRATCH),
-                          np.empty((SCRATCH, self.tr.K)))
+            self._kept = (np.empty((SCRATCH, self.C)), np.empty(SCRATCH), np.empty(SCRATCH), np.empty(SCRATCH),
+                          np.empty((SCRATCH, self.K)))
         yd, rd, speed, u, c = self._kept
         return yd[:N], rd[:N], speed[:N], u[:N], c[:N]
 
-    def _blocks(self, yd: np.ndarray, rd: np.ndarray, logu: np.ndarray, cosw: np.ndarray) -> BlockStats | None:
+    def _blocks(self, tr: OrderTracker, yd: np.ndarray, rd: np.ndarray, logu: np.ndarray,
+                cosw: np.ndarray) -> BlockStats | None:
         """:func:`~.blocks.fused_blocks` of the call with the gains at grid coordinates logu /
         log1p(q) and c = 2 cosw, in ``live_out``; None (nothing done) where the table lacks rows."""
-        tr = self.tr
         st, table = tr.state, tr.table
         assert table is not None
         pend = st.pend

@@ -289,7 +289,7 @@ class OrderTracker:
             out = self.process(y, rpm)
         else:
             if self._live is not None and callable(rpm):      # a live call: live.py, or the way below
-                got, rpm = self._live(y, rpm)
+                got, rpm = self._live(self, y, rpm)
                 if got is not None:
                     return got, None
             n0, yd, rd, miss = self._prepare(y, rpm)
