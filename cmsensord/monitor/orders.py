@@ -52,6 +52,7 @@ Limitations (documented, not hidden):
 from __future__ import annotations
 
 import math
+from itertools import chain
 from math import isfinite
 
 import numpy as np
@@ -129,6 +130,7 @@ class OrderChain:
         self.gate = SpeedGate(round(MAX_WAIT_S * fs))   # samples (n, C) waiting for a final speed
         self.sample0: int | None = None         # board sample index of the tracker's first input
         self._templates: dict[tuple[int, str], str | None] = {}   # (channel, method) -> template
+        self._channels: dict[str, list[tuple[str, str, str | None]]] = {}   # method -> _channels_of
 
     def _event(self, kind: str, channel: str | None, message: str, sample: int, **fields) -> Event:
         return Event(kind, channel, message, self.clock.stamp_ns(sample), fields)
@@ -171,15 +173,21 @@ class OrderChain:
     def release(self, *, final: bool = False, bounded: bool = False) -> Out:
         """Track the samples whose speed is final (all if ``final``; with ``bounded``, at least
         those waiting longer than MAX_WAIT_S)."""
-        if not self.gate.waiting:
+        gate = self.gate
+        waiting = gate.waiting
+        if not waiting:
             return []
+        end = gate.end
+        assert end is not None                              # samples wait
         if final:
-            upto = self.gate.first + self.gate.waiting      # the gate's end: everything
+            upto = end                                      # everything
         elif self.causal:
             upto = self.tacho.covered_until
         else:
             upto = math.floor(self.tacho.final_until)
-        got = self.gate.release(upto, final=final, bounded=bounded)
+        if not final and upto <= end - waiting and not (bounded and waiting > gate.max_rows):
+            return []                           # none to release (gate.release would say None)
+        got = gate.release(upto, final=final, bounded=bounded)
         if got is None:
             return []
         first, (take,) = got
@@ -235,32 +243,33 @@ class OrderChain:
                     entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
                     out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
             return out
-        fills = [self._template(ci, method) for ci in range(len(names))]
-        topics = [orders_topic(name) for name in names]
         spec = self._freq_spec
         Message = messages.Message
         order_entries = messages.order_entries
+        chans = self._channels.get(method) or self._channels_of(method)
         for e in range(n):
-            stamp = stamp_ns(base + int(t_in[e]))
-            rpm, ok = rpms[e], bool(valid[e])
+            stamp = stamp_ns(base + t_in[e])
+            rpm, ok = rpms[e], valid[e]
             freq = [f if o is None else o * rpm / 60.0 for o, f in spec]
-            speed = messages.num(rpm)
-            for ci, name in enumerate(names):
-                r, a, mf = rms[e][ci], amp[e][ci], missing[e][ci] / B
+            speed = None if rpm != rpm else rpm                 # messages.num
+            for (name, topic, fill), r, a, m in zip(chans, rms[e], amp[e], missing[e]):
+                mf = m / B
                 fields = {"channel": name, "speed_rpm": speed, "valid": ok, "method": method,   # messages.orders
                           "orders": order_entries(comps, freq, r, a, ok), "missing_fraction": mf}
                 text = None
-                fill = fills[ci]
                 if ok and fill is not None:
-                    nums = [rpm]
-                    for fk, rk, ak in zip(freq, r, a):
-                        nums += (fk, rk, ak)
-                    nums.append(mf)
+                    nums = (rpm, *chain.from_iterable(zip(freq, r, a)), mf)
                     if all(map(isfinite, nums)):
-                        text = fill % tuple(nums)
-                out.append(Message(topics[ci], "orders", stamp,
-                                   fields if text is None else EncodedMessage(fields, text)))
+                        text = fill % nums
+                out.append(Message(topic, "orders", stamp, fields if text is None else EncodedMessage(fields, text)))
         return out
+
+    def _channels_of(self, method: str) -> list[tuple[str, str, str | None]]:
+        """Per channel its name, /orders topic and the text template of its messages of
+        ``method`` (:meth:`_template`), made once."""
+        self._channels[method] = [(ch.name, orders_topic(ch.name), self._template(ci, method))
+                                  for ci, ch in enumerate(self.channels)]
+        return self._channels[method]
 
     def _template(self, ci: int, method: str) -> str | None:
         """The text template of channel ``ci``'s /orders messages of ``method``, made once (None:

@@ -20,6 +20,7 @@ from cmsensord.dsp.order_tracker.blocks import block_stats, fused_blocks, stats_
 from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
+from cmsensord.dsp.order_tracker.live import LiveCall
 from cmsensord.dsp.order_tracker.recursions import (
     CHUNK,
     backward_numpy,
@@ -123,6 +124,7 @@ class OrderTracker:
         self._setup_decimation(decimate, oversample, output_rate_hz)
         self._setup_blocks(output_rate_hz, smoother_lag_s)
         self._setup_table(horizon_s, table_step_rpm)
+        self._live = LiveCall.of(self, _trackerkernel)      # process_blocks's live calls (live.py)
         self.state = self.initial_state()
 
     # ------------------------------------------------------------------ setup
@@ -281,17 +283,19 @@ class OrderTracker:
         the same numbers and the same state after it.  A call without a missing sample,
         without the smoother (a live call), runs the filter, the envelope and the statistics in
         one kernel pass when the kernel has it (:func:`~.blocks.fused_blocks`), without the
-        per-sample outputs."""
+        per-sample outputs; with a speed function, all its steps in a few (:class:`~.live.LiveCall`)."""
         y, rpm = self._checked(y, rpm)
-        st = self.state
         if self._fused_kernel is None or self.lag is not None or y.shape[0] > self.piece * self.decimate:
             out = self.process(y, rpm)
         else:
+            if self._live is not None and callable(rpm):      # a live call: live.py, or the way below
+                got, rpm = self._live(self, y, rpm)
+                if got is not None:
+                    return got, None
             n0, yd, rd, miss = self._prepare(y, rpm)
-            N = yd.shape[0]
-            if miss is None and "miss" not in st.pend and N:
+            if miss is None and "miss" not in self.state.pend and yd.shape[0]:
                 c, k, _, _ = self._coeffs_gains(rd, None)
-                return fused_blocks(self._fused_kernel, st, n0, yd, c, k, rd, self), None
+                return fused_blocks(self._fused_kernel, self.state, n0, yd, c, k, rd, self), None
             out = self._track(n0, yd, rd, miss)
         return out.blocks, out.smoothed_blocks
 
