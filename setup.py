@@ -41,7 +41,10 @@ class BuildPyWithDefaultConfig(build_py):
 setup(
     ext_modules=[Extension("cmsensord.dsp._akfkernel", ["cmsensord/dsp/_akfkernel.c"],
                            extra_compile_args=["-O2", "-ffp-contract=off"]),
-                 Extension("cmsensord.dsp._trackerkernel", ["cmsensord/dsp/_trackerkernel.c"],
+                 Extension("cmsensord.dsp._trackerkernel",
+                           [f"cmsensord/dsp/_trackerkernel{part}.c"
+                            for part in ("", "_filter", "_blocks", "_tacho", "_edges")],
+                           depends=["cmsensord/dsp/_trackerkernel.h"],
                            extra_compile_args=["-O2", "-ffp-contract=off"]),
                  Extension("cmsensord._wirekernel", ["cmsensord/_wirekernel.c"], extra_compile_args=["-O2"])],
     cmdclass={"build_ext": OptionalBuildExt, "build_py": BuildPyWithDefaultConfig},
