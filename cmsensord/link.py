@@ -24,6 +24,11 @@ from typing import BinaryIO
 
 import serial
 
+try:                                    # the port class of pyserial on Linux, macOS, BSD
+    from serial.serialposix import Serial as PosixSerial
+except ImportError:                     # pragma: no cover - Windows
+    PosixSerial = None
+
 from cmsensord.errors import LinkError
 from cmsensord.protocol import Decoder, Frame, FrameType
 from cmsensord.read_pace import ReadPace
@@ -43,6 +48,10 @@ TTY_REFILL_S = 0.005
 STEP_BYTES = 1 << 16
 #: what pyserial and the OS really raise when a port goes away
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
+#: the module of pyserial's POSIX read: a port whose read is from elsewhere (wrapped) is read by it
+_POSIX_READ = "serial.serialposix"
+#: errors of a read of a non-blocking descriptor that mean "no bytes now" (pyserial's read ignores them)
+_NO_BYTES_NOW = (errno.EAGAIN, errno.EALREADY, errno.EWOULDBLOCK, errno.EINPROGRESS, errno.EINTR)
 
 
 class FrameQueue:
@@ -355,7 +364,7 @@ class SerialReader(threading.Thread):
             if not select.select([fileno()], [], [], READ_WAIT_S if timeout is None else timeout)[0]:
                 return b"", False
             n = ser.in_waiting or 1
-        data = ser.read(min(self.read_size, n))
+        data = take(ser, min(self.read_size, n))
         return self._burst(ser, data) if data else (data, False)
 
     def _burst(self, ser, first: bytes) -> tuple[bytes, bool]:
@@ -376,7 +385,7 @@ class SerialReader(threading.Thread):
                     n = self._refilled(ser, TTY_REFILL_S if last >= full else 0.0)
                 if not n:
                     break
-                chunk = ser.read(min(self.read_size, n))
+                chunk = take(ser, min(self.read_size, n))
                 if not chunk:                   # shown but gone (another reader): not waited for
                     last = 0
                     break
@@ -431,6 +440,31 @@ class SerialReader(threading.Thread):
             if gone and os.path.exists(self.port):
                 break
         self._backoff = min(self._backoff * 2, self.reconnect_max_s)
+
+
+def take(ser, n: int) -> bytes:
+    """A read of ``n`` bytes the port shows waiting (``in_waiting``).  A pyserial POSIX port's
+    own read waits on the descriptor with ``select`` and keeps a timeout before its one
+    ``os.read``: here the descriptor is read at once (the bytes are there), with the errors
+    pyserial's read raises (``read failed: ...``; a port that is readable and reads none, hung
+    up); none there after all and not readable (another reader took them): b"", not waited
+    for.  Any other port: its ``read``."""
+    read = getattr(type(ser), "read", None)
+    if (PosixSerial is None or not isinstance(ser, PosixSerial) or ser.fd is None
+            or getattr(read, "__module__", None) != _POSIX_READ):
+        return ser.read(n)              # not pyserial's own read (another port, or one wrapped)
+    try:
+        data = os.read(ser.fd, n)
+        if not data and not select.select([ser.fd], [], [], 0)[0]:
+            return b""                  # a tty read with nothing there returns none (VMIN 0)
+    except OSError as exc:
+        if exc.errno in _NO_BYTES_NOW:
+            return b""
+        raise serial.SerialException(f"read failed: {exc}") from None
+    if not data:
+        raise serial.SerialException("device reports readiness to read but returned no data "
+                                     "(device disconnected or multiple access on port?)")
+    return data
 
 
 def _one_line_error(exc: BaseException) -> str:

@@ -32,11 +32,13 @@ bytes gather in the port's kernel buffer meanwhile:
 * not while behind: when the newest frame read came more than ``behind_s`` after it was
   due, the read took only part of a backlog (a read returns at most ``read_size`` bytes,
   and a tty's input buffer shows only part of what waits), and the rest is read at once;
-* with the block to wake at more than ``2 MAX_HOLD_S`` off (RMS mode's next decision), until
-  ``MAX_HOLD_S`` before it is due, at most ``far_hold_s`` (``FAR_HOLD_S``); then, as a late
-  block, until ``-margin_s`` after it is due (two reads a decision: the backlog, the block),
-  unless no read has waited for ``far_probe_s`` (``FAR_PROBE_S``): then the read after the
-  backlog's is the probe, at once (it waits for the next frame, whenever the block is due);
+* with the block to wake at more than ``2 MAX_HOLD_S`` off (RMS mode's next decision), as
+  for a late block, until ``-margin_s`` after it is due, at most ``far_hold_s``
+  (``FAR_HOLD_S``): the decision's bytes and its block in one read (one wake-up of the reader
+  a decision; a block that came later than that is waited for in the read after the
+  backlog's, which measures its arrival); unless no read has waited for ``far_probe_s``
+  (``FAR_PROBE_S``): then not at all (the probe: that read waits for the next frame, which
+  measures the arrival times, and the hold for the block follows it);
 * with no block to wake at (no output chain yet), ``idle_hold_s``;
 * never longer than ``buffer_bytes`` take to arrive at the measured byte rate (a fast
   link, a sped-up simulator: the kernel's buffer must not fill), and not before the
@@ -53,14 +55,13 @@ from collections import deque
 #: the longest wait for a block to wake at (the live loop's period)
 MAX_HOLD_S = 0.1
 #: ... when that block is more than 2 MAX_HOLD_S off (a decision, RMS mode: once a second), the
-#: longest wait for the bytes before it, read until MAX_HOLD_S before it is due, then held for
-#: as above (a 1-s decision's bytes in one hold, then the block: issue 13); the daemon makes it
-#: no longer than half the link's stall_s (a hold must not look like a silent link)
+#: longest wait for it, held for as a late block (a 1-s decision's bytes and its block in one
+#: read: issue 13); the daemon makes it no longer than half the link's stall_s (a hold must not
+#: look like a silent link)
 FAR_HOLD_S = 1.0
-#: ... and a block read towards that way is held for as a late one (one read for it after the
-#: backlog's) while a read waited for its bytes in the last FAR_PROBE_S; else the probe is the
-#: read right after the backlog's, which waits for the next frame whenever the block is due
-#: (so the due time cannot drift off unmeasured): a probe every third 1-s decision, not at each
+#: ... while a read waited for its bytes in the last FAR_PROBE_S; else the read is at once, the
+#: probe, which waits for the next frame (so the due time cannot drift off unmeasured), and the
+#: hold follows it: a probe every third 1-s decision, one more read then, not at each
 FAR_PROBE_S = 2.5
 
 
@@ -138,15 +139,22 @@ class ReadPace:
                 step = wake_t0 - self._far if self._far is not None and wake_t0 > self._far else 0
                 self._far_step = step if step == self._step else 0
                 self._far, self._step = wake_t0, step
-            return min(cap, self.far_hold_s, due - now - MAX_HOLD_S)
+            if self._probe(now):
+                return 0.0
+            return min(cap, self.far_hold_s, due - self.margin_s - now)
         if wake_t0 == self._far:            # read towards in far holds: a probe is a read now
-            if self._exact_at is None or now - self._exact_at >= self.far_probe_s:
+            if self._probe(now):
                 return 0.0                  # (it waits for the next frame: an exact arrival)
             late = True
         else:
             late = (self._exact_at is not None and now - self._exact_at < self.probe_s
                     and (due - self.last[0]) * self.byte_rate <= self.buffer_bytes / 2)
         return max(0.0, min(cap, MAX_HOLD_S, due - (self.margin_s if late else self.probe_margin_s) - now))
+
+    def _probe(self, now: float) -> bool:
+        """No read has waited for its bytes in the last ``far_probe_s``: the next read is the
+        probe (at once: it waits for the next frame, an exact arrival)."""
+        return self._exact_at is None or now - self._exact_at >= self.far_probe_s
 
     def named_wait(self, now: float, wake_t0: int | None) -> float:
         """Seconds the reader may wait for the loop to name its next block, when the block it

@@ -31,28 +31,28 @@ def test_waits_until_shortly_before_the_block_to_wake_at_is_due():
     assert pace.hold(now, 250 * 312) == MAX_HOLD_S     # 130 ms off: the last 0.1 s as above
 
 
-def test_a_decision_further_off_is_read_towards_in_one_hold_then_held_for_as_a_late_block():
-    """RMS mode wakes at its 1-s decisions: the reader takes the bytes before one in one hold
-    until MAX_HOLD_S before it is due (FAR_HOLD_S at most), then holds for it as for a late
-    block, until just after it is due (two reads a decision): while a read waited for its bytes
-    in the last FAR_PROBE_S; without one, the read after the backlog's is at once (a probe)."""
+def test_a_decision_further_off_is_held_for_in_one_hold_as_a_late_block():
+    """RMS mode wakes at its 1-s decisions: the reader holds for one as for a late block, until
+    just after it is due (FAR_HOLD_S at most), so the decision's bytes and its block are one
+    read; a block not in by then is read at once (the read waits for it).  While no read has
+    waited for its bytes in the last FAR_PROBE_S, the next read is at once (a probe), however
+    far off the block is, and the hold follows it."""
     pace, now = paced(3.0, bytes_per_block=40)  # 4 channels' RMS frame per 10 ms
     cap = pace.buffer_bytes / pace.byte_rate
     assert cap > FAR_HOLD_S
     assert pace.hold(now, 250 * 700) == FAR_HOLD_S                              # 4.01 s off
-    assert pace.hold(now, 250 * 340) == pytest.approx(0.41 - MAX_HOLD_S)       # 0.41 s off
+    assert pace.hold(now, 250 * 340) == pytest.approx(0.41 - pace.margin_s)    # 0.41 s off
     assert pace.hold(now, 250 * 318) == MAX_HOLD_S                              # 0.19 s: as a block
-    assert pace.hold(now, 250 * 400) == pytest.approx(1.01 - MAX_HOLD_S)       # 1.01 s: one hold
-    t = now + 0.95                               # the backlog read 0.06 s before it is due
-    pace.arrived(t, 95 * 40, 250 * 394, exact=False)
-    assert pace.hold(t, 250 * 400) == pytest.approx(1.01 - 0.95 - pace.margin_s)   # late: past due
-    t = now + FAR_PROBE_S + 0.95                 # no read has waited since: the next one probes
-    far = 250 * (299 + round((FAR_PROBE_S + 1.01) * 100))                      # due at t + 0.06
-    assert pace.hold(t - 1.0, far) == pytest.approx(1.0 - MAX_HOLD_S + 0.06)  # read towards it
-    pace.arrived(t, 50 * 40, 250 * (299 + round((FAR_PROBE_S + 0.95) * 100)), exact=False)
-    assert pace.hold(t, far) == 0.0
-    pace.arrived(t + 0.01, 40, 250 * (300 + round((FAR_PROBE_S + 0.95) * 100)))   # the probe waited
-    assert pace.hold(t + 0.01, far) == pytest.approx(0.06 - 0.01 - pace.margin_s)
+    assert pace.hold(now, 250 * 396) == pytest.approx(0.97 - pace.margin_s)    # 0.97 s: one hold
+    t = now + 0.97 - pace.margin_s              # the block came late: the read had the backlog
+    pace.arrived(t, 96 * 40, 250 * 395, exact=False)
+    assert pace.hold(t, 250 * 396) < 0.005      # held for as a late block: it is due now
+    t = now + FAR_PROBE_S + 0.003               # a decision's block read as planned, not waited for
+    pace.arrived(t, 100 * 40, 250 * (299 + round(FAR_PROBE_S * 100)), exact=False)
+    far = 250 * (299 + round((FAR_PROBE_S + 1.0) * 100))                      # the next, 1 s on
+    assert pace.hold(t, far) == 0.0             # no read has waited since 3.0 s: the probe
+    pace.arrived(t + 0.01, 40, 250 * (300 + round(FAR_PROBE_S * 100)))        # the probe waited
+    assert pace.hold(t + 0.01, far) == pytest.approx(0.99 - pace.margin_s, abs=0.001)
     fast, now = paced(3.0)                      # RAW: the buffer fills in 0.27 s, sooner than that
     assert fast.hold(now, 250 * 400) == pytest.approx(fast.buffer_bytes / fast.byte_rate)
 
@@ -62,15 +62,16 @@ def test_a_far_block_in_is_followed_by_a_hold_for_the_next_one_period_on():
     reader holds for the next right away (as far off as the period), not waiting for the loop
     to name it; without that period known, it waits for the naming (hold 0: named_wait)."""
     pace, now = paced(3.0, bytes_per_block=40)
-    assert pace.hold(now, 250 * 400) == pytest.approx(1.01 - MAX_HOLD_S)
+    assert pace.hold(now, 250 * 400) == FAR_HOLD_S      # 1.01 s off, and just after it: capped
     assert pace.hold(now, 250 * 500) == FAR_HOLD_S
     one, _ = paced(3.0, bytes_per_block=40)
     one.hold(now, 250 * 600)
     for p in (pace, one):
         p.hold(now, 250 * 600)
-        p.arrived(now + 3.01, 301 * 40, 250 * 600)          # that block is in
-    assert pace.hold(now + 3.01, 250 * 600) == pytest.approx(1.0 - MAX_HOLD_S)
-    assert one.hold(now + 3.01, 250 * 600) == 0.0 and one.named_wait(now + 3.01, 250 * 600) > 0
+        p.arrived(now + 2.5, 250 * 40, 250 * 549)                   # a probe: a read that waited
+        p.arrived(now + 3.015, 51 * 40, 250 * 600, exact=False)     # that block is in, read
+    assert pace.hold(now + 3.015, 250 * 600) == pytest.approx(1.01 - 0.015 - pace.margin_s, abs=0.002)
+    assert one.hold(now + 3.015, 250 * 600) == 0.0 and one.named_wait(now + 3.015, 250 * 600) > 0
 
 
 def test_without_a_block_to_wake_at_it_waits_the_idle_hold_but_never_fills_the_buffer():
