@@ -202,5 +202,12 @@ class BlockClock:
             if len(self._epochs) > MAX_EPOCHS:
                 del self._epochs[0]
         self.next_slot += n_slots
-        self.last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
-        self.floor_ns = max(self.floor_ns, self.slot_end_ns(self.next_slot - 1))
+        if n_slots <= 0:
+            self.last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
+            self.floor_ns = max(self.floor_ns, self.slot_end_ns(self.next_slot - 1))
+            return
+        # the newest slot is in the current time base, the newest epoch: its stamps as stamp_ns's
+        anchor_ns, t0_first, slot0_t0, block_len, stamp_fs = params
+        ticks = slot0_t0 + (self.next_slot - 1) * block_len - t0_first
+        self.last_stamp_ns = anchor_ns + ticks * 1_000_000_000 // stamp_fs
+        self.floor_ns = max(self.floor_ns, anchor_ns + (ticks + block_len) * 1_000_000_000 // stamp_fs)

@@ -46,6 +46,8 @@ class RawBlocks:
 
     def rms(self) -> np.ndarray:
         """float32 (B, C): the block RMS per board channel, NaN where a frame is missing."""
+        if self._complete():                    # frame i: block i // C, channel i % C
+            return physical_rms(self.x).reshape(len(self.t0), self.n_channels)
         vals = np.full((len(self.t0), self.n_channels), np.nan, dtype=np.float32)
         vals[self.row, self.chan] = physical_rms(self.x)
         return vals
@@ -98,6 +100,7 @@ class RawInput:
         self.cfg = cfg
         self.waiting = Pending()        # RAW frames in order (lists, or batches kept as columns)
         self.dropped = 0
+        self._calibrated: tuple[Status | None, np.ndarray, np.ndarray] | None = None
 
     def add(self, frames: Sequence[Frame]) -> None:
         self.waiting.extend(frames)
@@ -155,7 +158,9 @@ class RawInput:
             t0, chan = good_batch.cols.t0_unwrapped, good_batch.cols.chan
             payloads = good_batch.payloads()
         else:
-            good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
+            good = frames if max(map(_CHAN, frames), default=0) < C \
+                and set(map(len, map(_PAYLOAD, frames))) <= {2 * L} \
+                else [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
             n = len(good)
             t0 = np.fromiter(map(_T0, good), dtype=np.int64, count=n)
             chan = np.fromiter(map(_CHAN, good), dtype=np.int64, count=n)
@@ -169,7 +174,10 @@ class RawInput:
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
         counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
         step = np.diff(t0)
-        if not (step < 0).any():                # in order (as sent): the blocks where t0 steps
+        single = bool((step > 0).all())
+        if single:                              # one frame a block, in order (one channel)
+            blocks, row = t0.copy(), np.arange(n)
+        elif not (step < 0).any():              # in order (as sent): the blocks where t0 steps
             new = np.flatnonzero(step) + 1
             blocks = t0[np.concatenate(([0], new))]
             row = np.zeros(len(t0), dtype=np.int64)
@@ -181,10 +189,22 @@ class RawInput:
             blocks = blocks[order]
             row = np.argsort(order)[row]
         scale, offset = self.calibration(status)
-        return RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C), events
+        out = RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C)
+        if single and C == 1:                   # every block's one channel, in order
+            out._complete_memo = not chan.any()
+        return out, events
 
     def calibration(self, status: Status | None) -> tuple[np.ndarray, np.ndarray]:
-        """Per board channel scale/offset: STATUS, overridden by the configuration."""
+        """Per board channel scale/offset: STATUS, overridden by the configuration (read-only
+        arrays, made once per STATUS)."""
+        cal = self._calibrated
+        if cal is None or cal[0] is not status:
+            scale, offset = self._calibration(status)
+            scale.flags.writeable = offset.flags.writeable = False
+            cal = self._calibrated = (status, scale, offset)
+        return cal[1], cal[2]
+
+    def _calibration(self, status: Status | None) -> tuple[np.ndarray, np.ndarray]:
         st = status
         n = max(st.n_channels if st else 0, 1 + max((ch.index for ch in self.cfg.channels), default=0))
         scale = np.ones(n, dtype=np.float32)
