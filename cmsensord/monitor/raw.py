@@ -88,7 +88,7 @@ class RawBlocks:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
         if self._runs_memo is None:
             L = self.x.shape[1]
-            cuts = (np.flatnonzero(np.diff(self.t0) != L) + 1).tolist()
+            cuts = (np.flatnonzero(self.t0[1:] - self.t0[:-1] != L) + 1).tolist()
             self._runs_memo = list(zip([0, *cuts], [*cuts, len(self.t0)]))
         return list(self._runs_memo)
 
@@ -173,7 +173,7 @@ class RawInput:
             return None, events
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
         counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
-        step = np.diff(t0)
+        step = t0[1:] - t0[:-1]
         single = bool((step > 0).all())
         if single:                              # one frame a block, in order (one channel)
             blocks, row = t0.copy(), np.arange(n)
