@@ -206,10 +206,10 @@ class Processor:
 
     def _few(self, frames: Sequence[Frame]) -> None:
         """A live call's frames.  RAW and TACHO frames only that all pass the segment check
-        (:meth:`Segments.passes`): the TACHO frames to the shaft (to wait for :meth:`_feed_tacho`),
+        (:meth:`Segments.passes`): the TACHO ones to the shaft (to wait for :meth:`_feed_tacho`),
         the RAW ones through the chain.  Else a long batch as :meth:`_scanned`, a short one frame
-        at a time with no call per frame but the segment check: RAW frames extend the waiting
-        batch and TACHO frames go to the shaft together, before any other frame (:meth:`_frame`)."""
+        at a time with no call per frame but the check: RAW frames extend the waiting batch and
+        TACHO ones go to the shaft together, before any other frame (:meth:`_frame`)."""
         raws = [f for f in frames if f.type is _RAW]
         tachos = [f for f in frames if f.type is _TACHO]
         if len(raws) + len(tachos) == len(frames) and self.segments.passes(frames):
@@ -482,7 +482,8 @@ class Processor:
             slots, n = self.clock.place(t0)
             a = 0
             while a < n:                        # bounded memory: at most max_slots slots a run
-                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + max_slots))
+                top = self.clock.next_slot + max_slots
+                b = n if slots[n - 1] < top else a + int(np.searchsorted(slots[a:n], top))
                 self._run(slots[a:b], vals[a:b])
                 a = b
             if n == len(t0):
@@ -595,6 +596,5 @@ class Processor:
 
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""
-        if not self.clock.last_stamp_ns:
-            return 0.0
-        return max(0.0, (self.clock_ns() - self.clock.last_stamp_ns) / 1e9)
+        last = self.clock.last_stamp_ns
+        return max(0.0, (self.clock_ns() - last) / 1e9) if last else 0.0
