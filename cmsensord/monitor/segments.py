@@ -96,10 +96,10 @@ class Segments:
         return self.hit
 
     def passes(self, frames: Sequence[Frame]) -> bool:
-        """True when every one of ``frames`` (a short batch: a live call's) passes :meth:`check`
+        """True when every one of ``frames`` (a live call's, at least one) passes :meth:`check`
         with no seq gap in front of it and none is a STATUS frame (which may change the mode or
         fs the check reads): :meth:`check`'s effects are applied for them, in a few C-level
-        passes.  False (nothing applied): the caller checks them one at a time."""
+        passes.  False (nothing applied): the caller checks them (:meth:`check`, :meth:`runs`)."""
         st = self.setup.status
         types = set(map(_TYPE, frames))
         if FrameType.STATUS in types or (st is not None and _OTHER.get(st.mode) in types) \
