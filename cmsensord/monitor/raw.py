@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from operator import attrgetter
+from operator import attrgetter, lt
 
 import numpy as np
 
@@ -150,6 +150,7 @@ class RawInput:
         """Frames of ``L`` samples -> :class:`RawBlocks` (frames of another length or a channel
         >= C are skipped with a decode_error event).  A batch is read from its columns (no
         frame built): the same blocks."""
+        chl: list[int] | None = None           # a list's channels (a batch's are its column)
         if type(frames) is FrameBatch:
             cols = frames.cols
             ok = (cols.chan < C) & (cols.end - cols.start == 2 * L)
@@ -157,13 +158,16 @@ class RawInput:
             n = len(good_batch)
             t0, chan = good_batch.cols.t0_unwrapped, good_batch.cols.chan
             payloads = good_batch.payloads()
-        else:
-            good = frames if max(map(_CHAN, frames), default=0) < C \
-                and set(map(len, map(_PAYLOAD, frames))) <= {2 * L} \
+            single = bool((t0[1:] > t0[:-1]).all())
+        else:                                   # a live call's few frames: their fields as lists
+            chl = list(map(_CHAN, frames))
+            good = frames if max(chl, default=0) < C and set(map(len, map(_PAYLOAD, frames))) <= {2 * L} \
                 else [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
-            n = len(good)
-            t0 = np.fromiter(map(_T0, good), dtype=np.int64, count=n)
-            chan = np.fromiter(map(_CHAN, good), dtype=np.int64, count=n)
+            if good is not frames:
+                chl = list(map(_CHAN, good))
+            n, t0l = len(good), list(map(_T0, good))
+            t0, chan = np.array(t0l, dtype=np.int64), np.array(chl, dtype=np.int64)
+            single = all(map(lt, t0l, t0l[1:]))
             payloads = list(map(_PAYLOAD, good))
         events = []
         if n < len(frames):
@@ -173,9 +177,8 @@ class RawInput:
             return None, events
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
         counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
-        step = t0[1:] - t0[:-1]
-        single = bool((step > 0).all())
-        if single:                              # one frame a block, in order (one channel)
+        step = None if single else t0[1:] - t0[:-1]
+        if step is None:                        # one frame a block, in order (one channel)
             blocks, row = t0.copy(), np.arange(n)
         elif not (step < 0).any():              # in order (as sent): the blocks where t0 steps
             new = np.flatnonzero(step) + 1
@@ -191,7 +194,7 @@ class RawInput:
         scale, offset = self.calibration(status)
         out = RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C)
         if single and C == 1:                   # every block's one channel, in order
-            out._complete_memo = not chan.any()
+            out._complete_memo = not (chan.any() if chl is None else any(chl))
         return out, events
 
     def calibration(self, status: Status | None) -> tuple[np.ndarray, np.ndarray]:

@@ -18,7 +18,7 @@ def observation_rows(first: int, slots: np.ndarray, vals: np.ndarray,
     ``index`` of ``vals`` (one row per block, its slot in ``slots``, increasing, none before
     ``first``)."""
     T = int(slots[-1]) + 1 - first
-    top = int(index.max())
+    top = max(index.tolist())              # a few channels: no array reduction
     if vals.shape[1] <= top:                # the board sends fewer channels: those are missing
         vals = np.pad(vals, ((0, 0), (0, top + 1 - vals.shape[1])), constant_values=np.nan)
     if T == len(slots):                     # a block in every slot (slots first .. first + T - 1)
