@@ -181,8 +181,13 @@ class BlockClock:
             self.t0_first = int(t0[0])
         slots = (t0 - self.slot0_t0) // self.block_len
         max_gap = max(1, min(MAX_FILL_SLOTS, int(MAX_FILL_S * self.fs / self.block_len)))
-        prev = np.concatenate(([self.next_slot - 1], slots[:-1]))
-        bad = np.flatnonzero((slots <= prev) | (slots - prev > max_gap))
+        if not len(slots):
+            return slots, 0
+        step = np.empty_like(slots)             # from the slot before: the newest one for the first
+        step[0] = self.next_slot - 1
+        step[1:] = slots[:-1]
+        np.subtract(slots, step, out=step)
+        bad = ((step <= 0) | (step > max_gap)).nonzero()[0]
         n = int(bad[0]) if bad.size else len(t0)
         return slots[:n], n
 
