@@ -181,8 +181,13 @@ class BlockClock:
             self.t0_first = int(t0[0])
         slots = (t0 - self.slot0_t0) // self.block_len
         max_gap = max(1, min(MAX_FILL_SLOTS, int(MAX_FILL_S * self.fs / self.block_len)))
-        prev = np.concatenate(([self.next_slot - 1], slots[:-1]))
-        bad = np.flatnonzero((slots <= prev) | (slots - prev > max_gap))
+        if not len(slots):
+            return slots, 0
+        step = np.empty_like(slots)             # from the slot before: the newest one for the first
+        step[0] = self.next_slot - 1
+        step[1:] = slots[:-1]
+        np.subtract(slots, step, out=step)
+        bad = ((step <= 0) | (step > max_gap)).nonzero()[0]
         n = int(bad[0]) if bad.size else len(t0)
         return slots[:n], n
 
@@ -202,5 +207,12 @@ class BlockClock:
             if len(self._epochs) > MAX_EPOCHS:
                 del self._epochs[0]
         self.next_slot += n_slots
-        self.last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
-        self.floor_ns = max(self.floor_ns, self.slot_end_ns(self.next_slot - 1))
+        if n_slots <= 0:
+            self.last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
+            self.floor_ns = max(self.floor_ns, self.slot_end_ns(self.next_slot - 1))
+            return
+        # the newest slot is in the current time base, the newest epoch: its stamps as stamp_ns's
+        anchor_ns, t0_first, slot0_t0, block_len, stamp_fs = params
+        ticks = slot0_t0 + (self.next_slot - 1) * block_len - t0_first
+        self.last_stamp_ns = anchor_ns + ticks * 1_000_000_000 // stamp_fs
+        self.floor_ns = max(self.floor_ns, anchor_ns + (ticks + block_len) * 1_000_000_000 // stamp_fs)

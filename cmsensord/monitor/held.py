@@ -57,10 +57,11 @@ class Held:
         decider takes a period in any parts) and would have the tacho fit its smoothed speed."""
         gate = sev.gate
         waiting = gate.waiting + self.n_rows        # the held rows follow the gate's
-        if (bounded and waiting > gate.max_rows) or clock.slot0_t0 is None or self.full():
+        if (bounded and waiting > gate.max_rows) or clock.slot0_t0 is None or self.n_rows >= MAX_HELD_SLOTS:
             return True
-        last = gate.first + sev.decider.period - sev.decider.phase - 1     # the period's last slot
-        return last < gate.first + waiting and tacho.covered_until >= clock.slot_t0(last + 1)
+        first = gate.first
+        last = first + sev.decider.period - sev.decider.phase - 1     # the period's last slot
+        return last < first + waiting and tacho.covered_until >= clock.slot_t0(last + 1)
 
     def hand_over(self, sev: SeverityChain | None, indicators: Indicators,
                   channels: tuple[ChannelConfig, ...]) -> None:

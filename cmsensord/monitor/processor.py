@@ -42,6 +42,8 @@ from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.segments import SCAN_MIN, Segments
 from cmsensord.monitor.shaft import Shaft
+from cmsensord.monitor.slots import observation_rows
+from cmsensord.monitor.wake import wake_t0
 from cmsensord.protocol import Frame, FrameType, decode_rms_rows
 
 if TYPE_CHECKING:
@@ -138,6 +140,8 @@ class Processor:
         """Messages to the sink and events to the log, in their order: each run of messages
         in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one.
         Returns a new empty list."""
+        if not items:
+            return []
         run: list = []
         watching = self.alarms.watching
         for it in items:
@@ -178,12 +182,17 @@ class Processor:
             return
         if self.clock.anchor_ns is None:
             self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
+        if len(frames) < SCAN_MIN or type(frames) is list and len(frames) < MAX_BATCH:   # a live call
+            self._few(frames)
+        else:
+            self._scanned(frames)
+        self._feed_tacho()
+
+    def _scanned(self, frames: Sequence[Frame]) -> None:
+        """A long batch, checked in one pass (:meth:`Segments.runs`) but where a frame does not
+        pass; each run of frames that passes by type (:meth:`_passed`)."""
         rms, raw = Pending(), Pending()
-        if len(frames) < SCAN_MIN:                          # a live call's few frames
-            self._flush(*self._few(frames, rms, raw))
-            self._feed_tacho()
-            return
-        for a, b, codes in self.segments.runs(frames):     # long batches checked in one pass
+        for a, b, codes in self.segments.runs(frames):
             if codes is None:
                 f = frames[a]
                 if self.segments.check(f) or f.lost_before:   # a reset, the other mode, a loss
@@ -194,15 +203,26 @@ class Processor:
                 continue
             rms, raw = self._passed(frames[a:b], codes, rms, raw)
         self._flush(rms, raw)
-        self._feed_tacho()
 
-    def _few(self, frames: Sequence[Frame], rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
-        """A short batch (a live call) as one frame at a time, with no call per frame but the
-        segment check: RAW frames extend the waiting batch and TACHO frames go to the shaft (to
-        wait for :meth:`_feed_tacho`) together, before any other frame (:meth:`_frame`)."""
+    def _few(self, frames: Sequence[Frame]) -> None:
+        """A live call's frames.  RAW and TACHO frames only that all pass the segment check
+        (:meth:`Segments.passes`): the TACHO ones to the shaft (to wait for :meth:`_feed_tacho`),
+        the RAW ones through the chain.  Else a long batch as :meth:`_scanned`, a short one frame
+        at a time with no call per frame but the check: RAW frames extend the waiting batch and
+        TACHO ones go to the shaft together, before any other frame (:meth:`_frame`)."""
+        raws = [f for f in frames if f.type is _RAW]
+        tachos = [f for f in frames if f.type is _TACHO]
+        if len(raws) + len(tachos) == len(frames) and self.segments.passes(frames):
+            if tachos:
+                self.shaft.add_many(tachos)
+            self._flush_raw(raws)
+            return
+        if len(frames) >= SCAN_MIN:
+            self._scanned(frames)
+            return
+        rms, raw = Pending(), Pending()
+        raws, tachos = [], []
         check = self.segments.check
-        raws: list[Frame] = []
-        tachos: list[Frame] = []
         for f in frames:
             hit = check(f) or f.lost_before
             if not hit and f.type is _RAW:
@@ -224,7 +244,7 @@ class Processor:
             raw = self._extend(raw, raws, False)
         if tachos:
             self.shaft.add_many(tachos)
-        return rms, raw
+        self._flush(rms, raw)
 
     def _passed(self, frames: Sequence[Frame], codes: np.ndarray, rms: Pending,
                 raw: Pending) -> tuple[Pending, Pending]:
@@ -389,12 +409,12 @@ class Processor:
     def _flush_raw(self, frames: Sequence[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
         self.raw.add(frames)
-        ready, C, events = self.raw.ready(self.status, final)
+        ready, C, events = self.raw.ready(self.setup.status, final)
         self._out(events)
         if not ready or not self.setup.ready(C):
             return
         self._board_channels(C)
-        blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.status)
+        blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.setup.status)
         self._out(events)
         if blocks is None:
             return
@@ -446,7 +466,7 @@ class Processor:
     def _feed_tacho(self, end: bool = False) -> None:
         """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as
         the speed gates allow, except at the ``end`` where the order chain drains anyway)."""
-        fed = bool(self.shaft.waiting) and self.shaft.ensure(self.status, self.clock)
+        fed = bool(self.shaft.waiting) and self.shaft.ensure(self.setup.status, self.clock)
         if fed:
             self._out(self.shaft.feed(self.clock))
         if self.orders is not None and (fed or not end):
@@ -462,7 +482,8 @@ class Processor:
             slots, n = self.clock.place(t0)
             a = 0
             while a < n:                        # bounded memory: at most max_slots slots a run
-                b = a + int(np.searchsorted(slots[a:n], self.clock.next_slot + max_slots))
+                top = self.clock.next_slot + max_slots
+                b = n if slots[n - 1] < top else a + int(np.searchsorted(slots[a:n], top))
                 self._run(slots[a:b], vals[a:b])
                 a = b
             if n == len(t0):
@@ -475,15 +496,8 @@ class Processor:
 
     def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:
         first = self.clock.next_slot
-        T = int(slots[-1]) + 1 - first
-        y = np.full((T, len(self.channels)), np.nan)
-        valid = np.zeros((T, len(self.channels)), dtype=bool)
-        index = self.severity.index
-        if vals.shape[1] <= index.max():        # the board sends fewer channels: those are missing
-            vals = np.pad(vals, ((0, 0), (0, index.max() + 1 - vals.shape[1])), constant_values=np.nan)
-        y[slots - first] = vals[:, index]
-        valid[slots - first] = True
-        valid &= np.isfinite(y)
+        y, valid = observation_rows(first, slots, vals, self.severity.index)
+        T = len(y)
         mics, trace = self.setup.microphones, self.cfg.output.akf_trace
         stamps = [self.clock.slot_stamp_ns(first + k) for k in range(T)] if mics or trace else []
         if mics is not None:
@@ -507,7 +521,7 @@ class Processor:
     def _release_decisions(self, final: bool, bounded: bool = False) -> None:
         """Decisions of the slots whose tacho speed is final (f_r: the period's mean speed);
         with ``bounded``, also those waiting longer than the speed gate allows."""
-        sev = self.severity
+        sev = self.setup.severity
         waiting = self.indicators.records
         if sev is None or len(waiting) > MAX_RECORDS:       # no decision to wait for / bounded
             self._out(self.indicators.take(None if sev is None else waiting[-MAX_RECORDS].stamp_ns))
@@ -543,7 +557,7 @@ class Processor:
     def _holding(self, plain: bool) -> bool:
         """Whether a call's observations wait in :attr:`held` (``plain``: no microphone or AKF
         trace): RAW with orders and the tacho's f_r, no observer or captures, the banks started."""
-        sev = self.severity
+        sev = self.setup.severity
         return (plain and self.orders is not None and self.observe is None and self.captures is None
                 and self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
                 and sev is not None and sev.gate.end is not None)
@@ -577,24 +591,10 @@ class Processor:
             self.segments.drifted(now, *drift)
 
     def wake_t0(self) -> int | None:
-        """t0 of the board block whose frames complete the next output (None: none known):
-        the next /orders block's last block, or the last block of the next decision period
-        still to come, whichever is first.  The live loop processes as soon as it is in."""
-        s0, L = self.clock.slot0_t0, self.clock.block_len
-        if s0 is None:
-            return None
-        s = self.orders.next_output_sample() if self.orders is not None else None
-        wake = None if s is None else s - (s - s0) % L
-        sev = self.severity
-        if sev is not None and sev.gate.end is not None:
-            last = sev.gate.first + sev.decider.period - sev.decider.phase - 1
-            if last >= self.clock.next_slot:        # a decision waiting for the tacho: not a block to come
-                t0 = self.clock.slot_t0(last)
-                wake = t0 if wake is None else min(wake, t0)
-        return wake
+        """t0 of the board block whose frames complete the next output (:mod:`.wake`)."""
+        return wake_t0(self.clock, self.orders, self.setup.severity)
 
     def lag_s(self) -> float:
         """Wall-clock lag of the newest processed observation (live mode)."""
-        if not self.clock.last_stamp_ns:
-            return 0.0
-        return max(0.0, (self.clock_ns() - self.clock.last_stamp_ns) / 1e9)
+        last = self.clock.last_stamp_ns
+        return max(0.0, (self.clock_ns() - last) / 1e9) if last else 0.0

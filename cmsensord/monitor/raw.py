@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from operator import attrgetter
+from operator import attrgetter, lt
 
 import numpy as np
 
@@ -46,6 +46,8 @@ class RawBlocks:
 
     def rms(self) -> np.ndarray:
         """float32 (B, C): the block RMS per board channel, NaN where a frame is missing."""
+        if self._complete():                    # frame i: block i // C, channel i % C
+            return physical_rms(self.x).reshape(len(self.t0), self.n_channels)
         vals = np.full((len(self.t0), self.n_channels), np.nan, dtype=np.float32)
         vals[self.row, self.chan] = physical_rms(self.x)
         return vals
@@ -86,7 +88,7 @@ class RawBlocks:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
         if self._runs_memo is None:
             L = self.x.shape[1]
-            cuts = (np.flatnonzero(np.diff(self.t0) != L) + 1).tolist()
+            cuts = (np.flatnonzero(self.t0[1:] - self.t0[:-1] != L) + 1).tolist()
             self._runs_memo = list(zip([0, *cuts], [*cuts, len(self.t0)]))
         return list(self._runs_memo)
 
@@ -98,6 +100,7 @@ class RawInput:
         self.cfg = cfg
         self.waiting = Pending()        # RAW frames in order (lists, or batches kept as columns)
         self.dropped = 0
+        self._calibrated: tuple[Status | None, np.ndarray, np.ndarray] | None = None
 
     def add(self, frames: Sequence[Frame]) -> None:
         self.waiting.extend(frames)
@@ -147,6 +150,7 @@ class RawInput:
         """Frames of ``L`` samples -> :class:`RawBlocks` (frames of another length or a channel
         >= C are skipped with a decode_error event).  A batch is read from its columns (no
         frame built): the same blocks."""
+        chl: list[int] | None = None           # a list's channels (a batch's are its column)
         if type(frames) is FrameBatch:
             cols = frames.cols
             ok = (cols.chan < C) & (cols.end - cols.start == 2 * L)
@@ -154,11 +158,16 @@ class RawInput:
             n = len(good_batch)
             t0, chan = good_batch.cols.t0_unwrapped, good_batch.cols.chan
             payloads = good_batch.payloads()
-        else:
-            good = [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
-            n = len(good)
-            t0 = np.fromiter(map(_T0, good), dtype=np.int64, count=n)
-            chan = np.fromiter(map(_CHAN, good), dtype=np.int64, count=n)
+            single = bool((t0[1:] > t0[:-1]).all())
+        else:                                   # a live call's few frames: their fields as lists
+            chl = list(map(_CHAN, frames))
+            good = frames if max(chl, default=0) < C and set(map(len, map(_PAYLOAD, frames))) <= {2 * L} \
+                else [f for f in frames if f.chan < C and len(f.payload) == 2 * L]
+            if good is not frames:
+                chl = list(map(_CHAN, good))
+            n, t0l = len(good), list(map(_T0, good))
+            t0, chan = np.array(t0l, dtype=np.int64), np.array(chl, dtype=np.int64)
+            single = all(map(lt, t0l, t0l[1:]))
             payloads = list(map(_PAYLOAD, good))
         events = []
         if n < len(frames):
@@ -168,8 +177,10 @@ class RawInput:
             return None, events
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
         counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
-        step = np.diff(t0)
-        if not (step < 0).any():                # in order (as sent): the blocks where t0 steps
+        step = None if single else t0[1:] - t0[:-1]
+        if step is None:                        # one frame a block, in order (one channel)
+            blocks, row = t0.copy(), np.arange(n)
+        elif not (step < 0).any():              # in order (as sent): the blocks where t0 steps
             new = np.flatnonzero(step) + 1
             blocks = t0[np.concatenate(([0], new))]
             row = np.zeros(len(t0), dtype=np.int64)
@@ -181,10 +192,22 @@ class RawInput:
             blocks = blocks[order]
             row = np.argsort(order)[row]
         scale, offset = self.calibration(status)
-        return RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C), events
+        out = RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C)
+        if single and C == 1:                   # every block's one channel, in order
+            out._complete_memo = not (chan.any() if chl is None else any(chl))
+        return out, events
 
     def calibration(self, status: Status | None) -> tuple[np.ndarray, np.ndarray]:
-        """Per board channel scale/offset: STATUS, overridden by the configuration."""
+        """Per board channel scale/offset: STATUS, overridden by the configuration (read-only
+        arrays, made once per STATUS)."""
+        cal = self._calibrated
+        if cal is None or cal[0] is not status:
+            scale, offset = self._calibration(status)
+            scale.flags.writeable = offset.flags.writeable = False
+            cal = self._calibrated = (status, scale, offset)
+        return cal[1], cal[2]
+
+    def _calibration(self, status: Status | None) -> tuple[np.ndarray, np.ndarray]:
         st = status
         n = max(st.n_channels if st else 0, 1 + max((ch.index for ch in self.cfg.channels), default=0))
         scale = np.ones(n, dtype=np.float32)

@@ -95,6 +95,28 @@ class Segments:
         self.hit = self._check(f)
         return self.hit
 
+    def passes(self, frames: Sequence[Frame]) -> bool:
+        """True when every one of ``frames`` (a live call's, at least one) passes :meth:`check`
+        with no seq gap in front of it and none is a STATUS frame (which may change the mode or
+        fs the check reads): :meth:`check`'s effects are applied for them, in a few C-level
+        passes.  False (nothing applied): the caller checks them (:meth:`check`, :meth:`runs`)."""
+        st = self.setup.status
+        types = set(map(_TYPE, frames))
+        if FrameType.STATUS in types or (st is not None and _OTHER.get(st.mode) in types) \
+                or any(map(_LOST, frames)):
+            return False
+        t = list(map(_T0, frames))
+        last = self.last_t0
+        first = t[0] if last is None else last
+        # in order and spanning at most MAX_GAP_S: no step back, none longer than that
+        if t[0] < first or t[-1] - first > MAX_GAP_S * self.clock.fs or t != sorted(t):
+            return False
+        if self.ignored:
+            self._report()
+        self.last_t0 = t[-1]
+        self.hit = False
+        return True
+
     def runs(self, frames: Sequence[Frame]) -> Iterator[tuple[int, int, np.ndarray | None]]:
         """The frames in order as runs ``frames[a:b]``: with their type codes when every one is
         known to pass :meth:`check` with no seq gap in front of it (:meth:`check`'s effects
