@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import struct
+
 
 class FakeClock:
     """A clock the test sets by hand: calling it returns ``t`` (seconds, 100.0 at start).
@@ -32,3 +34,16 @@ def replay_ticking(cap, proc_of, sink, clock: FakeClock, step_s: float, **source
             sink.tick()
     proc.finish()
     sink.close()
+
+
+def tacho_payload(rnd, counts, p_cut: float, p_extra: float) -> bytes:
+    """A random TACHO payload (docs/PROTOCOL.md: u16 N, N u32 offsets) of N from ``counts``;
+    with probability ``p_cut`` cut short, else with ``p_extra`` 1-4 bytes too long."""
+    n = rnd.choice(counts)
+    p = struct.pack("<H", n) + b"".join(struct.pack("<I", rnd.randrange(2**32)) for _ in range(n))
+    e = rnd.random()
+    if e < p_cut:
+        return p[:rnd.randrange(len(p))]
+    if e < p_cut + p_extra:
+        return p + rnd.randbytes(rnd.randrange(1, 5))
+    return p

@@ -15,6 +15,7 @@ import pytest
 import cmsensord.protocol as protocol
 from cmsensord.frame_runs import FrameRuns
 from cmsensord.protocol import SYNC, Decoder, FrameType, encode_frame
+from fakes import tacho_payload
 
 LENGTHS = {FrameType.STATUS: lambda r: 20 + 8 * r.randrange(1, 9), FrameType.RMS: lambda r: 4 * r.randrange(1, 9),
            FrameType.RAW: lambda r: 2 * r.choice([0, 1, 250, 250, 700, 2048]),
@@ -211,14 +212,7 @@ def test_a_few_tacho_payloads_one_by_one_equal_the_one_pass(seed):
     for _ in range(200):
         payloads = []
         for _ in range(rnd.randrange(FEW_TACHO + 1)):
-            n = rnd.choice([0, 0, 1, 1, 2, 4])
-            p = struct.pack("<H", n) + b"".join(struct.pack("<I", rnd.randrange(2**32)) for _ in range(n))
-            e = rnd.random()
-            if e < 0.05:
-                p = p[:rnd.randrange(len(p))]
-            elif e < 0.1:
-                p += rnd.randbytes(rnd.randrange(1, 5))
-            payloads.append(p)
+            payloads.append(tacho_payload(rnd, [0, 0, 1, 1, 2, 4], 0.05, 0.05))
         got, want = decode_tacho_few(payloads), protocol.decode_tacho_many(payloads)
         assert got[0].dtype == want[0].dtype and got[1].dtype == want[1].dtype == "uint32"
         assert got[0].tolist() == want[0].tolist() and got[1].tolist() == want[1].tolist()

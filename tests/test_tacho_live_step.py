@@ -11,7 +11,6 @@ Shaft's struct reading."""
 from __future__ import annotations
 
 import random
-import struct
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ from cmsensord.dsp.tacho import TachoTracker
 from cmsensord.dsp.tacho import tracker as tacho_tracker
 from cmsensord.dsp.tacho.edges import EdgeRuns, _kernel
 from cmsensord.monitor.shaft import FEW_TACHO, decode_tacho_lists, read_tacho_payloads
+from fakes import tacho_payload
 from test_tacho_batch import L, random_edges
 
 pytestmark = pytest.mark.skipif(not have_kernel(), reason="the compiled tracker kernel is not built")
@@ -164,14 +164,8 @@ def test_the_kernels_tacho_payloads_are_the_struct_reading(seed):
     for _ in range(2000):
         payloads: list = []
         for _ in range(rnd.randrange(FEW_TACHO + 1)):
-            n = rnd.choice([0, 0, 1, 1, 2, 300])
-            p = struct.pack("<H", n) + b"".join(struct.pack("<I", rnd.randrange(2**32)) for _ in range(n))
-            e = rnd.random()
-            if e < 0.01:
-                p = p[:rnd.randrange(len(p))]
-            elif e < 0.02:
-                p += rnd.randbytes(rnd.randrange(1, 5))
-            elif e < 0.03:
+            p = tacho_payload(rnd, [0, 0, 1, 1, 2, 300], 0.01, 0.01)
+            if rnd.random() < 0.01:
                 p = bytearray(p)
             payloads.append(p)
         got, want = _kernel.tacho_payloads(payloads), read_tacho_payloads(payloads)
