@@ -125,3 +125,23 @@ def test_a_long_call_is_tracked_in_bounded_pieces():
     assert len(out.waveform) == 6050 and len(out.blocks.rms) >= 10 and len(out.smoothed_index) >= 5000
     np.testing.assert_array_equal(out.waveform, wave[out.index])            # index: from the start
     np.testing.assert_array_equal(out.smoothed_waveform, swave[out.smoothed_index - sidx[0]])
+
+
+def test_a_tracker_with_its_table_is_freed_without_the_cycle_collector():
+    """The table holds its tracker's solver weakly: a tracker no longer used goes at once, its
+    table (up to 16 MB) with it, not at the cycle collector's next full pass."""
+    import gc
+    import weakref
+
+    gc.disable()
+    try:
+        tr = OrderTracker([TrackedComponent("1x", order=1.0), TrackedComponent("2x", order=2.0)], fs_in=25000.0,
+                          max_rpm=3000.0)
+        assert tr.table is not None
+        tr.process(np.random.default_rng(0).standard_normal((5000, 1)), np.full(5000, 1720.0))
+        gone = weakref.ref(tr)
+        table = weakref.ref(tr.table)
+        del tr
+        assert gone() is None and table() is None
+    finally:
+        gc.enable()

@@ -13,6 +13,7 @@ docs/order_tracker.md (§4 Gains).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -77,6 +78,23 @@ def choose_grid(lo: float, top: float, step_at_lo: float | None, cap_rpm: float 
         q = max(q, math.expm1(math.log(top / lo) / (n_max - 2)))
         grid = SpeedGrid(lo, top, q, math.inf)
     return grid
+
+
+def weakly(method: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+           ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """A bound ``method`` called through a weak reference to its object: a table given its
+    owner's method so does not keep the owner (owner -> table -> owner would be a cycle that
+    only the cycle collector frees, with the table's up to 16 MB in it); ReferenceError once
+    the owner is gone."""
+    ref = weakref.WeakMethod(method)
+
+    def call(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        bound = ref()
+        if bound is None:
+            raise ReferenceError("the gain table's owner is gone")
+        return bound(grid)
+
+    return call
 
 
 class GainTable:

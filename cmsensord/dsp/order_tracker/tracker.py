@@ -19,7 +19,7 @@ from cmsensord.dsp.order_tracker.bandwidth import component_r, describe
 from cmsensord.dsp.order_tracker.blocks import block_stats, fused_blocks, stats_numpy
 from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
-from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid
+from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid, weakly
 from cmsensord.dsp.order_tracker.live import LiveCall
 from cmsensord.dsp.order_tracker.recursions import (
     CHUNK,
@@ -188,7 +188,7 @@ class OrderTracker:
             # (_steady_state): a machine at one speed pays for a few grid points only
             grid = choose_grid(self.min_rpm, top, table_step_rpm, self._crossing_cap(top),
                                GainTable.bytes_per_point(self.K, want_p))
-            self.table = GainTable(grid, self.K, want_p, self._steady_state, kernel=self.backend == "c")
+            self.table = GainTable(grid, self.K, want_p, weakly(self._steady_state), kernel=self.backend == "c")
 
     def _crossing_cap(self, top: float) -> float | None:
         """1 rpm when a fixed-frequency component crosses an order's frequency between
