@@ -145,7 +145,13 @@ class BlockClock:
         if slot >= self.next_slot or not self._epochs or slot >= self._epochs[-1][0] and self._current():
             return self.stamp_ns(self.slot_t0(slot + blocks))
         i = max(0, bisect.bisect_right(self._epochs, slot, key=lambda e: e[0]) - 1)
-        _, anchor, t0_first, slot0_t0, block_len, stamp_fs = self._epochs[i]
+        return self._stamp_in(self._epochs[i][1:], slot, blocks)
+
+    @staticmethod
+    def _stamp_in(params: tuple[int, ...], slot: int, blocks: int) -> int:
+        """The stamp ``blocks`` blocks after the start of ``slot`` in the time base ``params``
+        (anchor_ns, t0_first, slot0_t0, block_len, stamp_fs: :meth:`_params`, an epoch's)."""
+        anchor, t0_first, slot0_t0, block_len, stamp_fs = params
         return anchor + (slot0_t0 + (slot + blocks) * block_len - t0_first) * 1_000_000_000 // stamp_fs
 
     def _params(self) -> tuple[int, int, int, int, int]:
@@ -211,8 +217,6 @@ class BlockClock:
             self.last_stamp_ns = self.slot_stamp_ns(self.next_slot - 1)
             self.floor_ns = max(self.floor_ns, self.slot_end_ns(self.next_slot - 1))
             return
-        # the newest slot is in the current time base, the newest epoch: its stamps as stamp_ns's
-        anchor_ns, t0_first, slot0_t0, block_len, stamp_fs = params
-        ticks = slot0_t0 + (self.next_slot - 1) * block_len - t0_first
-        self.last_stamp_ns = anchor_ns + ticks * 1_000_000_000 // stamp_fs
-        self.floor_ns = max(self.floor_ns, anchor_ns + (ticks + block_len) * 1_000_000_000 // stamp_fs)
+        newest = self.next_slot - 1             # in the current time base, the newest epoch
+        self.last_stamp_ns = self._stamp_in(params, newest, 0)
+        self.floor_ns = max(self.floor_ns, self._stamp_in(params, newest, 1))

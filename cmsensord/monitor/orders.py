@@ -173,21 +173,15 @@ class OrderChain:
     def release(self, *, final: bool = False, bounded: bool = False) -> Out:
         """Track the samples whose speed is final (all if ``final``; with ``bounded``, at least
         those waiting longer than MAX_WAIT_S)."""
-        gate = self.gate
-        waiting = gate.waiting
-        if not waiting:
+        if not self.gate.waiting:
             return []
-        end = gate.end
-        assert end is not None                              # samples wait
         if final:
-            upto = end                                      # everything
+            upto = self.gate.first + self.gate.waiting      # the gate's end: everything
         elif self.causal:
             upto = self.tacho.covered_until
         else:
             upto = math.floor(self.tacho.final_until)
-        if not final and upto <= end - waiting and not (bounded and waiting > gate.max_rows):
-            return []                           # none to release (gate.release would say None)
-        got = gate.release(upto, final=final, bounded=bounded)
+        got = self.gate.release(upto, final=final, bounded=bounded)
         if got is None:
             return []
         first, (take,) = got

@@ -260,11 +260,16 @@ class EdgeRuns(TachoState):
                 else:
                     n_scalar = MIN_EDGES            # not worth trying again at once
             for i in range(j, min(m, j + n_scalar)):
-                if not (self.batch_edges and self._regular_edge(ql[i], al[i])):
-                    if al[i] >= 0:
-                        self._advance(al[i])
-                    self._edge(ql[i])
+                self._one_edge(ql[i], al[i])
             j += n_scalar
+
+    def _one_edge(self, q: int, adv: int) -> None:
+        """Edge ``q`` after the coverage reached ``adv`` (-1: no advance): in one step when the
+        repair simply commits it (:meth:`_regular_edge`), else :meth:`_advance` and :meth:`_edge`."""
+        if not (self.batch_edges and self._regular_edge(q, adv)):
+            if adv >= 0:
+                self._advance(adv)
+            self._edge(q)
 
     def _few_edges(self, q: list[int], adv: list[int]) -> None:
         """:meth:`_edges` of a live call's few edges (Python lists): with the compiled kernel,
@@ -278,10 +283,7 @@ class EdgeRuns(TachoState):
         while j < m:
             j += self._regular_run(q, adv, j)
             if j < m:
-                if not self._regular_edge(q[j], adv[j]):
-                    if adv[j] >= 0:
-                        self._advance(adv[j])
-                    self._edge(q[j])
+                self._one_edge(q[j], adv[j])
                 j += 1
 
     def _regular_run(self, q: list[int], adv: list[int], j: int) -> int:
