@@ -5,4 +5,6 @@ Rooms: ``protocol`` (wire format), ``dsp`` (AKF bank, severity), ``pipeline``
 ``sinks`` (MCAP), ``config``, ``cli``.
 """
 
+from cmsensord import blas_threads  # noqa: F401  (before numpy: one BLAS thread)
+
 __version__ = "0.1.0"

@@ -7,6 +7,8 @@
 * :mod:`firmware_sim.cli` — ``python -m firmware_sim``.
 """
 
+from cmsensord import blas_threads  # noqa: F401, I001  (before numpy: one BLAS thread)
+
 from .board import Board, BoardConfig
 from .scenarios import SCENARIOS, Scenario, make_scenario
 
