@@ -1,0 +1,126 @@
+#!/usr/bin/env python3
+"""What a wake-up costs: the Processor alone, back to back against paced at 1x.
+
+Builds a capture with firmware_sim (RAW 1 channel + tacho of the `faulty` motor, and
+RMS 4 channels), then, per capture and part length, hands a fresh Processor the
+capture in parts of that much board time twice: back to back (as a replay does) and
+paced at 1x (a sleep until the next part is due after each, as the live loop waits
+for the board), and prints the CPU per board second of each and their ratio.  The
+first 6 s go in one call (start-up excluded); the sink keeps the messages in memory
+(no MCAP, no serial port, no reader thread).  The same calls on the same frames: the
+ratio is what doing the work in wake-ups costs over doing it back to back, the part of
+the live daemon's cost over a replay's (bench/bench_live.py) that no change to the
+reader or the loop removes.
+
+    python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2]
+
+``--repeat N`` measures each N times (back to back and paced in turn) and shows the
+least CPU of each.  Figures are ratios measured side by side in one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cmsensord.config import default_config
+from cmsensord.monitor.processor import Processor
+from cmsensord.protocol import Frame, iter_frames
+from cmsensord.sinks.memory import ListSink
+
+#: name -> (label, mode, channels, tacho)
+CAPTURES = {"raw1": ("RAW 1 ch + tacho + 4 orders", "raw", 1, True),
+            "rms4": ("RMS 4 ch", "rms", 4, False)}
+#: board seconds handed over in one call before the measured parts (start-up)
+WARMUP_S = 6.0
+
+
+def make_capture(path: Path, mode: str, channels: int, tacho: bool, seconds: float) -> None:
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    sc = make_scenario("faulty", n_channels=channels, duration_s=seconds, seed=1)
+    Board(sc, BoardConfig(n_channels=channels, mode=mode, tacho=tacho)).write_capture(path, seconds)
+
+
+def cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def parts_of(frames: list[Frame], span: int) -> list[list[Frame]]:
+    """``frames`` cut where a frame's t0 is ``span`` board samples past its part's first."""
+    out, start = [], 0
+    for k in range(1, len(frames)):
+        if frames[k].t0_unwrapped - frames[start].t0_unwrapped >= span:
+            out.append(frames[start:k])
+            start = k
+    out.append(frames[start:])
+    return out
+
+
+def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool) -> float:
+    """CPU seconds per board second of a fresh Processor's calls on parts of ``span_s``."""
+    sink = ListSink()
+    proc = Processor(default_config(), sink, clock_ns=lambda: 10**18)
+    proc.handle(frames[:50])                # the STATUS frame: the board's rate
+    fs, first = proc.fs, frames[0].t0_unwrapped
+    i = next(k for k, f in enumerate(frames) if f.t0_unwrapped - first > WARMUP_S * fs)
+    proc.handle(frames[50:i])
+    parts = parts_of(frames[i:], max(1, round(span_s * fs)))[:max(1, round(seconds / span_s))]
+    sink.messages.clear()
+    c0, t0 = cpu_s(), time.monotonic()
+    for k, part in enumerate(parts):
+        proc.handle(part)
+        sink.messages.clear()
+        if paced:
+            wait = t0 + (k + 1) * span_s - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+    used = cpu_s() - c0
+    proc.finish()
+    return used / (len(parts) * span_s)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=20.0, help="board seconds measured per run")
+    ap.add_argument("--span", type=float, action="append", help="board seconds a part (default 0.1 and 1.0)")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--only", action="append", choices=sorted(CAPTURES))
+    args = ap.parse_args()
+    spans = args.span or [0.1, 1.0]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.only or list(CAPTURES):
+            label, mode, channels, tacho = CAPTURES[name]
+            cap = Path(tmp) / f"{name}.bin"
+            make_capture(cap, mode, channels, tacho, WARMUP_S + args.seconds + 2)
+            frames = iter_frames(cap.read_bytes())[0]
+            for span in spans:
+                tight, paced = [], []
+                for _ in range(args.repeat):
+                    tight.append(measure(frames, span, args.seconds, paced=False))
+                    paced.append(measure(frames, span, args.seconds, paced=True))
+                rows.append((label, span, min(tight), min(paced)))
+                print(f"  done: {label}, parts of {span:g} s", file=sys.stderr, flush=True)
+    print(f"# the Processor alone, {args.seconds:g} board s in parts, back to back and paced at 1x "
+          f"(least of {args.repeat})\n")
+    print("| capture | part s | back to back: CPU ms / board s | paced at 1x: CPU ms / board s "
+          "| paced at 1x: % of a core | paced / back to back |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    for label, span, tight, paced in rows:
+        print(f"| {label} | {span:g} | {1000 * tight:.2f} | {1000 * paced:.2f} | {100 * paced:.3f} "
+              f"| {paced / tight:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
