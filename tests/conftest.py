@@ -23,6 +23,7 @@ import subprocess
 
 import pytest
 
+import cmsensord.blas_threads  # noqa: F401  (first: the test processes' numpy runs one BLAS thread too)
 import processes
 from fakes import FakeClock
 
