@@ -10,7 +10,9 @@ fixed window: CPU % of one core from /proc/<pid>/stat (utime + stime, all thread
 RSS and peak RSS (VmRSS, VmHWM), and the order latency (write time minus the
 sample's arrival, median and 95th percentile).  Then replays the capture the daemon
 wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its CPU
-per board second and the ratio live / replay.
+per board second and the ratio live / replay.  The last column is the simulated
+board's own CPU over the same window: the machine the daemon shares (a board process
+spinning BLAS workers took ~11 % of a core beside it until cmsensord/blas_threads.py).
 
     python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--tree before=DIR]
 
@@ -76,10 +78,13 @@ def tree_env(tree: Path) -> dict[str, str]:
 
 
 def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: float,
-         env: dict[str, str], more: str = "") -> dict:
-    """The daemon at 1x on a simulated board: CPU over the window, memory, latency, capture."""
+         tree: Path, more: str = "") -> dict:
+    """The daemon at 1x on a simulated board, both of checkout ``tree``: CPU over the window,
+    memory, latency, capture."""
+    env = tree_env(tree)
+    # the board in the tree: `python -m` puts the working directory before PYTHONPATH on sys.path
     sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--speed", "1",
-                            "--seed", "1", *sim_args], stdout=subprocess.PIPE, text=True, env=env)
+                            "--seed", "1", *sim_args], stdout=subprocess.PIPE, text=True, env=env, cwd=tree)
     assert sim.stdout is not None
     port = sim.stdout.readline().strip()
     cfg = tmp / "cmsensord.yaml"
@@ -91,9 +96,9 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
                               stderr=subprocess.PIPE, text=True, env=env)
     try:
         time.sleep(warmup)
-        c0, t0 = cpu_s(daemon.pid), time.monotonic()
+        c0, b0, t0 = cpu_s(daemon.pid), cpu_s(sim.pid), time.monotonic()
         time.sleep(seconds)
-        c1, t1 = cpu_s(daemon.pid), time.monotonic()
+        c1, b1, t1 = cpu_s(daemon.pid), cpu_s(sim.pid), time.monotonic()
         rss, hwm = memory_mb(daemon.pid)
     finally:
         daemon.send_signal(signal.SIGTERM)
@@ -105,7 +110,8 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
     r = json.loads(report.read_text())
     lat = r["latency_ms"][int(len(r["latency_ms"]) * warmup / (warmup + seconds)):]
     blat = r["board_latency_ms"][int(len(r["board_latency_ms"]) * warmup / (warmup + seconds)):]
-    return {"cpu_pct": 100 * (c1 - c0) / (t1 - t0), "rss_mb": rss, "hwm_mb": hwm, "scipy": r["scipy"],
+    return {"cpu_pct": 100 * (c1 - c0) / (t1 - t0), "board_pct": 100 * (b1 - b0) / (t1 - t0),
+            "rss_mb": rss, "hwm_mb": hwm, "scipy": r["scipy"],
             "lat_med": statistics.median(lat) if lat else None,
             "lat_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None,
             "board_med": statistics.median(blat) if blat else None, "capture": cap}
@@ -139,11 +145,10 @@ def main() -> int:
         sim_args, label = CONFIGS[name]
         for kernels in kernel_runs:
             for tree_label, tree in trees:
-                env = tree_env(tree)
                 with tempfile.TemporaryDirectory(prefix="bench_live") as tmp:
-                    lv = live(Path(tmp), sim_args, kernels, args.warmup, args.seconds, env,
+                    lv = live(Path(tmp), sim_args, kernels, args.warmup, args.seconds, tree,
                               MORE_CONFIG.get(name, ""))
-                    rp = replay(Path(tmp), lv["capture"], kernels, env)
+                    rp = replay(Path(tmp), lv["capture"], kernels, tree_env(tree))
                 rep_pct = 100 * rp["cpu_s"] / rp["board_s"]
                 row_label = f"{label} ({tree_label})" if tree_label else label
                 rows.append((row_label, "yes" if kernels else "no", lv, rp, rep_pct))
@@ -152,14 +157,14 @@ def main() -> int:
           "replay of the same capture\n")
     print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95; "
           "board time, median) "
-          "| scipy loaded | replay CPU s / board s | replay % | x real time | live / replay |")
-    print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |")
+          "| scipy loaded | replay CPU s / board s | replay % | x real time | live / replay | board CPU % |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |")
     for label, k, lv, rp, rep_pct in rows:
         lat = (f"{lv['lat_med']:.0f} / {lv['lat_p95']:.0f}; {lv['board_med']:.0f}"
                if lv["lat_med"] is not None else "-")
         print(f"| {label} | {k} | {lv['cpu_pct']:.2f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
               f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.2f} / {rp['board_s']:.0f} | {rep_pct:.2f} "
-              f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} |")
+              f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} | {lv['board_pct']:.1f} |")
     return 0
 
 
