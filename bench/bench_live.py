@@ -11,8 +11,7 @@ RSS and peak RSS (VmRSS, VmHWM), and the order latency (write time minus the
 sample's arrival, median and 95th percentile).  Then replays the capture the daemon
 wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its CPU
 per board second and the ratio live / replay.  The last column is the simulated
-board's own CPU over the same window: the machine the daemon shares (a board process
-spinning BLAS workers took ~11 % of a core beside it until cmsensord/blas_threads.py).
+board's own CPU over the same window: what the daemon shares the machine with.
 
     python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--tree before=DIR]
 

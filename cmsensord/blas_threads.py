@@ -1,13 +1,10 @@
 """One BLAS thread in every process of cmsensord and of its simulated board.
 
-numpy's OpenBLAS starts a worker thread per core at its import and, after a matrix
-product large enough to split, keeps them spinning for a while in wait for the next
-one.  The simulated board's products (a scenario's (2H, L) envelopes, every block)
-made ``cmsensord --simulate`` use 34 s of CPU in its 30 s, nine times what one
-thread takes for the same numbers, and ``firmware_sim --pty`` at 1x ~11 % of a core
-instead of ~1 %, on the machine the daemon it feeds is measured on.  The daemon's
-own matrices are small and its work is one stream, so on a board it gains nothing
-from them either; with one thread the products are also summed in one order.
+numpy's (and scipy's) OpenBLAS starts a worker thread per further core at its import
+and, after a matrix product large enough to split, keeps the workers spinning for a
+while in wait for the next one.  The daemon's matrices are small and its work is one
+stream, and the simulated board's products are a few per block: the workers add CPU
+(on the board, beside the daemon), not speed (README, "Dependencies", has the figures).
 
 Importing this module sets ``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS`` and
 ``MKL_NUM_THREADS`` to 1 where the environment does not set them (a value given
