@@ -29,25 +29,20 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
 
+import bench_raw
+import bench_rms
 from cmsensord.config import default_config
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, iter_frames
 from cmsensord.sinks.memory import ListSink
 
-#: name -> (label, mode, channels, tacho)
-CAPTURES = {"raw1": ("RAW 1 ch + tacho + 4 orders", "raw", 1, True),
-            "rms4": ("RMS 4 ch", "rms", 4, False)}
+#: name -> (label, how its capture of the `faulty` motor is made: path, seconds)
+CAPTURES = {"raw1": ("RAW 1 ch + tacho + 4 orders", lambda p, s: bench_raw.make_capture(p, "faulty", 1, s)),
+            "rms4": ("RMS 4 ch", lambda p, s: bench_rms.make_capture(p, 4, s, scenario="faulty"))}
 #: board seconds handed over in one call before the measured parts (start-up)
 WARMUP_S = 6.0
-
-
-def make_capture(path: Path, mode: str, channels: int, tacho: bool, seconds: float) -> None:
-    from firmware_sim.board import Board, BoardConfig
-    from firmware_sim.scenarios import make_scenario
-
-    sc = make_scenario("faulty", n_channels=channels, duration_s=seconds, seed=1)
-    Board(sc, BoardConfig(n_channels=channels, mode=mode, tacho=tacho)).write_capture(path, seconds)
 
 
 def cpu_s() -> float:
@@ -100,9 +95,9 @@ def main() -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.only or list(CAPTURES):
-            label, mode, channels, tacho = CAPTURES[name]
+            label, make = CAPTURES[name]
             cap = Path(tmp) / f"{name}.bin"
-            make_capture(cap, mode, channels, tacho, WARMUP_S + args.seconds + 2)
+            make(cap, WARMUP_S + args.seconds + 2)       # the RAW and RMS benchmarks' captures
             frames = iter_frames(cap.read_bytes())[0]
             for span in spans:
                 tight, paced = [], []
