@@ -12,8 +12,12 @@ ratio is what doing the work in wake-ups costs over doing it back to back, the p
 the live daemon's cost over a replay's (bench/bench_live.py) that no change to the
 reader or the loop removes.
 
-    python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2]
+    python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2] [--orders-only]
 
+``--orders-only`` also measures, paced, the order path alone (:func:`orders_only`: the
+RAW blocks, the tacho, the order tracker and its /orders messages; no observation, bank,
+indicator or decision).  Not what the daemon does: the least a wake-up carrying the
+/orders block costs, against the whole chain's back to back.
 ``--repeat N`` measures each N times (back to back and paced in turn) and shows the
 least CPU of each.  Figures are ratios measured side by side in one run.
 """
@@ -61,14 +65,28 @@ def parts_of(frames: list[Frame], span: int) -> list[list[Frame]]:
     return out
 
 
-def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool) -> float:
-    """CPU seconds per board second of a fresh Processor's calls on parts of ``span_s``."""
+def orders_only(proc: Processor) -> None:
+    """``proc`` made to run the order path alone: no observation, bank, indicator or decision."""
+    def nothing(*_args, **_kw):
+        return []
+    proc._observe = nothing                     # type: ignore[method-assign]
+    proc._release_decisions = nothing           # type: ignore[method-assign]
+    proc.indicators.raw = nothing               # type: ignore[method-assign]
+    proc.indicators.release = nothing           # type: ignore[method-assign]
+
+
+def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool,
+            only_orders: bool = False) -> float:
+    """CPU seconds per board second of a fresh Processor's calls on parts of ``span_s``
+    (``only_orders``: :func:`orders_only`, after the start-up)."""
     sink = ListSink()
     proc = Processor(default_config(), sink, clock_ns=lambda: 10**18)
     proc.handle(frames[:50])                # the STATUS frame: the board's rate
     fs, first = proc.fs, frames[0].t0_unwrapped
     i = next(k for k, f in enumerate(frames) if f.t0_unwrapped - first > WARMUP_S * fs)
     proc.handle(frames[50:i])
+    if only_orders:
+        orders_only(proc)
     parts = parts_of(frames[i:], max(1, round(span_s * fs)))[:max(1, round(seconds / span_s))]
     sink.messages.clear()
     c0, t0 = cpu_s(), time.monotonic()
@@ -90,6 +108,8 @@ def main() -> int:
     ap.add_argument("--span", type=float, action="append", help="board seconds a part (default 0.1 and 1.0)")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--only", action="append", choices=sorted(CAPTURES))
+    ap.add_argument("--orders-only", action="store_true",
+                    help="also the order path alone, paced (RAW captures)")
     args = ap.parse_args()
     spans = args.span or [0.1, 1.0]
     rows = []
@@ -99,21 +119,29 @@ def main() -> int:
             cap = Path(tmp) / f"{name}.bin"
             make(cap, WARMUP_S + args.seconds + 2)       # the RAW and RMS benchmarks' captures
             frames = iter_frames(cap.read_bytes())[0]
+            alone = args.orders_only and name.startswith("raw")
             for span in spans:
-                tight, paced = [], []
+                runs: dict[str, list[float]] = {"tight": [], "paced": [], "orders": []}
                 for _ in range(args.repeat):
-                    tight.append(measure(frames, span, args.seconds, paced=False))
-                    paced.append(measure(frames, span, args.seconds, paced=True))
-                rows.append((label, span, min(tight), min(paced)))
+                    runs["tight"].append(measure(frames, span, args.seconds, paced=False))
+                    runs["paced"].append(measure(frames, span, args.seconds, paced=True))
+                    if alone:
+                        runs["orders"].append(measure(frames, span, args.seconds, paced=True, only_orders=True))
+                rows.append((label, span, {k: min(v) for k, v in runs.items() if v}))
                 print(f"  done: {label}, parts of {span:g} s", file=sys.stderr, flush=True)
     print(f"# the Processor alone, {args.seconds:g} board s in parts, back to back and paced at 1x "
           f"(least of {args.repeat})\n")
+    extra = " | paced, the order path alone: CPU ms / board s | its / back to back" if args.orders_only else ""
     print("| capture | part s | back to back: CPU ms / board s | paced at 1x: CPU ms / board s "
-          "| paced at 1x: % of a core | paced / back to back |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
-    for label, span, tight, paced in rows:
-        print(f"| {label} | {span:g} | {1000 * tight:.2f} | {1000 * paced:.2f} | {100 * paced:.3f} "
-              f"| {paced / tight:.1f} |")
+          f"| paced at 1x: % of a core | paced / back to back{extra} |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |" + (" ---: | ---: |" if args.orders_only else ""))
+    for label, span, got in rows:
+        tight, paced = got["tight"], got["paced"]
+        line = (f"| {label} | {span:g} | {1000 * tight:.2f} | {1000 * paced:.2f} | {100 * paced:.3f} "
+                f"| {paced / tight:.1f} |")
+        if args.orders_only:
+            line += f" {1000 * got['orders']:.2f} | {got['orders'] / tight:.1f} |" if "orders" in got else " - | - |"
+        print(line)
     return 0
 
 
