@@ -116,11 +116,11 @@ def test_the_live_kernels_check_their_buffers():
 
     comps = [TrackedComponent("1x", order=1.0), TrackedComponent("2x", order=2.0)]
     tr = OrderTracker(comps, fs_in=5000.0, max_rpm=3600.0, n_channels=1, backend="c")
-    st, om = tr.state, tr._omegas
+    st, om = tr.state, tr.omegas
     T, D = 400, tr.decimate
     N = (T + D - 1) // D
     args = [tr.sos, np.zeros((T, 1)), st.zi, 0, D, st.last_miss, 10**6, tr.missing_window, st.rpm_line.copy(),
-            np.zeros(len(range(0, T, D))), 0, 300.0, om.orders, om.fixed, om._by_order_u8, 2 * np.pi,
+            np.zeros(len(range(0, T, D))), 0, 300.0, om.orders, om.fixed, om.by_order_u8, 2 * np.pi,
             tr.fs_track, 300.0, np.empty((N, 1)), np.empty(N), np.empty(N), np.empty(N), np.empty((N, 2))]
     assert k.live_in(*args) in (True, False)
     bad = list(args)

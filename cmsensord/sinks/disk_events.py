@@ -5,7 +5,7 @@ resumed, a failed disk operation and a salvage's result; retention's are
 
 A disk event is a ``disk_error`` event (:data:`~cmsensord.sinks.retention.DISK_EVENT`) told
 apart by ``details["action"]``; a function here returns ``(message, fields)`` for the sink's
-``_emit``, but :func:`salvage_result`, which queues its event on the sink itself.
+``emit``, but :func:`salvage_result`, which queues its event on the sink itself.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> N
     writer has open, nor for a salvage a stop interrupted (the journal says so)."""
     if isinstance(result, SinkIOError):
         sink.disk_errors += 1
-        sink._emit(DISK_EVENT, f"{result}; left for the next start",
+        sink.emit(DISK_EVENT, f"{result}; left for the next start",
                    details=error_details("salvage_failed", result, result.path))
         return
     if result.action == "busy":
@@ -73,4 +73,4 @@ def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> N
         log.info("%s", result.message())
         return
     sink.salvaged.append(result)
-    sink._emit(SALVAGE_EVENT, result.message(), count=result.messages, details=result.event_details())
+    sink.emit(SALVAGE_EVENT, result.message(), count=result.messages, details=result.event_details())

@@ -68,7 +68,7 @@ def apply_retention(sink: RotatingSink) -> None:
             pass
         except OSError as err:
             sink.disk_errors += 1
-            sink._emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
+            sink.emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
                        details={"action": "retention_failed", "errno": errno_name(err.errno),
                                 "file": str(path)})
             break
@@ -93,19 +93,19 @@ def apply_retention(sink: RotatingSink) -> None:
             why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
                        f"(now {free / MB:.1f} MB)")
         names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
-        sink._emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
+        sink.emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
                    f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}",
                    count=len(deleted), details={"action": "retention",
                                                 "files": [p.name for p in deleted],
                                                 "bytes": freed})
     low = floor is not None and free < floor
-    if low and not sink._low_space_told and not deleted:
-        sink._low_space_told = True
+    if low and not sink.low_space_told and not deleted:
+        sink.low_space_told = True
         left = [p for p in oldest if p not in deleted]
-        sink._emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
+        sink.emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
                    f"{o.min_free_mb:g} MB, which deleting the {max(0, len(left) - 1)} older "
                    f"finished log(s) of prefix {o.prefix!r} ({older / MB:.1f} MB; never the "
                    f"newest) cannot reach: none deleted for it",
                    details={"action": "low_space", "bytes": free})
     elif not low:
-        sink._low_space_told = False
+        sink.low_space_told = False

@@ -146,7 +146,7 @@ class RotatingSink:
         self._next_retry = now
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []
-        self._low_space_told = False
+        self.low_space_told = False          # retention said the disk is low (once till it is not)
         self._horizon_ns = 0                 # the reorder window's horizon, carried to the next file
         self._hold_all = False
 
@@ -189,7 +189,9 @@ class RotatingSink:
         """Events not delivered yet (no on_event): (kind, message, fields)."""
         return list(self._pending)
 
-    def _emit(self, kind: str, message: str, **fields: Any) -> None:
+    def emit(self, kind: str, message: str, **fields: Any) -> None:
+        """Queue an event of the sink (delivered to ``on_event`` in order, or kept in
+        :attr:`pending_events`), and wake whoever waits for it."""
         self._pending.append((kind, message, fields))
         if self.wake is not None:
             self.wake()
@@ -474,7 +476,7 @@ class RotatingSink:
             if cur.path.exists() and not cur.part_path.exists():
                 done = cur.path              # finished and renamed; the directory fsync failed
                 self.disk_errors += 1
-                self._emit(DISK_EVENT, str(err), details=disk_events.error_details("dir_fsync_failed", err, done))
+                self.emit(DISK_EVENT, str(err), details=disk_events.error_details("dir_fsync_failed", err, done))
             else:
                 self._failed(err, cur)
                 return None
@@ -504,7 +506,7 @@ class RotatingSink:
         self._drop(lost)
         self._event_dirty = self._need_sync = False
         text, fields = disk_events.removed(cur.part_path, lost)
-        self._emit(DISK_EVENT, text, **fields)
+        self.emit(DISK_EVENT, text, **fields)
         self._next_retry = self.clock()
         self._retry_if_due()
         return False
@@ -540,7 +542,7 @@ class RotatingSink:
         outage["errors"] += 1
         if first:
             text, fields = disk_events.abandoned(err, kept, cur is not None, lost, unsure, self.output.retry_s)
-            self._emit(DISK_EVENT, text, **fields)
+            self.emit(DISK_EVENT, text, **fields)
         if err.errno in _FULL:
             self._retention()
         # a new file at once at the start of an outage (a failed fsync needs nothing
@@ -575,7 +577,7 @@ class RotatingSink:
         self._last_errno = None
         where = self.path.name if self.path is not None else "the log"
         text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
-        self._emit(DISK_EVENT, text, **fields)
+        self.emit(DISK_EVENT, text, **fields)
         abandoned, self._abandoned = self._abandoned, []
         for part in abandoned:
             try:

@@ -62,7 +62,7 @@ def fused_blocks(kernel, st: TrackerState, n0: int, yd: np.ndarray, c: np.ndarra
     tw, te = np.empty((tail, C, K)), np.empty((tail, C, K))
     cw, ce = (pend["wave"], pend["env"]) if p else (tw[:0], te[:0])
     kernel(np.ascontiguousarray(yd), np.ascontiguousarray(c), np.ascontiguousarray(k), st.z, rpm, K, B, p,
-           np.ascontiguousarray(cw), np.ascontiguousarray(ce), tr.min_rpm, tr._top_order, 0.5 * tr.fs_track,
+           np.ascontiguousarray(cw), np.ascontiguousarray(ce), tr.min_rpm, tr.top_order, 0.5 * tr.fs_track,
            rms, amp, rmean, valid.view(np.uint8), tw, te)
     st.pend = {"wave": tw, "env": te, "rpm": rpm[E * B:].copy()} if p or tail else {}
     st.n_track = n0 + yd.shape[0]

@@ -81,7 +81,7 @@ class Omegas:
         self.by_order = np.array([c.order is not None for c in components])
         self.all_orders = bool(self.by_order.all())
         self.fixed = np.array([2.0 * np.pi * float(c.freq_hz or 0.0) for c in components])
-        self._by_order_u8 = self.by_order.astype(np.uint8)
+        self.by_order_u8 = self.by_order.astype(np.uint8)       # by_order as the kernels take it
 
     def __call__(self, speed: np.ndarray) -> np.ndarray:
         """ω_k(n) [rad/s] at model speeds ``speed`` (T,): (T, K)."""
@@ -96,7 +96,7 @@ class Omegas:
         if kernel and _model_omega is not None:
             rpm = np.ascontiguousarray(rpm, dtype=np.float64)
             speed, w = np.empty(rpm.shape[0]), np.empty((rpm.shape[0], self.orders.size))
-            _model_omega(rpm, float(min_rpm), self.orders, self.fixed, self._by_order_u8, 2.0 * np.pi, float(fs),
+            _model_omega(rpm, float(min_rpm), self.orders, self.fixed, self.by_order_u8, 2.0 * np.pi, float(fs),
                          speed, w)
             return speed, w
         speed = model_speed(rpm, min_rpm)

@@ -38,10 +38,10 @@ class SpeedGrid:
 
     def __init__(self, lo: float, top: float, q: float, h: float):
         self.lo, self.top, self.q, self.h = float(lo), float(top), float(q), float(h)
-        self._lq = math.log1p(self.q)
+        self.lq = math.log1p(self.q)          # the geometric part's step in log speed
         self.s_c = min(self.h / self.q, self.top)
         self.linear = self.s_c < self.top      # a part of steps h above s_c
-        self.x_c = math.log(self.s_c / self.lo) / self._lq     # coordinate of s_c
+        self.x_c = math.log(self.s_c / self.lo) / self.lq     # coordinate of s_c
         x_top = self.x_c + (self.top - self.s_c) / self.h if self.linear else self.x_c
         self.n = max(2, math.ceil(x_top - 1e-9) + 1)
 
@@ -49,16 +49,16 @@ class SpeedGrid:
         """The grid speeds at indices i (each the same whenever computed)."""
         i = np.asarray(i, dtype=np.float64)
         if not self.linear:
-            return self.lo * np.exp(i * self._lq)
-        geo = self.lo * np.exp(np.minimum(i, self.x_c) * self._lq)
+            return self.lo * np.exp(i * self.lq)
+        geo = self.lo * np.exp(np.minimum(i, self.x_c) * self.lq)
         return np.where(i <= self.x_c, geo, self.s_c + (i - self.x_c) * self.h)
 
     def coord(self, speed: np.ndarray) -> np.ndarray:
         """Grid coordinate of speeds >= lo (a speed below lo maps to 0)."""
         s = np.maximum(speed, self.lo)
         if not self.linear:
-            return np.log(s / self.lo) / self._lq
-        x = np.log(np.minimum(s, self.s_c) / self.lo) / self._lq
+            return np.log(s / self.lo) / self.lq
+        x = np.log(np.minimum(s, self.s_c) / self.lo) / self.lq
         return np.where(s > self.s_c, self.x_c + (s - self.s_c) / self.h, x)
 
 

@@ -43,14 +43,14 @@ class LiveCall:
     def __init__(self, tr: OrderTracker, kernel):
         self.C, self.K = tr.C, tr.K
         self._live_in, self._live_out, self._forward_blocks = kernel.live_in, kernel.live_out, kernel.forward_blocks
-        om = tr._omegas
+        om = tr.omegas
         assert tr.table is not None
         grid = tr.table.grid
-        self._omega = (tr.min_rpm, om.orders, om.fixed, om._by_order_u8, TWO_PI, tr.fs_track, grid.lo)
+        self._omega = (tr.min_rpm, om.orders, om.fixed, om.by_order_u8, TWO_PI, tr.fs_track, grid.lo)
         # the grid coordinate log(max(speed, lo) / lo) / lq of GainTable.lookup is log(speed / lo) / lq
         # where the grid starts at min_rpm (the model speed is never below it) and is geometric
         self._direct = not grid.linear and grid.lo == tr.min_rpm and tr.table.P is None
-        self._stats = (tr.min_rpm, tr._top_order, 0.5 * tr.fs_track)
+        self._stats = (tr.min_rpm, tr.top_order, 0.5 * tr.fs_track)
         self._kept: tuple[np.ndarray, ...] | None = None     # _scratch's arrays
 
     @classmethod
@@ -120,7 +120,7 @@ class LiveCall:
         rmean, valid, rt = np.empty(E), np.empty(E, dtype=bool), np.empty(tail)
         cw, ce, pr = (pend["wave"], pend["env"], pend["rpm"]) if p else (tw[:0], te[:0], rt[:0])
         n0 = st.n_track
-        if not self._live_out(logu, table.grid._lq, table.kS, table.dkS, table.have, SEGMENT, table.kS.shape[1],
+        if not self._live_out(logu, table.grid.lq, table.kS, table.dkS, table.have, SEGMENT, table.kS.shape[1],
                               yd, cosw, st.z, pr, rd, K, B, cw, ce, *self._stats, n0, tr.decimate, tr.delay_in,
                               rms, amp, rmean, valid, tw, te, rt, starts, t_in):
             return None

@@ -112,8 +112,8 @@ class OrderTracker:
         self.min_rpm = float(min_rpm)
         self.C = int(n_channels)
         self.K = len(self.components)
-        self._top_order = max((c.order or 0.0) for c in self.components)     # for _block_stats
-        self._omegas = Omegas(self.components)                              # omega() in one operation
+        self.top_order = max((c.order or 0.0) for c in self.components)      # the block statistics' top order
+        self.omegas = Omegas(self.components)                               # omega() in one operation
         # in the kernel with the C backend (the same numbers): block statistics; filter + stats (process_blocks)
         self._stats_kernel = getattr(_trackerkernel, "block_stats", None) if backend == "c" else None
         self._fused_kernel = getattr(_trackerkernel, "forward_blocks", None) if backend == "c" else None
@@ -434,7 +434,7 @@ class OrderTracker:
     def _coeffs_gains(self, rd: np.ndarray, miss: np.ndarray | None):
         """c (N, K) = 2 cos(omega / fs_track) at the model speeds of rd, and the gains there
         (:meth:`_gains`): c, k, S, P."""
-        speed, c = self._omegas.scaled(rd, self.min_rpm, self.fs_track, self.backend == "c")
+        speed, c = self.omegas.scaled(rd, self.min_rpm, self.fs_track, self.backend == "c")
         np.cos(c, out=c)                    # 2 cos(omega / fs_track), in place
         c *= 2.0
         k, S, P = self._gains(speed, c, miss[:, 0] if miss is not None and self.gains == "exact" else None)
@@ -504,7 +504,7 @@ class OrderTracker:
                 and rpm.flags.c_contiguous):        # the same operations in one pass
             rms, amp = np.empty((E, self.C, self.K)), np.empty((E, self.C, self.K))
             rmean, valid = np.empty(E), np.empty(E, dtype=bool)
-            kernel(wave, env, rpm, self.K, self.min_rpm, self._top_order, 0.5 * self.fs_track, rms, amp,
+            kernel(wave, env, rpm, self.K, self.min_rpm, self.top_order, 0.5 * self.fs_track, rms, amp,
                    rmean, valid.view(np.uint8))
         else:
             rms, amp, rmean, valid = self._block_stats_numpy(wave, env, rpm)
@@ -512,7 +512,7 @@ class OrderTracker:
 
     def _block_stats_numpy(self, wave, env, rpm):
         """rms, amplitude (E, C, K), mean speed and validity (E,) of whole blocks."""
-        return stats_numpy(wave, env, rpm, self.min_rpm, self._top_order, self.fs_track)
+        return stats_numpy(wave, env, rpm, self.min_rpm, self.top_order, self.fs_track)
 
     def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
         st = self.state
