@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import pty
 import signal
 import subprocess
 import sys
@@ -96,6 +97,25 @@ def stop(proc, timeout=10) -> str:
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=timeout)
     return err
+
+
+def on_terminal(args, **kw) -> tuple[int, bytes]:
+    """Run ``args`` with its stderr on a pseudo-terminal until it exits: (its exit status, what
+    it wrote there)."""
+    master, slave = pty.openpty()
+    p = spawn(args, stderr=slave, env=ENV, **kw)
+    os.close(slave)
+    out = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:                             # EIO: the process closed the terminal
+            break
+        if not chunk:
+            break
+        out += chunk
+    os.close(master)
+    return p.wait(timeout=60), out
 
 
 def fill(fd: int) -> None:

@@ -4,8 +4,6 @@ with line noise (real processes on a real pty)."""
 from __future__ import annotations
 
 import json
-import os
-import pty
 import subprocess
 import sys
 import time
@@ -15,7 +13,7 @@ from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, cmsensord, spawn, start_board, start_daemon, stop
+from processes import cmsensord, on_terminal, start_board, start_daemon, stop
 
 
 def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
@@ -28,25 +26,11 @@ def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
     assert fast.returncode == 0, fast.stderr
     assert "%" not in fast.stderr                        # not a terminal: no progress bar
 
-    master, slave = pty.openpty()                        # stderr on a terminal
     t = time.monotonic()
-    p = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "8",
-                          "--out", str(tmp_path / "paced")], stderr=slave, stdout=subprocess.DEVNULL,
-                         env=ENV)
-    os.close(slave)
-    out = b""
-    while True:
-        try:
-            chunk = os.read(master, 4096)
-        except OSError:                                  # EIO: the child closed the terminal
-            break
-        if not chunk:
-            break
-        out += chunk
-    p.wait(timeout=60)
+    status, out = on_terminal([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "8",
+                               "--out", str(tmp_path / "paced")], stdout=subprocess.DEVNULL)
     t_paced = time.monotonic() - t
-    os.close(master)
-    assert p.returncode == 0, out.decode(errors="replace")
+    assert status == 0, out.decode(errors="replace")
     text = out.decode(errors="replace")
     assert "replay cap.bin [" in text and "100.0%" in text and text.count("\r") >= 5
     assert t_paced >= 20.0 / 8 - 0.1 and t_paced > t_fast

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import html
 import json
-import os
-import pty
 import re
 import shutil
 import subprocess
@@ -19,7 +17,7 @@ import pytest
 
 from cmsensord.sinks.mcap_file import McapSink
 from cmsensord.sinks.mcap_read import read_messages
-from processes import ENV, cmsensord, run_module, spawn
+from processes import ENV, cmsensord, on_terminal, run_module
 
 SCHEMA_OF = {"events": "event", "diagnostics": "diagnostics", "severity": "severity", "orders": "orders",
              "indicators": "indicators", "log": "log", "alarms": "alarms"}
@@ -206,21 +204,9 @@ def test_headless_chromium_renders_the_report(logs, tmp_path):
 
 
 def test_progress_bar_on_a_terminal_only(logs, tmp_path):
-    master, slave = pty.openpty()
-    p = spawn([sys.executable, "-m", "cmsensord", "report", str(logs["faulty_raw"]), "--out",
-                          str(tmp_path / "r.html")], stdout=subprocess.PIPE, stderr=slave, env=ENV)
-    os.close(slave)
-    seen = b""
-    while True:
-        try:
-            chunk = os.read(master, 4096)
-        except OSError:                             # EIO: the process closed the terminal
-            break
-        if not chunk:
-            break
-        seen += chunk
-    os.close(master)
-    assert p.wait(timeout=60) == 0
+    status, seen = on_terminal([sys.executable, "-m", "cmsensord", "report", str(logs["faulty_raw"]), "--out",
+                                str(tmp_path / "r.html")], stdout=subprocess.PIPE)
+    assert status == 0
     assert b"\r[" + b"#" * 30 + b"] 100%" in seen
     piped = cmsensord("report", str(logs["faulty_raw"]), "--out", str(tmp_path / "r2.html"))
     assert "[#" not in piped.stderr and piped.stderr.count("\n") == 1
