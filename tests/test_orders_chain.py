@@ -36,6 +36,15 @@ def block_truth(sc, stamp_ns, name, n=2500):
     return float(np.sqrt(np.mean(x * x)))
 
 
+def worst_errors(sc, stamp_ns, msg, worst):
+    """``worst`` (order name -> % error) raised to the error of ``msg``'s orders 4 and 4.2 against
+    :func:`block_truth`."""
+    for o in msg["orders"]:
+        if o["name"] in worst:
+            truth = block_truth(sc, stamp_ns, {"o4": "order 4", "o4_2": "order 4.2"}[o["name"]])
+            worst[o["name"]] = max(worst[o["name"]], abs(o["rms"] - truth) / truth * 100)
+
+
 @pytest.fixture(scope="module")
 def close_orders_run():
     return run_chain("close_orders", 5.0)
@@ -52,10 +61,7 @@ def test_close_orders_through_the_daemon_meet_the_papers_bounds(close_orders_run
         if not m["valid"] or m["speed_rpm"] < 800 or stamp * FS // 10**9 > 5 * FS - 1:
             continue
         checked += 1
-        for o in m["orders"]:
-            if o["name"] in worst:
-                truth = block_truth(sc, stamp, {"o4": "order 4", "o4_2": "order 4.2"}[o["name"]])
-                worst[o["name"]] = max(worst[o["name"]], abs(o["rms"] - truth) / truth * 100)
+        worst_errors(sc, stamp, m, worst)
     assert checked >= 30
     assert worst["o4"] < 5.0 and worst["o4_2"] < 3.0, worst
 
@@ -235,9 +241,6 @@ def test_lost_raw_frames_are_predicted_and_flagged():
                     or round(stamp * FS / 1e9) > 5 * FS - 1:
                 continue
             checked += 1
-            for o in m["orders"]:
-                if o["name"] in worst:
-                    truth = block_truth(sc, stamp, {"o4": "order 4", "o4_2": "order 4.2"}[o["name"]])
-                    worst[o["name"]] = max(worst[o["name"]], abs(o["rms"] - truth) / truth * 100)
+            worst_errors(sc, stamp, m, worst)
     assert flagged >= 20 and checked >= 20, (flagged, checked)
     assert worst["o4"] < 5.0 and worst["o4_2"] < 3.0, worst
