@@ -113,10 +113,18 @@ def test_kill_9_at_random_moments_loses_at_most_the_last_second(tmp_path):
     salvage_events = [json.loads(data) for p in finished for topic, _t, data in read_all(p)
                       if topic == TOPIC_EVENTS and json.loads(data)["kind"] == "salvage"]
     report = []
-    for part, t_kill, readable, early in kills:
+    journal = err.read_text()
+    for k, (part, t_kill, readable, early) in enumerate(kills):
         salvaged = logs / part.name.replace(".mcap.part", ".salvaged.mcap")
         event = [e for e in salvage_events if e["details"]["source"].endswith(part.name)]
-        assert len(event) == 1 and not part.exists()
+        assert not part.exists()
+        if not event and k + 1 < len(kills) and kills[k + 1][3]:
+            # salvaged by the next start, killed within 0.3 s: its event was in its last second,
+            # which a kill may lose (the journal has it); the salvaged file is checked below
+            line = next(x for x in journal.splitlines() if f"salvage: {part.name}: " in x)
+            assert f"salvaged {len(readable)} message(s)" in line, line
+            event = [{"count": len(readable), "message": line}]
+        assert len(event) == 1, part.name
         if not readable:                         # killed before its first flush
             assert early and not salvaged.exists() and event[0]["count"] == 0
             assert "nothing recoverable" in event[0]["message"]
