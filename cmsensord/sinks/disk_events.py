@@ -65,7 +65,7 @@ def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> N
     if isinstance(result, SinkIOError):
         sink.disk_errors += 1
         sink.emit(DISK_EVENT, f"{result}; left for the next start",
-                   details=error_details("salvage_failed", result, result.path))
+                  details=error_details("salvage_failed", result, result.path))
         return
     if result.action == "busy":
         return                           # another writer's open file

@@ -46,17 +46,45 @@ def apply_retention(sink: RotatingSink) -> None:
         free = free_bytes(o.dir) if floor is not None else 0
     except OSError:
         return                           # no directory yet, or unreadable: nothing to do
-    stats = {}
-    for path in finished + parts:
-        with contextlib.suppress(OSError):  # gone meanwhile
-            stats[path] = path.lstat()   # a planted link: its own size, never its target's
-    sizes = {p: st.st_size for p, st in stats.items()}
-    total = sum(sizes.values())
-    oldest = [p for p in finished if p in stats]   # by the stamp in the name
+    sizes = _sizes(finished + parts)
+    oldest = [p for p in finished if p in sizes]    # by the stamp in the name
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
-    reachable = floor is not None and free + older >= floor
+    deleted, total, free = _delete_oldest(sink, oldest, sizes, cap, floor, free)
+    if deleted:
+        with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
+            fsync_dir(Path(o.dir))
+        sink.paths = [p for p in sink.paths if p not in deleted]
+        _deleted_event(sink, deleted, sum(sizes[p] for p in deleted), total, free)
+    low = floor is not None and free < floor
+    if low and not sink.low_space_told and not deleted:
+        sink.low_space_told = True
+        sink.emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
+                  f"{o.min_free_mb:g} MB, which deleting the {max(0, len(oldest) - 1)} older "
+                  f"finished log(s) of prefix {o.prefix!r} ({older / MB:.1f} MB; never the "
+                  f"newest) cannot reach: none deleted for it",
+                  details={"action": "low_space", "bytes": free})
+    elif not low:
+        sink.low_space_told = False
+
+
+def _sizes(paths: list[Path]) -> dict[Path, int]:
+    """The size of each of ``paths`` still there; a planted link's own, never its target's."""
+    sizes = {}
+    for path in paths:
+        with contextlib.suppress(OSError):  # gone meanwhile
+            sizes[path] = path.lstat().st_size
+    return sizes
+
+
+def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int], cap: float | None,
+                   floor: float | None, free: int) -> tuple[list[Path], int, int]:
+    """Delete ``oldest`` in order while over ``cap`` bytes in all or under ``floor`` bytes free
+    (the floor only where deleting all but the newest reaches it, never the newest): the files
+    deleted, the bytes left in all and the bytes free after.  A file that cannot be deleted is a
+    ``retention_failed`` event and ends it."""
+    total = sum(sizes.values())
+    reachable = floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
     deleted: list[Path] = []
-    freed = 0
     for path in oldest:
         over = cap is not None and total > cap
         low = reachable and floor is not None and free < floor and path != oldest[-1]
@@ -69,43 +97,32 @@ def apply_retention(sink: RotatingSink) -> None:
         except OSError as err:
             sink.disk_errors += 1
             sink.emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
-                       details={"action": "retention_failed", "errno": errno_name(err.errno),
-                                "file": str(path)})
+                      details={"action": "retention_failed", "errno": errno_name(err.errno),
+                               "file": str(path)})
             break
-        size = sizes[path]
-        total -= size
-        freed += size
+        total -= sizes[path]
         deleted.append(path)
         if floor is not None:
             try:
-                free = free_bytes(o.dir)
+                free = free_bytes(sink.output.dir)
             except OSError:
-                free += size
-    if deleted:
-        with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
-            fsync_dir(Path(o.dir))
-        sink.paths = [p for p in sink.paths if p not in deleted]
-        why = []
-        if cap is not None:
-            why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
-                       f"(now {total / MB:.1f} MB)")
-        if floor is not None:
-            why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
-                       f"(now {free / MB:.1f} MB)")
-        names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
-        sink.emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
-                   f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}",
-                   count=len(deleted), details={"action": "retention",
-                                                "files": [p.name for p in deleted],
-                                                "bytes": freed})
-    low = floor is not None and free < floor
-    if low and not sink.low_space_told and not deleted:
-        sink.low_space_told = True
-        left = [p for p in oldest if p not in deleted]
-        sink.emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
-                   f"{o.min_free_mb:g} MB, which deleting the {max(0, len(left) - 1)} older "
-                   f"finished log(s) of prefix {o.prefix!r} ({older / MB:.1f} MB; never the "
-                   f"newest) cannot reach: none deleted for it",
-                   details={"action": "low_space", "bytes": free})
-    elif not low:
-        sink.low_space_told = False
+                free += sizes[path]
+    return deleted, total, free
+
+
+def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: int, free: int) -> None:
+    """The ``retention`` event of the files ``deleted`` (``freed`` bytes; ``total`` left, ``free``)."""
+    o = sink.output
+    why = []
+    if o.retain_mb:
+        why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
+                   f"(now {total / MB:.1f} MB)")
+    if o.min_free_mb:
+        why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
+                   f"(now {free / MB:.1f} MB)")
+    names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
+    sink.emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
+              f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}",
+              count=len(deleted), details={"action": "retention",
+                                           "files": [p.name for p in deleted],
+                                           "bytes": freed})
