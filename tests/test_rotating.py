@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
+from pathlib import Path
 
 import pytest
 
@@ -162,6 +163,39 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, 
     assert sorted(deleted + [p.name for p in finished]) == sorted(
         p.name for p in rotated + [sink.paths[-1]])      # every finished file: kept or deleted once
     assert sorted(sink.paths) == sorted(finished)        # paths lists only what is left
+
+
+def test_a_file_retention_cannot_delete_is_one_event_and_ends_the_pass(tmp_path, clock, monkeypatch):
+    for k in range(3):
+        RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
+    files = sorted(tmp_path.glob("*.mcap"))
+    unlink = Path.unlink
+
+    def refuse_the_oldest(path, *a, **kw):
+        if path == files[0]:
+            raise PermissionError(13, "Permission denied", str(path))
+        return unlink(path, *a, **kw)
+
+    monkeypatch.setattr(Path, "unlink", refuse_the_oldest)
+    events = []
+    cap_mb = 1.5 * files[0].stat().st_size / 1e6          # over it: the two oldest would go
+    sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
+                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    assert [p.exists() for p in files] == [True, True, True]      # the pass ended at the first
+    assert [(k, m, f["details"]) for k, m, f in events] == [(
+        "disk_error", f"{files[0]}: retention cannot delete: Permission denied",
+        {"action": "retention_failed", "errno": "EACCES", "file": str(files[0])})]
+    assert sink.disk_errors == 1
+    monkeypatch.setattr(Path, "unlink", unlink)
+    events.clear()
+    sink.rotate()                                        # the next pass deletes, oldest first
+    sink.close()
+    assert not files[0].exists() and not files[1].exists()
+    assert len(events) == 1 and events[0][2]["details"]["files"][:2] == [files[0].name, files[1].name]
+    a, b = (re.escape(p.name) for p in files[:2])
+    assert re.fullmatch(rf"retention: deleted the \d oldest log file\(s\) \([0-9.]+ MB: {a}, {b}.*\) to keep "
+                        rf"this prefix's files under retain_mb = {cap_mb:g} MB \(now [0-9.]+ MB\)",
+                        events[0][1]), events[0][1]
 
 
 def test_an_unreachable_free_space_floor_deletes_nothing_and_says_so(tmp_path, clock):
