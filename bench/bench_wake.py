@@ -18,6 +18,7 @@ reader or the loop removes.
 RAW blocks, the tacho, the order tracker and its /orders messages; no observation, bank,
 indicator or decision).  Not what the daemon does: the least a wake-up carrying the
 /orders block costs, against the whole chain's back to back.
+
 ``--repeat N`` measures each N times (back to back and paced in turn) and shows the
 least CPU of each.  Figures are ratios measured side by side in one run.
 """
@@ -66,9 +67,12 @@ def parts_of(frames: list[Frame], span: int) -> list[list[Frame]]:
 
 
 def orders_only(proc: Processor) -> None:
-    """``proc`` made to run the order path alone: no observation, bank, indicator or decision."""
+    """``proc`` made to run the order path alone: no observation, bank, indicator or decision
+    (what the start-up left held for the banks is dropped)."""
     def nothing(*_args, **_kw):
         return []
+    proc.held.take_rows()
+    proc.held.take_blocks()
     proc._observe = nothing                     # type: ignore[method-assign]
     proc._release_decisions = nothing           # type: ignore[method-assign]
     proc.indicators.raw = nothing               # type: ignore[method-assign]
