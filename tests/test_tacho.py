@@ -238,6 +238,32 @@ def test_arguments_are_checked():
         TachoTracker(FS, 1, timeout_periods=1.5)
 
 
+@pytest.mark.parametrize("args, kw, message", [
+    ((0.0, 1), {}, "fs must be > 0, got 0.0"),
+    ((float("nan"), 1), {}, "fs must be > 0, got nan"),
+    ((FS, 256), {}, "ppr must be an integer 1..255, got 256"),
+    ((FS, 1.0), {}, "ppr must be an integer 1..255, got 1.0"),
+    ((FS, 1), {"block_len": 0}, "block_len must be a positive integer, got 0"),
+    ((FS, 1), {"half_window": 0}, "half_window must be an integer >= 1, got 0"),
+    ((FS, 1), {"tol": 0.5}, "tol must be in (0, 0.5), got 0.5"),
+    ((FS, 1), {"timeout_s": 2.0, "max_timeout_s": 1.0},
+     "need timeout_s > 0, timeout_periods > 2 (a missed pulse is 2 periods) and max_timeout_s >= "
+     "timeout_s; got 2.0, 3.0, 1.0"),
+    ((FS, 1), {"history_s": 0}, "history_s must be > 0, got 0"),
+    ((FS, 1), {"causal_window": 1}, "causal_window must be an integer >= 2, got 1"),
+])
+def test_each_setting_out_of_range_is_one_clear_error(args, kw, message):
+    with pytest.raises(ValueError) as err:
+        TachoTracker(*args, **kw)
+    assert str(err.value) == message
+
+
+def test_the_windows_default_from_ppr():
+    tr = TachoTracker(FS, 2)
+    assert (tr.half_window, tr.causal_window) == (8, 32)
+    assert (TachoTracker(FS, 8).causal_window, TachoTracker(FS, 1, causal_window=5).causal_window) == (64, 5)
+
+
 def test_history_is_bounded():
     _, board = make_board("healthy", 8.0, 1)
     t0, edges = board_frames(board, 800)

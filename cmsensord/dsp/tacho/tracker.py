@@ -70,26 +70,8 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
                  tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
                  max_timeout_s: float = 10.0, history_s: float = 60.0,
                  causal_window: int | None = None):
-        if not (fs > 0 and math.isfinite(fs)):
-            raise ValueError(f"fs must be > 0, got {fs!r}")
-        if not isinstance(ppr, (int, np.integer)) or not 1 <= ppr <= 255:
-            raise ValueError(f"ppr must be an integer 1..255, got {ppr!r}")
-        if not isinstance(block_len, (int, np.integer)) or block_len < 1:
-            raise ValueError(f"block_len must be a positive integer, got {block_len!r}")
-        h = 4 * int(ppr) if half_window is None else half_window
-        if not isinstance(h, (int, np.integer)) or h < 1:
-            raise ValueError(f"half_window must be an integer >= 1, got {half_window!r}")
-        if not 0 < tol < 0.5:
-            raise ValueError(f"tol must be in (0, 0.5), got {tol!r}")
-        if not (timeout_s > 0 and timeout_periods > 2 and max_timeout_s >= timeout_s):
-            raise ValueError("need timeout_s > 0, timeout_periods > 2 (a missed pulse is 2 periods) "
-                             f"and max_timeout_s >= timeout_s; got {timeout_s}, {timeout_periods}, "
-                             f"{max_timeout_s}")
-        if not history_s > 0:
-            raise ValueError(f"history_s must be > 0, got {history_s!r}")
-        m = min(64, max(3, 16 * int(ppr))) if causal_window is None else causal_window
-        if not isinstance(m, (int, np.integer)) or m < 2:
-            raise ValueError(f"causal_window must be an integer >= 2, got {causal_window!r}")
+        h, m = _checked(fs, ppr, block_len, half_window, tol, timeout_s, timeout_periods, max_timeout_s,
+                        history_s, causal_window)
         self.fs = float(fs)
         self.ppr = int(ppr)
         self.block_len = int(block_len)
@@ -385,3 +367,30 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
     def turns_at(self, samples: npt.ArrayLike) -> FloatArray:
         """Shaft angle in revolutions since the first edge at the sample indices."""
         return self.evaluate(samples)[1]
+
+
+def _checked(fs, ppr, block_len, half_window, tol, timeout_s, timeout_periods, max_timeout_s, history_s,
+             causal_window) -> tuple[int, int]:
+    """:class:`TachoTracker`'s settings checked (ValueError naming the first one out of range):
+    its smoothing half window and causal window, defaults filled in from ``ppr``."""
+    if not (fs > 0 and math.isfinite(fs)):
+        raise ValueError(f"fs must be > 0, got {fs!r}")
+    if not isinstance(ppr, (int, np.integer)) or not 1 <= ppr <= 255:
+        raise ValueError(f"ppr must be an integer 1..255, got {ppr!r}")
+    if not isinstance(block_len, (int, np.integer)) or block_len < 1:
+        raise ValueError(f"block_len must be a positive integer, got {block_len!r}")
+    h = 4 * int(ppr) if half_window is None else half_window
+    if not isinstance(h, (int, np.integer)) or h < 1:
+        raise ValueError(f"half_window must be an integer >= 1, got {half_window!r}")
+    if not 0 < tol < 0.5:
+        raise ValueError(f"tol must be in (0, 0.5), got {tol!r}")
+    if not (timeout_s > 0 and timeout_periods > 2 and max_timeout_s >= timeout_s):
+        raise ValueError("need timeout_s > 0, timeout_periods > 2 (a missed pulse is 2 periods) "
+                         f"and max_timeout_s >= timeout_s; got {timeout_s}, {timeout_periods}, "
+                         f"{max_timeout_s}")
+    if not history_s > 0:
+        raise ValueError(f"history_s must be > 0, got {history_s!r}")
+    m = min(64, max(3, 16 * int(ppr))) if causal_window is None else causal_window
+    if not isinstance(m, (int, np.integer)) or m < 2:
+        raise ValueError(f"causal_window must be an integer >= 2, got {causal_window!r}")
+    return int(h), int(m)
