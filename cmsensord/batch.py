@@ -133,38 +133,22 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     st = col.status
     fs, L = st.fs, st.block_len
     channels = proc.channels
-    scale, offset = proc.raw_calibration()
-    t0s = np.array([t for t, _, _ in col.raw], dtype=np.int64)
-    s0 = int(t0s.min())
-    n = int(t0s.max()) - s0 + L
-    y = np.zeros((n, len(channels)))
-    lost = np.ones((n, len(channels)), dtype=bool)          # no RAW block there: zeros in y
-    pos = {ch.index: i for i, ch in enumerate(channels)}
-    for t0, chan, payload in col.raw:
-        if chan in pos and len(payload) == 2 * L:
-            counts = decode_raw(payload)[None, :]
-            y[t0 - s0:t0 - s0 + L, pos[chan]] = rows_physical(counts, scale[chan:chan + 1],
-                                                              offset[chan:chan + 1])[0]
-            lost[t0 - s0:t0 - s0 + L, pos[chan]] = False
+    s0, y, lost = _record(col, proc)
+    n = len(y)
     # the whole record's speed and angle stay queryable (the daemon keeps 60 s of knots; behind
     # them the angle is unknown, which made every order's phase 0 there, all orders alike)
     tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s,
                          history_s=n / fs + 60.0)
     tacho.update(np.array(col.tacho_t0, dtype=np.int64), col.tacho_edges)
     comps = cfg.orders.components
-    rpm_top = cfg.orders.max_rpm
-    f_hi = max(c.freq_hz if c.freq_hz is not None else c.order * rpm_top / 60.0 for c in comps)
-    q = max(1, math.floor(fs / (5.0 * f_hi)))
-    per_block = round(fs / cfg.orders.output_rate_hz)          # blocks line up with the tracker's
-    q = max(d for d in range(1, q + 1) if per_block % d == 0)
+    q = _decimation(cfg, fs)
     fs_d = fs / q
     idx = s0 + np.arange(0, n, q)
     hz, turns, valid = tacho.evaluate(idx)
     yd = decimate(y, q, ftype="fir", axis=0, zero_phase=True) if q > 1 else y
     yd = yd[:len(idx)]
     spec = [c.order if c.order is not None else Hz(c.freq_hz) for c in comps]
-    t = idx / fs
-    ph = phases_for(spec, turns=np.nan_to_num(turns), t=t)
+    ph = phases_for(spec, turns=np.nan_to_num(turns), t=idx / fs)
     # the batch filter's own bandwidth: zero-phase over the whole record, it can be much
     # narrower than the causal tracker's (the components' r/bandwidth are for the tracker)
     r = [r_for_bandwidth(bandwidth_hz, fs_d, poles) for _ in comps]
@@ -173,6 +157,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     rpm_blocks = (60.0 * hz[:nb * block]).reshape(nb, block).mean(axis=1)
     ok_blocks = valid[:nb * block].reshape(nb, block).all(axis=1) & (rpm_blocks >= cfg.orders.min_rpm)
     gone = lost[idx[:nb * block] - s0].reshape(nb, block, len(channels)).mean(axis=1)
+    stamps = [proc.stamp_ns(int(idx[(b + 1) * block - 1])) for b in range(nb)]
     written, ridge = 0, []
     for ci, ch in enumerate(channels):
         res = vkf2(yd[:, ci], ph, r, poles=poles)
@@ -180,14 +165,51 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
         w = res.waveforms[:, :nb * block].reshape(len(comps), nb, block)
         rms = np.sqrt(np.mean(w * w, axis=2))
         amp = res.amplitude[:, :nb * block].reshape(len(comps), nb, block).mean(axis=2)
-        for b in range(nb):
-            rpm = float(rpm_blocks[b])
-            freqs = [c.freq_hz if c.freq_hz is not None else c.order * rpm / 60.0 for c in comps]
-            ok = bool(ok_blocks[b])
-            entries = messages.order_entries(comps, freqs, rms[:, b].tolist(), amp[:, b].tolist(), ok)
-            sink.write(*messages.orders(proc.stamp_ns(int(idx[(b + 1) * block - 1])), ch.name, rpm, ok,
-                                        "batch", entries, float(gone[b, ci])))
-            written += 1
+        written += _write_blocks(sink, comps, ch.name, stamps, rpm_blocks, ok_blocks, rms, amp, gone[:, ci])
     return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
             "components": [c.name for c in comps], "r": [float(v) for v in r],
             "ridge": [float(f"{m:.3g}") for m in ridge]}
+
+
+def _record(col, proc) -> tuple[int, np.ndarray, np.ndarray]:
+    """The record's RAW blocks in m/s², from its first block's board sample s0 on: (s0, y (n, C),
+    lost (n, C): True where no RAW block came, zeros in y)."""
+    L = col.status.block_len
+    channels = proc.channels
+    scale, offset = proc.raw_calibration()
+    t0s = np.array([t for t, _, _ in col.raw], dtype=np.int64)
+    s0 = int(t0s.min())
+    n = int(t0s.max()) - s0 + L
+    y = np.zeros((n, len(channels)))
+    lost = np.ones((n, len(channels)), dtype=bool)
+    pos = {ch.index: i for i, ch in enumerate(channels)}
+    for t0, chan, payload in col.raw:
+        if chan in pos and len(payload) == 2 * L:
+            counts = decode_raw(payload)[None, :]
+            y[t0 - s0:t0 - s0 + L, pos[chan]] = rows_physical(counts, scale[chan:chan + 1],
+                                                              offset[chan:chan + 1])[0]
+            lost[t0 - s0:t0 - s0 + L, pos[chan]] = False
+    return s0, y, lost
+
+
+def _decimation(cfg, fs: float) -> int:
+    """The decimation factor: the largest that keeps 5 samples a period of the fastest
+    component at ``orders.max_rpm`` and divides the board samples of an /orders block (so
+    that the blocks line up with the tracker's)."""
+    rpm_top = cfg.orders.max_rpm
+    f_hi = max(c.freq_hz if c.freq_hz is not None else c.order * rpm_top / 60.0 for c in cfg.orders.components)
+    q = max(1, math.floor(fs / (5.0 * f_hi)))
+    per_block = round(fs / cfg.orders.output_rate_hz)
+    return max(d for d in range(1, q + 1) if per_block % d == 0)
+
+
+def _write_blocks(sink, comps, channel: str, stamps: list[int], rpm_blocks: np.ndarray, ok_blocks: np.ndarray,
+                  rms: np.ndarray, amp: np.ndarray, gone: np.ndarray) -> int:
+    """The "batch" /orders messages of one channel's blocks (rms and amp (K, blocks)); how many."""
+    for b, stamp in enumerate(stamps):
+        rpm = float(rpm_blocks[b])
+        freqs = [c.freq_hz if c.freq_hz is not None else c.order * rpm / 60.0 for c in comps]
+        ok = bool(ok_blocks[b])
+        entries = messages.order_entries(comps, freqs, rms[:, b].tolist(), amp[:, b].tolist(), ok)
+        sink.write(*messages.orders(stamp, channel, rpm, ok, "batch", entries, float(gone[b])))
+    return len(stamps)
