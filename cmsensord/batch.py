@@ -157,7 +157,8 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     rpm_blocks = (60.0 * hz[:nb * block]).reshape(nb, block).mean(axis=1)
     ok_blocks = valid[:nb * block].reshape(nb, block).all(axis=1) & (rpm_blocks >= cfg.orders.min_rpm)
     gone = lost[idx[:nb * block] - s0].reshape(nb, block, len(channels)).mean(axis=1)
-    stamps = [proc.stamp_ns(int(idx[(b + 1) * block - 1])) for b in range(nb)]
+    heads = _block_heads(comps, [proc.stamp_ns(int(idx[(b + 1) * block - 1])) for b in range(nb)],
+                         rpm_blocks, ok_blocks)
     written, ridge = 0, []
     for ci, ch in enumerate(channels):
         res = vkf2(yd[:, ci], ph, r, poles=poles)
@@ -165,7 +166,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
         w = res.waveforms[:, :nb * block].reshape(len(comps), nb, block)
         rms = np.sqrt(np.mean(w * w, axis=2))
         amp = res.amplitude[:, :nb * block].reshape(len(comps), nb, block).mean(axis=2)
-        written += _write_blocks(sink, comps, ch.name, stamps, rpm_blocks, ok_blocks, rms, amp, gone[:, ci])
+        written += _write_blocks(sink, comps, ch.name, heads, rms, amp, gone[:, ci])
     return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
             "components": [c.name for c in comps], "r": [float(v) for v in r],
             "ridge": [float(f"{m:.3g}") for m in ridge]}
@@ -203,13 +204,22 @@ def _decimation(cfg, fs: float) -> int:
     return max(d for d in range(1, q + 1) if per_block % d == 0)
 
 
-def _write_blocks(sink, comps, channel: str, stamps: list[int], rpm_blocks: np.ndarray, ok_blocks: np.ndarray,
-                  rms: np.ndarray, amp: np.ndarray, gone: np.ndarray) -> int:
-    """The "batch" /orders messages of one channel's blocks (rms and amp (K, blocks)); how many."""
-    for b, stamp in enumerate(stamps):
-        rpm = float(rpm_blocks[b])
+def _block_heads(comps, stamps: list[int], rpm_blocks: np.ndarray,
+                 ok_blocks: np.ndarray) -> list[tuple[int, float, bool, list[float]]]:
+    """Per block what every channel's message of it shares: (stamp, speed [rpm], valid, the
+    components' frequencies [Hz])."""
+    heads = []
+    for stamp, rpm, ok in zip(stamps, rpm_blocks.tolist(), ok_blocks.tolist()):
         freqs = [c.freq_hz if c.freq_hz is not None else c.order * rpm / 60.0 for c in comps]
-        ok = bool(ok_blocks[b])
+        heads.append((stamp, float(rpm), bool(ok), freqs))
+    return heads
+
+
+def _write_blocks(sink, comps, channel: str, heads: list[tuple[int, float, bool, list[float]]],
+                  rms: np.ndarray, amp: np.ndarray, gone: np.ndarray) -> int:
+    """The "batch" /orders messages of one channel's blocks (:func:`_block_heads`; rms and amp
+    (K, blocks)); how many."""
+    for b, (stamp, rpm, ok, freqs) in enumerate(heads):
         entries = messages.order_entries(comps, freqs, rms[:, b].tolist(), amp[:, b].tolist(), ok)
         sink.write(*messages.orders(stamp, channel, rpm, ok, "batch", entries, float(gone[b])))
-    return len(stamps)
+    return len(heads)
