@@ -94,6 +94,19 @@ def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs, cl
     sink.close()
 
 
+def test_an_event_queued_between_ticks_is_fsynced_by_the_first_tick(tmp_path, fsyncs, clock):
+    sink = RotatingSink(output(tmp_path, fsync_s=30.0), clock=clock)
+    ino = os.fstat(sink.current.fileno()).st_ino
+    sink.on_event = lambda kind, message, **fields: sink.write(
+        TOPIC_EVENTS, "event", 10**18, {"kind": kind, "channel": None, "message": message})
+    sink.emit("salvage", "old.mcap.part: salvaged 3 message(s)")    # as the salvage thread does
+    clock.t += 0.1
+    sink.tick()
+    assert fsyncs == [ino]
+    assert summarize(sink.current.part_path)["event_counts"] == {"salvage": 1}
+    sink.close()
+
+
 def test_ticks_every_100_ms_keep_everything_older_than_flush_s_in_the_file(tmp_path, clock):
     sink = RotatingSink(output(tmp_path, flush_s=1.0), clock=clock)
     written = []                                         # clock time of each message

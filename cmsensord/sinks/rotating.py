@@ -359,8 +359,11 @@ class RotatingSink:
         """Once per loop iteration: make pending events durable, flush at least every
         ``flush_s``, fsync every ``fsync_s``, rotate by time, retry after a disk error.
 
-        Cheap when there is nothing to do; at most one fsync per call.
+        Events queued before the call (:meth:`emit`: a salvage's) are delivered first, so
+        this call makes them durable. Cheap when there is nothing to do; at most one fsync
+        per call.
         """
+        self._deliver()
         now = self.clock()
         self._margin.tick(now, self._current.reorder if self._current is not None else None)
         if self._current is None:
