@@ -62,6 +62,7 @@ PROCESS_MODULES = frozenset({
     "test_acoustic_calib_command.py",
     "test_indicators_daemon.py",
     "test_mqtt.py",
+    "test_retention_process.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

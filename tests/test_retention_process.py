@@ -1,0 +1,68 @@
+"""Retention through the command a user types: ``cmsensord replay`` into a directory holding
+older logs of its prefix deletes them under ``retain_mb`` (a ``retention`` event), and one it
+cannot delete is a ``retention_failed`` event, a journal line, and the replay goes on."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cmsensord.sinks.mcap_read import read_messages
+from processes import cmsensord, run_module
+
+OLD = "cmsensord-20200101T000000Z.mcap"      # the oldest name of the default prefix
+NEWER = "cmsensord-20200102T000000Z.mcap"
+CONFIG = "output:\n  dir: {out}\n  rotate_mb: 1\n  retain_mb: 1\n  min_free_mb: 0\n"
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory) -> Path:
+    """5 s of a healthy board's RMS frames."""
+    cap = tmp_path_factory.mktemp("cap") / "cap.bin"
+    r = run_module("firmware_sim", "--scenario", "healthy", "--duration", "5", "--out", str(cap))
+    assert r.returncode == 0, r.stderr
+    return cap
+
+
+def replay_into(tmp_path: Path, capture: Path) -> tuple[str, list[dict]]:
+    """``cmsensord replay`` of ``capture`` into tmp_path/out with a 1-MB cap: exit 0; (its
+    stderr, the /cm/events messages of the log it wrote)."""
+    out = tmp_path / "out"
+    (tmp_path / "c.yaml").write_text(CONFIG.format(out=out))
+    r = cmsensord("replay", str(capture), "--out", str(out), "--config", str(tmp_path / "c.yaml"))
+    assert r.returncode == 0, r.stderr
+    new = [p for p in out.glob("cmsensord-*.mcap") if p.name not in (OLD, NEWER)]
+    assert len(new) == 1, sorted(out.iterdir())                # the replay's own log
+    return r.stderr, [m for t, _, m in read_messages(new[0]) if t == "/cm/events"]
+
+
+def plant(path: Path, mb: float) -> None:
+    path.write_bytes(b"\0" * int(mb * 1_000_000))
+
+
+def test_older_logs_over_retain_mb_are_deleted_with_one_event(tmp_path, capture):
+    out = tmp_path / "out"
+    out.mkdir()
+    plant(out / OLD, 1.5)
+    plant(out / NEWER, 0.2)
+    other = out / "other-20200101T000000Z.mcap"         # another prefix's file: never counted
+    plant(other, 1.5)
+    _, events = replay_into(tmp_path, capture)
+    assert not (out / OLD).exists() and (out / NEWER).exists() and other.exists()
+    [ev] = [e for e in events if e["kind"] == "disk_error"]
+    assert ev["message"].startswith(f"retention: deleted the 1 oldest log file(s) (1.5 MB: {OLD}) "
+                                    "to keep this prefix's files under retain_mb = 1 MB (now 0.2 MB)")
+
+
+def test_a_log_retention_cannot_delete_is_one_event_and_the_replay_goes_on(tmp_path, capture):
+    out = tmp_path / "out"
+    (out / OLD).mkdir(parents=True)                       # a directory under a log's name: EISDIR
+    (out / OLD / "kept").write_text("x")
+    plant(out / NEWER, 1.5)
+    err, events = replay_into(tmp_path, capture)
+    message = f"{out / OLD}: retention cannot delete: Is a directory"
+    assert f"ERROR disk_error: {message}" in err.splitlines()
+    assert [e["message"] for e in events if e["kind"] == "disk_error"] == [message]
+    assert (out / OLD / "kept").exists() and (out / NEWER).exists()   # the pass ended at the first
+    assert "events: config 1, disk_error 1" in err
