@@ -27,6 +27,21 @@ _INDICATOR: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+",
 LEVEL_KEYS = {"alert": ("alert", "alert_zone", "alert_x_baseline"),
               "danger": ("danger", "danger_zone", "danger_x_baseline")}
 _ZONE = {"choices": ("B", "C", "D")}
+#: the level settings of a rule and of its speed bands: help text and checks
+_LEVEL_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "alert": ("alert level [the indicator's unit]", {}),
+    "danger": ("danger level [the indicator's unit]", {}),
+    "alert_zone": ("alert at the lower boundary of this ISO zone (B, C or D)", _ZONE),
+    "danger_zone": ("danger at the lower boundary of this ISO zone", _ZONE),
+    "alert_x_baseline": ("alert at k x the learned baseline", {"gt": 0}),
+    "danger_x_baseline": ("danger at k x the learned baseline", {"gt": 0}),
+}
+
+
+def _level(key: str) -> Any:
+    """The setting ``key`` of :data:`_LEVEL_SETTINGS` (default None: not given)."""
+    text, checks = _LEVEL_SETTINGS[key]
+    return setting(None, text, **checks)
 
 
 def _levels(need: bool) -> Rule:
@@ -69,12 +84,12 @@ class SpeedBandConfig:
     its highest band)."""
 
     below_rpm: float = setting(dataclasses.MISSING, "these levels apply while the speed is below this [rpm]", gt=0)
-    alert: float | None = setting(None, "alert level [the indicator's unit]")
-    danger: float | None = setting(None, "danger level [the indicator's unit]")
-    alert_zone: str | None = setting(None, "alert at the lower boundary of this ISO zone (B, C or D)", **_ZONE)
-    danger_zone: str | None = setting(None, "danger at the lower boundary of this ISO zone", **_ZONE)
-    alert_x_baseline: float | None = setting(None, "alert at k x the learned baseline", gt=0)
-    danger_x_baseline: float | None = setting(None, "danger at k x the learned baseline", gt=0)
+    alert: float | None = _level("alert")
+    danger: float | None = _level("danger")
+    alert_zone: str | None = _level("alert_zone")
+    danger_zone: str | None = _level("danger_zone")
+    alert_x_baseline: float | None = _level("alert_x_baseline")
+    danger_x_baseline: float | None = _level("danger_x_baseline")
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True),)
 
@@ -91,12 +106,12 @@ class AlarmRuleConfig:
                              "accel_rms, kurtosis, envelope_rms, zone, <bearing>.bpfo, band.<name>, ...), "
                              "severity_index, or order.<component> (order RMS)", **_INDICATOR)
     channels: tuple[str, ...] = setting((), "channels watched (default: every vibration channel)")
-    alert: float | None = setting(None, "alert level [the indicator's unit]")
-    danger: float | None = setting(None, "danger level [the indicator's unit]")
-    alert_zone: str | None = setting(None, "alert at the lower boundary of this ISO zone (B, C or D)", **_ZONE)
-    danger_zone: str | None = setting(None, "danger at the lower boundary of this ISO zone", **_ZONE)
-    alert_x_baseline: float | None = setting(None, "alert at k x the learned baseline", gt=0)
-    danger_x_baseline: float | None = setting(None, "danger at k x the learned baseline", gt=0)
+    alert: float | None = _level("alert")
+    danger: float | None = _level("danger")
+    alert_zone: str | None = _level("alert_zone")
+    danger_zone: str | None = _level("danger_zone")
+    alert_x_baseline: float | None = _level("alert_x_baseline")
+    danger_x_baseline: float | None = _level("danger_x_baseline")
     on_delay_s: float = setting(0.0, "the level must be exceeded this long before the alarm [s]", ge=0)
     off_delay_s: float = setting(0.0, "the value must stay below this long before it clears [s]", ge=0)
     deadband_pct: float = setting(5.0, "hysteresis: exceeded until below level x (1 - pct/100) [%]",
