@@ -129,68 +129,80 @@ class KnotSmoothing(TachoState):
         self._settle()
         s = np.asarray(samples, dtype=np.float64)
         flat = s.reshape(-1)
-        if flat.size:
-            kT, kth, kw, kr = self._knots(float(flat.min()), float(flat.max()))
-        else:
-            kT, kth, kw, kr = self._knots()
-        if kT.size == 0:
+        knots = self._knots(float(flat.min()), float(flat.max())) if flat.size else self._knots()
+        if knots[0].size == 0:
             return (np.zeros(s.shape), np.full(s.shape, self._held), np.zeros(s.shape, dtype=bool))
-        if _kernel is not None and self.use_kernel:
-            # between knots in C (one pass, no temporaries; 0 elsewhere), the rest below
-            speed = np.empty(flat.size)
-            turns = np.empty(flat.size)
-            jj = np.empty(flat.size, dtype=np.int64)
-            code = np.empty(flat.size, dtype=np.uint8)
-            _kernel.tacho_eval(np.ascontiguousarray(flat), np.ascontiguousarray(kT),
-                               np.ascontiguousarray(kth), np.ascontiguousarray(kw),
-                               np.ascontiguousarray(kr, dtype=np.int64), speed, turns, jj, code)
-            valid = code == 1
-            before = code == 0
-            tail = code == 2
-        else:
-            speed = np.zeros(flat.size)
-            turns = np.zeros(flat.size)
-            valid = np.zeros(flat.size, dtype=bool)
-            j = np.searchsorted(kT, flat, side="right") - 1
-            before = j < 0
-            jj = np.clip(j, 0, kT.size - 1)
-            nxt = np.minimum(jj + 1, kT.size - 1)
-            inner = (~before) & (jj + 1 < kT.size) & (kr[nxt] == kr[jj])
-            every = bool(inner.all())         # the usual case: no masks needed
-            a, b, x = (jj, nxt, flat) if every else (jj[inner], nxt[inner], flat[inner])
-            if a.size:
-                h = kT[b] - kT[a]
-                u = (x - kT[a]) / h
-                u2, u3 = u * u, u * u * u
-                th = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
-                      + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b])
-                sp = (1.0 - u) * kw[a] + u * kw[b]
-                if every:
-                    turns, speed = th, sp
-                    valid[:] = True
-                else:
-                    turns[inner] = th
-                    speed[inner] = sp
-                    valid[inner] = True
-            tail = (~before) & (~inner)
+        between = self._between_c if _kernel is not None and self.use_kernel else self._between
+        speed, turns, valid, jj, before, tail = between(flat, *knots)
         if tail.any():
-            a = jj[tail]
-            rids, inv = np.unique(kr[a], return_inverse=True)
-            stops = np.array([self._stop_of(int(r)) for r in rids])[inv.reshape(-1)]
-            tau = flat[tail] - kT[a]
-            w0 = kw[a]
-            c = 1.0 / self.ppr
-            tau_stop = stops - kT[a]
-            ok = tau < tau_stop
-            tq = np.where(ok, tau, tau_stop)
-            sp, dturn = self._tail(w0, tq, c)
-            turns[tail] = kth[a] + dturn
-            speed[tail] = np.where(ok, sp, 0.0)
-            valid[tail] = ok
+            self._after_runs(flat, jj, tail, knots, speed, turns, valid)
         if before.any() and self._pruned:  # behind the kept history: unknown
             turns[before] = np.nan
             speed[before] = np.nan
         return (speed.reshape(s.shape) * self.fs, turns.reshape(s.shape), valid.reshape(s.shape))
+
+    @staticmethod
+    def _between_c(flat: FloatArray, kT: FloatArray, kth: FloatArray, kw: FloatArray,
+                   kr: IntArray) -> tuple[FloatArray, FloatArray, BoolArray, IntArray, BoolArray, BoolArray]:
+        """:meth:`_between` in the compiled kernel (one pass, no temporaries)."""
+        speed = np.empty(flat.size)
+        turns = np.empty(flat.size)
+        jj = np.empty(flat.size, dtype=np.int64)
+        code = np.empty(flat.size, dtype=np.uint8)
+        _kernel.tacho_eval(np.ascontiguousarray(flat), np.ascontiguousarray(kT),
+                           np.ascontiguousarray(kth), np.ascontiguousarray(kw),
+                           np.ascontiguousarray(kr, dtype=np.int64), speed, turns, jj, code)
+        return speed, turns, code == 1, jj, code == 0, code == 2
+
+    @staticmethod
+    def _between(flat: FloatArray, kT: FloatArray, kth: FloatArray, kw: FloatArray,
+                 kr: IntArray) -> tuple[FloatArray, FloatArray, BoolArray, IntArray, BoolArray, BoolArray]:
+        """Speed and turns between two knots of one run (cubic Hermite angle, linear speed;
+        0 elsewhere), valid there; each sample's knot at or before it, and the samples before
+        the first knot and those after a run's last knot (``before``, ``tail``)."""
+        speed = np.zeros(flat.size)
+        turns = np.zeros(flat.size)
+        valid = np.zeros(flat.size, dtype=bool)
+        j = np.searchsorted(kT, flat, side="right") - 1
+        before = j < 0
+        jj = np.clip(j, 0, kT.size - 1)
+        nxt = np.minimum(jj + 1, kT.size - 1)
+        inner = (~before) & (jj + 1 < kT.size) & (kr[nxt] == kr[jj])
+        every = bool(inner.all())         # the usual case: no masks needed
+        a, b, x = (jj, nxt, flat) if every else (jj[inner], nxt[inner], flat[inner])
+        if a.size:
+            h = kT[b] - kT[a]
+            u = (x - kT[a]) / h
+            u2, u3 = u * u, u * u * u
+            th = ((2 * u3 - 3 * u2 + 1) * kth[a] + (u3 - 2 * u2 + u) * h * kw[a]
+                  + (-2 * u3 + 3 * u2) * kth[b] + (u3 - u2) * h * kw[b])
+            sp = (1.0 - u) * kw[a] + u * kw[b]
+            if every:
+                turns, speed = th, sp
+                valid[:] = True
+            else:
+                turns[inner] = th
+                speed[inner] = sp
+                valid[inner] = True
+        return speed, turns, valid, jj, before, (~before) & (~inner)
+
+    def _after_runs(self, flat: FloatArray, jj: IntArray, tail: BoolArray,
+                    knots: tuple[FloatArray, FloatArray, FloatArray, IntArray], speed: FloatArray,
+                    turns: FloatArray, valid: BoolArray) -> None:
+        """Into ``speed``, ``turns`` and ``valid`` at ``tail``: the samples after their run's
+        last knot (``jj``), extrapolated (:meth:`_tail`) until the run's timeout, 0 and invalid
+        after it."""
+        kT, kth, kw, kr = knots
+        a = jj[tail]
+        rids, inv = np.unique(kr[a], return_inverse=True)
+        stops = np.array([self._stop_of(int(r)) for r in rids])[inv.reshape(-1)]
+        tau = flat[tail] - kT[a]
+        tau_stop = stops - kT[a]
+        ok = tau < tau_stop
+        sp, dturn = self._tail(kw[a], np.where(ok, tau, tau_stop), 1.0 / self.ppr)
+        turns[tail] = kth[a] + dturn
+        speed[tail] = np.where(ok, sp, 0.0)
+        valid[tail] = ok
 
     def _stop_of(self, rid: int) -> float:
         """End of the valid extrapolation of run ``rid`` (samples): its timeout."""
