@@ -12,12 +12,16 @@ ratio is what doing the work in wake-ups costs over doing it back to back, the p
 the live daemon's cost over a replay's (bench/bench_live.py) that no change to the
 reader or the loop removes.
 
-    python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2] [--orders-only]
+    python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2] [--orders-only] [--idle]
 
 ``--orders-only`` also measures, paced, the order path alone (:func:`orders_only`: the
 RAW blocks, the tacho, the order tracker and its /orders messages; no observation, bank,
 indicator or decision).  Not what the daemon does: the least a wake-up carrying the
 /orders block costs, against the whole chain's back to back.
+
+``--idle`` also measures an empty loop paced the same way (:func:`idle`: a sleep until the
+next part is due, no work): what a wake-up alone costs this interpreter on this machine, the
+part of any paced loop's cost no change to the work removes.
 
 ``--repeat N`` measures each N times (back to back and paced in turn) and shows the
 least CPU of each.  Figures are ratios measured side by side in one run.
@@ -106,6 +110,28 @@ def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool,
     return used / (len(parts) * span_s)
 
 
+def idle(span_s: float, seconds: float) -> float:
+    """CPU seconds per wake-up of a loop that sleeps until its next part of ``span_s`` is due,
+    for ``seconds`` of wall time, and does nothing else."""
+    n = max(1, round(seconds / span_s))
+    c0, t0 = cpu_s(), time.monotonic()
+    for k in range(n):
+        wait = t0 + (k + 1) * span_s - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+    return (cpu_s() - c0) / n
+
+
+def print_idle(spans: list[float], seconds: float, repeat: int) -> None:
+    """The table of :func:`idle` per span (least of ``repeat``)."""
+    print(f"\n# an empty loop paced at 1x, {seconds:g} s per span (least of {repeat})\n")
+    print("| part s | wake-ups a second | CPU us per wake-up | % of a core |")
+    print("| ---: | ---: | ---: | ---: |")
+    for span in spans:
+        per = min(idle(span, seconds) for _ in range(repeat))
+        print(f"| {span:g} | {1 / span:g} | {1e6 * per:.0f} | {100 * per / span:.3f} |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="board seconds measured per run")
@@ -114,6 +140,7 @@ def main() -> int:
     ap.add_argument("--only", action="append", choices=sorted(CAPTURES))
     ap.add_argument("--orders-only", action="store_true",
                     help="also the order path alone, paced (RAW captures)")
+    ap.add_argument("--idle", action="store_true", help="also an empty loop paced the same way")
     args = ap.parse_args()
     spans = args.span or [0.1, 1.0]
     rows = []
@@ -146,6 +173,8 @@ def main() -> int:
         if args.orders_only:
             line += f" {1000 * got['orders']:.2f} | {got['orders'] / tight:.1f} |" if "orders" in got else " - | - |"
         print(line)
+    if args.idle:
+        print_idle(spans, args.seconds, args.repeat)
     return 0
 
 
