@@ -13,7 +13,12 @@ wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its 
 per board second and the ratio live / replay.  The last column is the simulated
 board's own CPU over the same window: what the daemon shares the machine with.
 
-    python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--tree before=DIR]
+    python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--repeat 3] [--tree before=DIR]
+
+``--repeat N`` runs every configuration N times, in rounds (each round runs them all in
+turn), prints every run's row, then per configuration the least, median and most of its live
+CPU % and live / replay: runs of one tree minutes apart scatter by tens of percent on a shared
+machine, more than most changes move them.
 
 ``--tree LABEL=DIR`` (repeatable) runs the simulator, the daemon and the replay from
 another checkout too (its C kernels built in place: ``python setup.py build_ext
@@ -127,6 +132,28 @@ def replay(tmp: Path, cap: Path, kernels: bool, env: dict[str, str]) -> dict:
     return json.loads(report.read_text())
 
 
+def measure(name: str, kernels: bool, tree: Path, warmup: float, seconds: float) -> tuple[dict, dict, float]:
+    """One run of configuration ``name``: (live, replay, the replay's CPU % of a core)."""
+    with tempfile.TemporaryDirectory(prefix="bench_live") as tmp:
+        lv = live(Path(tmp), CONFIGS[name][0], kernels, warmup, seconds, tree, MORE_CONFIG.get(name, ""))
+        rp = replay(Path(tmp), lv["capture"], kernels, tree_env(tree))
+    return lv, rp, 100 * rp["cpu_s"] / rp["board_s"]
+
+
+def print_spread(rows: list, repeat: int) -> None:
+    """Per configuration and kernels: least / median / most of the live CPU % and of live / replay."""
+    runs: dict[tuple[str, str], list[tuple[float, float]]] = {}
+    for label, k, lv, _rp, rep_pct in rows:
+        runs.setdefault((label, k), []).append((lv["cpu_pct"], lv["cpu_pct"] / rep_pct))
+    print(f"\n# the spread of {repeat} runs: least / median / most\n")
+    print("| configuration | kernels | live CPU % | live / replay |")
+    print("| --- | --- | ---: | ---: |")
+    for (label, k), got in runs.items():
+        cols = [sorted(v) for v in zip(*got)]
+        print(f"| {label} | {k} | " + " | ".join(
+            f"{c[0]:.2f} / {statistics.median(c):.2f} / {c[-1]:.2f}" for c in cols) + " |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="measuring window per configuration (s)")
@@ -135,23 +162,21 @@ def main() -> int:
     ap.add_argument("--kernels", choices=("both", "on", "off"), default="both")
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also run the code of another checkout (e.g. before=/tmp/before)")
+    ap.add_argument("--repeat", type=int, default=1, help="rounds of every configuration")
     args = ap.parse_args()
     kernel_runs = {"both": (True, False), "on": (True,), "off": (False,)}[args.kernels]
     trees = [(lab, Path(d).resolve()) for lab, d in (t.split("=", 1) for t in args.tree)]
     trees.append(("this" if trees else "", ROOT))
     rows = []
-    for name in args.only or list(CONFIGS):
-        sim_args, label = CONFIGS[name]
-        for kernels in kernel_runs:
-            for tree_label, tree in trees:
-                with tempfile.TemporaryDirectory(prefix="bench_live") as tmp:
-                    lv = live(Path(tmp), sim_args, kernels, args.warmup, args.seconds, tree,
-                              MORE_CONFIG.get(name, ""))
-                    rp = replay(Path(tmp), lv["capture"], kernels, tree_env(tree))
-                rep_pct = 100 * rp["cpu_s"] / rp["board_s"]
-                row_label = f"{label} ({tree_label})" if tree_label else label
-                rows.append((row_label, "yes" if kernels else "no", lv, rp, rep_pct))
-                print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
+    for _ in range(max(1, args.repeat)):
+        for name in args.only or list(CONFIGS):
+            sim_args, label = CONFIGS[name]
+            for kernels in kernel_runs:
+                for tree_label, tree in trees:
+                    row_label = f"{label} ({tree_label})" if tree_label else label
+                    rows.append((row_label, "yes" if kernels else "no",
+                                 *measure(name, kernels, tree, args.warmup, args.seconds)))
+                    print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
     print(f"# live daemon at 1x, {args.seconds:g} s window after {args.warmup:g} s warm-up; "
           "replay of the same capture\n")
     print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95; "
@@ -164,6 +189,8 @@ def main() -> int:
         print(f"| {label} | {k} | {lv['cpu_pct']:.2f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
               f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.2f} / {rp['board_s']:.0f} | {rep_pct:.2f} "
               f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} | {lv['board_pct']:.1f} |")
+    if args.repeat > 1:
+        print_spread(rows, args.repeat)
     return 0
 
 
