@@ -170,7 +170,7 @@ def main() -> int:
     rows = []
     for _ in range(max(1, args.repeat)):
         for name in args.only or list(CONFIGS):
-            sim_args, label = CONFIGS[name]
+            label = CONFIGS[name][1]
             for kernels in kernel_runs:
                 for tree_label, tree in trees:
                     row_label = f"{label} ({tree_label})" if tree_label else label
