@@ -13,6 +13,7 @@ the live daemon's cost over a replay's (bench/bench_live.py) that no change to t
 reader or the loop removes.
 
     python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2] [--orders-only] [--idle]
+                               [--footprint]
 
 ``--orders-only`` also measures, paced, the order path alone (:func:`orders_only`: the
 RAW blocks, the tacho, the order tracker and its /orders messages; no observation, bank,
@@ -22,6 +23,13 @@ indicator or decision).  Not what the daemon does: the least a wake-up carrying 
 ``--idle`` also measures an empty loop paced the same way (:func:`idle`: a sleep until the
 next part is due, no work): what a wake-up alone costs this interpreter on this machine, the
 part of any paced loop's cost no change to the work removes.
+
+``--footprint`` also times (wall, median of the calls) two synthetic workloads of the same
+Python and numpy calls, back to back and each after a sleep of the part's length
+(:func:`footprint_work`): 300 distinct small functions called once each (a broad code
+footprint, as the chain's ~330 calls a wake-up run each once) and the first of them called
+300 times (a narrow one).  Nothing of cmsensord runs: what a wake-up's work costs over the
+same work back to back on this machine, by how much distinct code it runs.
 
 ``--repeat N`` measures each N times (back to back and paced in turn) and shows the
 least CPU of each.  Figures are ratios measured side by side in one run.
@@ -34,7 +42,10 @@ import resource
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -84,9 +95,9 @@ def orders_only(proc: Processor) -> None:
 
 
 def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool,
-            only_orders: bool = False) -> float:
-    """CPU seconds per board second of a fresh Processor's calls on parts of ``span_s``
-    (``only_orders``: :func:`orders_only`, after the start-up)."""
+            only_orders: bool = False) -> tuple[float, float]:
+    """CPU seconds per board second of a fresh Processor's calls on parts of ``span_s``, and
+    the median wall seconds of one call (``only_orders``: :func:`orders_only`, after the start-up)."""
     sink = ListSink()
     proc = Processor(default_config(), sink, clock_ns=lambda: 10**18)
     proc.handle(frames[:50])                # the STATUS frame: the board's rate
@@ -97,9 +108,11 @@ def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool,
         orders_only(proc)
     parts = parts_of(frames[i:], max(1, round(span_s * fs)))[:max(1, round(seconds / span_s))]
     sink.messages.clear()
-    c0, t0 = cpu_s(), time.monotonic()
+    c0, t0, walls = cpu_s(), time.monotonic(), []
     for k, part in enumerate(parts):
+        w = time.perf_counter()
         proc.handle(part)
+        walls.append(time.perf_counter() - w)
         sink.messages.clear()
         if paced:
             wait = t0 + (k + 1) * span_s - time.monotonic()
@@ -107,7 +120,7 @@ def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool,
                 time.sleep(wait)
     used = cpu_s() - c0
     proc.finish()
-    return used / (len(parts) * span_s)
+    return used / (len(parts) * span_s), sorted(walls)[len(walls) // 2]
 
 
 def idle(span_s: float, seconds: float) -> float:
@@ -132,6 +145,57 @@ def print_idle(spans: list[float], seconds: float, repeat: int) -> None:
         print(f"| {span:g} | {1 / span:g} | {1e6 * per:.0f} | {100 * per / span:.3f} |")
 
 
+#: distinct functions of the broad synthetic workload (the chain's calls a wake-up, in round figures)
+FOOTPRINT_CALLS = 300
+
+
+def footprint_work(count: int = FOOTPRINT_CALLS) -> dict[str, Callable[[], float]]:
+    """Two workloads of ``count`` calls of small functions alike (arithmetic, a dict, a list,
+    a numpy element): ``broad`` calls ``count`` distinct ones once each, ``narrow`` the first
+    of them ``count`` times."""
+    funcs = []
+    for i in range(count):
+        src = (f"def f(x, a):\n    y = x * {i + 1} + {i}\n    if y % 3 == {i % 3}:\n        y -= {i}\n"
+               f"    d = {{'k{i}': y, 'j': [y, {i}]}}\n    return d['k{i}'] + len(d['j']) + float(a[{i % 50}])\n")
+        space: dict = {}
+        exec(src, space)                    # distinct code objects: a broad footprint
+        funcs.append(space["f"])
+    a = np.arange(100.0)
+
+    def broad() -> float:
+        return sum(f(3, a) for f in funcs)
+
+    def narrow() -> float:
+        f = funcs[0]
+        return sum(f(3, a) for _ in funcs)
+    return {"broad": broad, "narrow": narrow}
+
+
+def work_wall(work: Callable[[], float], span_s: float, seconds: float, paced: bool) -> float:
+    """Median wall seconds of one call of ``work``: called back to back, or each after a sleep
+    of ``span_s``, for about ``seconds`` of wall time (at most 200 calls)."""
+    walls = []
+    for _ in range(max(20, min(200, round(seconds / span_s)))):
+        if paced:
+            time.sleep(span_s)
+        t = time.perf_counter()
+        work()
+        walls.append(time.perf_counter() - t)
+    return sorted(walls)[len(walls) // 2]
+
+
+def print_footprint(spans: list[float], seconds: float, repeat: int) -> None:
+    """The table of :func:`footprint_work`'s two workloads per span (least of ``repeat``)."""
+    print(f"\n# synthetic work of {FOOTPRINT_CALLS} small calls, wall us a call (median; least of {repeat})\n")
+    print("| workload | part s | back to back | after a sleep of the part | after a sleep / back to back |")
+    print("| --- | ---: | ---: | ---: | ---: |")
+    for name, work in footprint_work().items():
+        for span in spans:
+            tight = min(work_wall(work, span, seconds, paced=False) for _ in range(repeat))
+            slept = min(work_wall(work, span, seconds, paced=True) for _ in range(repeat))
+            print(f"| {name} | {span:g} | {1e6 * tight:.0f} | {1e6 * slept:.0f} | {slept / tight:.1f} |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="board seconds measured per run")
@@ -141,6 +205,8 @@ def main() -> int:
     ap.add_argument("--orders-only", action="store_true",
                     help="also the order path alone, paced (RAW captures)")
     ap.add_argument("--idle", action="store_true", help="also an empty loop paced the same way")
+    ap.add_argument("--footprint", action="store_true",
+                    help="also synthetic work of many distinct or one repeated function, slept between")
     args = ap.parse_args()
     spans = args.span or [0.1, 1.0]
     rows = []
@@ -152,7 +218,7 @@ def main() -> int:
             frames = iter_frames(cap.read_bytes())[0]
             alone = args.orders_only and name.startswith("raw")
             for span in spans:
-                runs: dict[str, list[float]] = {"tight": [], "paced": [], "orders": []}
+                runs: dict[str, list[tuple[float, float]]] = {"tight": [], "paced": [], "orders": []}
                 for _ in range(args.repeat):
                     runs["tight"].append(measure(frames, span, args.seconds, paced=False))
                     runs["paced"].append(measure(frames, span, args.seconds, paced=True))
@@ -164,17 +230,20 @@ def main() -> int:
           f"(least of {args.repeat})\n")
     extra = " | paced, the order path alone: CPU ms / board s | its / back to back" if args.orders_only else ""
     print("| capture | part s | back to back: CPU ms / board s | paced at 1x: CPU ms / board s "
-          f"| paced at 1x: % of a core | paced / back to back{extra} |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |" + (" ---: | ---: |" if args.orders_only else ""))
+          f"| paced at 1x: % of a core | paced / back to back | a call, wall us: back to back / paced{extra} |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |" + (" ---: | ---: |" if args.orders_only else ""))
     for label, span, got in rows:
-        tight, paced = got["tight"], got["paced"]
+        (tight, tight_wall), (paced, paced_wall) = got["tight"], got["paced"]
         line = (f"| {label} | {span:g} | {1000 * tight:.2f} | {1000 * paced:.2f} | {100 * paced:.3f} "
-                f"| {paced / tight:.1f} |")
+                f"| {paced / tight:.1f} | {1e6 * tight_wall:.0f} / {1e6 * paced_wall:.0f} |")
         if args.orders_only:
-            line += f" {1000 * got['orders']:.2f} | {got['orders'] / tight:.1f} |" if "orders" in got else " - | - |"
+            alone = got["orders"][0] if "orders" in got else None
+            line += f" {1000 * alone:.2f} | {alone / tight:.1f} |" if alone is not None else " - | - |"
         print(line)
     if args.idle:
         print_idle(spans, args.seconds, args.repeat)
+    if args.footprint:
+        print_footprint(spans, args.seconds, args.repeat)
     return 0
 
 
