@@ -13,7 +13,7 @@ the live daemon's cost over a replay's (bench/bench_live.py) that no change to t
 reader or the loop removes.
 
     python bench/bench_wake.py [--seconds 20] [--span 0.1 --span 1.0] [--repeat 2] [--orders-only] [--idle]
-                               [--footprint]
+                               [--footprint] [--idle-poll]
 
 ``--orders-only`` also measures, paced, the order path alone (:func:`orders_only`: the
 RAW blocks, the tacho, the order tracker and its /orders messages; no observation, bank,
@@ -30,6 +30,11 @@ Python and numpy calls, back to back and each after a sleep of the part's length
 footprint, as the chain's ~330 calls a wake-up run each once) and the first of them called
 300 times (a narrow one).  Nothing of cmsensord runs: what a wake-up's work costs over the
 same work back to back on this machine, by how much distinct code it runs.
+
+``--idle-poll`` also measures everything with the CPUs polling when idle instead of halting
+(bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0, root only), rows marked "(idle: poll)",
+interleaved with the others: how much of the cold factor is the CPU's halt between wake-ups (on a
+virtual machine, the host's work on the core meanwhile).  A diagnostic, not a setting for the board.
 
 ``--repeat N`` measures each N times (back to back and paced in turn) and shows the
 least CPU of each.  Figures are ratios measured side by side in one run.
@@ -57,6 +62,7 @@ from cmsensord.config import default_config
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, iter_frames
 from cmsensord.sinks.memory import ListSink
+from cpu_idle import idle_driver, polling_idle
 
 #: name -> (label, how its capture of the `faulty` motor is made: path, seconds)
 CAPTURES = {"raw1": ("RAW 1 ch + tacho + 4 orders", lambda p, s: bench_raw.make_capture(p, "faulty", 1, s)),
@@ -123,6 +129,15 @@ def measure(frames: list[Frame], span_s: float, seconds: float, paced: bool,
     return used / (len(parts) * span_s), sorted(walls)[len(walls) // 2]
 
 
+def measure_all(frames: list[Frame], span_s: float, seconds: float, alone: bool) -> dict[str, tuple[float, float]]:
+    """:func:`measure` back to back, paced, and (``alone``) paced on the order path alone."""
+    got = {"tight": measure(frames, span_s, seconds, paced=False),
+           "paced": measure(frames, span_s, seconds, paced=True)}
+    if alone:
+        got["orders"] = measure(frames, span_s, seconds, paced=True, only_orders=True)
+    return got
+
+
 def idle(span_s: float, seconds: float) -> float:
     """CPU seconds per wake-up of a loop that sleeps until its next part of ``span_s`` is due,
     for ``seconds`` of wall time, and does nothing else."""
@@ -135,9 +150,9 @@ def idle(span_s: float, seconds: float) -> float:
     return (cpu_s() - c0) / n
 
 
-def print_idle(spans: list[float], seconds: float, repeat: int) -> None:
+def print_idle(spans: list[float], seconds: float, repeat: int, title: str = "") -> None:
     """The table of :func:`idle` per span (least of ``repeat``)."""
-    print(f"\n# an empty loop paced at 1x, {seconds:g} s per span (least of {repeat})\n")
+    print(f"\n# an empty loop paced at 1x, {seconds:g} s per span (least of {repeat}){title}\n")
     print("| part s | wake-ups a second | CPU us per wake-up | % of a core |")
     print("| ---: | ---: | ---: | ---: |")
     for span in spans:
@@ -184,9 +199,10 @@ def work_wall(work: Callable[[], float], span_s: float, seconds: float, paced: b
     return sorted(walls)[len(walls) // 2]
 
 
-def print_footprint(spans: list[float], seconds: float, repeat: int) -> None:
+def print_footprint(spans: list[float], seconds: float, repeat: int, title: str = "") -> None:
     """The table of :func:`footprint_work`'s two workloads per span (least of ``repeat``)."""
-    print(f"\n# synthetic work of {FOOTPRINT_CALLS} small calls, wall us a call (median; least of {repeat})\n")
+    print(f"\n# synthetic work of {FOOTPRINT_CALLS} small calls, wall us a call (median; least of {repeat})"
+          f"{title}\n")
     print("| workload | part s | back to back | after a sleep of the part | after a sleep / back to back |")
     print("| --- | ---: | ---: | ---: | ---: |")
     for name, work in footprint_work().items():
@@ -207,8 +223,11 @@ def main() -> int:
     ap.add_argument("--idle", action="store_true", help="also an empty loop paced the same way")
     ap.add_argument("--footprint", action="store_true",
                     help="also synthetic work of many distinct or one repeated function, slept between")
+    ap.add_argument("--idle-poll", action="store_true",
+                    help="also everything with the CPUs polling when idle, not halting (root; cpu_idle.py)")
     args = ap.parse_args()
     spans = args.span or [0.1, 1.0]
+    modes = [("", False)] + ([(" (idle: poll)", True)] if args.idle_poll else [])
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.only or list(CAPTURES):
@@ -218,16 +237,19 @@ def main() -> int:
             frames = iter_frames(cap.read_bytes())[0]
             alone = args.orders_only and name.startswith("raw")
             for span in spans:
-                runs: dict[str, list[tuple[float, float]]] = {"tight": [], "paced": [], "orders": []}
+                runs: dict[tuple[str, str], list[tuple[float, float]]] = {}
                 for _ in range(args.repeat):
-                    runs["tight"].append(measure(frames, span, args.seconds, paced=False))
-                    runs["paced"].append(measure(frames, span, args.seconds, paced=True))
-                    if alone:
-                        runs["orders"].append(measure(frames, span, args.seconds, paced=True, only_orders=True))
-                rows.append((label, span, {k: min(v) for k, v in runs.items() if v}))
+                    for idle_label, poll in modes:
+                        with polling_idle(poll):
+                            got = measure_all(frames, span, args.seconds, alone)
+                        for kind, value in got.items():
+                            runs.setdefault((idle_label, kind), []).append(value)
+                for idle_label, _poll in modes:
+                    rows.append((label + idle_label, span,
+                                 {k: min(v) for (m, k), v in runs.items() if m == idle_label}))
                 print(f"  done: {label}, parts of {span:g} s", file=sys.stderr, flush=True)
     print(f"# the Processor alone, {args.seconds:g} board s in parts, back to back and paced at 1x "
-          f"(least of {args.repeat})\n")
+          f"(least of {args.repeat}); cpuidle: {idle_driver()}\n")
     extra = " | paced, the order path alone: CPU ms / board s | its / back to back" if args.orders_only else ""
     print("| capture | part s | back to back: CPU ms / board s | paced at 1x: CPU ms / board s "
           f"| paced at 1x: % of a core | paced / back to back | a call, wall us: back to back / paced{extra} |")
@@ -240,10 +262,12 @@ def main() -> int:
             alone = got["orders"][0] if "orders" in got else None
             line += f" {1000 * alone:.2f} | {alone / tight:.1f} |" if alone is not None else " - | - |"
         print(line)
-    if args.idle:
-        print_idle(spans, args.seconds, args.repeat)
-    if args.footprint:
-        print_footprint(spans, args.seconds, args.repeat)
+    for idle_label, poll in modes:
+        with polling_idle(poll):
+            if args.idle:
+                print_idle(spans, args.seconds, args.repeat, idle_label)
+            if args.footprint:
+                print_footprint(spans, args.seconds, args.repeat, idle_label)
     return 0
 
 
