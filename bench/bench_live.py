@@ -6,19 +6,27 @@ RAW 4 channels + tacho + 4 orders), with and without the compiled kernels: start
 the simulated board on a pty at 1x (``python -m firmware_sim --pty --speed 1``) and
 the daemon on it (``cmsensord --config ... --capture cap.bin``, through
 bench/live_probe.py), lets it warm up, then measures the daemon process alone over a
-fixed window: CPU % of one core from /proc/<pid>/stat (utime + stime, all threads),
-RSS and peak RSS (VmRSS, VmHWM), and the order latency (write time minus the
+fixed window: CPU % of one core from its threads' run times (user and kernel, to the
+nanosecond: /proc/<pid>/task/*/schedstat; the 10-ms clock ticks of /proc/<pid>/stat where
+the kernel keeps no schedstat), RSS and peak RSS (VmRSS, VmHWM), and the order latency (write time minus the
 sample's arrival, median and 95th percentile).  Then replays the capture the daemon
 wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its CPU
 per board second and the ratio live / replay.  The last column is the simulated
 board's own CPU over the same window: what the daemon shares the machine with.
 
     python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--repeat 3] [--tree before=DIR]
+                               [--idle-poll]
 
 ``--repeat N`` runs every configuration N times, in rounds (each round runs them all in
 turn), prints every run's row, then per configuration the least, median and most of its live
 CPU % and live / replay: runs of one tree minutes apart scatter by tens of percent on a shared
 machine, more than most changes move them.
+
+``--idle-poll`` also runs every configuration with the CPUs polling when idle instead of
+halting (bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0 over the live run and its replay;
+root only), rows marked "(idle: poll)", right after the same configuration without: a diagnostic
+of how much of the live cost over a replay's is the CPUs' halt between wake-ups, not a setting for
+the board.
 
 ``--tree LABEL=DIR`` (repeatable) runs the simulator, the daemon and the replay from
 another checkout too (its C kernels built in place: ``python setup.py build_ext
@@ -30,6 +38,7 @@ The machine is shared and noisy: compare rows of one run.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import signal
@@ -42,6 +51,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = str(ROOT / "bench" / "live_probe.py")
+sys.path.insert(0, str(ROOT / "bench"))
+
+from cpu_idle import idle_driver, polling_idle  # noqa: E402
+
 TICK = os.sysconf("SC_CLK_TCK")
 
 #: name -> (simulator arguments, label)
@@ -59,10 +72,42 @@ MORE_CONFIG = {"raw1ll": "orders:\n  output_rate_hz: 50\n"}
 
 
 def cpu_s(pid: int) -> float:
-    """utime + stime of the process (all its threads), seconds."""
+    """utime + stime of the process (all its threads), seconds, in clock ticks (10 ms)."""
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def thread_ns(pid: int) -> dict[str, int]:
+    """Run time of each thread of the process, ns (the scheduler's ``sum_exec_runtime`` in
+    /proc/<pid>/task/<tid>/schedstat: user and kernel time to the nanosecond); empty where the
+    kernel keeps no schedstat."""
+    out = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            out[task.name] = int((task / "schedstat").read_text().split()[0])
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+class CpuWindow:
+    """The CPU seconds a process uses from :meth:`start` to :meth:`stop`: its threads' run times
+    (:func:`thread_ns`; a thread that ends inside the window is missed, the daemon's do not),
+    else the clock ticks of /proc/<pid>/stat, whose 10-ms steps are a third of a 20-s window's
+    0.15 % of a core."""
+
+    def __init__(self, pid: int):
+        self.pid = pid
+
+    def start(self) -> None:
+        self.ns0, self.ticks0 = thread_ns(self.pid), cpu_s(self.pid)
+
+    def stop(self) -> float:
+        ns1, ticks1 = thread_ns(self.pid), cpu_s(self.pid)
+        if not ns1:
+            return ticks1 - self.ticks0
+        return sum(v - self.ns0.get(tid, 0) for tid, v in ns1.items()) / 1e9
 
 
 def memory_mb(pid: int) -> tuple[float, float]:
@@ -100,9 +145,12 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
                               stderr=subprocess.PIPE, text=True, env=env)
     try:
         time.sleep(warmup)
-        c0, b0, t0 = cpu_s(daemon.pid), cpu_s(sim.pid), time.monotonic()
+        used, board = CpuWindow(daemon.pid), CpuWindow(sim.pid)
+        used.start()
+        board.start()
+        t0 = time.monotonic()
         time.sleep(seconds)
-        c1, b1, t1 = cpu_s(daemon.pid), cpu_s(sim.pid), time.monotonic()
+        c, b, t1 = used.stop(), board.stop(), time.monotonic()
         rss, hwm = memory_mb(daemon.pid)
     finally:
         daemon.send_signal(signal.SIGTERM)
@@ -114,7 +162,7 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
     r = json.loads(report.read_text())
     lat = r["latency_ms"][int(len(r["latency_ms"]) * warmup / (warmup + seconds)):]
     blat = r["board_latency_ms"][int(len(r["board_latency_ms"]) * warmup / (warmup + seconds)):]
-    return {"cpu_pct": 100 * (c1 - c0) / (t1 - t0), "board_pct": 100 * (b1 - b0) / (t1 - t0),
+    return {"cpu_pct": 100 * c / (t1 - t0), "board_pct": 100 * b / (t1 - t0),
             "rss_mb": rss, "hwm_mb": hwm, "scipy": r["scipy"],
             "lat_med": statistics.median(lat) if lat else None,
             "lat_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None,
@@ -151,7 +199,7 @@ def print_spread(rows: list, repeat: int) -> None:
     for (label, k), got in runs.items():
         cols = [sorted(v) for v in zip(*got)]
         print(f"| {label} | {k} | " + " | ".join(
-            f"{c[0]:.2f} / {statistics.median(c):.2f} / {c[-1]:.2f}" for c in cols) + " |")
+            f"{c[0]:.3g} / {statistics.median(c):.3g} / {c[-1]:.3g}" for c in cols) + " |")
 
 
 def main() -> int:
@@ -163,7 +211,10 @@ def main() -> int:
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also run the code of another checkout (e.g. before=/tmp/before)")
     ap.add_argument("--repeat", type=int, default=1, help="rounds of every configuration")
+    ap.add_argument("--idle-poll", action="store_true",
+                    help="also every configuration with the CPUs polling when idle (root; cpu_idle.py)")
     args = ap.parse_args()
+    modes = [("", False)] + ([("idle: poll", True)] if args.idle_poll else [])
     kernel_runs = {"both": (True, False), "on": (True,), "off": (False,)}[args.kernels]
     trees = [(lab, Path(d).resolve()) for lab, d in (t.split("=", 1) for t in args.tree)]
     trees.append(("this" if trees else "", ROOT))
@@ -172,13 +223,15 @@ def main() -> int:
         for name in args.only or list(CONFIGS):
             label = CONFIGS[name][1]
             for kernels in kernel_runs:
-                for tree_label, tree in trees:
-                    row_label = f"{label} ({tree_label})" if tree_label else label
-                    rows.append((row_label, "yes" if kernels else "no",
-                                 *measure(name, kernels, tree, args.warmup, args.seconds)))
+                for (tree_label, tree), (idle_label, poll) in itertools.product(trees, modes):
+                    marks = ", ".join(m for m in (tree_label, idle_label) if m)
+                    row_label = f"{label} ({marks})" if marks else label
+                    with polling_idle(poll):
+                        got = measure(name, kernels, tree, args.warmup, args.seconds)
+                    rows.append((row_label, "yes" if kernels else "no", *got))
                     print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
     print(f"# live daemon at 1x, {args.seconds:g} s window after {args.warmup:g} s warm-up; "
-          "replay of the same capture\n")
+          f"replay of the same capture; cpuidle: {idle_driver()}\n")
     print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95; "
           "board time, median) "
           "| scipy loaded | replay CPU s / board s | replay % | x real time | live / replay | board CPU % |")
@@ -186,8 +239,8 @@ def main() -> int:
     for label, k, lv, rp, rep_pct in rows:
         lat = (f"{lv['lat_med']:.0f} / {lv['lat_p95']:.0f}; {lv['board_med']:.0f}"
                if lv["lat_med"] is not None else "-")
-        print(f"| {label} | {k} | {lv['cpu_pct']:.2f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
-              f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.2f} / {rp['board_s']:.0f} | {rep_pct:.2f} "
+        print(f"| {label} | {k} | {lv['cpu_pct']:.3f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
+              f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.3f} / {rp['board_s']:.0f} | {rep_pct:.3f} "
               f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} | {lv['board_pct']:.1f} |")
     if args.repeat > 1:
         print_spread(rows, args.repeat)
