@@ -8,8 +8,9 @@ the daemon on it (``cmsensord --config ... --capture cap.bin``, through
 bench/live_probe.py), lets it warm up, then measures the daemon process alone over a
 fixed window: CPU % of one core from its threads' run times (user and kernel, to the
 nanosecond: /proc/<pid>/task/*/schedstat; the 10-ms clock ticks of /proc/<pid>/stat where
-the kernel keeps no schedstat), RSS and peak RSS (VmRSS, VmHWM), and the order latency (write time minus the
-sample's arrival, median and 95th percentile).  Then replays the capture the daemon
+the kernel keeps no schedstat), and of it the main thread's (the loop and the Processor; the
+rest is the serial reader's thread), RSS and peak RSS (VmRSS, VmHWM), and the order
+latency (write time minus the sample's arrival, median and 95th percentile).  Then replays the capture the daemon
 wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its CPU
 per board second and the ratio live / replay.  The last column is the simulated
 board's own CPU over the same window: what the daemon shares the machine with.
@@ -100,13 +101,18 @@ class CpuWindow:
     def __init__(self, pid: int):
         self.pid = pid
 
+    main: float | None = None           #: after stop: the main thread's CPU seconds (None: ticks)
+
     def start(self) -> None:
         self.ns0, self.ticks0 = thread_ns(self.pid), cpu_s(self.pid)
 
     def stop(self) -> float:
         ns1, ticks1 = thread_ns(self.pid), cpu_s(self.pid)
         if not ns1:
+            self.main = None
             return ticks1 - self.ticks0
+        main = str(self.pid)
+        self.main = (ns1.get(main, 0) - self.ns0.get(main, 0)) / 1e9   # the main thread's share
         return sum(v - self.ns0.get(tid, 0) for tid, v in ns1.items()) / 1e9
 
 
@@ -163,6 +169,7 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
     lat = r["latency_ms"][int(len(r["latency_ms"]) * warmup / (warmup + seconds)):]
     blat = r["board_latency_ms"][int(len(r["board_latency_ms"]) * warmup / (warmup + seconds)):]
     return {"cpu_pct": 100 * c / (t1 - t0), "board_pct": 100 * b / (t1 - t0),
+            "main_pct": None if used.main is None else 100 * used.main / (t1 - t0),
             "rss_mb": rss, "hwm_mb": hwm, "scipy": r["scipy"],
             "lat_med": statistics.median(lat) if lat else None,
             "lat_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None,
@@ -232,14 +239,16 @@ def main() -> int:
                     print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
     print(f"# live daemon at 1x, {args.seconds:g} s window after {args.warmup:g} s warm-up; "
           f"replay of the same capture; cpuidle: {idle_driver()}\n")
-    print("| configuration | kernels | live CPU % | RSS MB | peak RSS MB | order latency ms (median / p95; "
+    print("| configuration | kernels | live CPU % | of which the main thread | RSS MB | peak RSS MB "
+          "| order latency ms (median / p95; "
           "board time, median) "
           "| scipy loaded | replay CPU s / board s | replay % | x real time | live / replay | board CPU % |")
-    print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |")
     for label, k, lv, rp, rep_pct in rows:
         lat = (f"{lv['lat_med']:.0f} / {lv['lat_p95']:.0f}; {lv['board_med']:.0f}"
                if lv["lat_med"] is not None else "-")
-        print(f"| {label} | {k} | {lv['cpu_pct']:.3f} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
+        main = "-" if lv["main_pct"] is None else f"{lv['main_pct']:.3f}"
+        print(f"| {label} | {k} | {lv['cpu_pct']:.3f} | {main} | {lv['rss_mb']:.0f} | {lv['hwm_mb']:.0f} | {lat} "
               f"| {'yes' if lv['scipy'] else 'no'} | {rp['cpu_s']:.3f} / {rp['board_s']:.0f} | {rep_pct:.3f} "
               f"| {rp['board_s'] / rp['cpu_s']:,.0f}x | {lv['cpu_pct'] / rep_pct:.1f} | {lv['board_pct']:.1f} |")
     if args.repeat > 1:
