@@ -10,9 +10,9 @@ fixed window: CPU % of one core from its threads' run times (user and kernel, to
 nanosecond: /proc/<pid>/task/*/schedstat; the 10-ms clock ticks of /proc/<pid>/stat where
 the kernel keeps no schedstat), and of it the main thread's (the loop and the Processor; the
 rest is the serial reader's thread), RSS and peak RSS (VmRSS, VmHWM), and the order
-latency (write time minus the sample's arrival, median and 95th percentile).  Then replays the capture the daemon
-wrote (``cmsensord replay`` in a fresh process, imports excluded) and gives its CPU
-per board second and the ratio live / replay.  The last column is the simulated
+latency (write time minus the sample's arrival, median and 95th percentile).  Then replays
+the capture the daemon wrote (``cmsensord replay`` in a fresh process, imports excluded)
+and gives its CPU per board second and the ratio live / replay.  The last column is the simulated
 board's own CPU over the same window: what the daemon shares the machine with.
 
     python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--repeat 3] [--tree before=DIR]
@@ -98,10 +98,10 @@ class CpuWindow:
     else the clock ticks of /proc/<pid>/stat, whose 10-ms steps are a third of a 20-s window's
     0.15 % of a core."""
 
+    main: float | None = None           #: after stop: the main thread's CPU seconds (None: ticks)
+
     def __init__(self, pid: int):
         self.pid = pid
-
-    main: float | None = None           #: after stop: the main thread's CPU seconds (None: ticks)
 
     def start(self) -> None:
         self.ns0, self.ticks0 = thread_ns(self.pid), cpu_s(self.pid)

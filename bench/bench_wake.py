@@ -32,9 +32,11 @@ footprint, as the chain's ~330 calls a wake-up run each once) and the first of t
 same work back to back on this machine, by how much distinct code it runs.
 
 ``--idle-poll`` also measures everything with the CPUs polling when idle instead of halting
-(bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0, root only), rows marked "(idle: poll)",
-interleaved with the others: how much of the cold factor is the CPU's halt between wake-ups (on a
-virtual machine, the host's work on the core meanwhile).  A diagnostic, not a setting for the board.
+(bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0, root only), marked "(idle: poll)": the
+Processor's runs interleaved with the others in each repeat, the ``--idle`` and ``--footprint``
+tables once more after theirs.  How much of the cold factor is the CPU's halt between wake-ups
+(on a virtual machine, the host's work on the core meanwhile); a diagnostic, not a setting for
+the board.
 
 ``--repeat N`` measures each N times (back to back and paced in turn) and shows the
 least CPU of each.  Figures are ratios measured side by side in one run.
