@@ -66,3 +66,22 @@ def test_a_log_retention_cannot_delete_is_one_event_and_the_replay_goes_on(tmp_p
     assert [e["message"] for e in events if e["kind"] == "disk_error"] == [message]
     assert (out / OLD / "kept").exists() and (out / NEWER).exists()   # the pass ended at the first
     assert "events: config 1, disk_error 1" in err
+
+
+def test_a_log_retention_keeps_failing_on_is_one_event_over_many_rotations(tmp_path):
+    """The daemon on a simulated board, rotating every few kB: each rotation's retention meets
+    the same undeletable log, and says so once, not once a rotation."""
+    out = tmp_path / "out"
+    (out / OLD).mkdir(parents=True)
+    (tmp_path / "c.yaml").write_text(f"output:\n  dir: {out}\n  rotate_mb: 0.005\n  retain_mb: 0.005\n"
+                                     "  min_free_mb: 0\n  flush_s: 0.1\n")
+    r = cmsensord("--simulate", "--duration", "20", "--speed", "10", "--channels", "4", "--out", str(out),
+                  "--config", str(tmp_path / "c.yaml"))
+    assert r.returncode == 0, r.stderr
+    logs = sorted(p for p in out.glob("cmsensord-*.mcap") if p.name != OLD)
+    assert len(logs) >= 3, logs                              # retention ran at each rotation
+    message = f"{out / OLD}: retention cannot delete: Is a directory"
+    assert [line for line in r.stderr.splitlines() if "cannot delete" in line] == [f"ERROR disk_error: {message}"]
+    events = [m for p in logs for t, _, m in read_messages(p) if t == "/cm/events"]
+    assert [e["message"] for e in events if e["kind"] == "disk_error"] == [message]
+    assert (out / OLD).is_dir()

@@ -211,6 +211,60 @@ def test_a_file_retention_cannot_delete_is_one_event_and_ends_the_pass(tmp_path,
                         events[0][1]), events[0][1]
 
 
+def test_a_file_retention_keeps_failing_on_is_told_once_and_its_repeats_when_it_goes(tmp_path, clock,
+                                                                                     monkeypatch):
+    for k in range(3):
+        RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
+    files = sorted(tmp_path.glob("*.mcap"))
+    unlink = Path.unlink
+
+    def refuse_the_oldest(path, *a, **kw):
+        if path == files[0]:
+            raise PermissionError(13, "Permission denied", str(path))
+        return unlink(path, *a, **kw)
+
+    monkeypatch.setattr(Path, "unlink", refuse_the_oldest)
+    events = []
+    cap_mb = 1.5 * files[0].stat().st_size / 1e6
+    sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
+                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    sink.rotate()
+    sink.rotate()                                        # three passes refused the same way
+    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed"]
+    assert sink.disk_errors == 3 and files[0].exists()
+    monkeypatch.setattr(Path, "unlink", unlink)
+    sink.rotate()                                        # the fourth deletes it, and says what came before
+    sink.close()
+    assert not files[0].exists()
+    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed", "retention"]
+    assert events[1][1].endswith("; the 3 pass(es) before this one failed (told once)"), events[1][1]
+
+
+def test_another_file_retention_cannot_delete_is_a_new_event(tmp_path, clock, monkeypatch):
+    for k in range(3):
+        RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
+    files = sorted(tmp_path.glob("*.mcap"))
+    unlink = Path.unlink
+    refused = {files[0]}
+
+    def refuse(path, *a, **kw):
+        if path in refused:
+            raise PermissionError(13, "Permission denied", str(path))
+        return unlink(path, *a, **kw)
+
+    monkeypatch.setattr(Path, "unlink", refuse)
+    events = []
+    cap_mb = 1.5 * files[0].stat().st_size / 1e6
+    sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
+                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    refused.add(files[1])
+    unlink(files[0])                                     # gone by hand: the next oldest refuses
+    sink.rotate()
+    sink.close()
+    assert [(f["details"]["action"], f["details"]["file"]) for _, _, f in events] == [
+        ("retention_failed", str(files[0])), ("retention_failed", str(files[1]))]
+
+
 def test_an_unreachable_free_space_floor_deletes_nothing_and_says_so(tmp_path, clock):
     old = tmp_path / "cmsensord-20200101T000000Z.mcap"
     RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda: 1_577_836_800.0).close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -16,6 +17,26 @@ if TYPE_CHECKING:
 #: the kind of retention and disk events (``details["action"]`` tells them apart)
 DISK_EVENT = "disk_error"
 MB = 1_000_000
+
+
+@dataclass
+class RetentionTold:
+    """What retention has told and not repeated while it stays: the disk is low (``low_space``),
+    and the file it cannot delete (``refused``: its path and errno's name) with the passes since
+    that failed on it the same way (``repeats``)."""
+
+    low_space: bool = False
+    refused: tuple[str, str | None] | None = None
+    repeats: int = 0
+    failed: bool = False                # this pass failed on a file (told or repeated)
+
+    def past(self) -> int:
+        """After a pass: when it did not fail, the refusal told before is over; the passes
+        that repeated it (0: none, or it goes on)."""
+        if self.failed or self.refused is None:
+            return 0
+        repeats, self.refused, self.repeats = self.repeats, None, 0
+        return repeats
 
 
 def errno_name(code: int | None) -> str | None:
@@ -49,22 +70,25 @@ def apply_retention(sink: RotatingSink) -> None:
     sizes = _sizes(finished + parts)
     oldest = [p for p in finished if p in sizes]    # by the stamp in the name
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
+    told = sink.retention
+    told.failed = False
     deleted, total, free = _delete_oldest(sink, oldest, sizes, cap, floor, free)
+    repeats = told.past()
     if deleted:
         with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
             fsync_dir(Path(o.dir))
         sink.paths = [p for p in sink.paths if p not in deleted]
-        _deleted_event(sink, deleted, sum(sizes[p] for p in deleted), total, free)
+        _deleted_event(sink, deleted, sum(sizes[p] for p in deleted), total, free, repeats)
     low = floor is not None and free < floor
-    if low and not sink.low_space_told and not deleted:
-        sink.low_space_told = True
+    if low and not told.low_space and not deleted:
+        told.low_space = True
         sink.emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
                   f"{o.min_free_mb:g} MB, which deleting the {max(0, len(oldest) - 1)} older "
                   f"finished log(s) of prefix {o.prefix!r} ({older / MB:.1f} MB; never the "
                   f"newest) cannot reach: none deleted for it",
                   details={"action": "low_space", "bytes": free})
     elif not low:
-        sink.low_space_told = False
+        told.low_space = False
 
 
 def _sizes(paths: list[Path]) -> dict[Path, int]:
@@ -80,8 +104,8 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
                    floor: float | None, free: int) -> tuple[list[Path], int, int]:
     """Delete ``oldest`` in order while over ``cap`` bytes in all or under ``floor`` bytes free
     (the floor only where deleting all but the newest reaches it, never the newest): the files
-    deleted, the bytes left in all and the bytes free after.  A file that cannot be deleted is a
-    ``retention_failed`` event and ends it."""
+    deleted, the bytes left in all and the bytes free after.  A file that cannot be deleted ends
+    it (:func:`_refused`)."""
     total = sum(sizes.values())
     reachable = floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
     deleted: list[Path] = []
@@ -95,10 +119,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
         except FileNotFoundError:
             pass
         except OSError as err:
-            sink.disk_errors += 1
-            sink.emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
-                      details={"action": "retention_failed", "errno": errno_name(err.errno),
-                               "file": str(path)})
+            _refused(sink, path, err)
             break
         total -= sizes[path]
         deleted.append(path)
@@ -110,8 +131,26 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
     return deleted, total, free
 
 
-def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: int, free: int) -> None:
-    """The ``retention`` event of the files ``deleted`` (``freed`` bytes; ``total`` left, ``free``)."""
+def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
+    """``path`` cannot be deleted: a ``retention_failed`` event, once while the same file fails
+    the same way pass after pass (each failure counted in ``disk_errors``; the repeats in
+    ``sink.retention``, told by the pass that gets past it)."""
+    sink.disk_errors += 1
+    told = sink.retention
+    told.failed = True
+    key = (str(path), errno_name(err.errno))
+    if told.refused == key:
+        told.repeats += 1
+        return
+    told.refused, told.repeats = key, 0
+    sink.emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
+              details={"action": "retention_failed", "errno": key[1], "file": key[0]})
+
+
+def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: int, free: int,
+                   repeats: int = 0) -> None:
+    """The ``retention`` event of the files ``deleted`` (``freed`` bytes; ``total`` left, ``free``);
+    ``repeats``: the passes that failed again as the last ``retention_failed`` event told."""
     o = sink.output
     why = []
     if o.retain_mb:
@@ -121,8 +160,9 @@ def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: i
         why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
                    f"(now {free / MB:.1f} MB)")
     names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
+    again = f"; the {repeats + 1} pass(es) before this one failed (told once)" if repeats else ""
     sink.emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
-              f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}",
+              f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}{again}",
               count=len(deleted), details={"action": "retention",
                                            "files": [p.name for p in deleted],
                                            "bytes": freed})

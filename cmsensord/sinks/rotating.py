@@ -77,7 +77,7 @@ from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
 from cmsensord.sinks.reorder import MAX_S as REORDER_MAX_S
-from cmsensord.sinks.retention import DISK_EVENT, MB, apply_retention
+from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 log = logging.getLogger("cmsensord")
@@ -146,7 +146,7 @@ class RotatingSink:
         self._next_retry = now
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []
-        self.low_space_told = False          # retention said the disk is low (once till it is not)
+        self.retention = RetentionTold()    # what retention said once and does not repeat
         self._horizon_ns = 0                 # the reorder window's horizon, carried to the next file
         self._hold_all = False
 
