@@ -178,28 +178,46 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, 
     assert sorted(sink.paths) == sorted(finished)        # paths lists only what is left
 
 
-def test_a_file_retention_cannot_delete_is_one_event_and_ends_the_pass(tmp_path, clock, monkeypatch):
+UNLINK = Path.unlink
+
+
+def three_logs_refusing(tmp_path, clock, monkeypatch) -> tuple[list[Path], set[Path]]:
+    """Three finished logs in tmp_path, oldest first, and the set of paths whose unlinking fails
+    with EACCES from now on (the oldest; the caller may change it)."""
+    refused: set[Path] = set()
     for k in range(3):
         RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
-    files = sorted(tmp_path.glob("*.mcap"))
-    unlink = Path.unlink
 
-    def refuse_the_oldest(path, *a, **kw):
-        if path == files[0]:
+    def refuse(path, *a, **kw):
+        if path in refused:
             raise PermissionError(13, "Permission denied", str(path))
-        return unlink(path, *a, **kw)
+        return UNLINK(path, *a, **kw)
 
-    monkeypatch.setattr(Path, "unlink", refuse_the_oldest)
-    events = []
-    cap_mb = 1.5 * files[0].stat().st_size / 1e6          # over it: the two oldest would go
+    monkeypatch.setattr(Path, "unlink", refuse)
+    files = sorted(tmp_path.glob("*.mcap"))
+    refused.add(files[0])
+    return files, refused
+
+
+def capped_sink(tmp_path, clock, files: list[Path]) -> tuple[RotatingSink, float, list]:
+    """A sink whose cap the oldest two of ``files`` are over (its start's retention pass would
+    delete them): (the sink, the cap in MB, the events it emits)."""
+    cap_mb = 1.5 * files[0].stat().st_size / 1e6
+    events: list = []
     sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
                         on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    return sink, cap_mb, events
+
+
+def test_a_file_retention_cannot_delete_is_one_event_and_ends_the_pass(tmp_path, clock, monkeypatch):
+    files, refused = three_logs_refusing(tmp_path, clock, monkeypatch)
+    sink, cap_mb, events = capped_sink(tmp_path, clock, files)
     assert [p.exists() for p in files] == [True, True, True]      # the pass ended at the first
     assert [(k, m, f["details"]) for k, m, f in events] == [(
         "disk_error", f"{files[0]}: retention cannot delete: Permission denied",
         {"action": "retention_failed", "errno": "EACCES", "file": str(files[0])})]
     assert sink.disk_errors == 1
-    monkeypatch.setattr(Path, "unlink", unlink)
+    refused.clear()
     events.clear()
     sink.rotate()                                        # the next pass deletes, oldest first
     sink.close()
@@ -213,26 +231,13 @@ def test_a_file_retention_cannot_delete_is_one_event_and_ends_the_pass(tmp_path,
 
 def test_a_file_retention_keeps_failing_on_is_told_once_and_its_repeats_when_it_goes(tmp_path, clock,
                                                                                      monkeypatch):
-    for k in range(3):
-        RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
-    files = sorted(tmp_path.glob("*.mcap"))
-    unlink = Path.unlink
-
-    def refuse_the_oldest(path, *a, **kw):
-        if path == files[0]:
-            raise PermissionError(13, "Permission denied", str(path))
-        return unlink(path, *a, **kw)
-
-    monkeypatch.setattr(Path, "unlink", refuse_the_oldest)
-    events = []
-    cap_mb = 1.5 * files[0].stat().st_size / 1e6
-    sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
-                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    files, refused = three_logs_refusing(tmp_path, clock, monkeypatch)
+    sink, _, events = capped_sink(tmp_path, clock, files)
     sink.rotate()
     sink.rotate()                                        # three passes refused the same way
     assert [f["details"]["action"] for _, _, f in events] == ["retention_failed"]
     assert sink.disk_errors == 3 and files[0].exists()
-    monkeypatch.setattr(Path, "unlink", unlink)
+    refused.clear()
     sink.rotate()                                        # the fourth deletes it, and says what came before
     sink.close()
     assert not files[0].exists()
@@ -241,24 +246,10 @@ def test_a_file_retention_keeps_failing_on_is_told_once_and_its_repeats_when_it_
 
 
 def test_another_file_retention_cannot_delete_is_a_new_event(tmp_path, clock, monkeypatch):
-    for k in range(3):
-        RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
-    files = sorted(tmp_path.glob("*.mcap"))
-    unlink = Path.unlink
-    refused = {files[0]}
-
-    def refuse(path, *a, **kw):
-        if path in refused:
-            raise PermissionError(13, "Permission denied", str(path))
-        return unlink(path, *a, **kw)
-
-    monkeypatch.setattr(Path, "unlink", refuse)
-    events = []
-    cap_mb = 1.5 * files[0].stat().st_size / 1e6
-    sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
-                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    files, refused = three_logs_refusing(tmp_path, clock, monkeypatch)
+    sink, _, events = capped_sink(tmp_path, clock, files)
     refused.add(files[1])
-    unlink(files[0])                                     # gone by hand: the next oldest refuses
+    UNLINK(files[0])                                     # gone by hand: the next oldest refuses
     sink.rotate()
     sink.close()
     assert [(f["details"]["action"], f["details"]["file"]) for _, _, f in events] == [
