@@ -28,12 +28,11 @@ class RetentionTold:
     low_space: bool = False
     refused: tuple[str, str | None] | None = None
     repeats: int = 0
-    failed: bool = False                # this pass failed on a file (told or repeated)
 
     def past(self) -> int:
-        """After a pass: when it did not fail, the refusal told before is over; the passes
-        that repeated it (0: none, or it goes on)."""
-        if self.failed or self.refused is None:
+        """After a pass that failed on no file: the refusal told before is over; the passes
+        that repeated it (0: none)."""
+        if self.refused is None:
             return 0
         repeats, self.refused, self.repeats = self.repeats, None, 0
         return repeats
@@ -71,9 +70,8 @@ def apply_retention(sink: RotatingSink) -> None:
     oldest = [p for p in finished if p in sizes]    # by the stamp in the name
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
     told = sink.retention
-    told.failed = False
-    deleted, total, free = _delete_oldest(sink, oldest, sizes, cap, floor, free)
-    repeats = told.past()
+    deleted, total, free, refused = _delete_oldest(sink, oldest, sizes, cap, floor, free)
+    repeats = 0 if refused else told.past()
     if deleted:
         with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
             fsync_dir(Path(o.dir))
@@ -101,11 +99,11 @@ def _sizes(paths: list[Path]) -> dict[Path, int]:
 
 
 def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int], cap: float | None,
-                   floor: float | None, free: int) -> tuple[list[Path], int, int]:
+                   floor: float | None, free: int) -> tuple[list[Path], int, int, bool]:
     """Delete ``oldest`` in order while over ``cap`` bytes in all or under ``floor`` bytes free
     (the floor only where deleting all but the newest reaches it, never the newest): the files
-    deleted, the bytes left in all and the bytes free after.  A file that cannot be deleted ends
-    it (:func:`_refused`)."""
+    deleted, the bytes left in all, the bytes free after, and whether a file could not be
+    deleted (:func:`_refused`), which ends it."""
     total = sum(sizes.values())
     reachable = floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
     deleted: list[Path] = []
@@ -120,7 +118,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
             pass
         except OSError as err:
             _refused(sink, path, err)
-            break
+            return deleted, total, free, True
         total -= sizes[path]
         deleted.append(path)
         if floor is not None:
@@ -128,7 +126,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
                 free = free_bytes(sink.output.dir)
             except OSError:
                 free += sizes[path]
-    return deleted, total, free
+    return deleted, total, free, False
 
 
 def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
@@ -137,7 +135,6 @@ def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
     ``sink.retention``, told by the pass that gets past it)."""
     sink.disk_errors += 1
     told = sink.retention
-    told.failed = True
     key = (str(path), errno_name(err.errno))
     if told.refused == key:
         told.repeats += 1
