@@ -28,8 +28,10 @@ part of any paced loop's cost no change to the work removes.
 Python and numpy calls, back to back and each after a sleep of the part's length
 (:func:`footprint_work`): 300 distinct small functions called once each (a broad code
 footprint, as the chain's ~330 calls a wake-up run each once) and the first of them called
-300 times (a narrow one).  Nothing of cmsensord runs: what a wake-up's work costs over the
-same work back to back on this machine, by how much distinct code it runs.
+300 times (a narrow one); and compiled work of a known memory footprint (:func:`gather_work`:
+one numpy call reading a cache line in each of 1, 256 and 4,096 pages), what a compiled step's
+data costs after a sleep.  Nothing of cmsensord runs: what a wake-up's work costs over the
+same work back to back on this machine, by how much distinct code and memory it touches.
 
 ``--idle-poll`` also measures everything with the CPUs polling when idle instead of halting
 (bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0, root only), marked "(idle: poll)": the
@@ -185,7 +187,28 @@ def footprint_work(count: int = FOOTPRINT_CALLS) -> dict[str, Callable[[], float
     def narrow() -> float:
         f = funcs[0]
         return sum(f(3, a) for _ in funcs)
-    return {"broad": broad, "narrow": narrow}
+    return {"broad": broad, "narrow": narrow, **gather_work()}
+
+
+#: pages (4 KiB) the compiled workloads read one element of
+GATHER_PAGES = (1, 256, 4096)
+
+
+def gather_work(pages: tuple[int, ...] = GATHER_PAGES) -> dict[str, Callable[[], float]]:
+    """Compiled work of a known memory footprint: one numpy gather and sum reading one float64
+    in each of ``pages`` distinct 4-KiB pages (a different cache line of each), two Python calls
+    whatever the count: what touching that much memory costs after a sleep, without the
+    interpreter's own footprint growing with it."""
+    per_page = 4096 // 8
+    work: dict[str, Callable[[], float]] = {}
+    for n in pages:
+        buf = np.ones(n * per_page)
+        idx = np.arange(n) * per_page + (np.arange(n) * 8) % per_page
+
+        def gather(buf: np.ndarray = buf, idx: np.ndarray = idx) -> float:
+            return float(buf[idx].sum())
+        work[f"numpy gather, {n} page{'s' if n > 1 else ''}"] = gather
+    return work
 
 
 def work_wall(work: Callable[[], float], span_s: float, seconds: float, paced: bool) -> float:
@@ -202,16 +225,16 @@ def work_wall(work: Callable[[], float], span_s: float, seconds: float, paced: b
 
 
 def print_footprint(spans: list[float], seconds: float, repeat: int, title: str = "") -> None:
-    """The table of :func:`footprint_work`'s two workloads per span (least of ``repeat``)."""
-    print(f"\n# synthetic work of {FOOTPRINT_CALLS} small calls, wall us a call (median; least of {repeat})"
-          f"{title}\n")
+    """The table of :func:`footprint_work`'s workloads per span (least of ``repeat``)."""
+    print(f"\n# synthetic work: {FOOTPRINT_CALLS} small calls, or a numpy gather; wall us a call "
+          f"(median; least of {repeat}){title}\n")
     print("| workload | part s | back to back | after a sleep of the part | after a sleep / back to back |")
     print("| --- | ---: | ---: | ---: | ---: |")
     for name, work in footprint_work().items():
         for span in spans:
             tight = min(work_wall(work, span, seconds, paced=False) for _ in range(repeat))
             slept = min(work_wall(work, span, seconds, paced=True) for _ in range(repeat))
-            print(f"| {name} | {span:g} | {1e6 * tight:.0f} | {1e6 * slept:.0f} | {slept / tight:.1f} |")
+            print(f"| {name} | {span:g} | {1e6 * tight:.1f} | {1e6 * slept:.1f} | {slept / tight:.1f} |")
 
 
 def main() -> int:
