@@ -24,14 +24,15 @@ indicator or decision).  Not what the daemon does: the least a wake-up carrying 
 next part is due, no work): what a wake-up alone costs this interpreter on this machine, the
 part of any paced loop's cost no change to the work removes.
 
-``--footprint`` also times (wall, median of the calls) two synthetic workloads of the same
+``--footprint`` also times (wall, median of the calls) synthetic workloads of the same
 Python and numpy calls, back to back and each after a sleep of the part's length
 (:func:`footprint_work`): 300 distinct small functions called once each (a broad code
 footprint, as the chain's ~330 calls a wake-up run each once) and the first of them called
 300 times (a narrow one); and compiled work of a known memory footprint (:func:`gather_work`:
-one numpy call reading a cache line in each of 1, 256 and 4,096 pages), what a compiled step's
-data costs after a sleep.  Nothing of cmsensord runs: what a wake-up's work costs over the
-same work back to back on this machine, by how much distinct code and memory it touches.
+one numpy call reading a cache line in each of 1, 256 and 4,096 pages): what one compiled
+call costs after a sleep, and how much more the memory it reads adds.  Nothing of cmsensord
+runs: what a wake-up's work costs over the same work back to back on this machine, by how much
+distinct code and memory it touches.
 
 ``--idle-poll`` also measures everything with the CPUs polling when idle instead of halting
 (bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0, root only), marked "(idle: poll)": the
