@@ -24,7 +24,11 @@ change nothing the daemon computes:
   exit one JSON line is appended to FILE: ``{"path": cmsensord's directory, "argv": ...,
   "window_s": ..., "threads": {name: [wake-ups a second, CPU % of one core]}}`` over the
   last ``LIVE_PROBE_WINDOW_S`` (default 20) seconds sampled before the daemon was stopped
-  (bench/bench_live.py stops it at the end of its window).
+  (bench/bench_live.py stops it at the end of its window);
+* with ``LIVE_PROBE_GC=FILE``, Python's cyclic garbage collector: at exit one JSON line is
+  appended to FILE, ``{"argv": ..., "collections": {generation: count}, "cpu_s": {generation:
+  CPU seconds of the collecting thread}, "tracked": objects tracked at exit}`` over ``main``
+  (the collections a run makes, and what they cost it).
 
 At exit the figures go to REPORT.json.
 """
@@ -70,6 +74,25 @@ def _probe_sink(sink, state: dict):
 
         sink.write_many = probed_write_many
     return sink
+
+
+def _watch_gc() -> dict:
+    """Collections by generation and the collecting thread's CPU seconds in them, counted from
+    now into the dict returned (``gc.callbacks``)."""
+    import gc
+
+    state: dict = {"collections": {}, "cpu_s": {}, "start": 0.0}
+
+    def noted(phase: str, info: dict) -> None:
+        if phase == "start":
+            state["start"] = time.thread_time()
+            return
+        g = info["generation"]
+        state["collections"][g] = state["collections"].get(g, 0) + 1
+        state["cpu_s"][g] = state["cpu_s"].get(g, 0.0) + time.thread_time() - state["start"]
+
+    gc.callbacks.append(noted)
+    return state
 
 
 def _thread_counts() -> dict[str, list[int]]:
@@ -155,6 +178,8 @@ def main() -> int:
     threads_out, samples, stop = os.environ.get("LIVE_PROBE_THREADS"), [], threading.Event()
     if threads_out:
         threading.Thread(target=_sample_threads, args=(samples, stop), name="probe", daemon=True).start()
+    gc_out = os.environ.get("LIVE_PROBE_GC")
+    gc_state = _watch_gc() if gc_out else None
     c0 = _cpu()
     rc = cli_main(args)
     cpu = _cpu() - c0
@@ -164,6 +189,13 @@ def main() -> int:
         with open(threads_out, "a") as f:
             f.write(json.dumps({"path": os.path.dirname(link.__file__), "argv": args,
                                 **_thread_rates(samples, window)}) + "\n")
+    if gc_out and gc_state is not None:
+        import gc
+
+        with open(gc_out, "a") as f:
+            f.write(json.dumps({"argv": args, "collections": gc_state["collections"],
+                                "cpu_s": {g: round(t, 6) for g, t in gc_state["cpu_s"].items()},
+                                "tracked": len(gc.get_objects())}) + "\n")
     hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM")).split()[1]
     procs = state["procs"]
     latency, board_latency = [], []
