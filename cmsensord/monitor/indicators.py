@@ -280,7 +280,7 @@ class RmsIndicators:
         sq = np.where(ok, v, 0.0) ** 2
         t = np.asarray(t0, dtype=np.int64)
         B, N, L, per = len(t), self.N, self.L, self.per
-        steps = np.flatnonzero(np.diff(t) != L)     # block i to i + 1 is not the next block
+        steps = (np.diff(t) != L).nonzero()[0]     # block i to i + 1 is not the next block
         k = 0
         while k < B:
             tk = int(t[k])
@@ -291,7 +291,7 @@ class RmsIndicators:
                 out += self._close()
                 self.start += (tk - self.start) // N * N
             if tk == self.start and not self.n.any():   # whole intervals of back-to-back blocks
-                i = int(np.searchsorted(steps, k))
+                i = int(steps.searchsorted(k))
                 K = ((int(steps[i]) + 1 if i < len(steps) else B) - k) // per
                 if K >= ONE_PASS_INTERVALS:
                     out += self._whole(sq[k:k + K * per], ok[k:k + K * per], K)
@@ -300,9 +300,9 @@ class RmsIndicators:
             end = self.start + N
             # the blocks after k in this interval, up to the first one reaching its end
             nxt = t[k + 1:]
-            leave = np.flatnonzero((nxt < self.start) | (nxt >= end))
+            leave = ((nxt < self.start) | (nxt >= end)).nonzero()[0]
             e = k + 1 + int(leave[0]) if leave.size else B
-            close = np.flatnonzero(t[k:e] + L >= end)
+            close = (t[k:e] + L >= end).nonzero()[0]
             if close.size:
                 e = k + int(close[0]) + 1
             self.sq = np.add.accumulate(np.vstack((self.sq[None, :], sq[k:e])), axis=0)[-1]

@@ -255,7 +255,7 @@ class Processor:
         their part only."""
         tacho = codes == int(_TACHO)            # an int: numpy looks up no dunders on the enum
         if tacho.any():
-            cut = (np.flatnonzero(codes[:-1] == int(_STATUS)) + 1).tolist()
+            cut = ((codes[:-1] == int(_STATUS)).nonzero()[0] + 1).tolist()
             if cut:
                 for i, j in zip([0, *cut], [*cut, len(codes)]):
                     rms, raw = self._passed(frames[i:j], codes[i:j], rms, raw)
@@ -265,7 +265,7 @@ class Processor:
             frames, codes = select(frames, keep), codes[keep]
             if not len(codes):
                 return rms, raw
-        cuts = (np.flatnonzero(codes[1:] != codes[:-1]) + 1).tolist()
+        cuts = ((codes[1:] != codes[:-1]).nonzero()[0] + 1).tolist()
         starts = [0, *cuts]
         single = iter(select(frames, (codes != int(_RMS)) & (codes != int(_RAW))))   # one at a time: built at once
         # plain ints: numpy comparing its int64 with an IntEnum looks up dunders on the enum
@@ -379,7 +379,7 @@ class Processor:
             return
         chans, lengths, t0 = rms_fields(frames)
         C = int(chans[0])
-        other = np.flatnonzero(chans != C)
+        other = (chans != C).nonzero()[0]
         if other.size:                          # channel count changed mid-batch: split
             cut = int(other[0])
             self._flush_rms(frames[:cut])

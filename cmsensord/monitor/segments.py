@@ -28,6 +28,10 @@ from cmsensord.protocol import Frame, FrameType, status_mode_fs
 
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
+#: ... and their codes as plain ints, for numpy (comparing an array with an IntEnum looks up
+#: dunders on the enum class, a Python call each)
+_OTHER_CODE = {1: int(FrameType.RAW), 2: int(FrameType.RMS)}
+_STATUS_CODE = int(FrameType.STATUS)
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
 #: batches at least this long are checked in one pass (:meth:`Segments.runs`)
 SCAN_MIN = 32
@@ -156,16 +160,16 @@ class Segments:
         is checked against :attr:`last_t0` here."""
         st = self.setup.status
         mode = st.mode if st is not None else None
-        other = _OTHER.get(mode) if mode is not None else None
+        other = _OTHER_CODE.get(mode) if mode is not None else None
         bad, status = self._marks(cols, mode)
         code, t, lost, _ = cols
         t_s, last = int(t[start]), self.last_t0
         if lost[start] or code[start] < 0 or (other is not None and code[start] == other) \
                 or (last is not None and (t_s < last or t_s - last > MAX_GAP_S * self.clock.fs)):
             return 0
-        j = int(np.searchsorted(bad, start + 1))
+        j = int(bad.searchsorted(start + 1))
         end = int(bad[j]) if j < bad.size else t.size
-        j = int(np.searchsorted(status, start))
+        j = int(status.searchsorted(start))
         if j < status.size and status[j] < end:
             end = int(status[j]) + 1
         k = end - start
@@ -184,19 +188,19 @@ class Segments:
         m = self._marked
         if m is not None and m[0] is cols and m[1] == mode and m[2] == fs:
             return m[3], m[4]
-        other = _OTHER.get(mode) if mode is not None else None
+        other = _OTHER_CODE.get(mode) if mode is not None else None
         code, t, lost, frames = cols
         prev = np.empty_like(t)
         prev[:1] = t[:1]
         prev[1:] = t[:-1]
         bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * fs)
         if other is not None:
-            bad |= code == int(other)
-        status = np.flatnonzero(code == FrameType.STATUS)
+            bad |= code == other
+        status = (code == _STATUS_CODE).nonzero()[0]
         if mode is not None and status.size:    # one naming the mode and fs in force changes neither
             status = np.array([i for i in status.tolist() if not _names(frames[i].payload, mode, fs)],
                               dtype=np.int64)
-        marks = np.flatnonzero(bad), status
+        marks = bad.nonzero()[0], status
         self._marked = (cols, mode, fs, *marks)
         return marks
 
