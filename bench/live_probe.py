@@ -179,7 +179,7 @@ def main() -> int:
     if threads_out:
         threading.Thread(target=_sample_threads, args=(samples, stop), name="probe", daemon=True).start()
     gc_out = os.environ.get("LIVE_PROBE_GC")
-    gc_state = _watch_gc() if gc_out else None
+    gc_state = _watch_gc() if gc_out else None     # None: not watched
     c0 = _cpu()
     rc = cli_main(args)
     cpu = _cpu() - c0
@@ -189,7 +189,7 @@ def main() -> int:
         with open(threads_out, "a") as f:
             f.write(json.dumps({"path": os.path.dirname(link.__file__), "argv": args,
                                 **_thread_rates(samples, window)}) + "\n")
-    if gc_out and gc_state is not None:
+    if gc_state is not None:
         import gc
 
         with open(gc_out, "a") as f:

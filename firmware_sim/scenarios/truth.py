@@ -48,7 +48,7 @@ def write_truth(scenario: Scenario, path, duration_s: float, *, rate: float | No
     gain = float(scenario.channel_gains[channel])
     comps_fn = getattr(scenario, "components", None)
     names = list(comps_fn(np.zeros(1))) if comps_fn is not None else []
-    series = _series(scenario, rate, sub, channel, gain)
+    series = _series(scenario, rate, sub, channel, gain, names)
     meta = {
         "fs": np.array(fs), "rate": np.array(rate), "channel": np.array(channel),
         "gain": np.array(gain), "noise_std": np.array(gain * float(getattr(scenario, "noise_std", 0.0))),
@@ -73,9 +73,11 @@ def _check(scenario: Scenario, duration_s: float, rate: float, channel: int) -> 
 Series = list[tuple[str, str, Callable[[int, int], np.ndarray]]]
 
 
-def _series(scenario: Scenario, rate: float, sub: int | None, channel: int, gain: float) -> Series:
+def _series(scenario: Scenario, rate: float, sub: int | None, channel: int, gain: float,
+            names: list[str]) -> Series:
     """(key, dtype, values of truth samples a..b) of every array :func:`write_truth` streams;
-    ``sub``: board samples per truth sample when whole (else None: no ``accel``)."""
+    ``sub``: board samples per truth sample when whole (else None: no ``accel``); ``names``:
+    the scenario's components."""
     fs = scenario.fs
     comps_fn = getattr(scenario, "components", None)
 
@@ -93,7 +95,7 @@ def _series(scenario: Scenario, rate: float, sub: int | None, channel: int, gain
         def component(name: str) -> Callable[[int, int], np.ndarray]:
             return lambda a, b: gain * comps_fn(times(a, b))[name]
 
-        for name in comps_fn(np.zeros(1)):
+        for name in names:
             series.append((truth_key(name), "<f4", component(name)))
     if sub is not None:
         series.append(("accel", "<f4",
