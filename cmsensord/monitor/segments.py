@@ -30,7 +30,7 @@ from cmsensord.protocol import Frame, FrameType, status_mode_fs
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
 #: ... and their codes as plain ints, for numpy (comparing an array with an IntEnum looks up
 #: dunders on the enum class, a Python call each)
-_OTHER_CODE = {1: int(FrameType.RAW), 2: int(FrameType.RMS)}
+_OTHER_CODE = {mode: int(t) for mode, t in _OTHER.items()}
 _STATUS_CODE = int(FrameType.STATUS)
 _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
 #: batches at least this long are checked in one pass (:meth:`Segments.runs`)
