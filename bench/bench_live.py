@@ -16,7 +16,7 @@ and gives its CPU per board second and the ratio live / replay.  The last column
 board's own CPU over the same window: what the daemon shares the machine with.
 
     python bench/bench_live.py [--seconds 60] [--warmup 8] [--only raw1] [--repeat 3] [--tree before=DIR]
-                               [--idle-poll]
+                               [--idle-poll] [--floor 4]
 
 ``--repeat N`` runs every configuration N times, in rounds (each round runs them all in
 turn), prints every run's row, then per configuration the least, median and most of its live
@@ -28,6 +28,13 @@ halting (bench/cpu_idle.py: ``/dev/cpu_dma_latency`` held at 0 over the live run
 root only), rows marked "(idle: poll)", right after the same configuration without: a diagnostic
 of how much of the live cost over a replay's is the CPUs' halt between wake-ups, not a setting for
 the board.
+
+``--floor S`` also runs every configuration with the Processor idle after its first S board
+seconds (bench/live_probe.py's ``LIVE_PROBE_FLOOR``: the loop, the reader, the capture and the
+sink's ticks go on, waking for the blocks the Processor would name), rows marked "(floor)",
+beside a replay of its own capture (the replay does all the work): the daemon's cost besides the
+Processor's, the least any Processor, compiled or not, could be added to.  No order latency
+(it writes no /orders after S).
 
 ``--tree LABEL=DIR`` (repeatable) runs the simulator, the daemon and the replay from
 another checkout too (its C kernels built in place: ``python setup.py build_ext
@@ -133,9 +140,9 @@ def tree_env(tree: Path) -> dict[str, str]:
 
 
 def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: float,
-         tree: Path, more: str = "") -> dict:
+         tree: Path, more: str = "", floor: float | None = None) -> dict:
     """The daemon at 1x on a simulated board, both of checkout ``tree``: CPU over the window,
-    memory, latency, capture."""
+    memory, latency, capture (``floor``: the Processor idle after that many board seconds)."""
     env = tree_env(tree)
     # the board in the tree: `python -m` puts the working directory before PYTHONPATH on sys.path
     sim = subprocess.Popen([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--speed", "1",
@@ -147,8 +154,8 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
     report = tmp / "live.json"
     cap = tmp / "cap.bin"
     daemon = subprocess.Popen([sys.executable, PROBE, str(report), *([] if kernels else ["--no-kernels"]),
-                               "--", "--config", str(cfg), "--capture", str(cap)],
-                              stderr=subprocess.PIPE, text=True, env=env)
+                               "--", "--config", str(cfg), "--capture", str(cap)], stderr=subprocess.PIPE,
+                              text=True, env=env if floor is None else dict(env, LIVE_PROBE_FLOOR=str(floor)))
     try:
         time.sleep(warmup)
         used, board = CpuWindow(daemon.pid), CpuWindow(sim.pid)
@@ -166,6 +173,8 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
     if daemon.returncode != 0:
         raise SystemExit(f"daemon failed ({daemon.returncode}): {err}")
     r = json.loads(report.read_text())
+    if floor is not None:                   # no /orders after the floor begins
+        r["latency_ms"] = r["board_latency_ms"] = []
     lat = r["latency_ms"][int(len(r["latency_ms"]) * warmup / (warmup + seconds)):]
     blat = r["board_latency_ms"][int(len(r["board_latency_ms"]) * warmup / (warmup + seconds)):]
     return {"cpu_pct": 100 * c / (t1 - t0), "board_pct": 100 * b / (t1 - t0),
@@ -187,10 +196,12 @@ def replay(tmp: Path, cap: Path, kernels: bool, env: dict[str, str]) -> dict:
     return json.loads(report.read_text())
 
 
-def measure(name: str, kernels: bool, tree: Path, warmup: float, seconds: float) -> tuple[dict, dict, float]:
-    """One run of configuration ``name``: (live, replay, the replay's CPU % of a core)."""
+def measure(name: str, kernels: bool, tree: Path, warmup: float, seconds: float,
+            floor: float | None = None) -> tuple[dict, dict, float]:
+    """One run of configuration ``name``: (live, replay, the replay's CPU % of a core); ``floor``:
+    live with the Processor idle after that many board seconds (:func:`live`)."""
     with tempfile.TemporaryDirectory(prefix="bench_live") as tmp:
-        lv = live(Path(tmp), CONFIGS[name][0], kernels, warmup, seconds, tree, MORE_CONFIG.get(name, ""))
+        lv = live(Path(tmp), CONFIGS[name][0], kernels, warmup, seconds, tree, MORE_CONFIG.get(name, ""), floor)
         rp = replay(Path(tmp), lv["capture"], kernels, tree_env(tree))
     return lv, rp, 100 * rp["cpu_s"] / rp["board_s"]
 
@@ -220,8 +231,14 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=1, help="rounds of every configuration")
     ap.add_argument("--idle-poll", action="store_true",
                     help="also every configuration with the CPUs polling when idle (root; cpu_idle.py)")
+    ap.add_argument("--floor", type=float, metavar="S",
+                    help="also every configuration with the Processor idle after S board seconds")
     args = ap.parse_args()
-    modes = [("", False)] + ([("idle: poll", True)] if args.idle_poll else [])
+    if args.floor is not None and args.floor >= args.warmup:
+        ap.error("--floor must be less than --warmup (board seconds before the window)")
+    modes: list[tuple[str, bool, float | None]] = [("", False, None)]
+    modes += [("idle: poll", True, None)] if args.idle_poll else []
+    modes += [("floor", False, args.floor)] if args.floor is not None else []
     kernel_runs = {"both": (True, False), "on": (True,), "off": (False,)}[args.kernels]
     trees = [(lab, Path(d).resolve()) for lab, d in (t.split("=", 1) for t in args.tree)]
     trees.append(("this" if trees else "", ROOT))
@@ -230,11 +247,11 @@ def main() -> int:
         for name in args.only or list(CONFIGS):
             label = CONFIGS[name][1]
             for kernels in kernel_runs:
-                for (tree_label, tree), (idle_label, poll) in itertools.product(trees, modes):
-                    marks = ", ".join(m for m in (tree_label, idle_label) if m)
+                for (tree_label, tree), (mode_label, poll, floor) in itertools.product(trees, modes):
+                    marks = ", ".join(m for m in (tree_label, mode_label) if m)
                     row_label = f"{label} ({marks})" if marks else label
                     with polling_idle(poll):
-                        got = measure(name, kernels, tree, args.warmup, args.seconds)
+                        got = measure(name, kernels, tree, args.warmup, args.seconds, floor)
                     rows.append((row_label, "yes" if kernels else "no", *got))
                     print(f"  done: {row_label}, kernels {'on' if kernels else 'off'}", file=sys.stderr)
     print(f"# live daemon at 1x, {args.seconds:g} s window after {args.warmup:g} s warm-up; "

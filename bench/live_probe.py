@@ -25,6 +25,19 @@ change nothing the daemon computes:
   "window_s": ..., "threads": {name: [wake-ups a second, CPU % of one core]}}`` over the
   last ``LIVE_PROBE_WINDOW_S`` (default 20) seconds sampled before the daemon was stopped
   (bench/bench_live.py stops it at the end of its window);
+* with ``LIVE_PROBE_FLOOR=S`` (board seconds), the floor under any Processor: after its first S
+  board seconds the Processor does no work (:func:`_floor`), and the loop, the reader, the
+  capture and the sink's ticks run as before, waking for the blocks the real one would name,
+  so the daemon's CPU is what it pays besides the Processor (nothing is computed or written
+  after S: a measurement, not a mode);
+* with ``LIVE_PROBE_PARTS=FILE``, where the daemon's CPU goes: the CPU time of the thread
+  in each of its parts (:data:`PARTS`: the Processor's call, within it the sink's writes; the
+  sink's tick; the loop's step around the call; the reader's step, within it the decoder),
+  and each thread's run time, from ``LIVE_PROBE_WARMUP_S`` (default 6) after the start for
+  ``LIVE_PROBE_WINDOW_S`` (default 20) seconds: one JSON line appended to FILE at exit,
+  ``{"argv": ..., "window_s": ..., "parts": {name: [calls, CPU s]}, "threads": {name: run s}}``
+  (two clock reads a call: ~1 us more a call measured; a window the daemon's stop cuts short
+  ends when its loop does, and a run that stops within the warm-up, a replay, writes nothing);
 * with ``LIVE_PROBE_GC=FILE``, Python's cyclic garbage collector: at exit one JSON line is
   appended to FILE, ``{"argv": ..., "collections": {generation: count}, "cpu_s": {generation:
   CPU seconds of the collecting thread}, "tracked": objects tracked at exit}`` over ``main``
@@ -35,6 +48,7 @@ At exit the figures go to REPORT.json.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import resource
@@ -95,6 +109,114 @@ def _watch_gc() -> dict:
     return state
 
 
+def _floor(processor_cls, after_s: float) -> None:
+    """``processor_cls`` with, once an instance has handled ``after_s`` board seconds, its
+    ``handle`` keeping only the newest frame's t0, ``wake_t0`` naming the last block of the
+    next output period after it (the next /orders block, else the next decision: the block the
+    real one names in a steady stream), and ``check_wall`` doing nothing."""
+    handle, wake = processor_cls.handle, processor_cls.wake_t0
+
+    def floor_handle(self, frames):
+        if getattr(self, "_floor_newest", None) is None:
+            handle(self, frames)
+            if self.board_seconds >= after_s and self.clock.slot0_t0 is not None:
+                self._floor_newest = self.clock.slot0_t0 + (self.clock.next_slot - 1) * self.block_len
+            return
+        if frames:
+            self._floor_newest = max(self._floor_newest, frames[-1].t0_unwrapped)
+
+    def floor_wake(self):
+        newest = getattr(self, "_floor_newest", None)
+        if newest is None:
+            return wake(self)
+        L, s0 = self.block_len, self.clock.slot0_t0
+        rate = self.cfg.orders.output_rate_hz if self.orders is not None else 1 / self.cfg.monitor.decision_period_s
+        period = round(self.fs / rate)
+        k = -(-(newest + 2 * L - s0) // period)         # the first period whose last block is to come
+        return s0 + k * period - L
+
+    processor_cls.handle = floor_handle
+    processor_cls.wake_t0 = floor_wake
+    processor_cls.check_wall = lambda self, max_drift_s: None
+
+
+#: name -> (module, class or None, attribute) of the parts LIVE_PROBE_PARTS times
+PARTS = {
+    "loop: Processor.handle": ("cmsensord.monitor.processor", "Processor", "handle"),
+    "loop: within it, sink writes": ("cmsensord.sinks.rotating", "RotatingSink", "write"),
+    "loop: within it, sink batch writes": ("cmsensord.sinks.rotating", "RotatingSink", "write_many"),
+    "loop: sink tick": ("cmsensord.sinks.rotating", "RotatingSink", "tick"),
+    "loop: a batch's step (the call and what follows it)": ("cmsensord.service.live", None, "_process"),
+    "reader: a step (read, capture, decode, queue, pause)": ("cmsensord.link", "SerialReader", "_step"),
+    "reader: within it, the decoder": ("cmsensord.protocol", "Decoder", "feed"),
+}
+
+
+def _time_parts(warmup: float, window: float) -> tuple[dict, threading.Event, threading.Thread]:
+    """Each of :data:`PARTS` wrapped to add its thread's CPU time to the dict returned, over
+    ``window`` seconds from ``warmup`` seconds from now, or until the live loop returns or the
+    event returned is set (the thread returned then ends the window); with the threads' run
+    times (schedstat).  Nothing is
+    counted when the event is set within ``warmup`` (``window_s`` 0)."""
+    import importlib
+
+    got: dict = {"window_s": 0.0, "parts": {}, "threads": {}}
+    on, end = threading.Event(), threading.Event()
+
+    def timed(name, f):
+        def part(*a, **kw):
+            if not on.is_set():
+                return f(*a, **kw)
+            t = time.thread_time()
+            try:
+                return f(*a, **kw)
+            finally:
+                acc = got["parts"].setdefault(name, [0, 0.0])
+                acc[0] += 1
+                acc[1] += time.thread_time() - t
+        return part
+
+    for name, (module, cls, attr) in PARTS.items():
+        owner = importlib.import_module(module)
+        owner = getattr(owner, cls) if cls else owner
+        setattr(owner, attr, timed(name, getattr(owner, attr)))
+
+    def run_times() -> dict[str, float]:
+        names = {t.native_id: t.name for t in threading.enumerate()}
+        out = {}
+        for tid in os.listdir("/proc/self/task"):
+            with contextlib.suppress(OSError, ValueError, IndexError), \
+                    open(f"/proc/self/task/{tid}/schedstat") as f:
+                out[names.get(int(tid), f"tid{tid}")] = int(f.read().split()[0]) / 1e9
+        return out
+
+    def window_of_parts() -> None:
+        if end.wait(warmup):
+            return
+        before, t0 = run_times(), time.monotonic()
+        on.set()
+        end.wait(window)
+        on.clear()
+        after = run_times()
+        got["window_s"] = round(time.monotonic() - t0, 3)
+        got["threads"] = {k: round(v - before.get(k, 0.0), 6) for k, v in after.items() if k != "parts"}
+
+    thread = threading.Thread(target=window_of_parts, name="parts", daemon=True)
+    thread.start()
+    from cmsensord.service import live
+    loop = live._loop
+
+    def loop_then_end(*a, **kw):                # the window ends with the loop, the reader alive
+        try:
+            return loop(*a, **kw)
+        finally:
+            end.set()
+            thread.join()
+
+    live._loop = loop_then_end
+    return got, end, thread
+
+
 def _thread_counts() -> dict[str, list[int]]:
     """{thread name: [voluntary context switches, utime + stime ticks]} of this process."""
     names = {t.native_id: t.name for t in threading.enumerate()}
@@ -129,19 +251,12 @@ def _thread_rates(samples: list, window: float) -> dict:
         for name in sorted(set(a) & set(b)) if name != "probe"}}
 
 
-def main() -> int:
-    report_path, rest = sys.argv[1], sys.argv[2:]
-    no_kernels = "--no-kernels" in rest[:rest.index("--")]
-    args = rest[rest.index("--") + 1:]
-    if no_kernels:
-        for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel", "cmsensord._wirekernel"):
-            sys.modules[name] = None  # type: ignore[assignment]  # import raises ImportError
-    from cmsensord import link, service
-    from cmsensord.cli import main as cli_main
+def _install(state: dict) -> None:
+    """The latency probes: frames put in the queue (arrivals, the newest frame), the board
+    clock's first anchor, the Processors made, and the sink's /orders writes, noted in ``state``."""
+    from cmsensord import link
     from cmsensord.monitor import clock, processor
     from cmsensord.service import live
-
-    state: dict = {"arrivals": [], "anchor": None, "writes": [], "procs": [], "newest": None}
 
     put = link.FrameQueue.put
 
@@ -174,10 +289,29 @@ def main() -> int:
     clock.BlockClock.anchor = probed_anchor     # type: ignore[method-assign]
     processor.Processor.__init__ = probed_init  # type: ignore[method-assign]
     live.open_sink = probed_open_sink           # type: ignore[attr-defined]
-    del service
+
+
+def main() -> int:
+    report_path, rest = sys.argv[1], sys.argv[2:]
+    no_kernels = "--no-kernels" in rest[:rest.index("--")]
+    args = rest[rest.index("--") + 1:]
+    if no_kernels:
+        for name in ("cmsensord.dsp._akfkernel", "cmsensord.dsp._trackerkernel", "cmsensord._wirekernel"):
+            sys.modules[name] = None  # type: ignore[assignment]  # import raises ImportError
+    from cmsensord import link
+    from cmsensord.cli import main as cli_main
+    from cmsensord.monitor import processor
+
+    state: dict = {"arrivals": [], "anchor": None, "writes": [], "procs": [], "newest": None}
+    _install(state)
+    if os.environ.get("LIVE_PROBE_FLOOR"):
+        _floor(processor.Processor, float(os.environ["LIVE_PROBE_FLOOR"]))
     threads_out, samples, stop = os.environ.get("LIVE_PROBE_THREADS"), [], threading.Event()
     if threads_out:
         threading.Thread(target=_sample_threads, args=(samples, stop), name="probe", daemon=True).start()
+    parts_out = os.environ.get("LIVE_PROBE_PARTS")
+    parts = (_time_parts(float(os.environ.get("LIVE_PROBE_WARMUP_S", "6")),
+                         float(os.environ.get("LIVE_PROBE_WINDOW_S", "20"))) if parts_out else None)
     gc_out = os.environ.get("LIVE_PROBE_GC")
     gc_state = _watch_gc() if gc_out else None     # None: not watched
     c0 = _cpu()
@@ -189,6 +323,13 @@ def main() -> int:
         with open(threads_out, "a") as f:
             f.write(json.dumps({"path": os.path.dirname(link.__file__), "argv": args,
                                 **_thread_rates(samples, window)}) + "\n")
+    if parts is not None:
+        got, end, thread = parts
+        end.set()                                   # a window the stop cut short ends here
+        thread.join()
+        if got["window_s"]:
+            with open(parts_out, "a") as f:
+                f.write(json.dumps({"argv": args, **got}) + "\n")
     if gc_state is not None:
         import gc
 
