@@ -288,7 +288,7 @@ def _install(state: dict) -> None:
     link.FrameQueue.put = probed_put            # type: ignore[method-assign]
     clock.BlockClock.anchor = probed_anchor     # type: ignore[method-assign]
     processor.Processor.__init__ = probed_init  # type: ignore[method-assign]
-    live.open_sink = probed_open_sink           # type: ignore[attr-defined]
+    live.open_sink = probed_open_sink
 
 
 def main() -> int:
@@ -306,7 +306,8 @@ def main() -> int:
     _install(state)
     if os.environ.get("LIVE_PROBE_FLOOR"):
         _floor(processor.Processor, float(os.environ["LIVE_PROBE_FLOOR"]))
-    threads_out, samples, stop = os.environ.get("LIVE_PROBE_THREADS"), [], threading.Event()
+    samples: list = []
+    threads_out, stop = os.environ.get("LIVE_PROBE_THREADS"), threading.Event()
     if threads_out:
         threading.Thread(target=_sample_threads, args=(samples, stop), name="probe", daemon=True).start()
     parts_out = os.environ.get("LIVE_PROBE_PARTS")
@@ -323,14 +324,14 @@ def main() -> int:
         with open(threads_out, "a") as f:
             f.write(json.dumps({"path": os.path.dirname(link.__file__), "argv": args,
                                 **_thread_rates(samples, window)}) + "\n")
-    if parts is not None:
+    if parts_out and parts is not None:
         got, end, thread = parts
         end.set()                                   # a window the stop cut short ends here
         thread.join()
         if got["window_s"]:
             with open(parts_out, "a") as f:
                 f.write(json.dumps({"argv": args, **got}) + "\n")
-    if gc_state is not None:
+    if gc_out and gc_state is not None:
         import gc
 
         with open(gc_out, "a") as f:
