@@ -156,8 +156,8 @@ def _time_parts(warmup: float, window: float) -> tuple[dict, threading.Event, th
     """Each of :data:`PARTS` wrapped to add its thread's CPU time to the dict returned, over
     ``window`` seconds from ``warmup`` seconds from now, or until the live loop returns or the
     event returned is set (the thread returned then ends the window); with the threads' run
-    times (schedstat).  Nothing is
-    counted when the event is set within ``warmup`` (``window_s`` 0)."""
+    times (schedstat).  Nothing is counted when the event is set within ``warmup`` (``window_s``
+    stays 0)."""
     import importlib
 
     got: dict = {"window_s": 0.0, "parts": {}, "threads": {}}
