@@ -23,6 +23,7 @@ stamps follow the board's measured rate.
 from __future__ import annotations
 
 import bisect
+from typing import overload
 
 import numpy as np
 
@@ -127,7 +128,14 @@ class BlockClock:
             return self.anchor_ns
         return self.anchor_ns + (t0_unwrapped - self.t0_first) * 1_000_000_000 // self.stamp_fs
 
-    def slot_t0(self, slot) -> int:
+    @overload
+    def slot_t0(self, slot: int) -> int: ...
+    @overload
+    def slot_t0(self, slot: np.ndarray) -> np.ndarray: ...
+
+    def slot_t0(self, slot):
+        """The board sample (unwrapped t0) where observation slot ``slot`` (an int, or an
+        array of them) begins."""
         assert self.slot0_t0 is not None
         return self.slot0_t0 + slot * self.block_len
 
