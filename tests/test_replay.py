@@ -86,3 +86,31 @@ def test_raw_capture_with_line_noise_replays_to_the_live_messages(tmp_path):
             assert sorted(a[topic], key=repr) == sorted(b[topic], key=repr)
         else:
             assert a[topic] == b[topic], topic
+
+
+def test_a_file_that_is_no_capture_replays_to_nothing_and_one_line_says_so(tmp_path):
+    """The wrong file replayed (a WAV, say): exit 0, the link line counts every byte as in no
+    frame, and one line names the file and what to do."""
+    junk = tmp_path / "song.wav"
+    junk.write_bytes(b"RIFF" + bytes(range(256)) * 8)   # no sync (A5 5A) anywhere
+    r = cmsensord("replay", str(junk), "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert "  link: 2052 of 2052 bytes in no frame (0 CRC failure(s), 0 bad header(s))" in lines
+    assert (f"cmsensord: replay: no frame in {junk} (2052 bytes): not a capture of the board's serial "
+            "stream? (`cmsensord import` makes one from other recordings)") in lines
+
+
+def test_junk_in_front_of_a_capture_is_counted_in_the_summary(tmp_path):
+    """A capture with 1000 bytes of line junk before its first frame: replayed whole, the
+    summary's link line counts exactly those bytes, and no 'no frame' line."""
+    cap = tmp_path / "cap.bin"
+    sc = make_scenario("healthy", n_channels=1, duration_s=3.0, seed=0)
+    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, 3.0)
+    size = cap.stat().st_size
+    cap.write_bytes(bytes(1000) + cap.read_bytes())
+    r = cmsensord("replay", str(cap), "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert f"  link: 1000 of {size + 1000} bytes in no frame (0 CRC failure(s), 0 bad header(s))" in lines
+    assert not [x for x in lines if "no frame in" in x]

@@ -7,12 +7,13 @@ import time
 from pathlib import Path
 
 from cmsensord.config import Config
+from cmsensord.journal import error_line
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.sink import open_sink, route_sink_events
-from cmsensord.service.status import run_summary
+from cmsensord.service.status import frames_decoded, run_summary
 from cmsensord.source import CaptureSource, Paced
 
 #: bytes per read of an unpaced replay: 192 KiB (3.9 s of 1 RAW channel, 1 s of 4); with the
@@ -50,4 +51,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         out = sink.close()
     if not quiet:
         print(run_summary(proc, sink.paths, time.monotonic() - t0), file=sys.stderr)
+    counters = capture.counters.as_dict()
+    if not frames_decoded(counters):
+        error_line(f"cmsensord: replay: no frame in {path} ({counters['bytes_received']} bytes): not a capture "
+                   "of the board's serial stream? (`cmsensord import` makes one from other recordings)")
     return 0, out, proc

@@ -41,4 +41,22 @@ def run_summary(proc, paths: list[Path], wall_s: float) -> str:
         lines.append(f"  {v.name}: {v.timeline.render()}")
     if proc.event_counts:
         lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
+    link = link_line(proc.link())
+    if link:
+        lines.append(link)
     return "\n".join(lines)
+
+
+def link_line(counters: dict[str, int]) -> str:
+    """The bytes of the link that were no good frame (docs/PROTOCOL.md rules 1-2), on one line;
+    "" when there were none."""
+    junk, crc, bad = (counters.get(k, 0) for k in ("bytes_discarded", "crc_failures", "header_rejects"))
+    if not (junk or crc or bad):
+        return ""
+    return (f"  link: {junk} of {counters.get('bytes_received', 0)} bytes in no frame "
+            f"({crc} CRC failure(s), {bad} bad header(s))")
+
+
+def frames_decoded(counters: dict[str, int]) -> int:
+    """Frames the decoder framed, of every type."""
+    return sum(n for k, n in counters.items() if k.startswith("frames_") and k != "frames_lost")
