@@ -51,8 +51,12 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         out = sink.close()
     if not quiet:
         print(run_summary(proc, sink.paths, time.monotonic() - t0), file=sys.stderr)
-    counters = capture.counters.as_dict()
+        _no_frame(path, capture.counters.as_dict())
+    return 0, out, proc
+
+
+def _no_frame(path: str, counters: dict[str, int]) -> None:
+    """One line on stderr when the capture held no frame at all (the wrong file replayed)."""
     if not frames_decoded(counters):
         error_line(f"cmsensord: replay: no frame in {path} ({counters['bytes_received']} bytes): not a capture "
                    "of the board's serial stream? (`cmsensord import` makes one from other recordings)")
-    return 0, out, proc
