@@ -38,6 +38,9 @@ change nothing the daemon computes:
   ``{"argv": ..., "window_s": ..., "parts": {name: [calls, CPU s]}, "threads": {name: run s}}``
   (two clock reads a call: ~1 us more a call measured; a window the daemon's stop cuts short
   ends when its loop does, and a run that stops within the warm-up, a replay, writes nothing);
+  with ``LIVE_PROBE_PARTS_DETAIL=1`` also the Processor's own steps (:data:`DETAIL_PARTS`: the
+  frames' scan, the RMS observations, the RAW blocks, the banks, the decisions, the indicators,
+  the alarms, the order chain, the tacho);
 * with ``LIVE_PROBE_GC=FILE``, Python's cyclic garbage collector: at exit one JSON line is
   appended to FILE, ``{"argv": ..., "collections": {generation: count}, "cpu_s": {generation:
   CPU seconds of the collecting thread}, "tracked": objects tracked at exit}`` over ``main``
@@ -149,6 +152,30 @@ PARTS = {
     "reader: a step (read, capture, decode, queue, pause)": ("cmsensord.link", "SerialReader", "_step"),
     "reader: within it, the decoder": ("cmsensord.protocol", "Decoder", "feed"),
 }
+#: more parts within the Processor's call, timed too with ``LIVE_PROBE_PARTS_DETAIL=1`` (nested:
+#: a part's time holds the parts it calls)
+DETAIL_PARTS = {f"loop: within it, {cls}.{attr}": (module, cls, attr) for module, cls, attr in (
+    ("cmsensord.monitor.processor", "Processor", "_scanned"),
+    ("cmsensord.monitor.processor", "Processor", "_flush_rms"),
+    ("cmsensord.monitor.indicators", "Indicators", "rms"),
+    ("cmsensord.monitor.processor", "Processor", "_run"),
+    ("cmsensord.monitor.severity", "SeverityChain", "observe"),
+    ("cmsensord.monitor.processor", "Processor", "_release_decisions"),
+    ("cmsensord.monitor.severity", "SeverityChain", "release"),
+    ("cmsensord.monitor.severity", "SeverityChain", "decision"),
+    ("cmsensord.monitor.indicators", "Indicators", "take"),
+    ("cmsensord.monitor.alarms", "Alarms", "see"),
+    ("cmsensord.monitor.processor", "Processor", "_diagnostics_message"),
+    ("cmsensord.monitor.processor", "Processor", "_feed_tacho"),
+    ("cmsensord.monitor.processor", "Processor", "_few"),
+    ("cmsensord.monitor.processor", "Processor", "_flush_raw"),
+    ("cmsensord.monitor.raw", "RawInput", "blocks"),
+    ("cmsensord.monitor.indicators", "Indicators", "raw"),
+    ("cmsensord.monitor.held", "Held", "hand_over"),
+    ("cmsensord.monitor.orders", "OrderChain", "add_samples"),
+    ("cmsensord.monitor.orders", "OrderChain", "release"),
+    ("cmsensord.monitor.shaft", "Shaft", "feed"),
+)}
 
 
 def _time_parts(warmup: float, window: float) -> tuple[dict, threading.Event, threading.Thread]:
@@ -175,7 +202,8 @@ def _time_parts(warmup: float, window: float) -> tuple[dict, threading.Event, th
                 acc[1] += time.thread_time() - t
         return part
 
-    for name, (module, cls, attr) in PARTS.items():
+    detail = DETAIL_PARTS if os.environ.get("LIVE_PROBE_PARTS_DETAIL") else {}
+    for name, (module, cls, attr) in {**PARTS, **detail}.items():
         owner = importlib.import_module(module)
         owner = getattr(owner, cls) if cls else owner
         setattr(owner, attr, timed(name, getattr(owner, attr)))
