@@ -10,10 +10,10 @@ from cmsensord.config import Config
 from cmsensord.journal import error_line
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
-from cmsensord.protocol import MAX_FRAME, Decoder
+from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.sink import open_sink, route_sink_events
-from cmsensord.service.status import frames_decoded, run_summary
+from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
 
 #: bytes per read of an unpaced replay: 192 KiB (3.9 s of 1 RAW channel, 1 s of 4); with the
@@ -51,12 +51,12 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         out = sink.close()
     if not quiet:
         print(run_summary(proc, sink.paths, time.monotonic() - t0), file=sys.stderr)
-        _no_frame(path, capture.counters.as_dict())
+        _no_frame(path, capture.counters)
     return 0, out, proc
 
 
-def _no_frame(path: str, counters: dict[str, int]) -> None:
+def _no_frame(path: str, counters: LinkCounters) -> None:
     """One line on stderr when the capture held no frame at all (the wrong file replayed)."""
-    if not frames_decoded(counters):
-        error_line(f"cmsensord: replay: no frame in {path} ({counters['bytes_received']} bytes): not a capture "
+    if not sum(counters.frames.values()):
+        error_line(f"cmsensord: replay: no frame in {path} ({counters.bytes_received} bytes): not a capture "
                    "of the board's serial stream? (`cmsensord import` makes one from other recordings)")

@@ -56,7 +56,3 @@ def link_line(counters: dict[str, int]) -> str:
     return (f"  link: {junk} of {counters.get('bytes_received', 0)} bytes in no frame "
             f"({crc} CRC failure(s), {bad} bad header(s))")
 
-
-def frames_decoded(counters: dict[str, int]) -> int:
-    """Frames the decoder framed, of every type."""
-    return sum(n for k, n in counters.items() if k.startswith("frames_") and k != "frames_lost")
