@@ -55,4 +55,3 @@ def link_line(counters: dict[str, int]) -> str:
         return ""
     return (f"  link: {junk} of {counters.get('bytes_received', 0)} bytes in no frame "
             f"({crc} CRC failure(s), {bad} bad header(s))")
-
