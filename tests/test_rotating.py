@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import errno
 import os
 import re
 from pathlib import Path
@@ -181,16 +182,17 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, 
 UNLINK = Path.unlink
 
 
-def three_logs_refusing(tmp_path, clock, monkeypatch) -> tuple[list[Path], set[Path]]:
+def three_logs_refusing(tmp_path, clock, monkeypatch, code: int = errno.EACCES) -> tuple[list[Path], set[Path]]:
     """Three finished logs in tmp_path, oldest first, and the set of paths whose unlinking fails
-    with EACCES from now on (the oldest; the caller may change it)."""
+    with ``code`` (EACCES: the directory's permission) from now on (the oldest; the caller may
+    change it)."""
     refused: set[Path] = set()
     for k in range(3):
         RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda k=k: 1_577_836_800.0 + 60 * k).close()
 
     def refuse(path, *a, **kw):
         if path in refused:
-            raise PermissionError(13, "Permission denied", str(path))
+            raise OSError(code, os.strerror(code), str(path))
         return UNLINK(path, *a, **kw)
 
     monkeypatch.setattr(Path, "unlink", refuse)
@@ -254,6 +256,54 @@ def test_another_file_retention_cannot_delete_is_a_new_event(tmp_path, clock, mo
     sink.close()
     assert [(f["details"]["action"], f["details"]["file"]) for _, _, f in events] == [
         ("retention_failed", str(files[0])), ("retention_failed", str(files[1]))]
+
+
+def small_capped_sink(tmp_path, clock, files: list[Path]) -> tuple[RotatingSink, list]:
+    """A sink whose cap the oldest of ``files`` alone is over, so that every pass tries it
+    first: (the sink, the events it emits)."""
+    events: list = []
+    cap_mb = 0.5 * files[0].stat().st_size / 1e6
+    sink = RotatingSink(output(tmp_path, retain_mb=cap_mb, rotate_mb=cap_mb), clock=clock,
+                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    return sink, events
+
+
+def test_a_file_refused_for_a_reason_of_its_own_is_passed_over_and_told_once(tmp_path, clock, monkeypatch):
+    files, _ = three_logs_refusing(tmp_path, clock, monkeypatch, code=errno.EPERM)   # immutable
+    sizes = [p.stat().st_size for p in files]
+    sink, events = small_capped_sink(tmp_path, clock, files)
+    assert [p.exists() for p in files] == [True, False, False]   # the next oldest went instead
+    assert [(m, f["details"]) for _, m, f in events[:1]] == [(
+        f"{files[0]}: retention cannot delete: Operation not permitted",
+        {"action": "retention_failed", "errno": "EPERM", "file": str(files[0])})]
+    assert events[1][2]["details"] == {"action": "retention", "files": [files[1].name, files[2].name],
+                                       "bytes": sizes[1] + sizes[2]}
+    for _ in range(3):                                   # each pass meets the same refusal first
+        sink.rotate()
+    sink.close()
+    actions = [f["details"]["action"] for _, _, f in events]
+    assert actions == ["retention_failed"] + ["retention"] * 4, actions
+    assert sink.disk_errors == 4 and files[0].exists()
+
+
+def test_two_files_passed_over_are_told_once_each_and_their_repeats_when_they_go(tmp_path, clock,
+                                                                                monkeypatch):
+    files, refused = three_logs_refusing(tmp_path, clock, monkeypatch, code=errno.EISDIR)
+    refused.add(files[1])
+    sink, events = small_capped_sink(tmp_path, clock, files)
+    sink.rotate()
+    sink.rotate()                                        # three passes refused both
+    told = [f["details"]["file"] for _, _, f in events if f["details"]["action"] == "retention_failed"]
+    assert told == [str(files[0]), str(files[1])] and sink.disk_errors == 6
+    assert files[0].exists() and files[1].exists() and not files[2].exists()
+    refused.clear()
+    events.clear()
+    sink.rotate()                                        # both go, and the pass says what came before
+    sink.close()
+    assert not files[0].exists() and not files[1].exists()
+    [(_, message, fields)] = events
+    assert fields["details"]["files"][:2] == [files[0].name, files[1].name]
+    assert message.endswith("; the 3 pass(es) before this one failed (told once)"), message
 
 
 def test_an_unreachable_free_space_floor_deletes_nothing_and_says_so(tmp_path, clock):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,24 +18,43 @@ if TYPE_CHECKING:
 DISK_EVENT = "disk_error"
 MB = 1_000_000
 
+#: unlink errors of the file itself, not of its directory or file system: a directory under a
+#: log's name (EISDIR), an immutable file or another user's in a sticky directory (EPERM), a
+#: mount point or a running program (EBUSY, ETXTBSY). Retention passes over such a file to the
+#: next oldest; any other error (no write permission on the directory, a read-only or failing
+#: file system) would refuse every file, and ends the pass.
+PASS_OVER = frozenset({errno.EISDIR, errno.EPERM, errno.EBUSY, errno.ETXTBSY})
+
 
 @dataclass
 class RetentionTold:
     """What retention has told and not repeated while it stays: the disk is low (``low_space``),
-    and the file it cannot delete (``refused``: its path and errno's name) with the passes since
-    that failed on it the same way (``repeats``)."""
+    and the files it cannot delete (``refused``: each file's path, with errno's name and the
+    passes since its event that failed on it the same way)."""
 
     low_space: bool = False
-    refused: tuple[str, str | None] | None = None
-    repeats: int = 0
+    refused: dict[str, tuple[str | None, int]] = field(default_factory=dict)
 
-    def past(self) -> int:
-        """After a pass that failed on no file: the refusal told before is over; the passes
-        that repeated it (0: none)."""
-        if self.refused is None:
-            return 0
-        repeats, self.refused, self.repeats = self.repeats, None, 0
-        return repeats
+    def refuse(self, path: str, code: str | None) -> bool:
+        """A pass failed on ``path`` with errno ``code``: True when that is news (to be told),
+        else one repeat more."""
+        told = self.refused.get(path)
+        if told is not None and told[0] == code:
+            self.refused[path] = (code, told[1] + 1)
+            return False
+        self.refused[path] = (code, 0)
+        return True
+
+    def passed(self, path: str) -> int:
+        """A pass got past ``path`` (deleted, or gone): its refusal is over; the passes that
+        repeated it (0: none, or never refused)."""
+        return self.refused.pop(path, (None, 0))[1]
+
+    def keep_only(self, paths: list[Path]) -> None:
+        """Forget the refusals of files no longer among ``paths`` (gone meanwhile)."""
+        names = {str(p) for p in paths}
+        for path in [p for p in self.refused if p not in names]:
+            del self.refused[path]
 
 
 def errno_name(code: int | None) -> str | None:
@@ -70,8 +89,8 @@ def apply_retention(sink: RotatingSink) -> None:
     oldest = [p for p in finished if p in sizes]    # by the stamp in the name
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
     told = sink.retention
-    deleted, total, free, refused = _delete_oldest(sink, oldest, sizes, cap, floor, free)
-    repeats = 0 if refused else told.past()
+    told.keep_only(oldest)
+    deleted, total, free, repeats = _delete_oldest(sink, oldest, sizes, cap, floor, free)
     if deleted:
         with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
             fsync_dir(Path(o.dir))
@@ -99,14 +118,17 @@ def _sizes(paths: list[Path]) -> dict[Path, int]:
 
 
 def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int], cap: float | None,
-                   floor: float | None, free: int) -> tuple[list[Path], int, int, bool]:
+                   floor: float | None, free: int) -> tuple[list[Path], int, int, int]:
     """Delete ``oldest`` in order while over ``cap`` bytes in all or under ``floor`` bytes free
     (the floor only where deleting all but the newest reaches it, never the newest): the files
-    deleted, the bytes left in all, the bytes free after, and whether a file could not be
-    deleted (:func:`_refused`), which ends it."""
+    deleted, the bytes left in all, the bytes free after, and the most passes that repeated the
+    refusal of a file it got past (:class:`RetentionTold`). A file it cannot delete is a
+    :func:`_refused` event; one refused for a reason of its own (:data:`PASS_OVER`) is passed
+    over, still counted, and any other refusal ends it."""
     total = sum(sizes.values())
     reachable = floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
     deleted: list[Path] = []
+    repeats = 0
     for path in oldest:
         over = cap is not None and total > cap
         low = reachable and floor is not None and free < floor and path != oldest[-1]
@@ -118,7 +140,10 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
             pass
         except OSError as err:
             _refused(sink, path, err)
-            return deleted, total, free, True
+            if err.errno in PASS_OVER:
+                continue
+            break
+        repeats = max(repeats, sink.retention.passed(str(path)))
         total -= sizes[path]
         deleted.append(path)
         if floor is not None:
@@ -126,7 +151,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
                 free = free_bytes(sink.output.dir)
             except OSError:
                 free += sizes[path]
-    return deleted, total, free, False
+    return deleted, total, free, repeats
 
 
 def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
@@ -134,14 +159,10 @@ def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
     the same way pass after pass (each failure counted in ``disk_errors``; the repeats in
     ``sink.retention``, told by the pass that gets past it)."""
     sink.disk_errors += 1
-    told = sink.retention
-    key = (str(path), errno_name(err.errno))
-    if told.refused == key:
-        told.repeats += 1
-        return
-    told.refused, told.repeats = key, 0
-    sink.emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
-              details={"action": "retention_failed", "errno": key[1], "file": key[0]})
+    code = errno_name(err.errno)
+    if sink.retention.refuse(str(path), code):
+        sink.emit(DISK_EVENT, f"{path}: retention cannot delete: {err.strerror or err}",
+                  details={"action": "retention_failed", "errno": code, "file": str(path)})
 
 
 def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: int, free: int,
