@@ -7,7 +7,6 @@ import time
 from pathlib import Path
 
 from cmsensord.config import Config
-from cmsensord.journal import error_line
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
@@ -45,18 +44,23 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
             for frames in source:
                 proc.handle(frames)
                 progress.update(capture.bytes_read, f"{proc.adc_seconds:.0f} s")
+        _no_frame(proc, path, capture.counters)
         proc.finish()
     finally:
         progress.close()
         out = sink.close()
     if not quiet:
         print(run_summary(proc, sink.paths, time.monotonic() - t0), file=sys.stderr)
-        _no_frame(path, capture.counters)
     return 0, out, proc
 
 
-def _no_frame(path: str, counters: LinkCounters) -> None:
-    """One line on stderr when the capture held no frame at all (the wrong file replayed)."""
-    if not sum(counters.frames.values()):
-        error_line(f"cmsensord: replay: no frame in {path} ({counters.bytes_received} bytes): not a capture "
-                   "of the board's serial stream? (`cmsensord import` makes one from other recordings)")
+def _no_frame(proc: Processor, path: str, counters: LinkCounters) -> None:
+    """When the capture held no frame at all (the wrong file replayed): a ``decode_error``
+    event that names the file and what to do (in the log and the journal), and the link's
+    counters in one ``/cm/diagnostics`` message, so the log says why it is empty."""
+    if sum(counters.frames.values()):
+        return
+    now = time.time_ns()
+    proc.event("decode_error", None, f"replay: no frame in {path} ({counters.bytes_received} bytes): not a "
+               "capture of the board's serial stream? (`cmsensord import` makes one from other recordings)", now)
+    proc.write_diagnostics(now)
