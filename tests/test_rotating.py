@@ -269,21 +269,26 @@ def small_capped_sink(tmp_path, clock, files: list[Path]) -> tuple[RotatingSink,
 
 
 def test_a_file_refused_for_a_reason_of_its_own_is_passed_over_and_told_once(tmp_path, clock, monkeypatch):
-    files, _ = three_logs_refusing(tmp_path, clock, monkeypatch, code=errno.EPERM)   # immutable
-    sizes = [p.stat().st_size for p in files]
-    sink, events = small_capped_sink(tmp_path, clock, files)
-    assert [p.exists() for p in files] == [True, False, False]   # the next oldest went instead
+    """An immutable oldest log larger than the cap: the next oldest, itself over the cap, goes
+    instead; the newer logs are not deleted to make room for it (it is left out of the cap's
+    count), and each pass that meets it again says nothing more."""
+    files, _ = three_logs_refusing(tmp_path, clock, monkeypatch, code=errno.EPERM)
+    for path, kb in ((files[0], 100), (files[1], 80)):
+        with path.open("ab") as f:
+            f.write(bytes(kb * 1000))
+    events: list = []
+    sink = RotatingSink(output(tmp_path, retain_mb=0.05, rotate_mb=0.05), clock=clock,
+                        on_event=lambda kind, message, **f: events.append((kind, message, f)))
+    assert [p.exists() for p in files] == [True, False, True]
     assert [(m, f["details"]) for _, m, f in events[:1]] == [(
         f"{files[0]}: retention cannot delete: Operation not permitted",
         {"action": "retention_failed", "errno": "EPERM", "file": str(files[0])})]
-    assert events[1][2]["details"] == {"action": "retention", "files": [files[1].name, files[2].name],
-                                       "bytes": sizes[1] + sizes[2]}
-    for _ in range(3):                                   # each pass meets the same refusal first
-        sink.rotate()
+    assert [f["details"]["files"] for _, _, f in events[1:]] == [[files[1].name]]
+    rotated = [sink.rotate() for _ in range(3)]          # each pass meets the same refusal first
     sink.close()
-    actions = [f["details"]["action"] for _, _, f in events]
-    assert actions == ["retention_failed"] + ["retention"] * 4, actions
-    assert sink.disk_errors == 4 and files[0].exists()
+    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed", "retention"]
+    assert sink.disk_errors == 4 and files[0].exists() and files[2].exists()
+    assert all(p is not None and p.exists() for p in rotated), rotated
 
 
 def test_two_files_passed_over_are_told_once_each_and_their_repeats_when_they_go(tmp_path, clock,

@@ -21,8 +21,9 @@ MB = 1_000_000
 #: unlink errors of the file itself, not of its directory or file system: a directory under a
 #: log's name (EISDIR), an immutable file or another user's in a sticky directory (EPERM), a
 #: mount point or a running program (EBUSY, ETXTBSY). Retention passes over such a file to the
-#: next oldest; any other error (no write permission on the directory, a read-only or failing
-#: file system) would refuse every file, and ends the pass.
+#: next oldest, and leaves it out of ``retain_mb``'s count; any other error (no write
+#: permission on the directory, a read-only or failing file system) would refuse every file,
+#: and ends the pass.
 PASS_OVER = frozenset({errno.EISDIR, errno.EPERM, errno.EBUSY, errno.ETXTBSY})
 
 
@@ -124,7 +125,8 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
     deleted, the bytes left in all, the bytes free after, and the most passes that repeated the
     refusal of a file it got past (:class:`RetentionTold`). A file it cannot delete is a
     :func:`_refused` event; one refused for a reason of its own (:data:`PASS_OVER`) is passed
-    over, still counted, and any other refusal ends it."""
+    over and left out of ``cap``'s count (else one large file would take every other log with
+    it), and any other refusal ends it."""
     total = sum(sizes.values())
     reachable = floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
     deleted: list[Path] = []
@@ -140,9 +142,10 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
             pass
         except OSError as err:
             _refused(sink, path, err)
-            if err.errno in PASS_OVER:
-                continue
-            break
+            if err.errno not in PASS_OVER:
+                break
+            total -= sizes[path]             # kept on purpose: not the other logs' to make room for
+            continue
         repeats = max(repeats, sink.retention.passed(str(path)))
         total -= sizes[path]
         deleted.append(path)
