@@ -361,6 +361,22 @@ def test_a_reachable_free_space_floor_deletes_the_oldest_but_never_the_newest(
     assert files[3].exists() and [d["action"] for d in events] == ["low_space"]
 
 
+def test_a_free_space_floor_out_of_reach_past_a_refused_log_deletes_nothing(tmp_path, clock, monkeypatch):
+    """The floor reachable by deleting the three older logs, but the oldest is immutable: the
+    two others cannot reach it, so they are kept and low_space says so."""
+    import cmsensord.sinks.retention as retention
+    files, _ = three_logs_refusing(tmp_path, clock, monkeypatch, code=errno.EPERM)
+    RotatingSink(output(tmp_path), clock=clock, wall_clock=lambda: 1_577_836_800.0 + 180).close()
+    files = sorted(tmp_path.glob("*.mcap"))
+    size = files[0].stat().st_size
+    monkeypatch.setattr(retention, "free_bytes", lambda _path: sum(size for p in files if not p.exists()))
+    events = []
+    RotatingSink(output(tmp_path, min_free_mb=2.5 * size / 1e6), clock=clock,
+                 on_event=lambda kind, message, **f: events.append(f["details"]["action"])).close()
+    assert [p.exists() for p in files] == [True, True, True, True]
+    assert events == ["retention_failed", "low_space"]
+
+
 def test_reopen_finishes_the_file_and_continues_in_a_new_one(tmp_path, clock):
     sink = RotatingSink(output(tmp_path), clock=clock)
     sink.write(TOPIC_EVENTS, "event", 10**18, event(0))

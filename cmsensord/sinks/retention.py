@@ -126,12 +126,12 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
     refusal of a file it got past (:class:`RetentionTold`). A file it cannot delete is a
     :func:`_refused` event; one refused for a reason of its own (:data:`PASS_OVER`) is passed
     over and left out of ``cap``'s count (else one large file would take every other log with
-    it), and any other refusal ends it."""
+    it), and the floor's reach counted again without it; any other refusal ends it."""
     total = sum(sizes.values())
-    reachable = floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
+    reachable = _reaches(floor, free, oldest, sizes)
     deleted: list[Path] = []
     repeats = 0
-    for path in oldest:
+    for k, path in enumerate(oldest):
         over = cap is not None and total > cap
         low = reachable and floor is not None and free < floor and path != oldest[-1]
         if not (over or low):
@@ -145,6 +145,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
             if err.errno not in PASS_OVER:
                 break
             total -= sizes[path]             # kept on purpose: not the other logs' to make room for
+            reachable = reachable and _reaches(floor, free, oldest[k + 1:], sizes)
             continue
         repeats = max(repeats, sink.retention.passed(str(path)))
         total -= sizes[path]
@@ -155,6 +156,11 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
             except OSError:
                 free += sizes[path]
     return deleted, total, free, repeats
+
+
+def _reaches(floor: float | None, free: int, oldest: list[Path], sizes: dict[Path, int]) -> bool:
+    """Whether deleting all of ``oldest`` but the newest would bring ``free`` bytes up to ``floor``."""
+    return floor is not None and free + sum(sizes[p] for p in oldest[:-1]) >= floor
 
 
 def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
