@@ -172,6 +172,23 @@ def test_missing_log_is_one_line(tmp_path):
     assert p.stderr.strip() == f"cmsensord: {tmp_path}: no MCAP logs (*.mcap, *.mcap.part) in this directory"
 
 
+def test_a_file_that_is_not_mcap_is_one_line_and_no_report(tmp_path):
+    junk = tmp_path / "song.wav"
+    junk.write_bytes(b"RIFF" + bytes(range(256)) * 8)
+    p = cmsensord("report", str(junk), "--out", str(tmp_path / "r.html"))
+    assert p.returncode == 2 and p.stderr.strip() == f"cmsensord: {junk}: not an MCAP file (bad magic)"
+    assert not (tmp_path / "r.html").exists()
+
+
+def test_a_file_that_is_not_mcap_beside_logs_is_one_line_and_the_report_goes_on(logs, tmp_path):
+    junk = tmp_path / "song.wav"
+    junk.write_bytes(b"RIFF" + bytes(range(256)) * 8)
+    p, page, metas = _report(tmp_path, junk, logs["degrading_rms"])
+    assert [line for line in p.stderr.splitlines() if "song.wav" in line] == [
+        f"cmsensord: report: {junk}: not an MCAP file (bad magic); the report holds its 0 message(s) before that"]
+    assert "ch0-severity" in metas
+
+
 def test_summary_prints_iso_times_and_event_lines(logs):
     log = next(logs["degrading_rms"].glob("*.mcap"))
     info = json.loads(cmsensord("summary", "--json", str(log)).stdout)

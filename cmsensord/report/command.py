@@ -39,6 +39,7 @@ def run_report(args: argparse.Namespace) -> int:
     from cmsensord.report.reading import log_paths, read_logs
     paths = log_paths(args.logs)
     data = read_logs(paths, sys.stderr)
+    _tell_unreadable(data)
     sections = _draw(data)
     from cmsensord.report.html_page import render_page
     from cmsensord.report.localtime import local_text
@@ -57,6 +58,19 @@ def run_report(args: argparse.Namespace) -> int:
     n = sum(len(f) for _, f in sections)
     print(f"report: {out} ({n} figures, {data.messages:,} messages from {len(paths)} file(s))", file=sys.stderr)
     return 0
+
+
+def _tell_unreadable(data: Any) -> None:
+    """One line on stderr for each file whose read ended at damage (not MCAP, a bad chunk):
+    what it held before that is in the report. When no file could be read at all, a user
+    error (no report)."""
+    bad = [f for f in data.files if f.error]
+    if bad and len(bad) == len(data.files) and not data.messages:
+        more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
+        raise CmsensordError(f"{bad[0].path}: {bad[0].error}{more}")
+    for f in bad:
+        print(f"cmsensord: report: {f.path}: {f.error}; the report holds its {f.messages:,} message(s) "
+              "before that", file=sys.stderr)
 
 
 def _draw(data: Any) -> list[tuple[str, list[Any]]]:
