@@ -8,6 +8,7 @@ import html
 import json
 import re
 import shutil
+import struct
 import subprocess
 import sys
 from datetime import datetime
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from cmsensord.sinks.mcap_chunk_check import check_chunk
 from cmsensord.sinks.mcap_file import McapSink
 from cmsensord.sinks.mcap_read import read_messages
 from processes import ENV, cmsensord, on_terminal, run_module
@@ -187,6 +189,49 @@ def test_a_file_that_is_not_mcap_beside_logs_is_one_line_and_the_report_goes_on(
     assert [line for line in p.stderr.splitlines() if "song.wav" in line] == [
         f"cmsensord: report: {junk}: not an MCAP file (bad magic); the report holds its 0 message(s) before that"]
     assert "ch0-severity" in metas
+
+
+def _chunks(data: bytes) -> list[tuple[int, int]]:
+    """(offset, end) of each top-level chunk record of an MCAP file's bytes."""
+    out, pos = [], 8
+    while pos + 9 <= len(data):
+        opcode, length = struct.unpack_from("<BQ", data, pos)
+        if opcode == 0x06:
+            out.append((pos, pos + 9 + length))
+        if opcode == 0x02:
+            return out
+        pos += 9 + length
+    return out
+
+
+def test_a_damaged_chunk_is_read_past_and_one_line_says_so(logs, tmp_path):
+    """A log with its second chunk hit (bit rot on an SD card, say): the report holds every
+    message of the intact chunks after it, and one line on stderr and the file table say what
+    was skipped."""
+    clock = [0.0]
+    sink = McapSink(tmp_path / "chunked", clock=lambda: clock[0])
+    full = 0
+    for topic, t, msg in read_messages(next(logs["faulty_raw"].glob("*.mcap"))):
+        clock[0] = t / 1e9                  # log time: a chunk is finished every second
+        sink.write(topic, SCHEMA_OF[topic.rsplit("/", 1)[-1]], t, msg)
+        full += 1
+    whole = sink.close()
+    data = bytearray(whole.read_bytes())
+    start, end = _chunks(bytes(data))[1]
+    _chunk, _index, n, _schemas, _channels, dropped = check_chunk(bytes(data[start:end]), {})
+    for i in range(start + 80, start + 90):
+        data[i] ^= 0x55
+    hit = tmp_path / "logs" / "hit.mcap"
+    hit.parent.mkdir()
+    hit.write_bytes(bytes(data))
+    p, page, metas = _report(tmp_path, hit)
+    kept = full - n - dropped
+    why = rf"the first: bad chunk at byte {start}: cannot decompress \(zstd\): [^;)]+"   # zstd's own words
+    [line] = [line for line in p.stderr.splitlines() if "hit.mcap" in line]
+    assert re.fullmatch(rf"cmsensord: report: {re.escape(str(hit))}: 1 damaged stretch\(es\) skipped \({why}\); "
+                        rf"the report holds the {kept:,} message\(s\) of its intact chunks", line), line
+    assert f"{kept:,} messages from 1 file" in p.stderr and "ch0-severity" in metas
+    assert re.search(rf"damaged: 1 stretch\(es\) skipped \({why}\); complete", page)
 
 
 def test_summary_prints_iso_times_and_event_lines(logs):

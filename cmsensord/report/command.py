@@ -61,16 +61,21 @@ def run_report(args: argparse.Namespace) -> int:
 
 
 def _tell_unreadable(data: Any) -> None:
-    """One line on stderr for each file whose read ended at damage (not MCAP, a bad chunk):
-    what it held before that is in the report. When no file could be read at all, a user
-    error (no report)."""
+    """One line on stderr for each file with damage read past (a bad chunk, intact ones after
+    it) and each whose read ended at damage (not MCAP, no intact chunk after it). When no
+    file could be read at all, a user error (no report)."""
     bad = [f for f in data.files if f.error]
     if bad and len(bad) == len(data.files) and not data.messages:
         more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
         raise CmsensordError(f"{bad[0].path}: {bad[0].error}{more}")
-    for f in bad:
-        print(f"cmsensord: report: {f.path}: {f.error}; the report holds its {f.messages:,} message(s) "
-              "before that", file=sys.stderr)
+    for f in data.files:
+        if f.skipped:
+            print(f"cmsensord: report: {f.path}: {len(f.skipped)} damaged stretch(es) skipped (the first: "
+                  f"{f.skipped[0]}); the report holds the {f.messages:,} message(s) of its intact chunks",
+                  file=sys.stderr)
+        if f.error:
+            print(f"cmsensord: report: {f.path}: {f.error}; the report holds its {f.messages:,} message(s) "
+                  "before that", file=sys.stderr)
 
 
 def _draw(data: Any) -> list[tuple[str, list[Any]]]:

@@ -7,9 +7,13 @@ about ten times faster: the file is walked with the rules of
 last complete record, a record claiming more than ``RECORD_LIMIT`` bytes ends the
 read, nothing is raised on the content; the file is memory-mapped, not read into memory), each chunk is checked
 against its CRC and decompressed once, and the Channel and Message records in it
-are read by their fixed layouts (MCAP specification, "Records"). A chunk that
-cannot be decompressed or fails its CRC ends the read, as it ends the lenient
-reader's; :attr:`FastScan.error` says where.
+are read by their fixed layouts (MCAP specification, "Records"). Damage (a chunk
+that cannot be decompressed or fails its CRC, a record claiming more bytes than
+there are) is read past as salvage reads past it: from the next chunk record that
+checks out (:class:`~cmsensord.sinks.mcap_chunk_check.Resync`), each stretch
+skipped listed in :attr:`FastScan.skipped`; with no good chunk after it, the
+damage ends the read (:attr:`FastScan.error`; a file ending inside a record is
+an unfinished one).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from cmsensord.errors import SinkError
+from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
 from cmsensord.sinks.mcap_read import RECORD_LIMIT
 
@@ -49,16 +54,18 @@ def _zstd() -> Any:
 
 
 class FastScan:
-    """One file's messages (:meth:`messages`); :attr:`error` set when damage ended the read."""
+    """One file's messages (:meth:`messages`); :attr:`skipped` the damage read past,
+    :attr:`error` the damage that ended the read."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.topics: dict[int, str] = {}
         self.error: str | None = None
+        self.skipped: list[str] = []
         self.complete = False
 
     def messages(self) -> Iterator[tuple[str, int, bytes, int]]:
-        """(topic, log_time_ns, data, bytes read) of every message up to the first damage."""
+        """(topic, log_time_ns, data, bytes read) of every message the file's intact records hold."""
         try:
             f = open(self.path, "rb")
             size = os.fstat(f.fileno()).st_size
@@ -67,11 +74,16 @@ class FastScan:
         with f:
             if size < len(MAGIC):
                 return
-            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
-                yield from self._walk(buf, size)
+            resync = Resync(f, size, None)
+            try:
+                with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+                    yield from self._walk(buf, size, resync)
+            finally:
+                resync.close()
 
-    def _walk(self, buf: mmap.mmap, size: int) -> Iterator[tuple[str, int, bytes, int]]:
-        """The top-level records of the mapped file, as :class:`RecordWalker` walks them."""
+    def _walk(self, buf: mmap.mmap, size: int, resync: Resync) -> Iterator[tuple[str, int, bytes, int]]:
+        """The top-level records of the mapped file, as :class:`RecordWalker` walks them, damage
+        read past from the next good chunk (:meth:`_past`)."""
         if buf[: len(MAGIC)] != MAGIC:
             self.error = "not an MCAP file (bad magic)"
             return
@@ -79,28 +91,43 @@ class FastScan:
         while pos + 9 <= size:
             opcode, length = _HEAD.unpack_from(buf, pos)
             end = pos + 9 + length
+            damage = None
             if length > RECORD_LIMIT:
-                self.error = f"record at byte {pos} claims {length} bytes"
-                return
-            if end > size:
-                return                                  # the file ends inside a record
-            if opcode == _OP_CHUNK:
+                damage = f"record at byte {pos} claims {length} bytes"
+            elif end > size:
+                damage = ""                             # the file ends inside a record
+            elif opcode == _OP_CHUNK:
                 try:
                     records = self._chunk_records(buf[pos:end])
                 except (ValueError, struct.error, zlib.error) as err:
-                    self.error = f"bad chunk at byte {pos}: {err}"
-                    return
-                for topic, t, data in self._records(records, pos):
-                    yield topic, t, data, end
+                    damage = f"bad chunk at byte {pos}: {err}"
+                else:
+                    for topic, t, data in self._records(records, pos):
+                        yield topic, t, data, end
             elif opcode in (_OP_CHANNEL, _OP_MESSAGE):
                 for topic, t, data in self._records(buf[pos:end], pos):
                     yield topic, t, data, end
             elif opcode == _OP_FOOTER:
                 self.complete = buf[end: end + len(MAGIC)] == MAGIC
                 return
+            if damage is not None:
+                end = self._past(resync, pos, damage)
+                if end is None:
+                    return
             if self.error:
                 return
             pos = end
+
+    def _past(self, resync: Resync, pos: int, damage: str) -> int | None:
+        """Damage at byte ``pos`` (``""``: the file ends inside a record): the offset of the next
+        good chunk, the damage listed in :attr:`skipped`; None when there is none (the damage
+        ends the read, in :attr:`error`; an unfinished file's tail, in nothing)."""
+        nxt = resync.next_chunk(pos + 1, {})
+        if nxt is None:
+            self.error = damage or None
+            return None
+        self.skipped.append(damage or f"a record at byte {pos} claims more bytes than the file holds")
+        return nxt
 
     @staticmethod
     def _chunk_records(raw: bytes) -> bytes:
@@ -112,13 +139,16 @@ class FastScan:
         off += 4 + n
         (n,) = struct.unpack_from("<Q", raw, off)
         body = raw[off + 8: off + 8 + n]
-        if compression == "zstd":
-            body = _zstd().decompress(body, max_output_size=size)
-        elif compression == "lz4":
-            import lz4.frame  # type: ignore[import-not-found,unused-ignore]
-            body = lz4.frame.decompress(body)
-        elif compression:
+        if compression not in ("", "zstd", "lz4"):
             raise ValueError(f"unknown compression {compression!r}")
+        try:
+            if compression == "zstd":
+                body = _zstd().decompress(body, max_output_size=size)
+            elif compression == "lz4":
+                import lz4.frame  # type: ignore[import-not-found,unused-ignore]
+                body = lz4.frame.decompress(body)
+        except Exception as err:  # noqa: BLE001 - any failure of the codec is damage
+            raise ValueError(f"cannot decompress ({compression}): {err}") from None
         if len(body) != size or (crc and zlib.crc32(body) != crc):
             raise ValueError("CRC or size mismatch")
         return body

@@ -70,9 +70,10 @@ def _events_table(data: LogData) -> str:
 
 
 def _file_state(f: Any) -> str:
+    skipped = f"damaged: {len(f.skipped)} stretch(es) skipped (the first: {f.skipped[0]}); " if f.skipped else ""
     if f.error:
-        return html.escape(f"damaged: {f.error}; read up to there")
-    return "complete" if f.complete else "unfinished (read up to its last complete record)"
+        return html.escape(f"{skipped}damaged: {f.error}; read up to there")
+    return html.escape(skipped) + ("complete" if f.complete else "unfinished (read up to its last complete record)")
 
 
 def _diagnostics_table(data: LogData) -> str:

@@ -72,13 +72,15 @@ class ChannelData:
 
 @dataclass
 class FileInfo:
-    """One file read: its path, size and how far it could be read."""
+    """One file read: its path, size and how far it could be read (``skipped``: the damage
+    read past; ``error``: the damage that ended the read)."""
 
     path: str
     bytes: int
     messages: int = 0
     complete: bool = False
     error: str | None = None
+    skipped: list[str] = field(default_factory=list)
 
 
 class LogData:
