@@ -16,9 +16,10 @@ from pathlib import Path
 
 import pytest
 
+from cmsensord.report.fast_read import FastScan
 from cmsensord.sinks.mcap_chunk_check import check_chunk
 from cmsensord.sinks.mcap_file import McapSink
-from cmsensord.sinks.mcap_read import read_messages
+from cmsensord.sinks.mcap_read import iter_messages_at, read_messages
 from processes import ENV, cmsensord, on_terminal, run_module
 
 SCHEMA_OF = {"events": "event", "diagnostics": "diagnostics", "severity": "severity", "orders": "orders",
@@ -204,18 +205,36 @@ def _chunks(data: bytes) -> list[tuple[int, int]]:
     return out
 
 
+def _chunked(log_dir: Path, tmp_path: Path) -> Path:
+    """The log of ``log_dir`` written again as the daemon writes it live: a chunk a second."""
+    clock = [0.0]
+    sink = McapSink(tmp_path / "chunked", clock=lambda: clock[0])
+    for topic, t, msg in read_messages(next(log_dir.glob("*.mcap"))):
+        clock[0] = t / 1e9
+        sink.write(topic, SCHEMA_OF[topic.rsplit("/", 1)[-1]], t, msg)
+    return sink.close()
+
+
+def test_the_fast_reader_gives_what_the_lenient_reader_gives(logs, tmp_path):
+    """The report's reader against the plain lenient one: every log, and an unfinished file
+    cut inside a chunk, message for message."""
+    whole = _chunked(logs["faulty_raw"], tmp_path)
+    cut = tmp_path / "cut.mcap.part"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size * 2 // 3])
+    for log in [next(logs[k].glob("*.mcap")) for k in sorted(logs)] + [whole, cut]:
+        scan = FastScan(log)
+        fast = [(topic, t, bytes(data)) for topic, t, data, _ in scan.messages()]
+        plain = [(topic, t, bytes(data)) for topic, t, data, _ in iter_messages_at(log)]
+        assert fast == plain and len(plain) > 50, log
+        assert scan.error is None and scan.skipped == [] and scan.complete == (log != cut), log
+
+
 def test_a_damaged_chunk_is_read_past_and_one_line_says_so(logs, tmp_path):
     """A log with its second chunk hit (bit rot on an SD card, say): the report holds every
     message of the intact chunks after it, and one line on stderr and the file table say what
     was skipped."""
-    clock = [0.0]
-    sink = McapSink(tmp_path / "chunked", clock=lambda: clock[0])
-    full = 0
-    for topic, t, msg in read_messages(next(logs["faulty_raw"].glob("*.mcap"))):
-        clock[0] = t / 1e9                  # log time: a chunk is finished every second
-        sink.write(topic, SCHEMA_OF[topic.rsplit("/", 1)[-1]], t, msg)
-        full += 1
-    whole = sink.close()
+    whole = _chunked(logs["faulty_raw"], tmp_path)
+    full = len(read_messages(whole))
     data = bytearray(whole.read_bytes())
     start, end = _chunks(bytes(data))[1]
     _chunk, _index, n, _schemas, _channels, dropped = check_chunk(bytes(data[start:end]), {})

@@ -1,11 +1,11 @@
 """A fast lenient reader of MCAP messages for long logs: chunks parsed with ``struct``, not record objects.
 
-:func:`iter_messages_fast` yields the same (topic, log_time_ns, data) as
-:func:`~cmsensord.sinks.mcap_read.iter_messages_lenient`, plus the bytes read so far,
-about ten times faster: the file is walked with the rules of
+:meth:`FastScan.messages` yields the same (topic, log_time_ns, data) as
+:func:`~cmsensord.sinks.mcap_read.iter_messages_at` of an undamaged file, plus the
+bytes read so far, about ten times faster: the file is walked with the rules of
 :class:`~cmsensord.sinks.mcap_read.RecordWalker` (a ``.part`` file ends at its
-last complete record, a record claiming more than ``RECORD_LIMIT`` bytes ends the
-read, nothing is raised on the content; the file is memory-mapped, not read into memory), each chunk is checked
+last complete record, a record claiming more than ``RECORD_LIMIT`` bytes is
+damage, nothing is raised on the content; the file is memory-mapped, not read into memory), each chunk is checked
 against its CRC and decompressed once, and the Channel and Message records in it
 are read by their fixed layouts (MCAP specification, "Records"). Damage (a chunk
 that cannot be decompressed or fails its CRC, a record claiming more bytes than
@@ -13,7 +13,7 @@ there are) is read past as salvage reads past it: from the next chunk record tha
 checks out (:class:`~cmsensord.sinks.mcap_chunk_check.Resync`), each stretch
 skipped listed in :attr:`FastScan.skipped`; with no good chunk after it, the
 damage ends the read (:attr:`FastScan.error`; a file ending inside a record is
-an unfinished one).
+an unfinished one). The lenient reader ends at the first damage.
 """
 
 from __future__ import annotations
