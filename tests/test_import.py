@@ -274,7 +274,9 @@ def test_errors_are_one_line_and_leave_nothing_behind(tmp_path):
     (tmp_path / "bad.csv").write_text("1;2\n3;oops\n")
     scipy.io.savemat(tmp_path / "m.mat", {"data": np.zeros((10, 1))})
     np.save(tmp_path / "p.npy", np.stack([np.zeros(4096), np.tile([0.0, 1.0], 2048)], axis=1))
+    (tmp_path / "cut.wav").write_bytes(b"RIFF\x24\x00\x00\x00WAVEfmt ")    # a header cut short
     cases = {
+        ("cut.wav",): "cut.wav: not a readable WAV file (it ends inside its header); export it as PCM or float WAV",
         ("x.csv", "--fs", "100", "--columns", "acc"):
             "x.csv: no column 'acc' (columns: a, b, c); use --columns",
         ("x.csv",): "x.csv: the file does not say its sampling rate; give --fs HZ",

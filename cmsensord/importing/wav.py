@@ -9,6 +9,7 @@ at full scale in ``--unit``. The file's sampling rate is the recording's.
 
 from __future__ import annotations
 
+import struct
 import warnings
 
 import numpy as np
@@ -26,9 +27,9 @@ def read_wav(path: str) -> Table:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", wavfile.WavFileWarning)  # unknown chunks are skipped
             fs, a = wavfile.read(path, mmap=False)
-    except (ValueError, EOFError) as exc:
-        raise ImportFailure(f"{path}: not a readable WAV file ({' '.join(str(exc).split())}); "
-                            "export it as PCM or float WAV") from None
+    except (ValueError, EOFError, struct.error) as exc:
+        why = "it ends inside its header" if isinstance(exc, struct.error) else " ".join(str(exc).split())
+        raise ImportFailure(f"{path}: not a readable WAV file ({why}); export it as PCM or float WAV") from None
     if a.dtype == np.uint8:
         x = (a.astype(np.float64) - 128.0) / 128.0
     elif a.dtype == np.int16:
