@@ -5,6 +5,7 @@ silent, and a user's mistakes are one-line errors that leave nothing behind."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import wave
@@ -296,6 +297,24 @@ def test_errors_are_one_line_and_leave_nothing_behind(tmp_path):
         r = cmd("import", *args, "--out", "o.bin", cwd=tmp_path)
         assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), args
         assert not list(tmp_path.glob("o.bin*")), args
+
+
+def test_a_wav_file_cut_short_is_imported_as_far_as_it_goes_and_says_so(tmp_path):
+    """A WAV file whose data stops before its header says (a copy cut short): the samples there
+    are imported, and a note on stderr and in the sidecar says the file ends early."""
+    x = np.round(signal(8000, 1, amp=0.5)[0] * 32767).astype(np.int16)
+    wavfile.write(tmp_path / "whole.wav", 8000, x)
+    data = (tmp_path / "whole.wav").read_bytes()
+    (tmp_path / "cut.wav").write_bytes(data[: 44 + 2 * 5000])            # 5,000 of 8,000 samples
+    r = cmd("import", "cut.wav", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    [note] = [line for line in r.stderr.splitlines() if "cut.wav" in line]
+    assert re.fullmatch(r"  note: cut\.wav: the file ends before the data its header declares \(.+\); "
+                        r"the 5,000 sample\(s\) there are imported", note), note
+    assert note[len("  note: "):] in sidecar(tmp_path / "o.bin")["notes"]
+    cap = decode(tmp_path / "o.bin")
+    n = 5000 - 5000 % cap["status"].block_len              # whole blocks of what is there
+    assert_within_one_count(cap, x[None, :n] / 32768)
 
 
 def test_import_then_replay_end_to_end(tmp_path):

@@ -186,8 +186,9 @@ def _channels(t: Table, layout: _Layout, factor: float) -> np.ndarray:
 
 
 def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
-    """What the sidecar says about one file: snapshot times out of order, a short last snapshot."""
-    notes = []
+    """What the sidecar says about one file: what its reader noticed, snapshot times out of order,
+    a short last snapshot."""
+    notes = list(t.notes)
     if t.times is not None and (np.diff(t.times) <= 0).any():
         bad = np.flatnonzero(np.diff(t.times) <= 0)
         k = int(bad[0]) + 1

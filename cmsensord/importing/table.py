@@ -9,7 +9,7 @@ or a multi-snapshot file. ``fs``, ``times`` (each snapshot's start, seconds) and
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,7 @@ class Table:
     fs: float | None = None
     times: np.ndarray | None = None  # (snapshots,) seconds
     rpm: float | None = None
+    notes: list[str] = field(default_factory=list)  # what the reader noticed (a file cut short)
 
     @property
     def name(self) -> str:

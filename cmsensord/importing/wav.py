@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import struct
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -24,8 +25,8 @@ def read_wav(path: str) -> Table:
     from scipy.io import wavfile  # 0.3 s to import: only when a WAV file is read
 
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", wavfile.WavFileWarning)  # unknown chunks are skipped
+        with warnings.catch_warnings(record=True) as caught:   # unknown chunks are skipped silently
+            warnings.simplefilter("always", wavfile.WavFileWarning)
             fs, a = wavfile.read(path, mmap=False)
     except (ValueError, EOFError, struct.error) as exc:
         why = "it ends inside its header" if isinstance(exc, struct.error) else " ".join(str(exc).split())
@@ -45,4 +46,7 @@ def read_wav(path: str) -> Table:
     if x.shape[0] == 0:
         raise ImportFailure(f"{path}: the WAV file holds no samples")
     names = [f"ch{i}" for i in range(x.shape[1])]
-    return Table(path=path, data=x[None], columns=names, kind="channel", fs=float(fs))
+    cut = [" ".join(str(w.message).split()) for w in caught if "EOF" in str(w.message)]
+    notes = [f"{Path(path).name}: the file ends before the data its header declares ({cut[0]}); the "
+             f"{x.shape[0]:,} sample(s) there are imported"] if cut else []
+    return Table(path=path, data=x[None], columns=names, kind="channel", fs=float(fs), notes=notes)
