@@ -175,8 +175,18 @@ def add_calibrate_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
+def _writable_out(out: Path) -> Path:
+    """``--out`` checked before the capture is read: a file name in a directory that exists."""
+    if out.is_dir():
+        raise CmsensordError(f"calibrate: {out}: is a directory; give --out a file name, e.g. {out / 'site.yaml'}")
+    if not out.parent.is_dir():
+        raise CmsensordError(f"calibrate: {out}: cannot write the site file: no directory {out.parent}")
+    return out
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     """Read, learn, print the table, write SITE.yaml atomically and check it loads."""
+    out = _writable_out(Path(args.out))
     cfg = load_config(args.config) if args.config else Config()
     base = yaml.safe_load(Path(args.config).read_text(encoding="utf-8")) if args.config else None
     auto = not (isinstance(base, dict) and base.get("channels"))
@@ -185,12 +195,13 @@ def run_calibrate(args: argparse.Namespace) -> int:
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
     print(format_table(results, obs))
     text = site_yaml(results, obs, source=Path(args.capture).name, base=base, base_path=args.config)
-    out = Path(args.out)
     tmp = out.with_name(out.name + ".part")
     try:
         tmp.write_text(text)
         load_config(str(tmp))
         os.replace(tmp, out)
+    except OSError as exc:
+        raise CmsensordError(f"calibrate: {out}: cannot write the site file: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
     print(f"wrote {out}: run `cmsensord replay CAPTURE --config {out}` or `cmsensord --config {out}`",

@@ -82,6 +82,30 @@ def test_calibrate_errors_are_one_line(degrading, tmp_path, args, line, code):
     assert not (tmp_path / "s.yaml").exists() and not (tmp_path / "s.yaml.part").exists()
 
 
+@pytest.mark.parametrize("out, line", [
+    ("{tmp}", "cmsensord: calibrate: {tmp}: is a directory; give --out a file name, e.g. {tmp}/site.yaml"),
+    ("{tmp}/no/s.yaml", "cmsensord: calibrate: {tmp}/no/s.yaml: cannot write the site file: no directory {tmp}/no"),
+])
+def test_calibrate_to_an_output_it_cannot_write_is_one_line_before_the_read(tmp_path, out, line):
+    """--out is checked first: the capture given does not exist, and the --out line is the one told."""
+    p = run("cmsensord", "calibrate", str(tmp_path / "nope.bin"), "--out", out.format(tmp=tmp_path))
+    assert p.returncode == 2
+    assert p.stderr.strip() == line.format(tmp=tmp_path)
+    assert sorted(tmp_path.iterdir()) == []
+
+
+def test_calibrate_when_the_site_file_cannot_be_written_is_one_line(degrading):
+    """A write that fails after the read (a directory that takes no new file: /proc, even for root)
+    is one line after the table, and nothing is left."""
+    out = Path("/proc/cmsensord-site.yaml")
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "150", "--out", str(out))
+    assert p.returncode == 2
+    assert "healthy period: 0.0-150.0 board s" in p.stdout
+    assert p.stderr.strip().splitlines() == [
+        f"cmsensord: calibrate: {out}: cannot write the site file: No such file or directory"]
+    assert not out.exists() and not Path(f"{out}.part").exists()
+
+
 def test_calibrate_of_a_missing_capture(tmp_path):
     p = run("cmsensord", "calibrate", str(tmp_path / "nope.bin"), "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 2
