@@ -72,7 +72,8 @@ def test_calibrate_on_a_base_config_keeps_its_settings(degrading, tmp_path):
     (["--rpm", "6000"], "cmsensord: configuration error: calibrate: ch0.f_r: 100 Hz must be below the 100 "
                         "observations per decision (100 blocks/s x decision_period_s 1)", 78),
     (["--from", "700"], "cmsensord: calibrate: {cap}: no observations between 700 and", 2),
-    (["--to", "1"], "cmsensord: calibrate: channel ch0: need at least 2 decision periods", 2),
+    (["--to", "1"], "cmsensord: calibrate: channel ch0: need at least 2 decision periods of data (100 observations "
+                    "each; the first is the filters' transient), got 100 observation(s)", 2),
 ])
 def test_calibrate_errors_are_one_line(degrading, tmp_path, args, line, code):
     p = run("cmsensord", "calibrate", str(degrading), *args, "--out", str(tmp_path / "s.yaml"))

@@ -175,7 +175,8 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     level_raw = _level_per_period(y, period)[1:]
     if np.count_nonzero(np.isfinite(level_raw)) < 1:
         raise ValueError(f"need at least 2 decision periods of data ({period} observations each; "
-                         f"the first is the filters' transient), got {y.size // period}")
+                         f"the first is the filters' transient), got {np.count_nonzero(np.isfinite(y))} "
+                         "observation(s)")
     baseline = float(np.nanmedian(level_raw))
     if not baseline > 0:
         raise ValueError("the healthy period's block RMS is zero: no signal on this channel")
