@@ -111,6 +111,16 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     return sink.paths, summary
 
 
+def describe(info: dict, *, bandwidth_hz: float, poles: int) -> str:
+    """One line of what ``batch_orders`` did, for the terminal (its summary dict, read aloud)."""
+    ridge = [m for m in info["ridge"] if m]
+    return (f"batch VKF: {len(info['components'])} component(s) ({', '.join(info['components'])}), "
+            f"{poles} pole(s), {bandwidth_hz:g} Hz: {info['samples']:,} sample(s) a channel, decimated "
+            f"{info['decimation']}x to {info['fs_tracked']:g} Hz; {info['blocks']:,} /orders message(s) "
+            f"written in {info['wall_s']:.1f} s"
+            + (f"; a ridge term was needed (mu up to {max(ridge):.3g})" if ridge else ""))
+
+
 def _remove(paths: list[Path], made_dir: Path | None) -> None:
     """Delete the files of a failed run (they would hold the replay without the batch orders),
     and the output directory when this run made it and it is empty again."""

@@ -180,7 +180,7 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
 
 def _run_vkf(args: argparse.Namespace) -> int:
     """``cmsensord vkf``: the batch orders of a capture."""
-    from cmsensord.batch import batch_orders
+    from cmsensord.batch import batch_orders, describe
 
     cfg, _ = _config_for(args.sub_config)
     if args.sub_out:
@@ -188,7 +188,7 @@ def _run_vkf(args: argparse.Namespace) -> int:
     paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles)
     for p in paths:
         print(f"MCAP log: {p}", file=sys.stderr)
-    print(f"  batch VKF: {info}", file=sys.stderr)
+    print(f"  {describe(info, bandwidth_hz=args.bandwidth, poles=args.poles)}", file=sys.stderr)
     return 0
 
 

@@ -8,6 +8,8 @@ output file or directory is left behind.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import yaml
@@ -44,6 +46,9 @@ def test_vkf_runs_on_every_raw_scenario(tmp_path, scenario):
     msgs = batch_messages(tmp_path / "out")
     batch = [m for _, m in msgs if m["method"] == "batch"]
     assert len(batch) == int(seconds * 10)                 # one per 0.1 s block of the record
+    assert re.fullmatch(rf"  batch VKF: \d+ component\(s\) \(.+\), 2 pole\(s\), 1 Hz: [\d,]+ sample\(s\) a "
+                        rf"channel, decimated \d+x to [\d.]+ Hz; {len(batch):,} /orders message\(s\) written in "
+                        r"[\d.]+ s(; a ridge term was needed \(mu up to \S+\))?", r.stderr.splitlines()[-1])
     valid = [m for m in batch if m["valid"]]
     assert len(valid) >= 0.9 * len(batch) if scenario not in SECONDS else len(valid) > 0.5 * len(batch)
     for m in valid:
