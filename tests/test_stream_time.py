@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from cmsensord.config import config_from_dict
 from cmsensord.protocol import (
     MODE_RAW,
     MODE_RMS,
@@ -24,6 +25,7 @@ from cmsensord.protocol import (
 )
 from cmsensord.sinks.mcap_sink import read_messages
 from processes import ENV, start_board, start_daemon, stop
+from stream import run_processor
 
 MB = 1024          # ru_maxrss is in kB
 
@@ -131,6 +133,84 @@ def test_a_replugged_board_that_restarted_is_a_new_segment_from_the_wall_clock(t
     assert not events(msgs, "frames_lost")
     assert_time_goes_on(msgs)
     assert sum(s > stamp for t, s, _ in msgs if t == "/cm/ch0/severity") >= 1
+
+
+def raw_capture(tmp_path, seconds: float) -> bytes:
+    """A simulated board in RAW mode with a tacho, 1 channel, from t0 and seq 0."""
+    cap = tmp_path / f"raw{seconds:g}.bin"
+    p = subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw",
+                        "--tacho", "--duration", str(seconds), "--out", str(cap)],
+                       capture_output=True, text=True, env=ENV, timeout=60)
+    assert p.returncode == 0, p.stderr
+    return cap.read_bytes()
+
+
+def test_a_board_reset_restarts_the_shaft_speed_and_the_order_tracker(tmp_path):
+    """A board with a tacho restarts (t0 and seq from 0): the shaft speed and the order tracker
+    start again with it, so the same 6 s sent again give the same orders and speeds.  Before:
+    every TACHO frame after the reset was dropped as "before the newest one in board time" until
+    the board's clock passed its uptime before the reset: no speed and no valid order for as
+    long as the board had run."""
+    one = raw_capture(tmp_path, 6.0)
+    p, msgs, rss = replay(tmp_path, one + one)
+    assert p.returncode == 0, p.stderr
+    assert "before the newest one in board time" not in p.stderr
+    assert not events(msgs, "decode_error")
+    (stamp, _), = events(msgs, "time_base")
+    hello = [m for m in said(msgs, "config") if m.startswith("order tracker: ")]
+    assert len(hello) == 2 and hello[0] == hello[1]
+    orders = [(s, m) for t, s, m in msgs if t == "/cm/ch0/orders"]
+    before = [(m["valid"], m["speed_rpm"], m["orders"]) for s, m in orders if s < stamp]
+    after = [(m["valid"], m["speed_rpm"], m["orders"]) for s, m in orders if s >= stamp]
+    assert len(before) == len(after) == 60
+    assert sum(v for v, _, _ in before) >= 55
+    assert after == before
+    speeds = [m["speed_rpm"] for t, _, m in msgs if t == "/cm/ch0/indicators"]
+    assert len(speeds) == 12 and None not in speeds and speeds[6:] == speeds[:6]
+    assert rss < 100 * MB
+
+
+def test_a_board_reset_with_a_tacho_gives_the_same_messages_however_the_stream_is_read(tmp_path):
+    """Chunk-split invariance across the reset: reads of 997 bytes, 64 kB and the whole stream
+    give every topic's messages alike (not /cm/diagnostics, which tells how the stream was read;
+    the topics interleave as the parts release them)."""
+    data = raw_capture(tmp_path, 3.0) * 2
+    cfg = config_from_dict({})
+    runs = []
+    for chunk in (997, 65_536, len(data)):
+        topics: dict[str, list] = {}
+        for topic, stamp, msg in run_processor(data, cfg, chunk=chunk)[0].messages:
+            if topic != "/cm/diagnostics":
+                topics.setdefault(topic, []).append((stamp, msg))
+        runs.append(topics)
+    assert [m["kind"] for _, m in runs[0]["/cm/events"]].count("time_base") == 1
+    assert sum(m["valid"] for _, m in runs[0]["/cm/ch0/orders"]) >= 50
+    assert runs[1] == runs[0] and runs[2] == runs[0]
+
+
+def test_a_replugged_raw_board_that_restarted_gets_its_shaft_speed_at_once(tmp_path):
+    """Live: a RAW board with a tacho runs 5 s, goes away and comes back restarted on the same
+    name for 3.5 s: valid orders come after the time_base event (before the fix none could
+    before the new board's clock passed the 5 s of the old one)."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--speed", "1", "--mode", "raw", "--tacho", "--link", str(link))
+    d = start_daemon(tmp_path, link)
+    time.sleep(5.0)
+    sim.terminate()
+    sim.wait(timeout=5)
+    sim = start_board("--scenario", "healthy", "--speed", "1", "--mode", "raw", "--tacho", "--link", str(link),
+                      "--seed", "1")
+    time.sleep(3.5)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    (stamp, _), = events(msgs, "time_base")
+    assert "before the newest one in board time" not in err
+    valid_after = [m for t, s, m in msgs if t == "/cm/ch0/orders" and s > stamp and m["valid"]]
+    assert len(valid_after) >= 10, len(valid_after)
+    assert all(abs(m["speed_rpm"] - 1720) < 20 for m in valid_after)
 
 
 def test_a_board_clock_running_fast_is_re_anchored_to_the_wall_clock(tmp_path):

@@ -235,7 +235,7 @@ def test_the_processor_writes_the_files_a_one_message_sink_gets(tmp_path, monkey
             return procs[-1]
 
         replay_ticking(cap, proc_of, sink, clock, 0.4, chunk=1 << 15)
-        assert (procs[0]._write_many is None) == (name == "one")
+        assert (procs[0].output.write_many is None) == (name == "one")
     assert sinks[0].messages_written == sinks[1].messages_written > 1000
     assert len(sinks[1].paths) >= 3
     assert files(tmp_path / "one") == files(tmp_path / "many")

@@ -18,7 +18,7 @@ hand it the same :class:`~cmsensord.protocol.Frame` batches
   alarm events and /cm/alarms right after the message that caused them.
 
 Every message is built in :mod:`.messages`; every event goes through the
-:class:`~cmsensord.monitor.events.EventLog`.
+:class:`~cmsensord.monitor.events.EventLog`; both leave through :mod:`.output`.
 """
 
 from __future__ import annotations
@@ -33,12 +33,13 @@ import numpy as np
 from cmsensord.config import Config
 from cmsensord.frame_batch import Pending, rms_fields, select
 from cmsensord.monitor import messages
-from cmsensord.monitor.alarms import WATCHED, Alarms
+from cmsensord.monitor.alarms import Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
+from cmsensord.monitor.output import Output
 from cmsensord.monitor.raw import RawInput
 from cmsensord.monitor.segments import SCAN_MIN, Segments
 from cmsensord.monitor.shaft import Shaft
@@ -83,8 +84,6 @@ class Processor:
                  on_event: Callable[[dict], None] | None = None,
                  observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
         self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
-        # a sink's own write_many (not one a wrapper's __getattr__ hands on from what it wraps)
-        self._write_many = sink.write_many if hasattr(type(sink), "write_many") else None
         self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
@@ -96,6 +95,8 @@ class Processor:
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
         self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho)
         self.alarms = Alarms(cfg, lambda: tuple(ch.name for ch in self.channels if ch.kind != "microphone"))
+        self.output = Output(sink, self.log, self.alarms)
+        self._out = self.output.out
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
@@ -135,40 +136,6 @@ class Processor:
     def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
               **extra: Any) -> None:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
-
-    def _out(self, items) -> list:
-        """Messages to the sink and events to the log, in their order: each run of messages
-        in one call of the sink's ``write_many`` (the same as one ``write`` each), if it has one.
-        Returns a new empty list."""
-        if not items:
-            return []
-        run: list = []
-        watching = self.alarms.watching
-        for it in items:
-            kind = type(it)
-            if kind is Event:
-                run = self._write_run(run)
-                self.log.add((it,))
-            elif kind is messages.MessageGroup:         # a capture: one chunk of the log
-                run = self._write_run(run)
-                self.sink.write_group(list(it.messages))
-            else:
-                run.append(it)
-                if watching and it.schema in WATCHED:   # the alarm manager reads it
-                    more = self.alarms.see(it)
-                    if more:
-                        run = self._write_run(run)
-                        self._out(more)
-        return self._write_run(run)
-
-    def _write_run(self, run: list) -> list:
-        """Messages to the sink, in one call if it takes many; returns a new empty run."""
-        if len(run) > 1 and self._write_many is not None:
-            self._write_many(run)
-        else:
-            for m in run:
-                self.sink.write(*m)
-        return []
 
     def ack(self, which: str | None) -> None:
         """Acknowledge alarm ``which`` (None: all), stamped with the newest alarm input's stamp;
@@ -321,6 +288,8 @@ class Processor:
         board reset starts a new segment (its seq gap is no loss), a seq gap is counted as
         lost frames.  True when ``f`` is to be skipped (a frame of the other mode)."""
         if self.segments.pending(f):
+            if not self.segments.other_mode(f):     # a reset: the old segment's speed before its decisions
+                self._feed_tacho(end=True)
             self._release_decisions(final=True)     # decided on the old segment's time base
             return self.segments.start(f)
         self.frames_lost += f.lost_before
@@ -361,11 +330,16 @@ class Processor:
             release_held()
 
     def _segment_ends(self) -> None:
-        """Before a new time segment: what waits of the old one (the last RAW block, the
-        indicator intervals, stamped in their own segment)."""
+        """Before a new time segment: what waits of the old one (the last RAW block, the order
+        chain, the indicator intervals, stamped in their own segment); the board's sample
+        indices start again, so the shaft and the order chain do too."""
         self._flush_raw([], final=True)
+        if self.orders is not None:
+            self._out(self.orders.finish())
+            self.orders = None
         self._hand_over()
         self.indicators.finish()
+        self.shaft.restart(self.status, self.clock)
 
     def _flush(self, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
         self._flush_rms(rms.joined())

@@ -121,6 +121,15 @@ class Shaft:
             self.waiting = Pending()
             self.waiting.extend(newest)
 
+    def restart(self, status: Status | None, clock: BlockClock) -> None:
+        """A board reset (a new time segment, its TACHO frames fed): the board's sample indices
+        start again, and so does the tracker (a new one, if the board has a tacho)."""
+        self.tacho = None
+        self.waiting = Pending()
+        self._prev_t0 = self._fed_t0 = None
+        self._gaps.clear()
+        self.ensure(status, clock)
+
     def ensure(self, status: Status | None, clock: BlockClock) -> bool:
         """Create the tracker once the board has said it has a tacho; True when there is one."""
         if self.tacho is None and status is not None and status.tacho_inputs > 0:
