@@ -6,6 +6,7 @@ line, its stamps never go backwards and it stays under 100 MB resident."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import subprocess
@@ -18,7 +19,11 @@ from cmsensord.config import config_from_dict
 from cmsensord.protocol import (
     MODE_RAW,
     MODE_RMS,
+    Decoder,
+    FrameType,
     Status,
+    decode_status,
+    encode_frame,
     encode_raw,
     encode_rms,
     encode_status,
@@ -186,6 +191,44 @@ def test_a_board_reset_with_a_tacho_gives_the_same_messages_however_the_stream_i
     assert [m["kind"] for _, m in runs[0]["/cm/events"]].count("time_base") == 1
     assert sum(m["valid"] for _, m in runs[0]["/cm/ch0/orders"]) >= 50
     assert runs[1] == runs[0] and runs[2] == runs[0]
+
+
+def at_rate(data: bytes, fs: int, seq: int) -> bytes:
+    """``data`` with its STATUS frames announcing ``fs`` and its seq numbers from ``seq`` on."""
+    out = bytearray()
+    for k, f in enumerate(Decoder().feed(data)):
+        n = (seq + k) & 0xFFFF
+        if f.type == FrameType.STATUS:
+            out += encode_status(n, f.t0, dataclasses.replace(decode_status(f.payload), fs=fs))
+        else:
+            out += encode_frame(f.type, n, f.t0, f.chan, f.flags, f.payload)
+    return bytes(out)
+
+
+def test_a_board_changing_fs_restarts_the_shaft_speed_at_the_new_rate(tmp_path):
+    """The board goes on at half the rate (STATUS fs 12500), its t0 counting on: the shaft speed
+    and the order tracker start again at the new rate, so the same tacho edges in samples are
+    half the speed.  Before: the tracker made at 25 kHz went on reading them at 25 kHz (1720 rpm
+    where the board said 860) and the order chain kept its 25-kHz decimation."""
+    first = raw_capture(tmp_path, 6.0)
+    again = subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw",
+                            "--tacho", "--duration", "6", "--t0-start", "150000", "--out", str(tmp_path / "b.bin")],
+                           capture_output=True, text=True, env=ENV, timeout=60)
+    assert again.returncode == 0, again.stderr
+    p, msgs, _ = replay(tmp_path, first + at_rate((tmp_path / "b.bin").read_bytes(), 12500,
+                                                  len(Decoder().feed(first))))
+    assert p.returncode == 0, p.stderr
+    assert not events(msgs, "frames_lost") and not events(msgs, "decode_error")
+    assert "board changed fs/block_len to 12500/250: time base re-anchored" in said(msgs, "config")
+    hello = [m.split(",")[1] for m in said(msgs, "config") if m.startswith("order tracker: ")]
+    assert hello == [" decimation 20 to 1250 Hz", " decimation 10 to 1250 Hz"]
+    speeds = [m["speed_rpm"] for t, _, m in msgs if t == "/cm/ch0/indicators"]
+    assert len(speeds) == 18          # 6 s at 25 kHz, then 12 board seconds at 12.5 kHz
+    assert all(abs(v - 1720) < 5 for v in speeds[:6]) and all(abs(v - 860) < 3 for v in speeds[6:])
+    orders = [m for t, _, m in msgs if t == "/cm/ch0/orders"]
+    assert len(orders) == 180
+    late = [m["speed_rpm"] for m in orders[70:] if m["valid"]]
+    assert len(late) >= 100 and all(abs(v - 860) < 3 for v in late)
 
 
 def test_a_replugged_raw_board_that_restarted_gets_its_shaft_speed_at_once(tmp_path):

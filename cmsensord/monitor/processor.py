@@ -271,9 +271,14 @@ class Processor:
             st, news = self.setup.decode(f)
             if st is not None and news:     # it changes the time base or the channels:
                 rms, raw = self._flush(rms, raw)    # the frames before it go first,
+                rate = (st.fs, st.block_len) != (self.clock.fs, self.clock.block_len)
+                if rate:
+                    self._feed_tacho(end=True)      # the shaft speed at the old rate
                 self._release_decisions(final=True)  # decided on the old time base
                 self.indicators.finish()             # intervals stamped on it too
                 self.setup.apply(f, st)
+                if rate:
+                    self._restart_shaft()
             self.setup.status = st or self.setup.status
             if self.status is not None:
                 self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
@@ -330,15 +335,19 @@ class Processor:
             release_held()
 
     def _segment_ends(self) -> None:
-        """Before a new time segment: what waits of the old one (the last RAW block, the order
-        chain, the indicator intervals, stamped in their own segment); the board's sample
-        indices start again, so the shaft and the order chain do too."""
+        """Before a new time segment: what waits of the old one (the last RAW block, the
+        indicator intervals, the order chain, stamped in their own segment)."""
         self._flush_raw([], final=True)
+        self._hand_over()
+        self.indicators.finish()
+        self._restart_shaft()
+
+    def _restart_shaft(self) -> None:
+        """The board's sample count starts again (a reset) or counts at a new rate: the order
+        chain tracks what it holds, and the shaft and the order chain start afresh."""
         if self.orders is not None:
             self._out(self.orders.finish())
             self.orders = None
-        self._hand_over()
-        self.indicators.finish()
         self.shaft.restart(self.status, self.clock)
 
     def _flush(self, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
