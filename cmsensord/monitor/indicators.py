@@ -138,7 +138,7 @@ class IndicatorChain:
         while len(y):
             if self.start is None or pos < self.start:          # the first, or the clock stepped back
                 self._close()
-                self.start = pos
+                self.start = self.newest = pos
             elif pos >= self.start + self.N:                    # a gap past the open interval
                 self._close()
                 self.start += (pos - self.start) // self.N * self.N

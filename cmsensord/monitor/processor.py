@@ -40,7 +40,7 @@ from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.output import Output
-from cmsensord.monitor.raw import RawInput
+from cmsensord.monitor.raw import RawBlocks, RawInput
 from cmsensord.monitor.segments import SCAN_MIN, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.monitor.slots import observation_rows
@@ -65,6 +65,9 @@ MAX_RUN_SLOTS = 2 * MAX_BATCH
 MAX_RUN_MESSAGES = 256
 #: indicator records waiting for the decision of their stamp at most (then written anyway)
 MAX_RECORDS = 1000
+#: RAW blocks go through the chains in pieces of at most this many board seconds, each after the TACHO
+#: frames in front of it: any read gives what small reads give (a wait for the speed lasts 10 s)
+PIECE_S = 2.0
 
 
 class Processor:
@@ -292,9 +295,9 @@ class Processor:
         """A break in the stream in front of ``f`` (the frames before it are processed): a
         board reset starts a new segment (its seq gap is no loss), a seq gap is counted as
         lost frames.  True when ``f`` is to be skipped (a frame of the other mode)."""
+        if self.shaft.waiting:      # the edges in front of it first: what comes after may release what waits
+            self._feed_tacho(end=True)
         if self.segments.pending(f):
-            if not self.segments.other_mode(f):     # a reset: the old segment's speed before its decisions
-                self._feed_tacho(end=True)
             self._release_decisions(final=True)     # decided on the old segment's time base
             return self.segments.start(f)
         self.frames_lost += f.lost_before
@@ -401,6 +404,19 @@ class Processor:
         self._out(events)
         if blocks is None:
             return
+        if not (self.shaft.waiting and self.shaft.ensure(self.status, self.clock)):
+            self._raw_blocks(blocks)
+            return
+        most = max(1, round(PIECE_S * self.clock.fs) // self.clock.block_len)
+        for a, b in blocks.runs():              # each piece after the TACHO frames in front of it
+            for k in range(a, b, most):
+                piece = blocks.take(k, min(b, k + most))
+                if self.shaft.waits_before(int(piece.t0[0])):
+                    self._feed_tacho(before=int(piece.t0[0]))
+                self._raw_blocks(piece)
+
+    def _raw_blocks(self, blocks: RawBlocks) -> None:
+        """Converted RAW blocks through the chains: observations, indicators, captures, orders."""
         self._observe(blocks.t0, blocks.rms())
         if self.held.rows:                      # the banks wait for a decision: so do the indicators
             self.held.blocks.append(blocks)
@@ -446,12 +462,13 @@ class Processor:
                 expect_lag()
         return self.orders
 
-    def _feed_tacho(self, end: bool = False) -> None:
-        """TACHO frames -> shaft speed, then what waited for a final speed (at most as long as
-        the speed gates allow, except at the ``end`` where the order chain drains anyway)."""
+    def _feed_tacho(self, end: bool = False, before: int | None = None) -> None:
+        """TACHO frames (``before``: those in front of the first at or after that t0) -> shaft
+        speed, then what waited for a final speed (at most as long as the speed gates allow,
+        except at the ``end`` where the order chain drains anyway)."""
         fed = bool(self.shaft.waiting) and self.shaft.ensure(self.setup.status, self.clock)
         if fed:
-            self._out(self.shaft.feed(self.clock))
+            self._out(self.shaft.feed(self.clock, before))
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
         self.indicators.release()

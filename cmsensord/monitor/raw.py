@@ -84,6 +84,18 @@ class RawBlocks:
         return n == len(self.t0) * C and bool((self.row == np.arange(n) // C).all()) \
             and bool((self.chan == np.arange(n) % C).all())
 
+    def take(self, a: int, b: int) -> RawBlocks:
+        """Blocks ``a`` .. ``b - 1`` (their frames' rows renumbered from 0; views where the
+        frames are in block order, as the decoder gives them)."""
+        if a == 0 and b == len(self.t0):
+            return self
+        row = self.row
+        if row.size < 2 or bool((row[1:] >= row[:-1]).all()):
+            i, j = row.searchsorted([a, b]).tolist()
+            return RawBlocks(self.t0[a:b], row[i:j] - a, self.chan[i:j], self.x[i:j], self.n_channels)
+        sel = (row >= a) & (row < b)
+        return RawBlocks(self.t0[a:b], row[sel] - a, self.chan[sel], self.x[sel], self.n_channels)
+
     def runs(self) -> list[tuple[int, int]]:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
         if self._runs_memo is None:

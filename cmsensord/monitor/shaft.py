@@ -154,10 +154,16 @@ class Shaft:
         assert self.tacho is not None, "no tacho tracker before ensure()"
         return self.tacho
 
-    def feed(self, clock: BlockClock) -> list[Event]:
-        """The waiting TACHO frames -> the tracker; its events (and bad payloads)."""
+    def feed(self, clock: BlockClock, before: int | None = None) -> list[Event]:
+        """The waiting TACHO frames -> the tracker; its events (and bad payloads).  With
+        ``before``: only those in front of the first whose t0 is at or after it (the rest wait)."""
         waiting = self.waiting.joined()
-        self.waiting, events = Pending(), []
+        self.waiting = Pending()
+        events: list[Event] = []
+        if before is not None:
+            waiting = self._in_front_of(waiting, before)
+            if not len(waiting):
+                return events
         frames: Sequence[Frame]
         if type(waiting) is FrameBatch and len(waiting) > _FEW_FRAMES:
             frames, dropped, t0s = self._in_time_order_columns(waiting)
@@ -185,6 +191,23 @@ class Shaft:
             events.append(Event(ev.kind, None, ev.message, clock.stamp_ns(int(ev.sample)),
                                 {"count": int(ev.count)}))
         return events
+
+    def waits_before(self, t0: int) -> bool:
+        """Whether the first waiting TACHO frame starts before board sample ``t0``."""
+        if not self.waiting.parts:
+            return False
+        first = self.waiting.parts[0]
+        return int(first.cols.t0_unwrapped[0] if type(first) is FrameBatch else first[0].t0_unwrapped) < t0
+
+    def _in_front_of(self, frames: Sequence[Frame], before: int) -> Sequence[Frame]:
+        """The frames in front of the first whose t0 is at or after ``before``; the rest wait."""
+        if type(frames) is FrameBatch:
+            late = (frames.cols.t0_unwrapped >= before).nonzero()[0]
+            k = int(late[0]) if late.size else len(frames)
+        else:
+            k = next((i for i, f in enumerate(frames) if f.t0_unwrapped >= before), len(frames))
+        self.waiting.extend(frames[k:])
+        return frames[:k]
 
     def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int, list[int]]:
         """The frames at or after the newest t0 fed so far, how many stepped back (dropped),
