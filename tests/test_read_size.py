@@ -1,6 +1,6 @@
-"""A RAW stream with a tacho gives the same messages however it is read: reads of 997 bytes,
+"""A stream with a tacho (RAW or RMS mode) gives the same messages however it is read: reads of 997 bytes,
 64 kB and 1 MiB give every topic's messages alike (not /cm/diagnostics, which tells how the
-stream was read), and every indicator interval its shaft speed.  Each stream holds what makes the
+stream was read), and every RAW indicator interval and valid order its shaft speed.  Each stream holds what makes the
 chains wait for the speed or start again: a link loss of a minute, a board clock jumping a minute,
 board resets, a change of rate, a board slower than 25 kHz (one read then holds more board seconds
 than the 10 s a wait for the speed lasts).  Before, a large read let the waits end before the
@@ -9,23 +9,25 @@ decayed towards zero, and decisions on the configured f_r."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from cmsensord.config import config_from_dict
+from cmsensord.monitor.raw import RawBlocks
 from cmsensord.protocol import Decoder
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from stream import run_processor
 
 READS = (997, 65_536, 1 << 20)
-#: frames a second of a 1-channel RAW board with a tacho: a RAW and a TACHO frame a block, a STATUS
+#: frames a second of a 1-channel board with a tacho: a data and a TACHO frame a block, a STATUS
 FRAMES_PER_S = 201
 
 
-def board(seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0) -> bytes:
-    """A healthy motor at 1720 rpm on a 1-channel RAW board with a tacho."""
+def board(mode: str, seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0) -> bytes:
+    """A healthy motor at 1720 rpm on a 1-channel board with a tacho."""
     sc = make_scenario("healthy", n_channels=1, duration_s=seconds, seed=1, fs=fs)
-    cfg = BoardConfig(mode="raw", n_channels=1, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=True)
+    cfg = BoardConfig(mode=mode, n_channels=1, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=True)
     return Board(sc, cfg).generate(seconds)
 
 
@@ -33,27 +35,27 @@ def frames(data: bytes) -> int:
     return len(Decoder().feed(data))
 
 
-def link_loss() -> bytes:
-    first = board(6)
-    return first + board(6, t0=150_000 + 60 * 25_000, seq=frames(first) + 60 * FRAMES_PER_S)
+def link_loss(mode: str) -> bytes:
+    first = board(mode, 6)
+    return first + board(mode, 6, t0=150_000 + 60 * 25_000, seq=frames(first) + 60 * FRAMES_PER_S)
 
 
-def clock_jump() -> bytes:
-    first = board(6)
-    return first + board(6, t0=150_000 + 60 * 25_000, seq=frames(first))
+def clock_jump(mode: str) -> bytes:
+    first = board(mode, 6)
+    return first + board(mode, 6, t0=150_000 + 60 * 25_000, seq=frames(first))
 
 
-def resets() -> bytes:
-    return board(14) * 3
+def resets(mode: str) -> bytes:
+    return board(mode, 14) * 3
 
 
-def rate_change() -> bytes:
-    first = board(6)
-    return first + board(12, fs=12_500, t0=150_000, seq=frames(first))
+def rate_change(mode: str) -> bytes:
+    first = board(mode, 6)
+    return first + board(mode, 12, fs=12_500, t0=150_000, seq=frames(first))
 
 
-def slow_board() -> bytes:
-    return board(24, fs=12_500)
+def slow_board(mode: str) -> bytes:
+    return board(mode, 24, fs=12_500)
 
 
 def by_topic(data: bytes, read: int) -> dict[str, list]:
@@ -64,15 +66,45 @@ def by_topic(data: bytes, read: int) -> dict[str, list]:
     return topics
 
 
+@pytest.mark.parametrize("mode", ["raw", "rms"])
 @pytest.mark.parametrize("make", [link_loss, clock_jump, resets, rate_change, slow_board])
-def test_the_messages_do_not_depend_on_the_read_size(make):
-    data = make()
+def test_the_messages_do_not_depend_on_the_read_size(make, mode):
+    data = make(mode)
     runs = [by_topic(data, read) for read in READS]
     for topic in runs[0]:
         assert runs[1][topic] == runs[0][topic], (topic, READS[1])
         assert runs[2][topic] == runs[0][topic], (topic, READS[2])
     assert runs[1].keys() == runs[0].keys() == runs[2].keys()
+    for topic in ("/cm/ch0/indicators", "/cm/ch0/severity"):
+        stamps = [s for s, _ in runs[0][topic]]
+        assert stamps == sorted(set(stamps)), topic          # one record a stamp, in time order
+    f_r = [m["f_r"] for _, m in runs[0]["/cm/ch0/severity"]]
+    assert len(f_r) >= 12 and all(abs(v - 1720 / 60) < 0.3 for v in f_r)
+    if mode == "rms":
+        return
     speeds = [m.get("speed_rpm") for _, m in runs[0]["/cm/ch0/indicators"]]
     assert len(speeds) >= 12 and all(v is not None and abs(v - 1720) < 20 for v in speeds), speeds
     orders = [m["speed_rpm"] for _, m in runs[0]["/cm/ch0/orders"] if m["valid"]]
     assert len(orders) >= 100 and all(abs(v - 1720) < 20 for v in orders)
+
+
+@pytest.mark.parametrize("shuffled", [False, True])
+def test_raw_pieces_hold_the_blocks_of_the_whole(shuffled):
+    """RawBlocks.pieces: runs cut into pieces of at most 2 blocks, each with the samples and block
+    RMS of its blocks in the whole (frames in block order: views; shuffled: the masked path)."""
+    rng = np.random.default_rng(0)
+    t0 = np.array([0, 250, 500, 1000, 1250], dtype=np.int64)      # a lost block between 500 and 1000
+    row = np.array([0, 0, 1, 1, 2, 3, 3, 4, 4])                    # block 2 lost its channel 1 frame
+    chan = np.array([0, 1, 0, 1, 0, 0, 1, 0, 1])
+    x = rng.standard_normal((len(row), 250))
+    if shuffled:
+        order = rng.permutation(len(row))
+        row, chan, x = row[order], chan[order], x[order]
+    whole = RawBlocks(t0, row, chan, x, 2)
+    pieces = whole.pieces(2)
+    assert [p.t0.tolist() for p in pieces] == [[0, 250], [500], [1000, 1250]]
+    first = [0, 2, 3]
+    for p, a in zip(pieces, first):
+        b = a + len(p.t0)
+        np.testing.assert_array_equal(p.samples([0, 1]), whole.samples([0, 1])[a:b])
+        np.testing.assert_array_equal(p.rms(), whole.rms()[a:b])

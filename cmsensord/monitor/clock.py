@@ -185,14 +185,20 @@ class BlockClock:
         return self.next_slot * self.block_len / self.fs
 
     # ---- slots -------------------------------------------------------------
+    def begin(self, t0: int) -> None:
+        """A block starting at ``t0`` comes: the first of the stream or of a new rate sets where
+        the slots and the stamps count from (before it, stamps are the anchor's)."""
+        if self.slot0_t0 is None:
+            self.slot0_t0 = t0 - self.next_slot * self.block_len
+        if self.t0_first is None:
+            self.t0_first = t0
+
     def place(self, t0: np.ndarray) -> tuple[np.ndarray, int]:
         """Slots of the blocks starting at ``t0`` (int64, in arrival order), up to the first
         time jump or duplicate: (slots of the first n blocks, n).  n < len(t0): call
         :meth:`reanchor` with t0[n], then place the rest."""
-        if self.slot0_t0 is None:
-            self.slot0_t0 = int(t0[0]) - self.next_slot * self.block_len
-        if self.t0_first is None:
-            self.t0_first = int(t0[0])
+        if len(t0):
+            self.begin(int(t0[0]))
         slots = (t0 - self.slot0_t0) // self.block_len
         max_gap = max(1, min(MAX_FILL_SLOTS, int(MAX_FILL_S * self.fs / self.block_len)))
         if not len(slots):

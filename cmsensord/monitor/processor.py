@@ -385,6 +385,7 @@ class Processor:
             frames = good
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
+        self.clock.begin(int(t0[0]))            # the intervals it closes are stamped on its time base
         self.indicators.rms(self.channels, t0, vals)
         self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)))
         if self.captures is not None:
@@ -407,13 +408,10 @@ class Processor:
         if not (self.shaft.waiting and self.shaft.ensure(self.status, self.clock)):
             self._raw_blocks(blocks)
             return
-        most = max(1, round(PIECE_S * self.clock.fs) // self.clock.block_len)
-        for a, b in blocks.runs():              # each piece after the TACHO frames in front of it
-            for k in range(a, b, most):
-                piece = blocks.take(k, min(b, k + most))
-                if self.shaft.waits_before(int(piece.t0[0])):
-                    self._feed_tacho(before=int(piece.t0[0]))
-                self._raw_blocks(piece)
+        for piece in blocks.pieces(max(1, round(PIECE_S * self.clock.fs) // self.clock.block_len)):
+            if self.shaft.waits_before(int(piece.t0[0])):       # the TACHO frames in front of it first
+                self._feed_tacho(before=int(piece.t0[0]))
+            self._raw_blocks(piece)
 
     def _raw_blocks(self, blocks: RawBlocks) -> None:
         """Converted RAW blocks through the chains: observations, indicators, captures, orders."""
@@ -488,10 +486,12 @@ class Processor:
                 a = b
             if n == len(t0):
                 return
-            old = self.clock.next_slot
-            self.clock.reanchor(int(t0[n]))
-            self.event("config", None, f"board clock jumped (t0 {int(t0[n])} after slot {old - 1}): "
-                       "time base re-anchored", self.clock.stamp_ns(int(t0[n])))
+            old, at = self.clock.next_slot, int(t0[n])
+            if self.shaft.waits_before(at):     # the speed in front of the jump, on the old anchor
+                self._feed_tacho(before=at)
+            self.clock.reanchor(at)
+            self.event("config", None, f"board clock jumped (t0 {at} after slot {old - 1}): "
+                       "time base re-anchored", self.clock.stamp_ns(at))
             t0, vals = t0[n:], vals[n:]
 
     def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:

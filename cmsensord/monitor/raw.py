@@ -96,6 +96,11 @@ class RawBlocks:
         sel = (row >= a) & (row < b)
         return RawBlocks(self.t0[a:b], row[sel] - a, self.chan[sel], self.x[sel], self.n_channels)
 
+    def pieces(self, most: int) -> list[RawBlocks]:
+        """The runs of consecutive blocks (:meth:`runs`), each cut into pieces of at most
+        ``most`` blocks, in order."""
+        return [self.take(k, min(b, k + most)) for a, b in self.runs() for k in range(a, b, most)]
+
     def runs(self) -> list[tuple[int, int]]:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
         if self._runs_memo is None:
