@@ -45,7 +45,7 @@ from cmsensord.monitor.segments import SCAN_MIN, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.monitor.slots import observation_rows
 from cmsensord.monitor.wake import wake_t0
-from cmsensord.protocol import Frame, FrameType, decode_rms_rows
+from cmsensord.protocol import Frame, FrameType, Status, decode_rms_rows
 
 if TYPE_CHECKING:
     from cmsensord.monitor.capture import Captures
@@ -281,7 +281,7 @@ class Processor:
                 self.indicators.finish()             # intervals stamped on it too
                 self.setup.apply(f, st)
                 if rate:
-                    self._restart_shaft()
+                    self._restart_shaft(st)
             self.setup.status = st or self.setup.status
             if self.status is not None:
                 self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
@@ -345,13 +345,13 @@ class Processor:
         self.indicators.finish()
         self._restart_shaft()
 
-    def _restart_shaft(self) -> None:
-        """The board's sample count starts again (a reset) or counts at a new rate: the order
-        chain tracks what it holds, and the shaft and the order chain start afresh."""
+    def _restart_shaft(self, status: Status | None = None) -> None:
+        """The board's samples count anew (a reset, or the new rate of ``status``): the order chain
+        tracks what it holds, and the shaft and the order chain start afresh."""
         if self.orders is not None:
             self._out(self.orders.finish())
             self.orders = None
-        self.shaft.restart(self.status, self.clock)
+        self.shaft.restart(status or self.status, self.clock)
 
     def _flush(self, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
         self._flush_rms(rms.joined())

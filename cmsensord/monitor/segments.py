@@ -221,15 +221,11 @@ class Segments:
             return True
         return False
 
-    def other_mode(self, f: Frame) -> bool:
-        """``f`` is a data frame of the mode the board is not in (STATUS): skipped, not a reset."""
-        st = self.setup.status
-        return st is not None and f.type is _OTHER.get(st.mode)
-
     def start(self, f: Frame) -> bool:
         """After :meth:`check` said so (and the frames before ``f`` are processed): True when
         ``f`` is to be skipped (the other mode); else ``f`` starts a new segment."""
-        if self.other_mode(f):
+        st = self.setup.status
+        if st is not None and f.type is _OTHER.get(st.mode):
             self.ignored += 1
             self.ignored_type = f.type
             return True

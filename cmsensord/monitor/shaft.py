@@ -122,8 +122,8 @@ class Shaft:
             self.waiting.extend(newest)
 
     def restart(self, status: Status | None, clock: BlockClock) -> None:
-        """A board reset (a new time segment, its TACHO frames fed): the board's sample indices
-        start again, and so does the tracker (a new one, if the board has a tacho)."""
+        """The board's samples count anew (a reset, a new rate; the TACHO frames before it fed):
+        so does the tracker (a new one, if the board has a tacho)."""
         self.tacho = None
         self.waiting = Pending()
         self._prev_t0 = self._fed_t0 = None
