@@ -229,10 +229,9 @@ def test_the_fast_reader_gives_what_the_lenient_reader_gives(logs, tmp_path):
         assert scan.error is None and scan.skipped == [] and scan.complete == (log != cut), log
 
 
-def test_a_damaged_chunk_is_read_past_and_one_line_says_so(logs, tmp_path):
-    """A log with its second chunk hit (bit rot on an SD card, say): the report holds every
-    message of the intact chunks after it, and one line on stderr and the file table say what
-    was skipped."""
+def _hit(logs, tmp_path: Path) -> tuple[Path, int, int]:
+    """The chunked faulty_raw log with its second chunk hit (bit rot on an SD card, say):
+    (the file, the chunk's offset, the messages of the intact chunks)."""
     whole = _chunked(logs["faulty_raw"], tmp_path)
     full = len(read_messages(whole))
     data = bytearray(whole.read_bytes())
@@ -243,14 +242,37 @@ def test_a_damaged_chunk_is_read_past_and_one_line_says_so(logs, tmp_path):
     hit = tmp_path / "logs" / "hit.mcap"
     hit.parent.mkdir()
     hit.write_bytes(bytes(data))
+    return hit, start, full - n - dropped
+
+
+def test_a_damaged_chunk_is_read_past_and_one_line_says_so(logs, tmp_path):
+    """A log with its second chunk hit: the report holds every message of the intact chunks
+    after it, and one line on stderr and the file table say what was skipped."""
+    hit, start, kept = _hit(logs, tmp_path)
     p, page, metas = _report(tmp_path, hit)
-    kept = full - n - dropped
     why = rf"the first: bad chunk at byte {start}: cannot decompress \(zstd\): [^;)]+"   # zstd's own words
     [line] = [line for line in p.stderr.splitlines() if "hit.mcap" in line]
     assert re.fullmatch(rf"cmsensord: report: {re.escape(str(hit))}: 1 damaged stretch\(es\) skipped \({why}\); "
                         rf"the report holds the {kept:,} message\(s\) of its intact chunks", line), line
     assert f"{kept:,} messages from 1 file" in p.stderr and "ch0-severity" in metas
     assert re.search(rf"damaged: 1 stretch\(es\) skipped \({why}\); complete", page)
+
+
+def test_summary_and_the_lenient_reader_read_past_a_damaged_chunk(logs, tmp_path):
+    """`cmsensord summary` of a log with its second chunk hit counts the messages of every intact
+    chunk, says what it skipped and that the file is complete (before, it ended at the damage:
+    the messages of the first chunk, "error: bad record ..."); read_messages(lenient=True) and
+    the plain lenient reader give what the report's reader gives."""
+    hit, start, kept = _hit(logs, tmp_path)
+    info = json.loads(cmsensord("summary", "--json", str(hit)).stdout)
+    assert info["messages"] == kept and info["complete"] and info["error"] is None
+    assert info["valid_bytes"] == info["file_bytes"]
+    [skipped] = info["skipped"]
+    assert skipped.startswith(f"bad record at byte {start}: "), skipped
+    assert f"\nerror: None\nskipped: 1 item(s)\n  {skipped}\n" in cmsensord("summary", str(hit)).stdout
+    fast = [(topic, t, bytes(data)) for topic, t, data, _ in FastScan(hit).messages()]
+    plain = [(topic, t, bytes(data)) for topic, t, data, _ in iter_messages_at(hit)]
+    assert plain == fast and len(plain) == kept == len(read_messages(hit, lenient=True))
 
 
 def test_summary_prints_iso_times_and_event_lines(logs):

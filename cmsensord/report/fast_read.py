@@ -29,7 +29,7 @@ from typing import Any
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
-from cmsensord.sinks.mcap_read import RECORD_LIMIT
+from cmsensord.sinks.mcap_records import RECORD_LIMIT
 
 __all__ = ["FastScan"]
 

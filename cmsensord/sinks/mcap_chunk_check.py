@@ -22,7 +22,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Schema
 
 from cmsensord.sinks.mcap_chunks import MESSAGE_FIXED, OP_MESSAGE, lz4_frame
-from cmsensord.sinks.mcap_read import RECORD_LIMIT, parse_record
+from cmsensord.sinks.mcap_records import RECORD_LIMIT, parse_record
 
 __all__ = ["ChunkDamaged", "Interrupted", "Resync", "check_chunk"]
 

@@ -1,32 +1,31 @@
-"""Reading MCAP files, finished or not: the record walker, messages and summaries.
+"""Reading MCAP files, finished or not: messages and summaries.
 
-:class:`RecordWalker` is the one sequential reader of top-level records: it
-checks each record's length before anything parses it, so a file that ends
-inside a record (a ``.part`` file of a crashed process) or claims an absurd
-length (corruption) ends the walk without an exception. Salvage
-(:mod:`cmsensord.sinks.mcap_salvage`) and the lenient readers here
-(:func:`summarize`, :func:`iter_messages_lenient`, ``read_messages(...,
-lenient=True)``) both walk files with it. A finished file is read with
-mcap's own reader (:func:`read_messages`).
+A finished file is read with mcap's own reader (:func:`read_messages`). The lenient readers
+(:func:`summarize`, :func:`iter_messages_lenient`, :func:`iter_messages_at`,
+``read_messages(..., lenient=True)``) walk the file's records with
+:class:`~cmsensord.sinks.mcap_records.RecordWalker`, so a partial record is never parsed and
+nothing is raised on the content, and read past damage from the next chunk that checks out
+(:class:`~cmsensord.sinks.mcap_chunk_check.Resync`, as salvage and the report do).
 """
 
 from __future__ import annotations
 
-import io
 import json
-import struct
-from collections.abc import Iterator
+import os
+from collections.abc import Generator, Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import breakup_chunk
 
 from cmsensord.errors import SinkError
+from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
 from cmsensord.sinks.mcap_encoding import NS
+from cmsensord.sinks.mcap_records import KNOWN_OPCODES, NOT_MCAP, RecordWalker, parse_record
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 __all__ = [
@@ -38,93 +37,6 @@ __all__ = [
     "iter_messages_at",
     "summarize",
 ]
-
-#: summarize()'s ``error`` for a file that does not start with the MCAP magic
-NOT_MCAP = "not an MCAP file (bad magic)"
-# A record longer than this in a file we wrote means corruption, not data
-# (chunks are ~1 MiB); reading it would only waste memory.
-RECORD_LIMIT = 256 * 1024 * 1024
-_HEAD = struct.Struct("<BQ")  # opcode, record length
-_KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
-
-
-class RecordWalker:
-    """The top-level records of an MCAP file open in ``f``, read sequentially.
-
-    :meth:`records` reads the magic, then yields ``(offset, opcode, raw)`` for
-    every complete record (``raw``: opcode, length and body, as in the file).
-    It stops, never raising on the content, when the file ends or a record
-    claims more than ``RECORD_LIMIT`` bytes, and then sets :attr:`end`:
-
-    * ``NOT_MCAP``: the file does not start with the magic;
-    * ``IN_MAGIC``: the file ends inside the magic (or is empty);
-    * ``AT_END``: the file ends just after a complete record;
-    * ``IN_RECORD``: the file ends inside a record;
-    * ``TOO_LONG``: a record claims too many bytes (:attr:`error` says which).
-
-    :attr:`end` stays None when the caller stops first. :attr:`valid_bytes` is
-    the offset after the magic and the last complete record read (0 without
-    the magic).
-    """
-
-    NOT_MCAP = "not_mcap"
-    IN_MAGIC = "in_magic"
-    AT_END = "at_end"
-    IN_RECORD = "in_record"
-    TOO_LONG = "too_long"
-
-    def __init__(self, f: BinaryIO) -> None:
-        self._f = f
-        self.end: str | None = None
-        self.error: str | None = None
-        self.valid_bytes = 0
-
-    def records(self, start: int | None = None) -> Iterator[tuple[int, int, bytes]]:
-        """(offset, opcode, raw record) of each complete record, in file order.
-
-        ``start``: the offset of a record to resume at (after damage); the
-        magic is then not read again.
-        """
-        f = self._f
-        if start is None:
-            magic = f.read(len(MAGIC))
-            if magic != MAGIC:
-                self.end = self.IN_MAGIC if MAGIC.startswith(magic) else self.NOT_MCAP
-                return
-            start = len(MAGIC)
-        else:
-            f.seek(start)
-        self.end = self.error = None
-        pos = self.valid_bytes = start
-        while True:
-            head = f.read(_HEAD.size)
-            if len(head) < _HEAD.size:
-                self.end = self.IN_RECORD if head else self.AT_END
-                return
-            opcode, length = _HEAD.unpack(head)
-            if length > RECORD_LIMIT:
-                self.end = self.TOO_LONG
-                self.error = f"record at byte {pos} claims {length} bytes"
-                return
-            body = f.read(length)
-            if len(body) < length:
-                self.end = self.IN_RECORD
-                return
-            self.valid_bytes = pos + _HEAD.size + length
-            yield pos, opcode, head + body
-            pos = self.valid_bytes
-
-    def closing_magic(self) -> bool:
-        """After the Footer record has been yielded: whether the closing magic follows."""
-        return self._f.read(len(MAGIC)) == MAGIC
-
-
-def parse_record(raw: bytes) -> Any:
-    """One complete record (from :meth:`RecordWalker.records`) as an mcap record object.
-
-    A chunk stays a Chunk. Raises whatever mcap's parser raises on bad content.
-    """
-    return next(iter(StreamReader(io.BytesIO(raw), skip_magic=True, emit_chunks=True).records))
 
 
 def read_messages(path: str | Path, *, lenient: bool = False) -> list[tuple[str, int, dict]]:
@@ -153,53 +65,72 @@ class _Scan:
         self.path = Path(path)
         self.complete = False  # footer and closing magic seen
         self.truncated = False  # the file ends inside a record
-        self.error: str | None = None  # a complete record that could not be parsed
+        self.error: str | None = None  # the damage that ended the read
+        self.skipped: list[str] = []  # the damage read past, one line each
         self.valid_bytes = 0  # end of the last good record
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.metadata: dict[str, dict[str, str]] = {}
 
     def records(self) -> Iterator[Any]:
-        """Yield records (chunks broken up) up to the first incomplete or bad one.
+        """Yield the records (chunks broken up) of every intact stretch of the file.
 
-        Walks the file with :class:`RecordWalker`, so a partial record is
-        never parsed and nothing is raised on the content; records of
-        unknown kinds are skipped (MCAP spec). Raises SinkError when the file
-        cannot be opened.
+        Records of unknown kinds are skipped (MCAP spec). Damage (a record that does not
+        parse, or claims more bytes than the limit or the file holds) is read past from the
+        next chunk that checks out, each stretch skipped said in :attr:`skipped`; with no
+        good chunk after it, the damage ends the read (:attr:`error`, or :attr:`truncated`
+        when the file ends inside a record). Raises SinkError when the file cannot be opened.
         """
         try:
             f = open(self.path, "rb")
         except OSError as err:
             raise SinkError(f"{self.path}: cannot read: {err.strerror or err}") from None
         with f:
-            walker = RecordWalker(f)
-            for pos, opcode, raw in walker.records():
-                if opcode in _KNOWN_OPCODES:
-                    try:
-                        parsed = self._parse(raw)
-                    except Exception as err:  # noqa: BLE001 - any corruption ends the scan
-                        self.error = f"bad record at byte {pos}: {type(err).__name__}: {err}"
-                        self.valid_bytes = pos
+            resync = Resync(f, os.fstat(f.fileno()).st_size, None)
+            try:
+                start = None
+                while (damage := (yield from self._stretch(f, start))) is not None:
+                    start = resync.next_chunk(damage + 1, self.channels)
+                    if start is None:
                         return
-                else:
-                    parsed = []
-                self.valid_bytes = pos + len(raw)
-                for record in parsed:
-                    self._remember(record)
-                    yield record
-                if opcode == Opcode.FOOTER:
-                    self.complete = walker.closing_magic()
-                    self.truncated = not self.complete
-                    if self.complete:
-                        self.valid_bytes += len(MAGIC)
-                    return
-            self.valid_bytes = walker.valid_bytes
-            if walker.end == RecordWalker.NOT_MCAP:
-                self.error = NOT_MCAP
-            elif walker.end == RecordWalker.TOO_LONG:
-                self.error = walker.error
+                    self.skipped.append(self.error or f"a record at byte {damage} claims more bytes "
+                                                      "than the file holds")
+                    self.error, self.truncated = None, False
+            finally:
+                resync.close()
+
+    def _stretch(self, f: BinaryIO, start: int | None) -> Generator[Any, None, int | None]:
+        """The records from ``start`` (None: the file's start) up to the end or to damage;
+        returns the offset of the damage (None: the read ends here)."""
+        walker = RecordWalker(f)
+        for pos, opcode, raw in walker.records(start):
+            if opcode in KNOWN_OPCODES:
+                try:
+                    parsed = self._parse(raw)
+                except Exception as err:  # noqa: BLE001 - any corruption is damage
+                    self.error = f"bad record at byte {pos}: {type(err).__name__}: {err}"
+                    return pos
             else:
-                self.truncated = True
+                parsed = []
+            self.valid_bytes = pos + len(raw)
+            for record in parsed:
+                self._remember(record)
+                yield record
+            if opcode == Opcode.FOOTER:
+                self.complete = walker.closing_magic()
+                self.truncated = not self.complete
+                if self.complete:
+                    self.valid_bytes += len(MAGIC)
+                return None
+        self.valid_bytes = walker.valid_bytes
+        if walker.end == RecordWalker.NOT_MCAP:
+            self.error = NOT_MCAP
+            return None
+        if walker.end == RecordWalker.TOO_LONG:
+            self.error = walker.error
+            return walker.valid_bytes
+        self.truncated = True
+        return walker.valid_bytes if walker.end == RecordWalker.IN_RECORD else None
 
     def _remember(self, record: Any) -> None:
         if isinstance(record, Schema):
@@ -286,9 +217,9 @@ def _topics_and_schemas(
 def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
     """Summary of an MCAP file, also of a truncated ``.part`` file.
 
-    Reads sequentially and stops at the first incomplete or damaged record
-    without raising. Returns a dict: path, complete, truncated, error,
-    file_bytes, valid_bytes, messages, topics {topic: count}, schemas
+    Reads sequentially without raising, past damage from the next chunk that checks out.
+    Returns a dict: path, complete, truncated, error (the damage that ended the read),
+    skipped (the damage read past, a line each), file_bytes, valid_bytes, messages, topics {topic: count}, schemas
     {topic: schema name}, start_ns, end_ns, duration_s, event_counts
     {kind: count}, events [first max_events as {time_ns, kind, channel,
     message}], events_omitted, metadata.
@@ -321,6 +252,7 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
         "complete": scan.complete,
         "truncated": scan.truncated,
         "error": scan.error,
+        "skipped": scan.skipped,
         "file_bytes": file_bytes,
         "valid_bytes": scan.valid_bytes,
         "messages": n,

@@ -40,7 +40,7 @@ from cmsensord.sinks.mcap_file import (
     os_error_text,
     salvaged_path,
 )
-from cmsensord.sinks.mcap_read import NOT_MCAP, RecordWalker, parse_record
+from cmsensord.sinks.mcap_records import NOT_MCAP, RecordWalker, parse_record
 
 __all__ = ["SalvageResult", "salvage", "salvage_leftovers"]
 
