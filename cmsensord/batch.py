@@ -34,7 +34,7 @@ from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor import messages
-from cmsensord.protocol import FrameType, Status, decode_raw, decode_status, decode_tacho
+from cmsensord.protocol import MODE_RAW, FrameType, Status, decode_raw, decode_status, decode_tacho
 from cmsensord.source import CaptureSource
 
 
@@ -86,8 +86,11 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
         col = _Collector()
         with source:
             for frames in source:
-                proc.handle(frames)
                 col.add(frames, cfg.tacho.input)
+                if col.status is not None and col.status.mode != MODE_RAW and not col.raw:
+                    raise CmsensordError(f"{capture}: the board is in RMS mode (its first STATUS): the "
+                                         "batch VKF needs a capture in RAW mode")
+                proc.handle(frames)
         proc.finish()
         if not col.raw or col.status is None:
             raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "

@@ -44,7 +44,9 @@ CASES = [
      "/dev/nonexistent-tty: no such device (is the board plugged in?"),
     (["record", "--port", "/dev/null", "--out", "x.bin", "--duration", "1"], USAGE,
      "is it a serial port?"),
-    (["vkf", "capture.bin"], USAGE, "needs a capture in RAW mode"),
+    (["vkf", "capture.bin"], USAGE, "capture.bin: the board is in RMS mode (its first STATUS): the batch VKF "
+                                    "needs a capture in RAW mode"),
+    (["vkf", "degrading.bin"], USAGE, "degrading.bin: the board is in RMS mode (its first STATUS)"),
     (["--simulate", "--scenario", "nosuch"], USAGE, "unknown scenario; choose from healthy"),
     (["--simulate", "--speed", "-1"], USAGE, "expected a positive number"),
     (["replay", "capture.bin", "--speed", "0"], USAGE, "expected a positive number"),
@@ -68,6 +70,8 @@ def scratch(tmp_path_factory):
     from firmware_sim.scenarios import make_scenario
 
     Board(make_scenario("healthy", duration_s=2.0), BoardConfig()).write_capture(d / "capture.bin", 2.0)
+    # an RMS capture whose replay warns (a failure): vkf says RMS mode before replaying it
+    Board(make_scenario("degrading", duration_s=20.0), BoardConfig()).write_capture(d / "degrading.bin", 20.0)
     return d
 
 
