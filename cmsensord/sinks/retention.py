@@ -91,12 +91,13 @@ def apply_retention(sink: RotatingSink) -> None:
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
     told = sink.retention
     told.keep_only(oldest)
-    deleted, total, free, repeats = _delete_oldest(sink, oldest, sizes, cap, floor, free)
+    deleted, total, free, repeats, kept = _delete_oldest(sink, oldest, sizes, cap, floor, free)
     if deleted:
         with contextlib.suppress(OSError):  # the deletions are done; durability of the names only
             fsync_dir(Path(o.dir))
         sink.paths = [p for p in sink.paths if p not in deleted]
-        _deleted_event(sink, deleted, sum(sizes[p] for p in deleted), total, free, repeats)
+        _deleted_event(sink, deleted, sum(sizes[p] for p in deleted), total, free, repeats,
+                       (len(kept), sum(sizes[p] for p in kept)))
     low = floor is not None and free < floor
     if low and not told.low_space and not deleted:
         told.low_space = True
@@ -119,17 +120,18 @@ def _sizes(paths: list[Path]) -> dict[Path, int]:
 
 
 def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int], cap: float | None,
-                   floor: float | None, free: int) -> tuple[list[Path], int, int, int]:
+                   floor: float | None, free: int) -> tuple[list[Path], int, int, int, list[Path]]:
     """Delete ``oldest`` in order while over ``cap`` bytes in all or under ``floor`` bytes free
     (the floor only where deleting all but the newest reaches it, never the newest): the files
-    deleted, the bytes left in all, the bytes free after, and the most passes that repeated the
-    refusal of a file it got past (:class:`RetentionTold`). A file it cannot delete is a
+    deleted, the bytes left in all, the bytes free after, the most passes that repeated the
+    refusal of a file it got past (:class:`RetentionTold`), and the files passed over. A file it cannot delete is a
     :func:`_refused` event; one refused for a reason of its own (:data:`PASS_OVER`) is passed
     over and left out of ``cap``'s count (else one large file would take every other log with
     it), and the floor's reach counted again without it; any other refusal ends it."""
     total = sum(sizes.values())
     reachable = _reaches(floor, free, oldest, sizes)
     deleted: list[Path] = []
+    kept: list[Path] = []
     repeats = 0
     for k, path in enumerate(oldest):
         over = cap is not None and total > cap
@@ -145,6 +147,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
             if err.errno not in PASS_OVER:
                 break
             total -= sizes[path]             # kept on purpose: not the other logs' to make room for
+            kept.append(path)
             reachable = reachable and _reaches(floor, free, oldest[k + 1:], sizes)
             continue
         repeats = max(repeats, sink.retention.passed(str(path)))
@@ -155,7 +158,7 @@ def _delete_oldest(sink: RotatingSink, oldest: list[Path], sizes: dict[Path, int
                 free = free_bytes(sink.output.dir)
             except OSError:
                 free += sizes[path]
-    return deleted, total, free, repeats
+    return deleted, total, free, repeats, kept
 
 
 def _reaches(floor: float | None, free: int, oldest: list[Path], sizes: dict[Path, int]) -> bool:
@@ -175,14 +178,16 @@ def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
 
 
 def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: int, free: int,
-                   repeats: int = 0) -> None:
+                   repeats: int = 0, kept: tuple[int, int] = (0, 0)) -> None:
     """The ``retention`` event of the files ``deleted`` (``freed`` bytes; ``total`` left, ``free``);
-    ``repeats``: the passes that failed again as the last ``retention_failed`` event told."""
+    ``repeats``: the passes that failed again as the last ``retention_failed`` event told;
+    ``kept``: (files, bytes) passed over, which ``total`` leaves out."""
     o = sink.output
     why = []
     if o.retain_mb:
+        besides = f", besides {kept[1] / MB:.1f} MB in {kept[0]} file(s) passed over" if kept[0] else ""
         why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
-                   f"(now {total / MB:.1f} MB)")
+                   f"(now {total / MB:.1f} MB{besides})")
     if o.min_free_mb:
         why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "
                    f"(now {free / MB:.1f} MB)")
