@@ -112,24 +112,31 @@ def test_a_board_reset_starts_a_new_segment_with_no_bogus_loss_in_replay(tmp_pat
     assert rss < 100 * MB
 
 
-def test_a_replugged_board_that_restarted_is_a_new_segment_from_the_wall_clock(tmp_path):
-    """Live: the board goes away and comes back restarted (t0 and seq from 0) on the same
-    name: a time_base event stamped from the wall clock when it is read, no frames_lost, and
-    the decisions after it are stamped later than every one before."""
+def replugged(tmp_path, first_s: float, then_s: float, *board: str) -> tuple[str, list, int]:
+    """Live: a board (firmware_sim ``board`` arguments) runs ``first_s``, goes away and comes back
+    restarted (t0 and seq from 0) on the same name for ``then_s``: the daemon's stderr, its
+    messages, and the wall clock when the board came back."""
     link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--speed", "1", "--link", str(link))
+    sim = start_board("--scenario", "healthy", "--speed", "1", *board, "--link", str(link))
     d = start_daemon(tmp_path, link)
-    time.sleep(2.5)
+    time.sleep(first_s)
     sim.terminate()
     sim.wait(timeout=5)
     back = time.time_ns()
-    sim = start_board("--scenario", "healthy", "--speed", "1", "--link", str(link), "--seed", "1")
-    time.sleep(4.0)
+    sim = start_board("--scenario", "healthy", "--speed", "1", *board, "--link", str(link), "--seed", "1")
+    time.sleep(then_s)
     err = stop(d)
     sim.terminate()
     sim.wait(timeout=5)
     assert d.returncode == 0, err
-    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    return err, read_messages(next((tmp_path / "logs").glob("*.mcap"))), back
+
+
+def test_a_replugged_board_that_restarted_is_a_new_segment_from_the_wall_clock(tmp_path):
+    """Live: the board goes away and comes back restarted (t0 and seq from 0) on the same
+    name: a time_base event stamped from the wall clock when it is read, no frames_lost, and
+    the decisions after it are stamped later than every one before."""
+    _, msgs, back = replugged(tmp_path, 2.5, 4.0)
     (stamp, ev), = events(msgs, "time_base")
     assert re.fullmatch(r"board clock restarted \(t0 \d+ after \d+\): time segment 1 starts at the "
                         r"wall clock(; the seq gap of \d+ in front of it is not a loss \(seq restarted\))?",
@@ -235,20 +242,7 @@ def test_a_replugged_raw_board_that_restarted_gets_its_shaft_speed_at_once(tmp_p
     """Live: a RAW board with a tacho runs 5 s, goes away and comes back restarted on the same
     name for 3.5 s: valid orders come after the time_base event (before the fix none could
     before the new board's clock passed the 5 s of the old one)."""
-    link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--speed", "1", "--mode", "raw", "--tacho", "--link", str(link))
-    d = start_daemon(tmp_path, link)
-    time.sleep(5.0)
-    sim.terminate()
-    sim.wait(timeout=5)
-    sim = start_board("--scenario", "healthy", "--speed", "1", "--mode", "raw", "--tacho", "--link", str(link),
-                      "--seed", "1")
-    time.sleep(3.5)
-    err = stop(d)
-    sim.terminate()
-    sim.wait(timeout=5)
-    assert d.returncode == 0, err
-    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    err, msgs, _ = replugged(tmp_path, 5.0, 3.5, "--mode", "raw", "--tacho")
     (stamp, _), = events(msgs, "time_base")
     assert "before the newest one in board time" not in err
     valid_after = [m for t, s, m in msgs if t == "/cm/ch0/orders" and s > stamp and m["valid"]]
