@@ -255,6 +255,34 @@ def injections(draw, size, starts):
     return out
 
 
+def equal_run(clean: bytes, pos: int) -> tuple[int, int]:
+    """The first and last index of the run of bytes equal to ``clean[pos]`` around it: dropping
+    any byte of it gives the same stream, so the drop may have cost any frame the run touches
+    (the last CRC byte of a frame equal to the first sync byte of the next: either frame)."""
+    lo = hi = pos
+    while lo > 0 and clean[lo - 1] == clean[pos]:
+        lo -= 1
+    while hi + 1 < len(clean) and clean[hi + 1] == clean[pos]:
+        hi += 1
+    return lo, hi
+
+
+def test_a_drop_in_a_run_of_equal_bytes_costs_one_frame_of_the_run():
+    """The fuzz test's counterexample: a frame whose last CRC byte is 0xA5, the next frame's
+    first sync byte. Dropping it is dropping the sync byte: the first frame is read whole, the
+    second is lost, the third is read; the run of equal bytes counts both as touched."""
+    sent = [(FrameType.TACHO, 65530, 123456, 215, 0, bytes.fromhex("cd072cd8be6f9f62ac4c09c2e7e3")),
+            (FrameType.RMS, 65531, 123706, 248, 3, b":^HB"),
+            (FrameType.RMS, 65532, 123956, 155, 3, bytes.fromhex("b36711eb"))]
+    wires = [encode_frame(*f) for f in sent]
+    clean = b"".join(wires)
+    assert clean[31] == clean[32] == SYNC[0] and len(wires[0]) == 32
+    spans = [(0, 32), (32, 54), (54, 76)]
+    stream, untouched = apply_injections(clean, spans, [(31, "drop", b"")])
+    assert untouched == [2] and equal_run(clean, 31) == (31, 32)
+    assert [f.seq for f in Decoder().feed(stream)] == [65530, 65532]
+
+
 def apply_injections(clean: bytes, spans, errors):
     """The corrupted stream, and the indices of frames no error touched."""
     out = bytearray()
@@ -271,8 +299,9 @@ def apply_injections(clean: bytes, spans, errors):
             if kind == "flip":
                 out.append(clean[pos] ^ data[0])
             prev = pos + 1
+            lo, hi = (pos, pos) if kind == "flip" else equal_run(clean, pos)
             for k, (a, b) in enumerate(spans):
-                if a <= pos < b:
+                if a <= hi and lo < b:
                     touched.add(k)
         else:
             out += data
