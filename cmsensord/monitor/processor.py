@@ -274,9 +274,9 @@ class Processor:
             st, news = self.setup.decode(f)
             if st is not None and news:     # it changes the time base or the channels:
                 rms, raw = self._flush(rms, raw)    # the frames before it go first,
+                if self.shaft.waiting:              # and the shaft speed in front of it
+                    self._feed_tacho(end=True)
                 rate = (st.fs, st.block_len) != (self.clock.fs, self.clock.block_len)
-                if rate:
-                    self._feed_tacho(end=True)      # the shaft speed at the old rate
                 self._release_decisions(final=True)  # decided on the old time base
                 self.indicators.finish()             # intervals stamped on it too
                 self.setup.apply(f, st)
