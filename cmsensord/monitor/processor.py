@@ -409,8 +409,8 @@ class Processor:
             self._raw_blocks(blocks)
             return
         for piece in blocks.pieces(max(1, round(PIECE_S * self.clock.fs) // self.clock.block_len)):
-            if self.shaft.waits_before(int(piece.t0[0])):       # the TACHO frames in front of it first
-                self._feed_tacho(before=int(piece.t0[0]))
+            if self.shaft.waits_before(start := int(piece.t0[0])):     # the TACHO frames in front of it first
+                self._feed_tacho(before=start)
             self._raw_blocks(piece)
 
     def _raw_blocks(self, blocks: RawBlocks) -> None:

@@ -84,13 +84,16 @@ class RawBlocks:
         return n == len(self.t0) * C and bool((self.row == np.arange(n) // C).all()) \
             and bool((self.chan == np.arange(n) % C).all())
 
-    def take(self, a: int, b: int) -> RawBlocks:
+    def take(self, a: int, b: int, ordered: bool | None = None) -> RawBlocks:
         """Blocks ``a`` .. ``b - 1`` (their frames' rows renumbered from 0; views where the
-        frames are in block order, as the decoder gives them)."""
+        frames are in block order, as the decoder gives them; ``ordered``: whether they are,
+        if known)."""
         if a == 0 and b == len(self.t0):
             return self
         row = self.row
-        if row.size < 2 or bool((row[1:] >= row[:-1]).all()):
+        if ordered is None:
+            ordered = row.size < 2 or bool((row[1:] >= row[:-1]).all())
+        if ordered:
             i, j = row.searchsorted([a, b]).tolist()
             return RawBlocks(self.t0[a:b], row[i:j] - a, self.chan[i:j], self.x[i:j], self.n_channels)
         sel = (row >= a) & (row < b)
@@ -99,7 +102,9 @@ class RawBlocks:
     def pieces(self, most: int) -> list[RawBlocks]:
         """The runs of consecutive blocks (:meth:`runs`), each cut into pieces of at most
         ``most`` blocks, in order."""
-        return [self.take(k, min(b, k + most)) for a, b in self.runs() for k in range(a, b, most)]
+        row = self.row
+        ordered = row.size < 2 or bool((row[1:] >= row[:-1]).all())    # checked once for all pieces
+        return [self.take(k, min(b, k + most), ordered) for a, b in self.runs() for k in range(a, b, most)]
 
     def runs(self) -> list[tuple[int, int]]:
         """(first, end) block rows of the runs of consecutive blocks (lost ones cut them)."""
