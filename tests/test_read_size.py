@@ -24,10 +24,13 @@ READS = (997, 65_536, 1 << 20)
 FRAMES_PER_S = 201
 
 
-def board(mode: str, seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0, channels: int = 1) -> bytes:
-    """A healthy motor at 1720 rpm on a board with a tacho (1 channel unless ``channels``)."""
+def board(mode: str, seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0, channels: int = 1,
+          ppr: int = 1) -> bytes:
+    """A healthy motor at 1720 rpm on a board with a tacho (1 channel and 1 pulse per revolution unless
+    ``channels``, ``ppr``)."""
     sc = make_scenario("healthy", n_channels=channels, duration_s=seconds, seed=1, fs=fs)
-    cfg = BoardConfig(mode=mode, n_channels=channels, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=True)
+    cfg = BoardConfig(mode=mode, n_channels=channels, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=True,
+                      ppr=ppr)
     return Board(sc, cfg).generate(seconds)
 
 
@@ -68,6 +71,11 @@ def mode_switch(mode: str) -> bytes:
     return first + board("rms" if mode == "raw" else "raw", 6, t0=150_000, seq=frames(first))
 
 
+def ppr_change(mode: str, before: int, after: int) -> bytes:
+    first = board(mode, 6, ppr=before)
+    return first + board(mode, 12, t0=150_000, seq=frames(first), ppr=after)
+
+
 def by_topic(data: bytes, read: int) -> dict[str, list]:
     topics: dict[str, list] = {}
     for topic, stamp, msg in run_processor(data, config_from_dict({}), chunk=read)[0].messages:
@@ -102,6 +110,23 @@ def test_a_status_changing_the_channels_or_the_mode_gives_the_same_messages_at_a
     raw = [m["speed_rpm"] for _, m in runs[0]["/cm/ch0/indicators"] if m["mode"] == "raw"]
     rms_only = make is channel_change and mode == "rms"
     assert len(raw) >= (0 if rms_only else 6) and all(abs(v - 1720) < 20 for v in raw), raw
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+@pytest.mark.parametrize(("before", "after"), [(1, 2), (2, 1)])
+def test_a_status_changing_the_tacho_pulses_per_revolution_starts_the_shaft_speed_again(mode, before, after):
+    """The board's tacho goes from ``before`` to ``after`` pulses per revolution: the shaft speed starts
+    again counting ``after`` (before, it went on counting ``before``: every second pulse removed as spurious,
+    29 events a second, or a missed pulse every revolution), and the config event says so."""
+    runs = same_at_every_read_size(ppr_change(mode, before, after))
+    events = [m for _, m in runs[0]["/cm/events"]]
+    assert [e["kind"] for e in events if e["kind"].startswith("tacho")] == []
+    told = [e["message"].split(", tacho of ")[1] for e in events if "tacho of" in e["message"]]
+    assert told == [f"{before} pulse(s) per revolution", f"{after} pulse(s) per revolution"]
+    if mode == "raw":
+        orders = [(s, m["speed_rpm"]) for s, m in runs[0]["/cm/ch0/orders"] if m["valid"]]
+        assert len(orders) >= 160 and all(abs(v - 1720) < 20 for _, v in orders)
+        assert max(s for s, _ in orders) > 17e9
 
 
 @pytest.mark.parametrize("mode", ["raw", "rms"])

@@ -51,8 +51,8 @@ class ChannelSetup:
         self.odd_dropped = 0                    # odd frames dropped in all
 
     def decode(self, f: Frame) -> tuple[Status | None, bool]:
-        """A STATUS frame -> (its Status or None if bad, whether it changes the time base or
-        the channels)."""
+        """A STATUS frame -> (its Status or None if bad, whether it changes the time base, the
+        channels or the tacho)."""
         try:
             st = decode_status(f.payload)
         except ValueError as exc:
@@ -67,8 +67,8 @@ class ChannelSetup:
                           "(and a scale not 0): the previous STATUS is kept")
             return None, False
         old = self.status
-        return st, old is None or (st.fs, st.block_len, st.n_channels, st.mode) != (
-            old.fs, old.block_len, old.n_channels, old.mode)
+        return st, old is None or (st.fs, st.block_len, st.n_channels, st.mode, st.tacho_inputs, st.tacho_ppr) != (
+            old.fs, old.block_len, old.n_channels, old.mode, old.tacho_inputs, old.tacho_ppr)
 
     def apply(self, f: Frame, st: Status) -> None:
         """News from the board: the clock's rate, and the config event."""
@@ -77,7 +77,8 @@ class ChannelSetup:
                           " time base re-anchored")
         mode = {1: "RMS", 2: "RAW"}.get(st.mode, f"unknown({st.mode})")
         self.log.emit("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
-                      f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}",
+                      f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}"
+                      + (f", tacho of {st.tacho_ppr} pulse(s) per revolution" if st.tacho_inputs else ""),
                       self.clock.stamp_ns(f.t0_unwrapped))
 
     def accept(self, n: int, frames: Sequence[Frame]) -> bool:

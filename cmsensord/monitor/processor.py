@@ -272,7 +272,7 @@ class Processor:
             self.shaft.add(f)
         elif f.type == _STATUS:
             st, news = self.setup.decode(f)
-            if st is not None and news:     # it changes the time base or the channels:
+            if st is not None and news:     # it changes the time base, the channels or the tacho:
                 rms, raw = self._flush(rms, raw)    # the frames before it go first,
                 if self.shaft.waiting:              # and the shaft speed in front of it
                     self._feed_tacho(end=True)
@@ -280,7 +280,7 @@ class Processor:
                 self._release_decisions(final=True)  # decided on the old time base
                 self.indicators.finish()             # intervals stamped on it too
                 self.setup.apply(f, st)
-                if rate:
+                if rate or self.shaft.new_ppr(st):
                     self._restart_shaft(st)
             self.setup.status = st or self.setup.status
             if self.status is not None:

@@ -130,6 +130,11 @@ class Shaft:
         self._gaps.clear()
         self.ensure(status, clock)
 
+    def new_ppr(self, status: Status) -> bool:
+        """Whether ``status`` announces other pulses per revolution than the tracker counts
+        with (the configured ``tacho.ppr`` overrides the board's)."""
+        return self.tacho is not None and (self.cfg.tacho.ppr or status.tacho_ppr) != self.tacho.ppr
+
     def ensure(self, status: Status | None, clock: BlockClock) -> bool:
         """Create the tracker once the board has said it has a tacho; True when there is one."""
         if self.tacho is None and status is not None and status.tacho_inputs > 0:
