@@ -37,6 +37,7 @@ from cmsensord.monitor.alarms import Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event, EventLog
+from cmsensord.monitor.figures import Figures
 from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.output import Output
@@ -70,7 +71,7 @@ MAX_RECORDS = 1000
 PIECE_S = 2.0
 
 
-class Processor:
+class Processor(Figures):
     """Frames in, messages out (see module docstring).
 
     ``auto_channels``: the channel list follows the board (the first RMS frame's
@@ -112,22 +113,6 @@ class Processor:
             from cmsensord.monitor.capture_marks import CaptureMarks
             self.captures = Captures(cfg.capture, self.clock.stamp_ns, CaptureMarks(cfg, lambda: self.shaft.tacho))
             self.log.watch = self.captures.watch
-
-    # ---- the parts' figures, for the status line, the summary and the tools --
-    status = property(lambda self: self.setup.status)
-    channels = property(lambda self: self.setup.channels)
-    severity = property(lambda self: self.setup.severity)
-    views = property(lambda self: self.setup.severity.views if self.setup.severity else [])
-    tacho = property(lambda self: self.shaft.tacho)
-    events = property(lambda self: self.log.recent)
-    event_counts = property(lambda self: self.log.counts)
-    raw_dropped = property(lambda self: self.raw.dropped)
-    fs = property(lambda self: self.clock.fs)
-    block_len = property(lambda self: self.clock.block_len)
-    anchor_ns = property(lambda self: self.clock.anchor_ns)
-    next_slot = property(lambda self: self.clock.next_slot)
-    board_seconds = property(lambda self: self.clock.board_seconds)
-    adc_seconds = property(lambda self: self.clock.adc_seconds)
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
@@ -495,8 +480,10 @@ class Processor:
             t0, vals = t0[n:], vals[n:]
 
     def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:
-        first = self.clock.next_slot
-        y, valid = observation_rows(first, slots, vals, self.severity.index)
+        """Observations on their slots -> the banks (or what waits for a decision); with the channels known."""
+        first, sev = self.clock.next_slot, self.setup.severity
+        assert sev is not None, "observations before the board's channels are known"
+        y, valid = observation_rows(first, slots, vals, sev.index)
         T = len(y)
         mics, trace = self.setup.microphones, self.cfg.output.akf_trace
         stamps = [self.clock.slot_stamp_ns(first + k) for k in range(T)] if mics or trace else []
@@ -513,9 +500,9 @@ class Processor:
             self._release_decisions(final=False)
             return
         self._hand_over()
-        y, out = self.severity.observe(first, y, valid, full=trace)
+        y, out = sev.observe(first, y, valid, full=trace)
         if out is not None:
-            self._out(self.severity.trace(stamps, y, valid, out))
+            self._out(sev.trace(stamps, y, valid, out))
         self._release_decisions(final=False)
 
     def _release_decisions(self, final: bool, bounded: bool = False) -> None:

@@ -1,0 +1,99 @@
+"""The Processor's figures, read-only, for the status line, the summary and the tools: each is
+the figure of the part that owns it (the board's STATUS and channels, the shaft, the events, the
+RAW input, the block clock)."""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from cmsensord.config import ChannelConfig
+    from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.monitor.channels import ChannelSetup
+    from cmsensord.monitor.clock import BlockClock
+    from cmsensord.monitor.events import EventLog
+    from cmsensord.monitor.raw import RawInput
+    from cmsensord.monitor.severity import ChannelView, SeverityChain
+    from cmsensord.monitor.shaft import Shaft
+    from cmsensord.protocol import Status
+
+
+class Figures:
+    """Read-only figures of the parts (a base of :class:`~cmsensord.monitor.processor.Processor`)."""
+
+    setup: ChannelSetup
+    shaft: Shaft
+    log: EventLog
+    raw: RawInput
+    clock: BlockClock
+
+    @property
+    def status(self) -> Status | None:
+        """The board's newest good STATUS."""
+        return self.setup.status
+
+    @property
+    def channels(self) -> tuple[ChannelConfig, ...]:
+        """The monitored channels."""
+        return self.setup.channels
+
+    @property
+    def severity(self) -> SeverityChain | None:
+        """The severity chain of the monitored channels, once the board's channels are known."""
+        return self.setup.severity
+
+    @property
+    def views(self) -> list[ChannelView]:
+        """Each monitored channel's newest severity figures."""
+        return self.setup.severity.views if self.setup.severity else []
+
+    @property
+    def tacho(self) -> TachoTracker | None:
+        """The tacho tracker, once the board has announced a tacho."""
+        return self.shaft.tacho
+
+    @property
+    def events(self) -> deque[dict]:
+        """The recent events, newest last."""
+        return self.log.recent
+
+    @property
+    def event_counts(self) -> dict[str, int]:
+        """Events by kind, since the start."""
+        return self.log.counts
+
+    @property
+    def raw_dropped(self) -> int:
+        """RAW frames dropped while no STATUS had come."""
+        return self.raw.dropped
+
+    @property
+    def fs(self) -> int:
+        """The board's samples per second."""
+        return self.clock.fs
+
+    @property
+    def block_len(self) -> int:
+        """Samples in a board block."""
+        return self.clock.block_len
+
+    @property
+    def anchor_ns(self) -> int | None:
+        """The wall clock at the first frame."""
+        return self.clock.anchor_ns
+
+    @property
+    def next_slot(self) -> int:
+        """The next observation slot expected."""
+        return self.clock.next_slot
+
+    @property
+    def board_seconds(self) -> float:
+        """The board's clock at the end of the processed observations."""
+        return self.clock.board_seconds
+
+    @property
+    def adc_seconds(self) -> float:
+        """ADC time covered by the observations processed so far."""
+        return self.clock.adc_seconds
