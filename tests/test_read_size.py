@@ -25,12 +25,12 @@ FRAMES_PER_S = 201
 
 
 def board(mode: str, seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0, channels: int = 1,
-          ppr: int = 1) -> bytes:
-    """A healthy motor at 1720 rpm on a board with a tacho (1 channel and 1 pulse per revolution unless
-    ``channels``, ``ppr``)."""
+          ppr: int = 1, scale: tuple[float, ...] | None = None) -> bytes:
+    """A healthy motor at 1720 rpm on a board with a tacho (1 channel, 1 pulse per revolution and the
+    board's default scale unless ``channels``, ``ppr``, ``scale``)."""
     sc = make_scenario("healthy", n_channels=channels, duration_s=seconds, seed=1, fs=fs)
     cfg = BoardConfig(mode=mode, n_channels=channels, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=True,
-                      ppr=ppr)
+                      ppr=ppr, scale=scale)
     return Board(sc, cfg).generate(seconds)
 
 
@@ -76,6 +76,11 @@ def ppr_change(mode: str, before: int, after: int) -> bytes:
     return first + board(mode, 12, t0=150_000, seq=frames(first), ppr=after)
 
 
+def calibration_change(mode: str) -> bytes:
+    first = board(mode, 6)
+    return first + board(mode, 6, t0=150_000, seq=frames(first), scale=(0.02,))
+
+
 def by_topic(data: bytes, read: int) -> dict[str, list]:
     topics: dict[str, list] = {}
     for topic, stamp, msg in run_processor(data, config_from_dict({}), chunk=read)[0].messages:
@@ -110,6 +115,24 @@ def test_a_status_changing_the_channels_or_the_mode_gives_the_same_messages_at_a
     raw = [m["speed_rpm"] for _, m in runs[0]["/cm/ch0/indicators"] if m["mode"] == "raw"]
     rms_only = make is channel_change and mode == "rms"
     assert len(raw) >= (0 if rms_only else 6) and all(abs(v - 1720) < 20 for v in raw), raw
+
+
+def test_a_status_changing_the_calibration_converts_the_raw_blocks_before_it_with_the_old_one():
+    """The board's scale goes from +-20 g full scale to 0.02 m/s² per count at 6 s (its counts change, not the
+    vibration): at any read size the RAW blocks in front of the STATUS are converted with the old scale, so each
+    interval's RMS is the board's own (RMS mode), and a config event tells the change.  Before, the blocks waiting
+    when it came were converted with the new one: the newest block at any read size (0.676 for 0.683 m/s²),
+    seconds of them in a large read (0.14)."""
+    raw, rms = (same_at_every_read_size(calibration_change(mode)) for mode in ("raw", "rms"))
+    by_raw = {s: m["accel_rms"] for s, m in raw[0]["/cm/ch0/indicators"]}
+    by_rms = {s: m["accel_rms"] for s, m in rms[0]["/cm/ch0/indicators"]}
+    assert len(by_raw) == 12 and by_raw.keys() == by_rms.keys()
+    assert all(abs(by_raw[s] - by_rms[s]) < 1e-3 for s in by_raw), (by_raw, by_rms)
+    change = ("board changed the calibration of channel 0 (scale 0.0957681 -> 0.02 m/s² per count, "
+              "offset 2048 -> 2048 counts)")
+    for runs, then in ((raw, ": RAW samples from here on are converted with it"), (rms, "")):
+        told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if "calibration" in m["message"]]
+        assert told == [(6_000_000_000, change + then)]
 
 
 @pytest.mark.parametrize("mode", ["raw", "rms"])

@@ -9,7 +9,9 @@ board does not send are reported and left out.  With the first data, the
 severity chain (and the microphone estimator) of the usable channels is made.
 
 A STATUS whose scale or offset is not finite, or whose scale is 0, is ignored
-with a ``decode_error`` event: the previous one (its calibration) is kept.
+with a ``decode_error`` event: the previous one (its calibration) is kept.  One that
+changes the scale or offset of a monitored channel that the configuration does not set
+is told with a ``config`` event (the RAW blocks before it keep the old calibration).
 
 A data frame whose channel count is not the board's (:meth:`ChannelSetup.accept`)
 is one odd frame, dropped and counted with a ``channels`` event, unless a
@@ -69,6 +71,23 @@ class ChannelSetup:
         old = self.status
         return st, old is None or (st.fs, st.block_len, st.n_channels, st.mode, st.tacho_inputs, st.tacho_ppr) != (
             old.fs, old.block_len, old.n_channels, old.mode, old.tacho_inputs, old.tacho_ppr)
+
+    def recalibrates(self, f: Frame, st: Status) -> bool:
+        """Whether ``st`` changes the scale or offset of a monitored channel that the configuration
+        does not set; a ``config`` event names them and the change."""
+        old = self.status
+        if old is None:
+            return False
+        own_scale = {ch.index for ch in self.channels if ch.scale is None}
+        own_offset = {ch.index for ch in self.channels if ch.offset is None}
+        moved = [f"{i} (scale {a:.6g} -> {b:.6g} m/s² per count, offset {c:.6g} -> {d:.6g} counts)"
+                 for i, (a, b, c, d) in enumerate(zip(old.scale, st.scale, old.offset, st.offset))
+                 if (a != b and i in own_scale) or (c != d and i in own_offset)]
+        if moved:
+            then = ": RAW samples from here on are converted with it" if st.mode == 2 else ""
+            self.log.emit("config", None, f"board changed the calibration of channel {', '.join(moved)}{then}",
+                          self.clock.stamp_ns(f.t0_unwrapped))
+        return bool(moved)
 
     def apply(self, f: Frame, st: Status) -> None:
         """News from the board: the clock's rate, and the config event."""

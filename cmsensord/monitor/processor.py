@@ -256,24 +256,34 @@ class Processor(Figures):
         elif f.type == _TACHO:
             self.shaft.add(f)
         elif f.type == _STATUS:
-            st, news = self.setup.decode(f)
-            if st is not None and news:     # it changes the time base, the channels or the tacho:
-                rms, raw = self._flush(rms, raw)    # the frames before it go first,
-                if self.shaft.waiting:              # and the shaft speed in front of it
-                    self._feed_tacho(end=True)
-                rate = (st.fs, st.block_len) != (self.clock.fs, self.clock.block_len)
-                self._release_decisions(final=True)  # decided on the old time base
-                self.indicators.finish()             # intervals stamped on it too
-                self.setup.apply(f, st)
-                if rate or self.shaft.new_ppr(st):
-                    self._restart_shaft(st)
-            self.setup.status = st or self.setup.status
-            if self.status is not None:
-                self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
-                self._out(self.shaft.notes)
-                self.shaft.notes.clear()
-                if self.raw.waiting:
-                    self._flush_raw([])
+            rms, raw = self._status(f, rms, raw)
+        return rms, raw
+
+    def _status(self, f: Frame, rms: Pending, raw: Pending) -> tuple[Pending, Pending]:
+        """A STATUS frame.  One that changes the board's time base, channels, mode or tacho ends
+        what was decided and measured on the old board; one that changes its calibration (or the
+        board) converts the RAW blocks in front of it first, with the old one."""
+        st, news = self.setup.decode(f)
+        if st is not None and (self.setup.recalibrates(f, st) or news):
+            rms, raw = self._flush(rms, raw)    # the frames before it go first,
+            if self.setup.status is not None:   # the newest RAW block too: it came before it
+                self._flush_raw([], final=True)
+        if st is not None and news:
+            if self.shaft.waiting:              # and the shaft speed in front of it
+                self._feed_tacho(end=True)
+            rate = (st.fs, st.block_len) != (self.clock.fs, self.clock.block_len)
+            self._release_decisions(final=True)  # decided on the old time base
+            self.indicators.finish()             # intervals stamped on it too
+            self.setup.apply(f, st)
+            if rate or self.shaft.new_ppr(st):
+                self._restart_shaft(st)
+        self.setup.status = st or self.setup.status
+        if self.status is not None:
+            self.shaft.ensure(self.status, self.clock)  # from now on decisions wait for it
+            self._out(self.shaft.notes)
+            self.shaft.notes.clear()
+            if self.raw.waiting:
+                self._flush_raw([])
         return rms, raw
 
     def _break(self, f: Frame) -> bool:
