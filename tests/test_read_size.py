@@ -128,7 +128,7 @@ def test_a_status_changing_the_calibration_converts_the_raw_blocks_before_it_wit
     by_rms = {s: m["accel_rms"] for s, m in rms[0]["/cm/ch0/indicators"]}
     assert len(by_raw) == 12 and by_raw.keys() == by_rms.keys()
     assert all(abs(by_raw[s] - by_rms[s]) < 1e-3 for s in by_raw), (by_raw, by_rms)
-    change = ("board changed the calibration of channel 0 (scale 0.0957681 -> 0.02 m/s² per count, "
+    change = ("board changed the calibration of channel 0 (scale 0.09576806 -> 0.02 m/s² per count, "
               "offset 2048 -> 2048 counts)")
     for runs, then in ((raw, ": RAW samples from here on are converted with it"), (rms, "")):
         told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if "calibration" in m["message"]]

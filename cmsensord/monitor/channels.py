@@ -80,7 +80,7 @@ class ChannelSetup:
             return False
         own_scale = {ch.index for ch in self.channels if ch.scale is None}
         own_offset = {ch.index for ch in self.channels if ch.offset is None}
-        moved = [f"{i} (scale {a:.6g} -> {b:.6g} m/s² per count, offset {c:.6g} -> {d:.6g} counts)"
+        moved = [f"{i} (scale {a:.7g} -> {b:.7g} m/s² per count, offset {c:.7g} -> {d:.7g} counts)"
                  for i, (a, b, c, d) in enumerate(zip(old.scale, st.scale, old.offset, st.offset))
                  if (a != b and i in own_scale) or (c != d and i in own_offset)]
         if moved:
