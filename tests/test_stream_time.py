@@ -200,16 +200,62 @@ def test_a_board_reset_with_a_tacho_gives_the_same_messages_however_the_stream_i
     assert runs[1] == runs[0] and runs[2] == runs[0]
 
 
-def at_rate(data: bytes, fs: int, seq: int) -> bytes:
-    """``data`` with its STATUS frames announcing ``fs`` and its seq numbers from ``seq`` on."""
+def restated(data: bytes, seq: int, **status) -> bytes:
+    """``data`` with its STATUS frames announcing the fields ``status`` and its seq numbers from
+    ``seq`` on."""
     out = bytearray()
     for k, f in enumerate(Decoder().feed(data)):
         n = (seq + k) & 0xFFFF
         if f.type == FrameType.STATUS:
-            out += encode_status(n, f.t0, dataclasses.replace(decode_status(f.payload), fs=fs))
+            out += encode_status(n, f.t0, dataclasses.replace(decode_status(f.payload), **status))
         else:
             out += encode_frame(f.type, n, f.t0, f.chan, f.flags, f.payload)
     return bytes(out)
+
+
+def at_rate(data: bytes, fs: int, seq: int) -> bytes:
+    """``data`` with its STATUS frames announcing ``fs`` and its seq numbers from ``seq`` on."""
+    return restated(data, seq, fs=fs)
+
+
+def board_goes_on(tmp_path, first_s: float, then_s: float, **status) -> bytes:
+    """:func:`raw_capture` of ``first_s`` and ``then_s`` more of the board, its STATUS frames then
+    announcing ``status``."""
+    first = raw_capture(tmp_path, first_s)
+    more = subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw", "--tacho",
+                           "--duration", str(then_s), "--t0-start", str(round(25_000 * first_s)),
+                           "--out", str(tmp_path / "more.bin")], capture_output=True, text=True, env=ENV, timeout=60)
+    assert more.returncode == 0, more.stderr
+    return first + restated((tmp_path / "more.bin").read_bytes(), len(Decoder().feed(first)), **status)
+
+
+def test_a_board_changing_its_scale_is_told_and_the_blocks_before_keep_the_old_one(tmp_path):
+    """The board's gain changes at 6 s (STATUS scale 0.02 m/s² per count, its counts as before): the config
+    event names the change, the intervals before it keep the old scale (before, a replay converted the RAW
+    blocks waiting when it came with the new one: seconds of them) and those after take the new."""
+    p, msgs, _ = replay(tmp_path, board_goes_on(tmp_path, 6.0, 6.0, scale=(0.02,)))
+    assert p.returncode == 0, p.stderr
+    assert said(msgs, "config")[2:] == [
+        "board changed the calibration of channel 0 (scale 0.09576806 -> 0.02 m/s² per count, offset 2048 -> 2048 "
+        "counts): RAW samples from here on are converted with it"]
+    accel = [m["accel_rms"] for t, _, m in msgs if t == "/cm/ch0/indicators"]
+    assert len(accel) == 12
+    assert all(0.6 < v < 0.8 for v in accel[:6]), accel
+    assert all(abs(v / w - 0.02 / 0.09576806) < 0.02 for v, w in zip(accel[6:], accel)), accel
+
+
+def test_a_board_changing_its_tacho_pulses_per_revolution_starts_the_shaft_speed_again(tmp_path):
+    """The board says at 6 s that its tacho gives 2 pulses a revolution (its edges as before: the shaft at half
+    the speed): the config event names it and the shaft speed starts again on 2 pulses (before, the tracker went
+    on counting 1: 1720 rpm)."""
+    p, msgs, _ = replay(tmp_path, board_goes_on(tmp_path, 6.0, 6.0, tacho_ppr=2))
+    assert p.returncode == 0, p.stderr
+    assert [m.split(", tacho of ")[1] for m in said(msgs, "config") if m.startswith("board firmware")] == [
+        "1 pulse(s) per revolution", "2 pulse(s) per revolution"]
+    speeds = [m["speed_rpm"] for t, _, m in msgs if t == "/cm/ch0/indicators"]
+    assert len(speeds) == 12
+    assert all(abs(v - 1720) < 5 for v in speeds[:6]) and all(abs(v - 860) < 3 for v in speeds[6:]), speeds
+    assert not [k for k in ("tacho_missed_pulse", "tacho_extra_pulse") if events(msgs, k)]
 
 
 def test_a_board_changing_fs_restarts_the_shaft_speed_at_the_new_rate(tmp_path):
