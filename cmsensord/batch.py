@@ -13,7 +13,8 @@ tracked frequency (``scipy.signal.decimate``, FIR, forwards and backwards),
 phases θ_k = 2π o_k turns (or 2π f t), one coupled banded solve per channel.
 A lost RAW block is zeros in the record (the batch filter sees a short gap); each
 /orders message says which fraction of its block's samples had none (``missing_fraction``).
-Whatever it cannot handle (no RAW blocks or tacho, a bandwidth too narrow for double
+Whatever it cannot handle (no RAW blocks or tacho, a board that changes its rate, channels,
+calibration or tacho pulses mid-record, a bandwidth too narrow for double
 precision or not below the tracked rate, a record too large for memory) is one
 CmsensordError line, and the files of the run are deleted: nothing is left behind.
 This is an offline tool: it holds the whole record in memory (about 8 bytes
@@ -37,15 +38,20 @@ from cmsensord.monitor import messages
 from cmsensord.protocol import MODE_RAW, FrameType, Status, decode_raw, decode_status, decode_tacho
 from cmsensord.source import CaptureSource
 
+#: what a STATUS may change that one solve over the whole record cannot follow
+ONE_SETUP = ("mode", "n_channels", "fs", "block_len", "tacho_ppr", "scale", "offset")
+
 
 class _Collector:
-    """RAW counts and TACHO edges of a whole capture, as decoded."""
+    """RAW counts and TACHO edges of a whole capture, as decoded; the first STATUS, and where a
+    later one first changes what :data:`ONE_SETUP` names."""
 
     def __init__(self) -> None:
         self.raw: list[tuple[int, int, bytes]] = []      # (t0, chan, payload)
         self.tacho_t0: list[int] = []
         self.tacho_edges: list[np.ndarray] = []
         self.status: Status | None = None
+        self.changed: str | None = None
 
     def add(self, frames, tacho_input: int) -> None:
         for f in frames:
@@ -58,9 +64,17 @@ class _Collector:
                     continue
                 self.tacho_t0.append(f.t0_unwrapped)
                 self.tacho_edges.append(edges)
-            elif f.type == FrameType.STATUS and self.status is None:
+            elif f.type == FrameType.STATUS and self.changed is None:
                 with contextlib.suppress(ValueError):
-                    self.status = decode_status(f.payload)
+                    self._status(decode_status(f.payload), f.offset)
+
+    def _status(self, st: Status, offset: int) -> None:
+        if self.status is None:
+            self.status = st
+            return
+        moved = [k for k in ONE_SETUP if getattr(st, k) != getattr(self.status, k)]
+        if moved:
+            self.changed = f"{', '.join(moved)} at byte {offset}"
 
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
@@ -95,6 +109,9 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
         if not col.raw or col.status is None:
             raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
                                  "capture in RAW mode")
+        if col.changed:
+            raise CmsensordError(f"{capture}: the board changed its {col.changed}: the batch VKF needs one "
+                                 "board set-up for the whole record (cut the capture at that byte)")
         if not col.tacho_t0:
             raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
         try:
