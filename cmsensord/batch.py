@@ -14,7 +14,7 @@ phases θ_k = 2π o_k turns (or 2π f t), one coupled banded solve per channel.
 A lost RAW block is zeros in the record (the batch filter sees a short gap); each
 /orders message says which fraction of its block's samples had none (``missing_fraction``).
 Whatever it cannot handle (no RAW blocks or tacho, a board that changes its rate, channels,
-calibration or tacho pulses mid-record, a bandwidth too narrow for double
+calibration or tacho pulses, or restarts, mid-record, a bandwidth too narrow for double
 precision or not below the tracked rate, a record too large for memory) is one
 CmsensordError line, and the files of the run are deleted: nothing is left behind.
 This is an offline tool: it holds the whole record in memory (about 8 bytes
@@ -43,8 +43,8 @@ ONE_SETUP = ("mode", "n_channels", "fs", "block_len", "tacho_ppr", "scale", "off
 
 
 class _Collector:
-    """RAW counts and TACHO edges of a whole capture, as decoded; the first STATUS, and where a
-    later one first changes what :data:`ONE_SETUP` names."""
+    """RAW counts and TACHO edges of a whole capture, as decoded; the first STATUS, and where the
+    board first changed what :data:`ONE_SETUP` names or restarted its clock (:attr:`changed`)."""
 
     def __init__(self) -> None:
         self.raw: list[tuple[int, int, bytes]] = []      # (t0, chan, payload)
@@ -52,9 +52,15 @@ class _Collector:
         self.tacho_edges: list[np.ndarray] = []
         self.status: Status | None = None
         self.changed: str | None = None
+        self._newest_t0 = -1
 
     def add(self, frames, tacho_input: int) -> None:
         for f in frames:
+            if f.type in (FrameType.RAW, FrameType.TACHO):
+                if f.t0_unwrapped < self._newest_t0 and self.changed is None:
+                    self.changed = (f"restarted its clock (t0 {f.t0_unwrapped} after {self._newest_t0}) "
+                                    f"at byte {f.offset}")
+                self._newest_t0 = max(self._newest_t0, f.t0_unwrapped)
             if f.type == FrameType.RAW:
                 self.raw.append((f.t0_unwrapped, f.chan, f.payload))
             elif f.type == FrameType.TACHO and f.chan == tacho_input:
@@ -74,7 +80,7 @@ class _Collector:
             return
         moved = [k for k in ONE_SETUP if getattr(st, k) != getattr(self.status, k)]
         if moved:
-            self.changed = f"{', '.join(moved)} at byte {offset}"
+            self.changed = f"changed its {', '.join(moved)} at byte {offset}"
 
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
@@ -110,7 +116,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
             raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
                                  "capture in RAW mode")
         if col.changed:
-            raise CmsensordError(f"{capture}: the board changed its {col.changed}: the batch VKF needs one "
+            raise CmsensordError(f"{capture}: the board {col.changed}: the batch VKF needs one "
                                  "board set-up for the whole record (cut the capture at that byte)")
         if not col.tacho_t0:
             raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")

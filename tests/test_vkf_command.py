@@ -109,23 +109,27 @@ def test_failed_vkf_leaves_an_existing_output_directory_as_it_was(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["older.mcap"]
 
 
-@pytest.mark.parametrize(("change", "said"), [({"scale": (0.02,)}, "scale"), ({"fs": 12_500}, "fs"),
-                                              ({"ppr": 2}, "tacho_ppr")])
+@pytest.mark.parametrize(("change", "said"), [({"scale": (0.02,)}, "changed its scale"),
+                                              ({"fs": 12_500}, "changed its fs"),
+                                              ({"ppr": 2}, "changed its tacho_ppr"),
+                                              ({"t0_start": 0}, "restarted its clock (t0 0 after 99750)")])
 def test_vkf_of_a_board_that_changes_its_set_up_mid_record_is_one_line(tmp_path, change, said):
-    """A capture whose board changes its calibration, rate or tacho pulses at 4 s: the batch solve over the
-    whole record has one of each, so it says where and stops (exit 2, no file left), where it took the first
-    STATUS's rate and pulses and the newest one's calibration for every sample."""
+    """A capture whose board changes its calibration, rate or tacho pulses, or restarts, at 4 s: the batch
+    solve over the whole record has one of each and one clock, so it says where and stops (exit 2, no file
+    left), where it took the first STATUS's rate and pulses and the newest one's calibration for every sample
+    (a restart: an error about TACHO frames out of time order)."""
     first = Board(make_scenario("healthy", duration_s=4.0, seed=1),
                   BoardConfig(mode="raw", tacho=True)).generate(4.0)
     fs = change.get("fs", 25_000)
+    board = {"t0_start": 100_000, "seq_start": len(Decoder().feed(first)),
+             **{k: v for k, v in change.items() if k != "fs"}}
     then = Board(make_scenario("healthy", duration_s=4.0, seed=1, fs=fs),
-                 BoardConfig(mode="raw", tacho=True, fs=fs, t0_start=100_000, seq_start=len(Decoder().feed(first)),
-                             **{k: v for k, v in change.items() if k != "fs"})).generate(4.0)
+                 BoardConfig(mode="raw", tacho=True, fs=fs, **board)).generate(4.0)
     cap = tmp_path / "changes.bin"
     cap.write_bytes(first + then)
     r = cmsensord("vkf", str(cap), "--out", str(tmp_path / "out"))
+    at = len(first) + 46 * ("t0_start" in change)     # a restart: its first data frame, after its STATUS
     assert (r.returncode, r.stderr.strip().splitlines()[-1]) == (
-        2, f"cmsensord: {cap}: the board changed its {said} at byte {len(first)}: the batch VKF needs one board "
-           "set-up for the whole record (cut the capture at that byte)")
+        2, f"cmsensord: {cap}: the board {said} at byte {at}: the batch "
+           "VKF needs one board set-up for the whole record (cut the capture at that byte)")
     assert not (tmp_path / "out").exists()
-
