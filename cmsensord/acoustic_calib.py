@@ -305,13 +305,15 @@ def blocks_from_capture(path, channels, *, chunk: int = 1 << 20, samples_of: int
 
 
 def _read_capture(path, channels: list[int], chunk: int):
-    """A capture's last decodable STATUS, the RMS rows of ``channels`` by t0 and
-    the RAW payloads by t0 and channel; bad payloads are skipped."""
+    """A capture's STATUS, the RMS rows of ``channels`` by t0 and the RAW payloads by t0 and
+    channel; bad payloads are skipped.  ValueError for a capture that is not one board set-up
+    (:class:`~cmsensord.one_setup.OneSetup`)."""
     from cmsensord.errors import LinkError
-    from cmsensord.protocol import FrameType, decode_rms, decode_status
+    from cmsensord.one_setup import OneSetup
+    from cmsensord.protocol import FrameType, decode_rms
     from cmsensord.source import CaptureSource
 
-    status = None
+    setup = OneSetup()
     rms_rows: dict[int, np.ndarray] = {}
     raw: dict[int, dict[int, bytes]] = {}
     try:
@@ -321,12 +323,8 @@ def _read_capture(path, channels: list[int], chunk: int):
     with source:
         for frames in source:
             for fr in frames:
-                if fr.type == FrameType.STATUS:
-                    try:
-                        status = decode_status(fr.payload)
-                    except ValueError:
-                        continue
-                elif fr.type == FrameType.RMS:
+                setup.see(fr)
+                if fr.type == FrameType.RMS:
                     try:
                         vals = decode_rms(fr)
                     except ValueError:
@@ -335,9 +333,12 @@ def _read_capture(path, channels: list[int], chunk: int):
                         rms_rows[fr.t0_unwrapped] = vals[channels].astype(np.float64)
                 elif fr.type == FrameType.RAW and fr.chan in channels:
                     raw.setdefault(fr.t0_unwrapped, {})[fr.chan] = fr.payload
-    if status is None:
+    if setup.status is None:
         raise ValueError(f"{path}: no STATUS frame (block length and scale unknown)")
-    return status, rms_rows, raw
+    if setup.changed is not None:
+        raise ValueError(f"{path}: the board {setup.changed}: the acoustic calibration needs one board "
+                         "set-up for the whole capture (cut the capture at that byte)")
+    return setup.status, rms_rows, raw
 
 
 def _raw_block_rms(path, status, raw: dict[int, dict[int, bytes]], channels: list[int],

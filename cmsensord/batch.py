@@ -35,32 +35,24 @@ from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor import messages
-from cmsensord.protocol import MODE_RAW, FrameType, Status, decode_raw, decode_status, decode_tacho
+from cmsensord.one_setup import OneSetup
+from cmsensord.protocol import MODE_RAW, FrameType, decode_raw, decode_tacho
 from cmsensord.source import CaptureSource
-
-#: what a STATUS may change that one solve over the whole record cannot follow
-ONE_SETUP = ("mode", "n_channels", "fs", "block_len", "tacho_ppr", "scale", "offset")
 
 
 class _Collector:
-    """RAW counts and TACHO edges of a whole capture, as decoded; the first STATUS, and where the
-    board first changed what :data:`ONE_SETUP` names or restarted its clock (:attr:`changed`)."""
+    """RAW counts and TACHO edges of a whole capture, as decoded; its first STATUS, and what first
+    broke its one board set-up (:class:`~cmsensord.one_setup.OneSetup`)."""
 
     def __init__(self) -> None:
         self.raw: list[tuple[int, int, bytes]] = []      # (t0, chan, payload)
         self.tacho_t0: list[int] = []
         self.tacho_edges: list[np.ndarray] = []
-        self.status: Status | None = None
-        self.changed: str | None = None
-        self._newest_t0 = -1
+        self.setup = OneSetup()
 
     def add(self, frames, tacho_input: int) -> None:
         for f in frames:
-            if f.type in (FrameType.RAW, FrameType.TACHO):
-                if f.t0_unwrapped < self._newest_t0 and self.changed is None:
-                    self.changed = (f"restarted its clock (t0 {f.t0_unwrapped} after {self._newest_t0}) "
-                                    f"at byte {f.offset}")
-                self._newest_t0 = max(self._newest_t0, f.t0_unwrapped)
+            self.setup.see(f)
             if f.type == FrameType.RAW:
                 self.raw.append((f.t0_unwrapped, f.chan, f.payload))
             elif f.type == FrameType.TACHO and f.chan == tacho_input:
@@ -70,17 +62,6 @@ class _Collector:
                     continue
                 self.tacho_t0.append(f.t0_unwrapped)
                 self.tacho_edges.append(edges)
-            elif f.type == FrameType.STATUS and self.changed is None:
-                with contextlib.suppress(ValueError):
-                    self._status(decode_status(f.payload), f.offset)
-
-    def _status(self, st: Status, offset: int) -> None:
-        if self.status is None:
-            self.status = st
-            return
-        moved = [k for k in ONE_SETUP if getattr(st, k) != getattr(self.status, k)]
-        if moved:
-            self.changed = f"changed its {', '.join(moved)} at byte {offset}"
 
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
@@ -107,16 +88,16 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
         with source:
             for frames in source:
                 col.add(frames, cfg.tacho.input)
-                if col.status is not None and col.status.mode != MODE_RAW and not col.raw:
+                if col.setup.status is not None and col.setup.status.mode != MODE_RAW and not col.raw:
                     raise CmsensordError(f"{capture}: the board is in RMS mode (its first STATUS): the "
                                          "batch VKF needs a capture in RAW mode")
                 proc.handle(frames)
         proc.finish()
-        if not col.raw or col.status is None:
+        if not col.raw or col.setup.status is None:
             raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
                                  "capture in RAW mode")
-        if col.changed:
-            raise CmsensordError(f"{capture}: the board {col.changed}: the batch VKF needs one "
+        if col.setup.changed:
+            raise CmsensordError(f"{capture}: the board {col.setup.changed}: the batch VKF needs one "
                                  "board set-up for the whole record (cut the capture at that byte)")
         if not col.tacho_t0:
             raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
@@ -166,7 +147,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     from cmsensord.dsp.tacho import TachoTracker
     from cmsensord.dsp.vkf_batch import Hz, phases_for, r_for_bandwidth, vkf2
 
-    st = col.status
+    st = col.setup.status
     fs, L = st.fs, st.block_len
     channels = proc.channels
     s0, y, lost = _record(col, proc)
@@ -211,7 +192,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
 def _record(col, proc) -> tuple[int, np.ndarray, np.ndarray]:
     """The record's RAW blocks in m/s², from its first block's board sample s0 on: (s0, y (n, C),
     lost (n, C): True where no RAW block came, zeros in y)."""
-    L = col.status.block_len
+    L = col.setup.status.block_len
     channels = proc.channels
     scale, offset = proc.raw_calibration()
     t0s = np.array([t for t, _, _ in col.raw], dtype=np.int64)

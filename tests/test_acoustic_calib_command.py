@@ -60,3 +60,20 @@ def test_calibration_command_then_daemon_follow_the_degradation(tmp_path):
     assert mic[:240].max() == 0
     assert mic[400:480].max() == 10 and acc[400:480].max() == 10
     assert np.mean(np.abs(acc - mic) <= 1) >= 0.70
+
+
+def test_a_paired_capture_whose_board_restarts_is_one_line(tmp_path):
+    """A paired capture in which the board restarts (two recordings glued together, both from t0 0): the
+    calibration stops with one line saying where (exit 2, no file), where the second recording's blocks
+    overwrote the first's of the same t0 and the fit took the mix."""
+    one = board(tmp_path, "one.bin", "--mode", "raw", "--seed", "1000", "--duration", "6").read_bytes()
+    pair = tmp_path / "pair.bin"
+    pair.write_bytes(one + one)
+    bg = board(tmp_path, "bg.bin", "--mode", "raw", "--seed", "1001", "--duration", "6", "--param", "machine_off=1")
+    cal = tmp_path / "mic.json"
+    r = run_module("cmsensord.acoustic_calib", "--paired", str(pair), "--background", str(bg), "--out", str(cal))
+    first_data = len(one) + 18 + 20 + 8 * 2             # the second recording's STATUS comes first
+    assert (r.returncode, r.stderr.strip()) == (
+        2, f"acoustic_calib: error: {pair}: the board restarted its clock (t0 0 after 149750) at byte {first_data}: "
+           "the acoustic calibration needs one board set-up for the whole capture (cut the capture at that byte)")
+    assert not cal.exists()
