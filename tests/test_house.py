@@ -113,3 +113,10 @@ def test_no_function_over_80_lines_but_the_named_hot_loops():
             if size > 80:
                 long.add(f"{path.relative_to(ROOT)}::{node.name}")
     assert long == LONG_FUNCTIONS
+
+
+def test_every_monitor_module_is_in_the_architecture_table():
+    """docs/architecture.md names each module of the monitoring chain with its one job."""
+    table = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    modules = {f.name for f in (ROOT / "cmsensord" / "monitor").glob("*.py") if f.name != "__init__.py"}
+    assert {m for m in modules if f"| `{m}` |" not in table} == set()
