@@ -61,6 +61,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PROBE = str(ROOT / "bench" / "live_probe.py")
 sys.path.insert(0, str(ROOT / "bench"))
 
+from bench_rms import trees as checkouts  # noqa: E402  (each compiled to .pyc, as installed)
 from cpu_idle import idle_driver, polling_idle  # noqa: E402
 
 TICK = os.sysconf("SC_CLK_TCK")
@@ -240,8 +241,7 @@ def main() -> int:
     modes += [("idle: poll", True, None)] if args.idle_poll else []
     modes += [("floor", False, args.floor)] if args.floor is not None else []
     kernel_runs = {"both": (True, False), "on": (True,), "off": (False,)}[args.kernels]
-    trees = [(lab, Path(d).resolve()) for lab, d in (t.split("=", 1) for t in args.tree)]
-    trees.append(("this" if trees else "", ROOT))
+    trees = checkouts(args.tree)
     rows = []
     for _ in range(max(1, args.repeat)):
         for name in args.only or list(CONFIGS):

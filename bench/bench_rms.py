@@ -103,10 +103,26 @@ def best_of(runs: list[dict]) -> dict:
 
 def trees(specs: list[str]) -> list[tuple[str, Path]]:
     """``--tree LABEL=DIR`` options -> [(label, checkout)], this checkout last (labelled
-    "this" when there are others, else "")."""
+    "this" when there are others, else ""), each with its modules compiled to .pyc files
+    (:func:`compiled`)."""
     out = [(lab, Path(d).resolve()) for lab, d in (t.split("=", 1) for t in specs)]
     out.append(("this" if out else "", ROOT))
+    for _, tree in out:
+        compiled(tree)
     return out
+
+
+def compiled(tree: Path) -> None:
+    """The .pyc files of checkout ``tree``'s packages written, as pip writes them on install:
+    with PYTHONDONTWRITEBYTECODE=1 a checkout without them (a fresh worktree, or a module edited
+    since) has every module compiled at each import, and the modules a replay or the daemon
+    imports on first use (the order chain's) inside the timing: 0.02 CPU s of a 26-s RAW
+    replay's 0.067 measured, which made an older tree's replay look 30 % dearer."""
+    import compileall
+
+    for pkg in ("cmsensord", "firmware_sim"):
+        if (tree / pkg).is_dir():
+            compileall.compile_dir(str(tree / pkg), quiet=1)
 
 
 # ----------------------------------------------------------------- filterpy peer
