@@ -32,8 +32,10 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
 from cmsensord.monitor.severity import SeverityChain
-from cmsensord.protocol import Frame, Status, decode_status
+from cmsensord.protocol import MODE_RAW, Frame, Status, decode_status
 
+#: the STATUS fields whose change is news: the board's time base, channels, mode or tacho
+NEWS = ("fs", "block_len", "n_channels", "mode", "tacho_inputs", "tacho_ppr")
 #: data frames of another channel count in a row that mean the board changed (1 s of RMS blocks)
 CHANGE_FRAMES = 100
 
@@ -69,8 +71,7 @@ class ChannelSetup:
                           "(and a scale not 0): the previous STATUS is kept")
             return None, False
         old = self.status
-        return st, old is None or (st.fs, st.block_len, st.n_channels, st.mode, st.tacho_inputs, st.tacho_ppr) != (
-            old.fs, old.block_len, old.n_channels, old.mode, old.tacho_inputs, old.tacho_ppr)
+        return st, old is None or any(getattr(st, k) != getattr(old, k) for k in NEWS)
 
     def recalibrates(self, f: Frame, st: Status) -> bool:
         """Whether ``st`` changes the scale or offset of a monitored channel that the configuration
@@ -84,7 +85,7 @@ class ChannelSetup:
                  for i, (a, b, c, d) in enumerate(zip(old.scale, st.scale, old.offset, st.offset))
                  if (a != b and i in own_scale) or (c != d and i in own_offset)]
         if moved:
-            then = ": RAW samples from here on are converted with it" if st.mode == 2 else ""
+            then = ": RAW samples from here on are converted with it" if st.mode == MODE_RAW else ""
             self.log.emit("config", None, f"board changed the calibration of channel {', '.join(moved)}{then}",
                           self.clock.stamp_ns(f.t0_unwrapped))
         return bool(moved)
