@@ -25,11 +25,11 @@ FRAMES_PER_S = 201
 
 
 def board(mode: str, seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0, channels: int = 1,
-          ppr: int = 1, scale: tuple[float, ...] | None = None) -> bytes:
+          ppr: int = 1, scale: tuple[float, ...] | None = None, tacho: bool = True) -> bytes:
     """A healthy motor at 1720 rpm on a board with a tacho (1 channel, 1 pulse per revolution and the
-    board's default scale unless ``channels``, ``ppr``, ``scale``)."""
+    board's default scale unless ``channels``, ``ppr``, ``scale``; no tacho unless ``tacho``)."""
     sc = make_scenario("healthy", n_channels=channels, duration_s=seconds, seed=1, fs=fs)
-    cfg = BoardConfig(mode=mode, n_channels=channels, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=True,
+    cfg = BoardConfig(mode=mode, n_channels=channels, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=tacho,
                       ppr=ppr, scale=scale)
     return Board(sc, cfg).generate(seconds)
 
@@ -79,6 +79,11 @@ def ppr_change(mode: str, before: int, after: int) -> bytes:
 def calibration_change(mode: str) -> bytes:
     first = board(mode, 6)
     return first + board(mode, 6, t0=150_000, seq=frames(first), scale=(0.02,))
+
+
+def tacho_goes(mode: str) -> bytes:
+    first = board(mode, 6)
+    return first + board(mode, 8, t0=150_000, seq=frames(first), tacho=False)
 
 
 def by_topic(data: bytes, read: int) -> dict[str, list]:
@@ -133,6 +138,22 @@ def test_a_status_changing_the_calibration_converts_the_raw_blocks_before_it_wit
     for runs, then in ((raw, ": RAW samples from here on are converted with it"), (rms, "")):
         told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if "calibration" in m["message"]]
         assert told == [(6_000_000_000, change + then)]
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_a_status_announcing_no_tacho_ends_the_shaft_speed(mode):
+    """The board says at 6 s that it has no tacho (and sends no TACHO frame): the shaft speed and the
+    order tracker end there, and an event says so; the intervals after it have no speed.  Before, the
+    tracker went on with no edge: intervals with a tacho speed decaying from 1720 to 461, 101, 60 rpm
+    and orders to the end of the stream."""
+    runs = same_at_every_read_size(tacho_goes(mode))
+    told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if "tacho now" in m["message"]]
+    assert told == [(6_000_000_000, "the board has no tacho now: no shaft speed, no orders, decisions on the "
+                                    "configured f_r")]
+    if mode == "raw":
+        speeds = [m.get("speed_rpm") for _, m in runs[0]["/cm/ch0/indicators"]]
+        assert len(speeds) == 14 and all(abs(v - 1720) < 5 for v in speeds[:6]) and speeds[6:] == [None] * 8
+        assert max(s for s, _ in runs[0]["/cm/ch0/orders"]) < 6e9
 
 
 @pytest.mark.parametrize("mode", ["raw", "rms"])

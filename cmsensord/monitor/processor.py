@@ -275,7 +275,7 @@ class Processor(Figures):
             self._release_decisions(final=True)  # decided on the old time base
             self.indicators.finish()             # intervals stamped on it too
             self.setup.apply(f, st)
-            if rate or self.shaft.new_ppr(st):
+            if rate or self.shaft.changes_tacho(st):
                 self._restart_shaft(st)
         self.setup.status = st or self.setup.status
         if self.status is not None:

@@ -124,16 +124,20 @@ class Shaft:
     def restart(self, status: Status | None, clock: BlockClock) -> None:
         """The board's samples count anew (a reset, a new rate; the TACHO frames before it fed):
         so does the tracker (a new one, if the board has a tacho)."""
+        if self.tacho is not None and status is not None and not status.tacho_inputs:
+            self.notes.append(Event("config", None, "the board has no tacho now: no shaft speed, no orders, "
+                                    "decisions on the configured f_r"))
         self.tacho = None
         self.waiting = Pending()
         self._prev_t0 = self._fed_t0 = None
         self._gaps.clear()
         self.ensure(status, clock)
 
-    def new_ppr(self, status: Status) -> bool:
-        """Whether ``status`` announces other pulses per revolution than the tracker counts
-        with (the configured ``tacho.ppr`` overrides the board's)."""
-        return self.tacho is not None and (self.cfg.tacho.ppr or status.tacho_ppr) != self.tacho.ppr
+    def changes_tacho(self, status: Status) -> bool:
+        """Whether ``status`` announces no tacho, or other pulses per revolution than the tracker
+        counts with (the configured ``tacho.ppr`` overrides the board's), while there is one."""
+        return self.tacho is not None and (
+            not status.tacho_inputs or (self.cfg.tacho.ppr or status.tacho_ppr) != self.tacho.ppr)
 
     def ensure(self, status: Status | None, clock: BlockClock) -> bool:
         """Create the tracker once the board has said it has a tacho; True when there is one."""
