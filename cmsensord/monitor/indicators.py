@@ -205,12 +205,16 @@ class IndicatorChain:
     def _speeds(self, starts: list[int], tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
         """(shaft speed [Hz] or None, its source) of the intervals starting at ``starts``: the
         mean of the tacho's causal speed at SPEED_POINTS points of each (None when fewer than
-        half are valid), all read in one call; without a tacho, ``indicators.rpm``."""
+        half are valid, a point after the newest TACHO frame being not valid: an interval let go
+        after the longest wait has no speed there), all read in one call; without a tacho,
+        ``indicators.rpm``."""
         if tacho is None:
             rpm = self.cfg.indicators.rpm
             return [(rpm / 60.0, "config") if rpm else (None, None)] * len(starts)
         at = (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS
-        hz, ok = tacho.evaluate_causal(np.array(starts)[:, None] + at[None, :])
+        points = np.array(starts)[:, None] + at[None, :]
+        hz, ok = tacho.evaluate_causal(points)
+        ok &= points < tacho.covered_until
         return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
 
     def _records(self, ready: list[tuple[int, np.ndarray, int, np.ndarray | None]],

@@ -194,13 +194,18 @@ class OrderChain:
     def _rpm(self, samples: np.ndarray) -> np.ndarray:
         """The speed [rpm] the tracker runs on at board samples (ascending): the tacho's causal
         speed (:meth:`TachoTracker.causal_rpm`), or its final one (``orders.speed``); 0 where
-        it is not valid.  The tracker asks only for the samples it reads (one in its
-        decimation, in the call they come in), each the value it has at every sample
-        (:meth:`TachoTracker.causal_range`)."""
+        it is not valid or after the newest TACHO frame (samples let go after the longest wait).
+        The tracker asks only for the samples it reads (one in its decimation, in the call they
+        come in), each the value it has at every sample (:meth:`TachoTracker.causal_range`)."""
         if self.causal:
-            return self.tacho.causal_rpm(0, samples)
-        hz, _, valid = self.tacho.evaluate(samples)
-        return np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
+            rpm = self.tacho.causal_rpm(0, samples)
+        else:
+            hz, _, valid = self.tacho.evaluate(samples)
+            rpm = np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
+        covered = self.tacho.covered_until
+        if len(samples) and samples[-1] >= covered:
+            rpm[samples >= covered] = 0.0
+        return rpm
 
     def _blocks(self, blocks, method: str) -> Out:
         """The /orders messages of tracker blocks: the per-block numbers converted to Python
