@@ -14,7 +14,7 @@ import pytest
 
 from cmsensord.config import config_from_dict
 from cmsensord.monitor.raw import RawBlocks
-from cmsensord.protocol import Decoder
+from cmsensord.protocol import Decoder, FrameType, encode_frame
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from stream import run_processor
@@ -86,6 +86,16 @@ def tacho_goes(mode: str) -> bytes:
     return first + board(mode, 8, t0=150_000, seq=frames(first), tacho=False)
 
 
+def tacho_stops(mode: str) -> bytes:
+    """20 s of the board whose TACHO frames stop at 6 s, the others numbered on (none lost)."""
+    out, seq = bytearray(), 0
+    for f in Decoder().feed(board(mode, 20)):
+        if f.type != FrameType.TACHO or f.t0 < 150_000:
+            out += encode_frame(f.type, seq, f.t0, f.chan, f.flags, f.payload)
+            seq += 1
+    return bytes(out)
+
+
 def by_topic(data: bytes, read: int) -> dict[str, list]:
     topics: dict[str, list] = {}
     for topic, stamp, msg in run_processor(data, config_from_dict({}), chunk=read)[0].messages:
@@ -138,6 +148,23 @@ def test_a_status_changing_the_calibration_converts_the_raw_blocks_before_it_wit
     for runs, then in ((raw, ": RAW samples from here on are converted with it"), (rms, "")):
         told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if "calibration" in m["message"]]
         assert told == [(6_000_000_000, change + then)]
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_tacho_frames_that_stop_coming_are_told_and_give_no_speed(mode):
+    """The board announces a tacho but its TACHO frames stop at 6 s (none lost: no seq gap): once the data
+    runs 10 s past the last one a tacho_lost event says so, and the intervals and orders let go after the
+    longest wait have no speed (orders at 0 rpm, not valid).  Before, nothing was told and they carried the
+    tracker's extrapolation: a "tacho" speed decaying from 1720 to 461, 101 ... 11 rpm."""
+    runs = same_at_every_read_size(tacho_stops(mode))
+    lost = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "tacho_lost"]
+    assert lost == [(16_000_000_000, "no TACHO frame for 10 s of board time while the board sends data: no shaft "
+                                     "speed since sample 150000")]
+    if mode == "raw":
+        speeds = [m.get("speed_rpm") for _, m in runs[0]["/cm/ch0/indicators"]]
+        assert len(speeds) == 20 and all(abs(v - 1720) < 5 for v in speeds[:6]) and speeds[6:] == [None] * 14
+        late = [(m["speed_rpm"], m["valid"]) for s, m in runs[0]["/cm/ch0/orders"] if s > 6.5e9]
+        assert len(late) == 135 and set(late) == {(0.0, False)}
 
 
 @pytest.mark.parametrize("mode", ["raw", "rms"])

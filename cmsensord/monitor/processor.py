@@ -462,6 +462,7 @@ class Processor(Figures):
         fed = bool(self.shaft.waiting) and self.shaft.ensure(self.setup.status, self.clock)
         if fed:
             self._out(self.shaft.feed(self.clock, before))
+        self._out(self.shaft.check_silent(self.clock))
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
         self.indicators.release()

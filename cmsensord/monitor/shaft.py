@@ -9,7 +9,10 @@ severity chain (:meth:`Shaft.period_f_r`).
 A TACHO frame lost on the link (a gap in the input's t0 sequence) is a frame
 loss, reported as such by the decoder's ``frames_lost``: pulses the tracker
 inserts in it are not reported as ``tacho_missed_pulse`` (counted in
-:attr:`Shaft.missed_in_lost_frames`).
+:attr:`Shaft.missed_in_lost_frames`).  TACHO frames that stop coming while the
+data goes on (none lost) are told once, ``SILENT_S`` of board time on
+(:meth:`Shaft.check_silent`); a STATUS announcing no tacho, or other pulses per
+revolution, ends the tracker (:meth:`Shaft.changes_tacho`).
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ if TYPE_CHECKING:
 TACHO_WAIT_FRAMES = 200
 #: up to this many waiting TACHO frames are checked on Python ints (a live call), more on columns
 _FEW_FRAMES = 64
+#: board seconds of observations past the newest TACHO frame that make the tacho silent (``tacho_lost``)
+SILENT_S = 10.0
 #: gaps of lost TACHO frames remembered (the tracker reports a missed pulse a few frames late)
 LOST_GAPS = 64
 
@@ -101,6 +106,7 @@ class Shaft:
         self.notes: list[Event] = []             # events of ensure(), for the processor to emit
         self._gaps: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # [first, end) samples not covered
         self.missed_in_lost_frames = 0
+        self._silent = False                      # told: no TACHO frame for SILENT_S
 
     def add(self, f: Frame) -> None:
         """A TACHO frame of any input; only the configured one is kept."""
@@ -130,8 +136,25 @@ class Shaft:
         self.tacho = None
         self.waiting = Pending()
         self._prev_t0 = self._fed_t0 = None
+        self._silent = False
         self._gaps.clear()
         self.ensure(status, clock)
+
+    def check_silent(self, clock: BlockClock) -> list[Event]:
+        """A ``tacho_lost`` event, once, when the observations run ``SILENT_S`` past the newest
+        TACHO frame (or the first block of the time base, before any): the board announces a tacho
+        but sends no TACHO frame, none of them lost (that is a seq gap).  The tracker cannot tell:
+        no frame, no timeout.  When frames come again, the tracker's own ``tacho_lost`` of the
+        silence is not told twice (:meth:`feed`)."""
+        if self.tacho is None or self._silent or clock.slot0_t0 is None or clock.t0_first is None:
+            return []
+        since = clock.t0_first if self._fed_t0 is None else max(clock.t0_first, self._fed_t0 + clock.block_len)
+        told = since + round(SILENT_S * clock.fs)          # stamped when the silence reached SILENT_S
+        if clock.slot_t0(clock.next_slot) <= told:
+            return []
+        self._silent = True
+        return [Event("tacho_lost", None, f"no TACHO frame for {SILENT_S:g} s of board time while the board "
+                      f"sends data: no shaft speed since sample {since}", clock.stamp_ns(told))]
 
     def changes_tacho(self, status: Status) -> bool:
         """Whether ``status`` announces no tacho, or other pulses per revolution than the tracker
@@ -193,9 +216,12 @@ class Shaft:
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
         self._note_gaps(t0s, clock.block_len)
+        told, self._silent = self._silent, False
         for ev in fed:
             if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
                 self.missed_in_lost_frames += int(ev.count)
+                continue
+            if told and ev.kind == "tacho_lost":  # the silence, told by check_silent
                 continue
             events.append(Event(ev.kind, None, ev.message, clock.stamp_ns(int(ev.sample)),
                                 {"count": int(ev.count)}))
