@@ -460,3 +460,22 @@ def test_random_time_keeps_the_replay_running_bounded_and_in_order(tmp_path):
     assert rss < 100 * MB
     stamps = [s for t, s, _ in msgs if t.endswith("/severity")]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))
+
+
+def test_tacho_frames_that_stop_coming_are_one_event_in_a_replay(tmp_path):
+    """A RAW capture whose TACHO frames stop at 6 s, none lost (the seq numbers go on): `cmsensord replay`
+    tells it once, 10 s of board time on, and the intervals after it have no speed (before: no event, and a
+    "tacho" speed decaying from 1720 to 11 rpm)."""
+    out, seq = bytearray(), 0
+    for f in Decoder().feed(raw_capture(tmp_path, 20.0)):
+        if f.type != FrameType.TACHO or f.t0 < 150_000:
+            out += encode_frame(f.type, seq, f.t0, f.chan, f.flags, f.payload)
+            seq += 1
+    p, msgs, _ = replay(tmp_path, bytes(out))
+    assert p.returncode == 0, p.stderr
+    start = next(s for t, s, _ in msgs if t == "/cm/ch0/indicators") - 1_000_000_000     # the stamp of board time 0
+    assert [(s - start, m["message"]) for s, m in events(msgs, "tacho_lost")] == [
+        (16_000_000_000, "no TACHO frame for 10 s of board time while the board sends data: no shaft speed since "
+                         "sample 150000")]
+    speeds = [m.get("speed_rpm") for t, _, m in msgs if t == "/cm/ch0/indicators"]
+    assert len(speeds) == 20 and all(abs(v - 1720) < 5 for v in speeds[:6]) and speeds[6:] == [None] * 14
