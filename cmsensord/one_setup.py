@@ -11,7 +11,7 @@ import contextlib
 from cmsensord.protocol import Frame, FrameType, Status, decode_status
 
 #: what a STATUS may change that one record cannot follow
-FIELDS = ("mode", "n_channels", "fs", "block_len", "tacho_ppr", "scale", "offset")
+FIELDS = ("mode", "n_channels", "fs", "block_len", "tacho_inputs", "tacho_ppr", "scale", "offset")
 
 
 class OneSetup:
