@@ -86,11 +86,12 @@ def tacho_goes(mode: str) -> bytes:
     return first + board(mode, 8, t0=150_000, seq=frames(first), tacho=False)
 
 
-def tacho_stops(mode: str) -> bytes:
-    """20 s of the board whose TACHO frames stop at 6 s, the others numbered on (none lost)."""
+def tacho_stops(mode: str, seconds: float = 20, resume_s: float = 1e9) -> bytes:
+    """``seconds`` of the board whose TACHO frames stop at 6 s (until ``resume_s``), the others
+    numbered on (none lost)."""
     out, seq = bytearray(), 0
-    for f in Decoder().feed(board(mode, 20)):
-        if f.type != FrameType.TACHO or f.t0 < 150_000:
+    for f in Decoder().feed(board(mode, seconds)):
+        if f.type != FrameType.TACHO or not 150_000 <= f.t0 < resume_s * 25_000:
             out += encode_frame(f.type, seq, f.t0, f.chan, f.flags, f.payload)
             seq += 1
     return bytes(out)
@@ -165,6 +166,22 @@ def test_tacho_frames_that_stop_coming_are_told_and_give_no_speed(mode):
         assert len(speeds) == 20 and all(abs(v - 1720) < 5 for v in speeds[:6]) and speeds[6:] == [None] * 14
         late = [(m["speed_rpm"], m["valid"]) for s, m in runs[0]["/cm/ch0/orders"] if s > 6.5e9]
         assert len(late) == 135 and set(late) == {(0.0, False)}
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_tacho_frames_that_come_again_after_a_silence_give_the_same_messages_at_any_read_size(mode):
+    """The TACHO frames stop at 6 s and come again at 18 s.  A small read lets go what waited 10 s before
+    they come, a large one after: the speed there is none either way (a silence of 10 s or more is no
+    speed whenever it is asked for), and the silence is told once, by the same event.  Before, the orders
+    of the half second after the last edge had 0 rpm in one and a decaying speed in the other (valid, 1573
+    to 395 rpm), a large read's intervals a decaying "tacho" speed, and the event was the tracker's or ours."""
+    runs = same_at_every_read_size(tacho_stops(mode, 24, resume_s=18))
+    told = [(s, m["kind"]) for s, m in runs[0]["/cm/events"] if m["kind"].startswith("tacho")]
+    assert [k for _, k in told] == ["tacho_lost", "tacho_restored"] and told[0][0] == 16_000_000_000
+    if mode == "raw":
+        orders = [(s, m["speed_rpm"], m["valid"]) for s, m in runs[0]["/cm/ch0/orders"]]
+        assert all((v, ok) == (0.0, False) for s, v, ok in orders if 6.1e9 < s < 18e9)     # blocks of 0.1 s
+        assert all(ok and abs(v - 1720) < 20 for s, v, ok in orders if s > 18.15e9)
 
 
 @pytest.mark.parametrize("mode", ["raw", "rms"])

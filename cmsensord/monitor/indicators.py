@@ -115,11 +115,15 @@ MAX_INTERVAL_SAMPLES = 1 << 16
 class IndicatorChain:
     """RAW samples of ``channels`` -> /cm/<channel>/indicators (see module docstring).
 
-    ``tacho``: returns the tacho tracker, or None when the board has no tacho."""
+    ``tacho``: returns the tacho tracker, or None when the board has no tacho; ``uncovered``: which
+    board samples no TACHO frame covers (:meth:`~cmsensord.monitor.shaft.Shaft.uncovered`;
+    default: those after the newest)."""
 
     def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, clock: BlockClock,
-                 tacho: Callable[[], TachoTracker | None]):
+                 tacho: Callable[[], TachoTracker | None],
+                 uncovered: Callable[[np.ndarray], np.ndarray] | None = None):
         self.cfg, self.channels, self.fs, self.clock, self.tacho = cfg, channels, fs, clock, tacho
+        self.uncovered = uncovered
         self.N = max(2, min(MAX_INTERVAL_SAMPLES, round(cfg.indicators.interval_s * fs)))
         self.index = [ch.index for ch in channels]
         self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
@@ -205,16 +209,17 @@ class IndicatorChain:
     def _speeds(self, starts: list[int], tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
         """(shaft speed [Hz] or None, its source) of the intervals starting at ``starts``: the
         mean of the tacho's causal speed at SPEED_POINTS points of each (None when fewer than
-        half are valid, a point after the newest TACHO frame being not valid: an interval let go
-        after the longest wait has no speed there), all read in one call; without a tacho,
-        ``indicators.rpm``."""
+        half are valid, a point no TACHO frame covers being not valid: an interval let go after
+        the longest wait, or in a silence of the tacho, has no speed there), all read in one call;
+        without a tacho, ``indicators.rpm``."""
         if tacho is None:
             rpm = self.cfg.indicators.rpm
             return [(rpm / 60.0, "config") if rpm else (None, None)] * len(starts)
         at = (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS
         points = np.array(starts)[:, None] + at[None, :]
         hz, ok = tacho.evaluate_causal(points)
-        ok &= points < tacho.covered_until
+        ok &= ~(self.uncovered(points.ravel()).reshape(points.shape) if self.uncovered is not None
+                else points >= tacho.covered_until)
         return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
 
     def _records(self, ready: list[tuple[int, np.ndarray, int, np.ndarray | None]],
@@ -369,10 +374,12 @@ class RmsIndicators:
 
 class Indicators:
     """The indicator chains of one Processor and their records waiting to be written (see
-    module docstring).  ``tacho``: the tacho tracker, or None while there is none."""
+    module docstring).  ``tacho``: the tacho tracker, or None while there is none; ``uncovered``:
+    as :class:`IndicatorChain`'s."""
 
-    def __init__(self, cfg: Config, clock: BlockClock, tacho: Callable[[], TachoTracker | None]):
-        self.cfg, self.clock, self.tacho = cfg, clock, tacho
+    def __init__(self, cfg: Config, clock: BlockClock, tacho: Callable[[], TachoTracker | None],
+                 uncovered: Callable[[np.ndarray], np.ndarray] | None = None):
+        self.cfg, self.clock, self.tacho, self.uncovered = cfg, clock, tacho, uncovered
         self.raw_chain: IndicatorChain | None = None
         self.rms_chain: RmsIndicators | None = None
         self.records: list[messages.Message] = []
@@ -391,7 +398,7 @@ class Indicators:
             if ind is not None:
                 self.records += ind.finish()
             ind = self.raw_chain = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
-                                                  tacho=self.tacho)
+                                                  tacho=self.tacho, uncovered=self.uncovered)
         y = blocks.samples(ind.index)
         for a, b in blocks.runs():          # consecutive except across lost blocks
             self.records += ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index)))

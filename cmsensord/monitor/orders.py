@@ -52,6 +52,7 @@ Limitations (documented, not hidden):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from itertools import chain
 from math import isfinite
 
@@ -95,8 +96,9 @@ class OrderChain:
     """
 
     def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], tacho: TachoTracker, *,
-                 fs: int, clock: BlockClock):
+                 fs: int, clock: BlockClock, uncovered: Callable[[np.ndarray], np.ndarray] | None = None):
         self.cfg = cfg
+        self.uncovered = uncovered or (lambda samples: samples >= tacho.covered_until)
         self.channels = channels
         self.fs = fs
         self.clock = clock
@@ -194,17 +196,17 @@ class OrderChain:
     def _rpm(self, samples: np.ndarray) -> np.ndarray:
         """The speed [rpm] the tracker runs on at board samples (ascending): the tacho's causal
         speed (:meth:`TachoTracker.causal_rpm`), or its final one (``orders.speed``); 0 where
-        it is not valid or after the newest TACHO frame (samples let go after the longest wait).
-        The tracker asks only for the samples it reads (one in its decimation, in the call they
+        it is not valid or no TACHO frame covers it (``uncovered``: after the newest, samples let
+        go after the longest wait; in a silence between two, :meth:`Shaft.uncovered`).  The
+        tracker asks only for the samples it reads (one in its decimation, in the call they
         come in), each the value it has at every sample (:meth:`TachoTracker.causal_range`)."""
         if self.causal:
             rpm = self.tacho.causal_rpm(0, samples)
         else:
             hz, _, valid = self.tacho.evaluate(samples)
             rpm = np.where(valid & np.isfinite(hz), 60.0 * hz, 0.0)
-        covered = self.tacho.covered_until
-        if len(samples) and samples[-1] >= covered:
-            rpm[samples >= covered] = 0.0
+        if len(samples):
+            rpm[self.uncovered(samples)] = 0.0
         return rpm
 
     def _blocks(self, blocks, method: str) -> Out:

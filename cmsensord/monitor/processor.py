@@ -97,7 +97,7 @@ class Processor(Figures):
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
-        self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho)
+        self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho, self.shaft.uncovered)
         self.alarms = Alarms(cfg, lambda: tuple(ch.name for ch in self.channels if ch.kind != "microphone"))
         self.output = Output(sink, self.log, self.alarms)
         self._out = self.output.out
@@ -445,7 +445,8 @@ class Processor(Figures):
                 return None
             from cmsensord.monitor.orders import OrderChain  # scipy is loaded only for the raw chain
             try:
-                self.orders = OrderChain(self.cfg, vib, self.shaft.tracker(), fs=self.clock.fs, clock=self.clock)
+                self.orders = OrderChain(self.cfg, vib, self.shaft.tracker(), fs=self.clock.fs, clock=self.clock,
+                                         uncovered=self.shaft.uncovered)
             except ValueError as exc:           # a rate the tracked orders do not fit in
                 self._orders_refused = self.clock.fs
                 self.event("config", None, f"order tracker not started at fs {self.clock.fs} Hz: {exc}")
@@ -462,7 +463,6 @@ class Processor(Figures):
         fed = bool(self.shaft.waiting) and self.shaft.ensure(self.setup.status, self.clock)
         if fed:
             self._out(self.shaft.feed(self.clock, before))
-        self._out(self.shaft.check_silent(self.clock))
         if self.orders is not None and (fed or not end):
             self._out(self.orders.release(bounded=not end))
         self.indicators.release()
@@ -472,6 +472,7 @@ class Processor(Figures):
     def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS) -> None:
         """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain, at
         most ``max_slots`` slots (received or missing) a call."""
+        self._out(self.shaft.check_silent(self.clock, t0))
         while len(t0):
             slots, n = self.clock.place(t0)
             a = 0

@@ -106,7 +106,7 @@ class Shaft:
         self.notes: list[Event] = []             # events of ensure(), for the processor to emit
         self._gaps: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # [first, end) samples not covered
         self.missed_in_lost_frames = 0
-        self._silent = False                      # told: no TACHO frame for SILENT_S
+        self._silent_since: int | None = None    # told: no TACHO frame from this sample on
 
     def add(self, f: Frame) -> None:
         """A TACHO frame of any input; only the configured one is kept."""
@@ -135,26 +135,39 @@ class Shaft:
                                     "decisions on the configured f_r"))
         self.tacho = None
         self.waiting = Pending()
-        self._prev_t0 = self._fed_t0 = None
-        self._silent = False
+        self._prev_t0 = self._fed_t0 = self._silent_since = None
         self._gaps.clear()
         self.ensure(status, clock)
 
-    def check_silent(self, clock: BlockClock) -> list[Event]:
-        """A ``tacho_lost`` event, once, when the observations run ``SILENT_S`` past the newest
-        TACHO frame (or the first block of the time base, before any): the board announces a tacho
-        but sends no TACHO frame, none of them lost (that is a seq gap).  The tracker cannot tell:
-        no frame, no timeout.  When frames come again, the tracker's own ``tacho_lost`` of the
-        silence is not told twice (:meth:`feed`)."""
-        if self.tacho is None or self._silent or clock.slot0_t0 is None or clock.t0_first is None:
+    def check_silent(self, clock: BlockClock, t0: np.ndarray) -> list[Event]:
+        """A ``tacho_lost`` event, once, when a data block (of those starting at ``t0``) starts
+        ``SILENT_S`` or more after the end of the TACHO frame before it (fed or waiting; or the
+        time base's start, before any): the board announces a tacho but sends none, none of them
+        lost (a link loss stops the data too).  The tracker cannot tell: no frame, no timeout.
+        Judged on the frames alone, so however the stream was read; when frames come again, the
+        tracker's own ``tacho_lost`` of the silence is not told twice (:meth:`feed`)."""
+        if self.tacho is None or self._silent_since is not None or not len(t0) or clock.t0_first is None:
             return []
-        since = clock.t0_first if self._fed_t0 is None else max(clock.t0_first, self._fed_t0 + clock.block_len)
-        told = since + round(SILENT_S * clock.fs)          # stamped when the silence reached SILENT_S
-        if clock.slot_t0(clock.next_slot) <= told:
+        L, silent = clock.block_len, round(SILENT_S * clock.fs)
+        fed = clock.t0_first - L if self._fed_t0 is None else max(clock.t0_first - L, self._fed_t0)
+        if int(t0.max()) - fed - L < silent:       # every block within the wait of the newest fed
             return []
-        self._silent = True
+        waiting = self._waiting_t0()
+        tachos = np.concatenate(([fed], np.sort(waiting[waiting > fed])))
+        data = np.sort(t0[t0 > fed])
+        prev = tachos[np.searchsorted(tachos, data, side="right") - 1]     # the newest TACHO at or before
+        hit = np.flatnonzero(data - prev - L >= silent)
+        if not hit.size:
+            return []
+        since = self._silent_since = int(prev[hit[0]]) + L
         return [Event("tacho_lost", None, f"no TACHO frame for {SILENT_S:g} s of board time while the board "
-                      f"sends data: no shaft speed since sample {since}", clock.stamp_ns(told))]
+                      f"sends data: no shaft speed since sample {since}", clock.stamp_ns(since + silent))]
+
+    def _waiting_t0(self) -> np.ndarray:
+        """The t0 of the waiting TACHO frames, in their order."""
+        parts = [p.cols.t0_unwrapped if type(p) is FrameBatch else np.array([f.t0_unwrapped for f in p], dtype=np.int64)
+                 for p in self.waiting.parts]
+        return np.concatenate(parts) if parts else np.empty(0, dtype=np.int64)
 
     def changes_tacho(self, status: Status) -> bool:
         """Whether ``status`` announces no tacho, or other pulses per revolution than the tracker
@@ -216,7 +229,9 @@ class Shaft:
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
         self._note_gaps(t0s, clock.block_len)
-        told, self._silent = self._silent, False
+        told = self._silent_since is not None and t0s[-1] >= self._silent_since    # frames again after it
+        if told:
+            self._silent_since = None
         for ev in fed:
             if ev.kind == "tacho_missed_pulse" and self._in_gap(ev.sample, clock.block_len):
                 self.missed_in_lost_frames += int(ev.count)
@@ -296,6 +311,20 @@ class Shaft:
                 self._gaps.append((prev + L, t))
             prev = t
         self._prev_t0 = t0[-1]
+
+    def uncovered(self, samples: np.ndarray) -> np.ndarray:
+        """Which board ``samples`` (ascending) no TACHO frame covers: after the newest, or in a
+        silence, a gap of at least ``SILENT_S`` between two (of the last ``LOST_GAPS`` gaps): the
+        tacho has not told what the shaft did there.  What waited there longer than the wait for
+        the speed went on before the next frame came, uncovered; the rest after it, in the gap:
+        either way no speed, however the stream was read.  A shorter gap (frames lost on the link)
+        keeps the tracker's speed."""
+        out = samples >= self.tracker().covered_until
+        lo, hi, silent = samples[0], samples[-1], SILENT_S * self.tracker().fs
+        for a, b in self._gaps:
+            if b - a >= silent and a <= hi and b > lo:
+                out |= (samples >= a) & (samples < b)
+        return out
 
     def _in_gap(self, sample: float, L: int) -> bool:
         """True when ``sample`` is in (or within a block of) a gap of lost TACHO frames."""
