@@ -159,8 +159,8 @@ def test_tacho_frames_that_stop_coming_are_told_and_give_no_speed(mode):
     tracker's extrapolation: a "tacho" speed decaying from 1720 to 461, 101 ... 11 rpm."""
     runs = same_at_every_read_size(tacho_stops(mode))
     lost = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "tacho_lost"]
-    assert lost == [(16_000_000_000, "no TACHO frame for 10 s of board time while the board sends data: no shaft "
-                                     "speed since sample 150000")]
+    assert lost == [(16_000_000_000, "no TACHO frame of input 0 for 10 s of board time while the board sends data: "
+                                     "no shaft speed since sample 150000")]
     if mode == "raw":
         speeds = [m.get("speed_rpm") for _, m in runs[0]["/cm/ch0/indicators"]]
         assert len(speeds) == 20 and all(abs(v - 1720) < 5 for v in speeds[:6]) and speeds[6:] == [None] * 14
@@ -182,6 +182,16 @@ def test_tacho_frames_that_come_again_after_a_silence_give_the_same_messages_at_
         orders = [(s, m["speed_rpm"], m["valid"]) for s, m in runs[0]["/cm/ch0/orders"]]
         assert all((v, ok) == (0.0, False) for s, v, ok in orders if 6.1e9 < s < 18e9)     # blocks of 0.1 s
         assert all(ok and abs(v - 1720) < 20 for s, v, ok in orders if s > 18.15e9)
+
+
+def test_a_tacho_input_the_board_does_not_use_is_told_with_the_inputs_it_does():
+    """``tacho.input: 1`` on a board whose TACHO frames come on input 0: 10 s of board time on, one
+    tacho_lost event names both (before, nothing was told: no speed, and no word why)."""
+    cfg = config_from_dict({"tacho": {"input": 1}})
+    runs = [[(s, m["message"]) for t, s, m in run_processor(board("raw", 14), cfg, chunk=read)[0].messages
+             if t == "/cm/events" and m["kind"] == "tacho_lost"] for read in READS]
+    assert runs == [[(10_000_000_000, "no TACHO frame of input 1 for 10 s of board time while the board sends "
+                      "data: no shaft speed since sample 0 (TACHO frames come on input 0: see tacho.input)")]] * 3
 
 
 @pytest.mark.parametrize("mode", ["raw", "rms"])

@@ -475,7 +475,7 @@ def test_tacho_frames_that_stop_coming_are_one_event_in_a_replay(tmp_path):
     assert p.returncode == 0, p.stderr
     start = next(s for t, s, _ in msgs if t == "/cm/ch0/indicators") - 1_000_000_000     # the stamp of board time 0
     assert [(s - start, m["message"]) for s, m in events(msgs, "tacho_lost")] == [
-        (16_000_000_000, "no TACHO frame for 10 s of board time while the board sends data: no shaft speed since "
-                         "sample 150000")]
+        (16_000_000_000, "no TACHO frame of input 0 for 10 s of board time while the board sends data: no shaft "
+                         "speed since sample 150000")]
     speeds = [m.get("speed_rpm") for t, _, m in msgs if t == "/cm/ch0/indicators"]
     assert len(speeds) == 20 and all(abs(v - 1720) < 5 for v in speeds[:6]) and speeds[6:] == [None] * 14

@@ -107,6 +107,7 @@ class Shaft:
         self._gaps: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # [first, end) samples not covered
         self.missed_in_lost_frames = 0
         self._silent_since: int | None = None    # told: no TACHO frame from this sample on
+        self.other_inputs: set[int] = set()      # the inputs of TACHO frames not the configured one
 
     def add(self, f: Frame) -> None:
         """A TACHO frame of any input; only the configured one is kept."""
@@ -119,9 +120,14 @@ class Shaft:
         inp = self.cfg.tacho.input
         if type(frames) is FrameBatch:
             mine = frames.cols.chan == inp
+            if not mine.all():
+                self.other_inputs.update(np.unique(frames.cols.chan[~mine]).tolist())
             self.waiting.extend(frames if mine.all() else frames.take(np.flatnonzero(mine)))
         else:
-            self.waiting.extend([f for f in frames if f.chan == inp])
+            kept = [f for f in frames if f.chan == inp]
+            if len(kept) < len(frames):
+                self.other_inputs.update(f.chan for f in frames if f.chan != inp)
+            self.waiting.extend(kept)
         if self.tacho is None and len(self.waiting) > TACHO_WAIT_FRAMES:
             newest = self.waiting.joined()[-TACHO_WAIT_FRAMES:]   # no STATUS yet: keep only the newest
             self.waiting = Pending()
@@ -160,8 +166,12 @@ class Shaft:
         if not hit.size:
             return []
         since = self._silent_since = int(prev[hit[0]]) + L
-        return [Event("tacho_lost", None, f"no TACHO frame for {SILENT_S:g} s of board time while the board "
-                      f"sends data: no shaft speed since sample {since}", clock.stamp_ns(since + silent))]
+        inp = self.cfg.tacho.input
+        others = (f" (TACHO frames come on input {', '.join(map(str, sorted(self.other_inputs)))}: see tacho.input)"
+                  if self.other_inputs else "")
+        return [Event("tacho_lost", None, f"no TACHO frame of input {inp} for {SILENT_S:g} s of board time while "
+                      f"the board sends data: no shaft speed since sample {since}{others}",
+                      clock.stamp_ns(since + silent))]
 
     def _waiting_t0(self) -> np.ndarray:
         """The t0 of the waiting TACHO frames, in their order."""
