@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import contextlib
 
-from cmsensord.protocol import Frame, FrameType, Status, decode_status
+from cmsensord.protocol import SETUP_FIELDS, Frame, FrameType, Status, decode_status
 
 #: what a STATUS may change that one record cannot follow
-FIELDS = ("mode", "n_channels", "fs", "block_len", "tacho_inputs", "tacho_ppr", "scale", "offset")
+FIELDS = (*SETUP_FIELDS, "scale", "offset")
 
 
 class OneSetup:

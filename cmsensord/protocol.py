@@ -116,6 +116,10 @@ class Frame(_FrameFields):
                                    t0 if t0_unwrapped is None else t0_unwrapped, offset, lost_before))
 
 
+#: the STATUS fields that describe the board's set-up (its time base, channels, mode and tacho)
+SETUP_FIELDS = ("fs", "block_len", "n_channels", "mode", "tacho_inputs", "tacho_ppr")
+
+
 @dataclass(frozen=True, slots=True)
 class Status:
     """STATUS payload fields (docs/PROTOCOL.md, STATUS)."""

@@ -32,10 +32,8 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
 from cmsensord.monitor.severity import SeverityChain
-from cmsensord.protocol import MODE_RAW, Frame, Status, decode_status
+from cmsensord.protocol import MODE_RAW, SETUP_FIELDS, Frame, Status, decode_status
 
-#: the STATUS fields whose change is news: the board's time base, channels, mode or tacho
-NEWS = ("fs", "block_len", "n_channels", "mode", "tacho_inputs", "tacho_ppr")
 #: data frames of another channel count in a row that mean the board changed (1 s of RMS blocks)
 CHANGE_FRAMES = 100
 
@@ -71,7 +69,7 @@ class ChannelSetup:
                           "(and a scale not 0): the previous STATUS is kept")
             return None, False
         old = self.status
-        return st, old is None or any(getattr(st, k) != getattr(old, k) for k in NEWS)
+        return st, old is None or any(getattr(st, k) != getattr(old, k) for k in SETUP_FIELDS)
 
     def recalibrates(self, f: Frame, st: Status) -> bool:
         """Whether ``st`` changes the scale or offset of a monitored channel that the configuration

@@ -123,7 +123,7 @@ class IndicatorChain:
                  tacho: Callable[[], TachoTracker | None],
                  uncovered: Callable[[np.ndarray], np.ndarray] | None = None):
         self.cfg, self.channels, self.fs, self.clock, self.tacho = cfg, channels, fs, clock, tacho
-        self.uncovered = uncovered
+        self.uncovered = uncovered or self._after_newest
         self.N = max(2, min(MAX_INTERVAL_SAMPLES, round(cfg.indicators.interval_s * fs)))
         self.index = [ch.index for ch in channels]
         self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
@@ -206,6 +206,11 @@ class IndicatorChain:
             ready.append(self.pending.pop(0))
         return self._records(ready, tacho) if ready else []
 
+    def _after_newest(self, samples: np.ndarray) -> np.ndarray:
+        """The samples after the newest TACHO frame (``uncovered`` when none is given)."""
+        tacho = self.tacho()
+        return samples >= (tacho.covered_until if tacho is not None else 0)
+
     def _speeds(self, starts: list[int], tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
         """(shaft speed [Hz] or None, its source) of the intervals starting at ``starts``: the
         mean of the tacho's causal speed at SPEED_POINTS points of each (None when fewer than
@@ -218,8 +223,7 @@ class IndicatorChain:
         at = (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS
         points = np.array(starts)[:, None] + at[None, :]
         hz, ok = tacho.evaluate_causal(points)
-        ok &= ~(self.uncovered(points.ravel()).reshape(points.shape) if self.uncovered is not None
-                else points >= tacho.covered_until)
+        ok &= ~self.uncovered(points.ravel()).reshape(points.shape)
         return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
 
     def _records(self, ready: list[tuple[int, np.ndarray, int, np.ndarray | None]],

@@ -105,6 +105,7 @@ class Shaft:
         self._bad_ppr: int | None = None
         self.notes: list[Event] = []             # events of ensure(), for the processor to emit
         self._gaps: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # [first, end) samples not covered
+        self._silences: deque[tuple[int, int]] = deque(maxlen=LOST_GAPS)   # those gaps of SILENT_S or more
         self.missed_in_lost_frames = 0
         self._silent_since: int | None = None    # told: no TACHO frame from this sample on
         self.other_inputs: set[int] = set()      # the inputs of TACHO frames not the configured one
@@ -143,6 +144,7 @@ class Shaft:
         self.waiting = Pending()
         self._prev_t0 = self._fed_t0 = self._silent_since = None
         self._gaps.clear()
+        self._silences.clear()
         self.ensure(status, clock)
 
     def check_silent(self, clock: BlockClock, t0: np.ndarray) -> list[Event]:
@@ -312,27 +314,30 @@ class Shaft:
         return frames.take(kept), len(t0) - kept.size, t0[kept].tolist()
 
     def _note_gaps(self, t0: list[int], L: int) -> None:
-        """Gaps between consecutive TACHO frames (one per block): lost frames."""
+        """Gaps between consecutive TACHO frames (one per block): lost frames, or a silence of the
+        tacho when ``SILENT_S`` or more."""
         if not t0:
             return
         prev = t0[0] if self._prev_t0 is None else self._prev_t0
         for t in t0:
             if t - prev > L:
                 self._gaps.append((prev + L, t))
+                if t - prev - L >= SILENT_S * self.tracker().fs:
+                    self._silences.append((prev + L, t))
             prev = t
         self._prev_t0 = t0[-1]
 
     def uncovered(self, samples: np.ndarray) -> np.ndarray:
         """Which board ``samples`` (ascending) no TACHO frame covers: after the newest, or in a
-        silence, a gap of at least ``SILENT_S`` between two (of the last ``LOST_GAPS`` gaps): the
+        silence, a gap of at least ``SILENT_S`` between two (of the last ``LOST_GAPS``): the
         tacho has not told what the shaft did there.  What waited there longer than the wait for
         the speed went on before the next frame came, uncovered; the rest after it, in the gap:
         either way no speed, however the stream was read.  A shorter gap (frames lost on the link)
         keeps the tracker's speed."""
         out = samples >= self.tracker().covered_until
-        lo, hi, silent = samples[0], samples[-1], SILENT_S * self.tracker().fs
-        for a, b in self._gaps:
-            if b - a >= silent and a <= hi and b > lo:
+        lo, hi = samples[0], samples[-1]
+        for a, b in self._silences:
+            if a <= hi and b > lo:
                 out |= (samples >= a) & (samples < b)
         return out
 
