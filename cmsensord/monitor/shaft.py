@@ -240,7 +240,7 @@ class Shaft:
             fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
-        self._note_gaps(t0s, clock.block_len)
+        self._note_gaps(t0s, clock.block_len, round(SILENT_S * clock.fs))
         told = self._silent_since is not None and t0s[-1] >= self._silent_since    # frames again after it
         if told:
             self._silent_since = None
@@ -313,16 +313,16 @@ class Shaft:
         kept = np.flatnonzero(keep)
         return frames.take(kept), len(t0) - kept.size, t0[kept].tolist()
 
-    def _note_gaps(self, t0: list[int], L: int) -> None:
+    def _note_gaps(self, t0: list[int], L: int, silent: int | None = None) -> None:
         """Gaps between consecutive TACHO frames (one per block): lost frames, or a silence of the
-        tacho when ``SILENT_S`` or more."""
+        tacho when ``silent`` samples or more."""
         if not t0:
             return
         prev = t0[0] if self._prev_t0 is None else self._prev_t0
         for t in t0:
             if t - prev > L:
                 self._gaps.append((prev + L, t))
-                if t - prev - L >= SILENT_S * self.tracker().fs:
+                if silent is not None and t - prev - L >= silent:
                     self._silences.append((prev + L, t))
             prev = t
         self._prev_t0 = t0[-1]
