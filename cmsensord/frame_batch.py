@@ -184,8 +184,10 @@ class FrameBatch(Sequence):
         return list(map(self.data.__getitem__, map(slice, c.start.tolist(), c.end.tolist())))
 
     def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(type codes, unwrapped t0, seq gaps in front) of the frames."""
-        return self.cols.code, self.cols.t0_unwrapped, self.cols.lost
+        """(type codes, unwrapped t0, whether a break in the link is in front) of the frames: a
+        seq gap, or repeats the receiver dropped (flags above the wire's eight bits)."""
+        c = self.cols
+        return c.code, c.t0_unwrapped, (c.lost != 0) | (c.flags > 0xFF)
 
     def payload_lengths(self) -> np.ndarray:
         return self.cols.end - self.cols.start

@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cmsensord.frame_batch import Columns, FrameBatch, build, scanned_batch, scanned_frames
+from cmsensord.frame_repeats import Repeats
 from cmsensord.frame_runs import MIN_BYTES, FrameRuns, run_columns
 from cmsensord.wire_scan import WireScanner, have_kernel
 
@@ -251,17 +252,14 @@ def decode_rms_rows(frames: Sequence[Frame], n_channels: int) -> np.ndarray:
     """float32 array (len(frames), n_channels), m/s^2: the RMS frames of one channel count in
     one pass (:func:`decode_rms` of each, stacked)."""
     expected = 4 * n_channels
-    if type(frames) is FrameBatch:          # the payloads are in the batch's bytes
-        lengths = set(frames.payload_lengths().tolist())
-        if lengths - {expected}:
-            raise ProtocolError(f"RMS payload: expected {expected} bytes (4 x {n_channels} channels), "
-                                f"got {max(lengths - {expected})}")
-        return frames.rms_values(n_channels)
-    payloads = [f.payload for f in frames]
-    lengths = set(map(len, payloads))
+    batch = frames if type(frames) is FrameBatch else None      # the payloads are in the batch's bytes
+    payloads = [] if batch is not None else [f.payload for f in frames]
+    lengths = set(batch.payload_lengths().tolist() if batch is not None else map(len, payloads))
     if lengths - {expected}:
         raise ProtocolError(f"RMS payload: expected {expected} bytes (4 x {n_channels} channels), "
                             f"got {max(lengths - {expected})}")
+    if batch is not None:
+        return batch.rms_values(n_channels)
     rows = np.frombuffer(b"".join(payloads), dtype="<f4")
     return rows.reshape(len(frames), n_channels).astype(np.float32)
 
@@ -330,12 +328,13 @@ class LinkCounters:
     """Per-link counters (rule 5)."""
 
     bytes_received: int = 0
-    bytes_discarded: int = 0  # while hunting, incl. rejected/bad-CRC sync bytes
+    bytes_discarded: int = 0  # while hunting, incl. rejected/bad-CRC sync bytes, and repeated frames
     crc_failures: int = 0
     header_rejects: int = 0  # sync found but version/type/len invalid
     frames: dict[str, int] = field(default_factory=_zero_frames)
     frames_lost: int = 0  # by seq gaps (rule 3)
     overruns: int = 0  # frames carrying FLAG_OVERRUN
+    frames_repeated: int = 0  # frames received again, dropped (cmsensord.frame_repeats)
 
     def as_dict(self) -> dict[str, int]:
         d = {
@@ -348,6 +347,7 @@ class LinkCounters:
             d[f"frames_{name}"] = count
         d["frames_lost"] = self.frames_lost
         d["overruns"] = self.overruns
+        d["frames_repeated"] = self.frames_repeated
         return d
 
 
@@ -385,6 +385,8 @@ class Decoder:
         self._last_seq: int | None = None
         self._last_t0 = 0
         self._last_t0_unwrapped = 0
+        self._scan_lost = 0  # the seq gaps of the last scan
+        self._repeats = Repeats(_make)
 
     def buffered(self) -> int:
         return len(self._buf)
@@ -402,11 +404,11 @@ class Decoder:
     def flush(self) -> list[Frame]:
         """End of stream: incomplete candidates are not frames (drop their first sync
         byte and hunt on through the rest); whatever is left is discarded."""
-        return _frames(*self._scan_frames(final=True))
+        return _frames(*self._scan_once(self._scan_frames, final=True))
 
     def flush_batch(self) -> FrameBatch:
         """:meth:`flush`'s frames as a batch of columns."""
-        return _batch(*self._scanner(final=True))
+        return _batch(*self._scan_once(self._scanner, final=True))
 
     def _feed(self, data: bytes | bytearray | memoryview, scan) -> list[tuple[list, bytes]]:
         """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""
@@ -417,15 +419,32 @@ class Decoder:
         room = self.max_buffer - len(buf)
         if total <= room:  # the common case: one append, one scan
             buf += view
-            return [scan(final=False)]
+            return [self._scan_once(scan, final=False)]
         scans = []
         start = 0
         while start < total:
             room = self.max_buffer - len(buf)
             buf += view[start:start + room]
             start += room
-            scans.append(scan(final=False))
+            scans.append(self._scan_once(scan, final=False))
         return scans
+
+    def _scan_once(self, scan, final: bool) -> tuple[list, bytes]:
+        """One scan (``scan``: :meth:`_scan` or :meth:`_scan_kernel`'s forms), the frames the
+        link delivered again dropped and counted (:mod:`cmsensord.frame_repeats`)."""
+        before = self._last_seq
+        out, data = scan(final=final)
+        rep = self._repeats
+        out = rep.take(out, data, before, self._last_seq, self._scan_lost)
+        if rep.dropped or rep.lost_removed:
+            c = self.counters
+            for f in rep.dropped:
+                c.frames[_TYPE_NAMES[f.type]] -= 1
+                c.overruns -= bool(f.flags & FLAG_OVERRUN)
+                c.bytes_discarded += OVERHEAD + len(f.payload)
+            c.frames_repeated += len(rep.dropped)
+            c.frames_lost -= rep.lost_removed
+        return out, data
 
     def _scan(self, final: bool) -> tuple[list, bytes]:
         """Frame every complete candidate in the buffer (docs/PROTOCOL.md receiver rules 1-3);
@@ -555,6 +574,7 @@ class Decoder:
         c.crc_failures += crc_fail
         c.frames_lost += lost
         c.overruns += overruns
+        self._scan_lost = lost
 
 
 def _make(cols: Columns, data: bytes) -> list[Frame]:

@@ -97,6 +97,8 @@ class BoardConfig:
     fw_version: int = 0x0100
     status_every_s: float = 1.0
     overrun_blocks: tuple[int, ...] = ()
+    # block indices whose frames the board sends twice, at once (a DMA buffer sent again)
+    resent_blocks: tuple[int, ...] = ()
     # shaft-encoder faults (see Board.tacho_edges): a probability per pulse, or the
     # pulse indices m (edge where ppr * turns = m, m = 0 at t = 0) to hit
     tacho_missed: float | tuple[int, ...] = 0.0  # pulses not seen
@@ -121,6 +123,7 @@ class BoardConfig:
         self._set_calibration()
         self._check_header_fields()
         self.overrun_blocks = tuple(int(b) for b in self.overrun_blocks)
+        self.resent_blocks = tuple(int(b) for b in self.resent_blocks)
         self.tacho_missed = self._fault_spec("tacho_missed", self.tacho_missed)
         self.tacho_extra = self._fault_spec("tacho_extra", self.tacho_extra)
         if not (self.tacho_jitter >= 0 and math.isfinite(self.tacho_jitter)):
@@ -198,6 +201,7 @@ class Board:
         self.scale = np.asarray(config.scale, dtype=np.float32).astype(np.float64)
         self.offset = np.asarray(config.offset, dtype=np.float32).astype(np.float64)
         self._overrun_set = frozenset(config.overrun_blocks)
+        self._resent_set = frozenset(config.resent_blocks)
         self._status_every = max(1, int(round(config.status_every_s * self.fs / self.block_len)))
         self._tacho_draw_cache: dict[int, dict[str, np.ndarray]] = {}
 
@@ -436,6 +440,8 @@ class Board:
                 if cfg.tacho:
                     parts.append(encode_tacho(seq, t0, 0, e_off[bounds[i]:bounds[i + 1]]))
                     seq = (seq + 1) & 0xFFFF
+                if blk in self._resent_set:
+                    parts += parts
                 yield b"".join(parts), len(parts)
             b += nb
 

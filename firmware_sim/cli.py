@@ -74,6 +74,17 @@ def _fault(text: str) -> float | tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"expected a probability or pulse indices like 5,17, got {text!r}") from None
 
 
+def _blocks(text: str) -> tuple[int, ...]:
+    """Block indices ("5" or "5,17,300": integers from 0)."""
+    try:
+        blocks = tuple(int(v) for v in text.strip().strip("()[]").split(",") if v.strip())
+    except ValueError:
+        blocks = (-1,)
+    if not blocks or min(blocks) < 0:
+        raise argparse.ArgumentTypeError(f"expected block indices like 5,17 (integers from 0), got {text!r}")
+    return blocks
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="firmware_sim", description="The simulated TM4C1294 ADC board of cmsensord "
                 "(docs/PROTOCOL.md): writes a capture file or serves a pseudo-terminal.")
@@ -96,6 +107,9 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="encoder fault: probability of a spurious pulse after a pulse, or the pulse indices")
     p.add_argument("--tacho-jitter", type=float, default=0.0, metavar="SAMPLES",
                    help="encoder fault: std of the edge-time jitter in samples (default 0)")
+    p.add_argument("--resend-blocks", type=_blocks, default=(), metavar="B,B,..",
+                   help="board fault: the blocks (indices from 0) whose frames it sends twice, as a "
+                        "firmware that sends a DMA buffer again")
     p.add_argument("--baud", type=float, default=DEFAULT_BAUD,
                    help=f"UART rate the stream must fit (default {DEFAULT_BAUD}); warns when it does not")
     p.add_argument("--truth", metavar="FILE.npz",
@@ -173,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         config = BoardConfig(mode=args.mode, n_channels=args.channels, fs=scenario.fs,
                              tacho=args.tacho, ppr=args.ppr, t0_start=args.t0_start,
                              tacho_missed=args.tacho_missed, tacho_extra=args.tacho_extra,
-                             tacho_jitter=args.tacho_jitter,
+                             tacho_jitter=args.tacho_jitter, resent_blocks=args.resend_blocks,
                              scale=getattr(scenario, "board_scale", None))   # Pa/count for a microphone
         board = Board(scenario, config)
         if args.truth_rate is not None and not args.truth:

@@ -6,7 +6,8 @@ inserted bytes (glitches), and optionally gaps (a run of lost bytes: a
 disconnect). Each fault is recorded with its offset in the *original* stream,
 so a test can tell which frames it hit. The other board-side faults live in
 :class:`firmware_sim.board.BoardConfig`: ``t0_start`` near 2**32 (t0 wrap),
-``seq_start`` near 65535 (seq wrap), ``overrun_blocks`` (ADC overruns) and the
+``seq_start`` near 65535 (seq wrap), ``overrun_blocks`` (ADC overruns), ``resent_blocks``
+(a block's frames sent twice) and the
 shaft-encoder faults ``tacho_missed``, ``tacho_extra``, ``tacho_jitter``
 (see :meth:`firmware_sim.board.Board.tacho_edges`).
 """

@@ -524,7 +524,7 @@ def test_counters_as_dict_is_flat():
     assert c.as_dict() == {
         "bytes_received": 2 * len(VEC_RMS) - 4, "bytes_discarded": 0, "crc_failures": 0,
         "header_rejects": 0, "frames_status": 0, "frames_rms": 2, "frames_raw": 0,
-        "frames_tacho": 0, "frames_lost": 1, "overruns": 1,
+        "frames_tacho": 0, "frames_lost": 1, "overruns": 1, "frames_repeated": 0,
     }
     assert LinkCounters().frames == {"status": 0, "rms": 0, "raw": 0, "tacho": 0}
 

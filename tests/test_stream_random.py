@@ -61,7 +61,7 @@ def _frame(rng: np.random.Generator, seq: int, t0: int) -> bytes:
 
 def random_stream(seed: int, n_frames: int) -> bytes:
     """Mostly a plausible 4-channel RMS stream; now and then odd frames, t0 stuck, reset,
-    jumping far ahead or back, seq gaps and restarts."""
+    jumping far ahead or back, seq gaps and restarts, frames sent twice."""
     rng = np.random.default_rng(seed)
     out = [_status(rng, 0, 0)]
     t0, seq = 0, 1
@@ -79,6 +79,8 @@ def random_stream(seed: int, n_frames: int) -> bytes:
             t0 -= int(rng.integers(1, 25000 * 10))
         seq = (seq + (1 if rng.random() < 0.97 else int(rng.integers(0, 1 << 16)))) & 0xFFFF
         out.append(_frame(rng, seq, t0 & 0xFFFFFFFF))
+        if rng.random() < 0.01:
+            out.append(out[-1])                    # the same frame twice
     return b"".join(out)
 
 

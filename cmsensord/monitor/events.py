@@ -50,7 +50,8 @@ log = logging.getLogger("cmsensord")
 #: severity index and everything about the link or the disk is news.
 LOG_LEVEL = {
     "anomaly_onset": VERBOSE, "anomaly_clear": VERBOSE,
-    "failure": logging.WARNING, "frames_lost": logging.WARNING, "link_lost": logging.WARNING,
+    "failure": logging.WARNING, "frames_lost": logging.WARNING, "frames_repeated": logging.WARNING,
+    "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
     "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
     "decision_rule": logging.WARNING, "time_base": logging.WARNING, "anomaly_held": logging.WARNING,

@@ -42,7 +42,7 @@ from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.output import Output
 from cmsensord.monitor.raw import RawBlocks, RawInput
-from cmsensord.monitor.segments import SCAN_MIN, Segments
+from cmsensord.monitor.segments import SCAN_MIN, WIRE_FLAGS, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.monitor.slots import observation_rows
 from cmsensord.monitor.wake import wake_t0
@@ -150,7 +150,7 @@ class Processor(Figures):
         for a, b, codes in self.segments.runs(frames):
             if codes is None:
                 f = frames[a]
-                if self.segments.check(f) or f.lost_before:   # a reset, the other mode, a loss
+                if self.segments.check(f) or f.lost_before or f.flags > WIRE_FLAGS:   # a reset, the other mode, a break
                     rms, raw = self._flush(rms, raw)
                     if self._break(f):
                         continue
@@ -179,7 +179,7 @@ class Processor(Figures):
         raws, tachos = [], []
         check = self.segments.check
         for f in frames:
-            hit = check(f) or f.lost_before
+            hit = check(f) or f.lost_before or f.flags > WIRE_FLAGS
             if not hit and f.type is _RAW:
                 raws.append(f)
             elif not hit and f.type is _TACHO:
@@ -293,11 +293,10 @@ class Processor(Figures):
         if self.shaft.waiting:      # the edges in front of it first: what comes after may release what waits
             self._feed_tacho(end=True)
         if self.segments.pending(f):
+            self.segments.gaps(f, None)
             self._release_decisions(final=True)     # decided on the old segment's time base
             return self.segments.start(f)
-        self.frames_lost += f.lost_before
-        self.event("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} "
-                   f"(seq gap)", self.clock.stamp_ns(f.t0_unwrapped), count=f.lost_before)
+        self.frames_lost += self.segments.gaps(f, self.clock.stamp_ns(f.t0_unwrapped))
         return False
 
     def finish(self) -> None:

@@ -11,6 +11,10 @@ starts a new segment at the board's measured rate, with a ``time_base`` event.
 
 RAW frames in an RMS stream (STATUS says RMS mode), or RMS frames in a RAW one,
 are ignored: each run of them is counted in one ``decode_error`` event when it ends.
+
+A break in the link in front of a frame, a seq gap or frames the receiver dropped as
+repeats (:mod:`cmsensord.frame_repeats`), is a ``frames_lost`` or ``frames_repeated``
+event (:meth:`Segments.gaps`).
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from cmsensord.frame_repeats import REPEATS_SHIFT, repeats_before
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import MAX_GAP_S, BlockClock
 from cmsensord.monitor.events import EventLog
@@ -36,7 +41,9 @@ _NAME = {FrameType.RAW: "RAW", FrameType.RMS: "RMS"}
 #: batches at least this long are checked in one pass (:meth:`Segments.runs`)
 SCAN_MIN = 32
 #: a field of every frame of a batch, in one C-level pass
-_TYPE, _T0, _LOST = attrgetter("type"), attrgetter("t0_unwrapped"), attrgetter("lost_before")
+_TYPE, _T0, _LOST, _FLAGS = (attrgetter(name) for name in ("type", "t0_unwrapped", "lost_before", "flags"))
+#: flags above this: the receiver dropped repeats in front of the frame
+WIRE_FLAGS = (1 << REPEATS_SHIFT) - 1
 #: after a frame that does not pass, this many frames are checked one by one before the next pass
 SCAN_RETRY = 8
 
@@ -46,7 +53,7 @@ class FrameColumns(NamedTuple):
 
     code: np.ndarray    # the type code; -1 for a type that is not a FrameType (a frame built by hand)
     t0: np.ndarray      # t0_unwrapped
-    lost: np.ndarray    # a seq gap in front of it
+    lost: np.ndarray    # a break in the link in front of it (a seq gap, repeats dropped)
     frames: Sequence[Frame]     # the batch (a STATUS frame's payload is read from it)
 
 
@@ -56,7 +63,7 @@ def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
     cols = getattr(frames, "columns", None)
     if cols is not None:
         code, t0, lost = cols()
-        return FrameColumns(code, t0, lost != 0, frames)
+        return FrameColumns(code, t0, lost, frames)
     n = len(frames)
     types = list(map(_TYPE, frames))
     if set(map(type, types)) <= {FrameType}:
@@ -65,6 +72,7 @@ def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
         code = np.fromiter((t if type(t) is FrameType else -1 for t in types), dtype=np.int64, count=n)
     t0 = np.fromiter(map(_T0, frames), dtype=np.int64, count=n)
     lost = np.fromiter(map(_LOST, frames), dtype=np.int64, count=n) != 0
+    lost |= np.fromiter(map(_FLAGS, frames), dtype=np.int64, count=n) > WIRE_FLAGS
     return FrameColumns(code, t0, lost, frames)
 
 
@@ -107,7 +115,7 @@ class Segments:
         st = self.setup.status
         types = set(map(_TYPE, frames))
         if FrameType.STATUS in types or (st is not None and _OTHER.get(st.mode) in types) \
-                or any(map(_LOST, frames)):
+                or any(map(_LOST, frames)) or max(map(_FLAGS, frames)) > WIRE_FLAGS:
             return False
         t = list(map(_T0, frames))
         last = self.last_t0
@@ -239,6 +247,19 @@ class Segments:
                    f"{self.previous_t0}): time segment {self.clock.segment} starts at the wall "
                    f"clock{lost}", stamp, details={"segment": self.clock.segment, "reason": "reset"})
         return False
+
+    def gaps(self, f: Frame, stamp: int | None) -> int:
+        """The break in the link in front of ``f`` as events: the repeats the receiver dropped, and
+        its seq gap unless it starts a new segment (``stamp`` None, the gap is no loss); the frames lost."""
+        n = repeats_before(f.flags)
+        if n:
+            self.log.emit("frames_repeated", None, f"{n} frame(s) received again before seq {f.seq} (the "
+                          "same frames as already received): dropped", stamp, count=n)
+        if stamp is None or not f.lost_before:
+            return 0
+        self.log.emit("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} (seq gap)",
+                      stamp, count=f.lost_before)
+        return f.lost_before
 
     def drifted(self, now_ns: int, offset_s: float, rate: int) -> None:
         """Live: the board's stamps are ``offset_s`` off the wall clock ``now_ns`` (positive:

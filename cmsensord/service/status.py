@@ -48,10 +48,11 @@ def run_summary(proc, paths: list[Path], wall_s: float) -> str:
 
 
 def link_line(counters: dict[str, int]) -> str:
-    """The bytes of the link that were no good frame (docs/PROTOCOL.md rules 1-2), on one line;
-    "" when there were none."""
-    junk, crc, bad = (counters.get(k, 0) for k in ("bytes_discarded", "crc_failures", "header_rejects"))
+    """The bytes of the link that were no good frame (docs/PROTOCOL.md rules 1-2, and frames received
+    twice: cmsensord.frame_repeats), on one line; "" when there were none."""
+    junk, crc, bad, twice = (counters.get(k, 0) for k in ("bytes_discarded", "crc_failures", "header_rejects",
+                                                          "frames_repeated"))
     if not (junk or crc or bad):
         return ""
     return (f"  link: {junk} of {counters.get('bytes_received', 0)} bytes in no frame "
-            f"({crc} CRC failure(s), {bad} bad header(s))")
+            f"({crc} CRC failure(s), {bad} bad header(s)" + (f", {twice} frame(s) received twice)" if twice else ")"))

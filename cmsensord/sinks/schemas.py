@@ -114,6 +114,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "failure",
     "failure_clear",
     "frames_lost",
+    "frames_repeated",
     "link_lost",
     "link_restored",
     "link_stalled",
@@ -151,6 +152,7 @@ LINK_COUNTERS: tuple[str, ...] = (
     "frames_tacho",
     "frames_lost",
     "overruns",
+    "frames_repeated",
 )
 
 # ---------------------------------------------------------------------------
@@ -373,6 +375,7 @@ DIAGNOSTICS = _obj(
                 "frames_tacho": _int("TACHO frames decoded"),
                 "frames_lost": _int("frames lost, from seq gaps"),
                 "overruns": _int("frames with the ADC overrun flag"),
+                "frames_repeated": _int("frames received again (the same frame twice), dropped"),
             },
             "required": list(LINK_COUNTERS),
         },
