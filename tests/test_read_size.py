@@ -97,6 +97,26 @@ def tacho_stops(mode: str, seconds: float = 20, resume_s: float = 1e9) -> bytes:
     return bytes(out)
 
 
+def stuck_blocks(mode: str, seconds: float = 14, every: int = 150) -> bytes:
+    """The board sends every ``every``-th block's data and TACHO frames a second time under its
+    t0 (a t0 that stuck for a block), the data with other values (10 % more), numbered on."""
+    out, seq, block = bytearray(), 0, []
+    for f in Decoder().feed(board(mode, seconds)):
+        block.append(f)
+        if f.type == FrameType.TACHO:
+            again = [g for g in block if g.type != FrameType.STATUS] if (f.t0 // 250) % every == 7 else []
+            for g in block + again:
+                payload = g.payload
+                if g in again and g.type == FrameType.RMS:
+                    payload = (np.frombuffer(payload, "<f4") * 1.1).astype("<f4").tobytes()
+                elif g in again and g.type == FrameType.RAW:
+                    payload = (np.frombuffer(payload, "<u2") // 2 + 1024).astype("<u2").tobytes()
+                out += encode_frame(g.type, seq, g.t0, g.chan, g.flags, payload)
+                seq += 1
+            block = []
+    return bytes(out)
+
+
 def by_topic(data: bytes, read: int) -> dict[str, list]:
     topics: dict[str, list] = {}
     for topic, stamp, msg in run_processor(data, config_from_dict({}), chunk=read)[0].messages:
@@ -259,3 +279,15 @@ def test_raw_pieces_hold_the_blocks_of_the_whole(shuffled):
         b = a + len(p.t0)
         np.testing.assert_array_equal(p.samples([0, 1]), whole.samples([0, 1])[a:b])
         np.testing.assert_array_equal(p.rms(), whole.rms()[a:b])
+
+
+def test_an_rms_block_again_under_its_t0_gives_the_same_messages_at_any_read_size():
+    """RMS blocks whose t0 stuck (another RMS frame under the t0 of the one before): each is an
+    observation of its own, a block later (one `config` event: the time base re-anchored), at
+    any read size, and the RMS indicators leave it out (before: a `missing_fraction` of -0.01,
+    the block counted twice, and intervals stamped 10 ms apart at other read sizes)."""
+    runs = same_at_every_read_size(stuck_blocks("rms"))
+    jumps = [m for _, m in runs[0]["/cm/events"] if m["message"].startswith("board clock jumped")]
+    assert len(jumps) == 10
+    missing = [m["missing_fraction"] for _, m in runs[0]["/cm/ch0/indicators"]]
+    assert len(missing) >= 13 and all(0.0 <= v <= 1.0 for v in missing), missing

@@ -14,7 +14,8 @@ from cmsensord.monitor.indicators import RmsIndicators
 
 
 class Reference(RmsIndicators):
-    """The block-by-block ``add`` as it was before the one-pass sums."""
+    """The block-by-block ``add`` as it was before the one-pass sums (a block under the t0 of the
+    one before it left out)."""
 
     def add(self, t0: np.ndarray, vals: np.ndarray) -> list:
         out: list = []
@@ -23,6 +24,9 @@ class Reference(RmsIndicators):
         have = [i for i, j in enumerate(idx) if j < vals.shape[1]]
         v[:, have] = vals[:, [idx[i] for i in have]]
         for k, t in enumerate(t0.tolist()):
+            if t == self.newest:
+                continue
+            self.newest = t
             if self.start is None or t < self.start:
                 out += self._close()
                 self.start = t

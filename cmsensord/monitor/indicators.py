@@ -275,6 +275,7 @@ class RmsIndicators:
         self.per = max(1, round(cfg.indicators.interval_s * fs / block_len))   # blocks per interval
         self.N = self.per * block_len
         self.start: int | None = None
+        self.newest: int | None = None          # t0 of the newest block taken
         self.sq = np.zeros(len(channels))
         self.n = np.zeros(len(channels), dtype=np.int64)
 
@@ -283,7 +284,16 @@ class RmsIndicators:
 
         Block by block, an interval opens at a block before its start or past its end and
         closes after a block reaching its end; the blocks of one interval are summed in one
-        pass, a running sum in block order (the same sums as one block at a time)."""
+        pass, a running sum in block order (the same sums as one block at a time).  A block
+        under the t0 of the block before it (the board's t0 stuck, a block sent again) is
+        left out: it would count one place on the board's time grid twice."""
+        t0 = np.asarray(t0, dtype=np.int64)
+        if len(t0) and (t0[0] == self.newest or (t0[1:] == t0[:-1]).any()):
+            keep = t0 != np.concatenate(([self.newest if self.newest is not None else t0[0] - 1], t0[:-1]))
+            t0, vals = t0[keep], vals[keep]
+        if not len(t0):
+            return []
+        self.newest = int(t0[-1])
         out: list = []
         idx = [ch.index for ch in self.channels]
         v = np.full((len(t0), len(idx)), np.nan)
@@ -357,7 +367,7 @@ class RmsIndicators:
     def finish(self) -> list:
         """End of the stream or of a time segment: the open interval; the next block starts anew."""
         out = self._close()
-        self.start = None
+        self.start = self.newest = None
         return out
 
     def _close(self) -> list:

@@ -380,8 +380,8 @@ class Processor(Figures):
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.clock.begin(int(t0[0]))            # the intervals it closes are stamped on its time base
-        self.indicators.rms(self.channels, t0, vals)
-        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)))
+        rms = lambda t, v: self.indicators.rms(self.channels, t, v)     # noqa: E731 (before each re-anchoring)
+        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)), rms)
         if self.captures is not None:
             vib = [ch for ch in self.channels if ch.index < C]
             self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
@@ -468,12 +468,16 @@ class Processor(Figures):
         self._release_decisions(final=False, bounded=True)
 
     # ---- observations and decisions -----------------------------------------
-    def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS) -> None:
+    def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS,
+                 placed: Callable[[np.ndarray, np.ndarray], None] | None = None) -> None:
         """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain, at
-        most ``max_slots`` slots (received or missing) a call."""
+        most ``max_slots`` slots (received or missing) a call; ``placed`` is first given each run
+        of blocks on one time base (before the next re-anchoring)."""
         self._out(self.shaft.check_silent(self.clock, t0))
         while len(t0):
             slots, n = self.clock.place(t0)
+            if placed is not None:
+                placed(t0[:n], vals[:n])
             a = 0
             while a < n:                        # bounded memory: at most max_slots slots a run
                 top = self.clock.next_slot + max_slots
@@ -572,12 +576,8 @@ class Processor(Figures):
                                     self.diagnostics() if self.diagnostics else None)
 
     def link(self) -> dict:
-        """The link's counters; a seq gap in front of a board reset is no loss (the board
-        restarted its seq), so ``frames_lost`` leaves it out."""
-        counters = self.link_counters() if self.link_counters else {}
-        if "frames_lost" in counters:
-            counters = {**counters, "frames_lost": counters["frames_lost"] - self.segments.seq_restarts}
-        return counters
+        """The link's counters (:meth:`Segments.link`)."""
+        return self.segments.link(self.link_counters() if self.link_counters else {})
 
     def check_wall(self, max_drift_s: float) -> None:
         """Live, with the queue drained: a board clock off the wall clock by more than

@@ -162,6 +162,9 @@ class RawInput:
                 k = len(frames)
                 while k > 0 and frames[k - 1].t0_unwrapped == last:
                     k -= 1
+            if len(frames) - k > 1:             # the newest block: from a channel that came again
+                tail = cols.chan[k:].tolist() if cols is not None else list(map(_CHAN, frames[k:]))
+                k += block_starts([0] * len(tail), tail)[-1]
             if len(frames) - k < C:
                 frames, rest = frames[:k], frames[k:]
                 self.waiting.extend(rest)
@@ -202,6 +205,12 @@ class RawInput:
         step = None if single else t0[1:] - t0[:-1]
         if step is None:                        # one frame a block, in order (one channel)
             blocks, row = t0.copy(), np.arange(n)
+        elif not ((step > 0) | (chan[1:] > chan[:-1])).all() and not (step < 0).any():
+            starts = np.array(block_starts(t0.tolist(), chan.tolist()), dtype=np.int64)
+            blocks = t0[starts]                 # a channel again under one t0: a block sent again
+            row = np.zeros(len(t0), dtype=np.int64)
+            row[starts[1:]] = 1
+            np.cumsum(row, out=row)
         elif not (step < 0).any():              # in order (as sent): the blocks where t0 steps
             new = np.flatnonzero(step) + 1
             blocks = t0[np.concatenate(([0], new))]
@@ -243,3 +252,19 @@ class RawInput:
             if ch.offset is not None:
                 offset[ch.index] = ch.offset
         return scale, offset
+
+
+def block_starts(t0: list[int], chan: list[int]) -> list[int]:
+    """The first frame of each block of frames in arrival order: a block starts where t0
+    changes or where a channel of the block comes again (a block the board sent twice under
+    one t0 is two blocks, whether it came in one read or in two)."""
+    starts: list[int] = []
+    seen: set[int] = set()
+    last = None
+    for i, (t, c) in enumerate(zip(t0, chan)):
+        if t != last or c in seen:
+            starts.append(i)
+            seen.clear()
+            last = t
+        seen.add(c)
+    return starts

@@ -261,6 +261,13 @@ class Segments:
                       stamp, count=f.lost_before)
         return f.lost_before
 
+    def link(self, counters: dict) -> dict:
+        """The link's ``counters``; a seq gap in front of a board reset is no loss (the board
+        restarted its seq), so ``frames_lost`` leaves it out."""
+        if "frames_lost" in counters:
+            counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts}
+        return counters
+
     def drifted(self, now_ns: int, offset_s: float, rate: int) -> None:
         """Live: the board's stamps are ``offset_s`` off the wall clock ``now_ns`` (positive:
         ahead) and its clock runs at ``rate`` ticks per wall second: a new segment."""

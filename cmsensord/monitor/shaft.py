@@ -20,6 +20,7 @@ from __future__ import annotations
 import struct
 from collections import deque
 from collections.abc import Sequence
+from operator import lt
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -228,9 +229,9 @@ class Shaft:
         else:
             frames, dropped, t0s = self._in_time_order(list(waiting))
             payloads = [f.payload for f in frames]
-        if dropped:
-            events.append(Event("decode_error", None, f"{dropped} TACHO frame(s) before the newest one "
-                                "in board time dropped (the tacho needs time order)"))
+        for t in dropped:
+            events.append(Event("decode_error", None, f"TACHO frame at t0 {t} not after the newest one in board "
+                                "time: dropped (the tacho needs time order, one frame a block)", clock.stamp_ns(t)))
         tracker = self.tracker()                # the smoothed speed: fitted when asked for
         if len(payloads) <= FEW_TACHO:          # a live call's few: on Python ints
             counts, offsets, bad = decode_tacho_lists(payloads)
@@ -271,47 +272,51 @@ class Shaft:
         self.waiting.extend(frames[k:])
         return frames[:k]
 
-    def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], int, list[int]]:
-        """The frames at or after the newest t0 fed so far, how many stepped back (dropped),
-        and the t0 of those kept.  On Python ints: a live call brings about ten frames, in time
-        order and after those fed (then all of them are kept, at once)."""
+    def _in_time_order(self, frames: list[Frame]) -> tuple[list[Frame], list[int], list[int]]:
+        """The frames after the newest t0 fed so far, the t0 of those that did not step on
+        (dropped: one back, or a block's frame sent again under its t0), and the t0 of those
+        kept.  On Python ints: a live call brings about ten frames, in time order and after those
+        fed (then all of them are kept, at once)."""
         fed = self._fed_t0
         ts = [f.t0_unwrapped for f in frames]
-        if ts and (fed is None or ts[0] >= fed) and sorted(ts) == ts:
+        if ts and (fed is None or ts[0] > fed) and all(map(lt, ts, ts[1:])):
             self._fed_t0 = ts[-1]
-            return frames, 0, ts
+            return frames, [], ts
         kept: list[Frame] = []
         t0s: list[int] = []
+        dropped: list[int] = []
         newest = before = None                      # the newest t0 before each (kept or not)
         for f in frames:
             t = f.t0_unwrapped
-            before = (t if fed is None else fed) if newest is None else \
+            before = (t - 1 if fed is None else fed) if newest is None else \
                 (newest if fed is None else max(newest, fed))
-            if t >= before:
+            if t > before:
                 kept.append(f)
                 t0s.append(t)
+            else:
+                dropped.append(t)
             newest = t if newest is None else max(newest, t)
         if newest is not None and before is not None:
             self._fed_t0 = max(before, frames[-1].t0_unwrapped)
-        return kept, len(frames) - len(kept), t0s
+        return kept, dropped, t0s
 
-    def _in_time_order_columns(self, frames: FrameBatch) -> tuple[FrameBatch, int, list[int]]:
+    def _in_time_order_columns(self, frames: FrameBatch) -> tuple[FrameBatch, list[int], list[int]]:
         """:meth:`_in_time_order` of a batch, on its t0 column (a replay's reads bring hundreds
-        of frames): frame i is kept when its t0 is at or after the newest one before it (and
-        the newest fed so far); the same frames, count and ``_fed_t0``."""
+        of frames): frame i is kept when its t0 is after the newest one before it (and
+        the newest fed so far); the same frames, t0 lists and ``_fed_t0``."""
         t0 = frames.cols.t0_unwrapped
         fed = self._fed_t0
         before = np.empty_like(t0)
-        before[0] = t0[0] if fed is None else fed
+        before[0] = t0[0] - 1 if fed is None else fed
         np.maximum.accumulate(t0[:-1], out=before[1:])
         if fed is not None:
             np.maximum(before, fed, out=before)
-        keep = t0 >= before
+        keep = t0 > before
         self._fed_t0 = max(int(before[-1]), int(t0[-1]))
         if keep.all():
-            return frames, 0, t0.tolist()
+            return frames, [], t0.tolist()
         kept = np.flatnonzero(keep)
-        return frames.take(kept), len(t0) - kept.size, t0[kept].tolist()
+        return frames.take(kept), t0[~keep].tolist(), t0[kept].tolist()
 
     def _note_gaps(self, t0: list[int], L: int, silent: int | None = None) -> None:
         """Gaps between consecutive TACHO frames (one per block): lost frames, or a silence of the
