@@ -37,6 +37,7 @@ is ``(t0_start + sample index) // fs``.
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,8 +98,10 @@ class BoardConfig:
     fw_version: int = 0x0100
     status_every_s: float = 1.0
     overrun_blocks: tuple[int, ...] = ()
-    # block indices whose frames the board sends twice, at once (a DMA buffer sent again)
+    # block indices whose frames the board sends twice, at once (a DMA buffer sent again), under
+    # their seqs, or (resend_new_seq) under the next seqs (the buffer sent again with a fresh header)
     resent_blocks: tuple[int, ...] = ()
+    resend_new_seq: bool = False
     # shaft-encoder faults (see Board.tacho_edges): a probability per pulse, or the
     # pulse indices m (edge where ppr * turns = m, m = 0 at t = 0) to hit
     tacho_missed: float | tuple[int, ...] = 0.0  # pulses not seen
@@ -441,7 +444,11 @@ class Board:
                     parts.append(encode_tacho(seq, t0, 0, e_off[bounds[i]:bounds[i + 1]]))
                     seq = (seq + 1) & 0xFFFF
                 if blk in self._resent_set:
-                    parts += parts
+                    again = parts
+                    if cfg.resend_new_seq:
+                        again = [_renumbered(p, seq + k) for k, p in enumerate(parts)]
+                        seq = (seq + len(parts)) & 0xFFFF
+                    parts += again
                 yield b"".join(parts), len(parts)
             b += nb
 
@@ -538,3 +545,10 @@ def link_budget(mode: str, n_channels: int, block_len: int, fs: int, tacho: bool
     msg = (f"{what}: {total:,.0f} B/s = {100 * total / capacity:.0f} % of a {baud:g}-baud UART "
            f"({capacity:,.0f} B/s): {verdict}")
     return total, fits, msg
+
+
+def _renumbered(frame: bytes, seq: int) -> bytes:
+    """``frame`` (a complete one, sync to CRC) under seq ``seq``: its header's seq and its CRC."""
+    body = bytearray(frame[2:-4])
+    body[2:4] = (seq & 0xFFFF).to_bytes(2, "little")
+    return frame[:2] + bytes(body) + zlib.crc32(body).to_bytes(4, "little")

@@ -110,6 +110,9 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resend-blocks", type=_blocks, default=(), metavar="B,B,..",
                    help="board fault: the blocks (indices from 0) whose frames it sends twice, as a "
                         "firmware that sends a DMA buffer again")
+    p.add_argument("--resend-new-seq", action="store_true",
+                   help="with --resend-blocks: the frames sent again carry the next seqs (the buffer sent "
+                        "again with a fresh header)")
     p.add_argument("--baud", type=float, default=DEFAULT_BAUD,
                    help=f"UART rate the stream must fit (default {DEFAULT_BAUD}); warns when it does not")
     p.add_argument("--truth", metavar="FILE.npz",
@@ -165,6 +168,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise _UsageError(f"--byte-error-rate must be a probability 0..1, got {args.byte_error_rate}")
     if args.faults_out and not args.byte_error_rate:
         raise _UsageError("--faults-out needs --byte-error-rate")
+    if args.resend_new_seq and not args.resend_blocks:
+        raise _UsageError("--resend-new-seq needs --resend-blocks")
     if args.link and not args.pty:
         raise _UsageError("--link needs --pty")
     if args.flow_control and not args.pty:
@@ -188,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                              tacho=args.tacho, ppr=args.ppr, t0_start=args.t0_start,
                              tacho_missed=args.tacho_missed, tacho_extra=args.tacho_extra,
                              tacho_jitter=args.tacho_jitter, resent_blocks=args.resend_blocks,
+                             resend_new_seq=args.resend_new_seq,
                              scale=getattr(scenario, "board_scale", None))   # Pa/count for a microphone
         board = Board(scenario, config)
         if args.truth_rate is not None and not args.truth:

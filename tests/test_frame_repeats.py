@@ -47,6 +47,25 @@ def as_sent(frames) -> list:
     return [(f.type, f.seq, f.t0, f.chan, f.flags & 0xFF, f.payload, f.t0_unwrapped) for f in frames]
 
 
+def again_under_new_seqs(frames, blocks: tuple[int, ...]) -> tuple[bytes, list]:
+    """``frames`` with the frames of ``blocks`` (indices of t0 / 250) sent again at once under the
+    next seqs, and the frames it holds without them (numbered as sent)."""
+    out, taken, seq, block = [], [], frames[0].seq, []
+    for i, f in enumerate(frames):
+        block.append(f)
+        if i + 1 < len(frames) and frames[i + 1].t0 == f.t0:
+            continue
+        for g in block:
+            taken.append(g._replace(seq=seq & 0xFFFF))
+            seq += 1
+        out += taken[-len(block):]
+        if f.t0 // 250 in blocks:
+            out += [g._replace(seq=(seq + k) & 0xFFFF) for k, g in enumerate(block)]
+            seq += len(block)
+        block = []
+    return wire(out), taken
+
+
 SENT = board_frames(overrun_blocks=(3,))
 
 #: name -> (the stream, what was sent, frames lost, frames repeated, [(seq of the frame marked, repeats)])
@@ -60,6 +79,11 @@ STREAMS = {
                                   [(SENT[303].seq, 50)]),
     "the overrun frame twice": (wire(SENT[:8] + SENT[7:8] + SENT[8:]), SENT, 0, 1, [(SENT[8].seq, 1)]),
 }
+_DATA, _TAKEN = again_under_new_seqs(SENT, (3, 100, 101, 700))
+#: blocks 3 (its RAW frame flagged overrun), 100 and 700 (with a STATUS) and 101 sent again under new seqs
+STREAMS["blocks again under new seqs"] = (
+    _DATA, _TAKEN, 0, 10,
+    [(next(f.seq for f in _TAKEN if f.t0 == (b + 1) * 250), n) for b, n in ((3, 2), (100, 3), (101, 2), (700, 3))])
 
 
 @pytest.mark.parametrize("decoder", DECODERS)
@@ -103,14 +127,29 @@ def by_topic(data: bytes, read: int) -> dict[str, list]:
     return topics
 
 
+def repeated(sent: list, seq: str) -> tuple[bytes, list, list[tuple[int, int]]]:
+    """The stream of ``sent`` with frames again (``seq``: "same": every 97th frame at once under its
+    seq; "new": blocks 3, 100, 101 and 700 under the next seqs), the frames it holds without them,
+    and (repeats, seq of the frame after them) of each run of repeats."""
+    if seq == "same":
+        return (b"".join(wire([f]) * (2 if i % 97 == 5 else 1) for i, f in enumerate(sent)), sent,
+                [(1, sent[i + 1].seq) for i in range(5, len(sent) - 1, 97)])
+    data, taken = again_under_new_seqs(sent, (3, 100, 101, 700))
+    runs = [(sum(f.t0 == b * 250 for f in taken), next(f.seq for f in taken if f.t0 == (b + 1) * 250))
+            for b in (3, 100, 101, 700)]
+    return data, taken, runs
+
+
+@pytest.mark.parametrize("seq", ["same", "new"])
 @pytest.mark.parametrize("mode", ["raw", "rms"])
-def test_repeats_give_the_messages_of_the_stream_without_them_at_any_read_size(mode):
-    """Frames received again change no data message at any read size: the messages of the stream
-    the board sent, and one `frames_repeated` event where each run of repeats was (before: a
-    `frames_lost` of 65535 and a `time_base` re-anchoring each, and a restarted order tracker)."""
-    sent = SENT if mode == "raw" else board_frames("rms")
-    data = b"".join(wire([f]) * (2 if i % 97 == 5 else 1) for i, f in enumerate(sent))
-    want = by_topic(wire(sent), 65_536)
+def test_repeats_give_the_messages_of_the_stream_without_them_at_any_read_size(mode, seq):
+    """Frames received again, under their seq or the next, change no data message at any read size:
+    the messages of the stream without them, and one `frames_repeated` event where each run of
+    repeats was (before: under their seq a `frames_lost` of 65535 and a `time_base` re-anchoring
+    each; under the next a `config` re-anchoring, the block observed twice and, with RAW, the order
+    tracker restarted)."""
+    data, sent, runs = repeated(SENT if mode == "raw" else board_frames("rms"), seq)
+    want = by_topic(wire([f._replace(seq=i) for i, f in enumerate(sent)]), 65_536)     # numbered on
     for read in READS:
         got = by_topic(data, read)
         events = got.pop("/cm/events")
@@ -118,18 +157,19 @@ def test_repeats_give_the_messages_of_the_stream_without_them_at_any_read_size(m
         assert got == {t: m for t, m in want.items() if t not in ("/cm/events", "/cm/log")}, read
         repeats = [(s, m) for s, m in events if m["kind"] == "frames_repeated"]
         assert [(s, m) for s, m in events if m["kind"] != "frames_repeated"] == want["/cm/events"]
-        assert [m["message"] for _, m in repeats] == [
-            f"1 frame(s) received again before seq {sent[i + 1].seq} (the same frames as already received): dropped"
-            for i in range(5, len(sent) - 1, 97)]
-        assert all(m["count"] == 1 for _, m in repeats)
+        assert [(m["message"], m["count"]) for _, m in repeats] == [
+            (f"{n} frame(s) received again before seq {after} (the same frames as already received): dropped", n)
+            for n, after in runs]
 
 
-def test_replay_of_a_capture_whose_board_sent_blocks_twice(tmp_path):
-    """`cmsensord replay` of a firmware_sim capture whose board sent two blocks twice (block 200: a
-    STATUS, a RAW and a TACHO frame; block 250: a RAW and a TACHO frame): one event each naming the
-    frames, no frame lost, no re-anchoring, the repeats on the summary's link line and in the
-    diagnostics; the messages of the capture without them."""
-    for name, extra in (("twice", ["--resend-blocks", "200,250"]), ("clean", [])):
+@pytest.mark.parametrize("new_seq", [False, True])
+def test_replay_of_a_capture_whose_board_sent_blocks_twice(tmp_path, new_seq):
+    """`cmsensord replay` of a firmware_sim capture whose board sent two blocks twice, under their
+    seqs or the next (block 200: a STATUS, a RAW and a TACHO frame; block 250: a RAW and a TACHO
+    frame): one event each naming the frames, no frame lost, no re-anchoring, the repeats on the
+    summary's link line and in the diagnostics; the messages of the capture without them."""
+    again = ["--resend-blocks", "200,250"] + (["--resend-new-seq"] if new_seq else [])
+    for name, extra in (("twice", again), ("clean", [])):
         made = run_module("firmware_sim", "--scenario", "healthy", "--mode", "raw", "--tacho", "--duration", "6",
                           "--out", str(tmp_path / f"{name}.bin"), *extra)
         assert made.returncode == 0, made.stderr
@@ -139,8 +179,9 @@ def test_replay_of_a_capture_whose_board_sent_blocks_twice(tmp_path):
         assert r.returncode == 0, r.stderr
         runs[name] = (r.stderr, read_messages(next((tmp_path / name).glob("*.mcap"))))
     stderr, messages = runs["twice"]
-    sent = iter_frames((tmp_path / "clean.bin").read_bytes())[0]
-    after = [next(f.seq for f in sent if f.t0 == (b + 1) * 250) for b in (200, 250)]
+    taken = iter_frames((tmp_path / "twice.bin").read_bytes())[0]
+    after = [next(f.seq for f in taken if f.t0 == (b + 1) * 250) for b in (200, 250)]
+    assert [f.flags >> 8 for f in taken if f.flags > 0xFF] == [3, 2]
     events = [m for t, _, m in messages if t == "/cm/events"]
     assert [m["message"] for m in events if m["kind"] == "frames_repeated"] == [
         f"3 frame(s) received again before seq {after[0]} (the same frames as already received): dropped",
@@ -155,13 +196,16 @@ def test_replay_of_a_capture_whose_board_sent_blocks_twice(tmp_path):
         == comparable([m for m in runs["clean"][1] if m[0] != "/cm/diagnostics"])
 
 
-def test_a_live_board_sending_blocks_twice_is_told_and_replay_matches_live(tmp_path):
+@pytest.mark.parametrize("new_seq", [False, True])
+def test_a_live_board_sending_blocks_twice_is_told_and_replay_matches_live(tmp_path, new_seq):
     """firmware_sim on a real pty sends blocks 1550 and 2250 (an RMS frame each) and 2800 (a STATUS
-    and an RMS frame) twice: the live daemon logs one `frames_repeated` event for each, loses no
-    frame, and the replay of its capture gives its messages."""
+    and an RMS frame) twice, under their seqs or the next: the live daemon logs one
+    `frames_repeated` event for each, loses no frame, and the replay of its capture gives its
+    messages."""
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "faulty", "--channels", "2", "--duration", "30", "--speed", "5", "--seed", "3",
-                      "--resend-blocks", "1550,2250,2800", "--link", str(link), "--flow-control")
+                      "--resend-blocks", "1550,2250,2800", *(["--resend-new-seq"] if new_seq else []),
+                      "--link", str(link), "--flow-control")
     d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
     json.loads(sim.stdout.readline())                  # the board has sent everything
     time.sleep(1.5)
@@ -171,7 +215,8 @@ def test_a_live_board_sending_blocks_twice_is_told_and_replay_matches_live(tmp_p
     assert d.returncode == 0, err
     assert "Traceback" not in err
     sent = iter_frames(Board(make_scenario("faulty", n_channels=2, duration_s=30.0, seed=3),
-                             BoardConfig(n_channels=2)).generate(30.0))[0]
+                             BoardConfig(n_channels=2, resent_blocks=(1550, 2250, 2800),
+                                         resend_new_seq=new_seq)).generate(30.0))[0]
     after = [next(f.seq for f in sent if f.t0 == (b + 1) * 250) for b in (1550, 2250, 2800)]
     live = read_messages(next((tmp_path / "logs").glob("*.mcap")))
     events = [m for t, _, m in live if t == "/cm/events"]

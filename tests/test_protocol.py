@@ -385,7 +385,7 @@ def test_seq_wrap_is_not_a_gap():
 
 
 def test_seq_gap_across_wrap_counts_lost_frames():
-    wire = b"".join(encode_rms(s, 0, [1.0]) for s in [65533, 2, 3, 10])
+    wire = b"".join(encode_rms(s, 250 * k, [1.0]) for k, s in enumerate([65533, 2, 3, 10]))
     frames, c = iter_frames(wire)
     assert [f.lost_before for f in frames] == [0, 4, 0, 6]
     assert c.frames_lost == 10
@@ -507,7 +507,7 @@ def test_flush_recovers_frames_after_a_fake_header_at_the_end():
     assert [f.seq for f in frames] == [0, 1, 2]
     assert dec.buffered() == 0 and dec.counters.bytes_discarded == 14 + 3
     # The decoder stays usable, keeping its seq/t0 history.
-    (f,) = dec.feed(encode_rms(5, 0, [1.0]))
+    (f,) = dec.feed(encode_rms(5, 250, [1.0]))
     assert f.lost_before == 2 and dec.counters.frames_lost == 65535 - 100 + 2
 
 

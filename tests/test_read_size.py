@@ -105,11 +105,11 @@ def stuck_blocks(mode: str, seconds: float = 14, every: int = 150) -> bytes:
         block.append(f)
         if f.type == FrameType.TACHO:
             again = [g for g in block if g.type != FrameType.STATUS] if (f.t0 // 250) % every == 7 else []
-            for g in block + again:
+            for g, stuck in [(g, False) for g in block] + [(g, True) for g in again]:
                 payload = g.payload
-                if g in again and g.type == FrameType.RMS:
+                if stuck and g.type == FrameType.RMS:
                     payload = (np.frombuffer(payload, "<f4") * 1.1).astype("<f4").tobytes()
-                elif g in again and g.type == FrameType.RAW:
+                elif stuck and g.type == FrameType.RAW:
                     payload = (np.frombuffer(payload, "<u2") // 2 + 1024).astype("<u2").tobytes()
                 out += encode_frame(g.type, seq, g.t0, g.chan, g.flags, payload)
                 seq += 1
