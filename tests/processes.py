@@ -9,11 +9,13 @@ start processes or ptys: tests/conftest.py marks them ``process``.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import pty
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,6 +92,24 @@ def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subproce
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{config}")
     return spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg), *extra],
                  stderr=subprocess.PIPE, text=True)
+
+
+def board_then_daemon(tmp_path, *board_args) -> dict:
+    """firmware_sim on a pty (``board_args``; published at tmp_path/ttyBOARD, with flow control,
+    so a daemon slow to start loses no byte) and the daemon on it, its bytes captured to
+    tmp_path/cap.bin, until the board has sent everything: the board's stats.  The daemon
+    exited 0 without a traceback."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board(*board_args, "--link", str(link), "--flow-control")
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
+    stats = json.loads(sim.stdout.readline())["stats"]          # the board has sent everything
+    time.sleep(1.5)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    assert "Traceback" not in err
+    return stats
 
 
 def stop(proc, timeout=10) -> str:

@@ -8,18 +8,16 @@ t0 behind the newest, as a board that restarted its clock: a `frames_lost` event
 from __future__ import annotations
 
 import json
-import time
 
 import pytest
 
-from cmsensord.config import config_from_dict
 from cmsensord.protocol import OVERHEAD, Decoder, FrameType, encode_frame, iter_frames
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import cmsensord, run_module, start_board, start_daemon, stop
-from stream import run_processor
+from processes import board_then_daemon, cmsensord, run_module
+from test_read_size import by_topic
 
 READS = (997, 4114, 65_536, 1 << 20)
 DECODERS = {"plain": dict(runs=False), "numpy runs": dict(runs=True, kernel=False), "kernel": dict(kernel=True)}
@@ -119,14 +117,6 @@ def test_a_board_restarting_under_old_seqs_is_no_repeat():
         assert got[6].seq == again[1].seq and got[6].lost_before == (again[1].seq - first[-1].seq - 1) % 65536
 
 
-def by_topic(data: bytes, read: int) -> dict[str, list]:
-    topics: dict[str, list] = {}
-    for topic, stamp, msg in run_processor(data, config_from_dict({}), chunk=read)[0].messages:
-        if topic != "/cm/diagnostics":
-            topics.setdefault(topic, []).append((stamp, msg))
-    return topics
-
-
 def repeated(sent: list, seq: str) -> tuple[bytes, list, list[tuple[int, int]]]:
     """The stream of ``sent`` with frames again (``seq``: "same": every 97th frame at once under its
     seq; "new": blocks 3, 100, 101 and 700 under the next seqs), the frames it holds without them,
@@ -202,18 +192,8 @@ def test_a_live_board_sending_blocks_twice_is_told_and_replay_matches_live(tmp_p
     and an RMS frame) twice, under their seqs or the next: the live daemon logs one
     `frames_repeated` event for each, loses no frame, and the replay of its capture gives its
     messages."""
-    link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "faulty", "--channels", "2", "--duration", "30", "--speed", "5", "--seed", "3",
-                      "--resend-blocks", "1550,2250,2800", *(["--resend-new-seq"] if new_seq else []),
-                      "--link", str(link), "--flow-control")
-    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
-    json.loads(sim.stdout.readline())                  # the board has sent everything
-    time.sleep(1.5)
-    err = stop(d)
-    sim.terminate()
-    sim.wait(timeout=5)
-    assert d.returncode == 0, err
-    assert "Traceback" not in err
+    board_then_daemon(tmp_path, "--scenario", "faulty", "--channels", "2", "--duration", "30", "--speed", "5",
+                      "--seed", "3", "--resend-blocks", "1550,2250,2800", *(["--resend-new-seq"] if new_seq else []))
     sent = iter_frames(Board(make_scenario("faulty", n_channels=2, duration_s=30.0, seed=3),
                              BoardConfig(n_channels=2, resent_blocks=(1550, 2250, 2800),
                                          resend_new_seq=new_seq)).generate(30.0))[0]

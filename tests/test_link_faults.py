@@ -22,7 +22,7 @@ from firmware_sim.board import Board, BoardConfig
 from firmware_sim.faults import frames_hit, read_records
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import ENV, cmsensord, drain, fill, spawn, start_board, start_daemon, stop
+from processes import ENV, board_then_daemon, cmsensord, drain, fill, spawn, start_board, start_daemon, stop
 from stream import run_processor
 
 
@@ -30,19 +30,9 @@ def test_line_noise_loses_only_the_frames_it_hits_and_replay_matches_live(tmp_pa
     """Byte error rate 1e-3 (flips, drops, insertions) injected by firmware_sim on the pty:
     no exception, exactly the frames hit by a fault are lost, the counters and the
     frames_lost events say so, and replaying the capture gives the live messages."""
-    link = tmp_path / "ttyBOARD"
-    args = ["--scenario", "faulty", "--channels", "2", "--duration", "30", "--speed", "5",
-            "--seed", "3", "--byte-error-rate", "1e-3", "--faults-out", str(tmp_path / "faults.jsonl"),
-            "--link", str(link), "--flow-control"]     # a daemon slow to start loses no byte either
-    sim = start_board(*args)
-    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
-    stats = json.loads(sim.stdout.readline())["stats"]          # the board has sent everything
-    time.sleep(1.5)
-    err = stop(d)
-    sim.terminate()
-    sim.wait(timeout=5)
-    assert d.returncode == 0, err
-    assert "Traceback" not in err
+    stats = board_then_daemon(tmp_path, "--scenario", "faulty", "--channels", "2", "--duration", "30",
+                              "--speed", "5", "--seed", "3", "--byte-error-rate", "1e-3",
+                              "--faults-out", str(tmp_path / "faults.jsonl"))
     assert stats["dropped_bytes"] == 0
 
     # what the board sent, clean, and which of its frames a fault hit
