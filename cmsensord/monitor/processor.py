@@ -369,11 +369,10 @@ class Processor(Figures):
             return
         self._board_channels(C)
         good = frames if np.all(lengths == 4 * C) else [f for f in frames if len(f.payload) == 4 * C]
-        if len(good) < len(frames):             # only those frames are lost
-            n = len(frames) - len(good)
-            first = next(f for f in frames if len(f.payload) != 4 * C)
-            self.event("decode_error", None, f"{n} RMS frame(s) with a payload that is not 4 x {C} "
-                       "bytes dropped", self.clock.stamp_ns(first.t0_unwrapped), count=n)
+        if len(good) < len(frames):             # only those frames are lost, each told at its t0
+            for f in (f for f in frames if len(f.payload) != 4 * C):
+                self.event("decode_error", None, f"RMS frame at t0 {f.t0_unwrapped} dropped: {len(f.payload)} "
+                           f"bytes, not 4 x {C}", self.clock.stamp_ns(f.t0_unwrapped), count=1)
             if not good:
                 return
             frames = good
@@ -395,7 +394,7 @@ class Processor(Figures):
         if not ready or not self.setup.ready(C):
             return
         self._board_channels(C)
-        blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.setup.status)
+        blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.setup.status, self.clock.stamp_ns)
         self._out(events)
         if blocks is None:
             return

@@ -12,7 +12,7 @@ come.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from operator import attrgetter, lt
 
@@ -170,11 +170,11 @@ class RawInput:
                 self.waiting.extend(rest)
         return frames, C, []
 
-    def blocks(self, frames: Sequence[Frame], C: int, L: int,
-               status: Status | None) -> tuple[RawBlocks | None, list[Event]]:
-        """Frames of ``L`` samples -> :class:`RawBlocks` (frames of another length or a channel
-        >= C are skipped with a decode_error event).  A batch is read from its columns (no
-        frame built): the same blocks."""
+    def blocks(self, frames: Sequence[Frame], C: int, L: int, status: Status | None,
+               stamp_ns: Callable[[int], int] | None = None) -> tuple[RawBlocks | None, list[Event]]:
+        """Frames of ``L`` samples -> :class:`RawBlocks` (a frame of another length or a channel
+        >= C is skipped with a decode_error event, stamped at its t0 by ``stamp_ns``).  A batch is
+        read from its columns (no frame built): the same blocks."""
         chl: list[int] | None = None           # a list's channels (a batch's are its column)
         if type(frames) is FrameBatch:
             cols = frames.cols
@@ -196,8 +196,11 @@ class RawInput:
             payloads = list(map(_PAYLOAD, good))
         events = []
         if n < len(frames):
-            events.append(Event("decode_error", None, f"{len(frames) - n} RAW frame(s) with "
-                                f"a channel >= {C} or a payload that is not {L} samples skipped"))
+            for f in frames:
+                if f.chan >= C or len(f.payload) != 2 * L:
+                    why = f"channel >= {C}" if f.chan >= C else f"{len(f.payload)} bytes, not {L} samples"
+                    events.append(Event("decode_error", None, f"RAW frame of channel {f.chan} at t0 {f.t0_unwrapped} "
+                                        f"skipped: {why}", stamp_ns(f.t0_unwrapped) if stamp_ns else None))
         if not n:
             return None, events
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them

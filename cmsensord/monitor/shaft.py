@@ -233,11 +233,17 @@ class Shaft:
             events.append(Event("decode_error", None, f"TACHO frame at t0 {t} not after the newest one in board "
                                 "time: dropped (the tacho needs time order, one frame a block)", clock.stamp_ns(t)))
         tracker = self.tracker()                # the smoothed speed: fitted when asked for
+        limit = clock.block_len * 256           # an edge is inside its block (docs/PROTOCOL.md, TACHO)
         if len(payloads) <= FEW_TACHO:          # a live call's few: on Python ints
             counts, offsets, bad = decode_tacho_lists(payloads)
+            if offsets and max(offsets) >= limit:
+                c, o = _inside(np.array(counts), np.array(offsets, dtype=np.int64), limit, t0s, clock, events)
+                counts, offsets = c.tolist(), o.tolist()
             fed = tracker.feed_few(t0s, counts, offsets)
         else:
             counts_a, offsets_a, bad = decode_tacho_many(payloads)
+            if offsets_a.size and int(offsets_a.max()) >= limit:
+                counts_a, offsets_a = _inside(counts_a, offsets_a.astype(np.int64), limit, t0s, clock, events)
             fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
@@ -367,3 +373,17 @@ class Shaft:
         if ok.mean() < 0.5:
             return cfg_f_r
         return np.full(len(cfg_f_r), float(np.mean(hz[ok])))
+
+
+def _inside(counts: np.ndarray, offsets: np.ndarray, limit: int, t0s: list[int], clock: BlockClock,
+            events: list[Event]) -> tuple[np.ndarray, np.ndarray]:
+    """The edges inside their frame's block (offsets below ``limit``, 1/256 sample), per frame
+    (``counts``) and flat (``offsets``); a ``decode_error`` event, at its t0, for each frame with
+    an edge outside it (a hostile or broken frame: it would place the speed anywhere in time)."""
+    frame = np.repeat(np.arange(len(counts)), counts)
+    out = offsets >= limit
+    for i in np.unique(frame[out]).tolist():
+        n = int(np.count_nonzero(out[frame == i]))
+        events.append(Event("decode_error", None, f"TACHO frame at t0 {t0s[i]}: {n} edge(s) outside its block "
+                            f"(offsets of {limit // 256} samples or more) dropped", clock.stamp_ns(t0s[i])))
+    return counts - np.bincount(frame[out], minlength=len(counts)), offsets[~out]

@@ -1,0 +1,100 @@
+"""Frames with a good CRC but a bad body, in a healthy stream: each is one `decode_error` event,
+stamped at its own t0, and costs only itself, whatever the reads.  Before, the events counted
+the bad frames of each read ("14 RAW frame(s) with a channel >= 1 ..." in a 1 MiB read, fourteen
+events of one in reads of 997 bytes), and a TACHO edge outside its block (an offset past the
+block's samples) was taken where it said: "tacho restored at sample 16822216", 11 minutes past
+the end of a 16-s stream, stamped where each read size put it."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from cmsensord.protocol import Decoder, FrameType, encode_frame
+from test_read_size import board, same_at_every_read_size
+from test_stream_events import replay
+
+
+def rebuilt(data: bytes, change) -> tuple[bytes, list]:
+    """The frames of ``data`` through ``change(i, frame)`` (a frame, the same or another), numbered
+    as sent; and the frames changed."""
+    out, changed = bytearray(), []
+    for i, f in enumerate(Decoder().feed(data)):
+        g = change(i, f)
+        if g is not f:
+            changed.append(g)
+        out += encode_frame(g.type, g.seq, g.t0, g.chan, g.flags, g.payload)
+    return bytes(out), changed
+
+
+def decode_errors(runs: list[dict]) -> list[str]:
+    return [m["message"] for _, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_data_frames_of_a_wrong_length_or_channel_are_one_event_each_at_their_t0(mode):
+    """Every 77th data frame is 100 bytes short, every 101st names channel 7 (RAW; an RMS frame
+    with 7 channels' values is another board, so RMS frames only get short)."""
+    data_type = FrameType.RAW if mode == "raw" else FrameType.RMS
+
+    def change(i, f):
+        if f.type is data_type and i % 77 == 2:
+            return f._replace(payload=f.payload[:-100] if mode == "raw" else f.payload[:2])
+        if f.type is data_type and mode == "raw" and i % 101 == 4:
+            return f._replace(chan=7)
+        return f
+
+    data, changed = rebuilt(board(mode, 16), change)
+    runs = same_at_every_read_size(data)
+    if mode == "raw":
+        want = [f"RAW frame of channel {f.chan} at t0 {f.t0} skipped: "
+                + ("channel >= 1" if f.chan else "400 bytes, not 250 samples") for f in changed]
+    else:
+        want = [f"RMS frame at t0 {f.t0} dropped: 2 bytes, not 4 x 1" for f in changed]
+    assert len(changed) >= 20 and decode_errors(runs) == want
+    assert [s for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"] == [f.t0 * 40_000 for f in changed]
+
+
+def edge_outside(i, f):
+    """Every 40th TACHO frame with one more edge, after its own, past its block: at 250 samples
+    and 5/256 (the next block's first instant) or at 2^32 - 1 (11 minutes on)."""
+    if f.type is FrameType.TACHO and i % 40 == 3:
+        (n,) = struct.unpack_from("<H", f.payload)
+        outside = 250 * 256 + 5 if i % 80 == 3 else 2**32 - 1
+        return f._replace(payload=struct.pack("<H", n + 1) + f.payload[2:] + struct.pack("<I", outside))
+    return f
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_a_tacho_edge_outside_its_block_is_dropped_with_one_event_at_its_t0(mode):
+    """:func:`edge_outside`: the edges inside are taken: the shaft speed and the orders are the
+    stream's (1720 rpm), no tacho event."""
+    data, changed = rebuilt(board(mode, 16), edge_outside)
+    runs = same_at_every_read_size(data)
+    assert len(changed) >= 30 and decode_errors(runs) == [
+        f"TACHO frame at t0 {f.t0}: 1 edge(s) outside its block (offsets of 250 samples or more) dropped"
+        for f in changed]
+    assert not [m for _, m in runs[0]["/cm/events"] if m["kind"].startswith("tacho_")]
+    if mode == "raw":
+        orders = [m["speed_rpm"] for _, m in runs[0]["/cm/ch0/orders"] if m["valid"]]
+        assert len(orders) >= 140 and all(abs(v - 1720) < 20 for v in orders)
+
+
+def test_a_replay_tells_each_bad_frame(tmp_path):
+    """`cmsensord replay` of a RAW capture with TACHO edges outside their blocks and RAW frames
+    100 bytes short: one event each, in the log, and nothing else goes wrong."""
+    def change(i, f):                   # about two a second: under the events' rate limit
+        if f.type is FrameType.RAW and i % 277 == 2:
+            return f._replace(payload=f.payload[:-100])
+        return edge_outside(i, f) if i % 80 == 3 else f
+
+    data, changed = rebuilt(board("raw", 8), change)
+    events = replay(tmp_path, data)
+    assert [e for e in events if e.startswith("decode_error")] == [
+        f"decode_error | RAW frame of channel 0 at t0 {f.t0} skipped: 400 bytes, not 250 samples"
+        if f.type is FrameType.RAW else
+        f"decode_error | TACHO frame at t0 {f.t0}: 1 edge(s) outside its block (offsets of 250 samples or more) "
+        "dropped" for f in sorted(changed, key=lambda f: (f.t0, f.type))]
+    assert not [e for e in events if e.startswith(("tacho_", "frames_", "time_base"))]
+    assert f"decode_error {len(changed)}" in (tmp_path / "stderr.txt").read_text()
