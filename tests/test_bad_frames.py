@@ -98,3 +98,18 @@ def test_a_replay_tells_each_bad_frame(tmp_path):
         "dropped" for f in sorted(changed, key=lambda f: (f.t0, f.type))]
     assert not [e for e in events if e.startswith(("tacho_", "frames_", "time_base"))]
     assert f"decode_error {len(changed)}" in (tmp_path / "stderr.txt").read_text()
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_a_malformed_tacho_payload_is_one_event_at_its_t0(mode):
+    """Every 90th TACHO frame has a byte too many: its edges are not read (one `decode_error`
+    naming its byte and the lengths, stamped at its t0), the same at every read size."""
+    data, changed = rebuilt(board(mode, 16), lambda i, f: f._replace(payload=f.payload + b"\x01")
+                            if f.type is FrameType.TACHO and i % 90 == 3 else f)
+    runs = same_at_every_read_size(data)
+    errors = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+    sent = Decoder().feed(data)
+    at = {f.t0: f.offset for f in sent if f.type is FrameType.TACHO}
+    assert len(changed) >= 15 and errors == [
+        (f.t0 * 40_000, f"bad TACHO payload at byte {at[f.t0]}: TACHO payload: expected {len(f.payload) - 1} bytes "
+                        f"(2 + 4 x N={(len(f.payload) - 3) // 4} edges), got {len(f.payload)}") for f in changed]

@@ -246,7 +246,8 @@ class Shaft:
                 counts_a, offsets_a = _inside(counts_a, offsets_a.astype(np.int64), limit, t0s, clock, events)
             fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
         for i, message in bad:
-            events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}"))
+            events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}",
+                                clock.stamp_ns(t0s[i])))
         self._note_gaps(t0s, clock.block_len, round(SILENT_S * clock.fs))
         told = self._silent_since is not None and t0s[-1] >= self._silent_since    # frames again after it
         if told:
