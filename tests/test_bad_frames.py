@@ -113,3 +113,41 @@ def test_a_malformed_tacho_payload_is_one_event_at_its_t0(mode):
     assert len(changed) >= 15 and errors == [
         (f.t0 * 40_000, f"bad TACHO payload at byte {at[f.t0]}: TACHO payload: expected {len(f.payload) - 1} bytes "
                         f"(2 + 4 x N={(len(f.payload) - 3) // 4} edges), got {len(f.payload)}") for f in changed]
+
+
+@pytest.mark.parametrize(("first", "count", "dropped"), [(700, 30, 30), (700, 300, 99)])
+def test_rms_frames_of_another_channel_count_in_a_row_are_dropped_alike_at_any_read_size(first, count, dropped):
+    """``count`` RMS frames in a row with two channels' values in a one-channel stream (no STATUS
+    says so): fewer than 100 are odd frames, dropped, one `channels` event for the run at its
+    first frame; from the 100th on the board has changed and they are taken.  Before, the event
+    counted the odd frames of each read, and a read holding the 100th took the 99 before it too
+    (a large read took all 300, reads of 997 bytes dropped 99)."""
+    rms = [i for i, f in enumerate(Decoder().feed(board("rms", 16))) if f.type is FrameType.RMS]
+    two = set(rms[first:first + count])
+    data, changed = rebuilt(board("rms", 16), lambda i, f: f._replace(chan=2, payload=f.payload * 2)
+                            if i in two else f)
+    runs = same_at_every_read_size(data)
+    told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "channels"]
+    assert told[0] == (changed[0].t0 * 40_000, f"{dropped} RMS frame(s) of 2 channel(s) in a 1-channel stream "
+                                               f"dropped ({dropped} in all)")
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_a_bad_status_is_one_event_at_its_t0(mode):
+    """The STATUS frames at 4 s and 10 s are 3 bytes short, the one at 7 s names a NaN scale: each
+    is one `decode_error` stamped at its t0 (before: where the read had got to), the board's set-up
+    stays."""
+    def change(i, f):
+        if f.type is FrameType.STATUS and f.t0 in (100_000, 250_000):
+            return f._replace(payload=f.payload[:-3])
+        if f.type is FrameType.STATUS and f.t0 == 175_000:
+            return f._replace(payload=f.payload[:20] + struct.pack("<2f", float("nan"), 2048.0))
+        return f
+
+    data, changed = rebuilt(board(mode, 16), change)
+    runs = same_at_every_read_size(data)
+    errors = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+    assert [s for s, _ in errors] == [4_000_000_000, 7_000_000_000, 10_000_000_000]
+    assert errors[0][1].endswith("STATUS payload: expected 28 bytes (20 + 8 x 1 channels), got 25")
+    assert errors[1][1].endswith("with scale/offset nan/2048, not finite (and a scale not 0): the previous STATUS "
+                                 "is kept")

@@ -50,6 +50,7 @@ class ChannelSetup:
         self._no_channels = False
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
+        self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
         self.odd_dropped = 0                    # odd frames dropped in all
 
     def decode(self, f: Frame) -> tuple[Status | None, bool]:
@@ -58,7 +59,8 @@ class ChannelSetup:
         try:
             st = decode_status(f.payload)
         except ValueError as exc:
-            self.log.emit("decode_error", None, f"bad STATUS payload at byte {f.offset}: {exc}")
+            self.log.emit("decode_error", None, f"bad STATUS payload at byte {f.offset}: {exc}",
+                          self.clock.stamp_ns(f.t0_unwrapped))
             return None, False
         bad = [i for i, (a, b) in enumerate(zip(st.scale, st.offset))
                if not (math.isfinite(a) and a != 0.0 and math.isfinite(b))]
@@ -66,7 +68,7 @@ class ChannelSetup:
             self.log.emit("decode_error", None, f"STATUS at byte {f.offset} ignored: channel(s) "
                           f"{', '.join(map(str, bad))} with scale/offset "
                           f"{', '.join(f'{st.scale[i]:g}/{st.offset[i]:g}' for i in bad)}, not finite "
-                          "(and a scale not 0): the previous STATUS is kept")
+                          "(and a scale not 0): the previous STATUS is kept", self.clock.stamp_ns(f.t0_unwrapped))
             return None, False
         old = self.status
         return st, old is None or any(getattr(st, k) != getattr(old, k) for k in SETUP_FIELDS)
@@ -99,23 +101,38 @@ class ChannelSetup:
                       + (f", tacho of {st.tacho_ppr} pulse(s) per revolution" if st.tacho_inputs else ""),
                       self.clock.stamp_ns(f.t0_unwrapped))
 
+    def _odd(self, n: int) -> bool:
+        """Whether data frames of ``n`` channels are odd: not the board's count, nor announced."""
+        return not (self.severity is None or n == self.n_board
+                    or self.status is not None and self.status.n_channels == n)
+
+    def odd_split(self, n: int, n_frames: int) -> int:
+        """How many of ``n_frames`` data frames of ``n`` channels in a row are odd before the one
+        that makes ``CHANGE_FRAMES`` in a row (the board changed): the caller hands those first."""
+        return CHANGE_FRAMES - 1 - self._odd_run if self._odd(n) else 0
+
     def accept(self, n: int, frames: Sequence[Frame]) -> bool:
         """Data frames in a row of ``n`` channels: True to process them (the board's count, or a
-        change of the board), False when they are dropped as odd frames."""
-        n_frames = len(frames)
-        if self.severity is None or n == self.n_board:
-            self._odd_run = 0
+        change of the board), False when they are dropped as odd frames (:meth:`odd_split` cuts a
+        call at the change, so any read drops the same ones).  Each run of odd frames is one
+        ``channels`` event when it ends (:meth:`end_odd_run`)."""
+        if not self._odd(n) or self._odd_run + len(frames) >= CHANGE_FRAMES:
+            self.end_odd_run()
             return True
-        self._odd_run += n_frames
-        announced = self.status is not None and self.status.n_channels == n
-        if announced or self._odd_run >= CHANGE_FRAMES:
-            self._odd_run = 0
-            return True
-        self.odd_dropped += n_frames
-        self.log.emit("channels", None, f"{n_frames} RMS frame(s) of {n} channel(s) in a "
-                      f"{self.n_board}-channel stream dropped ({self.odd_dropped} in all)",
-                      self.clock.stamp_ns(frames[0].t0_unwrapped), count=n_frames, total=self.odd_dropped)
+        if not self._odd_run:
+            self._odd_first = (frames[0].t0_unwrapped, n)
+        self._odd_run += len(frames)
+        self.odd_dropped += len(frames)
         return False
+
+    def end_odd_run(self) -> None:
+        """The run of odd frames (if any) is over: its ``channels`` event, at its first frame."""
+        if self._odd_run:
+            (t0, n), run = self._odd_first, self._odd_run
+            self.log.emit("channels", None, f"{run} RMS frame(s) of {n} channel(s) in a {self.n_board}-channel "
+                          f"stream dropped ({self.odd_dropped} in all)", self.clock.stamp_ns(t0), count=run,
+                          total=self.odd_dropped)
+        self._odd_run = 0
 
     def changed(self, n_board: int) -> bool:
         """True when the board now sends ``n_board`` channels, not the chain's count: the

@@ -359,9 +359,9 @@ class Processor(Figures):
             return
         chans, lengths, t0 = rms_fields(frames)
         C = int(chans[0])
-        other = (chans != C).nonzero()[0]
-        if other.size:                          # channel count changed mid-batch: split
-            cut = int(other[0])
+        other = (chans != C).nonzero()[0]       # the channel count changes mid-batch, or the board does
+        cut = int(other[0]) if other.size else self.setup.odd_split(C, len(frames))
+        if 0 < cut < len(frames):
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
@@ -427,6 +427,8 @@ class Processor(Figures):
         """The board now sends C channels: a new chain drains the old one's decisions first."""
         if self.setup.changed(C):
             if C > self.setup.n_board:
+                if self.shaft.waiting:          # on the speed of the TACHO frames in front of it
+                    self._feed_tacho(end=True)
                 self._release_decisions(final=True)
             self._hand_over()
             self.setup.change(C)

@@ -280,9 +280,11 @@ class Segments:
                                         "offset_s": round(offset_s, 3), "rate_hz": rate})
 
     def finish(self) -> None:
-        """End of the stream: a run of frames of the other mode is reported."""
+        """End of the stream: a run of frames of the other mode, or of another channel count, is
+        reported."""
         if self.ignored:
             self._report()
+        self.setup.end_odd_run()
 
     def _report(self) -> None:
         st = self.setup.status
