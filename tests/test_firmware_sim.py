@@ -483,6 +483,8 @@ def test_cli_out_list_and_errors(tmp_path, capsys):
                  ["--scenario", "healthy", "--channels", "9", "--out", str(path)],
                  ["--scenario", "healthy", "--param", "nope=1", "--out", str(path)],
                  ["--scenario", "healthy"],
+                 ["--scenario", "healthy", "--resend-new-seq", "--out", str(path)],
+                 ["--scenario", "healthy", "--resend-blocks", "3,-1", "--out", str(path)],
                  ["--bogus"]):
         assert cli.main(argv) == 2
         err = capsys.readouterr().err
