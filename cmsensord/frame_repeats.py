@@ -174,10 +174,10 @@ class Repeats:
             kept.append(f)
             recent[f.seq] = key
             if t != self.blocks.t0:
-                self.blocks.t0, self.blocks.keys, block = t, set(), {}
-            self.blocks.keys.add(place)
+                self.blocks.t0, block = t, {}
             block[place] = key[4:]
             self.newest = f.seq
+        self.blocks.keys = set(block)
         return kept
 
     def _drop(self, f) -> None:

@@ -385,7 +385,6 @@ class Decoder:
         self._last_seq: int | None = None
         self._last_t0 = 0
         self._last_t0_unwrapped = 0
-        self._scan_lost = 0  # the seq gaps of the last scan
         self._repeats = Repeats(_make)
 
     def buffered(self) -> int:
@@ -432,10 +431,10 @@ class Decoder:
     def _scan_once(self, scan, final: bool) -> tuple[list, bytes]:
         """One scan (``scan``: :meth:`_scan` or :meth:`_scan_kernel`'s forms), the frames the
         link delivered again dropped and counted (:mod:`cmsensord.frame_repeats`)."""
-        before = self._last_seq
+        before, lost = self._last_seq, self.counters.frames_lost
         out, data = scan(final=final)
         rep = self._repeats
-        out = rep.take(out, data, before, self._last_seq, self._scan_lost)
+        out = rep.take(out, data, before, self._last_seq, self.counters.frames_lost - lost)
         if rep.dropped or rep.lost_removed:
             c = self.counters
             for f in rep.dropped:
@@ -574,7 +573,6 @@ class Decoder:
         c.crc_failures += crc_fail
         c.frames_lost += lost
         c.overruns += overruns
-        self._scan_lost = lost
 
 
 def _make(cols: Columns, data: bytes) -> list[Frame]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -379,8 +380,7 @@ class Processor(Figures):
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.clock.begin(int(t0[0]))            # the intervals it closes are stamped on its time base
-        rms = lambda t, v: self.indicators.rms(self.channels, t, v)     # noqa: E731 (before each re-anchoring)
-        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)), rms)
+        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)), partial(self.indicators.rms, self.channels))
         if self.captures is not None:
             vib = [ch for ch in self.channels if ch.index < C]
             self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],

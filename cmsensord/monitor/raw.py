@@ -164,7 +164,7 @@ class RawInput:
                     k -= 1
             if len(frames) - k > 1:             # the newest block: from a channel that came again
                 tail = cols.chan[k:].tolist() if cols is not None else list(map(_CHAN, frames[k:]))
-                k += block_starts([0] * len(tail), tail)[-1]
+                k += block_starts([0] * len(tail), tail)[-1]     # one t0: where a channel came again
             if len(frames) - k < C:
                 frames, rest = frames[:k], frames[k:]
                 self.waiting.extend(rest)
