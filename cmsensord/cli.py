@@ -85,7 +85,25 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
                    "prints every key with its default and meaning)")
     p.add_argument("-v", "--verbose", action="count", default=0,
                    help="log more: -v the per-AKF anomaly flags too, -vv everything (debug)")
-    sim = p.add_argument_group("simulation (--simulate)")
+    _add_simulation_args(p.add_argument_group("simulation (--simulate)"))
+    sub = p.add_subparsers(dest="command", parser_class=_Parser,
+                           metavar="{replay,record,import,calibrate,vkf,config,summary,report,ack,status,capture-now}")
+    _add_replay_parser(sub)
+    _add_record_parser(sub)
+    _add_vkf_parser(sub)
+    from cmsensord.importing.command import add_import_parser
+    add_import_parser(sub)
+    add_calibrate_parser(sub)
+    _add_config_parser(sub)
+    from cmsensord.report.command import add_report_parser
+    add_report_parser(sub)
+    from cmsensord.service.operator import add_operator_parsers
+    add_operator_parsers(sub)
+    _add_summary_parser(sub)
+    return p
+
+
+def _add_simulation_args(sim) -> None:
     sim.add_argument("--simulate", action="store_true",
                      help="run a simulated ADC board on a pty and the daemon on it")
     sim.add_argument("--scenario", default="degrading", help="machine scenario (default degrading)")
@@ -107,14 +125,17 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate or --config)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
-    sub = p.add_subparsers(dest="command", parser_class=_Parser,
-                           metavar="{replay,record,import,calibrate,vkf,config,summary,report,ack,status,capture-now}")
-    _add_replay_parser(sub)
+
+
+def _add_record_parser(sub) -> None:
     rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
     rec.add_argument("--baud", type=int, default=921600)
     rec.add_argument("--duration", dest="sub_duration", type=positive, help="seconds (default: until Ctrl-C)")
+
+
+def _add_vkf_parser(sub) -> None:
     v = sub.add_parser("vkf", help="replay a RAW capture and add the batch (zero-phase) Vold-Kalman "
                                    "orders (Tůma) beside the recursive ones")
     v.add_argument("capture", help="capture file in RAW mode with a tacho")
@@ -123,20 +144,18 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     v.add_argument("--bandwidth", type=positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
-    from cmsensord.importing.command import add_import_parser
-    add_import_parser(sub)
-    add_calibrate_parser(sub)
+
+
+def _add_config_parser(sub) -> None:
     c = sub.add_parser("config", help="print the default configuration (every key, commented)")
     c.add_argument("--default", action="store_true", required=True,
                    help="print config/default.yaml: start a site file from it")
-    from cmsensord.report.command import add_report_parser
-    add_report_parser(sub)
-    from cmsensord.service.operator import add_operator_parsers
-    add_operator_parsers(sub)
+
+
+def _add_summary_parser(sub) -> None:
     s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
     s.add_argument("mcap", help="MCAP file")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
-    return p
 
 
 def _add_replay_parser(sub) -> None:

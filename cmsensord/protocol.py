@@ -138,9 +138,7 @@ class Status:
     offset: tuple[float, ...]  # counts at 0 m/s^2, one per channel
 
 
-# ---------------------------------------------------------------------------
-# Encoding
-# ---------------------------------------------------------------------------
+# -- Encoding --------------------------------------------------------------
 
 def encode_frame(ftype: int, seq: int, t0: int, chan: int, flags: int, payload: bytes) -> bytes:
     """A complete frame (sync .. crc). seq is masked to u16 and t0 to u32."""
@@ -209,9 +207,7 @@ def encode_tacho(seq: int, t0: int, chan: int, edges: Sequence[int] | np.ndarray
     return encode_frame(FrameType.TACHO, seq, t0, chan, flags, payload)
 
 
-# ---------------------------------------------------------------------------
-# Payload decoding
-# ---------------------------------------------------------------------------
+# -- Payload decoding ------------------------------------------------------
 
 def status_mode_fs(payload: bytes) -> tuple[int, int] | None:
     """The board mode and fs a STATUS payload names (None: too short for them), without
@@ -315,9 +311,7 @@ def decode_tacho_many(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray
     return count, offsets, bad
 
 
-# ---------------------------------------------------------------------------
-# Receiving
-# ---------------------------------------------------------------------------
+# -- Receiving -------------------------------------------------------------
 
 def _zero_frames() -> dict[str, int]:
     return {name: 0 for name in _TYPE_NAMES.values()}
@@ -349,6 +343,20 @@ class LinkCounters:
         d["overruns"] = self.overruns
         d["frames_repeated"] = self.frames_repeated
         return d
+
+
+@dataclass(slots=True)
+class _Tally:
+    """A scan's receiver state (rules 3-4) and what it counted."""
+
+    last_seq: int | None
+    last_t0: int
+    last_unw: int
+    discarded: int = 0
+    rejects: int = 0
+    crc_fail: int = 0
+    lost: int = 0
+    overruns: int = 0
 
 
 class Decoder:
@@ -451,87 +459,84 @@ class Decoder:
         with the columns of each run of good back-to-back frames in their place, and the
         bytes of the buffer the runs' payloads are in.
 
-        The receiver's loop without the compiled kernel (with it, :meth:`_scan_kernel`): every
-        byte of the link passes through it, so the lookups are bound to locals and the counters
-        summed locally.
+        The receiver's loop without the compiled kernel (with it, :meth:`_scan_kernel`).
         """
         buf = self._buf
         n = len(buf)
         find = buf.find
-        unpack_hdr = _HDR.unpack_from
-        unpack_crc = _CRC.unpack_from
-        crc32 = zlib.crc32
-        types = _TYPE_BY_CODE
-        names = _TYPE_NAMES
-        new = tuple.__new__
-        counts = self.counters.frames
-        base = self._base
-        last_seq, last_t0, last_unw = self._last_seq, self._last_t0, self._last_t0_unwrapped
-        discarded = rejects = crc_fail = lost_total = overruns = 0
+        t = _Tally(self._last_seq, self._last_t0, self._last_t0_unwrapped)
         out: list = []      # frames, and the Columns of each run of good frames in its place
         pos = 0
-        runs = FrameRuns(bytes(buf), VERSION, len(types), MAX_PAYLOAD) if self.runs and n >= MIN_BYTES else None
+        runs = FrameRuns(bytes(buf), VERSION, len(_TYPE_BY_CODE), MAX_PAYLOAD) if self.runs and n >= MIN_BYTES else None
         with memoryview(buf) as mv:
             while True:
                 i = find(SYNC, pos)
                 if i < 0:
                     # No sync: keep only a trailing 0xA5 (it may be half a sync).
                     keep = 1 if (not final and n > pos and buf[n - 1] == 0xA5) else 0
-                    discarded += n - keep - pos
+                    t.discarded += n - keep - pos
                     pos = n - keep
                     break
-                discarded += i - pos
+                t.discarded += i - pos
                 pos = i
                 if runs is not None and (run := runs.take(pos)) is not None:
                     # good frames back to back: in one pass (cmsensord/frame_runs.py)
-                    cols, last_seq, last_t0, last_unw = run_columns(run, base, last_seq, last_t0, last_unw)
+                    cols, t.last_seq, t.last_t0, t.last_unw = run_columns(run, self._base, t.last_seq,
+                                                                          t.last_t0, t.last_unw)
                     out.append(cols)
-                    lost_total, overruns = self._count_run(cols, lost_total, overruns)
+                    self._count_run(cols, t)
                     pos = int(run.end_payload[-1]) + CRC_LEN
                     continue
-                if n - pos < HEADER_LEN:
-                    if not final:
-                        break
-                    # a truncated header at the end of the stream: not a frame (dropped below)
-                else:
-                    ver, code, seq, t0, chan, flags, ln = unpack_hdr(buf, pos + 2)
-                    ftype = types.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
-                    end_payload = pos + HEADER_LEN + ln
-                    end = end_payload + CRC_LEN
-                    if ftype is None:  # rule 1
-                        rejects += 1
-                    elif end > n:
-                        if not final:
-                            break  # rule 2: wait for the whole frame (at the end: not a frame)
-                    elif crc32(mv[pos + 2:end_payload]) != unpack_crc(buf, end_payload)[0]:
-                        crc_fail += 1  # rule 2: drop only the first sync byte
-                    else:
-                        if last_seq is None:
-                            lost, unw = 0, t0
-                        else:
-                            lost = (seq - last_seq - 1) & 0xFFFF  # rule 3
-                            unw = last_unw + (((t0 - last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
-                        last_seq, last_t0, last_unw = seq, t0, unw
-                        lost_total += lost
-                        if flags & FLAG_OVERRUN:
-                            overruns += 1
-                        counts[names[ftype]] += 1
-                        out.append(new(Frame, (ftype, seq, t0, chan, flags, bytes(mv[pos + HEADER_LEN:end_payload]),
-                                               unw, base + pos, lost)))
-                        pos = end
-                        continue
-                discarded += 1  # not a frame: drop its first sync byte and hunt on
-                pos += 1
-        self._done(pos, last_seq, last_t0, last_unw, discarded, rejects, crc_fail, lost_total, overruns)
+                step = self._candidate(mv, pos, final, t, out)
+                if not step:
+                    break   # rule 2: wait for the whole frame
+                pos += step
+        self._done(pos, t)
         return out, runs.data if runs is not None else b""
 
-    def _count_run(self, cols: Columns, lost_total: int, overruns: int) -> tuple[int, int]:
-        """A run's frames counted by type; ``lost_total`` and ``overruns`` with its own added."""
+    def _candidate(self, mv: memoryview, pos: int, final: bool, t: _Tally, out: list) -> int:
+        """The candidate at ``pos`` (a sync): a good frame is appended to ``out`` and its length
+        returned; 0 while it is incomplete and more may come; else 1 (not a frame: its first sync
+        byte is dropped, and counted in ``t``)."""
+        buf = self._buf
+        n = len(buf)
+        if n - pos >= HEADER_LEN:
+            ver, code, seq, t0, chan, flags, ln = _HDR.unpack_from(buf, pos + 2)
+            ftype = _TYPE_BY_CODE.get(code) if (ver == VERSION and ln <= MAX_PAYLOAD) else None
+            end_payload = pos + HEADER_LEN + ln
+            if ftype is None:  # rule 1
+                t.rejects += 1
+            elif end_payload + CRC_LEN > n:
+                if not final:
+                    return 0    # (at the end: not a frame)
+            elif zlib.crc32(mv[pos + 2:end_payload]) != _CRC.unpack_from(buf, end_payload)[0]:
+                t.crc_fail += 1  # rule 2: drop only the first sync byte
+            else:
+                if t.last_seq is None:
+                    lost, unw = 0, t0
+                else:
+                    lost = (seq - t.last_seq - 1) & 0xFFFF  # rule 3
+                    unw = t.last_unw + (((t0 - t.last_t0 + 0x80000000) & 0xFFFFFFFF) - 0x80000000)
+                t.last_seq, t.last_t0, t.last_unw = seq, t0, unw
+                t.lost += lost
+                t.overruns += bool(flags & FLAG_OVERRUN)
+                self.counters.frames[_TYPE_NAMES[ftype]] += 1
+                out.append(tuple.__new__(Frame, (ftype, seq, t0, chan, flags, bytes(mv[pos + HEADER_LEN:end_payload]),
+                                                 unw, self._base + pos, lost)))
+                return end_payload + CRC_LEN - pos
+        elif not final:
+            return 0
+        t.discarded += 1
+        return 1
+
+    def _count_run(self, cols: Columns, t: _Tally) -> None:
+        """A run's frames counted by type; its lost frames and overruns added to ``t``."""
         counts = self.counters.frames
         for code, k in enumerate(np.bincount(cols.code).tolist()):
             if k:
                 counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
-        return lost_total + int(cols.lost.sum()), overruns + int(np.count_nonzero(cols.flags & FLAG_OVERRUN))
+        t.lost += int(cols.lost.sum())
+        t.overruns += int(np.count_nonzero(cols.flags & FLAG_OVERRUN))
 
     def _kernel_frames(self, final: bool) -> tuple[list, bytes]:
         """:meth:`_scan_kernel` with the frames made by the kernel, as :meth:`_scan` returns them."""
@@ -552,27 +557,24 @@ class Decoder:
         for code, k in enumerate(r.by_code):
             if k:
                 counts[_TYPE_NAMES[_TYPE_BY_CODE[code]]] += k
-        self._done(r.consumed, r.last_seq, r.last_t0, r.last_unw, r.discarded, r.header_rejects,
-                   r.crc_failures, r.lost, r.overruns)
+        self._done(r.consumed, _Tally(r.last_seq, r.last_t0, r.last_unw, r.discarded, r.header_rejects,
+                                      r.crc_failures, r.lost, r.overruns))
         if isinstance(found, Columns):
             return [found], data
         return found or [], data
 
-    def _done(self, pos: int, last_seq: int | None, last_t0: int, last_unw: int, discarded: int,
-              rejects: int, crc_fail: int, lost: int, overruns: int) -> None:
+    def _done(self, pos: int, t: _Tally) -> None:
         """A scan's end: its ``pos`` bytes leave the buffer; the receiver's state and counters."""
         if pos:
             del self._buf[:pos]
         self._base += pos
-        self._last_seq = last_seq
-        self._last_t0 = last_t0
-        self._last_t0_unwrapped = last_unw
+        self._last_seq, self._last_t0, self._last_t0_unwrapped = t.last_seq, t.last_t0, t.last_unw
         c = self.counters
-        c.bytes_discarded += discarded
-        c.header_rejects += rejects
-        c.crc_failures += crc_fail
-        c.frames_lost += lost
-        c.overruns += overruns
+        c.bytes_discarded += t.discarded
+        c.header_rejects += t.rejects
+        c.crc_failures += t.crc_fail
+        c.frames_lost += t.lost
+        c.overruns += t.overruns
 
 
 def _make(cols: Columns, data: bytes) -> list[Frame]:
