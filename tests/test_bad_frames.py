@@ -7,12 +7,19 @@ the end of a 16-s stream, stamped where each read size put it."""
 
 from __future__ import annotations
 
+import fcntl
+import os
 import struct
+import termios
+import time
+import tty
 
 import pytest
 
 from cmsensord.protocol import Decoder, FrameType, encode_frame
-from test_read_size import board, same_at_every_read_size
+from cmsensord.sinks.mcap_sink import read_messages
+from processes import start_daemon, stop
+from test_read_size import board, by_topic, same_at_every_read_size
 from test_stream_events import replay
 
 
@@ -151,3 +158,90 @@ def test_a_bad_status_is_one_event_at_its_t0(mode):
     assert errors[0][1].endswith("STATUS payload: expected 28 bytes (20 + 8 x 1 channels), got 25")
     assert errors[1][1].endswith("with scale/offset nan/2048, not finite (and a scale not 0): the previous STATUS "
                                  "is kept")
+
+
+def written_one_by_one(stamps: list[int]) -> tuple[list[int], list[int]]:
+    """The events' rate limit, plainly (docs: at most 5 of a kind in 1 s of event time from the
+    first): of events at ``stamps``, the stamps of those written one by one, and the summaries'
+    counts."""
+    written, summaries, since, n = [], [], None, 0
+    for s in sorted(stamps):
+        if since is None or s - since >= 1_000_000_000:
+            if n > 5:
+                summaries.append(n - 5)
+            since, n = s, 0
+        n += 1
+        if n <= 5:
+            written.append(s)
+    if n > 5:
+        summaries.append(n - 5)
+    return written, summaries
+
+
+def flood(mode: str) -> tuple[bytes, list]:
+    """From 2 s to 12 s of a 16-s stream a third of the data frames come short and a quarter of
+    the TACHO frames with a byte too many: ~40 bad frames a second, reported by the frames' path
+    and the tacho's, which run at different points of a read."""
+    data_type = FrameType.RAW if mode == "raw" else FrameType.RMS
+
+    def change(i, f):
+        if not 50_000 <= f.t0 < 300_000:
+            return f
+        if f.type is data_type and i % 3 == 1:
+            return f._replace(payload=f.payload[:-100] if mode == "raw" else f.payload[:2])
+        if f.type is FrameType.TACHO and i % 4 == 3:
+            return f._replace(payload=f.payload + b"\x01")
+        return f
+
+    return rebuilt(board(mode, 16), change)
+
+
+@pytest.mark.parametrize("mode", ["raw", "rms"])
+def test_a_flood_of_bad_frames_is_summarised_alike_at_any_read_size(mode):
+    """:func:`flood`: the events written one by one are the first five of each second by stamp,
+    the rest summarised, at every read size (before: which ones and how many summaries followed
+    the reads, 63 / 105 / 99 records)."""
+    data, changed = flood(mode)
+    runs = same_at_every_read_size(data)
+    errors = [(s, m) for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+    want, summaries = written_one_by_one([f.t0 * 40_000 for f in changed])
+    assert len(changed) >= 300 and len(summaries) >= 9
+    assert [s for s, m in errors if "summarised" not in m] == want
+    assert [m["summarised"] for _, m in errors if "summarised" in m] == summaries
+    assert sum(m.get("summarised", 1) for _, m in errors) == len(changed)
+
+
+def test_a_flood_of_bad_frames_on_a_pty_is_summarised_as_its_replay(tmp_path):
+    """:func:`flood` (RAW) written to a pty in 997-byte pieces, the daemon on it: its /cm/events
+    are those of `cmsensord replay` of its capture, and of the Processor at every read size."""
+    data, changed = flood("raw")
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    d = start_daemon(tmp_path, os.ttyname(slave), "--capture", str(tmp_path / "cap.bin"))
+    try:
+        time.sleep(1.0)
+        for i in range(0, len(data), 997):
+            os.write(master, data[i:i + 997])
+            time.sleep(0.002)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and _unread(slave):
+            time.sleep(0.05)
+        time.sleep(1.5)
+    finally:
+        err = stop(d)
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0 and "Traceback" not in err, err
+    assert (tmp_path / "cap.bin").read_bytes() == data
+    live = [m for f in sorted((tmp_path / "logs").glob("*.mcap")) for t, _, m in read_messages(f) if t == "/cm/events"]
+    errors = [f"{m['kind']} | {m['message']}" for m in live if m["kind"] == "decode_error"]
+    assert sum(m.get("summarised", 1) for m in live if m["kind"] == "decode_error") == len(changed)
+    (tmp_path / "replay").mkdir()
+    assert errors == [e for e in replay(tmp_path / "replay", data) if e.startswith("decode_error")]
+    assert errors == [f"decode_error | {m['message']}" for _, m in by_topic(data, 997)["/cm/events"]
+                      if m["kind"] == "decode_error"]
+
+
+def _unread(fd: int) -> int:
+    """Bytes in the tty's input not read yet (by anyone with it open)."""
+    return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]

@@ -6,17 +6,21 @@ ones (status line, exit summary), counted by kind, logged to the journal at the
 level of its kind, and handed to ``on_event`` when one is given.  A producer
 that knows better (the sink about its own routine work) passes ``log_level``.
 
-Repeated events of one kind on one channel are rate-limited: at most
-``RATE_BURST`` in an interval of ``RATE_S`` of event time starting at the first;
-the ones after them within that interval are counted
-(their ``count`` fields summed) and written as one summary event of that kind
-with the next event of that kind after the interval, or at the end of the run
-(:meth:`EventLog.summarise`) — so where a summary lands depends on the stream
-only, not on how it was read (live and replay write the same).  Every occurrence
-stays in :attr:`EventLog.counts`.  Kinds in
-``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears,
-failures and decisions' notes, the alarm manager's transitions, which its
-delays already bound) are never held back.
+Repeated events of one kind on one channel are rate-limited
+(:mod:`cmsensord.monitor.event_rate`): at most ``RATE_BURST`` in an interval of ``RATE_S``
+of event time starting at the first; the ones after them within that interval are counted
+(their ``count`` fields summed) and written as one summary event of that kind.  The limit
+of ``/cm/events`` and ``/cm/log`` is applied as the records are written, in stamp order (a
+stamp's records in the order of kind, channel and message), so which events are written one
+by one and what the summaries say depend on the stream only, not on how it was read (live
+and replay write the same); a summary is written where its interval ends (before the first
+record stamped past it), or at a board reset or the end of the run.  The journal, the recent
+list and ``on_event`` get the events as they come, limited in that order (their summaries
+with the next event of the kind after the interval, or at the end of the run:
+:meth:`EventLog.summarise`).  Every occurrence stays in :attr:`EventLog.counts`.  Kinds in
+``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears, failures and
+decisions' notes, the alarm manager's transitions, which its delays already bound) are
+never held back.
 
 ``/cm/events`` goes forward in time: an event carries the stamp of what it is
 about (a frame, a tacho edge, a decision), and parts of the chain report late
@@ -29,7 +33,7 @@ of the run.  Events of the wall clock, not of the stream (``WALL_KINDS``: start
 and stop, the link, the reader, the queue, the disk) are written at once.  A
 record that still comes after a later one was written (or stamped before its
 time segment started) is written at the newest stamp instead.  The journal,
-the recent list and ``on_event`` get every event at once.
+the recent list and ``on_event`` get the events they are told at once.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from typing import Any
 
 from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
+from cmsensord.monitor.event_rate import RateLimit, Summary
 
 log = logging.getLogger("cmsensord")
 
@@ -59,9 +64,6 @@ LOG_LEVEL = {
     "alarm_ack": logging.WARNING,
 }
 
-#: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
-RATE_S = 1.0
-RATE_BURST = 5
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change",
@@ -77,17 +79,6 @@ WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_sta
 MAX_PENDING = 1000
 #: a record stamped further than this past the processed stream waits as if stamped there
 AHEAD_S = 600.0
-
-
-@dataclass
-class _Held:
-    """Events of one (kind, channel) held back in the interval starting at ``since_ns``."""
-
-    since_ns: int
-    written: int = 1        # written one by one in the interval
-    n: int = 0
-    count: int = 0          # their ``count`` fields, summed
-    last_ns: int = 0
 
 
 @dataclass
@@ -124,7 +115,8 @@ class EventLog:
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
-        self._held: dict[tuple[str, str | None], _Held] = {}
+        self._told = RateLimit()          # as events come: the journal, recent, on_event, WALL_KINDS
+        self._written = RateLimit()       # as records are written, in stamp order: /cm/events
 
     def emit(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, *,
              log_level: int | None = None, **extra: Any) -> None:
@@ -136,68 +128,58 @@ class EventLog:
             self._write(ev.kind, ev.channel, ev.message, ev.stamp_ns, ev.fields, None)
 
     def summarise(self, now_ns: int | None = None, *, final: bool = False) -> None:
-        """Summary events of the intervals over at ``now_ns`` (the default stamp), or of all
-        (``final``: the end of the run)."""
-        if not self._held:
-            return
+        """The journal's summaries of the intervals over at ``now_ns`` (the default stamp), or of
+        all (``final``: the end of the run); /cm/events gets its own as its records are written."""
         now = self.default_stamp() if now_ns is None else now_ns
-        for key, h in list(self._held.items()):
-            if final or not 0 <= now - h.since_ns < RATE_S * 1e9:
-                self._close(key, h)
-
-    def _close(self, key: tuple[str, str | None], h: _Held) -> None:
-        del self._held[key]
-        if h.n:
-            kind, channel = key
-            extra: dict[str, Any] = {"summarised": h.n}
-            if h.count:
-                extra["count"] = h.count
-            self._record(kind, channel, f"{h.n} more {kind} event(s) in "
-                         f"{(h.last_ns - h.since_ns) / 1e9:.3g} s" + (f" ({h.count} in all)" if h.count else "")
-                         + f": at most {RATE_BURST} per {RATE_S:g} s are written one by one", h.last_ns, extra, None)
+        for s in self._told.close_all() if final else self._told.over(now):
+            self._tell_summary(s)
 
     def _write(self, kind: str, channel: str | None, message: str, stamp_ns: int | None,
                extra: dict[str, Any], log_level: int | None) -> None:
         stamp = self.default_stamp() if stamp_ns is None else stamp_ns
         self.counts[kind] = self.counts.get(kind, 0) + 1
+        told = True
         if kind not in UNLIMITED:
-            key = (kind, channel)
-            h = self._held.get(key)
-            if h is not None and 0 <= stamp - h.since_ns < RATE_S * 1e9:
-                if h.written < RATE_BURST:
-                    h.written += 1
-                    h.last_ns = max(h.last_ns, stamp)
-                    self._record(kind, channel, message, stamp, extra, log_level)
-                    return
-                h.n += 1
-                h.count += int(extra.get("count", 0) or 0)
-                h.last_ns = max(h.last_ns, stamp)
-                return
-            if h is not None:
-                self._close(key, h)
-            self._held[key] = _Held(stamp, last_ns=stamp)
-        self._record(kind, channel, message, stamp, extra, log_level)
-
-    def _record(self, kind: str, channel: str | None, message: str, stamp_ns: int,
-                extra: dict[str, Any], log_level: int | None) -> None:
-        m = messages.event(stamp_ns, kind, channel, message, extra)
+            closed, told = self._told.admit(kind, channel, stamp, int(extra.get("count", 0) or 0))
+            if closed is not None:
+                self._tell_summary(closed)
+        m = messages.event(stamp, kind, channel, message, extra)
         level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind in WALL_KINDS:
-            self._put(m, m.stamp_ns, level)
+            if told:
+                self._put(m, m.stamp_ns, level)
         else:
-            self._n += 1
-            key = min(stamp_ns, self.default_stamp() + int(AHEAD_S * 1e9))
-            heapq.heappush(self._pending, (key, self._n, m, level))
+            self._hold(m, level)
+        if told:
+            self._tell(m, level)
+
+    def _tell_summary(self, s: Summary) -> None:
+        """A summary of the events not told: to the journal (and the sink, for a WALL_KINDS kind)."""
+        m = messages.event(s.last_ns, s.kind, s.channel, s.message(), s.fields())
+        level = LOG_LEVEL.get(s.kind, logging.INFO)
+        if s.kind in WALL_KINDS:
+            self._put(m, m.stamp_ns, level)
+        self._tell(m, level)
+
+    def _hold(self, m: messages.Message, level: int) -> None:
+        """A record of the stream into the reorder buffer (written at once after the run)."""
+        self._n += 1
+        key = min(m.stamp_ns, self.default_stamp() + int(AHEAD_S * 1e9))
+        heapq.heappush(self._pending, (key, self._n, m, level))
         if not self.hold:
             self.flush()
         elif len(self._pending) > MAX_PENDING:
             self._write_upto(self._pending[0][0])
+
+    def _tell(self, m: messages.Message, level: int) -> None:
+        ev = m.msg
         if self.watch is not None:
-            self.watch(kind, channel, message, stamp_ns, extra)
-        self.recent.append(m.msg)
-        log.log(level, "%s: %s", kind, message)
+            extra = {k: v for k, v in ev.items() if k not in ("kind", "channel", "message")}
+            self.watch(ev["kind"], ev["channel"], ev["message"], m.stamp_ns, extra)
+        self.recent.append(ev)
+        log.log(level, "%s: %s", ev["kind"], ev["message"])
         if self.on_event is not None:
-            self.on_event(m.msg)
+            self.on_event(ev)
 
     def release(self, processed_ns: int) -> None:
         """Write the records at least ``HOLD_S`` before ``processed_ns`` (a decision's
@@ -215,8 +197,36 @@ class EventLog:
     def _write_upto(self, upto_ns: int | None) -> None:
         pending = self._pending
         while pending and (upto_ns is None or pending[0][0] <= upto_ns):
-            stamp, _, m, level = heapq.heappop(pending)
-            self._put(m, stamp, level)
+            key = pending[0][0]
+            group = [heapq.heappop(pending)]
+            while pending and pending[0][0] == key:
+                group.append(heapq.heappop(pending))
+            self._write_group(key, group)
+        if upto_ns is None:
+            for s in self._written.close_all():
+                self._put_summary(s)
+
+    def _write_group(self, key: int, group: list[tuple[int, int, messages.Message, int]]) -> None:
+        """The records of one stamp, in the order they came; which of the rate-limited ones are
+        written is decided in the order of kind, channel and message (the stream's, not the reads')."""
+        for s in self._written.over(key):
+            self._put_summary(s)
+        skip = set()
+        for _, n, m, _ in sorted(group, key=_by_content):
+            ev = m.msg
+            if ev["kind"] not in UNLIMITED:
+                closed, ok = self._written.admit(ev["kind"], ev["channel"], m.stamp_ns, int(ev.get("count", 0) or 0))
+                if closed is not None:
+                    self._put_summary(closed)
+                if not ok:
+                    skip.add(n)
+        for _, n, m, level in group:
+            if n not in skip:
+                self._put(m, key, level)
+
+    def _put_summary(self, s: Summary) -> None:
+        self._put(messages.event(s.last_ns, s.kind, s.channel, s.message(), s.fields()), s.last_ns,
+                  LOG_LEVEL.get(s.kind, logging.INFO))
 
     def _put(self, m: messages.Message, stamp: int, level: int) -> None:
         """The event at ``stamp`` (or the newest stamp written), and its foxglove.Log copy."""
@@ -225,3 +235,8 @@ class EventLog:
         ev = m.msg
         self.sink.write(*messages.log(at, level, ev["kind"], ev.get("channel"), ev["message"]))
         self._newest = at
+
+
+def _by_content(entry: tuple[int, int, messages.Message, int]) -> tuple[str, str, str]:
+    ev = entry[2].msg
+    return ev["kind"], ev["channel"] or "", ev["message"]
