@@ -187,8 +187,10 @@ def live(tmp: Path, sim_args: list[str], kernels: bool, warmup: float, seconds: 
 
 
 def replay(tmp: Path, cap: Path, kernels: bool, env: dict[str, str]) -> dict:
-    """``cmsensord replay`` of the capture in a fresh process: CPU of the replay, board seconds."""
+    """``cmsensord replay`` of the capture in a fresh process: CPU of the replay, board seconds.
+    The live daemon's probes (``LIVE_PROBE_*`` in the environment) are not the replay's."""
     report = tmp / "replay.json"
+    env = {k: v for k, v in env.items() if not k.startswith("LIVE_PROBE_")}
     p = subprocess.run([sys.executable, PROBE, str(report), *([] if kernels else ["--no-kernels"]),
                         "--", "replay", str(cap), "--out", str(tmp / "replay")],
                        capture_output=True, text=True, env=env)
