@@ -50,6 +50,8 @@ __all__ = ["Captures"]
 
 #: seconds the ring holds beyond pre_s + post_s: how late a trigger may come (decisions wait for the tacho)
 HOLD_S = 20.0
+#: the longest a complete RAW capture waits for the tacho to cover its window [s of board time]
+MAX_WAIT_S = 10.0
 #: JSON bytes per sample counted against max_mb_per_hour
 BYTES_PER_SAMPLE = 12
 #: the envelope spectrum is kept up to this frequency [Hz]
@@ -202,6 +204,13 @@ class Captures:
                    f"{self.cfg.max_mb_per_hour:g})"
         return None
 
+    def owed(self) -> int | None:
+        """The earliest stamp of the events still to come from here (a capture in progress, an
+        event not handed over yet), or None: the event log writes nothing from it on."""
+        stamps = [p.stamp_ns for p in self.pending] + [e.stamp_ns for e in self.out
+                                                     if isinstance(e, Event) and e.stamp_ns is not None]
+        return min(stamps, default=None)
+
     def _event(self, kind: str, channel: str | None, message: str, stamp_ns: int, **fields: Any) -> None:
         self.out.append(Event(kind, channel, message, stamp_ns, fields))
 
@@ -250,7 +259,13 @@ class Captures:
                 self._trigger(None, tick, self.stamp_of(tick * self.ticks),
                               {"kind": "periodic", "message": f"every {self.cfg.every_s:g} s"})
 
-    def _complete(self) -> list[Any]:
+    def _speed_waits(self, p: _Pending, end: int) -> bool:
+        """Whether a complete RAW capture waits for the tacho to cover its window (its marks are
+        read off the tacho's speed there), at most MAX_WAIT_S past its end."""
+        return (self.source == "raw" and self.marks is not None and self.marks.waits(p.end)
+                and end - p.end <= MAX_WAIT_S * self.rate)
+
+    def _complete(self, final: bool = False) -> list[Any]:
         ring = self.ring
         assert ring is not None
         end, oldest = ring.newest_end, ring.oldest
@@ -261,7 +276,7 @@ class Captures:
                     "its first samples are no longer held"
                 self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} "
                             f"skipped: {why}", p.stamp_ns)
-            elif end is not None and end >= p.end:
+            elif end is not None and end >= p.end and (final or not self._speed_waits(p, end)):
                 self.out.extend(self._messages(p, ring.window(p.start, p.end, p.column)))
             else:
                 still.append(p)
@@ -271,7 +286,7 @@ class Captures:
 
     def finish(self) -> list[Any]:
         """End of the stream: the captures complete by now are written, those still open skipped."""
-        done = self._complete() if self.ring is not None else []
+        done = self._complete(final=True) if self.ring is not None else []
         for p in self.pending:
             self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} skipped: "
                         "the stream ended before its post_s", p.stamp_ns)

@@ -48,6 +48,11 @@ class CaptureMarks:
                 return float(np.mean(hz[ok])), "tacho"
         return (self.rpm / 60.0, "config") if self.rpm else (None, None)
 
+    def waits(self, b: int) -> bool:
+        """Whether the tacho's edges do not yet cover the board samples up to ``b``."""
+        tacho = self.tacho()
+        return tacho is not None and tacho.covered_until < b
+
     def fields(self, channel: str, a: int, b: int, nyquist_hz: float) -> dict[str, Any]:
         """The capture spectrum's fields: ``shaft_speed_rpm``, ``speed_source`` and ``marks``
         (absent when the speed is unknown)."""

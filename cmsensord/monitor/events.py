@@ -112,6 +112,9 @@ class EventLog:
         self._n = 0
         #: called with (kind, channel, message, stamp_ns, fields) of every event written (captures)
         self.watch: Callable[[str, str | None, str, int, dict], None] | None = None
+        #: the earliest stamp of events a part of the chain still owes (a capture in progress is
+        #: stamped at its trigger): :meth:`release` writes none at or after it
+        self.owed: Callable[[], int | None] = lambda: None
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
@@ -183,12 +186,18 @@ class EventLog:
 
     def release(self, processed_ns: int) -> None:
         """Write the records at least ``HOLD_S`` before ``processed_ns`` (a decision's
-        stamp; live, the wall clock while no frames come), in stamp order."""
-        self._write_upto(processed_ns - int(HOLD_S * 1e9))
+        stamp; live, the wall clock while no frames come) and before what is :attr:`owed`,
+        in stamp order."""
+        self._write_upto(self._upto(processed_ns))
 
     def due(self, processed_ns: int) -> bool:
         """Whether :meth:`release` at ``processed_ns`` would write a record."""
-        return bool(self._pending) and self._pending[0][0] <= processed_ns - int(HOLD_S * 1e9)
+        return bool(self._pending) and self._pending[0][0] <= self._upto(processed_ns)
+
+    def _upto(self, processed_ns: int) -> int:
+        upto = processed_ns - int(HOLD_S * 1e9)
+        owed = self.owed()
+        return upto if owed is None else min(upto, owed - 1)
 
     def flush(self) -> None:
         """Write every waiting record, in stamp order."""

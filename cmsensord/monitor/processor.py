@@ -113,7 +113,7 @@ class Processor(Figures):
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
             from cmsensord.monitor.capture_marks import CaptureMarks
             self.captures = Captures(cfg.capture, self.clock.stamp_ns, CaptureMarks(cfg, lambda: self.shaft.tacho))
-            self.log.watch = self.captures.watch
+            self.log.watch, self.log.owed = self.captures.watch, self.captures.owed
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
