@@ -94,14 +94,14 @@ def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subproce
                  stderr=subprocess.PIPE, text=True)
 
 
-def board_then_daemon(tmp_path, *board_args) -> dict:
+def board_then_daemon(tmp_path, *board_args, config: str = "") -> dict:
     """firmware_sim on a pty (``board_args``; published at tmp_path/ttyBOARD, with flow control,
     so a daemon slow to start loses no byte) and the daemon on it, its bytes captured to
-    tmp_path/cap.bin, until the board has sent everything: the board's stats.  The daemon
-    exited 0 without a traceback."""
+    tmp_path/cap.bin, until the board has sent everything: the board's stats.  ``config``: more
+    YAML for the daemon.  The daemon exited 0 without a traceback."""
     link = tmp_path / "ttyBOARD"
     sim = start_board(*board_args, "--link", str(link), "--flow-control")
-    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"))
+    d = start_daemon(tmp_path, link, "--capture", str(tmp_path / "cap.bin"), config=config)
     stats = json.loads(sim.stdout.readline())["stats"]          # the board has sent everything
     time.sleep(1.5)
     err = stop(d)

@@ -3,14 +3,19 @@
 :class:`Captures` holds, per stream (RAW samples at fs, or in RMS mode the block RMS
 at fs / block length), a bounded ring of the last ``pre_s + post_s + HOLD_S``
 seconds of every channel, indexed by board sample (RAW: the sample counter t0;
-RMS: t0 / block length). An event record whose kind is in ``capture.triggers``
-(:meth:`watch`, called by the event log for every event written) or a periodic
-tick every ``capture.every_s`` of board time starts a capture of its channel (of
-every channel for an event without one): the samples from ``pre_s`` before the
-trigger's board sample to ``post_s`` after it, written once the stream has passed
-its end (:meth:`raw`, :meth:`rms`), as three messages stamped at the trigger
+RMS: t0 / block length), and beyond it, up to ``MAX_KEPT_BYTES``, the samples a trigger
+not taken yet may need. An event record whose kind is in ``capture.triggers``
+(:meth:`watch`, called by the event log for every event it writes, in stamp order) or a
+periodic tick every ``capture.every_s`` of board time (queued as the samples pass it and
+taken by :meth:`settle`, which the event log calls before it writes the records from a
+stamp on) starts a capture of its channel (of every channel for an event without one), so
+ticks and events are taken in stamp order whatever the reads: the samples from ``pre_s``
+before the trigger's board sample to ``post_s`` after it, written once the stream has passed
+its end (:meth:`raw`, :meth:`rms`; in RAW mode also once the tacho covers it, at most
+``MAX_WAIT_S`` later, as its spectra are marked at the speed there), as three messages stamped at the trigger
 (:mod:`cmsensord.sinks.capture_schema`) in one :class:`MessageGroup` (one chunk of the log:
-after a crash the capture is complete or absent). A capture starting within
+after a crash the capture is complete or absent); until then the event log writes no event
+from the trigger's stamp on (:meth:`owed`). A capture starting within
 ``min_interval_s`` of the channel's last one, one whose size would exceed
 ``max_mb_per_hour`` in the hour of board time, one whose ``pre_s`` reaches back
 before the stream's first sample (refused at once: it does not count as the
@@ -52,6 +57,11 @@ __all__ = ["Captures"]
 HOLD_S = 20.0
 #: the longest a complete RAW capture waits for the tacho to cover its window [s of board time]
 MAX_WAIT_S = 10.0
+#: the most the ring holds beyond its capacity for triggers not taken yet (a large read's samples
+#: come before the decisions that may trigger on them) [bytes]
+MAX_KEPT_BYTES = 32e6
+#: a stamp past any stream's: the event log released to the end
+_END = 1 << 62
 #: JSON bytes per sample counted against max_mb_per_hour
 BYTES_PER_SAMPLE = 12
 #: the envelope spectrum is kept up to this frequency [Hz]
@@ -70,17 +80,22 @@ class _Pending:
 
 
 class _Ring:
-    """The last ``capacity`` samples of C channels, by board sample index; lost samples NaN."""
+    """The last ``capacity`` samples of C channels, by board sample index; lost samples NaN.
+    Samples from ``keep_from`` on stay beyond that, up to ``most`` samples in all."""
 
-    def __init__(self, capacity: int) -> None:
+    def __init__(self, capacity: int, most: int) -> None:
         self.capacity = capacity
+        self.most = max(capacity, most)
         self.blocks: deque[tuple[int, np.ndarray]] = deque()
         self.held = 0
 
-    def add(self, first: int, x: np.ndarray) -> None:
+    def add(self, first: int, x: np.ndarray, keep_from: int | None = None) -> None:
         self.blocks.append((first, x.astype(np.float32)))
         self.held += len(x)
         while self.held - len(self.blocks[0][1]) >= self.capacity:
+            head, y = self.blocks[0]
+            if keep_from is not None and head + len(y) > keep_from and self.held <= self.most:
+                break
             self.held -= len(self.blocks.popleft()[1])
 
     @property
@@ -118,7 +133,9 @@ class Captures:
         self.last_ns: dict[str, int] = {}
         self.budget: deque[tuple[int, int]] = deque()             # (stamp_ns, bytes) of the last hour
         self.next_tick: int | None = None
+        self.ticks_due: deque[tuple[int, int]] = deque()          # (index, stamp_ns) of ticks not taken yet
         self.first_idx: int | None = None                         # the stream's first index
+        self.settled_ns: int | None = None                        # triggers up to it are taken
         self.out: list[Any] = []
 
     # ---- triggers ------------------------------------------------------------
@@ -233,9 +250,12 @@ class Captures:
         if self.ring is not None and (source, channels, rate) == (self.source, self.channels, self.rate):
             return
         self.source, self.channels, self.rate, self.ticks = source, list(channels), rate, ticks
-        self.ring = _Ring(int((self.cfg.pre_s + self.cfg.post_s + HOLD_S) * rate))
+        self.ring = _Ring(int((self.cfg.pre_s + self.cfg.post_s + HOLD_S) * rate),
+                          int(MAX_KEPT_BYTES / (4 * max(1, len(channels)))))
+        self.settled_ns = None
         self.anchors.clear()
         self.next_tick = None
+        self.ticks_due.clear()
         self.first_idx = None
         for p in self.pending:
             self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} skipped: "
@@ -248,16 +268,34 @@ class Captures:
         if self.first_idx is None:
             self.first_idx = idx
         self.anchors.append((idx, stamp))
-        self.ring.add(idx, x)
+        self.ring.add(idx, x, self._keep_from())
         if self.cfg.every_s > 0:
             step = round(self.cfg.every_s * self.rate)
             if self.next_tick is None:
                 self.next_tick = idx + step
             while self.next_tick < idx + len(x):
-                tick = self.next_tick
+                self.ticks_due.append((self.next_tick, self.stamp_of(self.next_tick * self.ticks)))
                 self.next_tick += step
-                self._trigger(None, tick, self.stamp_of(tick * self.ticks),
-                              {"kind": "periodic", "message": f"every {self.cfg.every_s:g} s"})
+
+    def _keep_from(self) -> int | None:
+        """The first sample a capture may still need: its pre_s before the earliest trigger
+        not taken yet (the ticks due, the events the log has not written), or a pending start."""
+        starts = [p.start for p in self.pending]
+        if self.ticks_due:
+            starts.append(self.ticks_due[0][0] - round(self.cfg.pre_s * self.rate))
+        if self.settled_ns is not None and (idx := self._index_of(self.settled_ns)) is not None:
+            starts.append(idx - round(self.cfg.pre_s * self.rate))
+        return min(starts, default=None)
+
+    def settle(self, upto_ns: int | None) -> None:
+        """The periodic ticks stamped up to ``upto_ns`` (None: all) start their captures: called by
+        the event log before it writes the records from there on, so ticks and events trigger in
+        stamp order (a tick first at one stamp), whatever the reads."""
+        if upto_ns is not None and (self.settled_ns is None or upto_ns > self.settled_ns):
+            self.settled_ns = upto_ns
+        while self.ticks_due and (upto_ns is None or self.ticks_due[0][1] <= upto_ns):
+            tick, stamp = self.ticks_due.popleft()
+            self._trigger(None, tick, stamp, {"kind": "periodic", "message": f"every {self.cfg.every_s:g} s"})
 
     def _speed_waits(self, p: _Pending, end: int) -> bool:
         """Whether a complete RAW capture waits for the tacho to cover its window (its marks are
@@ -284,15 +322,24 @@ class Captures:
         out, self.out = self.out, []
         return out
 
-    def finish(self) -> list[Any]:
-        """End of the stream: the captures complete by now are written, those still open skipped."""
-        done = self._complete(final=True) if self.ring is not None else []
+    def finish(self, emit: Callable[[list[Any]], object], release: Callable[[int], None]) -> None:
+        """End of the stream: every trigger taken and every capture complete by now written, in
+        stamp order (``emit`` hands the event log what it makes, ``release`` lets the log write
+        on to the next capture owed); those still open are skipped."""
+        release(_END)
+        while self.ring is not None and (self.pending or self.out):
+            before = len(self.pending)
+            out = self._complete(final=True)
+            if not out and len(self.pending) == before:
+                break                           # the ones left end past the stream
+            emit(out)
+            release(_END)
         for p in self.pending:
             self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} skipped: "
                         "the stream ended before its post_s", p.stamp_ns)
         self.pending.clear()
         out, self.out = self.out, []
-        return done + out
+        emit(out)
 
     def _messages(self, p: _Pending, x: np.ndarray) -> list[Any]:
         wave_t, spec_t, env_t = capture_topics(p.channel)

@@ -33,7 +33,10 @@ of the run.  Events of the wall clock, not of the stream (``WALL_KINDS``: start
 and stop, the link, the reader, the queue, the disk) are written at once.  A
 record that still comes after a later one was written (or stamped before its
 time segment started) is written at the newest stamp instead.  The journal,
-the recent list and ``on_event`` get the events they are told at once.
+the recent list and ``on_event`` get the events they are told at once; ``watch`` (the
+captures' triggers) gets the records as they are written, in stamp order, after ``settle``
+has taken the stream's own triggers up to their stamp, and nothing is released at or
+after a stamp a part of the chain still ``owed`` (a capture in progress).
 """
 
 from __future__ import annotations
@@ -110,11 +113,15 @@ class EventLog:
         self.hold = True                  # False: records are written at once (after the run)
         self._pending: list[tuple[int, int, messages.Message, int]] = []
         self._n = 0
-        #: called with (kind, channel, message, stamp_ns, fields) of every event written (captures)
+        #: called with (kind, channel, message, stamp_ns, fields) of every event written, in the
+        #: order written (captures: their triggers)
         self.watch: Callable[[str, str | None, str, int, dict], None] | None = None
         #: the earliest stamp of events a part of the chain still owes (a capture in progress is
         #: stamped at its trigger): :meth:`release` writes none at or after it
         self.owed: Callable[[], int | None] = lambda: None
+        #: called with a stamp (None: all) before records from it on are written: the triggers
+        #: of the stream up to it are taken (captures' periodic ticks), in order with the events
+        self.settle: Callable[[int | None], None] = lambda upto_ns: None
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
@@ -176,9 +183,6 @@ class EventLog:
 
     def _tell(self, m: messages.Message, level: int) -> None:
         ev = m.msg
-        if self.watch is not None:
-            extra = {k: v for k, v in ev.items() if k not in ("kind", "channel", "message")}
-            self.watch(ev["kind"], ev["channel"], ev["message"], m.stamp_ns, extra)
         self.recent.append(ev)
         log.log(level, "%s: %s", ev["kind"], ev["message"])
         if self.on_event is not None:
@@ -188,25 +192,33 @@ class EventLog:
         """Write the records at least ``HOLD_S`` before ``processed_ns`` (a decision's
         stamp; live, the wall clock while no frames come) and before what is :attr:`owed`,
         in stamp order."""
-        self._write_upto(self._upto(processed_ns))
+        self._write_upto(processed_ns - int(HOLD_S * 1e9), floored=True)
 
     def due(self, processed_ns: int) -> bool:
         """Whether :meth:`release` at ``processed_ns`` would write a record."""
-        return bool(self._pending) and self._pending[0][0] <= self._upto(processed_ns)
+        return bool(self._pending) and self._pending[0][0] <= self._floor(processed_ns - int(HOLD_S * 1e9))
 
-    def _upto(self, processed_ns: int) -> int:
-        upto = processed_ns - int(HOLD_S * 1e9)
+    def _floor(self, upto_ns: int) -> int:
         owed = self.owed()
-        return upto if owed is None else min(upto, owed - 1)
+        return upto_ns if owed is None else min(upto_ns, owed - 1)
 
     def flush(self) -> None:
         """Write every waiting record, in stamp order."""
         self._write_upto(None)
 
-    def _write_upto(self, upto_ns: int | None) -> None:
+    def _write_upto(self, upto_ns: int | None, floored: bool = False) -> None:
+        """The records up to ``upto_ns`` (None: all), in stamp order, the stream's triggers before
+        each settled first; ``floored``: none at or after what is :attr:`owed`."""
         pending = self._pending
-        while pending and (upto_ns is None or pending[0][0] <= upto_ns):
+        while True:
+            limit = self._floor(upto_ns) if floored and upto_ns is not None else upto_ns
+            if not pending or (limit is not None and pending[0][0] > limit):
+                self.settle(limit)
+                break
             key = pending[0][0]
+            self.settle(key)
+            if floored and upto_ns is not None and key > self._floor(upto_ns):
+                continue                        # a trigger before it started a capture: owed
             group = [heapq.heappop(pending)]
             while pending and pending[0][0] == key:
                 group.append(heapq.heappop(pending))
@@ -244,6 +256,9 @@ class EventLog:
         ev = m.msg
         self.sink.write(*messages.log(at, level, ev["kind"], ev.get("channel"), ev["message"]))
         self._newest = at
+        if self.watch is not None:
+            extra = {k: v for k, v in ev.items() if k not in ("kind", "channel", "message")}
+            self.watch(ev["kind"], ev["channel"], ev["message"], m.stamp_ns, extra)
 
 
 def _by_content(entry: tuple[int, int, messages.Message, int]) -> tuple[str, str, str]:

@@ -113,7 +113,8 @@ class Processor(Figures):
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
             from cmsensord.monitor.capture_marks import CaptureMarks
             self.captures = Captures(cfg.capture, self.clock.stamp_ns, CaptureMarks(cfg, lambda: self.shaft.tacho))
-            self.log.watch, self.log.owed = self.captures.watch, self.captures.owed
+            self.log.watch, self.log.owed, self.log.settle = self.captures.watch, self.captures.owed, \
+                self.captures.settle
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
@@ -313,7 +314,7 @@ class Processor(Figures):
         self._release_decisions(final=True)
         self._out(self.indicators.take(None))
         if self.captures is not None:
-            self._out(self.captures.finish())
+            self.captures.finish(self._out, self.log.release)
         self.log.summarise(final=True)
         self.log.flush()
         self.log.hold = False
