@@ -136,6 +136,7 @@ class Captures:
         self.ticks_due: deque[tuple[int, int]] = deque()          # (index, stamp_ns) of ticks not taken yet
         self.first_idx: int | None = None                         # the stream's first index
         self.settled_ns: int | None = None                        # triggers up to it are taken
+        self.settled_idx: int | None = None                       # ... its board index
         self.out: list[Any] = []
 
     # ---- triggers ------------------------------------------------------------
@@ -252,7 +253,7 @@ class Captures:
         self.source, self.channels, self.rate, self.ticks = source, list(channels), rate, ticks
         self.ring = _Ring(int((self.cfg.pre_s + self.cfg.post_s + HOLD_S) * rate),
                           int(MAX_KEPT_BYTES / (4 * max(1, len(channels)))))
-        self.settled_ns = None
+        self.settled_ns = self.settled_idx = None
         self.anchors.clear()
         self.next_tick = None
         self.ticks_due.clear()
@@ -283,8 +284,8 @@ class Captures:
         starts = [p.start for p in self.pending]
         if self.ticks_due:
             starts.append(self.ticks_due[0][0] - round(self.cfg.pre_s * self.rate))
-        if self.settled_ns is not None and (idx := self._index_of(self.settled_ns)) is not None:
-            starts.append(idx - round(self.cfg.pre_s * self.rate))
+        if self.settled_idx is not None:
+            starts.append(self.settled_idx - round(self.cfg.pre_s * self.rate))
         return min(starts, default=None)
 
     def settle(self, upto_ns: int | None) -> None:
@@ -292,7 +293,7 @@ class Captures:
         the event log before it writes the records from there on, so ticks and events trigger in
         stamp order (a tick first at one stamp), whatever the reads."""
         if upto_ns is not None and (self.settled_ns is None or upto_ns > self.settled_ns):
-            self.settled_ns = upto_ns
+            self.settled_ns, self.settled_idx = upto_ns, self._index_of(upto_ns)
         while self.ticks_due and (upto_ns is None or self.ticks_due[0][1] <= upto_ns):
             tick, stamp = self.ticks_due.popleft()
             self._trigger(None, tick, stamp, {"kind": "periodic", "message": f"every {self.cfg.every_s:g} s"})
