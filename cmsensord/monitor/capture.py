@@ -11,8 +11,8 @@ taken by :meth:`settle`, which the event log calls before it writes the records 
 stamp on) starts a capture of its channel (of every channel for an event without one), so
 ticks and events are taken in stamp order whatever the reads: the samples from ``pre_s``
 before the trigger's board sample to ``post_s`` after it, written once the stream has passed
-its end (:meth:`raw`, :meth:`rms`; in RAW mode also once the tacho covers it, at most
-``MAX_WAIT_S`` later, as its spectra are marked at the speed there), as three messages stamped at the trigger
+its end (:meth:`raw`, :meth:`rms`; in RAW mode also once the tacho covers it, at most the
+indicators' ``MAX_WAIT_S`` later, as its spectra are marked at the speed there), as three messages stamped at the trigger
 (:mod:`cmsensord.sinks.capture_schema`) in one :class:`MessageGroup` (one chunk of the log:
 after a crash the capture is complete or absent); until then the event log writes no event
 from the trigger's stamp on (:meth:`owed`). A capture starting within
@@ -48,6 +48,7 @@ from cmsensord.dsp.capture_spectra import amplitude_spectrum
 from cmsensord.dsp.indicators.envelope import default_band, envelope, envelope_spectrum
 from cmsensord.monitor.capture_marks import CaptureMarks
 from cmsensord.monitor.events import Event
+from cmsensord.monitor.indicators import MAX_WAIT_S
 from cmsensord.monitor.messages import Message, MessageGroup
 from cmsensord.sinks.capture_schema import capture_topics
 
@@ -55,8 +56,6 @@ __all__ = ["Captures"]
 
 #: seconds the ring holds beyond pre_s + post_s: how late a trigger may come (decisions wait for the tacho)
 HOLD_S = 20.0
-#: the longest a complete RAW capture waits for the tacho to cover its window [s of board time]
-MAX_WAIT_S = 10.0
 #: the most the ring holds beyond its capacity for triggers not taken yet (a large read's samples
 #: come before the decisions that may trigger on them) [bytes]
 MAX_KEPT_BYTES = 32e6
@@ -300,7 +299,7 @@ class Captures:
 
     def _speed_waits(self, p: _Pending, end: int) -> bool:
         """Whether a complete RAW capture waits for the tacho to cover its window (its marks are
-        read off the tacho's speed there), at most MAX_WAIT_S past its end."""
+        read off the tacho's speed there), at most as long past its end as an indicator interval."""
         return (self.source == "raw" and self.marks is not None and self.marks.waits(p.end)
                 and end - p.end <= MAX_WAIT_S * self.rate)
 
