@@ -15,33 +15,23 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from cmsensord.config import config_from_dict
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from processes import board_then_daemon, cmsensord
-from stream import run_processor
+from test_read_size import READS, by_topic
 
-READS = (997, 65_536, 1 << 20)
 S = 1_000_000_000
 CONFIG = {"capture": {"triggers": ["severity_change", "anomaly_onset", "failure", "tacho_lost", "alarm_alert"],
                       "every_s": 7.0, "pre_s": 2.0, "post_s": 2.0, "min_interval_s": 5.0},
           "alarms": {"rules": [{"name": "acc", "indicator": "accel_rms", "alert": 0.5, "danger": 5.0}]}}
 
 
-def by_topic(data: bytes, read: int) -> dict[str, list]:
-    out: dict[str, list] = {}
-    for topic, stamp, msg in run_processor(data, config_from_dict(CONFIG), chunk=read)[0].messages:
-        if topic != "/cm/diagnostics":
-            out.setdefault(topic, []).append((stamp, msg))
-    return out
-
-
 FAULTS = [{}, {"tacho_extra": 0.3, "tacho_missed": 0.3, "tacho_jitter": 3.0}]
 
 
 def same_at_every_read_size(data: bytes) -> dict[str, list]:
-    runs = [by_topic(data, read) for read in READS]
+    runs = [by_topic(data, read, CONFIG) for read in READS]
     for topic in runs[0]:
         for k in (1, 2):
             assert runs[k].get(topic) == runs[0][topic], (topic, READS[k])

@@ -117,9 +117,11 @@ def stuck_blocks(mode: str, seconds: float = 14, every: int = 150) -> bytes:
     return bytes(out)
 
 
-def by_topic(data: bytes, read: int) -> dict[str, list]:
+def by_topic(data: bytes, read: int, config: dict | None = None) -> dict[str, list]:
+    """The Processor's messages of ``data`` fed in reads of ``read`` bytes, by topic (but
+    /cm/diagnostics); ``config``: the settings (default: the defaults)."""
     topics: dict[str, list] = {}
-    for topic, stamp, msg in run_processor(data, config_from_dict({}), chunk=read)[0].messages:
+    for topic, stamp, msg in run_processor(data, config_from_dict(config or {}), chunk=read)[0].messages:
         if topic != "/cm/diagnostics":
             topics.setdefault(topic, []).append((stamp, msg))
     return topics
