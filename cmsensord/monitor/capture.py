@@ -12,7 +12,8 @@ stamp on) starts a capture of its channel (of every channel for an event without
 ticks and events are taken in stamp order whatever the reads: the samples from ``pre_s``
 before the trigger's board sample to ``post_s`` after it, written once the stream has passed
 its end (:meth:`raw`, :meth:`rms`; in RAW mode also once the tacho covers it, at most the
-indicators' ``MAX_WAIT_S`` later, as its spectra are marked at the speed there), as three messages stamped at the trigger
+indicators' ``MAX_WAIT_S`` later, as its spectra are marked at the speed there), as three
+messages stamped at the trigger
 (:mod:`cmsensord.sinks.capture_schema`) in one :class:`MessageGroup` (one chunk of the log:
 after a crash the capture is complete or absent); until then the event log writes no event
 from the trigger's stamp on (:meth:`owed`). A capture starting within
