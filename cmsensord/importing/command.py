@@ -2,6 +2,7 @@
 
     cmsensord import femto/Bearing1_1.npz --unit mg --channels 0 --names horizontal --out b11.bin
     cmsensord import ims/NA.mat --fs 20480 --unit g --snapshot-len 20480 --out na.bin
+  cmsensord import IMS/2nd_test --fs 20480 --unit g --channels 0 --out b1.bin   (files named by time)
 
 Errors the user can cause end in one line, ``cmsensord import: FILE: what; fix``,
 and exit status 2; nothing is written then. A progress bar shows on a terminal.
@@ -34,6 +35,7 @@ examples:
   cmsensord import femto/Bearing1_1.npz --unit mg --channels 0 --names horizontal --out b11.bin
   cmsensord import 'Bearing1_1/acc_*.csv' --fs 25600 --channels 4 --unit g --snapshot-interval 10 --out b11.bin
   cmsensord import ims/NA.mat --fs 20480 --unit g --snapshot-len 20480 --out na.bin
+  cmsensord import IMS/2nd_test --fs 20480 --unit g --channels 0 --out b1.bin   (files named by time)
 Columns and channels count from 0. The sidecar CAPTURE.json (b11.bin.json) lists the snapshots
 (board second, length, % of the record, original time and gap), units and scales."""
 
@@ -100,7 +102,8 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--snapshot-len", dest="imp_snapshot_len", type=count(1, 1 << 40), metavar="N",
                    help="split each file's samples into snapshots of N (e.g. 20480 for IMS)")
     p.add_argument("--snapshot-interval", dest="imp_snapshot_interval", type=positive, metavar="S",
-                   help="seconds between snapshot starts in the original recording (for the sidecar)")
+                   help="seconds between snapshot starts in the original recording (for the sidecar; "
+                        "default: the files' own times, or the dates and times in their names)")
     tach = p.add_mutually_exclusive_group()
     tach.add_argument("--tacho-column", dest="imp_tacho_column", metavar="COL",
                       help="a tacho pulse column/channel (index or name): rising crossings are edges")

@@ -1,10 +1,13 @@
 """SRC arguments to files in time order, and files to one :class:`Recording`.
 
 Files: each SRC is a file, a directory (its files of the most common supported
-extension) or a glob pattern (also ``--glob``). They are taken in natural name
-order (``acc_2`` before ``acc_10``) unless ``order`` is ``mtime`` (modification
+extension, or its text tables of numbers under other names: the IMS rig's files are
+named by date and time) or a glob pattern (also ``--glob``). They are taken in natural
+name order (``acc_2`` before ``acc_10``) unless ``order`` is ``mtime`` (modification
 time) or ``given`` (as listed). Every file is one contiguous snapshot, or
 several (a 3-D array, or ``snapshot_len``); the snapshots are laid end to end.
+Snapshot times come from ``snapshot_interval``, else the files themselves, else the
+files' names (:mod:`.name_times`).
 
 Channels: ``channels`` picks columns by index (from 0) or name, the same for
 every file; the default is every column but the tacho column, at most 8 (the
@@ -24,10 +27,11 @@ import numpy as np
 from .arrays import read_npy, read_npz
 from .errors import ImportFailure
 from .matlab import read_mat
+from .name_times import times_from_names
 from .options import ImportOptions
 from .recording import Recording, Snapshot
 from .table import Table
-from .tabular import read_tabular
+from .tabular import is_text_table, read_tabular
 from .tacho import pulse_edges
 from .units import to_ms2_factor
 from .wav import read_wav
@@ -42,13 +46,24 @@ def _natural_key(path: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
 
 
+def _kind(p: Path) -> str | None:
+    """What a file in a directory is: its known extension, ``text`` (a text table of numbers
+    under another name, :func:`~.tabular.is_text_table`) or None (not a recording)."""
+    ext = p.suffix.lower()
+    if ext in EXTENSIONS:
+        return ext
+    return "text" if not p.name.startswith(".") and is_text_table(str(p)) else None
+
+
 def _dir_files(d: Path) -> list[str]:
-    files = [p for p in d.iterdir() if p.is_file() and p.suffix.lower() in EXTENSIONS]
+    """The directory's recording files of the most common kind (:func:`_kind`)."""
+    kinds = {p: _kind(p) for p in d.iterdir() if p.is_file()}
+    files = [p for p, k in kinds.items() if k is not None]
     if not files:
-        raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}) in this directory; "
-                            "give the files or a --glob pattern")
-    ext = Counter(p.suffix.lower() for p in files).most_common(1)[0][0]
-    return [str(p) for p in files if p.suffix.lower() == ext]
+        raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}, or text tables of numbers) "
+                            "in this directory; give the files or a --glob pattern")
+    kind = Counter(kinds[p] for p in files).most_common(1)[0][0]
+    return [str(p) for p in files if kinds[p] == kind]
 
 
 def collect_files(srcs: list[str], globs: list[str], order: str) -> list[str]:
@@ -100,8 +115,10 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
         return read_npz(path, opts.array)
     if ext == ".mat":
         return read_mat(path, opts.variable)
-    raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}; supported: "
-                        f"{', '.join(EXTENSIONS)}")
+    if is_text_table(path):                 # a text table under another name (IMS: a date and time)
+        return read_tabular(path, opts.separator, opts.header)
+    raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}, and not a text table of "
+                        f"numbers; supported: {', '.join(EXTENSIONS)}")
 
 
 def _column(t: Table, token: str, option: str) -> int:
@@ -202,6 +219,21 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
     return notes
 
 
+def _retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[str], opts: ImportOptions,
+             fs: float, own_times: bool, notes: list[str]) -> list[Snapshot]:
+    """The snapshots' times in the original recording: every ``--snapshot-interval``; else, when
+    no file gave its own, by the files' names (:mod:`.name_times`, with a note), a snapshot
+    ``a`` samples into its file ``a / fs`` after the file's time; else as read."""
+    if opts.snapshot_interval is not None:
+        return [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval) for i, s in enumerate(snaps)]
+    named = None if own_times else times_from_names(files)
+    if named is None:
+        return snaps
+    notes.append(named.note())
+    return [Snapshot(s.source, s.start, s.length, named.seconds[fi] + a / fs)
+            for s, (fi, a) in zip(snaps, origins)]
+
+
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
     """Read every file (``progress(i)`` after each) and lay the snapshots end to end."""
     factor = to_ms2_factor(opts.unit, opts.sensitivity, opts.scale_factor)
@@ -212,6 +244,8 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
     notes: list[str] = []
     rpm_file = None
     pos = 0
+    origins: list[tuple[int, int]] = []     # per snapshot: (its file, its first sample in the file)
+    own_times = False                       # a file gave its snapshots' times
     for fi, path in enumerate(files):
         t = read_table(path, opts)
         if layout is None:
@@ -222,10 +256,12 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
         if layout.tacho is not None:
             tacho_pieces.append(t.data[:, :, layout.tacho].astype(np.float64).reshape(-1))
         many = t.data.shape[0] > 1 or opts.snapshot_len
-        for k, (s, _a, n) in enumerate(_split(t, opts.snapshot_len)):
+        for k, (s, a, n) in enumerate(_split(t, opts.snapshot_len)):
             time = None if t.times is None else float(t.times[s])
             snaps.append(Snapshot(f"{t.name}[{k}]" if many else t.name, pos, n, time))
+            origins.append((fi, a))
             pos += n
+        own_times = own_times or t.times is not None
         notes += _file_notes(t, opts)
         pieces.append(x.reshape(len(layout.idx), -1))
         if t.rpm and rpm_file is None:
@@ -241,9 +277,7 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
         notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
-    if opts.snapshot_interval is not None:
-        snaps = [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval)
-                 for i, s in enumerate(snaps)]
+    snaps = _retimed(snaps, origins, files, opts, fs, own_times, notes)
     rec = Recording(fs=int(round(fs)), data=data, names=layout.names, snapshots=snaps,
                     sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes)
     if layout.tacho is not None:

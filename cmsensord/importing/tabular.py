@@ -27,11 +27,13 @@ import numpy as np
 from .errors import ImportFailure
 from .table import Table
 
-__all__ = ["read_tabular", "sniff"]
+__all__ = ["read_tabular", "sniff", "is_text_table"]
 
 _SEPARATORS = ("\t", ";", ",", "|")
 _SEP_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
 _SNIFF_BYTES = 1 << 16
+#: bytes :func:`is_text_table` looks at
+_TEXT_PROBE_BYTES = 4096
 
 
 def _is_number(text: str) -> bool:
@@ -84,6 +86,31 @@ def _first_lines(path: str) -> list[str]:
     if not lines:
         raise ImportFailure(f"{path}: no data (empty file)")
     return lines[:20]
+
+
+def is_text_table(path: str) -> bool:
+    """Whether a file of no known extension is a text table of numbers (the IMS bearing rig's
+    snapshot files, named by their date and time): its first 4 kB are text without NUL bytes,
+    and a line among the first two that are not blank or ``#`` is a row of numbers."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(_TEXT_PROBE_BYTES)
+    except OSError:
+        return False
+    if not head or b"\0" in head:
+        return False
+    lines = [ln for ln in head.decode("latin-1").splitlines()[:-1] or [head.decode("latin-1")]
+             if ln.strip() and not ln.lstrip().startswith("#")][:2]
+    return any(_is_number_row(ln) for ln in lines)
+
+
+def _is_number_row(line: str) -> bool:
+    """Every field of the line is a number, by any of the separators :func:`sniff` knows."""
+    for sep in (None, *_SEPARATORS):
+        fields = [f for f in _split(line, sep) if f.strip()]
+        if fields and all(_is_number(f) for f in fields):
+            return True
+    return False
 
 
 def _loadtxt_message(text: str, header: int) -> str:

@@ -1,0 +1,100 @@
+"""`cmsensord import` of snapshot files under names of no known type (the IMS bearing rig's
+files: text tables named by date and time), and snapshot times from the files' names."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmsensord.importing.name_times import times_from_names
+from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
+
+FS, ROWS = 20480, 2048
+#: IMS-style names: the second file 10 min after the first, the third 5 min after it
+NAMES = ("2004.02.12.10.32.39", "2004.02.12.10.42.39", "2004.02.12.10.47.39")
+
+
+def ims_dir(tmp_path: Path) -> tuple[Path, np.ndarray]:
+    """A directory as the IMS rig writes it (four tab-separated columns in g, no header, one
+    file per snapshot named by its time), with a README and a hidden binary file beside them;
+    and the files' first column, end to end."""
+    d = tmp_path / "2nd_test"
+    d.mkdir()
+    rng = np.random.default_rng(7)
+    first = []
+    for name in NAMES:
+        x = np.round(rng.normal(0.0, 0.1, (ROWS, 4)), 3)
+        np.savetxt(d / name, x, fmt="%.3f", delimiter="\t")
+        first.append(x[:, 0])
+    (d / "Readme Document for IMS Bearing Data.txt").write_text("Bearing data, test 2\nNASA\n")
+    (d / ".DS_Store").write_bytes(b"\x00\x00\x00\x01Bud1" + bytes(64))
+    return d, np.concatenate(first)
+
+
+def test_ims_files_named_by_time_import_with_their_times(tmp_path):
+    d, x = ims_dir(tmp_path)
+    r = cmd("import", d, "--fs", FS, "--channels", "0", "--unit", "g", "--block-len", "256",
+            "--out", "ims.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: snapshot times from the file names: 2004-02-12 10:32:39 to 2004-02-12 10:47:39 "
+            "(0.25 h); --snapshot-interval S sets them instead\n") in r.stderr
+    assert_within_one_count(decode(tmp_path / "ims.bin"), x[None] * G)
+    snaps = sidecar(tmp_path / "ims.bin")["snapshots"]
+    assert [s["source"] for s in snaps] == list(NAMES)
+    assert [s["source_time_s"] for s in snaps] == [0.0, 600.0, 900.0]
+    assert [s["gap_before_s"] for s in snaps] == [None, 599.9, 299.9]    # each snapshot is 0.1 s
+    # the same files by a glob: the same capture, byte for byte
+    r = cmd("import", d / "2004.*", "--fs", FS, "--channels", "0", "--unit", "g", "--block-len", "256",
+            "--out", "glob.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "glob.bin").read_bytes() == (tmp_path / "ims.bin").read_bytes()
+
+
+def test_snapshots_within_a_named_file_and_the_interval_option(tmp_path):
+    d, _ = ims_dir(tmp_path)
+    args = ("--fs", FS, "--channels", "0", "--unit", "g", "--block-len", "256")
+    r = cmd("import", d, *args, "--snapshot-len", "1024", "--out", "s.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    times = [s["source_time_s"] for s in sidecar(tmp_path / "s.bin")["snapshots"]]
+    assert times == [0.0, 0.05, 600.0, 600.05, 900.0, 900.05]    # 1024 samples at 20480 Hz: 0.05 s
+    r = cmd("import", d, *args, "--snapshot-interval", "10", "--out", "i.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "from the file names" not in r.stderr
+    assert [s["source_time_s"] for s in sidecar(tmp_path / "i.bin")["snapshots"]] == [0.0, 10.0, 20.0]
+
+
+@pytest.mark.parametrize("names, seconds", [
+    (["rec_2024-01-05_23-59-30.csv", "rec_2024-01-06_00-00-10.csv"], [0.0, 40.0]),
+    (["20240105T235930.wav", "20240106T000010.wav"], [0.0, 40.0]),
+    (["a/20240105_235930", "b/20240106_000010"], [0.0, 40.0]),
+    (["acc_1.csv", "acc_2.csv"], None),                                     # no time in the names
+    (["2004.02.12.10.42.39", "2004.02.12.10.32.39"], None),                 # not increasing
+    (["2004.02.12.10.32.39", "2004.02.30.10.42.39"], None),                 # not a date
+    (["2004.02.12.10.32.39_2004.02.12.10.33.39", "2004.02.12.10.42.39"], None),   # two in one name
+    (["2004.02.12.10.32.39"], None),                                        # one file
+])
+def test_times_from_names(names, seconds):
+    got = times_from_names(names)
+    assert (None if got is None else got.seconds) == seconds
+
+
+def test_files_of_no_known_type_that_are_not_text_tables_are_one_line_errors(tmp_path):
+    (tmp_path / "blob").write_bytes(bytes(range(256)))
+    (tmp_path / "words").write_text("not a number\nnor this\n")
+    d = tmp_path / "notes"
+    d.mkdir()
+    (d / "log").write_text("started at 10:32\n")
+    cases = {
+        "blob": "blob: unknown file type (no extension), and not a text table of numbers; supported: "
+                ".wav, .csv, .tsv, .txt, .npy, .npz, .mat",
+        "words": "words: unknown file type (no extension), and not a text table of numbers; supported: "
+                 ".wav, .csv, .tsv, .txt, .npy, .npz, .mat",
+        "notes": "notes: no recording files (.wav, .csv, .tsv, .txt, .npy, .npz, .mat, or text tables of "
+                 "numbers) in this directory; give the files or a --glob pattern",
+    }
+    for src, message in cases.items():
+        r = cmd("import", src, "--fs", "100", "--out", "o.bin", cwd=tmp_path)
+        assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), src
+        assert not list(tmp_path.glob("o.bin*")), src
