@@ -98,3 +98,25 @@ def test_files_of_no_known_type_that_are_not_text_tables_are_one_line_errors(tmp
         r = cmd("import", src, "--fs", "100", "--out", "o.bin", cwd=tmp_path)
         assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), src
         assert not list(tmp_path.glob("o.bin*")), src
+
+
+def test_a_directory_takes_its_largest_series_of_files_and_says_what_it_left(tmp_path):
+    """FEMTO's bearing directories hold acc_NNNNN.csv snapshots and, beside them, fewer
+    temp_NNNNN.csv temperature files of another layout."""
+    d = tmp_path / "Bearing1_1"
+    d.mkdir()
+    rng = np.random.default_rng(3)
+    x = np.round(rng.normal(0.0, 0.5, (3, 2560)), 3)
+    for k in range(3):
+        rows = [f"9,39,{39 + 10 * k},{65664 + 39 * i},{v:.3f},0.1" for i, v in enumerate(x[k])]
+        (d / f"acc_{k + 1:05d}.csv").write_text("\n".join(rows) + "\n")
+    (d / "temp_00001.csv").write_text("9,39,39,6.5e+05,29.8\n9,39,39,7.5e+05,29.8\n")
+    r = cmd("import", d, "--fs", "25600", "--channels", "4", "--unit", "g", "--out", "b.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    note = (f"{d}: took the 3 file(s) named like acc_#.csv; left out 1 other recording file(s) "
+            "(temp_#.csv): name them to import them")
+    assert f"  note: {note}\n" in r.stderr
+    meta = sidecar(tmp_path / "b.bin")
+    assert [s["source"] for s in meta["snapshots"]] == ["acc_00001.csv", "acc_00002.csv", "acc_00003.csv"]
+    assert note in meta["notes"]
+    assert_within_one_count(decode(tmp_path / "b.bin"), x.reshape(1, -1) * G)

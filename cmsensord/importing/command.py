@@ -186,7 +186,8 @@ def _report(meta: dict, rec, out: str, size: int, notes: list[str]) -> list[str]
 
 
 def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
-    files = collect_files(srcs, globs, opts.order)
+    left: list[str] = []                    # what a directory's files left out
+    files = collect_files(srcs, globs, opts.order, left)
     bar = _Bar(len(files), f"import: reading {len(files)} file(s)")
     try:
         rec = build_recording(files, opts, progress=bar if len(files) > 1 else None)
@@ -194,7 +195,7 @@ def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
         bar.close()
     L, note = choose_block_len(rec.fs, opts.block_len, opts.mode)
     plan = plan_blocks(rec, L)
-    notes = list(rec.notes) + ([note] if note else [])
+    notes = left + list(rec.notes) + ([note] if note else [])
     rem = remainder_note(rec, plan)
     if rem:
         notes.append(rem)

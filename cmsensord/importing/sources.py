@@ -55,23 +55,38 @@ def _kind(p: Path) -> str | None:
     return "text" if not p.name.startswith(".") and is_text_table(str(p)) else None
 
 
-def _dir_files(d: Path) -> list[str]:
-    """The directory's recording files of the most common kind (:func:`_kind`)."""
+def _pattern(p: Path) -> str:
+    """A file's name with each run of digits as ``#``: the snapshots of one series share it."""
+    return re.sub(r"\d+", "#", p.name)
+
+
+def _dir_files(d: Path, notes: list[str]) -> list[str]:
+    """The directory's recording files of the most common kind (:func:`_kind`) and, among them,
+    name (:func:`_pattern`: FEMTO's ``acc_00001.csv`` beside its ``temp_00001.csv``); a note
+    names the series left out."""
     kinds = {p: _kind(p) for p in d.iterdir() if p.is_file()}
     files = [p for p, k in kinds.items() if k is not None]
     if not files:
         raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}, or text tables of numbers) "
                             "in this directory; give the files or a --glob pattern")
-    kind = Counter(kinds[p] for p in files).most_common(1)[0][0]
-    return [str(p) for p in files if kinds[p] == kind]
+    groups = Counter((kinds[p], _pattern(p)) for p in files)
+    best = min(groups, key=lambda g: (-groups[g], g[1]))
+    left = sorted({g[1] for g in groups if g != best})
+    if left:
+        notes.append(f"{d}: took the {groups[best]} file(s) named like {best[1]}; left out "
+                     f"{sum(groups.values()) - groups[best]} other recording file(s) ({', '.join(left[:3])}"
+                     f"{', ...' if len(left) > 3 else ''}): name them to import them")
+    return [str(p) for p in files if (kinds[p], _pattern(p)) == best]
 
 
-def collect_files(srcs: list[str], globs: list[str], order: str) -> list[str]:
+def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str] | None = None) -> list[str]:
+    """The files named by ``srcs`` and ``globs``, in ``order``; what a directory left out is
+    appended to ``notes``."""
     files: list[str] = []
     for src in srcs:
         p = Path(src)
         if p.is_dir():
-            files += _dir_files(p)
+            files += _dir_files(p, [] if notes is None else notes)
         elif p.exists():
             files.append(src)
         elif globmod.has_magic(src):
