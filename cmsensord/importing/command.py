@@ -78,8 +78,11 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                    help="columns/channels to import, by index from 0 or by name (default: all but "
                         "the tacho column, at most 8)")
     p.add_argument("--names", dest="imp_names", type=comma_list, metavar="LIST", help="channel names")
-    p.add_argument("--array", dest="imp_array", metavar="NAME", help="the array of an .npz file")
-    p.add_argument("--variable", dest="imp_variable", metavar="NAME", help="the variable of a .mat file")
+    p.add_argument("--array", dest="imp_array", type=comma_list, metavar="NAME[,NAME]",
+                   help="the array(s) of an .npz file, side by side; a name may be a pattern (*_x)")
+    p.add_argument("--variable", dest="imp_variable", type=comma_list, metavar="NAME[,NAME]",
+                   help="the variable(s) of a .mat file, side by side; a name may be a pattern "
+                        "(*_DE_time) or a struct's field (bearing.gs)")
     p.add_argument("--separator", dest="imp_separator", metavar="SEP",
                    help="CSV separator: ',', ';', tab, whitespace, ... (default: detected)")
     hdr = p.add_mutually_exclusive_group()

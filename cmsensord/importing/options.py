@@ -14,8 +14,8 @@ class ImportOptions:
     fs: float | None = None  # overrides / supplies the sampling rate
     channels: tuple[str, ...] | None = None  # indices (from 0) or names; None: all
     names: tuple[str, ...] | None = None
-    array: str | None = None  # .npz
-    variable: str | None = None  # .mat
+    array: tuple[str, ...] | None = None  # .npz: names or patterns
+    variable: tuple[str, ...] | None = None  # .mat: names or patterns
     separator: str | None = None  # CSV; None: detected
     header: bool | None = None  # CSV; None: detected
     unit: str = "m/s2"

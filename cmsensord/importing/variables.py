@@ -1,0 +1,127 @@
+"""Which arrays of an ``.npz`` archive, or variables of a ``.mat`` file, are the data
+(``--array`` / ``--variable``), and the scalars that say the file's rate and speed.
+
+* ``chosen`` is a comma-separated list; each item names one array, or is a pattern
+  (``*_DE_time``) that matches exactly one: the CWRU bearing data centre names a file's
+  variables after its record (``X097_DE_time``, ``X097_FE_time``), so one pattern picks the
+  same sensor in every file.  Their columns are laid side by side (the same number of
+  samples each); a pattern's columns are named by its text without the wildcards
+  (``DE_time``), so that every file has the same layout.
+* Without ``chosen``, the one numeric array with two dimensions, else the one with more than
+  one element (:func:`pick_data`).
+* A MATLAB struct's fields are variables named ``struct.field`` (:func:`flatten`; the MFPT
+  bearing files hold ``bearing.gs``, the signal, and ``bearing.sr``, its rate).
+* Scalars (:func:`scalar_named`) are found by the last part of their name; the speed also
+  by a name that ends in ``rpm`` (CWRU: ``X097RPM``).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import re
+
+import numpy as np
+
+from .errors import ImportFailure
+from .table import RPM_KEYS, as_snapshot_array
+
+__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "selected"]
+
+#: how deep :func:`flatten` looks into structs within structs
+MAX_DEPTH = 3
+
+
+def flatten(arrays: dict, depth: int = MAX_DEPTH) -> dict:
+    """``arrays`` with each MATLAB struct (a 1 x 1 record array, as ``scipy.io.loadmat``
+    returns it) replaced by its fields, named ``struct.field``."""
+    out: dict = {}
+    for name, v in arrays.items():
+        names = getattr(getattr(v, "dtype", None), "names", None)
+        if names and depth > 0 and v.size == 1:
+            rec = v.reshape(-1)[0]
+            out.update(flatten({f"{name}.{f}": rec[f] for f in names}, depth - 1))
+        else:
+            out[name] = v
+    return out
+
+
+def _numeric(v) -> bool:
+    return isinstance(v, np.ndarray) and v.dtype.kind in "iufb"
+
+
+def scalar_named(arrays: dict, keys: tuple[str, ...]) -> float | None:
+    """The value of the first numeric scalar whose name's last part (after a ``.``), in lower
+    case, is one of ``keys``."""
+    return _scalar(arrays, lambda name: name in keys)
+
+
+def rpm_named(arrays: dict) -> float | None:
+    """The shaft speed: a scalar named like :data:`~.table.RPM_KEYS`, else one whose name ends
+    in ``rpm``."""
+    got = scalar_named(arrays, RPM_KEYS)
+    return got if got is not None else _scalar(arrays, lambda name: name.endswith("rpm"))
+
+
+def _scalar(arrays: dict, match) -> float | None:
+    for name, v in arrays.items():
+        if match(name.rsplit(".", 1)[-1].lower()):
+            v = np.asarray(v)
+            if v.size == 1 and v.dtype.kind in "iuf":
+                return float(v.reshape(()))
+    return None
+
+
+def _listing(arrays: dict) -> str:
+    return ", ".join(f"{k} {tuple(np.shape(v))}" for k, v in arrays.items()) or "none"
+
+
+def pick_data(path: str, arrays: dict, option: str, what: str) -> str:
+    """The name of the only candidate data array (see module docstring)."""
+    numeric = {k: v for k, v in arrays.items() if _numeric(v)}
+    multi = [k for k, v in numeric.items() if v.ndim >= 2 and min(v.shape) >= 1 and v.size > 1]
+    if len(multi) != 1:
+        multi = [k for k, v in numeric.items() if v.size > 1]
+    if len(multi) == 1:
+        return multi[0]
+    raise ImportFailure(f"{path}: {'no numeric ' + what if not multi else 'several ' + what + 's'} "
+                        f"to import ({what}s: {_listing(arrays)}); choose one with {option} "
+                        f"(several: {option} A,B)")
+
+
+def _one(path: str, arrays: dict, item: str, option: str, what: str) -> tuple[str, str]:
+    """(the array's name, its columns' name) for one item of ``chosen``."""
+    if item in arrays:
+        return item, item
+    if not any(c in item for c in "*?["):
+        raise ImportFailure(f"{path}: no {what} {item!r} ({what}s: {', '.join(arrays) or 'none'}); "
+                            f"use {option}")
+    hits = [k for k in arrays if fnmatch.fnmatchcase(k, item)]
+    if len(hits) != 1:
+        found = f"{len(hits)} {what}s match it ({', '.join(hits)})" if hits else f"no {what} matches it"
+        raise ImportFailure(f"{path}: {option} {item}: {found} ({what}s: {', '.join(arrays)}); "
+                            "give a pattern that matches one")
+    return hits[0], re.sub(r"[*?]|\[[^]]*\]", "", item).strip("_.") or "data"
+
+
+def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: str,
+             what: str) -> tuple[np.ndarray, list[str]]:
+    """The data, (snapshots, samples, columns), and its columns' names (see module docstring)."""
+    picks = [_one(path, arrays, item, option, what) for item in chosen] if chosen else \
+        [(n := pick_data(path, arrays, option, what), n)]
+    parts: list[np.ndarray] = []
+    columns: list[str] = []
+    for name, label in picks:
+        v = arrays[name]
+        if not _numeric(v):
+            kind = "a struct" if getattr(getattr(v, "dtype", None), "names", None) else \
+                f"of type {getattr(v, 'dtype', type(v).__name__)}"
+            raise ImportFailure(f"{path}: {what} {name!r} is {kind}, not a numeric array; "
+                                f"choose a numeric one with {option}")
+        a = as_snapshot_array(path, f"{what} {name!r}", v)
+        if parts and a.shape[:2] != parts[0].shape[:2]:
+            raise ImportFailure(f"{path}: {what} {name!r} holds {a.shape[1]} samples x {a.shape[0]} "
+                                f"snapshot(s), {picks[0][0]!r} {parts[0].shape[1]} x {parts[0].shape[0]}; "
+                                f"{option} takes {what}s of the same length")
+        parts.append(a)
+        columns += [label] if a.shape[2] == 1 else [f"{label}_{i}" for i in range(a.shape[2])]
+    return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)), columns

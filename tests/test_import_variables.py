@@ -1,0 +1,84 @@
+"""`cmsensord import` of MATLAB and NumPy files laid out as public bearing data sets lay them
+out: several variables side by side, variable names that carry the record number (CWRU),
+a struct holding the signal and its rate (MFPT)."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.io
+
+from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
+
+N = 4800
+
+
+def cwru(path, record: int, seed: int) -> np.ndarray:
+    """A file as the CWRU bearing data centre writes it (drive end, fan end, speed); its two
+    signals in g, (2, N)."""
+    x = np.round(np.random.default_rng(seed).normal(0.0, 0.2, (2, N)), 4)
+    scipy.io.savemat(path, {f"X{record:03d}_DE_time": x[0][:, None], f"X{record:03d}_FE_time": x[1][:, None],
+                            f"X{record:03d}RPM": np.array([[1797]])})
+    return x
+
+
+def test_cwru_files_by_variable_patterns_side_by_side_with_their_speed(tmp_path):
+    x97, x98 = cwru(tmp_path / "97.mat", 97, 1), cwru(tmp_path / "98.mat", 98, 2)
+    r = cmd("import", "97.mat", "98.mat", "--variable", "*_DE_time,*_FE_time", "--fs", "12000", "--unit", "g",
+            "--out", "c.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  speed: 1797 rpm from 97.mat (sidecar only; --rpm 1797 also sends TACHO frames)\n" in r.stderr
+    meta = sidecar(tmp_path / "c.bin")
+    assert meta["channel_names"] == ["DE_time", "FE_time"] and meta["rpm"] == 1797
+    assert_within_one_count(decode(tmp_path / "c.bin"), np.concatenate([x97, x98], axis=1) * G)
+    # by name, one file: the same channels, named as the file names them
+    r = cmd("import", "97.mat", "--variable", "X097_FE_time,X097_DE_time", "--fs", "12000", "--unit", "g",
+            "--out", "n.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sidecar(tmp_path / "n.bin")["channel_names"] == ["X097_FE_time", "X097_DE_time"]
+    assert_within_one_count(decode(tmp_path / "n.bin"), x97[::-1] * G)
+
+
+def test_mfpt_struct_fields_give_the_signal_and_its_rate(tmp_path):
+    gs = np.round(np.random.default_rng(3).normal(0.0, 1.0, 9766), 4)
+    scipy.io.savemat(tmp_path / "baseline_1.mat", {"bearing": {"sr": 97656, "gs": gs[:, None], "load": 270,
+                                                               "rate": 25}})
+    r = cmd("import", "baseline_1.mat", "--unit", "g", "--out", "m.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta = sidecar(tmp_path / "m.bin")
+    assert (meta["fs"], meta["channel_names"]) == (97656, ["bearing.gs"])
+    L = meta["block_len"]
+    assert_within_one_count(decode(tmp_path / "m.bin"), gs[None, :gs.size // L * L] * G)
+
+
+def test_npz_arrays_side_by_side(tmp_path):
+    a, b = np.random.default_rng(4).normal(0.0, 1.0, (2, 3000))
+    np.savez(tmp_path / "r.npz", acc_x=a, acc_y=b, fs=10000)
+    r = cmd("import", "r.npz", "--array", "acc_y,acc_x", "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sidecar(tmp_path / "r.bin")["channel_names"] == ["acc_y", "acc_x"]
+    assert_within_one_count(decode(tmp_path / "r.bin"), np.stack([b, a]))
+
+
+def test_variable_choices_that_do_not_fit_are_one_line_errors(tmp_path):
+    cwru(tmp_path / "97.mat", 97, 1)
+    scipy.io.savemat(tmp_path / "odd.mat", {"a": np.zeros((100, 1)), "b": np.zeros((90, 1))})
+    scipy.io.savemat(tmp_path / "s.mat", {"bearing": {"sr": 1000, "gs": np.zeros((100, 1))}})
+    cases = {
+        ("97.mat",): "97.mat: several variables to import (variables: X097_DE_time (4800, 1), "
+                     "X097_FE_time (4800, 1), X097RPM (1, 1)); choose one with --variable (several: --variable A,B)",
+        ("97.mat", "--variable", "*_time"):
+            "97.mat: --variable *_time: 2 variables match it (X097_DE_time, X097_FE_time) (variables: "
+            "X097_DE_time, X097_FE_time, X097RPM); give a pattern that matches one",
+        ("97.mat", "--variable", "*_BA_time"):
+            "97.mat: --variable *_BA_time: no variable matches it (variables: X097_DE_time, X097_FE_time, "
+            "X097RPM); give a pattern that matches one",
+        ("odd.mat", "--variable", "a,b"):
+            "odd.mat: variable 'b' holds 90 samples x 1 snapshot(s), 'a' 100 x 1; --variable takes "
+            "variables of the same length",
+        ("s.mat", "--variable", "bearing"): "s.mat: no variable 'bearing' (variables: bearing.sr, bearing.gs); "
+                                            "use --variable",
+    }
+    for args, message in cases.items():
+        r = cmd("import", *args, "--fs", "1000", "--out", "o.bin", cwd=tmp_path)
+        assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), args
+        assert not list(tmp_path.glob("o.bin*")), args
