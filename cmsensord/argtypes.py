@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["comma_list", "count", "nonzero", "positive", "real"]
+__all__ = ["Percent", "board_time", "comma_list", "count", "nonzero", "positive", "real"]
 
 
 def real(text: str) -> float:
@@ -18,6 +18,29 @@ def real(text: str) -> float:
     if v != v or abs(v) == float("inf"):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return v
+
+
+class Percent(float):
+    """A share of a capture's board time, in % (``--to 20%``)."""
+
+    def seconds(self, total_s: float) -> float:
+        """The board seconds it is of a capture of ``total_s``."""
+        return total_s * float(self) / 100.0
+
+    def __str__(self) -> str:
+        return f"{float(self):g} %"
+
+
+def board_time(text: str) -> float:
+    """Board seconds >= 0, or ``P%``: that share of the capture (a :class:`Percent`, 0-100)."""
+    pct = text.strip().endswith("%")
+    try:
+        v = real(text.strip().rstrip("%").strip())
+    except argparse.ArgumentTypeError:
+        v = -1.0
+    if v < 0 or (pct and v > 100):
+        raise argparse.ArgumentTypeError(f"expected board seconds >= 0 or a percentage 0-100%, got {text!r}")
+    return Percent(v) if pct else v
 
 
 def positive(text: str) -> float:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from cmsensord.argtypes import positive, real
+from cmsensord.argtypes import board_time, positive
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.dsp.commissioning import MARGIN, SPAN, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
@@ -162,10 +162,12 @@ def add_calibrate_parser(sub) -> argparse.ArgumentParser:
                        description="Learn R_min, R_max, f_r and the healthy baseline per channel from the "
                                    "healthy period [--from, --to] of a capture and write a site configuration.")
     p.add_argument("capture", help="capture of the machine (cmsensord record / import)")
-    p.add_argument("--from", dest="from_s", type=real, default=0.0, metavar="S",
-                   help="start of the healthy period, board seconds (default: 0)")
-    p.add_argument("--to", dest="to_s", type=real, default=None, metavar="S",
-                   help="end of the healthy period, board seconds (default: the end of the capture)")
+    p.add_argument("--from", dest="from_s", type=board_time, default=0.0, metavar="S|P%",
+                   help="start of the healthy period, board seconds or a percentage of the capture "
+                        "(default: 0)")
+    p.add_argument("--to", dest="to_s", type=board_time, default=None, metavar="S|P%",
+                   help="end of the healthy period, board seconds or a percentage of the capture "
+                        "(e.g. 20%%: the first fifth of a run to failure; default: the end of the capture)")
     p.add_argument("--faulty", metavar="CAPTURE2", help="a faulty capture of the same machine: R_max "
                    "becomes the largest R that still flags it (Kim et al. 2023)")
     p.add_argument("--rpm", type=positive, default=None, help="shaft speed, if neither the tacho nor the "

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor.processor import Processor
@@ -89,7 +90,9 @@ def _names(meta: dict, proc: Processor, auto_channels: bool) -> list[str]:
 
 def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool = True,
                       from_s: float = 0.0, to_s: float | None = None) -> Observations:
-    """Replay ``capture`` up to ``to_s`` and keep the observations in [from_s, to_s].
+    """Replay ``capture`` up to ``to_s`` and keep the observations in [from_s, to_s] (board
+    seconds; a :class:`~cmsensord.argtypes.Percent` is that share of the capture's board time,
+    which is then read whole).
 
     ``auto_channels``: the configuration lists no channels (take the board's).
     """
@@ -101,7 +104,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     with _quiet(logging.getLogger("cmsensord")), CaptureSource(capture) as source:
         for frames in source:            # the default monitor's events mean nothing here
             proc.handle(frames)
-            if to_s is not None and proc.adc_seconds > to_s + 2.0:
+            if to_s is not None and not isinstance(to_s, Percent) and proc.adc_seconds > to_s + 2.0:
                 break
         else:
             proc.finish()
@@ -109,18 +112,28 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
     y = np.concatenate([b for _, b in collect.blocks])
-    first = int(np.floor(from_s * rate))
-    last = y.shape[0] if to_s is None else min(y.shape[0], int(np.floor(to_s * rate)))
+    total = y.shape[0] / rate
+    first = int(np.floor(_seconds(from_s, total) * rate))
+    last = y.shape[0] if to_s is None else min(y.shape[0], int(np.floor(_seconds(to_s, total) * rate)))
     if last <= first:
-        end = "the end" if to_s is None else f"{to_s:g}"
-        raise CmsensordError(f"calibrate: {capture}: no observations between {from_s:g} and {end} "
-                             f"board seconds (the capture holds {y.shape[0] / rate:.1f} s)")
+        end = "the end" if to_s is None else _said(to_s)
+        raise CmsensordError(f"calibrate: {capture}: no observations between {_said(from_s)} and {end} "
+                             f"(board seconds, or % of the capture; it holds {total:.1f} s)")
     shaft = _shaft_hz(sink, proc, first / rate, last / rate)
     rpm = meta.get("rpm")
     return Observations(names=_names(meta, proc, auto_channels), indices=[ch.index for ch in proc.channels],
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
                         rpm=float(rpm) if rpm else None,
                         indicators=_indicator_medians(sink, proc, first / rate, last / rate))
+
+
+def _seconds(at: float, total_s: float) -> float:
+    """Board seconds of ``at`` (a :class:`~cmsensord.argtypes.Percent`: of ``total_s``)."""
+    return at.seconds(total_s) if isinstance(at, Percent) else at
+
+
+def _said(at: float) -> str:
+    return str(at) if isinstance(at, Percent) else f"{at:g}"
 
 
 def _indicator_medians(sink: ListSink, proc: Processor, start: float, end: float) -> dict[str, dict[str, float]]:

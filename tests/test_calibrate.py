@@ -68,7 +68,23 @@ def test_calibrate_on_a_base_config_keeps_its_settings(degrading, tmp_path):
     assert cfg["channels"][0]["name"] == "motor_de" and cfg["channels"][0]["z_c"] == 3.0
 
 
+def test_calibrate_healthy_period_as_a_percentage_of_the_capture(degrading, tmp_path):
+    """--to 25% of a 600-s capture is --to 150: the same site file, byte for byte."""
+    by_s, by_pct = tmp_path / "s.yaml", tmp_path / "p.yaml"
+    assert run("cmsensord", "calibrate", str(degrading), "--to", "150", "--out", str(by_s)).returncode == 0
+    p = run("cmsensord", "calibrate", str(degrading), "--from", "0%", "--to", "25%", "--out", str(by_pct))
+    assert p.returncode == 0, p.stderr
+    assert "healthy period: 0.0-150.0 board s, 100 blocks/s" in p.stdout
+    assert by_pct.read_bytes() == by_s.read_bytes()
+
+
 @pytest.mark.parametrize("args, line, code", [
+    (["--from", "90%", "--to", "10%"], "cmsensord: calibrate: {cap}: no observations between 90 % and 10 % "
+                                       "(board seconds, or % of the capture; it holds 600.0 s)", 2),
+    (["--to", "120%"], "cmsensord calibrate: error: argument --to: expected board seconds >= 0 or a percentage "
+                       "0-100%, got '120%' (see cmsensord calibrate --help)", 2),
+    (["--from", "early"], "cmsensord calibrate: error: argument --from: expected board seconds >= 0 or a "
+                          "percentage 0-100%, got 'early' (see cmsensord calibrate --help)", 2),
     (["--rpm", "6000"], "cmsensord: configuration error: calibrate: ch0.f_r: 100 Hz must be below the 100 "
                         "observations per decision (100 blocks/s x decision_period_s 1)", 78),
     (["--from", "700"], "cmsensord: calibrate: {cap}: no observations between 700 and", 2),
