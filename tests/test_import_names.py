@@ -3,6 +3,8 @@ files: text tables named by date and time), and snapshot times from the files' n
 
 from __future__ import annotations
 
+import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +43,9 @@ def test_ims_files_named_by_time_import_with_their_times(tmp_path):
     assert ("  note: snapshot times from the file names: 2004-02-12 10:32:39 to 2004-02-12 10:47:39 "
             "(0.25 h); --snapshot-interval S sets them instead\n") in r.stderr
     assert_within_one_count(decode(tmp_path / "ims.bin"), x[None] * G)
-    snaps = sidecar(tmp_path / "ims.bin")["snapshots"]
+    meta = sidecar(tmp_path / "ims.bin")
+    assert meta["source_start"] == "2004-02-12T10:32:39"
+    snaps = meta["snapshots"]
     assert [s["source"] for s in snaps] == list(NAMES)
     assert [s["source_time_s"] for s in snaps] == [0.0, 600.0, 900.0]
     assert [s["gap_before_s"] for s in snaps] == [None, 599.9, 299.9]    # each snapshot is 0.1 s
@@ -120,3 +124,48 @@ def test_a_directory_takes_its_largest_series_of_files_and_says_what_it_left(tmp
     assert [s["source"] for s in meta["snapshots"]] == ["acc_00001.csv", "acc_00002.csv", "acc_00003.csv"]
     assert note in meta["notes"]
     assert_within_one_count(decode(tmp_path / "b.bin"), x.reshape(1, -1) * G)
+
+
+def run_to_failure(tmp_path: Path) -> Path:
+    """40 one-second snapshots at 2560 Hz, one every 10 minutes, named by time: quiet for 28,
+    then louder and rougher each time."""
+    d = tmp_path / "r2f"
+    d.mkdir()
+    rng = np.random.default_rng(11)
+    t = np.arange(2560) / 2560
+    for k in range(40):
+        grow = max(0, k - 27)
+        x = 0.05 * rng.standard_normal(2560) + 0.05 * np.sin(2 * np.pi * 30 * t) \
+            + 0.03 * grow * rng.standard_normal(2560) * (np.sin(2 * np.pi * 97 * t) > 0.9)
+        stamp = 1_076_582_400 + 600 * k        # 2004-02-12 10:40:00 UTC
+        name = time.strftime("%Y.%m.%d.%H.%M.%S", time.gmtime(stamp))
+        np.savetxt(d / name, x[:, None], fmt="%.4f")
+    return d
+
+
+@pytest.mark.parametrize("times", ["names", "interval"])
+def test_replay_says_where_in_the_recording_each_severity_level_was_first_reached(tmp_path, times):
+    d = run_to_failure(tmp_path)
+    more = ["--snapshot-interval", "600"] if times == "interval" else []
+    r = cmd("import", d, "--fs", "2560", "--unit", "g", "--names", "bearing", "--rpm", "1800", *more,
+            "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmd("calibrate", "r.bin", "--to", "25%", "--out", "site.yaml", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmd("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    firsts = re.search(r"  bearing: \|.*\| [\d-]+ s; first (.*)\n", r.stderr)
+    assert firsts, r.stderr
+    reached = [(lv, float(t)) for lv, t in re.findall(r"([\d.]+) at (\d+) s", firsts[1])]
+    assert [lv for lv, _ in reached] == ["0.1", "0.5", "1"]     # the recording does fail
+    # a plain re-statement: the decision ending at board second t is snapshot t - 1 (1-s snapshots)
+    at: dict[str, list[str]] = {}
+    for lv, t in reached:
+        k = int(t) - 1
+        name = time.strftime("%Y.%m.%d.%H.%M.%S", time.gmtime(1_076_582_400 + 600 * k))
+        when = f"{time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime(1_076_582_400 + 600 * k))}" \
+            if times == "names" else f"{600 * k / 3600:.4g} h in"
+        at.setdefault(f"{name} ({100 * k / 40:.1f} % of the record, {when})", []).append(lv)
+    line = "; ".join(f"{' and '.join(lvs)} at {where}" for where, lvs in at.items())
+    assert f"  bearing: in the recording: {line}\n" in r.stderr
+    assert reached[0][1] > 28       # not before the snapshots grow

@@ -16,8 +16,9 @@ per snapshot its ``source`` (file, ``[i]`` for the i-th inside a file),
 ``start_s`` (board seconds), ``length`` (samples in blocks), ``dropped``
 (samples at its end that fill no block), ``pct_of_record`` (its start as a
 percentage of the capture's board time), ``source_time_s`` (its start in the
-original recording, when known) and ``gap_before_s`` (from the previous
-snapshot's end to its start there).
+original recording, when known, counted from ``source_start`` when its date is
+known: the file names') and ``gap_before_s`` (from the previous snapshot's end to
+its start there).
 
 Counts are computed in vectorised chunks of ``CHUNK_BLOCKS`` blocks; only the
 frame encoding is per block. The capture is written to ``OUT.part`` and the
@@ -175,6 +176,7 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         "rpm": rec.rpm, "rpm_source": rec.rpm_source, "ppr": rec.ppr,
         "tacho": rec.tacho_source if stats["tacho_edges"] or rec.tacho_source else None,
         "tacho_edges": stats["tacho_edges"],
+        "source_start": rec.source_start,
         "snapshots": snaps,
     }
 

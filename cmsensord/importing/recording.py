@@ -43,6 +43,7 @@ class Recording:
     rpm_source: str | None = None  # "--rpm" or the file it was read from
     ppr: int = 1
     notes: list[str] = field(default_factory=list)  # things the user should know (printed)
+    source_start: str | None = None  # the date and time source_time_s counts from (ISO 8601), if known
 
     def __post_init__(self) -> None:
         if self.data.ndim != 2:

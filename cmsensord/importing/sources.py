@@ -235,18 +235,20 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
 
 
 def _retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[str], opts: ImportOptions,
-             fs: float, own_times: bool, notes: list[str]) -> list[Snapshot]:
-    """The snapshots' times in the original recording: every ``--snapshot-interval``; else, when
-    no file gave its own, by the files' names (:mod:`.name_times`, with a note), a snapshot
-    ``a`` samples into its file ``a / fs`` after the file's time; else as read."""
+             fs: float, own_times: bool, notes: list[str]) -> tuple[list[Snapshot], str | None]:
+    """The snapshots' times in the original recording, and the date and time they count from
+    (None: not known): every ``--snapshot-interval``; else, when no file gave its own, by the
+    files' names (:mod:`.name_times`, with a note), a snapshot ``a`` samples into its file
+    ``a / fs`` after the file's time; else as read."""
     if opts.snapshot_interval is not None:
-        return [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval) for i, s in enumerate(snaps)]
+        return [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval)
+                for i, s in enumerate(snaps)], None
     named = None if own_times else times_from_names(files)
     if named is None:
-        return snaps
+        return snaps, None
     notes.append(named.note())
     return [Snapshot(s.source, s.start, s.length, named.seconds[fi] + a / fs)
-            for s, (fi, a) in zip(snaps, origins)]
+            for s, (fi, a) in zip(snaps, origins)], named.first.isoformat()
 
 
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
@@ -292,9 +294,10 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
         notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
-    snaps = _retimed(snaps, origins, files, opts, fs, own_times, notes)
+    snaps, start = _retimed(snaps, origins, files, opts, fs, own_times, notes)
     rec = Recording(fs=int(round(fs)), data=data, names=layout.names, snapshots=snaps,
-                    sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes)
+                    sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes,
+                    source_start=start)
     if layout.tacho is not None:
         pulses = np.concatenate(tacho_pieces)
         rec.tacho_edges = pulse_edges(pulses, [(s.start, s.length) for s in snaps], opts.tacho_threshold)

@@ -9,6 +9,7 @@ from pathlib import Path
 from cmsensord.config import Config
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
+from cmsensord.observations import sidecar
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.sink import open_sink, route_sink_events
@@ -50,7 +51,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        print(run_summary(proc, sink.paths, time.monotonic() - t0), file=sys.stderr)
+        print(run_summary(proc, sink.paths, time.monotonic() - t0, sidecar(path)), file=sys.stderr)
     return 0, out, proc
 
 
