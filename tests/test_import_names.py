@@ -3,12 +3,14 @@ files: text tables named by date and time), and snapshot times from the files' n
 
 from __future__ import annotations
 
+import json
 import re
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from cmsensord.importing.name_times import times_from_names
 from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
@@ -169,3 +171,37 @@ def test_replay_says_where_in_the_recording_each_severity_level_was_first_reache
     line = "; ".join(f"{' and '.join(lvs)} at {where}" for where, lvs in at.items())
     assert f"  bearing: in the recording: {line}\n" in r.stderr
     assert reached[0][1] > 28       # not before the snapshots grow
+
+
+def test_column_labels_become_channel_names_that_calibrate_and_the_topics_take(tmp_path):
+    rng = np.random.default_rng(5)
+    x = rng.normal(0.0, 1.0, (3000, 3))
+    (tmp_path / "h.csv").write_text("Acc X (g),Acc-Y,Acc X g\n" + "\n".join(f"{a:.4f},{b:.4f},{c:.4f}"
+                                                                          for a, b, c in x) + "\n")
+    r = cmd("import", "h.csv", "--fs", "100", "--unit", "g", "--out", "h.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: channel 'Acc X (g)' is named Acc_X_g (letters, digits and _ only: the MCAP topics "
+            "/cm/Acc_X_g/...); --names sets other names\n") in r.stderr
+    assert sidecar(tmp_path / "h.bin")["channel_names"] == ["Acc_X_g", "Acc_Y", "Acc_X_g_2"]
+    r = cmd("calibrate", "h.bin", "--out", "site.yaml", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    site = yaml.safe_load((tmp_path / "site.yaml").read_text())
+    assert [ch["name"] for ch in site["channels"]] == ["Acc_X_g", "Acc_Y", "Acc_X_g_2"]
+    # a capture imported before: its sidecar's labels are made channel names the same way
+    meta = sidecar(tmp_path / "h.bin")
+    meta["channel_names"] = ["Acc X (g)", "Acc-Y", "Acc X g"]
+    (tmp_path / "h.bin.json").write_text(json.dumps(meta))
+    r = cmd("calibrate", "h.bin", "--out", "old.yaml", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "old.yaml").read_text() == (tmp_path / "site.yaml").read_text()
+
+
+@pytest.mark.parametrize("names, message", [
+    ("a b,c,d", "--names: 'a b' is not a channel name: letters, digits and _ only (the MCAP topics /cm/<name>/...)"),
+    ("x,y,x", "--names: x given twice; every channel needs its own name"),
+])
+def test_names_that_are_not_channel_names_are_one_line_errors(tmp_path, names, message):
+    (tmp_path / "h.csv").write_text("1,2,3\n4,5,6\n")
+    r = cmd("import", "h.csv", "--fs", "100", "--names", names, "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n")
+    assert not list(tmp_path.glob("o.bin*"))

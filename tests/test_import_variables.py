@@ -45,7 +45,7 @@ def test_mfpt_struct_fields_give_the_signal_and_its_rate(tmp_path):
     r = cmd("import", "baseline_1.mat", "--unit", "g", "--out", "m.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     meta = sidecar(tmp_path / "m.bin")
-    assert (meta["fs"], meta["channel_names"]) == (97656, ["bearing.gs"])
+    assert (meta["fs"], meta["channel_names"]) == (97656, ["bearing_gs"])     # a channel name: no "."
     L = meta["block_len"]
     assert_within_one_count(decode(tmp_path / "m.bin"), gs[None, :gs.size // L * L] * G)
 

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .arrays import read_npy, read_npz
+from .channel_names import channel_names, checked_names
 from .errors import ImportFailure
 from .matlab import read_mat
 from .name_times import times_from_names
@@ -165,7 +166,11 @@ class _Layout:
         if len(self.idx) > MAX_CHANNELS:
             raise ImportFailure(f"{t.path}: {len(self.idx)} {t.kind}s, the board carries at most "
                                 f"{MAX_CHANNELS}; choose some with --channels (e.g. --channels 0,1)")
-        self.names = list(opts.names) if opts.names else [t.columns[i] for i in self.idx]
+        self.renamed: list[str] = []        # notes: labels that are not channel names
+        if opts.names:
+            self.names = checked_names(list(opts.names))
+        else:
+            self.names, self.renamed = channel_names([t.columns[i] for i in self.idx])
         if len(self.names) != len(self.idx):
             raise ImportFailure(f"--names gives {len(self.names)} name(s) for {len(self.idx)} channel(s); "
                                 "give one name per imported channel")
@@ -212,7 +217,7 @@ def _channels(t: Table, layout: _Layout, factor: float) -> np.ndarray:
     x = np.empty((len(layout.idx), s_, n_))  # one float64 copy per channel, nothing more
     for c, i in enumerate(layout.idx):
         x[c] = t.data[:, :, i]
-    _finite(t, x, layout.names)
+    _finite(t, x, [t.columns[i] for i in layout.idx])
     x *= factor
     return x
 
@@ -286,6 +291,7 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
         if progress is not None:
             progress(fi + 1)
     assert layout is not None
+    notes[:0] = layout.renamed
     data = pieces[0] if len(pieces) == 1 else np.concatenate(pieces, axis=1)
     del pieces
     fs = layout.fs

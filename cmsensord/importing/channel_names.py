@@ -1,0 +1,47 @@
+"""Channel names an import gives: names the daemon can use in its MCAP topics (``/cm/<name>/...``).
+
+A recording's column labels are often not (``Acc X (g)``, ``bearing.gs``): each run of
+characters other than letters, digits and ``_`` becomes one ``_`` (``Acc_X_g``), a label
+with none of them left is ``chN`` (its channel's index), and a name already taken gets ``_2``,
+``_3``, ...  Names given with ``--names`` are the user's own: one that is not a channel name is
+an error instead.
+"""
+
+from __future__ import annotations
+
+import re
+
+from .errors import ImportFailure
+
+__all__ = ["NAME_RULE", "channel_names", "checked_names"]
+
+#: what a channel name may hold (the configuration's rule for channels[].name)
+NAME_RULE = re.compile(r"[A-Za-z0-9_]+")
+
+
+def channel_names(labels: list[str]) -> tuple[list[str], list[str]]:
+    """Names from column labels, and a note for each label that had to change."""
+    names: list[str] = []
+    notes = []
+    for i, label in enumerate(labels):
+        base = re.sub(r"[^A-Za-z0-9_]+", "_", label).strip("_") or f"ch{i}"
+        name, k = base, 2
+        while name in names:
+            name, k = f"{base}_{k}", k + 1
+        names.append(name)
+        if name != label:
+            notes.append(f"channel {label!r} is named {name} (letters, digits and _ only: the MCAP topics "
+                         f"/cm/{name}/...); --names sets other names")
+    return names, notes
+
+
+def checked_names(given: list[str]) -> list[str]:
+    """``--names`` as given; a one-line error for one that is not a channel name or comes twice."""
+    for name in given:
+        if not NAME_RULE.fullmatch(name):
+            raise ImportFailure(f"--names: {name!r} is not a channel name: letters, digits and _ only "
+                                f"(the MCAP topics /cm/<name>/...)")
+    twice = sorted({n for n in given if given.count(n) > 1})
+    if twice:
+        raise ImportFailure(f"--names: {', '.join(twice)} given twice; every channel needs its own name")
+    return given
