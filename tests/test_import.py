@@ -328,10 +328,10 @@ def test_import_then_replay_end_to_end(tmp_path):
     r = cmd("replay", "rec.bin", "--out", "mcap", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "4.0 s of ADC time" in r.stderr and "400 observations, 0 missing, 0 frames lost" in r.stderr
-    assert "ch0: final severity" in r.stderr and "4 decisions" in r.stderr
+    assert "bearing: final severity" in r.stderr and "4 decisions" in r.stderr    # named as imported
     (log,) = (tmp_path / "mcap").glob("*.mcap")
     info = summarize(log)
-    assert info["topics"]["/cm/ch0/severity"] == 4  # one severity message per 1-s decision
+    assert info["topics"]["/cm/bearing/severity"] == 4  # one severity message per 1-s decision
     assert info["events"][0]["message"] == "board firmware 1.0: RAW mode, 1 channel(s), fs 25600 Hz, block 256"
 
 

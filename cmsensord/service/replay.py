@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
-from cmsensord.config import Config
+from cmsensord.config import ChannelConfig, Config
+from cmsensord.importing.channel_names import channel_names
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.observations import sidecar
@@ -53,6 +55,17 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     if not quiet:
         print(run_summary(proc, sink.paths, time.monotonic() - t0, sidecar(path)), file=sys.stderr)
     return 0, out, proc
+
+
+def imported_channels(cfg: Config, path: str) -> Config:
+    """``cfg`` (which lists no channels) with the channels of an imported capture named as
+    its import named them (the sidecar's ``channel_names``, as channel names); ``cfg`` itself
+    for a capture without a sidecar."""
+    names = channel_names([str(n) for n in sidecar(path).get("channel_names") or []])[0]
+    if not names:
+        return cfg
+    return replace(cfg, channels=tuple(ChannelConfig(name=n, index=i, monitor=cfg.monitor)
+                                       for i, n in enumerate(names)))
 
 
 def _no_frame(proc: Processor, path: str, counters: LinkCounters) -> None:
