@@ -86,6 +86,19 @@ def test_times_from_names(names, seconds):
     assert (None if got is None else got.seconds) == seconds
 
 
+def test_a_directory_of_files_not_in_series_takes_them_all(tmp_path):
+    """Files named each its own way (and one series beside them) are all taken, in name order."""
+    d = tmp_path / "week"
+    d.mkdir()
+    for i, name in enumerate(["monday.csv", "tuesday.csv", "run1.csv", "run2.csv"]):
+        (d / name).write_text(f"{i}\n{i}\n")
+    r = cmd("import", d, "--fs", "100", "--block-len", "2", "--out", "w.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "left out" not in r.stderr
+    assert [s["source"] for s in sidecar(tmp_path / "w.bin")["snapshots"]] == \
+        ["monday.csv", "run1.csv", "run2.csv", "tuesday.csv"]
+
+
 def test_files_of_no_known_type_that_are_not_text_tables_are_one_line_errors(tmp_path):
     (tmp_path / "blob").write_bytes(bytes(range(256)))
     (tmp_path / "words").write_text("not a number\nnor this\n")
@@ -116,11 +129,13 @@ def test_a_directory_takes_its_largest_series_of_files_and_says_what_it_left(tmp
     for k in range(3):
         rows = [f"9,39,{39 + 10 * k},{65664 + 39 * i},{v:.3f},0.1" for i, v in enumerate(x[k])]
         (d / f"acc_{k + 1:05d}.csv").write_text("\n".join(rows) + "\n")
-    (d / "temp_00001.csv").write_text("9,39,39,6.5e+05,29.8\n9,39,39,7.5e+05,29.8\n")
+    for k in (1, 2):
+        (d / f"temp_{k:05d}.csv").write_text("9,39,39,6.5e+05,29.8\n9,39,39,7.5e+05,29.8\n")
+    (d / "notes.csv").write_text("1,2\n")      # alone: no series, left out with the temperatures
     r = cmd("import", d, "--fs", "25600", "--channels", "4", "--unit", "g", "--out", "b.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    note = (f"{d}: took the 3 file(s) named like acc_#.csv; left out 1 other recording file(s) "
-            "(temp_#.csv): name them to import them")
+    note = (f"{d}: took the 3 file(s) named like acc_#.csv; left out 3 other(s) (notes.csv, temp_#.csv): "
+            "name them to import them")
     assert f"  note: {note}\n" in r.stderr
     meta = sidecar(tmp_path / "b.bin")
     assert [s["source"] for s in meta["snapshots"]] == ["acc_00001.csv", "acc_00002.csv", "acc_00003.csv"]

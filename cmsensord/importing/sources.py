@@ -62,22 +62,25 @@ def _pattern(p: Path) -> str:
 
 
 def _dir_files(d: Path, notes: list[str]) -> list[str]:
-    """The directory's recording files of the most common kind (:func:`_kind`) and, among them,
-    name (:func:`_pattern`: FEMTO's ``acc_00001.csv`` beside its ``temp_00001.csv``); a note
-    names the series left out."""
+    """The directory's recording files of the most common kind (:func:`_kind`); when several
+    series of them are there (two files or more named alike, :func:`_pattern`: FEMTO's
+    ``acc_00001.csv`` beside its ``temp_00001.csv``), only the largest, and a note names what
+    was left out."""
     kinds = {p: _kind(p) for p in d.iterdir() if p.is_file()}
     files = [p for p, k in kinds.items() if k is not None]
     if not files:
         raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}, or text tables of numbers) "
                             "in this directory; give the files or a --glob pattern")
-    groups = Counter((kinds[p], _pattern(p)) for p in files)
-    best = min(groups, key=lambda g: (-groups[g], g[1]))
-    left = sorted({g[1] for g in groups if g != best})
-    if left:
-        notes.append(f"{d}: took the {groups[best]} file(s) named like {best[1]}; left out "
-                     f"{sum(groups.values()) - groups[best]} other recording file(s) ({', '.join(left[:3])}"
-                     f"{', ...' if len(left) > 3 else ''}): name them to import them")
-    return [str(p) for p in files if (kinds[p], _pattern(p)) == best]
+    kind = min(Counter(kinds[p] for p in files).items(), key=lambda kv: (-kv[1], kv[0]))[0]
+    files = [p for p in files if kinds[p] == kind]
+    series = Counter(_pattern(p) for p in files)
+    if sum(n > 1 for n in series.values()) < 2:
+        return [str(p) for p in files]
+    best = min(series, key=lambda name: (-series[name], name))
+    left = sorted(name for name in series if name != best)
+    notes.append(f"{d}: took the {series[best]} file(s) named like {best}; left out {len(files) - series[best]} "
+                 f"other(s) ({', '.join(left[:3])}{', ...' if len(left) > 3 else ''}): name them to import them")
+    return [str(p) for p in files if _pattern(p) == best]
 
 
 def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str] | None = None) -> list[str]:
