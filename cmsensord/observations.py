@@ -123,10 +123,13 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                              f"(board seconds, or % of the capture; it holds {total:.1f} s)")
     shaft = _shaft_hz(sink, proc, first / rate, last / rate)
     rpm = meta.get("rpm")
-    return Observations(names=_names(meta, proc, auto_channels), indices=[ch.index for ch in proc.channels],
+    names = _names(meta, proc, auto_channels)
+    medians = _indicator_medians(sink, proc, first / rate, last / rate)   # by the Processor's names
+    return Observations(names=names, indices=[ch.index for ch in proc.channels],
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
                         rpm=float(rpm) if rpm else None,
-                        indicators=_indicator_medians(sink, proc, first / rate, last / rate))
+                        indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
+                                    if ch.name in medians})
 
 
 def _seconds(at: float, total_s: float) -> float:

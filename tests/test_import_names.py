@@ -220,3 +220,31 @@ def test_names_that_are_not_channel_names_are_one_line_errors(tmp_path, names, m
     r = cmd("import", "h.csv", "--fs", "100", "--names", names, "--out", "o.bin", cwd=tmp_path)
     assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n")
     assert not list(tmp_path.glob("o.bin*"))
+
+
+MOTOR = """alarms:
+  rules:
+    - name: rms_trend
+      indicator: accel_rms
+      alert_x_baseline: 2.0
+      danger_x_baseline: 4.0
+      on_delay_s: 2
+"""
+
+
+def test_calibrate_learns_indicator_baselines_for_the_channels_named_at_import(tmp_path):
+    """An import's channel names (not the board's ch0) carry the learned indicator baselines,
+    so k x baseline alarms rise on the replay."""
+    d = run_to_failure(tmp_path)
+    (tmp_path / "motor.yaml").write_text(MOTOR)
+    r = cmd("import", d, "--fs", "2560", "--unit", "g", "--names", "bearing", "--rpm", "1800", "--out", "r.bin",
+            cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmd("calibrate", "r.bin", "--to", "25%", "--config", "motor.yaml", "--out", "site.yaml", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    baselines = yaml.safe_load((tmp_path / "site.yaml").read_text())["alarms"]["baselines"]
+    rms = [b for b in baselines if b["indicator"] == "accel_rms"]
+    assert [b["channel"] for b in rms] == ["bearing"] and rms[0]["value"] > 0
+    r = cmd("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"events: .*alarm_alert 1\b", r.stderr), r.stderr
