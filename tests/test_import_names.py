@@ -4,6 +4,7 @@ files: text tables named by date and time), and snapshot times from the files' n
 from __future__ import annotations
 
 import json
+import math
 import re
 import time
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 import yaml
 
 from cmsensord.importing.name_times import times_from_names
+from cmsensord.sinks.mcap_sink import read_messages
 from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
 
 FS, ROWS = 20480, 2048
@@ -143,9 +145,14 @@ def test_a_directory_takes_its_largest_series_of_files_and_says_what_it_left(tmp
     assert_within_one_count(decode(tmp_path / "b.bin"), x.reshape(1, -1) * G)
 
 
+#: how the tests import :func:`run_to_failure`'s files
+R2F = ("--fs", "2560", "--block-len", "32", "--unit", "g", "--names", "bearing", "--rpm", "1800")
+
+
 def run_to_failure(tmp_path: Path) -> Path:
     """40 one-second snapshots at 2560 Hz, one every 10 minutes, named by time: quiet for 28,
-    then louder and rougher each time."""
+    then louder and rougher each time (imported in 32-sample blocks: each snapshot is one
+    board second)."""
     d = tmp_path / "r2f"
     d.mkdir()
     rng = np.random.default_rng(11)
@@ -164,8 +171,7 @@ def run_to_failure(tmp_path: Path) -> Path:
 def test_replay_says_where_in_the_recording_each_severity_level_was_first_reached(tmp_path, times):
     d = run_to_failure(tmp_path)
     more = ["--snapshot-interval", "600"] if times == "interval" else []
-    r = cmd("import", d, "--fs", "2560", "--unit", "g", "--names", "bearing", "--rpm", "1800", *more,
-            "--out", "r.bin", cwd=tmp_path)
+    r = cmd("import", d, *R2F, *more, "--out", "r.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     r = cmd("calibrate", "r.bin", "--to", "25%", "--out", "site.yaml", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -237,8 +243,7 @@ def test_calibrate_learns_indicator_baselines_for_the_channels_named_at_import(t
     so k x baseline alarms rise on the replay."""
     d = run_to_failure(tmp_path)
     (tmp_path / "motor.yaml").write_text(MOTOR)
-    r = cmd("import", d, "--fs", "2560", "--unit", "g", "--names", "bearing", "--rpm", "1800", "--out", "r.bin",
-            cwd=tmp_path)
+    r = cmd("import", d, *R2F, "--out", "r.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     r = cmd("calibrate", "r.bin", "--to", "25%", "--config", "motor.yaml", "--out", "site.yaml", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -248,3 +253,24 @@ def test_calibrate_learns_indicator_baselines_for_the_channels_named_at_import(t
     r = cmd("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert re.search(r"events: .*alarm_alert 1\b", r.stderr), r.stderr
+
+
+def test_replay_says_where_in_the_recording_each_alarm_first_rose(tmp_path):
+    d = run_to_failure(tmp_path)
+    (tmp_path / "motor.yaml").write_text(MOTOR)
+    assert cmd("import", d, *R2F, "--out", "r.bin", cwd=tmp_path).returncode == 0
+    assert cmd("calibrate", "r.bin", "--to", "25%", "--config", "motor.yaml", "--out", "site.yaml",
+               cwd=tmp_path).returncode == 0
+    r = cmd("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    msgs = read_messages(log)
+    # board second 0 is 1 s before the first indicator record's stamp (its 1-s interval's end)
+    t0 = next(stamp for topic, stamp, _ in msgs if topic == "/cm/bearing/indicators") - 1_000_000_000
+    alerts = [stamp for topic, stamp, m in msgs if topic == "/cm/events" and m["kind"] == "alarm_alert"]
+    assert alerts, r.stderr
+    k = math.ceil((alerts[0] - t0) / 1e9) - 1          # the snapshot whose second ends there
+    name = time.strftime("%Y.%m.%d.%H.%M.%S", time.gmtime(1_076_582_400 + 600 * k))
+    clock = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(1_076_582_400 + 600 * k))
+    assert (f"  alarm rms_trend/bearing: in the recording: alert at {name} ({100 * k / 40:.1f} % of the "
+            f"record, {clock})\n") in r.stderr

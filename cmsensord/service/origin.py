@@ -5,7 +5,8 @@ them in the capture's sidecar: each snapshot's source, where it starts in board 
 share of the record (``pct_of_record``) and, when the recording says, its time in it
 (``source_time_s``, after ``source_start`` when that date is known).  A replay's summary gives
 the board second at which each channel first reached severity 0.1, 0.5 and 1; for an imported
-recording of several snapshots, :func:`origin_lines` says which snapshot that was, and when.
+recording of several snapshots, :func:`origin_lines` says which snapshot that was, and when;
+and the same of each alarm's first alert and danger (:class:`FirstAlarms`).
 """
 
 from __future__ import annotations
@@ -13,11 +14,40 @@ from __future__ import annotations
 import bisect
 from datetime import datetime, timedelta
 
-__all__ = ["origin_lines"]
+__all__ = ["FirstAlarms", "origin_lines"]
+
+#: the alarm events whose first occurrence per alarm is placed in the recording
+_ALARM_KINDS = {"alarm_alert": "alert", "alarm_danger": "danger"}
 
 
-def origin_lines(meta: dict, views) -> list[str]:
-    """One line per channel that reached a level (``views``: the Processor's channel views),
+class FirstAlarms:
+    """The stamp of each alarm's first alert and first danger, taken from the events an
+    :class:`~cmsensord.monitor.events.EventLog` writes (its ``watch``, which it passes on)."""
+
+    def __init__(self, log):
+        self.first: dict[str, dict[str, int]] = {}      # alarm -> {"alert"|"danger": stamp_ns}
+        self._then = log.watch
+        log.watch = self
+
+    def __call__(self, kind: str, channel: str | None, message: str, stamp_ns: int, fields: dict) -> None:
+        level = _ALARM_KINDS.get(kind)
+        if level is not None:
+            self.first.setdefault(str(fields.get("alarm")), {}).setdefault(level, stamp_ns)
+        if self._then is not None:
+            self._then(kind, channel, message, stamp_ns, fields)
+
+    def board_s(self, anchor_ns: int | None) -> dict[str, dict[str, float]]:
+        """The firsts in board seconds of a capture whose board clock starts at 0 (an import's)
+        and is stamped from ``anchor_ns``."""
+        if anchor_ns is None:
+            return {}
+        return {alarm: {level: (ns - anchor_ns) / 1e9 for level, ns in levels.items()}
+                for alarm, levels in self.first.items()}
+
+
+def origin_lines(meta: dict, views, alarms: dict[str, dict[str, float]] | None = None) -> list[str]:
+    """One line per channel that reached a severity level (``views``: the Processor's channel
+    views) and per alarm that rose (``alarms``: alarm -> {"alert"|"danger": board second}),
     naming the snapshot of each first; none unless ``meta`` is an import's sidecar of several
     snapshots."""
     snaps = meta.get("snapshots") if meta.get("format") == "cmsensord import" else None
@@ -26,18 +56,27 @@ def origin_lines(meta: dict, views) -> list[str]:
     starts = [float(s["start_s"]) for s in snaps]
     lines = []
     for v in views:
-        if not (v.judged and v.timeline.first):
-            continue
-        at: dict[str, list[str]] = {}       # snapshot -> the levels first reached in it, in order
-        for level, t in sorted(v.timeline.first.items()):
-            at.setdefault(_where(meta, snaps, starts, t), []).append(f"{level:g}")
-        firsts = "; ".join(f"{' and '.join(levels)} at {where}" for where, levels in at.items())
-        lines.append(f"  {v.name}: in the recording: {firsts}")
+        if v.judged and v.timeline.first:
+            firsts = [(f"{level:g}", t) for level, t in sorted(v.timeline.first.items())]
+            lines.append(f"  {v.name}: in the recording: {_placed(meta, snaps, starts, firsts)}")
+    for alarm, levels in sorted((alarms or {}).items()):
+        firsts = [(level, levels[level]) for level in ("alert", "danger") if level in levels]
+        lines.append(f"  alarm {alarm}: in the recording: {_placed(meta, snaps, starts, firsts)}")
     return lines
 
 
+def _placed(meta: dict, snaps: list[dict], starts: list[float], firsts: list[tuple[str, float]]) -> str:
+    """``0.1 and 0.5 at SNAPSHOT (...); 1 at SNAPSHOT (...)``: the levels first reached in each
+    snapshot (``firsts``: (level, board second), in order)."""
+    at: dict[str, list[str]] = {}
+    for level, t in firsts:
+        at.setdefault(_where(meta, snaps, starts, t), []).append(level)
+    return "; ".join(f"{' and '.join(levels)} at {where}" for where, levels in at.items())
+
+
 def _where(meta: dict, snaps: list[dict], starts: list[float], t_s: float) -> str:
-    """The snapshot whose samples end the decision ending at board second ``t_s``."""
+    """The snapshot whose samples end what ends at board second ``t_s`` (a decision, an
+    indicator interval)."""
     s = snaps[max(0, bisect.bisect_right(starts, t_s - 1e-6) - 1)]
     when = f"{s['pct_of_record']:.1f} % of the record"
     if s.get("source_time_s") is not None:

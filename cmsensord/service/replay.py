@@ -14,6 +14,7 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.observations import sidecar
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
+from cmsensord.service.origin import FirstAlarms, origin_lines
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
@@ -39,6 +40,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     route_sink_events(sink, proc.log)
+    alarms = FirstAlarms(proc.log)
     progress = Progress(capture.size, f"replay {Path(path).name}")
     source = capture if speed is None else Paced(capture, speed)
     t0 = time.monotonic()
@@ -53,7 +55,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        print(run_summary(proc, sink.paths, time.monotonic() - t0, sidecar(path)), file=sys.stderr)
+        placed = origin_lines(sidecar(path), proc.views, alarms.board_s(proc.clock.anchor_ns))
+        print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return 0, out, proc
 
 

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-
-from cmsensord.service.origin import origin_lines
 
 
 def status_line(proc, source=None) -> str:
@@ -26,9 +25,9 @@ def status_line(proc, source=None) -> str:
     return " ".join(parts)
 
 
-def run_summary(proc, paths: list[Path], wall_s: float, origin: dict | None = None) -> str:
-    """What a run wrote and saw, printed at its end (``origin``: the sidecar of an imported
-    capture, whose snapshots the severity firsts are placed in: :mod:`cmsensord.service.origin`)."""
+def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = ()) -> str:
+    """What a run wrote and saw, printed at its end (``placed``: lines after the channels', where
+    an imported recording's severity levels and alarms came: :mod:`cmsensord.service.origin`)."""
     lines = [f"MCAP log: {p}" for p in paths] + [
              f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
              f"({proc.observations} observations, {proc.missing_observations} missing, "
@@ -42,7 +41,7 @@ def run_summary(proc, paths: list[Path], wall_s: float, origin: dict | None = No
         lines.append(f"  {v.name}: final severity {v.severity:.1f}, max {v.max_severity:.1f}, "
                      f"{v.failures} failure event(s), {v.decisions} decisions")
         lines.append(f"  {v.name}: {v.timeline.render()}")
-    lines += origin_lines(origin or {}, proc.views)
+    lines += placed
     if proc.event_counts:
         lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
     link = link_line(proc.link())
