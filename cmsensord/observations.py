@@ -24,7 +24,7 @@ import numpy as np
 from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.errors import CmsensordError
-from cmsensord.importing.channel_names import channel_names
+from cmsensord.importing.channel_names import imported_names
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
 from cmsensord.source import CaptureSource
@@ -84,10 +84,10 @@ class _Collect:
 def _names(meta: dict, proc: Processor, auto_channels: bool) -> list[str]:
     """Channel names: the configuration's, else the import's (as channel names: a capture
     imported before they were made so may hold others), else ch0, ch1, ..."""
-    given = channel_names([str(n) for n in meta.get("channel_names") or []])[0]
+    given = imported_names(meta)
     if not auto_channels:
         return [ch.name for ch in proc.channels]
-    return [str(given[i]) if i < len(given) else ch.name for i, ch in enumerate(proc.channels)]
+    return [given[i] if i < len(given) else ch.name for i, ch in enumerate(proc.channels)]
 
 
 def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool = True,

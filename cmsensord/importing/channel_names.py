@@ -13,7 +13,7 @@ import re
 
 from .errors import ImportFailure
 
-__all__ = ["NAME_RULE", "channel_names", "checked_names"]
+__all__ = ["NAME_RULE", "channel_names", "checked_names", "imported_names"]
 
 #: what a channel name may hold (the configuration's rule for channels[].name)
 NAME_RULE = re.compile(r"[A-Za-z0-9_]+")
@@ -45,3 +45,9 @@ def checked_names(given: list[str]) -> list[str]:
     if twice:
         raise ImportFailure(f"--names: {', '.join(twice)} given twice; every channel needs its own name")
     return given
+
+
+def imported_names(meta: dict) -> list[str]:
+    """The channel names of an imported capture's sidecar ``meta`` (none: []), made names as an
+    import makes them now: a capture imported before may hold other labels."""
+    return channel_names([str(n) for n in meta.get("channel_names") or []])[0]

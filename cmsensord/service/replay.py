@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from cmsensord.config import ChannelConfig, Config
-from cmsensord.importing.channel_names import channel_names
+from cmsensord.importing.channel_names import imported_names
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.observations import sidecar
@@ -64,7 +64,7 @@ def imported_channels(cfg: Config, path: str) -> Config:
     """``cfg`` (which lists no channels) with the channels of an imported capture named as
     its import named them (the sidecar's ``channel_names``, as channel names); ``cfg`` itself
     for a capture without a sidecar."""
-    names = channel_names([str(n) for n in sidecar(path).get("channel_names") or []])[0]
+    names = imported_names(sidecar(path))
     if not names:
         return cfg
     return replace(cfg, channels=tuple(ChannelConfig(name=n, index=i, monitor=cfg.monitor)
