@@ -4,7 +4,7 @@ For each recording: ``cmsensord import`` -> ``cmsensord calibrate`` on the healt
 period -> ``cmsensord replay --config SITE.yaml``, run as a user types them, then
 the severity messages of the MCAP log are read back.
 
-FEMTO-ST PRONOSTIA learning bearings (horizontal channel, calibrated on the first
+FEMTO-ST PRONOSTIA learning bearings (horizontal channel, or ``--axis vertical``, calibrated on the first
 20 % of each life): decisions with S_idx > 0 between 20 % and 50 % of life, the
 life fraction at which S_idx first reaches 0.1, 0.5 and 1.0, and the analysts'
 level rule beside it (one RMS per snapshot, baseline = median of the first 20 %,
@@ -78,13 +78,17 @@ def first_reached(life: np.ndarray, sev: np.ndarray, level: float) -> float:
     return float(life[idx[0]]) if idx.size else float("nan")
 
 
-def femto(data: Path, work: Path, bearing: str) -> dict:
+#: FEMTO's accelerometers: index in the archive's last axis
+AXES = {"horizontal": 0, "vertical": 1}
+
+
+def femto(data: Path, work: Path, bearing: str, axis: str = "horizontal") -> dict:
     src = data / "femto" / f"Bearing{bearing}.npz"
     d = np.load(src)
     snaps = d["acc_mg"].shape[0]
-    rms = np.sqrt(((d["acc_mg"][..., 0] / 1000.0) ** 2).mean(axis=1))
+    rms = np.sqrt(((d["acc_mg"][..., AXES[axis]] / 1000.0) ** 2).mean(axis=1))
     cap, site, out = work / f"B{bearing}.bin", work / f"B{bearing}.yaml", work / f"B{bearing}"
-    cpu = cmsensord("import", str(src), "--array", "acc_mg", "--channels", "0", "--names", "horizontal",
+    cpu = cmsensord("import", str(src), "--array", "acc_mg", "--channels", str(AXES[axis]), "--names", axis,
                     "--unit", "mg", "--out", str(cap))
     cpu += cmsensord("calibrate", str(cap), "--to", f"{HEALTHY * snaps * SNAPSHOT_S:g}",
                      "--out", str(site))          # f_r from the rpm the import read from the archive
@@ -93,8 +97,8 @@ def femto(data: Path, work: Path, bearing: str) -> dict:
         site.write_text(text + f"\nindicators:\n  interval_s: {SNAPSHOT_S}\n  rpm: {float(d['rpm']):g}\n",
                         encoding="utf-8")
     cpu += cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
-    t, sev = severity_timeline(out, "horizontal")
-    akf = severity_timeline(out, "horizontal", "severity_akf")[1]
+    t, sev = severity_timeline(out, axis)
+    akf = severity_timeline(out, axis, "severity_akf")[1]
     life = t / (snaps * SNAPSHOT_S) * 100
     mid = (life > 20) & (life <= 50)
     rule = level_rule(rms)
@@ -103,7 +107,7 @@ def femto(data: Path, work: Path, bearing: str) -> dict:
             "s01": first_reached(life, sev, 0.1), "s05": s05, "s10": first_reached(life, sev, 1.0),
             "akf01": first_reached(life, akf, 0.1), "akf05": first_reached(life, akf, 0.5),
             "rule": rule, "diff": s05 - rule, "decision": 100.0 / (snaps * SNAPSHOT_S), "cpu": cpu,
-            "trends": indicator_trends(out, "horizontal")}
+            "trends": indicator_trends(out, axis)}
 
 
 TRENDS = (("velocity_rms_mm_s", "velocity RMS mm/s"), ("kurtosis", "kurtosis"), ("envelope_rms", "envelope RMS m/s^2"))
@@ -153,18 +157,20 @@ def main() -> int:
     ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "realdata")
     ap.add_argument("--bearings", nargs="*", default=list(BEARINGS))
     ap.add_argument("--no-ims", action="store_true")
+    ap.add_argument("--axis", choices=tuple(AXES), default="horizontal",
+                    help="the FEMTO accelerometer (the rules were developed on the horizontal one)")
     args = ap.parse_args()
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench_realdata_") as tmp:
         work = Path(tmp)
-        print("FEMTO learning bearings, horizontal, calibrated on the first 20 % of life "
+        print(f"FEMTO learning bearings, {args.axis}, calibrated on the first 20 % of life "
               "(% of life; 'quiet' = decisions with S_idx > 0 in 20-50 %)")
         print("| bearing | snapshots | S>0 in 20-50 % | S>=0.1 | S>=0.5 | S>=1.0 | AKF part >=0.1 | "
               "AKF part >=0.5 | 2x rule | S>=0.5 - rule | 1 decision | CPU s |")
         print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         femto_rows = []
         for b in args.bearings:
-            r = femto(args.data, work, b)
+            r = femto(args.data, work, b, args.axis)
             femto_rows.append(r)
             print(f"| {r['bearing']} | {r['snapshots']} | {r['quiet']} | {_pct(r['s01'])} | {_pct(r['s05'])} | "
                   f"{_pct(r['s10'])} | {_pct(r['akf01'])} | {_pct(r['akf05'])} | {_pct(r['rule'])} | "
