@@ -50,6 +50,31 @@ def test_mfpt_struct_fields_give_the_signal_and_its_rate(tmp_path):
     assert_within_one_count(decode(tmp_path / "m.bin"), gs[None, :gs.size // L * L] * G)
 
 
+def paderborn(path, seed: int) -> np.ndarray:
+    """A file as the Paderborn bearing data centre writes it: one struct named after the file,
+    whose Y is an array of structs, each a named signal (Name, Raster, Data); its vibration."""
+    rng = np.random.default_rng(seed)
+    y = np.zeros((1, 3), dtype=[("Name", "O"), ("Raster", "O"), ("Data", "O")])
+    for i, (name, n) in enumerate([("force", 400), ("phase_current_1", 6400), ("vibration_1", 6400)]):
+        y[0, i] = (name, "HostService", np.round(rng.normal(0.0, 1.0, (1, n)), 4))
+    top = np.zeros((1, 1), dtype=[("Info", "O"), ("Y", "O")])
+    top[0, 0] = ("info", y)
+    scipy.io.savemat(path, {path.stem: top})
+    return y[0, 2]["Data"].ravel()
+
+
+def test_paderborn_files_by_the_name_of_a_signal_in_an_array_of_structs(tmp_path):
+    d = tmp_path / "K001"
+    d.mkdir()
+    x = [paderborn(d / f"N15_M07_F10_K001_{k}.mat", k) for k in (1, 2, 10)]
+    r = cmd("import", d, "--variable", "*vibration_1.Data", "--fs", "6400", "--out", "p.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta = sidecar(tmp_path / "p.bin")
+    assert meta["channel_names"] == ["vibration_1_Data"]
+    assert [s["source"] for s in meta["snapshots"]] == [f"N15_M07_F10_K001_{k}.mat" for k in (1, 2, 10)]
+    assert_within_one_count(decode(tmp_path / "p.bin"), np.concatenate(x)[None])
+
+
 def test_npz_arrays_side_by_side(tmp_path):
     a, b = np.random.default_rng(4).normal(0.0, 1.0, (2, 3000))
     np.savez(tmp_path / "r.npz", acc_x=a, acc_y=b, fs=10000)

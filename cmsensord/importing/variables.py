@@ -10,7 +10,8 @@
 * Without ``chosen``, the one numeric array with two dimensions, else the one with more than
   one element (:func:`pick_data`).
 * A MATLAB struct's fields are variables named ``struct.field`` (:func:`flatten`; the MFPT
-  bearing files hold ``bearing.gs``, the signal, and ``bearing.sr``, its rate).
+  bearing files hold ``bearing.gs``, the signal, and ``bearing.sr``, its rate), an array of
+  structs' ``struct.NAME.field`` (Paderborn: ``'*vibration_1.Data'``).
 * Scalars (:func:`scalar_named`) are found by the last part of their name; the speed also
   by a name that ends in ``rpm`` (CWRU: ``X097RPM``).
 """
@@ -32,17 +33,29 @@ MAX_DEPTH = 3
 
 
 def flatten(arrays: dict, depth: int = MAX_DEPTH) -> dict:
-    """``arrays`` with each MATLAB struct (a 1 x 1 record array, as ``scipy.io.loadmat``
-    returns it) replaced by its fields, named ``struct.field``."""
+    """``arrays`` with each MATLAB struct (a record array, as ``scipy.io.loadmat`` returns it)
+    replaced by its fields: ``struct.field`` for a 1 x 1 struct; for an array of structs,
+    ``struct.LABEL.field``, LABEL the element's ``Name`` field where it holds one word (the
+    Paderborn bearing files: ``...Y.vibration_1.Data``), else ``[i]``."""
     out: dict = {}
     for name, v in arrays.items():
         names = getattr(getattr(v, "dtype", None), "names", None)
-        if names and depth > 0 and v.size == 1:
-            rec = v.reshape(-1)[0]
-            out.update(flatten({f"{name}.{f}": rec[f] for f in names}, depth - 1))
-        else:
+        if not names or depth <= 0:
             out[name] = v
+            continue
+        recs = v.reshape(-1)
+        for i, rec in enumerate(recs):
+            at = name if recs.size == 1 else f"{name}.{_label(rec, names, i)}"
+            out.update(flatten({f"{at}.{f}": rec[f] for f in names}, depth - 1))
     return out
+
+
+def _label(rec, names: tuple[str, ...], i: int) -> str:
+    """An element of an array of structs: its ``Name`` (any case) when that is one word, else ``[i]``."""
+    field = next((f for f in names if f.lower() == "name"), None)
+    value = np.asarray(rec[field]).ravel() if field else np.empty(0)
+    word = str(value[0]) if value.size == 1 and value.dtype.kind == "U" else ""
+    return word if re.fullmatch(r"\w+", word) else f"[{i}]"
 
 
 def _numeric(v) -> bool:
