@@ -105,6 +105,10 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} (margin {margin:.2g}x); "
                      f"{m.flagged} healthy decision(s) would be flagged")
+        if r.f_r_source == "config":
+            lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
+                         "machine's shaft speed (no tacho, no --rpm, no rpm in the capture); if it turns at "
+                         "another speed, give --rpm RPM")
     return "\n".join(lines)
 
 

@@ -40,6 +40,8 @@ def test_calibrate_writes_a_site_file_that_keeps_the_healthy_period_silent(degra
     assert p.returncode == 0, p.stderr
     assert "healthy period: 0.0-150.0 board s, 100 blocks/s" in p.stdout
     assert "ch0: highest outlier count per decision on the healthy period at R_1:" in p.stdout
+    assert ("ch0: f_r 28.66 Hz is the configuration's monitor.f_r: nothing gave this machine's shaft speed "
+            "(no tacho, no --rpm, no rpm in the capture); if it turns at another speed, give --rpm RPM\n") in p.stdout
     ch = yaml.safe_load(site.read_text())["channels"][0]
     assert ch["name"] == "ch0" and ch["baseline"] > 0 and ch["r_max"] > ch["r_min"] > 0
     again = tmp_path / "again.yaml"
@@ -66,6 +68,13 @@ def test_calibrate_on_a_base_config_keeps_its_settings(degrading, tmp_path):
     cfg = yaml.safe_load(site.read_text())
     assert cfg["monitor"]["c"] == 0.5
     assert cfg["channels"][0]["name"] == "motor_de" and cfg["channels"][0]["z_c"] == 3.0
+
+
+def test_calibrate_says_nothing_of_f_r_when_the_speed_is_given(degrading, tmp_path):
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "150", "--rpm", "1500", "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "ch0           25.000 --rpm" in p.stdout
+    assert "monitor.f_r" not in p.stdout
 
 
 def test_calibrate_healthy_period_as_a_percentage_of_the_capture(degrading, tmp_path):
