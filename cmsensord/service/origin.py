@@ -14,7 +14,7 @@ from __future__ import annotations
 import bisect
 from datetime import datetime, timedelta
 
-__all__ = ["FirstAlarms", "origin_lines"]
+__all__ = ["FirstAlarms", "origin_lines", "span_line"]
 
 #: the alarm events whose first occurrence per alarm is placed in the recording
 _ALARM_KINDS = {"alarm_alert": "alert", "alarm_danger": "danger"}
@@ -45,15 +45,35 @@ class FirstAlarms:
                 for alarm, levels in self.first.items()}
 
 
+def _snapshots(meta: dict) -> tuple[list[dict], list[float]] | None:
+    """An import's snapshots and their board starts (None: not an import of several)."""
+    snaps = meta.get("snapshots") if meta.get("format") == "cmsensord import" else None
+    if not snaps or len(snaps) < 2:
+        return None
+    return snaps, [float(s["start_s"]) for s in snaps]
+
+
+def span_line(meta: dict, start_s: float, end_s: float) -> str | None:
+    """``in the recording: SNAPSHOT (...) to SNAPSHOT (...)``: the snapshots a span of board
+    seconds begins and ends in (calibrate's healthy period); None unless ``meta`` is an
+    import's sidecar of several snapshots."""
+    found = _snapshots(meta)
+    if found is None:
+        return None
+    snaps, starts = found
+    return (f"in the recording: {_where(meta, snaps, starts, start_s, ending=False)} to "
+            f"{_where(meta, snaps, starts, end_s)}")
+
+
 def origin_lines(meta: dict, views, alarms: dict[str, dict[str, float]] | None = None) -> list[str]:
     """One line per channel that reached a severity level (``views``: the Processor's channel
     views) and per alarm that rose (``alarms``: alarm -> {"alert"|"danger": board second}),
     naming the snapshot of each first; none unless ``meta`` is an import's sidecar of several
     snapshots."""
-    snaps = meta.get("snapshots") if meta.get("format") == "cmsensord import" else None
-    if not snaps or len(snaps) < 2:
+    found = _snapshots(meta)
+    if found is None:
         return []
-    starts = [float(s["start_s"]) for s in snaps]
+    snaps, starts = found
     lines = []
     for v in views:
         if v.judged and v.timeline.first:
@@ -74,10 +94,10 @@ def _placed(meta: dict, snaps: list[dict], starts: list[float], firsts: list[tup
     return "; ".join(f"{' and '.join(levels)} at {where}" for where, levels in at.items())
 
 
-def _where(meta: dict, snaps: list[dict], starts: list[float], t_s: float) -> str:
+def _where(meta: dict, snaps: list[dict], starts: list[float], t_s: float, ending: bool = True) -> str:
     """The snapshot whose samples end what ends at board second ``t_s`` (a decision, an
-    indicator interval)."""
-    s = snaps[max(0, bisect.bisect_right(starts, t_s - 1e-6) - 1)]
+    indicator interval), or with ``ending`` False begin what begins there."""
+    s = snaps[max(0, bisect.bisect_right(starts, t_s - 1e-6 if ending else t_s + 1e-6) - 1)]
     when = f"{s['pct_of_record']:.1f} % of the record"
     if s.get("source_time_s") is not None:
         start = meta.get("source_start")
