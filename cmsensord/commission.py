@@ -175,8 +175,8 @@ def add_calibrate_parser(sub) -> argparse.ArgumentParser:
                         "(e.g. 20%%: the first fifth of a run to failure; default: the end of the capture)")
     p.add_argument("--faulty", metavar="CAPTURE2", help="a faulty capture of the same machine: R_max "
                    "becomes the largest R that still flags it (Kim et al. 2023)")
-    p.add_argument("--rpm", type=positive, default=None, help="shaft speed, if neither the tacho nor the "
-                   "capture gives it")
+    p.add_argument("--rpm", type=positive, default=None, help="the machine's shaft speed (before the "
+                   "tacho's and the capture's)")
     p.add_argument("--config", metavar="BASE.yaml", help="base configuration the site file extends")
     p.add_argument("--out", required=True, metavar="SITE.yaml", help="site configuration to write")
     return p
