@@ -32,7 +32,7 @@ from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigErro
 from cmsensord.journal import JournalStream, error_line, setup_logging, under_journal
 from cmsensord.service.live import run_live
 from cmsensord.service.record import record
-from cmsensord.service.replay import imported_channels, replay
+from cmsensord.service.replay import replay
 from cmsensord.service.simulate import RUNUP_ORDERS, SimulateOptions, simulate
 from cmsensord.service.summary import summary
 
@@ -212,12 +212,8 @@ def _run_vkf(args: argparse.Namespace) -> int:
 
 
 def _run_replay(args: argparse.Namespace) -> int:
-    """``cmsensord replay``: a capture through the daemon's Processor; without channels in the
-    configuration, an imported capture's channels are named as its import named them."""
+    """``cmsensord replay``: a capture through the daemon's Processor."""
     cfg, auto = _config_for(args.sub_config)
-    if auto:
-        named = imported_channels(cfg, args.capture)
-        cfg, auto = named, named is cfg
     if args.sub_out or args.sub_trace:
         cfg = dataclasses.replace(cfg, output=dataclasses.replace(
             cfg.output, dir=args.sub_out or cfg.output.dir,

@@ -23,7 +23,7 @@ from cmsensord.argtypes import board_time, positive
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.dsp.commissioning import MARGIN, SPAN, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
-from cmsensord.observations import Observations, read_observations, sidecar
+from cmsensord.observations import Observations, read_observations
 from cmsensord.service.origin import span_line
 
 __all__ = ["ChannelResult", "add_calibrate_parser", "calibrate", "format_table", "run_calibrate",
@@ -201,7 +201,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
     print(format_table(results, obs))
-    where = span_line(sidecar(args.capture), obs.start_s, obs.end_s)
+    where = span_line(obs.meta, obs.start_s, obs.end_s)
     if where:
         print(f"healthy period {where}")
     text = site_yaml(results, obs, source=Path(args.capture).name, base=base, base_path=args.config)

@@ -44,6 +44,7 @@ class Observations:
     shaft_hz: float | None        # median tacho speed over the window (None: no tacho)
     rpm: float | None             # the capture's nominal speed (import sidecar), if any
     indicators: dict[str, dict[str, float]] = field(default_factory=dict)  # channel -> name -> median
+    meta: dict = field(default_factory=dict)    # the import's sidecar ({}: not an import)
 
     @property
     def end_s(self) -> float:
@@ -129,7 +130,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
-                                    if ch.name in medians})
+                                    if ch.name in medians}, meta=meta)
 
 
 def _seconds(at: float, total_s: float) -> float:

@@ -9,14 +9,17 @@ an error instead.
 
 from __future__ import annotations
 
+import dataclasses
 import re
+
+from cmsensord.config import ChannelConfig
 
 from .errors import ImportFailure
 
 __all__ = ["NAME_RULE", "channel_names", "checked_names", "imported_names"]
 
-#: what a channel name may hold (the configuration's rule for channels[].name)
-NAME_RULE = re.compile(r"[A-Za-z0-9_]+")
+#: what a channel name may hold: the configuration's rule for channels[].name
+NAME_RULE = re.compile(next(f.metadata["pattern"] for f in dataclasses.fields(ChannelConfig) if f.name == "name"))
 
 
 def channel_names(labels: list[str]) -> tuple[list[str], list[str]]:

@@ -28,8 +28,10 @@ REPLAY_CHUNK = 3 << 16
 def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, str] | None = None,
            quiet: bool = False, speed: float | None = None) -> tuple[int, Path | None, Processor]:
     """Process a capture file through the same decoder and Processor: as fast as possible,
-    or paced at ``speed`` x the board's clock (1: real time).  Returns (exit status, the last
-    MCAP file or None if it could not be finished, the Processor)."""
+    or paced at ``speed`` x the board's clock (1: real time); with ``auto_channels`` (``cfg``
+    lists no channels), an imported capture's channels named as its import named them.
+    Returns (exit status, the last MCAP file or None if it could not be finished, the
+    Processor)."""
     keep_freed_memory()         # the chain's arrays of each read from the heap, not fresh pages
     # as fast as possible: REPLAY_CHUNK reads, so each of the chain's per-call
     # costs (tacho, orders, indicators) comes a few times fewer; the messages are the same for
@@ -37,6 +39,10 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     # the partial frame before it, so each read is one scan (one batch, nothing joined)
     capture = CaptureSource(path, chunk=REPLAY_CHUNK if speed is None else 1 << 12,   # LinkError before any output
                             decoder=Decoder(max_buffer=REPLAY_CHUNK + MAX_FRAME), batches=True)
+    meta = sidecar(path)                # an import's: its channels' names, its snapshots
+    if auto_channels:
+        named = imported_channels(cfg, meta)
+        cfg, auto_channels = named, named is cfg
     sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     route_sink_events(sink, proc.log)
@@ -55,16 +61,16 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        placed = origin_lines(sidecar(path), proc.views, alarms.board_s(proc.clock.anchor_ns))
+        placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns))
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return 0, out, proc
 
 
-def imported_channels(cfg: Config, path: str) -> Config:
+def imported_channels(cfg: Config, meta: dict) -> Config:
     """``cfg`` (which lists no channels) with the channels of an imported capture named as
-    its import named them (the sidecar's ``channel_names``, as channel names); ``cfg`` itself
-    for a capture without a sidecar."""
-    names = imported_names(sidecar(path))
+    its import named them (its sidecar ``meta``'s ``channel_names``, as channel names); ``cfg``
+    itself without them."""
+    names = imported_names(meta)
     if not names:
         return cfg
     return replace(cfg, channels=tuple(ChannelConfig(name=n, index=i, monitor=cfg.monitor)
