@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["Percent", "board_time", "comma_list", "count", "nonzero", "positive", "real"]
+__all__ = ["Percent", "board_time", "comma_list", "count", "nonnegative", "nonzero", "positive", "real"]
 
 
 def real(text: str) -> float:
@@ -48,6 +48,14 @@ def positive(text: str) -> float:
     v = real(text)
     if not v > 0:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
+def nonnegative(text: str) -> float:
+    """A finite number >= 0."""
+    v = real(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
     return v
 
 

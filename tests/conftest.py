@@ -48,6 +48,7 @@ PROCESS_MODULES = frozenset({
     "test_stream_random.py",
     "test_realdata.py",
     "test_import.py",
+    "test_import_memory.py",
     "test_stream_time.py",
     "test_config_hostile.py",
     "test_reader_thread.py",
@@ -103,6 +104,24 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.process)
         if name in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture
+def small_fs(tmp_path):
+    """A 512 KiB tmpfs (root in a container that allows mounts; else the test skips)."""
+    mnt = tmp_path / "fs"
+    mnt.mkdir()
+    try:
+        r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=512k", "tmpfs", str(mnt)],
+                           capture_output=True, text=True, timeout=10)
+    except FileNotFoundError:
+        pytest.skip("no mount command")
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.strip()}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True, timeout=10)
 
 
 @pytest.fixture(autouse=True)

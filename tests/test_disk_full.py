@@ -38,24 +38,6 @@ def output(path, **kw):
     return dataclasses.replace(OutputConfig(), **{**base, **kw})
 
 
-@pytest.fixture
-def small_fs(tmp_path):
-    """A 512 KiB tmpfs (root in a container that allows mounts; else the test skips)."""
-    mnt = tmp_path / "fs"
-    mnt.mkdir()
-    try:
-        r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=512k", "tmpfs", str(mnt)],
-                           capture_output=True, text=True, timeout=10)
-    except FileNotFoundError:
-        pytest.skip("no mount command")
-    if r.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.strip()}")
-    try:
-        yield mnt
-    finally:
-        subprocess.run(["umount", "-l", str(mnt)], capture_output=True, timeout=10)
-
-
 def fill(fs: Path, leave: int) -> Path:
     """A file taking all but ``leave`` bytes of the file system."""
     st = os.statvfs(fs)

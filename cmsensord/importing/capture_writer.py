@@ -20,8 +20,9 @@ original recording, when known, counted from ``source_start`` when its date is
 known: the file names') and ``gap_before_s`` (from the previous snapshot's end to
 its start there).
 
-Counts are computed in vectorised chunks of ``CHUNK_BLOCKS`` blocks; only the
-frame encoding is per block. The capture is written to ``OUT.part`` and the
+Counts are computed in vectorised chunks of at most ``CHUNK_BLOCKS`` blocks and
+``CHUNK_SAMPLES`` samples (all channels), read from the recording's
+:class:`~.samples.SampleStore`; only the frame encoding is per block. The capture is written to ``OUT.part`` and the
 sidecar to ``OUT.json.part``; both are renamed when complete and deleted on any
 error, so no partial capture is left behind.
 """
@@ -54,10 +55,11 @@ from .errors import ImportFailure
 from .recording import Recording
 from .tacho import block_edges, rpm_edges
 
-__all__ = ["CHUNK_BLOCKS", "FW_VERSION", "MAX_TACHO_EDGES", "choose_ranges", "sidecar_path",
+__all__ = ["CHUNK_BLOCKS", "CHUNK_SAMPLES", "FW_VERSION", "MAX_TACHO_EDGES", "choose_ranges", "sidecar_path",
            "write_capture"]
 
 CHUNK_BLOCKS = 1000
+CHUNK_SAMPLES = 1 << 18
 FW_VERSION = 0x0100
 MAX_TACHO_EDGES = (4096 - 2) // 4  # edges one TACHO payload holds
 
@@ -74,8 +76,7 @@ def choose_ranges(rec: Recording, requested: tuple[float, ...] | None) -> list[f
             raise ImportFailure(f"--range gives {len(requested)} values for {C} channels; give one, "
                                 "or one per channel")
         return [float(v) for v in (requested * C if len(requested) == 1 else requested)]
-    peak = np.abs(rec.data).max(axis=1) if rec.n_samples else np.zeros(C)
-    return [nice_range(p) for p in peak]
+    return [nice_range(p) for p in rec.peak]
 
 
 def _tacho_frames(rec: Recording, plan: BlockPlan) -> tuple[np.ndarray, np.ndarray] | None:
@@ -110,9 +111,12 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
     clip_samples = np.zeros(C, dtype=np.int64)
     seq = frames = 0
     ar = np.arange(L)
-    for c0 in range(0, plan.n_blocks, CHUNK_BLOCKS):
-        c1 = min(c0 + CHUNK_BLOCKS, plan.n_blocks)
-        counts = to_counts(rec.data[:, plan.src_start[c0:c1, None] + ar], scale)  # (C, nb, L)
+    chunk = max(1, min(CHUNK_BLOCKS, CHUNK_SAMPLES // (C * L)))
+    for c0 in range(0, plan.n_blocks, chunk):
+        c1 = min(c0 + chunk, plan.n_blocks)
+        a0 = int(plan.src_start[c0])
+        x = rec.samples.read(a0, int(plan.src_start[c1 - 1]) + L)
+        counts = to_counts(x[:, plan.src_start[c0:c1, None] - a0 + ar], scale)  # (C, nb, L)
         edge = (counts == 0) | (counts == ADC_MAX)  # docs/PROTOCOL.md: clipped
         clip = edge.any(axis=-1)  # (C, nb)
         clip_blocks += clip.sum(axis=1)
@@ -189,8 +193,6 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
     part = Path(f"{out}.part")
     side = sidecar_path(out)
     side_part = Path(f"{side}.part")
-    if Path(out).is_dir():
-        raise ImportFailure(f"{out}: is a directory; give --out a file name, e.g. {Path(out) / 'capture.bin'}")
     try:
         try:
             with open(part, "wb") as f:

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from cmsensord.argtypes import comma_list, count, nonzero, positive, real
+from cmsensord.argtypes import comma_list, count, nonnegative, nonzero, positive, real
 from cmsensord.errors import EXIT_USAGE
 
 from .adc import ADC_MAX, OFFSET, nice_range
@@ -23,6 +23,8 @@ from .blocks import choose_block_len, plan_blocks, remainder_note
 from .capture_writer import choose_ranges, sidecar_path, write_capture
 from .errors import ImportFailure
 from .options import ImportOptions
+from .recording import Recording
+from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
 from .units import UNITS, G
 
@@ -114,6 +116,10 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                       help="constant shaft speed: TACHO frames with --ppr edges a revolution")
     p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=real, metavar="X",
                    help="pulse threshold (default: halfway between the column's 1st and 99th percentile)")
+    p.add_argument("--memory-mb", dest="imp_memory_mb", type=nonnegative, default=MEMORY_MB, metavar="MB",
+                   help=f"hold at most MB of samples in memory (default {MEMORY_MB:g}); a longer recording "
+                        "waits on disk beside --out while the capture is written (8 bytes a sample a "
+                        "channel)")
     p.add_argument("--ppr", dest="imp_ppr", type=count(1, 255), default=1, metavar="N",
                    help="tacho pulses per revolution (default 1)")
     return p
@@ -132,7 +138,8 @@ def options_from_args(args: argparse.Namespace) -> ImportOptions:
         scale_factor=args.imp_scale_factor, full_scale=args.imp_range, block_len=args.imp_block_len,
         snapshot_len=args.imp_snapshot_len, snapshot_interval=args.imp_snapshot_interval,
         order=args.imp_order, tacho_column=args.imp_tacho_column,
-        tacho_threshold=args.imp_tacho_threshold, ppr=args.imp_ppr, rpm=args.imp_rpm)
+        tacho_threshold=args.imp_tacho_threshold, ppr=args.imp_ppr, rpm=args.imp_rpm,
+        memory_mb=args.imp_memory_mb)
 
 
 class _Bar:
@@ -159,14 +166,14 @@ class _Bar:
             self.stream.flush()
 
 
-def _report(meta: dict, rec, out: str, size: int, notes: list[str]) -> list[str]:
+def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -> list[str]:
     C = len(meta["channel_names"])
     n_snap = len(meta["snapshots"])
     lines = [f"capture: {out} ({size:,} bytes, {meta['frames']:,} frames): "
              f"{meta['mode'].upper()}, {C} channel(s), fs {meta['fs']} Hz, block {meta['block_len']} "
              f"({meta['blocks_per_s']:g} blocks/s), {meta['board_seconds']:.2f} s of board time"
              + (f" from {n_snap} snapshots" if n_snap > 1 else "")]
-    peaks = abs(rec.data).max(axis=1) if rec.n_samples else [0.0] * C
+    peaks = rec.peak
     for c, name in enumerate(meta["channel_names"]):
         fs_, sc = meta["full_scale"][c], meta["scale"][c]
         line = (f"  {name}: full scale +-{fs_:g} m/s2 ({sc:.4g} m/s2 a count), "
@@ -191,11 +198,19 @@ def _report(meta: dict, rec, out: str, size: int, notes: list[str]) -> list[str]
 def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
     left: list[str] = []                    # what a directory's files left out
     files = collect_files(srcs, globs, opts.order, left)
+    if Path(opts.out).is_dir():
+        raise ImportFailure(f"{opts.out}: is a directory; give --out a file name, e.g. "
+                            f"{Path(opts.out) / 'capture.bin'}")
     bar = _Bar(len(files), f"import: reading {len(files)} file(s)")
     try:
         rec = build_recording(files, opts, progress=bar if len(files) > 1 else None)
     finally:
         bar.close()
+    with rec.samples:
+        return _write(rec, opts, files, left)
+
+
+def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str]) -> int:
     L, note = choose_block_len(rec.fs, opts.block_len, opts.mode)
     plan = plan_blocks(rec, L)
     notes = left + list(rec.notes) + ([note] if note else [])

@@ -30,3 +30,4 @@ class ImportOptions:
     tacho_threshold: float | None = None
     ppr: int = 1
     rpm: float | None = None  # synthesise TACHO frames at this constant speed
+    memory_mb: float = 64.0  # samples held in memory at most; beyond, on disk beside ``out``

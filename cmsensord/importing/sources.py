@@ -31,6 +31,7 @@ from .matlab import read_mat
 from .name_times import times_from_names
 from .options import ImportOptions
 from .recording import Recording, Snapshot
+from .samples import SampleStore
 from .table import Table
 from .tabular import is_text_table, read_tabular
 from .tacho import pulse_edges
@@ -260,10 +261,21 @@ def _retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[
 
 
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
-    """Read every file (``progress(i)`` after each) and lay the snapshots end to end."""
+    """Read every file (``progress(i)`` after each) and lay the snapshots end to end in a
+    :class:`~.samples.SampleStore` beside ``opts.out`` (the caller closes ``rec.samples``):
+    only one file's samples, and a tacho column, are held in memory at a time."""
+    stores: list[SampleStore] = []
+    try:
+        return _build(files, opts, progress, stores)
+    except BaseException:
+        for store in stores:
+            store.close()
+        raise
+
+
+def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleStore]) -> Recording:
     factor = to_ms2_factor(opts.unit, opts.sensitivity, opts.scale_factor)
     layout: _Layout | None = None
-    pieces: list[np.ndarray] = []
     tacho_pieces: list[np.ndarray] = []
     snaps: list[Snapshot] = []
     notes: list[str] = []
@@ -275,6 +287,7 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
         t = read_table(path, opts)
         if layout is None:
             layout = _Layout(t, opts)
+            stores.append(SampleStore(len(layout.idx), opts.out, opts.memory_mb))
         else:
             layout.check(t, Path(files[0]).name)
         x = _channels(t, layout, factor)
@@ -288,15 +301,14 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
             pos += n
         own_times = own_times or t.times is not None
         notes += _file_notes(t, opts)
-        pieces.append(x.reshape(len(layout.idx), -1))
+        stores[0].append(x.reshape(len(layout.idx), -1))
         if t.rpm and rpm_file is None:
             rpm_file = (t.rpm, t.name)
+        del t, x
         if progress is not None:
             progress(fi + 1)
     assert layout is not None
     notes[:0] = layout.renamed
-    data = pieces[0] if len(pieces) == 1 else np.concatenate(pieces, axis=1)
-    del pieces
     fs = layout.fs
     if fs != round(fs) or fs <= 0:
         raise ImportFailure(f"{files[0]}: sampling rate {fs:g} Hz; the board protocol carries a whole "
@@ -304,7 +316,7 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
         notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
     snaps, start = _retimed(snaps, origins, files, opts, fs, own_times, notes)
-    rec = Recording(fs=int(round(fs)), data=data, names=layout.names, snapshots=snaps,
+    rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
                     sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes,
                     source_start=start)
     if layout.tacho is not None:

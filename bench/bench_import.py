@@ -1,0 +1,102 @@
+#!/usr/bin/env python3
+"""Benchmark of ``cmsensord import`` over a directory of snapshot files: wall time, CPU
+seconds and peak resident memory as the recording grows.
+
+Writes N one-second snapshot files of four channels at 20,480 Hz, as the IMS rig's
+(text tables of numbers, tab-separated, three decimals, named by date and time), then runs
+``python -m cmsensord import DIR --fs 20480 --unit g --out ...`` as a user would, once per
+length, and prints per length the files, the recording's float64 samples (MB), the
+capture's size, wall and CPU seconds and the import process's peak resident memory. The
+same memory for every length shows that it is bounded (``--memory-mb``, default 64, then
+one file). ``--tree LABEL=DIR`` (repeatable) runs another checkout's code on the same
+files, side by side.
+
+    python bench/bench_import.py [--files 60 240] [--memory-mb 64] [--tree before=DIR] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_rms import trees  # noqa: E402  (each checkout compiled to .pyc, as installed)
+
+FS = 20480
+CHANNELS = 4
+
+
+def write_files(d: Path, n: int) -> None:
+    """``n`` IMS-like snapshot files in ``d``, ten minutes apart by their names."""
+    d.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    t = dt.datetime(2004, 2, 12, 10, 32, 39)
+    for k in range(n):
+        name = (t + dt.timedelta(minutes=10 * k)).strftime("%Y.%m.%d.%H.%M.%S")
+        np.savetxt(d / name, 0.1 * rng.standard_normal((FS, CHANNELS)), fmt="%.3f", delimiter="\t")
+
+
+def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None) -> dict:
+    """One ``cmsensord import`` in a child process: wall s, CPU s, peak RSS MB, capture MB."""
+    args = [sys.executable, "-m", "cmsensord", "import", str(src), "--fs", str(FS), "--unit", "g",
+            "--block-len", "2048", "--out", str(out)]
+    if memory_mb is not None:
+        args += ["--memory-mb", f"{memory_mb:g}"]
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    t0 = time.monotonic()
+    p = subprocess.Popen(args, cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    assert p.stderr is not None
+    err = p.stderr.read().decode()
+    _, status, usage = os.wait4(p.pid, 0)
+    wall = time.monotonic() - t0
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"import failed ({tree}):\n{err}")
+    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "rss_mb": usage.ru_maxrss / 1024,
+            "capture_mb": out.stat().st_size / 1e6}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--files", type=int, nargs="+", default=[60, 240], help="recording lengths, in files")
+    ap.add_argument("--memory-mb", type=float, help="passed to this checkout's import (default: its own)")
+    ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
+                    help="also run another checkout's code (e.g. before=../old)")
+    ap.add_argument("--keep", type=Path, help="write the files and captures here and keep them")
+    args = ap.parse_args()
+    base = args.keep or Path(tempfile.mkdtemp(prefix="bench_import_"))
+    rows = []
+    try:
+        for n in sorted(args.files):
+            src = base / f"files_{n}"
+            if not src.is_dir():
+                print(f"writing {n} snapshot files ...", file=sys.stderr, flush=True)
+                write_files(src, n)
+            for label, tree in trees(args.tree):
+                memory = args.memory_mb if tree == ROOT else None
+                r = run_import(src, base / f"capture_{n}_{label or 'this'}.bin", tree, memory)
+                rows.append((label, n, r))
+    finally:
+        if args.keep is None:
+            shutil.rmtree(base, ignore_errors=True)
+    samples_mb = {n: n * FS * CHANNELS * 8 / 1e6 for n in args.files}
+    print(f"cmsensord import of N IMS-like text files (1 s, {CHANNELS} channels at {FS} Hz each)")
+    print("| code | files | samples MB (float64) | capture MB | wall s | CPU s | peak RSS MB |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for label, n, r in rows:
+        print(f"| {label or 'this'} | {n} | {samples_mb[n]:.0f} | {r['capture_mb']:.1f} | {r['wall_s']:.1f} | "
+              f"{r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
+
+
+if __name__ == "__main__":
+    main()

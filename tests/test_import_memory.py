@@ -1,0 +1,128 @@
+"""`cmsensord import` of a long recording: its memory stays bounded (``--memory-mb``, then one
+file) however many files there are, the capture is the same bytes whatever the chunking and
+wherever the samples wait, and a disk without room for them is a one-line error that leaves
+nothing behind."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmsensord.importing.errors import ImportFailure
+from cmsensord.importing.samples import SampleStore
+
+FS = 25600
+
+
+def write_files(d: Path, n: int, seed: int = 0) -> None:
+    """``n`` one-second snapshot files of four channels, in g, as .npy."""
+    d.mkdir()
+    rng = np.random.default_rng(seed)
+    for k in range(n):
+        np.save(d / f"snap_{k:04d}.npy", 0.1 * rng.standard_normal((FS, 4)))
+
+
+def import_rss_mb(*args: str | Path, cwd: Path) -> tuple[int, str, float]:
+    """(exit status, stderr, peak resident memory in MB) of ``cmsensord import ARGS``."""
+    p = subprocess.Popen([sys.executable, "-m", "cmsensord", "import", *map(str, args)], cwd=cwd,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    assert p.stderr is not None
+    err = p.stderr.read()
+    _, status, usage = os.wait4(p.pid, 0)
+    p.returncode = os.waitstatus_to_exitcode(status)
+    return p.returncode, err, usage.ru_maxrss / 1024
+
+
+def test_memory_does_not_grow_with_the_number_of_files(tmp_path):
+    """With ``--memory-mb 8``, ten times the files (60 of 0.82 MB: 49 MB of float64 samples)
+    costs no more than a few MB more memory; holding the recording in memory would cost at
+    least 40 MB more."""
+    write_files(tmp_path / "short", 6)
+    write_files(tmp_path / "long", 60)
+    rc, err, short = import_rss_mb("short", "--fs", FS, "--unit", "g", "--memory-mb", "8", "--out", "s.bin",
+                                   cwd=tmp_path)
+    assert rc == 0, err
+    rc, err, long = import_rss_mb("long", "--fs", FS, "--unit", "g", "--memory-mb", "8", "--out", "l.bin",
+                                  cwd=tmp_path)
+    assert rc == 0, err
+    assert "60.00 s of board time from 60 snapshots" in err
+    assert long - short < 12, (short, long)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["l.bin", "l.bin.json", "long", "s.bin",
+                                                          "s.bin.json", "short"]
+
+
+def test_the_capture_is_the_same_bytes_whatever_the_chunk_and_wherever_the_samples_wait(
+        tmp_path, monkeypatch):
+    """Chunks of one block, of a few blocks and of the default, with the samples in memory, on
+    disk from the start, or moved to disk part way, give the same capture and sidecar."""
+    from cmsensord.cli import main
+    from cmsensord.importing import capture_writer
+
+    write_files(tmp_path / "d", 3)
+    outs = set()
+    for blocks, samples, memory in ((1000, 1 << 18, "64"), (7, 1 << 18, "0"), (1000, 1, "1.5"),
+                                    (3, 1 << 18, "1.5")):
+        monkeypatch.setattr(capture_writer, "CHUNK_BLOCKS", blocks)
+        monkeypatch.setattr(capture_writer, "CHUNK_SAMPLES", samples)
+        out = tmp_path / "o.bin"
+        assert main(["import", str(tmp_path / "d"), "--fs", str(FS), "--unit", "g", "--block-len", "2048",
+                     "--memory-mb", memory, "--out", str(out)]) == 0
+        outs.add((out.read_bytes(), Path(f"{out}.json").read_bytes()))
+    assert len(outs) == 1
+
+
+def test_a_disk_without_room_for_the_samples_is_one_line_and_leaves_nothing(tmp_path, small_fs):
+    """With ``--memory-mb 0`` the 512 KiB tmpfs cannot hold one file's 0.82 MB of samples: the
+    import says so in one line, exits 2 and leaves the disk as it found it; with the samples in
+    memory (the default) the same disk takes the 0.4-MB capture."""
+    write_files(tmp_path / "d", 2)
+    args = [sys.executable, "-m", "cmsensord", "import", "d", "--fs", str(FS), "--unit", "g", "--out",
+            str(small_fs / "o.bin")]
+    r = subprocess.run([*args, "--memory-mb", "0"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stdout) == (2, "")
+    assert r.stderr == (f"cmsensord import: {small_fs}/o.bin: no room on its disk for the samples read so "
+                        "far (0.8 MB, 8 bytes a sample a channel, held there until the capture is written): "
+                        "No space left on device; free space, give --out on another disk or hold more in "
+                        "memory with --memory-mb\n")
+    assert list(small_fs.iterdir()) == []
+    r = subprocess.run(args, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in small_fs.iterdir()) == ["o.bin", "o.bin.json"]
+
+
+def test_an_output_directory_that_does_not_exist_is_one_line(tmp_path):
+    write_files(tmp_path / "d", 1)
+    r = subprocess.run([sys.executable, "-m", "cmsensord", "import", "d", "--fs", str(FS), "--out",
+                        "no/o.bin"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stdout) == (2, "")
+    assert r.stderr == ("cmsensord import: no/o.bin: cannot write the capture: No such file or directory; "
+                        "check that the directory exists, is writable and has room\n")
+
+
+@pytest.mark.parametrize("memory_mb, on_disk", [(1.0, False), (0.0, True), (0.02, True)])
+def test_the_store_reads_back_what_was_appended_and_keeps_each_channel_peak(tmp_path, memory_mb, on_disk):
+    """In memory, on disk from the start, or moved there at the third part (past 20 kB)."""
+    rng = np.random.default_rng(2)
+    parts = [rng.standard_normal((3, n)) for n in (5, 0, 1000, 17)]
+    whole = np.concatenate(parts, axis=1)
+    with SampleStore(3, str(tmp_path / "o.bin"), memory_mb) as store:
+        for x in parts:
+            store.append(x)
+        assert (store.n_samples, store.on_disk) == (1022, on_disk)
+        np.testing.assert_array_equal(store.peak, np.abs(whole).max(axis=1))
+        for a, b in ((0, 1022), (3, 9), (1005, 1022), (7, 7)):
+            np.testing.assert_array_equal(store.read(a, b), whole[:, a:b])
+        for a, b in ((-1, 3), (5, 1023), (9, 8)):
+            with pytest.raises(IndexError):
+                store.read(a, b)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_store_refuses_a_directory_it_cannot_write(tmp_path):
+    with pytest.raises(ImportFailure, match="cannot write the capture: No such file or directory"):
+        SampleStore(1, str(tmp_path / "missing" / "o.bin"))
