@@ -13,13 +13,15 @@ Modules, one job each:
 * :mod:`.table` -- what every reader returns (raw columns, maybe fs, times, rpm);
 * :mod:`.wav`, :mod:`.tabular`, :mod:`.arrays`, :mod:`.matlab` -- the readers;
 * :mod:`.sources` -- SRC arguments to files in order, files to a :class:`Recording`;
-* :mod:`.recording` -- the in-memory recording (m/s², snapshots, tacho edges);
+* :mod:`.recording` -- the recording (m/s², snapshots, tacho edges);
+* :mod:`.samples` -- its samples, in memory up to ``--memory-mb``, beyond it on disk;
 * :mod:`.units` -- the input unit to m/s²;
 * :mod:`.adc` -- the 12-bit full-scale range and the counts;
 * :mod:`.tacho` -- tacho edges from a pulse column or a constant speed;
 * :mod:`.blocks` -- block length, which samples fill blocks, the board clock;
 * :mod:`.capture_writer` -- frames to ``OUT.part``, the sidecar, the rename;
-* :mod:`.command` -- the argparse sub-command and its summary.
+* :mod:`.command` -- the argparse sub-command and its summary;
+* :mod:`.timeline` -- board seconds of a capture to times in the recording (replay, report).
 """
 
 from .errors import ImportFailure

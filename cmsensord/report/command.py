@@ -42,8 +42,8 @@ def run_report(args: argparse.Namespace) -> int:
     _tell_unreadable(data)
     sections = _draw(data)
     from cmsensord.report.html_page import render_page
-    from cmsensord.report.localtime import local_text
-    title = args.title or f"cmsensord report {local_text(data.start_ns)[:16]} – {local_text(data.end_ns)[:16]}"
+    title = args.title or (f"cmsensord report {data.axis.text(data.start_ns)[:16]} – "
+                           f"{data.axis.text(data.end_ns)[:16]}")
     out = Path(args.sub_out)
     try:
         out.write_text(render_page(data, sections, title), encoding="utf-8")
@@ -87,10 +87,10 @@ def _draw(data: Any) -> list[tuple[str, list[Any]]]:
         figs = []
         if ch.severity:
             figs.append(figures.severity_figure(data, ch))
-        for make in (figures.indicators_figure, figures.orders_figure, figures.campbell_figure):
-            fig = make(ch)
+        for fig in (figures.indicators_figure(ch, data.axis), figures.orders_figure(ch),
+                    figures.campbell_figure(ch)):
             if fig is not None:
                 figs.append(fig)
-        figs.extend(figures.capture_figure(cap, i) for i, cap in enumerate(ch.captures))
+        figs.extend(figures.capture_figure(cap, i, data.axis) for i, cap in enumerate(ch.captures))
         sections.append((f"Channel {name}", figs))
     return sections

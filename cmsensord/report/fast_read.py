@@ -31,8 +31,10 @@ from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
 from cmsensord.sinks.mcap_records import RECORD_LIMIT
 
-__all__ = ["FastScan"]
+__all__ = ["FastScan", "head_metadata"]
 
+_OP_HEADER = 0x01
+_OP_METADATA = 0x0C
 _OP_CHANNEL = 0x04
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
@@ -43,6 +45,49 @@ _CHUNK = struct.Struct("<QQQI")         # message start, end, uncompressed size,
 
 
 _ZSTD: list[Any] = []
+
+
+def head_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    """The Metadata records at the head of an MCAP file, before its first other record (where
+    cmsensord's sink writes them): name -> map; {} for a file that cannot be read or is not
+    MCAP, and what was read up to a damaged record."""
+    out: dict[str, dict[str, str]] = {}
+    try:
+        with open(path, "rb") as f:
+            if f.read(len(MAGIC)) != MAGIC:
+                return out
+            while len(head := f.read(9)) == 9:
+                opcode, length = _HEAD.unpack(head)
+                if opcode not in (_OP_HEADER, _OP_METADATA) or length > RECORD_LIMIT:
+                    break
+                body = f.read(length)
+                if len(body) < length:
+                    break
+                if opcode == _OP_METADATA:
+                    name, pairs = _metadata(body)
+                    out[name] = pairs
+    except (OSError, ValueError, struct.error, UnicodeDecodeError):
+        pass
+    return out
+
+
+def _metadata(body: bytes) -> tuple[str, dict[str, str]]:
+    """A Metadata record's name and map (MCAP specification, "Metadata")."""
+    def text(off: int) -> tuple[str, int]:
+        (n,) = struct.unpack_from("<I", body, off)
+        if off + 4 + n > len(body):
+            raise ValueError("a string runs past its record")
+        return body[off + 4: off + 4 + n].decode("utf-8"), off + 4 + n
+
+    name, off = text(0)
+    (size,) = struct.unpack_from("<I", body, off)
+    off += 4
+    end = off + size
+    pairs = {}
+    while off < end:
+        key, off = text(off)
+        pairs[key], off = text(off)
+    return name, pairs
 
 
 def _zstd() -> Any:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import io
 import json
 from dataclasses import dataclass
-from datetime import datetime
 from typing import Any
 
 import matplotlib
@@ -22,8 +21,8 @@ import matplotlib.dates as mdates  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cmsensord.report.localtime import local_datetime  # noqa: E402
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
+from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 
 __all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
 
@@ -46,29 +45,31 @@ class Figure:
     png: bytes
 
 
-def _times(t_ns: np.ndarray) -> np.ndarray:
-    """Unix ns -> matplotlib date numbers of the local wall-clock time."""
-    return np.asarray(mdates.date2num([local_datetime(int(t)).replace(tzinfo=None) for t in t_ns]))
+def _times(t_ns: np.ndarray, axis: TimeAxis) -> np.ndarray:
+    """Shown times (:class:`TimeAxis`) -> x: matplotlib date numbers of the local wall-clock
+    reading, or hours into the recording."""
+    if not axis.is_dates():
+        return axis.hours(t_ns)
+    return np.asarray(mdates.date2num([axis.reading(int(t)) for t in t_ns]))
 
 
-def _axes_meta(ax: Any, time_axis: bool = False) -> dict[str, Any]:
+def _axes_meta(ax: Any, time_axis: TimeAxis | None = None) -> dict[str, Any]:
     xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
     out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
                            "xlim": xlim, "ylim": ylim, "xscale": ax.get_xscale(),
                            "lines": [ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")]}
-    if time_axis:
+    if time_axis is not None and time_axis.is_dates():
         out["xlim_local"] = [mdates.num2date(x).replace(tzinfo=None).isoformat(timespec="seconds") for x in xlim]
     return out
 
 
-def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: bool = False,
+def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: TimeAxis | None = None,
             boxes: bool = False) -> Figure:
     """The PNG and its metadata; with ``boxes`` each axes' box in the PNG too (``box_px``: left,
     top, right, bottom pixels, laid out as saved), so a test can find a line's pixel column."""
-    if time_axis:
-        offset = datetime.now().astimezone().strftime("%z")
-        axes[-1].set_xlabel(f"local time (UTC{offset[:3]}:{offset[3:]})")
-        for ax in axes:
+    if time_axis is not None:
+        axes[-1].set_xlabel(time_axis.label())
+        for ax in axes if time_axis.is_dates() else ():
             locator = mdates.AutoDateLocator()
             ax.xaxis.set_major_locator(locator)
             ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
@@ -94,30 +95,30 @@ def _event_lines(ax: Any, data: LogData, channel: str) -> None:
             continue
         label = ev["kind"] if ev["kind"] not in shown else None
         shown.add(ev["kind"])
-        ax.axvline(_times(np.array([t_ns]))[0], color=colour, lw=1.2, ls="--", label=label)
+        ax.axvline(_times(np.array([t_ns]), data.axis)[0], color=colour, lw=1.2, ls="--", label=label)
 
 
 def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     """The severity index S_idx over time, anomaly periods shaded, channel events as lines."""
     fig, ax = plt.subplots(figsize=(11, 3.2), layout="constrained")
     t, s = ch.severity.arrays()
-    x = _times(t)
+    x = _times(t, data.axis)
     ax.step(x, s, where="post", color="#1f4e99", lw=1.4, label="severity index")
     ta, a = ch.anomaly.arrays()
     if a.size and a.max() > 0:
-        ax.fill_between(_times(ta), 0, 1, where=a > 0, step="post", color="#ff9800", alpha=0.25,
+        ax.fill_between(_times(ta, data.axis), 0, 1, where=a > 0, step="post", color="#ff9800", alpha=0.25,
                         transform=ax.get_xaxis_transform(), label="anomaly flagged")
     _event_lines(ax, data, ch.name)
     ax.set_ylim(0, 1.05)
     if x.size:
-        ax.set_xlim(x[0], x[-1] if x[-1] > x[0] else x[0] + 1 / 86400)
+        ax.set_xlim(x[0], x[-1] if x[-1] > x[0] else x[0] + (1 / 86400 if data.axis.is_dates() else 1 / 3600))
     ax.set_ylabel("severity index")
     ax.set_title(f"{ch.name}: severity index (Kim et al. 2023)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8, ncols=4)
     meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
             "title": f"{ch.name}: severity index", "points": int(ch.severity.count)}
-    return _finish(fig, meta, [ax], time_axis=True)
+    return _finish(fig, meta, [ax], time_axis=data.axis)
 
 
 def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
@@ -128,9 +129,11 @@ def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
                 va="center", fontsize=9, color="#444")
 
 
-def indicators_figure(ch: ChannelData) -> Figure | None:
+def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure | None:
     """Velocity RMS with the ISO 10816-3 zones shaded (or the acceleration RMS in RMS mode),
-    and the shape indicators (kurtosis, crest factor) when the log has them."""
+    and the shape indicators (kurtosis, crest factor) when the log has them, over ``axis``
+    (default: local time)."""
+    axis = axis or TimeAxis()
     main = "velocity_rms_mm_s" if "velocity_rms_mm_s" in ch.indicators else "accel_rms"
     if main not in ch.indicators:
         return None
@@ -139,7 +142,7 @@ def indicators_figure(ch: ChannelData) -> Figure | None:
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.9 * rows), sharex=True, layout="constrained", squeeze=False)
     ax = axes[0][0]
     t, v = ch.indicators[main].arrays()
-    ax.plot(_times(t), v, color="#1f4e99", lw=1.2, label=main)
+    ax.plot(_times(t, axis), v, color="#1f4e99", lw=1.2, label=main)
     if main == "velocity_rms_mm_s":
         top = max(float(v.max()) * 1.1, 0.1)
         if ch.zone_boundaries:
@@ -153,7 +156,7 @@ def indicators_figure(ch: ChannelData) -> Figure | None:
     else:
         if "envelope_rms" in ch.indicators:
             te, ve = ch.indicators["envelope_rms"].arrays()
-            ax.plot(_times(te), ve, color="#e08a00", lw=1, label="envelope_rms")
+            ax.plot(_times(te, axis), ve, color="#e08a00", lw=1, label="envelope_rms")
         ax.set_ylabel("acceleration RMS [m/s²]")
         ax.set_title(f"{ch.name}: acceleration RMS")
     ax.legend(loc="upper left", fontsize=8)
@@ -163,14 +166,14 @@ def indicators_figure(ch: ChannelData) -> Figure | None:
         ax2 = axes[1][0]
         for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
             tk, vk = ch.indicators[k].arrays()
-            ax2.plot(_times(tk), vk, color=colour, lw=1, label=k)
+            ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
         ax2.set_ylabel("kurtosis, crest factor")
         ax2.legend(loc="upper left", fontsize=8)
         ax2.grid(alpha=0.3)
         used.append(ax2)
     meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
             "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries)}
-    return _finish(fig, meta, used, time_axis=True)
+    return _finish(fig, meta, used, time_axis=axis)
 
 
 def orders_figure(ch: ChannelData) -> Figure | None:
@@ -297,9 +300,10 @@ def _zoom_to(msg: dict[str, Any]) -> float | None:
     return min(ZOOM_LINES * max(lines), top)
 
 
-def capture_figure(cap: Capture, index: int) -> Figure:
+def capture_figure(cap: Capture, index: int, axis: TimeAxis | None = None) -> Figure:
     """A captured waveform (seconds from its trigger), its spectrum and its envelope spectrum,
-    the marked lines on both; with bearing lines also the envelope spectrum zoomed on them."""
+    the marked lines on both; with bearing lines also the envelope spectrum zoomed on them; its
+    time in the title as ``axis`` shows times (default: local time)."""
     parts: list[str] = [p for p in ("waveform", "spectrum", "envelope") if p in cap.parts]
     zoom = _zoom_to(cap.parts["envelope"]) if "envelope" in cap.parts else None
     if zoom is not None:
@@ -315,7 +319,7 @@ def capture_figure(cap: Capture, index: int) -> Figure:
             _spectrum(ax, cap.parts[part], "spectrum", log_f="envelope" in cap.parts, legend=False)  # RAW
         else:                                   # with a zoom below, its legend says what the lines are
             _spectrum(ax, cap.parts[part], "envelope spectrum", legend=zoom is None)
-    fig.suptitle(f"{cap.channel}: capture at {local_datetime(cap.time_ns).isoformat(timespec='seconds')}"
+    fig.suptitle(f"{cap.channel}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
                  f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}", fontsize=11)
     meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
             "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "trigger": trigger.get("kind"),

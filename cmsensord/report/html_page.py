@@ -13,7 +13,6 @@ import html
 import json
 from typing import Any
 
-from cmsensord.report.localtime import iso_local, local_text
 from cmsensord.report.log_data import MAX_EVENTS, LogData
 
 __all__ = ["render_page"]
@@ -47,7 +46,7 @@ def _figure_html(fig: Any) -> str:
 
 def _cards(data: LogData) -> str:
     span = (data.end_ns - data.start_ns) / 1e9 if data.start_ns is not None and data.end_ns is not None else 0.0
-    items = [("from", local_text(data.start_ns)), ("to", local_text(data.end_ns)),
+    items = [("from", data.axis.text(data.start_ns)), ("to", data.axis.text(data.end_ns)),
              ("duration", f"{span / 3600:.2f} h" if span >= 3600 else f"{span:.0f} s"),
              ("messages", f"{data.messages:,}"), ("files", str(len(data.files))),
              ("events", f"{sum(data.event_counts.values()):,}")]
@@ -58,14 +57,14 @@ def _cards(data: LogData) -> str:
 def _events_table(data: LogData) -> str:
     counts = ", ".join(f"{html.escape(k)} {n}" for k, n in sorted(data.event_counts.items()))
     rows = "".join(
-        f'<tr class="kind-{html.escape(ev["kind"])}"><td class="t">{local_text(t, ms=True)}</td>'
+        f'<tr class="kind-{html.escape(ev["kind"])}"><td class="t">{data.axis.text(t, ms=True)}</td>'
         f'<td>{html.escape(ev["kind"])}</td>'
         f'<td>{html.escape(str(ev["channel"] or ""))}</td><td>{html.escape(ev["message"])}</td></tr>'
         for t, ev in data.events)
     more = sum(data.event_counts.values()) - len(data.events)
     note = f"<p>The first {MAX_EVENTS} events are listed; {more} more are counted above.</p>" if more > 0 else ""
     return (f"<h2>Events</h2><p>By kind: {counts or 'none'}</p>{note}"
-            f'<table class="events" id="events"><tr><th>local time</th><th>kind</th><th>channel</th>'
+            f'<table class="events" id="events"><tr><th>{data.axis.column}</th><th>kind</th><th>channel</th>'
             f"<th>message</th></tr>{rows}</table>")
 
 
@@ -96,7 +95,7 @@ def _diagnostics_table(data: LogData) -> str:
 def render_page(data: LogData, sections: list[tuple[str, list[Any]]], title: str) -> str:
     """The whole page: overview cards, a section of figures per channel, events, link and disk."""
     body = [f"<h1>{html.escape(title)}</h1>",
-            f'<p class="sub">Times are local time, UTC{html.escape(iso_local(data.start_ns)[19:] or "")}.</p>',
+            f'<p class="sub">{html.escape(data.axis.caption(data.start_ns))}</p>',
             _cards(data)]
     for heading, figs in sections:
         body.append(f"<h2>{html.escape(heading)}</h2>")

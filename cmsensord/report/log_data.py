@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from cmsensord.report.time_axis import TimeAxis
 from cmsensord.report.trend import Trend
 
 __all__ = ["LogData", "ChannelData", "Capture", "FileInfo", "INDICATOR_FIELDS", "MAX_EVENTS", "MAX_CAPTURES"]
@@ -94,6 +95,7 @@ class LogData:
         self.start_ns: int | None = None
         self.end_ns: int | None = None
         self.files: list[FileInfo] = []
+        self.axis = TimeAxis()          # how times are shown; messages are added in shown times
         self.link_total: dict[str, int] = {}
         self._diag_last: bytes | None = None
         self._received_last = 0.0

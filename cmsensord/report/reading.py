@@ -13,9 +13,10 @@ from pathlib import Path
 from typing import TextIO
 
 from cmsensord.errors import CmsensordError
-from cmsensord.report.fast_read import FastScan
+from cmsensord.report.fast_read import FastScan, head_metadata
 from cmsensord.report.log_data import FileInfo, LogData
 from cmsensord.report.progress import Progress
+from cmsensord.report.time_axis import TimeAxis
 
 __all__ = ["log_paths", "read_logs"]
 
@@ -43,8 +44,11 @@ def log_paths(names: list[str]) -> list[Path]:
 
 
 def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
-    """All messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal."""
+    """All messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal; the
+    messages of a replayed import in the recording's own time (:mod:`.time_axis`)."""
     data = LogData()
+    data.axis = TimeAxis.of_logs([head_metadata(p) for p in paths])
+    shown = None if data.axis.timeline is None else data.axis.shown
     sizes = [p.stat().st_size for p in paths]
     progress = Progress(sum(sizes), progress_stream)
     done = 0
@@ -52,7 +56,7 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
         info = FileInfo(str(path), size)
         scan = FastScan(path)
         for topic, t, raw, offset in scan.messages():
-            data.add(topic, t, raw)
+            data.add(topic, t if shown is None else shown(t), raw)
             info.messages += 1
             if info.messages % 4096 == 0:
                 progress.update(done + offset)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from cmsensord.config import ChannelConfig, Config
 from cmsensord.importing.channel_names import imported_names
+from cmsensord.importing.timeline import Timeline
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.observations import sidecar
@@ -29,7 +30,10 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
            quiet: bool = False, speed: float | None = None) -> tuple[int, Path | None, Processor]:
     """Process a capture file through the same decoder and Processor: as fast as possible,
     or paced at ``speed`` x the board's clock (1: real time); with ``auto_channels`` (``cfg``
-    lists no channels), an imported capture's channels named as its import named them.
+    lists no channels), an imported capture's channels named as its import named them. An
+    import of snapshots with their times has its :class:`~cmsensord.importing.timeline.Timeline`
+    in the log's ``cmsensord`` metadata (``recording_timeline``), board second 0 stamped at
+    the ``board_zero_ns`` it gives.
     Returns (exit status, the last MCAP file or None if it could not be finished, the
     Processor)."""
     keep_freed_memory()         # the chain's arrays of each read from the heap, not fresh pages
@@ -43,8 +47,13 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     if auto_channels:
         named = imported_channels(cfg, meta)
         cfg, auto_channels = named, named is cfg
-    sink = open_sink(cfg, {"source": str(path), **(metadata or {})})
+    timeline = Timeline.from_sidecar(meta)
+    board_zero_ns = time.time_ns()
+    extra = {"recording_timeline": timeline.to_json(board_zero_ns)} if timeline else {}
+    sink = open_sink(cfg, {"source": str(path), **(metadata or {}), **extra})
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
+    if timeline:
+        proc.clock.anchor(0, board_zero_ns)     # the import's board clock starts at 0
     route_sink_events(sink, proc.log)
     alarms = FirstAlarms(proc.log)
     progress = Progress(capture.size, f"replay {Path(path).name}")

@@ -1,0 +1,101 @@
+"""Board seconds of an imported capture to times in the recording it came from.
+
+``cmsensord import`` lays a recording's snapshots end to end on the board clock and lists
+them in the capture's sidecar (:mod:`.capture_writer`): each snapshot's board start
+``start_s`` and, when the recording says, its time in the recording ``source_time_s``
+(seconds after ``source_start`` when that date is known). A board second ``t`` in snapshot
+``k`` is ``source_time_s[k] + (t - start_s[k])`` seconds into the recording; a time on the
+start of snapshot ``k`` is the end of snapshot ``k - 1`` (the daemon stamps an interval at
+its end).
+
+A snapshot whose time goes back against the snapshots before it (a logger's clock set wrong
+for a few files: two of FEMTO Bearing1_1's 2803) is placed between its neighbours, by its
+place in the file order, and counted (:attr:`Timeline.repaired`). A replay writes the timeline
+into its MCAP log (:meth:`Timeline.to_json`, with the log time of board second 0), so that a
+report can draw the log over the recording's own time.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from datetime import datetime
+
+import numpy as np
+
+__all__ = ["Timeline"]
+
+
+@dataclass(frozen=True)
+class Timeline:
+    start_s: np.ndarray  # float64 (snapshots,): board second of each snapshot's start, increasing
+    source_s: np.ndarray  # float64 (snapshots,): its time in the recording, non-decreasing
+    source_start: str | None = None  # ISO 8601 date and time that source_s counts from, if known
+    repaired: int = 0  # snapshots whose time went back, placed between their neighbours
+
+    @classmethod
+    def from_sidecar(cls, meta: dict) -> Timeline | None:
+        """The timeline of an import's sidecar ``meta`` of two or more snapshots that all have
+        a time; None otherwise (not an import, one snapshot, times unknown, or mostly out of
+        order)."""
+        snaps = meta.get("snapshots") if meta.get("format") == "cmsensord import" else None
+        if not snaps or len(snaps) < 2 or any(s.get("source_time_s") is None for s in snaps):
+            return None
+        start = np.array([float(s["start_s"]) for s in snaps])
+        times, repaired = _in_order(np.array([float(s["source_time_s"]) for s in snaps]))
+        if repaired * 2 > len(snaps):
+            return None
+        return cls(start, times, _date(meta.get("source_start")), repaired)
+
+    def seconds(self, board_s: np.ndarray | float) -> np.ndarray:
+        """Seconds into the recording of board second(s) ``board_s``."""
+        t = np.asarray(board_s, dtype=np.float64)
+        k = np.clip(np.searchsorted(self.start_s, t, side="left") - 1, 0, self.start_s.size - 1)
+        return self.source_s[k] + (t - self.start_s[k])
+
+    def to_json(self, board_zero_ns: int) -> str:
+        """The timeline as one compact JSON text, with the log time of board second 0."""
+        return json.dumps({"board_zero_ns": int(board_zero_ns), "source_start": self.source_start,
+                           "repaired": self.repaired, "start_s": [round(float(v), 6) for v in self.start_s],
+                           "source_time_s": [round(float(v), 6) for v in self.source_s]},
+                          separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> tuple[Timeline, int] | None:
+        """(timeline, log time of board second 0) from :meth:`to_json`'s text; None when the
+        text is not one (a damaged or foreign log)."""
+        try:
+            d = json.loads(text)
+            start = np.asarray(d["start_s"], dtype=np.float64)
+            times = np.asarray(d["source_time_s"], dtype=np.float64)
+            zero = int(d["board_zero_ns"])
+            ok = (start.ndim == 1 and start.shape == times.shape and start.size >= 2
+                  and bool(np.all(np.isfinite(start)) and np.all(np.isfinite(times))))
+        except (ValueError, TypeError, KeyError):
+            return None
+        if not ok:
+            return None
+        return cls(start, np.maximum.accumulate(times), _date(d.get("source_start")),
+                   int(d.get("repaired") or 0)), zero
+
+
+def _in_order(times: np.ndarray) -> tuple[np.ndarray, int]:
+    """``times`` with each one below the largest before it placed between its in-order
+    neighbours (linear by index; after the last in-order one: that one's time), and how many."""
+    ok = times >= np.maximum.accumulate(times)
+    bad = int((~ok).sum())
+    if not bad:
+        return times, 0
+    idx = np.arange(times.size)
+    return np.interp(idx, idx[ok], times[ok]), bad
+
+
+def _date(text: object) -> str | None:
+    """An ISO 8601 date and time, or None when ``text`` is not one."""
+    if not isinstance(text, str):
+        return None
+    try:
+        datetime.fromisoformat(text)
+    except ValueError:
+        return None
+    return text

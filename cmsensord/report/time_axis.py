@@ -1,0 +1,105 @@
+"""The report's time: local wall-clock time, or the time of the recording a replayed import came from.
+
+A daemon's log, or a replay of a capture, is drawn in local time (``local``). A replay of an
+imported recording of snapshots carries the import's
+:class:`~cmsensord.importing.timeline.Timeline` in its ``cmsensord`` metadata
+(``recording_timeline``): its log times are then shown as the recording's own, where the
+board clock ran on through the gaps between snapshots. With the recording's date (the import
+read it from the file names) the times are that date and time (``recording``, as the file
+names give them: not converted to this machine's zone, nor shifted by its daylight saving); without it, hours into the
+recording (``elapsed``). Logs of different recordings, or some of an import and some not,
+stay in local time, and :attr:`TimeAxis.note` says why.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+
+import numpy as np
+
+from cmsensord.importing.timeline import Timeline
+from cmsensord.report.localtime import iso_local, local_datetime, local_text
+
+__all__ = ["TimeAxis"]
+
+_HOUR_NS = 3_600_000_000_000
+
+
+class TimeAxis:
+    """Log times to the times the report shows (:meth:`shown`), and how to write and label them."""
+
+    def __init__(self, timeline: Timeline | None = None, board_zero_ns: int = 0, note: str = ""):
+        self.timeline, self.board_zero_ns = timeline, board_zero_ns
+        self.kind = "local" if timeline is None else "recording" if timeline.source_start else "elapsed"
+        self._epoch_s = datetime.fromisoformat(timeline.source_start).replace(tzinfo=timezone.utc).timestamp() \
+            if timeline is not None and timeline.source_start else 0.0
+        self.note = note
+
+    @classmethod
+    def of_logs(cls, metadata: list[dict[str, dict[str, str]]]) -> TimeAxis:
+        """The axis of logs whose head metadata is ``metadata`` (one dict per file)."""
+        texts = [m.get("cmsensord", {}).get("recording_timeline") for m in metadata]
+        if not any(texts):
+            return cls()
+        if len(set(texts)) > 1:
+            return cls(note="The logs are not all of one imported recording: local time is shown.")
+        parsed = Timeline.from_json(texts[0] or "")
+        if parsed is None:
+            return cls(note="The logs' recording timeline cannot be read: local time is shown.")
+        timeline, zero = parsed
+        fixed = (f" {timeline.repaired} snapshot(s) whose recorded time went back are placed between "
+                 "their neighbours." if timeline.repaired else "")
+        where = (f"the recording's own date and time (from {timeline.source_start})" if timeline.source_start
+                 else "hours into the recording")
+        return cls(timeline, zero, note=f"A replay of an imported recording: times are {where}, gaps "
+                                        f"between its snapshots included.{fixed}")
+
+    def shown(self, log_ns: int) -> int:
+        """The time shown for a message logged at ``log_ns``: ns since the Unix epoch (``local``;
+        ``recording``: the recording's clock read as UTC), or ns into the recording
+        (``elapsed``)."""
+        if self.timeline is None:
+            return log_ns
+        s = float(self.timeline.seconds((log_ns - self.board_zero_ns) / 1e9))
+        return int(round((self._epoch_s + s) * 1e9))
+
+    def text(self, ns: int | None, *, ms: bool = False) -> str:
+        """A shown time for a table or a card; ``None`` gives ``-``."""
+        if ns is None or self.kind == "local":
+            return local_text(ns, ms=ms)
+        if self.kind == "elapsed":
+            return f"{ns / _HOUR_NS:.{5 if ms else 3}f} h"
+        return self.reading(ns).isoformat(sep=" ", timespec="milliseconds" if ms else "seconds")
+
+    def reading(self, ns: int) -> datetime:
+        """A shown time (not ``elapsed``) as the clock reading it stands for, without a zone."""
+        if self.kind == "recording":
+            return datetime.fromtimestamp(ns / 1e9, timezone.utc).replace(tzinfo=None)
+        return local_datetime(ns).replace(tzinfo=None)
+
+    @property
+    def column(self) -> str:
+        """The heading of a column of shown times."""
+        return {"local": "local time", "recording": "recording time", "elapsed": "hours in"}[self.kind]
+
+    def caption(self, start_ns: int | None) -> str:
+        """The page's line on its times."""
+        if self.kind == "local":
+            return (f"Times are local time, UTC{iso_local(start_ns)[19:] or ''}. " + self.note).strip()
+        return self.note
+
+    def is_dates(self) -> bool:
+        return self.kind != "elapsed"
+
+    def hours(self, t_ns: np.ndarray) -> np.ndarray:
+        """Shown ns into the recording as hours (the ``elapsed`` axis's x)."""
+        return np.asarray(t_ns, dtype=np.float64) / _HOUR_NS
+
+    def label(self) -> str:
+        """The x label of a time axis."""
+        if self.kind == "local":
+            offset = datetime.now().astimezone().strftime("%z")
+            return f"local time (UTC{offset[:3]}:{offset[3:]})"
+        if self.kind == "recording":
+            return "recording time (from the import)"
+        return "hours into the recording"

@@ -1,0 +1,148 @@
+"""``cmsensord report`` of a replayed import: drawn over the recording's own time (its date and
+time from the file names, or hours into it), gaps between snapshots included; the timeline the
+replay writes into the log; logs of different recordings stay in local time and say why."""
+
+from __future__ import annotations
+
+import calendar
+import html
+import json
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmsensord.importing.timeline import Timeline
+from cmsensord.report.fast_read import head_metadata
+from processes import cmsensord, run_module
+from tests.test_import_names import R2F, run_to_failure
+
+pytest.importorskip("matplotlib", reason="the report extra")
+
+START = 1_076_582_400          # the first snapshot's name: 2004-02-12 10:40:00; one every 600 s
+
+
+def clock(k: int, plus_s: int = 0) -> str:
+    """Snapshot k's start (+ ``plus_s``) as the file names give it."""
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(START + 600 * k + plus_s))
+
+
+def replayed_import(tmp_path: Path, *more: str) -> tuple[Path, str]:
+    """The run-to-failure recording imported (40 one-second snapshots, 10 minutes apart),
+    calibrated on its first quarter and replayed: (log directory, the replay's stderr)."""
+    d = run_to_failure(tmp_path)
+    for args in (("import", str(d), *R2F, *more, "--out", "r.bin"),
+                 ("calibrate", "r.bin", "--to", "25%", "--out", "site.yaml")):
+        p = cmsensord(*args, cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+    p = cmsensord("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    return tmp_path / "logs", p.stderr
+
+
+def report(tmp_path: Path, *logs: Path) -> tuple[str, dict[str, dict]]:
+    out = tmp_path / "report.html"
+    p = cmsensord("report", *map(str, logs), "--out", str(out), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    page = out.read_text(encoding="utf-8")
+    metas = {m["id"]: m for m in json.loads(re.search(
+        r'<script type="application/json" id="figures">(.*?)</script>', page, re.S).group(1))}
+    return page, metas
+
+
+def event_rows(page: str) -> list[tuple[str, str]]:
+    return re.findall(r'<tr class="kind-([a-z_]+)"><td class="t">([^<]*)</td>', page)
+
+
+def test_a_replayed_import_of_files_named_by_time_is_drawn_in_the_recording_time(tmp_path):
+    logs, stderr = replayed_import(tmp_path)
+    page, metas = report(tmp_path, logs)
+    assert ("A replay of an imported recording: times are the recording's own date and time (from "
+            "2004-02-12T10:40:00), gaps between its snapshots included.") in html.unescape(page)
+    assert f"<title>cmsensord report {clock(0)[:16]} – {clock(39, 1)[:16]}</title>" in page
+    sev = metas["bearing-severity"]["axes"][0]
+    assert sev["xlabel"] == "recording time (from the import)"
+    # one decision a board second, each the end of one snapshot: the first and the last of them
+    assert sev["xlim_local"][0] in {clock(k, 1).replace(" ", "T") for k in range(3)}
+    assert sev["xlim_local"][1] == clock(39, 1).replace(" ", "T")
+    # each severity level's first decision: the end of the snapshot the replay names
+    line = re.search(r"  bearing: in the recording: (.*)\n", stderr)[1]
+    placed = re.findall(r"([\d.]+(?: and [\d.]+)*) at \S+ \([\d.]+ % of the record, ([\d-]+ [\d:]+)\)", line)
+    assert " and ".join(levels for levels, _ in placed).split(" and ") == ["0.1", "0.5", "1"]
+    changes = [t for kind, t in event_rows(page) if kind == "severity_change"]
+    for _, start in placed:
+        k = (calendar.timegm(time.strptime(start, "%Y-%m-%d %H:%M:%S")) - START) // 600
+        assert f"{clock(k, 1)}.000" in changes, (start, changes)
+
+
+def test_an_import_without_a_date_is_drawn_in_hours_into_the_recording(tmp_path):
+    logs, _ = replayed_import(tmp_path, "--snapshot-interval", "600")
+    page, metas = report(tmp_path, logs)
+    assert "times are hours into the recording" in html.unescape(page)
+    assert "<title>cmsensord report 0.000 h – 6.500 h</title>" in page
+    for fid in ("bearing-severity", "bearing-indicators"):
+        ax = metas[fid]["axes"][-1]
+        assert ax["xlabel"] == "hours into the recording" and "xlim_local" not in ax
+    lo, hi = metas["bearing-severity"]["axes"][0]["xlim"]
+    assert 0 < lo < 0.4 and hi == pytest.approx(39 * 600 / 3600 + 1 / 3600)
+    assert '<th>hours in</th>' in page
+    assert all(re.fullmatch(r"\d\.\d{5} h", t) for _, t in event_rows(page))
+
+
+def test_logs_of_an_import_and_of_a_board_stay_in_local_time_and_say_why(tmp_path):
+    logs, _ = replayed_import(tmp_path)
+    p = run_module("firmware_sim", "--scenario", "healthy", "--out", str(tmp_path / "sim.cap"),
+                   "--duration", "5")
+    assert p.returncode == 0, p.stderr
+    p = cmsensord("replay", "sim.cap", "--out", "sim", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    page, metas = report(tmp_path, logs, tmp_path / "sim")
+    assert "The logs are not all of one imported recording: local time is shown." in page
+    assert metas["bearing-severity"]["axes"][0]["xlabel"].startswith("local time (UTC")
+    assert "<th>local time</th>" in page
+
+
+def test_the_replay_writes_the_timeline_and_stamps_board_zero_at_it(tmp_path):
+    logs, _ = replayed_import(tmp_path)
+    (log,) = logs.glob("*.mcap")
+    timeline, zero = Timeline.from_json(head_metadata(log)["cmsensord"]["recording_timeline"])
+    assert timeline.start_s.tolist() == [float(k) for k in range(40)]
+    assert timeline.source_s.tolist() == [600.0 * k for k in range(40)]
+    assert (timeline.source_start, timeline.repaired) == ("2004-02-12T10:40:00", 0)
+    summary = json.loads(cmsensord("summary", "--json", str(log)).stdout)
+    assert summary["end_ns"] - zero == pytest.approx(40e9, abs=0.05e9)   # the last decision: board 40 s
+
+
+def sidecar(times: list[float | None], start: str | None = None) -> dict:
+    return {"format": "cmsensord import", "source_start": start,
+            "snapshots": [{"start_s": 0.5 * k, "source_time_s": t} for k, t in enumerate(times)]}
+
+
+def test_board_seconds_to_recording_seconds_and_snapshot_times_that_go_back():
+    tl = Timeline.from_sidecar(sidecar([0.0, 10.0, 20.0, 30.0], "2004-02-12T10:40:00"))
+    assert tl is not None and tl.source_start == "2004-02-12T10:40:00"
+    # inside a snapshot, on a start (the end of the one before), before the first, past the last
+    np.testing.assert_allclose(tl.seconds([0.2, 0.5, 0.75, 1.5, -0.1, 9.0]), [0.2, 0.5, 10.25, 20.5, -0.1, 37.5])
+    # FEMTO Bearing1_1's two snapshots stamped -52.2 s between 21190 and 21220 s
+    tl = Timeline.from_sidecar(sidecar([21180.0, 21190.0, -52.2, -52.2, 21220.0]))
+    assert tl is not None and tl.repaired == 2 and tl.source_start is None
+    assert tl.source_s.tolist() == [21180.0, 21190.0, 21200.0, 21210.0, 21220.0]
+    again, zero = Timeline.from_json(tl.to_json(123))
+    assert zero == 123 and again.source_s.tolist() == tl.source_s.tolist() and again.repaired == 2
+
+
+@pytest.mark.parametrize("meta", [
+    {}, sidecar([0.0]), sidecar([0.0, None, 20.0]), sidecar([100.0, 1.0, 2.0, 3.0]),
+    {**sidecar([0.0, 10.0]), "format": "something else"},
+])
+def test_no_timeline_without_two_timed_snapshots_mostly_in_order(meta):
+    assert Timeline.from_sidecar(meta) is None
+
+
+@pytest.mark.parametrize("text", ["", "{", "[]", '{"start_s":[0,1],"source_time_s":[0],"board_zero_ns":0}',
+                                  '{"start_s":[0,1],"source_time_s":[0,"x"],"board_zero_ns":0}',
+                                  '{"start_s":[0,NaN],"source_time_s":[0,1],"board_zero_ns":0}'])
+def test_a_timeline_that_cannot_be_read_is_none(text):
+    assert Timeline.from_json(text) is None
