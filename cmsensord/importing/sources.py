@@ -164,23 +164,25 @@ class _Layout:
             option = "--columns" if t.kind == "column" else "--channels"  # the same option
             self.idx = [_column(t, tok, option) for tok in opts.channels]
         else:
-            self.idx = [i for i in range(len(t.columns)) if i != self.tacho]
+            self.idx = [i for i in range(len(t.columns)) if i not in (self.tacho, t.time_column)]
         if not self.idx:
             raise ImportFailure(f"{t.path}: no {t.kind} left to import besides the tacho; check --channels")
         if len(self.idx) > MAX_CHANNELS:
             raise ImportFailure(f"{t.path}: {len(self.idx)} {t.kind}s, the board carries at most "
                                 f"{MAX_CHANNELS}; choose some with --channels (e.g. --channels 0,1)")
-        self.renamed: list[str] = []        # notes: labels that are not channel names
+        self.notes: list[str] = [t.time_note] if t.time_note else []   # the time base, labels renamed
         if opts.names:
             self.names = checked_names(list(opts.names))
         else:
-            self.names, self.renamed = channel_names([t.columns[i] for i in self.idx])
+            self.names, renamed = channel_names([t.columns[i] for i in self.idx])
+            self.notes += renamed
         if len(self.names) != len(self.idx):
             raise ImportFailure(f"--names gives {len(self.names)} name(s) for {len(self.idx)} channel(s); "
                                 "give one name per imported channel")
         fs = opts.fs if opts.fs is not None else t.fs
         if fs is None:
-            raise ImportFailure(f"{t.path}: the file does not say its sampling rate; give --fs HZ")
+            why = f": {t.time_note}" if t.time_note else ""
+            raise ImportFailure(f"{t.path}: the file does not say its sampling rate{why}; give --fs HZ")
         self.fs: float = fs
         self.file_fs = t.fs
 
@@ -308,7 +310,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
         if progress is not None:
             progress(fi + 1)
     assert layout is not None
-    notes[:0] = layout.renamed
+    notes[:0] = layout.notes
     fs = layout.fs
     if fs != round(fs) or fs <= 0:
         raise ImportFailure(f"{files[0]}: sampling rate {fs:g} Hz; the board protocol carries a whole "

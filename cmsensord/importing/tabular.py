@@ -10,6 +10,9 @@ From the first lines of the file (up to 20, blank and ``#`` lines skipped):
 * decimal comma: with a ``;``, tab or whitespace separator, a comma inside the
   numbers is read as a decimal point (``0,552;-0,146``).
 
+A column of times is found and marked (:mod:`.time_column`): it gives the
+sampling rate and is no channel by default.
+
 ``separator`` / ``header`` override the detection (the command's
 ``--separator`` and ``--header``/``--no-header``). The numbers are parsed by
 ``numpy.loadtxt`` (C speed); a row that does not parse is an error naming the
@@ -26,6 +29,7 @@ import numpy as np
 
 from .errors import ImportFailure
 from .table import Table
+from .time_column import with_time_column
 
 __all__ = ["read_tabular", "sniff", "is_text_table"]
 
@@ -151,4 +155,4 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     elif len(names) != a.shape[1]:
         raise ImportFailure(f"{path}: the header names {len(names)} columns, the rows hold {a.shape[1]}; "
                             "fix the header or use --no-header")
-    return Table(path=path, data=a[None], columns=names, kind="column")
+    return with_time_column(Table(path=path, data=a[None], columns=names, kind="column"), has_header)

@@ -1,0 +1,95 @@
+"""`cmsensord import` of a table with a time column (``Time (s),Acc X (g)``, ``t,x,y,z``, or a
+headerless first column of times): the column is the time base, gives the sampling rate when
+evenly spaced and is no channel; unevenly spaced times ask for --fs in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmsensord.importing.table import Table
+from cmsensord.importing.time_column import with_time_column
+from tests.test_import import G, assert_within_one_count, cmd, decode, signal
+
+FS = 25600
+
+
+def write(path: Path, header: str | None, columns: list[np.ndarray], fmts: list[str], sep: str = ",") -> None:
+    lines = [header] if header else []
+    lines += [sep.join(f % v for f, v in zip(fmts, row)) for row in zip(*columns)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def imported(tmp_path: Path, name: str, *args: str) -> tuple[dict, dict, str]:
+    """(decoded capture, sidecar, stderr) of ``cmsensord import NAME ARGS --out o.bin``."""
+    r = cmd("import", name, *args, "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    return decode(tmp_path / "o.bin"), json.loads((tmp_path / "o.bin.json").read_text()), r.stderr
+
+
+@pytest.mark.parametrize("label, scale, digits", [("Time (s)", 1.0, 6), ("time_ms", 1e3, 4), ("t [us]", 1e6, 1)])
+def test_a_labelled_time_column_gives_the_rate_and_is_not_a_channel(tmp_path, label, scale, digits):
+    """Times printed rounded (25.6 kHz at 6 decimals: steps of 39 and 40 us) still give the rate."""
+    x = signal(FS, 2, amp=0.3)
+    t = np.arange(FS) / FS * scale
+    write(tmp_path / "daq.csv", f"{label},Acc X (g),Acc Y (g)", [t, x[0], x[1]], [f"%.{digits}f", "%.6f", "%.6f"])
+    cap, side, err = imported(tmp_path, "daq.csv", "--unit", "g")
+    note = f"column {label!r} (0) is the time base: 25600 Hz from its steps; it is not imported as a channel"
+    assert f"  note: {note}\n" in err and note in side["notes"]
+    assert (side["fs"], side["channel_names"]) == (FS, ["Acc_X_g", "Acc_Y_g"])
+    assert_within_one_count(cap, np.round(x, 6) * G)
+
+
+def test_a_headerless_first_column_of_even_times_is_the_time_base(tmp_path):
+    x = signal(FS // 2, 3, amp=0.3)
+    write(tmp_path / "scope.txt", None, [np.arange(FS // 2) / FS, *x], ["%.7f"] + ["%.6f"] * 3, sep=" ")
+    cap, side, err = imported(tmp_path, "scope.txt", "--unit", "g")
+    assert "note: column 'col0' (0) is the time base: 25600 Hz from its steps" in err
+    assert side["channel_names"] == ["col1", "col2", "col3"]
+    assert_within_one_count(cap, np.round(x, 6) * G)
+
+
+def test_columns_that_are_not_times_stay_channels(tmp_path):
+    """A column labelled t that does not increase (a temperature), and a headerless first column
+    that is a signal: every column imported, no note of a time base."""
+    x = signal(2560, 2, amp=0.3)
+    write(tmp_path / "a.csv", "t,x", [20 + x[0], x[1]], ["%.6f", "%.6f"])
+    write(tmp_path / "b.csv", None, [x[0], x[1]], ["%.6f", "%.6f"])
+    for name in ("a.csv", "b.csv"):
+        cap, side, err = imported(tmp_path, name, "--fs", "2560", "--unit", "g")
+        assert "time base" not in err and len(side["channel_names"]) == 2
+
+
+def test_uneven_times_ask_for_the_rate_in_one_line_and_take_it(tmp_path):
+    t = np.arange(2560) / 2560
+    t[1280:] += 0.5                                   # half a second missing in the middle
+    write(tmp_path / "gap.csv", "t,x", [t, signal(2560, 1)[0]], ["%.6f", "%.6f"])
+    r = cmd("import", "gap.csv", "--out", "o.bin", cwd=tmp_path)
+    what = ("column 't' (0) is the time base, not evenly spaced (a step of 0.500391 s after row 1280, the "
+            "median step 0.000391 s): it is not imported as a channel")
+    assert (r.returncode, r.stderr) == (2, f"cmsensord import: gap.csv: the file does not say its sampling "
+                                           f"rate: {what}; give --fs HZ\n")
+    assert not list(tmp_path.glob("o.bin*"))
+    _, side, err = imported(tmp_path, "gap.csv", "--fs", "2560")
+    assert f"  note: {what}\n" in err and side["channel_names"] == ["x"]
+
+
+def test_fs_given_against_the_time_column_is_noted(tmp_path):
+    write(tmp_path / "d.csv", "time,x", [np.arange(1000) / 1000, signal(1000, 1)[0]], ["%.4f", "%.6f"])
+    _, side, err = imported(tmp_path, "d.csv", "--fs", "1024")
+    assert "note: fs 1024 Hz from --fs (the file says 1000 Hz)" in err and side["fs"] == 1024
+
+
+@pytest.mark.parametrize("label", ["t", "Time", "TIME (s)", "time_s", "t[ms]", "Zeit [s]", "timestamp", "elapsed time"])
+def test_labels_of_time(label):
+    t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
+    assert with_time_column(t, has_header=True).time_column == 0
+
+
+@pytest.mark.parametrize("label", ["temp", "tacho", "x", "t_x", "Time of flight", "ts_count"])
+def test_labels_that_are_not_time(label):
+    t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
+    assert with_time_column(t, has_header=True).time_column is None
