@@ -34,7 +34,7 @@ _EXAMPLES = """\
 examples:
   cmsensord import rec.wav --unit g --out rec.bin                   (fs from the WAV)
   cmsensord import log.csv --fs 25600 --channels acc_x,acc_y --unit g --out log.bin
-  cmsensord import daq.csv --unit g --out daq.bin              (fs from its time column, 'Time (s)')
+  cmsensord import daq.csv --unit g --out daq.bin                   (fs from its time column, 'Time (s)')
   cmsensord import femto/Bearing1_1.npz --unit mg --channels 0 --names horizontal --out b11.bin
   cmsensord import 'Bearing1_1/acc_*.csv' --fs 25600 --channels 4 --unit g --snapshot-interval 10 --out b11.bin
   cmsensord import ims/NA.mat --fs 20480 --unit g --snapshot-len 20480 --out na.bin
