@@ -49,7 +49,7 @@ PROCESS_MODULES = frozenset({
     "test_realdata.py",
     "test_import.py",
     "test_import_memory.py",
-    "test_import_time_column.py",
+    "test_import_text_tables.py",
     "test_report_recording_time.py",
     "test_stream_time.py",
     "test_config_hostile.py",

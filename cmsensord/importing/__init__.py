@@ -12,6 +12,7 @@ Modules, one job each:
 * :mod:`.options` -- the settings the user asked for;
 * :mod:`.table` -- what every reader returns (raw columns, maybe fs, times, rpm);
 * :mod:`.wav`, :mod:`.tabular`, :mod:`.arrays`, :mod:`.matlab` -- the readers;
+* :mod:`.text_head` -- where a text table's numbers begin (comments, a preamble, the names);
 * :mod:`.time_column` -- a text table's column of times: the rate, and no channel;
 * :mod:`.sources` -- SRC arguments to files in order, files to a :class:`Recording`;
 * :mod:`.recording` -- the recording (m/s², snapshots, tacho edges);

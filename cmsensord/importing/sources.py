@@ -40,7 +40,7 @@ from .wav import read_wav
 
 __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
 
-EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".npy", ".npz", ".mat")
+EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".lvm", ".npy", ".npz", ".mat")
 MAX_CHANNELS = 8
 
 
@@ -127,7 +127,7 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
     ext = Path(path).suffix.lower()
     if ext == ".wav":
         return read_wav(path)
-    if ext in (".csv", ".tsv", ".txt"):
+    if ext in (".csv", ".tsv", ".txt", ".lvm"):     # .lvm: LabVIEW's text measurement file
         return read_tabular(path, opts.separator, opts.header)
     if ext == ".npy":
         return read_npy(path)
@@ -170,7 +170,7 @@ class _Layout:
         if len(self.idx) > MAX_CHANNELS:
             raise ImportFailure(f"{t.path}: {len(self.idx)} {t.kind}s, the board carries at most "
                                 f"{MAX_CHANNELS}; choose some with --channels (e.g. --channels 0,1)")
-        self.notes: list[str] = [t.time_note] if t.time_note else []   # the time base, labels renamed
+        self.notes = [n for n in (t.head_note, t.time_note) if n]   # a preamble, the time base, labels renamed
         if opts.names:
             self.names = checked_names(list(opts.names))
         else:

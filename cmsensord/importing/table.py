@@ -38,6 +38,7 @@ class Table:
     notes: list[str] = field(default_factory=list)  # what the reader noticed (a file cut short)
     time_column: int | None = None  # a column of times (:mod:`.time_column`): not a channel by default
     time_note: str | None = None  # what the import says of it, once
+    head_note: str | None = None  # lines skipped before the numbers (a text table's preamble), said once
 
     @property
     def name(self) -> str:

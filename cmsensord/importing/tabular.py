@@ -1,12 +1,15 @@
 """CSV/TSV reader: separator and header detected, decimal commas accepted.
 
-From the first lines of the file (up to 20, blank and ``#`` lines skipped):
+The numbers begin where :mod:`.text_head` finds them (``#`` comments, blank lines and a
+preamble of settings before them are skipped, a preamble with a note). From the line
+before them and their first rows:
 
 * separator: tab, ``;``, ``,`` or ``|``, the first that occurs the same number
   of times (at least once) on every line; else runs of whitespace when a line
   has several fields; else one column;
-* header: the first line is a header when one of its fields is not a number;
-  its fields name the columns (``col0``, ``col1``, ... otherwise);
+* header: the line before the numbers is a header when one of its fields is not a
+  number and it has a field for every column; its fields name the columns
+  (``col0``, ``col1``, ... otherwise);
 * decimal comma: with a ``;``, tab or whitespace separator, a comma inside the
   numbers is read as a decimal point (``0,552;-0,146``).
 
@@ -16,7 +19,7 @@ sampling rate and is no channel by default.
 ``separator`` / ``header`` override the detection (the command's
 ``--separator`` and ``--header``/``--no-header``). The numbers are parsed by
 ``numpy.loadtxt`` (C speed); a row that does not parse is an error naming the
-file, the row and the column.
+file, its line in the file and the column.
 """
 
 from __future__ import annotations
@@ -29,27 +32,14 @@ import numpy as np
 
 from .errors import ImportFailure
 from .table import Table
+from .text_head import SEPARATORS, Head, first_row, is_number, read_head, split
 from .time_column import with_time_column
 
 __all__ = ["read_tabular", "sniff", "is_text_table"]
 
-_SEPARATORS = ("\t", ";", ",", "|")
 _SEP_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
-_SNIFF_BYTES = 1 << 16
 #: bytes :func:`is_text_table` looks at
 _TEXT_PROBE_BYTES = 4096
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text.strip().strip('"').replace(",", "."))
-        return True
-    except ValueError:
-        return False
-
-
-def _split(line: str, sep: str | None) -> list[str]:
-    return line.split() if sep is None else line.split(sep)
 
 
 def sniff(lines: list[str], separator: str | None = None,
@@ -58,7 +48,7 @@ def sniff(lines: list[str], separator: str | None = None,
     if separator is None:
         body = lines[1:] or lines  # the header may hold other characters
         sep: str | None = None
-        for cand in _SEPARATORS:
+        for cand in SEPARATORS:
             counts = {line.count(cand) for line in body}
             if len(counts) == 1 and counts.pop() > 0 and cand in lines[0]:
                 sep = cand
@@ -68,34 +58,18 @@ def sniff(lines: list[str], separator: str | None = None,
     else:
         sep = None if separator in ("whitespace", " ") else separator
     if header is None:
-        header = not all(_is_number(f) for f in _split(lines[0], sep) if f.strip())
+        header = not all(is_number(f) for f in split(lines[0], sep) if f.strip())
     data = lines[1:] if header else lines
     decimal_comma = sep != "," and any("," in line for line in data) \
         and not any("." in line for line in data)
     return sep, header, decimal_comma
 
 
-def _first_lines(path: str) -> list[str]:
-    try:
-        with open(path, "rb") as f:
-            head = f.read(_SNIFF_BYTES)
-    except OSError as exc:
-        raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None
-    try:
-        text = head.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = head.decode("latin-1")
-    lines = [ln.rstrip("\r") for ln in text.split("\n")[:-1] or text.split("\n")]
-    lines = [ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise ImportFailure(f"{path}: no data (empty file)")
-    return lines[:20]
-
-
 def is_text_table(path: str) -> bool:
     """Whether a file of no known extension is a text table of numbers (the IMS bearing rig's
     snapshot files, named by their date and time): its first 4 kB are text without NUL bytes,
-    and a line among the first two that are not blank or ``#`` is a row of numbers."""
+    and three rows of numbers follow each other there (:func:`~.text_head.first_row`; a
+    preamble before them may be), or its lines there are all rows of numbers."""
     try:
         with open(path, "rb") as f:
             head = f.read(_TEXT_PROBE_BYTES)
@@ -103,56 +77,73 @@ def is_text_table(path: str) -> bool:
         return False
     if not head or b"\0" in head:
         return False
-    lines = [ln for ln in head.decode("latin-1").splitlines()[:-1] or [head.decode("latin-1")]
-             if ln.strip() and not ln.lstrip().startswith("#")][:2]
-    return any(_is_number_row(ln) for ln in lines)
+    lines = head.decode("latin-1").splitlines()[:-1] or [head.decode("latin-1")]
+    return first_row(lines) is not None
 
 
-def _is_number_row(line: str) -> bool:
-    """Every field of the line is a number, by any of the separators :func:`sniff` knows."""
-    for sep in (None, *_SEPARATORS):
-        fields = [f for f in _split(line, sep) if f.strip()]
-        if fields and all(_is_number(f) for f in fields):
-            return True
-    return False
-
-
-def _loadtxt_message(text: str, header: int) -> str:
-    """numpy.loadtxt's message with file lines (from 1) and columns (from 0, as --channels counts)."""
+def _loadtxt_message(text: str, skip: int) -> str:
+    """numpy.loadtxt's message with file lines (from 1; ``skip`` lines before the numbers) and
+    columns (from 0, as --channels counts)."""
     msg = re.sub(r";? ?use `usecols`.*", "", " ".join(text.split())).rstrip(". ")
     m = re.search(r"could not convert string (.*) to float64 at row (\d+), column (\d+)", msg)
     if m:  # loadtxt: data row from 0, column from 1
-        return f"line {int(m[2]) + 1 + header}, column {int(m[3]) - 1}: {m[1]} is not a number"
+        return f"line {int(m[2]) + 1 + skip}, column {int(m[3]) - 1}: {m[1]} is not a number"
     m = re.search(r"the number of columns changed from (\d+) to (\d+) at row (\d+)", msg)
     if m:  # loadtxt: data row from 1
-        return f"line {int(m[3]) + header}: {m[2]} column(s) where the lines before have {m[1]}"
+        return f"line {int(m[3]) + skip}: {m[2]} column(s) where the lines before have {m[1]}"
     return msg
 
 
-def read_tabular(path: str, separator: str | None = None, header: bool | None = None) -> Table:
-    lines = _first_lines(path)
+def _layout(head: Head, separator: str | None, header: bool | None) -> tuple[str | None, str | None, bool, int]:
+    """(separator, the header line or None, decimal comma, lines before the numbers). The header
+    candidate names the columns unless ``header`` is False; without a candidate, ``header`` True
+    takes the first row."""
+    candidate = head.header if header is not False else None
+    lines = head.rows if candidate is None else [candidate, *head.rows]
     sep, has_header, decimal_comma = sniff(lines, separator, header)
-    if has_header:
-        names = [f.strip().strip('"').strip() for f in _split(lines[0], sep)]
-        names = [n or f"col{i}" for i, n in enumerate(names)]
+    if has_header and candidate is None:
+        return sep, head.rows[0], decimal_comma, head.skip + 1
+    return sep, candidate if has_header else None, decimal_comma, head.skip
+
+
+def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
+    """What was skipped before the numbers (a preamble, a line of names that does not fit)."""
+    skipped = list(head.preamble) + ([] if names_kept or head.header is None else [head.header])
+    if not skipped:
+        return None
+    first = skipped[0].strip()
+    first = first if len(first) <= 40 else first[:37] + "..."
+    return (f"{Path(path).name}: {len(skipped)} line(s) before the {'column names' if names_kept else 'numbers'} "
+            f"skipped (the first: {first!r})")
+
+
+def read_tabular(path: str, separator: str | None = None, header: bool | None = None) -> Table:
+    head = read_head(path)
+    sep, header_line, decimal_comma, skip = _layout(head, separator, header)
     try:
         if decimal_comma:
             text = Path(path).read_text(encoding="utf-8-sig", errors="replace").replace(",", ".")
             src: str | io.StringIO = io.StringIO(text)
         else:
             src = path
-        a = np.loadtxt(src, delimiter=sep, skiprows=1 if has_header else 0, ndmin=2,
+        a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2,
                        dtype=np.float64, quotechar='"', encoding="utf-8-sig")
     except ValueError as exc:
-        msg = _loadtxt_message(str(exc), int(has_header))
+        msg = _loadtxt_message(str(exc), skip)
         raise ImportFailure(f"{path}: {msg} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
-                            f"{'a header line' if has_header else 'no header'}); fix the file, or set "
-                            "--separator / --header / --no-header") from None
+                            f"{'a header line' if header_line is not None else 'no header'}); fix the file, "
+                            "or set --separator / --header / --no-header") from None
     if a.shape[0] == 0:
         raise ImportFailure(f"{path}: a header but no rows of numbers")
-    if not has_header:
-        names = [f"col{i}" for i in range(a.shape[1])]
-    elif len(names) != a.shape[1]:
-        raise ImportFailure(f"{path}: the header names {len(names)} columns, the rows hold {a.shape[1]}; "
-                            "fix the header or use --no-header")
-    return with_time_column(Table(path=path, data=a[None], columns=names, kind="column"), has_header)
+    names = None
+    if header_line is not None:
+        names = [f.strip().strip('"').strip() or f"col{i}" for i, f in enumerate(split(header_line, sep))]
+        if len(names) != a.shape[1]:
+            if header is True:
+                raise ImportFailure(f"{path}: the header names {len(names)} columns, the rows hold "
+                                    f"{a.shape[1]}; fix the header or use --no-header")
+            names = None                    # a preamble's last line, not the columns' names
+    note = _head_note(path, head, names is not None)
+    t = Table(path=path, data=a[None], columns=names or [f"col{i}" for i in range(a.shape[1])], kind="column",
+              head_note=note)
+    return with_time_column(t, names is not None)

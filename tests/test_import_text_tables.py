@@ -1,6 +1,8 @@
-"""`cmsensord import` of a table with a time column (``Time (s),Acc X (g)``, ``t,x,y,z``, or a
-headerless first column of times): the column is the time base, gives the sampling rate when
-evenly spaced and is no channel; unevenly spaced times ask for --fs in one line."""
+"""`cmsensord import` of text tables as loggers write them. A time column (``Time (s),Acc X (g)``,
+``t,x,y,z``, or a headerless first column of times) is the time base, gives the sampling rate when
+evenly spaced and is no channel; unevenly spaced times ask for --fs in one line. Comments, blank
+lines and a preamble of settings before the numbers are skipped (a preamble said once), and a
+bad row is named by its line in the file."""
 
 from __future__ import annotations
 
@@ -93,3 +95,43 @@ def test_labels_of_time(label):
 def test_labels_that_are_not_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
     assert with_time_column(t, has_header=True).time_column is None
+
+
+# --------------------------------------------------------------------------- lines before the numbers
+def test_comments_and_blank_lines_before_a_header_are_skipped(tmp_path):
+    """`#` lines and blank lines before the column names: the names and every row are read."""
+    x = signal(2000, 1, amp=0.3)[0]
+    write(tmp_path / "c.csv", "# exported by the logger\n# fs = 2000\n\ntime,acc", [np.arange(2000) / 2000, x],
+          ["%.4f", "%.6f"])
+    cap, side, err = imported(tmp_path, "c.csv", "--unit", "g")
+    assert side["channel_names"] == ["acc"] and "skipped" not in err
+    assert_within_one_count(cap, np.round(x, 6)[None] * G)
+
+
+@pytest.mark.parametrize("suffix", [".txt", ".lvm", ""])
+def test_a_preamble_of_settings_before_the_numbers_is_skipped_and_said_once(tmp_path, suffix):
+    """A LabVIEW text file (.lvm; or named .txt, or without an extension): settings and a line of
+    names that does not fit the rows (13 lines that are not blank), then times and values; two
+    such files in a directory say so once."""
+    pre = ("LabVIEW Measurement\nWriter_Version\t2\nReader_Version\t2\nSeparator\tTab\nDecimal_Separator\t.\n"
+           "***End_of_Header***\n\nChannels\t1\nSamples\t2000\nX_Dimension\tTime\nX0\t0\nDelta_X\t0.0005\n"
+           "***End_of_Header***\nX_Value\tAcc\tComment")
+    d = tmp_path / "runs"
+    d.mkdir()
+    xs = [signal(2000, 1, amp=0.3, seed=k)[0] for k in range(2)]
+    for k, x in enumerate(xs):
+        write(d / f"run_{k}{suffix}", pre, [np.arange(2000) / 2000, x], ["%.6f", "%.6f"], sep="\t")
+    cap, side, err = imported(tmp_path, "runs", "--unit", "g", "--snapshot-interval", "60")
+    note = f"run_0{suffix}: 13 line(s) before the numbers skipped (the first: 'LabVIEW Measurement')"
+    assert err.count("skipped") == 1 and f"  note: {note}\n" in err and note in side["notes"]
+    assert side["fs"] == 2000 and side["channel_names"] == ["col1"]
+    assert_within_one_count(cap, np.round(np.concatenate(xs), 6)[None] * G)
+
+
+def test_a_bad_row_is_named_by_its_line_in_the_file(tmp_path):
+    """Line numbers count the preamble, the comments and the header (the file's own lines)."""
+    (tmp_path / "b.csv").write_text("# a comment\nsettings: none\nt,x\n0,1\n1,2\n2,3\n3,oops\n")
+    r = cmd("import", "b.csv", "--fs", "10", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, "cmsensord import: b.csv: line 7, column 1: 'oops' is not a number "
+                                           "(separator ',', a header line); fix the file, or set --separator / "
+                                           "--header / --no-header\n")

@@ -1,0 +1,111 @@
+"""Where a text table's rows of numbers begin, and the lines before them.
+
+Data loggers write lines before their numbers: ``#`` comments, blank lines, a preamble of
+settings (``LabVIEW Measurement``, ``Sample rate: 25600 Hz``), then maybe a line of column
+names. The rows of numbers begin at the first line that is a row of numbers (every field a
+number, by one of the separators) followed by two more (or by the end of what is read); the
+last line before it that is neither blank nor a comment is the header candidate; the lines
+before that, the preamble. Only the file's first ``HEAD_BYTES`` are read here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .errors import ImportFailure
+
+__all__ = ["HEAD_BYTES", "SEPARATORS", "Head", "filled_lines", "first_row", "is_number", "is_number_row",
+           "read_head", "split"]
+
+SEPARATORS = ("\t", ";", ",", "|")
+HEAD_BYTES = 1 << 16
+#: rows of numbers handed to the separator and header detection
+ROWS = 20
+
+
+def is_number(text: str) -> bool:
+    try:
+        float(text.strip().strip('"').replace(",", "."))
+        return True
+    except ValueError:
+        return False
+
+
+def split(line: str, sep: str | None) -> list[str]:
+    return line.split() if sep is None else line.split(sep)
+
+
+def is_number_row(line: str) -> bool:
+    """Every field of the line is a number, by whitespace or one of :data:`SEPARATORS`."""
+    for sep in (None, *SEPARATORS):
+        fields = [f for f in split(line, sep) if f.strip()]
+        if fields and all(is_number(f) for f in fields):
+            return True
+    return False
+
+
+@dataclass(frozen=True)
+class Head:
+    rows: list[str]  # the first rows of numbers (at most ROWS)
+    skip: int  # physical lines before the first of them (numpy.loadtxt's skiprows)
+    header: str | None = None  # the header candidate: the line before them, if it is not a row
+    preamble: tuple[str, ...] = ()  # the lines before the candidate that are not blank or comments
+
+
+def _physical_lines(path: str) -> list[str]:
+    try:
+        with open(path, "rb") as f:
+            head = f.read(HEAD_BYTES)
+            whole = not f.read(1)
+    except OSError as exc:
+        raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = head.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = head.decode("latin-1")
+    lines = text.split("\n")
+    if not whole and len(lines) > 1:
+        lines = lines[:-1]                  # cut inside a line
+    return [ln.rstrip("\r") for ln in lines]
+
+
+def filled_lines(lines: list[str]) -> list[int]:
+    """The indices of the lines that are neither blank nor ``#`` comments."""
+    return [i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")]
+
+
+def first_row(lines: list[str], filled: list[int] | None = None) -> int | None:
+    """The line where the rows of numbers begin: a row, and so are the next two filled lines
+    (``filled``: :func:`filled_lines`, computed when not given); None when there is none."""
+    if filled is None:
+        filled = filled_lines(lines)
+    number: dict[int, bool] = {}
+
+    def row(i: int) -> bool:
+        if i not in number:
+            number[i] = is_number_row(lines[i])
+        return number[i]
+
+    for k in range(len(filled)):
+        if all(row(i) for i in filled[k:k + 3]):
+            return filled[k]
+    return None
+
+
+def read_head(path: str) -> Head:
+    """The file's :class:`Head`; a file without a line that is not blank or a comment is a
+    one-line ImportFailure. Where no three rows of numbers follow each other, the rows are
+    the first filled lines as they come (the reader then says which line is not numbers)."""
+    lines = _physical_lines(path)
+    filled = filled_lines(lines)
+    if not filled:
+        raise ImportFailure(f"{path}: no data (empty file)")
+    start = first_row(lines, filled)
+    if start is None:
+        return Head(rows=[lines[i] for i in filled][:ROWS], skip=filled[0])
+    before = [i for i in filled if i < start]
+    first = [lines[i] for i in filled if i >= start][:ROWS]
+    if not before:
+        return Head(rows=first, skip=start)
+    return Head(rows=first, skip=start, header=lines[before[-1]],
+                preamble=tuple(lines[i] for i in before[:-1]))
