@@ -88,13 +88,13 @@ def test_fs_given_against_the_time_column_is_noted(tmp_path):
 @pytest.mark.parametrize("label", ["t", "Time", "TIME (s)", "time_s", "t[ms]", "Zeit [s]", "timestamp", "elapsed time"])
 def test_labels_of_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
-    assert with_time_column(t, has_header=True).time_column == 0
+    assert with_time_column(t, has_header=True).time_columns == (0,)
 
 
 @pytest.mark.parametrize("label", ["temp", "tacho", "x", "t_x", "Time of flight", "ts_count"])
 def test_labels_that_are_not_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
-    assert with_time_column(t, has_header=True).time_column is None
+    assert with_time_column(t, has_header=True).time_columns == ()
 
 
 # --------------------------------------------------------------------------- lines before the numbers
@@ -135,3 +135,44 @@ def test_a_bad_row_is_named_by_its_line_in_the_file(tmp_path):
     assert (r.returncode, r.stderr) == (2, "cmsensord import: b.csv: line 7, column 1: 'oops' is not a number "
                                            "(separator ',', a header line); fix the file, or set --separator / "
                                            "--header / --no-header\n")
+
+
+# --------------------------------------------------------------------------- time-of-day columns
+def femto_like(d: Path, starts: list[tuple[int, int, int]], seed: int = 0) -> np.ndarray:
+    """Snapshot files as the PRONOSTIA rig writes them: hour, minute, second, microsecond (5
+    significant digits past 1e5: ``1.6527e+005``), then two accelerations in g; 2560 samples at
+    25.6 kHz each, starting at ``starts``. Returns the accelerations (2, files x 2560)."""
+    d.mkdir()
+    x = signal(2560 * len(starts), 2, amp=0.5, seed=seed)
+    for k, (h, m, s) in enumerate(starts):
+        us = 65664 + np.arange(2560) * 1e6 / 25600
+        rows = [f"{h},{m},{s},{float(f'{u:.5g}'):.5g}".replace("e+05", "e+005") + f",{a:.3f},{b:.3f}"
+                for u, a, b in zip(us, x[0, k * 2560:(k + 1) * 2560], x[1, k * 2560:(k + 1) * 2560])]
+        (d / f"acc_{k + 1:05d}.csv").write_text("\n".join(rows) + "\n")
+    return x
+
+
+def test_time_of_day_columns_give_the_rate_and_the_snapshot_times_past_midnight(tmp_path):
+    x = femto_like(tmp_path / "b", [(23, 59, 45), (23, 59, 55), (0, 0, 5), (0, 10, 5)])
+    cap, side, err = imported(tmp_path, "b", "--unit", "g", "--names", "horizontal,vertical")
+    assert ("  note: columns 0-3 are the time of day (hour, minute, second, microsecond): 25600 Hz from "
+            "their steps; they are not imported as channels\n") in err
+    assert ("  note: snapshot times from the files' time-of-day columns: 23:59:45 to 00:10:05 (0.1722 h, past "
+            "midnight); --snapshot-interval S sets them instead\n") in err
+    assert side["fs"] == FS and side["channel_names"] == ["horizontal", "vertical"]
+    times = [s["source_time_s"] for s in side["snapshots"]]
+    assert times == pytest.approx([0.0, 10.0, 20.0, 620.0], abs=1e-6)
+    assert_within_one_count(cap, np.round(x, 3) * G)
+    # the interval given instead: the times it makes
+    _, side, _ = imported(tmp_path, "b", "--unit", "g", "--snapshot-interval", "10")
+    assert [s["source_time_s"] for s in side["snapshots"]] == [0.0, 10.0, 20.0, 30.0]
+
+
+def test_the_rigs_own_files_import_without_options(tmp_path):
+    """Three of the PRONOSTIA rig's own files (tests/data/femto_csv): 25600 Hz, two channels,
+    the snapshot times of the rig's clock."""
+    src = Path(__file__).parent / "data" / "femto_csv"
+    _, side, err = imported(tmp_path, str(src), "--unit", "g")
+    assert side["fs"] == FS and len(side["channel_names"]) == 2
+    assert [s["source_time_s"] for s in side["snapshots"]] == pytest.approx([0.0, 10.0, 28020.0], abs=1e-6)
+    assert "09:39:39 to 17:26:39 (7.783 h)" in err

@@ -164,7 +164,7 @@ class _Layout:
             option = "--columns" if t.kind == "column" else "--channels"  # the same option
             self.idx = [_column(t, tok, option) for tok in opts.channels]
         else:
-            self.idx = [i for i in range(len(t.columns)) if i not in (self.tacho, t.time_column)]
+            self.idx = [i for i in range(len(t.columns)) if i != self.tacho and i not in t.time_columns]
         if not self.idx:
             raise ImportFailure(f"{t.path}: no {t.kind} left to import besides the tacho; check --channels")
         if len(self.idx) > MAX_CHANNELS:
@@ -246,20 +246,40 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
 
 
 def _retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[str], opts: ImportOptions,
-             fs: float, own_times: bool, notes: list[str]) -> tuple[list[Snapshot], str | None]:
+             fs: float, own_times: bool, clock: bool, notes: list[str]) -> tuple[list[Snapshot], str | None]:
     """The snapshots' times in the original recording, and the date and time they count from
-    (None: not known): every ``--snapshot-interval``; else, when no file gave its own, by the
-    files' names (:mod:`.name_times`, with a note), a snapshot ``a`` samples into its file
-    ``a / fs`` after the file's time; else as read."""
+    (None: not known): every ``--snapshot-interval``; else from the files' time-of-day columns
+    (``clock``: :func:`_from_clock`); else, when no file gave its own, by the files' names
+    (:mod:`.name_times`, with a note), a snapshot ``a`` samples into its file ``a / fs`` after
+    the file's time; else as read."""
     if opts.snapshot_interval is not None:
         return [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval)
                 for i, s in enumerate(snaps)], None
+    if clock:
+        return _from_clock(snaps, origins, fs, notes), None
     named = None if own_times else times_from_names(files)
     if named is None:
         return snaps, None
     notes.append(named.note())
     return [Snapshot(s.source, s.start, s.length, named.seconds[fi] + a / fs)
             for s, (fi, a) in zip(snaps, origins)], named.first.isoformat()
+
+
+def _from_clock(snaps: list[Snapshot], origins: list[tuple[int, int]], fs: float, notes: list[str]) -> list[Snapshot]:
+    """Snapshot times from times of day (:mod:`.time_column`), counted from the first snapshot:
+    a time more than 12 h before the one before it is on the next day. A note says the span."""
+    of_day = np.array([s.source_time_s for s in snaps], dtype=np.float64) + np.array([a for _, a in origins]) / fs
+    days = np.concatenate([[0], np.cumsum(np.diff(of_day) < -43200)])
+    t = of_day + 86400 * days - of_day[0]
+    notes.append(f"snapshot times from the files' time-of-day columns: {_hms(of_day[0])} to {_hms(of_day[-1])} "
+                 f"({t[-1] / 3600:.4g} h{', past midnight' if days[-1] else ''}); --snapshot-interval S sets "
+                 "them instead")
+    return [Snapshot(s.source, s.start, s.length, float(ti)) for s, ti in zip(snaps, t)]
+
+
+def _hms(seconds: float) -> str:
+    s = int(seconds) % 86400
+    return f"{s // 3600:02d}:{s % 3600 // 60:02d}:{s % 60:02d}"
 
 
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
@@ -284,7 +304,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     rpm_file = None
     pos = 0
     origins: list[tuple[int, int]] = []     # per snapshot: (its file, its first sample in the file)
-    own_times = False                       # a file gave its snapshots' times
+    own_times = clock = False               # a file gave its snapshots' times (of day)
     for fi, path in enumerate(files):
         t = read_table(path, opts)
         if layout is None:
@@ -301,7 +321,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             snaps.append(Snapshot(f"{t.name}[{k}]" if many else t.name, pos, n, time))
             origins.append((fi, a))
             pos += n
-        own_times = own_times or t.times is not None
+        own_times, clock = own_times or t.times is not None, clock or t.clock
         notes += _file_notes(t, opts)
         stores[0].append(x.reshape(len(layout.idx), -1))
         if t.rpm and rpm_file is None:
@@ -317,7 +337,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
         notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
-    snaps, start = _retimed(snaps, origins, files, opts, fs, own_times, notes)
+    snaps, start = _retimed(snaps, origins, files, opts, fs, own_times, clock, notes)
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
                     sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes,
                     source_start=start)

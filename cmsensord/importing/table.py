@@ -4,7 +4,7 @@ A :class:`Table` holds one file's numbers before any unit or channel choice:
 ``data`` is (snapshots, samples, columns) in the file's own dtype and unit,
 one snapshot for a plain 2-D table, several for a 3-D array (the FEMTO archives)
 or a multi-snapshot file. ``fs``, ``times`` (each snapshot's start, seconds),
-``rpm`` and ``time_column`` are set when the file carries them.
+``rpm`` and ``time_columns`` are set when the file carries them.
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ class Table:
     times: np.ndarray | None = None  # (snapshots,) seconds
     rpm: float | None = None
     notes: list[str] = field(default_factory=list)  # what the reader noticed (a file cut short)
-    time_column: int | None = None  # a column of times (:mod:`.time_column`): not a channel by default
+    time_columns: tuple[int, ...] = ()  # columns of times (:mod:`.time_column`): no channels by default
+    clock: bool = False  # ``times`` are times of day (seconds after midnight, the day not known)
     time_note: str | None = None  # what the import says of it, once
     head_note: str | None = None  # lines skipped before the numbers (a text table's preamble), said once
 

@@ -7,11 +7,17 @@ unit: ``Time (s)``, ``time_ms``, ``t [us]``) and its values increase, or, in a t
 header, when the first column increases evenly (a vibration signal never does). Its unit comes
 from the label: seconds unless it says ms, us (µs) or ns.
 
+Columns of the time of day -- hour, minute, second and microsecond, or hour, minute and
+seconds with their fraction, the first three or four of the table (the FEMTO/PRONOSTIA
+bearing files' ``9,39,39,65664,0.552,-0.146``) -- are the time base too, when the hours and
+minutes are whole numbers in range and the time they make increases evenly; each file's first
+time is then its snapshot's time of day (``Table.times``, ``clock``).
+
 When the times are evenly spaced -- each within half a step of the straight line from the first
 to the last, as printed times rounded to a few decimals are -- they give the sampling rate,
-``(n - 1) / (t_last - t_first)``, rounded to a whole number of Hz when within 0.01 % of one.
+one over the least-squares step, rounded to a whole number of Hz when within 0.01 % of one.
 The import then takes every other column as a channel by default and needs no ``--fs``
-(:class:`~.table.Table` ``time_column`` and ``fs``). Unevenly spaced times (gaps, a restart)
+(:class:`~.table.Table` ``time_columns`` and ``fs``). Unevenly spaced times (gaps, a restart)
 still mark the time base, without a rate: ``--fs`` gives it.
 """
 
@@ -35,10 +41,17 @@ WHOLE_HZ = 1e-4
 
 
 def with_time_column(t: Table, has_header: bool) -> Table:
-    """``t`` with its time column and the rate it gives marked (see the module docstring), or
-    ``t`` itself when it has none."""
+    """``t`` with its time column(s) and the rate they give marked (see the module docstring),
+    or ``t`` itself when it has none."""
     if t.data.shape[0] != 1 or t.data.shape[1] < 3 or t.data.shape[2] < 2:
         return t
+    clock = _clock(t)
+    if clock is not None:
+        cols, of_day = clock
+        rate = _rate(of_day)
+        note = (f"columns {cols[0]}-{cols[-1]} are the time of day ({', '.join(_CLOCK_NAMES[:len(cols)])}): "
+                f"{rate:g} Hz from their steps; they are not imported as channels")
+        return replace(t, time_columns=cols, fs=t.fs or rate, time_note=note, times=of_day[:1], clock=True)
     found = _labelled(t) if has_header else (0, 1.0) if _even(t.data[0, :, 0]) else None
     if found is None:
         return t
@@ -48,7 +61,31 @@ def with_time_column(t: Table, has_header: bool) -> Table:
     what = f"column {t.columns[col]!r} ({col}) is the time base"
     note = (f"{what}: {fs:g} Hz from its steps; it is not imported as a channel" if fs else
             f"{what}, not evenly spaced ({_gap(times)}): it is not imported as a channel")
-    return replace(t, time_column=col, fs=t.fs or fs, time_note=note)
+    return replace(t, time_columns=(col,), fs=t.fs or fs, time_note=note)
+
+
+_CLOCK_NAMES = ("hour", "minute", "second", "microsecond")
+
+
+def _clock(t: Table) -> tuple[tuple[int, ...], np.ndarray] | None:
+    """(columns, seconds of the day) of time-of-day columns at the table's start, or None."""
+    a = t.data[0]
+    for width in (4, 3):
+        if a.shape[1] <= width:
+            continue
+        c = a[:, :width].astype(np.float64)
+        whole = c[:, :2] if width == 3 else c[:, :3]
+        if not (np.array_equal(whole, np.round(whole)) and c[:, 0].min() >= 0 and c[:, 0].max() < 24
+                and c[:, 1].min() >= 0 and c[:, 1].max() < 60 and c[:, 2].min() >= 0 and c[:, 2].max() < 61):
+            continue
+        seconds = c[:, 0] * 3600 + c[:, 1] * 60 + c[:, 2]
+        if width == 4:
+            if c[:, 3].min() < 0 or c[:, 3].max() >= 1e6:
+                continue
+            seconds = seconds + c[:, 3] * 1e-6
+        if _even(seconds):
+            return tuple(range(width)), seconds
+    return None
 
 
 def _labelled(t: Table) -> tuple[int, float] | None:
@@ -70,8 +107,11 @@ def _even(x: np.ndarray) -> bool:
 
 
 def _rate(times: np.ndarray) -> float:
-    fs = (times.size - 1) / (times[-1] - times[0])
-    return float(round(fs)) if abs(fs - round(fs)) <= WHOLE_HZ * fs else float(fs)
+    """1 / the least-squares step of evenly spaced times (printed times are rounded: the fit
+    averages that away, the two ends alone do not), whole Hz when within ``WHOLE_HZ``."""
+    i = np.arange(times.size, dtype=np.float64) - (times.size - 1) / 2
+    fs = float((i * i).sum() / (i * (times - times.mean())).sum())
+    return float(round(fs)) if abs(fs - round(fs)) <= WHOLE_HZ * fs else fs
 
 
 def _gap(times: np.ndarray) -> str:
