@@ -176,3 +176,18 @@ def test_the_rigs_own_files_import_without_options(tmp_path):
     assert side["fs"] == FS and len(side["channel_names"]) == 2
     assert [s["source_time_s"] for s in side["snapshots"]] == pytest.approx([0.0, 10.0, 28020.0], abs=1e-6)
     assert "09:39:39 to 17:26:39 (7.783 h)" in err
+
+
+def test_a_file_whose_clock_does_not_run_evenly_leaves_the_snapshots_without_times(tmp_path):
+    """One file of three with its microseconds restarting half way: the rate and the channels
+    stay those of the others, the snapshots get no times, and a note names the file."""
+    x = femto_like(tmp_path / "b", [(9, 39, 39), (9, 39, 49), (9, 39, 59)])
+    f = tmp_path / "b" / "acc_00002.csv"
+    rows = f.read_text().splitlines()
+    f.write_text("\n".join(rows[:1280] + [r.replace("9,39,49,", "9,39,50,", 1) for r in rows[1280:]]) + "\n")
+    cap, side, err = imported(tmp_path, "b", "--unit", "g")
+    assert ("  note: acc_00002.csv: no time of day that increases evenly, as the other files have: the "
+            "snapshots have no times; --snapshot-interval S gives them\n") in err
+    assert [s["source_time_s"] for s in side["snapshots"]] == [None, None, None]
+    assert side["fs"] == FS and len(side["channel_names"]) == 2
+    assert_within_one_count(cap, np.round(x, 3) * G)

@@ -267,7 +267,14 @@ def _retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[
 
 def _from_clock(snaps: list[Snapshot], origins: list[tuple[int, int]], fs: float, notes: list[str]) -> list[Snapshot]:
     """Snapshot times from times of day (:mod:`.time_column`), counted from the first snapshot:
-    a time more than 12 h before the one before it is on the next day. A note says the span."""
+    a time more than 12 h before the one before it is on the next day. A note says the span,
+    or, when a file had no time-of-day columns that increase evenly, which (no times then)."""
+    lacking = [s.source for s in snaps if s.source_time_s is None]
+    if lacking:
+        notes.append(f"{lacking[0]}{f' and {len(lacking) - 1} more' if len(lacking) > 1 else ''}: no time of day "
+                     "that increases evenly, as the other files have: the snapshots have no times; "
+                     "--snapshot-interval S gives them")
+        return [Snapshot(s.source, s.start, s.length, None) for s in snaps]
     of_day = np.array([s.source_time_s for s in snaps], dtype=np.float64) + np.array([a for _, a in origins]) / fs
     days = np.concatenate([[0], np.cumsum(np.diff(of_day) < -43200)])
     t = of_day + 86400 * days - of_day[0]
