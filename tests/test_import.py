@@ -351,3 +351,15 @@ def test_progress_bar_only_on_a_terminal():
         bar.close()
     assert tty.getvalue().startswith("\rimport: writing x.bin [" + "#" * 30 + "] 100.0%")
     assert pipe.getvalue() == ""
+
+
+def test_a_snapshot_time_that_is_not_a_number_is_no_time_in_a_sidecar_of_strict_json(tmp_path):
+    snaps = np.round(signal(4 * 1280, 1).T.reshape(4, 1280, 1) * 1000).astype(np.int32)
+    np.savez(tmp_path / "t.npz", acc_mg=snaps, t_s=np.array([0.0, 10.0, np.nan, 30.0]), fs_hz=12800.0)
+    assert run(tmp_path / "t.npz", "--array", "acc_mg", "--unit", "mg", "--out", tmp_path / "t.bin") == 0
+
+    def refuse(word):
+        raise ValueError(f"{word} in the sidecar")
+
+    meta = json.loads((tmp_path / "t.bin.json").read_text(), parse_constant=refuse)
+    assert [s["source_time_s"] for s in meta["snapshots"]] == [0.0, 10.0, None, 30.0]

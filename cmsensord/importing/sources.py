@@ -324,7 +324,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             tacho_pieces.append(t.data[:, :, layout.tacho].astype(np.float64).reshape(-1))
         many = t.data.shape[0] > 1 or opts.snapshot_len
         for k, (s, a, n) in enumerate(_split(t, opts.snapshot_len)):
-            time = None if t.times is None else float(t.times[s])
+            time = None if t.times is None or not np.isfinite(t.times[s]) else float(t.times[s])
             snaps.append(Snapshot(f"{t.name}[{k}]" if many else t.name, pos, n, time))
             origins.append((fi, a))
             pos += n
