@@ -20,7 +20,7 @@ from cmsensord.cli import main
 from cmsensord.dsp.rms import block_rms
 from cmsensord.importing.adc import nice_range
 from cmsensord.protocol import FLAG_CLIPPED, FrameType, decode_raw, decode_rms, decode_status, decode_tacho, iter_frames
-from cmsensord.sinks.mcap_sink import summarize
+from cmsensord.sinks.mcap_sink import read_messages, summarize
 
 G = 9.80665
 REPO = Path(__file__).resolve().parents[1]
@@ -262,6 +262,51 @@ def test_tacho_from_a_pulse_column_and_from_a_constant_speed(tmp_path):
     assert cap["status"].tacho_ppr == 2
     assert np.allclose(cap["edges"], np.arange(0, n, 200), atol=1 / 256)  # 50 Hz x 2 = every 200 samples
     assert sidecar(out)["rpm"] == 1500.0
+
+
+def test_tacho_from_a_column_of_shaft_speed_in_rpm(tmp_path):
+    """A run-up logged as a speed column (600 -> 1500 rpm over 3 s at 5 kHz): --speed-column
+    gives ppr edges a revolution where the integrated speed passes each 1/ppr revolution."""
+    fs, n, ppr = 5000, 15000, 2
+    rpm = 600.0 + 300.0 * np.arange(n) / fs
+    np.save(tmp_path / "s.npy", np.stack([signal(n, 1)[0], rpm], axis=1))
+    out = tmp_path / "s.bin"
+    assert run(tmp_path / "s.npy", "--fs", fs, "--speed-column", "1", "--ppr", ppr, "--out", out) == 0
+    cap = decode(out)
+    assert cap["status"].tacho_inputs == 1 and cap["status"].n_channels == 1 and cap["status"].tacho_ppr == ppr
+    # a plain re-statement: the revolutions at sample i are the trapezoid sum of rpm / 60 / fs
+    revs = np.concatenate([[0.0], np.cumsum(0.5 * (rpm[1:] + rpm[:-1]) / 60 / fs)])
+    expected = np.array([np.interp(k / ppr, revs, np.arange(n)) for k in range(int(revs[-1] * ppr) + 1)])
+    assert cap["edges"].size == expected.size == 105       # 52.5 revolutions, from the first sample
+    assert np.allclose(cap["edges"], expected, atol=1 / 256)
+    meta = sidecar(out)
+    assert (meta["tacho"], meta["tacho_from"], meta["rpm"], meta["rpm_source"]) == (
+        "ch_1", "speed", float(np.median(rpm)), "column ch_1 (median)")
+
+
+def test_a_run_up_with_a_speed_column_is_order_tracked_on_replay(tmp_path):
+    """`import --speed-column` then `replay`: the orders follow the logged speed, and the 1x
+    and 2x amplitudes are the recording's (0.5 g and 0.2 g)."""
+    fs, n = 10000, 100000
+    rpm = 600.0 + 120.0 * np.arange(n) / fs
+    phase = np.cumsum(rpm / 60 / fs)
+    x = 0.5 * np.sin(2 * np.pi * phase) + 0.2 * np.sin(4 * np.pi * phase)
+    np.save(tmp_path / "r.npy", np.stack([x, rpm], axis=1))
+    r = cmd("import", "r.npy", "--fs", str(fs), "--unit", "g", "--names", "motor", "--speed-column", "1",
+            "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  tacho: speed column ch_1 (median 1199.99 rpm), 200 edge(s), 1 a revolution\n" in r.stderr
+    r = cmd("replay", "r.bin", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    orders = [m for topic, _, m in read_messages(log) if topic == "/cm/motor/orders"]
+    assert len(orders) == 100                            # one /orders block every 100 ms
+    for m in orders[30:]:                                # the tracker settled (3 s)
+        t = m["timestamp"]["sec"] + m["timestamp"]["nsec"] / 1e9 - (orders[0]["timestamp"]["sec"]
+                                                                    + orders[0]["timestamp"]["nsec"] / 1e9)
+        assert m["speed_rpm"] == pytest.approx(600 + 120 * (t + 0.1), rel=0.02)
+        amp = {o["name"]: o["amplitude"] for o in m["orders"]}
+        assert amp["1x"] == pytest.approx(0.5 * G, rel=0.05) and amp["2x"] == pytest.approx(0.2 * G, rel=0.05)
 
 
 # --------------------------------------------------------------------------- the real command

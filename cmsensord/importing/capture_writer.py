@@ -11,7 +11,8 @@ a sample at 0 or 4095 carries the clipped flag.
 
 The sidecar (``OUT.json``) holds what the frames cannot: the sources, the
 channel names, the input unit and scale factor, the full-scale range, the
-clipped blocks and samples per channel, the speed (``rpm``, ``rpm_source``) and
+clipped blocks and samples per channel, the speed (``rpm``, ``rpm_source``), the tacho
+(``tacho``: the column's name or ``rpm``; ``tacho_from``: ``pulses``, ``speed`` or ``rpm``) and
 per snapshot its ``source`` (file, ``[i]`` for the i-th inside a file),
 ``start_s`` (board seconds), ``length`` (samples in blocks), ``dropped``
 (samples at its end that fill no block), ``pct_of_record`` (its start as a
@@ -90,7 +91,8 @@ def _tacho_frames(rec: Recording, plan: BlockPlan) -> tuple[np.ndarray, np.ndarr
     most = int(np.diff(bounds).max()) if plan.n_blocks else 0
     if most > MAX_TACHO_EDGES:
         what = (f"--rpm {rec.rpm:g}" if rec.tacho_edges is None else
-                f"{Path(rec.sources[0]).name}: tacho column {rec.tacho_source!r}")
+                f"{Path(rec.sources[0]).name}: {'speed' if rec.tacho_from == 'speed' else 'tacho'} column "
+                f"{rec.tacho_source!r}")
         raise ImportFailure(f"{what}: {most} edges in one {plan.block_len}-sample block, "
                             f"a TACHO frame holds at most {MAX_TACHO_EDGES}; check --tacho-threshold, "
                             "--ppr or --rpm")
@@ -179,6 +181,7 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         "dropped_samples": int(plan.dropped.sum()),
         "rpm": rec.rpm, "rpm_source": rec.rpm_source, "ppr": rec.ppr,
         "tacho": rec.tacho_source if stats["tacho_edges"] or rec.tacho_source else None,
+        "tacho_from": rec.tacho_from,
         "tacho_edges": stats["tacho_edges"],
         "source_start": rec.source_start,
         "snapshots": snaps,

@@ -113,6 +113,9 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
     tach = p.add_mutually_exclusive_group()
     tach.add_argument("--tacho-column", dest="imp_tacho_column", metavar="COL",
                       help="a tacho pulse column/channel (index or name): rising crossings are edges")
+    tach.add_argument("--speed-column", dest="imp_speed_column", metavar="COL",
+                      help="a column/channel of shaft speed in rpm (index or name): TACHO frames with --ppr "
+                           "edges a revolution, the speed integrated")
     tach.add_argument("--rpm", dest="imp_rpm", type=positive, metavar="RPM",
                       help="constant shaft speed: TACHO frames with --ppr edges a revolution")
     p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=real, metavar="X",
@@ -138,7 +141,7 @@ def options_from_args(args: argparse.Namespace) -> ImportOptions:
         header=args.imp_header, unit=args.imp_unit, sensitivity=args.imp_sensitivity,
         scale_factor=args.imp_scale_factor, full_scale=args.imp_range, block_len=args.imp_block_len,
         snapshot_len=args.imp_snapshot_len, snapshot_interval=args.imp_snapshot_interval,
-        order=args.imp_order, tacho_column=args.imp_tacho_column,
+        order=args.imp_order, tacho_column=args.imp_tacho_column, speed_column=args.imp_speed_column,
         tacho_threshold=args.imp_tacho_threshold, ppr=args.imp_ppr, rpm=args.imp_rpm,
         memory_mb=args.imp_memory_mb)
 
@@ -186,7 +189,12 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
                          f"clipped at +-{fs_:g} m/s2 (counts 0/{ADC_MAX}); those blocks carry the "
                          f"clipped flag; --range {nice_range(peaks[c]):g} avoids it")
     if meta["tacho"]:
-        what = f"constant {meta['rpm']:g} rpm" if meta["tacho"] == "rpm" else f"column {meta['tacho']}"
+        if meta["tacho_from"] == "rpm":
+            what = f"constant {meta['rpm']:g} rpm"
+        elif meta["tacho_from"] == "speed":
+            what = f"speed column {meta['tacho']} (median {meta['rpm']:g} rpm)"
+        else:
+            what = f"column {meta['tacho']}"
         lines.append(f"  tacho: {what}, {meta['tacho_edges']} edge(s), {meta['ppr']} a revolution")
     elif meta["rpm"]:
         lines.append(f"  speed: {meta['rpm']:g} rpm from {meta['rpm_source']} (sidecar only; --rpm "

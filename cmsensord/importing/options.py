@@ -27,6 +27,7 @@ class ImportOptions:
     snapshot_interval: float | None = None  # s between snapshot starts in the original recording
     order: str = "name"  # "name", "mtime" or "given"
     tacho_column: str | None = None
+    speed_column: str | None = None  # a column of shaft speed in rpm: TACHO edges from it
     tacho_threshold: float | None = None
     ppr: int = 1
     rpm: float | None = None  # synthesise TACHO frames at this constant speed

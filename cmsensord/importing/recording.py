@@ -40,7 +40,8 @@ class Recording:
     sources: list[str]
     source_unit: str = "m/s2"
     tacho_edges: np.ndarray | None = None  # float64 fractional sample indices into samples
-    tacho_source: str | None = None  # "column NAME" or "rpm"
+    tacho_source: str | None = None  # the pulse or speed column's name, or "rpm"
+    tacho_from: str | None = None  # "pulses" (a pulse column), "speed" (a speed column) or "rpm" (constant)
     rpm: float | None = None
     rpm_source: str | None = None  # "--rpm" or the file it was read from
     ppr: int = 1

@@ -34,7 +34,7 @@ from .recording import Recording, Snapshot
 from .samples import SampleStore
 from .table import Table
 from .tabular import is_text_table, read_tabular
-from .tacho import pulse_edges
+from .tacho import pulse_edges, speed_edges
 from .units import to_ms2_factor
 from .wav import read_wav
 
@@ -159,7 +159,9 @@ class _Layout:
 
     def __init__(self, t: Table, opts: ImportOptions):
         self.columns = list(t.columns)
-        self.tacho = _column(t, opts.tacho_column, "--tacho-column") if opts.tacho_column else None
+        col, option = (opts.speed_column, "--speed-column") if opts.speed_column else \
+            (opts.tacho_column, "--tacho-column")
+        self.tacho = _column(t, col, option) if col else None
         if opts.channels:
             option = "--columns" if t.kind == "column" else "--channels"  # the same option
             self.idx = [_column(t, tok, option) for tok in opts.channels]
@@ -349,11 +351,22 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
                     sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes,
                     source_start=start)
     if layout.tacho is not None:
-        pulses = np.concatenate(tacho_pieces)
-        rec.tacho_edges = pulse_edges(pulses, [(s.start, s.length) for s in snaps], opts.tacho_threshold)
-        rec.tacho_source = f"{layout.columns[layout.tacho]}"
+        _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)
     if opts.rpm is not None:
-        rec.rpm, rec.rpm_source, rec.tacho_source = opts.rpm, "--rpm", "rpm"
-    elif rpm_file is not None:
+        rec.rpm, rec.rpm_source, rec.tacho_source, rec.tacho_from = opts.rpm, "--rpm", "rpm", "rpm"
+    elif rpm_file is not None and rec.rpm is None:
         rec.rpm, rec.rpm_source = rpm_file
     return rec
+
+
+def _tacho(rec: Recording, column: np.ndarray, name: str, opts: ImportOptions) -> None:
+    """The tacho edges of a pulse column, or of a speed column (rpm; its median also the
+    sidecar's ``rpm``)."""
+    bounds = [(s.start, s.length) for s in rec.snapshots]
+    if opts.speed_column:
+        rec.tacho_edges = speed_edges(column, bounds, rec.fs, opts.ppr)
+        rec.tacho_source, rec.tacho_from = name, "speed"
+        rec.rpm, rec.rpm_source = float(np.median(column)), f"column {name} (median)"
+    else:
+        rec.tacho_edges = pulse_edges(column, bounds, opts.tacho_threshold)
+        rec.tacho_source, rec.tacho_from = name, "pulses"

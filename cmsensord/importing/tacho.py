@@ -6,6 +6,10 @@
   would time them;
 * :func:`rpm_edges`: ``ppr`` edges per revolution at ``rpm``, one every
   ``60 fs / (rpm ppr)`` samples of the board clock from sample 0;
+* :func:`speed_edges`: ``ppr`` edges per revolution of a column of shaft speed
+  in rpm, inside each snapshot: the speed integrated (trapezoids) to the shaft's
+  angle, an edge where it passes each ``1 / ppr`` revolution from the snapshot's
+  first sample (a speed below 0 counts as standing still);
 * :func:`block_edges`: edge positions on the board clock to (block, offset in
   1/256 sample), what the TACHO frames carry (docs/PROTOCOL.md, TACHO).
 """
@@ -14,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SUB", "pulse_edges", "rpm_edges", "block_edges"]
+__all__ = ["SUB", "pulse_edges", "rpm_edges", "speed_edges", "block_edges"]
 
 SUB = 256  # TACHO edge resolution: 1/256 sample
 
@@ -41,6 +45,21 @@ def rpm_edges(n_samples: int, fs: float, rpm: float, ppr: int) -> np.ndarray:
     """float64 board sample positions of ``ppr`` pulses a revolution at ``rpm``, in [0, n_samples)."""
     step = 60.0 * fs / (rpm * ppr)
     return np.arange(int(np.ceil(n_samples / step)), dtype=np.float64) * step
+
+
+def speed_edges(rpm: np.ndarray, bounds: list[tuple[int, int]], fs: float, ppr: int) -> np.ndarray:
+    """float64 fractional sample indices into ``rpm`` of ``ppr`` edges a revolution, each
+    snapshot ``[start, start + length)`` of ``bounds`` on its own."""
+    out = [np.empty(0)]
+    for start, n in bounds:
+        if n < 2:
+            continue
+        pulses = np.maximum(np.asarray(rpm[start:start + n], dtype=np.float64), 0.0) * ppr / (60.0 * fs)
+        phase = np.concatenate([[0.0], np.cumsum(0.5 * (pulses[1:] + pulses[:-1]))])   # pulses at each sample
+        k = np.arange(int(np.floor(phase[-1])) + 1, dtype=np.float64)
+        moving = np.concatenate([[True], np.diff(phase) > 0])      # np.interp: increasing x only
+        out.append(start + np.interp(k, phase[moving], np.flatnonzero(moving).astype(np.float64)))
+    return np.concatenate(out)
 
 
 def block_edges(pos: np.ndarray, block_len: int, n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
