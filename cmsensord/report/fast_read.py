@@ -26,10 +26,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from mcap.records import Metadata
+
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
-from cmsensord.sinks.mcap_records import RECORD_LIMIT
+from cmsensord.sinks.mcap_records import RECORD_LIMIT, parse_record
 
 __all__ = ["FastScan", "head_metadata"]
 
@@ -63,31 +65,12 @@ def head_metadata(path: str | Path) -> dict[str, dict[str, str]]:
                 body = f.read(length)
                 if len(body) < length:
                     break
-                if opcode == _OP_METADATA:
-                    name, pairs = _metadata(body)
-                    out[name] = pairs
-    except (OSError, ValueError, struct.error, UnicodeDecodeError):
+                record = parse_record(head + body)
+                if isinstance(record, Metadata):
+                    out[record.name] = dict(record.metadata)
+    except Exception:  # noqa: BLE001 - a file that cannot be read, or mcap's parser on damage
         pass
     return out
-
-
-def _metadata(body: bytes) -> tuple[str, dict[str, str]]:
-    """A Metadata record's name and map (MCAP specification, "Metadata")."""
-    def text(off: int) -> tuple[str, int]:
-        (n,) = struct.unpack_from("<I", body, off)
-        if off + 4 + n > len(body):
-            raise ValueError("a string runs past its record")
-        return body[off + 4: off + 4 + n].decode("utf-8"), off + 4 + n
-
-    name, off = text(0)
-    (size,) = struct.unpack_from("<I", body, off)
-    off += 4
-    end = off + size
-    pairs = {}
-    while off < end:
-        key, off = text(off)
-        pairs[key], off = text(off)
-    return name, pairs
 
 
 def _zstd() -> Any:
