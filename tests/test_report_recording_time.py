@@ -146,3 +146,27 @@ def test_no_timeline_without_two_timed_snapshots_mostly_in_order(meta):
                                   '{"start_s":[0,NaN],"source_time_s":[0,1],"board_zero_ns":0}'])
 def test_a_timeline_that_cannot_be_read_is_none(text):
     assert Timeline.from_json(text) is None
+
+
+def test_the_replay_places_levels_in_snapshots_stamped_out_of_order_as_the_report_does(tmp_path):
+    """The run-to-failure recording as one archive whose snapshots 28-36 carry a wrong time
+    (-5 s, as two of FEMTO Bearing1_1's do): the replay's summary gives those snapshots the time
+    between their neighbours (600 s apart), the report's timeline too."""
+    d = run_to_failure(tmp_path)
+    x = np.stack([np.loadtxt(f) for f in sorted(d.iterdir())])[:, :, None]      # (40, 2560, 1)
+    t_s = 600.0 * np.arange(40)
+    t_s[28:37] = -5.0
+    np.savez(tmp_path / "r.npz", x=x, t_s=t_s)
+    for args in (("import", "r.npz", "--array", "x", *R2F, "--out", "r.bin"),
+                 ("calibrate", "r.bin", "--to", "25%", "--out", "site.yaml")):
+        p = cmsensord(*args, cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+    p = cmsensord("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    line = re.search(r"  bearing: in the recording: (.*)\n", p.stderr)[1]
+    placed = re.findall(r"r\.npz\[(\d+)\] \([\d.]+ % of the record, (-?[\d.]+) h in\)", line)
+    assert placed and any(28 <= int(k) <= 36 for k, _ in placed), line
+    for k, hours in placed:
+        assert hours == f"{600 * int(k) / 3600:.4g}", line
+    page, _ = report(tmp_path, tmp_path / "logs")
+    assert "9 snapshot(s) whose recorded time went back are placed between their neighbours." in page

@@ -14,6 +14,8 @@ from __future__ import annotations
 import bisect
 from datetime import datetime, timedelta
 
+from cmsensord.importing.timeline import Timeline
+
 __all__ = ["FirstAlarms", "origin_lines", "span_line"]
 
 #: the alarm events whose first occurrence per alarm is placed in the recording
@@ -46,10 +48,15 @@ class FirstAlarms:
 
 
 def _snapshots(meta: dict) -> tuple[list[dict], list[float]] | None:
-    """An import's snapshots and their board starts (None: not an import of several)."""
+    """An import's snapshots and their board starts (None: not an import of several); each
+    snapshot's ``source_time_s`` as the import's :class:`~cmsensord.importing.timeline.Timeline`
+    has it (a time that goes back placed between its neighbours, as the report places it)."""
     snaps = meta.get("snapshots") if meta.get("format") == "cmsensord import" else None
     if not snaps or len(snaps) < 2:
         return None
+    timeline = Timeline.from_sidecar(meta)
+    if timeline is not None and timeline.repaired:
+        snaps = [{**s, "source_time_s": float(t)} for s, t in zip(snaps, timeline.source_s)]
     return snaps, [float(s["start_s"]) for s in snaps]
 
 
