@@ -170,3 +170,20 @@ def test_the_replay_places_levels_in_snapshots_stamped_out_of_order_as_the_repor
         assert hours == f"{600 * int(k) / 3600:.4g}", line
     page, _ = report(tmp_path, tmp_path / "logs")
     assert "9 snapshot(s) whose recorded time went back are placed between their neighbours." in page
+
+
+def test_the_summary_of_a_replayed_import_gives_each_event_its_time_in_the_recording(tmp_path):
+    logs, _ = replayed_import(tmp_path)
+    (log,) = logs.glob("*.mcap")
+    p = cmsensord("summary", str(log), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    assert re.fullmatch(r"start: \S+ \(2004-02-12 10:40:0[01] in the recording\)", lines[[
+        ln.startswith("start:") for ln in lines].index(True)])
+    assert any(re.fullmatch(r"end: \S+ \(2004-02-12 17:10:01 in the recording\)", ln) for ln in lines)
+    changes = [ln for ln in lines if " severity_change " in ln]
+    assert changes and all(re.fullmatch(r"  \S+ \(2004-02-12 \d\d:\d0:01 in the recording\) severity_change .*", ln)
+                           for ln in changes), changes
+    assert ("  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshots over 6.5 h of the recording "
+            "from 2004-02-12T10:40:00'}") in lines
+    assert max(map(len, lines)) < 300                    # no 60-kB line of the timeline

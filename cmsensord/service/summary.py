@@ -9,6 +9,7 @@ from pathlib import Path
 
 from cmsensord.errors import EXIT_USAGE
 from cmsensord.report.localtime import iso_local
+from cmsensord.report.time_axis import TimeAxis
 from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
 
 
@@ -31,14 +32,20 @@ def summary(path: str, *, as_json: bool = False) -> int:
 
 def format_summary(info: dict) -> str:
     """The summary as text: times as ISO 8601 local time, one line per event
-    (``time kind [channel]: message``), other lists and dicts one item a line."""
+    (``time kind [channel]: message``; for a replayed import also its time in the recording,
+    :mod:`cmsensord.report.time_axis`), other lists and dicts one item a line, a metadata
+    value past 120 characters shortened (the recording's timeline to its span)."""
+    axis = TimeAxis.of_logs([info.get("metadata") or {}])
     lines = []
     for k, v in info.items():
         if k in ("start_ns", "end_ns"):
-            lines.append(f"{k[:-3]}: {iso_local(v, ms=True)}")
+            lines.append(f"{k[:-3]}: {iso_local(v, ms=True)}{_in_recording(axis, v)}")
         elif k == "events":
             lines.append(f"events: {len(v)} shown")
-            lines.extend(f"  {event_line(e)}" for e in v)
+            lines.extend(f"  {event_line(e, axis)}" for e in v)
+        elif k == "metadata":
+            lines.append("metadata:")
+            lines.extend(f"  {name}: {_metadata(values, axis)}" for name, values in v.items())
         elif isinstance(v, dict):
             lines.append(f"{k}:")
             for kk, vv in v.items():
@@ -52,11 +59,33 @@ def format_summary(info: dict) -> str:
     return "\n".join(lines)
 
 
-def event_line(event: dict) -> str:
+def _in_recording(axis: TimeAxis, ns: int | None) -> str:
+    """`` (TIME in the recording)`` for a replayed import's log time ``ns``; else nothing."""
+    if axis.timeline is None or ns is None:
+        return ""
+    return f" ({axis.text(axis.shown(int(ns)))} in the recording)"
+
+
+def _metadata(values: dict, axis: TimeAxis) -> dict:
+    """A metadata record's map, each value past 120 characters shortened."""
+    out = {}
+    for key, value in values.items():
+        if key == "recording_timeline" and axis.timeline is not None:
+            start, end = axis.timeline.source_s[0], axis.timeline.source_s[-1]
+            out[key] = (f"{axis.timeline.start_s.size} snapshots over {(end - start) / 3600:.4g} h of the "
+                        f"recording" + (f" from {axis.timeline.source_start}" if axis.timeline.source_start else ""))
+        else:
+            out[key] = value if len(str(value)) <= 120 else f"{str(value)[:100]}... ({len(str(value)):,} characters)"
+    return out
+
+
+def event_line(event: dict, axis: TimeAxis | None = None) -> str:
     """One event of :func:`~cmsensord.sinks.mcap_read.summarize` as a line:
-    ``2026-11-26T17:47:02.522+00:00 anomaly_onset ch0: message``."""
+    ``2026-11-26T17:47:02.522+00:00 anomaly_onset ch0: message`` (for a replayed import,
+    its time in the recording after the time)."""
     channel, message = event.get("channel"), event.get("message") or ""
     where = f" {channel}" if channel and not message.startswith(f"{channel}:") else ""
     if not where and channel:
         where, message = f" {channel}", message[len(channel) + 2:]
-    return f"{iso_local(event.get('time_ns'), ms=True)} {event.get('kind')}{where}: {message}"
+    when = iso_local(event.get("time_ns"), ms=True) + (_in_recording(axis, event.get("time_ns")) if axis else "")
+    return f"{when} {event.get('kind')}{where}: {message}"
