@@ -191,3 +191,36 @@ def test_a_file_whose_clock_does_not_run_evenly_leaves_the_snapshots_without_tim
     assert [s["source_time_s"] for s in side["snapshots"]] == [None, None, None]
     assert side["fs"] == FS and len(side["channel_names"]) == 2
     assert_within_one_count(cap, np.round(x, 3) * G)
+
+
+# --------------------------------------------------------------------------- dates and times
+def test_a_first_column_of_dates_and_times_gives_the_rate_and_the_recordings_date(tmp_path):
+    """Three logger files of 3 s at 1 kHz, 10 minutes apart across midnight, each row stamped
+    ``2023-05-01 23:50:00.001``: 1000 Hz, the snapshots' times and the recording's start."""
+    d = tmp_path / "logs"
+    d.mkdir()
+    x = signal(9000, 2, amp=0.3)
+    start = np.datetime64("2023-05-01T23:50:00.000")
+    for k in range(3):
+        stamps = start + np.timedelta64(600 * k, "s") + np.arange(3000) * np.timedelta64(1, "ms")
+        rows = [f"{str(s).replace('T', ' ')},{a:.6f},{b:.6f}"
+                for s, a, b in zip(stamps, x[0, 3000 * k:3000 * (k + 1)], x[1, 3000 * k:3000 * (k + 1)])]
+        (d / f"log_{k}.csv").write_text("Timestamp,x,y\n" + "\n".join(rows) + "\n")
+    cap, side, err = imported(tmp_path, "logs", "--unit", "g")
+    assert ("  note: column 'Timestamp' (0) holds dates and times: 1000 Hz from their steps; it is not "
+            "imported as a channel\n") in err
+    assert ("  note: snapshot times from the files' dates and times: 2023-05-01 23:50:00 to 2023-05-02 "
+            "00:10:00 (0.3333 h); --snapshot-interval S sets them instead\n") in err
+    assert (side["fs"], side["channel_names"], side["source_start"]) == (1000, ["x", "y"], "2023-05-01T23:50:00")
+    assert [s["source_time_s"] for s in side["snapshots"]] == [0.0, 600.0, 1200.0]
+    assert_within_one_count(cap, np.round(x, 6) * G)
+
+
+def test_a_row_whose_date_is_not_one_is_named_by_its_line(tmp_path):
+    rows = [f"2023-05-01 12:00:0{i}.000,{i}" for i in range(5)]
+    rows[3] = "2023-13-45 12:00:03.000,3"
+    (tmp_path / "d.csv").write_text("# logger 7\ntime,x\n" + "\n".join(rows) + "\n")
+    r = cmd("import", "d.csv", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, "cmsensord import: d.csv: line 6, column 0: '2023-13-45 12:00:03.000' is "
+                                           "not a date and time (separator ',', a header line); fix the file, or "
+                                           "set --separator / --header / --no-header\n")

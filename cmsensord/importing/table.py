@@ -38,6 +38,7 @@ class Table:
     notes: list[str] = field(default_factory=list)  # what the reader noticed (a file cut short)
     time_columns: tuple[int, ...] = ()  # columns of times (:mod:`.time_column`): no channels by default
     clock: bool = False  # ``times`` are times of day (seconds after midnight, the day not known)
+    dated: bool = False  # ``times`` are dates and times (seconds since the Unix epoch, the zone not known)
     time_note: str | None = None  # what the import says of it, once
     head_note: str | None = None  # lines skipped before the numbers (a text table's preamble), said once
 

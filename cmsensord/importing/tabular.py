@@ -32,7 +32,7 @@ import numpy as np
 
 from .errors import ImportFailure
 from .table import Table
-from .text_head import SEPARATORS, Head, first_row, is_number, read_head, split
+from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split
 from .time_column import with_time_column
 
 __all__ = ["read_tabular", "sniff", "is_text_table"]
@@ -58,7 +58,7 @@ def sniff(lines: list[str], separator: str | None = None,
     else:
         sep = None if separator in ("whitespace", " ") else separator
     if header is None:
-        header = not all(is_number(f) for f in split(lines[0], sep) if f.strip())
+        header = not all(is_cell(f, i == 0) for i, f in enumerate(split(lines[0], sep)) if f.strip())
     data = lines[1:] if header else lines
     decimal_comma = sep != "," and any("," in line for line in data) \
         and not any("." in line for line in data)
@@ -117,6 +117,28 @@ def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
             f"skipped (the first: {first!r})")
 
 
+def _dates(src: str | io.StringIO, sep: str | None, skip: int, path: str) -> np.ndarray:
+    """The first column's dates and times as seconds since the Unix epoch (float64)."""
+    if isinstance(src, io.StringIO):
+        src.seek(0)
+    text = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=1, dtype=str, quotechar='"',
+                      encoding="utf-8-sig", usecols=0)
+    try:
+        stamps = np.char.strip(text).astype("datetime64[us]")
+    except ValueError:
+        bad = next(i for i, v in enumerate(text) if not _is_date(v))
+        raise ValueError(f"line {bad + 1 + skip}, column 0: {str(text[bad])!r} is not a date and time") from None
+    return (stamps - np.datetime64(0, "us")).astype(np.float64) / 1e6
+
+
+def _is_date(text: str) -> bool:
+    try:
+        np.datetime64(text.strip())
+    except ValueError:
+        return False
+    return DATETIME.fullmatch(text) is not None
+
+
 def read_tabular(path: str, separator: str | None = None, header: bool | None = None) -> Table:
     head = read_head(path)
     sep, header_line, decimal_comma, skip = _layout(head, separator, header)
@@ -126,8 +148,12 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
             src: str | io.StringIO = io.StringIO(text)
         else:
             src = path
-        a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2,
-                       dtype=np.float64, quotechar='"', encoding="utf-8-sig")
+        first = split(head.rows[0], sep) if head.rows else []
+        dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
+        a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
+                       encoding="utf-8-sig", usecols=range(1, len(first)) if dated else None)
+        if dated:
+            a = np.column_stack([_dates(src, sep, skip, path), a])
     except ValueError as exc:
         msg = _loadtxt_message(str(exc), skip)
         raise ImportFailure(f"{path}: {msg} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
@@ -146,4 +172,4 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     note = _head_note(path, head, names is not None)
     t = Table(path=path, data=a[None], columns=names or [f"col{i}" for i in range(a.shape[1])], kind="column",
               head_note=note)
-    return with_time_column(t, names is not None)
+    return with_time_column(t, names is not None, dated=dated)

@@ -3,19 +3,21 @@
 Data loggers write lines before their numbers: ``#`` comments, blank lines, a preamble of
 settings (``LabVIEW Measurement``, ``Sample rate: 25600 Hz``), then maybe a line of column
 names. The rows of numbers begin at the first line that is a row of numbers (every field a
-number, by one of the separators) followed by two more (or by the end of what is read); the
-last line before it that is neither blank nor a comment is the header candidate; the lines
-before that, the preamble. Only the file's first ``HEAD_BYTES`` are read here.
+number, by one of the separators; the first may be a date and time) followed by two more
+(or by the end of what is read); the last line before it that is neither blank nor a
+comment is the header candidate; the lines before that, the preamble. Only the file's
+first ``HEAD_BYTES`` are read here.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from .errors import ImportFailure
 
-__all__ = ["HEAD_BYTES", "SEPARATORS", "Head", "filled_lines", "first_row", "is_number", "is_number_row",
-           "read_head", "split"]
+__all__ = ["DATETIME", "HEAD_BYTES", "SEPARATORS", "Head", "filled_lines", "first_row", "is_cell", "is_number",
+           "is_number_row", "read_head", "split"]
 
 SEPARATORS = ("\t", ";", ",", "|")
 HEAD_BYTES = 1 << 16
@@ -31,15 +33,25 @@ def is_number(text: str) -> bool:
         return False
 
 
+#: a date and time as the first field of a row (ISO 8601, without a zone): ``2023-05-01 12:00:00.125``
+DATETIME = re.compile(r'\s*"?\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?"?\s*')
+
+
+def is_cell(text: str, first: bool) -> bool:
+    """A number, or (the row's first field) a date and time."""
+    return is_number(text) or (first and DATETIME.fullmatch(text) is not None)
+
+
 def split(line: str, sep: str | None) -> list[str]:
     return line.split() if sep is None else line.split(sep)
 
 
 def is_number_row(line: str) -> bool:
-    """Every field of the line is a number, by whitespace or one of :data:`SEPARATORS`."""
+    """Every field of the line is a number (the first may be a date and time), by whitespace
+    or one of :data:`SEPARATORS`."""
     for sep in (None, *SEPARATORS):
         fields = [f for f in split(line, sep) if f.strip()]
-        if fields and all(is_number(f) for f in fields):
+        if fields and all(is_cell(f, i == 0) for i, f in enumerate(fields)):
             return True
     return False
 

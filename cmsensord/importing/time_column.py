@@ -13,6 +13,10 @@ bearing files' ``9,39,39,65664,0.552,-0.146``) -- are the time base too, when th
 minutes are whole numbers in range and the time they make increases evenly; each file's first
 time is then its snapshot's time of day (``Table.times``, ``clock``).
 
+A first column of dates and times (``2023-05-01 12:00:00.125``, ISO 8601 without a zone) is
+the time base too, whatever its label; each file's first date and time is then its
+snapshot's (``Table.times``, ``dated``), and the recording's start.
+
 When the times are evenly spaced -- each within half a step of the straight line from the first
 to the last, as printed times rounded to a few decimals are -- they give the sampling rate,
 one over the least-squares step, rounded to a whole number of Hz when within 0.01 % of one.
@@ -40,9 +44,12 @@ _UNIT_S = {"ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "usec
 WHOLE_HZ = 1e-4
 
 
-def with_time_column(t: Table, has_header: bool) -> Table:
+def with_time_column(t: Table, has_header: bool, dated: bool = False) -> Table:
     """``t`` with its time column(s) and the rate they give marked (see the module docstring),
-    or ``t`` itself when it has none."""
+    or ``t`` itself when it has none; ``dated``: its first column holds dates and times (as
+    seconds since the Unix epoch), the time base whatever its label."""
+    if dated:
+        return _dated(t)
     if t.data.shape[0] != 1 or t.data.shape[1] < 3 or t.data.shape[2] < 2:
         return t
     clock = _clock(t)
@@ -62,6 +69,18 @@ def with_time_column(t: Table, has_header: bool) -> Table:
     note = (f"{what}: {fs:g} Hz from its steps; it is not imported as a channel" if fs else
             f"{what}, not evenly spaced ({_gap(times)}): it is not imported as a channel")
     return replace(t, time_columns=(col,), fs=t.fs or fs, time_note=note)
+
+
+def _dated(t: Table) -> Table:
+    """The first column's dates and times: the time base, its rate when evenly spaced, and the
+    file's first date and time (``times``, ``dated``)."""
+    epoch = t.data[0, :, 0]
+    since = epoch - epoch[0]
+    rate = _rate(since) if _even(since) else None
+    what = f"column {t.columns[0]!r} (0) holds dates and times"
+    note = (f"{what}: {rate:g} Hz from their steps; it is not imported as a channel" if rate else
+            f"{what}, not evenly spaced ({_gap(since)}): it is not imported as a channel")
+    return replace(t, time_columns=(0,), fs=t.fs or rate, time_note=note, times=epoch[:1], dated=True)
 
 
 _CLOCK_NAMES = ("hour", "minute", "second", "microsecond")
