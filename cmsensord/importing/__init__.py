@@ -15,6 +15,7 @@ Modules, one job each:
 * :mod:`.text_head` -- where a text table's numbers begin (comments, a preamble, the names);
 * :mod:`.time_column` -- a text table's column of times: the rate, and no channel;
 * :mod:`.sources` -- SRC arguments to files in order, files to a :class:`Recording`;
+* :mod:`.snapshot_times` -- the snapshots' times in the original recording;
 * :mod:`.recording` -- the recording (m/s², snapshots, tacho edges);
 * :mod:`.samples` -- its samples, in memory up to ``--memory-mb``, beyond it on disk;
 * :mod:`.units` -- the input unit to m/s²;

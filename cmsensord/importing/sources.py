@@ -20,7 +20,6 @@ import glob as globmod
 import os
 import re
 from collections import Counter
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -29,10 +28,10 @@ from .arrays import read_npy, read_npz
 from .channel_names import channel_names, checked_names
 from .errors import ImportFailure
 from .matlab import read_mat
-from .name_times import times_from_names
 from .options import ImportOptions
 from .recording import Recording, Snapshot
 from .samples import SampleStore
+from .snapshot_times import retimed
 from .table import Table
 from .tabular import is_text_table, read_tabular
 from .tacho import pulse_edges, speed_edges
@@ -248,58 +247,6 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
     return notes
 
 
-def _retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[str], opts: ImportOptions,
-             fs: float, own_times: bool, clock: str, notes: list[str]) -> tuple[list[Snapshot], str | None]:
-    """The snapshots' times in the original recording, and the date and time they count from
-    (None: not known): every ``--snapshot-interval``; else from the files' time columns
-    (``clock`` "day": times of day; "date": dates and times; :func:`_from_clock`); else, when
-    no file gave its own, by the files' names
-    (:mod:`.name_times`, with a note), a snapshot ``a`` samples into its file ``a / fs`` after
-    the file's time; else as read."""
-    if opts.snapshot_interval is not None:
-        return [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval)
-                for i, s in enumerate(snaps)], None
-    if clock:
-        return _from_clock(snaps, origins, fs, notes, clock == "date")
-    named = None if own_times else times_from_names(files)
-    if named is None:
-        return snaps, None
-    notes.append(named.note())
-    return [Snapshot(s.source, s.start, s.length, named.seconds[fi] + a / fs)
-            for s, (fi, a) in zip(snaps, origins)], named.first.isoformat()
-
-
-def _from_clock(snaps: list[Snapshot], origins: list[tuple[int, int]], fs: float, notes: list[str],
-                dated: bool) -> tuple[list[Snapshot], str | None]:
-    """Snapshot times from the files' time columns (:mod:`.time_column`), counted from the
-    first snapshot, and its date and time when ``dated``; times of day: a time more than 12 h
-    before the one before it is on the next day. A note says the span, or, when a file had no
-    time column that increases evenly, which (no times then)."""
-    lacking = [s.source for s in snaps if s.source_time_s is None]
-    if lacking:
-        notes.append(f"{lacking[0]}{f' and {len(lacking) - 1} more' if len(lacking) > 1 else ''}: no "
-                     f"{'date and time' if dated else 'time of day'} that increases evenly, as the other files "
-                     "have: the snapshots have no times; --snapshot-interval S gives them")
-        return [Snapshot(s.source, s.start, s.length, None) for s in snaps], None
-    at = np.array([s.source_time_s for s in snaps], dtype=np.float64) + np.array([a for _, a in origins]) / fs
-    days = np.zeros(at.size) if dated else np.concatenate([[0], np.cumsum(np.diff(at) < -43200)])
-    t = at + 86400 * days - at[0]
-    if dated:
-        first, last = (datetime.fromtimestamp(v, timezone.utc).replace(tzinfo=None) for v in (at[0], at[-1]))
-        span, start = f"{first:%Y-%m-%d %H:%M:%S} to {last:%Y-%m-%d %H:%M:%S}", first.isoformat()
-    else:
-        span, start = f"{_hms(at[0])} to {_hms(at[-1])}", None
-    notes.append(f"snapshot times from the files' {'dates and times' if dated else 'time-of-day columns'}: {span} "
-                 f"({t[-1] / 3600:.4g} h{', past midnight' if days[-1] else ''}); --snapshot-interval S sets "
-                 "them instead")
-    return [Snapshot(s.source, s.start, s.length, float(ti)) for s, ti in zip(snaps, t)], start
-
-
-def _hms(seconds: float) -> str:
-    s = int(seconds) % 86400
-    return f"{s // 3600:02d}:{s % 3600 // 60:02d}:{s % 60:02d}"
-
-
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
     """Read every file (``progress(i)`` after each) and lay the snapshots end to end in a
     :class:`~.samples.SampleStore` beside ``opts.out`` (the caller closes ``rec.samples``):
@@ -355,7 +302,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
         notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
-    snaps, start = _retimed(snaps, origins, files, opts, fs, own_times, "date" if dated else "day" if clock else "",
+    snaps, start = retimed(snaps, origins, files, opts, fs, own_times, "date" if dated else "day" if clock else "",
                             notes)
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
                     sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes,
