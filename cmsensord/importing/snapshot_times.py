@@ -21,13 +21,13 @@ __all__ = ["retimed"]
 
 
 def retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[str], opts: ImportOptions,
-             fs: float, own_times: bool, clock: str, notes: list[str]) -> tuple[list[Snapshot], str | None]:
+            fs: float, own_times: bool, clock: str, notes: list[str]) -> tuple[list[Snapshot], str | None]:
     """The snapshots' times in the original recording, and the date and time they count from
     (None: not known): every ``--snapshot-interval``; else from the files' time columns
     (``clock`` "day": times of day; "date": dates and times; :func:`_from_clock`); else, when
-    no file gave its own, by the files' names
-    (:mod:`.name_times`, with a note), a snapshot ``a`` samples into its file ``a / fs`` after
-    the file's time; else as read."""
+    no file gave its own, by the files' names (:mod:`.name_times`, with a note), a snapshot
+    ``a`` samples into its file ``a / fs`` after the file's time; else as read. ``origins``:
+    per snapshot, its file and its first sample in the file."""
     if opts.snapshot_interval is not None:
         return [Snapshot(s.source, s.start, s.length, i * opts.snapshot_interval)
                 for i, s in enumerate(snaps)], None
