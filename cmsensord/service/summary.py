@@ -6,11 +6,14 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cmsensord.errors import EXIT_USAGE
 from cmsensord.report.localtime import iso_local
-from cmsensord.report.time_axis import TimeAxis
 from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
+
+if TYPE_CHECKING:
+    from cmsensord.report.time_axis import TimeAxis
 
 
 def summary(path: str, *, as_json: bool = False) -> int:
@@ -35,6 +38,8 @@ def format_summary(info: dict) -> str:
     (``time kind [channel]: message``; for a replayed import also its time in the recording,
     :mod:`cmsensord.report.time_axis`), other lists and dicts one item a line, a metadata
     value past 120 characters shortened (the recording's timeline to its span)."""
+    from cmsensord.report.time_axis import TimeAxis  # here: the replay imports this module too
+
     axis = TimeAxis.of_logs([info.get("metadata") or {}])
     lines = []
     for k, v in info.items():
