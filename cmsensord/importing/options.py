@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .samples import MEMORY_MB
+
 __all__ = ["ImportOptions"]
 
 
@@ -31,4 +33,4 @@ class ImportOptions:
     tacho_threshold: float | None = None
     ppr: int = 1
     rpm: float | None = None  # synthesise TACHO frames at this constant speed
-    memory_mb: float = 64.0  # samples held in memory at most; beyond, on disk beside ``out``
+    memory_mb: float = MEMORY_MB  # samples held in memory at most; beyond, on disk beside ``out``

@@ -1,13 +1,15 @@
-"""The in-memory recording: physical samples in m/s², snapshots, optional tacho.
+"""The recording read from the files: physical samples in m/s², snapshots, optional tacho.
 
 A :class:`Recording` is what every reader's output becomes before encoding:
 
-* ``samples``: m/s², every snapshot end to end, on disk (:class:`~.samples.SampleStore`);
+* ``samples``: m/s², every snapshot end to end, in memory up to a bound and beyond it on
+  disk (:class:`~.samples.SampleStore`);
 * ``snapshots``: where each contiguous snapshot lies in ``samples`` (start, length),
   which file (and which entry of it) it came from, and its time in the original
   recording where that is known;
-* ``tacho_edges``: optional rising tacho edges as fractional sample indices into
-  ``samples`` (a pulse column), or ``rpm`` for edges synthesised at a constant speed.
+* ``tacho_edges``: optional tacho edges as fractional sample indices into ``samples``
+  (a pulse column's rising crossings, or a speed column's revolutions), or ``rpm`` for
+  edges synthesised at a constant speed.
 """
 
 from __future__ import annotations

@@ -250,7 +250,8 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
     """Read every file (``progress(i)`` after each) and lay the snapshots end to end in a
     :class:`~.samples.SampleStore` beside ``opts.out`` (the caller closes ``rec.samples``):
-    only one file's samples, and a tacho column, are held in memory at a time."""
+    past ``opts.memory_mb`` of samples, only one file's (and a tacho or speed column) are held
+    in memory."""
     stores: list[SampleStore] = []
     try:
         return _build(files, opts, progress, stores)
