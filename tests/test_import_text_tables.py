@@ -224,3 +224,24 @@ def test_a_row_whose_date_is_not_one_is_named_by_its_line(tmp_path):
     assert (r.returncode, r.stderr) == (2, "cmsensord import: d.csv: line 6, column 0: '2023-13-45 12:00:03.000' is "
                                            "not a date and time (separator ',', a header line); fix the file, or "
                                            "set --separator / --header / --no-header\n")
+
+
+@pytest.mark.parametrize("name, text, args, message", [
+    ("one.csv", "2023-05-01 12:00:00.000,1,2\n", (),
+     "one.csv: the file does not say its sampling rate: column 'col0' (0) holds dates and times, not evenly "
+     "spaced (a single row): it is not imported as a channel; give --fs HZ"),
+    ("nan.csv", "x,rpm\n" + "".join(f"{i % 7},{'nan' if i == 5 else 1500}\n" for i in range(100)),
+     ("--fs", "1000", "--speed-column", "rpm"),
+     "nan.csv: column 'rpm' (--speed-column) has 1 missing or non-finite value(s) (first at sample 5); clean the file"),
+    ("fast.csv", "x,rpm\n" + "".join(f"{i % 7},{90000 if i == 50 else 1500}\n" for i in range(100)),
+     ("--fs", "1000", "--speed-column", "rpm", "--ppr", "2"),
+     "fast.csv: speed column 'rpm' reaches 90000 rpm, more than one tacho edge a sample at 2 a revolution (at "
+     "most 30000 rpm at 1000 Hz); check the column's unit and --ppr"),
+    ("names.csv", "# logger\ntime,x\n", ("--fs", "10"), "names.csv: a header but no rows of numbers"),
+])
+def test_hostile_text_tables_are_one_line(tmp_path, name, text, args, message):
+    """Found by feeding the import random tables: each was a traceback or more than one line."""
+    (tmp_path / name).write_text(text)
+    r = cmd("import", name, *args, "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n")
+    assert not list(tmp_path.glob("o.bin*"))

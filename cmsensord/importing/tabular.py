@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import io
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -150,8 +151,10 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
             src = path
         first = split(head.rows[0], sep) if head.rows else []
         dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
-        a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
-                       encoding="utf-8-sig", usecols=range(1, len(first)) if dated else None)
+        with warnings.catch_warnings():             # "input contained no data": said below, once
+            warnings.simplefilter("ignore", UserWarning)
+            a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
+                           encoding="utf-8-sig", usecols=range(1, len(first)) if dated else None)
         if dated:
             a = np.column_stack([_dates(src, sep, skip, path), a])
     except ValueError as exc:

@@ -136,5 +136,7 @@ def _rate(times: np.ndarray) -> float:
 def _gap(times: np.ndarray) -> str:
     """The largest step, and where (file line counted from the first row of numbers)."""
     d = np.diff(times)
+    if not d.size:
+        return "a single row"
     k = int(np.argmax(d))
     return f"a step of {d[k]:.6g} s after row {k + 1}, the median step {float(np.median(d)):.6g} s"
