@@ -408,3 +408,16 @@ def test_a_snapshot_time_that_is_not_a_number_is_no_time_in_a_sidecar_of_strict_
 
     meta = json.loads((tmp_path / "t.bin.json").read_text(), parse_constant=refuse)
     assert [s["source_time_s"] for s in meta["snapshots"]] == [0.0, 10.0, None, 30.0]
+
+
+def test_a_rate_or_speed_in_the_file_that_is_not_a_number(tmp_path):
+    """Found by feeding the import random archives: an fs of NaN was a traceback, an rpm of inf
+    went into the sidecar as Infinity (not JSON)."""
+    np.savez(tmp_path / "nan.npz", data=np.zeros((1000, 1)), fs=np.nan)
+    r = cmd("import", "nan.npz", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, "cmsensord import: nan.npz: the sampling rate the file gives, nan Hz, "
+                                           "is not a rate; give --fs HZ\n")
+    np.savez(tmp_path / "inf.npz", data=signal(1000, 1).T, fs=1000.0, rpm=np.inf)
+    assert run(tmp_path / "inf.npz", "--out", tmp_path / "o.bin") == 0
+    meta = json.loads((tmp_path / "o.bin.json").read_text(), parse_constant=lambda word: word + " in the sidecar")
+    assert (meta["rpm"], meta["rpm_source"]) == (None, None)

@@ -290,7 +290,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
         own_times, clock, dated = own_times or t.times is not None, clock or t.clock, dated or t.dated
         notes += _file_notes(t, opts)
         stores[0].append(x.reshape(len(layout.idx), -1))
-        if t.rpm and rpm_file is None:
+        if t.rpm and np.isfinite(t.rpm) and t.rpm > 0 and rpm_file is None:
             rpm_file = (t.rpm, t.name)
         del t, x
         if progress is not None:
@@ -298,7 +298,9 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     assert layout is not None
     notes[:0] = layout.notes
     fs = layout.fs
-    if fs != round(fs) or fs <= 0:
+    if not (np.isfinite(fs) and fs > 0):
+        raise ImportFailure(f"{files[0]}: the sampling rate the file gives, {fs:g} Hz, is not a rate; give --fs HZ")
+    if fs != round(fs):
         raise ImportFailure(f"{files[0]}: sampling rate {fs:g} Hz; the board protocol carries a whole "
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
