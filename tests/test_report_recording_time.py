@@ -143,7 +143,10 @@ def test_no_timeline_without_two_timed_snapshots_mostly_in_order(meta):
 
 @pytest.mark.parametrize("text", ["", "{", "[]", '{"start_s":[0,1],"source_time_s":[0],"board_zero_ns":0}',
                                   '{"start_s":[0,1],"source_time_s":[0,"x"],"board_zero_ns":0}',
-                                  '{"start_s":[0,NaN],"source_time_s":[0,1],"board_zero_ns":0}'])
+                                  '{"start_s":[0,NaN],"source_time_s":[0,1],"board_zero_ns":0}',
+                                  '{"start_s":[1,0],"source_time_s":[0,1],"board_zero_ns":0}',
+                                  '{"start_s":[0,1],"source_time_s":[0,1e300],"board_zero_ns":0}',
+                                  '{"start_s":[0,1],"source_time_s":[0,1],"board_zero_ns":1e30}'])
 def test_a_timeline_that_cannot_be_read_is_none(text):
     assert Timeline.from_json(text) is None
 

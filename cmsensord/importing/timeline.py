@@ -23,7 +23,10 @@ from datetime import datetime
 
 import numpy as np
 
-__all__ = ["Timeline"]
+__all__ = ["MAX_S", "Timeline"]
+
+#: seconds beyond which a timeline read from a log is not one (about 3,000 years)
+MAX_S = 1e11
 
 
 @dataclass(frozen=True)
@@ -63,14 +66,17 @@ class Timeline:
     @classmethod
     def from_json(cls, text: str) -> tuple[Timeline, int] | None:
         """(timeline, log time of board second 0) from :meth:`to_json`'s text; None when the
-        text is not one (a damaged or foreign log)."""
+        text is not one (a damaged or foreign log: board starts that go back, times past
+        ``MAX_S``)."""
         try:
             d = json.loads(text)
             start = np.asarray(d["start_s"], dtype=np.float64)
             times = np.asarray(d["source_time_s"], dtype=np.float64)
             zero = int(d["board_zero_ns"])
             ok = (start.ndim == 1 and start.shape == times.shape and start.size >= 2
-                  and bool(np.all(np.isfinite(start)) and np.all(np.isfinite(times))))
+                  and bool(np.all(np.isfinite(start)) and np.all(np.isfinite(times)))
+                  and bool(np.all(np.diff(start) >= 0)) and float(np.abs(times).max()) < MAX_S
+                  and float(np.abs(start).max()) < MAX_S and abs(zero) < 2 ** 63)
         except (ValueError, TypeError, KeyError):
             return None
         if not ok:
