@@ -52,7 +52,7 @@ from cmsensord.protocol import (
 
 from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan
-from .errors import ImportFailure
+from .errors import ImportFailure, cannot_write
 from .recording import Recording
 from .tacho import block_edges, rpm_edges
 
@@ -205,8 +205,7 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
             os.replace(part, out)
             os.replace(side_part, side)
         except OSError as exc:
-            raise ImportFailure(f"{out}: cannot write the capture: {exc.strerror or exc}; check that "
-                                "the directory exists, is writable and has room") from None
+            raise cannot_write(out, exc.strerror or str(exc)) from None
     except BaseException:
         for p in (part, side_part):
             p.unlink(missing_ok=True)

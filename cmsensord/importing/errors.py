@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from cmsensord.errors import CmsensordError
 
-__all__ = ["ImportFailure"]
+__all__ = ["ImportFailure", "cannot_write"]
 
 
 class ImportFailure(CmsensordError):
@@ -17,3 +17,9 @@ class ImportFailure(CmsensordError):
 
     def __init__(self, message: str) -> None:
         super().__init__(" ".join(str(message).split()))
+
+
+def cannot_write(out: str | object, reason: str) -> ImportFailure:
+    """The one error for an output the import cannot write (``reason``: the OS's words)."""
+    return ImportFailure(f"{out}: cannot write the capture: {reason}; check that the directory exists, "
+                         "is writable and has room")

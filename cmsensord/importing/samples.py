@@ -20,7 +20,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from .errors import ImportFailure
+from .errors import ImportFailure, cannot_write
 
 __all__ = ["MEMORY_MB", "SampleStore"]
 
@@ -41,8 +41,7 @@ class SampleStore:
         self._ends: list[int] = []          # sample index after each part
         self._file: BinaryIO | None = None
         if not Path(out).resolve().parent.is_dir():
-            raise ImportFailure(f"{out}: cannot write the capture: No such file or directory; check "
-                                "that the directory exists, is writable and has room")
+            raise cannot_write(out, "No such file or directory")
 
     @property
     def on_disk(self) -> bool:
@@ -69,8 +68,7 @@ class SampleStore:
         try:
             self._file = tempfile.TemporaryFile(dir=Path(self._out).resolve().parent)
         except OSError as exc:
-            raise ImportFailure(f"{self._out}: cannot write the capture: {exc.strerror or exc}; check "
-                                "that the directory exists, is writable and has room") from None
+            raise cannot_write(self._out, exc.strerror or str(exc)) from None
         parts, self._parts, self._ends = self._parts, [], []
         for part in parts:
             self._write(part)

@@ -280,7 +280,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             layout.check(t, Path(files[0]).name)
         x = _channels(t, layout, factor)
         if layout.tacho is not None:
-            tacho_pieces.append(_tacho_column(t, layout.tacho, opts))
+            tacho_pieces.append(_tacho_column(t, layout.tacho, layout.fs, opts))
         many = t.data.shape[0] > 1 or opts.snapshot_len
         for k, (s, a, n) in enumerate(_split(t, opts.snapshot_len)):
             time = None if t.times is None or not np.isfinite(t.times[s]) else float(t.times[s])
@@ -319,18 +319,18 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     return rec
 
 
-def _tacho_column(t: Table, col: int, opts: ImportOptions) -> np.ndarray:
+def _tacho_column(t: Table, col: int, fs: float, opts: ImportOptions) -> np.ndarray:
     """A file's tacho or speed column, float64, checked finite (and a speed of at most one
-    edge a sample)."""
+    edge a sample at the import's rate ``fs``)."""
     x = t.data[:, :, col].astype(np.float64).reshape(-1)
     option = "--speed-column" if opts.speed_column else "--tacho-column"
     bad = ~np.isfinite(x)
     if bad.any():
         raise ImportFailure(f"{t.path}: {t.kind} {t.columns[col]!r} ({option}) has {int(bad.sum())} missing or "
                             f"non-finite value(s) (first at sample {int(np.argmax(bad))}); clean the file")
-    fs = opts.fs if opts.fs is not None else t.fs
-    if opts.speed_column and fs and x.size and float(np.abs(x).max()) * opts.ppr > 60.0 * fs:
-        raise ImportFailure(f"{t.path}: speed column {t.columns[col]!r} reaches {float(np.abs(x).max()):g} rpm, "
+    top = float(np.abs(x).max()) if x.size else 0.0
+    if opts.speed_column and top * opts.ppr > 60.0 * fs:
+        raise ImportFailure(f"{t.path}: speed column {t.columns[col]!r} reaches {top:g} rpm, "
                             f"more than one tacho edge a sample at {opts.ppr} a revolution (at most "
                             f"{60.0 * fs / opts.ppr:g} rpm at {fs:g} Hz); check the column's unit and --ppr")
     return x

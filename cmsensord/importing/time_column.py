@@ -63,24 +63,25 @@ def with_time_column(t: Table, has_header: bool, dated: bool = False) -> Table:
     if found is None:
         return t
     col, unit_s = found
-    times = t.data[0, :, col].astype(np.float64) * unit_s
-    fs = _rate(times) if _even(times) else None
-    what = f"column {t.columns[col]!r} ({col}) is the time base"
-    note = (f"{what}: {fs:g} Hz from its steps; it is not imported as a channel" if fs else
-            f"{what}, not evenly spaced ({_gap(times)}): it is not imported as a channel")
-    return replace(t, time_columns=(col,), fs=t.fs or fs, time_note=note)
+    return _time_base(t, col, t.data[0, :, col].astype(np.float64) * unit_s, "is the time base", "its")
 
 
 def _dated(t: Table) -> Table:
     """The first column's dates and times: the time base, its rate when evenly spaced, and the
     file's first date and time (``times``, ``dated``)."""
     epoch = t.data[0, :, 0]
-    since = epoch - epoch[0]
-    rate = _rate(since) if _even(since) else None
-    what = f"column {t.columns[0]!r} (0) holds dates and times"
-    note = (f"{what}: {rate:g} Hz from their steps; it is not imported as a channel" if rate else
-            f"{what}, not evenly spaced ({_gap(since)}): it is not imported as a channel")
-    return replace(t, time_columns=(0,), fs=t.fs or rate, time_note=note, times=epoch[:1], dated=True)
+    return replace(_time_base(t, 0, epoch - epoch[0], "holds dates and times", "their"), times=epoch[:1],
+                   dated=True)
+
+
+def _time_base(t: Table, col: int, times: np.ndarray, what: str, whose: str) -> Table:
+    """``t`` with column ``col`` (``times``, seconds) its time base: the rate when evenly spaced,
+    and the note that says so."""
+    fs = _rate(times) if _even(times) else None
+    what = f"column {t.columns[col]!r} ({col}) {what}"
+    note = (f"{what}: {fs:g} Hz from {whose} steps; it is not imported as a channel" if fs else
+            f"{what}, not evenly spaced ({_gap(times)}): it is not imported as a channel")
+    return replace(t, time_columns=(col,), fs=t.fs or fs, time_note=note)
 
 
 _CLOCK_NAMES = ("hour", "minute", "second", "microsecond")
