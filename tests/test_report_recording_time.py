@@ -124,7 +124,7 @@ def test_board_seconds_to_recording_seconds_and_snapshot_times_that_go_back():
     tl = Timeline.from_sidecar(sidecar([0.0, 10.0, 20.0, 30.0], "2004-02-12T10:40:00"))
     assert tl is not None and tl.source_start == "2004-02-12T10:40:00"
     # inside a snapshot, on a start (the end of the one before), before the first, past the last
-    np.testing.assert_allclose(tl.seconds([0.2, 0.5, 0.75, 1.5, -0.1, 9.0]), [0.2, 0.5, 10.25, 20.5, -0.1, 37.5])
+    np.testing.assert_allclose(tl.at([0.2, 0.5, 0.75, 1.5, -0.1, 9.0]), [0.2, 0.5, 10.25, 20.5, -0.1, 37.5])
     # FEMTO Bearing1_1's two snapshots stamped -52.2 s between 21190 and 21220 s
     tl = Timeline.from_sidecar(sidecar([21180.0, 21190.0, -52.2, -52.2, 21220.0]))
     assert tl is not None and tl.repaired == 2 and tl.source_start is None
@@ -133,12 +133,26 @@ def test_board_seconds_to_recording_seconds_and_snapshot_times_that_go_back():
     assert zero == 123 and again.source_s.tolist() == tl.source_s.tolist() and again.repaired == 2
 
 
-@pytest.mark.parametrize("meta", [
-    {}, sidecar([0.0]), sidecar([0.0, None, 20.0]), sidecar([100.0, 1.0, 2.0, 3.0]),
-    {**sidecar([0.0, 10.0]), "format": "something else"},
-])
-def test_no_timeline_without_two_timed_snapshots_mostly_in_order(meta):
+@pytest.mark.parametrize("meta", [{}, {**sidecar([0.0, 10.0]), "format": "something else"},
+                                  sidecar([None, None])])
+def test_no_timeline_but_of_an_import_with_its_length(meta):
     assert Timeline.from_sidecar(meta) is None
+
+
+@pytest.mark.parametrize("times", [[None, None, None, None], [0.0, None, 20.0, 30.0], [100.0, 1.0, 2.0, 3.0]])
+def test_snapshots_without_times_or_mostly_out_of_order_are_placed_by_their_share_of_the_record(times):
+    tl = Timeline.from_sidecar({**sidecar(times), "board_seconds": 2.0})
+    assert tl is not None and tl.unit == "%" and tl.span == 100.0
+    np.testing.assert_allclose(tl.at([0.0, 0.5, 1.25, 2.0, 2.2]), [0.0, 25.0, 62.5, 100.0, 100.0])
+    again, zero = Timeline.from_json(tl.to_json(7))
+    assert (zero, again.unit, again.end_s) == (7, "%", 2.0)
+    np.testing.assert_allclose(again.at([1.25]), [62.5])
+
+
+def test_one_snapshot_without_a_time_is_a_continuous_recording_from_its_second_0():
+    tl = Timeline.from_sidecar({**sidecar([None]), "board_seconds": 40.0})
+    assert tl is not None and (tl.unit, tl.span) == ("s", 40.0)
+    np.testing.assert_allclose(tl.at([0.0, 12.5, 40.0]), [0.0, 12.5, 40.0])
 
 
 @pytest.mark.parametrize("text", ["", "{", "[]", '{"start_s":[0,1],"source_time_s":[0],"board_zero_ns":0}',
@@ -146,7 +160,10 @@ def test_no_timeline_without_two_timed_snapshots_mostly_in_order(meta):
                                   '{"start_s":[0,NaN],"source_time_s":[0,1],"board_zero_ns":0}',
                                   '{"start_s":[1,0],"source_time_s":[0,1],"board_zero_ns":0}',
                                   '{"start_s":[0,1],"source_time_s":[0,1e300],"board_zero_ns":0}',
-                                  '{"start_s":[0,1],"source_time_s":[0,1],"board_zero_ns":1e30}'])
+                                  '{"start_s":[0,1],"source_time_s":[0,1],"board_zero_ns":1e30}',
+                                  '{"start_s":[0,1],"source_time_s":[0,1],"board_zero_ns":0,"unit":"min"}',
+                                  '{"start_s":[0,1],"source_time_s":[0,1],"board_zero_ns":0,"unit":"%"}',
+                                  '{"start_s":[0,1],"source_time_s":[0,1],"board_zero_ns":0,"end_s":-2}'])
 def test_a_timeline_that_cannot_be_read_is_none(text):
     assert Timeline.from_json(text) is None
 
@@ -190,3 +207,60 @@ def test_the_summary_of_a_replayed_import_gives_each_event_its_time_in_the_recor
     assert ("  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshots over 6.5 h of the recording "
             "from 2004-02-12T10:40:00'}") in lines
     assert max(map(len, lines)) < 300                    # no 60-kB line of the timeline
+
+
+def replayed(tmp_path: Path, source: str, *more: str) -> tuple[Path, str]:
+    """``source`` imported as the run-to-failure recording is (``R2F``), calibrated on its first
+    quarter and replayed: (log directory, the replay's stderr)."""
+    for args in (("import", source, *R2F, *more, "--out", "r.bin"),
+                 ("calibrate", "r.bin", "--to", "25%", "--out", "site.yaml"),
+                 ("replay", "r.bin", "--config", "site.yaml", "--out", "logs")):
+        p = cmsensord(*args, cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+    return tmp_path / "logs", p.stderr
+
+
+def test_snapshots_without_times_are_drawn_in_percent_of_the_record_not_the_replays_clock(tmp_path):
+    """The run-to-failure snapshots as files named 1.csv ... 40.csv (no times, as XJTU-SY's):
+    the report, its events and `cmsensord summary` place them by their share of the record,
+    where the replay's summary names each severity level's first snapshot."""
+    d = run_to_failure(tmp_path)
+    (tmp_path / "xj").mkdir()
+    for k, f in enumerate(sorted(d.iterdir())):
+        f.rename(tmp_path / "xj" / f"{k + 1}.csv")
+    logs, stderr = replayed(tmp_path, "xj")
+    page, metas = report(tmp_path, logs)
+    assert ("A replay of an imported recording whose snapshots have no times: places are % of the "
+            "record (the share of its recorded signal, snapshots end to end).") in html.unescape(page)
+    assert "<title>cmsensord report 0.0 % – 100.0 %</title>" in page
+    sev = metas["bearing-severity"]["axes"][0]
+    assert sev["xlabel"] == "% of the record (snapshots end to end; the import has no times)"
+    assert "xlim_local" not in sev and 0 < sev["xlim"][0] <= 7.5 and sev["xlim"][1] == pytest.approx(100.0)
+    assert "<th>% of the record</th>" in page
+    # each level's first decision: the end of the snapshot the replay names (2.5 % of the record each)
+    line = re.search(r"  bearing: in the recording: (.*)\n", stderr)[1]
+    placed = re.findall(r"at (\d+)\.csv \(([\d.]+) % of the record\)", line)
+    assert placed, line
+    changes = [t for kind, t in event_rows(page) if kind == "severity_change"]
+    for name, pct in placed:
+        assert float(pct) == pytest.approx(2.5 * (int(name) - 1))
+        assert f"{2.5 * int(name):.3f} %" in changes, (name, changes)
+    (log,) = logs.glob("*.mcap")
+    lines = cmsensord("summary", str(log), cwd=tmp_path).stdout.splitlines()
+    assert any(re.fullmatch(r"end: \S+ \(100\.0 % of the record\)", ln) for ln in lines), lines
+    assert ("  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshot(s) without times, "
+            "40 s of signal end to end'}") in lines
+
+
+def test_one_continuous_file_is_drawn_in_seconds_into_it(tmp_path):
+    d = run_to_failure(tmp_path)
+    x = np.concatenate([np.loadtxt(f) for f in sorted(d.iterdir())])
+    np.savetxt(tmp_path / "run.csv", x, fmt="%.5f")
+    logs, _ = replayed(tmp_path, "run.csv")
+    page, metas = report(tmp_path, logs)
+    assert "times are seconds into the recording, gaps between its snapshots included." in page
+    assert "<title>cmsensord report 0.0 s – 40.0 s</title>" in page
+    sev = metas["bearing-severity"]["axes"][0]
+    assert sev["xlabel"] == "seconds into the recording" and sev["xlim"][1] == pytest.approx(40.0)
+    assert "<th>seconds in</th>" in page
+    assert all(re.fullmatch(r"\d+\.\d{3} s", t) for _, t in event_rows(page))

@@ -47,9 +47,9 @@ class Figure:
 
 def _times(t_ns: np.ndarray, axis: TimeAxis) -> np.ndarray:
     """Shown times (:class:`TimeAxis`) -> x: matplotlib date numbers of the local wall-clock
-    reading, or hours into the recording."""
+    reading, or :meth:`TimeAxis.numbers`."""
     if not axis.is_dates():
-        return axis.hours(t_ns)
+        return axis.numbers(t_ns)
     return np.asarray(mdates.date2num([axis.reading(int(t)) for t in t_ns]))
 
 

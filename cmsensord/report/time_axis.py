@@ -1,14 +1,16 @@
 """The report's time: local wall-clock time, or the time of the recording a replayed import came from.
 
 A daemon's log, or a replay of a capture, is drawn in local time (``local``). A replay of an
-imported recording of snapshots carries the import's
-:class:`~cmsensord.importing.timeline.Timeline` in its ``cmsensord`` metadata
-(``recording_timeline``): its log times are then shown as the recording's own, where the
-board clock ran on through the gaps between snapshots. With the recording's date (the import
-read it from the file names) the times are that date and time (``recording``, as the file
-names give them: not converted to this machine's zone, nor shifted by its daylight saving); without it, hours into the
-recording (``elapsed``). Logs of different recordings, or some of an import and some not,
-stay in local time, and :attr:`TimeAxis.note` says why.
+imported recording carries the import's :class:`~cmsensord.importing.timeline.Timeline` in
+its ``cmsensord`` metadata (``recording_timeline``): its log times are then shown as the
+recording's own, where the board clock ran on through the gaps between snapshots. With the
+recording's date (the import read it from the file names) the times are that date and time
+(``recording``, as the file names give them: not converted to this machine's zone, nor
+shifted by its daylight saving); without it, time into the recording (``elapsed``: hours, or
+seconds for a recording shorter than ten minutes); for snapshots without times, the share of
+the recorded signal (``record``: % of the record, the snapshots end to end). Logs of
+different recordings, or some of an import and some not, stay in local time, and
+:attr:`TimeAxis.note` says why.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from cmsensord.report.localtime import iso_local, local_datetime, local_text
 __all__ = ["TimeAxis"]
 
 _HOUR_NS = 3_600_000_000_000
+#: a recording shorter than this is shown in seconds into it, a longer one in hours
+SECONDS_UNTIL_S = 600.0
 
 
 class TimeAxis:
@@ -30,7 +34,10 @@ class TimeAxis:
 
     def __init__(self, timeline: Timeline | None = None, board_zero_ns: int = 0, note: str = ""):
         self.timeline, self.board_zero_ns = timeline, board_zero_ns
-        self.kind = "local" if timeline is None else "recording" if timeline.source_start else "elapsed"
+        self.kind = ("local" if timeline is None else "record" if timeline.unit == "%"
+                     else "recording" if timeline.source_start else "elapsed")
+        self.unit_ns = 1e9 if self.kind == "record" or (
+            self.kind == "elapsed" and timeline is not None and timeline.span < SECONDS_UNTIL_S) else _HOUR_NS
         self._epoch_s = datetime.fromisoformat(timeline.source_start).replace(tzinfo=timezone.utc).timestamp() \
             if timeline is not None and timeline.source_start else 0.0
         self.note = note
@@ -49,26 +56,36 @@ class TimeAxis:
         timeline, zero = parsed
         fixed = (f" {timeline.repaired} snapshot(s) whose recorded time went back are placed between "
                  "their neighbours." if timeline.repaired else "")
-        where = (f"the recording's own date and time (from {timeline.source_start})" if timeline.source_start
-                 else "hours into the recording")
-        return cls(timeline, zero, note=f"A replay of an imported recording: times are {where}, gaps "
-                                        f"between its snapshots included.{fixed}")
+        axis = cls(timeline, zero)
+        if axis.kind == "record":
+            axis.note = ("A replay of an imported recording whose snapshots have no times: places are "
+                         "% of the record (the share of its recorded signal, snapshots end to end).")
+        else:
+            where = (f"the recording's own date and time (from {timeline.source_start})"
+                     if timeline.source_start else axis.label())
+            axis.note = (f"A replay of an imported recording: times are {where}, gaps between its "
+                         f"snapshots included.{fixed}")
+        return axis
 
     def shown(self, log_ns: int) -> int:
         """The time shown for a message logged at ``log_ns``: ns since the Unix epoch (``local``;
-        ``recording``: the recording's clock read as UTC), or ns into the recording
-        (``elapsed``)."""
+        ``recording``: the recording's clock read as UTC), ns into the recording (``elapsed``),
+        or 1e-9 % of the record (``record``)."""
         if self.timeline is None:
             return log_ns
-        s = float(self.timeline.seconds((log_ns - self.board_zero_ns) / 1e9))
+        s = float(self.timeline.at((log_ns - self.board_zero_ns) / 1e9))
         return int(round((self._epoch_s + s) * 1e9))
 
     def text(self, ns: int | None, *, ms: bool = False) -> str:
         """A shown time for a table or a card; ``None`` gives ``-``."""
         if ns is None or self.kind == "local":
             return local_text(ns, ms=ms)
-        if self.kind == "elapsed":
+        if self.kind == "record":
+            return f"{ns / 1e9:.{3 if ms else 1}f} %"
+        if self.kind == "elapsed" and self.unit_ns == _HOUR_NS:
             return f"{ns / _HOUR_NS:.{5 if ms else 3}f} h"
+        if self.kind == "elapsed":
+            return f"{ns / 1e9:.{3 if ms else 1}f} s"
         return self.reading(ns).isoformat(sep=" ", timespec="milliseconds" if ms else "seconds")
 
     def reading(self, ns: int) -> datetime:
@@ -80,7 +97,9 @@ class TimeAxis:
     @property
     def column(self) -> str:
         """The heading of a column of shown times."""
-        return {"local": "local time", "recording": "recording time", "elapsed": "hours in"}[self.kind]
+        if self.kind == "elapsed":
+            return "hours in" if self.unit_ns == _HOUR_NS else "seconds in"
+        return {"local": "local time", "recording": "recording time", "record": "% of the record"}[self.kind]
 
     def caption(self, start_ns: int | None) -> str:
         """The page's line on its times."""
@@ -89,11 +108,12 @@ class TimeAxis:
         return self.note
 
     def is_dates(self) -> bool:
-        return self.kind != "elapsed"
+        return self.kind in ("local", "recording")
 
-    def hours(self, t_ns: np.ndarray) -> np.ndarray:
-        """Shown ns into the recording as hours (the ``elapsed`` axis's x)."""
-        return np.asarray(t_ns, dtype=np.float64) / _HOUR_NS
+    def numbers(self, t_ns: np.ndarray) -> np.ndarray:
+        """Shown times as the x of an axis that is not dates: hours or seconds into the
+        recording (``elapsed``), % of the record (``record``)."""
+        return np.asarray(t_ns, dtype=np.float64) / self.unit_ns
 
     def label(self) -> str:
         """The x label of a time axis."""
@@ -102,4 +122,6 @@ class TimeAxis:
             return f"local time (UTC{offset[:3]}:{offset[3:]})"
         if self.kind == "recording":
             return "recording time (from the import)"
-        return "hours into the recording"
+        if self.kind == "record":
+            return "% of the record (snapshots end to end; the import has no times)"
+        return "hours into the recording" if self.unit_ns == _HOUR_NS else "seconds into the recording"

@@ -31,9 +31,9 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     """Process a capture file through the same decoder and Processor: as fast as possible,
     or paced at ``speed`` x the board's clock (1: real time); with ``auto_channels`` (``cfg``
     lists no channels), an imported capture's channels named as its import named them. An
-    import of snapshots with their times has its :class:`~cmsensord.importing.timeline.Timeline`
-    in the log's ``cmsensord`` metadata (``recording_timeline``), board second 0 stamped at
-    the ``board_zero_ns`` it gives.
+    import has its :class:`~cmsensord.importing.timeline.Timeline` in the log's ``cmsensord``
+    metadata (``recording_timeline``), board second 0 stamped at the ``board_zero_ns`` it
+    gives.
     Returns (exit status, the last MCAP file or None if it could not be finished, the
     Processor)."""
     keep_freed_memory()         # the chain's arrays of each read from the heap, not fresh pages

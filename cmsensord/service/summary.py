@@ -65,20 +65,24 @@ def format_summary(info: dict) -> str:
 
 
 def _in_recording(axis: TimeAxis, ns: int | None) -> str:
-    """`` (TIME in the recording)`` for a replayed import's log time ``ns``; else nothing."""
+    """`` (TIME in the recording)`` (or `` (P % of the record)``) for a replayed import's log
+    time ``ns``; else nothing."""
     if axis.timeline is None or ns is None:
         return ""
-    return f" ({axis.text(axis.shown(int(ns)))} in the recording)"
+    return f" ({axis.text(axis.shown(int(ns)))} {'of the record' if axis.kind == 'record' else 'in the recording'})"
 
 
 def _metadata(values: dict, axis: TimeAxis) -> dict:
     """A metadata record's map, each value past 120 characters shortened."""
     out = {}
     for key, value in values.items():
-        if key == "recording_timeline" and axis.timeline is not None:
-            start, end = axis.timeline.source_s[0], axis.timeline.source_s[-1]
-            out[key] = (f"{axis.timeline.start_s.size} snapshots over {(end - start) / 3600:.4g} h of the "
-                        f"recording" + (f" from {axis.timeline.source_start}" if axis.timeline.source_start else ""))
+        tl = axis.timeline
+        if key == "recording_timeline" and tl is not None and tl.unit == "%":
+            out[key] = f"{tl.start_s.size} snapshot(s) without times, {tl.end_s:g} s of signal end to end"
+        elif key == "recording_timeline" and tl is not None:
+            start, end = tl.source_s[0], tl.source_s[-1]
+            out[key] = (f"{tl.start_s.size} snapshots over {(end - start) / 3600:.4g} h of the "
+                        f"recording" + (f" from {tl.source_start}" if tl.source_start else ""))
         else:
             out[key] = value if len(str(value)) <= 120 else f"{str(value)[:100]}... ({len(str(value)):,} characters)"
     return out
