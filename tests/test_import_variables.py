@@ -75,6 +75,46 @@ def test_paderborn_files_by_the_name_of_a_signal_in_an_array_of_structs(tmp_path
     assert_within_one_count(decode(tmp_path / "p.bin"), np.concatenate(x)[None])
 
 
+def paderborn_run_up(path, rpm0: float, fs: int, n: int) -> np.ndarray:
+    """A Paderborn-like file whose speed (rpm, rising 60 rpm a second) is sampled 16 x slower
+    than its vibration, one sample more than a whole factor (16015 against 256823 in the real
+    files); the speed at each vibration sample, as the import should read it."""
+    m = n // 16 + 1
+    speed = rpm0 + 60.0 * np.arange(m) * (n / m) / fs
+    y = np.zeros((1, 2), dtype=[("Name", "O"), ("Raster", "O"), ("Data", "O")])
+    y[0, 0] = ("speed", "Mech_4kHz", speed[None, :])
+    y[0, 1] = ("vibration_1", "HostService", np.round(np.random.default_rng(3).normal(0.0, 1.0, (1, n)), 4))
+    top = np.zeros((1, 1), dtype=[("Info", "O"), ("Y", "O")])
+    top[0, 0] = ("info", y)
+    scipy.io.savemat(path, {path.stem: top})
+    return np.interp(np.arange(n) * m / n, np.arange(m), speed)
+
+
+def test_a_speed_sampled_slower_than_the_vibration_gives_the_tacho_over_the_same_time(tmp_path):
+    fs, n = 6400, 12800
+    rpm = [paderborn_run_up(tmp_path / f"N15_M07_F10_K001_{k}.mat", 1500.0 + 120 * k, fs, n) for k in (1, 2)]
+    args = ("import", ".", "--variable", "*vibration_1.Data,*speed.Data", "--fs", fs, "--out", "p.bin")
+    r = cmd(*args, cwd=tmp_path)
+    assert r.returncode == 2 and r.stderr.endswith(
+        "variable 'N15_M07_F10_K001_1.Y.speed.Data' holds 801 samples x 1 snapshot(s), "
+        "'N15_M07_F10_K001_1.Y.vibration_1.Data' 12800 x 1; --variable takes variables of the same length; "
+        "a speed sampled slower: name it with --speed-column\n"), r.stderr
+    r = cmd(*args, "--speed-column", "speed.Data", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: speed.Data: 801 samples beside 12800 of vibration_1.Data: taken as the same time "
+            "sampled 15.98 x slower, interpolated linearly\n") in r.stderr
+    cap = decode(tmp_path / "p.bin")
+    assert cap["status"].n_channels == 1 and cap["status"].tacho_inputs == 1
+    # each file's revolutions, from its first sample: the trapezoid sum of its speed / 60 / fs
+    expected = []
+    for k, v in enumerate(rpm):
+        revs = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) / 60 / fs)])
+        expected += [k * n + np.interp(e, revs, np.arange(n)) for e in range(int(revs[-1]) + 1)]
+    assert cap["edges"].size == len(expected) == 116   # from 1620 and 1740 rpm, rising, 2 s each
+    assert np.allclose(cap["edges"], expected, atol=1 / 256)
+    assert sidecar(tmp_path / "p.bin")["tacho_from"] == "speed"
+
+
 def test_npz_arrays_side_by_side(tmp_path):
     a, b = np.random.default_rng(4).normal(0.0, 1.0, (2, 3000))
     np.savez(tmp_path / "r.npz", acc_x=a, acc_y=b, fs=10000)

@@ -39,18 +39,20 @@ def read_npy(path: str) -> Table:
     return Table(path=path, data=data, columns=_columns("ch", data.shape[2]), kind="channel")
 
 
-def read_npz(path: str, array: tuple[str, ...] | None) -> Table:
+def read_npz(path: str, array: tuple[str, ...] | None, slow: str | None = None) -> Table:
+    """The arrays ``array`` of an .npz archive side by side (``slow``: the speed column,
+    :func:`~.variables.selected`), and the rate, times and speed it holds."""
     with _load(path) as z:
         try:
             arrays = {k: z[k] for k in z.files}
         except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
             raise ImportFailure(f"{path}: an array cannot be read ({' '.join(str(exc).split())}); "
                                 "save the archive with numeric arrays only") from None
-    data, columns = selected(path, arrays, array, "--array", "array")
+    data, columns, note = selected(path, arrays, array, "--array", "array", slow)
     times = None
     for k, v in arrays.items():
         if k.lower() in TIME_KEYS and v.ndim == 1 and v.size == data.shape[0] \
                 and v.dtype.kind in "iuf" and data.shape[0] > 1:
             times = v.astype(np.float64)
-    return Table(path=path, data=data, columns=columns, kind="channel",
+    return Table(path=path, data=data, columns=columns, kind="channel", rate_note=note,
                  fs=scalar_named(arrays, FS_KEYS), times=times, rpm=rpm_named(arrays))

@@ -17,7 +17,9 @@ from .variables import flatten, rpm_named, scalar_named, selected
 __all__ = ["read_mat"]
 
 
-def read_mat(path: str, variable: tuple[str, ...] | None) -> Table:
+def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = None) -> Table:
+    """The variables ``variable`` of a .mat file side by side (``slow``: the speed column,
+    :func:`~.variables.selected`), and the rate and speed it names."""
     import scipy.io  # 0.3 s to import: only when a .mat file is read
 
     try:
@@ -28,6 +30,6 @@ def read_mat(path: str, variable: tuple[str, ...] | None) -> Table:
     except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as exc:
         raise ImportFailure(f"{path}: not a readable MATLAB file ({' '.join(str(exc).split())})") from None
     arrays = flatten({k: v for k, v in m.items() if not k.startswith("__")})
-    data, columns = selected(path, arrays, variable, "--variable", "variable")
-    return Table(path=path, data=data, columns=columns, kind="column",
+    data, columns, note = selected(path, arrays, variable, "--variable", "variable", slow)
+    return Table(path=path, data=data, columns=columns, kind="column", rate_note=note,
                  fs=scalar_named(arrays, tuple(k.lower() for k in FS_KEYS)), rpm=rpm_named(arrays))

@@ -132,9 +132,9 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
     if ext == ".npy":
         return read_npy(path)
     if ext == ".npz":
-        return read_npz(path, opts.array)
+        return read_npz(path, opts.array, opts.speed_column)
     if ext == ".mat":
-        return read_mat(path, opts.variable)
+        return read_mat(path, opts.variable, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)
         return read_tabular(path, opts.separator, opts.header)
     raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}, and not a text table of "
@@ -172,7 +172,7 @@ class _Layout:
         if len(self.idx) > MAX_CHANNELS:
             raise ImportFailure(f"{t.path}: {len(self.idx)} {t.kind}s, the board carries at most "
                                 f"{MAX_CHANNELS}; choose some with --channels (e.g. --channels 0,1)")
-        self.notes = [n for n in (t.head_note, t.time_note) if n]   # a preamble, the time base, labels renamed
+        self.notes = [n for n in (t.head_note, t.time_note, t.rate_note) if n]  # said once: preamble, time base, ...
         if opts.names:
             self.names = checked_names(list(opts.names))
         else:

@@ -41,6 +41,7 @@ class Table:
     dated: bool = False  # ``times`` are dates and times (seconds since the Unix epoch, the zone not known)
     time_note: str | None = None  # what the import says of it, once
     head_note: str | None = None  # lines skipped before the numbers (a text table's preamble), said once
+    rate_note: str | None = None  # a speed column sampled slower, interpolated to the rate, said once
 
     @property
     def name(self) -> str:

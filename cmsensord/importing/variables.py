@@ -6,7 +6,10 @@
   variables after its record (``X097_DE_time``, ``X097_FE_time``), so one pattern picks the
   same sensor in every file.  Their columns are laid side by side (the same number of
   samples each); a pattern's columns are named by its text without the wildcards
-  (``DE_time``), so that every file has the same layout.
+  (``DE_time``), so that every file has the same layout. The one exception is the speed
+  column (``slow``, ``--speed-column``), which loggers often sample slower (Paderborn: the
+  speed at 4 kHz beside the vibration at 64 kHz): with fewer samples it is taken to span the
+  same time and is interpolated linearly to the others' samples, and the import says so.
 * Without ``chosen``, the one numeric array with two dimensions, else the one with more than
   one element (:func:`pick_data`).
 * A MATLAB struct's fields are variables named ``struct.field`` (:func:`flatten`; the MFPT
@@ -116,9 +119,10 @@ def _one(path: str, arrays: dict, item: str, option: str, what: str) -> tuple[st
     return hits[0], re.sub(r"[*?]|\[[^]]*\]", "", item).strip("_.") or "data"
 
 
-def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: str,
-             what: str) -> tuple[np.ndarray, list[str]]:
-    """The data, (snapshots, samples, columns), and its columns' names (see module docstring)."""
+def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: str, what: str,
+             slow: str | None = None) -> tuple[np.ndarray, list[str], str | None]:
+    """The data, (snapshots, samples, columns), its columns' names, and a note when the speed
+    column ``slow`` (a name or an index) was sampled slower (see module docstring)."""
     picks = [_one(path, arrays, item, option, what) for item in chosen] if chosen else \
         [(n := pick_data(path, arrays, option, what), n)]
     parts: list[np.ndarray] = []
@@ -130,11 +134,31 @@ def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: st
                 f"of type {getattr(v, 'dtype', type(v).__name__)}"
             raise ImportFailure(f"{path}: {what} {name!r} is {kind}, not a numeric array; "
                                 f"choose a numeric one with {option}")
-        a = as_snapshot_array(path, f"{what} {name!r}", v)
-        if parts and a.shape[:2] != parts[0].shape[:2]:
-            raise ImportFailure(f"{path}: {what} {name!r} holds {a.shape[1]} samples x {a.shape[0]} "
-                                f"snapshot(s), {picks[0][0]!r} {parts[0].shape[1]} x {parts[0].shape[0]}; "
-                                f"{option} takes {what}s of the same length")
-        parts.append(a)
-        columns += [label] if a.shape[2] == 1 else [f"{label}_{i}" for i in range(a.shape[2])]
-    return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)), columns
+        parts.append(as_snapshot_array(path, f"{what} {name!r}", v))
+        columns += [label] if parts[-1].shape[2] == 1 else [f"{label}_{i}" for i in range(parts[-1].shape[2])]
+    is_slow = [slow is not None and a.shape[2] == 1 and slow in (label, str(columns.index(label)))
+               for a, (_, label) in zip(parts, picks)]
+    ref = next((k for k, s in enumerate(is_slow) if not s), 0)
+    note = None
+    for k, a in enumerate(parts):
+        if a.shape[:2] == parts[ref].shape[:2]:
+            continue
+        if is_slow[k] and a.shape[0] == parts[ref].shape[0] and 2 <= a.shape[1] < parts[ref].shape[1]:
+            parts[k], note = _stretched(a, parts[ref].shape[1]), (
+                f"{picks[k][1]}: {a.shape[1]} samples beside {parts[ref].shape[1]} of {picks[ref][1]}: "
+                f"taken as the same time sampled {parts[ref].shape[1] / a.shape[1]:.4g} x slower, "
+                "interpolated linearly")
+            continue
+        hint = "; a speed sampled slower: name it with --speed-column" if 2 * a.shape[1] <= parts[ref].shape[1] \
+            and a.shape[2] == 1 and not is_slow[k] else ""
+        raise ImportFailure(f"{path}: {what} {picks[k][0]!r} holds {a.shape[1]} samples x {a.shape[0]} "
+                            f"snapshot(s), {picks[ref][0]!r} {parts[ref].shape[1]} x {parts[ref].shape[0]}; "
+                            f"{option} takes {what}s of the same length{hint}")
+    return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)), columns, note
+
+
+def _stretched(a: np.ndarray, n: int) -> np.ndarray:
+    """(snapshots, m, 1) sampled over the same time as ``n`` samples, interpolated to them."""
+    m = a.shape[1]
+    at = np.arange(n) * (m / n)
+    return np.stack([np.interp(at, np.arange(m), row[:, 0]) for row in a])[:, :, None]
