@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.io
 
+from cmsensord.sinks.mcap_read import read_messages
 from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
 
 N = 4800
@@ -147,3 +148,46 @@ def test_variable_choices_that_do_not_fit_are_one_line_errors(tmp_path):
         r = cmd("import", *args, "--fs", "1000", "--out", "o.bin", cwd=tmp_path)
         assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), args
         assert not list(tmp_path.glob("o.bin*")), args
+
+
+def encoder_run_up(path, fs: int, n: int, ppr: int) -> np.ndarray:
+    """A file as the University of Ottawa's time-varying-speed set writes one: the vibration
+    (Channel_1) beside an encoder's square wave (Channel_2) of ``ppr`` pulses a revolution, the
+    shaft speeding up from 10 to 12 revolutions a second; the encoder's rising crossings."""
+    revs = np.cumsum(10.0 + 2.0 * np.arange(n) / n) / fs
+    square = (np.sin(2 * np.pi * ppr * revs - 0.1) > 0).astype(np.float64) * 5.0
+    scipy.io.savemat(path, {"Channel_1": np.sin(2 * np.pi * revs)[:, None], "Channel_2": square[:, None]})
+    up = np.flatnonzero((square[:-1] < 2.5) & (square[1:] >= 2.5))
+    return up + (2.5 - square[up]) / (square[up + 1] - square[up])
+
+
+def test_an_encoder_of_more_pulses_than_the_board_carries_keeps_every_kth_edge_of_each_snapshot(tmp_path):
+    fs, n = 20000, 20000
+    rising = [encoder_run_up(tmp_path / f"I-A-{k}.mat", fs, n, 360) for k in (1, 2)]
+    r = cmd("import", "I-A-1.mat", "I-A-2.mat", "--variable", "Channel_1,Channel_2", "--tacho-column", "Channel_2",
+            "--ppr", "360", "--fs", fs, "--unit", "g", "--out", "e.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: --ppr 360: the board protocol carries at most 255 pulses a revolution: 180 a revolution "
+            "(one edge in 2, at the same angles)\n") in r.stderr
+    cap = decode(tmp_path / "e.bin")
+    assert cap["status"].tacho_ppr == 180
+    expected = np.concatenate([k * n + e[::2] for k, e in enumerate(rising)])
+    assert expected.size > 3900 and cap["edges"].size == expected.size
+    assert np.allclose(cap["edges"], expected, atol=1 / 256)
+    # the replay's shaft speed from them: 10 -> 12 revolutions a second in each file
+    r = cmd("replay", "e.bin", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    rpm = [m["speed_rpm"] for topic, _, m in read_messages(log) if topic.endswith("/orders") and m["valid"]]
+    assert rpm and 600 * 0.99 < min(rpm) and max(rpm) < 720 * 1.01
+
+
+def test_an_encoder_ppr_with_a_constant_speed_and_a_ppr_the_board_cannot_take_at_all(tmp_path):
+    np.save(tmp_path / "x.npy", np.zeros(20000))
+    r = cmd("import", "x.npy", "--fs", 20000, "--rpm", "600", "--ppr", "1000", "--out", "c.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    cap = decode(tmp_path / "c.bin")
+    assert cap["status"].tacho_ppr == 250 and np.allclose(cap["edges"], np.arange(2500) * 8.0)
+    r = cmd("import", "x.npy", "--fs", 20000, "--rpm", "600", "--ppr", "0", "--out", "c.bin", cwd=tmp_path)
+    assert r.returncode == 2 and r.stderr.startswith("cmsensord import: error: argument --ppr: expected an integer "
+                                                     "1..65536, got 0"), r.stderr

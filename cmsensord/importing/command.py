@@ -124,8 +124,9 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"hold at most MB of samples in memory (default {MEMORY_MB:g}); a longer recording "
                         "waits on disk beside --out while the capture is written (8 bytes a sample a "
                         "channel)")
-    p.add_argument("--ppr", dest="imp_ppr", type=count(1, 255), default=1, metavar="N",
-                   help="tacho pulses per revolution (default 1)")
+    p.add_argument("--ppr", dest="imp_ppr", type=count(1, 1 << 16), default=1, metavar="N",
+                   help="tacho pulses per revolution (default 1); above 255 (an encoder's) every k-th "
+                        "edge is kept, 255 or fewer a revolution")
     return p
 
 

@@ -34,7 +34,7 @@ from .samples import SampleStore
 from .snapshot_times import retimed
 from .table import Table
 from .tabular import is_text_table, read_tabular
-from .tacho import pulse_edges, speed_edges
+from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
 from .units import to_ms2_factor
 from .wav import read_wav
 
@@ -308,8 +308,11 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     snaps, start = retimed(snaps, origins, files, opts, fs, own_times, "date" if dated else "day" if clock else "",
                             notes)
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
-                    sources=[str(f) for f in files], source_unit=opts.unit, ppr=opts.ppr, notes=notes,
+                    sources=[str(f) for f in files], source_unit=opts.unit, ppr=board_ppr(opts.ppr), notes=notes,
                     source_start=start)
+    if rec.ppr != opts.ppr and (layout.tacho is not None or opts.rpm is not None):
+        notes.append(f"--ppr {opts.ppr}: the board protocol carries at most {MAX_PPR} pulses a revolution: "
+                     f"{rec.ppr} a revolution (one edge in {opts.ppr // rec.ppr}, at the same angles)")
     if layout.tacho is not None:
         _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)
     if opts.rpm is not None:
@@ -329,10 +332,11 @@ def _tacho_column(t: Table, col: int, fs: float, opts: ImportOptions) -> np.ndar
         raise ImportFailure(f"{t.path}: {t.kind} {t.columns[col]!r} ({option}) has {int(bad.sum())} missing or "
                             f"non-finite value(s) (first at sample {int(np.argmax(bad))}); clean the file")
     top = float(np.abs(x).max()) if x.size else 0.0
-    if opts.speed_column and top * opts.ppr > 60.0 * fs:
+    ppr = board_ppr(opts.ppr)
+    if opts.speed_column and top * ppr > 60.0 * fs:
         raise ImportFailure(f"{t.path}: speed column {t.columns[col]!r} reaches {top:g} rpm, "
-                            f"more than one tacho edge a sample at {opts.ppr} a revolution (at most "
-                            f"{60.0 * fs / opts.ppr:g} rpm at {fs:g} Hz); check the column's unit and --ppr")
+                            f"more than one tacho edge a sample at {ppr} a revolution (at most "
+                            f"{60.0 * fs / ppr:g} rpm at {fs:g} Hz); check the column's unit and --ppr")
     return x
 
 
@@ -341,9 +345,9 @@ def _tacho(rec: Recording, column: np.ndarray, name: str, opts: ImportOptions) -
     sidecar's ``rpm``)."""
     bounds = [(s.start, s.length) for s in rec.snapshots]
     if opts.speed_column:
-        rec.tacho_edges = speed_edges(column, bounds, rec.fs, opts.ppr)
+        rec.tacho_edges = speed_edges(column, bounds, rec.fs, rec.ppr)
         rec.tacho_source, rec.tacho_from = name, "speed"
         rec.rpm, rec.rpm_source = float(np.median(column)), f"column {name} (median)"
     else:
-        rec.tacho_edges = pulse_edges(column, bounds, opts.tacho_threshold)
+        rec.tacho_edges = every_kth(pulse_edges(column, bounds, opts.tacho_threshold), bounds, opts.ppr // rec.ppr)
         rec.tacho_source, rec.tacho_from = name, "pulses"

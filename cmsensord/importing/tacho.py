@@ -18,9 +18,28 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SUB", "pulse_edges", "rpm_edges", "speed_edges", "block_edges"]
+__all__ = ["SUB", "MAX_PPR", "board_ppr", "every_kth", "pulse_edges", "rpm_edges", "speed_edges", "block_edges"]
 
 SUB = 256  # TACHO edge resolution: 1/256 sample
+MAX_PPR = 255  # pulses a revolution the board's STATUS frame can announce (docs/PROTOCOL.md)
+
+
+def board_ppr(ppr: int) -> int:
+    """The pulses a revolution the capture carries for a sensor of ``ppr`` (an encoder's 1024):
+    ``ppr`` itself up to :data:`MAX_PPR`, else ``ppr / k`` for the least whole ``k`` that
+    brings it there (1024 -> 128), so that every ``k``-th edge still marks the same angle."""
+    return next(ppr // k for k in range(1, ppr + 1) if ppr % k == 0 and ppr // k <= MAX_PPR)
+
+
+def every_kth(edges: np.ndarray, bounds: list[tuple[int, int]], k: int) -> np.ndarray:
+    """Sorted ``edges`` with every ``k``-th kept, counted from each snapshot's first edge
+    (``bounds``: its ``(start, length)``), as a sensor of ``k`` times fewer pulses would give."""
+    if k == 1 or not edges.size:
+        return edges
+    starts = np.array([s for s, _ in bounds] or [0])
+    snap = np.searchsorted(starts, edges, side="right") - 1
+    first = np.searchsorted(snap, snap, side="left")      # each edge's snapshot's first edge
+    return edges[(np.arange(edges.size) - first) % k == 0]
 
 
 def pulse_edges(x: np.ndarray, bounds: list[tuple[int, int]], threshold: float | None = None) -> np.ndarray:
