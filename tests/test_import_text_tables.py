@@ -110,9 +110,9 @@ def test_comments_and_blank_lines_before_a_header_are_skipped(tmp_path):
 
 @pytest.mark.parametrize("suffix", [".txt", ".lvm", ""])
 def test_a_preamble_of_settings_before_the_numbers_is_skipped_and_said_once(tmp_path, suffix):
-    """A LabVIEW text file (.lvm; or named .txt, or without an extension): settings and a line of
-    names that does not fit the rows (13 lines that are not blank), then times and values; two
-    such files in a directory say so once."""
+    """A LabVIEW text file (.lvm; or named .txt, or without an extension): settings (12 lines that
+    are not blank), its line of names with the Comment column the rows leave out, then times
+    (X_Value: the time base) and values; two such files in a directory say so once."""
     pre = ("LabVIEW Measurement\nWriter_Version\t2\nReader_Version\t2\nSeparator\tTab\nDecimal_Separator\t.\n"
            "***End_of_Header***\n\nChannels\t1\nSamples\t2000\nX_Dimension\tTime\nX0\t0\nDelta_X\t0.0005\n"
            "***End_of_Header***\nX_Value\tAcc\tComment")
@@ -122,10 +122,41 @@ def test_a_preamble_of_settings_before_the_numbers_is_skipped_and_said_once(tmp_
     for k, x in enumerate(xs):
         write(d / f"run_{k}{suffix}", pre, [np.arange(2000) / 2000, x], ["%.6f", "%.6f"], sep="\t")
     cap, side, err = imported(tmp_path, "runs", "--unit", "g", "--snapshot-interval", "60")
-    note = f"run_0{suffix}: 13 line(s) before the numbers skipped (the first: 'LabVIEW Measurement')"
+    note = f"run_0{suffix}: 12 line(s) before the column names skipped (the first: 'LabVIEW Measurement')"
     assert err.count("skipped") == 1 and f"  note: {note}\n" in err and note in side["notes"]
-    assert side["fs"] == 2000 and side["channel_names"] == ["col1"]
+    assert side["fs"] == 2000 and side["channel_names"] == ["Acc"]
+    assert ("  note: column 'X_Value' (0) is the time base: 2000 Hz from its steps; it is not imported as a "
+            "channel\n") in err
     assert_within_one_count(cap, np.round(np.concatenate(xs), 6)[None] * G)
+
+
+@pytest.mark.parametrize("dates, start", [
+    (["Date\t2024/03/05\nTime\t10:15:02.1234567890", "Date\t2024/03/05\nTime\t10:25:02,1234567890"],
+     "2024-03-05T10:15:02.123457"),
+    (["Start Time: 2024-03-05 23:55:00", "Start Time: 2024-03-06 00:05:00.5"], "2024-03-05T23:55:00"),
+])
+def test_the_date_and_time_a_preamble_gives_is_each_files_snapshot_time(tmp_path, dates, start):
+    """LabVIEW's Date and Time lines (a decimal comma too), or one line of another logger's,
+    date each file's snapshot: the sidecar's times and the recording's start."""
+    d = tmp_path / "runs"
+    d.mkdir()
+    for k, when in enumerate(dates):
+        pre = f"LabVIEW Measurement\nSeparator\tTab\n{when}\n***End_of_Header***\nX_Value\tAcc\tComment"
+        write(d / f"run_{k}.lvm", pre, [np.arange(2000) / 2000, signal(2000, 1, seed=k)[0]], ["%.6f", "%.6f"], sep="\t")
+    _, side, err = imported(tmp_path, "runs", "--unit", "g")
+    assert side["source_start"] == start
+    times = [s["source_time_s"] for s in side["snapshots"]]
+    assert times[0] == 0.0 and times[1] == pytest.approx(600.0 + (0.5 if "Start" in dates[1] else 0.0), abs=1e-6)
+    assert "  note: snapshot times from the files' dates and times: " in err
+
+
+def test_a_preamble_without_a_whole_date_and_time_dates_nothing(tmp_path):
+    for name, pre in (("a.lvm", "Date\t2024/13/05\nTime\t10:15:02"), ("b.lvm", "Time\t10:15:02"),
+                      ("c.lvm", "Start Time: soon")):
+        write(tmp_path / name, f"LabVIEW Measurement\n{pre}\nX_Value\tAcc", [np.arange(200) / 200, np.zeros(200)],
+              ["%.6f", "%.6f"], sep="\t")
+        _, side, _ = imported(tmp_path, name)
+        assert side["source_start"] is None and side["snapshots"][0]["source_time_s"] is None, name
 
 
 def test_a_bad_row_is_named_by_its_line_in_the_file(tmp_path):

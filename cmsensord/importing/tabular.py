@@ -8,13 +8,15 @@ before them and their first rows:
   of times (at least once) on every line; else runs of whitespace when a line
   has several fields; else one column;
 * header: the line before the numbers is a header when one of its fields is not a
-  number and it has a field for every column; its fields name the columns
-  (``col0``, ``col1``, ... otherwise);
+  number and it has a field for every column (LabVIEW's last name ``Comment``, a column
+  the rows leave out, aside); its fields name the columns (``col0``, ``col1``, ...
+  otherwise);
 * decimal comma: with a ``;``, tab or whitespace separator, a comma inside the
   numbers is read as a decimal point (``0,552;-0,146``).
 
 A column of times is found and marked (:mod:`.time_column`): it gives the
-sampling rate and is no channel by default.
+sampling rate and is no channel by default. A date and time in the preamble
+(:mod:`.preamble`: LabVIEW's ``Date`` and ``Time``) is the file's snapshot time.
 
 ``separator`` / ``header`` override the detection (the command's
 ``--separator`` and ``--header``/``--no-header``). The numbers are parsed by
@@ -27,11 +29,13 @@ from __future__ import annotations
 import io
 import re
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from .errors import ImportFailure
+from .preamble import preamble_start
 from .table import Table
 from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split
 from .time_column import with_time_column
@@ -167,12 +171,15 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     names = None
     if header_line is not None:
         names = [f.strip().strip('"').strip() or f"col{i}" for i, f in enumerate(split(header_line, sep))]
+        if len(names) == a.shape[1] + 1 and names[-1].lower() == "comment":
+            names = names[:-1]              # LabVIEW's comment column, which rows of numbers leave out
         if len(names) != a.shape[1]:
             if header is True:
                 raise ImportFailure(f"{path}: the header names {len(names)} columns, the rows hold "
                                     f"{a.shape[1]}; fix the header or use --no-header")
             names = None                    # a preamble's last line, not the columns' names
     note = _head_note(path, head, names is not None)
-    t = Table(path=path, data=a[None], columns=names or [f"col{i}" for i in range(a.shape[1])], kind="column",
-              head_note=note)
-    return with_time_column(t, names is not None, dated=dated)
+    t = with_time_column(Table(path=path, data=a[None], columns=names or [f"col{i}" for i in range(a.shape[1])],
+                               kind="column", head_note=note), names is not None, dated=dated)
+    start = preamble_start(head.preamble + (() if names is not None or head.header is None else (head.header,)))
+    return t if start is None or t.times is not None else replace(t, times=np.array([start]), dated=True)
