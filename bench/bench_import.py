@@ -8,10 +8,13 @@ Writes N one-second snapshot files of four channels at 20,480 Hz, as the IMS rig
 length, and prints per length the files, the recording's float64 samples (MB), the
 capture's size, wall and CPU seconds and the import process's peak resident memory. The
 same memory for every length shows that it is bounded (``--memory-mb``, default 64, then
-one file). ``--tree LABEL=DIR`` (repeatable) runs another checkout's code on the same
+one file). ``--wav-minutes M`` (repeatable) also imports one long WAV file of M minutes, as
+a field recorder writes it (48 kHz, stereo, 16-bit): its memory should not grow with its
+length either. ``--tree LABEL=DIR`` (repeatable) runs another checkout's code on the same
 files, side by side.
 
-    python bench/bench_import.py [--files 60 240] [--memory-mb 64] [--tree before=DIR] [--keep DIR]
+    python bench/bench_import.py [--files 60 240] [--wav-minutes 2 10] [--memory-mb 64] [--tree before=DIR]
+                                 [--keep DIR]
 """
 
 from __future__ import annotations
@@ -47,10 +50,27 @@ def write_files(d: Path, n: int) -> None:
         np.savetxt(d / name, 0.1 * rng.standard_normal((FS, CHANNELS)), fmt="%.3f", delimiter="\t")
 
 
-def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None) -> dict:
-    """One ``cmsensord import`` in a child process: wall s, CPU s, peak RSS MB, capture MB."""
-    args = [sys.executable, "-m", "cmsensord", "import", str(src), "--fs", str(FS), "--unit", "g",
-            "--block-len", "2048", "--out", str(out)]
+WAV_FS = 48000
+
+
+def write_wav(path: Path, minutes: float) -> None:
+    """A stereo 16-bit WAV of ``minutes`` at 48 kHz, written a minute at a time."""
+    import wave
+
+    rng = np.random.default_rng(1)
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(2)
+        w.setsampwidth(2)
+        w.setframerate(WAV_FS)
+        for _ in range(int(round(minutes))):
+            w.writeframes((rng.standard_normal((60 * WAV_FS, 2)) * 3000).astype("<i2").tobytes())
+
+
+def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None, *how: str) -> dict:
+    """One ``cmsensord import SRC HOW`` in a child process (HOW: the IMS-like files' options by
+    default): wall s, CPU s, peak RSS MB, capture MB."""
+    how = how or ("--fs", str(FS), "--unit", "g", "--block-len", "2048")
+    args = [sys.executable, "-m", "cmsensord", "import", str(src), *how, "--out", str(out)]
     if memory_mb is not None:
         args += ["--memory-mb", f"{memory_mb:g}"]
     env = dict(os.environ, PYTHONPATH=str(tree))
@@ -69,13 +89,15 @@ def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None) -> dic
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--files", type=int, nargs="+", default=[60, 240], help="recording lengths, in files")
+    ap.add_argument("--wav-minutes", type=float, nargs="*", default=[],
+                    help="also one long stereo WAV of these lengths, in minutes")
     ap.add_argument("--memory-mb", type=float, help="passed to this checkout's import (default: its own)")
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also run another checkout's code (e.g. before=../old)")
     ap.add_argument("--keep", type=Path, help="write the files and captures here and keep them")
     args = ap.parse_args()
     base = args.keep or Path(tempfile.mkdtemp(prefix="bench_import_"))
-    rows = []
+    rows, wav_rows = [], []
     try:
         for n in sorted(args.files):
             src = base / f"files_{n}"
@@ -86,6 +108,16 @@ def main() -> None:
                 memory = args.memory_mb if tree == ROOT else None
                 r = run_import(src, base / f"capture_{n}_{label or 'this'}.bin", tree, memory)
                 rows.append((label, n, r))
+        for m in sorted(args.wav_minutes):
+            src = base / f"long_{m:g}.wav"
+            if not src.is_file():
+                print(f"writing a {m:g}-minute WAV ...", file=sys.stderr, flush=True)
+                write_wav(src, m)
+            for label, tree in trees(args.tree):
+                memory = args.memory_mb if tree == ROOT else None
+                r = run_import(src, base / f"wav_{m:g}_{label or 'this'}.bin", tree, memory, "--unit", "g",
+                               "--scale-factor", "10")
+                wav_rows.append((label, m, src.stat().st_size / 1e6, r))
     finally:
         if args.keep is None:
             shutil.rmtree(base, ignore_errors=True)
@@ -96,6 +128,13 @@ def main() -> None:
     for label, n, r in rows:
         print(f"| {label or 'this'} | {n} | {samples_mb[n]:.0f} | {r['capture_mb']:.1f} | {r['wall_s']:.1f} | "
               f"{r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
+    if wav_rows:
+        print(f"\ncmsensord import of one WAV file (stereo, 16-bit, {WAV_FS} Hz)")
+        print("| code | minutes | file MB | samples MB (float64) | capture MB | wall s | CPU s | peak RSS MB |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+        for label, m, file_mb, r in wav_rows:
+            print(f"| {label or 'this'} | {m:g} | {file_mb:.0f} | {m * 60 * WAV_FS * 2 * 8 / 1e6:.0f} | "
+                  f"{r['capture_mb']:.1f} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
 
 
 if __name__ == "__main__":

@@ -56,19 +56,43 @@ def test_memory_does_not_grow_with_the_number_of_files(tmp_path):
                                                           "s.bin.json", "short"]
 
 
+@pytest.mark.parametrize("kind", ["wav", "npy"])
+def test_memory_does_not_grow_with_the_length_of_one_file(tmp_path, kind):
+    """One 16-bit file of 10 M samples (20 MB; as float64 80 MB) costs at most its own pages (the
+    file is mapped, its samples converted a stretch at a time) more than one of 1 M samples."""
+    from scipy.io import wavfile
+
+    rng = np.random.default_rng(5)
+    for name, n in (("short", 1_000_000), ("long", 10_000_000)):
+        x = (rng.standard_normal(n) * 3000).astype(np.int16)
+        if kind == "wav":
+            wavfile.write(tmp_path / f"{name}.wav", FS, x)
+        else:
+            np.save(tmp_path / f"{name}.npy", x)
+    rss = []
+    for name in ("short", "long"):
+        rc, err, mb = import_rss_mb(f"{name}.{kind}", "--fs", FS, "--memory-mb", "8", "--out", f"{name}.bin",
+                                    cwd=tmp_path)
+        assert rc == 0, err
+        rss.append(mb)
+    assert rss[1] - rss[0] < 20 + 10, rss
+
+
 def test_the_capture_is_the_same_bytes_whatever_the_chunk_and_wherever_the_samples_wait(
         tmp_path, monkeypatch):
     """Chunks of one block, of a few blocks and of the default, with the samples in memory, on
-    disk from the start, or moved to disk part way, give the same capture and sidecar."""
+    disk from the start, or moved to disk part way, and files converted in stretches of 7 samples
+    to the default, give the same capture and sidecar."""
     from cmsensord.cli import main
-    from cmsensord.importing import capture_writer
+    from cmsensord.importing import capture_writer, sources
 
     write_files(tmp_path / "d", 3)
     outs = set()
-    for blocks, samples, memory in ((1000, 1 << 18, "64"), (7, 1 << 18, "0"), (1000, 1, "1.5"),
-                                    (3, 1 << 18, "1.5")):
+    for blocks, samples, memory, read in ((1000, 1 << 18, "64", 1 << 18), (7, 1 << 18, "0", 1000),
+                                          (1000, 1, "1.5", 1 << 18), (3, 1 << 18, "1.5", 7)):
         monkeypatch.setattr(capture_writer, "CHUNK_BLOCKS", blocks)
         monkeypatch.setattr(capture_writer, "CHUNK_SAMPLES", samples)
+        monkeypatch.setattr(sources, "READ_SAMPLES", read)
         out = tmp_path / "o.bin"
         assert main(["import", str(tmp_path / "d"), "--fs", str(FS), "--unit", "g", "--block-len", "2048",
                      "--memory-mb", memory, "--out", str(out)]) == 0

@@ -22,9 +22,9 @@ from .variables import rpm_named, scalar_named, selected
 __all__ = ["read_npy", "read_npz"]
 
 
-def _load(path: str):
+def _load(path: str, mmap: bool = False):
     try:
-        return np.load(path, allow_pickle=False)
+        return np.load(path, allow_pickle=False, mmap_mode="r" if mmap else None)
     except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
         raise ImportFailure(f"{path}: not a readable NumPy file ({' '.join(str(exc).split())})") from None
 
@@ -34,7 +34,8 @@ def _columns(name: str, n: int) -> list[str]:
 
 
 def read_npy(path: str) -> Table:
-    a = _load(path)
+    """The array of an .npy file, a memory map of the file (the import converts a stretch at a time)."""
+    a = _load(path, mmap=True)
     data = as_snapshot_array(path, "the array", a)
     return Table(path=path, data=data, columns=_columns("ch", data.shape[2]), kind="channel")
 

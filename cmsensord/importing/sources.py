@@ -20,6 +20,7 @@ import glob as globmod
 import os
 import re
 from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +43,8 @@ __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_
 
 EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".lvm", ".npy", ".npz", ".mat")
 MAX_CHANNELS = 8
+#: samples a channel converted at a time (2 MB of float64 each)
+READ_SAMPLES = 1 << 18
 
 
 def _natural_key(path: str) -> list:
@@ -198,12 +201,13 @@ class _Layout:
                                 "import them separately")
 
 
-def _finite(t: Table, x: np.ndarray, names: list[str]) -> None:
-    """x (C, s, n): an error naming the file and column of the first NaN/inf."""
+def _finite(t: Table, x: np.ndarray, names: list[str], snapshot: int | None, first: int) -> None:
+    """x (C, n), samples ``first`` on of a snapshot (None: the file's only one): an error naming
+    the file and column of the first NaN/inf."""
     bad = ~np.isfinite(x)
     if bad.any():
-        c, s, i = np.argwhere(bad)[0]
-        where = f"snapshot {s}, sample {i}" if x.shape[1] > 1 else f"sample {i}"
+        c, i = np.argwhere(bad)[0]
+        where = f"sample {first + i}" if snapshot is None else f"snapshot {snapshot}, sample {first + i}"
         raise ImportFailure(f"{t.path}: {t.kind} {names[c]!r} has {int(bad.sum())} missing or "
                             f"non-finite value(s) (first at {where}); clean the file or choose "
                             "other --channels")
@@ -219,15 +223,21 @@ def _split(t: Table, n: int | None) -> list[tuple[int, int, int]]:
     return [(0, a, min(n, length - a)) for a in range(0, length, n)]
 
 
-def _channels(t: Table, layout: _Layout, factor: float) -> np.ndarray:
-    """The imported channels of one file in m/s², (C, snapshots, samples), checked finite."""
+def _channels(t: Table, layout: _Layout, factor: float) -> Iterator[np.ndarray]:
+    """The imported channels of one file in m/s², (C, n) stretches of at most ``READ_SAMPLES`` in
+    file order, each checked finite: one float64 copy of a stretch, not of the file."""
     s_, n_, _ = t.data.shape
-    x = np.empty((len(layout.idx), s_, n_))  # one float64 copy per channel, nothing more
-    for c, i in enumerate(layout.idx):
-        x[c] = t.data[:, :, i]
-    _finite(t, x, [t.columns[i] for i in layout.idx])
-    x *= factor
-    return x
+    names = [t.columns[i] for i in layout.idx]
+    for s in range(s_):
+        for a in range(0, n_, READ_SAMPLES):
+            x = np.empty((len(layout.idx), min(n_, a + READ_SAMPLES) - a))
+            for c, i in enumerate(layout.idx):
+                x[c] = t.data[s, a:a + x.shape[1], i]
+            _finite(t, x, names, s if s_ > 1 else None, a)
+            if t.zero:
+                x -= t.zero
+            x *= t.gain * factor
+            yield x
 
 
 def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
@@ -278,7 +288,6 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             stores.append(SampleStore(len(layout.idx), opts.out, opts.memory_mb))
         else:
             layout.check(t, Path(files[0]).name)
-        x = _channels(t, layout, factor)
         if layout.tacho is not None:
             tacho_pieces.append(_tacho_column(t, layout.tacho, layout.fs, opts))
         many = t.data.shape[0] > 1 or opts.snapshot_len
@@ -289,10 +298,11 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             pos += n
         own_times, clock, dated = own_times or t.times is not None, clock or t.clock, dated or t.dated
         notes += _file_notes(t, opts)
-        stores[0].append(x.reshape(len(layout.idx), -1))
+        for x in _channels(t, layout, factor):
+            stores[0].append(x)
         if t.rpm and np.isfinite(t.rpm) and t.rpm > 0 and rpm_file is None:
             rpm_file = (t.rpm, t.name)
-        del t, x
+        del t
         if progress is not None:
             progress(fi + 1)
     assert layout is not None
@@ -325,7 +335,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
 def _tacho_column(t: Table, col: int, fs: float, opts: ImportOptions) -> np.ndarray:
     """A file's tacho or speed column, float64, checked finite (and a speed of at most one
     edge a sample at the import's rate ``fs``)."""
-    x = t.data[:, :, col].astype(np.float64).reshape(-1)
+    x = (t.data[:, :, col].astype(np.float64).reshape(-1) - t.zero) * t.gain
     option = "--speed-column" if opts.speed_column else "--tacho-column"
     bad = ~np.isfinite(x)
     if bad.any():

@@ -1,7 +1,8 @@
 """What a reader returns: the file's raw columns, and what the file itself says.
 
 A :class:`Table` holds one file's numbers before any unit or channel choice:
-``data`` is (snapshots, samples, columns) in the file's own dtype and unit,
+``data`` is (snapshots, samples, columns) in the file's own dtype (perhaps a memory map of
+the file: a WAV's, an NPY's), ``(data - zero) * gain`` in its unit,
 one snapshot for a plain 2-D table, several for a 3-D array (the FEMTO archives)
 or a multi-snapshot file. ``fs``, ``times`` (each snapshot's start, seconds),
 ``rpm`` and ``time_columns`` are set when the file carries them.
@@ -42,6 +43,8 @@ class Table:
     time_note: str | None = None  # what the import says of it, once
     head_note: str | None = None  # lines skipped before the numbers (a text table's preamble), said once
     rate_note: str | None = None  # a speed column sampled slower, interpolated to the rate, said once
+    gain: float = 1.0  # ``data`` in the file's unit: (data - zero) * gain (a WAV's PCM to fractions of full scale)
+    zero: float = 0.0
 
     @property
     def name(self) -> str:

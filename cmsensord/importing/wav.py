@@ -3,7 +3,9 @@
 PCM samples are read as fractions of full scale (-1 .. 1): a 16-bit sample
 divided by 2^15, 24- and 32-bit ones by 2^31 (scipy returns 24-bit samples
 left-justified in int32), 8-bit unsigned ones as (x - 128) / 128. Float
-samples are taken as they are. ``--scale-factor`` then gives the physical value
+samples are taken as they are. The samples stay in the file (a memory map)
+and the import converts them a stretch at a time, so a long WAV does not
+need its float64 copy in memory. ``--scale-factor`` then gives the physical value
 at full scale in ``--unit``. The file's sampling rate is the recording's.
 """
 
@@ -13,8 +15,6 @@ import struct
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from .errors import ImportFailure
 from .table import Table
 
@@ -22,31 +22,40 @@ __all__ = ["read_wav"]
 
 
 def read_wav(path: str) -> Table:
+    """The WAV file's samples as a memory map of the file where scipy can map it (8, 16, 32-bit
+    PCM and float; a 24-bit or cut-short file is read), the PCM's scale as ``gain``/``zero``."""
     from scipy.io import wavfile  # 0.3 s to import: only when a WAV file is read
 
     try:
         with warnings.catch_warnings(record=True) as caught:   # unknown chunks are skipped silently
             warnings.simplefilter("always", wavfile.WavFileWarning)
-            fs, a = wavfile.read(path, mmap=False)
+            fs, a = _read(wavfile, path)
     except (ValueError, EOFError, struct.error) as exc:
         why = "it ends inside its header" if isinstance(exc, struct.error) else " ".join(str(exc).split())
         raise ImportFailure(f"{path}: not a readable WAV file ({why}); export it as PCM or float WAV") from None
-    if a.dtype == np.uint8:
-        x = (a.astype(np.float64) - 128.0) / 128.0
-    elif a.dtype == np.int16:
-        x = a / 32768.0
-    elif a.dtype == np.int32:
-        x = a / 2147483648.0
-    elif a.dtype.kind == "f":
-        x = a
-    else:  # pragma: no cover - scipy returns one of the above
+    zero, gain = _SCALES.get(a.dtype.str[1:], (0.0, 1.0)) if a.dtype.kind in "iu" else (0.0, 1.0)
+    if a.dtype.kind not in "iuf" or (a.dtype.kind in "iu" and a.dtype.str[1:] not in _SCALES):
         raise ImportFailure(f"{path}: WAV samples of type {a.dtype} are not supported; export as PCM 16/24/32 or float")
-    if x.ndim == 1:
-        x = x[:, None]
-    if x.shape[0] == 0:
+    if a.ndim == 1:
+        a = a[:, None]
+    if a.shape[0] == 0:
         raise ImportFailure(f"{path}: the WAV file holds no samples")
-    names = [f"ch{i}" for i in range(x.shape[1])]
+    names = [f"ch{i}" for i in range(a.shape[1])]
     cut = [" ".join(str(w.message).split()) for w in caught if "EOF" in str(w.message)]
     notes = [f"{Path(path).name}: the file ends before the data its header declares ({cut[0]}); the "
-             f"{x.shape[0]:,} sample(s) there are imported"] if cut else []
-    return Table(path=path, data=x[None], columns=names, kind="channel", fs=float(fs), notes=notes)
+             f"{a.shape[0]:,} sample(s) there are imported"] if cut else []
+    return Table(path=path, data=a[None], columns=names, kind="channel", fs=float(fs), notes=notes,
+                 gain=gain, zero=zero)
+
+
+#: PCM sample type -> (zero, gain) to fractions of full scale (24-bit samples come left-justified in int32)
+_SCALES = {"u1": (128.0, 1 / 128), "i2": (0.0, 1 / 32768), "i4": (0.0, 1 / 2147483648)}
+
+
+def _read(wavfile, path: str):
+    """(fs, samples): a memory map of the file's samples, or (24-bit, or a file cut short, which
+    cannot be mapped) the samples read."""
+    try:
+        return wavfile.read(path, mmap=True)
+    except ValueError:
+        return wavfile.read(path, mmap=False)
