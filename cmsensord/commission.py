@@ -87,15 +87,17 @@ def _g(x: float) -> str:
 
 
 def format_table(results: list[ChannelResult], obs: Observations) -> str:
-    """What calibrate measured and chose, one row per channel, and the margins."""
-    head = (f"{'channel':<12} {'f_r Hz':>7} {'from':<10} {'baseline':>9} {'spread':>7} {'run-in s':>8} "
+    """What calibrate measured and chose, one row per channel (the names' column as wide as the
+    longest), and the margins."""
+    w = max([12, *(len(r.name) for r in results)])
+    head = (f"{'channel':<{w}} {'f_r Hz':>7} {'from':<10} {'baseline':>9} {'spread':>7} {'run-in s':>8} "
             f"{'learned s':>9} {'H':>9} {'R_1':>9} {'R_min':>9} {'R_max':>9} {'max cnt':>7} {'flagged':>7}")
     lines = [f"healthy period: {obs.start_s:.1f}-{obs.end_s:.1f} board s, {obs.rate_hz:.4g} blocks/s", head]
     for r in results:
         m = r.model
         per = obs.period(1.0) / obs.rate_hz
         lines.append(
-            f"{r.name:<12} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
+            f"{r.name:<{w}} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
             f"{m.runin_periods * per:>8.0f} {m.periods * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
             f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "

@@ -162,3 +162,20 @@ def test_faulty_capture_sets_r_max(degrading, tmp_path):
     b = yaml.safe_load(with_faulty.read_text())["channels"][0]
     assert b["r_max"] > a["r_max"] and b["baseline"] == a["baseline"]
     assert "# R_n: the largest R that still flags the faulty capture" in with_faulty.read_text()
+
+
+def test_calibrate_table_keeps_its_columns_under_a_long_channel_name(tmp_path):
+    """An import's channel named as its file names it (XJTU-SY: Horizontal_vibration_signals):
+    every row of the table as long as its heading, the names' column as wide as the longest."""
+    from tests.test_import_names import R2F, run_to_failure
+
+    d = run_to_failure(tmp_path)
+    name = "Horizontal_vibration_signals"
+    p = run("cmsensord", "import", str(d), *R2F, "--names", name, "--out", str(tmp_path / "r.bin"))
+    assert p.returncode == 0, p.stderr
+    p = run("cmsensord", "calibrate", str(tmp_path / "r.bin"), "--to", "25%", "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines() + p.stderr.splitlines()
+    head = next(ln for ln in lines if ln.startswith("channel "))
+    row = next(ln for ln in lines if ln.startswith(f"{name} "))
+    assert len(row) == len(head) and head.index("f_r Hz") == len(name) + 2, (head, row)
