@@ -337,6 +337,10 @@ def test_errors_are_one_line_and_leave_nothing_behind(tmp_path):
         ("p.npy", "--fs", "204800", "--tacho-column", "1", "--block-len", "2048"):
             "p.npy: tacho column 'ch_1': 1024 edges in one 2048-sample block, a TACHO frame holds at most 1023; "
             "check --tacho-threshold, --ppr or --rpm",
+        # found by trying hostile speeds: a traceback allocating 32 GB of edge times
+        ("p.npy", "--fs", "20000", "--channels", "0", "--rpm", "1e12"):
+            "--rpm 1e+12: more than one tacho edge a sample at 1 a revolution (at most 1.2e+06 rpm at 20000 Hz); "
+            "check --rpm and --ppr",
     }
     for args, message in cases.items():
         r = cmd("import", *args, "--out", "o.bin", cwd=tmp_path)

@@ -320,16 +320,25 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
                     sources=[str(f) for f in files], source_unit=opts.unit, ppr=board_ppr(opts.ppr), notes=notes,
                     source_start=start)
-    if rec.ppr != opts.ppr and (layout.tacho is not None or opts.rpm is not None):
-        notes.append(f"--ppr {opts.ppr}: the board protocol carries at most {MAX_PPR} pulses a revolution: "
-                     f"{rec.ppr} a revolution (one edge in {opts.ppr // rec.ppr}, at the same angles)")
     if layout.tacho is not None:
         _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)
+    _speed(rec, opts, rpm_file, layout.tacho is not None)
+    return rec
+
+
+def _speed(rec: Recording, opts: ImportOptions, rpm_file: tuple[float, str] | None, tacho: bool) -> None:
+    """The recording's speed: ``--rpm`` (checked: at most one edge a sample), else the one a file
+    gave; a note when ``--ppr`` is more than the board carries and a tacho is made."""
+    if rec.ppr != opts.ppr and (tacho or opts.rpm is not None):
+        rec.notes.append(f"--ppr {opts.ppr}: the board protocol carries at most {MAX_PPR} pulses a revolution: "
+                         f"{rec.ppr} a revolution (one edge in {opts.ppr // rec.ppr}, at the same angles)")
+    if opts.rpm is not None and opts.rpm * rec.ppr > 60.0 * rec.fs:
+        raise ImportFailure(f"--rpm {opts.rpm:g}: more than one tacho edge a sample at {rec.ppr} a revolution "
+                            f"(at most {60.0 * rec.fs / rec.ppr:g} rpm at {rec.fs:g} Hz); check --rpm and --ppr")
     if opts.rpm is not None:
         rec.rpm, rec.rpm_source, rec.tacho_source, rec.tacho_from = opts.rpm, "--rpm", "rpm", "rpm"
     elif rpm_file is not None and rec.rpm is None:
         rec.rpm, rec.rpm_source = rpm_file
-    return rec
 
 
 def _tacho_column(t: Table, col: int, fs: float, opts: ImportOptions) -> np.ndarray:
