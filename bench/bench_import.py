@@ -10,11 +10,13 @@ capture's size, wall and CPU seconds and the import process's peak resident memo
 same memory for every length shows that it is bounded (``--memory-mb``, default 64, then
 one file). ``--wav-minutes M`` (repeatable) also imports one long WAV file of M minutes, as
 a field recorder writes it (48 kHz, stereo, 16-bit): its memory should not grow with its
-length either. ``--tree LABEL=DIR`` (repeatable) runs another checkout's code on the same
+length either; ``--csv-minutes M`` one long CSV (a time column and three channels at
+25.6 kHz). The long files' table also gives the import's peak anonymous memory (its own, not
+the pages of the files it maps). ``--tree LABEL=DIR`` (repeatable) runs another checkout's code on the same
 files, side by side.
 
-    python bench/bench_import.py [--files 60 240] [--wav-minutes 2 10] [--memory-mb 64] [--tree before=DIR]
-                                 [--keep DIR]
+    python bench/bench_import.py [--files 60 240] [--wav-minutes 2 10] [--csv-minutes 2 10] [--memory-mb 64]
+                                 [--tree before=DIR] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -66,6 +69,20 @@ def write_wav(path: Path, minutes: float) -> None:
             w.writeframes((rng.standard_normal((60 * WAV_FS, 2)) * 3000).astype("<i2").tobytes())
 
 
+CSV_FS = 25600
+
+
+def write_csv(path: Path, minutes: float) -> None:
+    """A CSV of ``minutes`` at 25.6 kHz: ``Time (s)`` and three channels in g, a minute at a time."""
+    rng = np.random.default_rng(2)
+    with open(path, "w") as f:
+        f.write("Time (s),ax,ay,az\n")
+        for k in range(int(round(minutes))):
+            t = (k * 60 * CSV_FS + np.arange(60 * CSV_FS)) / CSV_FS
+            np.savetxt(f, np.c_[t, 0.1 * rng.standard_normal((t.size, 3))], fmt=["%.6f", "%.4f", "%.4f", "%.4f"],
+                       delimiter=",")
+
+
 def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None, *how: str) -> dict:
     """One ``cmsensord import SRC HOW`` in a child process (HOW: the IMS-like files' options by
     default): wall s, CPU s, peak RSS MB, capture MB."""
@@ -76,14 +93,31 @@ def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None, *how: 
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.monotonic()
     p = subprocess.Popen(args, cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    assert p.stderr is not None
-    err = p.stderr.read().decode()
-    _, status, usage = os.wait4(p.pid, 0)
+    err: list[bytes] = []
+    reader = threading.Thread(target=lambda: err.append(p.stderr.read() if p.stderr else b""))
+    reader.start()
+    anon = 0
+    while True:
+        pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+        if pid:
+            break
+        anon = max(anon, _rss_anon_kb(p.pid))
+        time.sleep(0.02)
     wall = time.monotonic() - t0
+    reader.join()
     if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"import failed ({tree}):\n{err}")
+        raise SystemExit(f"import failed ({tree}):\n{b''.join(err).decode()}")
     return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "rss_mb": usage.ru_maxrss / 1024,
-            "capture_mb": out.stat().st_size / 1e6}
+            "anon_mb": anon / 1024, "capture_mb": out.stat().st_size / 1e6}
+
+
+def _rss_anon_kb(pid: int) -> int:
+    """The process's anonymous resident memory now (its own, not pages of files it maps), kB."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            return next((int(line.split()[1]) for line in f if line.startswith("RssAnon:")), 0)
+    except OSError:
+        return 0
 
 
 def main() -> None:
@@ -91,13 +125,16 @@ def main() -> None:
     ap.add_argument("--files", type=int, nargs="+", default=[60, 240], help="recording lengths, in files")
     ap.add_argument("--wav-minutes", type=float, nargs="*", default=[],
                     help="also one long stereo WAV of these lengths, in minutes")
+    ap.add_argument("--csv-minutes", type=float, nargs="*", default=[],
+                    help="also one long CSV (a time column, 3 channels at 25.6 kHz) of these lengths, in minutes")
     ap.add_argument("--memory-mb", type=float, help="passed to this checkout's import (default: its own)")
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also run another checkout's code (e.g. before=../old)")
     ap.add_argument("--keep", type=Path, help="write the files and captures here and keep them")
     args = ap.parse_args()
     base = args.keep or Path(tempfile.mkdtemp(prefix="bench_import_"))
-    rows, wav_rows = [], []
+    rows: list = []
+    long_rows: list = []
     try:
         for n in sorted(args.files):
             src = base / f"files_{n}"
@@ -108,6 +145,15 @@ def main() -> None:
                 memory = args.memory_mb if tree == ROOT else None
                 r = run_import(src, base / f"capture_{n}_{label or 'this'}.bin", tree, memory)
                 rows.append((label, n, r))
+        for m in sorted(args.csv_minutes):
+            src = base / f"long_{m:g}.csv"
+            if not src.is_file():
+                print(f"writing a {m:g}-minute CSV ...", file=sys.stderr, flush=True)
+                write_csv(src, m)
+            for label, tree in trees(args.tree):
+                memory = args.memory_mb if tree == ROOT else None
+                r = run_import(src, base / f"csv_{m:g}_{label or 'this'}.bin", tree, memory, "--unit", "g")
+                long_rows.append(("CSV", label, m, src.stat().st_size / 1e6, m * 60 * CSV_FS * 3 * 8 / 1e6, r))
         for m in sorted(args.wav_minutes):
             src = base / f"long_{m:g}.wav"
             if not src.is_file():
@@ -117,7 +163,7 @@ def main() -> None:
                 memory = args.memory_mb if tree == ROOT else None
                 r = run_import(src, base / f"wav_{m:g}_{label or 'this'}.bin", tree, memory, "--unit", "g",
                                "--scale-factor", "10")
-                wav_rows.append((label, m, src.stat().st_size / 1e6, r))
+                long_rows.append(("WAV", label, m, src.stat().st_size / 1e6, m * 60 * WAV_FS * 2 * 8 / 1e6, r))
     finally:
         if args.keep is None:
             shutil.rmtree(base, ignore_errors=True)
@@ -128,13 +174,15 @@ def main() -> None:
     for label, n, r in rows:
         print(f"| {label or 'this'} | {n} | {samples_mb[n]:.0f} | {r['capture_mb']:.1f} | {r['wall_s']:.1f} | "
               f"{r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
-    if wav_rows:
-        print(f"\ncmsensord import of one WAV file (stereo, 16-bit, {WAV_FS} Hz)")
-        print("| code | minutes | file MB | samples MB (float64) | capture MB | wall s | CPU s | peak RSS MB |")
-        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
-        for label, m, file_mb, r in wav_rows:
-            print(f"| {label or 'this'} | {m:g} | {file_mb:.0f} | {m * 60 * WAV_FS * 2 * 8 / 1e6:.0f} | "
-                  f"{r['capture_mb']:.1f} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
+    if long_rows:
+        print(f"\ncmsensord import of one long file: a stereo 16-bit WAV at {WAV_FS} Hz, a CSV of a time column "
+              f"and 3 channels at {CSV_FS} Hz ('own MB': peak anonymous memory, not pages of files it maps)")
+        print("| file | code | minutes | file MB | samples MB (float64) | capture MB | wall s | CPU s | peak RSS MB "
+              "| own MB |")
+        print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+        for kind, label, m, file_mb, samples_mb, r in long_rows:
+            print(f"| {kind} | {label or 'this'} | {m:g} | {file_mb:.0f} | {samples_mb:.0f} | {r['capture_mb']:.1f} | "
+                  f"{r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['rss_mb']:.0f} | {r['anon_mb']:.0f} |")
 
 
 if __name__ == "__main__":

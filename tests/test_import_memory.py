@@ -5,6 +5,7 @@ nothing behind."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -150,3 +151,61 @@ def test_the_store_reads_back_what_was_appended_and_keeps_each_channel_peak(tmp_
 def test_the_store_refuses_a_directory_it_cannot_write(tmp_path):
     with pytest.raises(ImportFailure, match="cannot write the capture: No such file or directory"):
         SampleStore(1, str(tmp_path / "missing" / "o.bin"))
+
+
+def long_csv(path: Path, dated: bool = False, decimal_comma: bool = False) -> None:
+    """A logger's CSV: a preamble, a header, a time (or date and time) column, three channels,
+    a comment and a blank line among the rows."""
+    rng = np.random.default_rng(2)
+    sep, dot = (";", ",") if decimal_comma else (",", ".")
+    rows = []
+    for k in range(3000):
+        t = f"2023-05-01 12:00:{k / 1000:06.3f}" if dated else f"{k / 1000:.3f}".replace(".", dot)
+        rows.append(sep.join([t, *(f"{v:.4f}".replace(".", dot) for v in 0.1 * rng.standard_normal(3))]))
+    rows[1234:1234] = ["# operator changed the cable", ""]
+    path.write_text("Logger: DL-9\nSample rate: see times\n" + sep.join(["Time", "ax", "ay", "az"]) + "\n"
+                    + "\n".join(rows) + "\n")
+
+
+@pytest.mark.parametrize("kind", ["plain", "dated", "decimal_comma"])
+def test_a_long_text_file_read_in_chunks_gives_the_same_capture(tmp_path, monkeypatch, kind):
+    """Past ``--memory-mb`` a text file's numbers are read a chunk of lines at a time and wait
+    on disk; chunks of 1,000 and of 7 lines give the capture and sidecar of a whole read."""
+    from cmsensord.cli import main
+    from cmsensord.importing import tabular
+
+    long_csv(tmp_path / "log.csv", dated=kind == "dated", decimal_comma=kind == "decimal_comma")
+    outs = set()
+    for memory, lines in (("64", 1 << 16), ("0", 1000), ("0", 7)):
+        monkeypatch.setattr(tabular, "CHUNK_LINES", lines)
+        out = tmp_path / "o.bin"
+        assert main(["import", str(tmp_path / "log.csv"), "--unit", "g", "--memory-mb", memory, "--out", str(out)]) == 0
+        outs.add((out.read_bytes(), Path(f"{out}.json").read_bytes()))
+    assert len(outs) == 1
+    assert json.loads(Path(f"{out}.json").read_text())["fs"] == 1000
+
+
+@pytest.mark.parametrize("memory", ["64", "0"])
+def test_a_bad_line_of_a_long_text_file_is_named_as_in_a_whole_read(tmp_path, monkeypatch, capsys, memory):
+    from cmsensord.cli import main
+    from cmsensord.importing import tabular
+
+    monkeypatch.setattr(tabular, "CHUNK_LINES", 3)
+    rows = [f"{k},{k % 7}" for k in range(20)]
+    (tmp_path / "bad.csv").write_text("t,x\n" + "\n".join(rows[:9] + ["9,oops"] + rows[10:]) + "\n")
+    (tmp_path / "wide.csv").write_text("t,x\n" + "\n".join(rows[:13] + ["13,1,2"] + rows[14:]) + "\n")
+    for name, line in (("bad", "line 11, column 1: 'oops' is not a number"),
+                       ("wide", "line 15: 3 column(s) where the lines before have 2")):
+        assert main(["import", str(tmp_path / f"{name}.csv"), "--memory-mb", memory, "--out",
+                     str(tmp_path / "o.bin")]) == 2
+        assert capsys.readouterr().err == (f"cmsensord import: {tmp_path / name}.csv: {line} (separator ',', a "
+                                           "header line); fix the file, or set --separator / --header / --no-header\n")
+        assert not list(tmp_path.glob("o.bin*"))
+
+
+def test_a_blank_line_among_dated_rows_says_nothing_of_numpy(tmp_path):
+    from tests.test_import import cmd
+
+    long_csv(tmp_path / "log.csv", dated=True)
+    r = cmd("import", "log.csv", "--unit", "g", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0 and "Warning" not in r.stderr and "numpy" not in r.stderr, r.stderr

@@ -131,7 +131,7 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
     if ext == ".wav":
         return read_wav(path)
     if ext in (".csv", ".tsv", ".txt", ".lvm"):     # .lvm: LabVIEW's text measurement file
-        return read_tabular(path, opts.separator, opts.header)
+        return read_tabular(path, opts.separator, opts.header, _spill(opts))
     if ext == ".npy":
         return read_npy(path)
     if ext == ".npz":
@@ -139,9 +139,14 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
     if ext == ".mat":
         return read_mat(path, opts.variable, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)
-        return read_tabular(path, opts.separator, opts.header)
+        return read_tabular(path, opts.separator, opts.header, _spill(opts))
     raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}, and not a text table of "
                         f"numbers; supported: {', '.join(EXTENSIONS)}")
+
+
+def _spill(opts: ImportOptions) -> tuple[str, float]:
+    """Where a long text table's numbers wait while it is read (beside ``--out``), past how many MB."""
+    return str(Path(opts.out).resolve().parent), opts.memory_mb
 
 
 def _column(t: Table, token: str, option: str) -> int:

@@ -27,14 +27,16 @@ file, its line in the file and the column.
 from __future__ import annotations
 
 import io
+import itertools
 import re
+import tempfile
 import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from .errors import ImportFailure
+from .errors import ImportFailure, cannot_write
 from .preamble import preamble_start
 from .table import Table
 from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split
@@ -45,6 +47,8 @@ __all__ = ["read_tabular", "sniff", "is_text_table"]
 _SEP_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
 #: bytes :func:`is_text_table` looks at
 _TEXT_PROBE_BYTES = 4096
+#: lines of a long text table read at a time (:func:`_numbers_in_chunks`)
+CHUNK_LINES = 1 << 16
 
 
 def sniff(lines: list[str], separator: str | None = None,
@@ -122,8 +126,62 @@ def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
             f"skipped (the first: {first!r})")
 
 
-def _dates(src: str | io.StringIO, sep: str | None, skip: int, path: str) -> np.ndarray:
-    """The first column's dates and times as seconds since the Unix epoch (float64)."""
+def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dated: bool, width: int) -> np.ndarray:
+    """float64 (rows, columns) of the text table ``src`` after its first ``skip`` lines, which
+    begin at line ``line0`` of the file (a first column of dates as seconds since the Unix
+    epoch); a row that is not numbers is a ValueError naming its line in the file."""
+    try:
+        with warnings.catch_warnings():             # "input contained no data", blank lines: not the user's
+            warnings.simplefilter("ignore", UserWarning)
+            a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
+                           encoding="utf-8-sig", usecols=range(1, width) if dated else None)
+            return np.column_stack([_dates(src, sep, skip, line0), a]) if dated else a
+    except ValueError as exc:
+        raise ValueError(_loadtxt_message(str(exc), line0)) from None
+
+
+def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, width: int,
+                       spill_dir: str) -> np.ndarray:
+    """:func:`_numbers` of the whole file, read ``CHUNK_LINES`` lines at a time into an unnamed
+    file in ``spill_dir`` (gone with the map), as a read-only memory map (rows, columns)."""
+    done, columns = 0, 0
+    try:
+        store = tempfile.TemporaryFile(dir=spill_dir)
+    except OSError as exc:
+        raise cannot_write(spill_dir, exc.strerror or str(exc)) from None
+    with store, open(path, encoding="utf-8-sig", errors="replace") as f:
+        for _ in itertools.islice(f, skip):
+            pass
+        line0 = skip
+        while lines := list(itertools.islice(f, CHUNK_LINES)):
+            text = "".join(lines)
+            a = _numbers(io.StringIO(text.replace(",", ".") if decimal_comma else text), sep, 0, line0, dated, width)
+            if a.size and columns and a.shape[1] != columns:
+                at = line0 + next(i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#"))
+                raise ValueError(f"line {at + 1}: {a.shape[1]} column(s) where the lines before have {columns}")
+            if a.size:
+                columns = a.shape[1]
+                _spill(store, a, spill_dir)
+                done += a.shape[0]
+            line0 += len(lines)
+        if not done:
+            return np.empty((0, max(columns, 1)))
+        store.flush()
+        return np.memmap(store, dtype=np.float64, mode="r", shape=(done, columns))
+
+
+def _spill(store, a: np.ndarray, spill_dir: str) -> None:
+    try:
+        store.write(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    except OSError as exc:
+        raise ImportFailure(f"{spill_dir}: no room on its disk for the numbers of a long text file (held there "
+                            f"while it is read, 8 bytes a value): {exc.strerror or exc}; free space, give --out "
+                            "on another disk or hold more in memory with --memory-mb") from None
+
+
+def _dates(src: str | io.StringIO, sep: str | None, skip: int, line0: int) -> np.ndarray:
+    """The first column's dates and times as seconds since the Unix epoch (float64); ``line0``:
+    the file's line of the first row."""
     if isinstance(src, io.StringIO):
         src.seek(0)
     text = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=1, dtype=str, quotechar='"',
@@ -132,7 +190,7 @@ def _dates(src: str | io.StringIO, sep: str | None, skip: int, path: str) -> np.
         stamps = np.char.strip(text).astype("datetime64[us]")
     except ValueError:
         bad = next(i for i, v in enumerate(text) if not _is_date(v))
-        raise ValueError(f"line {bad + 1 + skip}, column 0: {str(text[bad])!r} is not a date and time") from None
+        raise ValueError(f"line {bad + 1 + line0}, column 0: {str(text[bad])!r} is not a date and time") from None
     return (stamps - np.datetime64(0, "us")).astype(np.float64) / 1e6
 
 
@@ -144,26 +202,25 @@ def _is_date(text: str) -> bool:
     return DATETIME.fullmatch(text) is not None
 
 
-def read_tabular(path: str, separator: str | None = None, header: bool | None = None) -> Table:
+def read_tabular(path: str, separator: str | None = None, header: bool | None = None,
+                 spill: tuple[str, float] | None = None) -> Table:
+    """The text table's numbers; with ``spill`` (a directory, MB), a file larger than that many
+    MB is read a chunk of lines at a time into an unnamed file in that directory, its numbers a
+    memory map of it (:func:`_numbers_in_chunks`), so that a long recording's text does not
+    need its float64 table in memory."""
     head = read_head(path)
     sep, header_line, decimal_comma, skip = _layout(head, separator, header)
+    first = split(head.rows[0], sep) if head.rows else []
+    dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
     try:
-        if decimal_comma:
-            text = Path(path).read_text(encoding="utf-8-sig", errors="replace").replace(",", ".")
-            src: str | io.StringIO = io.StringIO(text)
+        if spill is not None and Path(path).stat().st_size > spill[1] * 1e6:
+            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, len(first), spill[0])
         else:
-            src = path
-        first = split(head.rows[0], sep) if head.rows else []
-        dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
-        with warnings.catch_warnings():             # "input contained no data": said below, once
-            warnings.simplefilter("ignore", UserWarning)
-            a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
-                           encoding="utf-8-sig", usecols=range(1, len(first)) if dated else None)
-        if dated:
-            a = np.column_stack([_dates(src, sep, skip, path), a])
-    except ValueError as exc:
-        msg = _loadtxt_message(str(exc), skip)
-        raise ImportFailure(f"{path}: {msg} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
+            src: str | io.StringIO = io.StringIO(Path(path).read_text(encoding="utf-8-sig", errors="replace")
+                                                 .replace(",", ".")) if decimal_comma else path
+            a = _numbers(src, sep, skip, skip, dated, len(first))
+    except ValueError as exc:                       # its message names the line (_numbers)
+        raise ImportFailure(f"{path}: {exc} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
                             f"{'a header line' if header_line is not None else 'no header'}); fix the file, "
                             "or set --separator / --header / --no-header") from None
     if a.shape[0] == 0:

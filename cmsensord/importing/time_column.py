@@ -64,7 +64,7 @@ def with_time_column(t: Table, has_header: bool, dated: bool = False) -> Table:
     if found is None:
         return t
     col, unit_s = found
-    return _time_base(t, col, t.data[0, :, col].astype(np.float64) * unit_s, "is the time base", "its")
+    return _time_base(t, col, np.multiply(t.data[0, :, col], unit_s, dtype=np.float64), "is the time base", "its")
 
 
 def _dated(t: Table) -> Table:
@@ -86,10 +86,15 @@ def _time_base(t: Table, col: int, times: np.ndarray, what: str, whose: str) -> 
 
 
 _CLOCK_NAMES = ("hour", "minute", "second", "microsecond")
+#: rows a table's time-of-day columns are first told by
+_HEAD_ROWS = 4096
 
 
 def _clock(t: Table) -> tuple[tuple[int, ...], np.ndarray] | None:
-    """(columns, seconds of the day) of time-of-day columns at the table's start, or None."""
+    """(columns, seconds of the day) of time-of-day columns at the table's start, or None (told
+    by the first rows first: a long table's columns are copied only when those are times)."""
+    if t.data.shape[1] > _HEAD_ROWS and _clock(replace(t, data=t.data[:, :_HEAD_ROWS])) is None:
+        return None
     a = t.data[0]
     for width in (4, 3):
         if a.shape[1] <= width:
@@ -113,25 +118,44 @@ def _labelled(t: Table) -> tuple[int, float] | None:
     """(column, seconds a unit of it) of the first column labelled as time whose values increase."""
     for i, name in enumerate(t.columns):
         m = _LABEL.fullmatch(name)
-        if m and bool(np.all(np.diff(t.data[0, :, i]) > 0)):
+        if m and _increasing(t.data[0, :, i]):
             return i, _UNIT_S.get((m[2] or "s").lower(), 1.0)
     return None
+
+
+#: values a long column is checked a stretch at a time by (no column-long temporaries)
+_STRETCH = 1 << 20
+
+
+def _stretches(n: int):
+    return range(0, n, _STRETCH)
+
+
+def _increasing(x: np.ndarray) -> bool:
+    return all(bool(np.all(np.diff(x[a:a + _STRETCH + 1]) > 0)) for a in _stretches(x.size))
 
 
 def _even(x: np.ndarray) -> bool:
     """Strictly increasing, each value within half a mean step of the straight line."""
     x = np.asarray(x, dtype=np.float64)
-    if x.size < 3 or not bool(np.all(np.diff(x) > 0)):
+    if x.size < 3 or not _increasing(x):
         return False
     step = (x[-1] - x[0]) / (x.size - 1)
-    return bool(np.abs(x - (x[0] + step * np.arange(x.size))).max() <= 0.5 * step)
+    return all(float(np.abs(x[a:a + _STRETCH] - (x[0] + step * np.arange(a, min(a + _STRETCH, x.size)))).max())
+               <= 0.5 * step for a in _stretches(x.size))
 
 
 def _rate(times: np.ndarray) -> float:
     """1 / the least-squares step of evenly spaced times (printed times are rounded: the fit
     averages that away, the two ends alone do not), whole Hz when within ``WHOLE_HZ``."""
-    i = np.arange(times.size, dtype=np.float64) - (times.size - 1) / 2
-    fs = float((i * i).sum() / (i * (times - times.mean())).sum())
+    n, mid = times.size, (times.size - 1) / 2
+    mean = sum(float(times[a:a + _STRETCH].sum()) for a in _stretches(n)) / n
+    num = den = 0.0
+    for a in _stretches(n):
+        k = np.arange(a, min(a + _STRETCH, n), dtype=np.float64) - mid
+        num += float((k * k).sum())
+        den += float((k * (times[a:a + k.size] - mean)).sum())
+    fs = num / den
     return float(round(fs)) if abs(fs - round(fs)) <= WHOLE_HZ * fs else fs
 
 
