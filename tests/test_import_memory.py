@@ -120,6 +120,21 @@ def test_a_disk_without_room_for_the_samples_is_one_line_and_leaves_nothing(tmp_
     assert sorted(p.name for p in small_fs.iterdir()) == ["o.bin", "o.bin.json"]
 
 
+def test_a_disk_without_room_for_a_long_text_files_numbers_is_one_line_and_leaves_nothing(tmp_path, small_fs):
+    """20,000 rows of a time and three channels (640 kB of float64) read in chunks beside an
+    --out on the 512 KiB tmpfs: one line, exit 2, the disk as it was."""
+    rng = np.random.default_rng(3)
+    rows = np.c_[np.arange(20000) / 1000, 0.1 * rng.standard_normal((20000, 3))]
+    np.savetxt(tmp_path / "log.csv", rows, fmt="%.4f", delimiter=",", header="t,ax,ay,az", comments="")
+    r = subprocess.run([sys.executable, "-m", "cmsensord", "import", "log.csv", "--unit", "g", "--memory-mb", "0",
+                        "--out", str(small_fs / "o.bin")], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert (r.returncode, r.stdout) == (2, "")
+    assert r.stderr == (f"cmsensord import: log.csv: no room in {small_fs} for the numbers of this long text file "
+                        "(held there while it is read, 8 bytes a value): No space left on device; free space, give "
+                        "--out on another disk or hold more in memory with --memory-mb\n")
+    assert list(small_fs.iterdir()) == []
+
+
 def test_an_output_directory_that_does_not_exist_is_one_line(tmp_path):
     write_files(tmp_path / "d", 1)
     r = subprocess.run([sys.executable, "-m", "cmsensord", "import", "d", "--fs", str(FS), "--out",

@@ -161,20 +161,25 @@ def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: boo
                 raise ValueError(f"line {at + 1}: {a.shape[1]} column(s) where the lines before have {columns}")
             if a.size:
                 columns = a.shape[1]
-                _spill(store, a, spill_dir)
+                _spill(store, a, spill_dir, path)
                 done += a.shape[0]
             line0 += len(lines)
         if not done:
             return np.empty((0, max(columns, 1)))
-        store.flush()
+        _spill(store, None, spill_dir, path)
         return np.memmap(store, dtype=np.float64, mode="r", shape=(done, columns))
 
 
-def _spill(store, a: np.ndarray, spill_dir: str) -> None:
+def _spill(store, a: np.ndarray | None, spill_dir: str, path: str) -> None:
+    """``a`` written to the end of ``store`` (None: what is buffered, flushed); a disk without
+    room is one line."""
     try:
-        store.write(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+        if a is None:
+            store.flush()
+        else:
+            store.write(np.ascontiguousarray(a, dtype=np.float64).tobytes())
     except OSError as exc:
-        raise ImportFailure(f"{spill_dir}: no room on its disk for the numbers of a long text file (held there "
+        raise ImportFailure(f"{path}: no room in {spill_dir} for the numbers of this long text file (held there "
                             f"while it is read, 8 bytes a value): {exc.strerror or exc}; free space, give --out "
                             "on another disk or hold more in memory with --memory-mb") from None
 
