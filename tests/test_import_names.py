@@ -109,10 +109,10 @@ def test_files_of_no_known_type_that_are_not_text_tables_are_one_line_errors(tmp
     (d / "log").write_text("started at 10:32\n")
     cases = {
         "blob": "blob: unknown file type (no extension), and not a text table of numbers; supported: "
-                ".wav, .csv, .tsv, .txt, .lvm, .npy, .npz, .mat",
+                ".wav, .csv, .tsv, .txt, .lvm, .npy, .npz, .mat, .tdms",
         "words": "words: unknown file type (no extension), and not a text table of numbers; supported: "
-                 ".wav, .csv, .tsv, .txt, .lvm, .npy, .npz, .mat",
-        "notes": "notes: no recording files (.wav, .csv, .tsv, .txt, .lvm, .npy, .npz, .mat, or text tables of "
+                 ".wav, .csv, .tsv, .txt, .lvm, .npy, .npz, .mat, .tdms",
+        "notes": "notes: no recording files (.wav, .csv, .tsv, .txt, .lvm, .npy, .npz, .mat, .tdms, or text tables of "
                  "numbers) in this directory; give the files or a --glob pattern",
     }
     for src, message in cases.items():

@@ -2,7 +2,7 @@
 
 A capture of the board's serial protocol (docs/PROTOCOL.md) is the one input
 ``replay`` and everything downstream read; this package writes one from a WAV,
-CSV/TSV, NPY/NPZ or MATLAB v5/v7 file, or from a directory or glob of snapshot
+CSV/TSV, NPY/NPZ, MATLAB v5/v7 or TDMS file, or from a directory or glob of snapshot
 files, plus a sidecar JSON (``CAPTURE.json``, e.g. ``b11.bin.json``) that records where every snapshot
 came from and the gaps between them.
 
@@ -11,7 +11,7 @@ Modules, one job each:
 * :mod:`.errors` -- the one-line :class:`ImportFailure`;
 * :mod:`.options` -- the settings the user asked for;
 * :mod:`.table` -- what every reader returns (raw columns, maybe fs, times, rpm);
-* :mod:`.wav`, :mod:`.tabular`, :mod:`.arrays`, :mod:`.matlab` -- the readers;
+* :mod:`.wav`, :mod:`.tabular`, :mod:`.arrays`, :mod:`.matlab`, :mod:`.tdms` -- the readers;
 * :mod:`.text_head` -- where a text table's numbers begin (comments, a preamble, the names);
 * :mod:`.preamble` -- the start date and time a text table's preamble gives (LabVIEW's);
 * :mod:`.time_column` -- a text table's column of times: the rate, and no channel;

@@ -55,5 +55,5 @@ def read_npz(path: str, array: tuple[str, ...] | None, slow: str | None = None) 
         if k.lower() in TIME_KEYS and v.ndim == 1 and v.size == data.shape[0] \
                 and v.dtype.kind in "iuf" and data.shape[0] > 1:
             times = v.astype(np.float64)
-    return Table(path=path, data=data, columns=columns, kind="channel", rate_note=note,
+    return Table(path=path, data=data, columns=columns, kind="channel", layout_note=note,
                  fs=scalar_named(arrays, FS_KEYS), times=times, rpm=rpm_named(arrays))

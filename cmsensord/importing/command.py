@@ -59,7 +59,7 @@ _SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "comma": ",", "semicolon": ";", "s
 
 def add_import_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
-        "import", help="turn a recording from another data logger (WAV, CSV, LVM, NPY/NPZ, MAT, "
+        "import", help="turn a recording from another data logger (WAV, CSV, LVM, NPY/NPZ, MAT, TDMS, "
                        "snapshot files) into a capture for replay",
         description="Turn a recording from another data logger into a capture of the board's "
                     "protocol (RAW mode at the recording's own rate, or RMS mode), with a sidecar "

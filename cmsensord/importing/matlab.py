@@ -31,5 +31,5 @@ def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = Non
         raise ImportFailure(f"{path}: not a readable MATLAB file ({' '.join(str(exc).split())})") from None
     arrays = flatten({k: v for k, v in m.items() if not k.startswith("__")})
     data, columns, note = selected(path, arrays, variable, "--variable", "variable", slow)
-    return Table(path=path, data=data, columns=columns, kind="column", rate_note=note,
+    return Table(path=path, data=data, columns=columns, kind="column", layout_note=note,
                  fs=scalar_named(arrays, tuple(k.lower() for k in FS_KEYS)), rpm=rpm_named(arrays))

@@ -36,12 +36,13 @@ from .snapshot_times import retimed
 from .table import Table
 from .tabular import is_text_table, read_tabular
 from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
+from .tdms import read_tdms
 from .units import to_ms2_factor
 from .wav import read_wav
 
 __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
 
-EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".lvm", ".npy", ".npz", ".mat")
+EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".lvm", ".npy", ".npz", ".mat", ".tdms")
 MAX_CHANNELS = 8
 #: samples a channel converted at a time (2 MB of float64 each)
 READ_SAMPLES = 1 << 18
@@ -138,6 +139,8 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
         return read_npz(path, opts.array, opts.speed_column)
     if ext == ".mat":
         return read_mat(path, opts.variable, opts.speed_column)
+    if ext == ".tdms":
+        return read_tdms(path, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)
         return read_tabular(path, opts.separator, opts.header, _spill(opts))
     raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}, and not a text table of "
@@ -180,7 +183,7 @@ class _Layout:
         if len(self.idx) > MAX_CHANNELS:
             raise ImportFailure(f"{t.path}: {len(self.idx)} {t.kind}s, the board carries at most "
                                 f"{MAX_CHANNELS}; choose some with --channels (e.g. --channels 0,1)")
-        self.notes = [n for n in (t.head_note, t.time_note, t.rate_note) if n]  # said once: preamble, time base, ...
+        self.notes = [n for n in (t.head_note, t.time_note, t.layout_note) if n]  # said once: preamble, time base, ...
         if opts.names:
             self.names = checked_names(list(opts.names))
         else:

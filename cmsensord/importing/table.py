@@ -42,7 +42,7 @@ class Table:
     dated: bool = False  # ``times`` are dates and times (seconds since the Unix epoch, the zone not known)
     time_note: str | None = None  # what the import says of it, once
     head_note: str | None = None  # lines skipped before the numbers (a text table's preamble), said once
-    rate_note: str | None = None  # a speed column sampled slower, interpolated to the rate, said once
+    layout_note: str | None = None  # what the reader made of the columns (a slower speed interpolated), said once
     gain: float = 1.0  # ``data`` in the file's unit: (data - zero) * gain (a WAV's PCM to fractions of full scale)
     zero: float = 0.0
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from .table import Table
 
-__all__ = ["with_time_column"]
+__all__ = ["whole_hz", "with_time_column"]
 
 _LABEL = re.compile(
     r"\s*(t|time|times|timestamp|time_?stamp|elapsed(?:[ _]?time)?|zeit|temps|tiempo|x_value)"
@@ -156,6 +156,12 @@ def _rate(times: np.ndarray) -> float:
         num += float((k * k).sum())
         den += float((k * (times[a:a + k.size] - mean)).sum())
     fs = num / den
+    return whole_hz(fs)
+
+
+def whole_hz(fs: float) -> float:
+    """``fs`` as a whole number of Hz when within ``WHOLE_HZ`` of one (a rate from printed times,
+    or from a waveform's time step)."""
     return float(round(fs)) if abs(fs - round(fs)) <= WHOLE_HZ * fs else fs
 
 

@@ -29,7 +29,7 @@ import numpy as np
 from .errors import ImportFailure
 from .table import RPM_KEYS, as_snapshot_array
 
-__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "selected"]
+__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "selected", "stretched"]
 
 #: how deep :func:`flatten` looks into structs within structs
 MAX_DEPTH = 3
@@ -144,7 +144,7 @@ def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: st
         if a.shape[:2] == parts[ref].shape[:2]:
             continue
         if is_slow[k] and a.shape[0] == parts[ref].shape[0] and 2 <= a.shape[1] < parts[ref].shape[1]:
-            parts[k], note = _stretched(a, parts[ref].shape[1]), (
+            parts[k], note = stretched(a, parts[ref].shape[1]), (
                 f"{picks[k][1]}: {a.shape[1]} samples beside {parts[ref].shape[1]} of {picks[ref][1]}: "
                 f"taken as the same time sampled {parts[ref].shape[1] / a.shape[1]:.4g} x slower, "
                 "interpolated linearly")
@@ -157,7 +157,7 @@ def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: st
     return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)), columns, note
 
 
-def _stretched(a: np.ndarray, n: int) -> np.ndarray:
+def stretched(a: np.ndarray, n: int) -> np.ndarray:
     """(snapshots, m, 1) sampled over the same time as ``n`` samples, interpolated to them."""
     m = a.shape[1]
     at = np.arange(n) * (m / n)

@@ -1,0 +1,100 @@
+"""TDMS reader: National Instruments' files (LabVIEW, DAQExpress, FlexLogger), with the
+optional ``tdms`` extra (npTDMS).
+
+Every numeric channel of the file's groups is a column, named by the channel (``group.channel``
+where two groups name a channel alike). A waveform channel says its own rate and start:
+``wf_increment`` (seconds a sample) gives fs, ``wf_start_time`` the file's snapshot time (as
+TDMS stores it, UTC), so a logger's directory of one file per snapshot needs neither ``--fs``
+nor ``--snapshot-interval``. Channels shorter than the longest (a temperature logged beside the
+vibration) are left out with a note, except the speed column (``--speed-column``), which is
+taken to span the same time (:func:`~.variables.stretched`). The file is read whole.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ImportFailure
+from .table import Table
+from .time_column import whole_hz
+from .variables import stretched
+
+__all__ = ["read_tdms"]
+
+
+def read_tdms(path: str, slow: str | None = None) -> Table:
+    try:
+        from nptdms import TdmsFile
+    except ImportError:
+        raise ImportFailure(f"{path}: reading TDMS files needs npTDMS: pip install 'cmsensord[tdms]'") from None
+    said: list[str] = []        # what npTDMS logged of the file (a cut-short segment, a bad version)
+    try:
+        with _heard(said):
+            f = TdmsFile.read(path)
+    except Exception as exc:  # npTDMS raises what the bytes make it (ValueError, KeyError, struct.error, ...)
+        why = " ".join(str(exc).split()) or type(exc).__name__
+        raise ImportFailure(f"{path}: not a readable TDMS file ({why}); export it again from LabVIEW, or as CSV") \
+            from None
+    chans = [(g.name, c) for g in f.groups() for c in g.channels()
+             if np.asarray(c[:]).dtype.kind in "iuf" and len(c) > 1]
+    if not chans:
+        why = f"not a readable TDMS file ({said[0]})" if said else "no numeric channel in the file"
+        raise ImportFailure(f"{path}: {why}; export it again from LabVIEW, or as CSV")
+    plain = [c.name for _, c in chans]
+    names = [c.name if plain.count(c.name) == 1 else f"{g}.{c.name}" for g, c in chans]
+    n = max(len(c) for _, c in chans)
+    keep = [k for k, (_, c) in enumerate(chans) if len(c) == n or (names[k] == slow and len(c) < n)]
+    left = [f"{names[k]} ({len(c)})" for k, (_, c) in enumerate(chans) if k not in keep]
+    data = np.stack([_column(chans[k][1], n) for k in keep], axis=1)[None]
+    first = chans[keep[0]][1].properties
+    note = f"channel(s) {', '.join(left)} hold fewer samples than the others' {n}: not imported" if left else None
+    start = first.get("wf_start_time")
+    times = None
+    if isinstance(start, np.datetime64) and not np.isnat(start):
+        times = np.array([(start.astype("datetime64[us]") - np.datetime64(0, "us")).astype(np.float64) / 1e6])
+    return Table(path=path, data=data, columns=[names[k] for k in keep], kind="channel", fs=_fs(first),
+                 times=times, dated=times is not None, layout_note=note,
+                 notes=[f"{Path(path).name}: npTDMS: {said[0]}; the channels' samples there are imported"] if said
+                 else [])
+
+
+class _Heard(logging.Handler):
+    def __init__(self, said: list[str]):
+        super().__init__(logging.WARNING)
+        self.said = said
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.said.append(record.getMessage())
+
+
+@contextmanager
+def _heard(said: list[str]):
+    """npTDMS's warnings (it prints them to stderr itself) into ``said`` instead."""
+    from nptdms.log import log_manager
+
+    saved = [(log, log.propagate, list(log.handlers)) for log in log_manager.loggers.values()]
+    for log, _, _ in saved:
+        log.handlers, log.propagate = [_Heard(said)], False
+    try:
+        yield
+    finally:
+        for log, propagate, handlers in saved:
+            log.handlers, log.propagate = handlers, propagate
+
+
+def _column(channel, n: int) -> np.ndarray:
+    x = np.asarray(channel[:])
+    return x if x.size == n else stretched(x[None, :, None], n)[0, :, 0]
+
+
+def _fs(properties: dict) -> float | None:
+    """1 / the waveform's ``wf_increment``, when it has one that is a time step."""
+    try:
+        inc = float(properties["wf_increment"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return whole_hz(1.0 / inc) if np.isfinite(inc) and inc > 0 else None

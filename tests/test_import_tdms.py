@@ -1,0 +1,98 @@
+"""`cmsensord import` of National Instruments' TDMS files (the ``tdms`` extra): the rate and each
+file's start from its waveform channels, a logger's directory of snapshot files dated by them,
+channels shorter than the others left out but a speed column sampled slower, and a file that is
+not TDMS, or no npTDMS, in one line."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
+
+nptdms = pytest.importorskip("nptdms", reason="the tdms extra")
+
+FS = 10000
+
+
+def write_tdms(path, k: int, speed: np.ndarray | None = None) -> np.ndarray:
+    """One snapshot file as a logger writes it: two accelerometers (g) in one group, a slow
+    temperature in another, the snapshot's start 10 minutes after the one before; its samples."""
+    rng = np.random.default_rng(k)
+    x = np.round(0.2 * rng.standard_normal((2, FS)), 5)
+    wave = {"wf_increment": 1.0 / FS, "wf_start_time": np.datetime64("2024-03-05T10:15:00")
+            + np.timedelta64(600 * k, "s"), "unit_string": "g"}
+    objs = [nptdms.RootObject({}), nptdms.GroupObject("Vibration"),
+            nptdms.ChannelObject("Vibration", "Accel DE", x[0], wave),
+            nptdms.ChannelObject("Vibration", "Accel FE", x[1], wave),
+            nptdms.ChannelObject("Environment", "Temperature", np.array([21.5, 21.6, 21.7]), {"wf_increment": 1.0})]
+    if speed is not None:
+        objs.append(nptdms.ChannelObject("Vibration", "speed", speed, {"wf_increment": FS / speed.size / FS}))
+    with nptdms.TdmsWriter(str(path)) as w:
+        w.write_segment(objs)
+    return x
+
+
+def test_a_directory_of_tdms_snapshots_gives_its_rate_times_and_channels(tmp_path):
+    d = tmp_path / "run"
+    d.mkdir()
+    xs = [write_tdms(d / f"vib_{k:03d}.tdms", k) for k in range(3)]
+    r = cmd("import", "run", "--unit", "g", "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta = sidecar(tmp_path / "r.bin")
+    assert (meta["fs"], meta["channel_names"], meta["source_start"]) == (FS, ["Accel_DE", "Accel_FE"],
+                                                                          "2024-03-05T10:15:00")
+    assert [s["source_time_s"] for s in meta["snapshots"]] == [0.0, 600.0, 1200.0]
+    assert r.stderr.count("  note: channel(s) Temperature (3) hold fewer samples than the others' 10000: "
+                          "not imported\n") == 1
+    assert_within_one_count(decode(tmp_path / "r.bin"), np.concatenate(xs, axis=1) * G)
+
+
+def test_a_speed_channel_sampled_slower_gives_the_tacho(tmp_path):
+    rpm = np.full(FS // 10, 1500.0)
+    write_tdms(tmp_path / "s.tdms", 0, speed=rpm)
+    r = cmd("import", "s.tdms", "--unit", "g", "--speed-column", "speed", "--out", "s.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    cap = decode(tmp_path / "s.bin")
+    assert cap["status"].n_channels == 2 and cap["edges"].size == 25     # 25 revolutions in its second
+    assert np.allclose(np.diff(cap["edges"]), FS / 25, atol=1 / 256)
+
+
+def test_a_file_that_is_not_tdms_is_one_line(tmp_path):
+    (tmp_path / "bad.tdms").write_bytes(b"TDSm" + bytes(range(200)))
+    r = cmd("import", "bad.tdms", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 2 and r.stderr.startswith("cmsensord import: bad.tdms: not a readable TDMS file (")
+    assert r.stderr.endswith("; export it again from LabVIEW, or as CSV\n") and r.stderr.count("\n") == 1
+    assert not list(tmp_path.glob("o.bin*"))
+
+
+def test_a_tdms_file_cut_short_is_imported_as_far_as_it_goes_and_says_so(tmp_path):
+    """Two segments written, the second cut inside its data: npTDMS's own words in a note (not
+    its log lines on stderr), the first segment's samples imported."""
+    x = np.round(0.2 * np.random.default_rng(1).standard_normal(2 * FS), 5)
+    wave = {"wf_increment": 1.0 / FS}
+    with nptdms.TdmsWriter(str(tmp_path / "c.tdms")) as w:
+        for half in (x[:FS], x[FS:]):
+            w.write_segment([nptdms.ChannelObject("Vibration", "acc", half, wave)])
+    data = (tmp_path / "c.tdms").read_bytes()
+    (tmp_path / "c.tdms").write_bytes(data[:-4000])
+    r = cmd("import", "c.tdms", "--unit", "g", "--out", "c.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "nptdms" not in r.stderr and "WARNING" not in r.stderr
+    [note] = [ln for ln in r.stderr.splitlines() if "npTDMS" in ln]
+    assert note.startswith("  note: c.tdms: npTDMS: ") and note.endswith("; the channels' samples there are imported")
+    cap = decode(tmp_path / "c.bin")
+    assert cap["x"].shape[1] >= FS
+    assert_within_one_count(cap, x[None, :cap["x"].shape[1]] * G)
+
+
+def test_without_nptdms_a_tdms_file_says_which_extra_reads_it(tmp_path, monkeypatch, capsys):
+    from cmsensord.cli import main
+
+    write_tdms(tmp_path / "v.tdms", 0)
+    monkeypatch.setitem(sys.modules, "nptdms", None)
+    assert main(["import", str(tmp_path / "v.tdms"), "--out", str(tmp_path / "o.bin")]) == 2
+    assert capsys.readouterr().err == (f"cmsensord import: {tmp_path / 'v.tdms'}: reading TDMS files needs npTDMS: "
+                                       "pip install 'cmsensord[tdms]'\n")
