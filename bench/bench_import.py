@@ -111,6 +111,17 @@ def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None, *how: 
             "anon_mb": anon / 1024, "capture_mb": out.stat().st_size / 1e6}
 
 
+def measure(args: argparse.Namespace, src: Path, write, length: float, what: str,
+            *how: str) -> list[tuple[str, dict]]:
+    """(label, :func:`run_import`'s result) of importing ``src`` with each tree (``args.tree``),
+    ``src`` written first (``write(src, length)``) unless it is there."""
+    if not src.exists():
+        print(f"writing {what} ...", file=sys.stderr, flush=True)
+        write(src, length)
+    return [(label, run_import(src, src.parent / f"{src.name}_{label or 'this'}.bin", tree,
+                               args.memory_mb if tree == ROOT else None, *how)) for label, tree in trees(args.tree)]
+
+
 def _rss_anon_kb(pid: int) -> int:
     """The process's anonymous resident memory now (its own, not pages of files it maps), kB."""
     try:
@@ -137,33 +148,16 @@ def main() -> None:
     long_rows: list = []
     try:
         for n in sorted(args.files):
-            src = base / f"files_{n}"
-            if not src.is_dir():
-                print(f"writing {n} snapshot files ...", file=sys.stderr, flush=True)
-                write_files(src, n)
-            for label, tree in trees(args.tree):
-                memory = args.memory_mb if tree == ROOT else None
-                r = run_import(src, base / f"capture_{n}_{label or 'this'}.bin", tree, memory)
-                rows.append((label, n, r))
-        for m in sorted(args.csv_minutes):
-            src = base / f"long_{m:g}.csv"
-            if not src.is_file():
-                print(f"writing a {m:g}-minute CSV ...", file=sys.stderr, flush=True)
-                write_csv(src, m)
-            for label, tree in trees(args.tree):
-                memory = args.memory_mb if tree == ROOT else None
-                r = run_import(src, base / f"csv_{m:g}_{label or 'this'}.bin", tree, memory, "--unit", "g")
-                long_rows.append(("CSV", label, m, src.stat().st_size / 1e6, m * 60 * CSV_FS * 3 * 8 / 1e6, r))
-        for m in sorted(args.wav_minutes):
-            src = base / f"long_{m:g}.wav"
-            if not src.is_file():
-                print(f"writing a {m:g}-minute WAV ...", file=sys.stderr, flush=True)
-                write_wav(src, m)
-            for label, tree in trees(args.tree):
-                memory = args.memory_mb if tree == ROOT else None
-                r = run_import(src, base / f"wav_{m:g}_{label or 'this'}.bin", tree, memory, "--unit", "g",
-                               "--scale-factor", "10")
-                long_rows.append(("WAV", label, m, src.stat().st_size / 1e6, m * 60 * WAV_FS * 2 * 8 / 1e6, r))
+            rows += [(label, n, r) for label, r in measure(args, base / f"files_{n}", write_files, n,
+                                                             f"{n} snapshot files")]
+        for kind, minutes, write, fs, channels, how in (
+                ("CSV", args.csv_minutes, write_csv, CSV_FS, 3, ("--unit", "g")),
+                ("WAV", args.wav_minutes, write_wav, WAV_FS, 2, ("--unit", "g", "--scale-factor", "10"))):
+            for m in sorted(minutes):
+                src = base / f"long_{m:g}.{kind.lower()}"
+                found = measure(args, src, write, m, f"a {m:g}-minute {kind}", *how)
+                long_rows += [(kind, label, m, src.stat().st_size / 1e6, m * 60 * fs * channels * 8 / 1e6, r)
+                              for label, r in found]
     finally:
         if args.keep is None:
             shutil.rmtree(base, ignore_errors=True)
