@@ -27,6 +27,8 @@ __all__ = ["read_tdms"]
 
 
 def read_tdms(path: str, slow: str | None = None) -> Table:
+    """The file's numeric channels side by side (``slow``: the speed column's name), its rate and
+    start from the first full-length channel's waveform properties (see module docstring)."""
     try:
         from nptdms import TdmsFile
     except ImportError:
@@ -50,7 +52,7 @@ def read_tdms(path: str, slow: str | None = None) -> Table:
     keep = [k for k, (_, c) in enumerate(chans) if len(c) == n or (names[k] == slow and len(c) < n)]
     left = [f"{names[k]} ({len(c)})" for k, (_, c) in enumerate(chans) if k not in keep]
     data = np.stack([_column(chans[k][1], n) for k in keep], axis=1)[None]
-    first = chans[keep[0]][1].properties
+    first = next(c for _, c in chans if len(c) == n).properties
     note = f"channel(s) {', '.join(left)} hold fewer samples than the others' {n}: not imported" if left else None
     start = first.get("wf_start_time")
     times = None

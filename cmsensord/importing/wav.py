@@ -33,8 +33,8 @@ def read_wav(path: str) -> Table:
     except (ValueError, EOFError, struct.error) as exc:
         why = "it ends inside its header" if isinstance(exc, struct.error) else " ".join(str(exc).split())
         raise ImportFailure(f"{path}: not a readable WAV file ({why}); export it as PCM or float WAV") from None
-    zero, gain = _SCALES.get(a.dtype.str[1:], (0.0, 1.0)) if a.dtype.kind in "iu" else (0.0, 1.0)
-    if a.dtype.kind not in "iuf" or (a.dtype.kind in "iu" and a.dtype.str[1:] not in _SCALES):
+    zero, gain = (0.0, 1.0) if a.dtype.kind == "f" else _SCALES.get(a.dtype.str[1:], (None, None))
+    if zero is None or gain is None:     # pragma: no cover - scipy returns one of the above
         raise ImportFailure(f"{path}: WAV samples of type {a.dtype} are not supported; export as PCM 16/24/32 or float")
     if a.ndim == 1:
         a = a[:, None]
