@@ -17,9 +17,10 @@ nptdms = pytest.importorskip("nptdms", reason="the tdms extra")
 FS = 10000
 
 
-def write_tdms(path, k: int, speed: np.ndarray | None = None) -> np.ndarray:
+def write_tdms(path, k: int, speed: np.ndarray | None = None, speed_first: bool = False) -> np.ndarray:
     """One snapshot file as a logger writes it: two accelerometers (g) in one group, a slow
-    temperature in another, the snapshot's start 10 minutes after the one before; its samples."""
+    temperature in another, the snapshot's start 10 minutes after the one before (a speed
+    channel after them, or before); its samples."""
     rng = np.random.default_rng(k)
     x = np.round(0.2 * rng.standard_normal((2, FS)), 5)
     wave = {"wf_increment": 1.0 / FS, "wf_start_time": np.datetime64("2024-03-05T10:15:00")
@@ -29,7 +30,8 @@ def write_tdms(path, k: int, speed: np.ndarray | None = None) -> np.ndarray:
             nptdms.ChannelObject("Vibration", "Accel FE", x[1], wave),
             nptdms.ChannelObject("Environment", "Temperature", np.array([21.5, 21.6, 21.7]), {"wf_increment": 1.0})]
     if speed is not None:
-        objs.append(nptdms.ChannelObject("Vibration", "speed", speed, {"wf_increment": FS / speed.size / FS}))
+        objs.insert(2 if speed_first else len(objs),
+                    nptdms.ChannelObject("Vibration", "speed", speed, {"wf_increment": 1.0 / speed.size}))
     with nptdms.TdmsWriter(str(path)) as w:
         w.write_segment(objs)
     return x
@@ -50,12 +52,15 @@ def test_a_directory_of_tdms_snapshots_gives_its_rate_times_and_channels(tmp_pat
     assert_within_one_count(decode(tmp_path / "r.bin"), np.concatenate(xs, axis=1) * G)
 
 
-def test_a_speed_channel_sampled_slower_gives_the_tacho(tmp_path):
+@pytest.mark.parametrize("speed_first", [False, True])
+def test_a_speed_channel_sampled_slower_gives_the_tacho(tmp_path, speed_first):
+    """The file's rate is the vibration's, wherever the speed channel is listed."""
     rpm = np.full(FS // 10, 1500.0)
-    write_tdms(tmp_path / "s.tdms", 0, speed=rpm)
+    write_tdms(tmp_path / "s.tdms", 0, speed=rpm, speed_first=speed_first)
     r = cmd("import", "s.tdms", "--unit", "g", "--speed-column", "speed", "--out", "s.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     cap = decode(tmp_path / "s.bin")
+    assert sidecar(tmp_path / "s.bin")["fs"] == FS
     assert cap["status"].n_channels == 2 and cap["edges"].size == 25     # 25 revolutions in its second
     assert np.allclose(np.diff(cap["edges"]), FS / 25, atol=1 / 256)
 
