@@ -224,3 +224,18 @@ def test_a_blank_line_among_dated_rows_says_nothing_of_numpy(tmp_path):
     long_csv(tmp_path / "log.csv", dated=True)
     r = cmd("import", "log.csv", "--unit", "g", "--out", "o.bin", cwd=tmp_path)
     assert r.returncode == 0 and "Warning" not in r.stderr and "numpy" not in r.stderr, r.stderr
+
+
+def test_a_long_text_file_shows_its_progress_while_it_is_read(tmp_path, monkeypatch):
+    """One file read in chunks of 500 lines: the bar moves in fractions of it, up to the whole."""
+    from cmsensord.cli import main
+    from cmsensord.importing import command, tabular
+
+    seen: list[float] = []
+    monkeypatch.setattr(tabular, "CHUNK_LINES", 500)
+    monkeypatch.setattr(command._Bar, "__call__", lambda self, done: seen.append(done))
+    long_csv(tmp_path / "log.csv")
+    assert main(["import", str(tmp_path / "log.csv"), "--unit", "g", "--memory-mb", "0",
+                 "--out", str(tmp_path / "o.bin")]) == 0
+    reading = seen[:seen.index(1.0) + 1]
+    assert len(reading) >= 6 and reading == sorted(reading) and 0 < reading[0] < 0.2, reading

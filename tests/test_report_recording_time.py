@@ -258,7 +258,7 @@ def test_one_continuous_file_is_drawn_in_seconds_into_it(tmp_path):
     np.savetxt(tmp_path / "run.csv", x, fmt="%.5f")
     logs, _ = replayed(tmp_path, "run.csv")
     page, metas = report(tmp_path, logs)
-    assert "times are seconds into the recording, gaps between its snapshots included." in page
+    assert "A replay of an imported recording: times are seconds into the recording." in page
     assert "<title>cmsensord report 0.0 s – 40.0 s</title>" in page
     sev = metas["bearing-severity"]["axes"][0]
     assert sev["xlabel"] == "seconds into the recording" and sev["xlim"][1] == pytest.approx(40.0)

@@ -156,7 +156,7 @@ class _Bar:
         self.enabled = self.stream.isatty() if hasattr(self.stream, "isatty") else False
         self._last = 0.0
 
-    def __call__(self, done: int) -> None:
+    def __call__(self, done: float) -> None:
         now = time.monotonic()
         if not self.enabled or (now - self._last < 0.2 and done < self.total):
             return
@@ -213,7 +213,7 @@ def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
                             f"{Path(opts.out) / 'capture.bin'}")
     bar = _Bar(len(files), f"import: reading {len(files)} file(s)")
     try:
-        rec = build_recording(files, opts, progress=bar if len(files) > 1 else None)
+        rec = build_recording(files, opts, progress=bar)
     finally:
         bar.close()
     with rec.samples:

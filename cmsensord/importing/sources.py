@@ -20,7 +20,7 @@ import glob as globmod
 import os
 import re
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +34,7 @@ from .recording import Recording, Snapshot
 from .samples import SampleStore
 from .snapshot_times import retimed
 from .table import Table
-from .tabular import is_text_table, read_tabular
+from .tabular import LongText, is_text_table, read_tabular
 from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
 from .tdms import read_tdms
 from .units import to_ms2_factor
@@ -119,20 +119,21 @@ def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str
     return files
 
 
-def read_table(path: str, opts: ImportOptions) -> Table:
-    """The file's table, by its extension; an unreadable file is a one-line ImportFailure."""
+def read_table(path: str, opts: ImportOptions, progress: Callable[[float], None] | None = None) -> Table:
+    """The file's table, by its extension (``progress(fraction)`` while a long text file is read);
+    an unreadable file is a one-line ImportFailure."""
     try:
-        return _read_by_extension(path, opts)
+        return _read_by_extension(path, opts, progress)
     except OSError as exc:
         raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
-def _read_by_extension(path: str, opts: ImportOptions) -> Table:
+def _read_by_extension(path: str, opts: ImportOptions, progress: Callable[[float], None] | None) -> Table:
     ext = Path(path).suffix.lower()
     if ext == ".wav":
         return read_wav(path)
     if ext in (".csv", ".tsv", ".txt", ".lvm"):     # .lvm: LabVIEW's text measurement file
-        return read_tabular(path, opts.separator, opts.header, _spill(opts))
+        return read_tabular(path, opts.separator, opts.header, _long_text(opts, progress))
     if ext == ".npy":
         return read_npy(path)
     if ext == ".npz":
@@ -142,14 +143,14 @@ def _read_by_extension(path: str, opts: ImportOptions) -> Table:
     if ext == ".tdms":
         return read_tdms(path, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)
-        return read_tabular(path, opts.separator, opts.header, _spill(opts))
+        return read_tabular(path, opts.separator, opts.header, _long_text(opts, progress))
     raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}, and not a text table of "
                         f"numbers; supported: {', '.join(EXTENSIONS)}")
 
 
-def _spill(opts: ImportOptions) -> tuple[str, float]:
-    """Where a long text table's numbers wait while it is read (beside ``--out``), past how many MB."""
-    return str(Path(opts.out).resolve().parent), opts.memory_mb
+def _long_text(opts: ImportOptions, progress: Callable[[float], None] | None) -> LongText:
+    """A long text table's numbers wait beside ``--out`` while it is read, past ``--memory-mb``."""
+    return LongText(str(Path(opts.out).resolve().parent), opts.memory_mb, progress)
 
 
 def _column(t: Table, token: str, option: str) -> int:
@@ -265,8 +266,16 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
     return notes
 
 
+def _within(progress: Callable[[float], None] | None, fi: int) -> Callable[[float], None] | None:
+    """``progress`` of the files done while file ``fi`` is read: ``fi`` + the fraction read."""
+    if progress is None:
+        return None
+    return lambda fraction: progress(fi + fraction)
+
+
 def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Recording:
-    """Read every file (``progress(i)`` after each) and lay the snapshots end to end in a
+    """Read every file (``progress(files done)`` after each, and in fractions while a long text
+    file is read) and lay the snapshots end to end in a
     :class:`~.samples.SampleStore` beside ``opts.out`` (the caller closes ``rec.samples``):
     past ``opts.memory_mb`` of samples, only one file's (and a tacho or speed column) are held
     in memory."""
@@ -290,7 +299,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     origins: list[tuple[int, int]] = []     # per snapshot: (its file, its first sample in the file)
     own_times = clock = dated = False       # a file gave its snapshots' times (of day, or dated)
     for fi, path in enumerate(files):
-        t = read_table(path, opts)
+        t = read_table(path, opts, _within(progress, fi))
         if layout is None:
             layout = _Layout(t, opts)
             stores.append(SampleStore(len(layout.idx), opts.out, opts.memory_mb))

@@ -31,7 +31,8 @@ import itertools
 import re
 import tempfile
 import warnings
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ from .table import Table
 from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split
 from .time_column import with_time_column
 
-__all__ = ["read_tabular", "sniff", "is_text_table"]
+__all__ = ["LongText", "read_tabular", "sniff", "is_text_table"]
 
 _SEP_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'", None: "whitespace"}
 #: bytes :func:`is_text_table` looks at
@@ -141,9 +142,10 @@ def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dat
 
 
 def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, width: int,
-                       spill_dir: str) -> np.ndarray:
+                       long: LongText) -> np.ndarray:
     """:func:`_numbers` of the whole file, read ``CHUNK_LINES`` lines at a time into an unnamed
-    file in ``spill_dir`` (gone with the map), as a read-only memory map (rows, columns)."""
+    file in ``long.spill_dir`` (gone with the map), as a read-only memory map (rows, columns)."""
+    spill_dir, size, read = long.spill_dir, max(1, Path(path).stat().st_size), 0
     done, columns = 0, 0
     try:
         store = tempfile.TemporaryFile(dir=spill_dir)
@@ -164,6 +166,9 @@ def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: boo
                 _spill(store, a, spill_dir, path)
                 done += a.shape[0]
             line0 += len(lines)
+            read += len(text)
+            if long.progress is not None:
+                long.progress(min(1.0, read / size))
         if not done:
             return np.empty((0, max(columns, 1)))
         _spill(store, None, spill_dir, path)
@@ -207,19 +212,28 @@ def _is_date(text: str) -> bool:
     return DATETIME.fullmatch(text) is not None
 
 
+@dataclass(frozen=True)
+class LongText:
+    """How a text table larger than ``memory_mb`` is read (:func:`_numbers_in_chunks`): its
+    numbers wait in ``spill_dir``; ``progress(fraction of the file)`` after each chunk."""
+
+    spill_dir: str
+    memory_mb: float
+    progress: Callable[[float], None] | None = None
+
+
 def read_tabular(path: str, separator: str | None = None, header: bool | None = None,
-                 spill: tuple[str, float] | None = None) -> Table:
-    """The text table's numbers; with ``spill`` (a directory, MB), a file larger than that many
-    MB is read a chunk of lines at a time into an unnamed file in that directory, its numbers a
-    memory map of it (:func:`_numbers_in_chunks`), so that a long recording's text does not
-    need its float64 table in memory."""
+                 long: LongText | None = None) -> Table:
+    """The text table's numbers; with ``long``, a file larger than ``long.memory_mb`` is read a
+    chunk of lines at a time into an unnamed file in ``long.spill_dir``, its numbers a memory
+    map of it, so that a long recording's text does not need its float64 table in memory."""
     head = read_head(path)
     sep, header_line, decimal_comma, skip = _layout(head, separator, header)
     first = split(head.rows[0], sep) if head.rows else []
     dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
     try:
-        if spill is not None and Path(path).stat().st_size > spill[1] * 1e6:
-            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, len(first), spill[0])
+        if long is not None and Path(path).stat().st_size > long.memory_mb * 1e6:
+            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, len(first), long)
         else:
             src: str | io.StringIO = io.StringIO(Path(path).read_text(encoding="utf-8-sig", errors="replace")
                                                  .replace(",", ".")) if decimal_comma else path

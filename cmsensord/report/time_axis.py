@@ -63,8 +63,8 @@ class TimeAxis:
         else:
             where = (f"the recording's own date and time (from {timeline.source_start})"
                      if timeline.source_start else axis.label())
-            axis.note = (f"A replay of an imported recording: times are {where}, gaps between its "
-                         f"snapshots included.{fixed}")
+            gaps = ", gaps between its snapshots included" if timeline.start_s.size > 1 else ""
+            axis.note = f"A replay of an imported recording: times are {where}{gaps}.{fixed}"
         return axis
 
     def shown(self, log_ns: int) -> int:
