@@ -5,6 +5,7 @@ a struct holding the signal and its rate (MFPT)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.io
 
 from cmsensord.sinks.mcap_read import read_messages
@@ -191,3 +192,67 @@ def test_an_encoder_ppr_with_a_constant_speed_and_a_ppr_the_board_cannot_take_at
     r = cmd("import", "x.npy", "--fs", 20000, "--rpm", "600", "--ppr", "0", "--out", "c.bin", cwd=tmp_path)
     assert r.returncode == 2 and r.stderr.startswith("cmsensord import: error: argument --ppr: expected an integer "
                                                      "1..65536, got 0"), r.stderr
+
+
+def mat73(path, variables: dict) -> None:
+    """A MATLAB v7.3 file as MATLAB writes one: HDF5 behind a 512-byte MAT header, each
+    variable transposed, a MATLAB_class on each; a dict is a struct, a str a char array."""
+    h5py = pytest.importorskip("h5py", reason="the mat73 extra")
+
+    def put(group, name, v):
+        d = group.create_dataset(name, data=np.atleast_2d(np.asarray(v, dtype=np.float64)).T)
+        d.attrs["MATLAB_class"] = np.bytes_("double")
+
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for name, v in variables.items():
+            if isinstance(v, dict):
+                g = f.create_group(name)
+                g.attrs["MATLAB_class"] = np.bytes_("struct")
+                for k, x in v.items():
+                    put(g, k, x)
+            elif isinstance(v, str):
+                d = f.create_dataset(name, data=np.array([[ord(c) for c in v]], dtype=np.uint16).T)
+                d.attrs["MATLAB_class"] = np.bytes_("char")
+            else:
+                put(f, name, v)
+    head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 30 08:00:00 2026 HDF5 schema 1.00 ."
+    with open(path, "r+b") as f:
+        f.write(head.ljust(116, b" ") + b"\0" * 8 + b"\x00\x02IM")
+
+
+def test_a_matlab_v73_file_imports_as_the_same_variables_saved_as_v7(tmp_path):
+    """CWRU's variables (a signal, its speed, a note) saved as v7.3 and as v5: the same capture;
+    an MFPT-like struct's signal and rate in v7.3 too."""
+    x = np.round(np.random.default_rng(6).normal(0.0, 0.3, (N, 1)), 5)
+    scipy.io.savemat(tmp_path / "v5.mat", {"X097_DE_time": x, "X097RPM": 1796.0, "note": "healthy"})
+    mat73(tmp_path / "v73.mat", {"X097_DE_time": x, "X097RPM": 1796.0, "note": "healthy"})
+    for name in ("v5", "v73"):
+        r = cmd("import", f"{name}.mat", "--variable", "*_DE_time", "--fs", "12000", "--unit", "g",
+                "--out", f"{name}.bin", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    assert (tmp_path / "v5.bin").read_bytes() == (tmp_path / "v73.bin").read_bytes()
+    assert sidecar(tmp_path / "v73.bin")["rpm"] == 1796.0
+    mat73(tmp_path / "mfpt.mat", {"bearing": {"gs": x[:, 0], "sr": 48828.0}})
+    r = cmd("import", "mfpt.mat", "--variable", "bearing.gs", "--unit", "g", "--out", "m.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sidecar(tmp_path / "m.bin")["fs"] == 48828
+
+
+def test_a_matlab_v73_file_without_h5py_or_cut_short_is_one_line(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from cmsensord.cli import main
+
+    mat73(tmp_path / "v73.mat", {"x": np.zeros(N)})
+    data = (tmp_path / "v73.mat").read_bytes()
+    (tmp_path / "cut.mat").write_bytes(data[:len(data) // 2])
+    assert main(["import", str(tmp_path / "cut.mat"), "--fs", "100", "--out", str(tmp_path / "o.bin")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"cmsensord import: {tmp_path / 'cut.mat'}: a MATLAB v7.3 (HDF5) file that cannot be "
+                          "read (") and err.count("\n") == 1, err
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    assert main(["import", str(tmp_path / "v73.mat"), "--fs", "100", "--out", str(tmp_path / "o.bin")]) == 2
+    assert capsys.readouterr().err == (f"cmsensord import: {tmp_path / 'v73.mat'}: a MATLAB v7.3 (HDF5) file: "
+                                       "reading it needs h5py (pip install 'cmsensord[mat73]'); or in MATLAB "
+                                       "re-save it with save(FILE, VAR, '-v7'), or export it as CSV\n")
+    assert not list(tmp_path.glob("o.bin*"))

@@ -5,7 +5,10 @@ the data; a struct's fields are variables ``struct.field``; scalars named like a
 sampling rate (``fs``, ``Fs``, ``sample_rate``, ``sr``) or a speed (``rpm``,
 ``X097RPM``) are read as such (:mod:`.variables`, also for ``--variable A,B``
 and patterns such as ``*_DE_time``). v7.3 files are HDF5, which scipy does not
-read: the error says how to re-save them. Axes: see :func:`.table.as_snapshot_array`.
+read: with the optional ``mat73`` extra (h5py) their numeric variables and structs' fields
+are read as loadmat would give the same variables of a v7 file (MATLAB stores them
+transposed; text and cell arrays are left out); without it the error says how to re-save
+them. Axes: see :func:`.table.as_snapshot_array`.
 """
 
 from __future__ import annotations
@@ -25,11 +28,37 @@ def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = Non
     try:
         m = scipy.io.loadmat(path)
     except NotImplementedError:
-        raise ImportFailure(f"{path}: a MATLAB v7.3 (HDF5) file, which scipy.io cannot read; in MATLAB "
-                            "re-save it with save(FILE, VAR, '-v7') or export it as CSV") from None
+        m = _read_v73(path)
     except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as exc:
         raise ImportFailure(f"{path}: not a readable MATLAB file ({' '.join(str(exc).split())})") from None
     arrays = flatten({k: v for k, v in m.items() if not k.startswith("__")})
     data, columns, note = selected(path, arrays, variable, "--variable", "variable", slow)
     return Table(path=path, data=data, columns=columns, kind="column", layout_note=note,
                  fs=scalar_named(arrays, tuple(k.lower() for k in FS_KEYS)), rpm=rpm_named(arrays))
+
+
+def _read_v73(path: str) -> dict:
+    """A MATLAB v7.3 (HDF5) file's numeric variables, ``struct.field`` for a struct's, each
+    transposed back to MATLAB's axes (as loadmat gives them)."""
+    try:
+        import h5py
+    except ImportError:
+        raise ImportFailure(f"{path}: a MATLAB v7.3 (HDF5) file: reading it needs h5py (pip install "
+                            "'cmsensord[mat73]'); or in MATLAB re-save it with save(FILE, VAR, '-v7'), or "
+                            "export it as CSV") from None
+    out: dict = {}
+
+    def take(name: str, obj) -> None:
+        kind = obj.attrs.get("MATLAB_class", b"") if isinstance(obj, h5py.Dataset) else b"group"
+        if isinstance(kind, str):
+            kind = kind.encode()
+        if kind not in (b"group", b"char", b"cell") and not name.startswith("#") and obj.dtype.kind in "iufb":
+            out[name.replace("/", ".")] = obj[()].T
+
+    try:
+        with h5py.File(path, "r") as f:
+            f.visititems(take)
+    except (OSError, ValueError, KeyError) as exc:
+        raise ImportFailure(f"{path}: a MATLAB v7.3 (HDF5) file that cannot be read "
+                            f"({' '.join(str(exc).split())})") from None
+    return out
