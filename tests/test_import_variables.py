@@ -246,10 +246,14 @@ def test_a_matlab_v73_file_without_h5py_or_cut_short_is_one_line(tmp_path, monke
     mat73(tmp_path / "v73.mat", {"x": np.zeros(N)})
     data = (tmp_path / "v73.mat").read_bytes()
     (tmp_path / "cut.mat").write_bytes(data[:len(data) // 2])
-    assert main(["import", str(tmp_path / "cut.mat"), "--fs", "100", "--out", str(tmp_path / "o.bin")]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith(f"cmsensord import: {tmp_path / 'cut.mat'}: a MATLAB v7.3 (HDF5) file that cannot be "
-                          "read (") and err.count("\n") == 1, err
+    # bytes of the superblock's neighbourhood damaged: h5py says so as OSError, RuntimeError, KeyError
+    for at in (512, 640, 1344):
+        (tmp_path / f"bad{at}.mat").write_bytes(data[:at] + b"\xff" * 16 + data[at + 16:])
+    for name in ("cut", "bad512", "bad640", "bad1344"):
+        assert main(["import", str(tmp_path / f"{name}.mat"), "--fs", "100", "--out", str(tmp_path / "o.bin")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"cmsensord import: {tmp_path / name}.mat: a MATLAB v7.3 (HDF5) file that cannot be "
+                              "read (") and err.count("\n") == 1, err
     monkeypatch.setitem(sys.modules, "h5py", None)
     assert main(["import", str(tmp_path / "v73.mat"), "--fs", "100", "--out", str(tmp_path / "o.bin")]) == 2
     assert capsys.readouterr().err == (f"cmsensord import: {tmp_path / 'v73.mat'}: a MATLAB v7.3 (HDF5) file: "

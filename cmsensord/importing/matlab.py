@@ -58,7 +58,7 @@ def _read_v73(path: str) -> dict:
     try:
         with h5py.File(path, "r") as f:
             f.visititems(take)
-    except (OSError, ValueError, KeyError) as exc:
+    except (OSError, ValueError, KeyError, RuntimeError) as exc:      # h5py's words for damaged bytes
         raise ImportFailure(f"{path}: a MATLAB v7.3 (HDF5) file that cannot be read "
                             f"({' '.join(str(exc).split())})") from None
     return out
