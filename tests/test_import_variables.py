@@ -40,6 +40,19 @@ def test_cwru_files_by_variable_patterns_side_by_side_with_their_speed(tmp_path)
     assert_within_one_count(decode(tmp_path / "n.bin"), x97[::-1] * G)
 
 
+def test_a_cwru_file_that_also_holds_another_records_signals_gives_its_own(tmp_path):
+    """CWRU's 99.mat holds record 98's drive-end and fan-end signals beside its own 99's: the
+    pattern takes the variables of the record the file is named by."""
+    x98 = cwru(tmp_path / "98.mat", 98, 2)
+    x99 = cwru(tmp_path / "99.mat", 99, 3)
+    both = {**scipy.io.loadmat(tmp_path / "98.mat"), **scipy.io.loadmat(tmp_path / "99.mat")}
+    scipy.io.savemat(tmp_path / "99.mat", {k: v for k, v in both.items() if not k.startswith("__")})
+    r = cmd("import", "98.mat", "99.mat", "--variable", "*_DE_time,*_FE_time", "--fs", "12000", "--unit", "g",
+            "--out", "c.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert_within_one_count(decode(tmp_path / "c.bin"), np.concatenate([x98, x99], axis=1) * G)
+
+
 def test_mfpt_struct_fields_give_the_signal_and_its_rate(tmp_path):
     gs = np.round(np.random.default_rng(3).normal(0.0, 1.0, 9766), 4)
     scipy.io.savemat(tmp_path / "baseline_1.mat", {"bearing": {"sr": 97656, "gs": gs[:, None], "load": 270,

@@ -4,7 +4,8 @@
 * ``chosen`` is a comma-separated list; each item names one array, or is a pattern
   (``*_DE_time``) that matches exactly one: the CWRU bearing data centre names a file's
   variables after its record (``X097_DE_time``, ``X097_FE_time``), so one pattern picks the
-  same sensor in every file.  Their columns are laid side by side (the same number of
+  same sensor in every file (where a file holds another record's too, the one whose number
+  its own name carries).  Their columns are laid side by side (the same number of
   samples each); a pattern's columns are named by its text without the wildcards
   (``DE_time``), so that every file has the same layout. The one exception is the speed
   column (``slow``, ``--speed-column``), which loggers often sample slower (Paderborn: the
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import fnmatch
 import re
+from pathlib import Path
 
 import numpy as np
 
@@ -112,11 +114,21 @@ def _one(path: str, arrays: dict, item: str, option: str, what: str) -> tuple[st
         raise ImportFailure(f"{path}: no {what} {item!r} ({what}s: {', '.join(arrays) or 'none'}); "
                             f"use {option}")
     hits = [k for k in arrays if fnmatch.fnmatchcase(k, item)]
+    if len(hits) > 1:
+        hits = _of_the_file(path, hits) or hits
     if len(hits) != 1:
         found = f"{len(hits)} {what}s match it ({', '.join(hits)})" if hits else f"no {what} matches it"
         raise ImportFailure(f"{path}: {option} {item}: {found} ({what}s: {', '.join(arrays)}); "
                             "give a pattern that matches one")
     return hits[0], re.sub(r"[*?]|\[[^]]*\]", "", item).strip("_.") or "data"
+
+
+def _of_the_file(path: str, hits: list[str]) -> list[str]:
+    """The one of ``hits`` whose name carries the number the file's name ends in (CWRU's
+    ``99.mat`` also holds record 98's ``X098_DE_time`` beside its own ``X099_DE_time``), or none."""
+    own = re.findall(r"\d+", Path(path).stem)
+    mine = [k for k in hits if own and int(own[-1]) in {int(d) for d in re.findall(r"\d+", k)}]
+    return mine if len(mine) == 1 else []
 
 
 def selected(path: str, arrays: dict, chosen: tuple[str, ...] | None, option: str, what: str,
