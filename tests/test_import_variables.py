@@ -45,12 +45,16 @@ def test_a_cwru_file_that_also_holds_another_records_signals_gives_its_own(tmp_p
     pattern takes the variables of the record the file is named by."""
     x98 = cwru(tmp_path / "98.mat", 98, 2)
     x99 = cwru(tmp_path / "99.mat", 99, 3)
-    both = {**scipy.io.loadmat(tmp_path / "98.mat"), **scipy.io.loadmat(tmp_path / "99.mat")}
+    both = {**scipy.io.loadmat(tmp_path / "98.mat"), **scipy.io.loadmat(tmp_path / "99.mat"), "X099RPM": 1750.0}
     scipy.io.savemat(tmp_path / "99.mat", {k: v for k, v in both.items() if not k.startswith("__")})
     r = cmd("import", "98.mat", "99.mat", "--variable", "*_DE_time,*_FE_time", "--fs", "12000", "--unit", "g",
             "--out", "c.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert_within_one_count(decode(tmp_path / "c.bin"), np.concatenate([x98, x99], axis=1) * G)
+    # its speed too: record 99's 1750 rpm, not 98's 1797 stored first
+    r = cmd("import", "99.mat", "--variable", "*_DE_time", "--fs", "12000", "--out", "s.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sidecar(tmp_path / "s.bin")["rpm"] == 1750.0
 
 
 def test_mfpt_struct_fields_give_the_signal_and_its_rate(tmp_path):

@@ -56,4 +56,4 @@ def read_npz(path: str, array: tuple[str, ...] | None, slow: str | None = None) 
                 and v.dtype.kind in "iuf" and data.shape[0] > 1:
             times = v.astype(np.float64)
     return Table(path=path, data=data, columns=columns, kind="channel", layout_note=note,
-                 fs=scalar_named(arrays, FS_KEYS), times=times, rpm=rpm_named(arrays))
+                 fs=scalar_named(arrays, FS_KEYS), times=times, rpm=rpm_named(arrays, path))

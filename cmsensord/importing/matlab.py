@@ -34,7 +34,7 @@ def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = Non
     arrays = flatten({k: v for k, v in m.items() if not k.startswith("__")})
     data, columns, note = selected(path, arrays, variable, "--variable", "variable", slow)
     return Table(path=path, data=data, columns=columns, kind="column", layout_note=note,
-                 fs=scalar_named(arrays, tuple(k.lower() for k in FS_KEYS)), rpm=rpm_named(arrays))
+                 fs=scalar_named(arrays, tuple(k.lower() for k in FS_KEYS)), rpm=rpm_named(arrays, path))
 
 
 def _read_v73(path: str) -> dict:

@@ -73,11 +73,16 @@ def scalar_named(arrays: dict, keys: tuple[str, ...]) -> float | None:
     return _scalar(arrays, lambda name: name in keys)
 
 
-def rpm_named(arrays: dict) -> float | None:
+def rpm_named(arrays: dict, path: str = "") -> float | None:
     """The shaft speed: a scalar named like :data:`~.table.RPM_KEYS`, else one whose name ends
-    in ``rpm``."""
+    in ``rpm`` (of several, the one whose number the file's name ``path`` carries: CWRU's
+    ``99.mat`` holds record 98's ``X098RPM`` too)."""
     got = scalar_named(arrays, RPM_KEYS)
-    return got if got is not None else _scalar(arrays, lambda name: name.endswith("rpm"))
+    if got is not None:
+        return got
+    named = [k for k in arrays if k.rsplit(".", 1)[-1].lower().endswith("rpm")]
+    own = _of_the_file(path, named) if len(named) > 1 else []
+    return _scalar({k: arrays[k] for k in own or named}, lambda name: True)
 
 
 def _scalar(arrays: dict, match) -> float | None:
