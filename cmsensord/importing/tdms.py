@@ -41,18 +41,18 @@ def read_tdms(path: str, slow: str | None = None) -> Table:
         why = " ".join(str(exc).split()) or type(exc).__name__
         raise ImportFailure(f"{path}: not a readable TDMS file ({why}); export it again from LabVIEW, or as CSV") \
             from None
-    chans = [(g.name, c) for g in f.groups() for c in g.channels()
-             if np.asarray(c[:]).dtype.kind in "iuf" and len(c) > 1]
+    chans = [(g.name, c.name, c.properties, x) for g in f.groups() for c in g.channels()
+             if (x := np.asarray(c[:])).dtype.kind in "iuf" and x.size > 1]     # each channel's data read once
     if not chans:
         why = f"not a readable TDMS file ({said[0]})" if said else "no numeric channel in the file"
         raise ImportFailure(f"{path}: {why}; export it again from LabVIEW, or as CSV")
-    plain = [c.name for _, c in chans]
-    names = [c.name if plain.count(c.name) == 1 else f"{g}.{c.name}" for g, c in chans]
-    n = max(len(c) for _, c in chans)
-    keep = [k for k, (_, c) in enumerate(chans) if len(c) == n or (names[k] == slow and len(c) < n)]
-    left = [f"{names[k]} ({len(c)})" for k, (_, c) in enumerate(chans) if k not in keep]
-    data = np.stack([_column(chans[k][1], n) for k in keep], axis=1)[None]
-    first = next(c for _, c in chans if len(c) == n).properties
+    plain = [name for _, name, _, _ in chans]
+    names = [name if plain.count(name) == 1 else f"{g}.{name}" for g, name, _, _ in chans]
+    n = max(x.size for _, _, _, x in chans)
+    keep = [k for k, (_, _, _, x) in enumerate(chans) if x.size == n or (names[k] == slow and x.size < n)]
+    left = [f"{names[k]} ({x.size})" for k, (_, _, _, x) in enumerate(chans) if k not in keep]
+    data = np.stack([_column(chans[k][3], n) for k in keep], axis=1)[None]
+    first = next(props for _, _, props, x in chans if x.size == n)
     note = f"channel(s) {', '.join(left)} hold fewer samples than the others' {n}: not imported" if left else None
     start = first.get("wf_start_time")
     times = None
@@ -88,8 +88,8 @@ def _heard(said: list[str]):
             log.handlers, log.propagate = handlers, propagate
 
 
-def _column(channel, n: int) -> np.ndarray:
-    x = np.asarray(channel[:])
+def _column(x: np.ndarray, n: int) -> np.ndarray:
+    """A channel's samples, or a slower one's interpolated to ``n`` over the same time."""
     return x if x.size == n else stretched(x[None, :, None], n)[0, :, 0]
 
 

@@ -74,9 +74,8 @@ def _in_recording(axis: TimeAxis, ns: int | None) -> str:
 
 def _metadata(values: dict, axis: TimeAxis) -> dict:
     """A metadata record's map, each value past 120 characters shortened."""
-    out = {}
+    out, tl = {}, axis.timeline
     for key, value in values.items():
-        tl = axis.timeline
         if key == "recording_timeline" and tl is not None and tl.unit == "%":
             out[key] = f"{tl.start_s.size} snapshot(s) without times, {tl.end_s:g} s of signal end to end"
         elif key == "recording_timeline" and tl is not None:
