@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from cmsensord.errors import CmsensordError
 
-__all__ = ["ImportFailure", "cannot_write"]
+__all__ = ["ImportFailure", "cannot_write", "no_room"]
 
 
 class ImportFailure(CmsensordError):
@@ -23,3 +23,10 @@ def cannot_write(out: str | object, reason: str) -> ImportFailure:
     """The one error for an output the import cannot write (``reason``: the OS's words)."""
     return ImportFailure(f"{out}: cannot write the capture: {reason}; check that the directory exists, "
                          "is writable and has room")
+
+
+def no_room(what: str, reason: str) -> ImportFailure:
+    """The one error for a disk that cannot hold what the import keeps beside ``--out`` while it
+    runs (``what``: where and what, ``reason``: the OS's words)."""
+    return ImportFailure(f"{what}: {reason}; free space, give --out on another disk or hold more in memory "
+                         "with --memory-mb")

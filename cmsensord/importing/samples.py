@@ -20,7 +20,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from .errors import ImportFailure, cannot_write
+from .errors import cannot_write, no_room
 
 __all__ = ["MEMORY_MB", "SampleStore"]
 
@@ -79,10 +79,9 @@ class SampleStore:
             self._file.write(np.ascontiguousarray(x.T, dtype=np.float64).tobytes())
         except OSError as exc:
             mb = self.n_samples * self.n_channels * _ITEM / 1e6
-            raise ImportFailure(f"{self._out}: no room on its disk for the samples read so far "
-                                f"({mb:,.1f} MB, 8 bytes a sample a channel, held there until the "
-                                f"capture is written): {exc.strerror or exc}; free space, give --out "
-                                "on another disk or hold more in memory with --memory-mb") from None
+            where = (f"{self._out}: no room on its disk for the samples read so far ({mb:,.1f} MB, 8 bytes a "
+                     "sample a channel, held there until the capture is written)")
+            raise no_room(where, exc.strerror or str(exc)) from None
 
     def read(self, a: int, b: int) -> np.ndarray:
         """Samples ``a`` to ``b`` (not included), float64 (n_channels, b - a)."""

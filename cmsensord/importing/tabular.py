@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ImportFailure, cannot_write
+from .errors import ImportFailure, cannot_write, no_room
 from .preamble import preamble_start
 from .table import Table
 from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split
@@ -184,9 +184,8 @@ def _spill(store, a: np.ndarray | None, spill_dir: str, path: str) -> None:
         else:
             store.write(np.ascontiguousarray(a, dtype=np.float64).tobytes())
     except OSError as exc:
-        raise ImportFailure(f"{path}: no room in {spill_dir} for the numbers of this long text file (held there "
-                            f"while it is read, 8 bytes a value): {exc.strerror or exc}; free space, give --out "
-                            "on another disk or hold more in memory with --memory-mb") from None
+        raise no_room(f"{path}: no room in {spill_dir} for the numbers of this long text file (held there while "
+                      "it is read, 8 bytes a value)", exc.strerror or str(exc)) from None
 
 
 def _dates(src: str | io.StringIO, sep: str | None, skip: int, line0: int) -> np.ndarray:
