@@ -10,6 +10,7 @@ The same input gives the same file.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from dataclasses import dataclass
@@ -39,6 +40,8 @@ class ChannelResult:
     f_r: float
     f_r_source: str
     model: HealthyModel
+    decision_s: float = 1.0      # seconds of board time a decision period
+    level_alert: float | None = None  # the combined severity's level / baseline alert (None: paper)
 
 
 def _f_r(obs: Observations, c: int, cfg: Config, rpm: float | None) -> tuple[float, str]:
@@ -73,12 +76,13 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
                 f"{f_r:.4g} Hz must be below the {period} observations per decision "
                 f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g})")
         fy = faulty.y[:, faulty.names.index(name)] if faulty is not None and name in faulty.names else None
+        alert = None if mon.severity == "paper" else mon.level_alert
         try:
             model = learn_healthy(obs.y[:, c], f_r=f_r, period=period, n=mon.n, window=mon.window,
-                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy)
+                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy, level_alert=alert)
         except ValueError as exc:
             raise CmsensordError(f"calibrate: channel {name}: {exc}") from None
-        results.append(ChannelResult(name, obs.indices[c], f_r, source, model))
+        results.append(ChannelResult(name, obs.indices[c], f_r, source, model, period / obs.rate_hz, alert))
     return results
 
 
@@ -99,7 +103,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         lines.append(
             f"{r.name:<{w}} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
             f"{m.runin_periods * per:>8.0f} {m.periods * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
-            f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.flagged:>7d}")
+            f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.any_flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
                  f"(twice the healthy fluctuation amplitude), R_n = {SPAN:g} x R_1 unless --faulty.")
     for r in results:
@@ -107,12 +111,46 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         margin = r.f_r / m.max_cnt if m.max_cnt else float("inf")
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} (margin {margin:.2g}x); "
-                     f"{m.flagged} healthy decision(s) would be flagged")
+                     f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))
+        if m.level_flagged:
+            lines.append(_level_warning(r, obs))
         if r.f_r_source == "config":
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
                          "machine's shaft speed (no tacho, no --rpm, no rpm in the capture); if it turns at "
                          "another speed, give --rpm RPM")
     return "\n".join(lines)
+
+
+def _by_what(r: ChannelResult) -> str:
+    """`` (A by R_1, L by their level >= K x baseline)`` when the level check ran and any was flagged."""
+    if r.level_alert is None or not r.model.any_flagged:
+        return ""
+    return f" ({r.model.flagged} by R_1, {r.model.level_flagged} by their level >= {r.level_alert:g} x baseline)"
+
+
+def _level_warning(r: ChannelResult, obs: Observations) -> str:
+    """What the decisions of the healthy period that are already at the alert level mean, where
+    they are, and the ``--to`` or ``--from`` of its longest steady stretch (from its start, or
+    back from its end; to a tenth of a second, within the stretch)."""
+    m, dec = r.model, r.decision_s
+    first, last = obs.start_s + m.level_first * dec, obs.start_s + (m.level_last + 1) * dec
+    mid = (obs.start_s + obs.end_s) / 2
+    where = span_line(obs.meta, first, last)
+    span = f"{first:.1f}-{last:.1f} board s" + (f", {where}" if where else "")
+    what = ("the machine may already be changing there (a fault starting)" if first >= mid else
+            "a start-up or a disturbance" if last <= mid else "the level is not steady over the healthy period")
+    periods = m.periods + m.runin_periods + 1          # with the transient's
+    within = f"(levels within {r.level_alert:g} x its own median)"
+    if max(m.steady_head, m.steady_tail) < 2:
+        advice = "no stretch of it is steady: choose another healthy period with --from/--to"
+    elif m.steady_head >= m.steady_tail:
+        to = math.floor(round(10 * (obs.start_s + (m.steady_head + 1) * dec), 6)) / 10
+        advice = f"its steady stretch from the start ends at --to {to:g} {within}"
+    else:
+        start = math.ceil(round(10 * (obs.start_s + (periods - m.steady_tail) * dec), 6)) / 10
+        advice = f"its steady stretch to the end begins at --from {start:g} {within}"
+    return (f"{r.name}: warning: {m.level_flagged} decision(s) of the healthy period are already at "
+            f">= {r.level_alert:g} x its baseline (level_alert: severity 0.5) in {span}: {what}; {advice}")
 
 
 def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,

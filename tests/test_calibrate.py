@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -179,3 +180,62 @@ def test_calibrate_table_keeps_its_columns_under_a_long_channel_name(tmp_path):
     head = next(ln for ln in lines if ln.startswith("channel "))
     row = next(ln for ln in lines if ln.startswith(f"{name} "))
     assert len(row) == len(head) and head.index("f_r Hz") == len(name) + 2, (head, row)
+
+
+def test_a_healthy_period_that_holds_the_fault_is_said_with_where_a_steady_one_ends(degrading, tmp_path):
+    """The whole run to failure given as healthy: calibrate says which of its decisions are
+    already at level_alert x the baseline (the replay grades them 0.5) and the --to of its
+    steady stretch; calibrated to that --to, nothing is said and no level is graded in the period
+    (its AKF part is the R_1 check's, as before)."""
+    p = run("cmsensord", "calibrate", str(degrading), "--out", str(tmp_path / "all.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert ("ch0: warning: 53 decision(s) of the healthy period are already at >= 2 x its baseline "
+            "(level_alert: severity 0.5) in 409.0-515.0 board s: the machine may already be changing there "
+            "(a fault starting); its steady stretch from the start ends at --to 256 (levels within 2 x its "
+            "own median)\n") in p.stdout
+    assert "would be flagged (0 by R_1, 53 by their level >= 2 x baseline)" in p.stdout
+    out = tmp_path / "all"
+    assert run("cmsensord", "replay", str(degrading), "--config", str(tmp_path / "all.yaml"),
+               "--out", str(out)).returncode == 0
+    first = next(t for t, m in _severity(out) if m["severity_index"] >= 0.5)
+    assert first == pytest.approx(410.0, abs=0.05)            # the decision 409-410 s, as said
+
+    site = tmp_path / "site.yaml"
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "256", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "warning" not in p.stdout and ", 0 by their level >= 2 x baseline)\n" in p.stdout
+    out = tmp_path / "steady"
+    assert run("cmsensord", "replay", str(degrading), "--config", str(site), "--out", str(out)).returncode == 0
+    sev = _severity(out)
+    assert all(m["severity_level"] == 0.0 for t, m in sev if t <= 256.5)
+    assert max(m["severity_level"] for t, m in sev) >= 0.5
+
+
+def test_a_loud_start_of_the_healthy_period_is_said_with_where_the_steady_stretch_begins(tmp_path):
+    """An imported recording whose first six snapshots are three times as loud (a start-up): the
+    warning names them in the recording and gives the --from after them; from there, silent."""
+    x = np.random.default_rng(5).standard_normal((60, 5120, 1))
+    x[:6] *= 3.0
+    np.savez(tmp_path / "start.npz", acc=x, fs=5120.0, t_s=np.arange(60) * 600.0)
+    cap = tmp_path / "start.bin"
+    p = run("cmsensord", "import", str(tmp_path / "start.npz"), "--unit", "g", "--names", "pump", "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert ("pump: warning: 5 decision(s) of the healthy period are already at >= 2 x its baseline "
+            "(level_alert: severity 0.5) in 1.0-6.0 board s, in the recording: start.npz[1] (1.7 % of the "
+            "record, 0.1667 h in) to start.npz[5] (8.3 % of the record, 0.8333 h in): a start-up or a "
+            "disturbance; its steady stretch to the end begins at --from 6 (levels within 2 x its own "
+            "median)\n") in p.stdout
+    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--from", "6", "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "warning" not in p.stdout and "pump: highest outlier count" in p.stdout
+
+
+def test_the_papers_severity_has_no_level_check(degrading, tmp_path):
+    """With monitor.severity: paper the level is not graded, so calibrate does not check it."""
+    base = tmp_path / "base.yaml"
+    base.write_text("monitor:\n  severity: paper\n")
+    p = run("cmsensord", "calibrate", str(degrading), "--config", str(base), "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "warning" not in p.stdout and "by their level" not in p.stdout

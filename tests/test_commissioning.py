@@ -13,6 +13,7 @@ from cmsensord.dsp.commissioning import (
     learn_healthy,
     period_counts,
     run_in_periods,
+    steady_length,
 )
 from cmsensord.dsp.severity import AnomalyDecider, level_severity
 
@@ -81,6 +82,33 @@ def test_run_in_is_left_out():
     plain = learn_healthy(y[1600:], f_r=30.0, **KW)
     assert m.runin_periods == 19          # the first quarter of the 79 learned periods
     assert m.r_1 == pytest.approx(plain.r_1, rel=0.5)
+
+
+def test_the_healthy_periods_own_levels_at_level_alert_are_counted_and_placed():
+    """A step to 2.5 x the level in the last 5 of 40 s: those decisions are the ones the
+    combined severity grades 0.5 (the replay would report them), placed by period number."""
+    y = _healthy(40, seed=11)
+    y[3500:] *= 2.5
+    plain = learn_healthy(y, f_r=30.0, **KW)
+    m = learn_healthy(y, f_r=30.0, level_alert=2.0, **KW)
+    assert (plain.level_flagged, plain.level_first, plain.any_flagged) == (0, -1, plain.flagged)
+    assert (m.level_flagged, m.level_first, m.level_last) == (5, 35, 39)
+    assert m.any_flagged >= 5 and m.steady_head == 34
+    s = _run(y, m, 30.0, level_alert=2.0, level_danger=4.0)
+    assert [d.period for d in s if d.severity[0] >= 0.5 and d.period < 40][:1] == [35]
+
+
+def test_steady_length_cuts_until_no_level_is_at_alert_x_its_own_median():
+    step = np.r_[np.ones(30), np.full(10, 2.5)]
+    assert steady_length(step, 2.0) == 30
+    start = step[::-1]                                   # a loud start-up, then steady
+    assert steady_length(start, 2.0) == 0 and steady_length(start[::-1], 2.0) == 30
+    assert steady_length(np.ones(12), 2.0) == 12
+    growth = 1.03 ** np.arange(100)                      # a level growing 3 % a second
+    k = steady_length(growth, 2.0)
+    assert 0 < k < 100 and growth[:k].max() < 2.0 * np.median(growth[:k])
+    assert growth[:k + 1].max() >= 2.0 * np.median(growth[:k + 1]) or k + 1 > 100
+    assert steady_length(np.full(5, np.nan), 2.0) == 0
 
 
 def test_run_in_periods_needs_a_clear_step():

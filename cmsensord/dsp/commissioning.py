@@ -20,6 +20,11 @@ unsteady run-in sets R_min for the whole life), so cmsensord extends it:
    amplitude (R is a variance).  R_n = SPAN·R_1.  With ``faulty`` data, R_n is the
    paper's rule instead: the largest R that still flags at least half of the
    faulty capture's decisions.
+6. The healthy period is checked as the monitor will judge it: the decisions R_1
+   flags, and (with the combined severity's ``level_alert``) those whose level is
+   already that many times the baseline.  A period that holds the start of a fault
+   (a step or rise of level near its end, the whole of a run to failure) shows there,
+   with where it starts, so the engineer can end the period before it.
 
 Everything here is pure numpy on arrays; the command that reads captures is
 ``cmsensord.commission``.
@@ -67,6 +72,12 @@ class HealthyModel:
     flagged: int           # healthy decisions that R_1 would still flag (cnt >= f_r)
     rstar_median: float
     r_max_rule: str = "span"   # "span": R_n = SPAN x R_1; "faulty": from the faulty recording
+    level_flagged: int = 0     # healthy decisions whose level is >= level_alert x baseline
+    level_first: int = -1      # the first and last of them (decision periods from the healthy
+    level_last: int = -1       # period's start, 0 = the filters' transient); -1: none
+    any_flagged: int = 0       # healthy decisions flagged by R_1 or by the level
+    steady_head: int = 0       # decisions after the transient, from the start / back from the end,
+    steady_tail: int = 0       # that hold no level_alert decision of their own (:func:`steady_length`)
 
 
 def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
@@ -161,13 +172,36 @@ def _level_per_period(y: np.ndarray, period: int) -> np.ndarray:
         return np.nanmedian(y[: P * period].reshape(P, period), axis=1)
 
 
+def steady_length(level: np.ndarray, alert: float, max_rounds: int = 100) -> int:
+    """How many of the per-decision ``level`` values, from the first, make a steady healthy period:
+    none of them at ``alert`` x their own median (NaN: missing).
+
+    The span is cut at its first loud decision and checked again against the median of what is
+    left, until none is loud (a level rising through the span lowers the median as it is cut).
+    Reversed ``level`` gives the steady stretch at the end (after a start-up).
+    """
+    k = level.size
+    for _ in range(max_rounds):
+        head = level[:k]
+        if not np.any(np.isfinite(head)):
+            return 0
+        with np.errstate(invalid="ignore"):
+            loud = np.flatnonzero(head >= alert * np.nanmedian(head))
+        if not loud.size:
+            return k
+        k = int(loud[0])
+    return k
+
+
 def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int, z_c: float,
                   p0: float = 1.0, q0: float = 1e-3, faulty: np.ndarray | None = None,
-                  grid: np.ndarray = R_GRID) -> HealthyModel:
+                  grid: np.ndarray = R_GRID, level_alert: float | None = None) -> HealthyModel:
     """The healthy model of one channel from its block RMS ``y`` (T,), NaN = missing.
 
     The first decision period (the filters' transient) is not learned from.
     ``faulty``: block RMS of a faulty recording of the same machine (optional).
+    ``level_alert``: the combined severity's level / baseline alert, for the check of the
+    healthy period's own levels (None: the paper's severity, without a level part).
     """
     y = np.asarray(y, dtype=np.float64).reshape(-1)
     if f_r >= period:
@@ -203,9 +237,21 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     med = np.nanmedian(ratio)
     spread = float(1.4826 * np.nanmedian(np.abs(ratio - med)))
     at_r1 = counts_of(y, np.array([r_1]))[kept, 0]
+    flagged = np.zeros(level_raw.size, dtype=bool)
+    flagged[skip:] = at_r1 >= f_r
+    loud = np.empty(0, dtype=np.int64)
+    steady = (ratio.size, ratio.size)
+    if level_alert is not None:
+        loud = np.flatnonzero(ratio >= level_alert)
+        if loud.size:
+            steady = (steady_length(ratio, level_alert), steady_length(ratio[::-1], level_alert))
+    flagged[loud] = True
     return HealthyModel(
         baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
         healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
         max_cnt=int(at_r1.max()), flagged=int(np.count_nonzero(at_r1 >= f_r)),
         rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule,
+        level_flagged=int(loud.size), level_first=int(loud[0]) + 1 if loud.size else -1,
+        level_last=int(loud[-1]) + 1 if loud.size else -1, any_flagged=int(np.count_nonzero(flagged)),
+        steady_head=steady[0], steady_tail=steady[1],
     )
