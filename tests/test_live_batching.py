@@ -112,6 +112,31 @@ def test_the_loops_batches_give_the_messages_of_one_frame_per_call():
     assert a == b
 
 
+def test_raw_without_a_tacho_gives_its_indicator_alarms_the_same_stamps_however_it_is_called():
+    """RAW blocks and no tacho (no orders, nothing held): a call of seconds (a replay's) wrote
+    the decisions of its blocks before their indicator records, so an alarm the records raised
+    was stamped at the newest event written (3 s late here), not at its record, unlike one
+    frame per call (live). Each alarm event is stamped at the record that raised it."""
+    import dataclasses
+
+    from cmsensord.config.alarms import AlarmRuleConfig, AlarmsConfig
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    sc = make_scenario("faulty", n_channels=1, duration_s=12.0, seed=3)
+    frames, _ = iter_frames(Board(sc, BoardConfig(n_channels=1, mode="raw", tacho=False)).generate(12.0))
+    rule = AlarmRuleConfig(name="rms", indicator="accel_rms", alert=0.001)
+    cfg = dataclasses.replace(default_config(1), alarms=AlarmsConfig(rules=(rule,)))
+    whole = ListSink()
+    proc = Processor(cfg, whole, clock_ns=lambda: 10**18)
+    proc.handle(frames)
+    proc.finish()
+    records = [t for topic, t, _ in whole.messages if topic == "/cm/ch0/indicators"]
+    alerts = [t for topic, t, m in whole.messages if topic == "/cm/events" and m["kind"] == "alarm_alert"]
+    assert len(records) >= 10 and alerts == [records[0]]
+    assert by_topic(whole.messages) == by_topic(one_frame_per_call(frames, cfg).messages)
+
+
 def test_the_serial_source_wakes_every_batch_period_or_when_enough_frames_wait():
     """Frames trickling in come out together once per BATCH_S, not one call per read; a burst
     of BATCH_FRAMES comes out at once."""

@@ -8,10 +8,14 @@ instead of going into the indicator intervals: both take them in any number of p
 the same results (a replay hands over seconds at once), so the Processor hands them over
 joined when a decision may be due, or anything else needs them (a new segment, new channels,
 a quiet link, the end).  What the slots' stamps depend on (the block clock) is not held.
+Without orders every call's blocks pass through here too, handed over before the banks
+take the call's observations, so the indicator records are there before the decisions
+after them (a replay's call of seconds gives what the live calls give).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -74,6 +78,17 @@ class Held:
         blocks = self.take_blocks()
         if blocks is not None:
             indicators.raw(channels, blocks)
+
+    def placer(self, blocks: RawBlocks) -> Callable[[np.ndarray, np.ndarray], None]:
+        """A ``placed`` callback of the Processor's ``_observe``: holds ``blocks`` run by run as
+        the block clock places them (each call's ``t0`` are the next of them)."""
+        start = 0
+
+        def placed(t0: np.ndarray, _vals: np.ndarray) -> None:
+            nonlocal start
+            self.blocks.append(blocks.take(start, start + len(t0)))
+            start += len(t0)
+        return placed
 
     def take_rows(self) -> tuple[int, np.ndarray, np.ndarray] | None:
         """The rows held, joined (None: none)."""

@@ -408,12 +408,12 @@ class Processor(Figures):
             self._raw_blocks(piece)
 
     def _raw_blocks(self, blocks: RawBlocks) -> None:
-        """Converted RAW blocks through the chains: observations, indicators, captures, orders."""
-        self._observe(blocks.t0, blocks.rms())
-        if self.held.rows:                      # the banks wait for a decision: so do the indicators
-            self.held.blocks.append(blocks)
-        else:
-            self.indicators.raw(self.channels, blocks)
+        """Converted RAW blocks through the chains: observations, indicators (each run on one time
+        base waits in :attr:`held` until before the next decision: its records go out ahead of the
+        decisions after them, however the stream was cut into calls), captures, orders."""
+        self._observe(blocks.t0, blocks.rms(), placed=self.held.placer(blocks))
+        if not self.held.rows:                  # the banks wait for no decision: nor do the indicators
+            self._hand_over()
         if self.captures is not None:
             self._out(self.captures.raw([ch.name for ch in self.channels], blocks.t0,
                                         blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
