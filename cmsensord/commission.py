@@ -24,10 +24,11 @@ from cmsensord.argtypes import board_time, positive
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.dsp.commissioning import MARGIN, SPAN, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
-from cmsensord.observations import Observations, read_observations
-from cmsensord.service.origin import span_line
+from cmsensord.monitor.alarms import order_rules
+from cmsensord.observations import Observations, alarm_events, read_observations
+from cmsensord.service.origin import origin_lines, span_line
 
-__all__ = ["ChannelResult", "add_calibrate_parser", "calibrate", "format_table", "run_calibrate",
+__all__ = ["ChannelResult", "add_calibrate_parser", "alarm_lines", "calibrate", "format_table", "run_calibrate",
            "site_yaml"]
 
 
@@ -248,12 +249,49 @@ def run_calibrate(args: argparse.Namespace) -> int:
     tmp = out.with_name(out.name + ".part")
     try:
         tmp.write_text(text)
-        load_config(str(tmp))
+        site = load_config(str(tmp))
         os.replace(tmp, out)
     except OSError as exc:
         raise CmsensordError(f"calibrate: {out}: cannot write the site file: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
+    for line in alarm_lines(args.capture, site, obs):
+        print(line)
     print(f"wrote {out}: run `cmsensord replay CAPTURE --config {out}` or `cmsensord --config {out}`",
           file=sys.stderr)
     return 0
+
+
+def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
+    """A warning per alarm of ``site`` that a replay raises within the healthy period itself, or
+    that stands all through it from before: its levels are within what the machine did then."""
+    if not (site.alarms.enabled and (site.alarms.rules or order_rules(site))):
+        return []
+    standing: dict[str, tuple[float, str, str]] = {}     # alarm -> (since, level, message) all through
+    seen: dict[str, list[tuple[float, str, str]]] = {}   # alarm -> its rises within the period
+    for t, m in alarm_events(capture, site, obs.end_s):
+        alarm, level = str(m.get("alarm")), m["kind"].removeprefix("alarm_")
+        said = (t, level, m["message"].removeprefix(alarm + ": "))
+        if level == "clear":
+            standing.pop(alarm, None)
+        elif t < obs.start_s - 1e-3:
+            standing[alarm] = said
+        else:
+            seen.setdefault(alarm, []).append(said)
+    lines = []
+    for alarm in dict.fromkeys([*standing, *seen]):
+        parts = []
+        if alarm in standing:
+            t, level, message = standing[alarm]
+            parts.append(f"{level} since {t:.1f} board s, before the period, and all through it ({message})")
+        firsts: dict[str, float] = {}
+        for t, level, message in seen.get(alarm, []):
+            if level not in firsts:
+                firsts[level] = t
+                parts.append(f"{level} at {t:.1f} board s ({message})")
+        rises = f", raised {len(seen[alarm])} time(s)" if alarm in seen else ""
+        lines.append(f"alarm {alarm}: warning: shown within the healthy period{rises}: {'; '.join(parts)}; "
+                     "its levels are within what this machine did then: check the rule's levels, or whether "
+                     "the period was healthy")
+        lines += [ln.strip() for ln in origin_lines(obs.meta, [], {alarm: firsts})] if firsts else []
+    return lines

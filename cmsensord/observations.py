@@ -27,9 +27,10 @@ from cmsensord.errors import CmsensordError
 from cmsensord.importing.channel_names import imported_names
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
+from cmsensord.sinks.schemas import TOPIC_EVENTS
 from cmsensord.source import CaptureSource
 
-__all__ = ["Observations", "read_observations", "sidecar"]
+__all__ = ["Observations", "alarm_events", "read_observations", "sidecar"]
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ def sidecar(path: str | Path) -> dict:
 @contextlib.contextmanager
 def _quiet(logger: logging.Logger):
     level = logger.level
-    logger.setLevel(logging.ERROR)
+    logger.setLevel(logging.CRITICAL)       # the replay's alarms and events are not the command's
     try:
         yield
     finally:
@@ -100,17 +101,8 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     ``auto_channels``: the configuration lists no channels (take the board's).
     """
     meta = sidecar(capture)
-    cfg = replace(cfg, output=replace(cfg.output, akf_trace=False, status_line=False))
     collect = _Collect()
-    sink = ListSink()
-    proc = Processor(cfg, sink, auto_channels=auto_channels, observe=collect)
-    with _quiet(logging.getLogger("cmsensord")), CaptureSource(capture) as source:
-        for frames in source:            # the default monitor's events mean nothing here
-            proc.handle(frames)
-            if to_s is not None and not isinstance(to_s, Percent) and proc.adc_seconds > to_s + 2.0:
-                break
-        else:
-            proc.finish()
+    proc, sink = _replay(capture, cfg, auto_channels, to_s, collect)
     if not collect.blocks:
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
@@ -131,6 +123,39 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta)
+
+
+def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,
+            observe: _Collect | None = None, finish: bool = False) -> tuple[Processor, ListSink]:
+    """The Processor after a replay of ``capture`` up to ``to_s`` board seconds (and 2 s more;
+    a :class:`~cmsensord.argtypes.Percent` or None: all of it), and the messages it wrote.
+    ``finish``: also after a stop short of the end (what the stream left pending is written)."""
+    cfg = replace(cfg, output=replace(cfg.output, akf_trace=False, status_line=False))
+    sink = ListSink()
+    proc = Processor(cfg, sink, auto_channels=auto_channels, observe=observe)
+    with _quiet(logging.getLogger("cmsensord")), CaptureSource(capture) as source:
+        for frames in source:            # the default monitor's events mean nothing here
+            proc.handle(frames)
+            if to_s is not None and not isinstance(to_s, Percent) and proc.adc_seconds > to_s + 2.0:
+                if finish:
+                    proc.finish()
+                break
+        else:
+            proc.finish()
+    return proc, sink
+
+
+def alarm_events(capture: str | Path, cfg: Config, end_s: float) -> list[tuple[float, dict]]:
+    """The alarm events (``alarm_alert``, ``alarm_danger``, ``alarm_clear``) that a replay of
+    ``capture`` with ``cfg`` (a site configuration: its channels named) writes up to ``end_s``
+    board seconds, each with its board second, in order."""
+    proc, sink = _replay(capture, cfg, False, end_s, finish=True)
+    if proc.clock.slot0_t0 is None:
+        return []
+    t0 = proc.clock.slot_stamp_ns(0)
+    changes = [((stamp - t0) / 1e9, m) for topic, stamp, m in sink.messages
+               if topic == TOPIC_EVENTS and m.get("kind") in ("alarm_alert", "alarm_danger", "alarm_clear")]
+    return [(t, m) for t, m in changes if t <= end_s + 1e-3]
 
 
 def _seconds(at: float, total_s: float) -> float:

@@ -211,25 +211,66 @@ def test_a_healthy_period_that_holds_the_fault_is_said_with_where_a_steady_one_e
     assert max(m["severity_level"] for t, m in sev) >= 0.5
 
 
-def test_a_loud_start_of_the_healthy_period_is_said_with_where_the_steady_stretch_begins(tmp_path):
-    """An imported recording whose first six snapshots are three times as loud (a start-up): the
-    warning names them in the recording and gives the --from after them; from there, silent."""
+@pytest.fixture(scope="module")
+def loud_start(tmp_path_factory):
+    """An imported recording of 60 snapshots whose first six are three times as loud (a start-up)."""
+    d = tmp_path_factory.mktemp("loud")
     x = np.random.default_rng(5).standard_normal((60, 5120, 1))
     x[:6] *= 3.0
-    np.savez(tmp_path / "start.npz", acc=x, fs=5120.0, t_s=np.arange(60) * 600.0)
-    cap = tmp_path / "start.bin"
-    p = run("cmsensord", "import", str(tmp_path / "start.npz"), "--unit", "g", "--names", "pump", "--out", str(cap))
+    np.savez(d / "start.npz", acc=x, fs=5120.0, t_s=np.arange(60) * 600.0)
+    cap = d / "start.bin"
+    p = run("cmsensord", "import", str(d / "start.npz"), "--unit", "g", "--names", "pump", "--out", str(cap))
     assert p.returncode == 0, p.stderr
-    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--out", str(tmp_path / "s.yaml"))
+    return cap
+
+
+def test_a_loud_start_of_the_healthy_period_is_said_with_where_the_steady_stretch_begins(loud_start, tmp_path):
+    """The warning names the loud snapshots in the recording and gives the --from after them;
+    from there, nothing is said."""
+    p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 0, p.stderr
     assert ("pump: warning: 5 decision(s) of the healthy period are already at >= 2 x its baseline "
             "(level_alert: severity 0.5) in 1.0-6.0 board s, in the recording: start.npz[1] (1.7 % of the "
             "record, 0.1667 h in) to start.npz[5] (8.3 % of the record, 0.8333 h in): a start-up or a "
             "disturbance; its steady stretch to the end begins at --from 6 (levels within 2 x its own "
             "median)\n") in p.stdout
-    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--from", "6", "--out", str(tmp_path / "s.yaml"))
+    p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 0, p.stderr
     assert "warning" not in p.stdout and "pump: highest outlier count" in p.stdout
+
+
+RULES = """alarms:
+  rules:
+    - {name: rms_x2, indicator: accel_rms, alert_x_baseline: 2, danger_x_baseline: 4}
+    - {name: iso, indicator: velocity_rms_mm_s, alert_zone: C, danger_zone: D}
+"""
+
+
+def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
+    """With the base configuration's alarm rules, calibrate replays the healthy period with the
+    site file it wrote and says each alarm shown there (raised in it, or standing all through it
+    from before), as the replay itself then places it; quietly otherwise, and no log lines."""
+    base = tmp_path / "base.yaml"
+    base.write_text(RULES)
+    site = tmp_path / "site.yaml"
+    p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--config", str(base), "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert ("alarm rms_x2/pump: warning: shown within the healthy period, raised 1 time(s): alert at 1.0 board s "
+            "(accel_rms 29.63 reached the alert level 19.66); its levels are within what this machine did then: "
+            "check the rule's levels, or whether the period was healthy\n"
+            "alarm rms_x2/pump: in the recording: alert at start.npz[1] (1.7 % of the record, 0.1667 h in)\n"
+            ) in p.stdout
+    assert "ERROR" not in p.stderr and "alarm_" not in p.stderr
+    p = run("cmsensord", "replay", str(loud_start), "--config", str(site), "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    assert "alarm rms_x2/pump: in the recording: alert at start.npz[1] (1.7 % of the record, 0.1667 h in)" in p.stderr
+
+    p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--config", str(base),
+            "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "alarm rms_x2" not in p.stdout          # raised before the period, cleared in it
+    assert ("alarm iso/pump: warning: shown within the healthy period: danger since 1.0 board s, before the "
+            "period, and all through it (velocity_rms_mm_s 27.88 reached the danger level 4.5); ") in p.stdout
 
 
 def test_the_papers_severity_has_no_level_check(degrading, tmp_path):
