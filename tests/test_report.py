@@ -78,7 +78,7 @@ def test_raw_report_has_severity_indicators_with_zones_and_orders(logs, tmp_path
         png.load()
         assert png.size[0] > 800 and json.loads(png.text["Description"]) == meta
     assert page.count('src="data:image/png;base64,') == 3 and "http://" not in page and "https://" not in page
-    sev = metas["ch0-severity"]["axes"][0]
+    [sev] = metas["ch0-severity"]["axes"]          # the paper's index alone: no level / baseline
     assert sev["ylim"] == [0.0, 1.05] and sev["lines"][0] == "severity index"
     start, end = _log_span(logs["faulty_raw"])
     assert start <= sev["xlim_local"][0] < sev["xlim_local"][1] <= end

@@ -63,7 +63,7 @@ def test_a_replayed_import_of_files_named_by_time_is_drawn_in_the_recording_time
             "2004-02-12T10:40:00), gaps between its snapshots included.") in html.unescape(page)
     assert f"<title>cmsensord report {clock(0)[:16]} – {clock(39, 1)[:16]}</title>" in page
     sev = metas["bearing-severity"]["axes"][0]
-    assert sev["xlabel"] == "recording time (from the import)"
+    assert metas["bearing-severity"]["axes"][-1]["xlabel"] == "recording time (from the import)"
     # one decision a board second, each the end of one snapshot: the first and the last of them
     assert sev["xlim_local"][0] in {clock(k, 1).replace(" ", "T") for k in range(3)}
     assert sev["xlim_local"][1] == clock(39, 1).replace(" ", "T")
@@ -100,7 +100,7 @@ def test_logs_of_an_import_and_of_a_board_stay_in_local_time_and_say_why(tmp_pat
     assert p.returncode == 0, p.stderr
     page, metas = report(tmp_path, logs, tmp_path / "sim")
     assert "The logs are not all of one imported recording: local time is shown." in page
-    assert metas["bearing-severity"]["axes"][0]["xlabel"].startswith("local time (UTC")
+    assert metas["bearing-severity"]["axes"][-1]["xlabel"].startswith("local time (UTC")
     assert "<th>local time</th>" in page
 
 
@@ -234,7 +234,8 @@ def test_snapshots_without_times_are_drawn_in_percent_of_the_record_not_the_repl
             "record (the share of its recorded signal, snapshots end to end).") in html.unescape(page)
     assert "<title>cmsensord report 0.0 % – 100.0 %</title>" in page
     sev = metas["bearing-severity"]["axes"][0]
-    assert sev["xlabel"] == "% of the record (snapshots end to end; the import has no times)"
+    assert metas["bearing-severity"]["axes"][-1]["xlabel"] == \
+        "% of the record (snapshots end to end; the import has no times)"
     assert "xlim_local" not in sev and 0 < sev["xlim"][0] <= 7.5 and sev["xlim"][1] == pytest.approx(100.0)
     assert "<th>% of the record</th>" in page
     # each level's first decision: the end of the snapshot the replay names (2.5 % of the record each)
@@ -261,6 +262,25 @@ def test_one_continuous_file_is_drawn_in_seconds_into_it(tmp_path):
     assert "A replay of an imported recording: times are seconds into the recording." in page
     assert "<title>cmsensord report 0.0 s – 40.0 s</title>" in page
     sev = metas["bearing-severity"]["axes"][0]
-    assert sev["xlabel"] == "seconds into the recording" and sev["xlim"][1] == pytest.approx(40.0)
+    assert metas["bearing-severity"]["axes"][-1]["xlabel"] == "seconds into the recording"
+    assert sev["xlim"][1] == pytest.approx(40.0)
     assert "<th>seconds in</th>" in page
     assert all(re.fullmatch(r"\d+\.\d{3} s", t) for _, t in event_rows(page))
+
+
+def test_a_calibrated_replay_draws_the_level_against_its_baseline_under_the_severity(tmp_path):
+    """The combined severity's level / healthy baseline under the index, on a log scale with the
+    baseline, level_alert and level_danger (the 2 x baseline rule), as the log's messages say."""
+    from cmsensord.sinks.mcap_sink import read_messages
+
+    logs, _ = replayed_import(tmp_path)
+    _, metas = report(tmp_path, logs)
+    top, below = metas["bearing-severity"]["axes"]
+    assert top["ylabel"] == "severity index" and top["xlabel"] == ""
+    assert below["ylabel"] == "level / baseline"
+    assert below["lines"] == ["level / baseline", "level_alert 2 x (severity 0.5)", "level_danger 4 x (severity 1)"]
+    sev = [m for topic, _, m in read_messages(next(logs.glob("*.mcap"))) if topic == "/cm/bearing/severity"]
+    assert {(m["level_alert"], m["level_danger"]) for m in sev} == {(2.0, 4.0)}
+    ratios = [m["level_ratio"] for m in sev if "level_ratio" in m]
+    assert max(ratios) > 2.0 and below["ylim"][0] <= min(ratios) and max(ratios, default=0) < 4.0 < below["ylim"][1]
+    assert below["xlim"] == top["xlim"]

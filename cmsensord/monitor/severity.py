@@ -11,7 +11,8 @@ change, failure), and updates the channels' :class:`ChannelView`.
 With a commissioned baseline the banks watch block RMS / baseline, and the
 combined severity (``monitor.severity``) also grades the period's level against
 it (:func:`~cmsensord.dsp.severity.level_severity`); its severity messages then
-carry ``severity_akf``, ``severity_level`` and ``level_ratio``.
+carry ``severity_akf``, ``severity_level``, ``level_ratio`` and the channel's ``level_alert`` and
+``level_danger``.
 """
 
 from __future__ import annotations
@@ -199,7 +200,10 @@ class SeverityChain:
         """The combined severity's fields of channel ``c``'s message (none in the paper's mode)."""
         if self.combined is None or not self.combined[c]:
             return {}
-        extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c])}
+        dec = self.decider
+        assert dec.level_alert is not None and dec.level_danger is not None
+        extra = {"severity_akf": float(d.severity_akf[c]), "severity_level": float(d.severity_level[c]),
+                 "level_alert": float(dec.level_alert[c]), "level_danger": float(dec.level_danger[c])}
         if np.isfinite(d.level[c]):
             extra["level_ratio"] = float(d.level[c])
         return extra

@@ -19,6 +19,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.dates as mdates  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker as mticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
@@ -99,8 +100,13 @@ def _event_lines(ax: Any, data: LogData, channel: str) -> None:
 
 
 def severity_figure(data: LogData, ch: ChannelData) -> Figure:
-    """The severity index S_idx over time, anomaly periods shaded, channel events as lines."""
-    fig, ax = plt.subplots(figsize=(11, 3.2), layout="constrained")
+    """The severity index S_idx over time, anomaly periods shaded, channel events as lines;
+    under it, when the log has the combined severity's level, the level / healthy baseline
+    with its alert and danger ratios (the analysts' 2 x baseline rule)."""
+    levels = ch.level.count > 0
+    fig, axes = plt.subplots(2 if levels else 1, 1, figsize=(11, 5.6 if levels else 3.2), sharex=True,
+                             layout="constrained", squeeze=False, height_ratios=[1, 0.8] if levels else None)
+    ax = axes[0, 0]
     t, s = ch.severity.arrays()
     x = _times(t, data.axis)
     ax.step(x, s, where="post", color="#1f4e99", lw=1.4, label="severity index")
@@ -116,9 +122,36 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     ax.set_title(f"{ch.name}: severity index (Kim et al. 2023)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8, ncols=4)
+    if levels:
+        _level_axes(axes[1, 0], data, ch)
     meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
             "title": f"{ch.name}: severity index", "points": int(ch.severity.count)}
-    return _finish(fig, meta, [ax], time_axis=data.axis)
+    return _finish(fig, meta, list(axes[:, 0]), time_axis=data.axis)
+
+
+def _level_axes(ax: Any, data: LogData, ch: ChannelData) -> None:
+    """The decisions' median level / healthy baseline on a log scale, with the baseline (1) and
+    the alert and danger ratios of the combined severity."""
+    t, v = ch.level.arrays()
+    ax.step(_times(t, data.axis), v, where="post", color="#37474f", lw=1.2, label="level / baseline")
+    ax.axhline(1.0, color="#888", lw=0.8, ls=":")
+    top = float(np.nanmax(v)) if v.size else 1.0
+    if ch.level_limits is not None:
+        alert, danger = ch.level_limits
+        ax.axhline(alert, color="#e08a00", lw=1.2, ls="--", label=f"level_alert {alert:g} x (severity 0.5)")
+        ax.axhline(danger, color="#b00020", lw=1.2, ls="--", label=f"level_danger {danger:g} x (severity 1)")
+        top = max(top, danger)
+    low = float(np.nanmin(v)) if v.size and np.nanmin(v) > 0 else 0.5
+    ax.set_yscale("log")
+    ax.set_ylim(min(0.5, low / 1.2), top * 1.3)
+    plain = mticker.FuncFormatter(lambda y, _: f"{y:g}")
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(mticker.NullFormatter())
+    ax.set_yticks([y for y in (0.5, 1, 2, 4, 8, 16, 32, 64) if min(0.5, low / 1.2) <= y <= top * 1.3])
+    ax.set_ylabel("level / baseline")
+    ax.set_title(f"{ch.name}: decision level / healthy baseline (the 2 x baseline rule)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="upper left", fontsize=8, ncols=3)
 
 
 def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:

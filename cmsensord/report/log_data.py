@@ -38,6 +38,7 @@ _ANOMALY = re.compile(rb'"anomaly":\[([^\]]*)\]')
 _INDICATOR = re.compile(rb'"(velocity_rms_mm_s|accel_rms|envelope_rms|kurtosis|crest_factor|velocity_alarm_mm_s)":'
                         + _NUM)
 _ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
+_LEVEL = re.compile(rb'"(level_ratio|level_alert|level_danger)":' + _NUM)
 _DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s)":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
 _TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
@@ -61,6 +62,8 @@ class ChannelData:
     name: str
     severity: Trend = field(default_factory=Trend)
     anomaly: Trend = field(default_factory=Trend)
+    level: Trend = field(default_factory=Trend)      # the combined severity's level / baseline
+    level_limits: tuple[float, float] | None = None  # its level_alert and level_danger, the newest
     indicators: dict[str, Trend] = field(default_factory=dict)
     zone_boundaries: list[float] | None = None
     velocity_alarm: float | None = None
@@ -146,6 +149,8 @@ class LogData:
             ch.severity.add(t_ns, _number(m.group(1)) if m is not None else None)
             m = _ANOMALY.search(data)
             ch.anomaly.add(t_ns, 1.0 if m is not None and b"1" in m.group(1) else 0.0)
+            if b'"level_' in data:
+                _level(ch, t_ns, {k.decode(): _number(v) for k, v in _LEVEL.findall(data)})
         else:
             fields: dict[str, Any] = {k.decode(): _number(v) for k, v in _INDICATOR.findall(data)}
             m = _ZONES.search(data)
@@ -158,6 +163,7 @@ class LogData:
             ch = self.channel(name)
             ch.severity.add(t_ns, msg.get("severity_index"))
             ch.anomaly.add(t_ns, 1.0 if any(msg.get("anomaly") or ()) else 0.0)
+            _level(ch, t_ns, msg)
         elif kind == "indicators":
             self._indicators(self.channel(name), t_ns, msg)
         elif kind == "orders":
@@ -264,3 +270,11 @@ def _counters(data: bytes | None) -> tuple[dict[str, int], int]:
     msg = json.loads(data)
     link = {k: int(v) for k, v in (msg.get("link") or {}).items() if isinstance(v, int | float)}
     return link, int(msg.get("queue_drops") or 0)
+
+
+def _level(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
+    """A combined severity message's level / baseline and its alert and danger ratios."""
+    ch.level.add(t_ns, msg.get("level_ratio"))
+    alert, danger = msg.get("level_alert"), msg.get("level_danger")
+    if isinstance(alert, (int, float)) and isinstance(danger, (int, float)):
+        ch.level_limits = (float(alert), float(danger))
