@@ -310,9 +310,9 @@ def test_a_run_up_with_a_speed_column_is_order_tracked_on_replay(tmp_path):
 
 
 # --------------------------------------------------------------------------- the real command
-def cmd(*args, cwd) -> subprocess.CompletedProcess:
+def cmd(*args, cwd, env=None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cmsensord", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=60, env=env)
 
 
 def test_errors_are_one_line_and_leave_nothing_behind(tmp_path):

@@ -5,6 +5,7 @@ not TDMS, or no npTDMS, in one line."""
 
 from __future__ import annotations
 
+import os
 import sys
 
 import numpy as np
@@ -41,15 +42,36 @@ def test_a_directory_of_tdms_snapshots_gives_its_rate_times_and_channels(tmp_pat
     d = tmp_path / "run"
     d.mkdir()
     xs = [write_tdms(d / f"vib_{k:03d}.tdms", k) for k in range(3)]
-    r = cmd("import", "run", "--unit", "g", "--out", "r.bin", cwd=tmp_path)
+    r = cmd("import", "run", "--unit", "g", "--out", "r.bin", cwd=tmp_path, env=dict(os.environ, TZ="UTC"))
     assert r.returncode == 0, r.stderr
     meta = sidecar(tmp_path / "r.bin")
     assert (meta["fs"], meta["channel_names"], meta["source_start"]) == (FS, ["Accel_DE", "Accel_FE"],
                                                                           "2024-03-05T10:15:00")
+    assert r.stderr.count("  note: the files' start times (wf_start_time) are UTC: taken in this computer's "
+                          "local time (UTC), as LabVIEW shows them; TZ=Area/City sets another zone\n") == 1
     assert [s["source_time_s"] for s in meta["snapshots"]] == [0.0, 600.0, 1200.0]
     assert r.stderr.count("  note: channel(s) Temperature (3) hold fewer samples than the others' 10000: "
                           "not imported\n") == 1
     assert_within_one_count(decode(tmp_path / "r.bin"), np.concatenate(xs, axis=1) * G)
+
+
+@pytest.mark.parametrize("zone, offset_h, said", [
+    ("Europe/Berlin", 1, "CET, UTC+01:00"),         # 5 March: winter time
+    ("America/New_York", -5, "EST, UTC-05:00"),
+])
+def test_tdms_start_times_in_utc_are_read_in_the_local_time_as_labview_shows_them(tmp_path, zone, offset_h, said):
+    """wf_start_time is UTC (10:15 in the files): the recording's own time is the computer's local
+    one (TZ), as the logger and LabVIEW showed it to the engineer, and the import says so."""
+    d = tmp_path / "run"
+    d.mkdir()
+    for k in range(2):
+        write_tdms(d / f"vib_{k}.tdms", k)
+    r = cmd("import", "run", "--unit", "g", "--out", "r.bin", cwd=tmp_path, env=dict(os.environ, TZ=zone))
+    assert r.returncode == 0, r.stderr
+    assert sidecar(tmp_path / "r.bin")["source_start"] == f"2024-03-05T{10 + offset_h:02d}:15:00"
+    assert (f"  note: the files' start times (wf_start_time) are UTC: taken in this computer's local time "
+            f"({said}), as LabVIEW shows them; TZ=Area/City sets another zone\n") in r.stderr
+    assert f"2024-03-05 {10 + offset_h:02d}:15:00 to 2024-03-05 {10 + offset_h:02d}:25:00" in r.stderr
 
 
 @pytest.mark.parametrize("speed_first", [False, True])

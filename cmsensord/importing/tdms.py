@@ -3,9 +3,11 @@ optional ``tdms`` extra (npTDMS).
 
 Every numeric channel of the file's groups is a column, named by the channel (``group.channel``
 where two groups name a channel alike). A waveform channel says its own rate and start:
-``wf_increment`` (seconds a sample) gives fs, ``wf_start_time`` the file's snapshot time (as
-TDMS stores it, UTC), so a logger's directory of one file per snapshot needs neither ``--fs``
-nor ``--snapshot-interval``. Channels shorter than the longest (a temperature logged beside the
+``wf_increment`` (seconds a sample) gives fs, ``wf_start_time`` the file's snapshot time, so a
+logger's directory of one file per snapshot needs neither ``--fs`` nor ``--snapshot-interval``.
+TDMS stores that time in UTC; it is taken in this computer's local time (``TZ`` sets another
+zone), as LabVIEW and the logger show it and as the other formats' dates are read, with a
+note. Channels shorter than the longest (a temperature logged beside the
 vibration) are left out with a note, except the speed column (``--speed-column``), which is
 taken to span the same time (:func:`~.variables.stretched`). The file is read whole.
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import logging
 from contextlib import contextmanager
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
@@ -55,11 +58,15 @@ def read_tdms(path: str, slow: str | None = None) -> Table:
     first = next(props for _, _, props, x in chans if x.size == n)
     note = f"channel(s) {', '.join(left)} hold fewer samples than the others' {n}: not imported" if left else None
     start = first.get("wf_start_time")
-    times = None
+    times, zone = None, None
     if isinstance(start, np.datetime64) and not np.isnat(start):
-        times = np.array([(start.astype("datetime64[us]") - np.datetime64(0, "us")).astype(np.float64) / 1e6])
+        utc = (start.astype("datetime64[us]") - np.datetime64(0, "us")).astype(np.float64) / 1e6
+        local, zone = _local(utc)
+        times = np.array([local])
     return Table(path=path, data=data, columns=[names[k] for k in keep], kind="channel", fs=_fs(first),
-                 times=times, dated=times is not None, layout_note=note,
+                 times=times, dated=times is not None, layout_note=note, time_note=zone and (
+                     f"the files' start times (wf_start_time) are UTC: taken in this computer's local time "
+                     f"({zone}), as LabVIEW shows them; TZ=Area/City sets another zone"),
                  notes=[f"{Path(path).name}: npTDMS: {said[0]}; the channels' samples there are imported"] if said
                  else [])
 
@@ -100,3 +107,14 @@ def _fs(properties: dict) -> float | None:
     except (KeyError, TypeError, ValueError):
         return None
     return whole_hz(1.0 / inc) if np.isfinite(inc) and inc > 0 else None
+
+
+def _local(utc_s: float) -> tuple[float, str]:
+    """The local wall-clock reading of a UTC time, as seconds counted like the naive dates of the
+    other formats, and the zone (``CET, UTC+01:00``)."""
+    at = datetime.fromtimestamp(utc_s, timezone.utc).astimezone()
+    offset = at.utcoffset() or timedelta(0)
+    sign, mins = ("-" if offset < timedelta(0) else "+"), abs(int(offset.total_seconds())) // 60
+    name = at.tzname() or ""
+    plain = f"UTC{sign}{mins // 60:02d}:{mins % 60:02d}"
+    return utc_s + offset.total_seconds(), name if name == "UTC" and not mins else f"{name}, {plain}"
