@@ -25,6 +25,7 @@ from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.errors import CmsensordError
 from cmsensord.importing.channel_names import imported_names
+from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
@@ -126,22 +127,30 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
 
 
 def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,
-            observe: _Collect | None = None, finish: bool = False) -> tuple[Processor, ListSink]:
+            observe: _Collect | None = None, finish: bool = False,
+            what: str = "the healthy period") -> tuple[Processor, ListSink]:
     """The Processor after a replay of ``capture`` up to ``to_s`` board seconds (and 2 s more;
     a :class:`~cmsensord.argtypes.Percent` or None: all of it), and the messages it wrote.
-    ``finish``: also after a stop short of the end (what the stream left pending is written)."""
+    ``finish``: also after a stop short of the end (what the stream left pending is written).
+    On a terminal a progress bar says how far it is (``what``: of what)."""
     cfg = replace(cfg, output=replace(cfg.output, akf_trace=False, status_line=False))
     sink = ListSink()
     proc = Processor(cfg, sink, auto_channels=auto_channels, observe=observe)
     with _quiet(logging.getLogger("cmsensord")), CaptureSource(capture) as source:
-        for frames in source:            # the default monitor's events mean nothing here
-            proc.handle(frames)
-            if to_s is not None and not isinstance(to_s, Percent) and proc.adc_seconds > to_s + 2.0:
-                if finish:
-                    proc.finish()
-                break
-        else:
-            proc.finish()
+        progress = Progress(source.size, f"calibrate {Path(capture).name}: {what}")
+        try:
+            for frames in source:            # the default monitor's events mean nothing here
+                proc.handle(frames)
+                progress.update(source.bytes_read, f"{proc.adc_seconds:.0f} s" + (
+                    f" of {to_s:.0f} s" if to_s is not None and not isinstance(to_s, Percent) else ""))
+                if to_s is not None and not isinstance(to_s, Percent) and proc.adc_seconds > to_s + 2.0:
+                    if finish:
+                        proc.finish()
+                    break
+            else:
+                proc.finish()
+        finally:
+            progress.close()
     return proc, sink
 
 
@@ -149,7 +158,7 @@ def alarm_events(capture: str | Path, cfg: Config, end_s: float) -> list[tuple[f
     """The alarm events (``alarm_alert``, ``alarm_danger``, ``alarm_clear``) that a replay of
     ``capture`` with ``cfg`` (a site configuration: its channels named) writes up to ``end_s``
     board seconds, each with its board second, in order."""
-    proc, sink = _replay(capture, cfg, False, end_s, finish=True)
+    proc, sink = _replay(capture, cfg, False, end_s, finish=True, what="its alarms")
     if proc.clock.slot0_t0 is None:
         return []
     t0 = proc.clock.slot_stamp_ns(0)

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from cmsensord.sinks.mcap_sink import read_messages
-from processes import ENV
+from processes import ENV, on_terminal
 
 
 def run(*args, timeout=120):
@@ -280,3 +280,17 @@ def test_the_papers_severity_has_no_level_check(degrading, tmp_path):
     p = run("cmsensord", "calibrate", str(degrading), "--config", str(base), "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 0, p.stderr
     assert "warning" not in p.stdout and "by their level" not in p.stdout
+
+
+def test_calibrate_shows_its_progress_on_a_terminal_and_nothing_else_without_one(degrading, tmp_path):
+    """Both replays (the healthy period, then its alarms with the site file) draw a bar on a
+    terminal; a pipe gets the table and no bar."""
+    base = tmp_path / "base.yaml"
+    base.write_text("alarms:\n  rules:\n    - {name: sev, indicator: severity_index, alert: 0.5}\n")
+    args = ["calibrate", str(degrading), "--to", "150", "--config", str(base), "--out", str(tmp_path / "s.yaml")]
+    status, seen = on_terminal([sys.executable, "-m", "cmsensord", *args])
+    assert status == 0, seen
+    assert b"\rcalibrate degrading.bin: the healthy period [" in seen and b"s of 150 s" in seen
+    assert b"\rcalibrate degrading.bin: its alarms [" in seen
+    p = run("cmsensord", *args)
+    assert p.returncode == 0 and "\r" not in p.stderr + p.stdout and "[#" not in p.stderr
