@@ -276,3 +276,70 @@ def test_hostile_text_tables_are_one_line(tmp_path, name, text, args, message):
     r = cmd("import", name, *args, "--out", "o.bin", cwd=tmp_path)
     assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n")
     assert not list(tmp_path.glob("o.bin*"))
+
+
+def _with_gaps(tmp_path: Path) -> tuple[Path, np.ndarray]:
+    """A logger's CSV with a NaN, an inf and an empty cell in channel a and a NaN in b (blocks 50,
+    70, 90 of 100 samples at 10 kHz): the file and its samples (NaN where missing)."""
+    x = np.round(np.random.default_rng(3).standard_normal((20000, 2)), 4)
+    cells = [[f"{v:.4f}" for v in row] for row in x]
+    for (i, c), text in {(5000, 0): "NaN", (7003, 0): "inf", (7050, 1): "nan", (9099, 0): ""}.items():
+        cells[i][c], x[i, c] = text, np.nan
+    rows = [f"{i / 10000:.4f},{a},{b}\n" for i, (a, b) in enumerate(cells)]
+    (tmp_path / "gaps.csv").write_text("t,a,b\n" + "".join(rows))
+    return tmp_path / "gaps.csv", x
+
+
+def test_missing_values_leave_their_blocks_out_as_frames_the_board_lost(tmp_path):
+    """NaN, inf and empty cells are not an error: each channel's block that holds one is not
+    sent (its seq skipped), the other samples go through unchanged, and a replay counts the
+    lost frames and the missing observations."""
+    path, x = _with_gaps(tmp_path)
+    r = cmd("import", path, "--unit", "g", "--out", "g.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: gaps.csv: 4 missing value(s) (NaN, inf or empty cells) in a (3), b (1), the first at sample "
+            "5000: the blocks that hold them are left out of the capture, as frames the board lost (a replay "
+            "counts their observations missing)\n") in r.stderr
+    assert "peak" in r.stderr and ", 3 block(s) left out for missing samples\n" in r.stderr
+    meta = json.loads((tmp_path / "g.bin.json").read_text())
+    assert meta["missing_blocks"] == [3, 1] and meta["clipped_blocks"] == [0, 0]
+    from cmsensord.protocol import FrameType, iter_frames
+
+    frames, counters = iter_frames((tmp_path / "g.bin").read_bytes())
+    assert counters.frames_lost == 4 and counters.crc_failures == 0
+    sent = {(f.chan, f.t0_unwrapped // 100) for f in frames if f.type == FrameType.RAW}
+    assert {(c, b) for c in (0, 1) for b in range(200)} - sent == {(0, 50), (0, 70), (1, 70), (0, 90)}
+    kept = np.ones(20000, dtype=bool)
+    for b in (50, 70, 90):
+        kept[b * 100:(b + 1) * 100] = False
+    got = decode_lossy(tmp_path / "g.bin")
+    assert_within_one_count({"x": got[0][None, :], "status": got[1]}, x[kept, 0][None, :] * G)
+    r = cmd("replay", "g.bin", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "(396 observations, 4 missing, 4 frames lost)" in r.stderr
+    r = cmd("import", path, "--unit", "g", "--memory-mb", "0.1", "--out", "long.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr                  # read a stretch of lines at a time: the same
+    assert (tmp_path / "long.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()
+
+
+def decode_lossy(path: Path):
+    """Channel 0's samples in the frames sent (the blocks left out skipped), and the STATUS."""
+    from cmsensord.protocol import FrameType, decode_raw, decode_status, iter_frames
+
+    frames, _ = iter_frames(path.read_bytes())
+    status = decode_status(next(f for f in frames if f.type == FrameType.STATUS).payload)
+    counts = np.concatenate([decode_raw(f.payload) for f in frames if f.type == FrameType.RAW and f.chan == 0])
+    return (counts - status.offset[0]) * status.scale[0], status
+
+
+def test_in_rms_mode_a_missing_value_leaves_the_blocks_rms_frame_out(tmp_path):
+    path, _ = _with_gaps(tmp_path)
+    r = cmd("import", path, "--unit", "g", "--mode", "rms", "--out", "g.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((tmp_path / "g.bin.json").read_text())
+    assert meta["missing_blocks"] == [3, 3]               # block 70 of both: one frame holds every channel
+    from cmsensord.protocol import FrameType, iter_frames
+
+    frames, counters = iter_frames((tmp_path / "g.bin").read_bytes())
+    assert counters.frames_lost == 3
+    assert sorted({f.t0_unwrapped // 100 for f in frames if f.type == FrameType.RMS} ^ set(range(200))) == [50, 70, 90]

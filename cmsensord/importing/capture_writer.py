@@ -7,12 +7,15 @@ due (block 0, then once a second of board time), then one RAW frame per channel
 counts, as the board computes it), then a TACHO frame when a tacho is imported.
 seq counts every frame; t0 is the block's first sample on the board clock,
 which runs on continuously through the snapshots (:mod:`.blocks`). A block with
-a sample at 0 or 4095 carries the clipped flag.
+a sample at 0 or 4095 carries the clipped flag. A channel's block that holds a missing
+sample (NaN) is not sent: its RAW frame (RMS mode: the block's RMS frame) is left out and
+its seq skipped, as a frame the board lost, so a replay counts its observations missing.
 
 The sidecar (``OUT.json``) holds what the frames cannot: the sources, the
 channel names, the input unit and scale factor, the full-scale range, the
 clipped blocks and samples per channel, the speed (``rpm``, ``rpm_source``), the tacho
 (``tacho``: the column's name or ``rpm``; ``tacho_from``: ``pulses``, ``speed`` or ``rpm``) and
+the blocks left out for missing samples per channel (``missing_blocks``),
 per snapshot its ``source`` (file, ``[i]`` for the i-th inside a file),
 ``start_s`` (board seconds), ``length`` (samples in blocks), ``dropped``
 (samples at its end that fill no block), ``pct_of_record`` (its start as a
@@ -111,6 +114,7 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
                     overruns=0, scale=tuple(scale.tolist()), offset=tuple(offset.tolist()), uptime_s=0)
     clip_blocks = np.zeros(C, dtype=np.int64)
     clip_samples = np.zeros(C, dtype=np.int64)
+    missing_blocks = np.zeros(C, dtype=np.int64)
     seq = frames = 0
     ar = np.arange(L)
     chunk = max(1, min(CHUNK_BLOCKS, CHUNK_SAMPLES // (C * L)))
@@ -118,11 +122,18 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
         c1 = min(c0 + chunk, plan.n_blocks)
         a0 = int(plan.src_start[c0])
         x = rec.samples.read(a0, int(plan.src_start[c1 - 1]) + L)
-        counts = to_counts(x[:, plan.src_start[c0:c1, None] - a0 + ar], scale)  # (C, nb, L)
-        edge = (counts == 0) | (counts == ADC_MAX)  # docs/PROTOCOL.md: clipped
+        xb = x[:, plan.src_start[c0:c1, None] - a0 + ar]  # (C, nb, L)
+        lost = np.isnan(xb).any(axis=-1)  # (C, nb): a missing sample: the frame is not sent
+        if lost.any():
+            xb = np.where(np.isnan(xb), 0.0, xb)
+            if mode == "rms":
+                lost[:] = lost.any(axis=0)  # one RMS frame holds every channel's
+        counts = to_counts(xb, scale)
+        edge = ((counts == 0) | (counts == ADC_MAX)) & ~lost[..., None]  # docs/PROTOCOL.md: clipped
         clip = edge.any(axis=-1)  # (C, nb)
         clip_blocks += clip.sum(axis=1)
         clip_samples += edge.sum(axis=(1, 2))
+        missing_blocks += lost.sum(axis=1)
         if mode == "rms":
             rms = block_rms(counts.reshape(C, -1), scale, offset, L).T  # (nb, C)
             any_clip = clip.any(axis=0)
@@ -135,10 +146,12 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
                 seq += 1
             if mode == "raw":
                 for c in range(C):
-                    parts.append(encode_raw(seq, t0, c, counts[c, i], FLAG_CLIPPED if clip[c, i] else 0))
+                    if not lost[c, i]:
+                        parts.append(encode_raw(seq, t0, c, counts[c, i], FLAG_CLIPPED if clip[c, i] else 0))
                     seq += 1
             else:
-                parts.append(encode_rms(seq, t0, rms[i], FLAG_CLIPPED if any_clip[i] else 0))
+                if not lost[0, i]:
+                    parts.append(encode_rms(seq, t0, rms[i], FLAG_CLIPPED if any_clip[i] else 0))
                 seq += 1
             if tacho is not None:
                 bounds, off = tacho
@@ -149,7 +162,7 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
         if progress is not None:
             progress(c1)
     return {"frames": frames, "clipped_blocks": clip_blocks.tolist(),
-            "clipped_samples": clip_samples.tolist(),
+            "clipped_samples": clip_samples.tolist(), "missing_blocks": missing_blocks.tolist(),
             "tacho_edges": int(tacho[1].size) if tacho is not None else 0}
 
 
@@ -177,6 +190,7 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         "channel_names": rec.names, "unit": "m/s2", "source_unit": rec.source_unit, **extra,
         "full_scale": full_scale, "scale": scale.tolist(), "offset": [OFFSET] * rec.n_channels,
         "clipped_blocks": stats["clipped_blocks"], "clipped_samples": stats["clipped_samples"],
+        "missing_blocks": stats["missing_blocks"],
         "board_seconds": plan.n_board_samples / fs, "blocks": plan.n_blocks, "frames": stats["frames"],
         "dropped_samples": int(plan.dropped.sum()),
         "rpm": rec.rpm, "rpm_source": rec.rpm_source, "ppr": rec.ppr,

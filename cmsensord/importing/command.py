@@ -183,8 +183,9 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
         fs_, sc = meta["full_scale"][c], meta["scale"][c]
         line = (f"  {name}: full scale +-{fs_:g} m/s2 ({sc:.4g} m/s2 a count), "
                 f"peak {peaks[c]:.4g} m/s2")
-        nclip = meta["clipped_samples"][c]
-        lines.append(line + (", no clipping" if not nclip else ""))
+        nclip, lost = meta["clipped_samples"][c], meta["missing_blocks"][c]
+        lines.append(line + (", no clipping" if not nclip else "")
+                     + (f", {lost:,} block(s) left out for missing samples" if lost else ""))
         if nclip:
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
                          f"clipped at +-{fs_:g} m/s2 (counts 0/{ADC_MAX}); those blocks carry the "

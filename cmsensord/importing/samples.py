@@ -2,7 +2,7 @@
 so that an import's memory does not grow with the recording.
 
 A :class:`SampleStore` takes each file's channels as they are read (:meth:`~SampleStore.append`,
-float64 m/s²), keeps each channel's peak |x| on the way, and gives back any stretch of
+float64 m/s²), keeps each channel's peak |x| on the way (NaN, a missing value, aside), and gives back any stretch of
 samples (:meth:`~SampleStore.read`). Up to ``memory_mb`` of samples stay in memory; past
 that, all of them go to an unnamed temporary file in the output's directory (8 bytes a
 sample a channel, beside the capture's 2), which goes when the store is closed or when the
@@ -53,7 +53,7 @@ class SampleStore:
             raise ValueError(f"{x.shape[0]} channels, the store holds {self.n_channels}")
         if not x.shape[1]:
             return
-        np.maximum(self.peak, np.abs(x).max(axis=1), out=self.peak)
+        np.fmax(self.peak, np.fmax.reduce(np.abs(x), axis=1), out=self.peak)     # NaN (missing) not counted
         self.n_samples += x.shape[1]
         if self._file is None and self.n_samples * self.n_channels * _ITEM <= self._memory_bytes:
             self._parts.append(np.asarray(x, dtype=np.float64))

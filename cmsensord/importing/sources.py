@@ -210,16 +210,16 @@ class _Layout:
                                 "import them separately")
 
 
-def _finite(t: Table, x: np.ndarray, names: list[str], snapshot: int | None, first: int) -> None:
-    """x (C, n), samples ``first`` on of a snapshot (None: the file's only one): an error naming
-    the file and column of the first NaN/inf."""
-    bad = ~np.isfinite(x)
-    if bad.any():
-        c, i = np.argwhere(bad)[0]
-        where = f"sample {first + i}" if snapshot is None else f"snapshot {snapshot}, sample {first + i}"
-        raise ImportFailure(f"{t.path}: {t.kind} {names[c]!r} has {int(bad.sum())} missing or "
-                            f"non-finite value(s) (first at {where}); clean the file or choose "
-                            "other --channels")
+def _missing_note(t: Table, names: list[str], missing: np.ndarray, first: tuple[int, int] | None) -> str | None:
+    """One line on a file's missing values (``missing``: per channel; ``first``: the snapshot and
+    sample of the first), or None when it has none."""
+    if first is None:
+        return None
+    which = ", ".join(f"{name} ({int(n):,})" for name, n in zip(names, missing) if n)
+    at = f"snapshot {first[0]}, sample {first[1]}" if t.data.shape[0] > 1 else f"sample {first[1]}"
+    return (f"{t.name}: {int(missing.sum()):,} missing value(s) (NaN, inf or empty cells) in {which}, the first "
+            f"at {at}: the blocks that hold them are left out of the capture, as frames the board lost (a "
+            "replay counts their observations missing)")
 
 
 def _split(t: Table, n: int | None) -> list[tuple[int, int, int]]:
@@ -232,21 +232,30 @@ def _split(t: Table, n: int | None) -> list[tuple[int, int, int]]:
     return [(0, a, min(n, length - a)) for a in range(0, length, n)]
 
 
-def _channels(t: Table, layout: _Layout, factor: float) -> Iterator[np.ndarray]:
+def _channels(t: Table, layout: _Layout, factor: float, notes: list[str]) -> Iterator[np.ndarray]:
     """The imported channels of one file in m/s², (C, n) stretches of at most ``READ_SAMPLES`` in
-    file order, each checked finite: one float64 copy of a stretch, not of the file."""
+    file order: one float64 copy of a stretch, not of the file. A missing or non-finite value is
+    NaN there (its block is left out of the capture), and ``notes`` gets one line on them."""
     s_, n_, _ = t.data.shape
-    names = [t.columns[i] for i in layout.idx]
+    missing = np.zeros(len(layout.idx), dtype=np.int64)
+    first: tuple[int, int] | None = None
     for s in range(s_):
         for a in range(0, n_, READ_SAMPLES):
             x = np.empty((len(layout.idx), min(n_, a + READ_SAMPLES) - a))
             for c, i in enumerate(layout.idx):
                 x[c] = t.data[s, a:a + x.shape[1], i]
-            _finite(t, x, names, s if s_ > 1 else None, a)
+            bad = ~np.isfinite(x)
+            if bad.any():
+                missing += bad.sum(axis=1)
+                first = first or (s, a + int(np.flatnonzero(bad.any(axis=0))[0]))
+                x[bad] = np.nan
             if t.zero:
                 x -= t.zero
             x *= t.gain * factor
             yield x
+    note = _missing_note(t, [t.columns[i] for i in layout.idx], missing, first)
+    if note:
+        notes.append(note)
 
 
 def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
@@ -315,7 +324,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             pos += n
         own_times, clock, dated = own_times or t.times is not None, clock or t.clock, dated or t.dated
         notes += _file_notes(t, opts)
-        for x in _channels(t, layout, factor):
+        for x in _channels(t, layout, factor, notes):
             stores[0].append(x)
         if t.rpm and np.isfinite(t.rpm) and t.rpm > 0 and rpm_file is None:
             rpm_file = (t.rpm, t.name)

@@ -130,15 +130,32 @@ def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
 def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dated: bool, width: int) -> np.ndarray:
     """float64 (rows, columns) of the text table ``src`` after its first ``skip`` lines, which
     begin at line ``line0`` of the file (a first column of dates as seconds since the Unix
-    epoch); a row that is not numbers is a ValueError naming its line in the file."""
+    epoch; an empty cell is NaN, a missing value); a row that is not numbers is a ValueError
+    naming its line in the file."""
     try:
         with warnings.catch_warnings():             # "input contained no data", blank lines: not the user's
             warnings.simplefilter("ignore", UserWarning)
-            a = np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
-                           encoding="utf-8-sig", usecols=range(1, width) if dated else None)
+            try:
+                a = _loadtxt(src, sep, skip, dated, width, None)
+            except ValueError as exc:
+                if "convert string '' to" not in str(exc):
+                    raise
+                if isinstance(src, io.StringIO):
+                    src.seek(0)
+                a = _loadtxt(src, sep, skip, dated, width, _cell)   # cell by cell: slower, only for such a file
             return np.column_stack([_dates(src, sep, skip, line0), a]) if dated else a
     except ValueError as exc:
         raise ValueError(_loadtxt_message(str(exc), line0)) from None
+
+
+def _loadtxt(src: str | io.StringIO, sep: str | None, skip: int, dated: bool, width: int, cell) -> np.ndarray:
+    return np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
+                      encoding="utf-8-sig", usecols=range(1, width) if dated else None, converters=cell)
+
+
+def _cell(text: str) -> float:
+    """A cell's number; an empty cell (a logger's missing value) is NaN."""
+    return float(text) if text.strip() else float("nan")
 
 
 def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, width: int,
