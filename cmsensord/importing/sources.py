@@ -27,6 +27,7 @@ import numpy as np
 
 from .arrays import read_npy, read_npz
 from .channel_names import channel_names, checked_names
+from .columns import Columns
 from .errors import ImportFailure
 from .matlab import read_mat
 from .options import ImportOptions
@@ -324,8 +325,12 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             pos += n
         own_times, clock, dated = own_times or t.times is not None, clock or t.clock, dated or t.dated
         notes += _file_notes(t, opts)
-        for x in _channels(t, layout, factor, notes):
-            stores[0].append(x)
+        try:
+            for x in _channels(t, layout, factor, notes):
+                stores[0].append(x)
+        finally:
+            if isinstance(t.data, Columns):     # read a stretch at a time from a file kept open
+                t.data.close()
         if t.rpm and np.isfinite(t.rpm) and t.rpm > 0 and rpm_file is None:
             rpm_file = (t.rpm, t.name)
         del t

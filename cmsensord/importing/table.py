@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .columns import Columns
 from .errors import ImportFailure
 
 __all__ = ["Table", "as_snapshot_array", "FS_KEYS", "TIME_KEYS", "RPM_KEYS"]
@@ -30,7 +31,7 @@ RPM_KEYS = ("rpm", "speed_rpm")
 @dataclass
 class Table:
     path: str
-    data: np.ndarray  # (snapshots, samples, columns)
+    data: np.ndarray | Columns  # (snapshots, samples, columns); Columns: read a stretch at a time
     columns: list[str]  # one name per column
     kind: str = "column"  # what the user calls a column of this file in messages
     fs: float | None = None

@@ -9,7 +9,8 @@ TDMS stores that time in UTC; it is taken in this computer's local time (``TZ`` 
 zone), as LabVIEW and the logger show it and as the other formats' dates are read, with a
 note. Channels shorter than the longest (a temperature logged beside the
 vibration) are left out with a note, except the speed column (``--speed-column``), which is
-taken to span the same time (:func:`~.variables.stretched`). The file is read whole.
+taken to span the same time (:func:`~.variables.stretched`). The channels are read a stretch
+at a time as the import converts them (:class:`~.columns.Columns`), not whole.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .columns import Columns
 from .errors import ImportFailure
 from .table import Table
 from .time_column import whole_hz
@@ -39,23 +41,32 @@ def read_tdms(path: str, slow: str | None = None) -> Table:
     said: list[str] = []        # what npTDMS logged of the file (a cut-short segment, a bad version)
     try:
         with _heard(said):
-            f = TdmsFile.read(path)
+            f = TdmsFile.open(path)      # the channels' data is read later, a stretch at a time
     except Exception as exc:  # npTDMS raises what the bytes make it (ValueError, KeyError, struct.error, ...)
         why = " ".join(str(exc).split()) or type(exc).__name__
         raise ImportFailure(f"{path}: not a readable TDMS file ({why}); export it again from LabVIEW, or as CSV") \
             from None
-    chans = [(g.name, c.name, c.properties, x) for g in f.groups() for c in g.channels()
-             if (x := np.asarray(c[:])).dtype.kind in "iuf" and x.size > 1]     # each channel's data read once
+    try:
+        return _table(path, f, slow, said)
+    except BaseException:
+        f.close()
+        raise
+
+
+def _table(path: str, f, slow: str | None, said: list[str]) -> Table:
+    """The Table of the open file ``f`` (its channels read when the import asks; closed with ``data.close``)."""
+    chans = [(g.name, c.name, c.properties, c) for g in f.groups() for c in g.channels()
+             if _numeric(c) and len(c) > 1]
     if not chans:
         why = f"not a readable TDMS file ({said[0]})" if said else "no numeric channel in the file"
         raise ImportFailure(f"{path}: {why}; export it again from LabVIEW, or as CSV")
     plain = [name for _, name, _, _ in chans]
     names = [name if plain.count(name) == 1 else f"{g}.{name}" for g, name, _, _ in chans]
-    n = max(x.size for _, _, _, x in chans)
-    keep = [k for k, (_, _, _, x) in enumerate(chans) if x.size == n or (names[k] == slow and x.size < n)]
-    left = [f"{names[k]} ({x.size})" for k, (_, _, _, x) in enumerate(chans) if k not in keep]
-    data = np.stack([_column(chans[k][3], n) for k in keep], axis=1)[None]
-    first = next(props for _, _, props, x in chans if x.size == n)
+    n = max(len(c) for _, _, _, c in chans)
+    keep = [k for k, (_, _, _, c) in enumerate(chans) if len(c) == n or (names[k] == slow and len(c) < n)]
+    left = [f"{names[k]} ({len(c)})" for k, (_, _, _, c) in enumerate(chans) if k not in keep]
+    data = Columns([_reader(chans[k][3], n, said) for k in keep], n, np.dtype(np.float64), close=f.close)
+    first = next(props for _, _, props, c in chans if len(c) == n)
     note = f"channel(s) {', '.join(left)} hold fewer samples than the others' {n}: not imported" if left else None
     start = first.get("wf_start_time")
     times, zone = None, None
@@ -95,9 +106,26 @@ def _heard(said: list[str]):
             log.handlers, log.propagate = handlers, propagate
 
 
-def _column(x: np.ndarray, n: int) -> np.ndarray:
-    """A channel's samples, or a slower one's interpolated to ``n`` over the same time."""
-    return x if x.size == n else stretched(x[None, :, None], n)[0, :, 0]
+def _numeric(channel) -> bool:
+    """Whether a channel holds numbers (not times or text), from its type, without reading it."""
+    try:
+        return np.dtype(channel.dtype).kind in "iuf"
+    except TypeError:
+        return False
+
+
+def _reader(channel, n: int, said: list[str]):
+    """Samples a..b of a channel, float64 (read then; npTDMS's warnings into ``said``); a slower
+    one (a speed column with fewer samples) read whole, interpolated to ``n`` over the same time."""
+    if len(channel) != n:
+        with _heard(said):
+            x = stretched(np.asarray(channel[:], dtype=np.float64)[None, :, None], n)[0, :, 0]
+        return lambda a, b: x[a:b]
+
+    def read(a: int, b: int) -> np.ndarray:
+        with _heard(said):
+            return np.asarray(channel.read_data(a, b - a), dtype=np.float64)
+    return read
 
 
 def _fs(properties: dict) -> float | None:

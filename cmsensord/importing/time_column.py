@@ -95,6 +95,7 @@ def _clock(t: Table) -> tuple[tuple[int, ...], np.ndarray] | None:
     by the first rows first: a long table's columns are copied only when those are times)."""
     if t.data.shape[1] > _HEAD_ROWS and _clock(replace(t, data=t.data[:, :_HEAD_ROWS])) is None:
         return None
+    assert isinstance(t.data, np.ndarray), "a text table's numbers are in memory (or mapped)"
     a = t.data[0]
     for width in (4, 3):
         if a.shape[1] <= width:
