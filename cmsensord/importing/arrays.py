@@ -11,6 +11,7 @@ length is the number of snapshots, are read as such. Axes: see
 
 from __future__ import annotations
 
+import struct
 import zipfile
 
 import numpy as np
@@ -42,10 +43,12 @@ def read_npy(path: str) -> Table:
 
 def read_npz(path: str, array: tuple[str, ...] | None, slow: str | None = None) -> Table:
     """The arrays ``array`` of an .npz archive side by side (``slow``: the speed column,
-    :func:`~.variables.selected`), and the rate, times and speed it holds."""
+    :func:`~.variables.selected`), and the rate, times and speed it holds. An array stored
+    uncompressed (``np.savez``) is a memory map of the archive, so one long array is converted
+    a stretch at a time, as an .npy file's; a compressed one is read."""
     with _load(path) as z:
         try:
-            arrays = {k: z[k] for k in z.files}
+            arrays = {k: z[k] if (m := _mapped(path, z.zip, k)) is None else m for k in z.files}
         except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
             raise ImportFailure(f"{path}: an array cannot be read ({' '.join(str(exc).split())}); "
                                 "save the archive with numeric arrays only") from None
@@ -57,3 +60,34 @@ def read_npz(path: str, array: tuple[str, ...] | None, slow: str | None = None) 
             times = v.astype(np.float64)
     return Table(path=path, data=data, columns=columns, kind="channel", layout_note=note,
                  fs=scalar_named(arrays, FS_KEYS), times=times, rpm=rpm_named(arrays, path))
+
+
+#: arrays smaller than this are read, not mapped
+MAP_BYTES = 1 << 20
+
+
+def _mapped(path: str, zf: zipfile.ZipFile, name: str) -> np.memmap | None:
+    """Member ``name`` (``A.npy``'s ``A``) of the archive as a read-only memory map, when it is
+    stored uncompressed, numeric, in an .npy format version numpy reads publicly and at least
+    MAP_BYTES long; else None (read it)."""
+    info = zf.getinfo(f"{name}.npy") if f"{name}.npy" in zf.NameToInfo else zf.getinfo(name)
+    if info.compress_type != zipfile.ZIP_STORED or info.file_size < MAP_BYTES:
+        return None
+    with open(path, "rb") as f:
+        f.seek(info.header_offset)
+        local = f.read(30)                  # the local file header: its name and extra field follow
+        if len(local) < 30 or local[:4] != b"PK\x03\x04":
+            return None
+        name_len, extra_len = struct.unpack("<HH", local[26:30])
+        f.seek(info.header_offset + 30 + name_len + extra_len)
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+        else:
+            return None
+        offset = f.tell()
+    if dtype.hasobject or dtype.kind not in "iufb" or not shape:
+        return None
+    return np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=shape, order="F" if fortran else "C")
