@@ -11,11 +11,14 @@ same memory for every length shows that it is bounded (``--memory-mb``, default 
 one file). ``--wav-minutes M`` (repeatable) also imports one long WAV file of M minutes, as
 a field recorder writes it (48 kHz, stereo, 16-bit): its memory should not grow with its
 length either; ``--csv-minutes M`` one long CSV (a time column and three channels at
-25.6 kHz). The long files' table also gives the import's peak anonymous memory (its own, not
-the pages of the files it maps). ``--tree LABEL=DIR`` (repeatable) runs another checkout's code on the same
-files, side by side.
+25.6 kHz); ``--tdms-minutes M`` one long TDMS file and ``--npz-minutes M`` one long
+uncompressed .npz (four float64 channels at 25.6 kHz each). The long files' table also gives
+the import's peak anonymous memory (its own, not the pages of the files it maps). Peak RSS
+is each import's own VmHWM. ``--tree LABEL=DIR`` (repeatable) runs another checkout's code
+on the same files, side by side.
 
-    python bench/bench_import.py [--files 60 240] [--wav-minutes 2 10] [--csv-minutes 2 10] [--memory-mb 64]
+    python bench/bench_import.py [--files 60 240] [--wav-minutes 2 10] [--csv-minutes 2 10]
+                                 [--tdms-minutes 2 10] [--npz-minutes 2 10] [--memory-mb 64]
                                  [--tree before=DIR] [--keep DIR]
 """
 
@@ -70,6 +73,36 @@ def write_wav(path: Path, minutes: float) -> None:
 
 
 CSV_FS = 25600
+LOGGER_FS = 25600
+
+
+def write_tdms(path: Path, minutes: float) -> None:
+    """A logger's TDMS file of ``minutes``: four float64 channels at 25.6 kHz, a segment a second."""
+    import nptdms
+
+    rng = np.random.default_rng(3)
+    wave = {"wf_increment": 1.0 / LOGGER_FS, "wf_start_time": np.datetime64("2024-03-05T10:15:00")}
+    with nptdms.TdmsWriter(str(path)) as w:
+        for k in range(int(round(minutes * 60))):
+            x = np.round(0.1 * rng.standard_normal((4, LOGGER_FS)), 5)
+            w.write_segment([nptdms.ChannelObject("Vibration", f"acc{c}", x[c], wave if k == 0 else {})
+                             for c in range(4)])
+
+
+def write_npz(path: Path, minutes: float) -> None:
+    """An .npz of ``minutes`` as ``np.savez`` stores it (uncompressed): ``acc`` (samples, 4) float64
+    at 25.6 kHz and ``fs``, written a minute at a time into the archive's member."""
+    import zipfile
+
+    rng = np.random.default_rng(4)
+    n = int(round(minutes * 60)) * LOGGER_FS
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED, allowZip64=True) as z:
+        with z.open("acc.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array_header_1_0(f, {"descr": "<f8", "fortran_order": False, "shape": (n, 4)})
+            for _ in range(int(round(minutes))):
+                f.write(np.round(0.1 * rng.standard_normal((60 * LOGGER_FS, 4)), 5).tobytes())
+        with z.open("fs.npy", "w") as f:
+            np.lib.format.write_array(f, np.array(float(LOGGER_FS)))
 
 
 def write_csv(path: Path, minutes: float) -> None:
@@ -96,18 +129,19 @@ def run_import(src: Path, out: Path, tree: Path, memory_mb: float | None, *how: 
     err: list[bytes] = []
     reader = threading.Thread(target=lambda: err.append(p.stderr.read() if p.stderr else b""))
     reader.start()
-    anon = 0
+    anon = peak = 0
     while True:
         pid, status, usage = os.wait4(p.pid, os.WNOHANG)
         if pid:
             break
-        anon = max(anon, _rss_anon_kb(p.pid))
+        anon = max(anon, _status_kb(p.pid, "RssAnon:"))
+        peak = max(peak, _status_kb(p.pid, "VmHWM:"))     # ru_maxrss starts at this process's peak
         time.sleep(0.02)
     wall = time.monotonic() - t0
     reader.join()
     if os.waitstatus_to_exitcode(status) != 0:
         raise SystemExit(f"import failed ({tree}):\n{b''.join(err).decode()}")
-    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "rss_mb": usage.ru_maxrss / 1024,
+    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "rss_mb": peak / 1024,
             "anon_mb": anon / 1024, "capture_mb": out.stat().st_size / 1e6}
 
 
@@ -122,11 +156,12 @@ def measure(args: argparse.Namespace, src: Path, write, length: float, what: str
                                args.memory_mb if tree == ROOT else None, *how)) for label, tree in trees(args.tree)]
 
 
-def _rss_anon_kb(pid: int) -> int:
-    """The process's anonymous resident memory now (its own, not pages of files it maps), kB."""
+def _status_kb(pid: int, key: str) -> int:
+    """A field of the process's /proc status now, kB: ``RssAnon:`` its anonymous resident memory
+    (its own, not pages of files it maps), ``VmHWM:`` its peak resident memory since its exec."""
     try:
         with open(f"/proc/{pid}/status") as f:
-            return next((int(line.split()[1]) for line in f if line.startswith("RssAnon:")), 0)
+            return next((int(line.split()[1]) for line in f if line.startswith(key)), 0)
     except OSError:
         return 0
 
@@ -138,6 +173,10 @@ def main() -> None:
                     help="also one long stereo WAV of these lengths, in minutes")
     ap.add_argument("--csv-minutes", type=float, nargs="*", default=[],
                     help="also one long CSV (a time column, 3 channels at 25.6 kHz) of these lengths, in minutes")
+    ap.add_argument("--tdms-minutes", type=float, nargs="*", default=[],
+                    help="also one long TDMS file (4 channels at 25.6 kHz, the tdms extra) of these lengths")
+    ap.add_argument("--npz-minutes", type=float, nargs="*", default=[],
+                    help="also one long uncompressed .npz (4 channels at 25.6 kHz) of these lengths")
     ap.add_argument("--memory-mb", type=float, help="passed to this checkout's import (default: its own)")
     ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
                     help="also run another checkout's code (e.g. before=../old)")
@@ -152,7 +191,9 @@ def main() -> None:
                                                              f"{n} snapshot files")]
         for kind, minutes, write, fs, channels, how in (
                 ("CSV", args.csv_minutes, write_csv, CSV_FS, 3, ("--unit", "g")),
-                ("WAV", args.wav_minutes, write_wav, WAV_FS, 2, ("--unit", "g", "--scale-factor", "10"))):
+                ("WAV", args.wav_minutes, write_wav, WAV_FS, 2, ("--unit", "g", "--scale-factor", "10")),
+                ("TDMS", args.tdms_minutes, write_tdms, LOGGER_FS, 4, ("--unit", "g")),
+                ("NPZ", args.npz_minutes, write_npz, LOGGER_FS, 4, ("--unit", "g"))):
             for m in sorted(minutes):
                 src = base / f"long_{m:g}.{kind.lower()}"
                 found = measure(args, src, write, m, f"a {m:g}-minute {kind}", *how)
@@ -170,7 +211,8 @@ def main() -> None:
               f"{r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
     if long_rows:
         print(f"\ncmsensord import of one long file: a stereo 16-bit WAV at {WAV_FS} Hz, a CSV of a time column "
-              f"and 3 channels at {CSV_FS} Hz ('own MB': peak anonymous memory, not pages of files it maps)")
+              f"and 3 channels at {CSV_FS} Hz, a TDMS file and an .npz of 4 float64 channels at {LOGGER_FS} Hz "
+              "('own MB': peak anonymous memory, not pages of files it maps)")
         print("| file | code | minutes | file MB | samples MB (float64) | capture MB | wall s | CPU s | peak RSS MB "
               "| own MB |")
         print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
