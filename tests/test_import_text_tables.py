@@ -343,3 +343,58 @@ def test_in_rms_mode_a_missing_value_leaves_the_blocks_rms_frame_out(tmp_path):
     frames, counters = iter_frames((tmp_path / "g.bin").read_bytes())
     assert counters.frames_lost == 3
     assert sorted({f.t0_unwrapped // 100 for f in frames if f.type == FrameType.RMS} ^ set(range(200))) == [50, 70, 90]
+
+
+def _ims_dir(tmp_path: Path) -> Path:
+    """Four IMS-like snapshot files (tab-separated, 2048 rows of four channels) named by time."""
+    d = tmp_path / "rig"
+    d.mkdir()
+    rng = np.random.default_rng(8)
+    for k in range(4):
+        np.savetxt(d / f"2004.02.12.10.{32 + 10 * k}.39", 0.1 * rng.standard_normal((2048, 4)), fmt="%.3f",
+                   delimiter="\t")
+    return d
+
+
+@pytest.mark.parametrize("memory_mb", [None, "0.01"])
+def test_a_file_whose_writing_stopped_mid_line_is_imported_up_to_its_last_whole_line(tmp_path, memory_mb):
+    """The logger stopped while writing the third file: its last line holds 2 of 4 values and no
+    line end. That line is left out with a note, and the short snapshot is pointed out; read
+    whole or a stretch of lines at a time, the same capture."""
+    d = _ims_dir(tmp_path)
+    cut = d / "2004.02.12.10.52.39"
+    text = cut.read_text()
+    at = text.index("\t", text.index("\n", len(text) // 2)) + 3         # two values into a row
+    cut.write_text(text[:at])
+    whole = text[:at].count("\n")
+    more = ("--memory-mb", memory_mb) if memory_mb else ()
+    r = cmd("import", d, "--fs", 20480, "--unit", "g", "--block-len", 256, *more, "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: 2004.02.12.10.52.39: its last line is cut short (2 of 4 values and no line end, as a file "
+            "left when its writing stopped); the lines before it are imported\n") in r.stderr
+    assert (f"  note: 1 snapshot(s) hold far fewer samples than most (2,048): 2004.02.12.10.52.39 ({whole:,}); "
+            "files cut short?\n") in r.stderr
+    meta = json.loads((tmp_path / "r.bin.json").read_text())
+    assert [s["length"] + s["dropped"] for s in meta["snapshots"]] == [2048, 2048, whole, 2048]
+
+
+def test_a_last_line_without_a_line_end_but_whole_is_a_row_like_the_others(tmp_path):
+    d = _ims_dir(tmp_path)
+    f = d / "2004.02.12.10.42.39"
+    f.write_text(f.read_text().rstrip("\n"))
+    r = cmd("import", d, "--fs", 20480, "--unit", "g", "--block-len", 256, "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "cut short" not in r.stderr
+    assert [s["length"] for s in json.loads((tmp_path / "r.bin.json").read_text())["snapshots"]] == [2048] * 4
+
+
+def test_a_row_cut_short_inside_the_file_is_still_an_error_naming_its_line(tmp_path):
+    d = _ims_dir(tmp_path)
+    f = d / "2004.02.12.10.42.39"
+    lines = f.read_text().splitlines(keepends=True)
+    lines[99] = "0.1\t0.2\n"
+    f.write_text("".join(lines))
+    r = cmd("import", d, "--fs", 20480, "--unit", "g", "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr.startswith(f"cmsensord import: {f}: line 100: 2 column(s) where the lines "
+                               "before have 4")

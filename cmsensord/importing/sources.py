@@ -276,6 +276,19 @@ def _file_notes(t: Table, opts: ImportOptions) -> list[str]:
     return notes
 
 
+def _short_snapshots(snaps: list[Snapshot], opts: ImportOptions) -> list[str]:
+    """A note on the snapshots much shorter than most (files cut short?), when there are a few
+    (not ``--snapshot-len``'s last piece, which has its own)."""
+    if len(snaps) < 3 or opts.snapshot_len:
+        return []
+    usual = int(np.median([s.length for s in snaps]))
+    short = [s for s in snaps if s.length < 0.9 * usual]
+    if not short:
+        return []
+    listed = ", ".join(f"{s.source} ({s.length:,})" for s in short[:3]) + (", ..." if len(short) > 3 else "")
+    return [f"{len(short)} snapshot(s) hold far fewer samples than most ({usual:,}): {listed}; files cut short?"]
+
+
 def _within(progress: Callable[[float], None] | None, fi: int) -> Callable[[float], None] | None:
     """``progress`` of the files done while file ``fi`` is read: ``fi`` + the fraction read."""
     if progress is None:
@@ -346,6 +359,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")
     if opts.fs is not None and layout.file_fs is not None and opts.fs != layout.file_fs:
         notes.append(f"fs {opts.fs:g} Hz from --fs (the file says {layout.file_fs:g} Hz)")
+    notes += _short_snapshots(snaps, opts)
     snaps, start = retimed(snaps, origins, files, opts, fs, own_times, "date" if dated else "day" if clock else "",
                             notes)
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,

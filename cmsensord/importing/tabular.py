@@ -159,7 +159,7 @@ def _cell(text: str) -> float:
 
 
 def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, width: int,
-                       long: LongText) -> np.ndarray:
+                       long: LongText, cut: bool = False) -> np.ndarray:
     """:func:`_numbers` of the whole file, read ``CHUNK_LINES`` lines at a time into an unnamed
     file in ``long.spill_dir`` (gone with the map), as a read-only memory map (rows, columns)."""
     spill_dir, size, read = long.spill_dir, max(1, Path(path).stat().st_size), 0
@@ -173,6 +173,8 @@ def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: boo
             pass
         line0 = skip
         while lines := list(itertools.islice(f, CHUNK_LINES)):
+            if cut and not lines[-1].endswith("\n"):      # the file's last line, cut short: left out
+                lines.pop()
             text = "".join(lines)
             a = _numbers(io.StringIO(text.replace(",", ".") if decimal_comma else text), sep, 0, line0, dated, width)
             if a.size and columns and a.shape[1] != columns:
@@ -228,6 +230,28 @@ def _is_date(text: str) -> bool:
     return DATETIME.fullmatch(text) is not None
 
 
+#: bytes at a file's end read for its last line
+_TAIL_BYTES = 1 << 16
+
+
+def _cut_short(path: str, sep: str | None, width: int) -> str | None:
+    """A note when the file's last line is cut short: no line end, and fewer values than the
+    rows (``width``), as a logger leaves a file it was writing when it stopped; else None."""
+    with open(path, "rb") as f:
+        f.seek(0, 2)
+        size = f.tell()
+        f.seek(max(0, size - _TAIL_BYTES))
+        tail = f.read()
+    if not tail or tail.endswith((b"\n", b"\r")) or b"\n" not in tail:
+        return None
+    last = tail[tail.rfind(b"\n") + 1:].decode("latin-1")
+    n = len([v for v in split(last, sep) if v.strip()])
+    if not last.strip() or n >= width:
+        return None
+    return (f"{Path(path).name}: its last line is cut short ({n} of {width} values and no line end, as a "
+            "file left when its writing stopped); the lines before it are imported")
+
+
 @dataclass(frozen=True)
 class LongText:
     """How a text table larger than ``memory_mb`` is read (:func:`_numbers_in_chunks`): its
@@ -247,12 +271,16 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     sep, header_line, decimal_comma, skip = _layout(head, separator, header)
     first = split(head.rows[0], sep) if head.rows else []
     dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
+    cut = _cut_short(path, sep, len(first))
     try:
         if long is not None and Path(path).stat().st_size > long.memory_mb * 1e6:
-            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, len(first), long)
+            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, len(first), long, cut is not None)
         else:
-            src: str | io.StringIO = io.StringIO(Path(path).read_text(encoding="utf-8-sig", errors="replace")
-                                                 .replace(",", ".")) if decimal_comma else path
+            src: str | io.StringIO = path
+            if decimal_comma or cut is not None:
+                text = Path(path).read_text(encoding="utf-8-sig", errors="replace")
+                text = text[:text.rfind("\n") + 1] if cut is not None else text
+                src = io.StringIO(text.replace(",", ".") if decimal_comma else text)
             a = _numbers(src, sep, skip, skip, dated, len(first))
     except ValueError as exc:                       # its message names the line (_numbers)
         raise ImportFailure(f"{path}: {exc} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
@@ -272,6 +300,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
             names = None                    # a preamble's last line, not the columns' names
     note = _head_note(path, head, names is not None)
     t = with_time_column(Table(path=path, data=a[None], columns=names or [f"col{i}" for i in range(a.shape[1])],
-                               kind="column", head_note=note), names is not None, dated=dated)
+                               kind="column", head_note=note, notes=[cut] if cut else []), names is not None,
+                         dated=dated)
     start = preamble_start(head.preamble + (() if names is not None or head.header is None else (head.header,)))
     return t if start is None or t.times is not None else replace(t, times=np.array([start]), dated=True)
