@@ -398,3 +398,17 @@ def test_a_row_cut_short_inside_the_file_is_still_an_error_naming_its_line(tmp_p
     assert r.returncode == 2
     assert r.stderr.startswith(f"cmsensord import: {f}: line 100: 2 column(s) where the lines "
                                "before have 4")
+
+
+def test_empty_files_in_a_directory_are_left_out_with_a_note(tmp_path):
+    """A logger that stopped leaves an empty file named like the others (or a .csv): the other
+    files are imported, and the note names it; the same capture as without it."""
+    d = _ims_dir(tmp_path)
+    r = cmd("import", d, "--fs", 20480, "--unit", "g", "--block-len", 256, "--out", "plain.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (d / "2004.02.12.11.12.39").write_bytes(b"")
+    (d / "2004.02.12.11.22.39.csv").write_bytes(b"")
+    r = cmd("import", d, "--fs", 20480, "--unit", "g", "--block-len", 256, "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert f"  note: {d}: left out 2 empty file(s) (2004.02.12.11.12.39, 2004.02.12.11.22.39.csv)\n" in r.stderr
+    assert (tmp_path / "r.bin").read_bytes() == (tmp_path / "plain.bin").read_bytes()

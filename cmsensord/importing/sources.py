@@ -71,8 +71,13 @@ def _dir_files(d: Path, notes: list[str]) -> list[str]:
     """The directory's recording files of the most common kind (:func:`_kind`); when several
     series of them are there (two files or more named alike, :func:`_pattern`: FEMTO's
     ``acc_00001.csv`` beside its ``temp_00001.csv``), only the largest, and a note names what
-    was left out."""
-    kinds = {p: _kind(p) for p in d.iterdir() if p.is_file()}
+    was left out. Empty files (a logger's, created when it stopped) are left out with a note."""
+    found = [p for p in d.iterdir() if p.is_file()]
+    empty = sorted((p for p in found if p.stat().st_size == 0), key=lambda p: _natural_key(p.name))
+    if empty:
+        notes.append(f"{d}: left out {len(empty)} empty file(s) ({', '.join(p.name for p in empty[:3])}"
+                     f"{', ...' if len(empty) > 3 else ''})")
+    kinds = {p: _kind(p) for p in found if p.stat().st_size > 0}
     files = [p for p, k in kinds.items() if k is not None]
     if not files:
         raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}, or text tables of numbers) "
