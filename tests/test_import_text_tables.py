@@ -412,3 +412,40 @@ def test_empty_files_in_a_directory_are_left_out_with_a_note(tmp_path):
     assert r.returncode == 0, r.stderr
     assert f"  note: {d}: left out 2 empty file(s) (2004.02.12.11.12.39, 2004.02.12.11.22.39.csv)\n" in r.stderr
     assert (tmp_path / "r.bin").read_bytes() == (tmp_path / "plain.bin").read_bytes()
+
+
+def _logger_text(x: np.ndarray, head: str, sep: str = "\t", end: str = "") -> str:
+    """``head`` then a time column at 5 kHz and ``x``'s columns, each line ending with ``end``."""
+    return head + "".join(f"{i / 5000:.5f}{sep}" + sep.join(f"{v:.4f}" for v in row) + f"{end}\n"
+                          for i, row in enumerate(x))
+
+
+def test_a_units_line_under_the_column_names_names_their_units(tmp_path):
+    """catman, DIAdem and the like write a line of units under the column names: the names
+    are the line above it, with their units, so 'Time' in s is the time base."""
+    x = np.round(np.random.default_rng(9).standard_normal((5000, 2)), 4)
+    (tmp_path / "units.txt").write_text(_logger_text(x, "Test rig 3\nTime\tAcc X\tAcc Y\ns\t[g]\t[g]\n"))
+    (tmp_path / "plain.txt").write_text(_logger_text(x, "Time (s)\tAcc X (g)\tAcc Y (g)\n"))
+    r = cmd("import", "units.txt", "--unit", "g", "--out", "u.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: units.txt: the line under the column names gives their units: Time (s), Acc X (g), "
+            "Acc Y (g)\n") in r.stderr
+    assert "  note: units.txt: 1 line(s) before the column names skipped (the first: 'Test rig 3')\n" in r.stderr
+    assert "  note: column 'Time (s)' (0) is the time base: 5000 Hz from its steps" in r.stderr
+    assert cmd("import", "plain.txt", "--unit", "g", "--out", "p.bin", cwd=tmp_path).returncode == 0
+    assert (tmp_path / "u.bin").read_bytes() == (tmp_path / "p.bin").read_bytes()
+    meta = json.loads((tmp_path / "u.bin.json").read_text())
+    assert meta["channel_names"] == ["Acc_X_g", "Acc_Y_g"] and meta["fs"] == 5000
+
+
+def test_lines_that_end_with_the_separator_have_no_empty_last_column(tmp_path):
+    x = np.round(np.random.default_rng(10).standard_normal((5000, 2)), 4)
+    (tmp_path / "trail.csv").write_text(_logger_text(x, "t,a,b,\n", ",", ","))
+    (tmp_path / "plain.csv").write_text(_logger_text(x, "t,a,b\n", ","))
+    said = []
+    for name in ("trail", "plain"):
+        r = cmd("import", f"{name}.csv", "--unit", "g", "--out", f"{name}.bin", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        said.append(r.stderr)
+    assert "missing" not in said[0] and "2 channel(s)" in said[0]
+    assert (tmp_path / "trail.bin").read_bytes() == (tmp_path / "plain.bin").read_bytes()

@@ -40,7 +40,7 @@ import numpy as np
 from .errors import ImportFailure, cannot_write, no_room
 from .preamble import preamble_start
 from .table import Table
-from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split
+from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split, unit_fields
 from .time_column import with_time_column
 
 __all__ = ["LongText", "read_tabular", "sniff", "is_text_table"]
@@ -127,7 +127,8 @@ def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
             f"skipped (the first: {first!r})")
 
 
-def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dated: bool, width: int) -> np.ndarray:
+def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dated: bool,
+             cols: range | None) -> np.ndarray:
     """float64 (rows, columns) of the text table ``src`` after its first ``skip`` lines, which
     begin at line ``line0`` of the file (a first column of dates as seconds since the Unix
     epoch; an empty cell is NaN, a missing value); a row that is not numbers is a ValueError
@@ -136,21 +137,21 @@ def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dat
         with warnings.catch_warnings():             # "input contained no data", blank lines: not the user's
             warnings.simplefilter("ignore", UserWarning)
             try:
-                a = _loadtxt(src, sep, skip, dated, width, None)
+                a = _loadtxt(src, sep, skip, cols, None)
             except ValueError as exc:
                 if "convert string '' to" not in str(exc):
                     raise
                 if isinstance(src, io.StringIO):
                     src.seek(0)
-                a = _loadtxt(src, sep, skip, dated, width, _cell)   # cell by cell: slower, only for such a file
+                a = _loadtxt(src, sep, skip, cols, _cell)   # cell by cell: slower, only for such a file
             return np.column_stack([_dates(src, sep, skip, line0), a]) if dated else a
     except ValueError as exc:
         raise ValueError(_loadtxt_message(str(exc), line0)) from None
 
 
-def _loadtxt(src: str | io.StringIO, sep: str | None, skip: int, dated: bool, width: int, cell) -> np.ndarray:
+def _loadtxt(src: str | io.StringIO, sep: str | None, skip: int, cols: range | None, cell) -> np.ndarray:
     return np.loadtxt(src, delimiter=sep, skiprows=skip, ndmin=2, dtype=np.float64, quotechar='"',
-                      encoding="utf-8-sig", usecols=range(1, width) if dated else None, converters=cell)
+                      encoding="utf-8-sig", usecols=cols, converters=cell)
 
 
 def _cell(text: str) -> float:
@@ -158,7 +159,7 @@ def _cell(text: str) -> float:
     return float(text) if text.strip() else float("nan")
 
 
-def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, width: int,
+def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, cols: range | None,
                        long: LongText, cut: bool = False) -> np.ndarray:
     """:func:`_numbers` of the whole file, read ``CHUNK_LINES`` lines at a time into an unnamed
     file in ``long.spill_dir`` (gone with the map), as a read-only memory map (rows, columns)."""
@@ -176,7 +177,7 @@ def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: boo
             if cut and not lines[-1].endswith("\n"):      # the file's last line, cut short: left out
                 lines.pop()
             text = "".join(lines)
-            a = _numbers(io.StringIO(text.replace(",", ".") if decimal_comma else text), sep, 0, line0, dated, width)
+            a = _numbers(io.StringIO(text.replace(",", ".") if decimal_comma else text), sep, 0, line0, dated, cols)
             if a.size and columns and a.shape[1] != columns:
                 at = line0 + next(i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#"))
                 raise ValueError(f"line {at + 1}: {a.shape[1]} column(s) where the lines before have {columns}")
@@ -271,17 +272,20 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     sep, header_line, decimal_comma, skip = _layout(head, separator, header)
     first = split(head.rows[0], sep) if head.rows else []
     dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
-    cut = _cut_short(path, sep, len(first))
+    trailing = sep is not None and len(first) > 1 and all(split(r, sep)[-1].strip() == "" for r in head.rows)
+    width = len(first) - trailing               # lines that end with the separator: no last column
+    cols = range(1 if dated else 0, width) if dated or trailing else None   # a date column: read apart
+    cut = _cut_short(path, sep, width)
     try:
         if long is not None and Path(path).stat().st_size > long.memory_mb * 1e6:
-            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, len(first), long, cut is not None)
+            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, cols, long, cut is not None)
         else:
             src: str | io.StringIO = path
             if decimal_comma or cut is not None:
                 text = Path(path).read_text(encoding="utf-8-sig", errors="replace")
                 text = text[:text.rfind("\n") + 1] if cut is not None else text
                 src = io.StringIO(text.replace(",", ".") if decimal_comma else text)
-            a = _numbers(src, sep, skip, skip, dated, len(first))
+            a = _numbers(src, sep, skip, skip, dated, cols)
     except ValueError as exc:                       # its message names the line (_numbers)
         raise ImportFailure(f"{path}: {exc} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
                             f"{'a header line' if header_line is not None else 'no header'}); fix the file, "
@@ -289,8 +293,20 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     if a.shape[0] == 0:
         raise ImportFailure(f"{path}: a header but no rows of numbers")
     names = None
+    notes = [cut] if cut else []
+    units = unit_fields(header_line, sep) if header_line is not None and head.preamble else None
+    if units is not None and len(split(head.preamble[-1], sep)) == len(units):
+        header_line, head = head.preamble[-1], replace(head, preamble=head.preamble[:-1])   # names, then units
+    else:
+        units = None
     if header_line is not None:
         names = [f.strip().strip('"').strip() or f"col{i}" for i, f in enumerate(split(header_line, sep))]
+        if units is not None:
+            names = [f"{n} ({u})" if u else n for n, u in zip(names, units)]
+            notes.append(f"{Path(path).name}: the line under the column names gives their units: "
+                         f"{', '.join(n for n, u in zip(names, units) if u)}")
+        if trailing and len(names) == a.shape[1] + 1 and not split(header_line, sep)[-1].strip():
+            names = names[:-1]              # the header ends with the separator too
         if len(names) == a.shape[1] + 1 and names[-1].lower() == "comment":
             names = names[:-1]              # LabVIEW's comment column, which rows of numbers leave out
         if len(names) != a.shape[1]:
@@ -300,7 +316,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
             names = None                    # a preamble's last line, not the columns' names
     note = _head_note(path, head, names is not None)
     t = with_time_column(Table(path=path, data=a[None], columns=names or [f"col{i}" for i in range(a.shape[1])],
-                               kind="column", head_note=note, notes=[cut] if cut else []), names is not None,
+                               kind="column", head_note=note, notes=notes), names is not None,
                          dated=dated)
     start = preamble_start(head.preamble + (() if names is not None or head.header is None else (head.header,)))
     return t if start is None or t.times is not None else replace(t, times=np.array([start]), dated=True)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from .errors import ImportFailure
 
 __all__ = ["DATETIME", "HEAD_BYTES", "SEPARATORS", "Head", "filled_lines", "first_row", "is_cell", "is_number",
-           "is_number_row", "read_head", "split"]
+           "is_number_row", "read_head", "split", "unit_fields"]
 
 SEPARATORS = ("\t", ";", ",", "|")
 HEAD_BYTES = 1 << 16
@@ -54,6 +54,20 @@ def is_number_row(line: str) -> bool:
         if fields and all(is_cell(f, i == 0) for i, f in enumerate(fields)):
             return True
     return False
+
+
+#: a unit as loggers write one under a column's name (``s``, ``[g]``, ``(m/s^2)``, ``mm/s``, ``°C``, ``1/min``)
+_UNIT = re.compile(r"[\[(]?\s*(?:[munkµ]?(?:s|g|V|A|N|Pa|Hz|m|W|Nm)|m/s(?:\^?2|²)?|mm/s2?|G|g0|rpm|RPM|"
+                   r"1/min|min|h|%|°C|degC|K|bar|sec)\s*[\])]?")
+
+
+def unit_fields(line: str, sep: str | None) -> list[str] | None:
+    """The line's fields when every one is a unit or empty (and one at least a unit): the units
+    line some loggers write under the column names; else None."""
+    fields = [f.strip().strip('"').strip() for f in split(line, sep)]
+    if not any(fields) or not all(not f or _UNIT.fullmatch(f) for f in fields):
+        return None
+    return [f.strip("[]()").strip() for f in fields]
 
 
 @dataclass(frozen=True)
