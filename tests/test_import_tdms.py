@@ -123,3 +123,13 @@ def test_without_nptdms_a_tdms_file_says_which_extra_reads_it(tmp_path, monkeypa
     assert main(["import", str(tmp_path / "v.tdms"), "--out", str(tmp_path / "o.bin")]) == 2
     assert capsys.readouterr().err == (f"cmsensord import: {tmp_path / 'v.tdms'}: reading TDMS files needs npTDMS: "
                                        "pip install 'cmsensord[tdms]'\n")
+
+
+def test_a_tdms_channels_unit_string_is_the_unit_without_unit(tmp_path):
+    """The logger's unit_string (g) is what the values are in: the same capture as --unit g."""
+    write_tdms(tmp_path / "v.tdms", 0)
+    r = cmd("import", "v.tdms", "--out", "auto.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  note: unit g from the file (Accel DE, Accel FE); --unit sets another\n" in r.stderr
+    assert cmd("import", "v.tdms", "--unit", "g", "--out", "g.bin", cwd=tmp_path).returncode == 0
+    assert (tmp_path / "auto.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()

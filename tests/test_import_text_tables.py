@@ -449,3 +449,25 @@ def test_lines_that_end_with_the_separator_have_no_empty_last_column(tmp_path):
         said.append(r.stderr)
     assert "missing" not in said[0] and "2 channel(s)" in said[0]
     assert (tmp_path / "trail.bin").read_bytes() == (tmp_path / "plain.bin").read_bytes()
+
+
+def test_without_unit_the_files_own_unit_is_taken_and_a_different_unit_given_is_pointed_out(tmp_path):
+    """The units line (or the names: 'Acc X (g)') says g: without --unit the values are g, not
+    m/s2 (9.81 x too small before); with another --unit the user's choice stands, with a note."""
+    x = np.round(np.random.default_rng(11).standard_normal((5000, 2)), 4)
+    (tmp_path / "units.txt").write_text(_logger_text(x, "Time\tAcc X\tAcc Y\ns\tg\tg\n"))
+    r = cmd("import", "units.txt", "--out", "auto.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  note: unit g from the file (Acc X (g), Acc Y (g)); --unit sets another\n" in r.stderr
+    assert cmd("import", "units.txt", "--unit", "g", "--out", "g.bin", cwd=tmp_path).returncode == 0
+    assert (tmp_path / "auto.bin").read_bytes() == (tmp_path / "g.bin").read_bytes()
+    assert json.loads((tmp_path / "auto.bin.json").read_text())["source_unit"] == "g"
+    r = cmd("import", "units.txt", "--unit", "m/s2", "--out", "ms2.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: --unit m/s2 given, but the file says g (Acc X (g), Acc Y (g)): the values are taken as m/s2; "
+            "check --unit\n") in r.stderr
+    assert json.loads((tmp_path / "ms2.bin.json").read_text())["source_unit"] == "m/s2"
+    (tmp_path / "plain.csv").write_text(_logger_text(x, "t,a,b\n", ","))
+    r = cmd("import", "plain.csv", "--out", "plain.bin", cwd=tmp_path)     # nothing said: m/s2, as before
+    assert r.returncode == 0 and "unit" not in r.stderr.replace("--unit", "")
+    assert json.loads((tmp_path / "plain.bin.json").read_text())["source_unit"] == "m/s2"

@@ -93,8 +93,9 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                      help="the CSV's first line names the columns (default: detected)")
     hdr.add_argument("--no-header", dest="imp_header", action="store_const", const=False,
                      help="the CSV has no header line")
-    p.add_argument("--unit", dest="imp_unit", choices=tuple(UNITS), default="m/s2",
-                   help="unit of the values (default m/s2; V needs --sensitivity)")
+    p.add_argument("--unit", dest="imp_unit", choices=tuple(UNITS), default=None,
+                   help="unit of the values (default: the one the file gives every column, in a units line, "
+                        "the column names or TDMS unit_string; else m/s2; V needs --sensitivity)")
     p.add_argument("--sensitivity", dest="imp_sensitivity", type=positive, metavar="MV_PER_G",
                    help="accelerometer sensitivity in mV/g, for --unit V")
     p.add_argument("--scale-factor", dest="imp_scale_factor", type=nonzero,

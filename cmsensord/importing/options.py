@@ -20,7 +20,7 @@ class ImportOptions:
     variable: tuple[str, ...] | None = None  # .mat: names or patterns
     separator: str | None = None  # CSV; None: detected
     header: bool | None = None  # CSV; None: detected
-    unit: str = "m/s2"
+    unit: str | None = None  # None: the file's own, else m/s2
     sensitivity: float | None = None  # mV/g, for unit V
     scale_factor: float = 1.0
     full_scale: tuple[float, ...] | None = None  # m/s^2, one or one per channel; None: from the data

@@ -38,7 +38,7 @@ from .table import Table
 from .tabular import LongText, is_text_table, read_tabular
 from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
 from .tdms import read_tdms
-from .units import to_ms2_factor
+from .units import resolve_unit, to_ms2_factor, unit_in_name, unit_of
 from .wav import read_wav
 
 __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
@@ -205,6 +205,9 @@ class _Layout:
             raise ImportFailure(f"{t.path}: the file does not say its sampling rate{why}; give --fs HZ")
         self.fs: float = fs
         self.file_fs = t.fs
+        said = [(t.columns[i], unit_of(t.units[i]) if t.units else unit_in_name(t.columns[i])) for i in self.idx]
+        self.unit, note = resolve_unit(opts.unit, said)
+        self.notes += [note] if note else []
 
     def check(self, t: Table, first: str) -> None:
         if t.columns != self.columns:
@@ -317,7 +320,6 @@ def build_recording(files: list[str], opts: ImportOptions, progress=None) -> Rec
 
 
 def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleStore]) -> Recording:
-    factor = to_ms2_factor(opts.unit, opts.sensitivity, opts.scale_factor)
     layout: _Layout | None = None
     tacho_pieces: list[np.ndarray] = []
     snaps: list[Snapshot] = []
@@ -330,6 +332,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
         t = read_table(path, opts, _within(progress, fi))
         if layout is None:
             layout = _Layout(t, opts)
+            factor = to_ms2_factor(layout.unit, opts.sensitivity, opts.scale_factor)
             stores.append(SampleStore(len(layout.idx), opts.out, opts.memory_mb))
         else:
             layout.check(t, Path(files[0]).name)
@@ -368,7 +371,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     snaps, start = retimed(snaps, origins, files, opts, fs, own_times, "date" if dated else "day" if clock else "",
                             notes)
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
-                    sources=[str(f) for f in files], source_unit=opts.unit, ppr=board_ppr(opts.ppr), notes=notes,
+                    sources=[str(f) for f in files], source_unit=layout.unit, ppr=board_ppr(opts.ppr), notes=notes,
                     source_start=start)
     if layout.tacho is not None:
         _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)

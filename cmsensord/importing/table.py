@@ -46,6 +46,7 @@ class Table:
     layout_note: str | None = None  # what the reader made of the columns (a slower speed interpolated), said once
     gain: float = 1.0  # ``data`` in the file's unit: (data - zero) * gain (a WAV's PCM to fractions of full scale)
     zero: float = 0.0
+    units: list[str | None] | None = None  # what the file says each column's unit is (None: the names say)
 
     @property
     def name(self) -> str:
