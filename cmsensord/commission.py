@@ -22,7 +22,7 @@ import yaml
 
 from cmsensord.argtypes import board_time, positive
 from cmsensord.config import Config, ConfigError, load_config
-from cmsensord.dsp.commissioning import MARGIN, SPAN, HealthyModel, learn_healthy
+from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor.alarms import order_rules
 from cmsensord.observations import Observations, alarm_events, read_observations
@@ -103,7 +103,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         per = obs.period(1.0) / obs.rate_hz
         lines.append(
             f"{r.name:<{w}} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
-            f"{m.runin_periods * per:>8.0f} {m.periods * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
+            f"{m.runin_periods * per:>8.0f} {m.learned * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
             f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.any_flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
                  f"(twice the healthy fluctuation amplitude), R_n = {SPAN:g} x R_1 unless --faulty.")
@@ -113,6 +113,9 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} (margin {margin:.2g}x); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))
+        if m.idle_periods:
+            lines.append(f"{r.name}: {m.idle_periods} decision(s) with the machine stopped (level below "
+                         f"{100 * STOPPED_SHARE:g} % of its running level), starting or stopping: not learned from")
         if m.level_flagged:
             lines.append(_level_warning(r, obs))
         if r.f_r_source == "config":

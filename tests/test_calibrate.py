@@ -294,3 +294,30 @@ def test_calibrate_shows_its_progress_on_a_terminal_and_nothing_else_without_one
     assert b"\rcalibrate degrading.bin: its alarms [" in seen
     p = run("cmsensord", *args)
     assert p.returncode == 0 and "\r" not in p.stderr + p.stdout and "[#" not in p.stderr
+
+
+def test_a_machine_that_stops_for_most_of_the_healthy_period_is_learned_from_its_running_time(tmp_path):
+    """A pump that runs 10 s, stops 30 s, ... over 120 s: without leaving the stops out, the
+    stopped level was the baseline and the replay of its own healthy period a FAILURE at every
+    run; now the baseline is the running level and the whole record stays at 0."""
+    rng = np.random.default_rng(1)
+    t = np.arange(200 * 5120) / 5120
+    x = np.sin(2 * np.pi * 25 * t) * 2 + rng.standard_normal(t.size)
+    for a, b in ((10, 40), (50, 80), (90, 110)):
+        x[(t >= a) & (t < b)] *= 0.01
+    np.save(tmp_path / "pump.npy", x.astype(np.float32))
+    p = run("cmsensord", "import", str(tmp_path / "pump.npy"), "--fs", "5120", "--block-len", "64", "--unit", "g",
+            "--names", "pump", "--out", str(tmp_path / "pump.bin"))
+    assert p.returncode == 0, p.stderr
+    p = run("cmsensord", "calibrate", str(tmp_path / "pump.bin"), "--to", "120", "--rpm", "1500",
+            "--out", str(tmp_path / "site.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert ("pump: 86 decision(s) with the machine stopped (level below 10 % of its running level), starting or "
+            "stopping: not learned from\n") in p.stdout
+    assert "warning" not in p.stdout
+    base = yaml.safe_load((tmp_path / "site.yaml").read_text())["channels"][0]["baseline"]
+    assert base == pytest.approx(np.sqrt(2 ** 2 / 2 + 1) * 9.80665, rel=0.05)    # the running RMS, in m/s2
+    p = run("cmsensord", "replay", str(tmp_path / "pump.bin"), "--config", str(tmp_path / "site.yaml"),
+            "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    assert max(m["severity_index"] for _, m in _severity(tmp_path / "logs", "pump")) == 0.0

@@ -10,6 +10,7 @@ from cmsensord.dsp.commissioning import (
     SPAN,
     bank_limits,
     critical_r,
+    idle_periods,
     learn_healthy,
     period_counts,
     run_in_periods,
@@ -96,6 +97,29 @@ def test_the_healthy_periods_own_levels_at_level_alert_are_counted_and_placed():
     assert m.any_flagged >= 5 and m.steady_head == 34
     s = _run(y, m, 30.0, level_alert=2.0, level_danger=4.0)
     assert [d.period for d in s if d.severity[0] >= 0.5 and d.period < 40][:1] == [35]
+
+
+def test_a_machine_stopped_for_most_of_the_healthy_period_is_learned_from_its_running_seconds():
+    """Running 20 of 60 s (at 3.0), stopped the rest (at 0.03): the baseline is the running
+    level, not the stopped one (which made every running second 100 x baseline), and the model
+    is the running seconds' alone."""
+    run = _healthy(60, seed=12)
+    y = run.copy()
+    for a, b in ((5, 25), (35, 55)):
+        y[a * 100:b * 100] *= 0.01
+    m = learn_healthy(y, f_r=30.0, level_alert=2.0, **KW)
+    alone = learn_healthy(np.concatenate([run[100:500], run[2600:3400], run[5600:]]), f_r=30.0, **KW)
+    assert m.baseline == pytest.approx(3.0, rel=0.02)
+    assert m.idle_periods == 40 + 4 and m.level_flagged == 0          # 40 stopped, 4 beside them
+    assert m.r_1 == pytest.approx(alone.r_1, rel=1.0)
+    assert m.learned == 59 - m.idle_periods
+
+
+def test_idle_periods_are_the_stopped_and_their_neighbours_only():
+    level = np.r_[np.ones(10), np.full(5, 0.01), np.ones(10), np.nan, np.ones(3)]
+    assert np.flatnonzero(idle_periods(level)).tolist() == list(range(9, 16))
+    assert not idle_periods(np.r_[np.ones(20), 0.3 * np.ones(20)]).any()       # a lower load is running
+    assert not idle_periods(np.full(4, np.nan)).any()
 
 
 def test_steady_length_cuts_until_no_level_is_at_alert_x_its_own_median():

@@ -20,7 +20,11 @@ unsteady run-in sets R_min for the whole life), so cmsensord extends it:
    amplitude (R is a variance).  R_n = SPAN·R_1.  With ``faulty`` data, R_n is the
    paper's rule instead: the largest R that still flags at least half of the
    faulty capture's decisions.
-6. The healthy period is checked as the monitor will judge it: the decisions R_1
+6. A machine that stops during the healthy period (a pump that cycles, a shift's break) is
+   not learned while stopped: decisions whose level is below STOPPED_SHARE of the period's
+   running level (its 90th percentile), and the starts and stops beside them, are left out
+   of the baseline and the critical R (they would make the stopped level the baseline).
+7. The healthy period is checked as the monitor will judge it: the decisions R_1
    flags, and (with the combined severity's ``level_alert``) those whose level is
    already that many times the baseline.  A period that holds the start of a fault
    (a step or rise of level near its end, the whole of a run to failure) shows there,
@@ -54,6 +58,8 @@ SPAN = 4.0
 RUNIN_LEVEL = 1.25
 #: ... or this much above the rest in critical R
 RUNIN_RSTAR = 2.0
+#: a decision below this share of the running level (the 90th percentile) is the machine stopped
+STOPPED_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,8 @@ class HealthyModel:
     level_first: int = -1      # the first and last of them (decision periods from the healthy
     level_last: int = -1       # period's start, 0 = the filters' transient); -1: none
     any_flagged: int = 0       # healthy decisions flagged by R_1 or by the level
+    idle_periods: int = 0      # decisions left out with the machine stopped, and its starts and stops
+    learned: int = 0           # decisions learned from (after the run-in, the machine running)
     steady_head: int = 0       # decisions after the transient, from the start / back from the end,
     steady_tail: int = 0       # that hold no level_alert decision of their own (:func:`steady_length`)
 
@@ -130,8 +138,10 @@ def run_in_periods(level: np.ndarray, rstar: np.ndarray) -> int:
     skip = 0
     for _ in range(2):
         head, rest = slice(skip, skip + q), slice(skip + q, P)
-        lv_head, lv_rest = np.nanmedian(level[head]), np.nanmedian(level[rest])
-        r_head, r_rest = np.median(rstar[head]), np.median(rstar[rest])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # a quarter of the machine stopped: NaN
+            lv_head, lv_rest = np.nanmedian(level[head]), np.nanmedian(level[rest])
+            r_head, r_rest = np.nanmedian(rstar[head]), np.nanmedian(rstar[rest])
         if lv_head > RUNIN_LEVEL * lv_rest or r_head > RUNIN_RSTAR * r_rest:
             skip += q
         else:
@@ -170,6 +180,20 @@ def _level_per_period(y: np.ndarray, period: int) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period is NaN
         return np.nanmedian(y[: P * period].reshape(P, period), axis=1)
+
+
+def idle_periods(level: np.ndarray) -> np.ndarray:
+    """Per decision, whether the machine is stopped (level below STOPPED_SHARE of the 90th
+    percentile level; NaN: missing) or starting or stopping (a decision beside a stopped one)."""
+    finite = np.isfinite(level)
+    if not finite.any():
+        return np.zeros(level.size, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        stopped = level < STOPPED_SHARE * np.percentile(level[finite], 90)
+    idle = stopped.copy()
+    idle[1:] |= stopped[:-1]
+    idle[:-1] |= stopped[1:]
+    return idle
 
 
 def steady_length(level: np.ndarray, alert: float, max_rounds: int = 100) -> int:
@@ -211,7 +235,12 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
         raise ValueError(f"need at least 2 decision periods of data ({period} observations each; "
                          f"the first is the filters' transient), got {np.count_nonzero(np.isfinite(y))} "
                          "observation(s)")
-    baseline = float(np.nanmedian(level_raw))
+    idle = idle_periods(level_raw)
+    running = np.where(idle, np.nan, level_raw)
+    if not np.isfinite(running).any():
+        raise ValueError("the machine does not run steadily in the healthy period (every decision is stopped, "
+                         "starting or stopping); choose a period where it runs")
+    baseline = float(np.nanmedian(running))
     if not baseline > 0:
         raise ValueError("the healthy period's block RMS is zero: no signal on this channel")
     def counts_of(series: np.ndarray, rs: np.ndarray) -> np.ndarray:
@@ -219,7 +248,8 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
 
     counts = counts_of(y, grid)
     rstar = critical_r(counts, f_r, grid)
-    skip = run_in_periods(level_raw, rstar)
+    rstar[idle] = np.nan                    # not learned from (:func:`_robust_high` takes finite ones)
+    skip = run_in_periods(running, rstar)
     kept = slice(skip, None)
     rstar = rstar[kept]
     H = _robust_high(rstar)
@@ -234,8 +264,8 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
             r_min = r_min if r_min > 0 else r_1 / 2
             r_max, rule = r_f, "faulty"
     ratio = level_raw / baseline
-    med = np.nanmedian(ratio)
-    spread = float(1.4826 * np.nanmedian(np.abs(ratio - med)))
+    med = np.nanmedian(running / baseline)
+    spread = float(1.4826 * np.nanmedian(np.abs(running / baseline - med)))
     at_r1 = counts_of(y, np.array([r_1]))[kept, 0]
     flagged = np.zeros(level_raw.size, dtype=bool)
     flagged[skip:] = at_r1 >= f_r
@@ -253,5 +283,6 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
         rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule,
         level_flagged=int(loud.size), level_first=int(loud[0]) + 1 if loud.size else -1,
         level_last=int(loud[-1]) + 1 if loud.size else -1, any_flagged=int(np.count_nonzero(flagged)),
-        steady_head=steady[0], steady_tail=steady[1],
+        steady_head=steady[0], steady_tail=steady[1], idle_periods=int(np.count_nonzero(idle)),
+        learned=int(np.count_nonzero(~np.isnan(rstar))),
     )
