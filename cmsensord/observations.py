@@ -23,6 +23,7 @@ import numpy as np
 
 from cmsensord.argtypes import Percent
 from cmsensord.config import Config
+from cmsensord.dsp.commissioning import idle_periods
 from cmsensord.errors import CmsensordError
 from cmsensord.importing.channel_names import imported_names
 from cmsensord.link import Progress
@@ -178,24 +179,33 @@ def _said(at: float) -> str:
 
 def _indicator_medians(sink: ListSink, proc: Processor, start: float, end: float) -> dict[str, dict[str, float]]:
     """Per channel, the median of each indicator over the complete records in [start, end]
-    board seconds (the zone left out: it is graded, not measured)."""
+    board seconds (the zone left out: it is graded, not measured), the machine running: the
+    records whose ``accel_rms`` says it stopped, and its starts and stops beside them
+    (:func:`~cmsensord.dsp.commissioning.idle_periods`), are left out, as calibrate leaves them
+    out of the severity's model."""
     from cmsensord.monitor.alarms import indicator_values
 
     if proc.clock.slot0_t0 is None:
         return {}
     t0 = proc.clock.slot_stamp_ns(0)
-    seen: dict[str, dict[str, list[float]]] = {}
+    records: dict[str, list[dict[str, float]]] = {}
     for topic, stamp, m in sink.messages:
         if not topic.endswith("/indicators") or m.get("missing_fraction", 1.0) > 0:
             continue
         t_end = (stamp - t0) / 1e9
         if t_end - m["interval_s"] < start - 1e-3 or t_end > end + 1e-3:
             continue
-        per = seen.setdefault(m["channel"], {})
-        for k, v in indicator_values(m).items():
-            if k != "zone":
-                per.setdefault(k, []).append(v)
-    return {ch: {k: float(np.median(v)) for k, v in per.items()} for ch, per in seen.items()}
+        records.setdefault(m["channel"], []).append({k: v for k, v in indicator_values(m).items() if k != "zone"})
+    out = {}
+    for ch, recs in records.items():
+        idle = idle_periods(np.array([r.get("accel_rms", np.nan) for r in recs], dtype=np.float64))
+        running = [r for r, i in zip(recs, idle) if not i] or recs
+        values: dict[str, list[float]] = {}
+        for r in running:
+            for k, v in r.items():
+                values.setdefault(k, []).append(v)
+        out[ch] = {k: float(np.median(v)) for k, v in values.items()}
+    return out
 
 
 def _shaft_hz(sink: ListSink, proc: Processor, start: float, end: float) -> float | None:

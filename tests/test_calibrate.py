@@ -321,3 +321,12 @@ def test_a_machine_that_stops_for_most_of_the_healthy_period_is_learned_from_its
             "--out", str(tmp_path / "logs"))
     assert p.returncode == 0, p.stderr
     assert max(m["severity_index"] for _, m in _severity(tmp_path / "logs", "pump")) == 0.0
+    (tmp_path / "base.yaml").write_text("alarms:\n  rules:\n    - {name: rms_x2, indicator: accel_rms, "
+                                        "alert_x_baseline: 2}\n")
+    p = run("cmsensord", "calibrate", str(tmp_path / "pump.bin"), "--to", "120", "--rpm", "1500", "--config",
+            str(tmp_path / "base.yaml"), "--out", str(tmp_path / "alarms.yaml"))
+    assert p.returncode == 0, p.stderr
+    learned = yaml.safe_load((tmp_path / "alarms.yaml").read_text())["alarms"]["baselines"]
+    rms = next(b["value"] for b in learned if b["indicator"] == "accel_rms")
+    assert rms == pytest.approx(np.sqrt(2 ** 2 / 2 + 1) * 9.80665, rel=0.05)      # the indicators' too
+    assert "alarm rms_x2" not in p.stdout
