@@ -72,12 +72,12 @@ def _dir_files(d: Path, notes: list[str]) -> list[str]:
     series of them are there (two files or more named alike, :func:`_pattern`: FEMTO's
     ``acc_00001.csv`` beside its ``temp_00001.csv``), only the largest, and a note names what
     was left out. Empty files (a logger's, created when it stopped) are left out with a note."""
-    found = [p for p in d.iterdir() if p.is_file()]
-    empty = sorted((p for p in found if p.stat().st_size == 0), key=lambda p: _natural_key(p.name))
+    sizes = {p: p.stat().st_size for p in d.iterdir() if p.is_file()}
+    empty = sorted((p for p, size in sizes.items() if not size), key=lambda p: _natural_key(p.name))
     if empty:
         notes.append(f"{d}: left out {len(empty)} empty file(s) ({', '.join(p.name for p in empty[:3])}"
                      f"{', ...' if len(empty) > 3 else ''})")
-    kinds = {p: _kind(p) for p in found if p.stat().st_size > 0}
+    kinds = {p: _kind(p) for p, size in sizes.items() if size}
     files = [p for p, k in kinds.items() if k is not None]
     if not files:
         raise ImportFailure(f"{d}: no recording files ({', '.join(EXTENSIONS)}, or text tables of numbers) "
