@@ -75,7 +75,9 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
             raise ConfigError(
                 "calibrate", f"{name}.f_r",
                 f"{f_r:.4g} Hz must be below the {period} observations per decision "
-                f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g})")
+                f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g}); for a machine "
+                f"this fast give a longer decision: monitor: {{decision_period_s: "
+                f"{math.floor(f_r / obs.rate_hz) + 1:g}}} in --config BASE.yaml")
         fy = faulty.y[:, faulty.names.index(name)] if faulty is not None and name in faulty.names else None
         alert = None if mon.severity == "paper" else mon.level_alert
         try:

@@ -96,7 +96,8 @@ def test_calibrate_healthy_period_as_a_percentage_of_the_capture(degrading, tmp_
     (["--from", "early"], "cmsensord calibrate: error: argument --from: expected board seconds >= 0 or a "
                           "percentage 0-100%, got 'early' (see cmsensord calibrate --help)", 2),
     (["--rpm", "6000"], "cmsensord: configuration error: calibrate: ch0.f_r: 100 Hz must be below the 100 "
-                        "observations per decision (100 blocks/s x decision_period_s 1)", 78),
+                        "observations per decision (100 blocks/s x decision_period_s 1); for a machine this fast "
+                        "give a longer decision: monitor: {{decision_period_s: 2}} in --config BASE.yaml\n", 78),
     (["--from", "700"], "cmsensord: calibrate: {cap}: no observations between 700 and", 2),
     (["--to", "1"], "cmsensord: calibrate: channel ch0: need at least 2 decision periods of data (100 observations "
                     "each; the first is the filters' transient), got 100 observation(s)", 2),
@@ -330,3 +331,15 @@ def test_a_machine_that_stops_for_most_of_the_healthy_period_is_learned_from_its
     rms = next(b["value"] for b in learned if b["indicator"] == "accel_rms")
     assert rms == pytest.approx(np.sqrt(2 ** 2 / 2 + 1) * 9.80665, rel=0.05)      # the indicators' too
     assert "alarm rms_x2" not in p.stdout
+
+
+def test_a_machine_too_fast_for_one_second_decisions_calibrates_with_the_decision_the_error_gives(degrading, tmp_path):
+    """6000 rpm (100 Hz) against 100 observations a decision: the error's advice, a 2-s decision,
+    calibrates, and the site file keeps it."""
+    base = tmp_path / "base.yaml"
+    base.write_text("monitor: {decision_period_s: 2}\n")
+    p = run("cmsensord", "calibrate", str(degrading), "--rpm", "6000", "--to", "150", "--config", str(base),
+            "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert yaml.safe_load((tmp_path / "s.yaml").read_text())["monitor"]["decision_period_s"] == 2
+    assert "ch0          100.000 --rpm" in p.stdout
