@@ -124,7 +124,8 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
                          "machine's shaft speed (no tacho, no --rpm, no rpm in the capture); if it turns at "
                          "another speed, give --rpm RPM")
-    return "\n".join(lines)
+    every = _every_channels_bound(results, obs)
+    return "\n".join(lines + ([every] if every else []))
 
 
 def _by_what(r: ChannelResult) -> str:
@@ -136,8 +137,7 @@ def _by_what(r: ChannelResult) -> str:
 
 def _level_warning(r: ChannelResult, obs: Observations) -> str:
     """What the decisions of the healthy period that are already at the alert level mean, where
-    they are, and the ``--to`` or ``--from`` of its longest steady stretch (from its start, or
-    back from its end; to a tenth of a second, within the stretch)."""
+    they are, and the ``--to`` or ``--from`` of its longest steady stretch (:func:`_steady_bound`)."""
     m, dec = r.model, r.decision_s
     first, last = obs.start_s + m.level_first * dec, obs.start_s + (m.level_last + 1) * dec
     mid = (obs.start_s + obs.end_s) / 2
@@ -145,18 +145,40 @@ def _level_warning(r: ChannelResult, obs: Observations) -> str:
     span = f"{first:.1f}-{last:.1f} board s" + (f", {where}" if where else "")
     what = ("the machine may already be changing there (a fault starting)" if first >= mid else
             "a start-up or a disturbance" if last <= mid else "the level is not steady over the healthy period")
-    periods = m.periods + m.runin_periods + 1          # with the transient's
     within = f"(levels within {r.level_alert:g} x its own median)"
-    if max(m.steady_head, m.steady_tail) < 2:
+    bound = _steady_bound(r, obs)
+    if bound is None:
         advice = "no stretch of it is steady: choose another healthy period with --from/--to"
-    elif m.steady_head >= m.steady_tail:
-        to = math.floor(round(10 * (obs.start_s + (m.steady_head + 1) * dec), 6)) / 10
-        advice = f"its steady stretch from the start ends at --to {to:g} {within}"
+    elif bound[0] == "--to":
+        advice = f"its steady stretch from the start ends at --to {bound[1]:g} {within}"
     else:
-        start = math.ceil(round(10 * (obs.start_s + (periods - m.steady_tail) * dec), 6)) / 10
-        advice = f"its steady stretch to the end begins at --from {start:g} {within}"
+        advice = f"its steady stretch to the end begins at --from {bound[1]:g} {within}"
     return (f"{r.name}: warning: {m.level_flagged} decision(s) of the healthy period are already at "
             f">= {r.level_alert:g} x its baseline (level_alert: severity 0.5) in {span}: {what}; {advice}")
+
+
+def _steady_bound(r: ChannelResult, obs: Observations) -> tuple[str, float] | None:
+    """(``--to``, board s) of the healthy period's longest steady stretch from its start, or
+    (``--from``, board s) of the one to its end, to a tenth of a second within it; None when
+    neither is two decisions long."""
+    m, dec = r.model, r.decision_s
+    if max(m.steady_head, m.steady_tail) < 2:
+        return None
+    if m.steady_head >= m.steady_tail:
+        return "--to", math.floor(round(10 * (obs.start_s + (m.steady_head + 1) * dec), 6)) / 10
+    periods = m.periods + m.runin_periods + 1          # with the transient's
+    return "--from", math.ceil(round(10 * (obs.start_s + (periods - m.steady_tail) * dec), 6)) / 10
+
+
+def _every_channels_bound(results: list[ChannelResult], obs: Observations) -> str | None:
+    """With several channels warned of, the one ``--to`` (the earliest) or ``--from`` (the
+    latest) that keeps each one's steady stretch, when they agree on which."""
+    bounds = [b for r in results if r.model.level_flagged and (b := _steady_bound(r, obs)) is not None]
+    if len(bounds) < 2 or len({kind for kind, _ in bounds}) != 1:
+        return None
+    kind = bounds[0][0]
+    at = min(v for _, v in bounds) if kind == "--to" else max(v for _, v in bounds)
+    return f"every channel's steady stretch: {kind} {at:g}"
 
 
 def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,

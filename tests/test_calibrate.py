@@ -343,3 +343,24 @@ def test_a_machine_too_fast_for_one_second_decisions_calibrates_with_the_decisio
     assert p.returncode == 0, p.stderr
     assert yaml.safe_load((tmp_path / "s.yaml").read_text())["monitor"]["decision_period_s"] == 2
     assert "ch0          100.000 --rpm" in p.stdout
+
+
+def test_with_several_channels_warned_of_one_bound_keeps_each_ones_steady_stretch(tmp_path):
+    """Two bearings whose level triples from snapshot 48 and 52 of 60: each channel's --to, then
+    the one that keeps both steady; calibrated to it, nothing is said."""
+    x = np.random.default_rng(3).standard_normal((60, 5120, 2))
+    x[48:, :, 0] *= 3.0
+    x[52:, :, 1] *= 3.0
+    np.savez(tmp_path / "two.npz", acc=x, fs=5120.0, t_s=np.arange(60) * 600.0)
+    cap = tmp_path / "two.bin"
+    p = run("cmsensord", "import", str(tmp_path / "two.npz"), "--unit", "g", "--names", "de,fe", "--block-len", "64",
+            "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "its steady stretch from the start ends at --to 48 (" in p.stdout
+    assert "its steady stretch from the start ends at --to 52 (" in p.stdout
+    assert "\nevery channel's steady stretch: --to 48\n" in p.stdout
+    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--to", "48", "--out", str(tmp_path / "s.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "warning" not in p.stdout and "every channel" not in p.stdout
