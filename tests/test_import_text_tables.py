@@ -471,3 +471,15 @@ def test_without_unit_the_files_own_unit_is_taken_and_a_different_unit_given_is_
     r = cmd("import", "plain.csv", "--out", "plain.bin", cwd=tmp_path)     # nothing said: m/s2, as before
     assert r.returncode == 0 and "unit" not in r.stderr.replace("--unit", "")
     assert json.loads((tmp_path / "plain.bin.json").read_text())["source_unit"] == "m/s2"
+
+
+def test_a_file_in_volts_without_a_sensitivity_is_one_line_naming_what_the_file_says(tmp_path):
+    x = np.round(np.random.default_rng(12).standard_normal((5000, 1)), 4)
+    (tmp_path / "volts.txt").write_text(_logger_text(x, "Time\tAccel\ns\tV\n"))
+    r = cmd("import", "volts.txt", "--out", "v.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, "cmsensord import: volts.txt: the file gives its columns in V (Accel (V)): "
+                                           "add the accelerometer's --sensitivity MV_PER_G (e.g. 100), or --unit for "
+                                           "another\n")
+    r = cmd("import", "volts.txt", "--sensitivity", "100", "--out", "v.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "v.bin.json").read_text())["source_unit"] == "V"

@@ -208,6 +208,9 @@ class _Layout:
         said = [(t.columns[i], unit_of(t.units[i]) if t.units else unit_in_name(t.columns[i])) for i in self.idx]
         self.unit, note = resolve_unit(opts.unit, said)
         self.notes += [note] if note else []
+        if opts.unit is None and self.unit == "V" and opts.sensitivity is None:
+            raise ImportFailure(f"{t.path}: the file gives its {t.kind}s in V ({', '.join(c for c, _ in said)}): "
+                                "add the accelerometer's --sensitivity MV_PER_G (e.g. 100), or --unit for another")
 
     def check(self, t: Table, first: str) -> None:
         if t.columns != self.columns:
