@@ -147,8 +147,11 @@ def test_f_r_at_the_decision_size_is_a_configuration_error(degrading, tmp_path):
     assert p.returncode == 78
     assert p.stderr.strip() == (
         f"cmsensord: configuration error: {cfg}: monitor.f_r: must be below the 100 observations per "
-        "decision (decision_period_s 1 x 100 blocks/s): at or above it no decision can flag an anomaly "
-        "(got 100.0)")
+        "decision (decision_period_s 1 x 100 blocks/s): at or above it no decision can flag an anomaly; "
+        "for a machine this fast give decision_period_s: 2 (got 100.0)")
+    cfg.write_text("monitor:\n  f_r: 100\n  decision_period_s: 2\n")        # the advice: a replay
+    p = run("cmsensord", "replay", str(degrading), "--config", str(cfg), "--out", str(tmp_path / "o"))
+    assert p.returncode == 0, p.stderr
 
 
 def test_faulty_capture_sets_r_max(degrading, tmp_path):

@@ -50,9 +50,11 @@ NOMINAL_RATE_HZ = 100.0
 def _f_r_below_decision_size(obj: Any) -> tuple[str, str, Any] | None:
     per_decision = obj.decision_period_s * NOMINAL_RATE_HZ
     if not obj.f_r < per_decision:
+        longer = int(obj.f_r // NOMINAL_RATE_HZ) + 1
         return "f_r", (f"must be below the {per_decision:g} observations per decision "
                        f"(decision_period_s {obj.decision_period_s:g} x {NOMINAL_RATE_HZ:g} blocks/s): "
-                       "at or above it no decision can flag an anomaly"), obj.f_r
+                       "at or above it no decision can flag an anomaly; for a machine this fast give "
+                       f"decision_period_s: {longer}"), obj.f_r
     return None
 
 
