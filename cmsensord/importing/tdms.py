@@ -74,9 +74,8 @@ def _table(path: str, f, slow: str | None, said: list[str]) -> Table:
         utc = (start.astype("datetime64[us]") - np.datetime64(0, "us")).astype(np.float64) / 1e6
         local, zone = _local(utc)
         times = np.array([local])
-    units = [chans[k][2].get("unit_string") for k in keep]
-    return Table(path=path, data=data, columns=[names[k] for k in keep], kind="channel", fs=_fs(first),
-                 units=[u if isinstance(u, str) else None for u in units],
+    units = [u if isinstance(u := chans[k][2].get("unit_string"), str) else None for k in keep]
+    return Table(path=path, data=data, columns=[names[k] for k in keep], kind="channel", fs=_fs(first), units=units,
                  times=times, dated=times is not None, layout_note=note, time_note=zone and (
                      f"the files' start times (wf_start_time) are UTC: taken in this computer's local time "
                      f"({zone}), as LabVIEW shows them; TZ=Area/City sets another zone"),

@@ -142,12 +142,12 @@ def _level_axes(ax: Any, data: LogData, ch: ChannelData) -> None:
         ax.axhline(danger, color="#b00020", lw=1.2, ls="--", label=f"level_danger {danger:g} x (severity 1)")
         top = max(top, danger)
     low = float(np.nanmin(v)) if v.size and np.nanmin(v) > 0 else 0.5
+    lo, hi = min(0.5, low / 1.2), top * 1.3
     ax.set_yscale("log")
-    ax.set_ylim(min(0.5, low / 1.2), top * 1.3)
-    plain = mticker.FuncFormatter(lambda y, _: f"{y:g}")
-    ax.yaxis.set_major_formatter(plain)
+    ax.set_ylim(lo, hi)
+    ax.yaxis.set_major_formatter(mticker.FuncFormatter(lambda y, _: f"{y:g}"))
     ax.yaxis.set_minor_formatter(mticker.NullFormatter())
-    ax.set_yticks([y for y in (0.5, 1, 2, 4, 8, 16, 32, 64) if min(0.5, low / 1.2) <= y <= top * 1.3])
+    ax.set_yticks([y for y in (0.5, 1, 2, 4, 8, 16, 32, 64) if lo <= y <= hi])
     ax.set_ylabel("level / baseline")
     ax.set_title(f"{ch.name}: decision level / healthy baseline (the 2 x baseline rule)")
     ax.grid(alpha=0.3, which="both")
