@@ -22,9 +22,11 @@ from cmsensord.acoustic_calib import (
 )
 from cmsensord.config import config_from_dict, config_to_dict
 from cmsensord.errors import ConfigError
+from cmsensord.sinks.mcap_read import read_messages
 from cmsensord.sinks.schemas import SCHEMAS
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
+from processes import cmsensord, run_module
 from stream import run_processor
 
 
@@ -228,3 +230,23 @@ def test_degrading_machine_heard_by_the_microphone_only(calibration):
     assert np.median(tenth[7]) >= 8 and np.median(tenth[8]) >= 8   # failure heard
     assert np.median(tenth[9]) < np.median(tenth[8])              # and easing heard
     assert any(e["kind"] == "failure" for e in mic.topic("/cm/events"))
+
+
+def test_a_microphone_channels_capture_is_in_pascal(calibration, tmp_path):
+    """A RAW capture of a microphone channel is its sound in Pa, as the accelerometer's is in m/s^2:
+    the waveform and spectra say so (the report labels its axes from them)."""
+    cap = tmp_path / "pair.bin"
+    p = run_module("firmware_sim", "--out", str(cap), "--scenario", "degrading_mic", "--channels", "2",
+                   "--mode", "raw", "--duration", "8")
+    assert p.returncode == 0, p.stderr
+    cfg = tmp_path / "site.yaml"
+    cfg.write_text(f"channels:\n  - {{name: acc, index: 0}}\n  - {{name: mic, index: 1, kind: microphone}}\n"
+                   f"acoustic: {{calibration: {calibration}}}\n"
+                   "capture: {every_s: 4, pre_s: 1, post_s: 1, min_interval_s: 0}\n")
+    p = cmsensord("replay", str(cap), "--config", str(cfg), "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    units = {(topic, m["unit"]) for topic, _, m in read_messages(log) if "capture" in topic}
+    assert units == {("/cm/acc/capture_waveform", "m/s^2"), ("/cm/acc/capture_spectrum", "m/s^2"),
+                     ("/cm/acc/capture_envelope", "m/s^2"), ("/cm/mic/capture_waveform", "Pa"),
+                     ("/cm/mic/capture_spectrum", "Pa"), ("/cm/mic/capture_envelope", "Pa")}

@@ -138,6 +138,11 @@ class ChannelConfig:
                                "or Pa (a microphone); null: its kind's; one that does not fit the "
                                "kind is refused", choices=("m/s^2", "Pa"))
 
+    @property
+    def physical_unit(self) -> str:
+        """What its values are in: its kind's unit (m/s^2, a microphone's Pa)."""
+        return KIND_UNITS[self.kind]
+
     def __post_init__(self) -> None:
         validate(self)
 

@@ -127,6 +127,7 @@ class Captures:
         self.rate = 0.0
         self.ticks = 1                      # board samples per index (RMS: block length)
         self.channels: list[str] = []
+        self.units: dict[str, str] = {}     # a channel's unit when not m/s^2
         self.ring: _Ring | None = None
         self.anchors: deque[tuple[int, int]] = deque(maxlen=64)   # (index, stamp_ns)
         self.pending: list[_Pending] = []
@@ -233,9 +234,12 @@ class Captures:
         self.out.append(Event(kind, channel, message, stamp_ns, fields))
 
     # ---- the streams ---------------------------------------------------------
-    def raw(self, channels: list[str], t0: np.ndarray, y: np.ndarray, fs: float) -> list[Any]:
-        """RAW blocks: t0 (B,) first sample of each, y (B, L, C) m/s²; what became complete."""
+    def raw(self, channels: list[str], t0: np.ndarray, y: np.ndarray, fs: float,
+            units: list[str] | None = None) -> list[Any]:
+        """RAW blocks: t0 (B,) first sample of each, y (B, L, C) in each channel's unit (``units``:
+        m/s^2 when not given; a microphone's Pa); what became complete."""
         self._start("raw", channels, fs, 1)
+        self.units = dict(zip(channels, units or ()))
         for b in range(len(t0)):
             self._add(int(t0[b]), y[b])
         return self._complete()
@@ -345,19 +349,20 @@ class Captures:
     def _messages(self, p: _Pending, x: np.ndarray) -> list[Any]:
         wave_t, spec_t, env_t = capture_topics(p.channel)
         head = {"channel": p.channel, "trigger": p.trigger}
+        unit = self.units.get(p.channel, "m/s^2")
         lost = ~np.isfinite(x)
         filled = np.where(lost, 0.0, x)
         samples = [round(v, 6) for v in filled.tolist()]
         group: list[Message] = [Message(wave_t, "capture_waveform", p.stamp_ns, {
             **head, "source": self.source, "sample_rate_hz": self.rate, "first_sample": p.start,
-            "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s, "unit": "m/s^2", "missing": int(lost.sum()),
+            "pre_s": self.cfg.pre_s, "post_s": self.cfg.post_s, "unit": unit, "missing": int(lost.sum()),
             "samples": samples, **({"lost": np.flatnonzero(lost).tolist()} if lost.any() else {})})]
         f, A = amplitude_spectrum(filled, self.rate)
         marks = self.marks.fields(p.channel, p.start, p.end, self.rate / 2) \
             if self.source == "raw" and self.marks is not None else {}
         group.append(Message(spec_t, "capture_spectrum", p.stamp_ns, {
             **head, "kind": "spectrum", "freq_start_hz": 0.0, "freq_step_hz": float(f[1] - f[0]),
-            "unit": "m/s^2", "amplitude": np.round(A, 6).tolist(), **marks}))
+            "unit": unit, "amplitude": np.round(A, 6).tolist(), **marks}))
         if self.source == "raw":
             env = envelope(filled, self.rate, default_band(self.rate))
             fe, Ae = envelope_spectrum(env.env, env.fs_env)
@@ -366,7 +371,7 @@ class Captures:
                 marks = {**marks, "marks": [m for m in marks["marks"] if m["freq_hz"] <= ENVELOPE_MAX_HZ]}
             group.append(Message(env_t, "capture_spectrum", p.stamp_ns, {
                 **head, "kind": "envelope", "freq_start_hz": 0.0, "freq_step_hz": float(fe[1] - fe[0]),
-                "band_hz": [float(env.band[0]), float(env.band[1])], "unit": "m/s^2",
+                "band_hz": [float(env.band[0]), float(env.band[1])], "unit": unit,
                 "amplitude": np.round(Ae[keep], 6).tolist(), **marks}))
         out: list[Any] = [MessageGroup(tuple(group))]
         out.append(Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "

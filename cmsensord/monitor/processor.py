@@ -416,7 +416,8 @@ class Processor(Figures):
             self._hand_over()
         if self.captures is not None:
             self._out(self.captures.raw([ch.name for ch in self.channels], blocks.t0,
-                                        blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
+                                        blocks.samples([ch.index for ch in self.channels]), self.clock.fs,
+                                        [ch.physical_unit for ch in self.channels]))
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
