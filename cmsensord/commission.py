@@ -111,9 +111,9 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
                  f"(twice the healthy fluctuation amplitude), R_n = {SPAN:g} x R_1 unless --faulty.")
     for r in results:
         m = r.model
-        margin = r.f_r / m.max_cnt if m.max_cnt else float("inf")
+        margin = f"margin {r.f_r / m.max_cnt:.2g}x" if m.max_cnt else "no outlier at all"
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
-                     f"{m.max_cnt} against f_r {r.f_r:.3g} (margin {margin:.2g}x); "
+                     f"{m.max_cnt} against f_r {r.f_r:.3g} ({margin}); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))
         if m.idle_periods:
             lines.append(f"{r.name}: {m.idle_periods} decision(s) with the machine stopped (level below "

@@ -279,3 +279,25 @@ def test_replay_says_where_in_the_recording_each_alarm_first_rose(tmp_path):
     clock = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(1_076_582_400 + 600 * k))
     assert (f"  alarm rms_trend/bearing: in the recording: alert at {name} ({100 * k / 40:.1f} % of the "
             f"record, {clock})\n") in r.stderr
+
+
+def test_names_given_stay_as_typed_in_calibrate_and_replay(tmp_path):
+    """``--names x_,x``: each channel keeps its own name downstream (made names again, x_ was
+    x and x became x_2: the topics of the two channels swapped)."""
+    t = np.arange(20000) / 1000.0
+    (tmp_path / "z.csv").write_text("".join(f"{2 * np.sin(30 * a):.5f},{np.sin(30 * a):.5f}\n" for a in t))
+    r = cmd("import", "z.csv", "--fs", "1000", "--block-len", "10", "--names", "x_,x", "--out", "z.bin",
+            cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmd("calibrate", "z.bin", "--out", "site.yaml", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("x: highest outlier count per decision on the healthy period at R_1: 0 against f_r 28.7 "
+            "(no outlier at all); 0 healthy decision(s) would be flagged") in r.stdout     # a sine: none
+    site = yaml.safe_load((tmp_path / "site.yaml").read_text())
+    baselines = {ch["name"]: ch["baseline"] for ch in site["channels"]}
+    assert list(baselines) == ["x_", "x"]
+    assert baselines["x_"] == pytest.approx(2 * baselines["x"], rel=0.01)     # x_ is the louder one
+    r = cmd("replay", "z.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    assert {topic.split("/")[2] for topic, _, _ in read_messages(log) if topic.endswith("/severity")} == {"x_", "x"}

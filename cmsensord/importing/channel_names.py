@@ -51,6 +51,11 @@ def checked_names(given: list[str]) -> list[str]:
 
 
 def imported_names(meta: dict) -> list[str]:
-    """The channel names of an imported capture's sidecar ``meta`` (none: []), made names as an
-    import makes them now: a capture imported before may hold other labels."""
-    return channel_names([str(n) for n in meta.get("channel_names") or []])[0]
+    """The channel names of an imported capture's sidecar ``meta`` (none: []): as they are when
+    each is a channel name and none comes twice (the names the import gave, ``--names`` as
+    typed); else made names as an import makes them now (a capture imported before may hold
+    other labels)."""
+    names = [str(n) for n in meta.get("channel_names") or []]
+    if all(NAME_RULE.fullmatch(n) for n in names) and len(set(names)) == len(names):
+        return names
+    return channel_names(names)[0]
