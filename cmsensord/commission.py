@@ -78,6 +78,7 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
                 f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g}); for a machine "
                 f"this fast give a longer decision: monitor: {{decision_period_s: "
                 f"{math.floor(f_r / obs.rate_hz) + 1:g}}} in --config BASE.yaml")
+        _long_enough(obs, c, period)
         fy = faulty.y[:, faulty.names.index(name)] if faulty is not None and name in faulty.names else None
         alert = None if mon.severity == "paper" else mon.level_alert
         try:
@@ -87,6 +88,22 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
             raise CmsensordError(f"calibrate: channel {name}: {exc}") from None
         results.append(ChannelResult(name, obs.indices[c], f_r, source, model, period / obs.rate_hz, alert))
     return results
+
+
+#: fewer decisions learned from than this: calibrate warns that the healthy fluctuation is a guess
+FEW_DECISIONS = 10
+
+
+def _long_enough(obs: Observations, c: int, period: int) -> None:
+    """A one-line error, with the period that would do, when channel ``c`` holds fewer than the
+    two decision periods learning needs (the first is the filters' transient)."""
+    n = int(np.count_nonzero(np.isfinite(obs.y[:, c])))
+    if n < 2 * period:
+        need = 2 * period / obs.rate_hz
+        raise CmsensordError(
+            f"calibrate: channel {obs.names[c]}: the healthy period holds {n} observation(s) ({n / obs.rate_hz:.3g} "
+            f"s), fewer than the 2 decision periods learning needs ({2 * period}, {need:g} s: the first is the "
+            f"filters' transient); give a longer one (--to {obs.start_s + need:g} or later)")
 
 
 def _g(x: float) -> str:
@@ -115,6 +132,9 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} ({margin}); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))
+        if m.learned < FEW_DECISIONS:
+            lines.append(f"{r.name}: warning: learned from {m.learned} decision(s) only: the healthy fluctuation "
+                         "of so few is a guess; a longer healthy period (an hour of normal running) learns it better")
         if m.idle_periods:
             lines.append(f"{r.name}: {m.idle_periods} decision(s) with the machine stopped (level below "
                          f"{100 * STOPPED_SHARE:g} % of its running level), starting or stopping: not learned from")
@@ -269,6 +289,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
     print(format_table(results, obs))
+    for note in obs.notes:
+        print(f"note: {note}")
     where = span_line(obs.meta, obs.start_s, obs.end_s)
     if where:
         print(f"healthy period {where}")
@@ -321,4 +343,6 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
                      "its levels are within what this machine did then: check the rule's levels, or whether "
                      "the period was healthy")
         lines += [ln.strip() for ln in origin_lines(obs.meta, [], {alarm: firsts})] if firsts else []
-    return lines
+    rules = len(site.alarms.rules) + len(order_rules(site))
+    return lines or [f"alarms: none of the {rules} rule(s) shown within the healthy period (replayed with the "
+                     "site file)"]

@@ -48,6 +48,7 @@ class Observations:
     rpm: float | None             # the capture's nominal speed (import sidecar), if any
     indicators: dict[str, dict[str, float]] = field(default_factory=dict)  # channel -> name -> median
     meta: dict = field(default_factory=dict)    # the import's sidecar ({}: not an import)
+    notes: tuple[str, ...] = ()   # what the command says of the window (--to past the end, missing data)
 
     @property
     def end_s(self) -> float:
@@ -102,9 +103,13 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
 
     ``auto_channels``: the configuration lists no channels (take the board's).
     """
+    if to_s is not None and (isinstance(to_s, Percent) == isinstance(from_s, Percent) or not from_s) \
+            and to_s <= from_s:
+        raise CmsensordError(f"calibrate: --to {_said(to_s)} is not after --from {_said(from_s)}: the healthy "
+                             "period runs from --from to --to (board seconds, or % of the capture)")
     meta = sidecar(capture)
     collect = _Collect()
-    proc, sink = _replay(capture, cfg, auto_channels, to_s, collect)
+    proc, sink = _replay(capture, cfg, auto_channels, None if isinstance(from_s, Percent) else to_s, collect)
     if not collect.blocks:
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
@@ -124,7 +129,21 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
-                                    if ch.name in medians}, meta=meta)
+                                    if ch.name in medians}, meta=meta,
+                        notes=_window_notes(y[first:last], rate, total, to_s))
+
+
+def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:
+    """A line when ``--to`` is past the capture's end, and one on the observations the window
+    misses (blocks the board lost, or an import left out)."""
+    notes = []
+    if to_s is not None and not isinstance(to_s, Percent) and to_s > total + 1.0 / rate:
+        notes.append(f"--to {to_s:g} is past the capture's end ({total:.1f} board s): the healthy period ends there")
+    missing = int(np.count_nonzero(np.isnan(y).any(axis=1)))
+    if missing:
+        notes.append(f"the healthy period misses {missing / rate:.1f} s of its {y.shape[0] / rate:.1f} s (blocks the "
+                     f"board lost, or the import left out): learned from the rest")
+    return tuple(notes)
 
 
 def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -89,7 +90,13 @@ def test_calibrate_healthy_period_as_a_percentage_of_the_capture(degrading, tmp_
 
 
 @pytest.mark.parametrize("args, line, code", [
-    (["--from", "90%", "--to", "10%"], "cmsensord: calibrate: {cap}: no observations between 90 % and 10 % "
+    (["--from", "90%", "--to", "10%"], "cmsensord: calibrate: --to 10 % is not after --from 90 %: the healthy "
+                                       "period runs from --from to --to (board seconds, or % of the capture)", 2),
+    (["--to", "0"], "cmsensord: calibrate: --to 0 is not after --from 0: the healthy period runs from --from to "
+                    "--to (board seconds, or % of the capture)", 2),
+    (["--from", "50", "--to", "40"], "cmsensord: calibrate: --to 40 is not after --from 50: the healthy period "
+                                     "runs from --from to --to (board seconds, or % of the capture)", 2),
+    (["--from", "90%", "--to", "500"], "cmsensord: calibrate: {cap}: no observations between 90 % and 500 "
                                        "(board seconds, or % of the capture; it holds 600.0 s)", 2),
     (["--to", "120%"], "cmsensord calibrate: error: argument --to: expected board seconds >= 0 or a percentage "
                        "0-100%, got '120%' (see cmsensord calibrate --help)", 2),
@@ -99,8 +106,13 @@ def test_calibrate_healthy_period_as_a_percentage_of_the_capture(degrading, tmp_
                         "observations per decision (100 blocks/s x decision_period_s 1); for a machine this fast "
                         "give a longer decision: monitor: {{decision_period_s: 2}} in --config BASE.yaml\n", 78),
     (["--from", "700"], "cmsensord: calibrate: {cap}: no observations between 700 and", 2),
-    (["--to", "1"], "cmsensord: calibrate: channel ch0: need at least 2 decision periods of data (100 observations "
-                    "each; the first is the filters' transient), got 100 observation(s)", 2),
+    (["--to", "1"], "cmsensord: calibrate: channel ch0: the healthy period holds 100 observation(s) (1 s), fewer "
+                    "than the 2 decision periods learning needs (200, 2 s: the first is the filters' transient); "
+                    "give a longer one (--to 2 or later)", 2),
+    (["--from", "10", "--to", "11.5"], "cmsensord: calibrate: channel ch0: the healthy period holds 150 "
+                                       "observation(s) (1.5 s), fewer than the 2 decision periods learning needs "
+                                       "(200, 2 s: the first is the filters' transient); give a longer one (--to 12 "
+                                       "or later)", 2),
 ])
 def test_calibrate_errors_are_one_line(degrading, tmp_path, args, line, code):
     p = run("cmsensord", "calibrate", str(degrading), *args, "--out", str(tmp_path / "s.yaml"))
@@ -275,6 +287,33 @@ def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
     assert "alarm rms_x2" not in p.stdout          # raised before the period, cleared in it
     assert ("alarm iso/pump: warning: shown within the healthy period: danger since 1.0 board s, before the "
             "period, and all through it (velocity_rms_mm_s 27.88 reached the danger level 4.5); ") in p.stdout
+    base.write_text(RULES.splitlines(keepends=True)[0] + "".join(RULES.splitlines(keepends=True)[1:3]))
+    p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--config", str(base),
+            "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "alarms: none of the 1 rule(s) shown within the healthy period (replayed with the site file)\n" in p.stdout
+
+
+def test_what_the_healthy_period_lacks_is_said(degrading, tmp_path):
+    """A --to past the end, blocks missing in the period, and a period of a few decisions are
+    each one line; the site file is still written."""
+    site = tmp_path / "s.yaml"
+    p = run("cmsensord", "calibrate", str(degrading), "--from", "550", "--to", "700", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "note: --to 700 is past the capture's end (600.0 board s): the healthy period ends there\n" in p.stdout
+    assert "missing" not in p.stdout
+    holed = tmp_path / "holed.bin"
+    data = degrading.read_bytes()
+    holed.write_bytes(data[:len(data) // 10] + data[len(data) // 10 + 20000:])   # 20 kB out of the first minute
+    p = run("cmsensord", "calibrate", str(holed), "--to", "120", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert re.search(r"note: the healthy period misses \d+\.\d s of its 120\.0 s \(blocks the board lost, or "
+                     r"the import left out\): learned from the rest\n", p.stdout), p.stdout
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "5", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert ("ch0: warning: learned from 4 decision(s) only: the healthy fluctuation of so few is a guess; a longer "
+            "healthy period (an hour of normal running) learns it better\n") in p.stdout
+    assert site.exists()
 
 
 def test_the_papers_severity_has_no_level_check(degrading, tmp_path):
