@@ -194,7 +194,8 @@ BAD_DICTS = [
     ({"channels": {"name": "a"}}, "channels: expected a list of channel entries (got {'name': 'a'})"),
     ({"channels": ["a"]}, "channels[0]: expected a mapping (name: ..., index: ...) (got 'a')"),
     ({"monitor": [1, 2]}, "cfg.yaml: monitor: expected a mapping of keys to values (got [1, 2])"),
-    ([1, 2], "cfg.yaml: top level must be a mapping with the sections link, output, monitor, channels, tacho, orders (got [1, 2])"),
+    ([1, 2], "cfg.yaml: top level must be a mapping of the sections link, output, monitor, channels, tacho, orders, "
+             "acoustic, indicators, bearings, capture, mqtt, alarms (got [1, 2])"),
     ("text", "cfg.yaml: top level must be a mapping"),
 ]
 
@@ -214,7 +215,10 @@ BAD_FILES = [
     ("monitor:\n  n: 3\n  r_max: [0.1\n", "YAML syntax error at line 4, column 1"),
     ("monitor:\n  n: 3\n    z_c: 2\n", "YAML syntax error at line 3, column 8: mapping values are not allowed here"),
     ("monitor:\n  r_max: 0.1\n  r_max: 0.2\n", "YAML syntax error at line 3, column 3: found duplicate key 'r_max'"),
-    ("- monitor\n- link\n", "top level must be a mapping with the sections link, output, monitor, channels, tacho, orders (got ['monitor', 'link'])"),
+    ("- monitor\n- link\n", "top level must be a mapping of the sections link, output, monitor, channels, tacho, "
+                            "orders, acoustic, indicators, bearings, capture, mqtt, alarms (got ['monitor', 'link'])"),
+    ("monitor:\n\tn: 3\n", "YAML syntax error at line 2, column 1: found character '\\t' that cannot start any token: "
+                          "indent with spaces, not tabs"),
     ("42\n", "top level must be a mapping"),
     ("monitor:\n  f_r: 1e999\n", "monitor.f_r: expected a finite number (got inf)"),
     ("monitor: !!python/object:os.system {}\n", "YAML syntax error at line 1, column 10: could not determine a constructor"),
@@ -236,7 +240,7 @@ def test_missing_file(tmp_path):
     path = tmp_path / "nope.yaml"
     with pytest.raises(ConfigError) as info:
         load_config(path)
-    assert str(info.value) == f"{path}: file not found"
+    assert str(info.value) == f"{path}: file not found (`cmsensord config --default > FILE` writes one with every setting)"
     assert info.value.path == str(path)
 
 

@@ -115,7 +115,7 @@ def config_from_dict(
         raise ConfigError(
             source,
             None,
-            "top level must be a mapping with the sections link, output, monitor, channels, tacho, orders",
+            f"top level must be a mapping of the sections {', '.join(_TOP_KEYS)}",
             d,
         )
     _reject_unknown(d, _TOP_KEYS, source, "")
@@ -328,7 +328,8 @@ def _read_text(path: str | Path, source: str) -> str:
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
-        raise ConfigError(source, None, "file not found") from None
+        raise ConfigError(source, None, "file not found (`cmsensord config --default > FILE` writes one with every "
+                          "setting)") from None
     except PermissionError:
         raise ConfigError(source, None, "cannot read: permission denied") from None
     except OSError as err:
@@ -400,6 +401,8 @@ def _expanded_nodes(root: yaml.Node) -> int:
 def _yaml_reason(err: yaml.YAMLError) -> str:
     mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
     problem = getattr(err, "problem", None) or getattr(err, "context", None) or str(err)
+    if "'\\t'" in problem:
+        problem += ": indent with spaces, not tabs"
     if mark is not None:
         return f"YAML syntax error at line {mark.line + 1}, column {mark.column + 1}: {problem}"
     return f"YAML syntax error: {problem}"
