@@ -222,6 +222,7 @@ class SerialReader(threading.Thread):
         self.failures = 0
         self.errors = 0                       # unexpected exceptions since the last bytes read
         self.error: str | None = None         # the last one, as reported
+        self.down: str | None = None          # why the port is not open now (None: it is)
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
         self.pace = ReadPace()
@@ -260,8 +261,9 @@ class SerialReader(threading.Thread):
             try:
                 ser = self._open_port()
             except PORT_ERRORS as exc:
+                self.down = f"{self.port}: {cannot_open(self.port, exc)}; retrying"
                 if self.failures == 0:
-                    self._event("link_lost", f"cannot open {self.port}: {_why(exc)}; retrying")
+                    self._event("link_lost", self.down)
                 self.failures += 1
                 self._wait_backoff()
                 return None
@@ -270,6 +272,7 @@ class SerialReader(threading.Thread):
             self.ever_connected = True
             self.failures = 0
             self._backoff = self.reconnect_min_s
+            self.down = None
             self.connected.set()
         try:
             data, more = self._read(ser)
@@ -277,6 +280,7 @@ class SerialReader(threading.Thread):
                 return ser
         except PORT_ERRORS as exc:
             self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
+            self.down = f"{self.port}: {_why(exc)}; reconnecting"
             self.connected.clear()
             self.failures = 1
             _close_quietly(ser)
@@ -519,11 +523,18 @@ class Progress:
 def open_port_checked(port: str, baud: int) -> serial.Serial:
     """Open a serial port or raise LinkError with a one-line reason and the fix."""
     if not os.path.exists(port):
-        raise LinkError(f"{port}: no such device (is the board plugged in? check `ls /dev/tty*`)")
+        raise LinkError(f"{port}: {cannot_open(port, None)}")
     try:
         return serial.Serial(port, baud, timeout=0.1)
     except PORT_ERRORS as exc:
-        hint = (" (add the user to the dialout group)" if "ermission" in str(exc)
-                else " (is it a serial port? give the board's tty, e.g. /dev/ttyACM0)"
-                if "ioctl" in str(exc) else "")
-        raise LinkError(f"{port}: cannot open: {_why(exc)}{hint}") from None
+        raise LinkError(f"{port}: {cannot_open(port, exc)}") from None
+
+
+def cannot_open(port: str, exc: BaseException | None) -> str:
+    """Why ``port`` did not open (``exc``: the error of the open), with the fix."""
+    if not os.path.exists(port):
+        return "no such device (is the board plugged in? check `ls /dev/tty*`)"
+    hint = (" (add the user to the dialout group)" if "ermission" in str(exc)
+            else " (is it a serial port? give the board's tty, e.g. /dev/ttyACM0)"
+            if "ioctl" in str(exc) else "")
+    return f"cannot open: {_why(exc) if exc is not None else 'no reason given'}{hint}"

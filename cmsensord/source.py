@@ -67,6 +67,11 @@ class FrameSource:
     def counters(self) -> LinkCounters:
         return self.decoder.counters
 
+    @property
+    def link_down(self) -> str | None:
+        """Why a live port is not open now (None: open, or not a port)."""
+        return None
+
     def __iter__(self) -> Iterator[Batch]:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -199,6 +204,10 @@ class SerialSource(FrameSource):
     @property
     def events(self):
         return self.reader.events
+
+    @property
+    def link_down(self) -> str | None:
+        return self.reader.down
 
     def __enter__(self):
         self.reader.start()

@@ -107,6 +107,22 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
     assert len(sev) >= 8
 
 
+def test_a_port_that_is_not_there_is_said_on_every_status_line(tmp_path):
+    """No board on the port: besides the one link_lost event, each status line says what the
+    daemon is waiting for (a line of zero counters alone looked like a board sending nothing)."""
+    port = tmp_path / "ttyNONE"
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp_path / 'logs'}\n")
+    d = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)], stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    err = stop(d)
+    assert d.returncode == 0, err
+    status = [line for line in err.splitlines() if line.startswith("[")]
+    assert len(status) >= 2, err
+    assert all(line.endswith(f"| {port}: no such device (is the board plugged in? check `ls /dev/tty*`); retrying")
+               for line in status), status
+
+
 def test_a_stalled_link_reports_the_last_partial_interval_at_once(tmp_path):
     """The board stops sending mid-interval and stays connected: at link_stalled the daemon
     writes the open indicator interval (partial) and the ones waiting for the tacho, so they

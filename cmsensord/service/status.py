@@ -22,6 +22,8 @@ def status_line(proc, source=None) -> str:
                      f"lost {c.frames_lost - proc.segments.seq_restarts}, crc {c.crc_failures}")
         queue = source.queue
         parts.append(f"q {len(queue)} drop {queue.drops}")
+        if source.link_down:
+            parts.append(f"| {source.link_down}")
     return " ".join(parts)
 
 
