@@ -194,6 +194,8 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
         raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     except (OSError, yaml.YAMLError):
         raw = {}
+    if not raw:
+        log.warning("config: %s holds no settings (empty, or comments only): every setting is its default", path)
     return cfg, not (isinstance(raw, dict) and raw.get("channels"))
 
 

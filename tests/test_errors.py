@@ -103,3 +103,13 @@ def test_summary_into_a_closed_pipe_is_quiet(scratch):
     err = p.stderr.read().decode()
     assert p.wait(timeout=30) == 0
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_an_empty_config_file_is_said(scratch):
+    """A site file emptied by mistake would run every setting at its default (its calibration
+    gone): one warning line says so, and the run goes on."""
+    (scratch / "empty.yaml").write_text("# emptied\n")
+    p = cmsensord("replay", "capture.bin", "--config", "empty.yaml", "--out", str(scratch / "empty_logs"), cwd=scratch)
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == ("WARNING config: empty.yaml holds no settings (empty, or comments only): "
+                                        "every setting is its default")
