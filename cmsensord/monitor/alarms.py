@@ -26,6 +26,7 @@ from typing import Any
 
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
 from cmsensord.config import Config
+from cmsensord.config.alarm_indicators import RECORD_VALUES
 from cmsensord.config.alarms import AlarmRuleConfig
 from cmsensord.dsp.indicators.iso_zones import boundaries
 from cmsensord.monitor import messages
@@ -35,7 +36,8 @@ __all__ = ["Alarms", "indicator_values", "order_rules"]
 
 #: the message kinds the alarm manager reads
 WATCHED = frozenset({"indicators", "severity", "orders"})
-_SCALARS = ("accel_rms", "accel_peak", "crest_factor", "kurtosis", "velocity_rms_mm_s", "envelope_rms")
+#: the measured values of a record (the names rules may watch: the zone is graded, below)
+_SCALARS = tuple(k for k in RECORD_VALUES if k != "zone")
 
 
 def indicator_values(msg: dict) -> dict[str, float]:

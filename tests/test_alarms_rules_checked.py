@@ -1,0 +1,87 @@
+"""Alarm rules that could never fire are refused, through the commands a user types: a rule on no
+indicator (a misspelt name, a bearing or band not configured), levels in the wrong order or
+negative; each a one-line configuration error (exit 78) of `cmsensord replay` and `cmsensord
+calibrate`, before anything is read or written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cmsensord.config import ConfigError, config_from_dict
+from processes import cmsensord, run_module
+
+ERROR = "cmsensord: configuration error: "
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory) -> Path:
+    """4 s of the degrading motor, RAW with a tacho."""
+    work = tmp_path_factory.mktemp("rules_checked")
+    p = run_module("firmware_sim", "--scenario", "degrading", "--mode", "raw", "--tacho", "--duration", "4",
+                   "--out", str(work / "deg.bin"))
+    assert p.returncode == 0, p.stderr
+    return work / "deg.bin"
+
+
+def refused(tmp_path: Path, capture: Path, rules: str, *, command: str = "replay") -> str:
+    """The stderr of ``cmsensord COMMAND CAPTURE --config bad.yaml`` (alarms: {rules: RULES}),
+    asserting exit 78 and that nothing was written."""
+    (tmp_path / "bad.yaml").write_text(f"alarms:\n  rules: {rules}\n")
+    out = "site.yaml" if command == "calibrate" else "logs"
+    p = cmsensord(command, str(capture), "--config", "bad.yaml", "--out", out, cwd=tmp_path)
+    assert p.returncode == 78, p.stderr
+    assert not (tmp_path / out).exists()
+    return p.stderr
+
+
+def test_a_misspelt_indicator_is_refused_by_replay_and_calibrate(tmp_path, capture):
+    rules = "[{name: v, indicator: velocity_rms, alert: 2.8}]"
+    line = (ERROR + "bad.yaml: alarms.rules[0].indicator: unknown indicator (did you mean "
+            "'velocity_rms_mm_s'?): a rule on it never fires (got 'velocity_rms')\n")
+    assert refused(tmp_path, capture, rules) == line
+    assert refused(tmp_path, capture, rules, command="calibrate") == line     # no site file with it
+
+
+def test_a_bearing_line_of_no_configured_bearing_is_refused(tmp_path, capture):
+    assert refused(tmp_path, capture, "[{name: de_outer, indicator: de.bpfo, alert: 1}]") == (
+        ERROR + "bad.yaml: alarms.rules[0].indicator: names no bearing 'de' (bearings: none configured): "
+        "add it under bearings (name, channel, geometry) or name one of them (got 'de.bpfo')\n")
+
+
+BANDS = {"bands": [{"name": "low", "lo_hz": 10, "hi_hz": 100}]}
+BEARING = {"name": "motor_de", "channel": "ch0", "elements": 9, "ball_diameter": 7.94, "pitch_diameter": 39.04}
+
+
+@pytest.mark.parametrize("indicator, reason", [
+    ("de.bpfo", "names no bearing 'de' (bearings: motor_de): add it under bearings (name, channel, geometry) "
+     "or name one of them; did you mean 'motor_de.bpfo'?"),
+    ("motor_de.bpfx", "'bpfx' is not a line of bearing motor_de (lines: ftf, ftf_2x, bpfo, bpfo_2x, bpfi, "
+     "bpfi_2x, bsf, bsf_2x); did you mean 'motor_de.bpfo'?"),
+    ("band.high", "no band 'high' in indicators.bands (bands: low)"),
+    ("order.whirl", "no component 'whirl' in orders.components (components: 1x, 2x, 3x, 4x)"),
+    ("sevrity_index", "unknown indicator (did you mean 'severity_index'?): a rule on it never fires"),
+])
+def test_every_kind_of_indicator_name_is_checked(indicator, reason):
+    with pytest.raises(ConfigError) as err:
+        config_from_dict({"bearings": [BEARING], "indicators": BANDS,
+                          "alarms": {"rules": [{"name": "r", "indicator": indicator, "alert": 1}]}}, source="m.yaml")
+    assert str(err.value) == f"m.yaml: alarms.rules[0].indicator: {reason} (got {indicator!r})"
+
+
+def test_the_level_indicator_of_the_operating_state_is_checked():
+    with pytest.raises(ConfigError) as err:
+        config_from_dict({"alarms": {"operating": {"source": "level", "running_above": 1,
+                                                   "level_indicator": "accel"}}}, source="m.yaml")
+    assert str(err.value) == ("m.yaml: alarms.operating.level_indicator: unknown indicator (did you mean "
+                              "'accel_rms'?): the machine would never be seen running (got 'accel')")
+
+
+def test_every_name_the_chain_writes_is_accepted():
+    cfg = config_from_dict({"bearings": [BEARING], "indicators": BANDS,
+                            "alarms": {"rules": [{"name": f"r{i}", "indicator": n, "alert": 1} for i, n in enumerate(
+                                ["velocity_rms_mm_s", "accel_rms", "accel_peak", "crest_factor", "kurtosis",
+                                 "envelope_rms", "zone", "motor_de.bpfi_2x", "band.low", "severity_index",
+                                 "order.1x"])]}})
+    assert len(cfg.alarms.rules) == 11
