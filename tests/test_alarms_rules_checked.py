@@ -85,3 +85,49 @@ def test_every_name_the_chain_writes_is_accepted():
                                  "envelope_rms", "zone", "motor_de.bpfi_2x", "band.low", "severity_index",
                                  "order.1x"])]}})
     assert len(cfg.alarms.rules) == 11
+
+
+def test_levels_in_the_wrong_order_are_refused_by_replay_and_calibrate(tmp_path, capture):
+    """alert 7.1 above danger 2.8: only the danger alarm would ever show, never the alert."""
+    rules = "[{name: v, indicator: velocity_rms_mm_s, alert: 7.1, danger: 2.8}]"
+    line = (ERROR + "bad.yaml: alarms.rules[0].danger: must be greater than alert = 7.1: the alert comes first "
+            "(got 2.8)\n")
+    assert refused(tmp_path, capture, rules) == line
+    assert refused(tmp_path, capture, rules, command="calibrate") == line
+
+
+@pytest.mark.parametrize("levels, expected", [
+    ({"alert_zone": "D", "danger_zone": "C"},
+     "danger_zone: must be a zone above alert_zone = D (zones A < B < C < D): the alert comes first (got 'C')"),
+    ({"alert_zone": "C", "danger_zone": "C"},
+     "danger_zone: must be a zone above alert_zone = C (zones A < B < C < D): the alert comes first (got 'C')"),
+    ({"alert_x_baseline": 6, "danger_x_baseline": 3},
+     "danger_x_baseline: must be greater than alert_x_baseline = 6.0: the alert comes first (got 3.0)"),
+    ({"alert": 2.8, "danger": 2.8}, "danger: must be greater than alert = 2.8: the alert comes first (got 2.8)"),
+    ({"alert": -1}, "alert: must be >= 0 (got -1)"),
+    ({"danger": -0.5}, "danger: must be >= 0 (got -0.5)"),
+    ({"alert": 5, "danger_zone": "C"}, "danger_zone: must be above the alert level: alert 5.0 against danger_zone C "
+     "(zone C begins at 2.8 mm/s for machine group 2, rigid): the alert comes first (got 'C')"),
+    ({"alert_zone": "D", "danger": 3}, "danger: must be above the alert level: alert_zone D against danger 3.0 "
+     "(zone D begins at 4.5 mm/s for machine group 2, rigid): the alert comes first (got 3.0)"),
+    ({"alert": 1, "bands": [{"below_rpm": 1000, "alert": 5, "danger": 2}]},
+     "bands[0].danger: must be greater than alert = 5.0: the alert comes first (got 2.0)"),
+    ({"alert": 1, "bands": [{"below_rpm": 1000, "alert": -5}]}, "bands[0].alert: must be >= 0 (got -5)"),
+    ({"alert": 1, "bands": [{"below_rpm": 1000, "alert_zone": "D", "danger": 4}]},
+     "bands[0].danger: must be above the alert level: alert_zone D against danger 4.0 (zone D begins at 4.5 "
+     "mm/s for machine group 2, rigid): the alert comes first (got 4.0)"),
+])
+def test_every_level_pair_must_rise_and_no_level_is_negative(levels, expected):
+    with pytest.raises(ConfigError) as err:
+        config_from_dict({"alarms": {"rules": [{"name": "v", "indicator": "velocity_rms_mm_s", **levels}]}},
+                         source="m.yaml")
+    assert str(err.value) == "m.yaml: alarms.rules[0]." + expected
+
+
+def test_rising_levels_given_in_different_ways_are_accepted():
+    cfg = config_from_dict({"alarms": {"rules": [
+        {"name": "a", "indicator": "velocity_rms_mm_s", "alert": 2.0, "danger_zone": "C"},
+        {"name": "b", "indicator": "velocity_rms_mm_s", "alert_zone": "C", "danger": 9.5},
+        {"name": "c", "indicator": "velocity_rms_mm_s", "alert_x_baseline": 2, "danger": 9.5},
+        {"name": "d", "indicator": "kurtosis", "alert": 0, "bands": [{"below_rpm": 600, "danger": 8}]}]}})
+    assert [r.name for r in cfg.alarms.rules] == ["a", "b", "c", "d"]

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from .alarm_indicators import rules_see_indicators
-from .alarms import AlarmsConfig, alarms_see_channels
+from .alarms import AlarmsConfig, alarms_see_channels, rules_levels_rise
 from .capture import CaptureConfig, capture_sees_operating
 from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
 from .mqtt import MqttConfig
@@ -394,7 +394,7 @@ class Config:
     alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels, alarms_see_channels,
-                                          rules_see_indicators, capture_sees_operating)
+                                          rules_see_indicators, rules_levels_rise, capture_sees_operating)
 
     def __post_init__(self) -> None:
         validate(self)
