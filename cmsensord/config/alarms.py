@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 from .validation import Rule, fmt_num, setting, validate
 
 __all__ = ["AlarmsConfig", "AlarmRuleConfig", "BaselineConfig", "OperatingConfig", "SpeedBandConfig",
-           "LEVEL_KEYS", "alarms_see_channels", "rules_levels_rise"]
+           "LEVEL_KEYS", "rules_levels_rise"]
 
 _NAME: dict[str, Any] = {"pattern": r"[A-Za-z0-9_]+", "pattern_reason": "must contain only letters, digits and _"}
 _INDICATOR: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+",
@@ -208,17 +208,6 @@ class AlarmsConfig:
     def baseline(self, channel: str, indicator: str) -> float | None:
         """The learned baseline of ``indicator`` on ``channel`` (None: not learned)."""
         return next((b.value for b in self.baselines if b.channel == channel and b.indicator == indicator), None)
-
-
-def alarms_see_channels(cfg: Any) -> tuple[str, str, Any] | None:
-    """Config rule: every channel an alarm rule names is a configured one (or ch<k>)."""
-    import re
-    names = {ch.name for ch in cfg.channels}
-    for i, r in enumerate(cfg.alarms.rules):
-        for c in r.channels:
-            if c not in names and not re.fullmatch(r"ch[0-7]", c):
-                return (f"alarms.rules[{i}].channels", f"names no channel (channels: {', '.join(sorted(names))})", c)
-    return None
 
 
 def _mixed_levels_rise(src: Any, zones: tuple[float, float, float], machine: str) -> tuple[str, str, Any] | None:
