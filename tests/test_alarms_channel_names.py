@@ -110,3 +110,17 @@ def test_the_daemon_refuses_a_rule_on_no_channel_of_the_board(tmp_path):
     assert events[-1]["kind"] == "stop"
     assert ("config", "configuration error: alarms.rules[0].channels: names no channel (channels: ch0) "
             "(got 'ch3')") in [(m["kind"], m["message"]) for m in events]
+
+
+def test_a_vote_of_more_channels_than_the_board_has_is_refused_by_replay(tmp_path, board_capture):
+    """`vote: 3` on a one-channel board: the voting alarm could never rise."""
+    vote = "alarms:\n  rules:\n    - {name: v, indicator: velocity_rms_mm_s, alert: 2.8, vote: 3}\n"
+    p = run("replay", board_capture, tmp_path, vote)
+    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: alarms.rules[0].vote: must be at most "
+                                                         "the 1 channel(s) the rule watches (ch0): that many never "
+                                                         "exceed the level together (got 3)")
+    with pytest.raises(ConfigError) as err:                 # with a channel list: on loading
+        config_from_dict({"channels": [{"name": "a"}, {"name": "b"}], "alarms": {"rules": [
+            {"name": "v", "indicator": "accel_rms", "alert": 1, "vote": 3}]}}, source="f.yaml")
+    assert str(err.value) == ("f.yaml: alarms.rules[0].vote: must be at most the 2 channel(s) the rule watches "
+                              "(a, b): that many never exceed the level together (got 3)")

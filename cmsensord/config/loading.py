@@ -136,7 +136,7 @@ def config_from_dict(
     channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
     if d.get("channels") is not None:           # the channels' names are known: the list's
-        check_channel_refs(cfg, [ch.name for ch in cfg.channels], source)
+        check_channel_refs(cfg, cfg.channels, source)
     _check_calibrations(cfg, source)
     return cfg
 

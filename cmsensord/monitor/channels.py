@@ -181,7 +181,7 @@ class ChannelSetup:
                      f"monitored, the rest is not")
             self.channels = default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor)
         named = self.channels if self.auto_channels else self.cfg.channels
-        check_channel_refs(self.cfg, [ch.name for ch in named])
+        check_channel_refs(self.cfg, named)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
         if len(usable) < len(self.channels):
             missing = [ch.name for ch in self.channels if ch.index >= n_board]
