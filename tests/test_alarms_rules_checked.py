@@ -131,3 +131,25 @@ def test_rising_levels_given_in_different_ways_are_accepted():
         {"name": "c", "indicator": "velocity_rms_mm_s", "alert_x_baseline": 2, "danger": 9.5},
         {"name": "d", "indicator": "kurtosis", "alert": 0, "bands": [{"below_rpm": 600, "danger": 8}]}]}})
     assert [r.name for r in cfg.alarms.rules] == ["a", "b", "c", "d"]
+
+
+def test_a_baseline_level_without_a_baseline_is_said_once_per_rule_and_channel(tmp_path, capture):
+    """alert_x_baseline with no alarms.baselines: accepted (calibrate's base configuration learns
+    them), but replay says once, with an event and a warning line, that the level is not in force."""
+    (tmp_path / "base.yaml").write_text(
+        "output: {status_line: false}\nalarms:\n  rules:\n"
+        "    - {name: vel, indicator: velocity_rms_mm_s, alert_x_baseline: 2, danger: 9.5}\n")
+    p = cmsensord("replay", str(capture), "--config", "base.yaml", "--out", "logs", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    said = [ln for ln in p.stderr.splitlines() if ln.startswith("WARNING alarm_no_baseline")]
+    assert said == ["WARNING alarm_no_baseline: rule vel on ch0: no baseline of velocity_rms_mm_s learned for ch0 "
+                    "(alarms.baselines), so its alert_x_baseline level(s) are not in force there: run cmsensord "
+                    "calibrate on a healthy capture of this machine"]
+    from cmsensord.sinks.mcap_sink import read_messages
+    events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap")))
+              if t == "/cm/events" and m["kind"] == "alarm_no_baseline"]
+    assert [(m["channel"], m["alarm"]) for m in events] == [("ch0", "vel/ch0")]
+    p = cmsensord("calibrate", str(capture), "--config", "base.yaml", "--out", "site.yaml", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    p = cmsensord("replay", str(capture), "--config", "site.yaml", "--out", "logs2", cwd=tmp_path)
+    assert p.returncode == 0 and "alarm_no_baseline" not in p.stderr, p.stderr
