@@ -272,6 +272,13 @@ def _dispatch(args: argparse.Namespace) -> int:
     return EXIT_USAGE
 
 
+def _in_config_file(exc: ConfigError, args: argparse.Namespace) -> ConfigError:
+    """``exc`` in the --config file given, when it was found in code (``<code>``: the settings
+    against the channels, once the capture or the board said which there are)."""
+    path = getattr(args, "sub_config", None) or getattr(args, "config", None)
+    return exc.relocated(str(path)) if exc.source == "<code>" and path else exc
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if under_journal() and not isinstance(sys.stderr, JournalStream):
@@ -283,6 +290,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _dispatch(args)
     except ConfigError as exc:
+        exc = _in_config_file(exc, args)
         if exc.source.startswith("--"):         # a command-line option: a usage error
             error_line(f"cmsensord: {exc}")
             return EXIT_USAGE

@@ -25,7 +25,7 @@ from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.dsp.commissioning import idle_periods
 from cmsensord.errors import CmsensordError
-from cmsensord.importing.channel_names import imported_names
+from cmsensord.importing.channel_names import imported_channels
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
@@ -86,28 +86,23 @@ class _Collect:
         self.blocks.append((first_slot, np.where(valid, y, np.nan)))
 
 
-def _names(meta: dict, proc: Processor, auto_channels: bool) -> list[str]:
-    """Channel names: the configuration's, else the import's (as channel names: a capture
-    imported before they were made so may hold others), else ch0, ch1, ..."""
-    given = imported_names(meta)
-    if not auto_channels:
-        return [ch.name for ch in proc.channels]
-    return [given[i] if i < len(given) else ch.name for i, ch in enumerate(proc.channels)]
-
-
 def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool = True,
                       from_s: float = 0.0, to_s: float | None = None) -> Observations:
     """Replay ``capture`` up to ``to_s`` and keep the observations in [from_s, to_s] (board
     seconds; a :class:`~cmsensord.argtypes.Percent` is that share of the capture's board time,
     which is then read whole).
 
-    ``auto_channels``: the configuration lists no channels (take the board's).
+    ``auto_channels``: the configuration lists no channels: an imported capture's channels are
+    named as its import named them (as ``cmsensord replay`` names them), else the board's.
     """
     if to_s is not None and (isinstance(to_s, Percent) == isinstance(from_s, Percent) or not from_s) \
             and to_s <= from_s:
         raise CmsensordError(f"calibrate: --to {_said(to_s)} is not after --from {_said(from_s)}: the healthy "
                              "period runs from --from to --to (board seconds, or % of the capture)")
     meta = sidecar(capture)
+    if auto_channels:
+        named = imported_channels(cfg, meta)
+        cfg, auto_channels = named, named is cfg
     collect = _Collect()
     proc, sink = _replay(capture, cfg, auto_channels, None if isinstance(from_s, Percent) else to_s, collect)
     if not collect.blocks:
@@ -123,7 +118,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                              f"(board seconds, or % of the capture; it holds {total:.1f} s)")
     shaft = _shaft_hz(sink, proc, first / rate, last / rate)
     rpm = meta.get("rpm")
-    names = _names(meta, proc, auto_channels)
+    names = [ch.name for ch in proc.channels]
     medians = _indicator_medians(sink, proc, first / rate, last / rate)   # by the Processor's names
     return Observations(names=names, indices=[ch.index for ch in proc.channels],
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,

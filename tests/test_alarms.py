@@ -21,7 +21,7 @@ def manager(rules: list[dict], operating: dict | None = None, baselines: list[di
     return AlarmManager(cfg.alarms, channels, ZONES)
 
 
-def run(m: AlarmManager, series, indicator="v", channel="ch0", speeds=None):
+def run(m: AlarmManager, series, indicator="velocity_rms_mm_s", channel="ch0", speeds=None):
     """Feed one value per second; the (second, kind) of every transition."""
     out = []
     for k, x in enumerate(series):
@@ -30,7 +30,7 @@ def run(m: AlarmManager, series, indicator="v", channel="ch0", speeds=None):
     return out
 
 
-RULE = {"name": "vel", "indicator": "v", "alert": 2.0, "danger": 4.0}
+RULE = {"name": "vel", "indicator": "velocity_rms_mm_s", "alert": 2.0, "danger": 4.0}
 
 
 def test_no_delay_raises_and_clears_at_once():
@@ -129,8 +129,8 @@ def test_zone_boundary_and_baseline_levels():
 
 
 def test_baseline_level_without_a_baseline_never_raises():
-    m = manager([{"name": "base", "indicator": "v", "alert_x_baseline": 2.0}])
-    assert run(m, [100.0]) == []
+    m = manager([{"name": "base", "indicator": "kurtosis", "alert_x_baseline": 2.0}])
+    assert run(m, [100.0], indicator="kurtosis") == []
     assert "alert_level" not in m.table()[0]
 
 
@@ -139,7 +139,7 @@ def test_two_of_three_voting():
     out = []
     for k, vals in enumerate([(3, 1, 1), (3, 1, 3), (5, 5, 1), (1, 1, 5)]):
         for ch, v in zip("abc", vals):
-            out += [(k, t.kind, t.alarm, t.channel) for t in m.record(k * S, ch, {"v": v})]
+            out += [(k, t.kind, t.alarm, t.channel) for t in m.record(k * S, ch, {"velocity_rms_mm_s": v})]
     assert out == [(1, "alarm_alert", "vel", None), (2, "alarm_danger", "vel", None),
                    (3, "alarm_clear", "vel", None)]
 
@@ -152,12 +152,13 @@ def test_alarms_config_errors_are_one_line():
             {"rules": [{"name": "a", "indicator": "accel_rms"}]},
         "alarms.operating.running_above: needed with source: speed": {"operating": {"source": "speed"}},
         "alarms.rules[1].name: duplicate alarm name":
-            {"rules": [{"name": "a", "indicator": "x", "alert": 1}, {"name": "a", "indicator": "y", "alert": 1}]},
+            {"rules": [{"name": "a", "indicator": "accel_rms", "alert": 1},
+                       {"name": "a", "indicator": "kurtosis", "alert": 1}]},
         "alarms.rules[0].vote: must be at most the 1 channel(s) listed":
-            {"rules": [{"name": "a", "indicator": "x", "alert": 1, "channels": ["ch0"], "vote": 2}]},
+            {"rules": [{"name": "a", "indicator": "accel_rms", "alert": 1, "channels": ["ch0"], "vote": 2}]},
         "alarms.rules[0].bands[0].below_rpm: missing (required)":
-            {"rules": [{"name": "a", "indicator": "x", "alert": 1, "bands": [{"alert": 2}]}]},
-        "alarms.rules[0].on_dealy_s": {"rules": [{"name": "a", "indicator": "x", "alert": 1, "on_dealy_s": 2}]},
+            {"rules": [{"name": "a", "indicator": "accel_rms", "alert": 1, "bands": [{"alert": 2}]}]},
+        "alarms.rules[0].on_dealy_s": {"rules": [{"name": "a", "indicator": "accel_rms", "alert": 1, "on_dealy_s": 2}]},
     }
     for expected, alarms in cases.items():
         with pytest.raises(ConfigError) as err:

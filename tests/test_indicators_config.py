@@ -48,7 +48,7 @@ def test_a_full_section_round_trips():
      "f.yaml: indicators.bands[0].lo_hz: give either lo_hz and hi_hz, or lo_order and hi_order (got 5.0)"),
     ({"indicators": {"intervall_s": 1}},
      "f.yaml: indicators.intervall_s: unknown key 'intervall_s' (did you mean 'interval_s'?)"),
-    ({"bearings": [{**ZA2115, "channel": "motor"}]},
+    ({"channels": [{"name": "ch0"}], "bearings": [{**ZA2115, "channel": "motor"}]},
      "f.yaml: bearings[0].channel: names no channel (channels: ch0) (got 'motor')"),
     ({"bearings": [{**ZA2115, "ball_diameter": 3.0}]},
      "f.yaml: bearings[0].pitch_diameter: must be greater than ball_diameter = 3.0 (got 2.815)"),

@@ -15,10 +15,10 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from .validation import Rule, setting, validate
+from .validation import Rule, fmt_num, setting, validate
 
 __all__ = ["AlarmsConfig", "AlarmRuleConfig", "BaselineConfig", "OperatingConfig", "SpeedBandConfig",
-           "LEVEL_KEYS", "alarms_see_channels"]
+           "LEVEL_KEYS", "rules_levels_rise"]
 
 _NAME: dict[str, Any] = {"pattern": r"[A-Za-z0-9_]+", "pattern_reason": "must contain only letters, digits and _"}
 _INDICATOR: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+",
@@ -27,10 +27,12 @@ _INDICATOR: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+",
 LEVEL_KEYS = {"alert": ("alert", "alert_zone", "alert_x_baseline"),
               "danger": ("danger", "danger_zone", "danger_x_baseline")}
 _ZONE = {"choices": ("B", "C", "D")}
+#: the zones in their order: a zone's level is its lower boundary
+ZONES = "ABCD"
 #: the level settings of a rule and of its speed bands: help text and checks
 _LEVEL_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
-    "alert": ("alert level [the indicator's unit]", {}),
-    "danger": ("danger level [the indicator's unit]", {}),
+    "alert": ("alert level [the indicator's unit]", {"ge": 0}),
+    "danger": ("danger level [the indicator's unit]", {"ge": 0}),
     "alert_zone": ("alert at the lower boundary of this ISO zone (B, C or D)", _ZONE),
     "danger_zone": ("danger at the lower boundary of this ISO zone", _ZONE),
     "alert_x_baseline": ("alert at k x the learned baseline", {"gt": 0}),
@@ -59,6 +61,22 @@ def _levels(need: bool) -> Rule:
         return None
 
     return rule
+
+
+def _levels_rise(obj: Any) -> tuple[str, str, Any] | None:
+    """Rule: where alert and danger are given the same way, danger is the higher level (zones by
+    their order A < B < C < D); else the danger alarm would come first and the alert never."""
+    for a_key, d_key in zip(LEVEL_KEYS["alert"], LEVEL_KEYS["danger"]):
+        a, d = getattr(obj, a_key), getattr(obj, d_key)
+        if a is None or d is None:
+            continue
+        if a_key == "alert_zone":
+            if ZONES.index(d) <= ZONES.index(a):
+                return (d_key, f"must be a zone above alert_zone = {a} (zones A < B < C < D): the alert "
+                        "comes first", d)
+        elif not d > a:
+            return d_key, f"must be greater than {a_key} = {fmt_num(a)}: the alert comes first", d
+    return None
 
 
 def _zone_needs_velocity(obj: Any) -> tuple[str, str, Any] | None:
@@ -91,7 +109,7 @@ class SpeedBandConfig:
     alert_x_baseline: float | None = _level("alert_x_baseline")
     danger_x_baseline: float | None = _level("danger_x_baseline")
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True),)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True), _levels_rise)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -121,7 +139,7 @@ class AlarmRuleConfig:
                         "exceed the level", ge=1, le=8)
     bands: tuple[SpeedBandConfig, ...] = field(default=(), metadata={"help": "level sets per speed band"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True), _zone_needs_velocity, _vote_fits)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True), _levels_rise, _zone_needs_velocity, _vote_fits)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -192,12 +210,43 @@ class AlarmsConfig:
         return next((b.value for b in self.baselines if b.channel == channel and b.indicator == indicator), None)
 
 
-def alarms_see_channels(cfg: Any) -> tuple[str, str, Any] | None:
-    """Config rule: every channel an alarm rule names is a configured one (or ch<k>)."""
-    import re
-    names = {ch.name for ch in cfg.channels}
-    for i, r in enumerate(cfg.alarms.rules):
-        for c in r.channels:
-            if c not in names and not re.fullmatch(r"ch[0-7]", c):
-                return (f"alarms.rules[{i}].channels", f"names no channel (channels: {', '.join(sorted(names))})", c)
+def _mixed_levels_rise(src: Any, zones: tuple[float, float, float], machine: str) -> tuple[str, str, Any] | None:
+    """(key, reason, value) when one of ``src``'s levels is absolute and the other a zone boundary
+    (``zones``: B, C, D's lower boundaries of ``machine``) and danger is not the higher."""
+    pairs = (("alert", "danger_zone"), ("alert_zone", "danger"))
+    for a_key, d_key in pairs:
+        a, d = getattr(src, a_key), getattr(src, d_key)
+        if a is None or d is None:
+            continue
+        a_lv = a if a_key == "alert" else zones[ZONES.index(a) - 1]
+        d_lv = d if d_key == "danger" else zones[ZONES.index(d) - 1]
+        if not d_lv > a_lv:
+            zone, lv = (d, d_lv) if d_key == "danger_zone" else (a, a_lv)
+            return (d_key, f"must be above the alert level: {a_key} {a} against {d_key} {d} (zone {zone} "
+                    f"begins at {lv:g} mm/s for {machine}): the alert comes first", d)
+    return None
+
+
+def _level_sets(rules: tuple[AlarmRuleConfig, ...]) -> list[tuple[str, Any]]:
+    """Every rule and speed band, with its key path."""
+    return [(f"alarms.rules[{i}]", r) for i, r in enumerate(rules)] + [
+        (f"alarms.rules[{i}].bands[{j}]", b) for i, r in enumerate(rules) for j, b in enumerate(r.bands)]
+
+
+def rules_levels_rise(cfg: Any) -> tuple[str, str, Any] | None:
+    """Config rule: a rule (or speed band) with an absolute alert and a danger zone, or the reverse,
+    has danger above alert at the configured machine group's and foundation's zone boundaries."""
+    mixed = [(where, src) for where, src in _level_sets(cfg.alarms.rules)
+             if (src.alert is not None and src.danger_zone is not None)
+             or (src.alert_zone is not None and src.danger is not None)]
+    if not mixed:                       # (the zone table's module loads numpy)
+        return None
+    from cmsensord.dsp.indicators.iso_zones import boundaries
+
+    ic = cfg.indicators
+    zones = boundaries(ic.machine_group, ic.foundation)
+    for where, src in mixed:
+        found = _mixed_levels_rise(src, zones, f"machine group {ic.machine_group}, {ic.foundation}")
+        if found is not None:
+            return f"{where}.{found[0]}", found[1], found[2]
     return None

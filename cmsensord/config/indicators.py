@@ -9,13 +9,12 @@ computation is :mod:`cmsensord.dsp.indicators`.
 from __future__ import annotations
 
 import dataclasses
-import re
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from .validation import Rule, fmt_num, greater, setting, validate
 
-__all__ = ["BandConfig", "IndicatorsConfig", "BearingConfig", "bearings_see_channels"]
+__all__ = ["BandConfig", "IndicatorsConfig", "BearingConfig", "bearings_unique"]
 
 _NAME: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+", "pattern_reason": "must contain only letters, digits, _ and ."}
 
@@ -115,16 +114,12 @@ class BearingConfig:
         validate(self)
 
 
-def bearings_see_channels(cfg: Any) -> tuple[str, str, Any] | None:
-    """Config rule: bearing names are unique and each names a configured channel (or a
-    board default name ch<k>, for channels that follow the board)."""
-    names = {ch.name for ch in cfg.channels}
+def bearings_unique(cfg: Any) -> tuple[str, str, Any] | None:
+    """Config rule: bearing names are unique (the channel each names is checked against the
+    channels' names once they are known: :mod:`.channel_refs`)."""
     seen: list[str] = []
     for i, b in enumerate(cfg.bearings):
         if b.name in seen:
             return f"bearings[{i}].name", "duplicate bearing name", b.name
         seen.append(b.name)
-        if b.channel not in names and not re.fullmatch(r"ch[0-7]", b.channel):
-            return (f"bearings[{i}].channel", "names no channel (channels: "
-                    f"{', '.join(sorted(names))})", b.channel)
     return None

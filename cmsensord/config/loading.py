@@ -24,6 +24,7 @@ import yaml
 
 from .alarms import AlarmRuleConfig, AlarmsConfig, BaselineConfig, OperatingConfig, SpeedBandConfig
 from .capture import CaptureConfig
+from .channel_refs import check_channel_refs
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .mqtt import MqttConfig
 from .settings import (
@@ -134,6 +135,8 @@ def config_from_dict(
 
     channels = _build_channels(d.get("channels"), monitor, n_channels, source)
     cfg = _build(Config, {**sections, "channels": channels}, source, "")
+    if d.get("channels") is not None:           # the channels' names are known: the list's
+        check_channel_refs(cfg, cfg.channels, source)
     _check_calibrations(cfg, source)
     return cfg
 

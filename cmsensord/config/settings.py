@@ -11,9 +11,10 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from .alarms import AlarmsConfig, alarms_see_channels
+from .alarm_indicators import rules_see_indicators
+from .alarms import AlarmsConfig, rules_levels_rise
 from .capture import CaptureConfig, capture_sees_operating
-from .indicators import BearingConfig, IndicatorsConfig, bearings_see_channels
+from .indicators import BearingConfig, IndicatorsConfig, bearings_unique
 from .mqtt import MqttConfig
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
@@ -392,8 +393,8 @@ class Config:
     mqtt: MqttConfig | None = field(default=None, metadata={"help": "publishing to an MQTT broker"})
     alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_see_channels, alarms_see_channels,
-                                          capture_sees_operating)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_unique, rules_see_indicators,
+                                          rules_levels_rise, capture_sees_operating)
 
     def __post_init__(self) -> None:
         validate(self)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import dataclasses
 import re
 
-from cmsensord.config import ChannelConfig
+from cmsensord.config import ChannelConfig, Config
 
 from .errors import ImportFailure
 
-__all__ = ["NAME_RULE", "channel_names", "checked_names", "imported_names"]
+__all__ = ["NAME_RULE", "channel_names", "checked_names", "imported_channels", "imported_names"]
 
 #: what a channel name may hold: the configuration's rule for channels[].name
 NAME_RULE = re.compile(next(f.metadata["pattern"] for f in dataclasses.fields(ChannelConfig) if f.name == "name"))
@@ -59,3 +59,14 @@ def imported_names(meta: dict) -> list[str]:
     if all(NAME_RULE.fullmatch(n) for n in names) and len(set(names)) == len(names):
         return names
     return channel_names(names)[0]
+
+
+def imported_channels(cfg: Config, meta: dict) -> Config:
+    """``cfg`` (which lists no channels) with the channels of an imported capture named as
+    its import named them (its sidecar ``meta``'s ``channel_names``, as channel names); ``cfg``
+    itself without them."""
+    names = imported_names(meta)
+    if not names:
+        return cfg
+    return dataclasses.replace(cfg, channels=tuple(ChannelConfig(name=n, index=i, monitor=cfg.monitor)
+                                                   for i, n in enumerate(names)))

@@ -14,7 +14,9 @@ changes, one ``/cm/alarms`` message — all stamped with the stamp of the messag
 that caused them (an acknowledgement: the newest stamp), so a replay gives what
 the live run gave.  A change of the machine's operating state is an
 ``operating_state`` event (details: ``state``, ``previous``); with an
-``alarms.operating`` source the manager runs for it even without rules.
+``alarms.operating`` source the manager runs for it even without rules.  A rule level given
+as k x a baseline that ``alarms.baselines`` lacks for a channel is said once, with the first
+message: an ``alarm_no_baseline`` event (a warning) naming the rule and the channel.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import Any
 
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
 from cmsensord.config import Config
+from cmsensord.config.alarm_indicators import RECORD_VALUES
 from cmsensord.config.alarms import AlarmRuleConfig
 from cmsensord.dsp.indicators.iso_zones import boundaries
 from cmsensord.monitor import messages
@@ -35,7 +38,8 @@ __all__ = ["Alarms", "indicator_values", "order_rules"]
 
 #: the message kinds the alarm manager reads
 WATCHED = frozenset({"indicators", "severity", "orders"})
-_SCALARS = ("accel_rms", "accel_peak", "crest_factor", "kurtosis", "velocity_rms_mm_s", "envelope_rms")
+#: the measured values of a record (the names rules may watch: the zone is graded, below)
+_SCALARS = tuple(k for k in RECORD_VALUES if k != "zone")
 
 
 def indicator_values(msg: dict) -> dict[str, float]:
@@ -91,9 +95,32 @@ class Alarms:
         return self.manager
 
     def see(self, m: messages.Message) -> list:
-        """The events and the /cm/alarms message that message ``m`` causes (often none)."""
+        """The events and the /cm/alarms message that message ``m`` causes (often none); with the
+        first, an ``alarm_no_baseline`` event per rule and channel whose levels need a baseline
+        not learned (:meth:`_unlearned`)."""
         if m.schema not in WATCHED or not self.watching:
             return []
+        first = self.manager is None
+        out = self._see(m)
+        return self._unlearned(m.stamp_ns) + out if first else out
+
+    def _unlearned(self, stamp: int) -> list:
+        """An ``alarm_no_baseline`` event for each rule and channel with a level given as k x a
+        baseline that ``alarms.baselines`` does not hold: that level is not in force there."""
+        out: list[Any] = []
+        for a in self._manager().alarms.values():
+            r = a.rule
+            keys = list(dict.fromkeys(k for src in (r, *r.bands) for k in ("alert_x_baseline", "danger_x_baseline")
+                                      if getattr(src, k) is not None))
+            for ch in a.channels if keys else ():
+                if self.rules.baseline(ch, r.indicator) is None:
+                    out.append(Event("alarm_no_baseline", ch, f"rule {r.name} on {ch}: no baseline of "
+                                     f"{r.indicator} learned for {ch} (alarms.baselines), so its "
+                                     f"{' and '.join(keys)} level(s) are not in force there: run cmsensord "
+                                     "calibrate on a healthy capture of this machine", stamp, {"alarm": a.id}))
+        return out
+
+    def _see(self, m: messages.Message) -> list:
         msg, stamp = m.msg, m.stamp_ns
         self.newest_ns = max(self.newest_ns, stamp)
         mgr = self._manager()

@@ -6,7 +6,9 @@ re-anchors its slots), and a ``config`` event says what the board sends.  The
 channels come from the configuration, or from the board's first data frame's C
 when the configuration lists none (``auto_channels``); configured channels the
 board does not send are reported and left out.  With the first data, the
-severity chain (and the microphone estimator) of the usable channels is made.
+severity chain (and the microphone estimator) of the usable channels is made.  Then the
+channels' names are known: an alarm rule or a bearing naming none of them is a
+:class:`~cmsensord.errors.ConfigError` (:mod:`cmsensord.config.channel_refs`).
 
 A STATUS whose scale or offset is not finite, or whose scale is 0, is ignored
 with a ``decode_error`` event: the previous one (its calibration) is kept.  One that
@@ -28,6 +30,7 @@ import math
 from collections.abc import Sequence
 
 from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
+from cmsensord.config.channel_refs import check_channel_refs
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
@@ -177,6 +180,8 @@ class ChannelSetup:
                      f"{MAX_CHANNELS} a configuration can name: ch0..ch{MAX_CHANNELS - 1} are "
                      f"monitored, the rest is not")
             self.channels = default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor)
+        named = self.channels if self.auto_channels else self.cfg.channels
+        check_channel_refs(self.cfg, named)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
         if len(usable) < len(self.channels):
             missing = [ch.name for ch in self.channels if ch.index >= n_board]

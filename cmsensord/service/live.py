@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict
-from cmsensord.errors import SinkError
+from cmsensord.errors import ConfigError, SinkError
 from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, FrameType
@@ -194,17 +194,22 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     if warning:
         log.warning("%s", warning)
     status = 0
+    refused: ConfigError | None = None
     with source:
         try:
             _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done), control)
         except ReaderDied as died:
             proc.event("reader_died", None, str(died), log_level=logging.ERROR)
             status = EXIT_READER_DIED
+        except ConfigError as exc:      # the settings against the board's channels, once it sent them
+            refused = exc
+            proc.event("config", None, "configuration error: " + str(exc).removeprefix(exc.source + ": "),
+                       log_level=logging.ERROR)
         finally:
             if stop.event.is_set():     # SIGTERM: a salvage under way stops between records
                 sink.stop_salvage()
             source.stop()
-            for frames in source:       # what the reader queued before it stopped
+            for frames in source if refused is None else ():    # what the reader queued before it stopped
                 proc.handle(frames)
             if control is not None:
                 control.close()
@@ -216,6 +221,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     print(run_summary(proc, sink.paths, time.monotonic() - t_start), file=sys.stderr)
     if capture_path:
         print(f"  capture: {capture_path}", file=sys.stderr)
+    if refused is not None:
+        raise refused
     return status
 
 

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
-from cmsensord.config import ChannelConfig, Config
-from cmsensord.importing.channel_names import imported_names
+from cmsensord.config import Config
+from cmsensord.importing.channel_names import imported_channels
 from cmsensord.importing.timeline import Timeline
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
@@ -73,17 +72,6 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns))
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return 0, out, proc
-
-
-def imported_channels(cfg: Config, meta: dict) -> Config:
-    """``cfg`` (which lists no channels) with the channels of an imported capture named as
-    its import named them (its sidecar ``meta``'s ``channel_names``, as channel names); ``cfg``
-    itself without them."""
-    names = imported_names(meta)
-    if not names:
-        return cfg
-    return replace(cfg, channels=tuple(ChannelConfig(name=n, index=i, monitor=cfg.monitor)
-                                       for i, n in enumerate(names)))
 
 
 def _no_frame(proc: Processor, path: str, counters: LinkCounters) -> None:

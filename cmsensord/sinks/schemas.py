@@ -137,6 +137,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "alarm_danger",
     "alarm_clear",
     "alarm_ack",
+    "alarm_no_baseline",
     "operating_state",
 )
 
