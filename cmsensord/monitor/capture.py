@@ -38,12 +38,13 @@ over the capture and the lines at it (1x, each bearing's defect frequencies:
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from cmsensord.config import ChannelConfig
 from cmsensord.config.capture import CaptureConfig
 from cmsensord.dsp.capture_spectra import amplitude_spectrum
 from cmsensord.dsp.indicators.envelope import default_band, envelope, envelope_spectrum
@@ -127,7 +128,7 @@ class Captures:
         self.rate = 0.0
         self.ticks = 1                      # board samples per index (RMS: block length)
         self.channels: list[str] = []
-        self.units: dict[str, str] = {}     # a channel's unit when not m/s^2
+        self.units: dict[str, str] = {}     # each channel's unit
         self.ring: _Ring | None = None
         self.anchors: deque[tuple[int, int]] = deque(maxlen=64)   # (index, stamp_ns)
         self.pending: list[_Pending] = []
@@ -234,12 +235,11 @@ class Captures:
         self.out.append(Event(kind, channel, message, stamp_ns, fields))
 
     # ---- the streams ---------------------------------------------------------
-    def raw(self, channels: list[str], t0: np.ndarray, y: np.ndarray, fs: float,
-            units: list[str] | None = None) -> list[Any]:
-        """RAW blocks: t0 (B,) first sample of each, y (B, L, C) in each channel's unit (``units``:
-        m/s^2 when not given; a microphone's Pa); what became complete."""
-        self._start("raw", channels, fs, 1)
-        self.units = dict(zip(channels, units or ()))
+    def raw(self, channels: Sequence[ChannelConfig], t0: np.ndarray, y: np.ndarray, fs: float) -> list[Any]:
+        """RAW blocks of ``channels``: t0 (B,) first sample of each, y (B, L, C) in each channel's
+        unit (m/s^2; a microphone's Pa); what became complete."""
+        self._start("raw", [ch.name for ch in channels], fs, 1)
+        self.units = {ch.name: ch.physical_unit for ch in channels}
         for b in range(len(t0)):
             self._add(int(t0[b]), y[b])
         return self._complete()

@@ -415,9 +415,8 @@ class Processor(Figures):
         if not self.held.rows:                  # the banks wait for no decision: nor do the indicators
             self._hand_over()
         if self.captures is not None:
-            self._out(self.captures.raw([ch.name for ch in self.channels], blocks.t0,
-                                        blocks.samples([ch.index for ch in self.channels]), self.clock.fs,
-                                        [ch.physical_unit for ch in self.channels]))
+            self._out(self.captures.raw(self.channels, blocks.t0,
+                                        blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
         orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
