@@ -85,16 +85,31 @@ def test_fs_given_against_the_time_column_is_noted(tmp_path):
     assert "note: fs 1024 Hz from --fs (the file says 1000 Hz)" in err and side["fs"] == 1024
 
 
-@pytest.mark.parametrize("label", ["t", "Time", "TIME (s)", "time_s", "t[ms]", "Zeit [s]", "timestamp", "elapsed time"])
+@pytest.mark.parametrize("label", ["t", "Time", "TIME (s)", "time_s", "t[ms]", "Zeit [s]", "timestamp", "elapsed time",
+                                   "Time Stamp", "time-stamp", "TimeStamp", "Time_Stamp [ms]"])
 def test_labels_of_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
     assert with_time_column(t, has_header=True).time_columns == (0,)
 
 
-@pytest.mark.parametrize("label", ["temp", "tacho", "x", "t_x", "Time of flight", "ts_count"])
+@pytest.mark.parametrize("label", ["temp", "tacho", "x", "t_x", "Time of flight", "ts_count", "Stamp", "time stamp id",
+                                   "timestamped"])
 def test_labels_that_are_not_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
     assert with_time_column(t, has_header=True).time_columns == ()
+
+
+@pytest.mark.parametrize("label", ["Time Stamp", "time-stamp", "TimeStamp"])
+def test_a_time_stamp_column_spelt_with_a_space_or_hyphen_is_the_time_base(tmp_path, label):
+    """KAIST's files and NI/Excel exports head their time column ``Time Stamp``: the rate from
+    it, and no channel of it."""
+    x = signal(FS, 1, amp=0.3)[0]
+    write(tmp_path / "k.csv", f"{label},x_direction_housing_A", [np.arange(FS) / FS, x], ["%.7f", "%.6f"])
+    cap, side, err = imported(tmp_path, "k.csv", "--unit", "g")
+    assert (f"  note: column {label!r} (0) is the time base: 25600 Hz from its steps; it is not imported as a "
+            "channel\n") in err
+    assert (side["fs"], side["channel_names"]) == (FS, ["x_direction_housing_A"])
+    assert_within_one_count(cap, np.round(x, 6)[None] * G)
 
 
 # --------------------------------------------------------------------------- lines before the numbers

@@ -2,8 +2,8 @@
 
 Data loggers and oscilloscopes often write a time column before the signals (``Time (s),Acc X
 (g)``, ``t,x,y,z``). A column is the time base when its header names it (a word for time --
-``t``, ``time``, ``timestamp``, ``elapsed``, ``zeit``, ``temps``, ``tiempo``, LabVIEW's
-``X_Value`` -- then at most a
+``t``, ``time``, ``timestamp`` (or ``Time Stamp``, ``time_stamp``, ``time-stamp``),
+``elapsed``, ``zeit``, ``temps``, ``tiempo``, LabVIEW's ``X_Value`` -- then at most a
 unit: ``Time (s)``, ``time_ms``, ``t [us]``) and its values increase, or, in a table without a
 header, when the first column increases evenly (a vibration signal never does). Its unit comes
 from the label: seconds unless it says ms, us (µs) or ns.
@@ -38,7 +38,7 @@ from .table import Table
 __all__ = ["whole_hz", "with_time_column"]
 
 _LABEL = re.compile(
-    r"\s*(t|time|times|timestamp|time_?stamp|elapsed(?:[ _]?time)?|zeit|temps|tiempo|x_value)"
+    r"\s*(t|times?|time[ _-]?stamps?|elapsed(?:[ _-]?time)?|zeit|temps|tiempo|x_value)"
     r"(?:\s*[_ ]?\s*[(\[]?\s*(s|sec|secs|seconds|ms|msec|us|µs|μs|usec|ns)?\s*[)\]]?)?\s*", re.I)
 _UNIT_S = {"ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "usec": 1e-6, "ns": 1e-9}
 #: a rate this close to a whole number of Hz is that number (relative)
