@@ -112,6 +112,44 @@ def test_a_time_stamp_column_spelt_with_a_space_or_hyphen_is_the_time_base(tmp_p
     assert_within_one_count(cap, np.round(x, 6)[None] * G)
 
 
+@pytest.mark.parametrize("header", ["", "Unnamed: 0", "index", None])
+def test_a_first_column_of_row_numbers_is_a_row_index_not_a_channel_nor_the_time_base(tmp_path, header):
+    """pandas' to_csv writes the index first (its header cell empty, or ``Unnamed: 0`` once read
+    and written again, or ``index``): not a channel of 1e5 m/s2 peaks, nor a time base of 1 Hz."""
+    x = np.round(np.sin(np.arange(10000) / 50), 5)
+    y = np.round(x / 2, 5)
+    write(tmp_path / "p.csv", None if header is None else f"{header},x,y", [np.arange(10000), x, y],
+          ["%d", "%.5f", "%.5f"])
+    note = (f"column {header or 'col0'!r} (0) holds the row numbers 0, 1, 2, ...: a row index, not times; it is not "
+            "imported as a channel")
+    r = cmd("import", "p.csv", "--unit", "g", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, f"cmsensord import: p.csv: the file does not say its sampling rate: "
+                                           f"{note}; give --fs HZ\n")
+    cap, side, err = imported(tmp_path, "p.csv", "--fs", "10000", "--unit", "g")
+    assert f"  note: {note}\n" in err and note in side["notes"]
+    assert side["channel_names"] == (["x", "y"] if header is not None else ["col1", "col2"])
+    assert_within_one_count(cap, np.stack([x, y]) * G)
+
+
+def test_a_row_index_beside_a_time_column_and_a_time_column_of_whole_seconds(tmp_path):
+    """An index from 1 before a time column: both left out, the rate from the times. A column
+    labelled time that holds 0, 1, 2, ... is times (1 Hz), not an index."""
+    x = np.round(signal(2000, 1, amp=0.3)[0], 6)
+    write(tmp_path / "i.csv", "Unnamed: 0,time,x", [np.arange(1, 2001), np.arange(2000) / 1000, x],
+          ["%d", "%.4f", "%.6f"])
+    cap, side, err = imported(tmp_path, "i.csv", "--unit", "g")
+    assert ("  note: column 'Unnamed: 0' (0) holds the row numbers 1, 2, 3, ...: a row index, not times; it is not "
+            "imported as a channel\n") in err
+    assert ("  note: column 'time' (1) is the time base: 1000 Hz from its steps; it is not imported as a "
+            "channel\n") in err
+    assert (side["fs"], side["channel_names"]) == (1000, ["x"])
+    assert_within_one_count(cap, x[None] * G)
+    write(tmp_path / "s.csv", "time,x", [np.arange(2000), x], ["%d", "%.6f"])
+    _, side, err = imported(tmp_path, "s.csv", "--unit", "g", "--block-len", "1")
+    assert "  note: column 'time' (0) is the time base: 1 Hz from its steps; it is not imported as a channel\n" in err
+    assert (side["fs"], side["channel_names"]) == (1, ["x"])
+
+
 # --------------------------------------------------------------------------- lines before the numbers
 def test_comments_and_blank_lines_before_a_header_are_skipped(tmp_path):
     """`#` lines and blank lines before the column names: the names and every row are read."""
