@@ -145,6 +145,22 @@ def test_a_directory_takes_its_largest_series_of_files_and_says_what_it_left(tmp
     assert_within_one_count(decode(tmp_path / "b.bin"), x.reshape(1, -1) * G)
 
 
+@pytest.mark.parametrize("names, order", [
+    (["20.48.csv", "9.8304.csv", "20.0704.csv", "10.csv"], ["9.8304.csv", "10.csv", "20.0704.csv", "20.48.csv"]),
+    (["run1.10.csv", "run1.9.csv", "run1.2.csv"], ["run1.2.csv", "run1.9.csv", "run1.10.csv"]),
+])
+def test_files_named_by_a_decimal_number_are_in_the_order_of_its_value(tmp_path, names, order):
+    """MAFAULDA names each file by its speed in Hz: 20.0704 before 20.48. Names that are more
+    than one number keep the order of their runs of digits."""
+    d = tmp_path / "speeds"
+    d.mkdir()
+    for name in names:
+        (d / name).write_text("0.1\n-0.1\n0.2\n-0.2\n")
+    r = cmd("import", d, "--fs", "100", "--block-len", "2", "--out", "w.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert [s["source"] for s in sidecar(tmp_path / "w.bin")["snapshots"]] == order
+
+
 def _snapshot_dir(d: Path) -> None:
     """Two snapshot files as the XJTU-SY bearing set writes them, 1.csv and 2.csv."""
     d.mkdir()

@@ -3,8 +3,8 @@
 Files: each SRC is a file, a directory (its files of the most common supported
 extension, or its text tables of numbers under other names: the IMS rig's files are
 named by date and time) or a glob pattern (also ``--glob``). They are taken in natural
-name order (``acc_2`` before ``acc_10``) unless ``order`` is ``mtime`` (modification
-time) or ``given`` (as listed). Every file is one contiguous snapshot, or
+name order (``acc_2`` before ``acc_10``, ``20.0704.csv`` before ``20.48.csv``) unless
+``order`` is ``mtime`` (modification time) or ``given`` (as listed). Every file is one contiguous snapshot, or
 several (a 3-D array, or ``snapshot_len``); the snapshots are laid end to end.
 Snapshot times come from ``snapshot_interval``, else the files themselves, else the
 files' names (:mod:`.name_times`).
@@ -50,7 +50,19 @@ MAX_CHANNELS = 8
 READ_SAMPLES = 1 << 18
 
 
+#: a file's stem that is one decimal number (MAFAULDA names its files by speed: ``20.48.csv``)
+_DECIMAL_STEM = re.compile(r"\d+\.\d+")
+
+
 def _natural_key(path: str) -> list:
+    """Natural name order: runs of digits by their value (``acc_2`` before ``acc_10``); a file
+    whose whole stem is a decimal number (``9.8304.csv``, ``20.0704.csv``, ``20.48.csv``) by that
+    number. Names of several dots (``2004.02.12.10.32.39``) or more than a number
+    (``run1.10``) keep the order of their runs of digits."""
+    p = Path(path)
+    if _DECIMAL_STEM.fullmatch(p.stem):
+        head = path[:len(path) - len(p.name)]
+        return [*_natural_key(head), float(p.stem), p.suffix.lower()]
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
 
 
