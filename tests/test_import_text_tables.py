@@ -221,6 +221,23 @@ def test_a_bad_row_is_named_by_its_line_in_the_file(tmp_path):
                                            "--header / --no-header\n")
 
 
+@pytest.mark.parametrize("bom, encoding", [(b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be")])
+def test_utf16_text_as_excel_saves_unicode_text_is_read(tmp_path, bom, encoding):
+    """Excel's "Unicode Text": UTF-16 after a byte order mark, tab-separated, CRLF line ends;
+    the same capture when read a chunk of lines at a time."""
+    x = np.round(signal(2000, 2, amp=0.3), 6)
+    rows = "".join(f"{i / 2000:.4f}\t{a:.6f}\t{b:.6f}\r\n" for i, (a, b) in enumerate(x.T))
+    (tmp_path / "u.txt").write_bytes(bom + f"Time (s)\tAcc X (g)\tAcc Y (g)\r\n{rows}".encode(encoding))
+    cap, side, err = imported(tmp_path, "u.txt")
+    assert (side["fs"], side["channel_names"], side["source_unit"]) == (2000, ["Acc_X_g", "Acc_Y_g"], "g")
+    assert ("  note: column 'Time (s)' (0) is the time base: 2000 Hz from its steps; it is not imported as a "
+            "channel\n") in err
+    assert_within_one_count(cap, x * G)
+    r = cmd("import", "u.txt", "--memory-mb", "0.01", "--out", "long.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "long.bin").read_bytes() == (tmp_path / "o.bin").read_bytes()
+
+
 # --------------------------------------------------------------------------- time-of-day columns
 def femto_like(d: Path, starts: list[tuple[int, int, int]], seed: int = 0) -> np.ndarray:
     """Snapshot files as the PRONOSTIA rig writes them: hour, minute, second, microsecond (5

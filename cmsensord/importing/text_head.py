@@ -7,6 +7,9 @@ number, by one of the separators; the first may be a date and time) followed by 
 (or by the end of what is read); the last line before it that is neither blank nor a
 comment is the header candidate; the lines before that, the preamble. Only the file's
 first ``HEAD_BYTES`` are read here.
+
+Text is UTF-8 (a byte order mark dropped; Latin-1 where it is not UTF-8), or UTF-16 when it
+begins with UTF-16's byte order mark (Excel's "Unicode Text" export): :func:`encoding_of`.
 """
 
 from __future__ import annotations
@@ -16,8 +19,8 @@ from dataclasses import dataclass
 
 from .errors import ImportFailure
 
-__all__ = ["DATETIME", "HEAD_BYTES", "SEPARATORS", "Head", "filled_lines", "first_row", "is_cell", "is_number",
-           "is_number_row", "read_head", "split", "unit_fields"]
+__all__ = ["DATETIME", "HEAD_BYTES", "SEPARATORS", "UTF16", "Head", "decode_head", "encoding_of", "file_encoding",
+           "filled_lines", "first_row", "is_cell", "is_number", "is_number_row", "read_head", "split", "unit_fields"]
 
 SEPARATORS = ("\t", ";", ",", "|")
 HEAD_BYTES = 1 << 16
@@ -78,6 +81,37 @@ class Head:
     preamble: tuple[str, ...] = ()  # the lines before the candidate that are not blank or comments
 
 
+#: the encoding :func:`encoding_of` gives text after a UTF-16 byte order mark
+UTF16 = "utf-16"
+#: UTF-16's byte order marks: little endian (Windows, Excel), big endian
+_UTF16_BOMS = {b"\xff\xfe": "utf-16-le", b"\xfe\xff": "utf-16-be"}
+
+
+def encoding_of(head: bytes) -> str:
+    """The encoding of text that begins with ``head``: :data:`UTF16` after a UTF-16 byte order
+    mark, else ``utf-8-sig``."""
+    return UTF16 if head[:2] in _UTF16_BOMS else "utf-8-sig"
+
+
+def file_encoding(path: str) -> str:
+    """:func:`encoding_of` the file's first bytes."""
+    with open(path, "rb") as f:
+        return encoding_of(f.read(2))
+
+
+def decode_head(head: bytes, bom: bytes | None = None) -> str:
+    """Text of a file's bytes ``head`` (its first, or, with the file's first two bytes ``bom``, a
+    stretch of it at an even offset): UTF-16 by the byte order mark, a character cut at the end
+    as U+FFFD; else UTF-8 (its BOM dropped), or Latin-1 where it is not UTF-8."""
+    order = _UTF16_BOMS.get((head if bom is None else bom)[:2])
+    if order is not None:
+        return head[2 if bom is None else 0:].decode(order, errors="replace").lstrip("\ufeff")
+    try:
+        return head.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return head.decode("latin-1")
+
+
 def _physical_lines(path: str) -> list[str]:
     try:
         with open(path, "rb") as f:
@@ -85,11 +119,7 @@ def _physical_lines(path: str) -> list[str]:
             whole = not f.read(1)
     except OSError as exc:
         raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None
-    try:
-        text = head.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = head.decode("latin-1")
-    lines = text.split("\n")
+    lines = decode_head(head).split("\n")
     if not whole and len(lines) > 1:
         lines = lines[:-1]                  # cut inside a line
     return [ln.rstrip("\r") for ln in lines]
