@@ -152,13 +152,27 @@ def test_a_row_index_beside_a_time_column_and_a_time_column_of_whole_seconds(tmp
 
 # --------------------------------------------------------------------------- lines before the numbers
 def test_comments_and_blank_lines_before_a_header_are_skipped(tmp_path):
-    """`#` lines and blank lines before the column names: the names and every row are read."""
+    """`#` lines and blank lines before the column names: the names and every row are read, and
+    a note says the comments were skipped."""
     x = signal(2000, 1, amp=0.3)[0]
     write(tmp_path / "c.csv", "# exported by the logger\n# fs = 2000\n\ntime,acc", [np.arange(2000) / 2000, x],
           ["%.4f", "%.6f"])
     cap, side, err = imported(tmp_path, "c.csv", "--unit", "g")
-    assert side["channel_names"] == ["acc"] and "skipped" not in err
+    note = "c.csv: 2 line(s) before the column names skipped (the first: '# exported by the logger')"
+    assert side["channel_names"] == ["acc"] and f"  note: {note}\n" in err and note in side["notes"]
     assert_within_one_count(cap, np.round(x, 6)[None] * G)
+
+
+@pytest.mark.parametrize("mark", ["#", "%"])
+def test_comment_lines_before_headerless_numbers_get_the_note_a_preamble_gets(tmp_path, mark):
+    """`#` lines are said as `%` lines (a MATLAB export's) are, among the preamble's lines."""
+    x = np.round(signal(1000, 2, amp=0.3), 6)
+    lines = f"{mark} recorded 2024-03-05\nrig: 3 of 4\n{mark} fs 1000"
+    write(tmp_path / "m.txt", lines, [x[0], x[1]], ["%.6f", "%.6f"], sep=" ")
+    cap, side, err = imported(tmp_path, "m.txt", "--fs", "1000", "--unit", "g")
+    note = f"m.txt: 3 line(s) before the numbers skipped (the first: '{mark} recorded 2024-03-05')"
+    assert f"  note: {note}\n" in err and note in side["notes"]
+    assert_within_one_count(cap, x * G)
 
 
 @pytest.mark.parametrize("suffix", [".txt", ".lvm", ""])

@@ -3,7 +3,7 @@
 Text is UTF-8, or UTF-16 after its byte order mark (Excel's "Unicode Text"; read decoded
 into memory, or a chunk of lines at a time when long). The numbers begin where
 :mod:`.text_head` finds them (``#`` comments, blank lines and a
-preamble of settings before them are skipped, a preamble with a note). From the line
+preamble of settings before them are skipped, comments and a preamble with a note). From the line
 before them and their first rows:
 
 * separator: tab, ``;``, ``,`` or ``|``, the first that occurs the same number
@@ -133,8 +133,9 @@ def _layout(head: Head, separator: str | None, header: bool | None) -> tuple[str
 
 
 def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
-    """What was skipped before the numbers (a preamble, a line of names that does not fit)."""
-    skipped = list(head.preamble) + ([] if names_kept or head.header is None else [head.header])
+    """What was skipped before the numbers (``#`` comments, a preamble, a line of names that
+    does not fit)."""
+    skipped = head.skipped(names_kept)
     if not skipped:
         return None
     first = skipped[0].strip()
@@ -316,7 +317,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     notes = [cut] if cut else []
     units = unit_fields(header_line, sep) if header_line is not None and head.preamble else None
     if units is not None and len(split(head.preamble[-1], sep)) == len(units):
-        header_line, head = head.preamble[-1], replace(head, preamble=head.preamble[:-1])   # names, then units
+        header_line, head = head.preamble[-1], head.names_above()   # names, then units
     else:
         units = None
     if header_line is not None:

@@ -5,8 +5,9 @@ settings (``LabVIEW Measurement``, ``Sample rate: 25600 Hz``), then maybe a line
 names. The rows of numbers begin at the first line that is a row of numbers (every field a
 number, by one of the separators; the first may be a date and time) followed by two more
 (or by the end of what is read); the last line before it that is neither blank nor a
-comment is the header candidate; the lines before that, the preamble. Only the file's
-first ``HEAD_BYTES`` are read here.
+comment is the header candidate; the lines before that, the preamble (with the ``#``
+comments among them: the lead, which the import says it skipped). Only the file's first
+``HEAD_BYTES`` are read here.
 
 Text is UTF-8 (a byte order mark dropped; Latin-1 where it is not UTF-8), or UTF-16 when it
 begins with UTF-16's byte order mark (Excel's "Unicode Text" export): :func:`encoding_of`.
@@ -15,7 +16,7 @@ begins with UTF-16's byte order mark (Excel's "Unicode Text" export): :func:`enc
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .errors import ImportFailure
 
@@ -79,6 +80,23 @@ class Head:
     skip: int  # physical lines before the first of them (numpy.loadtxt's skiprows)
     header: str | None = None  # the header candidate: the line before them, if it is not a row
     preamble: tuple[str, ...] = ()  # the lines before the candidate that are not blank or comments
+    lead: tuple[str, ...] = ()  # the lines before the rows that are not blank: comments, preamble, candidate
+
+    def names_above(self) -> Head:
+        """This head with the preamble's last line (the column names above a units line, the
+        candidate) no longer in ``preamble`` nor ``lead``."""
+        return replace(self, preamble=self.preamble[:-1], lead=_without_filled(self.lead, 2))
+
+    def skipped(self, names_kept: bool) -> list[str]:
+        """The lines before the rows that the reader skips: ``lead`` but the candidate when it
+        names the columns (``names_kept``)."""
+        return list(_without_filled(self.lead, 1) if names_kept and self.header is not None else self.lead)
+
+
+def _without_filled(lines: tuple[str, ...], back: int) -> tuple[str, ...]:
+    """``lines`` without the ``back``-th last of them that is not a comment (1: the last)."""
+    at = [i for i, ln in enumerate(lines) if not _is_comment(ln)][-back]
+    return lines[:at] + lines[at + 1:]
 
 
 #: the encoding :func:`encoding_of` gives text after a UTF-16 byte order mark
@@ -125,9 +143,13 @@ def _physical_lines(path: str) -> list[str]:
     return [ln.rstrip("\r") for ln in lines]
 
 
+def _is_comment(line: str) -> bool:
+    return line.lstrip().startswith("#")
+
+
 def filled_lines(lines: list[str]) -> list[int]:
     """The indices of the lines that are neither blank nor ``#`` comments."""
-    return [i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")]
+    return [i for i, ln in enumerate(lines) if ln.strip() and not _is_comment(ln)]
 
 
 def first_row(lines: list[str], filled: list[int] | None = None) -> int | None:
@@ -161,7 +183,8 @@ def read_head(path: str) -> Head:
         return Head(rows=[lines[i] for i in filled][:ROWS], skip=filled[0])
     before = [i for i in filled if i < start]
     first = [lines[i] for i in filled if i >= start][:ROWS]
+    lead = tuple(ln for ln in lines[:start] if ln.strip())
     if not before:
-        return Head(rows=first, skip=start)
+        return Head(rows=first, skip=start, lead=lead)
     return Head(rows=first, skip=start, header=lines[before[-1]],
-                preamble=tuple(lines[i] for i in before[:-1]))
+                preamble=tuple(lines[i] for i in before[:-1]), lead=lead)
