@@ -553,8 +553,27 @@ def test_without_unit_the_files_own_unit_is_taken_and_a_different_unit_given_is_
     assert json.loads((tmp_path / "ms2.bin.json").read_text())["source_unit"] == "m/s2"
     (tmp_path / "plain.csv").write_text(_logger_text(x, "t,a,b\n", ","))
     r = cmd("import", "plain.csv", "--out", "plain.bin", cwd=tmp_path)     # nothing said: m/s2, as before
-    assert r.returncode == 0 and "unit" not in r.stderr.replace("--unit", "")
+    assert r.returncode == 0 and f"  note: {_ASSUMED}\n" in r.stderr
+    assert "unit" not in r.stderr.replace(_ASSUMED, "").replace("--unit", "")
     assert json.loads((tmp_path / "plain.bin.json").read_text())["source_unit"] == "m/s2"
+
+
+#: the note of an import whose file says no unit and no --unit given
+_ASSUMED = "unit m/s2 assumed: the file does not say its unit; give --unit (g, mg, m/s2, mm/s2, V)"
+
+
+def test_without_unit_a_file_that_says_none_is_taken_as_ms2_with_a_note(tmp_path):
+    """A file in g imported without --unit would show peaks 9.8 x too small: the import says
+    which unit it took and how to give another; with --unit, or a unit in the file, it does not."""
+    x = np.round(np.random.default_rng(13).standard_normal((5000, 2)), 4)
+    (tmp_path / "plain.csv").write_text(_logger_text(x, "t,a,b\n", ","))
+    r = cmd("import", "plain.csv", "--out", "plain.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert f"  note: {_ASSUMED}\n" in r.stderr
+    assert _ASSUMED in json.loads((tmp_path / "plain.bin.json").read_text())["notes"]
+    r = cmd("import", "plain.csv", "--unit", "m/s2", "--out", "given.bin", cwd=tmp_path)
+    assert r.returncode == 0 and "assumed" not in r.stderr, r.stderr
+    assert (tmp_path / "plain.bin").read_bytes() == (tmp_path / "given.bin").read_bytes()
 
 
 def test_a_file_in_volts_without_a_sensitivity_is_one_line_naming_what_the_file_says(tmp_path):
