@@ -145,6 +145,64 @@ def test_a_directory_takes_its_largest_series_of_files_and_says_what_it_left(tmp
     assert_within_one_count(decode(tmp_path / "b.bin"), x.reshape(1, -1) * G)
 
 
+@pytest.mark.parametrize("names, order", [
+    (["20.48.csv", "9.8304.csv", "20.0704.csv", "10.csv"], ["9.8304.csv", "10.csv", "20.0704.csv", "20.48.csv"]),
+    (["run1.10.csv", "run1.9.csv", "run1.2.csv"], ["run1.2.csv", "run1.9.csv", "run1.10.csv"]),
+])
+def test_files_named_by_a_decimal_number_are_in_the_order_of_its_value(tmp_path, names, order):
+    """MAFAULDA names each file by its speed in Hz: 20.0704 before 20.48. Names that are more
+    than one number keep the order of their runs of digits."""
+    d = tmp_path / "speeds"
+    d.mkdir()
+    for name in names:
+        (d / name).write_text("0.1\n-0.1\n0.2\n-0.2\n")
+    r = cmd("import", d, "--fs", "100", "--block-len", "2", "--out", "w.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert [s["source"] for s in sidecar(tmp_path / "w.bin")["snapshots"]] == order
+
+
+def _snapshot_dir(d: Path) -> None:
+    """Two snapshot files as the XJTU-SY bearing set writes them, 1.csv and 2.csv."""
+    d.mkdir()
+    for k in (1, 2):
+        rows = "".join(f"{v:.4f},{v / 2:.4f}\n" for v in np.sin(np.arange(1000) / 50 + k))
+        (d / f"{k}.csv").write_text("Horizontal_vibration_signals,Vertical_vibration_signals\n" + rows)
+
+
+@pytest.mark.parametrize("summary, what", [
+    ("file,rms\n1,0.1\n2,0.2\n3,0.3\n",
+     "other columns (file, rms) than 1.csv (Horizontal_vibration_signals, Vertical_vibration_signals)"),
+    ("file,rms,peak\n1,0.1,1\n2,0.2,2\n3,0.3,3\n",
+     "3 columns (file, rms, peak) where 1.csv has 2 (Horizontal_vibration_signals, Vertical_vibration_signals)"),
+])
+def test_a_file_of_another_layout_in_a_directory_is_named_with_how_to_leave_it_out(tmp_path, summary, what):
+    """A dataset's summary.csv beside its snapshots: the error says which columns differ and a
+    --glob pattern that leaves the file out, and that pattern imports the snapshots."""
+    _snapshot_dir(tmp_path / "mix4")
+    (tmp_path / "mix4" / "summary.csv").write_text(summary)
+    r = cmd("import", "mix4", "--fs", "1000", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, f"cmsensord import: mix4/summary.csv: {what}; every snapshot file must "
+                                           "have the same layout: leave it out (move it away, or import --glob "
+                                           "'mix4/[0-9]*.csv' instead)\n")
+    r = cmd("import", "--glob", "mix4/[0-9]*.csv", "--fs", "1000", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert [s["source"] for s in sidecar(tmp_path / "o.bin")["snapshots"]] == ["1.csv", "2.csv"]
+
+
+def test_files_of_another_type_in_a_directory_are_left_out_with_a_note(tmp_path):
+    """A README.txt and a README.md beside the .csv snapshots are named in a note (a hidden
+    file is not)."""
+    _snapshot_dir(tmp_path / "set")
+    (tmp_path / "set" / "README.txt").write_text("The dataset's description.\n")
+    (tmp_path / "set" / "README.md").write_text("# The dataset\n")
+    (tmp_path / "set" / ".DS_Store").write_bytes(b"\0\1")
+    r = cmd("import", "set", "--fs", "1000", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    note = "set: took the 2 .csv file(s); left out 2 of another type (README.md, README.txt)"
+    assert f"  note: {note}\n" in r.stderr and note in sidecar(tmp_path / "o.bin")["notes"]
+    assert [s["source"] for s in sidecar(tmp_path / "o.bin")["snapshots"]] == ["1.csv", "2.csv"]
+
+
 #: how the tests import :func:`run_to_failure`'s files
 R2F = ("--fs", "2560", "--block-len", "32", "--unit", "g", "--names", "bearing", "--rpm", "1800")
 

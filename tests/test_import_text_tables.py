@@ -85,27 +85,94 @@ def test_fs_given_against_the_time_column_is_noted(tmp_path):
     assert "note: fs 1024 Hz from --fs (the file says 1000 Hz)" in err and side["fs"] == 1024
 
 
-@pytest.mark.parametrize("label", ["t", "Time", "TIME (s)", "time_s", "t[ms]", "Zeit [s]", "timestamp", "elapsed time"])
+@pytest.mark.parametrize("label", ["t", "Time", "TIME (s)", "time_s", "t[ms]", "Zeit [s]", "timestamp", "elapsed time",
+                                   "Time Stamp", "time-stamp", "TimeStamp", "Time_Stamp [ms]"])
 def test_labels_of_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
     assert with_time_column(t, has_header=True).time_columns == (0,)
 
 
-@pytest.mark.parametrize("label", ["temp", "tacho", "x", "t_x", "Time of flight", "ts_count"])
+@pytest.mark.parametrize("label", ["temp", "tacho", "x", "t_x", "Time of flight", "ts_count", "Stamp", "time stamp id",
+                                   "timestamped"])
 def test_labels_that_are_not_time(label):
     t = Table("f.csv", np.stack([np.arange(5.0), np.zeros(5)], axis=1)[None], [label, "x"])
     assert with_time_column(t, has_header=True).time_columns == ()
 
 
+@pytest.mark.parametrize("label", ["Time Stamp", "time-stamp", "TimeStamp"])
+def test_a_time_stamp_column_spelt_with_a_space_or_hyphen_is_the_time_base(tmp_path, label):
+    """KAIST's files and NI/Excel exports head their time column ``Time Stamp``: the rate from
+    it, and no channel of it."""
+    x = signal(FS, 1, amp=0.3)[0]
+    write(tmp_path / "k.csv", f"{label},x_direction_housing_A", [np.arange(FS) / FS, x], ["%.7f", "%.6f"])
+    cap, side, err = imported(tmp_path, "k.csv", "--unit", "g")
+    assert (f"  note: column {label!r} (0) is the time base: 25600 Hz from its steps; it is not imported as a "
+            "channel\n") in err
+    assert (side["fs"], side["channel_names"]) == (FS, ["x_direction_housing_A"])
+    assert_within_one_count(cap, np.round(x, 6)[None] * G)
+
+
+@pytest.mark.parametrize("header", ["", "Unnamed: 0", "index", None])
+def test_a_first_column_of_row_numbers_is_a_row_index_not_a_channel_nor_the_time_base(tmp_path, header):
+    """pandas' to_csv writes the index first (its header cell empty, or ``Unnamed: 0`` once read
+    and written again, or ``index``): not a channel of 1e5 m/s2 peaks, nor a time base of 1 Hz."""
+    x = np.round(np.sin(np.arange(10000) / 50), 5)
+    y = np.round(x / 2, 5)
+    write(tmp_path / "p.csv", None if header is None else f"{header},x,y", [np.arange(10000), x, y],
+          ["%d", "%.5f", "%.5f"])
+    note = (f"column {header or 'col0'!r} (0) holds the row numbers 0, 1, 2, ...: a row index, not times; it is not "
+            "imported as a channel")
+    r = cmd("import", "p.csv", "--unit", "g", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, f"cmsensord import: p.csv: the file does not say its sampling rate: "
+                                           f"{note}; give --fs HZ\n")
+    cap, side, err = imported(tmp_path, "p.csv", "--fs", "10000", "--unit", "g")
+    assert f"  note: {note}\n" in err and note in side["notes"]
+    assert side["channel_names"] == (["x", "y"] if header is not None else ["col1", "col2"])
+    assert_within_one_count(cap, np.stack([x, y]) * G)
+
+
+def test_a_row_index_beside_a_time_column_and_a_time_column_of_whole_seconds(tmp_path):
+    """An index from 1 before a time column: both left out, the rate from the times. A column
+    labelled time that holds 0, 1, 2, ... is times (1 Hz), not an index."""
+    x = np.round(signal(2000, 1, amp=0.3)[0], 6)
+    write(tmp_path / "i.csv", "Unnamed: 0,time,x", [np.arange(1, 2001), np.arange(2000) / 1000, x],
+          ["%d", "%.4f", "%.6f"])
+    cap, side, err = imported(tmp_path, "i.csv", "--unit", "g")
+    assert ("  note: column 'Unnamed: 0' (0) holds the row numbers 1, 2, 3, ...: a row index, not times; it is not "
+            "imported as a channel\n") in err
+    assert ("  note: column 'time' (1) is the time base: 1000 Hz from its steps; it is not imported as a "
+            "channel\n") in err
+    assert (side["fs"], side["channel_names"]) == (1000, ["x"])
+    assert_within_one_count(cap, x[None] * G)
+    write(tmp_path / "s.csv", "time,x", [np.arange(2000), x], ["%d", "%.6f"])
+    _, side, err = imported(tmp_path, "s.csv", "--unit", "g", "--block-len", "1")
+    assert "  note: column 'time' (0) is the time base: 1 Hz from its steps; it is not imported as a channel\n" in err
+    assert (side["fs"], side["channel_names"]) == (1, ["x"])
+
+
 # --------------------------------------------------------------------------- lines before the numbers
 def test_comments_and_blank_lines_before_a_header_are_skipped(tmp_path):
-    """`#` lines and blank lines before the column names: the names and every row are read."""
+    """`#` lines and blank lines before the column names: the names and every row are read, and
+    a note says the comments were skipped."""
     x = signal(2000, 1, amp=0.3)[0]
     write(tmp_path / "c.csv", "# exported by the logger\n# fs = 2000\n\ntime,acc", [np.arange(2000) / 2000, x],
           ["%.4f", "%.6f"])
     cap, side, err = imported(tmp_path, "c.csv", "--unit", "g")
-    assert side["channel_names"] == ["acc"] and "skipped" not in err
+    note = "c.csv: 2 line(s) before the column names skipped (the first: '# exported by the logger')"
+    assert side["channel_names"] == ["acc"] and f"  note: {note}\n" in err and note in side["notes"]
     assert_within_one_count(cap, np.round(x, 6)[None] * G)
+
+
+@pytest.mark.parametrize("mark", ["#", "%"])
+def test_comment_lines_before_headerless_numbers_get_the_note_a_preamble_gets(tmp_path, mark):
+    """`#` lines are said as `%` lines (a MATLAB export's) are, among the preamble's lines."""
+    x = np.round(signal(1000, 2, amp=0.3), 6)
+    lines = f"{mark} recorded 2024-03-05\nrig: 3 of 4\n{mark} fs 1000"
+    write(tmp_path / "m.txt", lines, [x[0], x[1]], ["%.6f", "%.6f"], sep=" ")
+    cap, side, err = imported(tmp_path, "m.txt", "--fs", "1000", "--unit", "g")
+    note = f"m.txt: 3 line(s) before the numbers skipped (the first: '{mark} recorded 2024-03-05')"
+    assert f"  note: {note}\n" in err and note in side["notes"]
+    assert_within_one_count(cap, x * G)
 
 
 @pytest.mark.parametrize("suffix", [".txt", ".lvm", ""])
@@ -166,6 +233,23 @@ def test_a_bad_row_is_named_by_its_line_in_the_file(tmp_path):
     assert (r.returncode, r.stderr) == (2, "cmsensord import: b.csv: line 7, column 1: 'oops' is not a number "
                                            "(separator ',', a header line); fix the file, or set --separator / "
                                            "--header / --no-header\n")
+
+
+@pytest.mark.parametrize("bom, encoding", [(b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be")])
+def test_utf16_text_as_excel_saves_unicode_text_is_read(tmp_path, bom, encoding):
+    """Excel's "Unicode Text": UTF-16 after a byte order mark, tab-separated, CRLF line ends;
+    the same capture when read a chunk of lines at a time."""
+    x = np.round(signal(2000, 2, amp=0.3), 6)
+    rows = "".join(f"{i / 2000:.4f}\t{a:.6f}\t{b:.6f}\r\n" for i, (a, b) in enumerate(x.T))
+    (tmp_path / "u.txt").write_bytes(bom + f"Time (s)\tAcc X (g)\tAcc Y (g)\r\n{rows}".encode(encoding))
+    cap, side, err = imported(tmp_path, "u.txt")
+    assert (side["fs"], side["channel_names"], side["source_unit"]) == (2000, ["Acc_X_g", "Acc_Y_g"], "g")
+    assert ("  note: column 'Time (s)' (0) is the time base: 2000 Hz from its steps; it is not imported as a "
+            "channel\n") in err
+    assert_within_one_count(cap, x * G)
+    r = cmd("import", "u.txt", "--memory-mb", "0.01", "--out", "long.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "long.bin").read_bytes() == (tmp_path / "o.bin").read_bytes()
 
 
 # --------------------------------------------------------------------------- time-of-day columns
@@ -469,8 +553,27 @@ def test_without_unit_the_files_own_unit_is_taken_and_a_different_unit_given_is_
     assert json.loads((tmp_path / "ms2.bin.json").read_text())["source_unit"] == "m/s2"
     (tmp_path / "plain.csv").write_text(_logger_text(x, "t,a,b\n", ","))
     r = cmd("import", "plain.csv", "--out", "plain.bin", cwd=tmp_path)     # nothing said: m/s2, as before
-    assert r.returncode == 0 and "unit" not in r.stderr.replace("--unit", "")
+    assert r.returncode == 0 and f"  note: {_ASSUMED}\n" in r.stderr
+    assert "unit" not in r.stderr.replace(_ASSUMED, "").replace("--unit", "")
     assert json.loads((tmp_path / "plain.bin.json").read_text())["source_unit"] == "m/s2"
+
+
+#: the note of an import whose file says no unit and no --unit given
+_ASSUMED = "unit m/s2 assumed: the file does not say its unit; give --unit (g, mg, m/s2, mm/s2, V)"
+
+
+def test_without_unit_a_file_that_says_none_is_taken_as_ms2_with_a_note(tmp_path):
+    """A file in g imported without --unit would show peaks 9.8 x too small: the import says
+    which unit it took and how to give another; with --unit, or a unit in the file, it does not."""
+    x = np.round(np.random.default_rng(13).standard_normal((5000, 2)), 4)
+    (tmp_path / "plain.csv").write_text(_logger_text(x, "t,a,b\n", ","))
+    r = cmd("import", "plain.csv", "--out", "plain.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert f"  note: {_ASSUMED}\n" in r.stderr
+    assert _ASSUMED in json.loads((tmp_path / "plain.bin.json").read_text())["notes"]
+    r = cmd("import", "plain.csv", "--unit", "m/s2", "--out", "given.bin", cwd=tmp_path)
+    assert r.returncode == 0 and "assumed" not in r.stderr, r.stderr
+    assert (tmp_path / "plain.bin").read_bytes() == (tmp_path / "given.bin").read_bytes()
 
 
 def test_a_file_in_volts_without_a_sensitivity_is_one_line_naming_what_the_file_says(tmp_path):

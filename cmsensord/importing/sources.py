@@ -3,8 +3,8 @@
 Files: each SRC is a file, a directory (its files of the most common supported
 extension, or its text tables of numbers under other names: the IMS rig's files are
 named by date and time) or a glob pattern (also ``--glob``). They are taken in natural
-name order (``acc_2`` before ``acc_10``) unless ``order`` is ``mtime`` (modification
-time) or ``given`` (as listed). Every file is one contiguous snapshot, or
+name order (``acc_2`` before ``acc_10``, ``20.0704.csv`` before ``20.48.csv``) unless
+``order`` is ``mtime`` (modification time) or ``given`` (as listed). Every file is one contiguous snapshot, or
 several (a 3-D array, or ``snapshot_len``); the snapshots are laid end to end.
 Snapshot times come from ``snapshot_interval``, else the files themselves, else the
 files' names (:mod:`.name_times`).
@@ -16,6 +16,7 @@ board's limit). Values become m/s² by :func:`.units.to_ms2_factor`.
 
 from __future__ import annotations
 
+import fnmatch
 import glob as globmod
 import os
 import re
@@ -49,7 +50,19 @@ MAX_CHANNELS = 8
 READ_SAMPLES = 1 << 18
 
 
+#: a file's stem that is one decimal number (MAFAULDA names its files by speed: ``20.48.csv``)
+_DECIMAL_STEM = re.compile(r"\d+\.\d+")
+
+
 def _natural_key(path: str) -> list:
+    """Natural name order: runs of digits by their value (``acc_2`` before ``acc_10``); a file
+    whose whole stem is a decimal number (``9.8304.csv``, ``20.0704.csv``, ``20.48.csv``) by that
+    number. Names of several dots (``2004.02.12.10.32.39``) or more than a number
+    (``run1.10``) keep the order of their runs of digits."""
+    p = Path(path)
+    if _DECIMAL_STEM.fullmatch(p.stem):
+        head = path[:len(path) - len(p.name)]
+        return [*_natural_key(head), float(p.stem), p.suffix.lower()]
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
 
 
@@ -68,10 +81,12 @@ def _pattern(p: Path) -> str:
 
 
 def _dir_files(d: Path, notes: list[str]) -> list[str]:
-    """The directory's recording files of the most common kind (:func:`_kind`); when several
-    series of them are there (two files or more named alike, :func:`_pattern`: FEMTO's
-    ``acc_00001.csv`` beside its ``temp_00001.csv``), only the largest, and a note names what
-    was left out. Empty files (a logger's, created when it stopped) are left out with a note."""
+    """The directory's recording files of the most common kind (:func:`_kind`); the others
+    (another extension, not a recording: a ``README.txt`` beside ``.csv`` files), but hidden
+    ones, are left out with a note naming them. When several series of the files taken are
+    there (two files or more named alike, :func:`_pattern`: FEMTO's ``acc_00001.csv`` beside
+    its ``temp_00001.csv``), only the largest, and a note names what was left out. Empty files
+    (a logger's, created when it stopped) are left out with a note."""
     sizes = {p: p.stat().st_size for p in d.iterdir() if p.is_file()}
     empty = sorted((p for p, size in sizes.items() if not size), key=lambda p: _natural_key(p.name))
     if empty:
@@ -84,6 +99,10 @@ def _dir_files(d: Path, notes: list[str]) -> list[str]:
                             "in this directory; give the files or a --glob pattern")
     kind = min(Counter(kinds[p] for p in files).items(), key=lambda kv: (-kv[1], kv[0]))[0]
     files = [p for p in files if kinds[p] == kind]
+    other = sorted((p.name for p, k in kinds.items() if k != kind and not p.name.startswith(".")), key=_natural_key)
+    if other:
+        notes.append(f"{d}: took the {len(files)} {'text table' if kind == 'text' else kind} file(s); left out "
+                     f"{len(other)} of another type ({', '.join(other[:3])}{', ...' if len(other) > 3 else ''})")
     series = Counter(_pattern(p) for p in files)
     if sum(n > 1 for n in series.values()) < 2:
         return [str(p) for p in files]
@@ -212,14 +231,38 @@ class _Layout:
             raise ImportFailure(f"{t.path}: the file gives its {t.kind}s in V ({', '.join(c for c, _ in said)}): "
                                 "add the accelerometer's --sensitivity MV_PER_G (e.g. 100), or --unit for another")
 
-    def check(self, t: Table, first: str) -> None:
+    def check(self, t: Table, first_path: str) -> None:
+        """A one-line ImportFailure when file ``t`` has other columns than the first file
+        (``first_path``), or another rate, naming the difference."""
+        first = Path(first_path).name
         if t.columns != self.columns:
-            raise ImportFailure(f"{t.path}: {len(t.columns)} {t.kind}s ({', '.join(t.columns[:8])}) "
-                                f"where {first} has {len(self.columns)} ({', '.join(self.columns[:8])}); "
-                                "every snapshot file must have the same layout")
+            theirs, ours = _listed(t.columns), _listed(self.columns)
+            what = (f"other {t.kind}s ({theirs}) than {first} ({ours})" if len(t.columns) == len(self.columns) else
+                    f"{len(t.columns)} {t.kind}s ({theirs}) where {first} has {len(self.columns)} ({ours})")
+            raise ImportFailure(f"{t.path}: {what}; every snapshot file must have the same layout: "
+                                f"{_leave_out(t.path, first_path)}")
         if t.fs is not None and self.file_fs is not None and t.fs != self.file_fs:
             raise ImportFailure(f"{t.path}: sampled at {t.fs:g} Hz, {first} at {self.file_fs:g} Hz; "
                                 "import them separately")
+
+
+def _listed(names: list[str]) -> str:
+    return ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
+
+
+def _leave_out(odd: str, first: str) -> str:
+    """How to leave file ``odd`` out of an import of ``first``'s series: move it away, or a
+    ``--glob`` pattern that matches ``first`` (its runs of digits as ``[0-9]*``, or any name
+    ending in a digit) and not ``odd``, when one does."""
+    name, parent = Path(first).name, Path(first).parent
+    stem, suffix = Path(name).stem, Path(name).suffix
+    tries = [re.sub(r"\d+", "[0-9]*", name)] + (["*[0-9]" + suffix] if stem[-1:].isdigit() else [])
+    pattern = next((p for p in tries if p != name and fnmatch.fnmatchcase(name, p)
+                    and not fnmatch.fnmatchcase(Path(odd).name, p)), None)
+    if pattern is None:
+        return "leave it out (move it away)"
+    where = pattern if parent == Path(".") else str(parent / pattern)
+    return f"leave it out (move it away, or import --glob '{where}' instead)"
 
 
 def _missing_note(t: Table, names: list[str], missing: np.ndarray, first: tuple[int, int] | None) -> str | None:
@@ -338,7 +381,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
             factor = to_ms2_factor(layout.unit, opts.sensitivity, opts.scale_factor)
             stores.append(SampleStore(len(layout.idx), opts.out, opts.memory_mb))
         else:
-            layout.check(t, Path(files[0]).name)
+            layout.check(t, files[0])
         if layout.tacho is not None:
             tacho_pieces.append(_tacho_column(t, layout.tacho, layout.fs, opts))
         many = t.data.shape[0] > 1 or opts.snapshot_len

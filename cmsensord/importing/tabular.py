@@ -1,7 +1,9 @@
 """CSV/TSV reader: separator and header detected, decimal commas accepted.
 
-The numbers begin where :mod:`.text_head` finds them (``#`` comments, blank lines and a
-preamble of settings before them are skipped, a preamble with a note). From the line
+Text is UTF-8, or UTF-16 after its byte order mark (Excel's "Unicode Text"; read decoded
+into memory, or a chunk of lines at a time when long). The numbers begin where
+:mod:`.text_head` finds them (``#`` comments, blank lines and a
+preamble of settings before them are skipped, comments and a preamble with a note). From the line
 before them and their first rows:
 
 * separator: tab, ``;``, ``,`` or ``|``, the first that occurs the same number
@@ -40,7 +42,20 @@ import numpy as np
 from .errors import ImportFailure, cannot_write, no_room
 from .preamble import preamble_start
 from .table import Table
-from .text_head import DATETIME, SEPARATORS, Head, first_row, is_cell, read_head, split, unit_fields
+from .text_head import (
+    DATETIME,
+    SEPARATORS,
+    UTF16,
+    Head,
+    decode_head,
+    encoding_of,
+    file_encoding,
+    first_row,
+    is_cell,
+    read_head,
+    split,
+    unit_fields,
+)
 from .time_column import with_time_column
 
 __all__ = ["LongText", "read_tabular", "sniff", "is_text_table"]
@@ -85,9 +100,10 @@ def is_text_table(path: str) -> bool:
             head = f.read(_TEXT_PROBE_BYTES)
     except OSError:
         return False
-    if not head or b"\0" in head:
+    if not head or (b"\0" in head and encoding_of(head) != UTF16):
         return False
-    lines = head.decode("latin-1").splitlines()[:-1] or [head.decode("latin-1")]
+    text = decode_head(head)
+    lines = text.splitlines()[:-1] or [text]
     return first_row(lines) is not None
 
 
@@ -117,8 +133,9 @@ def _layout(head: Head, separator: str | None, header: bool | None) -> tuple[str
 
 
 def _head_note(path: str, head: Head, names_kept: bool) -> str | None:
-    """What was skipped before the numbers (a preamble, a line of names that does not fit)."""
-    skipped = list(head.preamble) + ([] if names_kept or head.header is None else [head.header])
+    """What was skipped before the numbers (``#`` comments, a preamble, a line of names that
+    does not fit)."""
+    skipped = head.skipped(names_kept)
     if not skipped:
         return None
     first = skipped[0].strip()
@@ -160,16 +177,18 @@ def _cell(text: str) -> float:
 
 
 def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, cols: range | None,
-                       long: LongText, cut: bool = False) -> np.ndarray:
-    """:func:`_numbers` of the whole file, read ``CHUNK_LINES`` lines at a time into an unnamed
-    file in ``long.spill_dir`` (gone with the map), as a read-only memory map (rows, columns)."""
+                       long: LongText, cut: bool = False, encoding: str = "utf-8-sig") -> np.ndarray:
+    """:func:`_numbers` of the whole file (text in ``encoding``), read ``CHUNK_LINES`` lines at a
+    time into an unnamed file in ``long.spill_dir`` (gone with the map), as a read-only memory
+    map (rows, columns)."""
     spill_dir, size, read = long.spill_dir, max(1, Path(path).stat().st_size), 0
     done, columns = 0, 0
     try:
         store = tempfile.TemporaryFile(dir=spill_dir)
     except OSError as exc:
         raise cannot_write(spill_dir, exc.strerror or str(exc)) from None
-    with store, open(path, encoding="utf-8-sig", errors="replace") as f:
+    char_bytes = 2 if encoding == UTF16 else 1
+    with store, open(path, encoding=encoding, errors="replace") as f:
         for _ in itertools.islice(f, skip):
             pass
         line0 = skip
@@ -186,7 +205,7 @@ def _numbers_in_chunks(path: str, sep: str | None, skip: int, decimal_comma: boo
                 _spill(store, a, spill_dir, path)
                 done += a.shape[0]
             line0 += len(lines)
-            read += len(text)
+            read += len(text) * char_bytes
             if long.progress is not None:
                 long.progress(min(1.0, read / size))
         if not done:
@@ -239,13 +258,14 @@ def _cut_short(path: str, sep: str | None, width: int) -> str | None:
     """A note when the file's last line is cut short: no line end, and fewer values than the
     rows (``width``), as a logger leaves a file it was writing when it stopped; else None."""
     with open(path, "rb") as f:
+        bom = f.read(2)
         f.seek(0, 2)
         size = f.tell()
         f.seek(max(0, size - _TAIL_BYTES))
-        tail = f.read()
-    if not tail or tail.endswith((b"\n", b"\r")) or b"\n" not in tail:
+        tail = decode_head(f.read(), bom) if encoding_of(bom) == UTF16 else f.read().decode("latin-1")
+    if not tail or tail.endswith(("\n", "\r")) or "\n" not in tail:
         return None
-    last = tail[tail.rfind(b"\n") + 1:].decode("latin-1")
+    last = tail[tail.rfind("\n") + 1:]
     n = len([v for v in split(last, sep) if v.strip()])
     if not last.strip() or n >= width:
         return None
@@ -269,6 +289,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     chunk of lines at a time into an unnamed file in ``long.spill_dir``, its numbers a memory
     map of it, so that a long recording's text does not need its float64 table in memory."""
     head = read_head(path)
+    encoding = file_encoding(path)
     sep, header_line, decimal_comma, skip = _layout(head, separator, header)
     first = split(head.rows[0], sep) if head.rows else []
     dated = bool(first) and DATETIME.fullmatch(first[0]) is not None
@@ -278,11 +299,11 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     cut = _cut_short(path, sep, width)
     try:
         if long is not None and Path(path).stat().st_size > long.memory_mb * 1e6:
-            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, cols, long, cut is not None)
+            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, cols, long, cut is not None, encoding)
         else:
             src: str | io.StringIO = path
-            if decimal_comma or cut is not None:
-                text = Path(path).read_text(encoding="utf-8-sig", errors="replace")
+            if decimal_comma or cut is not None or encoding == UTF16:
+                text = Path(path).read_text(encoding=encoding, errors="replace")
                 text = text[:text.rfind("\n") + 1] if cut is not None else text
                 src = io.StringIO(text.replace(",", ".") if decimal_comma else text)
             a = _numbers(src, sep, skip, skip, dated, cols)
@@ -296,7 +317,7 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     notes = [cut] if cut else []
     units = unit_fields(header_line, sep) if header_line is not None and head.preamble else None
     if units is not None and len(split(head.preamble[-1], sep)) == len(units):
-        header_line, head = head.preamble[-1], replace(head, preamble=head.preamble[:-1])   # names, then units
+        header_line, head = head.preamble[-1], head.names_above()   # names, then units
     else:
         units = None
     if header_line is not None:

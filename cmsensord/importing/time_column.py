@@ -2,8 +2,8 @@
 
 Data loggers and oscilloscopes often write a time column before the signals (``Time (s),Acc X
 (g)``, ``t,x,y,z``). A column is the time base when its header names it (a word for time --
-``t``, ``time``, ``timestamp``, ``elapsed``, ``zeit``, ``temps``, ``tiempo``, LabVIEW's
-``X_Value`` -- then at most a
+``t``, ``time``, ``timestamp`` (or ``Time Stamp``, ``time_stamp``, ``time-stamp``),
+``elapsed``, ``zeit``, ``temps``, ``tiempo``, LabVIEW's ``X_Value`` -- then at most a
 unit: ``Time (s)``, ``time_ms``, ``t [us]``) and its values increase, or, in a table without a
 header, when the first column increases evenly (a vibration signal never does). Its unit comes
 from the label: seconds unless it says ms, us (µs) or ns.
@@ -13,6 +13,14 @@ seconds with their fraction, the first three or four of the table (the FEMTO/PRO
 bearing files' ``9,39,39,65664,0.552,-0.146``) -- are the time base too, when the hours and
 minutes are whole numbers in range and the time they make increases evenly; each file's first
 time is then its snapshot's time of day (``Table.times``, ``clock``).
+
+A first column of row numbers -- a pandas ``DataFrame.to_csv`` index: its header cell empty
+(read as ``col0``), ``Unnamed: 0`` or ``index``, or the table without a header -- is a row index
+when its values are exactly 0, 1, 2, ... (or 1, 2, 3, ...): whole numbers, one apart, from the
+first row to the last. It is no channel by default and no time base (it does not give the
+rate: ``--fs`` does); a time column after it is still found. So a headerless file of seconds
+at 1 Hz (``0,...``, ``1,...``) needs ``--fs 1``; one whose column is labelled ``t`` or ``time``
+does not.
 
 A first column of dates and times (``2023-05-01 12:00:00.125``, ISO 8601 without a zone) is
 the time base too, whatever its label; each file's first date and time is then its
@@ -38,7 +46,7 @@ from .table import Table
 __all__ = ["whole_hz", "with_time_column"]
 
 _LABEL = re.compile(
-    r"\s*(t|time|times|timestamp|time_?stamp|elapsed(?:[ _]?time)?|zeit|temps|tiempo|x_value)"
+    r"\s*(t|times?|time[ _-]?stamps?|elapsed(?:[ _-]?time)?|zeit|temps|tiempo|x_value)"
     r"(?:\s*[_ ]?\s*[(\[]?\s*(s|sec|secs|seconds|ms|msec|us|µs|μs|usec|ns)?\s*[)\]]?)?\s*", re.I)
 _UNIT_S = {"ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "usec": 1e-6, "ns": 1e-9}
 #: a rate this close to a whole number of Hz is that number (relative)
@@ -53,6 +61,8 @@ def with_time_column(t: Table, has_header: bool, dated: bool = False) -> Table:
         return _dated(t)
     if t.data.shape[0] != 1 or t.data.shape[1] < 3 or t.data.shape[2] < 2:
         return t
+    if _row_index(t, has_header):
+        return _after_index(t, has_header)
     clock = _clock(t)
     if clock is not None:
         cols, of_day = clock
@@ -65,6 +75,35 @@ def with_time_column(t: Table, has_header: bool, dated: bool = False) -> Table:
         return t
     col, unit_s = found
     return _time_base(t, col, np.multiply(t.data[0, :, col], unit_s, dtype=np.float64), "is the time base", "its")
+
+
+#: what a header names a row index (lower case; ``col0``: an empty header cell)
+_INDEX_NAMES = ("col0", "unnamed: 0", "index")
+
+
+def _row_index(t: Table, has_header: bool) -> bool:
+    """Whether the first column is a row index (see the module docstring)."""
+    if has_header and t.columns[0].strip().lower() not in _INDEX_NAMES:
+        return False
+    x = t.data[0, :, 0]
+    if x[0] not in (0, 1) or x[-1] != x[0] + x.size - 1:
+        return False
+    return all(bool(np.array_equal(x[a:a + _STRETCH], x[0] + np.arange(a, min(a + _STRETCH, x.size))))
+               for a in _stretches(x.size))
+
+
+def _after_index(t: Table, has_header: bool) -> Table:
+    """``t`` with its first column a row index (no channel, no rate), and a time column after it
+    marked too: said by ``time_note`` alone, or by ``layout_note`` beside a time column's."""
+    first = int(t.data[0, 0, 0])
+    note = (f"column {t.columns[0]!r} (0) holds the row numbers {first}, {first + 1}, {first + 2}, ...: a row "
+            "index, not times; it is not imported as a channel")
+    found = _labelled(t, 1) if has_header else (1, 1.0) if t.data.shape[2] > 2 and _even(t.data[0, :, 1]) else None
+    if found is None:
+        return replace(t, time_columns=(0,), time_note=note)
+    col, unit_s = found
+    timed = _time_base(t, col, np.multiply(t.data[0, :, col], unit_s, dtype=np.float64), "is the time base", "its")
+    return replace(timed, time_columns=(0, col), layout_note=note)
 
 
 def _dated(t: Table) -> Table:
@@ -115,9 +154,10 @@ def _clock(t: Table) -> tuple[tuple[int, ...], np.ndarray] | None:
     return None
 
 
-def _labelled(t: Table) -> tuple[int, float] | None:
-    """(column, seconds a unit of it) of the first column labelled as time whose values increase."""
-    for i, name in enumerate(t.columns):
+def _labelled(t: Table, start: int = 0) -> tuple[int, float] | None:
+    """(column, seconds a unit of it) of the first column from ``start`` labelled as time whose
+    values increase."""
+    for i, name in enumerate(t.columns[start:], start):
         m = _LABEL.fullmatch(name)
         if m and _increasing(t.data[0, :, i]):
             return i, _UNIT_S.get((m[2] or "s").lower(), 1.0)

@@ -61,8 +61,8 @@ def unit_in_name(name: str) -> str | None:
 def resolve_unit(given: str | None, said: list[tuple[str, str | None]]) -> tuple[str, str | None]:
     """(the unit to import in, a note or None) from ``--unit`` (``given``, None: not given) and
     what the file says of each imported column (``said``: (column, UNITS key or None)). Not
-    given: the file's unit when every column says the same one, else m/s²; given, a note when
-    the file says another."""
+    given: the file's unit when every column says the same one, else m/s², with a note (the
+    file says no unit, or different ones); given, a note when the file says another."""
     units = {u for _, u in said if u is not None}
     known = all(u is not None for _, u in said) and len(units) == 1
     if given is None:
@@ -72,7 +72,7 @@ def resolve_unit(given: str | None, said: list[tuple[str, str | None]]) -> tuple
         if units:
             listed = ", ".join(f"{c}: {u}" for c, u in said if u is not None)
             return "m/s2", f"the file gives its columns different or no units ({listed}): taken as m/s2; give --unit"
-        return "m/s2", None
+        return "m/s2", f"unit m/s2 assumed: the file does not say its unit; give --unit ({', '.join(UNITS)})"
     other = [(c, u) for c, u in said if u is not None and u != given]
     if not other:
         return given, None
