@@ -77,7 +77,7 @@ class ChannelData:
 @dataclass
 class FileInfo:
     """One file read: its path, size and how far it could be read (``skipped``: the damage
-    read past; ``error``: the damage that ended the read)."""
+    read past; ``error``: the damage that ended the read); ``left_out``: why it was not read."""
 
     path: str
     bytes: int
@@ -85,6 +85,7 @@ class FileInfo:
     complete: bool = False
     error: str | None = None
     skipped: list[str] = field(default_factory=list)
+    left_out: str | None = None
 
 
 class LogData:
@@ -98,6 +99,7 @@ class LogData:
         self.start_ns: int | None = None
         self.end_ns: int | None = None
         self.files: list[FileInfo] = []
+        self.notes: list[str] = []      # lines on the logs left out (:mod:`.runs`)
         self.axis = TimeAxis()          # how times are shown; messages are added in shown times
         self.link_total: dict[str, int] = {}
         self._diag_last: bytes | None = None
