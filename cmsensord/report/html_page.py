@@ -73,7 +73,7 @@ def _file_state(f: Any) -> str:
         return html.escape(f.left_out)
     skipped = f"damaged: {len(f.skipped)} stretch(es) skipped (the first: {f.skipped[0]}); " if f.skipped else ""
     if f.error:
-        return html.escape(f"{skipped}damaged: {f.error}; read up to there")
+        return html.escape(f"{skipped}{'' if f.error == f.cut else 'damaged: '}{f.error}; read up to there")
     return html.escape(skipped) + ("complete" if f.complete else "unfinished (read up to its last complete record)")
 
 

@@ -77,7 +77,8 @@ class ChannelData:
 @dataclass
 class FileInfo:
     """One file read: its path, size and how far it could be read (``skipped``: the damage
-    read past; ``error``: the damage that ended the read); ``left_out``: why it was not read."""
+    read past; ``error``: the damage that ended the read, ``cut``: what ending before the footer lost);
+    ``left_out``: why it was not read."""
 
     path: str
     bytes: int
@@ -86,6 +87,7 @@ class FileInfo:
     error: str | None = None
     skipped: list[str] = field(default_factory=list)
     left_out: str | None = None
+    cut: str | None = None          # what ending before the footer lost (a .part's too)
 
 
 class LogData:

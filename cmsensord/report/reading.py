@@ -65,7 +65,7 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
             info.messages += 1
             if info.messages % 4096 == 0:
                 progress.update(done + offset)
-        info.complete, info.error, info.skipped = scan.complete, scan.error, scan.skipped
+        info.complete, info.error, info.skipped, info.cut = scan.complete, scan.error, scan.skipped, scan.cut
         data.files.append(info)
         done += size
     progress.close()
