@@ -55,10 +55,15 @@ def _times(t_ns: np.ndarray, axis: TimeAxis) -> np.ndarray:
 
 
 def _axes_meta(ax: Any, time_axis: TimeAxis | None = None) -> dict[str, Any]:
+    """An axes' labels, limits and labelled lines; its legend's box in axes fractions (left,
+    bottom, right, top: outside the axes when right of 1), laid out as saved."""
     xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
     out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
                            "xlim": xlim, "ylim": ylim, "xscale": ax.get_xscale(),
                            "lines": [ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")]}
+    if ax.get_legend() is not None:
+        box = ax.get_legend().get_window_extent().transformed(ax.transAxes.inverted())
+        out["legend_box"] = [round(float(v), 3) for v in (box.x0, box.y0, box.x1, box.y1)]
     if time_axis is not None and time_axis.is_dates():
         out["xlim_local"] = [mdates.num2date(x).replace(tzinfo=None).isoformat(timespec="seconds") for x in xlim]
     return out
@@ -74,9 +79,9 @@ def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: TimeAxis
             locator = mdates.AutoDateLocator()
             ax.xaxis.set_major_locator(locator)
             ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    fig.draw_without_rendering()                # the constrained layout as savefig makes it
     meta["axes"] = [_axes_meta(ax, time_axis) for ax in axes]
     if boxes:
-        fig.draw_without_rendering()            # the constrained layout as savefig makes it
         w, h = fig.get_size_inches() * SAVE_DPI
         for ax, m in zip(axes, meta["axes"]):
             x0, y0, x1, y1 = ax.get_position().extents
@@ -86,6 +91,11 @@ def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: TimeAxis
                                                       "Description": json.dumps(meta)})
     plt.close(fig)
     return Figure(meta, buf.getvalue())
+
+
+def legend_outside(ax: Any, pad: float = 0.01) -> None:
+    """The axes' legend to the right of it, clear of the data (the constrained layout makes room)."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1 + pad, 1.0), fontsize=8, borderaxespad=0.0)
 
 
 def _event_lines(ax: Any, data: LogData, channel: str) -> None:
@@ -121,7 +131,7 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     ax.set_ylabel("severity index")
     ax.set_title(f"{ch.name}: severity index (Kim et al. 2023)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8, ncols=4)
+    legend_outside(ax)
     if levels:
         _level_axes(axes[1, 0], data, ch)
     meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
@@ -151,7 +161,7 @@ def _level_axes(ax: Any, data: LogData, ch: ChannelData) -> None:
     ax.set_ylabel("level / baseline")
     ax.set_title(f"{ch.name}: decision level / healthy baseline (the 2 x baseline rule)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(loc="upper left", fontsize=8, ncols=3)
+    legend_outside(ax)
 
 
 def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
@@ -192,7 +202,7 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
             ax.plot(_times(te, axis), ve, color="#e08a00", lw=1, label="envelope_rms")
         ax.set_ylabel("acceleration RMS [m/s²]")
         ax.set_title(f"{ch.name}: acceleration RMS")
-    ax.legend(loc="upper left", fontsize=8)
+    legend_outside(ax, 0.03)                    # right of the zones' letters
     ax.grid(alpha=0.3)
     used = [ax]
     if shape:
@@ -201,7 +211,7 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
             tk, vk = ch.indicators[k].arrays()
             ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
         ax2.set_ylabel("kurtosis, crest factor")
-        ax2.legend(loc="upper left", fontsize=8)
+        legend_outside(ax2, 0.03)
         ax2.grid(alpha=0.3)
         used.append(ax2)
     meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,

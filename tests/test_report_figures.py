@@ -1,0 +1,57 @@
+"""``cmsensord report``'s figures of a degrading motor (RAW, tacho) replayed with two alarm rules
+and a capture on alarm_danger: legends clear of the data, failure and alarm_danger lines told
+apart, one spelling of m/s², the rules' alarm levels on the trends they watch."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from processes import cmsensord, run_module
+
+pytest.importorskip("matplotlib", reason="the report extra")
+
+SITE = """\
+output:
+  status_line: false
+capture:
+  triggers: [alarm_danger]
+alarms:
+  operating: {source: speed, running_above: 600, startup_suppress_s: 2}
+  rules:
+    - {name: de_velocity, indicator: velocity_rms_mm_s, alert_zone: C, danger: 9.5,
+       on_delay_s: 2, off_delay_s: 2}
+    - {name: de_kurtosis, indicator: kurtosis, alert: 6, danger: 12, latch: true}
+"""
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory) -> tuple[str, dict[str, dict], Path]:
+    """24 s of the degrading motor replayed with SITE, and its report: (page, figure metadata by
+    id, the PNG directory). The log holds alarm_alert, alarm_danger, failure and a capture."""
+    work = tmp_path_factory.mktemp("report_figures")
+    (work / "site.yaml").write_text(SITE)
+    p = run_module("firmware_sim", "--scenario", "degrading", "--mode", "raw", "--tacho", "--duration", "24",
+                   "--out", str(work / "deg.bin"))
+    assert p.returncode == 0, p.stderr
+    p = cmsensord("replay", "deg.bin", "--config", "site.yaml", "--out", "out", cwd=work)
+    assert p.returncode == 0, p.stderr
+    p = cmsensord("report", "out", "--out", "r.html", "--png", "png", cwd=work)
+    assert p.returncode == 0, p.stderr
+    page = (work / "r.html").read_text(encoding="utf-8")
+    metas = {m["id"]: m for m in json.loads(re.search(
+        r'<script type="application/json" id="figures">(.*?)</script>', page, re.S).group(1))}
+    return page, metas, work / "png"
+
+
+def test_the_legends_of_the_trends_are_beside_their_axes_not_over_the_data(report):
+    """Each legend of the severity and indicator figures lies right of its axes (before: at the
+    top left inside, over the severity's step to 1.0 and the level's start)."""
+    _, metas, _ = report
+    for fid in ("ch0-severity", "ch0-indicators"):
+        for ax in metas[fid]["axes"]:
+            x0, y0, x1, y1 = ax["legend_box"]
+            assert x0 > 1.0 and y1 <= 1.001, (fid, ax["title"], ax["legend_box"])
