@@ -55,3 +55,15 @@ def test_the_legends_of_the_trends_are_beside_their_axes_not_over_the_data(repor
         for ax in metas[fid]["axes"]:
             x0, y0, x1, y1 = ax["legend_box"]
             assert x0 > 1.0 and y1 <= 1.001, (fid, ax["title"], ax["legend_box"])
+
+
+def test_failure_and_alarm_danger_lines_are_told_apart_and_named(report):
+    """The severity figure marks the failure (solid) and the alarm_danger (dash-dot) events in
+    colours of their own, each named in the legend (before: the same crimson dashes)."""
+    _, metas, _ = report
+    styles = metas["ch0-severity"]["axes"][0]["styles"]
+    failure = styles["failure (the severity model: its last AKF flags)"]
+    danger = styles["alarm_danger (a rule's danger level reached)"]
+    alert = styles["alarm_alert (a rule's alert level reached)"]
+    assert failure == ["#b00020", "-"] and danger == ["#d81b60", "-."] and alert[1] == "--"
+    assert len({tuple(s) for s in styles.values()}) == len(styles)       # every line its own look

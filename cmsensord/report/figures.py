@@ -17,12 +17,14 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.colors as mcolors  # noqa: E402
 import matplotlib.dates as mdates  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker as mticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
+from cmsensord.report.marks import event_lines  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 
 __all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
@@ -32,10 +34,6 @@ SAVE_DPI = 100
 #: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
 MIN_SPEED_BINS = 5
 _ZONE_COLOURS = ("#cfeccf", "#f4f1c0", "#f8d9b0", "#f4b8b8")
-#: channel events drawn as vertical lines on the severity plot (kind -> colour)
-MARKED_EVENTS = {"failure": "#b00020", "failure_clear": "#2e7d32", "alarm_alert": "#e08a00",
-                 "alarm_danger": "#b00020", "alarm_clear": "#2e7d32", "order_alarm": "#6a1b9a",
-                 "capture": "#1565c0", "tacho_lost": "#555555"}
 
 
 @dataclass
@@ -55,12 +53,16 @@ def _times(t_ns: np.ndarray, axis: TimeAxis) -> np.ndarray:
 
 
 def _axes_meta(ax: Any, time_axis: TimeAxis | None = None) -> dict[str, Any]:
-    """An axes' labels, limits and labelled lines; its legend's box in axes fractions (left,
-    bottom, right, top: outside the axes when right of 1), laid out as saved."""
+    """An axes' labels, limits and labelled lines (``styles``: each one's colour and line style);
+    its legend's box in axes fractions (left, bottom, right, top: outside the axes when right of
+    1), laid out as saved."""
     xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
+    lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
     out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
                            "xlim": xlim, "ylim": ylim, "xscale": ax.get_xscale(),
-                           "lines": [ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")]}
+                           "lines": [ln.get_label() for ln in lines],
+                           "styles": {ln.get_label(): [mcolors.to_hex(ln.get_color()), ln.get_linestyle()]
+                                      for ln in lines}}
     if ax.get_legend() is not None:
         box = ax.get_legend().get_window_extent().transformed(ax.transAxes.inverted())
         out["legend_box"] = [round(float(v), 3) for v in (box.x0, box.y0, box.x1, box.y1)]
@@ -99,14 +101,10 @@ def legend_outside(ax: Any, pad: float = 0.01) -> None:
 
 
 def _event_lines(ax: Any, data: LogData, channel: str) -> None:
-    shown: set[str] = set()
-    for t_ns, ev in data.events:
-        colour = MARKED_EVENTS.get(ev["kind"])
-        if colour is None or ev["channel"] not in (channel, None):
-            continue
-        label = ev["kind"] if ev["kind"] not in shown else None
-        shown.add(ev["kind"])
-        ax.axvline(_times(np.array([t_ns]), data.axis)[0], color=colour, lw=1.2, ls="--", label=label)
+    """The events of ``channel`` and of the daemon marked on ``ax`` (:func:`.marks.event_lines`)."""
+    mine = [(t, ev["kind"]) for t, ev in data.events if ev["channel"] in (channel, None)]
+    x = _times(np.array([t for t, _ in mine], dtype=np.int64), data.axis) if mine else np.zeros(0)
+    event_lines(ax, [(float(xi), kind) for xi, (_, kind) in zip(x, mine)])
 
 
 def severity_figure(data: LogData, ch: ChannelData) -> Figure:
