@@ -67,3 +67,14 @@ def test_failure_and_alarm_danger_lines_are_told_apart_and_named(report):
     alert = styles["alarm_alert (a rule's alert level reached)"]
     assert failure == ["#b00020", "-"] and danger == ["#d81b60", "-."] and alert[1] == "--"
     assert len({tuple(s) for s in styles.values()}) == len(styles)       # every line its own look
+
+
+def test_capture_figures_write_m_s2_as_the_trends_do(report):
+    """The capture's messages carry m/s^2; every figure writes m/s² (before: m/s^2 on the capture,
+    m/s² on the trends)."""
+    _, metas, _ = report
+    cap = metas["ch0-capture-0"]
+    assert [ax["ylabel"] for ax in cap["axes"]] == ["waveform [m/s²]", "spectrum [m/s²]",
+                                                    "envelope spectrum [m/s²]"]
+    labels = [ax["ylabel"] for m in metas.values() for ax in m["axes"]]
+    assert not [t for t in labels if "^" in t] and "order RMS [m/s²]" in labels

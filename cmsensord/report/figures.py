@@ -324,10 +324,16 @@ def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = Non
     dotted = "; dotted: 2x and 3x of each line" if fmax is not None and marks else ""
     ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed}{dotted})" if f.size else label,
                  fontsize=9, loc="left")
-    ax.set_ylabel(f"{label.split(',')[0]} [{msg.get('unit', 'm/s²')}]")
+    ax.set_ylabel(f"{label.split(',')[0]} [{_unit(msg)}]")
     ax.grid(alpha=0.3, which="both" if log_f else "major")
     if marks and legend:
         ax.legend(loc="upper right", fontsize=7.5, ncols=3 if fmax is None else 2, framealpha=0.85)
+
+
+def _unit(msg: dict[str, Any]) -> str:
+    """A capture's unit as the figures write units: the messages' ``m/s^2`` as ``m/s²`` (the
+    trends' spelling), another unit (a microphone's Pa) as it is."""
+    return str(msg.get("unit") or "m/s^2").replace("^2", "²")
 
 
 def _zoom_to(msg: dict[str, Any]) -> float | None:
@@ -379,6 +385,6 @@ def _waveform(ax: Any, msg: dict[str, Any]) -> None:
     ax.set_xlabel("time from trigger [s]")
     ax.set_title(f"waveform ({msg.get('source', 'raw').upper()}, {rate:g} samples/s, "
                  f"{msg.get('missing', 0)} lost)", fontsize=9, loc="left")
-    ax.set_ylabel(f"waveform [{msg.get('unit', 'm/s²')}]")
+    ax.set_ylabel(f"waveform [{_unit(msg)}]")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=8)
