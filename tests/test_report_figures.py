@@ -78,3 +78,26 @@ def test_capture_figures_write_m_s2_as_the_trends_do(report):
                                                     "envelope spectrum [m/s²]"]
     labels = [ax["ylabel"] for m in metas.values() for ax in m["axes"]]
     assert not [t for t in labels if "^" in t] and "order RMS [m/s²]" in labels
+
+
+def test_each_rules_alert_and_danger_levels_are_drawn_on_its_indicators_trend(report):
+    """The alert and danger levels of de_velocity (alert_zone C: 2.8, danger 9.5) on the velocity
+    trend, of de_kurtosis (6, 12) on the kurtosis one, as the log's /cm/alarms table gives them,
+    dashed and labelled with the rule's name (before: not drawn)."""
+    from cmsensord.sinks.mcap_sink import read_messages
+
+    _, metas, png = report
+    rows = [row for topic, _, m in read_messages(next((png.parent / "out").glob("*.mcap")))
+            if topic == "/cm/alarms" for row in m["alarms"] if "danger_level" in row]
+    levels = {row["rule"]: (row["alert_level"], row["danger_level"]) for row in rows}
+    assert levels == {"de_velocity": (2.8, 9.5), "de_kurtosis": (6.0, 12.0)}
+    velocity, shape = metas["ch0-indicators"]["axes"]
+    assert velocity["lines"][1:] == ["de_velocity alert 2.8", "de_velocity danger 9.5"]
+    assert shape["lines"][2:] == ["de_kurtosis alert 6", "de_kurtosis danger 12"]
+    assert velocity["styles"]["de_velocity danger 9.5"] == ["#b00020", "--"] and velocity["ylim"][1] > 9.5
+    assert metas["ch0-indicators"]["alarm_levels"] == [
+        {"rule": "de_velocity", "indicator": "velocity_rms_mm_s", "level": "alert", "value": 2.8},
+        {"rule": "de_velocity", "indicator": "velocity_rms_mm_s", "level": "danger", "value": 9.5},
+        {"rule": "de_kurtosis", "indicator": "kurtosis", "level": "alert", "value": 6.0},
+        {"rule": "de_kurtosis", "indicator": "kurtosis", "level": "danger", "value": 12.0}]
+    assert metas["ch0-severity"]["alarm_levels"] == []          # no rule on severity_index

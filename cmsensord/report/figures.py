@@ -24,7 +24,7 @@ import matplotlib.ticker as mticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
-from cmsensord.report.marks import event_lines  # noqa: E402
+from cmsensord.report.marks import alarm_levels, event_lines  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 
 __all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
@@ -108,7 +108,8 @@ def _event_lines(ax: Any, data: LogData, channel: str) -> None:
 
 
 def severity_figure(data: LogData, ch: ChannelData) -> Figure:
-    """The severity index S_idx over time, anomaly periods shaded, channel events as lines;
+    """The severity index S_idx over time, anomaly periods shaded, channel events as lines, the
+    levels of alarm rules on ``severity_index``;
     under it, when the log has the combined severity's level, the level / healthy baseline
     with its alert and danger ratios (the analysts' 2 x baseline rule)."""
     levels = ch.level.count > 0
@@ -123,6 +124,7 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
         ax.fill_between(_times(ta, data.axis), 0, 1, where=a > 0, step="post", color="#ff9800", alpha=0.25,
                         transform=ax.get_xaxis_transform(), label="anomaly flagged")
     _event_lines(ax, data, ch.name)
+    drawn = alarm_levels(ax, ch, ("severity_index",))
     ax.set_ylim(0, 1.05)
     if x.size:
         ax.set_xlim(x[0], x[-1] if x[-1] > x[0] else x[0] + (1 / 86400 if data.axis.is_dates() else 1 / 3600))
@@ -133,7 +135,7 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     if levels:
         _level_axes(axes[1, 0], data, ch)
     meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
-            "title": f"{ch.name}: severity index", "points": int(ch.severity.count)}
+            "title": f"{ch.name}: severity index", "points": int(ch.severity.count), "alarm_levels": drawn}
     return _finish(fig, meta, list(axes[:, 0]), time_axis=data.axis)
 
 
@@ -173,7 +175,8 @@ def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
 def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure | None:
     """Velocity RMS with the ISO 10816-3 zones shaded (or the acceleration RMS in RMS mode),
     and the shape indicators (kurtosis, crest factor) when the log has them, over ``axis``
-    (default: local time)."""
+    (default: local time); on each, the alert and danger levels of the alarm rules watching
+    an indicator drawn there (``alarm_levels`` in the metadata)."""
     axis = axis or TimeAxis()
     main = "velocity_rms_mm_s" if "velocity_rms_mm_s" in ch.indicators else "accel_rms"
     if main not in ch.indicators:
@@ -181,11 +184,32 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
     shape = [k for k in ("kurtosis", "crest_factor") if k in ch.indicators]
     rows = 2 if shape else 1
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.9 * rows), sharex=True, layout="constrained", squeeze=False)
-    ax = axes[0][0]
+    used = [axes[0][0]]
+    drawn = _main_axes(axes[0][0], ch, axis, main)
+    if shape:
+        ax2 = axes[1][0]
+        for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
+            tk, vk = ch.indicators[k].arrays()
+            ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
+        drawn += alarm_levels(ax2, ch, tuple(shape))
+        ax2.set_ylabel("kurtosis, crest factor")
+        legend_outside(ax2, 0.03)
+        ax2.grid(alpha=0.3)
+        used.append(ax2)
+    meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
+            "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries),
+            "alarm_levels": drawn}
+    return _finish(fig, meta, used, time_axis=axis)
+
+
+def _main_axes(ax: Any, ch: ChannelData, axis: TimeAxis, main: str) -> list[dict[str, Any]]:
+    """The velocity RMS over its ISO zones (or the acceleration and envelope RMS) with the
+    alarm rules' levels on them; what :func:`.marks.alarm_levels` drew."""
     t, v = ch.indicators[main].arrays()
     ax.plot(_times(t, axis), v, color="#1f4e99", lw=1.2, label=main)
     if main == "velocity_rms_mm_s":
-        top = max(float(v.max()) * 1.1, 0.1)
+        drawn = alarm_levels(ax, ch, (main,))
+        top = max([float(v.max()) * 1.1, 0.1] + [d["value"] * 1.1 for d in drawn])
         if ch.zone_boundaries:
             _zone_bands(ax, ch.zone_boundaries, top)
             top = max(top, ch.zone_boundaries[-1] * 1.3)
@@ -198,23 +222,12 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
         if "envelope_rms" in ch.indicators:
             te, ve = ch.indicators["envelope_rms"].arrays()
             ax.plot(_times(te, axis), ve, color="#e08a00", lw=1, label="envelope_rms")
+        drawn = alarm_levels(ax, ch, (main, "envelope_rms") if "envelope_rms" in ch.indicators else (main,))
         ax.set_ylabel("acceleration RMS [m/s²]")
         ax.set_title(f"{ch.name}: acceleration RMS")
     legend_outside(ax, 0.03)                    # right of the zones' letters
     ax.grid(alpha=0.3)
-    used = [ax]
-    if shape:
-        ax2 = axes[1][0]
-        for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
-            tk, vk = ch.indicators[k].arrays()
-            ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
-        ax2.set_ylabel("kurtosis, crest factor")
-        legend_outside(ax2, 0.03)
-        ax2.grid(alpha=0.3)
-        used.append(ax2)
-    meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
-            "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries)}
-    return _finish(fig, meta, used, time_axis=axis)
+    return drawn
 
 
 def orders_figure(ch: ChannelData) -> Figure | None:
