@@ -329,5 +329,54 @@ def test_captured_waveform_spectrum_and_envelope_are_drawn(logs, tmp_path):
         wave, spectrum, env = m["axes"]
         assert wave["xlabel"] == "time from trigger [s]" and wave["xlim"][0] <= -1 and 2 <= wave["xlim"][1] < 2.5
         assert spectrum["xlabel"] == "frequency [Hz]" and 12000 < spectrum["xlim"][1] < 13500   # up to fs/2
-        assert env["ylabel"] == "envelope spectrum [m/s^2]" and 950 < env["xlim"][1] < 1100
+        assert env["ylabel"] == "envelope spectrum [m/s²]" and 950 < env["xlim"][1] < 1100
     assert page.count('src="data:image/png;base64,') == 3 + 3
+
+
+def _cut_replay(logs, tmp_path: Path) -> tuple[Path, str]:
+    """A replay's log (its messages in one chunk, as a replay writes them) cut inside that chunk,
+    as `head -c` leaves it: (the file, what the cut lost as the report and summary say it)."""
+    data = next(logs["faulty_raw"].glob("*.mcap")).read_bytes()
+    [(start, end)] = _chunks(data)
+    first, last = struct.unpack_from("<QQ", data, start + 9)
+    cut = tmp_path / "tr" / "cut.mcap"
+    cut.parent.mkdir()
+    cut.write_bytes(data[: (start + end) // 2])
+    lost = (f"cut short at byte {(start + end) // 2:,}, inside the chunk at byte {start:,} "
+            f"({(start + end) // 2 - start:,} of its {end - start:,} bytes; its messages over "
+            f"{(last - first) / 1e9:.1f} s of log time lost), no footer")
+    return cut, lost
+
+
+def test_a_replay_cut_short_is_one_line_and_exit_2_when_nothing_could_be_read(logs, tmp_path):
+    """A finished log cut short (no footer, its one chunk cut off): one line naming the file and
+    what was lost; alone, that line is the error (exit 2, no page; before: an empty page, exit 0);
+    beside a good log, the report goes on."""
+    cut, lost = _cut_replay(logs, tmp_path)
+    out = tmp_path / "cut.html"
+    p = cmsensord("report", str(cut), "--out", str(out))
+    assert (p.returncode, p.stderr.splitlines()) == (2, [f"cmsensord: {cut}: {lost}"])
+    assert not out.exists()
+    p, page, metas = _report(tmp_path, cut, logs["degrading_rms"])
+    assert f"cmsensord: report: {cut}: {lost}; the report holds its 0 message(s) before that" \
+        in p.stderr.splitlines()
+    assert "ch0-severity" in metas and html.escape(f"{lost}; read up to there") in page
+
+
+def test_summary_of_a_replay_cut_short_says_what_was_lost(logs, tmp_path):
+    """`cmsensord summary` of the cut log: the error is the cut (before: `error: None`, exit 0),
+    one line on stderr, exit 2 as nothing could be read; cut after its chunk, a warning, exit 0."""
+    cut, lost = _cut_replay(logs, tmp_path)
+    p = cmsensord("summary", str(cut))
+    assert (p.returncode, p.stderr.splitlines()) == (2, [f"cmsensord: {cut}: {lost}"])
+    assert f"\nerror: {lost}\n" in p.stdout and "\nmessages: 0\n" in p.stdout and "\ncut: " not in p.stdout
+    info = json.loads(cmsensord("summary", "--json", str(cut)).stdout)
+    assert (info["error"], info["cut"], info["messages"]) == (lost, lost, 0)
+    data = next(logs["faulty_raw"].glob("*.mcap")).read_bytes()
+    [(_, end)] = _chunks(data)
+    cut.write_bytes(data[:end])                  # the chunk whole, what follows it lost
+    p = cmsensord("summary", str(cut))
+    n = json.loads(cmsensord("summary", "--json", str(cut)).stdout)["messages"]
+    assert p.returncode == 0 and n > 50 and p.stderr.splitlines() == [
+        f"cmsensord: summary: {cut}: cut short at byte {end:,}, after its last complete record: no footer "
+        f"(anything written after it lost); the summary holds its {n:,} message(s) before that"]

@@ -284,3 +284,33 @@ def test_a_calibrated_replay_draws_the_level_against_its_baseline_under_the_seve
     ratios = [m["level_ratio"] for m in sev if "level_ratio" in m]
     assert max(ratios) > 2.0 and below["ylim"][0] <= min(ratios) and max(ratios, default=0) < 4.0 < below["ylim"][1]
     assert below["xlim"] == top["xlim"]
+
+
+def test_an_import_replayed_twice_into_one_directory_is_drawn_once_over_its_recording_time(tmp_path):
+    """The same capture replayed again into the same directory (after a new calibration, say):
+    the report draws the newest replay over the recording's time and says in one line that it
+    left the older one out (before: local time, "not all of one imported recording", and each
+    trace drawn back from the end of one replay to the start of the other)."""
+    logs, _ = replayed_import(tmp_path)
+    (first,) = logs.glob("*.mcap")
+    p = cmsensord("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    (second,) = set(logs.glob("*.mcap")) - {first}
+    _, alone = report(tmp_path, second)                  # the newest replay alone
+    out = tmp_path / "both.html"
+    p = cmsensord("report", str(logs), "--out", str(out), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    line = (f"r.bin was replayed 2 times into these logs: the report draws the newest replay ({second.name}) "
+            f"and leaves out the older one ({first.name}).")
+    assert f"cmsensord: report: {line}" in p.stderr.splitlines()
+    page = out.read_text(encoding="utf-8")
+    assert line in html.unescape(page) and "not all of one imported recording" not in page
+    assert f"<td>{first}</td><td class=\"n\">{first.stat().st_size:,}</td><td class=\"n\">0</td>" \
+           "<td>left out: an older replay of r.bin</td>" in page
+    metas = {m["id"]: m for m in json.loads(re.search(
+        r'<script type="application/json" id="figures">(.*?)</script>', page, re.S).group(1))}
+    sev = metas["bearing-severity"]
+    assert sev["axes"][-1]["xlabel"] == "recording time (from the import)"
+    assert sev["points"] == alone["bearing-severity"]["points"]
+    assert [ax["xlim"] for ax in sev["axes"]] == [ax["xlim"] for ax in alone["bearing-severity"]["axes"]]
+    assert f"<title>cmsensord report {clock(0)[:16]} – {clock(39, 1)[:16]}</title>" in page

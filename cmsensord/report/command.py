@@ -40,6 +40,8 @@ def run_report(args: argparse.Namespace) -> int:
     paths = log_paths(args.logs)
     data = read_logs(paths, sys.stderr)
     _tell_unreadable(data)
+    for note in data.notes:
+        print(f"cmsensord: report: {note}", file=sys.stderr)
     sections = _draw(data)
     from cmsensord.report.html_page import render_page
     title = args.title or (f"cmsensord report {data.axis.text(data.start_ns)[:16]} – "
@@ -56,19 +58,25 @@ def run_report(args: argparse.Namespace) -> int:
     except OSError as err:
         raise CmsensordError(f"{err.filename}: cannot write: {err.strerror}") from None
     n = sum(len(f) for _, f in sections)
-    print(f"report: {out} ({n} figures, {data.messages:,} messages from {len(paths)} file(s))", file=sys.stderr)
+    read = sum(f.left_out is None for f in data.files)
+    print(f"report: {out} ({n} figures, {data.messages:,} messages from {read} file(s))", file=sys.stderr)
     return 0
 
 
 def _tell_unreadable(data: Any) -> None:
     """One line on stderr for each file with damage read past (a bad chunk, intact ones after
-    it) and each whose read ended at damage (not MCAP, no intact chunk after it). When no
-    file could be read at all, a user error (no report)."""
-    bad = [f for f in data.files if f.error]
-    if bad and len(bad) == len(data.files) and not data.messages:
+    it) and each whose read ended at damage (not MCAP, no intact chunk after it, cut short:
+    what that lost). When no message could be read at all, a user error (no report): the
+    first file's damage, or that it holds no message."""
+    read = [f for f in data.files if f.left_out is None]
+    bad = [f for f in read if f.error]
+    if not data.messages:
+        if not bad:
+            raise CmsensordError(f"{read[0].path}: no complete message in it to report"
+                                 + (f" ({read[0].cut})" if read[0].cut else ""))
         more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
         raise CmsensordError(f"{bad[0].path}: {bad[0].error}{more}")
-    for f in data.files:
+    for f in read:
         if f.skipped:
             print(f"cmsensord: report: {f.path}: {len(f.skipped)} damaged stretch(es) skipped (the first: "
                   f"{f.skipped[0]}); the report holds the {f.messages:,} message(s) of its intact chunks",

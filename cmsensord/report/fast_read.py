@@ -12,8 +12,9 @@ that cannot be decompressed or fails its CRC, a record claiming more bytes than
 there are) is read past as salvage reads past it: from the next chunk record that
 checks out (:class:`~cmsensord.sinks.mcap_chunk_check.Resync`), each stretch
 skipped listed in :attr:`FastScan.skipped`; with no good chunk after it, the
-damage ends the read (:attr:`FastScan.error`; a file ending inside a record is
-an unfinished one). The lenient reader ends at the first damage.
+damage ends the read (:attr:`FastScan.error`). A file that ends before its footer
+says what that lost in :attr:`FastScan.cut`: a ``.part`` file is an unfinished one (read up to
+its last complete record), any other is cut short (the same text as :attr:`FastScan.error`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from mcap.records import Metadata
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
+from cmsensord.sinks.mcap_cut import CUT_HEAD, cut_text, is_unfinished_name
 from cmsensord.sinks.mcap_records import RECORD_LIMIT, parse_record
 
 __all__ = ["FastScan", "head_metadata"]
@@ -91,6 +93,7 @@ class FastScan:
         self.error: str | None = None
         self.skipped: list[str] = []
         self.complete = False
+        self.cut: str | None = None      # what a file ending short lost (:mod:`~cmsensord.sinks.mcap_cut`)
 
     def messages(self) -> Iterator[tuple[str, int, bytes, int]]:
         """(topic, log_time_ns, data, bytes read) of every message the file's intact records hold."""
@@ -139,20 +142,30 @@ class FastScan:
                 self.complete = buf[end: end + len(MAGIC)] == MAGIC
                 return
             if damage is not None:
-                end = self._past(resync, pos, damage)
+                end = self._past(resync, pos, damage, buf)
                 if end is None:
                     return
             if self.error:
                 return
             pos = end
+        self._cut(buf, pos, size)
 
-    def _past(self, resync: Resync, pos: int, damage: str) -> int | None:
+    def _cut(self, buf: mmap.mmap, pos: int, size: int) -> None:
+        """The file ends inside the record at ``pos`` (or after it, with no footer): what that
+        lost in :attr:`cut`, and as :attr:`error` too unless the file is one being written."""
+        self.cut = cut_text(buf[pos: pos + CUT_HEAD], pos, size)
+        if not is_unfinished_name(self.path.name):
+            self.error = self.cut
+
+    def _past(self, resync: Resync, pos: int, damage: str, buf: mmap.mmap) -> int | None:
         """Damage at byte ``pos`` (``""``: the file ends inside a record): the offset of the next
         good chunk, the damage listed in :attr:`skipped`; None when there is none (the damage
-        ends the read, in :attr:`error`; an unfinished file's tail, in nothing)."""
+        ends the read, in :attr:`error`; a file ending inside a record, :meth:`_cut`)."""
         nxt = resync.next_chunk(pos + 1, {})
         if nxt is None:
             self.error = damage or None
+            if not damage:
+                self._cut(buf, pos, len(buf))
             return None
         self.skipped.append(damage or f"a record at byte {pos} claims more bytes than the file holds")
         return nxt

@@ -17,12 +17,14 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.colors as mcolors  # noqa: E402
 import matplotlib.dates as mdates  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker as mticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
+from cmsensord.report.marks import alarm_levels, event_lines  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 
 __all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
@@ -32,10 +34,6 @@ SAVE_DPI = 100
 #: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
 MIN_SPEED_BINS = 5
 _ZONE_COLOURS = ("#cfeccf", "#f4f1c0", "#f8d9b0", "#f4b8b8")
-#: channel events drawn as vertical lines on the severity plot (kind -> colour)
-MARKED_EVENTS = {"failure": "#b00020", "failure_clear": "#2e7d32", "alarm_alert": "#e08a00",
-                 "alarm_danger": "#b00020", "alarm_clear": "#2e7d32", "order_alarm": "#6a1b9a",
-                 "capture": "#1565c0", "tacho_lost": "#555555"}
 
 
 @dataclass
@@ -55,10 +53,19 @@ def _times(t_ns: np.ndarray, axis: TimeAxis) -> np.ndarray:
 
 
 def _axes_meta(ax: Any, time_axis: TimeAxis | None = None) -> dict[str, Any]:
+    """An axes' labels, limits and labelled lines (``styles``: each one's colour and line style);
+    its legend's box in axes fractions (left, bottom, right, top: outside the axes when right of
+    1), laid out as saved."""
     xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
+    lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
     out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
                            "xlim": xlim, "ylim": ylim, "xscale": ax.get_xscale(),
-                           "lines": [ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")]}
+                           "lines": [ln.get_label() for ln in lines],
+                           "styles": {ln.get_label(): [mcolors.to_hex(ln.get_color()), ln.get_linestyle()]
+                                      for ln in lines}}
+    if ax.get_legend() is not None:
+        box = ax.get_legend().get_window_extent().transformed(ax.transAxes.inverted())
+        out["legend_box"] = [round(float(v), 3) for v in (box.x0, box.y0, box.x1, box.y1)]
     if time_axis is not None and time_axis.is_dates():
         out["xlim_local"] = [mdates.num2date(x).replace(tzinfo=None).isoformat(timespec="seconds") for x in xlim]
     return out
@@ -74,9 +81,9 @@ def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: TimeAxis
             locator = mdates.AutoDateLocator()
             ax.xaxis.set_major_locator(locator)
             ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    fig.draw_without_rendering()                # the constrained layout as savefig makes it
     meta["axes"] = [_axes_meta(ax, time_axis) for ax in axes]
     if boxes:
-        fig.draw_without_rendering()            # the constrained layout as savefig makes it
         w, h = fig.get_size_inches() * SAVE_DPI
         for ax, m in zip(axes, meta["axes"]):
             x0, y0, x1, y1 = ax.get_position().extents
@@ -88,19 +95,21 @@ def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: TimeAxis
     return Figure(meta, buf.getvalue())
 
 
+def legend_outside(ax: Any, pad: float = 0.01) -> None:
+    """The axes' legend to the right of it, clear of the data (the constrained layout makes room)."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1 + pad, 1.0), fontsize=8, borderaxespad=0.0)
+
+
 def _event_lines(ax: Any, data: LogData, channel: str) -> None:
-    shown: set[str] = set()
-    for t_ns, ev in data.events:
-        colour = MARKED_EVENTS.get(ev["kind"])
-        if colour is None or ev["channel"] not in (channel, None):
-            continue
-        label = ev["kind"] if ev["kind"] not in shown else None
-        shown.add(ev["kind"])
-        ax.axvline(_times(np.array([t_ns]), data.axis)[0], color=colour, lw=1.2, ls="--", label=label)
+    """The events of ``channel`` and of the daemon marked on ``ax`` (:func:`.marks.event_lines`)."""
+    mine = [(t, ev["kind"]) for t, ev in data.events if ev["channel"] in (channel, None)]
+    x = _times(np.array([t for t, _ in mine], dtype=np.int64), data.axis) if mine else np.zeros(0)
+    event_lines(ax, [(float(xi), kind) for xi, (_, kind) in zip(x, mine)])
 
 
 def severity_figure(data: LogData, ch: ChannelData) -> Figure:
-    """The severity index S_idx over time, anomaly periods shaded, channel events as lines;
+    """The severity index S_idx over time, anomaly periods shaded, channel events as lines, the
+    levels of alarm rules on ``severity_index``;
     under it, when the log has the combined severity's level, the level / healthy baseline
     with its alert and danger ratios (the analysts' 2 x baseline rule)."""
     levels = ch.level.count > 0
@@ -115,17 +124,18 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
         ax.fill_between(_times(ta, data.axis), 0, 1, where=a > 0, step="post", color="#ff9800", alpha=0.25,
                         transform=ax.get_xaxis_transform(), label="anomaly flagged")
     _event_lines(ax, data, ch.name)
+    drawn = alarm_levels(ax, ch, ("severity_index",))
     ax.set_ylim(0, 1.05)
     if x.size:
         ax.set_xlim(x[0], x[-1] if x[-1] > x[0] else x[0] + (1 / 86400 if data.axis.is_dates() else 1 / 3600))
     ax.set_ylabel("severity index")
     ax.set_title(f"{ch.name}: severity index (Kim et al. 2023)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8, ncols=4)
+    legend_outside(ax)
     if levels:
         _level_axes(axes[1, 0], data, ch)
     meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
-            "title": f"{ch.name}: severity index", "points": int(ch.severity.count)}
+            "title": f"{ch.name}: severity index", "points": int(ch.severity.count), "alarm_levels": drawn}
     return _finish(fig, meta, list(axes[:, 0]), time_axis=data.axis)
 
 
@@ -151,7 +161,7 @@ def _level_axes(ax: Any, data: LogData, ch: ChannelData) -> None:
     ax.set_ylabel("level / baseline")
     ax.set_title(f"{ch.name}: decision level / healthy baseline (the 2 x baseline rule)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(loc="upper left", fontsize=8, ncols=3)
+    legend_outside(ax)
 
 
 def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
@@ -165,7 +175,8 @@ def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
 def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure | None:
     """Velocity RMS with the ISO 10816-3 zones shaded (or the acceleration RMS in RMS mode),
     and the shape indicators (kurtosis, crest factor) when the log has them, over ``axis``
-    (default: local time)."""
+    (default: local time); on each, the alert and danger levels of the alarm rules watching
+    an indicator drawn there (``alarm_levels`` in the metadata)."""
     axis = axis or TimeAxis()
     main = "velocity_rms_mm_s" if "velocity_rms_mm_s" in ch.indicators else "accel_rms"
     if main not in ch.indicators:
@@ -173,11 +184,32 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
     shape = [k for k in ("kurtosis", "crest_factor") if k in ch.indicators]
     rows = 2 if shape else 1
     fig, axes = plt.subplots(rows, 1, figsize=(11, 2.9 * rows), sharex=True, layout="constrained", squeeze=False)
-    ax = axes[0][0]
+    used = [axes[0][0]]
+    drawn = _main_axes(axes[0][0], ch, axis, main)
+    if shape:
+        ax2 = axes[1][0]
+        for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
+            tk, vk = ch.indicators[k].arrays()
+            ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
+        drawn += alarm_levels(ax2, ch, tuple(shape))
+        ax2.set_ylabel("kurtosis, crest factor")
+        legend_outside(ax2, 0.03)
+        ax2.grid(alpha=0.3)
+        used.append(ax2)
+    meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
+            "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries),
+            "alarm_levels": drawn}
+    return _finish(fig, meta, used, time_axis=axis)
+
+
+def _main_axes(ax: Any, ch: ChannelData, axis: TimeAxis, main: str) -> list[dict[str, Any]]:
+    """The velocity RMS over its ISO zones (or the acceleration and envelope RMS) with the
+    alarm rules' levels on them; what :func:`.marks.alarm_levels` drew."""
     t, v = ch.indicators[main].arrays()
     ax.plot(_times(t, axis), v, color="#1f4e99", lw=1.2, label=main)
     if main == "velocity_rms_mm_s":
-        top = max(float(v.max()) * 1.1, 0.1)
+        drawn = alarm_levels(ax, ch, (main,))
+        top = max([float(v.max()) * 1.1, 0.1] + [d["value"] * 1.1 for d in drawn])
         if ch.zone_boundaries:
             _zone_bands(ax, ch.zone_boundaries, top)
             top = max(top, ch.zone_boundaries[-1] * 1.3)
@@ -190,23 +222,12 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
         if "envelope_rms" in ch.indicators:
             te, ve = ch.indicators["envelope_rms"].arrays()
             ax.plot(_times(te, axis), ve, color="#e08a00", lw=1, label="envelope_rms")
+        drawn = alarm_levels(ax, ch, (main, "envelope_rms") if "envelope_rms" in ch.indicators else (main,))
         ax.set_ylabel("acceleration RMS [m/s²]")
         ax.set_title(f"{ch.name}: acceleration RMS")
-    ax.legend(loc="upper left", fontsize=8)
+    legend_outside(ax, 0.03)                    # right of the zones' letters
     ax.grid(alpha=0.3)
-    used = [ax]
-    if shape:
-        ax2 = axes[1][0]
-        for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
-            tk, vk = ch.indicators[k].arrays()
-            ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
-        ax2.set_ylabel("kurtosis, crest factor")
-        ax2.legend(loc="upper left", fontsize=8)
-        ax2.grid(alpha=0.3)
-        used.append(ax2)
-    meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
-            "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries)}
-    return _finish(fig, meta, used, time_axis=axis)
+    return drawn
 
 
 def orders_figure(ch: ChannelData) -> Figure | None:
@@ -316,10 +337,16 @@ def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = Non
     dotted = "; dotted: 2x and 3x of each line" if fmax is not None and marks else ""
     ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed}{dotted})" if f.size else label,
                  fontsize=9, loc="left")
-    ax.set_ylabel(f"{label.split(',')[0]} [{msg.get('unit', 'm/s²')}]")
+    ax.set_ylabel(f"{label.split(',')[0]} [{_unit(msg)}]")
     ax.grid(alpha=0.3, which="both" if log_f else "major")
     if marks and legend:
         ax.legend(loc="upper right", fontsize=7.5, ncols=3 if fmax is None else 2, framealpha=0.85)
+
+
+def _unit(msg: dict[str, Any]) -> str:
+    """A capture's unit as the figures write units: the messages' ``m/s^2`` as ``m/s²`` (the
+    trends' spelling), another unit (a microphone's Pa) as it is."""
+    return str(msg.get("unit") or "m/s^2").replace("^2", "²")
 
 
 def _zoom_to(msg: dict[str, Any]) -> float | None:
@@ -371,6 +398,6 @@ def _waveform(ax: Any, msg: dict[str, Any]) -> None:
     ax.set_xlabel("time from trigger [s]")
     ax.set_title(f"waveform ({msg.get('source', 'raw').upper()}, {rate:g} samples/s, "
                  f"{msg.get('missing', 0)} lost)", fontsize=9, loc="left")
-    ax.set_ylabel(f"waveform [{msg.get('unit', 'm/s²')}]")
+    ax.set_ylabel(f"waveform [{_unit(msg)}]")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=8)

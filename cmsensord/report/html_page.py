@@ -69,9 +69,11 @@ def _events_table(data: LogData) -> str:
 
 
 def _file_state(f: Any) -> str:
+    if f.left_out:
+        return html.escape(f.left_out)
     skipped = f"damaged: {len(f.skipped)} stretch(es) skipped (the first: {f.skipped[0]}); " if f.skipped else ""
     if f.error:
-        return html.escape(f"{skipped}damaged: {f.error}; read up to there")
+        return html.escape(f"{skipped}{'' if f.error == f.cut else 'damaged: '}{f.error}; read up to there")
     return html.escape(skipped) + ("complete" if f.complete else "unfinished (read up to its last complete record)")
 
 
@@ -96,6 +98,7 @@ def render_page(data: LogData, sections: list[tuple[str, list[Any]]], title: str
     """The whole page: overview cards, a section of figures per channel, events, link and disk."""
     body = [f"<h1>{html.escape(title)}</h1>",
             f'<p class="sub">{html.escape(data.axis.caption(data.start_ns))}</p>',
+            *(f'<p class="sub note">{html.escape(note)}</p>' for note in data.notes),
             _cards(data)]
     for heading, figs in sections:
         body.append(f"<h2>{html.escape(heading)}</h2>")

@@ -3,11 +3,12 @@
 :class:`LogData` takes (topic, log_time_ns, JSON bytes) one message at a time
 (:meth:`LogData.add`) and keeps per channel: the severity index and the anomaly
 flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend with the
-latest ISO zone boundaries and alarm level, the order RMS per 10-rpm speed bin,
-and at most ``MAX_CAPTURES`` captured waveforms with their spectra; for the whole
-log: the events (the first ``MAX_EVENTS``, counts of all), the link counters
-(summed over daemon restarts), the largest processing lag and queue depth, and
-the files read. Nothing grows with the length of the log beyond these bounds.
+latest ISO zone boundaries and alarm level, each alarm rule's newest alert and
+danger levels, the order RMS per 10-rpm speed bin, and at most ``MAX_CAPTURES``
+captured waveforms with their spectra; for the whole log: the events (the first
+``MAX_EVENTS``, counts of all), the link counters (summed over daemon restarts),
+the largest processing lag and queue depth, and the files read. Nothing grows with
+the length of the log beyond these bounds.
 """
 
 from __future__ import annotations
@@ -72,12 +73,15 @@ class ChannelData:
     campbell: dict[str, dict[int, list[float]]] = field(default_factory=dict)
     captures: list[Capture] = field(default_factory=list)
     captures_omitted: int = 0
+    # alarm rule -> (indicator, (alert, danger)): the levels in force the log last gave
+    alarm_levels: dict[str, tuple[str, tuple[float | None, float | None]]] = field(default_factory=dict)
 
 
 @dataclass
 class FileInfo:
     """One file read: its path, size and how far it could be read (``skipped``: the damage
-    read past; ``error``: the damage that ended the read)."""
+    read past; ``error``: the damage that ended the read, ``cut``: what ending before the footer lost);
+    ``left_out``: why it was not read."""
 
     path: str
     bytes: int
@@ -85,6 +89,8 @@ class FileInfo:
     complete: bool = False
     error: str | None = None
     skipped: list[str] = field(default_factory=list)
+    left_out: str | None = None
+    cut: str | None = None          # what ending before the footer lost (a .part's too)
 
 
 class LogData:
@@ -98,6 +104,7 @@ class LogData:
         self.start_ns: int | None = None
         self.end_ns: int | None = None
         self.files: list[FileInfo] = []
+        self.notes: list[str] = []      # lines on the logs left out (:mod:`.runs`)
         self.axis = TimeAxis()          # how times are shown; messages are added in shown times
         self.link_total: dict[str, int] = {}
         self._diag_last: bytes | None = None
@@ -136,6 +143,8 @@ class LogData:
             return
         if topic == "/cm/events":
             self._event(t_ns, msg)
+        elif topic == "/cm/alarms":
+            self._alarms(msg)
         elif len(parts) == 4 and parts[1] == "cm":
             self._channel_message(parts[2], kind, t_ns, msg)
 
@@ -177,6 +186,22 @@ class LogData:
         if len(self.events) < MAX_EVENTS:
             self.events.append((t_ns, {"kind": kind, "channel": msg.get("channel"),
                                        "message": msg.get("message") or ""}))
+
+    def _alarms(self, msg: dict[str, Any]) -> None:
+        """An alarm table: each rule's alert and danger levels in force, on each channel it
+        watches (a level the table leaves out keeps the one it gave before)."""
+        for row in msg.get("alarms") or ():
+            if not isinstance(row, dict) or not isinstance(row.get("rule"), str):
+                continue
+            names = [row["channel"]] if isinstance(row.get("channel"), str) else \
+                [c for c in row.get("channels") or () if isinstance(c, str)]
+            given = [v if isinstance(v, int | float) else None
+                     for v in (row.get("alert_level"), row.get("danger_level"))]
+            for name in names:
+                ch = self.channel(name)
+                old = ch.alarm_levels.get(row["rule"], ("", (None, None)))[1]
+                levels = (given[0] if given[0] is not None else old[0], given[1] if given[1] is not None else old[1])
+                ch.alarm_levels[row["rule"]] = (str(row.get("indicator")), levels)
 
     def _diagnostics(self, data: bytes) -> None:
         """Largest lag and queue depth; the counters of the last message before each restart."""

@@ -4,7 +4,8 @@ A directory stands for its ``*.mcap`` and ``*.mcap.part`` files (salvaged
 files included), oldest name first. Every file is read with the lenient
 reader (:class:`~cmsensord.report.fast_read.FastScan`), so a ``.part``
 file of a crashed daemon or a damaged file gives what it holds up to the
-damage.
+damage. Of an imported recording replayed more than once, only the newest replay is read
+(:mod:`.runs`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from cmsensord.errors import CmsensordError
 from cmsensord.report.fast_read import FastScan, head_metadata
 from cmsensord.report.log_data import FileInfo, LogData
 from cmsensord.report.progress import Progress
+from cmsensord.report.runs import plan_logs
 from cmsensord.report.time_axis import TimeAxis
 
 __all__ = ["log_paths", "read_logs"]
@@ -44,25 +46,28 @@ def log_paths(names: list[str]) -> list[Path]:
 
 
 def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
-    """All messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal; the
-    messages of a replayed import in the recording's own time (:mod:`.time_axis`)."""
+    """The messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal; the
+    messages of a replayed import in the recording's own time (:mod:`.time_axis`); of an import
+    replayed more than once, only its newest replay (:mod:`.runs`; the others listed as left out)."""
     data = LogData()
-    data.axis = TimeAxis.of_logs([head_metadata(p) for p in paths])
-    shown = None if data.axis.timeline is None else data.axis.shown
-    sizes = [p.stat().st_size for p in paths]
+    plan = plan_logs(paths, [head_metadata(p) for p in paths])
+    data.axis = TimeAxis.of_logs([head_metadata(p) for p in plan.paths])
+    data.notes = plan.notes
+    sizes = [p.stat().st_size for p in plan.paths]
     progress = Progress(sum(sizes), progress_stream)
     done = 0
-    for path, size in zip(paths, sizes):
+    for path, size, zero in zip(plan.paths, sizes, plan.zeros):
         info = FileInfo(str(path), size)
         scan = FastScan(path)
+        local = data.axis.timeline is None
         for topic, t, raw, offset in scan.messages():
-            data.add(topic, t if shown is None else shown(t), raw)
+            data.add(topic, t if local else data.axis.shown(t, zero), raw)
             info.messages += 1
             if info.messages % 4096 == 0:
                 progress.update(done + offset)
-        info.complete, info.error, info.skipped = scan.complete, scan.error, scan.skipped
+        info.complete, info.error, info.skipped, info.cut = scan.complete, scan.error, scan.skipped, scan.cut
         data.files.append(info)
         done += size
     progress.close()
+    data.files.extend(FileInfo(str(path), path.stat().st_size, left_out=why) for path, why in plan.left_out)
     return data
-

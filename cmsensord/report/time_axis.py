@@ -48,12 +48,13 @@ class TimeAxis:
         texts = [m.get("cmsensord", {}).get("recording_timeline") for m in metadata]
         if not any(texts):
             return cls()
-        if len(set(texts)) > 1:
-            return cls(note="The logs are not all of one imported recording: local time is shown.")
-        parsed = Timeline.from_json(texts[0] or "")
-        if parsed is None:
+        parsed = [Timeline.from_json(text) if text else None for text in texts]
+        if any(text and p is None for text, p in zip(texts, parsed)):
             return cls(note="The logs' recording timeline cannot be read: local time is shown.")
-        timeline, zero = parsed
+        # replays of one recording differ only in the log time of board second 0 (each file's own)
+        if any(p is None for p in parsed) or len({p[0].to_json(0) for p in parsed if p is not None}) > 1:
+            return cls(note="The logs are not all of one imported recording: local time is shown.")
+        timeline, zero = parsed[0]   # type: ignore[misc]
         fixed = (f" {timeline.repaired} snapshot(s) whose recorded time went back are placed between "
                  "their neighbours." if timeline.repaired else "")
         axis = cls(timeline, zero)
@@ -67,13 +68,15 @@ class TimeAxis:
             axis.note = f"A replay of an imported recording: times are {where}{gaps}.{fixed}"
         return axis
 
-    def shown(self, log_ns: int) -> int:
-        """The time shown for a message logged at ``log_ns``: ns since the Unix epoch (``local``;
-        ``recording``: the recording's clock read as UTC), ns into the recording (``elapsed``),
-        or 1e-9 % of the record (``record``)."""
+    def shown(self, log_ns: int, board_zero_ns: int | None = None) -> int:
+        """The time shown for a message logged at ``log_ns`` by a replay whose board second 0 was
+        logged at ``board_zero_ns`` (default: the first log's): ns since the Unix epoch
+        (``local``; ``recording``: the recording's clock read as UTC), ns into the recording
+        (``elapsed``), or 1e-9 % of the record (``record``)."""
         if self.timeline is None:
             return log_ns
-        s = float(self.timeline.at((log_ns - self.board_zero_ns) / 1e9))
+        zero = self.board_zero_ns if board_zero_ns is None else board_zero_ns
+        s = float(self.timeline.at((log_ns - zero) / 1e9))
         return int(round((self._epoch_s + s) * 1e9))
 
     def text(self, ns: int | None, *, ms: bool = False) -> str:

@@ -17,7 +17,9 @@ if TYPE_CHECKING:
 
 
 def summary(path: str, *, as_json: bool = False) -> int:
-    """Print the summary of ``path`` (text or JSON); exit status 2 if it is not an MCAP file."""
+    """Print the summary of ``path`` (text or JSON); exit status 2 if it is not an MCAP file.
+    Damage that ended the read (a finished file cut short, say) is also one line on stderr
+    (:func:`_tell_damage`): an error with exit status 2 when no message could be read."""
     if not Path(path).is_file():
         what = "is a directory, not an MCAP file" if Path(path).is_dir() else "file not found"
         print(f"cmsensord: {path}: {what}", file=sys.stderr)
@@ -30,6 +32,19 @@ def summary(path: str, *, as_json: bool = False) -> int:
         print(json.dumps(info, indent=2, default=str) if as_json else format_summary(info), flush=True)
     except BrokenPipeError:     # `cmsensord summary FILE | head`: the reader has enough
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return _tell_damage(info)
+
+
+def _tell_damage(info: dict) -> int:
+    """The damage that ended the read as one line on stderr: a warning naming the messages read
+    before it (status 0), or, when there are none, the error (status 2)."""
+    if not info["error"]:
+        return 0
+    if not info["messages"]:
+        print(f"cmsensord: {info['path']}: {info['error']}", file=sys.stderr)
+        return EXIT_USAGE
+    print(f"cmsensord: summary: {info['path']}: {info['error']}; the summary holds its {info['messages']:,} "
+          "message(s) before that", file=sys.stderr)
     return 0
 
 
@@ -51,6 +66,8 @@ def format_summary(info: dict) -> str:
         elif k == "metadata":
             lines.append("metadata:")
             lines.extend(f"  {name}: {_metadata(values, axis)}" for name, values in v.items())
+        elif k == "cut" and v == info.get("error"):
+            continue                    # said as the error
         elif isinstance(v, dict):
             lines.append(f"{k}:")
             for kk, vv in v.items():

@@ -24,6 +24,7 @@ from mcap.stream_reader import breakup_chunk
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
+from cmsensord.sinks.mcap_cut import CUT_HEAD, cut_text, is_unfinished_name
 from cmsensord.sinks.mcap_encoding import NS
 from cmsensord.sinks.mcap_records import KNOWN_OPCODES, NOT_MCAP, RecordWalker, parse_record
 from cmsensord.sinks.schemas import TOPIC_EVENTS
@@ -68,6 +69,8 @@ class _Scan:
         self.error: str | None = None  # the damage that ended the read
         self.skipped: list[str] = []  # the damage read past, one line each
         self.valid_bytes = 0  # end of the last good record
+        self.cut: str | None = None  # what the file's ending before its footer lost
+        self._cut_at: int | None = None  # where it ends inside a record, or after one (no footer)
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.metadata: dict[str, dict[str, str]] = {}
@@ -79,7 +82,9 @@ class _Scan:
         parse, or claims more bytes than the limit or the file holds) is read past from the
         next chunk that checks out, each stretch skipped said in :attr:`skipped`; with no
         good chunk after it, the damage ends the read (:attr:`error`, or :attr:`truncated`
-        when the file ends inside a record). Raises SinkError when the file cannot be opened.
+        when the file ends inside a record). A file ending before its footer says what that lost
+        in :attr:`cut` (:mod:`~cmsensord.sinks.mcap_cut`), also as :attr:`error` unless it is a
+        ``.part`` (one being written). Raises SinkError when the file cannot be opened.
         """
         try:
             f = open(self.path, "rb")
@@ -92,12 +97,23 @@ class _Scan:
                 while (damage := (yield from self._stretch(f, start))) is not None:
                     start = resync.next_chunk(damage + 1, self.channels)
                     if start is None:
-                        return
+                        break
                     self.skipped.append(self.error or f"a record at byte {damage} claims more bytes "
                                                       "than the file holds")
                     self.error, self.truncated = None, False
+                self._say_cut(f)
             finally:
                 resync.close()
+
+    def _say_cut(self, f: BinaryIO) -> None:
+        """:attr:`cut` (and :attr:`error`) for a file that ended inside a record or without a footer."""
+        if not self.truncated or self._cut_at is None:
+            return
+        size = os.fstat(f.fileno()).st_size
+        f.seek(self._cut_at)
+        self.cut = cut_text(f.read(CUT_HEAD), self._cut_at, size)
+        if self.error is None and not is_unfinished_name(self.path.name):
+            self.error = self.cut
 
     def _stretch(self, f: BinaryIO, start: int | None) -> Generator[Any, None, int | None]:
         """The records from ``start`` (None: the file's start) up to the end or to damage;
@@ -117,6 +133,7 @@ class _Scan:
                 self._remember(record)
                 yield record
             if opcode == Opcode.FOOTER:
+                self._cut_at = None
                 self.complete = walker.closing_magic()
                 self.truncated = not self.complete
                 if self.complete:
@@ -130,6 +147,8 @@ class _Scan:
             self.error = walker.error
             return walker.valid_bytes
         self.truncated = True
+        if walker.end in (RecordWalker.IN_RECORD, RecordWalker.AT_END):
+            self._cut_at = walker.valid_bytes
         return walker.valid_bytes if walker.end == RecordWalker.IN_RECORD else None
 
     def _remember(self, record: Any) -> None:
@@ -218,7 +237,8 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
     """Summary of an MCAP file, also of a truncated ``.part`` file.
 
     Reads sequentially without raising, past damage from the next chunk that checks out.
-    Returns a dict: path, complete, truncated, error (the damage that ended the read),
+    Returns a dict: path, complete, truncated, error (the damage that ended the read, also a
+    finished file cut short), cut (what ending before the footer lost, a ``.part`` file's too),
     skipped (the damage read past, a line each), file_bytes, valid_bytes, messages, topics {topic: count}, schemas
     {topic: schema name}, start_ns, end_ns, duration_s, event_counts
     {kind: count}, events [first max_events as {time_ns, kind, channel,
@@ -252,6 +272,7 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
         "complete": scan.complete,
         "truncated": scan.truncated,
         "error": scan.error,
+        "cut": scan.cut,
         "skipped": scan.skipped,
         "file_bytes": file_bytes,
         "valid_bytes": scan.valid_bytes,

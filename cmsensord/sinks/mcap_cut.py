@@ -1,0 +1,43 @@
+"""What a file cut short lost, in one phrase (the report's and the summary's line on it).
+
+A finished log ends with a Footer and the closing magic. One that ends before them (``head -c``,
+a copy interrupted, a ``.part`` whose writer died) lost the record it ends inside: for a chunk,
+all its messages, whose span of log time the chunk's header gives (a replay writes its whole
+log in one or two chunks, so a cut loses all or half of it).
+"""
+
+from __future__ import annotations
+
+import struct
+
+__all__ = ["CUT_HEAD", "cut_text", "is_unfinished_name"]
+
+#: bytes of the cut record that :func:`cut_text` reads: its opcode and length, a chunk's times
+CUT_HEAD = 9 + 16
+_OP_CHUNK = 0x06
+
+
+def cut_text(head: bytes, pos: int, size: int) -> str:
+    """One phrase on a file of ``size`` bytes that ends inside the record at byte ``pos``
+    (``head``: the file's bytes from ``pos``, up to ``CUT_HEAD``), or, with ``pos == size``,
+    just after its last complete record, before any Footer."""
+    at = f"cut short at byte {size:,}"
+    if pos >= size:
+        return f"{at}, after its last complete record: no footer (anything written after it lost)"
+    if len(head) < 9:
+        return f"{at}, inside the header of the record at byte {pos:,} (anything from there on lost), no footer"
+    opcode, length = struct.unpack_from("<BQ", head)
+    part = f"{size - pos:,} of its {9 + length:,} bytes"
+    if opcode != _OP_CHUNK:
+        return f"{at}, inside the record at byte {pos:,} ({part}), no footer"
+    if len(head) < CUT_HEAD:
+        return f"{at}, inside the chunk at byte {pos:,} ({part}; all its messages lost), no footer"
+    first, last = struct.unpack_from("<QQ", head, 9)
+    span = f"{(last - first) / 1e9:.1f} s" if last >= first else "an unknown span"
+    return f"{at}, inside the chunk at byte {pos:,} ({part}; its messages over {span} of log time lost), no footer"
+
+
+def is_unfinished_name(name: str) -> bool:
+    """Whether a file named ``name`` is one being written (``*.part``), which ends short as a
+    matter of course, not a finished log cut short."""
+    return name.endswith(".part")
