@@ -406,3 +406,30 @@ def test_with_several_channels_warned_of_one_bound_keeps_each_ones_steady_stretc
     p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--to", "48", "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 0, p.stderr
     assert "warning" not in p.stdout and "every channel" not in p.stdout
+
+
+def test_a_channel_with_no_sensor_is_said_at_import_and_calibrate_names_the_way_out(tmp_path):
+    """A logger's spare column of zeros: the import warns; calibrate refuses it with the two ways
+    to leave it out, and a base configuration listing the channels to learn calibrates."""
+    rng = np.random.default_rng(2)
+    x = rng.normal(0.0, 0.2, (3000, 3))
+    x[:, 1] = 0.0
+    (tmp_path / "d.csv").write_text("Acc X (g),Spare (g),Acc Y (g)\n" + "".join(f"{a:.4f},{b:.4f},{c:.4f}\n"
+                                                                          for a, b, c in x))
+    cap = tmp_path / "d.bin"
+    p = run("cmsensord", "import", str(tmp_path / "d.csv"), "--fs", "1000", "--block-len", "10", "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    assert ("  WARNING Spare_g: every value is 0 (no sensor on it?): calibrate cannot learn it; leave it out "
+            "with --channels\n") in p.stderr
+    assert "WARNING Acc" not in p.stderr
+    site = tmp_path / "s.yaml"
+    p = run("cmsensord", "calibrate", str(cap), "--out", str(site))
+    assert (p.returncode, p.stderr.strip()) == (2, (
+        "cmsensord: calibrate: channel Spare_g: the healthy period's block RMS is zero: no signal on this channel "
+        "(no sensor on it?): leave it out (import --channels, or a --config BASE.yaml listing the channels to "
+        "learn)"))
+    base = tmp_path / "base.yaml"
+    base.write_text("channels:\n  - {name: Acc_X_g, index: 0}\n  - {name: Acc_Y_g, index: 2}\n")
+    p = run("cmsensord", "calibrate", str(cap), "--config", str(base), "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert [ch["name"] for ch in yaml.safe_load(site.read_text())["channels"]] == ["Acc_X_g", "Acc_Y_g"]

@@ -242,7 +242,8 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
                          "starting or stopping); choose a period where it runs")
     baseline = float(np.nanmedian(running))
     if not baseline > 0:
-        raise ValueError("the healthy period's block RMS is zero: no signal on this channel")
+        raise ValueError("the healthy period's block RMS is zero: no signal on this channel (no sensor on it?): "
+                         "leave it out (import --channels, or a --config BASE.yaml listing the channels to learn)")
     def counts_of(series: np.ndarray, rs: np.ndarray) -> np.ndarray:
         return period_counts(series / baseline, rs, period=period, window=window, z_c=z_c, p0=p0, q0=q0)[1:]
 

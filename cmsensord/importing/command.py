@@ -187,6 +187,9 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
         nclip, lost = meta["clipped_samples"][c], meta["missing_blocks"][c]
         lines.append(line + (", no clipping" if not nclip else "")
                      + (f", {lost:,} block(s) left out for missing samples" if lost else ""))
+        if not peaks[c] > 0:
+            lines.append(f"  WARNING {name}: every value is 0 (no sensor on it?): calibrate cannot learn it; "
+                         "leave it out with --channels")
         if nclip:
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
                          f"clipped at +-{fs_:g} m/s2 (counts 0/{ADC_MAX}); those blocks carry the "
