@@ -308,6 +308,22 @@ def test_a_file_whose_clock_does_not_run_evenly_leaves_the_snapshots_without_tim
     assert_within_one_count(cap, np.round(x, 3) * G)
 
 
+@pytest.mark.parametrize("starts, said", [
+    ([(10, 0, 0), (9, 0, 0), (11, 0, 0)], "acc_00002.csv: its time of day (09:00:00) is not after acc_00001.csv's "
+                                          "(10:00:00), at 1 place(s)"),
+    ([(10, 0, 0), (10, 0, 0), (10, 0, 0)], "acc_00002.csv: its time of day (10:00:00) is not after acc_00001.csv's "
+                                           "(10:00:00), at 2 place(s)"),
+])
+def test_files_whose_times_do_not_increase_in_their_order_leave_the_snapshots_without_times(tmp_path, starts, said):
+    """Files named in another order than their times, or a logger that stamps every file alike:
+    no times (before, the sidecar held gaps of -3602 s), and a note names the first such file."""
+    femto_like(tmp_path / "b", starts)
+    _, side, err = imported(tmp_path, "b", "--unit", "g")
+    assert f"  note: {said}: the snapshots have no times; --snapshot-interval S gives them\n" in err
+    assert [s["source_time_s"] for s in side["snapshots"]] == [None, None, None]
+    assert "snapshot times from" not in err
+
+
 # --------------------------------------------------------------------------- dates and times
 def test_a_first_column_of_dates_and_times_gives_the_rate_and_the_recordings_date(tmp_path):
     """Three logger files of 3 s at 1 kHz, 10 minutes apart across midnight, each row stamped
@@ -329,6 +345,10 @@ def test_a_first_column_of_dates_and_times_gives_the_rate_and_the_recordings_dat
     assert (side["fs"], side["channel_names"], side["source_start"]) == (1000, ["x", "y"], "2023-05-01T23:50:00")
     assert [s["source_time_s"] for s in side["snapshots"]] == [0.0, 600.0, 1200.0]
     assert_within_one_count(cap, np.round(x, 6) * G)
+    # one file: when it starts, not a span of nothing
+    _, side, err = imported(tmp_path, "logs/log_1.csv", "--unit", "g")
+    assert "  note: the recording starts at 2023-05-02 00:00:00 (the file's dates and times)\n" in err
+    assert "snapshot times from" not in err and side["source_start"] == "2023-05-02T00:00:00"
 
 
 def test_a_row_whose_date_is_not_one_is_named_by_its_line(tmp_path):

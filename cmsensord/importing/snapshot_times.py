@@ -46,7 +46,9 @@ def _from_clock(snaps: list[Snapshot], origins: list[tuple[int, int]], fs: float
     """Snapshot times from the files' time columns (:mod:`.time_column`), counted from the
     first snapshot, and its date and time when ``dated``; times of day: a time more than 12 h
     before the one before it is on the next day. A note says the span, or, when a file had no
-    time column that increases evenly, which (no times then)."""
+    time column that increases evenly, or a snapshot's time is not after the one before it (files
+    in another order than their times, a logger that stamps every file alike), which (no times
+    then)."""
     lacking = [s.source for s in snaps if s.source_time_s is None]
     if lacking:
         notes.append(f"{lacking[0]}{f' and {len(lacking) - 1} more' if len(lacking) > 1 else ''}: no "
@@ -56,15 +58,27 @@ def _from_clock(snaps: list[Snapshot], origins: list[tuple[int, int]], fs: float
     at = np.array([s.source_time_s for s in snaps], dtype=np.float64) + np.array([a for _, a in origins]) / fs
     days = np.zeros(at.size) if dated else np.concatenate([[0], np.cumsum(np.diff(at) < -43200)])
     t = at + 86400 * days - at[0]
-    if dated:
-        first, last = (datetime.fromtimestamp(v, timezone.utc).replace(tzinfo=None) for v in (at[0], at[-1]))
-        span, start = f"{first:%Y-%m-%d %H:%M:%S} to {last:%Y-%m-%d %H:%M:%S}", first.isoformat()
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        k = int(back[0]) + 1
+        notes.append(f"{snaps[k].source}: its {'date and time' if dated else 'time of day'} ({_when(at[k], dated)}) is "
+                     f"not after {snaps[k - 1].source}'s ({_when(at[k - 1], dated)}), at {back.size} place(s): the "
+                     "snapshots have no times; --snapshot-interval S gives them")
+        return [Snapshot(s.source, s.start, s.length, None) for s in snaps], None
+    start = datetime.fromtimestamp(at[0], timezone.utc).replace(tzinfo=None).isoformat() if dated else None
+    what = "dates and times" if dated else "time-of-day columns"
+    if len(snaps) == 1:
+        notes.append(f"the recording starts at {_when(at[0], dated)} (the file's {what})")
     else:
-        span, start = f"{_hms(at[0])} to {_hms(at[-1])}", None
-    notes.append(f"snapshot times from the files' {'dates and times' if dated else 'time-of-day columns'}: {span} "
-                 f"({t[-1] / 3600:.4g} h{', past midnight' if days[-1] else ''}); --snapshot-interval S sets "
-                 "them instead")
+        notes.append(f"snapshot times from the files' {what}: {_when(at[0], dated)} to {_when(at[-1], dated)} "
+                     f"({t[-1] / 3600:.4g} h{', past midnight' if days[-1] else ''}); --snapshot-interval S sets "
+                     "them instead")
     return [Snapshot(s.source, s.start, s.length, float(ti)) for s, ti in zip(snaps, t)], start
+
+
+def _when(at: float, dated: bool) -> str:
+    """A file's time as it said it: a date and time (seconds since the epoch), or a time of day."""
+    return f"{datetime.fromtimestamp(at, timezone.utc):%Y-%m-%d %H:%M:%S}" if dated else _hms(at)
 
 
 def _hms(seconds: float) -> str:
