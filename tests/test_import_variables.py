@@ -51,6 +51,8 @@ def test_a_cwru_file_that_also_holds_another_records_signals_gives_its_own(tmp_p
             "--out", "c.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert_within_one_count(decode(tmp_path / "c.bin"), np.concatenate([x98, x99], axis=1) * G)
+    assert ("  note: the files give different speeds (98.mat 1797 rpm; 99.mat 1750 rpm): the capture keeps 1797 "
+            "rpm; import each speed on its own, or give --rpm\n") in r.stderr
     # its speed too: record 99's 1750 rpm, not 98's 1797 stored first
     r = cmd("import", "99.mat", "--variable", "*_DE_time", "--fs", "12000", "--out", "s.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr

@@ -370,7 +370,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     tacho_pieces: list[np.ndarray] = []
     snaps: list[Snapshot] = []
     notes: list[str] = []
-    rpm_file = None
+    rpms: list[tuple[float, str]] = []     # the speeds the files give, and which
     pos = 0
     origins: list[tuple[int, int]] = []     # per snapshot: (its file, its first sample in the file)
     own_times = clock = dated = False       # a file gave its snapshots' times (of day, or dated)
@@ -398,8 +398,8 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
         finally:
             if isinstance(t.data, Columns):     # read a stretch at a time from a file kept open
                 t.data.close()
-        if t.rpm and np.isfinite(t.rpm) and t.rpm > 0 and rpm_file is None:
-            rpm_file = (t.rpm, t.name)
+        if t.rpm and np.isfinite(t.rpm) and t.rpm > 0:
+            rpms.append((t.rpm, t.name))
         del t
         if progress is not None:
             progress(fi + 1)
@@ -421,8 +421,20 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
                     source_start=start)
     if layout.tacho is not None:
         _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)
-    _speed(rec, opts, rpm_file, layout.tacho is not None)
+    _speed(rec, opts, rpms[0] if rpms else None, layout.tacho is not None)
+    rec.notes += _speeds_differ(rpms) if opts.rpm is None and layout.tacho is None else []
     return rec
+
+
+def _speeds_differ(rpms: list[tuple[float, str]]) -> list[str]:
+    """A note when the files give speeds more than 1 % apart (CWRU's files, one a load): the
+    sidecar keeps the first's."""
+    if not rpms or max(r for r, _ in rpms) <= 1.01 * min(r for r, _ in rpms):
+        return []
+    other = [(r, name) for r, name in rpms if abs(r - rpms[0][0]) > 0.01 * rpms[0][0]]
+    listed = ", ".join(f"{name} {r:g} rpm" for r, name in other[:3]) + (", ..." if len(other) > 3 else "")
+    return [f"the files give different speeds ({rpms[0][1]} {rpms[0][0]:g} rpm; {listed}): the capture keeps "
+            f"{rpms[0][0]:g} rpm; import each speed on its own, or give --rpm"]
 
 
 def _speed(rec: Recording, opts: ImportOptions, rpm_file: tuple[float, str] | None, tacho: bool) -> None:
