@@ -90,6 +90,9 @@ def test_a_board_channel_that_is_not_there_is_refused_by_replay(tmp_path, board_
     p = run("replay", board_capture, tmp_path, BEARING % "ch5")
     assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: bearings[0].channel: names no "
                                                          "channel (channels: ch0) (got 'ch5')")
+    events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap"))) if t == "/cm/events"]
+    assert ("config", "configuration error: bearings[0].channel: names no channel (channels: ch0) (got 'ch5')") \
+        in [(m["kind"], m["message"]) for m in events]            # the short log says why it ends
     p = run("replay", board_capture, tmp_path, RULES % "ch0" + BEARING % "ch0")
     assert p.returncode == 0, p.stderr
 

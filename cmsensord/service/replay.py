@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from cmsensord.config import Config
+from cmsensord.config import Config, ConfigError
 from cmsensord.importing.channel_names import imported_channels
 from cmsensord.importing.timeline import Timeline
 from cmsensord.link import Progress
@@ -65,6 +65,10 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
                 progress.update(capture.bytes_read, f"{proc.adc_seconds:.0f} s")
         _no_frame(proc, path, capture.counters)
         proc.finish()
+    except ConfigError as exc:          # the settings against the channels, once the capture named them
+        proc.event("config", None, "configuration error: " + str(exc).removeprefix(exc.source + ": "))
+        proc.finish()
+        raise
     finally:
         progress.close()
         out = sink.close()
