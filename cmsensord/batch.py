@@ -65,14 +65,18 @@ class _Collector:
 
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
-                 quiet: bool = False) -> tuple[list[Path], dict]:
+                 quiet: bool = False, auto_channels: bool = True) -> tuple[list[Path], dict]:
     """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary.
+    ``auto_channels``: ``cfg`` lists no channels: an imported capture's are named as its import
+    named them (as ``cmsensord replay`` names them), else the board's.
 
     A capture or a bandwidth the batch filter cannot handle (no RAW blocks or no tacho, a
     bandwidth too narrow for double precision, a record too large for memory) raises
     CmsensordError with one line, and the files this run wrote are deleted: nothing is left
     behind."""
+    from cmsensord.importing.channel_names import imported_channels
     from cmsensord.monitor.processor import Processor
+    from cmsensord.observations import sidecar
     from cmsensord.service.sink import open_sink
 
     t_start = time.monotonic()
@@ -83,7 +87,10 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
     done = False
     try:
-        proc = Processor(cfg, sink, auto_channels=True, link_counters=source.counters.as_dict)
+        if auto_channels:
+            named = imported_channels(cfg, sidecar(capture))
+            cfg, auto_channels = named, named is cfg
+        proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
         col = _Collector()
         with source:
             for frames in source:

@@ -203,10 +203,10 @@ def _run_vkf(args: argparse.Namespace) -> int:
     """``cmsensord vkf``: the batch orders of a capture."""
     from cmsensord.batch import batch_orders, describe
 
-    cfg, _ = _config_for(args.sub_config)
+    cfg, auto = _config_for(args.sub_config)
     if args.sub_out:
         cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
-    paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles)
+    paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles, auto_channels=auto)
     for p in paths:
         print(f"MCAP log: {p}", file=sys.stderr)
     print(f"  {describe(info, bandwidth_hz=args.bandwidth, poles=args.poles)}", file=sys.stderr)

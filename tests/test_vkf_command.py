@@ -133,3 +133,27 @@ def test_vkf_of_a_board_that_changes_its_set_up_mid_record_is_one_line(tmp_path,
         2, f"cmsensord: {cap}: the board {said} at byte {at}: the batch "
            "VKF needs one board set-up for the whole record (cut the capture at that byte)")
     assert not (tmp_path / "out").exists()
+
+
+def test_vkf_of_an_imported_capture_names_its_channels_as_replay_does(tmp_path):
+    """An import named `drive_end` with a constant speed: the batch orders go on /cm/drive_end,
+    and a site file calibrate made of it (its channels and a rule on them) is taken, not refused
+    against board names."""
+    t = np.arange(25600 * 6) / 25600.0
+    x = 0.5 * np.sin(2 * np.pi * 29.75 * t) + 0.1 * np.random.default_rng(4).standard_normal(t.size)
+    np.save(tmp_path / "r.npy", x)
+    r = cmsensord("import", "r.npy", "--fs", "25600", "--unit", "g", "--names", "drive_end", "--rpm", "1785",
+                  "--out", "r.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmsensord("vkf", "r.bin", "--out", "plain", cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert batch_messages(tmp_path / "plain", "drive_end") and not list(
+        t for p in (tmp_path / "plain").glob("*.mcap") for t, _, _ in read_messages(p) if t.startswith("/cm/ch0/"))
+    (tmp_path / "base.yaml").write_text("alarms:\n  rules:\n    - {name: a, indicator: accel_rms, alert: 100, "
+                                        "channels: [drive_end]}\n")
+    r = cmsensord("calibrate", "r.bin", "--config", "base.yaml", "--out", "site.yaml", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmsensord("vkf", "r.bin", "--config", "site.yaml", "--out", "sited", cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert batch_messages(tmp_path / "sited", "drive_end")
+    assert yaml.safe_load((tmp_path / "site.yaml").read_text())["channels"][0]["name"] == "drive_end"
