@@ -470,7 +470,7 @@ def test_without_unit_the_files_own_unit_is_taken_and_a_different_unit_given_is_
 
 
 #: the note of an import whose file says no unit and no --unit given
-_ASSUMED = "unit m/s2 assumed: the file does not say its unit; give --unit (g, mg, m/s2, mm/s2, V)"
+_ASSUMED = "unit m/s2 assumed: the file does not say its unit; give --unit (g, mg, m/s2, mm/s2, V, Pa)"
 
 
 def test_without_unit_a_file_that_says_none_is_taken_as_ms2_with_a_note(tmp_path):

@@ -187,7 +187,8 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         "format": "cmsensord import", "version": 1,
         "capture": Path(out).name, "sources": rec.sources, "mode": mode,
         "fs": fs, "block_len": L, "blocks_per_s": fs / L,
-        "channel_names": rec.names, "unit": "m/s2", "source_unit": rec.source_unit, **extra,
+        "channel_names": rec.names, "unit": _one_or_each(rec.units),
+        "source_unit": _one_or_each(rec.source_units or ["m/s2"]), **extra,
         "full_scale": full_scale, "scale": scale.tolist(), "offset": [OFFSET] * rec.n_channels,
         "clipped_blocks": stats["clipped_blocks"], "clipped_samples": stats["clipped_samples"],
         "missing_blocks": stats["missing_blocks"],
@@ -225,3 +226,8 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
             p.unlink(missing_ok=True)
         raise
     return meta
+
+
+def _one_or_each(units: list[str]) -> str | list[str]:
+    """One unit when every channel has it, else one per channel (the sidecar's ``unit``)."""
+    return units[0] if len(set(units)) == 1 else units

@@ -43,6 +43,21 @@ Columns and channels count from 0. The sidecar CAPTURE.json (b11.bin.json) lists
 (board second, length, % of the record, original time and gap), units and scales."""
 
 
+def _units(text: str) -> tuple[str, ...]:
+    """'g' or 'g,Pa' -> units of UNITS."""
+    units = comma_list(text)
+    bad = [u for u in units if u not in UNITS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown unit {bad[0]!r}; choose from {', '.join(UNITS)} (one, or one "
+                                         "per channel: g,Pa)")
+    return units
+
+
+def _numbers(kind):
+    """'2' or '2,0.5' -> numbers of ``kind`` (an argparse type)."""
+    return lambda text: tuple(kind(item) for item in comma_list(text))
+
+
 def _ranges(text: str) -> tuple[float, ...]:
     """'50', '5g', '50,100' -> m/s² values."""
     out = []
@@ -93,14 +108,15 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                      help="the CSV's first line names the columns (default: detected)")
     hdr.add_argument("--no-header", dest="imp_header", action="store_const", const=False,
                      help="the CSV has no header line")
-    p.add_argument("--unit", dest="imp_unit", choices=tuple(UNITS), default=None,
-                   help="unit of the values (default: the one the file gives every column, in a units line, "
-                        "the column names or TDMS unit_string; else m/s2; V needs --sensitivity)")
-    p.add_argument("--sensitivity", dest="imp_sensitivity", type=positive, metavar="MV_PER_G",
-                   help="accelerometer sensitivity in mV/g, for --unit V")
-    p.add_argument("--scale-factor", dest="imp_scale_factor", type=nonzero,
-                   default=1.0, metavar="X",
-                   help="multiply the values by X first (WAV PCM: the value at full scale)")
+    p.add_argument("--unit", dest="imp_unit", type=_units, default=None, metavar="UNIT[,UNIT]",
+                   help=f"unit of the values, one or one per channel: {', '.join(UNITS)} (Pa: a microphone; "
+                        "default: the units the file gives its columns, in a units line, the column names or "
+                        "TDMS unit_string; else m/s2; V needs --sensitivity)")
+    p.add_argument("--sensitivity", dest="imp_sensitivity", type=_numbers(positive), metavar="MV_PER_G[,...]",
+                   help="accelerometer sensitivity in mV/g, for the channels in V (one, or one per channel)")
+    p.add_argument("--scale-factor", dest="imp_scale_factor", type=_numbers(nonzero),
+                   default=(1.0,), metavar="X[,X]",
+                   help="multiply the values by X first, one or one per channel (WAV PCM: the value at full scale)")
     p.add_argument("--range", dest="imp_range", type=_ranges, metavar="R",
                    help="12-bit full scale +-R in m/s2 (or e.g. 5g), one or one per channel "
                         "(default: max |x| x 1.25, rounded up to a 1-1.2-1.5-2-2.5-3-4-5-6-8 value)")
@@ -181,9 +197,8 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
              + (f" from {n_snap} snapshots" if n_snap > 1 else "")]
     peaks = rec.peak
     for c, name in enumerate(meta["channel_names"]):
-        fs_, sc = meta["full_scale"][c], meta["scale"][c]
-        line = (f"  {name}: full scale +-{fs_:g} m/s2 ({sc:.4g} m/s2 a count), "
-                f"peak {peaks[c]:.4g} m/s2")
+        fs_, sc, u = meta["full_scale"][c], meta["scale"][c], rec.units[c]
+        line = f"  {name}: full scale +-{fs_:g} {u} ({sc:.4g} {u} a count), peak {peaks[c]:.4g} {u}"
         nclip, lost = meta["clipped_samples"][c], meta["missing_blocks"][c]
         lines.append(line + (", no clipping" if not nclip else "")
                      + (f", {lost:,} block(s) left out for missing samples" if lost else ""))
@@ -192,7 +207,7 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
                          "leave it out with --channels")
         if nclip:
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
-                         f"clipped at +-{fs_:g} m/s2 (counts 0/{ADC_MAX}); those blocks carry the "
+                         f"clipped at +-{fs_:g} {u} (counts 0/{ADC_MAX}); those blocks carry the "
                          f"clipped flag; --range {nice_range(peaks[c]):g} avoids it")
     if meta["tacho"]:
         if meta["tacho_from"] == "rpm":
@@ -225,6 +240,11 @@ def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
         return _write(rec, opts, files, left)
 
 
+def _one_or_all(values: tuple[float, ...] | None) -> float | list[float] | None:
+    """An option given once as its value, one per channel as the list (the sidecar's)."""
+    return values if values is None else values[0] if len(values) == 1 else list(values)
+
+
 def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str]) -> int:
     L, note = choose_block_len(rec.fs, opts.block_len, opts.mode)
     plan = plan_blocks(rec, L)
@@ -236,7 +256,7 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
         raise ImportFailure(f"{files[0]}: {rec.n_samples} sample(s) fill no {L}-sample block; "
                             "give a smaller --block-len")
     full_scale = choose_ranges(rec, opts.full_scale)
-    extra = {"scale_factor": opts.scale_factor, "sensitivity_mv_per_g": opts.sensitivity,
+    extra = {"scale_factor": _one_or_all(opts.scale_factor), "sensitivity_mv_per_g": _one_or_all(opts.sensitivity),
              "offset_counts": OFFSET, "notes": notes}
     bar = _Bar(plan.n_blocks, f"import: writing {Path(opts.out).name}")
     try:

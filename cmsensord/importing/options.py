@@ -20,9 +20,9 @@ class ImportOptions:
     variable: tuple[str, ...] | None = None  # .mat: names or patterns
     separator: str | None = None  # CSV; None: detected
     header: bool | None = None  # CSV; None: detected
-    unit: str | None = None  # None: the file's own, else m/s2
-    sensitivity: float | None = None  # mV/g, for unit V
-    scale_factor: float = 1.0
+    unit: tuple[str, ...] | None = None  # one, or one per channel; None: the file's own, else m/s2
+    sensitivity: tuple[float, ...] | None = None  # mV/g, for the channels in V: one, or one per channel
+    scale_factor: tuple[float, ...] = (1.0,)  # one, or one per channel
     full_scale: tuple[float, ...] | None = None  # m/s^2, one or one per channel; None: from the data
     block_len: int | None = None  # None: round(fs / 100)
     snapshot_len: int | None = None  # split each file's samples into snapshots of this length

@@ -2,8 +2,8 @@
 
 A :class:`Recording` is what every reader's output becomes before encoding:
 
-* ``samples``: m/s², every snapshot end to end, in memory up to a bound and beyond it on
-  disk (:class:`~.samples.SampleStore`);
+* ``samples``: m/s² (a microphone's Pa: :attr:`Recording.units`), every snapshot end to
+  end, in memory up to a bound and beyond it on disk (:class:`~.samples.SampleStore`);
 * ``snapshots``: where each contiguous snapshot lies in ``samples`` (start, length),
   which file (and which entry of it) it came from, and its time in the original
   recording where that is known;
@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .samples import SampleStore
+from .units import physical_unit
 
 __all__ = ["Snapshot", "Recording"]
 
@@ -40,7 +41,7 @@ class Recording:
     names: list[str]
     snapshots: list[Snapshot]
     sources: list[str]
-    source_unit: str = "m/s2"
+    source_units: list[str] = field(default_factory=list)  # each channel's unit in the files ([]: m/s2)
     tacho_edges: np.ndarray | None = None  # float64 fractional sample indices into samples
     tacho_source: str | None = None  # the pulse or speed column's name, or "rpm"
     tacho_from: str | None = None  # "pulses" (a pulse column), "speed" (a speed column) or "rpm" (constant)
@@ -56,6 +57,11 @@ class Recording:
         end = sum(s.length for s in self.snapshots)
         if end != self.samples.n_samples:
             raise ValueError(f"the snapshots cover {end} samples, the store holds {self.samples.n_samples}")
+
+    @property
+    def units(self) -> list[str]:
+        """Each channel's physical unit: m/s2, or a microphone's Pa."""
+        return [physical_unit(u) for u in self.source_units] or ["m/s2"] * self.n_channels
 
     @property
     def n_channels(self) -> int:

@@ -39,7 +39,7 @@ from .table import Table
 from .tabular import LongText, is_text_table, read_tabular
 from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
 from .tdms import read_tdms
-from .units import resolve_unit, to_ms2_factor, unit_in_name, unit_of
+from .units import per_channel, resolve_units, to_ms2_factor, unit_in_name, unit_of
 from .wav import read_wav
 
 __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
@@ -225,11 +225,22 @@ class _Layout:
         self.fs: float = fs
         self.file_fs = t.fs
         said = [(t.columns[i], unit_of(t.units[i]) if t.units else unit_in_name(t.columns[i])) for i in self.idx]
-        self.unit, note = resolve_unit(opts.unit, said)
-        self.notes += [note] if note else []
-        if opts.unit is None and self.unit == "V" and opts.sensitivity is None:
-            raise ImportFailure(f"{t.path}: the file gives its {t.kind}s in V ({', '.join(c for c, _ in said)}): "
+        self.units, unit_notes = resolve_units(opts.unit, said)
+        self.notes += unit_notes
+        in_volts = [c for (c, _), u in zip(said, self.units) if u == "V"]
+        if opts.unit is None and in_volts and opts.sensitivity is None:
+            raise ImportFailure(f"{t.path}: the file gives its {t.kind}s in V ({', '.join(in_volts)}): "
                                 "add the accelerometer's --sensitivity MV_PER_G (e.g. 100), or --unit for another")
+
+    def factors(self, opts: ImportOptions) -> np.ndarray:
+        """Each channel's physical unit per raw value, (C, 1): its unit's, ``--sensitivity`` and
+        ``--scale-factor`` (one, or one per channel)."""
+        n = len(self.units)
+        sens, scale = per_channel(opts.sensitivity, n, "--sensitivity"), per_channel(opts.scale_factor, n,
+                                                                                   "--scale-factor")
+        if opts.sensitivity is not None and "V" not in self.units:
+            to_ms2_factor(self.units[0], sens[0])           # its one-line error: V only
+        return np.array([[to_ms2_factor(u, s if u == "V" else None, k)] for u, s, k in zip(self.units, sens, scale)])
 
     def check(self, t: Table, first_path: str) -> None:
         """A one-line ImportFailure when file ``t`` has other columns than the first file
@@ -287,10 +298,11 @@ def _split(t: Table, n: int | None) -> list[tuple[int, int, int]]:
     return [(0, a, min(n, length - a)) for a in range(0, length, n)]
 
 
-def _channels(t: Table, layout: _Layout, factor: float, notes: list[str]) -> Iterator[np.ndarray]:
-    """The imported channels of one file in m/s², (C, n) stretches of at most ``READ_SAMPLES`` in
-    file order: one float64 copy of a stretch, not of the file. A missing or non-finite value is
-    NaN there (its block is left out of the capture), and ``notes`` gets one line on them."""
+def _channels(t: Table, layout: _Layout, factor: np.ndarray, notes: list[str]) -> Iterator[np.ndarray]:
+    """The imported channels of one file in their physical units (``factor``: (C, 1)), (C, n)
+    stretches of at most ``READ_SAMPLES`` in file order: one float64 copy of a stretch, not of
+    the file. A missing or non-finite value is NaN there (its block is left out of the capture),
+    and ``notes`` gets one line on them."""
     s_, n_, _ = t.data.shape
     missing = np.zeros(len(layout.idx), dtype=np.int64)
     first: tuple[int, int] | None = None
@@ -378,7 +390,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
         t = read_table(path, opts, _within(progress, fi))
         if layout is None:
             layout = _Layout(t, opts)
-            factor = to_ms2_factor(layout.unit, opts.sensitivity, opts.scale_factor)
+            factor = layout.factors(opts)
             stores.append(SampleStore(len(layout.idx), opts.out, opts.memory_mb))
         else:
             layout.check(t, files[0])
@@ -417,7 +429,7 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     snaps, start = retimed(snaps, origins, files, opts, fs, own_times, "date" if dated else "day" if clock else "",
                             notes)
     rec = Recording(fs=int(round(fs)), samples=stores[0], names=layout.names, snapshots=snaps,
-                    sources=[str(f) for f in files], source_unit=layout.unit, ppr=board_ppr(opts.ppr), notes=notes,
+                    sources=[str(f) for f in files], source_units=layout.units, ppr=board_ppr(opts.ppr), notes=notes,
                     source_start=start)
     if layout.tacho is not None:
         _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)

@@ -1,4 +1,9 @@
-"""Input units to m/s² (the capture's physical unit), and the unit a file says its columns are in."""
+"""Input units to each channel's physical unit (m/s² for an accelerometer, Pa for a
+microphone: the capture's), and the unit a file says its columns are in.
+
+A capture's channel is an accelerometer's (its values m/s²: g, mg, m/s2, mm/s2, or V through a
+sensitivity in mV/g) or a microphone's (Pa). One import may hold both (a paired recording for
+the acoustic calibration): ``--unit`` gives one unit, or one per channel."""
 
 from __future__ import annotations
 
@@ -6,17 +11,34 @@ import re
 
 from .errors import ImportFailure
 
-__all__ = ["G", "UNITS", "resolve_unit", "to_ms2_factor", "unit_in_name", "unit_of"]
+__all__ = ["G", "UNITS", "per_channel", "physical_unit", "resolve_units", "to_ms2_factor", "unit_in_name", "unit_of"]
 
 #: standard gravity, m/s^2 per g
 G = 9.80665
-#: m/s^2 per input unit; "V" needs a sensitivity in mV/g
-UNITS: dict[str, float | None] = {"g": G, "mg": G * 1e-3, "m/s2": 1.0, "mm/s2": 1e-3, "V": None}
+#: the physical unit per input unit (m/s^2; a microphone's Pa: Pa); "V" needs a sensitivity in mV/g
+UNITS: dict[str, float | None] = {"g": G, "mg": G * 1e-3, "m/s2": 1.0, "mm/s2": 1e-3, "V": None, "Pa": 1.0}
+
+
+def physical_unit(unit: str) -> str:
+    """The capture's unit of a channel imported in ``unit``: Pa for Pa, else m/s2."""
+    return "Pa" if unit == "Pa" else "m/s2"
+
+
+def per_channel(value, n: int, option: str) -> list:
+    """``value`` (None, one, or a tuple of one or ``n``) as one per channel; a one-line error
+    for another count."""
+    if not isinstance(value, tuple):
+        return [value] * n
+    if len(value) not in (1, n):
+        raise ImportFailure(f"{option} gives {len(value)} values for {n} channel(s); give one, or one per "
+                            "imported channel")
+    return list(value) * n if len(value) == 1 else list(value)
 
 
 def to_ms2_factor(unit: str, sensitivity_mv_per_g: float | None = None,
                   scale_factor: float = 1.0) -> float:
-    """m/s² per raw value: ``scale_factor`` x (m/s² per ``unit``).
+    """The physical unit (:func:`physical_unit`) per raw value: ``scale_factor`` x (m/s² per ``unit``,
+    or 1 for Pa).
 
     For ``V`` the sensor's sensitivity in mV/g is needed: 1 V = 1000 / sensitivity g.
     """
@@ -39,7 +61,7 @@ def to_ms2_factor(unit: str, sensitivity_mv_per_g: float | None = None,
 #: how files write the units of UNITS (lower case, spaces and brackets dropped)
 _SPELLINGS = {"g": "g", "g0": "g", "gn": "g", "mg": "mg", "m/s2": "m/s2", "m/s^2": "m/s2", "m/s²": "m/s2",
               "m/s**2": "m/s2", "ms^-2": "m/s2", "ms-2": "m/s2", "m/sec^2": "m/s2", "m/sec2": "m/s2",
-              "mm/s2": "mm/s2", "mm/s^2": "mm/s2", "mm/s²": "mm/s2", "v": "V"}
+              "mm/s2": "mm/s2", "mm/s^2": "mm/s2", "mm/s²": "mm/s2", "v": "V", "pa": "Pa"}
 #: a unit at the end of a column's name: ``Acc X (g)``, ``a [m/s^2]``
 _IN_NAME = re.compile(r"[\[(]\s*([^\[\]()]+?)\s*[\])]\s*$")
 
@@ -58,24 +80,33 @@ def unit_in_name(name: str) -> str | None:
     return unit_of(m.group(1)) if m else None
 
 
-def resolve_unit(given: str | None, said: list[tuple[str, str | None]]) -> tuple[str, str | None]:
-    """(the unit to import in, a note or None) from ``--unit`` (``given``, None: not given) and
-    what the file says of each imported column (``said``: (column, UNITS key or None)). Not
-    given: the file's unit when every column says the same one, else m/s², with a note (the
-    file says no unit, or different ones); given, a note when the file says another."""
-    units = {u for _, u in said if u is not None}
-    known = all(u is not None for _, u in said) and len(units) == 1
+def resolve_units(given: tuple[str, ...] | None, said: list[tuple[str, str | None]]) -> tuple[list[str], list[str]]:
+    """(each imported column's unit, notes) from ``--unit`` (``given``: one unit, or one per
+    column; None: not given) and what the file says of each (``said``: (column, UNITS key or
+    None)). Not given: each column's own unit where the file says it, else m/s², with a note;
+    given, a note on each column the file says another unit of."""
+    if given is not None and len(given) not in (1, len(said)):
+        raise ImportFailure(f"--unit gives {len(given)} units for {len(said)} channel(s); give one unit, or one "
+                            "per imported channel")
     if given is None:
-        if known:
-            unit = units.pop()
-            return unit, (f"unit {unit} from the file ({', '.join(c for c, _ in said)}); --unit sets another")
-        if units:
-            listed = ", ".join(f"{c}: {u}" for c, u in said if u is not None)
-            return "m/s2", f"the file gives its columns different or no units ({listed}): taken as m/s2; give --unit"
-        return "m/s2", f"unit m/s2 assumed: the file does not say its unit; give --unit ({', '.join(UNITS)})"
-    other = [(c, u) for c, u in said if u is not None and u != given]
+        return _from_file(said)
+    units = list(given) * len(said) if len(given) == 1 else list(given)
+    other = [(c, u, g) for (c, u), g in zip(said, units) if u is not None and u != g]
     if not other:
-        return given, None
-    says = ", ".join(sorted({u for _, u in other if u}))
-    return given, (f"--unit {given} given, but the file says {says} ({', '.join(c for c, _ in other)}): the "
-                   f"values are taken as {given}; check --unit")
+        return units, []
+    gave = ", ".join(sorted({g for _, _, g in other}))
+    says = ", ".join(sorted({u for _, u, _ in other if u}))
+    return units, [f"--unit {gave} given, but the file says {says} ({', '.join(c for c, _, _ in other)}): the values "
+                   f"are taken as {gave}; check --unit"]
+
+
+def _from_file(said: list[tuple[str, str | None]]) -> tuple[list[str], list[str]]:
+    """Each column's unit as the file says it (m/s² where it says none), and a note."""
+    units = [u or "m/s2" for _, u in said]
+    known = {u for _, u in said if u is not None}
+    if not known:
+        return units, [f"unit m/s2 assumed: the file does not say its unit; give --unit ({', '.join(UNITS)})"]
+    if all(u is not None for _, u in said) and len(known) == 1:
+        return units, [f"unit {units[0]} from the file ({', '.join(c for c, _ in said)}); --unit sets another"]
+    listed = ", ".join(f"{c}: {u or 'none, taken as m/s2'}" for c, u in said)
+    return units, [f"units from the file ({listed}); --unit sets others (one, or one per channel)"]

@@ -1,0 +1,86 @@
+"""`cmsensord import` of channels in different units: an accelerometer beside a microphone in
+one recording (a field recorder's WAV: each channel its own full scale), as the acoustic
+calibration needs them, each in its own physical unit (m/s², Pa)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.io import wavfile
+
+from cmsensord.acoustic_calib import blocks_from_capture
+from processes import run_module
+from tests.test_import import G, cmd, sidecar
+
+FS = 48000
+#: the recorder's full scale of each channel: the accelerometer's 50 g, the microphone's 20 Pa
+ACC_FS_G, MIC_FS_PA = 50.0, 20.0
+
+
+def recorder_wav(path, seconds: float, machine: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A 2-channel 16-bit WAV: ch0 an accelerometer (1x at 29.7 Hz and noise, ``machine`` x its
+    running level), ch1 a microphone hearing the machine and a background; its two signals in
+    m/s2 and Pa as the file holds them."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * FS)) / FS
+    acc = machine * (3.0 * np.sin(2 * np.pi * 29.7 * t) + 1.5 * rng.standard_normal(t.size)) \
+        + 0.05 * rng.standard_normal(t.size)
+    mic = machine * 0.8 * np.sin(2 * np.pi * 29.7 * t + 0.3) + 0.3 * rng.standard_normal(t.size)
+    pcm = np.round(np.stack([acc / (ACC_FS_G * G), mic / MIC_FS_PA], axis=1) * 32767).astype(np.int16)
+    wavfile.write(path, FS, pcm)
+    held = pcm.astype(np.float64) / 32768
+    return held[:, 0] * ACC_FS_G * G, held[:, 1] * MIC_FS_PA
+
+
+def test_an_accelerometer_and_a_microphone_in_one_wav_each_in_its_own_unit(tmp_path):
+    acc, mic = recorder_wav(tmp_path / "pair.wav", 6.0, 1.0, 1)
+    r = cmd("import", "pair.wav", "--unit", "g,Pa", "--scale-factor", f"{ACC_FS_G:g},{MIC_FS_PA:g}",
+            "--names", "acc,mic", "--out", "pair.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  acc: full scale +-" in r.stderr and " m/s2 a count), peak " in r.stderr
+    mic_line = next(line for line in r.stderr.splitlines() if line.startswith("  mic: "))
+    assert mic_line.startswith("  mic: full scale +-") and mic_line.count(" Pa") == 3, mic_line
+    meta = sidecar(tmp_path / "pair.bin")
+    assert (meta["unit"], meta["source_unit"], meta["scale_factor"]) == (["m/s2", "Pa"], ["g", "Pa"], [50.0, 20.0])
+    # the block RMS the daemon and the acoustic calibration see: m/s2 and Pa, each its own
+    _, rms, _ = blocks_from_capture(tmp_path / "pair.bin", [0, 1])
+    L = meta["block_len"]
+    n = rms.shape[0]
+    want = np.sqrt(np.stack([(x[:n * L].reshape(n, L) ** 2).mean(axis=1) for x in (acc, mic)], axis=1))
+    np.testing.assert_allclose(rms, want, rtol=0.02, atol=2e-3)
+    # one unit for both (before, the only choice) scales the microphone as if in g: 9.8 x too large
+    r = cmd("import", "pair.wav", "--unit", "g", "--scale-factor", f"{ACC_FS_G:g},{MIC_FS_PA:g}", "--out", "g.bin",
+            cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    _, rms_g, _ = blocks_from_capture(tmp_path / "g.bin", [0, 1])
+    assert 9.5 < np.median(rms_g[:, 1] / rms[:, 1]) < 10.1
+
+
+def test_the_acoustic_calibration_from_an_imported_paired_recording(tmp_path):
+    """The README's acoustic calibration, from a recorder's files instead of the simulator's."""
+    recorder_wav(tmp_path / "pair.wav", 20.0, 1.0, 2)
+    recorder_wav(tmp_path / "bg.wav", 10.0, 0.0, 3)                # the machine stopped: background alone
+    for name in ("pair", "bg"):
+        r = cmd("import", f"{name}.wav", "--unit", "g,Pa", "--scale-factor", f"{ACC_FS_G:g},{MIC_FS_PA:g}",
+                "--out", f"{name}.bin", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    r = run_module("cmsensord.acoustic_calib", "--paired", str(tmp_path / "pair.bin"), "--background",
+                   str(tmp_path / "bg.bin"), "--accel", "0", "--mic", "1", "--out", str(tmp_path / "mic.json"))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(f"wrote {tmp_path / 'mic.json'}: 2000 paired + 1000 background blocks of 10 ms")
+
+
+def test_units_and_values_per_channel_that_do_not_fit_are_one_line(tmp_path):
+    recorder_wav(tmp_path / "pair.wav", 1.0, 1.0, 4)
+    cases = {
+        ("--unit", "g,Pa,g"): "--unit gives 3 units for 2 channel(s); give one unit, or one per imported channel",
+        ("--unit", "g,Pa", "--scale-factor", "1,2,3"): "--scale-factor gives 3 values for 2 channel(s); give one, "
+                                                       "or one per imported channel",
+        ("--unit", "g,Pa", "--sensitivity", "100"): "--sensitivity applies to --unit V only (got --unit g); drop "
+                                                    "--sensitivity or use --unit V",
+    }
+    for args, message in cases.items():
+        r = cmd("import", "pair.wav", *args, "--out", "o.bin", cwd=tmp_path)
+        assert (r.returncode, r.stderr) == (2, f"cmsensord import: {message}\n"), args
+        assert not list(tmp_path.glob("o.bin*"))
+    r = cmd("import", "pair.wav", "--unit", "g,psi", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 2 and "unknown unit 'psi'; choose from g, mg, m/s2, mm/s2, V, Pa" in r.stderr
