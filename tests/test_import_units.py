@@ -84,3 +84,18 @@ def test_units_and_values_per_channel_that_do_not_fit_are_one_line(tmp_path):
         assert not list(tmp_path.glob("o.bin*"))
     r = cmd("import", "pair.wav", "--unit", "g,psi", "--out", "o.bin", cwd=tmp_path)
     assert r.returncode == 2 and "unknown unit 'psi'; choose from g, mg, m/s2, mm/s2, V, Pa" in r.stderr
+
+
+def test_a_file_that_gives_its_columns_different_units_is_read_in_each_ones(tmp_path):
+    """`Acc (g)` beside `Mic (Pa)`: each column in its own unit (before: both taken as m/s2)."""
+    rng = np.random.default_rng(5)
+    x = np.round(rng.normal(0.0, 0.5, (2000, 2)), 4)
+    (tmp_path / "d.csv").write_text("Acc (g),Mic (Pa)\n" + "".join(f"{a},{b}\n" for a, b in x))
+    r = cmd("import", "d.csv", "--fs", "1000", "--block-len", "10", "--out", "d.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: units from the file (Acc (g): g, Mic (Pa): Pa); --unit sets others (one, or one per "
+            "channel)\n") in r.stderr
+    assert sidecar(tmp_path / "d.bin")["unit"] == ["m/s2", "Pa"]
+    _, rms, _ = blocks_from_capture(tmp_path / "d.bin", [0, 1])
+    want = np.sqrt((x[:rms.shape[0] * 10].reshape(-1, 10, 2) ** 2).mean(axis=1)) * [G, 1.0]
+    np.testing.assert_allclose(rms, want, rtol=0.02, atol=2e-3)
