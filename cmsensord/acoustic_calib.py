@@ -55,6 +55,7 @@ import numpy as np
 from cmsensord import __version__
 from cmsensord.acoustic_model import FORMAT, VERSION, Calibration, load_calibration, save_calibration
 from cmsensord.dsp.acoustic import AcousticModel
+from cmsensord.importing.sidecar import channel_units, sidecar
 
 __all__ = [
     "FORMAT",
@@ -367,7 +368,21 @@ def _raw_block_rms(path, status, raw: dict[int, dict[int, bytes]], channels: lis
 
 #: the warning of a calibration from captures without RAW blocks of the microphone (docs §6)
 NO_CROSS_TERM = ("cross term not estimated ({why}): the noise variance is the background's alone and "
-                 "the sound estimate is less accurate; record the captures in RAW mode to estimate it")
+                 "the sound estimate is less accurate; {fix} to estimate it")
+#: ... its fix: RMS captures, or RAW captures at two rates
+IN_RAW, AT_ONE_RATE = "record the captures in RAW mode", "record (or import) both at one sampling rate"
+
+
+def _units_fit(path, wanted: dict[int, tuple[str, str]]) -> None:
+    """A ValueError when an imported capture's sidecar gives a channel of ``wanted`` (channel ->
+    (its option, the unit it must be in)) another unit: a microphone imported as if in g would
+    be calibrated 9.8 x too loud, without a word."""
+    units = channel_units(sidecar(path))
+    for c, (option, unit) in wanted.items():
+        if c < len(units) and units[c] != unit:
+            raise ValueError(f"{path}: channel {c} ({option}) is in {units[c]} by its import, not {unit}: "
+                             f"{'a microphone' if unit == 'Pa' else 'an accelerometer'} is imported in {unit} "
+                             "(cmsensord import --unit, one per channel: g,Pa)")
 
 
 def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_background: int | None = None,
@@ -381,6 +396,8 @@ def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_backgr
     so in one line.  An explicit ``cross_var`` keyword overrides both.
     """
     mic_bg = mic if mic_background is None else mic_background
+    _units_fit(paired, {accel: ("--accel", "m/s2"), mic: ("--mic", "Pa")})
+    _units_fit(background, {mic_bg: ("--mic-background" if mic_background is not None else "--mic", "Pa")})
     t, rms, block_s, p_samples = blocks_from_capture(paired, [accel, mic], samples_of=mic)
     _, bg, block_bg, q_samples = blocks_from_capture(background, [mic_bg], samples_of=mic_bg)
     if abs(block_s - block_bg) > 1e-12:
@@ -390,13 +407,17 @@ def fit_captures(paired, background, *, accel: int = 0, mic: int = 1, mic_backgr
         if p_samples is None or q_samples is None:
             which = [name for name, s in (("paired", p_samples), ("background", q_samples)) if s is None]
             warning = NO_CROSS_TERM.format(why=f"no RAW blocks of the microphone in the {' and '.join(which)} "
-                                               f"capture{'s' if len(which) > 1 else ''}")
+                                               f"capture{'s' if len(which) > 1 else ''}", fix=IN_RAW)
+            kwargs["cross_var"] = 0.0
+        elif p_samples.shape[1] != q_samples.shape[1]:
+            warning = NO_CROSS_TERM.format(why=f"the captures hold {p_samples.shape[1]} and {q_samples.shape[1]} "
+                                               "samples a block: two sampling rates", fix=AT_ONE_RATE)
             kwargs["cross_var"] = 0.0
         else:
             try:
                 kwargs["cross_var"] = cross_term_variance(p_samples, q_samples)
             except ValueError as exc:
-                warning = NO_CROSS_TERM.format(why=str(exc))
+                warning = NO_CROSS_TERM.format(why=str(exc), fix=IN_RAW)
                 kwargs["cross_var"] = 0.0
     # x and z are block mean squares ((m/s²)², Pa²), as fit_model documents: the squared RMS
     cal = fit_model(rms[:, 0] ** 2, rms[:, 1] ** 2, bg[:, 0] ** 2, t=t, block_s=block_s, **kwargs)

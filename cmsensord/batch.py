@@ -25,6 +25,7 @@ solve with 2 poles and 3 components).
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import time
 from pathlib import Path
@@ -74,9 +75,9 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     bandwidth too narrow for double precision, a record too large for memory) raises
     CmsensordError with one line, and the files this run wrote are deleted: nothing is left
     behind."""
-    from cmsensord.importing.channel_names import imported_channels
+    from cmsensord.importing.channel_names import capture_channels
+    from cmsensord.importing.sidecar import sidecar
     from cmsensord.monitor.processor import Processor
-    from cmsensord.observations import sidecar
     from cmsensord.service.sink import open_sink
 
     t_start = time.monotonic()
@@ -87,9 +88,9 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
     done = False
     try:
-        if auto_channels:
-            named = imported_channels(cfg, sidecar(capture))
-            cfg, auto_channels = named, named is cfg
+        cfg, auto_channels, warnings = capture_channels(cfg, sidecar(capture), auto_channels)
+        for warning in warnings:
+            logging.getLogger("cmsensord").warning("%s", warning)
         proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
         col = _Collector()
         with source:
@@ -185,6 +186,8 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
                          rpm_blocks, ok_blocks)
     written, ridge = 0, []
     for ci, ch in enumerate(channels):
+        if ch.kind == "microphone":         # orders are the vibration channels', as the daemon tracks them
+            continue
         res = vkf2(yd[:, ci], ph, r, poles=poles)
         ridge.append(res.ridge)
         w = res.waveforms[:, :nb * block].reshape(len(comps), nb, block)

@@ -13,7 +13,6 @@ will see.
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import warnings
 from dataclasses import dataclass, field, replace
@@ -25,7 +24,8 @@ from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.dsp.commissioning import idle_periods
 from cmsensord.errors import CmsensordError
-from cmsensord.importing.channel_names import imported_channels
+from cmsensord.importing.channel_names import capture_channels
+from cmsensord.importing.sidecar import sidecar
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
@@ -57,15 +57,6 @@ class Observations:
     def period(self, decision_period_s: float) -> int:
         """Observation slots per decision, as the daemon counts them."""
         return max(1, int(round(decision_period_s * self.rate_hz)))
-
-
-def sidecar(path: str | Path) -> dict:
-    """The capture's metadata written by ``cmsensord import`` (CAPTURE.json beside it), or {}."""
-    p = Path(str(path) + ".json")
-    try:
-        return json.loads(p.read_text()) if p.is_file() else {}
-    except (OSError, ValueError):
-        return {}
 
 
 @contextlib.contextmanager
@@ -100,9 +91,9 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
         raise CmsensordError(f"calibrate: --to {_said(to_s)} is not after --from {_said(from_s)}: the healthy "
                              "period runs from --from to --to (board seconds, or % of the capture)")
     meta = sidecar(capture)
-    if auto_channels:
-        named = imported_channels(cfg, meta)
-        cfg, auto_channels = named, named is cfg
+    cfg, auto_channels, said = capture_channels(cfg, meta, auto_channels)
+    if said:
+        raise CmsensordError(f"calibrate: {said[0]}; calibrate learns it from such a --config BASE.yaml")
     collect = _Collect()
     proc, sink = _replay(capture, cfg, auto_channels, None if isinstance(from_s, Percent) else to_s, collect)
     if not collect.blocks:

@@ -8,6 +8,8 @@ import numpy as np
 from scipy.io import wavfile
 
 from cmsensord.acoustic_calib import blocks_from_capture
+from cmsensord.sinks.mcap_read import read_messages
+from processes import cmsensord as cmsensord_run
 from processes import run_module
 from tests.test_import import G, cmd, sidecar
 
@@ -99,3 +101,66 @@ def test_a_file_that_gives_its_columns_different_units_is_read_in_each_ones(tmp_
     _, rms, _ = blocks_from_capture(tmp_path / "d.bin", [0, 1])
     want = np.sqrt((x[:rms.shape[0] * 10].reshape(-1, 10, 2) ** 2).mean(axis=1)) * [G, 1.0]
     np.testing.assert_allclose(rms, want, rtol=0.02, atol=2e-3)
+
+
+def test_a_microphone_in_the_wrong_unit_is_refused_where_it_would_estimate_nothing(tmp_path):
+    """A microphone calibrated in Pa and fed a channel imported in m/s2 gave severity 0 for a whole
+    run without a word; its unit is now checked against the channel's kind, and the calibration's
+    channels against theirs. A microphone no configuration lists is said to be monitored as a level."""
+    recorder_wav(tmp_path / "pair.wav", 20.0, 1.0, 2)
+    recorder_wav(tmp_path / "bg.wav", 10.0, 0.0, 3)
+    both = ("--unit", "g,Pa", "--scale-factor", f"{ACC_FS_G:g},{MIC_FS_PA:g}", "--names", "acc,mic")
+    for name, args in (("pair", both), ("bg", both), ("as_g", ("--unit", "g", "--scale-factor", "50,20",
+                                                               "--names", "acc,mic", "--rpm", "1782"))):
+        r = cmd("import", "pair.wav" if name == "as_g" else f"{name}.wav", *args, "--out", f"{name}.bin", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    calib = ("--paired", str(tmp_path / "pair.bin"), "--background", str(tmp_path / "bg.bin"))
+    r = run_module("cmsensord.acoustic_calib", *calib, "--accel", "1", "--mic", "0", "--out", str(tmp_path / "x.json"))
+    assert (r.returncode, r.stderr.strip()) == (2, f"acoustic_calib: error: {tmp_path / 'pair.bin'}: channel 1 "
+                                                   "(--accel) is in Pa by its import, not m/s2: an accelerometer is "
+                                                   "imported in m/s2 (cmsensord import --unit, one per channel: g,Pa)")
+    r = run_module("cmsensord.acoustic_calib", *calib, "--out", str(tmp_path / "mic.json"))
+    assert r.returncode == 0, r.stderr
+    site = tmp_path / "mic.yaml"
+    site.write_text(f"channels:\n  - {{name: acc, index: 0}}\n  - {{name: mic, index: 1, kind: microphone, "
+                    f"calibration: {tmp_path / 'mic.json'}}}\n")
+    r = cmsensord_run("replay", "as_g.bin", "--config", "mic.yaml", "--out", "logs", cwd=tmp_path)
+    assert (r.returncode, r.stderr.strip()) == (78, (
+        "cmsensord: configuration error: mic.yaml: channels[1].kind: microphone, but the capture holds mic in "
+        "m/s2 (its import's --unit): a microphone's channel is imported in Pa, an accelerometer's in an "
+        "acceleration; re-import it, or set kind (got 'microphone')"))
+    r = cmsensord_run("replay", "pair.bin", "--config", "mic.yaml", "--out", "logs", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    said = ("mic: the capture holds it in Pa (a microphone's), monitored here as an accelerometer's level: list it "
+            "in --config as kind: microphone with its calibration (python -m cmsensord.acoustic_calib)")
+    r = cmsensord_run("replay", "pair.bin", "--out", "auto", cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr.splitlines()[0] == f"WARNING {said}", r.stderr
+    r = cmsensord_run("calibrate", "pair.bin", "--out", "s.yaml", cwd=tmp_path)
+    assert (r.returncode, r.stderr.strip()) == (2, f"cmsensord: calibrate: {said}; calibrate learns it from such a "
+                                                   "--config BASE.yaml")
+    # the batch orders are the vibration channels', as the daemon's: none for the microphone
+    recorder_wav(tmp_path / "pair.wav", 6.0, 1.0, 5)
+    r = cmd("import", "pair.wav", *both, "--rpm", "1782", "--out", "run.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cmsensord_run("vkf", "run.bin", "--config", "mic.yaml", "--out", "vkf", cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+    topics = {t for p in (tmp_path / "vkf").glob("*.mcap") for t, _, m in read_messages(p)
+              if t.endswith("/orders") and m["method"] == "batch"}
+    assert topics == {"/cm/acc/orders"}
+
+
+def test_a_background_at_another_rate_says_so_not_raw_mode(tmp_path):
+    recorder_wav(tmp_path / "pair.wav", 20.0, 1.0, 2)
+    recorder_wav(tmp_path / "bg.wav", 10.0, 0.0, 3)
+    rate, pcm = wavfile.read(tmp_path / "bg.wav")
+    wavfile.write(tmp_path / "bg44.wav", 44100, pcm[:44100 * 10])
+    for name in ("pair", "bg44"):
+        r = cmd("import", f"{name}.wav", "--unit", "g,Pa", "--scale-factor", "50,20", "--out", f"{name}.bin",
+                cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    r = run_module("cmsensord.acoustic_calib", "--paired", str(tmp_path / "pair.bin"), "--background",
+                   str(tmp_path / "bg44.bin"), "--out", str(tmp_path / "mic.json"))
+    assert r.returncode == 0, r.stderr
+    assert ("acoustic_calib: warning: cross term not estimated (the captures hold 480 and 441 samples a block: two "
+            "sampling rates): the noise variance is the background's alone and the sound estimate is less accurate; "
+            "record (or import) both at one sampling rate to estimate it") in r.stderr

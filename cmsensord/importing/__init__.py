@@ -22,11 +22,12 @@ Modules, one job each:
 * :mod:`.channel_names` -- channel names from the columns' labels (letters, digits and ``_``);
 * :mod:`.recording` -- the recording (m/s², snapshots, tacho edges);
 * :mod:`.samples` -- its samples, in memory up to ``--memory-mb``, beyond it on disk;
-* :mod:`.units` -- the input unit to m/s²;
+* :mod:`.units` -- the input units to m/s² (a microphone's: Pa);
 * :mod:`.adc` -- the 12-bit full-scale range and the counts;
 * :mod:`.tacho` -- tacho edges from a pulse column, a speed column or a constant speed;
 * :mod:`.blocks` -- block length, which samples fill blocks, the board clock;
 * :mod:`.capture_writer` -- frames to ``OUT.part``, the sidecar, the rename;
+* :mod:`.sidecar` -- the sidecar read back (replay, calibrate, vkf, the acoustic calibration);
 * :mod:`.command` -- the argparse sub-command and its summary;
 * :mod:`.timeline` -- board seconds of a capture to times in the recording, or to its share of
   it (replay, report).

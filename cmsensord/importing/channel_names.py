@@ -12,11 +12,12 @@ from __future__ import annotations
 import dataclasses
 import re
 
-from cmsensord.config import ChannelConfig, Config
+from cmsensord.config import ChannelConfig, Config, ConfigError
 
 from .errors import ImportFailure
+from .sidecar import channel_units
 
-__all__ = ["NAME_RULE", "channel_names", "checked_names", "imported_channels", "imported_names"]
+__all__ = ["NAME_RULE", "capture_channels", "channel_names", "checked_names", "imported_channels", "imported_names"]
 
 #: what a channel name may hold: the configuration's rule for channels[].name
 NAME_RULE = re.compile(next(f.metadata["pattern"] for f in dataclasses.fields(ChannelConfig) if f.name == "name"))
@@ -59,6 +60,35 @@ def imported_names(meta: dict) -> list[str]:
     if all(NAME_RULE.fullmatch(n) for n in names) and len(set(names)) == len(names):
         return names
     return channel_names(names)[0]
+
+
+def capture_channels(cfg: Config, meta: dict, auto_channels: bool) -> tuple[Config, bool, list[str]]:
+    """The channels a replay of an imported capture (its sidecar ``meta``; {}: not an import)
+    runs: ``cfg``'s, or with ``auto_channels`` (``cfg`` lists none) the import's, named as it
+    named them (:func:`imported_channels`); with whether they are still the board's (``auto``)
+    and warnings. The import says each channel's unit (Pa: a microphone's): a configured
+    channel whose ``kind`` measures another is a :class:`~cmsensord.errors.ConfigError` (a
+    microphone calibrated in Pa fed m/s2 estimates nothing, and says nothing); a channel the
+    import holds in Pa that no configuration lists is a warning (monitored as a level)."""
+    if auto_channels:
+        named = imported_channels(cfg, meta)
+        cfg, auto_channels, listed = named, named is cfg, False
+    else:
+        listed = True
+    units = channel_units(meta)
+    warnings = []
+    for i, ch in enumerate(cfg.channels):
+        held = str(units[ch.index]) if ch.index < len(units) else None
+        if held is None or held == ch.physical_unit.replace("^", ""):
+            continue
+        if listed:
+            raise ConfigError("<code>", f"channels[{i}].kind", f"{ch.kind}, but the capture holds {ch.name} in "
+                              f"{held} (its import's --unit): a microphone's channel is imported in Pa, an "
+                              "accelerometer's in an acceleration; re-import it, or set kind", ch.kind)
+        warnings.append(f"{ch.name}: the capture holds it in Pa (a microphone's), monitored here as an "
+                        "accelerometer's level: list it in --config as kind: microphone with its calibration "
+                        "(python -m cmsensord.acoustic_calib)")
+    return cfg, auto_channels, warnings
 
 
 def imported_channels(cfg: Config, meta: dict) -> Config:

@@ -2,22 +2,25 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from pathlib import Path
 
 from cmsensord.config import Config, ConfigError
-from cmsensord.importing.channel_names import imported_channels
+from cmsensord.importing.channel_names import capture_channels
+from cmsensord.importing.sidecar import sidecar
 from cmsensord.importing.timeline import Timeline
 from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
-from cmsensord.observations import sidecar
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, origin_lines
 from cmsensord.service.sink import open_sink, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
+
+log = logging.getLogger("cmsensord")
 
 #: bytes per read of an unpaced replay: 192 KiB (3.9 s of 1 RAW channel, 1 s of 4); with the
 #: heap keeping freed memory a larger read is faster still, but at 256 KiB a 4-channel RAW
@@ -43,9 +46,9 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     capture = CaptureSource(path, chunk=REPLAY_CHUNK if speed is None else 1 << 12,   # LinkError before any output
                             decoder=Decoder(max_buffer=REPLAY_CHUNK + MAX_FRAME), batches=True)
     meta = sidecar(path)                # an import's: its channels' names, its snapshots
-    if auto_channels:
-        named = imported_channels(cfg, meta)
-        cfg, auto_channels = named, named is cfg
+    cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
+    for warning in warnings:
+        log.warning("%s", warning)
     timeline = Timeline.from_sidecar(meta)
     board_zero_ns = time.time_ns()
     extra = {"recording_timeline": timeline.to_json(board_zero_ns)} if timeline else {}
