@@ -84,6 +84,11 @@ def test_units_and_values_per_channel_that_do_not_fit_are_one_line(tmp_path):
         r = cmd("import", "pair.wav", *args, "--out", "o.bin", cwd=tmp_path)
         assert (r.returncode, r.stderr) == (2, f"cmsensord import: {message}\n"), args
         assert not list(tmp_path.glob("o.bin*"))
+    r = cmd("import", "pair.wav", "--unit", "g,Pa", "--range", "50g,5g", "--out", "o.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, "cmsensord import: --range: ch1 is a microphone's channel, in Pa: give its "
+                                           "range in Pa, not in g (one per channel: --range 50g,20)\n")
+    r = cmd("import", "pair.wav", "--unit", "g,Pa", "--range", "50g,20", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0 and sidecar(tmp_path / "o.bin")["full_scale"] == [50 * G, 20.0], r.stderr
     r = cmd("import", "pair.wav", "--unit", "g,psi", "--out", "o.bin", cwd=tmp_path)
     assert r.returncode == 2 and "unknown unit 'psi'; choose from g, mg, m/s2, mm/s2, V, Pa" in r.stderr
 

@@ -58,6 +58,7 @@ from .blocks import BlockPlan
 from .errors import ImportFailure, cannot_write
 from .recording import Recording
 from .tacho import block_edges, rpm_edges
+from .units import InG
 
 __all__ = ["CHUNK_BLOCKS", "CHUNK_SAMPLES", "FW_VERSION", "MAX_TACHO_EDGES", "choose_ranges", "sidecar_path",
            "write_capture"]
@@ -73,13 +74,19 @@ def sidecar_path(out: str | Path) -> Path:
 
 
 def choose_ranges(rec: Recording, requested: tuple[float, ...] | None) -> list[float]:
-    """Full-scale range (m/s²) per channel: as given (one for all, or one each), else from the data."""
+    """Full-scale range per channel, in its unit (m/s², a microphone's Pa): as given (one for all,
+    or one each; a value given in g on a channel in Pa is a one-line error), else from the data."""
     C = rec.n_channels
     if requested:
         if len(requested) not in (1, C):
             raise ImportFailure(f"--range gives {len(requested)} values for {C} channels; give one, "
                                 "or one per channel")
-        return [float(v) for v in (requested * C if len(requested) == 1 else requested)]
+        ranges = requested * C if len(requested) == 1 else requested
+        for name, unit, r in zip(rec.names, rec.units, ranges):
+            if unit == "Pa" and isinstance(r, InG):
+                raise ImportFailure(f"--range: {name} is a microphone's channel, in Pa: give its range in Pa, "
+                                    "not in g (one per channel: --range 50g,20)")
+        return [float(v) for v in ranges]
     return [nice_range(p) for p in rec.peak]
 
 

@@ -26,7 +26,7 @@ from .options import ImportOptions
 from .recording import Recording
 from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
-from .units import UNITS, G
+from .units import UNITS, G, InG
 
 __all__ = ["add_import_parser", "run_import", "options_from_args"]
 
@@ -59,12 +59,12 @@ def _numbers(kind):
 
 
 def _ranges(text: str) -> tuple[float, ...]:
-    """'50', '5g', '50,100' -> m/s² values."""
-    out = []
+    """'50', '5g', '50,100' -> values in the channels' units (m/s² for '5g': :class:`InG`)."""
+    out: list[float] = []
     for item in comma_list(text):
         g = item.lower().endswith("g")
         v = positive(item[:-1] if g else item.removesuffix("m/s2"))
-        out.append(v * G if g else v)
+        out.append(InG(v * G) if g else v)
     return tuple(out)
 
 

@@ -11,12 +11,17 @@ import re
 
 from .errors import ImportFailure
 
-__all__ = ["G", "UNITS", "per_channel", "physical_unit", "resolve_units", "to_ms2_factor", "unit_in_name", "unit_of"]
+__all__ = ["G", "UNITS", "InG", "per_channel", "physical_unit", "resolve_units", "to_ms2_factor", "unit_in_name",
+           "unit_of"]
 
 #: standard gravity, m/s^2 per g
 G = 9.80665
 #: the physical unit per input unit (m/s^2; a microphone's Pa: Pa); "V" needs a sensitivity in mV/g
 UNITS: dict[str, float | None] = {"g": G, "mg": G * 1e-3, "m/s2": 1.0, "mm/s2": 1e-3, "V": None, "Pa": 1.0}
+
+
+class InG(float):
+    """A value given in g (``--range 5g``), in m/s²: an acceleration's, no microphone's."""
 
 
 def physical_unit(unit: str) -> str:
