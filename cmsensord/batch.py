@@ -179,7 +179,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     r = [r_for_bandwidth(bandwidth_hz, fs_d, poles) for _ in comps]
     block = max(1, round(fs_d / cfg.orders.output_rate_hz))
     nb = len(idx) // block
-    rpm_blocks = (60.0 * hz[:nb * block]).reshape(nb, block).mean(axis=1)
+    rpm_blocks = _seen_mean(60.0 * hz[:nb * block], np.asarray(lost[idx[:nb * block] - s0].all(axis=1)), nb, block)
     ok_blocks = valid[:nb * block].reshape(nb, block).all(axis=1) & (rpm_blocks >= cfg.orders.min_rpm)
     gone = lost[idx[:nb * block] - s0].reshape(nb, block, len(channels)).mean(axis=1)
     heads = _block_heads(comps, [proc.stamp_ns(int(idx[(b + 1) * block - 1])) for b in range(nb)],
@@ -197,6 +197,16 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
             "components": [c.name for c in comps], "r": [float(v) for v in r],
             "ridge": [float(f"{m:.3g}") for m in ridge]}
+
+
+def _seen_mean(rpm: np.ndarray, unseen: np.ndarray, nb: int, block: int) -> np.ndarray:
+    """Per block of ``block`` samples, the mean speed over the samples some channel holds
+    (``unseen``: none does; the tacho's speed there spans a hole of lost frames, where it is
+    no measurement), or over all of them when none holds one."""
+    r, u = rpm.reshape(nb, block), unseen.reshape(nb, block)
+    held = (~u).sum(axis=1)
+    seen = np.where(u, 0.0, r).sum(axis=1) / np.maximum(held, 1)
+    return np.where(held > 0, seen, r.mean(axis=1))
 
 
 def _record(col, proc) -> tuple[int, np.ndarray, np.ndarray]:
@@ -245,8 +255,9 @@ def _block_heads(comps, stamps: list[int], rpm_blocks: np.ndarray,
 def _write_blocks(sink, comps, channel: str, heads: list[tuple[int, float, bool, list[float]]],
                   rms: np.ndarray, amp: np.ndarray, gone: np.ndarray) -> int:
     """The "batch" /orders messages of one channel's blocks (:func:`_block_heads`; rms and amp
-    (K, blocks)); how many."""
+    (K, blocks)); how many. A block of no sample (all lost) is not valid, as the daemon's."""
     for b, (stamp, rpm, ok, freqs) in enumerate(heads):
-        entries = messages.order_entries(comps, freqs, rms[:, b].tolist(), amp[:, b].tolist(), ok)
-        sink.write(*messages.orders(stamp, channel, rpm, ok, "batch", entries, float(gone[b])))
+        seen = ok and gone[b] < 1.0
+        entries = messages.order_entries(comps, freqs, rms[:, b].tolist(), amp[:, b].tolist(), seen)
+        sink.write(*messages.orders(stamp, channel, rpm, seen, "batch", entries, float(gone[b])))
     return len(heads)

@@ -244,3 +244,33 @@ def test_lost_raw_frames_are_predicted_and_flagged():
             worst_errors(sc, stamp, m, worst)
     assert flagged >= 20 and checked >= 20, (flagged, checked)
     assert worst["o4"] < 5.0 and worst["o4_2"] < 3.0, worst
+
+
+def test_a_half_second_lost_on_the_link_makes_no_speed_and_no_orders_up(tmp_path):
+    """0.56 s of RAW and TACHO frames lost (a USB hiccup): the tacho's causal speed over the
+    hole is an extrapolation capped lower and lower (1293, 692, 472, 358 rpm for a motor at 1720),
+    and the order blocks there hold no sample. Those blocks are not valid (they were, and the
+    report drew a run-up for a machine at constant speed), recursive and batch alike, and an
+    indicator record over the hole takes its speed from the samples it holds."""
+    from cmsensord.sinks.mcap_sink import read_messages
+    from processes import cmsensord, run_module
+
+    cap = tmp_path / "cap.bin"
+    p = run_module("firmware_sim", "--scenario", "faulty", "--mode", "raw", "--tacho", "--duration", "30",
+                   "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    data = cap.read_bytes()
+    (tmp_path / "hole.bin").write_bytes(data[:1_000_000] + data[1_030_000:])     # from 18.7 s: two records
+    p = cmsensord("vkf", str(tmp_path / "hole.bin"), "--out", str(tmp_path / "logs"), timeout=300)
+    assert p.returncode == 0, p.stderr
+    msgs = [(t, m) for path in (tmp_path / "logs").glob("*.mcap") for t, _, m in read_messages(path)]
+    orders = [m for t, m in msgs if t == "/cm/ch0/orders"]
+    for method in ("recursive", "batch"):
+        blind = [m for m in orders if m["method"] == method and m["missing_fraction"] == 1.0]
+        assert len(blind) >= 3, method
+        assert not any(m["valid"] for m in blind), method
+    valid = [m["speed_rpm"] for m in orders if m["valid"]]
+    assert min(valid) > 1650 and max(valid) < 1790, (min(valid), max(valid))      # no run-up drawn
+    holed = [m.get("speed_rpm") for t, m in msgs if t == "/cm/ch0/indicators" and m["missing_fraction"] > 0]
+    assert holed and all(rpm is None or 1690 < rpm < 1750 for rpm in holed), holed    # none, or the samples'
+    assert any(rpm is not None for rpm in holed), holed

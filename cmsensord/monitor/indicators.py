@@ -211,20 +211,28 @@ class IndicatorChain:
         tacho = self.tacho()
         return samples >= (tacho.covered_until if tacho is not None else 0)
 
-    def _speeds(self, starts: list[int], tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
-        """(shaft speed [Hz] or None, its source) of the intervals starting at ``starts``: the
-        mean of the tacho's causal speed at SPEED_POINTS points of each (None when fewer than
-        half are valid, a point no TACHO frame covers being not valid: an interval let go after
-        the longest wait, or in a silence of the tacho, has no speed there), all read in one call;
-        without a tacho, ``indicators.rpm``."""
+    def _speeds(self, ready: list[tuple[int, np.ndarray, int, np.ndarray | None]],
+                tacho: TachoTracker | None) -> list[tuple[float | None, str | None]]:
+        """(shaft speed [Hz] or None, its source) of the intervals ``ready`` (start, samples,
+        stamp, finite mask or None): the mean of the tacho's causal speed at those of its
+        SPEED_POINTS points at a sample it holds (over lost frames the tacho's speed is an
+        extrapolation; None when fewer than half of them are valid, a point no TACHO frame covers
+        being not valid: an interval let go after the longest wait, or in a silence of the tacho,
+        has no speed there), all read in one call; without a tacho, ``indicators.rpm``."""
         if tacho is None:
             rpm = self.cfg.indicators.rpm
-            return [(rpm / 60.0, "config") if rpm else (None, None)] * len(starts)
+            return [(rpm / 60.0, "config") if rpm else (None, None)] * len(ready)
         at = (np.arange(SPEED_POINTS) + 0.5) * self.N / SPEED_POINTS
-        points = np.array(starts)[:, None] + at[None, :]
+        points = np.array([r[0] for r in ready])[:, None] + at[None, :]
         hz, ok = tacho.evaluate_causal(points)
         ok &= ~self.uncovered(points.ravel()).reshape(points.shape)
-        return [(None, None) if o.mean() < 0.5 else (float(np.mean(h[o])), "tacho") for h, o in zip(hz, ok)]
+        seen = np.ones_like(ok)
+        for k, (_, _, _, finite) in enumerate(ready):
+            if finite is not None:
+                seen[k] = _seen_at(finite, at.astype(np.int64))
+        ok &= seen
+        return [(None, None) if not o.any() or o.sum() < 0.5 * n else (float(np.mean(h[o])), "tacho")
+                for h, o, n in zip(hz, ok, seen.sum(axis=1))]
 
     def _records(self, ready: list[tuple[int, np.ndarray, int, np.ndarray | None]],
                  tacho: TachoTracker | None) -> list:
@@ -233,7 +241,7 @@ class IndicatorChain:
         (:func:`compute_many`: the numbers of one :func:`compute` per record)."""
         rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
         todo: list = []                 # (x, setup, shaft_hz) of the complete records
-        for (_, x, stamp, finite), (shaft_hz, source) in zip(ready, self._speeds([r[0] for r in ready], tacho)):
+        for (_, x, stamp, finite), (shaft_hz, source) in zip(ready, self._speeds(ready, tacho)):
             head = {"mode": "raw", "interval_s": self.N / self.fs}
             if shaft_hz is not None:
                 head.update(speed_rpm=_num(60.0 * shaft_hz), speed_source=source)
@@ -464,3 +472,9 @@ class Indicators:
             if at != m.stamp_ns:
                 out[i] = m._replace(stamp_ns=at)
         return out
+
+
+def _seen_at(finite: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Whether any channel holds the samples ``idx`` of an interval (``finite``: (N, C) or (N,))."""
+    got = finite[idx]
+    return got.any(axis=1) if got.ndim == 2 else got

@@ -217,7 +217,8 @@ class OrderChain:
         :func:`~cmsensord.monitor.messages.orders` makes (that function builds them without
         ``PRE_ENCODED``: the reference, with the frequencies of all blocks in one array
         operation).  A component's frequency is order x rpm / 60 (the operations of
-        :meth:`TrackedComponent.freq`) or its fixed one; a message whose block is not valid
+        :meth:`TrackedComponent.freq`) or its fixed one; a channel's block of no sample (all
+        lost: the tracker's prediction alone) is not valid; a message whose block is not valid
         or has a number that is not finite has no text (it is encoded plain: such fields are
         left out of it)."""
         n = len(blocks.start)
@@ -241,8 +242,9 @@ class OrderChain:
                 stamp = stamp_ns(base + int(t_in[e]))
                 rpm, ok = rpms[e], bool(valid[e])
                 for ci, name in enumerate(names):
-                    entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], ok)
-                    out.append(messages.orders(stamp, name, rpm, ok, method, entries, missing[e][ci] / B))
+                    seen = ok and missing[e][ci] < B          # a block of no sample is a prediction: not valid
+                    entries = messages.order_entries(comps, freqs[e], rms[e][ci], amp[e][ci], seen)
+                    out.append(messages.orders(stamp, name, rpm, seen, method, entries, missing[e][ci] / B))
             return out
         spec = self._freq_spec
         Message = messages.Message
@@ -255,10 +257,11 @@ class OrderChain:
             speed = None if rpm != rpm else rpm                 # messages.num
             for (name, topic, fill), r, a, m in zip(chans, rms[e], amp[e], missing[e]):
                 mf = m / B
-                fields = {"channel": name, "speed_rpm": speed, "valid": ok, "method": method,   # messages.orders
-                          "orders": order_entries(comps, freq, r, a, ok), "missing_fraction": mf}
+                seen = ok and m < B
+                fields = {"channel": name, "speed_rpm": speed, "valid": seen, "method": method,   # messages.orders
+                          "orders": order_entries(comps, freq, r, a, seen), "missing_fraction": mf}
                 text = None
-                if ok and fill is not None:
+                if seen and fill is not None:
                     nums = (rpm, *chain.from_iterable(zip(freq, r, a)), mf)
                     if all(map(isfinite, nums)):
                         text = fill % nums

@@ -408,8 +408,9 @@ ORDERS = _obj(
         "channel": _CHANNEL,
         "speed_rpm": _num("shaft speed [rpm], mean over the block"),
         "valid": {"type": "boolean",
-                  "description": "false below orders.min_rpm or without a tacho speed: the "
-                                 "orders cannot be told apart and rms/amplitude are absent"},
+                  "description": "false below orders.min_rpm or without a tacho speed (the "
+                                 "orders cannot be told apart), or when every sample of the block "
+                                 "was lost (a prediction): rms/amplitude are absent"},
         "method": {"type": "string", "enum": ["recursive", "smoothed", "batch"],
                    "description": "recursive (Yeh, Pan & Le, causal), smoothed (fixed-lag RTS) or "
                                   "batch (Tůma's second-generation VKF, zero-phase)"},
