@@ -28,7 +28,15 @@ from cmsensord import __version__
 from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
-from cmsensord.errors import EXIT_CONFIG, EXIT_USAGE, CmsensordError, ConfigError, LinkError, SinkError
+from cmsensord.errors import (
+    EXIT_CONFIG,
+    EXIT_USAGE,
+    CmsensordError,
+    ConfigError,
+    InstanceError,
+    LinkError,
+    SinkError,
+)
 from cmsensord.journal import JournalStream, error_line, setup_logging, under_journal
 from cmsensord.service.live import run_live
 from cmsensord.service.record import record
@@ -295,6 +303,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             error_line(f"cmsensord: {exc}")
             return EXIT_USAGE
         error_line(f"cmsensord: configuration error: {exc}")
+        return EXIT_CONFIG
+    except InstanceError as exc:        # another daemon on this output directory
+        error_line(f"cmsensord: {exc}")
         return EXIT_CONFIG
     except SinkError as exc:            # the output directory is a setting (output.dir / --out)
         error_line(f"cmsensord: output error: {exc} (set output.dir or --out to a writable directory)")

@@ -15,6 +15,7 @@ __all__ = [
     "CmsensordError",
     "ConfigError",
     "SinkError",
+    "InstanceError",
     "LinkError",
     "EXIT_USAGE",
     "EXIT_CONFIG",
@@ -152,6 +153,10 @@ class ConfigError(CmsensordError):
 
 class SinkError(CmsensordError):
     """An output (MCAP file, directory) that cannot be written."""
+
+
+class InstanceError(CmsensordError):
+    """Another daemon already runs on this output directory (exit 78: systemd does not restart)."""
 
 
 class LinkError(CmsensordError):

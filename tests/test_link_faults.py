@@ -107,6 +107,33 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
     assert len(sev) >= 8
 
 
+def test_a_second_daemon_on_the_same_configuration_is_refused_and_the_first_loses_nothing(tmp_path):
+    """Started by hand beside the service: before, both read the port (each losing the other's
+    frames) and the second salvaged the first's open .part file. Now: one line, exit 78, and the
+    first daemon runs on without a lost frame."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--speed", "2", "--link", str(link), "--flow-control")
+    first = start_daemon(tmp_path, link)
+    try:
+        time.sleep(3.0)
+        second = spawn([sys.executable, "-m", "cmsensord", "--config", str(tmp_path / "cmsensord.yaml")],
+                       stderr=subprocess.PIPE, text=True)
+        _, err2 = second.communicate(timeout=60)
+        time.sleep(2.0)
+        assert first.poll() is None
+    finally:
+        err1 = stop(first)
+        sim.terminate()
+        sim.wait(timeout=5)
+    assert (second.returncode, err2.strip().splitlines()[-1]) == (78, (
+        f"cmsensord: {tmp_path / 'logs'}: another cmsensord (pid {first.pid}) writes its logs here; stop it first "
+        "(systemctl stop cmsensord), or give this one another output.dir"))
+    assert first.returncode == 0, err1
+    (log,) = (tmp_path / "logs").glob("*.mcap")
+    kinds = [m["kind"] for t, _, m in read_messages(log) if t == "/cm/events"]
+    assert "frames_lost" not in kinds and "salvage" not in " ".join(kinds), kinds
+
+
 def test_a_port_that_is_not_there_is_said_on_every_status_line(tmp_path):
     """No board on the port: besides the one link_lost event, each status line says what the
     daemon is waiting for (a line of zero counters alone looked like a board sending nothing)."""

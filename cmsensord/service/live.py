@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 import threading
 import time
@@ -18,6 +19,7 @@ from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.heap import keep_freed_memory
+from cmsensord.service.instance import claim_output_dir
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
@@ -163,7 +165,19 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None, open_port: Callable | None = None) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
-    how the reader opens the port, default pyserial's ``Serial``)."""
+    how the reader opens the port, default pyserial's ``Serial``), the output directory held
+    against a second daemon (:mod:`.instance`) from before its sink salvages what it finds there."""
+    held = claim_output_dir(cfg.output.dir)
+    try:
+        return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
+                         capture_path=capture_path, metadata=metadata, open_port=open_port)
+    finally:
+        if held is not None:
+            os.close(held)
+
+
+def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim_done: threading.Event | None,
+              capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None) -> int:
     keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
