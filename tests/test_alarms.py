@@ -79,6 +79,7 @@ def test_ack_of_an_active_alarm_keeps_it_and_marks_it():
     assert (row["level"], row["acknowledged"], row["latched"]) == ("alert", True, True)
     with pytest.raises(KeyError):
         m.ack(3 * S, "nope")
+    assert m.ack(4 * S) == []            # `ack --all` again: nothing left to acknowledge, no second event
 
 
 def test_startup_suppression_by_speed():

@@ -128,6 +128,7 @@ def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
             assert p.returncode == 0 and p.stdout.strip() == "acknowledged 1 alarm(s)", p.stdout + p.stderr
             after = status(cfg)
             assert after["alarms"][0]["level"] == "normal" and after["worst"] == "normal"
+            assert "| rx " in after["status"] and " frames " in after["status"], after["status"]   # the whole line
             bad = run_module("cmsensord", "ack", "nope", "--config", str(cfg))
             assert bad.returncode == 1 and "no alarm named 'nope'" in bad.stderr
         finally:

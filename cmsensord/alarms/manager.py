@@ -154,12 +154,12 @@ class AlarmManager:
         return out
 
     def ack(self, t_ns: int, which: str | None = None) -> list[Transition]:
-        """Acknowledge alarm ``which`` (None: every alarm showing a level) at ``t_ns``.
-        Raises KeyError for an unknown alarm."""
+        """Acknowledge alarm ``which`` (None: every alarm showing a level not acknowledged yet) at
+        ``t_ns``. Raises KeyError for an unknown alarm."""
         if which is not None and which not in self.alarms:
             raise KeyError(which)
         targets = [self.alarms[which]] if which is not None else \
-            [a for a in self.alarms.values() if a.state.level > 0]
+            [a for a in self.alarms.values() if a.state.level > 0 and not a.state.acknowledged]
         out: list[Transition] = []
         for a in targets:
             before = a.state.level

@@ -57,6 +57,7 @@ class ControlServer:
         self.path = path
         self.requests: queue.Queue[_Request] = queue.Queue(maxsize=16)
         self.wake: Callable[[], None] | None = None     # wakes the processing loop for a request
+        self.status_line: Callable[[], str] | None = None    # the daemon's whole status line (STATUS=)
         self._stop = threading.Event()
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
@@ -109,7 +110,7 @@ class ControlServer:
             except queue.Empty:
                 return
             try:
-                req.reply = handle(proc, req.body)
+                req.reply = handle(proc, req.body, self.status_line)
             finally:
                 req.done.set()
 
@@ -124,15 +125,16 @@ class ControlServer:
             self.path.unlink()
 
 
-def handle(proc, body: dict) -> dict:
-    """The answer to one request, from the Processor (the loop's thread)."""
+def handle(proc, body: dict, line: Callable[[], str] | None = None) -> dict:
+    """The answer to one request, from the Processor (the loop's thread); ``line``: the daemon's
+    whole status line (the link's counters and state, the broker's), else the Processor's part."""
     from cmsensord.service.status import status_line
 
     if body["cmd"] == "capture":
         return _capture(proc, body)
     alarms = proc.alarms
     if body["cmd"] == "status":
-        out: dict[str, Any] = {"ok": True, "status": status_line(proc)}
+        out: dict[str, Any] = {"ok": True, "status": line() if line is not None else status_line(proc)}
         if alarms.active:
             out.update(alarms.table())
         return out

@@ -295,6 +295,9 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             return f"reader error x{reader.errors}: {reader.error} | {line}"
         return line if reader.connected.is_set() else f"waiting for {cfg.link.port} | {line}"
 
+    if control is not None:             # cmsensord status: the whole line, as systemd's STATUS=
+        control.status_line = lambda: service_state(line_now())
+
     if notify.watchdog_interval_s:      # the loop wakes twice per ping interval: a ping is never late
         source.timeout = min(source.timeout, notify.watchdog_interval_s / 2)
         source.far_timeout = min(source.far_timeout, notify.watchdog_interval_s / 2)
