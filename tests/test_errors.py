@@ -26,6 +26,8 @@ CASES = [
     (["replay", "notmcap.mcap", "--config", "bad.yaml"], CONFIG, "monitor.r_max"),
     (["replay", "capture.bin", "--out", "afile/logs"], CONFIG,
      "afile/logs: cannot create output directory"),
+    (["replay", "capture.bin", "--out", "afile"], CONFIG,
+     "afile: cannot create output directory: it is a file, not a directory"),
     (["--simulate", "--duration", "1", "--out", "afile/logs"], CONFIG,
      "set output.dir or --out to a writable directory"),
     (["--config", "port.yaml", "--capture", "afile/cap.bin"], CONFIG,

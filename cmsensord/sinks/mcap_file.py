@@ -225,10 +225,10 @@ class McapSink:
         try:
             self.out_dir.mkdir(parents=True, exist_ok=True)
         except OSError as err:
-            raise SinkIOError(
-                f"{self.out_dir}: cannot create output directory: {os_error_text(err)}",
-                op="open", err=err, path=self.out_dir,
-            ) from None
+            why = "it is a file, not a directory" if self.out_dir.exists() and not self.out_dir.is_dir() \
+                else os_error_text(err)
+            raise SinkIOError(f"{self.out_dir}: cannot create output directory: {why}",
+                              op="open", err=err, path=self.out_dir) from None
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(wall_clock()))
         self._fh = self._open_unique(prefix, stamp)
 
