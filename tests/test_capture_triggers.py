@@ -248,3 +248,30 @@ def test_the_report_marks_the_defect_lines_on_the_captured_spectra(tmp_path):
 
     assert red_in_column(bpfo) > 0.4 * (bottom - top)                  # a dashed line through the axes
     assert red_in_column(bpfo * 1.25) == 0                              # and not elsewhere
+
+
+def test_a_manual_capture_does_not_hold_back_the_triggers_after_it():
+    """Someone's `capture-now` at 2 s, then the periodic trigger at 4 s with min_interval_s 60:
+    it is kept (before, it was skipped as '2 s after the last one', and so would an alarm's be)."""
+    from cmsensord.config import config_from_dict
+    from cmsensord.monitor.processor import Processor
+    from cmsensord.sinks.memory import ListSink
+    from cmsensord.source import ByteStreamSource
+    from firmware_sim.board import Board, BoardConfig
+    from firmware_sim.scenarios import make_scenario
+
+    data = Board(make_scenario("healthy", duration_s=8.0), BoardConfig(mode="raw")).generate(8.0)
+    cfg = config_from_dict({"capture": {"triggers": ["manual"], "every_s": 4, "pre_s": 0.5, "post_s": 0.5,
+                                        "min_interval_s": 60}})
+    sink = ListSink()
+    proc = Processor(cfg, sink)
+    asked = None
+    with ByteStreamSource.of(data, 4096) as source:
+        for frames in source:
+            proc.handle(frames)
+            if asked is None and proc.adc_seconds >= 2.0:
+                asked = proc.captures.manual(None)
+    proc.finish()
+    assert asked is not None and asked["ok"], asked
+    kinds = [m["trigger"]["kind"] for t, _, m in sink.messages if t == "/cm/ch0/capture_waveform"]
+    assert kinds == ["manual", "periodic"], kinds

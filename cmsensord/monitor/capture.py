@@ -207,7 +207,8 @@ class Captures:
                 self._event("capture_skipped", name, f"{name}: capture on {trigger['kind']} skipped: {why}",
                             stamp_ns)
                 continue
-            self.last_ns[name] = stamp_ns
+            if trigger["kind"] != "manual":     # someone's look does not hold back the next alarm's
+                self.last_ns[name] = stamp_ns
             self.budget.append((stamp_ns, (pre + post) * BYTES_PER_SAMPLE))
             self.pending.append(_Pending(name, col, idx - pre, idx + post, idx, stamp_ns, trigger))
 
