@@ -50,8 +50,9 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
     messages of a replayed import in the recording's own time (:mod:`.time_axis`); of an import
     replayed more than once, only its newest replay (:mod:`.runs`; the others listed as left out)."""
     data = LogData()
-    plan = plan_logs(paths, [head_metadata(p) for p in paths])
-    data.axis = TimeAxis.of_logs([head_metadata(p) for p in plan.paths])
+    heads = {p: head_metadata(p) for p in paths}
+    plan = plan_logs(paths, [heads[p] for p in paths])
+    data.axis = TimeAxis.of_logs([heads[p] for p in plan.paths])
     data.notes = plan.notes
     sizes = [p.stat().st_size for p in plan.paths]
     progress = Progress(sum(sizes), progress_stream)
