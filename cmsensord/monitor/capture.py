@@ -175,8 +175,8 @@ class Captures:
                 continue
             p = started.get(name)
             if p is None:
-                why = next((e.message for e in reversed(self.out) if e.kind == "capture_skipped"
-                            and e.channel == name), "skipped")
+                why = next((e.message for e in reversed(self.out) if isinstance(e, Event)
+                            and e.kind == "capture_skipped" and e.channel == name), "skipped")
                 rows.append({"channel": name, "skipped": why})
             else:
                 rows.append({"channel": name, "stamp_ns": stamp, "first_sample": p.start,
@@ -228,8 +228,8 @@ class Captures:
     def owed(self) -> int | None:
         """The earliest stamp of the events still to come from here (a capture in progress, an
         event not handed over yet), or None: the event log writes nothing from it on."""
-        stamps = [p.stamp_ns for p in self.pending] + [e.stamp_ns for e in self.out
-                                                     if isinstance(e, Event) and e.stamp_ns is not None]
+        events = [e if isinstance(e, Event) else e.written for e in self.out]   # a capture: its event
+        stamps = [p.stamp_ns for p in self.pending] + [e.stamp_ns for e in events if e.stamp_ns is not None]
         return min(stamps, default=None)
 
     def _event(self, kind: str, channel: str | None, message: str, stamp_ns: int, **fields: Any) -> None:
@@ -374,8 +374,10 @@ class Captures:
                 **head, "kind": "envelope", "freq_start_hz": 0.0, "freq_step_hz": float(fe[1] - fe[0]),
                 "band_hz": [float(env.band[0]), float(env.band[1])], "unit": unit,
                 "amplitude": np.round(Ae[keep], 6).tolist(), **marks}))
-        out: list[Any] = [MessageGroup(tuple(group))]
-        out.append(Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "
-                         f"{p.trigger['kind']} ({len(x)} samples, {int(lost.sum())} lost)", p.stamp_ns,
-                         {"samples": len(x)}))
-        return out
+        written = Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "
+                        f"{p.trigger['kind']} ({len(x)} samples, {int(lost.sum())} lost)", p.stamp_ns,
+                        {"samples": len(x)})
+        dropped = Event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} not "
+                        "written: the log is not being written (disk error)", p.stamp_ns,
+                        {"samples": len(x)})
+        return [MessageGroup(tuple(group), written, dropped)]

@@ -35,8 +35,12 @@ class Message(NamedTuple):
 
 class MessageGroup(NamedTuple):
     """Messages written whole or not at all, even by a crash (a capture): a sink's
-    ``write_group`` takes them in one call."""
+    ``write_group`` takes them in one call. ``written`` and ``dropped`` are the events
+    (:class:`cmsensord.monitor.events.Event`) to log after it: the first when the sink took
+    the group, the second when it went to no file (a disk outage)."""
     messages: tuple[Message, ...]
+    written: Any = None
+    dropped: Any = None
 
 
 def num(x: float):

@@ -31,7 +31,10 @@ class Output:
                 self.log.add((it,))
             elif kind is messages.MessageGroup:         # a capture: one chunk of the log
                 run = self._write_run(run)
-                self.sink.write_group(list(it.messages))
+                taken = self.sink.write_group(list(it.messages)) is not False
+                said = it.written if taken else it.dropped
+                if said is not None:
+                    self.log.add((said,))
             else:
                 run.append(it)
                 if watching and it.schema in WATCHED:   # the alarm manager reads it

@@ -284,8 +284,13 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
     fallback = fallback_note()
     publisher = publisher_of(sink)
 
-    def line_now() -> str:              # the status line; a missing C kernel, the broker link at its end
+    disk = getattr(sink, "outage_state", None)
+
+    def line_now() -> str:              # the status line; a disk outage, a missing C kernel, the broker link
         line = status_line(proc, source)
+        outage = disk() if disk is not None else ""
+        if outage:
+            line = f"{line} | {outage}"
         if fallback:
             line = f"{line} | {fallback}"
         return f"{line} | {publisher.status()}" if publisher is not None else line

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cmsensord.sinks.mcap_file import SinkIOError
-from cmsensord.sinks.mcap_salvage import SalvageResult
+from cmsensord.sinks.mcap_salvage import SalvageResult, salvage
 from cmsensord.sinks.retention import DISK_EVENT, errno_name
 
 if TYPE_CHECKING:
@@ -56,6 +56,25 @@ def resumed(where: str, outage: dict[str, Any], seconds: float) -> tuple[str, di
     return (f"logging resumed in {where} after {seconds:.1f} s: {outage['dropped']} message(s) could "
             f"not be logged ({outage['errors']} failed disk operation(s); first: {outage['error']})",
             {"count": outage["dropped"], "details": {"action": "resumed", "errors": outage["errors"]}})
+
+
+def outage_state(outage: dict[str, Any], now: float) -> str:
+    """The outage in progress, for the status line: since when, what failed, what was dropped."""
+    return (f"disk: not logging for {now - outage['start']:.0f} s ({outage['error']}); "
+            f"{outage['dropped']} message(s) dropped")
+
+
+def salvage_abandoned(sink: RotatingSink, parts: list[Path]) -> None:
+    """Salvage the files an outage abandoned, once logging is back: each one's event, and a
+    salvaged file joins ``sink.paths``."""
+    for part in parts:
+        try:
+            result: SalvageResult | SinkIOError = salvage(part)
+        except SinkIOError as err:
+            result = err
+        salvage_result(sink, result)
+        if isinstance(result, SalvageResult) and result.path is not None and result.action == "salvaged":
+            sink.paths.append(result.path)
 
 
 def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> None:

@@ -8,7 +8,7 @@ from typing import Protocol
 class Sink(Protocol):
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
 
-    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None: ...
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> bool | None: ...
 
 
 class ListSink:
@@ -20,10 +20,11 @@ class ListSink:
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None:
         self.messages.append((topic, stamp_ns, msg))
 
-    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
-        """Each message in turn (in memory a group cannot be split by a crash)."""
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> bool:
+        """Each message in turn (in memory a group cannot be split by a crash); True."""
         for m in messages:
             self.write(*m)
+        return True
 
     def topic(self, name: str) -> list[dict]:
         return [m for t, _, m in self.messages if t == name]

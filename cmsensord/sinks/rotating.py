@@ -75,7 +75,7 @@ from cmsensord.sinks import disk_events
 from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event kinds: disk_events)
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
-from cmsensord.sinks.mcap_salvage import SalvageResult, salvage, salvage_leftovers
+from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
 from cmsensord.sinks.reorder import MAX_S as REORDER_MAX_S
 from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention
 from cmsensord.sinks.schemas import TOPIC_EVENTS
@@ -235,6 +235,10 @@ class RotatingSink:
         """A file is open and no outage is in progress."""
         return self._current is not None and self._outage is None
 
+    def outage_state(self) -> str:
+        """"" while logging; during a disk outage, one phrase for the status line."""
+        return "" if self._outage is None else disk_events.outage_state(self._outage, self.clock())
+
     # -- writing -----------------------------------------------------------
 
     def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None:
@@ -287,21 +291,22 @@ class RotatingSink:
             i = j
             self._written(cur)
 
-    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> bool:
         """Append messages ``(topic, schema, stamp_ns, msg)`` that are whole or absent after a
         crash (:meth:`McapSink.write_group`); like :meth:`write` otherwise (a rotation comes
-        after the group, never inside it)."""
+        after the group, never inside it). False when the group went to no file (dropped)."""
         self.messages_written += len(messages)
         cur = self._file(len(messages))
         if cur is None:
-            return
+            return False
         try:
             cur.write_group(messages)
         except SinkIOError as err:
             self._failed(err, cur)
             self._deliver()
-            return
+            return False
         self._written(cur)
+        return True
 
     def _file(self, n: int) -> McapSink | None:
         """The file to write ``n`` messages to; None while there is none (they are dropped)."""
@@ -582,15 +587,7 @@ class RotatingSink:
         text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
         self.emit(DISK_EVENT, text, **fields)
         abandoned, self._abandoned = self._abandoned, []
-        for part in abandoned:
-            try:
-                result: SalvageResult | SinkIOError = salvage(part)
-            except SinkIOError as err:
-                result = err
-            disk_events.salvage_result(self, result)
-            if isinstance(result, SalvageResult) and result.path is not None \
-                    and result.action == "salvaged":
-                self.paths.append(result.path)
+        disk_events.salvage_abandoned(self, abandoned)
 
     # -- retention ---------------------------------------------------------
 

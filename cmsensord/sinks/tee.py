@@ -46,14 +46,15 @@ class TeeSink:
         if self.publisher.events:
             self.drain_events()
 
-    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> None:
+    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> bool:
         """Write the group to the MCAP sink (whole or absent after a crash), then offer each
-        message to the publisher."""
-        self.inner.write_group(messages)
+        message to the publisher; whether the MCAP sink took it (its answer)."""
+        taken = self.inner.write_group(messages) is not False
         for topic, _, stamp_ns, msg in messages:
             self.publisher.offer(topic, stamp_ns, msg)
         if self.publisher.events:
             self.drain_events()
+        return taken
 
     def tick(self) -> None:
         """The MCAP sink's tick, and the publisher's events."""
