@@ -211,7 +211,7 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         "# cmsensord site configuration written by `cmsensord calibrate`; re-run it to regenerate.",
         f"# learned from {source}, board seconds {obs.start_s:.1f}-{obs.end_s:.1f} (the healthy period)"
         + (f", on top of {base_path}" if base_path else ""),
-        "# Per channel: baseline = median block RMS of the healthy period; the AKF bank watches",
+        "# Per channel: baseline = median RMS of the healthy period's decisions; the AKF bank watches",
         "# block RMS / baseline, so r_min and r_max are in units of baseline^2; the severity also",
         "# grades the level against the baseline (monitor.severity: auto -> combined).",
     ]
@@ -222,7 +222,7 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         m = r.model
         entry = {k: v for k, v in base_channels.get(r.name, {}).items()
                  if k not in ("name", "index", "baseline", "baseline_spread", "r_min", "r_max", "f_r")}
-        rows = [("baseline", m.baseline, "median block RMS of the healthy period"),
+        rows = [("baseline", m.baseline, "median RMS of the healthy period's decisions"),
                 ("baseline_spread", m.spread, "robust std of the per-decision level / baseline"),
                 ("r_min", m.r_min, f"R_1 = {_g(m.r_1)} = {MARGIN:g} x healthy critical R {_g(m.healthy_r)}"),
                 ("r_max", m.r_max, f"R_n = {SPAN:g} x R_1" if m.r_max_rule == "span" else

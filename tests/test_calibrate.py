@@ -205,25 +205,25 @@ def test_a_healthy_period_that_holds_the_fault_is_said_with_where_a_steady_one_e
     (its AKF part is the R_1 check's, as before)."""
     p = run("cmsensord", "calibrate", str(degrading), "--out", str(tmp_path / "all.yaml"))
     assert p.returncode == 0, p.stderr
-    assert ("ch0: warning: 53 decision(s) of the healthy period are already at >= 2 x its baseline "
-            "(level_alert: severity 0.5) in 409.0-515.0 board s: the machine may already be changing there "
-            "(a fault starting); its steady stretch from the start ends at --to 256 (levels within 2 x its "
+    assert ("ch0: warning: 141 decision(s) of the healthy period are already at >= 2 x its baseline "
+            "(level_alert: severity 0.5) in 391.0-541.0 board s: the machine may already be changing there "
+            "(a fault starting); its steady stretch from the start ends at --to 266 (levels within 2 x its "
             "own median)\n") in p.stdout
-    assert "would be flagged (0 by R_1, 53 by their level >= 2 x baseline)" in p.stdout
+    assert "would be flagged (0 by R_1, 141 by their level >= 2 x baseline)" in p.stdout
     out = tmp_path / "all"
     assert run("cmsensord", "replay", str(degrading), "--config", str(tmp_path / "all.yaml"),
                "--out", str(out)).returncode == 0
     first = next(t for t, m in _severity(out) if m["severity_index"] >= 0.5)
-    assert first == pytest.approx(410.0, abs=0.05)            # the decision 409-410 s, as said
+    assert first == pytest.approx(392.0, abs=0.05)            # the decision 391-392 s, as said
 
     site = tmp_path / "site.yaml"
-    p = run("cmsensord", "calibrate", str(degrading), "--to", "256", "--out", str(site))
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "266", "--out", str(site))
     assert p.returncode == 0, p.stderr
     assert "warning" not in p.stdout and ", 0 by their level >= 2 x baseline)\n" in p.stdout
     out = tmp_path / "steady"
     assert run("cmsensord", "replay", str(degrading), "--config", str(site), "--out", str(out)).returncode == 0
     sev = _severity(out)
-    assert all(m["severity_level"] == 0.0 for t, m in sev if t <= 256.5)
+    assert all(m["severity_level"] == 0.0 for t, m in sev if t <= 266.5)
     assert max(m["severity_level"] for t, m in sev) >= 0.5
 
 

@@ -5,9 +5,10 @@ baseline free of anomalies and R_max from faulty data (the largest R that still
 flags it).  On real machines that rule alone is fragile (one outlier second or an
 unsteady run-in sets R_min for the whole life), so cmsensord extends it:
 
-1. The bank watches y/b, the block RMS divided by the healthy baseline b (median
-   block RMS of the healthy period), so R is in units of b² and means the same on
-   every machine and sensor.
+1. The bank watches y/b, the block RMS divided by the healthy baseline b (the median
+   over the healthy period's decisions of each one's RMS, the root mean square of its
+   blocks: the overall level an analyst reads), so R is in units of b² and means the
+   same on every machine and sensor.
 2. The healthy period is cut into decision periods.  For each period the
    *critical R*, R*, is the smallest R on a log grid for which one AKF counts
    fewer than f_r outliers in that period (it would not flag it).
@@ -66,7 +67,7 @@ STOPPED_SHARE = 0.1
 class HealthyModel:
     """What commissioning learned for one channel."""
 
-    baseline: float        # median block RMS of the healthy period [input unit]
+    baseline: float        # median over the healthy decisions of their RMS [input unit]
     spread: float          # robust std of the per-decision level ratio (1 = baseline)
     r_min: float           # eq. (16), units of baseline²
     r_max: float
@@ -179,7 +180,7 @@ def _level_per_period(y: np.ndarray, period: int) -> np.ndarray:
     P = y.size // period
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period is NaN
-        return np.nanmedian(y[: P * period].reshape(P, period), axis=1)
+        return np.sqrt(np.nanmean(np.square(y[: P * period].reshape(P, period)), axis=1))
 
 
 def idle_periods(level: np.ndarray) -> np.ndarray:

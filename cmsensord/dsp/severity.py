@@ -30,7 +30,7 @@ Extension (not in the paper), selected by ``level_alert``: the *combined*
 severity also grades the level of the period against the machine's learned
 healthy baseline, the way vibration analysts grade an overall level:
 
-    ratio     = median over the period of y/baseline
+    ratio     = RMS over the period of y/baseline (the root mean square of the blocks')
     S_level   = 0                                   ratio < alert
               = 0.5 + 0.5 log(ratio/alert)/log(danger/alert), at most 1, floored to i/n
     S_idx     = max(S_AKF, S_level)
@@ -86,7 +86,7 @@ class Decision:
     f_r: np.ndarray           # (C,) rotation frequency used
     missing: np.ndarray       # (C,) observations missing in the period
     severity_akf: np.ndarray  # (C,) the bank's S_idx (= severity in the paper's mode)
-    level: np.ndarray         # (C,) median level ratio of the period (NaN without a baseline)
+    level: np.ndarray         # (C,) the period's RMS / baseline (NaN without a baseline)
     severity_level: np.ndarray  # (C,) S_level (NaN in the paper's mode)
     held: np.ndarray          # (C, n) consecutive decisions F_a was kept by the hysteresis alone
     held_max: int = 0         # the largest of ``held``
@@ -249,13 +249,14 @@ class AnomalyDecider:
         return out
 
     def _level_part(self, transient: bool) -> tuple[np.ndarray, np.ndarray]:
-        """(median level ratio, S_level) of the period; NaN in the paper's mode."""
+        """(level ratio, S_level) of the period; NaN in the paper's mode. The ratio is the
+        period's RMS over the baseline: the root mean square of its block ratios (received)."""
         nan = np.full(self.C, np.nan)
         if not self.combined:
             return nan, nan
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period
-            level = np.nanmedian(self._level, axis=0)
+            level = np.sqrt(np.nanmean(np.square(self._level), axis=0))
         self._level[:] = np.nan
         if transient:
             return level, np.zeros(self.C)

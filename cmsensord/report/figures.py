@@ -140,7 +140,7 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
 
 
 def _level_axes(ax: Any, data: LogData, ch: ChannelData) -> None:
-    """The decisions' median level / healthy baseline on a log scale, with the baseline (1) and
+    """The decisions' level (RMS) / healthy baseline on a log scale, with the baseline (1) and
     the alert and danger ratios of the combined severity."""
     t, v = ch.level.arrays()
     ax.step(_times(t, data.axis), v, where="post", color="#37474f", lw=1.2, label="level / baseline")

@@ -294,7 +294,7 @@ SEVERITY = _obj(
         },
         "severity_akf": _num("combined: S_idx of the AKF bank", nullable=False),
         "severity_level": _num("combined: S_level of level_ratio", nullable=False),
-        "level_ratio": _num("combined: median block RMS / baseline", nullable=False),
+        "level_ratio": _num("combined: the decision period's RMS / baseline", nullable=False),
         "level_alert": _num("combined: the level_ratio graded 0.5 (monitor.level_alert)", nullable=False),
         "level_danger": _num("combined: the level_ratio graded 1 (monitor.level_danger)", nullable=False),
     },
