@@ -92,3 +92,16 @@ def test_a_configuration_error_is_an_error_in_the_journal(tmp_path):
     assert status == 78
     assert lines == [f"<3>cmsensord: configuration error: {bad}: monitor.r_mx: unknown key 'r_mx' "
                      f"(did you mean 'r_max'?)"]
+
+
+def test_the_status_line_goes_to_the_journal_once_a_minute_not_each_second(tmp_path):
+    """With the default ``output.status_line: true`` (a site file from ``config --default``):
+    each second on a terminal, under the journal the first line and then once a minute."""
+    status = re.compile(r"^(<6>)?\[\s*[\d.]+ s\] ch0 S=")
+    run = ("--simulate", "--scenario", "healthy", "--duration", "60", "--speed", "6")
+    counts = {}
+    for journal in (True, False):
+        code, lines = _run([*run, "--out", str(tmp_path / str(journal))], journal=journal)
+        assert code == 0, lines
+        counts[journal] = sum(bool(status.match(line)) for line in lines)
+    assert counts[True] == 1 and counts[False] >= 6, counts

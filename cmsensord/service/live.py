@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterator
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict
 from cmsensord.errors import ConfigError, SinkError
+from cmsensord.journal import under_journal
 from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, FrameType
@@ -22,7 +23,7 @@ from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.instance import claim_output_dir
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
-from cmsensord.service.status import run_summary, status_line
+from cmsensord.service.status import StatusPace, run_summary, status_line
 from cmsensord.source import BATCH_S, HOLD_S, SerialSource
 
 log = logging.getLogger("cmsensord")
@@ -310,6 +311,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
         reader.connected.wait(0.2)      # a present port opens within ms: READY's STATUS says which
     notify.ready(service_state(line_now()))
     next_status = time.monotonic() + 1.0
+    pace = StatusPace(under_journal())
     try:
         for frames in source:
             if not reader.is_alive():   # it ends only on stop: reading nothing, the loop must not look well
@@ -330,21 +332,22 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             if now >= next_status:      # once a second on average (the loop wakes every WAKE_S, or each decision)
                 next_status = max(next_status + 1.0, now + 0.5)
                 watch.diagnostics(now)
-                _status(cfg, notify, line_now, service_state)
+                _status(cfg, notify, line_now, service_state, pace.due(now))
     finally:
         notify.stopping("stopping: closing the MCAP log")
 
 
 def _status(cfg: Config, notify: Notifier, line_now: Callable[[], str],
-            service_state: Callable[[str], str]) -> None:
-    """The status line (stderr, or the debug log) and systemd's STATUS=, made once and only when
-    one of them is wanted."""
+            service_state: Callable[[str], str], printed: bool = True) -> None:
+    """The status line (stderr when ``printed``: under the journal once a minute; else the debug
+    log) and systemd's STATUS=, made once and only when one of them is wanted."""
     wanted = cfg.output.status_line or log.isEnabledFor(logging.DEBUG)
     if not (wanted or notify.enabled):
         return
     line = line_now()
     if cfg.output.status_line:
-        print(line, file=sys.stderr, flush=True)
+        if printed:
+            print(line, file=sys.stderr, flush=True)
     else:
         log.debug("status: %s", line)
     if notify.enabled:

@@ -27,6 +27,26 @@ def status_line(proc, source=None) -> str:
     return " ".join(parts)
 
 
+#: under the journal, the status line is printed once in this many seconds (systemd's STATUS=
+#: carries it every second): a trace of the state in the journal, not 86,400 lines a day
+JOURNAL_STATUS_S = 60.0
+
+
+class StatusPace:
+    """When the status line is printed: at each call (once a second), or, when stderr is the
+    journal, at the first call and then once in :data:`JOURNAL_STATUS_S`."""
+
+    def __init__(self, journal: bool) -> None:
+        self.every = JOURNAL_STATUS_S if journal else 0.0
+        self.next = float("-inf")
+
+    def due(self, now: float) -> bool:
+        if now < self.next:
+            return False
+        self.next = now + self.every
+        return True
+
+
 def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = ()) -> str:
     """What a run wrote and saw, printed at its end (``placed``: lines after the channels', where
     an imported recording's severity levels and alarms came: :mod:`cmsensord.service.origin`)."""
