@@ -191,6 +191,10 @@ def _completes(f: Frame, t0: int) -> bool:
 _LAST = (FrameType.TACHO, FrameType.RMS)
 
 
+#: the longest wait between two reopens of a port that stays open and silent
+REOPEN_MAX_S = 3600.0
+
+
 class SerialReader(threading.Thread):
     """Reads the port, feeds the decoder, queues frames; reconnects with back-off.
 
@@ -223,6 +227,10 @@ class SerialReader(threading.Thread):
         self.errors = 0                       # unexpected exceptions since the last bytes read
         self.error: str | None = None         # the last one, as reported
         self.down: str | None = None          # why the port is not open now (None: it is)
+        #: seconds without a byte on the open port before it is closed and opened again (0: never)
+        self.reopen_s = 0.0
+        self._reopen_wait = 0.0               # the wait now (doubles at each reopen; 0: reopen_s)
+        self._reopened_at = 0.0
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
         self.pace = ReadPace()
@@ -277,7 +285,7 @@ class SerialReader(threading.Thread):
         try:
             data, more = self._read(ser)
             if not data:
-                return ser
+                return self._quiet(ser)
         except PORT_ERRORS as exc:
             self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
             self.down = f"{self.port}: {_why(exc)}; reconnecting"
@@ -286,6 +294,7 @@ class SerialReader(threading.Thread):
             _close_quietly(ser)
             return None
         now = self.last_data = time.monotonic()
+        self._reopen_wait = 0.0
         if self.capture is not None and self.capture_error is None:
             try:
                 self.capture.write(data)
@@ -305,6 +314,22 @@ class SerialReader(threading.Thread):
             self.errors, self.error = 0, None
         self._pause(*pause)
         return ser
+
+    def _quiet(self, ser):
+        """The open port gave no byte: after ``reopen_s`` of that (a hung USB device keeps the
+        port open and silent) it is closed with a ``link_lost`` event, to be opened again at the
+        next step; each reopen doubles the wait, up to :data:`REOPEN_MAX_S`, until bytes come."""
+        wait = self._reopen_wait or self.reopen_s
+        now = time.monotonic()
+        if not wait or now - max(self.last_data, self._reopened_at) < wait:
+            return ser
+        self._reopen_wait = min(2 * wait, REOPEN_MAX_S)
+        self._reopened_at = now
+        self._event("link_lost", f"{self.port}: no byte for {wait:g} s on the open port; closing it to open "
+                    "it again (a hung USB device or board?)")
+        self.connected.clear()
+        _close_quietly(ser)
+        return None
 
     def _plan(self, now: float) -> tuple[float, bool]:
         """How long to wait as the pace allows (bytes gather in the port's buffer meanwhile),

@@ -197,6 +197,7 @@ class SerialSource(FrameSource):
         source = cls(link.port, baud=link.baud, read_size=link.read_size, queue_frames=link.queue_frames,
                      capture=capture, reconnect_min_s=link.reconnect_min_s,
                      reconnect_max_s=link.reconnect_max_s, open_port=open_port)
+        source.reader.reopen_s = link.reopen_s
         pace = source.reader.pace           # a hold must not look like a silent link (link_stalled)
         pace.far_hold_s = min(pace.far_hold_s, link.stall_s / 2)
         return source

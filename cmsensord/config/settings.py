@@ -162,6 +162,9 @@ class LinkConfig:
     reconnect_min_s: float = setting(0.5, "first reconnect back-off", gt=0)
     reconnect_max_s: float = setting(5.0, "longest reconnect back-off", gt=0)
     stall_s: float = setting(2.0, "seconds without a frame before link_stalled", gt=0)
+    reopen_s: float = setting(30.0, "seconds without a byte on an open port before it is closed and "
+                              "opened again (a hung USB device); twice as long each time, up to an hour; "
+                              "0: never", ge=0)
     max_drift_s: float = setting(2.0, "seconds the board's clock may run off the wall clock before "
                                  "its stamps are re-anchored (0: never, e.g. a board simulated "
                                  "faster than real time)", ge=0)

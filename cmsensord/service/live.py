@@ -52,6 +52,7 @@ class _Watch:
         self.cfg, self.proc, self.source = cfg, proc, source
         self.duration_s, self.sim_done = duration_s, sim_done
         self.stalled = False
+        self.stall_why = ""                     # "no bytes" or "bytes but no valid frame"
         self.idle_since: float | None = None
         self.drops_seen = 0
         self.last_frame = time.monotonic()      # a valid frame, or the start
@@ -91,12 +92,12 @@ class _Watch:
         # line) says the link stalled; the one after the event makes the event durable too
         last_bytes = self.source.last_bytes
         if now - last_bytes > link.stall_s and self.proc.anchor_ns is not None:
-            self.stalled = True
+            self.stalled, self.stall_why = True, "no bytes"
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
                             time.time_ns())
         elif now - self.last_frame > link.stall_s and now - last_bytes <= link.stall_s:
-            self.stalled = True
+            self.stalled, self.stall_why = True, "bytes but no valid frame"
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: bytes but no valid frame for "
                             f"{now - self.last_frame:.1f} s (wrong baud rate, or line noise?)",
@@ -105,6 +106,12 @@ class _Watch:
         if self.stalled:
             self.proc.link_quiet()
         return False
+
+    def stall_text(self, now: float) -> str:
+        """The stall in progress, for the status line ("" when frames come)."""
+        if not self.stalled:
+            return ""
+        return f"{self.cfg.link.port}: stalled, {self.stall_why} for {now - self.last_frame:.0f} s"
 
     def diagnostics(self, now: float) -> None:
         """``/cm/diagnostics`` when no decision wrote one for ``DIAGNOSTICS_S``."""
@@ -289,9 +296,9 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
 
     def line_now() -> str:              # the status line; a disk outage, a missing C kernel, the broker link
         line = status_line(proc, source)
-        outage = disk() if disk is not None else ""
-        if outage:
-            line = f"{line} | {outage}"
+        for more in (watch.stall_text(time.monotonic()), disk() if disk is not None else ""):
+            if more:
+                line = f"{line} | {more}"
         if fallback:
             line = f"{line} | {fallback}"
         return f"{line} | {publisher.status()}" if publisher is not None else line
