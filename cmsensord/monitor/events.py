@@ -8,8 +8,10 @@ that knows better (the sink about its own routine work) passes ``log_level``.
 
 Repeated events of one kind on one channel are rate-limited
 (:mod:`cmsensord.monitor.event_rate`): at most ``RATE_BURST`` in an interval of ``RATE_S``
-of event time starting at the first; the ones after them within that interval are counted
-(their ``count`` fields summed) and written as one summary event of that kind.  The limit
+of event time starting at the first (and, in the journal, at most ``LONG_BURST`` in
+``LONG_S``: a fault that never stops is a few lines each ten minutes); the ones after
+them within an interval are counted (their ``count`` fields summed) and written as one
+summary event of that kind when it ends.  The limit
 of ``/cm/events`` and ``/cm/log`` is applied as the records are written, in stamp order (a
 stamp's records in the order of kind, channel and message), so which events are written one
 by one and what the summaries say depend on the stream only, not on how it was read (live
@@ -19,8 +21,8 @@ list and ``on_event`` get the events as they come, limited in that order (their 
 with the next event of the kind after the interval, or at the end of the run:
 :meth:`EventLog.summarise`).  Every occurrence stays in :attr:`EventLog.counts`.  Kinds in
 ``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears, failures and
-decisions' notes, the alarm manager's transitions, which its delays already bound) are
-never held back.
+decisions' notes, the alarm manager's transitions, which its delays already bound, and the
+captures written, which their budget bounds) are never held back.
 
 ``/cm/events`` goes forward in time: an event carries the stamp of what it is
 about (a frame, a tacho edge, a decision), and parts of the chain report late
@@ -50,7 +52,7 @@ from typing import Any
 
 from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
-from cmsensord.monitor.event_rate import RateLimit, Summary
+from cmsensord.monitor.event_rate import RateLimit, RateLimits, Summary
 
 log = logging.getLogger("cmsensord")
 
@@ -70,7 +72,8 @@ LOG_LEVEL = {
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change",
-                       "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack", "alarm_no_baseline"})
+                       "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack", "alarm_no_baseline",
+                       "capture"})
 #: records wait until the processed stream is this far past them (events reported late; the
 #: sink's log-time window learns this lateness, so it is also what a kill -9 may cost the log)
 HOLD_S = 1.0
@@ -125,8 +128,8 @@ class EventLog:
         self.recent: deque[dict] = deque(maxlen=1000)
         self.counts: dict[str, int] = {}
         self._newest = 0                  # stamp of the newest event written
-        self._told = RateLimit()          # as events come: the journal, recent, on_event, WALL_KINDS
-        self._written = RateLimit()       # as records are written, in stamp order: /cm/events
+        self._told = RateLimits()         # as events come: the journal, recent, on_event, WALL_KINDS
+        self._written = RateLimits((RateLimit(),))   # as records are written, in stamp order: /cm/events
 
     def emit(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, *,
              log_level: int | None = None, **extra: Any) -> None:
@@ -151,8 +154,8 @@ class EventLog:
         told = True
         if kind not in UNLIMITED:
             closed, told = self._told.admit(kind, channel, stamp, int(extra.get("count", 0) or 0))
-            if closed is not None:
-                self._tell_summary(closed)
+            for s in closed:
+                self._tell_summary(s)
         m = messages.event(stamp, kind, channel, message, extra)
         level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind in WALL_KINDS:
@@ -237,8 +240,8 @@ class EventLog:
             ev = m.msg
             if ev["kind"] not in UNLIMITED:
                 closed, ok = self._written.admit(ev["kind"], ev["channel"], m.stamp_ns, int(ev.get("count", 0) or 0))
-                if closed is not None:
-                    self._put_summary(closed)
+                for s in closed:
+                    self._put_summary(s)
                 if not ok:
                     skip.add(n)
         for _, n, m, level in group:
