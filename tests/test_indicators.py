@@ -80,9 +80,9 @@ def test_velocity_rms_of_band_limited_noise_of_known_spectrum_within_two_percent
     assert math.sqrt(np.mean(ms)) == pytest.approx(expected, rel=0.02)
 
 
-def test_velocity_band_is_two_to_thousand_hertz_below_600_rpm():
-    assert velocity_band(1480.0) == (10.0, 1000.0)
-    assert velocity_band(450.0) == (2.0, 1000.0)
+def test_velocity_band_is_two_to_thousand_hertz_at_or_below_600_rpm():
+    assert velocity_band(1480.0) == velocity_band(600.5) == (10.0, 1000.0)
+    assert velocity_band(450.0) == velocity_band(600.0) == (2.0, 1000.0)
     assert velocity_band(None) == (10.0, 1000.0)
     assert velocity_band(450.0, (5.0, 500.0)) == (5.0, 500.0)
 
