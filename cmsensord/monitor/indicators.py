@@ -39,7 +39,7 @@ import numpy as np
 from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
-from cmsensord.dsp.indicators.envelope import default_band
+from cmsensord.dsp.indicators.envelope import envelope_band
 from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
@@ -65,13 +65,12 @@ def channel_setup(cfg: Config, ch: ChannelConfig, fs: float) -> Setup:
     """The :class:`~cmsensord.dsp.indicators.Setup` of one channel from the configuration."""
     ic = cfg.indicators
     vb = ic.velocity_band_hz
-    eb = ic.envelope_band_hz
     bands = tuple(Band(b.name, b.lo_hz, b.hi_hz) if b.lo_hz is not None and b.hi_hz is not None
                   else Band(b.name, b.lo_order or 0.0, b.hi_order or 0.0, orders=True) for b in ic.bands)
     bearings = tuple(Bearing(b.name, Geometry(b.elements, b.ball_diameter, b.pitch_diameter, b.contact_angle_deg))
                      for b in cfg.bearings if b.channel == ch.name)
     return Setup(fs, (vb[0], vb[1]) if vb else None,
-                 (eb[0], eb[1]) if eb else default_band(fs), ic.machine_group, ic.foundation,
+                 envelope_band(fs, ic.envelope_band_hz), ic.machine_group, ic.foundation,
                  ic.velocity_baseline_mm_s, ic.slip_pct / 100.0, bearings, bands, ic.rpm)
 
 

@@ -34,14 +34,21 @@ import numpy as np
 
 from .spectrum import bin_range, hann, hann_sums, rfft_freqs
 
-__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft", "centred_envelopes",
-           "envelope_spectrum",
+__all__ = ["default_band", "envelope_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft",
+           "centred_envelopes", "envelope_spectrum",
            "centred_envelope_spectrum", "LinePeak", "line_peak"]
 
 
 def default_band(fs: float) -> tuple[float, float]:
     """The resonance band demodulated by default: 0.08 fs .. 0.4 fs (2-10 kHz at 25 kHz)."""
     return 0.08 * fs, 0.4 * fs
+
+
+def envelope_band(fs: float, configured: tuple[float, ...] | None = None) -> tuple[float, float]:
+    """The band demodulated at fs: ``configured`` (``indicators.envelope_band_hz``, [lo, hi] Hz),
+    else :func:`default_band`; the indicators' envelope and the captures' envelope spectrum
+    both demodulate this one."""
+    return (float(configured[0]), float(configured[1])) if configured else default_band(fs)
 
 
 @lru_cache(maxsize=32)
