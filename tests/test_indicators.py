@@ -151,6 +151,18 @@ def test_envelope_of_an_amplitude_modulated_carrier():
     assert p is not None and p.freq_hz == 297.0 and p.amplitude == pytest.approx(0.5, rel=1e-3)
 
 
+@pytest.mark.parametrize("offset", [0.0, 0.1, 0.25, 0.4, 0.5, 0.63, 0.9])
+def test_a_line_between_bins_reads_its_amplitude_within_one_percent(offset):
+    """A modulation of 0.5 at 297 + offset Hz (1-Hz bins): the Hann scalloping (up to -15 %
+    midway) corrected by the two-bin interpolation (Grandke 1983)."""
+    x = (1 + 0.5 * np.cos(2 * np.pi * (297.0 + offset) * T)) * np.sin(2 * np.pi * 5000.0 * T)
+    e = envelope(x, FS, default_band(FS))
+    f, A = envelope_spectrum(e.env, e.fs_env)
+    p = line_peak(f, A, 297.0 + offset, 0.02)
+    assert p is not None and p.amplitude == pytest.approx(0.5, rel=0.01)
+    assert abs(p.freq_hz - (297.0 + offset)) <= 0.5
+
+
 def impacts(rate_hz: float, noise: float, seed: int) -> np.ndarray:
     """Decaying 5 kHz ringing started at ``rate_hz`` (a defect struck once per pass), in noise."""
     x = np.random.default_rng(seed).normal(0.0, noise, FS)

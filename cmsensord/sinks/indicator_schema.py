@@ -32,7 +32,9 @@ def _pair(description: str, n: int = 2) -> dict[str, Any]:
 
 def _line() -> dict[str, Any]:
     return {"type": "object", "description": "the envelope spectrum's largest bin within the slip window",
-            "properties": {"amplitude": _n("envelope-spectrum amplitude [m/s^2]", 0),
+            "properties": {"amplitude": _n("envelope-spectrum 0-peak amplitude [m/s^2] (a modulation m cos(2 pi f t) "
+                                          "of the envelope reads m), the bin's Hann scalloping corrected by "
+                                          "two-bin interpolation (Grandke 1983)", 0),
                            "freq_hz": _n("frequency of that bin [Hz]", 0),
                            "ratio": _n("amplitude over the median of the envelope spectrum from 0.5 to "
                                        "1.5 x the line's frequency (absent when that median is 0)", 0)},
