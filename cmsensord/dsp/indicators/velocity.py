@@ -7,7 +7,10 @@ edge.  Each bin of the acceleration power spectrum (:mod:`.spectrum`, m^2/s^4) d
 (2 pi f)^2 is the velocity power of that bin; the velocity RMS is the root of their sum over
 the bins with lo <= f <= hi (both edges included, rectangular: the band is the standard's, not a
 filter's -3 dB points), times 1000 for mm/s.  Above fs / 2 nothing is measured, so
-the upper edge is min(hi, fs / 2).
+the upper edge is min(hi, fs / 2).  A tone n bins (of 1 / record length Hz) above 0 Hz
+reads high, its Hann side bins weighted by 1 / (2 pi f)^2 (+6.6 % at 3 bins, +0.5 % at 10,
+about +50 / n^2 %), and a tone on the band's lower edge low, its lower side bin left out
+(-10 % for 10 Hz in 1 s): the README's "Velocity RMS at low frequencies and short intervals".
 """
 
 from __future__ import annotations
