@@ -121,3 +121,36 @@ def test_a_bad_capture_setting_is_one_line(raw_cap, tmp_path):
         f"cmsensord: configuration error: {cfg}: capture.triggers: unknown trigger 'alarm' (one of alarm_alert, "
         "alarm_danger, alarm_clear, severity_change, anomaly_onset, failure, order_alarm, time_base, tacho_lost, "
         "operating_state, manual) (got 'alarm')"]
+
+
+@pytest.mark.parametrize("carrier, band", [(5000.0, None), (1500.0, (1000.0, 2000.0))])
+def test_captured_spectra_are_rms_per_bin_and_the_envelope_demodulates_the_indicators_band(
+        tmp_path, carrier, band):
+    """An imported 1 g carrier modulated 50 % at 100 Hz, with a 0.3 g sine at 50 Hz: the
+    spectrum reads the sine's RMS, the envelope spectrum the modulation's RMS (0.5 g / sqrt 2,
+    what envelope_rms reads), of indicators.envelope_band_hz when it is set."""
+    fs, g = 25600, 9.80665
+    t = np.arange(8 * fs) / fs
+    x = (1 + 0.5 * np.cos(2 * np.pi * 100 * t)) * np.cos(2 * np.pi * carrier * t) + 0.3 * np.sin(2 * np.pi * 50 * t)
+    np.save(tmp_path / "am.npy", x)
+    p = cmsensord("import", str(tmp_path / "am.npy"), "--fs", str(fs), "--unit", "g", "--names", "ch0",
+                  "--out", str(tmp_path / "am.bin"))
+    assert p.returncode == 0, p.stderr
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("output:\n  status_line: false\ncapture:\n  every_s: 4\n  pre_s: 2\n  post_s: 2\n"
+                   + (f"indicators:\n  envelope_band_hz: [{band[0]}, {band[1]}]\n" if band else ""))
+    p = cmsensord("replay", str(tmp_path / "am.bin"), "--config", str(cfg), "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    spec = next(m for topic, _, m in msgs if topic == "/cm/ch0/capture_spectrum")
+    env = next(m for topic, _, m in msgs if topic == "/cm/ch0/capture_envelope")
+    ind = [m for topic, _, m in msgs if topic == "/cm/ch0/indicators"][2]
+
+    def peak(m, f0):
+        k = round(f0 / m["freq_step_hz"])
+        return max(m["amplitude"][k - 2:k + 3])
+    assert peak(spec, 50) == pytest.approx(0.3 * g / np.sqrt(2), rel=0.01)
+    assert env["band_hz"] == ind["envelope_band_hz"] == list(band or (0.08 * fs, 0.4 * fs))
+    # before: 4.903 (0-peak) at 5 kHz, and 0.0004 with the 1500-Hz carrier outside the default band
+    assert peak(env, 100) == pytest.approx(0.5 * g / np.sqrt(2), rel=0.01)
+    assert peak(env, 100) == pytest.approx(ind["envelope_rms"], rel=0.01)

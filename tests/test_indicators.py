@@ -80,9 +80,9 @@ def test_velocity_rms_of_band_limited_noise_of_known_spectrum_within_two_percent
     assert math.sqrt(np.mean(ms)) == pytest.approx(expected, rel=0.02)
 
 
-def test_velocity_band_is_two_to_thousand_hertz_below_600_rpm():
-    assert velocity_band(1480.0) == (10.0, 1000.0)
-    assert velocity_band(450.0) == (2.0, 1000.0)
+def test_velocity_band_is_two_to_thousand_hertz_at_or_below_600_rpm():
+    assert velocity_band(1480.0) == velocity_band(600.5) == (10.0, 1000.0)
+    assert velocity_band(450.0) == velocity_band(600.0) == (2.0, 1000.0)
     assert velocity_band(None) == (10.0, 1000.0)
     assert velocity_band(450.0, (5.0, 500.0)) == (5.0, 500.0)
 
@@ -149,6 +149,18 @@ def test_envelope_of_an_amplitude_modulated_carrier():
     f, A = envelope_spectrum(e.env, e.fs_env)
     p = line_peak(f, A, 297.0, 0.02)
     assert p is not None and p.freq_hz == 297.0 and p.amplitude == pytest.approx(0.5, rel=1e-3)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.1, 0.25, 0.4, 0.5, 0.63, 0.9])
+def test_a_line_between_bins_reads_its_amplitude_within_one_percent(offset):
+    """A modulation of 0.5 at 297 + offset Hz (1-Hz bins): the Hann scalloping (up to -15 %
+    midway) corrected by the two-bin interpolation (Grandke 1983)."""
+    x = (1 + 0.5 * np.cos(2 * np.pi * (297.0 + offset) * T)) * np.sin(2 * np.pi * 5000.0 * T)
+    e = envelope(x, FS, default_band(FS))
+    f, A = envelope_spectrum(e.env, e.fs_env)
+    p = line_peak(f, A, 297.0 + offset, 0.02)
+    assert p is not None and p.amplitude == pytest.approx(0.5, rel=0.01)
+    assert abs(p.freq_hz - (297.0 + offset)) <= 0.5
 
 
 def impacts(rate_hz: float, noise: float, seed: int) -> np.ndarray:

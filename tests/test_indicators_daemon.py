@@ -69,6 +69,28 @@ def test_the_simulated_outer_race_defect_shows_at_bpfo(simulated):
         assert max(m["bearings"][0]["lines"][k]["ratio"] for k in FIRST) < 3
 
 
+def test_a_bearing_line_between_bins_reads_its_0_peak_amplitude(tmp_path):
+    """An imported 1 g carrier at 5 kHz modulated 50 % at the BPFO of 1800 rpm (107.54 Hz, 0.46 of
+    a 1-Hz bin off): the line reads the modulation's 0-peak 0.5 g within 1 % (before: 4.279 m/s^2,
+    -13 %, the Hann window's scalloping)."""
+    fs, g = 25600, 9.80665
+    t = np.arange(4 * fs) / fs
+    bpfo = 9 / 2 * 30.0 * (1 - 7.94 / 39.04)
+    np.save(tmp_path / "am.npy", (1 + 0.5 * np.cos(2 * np.pi * bpfo * t)) * np.cos(2 * np.pi * 5000 * t))
+    ok("cmsensord", "import", str(tmp_path / "am.npy"), "--fs", str(fs), "--unit", "g", "--names", "ch",
+       "--out", str(tmp_path / "am.bin"))
+    (tmp_path / "site.yaml").write_text("output:\n  status_line: false\nindicators:\n  rpm: 1800\nbearings:\n"
+                                        "  - {name: de, channel: ch, elements: 9, ball_diameter: 7.94, "
+                                        "pitch_diameter: 39.04}\n")
+    ok("cmsensord", "replay", str(tmp_path / "am.bin"), "--config", str(tmp_path / "site.yaml"),
+       "--out", str(tmp_path / "out"))
+    recs = indicators(tmp_path / "out", "ch")[1:-1]
+    assert recs
+    for m in recs:
+        line = m["bearings"][0]["lines"]["bpfo"]
+        assert line["freq_hz"] == 108.0 and line["amplitude"] == pytest.approx(0.5 * g, rel=0.01)
+
+
 def test_simulate_in_rms_mode_reports_the_overall_rms_and_the_rest_unavailable(tmp_path):
     ok("cmsensord", "--simulate", "--scenario", "healthy", "--duration", "4", "--out", str(tmp_path))
     recs = indicators(tmp_path, "ch0")

@@ -51,7 +51,21 @@ def plain_line(f, A, f0, slip):
     win = np.flatnonzero((f >= f0 - half) & (f <= f0 + half))
     i = win[np.argmax(A[win])]
     floor = np.median(A[(f >= 0.5 * f0) & (f <= 1.5 * f0)])
-    return A[i], f[i], A[i] / floor
+    amp = plain_hann_peak(A, i)
+    return amp, f[i], amp / floor
+
+
+def plain_hann_peak(A, i):
+    """Grandke 1983 for the Hann window: the offset delta from the ratio of the larger
+    neighbour to bin i, the amplitude A[i] over the Hann kernel at delta."""
+    side = max(A[i - 1] if i > 0 else 0.0, A[i + 1] if i + 1 < A.size else 0.0)
+    if A[i] <= 0 or side > A[i]:
+        return A[i]
+    alpha = side / A[i]
+    delta = float(np.clip((2 * alpha - 1) / (alpha + 1), 0.0, 0.5))
+    if delta == 0:
+        return A[i]
+    return A[i] * np.pi * delta * (1 - delta ** 2) / np.sin(np.pi * delta)
 
 
 def plain_record(x, setup, shaft_hz):

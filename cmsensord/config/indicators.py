@@ -77,10 +77,11 @@ class IndicatorsConfig:
     interval_s: float = setting(1.0, "seconds of board time per indicator record", gt=0, le=60)
     machine_group: int = setting(2, "ISO 10816-3 machine group: 1 (> 300 kW) or 2 (15-300 kW)", ge=1, le=2)
     foundation: str = setting("rigid", "ISO 10816-3 foundation", choices=("rigid", "flexible"))
-    rpm: float | None = setting(None, "shaft speed [rpm] when there is no tacho (bearing "
-                                "frequencies, order bands, the 600 rpm velocity band rule)", gt=0)
+    rpm: float | None = setting(None, "shaft speed [rpm] when there is no tacho or it gives no speed "
+                                "(bearing frequencies, order bands, the velocity band)", gt=0)
     velocity_band_hz: tuple[float, ...] | None = setting(
-        None, "[lo, hi] Hz of the velocity RMS (default: 10-1000, 2-1000 below 600 rpm)")
+        None, "[lo, hi] Hz of the velocity RMS (default: by the record's speed, 2-1000 at or below "
+        "600 rpm, else 10-1000)")
     envelope_band_hz: tuple[float, ...] | None = setting(
         None, "[lo, hi] Hz demodulated (default: 0.08-0.4 fs, 2-10 kHz at 25 kHz)")
     slip_pct: float = setting(2.0, "search window +/- % around each defect frequency", ge=0, le=10)

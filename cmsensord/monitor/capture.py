@@ -32,7 +32,9 @@ received: ``pre_s`` from the ring, ``post_s`` still to come; it is not held back
 by ``min_interval_s`` (an operator asked for it) but counts against the hourly
 budget.  In RAW mode the spectrum and the envelope spectrum carry the shaft speed
 over the capture and the lines at it (1x, each bearing's defect frequencies:
-:mod:`.capture_marks`).
+:mod:`.capture_marks`).  Both spectra are RMS per bin
+(:mod:`cmsensord.dsp.capture_spectra`); the envelope spectrum demodulates the band the
+indicators do (``indicators.envelope_band_hz``, else 0.08-0.4 fs).
 """
 
 from __future__ import annotations
@@ -46,8 +48,8 @@ import numpy as np
 
 from cmsensord.config import ChannelConfig
 from cmsensord.config.capture import CaptureConfig
-from cmsensord.dsp.capture_spectra import amplitude_spectrum
-from cmsensord.dsp.indicators.envelope import default_band, envelope, envelope_spectrum
+from cmsensord.dsp.capture_spectra import amplitude_spectrum, envelope_rms_spectrum
+from cmsensord.dsp.indicators.envelope import envelope_band
 from cmsensord.monitor.capture_marks import CaptureMarks
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.indicators import MAX_WAIT_S
@@ -120,8 +122,9 @@ class Captures:
     """Triggers -> captures of the channels' signal (see the module docstring)."""
 
     def __init__(self, cfg: CaptureConfig, stamp_of: Callable[[int], int],
-                 marks: CaptureMarks | None = None) -> None:
+                 marks: CaptureMarks | None = None, envelope_band_hz: tuple[float, ...] | None = None) -> None:
         self.cfg = cfg
+        self.envelope_band_hz = envelope_band_hz    # indicators.envelope_band_hz (None: the default)
         self.marks = marks
         self.stamp_of = stamp_of            # board t0 -> stamp [ns]
         self.source = ""
@@ -365,14 +368,13 @@ class Captures:
             **head, "kind": "spectrum", "freq_start_hz": 0.0, "freq_step_hz": float(f[1] - f[0]),
             "unit": unit, "amplitude": np.round(A, 6).tolist(), **marks}))
         if self.source == "raw":
-            env = envelope(filled, self.rate, default_band(self.rate))
-            fe, Ae = envelope_spectrum(env.env, env.fs_env)
+            fe, Ae, band = envelope_rms_spectrum(filled, self.rate, envelope_band(self.rate, self.envelope_band_hz))
             keep = fe <= ENVELOPE_MAX_HZ
             if "marks" in marks:
                 marks = {**marks, "marks": [m for m in marks["marks"] if m["freq_hz"] <= ENVELOPE_MAX_HZ]}
             group.append(Message(env_t, "capture_spectrum", p.stamp_ns, {
                 **head, "kind": "envelope", "freq_start_hz": 0.0, "freq_step_hz": float(fe[1] - fe[0]),
-                "band_hz": [float(env.band[0]), float(env.band[1])], "unit": unit,
+                "band_hz": [float(band[0]), float(band[1])], "unit": unit,
                 "amplitude": np.round(Ae[keep], 6).tolist(), **marks}))
         written = Event("capture", p.channel, f"{p.channel}: captured {len(x) / self.rate:g} s around "
                         f"{p.trigger['kind']} ({len(x)} samples, {int(lost.sum())} lost)", p.stamp_ns,

@@ -11,7 +11,8 @@ once TACHO frames cover the interval's end; at most ``MAX_WAIT_S``), then
 
 * Speed: the mean of the tacho's causal speed at 16 points of the interval (None
   when fewer than half are valid: the machine stopped or the tacho is lost);
-  without a tacho, ``indicators.rpm``.
+  without a tacho, ``indicators.rpm``.  The velocity band (none configured) follows that
+  speed, else ``indicators.rpm`` (:meth:`~cmsensord.dsp.indicators.Setup.band_at`).
 * An interval with missing samples (lost RAW frames, a gap, the end of the stream)
   gives the waveform statistics of the samples it has, with ``missing_fraction``;
   the spectral indicators, which need all N samples, are listed as unavailable.
@@ -38,9 +39,8 @@ import numpy as np
 from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
-from cmsensord.dsp.indicators.envelope import default_band
+from cmsensord.dsp.indicators.envelope import envelope_band
 from cmsensord.dsp.indicators.statistics import waveform_stats
-from cmsensord.dsp.indicators.velocity import velocity_band
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.sinks.schemas import indicators_topic
@@ -65,14 +65,13 @@ def channel_setup(cfg: Config, ch: ChannelConfig, fs: float) -> Setup:
     """The :class:`~cmsensord.dsp.indicators.Setup` of one channel from the configuration."""
     ic = cfg.indicators
     vb = ic.velocity_band_hz
-    eb = ic.envelope_band_hz
     bands = tuple(Band(b.name, b.lo_hz, b.hi_hz) if b.lo_hz is not None and b.hi_hz is not None
                   else Band(b.name, b.lo_order or 0.0, b.hi_order or 0.0, orders=True) for b in ic.bands)
     bearings = tuple(Bearing(b.name, Geometry(b.elements, b.ball_diameter, b.pitch_diameter, b.contact_angle_deg))
                      for b in cfg.bearings if b.channel == ch.name)
-    return Setup(fs, velocity_band(ic.rpm, (vb[0], vb[1]) if vb else None),
-                 (eb[0], eb[1]) if eb else default_band(fs), ic.machine_group, ic.foundation,
-                 ic.velocity_baseline_mm_s, ic.slip_pct / 100.0, bearings, bands)
+    return Setup(fs, (vb[0], vb[1]) if vb else None,
+                 envelope_band(fs, ic.envelope_band_hz), ic.machine_group, ic.foundation,
+                 ic.velocity_baseline_mm_s, ic.slip_pct / 100.0, bearings, bands, ic.rpm)
 
 
 def _num(x: float) -> float:

@@ -112,9 +112,9 @@ class Processor(Figures):
         if cfg.capture.enabled:
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
             from cmsensord.monitor.capture_marks import CaptureMarks
-            self.captures = Captures(cfg.capture, self.clock.stamp_ns, CaptureMarks(cfg, lambda: self.shaft.tacho))
-            self.log.watch, self.log.owed, self.log.settle = self.captures.watch, self.captures.owed, \
-                self.captures.settle
+            c = self.captures = Captures(cfg.capture, self.clock.stamp_ns,
+                                         CaptureMarks(cfg, lambda: self.shaft.tacho), cfg.indicators.envelope_band_hz)
+            self.log.watch, self.log.owed, self.log.settle = c.watch, c.owed, c.settle
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)

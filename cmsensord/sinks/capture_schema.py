@@ -79,9 +79,12 @@ def capture_spectrum_schema(time: Callable[[], dict], obj: Callable[..., dict]) 
             "freq_start_hz": {"type": "number", "description": "frequency of the first bin [Hz]"},
             "freq_step_hz": {"type": "number", "description": "bin spacing [Hz]", "minimum": 0},
             "band_hz": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                        "description": "envelope: the band demodulated [Hz]"},
+                        "description": "envelope: the band demodulated [Hz] (indicators.envelope_band_hz, "
+                                       "else 0.08-0.4 fs: the indicators' band)"},
             "unit": {"type": "string", "description": "unit of amplitude"},
-            "amplitude": {"type": "array", "items": {"type": "number"}, "description": "RMS amplitude per bin"},
+            "amplitude": {"type": "array", "items": {"type": "number"},
+                          "description": "RMS amplitude per bin: a sine of RMS a reads a at its frequency (envelope: "
+                                         "a modulation of the envelope reads its RMS, as envelope_rms counts it)"},
             "shaft_speed_rpm": {"type": "number", "minimum": 0,
                                 "description": "RAW: mean shaft speed over the capture [rpm] (absent: unknown)"},
             "speed_source": {"type": "string", "enum": ["tacho", "config"],

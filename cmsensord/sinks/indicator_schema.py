@@ -32,7 +32,9 @@ def _pair(description: str, n: int = 2) -> dict[str, Any]:
 
 def _line() -> dict[str, Any]:
     return {"type": "object", "description": "the envelope spectrum's largest bin within the slip window",
-            "properties": {"amplitude": _n("envelope-spectrum amplitude [m/s^2]", 0),
+            "properties": {"amplitude": _n("envelope-spectrum 0-peak amplitude [m/s^2] (a modulation m cos(2 pi f t) "
+                                          "of the envelope reads m), the bin's Hann scalloping corrected by "
+                                          "two-bin interpolation (Grandke 1983)", 0),
                            "freq_hz": _n("frequency of that bin [Hz]", 0),
                            "ratio": _n("amplitude over the median of the envelope spectrum from 0.5 to "
                                        "1.5 x the line's frequency (absent when that median is 0)", 0)},
@@ -71,7 +73,9 @@ def indicators_schema(time: dict[str, Any], obj: Callable[..., dict]) -> dict[st
             "kurtosis": _n("mean(x^4) / mean(x^2)^2 of the acceleration minus its mean (3: Gaussian)", 0),
             "velocity_rms_mm_s": _n("velocity RMS over velocity_band_hz [mm/s], integrated in the "
                                     "frequency domain", 0),
-            "velocity_band_hz": _pair("[lo, hi] of the velocity RMS [Hz]"),
+            "velocity_band_hz": _pair("[lo, hi] of the velocity RMS [Hz]: indicators.velocity_band_hz, else "
+                                      "by the record's speed (speed_rpm, else indicators.rpm): 2-1000 at or "
+                                      "below 600 rpm, 10-1000 above or without a speed"),
             "zone": {"type": "string", "enum": ["A", "B", "C", "D"],
                      "description": "ISO 10816-3 / 20816-3 zone of velocity_rms_mm_s"},
             "zone_boundaries_mm_s": _pair("A/B, B/C, C/D boundaries of the machine group and "

@@ -425,7 +425,8 @@ ORDERS = _obj(
                               "description": "order (multiple of shaft speed); absent for a fixed frequency"},
                     "freq_hz": _num("frequency of the component over the block [Hz]"),
                     "rms": _num("RMS of the tracked waveform over the block [m/s^2]"),
-                    "amplitude": _num("mean envelope (peak) amplitude over the block [m/s^2]"),
+                    "amplitude": _num("0-peak amplitude, the mean envelope of the tracked waveform over "
+                                      "the block [m/s^2] (a steady sine of amplitude a reads a, its rms a / sqrt 2)"),
                 },
                 "required": ["name"],
             },

@@ -16,10 +16,13 @@ filter design):
 3. envelope RMS: the RMS of the envelope minus its mean (m/s^2);
 4. envelope spectrum: Hann-windowed amplitude spectrum of the envelope minus its
    mean, scaled so that a modulation m cos(2 pi f t) of the envelope reads m at f
-   (up to the Hann scalloping loss, at most 1.4 dB midway between bins);
+   (0-peak; on a bin, and up to the Hann scalloping loss, at most 1.4 dB midway between
+   bins, off it);
 5. the amplitude at a defect frequency f0: the largest bin within f0 (1 +/- slip)
-   (at least +/- one bin), and ``ratio``: that amplitude over the median of the
-   envelope spectrum from 0.5 f0 to 1.5 f0 (how far the line stands out of the
+   (at least +/- one bin), its scalloping loss corrected by the two-bin interpolation
+   for the Hann window (Grandke 1983, :func:`hann_peak_amplitude`: a single tone between
+   bins reads its 0-peak amplitude m), and ``ratio``: that amplitude over the median of
+   the envelope spectrum from 0.5 f0 to 1.5 f0 (how far the line stands out of the
    floor around it).
 
 Default band: 0.08 fs .. 0.4 fs (2-10 kHz at 25 kHz), :func:`default_band`.
@@ -27,6 +30,7 @@ Default band: 0.08 fs .. 0.4 fs (2-10 kHz at 25 kHz), :func:`default_band`.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -34,14 +38,21 @@ import numpy as np
 
 from .spectrum import bin_range, hann, hann_sums, rfft_freqs
 
-__all__ = ["default_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft", "centred_envelopes",
-           "envelope_spectrum",
-           "centred_envelope_spectrum", "LinePeak", "line_peak"]
+__all__ = ["default_band", "envelope_band", "Envelope", "envelope", "envelope_of_rfft", "envelopes_of_rfft",
+           "centred_envelopes", "envelope_spectrum",
+           "centred_envelope_spectrum", "LinePeak", "line_peak", "hann_peak_amplitude"]
 
 
 def default_band(fs: float) -> tuple[float, float]:
     """The resonance band demodulated by default: 0.08 fs .. 0.4 fs (2-10 kHz at 25 kHz)."""
     return 0.08 * fs, 0.4 * fs
+
+
+def envelope_band(fs: float, configured: tuple[float, ...] | None = None) -> tuple[float, float]:
+    """The band demodulated at fs: ``configured`` (``indicators.envelope_band_hz``, [lo, hi] Hz),
+    else :func:`default_band`; the indicators' envelope and the captures' envelope spectrum
+    both demodulate this one."""
+    return (float(configured[0]), float(configured[1])) if configured else default_band(fs)
 
 
 @lru_cache(maxsize=32)
@@ -149,9 +160,31 @@ def centred_envelope_spectrum(e: np.ndarray, fs_env: float) -> tuple[np.ndarray,
 
 
 class LinePeak(NamedTuple):
-    amplitude: float      # largest envelope-spectrum amplitude in the window [m/s^2]
-    freq_hz: float        # where it is
-    ratio: float          # over the median of the spectrum in 0.5 f0 .. 1.5 f0
+    amplitude: float      # 0-peak amplitude of the window's largest bin, interpolated [m/s^2]
+    freq_hz: float        # that bin's frequency
+    ratio: float          # amplitude over the median of the spectrum in 0.5 f0 .. 1.5 f0
+
+
+def hann_peak_amplitude(A: np.ndarray, i: int) -> float:
+    """The amplitude of a tone whose largest bin of the Hann-windowed amplitude spectrum A is
+    i, corrected for the tone's offset from the bin (Grandke 1983, the Hann window): with
+    alpha the larger neighbour over A[i], the tone lies delta = (2 alpha - 1) / (alpha + 1)
+    bins from i towards that neighbour (clipped to 0 .. 0.5), and A[i] is its amplitude times
+    the Hann kernel there, sin(pi delta) / (pi delta (1 - delta^2)); so A[i] / kernel is exact
+    for a single tone, +0 % on a bin to +17.8 % midway.  A[i] itself when it is not a local
+    maximum (the skirt of a line beyond it) or is 0."""
+    a = float(A[i])
+    left = float(A[i - 1]) if i > 0 else 0.0
+    right = float(A[i + 1]) if i + 1 < A.shape[-1] else 0.0
+    side = max(left, right)
+    if not a > 0.0 or side > a:
+        return a
+    alpha = side / a
+    delta = min(max((2.0 * alpha - 1.0) / (alpha + 1.0), 0.0), 0.5)
+    if delta == 0.0:
+        return a
+    x = math.pi * delta
+    return a * x * (1.0 - delta * delta) / math.sin(x)
 
 
 def line_peak(f: np.ndarray, A: np.ndarray, f0: float, slip: float) -> LinePeak | None:
@@ -165,4 +198,5 @@ def line_peak(f: np.ndarray, A: np.ndarray, f0: float, slip: float) -> LinePeak 
     i = a + int(np.argmax(A[a:b]))
     lo, hi = bin_range(f, 0.5 * f0, 1.5 * f0)
     floor = float(np.median(A[lo:hi]))
-    return LinePeak(float(A[i]), float(f[i]), float(A[i]) / floor if floor > 0 else float("nan"))
+    amp = hann_peak_amplitude(A, i)
+    return LinePeak(amp, float(f[i]), amp / floor if floor > 0 else float("nan"))

@@ -26,6 +26,7 @@ from .envelope import Envelope, LinePeak, centred_envelope_spectrum, centred_env
 from .iso_zones import ZONES, baseline_alarm_mm_s, boundaries, zone_index
 from .spectrum import bin_range, hann_power_bins, rfft_freqs
 from .statistics import WaveformStats, centred_stats, centred_stats_rows
+from .velocity import velocity_band
 
 __all__ = ["Band", "Bearing", "Setup", "BearingLines", "IndicatorRecord", "compute", "compute_many"]
 
@@ -51,10 +52,14 @@ class Bearing:
 
 @dataclass(frozen=True)
 class Setup:
-    """What :func:`compute` needs besides the samples, for one channel."""
+    """What :func:`compute` needs besides the samples, for one channel.
+
+    ``velocity_band``: the configured band, or None for the ISO band of each record's speed
+    (:func:`~.velocity.velocity_band`: the shaft speed given to :func:`compute`, else ``rpm``,
+    the configured speed)."""
 
     fs: float
-    velocity_band: tuple[float, float]
+    velocity_band: tuple[float, float] | None
     envelope_band: tuple[float, float]
     group: int = 2
     foundation: str = "rigid"
@@ -62,6 +67,12 @@ class Setup:
     slip: float = 0.02
     bearings: tuple[Bearing, ...] = ()
     bands: tuple[Band, ...] = ()
+    rpm: float | None = None
+
+    def band_at(self, shaft_hz: float | None) -> tuple[float, float]:
+        """The velocity band of a record at ``shaft_hz`` (None: no speed measured)."""
+        speed = 60.0 * shaft_hz if shaft_hz is not None and shaft_hz > 0 else self.rpm
+        return velocity_band(speed, self.velocity_band)
 
 
 @dataclass
@@ -122,11 +133,11 @@ def _hz_bands(setup: Setup, shaft_hz: float | None) -> list[tuple[Band, tuple[fl
     return out
 
 
-def _spectral_sums(X: np.ndarray, N: int, f: np.ndarray, setup: Setup,
+def _spectral_sums(X: np.ndarray, N: int, f: np.ndarray, setup: Setup, vband: tuple[float, float],
                    bands: list[tuple[Band, tuple[float, float]]]) -> tuple[float, list[float]]:
-    """Velocity RMS [mm/s] and band RMS from the Hann power of the bins they read, computed
-    once over the span of those bins (:func:`~.spectrum.hann_power_bins`)."""
-    va, vb = _velocity_bins(N, float(setup.fs), *setup.velocity_band)
+    """Velocity RMS [mm/s] over ``vband`` and band RMS from the Hann power of the bins they
+    read, computed once over the span of those bins (:func:`~.spectrum.hann_power_bins`)."""
+    va, vb = _velocity_bins(N, float(setup.fs), *vband)
     ranges = [bin_range(f, *edges) for _, edges in bands]
     used = [r for r in [(va, vb)] + ranges if r[1] > r[0]]
     k0 = min((a for a, _ in used), default=0)
@@ -219,7 +230,8 @@ def _record(N: int, X: np.ndarray, setup: Setup, shaft_hz: float | None, stats: 
     ``np.fft.rfft`` X, waveform statistics, envelope (:func:`~.envelope.envelope_of_rfft`)
     with its mean removed and that envelope's RMS."""
     bands = _hz_bands(setup, shaft_hz)
-    v, band_values = _spectral_sums(X, N, rfft_freqs(N, float(setup.fs)), setup, bands)
+    vband = setup.band_at(shaft_hz)
+    v, band_values = _spectral_sums(X, N, rfft_freqs(N, float(setup.fs)), setup, vband, bands)
     bounds = boundaries(setup.group, setup.foundation)
     alarm = (baseline_alarm_mm_s(setup.velocity_baseline_mm_s, setup.group, setup.foundation)
              if setup.velocity_baseline_mm_s is not None else None)
@@ -227,7 +239,7 @@ def _record(N: int, X: np.ndarray, setup: Setup, shaft_hz: float | None, stats: 
     if setup.bearings and shaft_hz is not None and shaft_hz > 0:
         fe, A = centred_envelope_spectrum(env.env, env.fs_env)
         bearings = [_bearing_lines(setup, b, shaft_hz, fe, A) for b in setup.bearings]
-    return IndicatorRecord(stats, v, (setup.velocity_band[0], min(setup.velocity_band[1], setup.fs / 2)),
+    return IndicatorRecord(stats, v, (vband[0], min(vband[1], setup.fs / 2)),
                            ZONES[zone_index(v, setup.group, setup.foundation)], bounds, alarm,
                            env_rms, env.band, shaft_hz,
                            bearings, [(band, edges, r) for (band, edges), r in zip(bands, band_values)])
