@@ -186,7 +186,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
         capture = open(capture_path, "wb") if capture_path else None
     except OSError as exc:
         raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
-    sink = open_sink(cfg, metadata or {}, background_salvage=True)
+    sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon")
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
     queue = source.queue
     sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
