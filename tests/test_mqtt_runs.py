@@ -1,17 +1,20 @@
-"""Which runs publish, and what they tell, against a real Mosquitto broker (tests/mosquitto.py):
-``replay`` and ``vkf`` ignore the ``mqtt`` section unless ``--publish`` is given."""
+"""Which runs publish, what they tell and what a broker restart keeps, against a real Mosquitto
+broker (tests/mosquitto.py): ``replay`` ignores the ``mqtt`` section unless ``--publish`` is given;
+the retained state is published again at each connection."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from mosquitto import Broker, Subscriber, needs_mosquitto
-from processes import ENV, cmsensord
-from test_mqtt import mqtt_yaml, seqs
+from processes import ENV, cmsensord, spawn
+from test_mqtt import mqtt_yaml, seqs, simulate
 
 pytestmark = needs_mosquitto
 
@@ -52,3 +55,41 @@ def test_replay_ignores_the_mqtt_section_unless_told_to_publish(tmp_path, broker
         assert sub.wait_for(lambda: seqs(sub)[:1] == [1])
     finally:
         sub.close()
+
+
+#: an alert at once, a latched danger once the severity is over 0.5: the table then stays put
+LATCHED = ("alarms:\n  rules:\n    - {name: rms, indicator: accel_rms, alert: 0.000001}\n"
+           "    - {name: sev, indicator: severity_index, danger: 0.5, latch: true}\n")
+
+
+def test_retained_state_is_published_again_after_a_broker_restart_without_persistence(tmp_path):
+    broker = Broker(tmp_path / "broker", persistence=False).start()
+    sub = Subscriber(broker.port)
+    yaml = mqtt_yaml(broker.port, "discovery: true", publish=("severity", "alarms", "events")) + LATCHED
+    daemon = spawn(simulate(tmp_path, yaml, duration=400, speed=20), stderr=subprocess.PIPE, text=True)
+    try:
+        assert sub.wait_for(lambda: any(m["level"] == "danger" for _, m in sub.messages("/ch0/worst_alarm")))
+        sub.close()
+        time.sleep(1.0)                             # the danger's table acknowledged
+        broker.stop()                               # it forgets every retained message
+        broker.start()
+        probe = Subscriber(broker.port, "cmsensord/rig1/status", client_id="probe")
+        assert probe.wait_for(lambda: (probe.got[-1:] or [("", b"")])[0][1] == b"online", timeout=20)
+        probe.close()
+        time.sleep(0.5)                             # the daemon re-published in the same breath
+        late = Subscriber(broker.port, "cmsensord/rig1/+/worst_alarm", client_id="late")
+        tables = Subscriber(broker.port, "cmsensord/rig1/alarms", client_id="late-tables")
+        try:
+            assert late.wait_for(lambda: late.got, timeout=5)
+            topic, body, retained = late.got[0]
+            assert (topic, json.loads(body)["level"], retained) == ("cmsensord/rig1/ch0/worst_alarm", "danger", True)
+            assert tables.wait_for(lambda: tables.got, timeout=5)
+            topic, body, retained = tables.got[0]
+            assert retained and json.loads(body)["worst"] == "danger"
+        finally:
+            late.close()
+            tables.close()
+    finally:
+        daemon.kill()
+        daemon.communicate()
+        broker.stop()

@@ -6,7 +6,10 @@ disk. The thread moves offered messages into the :class:`~.disk_queue.DiskQueue`
 them), sends from the queue while connected (at most ``MAX_INFLIGHT`` unacknowledged, at most
 ``resend_per_s``), and moves the queue's cursor with each PUBACK. A lost connection rewinds the
 send cursor to the first unacknowledged message; reconnection backs off from
-``reconnect_min_s`` doubling to ``reconnect_max_s``. State changes and losses become events
+``reconnect_min_s`` doubling to ``reconnect_max_s``. The latest message of each retained topic
+is kept in memory (one per topic) and published again at each connection once the broker has
+acknowledged it, so a broker that restarted without persistence has the retained state again.
+State changes and losses become events
 (:attr:`Publisher.events`, drained by the caller's thread into /cm/events).
 """
 
@@ -14,7 +17,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import functools
 import json
 import logging
 import threading
@@ -71,6 +73,7 @@ class Publisher:
         self._dial_error = ""
         self._last_send = 0.0
         self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
+        self._retained: dict[str, tuple[int, bytes]] = {}   # MQTT topic -> (seq, payload) of its latest
         self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
         if cfg.discovery and "alarms" in cfg.publish:
             self._worst = WorstAlarms(channels)
@@ -224,6 +227,14 @@ class Publisher:
         if self.cfg.discovery:
             for topic, body in discovery_messages(self.cfg, self.channels):
                 client.publish(topic, body, qos=1, retain=True)
+        self._republish(client)
+
+    def _republish(self, client: Any) -> None:
+        """The latest message of each retained topic that the broker acknowledged, again (the
+        broker may have lost it in a restart); one not yet acknowledged is sent from the queue."""
+        for topic, (seq, body) in list(self._retained.items()):
+            if seq <= self.queue.acked:
+                client.publish(topic, body, qos=self.cfg.qos, retain=True)
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         if self.state == "connected":
@@ -242,7 +253,10 @@ class Publisher:
         while self.handover:
             (mqtt_topic, retain), topic, stamp_ns, msg = self.handover[0]
             try:
-                self.queue.append(mqtt_topic, functools.partial(payload, topic, stamp_ns, msg), retain)
+                body = payload(topic, stamp_ns, msg, self.queue.next_seq)
+                seq = self.queue.append(mqtt_topic, lambda _, body=body: body, retain)
+                if retain:
+                    self._retained[mqtt_topic] = (seq, body)
             except OSError as err:
                 reason = err.strerror or str(err)
                 if self._queue_error != reason:
