@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from mosquitto import Broker, Subscriber, needs_mosquitto
-from processes import ENV, cmsensord, spawn
+from processes import ENV, board_then_daemon, cmsensord, spawn
 from test_mqtt import mqtt_yaml, seqs, simulate
 
 pytestmark = needs_mosquitto
@@ -93,3 +93,20 @@ def test_retained_state_is_published_again_after_a_broker_restart_without_persis
         daemon.kill()
         daemon.communicate()
         broker.stop()
+
+
+def test_discovery_and_worst_alarm_cover_the_channels_the_board_sends(tmp_path, broker):
+    sub = Subscriber(broker.port)
+    try:
+        yaml = mqtt_yaml(broker.port, "discovery: true", publish=("severity", "alarms")) + LATCHED
+        board_then_daemon(tmp_path, "--scenario", "faulty", "--channels", "3", "--speed", "20",
+                          "--duration", "20", config=yaml)       # no channels: list, the board's 3
+        names = [f"homeassistant/sensor/rig1_{ch}_{what}/config" for ch in ("ch0", "ch1", "ch2")
+                 for what in ("severity", "worst_alarm")]
+        assert sub.wait_for(lambda: set(names) <= {t for t, _, _ in sub.got}), sorted({t for t, _, _ in sub.got})
+        config = next(json.loads(body) for t, body, _ in sub.got if t == names[-1])
+        assert config["state_topic"] == "cmsensord/rig1/ch2/worst_alarm"
+        assert sub.wait_for(lambda: any(m["level"] == "alert" for _, m in sub.messages("/ch2/worst_alarm")))
+        assert sub.messages("/ch2/worst_alarm")[0][1]["level"] == "normal"   # the first table's
+    finally:
+        sub.close()

@@ -73,6 +73,7 @@ class Publisher:
         self._dial_error = ""
         self._last_send = 0.0
         self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
+        self._discovered: tuple[str, ...] = ()     # the channels announced on this connection
         self._retained: dict[str, tuple[int, bytes]] = {}   # MQTT topic -> (seq, payload) of its latest
         self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
         if cfg.discovery and "alarms" in cfg.publish:
@@ -99,6 +100,14 @@ class Publisher:
         if self._worst is not None and topic == TOPIC_ALARMS:
             for ch, state in self._worst.changed(msg):
                 self._hand((self.topics.worst_alarm(ch), True), f"/cm/{ch}/worst_alarm", stamp_ns, state)
+
+    def set_channels(self, channels: tuple[str, ...]) -> None:
+        """The monitored channels, once the board (or an import) says which: the worst alarm of
+        each is derived from the next ``/cm/alarms`` tables, and the thread sends the discovery
+        messages of those it has not sent yet."""
+        self.channels = channels
+        if self._worst is not None:
+            self._worst.channels = channels
 
     def _hand(self, route: tuple[str, bool], topic: str, stamp_ns: int, msg: dict) -> None:
         if len(self.handover) == self.handover.maxlen:
@@ -147,6 +156,8 @@ class Publisher:
                     self._client.loop(timeout=POLL_S)
                     if self.state == "connected":
                         backoff = self.cfg.reconnect_min_s
+                        if self._discovered != self.channels:
+                            self._discover()
                         self._send(now)
                         if now - last_beat >= self.cfg.heartbeat_s:
                             last_beat = now
@@ -224,10 +235,18 @@ class Publisher:
                     f"{self.queue.depth} message(s) queued", logging.INFO, state="connected",
                     queued=self.queue.depth)
         client.publish(self.topics.status, "online", qos=1, retain=True)
-        if self.cfg.discovery:
-            for topic, body in discovery_messages(self.cfg, self.channels):
-                client.publish(topic, body, qos=1, retain=True)
+        self._discovered = ()
+        self._discover()
         self._republish(client)
+
+    def _discover(self) -> None:
+        """The discovery messages of the channels not yet announced on this connection."""
+        channels = self.channels
+        new = tuple(ch for ch in channels if ch not in self._discovered)
+        if self.cfg.discovery and new:
+            for topic, body in discovery_messages(self.cfg, new):
+                self._client.publish(topic, body, qos=1, retain=True)
+        self._discovered = channels
 
     def _republish(self, client: Any) -> None:
         """The latest message of each retained topic that the broker acknowledged, again (the

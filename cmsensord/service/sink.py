@@ -37,7 +37,7 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
 
     queue_dir = cfg.mqtt.queue_path(cfg.output.dir)
     try:
-        publisher = Publisher(cfg.mqtt, queue_dir, channels=tuple(ch.name for ch in cfg.channels))
+        publisher = Publisher(cfg.mqtt, queue_dir)     # its channels: the Processor's, when known
     except OSError as exc:
         sink.close()
         raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None
