@@ -80,7 +80,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     from cmsensord.importing.channel_names import capture_channels
     from cmsensord.importing.sidecar import sidecar
     from cmsensord.monitor.processor import Processor
-    from cmsensord.service.sink import open_sink
+    from cmsensord.service.sink import open_sink, publish_lines
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
@@ -126,6 +126,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
         if not done:
             _remove(sink.paths, out_dir if made_dir else None)
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
+    summary["mqtt"] = publish_lines(sink)
     return sink.paths, summary
 
 

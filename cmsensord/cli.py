@@ -228,6 +228,8 @@ def _run_vkf(args: argparse.Namespace) -> int:
     for p in paths:
         print(f"MCAP log: {p}", file=sys.stderr)
     print(f"  {describe(info, bandwidth_hz=args.bandwidth, poles=args.poles)}", file=sys.stderr)
+    for line in info["mqtt"]:
+        print(line, file=sys.stderr)
     return 0
 
 

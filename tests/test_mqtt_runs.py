@@ -12,9 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from mosquitto import Broker, Subscriber, needs_mosquitto
+from cmsensord.publish.disk_queue import DiskQueue
+from mosquitto import Broker, Subscriber, free_port, needs_mosquitto
 from processes import ENV, board_then_daemon, cmsensord, spawn
-from test_mqtt import mqtt_yaml, seqs, simulate
+from test_mqtt import expected, mqtt_yaml, seqs, simulate
 
 pytestmark = needs_mosquitto
 
@@ -110,3 +111,33 @@ def test_discovery_and_worst_alarm_cover_the_channels_the_board_sends(tmp_path, 
         assert sub.messages("/ch2/worst_alarm")[0][1]["level"] == "normal"   # the first table's
     finally:
         sub.close()
+
+
+def test_live_messages_are_not_held_to_the_backlog_rate_and_the_summary_counts_them(tmp_path, broker):
+    sub = Subscriber(broker.port)
+    try:
+        yaml = mqtt_yaml(broker.port).replace("resend_per_s: 2000", "resend_per_s: 5")
+        p = subprocess.run(simulate(tmp_path, yaml), capture_output=True, text=True, env=ENV, timeout=120)
+        assert p.returncode == 0, p.stderr
+        n = len(expected(tmp_path / "logs"))           # ~80 a second at 20x, 3 s
+        assert n > 100
+        assert sub.wait_for(lambda: len(seqs(sub)) >= n, timeout=10)
+        assert f"  mqtt: {n} message(s) sent to 127.0.0.1:{broker.port} as client_id rig1, {n} acknowledged; " \
+               f"0 left unacknowledged in {tmp_path / 'logs' / 'mqtt-queue'}" in p.stderr.splitlines(), p.stderr
+    finally:
+        sub.close()
+
+
+def test_the_exit_summary_says_what_is_left_for_the_next_run(tmp_path):
+    down = free_port()                                  # nothing listens there: the broker is down
+    p = subprocess.run(simulate(tmp_path, mqtt_yaml(down), duration=20), capture_output=True, text=True,
+                       env=ENV, timeout=120)
+    assert p.returncode == 0, p.stderr
+    queue = tmp_path / "logs" / "mqtt-queue"
+    q = DiskQueue(queue, max_bytes=64_000_000)
+    left = q.depth
+    q.close()
+    assert left == len(expected(tmp_path / "logs")) > 0
+    assert f"  mqtt: 0 message(s) sent to 127.0.0.1:{down} as client_id rig1, 0 acknowledged; {left} left " \
+           f"unacknowledged in {queue}: the next run publishing from this queue sends them first" \
+           in p.stderr.splitlines(), p.stderr

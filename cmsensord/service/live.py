@@ -21,7 +21,7 @@ from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.instance import claim_output_dir
 from cmsensord.service.signals import StopFlag
-from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
+from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events
 from cmsensord.service.status import run_summary, status_line
 from cmsensord.source import BATCH_S, HOLD_S, SerialSource
 
@@ -232,7 +232,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
             sink.close()
             if capture is not None:
                 capture.close()
-    print(run_summary(proc, sink.paths, time.monotonic() - t_start), file=sys.stderr)
+    print(run_summary(proc, sink.paths, time.monotonic() - t_start, publish_lines(sink)), file=sys.stderr)
     if capture_path:
         print(f"  capture: {capture_path}", file=sys.stderr)
     if refused is not None:

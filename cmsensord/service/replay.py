@@ -16,7 +16,7 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, origin_lines
-from cmsensord.service.sink import open_sink, route_sink_events
+from cmsensord.service.sink import open_sink, publish_lines, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
 
@@ -79,7 +79,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns))
+        placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) + publish_lines(sink)
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return 0, out, proc
 

@@ -48,6 +48,12 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     return TeeSink(sink, publisher)  # type: ignore[return-value]  # a RotatingSink to its callers
 
 
+def publish_lines(sink: RotatingSink) -> list[str]:
+    """The exit summary's line of the sink's MQTT publisher (after ``close``), if it has one."""
+    publisher = publisher_of(sink)
+    return [publisher.summary()] if publisher is not None else []
+
+
 def publisher_of(sink: RotatingSink):
     """The sink's MQTT publisher, or None."""
     return sink.publisher if isinstance(sink, TeeSink) else None
