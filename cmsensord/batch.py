@@ -66,10 +66,12 @@ class _Collector:
 
 
 def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles: int = 2,
-                 quiet: bool = False, auto_channels: bool = True) -> tuple[list[Path], dict]:
+                 quiet: bool = False, auto_channels: bool = True, publish: bool = False
+                 ) -> tuple[list[Path], dict]:
     """Replay ``capture`` and add the batch VKF orders; returns the MCAP paths and a summary.
     ``auto_channels``: ``cfg`` lists no channels: an imported capture's are named as its import
-    named them (as ``cmsensord replay`` names them), else the board's.
+    named them (as ``cmsensord replay`` names them), else the board's. ``publish``: an
+    ``mqtt`` section publishes the run (``--publish``); otherwise it is ignored.
 
     A capture or a bandwidth the batch filter cannot handle (no RAW blocks or no tacho, a
     bandwidth too narrow for double precision, a record too large for memory) raises
@@ -78,13 +80,14 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     from cmsensord.importing.channel_names import capture_channels
     from cmsensord.importing.sidecar import sidecar
     from cmsensord.monitor.processor import Processor
-    from cmsensord.service.sink import open_sink
+    from cmsensord.service.sink import open_sink, publish_lines
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
-    sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"})
+    sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
+                     publish=publish, command="vkf")
     sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
     done = False
     try:
@@ -123,6 +126,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
         if not done:
             _remove(sink.paths, out_dir if made_dir else None)
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
+    summary["mqtt"] = publish_lines(sink)
     return sink.paths, summary
 
 

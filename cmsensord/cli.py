@@ -152,6 +152,7 @@ def _add_vkf_parser(sub) -> None:
     v.add_argument("--bandwidth", type=positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
+    _add_publish_arg(v)
 
 
 def _add_config_parser(sub) -> None:
@@ -166,6 +167,13 @@ def _add_summary_parser(sub) -> None:
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
+def _add_publish_arg(parser) -> None:
+    parser.add_argument("--publish", dest="sub_publish", action="store_true",
+                        help="publish to the broker of the config's mqtt section, as its client_id "
+                        "and topics (those of the live daemon of that config) and through its "
+                        "queue directory (default: the mqtt section is ignored)")
+
+
 def _add_replay_parser(sub) -> None:
     r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
@@ -173,6 +181,7 @@ def _add_replay_parser(sub) -> None:
     r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
     r.add_argument("--akf-trace", dest="sub_trace", action="store_true",
                    help="write /cm/<ch>/akf per observation")
+    _add_publish_arg(r)
     pace = r.add_mutually_exclusive_group()
     pace.add_argument("--realtime", action="store_const", const=1.0, dest="sub_speed",
                       help="pace the replay at the board's clock (default: as fast as possible)")
@@ -214,10 +223,13 @@ def _run_vkf(args: argparse.Namespace) -> int:
     cfg, auto = _config_for(args.sub_config)
     if args.sub_out:
         cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
-    paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles, auto_channels=auto)
+    paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles, auto_channels=auto,
+                               publish=args.sub_publish)
     for p in paths:
         print(f"MCAP log: {p}", file=sys.stderr)
     print(f"  {describe(info, bandwidth_hz=args.bandwidth, poles=args.poles)}", file=sys.stderr)
+    for line in info["mqtt"]:
+        print(line, file=sys.stderr)
     return 0
 
 
@@ -228,7 +240,7 @@ def _run_replay(args: argparse.Namespace) -> int:
         cfg = dataclasses.replace(cfg, output=dataclasses.replace(
             cfg.output, dir=args.sub_out or cfg.output.dir,
             akf_trace=cfg.output.akf_trace or args.sub_trace))
-    return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed)[0]
+    return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed, publish=args.sub_publish)[0]
 
 
 def _print_default_config() -> int:

@@ -31,16 +31,17 @@ def free_port() -> int:
 
 class Broker:
     """``mosquitto -c`` with a plain listener on :attr:`port` (for the subscriber) and ``extra``
-    configuration lines (more listeners, TLS, passwords)."""
+    configuration lines (more listeners, TLS, passwords); ``persistence``: False, a restart
+    forgets every retained message and session."""
 
-    def __init__(self, work: Path, extra: str = "", anonymous: bool = True) -> None:
+    def __init__(self, work: Path, extra: str = "", anonymous: bool = True, persistence: bool = True) -> None:
         self.work, self.port = work, free_port()
         work.mkdir(parents=True, exist_ok=True)
         self.conf = work / "mosquitto.conf"
         # run as the test's user: as root, mosquitto would drop to "mosquitto" and not read tmp_path
         self.conf.write_text(f"user {getpass.getuser()}\nper_listener_settings true\nlistener {self.port} 127.0.0.1\n"
                              f"allow_anonymous true\n{extra}"
-                             f"persistence true\npersistence_location {work}/\n"
+                             f"persistence {str(persistence).lower()}\npersistence_location {work}/\n"
                              f"log_dest file {work}/mosquitto.log\nlog_type all\n")
         self.proc: subprocess.Popen | None = None
 

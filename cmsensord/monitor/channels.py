@@ -27,7 +27,7 @@ chain is made, or a ``channels`` event names the board channels not monitored.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
 from cmsensord.config.channel_refs import check_channel_refs
@@ -44,7 +44,8 @@ CHANGE_FRAMES = 100
 class ChannelSetup:
     """The board's STATUS, the monitored channels and their severity chain (see module docstring)."""
 
-    def __init__(self, cfg: Config, auto_channels: bool, clock: BlockClock, log: EventLog):
+    def __init__(self, cfg: Config, auto_channels: bool, clock: BlockClock, log: EventLog,
+                 on_channels: Callable[[tuple[str, ...]], None] | None = None):
         self.cfg, self.auto_channels, self.clock, self.log = cfg, auto_channels, clock, log
         self.status: Status | None = None
         self.channels: tuple[ChannelConfig, ...] = cfg.channels
@@ -55,6 +56,9 @@ class ChannelSetup:
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
         self.odd_dropped = 0                    # odd frames dropped in all
+        #: called with the monitored channels' names each time a chain is made for them (the sink's
+        #: ``channels_known``: the MQTT publisher's discovery and worst alarms)
+        self.on_channels = on_channels
 
     def decode(self, f: Frame) -> tuple[Status | None, bool]:
         """A STATUS frame -> (its Status or None if bad, whether it changes the time base, the
@@ -196,6 +200,8 @@ class ChannelSetup:
         self._no_channels = False
         self.n_board = n_board
         self.channels = usable
+        if self.on_channels is not None:
+            self.on_channels(tuple(ch.name for ch in usable))
         self.severity = SeverityChain(usable, fs=self.clock.fs, block_len=self.clock.block_len,
                                       trace_filter=self.cfg.output.akf_trace_filter)
         self.log.add(self.severity.notes)

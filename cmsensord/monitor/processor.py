@@ -104,7 +104,7 @@ class Processor(Figures):
         self._out = self.output.out
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
-        self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log)
+        self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log, getattr(sink, "channels_known", None))
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
         self.held = Held()          # live RAW: what waits for the next decision (monitor/held.py)
         self._hand_over = lambda: self.held.hand_over(self.severity, self.indicators, self.channels)

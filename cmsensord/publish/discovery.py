@@ -1,4 +1,5 @@
-"""Home Assistant MQTT discovery (``mqtt.discovery``): per channel, a sensor for its severity
+"""Home Assistant MQTT discovery (``mqtt.discovery``): per monitored channel (the Processor's,
+once the board says which), a sensor for its severity
 index and, when ``alarms`` is published, one for its worst alarm.
 
 Each message is retained at ``<discovery_prefix>/sensor/<client>_<channel>_<what>/config``.

@@ -3,18 +3,20 @@
 The processing loop calls :meth:`Publisher.offer`, which only appends to a bounded deque (the
 oldest entry is dropped and counted when it is full): it never waits for the network or the
 disk. The thread moves offered messages into the :class:`~.disk_queue.DiskQueue` (numbering
-them), sends from the queue while connected (at most ``MAX_INFLIGHT`` unacknowledged, at most
-``resend_per_s``), and moves the queue's cursor with each PUBACK. A lost connection rewinds the
-send cursor to the first unacknowledged message; reconnection backs off from
-``reconnect_min_s`` doubling to ``reconnect_max_s``. State changes and losses become events
-(:attr:`Publisher.events`, drained by the caller's thread into /cm/events).
+them), sends from the queue while connected (at most ``MAX_INFLIGHT`` unacknowledged; the
+backlog, what was queued before the connection, at most ``resend_per_s``), and moves the
+queue's cursor with each PUBACK. A lost connection rewinds the send cursor to the first
+unacknowledged message; reconnection backs off from ``reconnect_min_s`` doubling to
+``reconnect_max_s``. The latest message of each retained topic is kept in memory (one per
+topic) and published again at each connection once the broker has acknowledged it, so a broker
+that restarted without persistence has the retained state again. State changes and losses
+become events (:attr:`Publisher.events`, drained by the caller's thread into /cm/events).
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
-import functools
 import json
 import logging
 import threading
@@ -61,6 +63,7 @@ class Publisher:
         self._client: Any = None
         self._inflight: dict[int, int] = {}       # paho mid -> seq
         self._tokens = 0.0
+        self._backlog_end = 1                     # seqs below it were queued before this connection
         self._refused: str | None = None          # the reason of the last refusal (one event each)
         self._down_reported = False               # this outage has had its event
         self._queue_error: str | None = None
@@ -71,6 +74,8 @@ class Publisher:
         self._dial_error = ""
         self._last_send = 0.0
         self._thread = threading.Thread(target=self._run, name="mqtt", daemon=True)
+        self._discovered: tuple[str, ...] = ()     # the channels announced on this connection
+        self._retained: dict[str, tuple[int, bytes]] = {}   # MQTT topic -> (seq, payload) of its latest
         self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
         if cfg.discovery and "alarms" in cfg.publish:
             self._worst = WorstAlarms(channels)
@@ -97,6 +102,14 @@ class Publisher:
             for ch, state in self._worst.changed(msg):
                 self._hand((self.topics.worst_alarm(ch), True), f"/cm/{ch}/worst_alarm", stamp_ns, state)
 
+    def set_channels(self, channels: tuple[str, ...]) -> None:
+        """The monitored channels, once the board (or an import) says which: the worst alarm of
+        each is derived from the next ``/cm/alarms`` tables, and the thread sends the discovery
+        messages of those it has not sent yet."""
+        self.channels = channels
+        if self._worst is not None:
+            self._worst.channels = channels
+
     def _hand(self, route: tuple[str, bool], topic: str, stamp_ns: int, msg: dict) -> None:
         if len(self.handover) == self.handover.maxlen:
             self.handover_drops += 1
@@ -114,6 +127,14 @@ class Publisher:
         q = self.queue
         return {"state": self.state, "queued": q.depth, "queue_bytes": q.size_bytes,
                 "dropped": q.dropped + self.handover_drops, "sent": self.sent, "acked": self.acked_total}
+
+    def summary(self) -> str:
+        """The exit summary's line (after :meth:`close`): what was sent, and what is left in the
+        queue for the next run publishing from it (it sends them first)."""
+        q, cfg = self.queue, self.cfg
+        line = (f"  mqtt: {self.sent} message(s) sent to {cfg.host}:{cfg.port} as client_id {cfg.client}, "
+                f"{self.acked_total} acknowledged; {q.depth} left unacknowledged in {q.dir}")
+        return line + (": the next run publishing from this queue sends them first" if q.depth else "")
 
     def status(self) -> str:
         """The status line's part: ``mqtt connected q 0``."""
@@ -144,6 +165,8 @@ class Publisher:
                     self._client.loop(timeout=POLL_S)
                     if self.state == "connected":
                         backoff = self.cfg.reconnect_min_s
+                        if self._discovered != self.channels:
+                            self._discover()
                         self._send(now)
                         if now - last_beat >= self.cfg.heartbeat_s:
                             last_beat = now
@@ -217,13 +240,30 @@ class Publisher:
         self.state, self._refused, self._down_reported = "connected", None, False
         self._inflight.clear()
         self.queue.rewind()
+        self._backlog_end = self.queue.next_seq
         self._event("mqtt_link", f"connected to {self.cfg.host}:{self.cfg.port} as {self.cfg.client}; "
                     f"{self.queue.depth} message(s) queued", logging.INFO, state="connected",
                     queued=self.queue.depth)
         client.publish(self.topics.status, "online", qos=1, retain=True)
-        if self.cfg.discovery:
-            for topic, body in discovery_messages(self.cfg, self.channels):
-                client.publish(topic, body, qos=1, retain=True)
+        self._discovered = ()
+        self._discover()
+        self._republish(client)
+
+    def _discover(self) -> None:
+        """The discovery messages of the channels not yet announced on this connection."""
+        channels = self.channels
+        new = tuple(ch for ch in channels if ch not in self._discovered)
+        if self.cfg.discovery and new:
+            for topic, body in discovery_messages(self.cfg, new):
+                self._client.publish(topic, body, qos=1, retain=True)
+        self._discovered = channels
+
+    def _republish(self, client: Any) -> None:
+        """The latest message of each retained topic that the broker acknowledged, again (the
+        broker may have lost it in a restart); one not yet acknowledged is sent from the queue."""
+        for topic, (seq, body) in list(self._retained.items()):
+            if seq <= self.queue.acked:
+                client.publish(topic, body, qos=self.cfg.qos, retain=True)
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         if self.state == "connected":
@@ -242,7 +282,10 @@ class Publisher:
         while self.handover:
             (mqtt_topic, retain), topic, stamp_ns, msg = self.handover[0]
             try:
-                self.queue.append(mqtt_topic, functools.partial(payload, topic, stamp_ns, msg), retain)
+                body = payload(topic, stamp_ns, msg, self.queue.next_seq)
+                seq = self.queue.append(mqtt_topic, lambda _, body=body: body, retain)
+                if retain:
+                    self._retained[mqtt_topic] = (seq, body)
             except OSError as err:
                 reason = err.strerror or str(err)
                 if self._queue_error != reason:
@@ -282,16 +325,22 @@ class Publisher:
                             f"({reason})", logging.ERROR, action="write_error", reason=reason)
 
     def _send(self, now: float) -> None:
-        rate = self.cfg.resend_per_s
-        self._tokens = min(max(rate, 1.0), self._tokens + rate * (now - (self._last_send or now)))
-        self._last_send = now
-        room = min(MAX_INFLIGHT - len(self._inflight), int(self._tokens))
+        """From the queue's send cursor, at most ``MAX_INFLIGHT`` unacknowledged: the backlog
+        (queued before this connection) at ``resend_per_s`` (a token bucket), what came since
+        as it comes."""
+        room = MAX_INFLIGHT - len(self._inflight)
+        backlog = self._backlog_end - self.queue.send_seq
+        if backlog > 0:
+            rate = self.cfg.resend_per_s
+            self._tokens = min(max(rate, 1.0), self._tokens + rate * (now - (self._last_send or now)))
+            self._last_send = now
+            room = min(room, int(self._tokens), backlog)
         if room <= 0:
             return
         for rec in self.queue.next_batch(room):
             info = self._client.publish(rec.topic, rec.payload, qos=self.cfg.qos, retain=rec.retain)
             self._inflight[info.mid] = rec.seq
-            self._tokens -= 1
+            self._tokens -= rec.seq < self._backlog_end
             self.sent += 1
 
     def _heartbeat(self) -> None:

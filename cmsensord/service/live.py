@@ -22,7 +22,7 @@ from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.instance import claim_output_dir
 from cmsensord.service.signals import StopFlag
-from cmsensord.service.sink import open_sink, publisher_of, route_sink_events
+from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events
 from cmsensord.service.status import StatusPace, run_summary, status_line
 from cmsensord.source import BATCH_S, HOLD_S, SerialSource
 
@@ -194,7 +194,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
         capture = open(capture_path, "wb") if capture_path else None
     except OSError as exc:
         raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
-    sink = open_sink(cfg, metadata or {}, background_salvage=True)
+    sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon")
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
     queue = source.queue
     sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later
@@ -240,7 +240,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
             sink.close()
             if capture is not None:
                 capture.close()
-    print(run_summary(proc, sink.paths, time.monotonic() - t_start), file=sys.stderr)
+    print(run_summary(proc, sink.paths, time.monotonic() - t_start, publish_lines(sink)), file=sys.stderr)
     if capture_path:
         print(f"  capture: {capture_path}", file=sys.stderr)
     if refused is not None:

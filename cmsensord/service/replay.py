@@ -16,7 +16,7 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, origin_lines
-from cmsensord.service.sink import open_sink, route_sink_events
+from cmsensord.service.sink import open_sink, publish_lines, route_sink_events
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
 
@@ -29,13 +29,15 @@ REPLAY_CHUNK = 3 << 16
 
 
 def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, str] | None = None,
-           quiet: bool = False, speed: float | None = None) -> tuple[int, Path | None, Processor]:
+           quiet: bool = False, speed: float | None = None, publish: bool = False
+           ) -> tuple[int, Path | None, Processor]:
     """Process a capture file through the same decoder and Processor: as fast as possible,
     or paced at ``speed`` x the board's clock (1: real time); with ``auto_channels`` (``cfg``
     lists no channels), an imported capture's channels named as its import named them. An
     import has its :class:`~cmsensord.importing.timeline.Timeline` in the log's ``cmsensord``
     metadata (``recording_timeline``), board second 0 stamped at the ``board_zero_ns`` it
-    gives.
+    gives. ``publish``: an ``mqtt`` section publishes the run (``--publish``); otherwise it
+    is ignored.
     Returns (exit status, the last MCAP file or None if it could not be finished, the
     Processor)."""
     keep_freed_memory()         # the chain's arrays of each read from the heap, not fresh pages
@@ -52,7 +54,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     timeline = Timeline.from_sidecar(meta)
     board_zero_ns = time.time_ns()
     extra = {"recording_timeline": timeline.to_json(board_zero_ns)} if timeline else {}
-    sink = open_sink(cfg, {"source": str(path), **(metadata or {}), **extra})
+    sink = open_sink(cfg, {"source": str(path), **(metadata or {}), **extra}, publish=publish,
+                     command="replay")
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     if timeline:
         proc.clock.anchor(0, board_zero_ns)     # the import's board clock starts at 0
@@ -76,7 +79,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns))
+        placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) + publish_lines(sink)
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return 0, out, proc
 

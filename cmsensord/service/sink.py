@@ -13,26 +13,45 @@ from cmsensord.sinks.tee import TeeSink
 #: disk_error events that report routine work or a recovery (details.action): INFO in the journal
 _DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
 
+log = logging.getLogger("cmsensord")
 
-def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False
-              ) -> RotatingSink:
+
+def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
+              publish: bool = False, command: str = "this run") -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable.
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
-    With an ``mqtt`` section, a :class:`TeeSink` that also publishes (its thread started;
-    its ``close`` stops it)."""
+    With an ``mqtt`` section and ``publish`` (the daemon, ``--simulate``, a ``--publish``
+    option), a :class:`TeeSink` that also publishes (its thread started; its ``close`` stops
+    it). With an ``mqtt`` section and not ``publish``, nothing is published and one INFO line
+    says so: ``command`` (e.g. ``replay``) would publish as the live daemon of that
+    configuration (its client id, its retained topics, its queue)."""
     sink = RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
     if cfg.mqtt is None:
+        return sink
+    if not publish:
+        log.info("mqtt: the mqtt section is ignored: %s does not publish (it would publish as client_id "
+                 "%s under %s/, the live daemon's); give --publish to publish it", command, cfg.mqtt.client,
+                 cfg.mqtt.prefix)
         return sink
     from cmsensord.publish.publisher import Publisher  # paho only when mqtt is configured
 
     queue_dir = cfg.mqtt.queue_path(cfg.output.dir)
     try:
-        publisher = Publisher(cfg.mqtt, queue_dir, channels=tuple(ch.name for ch in cfg.channels))
+        publisher = Publisher(cfg.mqtt, queue_dir)     # its channels: the Processor's, when known
     except OSError as exc:
         sink.close()
         raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None
     publisher.start()
+    if command != "the daemon":
+        log.info("mqtt: %s publishes to %s:%d as client_id %s under %s/", command, cfg.mqtt.host,
+                 cfg.mqtt.port, cfg.mqtt.client, cfg.mqtt.prefix)
     return TeeSink(sink, publisher)  # type: ignore[return-value]  # a RotatingSink to its callers
+
+
+def publish_lines(sink: RotatingSink) -> list[str]:
+    """The exit summary's line of the sink's MQTT publisher (after ``close``), if it has one."""
+    publisher = publisher_of(sink)
+    return [publisher.summary()] if publisher is not None else []
 
 
 def publisher_of(sink: RotatingSink):

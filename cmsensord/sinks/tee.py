@@ -56,6 +56,11 @@ class TeeSink:
             self.drain_events()
         return taken
 
+    def channels_known(self, names: tuple[str, ...]) -> None:
+        """The monitored channels are known (or changed): the publisher's discovery and worst
+        alarms cover them."""
+        self.publisher.set_channels(names)
+
     def tick(self) -> None:
         """The MCAP sink's tick, and the publisher's events."""
         self.inner.tick()
