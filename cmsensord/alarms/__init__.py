@@ -6,7 +6,9 @@
 * :mod:`.levels` -- a rule's levels on a channel: absolute, ISO zone boundary or
   k x the learned baseline, per speed band;
 * :mod:`.manager` -- the rules of the configuration over the channels, N-of-M
-  voting, the alarm table and acknowledgements.
+  voting, the alarm table and acknowledgements;
+* :mod:`.saved` -- the alarm state an operator relies on as saved records, put back
+  into a new manager (a daemon's restart).
 
 The monitoring chain feeds it (:mod:`cmsensord.monitor.alarms`); every time is a
 stamp of the stream, so a replay raises the same alarms as the live run.

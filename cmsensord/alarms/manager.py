@@ -8,7 +8,10 @@ channel the value is compared with the rule's levels at the current speed
 (:mod:`.levels`) with the rule's deadband (:mod:`.exceedance`); the alarm applies
 the delays and the latch (:mod:`.state`).  Alarms are evaluated while the
 machine is running (:mod:`.operating`); when it leaves that state each alarm is
-suppressed (non-latched ones clear).
+suppressed (non-latched ones clear).  Alarms put back from a saved state (a
+daemon's restart, :mod:`.saved`) show their restored levels until the rules confirm
+them (:mod:`.state`); when the first reading of the operating state after that says
+the machine is stopped, they are suppressed as when it stops.
 
 Every call returns the :class:`Transition` records it caused, stamped with the
 stream time it was given; :meth:`AlarmManager.table` is the alarm table.
@@ -64,6 +67,8 @@ class Alarm:
         out: dict = {"id": self.id, "rule": self.rule.name, "indicator": self.rule.indicator,
                      "channels": list(self.channels), "level": LEVELS[s.level], "live": LEVELS[s.live],
                      "latched": s.latched > 0, "acknowledged": s.acknowledged}
+        if s.restored:
+            out["restored"] = True
         if self.channel is not None:
             out["channel"] = self.channel
         if self.value is not None:
@@ -89,6 +94,8 @@ class AlarmManager:
         self.alarms: dict[str, Alarm] = {}
         self.exceed: dict[tuple[str, str], Exceedance] = {}
         self.by_indicator: dict[str, list[AlarmRuleConfig]] = {}
+        #: levels were put back from a saved state and no operating reading has come since
+        self.resumed = False
         for r in cfg.rules:
             watched = r.channels or channels
             self.by_indicator.setdefault(r.indicator, []).append(r)
@@ -142,8 +149,16 @@ class AlarmManager:
         reading = {"speed": speed_rpm, "level": max(self.levels_seen.values(), default=None)}.get(op.source)
         was = self.operating.running
         self.operating.step(t_ns, reading)
+        if self.resumed and reading is not None:
+            self.resumed = False
+            if self.operating.state == "stopped":
+                return self._suppress(t_ns)
         if not was or self.operating.running:
             return []
+        return self._suppress(t_ns)
+
+    def _suppress(self, t_ns: int) -> list[Transition]:
+        """Every alarm suppressed at ``t_ns`` (the machine left ``running``)."""
         out: list[Transition] = []
         for a in self.alarms.values():
             before = a.state.level
@@ -153,9 +168,9 @@ class AlarmManager:
             e.reset()
         return out
 
-    def ack(self, t_ns: int, which: str | None = None) -> list[Transition]:
+    def ack(self, t_ns: int, which: str | None = None, by: str | None = None) -> list[Transition]:
         """Acknowledge alarm ``which`` (None: every alarm showing a level not acknowledged yet) at
-        ``t_ns``. Raises KeyError for an unknown alarm."""
+        ``t_ns``, by user ``by`` (None: not known). Raises KeyError for an unknown alarm."""
         if which is not None and which not in self.alarms:
             raise KeyError(which)
         targets = [self.alarms[which]] if which is not None else \
@@ -163,7 +178,7 @@ class AlarmManager:
         out: list[Transition] = []
         for a in targets:
             before = a.state.level
-            after = a.state.ack(t_ns)
+            after = a.state.ack(t_ns, by)
             out.append(Transition("alarm_ack", a.id, a.channel, after, before, t_ns,
                                   f"{a.id} acknowledged ({LEVELS[before]}"
                                   + (f", now {LEVELS[after]})" if after != before else ")")))
@@ -193,7 +208,7 @@ class AlarmManager:
         """What a change of the table is: each alarm's shown and live level, flags and levels in
         force (a speed band, a first value), and the operating state; not the values."""
         return (self.operating.state,) + tuple(
-            (a.state.level, a.state.live, a.state.latched, a.state.acknowledged, a.levels)
+            (a.state.level, a.state.live, a.state.latched, a.state.acknowledged, a.state.restored, a.levels)
             for a in self.alarms.values())
 
     def worst(self) -> Alarm | None:

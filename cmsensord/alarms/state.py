@@ -7,16 +7,27 @@ on.  A latching alarm shows the highest level it reached until acknowledged; an
 acknowledgement then drops it to the level that is on now.  While suppressed
 (machine not running) nothing turns on, the timers restart, and the non-latched
 level is off.
+
+:meth:`AlarmState.resume` puts back what a saved state held (a daemon's restart:
+:mod:`.saved`): the latch, the acknowledgement, and the live level at the stop as a
+*restored* level, shown until the rule confirms it (the live level reaches it: the same
+episode goes on, no new alarm, the acknowledgement kept) or, unconfirmed, for
+``RESUME_S`` plus the on-delay (at least the off-delay) of stream time from the first
+input; then the alarm shows what the rule says.  A chain that starts again (the severity
+index starts at 0 and climbs back over some decisions) thus does not clear and raise again
+an alarm that held over the restart.  Suppression drops a restored level.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["LEVELS", "AlarmState"]
+__all__ = ["LEVELS", "AlarmState", "RESUME_S"]
 
 #: level names, by level
 LEVELS = ("normal", "alert", "danger")
+#: a restored level waits this long (plus the on-delay) of stream time for the rule to confirm it [s]
+RESUME_S = 30.0
 
 
 @dataclass
@@ -31,6 +42,10 @@ class AlarmState:
     latched: int = 0
     acknowledged: bool = False
     changed_ns: int | None = None        # stamp of the newest change of the shown level
+    acked_ns: int | None = None          # when the acknowledgement in force was given
+    acked_by: str | None = None          # who gave it (the user of `cmsensord ack`), if known
+    restored: int = 0                    # the live level at a restart's stop, until confirmed
+    restored_until: int | None = None    # stamp at which an unconfirmed restored level drops
 
     @property
     def live(self) -> int:
@@ -39,8 +54,9 @@ class AlarmState:
 
     @property
     def level(self) -> int:
-        """The level shown: the live level, or the latched one until acknowledged."""
-        return max(self.live, self.latched)
+        """The level shown: the live level, or the latched one until acknowledged, or the restored
+        one until confirmed."""
+        return max(self.live, self.latched, self.restored)
 
     def step(self, t_ns: int, x: int) -> int:
         """The input level ``x`` at ``t_ns``; returns the level shown after it."""
@@ -57,6 +73,11 @@ class AlarmState:
             if t_ns - since >= delay * 1e9:
                 self.on[i] = want
                 self.since[i] = None
+        if self.restored:
+            if self.restored_until is None:
+                self.restored_until = t_ns + round(max(RESUME_S + self.on_delay_s, self.off_delay_s) * 1e9)
+            if self.live >= self.restored or t_ns >= self.restored_until:
+                self.restored, self.restored_until = 0, None
         return self._shown(t_ns, before)
 
     def suppress(self, t_ns: int) -> int:
@@ -64,23 +85,34 @@ class AlarmState:
         before = self.level
         self.on = [False, False]
         self.since = [None, None]
+        self.restored, self.restored_until = 0, None
         return self._shown(t_ns, before)
 
-    def ack(self, t_ns: int) -> int:
-        """Acknowledged at ``t_ns``: the latch drops to the live level; returns the level shown."""
+    def ack(self, t_ns: int, by: str | None = None) -> int:
+        """Acknowledged at ``t_ns`` (by user ``by``): the latch drops to the live level; returns the
+        level shown."""
         before = self.level
         self.latched = 0
-        self.acknowledged = self.live > 0
+        self.acknowledged = max(self.live, self.restored) > 0
+        self.acked_ns, self.acked_by = (t_ns, by) if self.acknowledged else (None, None)
         return self._shown(t_ns, before)
+
+    def resume(self, live: int, latched: int, acknowledged: bool, changed_ns: int | None,
+               acked: tuple[int | None, str | None] = (None, None)) -> None:
+        """Put back a saved state: the level ``live`` as the restored level (see module docstring),
+        the latch at ``latched``, the acknowledgement (and its time and user)."""
+        self.restored, self.restored_until = live, None
+        self.latched, self.changed_ns = latched, changed_ns
+        self.acknowledged = acknowledged and self.level > 0
+        self.acked_ns, self.acked_by = acked if self.acknowledged else (None, None)
 
     def _shown(self, t_ns: int, before: int) -> int:
         if self.latch:
             self.latched = max(self.latched, self.live)
         now = self.level
-        if now > before:
+        if now > before or now == 0:
             self.acknowledged = False
+            self.acked_ns = self.acked_by = None
         if now != before:
             self.changed_ns = t_ns
-        if now == 0:
-            self.acknowledged = False
         return now

@@ -17,6 +17,13 @@ the live run gave.  A change of the machine's operating state is an
 ``alarms.operating`` source the manager runs for it even without rules.  A rule level given
 as k x a baseline that ``alarms.baselines`` lacks for a channel is said once, with the first
 message: an ``alarm_no_baseline`` event (a warning) naming the rule and the channel.
+
+The live daemon keeps the alarm state an operator relies on over a restart (:meth:`Alarms.keep`:
+a store, :mod:`cmsensord.service.alarm_store`, and what it held): the saved alarms go back
+into the manager when it is made (:mod:`cmsensord.alarms.saved`), with the first message,
+each said by an ``alarm_restored`` or ``alarm_not_restored`` event (a warning) naming the
+file; the store is written whenever the saved state changes, and a failed write is an
+``alarm_state_error`` event.  Without a store (a replay) nothing is read or kept.
 """
 
 from __future__ import annotations
@@ -24,9 +31,10 @@ from __future__ import annotations
 import dataclasses
 import re
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
+from cmsensord.alarms.saved import resume, snapshot
 from cmsensord.config import Config
 from cmsensord.config.alarm_indicators import RECORD_VALUES
 from cmsensord.config.alarms import AlarmRuleConfig
@@ -40,6 +48,14 @@ __all__ = ["Alarms", "indicator_values", "order_rules"]
 WATCHED = frozenset({"indicators", "severity", "orders"})
 #: the measured values of a record (the names rules may watch: the zone is graded, below)
 _SCALARS = tuple(k for k in RECORD_VALUES if k != "zone")
+
+
+class StateStore(Protocol):
+    """Where the alarm state is kept (:class:`cmsensord.service.alarm_store.AlarmStore`)."""
+
+    path: Any
+
+    def save(self, alarms: dict[str, dict[str, Any]]) -> None: ...
 
 
 def indicator_values(msg: dict) -> dict[str, float]:
@@ -87,6 +103,21 @@ class Alarms:
         self.watching = self.active or (cfg.alarms.enabled and cfg.alarms.operating.source != "none")
         self.newest_ns = 0
         self._signature: tuple = ()
+        self.store: StateStore | None = None
+        self._saved: dict[str, dict[str, Any]] = {}       # to put back when the manager is made
+        self._kept: dict[str, dict[str, Any]] = {}        # what the store holds
+
+    def keep(self, store: StateStore, saved: dict[str, dict[str, Any]]) -> list:
+        """Keep the alarm state in ``store`` from now on and put ``saved`` (what it held) back
+        with the first message.  Returns the ``alarm_not_restored`` events of saved alarms that
+        cannot go back as no rule is in force (then the store is emptied)."""
+        self.store, self._saved, self._kept = store, saved, saved
+        if self.active or not saved:
+            return []
+        why = "alarms.enabled is false" if not self.cfg.alarms.enabled else "no alarm rules are configured"
+        self._saved = {}
+        return [self._resumed(name, None, False, f"{name} not restored: {why}") for name in saved] \
+            + self._persist(None, {})
 
     def _manager(self) -> AlarmManager:
         if self.manager is None:
@@ -101,8 +132,34 @@ class Alarms:
         if m.schema not in WATCHED or not self.watching:
             return []
         first = self.manager is None
+        back = self._resume(m.stamp_ns) if first else []
         out = self._see(m)
-        return self._unlearned(m.stamp_ns) + out if first else out
+        return self._unlearned(m.stamp_ns) + back + out if first else out
+
+    def _resume(self, stamp: int) -> list:
+        """The saved alarms put back into the manager just made: an event for each."""
+        mgr, saved, self._saved = self._manager(), self._saved, {}
+        return [self._resumed(r.alarm, r.channel, r.restored, r.message, stamp) for r in resume(mgr, saved)]
+
+    def _resumed(self, alarm: str, channel: str | None, restored: bool, message: str,
+                 stamp: int | None = None) -> Event:
+        where = str(self.store.path) if self.store is not None else ""
+        return Event("alarm_restored" if restored else "alarm_not_restored", channel,
+                     f"{message}, from {where}", stamp, {"alarm": alarm, "details": {"file": where}})
+
+    def _persist(self, stamp: int | None, now: dict[str, dict[str, Any]]) -> list:
+        """``now`` into the store if it holds something else; an ``alarm_state_error`` event if
+        it cannot be written (tried again at the next change)."""
+        if self.store is None or now == self._kept:
+            return []
+        try:
+            self.store.save(now)
+        except OSError as exc:
+            return [Event("alarm_state_error", None, f"{self.store.path}: cannot write the alarm state "
+                          f"({exc.strerror or exc}): latches and acknowledgements of now would not survive "
+                          "a restart", stamp, {"details": {"file": str(self.store.path)}})]
+        self._kept = now
+        return []
 
     def _unlearned(self, stamp: int) -> list:
         """An ``alarm_no_baseline`` event for each rule and channel with a level given as k x a
@@ -145,14 +202,15 @@ class Alarms:
         return Event("operating_state", None, f"operating state {was} -> {now} ({why})", stamp,
                      {"details": {"state": now, "previous": was}})
 
-    def ack(self, which: str | None) -> list:
-        """Acknowledge alarm ``which`` (None: all); KeyError for an unknown alarm (and for any
-        before the first value: the alarms are made with the channels the stream brings)."""
+    def ack(self, which: str | None, by: str | None = None) -> list:
+        """Acknowledge alarm ``which`` (None: all) by user ``by`` (None: not known); KeyError for an
+        unknown alarm (and for any before the first value: the alarms are made with the channels
+        the stream brings)."""
         if not self.active or (self.manager is None and which is not None):
             raise KeyError(which or "all")
         if self.manager is None:
             return []
-        return self._after(self.newest_ns, self.manager.ack(self.newest_ns, which))
+        return self._after(self.newest_ns, self.manager.ack(self.newest_ns, which, by))
 
     def _after(self, stamp: int, tr: list[Transition]) -> list:
         out: list[Any] = [Event(t.kind, t.channel, t.message, t.stamp_ns,
@@ -163,6 +221,7 @@ class Alarms:
         if sig != self._signature:
             self._signature = sig
             out.append(messages.alarms(stamp, self.table()))
+            out += self._persist(stamp, snapshot(mgr))
         return out
 
     def table(self) -> dict:

@@ -67,13 +67,15 @@ LOG_LEVEL = {
     "decision_rule": logging.WARNING, "time_base": logging.WARNING, "anomaly_held": logging.WARNING,
     "alarm_alert": logging.WARNING, "alarm_danger": logging.ERROR, "alarm_clear": logging.WARNING,
     "alarm_ack": logging.WARNING, "alarm_no_baseline": logging.WARNING,
+    "alarm_restored": logging.WARNING, "alarm_not_restored": logging.WARNING,
+    "alarm_state_error": logging.WARNING,
 }
 
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change",
                        "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack", "alarm_no_baseline",
-                       "capture"})
+                       "alarm_restored", "alarm_not_restored", "capture"})
 #: records wait until the processed stream is this far past them (events reported late; the
 #: sink's log-time window learns this lateness, so it is also what a kill -9 may cost the log)
 HOLD_S = 1.0

@@ -127,10 +127,10 @@ class Processor(Figures):
               **extra: Any) -> None:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
 
-    def ack(self, which: str | None) -> None:
-        """Acknowledge alarm ``which`` (None: all), stamped with the newest alarm input's stamp;
-        KeyError for an unknown alarm."""
-        self._out(self.alarms.ack(which))
+    def ack(self, which: str | None, by: str | None = None) -> None:
+        """Acknowledge alarm ``which`` (None: all) by user ``by``, stamped with the newest alarm
+        input's stamp; KeyError for an unknown alarm."""
+        self._out(self.alarms.ack(which, by))
 
     # ---- frames ------------------------------------------------------------
     def handle(self, frames: Sequence[Frame]) -> None:

@@ -12,7 +12,9 @@ A small thread (:class:`ControlServer`) accepts connections and queues the
 requests; the processing loop answers them between batches
 (:meth:`ControlServer.apply`), so an acknowledgement is applied in the stream's
 order, stamped with stream time, and nothing else touches the Processor from
-another thread.  The thread waits at most ``REPLY_S`` for the loop.
+another thread.  The thread waits at most ``REPLY_S`` for the loop.  An
+acknowledgement is recorded with the user the connecting process runs as (the
+socket's peer credentials).
 """
 
 from __future__ import annotations
@@ -20,8 +22,10 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import pwd
 import queue
 import socket
+import struct
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -46,6 +50,7 @@ def socket_path(output_dir: str | os.PathLike) -> Path:
 @dataclass
 class _Request:
     body: dict
+    by: str | None = None           # the user the client runs as
     done: threading.Event = field(default_factory=threading.Event)
     reply: dict | None = None
 
@@ -81,16 +86,16 @@ class ControlServer:
                 return
             with conn, contextlib.suppress(OSError):
                 conn.settimeout(REPLY_S)
-                conn.sendall(json.dumps(self._answer(_read_line(conn))).encode() + b"\n")
+                conn.sendall(json.dumps(self._answer(_read_line(conn), _peer(conn))).encode() + b"\n")
 
-    def _answer(self, line: bytes) -> dict:
+    def _answer(self, line: bytes, by: str | None = None) -> dict:
         try:
             body = json.loads(line)
         except ValueError:
             return {"ok": False, "error": "the request is not one JSON line"}
         if not isinstance(body, dict) or body.get("cmd") not in ("ack", "status", "capture"):
             return {"ok": False, "error": "unknown request (cmd: ack, status or capture)"}
-        req = _Request(body)
+        req = _Request(body, by)
         try:
             self.requests.put_nowait(req)
         except queue.Full:
@@ -110,7 +115,7 @@ class ControlServer:
             except queue.Empty:
                 return
             try:
-                req.reply = handle(proc, req.body, self.status_line)
+                req.reply = handle(proc, req.body, self.status_line, req.by)
             finally:
                 req.done.set()
 
@@ -125,9 +130,10 @@ class ControlServer:
             self.path.unlink()
 
 
-def handle(proc, body: dict, line: Callable[[], str] | None = None) -> dict:
+def handle(proc, body: dict, line: Callable[[], str] | None = None, by: str | None = None) -> dict:
     """The answer to one request, from the Processor (the loop's thread); ``line``: the daemon's
-    whole status line (the link's counters and state, the broker's), else the Processor's part."""
+    whole status line (the link's counters and state, the broker's), else the Processor's part;
+    ``by``: the user who asks (recorded with an acknowledgement)."""
     from cmsensord.service.status import status_line
 
     if body["cmd"] == "capture":
@@ -145,7 +151,7 @@ def handle(proc, body: dict, line: Callable[[], str] | None = None) -> dict:
         return {"ok": False, "error": "no alarm rules are configured (alarms.rules)"}
     before = proc.event_counts.get("alarm_ack", 0)
     try:
-        proc.ack(which)
+        proc.ack(which, by)
     except KeyError:
         names = ", ".join(alarms.manager.alarms) if alarms.manager else ""
         return {"ok": False, "error": f"no alarm named {which!r} (alarms: {names})"}
@@ -161,6 +167,20 @@ def _capture(proc, body: dict) -> dict:
         return {"ok": False, "error": "captures are off in this daemon's configuration: give capture.triggers "
                 "(e.g. [manual]) or capture.every_s"}
     return proc.captures.manual(channel)
+
+
+def _peer(conn: socket.socket) -> str | None:
+    """The user name (else ``uid N``) the process at the other end of ``conn`` runs as; None if
+    the socket does not say."""
+    try:
+        _pid, uid, _gid = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
+                                                              struct.calcsize("3i")))
+    except (OSError, AttributeError):
+        return None
+    try:
+        return pwd.getpwuid(uid).pw_name
+    except KeyError:
+        return f"uid {uid}"
 
 
 def _read_line(conn: socket.socket) -> bytes:

@@ -18,6 +18,7 @@ from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
+from cmsensord.service.alarm_store import keep_alarm_state
 from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.instance import claim_output_dir
@@ -171,21 +172,26 @@ def can_wait(frames: list[Frame], start: int, wake: int | None, far: int) -> boo
 
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
-             metadata: dict[str, str] | None = None, open_port: Callable | None = None) -> int:
+             metadata: dict[str, str] | None = None, open_port: Callable | None = None,
+             keep_alarms: bool = True) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
     how the reader opens the port, default pyserial's ``Serial``), the output directory held
-    against a second daemon (:mod:`.instance`) from before its sink salvages what it finds there."""
+    against a second daemon (:mod:`.instance`) from before its sink salvages what it finds there.
+    ``keep_alarms``: the alarm state is restored from and kept in the output directory's state
+    file (:mod:`.alarm_store`), by the daemon holding the directory's lock only."""
     held = claim_output_dir(cfg.output.dir)
     try:
         return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
-                         capture_path=capture_path, metadata=metadata, open_port=open_port)
+                         capture_path=capture_path, metadata=metadata, open_port=open_port,
+                         keep_alarms=keep_alarms and held is not None)
     finally:
         if held is not None:
             os.close(held)
 
 
 def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim_done: threading.Event | None,
-              capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None) -> int:
+              capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None,
+              keep_alarms: bool) -> int:
     keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
@@ -208,6 +214,8 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
     t_start = time.monotonic()
     proc.event("start", None, f"cmsensord {__version__} on {cfg.link.port}")
     route_sink_events(sink, proc.log)       # salvage at start, disk errors: events from now on
+    if keep_alarms:
+        keep_alarm_state(cfg, proc)         # latches and acknowledgements of the run before
     control = _control(cfg, proc)           # cmsensord ack / status
     if control is not None:
         control.wake = queue.poke           # a request is answered at once, not at the loop's next wake-up

@@ -2,7 +2,9 @@
 
 Each scenario runs with its own defaults (:data:`SCENARIO_RUNS`: length, speed, channels,
 mode, microphone channels) unless the command line says otherwise; the board's pty has flow
-control, so a daemon that falls behind slows the board down and no byte is dropped.
+control, so a daemon that falls behind slows the board down and no byte is dropped.  A
+simulated board is not the machine: its alarms are neither restored from nor kept in the
+output directory's alarm state file (:mod:`cmsensord.service.alarm_store`).
 """
 
 from __future__ import annotations
@@ -143,7 +145,7 @@ def simulate(opt: SimulateOptions) -> int:
         return run_live(cfg, auto_channels=False, duration_s=opt.duration, sim_done=_watch(sim),
                         capture_path=opt.capture, open_port=_start_on_open(sim, line, cfg.link.baud),
                         metadata={"scenario": opt.scenario, "seed": str(opt.seed),
-                                  "duration_s": str(opt.duration)})
+                                  "duration_s": str(opt.duration)}, keep_alarms=False)
     finally:
         _end(sim)
 

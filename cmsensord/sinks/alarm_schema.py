@@ -37,6 +37,9 @@ def _row(time: dict[str, Any]) -> dict[str, Any]:
         "alert_level": _n("alert level in force [the indicator's unit]"),
         "danger_level": _n("danger level in force [the indicator's unit]"),
         "since": {**time, "description": "when the shown level last changed"},
+        "restored": {"type": "boolean", "description": "present (true) while the level shown is the one "
+                     "active when the daemon stopped, put back at its restart and not yet confirmed by "
+                     "the rule"},
     }, "required": ["id", "rule", "indicator", "channels", "level", "live", "latched", "acknowledged"]}
 
 

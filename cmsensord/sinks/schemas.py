@@ -138,6 +138,9 @@ EVENT_KINDS: tuple[str, ...] = (
     "alarm_clear",
     "alarm_ack",
     "alarm_no_baseline",
+    "alarm_restored",
+    "alarm_not_restored",
+    "alarm_state_error",
     "operating_state",
 )
 

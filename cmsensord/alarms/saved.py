@@ -1,0 +1,158 @@
+"""The alarm state an operator relies on, as a saved record, and putting it back (a restart).
+
+:func:`snapshot` gives, per alarm showing a level or holding a latch, what an operator
+relies on: the shown, live and latched level, since when the shown level holds, whether it
+is acknowledged (when, by whom), and the rule it was judged by (its name, indicator, latch
+and level settings).  :func:`check` refuses a record that is not such a one (ValueError).
+
+:func:`resume` puts saved records back into a new manager.  A saved alarm is restored when
+the manager has an alarm of that name on the same rule and indicator, and the rule still
+latches if the saved alarm was latched: its latch (level and since when), its
+acknowledgement, and its live level as a restored level that the rule confirms or drops
+(:mod:`.state`): the same episode is not raised again, an acknowledged one stays
+acknowledged.  When the rule's level settings changed since, a latch is restored (the levels then
+were exceeded: someone still has to look) but the live level is judged afresh; a saved
+alarm with no latch is then not restored.  Anything not restored is said: one
+:class:`Resumed` record per saved alarm, restored or not.  Times are stamps [ns] (of the
+live stream: the wall clock).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from cmsensord.config.alarms import AlarmRuleConfig
+
+from .manager import AlarmManager
+from .state import LEVELS
+
+__all__ = ["Resumed", "snapshot", "check", "resume", "level_settings"]
+
+_LEVEL_KEYS = ("alert", "danger", "alert_zone", "danger_zone", "alert_x_baseline", "danger_x_baseline")
+
+
+@dataclass(frozen=True)
+class Resumed:
+    """What became of one saved alarm: restored or not, and the line that says it."""
+
+    alarm: str
+    channel: str | None
+    restored: bool
+    message: str
+
+
+def level_settings(rule: AlarmRuleConfig) -> dict[str, Any]:
+    """The rule's level settings as JSON gives them back (those given, and its speed bands)."""
+    out: dict[str, Any] = {k: getattr(rule, k) for k in _LEVEL_KEYS if getattr(rule, k) is not None}
+    if rule.bands:
+        out["bands"] = [{k: v for k, v in dataclasses.asdict(b).items() if v is not None} for b in rule.bands]
+    return json.loads(json.dumps(out))
+
+
+def snapshot(mgr: AlarmManager) -> dict[str, dict[str, Any]]:
+    """The saved record of each alarm showing a level or holding a latch, by alarm name (its live
+    level: a restored one the rule has not confirmed yet counts, so a second restart keeps it)."""
+    out: dict[str, dict[str, Any]] = {}
+    for a in mgr.alarms.values():
+        s = a.state
+        if s.level == 0 and s.latched == 0:
+            continue
+        rec: dict[str, Any] = {"rule": a.rule.name, "indicator": a.rule.indicator, "latch": a.rule.latch,
+                               "levels": level_settings(a.rule), "level": LEVELS[s.level],
+                               "live": LEVELS[max(s.live, s.restored)], "latched": LEVELS[s.latched],
+                               "acknowledged": s.acknowledged}
+        for key, value in (("since_ns", s.changed_ns), ("acked_ns", s.acked_ns), ("acked_by", s.acked_by)):
+            if value is not None:
+                rec[key] = value
+        out[a.id] = rec
+    return out
+
+
+def check(alarms: Any) -> dict[str, dict[str, Any]]:
+    """``alarms`` if it is a mapping of alarm names to saved records; ValueError naming what is
+    wrong otherwise."""
+    if not isinstance(alarms, dict):
+        raise ValueError("'alarms' is not an object")
+    want = {"rule": str, "indicator": str, "latch": bool, "levels": dict, "acknowledged": bool}
+    for name, rec in alarms.items():
+        if not isinstance(rec, dict):
+            raise ValueError(f"alarm {name!r} is not an object")
+        for key, kind in want.items():
+            if not isinstance(rec.get(key), kind):
+                raise ValueError(f"alarm {name!r}: {key} missing or not a {kind.__name__}")
+        for key in ("level", "live", "latched"):
+            if rec.get(key) not in LEVELS:
+                raise ValueError(f"alarm {name!r}: {key} is not one of {', '.join(LEVELS)}")
+        for key, kind in (("since_ns", int), ("acked_ns", int), ("acked_by", str)):
+            if key in rec and (not isinstance(rec[key], kind) or isinstance(rec[key], bool)):
+                raise ValueError(f"alarm {name!r}: {key} is not a {kind.__name__}")
+    return alarms
+
+
+def when(stamp_ns: int) -> str:
+    """A stamp as local date and time to the second."""
+    return datetime.fromtimestamp(stamp_ns // 1_000_000_000).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def describe(name: str, rec: dict[str, Any]) -> str:
+    """One saved alarm in words: ``sev/ch0: danger latched since 2026-11-30 13:20:05 (not acknowledged)``."""
+    text = f"{name}: {rec['level']}" + (" latched" if rec["latched"] != "normal" else "")
+    if "since_ns" in rec:
+        text += f" since {when(rec['since_ns'])}"
+    if rec["live"] != rec["level"]:
+        text += f", {rec['live']} at the stop"
+    if not rec["acknowledged"]:
+        return text + " (not acknowledged)"
+    ack = " ".join(["acknowledged", *((when(rec["acked_ns"]),) if "acked_ns" in rec else ()),
+                    *((f"by {rec['acked_by']}",) if "acked_by" in rec else ())])
+    return f"{text} ({ack})"
+
+
+def _changed(old: dict[str, Any], new: dict[str, Any]) -> str:
+    keys = [k for k in (*_LEVEL_KEYS, "bands") if old.get(k) != new.get(k)]
+    return ", ".join(f"{k} {json.dumps(old.get(k))} -> {json.dumps(new.get(k))}" for k in keys)
+
+
+def _refused(mgr: AlarmManager, name: str, rec: dict[str, Any]) -> str | None:
+    """Why saved alarm ``name`` cannot go back into ``mgr``'s alarm of that name, or None."""
+    a = mgr.alarms.get(name)
+    if a is None:
+        same = [x for x in mgr.alarms.values() if x.rule.name == rec["rule"]]
+        if not same:
+            return f"the configuration has no rule {rec['rule']} now"
+        watched = dict.fromkeys(ch for x in same for ch in x.channels)
+        return (f"rule {rec['rule']} now makes no alarm {name} (it watches {', '.join(watched)}, "
+                f"vote {same[0].rule.vote})")
+    if a.rule.name != rec["rule"]:
+        return f"alarm {name!r} is now of rule {a.rule.name!r}, not {rec['rule']!r}"
+    if a.rule.indicator != rec["indicator"]:
+        return f"rule {a.rule.name} now watches {a.rule.indicator}, not {rec['indicator']}"
+    if rec["latched"] != "normal" and not a.rule.latch:
+        return f"rule {a.rule.name} no longer latches (latch: false)"
+    return None
+
+
+def resume(mgr: AlarmManager, saved: dict[str, dict[str, Any]]) -> list[Resumed]:
+    """Put ``saved`` (by :func:`check`) back into ``mgr`` (see module docstring): what became of each."""
+    out: list[Resumed] = []
+    for name, rec in saved.items():
+        a = mgr.alarms.get(name)
+        said = describe(name, rec)
+        why = _refused(mgr, name, rec)
+        changed = _changed(rec["levels"], level_settings(a.rule)) if a is not None and why is None else ""
+        if changed and rec["latched"] == "normal":
+            why = f"its levels changed since ({changed}): judged afresh against them"
+        if a is None or why is not None:
+            out.append(Resumed(name, a.channel if a else None, False, f"{said} not restored: {why}"))
+            continue
+        live = 0 if changed else LEVELS.index(rec["live"])
+        a.state.resume(live, LEVELS.index(rec["latched"]), rec["acknowledged"], rec.get("since_ns"),
+                       (rec.get("acked_ns"), rec.get("acked_by")))
+        mgr.resumed = mgr.resumed or live > 0
+        note = f"; its levels changed since ({changed}): the latch is kept, the value judged afresh" if changed else ""
+        out.append(Resumed(name, a.channel, True, said + note))
+    return out

@@ -1,0 +1,206 @@
+"""Latches and acknowledgements over a daemon's restart, through the commands a user types: a
+daemon on a simulated board (faulty, then healthy) stopped with SIGTERM and started again,
+`cmsensord status` and `cmsensord ack` on it, the journal lines and the MCAP log; the state
+file corrupt, or of rules changed since; `cmsensord replay` and `--simulate` leave it alone."""
+
+from __future__ import annotations
+
+import json
+import os
+import pwd
+import time
+from datetime import datetime
+from pathlib import Path
+
+from cmsensord.sinks.mcap_sink import read_messages
+from processes import run_module, start_board, start_daemon, stop
+
+S = 1_000_000_000
+LATCHED = "alarms:\n  rules:\n    - {name: sev, indicator: severity_index, alert: 0.3, danger: 0.6, latch: true}\n"
+PLAIN = "alarms:\n  rules:\n    - {name: sev, indicator: severity_index, alert: 0.3, danger: 0.6}\n"
+
+
+def status(tmp_path: Path) -> dict | None:
+    p = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml"), "--json")
+    return json.loads(p.stdout) if p.returncode == 0 else None
+
+
+def wait_row(tmp_path: Path, ok, timeout: float = 60.0) -> dict:
+    """The first alarm row of `cmsensord status --json` once ``ok(row)``; fails after ``timeout``."""
+    end, row = time.monotonic() + timeout, {}
+    while time.monotonic() < end:
+        time.sleep(0.5)
+        t = status(tmp_path)
+        row = t["alarms"][0] if t and t.get("alarms") else {}
+        if row and ok(row):
+            return row
+    raise AssertionError(f"not reached within {timeout:g} s: {row}")
+
+
+def when(sec: int) -> str:
+    return datetime.fromtimestamp(sec).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def lines(err: str, kind: str) -> list[str]:
+    return [ln for ln in err.splitlines() if ln.split(":")[0].endswith(" " + kind)]
+
+
+def alarm_events(log_dir: Path, newest: bool = True) -> list[dict]:
+    path = sorted(log_dir.glob("*.mcap"))[-1 if newest else 0]
+    return [m for t, _, m in read_messages(path) if t == "/cm/events" and m["kind"].startswith("alarm_")]
+
+
+def test_a_latched_alarm_stays_latched_over_a_restart(tmp_path):
+    """Danger latched on the faulty board; the healthy board swapped in and the daemon restarted:
+    `cmsensord status` still shows the latch, an alarm_restored line says so, `cmsensord ack`
+    then clears it, and the state file holds nothing more."""
+    link, state = tmp_path / "ttyBOARD", tmp_path / "logs" / "cmsensord-alarms.json"
+    board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
+    d = start_daemon(tmp_path, link, config=LATCHED)
+    before = wait_row(tmp_path, lambda r: r["level"] == "danger")
+    stop(d)                                                 # in danger at the stop
+    board.terminate()
+    board.wait(timeout=5)
+    board = start_board("--scenario", "healthy", "--speed", "20", "--link", str(link))
+    try:
+        d = start_daemon(tmp_path, link, config=LATCHED)
+        # the healthy board's values do not confirm the danger active at the stop: after its wait
+        # (30 s of stream time) the restored level goes, the latch stays
+        row = wait_row(tmp_path, lambda r: r["value"] == 0.0 and "restored" not in r)
+        assert (row["level"], row["live"], row["latched"], row["acknowledged"]) == ("danger", "normal", True, False)
+        assert row["since"] == before["since"]
+        text = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml")).stdout
+        assert "ALARM danger sev/ch0" in text and text.rstrip().endswith("latched"), text
+        p = run_module("cmsensord", "ack", "--all", "--config", str(tmp_path / "cmsensord.yaml"))
+        assert p.stdout.strip() == "acknowledged 1 alarm(s)", p.stdout + p.stderr
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert lines(err, "alarm_restored") == [
+        f"WARNING alarm_restored: sev/ch0: danger latched since {when(before['since']['sec'])} "
+        f"(not acknowledged), from {state}"]
+    assert lines(err, "alarm_danger") == [] and lines(err, "alarm_not_restored") == []
+    assert [(m["kind"], m["alarm"]) for m in alarm_events(tmp_path / "logs")] == [
+        ("alarm_restored", "sev/ch0"), ("alarm_ack", "sev/ch0"), ("alarm_clear", "sev/ch0")]
+    tables = [m for t, _, m in read_messages(sorted((tmp_path / "logs").glob("*.mcap"))[-1]) if t == "/cm/alarms"]
+    assert (tables[0]["worst"], tables[0]["alarms"][0]["latched"]) == ("danger", True)   # the retained table
+    assert json.loads(state.read_text())["alarms"] == {}
+
+
+def test_an_acknowledged_danger_is_not_raised_again_after_a_restart(tmp_path):
+    """Danger acknowledged on the faulty board, the daemon restarted on it: the severity index
+    climbs back from 0 while the chain starts again, the alarm stays danger and acknowledged
+    (by whom and when said), and no alarm_alert or alarm_danger is raised anew."""
+    link, state = tmp_path / "ttyBOARD", tmp_path / "logs" / "cmsensord-alarms.json"
+    board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
+    try:
+        d = start_daemon(tmp_path, link, config=PLAIN)
+        wait_row(tmp_path, lambda r: r["level"] == "danger")
+        p = run_module("cmsensord", "ack", "sev/ch0", "--config", str(tmp_path / "cmsensord.yaml"))
+        assert p.stdout.strip() == "acknowledged 1 alarm(s)", p.stdout + p.stderr
+        acked = wait_row(tmp_path, lambda r: r["acknowledged"])
+        stop(d)
+        d = start_daemon(tmp_path, link, config=PLAIN)
+        row = wait_row(tmp_path, lambda r: r["live"] == "danger")
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert [m["kind"] for m in alarm_events(tmp_path / "logs")] == ["alarm_restored"]
+    index = [m["severity_index"] for t, _, m in read_messages(sorted((tmp_path / "logs").glob("*.mcap"))[-1])
+             if t == "/cm/ch0/severity"]
+    assert index[0] < 0.3 and max(index) >= 0.6, index            # the chain started again from 0
+    assert (row["level"], row["acknowledged"], row["since"]) == ("danger", True, acked["since"])
+    saved = json.loads(state.read_text())["alarms"]["sev/ch0"]
+    assert saved["acked_by"] == pwd.getpwuid(os.getuid()).pw_name
+    assert lines(err, "alarm_restored") == [
+        f"WARNING alarm_restored: sev/ch0: danger since {when(acked['since']['sec'])} (acknowledged "
+        f"{when(saved['acked_ns'] // S)} by {saved['acked_by']}), from {state}"]
+
+
+def test_a_corrupt_state_file_is_one_warning_and_the_daemon_runs_on(tmp_path):
+    (tmp_path / "logs").mkdir()
+    state = tmp_path / "logs" / "cmsensord-alarms.json"
+    torn = '{"format": "cmsensord-alarms", "version": 1, "alarms": {"sev/ch0": {"rule": "s'
+    state.write_text(torn)
+    try:
+        json.loads(torn)
+    except ValueError as exc:
+        why = str(exc)
+    link = tmp_path / "ttyBOARD"
+    board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
+    try:
+        d = start_daemon(tmp_path, link, config=LATCHED)
+        wait_row(tmp_path, lambda r: r["level"] == "danger")
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert d.returncode == 0 and "Traceback" not in err
+    assert [ln for ln in err.splitlines() if "alarm_state_error:" in ln] == [
+        f"WARNING alarm_state_error: {state}: not JSON (truncated?): {why}: kept as cmsensord-alarms.json.bad; "
+        "no latch or acknowledgement is restored"]
+    counts = next(ln for ln in err.splitlines() if ln.startswith("  events: "))
+    assert "alarm_state_error 1," in counts and "alarm_danger 1," in counts, counts
+    assert (tmp_path / "logs" / "cmsensord-alarms.json.bad").read_text() == torn
+    assert json.loads(state.read_text())["alarms"]["sev/ch0"]["latched"] == "danger"   # kept anew
+    assert [m["kind"] for m in alarm_events(tmp_path / "logs")][:1] == ["alarm_state_error"]
+
+
+def saved_latch(rule: str, level: str, since_ns: int, **levels: float) -> dict:
+    return {"rule": rule, "indicator": "severity_index", "latch": True, "levels": levels, "level": level,
+            "live": "normal", "latched": level, "acknowledged": False, "since_ns": since_ns}
+
+
+def test_latches_of_rules_gone_or_changed_are_said(tmp_path):
+    """A latch of a rule no longer configured is dropped with an alarm_not_restored line; one
+    whose levels changed since is kept, the change said."""
+    (tmp_path / "logs").mkdir()
+    state = tmp_path / "logs" / "cmsensord-alarms.json"
+    since = (int(time.time()) - 3600) * S
+    state.write_text(json.dumps({"format": "cmsensord-alarms", "version": 1, "alarms": {
+        "old/ch0": saved_latch("old", "danger", since, alert=0.3, danger=0.6),
+        "sev/ch0": saved_latch("sev", "alert", since, alert=0.2, danger=0.5)}}))
+    link = tmp_path / "ttyBOARD"
+    board = start_board("--scenario", "healthy", "--speed", "20", "--link", str(link))
+    try:
+        d = start_daemon(tmp_path, link, config=LATCHED)
+        row = wait_row(tmp_path, lambda r: "value" in r)
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert (row["level"], row["live"], row["latched"]) == ("alert", "normal", True)
+    assert lines(err, "alarm_not_restored") == [
+        f"WARNING alarm_not_restored: old/ch0: danger latched since {when(since // S)}, normal at the stop "
+        f"(not acknowledged) not restored: the configuration has no rule old now, from {state}"]
+    assert lines(err, "alarm_restored") == [
+        f"WARNING alarm_restored: sev/ch0: alert latched since {when(since // S)}, normal at the stop "
+        "(not acknowledged); its "
+        "levels changed since (alert 0.2 -> 0.3, danger 0.5 -> 0.6): the latch is kept, the value judged "
+        f"afresh, from {state}"]
+    kept = json.loads(state.read_text())["alarms"]
+    assert list(kept) == ["sev/ch0"] and kept["sev/ch0"]["levels"] == {"alert": 0.3, "danger": 0.6}
+
+
+def test_replay_and_simulate_leave_the_state_file_alone(tmp_path):
+    """A replay is not the machine's present, nor is a simulated board: neither restores the
+    latch in the output directory's state file, nor writes it."""
+    site = tmp_path / "site.yaml"
+    site.write_text("output:\n  status_line: false\n" + LATCHED)
+    state = tmp_path / "out" / "cmsensord-alarms.json"
+    state.parent.mkdir()
+    held = json.dumps({"format": "cmsensord-alarms", "version": 1, "alarms": {
+        "sev/ch0": saved_latch("sev", "alert", 1_700_000_000 * S, alert=0.3, danger=0.6)}})
+    state.write_text(held)
+    assert run_module("firmware_sim", "--scenario", "faulty", "--duration", "8",
+                      "--out", str(tmp_path / "f.bin")).returncode == 0
+    p = run_module("cmsensord", "replay", str(tmp_path / "f.bin"), "--config", str(site), "--out", str(state.parent))
+    assert p.returncode == 0, p.stderr
+    assert [m["kind"] for m in alarm_events(state.parent)] == ["alarm_alert", "alarm_danger"]
+    p = run_module("cmsensord", "--simulate", "--scenario", "faulty", "--duration", "8", "--speed", "20",
+                   "--config", str(site), "--out", str(state.parent))
+    assert p.returncode == 0, p.stderr
+    assert "alarm_restored" not in p.stderr and "ERROR alarm_danger: sev/ch0" in p.stderr
+    assert state.read_text() == held
