@@ -18,11 +18,21 @@ anchored to the wall clock at the reset but never before the end of the newest s
 board's clock is compared with the wall clock (:meth:`BlockClock.drift`); one
 running fast or slow by more than ``link.max_drift_s`` starts a new segment whose
 stamps follow the board's measured rate.
+
+Live, the wall clock itself may step (an NTP sync after a boot with a stale clock, a
+board without an RTC battery): :class:`WallSteps` tells a step from the wall clock's
+advance against the monotonic clock's, which does not step, and
+:meth:`BlockClock.restep` re-anchors the time base to the new wall clock at once, at the
+board's rate, backwards too (the one case where stamps go back): a step is not a board
+running fast or slow, and the rate measured over an interval holding it would be wrong.
+Replay never looks at the wall clock after its anchor, so it never re-anchors for a step.
 """
 
 from __future__ import annotations
 
 import bisect
+import time
+from collections.abc import Callable
 from typing import overload
 
 import numpy as np
@@ -38,6 +48,9 @@ MAX_FILL_SLOTS = 1000
 DRIFT_MIN_WALL_S = 5.0
 #: a board ahead of the wall clock is stamped this much slower than its rate until caught up
 CATCH_UP = 0.1
+#: live: a wall clock advancing this much more or less than the monotonic clock between two
+#: looks has stepped (an NTP sync)
+STEP_S = 1.0
 #: time bases (epochs) kept to stamp slots already processed (a decision released late)
 MAX_EPOCHS = 4096
 
@@ -55,6 +68,7 @@ class BlockClock:
         self.last_stamp_ns = 0                 # stamp of the newest observation slot
         self.floor_ns = 0                      # no later stamp is before this (the end of the newest slot)
         self.stamp_fs = DEFAULT_FS             # board ticks per second of stamps (fs, or measured)
+        self.rate = 0                          # the board's measured ticks per wall second (0: fs)
         self.segment = 0                       # segments started after the first
         self.seg_wall_ns = 0                   # wall clock and t0 at the segment's start (drift)
         self.seg_t0 = 0
@@ -106,7 +120,19 @@ class BlockClock:
         wall clock at the next slot, at the measured ``rate`` (slower by ``CATCH_UP`` while
         the board is ahead, so the stamps never go back yet meet the wall clock)."""
         stamp_fs = round(rate * (1 + CATCH_UP)) if offset_s > 0 else rate
+        self.rate = rate
         return self.new_segment(self.slot_t0(self.next_slot), wall_ns, stamp_fs)
+
+    def restep(self, wall_ns: int) -> int:
+        """The wall clock stepped (:class:`WallSteps`): a new segment whose next slot is stamped
+        ``wall_ns``, even before the newest stamp (a step back), at the board's measured rate
+        (fs when none was measured); the drift is measured from here.  Returns its stamp."""
+        self.floor_ns = min(self.floor_ns, wall_ns)
+        if self.slot0_t0 is None:               # after a rate change, before its first block
+            self.anchor_ns = self.floor_ns = self.seg_stamp_ns = self.seg_wall_ns = wall_ns
+            self.segment += 1
+            return wall_ns
+        return self.new_segment(self.slot_t0(self.next_slot), wall_ns, self.rate or self.fs)
 
     def set_rate(self, fs: int, block_len: int) -> bool:
         """The board's fs/block_len; True when the slots had to be re-anchored for it."""
@@ -118,6 +144,7 @@ class BlockClock:
         self.slot0_t0 = None
         self.fs, self.block_len = fs, block_len
         self.stamp_fs = fs
+        self.rate = 0
         return moved
 
     # ---- stamps ------------------------------------------------------------
@@ -234,3 +261,22 @@ class BlockClock:
         newest = self.next_slot - 1             # in the current time base, the newest epoch
         self.last_stamp_ns = self._stamp_in(params, newest, 0)
         self.floor_ns = max(self.floor_ns, self._stamp_in(params, newest, 1))
+
+
+class WallSteps:
+    """Steps of the wall clock: how much more (or less) it advanced between two looks than
+    the monotonic clock (``mono_ns``), which does not step."""
+
+    def __init__(self, mono_ns: Callable[[], int] = time.monotonic_ns) -> None:
+        self.mono_ns = mono_ns
+        self._last: tuple[int, int] | None = None
+
+    def step(self, wall_ns: int) -> int | None:
+        """The step (ns, negative: back) of the wall clock, now ``wall_ns``, since the last look,
+        when more than ``STEP_S``; else None (and at the first look)."""
+        mono = self.mono_ns()
+        last, self._last = self._last, (wall_ns, mono)
+        if last is None:
+            return None
+        step = (wall_ns - last[0]) - (mono - last[1])
+        return step if abs(step) > STEP_S * 1e9 else None

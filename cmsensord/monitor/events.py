@@ -211,6 +211,12 @@ class EventLog:
         """Write every waiting record, in stamp order."""
         self._write_upto(None)
 
+    def went_back(self) -> None:
+        """The time base went back (the wall clock stepped back): every waiting record is
+        written, and the records after may be stamped before them."""
+        self.flush()
+        self._newest = 0
+
     def _write_upto(self, upto_ns: int | None, floored: bool = False) -> None:
         """The records up to ``upto_ns`` (None: all), in stamp order, the stream's triggers before
         each settled first; ``floored``: none at or after what is :attr:`owed`."""

@@ -582,13 +582,10 @@ class Processor(Figures):
         return self.segments.link(self.link_counters() if self.link_counters else {})
 
     def check_wall(self, max_drift_s: float) -> None:
-        """Live, with the queue drained: a board clock off the wall clock by more than
-        ``max_drift_s`` starts a new segment at its measured rate (:meth:`BlockClock.drift`)."""
-        now = self.clock_ns()
-        drift = self.clock.drift(now, max_drift_s)
-        if drift is not None:
-            self._hand_over()                   # stamped in the segment they came in
-            self.segments.drifted(now, *drift)
+        """Live, with the queue drained: a step of the wall clock re-anchors the stamps to it, a
+        board clock off it by more than ``max_drift_s`` starts a new segment at its measured
+        rate (:meth:`Segments.check_wall`)."""
+        self.segments.check_wall(self.clock_ns(), max_drift_s, self._hand_over)
 
     def wake_t0(self) -> int | None:
         """t0 of the board block whose frames complete the next output (:mod:`.wake`)."""

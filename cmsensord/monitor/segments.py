@@ -7,7 +7,10 @@ starts (:meth:`~cmsensord.monitor.clock.BlockClock.new_segment`), stamped from t
 wall clock at the reset and never before the newest stamp, with a ``time_base``
 event; the seq gap in front of that frame is not a loss (the board restarted its
 seq too).  Live, a board clock off the wall clock by more than ``link.max_drift_s``
-starts a new segment at the board's measured rate, with a ``time_base`` event.
+starts a new segment at the board's measured rate, with a ``time_base`` event; a step of
+the wall clock itself (an NTP sync) re-anchors the stamps to it at once, with one
+``time_base`` event, and a step back finishes the log file, so each file keeps its
+messages in time order (:meth:`Segments.check_wall`).
 
 RAW frames in an RMS stream (STATUS says RMS mode), or RMS frames in a RAW one,
 are ignored: each run of them is counted in one ``decode_error`` event when it ends.
@@ -27,7 +30,7 @@ import numpy as np
 
 from cmsensord.frame_repeats import REPEATS_SHIFT, repeats_before
 from cmsensord.monitor.channels import ChannelSetup
-from cmsensord.monitor.clock import MAX_GAP_S, BlockClock
+from cmsensord.monitor.clock import MAX_GAP_S, BlockClock, WallSteps
 from cmsensord.monitor.events import EventLog
 from cmsensord.protocol import Frame, FrameType, status_mode_fs
 
@@ -100,6 +103,7 @@ class Segments:
         self.hit = False                    # the last frame checked needs :meth:`start`
         self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
         self._marked: tuple | None = None   # (cols, mode, fs, bad, status) of :meth:`_marks`
+        self.wall = WallSteps()
 
     def check(self, f: Frame) -> bool:
         """True when ``f`` is a board reset or a frame of the other mode: call :meth:`start`
@@ -267,6 +271,36 @@ class Segments:
         if "frames_lost" in counters:
             counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts}
         return counters
+
+    def check_wall(self, now_ns: int, max_drift_s: float, hand_over: Callable[[], None]) -> None:
+        """Live, the wall clock now ``now_ns``: a step of it since the last look re-anchors the
+        time base (:meth:`stepped`); else a board clock off it by more than ``max_drift_s`` (0:
+        not checked) starts a new segment at its measured rate (:meth:`drifted`).  ``hand_over``
+        first writes what waits, stamped in the segment it came in."""
+        step = self.wall.step(now_ns)
+        if step is not None:
+            hand_over()
+            self.stepped(now_ns, step)
+            return
+        drift = self.clock.drift(now_ns, max_drift_s) if max_drift_s else None
+        if drift is not None:
+            hand_over()
+            self.drifted(now_ns, *drift)
+
+    def stepped(self, now_ns: int, step_ns: int) -> None:
+        """The wall clock stepped by ``step_ns``: the next slot is stamped ``now_ns``
+        (:meth:`BlockClock.restep`); a step back first writes the events waiting and finishes
+        the log file."""
+        if step_ns < 0:
+            self.log.went_back()
+            rotate = getattr(self.log.sink, "rotate", None)
+            if rotate is not None:
+                rotate()
+        stamp = self.clock.restep(now_ns)
+        self.log.emit("time_base", None, f"the system clock stepped {step_ns / 1e9:+.1f} s (NTP?); "
+                      f"re-anchored: time segment {self.clock.segment} stamped from the new wall clock",
+                      stamp, details={"segment": self.clock.segment, "reason": "wall_step",
+                                      "step_s": round(step_ns / 1e9, 3)})
 
     def drifted(self, now_ns: int, offset_s: float, rate: int) -> None:
         """Live: the board's stamps are ``offset_s`` off the wall clock ``now_ns`` (positive:

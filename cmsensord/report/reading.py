@@ -1,7 +1,8 @@
 """The logs of a report: the files named or found in directories, read leniently into a LogData.
 
 A directory stands for its ``*.mcap`` and ``*.mcap.part`` files (salvaged
-files included), oldest name first. Every file is read with the lenient
+files included), in the order they were opened
+(:func:`~cmsensord.sinks.log_names.order_key`). Every file is read with the lenient
 reader (:class:`~cmsensord.report.fast_read.FastScan`), so a ``.part``
 file of a crashed daemon or a damaged file gives what it holds up to the
 damage. Of an imported recording replayed more than once, only the newest replay is read
@@ -19,6 +20,7 @@ from cmsensord.report.log_data import FileInfo, LogData
 from cmsensord.report.progress import Progress
 from cmsensord.report.runs import plan_logs
 from cmsensord.report.time_axis import TimeAxis
+from cmsensord.sinks.log_names import order_key
 
 __all__ = ["log_paths", "read_logs"]
 
@@ -33,7 +35,8 @@ def log_paths(names: list[str]) -> list[Path]:
     for name in names:
         p = Path(name)
         if p.is_dir():
-            found = sorted(f for f in p.iterdir() if f.is_file() and f.name.endswith((".mcap", ".mcap.part")))
+            found = sorted((f for f in p.iterdir() if f.is_file() and f.name.endswith((".mcap", ".mcap.part"))),
+                           key=lambda f: order_key(f.name))
             if not found:
                 raise CmsensordError(f"{name}: no MCAP logs (*.mcap, *.mcap.part) in this directory")
             out.extend(found)

@@ -284,8 +284,7 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
     source.wake_at(proc.wake_t0(), proc.fs)     # batches end where an /orders block or a decision does
     if control is not None:
         control.apply(proc)                 # acks and status requests, between batches
-    if (frames and cfg.link.max_drift_s and watch.sim_done is None
-            and len(source.queue) < DRIFT_QUEUE_MAX):
+    if frames and watch.sim_done is None and len(source.queue) < DRIFT_QUEUE_MAX:
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
     if not frames and not source.waiting:       # no data moves the events' release on: the wall clock does

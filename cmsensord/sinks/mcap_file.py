@@ -1,7 +1,8 @@
 """The crash-safe MCAP file: one ``.part`` file written chunk by chunk, finished by a rename.
 
 * one file ``<prefix>-<UTC yyyymmddTHHMMSSZ>.mcap`` (``-1``, ``-2``, ... when
-  the name of that second is taken), written as ``*.mcap.part`` and renamed by
+  the name of that second is taken; never sorting before a name already there:
+  :mod:`cmsensord.sinks.log_names`), written as ``*.mcap.part`` and renamed by
   :meth:`McapSink.close` once the summary and footer are on disk (then the
   directory is fsynced). A ``.part`` file left by a crash holds every chunk
   flushed before it (:func:`~cmsensord.sinks.mcap_salvage.salvage` recovers
@@ -27,7 +28,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-import re
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -35,6 +35,7 @@ from pathlib import Path
 from cmsensord import __version__
 from cmsensord.errors import SinkError
 from cmsensord.sinks.json_templates import TEMPLATES
+from cmsensord.sinks.log_names import log_files, next_name, salvaged_path
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import REPEATED, ChannelRegistry, encode_message
 from cmsensord.sinks.reorder import GROUP, MAX_S, Payload, ReorderWindow
@@ -110,49 +111,6 @@ def fsync_dir(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
-
-
-# ---------------------------------------------------------------------------
-# The names of our files in a directory
-# ---------------------------------------------------------------------------
-
-_SALVAGED = ".salvaged"
-
-
-def _log_name(prefix: str) -> re.Pattern[str]:
-    """File names this sink writes with ``prefix``: finished, salvaged and .part."""
-    return re.compile(
-        rf"{re.escape(prefix)}-(\d{{8}}T\d{{6}}Z)(?:-(\d+))?(?:{re.escape(_SALVAGED)})?\.mcap(\.part)?"
-    )
-
-
-def log_files(out_dir: str | Path, prefix: str) -> tuple[list[Path], list[Path]]:
-    """(finished ``*.mcap``, unfinished ``*.mcap.part``) files of ``prefix`` in ``out_dir``,
-    each oldest first: by the UTC stamp of the name, then its number (``-2``
-    before ``-10``). Only names this sink writes count: another prefix's
-    files, or other files, are never listed. A missing directory has none.
-    """
-    pattern = _log_name(prefix)
-    finished: list[tuple[str, int, str]] = []
-    parts: list[tuple[str, int, str]] = []
-    try:
-        names = os.listdir(out_dir)
-    except FileNotFoundError:
-        return [], []
-    for name in names:
-        m = pattern.fullmatch(name)
-        if m is not None:
-            (parts if m.group(3) else finished).append((m.group(1), int(m.group(2) or 0), name))
-    return ([Path(out_dir) / n for *_key, n in sorted(finished)],
-            [Path(out_dir) / n for *_key, n in sorted(parts)])
-
-
-def salvaged_path(part: str | Path) -> Path:
-    """``<stem>.mcap.part`` -> ``<stem>.salvaged.mcap`` (the name of its salvaged file)."""
-    part = Path(part)
-    name = part.name
-    stem = name[: -len(".mcap.part")] if name.endswith(".mcap.part") else name
-    return part.with_name(stem + _SALVAGED + ".mcap")
 
 
 # ---------------------------------------------------------------------------
@@ -258,17 +216,7 @@ class McapSink:
     def _open_unique(self, prefix: str, stamp: str) -> RawFile:
         flags = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
                  | getattr(os, "O_CLOEXEC", 0))
-        # after the newest file of this stamp: names stay in creation order even when
-        # retention has deleted older files of the same second
-        first = 0
-        pattern = _log_name(prefix)
-        try:
-            for name in os.listdir(self.out_dir):
-                m = pattern.fullmatch(name)
-                if m is not None and m.group(1) == stamp:
-                    first = max(first, int(m.group(2) or 0) + 1)
-        except OSError:
-            pass  # the open below reports an unusable directory
+        stamp, first = next_name(self.out_dir, prefix, stamp)   # never before a name already there
         for k in range(first, first + 1000):
             base = f"{prefix}-{stamp}" + (f"-{k}" if k else "")
             final = self.out_dir / f"{base}.mcap"

@@ -72,6 +72,9 @@ def free_bytes(path: str | Path) -> int:
 def apply_retention(sink: RotatingSink) -> None:
     """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``.
 
+    Oldest: opened first, by the names' order (:mod:`cmsensord.sinks.log_names`), which a
+    wall clock stepping back does not change.
+
     For ``min_free_mb`` the newest finished file is never deleted, and
     nothing is when deleting all the others could not reach it (the free
     space is taken by something else): a ``low_space`` event says so.
@@ -87,7 +90,7 @@ def apply_retention(sink: RotatingSink) -> None:
     except OSError:
         return                           # no directory yet, or unreadable: nothing to do
     sizes = _sizes(finished + parts)
-    oldest = [p for p in finished if p in sizes]    # by the stamp in the name
+    oldest = [p for p in finished if p in sizes]    # in the order they were opened (log_names)
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
     told = sink.retention
     told.keep_only(oldest)

@@ -1,0 +1,95 @@
+"""The names of a sink's log files in a directory, and their order: the order they were opened.
+
+A file is named ``<prefix>-<UTC yyyymmddTHHMMSSZ>.mcap`` after the wall clock when it is
+opened, with ``-1``, ``-2``, ... (:func:`next_name`) when the name of that second is taken.
+A new name never sorts before a name of the same prefix already in the directory: when the
+wall clock is behind the newest stamp there (it stepped back: an NTP sync, a board without
+an RTC battery), the file takes the newest stamp with the next number instead of its own
+(``cmsensord-20261130T132741Z-1.mcap`` after ``cmsensord-20261130T132741Z.mcap``, though
+the clock says 12:27). So the names' order (:func:`order_key`: by stamp, then number,
+``-2`` before ``-10``; ``ls -v`` shows it) is the order the files were opened, across
+restarts too, and retention's "oldest" is the file opened first whatever the clock did.
+Files left by older versions, named by the wall clock alone, keep their names' order, and
+every file opened after them sorts after them.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+__all__ = ["SALVAGED", "log_files", "log_name", "next_name", "order_key", "salvaged_path"]
+
+SALVAGED = ".salvaged"
+_STAMP = r"\d{8}T\d{6}Z"
+
+
+def log_name(prefix: str) -> re.Pattern[str]:
+    """File names a sink writes with ``prefix``: finished, salvaged and .part (groups: the
+    stamp, the number or None, ``.part`` or None)."""
+    return re.compile(
+        rf"{re.escape(prefix)}-({_STAMP})(?:-(\d+))?(?:{re.escape(SALVAGED)})?\.mcap(\.part)?"
+    )
+
+
+_ANY = re.compile(rf"(.*)-({_STAMP})(?:-(\d+))?((?:{re.escape(SALVAGED)})?\.mcap(?:\.part)?)")
+
+
+def order_key(name: str) -> tuple:
+    """A key that sorts log file names (any prefix) in the order they were opened: by
+    prefix, stamp, then number (``-2`` before ``-10``, no number first); other names by
+    name, after the logs of a prefix they start with."""
+    m = _ANY.fullmatch(name)
+    if m is None:
+        return (name, "~")
+    return (m.group(1), m.group(2), int(m.group(3) or 0), m.group(4))
+
+
+def log_files(out_dir: str | Path, prefix: str) -> tuple[list[Path], list[Path]]:
+    """(finished ``*.mcap``, unfinished ``*.mcap.part``) files of ``prefix`` in ``out_dir``,
+    each oldest first (the order they were opened: :func:`order_key`). Only names this sink
+    writes count: another prefix's files, or other files, are never listed. A missing
+    directory has none.
+    """
+    pattern = log_name(prefix)
+    finished: list[tuple[str, int, str]] = []
+    parts: list[tuple[str, int, str]] = []
+    try:
+        names = os.listdir(out_dir)
+    except FileNotFoundError:
+        return [], []
+    for name in names:
+        m = pattern.fullmatch(name)
+        if m is not None:
+            (parts if m.group(3) else finished).append((m.group(1), int(m.group(2) or 0), name))
+    return ([Path(out_dir) / n for *_key, n in sorted(finished)],
+            [Path(out_dir) / n for *_key, n in sorted(parts)])
+
+
+def next_name(out_dir: Path, prefix: str, stamp: str) -> tuple[str, int]:
+    """The stamp and the first number for a new file of ``prefix`` opened at ``stamp``: after
+    the newest name of the directory (finished, salvaged or .part). ``stamp`` with 0 when it
+    is newer than every name there; else the newest stamp with its number + 1 (the same
+    second, or a clock that stepped back). An unreadable directory: ``stamp``, 0."""
+    pattern = log_name(prefix)
+    newest: tuple[str, int] | None = None
+    try:
+        for name in os.listdir(out_dir):
+            m = pattern.fullmatch(name)
+            if m is not None:
+                key = (m.group(1), int(m.group(2) or 0))
+                newest = key if newest is None or key > newest else newest
+    except OSError:
+        pass  # the open reports an unusable directory
+    if newest is None or stamp > newest[0]:
+        return stamp, 0
+    return newest[0], newest[1] + 1
+
+
+def salvaged_path(part: str | Path) -> Path:
+    """``<stem>.mcap.part`` -> ``<stem>.salvaged.mcap`` (the name of its salvaged file)."""
+    part = Path(part)
+    name = part.name
+    stem = name[: -len(".mcap.part")] if name.endswith(".mcap.part") else name
+    return part.with_name(stem + SALVAGED + ".mcap")

@@ -1,0 +1,79 @@
+"""The daemon live on a simulated board whose system clock steps (an NTP sync after a boot with
+a stale clock, a board without an RTC battery): one ``time_base`` event re-anchors the stamps
+to the new wall clock, forward or back, and the board-rate drift check stays quiet (before: a
+forward step was measured as a board at 4 Hz, then ``board clock ahead of the wall clock``
+every ~5 s for days; a step back gave no event and stamps an hour ahead)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import pytest
+
+from cmsensord.sinks.log_names import log_files
+from cmsensord.sinks.mcap_read import read_messages
+from processes import ROOT, spawn, start_board, stop
+
+pytestmark = pytest.mark.process
+
+
+def live_with_step(tmp_path, step_s: float) -> tuple[str, list[list[tuple[str, int, dict]]]]:
+    """The daemon (link.max_drift_s 2 s) on a simulated board for 7 s, its wall clock stepped by
+    ``step_s`` 3 s in: (its stderr, the messages of each log file, in the order opened)."""
+    sim = start_board("--scenario", "healthy", "--link", str(tmp_path / "tty"))
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"link:\n  port: {tmp_path / 'tty'}\n  max_drift_s: 2.0\n"
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n")
+    d = spawn([sys.executable, str(ROOT / "tests" / "wall_step.py"), "3", str(step_s), "--config", str(cfg)],
+              stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(7.0)
+        err = stop(d)
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    finished, _ = log_files(tmp_path / "logs", "cmsensord")
+    return err, [read_messages(p) for p in finished]
+
+
+def time_base(err: str, files) -> tuple[list[str], list[tuple[int, dict]]]:
+    """The time_base lines of ``err`` and the time_base events of the logs (stamp, message)."""
+    lines = [line for line in err.splitlines() if "time_base:" in line]
+    return lines, [(s, m) for msgs in files for t, s, m in msgs if t == "/cm/events" and m["kind"] == "time_base"]
+
+
+def severity_stamps(msgs) -> list[int]:
+    return [s for t, s, _ in msgs if t.endswith("/severity")]
+
+
+def test_a_forward_step_of_the_system_clock_re_anchors_the_stamps_once(tmp_path):
+    err, files = live_with_step(tmp_path, 86400)
+    lines, evs = time_base(err, files)
+    assert lines == ["WARNING time_base: the system clock stepped +86400.0 s (NTP?); re-anchored: time "
+                     "segment 1 stamped from the new wall clock"], lines
+    [(stamp, ev)] = evs
+    assert ev["details"] == {"segment": 1, "reason": "wall_step", "step_s": pytest.approx(86400, abs=0.5)}
+    [msgs] = files
+    stamps = severity_stamps(msgs)
+    before, after = [s for s in stamps if s < stamp], [s for s in stamps if s >= stamp]
+    assert len(before) >= 1 and len(after) >= 2, stamps
+    assert 86395 < (after[0] - before[-1]) / 1e9 < 86405                   # the step, once
+    assert abs(after[-1] / 1e9 - time.time() - 86400) < 5                  # on the new wall clock
+    assert all(0.5e9 < b - a < 1.5e9 for a, b in zip(after, after[1:]))   # at the board's rate
+
+
+def test_a_backward_step_of_the_system_clock_re_anchors_the_stamps_in_a_new_file(tmp_path):
+    err, files = live_with_step(tmp_path, -3600)
+    lines, evs = time_base(err, files)
+    assert lines == ["WARNING time_base: the system clock stepped -3600.0 s (NTP?); re-anchored: time "
+                     "segment 1 stamped from the new wall clock"], lines
+    [(stamp, ev)] = evs
+    assert ev["details"]["reason"] == "wall_step"
+    assert len(files) == 2, [len(m) for m in files]                 # each file in time order
+    old, new = (severity_stamps(m) for m in files)
+    assert old and len(new) >= 2 and min(new) >= stamp > max(old) - 3602e9
+    assert 3595 < (old[-1] - new[0]) / 1e9 < 3605 and new == sorted(new)
+    assert abs(new[-1] / 1e9 - time.time() + 3600) < 5              # on the new wall clock
