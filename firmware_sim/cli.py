@@ -292,6 +292,7 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
     from .pty_link import PtyEndpoint
 
     stop = _stop_on_signals()
+    _stop_when_orphaned(stop)
     try:
         with PtyEndpoint(link=link, injector=injector, flow_control=flow_control) as ep:
             print(ep.path, flush=True)
@@ -307,6 +308,20 @@ def _serve_pty(board: Board, *, speed: float, duration: float | None, hold: bool
         print(f"firmware_sim: error: pty: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _stop_when_orphaned(stop: threading.Event) -> None:
+    """Set ``stop`` when the process that started the simulator has gone (it is then another's
+    child): a ``cmsensord --simulate`` killed with SIGKILL leaves no board streaming or holding
+    its pty behind it."""
+    parent = os.getppid()
+
+    def _watch() -> None:
+        while not stop.wait(0.5):
+            if os.getppid() != parent:
+                stop.set()
+
+    threading.Thread(target=_watch, name="parent", daemon=True).start()
 
 
 def _wait_for_stdin(stop: threading.Event) -> bool:
