@@ -131,7 +131,8 @@ def _add_simulation_args(sim) -> None:
     sim.add_argument("--tacho", action="store_true",
                      help="the board sends TACHO frames (default for whirl and close_orders)")
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
-                     "file (with --simulate or --config)")
+                     "file (with --simulate: written afresh; the daemon appends to it, and it is not "
+                     "bounded by output.retain_mb)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
 
 

@@ -48,8 +48,8 @@ def test_board_and_daemon_run_no_blas_workers(tmp_path, monkeypatch):
         try:
             # the daemon: its loop, the serial reader, the control socket
             assert settled_threads(daemon.pid, 3) == 3
-            # the board: its main thread and the one waiting for signals
-            assert settled_threads(sim.pid, 2) == 2
+            # the board: its main thread, the one waiting for signals, the one watching its parent
+            assert settled_threads(sim.pid, 3) == 3
         finally:
             err = stop(daemon)
         assert daemon.returncode == 0, err

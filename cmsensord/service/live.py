@@ -44,6 +44,24 @@ class ReaderDied(Exception):
 DIAGNOSTICS_S = 5.0
 
 
+def _open_capture(path: str | None, *, append: bool):
+    """The ``--capture`` file (None without one), opened before the sink (a bad path leaves
+    nothing behind). The daemon (``append``) adds to what an earlier run captured there, with a
+    line saying so (a replay reads the daemon's restart as a gap of lost frames); a simulated
+    run writes it afresh."""
+    if not path:
+        return None
+    try:
+        before = os.path.getsize(path) if append and os.path.isfile(path) else 0
+        capture = open(path, "ab" if append else "wb")
+    except OSError as exc:
+        raise SinkError(f"{path}: cannot write the capture file: {exc.strerror or exc}") from None
+    if before:
+        log.info("capture: appending to %s (%.1f MB captured there before: a replay reads this restart "
+                 "as a gap)", path, before / 1e6)
+    return capture
+
+
 class _Watch:
     """What the loop notices besides frames: queue drops, a stalled link (no bytes, or bytes but
     no valid frame, for ``link.stall_s``), the end of a simulation."""
@@ -196,10 +214,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
     stop = StopFlag()
     stop.install()
     stop.install_reopen()
-    try:                                # before the sink: a bad path leaves nothing behind
-        capture = open(capture_path, "wb") if capture_path else None
-    except OSError as exc:
-        raise SinkError(f"{capture_path}: cannot write the capture file: {exc.strerror or exc}") from None
+    capture = _open_capture(capture_path, append=keep_alarms)
     sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon")
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
     queue = source.queue
