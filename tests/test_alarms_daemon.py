@@ -53,7 +53,7 @@ def test_replay_raises_the_alarms_of_the_degrading_motor(degrading):
     msgs, stderr = degrading
     recs = [m for t, _, m in msgs if t == "/cm/ch0/indicators"]
     events = [m for t, _, m in msgs if t == "/cm/events" and m["kind"].startswith("alarm_")]
-    got = [(m["kind"], m["alarm"], m["previous"], m["level"]) for m in events]
+    got = [(m["kind"], m["alarm"], m["previous_level"], m["alarm_level"]) for m in events]
     assert got == [("alarm_alert", "de_velocity/ch0", "normal", "alert"),
                    ("alarm_alert", "de_kurtosis/ch0", "normal", "alert"),
                    ("alarm_danger", "de_velocity/ch0", "alert", "danger"),
@@ -137,7 +137,7 @@ def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
     assert "WARNING alarm_clear: de_kurtosis/ch0: alert cleared" in err
     events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap")))
               if t == "/cm/events" and m["kind"].startswith("alarm_")]
-    assert [(m["kind"], m["level"]) for m in events] == [("alarm_alert", "alert"), ("alarm_ack", "normal"),
+    assert [(m["kind"], m["alarm_level"]) for m in events] == [("alarm_alert", "alert"), ("alarm_ack", "normal"),
                                                          ("alarm_clear", "normal")]
     assert not (tmp_path / "logs" / SOCKET_NAME).exists()               # removed at exit
 
@@ -199,3 +199,18 @@ def test_the_control_socket_works_in_a_deep_output_directory(tmp_path):
     finally:
         server.close()
     assert not (deep / "cmsensord.sock").exists()
+
+
+def test_every_event_field_is_declared_with_one_type(degrading):
+    """The alarm events' fields validate against the event schema, and each field an event carries
+    is declared there: ``level`` is the severity's integer everywhere; an alarm's levels are
+    ``alarm_level`` and ``previous_level`` (a consumer storing ``level`` got a string and an int)."""
+    import jsonschema
+
+    msgs, _ = degrading
+    events = [m for t, _, m in msgs if t == "/cm/events"]
+    assert {m["kind"] for m in events} >= {"alarm_alert", "alarm_danger", "severity_change"}
+    declared = set(SCHEMAS["event"]["properties"])
+    for m in events:
+        jsonschema.validate(m, SCHEMAS["event"])
+        assert set(m) <= declared, (m["kind"], set(m) - declared)

@@ -214,7 +214,8 @@ class Alarms:
 
     def _after(self, stamp: int, tr: list[Transition]) -> list:
         out: list[Any] = [Event(t.kind, t.channel, t.message, t.stamp_ns,
-                                {"alarm": t.alarm, "level": LEVELS[t.level], "previous": LEVELS[t.previous]})
+                                {"alarm": t.alarm, "alarm_level": LEVELS[t.level],
+                                 "previous_level": LEVELS[t.previous]})
                           for t in tr]
         mgr = self._manager()
         sig = mgr.signature()
