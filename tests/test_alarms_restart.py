@@ -204,3 +204,26 @@ def test_replay_and_simulate_leave_the_state_file_alone(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "alarm_restored" not in p.stderr and "ERROR alarm_danger: sev/ch0" in p.stderr
     assert state.read_text() == held
+
+
+def test_a_latch_saved_by_the_last_run_is_on_the_status_line_before_data_comes(tmp_path):
+    """Restarted with the board off: the alarms are made with the first data, but the status
+    line already says the latched danger the last run saved (it showed nothing)."""
+    link = tmp_path / "ttyBOARD"
+    board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
+    d = start_daemon(tmp_path, link, config=LATCHED)
+    try:
+        wait_row(tmp_path, lambda r: r["level"] == "danger")
+    finally:
+        stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    d = start_daemon(tmp_path, link, config=LATCHED)             # no board on the port now
+    try:
+        text, end = "", time.monotonic() + 20
+        while "ALARM" not in text and time.monotonic() < end:
+            time.sleep(0.5)
+            text = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml")).stdout
+    finally:
+        stop(d)
+    assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text

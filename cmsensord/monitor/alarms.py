@@ -243,11 +243,24 @@ class Alarms:
         return out
 
     def summary(self) -> str | None:
-        """The worst active alarm for the status line ("ALARM danger vel/ch0 +1"), None if none."""
+        """The worst active alarm for the status line ("ALARM danger vel/ch0 +1"), None if none;
+        before the first value, the worst alarm saved by the last run, said to be so."""
         if self.manager is None:
-            return None
+            return _saved_summary(self._saved)
         worst = self.manager.worst()
         if worst is None:
             return None
         n = sum(a.state.level > 0 for a in self.manager.alarms.values())
         return f"ALARM {LEVELS[worst.state.level]} {worst.id}" + (f" +{n - 1}" if n > 1 else "")
+
+
+def _saved_summary(saved: dict[str, dict[str, Any]]) -> str | None:
+    """The worst alarm the last run saved, for the status line until data comes."""
+    shown = {name: max(LEVELS.index(r.get("level", "normal")), LEVELS.index(r.get("latched", "normal")))
+             for name, r in saved.items() if isinstance(r, dict)}
+    shown = {name: level for name, level in shown.items() if level > 0}
+    if not shown:
+        return None
+    name = max(shown, key=lambda k: shown[k])
+    more = f" +{len(shown) - 1}" if len(shown) > 1 else ""
+    return f"ALARM {LEVELS[shown[name]]} {name}{more} (saved by the last run; waiting for data)"
