@@ -256,34 +256,44 @@ def test_a_failed_fsync_is_never_retried_on_that_file(tmp_path, monkeypatch, clo
     assert parts == [] and sorted(ii) == list(range(8)) + list(range(12, 40))
 
 
-@pytest.mark.slow
-def test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging(small_fs, tmp_path):
-    """The whole daemon (simulated board on a pty) writing to a tmpfs that fills up."""
+def daemon_filling(small_fs: Path, tmp_path: Path, config: str, *, settle_s: float, full_s: float) -> str:
+    """``cmsensord --simulate`` (5x) logging to the tmpfs ``small_fs``/logs with ``config`` (YAML):
+    filled ``settle_s`` after its first file appears, freed ``full_s`` later, stopped 3 s after
+    (retry_s 1 in ``config``: logging resumed). It ran through and exited 0: its stderr."""
     logs = small_fs / "logs"
     cfg = tmp_path / "cmsensord.yaml"
-    cfg.write_text("output:\n  retry_s: 1.0\n  retain_mb: 0\n  min_free_mb: 0\n"
-                   "  akf_trace: true\n  status_line: false\n")
+    cfg.write_text(config)
     d = spawn([sys.executable, "-m", "cmsensord", "--simulate", "--config", str(cfg),
-                          "--out", str(logs), "--duration", "3600", "--speed", "5"],
-                         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=ENV)
+               "--out", str(logs), "--duration", "3600", "--speed", "5"],
+              stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=ENV)
     try:
         deadline = time.monotonic() + 30
         while not list(logs.glob("*.part")) and time.monotonic() < deadline:
             time.sleep(0.1)
-        time.sleep(1.0)
+        time.sleep(settle_s)
         filler = fill(small_fs, leave=16 * 1024)
-        time.sleep(3.0)                          # the AKF trace fills the rest within a second
+        time.sleep(full_s)
         assert d.poll() is None                  # still running
         filler.unlink()
-        time.sleep(3.0)                          # retry_s 1: logging resumes
+        time.sleep(3.0)
         d.send_signal(signal.SIGTERM)
         _, err = d.communicate(timeout=20)
     finally:
         if d.poll() is None:
             d.kill()
             d.wait()
-    assert d.returncode == 0, err
+    assert d.returncode == 0, err[-2000:]
     assert "Traceback" not in err
+    return err
+
+
+@pytest.mark.slow
+def test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging(small_fs, tmp_path):
+    """The whole daemon (simulated board on a pty) writing to a tmpfs that fills up (the AKF
+    trace fills the rest within a second)."""
+    logs = small_fs / "logs"
+    err = daemon_filling(small_fs, tmp_path, "output:\n  retry_s: 1.0\n  retain_mb: 0\n  min_free_mb: 0\n"
+                         "  akf_trace: true\n  status_line: false\n", settle_s=1.0, full_s=3.0)
     journal = [ln for ln in err.splitlines() if "disk_error" in ln]
     assert any("No space left on device" in ln for ln in journal), err[-2000:]
     assert any("logging resumed" in ln for ln in journal), err[-2000:]
