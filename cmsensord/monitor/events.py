@@ -132,6 +132,7 @@ class EventLog:
         self._newest = 0                  # stamp of the newest event written
         self._told = RateLimits()         # as events come: the journal, recent, on_event, WALL_KINDS
         self._written = RateLimits((RateLimit(),))   # as records are written, in stamp order: /cm/events
+        self._wall = RateLimits((RateLimit(),))      # WALL_KINDS as they come: /cm/events
 
     def emit(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, *,
              log_level: int | None = None, **extra: Any) -> None:
@@ -144,24 +145,32 @@ class EventLog:
 
     def summarise(self, now_ns: int | None = None, *, final: bool = False) -> None:
         """The journal's summaries of the intervals over at ``now_ns`` (the default stamp), or of
-        all (``final``: the end of the run); /cm/events gets its own as its records are written."""
+        all (``final``: the end of the run), and those of the wall-clock kinds on /cm/events; the
+        stream's records get theirs as they are written."""
         now = self.default_stamp() if now_ns is None else now_ns
         for s in self._told.close_all() if final else self._told.over(now):
             self._tell_summary(s)
+        for s in self._wall.close_all() if final else self._wall.over(now):
+            self._put_summary(s)
 
     def _write(self, kind: str, channel: str | None, message: str, stamp_ns: int | None,
                extra: dict[str, Any], log_level: int | None) -> None:
         stamp = self.default_stamp() if stamp_ns is None else stamp_ns
         self.counts[kind] = self.counts.get(kind, 0) + 1
-        told = True
+        told = written = True
+        count = int(extra.get("count", 0) or 0)
         if kind not in UNLIMITED:
-            closed, told = self._told.admit(kind, channel, stamp, int(extra.get("count", 0) or 0))
+            closed, told = self._told.admit(kind, channel, stamp, count)
             for s in closed:
                 self._tell_summary(s)
+            if kind in WALL_KINDS:
+                closed, written = self._wall.admit(kind, channel, stamp, count)
+                for s in closed:
+                    self._put_summary(s)
         m = messages.event(stamp, kind, channel, message, extra)
         level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind in WALL_KINDS:
-            if told:
+            if written:
                 self._put(m, m.stamp_ns, level)
         else:
             self._hold(m, level)
@@ -169,12 +178,10 @@ class EventLog:
             self._tell(m, level)
 
     def _tell_summary(self, s: Summary) -> None:
-        """A summary of the events not told: to the journal (and the sink, for a WALL_KINDS kind)."""
+        """A summary of the events not told: to the journal (a WALL_KINDS kind's to the sink are
+        its own limit's)."""
         m = messages.event(s.last_ns, s.kind, s.channel, s.message(), s.fields())
-        level = LOG_LEVEL.get(s.kind, logging.INFO)
-        if s.kind in WALL_KINDS:
-            self._put(m, m.stamp_ns, level)
-        self._tell(m, level)
+        self._tell(m, LOG_LEVEL.get(s.kind, logging.INFO))
 
     def _hold(self, m: messages.Message, level: int) -> None:
         """A record of the stream into the reorder buffer (written at once after the run)."""
