@@ -4,9 +4,14 @@ file that the retry opened, whose chunk then fails, is in the outage's count of 
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import time
+
 import pytest
 
-from test_disk_full import daemon_filling
+from processes import ENV, spawn, stop
+from test_disk_full import daemon_filling, fill
 
 
 @pytest.mark.slow
@@ -24,3 +29,23 @@ def test_full_disk_on_the_status_line_and_captures_not_written_are_said(small_fs
                for ln in outage), "\n".join(outage)[-3000:]
     assert not [ln for ln in lines[end + 2:] if "| disk: not logging" in ln]
     assert any(": captured " in ln for ln in lines[:start])
+
+
+@pytest.mark.slow
+def test_the_daemon_starts_on_a_full_disk_and_runs(small_fs, tmp_path):
+    """Started on a full disk (the lock file's pid cannot be written there), the daemon runs
+    without a file, says why, and stops cleanly (it died with a traceback, a restart loop under
+    systemd)."""
+    logs = small_fs / "logs"
+    logs.mkdir()
+    fill(small_fs, leave=0)
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("output:\n  retain_mb: 0\n  min_free_mb: 0\n  status_line: false\n")
+    d = spawn([sys.executable, "-m", "cmsensord", "--simulate", "--config", str(cfg), "--out", str(logs),
+               "--duration", "3600", "--speed", "5"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
+              text=True, env=ENV)
+    time.sleep(4.0)
+    running = d.poll() is None
+    err = stop(d)
+    assert running and d.returncode == 0 and "Traceback" not in err, err[-3000:]
+    assert "ERROR disk_error: " in err and "No space left on device" in err, err[-3000:]

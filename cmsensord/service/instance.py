@@ -39,6 +39,9 @@ def claim_output_dir(directory: str | Path) -> int | None:
         os.close(fd)
         raise InstanceError(f"{directory}: another cmsensord (pid {pid}) writes its logs here; stop it first "
                         "(systemctl stop cmsensord), or give this one another output.dir") from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    try:                                # the pid, for the refusal's line: a full disk keeps the old one
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    except OSError:
+        pass
     return fd
