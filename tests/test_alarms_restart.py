@@ -8,12 +8,14 @@ from __future__ import annotations
 import json
 import os
 import pwd
+import subprocess
+import sys
 import time
 from datetime import datetime
 from pathlib import Path
 
 from cmsensord.sinks.mcap_sink import read_messages
-from processes import run_module, start_board, start_daemon, stop
+from processes import run_module, spawn, start_board, start_daemon, stop
 
 S = 1_000_000_000
 LATCHED = "alarms:\n  rules:\n    - {name: sev, indicator: severity_index, alert: 0.3, danger: 0.6, latch: true}\n"
@@ -227,3 +229,30 @@ def test_a_latch_saved_by_the_last_run_is_on_the_status_line_before_data_comes(t
     finally:
         stop(d)
     assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text
+
+
+def test_a_latch_raised_on_a_full_disk_is_saved_once_space_returns(small_fs, tmp_path):
+    """The state file cannot be written while the disk is full: one warning, then the daemon
+    tries again (it tried only at the next change, never while a latch just held)."""
+    from test_disk_full import fill
+
+    link, logs = tmp_path / "ttyBOARD", small_fs / "logs"
+    board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
+    cfg = tmp_path / "cmsensord.yaml"
+    cfg.write_text(f"link:\n  port: {link}\n  max_drift_s: 0\noutput:\n  dir: {logs}\n  status_line: false\n"
+                   f"  retain_mb: 0\n  min_free_mb: 0\n  retry_s: 1.0\n{LATCHED}")
+    logs.mkdir()
+    filler = fill(small_fs, leave=0)
+    d = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)], stderr=subprocess.PIPE, text=True)
+    try:
+        wait_row(tmp_path, lambda r: r["level"] == "danger")
+        filler.unlink()
+        time.sleep(3.0)                                      # 60 s of stream time at 20x
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert len(lines(err, "alarm_state_error")) == 1, err[-3000:]
+    assert f"INFO alarm state: written to {logs / 'cmsensord-alarms.json'} again" in err, err[-3000:]
+    saved = json.loads((logs / "cmsensord-alarms.json").read_text())["alarms"]
+    assert saved["sev/ch0"]["latched"] == "danger", saved

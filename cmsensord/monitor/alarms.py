@@ -29,6 +29,7 @@ file; the store is written whenever the saved state changes, and a failed write 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import re
 from collections.abc import Callable
 from typing import Any, Protocol
@@ -44,6 +45,10 @@ from cmsensord.monitor.events import Event
 
 __all__ = ["Alarms", "indicator_values", "order_rules"]
 
+log = logging.getLogger("cmsensord")
+
+#: a state the store could not take is tried again this often (seconds of stream time)
+SAVE_RETRY_S = 10.0
 #: the message kinds the alarm manager reads
 WATCHED = frozenset({"indicators", "severity", "orders"})
 #: the measured values of a record (the names rules may watch: the zone is graded, below)
@@ -106,6 +111,8 @@ class Alarms:
         self.store: StateStore | None = None
         self._saved: dict[str, dict[str, Any]] = {}       # to put back when the manager is made
         self._kept: dict[str, dict[str, Any]] = {}        # what the store holds
+        self._unsaved: dict[str, dict[str, Any]] | None = None   # what it could not take (retried)
+        self._retry_ns = 0
 
     def keep(self, store: StateStore, saved: dict[str, dict[str, Any]]) -> list:
         """Keep the alarm state in ``store`` from now on and put ``saved`` (what it held) back
@@ -131,6 +138,8 @@ class Alarms:
         not learned (:meth:`_unlearned`)."""
         if m.schema not in WATCHED or not self.watching:
             return []
+        if self._unsaved is not None and m.stamp_ns >= self._retry_ns:
+            self._persist(m.stamp_ns, self._unsaved)
         first = self.manager is None
         back = self._resume(m.stamp_ns) if first else []
         out = self._see(m)
@@ -149,16 +158,24 @@ class Alarms:
 
     def _persist(self, stamp: int | None, now: dict[str, dict[str, Any]]) -> list:
         """``now`` into the store if it holds something else; an ``alarm_state_error`` event if
-        it cannot be written (tried again at the next change)."""
+        it cannot be written (then tried again, silently, with the messages at least every
+        SAVE_RETRY_S of stream time, until it is written)."""
         if self.store is None or now == self._kept:
+            self._unsaved = None
             return []
         try:
             self.store.save(now)
         except OSError as exc:
-            return [Event("alarm_state_error", None, f"{self.store.path}: cannot write the alarm state "
-                          f"({exc.strerror or exc}): latches and acknowledgements of now would not survive "
-                          "a restart", stamp, {"details": {"file": str(self.store.path)}})]
-        self._kept = now
+            told = self._unsaved is not None
+            self._unsaved, self._retry_ns = now, (stamp or 0) + int(SAVE_RETRY_S * 1e9)
+            return [] if told else [
+                Event("alarm_state_error", None, f"{self.store.path}: cannot write the alarm state "
+                      f"({exc.strerror or exc}): latches and acknowledgements of now would not survive a "
+                      f"restart; trying again every {SAVE_RETRY_S:g} s", stamp,
+                      {"details": {"file": str(self.store.path)}})]
+        if self._unsaved is not None:
+            log.info("alarm state: written to %s again", self.store.path)
+        self._kept, self._unsaved = now, None
         return []
 
     def _unlearned(self, stamp: int) -> list:
