@@ -231,6 +231,7 @@ class SerialReader(threading.Thread):
         self.reopen_s = 0.0
         self._reopen_wait = 0.0               # the wait now (doubles at each reopen; 0: reopen_s)
         self._reopened_at = 0.0
+        self._reopens = 0                     # reopens of this silence (0: bytes came since)
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
         self.pace = ReadPace()
@@ -275,9 +276,10 @@ class SerialReader(threading.Thread):
                 self.failures += 1
                 self._wait_backoff()
                 return None
-            if (self.ever_connected or self.failures) and not self.errors:
+            if (self.ever_connected or self.failures) and not self.errors and not self._reopens:
                 self._event("link_restored", f"{self.port} open again")
             self.ever_connected = True
+            self.last_data = time.monotonic()   # silence is counted from the open
             self.failures = 0
             self._backoff = self.reconnect_min_s
             self.down = None
@@ -295,6 +297,9 @@ class SerialReader(threading.Thread):
             return None
         now = self.last_data = time.monotonic()
         self._reopen_wait = 0.0
+        if self._reopens:
+            self._event("link_restored", f"{self.port}: bytes again after {self._reopens} reopen(s)")
+            self._reopens = 0
         if self.capture is not None and self.capture_error is None:
             try:
                 self.capture.write(data)
@@ -317,16 +322,22 @@ class SerialReader(threading.Thread):
 
     def _quiet(self, ser):
         """The open port gave no byte: after ``reopen_s`` of that (a hung USB device keeps the
-        port open and silent) it is closed with a ``link_lost`` event, to be opened again at the
-        next step; each reopen doubles the wait, up to :data:`REOPEN_MAX_S`, until bytes come."""
+        port open and silent) it is closed, to be opened again at the next step; each reopen
+        doubles the wait, up to :data:`REOPEN_MAX_S`, until bytes come. The first of a silence is a
+        ``link_lost`` event, the next ones an INFO line; ``link_restored`` when bytes come."""
         wait = self._reopen_wait or self.reopen_s
         now = time.monotonic()
         if not wait or now - max(self.last_data, self._reopened_at) < wait:
             return ser
         self._reopen_wait = min(2 * wait, REOPEN_MAX_S)
         self._reopened_at = now
-        self._event("link_lost", f"{self.port}: no byte for {wait:g} s on the open port; closing it to open "
-                    "it again (a hung USB device or board?)")
+        self._reopens += 1
+        if self._reopens == 1:
+            self._event("link_lost", f"{self.port}: no byte for {wait:g} s on the open port; closing it to "
+                        "open it again (a hung USB device or board?)")
+        else:
+            log.info("link: %s: still no byte, %g s after reopen %d; opening it again", self.port, wait,
+                     self._reopens - 1)
         self.connected.clear()
         _close_quietly(ser)
         return None

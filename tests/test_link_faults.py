@@ -141,7 +141,7 @@ def test_a_port_that_is_not_there_is_said_on_every_status_line(tmp_path):
     cfg = tmp_path / "c.yaml"
     cfg.write_text(f"link:\n  port: {port}\noutput:\n  dir: {tmp_path / 'logs'}\n")
     d = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)], stderr=subprocess.PIPE, text=True)
-    time.sleep(3.0)
+    time.sleep(5.0)                              # two status lines, on a loaded machine too
     err = stop(d)
     assert d.returncode == 0, err
     status = [line for line in err.splitlines() if line.startswith("[")]

@@ -40,6 +40,8 @@ EXIT_READER_DIED = 70
 class ReaderDied(Exception):
     """The serial reader thread ended while the loop still ran (it only ends on stop)."""
 
+#: a port open this long with never a byte is a ``link_stalled`` (a board off behind a USB adapter)
+NEVER_S = 10.0
 #: /cm/diagnostics at least this often (seconds), also when no decision brings one
 DIAGNOSTICS_S = 5.0
 
@@ -115,6 +117,10 @@ class _Watch:
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
                             time.time_ns())
+        elif now - last_bytes > NEVER_S and self.proc.anchor_ns is None and not self.source.counters.bytes_received:
+            self.stalled, self.stall_why = True, "no bytes since the port opened"
+            self.proc.event("link_stalled", None, f"{link.port}: open for {NEVER_S:g} s and no byte yet (is "
+                            "the board powered and sending? the right port?)", time.time_ns())
         elif now - self.last_frame > link.stall_s and now - last_bytes <= link.stall_s:
             self.stalled, self.stall_why = True, "bytes but no valid frame"
             self.proc.link_quiet()
