@@ -208,9 +208,10 @@ def test_replay_and_simulate_leave_the_state_file_alone(tmp_path):
     assert state.read_text() == held
 
 
-def test_a_latch_saved_by_the_last_run_is_on_the_status_line_before_data_comes(tmp_path):
+def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_comes(tmp_path):
     """Restarted with the board off: the alarms are made with the first data, but the status
-    line already says the latched danger the last run saved (it showed nothing)."""
+    line and table already show the latched danger the last run saved, and `cmsensord ack` takes
+    it (before: nothing shown, `no alarm named 'sev/ch0'`)."""
     link = tmp_path / "ttyBOARD"
     board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
     d = start_daemon(tmp_path, link, config=LATCHED)
@@ -221,14 +222,24 @@ def test_a_latch_saved_by_the_last_run_is_on_the_status_line_before_data_comes(t
         board.terminate()
         board.wait(timeout=5)
     d = start_daemon(tmp_path, link, config=LATCHED)             # no board on the port now
+    cfg = str(tmp_path / "cmsensord.yaml")
     try:
         text, end = "", time.monotonic() + 20
         while "ALARM" not in text and time.monotonic() < end:
             time.sleep(0.5)
-            text = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml")).stdout
+            text = run_module("cmsensord", "status", "--config", cfg).stdout
+        acked = run_module("cmsensord", "ack", "sev/ch0", "--config", cfg)
+        after = run_module("cmsensord", "status", "--config", cfg).stdout
     finally:
-        stop(d)
+        err = stop(d)
     assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text
+    assert "worst: danger (sev/ch0)" in text and text.rstrip().endswith("latched saved"), text
+    assert acked.returncode == 0 and acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
+    assert after.rstrip().endswith("danger  normal           -        -        -  acknowledged saved"), after
+    assert lines(err, "alarm_ack") == ["WARNING alarm_ack: sev/ch0 acknowledged (danger, saved by the last run; "
+                                       "danger at its stop, judged again when data comes)"], err
+    rec = json.loads((tmp_path / "logs" / "cmsensord-alarms.json").read_text())["alarms"]["sev/ch0"]
+    assert (rec["latched"], rec["level"], rec["acknowledged"]) == ("normal", "danger", True)
 
 
 def test_a_latch_raised_on_a_full_disk_is_saved_once_space_returns(small_fs, tmp_path):

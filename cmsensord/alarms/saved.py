@@ -156,3 +156,45 @@ def resume(mgr: AlarmManager, saved: dict[str, dict[str, Any]]) -> list[Resumed]
         note = f"; its levels changed since ({changed}): the latch is kept, the value judged afresh" if changed else ""
         out.append(Resumed(name, a.channel, True, said + note))
     return out
+
+
+def shown(rec: dict[str, Any]) -> str:
+    """The level a saved record shows: its latch, else its level."""
+    return LEVELS[max(LEVELS.index(rec["level"]), LEVELS.index(rec["latched"]))]
+
+
+def saved_rows(saved: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Rows of the alarm table for saved records not put back yet (no data has come): flag
+    ``saved``, the live level not known."""
+    rows = []
+    for name, rec in saved.items():
+        row = {"id": name, "rule": rec["rule"], "indicator": rec["indicator"], "level": shown(rec),
+               "live": "normal", "latched": rec["latched"] != "normal", "acknowledged": rec["acknowledged"],
+               "saved": True}
+        if "since_ns" in rec:
+            row["since"] = {"sec": rec["since_ns"] // 1_000_000_000, "nsec": rec["since_ns"] % 1_000_000_000}
+        rows.append(row)
+    return rows
+
+
+def ack_saved(saved: dict[str, dict[str, Any]], which: str | None, t_ns: int,
+              by: str | None) -> list[tuple[str, str, str]]:
+    """Acknowledge saved records before they are put back, as :meth:`AlarmState.ack` would: the
+    latch drops to the level active at the stop, acknowledged when that is above normal, else the
+    record goes. ``which``: a name (KeyError if not saved) or None (each not acknowledged yet).
+    Returns (name, level before, level after) of each."""
+    if which is not None and which not in saved:
+        raise KeyError(which)
+    names = [which] if which is not None else [n for n, r in saved.items() if not r["acknowledged"]]
+    out = []
+    for name in names:
+        rec = saved[name]
+        before = shown(rec)
+        rec["latched"] = "normal"
+        if rec["live"] == "normal":
+            del saved[name]
+        else:
+            rec.update(level=rec["live"], acknowledged=True, acked_ns=t_ns,
+                       **({"acked_by": by} if by is not None else {}))
+        out.append((name, before, rec["live"]))
+    return out

@@ -31,11 +31,12 @@ from __future__ import annotations
 import dataclasses
 import logging
 import re
+import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
-from cmsensord.alarms.saved import resume, snapshot
+from cmsensord.alarms.saved import ack_saved, resume, saved_rows, shown, snapshot
 from cmsensord.config import Config
 from cmsensord.config.alarm_indicators import RECORD_VALUES
 from cmsensord.config.alarms import AlarmRuleConfig
@@ -118,7 +119,7 @@ class Alarms:
         """Keep the alarm state in ``store`` from now on and put ``saved`` (what it held) back
         with the first message.  Returns the ``alarm_not_restored`` events of saved alarms that
         cannot go back as no rule is in force (then the store is emptied)."""
-        self.store, self._saved, self._kept = store, saved, saved
+        self.store, self._saved, self._kept = store, saved, {k: dict(v) for k, v in saved.items()}
         if self.active or not saved:
             return []
         why = "alarms.enabled is false" if not self.cfg.alarms.enabled else "no alarm rules are configured"
@@ -223,11 +224,22 @@ class Alarms:
         """Acknowledge alarm ``which`` (None: all) by user ``by`` (None: not known); KeyError for an
         unknown alarm (and for any before the first value: the alarms are made with the channels
         the stream brings)."""
-        if not self.active or (self.manager is None and which is not None):
+        if not self.active:
             raise KeyError(which or "all")
         if self.manager is None:
-            return []
+            return self._ack_saved(which, by)
         return self._after(self.newest_ns, self.manager.ack(self.newest_ns, which, by))
+
+    def _ack_saved(self, which: str | None, by: str | None) -> list:
+        """Before the first value: acknowledge what the last run saved (:func:`ack_saved`), kept
+        in the store at once; an ``alarm_ack`` event each (KeyError: no such saved alarm)."""
+        now = time.time_ns()
+        done = ack_saved(self._saved, which, now, by)
+        out: list[Any] = [Event("alarm_ack", None, f"{name} acknowledged ({before}, saved by the last run; "
+                                f"{after} at its stop, judged again when data comes)", None,
+                                {"alarm": name, "alarm_level": after, "previous_level": before})
+                          for name, before, after in done]
+        return out + self._persist(None, {k: dict(v) for k, v in self._saved.items()})
 
     def _after(self, stamp: int, tr: list[Transition]) -> list:
         out: list[Any] = [Event(t.kind, t.channel, t.message, t.stamp_ns,
@@ -243,11 +255,10 @@ class Alarms:
         return out
 
     def table(self) -> dict:
-        """The /cm/alarms message body: operating state, worst level, every alarm's row (none
-        before the first value)."""
+        """The /cm/alarms message body: operating state, worst level, every alarm's row (before
+        the first value: the rows the last run saved, :meth:`_saved_table`)."""
         if self.manager is None:
-            return {"operating_state": "running" if self.rules.operating.source == "none" else "stopped",
-                    "worst": "normal", "alarms": []}
+            return self._saved_table()
         mgr = self.manager
         worst = mgr.worst()
         out: dict[str, Any] = {"operating_state": mgr.operating.state,
@@ -257,6 +268,19 @@ class Alarms:
             out["worst_alarm"] = worst.id
         if mgr.speed_rpm is not None:
             out["speed_rpm"] = round(mgr.speed_rpm, 6)
+        return out
+
+    def saved_names(self) -> list[str]:
+        """The alarms the last run saved, not put back yet (no data has come)."""
+        return list(self._saved)
+
+    def _saved_table(self) -> dict:
+        rows = saved_rows(self._saved)
+        top = max(rows, key=lambda r: LEVELS.index(r["level"]), default=None)
+        out = {"operating_state": "running" if self.rules.operating.source == "none" else "stopped",
+               "worst": top["level"] if top else "normal", "alarms": rows}
+        if top is not None and top["level"] != "normal":
+            out["worst_alarm"] = top["id"]
         return out
 
     def summary(self) -> str | None:
@@ -273,11 +297,10 @@ class Alarms:
 
 def _saved_summary(saved: dict[str, dict[str, Any]]) -> str | None:
     """The worst alarm the last run saved, for the status line until data comes."""
-    shown = {name: max(LEVELS.index(r.get("level", "normal")), LEVELS.index(r.get("latched", "normal")))
-             for name, r in saved.items() if isinstance(r, dict)}
-    shown = {name: level for name, level in shown.items() if level > 0}
-    if not shown:
+    levels = {name: LEVELS.index(shown(r)) for name, r in saved.items()}
+    levels = {name: level for name, level in levels.items() if level > 0}
+    if not levels:
         return None
-    name = max(shown, key=lambda k: shown[k])
-    more = f" +{len(shown) - 1}" if len(shown) > 1 else ""
-    return f"ALARM {LEVELS[shown[name]]} {name}{more} (saved by the last run; waiting for data)"
+    name = max(levels, key=lambda k: levels[k])
+    more = f" +{len(levels) - 1}" if len(levels) > 1 else ""
+    return f"ALARM {LEVELS[levels[name]]} {name}{more} (saved by the last run; waiting for data)"

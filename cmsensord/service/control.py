@@ -153,7 +153,7 @@ def handle(proc, body: dict, line: Callable[[], str] | None = None, by: str | No
     try:
         proc.ack(which, by)
     except KeyError:
-        names = ", ".join(alarms.manager.alarms) if alarms.manager else ""
+        names = ", ".join(alarms.manager.alarms if alarms.manager else alarms.saved_names())
         return {"ok": False, "error": f"no alarm named {which!r} (alarms: {names})"}
     return {"ok": True, "acknowledged": proc.event_counts.get("alarm_ack", 0) - before}
 

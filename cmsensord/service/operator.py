@@ -119,6 +119,7 @@ def format_table(t: dict) -> str:
     for a in t["alarms"]:
         num = [f"{a[k]:.4g}" if k in a else "-" for k in ("value", "alert_level", "danger_level")]
         flags = " ".join(f for f, on in (("latched", a["latched"]), ("acknowledged", a["acknowledged"]),
-                                         ("restored", a.get("restored", False))) if on)
+                                         ("restored", a.get("restored", False)),
+                                         ("saved", a.get("saved", False))) if on)
         lines.append(f"{a['id']:24} {a['level']:7} {a['live']:7} {num[0]:>10} {num[1]:>8} {num[2]:>8}  {flags}")
     return "\n".join(lines)
