@@ -110,7 +110,8 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
 def test_a_second_daemon_on_the_same_configuration_is_refused_and_the_first_loses_nothing(tmp_path):
     """Started by hand beside the service: before, both read the port (each losing the other's
     frames) and the second salvaged the first's open .part file. Now: one line, exit 78, and the
-    first daemon runs on without a lost frame."""
+    first daemon runs on without a lost frame. A replay into its directory (its logs, queue and
+    state) is refused the same way; elsewhere it runs."""
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "healthy", "--speed", "2", "--link", str(link), "--flow-control")
     first = start_daemon(tmp_path, link)
@@ -119,6 +120,11 @@ def test_a_second_daemon_on_the_same_configuration_is_refused_and_the_first_lose
         second = spawn([sys.executable, "-m", "cmsensord", "--config", str(tmp_path / "cmsensord.yaml")],
                        stderr=subprocess.PIPE, text=True)
         _, err2 = second.communicate(timeout=60)
+        cap, cfg = str(tmp_path / "cap.bin"), str(tmp_path / "cmsensord.yaml")
+        assert subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--duration", "3",
+                               "--out", cap], capture_output=True, env=ENV).returncode == 0
+        replay = cmsensord("replay", cap, "--config", cfg)            # no --out: the daemon's directory
+        elsewhere = cmsensord("replay", cap, "--config", cfg, "--out", str(tmp_path / "replay"))
         time.sleep(2.0)
         assert first.poll() is None
     finally:
@@ -128,6 +134,10 @@ def test_a_second_daemon_on_the_same_configuration_is_refused_and_the_first_lose
     assert (second.returncode, err2.strip().splitlines()[-1]) == (78, (
         f"cmsensord: {tmp_path / 'logs'}: another cmsensord (pid {first.pid}) writes its logs here; stop it first "
         "(systemctl stop cmsensord), or give this one another output.dir"))
+    assert (replay.returncode, replay.stderr.strip().splitlines()[-1]) == (78, (
+        f"cmsensord: {tmp_path / 'logs'}: the running cmsensord (pid {first.pid}) writes its logs here; give "
+        "replay another directory (--out DIR)")), replay.stderr
+    assert elsewhere.returncode == 0, elsewhere.stderr
     assert first.returncode == 0, err1
     (log,) = (tmp_path / "logs").glob("*.mcap")
     kinds = [m["kind"] for t, _, m in read_messages(log) if t == "/cm/events"]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from cmsensord.errors import InstanceError
 
-__all__ = ["LOCK_NAME", "claim_output_dir"]
+__all__ = ["LOCK_NAME", "claim_output_dir", "refuse_if_held"]
 
 LOCK_NAME = ".cmsensord.lock"
 
@@ -45,3 +45,21 @@ def claim_output_dir(directory: str | Path) -> int | None:
     except OSError:
         pass
     return fd
+
+
+def refuse_if_held(directory: str | Path, command: str) -> None:
+    """InstanceError when a daemon holds ``directory``: its logs, their retention and salvage,
+    its alarm state and its MQTT queue are that daemon's, and ``command`` (a replay) must write
+    elsewhere. Checked (a shared lock tried and let go), not kept."""
+    try:
+        fd = os.open(Path(directory) / LOCK_NAME, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        pid = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+        raise InstanceError(f"{directory}: the running cmsensord (pid {pid}) writes its logs here; give "
+                            f"{command} another directory (--out DIR)") from None
+    finally:
+        os.close(fd)

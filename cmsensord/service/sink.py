@@ -7,6 +7,7 @@ import logging
 from cmsensord.config import Config
 from cmsensord.errors import SinkError
 from cmsensord.monitor.events import EventLog
+from cmsensord.service.instance import refuse_if_held
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.tee import TeeSink
 
@@ -18,13 +19,16 @@ log = logging.getLogger("cmsensord")
 
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
               publish: bool = False, command: str = "this run") -> RotatingSink:
-    """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable.
+    """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable,
+    InstanceError if a running daemon holds it and ``command`` is not the daemon.
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
     With an ``mqtt`` section and ``publish`` (the daemon, ``--simulate``, a ``--publish``
     option), a :class:`TeeSink` that also publishes (its thread started; its ``close`` stops
     it). With an ``mqtt`` section and not ``publish``, nothing is published and one INFO line
     says so: ``command`` (e.g. ``replay``) would publish as the live daemon of that
     configuration (its client id, its retained topics, its queue)."""
+    if command != "the daemon":
+        refuse_if_held(cfg.output.dir, command)
     sink = RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
     if cfg.mqtt is None:
         return sink
