@@ -24,6 +24,7 @@ import time
 from typing import Any
 
 from cmsensord.config.mqtt import MqttConfig
+from cmsensord.config.mqtt_tls import tls_context
 from cmsensord.publish.discovery import WorstAlarms, discovery_messages
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.publish.topics import TopicMap, payload
@@ -202,8 +203,9 @@ class Publisher:
             try:
                 if cfg.username is not None:
                     client.username_pw_set(cfg.username, _password(cfg.password_file))
-                if cfg.ca_file is not None or cfg.certfile is not None:
-                    client.tls_set(ca_certs=cfg.ca_file, certfile=cfg.certfile, keyfile=cfg.keyfile)
+                context = tls_context(cfg)
+                if context is not None:
+                    client.tls_set_context(context)
                 client.connect(cfg.host, cfg.port, keepalive=cfg.keepalive_s)
             except Exception as err:                # noqa: BLE001 - refused, unreachable, TLS, files
                 self._dial_error = f"cannot connect to {cfg.host}:{cfg.port}: {err}"
