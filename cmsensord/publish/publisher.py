@@ -268,10 +268,27 @@ class Publisher:
                 client.publish(topic, body, qos=self.cfg.qos, retain=True)
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
-        if self.state == "connected":
-            self._down(f"lost the broker {self.cfg.host}:{self.cfg.port}: {reason}", "disconnected")
-        elif self.state == "connecting":
-            self._down(f"cannot connect to {self.cfg.host}:{self.cfg.port}: {reason}", "disconnected")
+        if self.state not in ("connected", "connecting"):
+            return
+        connected = self.state == "connected"
+        why = f"{reason}"
+        if why == "Unspecified error" and not getattr(flags, "is_disconnect_packet_from_server", False):
+            why += f" ({self._closed_causes(connected)})"
+        if connected:
+            self._down(f"lost the broker {self.cfg.host}:{self.cfg.port}: {why}", "disconnected")
+        else:
+            self._down(f"cannot connect to {self.cfg.host}:{self.cfg.port}: {why}", "disconnected")
+
+    def _closed_causes(self, connected: bool) -> str:
+        """The likely causes of a connection the broker closed without saying why (paho's
+        "Unspecified error"): once connected, another client taking over the client id or
+        the broker stopping; while connecting, plain MQTT spoken to a TLS port."""
+        if connected:
+            return (f"the broker closed the connection: another client using client_id {self.cfg.client}? "
+                    "the broker stopping?")
+        if self.cfg.ca_file is None and self.cfg.certfile is None:
+            return "the broker closed the connection: a TLS port without mqtt.ca_file? the broker's log says why"
+        return "the broker closed the connection: the broker's log says why"
 
     def _on_publish(self, client: Any, userdata: Any, mid: int, reason: Any, properties: Any) -> None:
         seq = self._inflight.pop(mid, None)
