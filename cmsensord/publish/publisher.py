@@ -50,9 +50,12 @@ def _password(path: str | None) -> str | None:
 
 class Publisher:
     """Publishes what :meth:`offer` is given to the broker of ``cfg``; ``queue_dir`` holds the
-    disk queue (OSError if it cannot be created)."""
+    disk queue (OSError if it cannot be created). ``alarm_rules``: alarms are evaluated, so
+    with discovery and ``alarms`` published, each channel's worst alarm is derived, published
+    and announced (without rules it would stay unknown)."""
 
-    def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = ()) -> None:
+    def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = (),
+                 alarm_rules: bool = False) -> None:
         self.cfg, self.topics, self.channels = cfg, TopicMap(cfg), channels
         self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s)
         self.handover: collections.deque = collections.deque(maxlen=cfg.handover_messages)
@@ -78,7 +81,7 @@ class Publisher:
         self._discovered: tuple[str, ...] = ()     # the channels announced on this connection
         self._retained: dict[str, tuple[int, bytes]] = {}   # MQTT topic -> (seq, payload) of its latest
         self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
-        if cfg.discovery and "alarms" in cfg.publish:
+        if cfg.discovery and "alarms" in cfg.publish and alarm_rules:
             self._worst = WorstAlarms(channels)
         if self.queue.truncated_bytes:
             self._event("mqtt_queue", f"store-and-forward queue: cut {self.queue.truncated_bytes} "
@@ -256,7 +259,7 @@ class Publisher:
         channels = self.channels
         new = tuple(ch for ch in channels if ch not in self._discovered)
         if self.cfg.discovery and new:
-            for topic, body in discovery_messages(self.cfg, new):
+            for topic, body in discovery_messages(self.cfg, new, worst_alarm=self._worst is not None):
                 self._client.publish(topic, body, qos=1, retain=True)
         self._discovered = channels
 
