@@ -2,7 +2,8 @@
 
 The broker is Debian's ``mosquitto`` (``.ci/run`` installs it when missing); it keeps its
 sessions on disk across a restart (``persistence``), so a subscriber with a persistent session
-misses nothing while the broker is down.
+misses nothing while the broker is down. :func:`make_certificates` makes a test CA and
+certificates with ``openssl``.
 """
 
 from __future__ import annotations
@@ -111,3 +112,20 @@ class Subscriber:
     def close(self) -> None:
         self.client.loop_stop()
         self.client.disconnect()
+
+
+def _openssl(*args: str, cwd: Path) -> None:
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True)
+
+
+def make_certificates(d: Path) -> None:
+    """A test CA, a server certificate for 127.0.0.1 and a client certificate, both signed by it."""
+    d.mkdir()
+    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem",
+             "-days", "2", "-subj", "/CN=cmsensord test CA", cwd=d)
+    (d / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    for name, ext in (("server", ["-extfile", "san.ext"]), ("client", [])):
+        _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key", "-out", f"{name}.csr",
+                 "-subj", f"/CN={'127.0.0.1' if name == 'server' else 'rig1'}", cwd=d)
+        _openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+                 "-CAcreateserial", "-out", f"{name}.pem", "-days", "2", *ext, cwd=d)

@@ -104,7 +104,8 @@ def status(cfg: Path) -> dict:
 
 def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
     """A running daemon on a degrading board: the kurtosis alarm latches, the machine eases,
-    `cmsensord ack --all` clears it; `cmsensord status` shows the table before and after."""
+    `cmsensord ack --all` clears it, `cmsensord ack NAME` then has nothing to acknowledge;
+    `cmsensord status` shows the table before and after."""
     rule = ("alarms:\n  rules:\n    - {name: de_kurtosis, indicator: kurtosis, alert: 10, latch: true}\n")
     cfg = tmp_path / "cmsensord.yaml"
     with board_on_pty("--scenario", "degrading", "--mode", "raw", "--tacho", "--duration", "24",
@@ -129,6 +130,9 @@ def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
             after = status(cfg)
             assert after["alarms"][0]["level"] == "normal" and after["worst"] == "normal"
             assert "| rx " in after["status"] and " frames " in after["status"], after["status"]   # the whole line
+            again = run_module("cmsensord", "ack", "de_kurtosis/ch0", "--config", str(cfg))
+            assert again.returncode == 0 and again.stdout.strip() == (
+                "nothing to acknowledge: de_kurtosis/ch0 is at normal or acknowledged already"), again.stdout
             bad = run_module("cmsensord", "ack", "nope", "--config", str(cfg))
             assert bad.returncode == 1 and "no alarm named 'nope'" in bad.stderr
         finally:

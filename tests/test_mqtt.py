@@ -17,7 +17,7 @@ import pytest
 
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, read_messages
-from mosquitto import Broker, Subscriber, free_port, needs_mosquitto
+from mosquitto import Broker, Subscriber, free_port, make_certificates, needs_mosquitto
 from processes import ENV, cmsensord, spawn, start_daemon
 
 pytestmark = needs_mosquitto
@@ -182,23 +182,6 @@ def test_the_queue_bound_drops_the_oldest_messages_with_an_event(tmp_path):
     assert q.acked + q.depth == len(expected(tmp_path / "logs"))
     assert 0 < sum(drops) <= q.acked
     q.close()
-
-
-def _openssl(*args: str, cwd: Path) -> None:
-    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True)
-
-
-def make_certificates(d: Path) -> None:
-    """A test CA, a server certificate for 127.0.0.1 and a client certificate, both signed by it."""
-    d.mkdir()
-    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem",
-             "-days", "2", "-subj", "/CN=cmsensord test CA", cwd=d)
-    (d / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
-    for name, ext in (("server", ["-extfile", "san.ext"]), ("client", [])):
-        _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key", "-out", f"{name}.csr",
-                 "-subj", f"/CN={'127.0.0.1' if name == 'server' else 'rig1'}", cwd=d)
-        _openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
-                 "-CAcreateserial", "-out", f"{name}.pem", "-days", "2", *ext, cwd=d)
 
 
 def test_tls_with_a_client_certificate(tmp_path):

@@ -113,6 +113,21 @@ def test_discovery_and_worst_alarm_cover_the_channels_the_board_sends(tmp_path, 
         sub.close()
 
 
+def test_without_alarm_rules_no_worst_alarm_is_announced_or_published(tmp_path, broker):
+    sub = Subscriber(broker.port)
+    try:
+        yaml = mqtt_yaml(broker.port, "discovery: true", publish=("severity", "alarms"))
+        p = subprocess.run(simulate(tmp_path, yaml, duration=20), capture_output=True, text=True, env=ENV,
+                           timeout=120)
+        assert p.returncode == 0, p.stderr
+        severity = "homeassistant/sensor/rig1_ch0_severity/config"
+        assert sub.wait_for(lambda: any(t == severity for t, _, _ in sub.got))
+        assert sub.wait_for(lambda: sub.messages("/ch0/severity"))
+        assert not [t for t, _, _ in sub.got if "worst_alarm" in t]    # it would stay "unknown"
+    finally:
+        sub.close()
+
+
 def test_live_messages_are_not_held_to_the_backlog_rate_and_the_summary_counts_them(tmp_path, broker):
     sub = Subscriber(broker.port)
     try:

@@ -169,12 +169,13 @@ class AlarmManager:
         return out
 
     def ack(self, t_ns: int, which: str | None = None, by: str | None = None) -> list[Transition]:
-        """Acknowledge alarm ``which`` (None: every alarm showing a level not acknowledged yet) at
-        ``t_ns``, by user ``by`` (None: not known). Raises KeyError for an unknown alarm."""
+        """Acknowledge alarm ``which`` (None: every alarm) at ``t_ns``, by user ``by`` (None: not
+        known); only an alarm showing a level not acknowledged yet is (one at normal, or
+        acknowledged already, has no transition). Raises KeyError for an unknown alarm."""
         if which is not None and which not in self.alarms:
             raise KeyError(which)
-        targets = [self.alarms[which]] if which is not None else \
-            [a for a in self.alarms.values() if a.state.level > 0 and not a.state.acknowledged]
+        named = [self.alarms[which]] if which is not None else list(self.alarms.values())
+        targets = [a for a in named if a.state.level > 0 and not a.state.acknowledged]
         out: list[Transition] = []
         for a in targets:
             before = a.state.level

@@ -27,6 +27,7 @@ from .capture import CaptureConfig
 from .channel_refs import check_channel_refs
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .mqtt import MqttConfig
+from .mqtt_tls import TlsFileError, tls_context
 from .settings import (
     MAX_CHANNELS,
     AcousticConfig,
@@ -235,7 +236,8 @@ def _build_indicators(raw: Any, source: str) -> IndicatorsConfig:
 
 
 def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
-    """The optional ``mqtt`` section; its files must be readable and paho-mqtt installed."""
+    """The optional ``mqtt`` section; its files must be readable, its TLS files must hold what
+    they are for (:func:`~.mqtt_tls.tls_context`), and paho-mqtt must be installed."""
     if raw is None:
         return None
     values = _mapping(raw, source, "mqtt")
@@ -249,6 +251,10 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
                     pass
             except OSError as err:
                 raise ConfigError(source, f"mqtt.{key}", f"cannot read: {err.strerror or err}", path) from None
+    try:
+        tls_context(cfg)
+    except TlsFileError as err:
+        raise ConfigError(source, f"mqtt.{err.key}", f"{err.path}: {err.reason}") from None
     import importlib.util
 
     if importlib.util.find_spec("paho") is None or importlib.util.find_spec("paho.mqtt") is None:

@@ -32,6 +32,37 @@ def _publish_known(obj: Any) -> tuple[str, str, Any] | None:
     return None
 
 
+#: schemes of a broker URL that mean TLS
+_TLS_SCHEMES = ("mqtts", "ssl", "tls", "wss")
+
+
+def _host_alone(obj: Any) -> tuple[str, str, Any] | None:
+    """A host written as a URL or ``host:port`` (``mqtt://broker:1883``, ``broker:1883``,
+    ``broker/x``): the name alone, and where its port and scheme go instead. A bare IPv6
+    address (``::1``, more than one colon) is a host."""
+    host = obj.host
+    scheme, sep, rest = host.partition("://")
+    if not sep:
+        scheme, rest = "", host
+        if "/" not in host and "[" not in host and host.count(":") != 1:
+            return None
+    netloc = rest.partition("/")[0].rpartition("@")[2]
+    if netloc.startswith("["):
+        name, _, tail = netloc[1:].partition("]")
+        port = tail[1:] if tail.startswith(":") else ""
+    elif netloc.count(":") == 1:
+        name, _, port = netloc.partition(":")
+    else:
+        name, port = netloc, ""
+    advice = f"give the host name alone ({name})" if name else "give the host name alone"
+    if port:
+        advice += f", the port as mqtt.port: {port}"
+    if scheme.lower() in _TLS_SCHEMES and obj.ca_file is None:
+        advice += (f"; {scheme}:// means TLS: set mqtt.ca_file to the broker's CA certificate"
+                   + ("" if port else " and mqtt.port (8883 is the usual TLS port)"))
+    return "host", advice, host
+
+
 def _key_needs_cert(obj: Any) -> tuple[str, str, Any] | None:
     if (obj.keyfile is None) != (obj.certfile is None):
         return "keyfile", "a client certificate needs both certfile and keyfile", obj.keyfile
@@ -81,7 +112,7 @@ class MqttConfig:
     discovery: bool = setting(False, "publish Home Assistant MQTT discovery messages")
     discovery_prefix: str = setting("homeassistant", "Home Assistant discovery prefix", **_TOPIC)
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_publish_known, _key_needs_cert,
+    _RULES: ClassVar[tuple[Rule, ...]] = (_host_alone, _publish_known, _key_needs_cert,
                                           at_most("reconnect_min_s", "reconnect_max_s"))
 
     def __post_init__(self) -> None:

@@ -96,6 +96,12 @@ def order_rules(cfg: Config) -> tuple[AlarmRuleConfig, ...]:
     return tuple(out)
 
 
+def has_alarm_rules(cfg: Config) -> bool:
+    """Whether alarms are evaluated: ``alarms.enabled`` and a rule (of ``alarms.rules`` or an
+    order component's ``alarm_rms``); without, no ``/cm/alarms`` table is ever written."""
+    return cfg.alarms.enabled and bool(cfg.alarms.rules or order_rules(cfg))
+
+
 class Alarms:
     """Messages -> alarm events and /cm/alarms (see module docstring).  ``channels``: the
     vibration channels' names when the first watched message comes."""
@@ -104,7 +110,7 @@ class Alarms:
         self.cfg, self.channels = cfg, channels
         self.manager: AlarmManager | None = None
         self.rules = dataclasses.replace(cfg.alarms, rules=cfg.alarms.rules + order_rules(cfg))
-        self.active = cfg.alarms.enabled and bool(self.rules.rules)
+        self.active = has_alarm_rules(cfg)
         #: the manager runs: for the rules, or for the operating state alone
         self.watching = self.active or (cfg.alarms.enabled and cfg.alarms.operating.source != "none")
         self.newest_ns = 0

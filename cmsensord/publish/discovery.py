@@ -1,6 +1,6 @@
 """Home Assistant MQTT discovery (``mqtt.discovery``): per monitored channel (the Processor's,
 once the board says which), a sensor for its severity
-index and, when ``alarms`` is published, one for its worst alarm.
+index and, when ``alarms`` is published and there are alarm rules, one for its worst alarm.
 
 Each message is retained at ``<discovery_prefix>/sensor/<client>_<channel>_<what>/config``.
 The severity sensor reads ``severity_index`` from ``<prefix>/<channel>/severity``; the worst
@@ -21,9 +21,9 @@ from cmsensord.config.mqtt import MqttConfig
 from cmsensord.publish.topics import TopicMap
 
 
-def discovery_messages(cfg: MqttConfig, channels: tuple[str, ...]) -> list[tuple[str, str]]:
+def discovery_messages(cfg: MqttConfig, channels: tuple[str, ...], worst_alarm: bool = True) -> list[tuple[str, str]]:
     """(topic, JSON) of the discovery message of each channel's severity sensor and, when
-    ``alarms`` is in ``cfg.publish``, of its worst alarm sensor."""
+    ``worst_alarm`` and ``alarms`` is in ``cfg.publish``, of its worst alarm sensor."""
     topics = TopicMap(cfg)
     node = re.sub(r"[^A-Za-z0-9_-]", "_", cfg.client)
     common: dict[str, Any] = {"availability_topic": topics.status, "payload_available": "online",
@@ -35,7 +35,7 @@ def discovery_messages(cfg: MqttConfig, channels: tuple[str, ...]) -> list[tuple
         sensors: dict[str, dict[str, Any]] = {"severity": {
             "name": f"{ch} severity", "state_topic": f"{topics.prefix}/{ch}/severity",
             "value_template": "{{ value_json.severity_index }}", "state_class": "measurement"}}
-        if "alarms" in cfg.publish:
+        if worst_alarm and "alarms" in cfg.publish:
             state = topics.worst_alarm(ch)
             sensors["worst_alarm"] = {"name": f"{ch} worst alarm", "state_topic": state,
                                       "value_template": "{{ value_json.level }}",

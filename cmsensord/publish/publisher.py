@@ -24,6 +24,7 @@ import time
 from typing import Any
 
 from cmsensord.config.mqtt import MqttConfig
+from cmsensord.config.mqtt_tls import tls_context
 from cmsensord.publish.discovery import WorstAlarms, discovery_messages
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.publish.topics import TopicMap, payload
@@ -49,9 +50,12 @@ def _password(path: str | None) -> str | None:
 
 class Publisher:
     """Publishes what :meth:`offer` is given to the broker of ``cfg``; ``queue_dir`` holds the
-    disk queue (OSError if it cannot be created)."""
+    disk queue (OSError if it cannot be created). ``alarm_rules``: alarms are evaluated, so
+    with discovery and ``alarms`` published, each channel's worst alarm is derived, published
+    and announced (without rules it would stay unknown)."""
 
-    def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = ()) -> None:
+    def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = (),
+                 alarm_rules: bool = False) -> None:
         self.cfg, self.topics, self.channels = cfg, TopicMap(cfg), channels
         self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s)
         self.handover: collections.deque = collections.deque(maxlen=cfg.handover_messages)
@@ -77,7 +81,7 @@ class Publisher:
         self._discovered: tuple[str, ...] = ()     # the channels announced on this connection
         self._retained: dict[str, tuple[int, bytes]] = {}   # MQTT topic -> (seq, payload) of its latest
         self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
-        if cfg.discovery and "alarms" in cfg.publish:
+        if cfg.discovery and "alarms" in cfg.publish and alarm_rules:
             self._worst = WorstAlarms(channels)
         if self.queue.truncated_bytes:
             self._event("mqtt_queue", f"store-and-forward queue: cut {self.queue.truncated_bytes} "
@@ -202,8 +206,9 @@ class Publisher:
             try:
                 if cfg.username is not None:
                     client.username_pw_set(cfg.username, _password(cfg.password_file))
-                if cfg.ca_file is not None or cfg.certfile is not None:
-                    client.tls_set(ca_certs=cfg.ca_file, certfile=cfg.certfile, keyfile=cfg.keyfile)
+                context = tls_context(cfg)
+                if context is not None:
+                    client.tls_set_context(context)
                 client.connect(cfg.host, cfg.port, keepalive=cfg.keepalive_s)
             except Exception as err:                # noqa: BLE001 - refused, unreachable, TLS, files
                 self._dial_error = f"cannot connect to {cfg.host}:{cfg.port}: {err}"
@@ -254,7 +259,7 @@ class Publisher:
         channels = self.channels
         new = tuple(ch for ch in channels if ch not in self._discovered)
         if self.cfg.discovery and new:
-            for topic, body in discovery_messages(self.cfg, new):
+            for topic, body in discovery_messages(self.cfg, new, worst_alarm=self._worst is not None):
                 self._client.publish(topic, body, qos=1, retain=True)
         self._discovered = channels
 
@@ -266,10 +271,27 @@ class Publisher:
                 client.publish(topic, body, qos=self.cfg.qos, retain=True)
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
-        if self.state == "connected":
-            self._down(f"lost the broker {self.cfg.host}:{self.cfg.port}: {reason}", "disconnected")
-        elif self.state == "connecting":
-            self._down(f"cannot connect to {self.cfg.host}:{self.cfg.port}: {reason}", "disconnected")
+        if self.state not in ("connected", "connecting"):
+            return
+        connected = self.state == "connected"
+        why = f"{reason}"
+        if why == "Unspecified error" and not getattr(flags, "is_disconnect_packet_from_server", False):
+            why += f" ({self._closed_causes(connected)})"
+        if connected:
+            self._down(f"lost the broker {self.cfg.host}:{self.cfg.port}: {why}", "disconnected")
+        else:
+            self._down(f"cannot connect to {self.cfg.host}:{self.cfg.port}: {why}", "disconnected")
+
+    def _closed_causes(self, connected: bool) -> str:
+        """The likely causes of a connection the broker closed without saying why (paho's
+        "Unspecified error"): once connected, another client taking over the client id or
+        the broker stopping; while connecting, plain MQTT spoken to a TLS port."""
+        if connected:
+            return (f"the broker closed the connection: another client using client_id {self.cfg.client}? "
+                    "the broker stopping?")
+        if self.cfg.ca_file is None and self.cfg.certfile is None:
+            return "the broker closed the connection: a TLS port without mqtt.ca_file? the broker's log says why"
+        return "the broker closed the connection: the broker's log says why"
 
     def _on_publish(self, client: Any, userdata: Any, mid: int, reason: Any, properties: Any) -> None:
         seq = self._inflight.pop(mid, None)

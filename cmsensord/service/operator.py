@@ -71,7 +71,12 @@ def run_ack(args: argparse.Namespace) -> int:
     if not answer.get("ok"):
         print(f"cmsensord: ack: {answer.get('error')}", file=sys.stderr)
         return EXIT_NO_DAEMON
-    print(f"acknowledged {answer['acknowledged']} alarm(s)")
+    if answer["acknowledged"]:
+        print(f"acknowledged {answer['acknowledged']} alarm(s)")
+    elif args.all:
+        print("nothing to acknowledge: no alarm shows a level not acknowledged yet")
+    else:
+        print(f"nothing to acknowledge: {args.alarm} is at normal or acknowledged already")
     return 0
 
 

@@ -37,11 +37,12 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
                  "%s under %s/, the live daemon's); give --publish to publish it", command, cfg.mqtt.client,
                  cfg.mqtt.prefix)
         return sink
+    from cmsensord.monitor.alarms import has_alarm_rules
     from cmsensord.publish.publisher import Publisher  # paho only when mqtt is configured
 
     queue_dir = cfg.mqtt.queue_path(cfg.output.dir)
-    try:
-        publisher = Publisher(cfg.mqtt, queue_dir)     # its channels: the Processor's, when known
+    try:                                               # its channels: the Processor's, when known
+        publisher = Publisher(cfg.mqtt, queue_dir, alarm_rules=has_alarm_rules(cfg))
     except OSError as exc:
         sink.close()
         raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None
