@@ -96,6 +96,9 @@ def femto(data: Path, work: Path, bearing: str, axis: str = "horizontal") -> dic
     if "indicators:" not in text:               # one record per 0.1-s snapshot
         site.write_text(text + f"\nindicators:\n  interval_s: {SNAPSHOT_S}\n  rpm: {float(d['rpm']):g}\n",
                         encoding="utf-8")
+    elif "\n  rpm:" not in text:                  # calibrate set the snapshots' interval_s
+        site.write_text(text.replace("indicators:\n", f"indicators:\n  rpm: {float(d['rpm']):g}\n", 1),
+                        encoding="utf-8")
     cpu += cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
     t, sev = severity_timeline(out, axis)
     akf = severity_timeline(out, axis, "severity_akf")[1]
