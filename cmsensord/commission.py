@@ -235,7 +235,8 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
     return "\n".join(out + _alarms_yaml(obs, base_alarms)) + "\n"
 
 
-_SETTING_WHY = {"interval_s": "a record within each of the capture's snapshots (their common length)"}
+_SETTING_WHY = {"interval_s": "a record within each of the capture's snapshots (their common length)",
+                "rpm": "the speed the import read from the recording (no tacho in the capture)"}
 
 
 def _indicators_yaml(settings: dict[str, float], base: dict[str, Any]) -> list[str]:

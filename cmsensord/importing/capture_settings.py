@@ -1,6 +1,6 @@
 """The indicator settings an imported capture's sidecar gives a replay (and ``calibrate``, and
 the site file it writes) when the configuration does not: the record length that keeps each
-record within one snapshot.
+record within one snapshot, and the speed the import read from the files.
 
 Records within snapshots. The import lays the snapshots end to end on the board clock, each
 a whole number of blocks (:mod:`.blocks`), and the indicator chain cuts a record every
@@ -18,6 +18,13 @@ setting stays and a line says the records straddle. An ``interval_s`` the config
 is kept, with a line when its records straddle the snapshots. A restart of the records at each
 snapshot's start would leave a partial record wherever the interval does not fit, without the
 spectral indicators; a length the snapshots share keeps every record whole.
+
+The speed. An import that read a constant speed from the files (an NPZ's ``rpm``, CWRU's
+``X097RPM``) without ``--rpm`` sends no TACHO frames: the speed is in the sidecar only. A
+configuration without ``indicators.rpm`` (and a capture without a tacho) takes it as
+``indicators.rpm``: the bearing lines, order bands and the velocity band follow it, and the
+records say ``speed_source: config`` (a speed given, not measured). Not when the files gave
+different speeds (the import's note says which it kept): then a line says it is not used.
 """
 
 from __future__ import annotations
@@ -29,10 +36,12 @@ from cmsensord.config import Config
 from cmsensord.config.indicators import IndicatorsConfig
 from cmsensord.monitor.indicators import MAX_INTERVAL_SAMPLES
 
-__all__ = ["MIN_RECORD_S", "capture_settings"]
+__all__ = ["MIN_RECORD_S", "SPEEDS_DIFFER", "capture_settings"]
 
 #: the shortest record the snapshots' common length may give (FEMTO's snapshots: 0.1 s)
 MIN_RECORD_S = 0.1
+#: how the import's note on files that give different speeds begins
+SPEEDS_DIFFER = "the files give different speeds"
 _DEFAULT_INTERVAL_S = IndicatorsConfig().interval_s
 
 
@@ -69,12 +78,29 @@ def _interval(cfg: Config, meta: dict) -> tuple[float | None, str | None]:
                       f"snapshots of {common} samples: a record of the default {n / fs:g} s would straddle them")
 
 
+def _speed(cfg: Config, meta: dict) -> tuple[float | None, str | None]:
+    """(the rpm to set or None, a line on it or None)."""
+    rpm = meta.get("rpm")
+    if cfg.indicators.rpm is not None or not rpm or meta.get("tacho") or meta.get("format") != "cmsensord import":
+        return None, None
+    if meta.get("rpm_differs") or any(str(n).startswith(SPEEDS_DIFFER) for n in meta.get("notes") or []):
+        return None, (f"indicators: the capture's {float(rpm):g} rpm is not used: its files gave different "
+                      "speeds; give indicators.rpm in --config")
+    return float(rpm), (f"indicators.rpm {float(rpm):g} from the capture (the speed its import read from "
+                        f"{meta.get('rpm_source') or 'the file'}): bearing lines, order bands and the velocity band "
+                        "at that speed")
+
+
 def capture_settings(cfg: Config, meta: dict) -> tuple[Config, dict[str, float], list[str]]:
     """``cfg`` with the indicator settings the sidecar ``meta`` gives (see module docstring;
     ``meta`` {}: not an import, ``cfg`` as it is), those settings by name, and one line on each
     (set, or why not)."""
     interval, said_interval = _interval(cfg, meta)
-    changes = {"interval_s": interval} if interval is not None else {}
-    if interval is not None:
-        cfg = dataclasses.replace(cfg, indicators=dataclasses.replace(cfg.indicators, interval_s=interval))
-    return cfg, changes, [said_interval] if said_interval else []
+    rpm, said_speed = _speed(cfg, meta)
+    changes = {k: v for k, v in (("interval_s", interval), ("rpm", rpm)) if v is not None}
+    ic = cfg.indicators
+    if changes:
+        ic = dataclasses.replace(ic, interval_s=changes.get("interval_s", ic.interval_s),
+                                 rpm=changes.get("rpm", ic.rpm))
+        cfg = dataclasses.replace(cfg, indicators=ic)
+    return cfg, changes, [line for line in (said_interval, said_speed) if line]

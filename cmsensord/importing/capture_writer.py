@@ -13,7 +13,8 @@ its seq skipped, as a frame the board lost, so a replay counts its observations 
 
 The sidecar (``OUT.json``) holds what the frames cannot: the sources, the
 channel names, the input unit and scale factor, the full-scale range, the
-clipped blocks and samples per channel, each channel's mean taken out (``dc_removed``, over the
+clipped blocks and samples per channel, ``rpm_differs`` (the files gave different speeds: a replay
+does not use ``rpm``), each channel's mean taken out (``dc_removed``, over the
 recording; null when kept; :mod:`.dc`), the speed (``rpm``, ``rpm_source``), the tacho
 (``tacho``: the column's name or ``rpm``; ``tacho_from``: ``pulses``, ``speed`` or ``rpm``) and
 the blocks left out for missing samples per channel (``missing_blocks``),
@@ -210,7 +211,7 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         "missing_blocks": stats["missing_blocks"],
         "board_seconds": plan.n_board_samples / fs, "blocks": plan.n_blocks, "frames": stats["frames"],
         "dropped_samples": int(plan.dropped.sum()),
-        "rpm": rec.rpm, "rpm_source": rec.rpm_source, "ppr": rec.ppr,
+        "rpm": rec.rpm, "rpm_source": rec.rpm_source, "rpm_differs": rec.rpm_differs, "ppr": rec.ppr,
         "tacho": rec.tacho_source if stats["tacho_edges"] or rec.tacho_source else None,
         "tacho_from": rec.tacho_from,
         "tacho_edges": stats["tacho_edges"],

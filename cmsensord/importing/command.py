@@ -226,7 +226,8 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
             what = f"column {meta['tacho']}"
         lines.append(f"  tacho: {what}, {meta['tacho_edges']} edge(s), {meta['ppr']} a revolution")
     elif meta["rpm"]:
-        lines.append(f"  speed: {meta['rpm']:g} rpm from {meta['rpm_source']} (sidecar only; --rpm "
+        lines.append(f"  speed: {meta['rpm']:g} rpm from {meta['rpm_source']} (no TACHO frames: replay takes it "
+                     f"as indicators.rpm{', unless the files differ' if meta.get('rpm_differs') else ''}; --rpm "
                      f"{meta['rpm']:g} also sends TACHO frames)")
     lines += [f"  note: {n}" for n in notes]
     lines.append(f"  sidecar: {sidecar_path(out)} (sources, snapshots, gaps, scales)")

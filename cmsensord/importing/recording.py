@@ -48,6 +48,7 @@ class Recording:
     tacho_from: str | None = None  # "pulses" (a pulse column), "speed" (a speed column) or "rpm" (constant)
     rpm: float | None = None
     rpm_source: str | None = None  # "--rpm" or the file it was read from
+    rpm_differs: bool = False  # the files gave speeds more than 1 % apart (rpm is the first's)
     ppr: int = 1
     notes: list[str] = field(default_factory=list)  # things the user should know (printed)
     source_start: str | None = None  # the date and time source_time_s counts from (ISO 8601), if known
