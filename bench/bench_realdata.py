@@ -11,8 +11,9 @@ level rule beside it (one RMS per snapshot, baseline = median of the first 20 %,
 alarm at the third consecutive snapshot above 2 x baseline).  Life fraction =
 board time / (snapshots x 0.1 s): the import puts the 0.1-s snapshots end to end.
 
-The vibration indicators of the same replays (``indicators.interval_s`` 0.1: one record per
-FEMTO snapshot; the speed from the archive): velocity RMS, kurtosis and envelope RMS over
+The vibration indicators of the same replays (the site file calibrate wrote:
+``indicators.interval_s`` 0.1, one record per FEMTO snapshot, and ``indicators.rpm``, the
+speed the import read from the archive): velocity RMS, kurtosis and envelope RMS over
 life -- the median of the first 20 % (baseline), around 50 % and of the last 5 %, and the
 life fraction at which each first stays above 2 x its baseline for 3 snapshots.
 
@@ -92,10 +93,8 @@ def femto(data: Path, work: Path, bearing: str, axis: str = "horizontal") -> dic
                     "--unit", "mg", "--out", str(cap))
     cpu += cmsensord("calibrate", str(cap), "--to", f"{HEALTHY * snaps * SNAPSHOT_S:g}",
                      "--out", str(site))          # f_r from the rpm the import read from the archive
-    text = site.read_text(encoding="utf-8")
-    if "indicators:" not in text:               # one record per 0.1-s snapshot
-        site.write_text(text + f"\nindicators:\n  interval_s: {SNAPSHOT_S}\n  rpm: {float(d['rpm']):g}\n",
-                        encoding="utf-8")
+    text = site.read_text(encoding="utf-8")     # calibrate wrote indicators: one record per 0.1-s
+    assert f"  interval_s: {SNAPSHOT_S}" in text and f"  rpm: {float(d['rpm'])!r}" in text, text  # snapshot, rpm
     cpu += cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
     t, sev = severity_timeline(out, axis)
     akf = severity_timeline(out, axis, "severity_akf")[1]

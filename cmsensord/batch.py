@@ -77,6 +77,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     bandwidth too narrow for double precision, a record too large for memory) raises
     CmsensordError with one line, and the files this run wrote are deleted: nothing is left
     behind."""
+    from cmsensord.importing.capture_settings import capture_settings
     from cmsensord.importing.channel_names import capture_channels
     from cmsensord.importing.sidecar import sidecar
     from cmsensord.monitor.processor import Processor
@@ -91,8 +92,10 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
     done = False
     try:
-        cfg, auto_channels, warnings = capture_channels(cfg, sidecar(capture), auto_channels)
-        for warning in warnings:
+        meta = sidecar(capture)
+        cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
+        cfg, _, said = capture_settings(cfg, meta)
+        for warning in warnings + said:
             logging.getLogger("cmsensord").warning("%s", warning)
         proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
         col = _Collector()

@@ -215,6 +215,7 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         "# block RMS / baseline, so r_min and r_max are in units of baseline^2; the severity also",
         "# grades the level against the baseline (monitor.severity: auto -> combined).",
     ]
+    out += _indicators_yaml(obs.settings, base)
     if base:
         out.append(yaml.safe_dump(base, sort_keys=False, default_flow_style=False).rstrip())
     out.append("channels:")
@@ -232,6 +233,21 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         for k, v in entry.items():
             out.append(f"    {k}: {yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}")
     return "\n".join(out + _alarms_yaml(obs, base_alarms)) + "\n"
+
+
+_SETTING_WHY = {"interval_s": "a record within each of the capture's snapshots (their common length)",
+                "rpm": "the speed the import read from the recording (no tacho in the capture)"}
+
+
+def _indicators_yaml(settings: dict[str, float], base: dict[str, Any]) -> list[str]:
+    """The ``indicators`` settings the capture's sidecar gave (``settings``), with why; merged
+    into BASE's own ``indicators`` section (``base``, changed) when it has one."""
+    if not settings:
+        return []
+    if isinstance(base.get("indicators"), dict):
+        base["indicators"] = {**base["indicators"], **settings}
+        return [f"# indicators.{k}: {_SETTING_WHY[k]}" for k in settings]
+    return ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {_SETTING_WHY[k]}" for k, v in settings.items()]
 
 
 def _alarms_yaml(obs: Observations, base_alarms: Any) -> list[str]:

@@ -24,6 +24,7 @@ from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.dsp.commissioning import idle_periods
 from cmsensord.errors import CmsensordError
+from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
 from cmsensord.link import Progress
@@ -49,6 +50,7 @@ class Observations:
     indicators: dict[str, dict[str, float]] = field(default_factory=dict)  # channel -> name -> median
     meta: dict = field(default_factory=dict)    # the import's sidecar ({}: not an import)
     notes: tuple[str, ...] = ()   # what the command says of the window (--to past the end, missing data)
+    settings: dict[str, float] = field(default_factory=dict)  # indicators.* the sidecar gave (capture_settings)
 
     @property
     def end_s(self) -> float:
@@ -94,6 +96,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     cfg, auto_channels, said = capture_channels(cfg, meta, auto_channels)
     if said:
         raise CmsensordError(f"calibrate: {said[0]}; calibrate learns it from such a --config BASE.yaml")
+    cfg, settings, set_lines = capture_settings(cfg, meta)     # as a replay of the capture runs
     collect = _Collect()
     proc, sink = _replay(capture, cfg, auto_channels, None if isinstance(from_s, Percent) else to_s, collect)
     if not collect.blocks:
@@ -116,7 +119,8 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
-                        notes=_window_notes(y[first:last], rate, total, to_s))
+                        notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s),
+                        settings=settings)
 
 
 def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:

@@ -27,16 +27,20 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def decode(path: Path) -> dict:
-    """The capture as the daemon's decoder sees it: STATUS, counts per channel, flags, tacho."""
+    """The capture as the daemon's decoder sees it: STATUS, counts per channel, flags, tacho;
+    ``x``: the values the counts stand for with the means the import took out (its sidecar's
+    ``dc_removed``) added back, the recording's own values."""
     frames, counters = iter_frames(path.read_bytes())
     assert counters.crc_failures == 0 and counters.bytes_discarded == 0 and counters.frames_lost == 0
     status = decode_status(next(f for f in frames if f.type == FrameType.STATUS).payload)
     raw: dict[int, list] = {}
     flags: dict[int, list] = {}
     rms, edges, t0s = [], [], []
+    dc: dict[int, list] = {}
     for f in frames:
         if f.type == FrameType.RAW:
             raw.setdefault(f.chan, []).append(decode_raw(f.payload))
+            dc.setdefault(f.chan, []).append(f.t0_unwrapped)
             flags.setdefault(f.chan, []).append(f.flags)
             if f.chan == 0:
                 t0s.append(f.t0_unwrapped)
@@ -53,8 +57,25 @@ def decode(path: Path) -> dict:
         scale = np.array(status.scale)[:, None]
         offset = np.array(status.offset)[:, None]
         out["counts"] = counts
-        out["x"] = (counts - offset) * scale
+        out["x"] = (counts - offset) * scale + _removed(path, status.fs, raw, dc)
     return out
+
+
+def _removed(path: Path, fs: int, raw: dict[int, list], t0s: dict[int, list]) -> np.ndarray | float:
+    """Per channel and sample, the mean the import took out of it (0 without a sidecar, or
+    with ``--keep-dc``)."""
+    side = Path(f"{path}.json")
+    meta = json.loads(side.read_text()) if side.is_file() else {}
+    if not meta.get("dc_removed"):
+        return 0.0
+    snaps = meta["snapshots"]
+    starts = np.array([round(s["start_s"] * fs) for s in snaps])
+    means = np.array([s.get("dc_removed", meta["dc_removed"]) for s in snaps])
+    rows = []
+    for c in sorted(raw):
+        k = np.searchsorted(starts, np.array(t0s[c]), side="right") - 1
+        rows.append(np.repeat(means[k, c], [len(b) for b in raw[c]]))
+    return np.stack(rows)
 
 
 def run(*args: str | Path) -> int:

@@ -28,7 +28,8 @@ def test_cwru_files_by_variable_patterns_side_by_side_with_their_speed(tmp_path)
     r = cmd("import", "97.mat", "98.mat", "--variable", "*_DE_time,*_FE_time", "--fs", "12000", "--unit", "g",
             "--out", "c.bin", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    assert "  speed: 1797 rpm from 97.mat (sidecar only; --rpm 1797 also sends TACHO frames)\n" in r.stderr
+    assert ("  speed: 1797 rpm from 97.mat (no TACHO frames: replay takes it as indicators.rpm; --rpm 1797 also "
+            "sends TACHO frames)\n") in r.stderr
     meta = sidecar(tmp_path / "c.bin")
     assert meta["channel_names"] == ["DE_time", "FE_time"] and meta["rpm"] == 1797
     assert_within_one_count(decode(tmp_path / "c.bin"), np.concatenate([x97, x98], axis=1) * G)

@@ -105,8 +105,10 @@ def test_simulate_in_rms_mode_reports_the_overall_rms_and_the_rest_unavailable(t
 
 @pytest.fixture(scope="module")
 def ims(tmp_path_factory):
-    """NA (healthy), IF (inner race), OF (outer race): six 1-s snapshots each, imported with a block
-    length dividing 20480 so each 1-s interval is one whole snapshot, replayed at 2000 rpm."""
+    """NA (healthy), IF (inner race), OF (outer race): six 1-s snapshots each, imported as one
+    recording (no --snapshot-len) of 122,880 samples, which 640 blocks of 192 fill with none
+    dropped (192 does not divide a snapshot's 20,480), so each 1-s interval of 20,480 samples
+    from the start is one whole snapshot; replayed at 2000 rpm."""
     work = tmp_path_factory.mktemp("ind_ims")
     (work / "site.yaml").write_text(IMS_SITE)
     got = {}

@@ -13,11 +13,14 @@ its seq skipped, as a frame the board lost, so a replay counts its observations 
 
 The sidecar (``OUT.json``) holds what the frames cannot: the sources, the
 channel names, the input unit and scale factor, the full-scale range, the
-clipped blocks and samples per channel, the speed (``rpm``, ``rpm_source``), the tacho
+clipped blocks and samples per channel, ``rpm_differs`` (the files gave different speeds: a replay
+does not use ``rpm``), each channel's mean taken out (``dc_removed``, over the
+recording; null when kept; :mod:`.dc`), the speed (``rpm``, ``rpm_source``), the tacho
 (``tacho``: the column's name or ``rpm``; ``tacho_from``: ``pulses``, ``speed`` or ``rpm``) and
 the blocks left out for missing samples per channel (``missing_blocks``),
 per snapshot its ``source`` (file, ``[i]`` for the i-th inside a file),
-``start_s`` (board seconds), ``length`` (samples in blocks), ``dropped``
+``start_s`` (board seconds), ``dc_removed`` (its own means, with several snapshots),
+``length`` (samples in blocks), ``dropped``
 (samples at its end that fill no block), ``pct_of_record`` (its start as a
 percentage of the capture's board time), ``source_time_s`` (its start in the
 original recording, when known, counted from ``source_start`` when its date is
@@ -55,6 +58,7 @@ from cmsensord.protocol import (
 
 from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan
+from .dc import recording_means
 from .errors import ImportFailure, cannot_write
 from .recording import Recording
 from .tacho import block_edges, rpm_edges
@@ -124,12 +128,15 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
     missing_blocks = np.zeros(C, dtype=np.int64)
     seq = frames = 0
     ar = np.arange(L)
+    snap_of = np.repeat(np.arange(len(rec.snapshots)), plan.snap_blocks)   # each block's snapshot
     chunk = max(1, min(CHUNK_BLOCKS, CHUNK_SAMPLES // (C * L)))
     for c0 in range(0, plan.n_blocks, chunk):
         c1 = min(c0 + chunk, plan.n_blocks)
         a0 = int(plan.src_start[c0])
         x = rec.samples.read(a0, int(plan.src_start[c1 - 1]) + L)
         xb = x[:, plan.src_start[c0:c1, None] - a0 + ar]  # (C, nb, L)
+        if rec.dc is not None:                            # the offset taken out (.dc)
+            xb -= rec.dc[snap_of[c0:c1]].T[:, :, None]
         lost = np.isnan(xb).any(axis=-1)  # (C, nb): a missing sample: the frame is not sent
         if lost.any():
             xb = np.where(np.isnan(xb), 0.0, xb)
@@ -188,6 +195,8 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         snaps.append({"source": s.source, "start_s": start / fs,
                       "length": int(plan.snap_blocks[k] * L), "dropped": int(plan.dropped[k]),
                       "pct_of_record": round(100.0 * start / total, 4),
+                      **({"dc_removed": [round(float(v), 9) for v in rec.dc[k]]}
+                         if rec.dc is not None and len(rec.snapshots) > 1 else {}),
                       "source_time_s": None if s.source_time_s is None else round(s.source_time_s, 6),
                       "gap_before_s": gap})
     return {
@@ -197,11 +206,12 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
         "channel_names": rec.names, "unit": _one_or_each(rec.units),
         "source_unit": _one_or_each(rec.source_units or ["m/s2"]), **extra,
         "full_scale": full_scale, "scale": scale.tolist(), "offset": [OFFSET] * rec.n_channels,
+        "dc_removed": [round(v, 9) for v in recording_means(rec)] if rec.dc is not None else None,
         "clipped_blocks": stats["clipped_blocks"], "clipped_samples": stats["clipped_samples"],
         "missing_blocks": stats["missing_blocks"],
         "board_seconds": plan.n_board_samples / fs, "blocks": plan.n_blocks, "frames": stats["frames"],
         "dropped_samples": int(plan.dropped.sum()),
-        "rpm": rec.rpm, "rpm_source": rec.rpm_source, "ppr": rec.ppr,
+        "rpm": rec.rpm, "rpm_source": rec.rpm_source, "rpm_differs": rec.rpm_differs, "ppr": rec.ppr,
         "tacho": rec.tacho_source if stats["tacho_edges"] or rec.tacho_source else None,
         "tacho_from": rec.tacho_from,
         "tacho_edges": stats["tacho_edges"],

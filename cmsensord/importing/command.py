@@ -5,7 +5,8 @@
   cmsensord import IMS/2nd_test --fs 20480 --unit g --channels 0 --out b1.bin   (files named by time)
 
 Errors the user can cause end in one line, ``cmsensord import: FILE: what; fix``,
-and exit status 2; nothing is written then. A progress bar shows on a terminal.
+and exit status 2; nothing is written then. A progress bar shows on a terminal. Each channel's
+mean is taken out (:mod:`.dc`, one summary line a channel) unless ``--keep-dc``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from cmsensord.errors import EXIT_USAGE
 from .adc import ADC_MAX, OFFSET, nice_range
 from .blocks import choose_block_len, plan_blocks, remainder_note
 from .capture_writer import choose_ranges, sidecar_path, write_capture
+from .dc import dc_lines, remove_dc
 from .errors import ImportFailure
 from .options import ImportOptions
 from .recording import Recording
@@ -137,6 +139,9 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                       help="constant shaft speed: TACHO frames with --ppr edges a revolution")
     p.add_argument("--tacho-threshold", dest="imp_tacho_threshold", type=real, metavar="X",
                    help="pulse threshold (default: halfway between the column's 1st and 99th percentile)")
+    p.add_argument("--keep-dc", dest="imp_keep_dc", action="store_true",
+                   help="keep each channel's mean (DC offset) in the capture; by default it is taken out, as "
+                        "the board's offset calibration does: each snapshot's own, or the whole recording's")
     p.add_argument("--memory-mb", dest="imp_memory_mb", type=nonnegative, default=MEMORY_MB, metavar="MB",
                    help=f"hold at most MB of samples in memory (default {MEMORY_MB:g}); a longer recording "
                         "waits on disk beside --out while the capture is written (8 bytes a sample a "
@@ -161,7 +166,7 @@ def options_from_args(args: argparse.Namespace) -> ImportOptions:
         snapshot_len=args.imp_snapshot_len, snapshot_interval=args.imp_snapshot_interval,
         order=args.imp_order, tacho_column=args.imp_tacho_column, speed_column=args.imp_speed_column,
         tacho_threshold=args.imp_tacho_threshold, ppr=args.imp_ppr, rpm=args.imp_rpm,
-        memory_mb=args.imp_memory_mb)
+        keep_dc=args.imp_keep_dc, memory_mb=args.imp_memory_mb)
 
 
 class _Bar:
@@ -196,14 +201,17 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
              f"({meta['blocks_per_s']:g} blocks/s), {meta['board_seconds']:.2f} s of board time"
              + (f" from {n_snap} snapshots" if n_snap > 1 else "")]
     peaks = rec.peak
+    dc = dc_lines(rec)
     for c, name in enumerate(meta["channel_names"]):
         fs_, sc, u = meta["full_scale"][c], meta["scale"][c], rec.units[c]
         line = f"  {name}: full scale +-{fs_:g} {u} ({sc:.4g} {u} a count), peak {peaks[c]:.4g} {u}"
         nclip, lost = meta["clipped_samples"][c], meta["missing_blocks"][c]
         lines.append(line + (", no clipping" if not nclip else "")
                      + (f", {lost:,} block(s) left out for missing samples" if lost else ""))
+        lines += dc[c:c + 1]
         if not peaks[c] > 0:
-            lines.append(f"  WARNING {name}: every value is 0 (no sensor on it?): calibrate cannot learn it; "
+            same = "0" if not rec.samples.peak[c] > 0 else "the same, a constant offset"
+            lines.append(f"  WARNING {name}: every value is {same} (no sensor on it?): calibrate cannot learn it; "
                          "leave it out with --channels")
         if nclip:
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
@@ -218,7 +226,8 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
             what = f"column {meta['tacho']}"
         lines.append(f"  tacho: {what}, {meta['tacho_edges']} edge(s), {meta['ppr']} a revolution")
     elif meta["rpm"]:
-        lines.append(f"  speed: {meta['rpm']:g} rpm from {meta['rpm_source']} (sidecar only; --rpm "
+        lines.append(f"  speed: {meta['rpm']:g} rpm from {meta['rpm_source']} (no TACHO frames: replay takes it "
+                     f"as indicators.rpm{', unless the files differ' if meta.get('rpm_differs') else ''}; --rpm "
                      f"{meta['rpm']:g} also sends TACHO frames)")
     lines += [f"  note: {n}" for n in notes]
     lines.append(f"  sidecar: {sidecar_path(out)} (sources, snapshots, gaps, scales)")
@@ -255,6 +264,8 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
     if plan.n_blocks == 0:
         raise ImportFailure(f"{files[0]}: {rec.n_samples} sample(s) fill no {L}-sample block; "
                             "give a smaller --block-len")
+    if not opts.keep_dc:
+        remove_dc(rec)                      # before the ranges: they fit the signal without its mean
     full_scale = choose_ranges(rec, opts.full_scale)
     extra = {"scale_factor": _one_or_all(opts.scale_factor), "sensitivity_mv_per_g": _one_or_all(opts.sensitivity),
              "offset_counts": OFFSET, "notes": notes}

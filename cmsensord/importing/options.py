@@ -33,4 +33,5 @@ class ImportOptions:
     tacho_threshold: float | None = None
     ppr: int = 1
     rpm: float | None = None  # synthesise TACHO frames at this constant speed
+    keep_dc: bool = False  # keep each channel's mean (default: taken out, as the board's offset: .dc)
     memory_mb: float = MEMORY_MB  # samples held in memory at most; beyond, on disk beside ``out``

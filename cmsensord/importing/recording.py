@@ -9,7 +9,8 @@ A :class:`Recording` is what every reader's output becomes before encoding:
   recording where that is known;
 * ``tacho_edges``: optional tacho edges as fractional sample indices into ``samples``
   (a pulse column's rising crossings, or a speed column's revolutions), or ``rpm`` for
-  edges synthesised at a constant speed.
+  edges synthesised at a constant speed;
+* ``dc``: each snapshot's mean per channel, which the capture writer subtracts (:mod:`.dc`).
 """
 
 from __future__ import annotations
@@ -47,9 +48,13 @@ class Recording:
     tacho_from: str | None = None  # "pulses" (a pulse column), "speed" (a speed column) or "rpm" (constant)
     rpm: float | None = None
     rpm_source: str | None = None  # "--rpm" or the file it was read from
+    rpm_differs: bool = False  # the files gave speeds more than 1 % apart (rpm is the first's)
     ppr: int = 1
     notes: list[str] = field(default_factory=list)  # things the user should know (printed)
     source_start: str | None = None  # the date and time source_time_s counts from (ISO 8601), if known
+    dc: np.ndarray | None = None  # (snapshots, channels): each snapshot's mean, subtracted (None: kept)
+    dc_peak: np.ndarray | None = None  # (channels,): the largest |x - mean|
+    dc_counts: np.ndarray | None = None  # (snapshots, channels): the samples each mean is of
 
     def __post_init__(self) -> None:
         if len(self.names) != self.samples.n_channels:
@@ -73,5 +78,6 @@ class Recording:
 
     @property
     def peak(self) -> np.ndarray:
-        """Each channel's largest |x|, m/s²."""
-        return self.samples.peak
+        """Each channel's largest |x|, m/s², of the samples without their mean when it is
+        removed (:mod:`.dc`)."""
+        return self.samples.peak if self.dc_peak is None else self.dc_peak

@@ -434,7 +434,9 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     if layout.tacho is not None:
         _tacho(rec, np.concatenate(tacho_pieces), layout.columns[layout.tacho], opts)
     _speed(rec, opts, rpms[0] if rpms else None, layout.tacho is not None)
-    rec.notes += _speeds_differ(rpms) if opts.rpm is None and layout.tacho is None else []
+    differ = _speeds_differ(rpms) if opts.rpm is None and layout.tacho is None else []
+    rec.notes += differ
+    rec.rpm_differs = bool(differ)
     return rec
 
 

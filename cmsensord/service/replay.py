@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from cmsensord.config import Config, ConfigError
+from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
 from cmsensord.importing.timeline import Timeline
@@ -33,7 +34,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
            ) -> tuple[int, Path | None, Processor]:
     """Process a capture file through the same decoder and Processor: as fast as possible,
     or paced at ``speed`` x the board's clock (1: real time); with ``auto_channels`` (``cfg``
-    lists no channels), an imported capture's channels named as its import named them. An
+    lists no channels), an imported capture's channels named as its import named them, and the
+    indicator settings its sidecar gives (:func:`~cmsensord.importing.capture_settings.capture_settings`). An
     import has its :class:`~cmsensord.importing.timeline.Timeline` in the log's ``cmsensord``
     metadata (``recording_timeline``), board second 0 stamped at the ``board_zero_ns`` it
     gives. ``publish``: an ``mqtt`` section publishes the run (``--publish``); otherwise it
@@ -51,6 +53,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
     for warning in warnings:
         log.warning("%s", warning)
+    cfg, _, said = capture_settings(cfg, meta)     # the snapshots' record length, the files' speed
     timeline = Timeline.from_sidecar(meta)
     board_zero_ns = time.time_ns()
     extra = {"recording_timeline": timeline.to_json(board_zero_ns)} if timeline else {}
@@ -79,7 +82,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         progress.close()
         out = sink.close()
     if not quiet:
-        placed = origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) + publish_lines(sink)
+        placed = [f"  {line}" for line in said] + origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) \
+            + publish_lines(sink)
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return 0, out, proc
 

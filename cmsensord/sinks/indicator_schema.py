@@ -86,7 +86,8 @@ def indicators_schema(time: dict[str, Any], obj: Callable[..., dict]) -> dict[st
             "envelope_band_hz": _pair("[lo, hi] demodulated [Hz]"),
             "speed_rpm": _n("shaft speed of the interval [rpm]", 0),
             "speed_source": {"type": "string", "enum": ["tacho", "config"],
-                             "description": "tacho (mean causal speed) or config (indicators.rpm)"},
+                             "description": "tacho (mean causal speed, measured) or config (indicators.rpm, "
+                                            "or an imported capture's constant speed: given, not measured)"},
             "bearings": {"type": "array", "description": "the bearings the channel sees",
                          "items": _bearing()},
             "bands": {"type": "array", "description": "band RMS (order bands only with a speed)",
