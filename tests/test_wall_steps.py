@@ -77,3 +77,42 @@ def test_a_backward_step_of_the_system_clock_re_anchors_the_stamps_in_a_new_file
     assert old and len(new) >= 2 and min(new) >= stamp > max(old) - 3602e9
     assert 3595 < (old[-1] - new[0]) / 1e9 < 3605 and new == sorted(new)
     assert abs(new[-1] / 1e9 - time.time() + 3600) < 5              # on the new wall clock
+
+
+
+@pytest.mark.parametrize("step_s", [-3600, 86400])
+def test_a_rule_s_delay_runs_the_stream_s_time_across_a_step(tmp_path, step_s):
+    """A rule's on-delay straddling a step counts the stream's own 3 s, each file's indicator
+    records in time order on their time base (before, a step back: every record after it kept
+    the stamp of the last one before it, and the alert never came)."""
+    sim = start_board("--scenario", "healthy", "--link", str(tmp_path / "tty"))
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"link:\n  port: {tmp_path / 'tty'}\n  max_drift_s: 2.0\n"
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n"
+                   "alarms:\n  rules:\n    - {name: acc, indicator: accel_rms, alert: 0.1, on_delay_s: 3}\n")
+    d = spawn([sys.executable, str(ROOT / "tests" / "wall_step.py"), "4", str(step_s), "--config", str(cfg)],
+              stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(10.0)
+        err = stop(d)
+    finally:
+        sim.terminate()
+        sim.wait(timeout=5)
+    assert d.returncode == 0, err
+    finished, _ = log_files(tmp_path / "logs", "cmsensord")
+    files = [read_messages(p) for p in finished]
+    assert len(files) == (2 if step_s < 0 else 1), [len(m) for m in files]   # a step back: a new file
+    assert all(m["accel_rms"] > 0.2 for msgs in files for t, _, m in msgs if t == "/cm/ch0/indicators")
+    records = [s for msgs in files for t, s, _ in msgs if t == "/cm/ch0/indicators"]
+    [at] = [i for i in range(1, len(records)) if abs(records[i] - records[i - 1]) > 1.5e9]   # the step, once
+    old, new = records[:at], records[at:]
+    assert old == sorted(set(old)) and all(0.9e9 < b - a < 1.1e9 for a, b in zip(new, new[1:])), records
+    assert old and len(new) >= 4 and abs((new[0] - old[-1]) / 1e9 - step_s) < 5, records
+    if step_s < 0:                                                  # each file in time order
+        assert [s for t, s, _ in files[0] if t == "/cm/ch0/indicators"] == old
+    shift = new[0] - old[-1] - 1_000_000_000                        # the next interval of the stream
+    stream = old + [s - shift for s in new]
+    due = next(i for i, s in enumerate(stream) if s >= stream[0] + 3_000_000_000)
+    alerts = [s for msgs in files for t, s, m in msgs if t == "/cm/events" and m["kind"] == "alarm_alert"]
+    assert due >= len(old) and alerts == [records[due]], (alerts, records, err)   # 3 s after the first
+    assert [m["worst"] for t, _, m in files[-1] if t == "/cm/alarms"][-1] == "alert"

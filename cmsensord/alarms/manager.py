@@ -200,6 +200,13 @@ class AlarmManager:
             msg = f"{a.id}: eased from {LEVELS[prev]} to {LEVELS[after]} ({what})"
         return [Transition(KIND[after], a.id, a.channel, after, prev, t_ns, msg)]
 
+    def shift(self, shift_ns: int) -> None:
+        """The stamps were re-anchored by ``shift_ns`` (a step of the wall clock): the delays, the
+        suppression times and the stamps of the alarms move with them (:meth:`AlarmState.shift`)."""
+        self.operating.shift(shift_ns)
+        for a in self.alarms.values():
+            a.state.shift(shift_ns)
+
     # ---------------------------------------------------------------- output
     def table(self) -> list[dict]:
         """Every alarm's row, in configuration order."""

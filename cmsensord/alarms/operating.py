@@ -60,6 +60,12 @@ class Operating:
         self._timeout(t_ns)
         return self.state
 
+    def shift(self, shift_ns: int) -> None:
+        """The stamps were re-anchored by ``shift_ns`` (a step of the wall clock): a suppression
+        time running goes on as if there had been none."""
+        if self.since_ns is not None:
+            self.since_ns += shift_ns
+
     def _timeout(self, t_ns: int) -> str:
         c = self.cfg
         limit = {"starting": c.startup_suppress_s, "coasting": c.coastdown_suppress_s}.get(self.state)

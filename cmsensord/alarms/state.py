@@ -6,7 +6,10 @@ it has been below L for ``off_delay_s``; the output is the highest level that is
 on.  A latching alarm shows the highest level it reached until acknowledged; an
 acknowledgement then drops it to the level that is on now.  While suppressed
 (machine not running) nothing turns on, the timers restart, and the non-latched
-level is off.
+level is off.  A delay counts the stream's own time: when the stamps are re-anchored (a step
+of the wall clock) :meth:`AlarmState.shift` moves its timers with them, so a delay straddling the
+step lasts as if there had been none; an input stamped before the start of a delay (stamps gone
+back unannounced) restarts it there, never measuring a negative time.
 
 :meth:`AlarmState.resume` puts back what a saved state held (a daemon's restart:
 :mod:`.saved`): the latch, the acknowledgement, and the live level at the stop as a
@@ -67,7 +70,7 @@ class AlarmState:
                 self.since[i] = None
                 continue
             since = self.since[i]
-            if since is None:
+            if since is None or t_ns < since:
                 since = self.since[i] = t_ns
             delay = self.on_delay_s if want else self.off_delay_s
             if t_ns - since >= delay * 1e9:
@@ -79,6 +82,16 @@ class AlarmState:
             if self.live >= self.restored or t_ns >= self.restored_until:
                 self.restored, self.restored_until = 0, None
         return self._shown(t_ns, before)
+
+    def shift(self, shift_ns: int) -> None:
+        """The stamps were re-anchored by ``shift_ns``: the times held move with them."""
+        self.since = [None if s is None else s + shift_ns for s in self.since]
+        if self.restored_until is not None:
+            self.restored_until += shift_ns
+        if self.changed_ns is not None:
+            self.changed_ns += shift_ns
+        if self.acked_ns is not None:
+            self.acked_ns += shift_ns
 
     def suppress(self, t_ns: int) -> int:
         """Suppressed at ``t_ns``: the live level off, the timers restarted."""

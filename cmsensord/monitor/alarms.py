@@ -23,7 +23,9 @@ a store, :mod:`cmsensord.service.alarm_store`, and what it held): the saved alar
 into the manager when it is made (:mod:`cmsensord.alarms.saved`), with the first message,
 each said by an ``alarm_restored`` or ``alarm_not_restored`` event (a warning) naming the
 file; the store is written whenever the saved state changes, and a failed write is an
-``alarm_state_error`` event.  Without a store (a replay) nothing is read or kept.
+``alarm_state_error`` event.  Without a store (a replay) nothing is read or kept.  A step of
+the wall clock moves the alarms' timers and stamps with the stamps (:meth:`Alarms.restepped`),
+so a delay counts the stream's own time across it.
 """
 
 from __future__ import annotations
@@ -225,6 +227,14 @@ class Alarms:
             self.manager.operating.reading is not None and op.source == "level" else "suppression time over"
         return Event("operating_state", None, f"operating state {was} -> {now} ({why})", stamp,
                      {"details": {"state": now, "previous": was}})
+
+    def restepped(self, shift_ns: int) -> None:
+        """The wall clock stepped and the stamps with it by ``shift_ns``: the alarms' timers and
+        stamps move with them (:meth:`AlarmManager.shift`), so a delay counts the stream's time."""
+        if self.newest_ns:
+            self.newest_ns += shift_ns
+        if self.manager is not None:
+            self.manager.shift(shift_ns)
 
     def ack(self, which: str | None, by: str | None = None) -> list:
         """Acknowledge alarm ``which`` (None: all) by user ``by`` (None: not known); KeyError for an

@@ -34,7 +34,10 @@ budget.  In RAW mode the spectrum and the envelope spectrum carry the shaft spee
 over the capture and the lines at it (1x, each bearing's defect frequencies:
 :mod:`.capture_marks`).  Both spectra are RMS per bin
 (:mod:`cmsensord.dsp.capture_spectra`); the envelope spectrum demodulates the band the
-indicators do (``indicators.envelope_band_hz``, else 0.08-0.4 fs).
+indicators do (``indicators.envelope_band_hz``, else 0.08-0.4 fs).  A step of the wall clock
+(:meth:`~cmsensord.monitor.clock.BlockClock.restep`) moves every stamp held (the board index
+of each stamp, the last capture of each channel, the hour's budget, the ticks and captures
+to come) by its shift: ``min_interval_s`` and the budget count the stream's time.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from cmsensord.config.capture import CaptureConfig
 from cmsensord.dsp.capture_spectra import amplitude_spectrum, envelope_rms_spectrum
 from cmsensord.dsp.indicators.envelope import envelope_band
 from cmsensord.monitor.capture_marks import CaptureMarks
+from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.indicators import MAX_WAIT_S
 from cmsensord.monitor.messages import Message, MessageGroup
@@ -121,12 +125,13 @@ class _Ring:
 class Captures:
     """Triggers -> captures of the channels' signal (see the module docstring)."""
 
-    def __init__(self, cfg: CaptureConfig, stamp_of: Callable[[int], int],
+    def __init__(self, cfg: CaptureConfig, clock: BlockClock,
                  marks: CaptureMarks | None = None, envelope_band_hz: tuple[float, ...] | None = None) -> None:
         self.cfg = cfg
+        clock.steps.append(self.restepped)
         self.envelope_band_hz = envelope_band_hz    # indicators.envelope_band_hz (None: the default)
         self.marks = marks
-        self.stamp_of = stamp_of            # board t0 -> stamp [ns]
+        self.stamp_of = clock.stamp_ns      # board t0 -> stamp [ns]
         self.source = ""
         self.rate = 0.0
         self.ticks = 1                      # board samples per index (RMS: block length)
@@ -143,6 +148,17 @@ class Captures:
         self.settled_ns: int | None = None                        # triggers up to it are taken
         self.settled_idx: int | None = None                       # ... its board index
         self.out: list[Any] = []
+
+    def restepped(self, shift_ns: int) -> None:
+        """The wall clock stepped: every stamp held moves by ``shift_ns``, as the time base did."""
+        self.anchors = deque(((idx, at + shift_ns) for idx, at in self.anchors), maxlen=self.anchors.maxlen)
+        self.last_ns = {name: at + shift_ns for name, at in self.last_ns.items()}
+        self.budget = deque((at + shift_ns, n) for at, n in self.budget)
+        self.ticks_due = deque((idx, at + shift_ns) for idx, at in self.ticks_due)
+        if self.settled_ns is not None:
+            self.settled_ns += shift_ns
+        for p in self.pending:
+            p.stamp_ns += shift_ns
 
     # ---- triggers ------------------------------------------------------------
     def watch(self, kind: str, channel: str | None, message: str, stamp_ns: int, fields: dict) -> None:

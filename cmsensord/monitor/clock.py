@@ -25,6 +25,10 @@ advance against the monotonic clock's, which does not step, and
 :meth:`BlockClock.restep` re-anchors the time base to the new wall clock at once, at the
 board's rate, backwards too (the one case where stamps go back): a step is not a board
 running fast or slow, and the rate measured over an interval holding it would be wrong.
+Whatever is not written yet moves with the time base, as if the wall clock had always been
+the new one: the slots already processed are stamped shifted by the re-anchoring's *shift*
+(the new stamp of the next slot less its old one), and each part of the chain that holds
+stamps (:attr:`BlockClock.steps`) is told the shift.
 Replay never looks at the wall clock after its anchor, so it never re-anchors for a step.
 """
 
@@ -75,6 +79,8 @@ class BlockClock:
         self.seg_stamp_ns = 0                  # the first stamp of the current segment
         #: (first slot, anchor_ns, t0_first, slot0_t0, block_len, stamp_fs) of each time base
         self._epochs: list[tuple[int, int, int, int, int, int]] = []
+        #: called with the shift [ns] of the stamps at each :meth:`restep` (a step of the wall clock)
+        self.steps: list[Callable[[int], None]] = []
 
     def anchor(self, t0_unwrapped: int, wall_ns: int) -> None:
         """The first frame: its t0 is ``wall_ns``."""
@@ -126,13 +132,22 @@ class BlockClock:
     def restep(self, wall_ns: int) -> int:
         """The wall clock stepped (:class:`WallSteps`): a new segment whose next slot is stamped
         ``wall_ns``, even before the newest stamp (a step back), at the board's measured rate
-        (fs when none was measured); the drift is measured from here.  Returns its stamp."""
+        (fs when none was measured); the drift is measured from here.  The slots already processed
+        and :attr:`steps` move by the shift (module docstring).  Returns its stamp."""
+        was = self.floor_ns if self.slot0_t0 is None else self.stamp_ns(self.slot_t0(self.next_slot))
         self.floor_ns = min(self.floor_ns, wall_ns)
         if self.slot0_t0 is None:               # after a rate change, before its first block
             self.anchor_ns = self.floor_ns = self.seg_stamp_ns = self.seg_wall_ns = wall_ns
             self.segment += 1
-            return wall_ns
-        return self.new_segment(self.slot_t0(self.next_slot), wall_ns, self.rate or self.fs)
+        else:
+            self.new_segment(self.slot_t0(self.next_slot), wall_ns, self.rate or self.fs)
+        shift = wall_ns - was if was else 0     # nothing stamped yet: nothing to move
+        self._epochs = [(f, a + shift, t, s0, n, fs) for f, a, t, s0, n, fs in self._epochs]
+        if self.last_stamp_ns:
+            self.last_stamp_ns += shift
+        for told in self.steps:
+            told(shift)
+        return wall_ns
 
     def set_rate(self, fs: int, block_len: int) -> bool:
         """The board's fs/block_len; True when the slots had to be re-anchored for it."""

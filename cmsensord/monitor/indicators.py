@@ -26,7 +26,10 @@ vibration channels (again when the rate or the channels change, the old one
 finished), and keeps their records until :meth:`Indicators.take` asks for those
 stamped up to a decision's stamp, so the order of all messages does not depend
 on how the stream was read.  An interval's stamp is its end, taken when it
-closes; a new time segment (a board reset) finishes the open intervals first.
+closes; a new time segment (a board reset) finishes the open intervals first.  A step of
+the wall clock (:meth:`~cmsensord.monitor.clock.BlockClock.restep`) moves the stamps of the
+records not written yet, and the newest of each topic, by its shift, so each topic goes on
+in time order on the new time base, back or forward.
 """
 
 from __future__ import annotations
@@ -405,6 +408,15 @@ class Indicators:
         self.rms_chain: RmsIndicators | None = None
         self.records: list[messages.Message] = []
         self._newest: dict[str, int] = {}      # per topic, the stamp of the newest record taken
+        clock.steps.append(self.restepped)
+
+    def restepped(self, shift_ns: int) -> None:
+        """The wall clock stepped: the stamps held (records waiting, intervals waiting for a speed,
+        each topic's newest) move by ``shift_ns``, as the time base did."""
+        self.records = [m._replace(stamp_ns=m.stamp_ns + shift_ns) for m in self.records]
+        self._newest = {topic: at + shift_ns for topic, at in self._newest.items()}
+        if self.raw_chain is not None:
+            self.raw_chain.pending = [(s, x, at + shift_ns, ok) for s, x, at, ok in self.raw_chain.pending]
 
     def _vibration(self, channels: tuple[ChannelConfig, ...]) -> tuple[ChannelConfig, ...]:
         return tuple(ch for ch in channels if ch.kind != "microphone") if self.cfg.indicators.enabled else ()

@@ -100,8 +100,8 @@ class Processor(Figures):
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
         self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho, self.shaft.uncovered)
         self.alarms = Alarms(cfg, lambda: tuple(ch.name for ch in self.channels if ch.kind != "microphone"))
-        self.output = Output(sink, self.log, self.alarms)
-        self._out = self.output.out
+        self._out = Output(sink, self.log, self.alarms).out
+        self.clock.steps.append(self.alarms.restepped)      # the alarms' timers move with the stamps
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log, getattr(sink, "channels_known", None))
@@ -112,7 +112,7 @@ class Processor(Figures):
         if cfg.capture.enabled:
             from cmsensord.monitor.capture import Captures  # loaded only when captures are configured
             from cmsensord.monitor.capture_marks import CaptureMarks
-            c = self.captures = Captures(cfg.capture, self.clock.stamp_ns,
+            c = self.captures = Captures(cfg.capture, self.clock,
                                          CaptureMarks(cfg, lambda: self.shaft.tacho), cfg.indicators.envelope_band_hz)
             self.log.watch, self.log.owed, self.log.settle = c.watch, c.owed, c.settle
 

@@ -289,8 +289,8 @@ class Segments:
 
     def stepped(self, now_ns: int, step_ns: int) -> None:
         """The wall clock stepped by ``step_ns``: the next slot is stamped ``now_ns``
-        (:meth:`BlockClock.restep`); a step back first writes the events waiting and finishes
-        the log file."""
+        (:meth:`BlockClock.restep`: what waits to be written moves with the time base); a step
+        back first writes the events waiting and finishes the log file."""
         if step_ns < 0:
             self.log.went_back()
             rotate = getattr(self.log.sink, "rotate", None)
