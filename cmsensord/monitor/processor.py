@@ -100,7 +100,8 @@ class Processor(Figures):
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
         self.indicators = Indicators(cfg, self.clock, lambda: self.shaft.tacho, self.shaft.uncovered)
         self.alarms = Alarms(cfg, lambda: tuple(ch.name for ch in self.channels if ch.kind != "microphone"))
-        self._out = Output(sink, self.log, self.alarms).out
+        self.output = Output(sink, self.log, self.alarms)
+        self._out = self.output.out
         self.clock.steps.append(self.alarms.restepped)      # the alarms' timers move with the stamps
         self.observations = self.missing_observations = self.frames_lost = 0
         self.started_wall = self.diagnostics_at = time.monotonic()
