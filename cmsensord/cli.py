@@ -134,6 +134,8 @@ def _add_simulation_args(sim) -> None:
                      "file (with --simulate: written afresh; the daemon appends to it, and it is not "
                      "bounded by output.retain_mb)")
     sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
+    sim.add_argument("--publish", action="store_true", help="with --simulate and a config's mqtt section: "
+                     "publish the simulated run to its broker, as its client_id (default: not published)")
 
 
 def _add_record_parser(sub) -> None:
@@ -284,7 +286,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         return simulate(SimulateOptions(
             scenario=args.scenario, duration=args.duration, speed=args.speed, seed=args.seed,
             channels=args.channels, mode=args.mode, tacho=args.tacho, config=args.config,
-            out=args.out, capture=args.capture, akf_trace=args.akf_trace))
+            out=args.out, capture=args.capture, akf_trace=args.akf_trace, publish=args.publish))
     if args.config:
         cfg, auto = _config_for(args.config)
         return run_live(cfg, auto_channels=auto, capture_path=args.capture)

@@ -35,7 +35,7 @@ def mqtt_yaml(port: int, *lines: str, publish=PUBLISHED) -> str:
 def simulate(tmp_path: Path, yaml: str, *args: str, duration: float = 60, speed: float = 20) -> list:
     cfg = tmp_path / "site.yaml"
     cfg.write_text("output:\n  status_line: false\n" + yaml)
-    return [sys.executable, "-m", "cmsensord", "--simulate", "--config", str(cfg), "--out",
+    return [sys.executable, "-m", "cmsensord", "--simulate", "--publish", "--config", str(cfg), "--out",
             str(tmp_path / "logs"), "--duration", str(duration), "--speed", str(speed), *args]
 
 

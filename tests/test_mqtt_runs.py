@@ -156,3 +156,21 @@ def test_the_exit_summary_says_what_is_left_for_the_next_run(tmp_path):
     assert f"  mqtt: 0 message(s) sent to 127.0.0.1:{down} as client_id rig1, 0 acknowledged; {left} left " \
            f"unacknowledged in {queue}: the next run publishing from this queue sends them first" \
            in p.stderr.splitlines(), p.stderr
+
+
+def test_a_simulated_board_with_the_site_config_publishes_only_when_told(tmp_path, broker):
+    """``--simulate --config site.yaml`` (a test of the set-up beside the service) published its
+    simulated alarms under the live daemon's client id and retained topics: now not without
+    ``--publish``, and one warning says so."""
+    sub = Subscriber(broker.port)
+    try:
+        args = [a for a in simulate(tmp_path, mqtt_yaml(broker.port), duration=10) if a != "--publish"]
+        p = subprocess.run(args, capture_output=True, text=True, env=ENV, timeout=120)
+        time.sleep(1.0)
+    finally:
+        sub.close()
+    assert p.returncode == 0, p.stderr
+    assert "WARNING mqtt: the mqtt section is ignored: a simulated board would publish as client_id rig1 under " \
+           "cmsensord/rig1/, the live daemon's (its retained alarms, its dashboards); give --publish to publish it" \
+           in p.stderr, p.stderr
+    assert [t for t, _, _ in sub.got if t.startswith("cmsensord/rig1/")] == []

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import os
 import subprocess
 import sys
@@ -25,6 +26,8 @@ from cmsensord.config import config_from_dict, default_config, load_config
 from cmsensord.errors import ConfigError, SinkError
 from cmsensord.service.live import run_live
 from cmsensord.service.sim_microphone import microphone_config
+
+log = logging.getLogger("cmsensord")
 
 #: order-tracker settings for the run-up scenarios of Yeh, Pan & Le (section 4.1): their
 #: components, a -3 dB bandwidth of 20 Hz (r about 50 at the tracker rate) and the 0.1 s
@@ -88,6 +91,7 @@ class SimulateOptions:
     out: str | None = None
     capture: str | None = None
     akf_trace: bool = False
+    publish: bool = False           # publish to the config's mqtt broker (as its client_id)
 
 
 def simulate(opt: SimulateOptions) -> int:
@@ -108,6 +112,11 @@ def simulate(opt: SimulateOptions) -> int:
                           f"{max(run.microphones)}: give at least {max(run.microphones) + 1} channels",
                           opt.channels)
     cfg = load_config(opt.config, n_channels=opt.channels) if opt.config else default_config(opt.channels)
+    if cfg.mqtt is not None and not opt.publish:
+        log.warning("mqtt: the mqtt section is ignored: a simulated board would publish as client_id %s "
+                    "under %s/, the live daemon's (its retained alarms, its dashboards); give --publish "
+                    "to publish it", cfg.mqtt.client, cfg.mqtt.prefix)
+        cfg = dataclasses.replace(cfg, mqtt=None)
     runup = opt.scenario in RUNUP_ORDERS
     mode = opt.mode
     tacho = opt.tacho or runup
