@@ -49,3 +49,17 @@ def test_the_daemon_starts_on_a_full_disk_and_runs(small_fs, tmp_path):
     err = stop(d)
     assert running and d.returncode == 0 and "Traceback" not in err, err[-3000:]
     assert "ERROR disk_error: " in err and "No space left on device" in err, err[-3000:]
+
+
+def test_a_capture_stopped_by_a_full_disk_is_said_in_the_summary(small_fs, tmp_path):
+    """``--capture`` onto a disk that fills: the capture stops (a disk_error says so) and the
+    run's summary says it is not whole (it named the file as if it were)."""
+    cap = small_fs / "cap.bin"
+    fill(small_fs, leave=8 * 1024)
+    p = subprocess.run([sys.executable, "-m", "cmsensord", "--simulate", "--duration", "20", "--speed", "20",
+                        "--out", str(tmp_path / "logs"), "--capture", str(cap)],
+                       capture_output=True, text=True, env=ENV, timeout=120)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "capture file: No space left on device; capture stopped" in p.stderr, p.stderr[-3000:]
+    assert f"  capture: {cap} (stopped: capture file: No space left on device; what came after is not in it)" \
+        in p.stderr, p.stderr[-3000:]

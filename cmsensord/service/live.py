@@ -267,14 +267,27 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
             proc.finish()
             proc.event("stop", None, f"cmsensord stopping ({stop.why()})")
             sink.close()
-            if capture is not None:
-                capture.close()
+            _close_capture(capture, source)
     print(run_summary(proc, sink.paths, time.monotonic() - t_start, publish_lines(sink)), file=sys.stderr)
     if capture_path:
-        print(f"  capture: {capture_path}", file=sys.stderr)
+        stopped = source.reader.capture_error
+        print(f"  capture: {capture_path}" + (f" (stopped: {stopped}; what came after is not in it)"
+                                               if stopped else ""), file=sys.stderr)
     if refused is not None:
         raise refused
     return status
+
+
+def _close_capture(capture, source: SerialSource) -> None:
+    """Close the ``--capture`` file; its last buffered bytes failing to go (a full disk) is the
+    capture's error, said in the summary, not a traceback."""
+    if capture is None:
+        return
+    try:
+        capture.close()
+    except OSError as exc:
+        reader = source.reader
+        reader.capture_error = reader.capture_error or f"capture file: {exc.strerror or exc}"
 
 
 def _control(cfg: Config, proc: Processor) -> ControlServer | None:
