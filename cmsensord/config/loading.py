@@ -27,7 +27,6 @@ from .capture import CaptureConfig
 from .channel_refs import check_channel_refs
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
 from .mqtt import MqttConfig
-from .mqtt_tls import TlsFileError, tls_context
 from .settings import (
     MAX_CHANNELS,
     AcousticConfig,
@@ -251,6 +250,8 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
                     pass
             except OSError as err:
                 raise ConfigError(source, f"mqtt.{key}", f"cannot read: {err.strerror or err}", path) from None
+    from .mqtt_tls import TlsFileError, tls_context  # ssl only with an mqtt section (2 MB of RSS)
+
     try:
         tls_context(cfg)
     except TlsFileError as err:
