@@ -7,22 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from cmsensord.sinks.mcap_sink import read_messages
-from processes import run_module
+from test_import_records import _records, _run
 
 FS = 5000
 BEARING = ("bearings:\n  - {name: b1, channel: ch, elements: 9, ball_diameter: 7.9, pitch_diameter: 39}\n"
            "indicators:\n  bands:\n    - {name: one_x, lo_order: 0.5, hi_order: 1.5}\n")
-
-
-def _run(*args) -> str:
-    p = run_module("cmsensord", *map(str, args))
-    assert p.returncode == 0, p.stderr
-    return p.stderr + p.stdout
-
-
-def _records(out) -> list[dict]:
-    return [m for path in sorted(out.glob("*.mcap")) for t, _, m in read_messages(path) if t == "/cm/ch/indicators"]
 
 
 def _npz(path, rpm: float, seed: int = 0) -> None:

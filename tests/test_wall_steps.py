@@ -19,17 +19,19 @@ from processes import ROOT, spawn, start_board, stop
 pytestmark = pytest.mark.process
 
 
-def live_with_step(tmp_path, step_s: float) -> tuple[str, list[list[tuple[str, int, dict]]]]:
-    """The daemon (link.max_drift_s 2 s) on a simulated board for 7 s, its wall clock stepped by
-    ``step_s`` 3 s in: (its stderr, the messages of each log file, in the order opened)."""
+def live_with_step(tmp_path, step_s: float, *, at_s: float = 3.0, run_s: float = 7.0,
+                   more: str = "") -> tuple[str, list[list[tuple[str, int, dict]]]]:
+    """The daemon (link.max_drift_s 2 s; ``more``: YAML) on a simulated board for ``run_s``, its
+    wall clock stepped by ``step_s`` ``at_s`` in: (its stderr, the messages of each log file, in
+    the order opened)."""
     sim = start_board("--scenario", "healthy", "--link", str(tmp_path / "tty"))
     cfg = tmp_path / "c.yaml"
     cfg.write_text(f"link:\n  port: {tmp_path / 'tty'}\n  max_drift_s: 2.0\n"
-                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n")
-    d = spawn([sys.executable, str(ROOT / "tests" / "wall_step.py"), "3", str(step_s), "--config", str(cfg)],
+                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n{more}")
+    d = spawn([sys.executable, str(ROOT / "tests" / "wall_step.py"), str(at_s), str(step_s), "--config", str(cfg)],
               stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(7.0)
+        time.sleep(run_s)
         err = stop(d)
     finally:
         sim.terminate()
@@ -79,28 +81,13 @@ def test_a_backward_step_of_the_system_clock_re_anchors_the_stamps_in_a_new_file
     assert abs(new[-1] / 1e9 - time.time() + 3600) < 5              # on the new wall clock
 
 
-
 @pytest.mark.parametrize("step_s", [-3600, 86400])
 def test_a_rule_s_delay_runs_the_stream_s_time_across_a_step(tmp_path, step_s):
     """A rule's on-delay straddling a step counts the stream's own 3 s, each file's indicator
     records in time order on their time base (before, a step back: every record after it kept
     the stamp of the last one before it, and the alert never came)."""
-    sim = start_board("--scenario", "healthy", "--link", str(tmp_path / "tty"))
-    cfg = tmp_path / "c.yaml"
-    cfg.write_text(f"link:\n  port: {tmp_path / 'tty'}\n  max_drift_s: 2.0\n"
-                   f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n"
-                   "alarms:\n  rules:\n    - {name: acc, indicator: accel_rms, alert: 0.1, on_delay_s: 3}\n")
-    d = spawn([sys.executable, str(ROOT / "tests" / "wall_step.py"), "4", str(step_s), "--config", str(cfg)],
-              stderr=subprocess.PIPE, text=True)
-    try:
-        time.sleep(10.0)
-        err = stop(d)
-    finally:
-        sim.terminate()
-        sim.wait(timeout=5)
-    assert d.returncode == 0, err
-    finished, _ = log_files(tmp_path / "logs", "cmsensord")
-    files = [read_messages(p) for p in finished]
+    err, files = live_with_step(tmp_path, step_s, at_s=4.0, run_s=10.0, more=(
+        "alarms:\n  rules:\n    - {name: acc, indicator: accel_rms, alert: 0.1, on_delay_s: 3}\n"))
     assert len(files) == (2 if step_s < 0 else 1), [len(m) for m in files]   # a step back: a new file
     assert all(m["accel_rms"] > 0.2 for msgs in files for t, _, m in msgs if t == "/cm/ch0/indicators")
     records = [s for msgs in files for t, s, _ in msgs if t == "/cm/ch0/indicators"]
