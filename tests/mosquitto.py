@@ -129,3 +129,16 @@ def make_certificates(d: Path) -> None:
                  "-subj", f"/CN={'127.0.0.1' if name == 'server' else 'rig1'}", cwd=d)
         _openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
                  "-CAcreateserial", "-out", f"{name}.pem", "-days", "2", *ext, cwd=d)
+
+
+def tls_broker(work: Path, *, client_certificate: bool = False) -> tuple[Broker, int, Path]:
+    """A started broker with a TLS listener on 127.0.0.1 (certificates made in ``work``/certs;
+    ``client_certificate``: the listener requires one): (the broker, the TLS port, the certs)."""
+    certs = work / "certs"
+    make_certificates(certs)
+    tls = free_port()
+    broker = Broker(work / "broker", extra=(
+        f"listener {tls} 127.0.0.1\nallow_anonymous true\ncafile {certs}/ca.pem\n"
+        f"certfile {certs}/server.pem\nkeyfile {certs}/server.key\n"
+        + ("require_certificate true\n" if client_certificate else ""))).start()
+    return broker, tls, certs

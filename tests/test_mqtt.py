@@ -17,7 +17,7 @@ import pytest
 
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, read_messages
-from mosquitto import Broker, Subscriber, free_port, make_certificates, needs_mosquitto
+from mosquitto import Broker, Subscriber, free_port, needs_mosquitto, tls_broker
 from processes import ENV, cmsensord, spawn, start_daemon
 
 pytestmark = needs_mosquitto
@@ -185,12 +185,7 @@ def test_the_queue_bound_drops_the_oldest_messages_with_an_event(tmp_path):
 
 
 def test_tls_with_a_client_certificate(tmp_path):
-    certs = tmp_path / "certs"
-    make_certificates(certs)
-    tls = free_port()
-    broker = Broker(tmp_path / "broker", extra=(
-        f"listener {tls} 127.0.0.1\nallow_anonymous true\ncafile {certs}/ca.pem\n"
-        f"certfile {certs}/server.pem\nkeyfile {certs}/server.key\nrequire_certificate true\n")).start()
+    broker, tls, certs = tls_broker(tmp_path, client_certificate=True)
     sub = Subscriber(broker.port)
     try:
         yaml = mqtt_yaml(tls, f"ca_file: {certs}/ca.pem", f"certfile: {certs}/client.pem",

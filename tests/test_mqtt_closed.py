@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 import subprocess
 
-from mosquitto import Broker, Subscriber, free_port, make_certificates, needs_mosquitto
+from mosquitto import Broker, Subscriber, needs_mosquitto, tls_broker
 from processes import ENV, spawn
 from test_mqtt import mqtt_yaml, simulate
 
@@ -45,12 +45,7 @@ def test_another_client_with_the_same_client_id_is_named_as_the_likely_cause(tmp
 
 
 def test_plain_mqtt_to_a_tls_port_is_named_as_the_likely_cause(tmp_path):
-    certs = tmp_path / "certs"
-    make_certificates(certs)
-    tls = free_port()
-    broker = Broker(tmp_path / "broker", extra=(
-        f"listener {tls} 127.0.0.1\nallow_anonymous true\ncafile {certs}/ca.pem\n"
-        f"certfile {certs}/server.pem\nkeyfile {certs}/server.key\n")).start()
+    broker, tls, _ = tls_broker(tmp_path)
     try:
         p = subprocess.run(simulate(tmp_path, mqtt_yaml(tls), duration=30, speed=10), capture_output=True,
                            text=True, timeout=120, env=ENV)
