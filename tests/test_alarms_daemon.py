@@ -5,6 +5,8 @@ acknowledged over its control socket (`cmsensord ack`, `cmsensord status`)."""
 from __future__ import annotations
 
 import json
+import os
+import pwd
 import time
 from pathlib import Path
 
@@ -137,7 +139,8 @@ def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
             assert bad.returncode == 1 and "no alarm named 'nope'" in bad.stderr
         finally:
             err = stop(d)
-    assert "WARNING alarm_ack: de_kurtosis/ch0 acknowledged (alert, now normal)" in err
+    assert f"WARNING alarm_ack: de_kurtosis/ch0 acknowledged by {pwd.getpwuid(os.getuid()).pw_name} (alert, " \
+           "now normal)" in err
     assert "WARNING alarm_clear: de_kurtosis/ch0: alert cleared" in err
     events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap")))
               if t == "/cm/events" and m["kind"].startswith("alarm_")]

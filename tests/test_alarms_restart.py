@@ -236,8 +236,9 @@ def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_com
     assert "worst: danger (sev/ch0)" in text and text.rstrip().endswith("latched saved"), text
     assert acked.returncode == 0 and acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
     assert after.rstrip().endswith("danger  normal           -        -        -  acknowledged saved"), after
-    assert lines(err, "alarm_ack") == ["WARNING alarm_ack: sev/ch0 acknowledged (danger, saved by the last run; "
-                                       "danger at its stop, judged again when data comes)"], err
+    user = pwd.getpwuid(os.getuid()).pw_name
+    assert lines(err, "alarm_ack") == [f"WARNING alarm_ack: sev/ch0 acknowledged by {user} (danger, saved by the "
+                                       "last run; danger at its stop, judged again when data comes)"], err
     rec = json.loads((tmp_path / "logs" / "cmsensord-alarms.json").read_text())["alarms"]["sev/ch0"]
     assert (rec["latched"], rec["level"], rec["acknowledged"]) == ("normal", "danger", True)
 

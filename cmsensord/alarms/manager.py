@@ -181,7 +181,7 @@ class AlarmManager:
             before = a.state.level
             after = a.state.ack(t_ns, by)
             out.append(Transition("alarm_ack", a.id, a.channel, after, before, t_ns,
-                                  f"{a.id} acknowledged ({LEVELS[before]}"
+                                  f"{a.id} acknowledged{f' by {by}' if by else ''} ({LEVELS[before]}"
                                   + (f", now {LEVELS[after]})" if after != before else ")")))
             out += self._apply(a, t_ns, before, after)
         return out

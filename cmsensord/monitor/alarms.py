@@ -251,7 +251,8 @@ class Alarms:
         in the store at once; an ``alarm_ack`` event each (KeyError: no such saved alarm)."""
         now = time.time_ns()
         done = ack_saved(self._saved, which, now, by)
-        out: list[Any] = [Event("alarm_ack", None, f"{name} acknowledged ({before}, saved by the last run; "
+        who = f" by {by}" if by else ""
+        out: list[Any] = [Event("alarm_ack", None, f"{name} acknowledged{who} ({before}, saved by the last run; "
                                 f"{after} at its stop, judged again when data comes)", None,
                                 {"alarm": name, "alarm_level": after, "previous_level": before})
                           for name, before, after in done]
