@@ -30,6 +30,8 @@ from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
 from .units import UNITS, G, InG
 
+CHOOSE = "--channels, or --array / --variable for .npz / .mat"
+
 __all__ = ["add_import_parser", "run_import", "options_from_args"]
 
 _EXAMPLES = """\
@@ -209,10 +211,13 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
         lines.append(line + (", no clipping" if not nclip else "")
                      + (f", {lost:,} block(s) left out for missing samples" if lost else ""))
         lines += dc[c:c + 1]
+        if lost * 10 >= meta["blocks"] and C > 1:
+            lines.append(f"  WARNING {name}: its missing samples leave out {100 * lost / meta['blocks']:.0f} % of the "
+                         f"blocks, every channel's (a frame holds them all); leave it out ({CHOOSE}) to keep them")
         if not peaks[c] > 0:
             same = "0" if not rec.samples.peak[c] > 0 else "the same, a constant offset"
             lines.append(f"  WARNING {name}: every value is {same} (no sensor on it?): calibrate cannot learn it; "
-                         "leave it out with --channels")
+                         f"leave it out ({CHOOSE})")
         if nclip:
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
                          f"clipped at +-{fs_:g} {u} (counts 0/{ADC_MAX}); those blocks carry the "
@@ -254,7 +259,19 @@ def _one_or_all(values: tuple[float, ...] | None) -> float | list[float] | None:
     return values if values is None else values[0] if len(values) == 1 else list(values)
 
 
+def _refuse_empty_channels(rec: Recording) -> None:
+    """An ImportFailure when a channel has no value at all (every one missing): the board's
+    frames hold every channel, so its missing blocks would leave out every other channel's."""
+    empty = [name for name, n in zip(rec.names, rec.samples.missing) if n == rec.samples.n_samples]
+    if empty and rec.samples.n_samples:
+        kept = [name for name in rec.names if name not in empty]
+        keep = f"import only {', '.join(kept)} ({CHOOSE})" if kept else "check the files' channels"
+        raise ImportFailure(f"{', '.join(empty)}: no value in the recording (every one NaN, inf or empty): "
+                            f"each frame holds every channel, so no block could be written; {keep}")
+
+
 def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str]) -> int:
+    _refuse_empty_channels(rec)
     L, note = choose_block_len(rec.fs, opts.block_len, opts.mode)
     plan = plan_blocks(rec, L)
     notes = left + list(rec.notes) + ([note] if note else [])

@@ -2,9 +2,9 @@
 so that an import's memory does not grow with the recording.
 
 A :class:`SampleStore` takes each file's channels as they are read (:meth:`~SampleStore.append`,
-float64 m/s²), keeps each channel's peak |x| on the way (NaN, a missing value, aside), and gives back any stretch of
-samples (:meth:`~SampleStore.read`). Up to ``memory_mb`` of samples stay in memory; past
-that, all of them go to an unnamed temporary file in the output's directory (8 bytes a
+float64 m/s²), keeps each channel's peak |x| and its count of missing values (NaN) on the
+way, and gives back any stretch of samples (:meth:`~SampleStore.read`). Up to ``memory_mb``
+of samples stay in memory; past that, all of them go to an unnamed temporary file in the output's directory (8 bytes a
 sample a channel, beside the capture's 2), which goes when the store is closed or when the
 process ends however it ends, so an import never leaves it behind. A disk without that room
 ends the import with a one-line :class:`~.errors.ImportFailure`.
@@ -35,6 +35,7 @@ class SampleStore:
         self.n_channels = n_channels
         self.n_samples = 0
         self.peak = np.zeros(n_channels)
+        self.missing = np.zeros(n_channels, dtype=np.int64)     # NaN samples of each channel
         self._out = out
         self._memory_bytes = memory_mb * 1e6
         self._parts: list[np.ndarray] = []  # in memory: (C, n) arrays end to end
@@ -54,6 +55,7 @@ class SampleStore:
         if not x.shape[1]:
             return
         np.fmax(self.peak, np.fmax.reduce(np.abs(x), axis=1), out=self.peak)     # NaN (missing) not counted
+        self.missing += np.isnan(x).sum(axis=1)
         self.n_samples += x.shape[1]
         if self._file is None and self.n_samples * self.n_channels * _ITEM <= self._memory_bytes:
             self._parts.append(np.asarray(x, dtype=np.float64))
