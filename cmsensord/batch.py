@@ -81,7 +81,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     from cmsensord.importing.channel_names import capture_channels
     from cmsensord.importing.sidecar import sidecar
     from cmsensord.monitor.processor import Processor
-    from cmsensord.service.sink import open_sink, publish_lines
+    from cmsensord.service.sink import open_sink, publish_lines, send_queued
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
@@ -124,6 +124,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
             raise CmsensordError(f"{capture}: batch VKF: not enough memory for the whole record "
                                  "(shorten the capture or track fewer components)") from None
         done = True
+        send_queued(sink)
     finally:
         sink.close()
         if not done:

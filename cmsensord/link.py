@@ -551,9 +551,11 @@ class Progress:
         self.stream.flush()
 
     def close(self) -> None:
+        """End the bar's line (once)."""
         if self.enabled:
             self.stream.write("\n")
             self.stream.flush()
+            self.enabled = False
 
 
 def open_port_checked(port: str, baud: int) -> serial.Serial:

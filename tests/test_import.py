@@ -408,7 +408,7 @@ def test_import_then_replay_end_to_end(tmp_path):
 def test_progress_bar_only_on_a_terminal():
     import io
 
-    from cmsensord.importing.command import _Bar
+    from cmsensord.terminal_bar import Bar
 
     class Tty(io.StringIO):
         def isatty(self):
@@ -416,7 +416,7 @@ def test_progress_bar_only_on_a_terminal():
 
     tty, pipe = Tty(), io.StringIO()
     for stream in (tty, pipe):
-        bar = _Bar(10, "import: writing x.bin", stream=stream)
+        bar = Bar(10, "import: writing x.bin", stream=stream)
         bar(10)
         bar.close()
     assert tty.getvalue().startswith("\rimport: writing x.bin [" + "#" * 30 + "] 100.0%")

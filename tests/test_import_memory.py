@@ -291,7 +291,7 @@ def test_a_long_text_file_shows_its_progress_while_it_is_read(tmp_path, monkeypa
 
     seen: list[float] = []
     monkeypatch.setattr(tabular, "CHUNK_LINES", 500)
-    monkeypatch.setattr(command._Bar, "__call__", lambda self, done: seen.append(done))
+    monkeypatch.setattr(command.Bar, "__call__", lambda self, done: seen.append(done))
     long_csv(tmp_path / "log.csv")
     assert main(["import", str(tmp_path / "log.csv"), "--unit", "g", "--memory-mb", "0",
                  "--out", str(tmp_path / "o.bin")]) == 0

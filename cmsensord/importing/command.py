@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 from cmsensord.argtypes import comma_list, count, nonnegative, nonzero, positive, real
 from cmsensord.errors import EXIT_USAGE
+from cmsensord.terminal_bar import Bar
 
 from .adc import ADC_MAX, OFFSET, nice_range
 from .blocks import choose_block_len, plan_blocks, remainder_note
@@ -171,30 +171,6 @@ def options_from_args(args: argparse.Namespace) -> ImportOptions:
         keep_dc=args.imp_keep_dc, memory_mb=args.imp_memory_mb)
 
 
-class _Bar:
-    """A one-line progress bar on stderr when it is a terminal; silent otherwise."""
-
-    def __init__(self, total: int, label: str, stream=None):
-        self.total, self.label = max(1, total), label
-        self.stream = stream or sys.stderr
-        self.enabled = self.stream.isatty() if hasattr(self.stream, "isatty") else False
-        self._last = 0.0
-
-    def __call__(self, done: float) -> None:
-        now = time.monotonic()
-        if not self.enabled or (now - self._last < 0.2 and done < self.total):
-            return
-        self._last = now
-        frac = min(1.0, done / self.total)
-        self.stream.write(f"\r{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%")
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            self.stream.write("\r\033[K")
-            self.stream.flush()
-
-
 def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -> list[str]:
     C = len(meta["channel_names"])
     n_snap = len(meta["snapshots"])
@@ -245,7 +221,7 @@ def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
     if Path(opts.out).is_dir():
         raise ImportFailure(f"{opts.out}: is a directory; give --out a file name, e.g. "
                             f"{Path(opts.out) / 'capture.bin'}")
-    bar = _Bar(len(files), f"import: reading {len(files)} file(s)")
+    bar = Bar(len(files), f"import: reading {len(files)} file(s)")
     try:
         rec = build_recording(files, opts, progress=bar)
     finally:
@@ -286,7 +262,7 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
     full_scale = choose_ranges(rec, opts.full_scale)
     extra = {"scale_factor": _one_or_all(opts.scale_factor), "sensitivity_mv_per_g": _one_or_all(opts.sensitivity),
              "offset_counts": OFFSET, "notes": notes}
-    bar = _Bar(plan.n_blocks, f"import: writing {Path(opts.out).name}")
+    bar = Bar(plan.n_blocks, f"import: writing {Path(opts.out).name}")
     try:
         meta = write_capture(rec, plan, opts.out, mode=opts.mode, full_scale=full_scale, extra=extra,
                              progress=bar)

@@ -21,6 +21,7 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from cmsensord.config.mqtt import MqttConfig
@@ -55,8 +56,9 @@ class Publisher:
     and announced (without rules it would stay unknown)."""
 
     def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = (),
-                 alarm_rules: bool = False) -> None:
+                 alarm_rules: bool = False, wait_when_full: bool = False) -> None:
         self.cfg, self.topics, self.channels = cfg, TopicMap(cfg), channels
+        self.wait_when_full = wait_when_full      # offer waits for room (a replay), not drops (the daemon)
         self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s)
         self.handover: collections.deque = collections.deque(maxlen=cfg.handover_messages)
         self.handover_drops = 0
@@ -115,9 +117,31 @@ class Publisher:
             self._worst.channels = channels
 
     def _hand(self, route: tuple[str, bool], topic: str, stamp_ns: int, msg: dict) -> None:
+        while self.wait_when_full and len(self.handover) == self.handover.maxlen and self._thread.is_alive():
+            time.sleep(0.01)
         if len(self.handover) == self.handover.maxlen:
             self.handover_drops += 1
         self.handover.append((route, topic, stamp_ns, msg))
+
+    def left(self) -> int:
+        """Offered messages the broker has not acknowledged yet."""
+        return len(self.handover) + self.queue.depth
+
+    def drain(self, idle_s: float = CONNACK_S, progress: Callable[[int], None] | None = None) -> int:
+        """Wait until the broker has acknowledged every offered message, or until it has
+        acknowledged none for ``idle_s`` (not connected, refused, gone); ``progress`` gets the
+        count acknowledged so far. Returns the count left (still queued on disk)."""
+        acked, since = self.acked_total, time.monotonic()
+        while self._thread.is_alive() and self.left():
+            if progress is not None:
+                progress(self.acked_total)
+            now = time.monotonic()
+            if self.acked_total != acked:
+                acked, since = self.acked_total, now
+            elif now - since > idle_s:
+                break
+            time.sleep(0.05)
+        return self.left()
 
     def close(self, timeout: float = 3.0) -> None:
         """Stop the thread: offered messages are queued on disk, sent if connected, and the

@@ -17,7 +17,7 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, origin_lines
-from cmsensord.service.sink import open_sink, publish_lines, route_sink_events
+from cmsensord.service.sink import open_sink, publish_lines, route_sink_events, send_queued
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
 
@@ -74,6 +74,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
                 progress.update(capture.bytes_read, f"{proc.adc_seconds:.0f} s")
         _no_frame(proc, path, capture.counters)
         proc.finish()
+        progress.close()
+        send_queued(sink)
     except ConfigError as exc:          # the settings against the channels, once the capture named them
         proc.event("config", None, "configuration error: " + str(exc).removeprefix(exc.source + ": "))
         proc.finish()

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import sys
+from typing import TextIO
 
 from cmsensord.config import Config
 from cmsensord.errors import SinkError
@@ -10,6 +12,7 @@ from cmsensord.monitor.events import EventLog
 from cmsensord.service.instance import refuse_if_held
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.tee import TeeSink
+from cmsensord.terminal_bar import Bar
 
 #: disk_error events that report routine work or a recovery (details.action): INFO in the journal
 _DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
@@ -42,7 +45,8 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
 
     queue_dir = cfg.mqtt.queue_path(cfg.output.dir)
     try:                                               # its channels: the Processor's, when known
-        publisher = Publisher(cfg.mqtt, queue_dir, alarm_rules=has_alarm_rules(cfg))
+        publisher = Publisher(cfg.mqtt, queue_dir, alarm_rules=has_alarm_rules(cfg),
+                              wait_when_full=command != "the daemon")
     except OSError as exc:
         sink.close()
         raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None
@@ -57,6 +61,33 @@ def publish_lines(sink: RotatingSink) -> list[str]:
     """The exit summary's line of the sink's MQTT publisher (after ``close``), if it has one."""
     publisher = publisher_of(sink)
     return [publisher.summary()] if publisher is not None else []
+
+
+def send_queued(sink: RotatingSink, stream: TextIO | None = None) -> None:
+    """Before a run that publishes and is not the daemon (``replay --publish``) ends: wait until
+    the broker has acknowledged what the run offered, saying so in one line (a bar on a
+    terminal), as long as the broker acknowledges something every
+    :data:`~cmsensord.publish.publisher.CONNACK_S` seconds. Ctrl-C stops waiting; what is left
+    stays in the queue for the next run publishing from it (the summary says how many)."""
+    publisher = publisher_of(sink)
+    if publisher is None or not publisher.left():
+        return
+    from cmsensord.publish.publisher import CONNACK_S
+
+    out, cfg, n, start = stream or sys.stderr, publisher.cfg, publisher.left(), publisher.acked_total
+    bar = Bar(n, "mqtt: sending", out)
+    try:                                # the line in it: a Ctrl-C right after it is one too
+        print(f"mqtt: sending {n:,} message(s) to {cfg.host}:{cfg.port} before exiting (the backlog at "
+              f"{cfg.resend_per_s:g} a second, mqtt.resend_per_s); Ctrl-C stops waiting, they stay queued", file=out)
+        left = publisher.drain(progress=lambda acked: bar(acked - start))
+    except KeyboardInterrupt:
+        left = -1
+    finally:
+        bar.close()
+    if left < 0:
+        print("mqtt: stopped waiting (Ctrl-C)", file=out)
+    elif left:
+        print(f"mqtt: the broker acknowledged nothing for {CONNACK_S:g} s: stopped waiting", file=out)
 
 
 def publisher_of(sink: RotatingSink):

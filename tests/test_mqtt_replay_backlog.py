@@ -1,0 +1,84 @@
+"""`cmsensord replay --publish` sends what it offered before it exits: a replay is done long
+before the publisher has connected (it sent 234 of 10,908 messages of an hour's capture and
+left the rest queued). It waits, saying so in one line, while the broker acknowledges; it
+stops waiting when the broker acknowledges nothing for 10 s, or at Ctrl-C, and what is left
+stays queued (the summary says how many)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from mosquitto import Subscriber, free_port, needs_mosquitto
+from processes import spawn
+from test_mqtt import broker, expected, mqtt_yaml, seqs  # noqa: F401 - broker: a fixture
+from test_mqtt_runs import capture
+
+pytestmark = needs_mosquitto
+
+SENDING = "mqtt: sending {n:,} message(s) to 127.0.0.1:{port} before exiting (the backlog at 2000 a second, " \
+          "mqtt.resend_per_s); Ctrl-C stops waiting, they stay queued"
+
+
+def _replay(tmp_path, port: int, *lines: str) -> list[str]:
+    cfg = tmp_path / "site.yaml"
+    cfg.write_text(mqtt_yaml(port, *lines))
+    return [sys.executable, "-m", "cmsensord", "replay", str(capture(tmp_path, "--duration", "300")),
+            "--config", str(cfg), "--out", str(tmp_path / "out"), "--publish"]
+
+
+@pytest.mark.parametrize("lines", [(), ("handover_messages: 16",)], ids=["default", "small_handover"])
+def test_an_unpaced_replay_delivers_every_message_before_it_exits(tmp_path, broker, lines):  # noqa: F811
+    """With a hand-over queue of 16 messages the replay waits for room (it dropped 3,552 of an
+    hour's 3,600 severity messages: 'the publisher fell behind')."""
+    sub = Subscriber(broker.port)
+    try:
+        p = subprocess.run(_replay(tmp_path, broker.port, *lines), capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, p.stderr
+        n = len(expected(tmp_path / "out"))
+        assert n > 800
+        sending = [ln for ln in p.stderr.splitlines() if ln.startswith("mqtt: sending ")]
+        assert len(sending) == 1 and 0 < int(sending[0].split()[2].replace(",", "")) <= n, p.stderr
+        assert sending[0].endswith(SENDING.format(n=n, port=broker.port).split(" message(s)")[1]), p.stderr
+        assert (f"  mqtt: {n} message(s) sent to 127.0.0.1:{broker.port} as client_id rig1, {n} acknowledged; 0 "
+                f"left unacknowledged in {tmp_path / 'out' / 'mqtt-queue'}") in p.stderr.splitlines(), p.stderr
+        assert "fell behind" not in p.stderr
+        assert sub.wait_for(lambda: len(set(seqs(sub))) >= n)
+        assert sorted(set(seqs(sub))) == list(range(1, n + 1))
+    finally:
+        sub.close()
+
+
+def test_without_a_broker_it_stops_waiting_after_10_s_and_keeps_the_queue(tmp_path):
+    port = free_port()
+    t0 = time.monotonic()
+    p = subprocess.run(_replay(tmp_path, port), capture_output=True, text=True, timeout=120)
+    waited = time.monotonic() - t0
+    assert p.returncode == 0, p.stderr
+    n = len(expected(tmp_path / "out"))
+    lines = p.stderr.splitlines()
+    assert SENDING.format(n=n, port=port) in lines, p.stderr
+    assert "mqtt: the broker acknowledged nothing for 10 s: stopped waiting" in lines, p.stderr
+    assert any(ln.endswith(f"0 acknowledged; {n} left unacknowledged in {tmp_path / 'out' / 'mqtt-queue'}: the "
+                           "next run publishing from this queue sends them first") for ln in lines), p.stderr
+    assert 10 <= waited < 60
+
+
+def test_ctrl_c_stops_waiting_and_the_run_ends_with_its_summary(tmp_path):
+    port = free_port()
+    proc = spawn(_replay(tmp_path, port), stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:
+        seen.append(line)
+        if line.startswith("mqtt: sending "):
+            break
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=30)[1]
+    assert proc.returncode == 0, "".join(seen) + rest
+    assert "mqtt: stopped waiting (Ctrl-C)\n" in rest, rest
+    assert "left unacknowledged in" in rest and "MCAP log:" in rest, rest
