@@ -56,6 +56,7 @@ from cmsensord import __version__
 from cmsensord.acoustic_model import FORMAT, VERSION, Calibration, load_calibration, save_calibration
 from cmsensord.dsp.acoustic import AcousticModel
 from cmsensord.importing.sidecar import channel_units, sidecar
+from cmsensord.out_paths import overwritten_input
 
 __all__ = [
     "FORMAT",
@@ -450,6 +451,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="initial uncertainty of a, relative to a0 (default 0.1)")
     p.add_argument("--out", required=True, help="calibration file to write (JSON)")
     args = p.parse_args(argv)
+    same = overwritten_input(args.out, [args.paired, args.background])
+    if same:
+        print(f"acoustic_calib: error: {same}", file=sys.stderr)
+        return 2
     try:
         cal = fit_captures(args.paired, args.background, accel=args.accel, mic=args.mic,
                            mic_background=args.mic_background, a_rel_std=args.a_rel_std)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from cmsensord.errors import EXIT_USAGE, CmsensordError
+from cmsensord.out_paths import overwritten_input
 
 __all__ = ["add_report_parser", "run_report", "MISSING_MATPLOTLIB"]
 
@@ -38,6 +39,9 @@ def run_report(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     from cmsensord.report.reading import log_paths, read_logs
     paths = log_paths(args.logs)
+    same = overwritten_input(args.sub_out, paths)
+    if same:
+        raise CmsensordError(same)
     data = read_logs(paths, sys.stderr)
     _tell_unreadable(data)
     for note in data.notes:
