@@ -27,7 +27,9 @@ the time base too, whatever its label; each file's first date and time is then i
 snapshot's (``Table.times``, ``dated``), and the recording's start.
 
 When the times are evenly spaced -- each within half a step of the straight line from the first
-to the last, as printed times rounded to a few decimals are -- they give the sampling rate,
+to the last, as printed times rounded to a few decimals are, or, in a column labelled as
+time or of dates, within the printed resolution when that is coarser than the step
+(``0.0000, 0.0000, 0.0001, ...`` at 25.6 kHz: a time may repeat) -- they give the sampling rate,
 one over the least-squares step, rounded to a whole number of Hz when within 0.01 % of one.
 The import then takes every other column as a channel by default and needs no ``--fs``
 (:class:`~.table.Table` ``time_columns`` and ``fs``). Unevenly spaced times (gaps, a restart)
@@ -117,7 +119,7 @@ def _dated(t: Table) -> Table:
 def _time_base(t: Table, col: int, times: np.ndarray, what: str, whose: str) -> Table:
     """``t`` with column ``col`` (``times``, seconds) its time base: the rate when evenly spaced,
     and the note that says so."""
-    fs = _rate(times) if _even(times) else None
+    fs = _rate(times) if _even(times, repeats=True) else None
     what = f"column {t.columns[col]!r} ({col}) {what}"
     note = (f"{what}: {fs:g} Hz from {whose} steps; it is not imported as a channel" if fs else
             f"{what}, not evenly spaced ({_gap(times)}): it is not imported as a channel")
@@ -156,10 +158,10 @@ def _clock(t: Table) -> tuple[tuple[int, ...], np.ndarray] | None:
 
 def _labelled(t: Table, start: int = 0) -> tuple[int, float] | None:
     """(column, seconds a unit of it) of the first column from ``start`` labelled as time whose
-    values increase."""
+    values increase (a value may repeat: times printed with fewer decimals than the rate needs)."""
     for i, name in enumerate(t.columns[start:], start):
         m = _LABEL.fullmatch(name)
-        if m and _increasing(t.data[0, :, i]):
+        if m and _increasing(t.data[0, :, i], repeats=True):
             return i, _UNIT_S.get((m[2] or "s").lower(), 1.0)
     return None
 
@@ -172,18 +174,34 @@ def _stretches(n: int):
     return range(0, n, _STRETCH)
 
 
-def _increasing(x: np.ndarray) -> bool:
+def _increasing(x: np.ndarray, repeats: bool = False) -> bool:
+    """Each value above the one before (``repeats``: or the same, the last above the first)."""
+    if repeats:
+        return bool(x[-1] > x[0]) and all(bool(np.all(np.diff(x[a:a + _STRETCH + 1]) >= 0))
+                                          for a in _stretches(x.size))
     return all(bool(np.all(np.diff(x[a:a + _STRETCH + 1]) > 0)) for a in _stretches(x.size))
 
 
-def _even(x: np.ndarray) -> bool:
-    """Strictly increasing, each value within half a mean step of the straight line."""
+def _quantum(x: np.ndarray) -> float:
+    """The smallest rise from one value to the next: the resolution the times were printed with
+    when it is coarser than their step."""
+    rises = (d[d > 0] for d in (np.diff(x[a:a + _STRETCH + 1]) for a in _stretches(x.size)))
+    return min((float(r.min()) for r in rises if r.size), default=0.0)
+
+
+def _even(x: np.ndarray, repeats: bool = False) -> bool:
+    """Increasing (:func:`_increasing`), each value within half a mean step of the straight
+    line from the first to the last. ``repeats`` (a column labelled as time): a value may
+    repeat, and each is within the resolution the times were printed with when that is coarser
+    than the step (each value, and so each end of the line, is off by up to half of it)."""
     x = np.asarray(x, dtype=np.float64)
-    if x.size < 3 or not _increasing(x):
+    if x.size < 3 or not _increasing(x, repeats):
         return False
     step = (x[-1] - x[0]) / (x.size - 1)
+    quantum = _quantum(x)
+    tol = (quantum if quantum > step else 0.5 * step) * (1 + 1e-6)
     return all(float(np.abs(x[a:a + _STRETCH] - (x[0] + step * np.arange(a, min(a + _STRETCH, x.size)))).max())
-               <= 0.5 * step for a in _stretches(x.size))
+               <= tol for a in _stretches(x.size))
 
 
 def _rate(times: np.ndarray) -> float:
