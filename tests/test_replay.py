@@ -4,6 +4,7 @@ with line noise (real processes on a real pty)."""
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 import time
@@ -13,7 +14,7 @@ from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import make_scenario
 from messages import comparable
-from processes import cmsensord, on_terminal, start_board, start_daemon, stop
+from processes import cmsensord, on_terminal, spawn, start_board, start_daemon, stop
 
 
 def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
@@ -122,3 +123,25 @@ def test_junk_in_front_of_a_capture_is_counted_in_the_summary(tmp_path):
     lines = r.stderr.splitlines()
     assert f"  link: 1000 of {size + 1000} bytes in no frame (0 CRC failure(s), 0 bad header(s))" in lines
     assert not [x for x in lines if "no frame in" in x]
+
+
+def test_ctrl_c_ends_a_replay_with_its_log_finished_and_its_summary(tmp_path):
+    """Ctrl-C during a replay (it exited 130 in silence): the log is finished, the summary
+    says how far it got, exit status 130."""
+    cap = tmp_path / "cap.bin"
+    sc = make_scenario("faulty", n_channels=1, duration_s=600.0, seed=0)
+    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, 600.0)
+    proc = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "20", "--out",
+                  str(tmp_path / "out")], stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=30)[1]
+    assert proc.returncode == 130, err
+    line = next(ln for ln in err.splitlines() if ln.startswith("  interrupted (Ctrl-C) at "))
+    assert line.endswith(f" of {cap.stat().st_size:,} bytes): the log holds what was replayed"), line
+    logs = list((tmp_path / "out").iterdir())
+    assert len(logs) == 1 and logs[0].suffix == ".mcap", logs
+    assert f"MCAP log: {logs[0]}" in err
+    severity = [m for t, _, m in read_messages(logs[0]) if t == "/cm/ch0/severity"]
+    assert 20 < len(severity) < 590
+    assert cmsensord("summary", str(logs[0])).returncode == 0

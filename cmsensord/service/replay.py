@@ -17,11 +17,15 @@ from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, origin_lines
+from cmsensord.service.signals import Interrupt
 from cmsensord.service.sink import open_sink, publish_lines, route_sink_events, send_queued
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
 
 log = logging.getLogger("cmsensord")
+
+#: the exit status of a run stopped by Ctrl-C, as a shell reports one ended by SIGINT
+EXIT_INTERRUPTED = 130
 
 #: bytes per read of an unpaced replay: 192 KiB (3.9 s of 1 RAW channel, 1 s of 4); with the
 #: heap keeping freed memory a larger read is faster still, but at 256 KiB a 4-channel RAW
@@ -66,16 +70,21 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     alarms = FirstAlarms(proc.log)
     progress = Progress(capture.size, f"replay {Path(path).name}")
     source = capture if speed is None else Paced(capture, speed)
+    interrupt = Interrupt()
     t0 = time.monotonic()
     try:
-        with source:
+        with source, interrupt:
             for frames in source:
                 proc.handle(frames)
                 progress.update(capture.bytes_read, f"{proc.adc_seconds:.0f} s")
-        _no_frame(proc, path, capture.counters)
+                if interrupt.seen:
+                    break
+        if not interrupt.seen:
+            _no_frame(proc, path, capture.counters)
         proc.finish()
         progress.close()
-        send_queued(sink)
+        if not interrupt.seen:
+            send_queued(sink)
     except ConfigError as exc:          # the settings against the channels, once the capture named them
         proc.event("config", None, "configuration error: " + str(exc).removeprefix(exc.source + ": "))
         proc.finish()
@@ -85,9 +94,18 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         out = sink.close()
     if not quiet:
         placed = [f"  {line}" for line in said] + origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) \
-            + publish_lines(sink)
+            + publish_lines(sink) + _interrupted(interrupt, capture)
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
-    return 0, out, proc
+    return (EXIT_INTERRUPTED if interrupt.seen else 0), out, proc
+
+
+def _interrupted(interrupt: Interrupt, capture: CaptureSource) -> list[str]:
+    """The summary's line on a replay stopped by Ctrl-C: how far it got."""
+    if not interrupt.seen:
+        return []
+    done = capture.bytes_read / max(capture.size, 1)
+    return [f"  interrupted (Ctrl-C) at {done:.0%} of the capture ({capture.bytes_read:,} of {capture.size:,} "
+            "bytes): the log holds what was replayed"]
 
 
 def _no_frame(proc: Processor, path: str, counters: LinkCounters) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import threading
 from collections.abc import Callable
+from typing import Any
 
 
 class StopFlag:
@@ -41,3 +42,27 @@ class StopFlag:
         self.reopen = True              # only a flag: the loop does the work
         if self.wake is not None:
             self.wake()
+
+
+class Interrupt:
+    """Ctrl-C (SIGINT) as a flag a batch run checks between reads (``seen``), so that it ends
+    as at the end of its input: its log finished, its summary printed. A second Ctrl-C
+    interrupts at once. Installed in the main thread only (elsewhere: never set)."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._old: Any = None
+
+    def __enter__(self) -> Interrupt:
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+            self._old = None
+
+    def _handler(self, _signum, _frame) -> None:
+        self.seen = True
+        signal.signal(signal.SIGINT, self._old if callable(self._old) else signal.default_int_handler)
