@@ -170,3 +170,23 @@ def test_a_background_at_another_rate_says_so_not_raw_mode(tmp_path):
     assert ("acoustic_calib: warning: cross term not estimated (the captures hold 480 and 441 samples a block: two "
             "sampling rates): the noise variance is the background's alone and the sound estimate is less accurate; "
             "record (or import) both at one sampling rate to estimate it") in r.stderr
+
+
+def test_a_unit_as_files_spell_it_and_a_peak_no_sensor_sees(tmp_path):
+    """``--unit m/s^2`` (as configurations write it) is m/s2; values of milli-g given as g
+    (FEMTO's ~50,000 'g' peaks) get a warning: it went through in silence."""
+    x = 50_000.0 * np.sin(np.arange(20000) / 7.0)
+    np.save(tmp_path / "x.npy", x)
+    p = run_module("cmsensord", "import", str(tmp_path / "x.npy"), "--fs", "2000", "--unit", "g",
+                   "--out", str(tmp_path / "g.bin"))
+    assert p.returncode == 0, p.stderr
+    peak = np.abs(x - x.mean()).max() * G
+    assert (f"  WARNING ch: peak {peak:.4g} m/s2 ({peak / G:,.0f} g), more than an accelerometer on a machine "
+            "measures: is --unit right (values in mg given as g read 1000 x)?\n") in p.stderr, p.stderr
+    p = run_module("cmsensord", "import", str(tmp_path / "x.npy"), "--fs", "2000", "--unit", "mg",
+                   "--out", str(tmp_path / "mg.bin"))
+    assert p.returncode == 0 and "WARNING" not in p.stderr, p.stderr
+    p = run_module("cmsensord", "import", str(tmp_path / "x.npy"), "--fs", "2000", "--unit", "m/s^2",
+                   "--out", str(tmp_path / "ms2.bin"))
+    assert p.returncode == 0, p.stderr
+    assert sidecar(tmp_path / "ms2.bin")["source_unit"] == "m/s2"

@@ -12,6 +12,7 @@ mean is taken out (:mod:`.dc`, one summary line a channel) unless ``--keep-dc``.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -29,7 +30,7 @@ from .options import ImportOptions
 from .recording import Recording
 from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
-from .units import UNITS, G, InG
+from .units import UNITS, G, InG, unit_of
 
 CHOOSE = "--channels, or --array / --variable for .npz / .mat"
 
@@ -49,9 +50,11 @@ Columns and channels count from 0. The sidecar CAPTURE.json (b11.bin.json) lists
 
 
 def _units(text: str) -> tuple[str, ...]:
-    """'g' or 'g,Pa' -> units of UNITS."""
-    units = comma_list(text)
-    bad = [u for u in units if u not in UNITS]
+    """'g' or 'g,Pa' -> units of UNITS; as files and configurations spell them too
+    ('m/s^2', 'm/s²', 'G': :func:`~.units.unit_of`)."""
+    given = comma_list(text)
+    units = tuple(u if u in UNITS else unit_of(u) or "" for u in given)
+    bad = [g for g, u in zip(given, units) if not u]
     if bad:
         raise argparse.ArgumentTypeError(f"unknown unit {bad[0]!r}; choose from {', '.join(UNITS)} (one, or one "
                                          "per channel: g,Pa)")
@@ -172,6 +175,25 @@ def options_from_args(args: argparse.Namespace) -> ImportOptions:
         keep_dc=args.imp_keep_dc, memory_mb=args.imp_memory_mb)
 
 
+#: peaks past these are more than a machine's accelerometer or microphone measures: a unit
+#: mistaken, most likely mg given as g (1000 x)
+IMPLAUSIBLE_G = 1000.0
+IMPLAUSIBLE_PA = 2000.0     # 160 dB SPL
+
+
+def _implausible(name: str, peak: float, unit: str) -> list[str]:
+    """A WARNING line when a channel's peak is more than a machine's sensor sees."""
+    if unit == "Pa":
+        if peak <= IMPLAUSIBLE_PA:
+            return []
+        return [f"  WARNING {name}: peak {peak:.4g} Pa ({20 * math.log10(peak / 2e-5):.0f} dB SPL), more than a "
+                "microphone at a machine hears: is --unit right?"]
+    if peak <= IMPLAUSIBLE_G * G:
+        return []
+    return [f"  WARNING {name}: peak {peak:.4g} m/s2 ({peak / G:,.0f} g), more than an accelerometer on a machine "
+            "measures: is --unit right (values in mg given as g read 1000 x)?"]
+
+
 def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -> list[str]:
     C = len(meta["channel_names"])
     n_snap = len(meta["snapshots"])
@@ -191,6 +213,7 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
         if lost * 10 >= meta["blocks"] and C > 1:
             lines.append(f"  WARNING {name}: its missing samples leave out {100 * lost / meta['blocks']:.0f} % of the "
                          f"blocks, every channel's (a frame holds them all); leave it out ({CHOOSE}) to keep them")
+        lines += _implausible(name, peaks[c], u)
         if not peaks[c] > 0:
             same = "0" if not rec.samples.peak[c] > 0 else "the same, a constant offset"
             lines.append(f"  WARNING {name}: every value is {same} (no sensor on it?): calibrate cannot learn it; "
