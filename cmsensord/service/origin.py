@@ -16,7 +16,7 @@ from datetime import datetime, timedelta
 
 from cmsensord.importing.timeline import Timeline
 
-__all__ = ["FirstAlarms", "origin_lines", "span_line"]
+__all__ = ["FirstAlarms", "delay_lines", "origin_lines", "span_line"]
 
 #: the alarm events whose first occurrence per alarm is placed in the recording
 _ALARM_KINDS = {"alarm_alert": "alert", "alarm_danger": "danger"}
@@ -112,3 +112,20 @@ def _where(meta: dict, snaps: list[dict], starts: list[float], t_s: float, endin
         clock = (datetime.fromisoformat(start) + at).strftime("%Y-%m-%d %H:%M:%S") if start else None
         when += f", {clock}" if clock else f", {at.total_seconds() / 3600:.4g} h in"
     return f"{s['source']} ({when})"
+
+
+def delay_lines(meta: dict, cfg) -> list[str]:
+    """One line when the alarm delays of ``cfg`` span much more of the recording than they say:
+    they count the capture's (board) seconds, and an import of snapshots lays them end to end
+    (FEMTO's 0.1-s snapshots every 10 s: one board second is 100 s of the recording)."""
+    timeline = Timeline.from_sidecar(meta)
+    if timeline is None or timeline.unit != "s" or len(timeline.start_s) < 2:
+        return []
+    ratio = (float(timeline.source_s[-1] - timeline.source_s[0])
+             / float(timeline.start_s[-1] - timeline.start_s[0]))      # from the first snapshot to the last
+    rules = cfg.alarms.rules if cfg.alarms.enabled else ()
+    delay = max([0.0] + [max(r.on_delay_s, r.off_delay_s) for r in rules])
+    if ratio < 1.5 or delay <= 0:
+        return []
+    return [f"  alarm delays count the capture's seconds, one of which is {ratio:.3g} s of the recording here "
+            f"(its snapshots end to end): a delay of {delay:g} s spans {delay * ratio:,.0f} s of it"]

@@ -16,7 +16,7 @@ from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
-from cmsensord.service.origin import FirstAlarms, origin_lines
+from cmsensord.service.origin import FirstAlarms, delay_lines, origin_lines
 from cmsensord.service.signals import Interrupt
 from cmsensord.service.sink import open_sink, publish_lines, route_sink_events, send_queued
 from cmsensord.service.status import run_summary
@@ -94,7 +94,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         out = sink.close()
     if not quiet:
         placed = [f"  {line}" for line in said] + origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) \
-            + publish_lines(sink) + _interrupted(interrupt, capture)
+            + delay_lines(meta, cfg) + publish_lines(sink) + _interrupted(interrupt, capture)
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return (EXIT_INTERRUPTED if interrupt.seen else 0), out, proc
 
