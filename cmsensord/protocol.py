@@ -59,6 +59,8 @@ MAX_FRAME = OVERHEAD + MAX_PAYLOAD  # 4114, the largest frame the decoder must h
 
 FLAG_OVERRUN = 0x01  # ADC overrun since the previous frame
 FLAG_CLIPPED = 0x02  # a sample of this block clipped (0 or 4095)
+#: the largest RAW count: the ADC's 12 bits
+COUNT_MAX = 4095
 
 MODE_RMS = 1
 MODE_RAW = 2

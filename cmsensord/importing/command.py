@@ -217,7 +217,7 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
         if not peaks[c] > 0:
             same = "0" if not rec.samples.peak[c] > 0 else "the same, a constant offset"
             lines.append(f"  WARNING {name}: every value is {same} (no sensor on it?): calibrate cannot learn it; "
-                         f"leave it out ({CHOOSE})")
+                         "leave it out with --channels")
         if nclip:
             lines.append(f"  WARNING {name}: {nclip} sample(s) in {meta['clipped_blocks'][c]} block(s) "
                          f"clipped at +-{fs_:g} {u} (counts 0/{ADC_MAX}); those blocks carry the "

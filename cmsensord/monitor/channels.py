@@ -35,10 +35,31 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
 from cmsensord.monitor.severity import SeverityChain
-from cmsensord.protocol import MODE_RAW, SETUP_FIELDS, Frame, Status, decode_status
+from cmsensord.protocol import MODE_RAW, MODE_RMS, SETUP_FIELDS, Frame, Status, decode_status
 
 #: data frames of another channel count in a row that mean the board changed (1 s of RMS blocks)
 CHANGE_FRAMES = 100
+
+
+#: the highest sampling rate a STATUS may name [Hz]: past it, no accelerometer board's
+FS_MAX = 1_000_000
+#: the most samples in a RAW frame's payload (len <= 4096 bytes of u16 counts)
+BLOCK_LEN_MAX = 2048
+
+
+def status_out_of_range(st: Status) -> str | None:
+    """What in ``st`` is outside the protocol's ranges (mode 1 or 2, 1..8 channels, fs and
+    block_len positive, at least one block a second), or None. The set-up sizes the monitor's
+    buffers, so one bad STATUS must not reach them."""
+    if st.mode not in (MODE_RMS, MODE_RAW):
+        return f"mode {st.mode} (the protocol's: 1 RMS, 2 RAW)"
+    if not 1 <= st.n_channels <= MAX_CHANNELS:
+        return f"{st.n_channels} channels (the protocol's: 1..{MAX_CHANNELS})"
+    if not 1 <= st.fs <= FS_MAX:
+        return f"fs {st.fs} Hz (1..{FS_MAX:,} Hz)"
+    if not 1 <= st.block_len <= min(BLOCK_LEN_MAX, st.fs):
+        return f"block_len {st.block_len} (1..{BLOCK_LEN_MAX} samples, at least one block a second)"
+    return None
 
 
 class ChannelSetup:
@@ -76,6 +97,11 @@ class ChannelSetup:
                           f"{', '.join(map(str, bad))} with scale/offset "
                           f"{', '.join(f'{st.scale[i]:g}/{st.offset[i]:g}' for i in bad)}, not finite "
                           "(and a scale not 0): the previous STATUS is kept", self.clock.stamp_ns(f.t0_unwrapped))
+            return None, False
+        out_of_range = status_out_of_range(st)
+        if out_of_range:
+            self.log.emit("decode_error", None, f"STATUS at byte {f.offset} ignored: {out_of_range}: the previous "
+                          "STATUS is kept", self.clock.stamp_ns(f.t0_unwrapped))
             return None, False
         old = self.status
         return st, old is None or any(getattr(st, k) != getattr(old, k) for k in SETUP_FIELDS)

@@ -22,7 +22,7 @@ from cmsensord.config import Config
 from cmsensord.dsp.rms import physical_rms, rows_physical
 from cmsensord.frame_batch import FrameBatch, Pending
 from cmsensord.monitor.events import Event
-from cmsensord.protocol import Frame, Status
+from cmsensord.protocol import COUNT_MAX, Frame, Status
 
 #: a field of every frame of a batch, in one C-level pass (map) rather than a generator
 _CHAN, _PAYLOAD, _T0 = attrgetter("chan"), attrgetter("payload"), attrgetter("t0_unwrapped")
@@ -205,6 +205,15 @@ class RawInput:
             return None, events
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
         counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
+        if counts.max() > COUNT_MAX:            # not 12-bit: a frame the protocol does not allow
+            keep = counts.max(axis=1) <= COUNT_MAX
+            events += _over_12_bits(counts, t0, chan, keep, stamp_ns)
+            counts, t0, chan = counts[keep], t0[keep], chan[keep]
+            n = len(t0)
+            if not n:
+                return None, events
+            single = bool((t0[1:] > t0[:-1]).all())
+            chl = None if chl is None else chan.tolist()
         step = None if single else t0[1:] - t0[:-1]
         if step is None:                        # one frame a block, in order (one channel)
             blocks, row = t0.copy(), np.arange(n)
@@ -255,6 +264,15 @@ class RawInput:
             if ch.offset is not None:
                 offset[ch.index] = ch.offset
         return scale, offset
+
+
+def _over_12_bits(counts: np.ndarray, t0: np.ndarray, chan: np.ndarray, keep: np.ndarray,
+                  stamp_ns: Callable[[int], int] | None) -> list[Event]:
+    """A decode_error for each RAW frame with a count past the ADC's 12 bits (skipped)."""
+    return [Event("decode_error", None, f"RAW frame of channel {int(chan[i])} at t0 {int(t0[i])} skipped: count "
+                  f"{int(counts[i].max())} past the ADC's 12 bits (0..{COUNT_MAX})",
+                  stamp_ns(int(t0[i])) if stamp_ns else None)
+            for i in np.flatnonzero(~keep)]
 
 
 def block_starts(t0: list[int], chan: list[int]) -> list[int]:
