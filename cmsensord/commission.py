@@ -83,7 +83,7 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
         alert = None if mon.severity == "paper" else mon.level_alert
         try:
             model = learn_healthy(obs.y[:, c], f_r=f_r, period=period, n=mon.n, window=mon.window,
-                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy, level_alert=alert)
+                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy, level_alert=alert, c=mon.c)
         except ValueError as exc:
             raise CmsensordError(f"calibrate: channel {name}: {exc}") from None
         results.append(ChannelResult(name, obs.indices[c], f_r, source, model, period / obs.rate_hz, alert))
@@ -132,6 +132,8 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} ({margin}); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))
+        if m.flagged:
+            lines.append(_r1_line(r, obs))
         if m.learned < FEW_DECISIONS:
             lines.append(f"{r.name}: warning: learned from {m.learned} decision(s) only: the healthy fluctuation "
                          "of so few is a guess; a longer healthy period (an hour of normal running) learns it better")
@@ -153,6 +155,19 @@ def _by_what(r: ChannelResult) -> str:
     if r.level_alert is None or not r.model.any_flagged:
         return ""
     return f" ({r.model.flagged} by R_1, {r.model.level_flagged} by their level >= {r.level_alert:g} x baseline)"
+
+
+def _r1_line(r: ChannelResult, obs: Observations) -> str:
+    """Where the decisions R_1 flags lie in the healthy period, and how many of them are in its
+    run-in: left out of the learning, but graded by the monitor (a replay flags them too)."""
+    m, dec = r.model, r.decision_s
+    first, last = obs.start_s + m.r1_first * dec, obs.start_s + (m.r1_last + 1) * dec
+    line = f"{r.name}: R_1 flags {m.flagged} decision(s) of the healthy period, in {first:.1f}-{last:.1f} board s"
+    if m.runin_flagged:
+        a, b = obs.start_s + dec, obs.start_s + (m.runin_periods + 1) * dec
+        line += (f"; {m.runin_flagged} of them in its run-in ({a:.1f}-{b:.1f} board s), which is not learned "
+                 "from but is graded all the same")
+    return line
 
 
 def _level_warning(r: ChannelResult, obs: Observations) -> str:

@@ -1,0 +1,60 @@
+"""`cmsensord calibrate` as a commissioning engineer uses it on an imported recording: what it
+says of the healthy period is what the replay with its site file then does, the channels and
+speed of the base configuration are the ones it learns with, and the site file is one for the
+live board."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmsensord.sinks.mcap_sink import read_messages
+from processes import cmsensord
+
+
+def _import(src: Path, *args: str) -> Path:
+    cap = src.with_suffix(".bin")
+    p = cmsensord("import", str(src), *args, "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    return cap
+
+
+def _severity(out_dir: Path, channel: str) -> list[tuple[float, dict]]:
+    """(board second at the decision's end, its severity message) of a replay's log."""
+    msgs = read_messages(next(out_dir.glob("*.mcap")))
+    sev = [(t, m) for topic, t, m in msgs if topic == f"/cm/{channel}/severity"]
+    t0 = sev[0][0] - 1_000_000_000          # the first decision ends 1 s after the first block
+    return [(round((t - t0) / 1e9, 3), m) for t, m in sev]
+
+
+@pytest.fixture(scope="module")
+def run_in(tmp_path_factory) -> Path:
+    """60 s of a bearing (80 blocks/s) whose first 15 s fluctuate more (a run-in), with one
+    rough second (6-7 s) in them."""
+    d = tmp_path_factory.mktemp("runin")
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal(60 * 5120).reshape(-1, 64)
+    amp = np.ones(x.shape[0])
+    amp[:80 * 15] *= 1 + 0.2 * rng.standard_normal(80 * 15).clip(-3, 3)
+    amp[80 * 6:80 * 7] *= 1 + 0.5 * rng.standard_normal(80).clip(-1.5, 1.5)
+    np.save(d / "runin.npy", (0.5 * x * amp[:, None]).reshape(-1).astype(np.float32))
+    return _import(d / "runin.npy", "--fs", "5120", "--block-len", "64", "--unit", "g", "--names", "de")
+
+
+def test_the_run_in_decisions_are_checked_as_the_replay_grades_them(run_in, tmp_path):
+    """The run-in is left out of the learning, but the monitor grades it: calibrate's margin and
+    its count of flagged healthy decisions take it in (before, 8 outliers at most and 0 flagged,
+    while the replay flagged 6-15 s), and say where they are; the replay flags exactly those."""
+    site = tmp_path / "site.yaml"
+    p = cmsensord("calibrate", str(run_in), "--rpm", "1500", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert ("de: highest outlier count per decision on the healthy period at R_1: 37 against f_r 25 (margin "
+            "0.68x); 9 healthy decision(s) would be flagged (9 by R_1, 0 by their level >= 2 x baseline)\n"
+            "de: R_1 flags 9 decision(s) of the healthy period, in 6.0-15.0 board s; 9 of them in its run-in "
+            "(1.0-15.0 board s), which is not learned from but is graded all the same\n") in p.stdout
+    p = cmsensord("replay", str(run_in), "--config", str(site), "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    flagged = [t for t, m in _severity(tmp_path / "logs", "de") if m["severity_index"] > 0]
+    assert flagged == [float(t) for t in range(7, 16)]
