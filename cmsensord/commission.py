@@ -46,11 +46,15 @@ class ChannelResult:
 
 
 def _f_r(obs: Observations, c: int, cfg: Config, rpm: float | None) -> tuple[float, str]:
-    """f_r of channel c: --rpm, else the tacho's mean speed, else the capture's rpm, else the config."""
+    """f_r of channel c: --rpm, else the tacho's mean speed, else the configuration's
+    indicators.rpm (the indicators' speed too), else the capture's rpm, else the configuration's
+    monitor.f_r."""
     if rpm is not None:
         return rpm / 60.0, f"--rpm {rpm:g}"
     if obs.shaft_hz is not None and np.isfinite(obs.shaft_hz):
         return float(obs.shaft_hz), "tacho"
+    if cfg.indicators.rpm is not None:
+        return cfg.indicators.rpm / 60.0, f"indicators.rpm {cfg.indicators.rpm:g}"
     if obs.rpm is not None:
         return obs.rpm / 60.0, f"capture rpm {obs.rpm:g}"
     return float(_monitor(cfg, obs.names[c]).f_r), "config"
@@ -106,6 +110,11 @@ def _long_enough(obs: Observations, c: int, period: int) -> None:
             f"filters' transient); give a longer one (--to {obs.start_s + need:g} or later)")
 
 
+def _from_word(source: str) -> str:
+    """The table's word for where f_r came from: --rpm, tacho, indicators, capture, config."""
+    return source.split()[0].split(".")[0]
+
+
 def _g(x: float) -> str:
     return f"{x:.4g}"
 
@@ -121,7 +130,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         m = r.model
         per = obs.period(1.0) / obs.rate_hz
         lines.append(
-            f"{r.name:<{w}} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
+            f"{r.name:<{w}} {r.f_r:>7.3f} {_from_word(r.f_r_source):<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
             f"{m.runin_periods * per:>8.0f} {m.learned * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
             f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.any_flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
@@ -144,8 +153,11 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
             lines.append(_level_warning(r, obs))
         if r.f_r_source == "config":
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
-                         "machine's shaft speed (no tacho, no --rpm, no rpm in the capture); if it turns at "
-                         "another speed, give --rpm RPM")
+                         "machine's shaft speed (no tacho, no --rpm, no indicators.rpm, no rpm in the capture); "
+                         "if it turns at another speed, give --rpm RPM")
+        elif r.f_r_source.startswith("indicators.rpm"):
+            lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz from the configuration's {r.f_r_source} (no tacho, no "
+                         "--rpm): the decisions at the speed of the indicators' bearing lines and bands")
     every = _every_channels_bound(results, obs)
     return "\n".join(lines + ([every] if every else []))
 

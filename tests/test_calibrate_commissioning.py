@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from cmsensord.sinks.mcap_sink import read_messages
 from processes import cmsensord
@@ -58,3 +59,24 @@ def test_the_run_in_decisions_are_checked_as_the_replay_grades_them(run_in, tmp_
     assert p.returncode == 0, p.stderr
     flagged = [t for t, m in _severity(tmp_path / "logs", "de") if m["severity_index"] > 0]
     assert flagged == [float(t) for t in range(7, 16)]
+
+
+def test_a_configured_indicators_rpm_is_the_shaft_speed_and_the_line_says_so(run_in, tmp_path):
+    """No tacho, no --rpm, no speed in the capture: indicators.rpm of --config is f_r (before, the
+    default monitor.f_r 28.66 Hz, "nothing gave this machine's shaft speed"), so the site file
+    grades at the speed its bearing lines are computed at; --rpm still comes first."""
+    base = tmp_path / "base.yaml"
+    base.write_text("indicators:\n  rpm: 2000\n")
+    site = tmp_path / "site.yaml"
+    p = cmsensord("calibrate", str(run_in), "--config", str(base), "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "\nde            33.333 indicators     4.904 " in p.stdout
+    assert ("de: f_r 33.33 Hz from the configuration's indicators.rpm 2000 (no tacho, no --rpm): the decisions "
+            "at the speed of the indicators' bearing lines and bands\n") in p.stdout
+    assert "monitor.f_r" not in p.stdout
+    cfg = yaml.safe_load(site.read_text())
+    assert (cfg["indicators"]["rpm"], cfg["channels"][0]["f_r"]) == (2000, 33.33)
+    assert "    f_r: 33.33                  # indicators.rpm 2000\n" in site.read_text()
+    p = cmsensord("calibrate", str(run_in), "--config", str(base), "--rpm", "1500", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert "\nde            25.000 --rpm          4.904 " in p.stdout and "indicators.rpm" not in p.stdout
