@@ -262,19 +262,27 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
     return "\n".join(out + _alarms_yaml(obs, base_alarms)) + "\n"
 
 
-_SETTING_WHY = {"interval_s": "a record within each of the capture's snapshots (their common length)",
-                "rpm": "the speed the import read from the recording (no tacho in the capture)"}
+_SETTING_WHY = {"rpm": "the speed the import read from the recording (no tacho in the capture)"}
 
 
 def _indicators_yaml(settings: dict[str, float], base: dict[str, Any]) -> list[str]:
-    """The ``indicators`` settings the capture's sidecar gave (``settings``), with why; merged
-    into BASE's own ``indicators`` section (``base``, changed) when it has one."""
-    if not settings:
-        return []
+    """The ``indicators`` settings the capture's sidecar gave (``settings``) that are the
+    machine's, with why; merged into BASE's own ``indicators`` section (``base``, changed) when
+    it has one.  The record length of a capture of snapshots is the capture's, not the machine's:
+    it is not written (the live board's stream is continuous; a replay of the capture takes it
+    from the sidecar again), a comment says so."""
+    kept = {k: v for k, v in settings.items() if k in _SETTING_WHY}
+    out = []
+    if "interval_s" in settings:
+        out += [f"# indicators.interval_s is not set: the {settings['interval_s']:g}-s records of the capture's "
+                "snapshots are its own (a replay", "# of it takes them from its sidecar); the live board's "
+                "continuous stream keeps the configured length."]
+    if not kept:
+        return out
     if isinstance(base.get("indicators"), dict):
-        base["indicators"] = {**base["indicators"], **settings}
-        return [f"# indicators.{k}: {_SETTING_WHY[k]}" for k in settings]
-    return ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {_SETTING_WHY[k]}" for k, v in settings.items()]
+        base["indicators"] = {**base["indicators"], **kept}
+        return out + [f"# indicators.{k}: {_SETTING_WHY[k]}" for k in kept]
+    return out + ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {_SETTING_WHY[k]}" for k, v in kept.items()]
 
 
 def _alarms_yaml(obs: Observations, base_alarms: Any) -> list[str]:
@@ -334,6 +342,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(format_table(results, obs))
     for note in obs.notes:
         print(f"note: {note}")
+    if "interval_s" in obs.settings:
+        every = obs.settings["interval_s"]
+        print(f"note: {out.name} does not carry indicators.interval_s {every:g} (the capture's snapshots'): the live "
+              f"board's continuous stream keeps records of {cfg.indicators.interval_s:g} s; a replay of this capture "
+              f"takes {every:g} s from its sidecar again")
     where = span_line(obs.meta, obs.start_s, obs.end_s)
     if where:
         print(f"healthy period {where}")

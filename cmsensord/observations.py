@@ -167,7 +167,10 @@ def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float |
 def alarm_events(capture: str | Path, cfg: Config, end_s: float) -> list[tuple[float, dict]]:
     """The alarm events (``alarm_alert``, ``alarm_danger``, ``alarm_clear``) that a replay of
     ``capture`` with ``cfg`` (a site configuration: its channels named) writes up to ``end_s``
-    board seconds, each with its board second, in order."""
+    board seconds, each with its board second, in order; with the indicator settings the
+    capture's sidecar gives, as ``cmsensord replay`` of it runs
+    (:func:`~cmsensord.importing.capture_settings.capture_settings`)."""
+    cfg, _, _ = capture_settings(cfg, sidecar(capture))
     proc, sink = _replay(capture, cfg, False, end_s, finish=True, what="its alarms")
     if proc.clock.slot0_t0 is None:
         return []

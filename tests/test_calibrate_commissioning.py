@@ -80,3 +80,35 @@ def test_a_configured_indicators_rpm_is_the_shaft_speed_and_the_line_says_so(run
     p = cmsensord("calibrate", str(run_in), "--config", str(base), "--rpm", "1500", "--out", str(site))
     assert p.returncode == 0, p.stderr
     assert "\nde            25.000 --rpm          4.904 " in p.stdout and "indicators.rpm" not in p.stdout
+
+
+def _records(out_dir: Path, channel: str) -> list[dict]:
+    return [m for topic, _, m in read_messages(next(out_dir.glob("*.mcap"))) if topic == f"/cm/{channel}/indicators"]
+
+
+def test_the_site_file_of_snapshots_leaves_their_record_length_to_the_capture(tmp_path):
+    """FEMTO-like 0.1-s snapshots: calibrate learns with one record a snapshot, but the site file
+    does not carry indicators.interval_s 0.1 (before, it did, and the live daemon on the port
+    wrote 10 records a second, its velocity read high); a replay of the capture takes 0.1 s from
+    its sidecar again, a continuous stream gets the configured 1-s records."""
+    x = np.random.default_rng(6).standard_normal((100, 2560, 1)).astype(np.float32)
+    np.savez(tmp_path / "snaps.npz", acc=x, fs=25600.0, t_s=np.arange(100) * 10.0)
+    snaps = _import(tmp_path / "snaps.npz", "--unit", "g", "--names", "de")
+    np.save(tmp_path / "stream.npy", x.reshape(-1))
+    stream = _import(tmp_path / "stream.npy", "--fs", "25600", "--unit", "g", "--names", "de")
+    site = tmp_path / "site.yaml"
+    p = cmsensord("calibrate", str(snaps), "--rpm", "1800", "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert ("note: site.yaml does not carry indicators.interval_s 0.1 (the capture's snapshots'): the live board's "
+            "continuous stream keeps records of 1 s; a replay of this capture takes 0.1 s from its sidecar again\n"
+            ) in p.stdout
+    text = site.read_text()
+    assert "interval_s" not in (yaml.safe_load(text).get("indicators") or {})
+    assert ("# indicators.interval_s is not set: the 0.1-s records of the capture's snapshots are its own (a replay\n"
+            "# of it takes them from its sidecar); the live board's continuous stream keeps the configured length.\n"
+            ) in text
+    for cap, every in ((snaps, 0.1), (stream, 1.0)):
+        out = tmp_path / f"logs_{cap.stem}"
+        p = cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
+        assert p.returncode == 0, p.stderr
+        assert {m["interval_s"] for m in _records(out, "de")} == {every}
