@@ -22,6 +22,7 @@ import yaml
 
 from cmsensord.argtypes import board_time, positive
 from cmsensord.config import Config, ConfigError, load_config
+from cmsensord.config.channel_refs import channel_refs_error
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor.alarms import order_rules
@@ -337,9 +338,12 @@ def run_calibrate(args: argparse.Namespace) -> int:
     base = yaml.safe_load(Path(args.config).read_text(encoding="utf-8")) if args.config else None
     auto = not (isinstance(base, dict) and base.get("channels"))
     obs = read_observations(args.capture, cfg, auto_channels=auto, from_s=args.from_s, to_s=args.to_s)
+    absent = "" if auto else _absent_channels(cfg, obs, args.config, Path(args.capture).name, out.name)
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
     print(format_table(results, obs))
+    if absent:
+        print(absent)
     for note in obs.notes:
         print(f"note: {note}")
     if "interval_s" in obs.settings:
@@ -365,6 +369,28 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote {out}: run `cmsensord replay CAPTURE --config {out}` or `cmsensord --config {out}`",
           file=sys.stderr)
     return 0
+
+
+def _absent_channels(cfg: Config, obs: Observations, base_path: str, capture: str, out: str) -> str:
+    """The warning line on the channels ``cfg`` (BASE.yaml at ``base_path``) lists that the
+    capture does not hold ("" when it holds them all): not learned, so not in the site file.  A
+    rule or bearing of BASE naming one of them (or a rule's vote that needs them) is a
+    :class:`ConfigError` naming BASE: the site file could not monitor it."""
+    absent = [ch for ch in cfg.channels if ch.name not in obs.names]
+    if not absent:
+        return ""
+    held = f"its {len(obs.names)} channel(s): {', '.join(obs.names)}"
+    found = channel_refs_error(cfg, [ch for ch in cfg.channels if ch.name in obs.names])
+    if found is not None:
+        path, reason, value = found
+        names = ", ".join(ch.name for ch in absent)
+        reason = (f"names {value}, a channel {capture} does not have ({held})" if value in names.split(", ") else
+                  f"{reason}: {capture} does not have channel(s) {names} ({held})")
+        raise ConfigError(base_path, path, f"{reason}; the site file holds the channels calibrate learns from the "
+                          f"capture: calibrate a capture that holds {names}, or leave {names} out of this file")
+    listed = ", ".join(f"{ch.name} (index {ch.index})" for ch in absent)
+    return (f"warning: {base_path} lists channel(s) {listed} that {capture} does not have ({held}): not learned, "
+            f"and left out of {out}: a daemon with it does not monitor them")
 
 
 def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:

@@ -112,3 +112,40 @@ def test_the_site_file_of_snapshots_leaves_their_record_length_to_the_capture(tm
         p = cmsensord("replay", str(cap), "--config", str(site), "--out", str(out))
         assert p.returncode == 0, p.stderr
         assert {m["interval_s"] for m in _records(out, "de")} == {every}
+
+
+@pytest.fixture(scope="module")
+def two_channels(tmp_path_factory) -> Path:
+    """20 s of two bearings (80 blocks/s), imported."""
+    d = tmp_path_factory.mktemp("two")
+    np.save(d / "two.npy", np.random.default_rng(7).standard_normal((20 * 5120, 2)).astype(np.float32))
+    return _import(d / "two.npy", "--fs", "5120", "--block-len", "64", "--unit", "g")
+
+
+def test_a_configured_channel_the_capture_does_not_hold_is_said(two_channels, tmp_path):
+    """BASE lists de, nde and fan; the capture holds two channels: calibrate says fan is not
+    learned and not in the site file (before, nothing was said), and the replay warns that it is
+    not monitored (before, an INFO event); a rule naming fan is an error naming BASE (before, one
+    naming calibrate's own temporary file and saying the channel was not defined)."""
+    base = tmp_path / "base.yaml"
+    base.write_text("channels:\n  - name: de\n  - name: nde\n  - name: fan\n")
+    site = tmp_path / "site.yaml"
+    p = cmsensord("calibrate", str(two_channels), "--rpm", "1500", "--config", str(base), "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    assert (f"\nwarning: {base} lists channel(s) fan (index 2) that two.bin does not have (its 2 channel(s): de, "
+            "nde): not learned, and left out of site.yaml: a daemon with it does not monitor them\n") in p.stdout
+    assert [ch["name"] for ch in yaml.safe_load(site.read_text())["channels"]] == ["de", "nde"]
+    p = cmsensord("replay", str(two_channels), "--config", str(base), "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    assert ("WARNING config: board sends 2 channel(s); configured channel(s) fan (index 2) not in the stream: not "
+            "monitored, their alarm rules and bearings see no value\n") in p.stderr
+
+    base.write_text("channels:\n  - name: de\n  - name: nde\n  - name: fan\nalarms:\n  rules:\n"
+                    "    - {name: fanv, indicator: velocity_rms_mm_s, channels: [fan], alert_zone: C}\n")
+    site.unlink()
+    p = cmsensord("calibrate", str(two_channels), "--rpm", "1500", "--config", str(base), "--out", str(site))
+    assert (p.returncode, p.stderr) == (78, (
+        f"cmsensord: configuration error: {base}: alarms.rules[0].channels: names fan, a channel two.bin does not "
+        "have (its 2 channel(s): de, nde); the site file holds the channels calibrate learns from the capture: "
+        "calibrate a capture that holds fan, or leave fan out of this file\n"))
+    assert not site.exists() and not (tmp_path / "site.yaml.part").exists()
