@@ -340,8 +340,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
     obs = read_observations(args.capture, cfg, auto_channels=auto, from_s=args.from_s, to_s=args.to_s)
     absent = "" if auto else _absent_channels(cfg, obs, args.config, Path(args.capture).name, out.name)
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
+    faulty, faulty_said = _faulty_matches(args.faulty, faulty, obs)
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
     print(format_table(results, obs))
+    for line in faulty_said + _faulty_unused(args.faulty, faulty, results):
+        print(line)
     if absent:
         print(absent)
     for note in obs.notes:
@@ -369,6 +372,40 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote {out}: run `cmsensord replay CAPTURE --config {out}` or `cmsensord --config {out}`",
           file=sys.stderr)
     return 0
+
+
+def _faulty_matches(path: str | None, faulty: Observations | None,
+                    obs: Observations) -> tuple[Observations | None, list[str]]:
+    """The ``--faulty`` capture to learn R_max from, or None when it is sampled otherwise than
+    the healthy one (another fs or block rate: its outlier counts per decision mean another
+    thing), with a line on what of it is not used (that, or the channels it lacks)."""
+    if faulty is None or path is None:
+        return None, []
+    name, span = Path(path).name, f"R_max is R_n = {SPAN:g} x R_1"
+    if (faulty.fs, faulty.rate_hz) != (obs.fs, obs.rate_hz):
+        return None, [f"warning: --faulty {name} is not used: it is sampled at {faulty.fs:g} Hz, {faulty.rate_hz:.4g} "
+                      f"blocks/s, the healthy capture at {obs.fs:g} Hz, {obs.rate_hz:.4g} blocks/s (another machine "
+                      f"or set-up?): {span}"]
+    lacking = [n for n in obs.names if n not in faulty.names]
+    if lacking:
+        return faulty, [f"warning: --faulty {name} has no channel {', '.join(lacking)} (its channels: "
+                        f"{', '.join(faulty.names)}): their {span}"]
+    return faulty, []
+
+
+def _faulty_unused(path: str | None, faulty: Observations | None, results: list[ChannelResult]) -> list[str]:
+    """A line per channel whose R_max the ``--faulty`` capture, which has it, did not change, with why."""
+    if faulty is None or path is None:
+        return []
+    lines = []
+    for r in results:
+        m = r.model
+        if r.name not in faulty.names or m.r_max_rule == "faulty":
+            continue
+        why = (f"no R flags half of its decisions (at f_r {r.f_r:.3g})" if not np.isfinite(m.faulty_r) else
+               f"the largest R that flags half of its decisions, {_g(m.faulty_r)}, is not above R_1 {_g(m.r_1)}")
+        lines.append(f"{r.name}: --faulty {Path(path).name} did not change R_max: {why}; R_n = {SPAN:g} x R_1")
+    return lines
 
 
 def _absent_channels(cfg: Config, obs: Observations, base_path: str, capture: str, out: str) -> str:

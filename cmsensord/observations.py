@@ -51,6 +51,7 @@ class Observations:
     meta: dict = field(default_factory=dict)    # the import's sidecar ({}: not an import)
     notes: tuple[str, ...] = ()   # what the command says of the window (--to past the end, missing data)
     settings: dict[str, float] = field(default_factory=dict)  # indicators.* the sidecar gave (capture_settings)
+    fs: float = 0.0               # the board's samples per second
 
     @property
     def end_s(self) -> float:
@@ -120,7 +121,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s),
-                        settings=settings)
+                        settings=settings, fs=float(proc.fs))
 
 
 def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:

@@ -149,3 +149,40 @@ def test_a_configured_channel_the_capture_does_not_hold_is_said(two_channels, tm
         "have (its 2 channel(s): de, nde); the site file holds the channels calibrate learns from the capture: "
         "calibrate a capture that holds fan, or leave fan out of this file\n"))
     assert not site.exists() and not (tmp_path / "site.yaml.part").exists()
+
+
+def test_a_faulty_capture_that_does_not_fit_or_does_not_change_r_max_is_said(two_channels, tmp_path):
+    """--faulty of another set-up (another fs and block rate) is not used, one that lacks the
+    channels leaves them R_n = 4 x R_1, and one that flags nothing above R_1 changes nothing:
+    each said in one line (before, all accepted without a word); the site file's R_max is then
+    the one learned without it."""
+    rng = np.random.default_rng(8)
+    np.save(tmp_path / "other.npy", rng.standard_normal((10 * 25600, 2)).astype(np.float32))
+    np.save(tmp_path / "calm.npy", rng.standard_normal((10 * 5120, 2)).astype(np.float32))
+    other = _import(tmp_path / "other.npy", "--fs", "25600", "--unit", "g")
+    calm = _import(tmp_path / "calm.npy", "--fs", "5120", "--block-len", "64", "--unit", "g")
+    named = tmp_path / "named.bin"
+    p = cmsensord("import", str(tmp_path / "calm.npy"), "--fs", "5120", "--block-len", "64", "--unit", "g",
+                  "--names", "de,nde", "--out", str(named))
+    assert p.returncode == 0, p.stderr
+
+    def calibrate(*faulty: str) -> tuple[list[str], list[float]]:
+        site = tmp_path / "site.yaml"
+        p = cmsensord("calibrate", str(two_channels), "--rpm", "1500", *faulty, "--out", str(site))
+        assert p.returncode == 0, p.stderr
+        said = [ln for ln in p.stdout.splitlines() if "faulty" in ln and not ln.startswith("R in units")]
+        return said, [ch["r_max"] for ch in yaml.safe_load(site.read_text())["channels"]]
+
+    plain = calibrate()
+    assert plain[0] == []
+    assert calibrate("--faulty", str(other)) == ([
+        "warning: --faulty other.bin is not used: it is sampled at 25600 Hz, 100 blocks/s, the healthy capture at "
+        "5120 Hz, 80 blocks/s (another machine or set-up?): R_max is R_n = 4 x R_1"], plain[1])
+    assert calibrate("--faulty", str(named)) == ([
+        "warning: --faulty named.bin has no channel ch_0, ch_1 (its channels: de, nde): their R_max is R_n = 4 x "
+        "R_1"], plain[1])
+    said, r_max = calibrate("--faulty", str(calm))
+    assert r_max == plain[1]
+    assert said == [f"{ch}: --faulty calm.bin did not change R_max: the largest R that flags half of its "
+                    f"decisions, {r_f}, is not above R_1 {r_1}; R_n = 4 x R_1"
+                    for ch, r_f, r_1 in (("ch_0", "0.0001995", "0.001265"), ("ch_1", "0.0001778", "0.001787"))]
