@@ -22,6 +22,7 @@ import yaml
 
 from cmsensord.argtypes import board_time, positive
 from cmsensord.config import Config, ConfigError, load_config
+from cmsensord.config.channel_refs import channel_refs_error
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor.alarms import order_rules
@@ -47,11 +48,15 @@ class ChannelResult:
 
 
 def _f_r(obs: Observations, c: int, cfg: Config, rpm: float | None) -> tuple[float, str]:
-    """f_r of channel c: --rpm, else the tacho's mean speed, else the capture's rpm, else the config."""
+    """f_r of channel c: --rpm, else the tacho's mean speed, else the configuration's
+    indicators.rpm (the indicators' speed too), else the capture's rpm, else the configuration's
+    monitor.f_r."""
     if rpm is not None:
         return rpm / 60.0, f"--rpm {rpm:g}"
     if obs.shaft_hz is not None and np.isfinite(obs.shaft_hz):
         return float(obs.shaft_hz), "tacho"
+    if cfg.indicators.rpm is not None:
+        return cfg.indicators.rpm / 60.0, f"indicators.rpm {cfg.indicators.rpm:g}"
     if obs.rpm is not None:
         return obs.rpm / 60.0, f"capture rpm {obs.rpm:g}"
     return float(_monitor(cfg, obs.names[c]).f_r), "config"
@@ -84,7 +89,7 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
         alert = None if mon.severity == "paper" else mon.level_alert
         try:
             model = learn_healthy(obs.y[:, c], f_r=f_r, period=period, n=mon.n, window=mon.window,
-                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy, level_alert=alert)
+                                  z_c=mon.z_c, p0=mon.p0, q0=mon.q0, faulty=fy, level_alert=alert, c=mon.c)
         except ValueError as exc:
             raise CmsensordError(f"calibrate: channel {name}: {exc}") from None
         results.append(ChannelResult(name, obs.indices[c], f_r, source, model, period / obs.rate_hz, alert))
@@ -107,6 +112,11 @@ def _long_enough(obs: Observations, c: int, period: int) -> None:
             f"filters' transient); give a longer one (--to {obs.start_s + need:g} or later)")
 
 
+def _from_word(source: str) -> str:
+    """The table's word for where f_r came from: --rpm, tacho, indicators, capture, config."""
+    return source.split()[0].split(".")[0]
+
+
 def _g(x: float) -> str:
     return f"{x:.4g}"
 
@@ -122,7 +132,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         m = r.model
         per = obs.period(1.0) / obs.rate_hz
         lines.append(
-            f"{r.name:<{w}} {r.f_r:>7.3f} {r.f_r_source.split()[0]:<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
+            f"{r.name:<{w}} {r.f_r:>7.3f} {_from_word(r.f_r_source):<10} {_g(m.baseline):>9} {m.spread:>7.3f} "
             f"{m.runin_periods * per:>8.0f} {m.learned * per:>9.0f} {_g(m.healthy_r):>9} {_g(m.r_1):>9} "
             f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.any_flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
@@ -133,6 +143,8 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} ({margin}); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))
+        if m.flagged:
+            lines.append(_r1_line(r, obs))
         if m.learned < FEW_DECISIONS:
             lines.append(f"{r.name}: warning: learned from {m.learned} decision(s) only: the healthy fluctuation "
                          "of so few is a guess; a longer healthy period (an hour of normal running) learns it better")
@@ -143,8 +155,11 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
             lines.append(_level_warning(r, obs))
         if r.f_r_source == "config":
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
-                         "machine's shaft speed (no tacho, no --rpm, no rpm in the capture); if it turns at "
-                         "another speed, give --rpm RPM")
+                         "machine's shaft speed (no tacho, no --rpm, no indicators.rpm, no rpm in the capture); "
+                         "if it turns at another speed, give --rpm RPM")
+        elif r.f_r_source.startswith("indicators.rpm"):
+            lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz from the configuration's {r.f_r_source} (no tacho, no "
+                         "--rpm): the decisions at the speed of the indicators' bearing lines and bands")
     every = _every_channels_bound(results, obs)
     return "\n".join(lines + ([every] if every else []))
 
@@ -154,6 +169,19 @@ def _by_what(r: ChannelResult) -> str:
     if r.level_alert is None or not r.model.any_flagged:
         return ""
     return f" ({r.model.flagged} by R_1, {r.model.level_flagged} by their level >= {r.level_alert:g} x baseline)"
+
+
+def _r1_line(r: ChannelResult, obs: Observations) -> str:
+    """Where the decisions R_1 flags lie in the healthy period, and how many of them are in its
+    run-in: left out of the learning, but graded by the monitor (a replay flags them too)."""
+    m, dec = r.model, r.decision_s
+    first, last = obs.start_s + m.r1_first * dec, obs.start_s + (m.r1_last + 1) * dec
+    line = f"{r.name}: R_1 flags {m.flagged} decision(s) of the healthy period, in {first:.1f}-{last:.1f} board s"
+    if m.runin_flagged:
+        a, b = obs.start_s + dec, obs.start_s + (m.runin_periods + 1) * dec
+        line += (f"; {m.runin_flagged} of them in its run-in ({a:.1f}-{b:.1f} board s), which is not learned "
+                 "from but is graded all the same")
+    return line
 
 
 def _level_warning(r: ChannelResult, obs: Observations) -> str:
@@ -236,19 +264,27 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
     return "\n".join(out + _alarms_yaml(obs, base_alarms)) + "\n"
 
 
-_SETTING_WHY = {"interval_s": "a record within each of the capture's snapshots (their common length)",
-                "rpm": "the speed the import read from the recording (no tacho in the capture)"}
+_SETTING_WHY = {"rpm": "the speed the import read from the recording (no tacho in the capture)"}
 
 
 def _indicators_yaml(settings: dict[str, float], base: dict[str, Any]) -> list[str]:
-    """The ``indicators`` settings the capture's sidecar gave (``settings``), with why; merged
-    into BASE's own ``indicators`` section (``base``, changed) when it has one."""
-    if not settings:
-        return []
+    """The ``indicators`` settings the capture's sidecar gave (``settings``) that are the
+    machine's, with why; merged into BASE's own ``indicators`` section (``base``, changed) when
+    it has one.  The record length of a capture of snapshots is the capture's, not the machine's:
+    it is not written (the live board's stream is continuous; a replay of the capture takes it
+    from the sidecar again), a comment says so."""
+    kept = {k: v for k, v in settings.items() if k in _SETTING_WHY}
+    out = []
+    if "interval_s" in settings:
+        out += [f"# indicators.interval_s is not set: the {settings['interval_s']:g}-s records of the capture's "
+                "snapshots are its own (a replay", "# of it takes them from its sidecar); the live board's "
+                "continuous stream keeps the configured length."]
+    if not kept:
+        return out
     if isinstance(base.get("indicators"), dict):
-        base["indicators"] = {**base["indicators"], **settings}
-        return [f"# indicators.{k}: {_SETTING_WHY[k]}" for k in settings]
-    return ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {_SETTING_WHY[k]}" for k, v in settings.items()]
+        base["indicators"] = {**base["indicators"], **kept}
+        return out + [f"# indicators.{k}: {_SETTING_WHY[k]}" for k in kept]
+    return out + ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {_SETTING_WHY[k]}" for k, v in kept.items()]
 
 
 def _alarms_yaml(obs: Observations, base_alarms: Any) -> list[str]:
@@ -306,11 +342,22 @@ def run_calibrate(args: argparse.Namespace) -> int:
     base = yaml.safe_load(Path(args.config).read_text(encoding="utf-8")) if args.config else None
     auto = not (isinstance(base, dict) and base.get("channels"))
     obs = read_observations(args.capture, cfg, auto_channels=auto, from_s=args.from_s, to_s=args.to_s)
+    absent = "" if auto else _absent_channels(cfg, obs, args.config, Path(args.capture).name, out.name)
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
+    faulty, faulty_said = _faulty_matches(args.faulty, faulty, obs)
     results = calibrate(obs, cfg, faulty=faulty, rpm=args.rpm)
     print(format_table(results, obs))
+    for line in faulty_said + _faulty_unused(args.faulty, faulty, results):
+        print(line)
+    if absent:
+        print(absent)
     for note in obs.notes:
         print(f"note: {note}")
+    if "interval_s" in obs.settings:
+        every = obs.settings["interval_s"]
+        print(f"note: {out.name} does not carry indicators.interval_s {every:g} (the capture's snapshots'): the live "
+              f"board's continuous stream keeps records of {cfg.indicators.interval_s:g} s; a replay of this capture "
+              f"takes {every:g} s from its sidecar again")
     where = span_line(obs.meta, obs.start_s, obs.end_s)
     if where:
         print(f"healthy period {where}")
@@ -329,6 +376,62 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote {out}: run `cmsensord replay CAPTURE --config {out}` or `cmsensord --config {out}`",
           file=sys.stderr)
     return 0
+
+
+def _faulty_matches(path: str | None, faulty: Observations | None,
+                    obs: Observations) -> tuple[Observations | None, list[str]]:
+    """The ``--faulty`` capture to learn R_max from, or None when it is sampled otherwise than
+    the healthy one (another fs or block rate: its outlier counts per decision mean another
+    thing), with a line on what of it is not used (that, or the channels it lacks)."""
+    if faulty is None or path is None:
+        return None, []
+    name, span = Path(path).name, f"R_max is R_n = {SPAN:g} x R_1"
+    if (faulty.fs, faulty.rate_hz) != (obs.fs, obs.rate_hz):
+        return None, [f"warning: --faulty {name} is not used: it is sampled at {faulty.fs:g} Hz, {faulty.rate_hz:.4g} "
+                      f"blocks/s, the healthy capture at {obs.fs:g} Hz, {obs.rate_hz:.4g} blocks/s (another machine "
+                      f"or set-up?): {span}"]
+    lacking = [n for n in obs.names if n not in faulty.names]
+    if lacking:
+        return faulty, [f"warning: --faulty {name} has no channel {', '.join(lacking)} (its channels: "
+                        f"{', '.join(faulty.names)}): their {span}"]
+    return faulty, []
+
+
+def _faulty_unused(path: str | None, faulty: Observations | None, results: list[ChannelResult]) -> list[str]:
+    """A line per channel whose R_max the ``--faulty`` capture, which has it, did not change, with why."""
+    if faulty is None or path is None:
+        return []
+    lines = []
+    for r in results:
+        m = r.model
+        if r.name not in faulty.names or m.r_max_rule == "faulty":
+            continue
+        why = (f"no R flags half of its decisions (at f_r {r.f_r:.3g})" if not np.isfinite(m.faulty_r) else
+               f"the largest R that flags half of its decisions, {_g(m.faulty_r)}, is not above R_1 {_g(m.r_1)}")
+        lines.append(f"{r.name}: --faulty {Path(path).name} did not change R_max: {why}; R_n = {SPAN:g} x R_1")
+    return lines
+
+
+def _absent_channels(cfg: Config, obs: Observations, base_path: str, capture: str, out: str) -> str:
+    """The warning line on the channels ``cfg`` (BASE.yaml at ``base_path``) lists that the
+    capture does not hold ("" when it holds them all): not learned, so not in the site file.  A
+    rule or bearing of BASE naming one of them (or a rule's vote that needs them) is a
+    :class:`ConfigError` naming BASE: the site file could not monitor it."""
+    absent = [ch for ch in cfg.channels if ch.name not in obs.names]
+    if not absent:
+        return ""
+    held = f"its {len(obs.names)} channel(s): {', '.join(obs.names)}"
+    found = channel_refs_error(cfg, [ch for ch in cfg.channels if ch.name in obs.names])
+    if found is not None:
+        path, reason, value = found
+        names = ", ".join(ch.name for ch in absent)
+        reason = (f"names {value}, a channel {capture} does not have ({held})" if value in names.split(", ") else
+                  f"{reason}: {capture} does not have channel(s) {names} ({held})")
+        raise ConfigError(base_path, path, f"{reason}; the site file holds the channels calibrate learns from the "
+                          f"capture: calibrate a capture that holds {names}, or leave {names} out of this file")
+    listed = ", ".join(f"{ch.name} (index {ch.index})" for ch in absent)
+    return (f"warning: {base_path} lists channel(s) {listed} that {capture} does not have ({held}): not learned, "
+            f"and left out of {out}: a daemon with it does not monitor them")
 
 
 def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:

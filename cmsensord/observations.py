@@ -51,6 +51,7 @@ class Observations:
     meta: dict = field(default_factory=dict)    # the import's sidecar ({}: not an import)
     notes: tuple[str, ...] = ()   # what the command says of the window (--to past the end, missing data)
     settings: dict[str, float] = field(default_factory=dict)  # indicators.* the sidecar gave (capture_settings)
+    fs: float = 0.0               # the board's samples per second
 
     @property
     def end_s(self) -> float:
@@ -120,7 +121,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s),
-                        settings=settings)
+                        settings=settings, fs=float(proc.fs))
 
 
 def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:
@@ -167,7 +168,10 @@ def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float |
 def alarm_events(capture: str | Path, cfg: Config, end_s: float) -> list[tuple[float, dict]]:
     """The alarm events (``alarm_alert``, ``alarm_danger``, ``alarm_clear``) that a replay of
     ``capture`` with ``cfg`` (a site configuration: its channels named) writes up to ``end_s``
-    board seconds, each with its board second, in order."""
+    board seconds, each with its board second, in order; with the indicator settings the
+    capture's sidecar gives, as ``cmsensord replay`` of it runs
+    (:func:`~cmsensord.importing.capture_settings.capture_settings`)."""
+    cfg, _, _ = capture_settings(cfg, sidecar(capture))
     proc, sink = _replay(capture, cfg, False, end_s, finish=True, what="its alarms")
     if proc.clock.slot0_t0 is None:
         return []

@@ -43,7 +43,8 @@ def test_calibrate_writes_a_site_file_that_keeps_the_healthy_period_silent(degra
     assert "healthy period: 0.0-150.0 board s, 100 blocks/s" in p.stdout
     assert "ch0: highest outlier count per decision on the healthy period at R_1:" in p.stdout
     assert ("ch0: f_r 28.66 Hz is the configuration's monitor.f_r: nothing gave this machine's shaft speed "
-            "(no tacho, no --rpm, no rpm in the capture); if it turns at another speed, give --rpm RPM\n") in p.stdout
+            "(no tacho, no --rpm, no indicators.rpm, no rpm in the capture); if it turns at another speed, give "
+            "--rpm RPM\n") in p.stdout
     ch = yaml.safe_load(site.read_text())["channels"][0]
     assert ch["name"] == "ch0" and ch["baseline"] > 0 and ch["r_max"] > ch["r_min"] > 0
     again = tmp_path / "again.yaml"

@@ -10,6 +10,7 @@ from cmsensord.dsp.commissioning import (
     SPAN,
     bank_limits,
     critical_r,
+    held_flags,
     idle_periods,
     learn_healthy,
     period_counts,
@@ -67,6 +68,19 @@ def test_learned_model_is_quiet_on_new_healthy_data_and_flags_a_change():
     rough = _healthy(30, sigma=0.25, seed=3)       # the fluctuation grows 5x at the same level
     flagged = _run(np.concatenate([_healthy(30, seed=4), rough]), m, 30.0)
     assert max(d.severity[0] for d in flagged[31:]) >= 0.5
+
+
+def test_held_flags_are_the_deciders_for_one_akf():
+    """Set at f_r, kept while the count stays at c f_r or more, cleared below: the flags the
+    monitor's AnomalyDecider shows for the same counts."""
+    cnt = np.array([3, 30, 12, 11, 31, 5, 29, 40])
+    assert held_flags(cnt, 30.0, 0.4).tolist() == [False, True, True, False, True, False, False, True]
+    dec = AnomalyDecider(1, 1, f_r=30.0, c=0.4, period=40)
+    outlier = np.zeros((40 * (cnt.size + 1), 1, 1), dtype=bool)
+    for k, v in enumerate(cnt):
+        outlier[40 * (k + 1):40 * (k + 1) + v] = True
+    ds = dec.update(outlier, np.ones((outlier.shape[0], 1), dtype=bool))[1:]
+    assert [bool(d.anomaly[0, 0]) for d in ds] == held_flags(cnt, 30.0, 0.4).tolist()
 
 
 def test_r_scales_with_the_baseline_not_the_unit():

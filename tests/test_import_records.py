@@ -1,7 +1,7 @@
 """An imported capture of snapshots gets indicator records that each hold one snapshot: with
-``indicators.interval_s`` at its default, replay and calibrate (and the site file it writes)
-take the snapshots' common length, and say so; an interval the configuration sets is kept,
-with a line when its records straddle the snapshots."""
+``indicators.interval_s`` at its default, replay and calibrate take the snapshots' common
+length, and say so (the site file calibrate writes leaves it to the capture); an interval the
+configuration sets is kept, with a line when its records straddle the snapshots."""
 
 from __future__ import annotations
 
@@ -45,11 +45,13 @@ def test_each_record_holds_one_snapshot_in_replay_and_in_the_site_file(tmp_path)
     site = tmp_path / "site.yaml"
     out = _run("calibrate", cap, "--out", site)
     assert f"note: {said}\n" in out, out
-    assert ("indicators:\n  interval_s: 0.95           # a record within each of the capture's snapshots (their "
-            "common length)\n") in site.read_text()
+    assert ("# indicators.interval_s is not set: the 0.95-s records of the capture's snapshots are its own (a "
+            "replay\n") in site.read_text()
+    assert "\n  interval_s:" not in site.read_text()        # the live board's stream is not of snapshots
     err = _run("replay", cap, "--config", site, "--out", tmp_path / "site")
-    assert "interval_s" not in err
-    assert [round(m["accel_peak"], 2) for m in _records(tmp_path / "site")] == [1.0, 2.0, 3.0, 4.0]
+    assert f"  {said}\n" in err, err                        # the replay of the capture takes it again
+    assert [(m["interval_s"], round(m["accel_peak"], 2)) for m in _records(tmp_path / "site")] == \
+        [(0.95, 1.0), (0.95, 2.0), (0.95, 3.0), (0.95, 4.0)]
 
 
 def test_an_interval_the_configuration_sets_is_kept_and_said_to_straddle(tmp_path):

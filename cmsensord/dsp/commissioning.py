@@ -25,11 +25,13 @@ unsteady run-in sets R_min for the whole life), so cmsensord extends it:
    not learned while stopped: decisions whose level is below STOPPED_SHARE of the period's
    running level (its 90th percentile), and the starts and stops beside them, are left out
    of the baseline and the critical R (they would make the stopped level the baseline).
-7. The healthy period is checked as the monitor will judge it: the decisions R_1
-   flags, and (with the combined severity's ``level_alert``) those whose level is
-   already that many times the baseline.  A period that holds the start of a fault
-   (a step or rise of level near its end, the whole of a run to failure) shows there,
-   with where it starts, so the engineer can end the period before it.
+7. The healthy period is checked as the monitor will judge it: every decision after
+   the filters' transient, the run-in's too (the monitor grades them, though step 3
+   leaves them out of the learning): the decisions R_1 flags, and (with the combined
+   severity's ``level_alert``) those whose level is already that many times the baseline.
+   A period that holds the start of a fault (a step or rise of level near its end, the
+   whole of a run to failure) shows there, with where it starts, so the engineer can end
+   the period before it.
 
 Everything here is pure numpy on arrays; the command that reads captures is
 ``cmsensord.commission``.
@@ -45,7 +47,7 @@ import numpy as np
 from cmsensord.dsp.akf import AkfBank
 
 __all__ = [
-    "MARGIN", "R_GRID", "SPAN", "HealthyModel", "bank_limits", "critical_r",
+    "MARGIN", "R_GRID", "SPAN", "HealthyModel", "bank_limits", "critical_r", "held_flags",
     "learn_healthy", "period_counts", "r_from_faulty", "run_in_periods",
 ]
 
@@ -75,8 +77,8 @@ class HealthyModel:
     healthy_r: float       # H, robust high critical R of the healthy period
     periods: int           # decision periods learned from
     runin_periods: int     # periods left out at the start as run-in
-    max_cnt: int           # highest outlier count per decision at R_1 on the healthy period
-    flagged: int           # healthy decisions that R_1 would still flag (cnt >= f_r)
+    max_cnt: int           # highest outlier count at R_1 of a decision the monitor grades (run-in's too)
+    flagged: int           # of those decisions, the ones AKF_1 (R_1) flags: cnt >= f_r, or held by c
     rstar_median: float
     r_max_rule: str = "span"   # "span": R_n = SPAN x R_1; "faulty": from the faulty recording
     level_flagged: int = 0     # healthy decisions whose level is >= level_alert x baseline
@@ -87,6 +89,10 @@ class HealthyModel:
     learned: int = 0           # decisions learned from (after the run-in, the machine running)
     steady_head: int = 0       # decisions after the transient, from the start / back from the end,
     steady_tail: int = 0       # that hold no level_alert decision of their own (:func:`steady_length`)
+    runin_flagged: int = 0     # of ``flagged``, the ones in the run-in (graded, though not learned from)
+    r1_first: int = -1         # the first and last decision R_1 flags (decision periods from the
+    r1_last: int = -1          # healthy period's start, 0 = the filters' transient); -1: none
+    faulty_r: float = float("nan")  # with faulty data: the largest R that flags half its decisions (NaN: none)
 
 
 def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
@@ -220,13 +226,14 @@ def steady_length(level: np.ndarray, alert: float, max_rounds: int = 100) -> int
 
 def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int, z_c: float,
                   p0: float = 1.0, q0: float = 1e-3, faulty: np.ndarray | None = None,
-                  grid: np.ndarray = R_GRID, level_alert: float | None = None) -> HealthyModel:
+                  grid: np.ndarray = R_GRID, level_alert: float | None = None, c: float = 0.4) -> HealthyModel:
     """The healthy model of one channel from its block RMS ``y`` (T,), NaN = missing.
 
     The first decision period (the filters' transient) is not learned from.
     ``faulty``: block RMS of a faulty recording of the same machine (optional).
     ``level_alert``: the combined severity's level / baseline alert, for the check of the
     healthy period's own levels (None: the paper's severity, without a level part).
+    ``c``: the decisions' hysteresis (``monitor.c``), for the check of the decisions R_1 flags.
     """
     y = np.asarray(y, dtype=np.float64).reshape(-1)
     if f_r >= period:
@@ -257,7 +264,7 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     H = _robust_high(rstar)
     r_1 = MARGIN * H
     r_min, r_max = bank_limits(r_1, n)
-    rule = "span"
+    rule, r_f = "span", float("nan")
     if faulty is not None:
         fc = counts_of(np.asarray(faulty, np.float64), grid)
         r_f = r_from_faulty(fc, f_r, grid)
@@ -265,12 +272,37 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
             r_min = (n * r_1 - r_f) / (n - 1)
             r_min = r_min if r_min > 0 else r_1 / 2
             r_max, rule = r_f, "faulty"
-    ratio = level_raw / baseline
     med = np.nanmedian(running / baseline)
     spread = float(1.4826 * np.nanmedian(np.abs(running / baseline - med)))
-    at_r1 = counts_of(y, np.array([r_1]))[kept, 0]
-    flagged = np.zeros(level_raw.size, dtype=bool)
-    flagged[skip:] = at_r1 >= f_r
+    check = _check_period(counts_of(y, np.array([r_1]))[:, 0], level_raw / baseline, f_r, c, skip, level_alert)
+    return HealthyModel(
+        baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
+        healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
+        rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule, faulty_r=r_f,
+        idle_periods=int(np.count_nonzero(idle)), learned=int(np.count_nonzero(~np.isnan(rstar))), **check,
+    )
+
+
+def held_flags(cnt: np.ndarray, f_r: float, c: float) -> np.ndarray:
+    """Per decision, one AKF's F_a by Fig. 3 from its outlier counts ``cnt``: set at cnt >= f_r,
+    cleared at cnt < c f_r, else kept (:class:`~cmsensord.dsp.severity.AnomalyDecider`)."""
+    out = np.zeros(cnt.size, dtype=bool)
+    state = False
+    for k, v in enumerate(cnt.tolist()):
+        state = True if v >= f_r else False if v < c * f_r else state
+        out[k] = state
+    return out
+
+
+def _check_period(at_r1: np.ndarray, ratio: np.ndarray, f_r: float, c: float, skip: int,
+                  level_alert: float | None) -> dict[str, int]:
+    """The healthy period judged as the monitor will judge it: every decision after the filters'
+    transient is graded, the run-in's (the first ``skip``, not learned from) too.  ``at_r1``: the
+    outlier counts at R_1 per decision, ``ratio``: the decisions' levels / baseline; the
+    :class:`HealthyModel` fields of the check by name."""
+    by_r1 = held_flags(at_r1, f_r, c)
+    r1_at = np.flatnonzero(by_r1)
+    flagged = by_r1.copy()
     loud = np.empty(0, dtype=np.int64)
     steady = (ratio.size, ratio.size)
     if level_alert is not None:
@@ -278,13 +310,10 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
         if loud.size:
             steady = (steady_length(ratio, level_alert), steady_length(ratio[::-1], level_alert))
     flagged[loud] = True
-    return HealthyModel(
-        baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
-        healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
-        max_cnt=int(at_r1.max()), flagged=int(np.count_nonzero(at_r1 >= f_r)),
-        rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule,
+    return dict(
+        max_cnt=int(at_r1.max()), flagged=int(r1_at.size), runin_flagged=int(np.count_nonzero(by_r1[:skip])),
+        r1_first=int(r1_at[0]) + 1 if r1_at.size else -1, r1_last=int(r1_at[-1]) + 1 if r1_at.size else -1,
         level_flagged=int(loud.size), level_first=int(loud[0]) + 1 if loud.size else -1,
         level_last=int(loud[-1]) + 1 if loud.size else -1, any_flagged=int(np.count_nonzero(flagged)),
-        steady_head=steady[0], steady_tail=steady[1], idle_periods=int(np.count_nonzero(idle)),
-        learned=int(np.count_nonzero(~np.isnan(rstar))),
+        steady_head=steady[0], steady_tail=steady[1],
     )

@@ -5,9 +5,9 @@ channel count or the mode is news: the block clock takes the new rate (and
 re-anchors its slots), and a ``config`` event says what the board sends.  The
 channels come from the configuration, or from the board's first data frame's C
 when the configuration lists none (``auto_channels``); configured channels the
-board does not send are reported and left out.  With the first data, the
-severity chain (and the microphone estimator) of the usable channels is made.  Then the
-channels' names are known: an alarm rule or a bearing naming none of them is a
+board does not send are reported (a warning: their rules and bearings see no value)
+and left out.  With the first data, the severity chain (and the microphone estimator)
+of the usable channels is made.  Then the channels' names are known: an alarm rule or a bearing naming none of them is a
 :class:`~cmsensord.errors.ConfigError` (:mod:`cmsensord.config.channel_refs`).
 
 A STATUS whose scale or offset is not finite, or whose scale is 0, is ignored
@@ -26,6 +26,7 @@ chain is made, or a ``channels`` event names the board channels not monitored.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable, Sequence
 
@@ -214,9 +215,10 @@ class ChannelSetup:
         check_channel_refs(self.cfg, named)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
         if len(usable) < len(self.channels):
-            missing = [ch.name for ch in self.channels if ch.index >= n_board]
+            missing = [f"{ch.name} (index {ch.index})" for ch in self.channels if ch.index >= n_board]
             emit("config", None, f"board sends {n_board} channel(s); configured channel(s) "
-                 f"{', '.join(missing)} not in the stream")
+                 f"{', '.join(missing)} not in the stream: not monitored, their alarm rules and bearings "
+                 "see no value", log_level=logging.WARNING)
         if not usable:
             if not self._no_channels:
                 self._no_channels = True
