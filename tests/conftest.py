@@ -67,6 +67,7 @@ PROCESS_MODULES = frozenset({
     "test_mqtt.py",
     "test_retention_process.py",
     "test_short_logs.py",
+    "test_dir_fsync.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
