@@ -68,6 +68,7 @@ PROCESS_MODULES = frozenset({
     "test_retention_process.py",
     "test_short_logs.py",
     "test_dir_fsync.py",
+    "test_report_link_totals.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
