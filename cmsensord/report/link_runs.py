@@ -21,14 +21,17 @@ from dataclasses import dataclass
 __all__ = ["LinkRuns"]
 
 
+_Entry = tuple[float, float, int, bytes]      # (uptime_s, bytes_received, t_ns, the message)
+
+
 @dataclass
 class _File:
     """The diagnostics of one file: its run (None: unknown), source, first and newest message."""
 
     run: str | None
     source: str
-    first: tuple[float, float, int, bytes] | None = None     # (uptime_s, bytes_received, t_ns, data)
-    last: tuple[float, float, int, bytes] | None = None
+    first: _Entry | None = None
+    last: _Entry | None = None
 
 
 class LinkRuns:
@@ -55,17 +58,21 @@ class LinkRuns:
 
     def runs(self) -> list[bytes]:
         """The newest diagnostics message of each run."""
-        newest: dict[object, tuple[float, float, int, bytes]] = {}
-        files = [f for f in self._files if f.first is not None and f.last is not None]
-        known = [f for f in files if f.run is not None]
-        legacy = sorted((f for f in files if f.run is None), key=lambda f: f.first[2])  # type: ignore[index]
-        for f in known:
-            _newest(newest, ("run", f.run), f.last)    # type: ignore[arg-type]
-        key: tuple = ("legacy", 0)
-        for i, f in enumerate(legacy):
-            if i == 0 or not _continues(legacy[i - 1], f):
+        newest: dict[tuple[str, str | int], _Entry] = {}
+        legacy: list[tuple[_File, _Entry, _Entry]] = []
+        for f in self._files:
+            if f.first is None or f.last is None:
+                continue
+            if f.run is not None:
+                _newest(newest, ("run", f.run), f.last)
+            else:
+                legacy.append((f, f.first, f.last))
+        legacy.sort(key=lambda x: x[1][2])              # by the time of the first diagnostics
+        key: tuple[str, str | int] = ("legacy", 0)
+        for i, (f, first, last) in enumerate(legacy):
+            if i == 0 or not _continues(legacy[i - 1], (f, first, last)):
                 key = ("legacy", i)
-            _newest(newest, key, f.last)                # type: ignore[arg-type]
+            _newest(newest, key, last)
         return [entry[3] for entry in newest.values()]
 
     def totals(self) -> tuple[dict[str, int], int, int]:
@@ -82,14 +89,13 @@ class LinkRuns:
         return link, drops, len(runs)
 
 
-def _newest(newest: dict[object, tuple[float, float, int, bytes]], key: object,
-            entry: tuple[float, float, int, bytes]) -> None:
+def _newest(newest: dict[tuple[str, str | int], _Entry], key: tuple[str, str | int], entry: _Entry) -> None:
     if key not in newest or entry[:2] >= newest[key][:2]:
         newest[key] = entry
 
 
-def _continues(before: _File, after: _File) -> bool:
-    """Whether ``after`` (no run in its metadata) goes on with the run of ``before``."""
-    assert before.last is not None and after.first is not None
-    return (before.source == after.source and after.first[0] >= before.last[0]
-            and after.first[1] >= before.last[1])
+def _continues(before: tuple[_File, _Entry, _Entry], after: tuple[_File, _Entry, _Entry]) -> bool:
+    """Whether the file ``after`` (no run in its metadata) goes on with the run of ``before``:
+    the same source, and its first uptime_s and bytes_received not below the newest of ``before``."""
+    (f0, _, last), (f1, first, _) = before, after
+    return f0.source == f1.source and first[0] >= last[0] and first[1] >= last[1]
