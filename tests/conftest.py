@@ -66,11 +66,15 @@ PROCESS_MODULES = frozenset({
     "test_indicators_daemon.py",
     "test_mqtt.py",
     "test_retention_process.py",
+    "test_short_logs.py",
+    "test_dir_fsync.py",
+    "test_report_link_totals.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
 PROCESS_TESTS = frozenset({
     "test_disk_full.py::test_the_daemon_keeps_running_on_a_full_disk_and_resumes_logging",
+    "test_event_kinds.py::test_replays_write_only_events_the_stored_schema_allows",
     "test_firmware_sim.py::test_pty_stream_is_paced_and_decodes_contiguously",
     "test_firmware_sim.py::test_pty_without_reader_drops_bytes_and_never_blocks",
     "test_firmware_sim.py::test_pty_with_flow_control_waits_for_a_slow_reader_and_drops_nothing",

@@ -22,6 +22,8 @@ from tests.test_import_names import R2F, run_to_failure
 pytest.importorskip("matplotlib", reason="the report extra")
 
 START = 1_076_582_400          # the first snapshot's name: 2004-02-12 10:40:00; one every 600 s
+#: a run's identity in its files' metadata (its UTC start, 8 random hex digits)
+RUN = r"\d{8}T\d{6}Z-[0-9a-f]{8}"
 
 
 def clock(k: int, plus_s: int = 0) -> str:
@@ -204,8 +206,9 @@ def test_the_summary_of_a_replayed_import_gives_each_event_its_time_in_the_recor
     changes = [ln for ln in lines if " severity_change " in ln]
     assert changes and all(re.fullmatch(r"  \S+ \(2004-02-12 \d\d:\d0:01 in the recording\) severity_change .*", ln)
                            for ln in changes), changes
-    assert ("  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshots over 6.5 h of the recording "
-            "from 2004-02-12T10:40:00'}") in lines
+    assert [ln for ln in lines if re.fullmatch(re.escape(
+        "  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshots over 6.5 h of the recording "
+        "from 2004-02-12T10:40:00', 'run': '") + RUN + "'}", ln)], lines
     assert max(map(len, lines)) < 300                    # no 60-kB line of the timeline
 
 
@@ -249,8 +252,9 @@ def test_snapshots_without_times_are_drawn_in_percent_of_the_record_not_the_repl
     (log,) = logs.glob("*.mcap")
     lines = cmsensord("summary", str(log), cwd=tmp_path).stdout.splitlines()
     assert any(re.fullmatch(r"end: \S+ \(100\.0 % of the record\)", ln) for ln in lines), lines
-    assert ("  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshot(s) without times, "
-            "40 s of signal end to end'}") in lines
+    assert [ln for ln in lines if re.fullmatch(re.escape(
+        "  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshot(s) without times, "
+        "40 s of signal end to end', 'run': '") + RUN + "'}", ln)], lines
 
 
 def test_one_continuous_file_is_drawn_in_seconds_into_it(tmp_path):

@@ -74,36 +74,37 @@ def fsyncs(monkeypatch):
 
 def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs, clock):
     sink = RotatingSink(output(tmp_path, fsync_s=30.0), clock=clock)
-    ino = os.fstat(sink.current.fileno()).st_ino
+    ino, d = os.fstat(sink.current.fileno()).st_ino, tmp_path.stat().st_ino
+    assert fsyncs == [d]                                 # the directory, once the file is made
     sink.write("/cm/ch0/severity", "severity", 10**18, {"severity_index": 0.1})
     clock.t += 0.1
     sink.tick()
-    assert fsyncs == []                                  # no event, fsync_s not reached
+    assert fsyncs == [d]                                 # no event, fsync_s not reached
     for i in range(3):
         sink.write(TOPIC_EVENTS, "event", 10**18 + i, event(i))
     clock.t += 0.1
     sink.tick()
-    assert fsyncs == [ino]                               # one fsync for the three events
+    assert fsyncs == [d, ino]                            # one fsync for the three events
     on_disk = summarize(sink.current.part_path)
     assert on_disk["event_counts"] == {"config": 3} and on_disk["messages"] == 4
     clock.t += 0.1
     sink.tick()
-    assert fsyncs == [ino]                               # nothing new: no fsync
+    assert fsyncs == [d, ino]                            # nothing new: no fsync
     clock.t += 30.0
     sink.tick()
-    assert fsyncs == [ino, ino]                          # fsync_s
+    assert fsyncs == [d, ino, ino]                       # fsync_s
     sink.close()
 
 
 def test_an_event_queued_between_ticks_is_fsynced_by_the_first_tick(tmp_path, fsyncs, clock):
     sink = RotatingSink(output(tmp_path, fsync_s=30.0), clock=clock)
-    ino = os.fstat(sink.current.fileno()).st_ino
+    ino, d = os.fstat(sink.current.fileno()).st_ino, tmp_path.stat().st_ino
     sink.on_event = lambda kind, message, **fields: sink.write(
         TOPIC_EVENTS, "event", 10**18, {"kind": kind, "channel": None, "message": message})
     sink.emit("salvage", "old.mcap.part: salvaged 3 message(s)")    # as the salvage thread does
     clock.t += 0.1
     sink.tick()
-    assert fsyncs == [ino]
+    assert fsyncs == [d, ino]                            # the directory once the file was made
     assert summarize(sink.current.part_path)["event_counts"] == {"salvage": 1}
     sink.close()
 
@@ -387,6 +388,34 @@ def test_reopen_finishes_the_file_and_continues_in_a_new_one(tmp_path, clock):
     assert second != first and sink.paths == [first, second]
     assert [m["message"] for p in sink.paths for _, _, m in read_messages(p)] == ["message 0",
                                                                                   "message 1"]
+
+
+def test_a_failed_directory_fsync_after_a_new_file_is_one_event_and_the_file_goes_on(tmp_path, clock,
+                                                                                     monkeypatch):
+    """The directory fsync after creating a ``.part`` fails (EIO; no real file system here fails
+    it on demand): a ``disk_error`` event (action dir_fsync_failed) naming the file, counted
+    as a failed operation; the file is written and finished as any other."""
+    from cmsensord.sinks import mcap_file
+
+    real, failures = mcap_file.fsync_dir, [OSError(errno.EIO, "Input/output error")]
+
+    def fsync_dir(path):
+        if failures:
+            raise failures.pop()
+        real(path)
+
+    monkeypatch.setattr(mcap_file, "fsync_dir", fsync_dir)
+    sink = RotatingSink(output(tmp_path), clock=clock)
+    part = sink.current.part_path
+    assert sink.pending_events == [("disk_error", f"{tmp_path}: directory fsync failed after creating "
+                                    f"{part.name}: Input/output error", {"details": {
+                                        "action": "dir_fsync_failed", "op": "fsync", "errno": "EIO",
+                                        "file": str(part)}})]
+    assert sink.disk_errors == 1
+    sink.write(TOPIC_EVENTS, "event", 10**18, event(0))
+    assert sink.close() == tmp_path / part.name.removesuffix(".part")
+    assert [m["message"] for _, _, m in read_messages(sink.paths[0])] == ["message 0"]
+    assert sink.disk_errors == 1 and len(sink.pending_events) == 1
 
 
 def test_events_wait_for_the_callback_and_arrive_in_order(tmp_path):

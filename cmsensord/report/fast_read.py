@@ -14,7 +14,9 @@ checks out (:class:`~cmsensord.sinks.mcap_chunk_check.Resync`), each stretch
 skipped listed in :attr:`FastScan.skipped`; with no good chunk after it, the
 damage ends the read (:attr:`FastScan.error`). A file that ends before its footer
 says what that lost in :attr:`FastScan.cut`: a ``.part`` file is an unfinished one (read up to
-its last complete record), any other is cut short (the same text as :attr:`FastScan.error`).
+its last complete record), any other is cut short (the same text as :attr:`FastScan.error`); a
+file shorter than the magic is empty or cut inside it, or not MCAP, in the words of ``summary``
+(:func:`~cmsensord.sinks.mcap_cut.short_text`).
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ from mcap.records import Metadata
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
-from cmsensord.sinks.mcap_cut import CUT_HEAD, cut_text, is_unfinished_name
-from cmsensord.sinks.mcap_records import RECORD_LIMIT, parse_record
+from cmsensord.sinks.mcap_cut import CUT_HEAD, cut_text, is_unfinished_name, short_text
+from cmsensord.sinks.mcap_records import NOT_MCAP, RECORD_LIMIT, parse_record
 
 __all__ = ["FastScan", "head_metadata"]
 
@@ -104,6 +106,7 @@ class FastScan:
             raise SinkError(f"{self.path}: cannot read: {err.strerror or err}") from None
         with f:
             if size < len(MAGIC):
+                self._short(f.read(size))
                 return
             resync = Resync(f, size, None)
             try:
@@ -112,11 +115,22 @@ class FastScan:
             finally:
                 resync.close()
 
+    def _short(self, head: bytes) -> None:
+        """A file of fewer bytes than the magic (``head``): empty or cut inside the magic, in
+        :attr:`cut` (and :attr:`error` unless it is a ``.part``), or not MCAP."""
+        text = short_text(head)
+        if text == NOT_MCAP:
+            self.error = text
+            return
+        self.cut = text
+        if not is_unfinished_name(self.path.name):
+            self.error = text
+
     def _walk(self, buf: mmap.mmap, size: int, resync: Resync) -> Iterator[tuple[str, int, bytes, int]]:
         """The top-level records of the mapped file, as :class:`RecordWalker` walks them, damage
         read past from the next good chunk (:meth:`_past`)."""
         if buf[: len(MAGIC)] != MAGIC:
-            self.error = "not an MCAP file (bad magic)"
+            self.error = NOT_MCAP
             return
         pos = len(MAGIC)
         while pos + 9 <= size:

@@ -90,6 +90,7 @@ def _diagnostics_table(data: LogData) -> str:
         for f in data.files)
     return ("<h2>Link and disk</h2><h3>Link counters and processing</h3>"
             f'<table id="link"><tr><th>counter</th><th>total</th></tr>{rows}</table>'
+            f'<p id="runs">Link counters summed over {data.runs()} run(s) (a daemon start, a replay).</p>'
             f"<h3>Disk</h3><p>disk_error events: {disk['disk_error']}, salvaged files: {disk['salvage']}</p>"
             f'<table id="files"><tr><th>file</th><th>bytes</th><th>messages</th><th>state</th></tr>{files}</table>')
 

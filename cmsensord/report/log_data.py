@@ -6,8 +6,10 @@ flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend with the
 latest ISO zone boundaries and alarm level, each alarm rule's newest alert and
 danger levels, the order RMS per 10-rpm speed bin, and at most ``MAX_CAPTURES``
 captured waveforms with their spectra; for the whole log: the events (the first
-``MAX_EVENTS``, counts of all), the link counters (summed over daemon restarts),
-the largest processing lag and queue depth, and the files read. Nothing grows with
+``MAX_EVENTS``, counts of all), the link counters (summed over daemon runs),
+the largest processing lag and queue depth, and the files read. The link counters are
+summed over the runs the files hold (:mod:`.link_runs`: told by each file's metadata, not by
+the order the files come in). Nothing grows with
 the length of the log beyond these bounds.
 """
 
@@ -20,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from cmsensord.report.link_runs import LinkRuns
 from cmsensord.report.time_axis import TimeAxis
 from cmsensord.report.trend import Trend
 
@@ -40,7 +43,7 @@ _INDICATOR = re.compile(rb'"(velocity_rms_mm_s|accel_rms|envelope_rms|kurtosis|c
                         + _NUM)
 _ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
 _LEVEL = re.compile(rb'"(level_ratio|level_alert|level_danger)":' + _NUM)
-_DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s)":' + _NUM)
+_DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s|uptime_s)":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
 _TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
 _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
@@ -106,12 +109,9 @@ class LogData:
         self.files: list[FileInfo] = []
         self.notes: list[str] = []      # lines on the logs left out (:mod:`.runs`)
         self.axis = TimeAxis()          # how times are shown; messages are added in shown times
-        self.link_total: dict[str, int] = {}
-        self._diag_last: bytes | None = None
-        self._received_last = 0.0
+        self.link_runs = LinkRuns()
         self.max_lag_s = 0.0
         self.max_queue_depth = 0
-        self.queue_drops = 0
         self.undecodable = 0
 
     def channel(self, name: str) -> ChannelData:
@@ -119,6 +119,11 @@ class LogData:
         if ch is None:
             ch = self.channels[name] = ChannelData(name)
         return ch
+
+    def begin_file(self, metadata: dict[str, str]) -> None:
+        """The messages added next are of a file whose ``cmsensord`` metadata is ``metadata``
+        (its ``run`` tells the daemon run its link counters count)."""
+        self.link_runs.begin(metadata)
 
     def add(self, topic: str, t_ns: int, data: bytes) -> None:
         """One message of any topic; topics the report does not draw only count."""
@@ -151,7 +156,7 @@ class LogData:
     def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
         """A severity, indicators or diagnostics message, read by the fields drawn."""
         if kind == "diagnostics":
-            self._diagnostics(data)
+            self._diagnostics(t_ns, data)
         elif kind == "severity":
             ch = self.channel(parts[2])
             m = _SEVERITY.search(data)
@@ -203,33 +208,24 @@ class LogData:
                 levels = (given[0] if given[0] is not None else old[0], given[1] if given[1] is not None else old[1])
                 ch.alarm_levels[row["rule"]] = (str(row.get("indicator")), levels)
 
-    def _diagnostics(self, data: bytes) -> None:
-        """Largest lag and queue depth; the counters of the last message before each restart."""
+    def _diagnostics(self, t_ns: int, data: bytes) -> None:
+        """Largest lag and queue depth; the message to the link counters of its run."""
         fields = {k: _number(v) for k, v in _DIAG.findall(data)}
-        received = fields.get(b"bytes_received") or 0.0
-        if received < self._received_last:          # the counters start again at a daemon restart
-            self._add_counters(self._diag_last)
-        self._received_last = received
-        self._diag_last = data
+        self.link_runs.add(t_ns, fields.get(b"uptime_s") or 0.0, fields.get(b"bytes_received") or 0.0, data)
         self.max_lag_s = max(self.max_lag_s, fields.get(b"lag_s") or 0.0)
         self.max_queue_depth = max(self.max_queue_depth, int(fields.get(b"queue_depth") or 0))
 
-    def _add_counters(self, data: bytes | None) -> None:
-        link, drops = _counters(data)
-        for k, v in link.items():
-            self.link_total[k] = self.link_total.get(k, 0) + v
-        self.queue_drops += drops
-
     def link_counters(self) -> dict[str, int]:
-        """The link counters over the whole log (summed across daemon restarts)."""
-        out = dict(self.link_total)
-        for k, v in _counters(self._diag_last)[0].items():
-            out[k] = out.get(k, 0) + v
-        return out
+        """The link counters over the whole log (summed over the daemon runs: :mod:`.link_runs`)."""
+        return self.link_runs.totals()[0]
 
     def total_queue_drops(self) -> int:
-        """Frames the daemon's queue dropped over the whole log."""
-        return self.queue_drops + _counters(self._diag_last)[1]
+        """Frames the daemons' queues dropped over the whole log."""
+        return self.link_runs.totals()[1]
+
+    def runs(self) -> int:
+        """The daemon runs (starts, replays) whose link counters the totals sum."""
+        return self.link_runs.totals()[2]
 
     @staticmethod
     def _indicators(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
@@ -286,15 +282,6 @@ class LogData:
 def _number(v: bytes) -> float | None:
     """A JSON number or null as a float or None."""
     return None if v == b"null" else float(v)
-
-
-def _counters(data: bytes | None) -> tuple[dict[str, int], int]:
-    """(link counters, queue drops) of one diagnostics message."""
-    if data is None:
-        return {}, 0
-    msg = json.loads(data)
-    link = {k: int(v) for k, v in (msg.get("link") or {}).items() if isinstance(v, int | float)}
-    return link, int(msg.get("queue_drops") or 0)
 
 
 def _level(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:

@@ -62,6 +62,7 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
     done = 0
     for path, size, zero in zip(plan.paths, sizes, plan.zeros):
         info = FileInfo(str(path), size)
+        data.begin_file(heads[path].get("cmsensord", {}))
         scan = FastScan(path)
         local = data.axis.timeline is None
         for topic, t, raw, offset in scan.messages():

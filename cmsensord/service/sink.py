@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import logging
+import secrets
 import sys
+import time
 from typing import TextIO
 
 from cmsensord.config import Config
@@ -20,6 +22,11 @@ _DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
 log = logging.getLogger("cmsensord")
 
 
+def run_id() -> str:
+    """A new identity of a run (a daemon start, a replay): its UTC start and 8 random hex digits."""
+    return f"{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}-{secrets.token_hex(4)}"
+
+
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
               publish: bool = False, command: str = "this run") -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable,
@@ -29,10 +36,12 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     option), a :class:`TeeSink` that also publishes (its thread started; its ``close`` stops
     it). With an ``mqtt`` section and not ``publish``, nothing is published and one INFO line
     says so: ``command`` (e.g. ``replay``) would publish as the live daemon of that
-    configuration (its client id, its retained topics, its queue)."""
+    configuration (its client id, its retained topics, its queue). Every file of the run gets
+    ``metadata`` and the run's identity (``run``: :func:`run_id`) as its ``cmsensord`` metadata,
+    by which a report tells the runs of its files apart."""
     if command != "the daemon":
         refuse_if_held(cfg.output.dir, command)
-    sink = RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
+    sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage)
     if cfg.mqtt is None:
         return sink
     if not publish:

@@ -32,6 +32,13 @@ def error_details(action: str, err: SinkIOError, file: Path | str, **more: Any) 
     return {"action": action, "op": err.op, "errno": errno_name(err.errno), **more, "file": str(file)}
 
 
+def dir_fsync_failed(sink: RotatingSink, err: SinkIOError, file: Path) -> None:
+    """The directory fsync after creating or finishing ``file`` failed: one failed operation and
+    its event; the file is written (or finished) all the same."""
+    sink.disk_errors += 1
+    sink.emit(DISK_EVENT, str(err), details=error_details("dir_fsync_failed", err, file))
+
+
 def abandoned(err: SinkIOError, kept: Path | None, had_file: bool, lost: int, unsure: int,
               retry_s: float) -> tuple[str, dict[str, Any]]:
     """The first error of an outage: the file kept for salvage (``kept``), none open

@@ -3,14 +3,22 @@
 A finished log ends with a Footer and the closing magic. One that ends before them (``head -c``,
 a copy interrupted, a ``.part`` whose writer died) lost the record it ends inside: for a chunk,
 all its messages, whose span of log time the chunk's header gives (a replay writes its whole
-log in one or two chunks, so a cut loses all or half of it).
+log in one or two chunks, so a cut loses all or half of it). A file shorter than the 8-byte
+magic that starts every MCAP file holds no record: empty, cut inside the magic, or not MCAP at
+all (:func:`short_text`).
 """
 
 from __future__ import annotations
 
 import struct
 
-__all__ = ["CUT_HEAD", "cut_text", "is_unfinished_name"]
+from cmsensord.sinks.mcap_chunks import MAGIC
+from cmsensord.sinks.mcap_records import NOT_MCAP
+
+__all__ = ["CUT_HEAD", "EMPTY", "cut_text", "is_unfinished_name", "short_text"]
+
+#: what an empty file is
+EMPTY = "empty file (0 bytes): no MCAP data"
 
 #: bytes of the cut record that :func:`cut_text` reads: its opcode and length, a chunk's times
 CUT_HEAD = 9 + 16
@@ -35,6 +43,17 @@ def cut_text(head: bytes, pos: int, size: int) -> str:
     first, last = struct.unpack_from("<QQ", head, 9)
     span = f"{(last - first) / 1e9:.1f} s" if last >= first else "an unknown span"
     return f"{at}, inside the chunk at byte {pos:,} ({part}; its messages over {span} of log time lost), no footer"
+
+
+def short_text(head: bytes) -> str:
+    """One phrase on a file shorter than the MCAP magic whose bytes are ``head``: :data:`EMPTY`,
+    cut inside the magic (no record in it), or :data:`NOT_MCAP` when its bytes are not the
+    magic's first ones."""
+    if not head:
+        return EMPTY
+    if not MAGIC.startswith(head):
+        return NOT_MCAP
+    return f"cut short at byte {len(head)}, inside the {len(MAGIC)}-byte MCAP magic: no record in it"
 
 
 def is_unfinished_name(name: str) -> bool:

@@ -2,11 +2,13 @@
 
 * one file ``<prefix>-<UTC yyyymmddTHHMMSSZ>.mcap`` (``-1``, ``-2``, ... when
   the name of that second is taken; never sorting before a name already there:
-  :mod:`cmsensord.sinks.log_names`), written as ``*.mcap.part`` and renamed by
-  :meth:`McapSink.close` once the summary and footer are on disk (then the
-  directory is fsynced). A ``.part`` file left by a crash holds every chunk
-  flushed before it (:func:`~cmsensord.sinks.mcap_salvage.salvage` recovers
-  them); it is locked (``flock``) while a sink has it open;
+  :mod:`cmsensord.sinks.log_names`), written as ``*.mcap.part`` (the directory
+  fsynced once it is created, so what a later fsync of the file makes durable
+  survives a power cut under its name) and renamed by :meth:`McapSink.close`
+  once the summary and footer are on disk (then the directory is fsynced
+  again). A ``.part`` file left by a crash holds every chunk flushed before it
+  (:func:`~cmsensord.sinks.mcap_salvage.salvage` recovers them); it is locked
+  (``flock``) while a sink has it open;
 * chunks are finished and written (unbuffered, :class:`RawFile`: straight to
   the kernel, so a kill -9 loses nothing written) every ``flush_s`` seconds by
   the injected clock, so at most ``flush_s`` of data is lost on a crash of the
@@ -205,6 +207,15 @@ class McapSink:
                 f"{self.part_path}: cannot write: {os_error_text(err)}", op="open", err=err,
                 path=self.part_path,
             ) from None
+        #: the directory fsync after creating the ``.part`` failed (the file is written all the
+        #: same; its name may not survive a power cut until the directory is fsynced again)
+        self.dir_sync_error: SinkIOError | None = None
+        try:
+            fsync_dir(self.out_dir)     # the new name durable before any data fsynced into it
+        except OSError as err:
+            self.dir_sync_error = SinkIOError(
+                f"{self.out_dir}: directory fsync failed after creating {self.part_path.name}: "
+                f"{os_error_text(err)}", op="fsync", err=err, path=self.part_path)
         self.reorder = ReorderWindow(reorder_s, horizon_ns=reorder_horizon_ns)
         self._registry = ChannelRegistry(self._writer)
         # topic -> (channel id, kind): the registry's map while the file takes messages, an

@@ -24,7 +24,7 @@ from mcap.stream_reader import breakup_chunk
 from cmsensord.errors import SinkError
 from cmsensord.sinks.mcap_chunk_check import Resync
 from cmsensord.sinks.mcap_chunks import MAGIC
-from cmsensord.sinks.mcap_cut import CUT_HEAD, cut_text, is_unfinished_name
+from cmsensord.sinks.mcap_cut import CUT_HEAD, cut_text, is_unfinished_name, short_text
 from cmsensord.sinks.mcap_encoding import NS
 from cmsensord.sinks.mcap_records import KNOWN_OPCODES, NOT_MCAP, RecordWalker, parse_record
 from cmsensord.sinks.schemas import TOPIC_EVENTS
@@ -147,6 +147,11 @@ class _Scan:
             self.error = walker.error
             return walker.valid_bytes
         self.truncated = True
+        if walker.end == RecordWalker.IN_MAGIC:          # empty, or too short for any record
+            f.seek(0)
+            self.cut = short_text(f.read(len(MAGIC)))
+            if not is_unfinished_name(self.path.name):
+                self.error = self.cut
         if walker.end in (RecordWalker.IN_RECORD, RecordWalker.AT_END):
             self._cut_at = walker.valid_bytes
         return walker.valid_bytes if walker.end == RecordWalker.IN_RECORD else None

@@ -24,7 +24,8 @@ the live loop does):
   loop iteration that wrote it, or of the next one when it was raised after
   that iteration's tick (at most one fsync per iteration, so a burst of events
   costs one fsync);
-* a finished file is fsynced, renamed and its directory fsynced.
+* a new file's directory is fsynced once it is created (its name is durable before its data);
+  a finished file is fsynced, renamed and its directory fsynced.
 
 Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk
 error) are salvaged (:func:`~cmsensord.sinks.mcap_salvage.salvage`) into
@@ -214,6 +215,8 @@ class RotatingSink:
         sink = McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
                         clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock,
                         reorder_horizon_ns=self._horizon_ns)
+        if sink.dir_sync_error is not None:
+            disk_events.dir_fsync_failed(self, sink.dir_sync_error, sink.part_path)
         if self._hold_all:
             sink.reorder.hold_all()
         self._opened = self.clock()
@@ -483,8 +486,7 @@ class RotatingSink:
         except SinkIOError as err:
             if cur.path.exists() and not cur.part_path.exists():
                 done = cur.path              # finished and renamed; the directory fsync failed
-                self.disk_errors += 1
-                self.emit(DISK_EVENT, str(err), details=disk_events.error_details("dir_fsync_failed", err, done))
+                disk_events.dir_fsync_failed(self, err, done)
             else:
                 self._failed(err, cur)
                 return None

@@ -104,6 +104,8 @@ def vibration_estimate_topic(channel: str) -> str:
 EVENT_KINDS: tuple[str, ...] = (
     "anomaly_onset",
     "anomaly_clear",
+    "anomaly_held",
+    "decision_rule",
     "order_alarm",
     "order_alarm_clear",
     "tacho_lost",
@@ -123,6 +125,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "reader_died",
     "queue_overflow",
     "decode_error",
+    "channels",
     "config",
     "start",
     "stop",
@@ -361,6 +364,7 @@ EVENT = _obj(
         "filters": {"type": "array", "items": {"type": "integer"},
                     "description": "anomaly_held: the AKFs (1-based) whose flags the hysteresis holds"},
         "samples": _int("capture, capture_skipped: samples in the capture"),
+        "n_channels": _int("channels: the channel count the board sends now", minimum=0),
         "state": _str("mqtt_link: the link's state (connected, disconnected, refused, failed)"),
         "queued": _int("mqtt_link: messages in the store-and-forward queue"),
         "action": _str("mqtt_queue: what happened (truncated, resumed, write_error, encode_error, "
