@@ -21,6 +21,8 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from cmsensord.sinks.mcap_file import fsync_dir
+
 _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
 _BODY = struct.Struct("<QBH")         # seq, retain, topic length
 #: no record body is larger than this (a torn length field reads as garbage beyond it)
@@ -77,6 +79,7 @@ class DiskQueue:
         self.dir = Path(directory)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.max_bytes, self.fsync_s = max_bytes, fsync_s
+        self._new_name = False
         self.segment_bytes = segment_bytes or max(4096, min(1 << 20, max_bytes // 8))
         self.segments: list[_Segment] = []
         self.truncated_bytes = 0        # torn tails cut off at open
@@ -139,6 +142,7 @@ class DiskQueue:
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_CLOEXEC", 0), 0o600)
         seg = _Segment(first, path, os.fstat(self._fd).st_size, first - 1)
         self.segments.append(seg)
+        self._new_name = True               # its directory entry is made durable at the next sync
         return seg
 
     def _close_fd(self) -> None:
@@ -166,6 +170,9 @@ class DiskQueue:
         if self._dirty and self._fd is not None:
             os.fsync(self._fd)
             self._dirty = False
+        if self._new_name:
+            fsync_dir(self.dir)
+            self._new_name = False
         if self.acked != self._acked_written:
             tmp = self.dir / "acked.tmp"
             tmp.write_text(f"{self.acked}\n")
