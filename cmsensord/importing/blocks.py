@@ -12,14 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cmsensord.protocol import MAX_PAYLOAD
+from cmsensord.protocol import MAX_BLOCKS_PER_S, MAX_RAW_BLOCK
 
 from .errors import ImportFailure
 from .recording import Recording
 
 __all__ = ["BlockPlan", "choose_block_len", "plan_blocks", "remainder_note"]
-
-MAX_RAW_BLOCK = MAX_PAYLOAD // 2  # 2048 u16 counts in one RAW payload
 
 
 def choose_block_len(fs: int, requested: int | None, mode: str) -> tuple[int, str | None]:
@@ -36,6 +34,9 @@ def choose_block_len(fs: int, requested: int | None, mode: str) -> tuple[int, st
     if mode == "raw" and L > MAX_RAW_BLOCK:
         raise ImportFailure(f"block_len {L}: a RAW frame carries at most {MAX_RAW_BLOCK} samples; "
                             f"give --block-len {MAX_RAW_BLOCK} or less, or use --mode rms")
+    if fs > MAX_BLOCKS_PER_S * L:
+        raise ImportFailure(f"block_len {L} at {fs} Hz: {fs / L:,.0f} blocks a second, more than the daemon takes "
+                            f"({MAX_BLOCKS_PER_S:,}); give --block-len {-(-fs // MAX_BLOCKS_PER_S)} or more")
     return L, note
 
 

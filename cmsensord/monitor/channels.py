@@ -36,30 +36,37 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
 from cmsensord.monitor.severity import SeverityChain
-from cmsensord.protocol import MODE_RAW, MODE_RMS, SETUP_FIELDS, Frame, Status, decode_status
+from cmsensord.protocol import (
+    MAX_BLOCKS_PER_S,
+    MAX_RAW_BLOCK,
+    MODE_RAW,
+    MODE_RMS,
+    SETUP_FIELDS,
+    Frame,
+    Status,
+    decode_status,
+)
 
 #: data frames of another channel count in a row that mean the board changed (1 s of RMS blocks)
 CHANGE_FRAMES = 100
 
 
-#: the highest sampling rate a STATUS may name [Hz]: past it, no accelerometer board's
-FS_MAX = 1_000_000
-#: the most samples in a RAW frame's payload (len <= 4096 bytes of u16 counts)
-BLOCK_LEN_MAX = 2048
-
-
 def status_out_of_range(st: Status) -> str | None:
     """What in ``st`` is outside the protocol's ranges (mode 1 or 2, 1..8 channels, fs and
-    block_len positive, at least one block a second), or None. The set-up sizes the monitor's
+    block_len at least 1, a RAW block in one frame's payload) or past the daemon's
+    :data:`~cmsensord.protocol.MAX_BLOCKS_PER_S`, or None. The set-up sizes the monitor's
     buffers, so one bad STATUS must not reach them."""
     if st.mode not in (MODE_RMS, MODE_RAW):
         return f"mode {st.mode} (the protocol's: 1 RMS, 2 RAW)"
     if not 1 <= st.n_channels <= MAX_CHANNELS:
         return f"{st.n_channels} channels (the protocol's: 1..{MAX_CHANNELS})"
-    if not 1 <= st.fs <= FS_MAX:
-        return f"fs {st.fs} Hz (1..{FS_MAX:,} Hz)"
-    if not 1 <= st.block_len <= min(BLOCK_LEN_MAX, st.fs):
-        return f"block_len {st.block_len} (1..{BLOCK_LEN_MAX} samples, at least one block a second)"
+    if st.fs < 1 or st.block_len < 1:
+        return f"fs {st.fs} Hz, block_len {st.block_len} (each at least 1)"
+    if st.mode == MODE_RAW and st.block_len > MAX_RAW_BLOCK:
+        return f"block_len {st.block_len} in RAW mode (a frame carries at most {MAX_RAW_BLOCK} samples)"
+    if st.fs > MAX_BLOCKS_PER_S * st.block_len:
+        return (f"fs {st.fs} Hz / block_len {st.block_len}: {st.fs / st.block_len:,.0f} blocks a second (at most "
+                f"{MAX_BLOCKS_PER_S:,})")
     return None
 
 
@@ -101,8 +108,9 @@ class ChannelSetup:
             return None, False
         out_of_range = status_out_of_range(st)
         if out_of_range:
-            self.log.emit("decode_error", None, f"STATUS at byte {f.offset} ignored: {out_of_range}: the previous "
-                          "STATUS is kept", self.clock.stamp_ns(f.t0_unwrapped))
+            kept = "the previous STATUS is kept" if self.status is not None else "no STATUS is in force yet"
+            self.log.emit("decode_error", None, f"STATUS at byte {f.offset} ignored: {out_of_range}: {kept}",
+                          self.clock.stamp_ns(f.t0_unwrapped))
             return None, False
         old = self.status
         return st, old is None or any(getattr(st, k) != getattr(old, k) for k in SETUP_FIELDS)
