@@ -27,10 +27,12 @@ the time base too, whatever its label; each file's first date and time is then i
 snapshot's (``Table.times``, ``dated``), and the recording's start.
 
 When the times are evenly spaced -- each within half a step of the straight line from the first
-to the last, as printed times rounded to a few decimals are, or, in a column labelled as
-time or of dates, within the printed resolution when that is coarser than the step
-(``0.0000, 0.0000, 0.0001, ...`` at 25.6 kHz: a time may repeat) -- they give the sampling rate,
+to the last, as printed times rounded to a few decimals are -- they give the sampling rate,
 one over the least-squares step, rounded to a whole number of Hz when within 0.01 % of one.
+A column labelled as time (or of dates) printed with fewer decimals than the rate needs
+(``0.0000, 0.0000, 0.0001, ...`` at 25.6 kHz) repeats each value in runs whose lengths differ
+by at most two: the time base too, and without a gap its rate is fitted to the rows where the
+values change (each a rounding boundary).
 The import then takes every other column as a channel by default and needs no ``--fs``
 (:class:`~.table.Table` ``time_columns`` and ``fs``). Unevenly spaced times (gaps, a restart)
 still mark the time base, without a rate: ``--fs`` gives it.
@@ -119,7 +121,7 @@ def _dated(t: Table) -> Table:
 def _time_base(t: Table, col: int, times: np.ndarray, what: str, whose: str) -> Table:
     """``t`` with column ``col`` (``times``, seconds) its time base: the rate when evenly spaced,
     and the note that says so."""
-    fs = _rate(times) if _even(times, repeats=True) else None
+    fs = _rate(times) if _even(times) else _printed_rate(times)
     what = f"column {t.columns[col]!r} ({col}) {what}"
     note = (f"{what}: {fs:g} Hz from {whose} steps; it is not imported as a channel" if fs else
             f"{what}, not evenly spaced ({_gap(times)}): it is not imported as a channel")
@@ -161,7 +163,7 @@ def _labelled(t: Table, start: int = 0) -> tuple[int, float] | None:
     values increase (a value may repeat: times printed with fewer decimals than the rate needs)."""
     for i, name in enumerate(t.columns[start:], start):
         m = _LABEL.fullmatch(name)
-        if m and _increasing(t.data[0, :, i], repeats=True):
+        if m and (_increasing(t.data[0, :, i]) or _printed(t.data[0, :, i]) is not None):
             return i, _UNIT_S.get((m[2] or "s").lower(), 1.0)
     return None
 
@@ -174,34 +176,64 @@ def _stretches(n: int):
     return range(0, n, _STRETCH)
 
 
-def _increasing(x: np.ndarray, repeats: bool = False) -> bool:
-    """Each value above the one before (``repeats``: or the same, the last above the first)."""
-    if repeats:
-        return bool(x[-1] > x[0]) and all(bool(np.all(np.diff(x[a:a + _STRETCH + 1]) >= 0))
-                                          for a in _stretches(x.size))
+def _increasing(x: np.ndarray) -> bool:
     return all(bool(np.all(np.diff(x[a:a + _STRETCH + 1]) > 0)) for a in _stretches(x.size))
 
 
-def _quantum(x: np.ndarray) -> float:
-    """The smallest rise from one value to the next: the resolution the times were printed with
-    when it is coarser than their step."""
-    rises = (d[d > 0] for d in (np.diff(x[a:a + _STRETCH + 1]) for a in _stretches(x.size)))
-    return min((float(r.min()) for r in rises if r.size), default=0.0)
-
-
-def _even(x: np.ndarray, repeats: bool = False) -> bool:
-    """Increasing (:func:`_increasing`), each value within half a mean step of the straight
-    line from the first to the last. ``repeats`` (a column labelled as time): a value may
-    repeat, and each is within the resolution the times were printed with when that is coarser
-    than the step (each value, and so each end of the line, is off by up to half of it)."""
+def _even(x: np.ndarray) -> bool:
+    """Strictly increasing, each value within half a mean step of the straight line."""
     x = np.asarray(x, dtype=np.float64)
-    if x.size < 3 or not _increasing(x, repeats):
+    if x.size < 3 or not _increasing(x):
         return False
     step = (x[-1] - x[0]) / (x.size - 1)
-    quantum = _quantum(x)
-    tol = (quantum if quantum > step else 0.5 * step) * (1 + 1e-6)
     return all(float(np.abs(x[a:a + _STRETCH] - (x[0] + step * np.arange(a, min(a + _STRETCH, x.size)))).max())
-               <= tol for a in _stretches(x.size))
+               <= 0.5 * step for a in _stretches(x.size))
+
+
+def _changes(x: np.ndarray) -> np.ndarray | None:
+    """The rows where a column that never decreases takes a new value (None: it decreases
+    somewhere, or never rises)."""
+    parts = []
+    for a in _stretches(x.size):
+        d = np.diff(x[a:a + _STRETCH + 1])
+        if (d < 0).any():
+            return None
+        parts.append(np.flatnonzero(d > 0) + a + 1)
+    rows = np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+    return rows if rows.size else None
+
+
+def _printed(x: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(rows where each new value starts, the printed resolution) of times printed with fewer
+    decimals than the rate needs (``0.0000, 0.0000, 0.0001, ...`` at 25.6 kHz): values that
+    repeat in runs whose lengths differ by at most two (a value on a rounding boundary goes
+    either way), apart from a run a gap ends (a rise past the resolution); None for anything
+    else (a warm-up's temperature rises unevenly)."""
+    rows = _changes(np.asarray(x, dtype=np.float64))
+    if rows is None or rows.size < 3 or rows.size == x.size - 1:
+        return None
+    rises = np.asarray(x, dtype=np.float64)[rows] - np.asarray(x, dtype=np.float64)[rows - 1]
+    quantum = float(rises.min())
+    runs = np.diff(rows)
+    kept = runs[rises[1:] <= quantum * (1 + 1e-6)]            # the runs no gap ends
+    if kept.size < 2 or int(kept.max()) - int(kept.min()) > 2 + 0.001 * float(np.median(kept)):
+        return None
+    return rows, quantum
+
+
+def _printed_rate(x: np.ndarray) -> float | None:
+    """The rate of times :func:`_printed` gives, when no gap is between them (else None): one
+    over the least-squares step of the rows where a new value starts (each a rounding boundary,
+    its time known to within a step) against their values."""
+    found = _printed(x)
+    if found is None:
+        return None
+    rows, quantum = found
+    v = np.asarray(x, dtype=np.float64)
+    if float(v[rows[-1]] - v[rows[0]]) > quantum * (rows.size - 1) * (1 + 1e-6):
+        return None                                             # a gap: more than one resolution per rise
+    k = rows.astype(np.float64) - rows.mean()
+    return whole_hz(float((k * k).sum() / (k * (v[rows] - v[rows].mean())).sum()))
 
 
 def _rate(times: np.ndarray) -> float:
@@ -230,4 +262,7 @@ def _gap(times: np.ndarray) -> str:
     if not d.size:
         return "a single row"
     k = int(np.argmax(d))
+    rises = d[d > 0]
+    if rises.size < d.size:             # values repeat: times printed coarser than their step
+        return f"a step of {d[k]:.6g} s after row {k + 1}, in times printed to {float(rises.min()):.6g} s"
     return f"a step of {d[k]:.6g} s after row {k + 1}, the median step {float(np.median(d)):.6g} s"
