@@ -138,13 +138,17 @@ class OrderChain:
         return Event(kind, channel, message, self.clock.stamp_ns(sample), fields)
 
     # ---------------------------------------------------------------- input
+    def begin(self, start: int) -> Out:
+        """The tracker's first input is board sample ``start``: its config event, stamped there
+        (the owner says it before the decisions of the blocks from there, so where it lands among
+        the events does not depend on how the stream was read)."""
+        self.sample0 = start
+        self.gate.restart(start)
+        return [self._event("config", None, self._hello, start)]
+
     def add_samples(self, start: int, y: np.ndarray) -> Out:
         """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost."""
-        out: Out = []
-        if self.sample0 is None:
-            self.sample0 = start
-            self.gate.restart(start)
-            out.append(self._event("config", None, self._hello, start))
+        out: Out = [] if self.sample0 is not None else self.begin(start)
         end = self.gate.end
         assert end is not None                  # restarted above or before
         gap = start - end

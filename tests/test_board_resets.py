@@ -1,0 +1,66 @@
+"""Board resets through ``cmsensord replay`` (docs/PROTOCOL.md: t0 is the ADC sample index of the
+first sample a frame covers, restarted with the board): each case is one small capture replayed by a
+real process, checked by the exact events in its MCAP.  A reset into RAW mode with a tacho says the
+order tracker at its first sample whatever the read size."""
+
+from __future__ import annotations
+
+import pytest
+
+from cmsensord.protocol import Decoder, FrameType, encode_frame, encode_tacho
+from cmsensord.service.replay import REPLAY_CHUNK
+from cmsensord.sinks.mcap_read import read_messages
+from processes import cmsensord
+from test_read_size import board
+
+pytestmark = pytest.mark.process
+
+
+def replay(tmp_path, data: bytes, *args: str) -> tuple[str, list]:
+    """``cmsensord replay`` of ``data`` (exit 0): its stderr and the messages of its MCAP."""
+    cap = tmp_path / "cap.bin"
+    cap.write_bytes(data)
+    p = cmsensord("replay", str(cap), "--out", str(tmp_path / "out"), *args)
+    assert p.returncode == 0, p.stderr
+    return p.stderr, [m for f in sorted((tmp_path / "out").glob("*.mcap")) for m in read_messages(f)]
+
+
+def events(msgs) -> list[tuple[int, str, str]]:
+    """(stamp from the first event's, kind, message) of every /cm/events record."""
+    ev = [(s, m["kind"], m["message"]) for t, s, m in msgs if t == "/cm/events"]
+    return [(s - ev[0][0], k, m) for s, k, m in ev]
+
+
+def frames_up_to(data: bytes, size: int) -> bytes:
+    """The whole frames of ``data`` that fit in ``size`` bytes."""
+    out = bytearray()
+    for f in Decoder().feed(data):
+        frame = encode_frame(f.type, f.seq, f.t0, f.chan, f.flags, f.payload)
+        if len(out) + len(frame) > size:
+            break
+        out += frame
+    return bytes(out)
+
+
+def test_a_reset_into_raw_with_a_tacho_says_the_order_tracker_at_the_reset(tmp_path):
+    """A 12.5-kHz RMS board (1 channel, no tacho) that fills replay's first read, reset into 2 RAW channels
+    with a tacho whose second read holds 3.9 s of them, one TACHO frame 0.5 s in with an edge outside its
+    block: the order tracker's config event is stamped at the reset, its first sample, and written before
+    that frame's decode_error.  Before, the tracker was made after the decisions of that read had let the
+    decode_error go, and was written late, at its stamp."""
+    rms = frames_up_to(board("rms", 180, fs=12_500, tacho=False), REPLAY_CHUNK)
+    raw = bytearray()
+    for f in Decoder().feed(board("raw", 6, channels=2, fs=12_500)):
+        edges = [300 * 256] if f.type == FrameType.TACHO and f.t0 == 6250 else None
+        raw += (encode_frame(f.type, f.seq, f.t0, f.chan, f.flags, f.payload) if edges is None
+                else encode_tacho(f.seq, f.t0, f.chan, edges))
+    _, msgs = replay(tmp_path, rms + bytes(raw))
+    after = [(s, k, m.split(":")[0]) for s, k, m in events(msgs) if s >= 170e9]
+    reset = after[0][0]
+    assert [(s - reset, k, m) for s, k, m in after] == [
+        (0, "time_base", "board clock restarted (t0 0 after 2144000)"),
+        (0, "config", "board firmware 1.0"),
+        (0, "decision_rule", "board block rate 50 blocks/s (fs 12500 / block 250), not 100"),
+        (0, "channels", "board now sends 2 channel(s), not 1"),
+        (0, "config", "order tracker"),
+        (500_000_000, "decode_error", "TACHO frame at t0 6250")]
