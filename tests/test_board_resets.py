@@ -7,7 +7,16 @@ from __future__ import annotations
 
 import pytest
 
-from cmsensord.protocol import Decoder, FrameType, encode_frame, encode_tacho
+from cmsensord.protocol import (
+    MODE_RMS,
+    Decoder,
+    FrameType,
+    Status,
+    encode_frame,
+    encode_rms,
+    encode_status,
+    encode_tacho,
+)
 from cmsensord.service.replay import REPLAY_CHUNK
 from cmsensord.sinks.mcap_read import read_messages
 from processes import cmsensord
@@ -29,6 +38,20 @@ def events(msgs) -> list[tuple[int, str, str]]:
     """(stamp from the first event's, kind, message) of every /cm/events record."""
     ev = [(s, m["kind"], m["message"]) for t, s, m in msgs if t == "/cm/events"]
     return [(s - ev[0][0], k, m) for s, k, m in ev]
+
+
+def rms_board(seconds: float, t0: int = 0, seq: int = 0, value=lambda k: 1.0) -> bytes:
+    """A 1-channel RMS board from ``t0`` and ``seq``: a STATUS each second, a frame a block of 250 at
+    25 kHz (RMS ``value(k)`` in block k)."""
+    st = Status(0x0100, MODE_RMS, 1, 25_000, 250, 0, 0, 0, 0, (1.0,), (0.0,))
+    out = bytearray()
+    for k in range(round(seconds * 100)):
+        if k % 100 == 0:
+            out += encode_status(seq, t0 + 250 * k, st)
+            seq += 1
+        out += encode_rms(seq, t0 + 250 * k, [value(k)])
+        seq += 1
+    return bytes(out)
 
 
 def frames_up_to(data: bytes, size: int) -> bytes:
@@ -64,3 +87,16 @@ def test_a_reset_into_raw_with_a_tacho_says_the_order_tracker_at_the_reset(tmp_p
         (0, "channels", "board now sends 2 channel(s), not 1"),
         (0, "config", "order tracker"),
         (500_000_000, "decode_error", "TACHO frame at t0 6250")]
+
+
+@pytest.mark.parametrize(("before", "after", "told"), [
+    (3_000_000_000, 0, "(t0 0 after 3000049750)"),
+    (0, 2**32 - 67_296, "(t0 4294900000 after 49750)")])
+def test_the_time_base_event_names_the_t0_the_board_sent(tmp_path, before, after, told):
+    """A board up 33 h reset to t0 0; a board reset to a t0 just before its 2^32 wrap (unwrapped, a step
+    back to -67296): the time_base event names the t0 fields as sent.  Before, the unwrapped ones:
+    "(t0 4294967296 after 3000049750)", "(t0 -67296 after 49750)"."""
+    _, msgs = replay(tmp_path, rms_board(2, before, seq=100) + rms_board(2, after))
+    assert [m for _, k, m in events(msgs) if k == "time_base"] == [
+        f"board clock restarted {told}: time segment 1 starts at the wall clock; the seq gap of 65234 in "
+        "front of it is not a loss (seq restarted)"]

@@ -247,8 +247,9 @@ class Segments:
         lost = (f"; the seq gap of {f.lost_before} in front of it is not a loss (seq restarted)"
                 if f.lost_before else "")
         self.seq_restarts += f.lost_before
-        self.log.emit("time_base", None, f"board clock restarted (t0 {f.t0_unwrapped} after "
-                   f"{self.previous_t0}): time segment {self.clock.segment} starts at the wall "
+        # the t0 fields as the board sent them (the unwrapped index wraps at 2^32 with them)
+        self.log.emit("time_base", None, f"board clock restarted (t0 {f.t0} after "
+                   f"{self.previous_t0 & 0xFFFFFFFF}): time segment {self.clock.segment} starts at the wall "
                    f"clock{lost}", stamp, details={"segment": self.clock.segment, "reason": "reset"})
         return False
 
