@@ -100,3 +100,19 @@ def test_the_time_base_event_names_the_t0_the_board_sent(tmp_path, before, after
     assert [m for _, k, m in events(msgs) if k == "time_base"] == [
         f"board clock restarted {told}: time segment 1 starts at the wall clock; the seq gap of 65234 in "
         "front of it is not a loss (seq restarted)"]
+
+
+def test_a_t0_stepping_back_every_other_frame_is_rate_limited_like_any_event(tmp_path):
+    """1 s of a board, then 2000 RMS frames whose t0 goes 0, 250, 0, 250 ... (a t0 field glitching): 1000
+    board resets, each a time segment 20 ms on.  /cm/events keeps 5 time_base records a second of event
+    time and a summary of the rest each second, as the README promises.  Before, each reset ended the
+    limit's intervals, and all 1000 were written one by one (~48 a second)."""
+    glitch = b"".join(encode_rms(101 + k, (k % 2) * 250, [1.0]) for k in range(2000))
+    _, msgs = replay(tmp_path, rms_board(1) + glitch)
+    told = [(s, m) for t, s, m in msgs if t == "/cm/events" and m["kind"] == "time_base"]
+    one = [s for s, m in told if "summarised" not in m]
+    summaries = [(s, m["summarised"], m["message"]) for s, m in told if "summarised" in m]
+    assert len(one) + sum(n for _, n, _ in summaries) == 1000
+    assert (len(one), len(summaries)) == (100, 20)
+    assert all(sum(0 <= t - s < 1e9 for t in one) <= 5 for s in one)
+    assert summaries[0][2] == "45 more time_base event(s) in 0.98 s: at most 5 per 1 s are written one by one"

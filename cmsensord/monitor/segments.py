@@ -242,7 +242,7 @@ class Segments:
             self.ignored_type = f.type
             return True
         self.flush()
-        self.log.flush()                    # the old segment's events before the new one's
+        self.log.flush(summaries=False)     # the old segment's events before the new one's
         stamp = self.clock.new_segment(f.t0_unwrapped, self.clock_ns())
         lost = (f"; the seq gap of {f.lost_before} in front of it is not a loss (seq restarted)"
                 if f.lost_before else "")
