@@ -27,6 +27,7 @@ pytestmark = pytest.mark.process
 
 def replay(tmp_path, data: bytes, *args: str) -> tuple[str, list]:
     """``cmsensord replay`` of ``data`` (exit 0): its stderr and the messages of its MCAP."""
+    tmp_path.mkdir(parents=True, exist_ok=True)
     cap = tmp_path / "cap.bin"
     cap.write_bytes(data)
     p = cmsensord("replay", str(cap), "--out", str(tmp_path / "out"), *args)
@@ -116,3 +117,31 @@ def test_a_t0_stepping_back_every_other_frame_is_rate_limited_like_any_event(tmp
     assert (len(one), len(summaries)) == (100, 20)
     assert all(sum(0 <= t - s < 1e9 for t in one) <= 5 for s in one)
     assert summaries[0][2] == "45 more time_base event(s) in 0.98 s: at most 5 per 1 s are written one by one"
+
+
+def jittered(data: bytes, every: int = 3, off: int = 7) -> bytes:
+    """``data`` with the RAW frame of every ``every``-th block from 2 s on under a t0 ``off`` samples
+    late (the TACHO frame after it, and the blocks after, under their own)."""
+    out = bytearray()
+    for f in Decoder().feed(data):
+        late = f.type == FrameType.RAW and f.t0 >= 50_000 and (f.t0 // 250) % every == 0
+        out += encode_frame(f.type, f.seq, f.t0 + off * late, f.chan, f.flags, f.payload)
+    return bytes(out)
+
+
+def test_a_t0_a_few_samples_off_is_no_board_reset(tmp_path):
+    """The RAW frame of every third block from 2 s on says a t0 7 samples late (docs/PROTOCOL.md: the
+    frames of a block share its t0): the TACHO frame after it, 7 samples behind, is no board reset and the
+    RAW samples follow on.  The replay tells what the board's own t0 gives, every observation and order
+    there.  Before, each such step back was a reset: 100 time segments in 3 s, each with an order tracker
+    made anew, and 100 missing observations."""
+    clean = board("raw", 5)
+    err, msgs = replay(tmp_path / "clean", clean)
+    jerr, jmsgs = replay(tmp_path / "jittered", jittered(clean))
+    assert [(k, m) for _, k, m in events(jmsgs)] == [(k, m) for _, k, m in events(msgs)]
+    assert [k for _, k, _ in events(msgs)] == ["config", "config"]
+    assert "(500 observations, 0 missing, 0 frames lost)" in jerr
+    orders = [[(m["valid"], m["speed_rpm"]) for t, _, m in run if t == "/cm/ch0/orders"] for run in (msgs, jmsgs)]
+    assert len(orders[1]) == len(orders[0]) == 50
+    assert [v for v, _ in orders[1]] == [v for v, _ in orders[0]] and sum(v for v, _ in orders[0]) == 49
+    assert orders[1] == orders[0]

@@ -147,11 +147,15 @@ class OrderChain:
         return [self._event("config", None, self._hello, start)]
 
     def add_samples(self, start: int, y: np.ndarray) -> Out:
-        """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost."""
+        """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost.  A ``start``
+        less than a block off the end of the samples before (a RAW frame's t0 a few samples off,
+        docs/PROTOCOL.md: the frames of a block share it) is taken as following on from them."""
         out: Out = [] if self.sample0 is not None else self.begin(start)
         end = self.gate.end
         assert end is not None                  # restarted above or before
         gap = start - end
+        if abs(gap) < self.clock.block_len:     # a t0 a few samples off (no reset either): they follow on
+            gap = 0
         if gap < 0 or gap > MAX_FILL_S * self.fs:
             out += self.release(final=True)
             self.tracker.reset()
