@@ -5,6 +5,8 @@ order tracker at its first sample whatever the read size."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from cmsensord.protocol import (
@@ -30,7 +32,7 @@ def replay(tmp_path, data: bytes, *args: str) -> tuple[str, list]:
     tmp_path.mkdir(parents=True, exist_ok=True)
     cap = tmp_path / "cap.bin"
     cap.write_bytes(data)
-    p = cmsensord("replay", str(cap), "--out", str(tmp_path / "out"), *args)
+    p = cmsensord("replay", str(cap), "--out", str(tmp_path / "out"), *args, timeout=60)
     assert p.returncode == 0, p.stderr
     return p.stderr, [m for f in sorted((tmp_path / "out").glob("*.mcap")) for m in read_messages(f)]
 
@@ -145,3 +147,15 @@ def test_a_t0_a_few_samples_off_is_no_board_reset(tmp_path):
     assert len(orders[1]) == len(orders[0]) == 50
     assert [v for v, _ in orders[1]] == [v for v, _ in orders[0]] and sum(v for v, _ in orders[0]) == 49
     assert orders[1] == orders[0]
+
+
+@pytest.mark.parametrize("before", [3_000_000_000, 0])
+def test_a_paced_replay_paces_each_segment_from_its_own_start(tmp_path, before):
+    """``replay --speed 2`` of 2 s of a board, a reset to t0 0, 2 s more: 2 s of wall time whether the board
+    had been up 33 h (t0 3e9: its unwrapped t0 then jumps on by 1.29e9 samples) or had just started (t0 back
+    by 2 s).  Before, the first slept 7.2 h at the reset (the run was killed at 60 s), and the second did not
+    pace the 2 s after the reset (1 s of wall time)."""
+    err, msgs = replay(tmp_path, rms_board(2, before, seq=100) + rms_board(2), "--speed", "2")
+    wall = float(re.search(r"4\.0 s of ADC time in ([0-9.]+) s wall", err).group(1))
+    assert 1.9 <= wall <= 3.5, err
+    assert [k for _, k, _ in events(msgs)] == ["config", "time_base"]
