@@ -1,7 +1,9 @@
 """Board resets through ``cmsensord replay`` (docs/PROTOCOL.md: t0 is the ADC sample index of the
-first sample a frame covers, restarted with the board): each case is one small capture replayed by a
-real process, checked by the exact events in its MCAP.  A reset into RAW mode with a tacho says the
-order tracker at its first sample whatever the read size."""
+first sample a frame covers, shared by the frames of a block and restarted with the board): each case
+is one small capture replayed by a real process, checked by the exact events in its MCAP.  A reset into
+RAW mode with a tacho says the order tracker at its first sample whatever the read size; the time_base
+event names the t0 the board sent; resets are rate-limited like any event; a t0 a few samples off is no
+reset; a paced replay paces each segment from its own start."""
 
 from __future__ import annotations
 
