@@ -18,7 +18,8 @@ reads frames this way, so they all decode bytes the same way:
   so the loop can do its periodic work; while that block is still to come, frames wait
   for it up to ``hold_s``), until :meth:`SerialSource.stop`, then what is left, then ends;
 * :class:`Paced` — wraps any source and paces it at ``speed`` times the
-  board's clock (the frames' own t0), with an injectable clock and sleep.
+  board's clock (the frames' own t0, each time segment from its first frame: a board
+  reset starts one), with an injectable clock and sleep.
 
 ``counters`` (the decoder's :class:`~cmsensord.protocol.LinkCounters`) is on
 every source.
@@ -33,6 +34,7 @@ from typing import BinaryIO
 
 from cmsensord.errors import LinkError
 from cmsensord.link import FrameQueue, SerialReader
+from cmsensord.monitor.clock import DEFAULT_BLOCK_LEN, DEFAULT_FS, is_reset
 from cmsensord.protocol import Decoder, Frame, FrameType, LinkCounters, decode_status
 
 __all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced"]
@@ -284,15 +286,19 @@ class SerialSource(FrameSource):
 class Paced(FrameSource):
     """``source`` at ``speed`` times the board's clock (1: real time).
 
-    The board's time of a batch is the t0 of its last frame over fs (fs from the
-    STATUS frames seen, 25 kHz before one), counted from the first frame.  After the
+    The board's time of a batch is the t0 of its last frame over fs (fs and the block
+    length from the STATUS frames seen, 25 kHz and 250 before one), counted from the
+    first frame of its time segment, plus the board time of the segments before it: a
+    board reset (:func:`~cmsensord.monitor.clock.is_reset`, as the daemon's segments
+    decide one) starts a segment, paced from its own first frame (a board up for days
+    that resets is not slept through the days its t0 goes back or on).  After the
     consumer is done with a batch, the wrapper sleeps until ``clock()`` reaches the
     start time plus that board time / speed.  ``clock`` and ``sleep`` are injectable.
     """
 
     def __init__(self, source: FrameSource, speed: float, *,
                  clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep, fs: int = 25000):
+                 sleep: Callable[[float], None] = time.sleep, fs: int = DEFAULT_FS):
         if not speed > 0:
             raise ValueError(f"speed must be positive, got {speed}")
         self.source = source
@@ -300,30 +306,42 @@ class Paced(FrameSource):
         self.clock = clock
         self.sleep = sleep
         self.fs = fs
+        self.block_len = DEFAULT_BLOCK_LEN
 
     def __getattr__(self, name: str):
         return getattr(self.source, name)      # counters, bytes_read, size, events ...
 
     def __iter__(self) -> Iterator[Batch]:
         t_start = self.clock()
-        first: int | None = None
+        done_s = 0.0                        # board seconds of the segments before the current one
+        first = last = 0                    # t0_unwrapped of the segment's first frame, of the newest
+        seen = False
         for frames in self.source:
             yield frames
             if not frames:
                 continue
             for f in frames:
-                if f.type == FrameType.STATUS:
-                    try:
-                        st = decode_status(f.payload)
-                    except ValueError:
-                        continue
-                    if st.fs > 0:
-                        self.fs = st.fs
-            if first is None:
-                first = frames[0].t0_unwrapped
-            wait = t_start + (frames[-1].t0_unwrapped - first) / self.fs / self.speed - self.clock()
+                t = f.t0_unwrapped
+                if not seen or is_reset(t, last, self.fs, self.block_len):
+                    done_s += (last - first) / self.fs
+                    first, seen = t, True
+                last = t
+                if f.type == FrameType.STATUS:      # after its own check, as the daemon takes it
+                    self._status(f.payload)
+            wait = t_start + (done_s + (last - first) / self.fs) / self.speed - self.clock()
             if wait > 0:
                 self.sleep(wait)
+
+    def _status(self, payload: bytes) -> None:
+        """The fs and block length a STATUS frame names (none when it is malformed or names 0)."""
+        try:
+            st = decode_status(payload)
+        except ValueError:
+            return
+        if st.fs > 0:
+            self.fs = st.fs
+        if st.block_len > 0:
+            self.block_len = st.block_len
 
     def close(self) -> None:
         self.source.close()

@@ -25,10 +25,10 @@ FRAMES_PER_S = 201
 
 
 def board(mode: str, seconds: float, *, fs: int = 25_000, t0: int = 0, seq: int = 0, channels: int = 1,
-          ppr: int = 1, scale: tuple[float, ...] | None = None, tacho: bool = True) -> bytes:
-    """A healthy motor at 1720 rpm on a board with a tacho (1 channel, 1 pulse per revolution and the
-    board's default scale unless ``channels``, ``ppr``, ``scale``; no tacho unless ``tacho``)."""
-    sc = make_scenario("healthy", n_channels=channels, duration_s=seconds, seed=1, fs=fs)
+          ppr: int = 1, scale: tuple[float, ...] | None = None, tacho: bool = True, scenario: str = "healthy") -> bytes:
+    """A healthy motor (or ``scenario``) at 1720 rpm on a board with a tacho (1 channel, 1 pulse per revolution
+    and the board's default scale unless ``channels``, ``ppr``, ``scale``; no tacho unless ``tacho``)."""
+    sc = make_scenario(scenario, n_channels=channels, duration_s=seconds, seed=1, fs=fs)
     cfg = BoardConfig(mode=mode, n_channels=channels, fs=fs, t0_start=t0, seq_start=seq & 0xFFFF, tacho=tacho,
                       ppr=ppr, scale=scale)
     return Board(sc, cfg).generate(seconds)
@@ -293,3 +293,31 @@ def test_an_rms_block_again_under_its_t0_gives_the_same_messages_at_any_read_siz
     assert len(jumps) == 10
     missing = [m["missing_fraction"] for _, m in runs[0]["/cm/ch0/indicators"]]
     assert len(missing) >= 13 and all(0.0 <= v <= 1.0 for v in missing), missing
+
+
+def reset_into_raw_and_back(rms_s: float = 10) -> bytes:
+    """A 1-channel RMS board with no tacho for ``rms_s``, reset into 2 RAW channels with a tacho (a faulty
+    machine: anomaly events in its first seconds) for 6 s, reset into 3 RMS channels for 10 s whose t0
+    starts 67296 samples before its wrap at 2^32 (a step back of 217046 from the newest)."""
+    return (board("rms", rms_s, tacho=False) + board("raw", 6, channels=2, scenario="faulty")
+            + board("rms", 10, channels=3, tacho=False, t0=2**32 - 67_296))
+
+
+def test_a_reset_into_raw_with_a_tacho_and_back_gives_the_same_messages_at_any_read_size():
+    """Across two resets that change the mode and the channels, every topic's messages are alike at every
+    read size, and the order tracker's config event is stamped at its first sample, the reset, ahead of
+    the anomaly events of the decisions after it.  Before, a 1-MiB read made the tracker after its first
+    blocks' decisions had let the events before them go: it was written at 13 s, after those events."""
+    runs = [by_topic(reset_into_raw_and_back(), read) for read in READS]
+    assert runs[1] == runs[0] and runs[2] == runs[0]
+    told = [(s, m["kind"], m["message"].split(":")[0]) for s, m in runs[0]["/cm/events"]]
+    assert told[1:9] == [(10_000_000_000, "time_base", "board clock restarted (t0 0 after 249750)"),
+                         (10_000_000_000, "config", "board firmware 1.0"),
+                         (10_000_000_000, "channels", "board now sends 2 channel(s), not 1"),
+                         (10_000_000_000, "config", "order tracker"),
+                         (11_000_000_000, "anomaly_onset", "ch0"),
+                         (11_000_000_000, "anomaly_onset", "ch0"),
+                         (11_000_000_000, "severity_change", "ch0"),
+                         (13_000_000_000, "anomaly_onset", "ch0")]
+    assert [(s, m) for s, k, m in told if k == "time_base"][1][0] == 16_000_000_000
+    assert sum(m["valid"] for _, m in runs[0]["/cm/ch0/orders"]) == 59

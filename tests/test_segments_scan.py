@@ -57,10 +57,10 @@ def test_one_pass_checks_on_a_raw_capture_with_a_tacho(monkeypatch):
     assert got == ref and counts == ref_counts and "/cm/ch0/orders" in ref
 
 
-def status_frame(seq: int, t0: int, mode: int = 1, fs: int = 25000) -> bytes:
+def status_frame(seq: int, t0: int, mode: int = 1, fs: int = 25000, block_len: int = 250) -> bytes:
     from cmsensord.protocol import Status, encode_status
 
-    return encode_status(seq, t0, Status(fw_version=0x0100, mode=mode, n_channels=4, fs=fs, block_len=250,
+    return encode_status(seq, t0, Status(fw_version=0x0100, mode=mode, n_channels=4, fs=fs, block_len=block_len,
                                          tacho_inputs=0, tacho_ppr=0, overruns=0, uptime_s=seq,
                                          scale=(1.0,) * 4, offset=(0.0,) * 4))
 
@@ -89,3 +89,31 @@ def test_one_pass_runs_through_status_frames_that_name_the_mode_and_fs_in_force(
     assert got == ref and counts == ref_counts
     assert max(passed) > 300                # through many STATUS frames at a time
     assert ref_counts.get("decode_error", 0) >= 1 and "/cm/ch0/severity" in ref
+
+
+def test_one_pass_checks_with_t0_a_few_samples_back_and_a_block_length_change(monkeypatch):
+    """A t0 now and then up to 300 samples behind the frame before it (less than a block: no reset; a block
+    or more: a reset, :func:`~cmsensord.monitor.clock.is_reset`), and STATUS frames that change the block
+    length (64 <-> 250) at the same mode and fs, which moves that line: the messages and events of one-pass
+    checks are those of frame-by-frame checks."""
+    import numpy as np
+
+    from cmsensord.protocol import encode_rms
+
+    rng = np.random.default_rng(2)
+    out, t0, seq, block = [], 0, 0, 250
+    for k in range(4000):
+        if k % 100 == 0:
+            block = 64 if k % 400 == 200 else 250
+            out.append(status_frame(seq, t0, block_len=block))
+            seq += 1
+        out.append(encode_rms(seq, max(0, t0 - int(rng.integers(1, 300))) if rng.random() < 0.1 else t0,
+                              rng.uniform(0.5, 1.5, 4)))
+        seq += 1
+        t0 += block
+    data = b"".join(out)
+    ref, ref_counts, _ = run(data, monkeypatch, one_pass=False, chunk=1 << 16)
+    got, counts, passed = run(data, monkeypatch, one_pass=True, chunk=1 << 16)
+    assert got == ref and counts == ref_counts
+    assert max(passed) > 50 and 0 in passed
+    assert 0 < ref_counts.get("time_base", 0) < 400         # the steps back of a block or more

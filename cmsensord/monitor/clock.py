@@ -11,8 +11,8 @@ gap forward, a duplicate or a step backwards re-anchors the slots instead of
 inventing missing observations for the whole gap; a duplicate (a stuck t0) is
 stamped one block after the newest stamp.
 
-Stamps are made in *segments*.  A step backwards or forward by more than
-``MAX_GAP_S`` is a board reset (t0 restarted or reloaded): a new segment starts,
+Stamps are made in *segments*.  A step back of a block or more, or forward by more than
+``MAX_GAP_S``, is a board reset (t0 restarted or reloaded: :func:`is_reset`): a new segment starts,
 anchored to the wall clock at the reset but never before the end of the newest slot
 (:meth:`BlockClock.new_segment`), so stamps never go backwards.  Live, the
 board's clock is compared with the wall clock (:meth:`BlockClock.drift`); one
@@ -59,6 +59,16 @@ STEP_S = 1.0
 MAX_EPOCHS = 4096
 
 
+def is_reset(t0_unwrapped: int, last_t0: int, fs: int, block_len: int) -> bool:
+    """True when a frame at ``t0_unwrapped`` after one at ``last_t0`` means the board restarted its
+    clock (at ``fs`` samples a second, blocks of ``block_len``): a step back of a block or more, or
+    forward by more than ``MAX_GAP_S``.  A frame's t0 is the first sample of its block, shared by the
+    frames of that block (docs/PROTOCOL.md), so one less than a block behind the frame before it is
+    a t0 off by a few samples (a RAW and a TACHO frame of one block that disagree), not a clock
+    that started again."""
+    return t0_unwrapped <= last_t0 - block_len or t0_unwrapped - last_t0 > MAX_GAP_S * fs
+
+
 class BlockClock:
     """Slots and wall-clock stamps of the board's blocks (see module docstring)."""
 
@@ -89,9 +99,8 @@ class BlockClock:
             self.t0_first = self.seg_t0 = t0_unwrapped
 
     def is_reset(self, t0_unwrapped: int, last_t0: int) -> bool:
-        """True when a frame at ``t0_unwrapped`` after one at ``last_t0`` means the board
-        restarted its clock: a step backwards, or forward by more than ``MAX_GAP_S``."""
-        return t0_unwrapped < last_t0 or t0_unwrapped - last_t0 > MAX_GAP_S * self.fs
+        """:func:`is_reset` at this clock's fs and block length."""
+        return is_reset(t0_unwrapped, last_t0, self.fs, self.block_len)
 
     def new_segment(self, t0_unwrapped: int, wall_ns: int, stamp_fs: int | None = None) -> int:
         """A new segment: the block at ``t0_unwrapped`` takes the next slot and is stamped

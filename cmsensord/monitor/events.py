@@ -16,7 +16,8 @@ of ``/cm/events`` and ``/cm/log`` is applied as the records are written, in stam
 stamp's records in the order of kind, channel and message), so which events are written one
 by one and what the summaries say depend on the stream only, not on how it was read (live
 and replay write the same); a summary is written where its interval ends (before the first
-record stamped past it), or at a board reset or the end of the run.  The journal, the recent
+record stamped past it), or at the end of the run or a step back of the wall clock (a board
+reset does not end it: the stamps of the next segment go on from the newest).  The journal, the recent
 list and ``on_event`` get the events as they come, limited in that order (their summaries
 with the next event of the kind after the interval, or at the end of the run:
 :meth:`EventLog.summarise`).  Every occurrence stays in :attr:`EventLog.counts`.  Kinds in
@@ -214,9 +215,15 @@ class EventLog:
         owed = self.owed()
         return upto_ns if owed is None else min(upto_ns, owed - 1)
 
-    def flush(self) -> None:
-        """Write every waiting record, in stamp order."""
+    def flush(self, *, summaries: bool = True) -> None:
+        """Write every waiting record, in stamp order, and with ``summaries`` end the intervals of
+        the rate limit of ``/cm/events`` (their summaries written).  A board reset writes the records
+        only: the next segment's stamps go on from the newest, and so does the limit (a t0 stepping
+        back every frame is 5 time_base records a second, not one a frame)."""
         self._write_upto(None)
+        if summaries:
+            for s in self._written.close_all():
+                self._put_summary(s)
 
     def went_back(self) -> None:
         """The time base went back (the wall clock stepped back): every waiting record is
@@ -241,9 +248,6 @@ class EventLog:
             while pending and pending[0][0] == key:
                 group.append(heapq.heappop(pending))
             self._write_group(key, group)
-        if upto_ns is None:
-            for s in self._written.close_all():
-                self._put_summary(s)
 
     def _write_group(self, key: int, group: list[tuple[int, int, messages.Message, int]]) -> None:
         """The records of one stamp, in the order they came; which of the rate-limited ones are

@@ -138,16 +138,24 @@ class OrderChain:
         return Event(kind, channel, message, self.clock.stamp_ns(sample), fields)
 
     # ---------------------------------------------------------------- input
+    def begin(self, start: int) -> Out:
+        """The tracker's first input is board sample ``start``: its config event, stamped there
+        (the owner says it before the decisions of the blocks from there, so where it lands among
+        the events does not depend on how the stream was read)."""
+        self.sample0 = start
+        self.gate.restart(start)
+        return [self._event("config", None, self._hello, start)]
+
     def add_samples(self, start: int, y: np.ndarray) -> Out:
-        """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost."""
-        out: Out = []
-        if self.sample0 is None:
-            self.sample0 = start
-            self.gate.restart(start)
-            out.append(self._event("config", None, self._hello, start))
+        """m/s² samples (n, C) from board sample ``start`` on; NaN where a block was lost.  A ``start``
+        less than a block off the end of the samples before (a RAW frame's t0 a few samples off,
+        docs/PROTOCOL.md: the frames of a block share it) is taken as following on from them."""
+        out: Out = [] if self.sample0 is not None else self.begin(start)
         end = self.gate.end
         assert end is not None                  # restarted above or before
         gap = start - end
+        if abs(gap) < self.clock.block_len:     # a t0 a few samples off (no reset either): they follow on
+            gap = 0
         if gap < 0 or gap > MAX_FILL_S * self.fs:
             out += self.release(final=True)
             self.tracker.reset()

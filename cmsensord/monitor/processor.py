@@ -412,13 +412,13 @@ class Processor(Figures):
         """Converted RAW blocks through the chains: observations, indicators (each run on one time
         base waits in :attr:`held` until before the next decision: its records go out ahead of the
         decisions after them, however the stream was cut into calls), captures, orders."""
+        orders = self._order_chain(int(blocks.t0[0]))     # made before the decisions the blocks release
         self._observe(blocks.t0, blocks.rms(), placed=self.held.placer(blocks))
         if not self.held.rows:                  # the banks wait for no decision: nor do the indicators
             self._hand_over()
         if self.captures is not None:
             self._out(self.captures.raw(self.channels, blocks.t0,
                                         blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
-        orders = self._order_chain()
         if orders is not None:
             index = [ch.index for ch in orders.channels]
             y = blocks.samples(index)
@@ -435,15 +435,13 @@ class Processor(Figures):
             self._hand_over()
             self.setup.change(C)
 
-    def _order_chain(self) -> OrderChain | None:
-        """The order chain of the vibration channels, created with the first RAW blocks
-        (None while there is none to make)."""
+    def _order_chain(self, start: int) -> OrderChain | None:
+        """The order chain of the vibration channels, created with the first RAW blocks, from board
+        sample ``start`` on, and said at once (None while there is none to make)."""
         if self.orders is None:
             vib = tuple(ch for ch in self.channels if ch.kind != "microphone")
             if not (vib and self.cfg.orders.enabled and self.severity is not None
-                    and self.shaft.ensure(self.status, self.clock)):
-                return None
-            if self._orders_refused == self.clock.fs:
+                    and self.shaft.ensure(self.status, self.clock)) or self._orders_refused == self.clock.fs:
                 return None
             from cmsensord.monitor.orders import OrderChain  # scipy is loaded only for the raw chain
             try:
@@ -456,6 +454,7 @@ class Processor(Figures):
             expect_lag = getattr(self.sink, "expect_lag", None)
             if expect_lag is not None:          # orders come seconds behind: the file's order waits
                 expect_lag()
+            self._out(self.orders.begin(start))
         return self.orders
 
     def _feed_tacho(self, end: bool = False, before: int | None = None) -> None:

@@ -1,8 +1,9 @@
 """Time segments of the stream: board resets, a board clock drifting off the wall clock,
 and frames of the mode the board is not in.
 
-A frame whose t0 steps backwards, or forward by more than ``MAX_GAP_S``, means the
-board restarted its clock (a reset, a replug of a rebooted board): a new segment
+A frame whose t0 steps back by a block or more, or forward by more than ``MAX_GAP_S``, means
+the board restarted its clock (a reset, a replug of a rebooted board; one a few samples behind
+the frame before it is no restart: :func:`~cmsensord.monitor.clock.is_reset`): a new segment
 starts (:meth:`~cmsensord.monitor.clock.BlockClock.new_segment`), stamped from the
 wall clock at the reset and never before the newest stamp, with a ``time_base``
 event; the seq gap in front of that frame is not a loss (the board restarted its
@@ -22,8 +23,9 @@ event (:meth:`Segments.gaps`).
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Iterator, Sequence
-from operator import attrgetter
+from operator import attrgetter, sub
 from typing import NamedTuple
 
 import numpy as np
@@ -32,7 +34,7 @@ from cmsensord.frame_repeats import REPEATS_SHIFT, repeats_before
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import MAX_GAP_S, BlockClock, WallSteps
 from cmsensord.monitor.events import EventLog
-from cmsensord.protocol import Frame, FrameType, status_mode_fs
+from cmsensord.protocol import Frame, FrameType
 
 #: STATUS mode -> the data frame type the board does not send in it
 _OTHER = {1: FrameType.RAW, 2: FrameType.RMS}
@@ -47,6 +49,8 @@ SCAN_MIN = 32
 _TYPE, _T0, _LOST, _FLAGS = (attrgetter(name) for name in ("type", "t0_unwrapped", "lost_before", "flags"))
 #: flags above this: the receiver dropped repeats in front of the frame
 WIRE_FLAGS = (1 << REPEATS_SHIFT) - 1
+#: a STATUS payload's mode, fs and block_len (docs/PROTOCOL.md: after u16 firmware version, u8 C)
+_MODE_FS_BLOCK = struct.Struct("<2xB1xIH")
 #: after a frame that does not pass, this many frames are checked one by one before the next pass
 SCAN_RETRY = 8
 
@@ -79,10 +83,10 @@ def frame_columns(frames: Sequence[Frame]) -> FrameColumns:
     return FrameColumns(code, t0, lost, frames)
 
 
-def _names(payload: bytes, mode: int, fs: int) -> bool:
-    """True when a STATUS payload names board mode ``mode`` and rate ``fs``: taken or refused,
-    it changes neither."""
-    return status_mode_fs(payload) == (mode, fs)
+def _names(payload: bytes, mode: int, fs: int, block_len: int) -> bool:
+    """True when a STATUS payload names board mode ``mode``, rate ``fs`` and block length
+    ``block_len`` (what :meth:`Segments.check` reads): taken or refused, it changes none."""
+    return len(payload) >= _MODE_FS_BLOCK.size and _MODE_FS_BLOCK.unpack_from(payload) == (mode, fs, block_len)
 
 
 class Segments:
@@ -123,9 +127,8 @@ class Segments:
             return False
         t = list(map(_T0, frames))
         last = self.last_t0
-        first = t[0] if last is None else last
-        # in order and spanning at most MAX_GAP_S: no step back, none longer than that
-        if t[0] < first or t[-1] - first > MAX_GAP_S * self.clock.fs or t != sorted(t):
+        steps = list(map(sub, t, [t[0] if last is None else last, *t[:-1]]))   # from the frame before
+        if min(steps) <= -self.clock.block_len or max(steps) > MAX_GAP_S * self.clock.fs:   # is_reset
             return False
         if self.ignored:
             self._report()
@@ -177,7 +180,7 @@ class Segments:
         code, t, lost, _ = cols
         t_s, last = int(t[start]), self.last_t0
         if lost[start] or code[start] < 0 or (other is not None and code[start] == other) \
-                or (last is not None and (t_s < last or t_s - last > MAX_GAP_S * self.clock.fs)):
+                or (last is not None and self.clock.is_reset(t_s, last)):
             return 0
         j = int(bad.searchsorted(start + 1))
         end = int(bad[j]) if j < bad.size else t.size
@@ -196,24 +199,24 @@ class Segments:
         them or are of the other mode than ``mode`` or follow a seq gap, indices of its STATUS
         frames that may change the mode or the fs), kept while the batch, the mode and the
         rate stay."""
-        fs = self.clock.fs
+        fs, block_len = self.clock.fs, self.clock.block_len
         m = self._marked
-        if m is not None and m[0] is cols and m[1] == mode and m[2] == fs:
+        if m is not None and m[0] is cols and m[1] == mode and m[2] == (fs, block_len):
             return m[3], m[4]
         other = _OTHER_CODE.get(mode) if mode is not None else None
         code, t, lost, frames = cols
         prev = np.empty_like(t)
         prev[:1] = t[:1]
         prev[1:] = t[:-1]
-        bad = lost | (code < 0) | (t < prev) | (t - prev > MAX_GAP_S * fs)
+        bad = lost | (code < 0) | (t <= prev - block_len) | (t - prev > MAX_GAP_S * fs)   # is_reset
         if other is not None:
             bad |= code == other
         status = (code == _STATUS_CODE).nonzero()[0]
-        if mode is not None and status.size:    # one naming the mode and fs in force changes neither
-            status = np.array([i for i in status.tolist() if not _names(frames[i].payload, mode, fs)],
+        if mode is not None and status.size:    # one naming the mode, fs and block in force changes none
+            status = np.array([i for i in status.tolist() if not _names(frames[i].payload, mode, fs, block_len)],
                               dtype=np.int64)
         marks = bad.nonzero()[0], status
-        self._marked = (cols, mode, fs, *marks)
+        self._marked = (cols, mode, (fs, block_len), *marks)
         return marks
 
     def pending(self, f: Frame) -> bool:
@@ -228,7 +231,7 @@ class Segments:
             self._report()
         t, last = f.t0_unwrapped, self.last_t0
         self.last_t0 = t
-        if last is not None and (t < last or t - last > MAX_GAP_S * self.clock.fs):
+        if last is not None and self.clock.is_reset(t, last):
             self.previous_t0 = last
             return True
         return False
@@ -242,13 +245,14 @@ class Segments:
             self.ignored_type = f.type
             return True
         self.flush()
-        self.log.flush()                    # the old segment's events before the new one's
+        self.log.flush(summaries=False)     # the old segment's events before the new one's
         stamp = self.clock.new_segment(f.t0_unwrapped, self.clock_ns())
         lost = (f"; the seq gap of {f.lost_before} in front of it is not a loss (seq restarted)"
                 if f.lost_before else "")
         self.seq_restarts += f.lost_before
-        self.log.emit("time_base", None, f"board clock restarted (t0 {f.t0_unwrapped} after "
-                   f"{self.previous_t0}): time segment {self.clock.segment} starts at the wall "
+        # the t0 fields as the board sent them (the unwrapped index wraps at 2^32 with them)
+        self.log.emit("time_base", None, f"board clock restarted (t0 {f.t0} after "
+                   f"{self.previous_t0 & 0xFFFFFFFF}): time segment {self.clock.segment} starts at the wall "
                    f"clock{lost}", stamp, details={"segment": self.clock.segment, "reason": "reset"})
         return False
 
