@@ -55,20 +55,15 @@ HEADER_LEN = 14
 CRC_LEN = 4
 OVERHEAD = HEADER_LEN + CRC_LEN  # 18
 MAX_PAYLOAD = 4096
-#: the most samples a RAW frame carries (u16 counts in one payload)
-MAX_RAW_BLOCK = MAX_PAYLOAD // 2
-#: the most blocks a second the daemon takes (fs / block_len): its decision buffers are sized
-#: by it (the board sends 100)
-MAX_BLOCKS_PER_S = 100_000
+MAX_RAW_BLOCK = MAX_PAYLOAD // 2  # u16 counts in one RAW payload
+MAX_BLOCKS_PER_S = 100_000  # fs / block_len the daemon takes (its buffers follow it; the board: 100)
 MAX_FRAME = OVERHEAD + MAX_PAYLOAD  # 4114, the largest frame the decoder must hold
 
 FLAG_OVERRUN = 0x01  # ADC overrun since the previous frame
 FLAG_CLIPPED = 0x02  # a sample of this block clipped (0 or 4095)
-#: the largest RAW count: the ADC's 12 bits
-COUNT_MAX = 4095
+COUNT_MAX = 4095  # the largest RAW count: the ADC's 12 bits
 
-MODE_RMS = 1
-MODE_RAW = 2
+MODE_RMS, MODE_RAW = 1, 2
 
 
 class FrameType(enum.IntEnum):

@@ -39,7 +39,7 @@ def test_one_pass_checks_give_the_messages_of_frame_by_frame_checks(seed, monkey
     ref, ref_counts, none = run(data, monkeypatch, one_pass=False, chunk=1 << 16)
     assert not none
     got, counts, passed = run(data, monkeypatch, one_pass=True, chunk=1 << 16)
-    assert sum(passed) > 1000 and 0 in passed           # many frames in passes; some checked one by one
+    assert sum(passed) > 500 and 0 in passed            # many frames in passes; some checked one by one
     assert got == ref and counts == ref_counts
     assert ref_counts.get("time_base", 0) > 0 and ref_counts.get("frames_lost", 0) > 0
 
