@@ -66,6 +66,7 @@ PROCESS_MODULES = frozenset({
     "test_indicators_daemon.py",
     "test_mqtt.py",
     "test_retention_process.py",
+    "test_log_times.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
