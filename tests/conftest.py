@@ -67,6 +67,7 @@ PROCESS_MODULES = frozenset({
     "test_mqtt.py",
     "test_retention_process.py",
     "test_log_times.py",
+    "test_replay_log_times.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

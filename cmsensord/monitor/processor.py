@@ -46,7 +46,7 @@ from cmsensord.monitor.raw import RawBlocks, RawInput
 from cmsensord.monitor.segments import SCAN_MIN, WIRE_FLAGS, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.monitor.slots import observation_rows
-from cmsensord.monitor.wake import wake_t0
+from cmsensord.monitor.wake import SPAN_S, output_pieces, wake_t0
 from cmsensord.protocol import Frame, FrameType, Status, decode_rms_rows
 
 if TYPE_CHECKING:
@@ -116,6 +116,8 @@ class Processor(Figures):
             c = self.captures = Captures(cfg.capture, self.clock,
                                          CaptureMarks(cfg, lambda: self.shaft.tacho), cfg.indicators.envelope_band_hz)
             self.log.watch, self.log.owed, self.log.settle = c.watch, c.owed, c.settle
+            if hasattr(sink, "expect_lag"):     # a capture, and the events after its trigger, come late
+                sink.expect_lag(c.lag_s(cfg))
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
@@ -382,11 +384,14 @@ class Processor(Figures):
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.clock.begin(int(t0[0]))            # the intervals it closes are stamped on its time base
-        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)), partial(self.indicators.rms, self.channels))
-        if self.captures is not None:
-            vib = [ch for ch in self.channels if ch.index < C]
-            self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
-                                        self.clock.fs, self.clock.block_len))
+        per_slot = self.cfg.output.akf_trace or self.setup.microphones is not None or self.captures is not None
+        for a, b in output_pieces(t0, self.wake_t0, round(SPAN_S * self.clock.fs)) if per_slot else ((0, len(t0)),):
+            self._observe(t0[a:b], vals[a:b], max(1, MAX_RMS_RUN // len(self.channels)),
+                          partial(self.indicators.rms, self.channels))
+            if self.captures is not None:
+                vib = [ch for ch in self.channels if ch.index < C]
+                self._out(self.captures.rms([ch.name for ch in vib], t0[a:b], vals[a:b, [ch.index for ch in vib]],
+                                            self.clock.fs, self.clock.block_len))
 
     def _flush_raw(self, frames: Sequence[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
@@ -591,8 +596,3 @@ class Processor(Figures):
     def wake_t0(self) -> int | None:
         """t0 of the board block whose frames complete the next output (:mod:`.wake`)."""
         return wake_t0(self.clock, self.orders, self.setup.severity)
-
-    def lag_s(self) -> float:
-        """Wall-clock lag of the newest processed observation (live mode)."""
-        last = self.clock.last_stamp_ns
-        return max(0.0, (self.clock_ns() - last) / 1e9) if last else 0.0

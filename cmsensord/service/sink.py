@@ -21,7 +21,7 @@ log = logging.getLogger("cmsensord")
 
 
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
-              publish: bool = False, command: str = "this run") -> RotatingSink:
+              publish: bool = False, command: str = "this run", max_lag_s: float | None = None) -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable,
     InstanceError if a running daemon holds it and ``command`` is not the daemon.
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
@@ -29,10 +29,11 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     option), a :class:`TeeSink` that also publishes (its thread started; its ``close`` stops
     it). With an ``mqtt`` section and not ``publish``, nothing is published and one INFO line
     says so: ``command`` (e.g. ``replay``) would publish as the live daemon of that
-    configuration (its client id, its retained topics, its queue)."""
+    configuration (its client id, its retained topics, its queue). ``max_lag_s``: the longest lag
+    the reorder window is opened to when one is expected (default 10 s; :mod:`~cmsensord.sinks.reorder_lag`)."""
     if command != "the daemon":
         refuse_if_held(cfg.output.dir, command)
-    sink = RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage)
+    sink = RotatingSink(cfg.output, metadata=metadata, background_salvage=background_salvage, max_lag_s=max_lag_s)
     if cfg.mqtt is None:
         return sink
     if not publish:
