@@ -68,6 +68,7 @@ PROCESS_MODULES = frozenset({
     "test_retention_process.py",
     "test_log_times.py",
     "test_replay_log_times.py",
+    "test_outage_stamps.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

@@ -33,10 +33,10 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.frame_batch import Pending, rms_fields, select
-from cmsensord.monitor import messages
 from cmsensord.monitor.alarms import Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.diagnostics import Diagnostics
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.figures import Figures
 from cmsensord.monitor.held import Held
@@ -104,7 +104,7 @@ class Processor(Figures):
         self._out = self.output.out
         self.clock.steps.append(self.alarms.restepped)      # the alarms' timers move with the stamps
         self.observations = self.missing_observations = self.frames_lost = 0
-        self.started_wall = self.diagnostics_at = time.monotonic()
+        self.diag = Diagnostics(self.clock, clock_ns, self.link, lambda: self.observations, diagnostics)
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log, getattr(sink, "channels_known", None))
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
         self.held = Held()          # live RAW: what waits for the next decision (monitor/held.py)
@@ -557,7 +557,7 @@ class Processor(Figures):
             out = sev.decision(d, stamp)
             run += self.indicators.take(stamp) + out
             if self.diagnostics is None:        # nothing in it depends on what is written
-                run.append(self._diagnostics_message(stamp))
+                run.append(self.diag.message(stamp))
             if not together or len(run) >= MAX_RUN_MESSAGES or Event in map(type, out):   # events: to the log first
                 run = self._out(run)
             if self.diagnostics is not None:    # the live loop's figures after the writes
@@ -573,15 +573,9 @@ class Processor(Figures):
                 and sev is not None and sev.gate.end is not None)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
-        """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
-        when none came for a while)."""
-        self._out([self._diagnostics_message(stamp_ns)])
-
-    def _diagnostics_message(self, stamp_ns: int) -> messages.Message:
-        self.diagnostics_at = time.monotonic()
-        return messages.diagnostics(stamp_ns, self.link(), self.observations,
-                                    round(self.diagnostics_at - self.started_wall, 3),
-                                    self.diagnostics() if self.diagnostics else None)
+        """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one,
+        stamped :meth:`Diagnostics.wall_stamp`, when none came for a while)."""
+        self._out([self.diag.message(stamp_ns)])
 
     def link(self) -> dict:
         """The link's counters (:meth:`Segments.link`)."""
