@@ -117,7 +117,7 @@ class Processor(Figures):
                                          CaptureMarks(cfg, lambda: self.shaft.tacho), cfg.indicators.envelope_band_hz)
             self.log.watch, self.log.owed, self.log.settle = c.watch, c.owed, c.settle
             if hasattr(sink, "expect_lag"):     # a capture, and the events after its trigger, come late
-                sink.expect_lag(c.lag_s(cfg))
+                c.expect = lambda raw: sink.expect_lag(Captures.lag_s(cfg, raw))
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
