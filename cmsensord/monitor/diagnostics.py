@@ -4,11 +4,11 @@ The Processor writes a diagnostics message with each decision, stamped as the de
 loop writes one when no decision brought one for a while (the board unplugged or off, a stalled
 link), and the daemon's own events (``stop``, the link's events) come when they happen, whatever
 the stream does: those are stamped with the wall clock on the stream's time base
-(:meth:`Diagnostics.wall_stamp`, :meth:`~cmsensord.monitor.clock.BlockClock.wall_stamp_ns`), so
-during an outage they go on at the time they were written (four diagnostics five seconds apart,
-a ``stop`` when SIGTERM came) instead of all standing at the end of the newest observation.  A
-diagnostics message is never stamped before the one written before it (a step of the wall clock
-moves that bound with the time base).
+(:meth:`Diagnostics.wall_stamp`, :meth:`~cmsensord.monitor.clock.BlockClock.wall_stamp_ns`): during
+an outage, when the end of the newest observation stands still, they go on at the time they are
+written (diagnostics five seconds apart, ``stop`` when SIGTERM came).  A diagnostics message is
+never stamped before the one written before it (a step of the wall clock moves that bound with
+the time base).
 """
 
 from __future__ import annotations
