@@ -69,6 +69,9 @@ PROCESS_MODULES = frozenset({
     "test_short_logs.py",
     "test_dir_fsync.py",
     "test_report_link_totals.py",
+    "test_log_times.py",
+    "test_replay_log_times.py",
+    "test_outage_stamps.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

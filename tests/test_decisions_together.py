@@ -56,9 +56,9 @@ def files(path) -> dict[str, bytes]:
 @pytest.mark.parametrize("alarms", [False, True])
 def test_decisions_written_together_give_the_files_of_one_run_per_decision(tmp_path, monkeypatch, alarms):
     from cmsensord.config.loading import default_config
-    from cmsensord.monitor import processor
+    from cmsensord.monitor import diagnostics
 
-    monkeypatch.setattr(processor, "time", type("T", (), {"monotonic": staticmethod(lambda: 5.0)}))
+    monkeypatch.setattr(diagnostics, "time", type("T", (), {"monotonic": staticmethod(lambda: 5.0)}))
     cap = tmp_path / "cap.bin"
     damaged(cap, 240.0, seed=5)
     cfg = default_config(4)

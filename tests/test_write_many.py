@@ -205,7 +205,7 @@ def test_the_processor_writes_the_files_a_one_message_sink_gets(tmp_path, monkey
     the Processor: into the rotating sink, whose write_many takes a decision's messages in
     one call, and into one taking a message per call; byte for byte the same files."""
     from cmsensord.config.loading import default_config
-    from cmsensord.monitor import processor
+    from cmsensord.monitor import diagnostics
     from cmsensord.monitor.processor import Processor
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario
@@ -218,7 +218,7 @@ def test_the_processor_writes_the_files_a_one_message_sink_gets(tmp_path, monkey
     for _ in range(20):                                     # line noise: flipped bits
         data[rnd.randrange(len(data))] ^= 1 << rnd.randrange(8)
     cap.write_bytes(bytes(data))
-    monkeypatch.setattr(processor, "time", type("T", (), {"monotonic": staticmethod(lambda: 5.0)}))
+    monkeypatch.setattr(diagnostics, "time", type("T", (), {"monotonic": staticmethod(lambda: 5.0)}))
     out = dataclasses.replace(OutputConfig(), rotate_mb=0.02, flush_s=1.0, compression="none",
                               retain_mb=0.0, min_free_mb=0.0)
     sinks = []

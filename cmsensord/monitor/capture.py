@@ -49,12 +49,13 @@ from typing import Any
 
 import numpy as np
 
-from cmsensord.config import ChannelConfig
+from cmsensord.config import ChannelConfig, Config
 from cmsensord.config.capture import CaptureConfig
 from cmsensord.dsp.capture_spectra import amplitude_spectrum, envelope_rms_spectrum
 from cmsensord.dsp.indicators.envelope import envelope_band
 from cmsensord.monitor.capture_marks import CaptureMarks
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.events import HOLD_S as EVENT_HOLD_S
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.indicators import MAX_WAIT_S
 from cmsensord.monitor.messages import Message, MessageGroup
@@ -148,6 +149,8 @@ class Captures:
         self.settled_ns: int | None = None                        # triggers up to it are taken
         self.settled_idx: int | None = None                       # ... its board index
         self.out: list[Any] = []
+        #: told at the start of each stream whether its samples are RAW (the sink expects its lag)
+        self.expect: Callable[[bool], None] = lambda raw: None
 
     def restepped(self, shift_ns: int) -> None:
         """The wall clock stepped: every stamp held moves by ``shift_ns``, as the time base did."""
@@ -159,6 +162,16 @@ class Captures:
             self.settled_ns += shift_ns
         for p in self.pending:
             p.stamp_ns += shift_ns
+
+    @staticmethod
+    def lag_s(cfg: Config, raw: bool) -> float:
+        """How far behind the stream a capture of ``cfg``, and the events it holds back, are
+        written at most (the sink's reorder window holds that long): its ``post_s``, the event
+        log's hold of the event that triggers it (``events.HOLD_S``), the longest decision period
+        (the stream is handed over up to each decision) and, of ``raw`` samples, the wait for the
+        tacho to cover it (at most ``MAX_WAIT_S``)."""
+        period = max(cfg.monitor.decision_period_s, *(ch.monitor.decision_period_s for ch in cfg.channels))
+        return cfg.capture.post_s + EVENT_HOLD_S + period + (MAX_WAIT_S if raw else 0.0)
 
     # ---- triggers ------------------------------------------------------------
     def watch(self, kind: str, channel: str | None, message: str, stamp_ns: int, fields: dict) -> None:
@@ -275,6 +288,7 @@ class Captures:
         if self.ring is not None and (source, channels, rate) == (self.source, self.channels, self.rate):
             return
         self.source, self.channels, self.rate, self.ticks = source, list(channels), rate, ticks
+        self.expect(source == "raw")
         self.ring = _Ring(int((self.cfg.pre_s + self.cfg.post_s + HOLD_S) * rate),
                           int(MAX_KEPT_BYTES / (4 * max(1, len(channels)))))
         self.settled_ns = self.settled_idx = None

@@ -115,6 +115,15 @@ class BlockClock:
             self.slot0_t0 = t0_unwrapped - self.next_slot * self.block_len
         return self.anchor_ns
 
+    def wall_stamp_ns(self, wall_ns: int) -> int:
+        """The wall clock ``wall_ns`` on the stream's time base: as far from the current segment's
+        first stamp as it is from the wall clock at the segment's start (the stamps of a board in
+        step with the wall clock), never before the end of the newest slot; ``wall_ns`` itself
+        before the first frame."""
+        if self.anchor_ns is None:
+            return wall_ns
+        return max(self.floor_ns, wall_ns + self.seg_stamp_ns - self.seg_wall_ns)
+
     def drift(self, wall_ns: int, max_drift_s: float = 2.0) -> tuple[float, int] | None:
         """Live: (offset s, measured board ticks per wall second) when the newest stamp is
         more than ``max_drift_s`` off the wall clock ``wall_ns`` (positive: the board is

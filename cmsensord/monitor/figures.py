@@ -5,6 +5,7 @@ RAW input, the block clock)."""
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -27,6 +28,7 @@ class Figures:
     log: EventLog
     raw: RawInput
     clock: BlockClock
+    clock_ns: Callable[[], int]
 
     @property
     def status(self) -> Status | None:
@@ -97,3 +99,8 @@ class Figures:
     def adc_seconds(self) -> float:
         """ADC time covered by the observations processed so far."""
         return self.clock.adc_seconds
+
+    def lag_s(self) -> float:
+        """Wall-clock lag of the newest processed observation (live mode)."""
+        last = self.clock.last_stamp_ns
+        return max(0.0, (self.clock_ns() - last) / 1e9) if last else 0.0

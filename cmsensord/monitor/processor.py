@@ -33,10 +33,10 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.frame_batch import Pending, rms_fields, select
-from cmsensord.monitor import messages
 from cmsensord.monitor.alarms import Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.diagnostics import Diagnostics
 from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.figures import Figures
 from cmsensord.monitor.held import Held
@@ -46,7 +46,7 @@ from cmsensord.monitor.raw import RawBlocks, RawInput
 from cmsensord.monitor.segments import SCAN_MIN, WIRE_FLAGS, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.monitor.slots import observation_rows
-from cmsensord.monitor.wake import wake_t0
+from cmsensord.monitor.wake import SPAN_S, output_pieces, wake_t0
 from cmsensord.protocol import Frame, FrameType, Status, decode_rms_rows
 
 if TYPE_CHECKING:
@@ -104,7 +104,7 @@ class Processor(Figures):
         self._out = self.output.out
         self.clock.steps.append(self.alarms.restepped)      # the alarms' timers move with the stamps
         self.observations = self.missing_observations = self.frames_lost = 0
-        self.started_wall = self.diagnostics_at = time.monotonic()
+        self.diag = Diagnostics(self.clock, clock_ns, self.link, lambda: self.observations, diagnostics)
         self.setup = ChannelSetup(cfg, auto_channels, self.clock, self.log, getattr(sink, "channels_known", None))
         self.segments = Segments(self.clock, self.setup, self.log, clock_ns, self._segment_ends)
         self.held = Held()          # live RAW: what waits for the next decision (monitor/held.py)
@@ -116,6 +116,8 @@ class Processor(Figures):
             c = self.captures = Captures(cfg.capture, self.clock,
                                          CaptureMarks(cfg, lambda: self.shaft.tacho), cfg.indicators.envelope_band_hz)
             self.log.watch, self.log.owed, self.log.settle = c.watch, c.owed, c.settle
+            if hasattr(sink, "expect_lag"):     # a capture, and the events after its trigger, come late
+                c.expect = lambda raw: sink.expect_lag(Captures.lag_s(cfg, raw))
 
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
@@ -382,11 +384,14 @@ class Processor(Figures):
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.clock.begin(int(t0[0]))            # the intervals it closes are stamped on its time base
-        self._observe(t0, vals, max(1, MAX_RMS_RUN // len(self.channels)), partial(self.indicators.rms, self.channels))
-        if self.captures is not None:
-            vib = [ch for ch in self.channels if ch.index < C]
-            self._out(self.captures.rms([ch.name for ch in vib], t0, vals[:, [ch.index for ch in vib]],
-                                        self.clock.fs, self.clock.block_len))
+        per_slot = self.cfg.output.akf_trace or self.setup.microphones is not None or self.captures is not None
+        for a, b in output_pieces(t0, self.wake_t0, round(SPAN_S * self.clock.fs)) if per_slot else ((0, len(t0)),):
+            self._observe(t0[a:b], vals[a:b], max(1, MAX_RMS_RUN // len(self.channels)),
+                          partial(self.indicators.rms, self.channels))
+            if self.captures is not None:
+                vib = [ch for ch in self.channels if ch.index < C]
+                self._out(self.captures.rms([ch.name for ch in vib], t0[a:b], vals[a:b, [ch.index for ch in vib]],
+                                            self.clock.fs, self.clock.block_len))
 
     def _flush_raw(self, frames: Sequence[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
@@ -551,7 +556,7 @@ class Processor(Figures):
             out = sev.decision(d, stamp)
             run += self.indicators.take(stamp) + out
             if self.diagnostics is None:        # nothing in it depends on what is written
-                run.append(self._diagnostics_message(stamp))
+                run.append(self.diag.message(stamp))
             if not together or len(run) >= MAX_RUN_MESSAGES or Event in map(type, out):   # events: to the log first
                 run = self._out(run)
             if self.diagnostics is not None:    # the live loop's figures after the writes
@@ -567,15 +572,9 @@ class Processor(Figures):
                 and sev is not None and sev.gate.end is not None)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
-        """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one
-        when none came for a while)."""
-        self._out([self._diagnostics_message(stamp_ns)])
-
-    def _diagnostics_message(self, stamp_ns: int) -> messages.Message:
-        self.diagnostics_at = time.monotonic()
-        return messages.diagnostics(stamp_ns, self.link(), self.observations,
-                                    round(self.diagnostics_at - self.started_wall, 3),
-                                    self.diagnostics() if self.diagnostics else None)
+        """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one,
+        stamped :meth:`Diagnostics.wall_stamp`, when none came for a while)."""
+        self._out([self.diag.message(stamp_ns)])
 
     def link(self) -> dict:
         """The link's counters (:meth:`Segments.link`)."""
@@ -590,8 +589,3 @@ class Processor(Figures):
     def wake_t0(self) -> int | None:
         """t0 of the board block whose frames complete the next output (:mod:`.wake`)."""
         return wake_t0(self.clock, self.orders, self.setup.severity)
-
-    def lag_s(self) -> float:
-        """Wall-clock lag of the newest processed observation (live mode)."""
-        last = self.clock.last_stamp_ns
-        return max(0.0, (self.clock_ns() - last) / 1e9) if last else 0.0

@@ -1,6 +1,6 @@
 """A fast lenient reader of MCAP messages for long logs: chunks parsed with ``struct``, not record objects.
 
-:meth:`FastScan.messages` yields the same (topic, log_time_ns, data) as
+:meth:`FastScan.messages` yields the same (topic, publish_time_ns, data) as
 :func:`~cmsensord.sinks.mcap_read.iter_messages_at` of an undamaged file, plus the
 bytes read so far, about ten times faster: the file is walked with the rules of
 :class:`~cmsensord.sinks.mcap_read.RecordWalker` (a ``.part`` file ends at its
@@ -98,7 +98,8 @@ class FastScan:
         self.cut: str | None = None      # what a file ending short lost (:mod:`~cmsensord.sinks.mcap_cut`)
 
     def messages(self) -> Iterator[tuple[str, int, bytes, int]]:
-        """(topic, log_time_ns, data, bytes read) of every message the file's intact records hold."""
+        """(topic, publish time [ns]: the message's own stamp, data, bytes read) of every message
+        the file's intact records hold."""
         try:
             f = open(self.path, "rb")
             size = os.fstat(f.fileno()).st_size
@@ -221,7 +222,7 @@ class FastScan:
                 self.error = f"bad chunk at byte {pos}: a record runs past its end"
                 return
             if opcode == _OP_MESSAGE:
-                cid, _seq, t, _pub = _MSG.unpack_from(buf, body)
+                cid, _seq, _log, t = _MSG.unpack_from(buf, body)
                 yield topics.get(cid, f"<channel {cid}>"), t, buf[body + _MSG.size: off]
             elif opcode == _OP_CHANNEL:
                 cid, _schema, tlen = struct.unpack_from("<HHI", buf, body)

@@ -1,6 +1,6 @@
 """What a report shows, gathered from the messages of MCAP logs in one pass with bounded memory.
 
-:class:`LogData` takes (topic, log_time_ns, JSON bytes) one message at a time
+:class:`LogData` takes (topic, time [ns], JSON bytes) one message at a time
 (:meth:`LogData.add`) and keeps per channel: the severity index and the anomaly
 flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend with the
 latest ISO zone boundaries and alarm level, each alarm rule's newest alert and

@@ -51,7 +51,8 @@ def log_paths(names: list[str]) -> list[Path]:
 def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
     """The messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal; the
     messages of a replayed import in the recording's own time (:mod:`.time_axis`); of an import
-    replayed more than once, only its newest replay (:mod:`.runs`; the others listed as left out)."""
+    replayed more than once, only its newest replay (:mod:`.runs`; the others listed as left out).
+    Each message is placed at its publish time (its own stamp), the events listed in time order."""
     data = LogData()
     heads = {p: head_metadata(p) for p in paths}
     plan = plan_logs(paths, [heads[p] for p in paths])
@@ -74,5 +75,6 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
         data.files.append(info)
         done += size
     progress.close()
+    data.events.sort(key=lambda e: e[0])
     data.files.extend(FileInfo(str(path), path.stat().st_size, left_out=why) for path, why in plan.left_out)
     return data

@@ -51,12 +51,17 @@ class Trend:
             self.stride *= 2
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """(times [ns] as int64, values) of the kept points, a part-filled last point included."""
+        """(times [ns] as int64, values) of the kept points, a part-filled last point included,
+        in time order (points added out of it, as a log's clamped messages come, are put in it)."""
         t, v = list(self.t), list(self.v)
         if self._pending is not None:
             t.append(self._pending[0])
             v.append(self._pending[1])
-        return np.asarray(t, dtype=np.int64), np.asarray(v, dtype=float)
+        ta, va = np.asarray(t, dtype=np.int64), np.asarray(v, dtype=float)
+        if ta.size > 1 and bool(np.any(ta[1:] < ta[:-1])):
+            order = np.argsort(ta, kind="stable")
+            ta, va = ta[order], va[order]
+        return ta, va
 
     def __bool__(self) -> bool:
         return self.count > 0

@@ -79,14 +79,15 @@ class _Watch:
         self.last_frame = time.monotonic()      # a valid frame, or the start
 
     def link_events(self) -> None:
-        """The reader's link events and the queue's drops become events."""
+        """The reader's link events (stamped when they happened, on the stream's time base:
+        :meth:`~cmsensord.monitor.diagnostics.Diagnostics.wall_stamp`) and the queue's drops become events."""
         proc, events, queue = self.proc, self.source.events, self.source.queue
         while events:
             wall_ns, kind, message = events.popleft()
             if kind in _ERRORS:
-                proc.event(kind, None, message, wall_ns, log_level=logging.ERROR)
+                proc.event(kind, None, message, proc.diag.wall_stamp(wall_ns), log_level=logging.ERROR)
             else:
-                proc.event(kind, None, message, wall_ns)
+                proc.event(kind, None, message, proc.diag.wall_stamp(wall_ns))
         if queue.drops != self.drops_seen:
             proc.event("queue_overflow", None, f"processing fell behind: {queue.drops - self.drops_seen} "
                        f"frame(s) dropped from the queue, oldest RAW blocks first ({queue.drops} "
@@ -116,18 +117,18 @@ class _Watch:
             self.stalled, self.stall_why = True, "no bytes"
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: no bytes for {link.stall_s:g} s",
-                            time.time_ns())
+                            self.proc.diag.wall_stamp())
         elif now - last_bytes > NEVER_S and self.proc.anchor_ns is None and not self.source.counters.bytes_received:
             self.stalled, self.stall_why = True, "no bytes since the port opened"
             self.proc.event("link_stalled", None, f"{link.port}: open for {NEVER_S:g} s and no byte yet (is "
-                            "the board powered and sending? the right port?)", time.time_ns())
+                            "the board powered and sending? the right port?)", self.proc.diag.wall_stamp())
         elif now - self.last_frame > link.stall_s and now - last_bytes <= link.stall_s:
             self.stalled, self.stall_why = True, "bytes but no valid frame"
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: bytes but no valid frame for "
                             f"{now - self.last_frame:.1f} s (wrong baud rate, or line noise?)",
-                            time.time_ns())
-            self.proc.write_diagnostics(time.time_ns())
+                            self.proc.diag.wall_stamp())
+            self.proc.write_diagnostics(self.proc.diag.wall_stamp())
         if self.stalled:
             self.proc.link_quiet()
         return False
@@ -139,9 +140,10 @@ class _Watch:
         return f"{self.cfg.link.port}: stalled, {self.stall_why} for {now - self.last_frame:.0f} s"
 
     def diagnostics(self, now: float) -> None:
-        """``/cm/diagnostics`` when no decision wrote one for ``DIAGNOSTICS_S``."""
-        if now - self.proc.diagnostics_at >= DIAGNOSTICS_S:
-            self.proc.write_diagnostics(self.proc.log.default_stamp())
+        """``/cm/diagnostics`` when no decision wrote one for ``DIAGNOSTICS_S``, stamped when it is
+        written (on the stream's time base: during an outage each at its own time)."""
+        if now - self.proc.diag.at >= DIAGNOSTICS_S:
+            self.proc.write_diagnostics(self.proc.diag.wall_stamp())
 
 
 def board_time_parts(frames: list[Frame], span: int) -> list[list[Frame]]:
@@ -265,7 +267,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
             if control is not None:
                 control.close()
             proc.finish()
-            proc.event("stop", None, f"cmsensord stopping ({stop.why()})")
+            proc.event("stop", None, f"cmsensord stopping ({stop.why()})", proc.diag.wall_stamp())
             sink.close()
             _close_capture(capture, source)
     print(run_summary(proc, sink.paths, time.monotonic() - t_start, publish_lines(sink)), file=sys.stderr)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import sys
 import time
 from pathlib import Path
@@ -61,8 +62,10 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     timeline = Timeline.from_sidecar(meta)
     board_zero_ns = time.time_ns()
     extra = {"recording_timeline": timeline.to_json(board_zero_ns)} if timeline else {}
+    # the lag a capture's post_s gives is held however long (no kill -9 to lose it to): the log
+    # times are the messages' own, as a daemon's are within 10 s
     sink = open_sink(cfg, {"source": str(path), **(metadata or {}), **extra}, publish=publish,
-                     command="replay")
+                     command="replay", max_lag_s=math.inf)
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
     if timeline:
         proc.clock.anchor(0, board_zero_ns)     # the import's board clock starts at 0

@@ -28,7 +28,7 @@ def run_id() -> str:
 
 
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
-              publish: bool = False, command: str = "this run") -> RotatingSink:
+              publish: bool = False, command: str = "this run", max_lag_s: float | None = None) -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable,
     InstanceError if a running daemon holds it and ``command`` is not the daemon.
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
@@ -38,10 +38,13 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     says so: ``command`` (e.g. ``replay``) would publish as the live daemon of that
     configuration (its client id, its retained topics, its queue). Every file of the run gets
     ``metadata`` and the run's identity (``run``: :func:`run_id`) as its ``cmsensord`` metadata,
-    by which a report tells the runs of its files apart."""
+    by which a report tells the runs of its files apart. ``max_lag_s``: the longest lag the
+    reorder window is opened to when one is expected (default 10 s;
+    :mod:`~cmsensord.sinks.reorder_lag`)."""
     if command != "the daemon":
         refuse_if_held(cfg.output.dir, command)
-    sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage)
+    sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage,
+                        max_lag_s=max_lag_s)
     if cfg.mqtt is None:
         return sink
     if not publish:

@@ -6,6 +6,10 @@ A finished file is read with mcap's own reader (:func:`read_messages`). The leni
 :class:`~cmsensord.sinks.mcap_records.RecordWalker`, so a partial record is never parsed and
 nothing is raised on the content, and read past damage from the next chunk that checks out
 (:class:`~cmsensord.sinks.mcap_chunk_check.Resync`, as salvage and the report do).
+
+Every reader here gives a message's time as its publish time: the stamp it was made with (its
+``timestamp`` field), also for a message the sink wrote with a clamped log time
+(:mod:`cmsensord.sinks.reorder`).
 """
 
 from __future__ import annotations
@@ -191,7 +195,7 @@ def iter_messages_at(path: str | Path) -> Iterator[tuple[str, int, bytes, int]]:
     scan = _Scan(path)
     for record in scan.records():
         if isinstance(record, Message):
-            yield scan.topic(record.channel_id), record.log_time, record.data, scan.valid_bytes
+            yield scan.topic(record.channel_id), record.publish_time, record.data, scan.valid_bytes
 
 
 class _Events:
@@ -245,9 +249,9 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
     Returns a dict: path, complete, truncated, error (the damage that ended the read, also a
     finished file cut short), cut (what ending before the footer lost, a ``.part`` file's too),
     skipped (the damage read past, a line each), file_bytes, valid_bytes, messages, topics {topic: count}, schemas
-    {topic: schema name}, start_ns, end_ns, duration_s, event_counts
-    {kind: count}, events [first max_events as {time_ns, kind, channel,
-    message}], events_omitted, metadata.
+    {topic: schema name}, start_ns, end_ns, duration_s (of the messages' publish times), event_counts
+    {kind: count}, events [the first max_events in the file, as {time_ns (publish time), kind,
+    channel, message}, in time order], events_omitted, metadata.
     """
     scan = _Scan(path)
     counts_by_id: dict[int, int] = {}
@@ -259,7 +263,7 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
         if not isinstance(record, Message):
             continue
         n += 1
-        t = record.log_time
+        t = record.publish_time
         start_ns = t if start_ns is None or t < start_ns else start_ns
         end_ns = t if end_ns is None or t > end_ns else end_ns
         cid = record.channel_id
@@ -288,7 +292,7 @@ def summarize(path: str | Path, *, max_events: int = 1000) -> dict[str, Any]:
         "end_ns": end_ns,
         "duration_s": (end_ns - start_ns) / NS if start_ns is not None and end_ns is not None else 0.0,
         "event_counts": dict(sorted(events.counts.items())),
-        "events": events.events,
+        "events": sorted(events.events, key=lambda e: e["time_ns"]),
         "events_omitted": events.omitted,
         "metadata": scan.metadata,
     }

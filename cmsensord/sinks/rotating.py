@@ -6,12 +6,13 @@ Owns the policy of ``output`` in the configuration; each file is an
 is split across files; a file opened by a rotation that gets no message
 before :meth:`RotatingSink.close` is deleted, never finished empty. Each file
 is in log-time order (:mod:`cmsensord.sinks.reorder`: late messages are held
-back up to the lag they come with, at most 10 s; the learnt lag carries over
-to the next file). Messages held there are not yet in the file: what the
-durability rules below say of "the messages of the last second" covers them
-only in a stream that comes in order (RMS mode); in RAW mode with order
-tracking add the orders' lag (a few seconds), except while the link is quiet
-(:meth:`RotatingSink.release_held`).
+back up to the lag they come with, at most 10 s unless a longer one is expected
+in a replay; the lag carries over to the next file, :mod:`.reorder_lag`).
+Messages held there are not yet in the file: what the durability rules below
+say of "the messages of the last second" covers them only in a stream that
+comes in order (RMS mode); in RAW mode with order tracking add the orders' lag
+(a few seconds), with captures their ``post_s`` and 2 s, except while the link
+is quiet (:meth:`RotatingSink.release_held`).
 
 Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
@@ -77,7 +78,7 @@ from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event 
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
-from cmsensord.sinks.reorder import MAX_S as REORDER_MAX_S
+from cmsensord.sinks.reorder_lag import ReorderLag
 from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 
@@ -90,7 +91,7 @@ _FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
 _QUEUED_EVENTS = 1000
 
 
-class RotatingSink:
+class RotatingSink(ReorderLag):
     """``write``/``flush``/``close`` like McapSink, over a sequence of files; never raises
     an OSError (see the module docstring).
 
@@ -103,6 +104,7 @@ class RotatingSink:
         salvage: salvage leftover ``.part`` files at start.
         background_salvage: ... in a thread, after the first file is open.
         wall_clock: Unix seconds, for the file names.
+        max_lag_s: the longest lag :meth:`expect_lag` opens the reorder window to.
 
     Raises:
         SinkError: at start, when the output directory cannot be used for a
@@ -116,8 +118,9 @@ class RotatingSink:
                  on_event: Callable[..., Any] | None = None,
                  salvage: bool = True,
                  wall_clock: Callable[[], float] = time.time,
-                 background_salvage: bool = False):
+                 background_salvage: bool = False, max_lag_s: float | None = None):
         self.output = output
+        self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
         self.metadata = metadata or {}
         self.clock = clock
         self.wall_clock = wall_clock
@@ -148,8 +151,6 @@ class RotatingSink:
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []
         self.retention = RetentionTold()    # what retention said once and does not repeat
-        self._horizon_ns = 0                 # the reorder window's horizon, carried to the next file
-        self._hold_all = False
 
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
@@ -212,13 +213,10 @@ class RotatingSink:
 
     def _open(self) -> McapSink:
         o = self.output
-        sink = McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
-                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock,
-                        reorder_horizon_ns=self._horizon_ns)
+        sink = self._window_of(McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
+                                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock))
         if sink.dir_sync_error is not None:
             disk_events.dir_fsync_failed(self, sink.dir_sync_error, sink.part_path)
-        if self._hold_all:
-            sink.reorder.hold_all()
         self._opened = self.clock()
         self._last_sync = self._opened
         return sink
@@ -330,15 +328,6 @@ class RotatingSink:
         elif self._pending:
             self._deliver()
 
-    def expect_lag(self, seconds: float = REORDER_MAX_S) -> None:
-        """Messages will come up to ``seconds`` late (the order chain has started): the
-        reorder window holds that long from now on, instead of learning it from the first
-        late messages (which it would write with a clamped log time)."""
-        self._horizon_ns = max(self._horizon_ns, min(int(seconds * 1e9), int(REORDER_MAX_S * 1e9)))
-        if self._current is not None:
-            window = self._current.reorder
-            window.horizon_ns = max(window.horizon_ns, min(self._horizon_ns, window.max_ns))
-
     def release_held(self) -> None:
         """The stream paused (the link went quiet): what the reorder window holds is written
         and flushed, so a crash during the pause loses none of it."""
@@ -350,13 +339,6 @@ class RotatingSink:
                 self._failed(err, cur)
                 return
             self.flush()
-
-    def hold_all(self) -> None:
-        """Every message is held until its file is finished (at most 200,000, then the oldest
-        go): ``cmsensord vkf`` writes the batch orders of the whole run after it, in order."""
-        self._hold_all = True
-        if self._current is not None:
-            self._current.reorder.hold_all()
 
     def _drop(self, n: int) -> None:
         self.dropped += n
