@@ -56,7 +56,7 @@ from cmsensord import __version__
 from cmsensord.acoustic_model import FORMAT, VERSION, Calibration, load_calibration, save_calibration
 from cmsensord.dsp.acoustic import AcousticModel
 from cmsensord.importing.sidecar import channel_units, sidecar
-from cmsensord.out_paths import overwritten_input
+from cmsensord.out_paths import overwritten_input, with_sidecars
 
 __all__ = [
     "FORMAT",
@@ -451,7 +451,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="initial uncertainty of a, relative to a0 (default 0.1)")
     p.add_argument("--out", required=True, help="calibration file to write (JSON)")
     args = p.parse_args(argv)
-    same = overwritten_input(args.out, [args.paired, args.background])
+    same = overwritten_input(args.out, with_sidecars([args.paired, args.background]))
     if same:
         print(f"acoustic_calib: error: {same}", file=sys.stderr)
         return 2

@@ -27,7 +27,7 @@ from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyMode
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor.alarms import order_rules
 from cmsensord.observations import Observations, alarm_events, read_observations
-from cmsensord.out_paths import overwritten_input
+from cmsensord.out_paths import overwritten_input, with_sidecars
 from cmsensord.service.origin import origin_lines, span_line
 
 __all__ = ["ChannelResult", "add_calibrate_parser", "alarm_lines", "calibrate", "format_table", "run_calibrate",
@@ -335,7 +335,7 @@ def _writable_out(out: Path) -> Path:
 def run_calibrate(args: argparse.Namespace) -> int:
     """Read, learn, print the table, write SITE.yaml atomically and check it loads."""
     out = _writable_out(Path(args.out))
-    same = overwritten_input(out, [args.capture] + ([args.faulty] if args.faulty else []))
+    same = overwritten_input(out, with_sidecars([args.capture] + ([args.faulty] if args.faulty else [])))
     if same:
         raise CmsensordError(f"calibrate: {same}")
     cfg = load_config(args.config) if args.config else Config()

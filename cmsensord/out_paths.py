@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 
-__all__ = ["overwritten_input"]
+__all__ = ["overwritten_input", "with_sidecars"]
 
 
 def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]) -> str | None:
@@ -21,3 +21,9 @@ def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike
             return (f"{out}: is the input {src}: writing it would destroy it; give --out another "
                     "file name")
     return None
+
+
+def with_sidecars(captures: Iterable[str]) -> list[str]:
+    """The captures and the sidecars beside them (an import's ``CAPTURE.json``), which a command
+    reading a capture reads too."""
+    return [p for c in captures for p in (c, f"{c}.json")]

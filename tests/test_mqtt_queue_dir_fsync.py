@@ -50,3 +50,26 @@ def test_a_new_queue_segment_is_fsynced_into_its_directory(tmp_path, broker):  #
     segment = next(c.removeprefix("create ") for c in calls if c.startswith("create "))
     first = calls.index(f"create {segment}")
     assert calls[first:first + 3] == [f"create {segment}", f"fsync {segment}", "fsync dir"], calls
+
+
+def test_a_directory_fsync_that_fails_is_said_once_and_the_acknowledgements_are_still_saved(tmp_path, broker):  # noqa: F811
+    """A file system that refuses to fsync a directory (EINVAL): the acked cursor was never
+    written again, so the next run sent every message a second time."""
+    cfg = tmp_path / "site.yaml"
+    cfg.write_text(mqtt_yaml(broker.port))
+    out = tmp_path / "out"
+    code = ("import errno, sys\n"
+            "import cmsensord.publish.disk_queue as q\n"
+            "def refuse(path):\n"
+            "    raise OSError(errno.EINVAL, 'Invalid argument')\n"
+            "q.fsync_dir = refuse\n"
+            "from cmsensord.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    p = subprocess.run([sys.executable, "-c", code, "replay", str(capture(tmp_path)), "--config", str(cfg),
+                        "--out", str(out), "--publish"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    said = [ln for ln in p.stderr.splitlines() if "fsync failed" in ln]
+    assert said == [f"ERROR mqtt_queue: store-and-forward queue {out / 'mqtt-queue'}: fsync failed (Invalid "
+                    "argument)"], p.stderr
+    sent = int(p.stderr.split("  mqtt: ")[1].split(" message(s)")[0])
+    assert sent > 50 and (out / "mqtt-queue" / "acked").read_text() == f"{sent}\n"

@@ -6,6 +6,8 @@ stays queued (the summary says how many)."""
 
 from __future__ import annotations
 
+import re
+import resource
 import signal
 import subprocess
 import sys
@@ -13,7 +15,7 @@ import time
 
 import pytest
 
-from mosquitto import Subscriber, free_port, needs_mosquitto
+from mosquitto import Broker, Subscriber, free_port, needs_mosquitto
 from processes import spawn
 from test_mqtt import broker, expected, mqtt_yaml, seqs  # noqa: F401 - broker: a fixture
 from test_mqtt_runs import capture
@@ -61,7 +63,9 @@ def test_without_a_broker_it_stops_waiting_after_10_s_and_keeps_the_queue(tmp_pa
     assert p.returncode == 0, p.stderr
     n = len(expected(tmp_path / "out"))
     lines = p.stderr.splitlines()
-    assert SENDING.format(n=n, port=port) in lines, p.stderr
+    link = [ln for ln in lines if ln.startswith("WARNING mqtt_link: ")]     # its event is published too
+    assert len(link) == 1 and SENDING.format(n=n - 1, port=port) in lines, p.stderr
+    assert lines.index(link[0]) > lines.index(SENDING.format(n=n - 1, port=port))   # said while it waits
     assert "mqtt: the broker acknowledged nothing for 10 s: stopped waiting" in lines, p.stderr
     assert any(ln.endswith(f"0 acknowledged; {n} left unacknowledged in {tmp_path / 'out' / 'mqtt-queue'}: the "
                            "next run publishing from this queue sends them first") for ln in lines), p.stderr
@@ -79,6 +83,43 @@ def test_ctrl_c_stops_waiting_and_the_run_ends_with_its_summary(tmp_path):
             break
     proc.send_signal(signal.SIGINT)
     rest = proc.communicate(timeout=30)[1]
-    assert proc.returncode == 0, "".join(seen) + rest
+    assert proc.returncode == 130, "".join(seen) + rest
     assert "mqtt: stopped waiting (Ctrl-C)\n" in rest, rest
     assert "left unacknowledged in" in rest and "MCAP log:" in rest, rest
+    assert "  interrupted (Ctrl-C) at 100% of the capture" in rest, rest
+
+
+def test_a_broker_that_refuses_the_login_ends_the_wait_at_once_and_says_why(tmp_path):
+    """It waited the 10 s for an acknowledgement and said why only after."""
+    secured = free_port()
+    pw = tmp_path / "broker.passwd"
+    subprocess.run(["mosquitto_passwd", "-c", "-b", str(pw), "rig", "right"], check=True, capture_output=True)
+    b = Broker(tmp_path / "broker", extra=f"listener {secured} 127.0.0.1\nallow_anonymous false\n"
+               f"password_file {pw}\n").start()
+    (tmp_path / "password").write_text("wrong\n")
+    try:
+        t0 = time.monotonic()
+        p = subprocess.run(_replay(tmp_path, secured, "username: rig", f"password_file: {tmp_path / 'password'}"),
+                           capture_output=True, text=True, timeout=120)
+        waited = time.monotonic() - t0
+    finally:
+        b.stop()
+    assert p.returncode == 0, p.stderr
+    lines = p.stderr.splitlines()
+    refused = next(i for i, ln in enumerate(lines) if ln.startswith("ERROR mqtt_link: ") and "refused" in ln)
+    assert lines.index("mqtt: the broker refused the connection: stopped waiting") > refused, p.stderr
+    assert waited < 9, waited
+
+
+def test_a_queue_that_cannot_be_written_does_not_hang_the_replay(tmp_path):
+    """The hand-over queue full and the disk queue refusing writes (a file size limit): the
+    replay waited for room for ever; it gives up after 10 s and drops, as the daemon does."""
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (30_000, 30_000))
+
+    args = _replay(tmp_path, free_port(), "handover_messages: 16")
+    p = subprocess.run(args, capture_output=True, text=True, timeout=120, preexec_fn=limit)
+    assert p.returncode == 0, p.stderr
+    assert ("WARNING mqtt_queue: the publisher has taken no message for 10 s: from here on the oldest waiting in "
+            "memory is dropped for each new one, as the daemon does") in p.stderr.splitlines(), p.stderr
+    assert re.search(r"  mqtt: 0 message\(s\) sent to .*, 0 acknowledged, \d+ dropped; ", p.stderr), p.stderr

@@ -46,6 +46,11 @@ def test_calibrate_over_its_capture_or_through_a_link(tmp_path):
     p = run_module("cmsensord", "calibrate", str(cap), "--out", str(link))
     _expect_refusal(p, "cmsensord: calibrate: ", link, cap)
     assert cap.read_bytes() == before
+    side = tmp_path / "healthy.bin.json"              # an import's sidecar: channel names, snapshots
+    side.write_text("{}")
+    p = run_module("cmsensord", "calibrate", str(cap), "--out", str(side))
+    _expect_refusal(p, "cmsensord: calibrate: ", side, side)
+    assert side.read_text() == "{}"
 
 
 def test_report_over_its_log(tmp_path):

@@ -145,3 +145,19 @@ def test_ctrl_c_ends_a_replay_with_its_log_finished_and_its_summary(tmp_path):
     severity = [m for t, _, m in read_messages(logs[0]) if t == "/cm/ch0/severity"]
     assert 20 < len(severity) < 590
     assert cmsensord("summary", str(logs[0])).returncode == 0
+
+
+def test_ctrl_c_ends_a_slowly_paced_replay_at_once(tmp_path):
+    """At --speed 0.05 a read of 4 KiB is 2 s of sleep at least: Ctrl-C ended the run only after it."""
+    cap = tmp_path / "cap.bin"
+    sc = make_scenario("faulty", n_channels=1, duration_s=120.0, seed=0)
+    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, 120.0)
+    proc = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "0.05", "--out",
+                  str(tmp_path / "out")], stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    t = time.monotonic()
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 130, err
+    assert time.monotonic() - t < 5.0
+    assert "  interrupted (Ctrl-C) at " in err, err

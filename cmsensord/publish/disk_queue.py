@@ -170,19 +170,21 @@ class DiskQueue:
         if self._dirty and self._fd is not None:
             os.fsync(self._fd)
             self._dirty = False
-        if self._new_name:
-            fsync_dir(self.dir)
-            self._new_name = False
         if self.acked != self._acked_written:
             tmp = self.dir / "acked.tmp"
             tmp.write_text(f"{self.acked}\n")
             os.replace(tmp, self.dir / "acked")
             self._acked_written = self.acked
+        if self._new_name:                  # once: a file system that refuses it refuses it again
+            self._new_name = False
+            fsync_dir(self.dir)
 
     def close(self) -> None:
         """Sync and close."""
-        self.sync(force=True)
-        self._close_fd()
+        try:
+            self.sync(force=True)
+        finally:
+            self._close_fd()
 
     # -- sending ---------------------------------------------------------------------------
     @property

@@ -59,6 +59,8 @@ class Publisher:
                  alarm_rules: bool = False, wait_when_full: bool = False) -> None:
         self.cfg, self.topics, self.channels = cfg, TopicMap(cfg), channels
         self.wait_when_full = wait_when_full      # offer waits for room (a replay), not drops (the daemon)
+        self.give_up = threading.Event()          # set: nothing waits for the broker or for room any more
+        self.moved = 0                            # messages the thread took from the hand-over queue
         self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s)
         self.handover: collections.deque = collections.deque(maxlen=cfg.handover_messages)
         self.handover_drops = 0
@@ -117,22 +119,38 @@ class Publisher:
             self._worst.channels = channels
 
     def _hand(self, route: tuple[str, bool], topic: str, stamp_ns: int, msg: dict) -> None:
-        while self.wait_when_full and len(self.handover) == self.handover.maxlen and self._thread.is_alive():
-            time.sleep(0.01)
+        if self.wait_when_full and len(self.handover) == self.handover.maxlen:
+            self._wait_for_room()
         if len(self.handover) == self.handover.maxlen:
             self.handover_drops += 1
         self.handover.append((route, topic, stamp_ns, msg))
+
+    def _wait_for_room(self) -> None:
+        """Wait while the thread moves the hand-over queue on; give up for good (then drop the
+        oldest, as the daemon does) once it has not moved for ``CONNACK_S`` (a queue that
+        cannot be written) or :attr:`give_up` is set (Ctrl-C)."""
+        seen, since = self.moved, time.monotonic()
+        while len(self.handover) == self.handover.maxlen and self._thread.is_alive() and not self.give_up.is_set():
+            if self.moved != seen:
+                seen, since = self.moved, time.monotonic()
+            elif time.monotonic() - since > CONNACK_S:
+                self.give_up.set()
+                self._event("mqtt_queue", f"the publisher has taken no message for {CONNACK_S:g} s: from here on "
+                            "the oldest waiting in memory is dropped for each new one, as the daemon does",
+                            logging.WARNING, action="dropping")
+            self.give_up.wait(0.01)
 
     def left(self) -> int:
         """Offered messages the broker has not acknowledged yet."""
         return len(self.handover) + self.queue.depth
 
     def drain(self, idle_s: float = CONNACK_S, progress: Callable[[int], None] | None = None) -> int:
-        """Wait until the broker has acknowledged every offered message, or until it has
-        acknowledged none for ``idle_s`` (not connected, refused, gone); ``progress`` gets the
-        count acknowledged so far. Returns the count left (still queued on disk)."""
+        """Wait until the broker has acknowledged every offered message, until it has
+        acknowledged none for ``idle_s`` (not connected, gone), refused the connection, or
+        :attr:`give_up` is set; ``progress`` gets the count acknowledged so far. Returns the
+        count left (still queued on disk)."""
         acked, since = self.acked_total, time.monotonic()
-        while self._thread.is_alive() and self.left():
+        while self._thread.is_alive() and self.left() and self.state != "refused" and not self.give_up.is_set():
             if progress is not None:
                 progress(self.acked_total)
             now = time.monotonic()
@@ -160,8 +178,10 @@ class Publisher:
         """The exit summary's line (after :meth:`close`): what was sent, and what is left in the
         queue for the next run publishing from it (it sends them first)."""
         q, cfg = self.queue, self.cfg
+        dropped = q.dropped + self.handover_drops
         line = (f"  mqtt: {self.sent} message(s) sent to {cfg.host}:{cfg.port} as client_id {cfg.client}, "
-                f"{self.acked_total} acknowledged; {q.depth} left unacknowledged in {q.dir}")
+                f"{self.acked_total} acknowledged{f', {dropped} dropped' if dropped else ''}; {q.depth} left "
+                f"unacknowledged in {q.dir}")
         return line + (": the next run publishing from this queue sends them first" if q.depth else "")
 
     def status(self) -> str:
@@ -344,6 +364,7 @@ class Publisher:
                 self._event("mqtt_queue", f"{topic}: not published: {err}", logging.WARNING,
                             action="encode_error")
             self.handover.popleft()
+            self.moved += 1
             if self._queue_error is not None:
                 self._queue_error = None
                 self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO,
@@ -360,9 +381,9 @@ class Publisher:
                         f"the {n} oldest unsent message(s) ({self.queue.dropped} in all)",
                         logging.WARNING, action="dropped", count=n, total=self.queue.dropped)
 
-    def _sync(self) -> None:
+    def _sync(self, force: bool = False) -> None:
         try:
-            self.queue.sync()
+            self.queue.sync(force)
         except OSError as err:
             reason = err.strerror or str(err)
             if self._queue_error != reason:
@@ -412,4 +433,5 @@ class Publisher:
                 self._client.loop(timeout=POLL_S)
             self._client.disconnect()
         self.state = "stopped"
+        self._sync(force=True)
         self.queue.close()

@@ -19,7 +19,7 @@ from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, delay_lines, origin_lines
 from cmsensord.service.signals import Interrupt
-from cmsensord.service.sink import open_sink, publish_lines, route_sink_events, send_queued
+from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events, send_queued
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
 
@@ -72,8 +72,9 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     route_sink_events(sink, proc.log)
     alarms = FirstAlarms(proc.log)
     progress = Progress(capture.size, f"replay {Path(path).name}")
-    source = capture if speed is None else Paced(capture, speed)
-    interrupt = Interrupt()
+    publisher = publisher_of(sink)
+    interrupt = Interrupt(then=publisher.give_up.set if publisher is not None else None)
+    source = capture if speed is None else Paced(capture, speed, sleep=interrupt.sleep)
     t0 = time.monotonic()
     try:
         with source, interrupt:
@@ -86,8 +87,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
             _no_frame(proc, path, capture.counters)
         proc.finish()
         progress.close()
-        if not interrupt.seen:
-            send_queued(sink)
+        if send_queued(sink):
+            interrupt.seen = True
     except ConfigError as exc:          # the settings against the channels, once the capture named them
         proc.event("config", None, "configuration error: " + str(exc).removeprefix(exc.source + ": "))
         proc.finish()

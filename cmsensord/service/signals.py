@@ -46,12 +46,19 @@ class StopFlag:
 
 class Interrupt:
     """Ctrl-C (SIGINT) as a flag a batch run checks between reads (``seen``), so that it ends
-    as at the end of its input: its log finished, its summary printed. A second Ctrl-C
-    interrupts at once. Installed in the main thread only (elsewhere: never set)."""
+    as at the end of its input: its log finished, its summary printed. :meth:`sleep` (a paced
+    replay's) ends at it, and ``then`` is called (what else should stop waiting). A second
+    Ctrl-C interrupts at once. Installed in the main thread only (elsewhere: never set)."""
 
-    def __init__(self) -> None:
+    def __init__(self, then: Callable[[], None] | None = None) -> None:
         self.seen = False
+        self.then = then
+        self._event = threading.Event()
         self._old: Any = None
+
+    def sleep(self, seconds: float) -> None:
+        """Sleep ``seconds``, or until Ctrl-C."""
+        self._event.wait(seconds)
 
     def __enter__(self) -> Interrupt:
         if threading.current_thread() is threading.main_thread():
@@ -65,4 +72,7 @@ class Interrupt:
 
     def _handler(self, _signum, _frame) -> None:
         self.seen = True
+        self._event.set()
         signal.signal(signal.SIGINT, self._old if callable(self._old) else signal.default_int_handler)
+        if self.then is not None:
+            self.then()

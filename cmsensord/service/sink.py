@@ -75,31 +75,43 @@ def publish_lines(sink: RotatingSink) -> list[str]:
     return [publisher.summary()] if publisher is not None else []
 
 
-def send_queued(sink: RotatingSink, stream: TextIO | None = None) -> None:
+def send_queued(sink: RotatingSink, stream: TextIO | None = None) -> bool:
     """Before a run that publishes and is not the daemon (``replay --publish``) ends: wait until
     the broker has acknowledged what the run offered, saying so in one line (a bar on a
-    terminal), as long as the broker acknowledges something every
-    :data:`~cmsensord.publish.publisher.CONNACK_S` seconds. Ctrl-C stops waiting; what is left
-    stays in the queue for the next run publishing from it (the summary says how many)."""
+    terminal) and passing the publisher's events on as they come, as long as the broker
+    acknowledges something every :data:`~cmsensord.publish.publisher.CONNACK_S` seconds and
+    has not refused the connection. Ctrl-C stops waiting; what is left stays in the queue for
+    the next run publishing from it (the summary says how many). Whether Ctrl-C stopped it."""
     publisher = publisher_of(sink)
-    if publisher is None or not publisher.left():
-        return
+    if publisher is None or not publisher.left() or publisher.give_up.is_set():
+        return False
     from cmsensord.publish.publisher import CONNACK_S
 
+    assert isinstance(sink, TeeSink), "a publisher is a TeeSink's"
     out, cfg, n, start = stream or sys.stderr, publisher.cfg, publisher.left(), publisher.acked_total
     bar = Bar(n, "mqtt: sending", out)
+
+    def progress(acked: int) -> None:
+        bar(acked - start)
+        if publisher.events:
+            sink.drain_events()
+
     try:                                # the line in it: a Ctrl-C right after it is one too
         print(f"mqtt: sending {n:,} message(s) to {cfg.host}:{cfg.port} before exiting (the backlog at "
               f"{cfg.resend_per_s:g} a second, mqtt.resend_per_s); Ctrl-C stops waiting, they stay queued", file=out)
-        left = publisher.drain(progress=lambda acked: bar(acked - start))
+        left = publisher.drain(progress=progress)
     except KeyboardInterrupt:
         left = -1
     finally:
         bar.close()
+    sink.drain_events()
     if left < 0:
         print("mqtt: stopped waiting (Ctrl-C)", file=out)
+    elif left and publisher.state == "refused":
+        print("mqtt: the broker refused the connection: stopped waiting", file=out)
     elif left:
         print(f"mqtt: the broker acknowledged nothing for {CONNACK_S:g} s: stopped waiting", file=out)
+    return left < 0
 
 
 def publisher_of(sink: RotatingSink):

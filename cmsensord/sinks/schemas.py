@@ -368,7 +368,7 @@ EVENT = _obj(
         "state": _str("mqtt_link: the link's state (connected, disconnected, refused, failed)"),
         "queued": _int("mqtt_link: messages in the store-and-forward queue"),
         "action": _str("mqtt_queue: what happened (truncated, resumed, write_error, encode_error, "
-                       "handover_dropped, dropped)"),
+                       "handover_dropped, dropped, dropping)"),
         "bytes": _int("mqtt_queue (truncated): bytes cut from the queue's end"),
         "reason": _str("mqtt_queue (write_error): why the queue cannot be written"),
         "total": _int("mqtt_queue: messages dropped since start"),
