@@ -45,15 +45,15 @@ def _joined(lines: list[str]) -> list[str]:
     return out
 
 
-def _calls(trace: Path, logs: Path) -> list[str]:
-    """In order: ``create NAME`` (a ``.part`` made), ``fsync NAME``, ``fsync dir``, ``rename NAME``;
-    an fsync repeated on the same file once."""
+def traced_calls(trace: Path, logs: Path, suffix: str = ".mcap.part") -> list[str]:
+    """In order: ``create NAME`` (a file of ``logs`` ending in ``suffix`` made), ``fsync NAME``,
+    ``fsync dir``, ``rename NAME``; an fsync repeated on the same file once."""
     fds: dict[str, str | None] = {}
     out: list[str] = []
     for call in _joined(trace.read_text().splitlines()):
         if m := _OPEN.search(call):
             path, flags, fd = Path(m.group(1)), m.group(2), m.group(3)
-            fds[fd] = "dir" if path == logs else path.name if path.name.endswith(".mcap.part") else None
+            fds[fd] = "dir" if path == logs else path.name if path.name.endswith(suffix) else None
             if fds[fd] not in (None, "dir") and "O_CREAT" in flags:
                 out.append(f"create {path.name}")
         elif m := _FD.search(call):
@@ -82,7 +82,7 @@ def test_each_new_part_is_fsynced_into_its_directory_before_its_data(tmp_path):
     finally:
         stop(board)
     assert tracer.returncode == 0, err
-    calls = _calls(trace, logs)
+    calls = traced_calls(trace, logs)
     parts = [c.removeprefix("create ") for c in calls if c.startswith("create ")]
     finished = [p.name + ".part" for p in sorted(logs.glob("*.mcap"))]
     assert len(finished) >= 2 and finished == parts[:len(finished)]   # the first file, a rotation

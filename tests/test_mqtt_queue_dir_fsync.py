@@ -8,34 +8,16 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 from mosquitto import needs_mosquitto
-from test_dir_fsync import _FD, _OPEN, _joined
+from test_dir_fsync import traced_calls
 from test_mqtt import broker, mqtt_yaml  # noqa: F401 - broker: a fixture
 from test_mqtt_runs import capture
 
 STRACE = shutil.which("strace")
 pytestmark = [needs_mosquitto, pytest.mark.skipif(STRACE is None, reason="strace is not installed")]
-
-
-def _queue_calls(trace: Path, queue: Path) -> list[str]:
-    """``create SEGMENT``, ``fsync SEGMENT``, ``fsync dir`` in order (an fsync repeated once)."""
-    fds: dict[str, str | None] = {}
-    out: list[str] = []
-    for call in _joined(trace.read_text().splitlines()):
-        if m := _OPEN.search(call):
-            path, flags, fd = Path(m.group(1)), m.group(2), m.group(3)
-            fds[fd] = "dir" if path == queue else path.name if path.suffix == ".seg" else None
-            if fds[fd] not in (None, "dir") and "O_CREAT" in flags:
-                out.append(f"create {path.name}")
-        elif m := _FD.search(call):
-            name = fds.pop(m.group(2), None) if m.group(1) == "close" else fds.get(m.group(2))
-            if m.group(1) == "fsync" and name is not None and out[-1:] != [f"fsync {name}"]:
-                out.append(f"fsync {name}")
-    return out
 
 
 def test_a_new_queue_segment_is_fsynced_into_its_directory(tmp_path, broker):  # noqa: F811
@@ -46,7 +28,7 @@ def test_a_new_queue_segment_is_fsynced_into_its_directory(tmp_path, broker):  #
                         "cmsensord", "replay", str(capture(tmp_path)), "--config", str(cfg), "--out", str(out),
                         "--publish"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
-    calls = _queue_calls(trace, out / "mqtt-queue")
+    calls = traced_calls(trace, out / "mqtt-queue", ".seg")
     segment = next(c.removeprefix("create ") for c in calls if c.startswith("create "))
     first = calls.index(f"create {segment}")
     assert calls[first:first + 3] == [f"create {segment}", f"fsync {segment}", "fsync dir"], calls

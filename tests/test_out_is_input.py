@@ -70,3 +70,4 @@ def test_acoustic_calibration_over_a_capture(tmp_path):
     shutil.copy(cap, other)
     p = run_module("cmsensord.acoustic_calib", "--paired", str(cap), "--background", str(other), "--out", str(other))
     _expect_refusal(p, "acoustic_calib: error: ", other, other)
+    assert other.read_bytes() == cap.read_bytes()

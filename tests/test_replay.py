@@ -125,16 +125,23 @@ def test_junk_in_front_of_a_capture_is_counted_in_the_summary(tmp_path):
     assert not [x for x in lines if "no frame in" in x]
 
 
-def test_ctrl_c_ends_a_replay_with_its_log_finished_and_its_summary(tmp_path):
-    """Ctrl-C during a replay (it exited 130 in silence): the log is finished, the summary
-    says how far it got, exit status 130."""
+def _interrupted_replay(tmp_path, seconds: float, speed: str):
+    """A faulty motor's capture of ``seconds`` replayed at ``speed``, sent SIGINT after 3 s:
+    the capture and the process."""
     cap = tmp_path / "cap.bin"
-    sc = make_scenario("faulty", n_channels=1, duration_s=600.0, seed=0)
-    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, 600.0)
-    proc = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "20", "--out",
+    sc = make_scenario("faulty", n_channels=1, duration_s=seconds, seed=0)
+    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, seconds)
+    proc = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", speed, "--out",
                   str(tmp_path / "out")], stderr=subprocess.PIPE, text=True)
     time.sleep(3.0)
     proc.send_signal(signal.SIGINT)
+    return cap, proc
+
+
+def test_ctrl_c_ends_a_replay_with_its_log_finished_and_its_summary(tmp_path):
+    """Ctrl-C during a replay (it exited 130 in silence): the log is finished, the summary
+    says how far it got, exit status 130."""
+    cap, proc = _interrupted_replay(tmp_path, 600.0, "20")
     err = proc.communicate(timeout=30)[1]
     assert proc.returncode == 130, err
     line = next(ln for ln in err.splitlines() if ln.startswith("  interrupted (Ctrl-C) at "))
@@ -149,13 +156,7 @@ def test_ctrl_c_ends_a_replay_with_its_log_finished_and_its_summary(tmp_path):
 
 def test_ctrl_c_ends_a_slowly_paced_replay_at_once(tmp_path):
     """At --speed 0.05 a read of 4 KiB is 2 s of sleep at least: Ctrl-C ended the run only after it."""
-    cap = tmp_path / "cap.bin"
-    sc = make_scenario("faulty", n_channels=1, duration_s=120.0, seed=0)
-    Board(sc, BoardConfig(n_channels=1)).write_capture(cap, 120.0)
-    proc = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "0.05", "--out",
-                  str(tmp_path / "out")], stderr=subprocess.PIPE, text=True)
-    time.sleep(3.0)
-    proc.send_signal(signal.SIGINT)
+    _, proc = _interrupted_replay(tmp_path, 120.0, "0.05")
     t = time.monotonic()
     err = proc.communicate(timeout=60)[1]
     assert proc.returncode == 130, err
