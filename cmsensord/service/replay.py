@@ -76,8 +76,9 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     interrupt = Interrupt(then=publisher.give_up.set if publisher is not None else None)
     source = capture if speed is None else Paced(capture, speed, sleep=interrupt.sleep)
     t0 = time.monotonic()
+    interrupt.install()                 # to the end of the log: a Ctrl-C in finishing it is one too
     try:
-        with source, interrupt:
+        with source:
             for frames in source:
                 proc.handle(frames)
                 progress.update(capture.bytes_read, f"{proc.adc_seconds:.0f} s")
@@ -87,7 +88,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
             _no_frame(proc, path, capture.counters)
         proc.finish()
         progress.close()
-        if send_queued(sink):
+        if send_queued(sink, interrupted=lambda: interrupt.seen):
             interrupt.seen = True
     except ConfigError as exc:          # the settings against the channels, once the capture named them
         proc.event("config", None, "configuration error: " + str(exc).removeprefix(exc.source + ": "))
@@ -96,6 +97,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     finally:
         progress.close()
         out = sink.close()
+        interrupt.restore()
     if not quiet:
         placed = [f"  {line}" for line in said] + origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) \
             + delay_lines(meta, cfg) + publish_lines(sink) + _interrupted(interrupt, capture)

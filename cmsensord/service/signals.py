@@ -60,15 +60,23 @@ class Interrupt:
         """Sleep ``seconds``, or until Ctrl-C."""
         self._event.wait(seconds)
 
-    def __enter__(self) -> Interrupt:
+    def install(self) -> None:
+        """Take SIGINT (in the main thread)."""
         if threading.current_thread() is threading.main_thread():
             self._old = signal.signal(signal.SIGINT, self._handler)
-        return self
 
-    def __exit__(self, *exc: object) -> None:
+    def restore(self) -> None:
+        """Give SIGINT back to the handler before :meth:`install`."""
         if self._old is not None:
             signal.signal(signal.SIGINT, self._old)
             self._old = None
+
+    def __enter__(self) -> Interrupt:
+        self.install()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.restore()
 
     def _handler(self, _signum, _frame) -> None:
         self.seen = True

@@ -6,6 +6,7 @@ import logging
 import secrets
 import sys
 import time
+from collections.abc import Callable
 from typing import TextIO
 
 from cmsensord.config import Config
@@ -75,16 +76,19 @@ def publish_lines(sink: RotatingSink) -> list[str]:
     return [publisher.summary()] if publisher is not None else []
 
 
-def send_queued(sink: RotatingSink, stream: TextIO | None = None) -> bool:
+def send_queued(sink: RotatingSink, stream: TextIO | None = None,
+                interrupted: Callable[[], bool] = lambda: False) -> bool:
     """Before a run that publishes and is not the daemon (``replay --publish``) ends: wait until
     the broker has acknowledged what the run offered, saying so in one line (a bar on a
     terminal) and passing the publisher's events on as they come, as long as the broker
     acknowledges something every :data:`~cmsensord.publish.publisher.CONNACK_S` seconds and
     has not refused the connection. Ctrl-C stops waiting; what is left stays in the queue for
-    the next run publishing from it (the summary says how many). Whether Ctrl-C stopped it."""
+    the next run publishing from it (the summary says how many): a KeyboardInterrupt, or
+    ``interrupted()`` once the wait has ended (a run that takes SIGINT itself stops the
+    publisher's waiting then). Whether Ctrl-C stopped it."""
     publisher = publisher_of(sink)
     if publisher is None or not publisher.left() or publisher.give_up.is_set():
-        return False
+        return interrupted()
     from cmsensord.publish.publisher import CONNACK_S
 
     assert isinstance(sink, TeeSink), "a publisher is a TeeSink's"
@@ -105,6 +109,8 @@ def send_queued(sink: RotatingSink, stream: TextIO | None = None) -> bool:
     finally:
         bar.close()
     sink.drain_events()
+    if left > 0 and interrupted():
+        left = -1
     if left < 0:
         print("mqtt: stopped waiting (Ctrl-C)", file=out)
     elif left and publisher.state == "refused":
