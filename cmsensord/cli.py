@@ -4,7 +4,7 @@
     cmsensord --config FILE              run the daemon on the configured port
     cmsensord replay CAPTURE [--config FILE] [--out DIR]
     cmsensord record --port DEV --out FILE [--duration S]
-    cmsensord summary FILE.mcap
+    cmsensord summary LOG.mcap ... | DIR
     cmsensord report LOG_OR_DIR... --out report.html [--png DIR]
     cmsensord ack | status | capture-now [--config FILE]   (to the running daemon)
 
@@ -42,7 +42,7 @@ from cmsensord.service.live import run_live
 from cmsensord.service.record import record
 from cmsensord.service.replay import replay
 from cmsensord.service.simulate import RUNUP_ORDERS, SimulateOptions, simulate
-from cmsensord.service.summary import summary
+from cmsensord.service.summary import summary_of
 
 __all__ = ["main", "build_parser", "RUNUP_ORDERS"]
 
@@ -165,8 +165,9 @@ def _add_config_parser(sub) -> None:
 
 
 def _add_summary_parser(sub) -> None:
-    s = sub.add_parser("summary", help="summarise an MCAP log (also a truncated .mcap.part)")
-    s.add_argument("mcap", help="MCAP file")
+    s = sub.add_parser("summary", help="summarise MCAP logs (also a truncated .mcap.part, or a directory's logs)")
+    s.add_argument("mcap", nargs="+", metavar="LOG", help="MCAP file(s), or directories of logs (in the order "
+                   "their files were opened)")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
@@ -264,7 +265,7 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "config":
         return _print_default_config()
     if args.command == "summary":
-        return summary(args.mcap, as_json=args.json)
+        return summary_of(args.mcap, as_json=args.json)
     if args.command == "import":
         from cmsensord.importing.command import run_import
         return run_import(args)

@@ -14,38 +14,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TextIO
 
-from cmsensord.errors import CmsensordError
 from cmsensord.report.fast_read import FastScan, head_metadata
 from cmsensord.report.log_data import FileInfo, LogData
 from cmsensord.report.progress import Progress
 from cmsensord.report.runs import plan_logs
 from cmsensord.report.time_axis import TimeAxis
-from cmsensord.sinks.log_names import order_key
+from cmsensord.sinks.log_names import log_paths
 
 __all__ = ["log_paths", "read_logs"]
-
-
-def log_paths(names: list[str]) -> list[Path]:
-    """The files of ``names`` (files, or directories of logs), in order, each once.
-
-    Raises CmsensordError (one line) for a name that does not exist or a
-    directory without logs.
-    """
-    out: list[Path] = []
-    for name in names:
-        p = Path(name)
-        if p.is_dir():
-            found = sorted((f for f in p.iterdir() if f.is_file() and f.name.endswith((".mcap", ".mcap.part"))),
-                           key=lambda f: order_key(f.name))
-            if not found:
-                raise CmsensordError(f"{name}: no MCAP logs (*.mcap, *.mcap.part) in this directory")
-            out.extend(found)
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise CmsensordError(f"{name}: file not found")
-    seen: set[Path] = set()
-    return [p for p in out if not (p.resolve() in seen or seen.add(p.resolve()))]   # type: ignore[func-returns-value]
 
 
 def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:

@@ -1,33 +1,57 @@
-"""``cmsensord summary FILE.mcap``: what an MCAP log (or a truncated .mcap.part) holds."""
+"""``cmsensord summary LOG ...``: what MCAP logs (or truncated .mcap.part files, or the logs of a
+directory) hold."""
 
 from __future__ import annotations
 
 import json
 import os
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING
 
-from cmsensord.errors import EXIT_USAGE
+from cmsensord.errors import EXIT_USAGE, CmsensordError
 from cmsensord.report.localtime import iso_local
+from cmsensord.sinks.log_names import log_paths
 from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
 
 if TYPE_CHECKING:
     from cmsensord.report.time_axis import TimeAxis
 
 
-def summary(path: str, *, as_json: bool = False) -> int:
-    """Print the summary of ``path`` (text or JSON); exit status 2 if it is not an MCAP file.
-    Damage that ended the read (a finished file cut short, say) is also one line on stderr
-    (:func:`_tell_damage`): an error with exit status 2 when no message could be read."""
-    if not Path(path).is_file():
-        what = "is a directory, not an MCAP file" if Path(path).is_dir() else "file not found"
-        print(f"cmsensord: {path}: {what}", file=sys.stderr)
+def summary_of(names: list[str], *, as_json: bool = False) -> int:
+    """The summary of each log of ``names`` (files, or directories of logs: a rotated set, in
+    the order its files were opened), each after a ``== FILE`` line when there are several
+    (JSON: a list of them); the exit status is the worst. A name that is neither is one line
+    and exit status 2."""
+    try:
+        paths = [str(p) for p in log_paths(names)]
+    except CmsensordError as exc:
+        print(f"cmsensord: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if len(paths) == 1:
+        return summary(paths[0], as_json=as_json)
+    if as_json:
+        infos = [summarize(p) for p in paths]
+        print(json.dumps(infos, indent=2, default=str), flush=True)
+        return max(_tell_damage(i) if i["error"] != NOT_MCAP else _not_mcap(i["path"]) for i in infos)
+    status = 0
+    for k, p in enumerate(paths):
+        print(("\n" if k else "") + f"== {p}", flush=True)
+        status = max(status, summary(p))
+    return status
+
+
+def _not_mcap(path: str) -> int:
+    print(f"cmsensord: {path}: {NOT_MCAP}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def summary(path: str, *, as_json: bool = False) -> int:
+    """Print the summary of the file ``path`` (text or JSON); exit status 2 if it is not an
+    MCAP file. Damage that ended the read (a finished file cut short, say) is also one line on
+    stderr (:func:`_tell_damage`): an error with exit status 2 when no message could be read."""
     info = summarize(path)
     if info["error"] == NOT_MCAP:
-        print(f"cmsensord: {path}: {NOT_MCAP}", file=sys.stderr)
-        return EXIT_USAGE
+        return _not_mcap(path)
     try:
         print(json.dumps(info, indent=2, default=str) if as_json else format_summary(info), flush=True)
     except BrokenPipeError:     # `cmsensord summary FILE | head`: the reader has enough

@@ -19,7 +19,9 @@ import os
 import re
 from pathlib import Path
 
-__all__ = ["SALVAGED", "log_files", "log_name", "next_name", "order_key", "salvaged_path"]
+from cmsensord.errors import CmsensordError
+
+__all__ = ["SALVAGED", "log_files", "log_name", "log_paths", "next_name", "order_key", "salvaged_path"]
 
 SALVAGED = ".salvaged"
 _STAMP = r"\d{8}T\d{6}Z"
@@ -93,3 +95,26 @@ def salvaged_path(part: str | Path) -> Path:
     name = part.name
     stem = name[: -len(".mcap.part")] if name.endswith(".mcap.part") else name
     return part.with_name(stem + SALVAGED + ".mcap")
+
+
+def log_paths(names: list[str]) -> list[Path]:
+    """The files of ``names`` (files, or directories of logs), in order, each once.
+
+    Raises CmsensordError (one line) for a name that does not exist or a
+    directory without logs.
+    """
+    out: list[Path] = []
+    for name in names:
+        p = Path(name)
+        if p.is_dir():
+            found = sorted((f for f in p.iterdir() if f.is_file() and f.name.endswith((".mcap", ".mcap.part"))),
+                           key=lambda f: order_key(f.name))
+            if not found:
+                raise CmsensordError(f"{name}: no MCAP logs (*.mcap, *.mcap.part) in this directory")
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise CmsensordError(f"{name}: file not found")
+    seen: set[Path] = set()
+    return [p for p in out if not (p.resolve() in seen or seen.add(p.resolve()))]   # type: ignore[func-returns-value]
