@@ -13,7 +13,6 @@ import errno
 import logging
 import os
 import select
-import sys
 import termios
 import threading
 import time
@@ -524,38 +523,6 @@ def _why(exc: BaseException) -> str:
 def _close_quietly(ser) -> None:
     with contextlib.suppress(*PORT_ERRORS):
         ser.close()
-
-
-class Progress:
-    """A one-line progress bar on a terminal (stderr); silent otherwise."""
-
-    def __init__(self, total: int, label: str, stream=None):
-        self.total = max(1, total)
-        self.label = label
-        self.stream = stream or sys.stderr
-        self.enabled = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.t0 = time.monotonic()
-        self._last = 0.0
-
-    def update(self, done: int, extra: str = "") -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if now - self._last < 0.2 and done < self.total:
-            return
-        self._last = now
-        frac = min(1.0, done / self.total)
-        bar = "#" * int(frac * 30)
-        rate = done / max(now - self.t0, 1e-9) / 1e6
-        self.stream.write(f"\r{self.label} [{bar:<30}] {frac * 100:5.1f}% {rate:6.1f} MB/s {extra}")
-        self.stream.flush()
-
-    def close(self) -> None:
-        """End the bar's line (once)."""
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
-            self.enabled = False
 
 
 def open_port_checked(port: str, baud: int) -> serial.Serial:

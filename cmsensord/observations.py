@@ -27,11 +27,11 @@ from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
-from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 from cmsensord.source import CaptureSource
+from cmsensord.terminal_bar import Progress
 
 __all__ = ["Observations", "alarm_events", "read_observations", "sidecar"]
 

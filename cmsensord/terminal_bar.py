@@ -1,12 +1,14 @@
-"""A one-line progress bar for long work in a command (an import, sending a replay's MQTT
-backlog): ``label [#####...]  45.0%`` on stderr when it is a terminal, silent otherwise."""
+"""One-line progress bars for long work in a command: ``label [#####...]  45.0%`` on stderr
+when it is a terminal, silent otherwise. :class:`Bar` (an import, sending a replay's MQTT
+backlog) erases its line when done; :class:`Progress` (reading a capture) adds the rate in
+MB/s and keeps its line."""
 
 from __future__ import annotations
 
 import sys
 import time
 
-__all__ = ["Bar"]
+__all__ = ["Bar", "Progress"]
 
 
 class Bar:
@@ -20,15 +22,40 @@ class Bar:
         self._last = 0.0
 
     def __call__(self, done: float) -> None:
+        self._draw(done, "")
+
+    def _draw(self, done: float, suffix: str) -> None:
         now = time.monotonic()
         if not self.enabled or (now - self._last < 0.2 and done < self.total):
             return
         self._last = now
         frac = min(1.0, done / self.total)
-        self.stream.write(f"\r{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%")
+        self.stream.write(f"\r{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%{suffix}")
         self.stream.flush()
 
     def close(self) -> None:
         if self.enabled:
             self.stream.write("\r\033[K")
             self.stream.flush()
+
+
+class Progress(Bar):
+    """A bar of bytes read, with their rate in MB/s and ``extra`` text; ``close`` ends its line
+    (once)."""
+
+    def __init__(self, total: int, label: str, stream=None):
+        super().__init__(total, label, stream)
+        self.t0 = time.monotonic()
+
+    def update(self, done: int, extra: str = "") -> None:
+        if not self.enabled:
+            return
+        rate = done / max(time.monotonic() - self.t0, 1e-9) / 1e6
+        self._draw(done, f" {rate:6.1f} MB/s {extra}")
+
+    def close(self) -> None:
+        """End the bar's line (once)."""
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.enabled = False

@@ -13,7 +13,6 @@ from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
 from cmsensord.importing.timeline import Timeline
-from cmsensord.link import Progress
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
 from cmsensord.service.heap import keep_freed_memory
@@ -22,6 +21,7 @@ from cmsensord.service.signals import Interrupt
 from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events, send_queued
 from cmsensord.service.status import run_summary
 from cmsensord.source import CaptureSource, Paced
+from cmsensord.terminal_bar import Progress
 
 log = logging.getLogger("cmsensord")
 
