@@ -209,10 +209,11 @@ def _printed(x: np.ndarray) -> tuple[np.ndarray, float] | None:
     repeat in runs whose lengths differ by at most two (a value on a rounding boundary goes
     either way), apart from a run a gap ends (a rise past the resolution); None for anything
     else (a warm-up's temperature rises unevenly)."""
-    rows = _changes(np.asarray(x, dtype=np.float64))
-    if rows is None or rows.size < 3 or rows.size == x.size - 1:
+    v = np.asarray(x, dtype=np.float64)
+    rows = _changes(v)
+    if rows is None or rows.size < 3 or rows.size == v.size - 1:
         return None
-    rises = np.asarray(x, dtype=np.float64)[rows] - np.asarray(x, dtype=np.float64)[rows - 1]
+    rises = v[rows] - v[rows - 1]
     quantum = float(rises.min())
     runs = np.diff(rows)
     kept = runs[rises[1:] <= quantum * (1 + 1e-6)]            # the runs no gap ends
