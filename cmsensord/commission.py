@@ -10,6 +10,7 @@ The same input gives the same file.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import sys
@@ -25,8 +26,9 @@ from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.config.channel_refs import channel_refs_error
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
+from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.monitor.alarms import order_rules
-from cmsensord.observations import Observations, alarm_events, read_observations
+from cmsensord.observations import Observations, alarm_events, read_observations, sidecar
 from cmsensord.out_paths import overwritten_input, with_sidecars
 from cmsensord.service.origin import origin_lines, span_line
 
@@ -231,8 +233,10 @@ def _every_channels_bound(results: list[ChannelResult], obs: Observations) -> st
 
 
 def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
-              base: dict[str, Any] | None = None, base_path: str | None = None) -> str:
-    """SITE.yaml text: BASE's settings (if any) with the learned channels, commented."""
+              base: dict[str, Any] | None = None, base_path: str | None = None,
+              rpm: float | None = None) -> str:
+    """SITE.yaml text: BASE's settings (if any) with the learned channels, commented.  A
+    speed given to calibrate (``rpm``, ``--rpm``) replaces the one the capture's import read."""
     base = dict(base or {})
     base_alarms = base.pop("alarms", None) or {}
     base_channels = {ch.get("name"): ch for ch in base.pop("channels", None) or [] if isinstance(ch, dict)}
@@ -244,7 +248,10 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         "# block RMS / baseline, so r_min and r_max are in units of baseline^2; the severity also",
         "# grades the level against the baseline (monitor.severity: auto -> combined).",
     ]
-    out += _indicators_yaml(obs.settings, base)
+    settings, why = dict(obs.settings), dict(_SETTING_WHY)
+    if rpm is not None:
+        settings["rpm"], why["rpm"] = rpm, "the machine's speed given to calibrate (--rpm)"
+    out += _indicators_yaml(settings, base, why)
     if base:
         out.append(yaml.safe_dump(base, sort_keys=False, default_flow_style=False).rstrip())
     out.append("channels:")
@@ -267,13 +274,13 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
 _SETTING_WHY = {"rpm": "the speed the import read from the recording (no tacho in the capture)"}
 
 
-def _indicators_yaml(settings: dict[str, float], base: dict[str, Any]) -> list[str]:
+def _indicators_yaml(settings: dict[str, float], base: dict[str, Any], why: dict[str, str]) -> list[str]:
     """The ``indicators`` settings the capture's sidecar gave (``settings``) that are the
     machine's, with why; merged into BASE's own ``indicators`` section (``base``, changed) when
     it has one.  The record length of a capture of snapshots is the capture's, not the machine's:
     it is not written (the live board's stream is continuous; a replay of the capture takes it
     from the sidecar again), a comment says so."""
-    kept = {k: v for k, v in settings.items() if k in _SETTING_WHY}
+    kept = {k: v for k, v in settings.items() if k in why}
     out = []
     if "interval_s" in settings:
         out += [f"# indicators.interval_s is not set: the {settings['interval_s']:g}-s records of the capture's "
@@ -283,8 +290,8 @@ def _indicators_yaml(settings: dict[str, float], base: dict[str, Any]) -> list[s
         return out
     if isinstance(base.get("indicators"), dict):
         base["indicators"] = {**base["indicators"], **kept}
-        return out + [f"# indicators.{k}: {_SETTING_WHY[k]}" for k in kept]
-    return out + ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {_SETTING_WHY[k]}" for k, v in kept.items()]
+        return out + [f"# indicators.{k}: {why[k]}" for k in kept]
+    return out + ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {why[k]}" for k, v in kept.items()]
 
 
 def _alarms_yaml(obs: Observations, base_alarms: Any) -> list[str]:
@@ -332,6 +339,15 @@ def _writable_out(out: Path) -> Path:
     return out
 
 
+def _given_speed(cfg: Config, capture: str, rpm: float | None) -> tuple[Config, float | None]:
+    """``cfg`` with ``indicators.rpm`` = ``rpm`` (``--rpm``) where the capture's import speed
+    would otherwise be it (no tacho, none configured), and that speed, else (``cfg``, None):
+    the indicators' baselines and the site file then follow the machine's speed as given."""
+    if rpm is None or "rpm" not in capture_settings(cfg, sidecar(capture))[1]:
+        return cfg, None
+    return dataclasses.replace(cfg, indicators=dataclasses.replace(cfg.indicators, rpm=rpm)), rpm
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     """Read, learn, print the table, write SITE.yaml atomically and check it loads."""
     out = _writable_out(Path(args.out))
@@ -341,6 +357,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     cfg = load_config(args.config) if args.config else Config()
     base = yaml.safe_load(Path(args.config).read_text(encoding="utf-8")) if args.config else None
     auto = not (isinstance(base, dict) and base.get("channels"))
+    cfg, speed = _given_speed(cfg, args.capture, args.rpm)
     obs = read_observations(args.capture, cfg, auto_channels=auto, from_s=args.from_s, to_s=args.to_s)
     absent = "" if auto else _absent_channels(cfg, obs, args.config, Path(args.capture).name, out.name)
     faulty = read_observations(args.faulty, cfg, auto_channels=auto) if args.faulty else None
@@ -361,7 +378,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     where = span_line(obs.meta, obs.start_s, obs.end_s)
     if where:
         print(f"healthy period {where}")
-    text = site_yaml(results, obs, source=Path(args.capture).name, base=base, base_path=args.config)
+    text = site_yaml(results, obs, source=Path(args.capture).name, base=base, base_path=args.config, rpm=speed)
     tmp = out.with_name(out.name + ".part")
     try:
         tmp.write_text(text)

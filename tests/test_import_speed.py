@@ -52,3 +52,21 @@ def test_files_of_different_speeds_give_none(tmp_path):
     assert ("  indicators: the capture's 300 rpm is not used: its files gave different speeds; give indicators.rpm "
             "in --config\n") in err, err
     assert all("speed_rpm" not in m for m in _records(tmp_path / "out"))
+
+
+def test_calibrates_rpm_is_the_site_files_speed(tmp_path):
+    """``calibrate --rpm`` is the machine's speed: the site file's ``indicators.rpm`` is it, not
+    the speed the capture's import read (before, f_r at --rpm but the lines at the import's)."""
+    _npz(tmp_path / "r.npz", 300.0)
+    cap = tmp_path / "r.bin"
+    _run("import", tmp_path / "r.npz", "--unit", "m/s2", "--names", "ch", "--out", cap)
+    (tmp_path / "base.yaml").write_text(BEARING)
+    site = tmp_path / "site.yaml"
+    out = _run("calibrate", cap, "--config", tmp_path / "base.yaml", "--rpm", "360", "--out", site)
+    text = site.read_text()
+    assert "  rpm: 360.0\n" in text and "  rpm: 300.0\n" not in text, text
+    assert "# indicators.rpm: the machine's speed given to calibrate (--rpm)\n" in text, text
+    assert "f_r: 6                      # --rpm 360\n" in text, text
+    assert "indicators.rpm 300 from the capture" not in out, out
+    _run("replay", cap, "--config", site, "--out", tmp_path / "site")
+    assert [m["speed_rpm"] for m in _records(tmp_path / "site")] == [360] * 4
