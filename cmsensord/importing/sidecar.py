@@ -5,18 +5,34 @@ units, the snapshots, the speed)."""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 __all__ = ["channel_units", "sidecar"]
 
 
+_said: set[str] = set()
+
+
 def sidecar(path: str | Path) -> dict:
-    """The capture's metadata written by ``cmsensord import`` (CAPTURE.json beside it), or {}."""
+    """The capture's metadata written by ``cmsensord import`` (CAPTURE.json beside it), or {}
+    when there is none, or when it cannot be read (truncated, not JSON, not an object): then a
+    one-line warning on stderr, once a process for that file."""
     p = Path(str(path) + ".json")
-    try:
-        return json.loads(p.read_text()) if p.is_file() else {}
-    except (OSError, ValueError):
+    if not p.is_file():
         return {}
+    try:
+        meta = json.loads(p.read_text(encoding="utf-8"))
+        why = "" if isinstance(meta, dict) else "not a JSON object"
+    except (OSError, ValueError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    if not why:
+        return meta
+    if str(p) not in _said:
+        _said.add(str(p))
+        print(f"warning: {p}: the capture's sidecar cannot be read ({why}): its channel names, units, "
+              "speed and time line are not used", file=sys.stderr)
+    return {}
 
 
 def channel_units(meta: dict) -> list[str]:
