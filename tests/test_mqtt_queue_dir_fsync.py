@@ -1,5 +1,6 @@
 """A new segment of the MQTT store-and-forward queue keeps its name through a power cut: its
-directory is fsynced after the segment is created, with the segment's first fsync (it never
+directory (and, made by the daemon, its parent) is fsynced after the segment is created, with
+the segment's first fsync (it never
 was: a strictly POSIX file system could lose the whole segment, against "a power cut loses at
 most the last second"). ``cmsensord replay --publish`` runs under ``strace``."""
 
@@ -12,7 +13,7 @@ import sys
 import pytest
 
 from mosquitto import needs_mosquitto
-from test_dir_fsync import traced_calls
+from test_dir_fsync import TRACED, traced_calls
 from test_mqtt import broker, mqtt_yaml  # noqa: F401 - broker: a fixture
 from test_mqtt_runs import capture
 
@@ -24,14 +25,17 @@ def test_a_new_queue_segment_is_fsynced_into_its_directory(tmp_path, broker):  #
     cfg = tmp_path / "site.yaml"
     cfg.write_text(mqtt_yaml(broker.port))
     trace, out = tmp_path / "strace.txt", tmp_path / "out"
-    p = subprocess.run([STRACE, "-f", "-o", str(trace), "-e", "trace=openat,fsync,close", sys.executable, "-m",
+    p = subprocess.run([STRACE, "-f", "-o", str(trace), "-e", TRACED, sys.executable, "-m",
                         "cmsensord", "replay", str(capture(tmp_path)), "--config", str(cfg), "--out", str(out),
                         "--publish"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     calls = traced_calls(trace, out / "mqtt-queue", ".seg")
     segment = next(c.removeprefix("create ") for c in calls if c.startswith("create "))
-    first = calls.index(f"create {segment}")
-    assert calls[first:first + 3] == [f"create {segment}", f"fsync {segment}", "fsync dir"], calls
+    assert "mkdir dir" in calls, calls
+    own = [c for c in calls if c != "fsync parent" and not c.startswith("rename ")]  # out/'s, acked's
+    at = own.index(f"create {segment}")
+    assert own[at:at + 3] == [f"create {segment}", f"fsync {segment}", "fsync dir"], calls
+    assert "fsync parent" in calls[calls.index(f"fsync {segment}"):calls.index("fsync dir")], calls
 
 
 def test_a_directory_fsync_that_fails_is_said_once_and_the_acknowledgements_are_still_saved(tmp_path, broker):  # noqa: F811

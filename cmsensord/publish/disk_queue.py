@@ -21,7 +21,7 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from cmsensord.sinks.mcap_file import fsync_dir
+from cmsensord.sinks.mcap_file import fsync_dir, make_dirs
 
 _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
 _BODY = struct.Struct("<QBH")         # seq, retain, topic length
@@ -77,7 +77,7 @@ class DiskQueue:
     def __init__(self, directory: str | os.PathLike, *, max_bytes: int, fsync_s: float = 1.0,
                  segment_bytes: int | None = None) -> None:
         self.dir = Path(directory)
-        self.dir.mkdir(parents=True, exist_ok=True)
+        self._new_dirs = make_dirs(self.dir)    # their names fsynced into their parents at the first sync
         self.max_bytes, self.fsync_s = max_bytes, fsync_s
         self._new_name = False
         self.segment_bytes = segment_bytes or max(4096, min(1 << 20, max_bytes // 8))
@@ -177,6 +177,9 @@ class DiskQueue:
             self._acked_written = self.acked
         if self._new_name:                  # once: a file system that refuses it refuses it again
             self._new_name = False
+            for new in self._new_dirs:
+                fsync_dir(new.parent)
+            self._new_dirs = []
             fsync_dir(self.dir)
 
     def close(self) -> None:

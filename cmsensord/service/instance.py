@@ -11,11 +11,13 @@ restart it) naming that daemon's pid.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 from pathlib import Path
 
 from cmsensord.errors import InstanceError
+from cmsensord.sinks.mcap_file import fsync_dir, make_dirs
 
 __all__ = ["LOCK_NAME", "claim_output_dir", "refuse_if_held"]
 
@@ -28,7 +30,9 @@ def claim_output_dir(directory: str | Path) -> int | None:
     own words); InstanceError when another process holds it."""
     path = Path(directory) / LOCK_NAME
     try:
-        Path(directory).mkdir(parents=True, exist_ok=True)
+        for new in make_dirs(Path(directory)):     # its name durable in its parent (a failure: the
+            with contextlib.suppress(OSError):     # sink's own directory fsync says so)
+                fsync_dir(new.parent)
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except OSError:
         return None

@@ -48,6 +48,7 @@ __all__ = [
     "RawFile",
     "fsync_dir",
     "log_files",
+    "make_dirs",
     "os_error_text",
     "salvaged_path",
 ]
@@ -113,6 +114,18 @@ def fsync_dir(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def make_dirs(path: Path) -> list[Path]:
+    """``mkdir -p path``: the directories it created, outermost first (OSError as mkdir's).
+    Their parents are to be fsynced (:func:`fsync_dir`) for the new names to survive a power cut."""
+    missing = []
+    at = path
+    while not at.exists() and at != at.parent:
+        missing.append(at)
+        at = at.parent
+    path.mkdir(parents=True, exist_ok=True)
+    return missing[::-1]
 
 
 # ---------------------------------------------------------------------------
@@ -183,7 +196,7 @@ class McapSink:
         self._failed = False
 
         try:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
+            created = make_dirs(self.out_dir)
         except OSError as err:
             why = "it is a file, not a directory" if self.out_dir.exists() and not self.out_dir.is_dir() \
                 else os_error_text(err)
@@ -211,6 +224,8 @@ class McapSink:
         #: same; its name may not survive a power cut until the directory is fsynced again)
         self.dir_sync_error: SinkIOError | None = None
         try:
+            for new in created:         # a directory made here: its name durable in its parent
+                fsync_dir(new.parent)
             fsync_dir(self.out_dir)     # the new name durable before any data fsynced into it
         except OSError as err:
             self.dir_sync_error = SinkIOError(
