@@ -123,6 +123,14 @@ def _g(x: float) -> str:
     return f"{x:.4g}"
 
 
+def _r1_why(m: HealthyModel) -> str:
+    """Where the bank's R_1 (eq. 16 of R_min, R_max, n) comes from."""
+    wanted = MARGIN * m.healthy_r
+    if math.isclose(m.r_1, wanted, rel_tol=1e-9):
+        return f"R_1 = {_g(m.r_1)} = {MARGIN:g} x healthy critical R {_g(m.healthy_r)}"
+    return f"R_1 = {_g(m.r_1)}: eq. 16 cannot reach R_max with R_1 = {MARGIN:g} x H = {_g(wanted)}"
+
+
 def format_table(results: list[ChannelResult], obs: Observations) -> str:
     """What calibrate measured and chose, one row per channel (the names' column as wide as the
     longest), and the margins."""
@@ -139,6 +147,11 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
             f"{_g(m.r_min):>9} {_g(m.r_max):>9} {m.max_cnt:>7d} {m.any_flagged:>7d}")
     lines.append(f"R in units of baseline^2 (the bank watches block RMS / baseline); R_1 = {MARGIN:g} x H "
                  f"(twice the healthy fluctuation amplitude), R_n = {SPAN:g} x R_1 unless --faulty.")
+    lines += [f"{r.name}: {_r1_why(r.model)}" for r in results if not math.isclose(
+        r.model.r_1, MARGIN * r.model.healthy_r, rel_tol=1e-9)]
+    lines += [f"{r.name}: R_n = {_g(r.model.r_max / r.model.r_1)} x R_1: with monitor.n <= {SPAN:g} AKFs, eq. 16 "
+              f"cannot reach {SPAN:g} x R_1 with R_min > 0 (R_min = R_1 / {SPAN:g})" for r in results
+              if r.model.r_max_rule == "span" and r.model.r_max < SPAN * r.model.r_1 * (1 - 1e-9)]
     for r in results:
         m = r.model
         margin = f"margin {r.f_r / m.max_cnt:.2g}x" if m.max_cnt else "no outlier at all"
@@ -261,8 +274,8 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
                  if k not in ("name", "index", "baseline", "baseline_spread", "r_min", "r_max", "f_r")}
         rows = [("baseline", m.baseline, "median RMS of the healthy period's decisions"),
                 ("baseline_spread", m.spread, "robust std of the per-decision level / baseline"),
-                ("r_min", m.r_min, f"R_1 = {_g(m.r_1)} = {MARGIN:g} x healthy critical R {_g(m.healthy_r)}"),
-                ("r_max", m.r_max, f"R_n = {SPAN:g} x R_1" if m.r_max_rule == "span" else
+                ("r_min", m.r_min, _r1_why(m)),
+                ("r_max", m.r_max, f"R_n = {_g(m.r_max / m.r_1)} x R_1" if m.r_max_rule == "span" else
                  "R_n: the largest R that still flags the faulty capture"), ("f_r", r.f_r, r.f_r_source)]
         out += [f"  - name: {r.name}", f"    index: {r.index}"]
         out += [f"    {(k + ': ' + _g(v)):<28}# {why}" for k, v, why in rows]

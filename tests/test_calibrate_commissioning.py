@@ -186,3 +186,34 @@ def test_a_faulty_capture_that_does_not_fit_or_does_not_change_r_max_is_said(two
     assert said == [f"{ch}: --faulty calm.bin did not change R_max: the largest R that flags half of its "
                     f"decisions, {r_f}, is not above R_1 {r_1}; R_n = 4 x R_1"
                     for ch, r_f, r_1 in (("ch_0", "0.0001995", "0.001265"), ("ch_1", "0.0001778", "0.001787"))]
+
+
+@pytest.mark.parametrize("n, faulty", [(3, False), (1, True)])
+def test_the_banks_r_1_is_the_one_calibrate_checked_and_reports(run_in, tmp_path, n, faulty):
+    """Eq. (16) with few AKFs (n <= 4) or a --faulty R_max out of its reach: the site file's
+    R_min, R_max give AKF_1 the R_1 the table reports and the healthy check ran at (before: n 3
+    gave R_1 1.5 x the one reported; n 1 with --faulty stopped on a ZeroDivisionError)."""
+    from cmsensord.dsp.akf import bank_r
+
+    base = tmp_path / "base.yaml"
+    base.write_text(f"monitor:\n  n: {n}\noutput:\n  akf_trace_filter: 1\n")
+    more = []
+    if faulty:
+        y = np.random.default_rng(9).standard_normal(30 * 5120).reshape(-1, 64)
+        amp = 1 + 0.6 * np.random.default_rng(10).standard_normal(y.shape[0]).clip(-1.5, 3)
+        np.save(tmp_path / "bad.npy", (0.5 * y * amp[:, None]).reshape(-1).astype(np.float32))
+        more = ["--faulty", str(_import(tmp_path / "bad.npy", "--fs", "5120", "--block-len", "64", "--unit", "g",
+                                        "--names", "de"))]
+    site = tmp_path / "site.yaml"
+    p = cmsensord("calibrate", str(run_in), "--rpm", "1500", "--config", str(base), *more, "--out", str(site))
+    assert p.returncode == 0, p.stderr
+    row = next(ln for ln in p.stdout.splitlines() if ln.startswith("de "))
+    r_1 = float(row.split()[8])
+    ch = yaml.safe_load(site.read_text())["channels"][0]
+    assert bank_r(ch["r_min"], ch["r_max"], n)[0] == pytest.approx(r_1, rel=1e-3), (row, ch)
+    if faulty:
+        assert f"de: R_1 = {r_1:.4g}: eq. 16 cannot reach R_max with R_1 = 4 x H = " in p.stdout, p.stdout
+    else:
+        assert ("de: R_n = 2.5 x R_1: with monitor.n <= 4 AKFs, eq. 16 cannot reach 4 x R_1 with R_min > 0 "
+                "(R_min = R_1 / 4)\n") in p.stdout, p.stdout
+        assert ch["r_max"] == pytest.approx(2.5 * r_1, rel=1e-3)

@@ -45,6 +45,15 @@ def test_bank_limits_give_r1_and_span(r_1):
     assert R[-1] == pytest.approx(SPAN * r_1, rel=1e-12)
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5])
+def test_bank_limits_keep_r1_for_small_banks(n):
+    """n <= SPAN: R_1 stays r_1 (before, n 2..4 gave AKF_1 a larger R than the one checked)."""
+    r_min, r_max = bank_limits(2e-3, n)
+    R = bank_r(r_min, r_max, n)
+    assert R[0] == pytest.approx(2e-3, rel=1e-12) and 0 < r_min < r_max
+    assert R[-1] == pytest.approx(min(SPAN * 2e-3, n * 2e-3 - (n - 1) * 2e-3 / SPAN), rel=1e-12)
+
+
 def test_critical_r_is_the_first_quiet_r():
     grid = np.array([1e-3, 1e-2, 1e-1])
     counts = np.array([[40, 20, 3], [10, 5, 1], [50, 45, 40]])

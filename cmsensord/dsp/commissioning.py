@@ -159,7 +159,9 @@ def run_in_periods(level: np.ndarray, rstar: np.ndarray) -> int:
 def bank_limits(r_1: float, n: int, span: float = SPAN) -> tuple[float, float]:
     """R_min, R_max of eq. (16) giving AKF_1 the variance r_1 and AKF_n span x r_1.
 
-    R_i = R_min + i (R_max - R_min)/n, so R_1 = R_min + (R_max - R_min)/n.
+    R_i = R_min + i (R_max - R_min)/n, so R_1 = R_min + (R_max - R_min)/n.  A bank of n <= span
+    AKFs cannot reach span x r_1 with R_min > 0 and R_1 = r_1 (Kim et al. 2023 use n = 10):
+    then R_min = r_1 / span and R_n is as wide as eq. (16) allows with R_1 kept at r_1.
     """
     if n == 1:
         return r_1 / span, r_1
@@ -167,6 +169,7 @@ def bank_limits(r_1: float, n: int, span: float = SPAN) -> tuple[float, float]:
     r_min = (n * r_1 - r_max) / (n - 1)
     if r_min <= 0:
         r_min = r_1 / span
+        r_max = n * r_1 - (n - 1) * r_min
     return float(r_min), float(r_max)
 
 
@@ -269,8 +272,10 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
         fc = counts_of(np.asarray(faulty, np.float64), grid)
         r_f = r_from_faulty(fc, f_r, grid)
         if np.isfinite(r_f) and r_f > r_1:
-            r_min = (n * r_1 - r_f) / (n - 1)
-            r_min = r_min if r_min > 0 else r_1 / 2
+            r_min = (n * r_1 - r_f) / (n - 1) if n > 1 else 0.0
+            if r_min <= 0:                  # R_n = r_f out of eq. (16)'s reach with R_1 = r_1:
+                r_min = r_1 / 2             # R_1 is larger, and the healthy check runs at it
+                r_1 = r_min + (r_f - r_min) / n
             r_max, rule = r_f, "faulty"
     med = np.nanmedian(running / baseline)
     spread = float(1.4826 * np.nanmedian(np.abs(running / baseline - med)))
