@@ -176,9 +176,10 @@ BAD_DICTS = [
     ({"monitor": {"r_max": 0.13, "r_min": 0.13}}, "monitor.r_max: must be greater than r_min = 0.13 (got 0.13)"),
     ({"channels": [{"name": "a", "r_max": 0.001}]}, "channels[0].r_max: must be greater than r_min = 0.004 (got 0.001)"),
     ({"link": {"reconnect_min_s": 9}}, "link.reconnect_min_s: must be <= reconnect_max_s = 5.0 (got 9.0)"),
-    ({"output": {"akf_trace_filter": 11}}, "output.akf_trace_filter: must be <= monitor.n = 10 (got 11)"),
+    ({"output": {"akf_trace": True, "akf_trace_filter": 11}},
+     "output.akf_trace_filter: must be <= monitor.n = 10 (got 11)"),
     (
-        {"output": {"akf_trace_filter": 5}, "channels": [{"name": "a", "n": 4}, {"name": "b", "n": 4}]},
+        {"output": {"akf_trace": True, "akf_trace_filter": 5}, "channels": [{"name": "a", "n": 4}, {"name": "b", "n": 4}]},
         "output.akf_trace_filter: must be <= channels[0].n = 4 (got 5)",
     ),
     (

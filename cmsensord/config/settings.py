@@ -320,7 +320,8 @@ class AcousticConfig:
 
 
 def _config_rules(cfg: Config) -> tuple[str, str, Any] | None:
-    """Rules spanning sections: channel uniqueness, akf_trace_filter <= n, microphone calibration."""
+    """Rules spanning sections: channel uniqueness, akf_trace_filter <= n (with akf_trace on),
+    microphone calibration."""
     if not cfg.channels:
         return "channels", "must list at least one channel", []
     for i, ch in enumerate(cfg.channels):
@@ -354,6 +355,8 @@ def _config_rules(cfg: Config) -> tuple[str, str, Any] | None:
             return (f"channels[{i}].n", f"every channel needs the same bank size n "
                     f"(channels[0] has {n0}): the banks run as one array", ch.monitor.n)
     k = cfg.output.akf_trace_filter
+    if not cfg.output.akf_trace:        # no trace: the setting is not used (a bank of n < 10 needs no word on it)
+        return None
     if k > cfg.monitor.n:
         return "output.akf_trace_filter", f"must be <= monitor.n = {cfg.monitor.n}", k
     for i, ch in enumerate(cfg.channels):
