@@ -102,10 +102,11 @@ Reading the converted text of the paper (figures are missing, some equations gar
 
 * Eq. (5) reads "x A^T A x"; it is xᵀ AᵀA x.  The number (9) is printed twice,
   for ηᵀη and for J; the loss is the second one.
-* Eq. (2) writes c(n) without saying which sample's ω it uses when ω varies.
-  Here c(n) = 2 cos(ω(n-1) Δt), the middle sample of the three, so that the
-  structural equation does not lag the frequency; for a stationary ω the
-  choices are the same.
+* Eq. (2) writes c(n) beside x(n) and ε(n): the newest sample's ω when ω varies.
+  Here c(n) = 2 cos(ω(n-1) Δt), the middle sample of the three (a stated
+  deviation), so that the structural equation does not lag the frequency; for
+  a stationary ω the choices are the same (for a 50-80 Hz sweep over 400
+  samples at 1 kHz they differ by about 0.6 % of the peak).
 * Fig. 1 (the frequency responses) is missing and the text does not say how
   the response of a finite record is measured.  Here |H(f)| is the RMS gain over
   the record for a complex exponential, ‖x‖/‖y‖ with y(n) = e^{j2πfn/fs}, which is

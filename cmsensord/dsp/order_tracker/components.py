@@ -19,7 +19,7 @@ _model_omega = getattr(_trackerkernel, "model_omega", None)
 DEFAULT_R = 50.0
 """Default weighting factor.  At a 2-kHz tracker rate its -3 dB bandwidth is
 15 Hz at 200 Hz, 29 Hz at 100 Hz (see :func:`r_to_bandwidth`; time constant
-21 ms at 200 Hz).  The paper's r = 2000 is 0.37 Hz wide at 200 Hz here (time
+21 ms at 200 Hz).  The paper's r = 2000 is 0.38 Hz wide at 200 Hz here (time
 constant 0.83 s): too slow for the close-orders run-up, whose ramps it then
 lags by about 20 % (eq. 26)."""
 
