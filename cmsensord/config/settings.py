@@ -91,6 +91,9 @@ class MonitorConfig:
     level_alert: float = setting(2.0, "level / baseline giving S_level = 0.5 (the analysts' "
                                  "2 x baseline alert)", gt=1)
     level_danger: float = setting(4.0, "level / baseline giving S_level = 1", gt=1)
+    signal_floor: float = setting(0.05, "combined: a decision's level / baseline below this is no "
+                                  "signal (sensor fault or machine stopped): severity and alarms held; "
+                                  "0: off", ge=0, lt=1)
 
     _RULES: ClassVar[tuple[Rule, ...]] = (greater("r_max", "r_min"),
                                           greater("level_danger", "level_alert"),

@@ -38,6 +38,12 @@ healthy baseline, the way vibration analysts grade an overall level:
 so the AKF bank reports a change of the signal's dynamics early and the level
 part keeps a grown level reported once the bank has adapted to it.  Without
 ``level_alert`` the decider is the paper's.
+
+Extension (not in the paper), in the combined mode: a period whose ratio is below
+``signal_floor`` (a fraction of the healthy baseline) has no signal to judge (a
+sensor, cable or ADC fault, or the machine stopped): its decision keeps F_a and
+S_idx as they were (``Decision.no_signal``), so a dead sensor does not read as a
+healed machine.
 """
 
 from __future__ import annotations
@@ -90,6 +96,7 @@ class Decision:
     severity_level: np.ndarray  # (C,) S_level (NaN in the paper's mode)
     held: np.ndarray          # (C, n) consecutive decisions F_a was kept by the hysteresis alone
     held_max: int = 0         # the largest of ``held``
+    no_signal: np.ndarray | None = None  # (C,) combined: level below signal_floor, F_a and S_idx held
 
 
 class AnomalyDecider:
@@ -101,7 +108,7 @@ class AnomalyDecider:
     """
 
     def __init__(self, n_channels: int, n_filters: int, *, f_r, c, period: int = 100,
-                 transient_periods: int = 1, level_alert=None, level_danger=None):
+                 transient_periods: int = 1, level_alert=None, level_danger=None, signal_floor=0.0):
         if period < 1:
             raise ValueError(f"period: expected >= 1 observation, got {period}")
         self.C, self.n = n_channels, n_filters
@@ -123,6 +130,7 @@ class AnomalyDecider:
             level_danger = 2.0 * self.level_alert
         self.level_danger = None if level_danger is None else np.broadcast_to(
             np.asarray(level_danger, dtype=np.float64), (n_channels,)).copy()
+        self.signal_floor = np.broadcast_to(np.asarray(signal_floor, dtype=np.float64), (n_channels,)).copy()
         self._level = np.full((self.period, n_channels), np.nan)
         self._last_severity = np.zeros(n_channels)
 
@@ -176,23 +184,31 @@ class AnomalyDecider:
     def _decide(self) -> Decision:
         prev = self.anomaly.copy()
         transient = self.periods < self.transient_periods
+        level, s_level = self._level_part(transient)
+        lost = None if not self.combined or transient else \
+            np.isfinite(level) & (level < self.signal_floor)
         if not transient:
             fr = self.f_r[:, None]
             set_ = self.cnt >= fr                       # cnt >= f_r  -> F_a = 1
             clear = self.cnt < self.c[:, None] * fr     # cnt < c f_r -> F_a = 0
             self.anomaly = np.where(set_, 1, np.where(clear, 0, self.anomaly)).astype(np.uint8)
             kept = (self.anomaly == 1) & ~set_
-            self.held = np.where(kept, self.held + 1, 0)
+            held = np.where(kept, self.held + 1, 0)
+            if lost is not None and lost.any():         # no signal: F_a as it was
+                self.anomaly[lost] = prev[lost]
+                held[lost] = self.held[lost]
+            self.held = held
         s_akf = self.severity_of(self.anomaly)
-        level, s_level = self._level_part(transient)
         severity = np.maximum(s_akf, np.nan_to_num(s_level)) if self.combined else s_akf
+        if lost is not None and lost.any():
+            severity = np.where(lost, self._last_severity, severity)
         d = Decision(
             slot=self.slot, period=self.periods, transient=transient,
             cnt=self.cnt.copy(), anomaly=self.anomaly.copy(), prev_anomaly=prev,
             severity=severity, prev_severity=self._last_severity.copy(),
             f_r=self.f_r.copy(), missing=self.missing.copy(),
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
-            held_max=int(self.held.max()),
+            held_max=int(self.held.max()), no_signal=lost,
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0

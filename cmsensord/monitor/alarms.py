@@ -16,7 +16,10 @@ the live run gave.  A change of the machine's operating state is an
 ``operating_state`` event (details: ``state``, ``previous``); with an
 ``alarms.operating`` source the manager runs for it even without rules.  A rule level given
 as k x a baseline that ``alarms.baselines`` lacks for a channel is said once, with the first
-message: an ``alarm_no_baseline`` event (a warning) naming the rule and the channel.
+message: an ``alarm_no_baseline`` event (a warning) naming the rule and the channel.  A record
+whose ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline has no signal (a
+sensor fault, or the machine stopped): the channel's rules hold (not judged on it), as its
+severity does (the ``signal_lost`` event of :mod:`cmsensord.monitor.severity`).
 
 The live daemon keeps the alarm state an operator relies on over a restart (:meth:`Alarms.keep`:
 a store, :mod:`cmsensord.service.alarm_store`, and what it held): the saved alarms go back
@@ -211,7 +214,7 @@ class Alarms:
         if m.schema == "indicators":
             speed = msg.get("speed_rpm")
             was = mgr.operating.state
-            tr = mgr.record(stamp, ch, indicator_values(msg), None if speed is None else float(speed))
+            tr = mgr.record(stamp, ch, self._judged(ch, indicator_values(msg)), None if speed is None else float(speed))
             if mgr.operating.state != was:
                 return [self._state_event(stamp, was, mgr.operating.state, speed)] + self._after(stamp, tr)
         elif m.schema == "severity":
@@ -219,6 +222,17 @@ class Alarms:
         else:
             tr = mgr.values(stamp, ch, _order_values(msg))
         return self._after(stamp, tr)
+
+    def _judged(self, ch: str, values: dict[str, float]) -> dict[str, float]:
+        """``values`` of a record of ``ch``; none but the operating state's level when its
+        ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline (no signal: the
+        channel's alarms hold, as its severity does)."""
+        mon = next((c.monitor for c in self.cfg.channels if c.name == ch), self.cfg.monitor)
+        base, level = self.rules.baseline(ch, "accel_rms"), values.get("accel_rms")
+        if not mon.signal_floor or not base or level is None or not level < mon.signal_floor * base:
+            return values
+        keep = self.rules.operating.level_indicator if self.rules.operating.source == "level" else None
+        return {k: v for k, v in values.items() if k == keep}
 
     def _state_event(self, stamp: int, was: str, now: str, speed: float | None) -> Event:
         op = self.rules.operating

@@ -68,7 +68,7 @@ class SeverityChain:
         self.decider = AnomalyDecider(
             len(channels), n, f_r=[m.f_r for m in mons], c=[m.c for m in mons], period=period,
             level_alert=[m.level_alert for m in mons] if any(combined) else None,
-            level_danger=[m.level_danger for m in mons])
+            level_danger=[m.level_danger for m in mons], signal_floor=[m.signal_floor for m in mons])
         self.index = np.array([ch.index for ch in channels])     # board column of each channel
         self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in channels]
         self.trace_i = min(trace_filter, n) - 1
@@ -78,6 +78,7 @@ class SeverityChain:
         self.cfg_f_r = np.array([m.f_r for m in mons])
         self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
         self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
+        self.no_signal = [False] * len(channels)   # the last decision had no signal (held)
         # what every severity message of a channel repeats: its name, topic and the bank's R
         self._names = [ch.name for ch in channels]
         self._topics = [severity_topic(ch.name) for ch in channels]
@@ -192,9 +193,26 @@ class SeverityChain:
             if judged:
                 v.judged += 1
                 v.timeline.add(t_s, sev)
+            if d.no_signal is not None and bool(d.no_signal[c]) != self.no_signal[c]:
+                out.append(self._signal_event(c, d, stamp, sev))
             if held or anomaly != prev[c] or sev != prev_sev[c]:    # else no event (no failure change)
                 out += self._note(c, d, msg, stamp, prev[c], prev_sev[c])
         return out
+
+    def _signal_event(self, c: int, d: Decision, stamp: int, sev: float) -> Event:
+        """``signal_lost`` when channel ``c``'s decision has no signal (its level below
+        ``monitor.signal_floor``), ``signal_back`` when it has again."""
+        name, ratio = self.channels[c].name, float(d.level[c])
+        lost = self.no_signal[c] = bool(d.no_signal is not None and d.no_signal[c])
+        what = {"level_ratio": ratio, "severity_index": sev}
+        if lost:
+            floor = self.channels[c].monitor.signal_floor
+            return Event("signal_lost", name, (
+                f"{name}: no signal: level {100 * ratio:.3g} % of the healthy baseline (below "
+                f"{100 * floor:g} %, monitor.signal_floor): a sensor, cable or ADC fault, or the machine "
+                f"stopped; severity {sev:.2f} and the channel's alarms held until it is back"), stamp, what)
+        return Event("signal_back", name, f"{name}: signal back: level {ratio:.3g} x the healthy baseline; "
+                     "severity and alarms judged again", stamp, what)
 
     def _extra(self, d: Decision, c: int) -> dict:
         """The combined severity's fields of channel ``c``'s message (none in the paper's mode)."""
@@ -206,6 +224,8 @@ class SeverityChain:
                  "level_alert": float(dec.level_alert[c]), "level_danger": float(dec.level_danger[c])}
         if np.isfinite(d.level[c]):
             extra["level_ratio"] = float(d.level[c])
+        if d.no_signal is not None and d.no_signal[c]:
+            extra["signal_lost"] = True
         return extra
 
     def _held(self, c: int, d: Decision, stamp: int) -> list[Event]:

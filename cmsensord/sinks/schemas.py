@@ -115,6 +115,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "severity_change",
     "failure",
     "failure_clear",
+    "signal_lost",
+    "signal_back",
     "frames_lost",
     "frames_repeated",
     "link_lost",
@@ -303,6 +305,11 @@ SEVERITY = _obj(
         "level_ratio": _num("combined: the decision period's RMS / baseline", nullable=False),
         "level_alert": _num("combined: the level_ratio graded 0.5 (monitor.level_alert)", nullable=False),
         "level_danger": _num("combined: the level_ratio graded 1 (monitor.level_danger)", nullable=False),
+        "signal_lost": {
+            "type": "boolean",
+            "description": "combined: true when level_ratio is below monitor.signal_floor (no signal: a "
+                           "sensor fault or the machine stopped); severity_index is then the one held",
+        },
     },
     [
         "timestamp",
