@@ -62,3 +62,18 @@ def test_an_interval_the_configuration_sets_is_kept_and_said_to_straddle(tmp_pat
             "multiples of 1900 samples only; indicators.interval_s is set): a record may hold the end of one and "
             "the start of the next\n") in err, err
     assert {m["interval_s"] for m in _records(tmp_path / "out")} == {0.5}
+
+
+def test_a_capture_longer_than_the_snapshots_is_said(tmp_path):
+    """capture.pre_s + post_s of 2 s against snapshots of 0.95 s: one line says a capture joins
+    snapshots of other times (before, nothing: its spectra averaged across the joins); none with
+    a capture within a snapshot."""
+    cap = _capture(tmp_path)
+    for span, said in ((1.0, True), (0.4, False)):
+        cfg = tmp_path / "cap.yaml"
+        cfg.write_text(f"capture:\n  every_s: 1.0\n  pre_s: {span}\n  post_s: {span}\n")
+        err = _run("replay", cap, "--config", cfg, "--out", tmp_path / f"out{span}")
+        line = (f"  capture: a capture of {2 * span:g} s (capture.pre_s + post_s) holds about 3 of the recording's "
+                "snapshots of 0.95 s, laid end to end: its waveform and spectra join records of other times; "
+                "pre_s + post_s <= 0.95 s keeps it within one or two\n")
+        assert (line in err) == said and ("  capture: a capture of" in err) == said, err

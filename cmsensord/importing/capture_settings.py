@@ -25,6 +25,9 @@ configuration without ``indicators.rpm`` (and a capture without a tacho) takes i
 ``indicators.rpm``: the bearing lines, order bands and the velocity band follow it, and the
 records say ``speed_source: config`` (a speed given, not measured). Not when the files gave
 different speeds (the import's note says which it kept): then a line says it is not used.
+
+Captures. A capture (``capture.pre_s`` + ``post_s``) longer than the snapshots holds several
+of them end to end, each of another time of the recording: a line says so.
 """
 
 from __future__ import annotations
@@ -91,6 +94,21 @@ def _speed(cfg: Config, meta: dict) -> tuple[float | None, str | None]:
                         "at that speed")
 
 
+def _captures(cfg: Config, meta: dict) -> str | None:
+    """A line when the captures configured (``capture.triggers``, ``every_s``) are longer than
+    the capture's snapshots: their waveforms and spectra then join snapshots of other times."""
+    shared, cc = _common_samples(meta), cfg.capture
+    if shared is None or not (cc.triggers or cc.every_s):
+        return None
+    common, fs = shared
+    span = cc.pre_s + cc.post_s
+    if span * fs <= common:
+        return None
+    return (f"capture: a capture of {span:g} s (capture.pre_s + post_s) holds about {math.ceil(span * fs / common)} "
+            f"of the recording's snapshots of {common / fs:g} s, laid end to end: its waveform and spectra join "
+            f"records of other times; pre_s + post_s <= {common / fs:g} s keeps it within one or two")
+
+
 def capture_settings(cfg: Config, meta: dict) -> tuple[Config, dict[str, float], list[str]]:
     """``cfg`` with the indicator settings the sidecar ``meta`` gives (see module docstring;
     ``meta`` {}: not an import, ``cfg`` as it is), those settings by name, and one line on each
@@ -103,4 +121,4 @@ def capture_settings(cfg: Config, meta: dict) -> tuple[Config, dict[str, float],
         ic = dataclasses.replace(ic, interval_s=changes.get("interval_s", ic.interval_s),
                                  rpm=changes.get("rpm", ic.rpm))
         cfg = dataclasses.replace(cfg, indicators=ic)
-    return cfg, changes, [line for line in (said_interval, said_speed) if line]
+    return cfg, changes, [line for line in (said_interval, said_speed, _captures(cfg, meta)) if line]
