@@ -363,7 +363,7 @@ def _zoom_to(msg: dict[str, Any]) -> float | None:
 def capture_figure(cap: Capture, index: int, axis: TimeAxis | None = None) -> Figure:
     """A captured waveform (seconds from its trigger), its spectrum and its envelope spectrum,
     the marked lines on both; with bearing lines also the envelope spectrum zoomed on them; its
-    time in the title as ``axis`` shows times (default: local time)."""
+    time in the title (``heading`` in the metadata) as ``axis`` shows times (default: local time)."""
     parts: list[str] = [p for p in ("waveform", "spectrum", "envelope") if p in cap.parts]
     zoom = _zoom_to(cap.parts["envelope"]) if "envelope" in cap.parts else None
     if zoom is not None:
@@ -379,10 +379,12 @@ def capture_figure(cap: Capture, index: int, axis: TimeAxis | None = None) -> Fi
             _spectrum(ax, cap.parts[part], "spectrum", log_f="envelope" in cap.parts, legend=False)  # RAW
         else:                                   # with a zoom below, its legend says what the lines are
             _spectrum(ax, cap.parts[part], "envelope spectrum", legend=zoom is None)
-    fig.suptitle(f"{cap.channel}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
-                 f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}", fontsize=11)
+    heading = (f"{cap.channel}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
+               f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}")
+    fig.suptitle(heading, fontsize=11)
     meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
-            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "trigger": trigger.get("kind"),
+            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "heading": heading,
+            "trigger": trigger.get("kind"),
             "parts": parts,
             "marks": [m["label"] for m in cap.parts.get("spectrum", {}).get("marks", [])]}
     return _finish(fig, meta, [a[0] for a in axes], boxes=True)

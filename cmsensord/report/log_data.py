@@ -52,7 +52,9 @@ _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum"
 
 @dataclass
 class Capture:
-    """One capture: its trigger time and the messages of its parts (waveform, spectrum, envelope)."""
+    """One capture: its time as the report shows times (its messages' stamp, the trigger's moment,
+    through :class:`.TimeAxis` as every message's) and the messages of its parts (waveform,
+    spectrum, envelope)."""
 
     channel: str
     time_ns: int
@@ -265,18 +267,16 @@ class LogData:
         for key in ("samples", "amplitude"):     # as float32 arrays: 2 MB, not 16, for 20 s at 25 kHz
             if isinstance(msg.get(key), list):
                 msg[key] = np.array([np.nan if v is None else v for v in msg[key]], dtype=np.float32)
-        stamp = msg.get("trigger_time") or msg.get("timestamp") or {}
-        time_ns = int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nsec", 0)) if stamp else t_ns
         kind = (msg.get("trigger") or {}).get("kind")
         for cap in ch.captures:
             first = next(iter(cap.parts.values()))
-            if cap.time_ns == time_ns and (first.get("trigger") or {}).get("kind") == kind and part not in cap.parts:
+            if cap.time_ns == t_ns and (first.get("trigger") or {}).get("kind") == kind and part not in cap.parts:
                 cap.parts[part] = msg
                 return
         if len(ch.captures) >= MAX_CAPTURES:
             ch.captures_omitted += part == "waveform"
             return
-        ch.captures.append(Capture(ch.name, time_ns, {part: msg}))
+        ch.captures.append(Capture(ch.name, t_ns, {part: msg}))
 
 
 def _number(v: bytes) -> float | None:
