@@ -91,7 +91,7 @@ def test_each_rules_alert_and_danger_levels_are_drawn_on_its_indicators_trend(re
             if topic == "/cm/alarms" for row in m["alarms"] if "danger_level" in row]
     levels = {row["rule"]: (row["alert_level"], row["danger_level"]) for row in rows}
     assert levels == {"de_velocity": (2.8, 9.5), "de_kurtosis": (6.0, 12.0)}
-    velocity, shape = metas["ch0-indicators"]["axes"]
+    velocity, *_, shape = metas["ch0-indicators"]["axes"]
     assert velocity["lines"][1:] == ["de_velocity alert 2.8", "de_velocity danger 9.5"]
     assert shape["lines"][2:] == ["de_kurtosis alert 6", "de_kurtosis danger 12"]
     assert velocity["styles"]["de_velocity danger 9.5"] == ["#b00020", "--"] and velocity["ylim"][1] > 9.5
