@@ -329,7 +329,7 @@ def test_captured_waveform_spectrum_and_envelope_are_drawn(logs, tmp_path):
         wave, spectrum, env = m["axes"]
         assert wave["xlabel"] == "time from trigger [s]" and wave["xlim"][0] <= -1 and 2 <= wave["xlim"][1] < 2.5
         assert spectrum["xlabel"] == "frequency [Hz]" and 12000 < spectrum["xlim"][1] < 13500   # up to fs/2
-        assert env["ylabel"] == "envelope spectrum [m/s²]" and 950 < env["xlim"][1] < 1100
+        assert env["ylabel"] == "envelope spectrum\nRMS per bin [m/s²]" and 950 < env["xlim"][1] < 1100
     assert page.count('src="data:image/png;base64,') == 3 + 3
 
 

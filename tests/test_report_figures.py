@@ -74,8 +74,8 @@ def test_capture_figures_write_m_s2_as_the_trends_do(report):
     m/s² on the trends)."""
     _, metas, _ = report
     cap = metas["ch0-capture-0"]
-    assert [ax["ylabel"] for ax in cap["axes"]] == ["waveform [m/s²]", "spectrum [m/s²]",
-                                                    "envelope spectrum [m/s²]"]
+    assert [ax["ylabel"] for ax in cap["axes"]] == ["waveform [m/s²]", "spectrum\nRMS per bin [m/s²]",
+                                                    "envelope spectrum\nRMS per bin [m/s²]"]
     labels = [ax["ylabel"] for m in metas.values() for ax in m["axes"]]
     assert not [t for t in labels if "^" in t] and "order RMS [m/s²]" in labels
 

@@ -152,3 +152,12 @@ def test_the_iso_line_names_a_group_and_foundation_only_as_far_as_the_boundaries
 
     assert iso_text(ChannelData("ch0", zone_boundaries=bounds)) == text
 
+
+def test_capture_spectra_say_they_are_rms_per_bin(report):
+    """The capture's spectrum and envelope spectrum are RMS per bin (a sine of RMS a reads a),
+    the indicators' bearing lines 0-peak: each label says which (before: only the unit)."""
+    _, metas, _ = report
+    cap = metas["bearing-capture-0"]
+    assert [ax["ylabel"] for ax in cap["axes"]] == [
+        "waveform [m/s²]", "spectrum\nRMS per bin [m/s²]", "envelope spectrum\nRMS per bin [m/s²]",
+        "envelope spectrum\nRMS per bin [m/s²]"]

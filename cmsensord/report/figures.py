@@ -397,7 +397,9 @@ def _marks(ax: Any, marks: list[dict[str, Any]], fmax: float, text: bool, harmon
 def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = None, *,
               log_f: bool = False, legend: bool = True) -> None:
     """An amplitude spectrum with its marks: up to ``fmax`` (a zoom: the lines labelled, their
-    2x and 3x dotted), or whole, on a log frequency axis with ``log_f`` (the lines labelled)."""
+    2x and 3x dotted), or whole, on a log frequency axis with ``log_f`` (the lines labelled).
+    Its y label says RMS per bin, as the capture's spectra are (a sine of RMS a reads a; the
+    indicators' bearing lines are 0-peak)."""
     amp = np.asarray(msg.get("amplitude", []), dtype=float)
     f = float(msg.get("freq_start_hz") or 0.0) + float(msg.get("freq_step_hz") or 1.0) * np.arange(amp.size)
     if fmax is not None:
@@ -417,7 +419,7 @@ def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = Non
     dotted = "; dotted: 2x and 3x of each line" if fmax is not None and marks else ""
     ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed}{dotted})" if f.size else label,
                  fontsize=9, loc="left")
-    ax.set_ylabel(f"{label.split(',')[0]} [{_unit(msg)}]")
+    ax.set_ylabel(f"{label.split(',')[0]}\nRMS per bin [{_unit(msg)}]")     # two lines: fits 2.6 in
     ax.grid(alpha=0.3, which="both" if log_f else "major")
     if marks and legend:
         ax.legend(loc="upper right", fontsize=7.5, ncols=3 if fmax is None else 2, framealpha=0.85)
