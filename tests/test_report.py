@@ -85,7 +85,7 @@ def test_raw_report_has_severity_indicators_with_zones_and_orders(logs, tmp_path
     ind = metas["ch0-indicators"]
     assert ind["main"] == "velocity_rms_mm_s" and ind["zones"] is True      # the faulty motor: zone D
     assert ind["axes"][0]["ylabel"] == "velocity RMS [mm/s]" and ind["axes"][0]["ylim"][1] >= 4.5 * 1.3
-    assert ind["axes"][1]["lines"] == ["kurtosis", "crest_factor"]
+    assert ind["axes"][-1]["lines"] == ["kurtosis", "crest_factor"]
     orders = metas["ch0-orders"]             # the motor runs at 1720 rpm: bars per order at that speed
     assert orders["speed_rpm"][0] <= 1720 <= orders["speed_rpm"][1] and orders["axes"][0]["xlabel"] == "order"
     assert orders["orders"] == ["1x", "2x", "3x", "4x"]
@@ -329,7 +329,7 @@ def test_captured_waveform_spectrum_and_envelope_are_drawn(logs, tmp_path):
         wave, spectrum, env = m["axes"]
         assert wave["xlabel"] == "time from trigger [s]" and wave["xlim"][0] <= -1 and 2 <= wave["xlim"][1] < 2.5
         assert spectrum["xlabel"] == "frequency [Hz]" and 12000 < spectrum["xlim"][1] < 13500   # up to fs/2
-        assert env["ylabel"] == "envelope spectrum [m/s²]" and 950 < env["xlim"][1] < 1100
+        assert env["ylabel"] == "envelope spectrum\nRMS per bin [m/s²]" and 950 < env["xlim"][1] < 1100
     assert page.count('src="data:image/png;base64,') == 3 + 3
 
 

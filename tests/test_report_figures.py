@@ -74,8 +74,8 @@ def test_capture_figures_write_m_s2_as_the_trends_do(report):
     m/s² on the trends)."""
     _, metas, _ = report
     cap = metas["ch0-capture-0"]
-    assert [ax["ylabel"] for ax in cap["axes"]] == ["waveform [m/s²]", "spectrum [m/s²]",
-                                                    "envelope spectrum [m/s²]"]
+    assert [ax["ylabel"] for ax in cap["axes"]] == ["waveform [m/s²]", "spectrum\nRMS per bin [m/s²]",
+                                                    "envelope spectrum\nRMS per bin [m/s²]"]
     labels = [ax["ylabel"] for m in metas.values() for ax in m["axes"]]
     assert not [t for t in labels if "^" in t] and "order RMS [m/s²]" in labels
 
@@ -91,7 +91,7 @@ def test_each_rules_alert_and_danger_levels_are_drawn_on_its_indicators_trend(re
             if topic == "/cm/alarms" for row in m["alarms"] if "danger_level" in row]
     levels = {row["rule"]: (row["alert_level"], row["danger_level"]) for row in rows}
     assert levels == {"de_velocity": (2.8, 9.5), "de_kurtosis": (6.0, 12.0)}
-    velocity, shape = metas["ch0-indicators"]["axes"]
+    velocity, *_, shape = metas["ch0-indicators"]["axes"]
     assert velocity["lines"][1:] == ["de_velocity alert 2.8", "de_velocity danger 9.5"]
     assert shape["lines"][2:] == ["de_kurtosis alert 6", "de_kurtosis danger 12"]
     assert velocity["styles"]["de_velocity danger 9.5"] == ["#b00020", "--"] and velocity["ylim"][1] > 9.5

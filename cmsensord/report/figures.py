@@ -23,17 +23,22 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker as mticker  # noqa: E402
 import numpy as np  # noqa: E402
 
+from cmsensord.dsp.indicators.iso_zones import BOUNDARIES_MM_S  # noqa: E402
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
 from cmsensord.report.marks import alarm_levels, event_lines  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
+from cmsensord.sinks.indicator_schema import DEFECT_LINES  # noqa: E402
 
-__all__ = ["Figure", "severity_figure", "indicators_figure", "orders_figure", "campbell_figure", "capture_figure"]
+__all__ = ["Figure", "severity_figure", "indicators_figure", "iso_text", "orders_figure", "campbell_figure",
+           "capture_figure"]
 
 #: PNG resolution [dots per inch]
 SAVE_DPI = 100
 #: fewer 10-rpm speed bins than this: the order figure shows bars, not curves over speed
 MIN_SPEED_BINS = 5
 _ZONE_COLOURS = ("#cfeccf", "#f4f1c0", "#f8d9b0", "#f4b8b8")
+#: colours of the marked lines, by kind (the shaft's 1x, the bearing defects)
+MARK_COLOURS = {"shaft": "#424242", "ftf": "#2e7d32", "bpfo": "#c62828", "bpfi": "#ef6c00", "bsf": "#6a1b9a"}
 
 
 @dataclass
@@ -172,61 +177,138 @@ def _zone_bands(ax: Any, bounds: list[float], top: float) -> None:
                 va="center", fontsize=9, color="#444")
 
 
-def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure | None:
-    """Velocity RMS with the ISO 10816-3 zones shaded (or the acceleration RMS in RMS mode),
-    and the shape indicators (kurtosis, crest factor) when the log has them, over ``axis``
-    (default: local time); on each, the alert and danger levels of the alarm rules watching
-    an indicator drawn there (``alarm_levels`` in the metadata)."""
-    axis = axis or TimeAxis()
-    main = "velocity_rms_mm_s" if "velocity_rms_mm_s" in ch.indicators else "accel_rms"
-    if main not in ch.indicators:
+#: each bearing's defect lines drawn as trends (a line of theirs an alarm rule watches is drawn too)
+BEARING_TRENDS = ("ftf", "bpfo", "bpfi", "bsf")
+#: the machine groups of ISO 10816-3 as the standard names them
+_GROUPS = {1: "large, > 300 kW", 2: "medium, 15-300 kW"}
+
+
+def iso_text(ch: ChannelData) -> str | None:
+    """The ISO 10816-3 grading the channel's indicator records carry: the zone boundaries and
+    the machine group and foundation they are the boundaries of (both, when two share them:
+    the records carry the boundaries, not the configuration)."""
+    if not ch.zone_boundaries:
         return None
-    shape = [k for k in ("kurtosis", "crest_factor") if k in ch.indicators]
-    rows = 2 if shape else 1
-    fig, axes = plt.subplots(rows, 1, figsize=(11, 2.9 * rows), sharex=True, layout="constrained", squeeze=False)
-    used = [axes[0][0]]
-    drawn = _main_axes(axes[0][0], ch, axis, main)
-    if shape:
-        ax2 = axes[1][0]
-        for k, colour in zip(shape, ("#6a1b9a", "#2e7d32")):
-            tk, vk = ch.indicators[k].arrays()
-            ax2.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
-        drawn += alarm_levels(ax2, ch, tuple(shape))
-        ax2.set_ylabel("kurtosis, crest factor")
-        legend_outside(ax2, 0.03)
-        ax2.grid(alpha=0.3)
-        used.append(ax2)
+    ab, bc, cd = ch.zone_boundaries
+    which = [(g, f) for (g, f), v in BOUNDARIES_MM_S.items() if np.allclose(v, ch.zone_boundaries)]
+    machine = ""
+    if len(which) == 1:
+        machine = f": machine group {which[0][0]} ({_GROUPS[which[0][0]]}), {which[0][1]} foundation"
+    elif which:
+        machine = (": " + " or ".join(f"group {g} on a {f}" for g, f in which)
+                   + " foundation (the log does not say which)")
+    return f"ISO 10816-3 zone boundaries A/B {ab:g}, B/C {bc:g}, C/D {cd:g} mm/s{machine}"
+
+
+def _band_text(ch: ChannelData) -> str:
+    """`` over 10-1000 Hz``: the velocity band(s) the records gave ('' without one)."""
+    return " over " + " and ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in ch.velocity_bands) if ch.velocity_bands else ""
+
+
+def _panels(ch: ChannelData) -> list[tuple[str, tuple[str, ...]]]:
+    """(kind, indicators) of each axes of the indicators figure, top to bottom: the velocity RMS,
+    the acceleration RMS, the envelope RMS, each bearing's lines (BEARING_TRENDS and those a rule
+    watches), the shape indicators; each one the log has."""
+    panels: list[tuple[str, tuple[str, ...]]] = [
+        (k, (k,)) for k in ("velocity_rms_mm_s", "accel_rms", "envelope_rms") if k in ch.indicators]
+    watched = {indicator for indicator, _ in ch.alarm_levels.values()}
+    for bearing in dict.fromkeys(k.rpartition(".")[0] for k in ch.indicators if "." in k):
+        lines = tuple(f"{bearing}.{line}" for line in DEFECT_LINES if f"{bearing}.{line}" in ch.indicators
+                      and (line in BEARING_TRENDS or f"{bearing}.{line}" in watched))
+        if lines:
+            panels.append(("bearing", lines))
+    shape = tuple(k for k in ("kurtosis", "crest_factor") if k in ch.indicators)
+    return panels + ([("shape", shape)] if shape else [])
+
+
+def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure | None:
+    """The channel's indicator trends over ``axis`` (default: local time), each on axes of its
+    own: velocity RMS with the ISO 10816-3 zones shaded and their boundaries, machine group and
+    foundation in its title (:func:`iso_text`), acceleration RMS (the only one in RMS mode),
+    envelope RMS, each bearing's defect lines (0-peak amplitudes in the envelope spectrum), and
+    kurtosis and crest factor; on each, the alert and danger levels of the alarm rules watching
+    an indicator drawn there (``alarm_levels`` in the metadata). None without a velocity or
+    acceleration RMS."""
+    axis = axis or TimeAxis()
+    panels = _panels(ch)
+    if not panels or panels[0][0] not in ("velocity_rms_mm_s", "accel_rms"):
+        return None
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 0.4 + 2.5 * len(panels)), sharex=True,
+                             layout="constrained", squeeze=False)
+    used = [a[0] for a in axes]
+    drawn: list[dict[str, Any]] = []
+    for ax, (kind, names) in zip(used, panels):
+        if kind == "velocity_rms_mm_s":
+            drawn += _velocity_axes(ax, ch, axis)
+        elif kind == "shape":
+            for k, colour in zip(names, ("#6a1b9a", "#2e7d32")):
+                tk, vk = ch.indicators[k].arrays()
+                ax.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
+            drawn += alarm_levels(ax, ch, names)
+            ax.set_ylabel("kurtosis, crest factor")
+            ax.set_title(f"{ch.name}: kurtosis and crest factor", fontsize=9.5)
+        else:
+            drawn += _trend_axes(ax, ch, axis, kind, names)
+        legend_outside(ax, 0.03)                # right of the zones' letters
+        ax.grid(alpha=0.3)
+    iso = iso_text(ch)
     meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
-            "title": f"{ch.name}: indicators", "main": main, "zones": bool(ch.zone_boundaries),
-            "alarm_levels": drawn}
+            "title": f"{ch.name}: indicators", "main": panels[0][0], "panels": [list(n) for _, n in panels],
+            "zones": bool(ch.zone_boundaries), "iso": iso, "alarm_levels": drawn}
+    if iso:
+        meta["caption"] = f"{ch.name}: indicators. Velocity RMS{_band_text(ch)}; {iso}."
     return _finish(fig, meta, used, time_axis=axis)
 
 
-def _main_axes(ax: Any, ch: ChannelData, axis: TimeAxis, main: str) -> list[dict[str, Any]]:
-    """The velocity RMS over its ISO zones (or the acceleration and envelope RMS) with the
-    alarm rules' levels on them; what :func:`.marks.alarm_levels` drew."""
-    t, v = ch.indicators[main].arrays()
-    ax.plot(_times(t, axis), v, color="#1f4e99", lw=1.2, label=main)
-    if main == "velocity_rms_mm_s":
-        drawn = alarm_levels(ax, ch, (main,))
-        top = max([float(v.max()) * 1.1, 0.1] + [d["value"] * 1.1 for d in drawn])
-        if ch.zone_boundaries:
-            _zone_bands(ax, ch.zone_boundaries, top)
-            top = max(top, ch.zone_boundaries[-1] * 1.3)
-        if ch.velocity_alarm is not None:
-            ax.axhline(ch.velocity_alarm, color="#b00020", ls="--", lw=1, label="alarm level")
-        ax.set_ylim(0, top)
-        ax.set_ylabel("velocity RMS [mm/s]")
-        ax.set_title(f"{ch.name}: velocity RMS, ISO 10816-3 zones A-D shaded")
+def _velocity_axes(ax: Any, ch: ChannelData, axis: TimeAxis) -> list[dict[str, Any]]:
+    """The velocity RMS over its ISO zones with the alarm rules' levels on it; what
+    :func:`.marks.alarm_levels` drew."""
+    t, v = ch.indicators["velocity_rms_mm_s"].arrays()
+    ax.plot(_times(t, axis), v, color="#1f4e99", lw=1.2, label="velocity_rms_mm_s")
+    drawn = alarm_levels(ax, ch, ("velocity_rms_mm_s",))
+    top = max([float(v.max()) * 1.1, 0.1] + [d["value"] * 1.1 for d in drawn])
+    if ch.zone_boundaries:
+        _zone_bands(ax, ch.zone_boundaries, top)
+        top = max(top, ch.zone_boundaries[-1] * 1.3)
+    if ch.velocity_alarm is not None:
+        ax.axhline(ch.velocity_alarm, color="#b00020", ls="--", lw=1, label="alarm level")
+    ax.set_ylim(0, top)
+    ax.set_ylabel("velocity RMS [mm/s]")
+    iso = iso_text(ch)
+    ax.set_title(f"{ch.name}: velocity RMS{_band_text(ch)}, ISO 10816-3 zones A-D shaded"
+                 + (f"\n{iso}" if iso else ""), fontsize=9.5)
+    return drawn
+
+
+#: (title, y label) of the trends of one unit in m/s², by the kind of axes
+_TREND_TEXTS = {"accel_rms": ("acceleration RMS", "acceleration RMS [m/s²]"),
+                "envelope_rms": ("envelope RMS (acceleration enveloping)", "envelope RMS [m/s²]"),
+                "bearing": ("bearing {} defect lines in the envelope spectrum, 0-peak", "line, 0-peak [m/s²]")}
+
+
+def _trend_axes(ax: Any, ch: ChannelData, axis: TimeAxis, kind: str, names: tuple[str, ...]) -> list[dict[str, Any]]:
+    """The trends ``names`` with the levels of the alarm rules on them: the acceleration or the
+    envelope RMS from 0, or one bearing's lines on a log scale (they span decades from healthy
+    to failed; a line's 2nd harmonic dotted)."""
+    top, low = 0.0, np.inf
+    for name in names:
+        t, v = ch.indicators[name].arrays()
+        line = name.rpartition(".")[2]
+        style = {"color": MARK_COLOURS.get(line.split("_")[0], "#1f4e99"), "ls": ":" if "_" in line else "-"} \
+            if kind == "bearing" else {"color": "#1f4e99" if kind == "accel_rms" else "#e08a00"}
+        ax.plot(_times(t, axis), v, lw=1.1, label=name, **style)
+        top = max(top, float(np.nanmax(v)) if v.size else 0.0)
+        low = min(low, float(np.nanmin(v[v > 0])) if np.any(v > 0) else np.inf)
+    drawn = alarm_levels(ax, ch, names, say_indicator=kind == "bearing" and len(names) > 1)
+    top = max([top, 1e-6] + [d["value"] for d in drawn])
+    if kind == "bearing":
+        ax.set_yscale("log")
+        ax.set_ylim(min([low, top / 10] + [d["value"] for d in drawn]) / 1.5, top * 1.5)
     else:
-        if "envelope_rms" in ch.indicators:
-            te, ve = ch.indicators["envelope_rms"].arrays()
-            ax.plot(_times(te, axis), ve, color="#e08a00", lw=1, label="envelope_rms")
-        drawn = alarm_levels(ax, ch, (main, "envelope_rms") if "envelope_rms" in ch.indicators else (main,))
-        ax.set_ylabel("acceleration RMS [m/s²]")
-        ax.set_title(f"{ch.name}: acceleration RMS")
-    legend_outside(ax, 0.03)                    # right of the zones' letters
-    ax.grid(alpha=0.3)
+        ax.set_ylim(0, top * 1.1)
+    title, ylabel = _TREND_TEXTS[kind]
+    ax.set_title(f"{ch.name}: {title.format(names[0].rpartition('.')[0])}", fontsize=9.5)
+    ax.set_ylabel(ylabel)
     return drawn
 
 
@@ -292,8 +374,6 @@ def campbell_figure(ch: ChannelData) -> Figure | None:
     return _finish(fig, meta, [ax])
 
 
-#: colours of the marked lines, by kind (the shaft's 1x, the bearing defects)
-MARK_COLOURS = {"shaft": "#424242", "ftf": "#2e7d32", "bpfo": "#c62828", "bpfi": "#ef6c00", "bsf": "#6a1b9a"}
 #: the zoomed envelope spectrum shows up to this many times its highest bearing line
 ZOOM_LINES = 3.5
 
@@ -317,7 +397,9 @@ def _marks(ax: Any, marks: list[dict[str, Any]], fmax: float, text: bool, harmon
 def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = None, *,
               log_f: bool = False, legend: bool = True) -> None:
     """An amplitude spectrum with its marks: up to ``fmax`` (a zoom: the lines labelled, their
-    2x and 3x dotted), or whole, on a log frequency axis with ``log_f`` (the lines labelled)."""
+    2x and 3x dotted), or whole, on a log frequency axis with ``log_f`` (the lines labelled).
+    Its y label says RMS per bin, as the capture's spectra are (a sine of RMS a reads a; the
+    indicators' bearing lines are 0-peak)."""
     amp = np.asarray(msg.get("amplitude", []), dtype=float)
     f = float(msg.get("freq_start_hz") or 0.0) + float(msg.get("freq_step_hz") or 1.0) * np.arange(amp.size)
     if fmax is not None:
@@ -337,7 +419,7 @@ def _spectrum(ax: Any, msg: dict[str, Any], label: str, fmax: float | None = Non
     dotted = "; dotted: 2x and 3x of each line" if fmax is not None and marks else ""
     ax.set_title(f"{label} ({f[0] if log_f else 0:.0f}-{f[-1]:.0f} Hz{speed}{dotted})" if f.size else label,
                  fontsize=9, loc="left")
-    ax.set_ylabel(f"{label.split(',')[0]} [{_unit(msg)}]")
+    ax.set_ylabel(f"{label.split(',')[0]}\nRMS per bin [{_unit(msg)}]")     # two lines: fits 2.6 in
     ax.grid(alpha=0.3, which="both" if log_f else "major")
     if marks and legend:
         ax.legend(loc="upper right", fontsize=7.5, ncols=3 if fmax is None else 2, framealpha=0.85)
@@ -363,7 +445,7 @@ def _zoom_to(msg: dict[str, Any]) -> float | None:
 def capture_figure(cap: Capture, index: int, axis: TimeAxis | None = None) -> Figure:
     """A captured waveform (seconds from its trigger), its spectrum and its envelope spectrum,
     the marked lines on both; with bearing lines also the envelope spectrum zoomed on them; its
-    time in the title as ``axis`` shows times (default: local time)."""
+    time in the title (``heading`` in the metadata) as ``axis`` shows times (default: local time)."""
     parts: list[str] = [p for p in ("waveform", "spectrum", "envelope") if p in cap.parts]
     zoom = _zoom_to(cap.parts["envelope"]) if "envelope" in cap.parts else None
     if zoom is not None:
@@ -379,10 +461,12 @@ def capture_figure(cap: Capture, index: int, axis: TimeAxis | None = None) -> Fi
             _spectrum(ax, cap.parts[part], "spectrum", log_f="envelope" in cap.parts, legend=False)  # RAW
         else:                                   # with a zoom below, its legend says what the lines are
             _spectrum(ax, cap.parts[part], "envelope spectrum", legend=zoom is None)
-    fig.suptitle(f"{cap.channel}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
-                 f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}", fontsize=11)
+    heading = (f"{cap.channel}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
+               f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}")
+    fig.suptitle(heading, fontsize=11)
     meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
-            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "trigger": trigger.get("kind"),
+            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "heading": heading,
+            "trigger": trigger.get("kind"),
             "parts": parts,
             "marks": [m["label"] for m in cap.parts.get("spectrum", {}).get("marks", [])]}
     return _finish(fig, meta, [a[0] for a in axes], boxes=True)

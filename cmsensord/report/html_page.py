@@ -41,7 +41,7 @@ def _figure_html(fig: Any) -> str:
     meta = html.escape(json.dumps(fig.meta), quote=True)
     return (f'<figure class="plot" id="{html.escape(fig.meta["id"])}" data-meta="{meta}">'
             f'<img alt="{html.escape(fig.meta["title"])}" src="data:image/png;base64,{src}">'
-            f'<figcaption>{html.escape(fig.meta["title"])}</figcaption></figure>')
+            f'<figcaption>{html.escape(fig.meta.get("caption") or fig.meta["title"])}</figcaption></figure>')
 
 
 def _cards(data: LogData) -> str:

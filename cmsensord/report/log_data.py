@@ -2,8 +2,9 @@
 
 :class:`LogData` takes (topic, time [ns], JSON bytes) one message at a time
 (:meth:`LogData.add`) and keeps per channel: the severity index and the anomaly
-flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend with the
-latest ISO zone boundaries and alarm level, each alarm rule's newest alert and
+flags (:class:`~cmsensord.report.trend.Trend`), each indicator's trend (each bearing's defect lines
+too, as ``<bearing>.<line>``, the alarm rules' names for them) with the latest ISO zone
+boundaries, the velocity bands and the alarm level, each alarm rule's newest alert and
 danger levels, the order RMS per 10-rpm speed bin, and at most ``MAX_CAPTURES``
 captured waveforms with their spectra; for the whole log: the events (the first
 ``MAX_EVENTS``, counts of all), the link counters (summed over daemon runs),
@@ -42,6 +43,13 @@ _ANOMALY = re.compile(rb'"anomaly":\[([^\]]*)\]')
 _INDICATOR = re.compile(rb'"(velocity_rms_mm_s|accel_rms|envelope_rms|kurtosis|crest_factor|velocity_alarm_mm_s)":'
                         + _NUM)
 _ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
+_VBAND = re.compile(rb'"velocity_band_hz":\[([^\]]*)\]')
+# a bearing of "bearings" (its name and its "lines" object: one level of objects inside), and
+# a line's amplitude in that object; bearing names are letters, digits, _ and . (the config's)
+_BEARING = re.compile(rb'\{"name":"([A-Za-z0-9_.]+)"[^{}\[\]]*"lines":\{((?:[^{}]|\{[^{}]*\})*)\}')
+_LINE = re.compile(rb'"([a-z0-9_]+)":\{[^{}]*?"amplitude":' + _NUM)
+#: the most velocity bands a channel keeps (one per speed range: 2-1000 or 10-1000 Hz)
+MAX_VELOCITY_BANDS = 4
 _LEVEL = re.compile(rb'"(level_ratio|level_alert|level_danger)":' + _NUM)
 _DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s|uptime_s)":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
@@ -52,7 +60,9 @@ _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum"
 
 @dataclass
 class Capture:
-    """One capture: its trigger time and the messages of its parts (waveform, spectrum, envelope)."""
+    """One capture: its time as the report shows times (its messages' stamp, the trigger's moment,
+    through :class:`.TimeAxis` as every message's) and the messages of its parts (waveform,
+    spectrum, envelope)."""
 
     channel: str
     time_ns: int
@@ -70,6 +80,7 @@ class ChannelData:
     level_limits: tuple[float, float] | None = None  # its level_alert and level_danger, the newest
     indicators: dict[str, Trend] = field(default_factory=dict)
     zone_boundaries: list[float] | None = None
+    velocity_bands: list[tuple[float, float]] = field(default_factory=list)   # each one the log gave
     velocity_alarm: float | None = None
     orders: dict[str, dict[int, list[float]]] = field(default_factory=dict)   # name -> bin -> [sum, n]
     # name -> speed bin -> [sum of freq_hz, sum of rms, n]: the Campbell diagram
@@ -170,6 +181,12 @@ class LogData:
             m = _ZONES.search(data)
             if m is not None and m.group(1):
                 fields["zone_boundaries_mm_s"] = [float(x) for x in m.group(1).split(b",")]
+            m = _VBAND.search(data)
+            if m is not None and m.group(1):
+                fields["velocity_band_hz"] = [float(x) for x in m.group(1).split(b",")]
+            if b'"bearings":[{' in data:
+                fields.update((f"{name.decode()}.{line.decode()}", _number(v))
+                              for name, lines in _BEARING.findall(data) for line, v in _LINE.findall(lines))
             self._indicators(self.channel(parts[2]), t_ns, fields)
 
     def _channel_message(self, name: str, kind: str, t_ns: int, msg: dict[str, Any]) -> None:
@@ -179,7 +196,7 @@ class LogData:
             ch.anomaly.add(t_ns, 1.0 if any(msg.get("anomaly") or ()) else 0.0)
             _level(ch, t_ns, msg)
         elif kind == "indicators":
-            self._indicators(self.channel(name), t_ns, msg)
+            self._indicators(self.channel(name), t_ns, {**msg, **_bearing_lines(msg)})
         elif kind == "orders":
             self._orders(self.channel(name), msg)
         elif kind in _CAPTURE_PARTS:
@@ -229,14 +246,22 @@ class LogData:
 
     @staticmethod
     def _indicators(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
+        """An indicator record's fields as :meth:`LogData._scalar_message` reads them: the trends
+        of INDICATOR_FIELDS and of the bearing lines (``<bearing>.<line>``), the zone boundaries,
+        the velocity band, the ISO alarm level."""
         for name, value in msg.items():
-            if name in _TRENDS and isinstance(value, int | float):
+            if (name in _TRENDS or "." in name) and isinstance(value, int | float):
                 trend = ch.indicators.get(name)
                 if trend is None:
                     trend = ch.indicators[name] = Trend()
                 trend.add(t_ns, float(value))
         if msg.get("zone_boundaries_mm_s"):
             ch.zone_boundaries = [float(x) for x in msg["zone_boundaries_mm_s"]]
+        band = msg.get("velocity_band_hz")
+        if isinstance(band, list) and len(band) == 2 and len(ch.velocity_bands) < MAX_VELOCITY_BANDS:
+            pair = (float(band[0]), float(band[1]))
+            if pair not in ch.velocity_bands:
+                ch.velocity_bands.append(pair)
         if isinstance(msg.get("velocity_alarm_mm_s"), int | float):
             ch.velocity_alarm = float(msg["velocity_alarm_mm_s"])
 
@@ -265,18 +290,28 @@ class LogData:
         for key in ("samples", "amplitude"):     # as float32 arrays: 2 MB, not 16, for 20 s at 25 kHz
             if isinstance(msg.get(key), list):
                 msg[key] = np.array([np.nan if v is None else v for v in msg[key]], dtype=np.float32)
-        stamp = msg.get("trigger_time") or msg.get("timestamp") or {}
-        time_ns = int(stamp.get("sec", 0)) * 1_000_000_000 + int(stamp.get("nsec", 0)) if stamp else t_ns
         kind = (msg.get("trigger") or {}).get("kind")
         for cap in ch.captures:
             first = next(iter(cap.parts.values()))
-            if cap.time_ns == time_ns and (first.get("trigger") or {}).get("kind") == kind and part not in cap.parts:
+            if cap.time_ns == t_ns and (first.get("trigger") or {}).get("kind") == kind and part not in cap.parts:
                 cap.parts[part] = msg
                 return
         if len(ch.captures) >= MAX_CAPTURES:
             ch.captures_omitted += part == "waveform"
             return
-        ch.captures.append(Capture(ch.name, time_ns, {part: msg}))
+        ch.captures.append(Capture(ch.name, t_ns, {part: msg}))
+
+
+def _bearing_lines(msg: dict[str, Any]) -> dict[str, float]:
+    """A decoded indicator record's bearing-line amplitudes under the alarm rules' names
+    (``<bearing>.<line>``: ``de.bpfo``, ``de.bpfo_2x``)."""
+    out = {}
+    for b in msg.get("bearings") or ():
+        lines = b.get("lines") if isinstance(b, dict) else None
+        for line, peak in (lines or {}).items() if isinstance(lines, dict) else ():
+            if isinstance(peak, dict) and isinstance(peak.get("amplitude"), int | float):
+                out[f"{b.get('name')}.{line}"] = float(peak["amplitude"])
+    return out
 
 
 def _number(v: bytes) -> float | None:

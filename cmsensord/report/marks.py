@@ -45,9 +45,11 @@ def event_lines(ax: Any, events: list[tuple[float, str]]) -> None:
         shown.add(kind)
 
 
-def alarm_levels(ax: Any, ch: ChannelData, indicators: tuple[str, ...]) -> list[dict[str, Any]]:
+def alarm_levels(ax: Any, ch: ChannelData, indicators: tuple[str, ...], *,
+                 say_indicator: bool = False) -> list[dict[str, Any]]:
     """Each alarm rule's alert and danger levels on ``ax`` for the rules watching one of
-    ``indicators`` on this channel: dashed horizontal lines labelled with the rule's name.
+    ``indicators`` on this channel: dashed horizontal lines labelled with the rule's name (with
+    ``say_indicator`` also the indicator it watches: ``bpfo alert 0.16 (de.bpfo)``).
     Returns what was drawn ({rule, indicator, level, value})."""
     drawn = []
     for rule, (indicator, levels) in sorted(ch.alarm_levels.items()):
@@ -56,6 +58,6 @@ def alarm_levels(ax: Any, ch: ChannelData, indicators: tuple[str, ...]) -> list[
         for level, value in zip(("alert", "danger"), levels):
             if value is not None and np.isfinite(value):
                 ax.axhline(value, color=LEVEL_COLOURS[level], lw=1, ls="--",
-                           label=f"{rule} {level} {value:g}")
+                           label=f"{rule} {level} {value:g}" + (f" ({indicator})" if say_indicator else ""))
                 drawn.append({"rule": rule, "indicator": indicator, "level": level, "value": value})
     return drawn
