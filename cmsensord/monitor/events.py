@@ -69,7 +69,7 @@ LOG_LEVEL = {
     "alarm_alert": logging.WARNING, "alarm_danger": logging.ERROR, "alarm_clear": logging.WARNING,
     "alarm_ack": logging.WARNING, "alarm_no_baseline": logging.WARNING,
     "alarm_restored": logging.WARNING, "alarm_not_restored": logging.WARNING,
-    "alarm_state_error": logging.WARNING,
+    "alarm_state_error": logging.WARNING, "lines_unresolved": logging.WARNING,
 }
 
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period
