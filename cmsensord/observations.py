@@ -6,7 +6,8 @@ clock with its missing slots, the tacho) and keeps, per channel, the block RMS o
 every observation slot in [from, to] board seconds (NaN where an observation is
 missing), the board's block rate and the shaft speed, and the median of each
 indicator (``/cm/<ch>/indicators``, under the alarm manager's names) over the
-records inside the window.  Commissioning learns from exactly what the daemon
+records inside the window (a bearing line the envelope spectrum does not resolve has none:
+the replay's ``lines_unresolved`` events are among the notes).  Commissioning learns from exactly what the daemon
 will see.
 """
 
@@ -120,7 +121,8 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
-                        notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s),
+                        notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s)
+                        + _unresolved(sink),
                         settings=settings, fs=float(proc.fs))
 
 
@@ -135,6 +137,13 @@ def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) 
         notes.append(f"the healthy period misses {missing / rate:.1f} s of its {y.shape[0] / rate:.1f} s (blocks the "
                      f"board lost, or the import left out): learned from the rest")
     return tuple(notes)
+
+
+def _unresolved(sink: ListSink) -> tuple[str, ...]:
+    """The ``lines_unresolved`` events of the replay (each once: bearing lines the envelope
+    spectrum's bins do not resolve, so the site file has no baseline of them)."""
+    return tuple(m["message"] for topic, _, m in sink.messages
+                 if topic == TOPIC_EVENTS and m.get("kind") == "lines_unresolved")
 
 
 def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,

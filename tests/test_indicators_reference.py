@@ -68,6 +68,15 @@ def plain_hann_peak(A, i):
     return A[i] * np.pi * delta * (1 - delta ** 2) / np.sin(np.pi * delta)
 
 
+def plain_unresolved(name, lines, slip, df):
+    """Line ``name`` of ``lines`` (name -> Hz) is not resolved by bins of df: its window
+    +/- max(slip f0, df) is wider than +/- max(slip, 10 %) of f0, or overlaps another line's."""
+    f0 = lines[name]
+    h0 = max(slip * f0, df)
+    return h0 > max(slip, 0.10) * f0 or any(abs(f1 - f0) < h0 + max(slip * f1, df)
+                                           for k, f1 in lines.items() if k != name)
+
+
 def plain_record(x, setup, shaft_hz):
     """Every number of compute(x, setup, shaft_hz).values(), one transform per quantity."""
     rms, peak, crest, kurt = plain_stats(x)
@@ -82,11 +91,13 @@ def plain_record(x, setup, shaft_hz):
         A = np.abs(np.fft.rfft(e * hann(e.size))) * 2 / hann(e.size).sum()
         fe = np.fft.rfftfreq(e.size, 1 / env.fs_env)
         for b in setup.bearings:
-            for name, f0 in zip(DEFECTS, defect_frequencies(b.geometry, shaft_hz)):
-                for h in (1, 2):
-                    line = plain_line(fe, A, h * f0, setup.slip)
-                    if line is not None:
-                        out[f"{b.name}.{name}" + ("" if h == 1 else f"_{h}x")] = line[0]
+            lines = {name + ("" if h == 1 else f"_{h}x"): h * f0
+                     for name, f0 in zip(DEFECTS, defect_frequencies(b.geometry, shaft_hz)) for h in (1, 2)}
+            for name, f0 in lines.items():
+                line = None if plain_unresolved(name, lines, setup.slip, fe[1]) else \
+                    plain_line(fe, A, f0, setup.slip)
+                if line is not None:
+                    out[f"{b.name}.{name}"] = line[0]
     for band in setup.bands:
         if band.orders and shaft_hz is None:
             continue

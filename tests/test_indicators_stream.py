@@ -56,6 +56,7 @@ def test_raw_records_carry_every_indicator_with_the_tacho_speed(raw6):
     de = m["bearings"][0]
     assert de["name"] == "de" and de["bpfo_hz"] == pytest.approx(9 / 2 * f_r * (1 - 7.94 / 39.04), rel=1e-6)
     assert set(de["lines"]) == {"ftf", "ftf_2x", "bpfo", "bpfo_2x", "bpfi", "bpfi_2x", "bsf", "bsf_2x"}
+    assert "unavailable" not in m       # FTF at 11.4 Hz: 11 bins up, resolved (resolution.py)
     bands = {b["name"]: b for b in m["bands"]}
     assert bands["1x"]["lo_hz"] == pytest.approx(0.8 * f_r, rel=1e-6) and bands["low"]["rms"] > 0
     assert all(not m2["bearings"] for t, _, m2 in recs if t == "/cm/ch1/indicators")   # no bearing on ch1
@@ -88,7 +89,8 @@ def test_rms_mode_reports_the_overall_rms_and_the_rest_unavailable():
     assert "unavailable" in a[0] and a[0]["unavailable"] == ["speed"]       # a bearing, no tacho, no rpm
     with_rpm = {**CFG, "indicators": {**CFG["indicators"], "rpm": 1500}}
     c = [m for t, _, m in indicators(raw, chunk=50_000, cfg=with_rpm) if t == "/cm/ch0/indicators"]
-    assert c[0]["speed_source"] == "config" and c[0]["speed_rpm"] == 1500 and "unavailable" not in c[0]
+    assert c[0]["speed_source"] == "config" and c[0]["speed_rpm"] == 1500
+    assert c[0]["unavailable"] == ["de.ftf"]        # 9.96 Hz: fewer than 10 of the 1-Hz bins up
 
 
 def test_a_board_reset_ends_the_intervals_in_their_own_time_segment(raw6):

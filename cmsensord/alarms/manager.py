@@ -6,7 +6,9 @@ channel given).  With ``vote: 1`` each channel has its own alarm, named
 whose input is the highest level that at least N of its channels exceed.  Per
 channel the value is compared with the rule's levels at the current speed
 (:mod:`.levels`) with the rule's deadband (:mod:`.exceedance`); the alarm applies
-the delays and the latch (:mod:`.state`).  Alarms are evaluated while the
+the delays and the latch (:mod:`.state`).  A value not given is no reading: its
+alarms hold their levels (one said to be unknown, :meth:`AlarmManager.unknown`, also
+restarts the delays pending on it).  Alarms are evaluated while the
 machine is running (:mod:`.operating`); when it leaves that state each alarm is
 suppressed (non-latched ones clear).  Alarms put back from a saved state (a
 daemon's restart, :mod:`.saved`) show their restored levels until the rules confirm
@@ -112,10 +114,28 @@ class AlarmManager:
 
     # ---------------------------------------------------------------- input
     def record(self, t_ns: int, channel: str, values: dict[str, float],
-               speed_rpm: float | None = None) -> list[Transition]:
-        """One indicator record of ``channel`` at ``t_ns``: the operating state, then the rules."""
+               speed_rpm: float | None = None, unknown: tuple[str, ...] = ()) -> list[Transition]:
+        """One indicator record of ``channel`` at ``t_ns``: the operating state, then the rules;
+        ``unknown``: indicators the record says it cannot give (:meth:`unknown`)."""
         out = self._operate(t_ns, channel, values, speed_rpm)
+        self.unknown(channel, unknown)
         return out + self.values(t_ns, channel, values)
+
+    def unknown(self, channel: str, names: tuple[str, ...]) -> None:
+        """The indicators ``names`` of ``channel`` are not known now (a bearing line its envelope
+        spectrum does not resolve).  An alarm on one holds its shown level (no value: neither
+        raised nor cleared), but nothing measured before counts on after: a delay pending on the
+        channel's values starts again with its next value, and a voting alarm counts no
+        exceedance of that channel until it has one."""
+        for name in names:
+            for r in self.by_indicator.get(name, ()):
+                a = self.alarms.get(f"{r.name}/{channel}") if r.vote == 1 else self.alarms[r.name]
+                if a is None or channel not in a.channels:
+                    continue
+                if a.channel is None:
+                    a.inputs.pop(channel, None)
+                else:
+                    a.state.restart_delays()
 
     def values(self, t_ns: int, channel: str, values: dict[str, float]) -> list[Transition]:
         """Values (by indicator name) of ``channel`` at ``t_ns`` against the rules watching them."""

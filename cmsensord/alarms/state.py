@@ -93,6 +93,11 @@ class AlarmState:
         if self.acked_ns is not None:
             self.acked_ns += shift_ns
 
+    def restart_delays(self) -> None:
+        """The input is not known for a while: a delay pending on it starts again with the
+        next input (the shown level stays)."""
+        self.since = [None, None]
+
     def suppress(self, t_ns: int) -> int:
         """Suppressed at ``t_ns``: the live level off, the timers restarted."""
         before = self.level

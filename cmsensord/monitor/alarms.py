@@ -5,7 +5,10 @@
 :meth:`cmsensord.dsp.indicators.IndicatorRecord.values`, its shaft speed, which
 also sets the operating state), each ``/cm/<ch>/severity`` decision
 (``severity_index``) and each recursive ``/cm/<ch>/orders`` block
-(``order.<name>``: the order's RMS, valid blocks only).  Each order component with
+(``order.<name>``: the order's RMS, valid blocks only).  A value a record lists in
+``unavailable`` by its name (a bearing line the envelope spectrum does not resolve) is no
+reading: its alarms hold their levels and a delay pending on it starts again with its next
+value (:meth:`AlarmManager.unknown`).  Each order component with
 ``alarm_rms`` is a rule ``order_<name>`` (:func:`order_rules`): alert at
 ``alarm_rms``, deadband ``1 - orders.alarm_clear``, ``orders.alarm_on_delay_s`` and
 ``alarm_off_delay_s``.  What they change comes back as events (``alarm_alert``,
@@ -18,8 +21,9 @@ the live run gave.  A change of the machine's operating state is an
 as k x a baseline that ``alarms.baselines`` lacks for a channel is said once, with the first
 message: an ``alarm_no_baseline`` event (a warning) naming the rule and the channel.  A record
 whose ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline has no signal (a
-sensor fault, or the machine stopped): the channel's rules hold (not judged on it), as its
-severity does (the ``signal_lost`` event of :mod:`cmsensord.monitor.severity`).
+sensor fault, or the machine stopped): the channel's rules hold (not judged on it; a delay
+pending on it starts again with its next value), as its severity does (the ``signal_lost``
+event of :mod:`cmsensord.monitor.severity`).
 
 The live daemon keeps the alarm state an operator relies on over a restart (:meth:`Alarms.keep`:
 a store, :mod:`cmsensord.service.alarm_store`, and what it held): the saved alarms go back
@@ -49,7 +53,7 @@ from cmsensord.dsp.indicators.iso_zones import boundaries
 from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 
-__all__ = ["Alarms", "indicator_values", "order_rules"]
+__all__ = ["Alarms", "indicator_values", "unknown_values", "order_rules"]
 
 log = logging.getLogger("cmsensord")
 
@@ -78,6 +82,13 @@ def indicator_values(msg: dict) -> dict[str, float]:
         out.update({f"{b['name']}.{k}": float(p["amplitude"]) for k, p in b.get("lines", {}).items()})
     out.update({f"band.{b['name']}": float(b["rms"]) for b in msg.get("bands", ())})
     return out
+
+
+def unknown_values(msg: dict) -> tuple[str, ...]:
+    """The values an indicators message names unavailable one by one (``<bearing>.<line>``:
+    a line its envelope spectrum does not resolve); not the groups (``speed``, ``bearings``,
+    ``bands``) nor the spectral indicators of an interval with lost samples, whose delays go on."""
+    return tuple(k for k in msg.get("unavailable", ()) if "." in k)
 
 
 def _order_values(msg: dict) -> dict[str, float]:
@@ -214,7 +225,10 @@ class Alarms:
         if m.schema == "indicators":
             speed = msg.get("speed_rpm")
             was = mgr.operating.state
-            tr = mgr.record(stamp, ch, self._judged(ch, indicator_values(msg)), None if speed is None else float(speed))
+            values = indicator_values(msg)
+            judged = self._judged(ch, values)           # no signal: none judged, their delays restart
+            unknown = unknown_values(msg) + tuple(k for k in values if k not in judged)
+            tr = mgr.record(stamp, ch, judged, None if speed is None else float(speed), unknown)
             if mgr.operating.state != was:
                 return [self._state_event(stamp, was, mgr.operating.state, speed)] + self._after(stamp, tr)
         elif m.schema == "severity":

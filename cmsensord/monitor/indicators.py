@@ -16,6 +16,11 @@ once TACHO frames cover the interval's end; at most ``MAX_WAIT_S``), then
 * An interval with missing samples (lost RAW frames, a gap, the end of the stream)
   gives the waveform statistics of the samples it has, with ``missing_fraction``;
   the spectral indicators, which need all N samples, are listed as unavailable.
+* A bearing line that the envelope spectrum's bins (1 / the interval's length) do not resolve
+  (:mod:`cmsensord.dsp.indicators.resolution`) is left out and listed as unavailable, as
+  ``<bearing>.<line>``; the first record with such a set of lines of a bearing comes after a
+  ``lines_unresolved`` event (a warning) naming them, the bin width, the rules on them and the
+  record length that resolves them.
 
 RMS mode (:class:`RmsIndicators`): the board's 100 Hz block RMS supports the
 overall acceleration RMS only, sqrt(mean(block RMS^2)) over the interval (the
@@ -34,6 +39,7 @@ in time order on the new time base, back or forward.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -43,9 +49,11 @@ from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
 from cmsensord.dsp.indicators.envelope import envelope_band
+from cmsensord.dsp.indicators.resolution import line_freqs, unresolved_line
 from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.events import Event
 from cmsensord.sinks.schemas import indicators_topic
 
 if TYPE_CHECKING:
@@ -96,6 +104,31 @@ def record_fields(r: IndicatorRecord) -> dict:
     out["bearings"] = [_bearing(b) for b in r.bearings]
     out["bands"] = [{"name": band.name, "lo_hz": _num(lo), "hi_hz": _num(hi), "rms": _num(rms)}
                     for band, (lo, hi), rms in r.bands]
+    unresolved = [f"{b.name}.{k}" for b in r.bearings for k in b.unresolved]
+    if unresolved:
+        out["unavailable"] = unresolved
+    return out
+
+
+def _unresolved_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, df: float, stamp: int,
+                      told: set) -> list[Event]:
+    """A ``lines_unresolved`` event (a warning) for each bearing of record ``r`` of ``channel``
+    with lines its envelope spectrum's bins of ``df`` Hz do not resolve, the first time that
+    set of lines is (``told``: the (channel, bearing, lines) said already): the one line of
+    :func:`~cmsensord.dsp.indicators.resolution.unresolved_line`, naming the rules on them."""
+    out = []
+    for b in r.bearings:
+        key = (channel, b.name, b.unresolved)
+        if not b.unresolved or b.freqs is None or key in told:
+            continue
+        told.add(key)
+        names = {f"{b.name}.{k}" for k in b.unresolved}
+        rules = tuple(dict.fromkeys(rule.name for rule in cfg.alarms.rules if rule.indicator in names
+                                    and (not rule.channels or channel in rule.channels)))
+        text = unresolved_line(b.name, channel, b.unresolved, line_freqs(b.freqs), setup.slip, df, rules,
+                               MAX_INTERVAL_SAMPLES / setup.fs)
+        out.append(Event("lines_unresolved", channel, text, stamp,
+                         {"details": {"bearing": b.name, "lines": list(b.unresolved), "bin_hz": _num(df)}}))
     return out
 
 
@@ -123,8 +156,10 @@ class IndicatorChain:
 
     def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, clock: BlockClock,
                  tacho: Callable[[], TachoTracker | None],
-                 uncovered: Callable[[np.ndarray], np.ndarray] | None = None):
+                 uncovered: Callable[[np.ndarray], np.ndarray] | None = None, told: set | None = None):
         self.cfg, self.channels, self.fs, self.clock, self.tacho = cfg, channels, fs, clock, tacho
+        #: the unresolved bearing lines said already (:func:`_unresolved_notes`)
+        self.told: set = set() if told is None else told
         self.uncovered = uncovered or self._after_newest
         self.N = max(2, min(MAX_INTERVAL_SAMPLES, round(cfg.indicators.interval_s * fs)))
         self.index = [ch.index for ch in channels]
@@ -240,7 +275,8 @@ class IndicatorChain:
                  tacho: TachoTracker | None) -> list:
         """The messages of the intervals ``ready`` (start, samples, stamp, finite mask or None),
         in order, channel by channel; the complete records' indicators computed together
-        (:func:`compute_many`: the numbers of one :func:`compute` per record)."""
+        (:func:`compute_many`: the numbers of one :func:`compute` per record); before a record, the
+        ``lines_unresolved`` events of its bearing lines not said yet (:func:`_unresolved_notes`)."""
         rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
         todo: list = []                 # (x, setup, shaft_hz) of the complete records
         for (_, x, stamp, finite), (shaft_hz, source) in zip(ready, self._speeds(ready, tacho)):
@@ -267,9 +303,11 @@ class IndicatorChain:
         out = []
         for stamp, name, head, missing, fields, setup, shaft_hz in rows:
             if fields is None:
-                fields = record_fields(next(records))
+                r = next(records)
+                fields = record_fields(r)
                 if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
-                    fields["unavailable"] = ["speed"]
+                    fields["unavailable"] = ["speed"] + fields.get("unavailable", [])
+                out += _unresolved_notes(self.cfg, name, r, setup, self.fs / self.N, stamp, self.told)
             out.append(messages.indicators(stamp, name, {**head, "missing_fraction": _num(missing), **fields}))
         return out
 
@@ -406,14 +444,17 @@ class Indicators:
         self.cfg, self.clock, self.tacho, self.uncovered = cfg, clock, tacho, uncovered
         self.raw_chain: IndicatorChain | None = None
         self.rms_chain: RmsIndicators | None = None
-        self.records: list[messages.Message] = []
+        #: the records waiting, and before a record the ``lines_unresolved`` events of its lines
+        self.records: list[messages.Message | Event] = []
         self._newest: dict[str, int] = {}      # per topic, the stamp of the newest record taken
+        self._told: set = set()                # the unresolved bearing lines said (over the chains)
         clock.steps.append(self.restepped)
 
     def restepped(self, shift_ns: int) -> None:
         """The wall clock stepped: the stamps held (records waiting, intervals waiting for a speed,
         each topic's newest) move by ``shift_ns``, as the time base did."""
-        self.records = [m._replace(stamp_ns=m.stamp_ns + shift_ns) for m in self.records]
+        self.records = [dataclasses.replace(m, stamp_ns=(m.stamp_ns or 0) + shift_ns) if isinstance(m, Event)
+                        else m._replace(stamp_ns=m.stamp_ns + shift_ns) for m in self.records]
         self._newest = {topic: at + shift_ns for topic, at in self._newest.items()}
         if self.raw_chain is not None:
             self.raw_chain.pending = [(s, x, at + shift_ns, ok) for s, x, at, ok in self.raw_chain.pending]
@@ -431,7 +472,7 @@ class Indicators:
             if ind is not None:
                 self.records += ind.finish()
             ind = self.raw_chain = IndicatorChain(self.cfg, vib, fs=self.clock.fs, clock=self.clock,
-                                                  tacho=self.tacho, uncovered=self.uncovered)
+                                                  tacho=self.tacho, uncovered=self.uncovered, told=self._told)
         y = blocks.samples(ind.index)
         for a, b in blocks.runs():          # consecutive except across lost blocks
             self.records += ind.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(ind.index)))
@@ -472,12 +513,15 @@ class Indicators:
             if chain is not None:
                 self.records += chain.finish()
 
-    def take(self, upto_ns: int | None) -> list[messages.Message]:
-        """The records stamped at or before ``upto_ns`` (all with None), oldest first."""
+    def take(self, upto_ns: int | None) -> list[messages.Message | Event]:
+        """The records stamped at or before ``upto_ns`` (all with None), oldest first, each
+        after the events made with it."""
         n = len(self.records) if upto_ns is None else \
-            next((i for i, m in enumerate(self.records) if m.stamp_ns > upto_ns), len(self.records))
+            next((i for i, m in enumerate(self.records) if (m.stamp_ns or 0) > upto_ns), len(self.records))
         out, self.records = self.records[:n], self.records[n:]
         for i, m in enumerate(out):             # a re-anchored clock, or a switch of chain,
+            if isinstance(m, Event):            # (a lines_unresolved event: stamped, no topic)
+                continue
             at = max(m.stamp_ns, self._newest.get(m.topic, 0))   # never steps a topic back
             self._newest[m.topic] = at
             if at != m.stamp_ns:

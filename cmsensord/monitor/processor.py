@@ -554,10 +554,12 @@ class Processor(Figures):
                 sev.notes.clear()
             self.log.release(stamp)             # events well before it, at a point set by the stream
             out = sev.decision(d, stamp)
-            run += self.indicators.take(stamp) + out
+            records = self.indicators.take(stamp)
+            run += records + out
             if self.diagnostics is None:        # nothing in it depends on what is written
                 run.append(self.diag.message(stamp))
-            if not together or len(run) >= MAX_RUN_MESSAGES or Event in map(type, out):   # events: to the log first
+            if not together or len(run) >= MAX_RUN_MESSAGES or Event in map(type, out) \
+                    or Event in map(type, records):         # events: to the log first
                 run = self._out(run)
             if self.diagnostics is not None:    # the live loop's figures after the writes
                 self.write_diagnostics(stamp)

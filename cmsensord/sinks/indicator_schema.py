@@ -48,7 +48,8 @@ def _bearing() -> dict[str, Any]:
         props[f"{k}_hz"] = _n(f"{what} frequency at this record's speed [Hz]", 0)
     props["lines"] = {"type": "object",
                       "description": "envelope-spectrum lines: each defect frequency and its 2nd harmonic "
-                                     "(<name>_2x); absent without a speed or beyond the envelope's bandwidth",
+                                     "(<name>_2x); absent without a speed, beyond the envelope's bandwidth, "
+                                     "or not resolved by the spectrum's bins (then in unavailable)",
                       "properties": {k: _line() for k in DEFECT_LINES}}
     return {"type": "object", "properties": props, "required": ["name", "lines"]}
 
@@ -98,7 +99,10 @@ def indicators_schema(time: dict[str, Any], obj: Callable[..., dict]) -> dict[st
                           "required": ["name", "lo_hz", "hi_hz", "rms"]}},
             "unavailable": {"type": "array", "items": {"type": "string"},
                             "description": "indicators this record cannot carry (rms mode, missing "
-                                           "samples) or that lack a speed (speed)"},
+                                           "samples), that lack a speed (speed), or bearing lines "
+                                           "(<bearing>.<line>) its envelope spectrum's bins do not resolve: "
+                                           "a window of +/-max(slip, 1 bin) wider than +/-10 % of the line, "
+                                           "or overlapping another line's of the bearing"},
         },
         ["timestamp", "channel", "mode", "interval_s", "missing_fraction"],
     )

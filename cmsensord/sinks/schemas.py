@@ -129,6 +129,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "decode_error",
     "channels",
     "config",
+    "lines_unresolved",
     "start",
     "stop",
     "disk_error",
@@ -249,6 +250,10 @@ _DETAILS: dict[str, Any] = {
         "state": _str("operating_state: the machine's new operating state (stopped, starting, running, "
                       "coasting)"),
         "previous": _str("operating_state: the state before"),
+        "bearing": _str("lines_unresolved: the configured bearing"),
+        "lines": {"type": "array", "items": {"type": "string"},
+                  "description": "lines_unresolved: its lines the envelope spectrum's bins do not resolve"},
+        "bin_hz": {"type": "number", "description": "lines_unresolved: the envelope spectrum's bin width [Hz]"},
     },
 }
 

@@ -9,7 +9,8 @@ second harmonics (:mod:`.envelope`, :mod:`.bearings`), and the band RMS
 (:mod:`.bands`).  :meth:`IndicatorRecord.values` flattens the numbers under
 stable names (``accel_rms``, ``velocity_rms_mm_s``, ``<bearing>.bpfi``,
 ``band.<name>`` ...); what cannot be computed (no speed for an order band or a
-bearing) is absent, never NaN.
+bearing) is absent, never NaN, and so is a bearing line the envelope spectrum's bins do
+not resolve (:mod:`.resolution`: named in :attr:`BearingLines.unresolved`).
 """
 
 from __future__ import annotations
@@ -21,18 +22,15 @@ from functools import lru_cache
 import numpy as np
 
 from .bands import order_band_hz
-from .bearings import DEFECTS, DefectFrequencies, Geometry, defect_frequencies
+from .bearings import DefectFrequencies, Geometry, defect_frequencies
 from .envelope import Envelope, LinePeak, centred_envelope_spectrum, centred_envelopes, envelope_of_rfft, line_peak
 from .iso_zones import ZONES, baseline_alarm_mm_s, boundaries, zone_index
+from .resolution import line_freqs, unresolved
 from .spectrum import bin_range, hann_power_bins, rfft_freqs
 from .statistics import WaveformStats, centred_stats, centred_stats_rows
 from .velocity import velocity_band
 
 __all__ = ["Band", "Bearing", "Setup", "BearingLines", "IndicatorRecord", "compute", "compute_many"]
-
-#: harmonics of each defect frequency read from the envelope spectrum
-HARMONICS = (1, 2)
-
 
 @dataclass(frozen=True)
 class Band:
@@ -80,6 +78,8 @@ class BearingLines:
     name: str
     freqs: DefectFrequencies | None                 # Hz; None without a shaft speed
     lines: dict[str, LinePeak] = field(default_factory=dict)   # "bpfo", "bpfo_2x", ...
+    #: the lines the envelope spectrum's bins do not resolve (:mod:`.resolution`): not read
+    unresolved: tuple[str, ...] = ()
 
 
 @dataclass
@@ -110,15 +110,20 @@ class IndicatorRecord:
 
 def _bearing_lines(setup: Setup, b: Bearing, shaft_hz: float | None, f: np.ndarray,
                    A: np.ndarray) -> BearingLines:
+    """Bearing ``b``'s lines in the envelope spectrum (f, A) at ``shaft_hz``: each read
+    (:func:`~.envelope.line_peak`) unless the spectrum's bins do not resolve it
+    (:func:`~.resolution.unresolved`: then named in ``unresolved``) or its window reaches
+    beyond the spectrum."""
     if shaft_hz is None or not shaft_hz > 0:
         return BearingLines(b.name, None)
     freqs = defect_frequencies(b.geometry, shaft_hz)
-    out = BearingLines(b.name, freqs)
-    for name, f0 in zip(DEFECTS, freqs):
-        for h in HARMONICS:
-            p = line_peak(f, A, h * f0, setup.slip)
-            if p is not None:
-                out.lines[name if h == 1 else f"{name}_{h}x"] = p
+    lines = line_freqs(freqs)
+    df = float(f[1] - f[0]) if f.size > 1 else 0.0
+    out = BearingLines(b.name, freqs, unresolved=unresolved(lines, setup.slip, df) if df > 0 else ())
+    for name, f0 in lines.items():
+        p = None if name in out.unresolved else line_peak(f, A, f0, setup.slip)
+        if p is not None:
+            out.lines[name] = p
     return out
 
 
