@@ -1,7 +1,7 @@
 """Command line: argparse, dispatch to :mod:`cmsensord.service`, errors -> exit status.
 
     cmsensord --simulate [--scenario NAME --duration S --speed X --out DIR ...]
-    cmsensord --config FILE              run the daemon on the configured port
+    cmsensord --config FILE [--out DIR]  run the daemon on the configured port
     cmsensord replay CAPTURE [--config FILE] [--out DIR]
     cmsensord record --port DEV --out FILE [--duration S]
     cmsensord summary LOG.mcap ... | DIR
@@ -121,7 +121,8 @@ def _add_simulation_args(sim) -> None:
     sim.add_argument("--speed", type=positive, default=None,
                      help="x real time (default: the scenario's, 20 for the motors: 600 s simulated "
                           "in 30 s; listed below); a reader that falls behind slows the board down")
-    sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
+    sim.add_argument("--out", metavar="DIR", help="MCAP output directory, of --simulate and of the "
+                     "daemon of --config (default output.dir; the daemon's control socket is there too)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--channels", type=count(1, 8), default=None,
                      help="number of channels 1..8 (default: the scenario's, 1; 2 with a microphone "
@@ -133,7 +134,8 @@ def _add_simulation_args(sim) -> None:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate: written afresh; the daemon appends to it, and it is not "
                      "bounded by output.retain_mb)")
-    sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
+    sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation "
+                     "(--simulate and the daemon of --config; default output.akf_trace)")
     sim.add_argument("--publish", action="store_true", help="with --simulate and a config's mqtt section: "
                      "publish the simulated run to its broker, as its client_id (default: not published)")
 
@@ -220,6 +222,14 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
     return cfg, not (isinstance(raw, dict) and raw.get("channels"))
 
 
+def _with_output(cfg: Config, out: str | None, akf_trace: bool) -> Config:
+    """``cfg`` with ``--out DIR`` as its output.dir and ``--akf-trace`` turning output.akf_trace on."""
+    if not out and not akf_trace:
+        return cfg
+    return dataclasses.replace(cfg, output=dataclasses.replace(
+        cfg.output, dir=out or cfg.output.dir, akf_trace=cfg.output.akf_trace or akf_trace))
+
+
 def _run_vkf(args: argparse.Namespace) -> int:
     """``cmsensord vkf``: the batch orders of a capture."""
     from cmsensord.batch import batch_orders, describe
@@ -240,10 +250,7 @@ def _run_vkf(args: argparse.Namespace) -> int:
 def _run_replay(args: argparse.Namespace) -> int:
     """``cmsensord replay``: a capture through the daemon's Processor."""
     cfg, auto = _config_for(args.sub_config)
-    if args.sub_out or args.sub_trace:
-        cfg = dataclasses.replace(cfg, output=dataclasses.replace(
-            cfg.output, dir=args.sub_out or cfg.output.dir,
-            akf_trace=cfg.output.akf_trace or args.sub_trace))
+    cfg = _with_output(cfg, args.sub_out, args.sub_trace)
     return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed, publish=args.sub_publish)[0]
 
 
@@ -290,7 +297,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             out=args.out, capture=args.capture, akf_trace=args.akf_trace, publish=args.publish))
     if args.config:
         cfg, auto = _config_for(args.config)
-        return run_live(cfg, auto_channels=auto, capture_path=args.capture)
+        return run_live(_with_output(cfg, args.out, args.akf_trace), auto_channels=auto, capture_path=args.capture)
     error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
                "(see cmsensord --help)")
     return EXIT_USAGE
