@@ -108,7 +108,18 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     from cmsensord.service.operator import add_operator_parsers
     add_operator_parsers(sub)
     _add_summary_parser(sub)
+    for subparser in sub.choices.values():
+        _add_verbose_after(subparser)
     return p
+
+
+def _add_verbose_after(subparser: argparse.ArgumentParser) -> None:
+    """``-v``/``-vv`` after the subcommand too (``cmsensord replay f.bin -v``).  The subparser
+    parses into a namespace of its own and copies what it holds over the main parser's: with
+    no default there (SUPPRESS), a ``-v`` given before the subcommand is kept when none follows
+    (and replaced by one that does)."""
+    subparser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                           help="log more: -v info, -vv debug (default: warnings and up)")
 
 
 def _add_simulation_args(sim) -> None:
@@ -204,6 +215,7 @@ def replay_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0)
     sub = p.add_subparsers(dest="command", parser_class=_Parser)
     _add_replay_parser(sub)
+    _add_verbose_after(sub.choices["replay"])
     return p
 
 

@@ -8,7 +8,7 @@ import json
 import time
 
 from cmsensord.sinks.mcap_sink import read_messages
-from processes import start_board, start_daemon, stop
+from processes import cmsensord, run_module, start_board, start_daemon, stop
 
 
 def test_the_daemon_writes_to_out_and_traces_with_akf_trace(tmp_path):
@@ -28,3 +28,18 @@ def test_the_daemon_writes_to_out_and_traces_with_akf_trace(tmp_path):
     assert f"MCAP log: {log}" in err.splitlines()
     topics = {t for t, _, _ in read_messages(log)}
     assert {"/cm/ch0/severity", "/cm/ch0/akf"} <= topics
+
+
+def test_verbose_is_taken_after_the_subcommand_as_before_it(tmp_path):
+    cap = tmp_path / "h.bin"
+    assert run_module("firmware_sim", "--out", str(cap), "--scenario", "healthy", "--duration", "5").returncode == 0
+    info = "INFO config: board firmware 1.0: RMS mode, 1 channel(s), fs 25000 Hz, block 250"
+    for args in (["replay", str(cap), "-v"], ["-v", "replay", str(cap)], ["replay", "-v", str(cap)]):
+        p = cmsensord(*args, "--out", str(tmp_path / "logs"))
+        assert p.returncode == 0, p.stderr
+        assert info in p.stderr.splitlines(), args
+    quiet = cmsensord("replay", str(cap), "--out", str(tmp_path / "logs"))
+    assert quiet.returncode == 0 and info not in quiet.stderr.splitlines()
+    for sub in ("replay", "summary", "calibrate", "import", "status"):
+        text = " ".join(cmsensord(sub, "--help").stdout.split())         # as wrapped to any width
+        assert " -v, --verbose log more: -v info, -vv debug (default: warnings and up) " in text + " ", sub
