@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -45,8 +44,6 @@ from cmsensord.service.simulate import RUNUP_ORDERS, SimulateOptions, simulate
 from cmsensord.service.summary import summary_of
 
 __all__ = ["main", "build_parser", "RUNUP_ORDERS"]
-
-log = logging.getLogger("cmsensord")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -220,7 +217,8 @@ def replay_parser() -> argparse.ArgumentParser:
 
 
 def _config_for(path: str | None) -> tuple[Config, bool]:
-    """Load a config; auto_channels when the file does not list channels."""
+    """Load a config (an empty one said in a warning line, by load_config); auto_channels when the
+    file does not list channels."""
     if path is None:
         return default_config(1), True
     cfg = load_config(path)
@@ -229,8 +227,6 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
         raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     except (OSError, yaml.YAMLError):
         raw = {}
-    if not raw:
-        log.warning("config: %s holds no settings (empty, or comments only): every setting is its default", path)
     return cfg, not (isinstance(raw, dict) and raw.get("channels"))
 
 

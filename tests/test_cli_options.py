@@ -43,3 +43,27 @@ def test_verbose_is_taken_after_the_subcommand_as_before_it(tmp_path):
     for sub in ("replay", "summary", "calibrate", "import", "status"):
         text = " ".join(cmsensord(sub, "--help").stdout.split())         # as wrapped to any width
         assert " -v, --verbose log more: -v info, -vv debug (default: warnings and up) " in text + " ", sub
+
+
+EMPTY = "WARNING config: empty.yaml holds no settings (empty, or comments only): every setting is its default"
+
+
+def test_an_empty_config_is_said_by_simulate(tmp_path):
+    """As by the daemon and replay (tests/test_errors.py): a site file emptied by mistake would run
+    every setting at its default."""
+    (tmp_path / "empty.yaml").write_text("# emptied\n")
+    p = cmsensord("--simulate", "--config", "empty.yaml", "--duration", "3", "--speed", "10",
+                  "--out", str(tmp_path / "sim"), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == EMPTY
+    assert p.stderr.splitlines().count(EMPTY) == 1
+
+
+def test_an_empty_config_is_said_by_calibrate(tmp_path):
+    (tmp_path / "empty.yaml").write_text("# emptied\n")
+    assert run_module("firmware_sim", "--out", str(tmp_path / "cap.bin"), "--scenario", "healthy",
+                      "--duration", "5").returncode == 0
+    p = cmsensord("calibrate", "cap.bin", "--config", "empty.yaml", "--out", "site.yaml", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == EMPTY
+    assert p.stderr.splitlines().count(EMPTY) == 1
