@@ -27,6 +27,7 @@ from cmsensord import __version__
 from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
+from cmsensord.config.settings import MAX_BAUD
 from cmsensord.errors import (
     EXIT_CONFIG,
     EXIT_USAGE,
@@ -152,13 +153,18 @@ def _add_record_parser(sub) -> None:
     rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
-    rec.add_argument("--baud", type=int, default=921600)
-    rec.add_argument("--duration", dest="sub_duration", type=positive, help="seconds (default: until Ctrl-C)")
+    rec.add_argument("--baud", type=count(1, MAX_BAUD), default=921600,
+                     help=f"UART baud (default 921600, at most {MAX_BAUD}; a USB CDC port or a pty ignores it)")
+    rec.add_argument("--duration", dest="sub_duration", type=positive, metavar="S",
+                     help="seconds (default: until Ctrl-C)")
 
 
 def _add_vkf_parser(sub) -> None:
     v = sub.add_parser("vkf", help="replay a RAW capture and add the batch (zero-phase) Vold-Kalman "
-                                   "orders (Tůma) beside the recursive ones")
+                                   "orders (Tůma) beside the recursive ones",
+                       description="Replay a RAW capture with a tacho as `cmsensord replay` does and add, "
+                                   "on the same /cm/<channel>/orders topics (method batch), the zero-phase "
+                                   "Vold-Kalman orders (Tůma) of the whole record, computed in memory.")
     v.add_argument("capture", help="capture file in RAW mode with a tacho")
     v.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration (orders)")
     v.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
@@ -189,7 +195,10 @@ def _add_publish_arg(parser) -> None:
 
 
 def _add_replay_parser(sub) -> None:
-    r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
+    r = sub.add_parser("replay", help="process a captured serial log as fast as possible",
+                       description="Process a capture (the bytes of the port, from `cmsensord record` or "
+                                   "--capture) through the daemon's chain into MCAP logs, as fast as "
+                                   "possible or paced (--realtime, --speed X), and print its summary.")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
     r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")

@@ -67,3 +67,12 @@ def test_an_empty_config_is_said_by_calibrate(tmp_path):
     assert p.returncode == 0, p.stderr
     assert p.stderr.splitlines()[0] == EMPTY
     assert p.stderr.splitlines().count(EMPTY) == 1
+
+
+def test_a_baud_rate_out_of_range_is_a_usage_line(tmp_path):
+    """Before, pyserial's ValueError ended `record --baud -5` in a traceback."""
+    p = cmsensord("record", "--port", "/dev/null", "--out", str(tmp_path / "r.bin"), "--baud", "-5")
+    assert p.returncode == 2
+    assert p.stderr.splitlines() == ["cmsensord record: error: argument --baud: expected an integer 1..12000000, "
+                                     "got -5 (see cmsensord record --help)"]
+    assert not (tmp_path / "r.bin").exists()
