@@ -1,7 +1,7 @@
 """Command line: argparse, dispatch to :mod:`cmsensord.service`, errors -> exit status.
 
     cmsensord --simulate [--scenario NAME --duration S --speed X --out DIR ...]
-    cmsensord --config FILE              run the daemon on the configured port
+    cmsensord --config FILE [--out DIR]  run the daemon on the configured port
     cmsensord replay CAPTURE [--config FILE] [--out DIR]
     cmsensord record --port DEV --out FILE [--duration S]
     cmsensord summary LOG.mcap ... | DIR
@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -28,6 +27,7 @@ from cmsensord import __version__
 from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
+from cmsensord.config.settings import MAX_BAUD
 from cmsensord.errors import (
     EXIT_CONFIG,
     EXIT_USAGE,
@@ -45,8 +45,6 @@ from cmsensord.service.simulate import RUNUP_ORDERS, SimulateOptions, simulate
 from cmsensord.service.summary import summary_of
 
 __all__ = ["main", "build_parser", "RUNUP_ORDERS"]
-
-log = logging.getLogger("cmsensord")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -108,7 +106,18 @@ def build_parser(with_scenarios: bool = True) -> argparse.ArgumentParser:
     from cmsensord.service.operator import add_operator_parsers
     add_operator_parsers(sub)
     _add_summary_parser(sub)
+    for subparser in sub.choices.values():
+        _add_verbose_after(subparser)
     return p
+
+
+def _add_verbose_after(subparser: argparse.ArgumentParser) -> None:
+    """``-v``/``-vv`` after the subcommand too (``cmsensord replay f.bin -v``).  The subparser
+    parses into a namespace of its own and copies what it holds over the main parser's: with
+    no default there (SUPPRESS), a ``-v`` given before the subcommand is kept when none follows
+    (and replaced by one that does)."""
+    subparser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                           help="log more: -v info, -vv debug (default: warnings and up)")
 
 
 def _add_simulation_args(sim) -> None:
@@ -121,7 +130,8 @@ def _add_simulation_args(sim) -> None:
     sim.add_argument("--speed", type=positive, default=None,
                      help="x real time (default: the scenario's, 20 for the motors: 600 s simulated "
                           "in 30 s; listed below); a reader that falls behind slows the board down")
-    sim.add_argument("--out", metavar="DIR", help="MCAP output directory (default output.dir)")
+    sim.add_argument("--out", metavar="DIR", help="MCAP output directory, of --simulate and of the "
+                     "daemon of --config (default output.dir; the daemon's control socket is there too)")
     sim.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     sim.add_argument("--channels", type=count(1, 8), default=None,
                      help="number of channels 1..8 (default: the scenario's, 1; 2 with a microphone "
@@ -133,7 +143,8 @@ def _add_simulation_args(sim) -> None:
     sim.add_argument("--capture", metavar="FILE", help="also write the received bytes to a capture "
                      "file (with --simulate: written afresh; the daemon appends to it, and it is not "
                      "bounded by output.retain_mb)")
-    sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation")
+    sim.add_argument("--akf-trace", action="store_true", help="write /cm/<ch>/akf per observation "
+                     "(--simulate and the daemon of --config; default output.akf_trace)")
     sim.add_argument("--publish", action="store_true", help="with --simulate and a config's mqtt section: "
                      "publish the simulated run to its broker, as its client_id (default: not published)")
 
@@ -142,13 +153,18 @@ def _add_record_parser(sub) -> None:
     rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
-    rec.add_argument("--baud", type=int, default=921600)
-    rec.add_argument("--duration", dest="sub_duration", type=positive, help="seconds (default: until Ctrl-C)")
+    rec.add_argument("--baud", type=count(1, MAX_BAUD), default=921600,
+                     help=f"UART baud (default 921600, at most {MAX_BAUD}; a USB CDC port or a pty ignores it)")
+    rec.add_argument("--duration", dest="sub_duration", type=positive, metavar="S",
+                     help="seconds (default: until Ctrl-C)")
 
 
 def _add_vkf_parser(sub) -> None:
     v = sub.add_parser("vkf", help="replay a RAW capture and add the batch (zero-phase) Vold-Kalman "
-                                   "orders (Tůma) beside the recursive ones")
+                                   "orders (Tůma) beside the recursive ones",
+                       description="Replay a RAW capture with a tacho as `cmsensord replay` does and add, "
+                                   "on the same /cm/<channel>/orders topics (method batch), the zero-phase "
+                                   "Vold-Kalman orders (Tůma) of the whole record, computed in memory.")
     v.add_argument("capture", help="capture file in RAW mode with a tacho")
     v.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration (orders)")
     v.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
@@ -179,7 +195,10 @@ def _add_publish_arg(parser) -> None:
 
 
 def _add_replay_parser(sub) -> None:
-    r = sub.add_parser("replay", help="process a captured serial log as fast as possible")
+    r = sub.add_parser("replay", help="process a captured serial log as fast as possible",
+                       description="Process a capture (the bytes of the port, from `cmsensord record` or "
+                                   "--capture) through the daemon's chain into MCAP logs, as fast as "
+                                   "possible or paced (--realtime, --speed X), and print its summary.")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
     r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
@@ -202,11 +221,13 @@ def replay_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0)
     sub = p.add_subparsers(dest="command", parser_class=_Parser)
     _add_replay_parser(sub)
+    _add_verbose_after(sub.choices["replay"])
     return p
 
 
 def _config_for(path: str | None) -> tuple[Config, bool]:
-    """Load a config; auto_channels when the file does not list channels."""
+    """Load a config (an empty one said in a warning line, by load_config); auto_channels when the
+    file does not list channels."""
     if path is None:
         return default_config(1), True
     cfg = load_config(path)
@@ -215,9 +236,15 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
         raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     except (OSError, yaml.YAMLError):
         raw = {}
-    if not raw:
-        log.warning("config: %s holds no settings (empty, or comments only): every setting is its default", path)
     return cfg, not (isinstance(raw, dict) and raw.get("channels"))
+
+
+def _with_output(cfg: Config, out: str | None, akf_trace: bool) -> Config:
+    """``cfg`` with ``--out DIR`` as its output.dir and ``--akf-trace`` turning output.akf_trace on."""
+    if not out and not akf_trace:
+        return cfg
+    return dataclasses.replace(cfg, output=dataclasses.replace(
+        cfg.output, dir=out or cfg.output.dir, akf_trace=cfg.output.akf_trace or akf_trace))
 
 
 def _run_vkf(args: argparse.Namespace) -> int:
@@ -240,10 +267,7 @@ def _run_vkf(args: argparse.Namespace) -> int:
 def _run_replay(args: argparse.Namespace) -> int:
     """``cmsensord replay``: a capture through the daemon's Processor."""
     cfg, auto = _config_for(args.sub_config)
-    if args.sub_out or args.sub_trace:
-        cfg = dataclasses.replace(cfg, output=dataclasses.replace(
-            cfg.output, dir=args.sub_out or cfg.output.dir,
-            akf_trace=cfg.output.akf_trace or args.sub_trace))
+    cfg = _with_output(cfg, args.sub_out, args.sub_trace)
     return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed, publish=args.sub_publish)[0]
 
 
@@ -290,7 +314,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             out=args.out, capture=args.capture, akf_trace=args.akf_trace, publish=args.publish))
     if args.config:
         cfg, auto = _config_for(args.config)
-        return run_live(cfg, auto_channels=auto, capture_path=args.capture)
+        return run_live(_with_output(cfg, args.out, args.akf_trace), auto_channels=auto, capture_path=args.capture)
     error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
                "(see cmsensord --help)")
     return EXIT_USAGE

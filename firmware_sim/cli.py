@@ -91,7 +91,8 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"firmware_sim (cmsensord {__version__})")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--scenario", help=f"machine model: {', '.join(SCENARIOS)}")
-    p.add_argument("--channels", type=int, default=1, help="accelerometer channels, 1..8 (default 1)")
+    p.add_argument("--channels", type=int, default=1,
+                   help="channels, 1..8 (default 1; the *_mic scenarios' microphone is channel 1: give 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--duration", type=float, default=None,
                    help="seconds to generate; also the scenario's time axis (degrading). "
@@ -139,8 +140,8 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed", type=float, default=1.0,
                    help="pty pacing, x real time (0 or inf: as fast as possible; default 1)")
     p.add_argument("--flow-control", action="store_true",
-                   help="with --pty: wait for a slow reader (hardware handshake) instead of dropping "
-                        "the bytes that do not fit, as a UART without flow control does (default)")
+                   help="with --pty: wait for a slow reader (hardware handshake); without it (the "
+                        "default) the bytes that do not fit are dropped, as by a UART without flow control")
     p.add_argument("--start-on-stdin", action="store_true",
                    help="with --pty: start the stream when a line (or EOF) comes on stdin, e.g. once "
                         "the reader has opened the port (pyserial discards what waits at its open)")

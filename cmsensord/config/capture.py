@@ -19,13 +19,16 @@ __all__ = ["CaptureConfig", "TRIGGER_KINDS", "OPERATING_STATES", "capture_sees_o
 #: event kinds that can trigger a capture (the alarm manager's kinds included), and ``manual``
 #: (only ``cmsensord capture-now``: it keeps the ring without any event triggering)
 TRIGGER_KINDS = ("alarm_alert", "alarm_danger", "alarm_clear", "severity_change", "anomaly_onset",
-                 "failure", "order_alarm", "time_base", "tacho_lost", "operating_state", "manual")
+                 "failure", "time_base", "tacho_lost", "operating_state", "manual")
 #: the operating states an ``operating_state`` trigger may be restricted to
 OPERATING_STATES = ("stopped", "starting", "running", "coasting")
 
 
 def _known_triggers(obj: Any) -> tuple[str, str, Any] | None:
     for kind in obj.triggers:
+        if kind == "order_alarm":       # order alarms are alarm-manager rules (order_<name>) now
+            return ("triggers", "order_alarm events are no longer written: order alarms are rules "
+                    "order_<name> of the alarm manager, use alarm_alert / alarm_danger", kind)
         if kind not in TRIGGER_KINDS:
             return "triggers", f"unknown trigger {kind!r} (one of {', '.join(TRIGGER_KINDS)})", kind
     for state in obj.operating_states:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import logging
 import os
 import re
 import stat
@@ -42,6 +43,7 @@ from .settings import (
 )
 from .validation import ConfigError
 
+_log = logging.getLogger("cmsensord")
 __all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict"]
 
 _SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
@@ -423,7 +425,8 @@ def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Co
 
     ``n_channels``: channel count to use when the file has no channels list.
     Every failure (missing or unreadable file, YAML syntax, unknown key, type,
-    range, cross-field rule) raises ConfigError with a one-line message.
+    range, cross-field rule) raises ConfigError with a one-line message; a file
+    holding no settings (empty, or comments only) is logged in one warning line.
     """
     if path is None:
         return default_config(n_channels if n_channels is not None else 1)
@@ -439,7 +442,11 @@ def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Co
         raise ConfigError(source, None, str(err)) from None
     if data is None:  # an empty file (or only comments): all defaults
         data = {}
-    return config_from_dict(data, source=source, n_channels=n_channels)
+    cfg = config_from_dict(data, source=source, n_channels=n_channels)
+    if data == {}:      # a site file emptied by mistake would run without its calibration: say so
+        _log.warning("config: %s holds no settings (empty, or comments only): every setting is its default",
+                     source)
+    return cfg
 
 
 def default_config(n_channels: int = 1) -> Config:

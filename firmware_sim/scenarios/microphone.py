@@ -393,7 +393,7 @@ class DegradingMicMotor(MicMotorMixin, DegradingMotor):
 
     name = "degrading_mic"
     description = ("degrading motor (as degrading) with a microphone (channel 1) beside the "
-                   "accelerometer (channel 0); run with --channels 2")
+                   "accelerometer (channel 0)")
     _motor_class = DegradingMotor
 
 

@@ -137,7 +137,7 @@ def bandwidth_to_r(bandwidth_hz, freq_hz, fs: float) -> np.ndarray:
                                np.asarray(freq_hz, dtype=np.float64))
     shape = b.shape
     b, f = b.ravel(), f.ravel()
-    if np.any(b <= 0) or np.any(b >= fs / 2):
+    if not np.all((b > 0) & (b < fs / 2)):          # NaN too (a bandwidth of None): no r is right for it
         raise ValueError(f"bandwidth_hz: expected in (0, fs/2 = {fs / 2}), got {b.min()}..{b.max()}")
     # first guess: the narrow-band relation B ≈ fs / (√2 π r sin θ) (see r_to_bandwidth)
     sin_t = np.maximum(np.sin(2.0 * np.pi * f / fs), 1e-3)
@@ -218,7 +218,7 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
         elif c.freq_hz is not None:
             key = (c, fs)
             if key not in _R_CACHE:
-                _R_CACHE[key] = float(bandwidth_to_r(c.bandwidth_hz, c.freq_hz, fs))
+                _R_CACHE[key] = float(bandwidth_to_r(_fixed_bandwidth(c, fs), c.freq_hz, fs))
             out[..., i] = _R_CACHE[key]
         elif span is None:                           # no finite speed
             out[..., i] = np.nan
@@ -228,6 +228,15 @@ def component_r(components: Sequence[TrackedComponent], speed, fs: float) -> np.
             s = np.clip(speed, _R_SPEEDS[0], _R_SPEEDS[-1])
             out[..., i] = np.exp(np.interp(np.log(s), _R_LOG[j0:j1], lr))
     return out
+
+
+def _fixed_bandwidth(c: TrackedComponent, fs: float) -> float:
+    """The -3 dB bandwidth [Hz] of a fixed-frequency component: its bandwidth_hz, or its
+    bandwidth_pct of freq_hz (capped at 0.45 fs, as the orders' grid caps theirs)."""
+    if c.bandwidth_hz is not None:
+        return c.bandwidth_hz
+    assert c.bandwidth_pct is not None and c.freq_hz is not None  # component_r's fixed, bandwidth-given ones
+    return min(c.bandwidth_pct / 100.0 * c.freq_hz, 0.45 * fs)
 
 
 def _fill_r_grid(components: Sequence[TrackedComponent], fs: float, need: np.ndarray) -> None:

@@ -1,0 +1,78 @@
+"""Options of the command line that apply beyond the mode they are listed with: ``--out`` and
+``--akf-trace`` of the live daemon, ``-v`` after a subcommand, and the one warning line of an
+empty configuration file in every command that reads one."""
+
+from __future__ import annotations
+
+import json
+import time
+
+from cmsensord.sinks.mcap_sink import read_messages
+from processes import cmsensord, run_module, start_board, start_daemon, stop
+
+
+def test_the_daemon_writes_to_out_and_traces_with_akf_trace(tmp_path):
+    """`cmsensord --config FILE --out DIR --akf-trace`: its logs in DIR (not output.dir), with
+    /cm/<ch>/akf, as --simulate and replay do with the same options."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--duration", "3", "--link", str(link), "--flow-control")
+    d = start_daemon(tmp_path, link, "--out", str(tmp_path / "out"), "--akf-trace")
+    json.loads(sim.stdout.readline())                # the board has sent everything
+    time.sleep(1.0)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0 and "Traceback" not in err, err
+    assert not (tmp_path / "logs").exists()                                 # the config's output.dir
+    (log,) = (tmp_path / "out").glob("*.mcap")
+    assert f"MCAP log: {log}" in err.splitlines()
+    topics = {t for t, _, _ in read_messages(log)}
+    assert "/cm/ch0/akf" in topics
+
+
+def test_verbose_is_taken_after_the_subcommand_as_before_it(tmp_path):
+    cap = tmp_path / "h.bin"
+    assert run_module("firmware_sim", "--out", str(cap), "--scenario", "healthy", "--duration", "5").returncode == 0
+    info = "INFO config: board firmware 1.0: RMS mode, 1 channel(s), fs 25000 Hz, block 250"
+    for args in (["replay", str(cap), "-v"], ["-v", "replay", str(cap)], ["replay", "-v", str(cap)]):
+        p = cmsensord(*args, "--out", str(tmp_path / "logs"))
+        assert p.returncode == 0, p.stderr
+        assert info in p.stderr.splitlines(), args
+    quiet = cmsensord("replay", str(cap), "--out", str(tmp_path / "logs"))
+    assert quiet.returncode == 0 and info not in quiet.stderr.splitlines()
+    for sub in ("replay", "summary", "calibrate", "import", "status"):
+        text = " ".join(cmsensord(sub, "--help").stdout.split())         # as wrapped to any width
+        assert " -v, --verbose log more: -v info, -vv debug (default: warnings and up) " in text + " ", sub
+
+
+EMPTY = "WARNING config: empty.yaml holds no settings (empty, or comments only): every setting is its default"
+
+
+def test_an_empty_config_is_said_by_simulate(tmp_path):
+    """As by the daemon and replay (tests/test_errors.py): a site file emptied by mistake would run
+    every setting at its default."""
+    (tmp_path / "empty.yaml").write_text("# emptied\n")
+    p = cmsensord("--simulate", "--config", "empty.yaml", "--duration", "3", "--speed", "10",
+                  "--out", str(tmp_path / "sim"), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == EMPTY
+    assert p.stderr.splitlines().count(EMPTY) == 1
+
+
+def test_an_empty_config_is_said_by_calibrate(tmp_path):
+    (tmp_path / "empty.yaml").write_text("# emptied\n")
+    assert run_module("firmware_sim", "--out", str(tmp_path / "cap.bin"), "--scenario", "healthy",
+                      "--duration", "5").returncode == 0
+    p = cmsensord("calibrate", "cap.bin", "--config", "empty.yaml", "--out", "site.yaml", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == EMPTY
+    assert p.stderr.splitlines().count(EMPTY) == 1
+
+
+def test_a_baud_rate_out_of_range_is_a_usage_line(tmp_path):
+    """Before, pyserial's ValueError ended `record --baud -5` in a traceback."""
+    p = cmsensord("record", "--port", "/dev/null", "--out", str(tmp_path / "r.bin"), "--baud", "-5")
+    assert p.returncode == 2
+    assert p.stderr.splitlines() == ["cmsensord record: error: argument --baud: expected an integer 1..12000000, "
+                                     "got -5 (see cmsensord record --help)"]
+    assert not (tmp_path / "r.bin").exists()
