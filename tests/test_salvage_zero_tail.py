@@ -1,7 +1,9 @@
 """A power cut can leave a ``.part`` longer than what was written to it: the file system had
 extended the file (its size on disk) but not its data, which reads back as zero bytes to the end.
 That is a cut, as a file ending inside a record is: salvage drops the zeros and says so, and
-keeps no ``.damaged`` copy (it kept one as big as the whole file, forever).
+keeps no ``.damaged`` copy (it kept one as big as the whole file, forever). The copies salvage
+does keep (``.damaged``, ``.unreadable``) count in ``retain_mb`` and are deleted oldest first,
+as the logs are (retention never saw them, and deleted real logs in their place).
 
 The daemon on a simulated board (a pty), killed with SIGKILL, its ``.part`` then given the
 zero tail (``truncate``, or zeros written over the end of its last chunk), and started again.
@@ -9,6 +11,7 @@ zero tail (``truncate``, or zeros written over the end of its last chunk), and s
 
 from __future__ import annotations
 
+import shutil
 import signal
 import subprocess
 import sys
@@ -21,7 +24,7 @@ from mcap.opcode import Opcode
 from cmsensord.sinks.mcap_records import RecordWalker
 from cmsensord.sinks.mcap_salvage import salvage
 from cmsensord.sinks.mcap_sink import log_files
-from processes import ENV, board_on_pty, spawn, stop
+from processes import ENV, board_on_pty, cmsensord, spawn, stop
 
 pytestmark = pytest.mark.process
 SIZE = 3_000_000      # the .part's size after the power cut
@@ -104,3 +107,23 @@ def test_zero_blocks_over_the_end_of_the_last_chunk_are_a_cut_too(tmp_path):
             f"{zeros} on, inside the chunk at byte {last}, {HOW})") in lines, "\n".join(lines)[-3000:]
     assert sorted(p.name for p in part.parent.iterdir() if ".part" in p.name) == []
 
+
+def test_kept_damaged_and_unreadable_copies_count_in_retain_mb_and_go_first(tmp_path):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    damaged = logs / "cmsensord-20200101T000000Z.mcap.part.damaged"
+    unreadable = logs / "cmsensord-20200102T000000Z.mcap.part.unreadable"
+    newer = logs / "cmsensord-20200103T000000Z.salvaged.mcap"
+    for path, size in ((damaged, 1_500_000), (unreadable, 1_500_000)):
+        path.write_bytes(b"\xff" * size)
+    sim = tmp_path / "s"
+    assert cmsensord("--simulate", "--duration", "2", "--speed", "20", "--out", str(sim)).returncode == 0
+    shutil.copy(log_files(sim, "cmsensord")[0][0], newer)         # a real log, 0.1 MB at most
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("output:\n  rotate_mb: 0.2\n  retain_mb: 1\n  min_free_mb: 0\n  status_line: false\n")
+    p = cmsensord("--simulate", "--duration", "2", "--speed", "20", "--config", str(cfg), "--out", str(logs))
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert (f"INFO disk_error: retention: deleted the 2 oldest log file(s) (3.0 MB: {damaged.name}, "
+            f"{unreadable.name}) to keep this prefix's files under retain_mb = 1 MB (now 0.0 MB)"
+            in p.stderr.splitlines()), p.stderr[-3000:]
+    assert newer.exists() and not damaged.exists() and not unreadable.exists()

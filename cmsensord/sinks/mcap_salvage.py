@@ -11,7 +11,8 @@ unchanged, through :class:`~cmsensord.sinks.mcap_chunks.ChunkWriter` into
 ``.part`` file of a prefix in a directory. A damaged record is skipped: the
 scan resynchronises at the next chunk record whose CRC checks out, so every
 intact chunk after the damage is kept, and a damaged ``.part`` is kept as
-``<name>.damaged`` rather than deleted. Zero bytes that run from the
+``<name>.damaged`` rather than deleted (retention counts it, and deletes it as it deletes
+the logs, oldest first: :mod:`cmsensord.sinks.retention`). Zero bytes that run from the
 last good record to the end of the file (a power cut: the file system had extended the file
 past the last write it got to disk) are a cut, not damage: dropped, nothing kept.
 """

@@ -38,7 +38,7 @@ between two records and leaves the ``.part`` it was reading as it was, for
 the next start; :meth:`RotatingSink.close` waits for the thread.
 
 Retention (after each rotation, at start and on a full disk): the oldest
-finished files of this prefix are deleted while this prefix's files take
+finished files of this prefix (and ``.part`` copies salvage kept) are deleted while this prefix's files take
 more than ``retain_mb`` or the file system has less than ``min_free_mb``
 free; never the file being written, never a ``.part`` file, never another
 prefix's file.
