@@ -10,10 +10,17 @@ segments wholly acknowledged are deleted. Beyond ``max_bytes`` the oldest segmen
 and its unsent records counted. Sending reads from the send cursor (:meth:`next_batch`), which a
 reconnection rewinds to the first unacknowledged record, so every record is delivered in order,
 at least once.
+
+With ``wait_for_disk`` (the daemon), a directory on a full, failing or read-only file system
+(:data:`DISK_FAULTS`) is no error at start: the queue opens with what it can read, and its
+first append fails as on a disk that failed later (the publisher keeps messages in memory
+until the directory takes them); a torn tail or an acknowledged segment it cannot remove
+stays for the next start.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import struct
 import time
@@ -27,6 +34,8 @@ _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
 _BODY = struct.Struct("<QBH")         # seq, retain, topic length
 #: no record body is larger than this (a torn length field reads as garbage beyond it)
 MAX_RECORD = 16 << 20
+#: errno values of a full, failing or read-only file system (``wait_for_disk``: no error at start)
+DISK_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
 
 
 @dataclass(frozen=True)
@@ -72,12 +81,18 @@ def _read_records(data: bytes) -> tuple[list[tuple[int, Record]], int]:
 
 
 class DiskQueue:
-    """The store-and-forward queue in ``directory`` (created if missing; OSError if unusable)."""
+    """The store-and-forward queue in ``directory`` (created if missing; OSError if unusable,
+    but for :data:`DISK_FAULTS` with ``wait_for_disk``: see the module docstring)."""
 
     def __init__(self, directory: str | os.PathLike, *, max_bytes: int, fsync_s: float = 1.0,
-                 segment_bytes: int | None = None) -> None:
+                 segment_bytes: int | None = None, wait_for_disk: bool = False) -> None:
         self.dir = Path(directory)
-        self._new_dirs = make_dirs(self.dir)    # their names fsynced into their parents at the first sync
+        self._wait_for_disk = wait_for_disk
+        self._new_dirs: list[Path] = []         # their names fsynced into their parents at the first sync
+        try:
+            self._new_dirs = make_dirs(self.dir)
+        except OSError as err:
+            self._unless_waiting(err)           # made by the first segment (_new_segment)
         self.max_bytes, self.fsync_s = max_bytes, fsync_s
         self._new_name = False
         self.segment_bytes = segment_bytes or max(4096, min(1 << 20, max_bytes // 8))
@@ -97,6 +112,11 @@ class DiskQueue:
         self.send_seq = self.acked + 1
 
     # -- opening ---------------------------------------------------------------------------
+    def _unless_waiting(self, err: OSError) -> None:
+        """Raise ``err`` unless it is a disk fault the queue waits out (``wait_for_disk``)."""
+        if not (self._wait_for_disk and err.errno in DISK_FAULTS):
+            raise err
+
     def _read_acked(self) -> int:
         try:
             return int((self.dir / "acked").read_text().strip() or 0)
@@ -109,10 +129,16 @@ class DiskQueue:
             records, valid = _read_records(data)
             if valid < len(data):               # a torn or corrupt tail: cut it off
                 self.truncated_bytes += len(data) - valid
-                with open(path, "r+b") as f:
-                    f.truncate(valid)
+                try:                            # else never appended to (a new segment is) nor read
+                    with open(path, "r+b") as f:
+                        f.truncate(valid)
+                except OSError as err:
+                    self._unless_waiting(err)
             if not records or records[-1][1].seq <= self.acked:
-                path.unlink()
+                try:
+                    path.unlink()
+                except OSError as err:
+                    self._unless_waiting(err)
                 continue
             self.segments.append(_Segment(records[0][1].seq, path, valid, records[-1][1].seq))
 
@@ -139,6 +165,8 @@ class DiskQueue:
     def _new_segment(self, first: int) -> _Segment:
         self._close_fd()
         path = self.dir / f"q-{first:020d}.seg"
+        if not self.dir.is_dir():               # not made at start (wait_for_disk), or removed since
+            self._new_dirs += make_dirs(self.dir)
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_CLOEXEC", 0), 0o600)
         seg = _Segment(first, path, os.fstat(self._fd).st_size, first - 1)
         self.segments.append(seg)

@@ -51,17 +51,20 @@ def _password(path: str | None) -> str | None:
 
 class Publisher:
     """Publishes what :meth:`offer` is given to the broker of ``cfg``; ``queue_dir`` holds the
-    disk queue (OSError if it cannot be created). ``alarm_rules``: alarms are evaluated, so
-    with discovery and ``alarms`` published, each channel's worst alarm is derived, published
-    and announced (without rules it would stay unknown)."""
+    disk queue (OSError if it cannot be created; with ``wait_for_disk``, the daemon, not for a
+    full, failing or read-only disk: messages then wait in memory as after a write error).
+    ``alarm_rules``: alarms are evaluated, so with discovery and ``alarms`` published, each
+    channel's worst alarm is derived, published and announced (without rules it would stay
+    unknown)."""
 
     def __init__(self, cfg: MqttConfig, queue_dir: str, channels: tuple[str, ...] = (),
-                 alarm_rules: bool = False, wait_when_full: bool = False) -> None:
+                 alarm_rules: bool = False, wait_when_full: bool = False, wait_for_disk: bool = False) -> None:
         self.cfg, self.topics, self.channels = cfg, TopicMap(cfg), channels
         self.wait_when_full = wait_when_full      # offer waits for room (a replay), not drops (the daemon)
         self.give_up = threading.Event()          # set: nothing waits for the broker or for room any more
         self.moved = 0                            # messages the thread took from the hand-over queue
-        self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s)
+        self.queue = DiskQueue(queue_dir, max_bytes=int(cfg.queue_mb * 1e6), fsync_s=cfg.fsync_s,
+                               wait_for_disk=wait_for_disk)
         self.handover: collections.deque = collections.deque(maxlen=cfg.handover_messages)
         self.handover_drops = 0
         self.events: collections.deque = collections.deque(maxlen=1000)

@@ -30,7 +30,8 @@ def run_id() -> str:
 
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
               publish: bool = False, command: str = "this run", max_lag_s: float | None = None) -> RotatingSink:
-    """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable,
+    """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable (for the
+    daemon a read-only one is not: it logs nothing until it is writable, :class:`RotatingSink`),
     InstanceError if a running daemon holds it and ``command`` is not the daemon.
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
     With an ``mqtt`` section and ``publish`` (the daemon, ``--simulate``, a ``--publish``
@@ -45,7 +46,7 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     if command != "the daemon":
         refuse_if_held(cfg.output.dir, command)
     sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage,
-                        max_lag_s=max_lag_s)
+                        max_lag_s=max_lag_s, wait_for_disk=command == "the daemon")
     if cfg.mqtt is None:
         return sink
     if not publish:
@@ -59,7 +60,7 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     queue_dir = cfg.mqtt.queue_path(cfg.output.dir)
     try:                                               # its channels: the Processor's, when known
         publisher = Publisher(cfg.mqtt, queue_dir, alarm_rules=has_alarm_rules(cfg),
-                              wait_when_full=command != "the daemon")
+                              wait_when_full=command != "the daemon", wait_for_disk=command == "the daemon")
     except OSError as exc:
         sink.close()
         raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None

@@ -41,10 +41,13 @@ def dir_fsync_failed(sink: RotatingSink, err: SinkIOError, file: Path) -> None:
 
 def abandoned(err: SinkIOError, kept: Path | None, had_file: bool, lost: int, unsure: int,
               retry_s: float) -> tuple[str, dict[str, Any]]:
-    """The first error of an outage: the file kept for salvage (``kept``), none open
-    (``had_file`` False) or removed; ``lost`` messages, ``unsure`` more maybe not on disk."""
-    what = (f"file kept as {kept.name} for salvage" if kept is not None
-            else "file removed (no complete chunk)" if had_file else "no file open")
+    """The first error of an outage: the file kept for salvage (``kept``) or removed; ``lost``
+    messages, ``unsure`` more maybe not on disk. With no file (``had_file`` False: none could
+    be opened) one line says that nothing is logged and how often it is tried again."""
+    if not had_file:                     # no file could be opened (at start, or after a rotation)
+        return (f"not logging: {err}; retrying every {retry_s:g} s",
+                {"count": lost, "details": error_details("abandoned", err, err.path, unsynced=unsure)})
+    what = f"file kept as {kept.name} for salvage" if kept is not None else "file removed (no complete chunk)"
     unsure_text = f" ({unsure} more written since the last good fsync may not be on the disk)" if unsure else ""
     return (f"{err}; {what}; {lost} message(s) lost{unsure_text}; trying a new file at once, then "
             f"every {retry_s:g} s",

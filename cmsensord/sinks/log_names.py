@@ -21,17 +21,22 @@ from pathlib import Path
 
 from cmsensord.errors import CmsensordError
 
-__all__ = ["SALVAGED", "log_files", "log_name", "log_paths", "next_name", "order_key", "salvaged_path"]
+__all__ = ["KEPT", "SALVAGED", "log_files", "log_name", "log_paths", "next_name", "order_key", "salvaged_path"]
 
 SALVAGED = ".salvaged"
 _STAMP = r"\d{8}T\d{6}Z"
 
 
+#: what salvage renames a ``.part`` it keeps to (damaged; nothing recoverable, not MCAP)
+KEPT = (".damaged", ".unreadable")
+
+
 def log_name(prefix: str) -> re.Pattern[str]:
-    """File names a sink writes with ``prefix``: finished, salvaged and .part (groups: the
-    stamp, the number or None, ``.part`` or None)."""
+    """File names a sink writes with ``prefix``: finished, salvaged and .part, and a .part salvage
+    kept (groups: the stamp, the number or None, ``.part`` or None, a :data:`KEPT` suffix or None)."""
+    kept = "|".join(re.escape(k) for k in KEPT)
     return re.compile(
-        rf"{re.escape(prefix)}-({_STAMP})(?:-(\d+))?(?:{re.escape(SALVAGED)})?\.mcap(\.part)?"
+        rf"{re.escape(prefix)}-({_STAMP})(?:-(\d+))?(?:{re.escape(SALVAGED)})?\.mcap(?:(\.part)({kept})?)?"
     )
 
 
@@ -48,11 +53,12 @@ def order_key(name: str) -> tuple:
     return (m.group(1), m.group(2), int(m.group(3) or 0), m.group(4))
 
 
-def log_files(out_dir: str | Path, prefix: str) -> tuple[list[Path], list[Path]]:
+def log_files(out_dir: str | Path, prefix: str, *, kept: bool = False) -> tuple[list[Path], list[Path]]:
     """(finished ``*.mcap``, unfinished ``*.mcap.part``) files of ``prefix`` in ``out_dir``,
     each oldest first (the order they were opened: :func:`order_key`). Only names this sink
     writes count: another prefix's files, or other files, are never listed. A missing
-    directory has none.
+    directory has none. ``kept``: the ``.part`` files salvage kept (``*.mcap.part.damaged``,
+    ``*.mcap.part.unreadable``) are among the finished ones (retention's), else in neither.
     """
     pattern = log_name(prefix)
     finished: list[tuple[str, int, str]] = []
@@ -63,8 +69,9 @@ def log_files(out_dir: str | Path, prefix: str) -> tuple[list[Path], list[Path]]
         return [], []
     for name in names:
         m = pattern.fullmatch(name)
-        if m is not None:
-            (parts if m.group(3) else finished).append((m.group(1), int(m.group(2) or 0), name))
+        if m is None or (m.group(4) and not kept):
+            continue
+        (parts if m.group(3) and not m.group(4) else finished).append((m.group(1), int(m.group(2) or 0), name))
     return ([Path(out_dir) / n for *_key, n in sorted(finished)],
             [Path(out_dir) / n for *_key, n in sorted(parts)])
 

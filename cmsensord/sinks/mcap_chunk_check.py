@@ -176,13 +176,31 @@ class Resync:
         if self._mm is not None:
             self._mm.close()
 
+    def _map(self) -> mmap.mmap:
+        if self._mm is None:
+            self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)
+        return self._mm
+
+    def zero_tail(self) -> int:
+        """The offset where the run of zero bytes that ends the file begins (the file's size
+        when its last byte is not zero): what a file system that extended the file past the
+        last write it got to disk (a power cut) reads back."""
+        if self._size == 0:
+            return 0
+        mm, end = self._map(), self._size
+        while end > 0:
+            start = max(0, end - (1 << 16))
+            kept = len(mm[start:end].rstrip(b"\0"))
+            if kept:
+                return start + kept
+            end = start
+        return 0
+
     def next_chunk(self, start: int, channels: dict[int, Channel]) -> int | None:
         """The offset of the first good chunk record at or after ``start``, or None."""
         if self._size <= start:
             return None
-        if self._mm is None:
-            self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)
-        mm, size, i = self._mm, self._size, start
+        mm, size, i = self._map(), self._size, start
         while (i := mm.find(b"\x06", i)) >= 0 and i + 9 + self._MIN_CHUNK <= size:
             if self._stop is not None and self._stop.is_set():
                 raise Interrupted

@@ -11,7 +11,10 @@ unchanged, through :class:`~cmsensord.sinks.mcap_chunks.ChunkWriter` into
 ``.part`` file of a prefix in a directory. A damaged record is skipped: the
 scan resynchronises at the next chunk record whose CRC checks out, so every
 intact chunk after the damage is kept, and a damaged ``.part`` is kept as
-``<name>.damaged`` rather than deleted.
+``<name>.damaged`` rather than deleted (retention counts it, and deletes it as it deletes
+the logs, oldest first: :mod:`cmsensord.sinks.retention`). Zero bytes that run from the
+last good record to the end of the file (a power cut: the file system had extended the file
+past the last write it got to disk) are a cut, not damage: dropped, nothing kept.
 """
 
 from __future__ import annotations
@@ -196,6 +199,8 @@ def _lock(f: BinaryIO) -> bool:
 
 
 _KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
+#: the least a file system extends a file by (its zero blocks after a power cut), in bytes
+_SECTOR = 512
 
 _WALK_END = {  # RecordWalker.end -> (damaged, reason) when the file itself ends the walk
     RecordWalker.NOT_MCAP: (True, NOT_MCAP),
@@ -240,6 +245,8 @@ def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult,
             elif bad[0] < 0:            # DataEnd or Footer
                 return result.source_bytes
             pos, what, after = bad
+            if _zero_cut(resync, pos, after, result):
+                return pos
             nxt = resync.next_chunk(pos + 1, channels)
             if nxt is None:
                 if what != "ends inside a record":
@@ -261,6 +268,22 @@ def _copy_records(f: BinaryIO, out: _SalvagedFile, result: SalvageResult,
         damaged, result.reason = _WALK_END[walker.end]
         result.damaged = result.damaged or damaged
     return walker.valid_bytes
+
+
+def _zero_cut(resync: Resync, pos: int, after: int, result: SalvageResult) -> bool:
+    """Whether the bad record at ``pos`` (a chunk ending at ``after``; else 0) is where a run of
+    zero bytes to the end of the file begins: from its first byte on, or within the chunk and
+    at least a sector long. That is a cut, not damage (a file system extended the file by zero
+    blocks past the last write it got to disk, a power cut): the scan ends there as at a cut
+    record, and ``result.reason`` says so (its chunk is not counted as damaged)."""
+    zeros = resync.zero_tail()
+    if not (zeros <= pos or (after and zeros < after and result.source_bytes - zeros >= _SECTOR)):
+        return False
+    if after:
+        result.lost_chunks -= 1         # counted as damaged when its check failed
+    where = "all zero bytes" if zeros <= pos else f"zero bytes from byte {zeros} on, inside the chunk at byte {pos}"
+    result.reason = f"a cut: {where}, as a file system leaves a file extended past its last write by a power cut"
+    return True
 
 
 def _copy_until_damage(walker: RecordWalker, start: int | None, out: _SalvagedFile,
@@ -370,8 +393,10 @@ def salvage(part: str | Path, *, durable: bool = True,
     end of the data section of a file that was finished but not renamed.
     Metadata records are kept. A damaged record is skipped and the scan
     resumes at the next intact chunk; the ``.part`` is then kept as
-    ``<name>.damaged``. See :class:`SalvageResult` for what happens when
-    nothing is recoverable, and for what is not a regular file. When
+    ``<name>.damaged``. A run of zero bytes to the end of the file from a record on (or from
+    within the last chunk, a sector at least) is the file's cut (:func:`_zero_cut`). See
+    :class:`SalvageResult` for what happens when nothing is recoverable, and for what is not
+    a regular file. When
     ``stop`` is set the scan ends between records and the ``.part`` is left
     as it was (``"interrupted"``).
 

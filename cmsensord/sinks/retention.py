@@ -1,4 +1,8 @@
-"""Retention of a rotating sink's finished log files: size cap and free-space floor."""
+"""Retention of a rotating sink's finished log files: size cap and free-space floor.
+
+The ``.part`` files salvage kept (``*.mcap.part.damaged``, ``*.mcap.part.unreadable``) count as
+finished files of their name's time: in ``retain_mb``, and deleted oldest first as logs are
+(they were kept for a human, not forever: outside retention they took the logs' room)."""
 
 from __future__ import annotations
 
@@ -70,7 +74,8 @@ def free_bytes(path: str | Path) -> int:
 
 
 def apply_retention(sink: RotatingSink) -> None:
-    """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``.
+    """Delete the oldest finished files (and kept ``.part`` copies) while over ``retain_mb`` or
+    under ``min_free_mb``.
 
     Oldest: opened first, by the names' order (:mod:`cmsensord.sinks.log_names`), which a
     wall clock stepping back does not change.
@@ -85,7 +90,7 @@ def apply_retention(sink: RotatingSink) -> None:
     if cap is None and floor is None:
         return
     try:
-        finished, parts = log_files(o.dir, o.prefix)
+        finished, parts = log_files(o.dir, o.prefix, kept=True)
         free = free_bytes(o.dir) if floor is not None else 0
     except OSError:
         return                           # no directory yet, or unreadable: nothing to do

@@ -38,7 +38,7 @@ between two records and leaves the ``.part`` it was reading as it was, for
 the next start; :meth:`RotatingSink.close` waits for the thread.
 
 Retention (after each rotation, at start and on a full disk): the oldest
-finished files of this prefix are deleted while this prefix's files take
+finished files of this prefix (and ``.part`` copies salvage kept) are deleted while this prefix's files take
 more than ``retain_mb`` or the file system has less than ``min_free_mb``
 free; never the file being written, never a ``.part`` file, never another
 prefix's file.
@@ -50,6 +50,8 @@ A failed fsync is never retried on the same file. A new file is tried at once, t
 ``retry_s``; messages written while no file is open, and those of the chunk that could
 not be written, are counted in :attr:`dropped`. Logging counts as back when a new file
 has been fsynced. One ``disk_error`` event per outage, one when logging resumes (the count).
+A full or failing disk at start (for the daemon, ``wait_for_disk``, a read-only one too) is
+such an outage; any other reason the first file cannot be opened is a SinkError.
 
 Events go to :attr:`RotatingSink.on_event` (``on_event(kind, message, **fields)``,
 settable after construction: the Processor that turns them into ``/cm/events`` messages
@@ -87,6 +89,9 @@ log = logging.getLogger("cmsensord")
 #: errno values that mean the disk is full or failing rather than misconfigured: at
 #: start the sink then runs without a file and retries (at run time every error does)
 _TRANSIENT = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO})
+#: ... with ``wait_for_disk`` (the daemon), a read-only file system too (an SD card the kernel
+#: remounted read-only after errors: it must not keep the service from restarting)
+_WAITED = _TRANSIENT | {errno.EROFS}
 _FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
 _QUEUED_EVENTS = 1000
 
@@ -105,11 +110,12 @@ class RotatingSink(ReorderLag):
         background_salvage: ... in a thread, after the first file is open.
         wall_clock: Unix seconds, for the file names.
         max_lag_s: the longest lag :meth:`expect_lag` opens the reorder window to.
+        wait_for_disk: a read-only file system (EROFS) at start is an outage too (the daemon).
 
     Raises:
         SinkError: at start, when the output directory cannot be used for a
-            reason other than a full or failing disk (permissions, not a
-            directory): a configuration error, one line.
+            reason other than a full or failing disk, or with ``wait_for_disk`` a
+            read-only one (permissions, not a directory): a configuration error, one line.
     """
 
     def __init__(self, output: OutputConfig, *, metadata: dict[str, str] | None = None,
@@ -118,7 +124,8 @@ class RotatingSink(ReorderLag):
                  on_event: Callable[..., Any] | None = None,
                  salvage: bool = True,
                  wall_clock: Callable[[], float] = time.time,
-                 background_salvage: bool = False, max_lag_s: float | None = None):
+                 background_salvage: bool = False, max_lag_s: float | None = None,
+                 wait_for_disk: bool = False):
         self.output = output
         self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
         self.metadata = metadata or {}
@@ -160,7 +167,7 @@ class RotatingSink(ReorderLag):
         try:
             self._current = self._open()
         except SinkIOError as err:
-            if err.errno not in _TRANSIENT:
+            if err.errno not in (_WAITED if wait_for_disk else _TRANSIENT):
                 raise                        # misconfigured: the daemon stops with one line
             self._failed(err, None)
         if salvage and background_salvage:   # the file being written is flock'ed: left alone
