@@ -118,8 +118,10 @@ class RotatingSink(ReorderLag):
                  on_event: Callable[..., Any] | None = None,
                  salvage: bool = True,
                  wall_clock: Callable[[], float] = time.time,
-                 background_salvage: bool = False, max_lag_s: float | None = None):
+                 background_salvage: bool = False, max_lag_s: float | None = None, own_files: bool = False):
         self.output = output
+        self.own_files = own_files           # retention counts and deletes this run's files only
+        self.lock: Any = None                # the output directory's hold (a replay's): release lets it go
         self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
         self.metadata = metadata or {}
         self.clock = clock
@@ -453,6 +455,12 @@ class RotatingSink(ReorderLag):
         self._deliver()
         return done
 
+    def release(self) -> None:
+        """Let the output directory's hold go (``lock``: its ``close``), once."""
+        if self.lock is not None:
+            self.lock.close()
+            self.lock = None
+
     def stop_salvage(self) -> None:
         """Stop the background salvage between two records (a stop signal): the
         ``.part`` it was reading is left as it was, for the next start."""
@@ -574,6 +582,14 @@ class RotatingSink(ReorderLag):
         disk_events.salvage_abandoned(self, abandoned)
 
     # -- retention ---------------------------------------------------------
+
+    def retained(self) -> set[Path] | None:
+        """The files retention may count and delete: with ``own_files`` those this run wrote
+        (finished, being written, kept for salvage); else None, every file of the prefix."""
+        if not self.own_files:
+            return None
+        cur = self._current
+        return {*self.paths, *self._abandoned, *([cur.part_path] if cur is not None else [])}
 
     def _retention(self) -> None:
         """Delete the oldest finished files while over ``retain_mb`` or under ``min_free_mb``
