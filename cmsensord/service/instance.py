@@ -8,7 +8,8 @@ daemon's.
 exclusive, non-blocking ``flock`` on ``output.dir/.cmsensord.lock`` (writing their pid there) and
 keep it while they write; the lock goes with the process, however it ends. A directory another
 process holds is a one-line :class:`~cmsensord.errors.InstanceError` (exit 78: systemd does not
-restart it) naming that process's pid.
+restart it) naming that process's pid. :class:`HeldDir` takes the lock again when its file is
+removed under the daemon (the directory deleted).
 """
 
 from __future__ import annotations
@@ -84,7 +85,9 @@ def _ident(st: os.stat_result) -> tuple[int, int]:
 
 
 class HeldDir:
-    """A lock of an output directory held (a replay's, a daemon's)."""
+    """The daemon's lock of its output directory, kept while its file is there: the directory
+    deleted (or the lock file alone), :meth:`retake` locks the new file of the same name; the
+    old inode's lock held no one off."""
 
     def __init__(self, directory: str | Path, fd: int, *, made: bool = False):
         self.dir = Path(directory)
@@ -100,6 +103,17 @@ class HeldDir:
             return True
         except OSError:
             return False                # not known to be gone (a permission error): kept
+
+    def retake(self) -> str | None:
+        """Lock the lock file of the directory (made again if need be) instead of the one held:
+        None when it is held now; else why not (another process holds it: its pid; the directory
+        or the file cannot be made), the old descriptor kept and :meth:`gone` still true."""
+        fd, pid, _ = _take(self.dir)
+        if fd is None:
+            return f"cmsensord (pid {pid}) holds it" if pid is not None else "it cannot be made"
+        os.close(self.fd)
+        self.fd, self._ident = fd, _ident(os.fstat(fd))
+        return None
 
     def close(self) -> None:
         """Let the lock go; with ``made``, its file removed first (while held, and if it is still
