@@ -127,6 +127,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
         send_queued(sink)
     finally:
         sink.close()
+        sink.release()                  # the directory's lock: a daemon may start now
         if not done:
             _remove(sink.paths, out_dir if made_dir else None)
     summary["wall_s"] = round(time.monotonic() - t_start, 3)

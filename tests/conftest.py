@@ -66,6 +66,7 @@ PROCESS_MODULES = frozenset({
     "test_indicators_daemon.py",
     "test_mqtt.py",
     "test_retention_process.py",
+    "test_output_dir_held.py",
     "test_short_logs.py",
     "test_dir_fsync.py",
     "test_report_link_totals.py",

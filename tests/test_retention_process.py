@@ -1,8 +1,10 @@
-"""Retention through the command a user types: ``cmsensord replay`` into a directory holding
-older logs of its prefix deletes them under ``retain_mb`` (a ``retention`` event), and one it
-cannot delete for a reason of its own (here a directory under a log's name) is a
-``retention_failed`` event and a journal line, said once, passed over for the next oldest, and
-the run goes on."""
+"""Retention through the commands a user types: the daemon (here ``cmsensord --simulate``, the
+daemon on a simulated board) in a directory holding older logs of its prefix deletes them under
+``retain_mb`` (a ``retention`` event), and one it cannot delete for a reason of its own (here a
+directory under a log's name) is a ``retention_failed`` event and a journal line, said once,
+passed over for the next oldest, and the run goes on. ``cmsensord replay`` into such a directory
+(the service's, by its configuration) leaves every log it did not write alone, says so in one
+line, and keeps its own under the limits."""
 
 from __future__ import annotations
 
@@ -28,15 +30,16 @@ def capture(tmp_path_factory) -> Path:
     return cap
 
 
-def replay_into(tmp_path: Path, capture: Path) -> tuple[str, list[dict]]:
-    """``cmsensord replay`` of ``capture`` into tmp_path/out with a 1-MB cap: exit 0; (its
-    stderr, the /cm/events messages of the log it wrote)."""
+def simulate_into(tmp_path: Path) -> tuple[str, list[dict]]:
+    """``cmsensord --simulate`` (3 s) into tmp_path/out with a 1-MB cap: exit 0; (its stderr, the
+    /cm/events messages of the log it wrote)."""
     out = tmp_path / "out"
     (tmp_path / "c.yaml").write_text(CONFIG.format(out=out))
-    r = cmsensord("replay", str(capture), "--out", str(out), "--config", str(tmp_path / "c.yaml"))
+    r = cmsensord("--simulate", "--duration", "3", "--speed", "10", "--out", str(out),
+                  "--config", str(tmp_path / "c.yaml"))
     assert r.returncode == 0, r.stderr
     new = [p for p in out.glob("cmsensord-*.mcap") if p.name not in (OLD, NEWER)]
-    assert len(new) == 1, sorted(out.iterdir())                # the replay's own log
+    assert len(new) == 1, sorted(out.iterdir())                # the run's own log
     return r.stderr, [m for t, _, m in read_messages(new[0]) if t == "/cm/events"]
 
 
@@ -44,26 +47,26 @@ def plant(path: Path, mb: float) -> None:
     path.write_bytes(b"\0" * int(mb * 1_000_000))
 
 
-def test_older_logs_over_retain_mb_are_deleted_with_one_event(tmp_path, capture):
+def test_older_logs_over_retain_mb_are_deleted_with_one_event(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     plant(out / OLD, 1.5)
     plant(out / NEWER, 0.2)
     other = out / "other-20200101T000000Z.mcap"         # another prefix's file: never counted
     plant(other, 1.5)
-    _, events = replay_into(tmp_path, capture)
+    _, events = simulate_into(tmp_path)
     assert not (out / OLD).exists() and (out / NEWER).exists() and other.exists()
     [ev] = [e for e in events if e["kind"] == "disk_error"]
     assert ev["message"].startswith(f"retention: deleted the 1 oldest log file(s) (1.5 MB: {OLD}) "
                                     "to keep this prefix's files under retain_mb = 1 MB (now 0.2 MB)")
 
 
-def test_a_log_retention_cannot_delete_is_one_event_passed_over_and_the_replay_goes_on(tmp_path, capture):
+def test_a_log_retention_cannot_delete_is_one_event_passed_over_and_the_run_goes_on(tmp_path):
     out = tmp_path / "out"
     (out / OLD).mkdir(parents=True)                       # a directory under a log's name: EISDIR
     (out / OLD / "kept").write_text("x")
     plant(out / NEWER, 1.5)
-    err, events = replay_into(tmp_path, capture)
+    err, events = simulate_into(tmp_path)
     message = f"{out / OLD}: retention cannot delete: Is a directory"
     assert f"ERROR disk_error: {message}" in err.splitlines()
     told = [e["message"] for e in events if e["kind"] == "disk_error"]
@@ -72,7 +75,35 @@ def test_a_log_retention_cannot_delete_is_one_event_passed_over_and_the_replay_g
                         r"prefix's files under retain_mb = 1 MB \(now [0-9.]+ MB, besides 0\.0 MB in 1 "
                         r"file\(s\) passed over\)( and at least min_free_mb = .*)?", told[1]), told[1]
     assert (out / OLD / "kept").exists() and not (out / NEWER).exists()   # the next oldest went
-    assert "events: config 1, disk_error 2" in err
+    assert "disk_error 2" in err
+
+
+def test_a_replay_into_the_services_directory_deletes_none_of_its_logs_and_says_so(tmp_path):
+    """The service stopped, ``cmsensord replay CAP --config <its configuration>``: before, the
+    replay's retention counted the service's logs with its own and deleted the oldest, saying
+    nothing on the terminal (4 service logs gone for a replay's one). Now they are left alone,
+    one line says so, and the replay keeps its own files under retain_mb (it rotates at 0.05 MB
+    and deletes its oldest)."""
+    out = tmp_path / "logs"
+    out.mkdir()
+    service = [out / f"cmsensord-20200101T00000{i}Z.mcap" for i in range(4)]
+    for path in service:
+        plant(path, 0.2)
+    cap = tmp_path / "cap.bin"
+    assert run_module("firmware_sim", "--scenario", "healthy", "--channels", "8", "--duration", "600",
+                      "--out", str(cap)).returncode == 0
+    (tmp_path / "c.yaml").write_text(f"output:\n  dir: {out}\n  rotate_mb: 0.05\n  retain_mb: 0.15\n")
+    r = cmsensord("replay", str(cap), "--config", str(tmp_path / "c.yaml"))
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.splitlines()[0] == (
+        f"WARNING retention: the 4 log(s) of prefix 'cmsensord' already in {out} are not this replay's: "
+        "left alone; it counts and deletes only its own under retain_mb and min_free_mb")
+    assert all(p.exists() for p in service)
+    own = [p for p in out.glob("cmsensord-*.mcap") if p not in service]
+    events = [m["message"] for p in own for t, _, m in read_messages(p) if t == "/cm/events"]
+    assert any(m.startswith("retention: deleted the 1 oldest log file(s)") and "to keep this run's files under "
+               "retain_mb = 0.15 MB" in m for m in events), events
+    assert 0 < sum(p.stat().st_size for p in own) < 0.3e6, own
 
 
 def test_a_log_retention_keeps_failing_on_is_one_event_over_many_rotations(tmp_path):

@@ -64,24 +64,57 @@ class ControlServer:
         self.wake: Callable[[], None] | None = None     # wakes the processing loop for a request
         self.status_line: Callable[[], str] | None = None    # the daemon's whole status line (STATUS=)
         self._stop = threading.Event()
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock, self._ident = self._bind()
+        self.thread = self._start()
+
+    def _bind(self) -> tuple[socket.socket, tuple[int, int]]:
+        """A socket bound and listening at ``path`` (one a dead daemon left there is replaced),
+        and the identity (device, inode) of its file."""
+        path = self.path
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             if path.is_socket() and not _answers(path):      # left by a daemon that died
                 path.unlink()
             with _short(path) as name:
-                self.sock.bind(name)
-            self.sock.listen(4)     # accept blocks: close's shutdown wakes it (no wake-ups when idle)
+                sock.bind(name)
+            st = os.stat(path)
+            sock.listen(4)          # accept blocks: close's shutdown wakes it (no wake-ups when idle)
         except OSError:
-            self.sock.close()
+            sock.close()
             raise
-        self.thread = threading.Thread(target=self._serve, name="cmsensord-control", daemon=True)
-        self.thread.start()
+        return sock, (st.st_dev, st.st_ino)
+
+    def _start(self) -> threading.Thread:
+        thread = threading.Thread(target=self._serve, args=(self.sock,), name="cmsensord-control", daemon=True)
+        thread.start()
+        return thread
+
+    def gone(self) -> bool:
+        """Whether the socket's file is no longer there (removed with the output directory's
+        contents, or replaced): clients cannot reach this daemon. One stat."""
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            return True
+        except OSError:
+            return False
+        return (st.st_dev, st.st_ino) != self._ident
+
+    def rebind(self) -> None:
+        """Bind the socket at ``path`` again (:meth:`gone`: its file removed), the accepting
+        thread with it; OSError (the old socket kept) when it cannot be bound."""
+        sock, ident = self._bind()
+        old, thread = self.sock, self.thread
+        self.sock, self._ident = sock, ident
+        _shut(old)
+        thread.join(timeout=2.0)
+        self.thread = self._start()
 
     # ---------------------------------------------------------- server thread
-    def _serve(self) -> None:
+    def _serve(self, sock: socket.socket) -> None:
         while not self._stop.is_set():
             try:
-                conn, _ = self.sock.accept()
+                conn, _ = sock.accept()
             except OSError:
                 return
             with conn, contextlib.suppress(OSError):
@@ -120,14 +153,21 @@ class ControlServer:
                 req.done.set()
 
     def close(self) -> None:
-        """Stop accepting (at once: shutdown wakes the thread's accept) and remove the socket."""
+        """Stop accepting (at once: shutdown wakes the thread's accept) and remove the socket
+        (its file only if it is this daemon's)."""
         self._stop.set()
-        with contextlib.suppress(OSError):
-            self.sock.shutdown(socket.SHUT_RDWR)
-        self.sock.close()
+        _shut(self.sock)
         self.thread.join(timeout=2.0)
-        with contextlib.suppress(OSError):
-            self.path.unlink()
+        if not self.gone():
+            with contextlib.suppress(OSError):
+                self.path.unlink()
+
+
+def _shut(sock: socket.socket) -> None:
+    """Close a listening socket, waking the thread blocked in its accept."""
+    with contextlib.suppress(OSError):
+        sock.shutdown(socket.SHUT_RDWR)
+    sock.close()
 
 
 def handle(proc, body: dict, line: Callable[[], str] | None = None, by: str | None = None) -> dict:

@@ -20,8 +20,9 @@ from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.alarm_store import keep_alarm_state
 from cmsensord.service.control import ControlServer, socket_path
+from cmsensord.service.dir_guard import DirGuard
 from cmsensord.service.heap import keep_freed_memory
-from cmsensord.service.instance import claim_output_dir
+from cmsensord.service.instance import HeldDir, claim_output_dir
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events
 from cmsensord.service.status import StatusPace, run_summary, status_line
@@ -205,23 +206,25 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     against a second daemon (:mod:`.instance`) from before its sink salvages what it finds there.
     ``keep_alarms``: the alarm state is restored from and kept in the output directory's state
     file (:mod:`.alarm_store`), by the daemon holding the directory's lock only."""
-    held = claim_output_dir(cfg.output.dir)
+    fd = claim_output_dir(cfg.output.dir)
+    held = HeldDir(cfg.output.dir, fd) if fd is not None else None
     try:
         return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
                          capture_path=capture_path, metadata=metadata, open_port=open_port,
-                         keep_alarms=keep_alarms and held is not None)
+                         keep_alarms=keep_alarms, held=held)
     finally:
         if held is not None:
-            os.close(held)
+            held.close()
 
 
 def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim_done: threading.Event | None,
               capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None,
-              keep_alarms: bool) -> int:
+              keep_alarms: bool, held: HeldDir | None) -> int:
     keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
     stop.install_reopen()
+    keep_alarms = keep_alarms and held is not None
     capture = _open_capture(capture_path, append=keep_alarms)
     sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon")
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
@@ -250,7 +253,8 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
     refused: ConfigError | None = None
     with source:
         try:
-            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done), control)
+            _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done), control,
+                  DirGuard(held, control, _emitter(proc), time.monotonic()))
         except ReaderDied as died:
             proc.event("reader_died", None, str(died), log_level=logging.ERROR)
             status = EXIT_READER_DIED
@@ -303,6 +307,12 @@ def _control(cfg: Config, proc: Processor) -> ControlServer | None:
         return None
 
 
+def _emitter(proc: Processor) -> Callable[[str, str, int, dict], None]:
+    """Events of the daemon's surroundings (:class:`DirGuard`'s), stamped by the wall clock."""
+    return lambda kind, message, level, details: proc.event(kind, None, message, proc.diag.wall_stamp(),
+                                                           log_level=level, details=details)
+
+
 def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
              control: ControlServer | None, frames: list) -> None:
     """One batch of frames through the Processor, then what comes between batches."""
@@ -328,7 +338,7 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
 
 
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
-          watch: _Watch, control: ControlServer | None = None) -> None:
+          watch: _Watch, control: ControlServer | None, guard: DirGuard) -> None:
     notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
     reader = source.reader
 
@@ -377,6 +387,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             # noticed here (its partial interval written) is made durable by this tick, not the next
             over = watch.done(bool(frames) or bool(source.waiting), now) or stop.event.is_set()
             sink.tick()                 # flush by flush_s, fsync events and by fsync_s, retry a full disk
+            guard.check(now)            # the directory deleted: its lock and socket made again
             if over:
                 break
             if now >= next_status:      # once a second on average (the loop wakes every WAKE_S, or each decision)

@@ -97,6 +97,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     finally:
         progress.close()
         out = sink.close()
+        sink.release()                  # the directory's lock: a daemon may start now
         interrupt.restore()
     if not quiet:
         placed = [f"  {line}" for line in said] + origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) \

@@ -12,7 +12,8 @@ from typing import TextIO
 from cmsensord.config import Config
 from cmsensord.errors import SinkError
 from cmsensord.monitor.events import EventLog
-from cmsensord.service.instance import refuse_if_held
+from cmsensord.service.instance import hold_output_dir
+from cmsensord.sinks.mcap_file import log_files
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.tee import TeeSink
 from cmsensord.terminal_bar import Bar
@@ -32,7 +33,11 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
               publish: bool = False, command: str = "this run", max_lag_s: float | None = None) -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable (for the
     daemon a read-only one is not: it logs nothing until it is writable, :class:`RotatingSink`),
-    InstanceError if a running daemon holds it and ``command`` is not the daemon.
+    InstanceError if a running daemon holds it and ``command`` is not the daemon. A
+    ``command`` that is not the daemon holds the directory's lock while it writes (a daemon
+    started meanwhile is refused; ``release`` after ``close`` lets it go), and its retention
+    counts and deletes its own files only, said in one WARNING line when the directory holds
+    other logs of the prefix (:func:`_say_own_retention`).
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
     With an ``mqtt`` section and ``publish`` (the daemon, ``--simulate``, a ``--publish``
     option), a :class:`TeeSink` that also publishes (its thread started; its ``close`` stops
@@ -43,10 +48,18 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     by which a report tells the runs of its files apart. ``max_lag_s``: the longest lag the
     reorder window is opened to when one is expected (default 10 s;
     :mod:`~cmsensord.sinks.reorder_lag`)."""
-    if command != "the daemon":
-        refuse_if_held(cfg.output.dir, command)
-    sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage,
-                        max_lag_s=max_lag_s, wait_for_disk=command == "the daemon")
+    daemon = command == "the daemon"
+    held = None if daemon else hold_output_dir(cfg.output.dir, command)   # the daemon's is run_live's
+    if not daemon:
+        _say_own_retention(cfg, command)
+    try:
+        sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage,
+                            max_lag_s=max_lag_s, own_files=not daemon, wait_for_disk=daemon)
+    except BaseException:
+        if held is not None:
+            held.close()
+        raise
+    sink.lock = held
     if cfg.mqtt is None:
         return sink
     if not publish:
@@ -69,6 +82,22 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
         log.info("mqtt: %s publishes to %s:%d as client_id %s under %s/", command, cfg.mqtt.host,
                  cfg.mqtt.port, cfg.mqtt.client, cfg.mqtt.prefix)
     return TeeSink(sink, publisher)  # type: ignore[return-value]  # a RotatingSink to its callers
+
+
+def _say_own_retention(cfg: Config, command: str) -> None:
+    """One WARNING line when ``command``'s retention could have deleted logs it did not write:
+    limits set and logs of the prefix in the directory (the service's, say), left alone."""
+    o = cfg.output
+    if not (o.retain_mb or o.min_free_mb):
+        return
+    try:
+        finished, parts = log_files(o.dir, o.prefix)
+    except OSError:
+        return
+    if finished or parts:
+        log.warning("retention: the %d log(s) of prefix %r already in %s are not this %s's: left alone; it "
+                    "counts and deletes only its own under retain_mb and min_free_mb", len(finished) + len(parts),
+                    o.prefix, o.dir, command)
 
 
 def publish_lines(sink: RotatingSink) -> list[str]:

@@ -73,9 +73,19 @@ def free_bytes(path: str | Path) -> int:
     return st.f_bavail * st.f_frsize
 
 
+def _retained(sink: RotatingSink) -> set[Path] | None:
+    """The files retention may count and delete: with the sink's ``own_files`` those its run
+    wrote (finished, being written, kept for salvage); else None, every file of the prefix."""
+    if not sink.own_files:
+        return None
+    cur = sink.current
+    return {*sink.paths, *sink._abandoned, *([cur.part_path] if cur is not None else [])}
+
+
 def apply_retention(sink: RotatingSink) -> None:
     """Delete the oldest finished files (and kept ``.part`` copies) while over ``retain_mb`` or
-    under ``min_free_mb``.
+    under ``min_free_mb``: of the prefix, or with the sink's ``own_files`` (a replay) of this run
+    only, counting only its files (:func:`_retained`).
 
     Oldest: opened first, by the names' order (:mod:`cmsensord.sinks.log_names`), which a
     wall clock stepping back does not change.
@@ -94,6 +104,9 @@ def apply_retention(sink: RotatingSink) -> None:
         free = free_bytes(o.dir) if floor is not None else 0
     except OSError:
         return                           # no directory yet, or unreadable: nothing to do
+    own = _retained(sink)                # a replay's: its own files only, never the daemon's
+    if own is not None:
+        finished, parts = [p for p in finished if p in own], [p for p in parts if p in own]
     sizes = _sizes(finished + parts)
     oldest = [p for p in finished if p in sizes]    # in the order they were opened (log_names)
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
@@ -111,11 +124,16 @@ def apply_retention(sink: RotatingSink) -> None:
         told.low_space = True
         sink.emit(DISK_EVENT, f"{o.dir}: {free / MB:.1f} MB free, below min_free_mb = "
                   f"{o.min_free_mb:g} MB, which deleting the {max(0, len(oldest) - 1)} older "
-                  f"finished log(s) of prefix {o.prefix!r} ({older / MB:.1f} MB; never the "
+                  f"finished log(s) of {_whose(sink)} ({older / MB:.1f} MB; never the "
                   f"newest) cannot reach: none deleted for it",
                   details={"action": "low_space", "bytes": free})
     elif not low:
         told.low_space = False
+
+
+def _whose(sink: RotatingSink) -> str:
+    """Whose logs retention deletes: this run's (a replay's) or the prefix's."""
+    return "this run" if sink.own_files else f"prefix {sink.output.prefix!r}"
 
 
 def _sizes(paths: list[Path]) -> dict[Path, int]:
@@ -194,7 +212,7 @@ def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: i
     why = []
     if o.retain_mb:
         besides = f", besides {kept[1] / MB:.1f} MB in {kept[0]} file(s) passed over" if kept[0] else ""
-        why.append(f"this prefix's files under retain_mb = {o.retain_mb:g} MB "
+        why.append(f"{'this run' if sink.own_files else 'this prefix'}'s files under retain_mb = {o.retain_mb:g} MB "
                    f"(now {total / MB:.1f} MB{besides})")
     if o.min_free_mb:
         why.append(f"at least min_free_mb = {o.min_free_mb:g} MB free "

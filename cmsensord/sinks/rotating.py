@@ -125,8 +125,10 @@ class RotatingSink(ReorderLag):
                  salvage: bool = True,
                  wall_clock: Callable[[], float] = time.time,
                  background_salvage: bool = False, max_lag_s: float | None = None,
-                 wait_for_disk: bool = False):
+                 wait_for_disk: bool = False, own_files: bool = False):
         self.output = output
+        self.own_files = own_files           # retention counts and deletes this run's files only
+        self.lock: Any = None                # the output directory's hold (a replay's): release lets it go
         self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
         self.metadata = metadata or {}
         self.clock = clock
@@ -459,6 +461,12 @@ class RotatingSink(ReorderLag):
         done = self._finish_current()
         self._deliver()
         return done
+
+    def release(self) -> None:
+        """Let the output directory's hold go (``lock``: its ``close``), once."""
+        if self.lock is not None:
+            self.lock.close()
+            self.lock = None
 
     def stop_salvage(self) -> None:
         """Stop the background salvage between two records (a stop signal): the

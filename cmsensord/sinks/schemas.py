@@ -227,7 +227,8 @@ _DETAILS: dict[str, Any] = {
     "description": "further fields, by kind; only those that apply are present",
     "properties": {
         "action": _str("disk_error, salvage: what happened (abandoned, resumed, removed, retention, "
-                       "retention_failed, low_space, salvage_failed, dir_fsync_failed; salvaged, "
+                       "retention_failed, low_space, salvage_failed, dir_fsync_failed, relocked, "
+                       "relock_failed; salvaged, "
                        "deleted, unreadable, ...)"),
         "op": _str("disk_error: the failed operation (open, write, fsync, close, read)"),
         "errno": _str("disk_error: the OS error's name (ENOSPC, EIO, ...)"),
