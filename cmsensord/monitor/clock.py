@@ -17,7 +17,13 @@ anchored to the wall clock at the reset but never before the end of the newest s
 (:meth:`BlockClock.new_segment`), so stamps never go backwards.  Live, the
 board's clock is compared with the wall clock (:meth:`BlockClock.drift`); one
 running fast or slow by more than ``link.max_drift_s`` starts a new segment whose
-stamps follow the board's measured rate.
+stamps follow the board's measured rate.  A silent link is no slow board: the wall time
+without frames is no board time, and the frames after it may be a backlog (a buffer on the
+way, a board that kept what it could not send), old when they come in.  So the board's rate
+is measured from the first look after a silence on, and stamps behind the wall clock that
+run faster than it (or ahead and slower) are on their way back to it, not drifting; the
+frames after the silence are stamped where their t0 puts them in the segment, which for a
+board whose clock kept running is the wall clock.
 
 Live, the wall clock itself may step (an NTP sync after a boot with a stale clock, a
 board without an RTC battery): :class:`WallSteps` tells a step from the wall clock's
@@ -50,6 +56,9 @@ MAX_FILL_S = 10.0
 MAX_FILL_SLOTS = 1000
 #: live: least wall time over which the board's rate is measured
 DRIFT_MIN_WALL_S = 5.0
+#: live: a look at the board's clock this long (s) after the one before follows a silence of the
+#: link (the live loop passes ``link.stall_s``): the rate is measured from there on
+QUIET_S = 2.0
 #: a board ahead of the wall clock is stamped this much slower than its rate until caught up
 CATCH_UP = 0.1
 #: live: a wall clock advancing this much more or less than the monotonic clock between two
@@ -87,6 +96,9 @@ class BlockClock:
         self.seg_wall_ns = 0                   # wall clock and t0 at the segment's start (drift)
         self.seg_t0 = 0
         self.seg_stamp_ns = 0                  # the first stamp of the current segment
+        self.win_wall_ns = 0                   # wall clock and t0 where the rate is measured from
+        self.win_t0 = 0                        # (the segment's start, or the first look after a silence)
+        self.looked_ns = 0                     # wall clock at the last look (:meth:`drift`)
         #: (first slot, anchor_ns, t0_first, slot0_t0, block_len, stamp_fs) of each time base
         self._epochs: list[tuple[int, int, int, int, int, int]] = []
         #: called with the shift [ns] of the stamps at each :meth:`restep` (a step of the wall clock)
@@ -95,8 +107,8 @@ class BlockClock:
     def anchor(self, t0_unwrapped: int, wall_ns: int) -> None:
         """The first frame: its t0 is ``wall_ns``."""
         if self.anchor_ns is None:
-            self.anchor_ns = self.seg_wall_ns = self.seg_stamp_ns = wall_ns
-            self.t0_first = self.seg_t0 = t0_unwrapped
+            self.anchor_ns = self.seg_wall_ns = self.seg_stamp_ns = self.win_wall_ns = wall_ns
+            self.t0_first = self.seg_t0 = self.win_t0 = t0_unwrapped
 
     def is_reset(self, t0_unwrapped: int, last_t0: int) -> bool:
         """:func:`is_reset` at this clock's fs and block length."""
@@ -108,7 +120,7 @@ class BlockClock:
         at ``stamp_fs`` board ticks per second (default fs).  Returns its stamp."""
         self.anchor_ns = self.floor_ns = self.seg_stamp_ns = max(wall_ns, self.floor_ns)
         self.t0_first = t0_unwrapped
-        self.seg_wall_ns, self.seg_t0 = wall_ns, t0_unwrapped
+        self.seg_wall_ns, self.seg_t0 = self.win_wall_ns, self.win_t0 = wall_ns, t0_unwrapped
         self.stamp_fs = stamp_fs or self.fs
         self.segment += 1
         if self.slot0_t0 is not None:
@@ -124,20 +136,33 @@ class BlockClock:
             return wall_ns
         return max(self.floor_ns, wall_ns + self.seg_stamp_ns - self.seg_wall_ns)
 
-    def drift(self, wall_ns: int, max_drift_s: float = 2.0) -> tuple[float, int] | None:
-        """Live: (offset s, measured board ticks per wall second) when the newest stamp is
-        more than ``max_drift_s`` off the wall clock ``wall_ns`` (positive: the board is
-        ahead) and the rate is measured over at least ``DRIFT_MIN_WALL_S``; else None."""
+    def drift(self, wall_ns: int, max_drift_s: float = 2.0,
+              quiet_s: float = QUIET_S) -> tuple[float, int] | None:
+        """Live, looked at after frames came: (offset s, measured board ticks per wall second)
+        when the newest stamp is more than ``max_drift_s`` off the wall clock ``wall_ns``
+        (positive: the board is ahead) and not on its way back to it, the rate measured over at
+        least ``DRIFT_MIN_WALL_S``; else None.  On its way back: behind, the stamps (at
+        ``stamp_fs``) run faster than the wall clock, or ahead, slower (a backlog coming in
+        after a silence; a segment catching up).  A look more than ``quiet_s`` after the one
+        before (the link was silent, or the loop behind) measures the rate from here on: the
+        wall time without frames is no board time."""
         if not self.last_stamp_ns or self.slot0_t0 is None:
             return None
+        looked, self.looked_ns = self.looked_ns, wall_ns
+        if looked and wall_ns - looked > quiet_s * 1e9:
+            self.win_wall_ns, self.win_t0 = wall_ns, self.slot_t0(self.next_slot)
+            return None
         offset = (self.last_stamp_ns - wall_ns) / 1e9
-        wall_s = (wall_ns - self.seg_wall_ns) / 1e9
+        wall_s = (wall_ns - self.win_wall_ns) / 1e9
         if abs(offset) <= max_drift_s or wall_s < DRIFT_MIN_WALL_S:
             return None
-        ticks = self.slot_t0(self.next_slot) - self.seg_t0
+        ticks = self.slot_t0(self.next_slot) - self.win_t0
         if ticks <= 0:
             return None
-        return offset, max(1, round(ticks / wall_s))
+        rate = max(1, round(ticks / wall_s))
+        if rate > self.stamp_fs if offset < 0 else rate < self.stamp_fs:
+            return None                         # on its way back to the wall clock
+        return offset, rate
 
     def rebase(self, wall_ns: int, offset_s: float, rate: int) -> int:
         """A new segment after a drift of ``offset_s`` (see :meth:`drift`): stamps from the
@@ -155,7 +180,7 @@ class BlockClock:
         was = self.floor_ns if self.slot0_t0 is None else self.stamp_ns(self.slot_t0(self.next_slot))
         self.floor_ns = min(self.floor_ns, wall_ns)
         if self.slot0_t0 is None:               # after a rate change, before its first block
-            self.anchor_ns = self.floor_ns = self.seg_stamp_ns = self.seg_wall_ns = wall_ns
+            self.anchor_ns = self.floor_ns = self.seg_stamp_ns = self.seg_wall_ns = self.win_wall_ns = wall_ns
             self.segment += 1
         else:
             self.new_segment(self.slot_t0(self.next_slot), wall_ns, self.rate or self.fs)

@@ -585,8 +585,8 @@ class Processor(Figures):
     def check_wall(self, max_drift_s: float) -> None:
         """Live, with the queue drained: a step of the wall clock re-anchors the stamps to it, a
         board clock off it by more than ``max_drift_s`` starts a new segment at its measured
-        rate (:meth:`Segments.check_wall`)."""
-        self.segments.check_wall(self.clock_ns(), max_drift_s, self._hand_over)
+        rate, measured since the link's last silence (:meth:`Segments.check_wall`)."""
+        self.segments.check_wall(self.clock_ns(), max_drift_s, self._hand_over, self.cfg.link.stall_s)
 
     def wake_t0(self) -> int | None:
         """t0 of the board block whose frames complete the next output (:mod:`.wake`)."""

@@ -8,7 +8,8 @@ starts (:meth:`~cmsensord.monitor.clock.BlockClock.new_segment`), stamped from t
 wall clock at the reset and never before the newest stamp, with a ``time_base``
 event; the seq gap in front of that frame is not a loss (the board restarted its
 seq too).  Live, a board clock off the wall clock by more than ``link.max_drift_s``
-starts a new segment at the board's measured rate, with a ``time_base`` event; a step of
+starts a new segment at the board's measured rate, with a ``time_base`` event (a silent
+link is no drift: the rate is measured from the frames after it on); a step of
 the wall clock itself (an NTP sync) re-anchors the stamps to it at once, with one
 ``time_base`` event, and a step back finishes the log file, so each file keeps its
 messages in time order (:meth:`Segments.check_wall`).
@@ -32,7 +33,7 @@ import numpy as np
 
 from cmsensord.frame_repeats import REPEATS_SHIFT, repeats_before
 from cmsensord.monitor.channels import ChannelSetup
-from cmsensord.monitor.clock import MAX_GAP_S, BlockClock, WallSteps
+from cmsensord.monitor.clock import MAX_GAP_S, QUIET_S, BlockClock, WallSteps
 from cmsensord.monitor.events import EventLog
 from cmsensord.protocol import Frame, FrameType
 
@@ -276,17 +277,20 @@ class Segments:
             counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts}
         return counters
 
-    def check_wall(self, now_ns: int, max_drift_s: float, hand_over: Callable[[], None]) -> None:
+    def check_wall(self, now_ns: int, max_drift_s: float, hand_over: Callable[[], None],
+                   quiet_s: float = QUIET_S) -> None:
         """Live, the wall clock now ``now_ns``: a step of it since the last look re-anchors the
         time base (:meth:`stepped`); else a board clock off it by more than ``max_drift_s`` (0:
-        not checked) starts a new segment at its measured rate (:meth:`drifted`).  ``hand_over``
-        first writes what waits, stamped in the segment it came in."""
+        not checked) and not on its way back to it starts a new segment at its measured rate
+        (:meth:`drifted`); a look more than ``quiet_s`` (``link.stall_s``) after the one before
+        follows a silent link, and the rate is measured from it on (:meth:`BlockClock.drift`).
+        ``hand_over`` first writes what waits, stamped in the segment it came in."""
         step = self.wall.step(now_ns)
         if step is not None:
             hand_over()
             self.stepped(now_ns, step)
             return
-        drift = self.clock.drift(now_ns, max_drift_s) if max_drift_s else None
+        drift = self.clock.drift(now_ns, max_drift_s, quiet_s) if max_drift_s else None
         if drift is not None:
             hand_over()
             self.drifted(now_ns, *drift)
