@@ -104,6 +104,7 @@ def test_capture_now_without_a_daemon_is_a_one_line_error(tmp_path):
     p = run_module("cmsensord", "capture-now", "--socket", str(tmp_path / "none.sock"))
     assert p.returncode == 1 and p.stdout == "" and p.stderr.count("\n") == 1
     assert p.stderr.startswith(f"cmsensord: no daemon answers on {tmp_path / 'none.sock'}: ")
+    assert p.stderr.endswith("; a daemon started with --out DIR answers on --socket DIR/cmsensord.sock)\n")
 
 
 def test_capture_now_to_a_daemon_without_captures_says_how_to_turn_them_on(tmp_path):

@@ -39,11 +39,12 @@ so the AKF bank reports a change of the signal's dynamics early and the level
 part keeps a grown level reported once the bank has adapted to it.  Without
 ``level_alert`` the decider is the paper's.
 
-Extension (not in the paper), in the combined mode: a period whose ratio is below
-``signal_floor`` (a fraction of the healthy baseline) has no signal to judge (a
-sensor, cable or ADC fault, or the machine stopped): its decision keeps F_a and
-S_idx as they were (``Decision.no_signal``), so a dead sensor does not read as a
-healed machine.
+Extension (not in the paper), in the combined mode: a period with a quarter whose ratio
+is below ``signal_floor`` (a fraction of the healthy baseline) has no signal to judge (a
+sensor, cable or ADC fault, or the machine stopped), nor has a period with no observation
+at all after one such: its decision keeps F_a and S_idx as they were
+(``Decision.no_signal``), so a dead sensor does not read as a healed machine, and the
+period the signal goes (or comes back) in, half dead, is not judged either.
 """
 
 from __future__ import annotations
@@ -96,7 +97,8 @@ class Decision:
     severity_level: np.ndarray  # (C,) S_level (NaN in the paper's mode)
     held: np.ndarray          # (C, n) consecutive decisions F_a was kept by the hysteresis alone
     held_max: int = 0         # the largest of ``held``
-    no_signal: np.ndarray | None = None  # (C,) combined: level below signal_floor, F_a and S_idx held
+    no_signal: np.ndarray | None = None  # (C,) combined: no signal in the period, F_a and S_idx held
+    quietest: np.ndarray | None = None   # (C,) combined: the lowest level ratio of the period's quarters
 
 
 class AnomalyDecider:
@@ -133,6 +135,9 @@ class AnomalyDecider:
         self.signal_floor = np.broadcast_to(np.asarray(signal_floor, dtype=np.float64), (n_channels,)).copy()
         self._level = np.full((self.period, n_channels), np.nan)
         self._last_severity = np.zeros(n_channels)
+        self._quiet = np.zeros(n_channels, dtype=bool)   # a quarter of the period below signal_floor
+        self._quietest = np.full(n_channels, np.nan)
+        self._lost = np.zeros(n_channels, dtype=bool)    # the last decision had no signal
 
     @property
     def combined(self) -> bool:
@@ -185,8 +190,10 @@ class AnomalyDecider:
         prev = self.anomaly.copy()
         transient = self.periods < self.transient_periods
         level, s_level = self._level_part(transient)
-        lost = None if not self.combined or transient else \
-            np.isfinite(level) & (level < self.signal_floor)
+        lost = None
+        if self.combined and not transient:     # no signal: a quiet quarter, or none at all while lost
+            lost = self._quiet | (np.isnan(level) & self._lost)
+            self._lost = lost
         if not transient:
             fr = self.f_r[:, None]
             set_ = self.cnt >= fr                       # cnt >= f_r  -> F_a = 1
@@ -209,6 +216,7 @@ class AnomalyDecider:
             f_r=self.f_r.copy(), missing=self.missing.copy(),
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
             held_max=int(self.held.max()), no_signal=lost,
+            quietest=self._quietest.copy() if self.combined else None,
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0
@@ -271,8 +279,12 @@ class AnomalyDecider:
         if not self.combined:
             return nan, nan
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period
-            level = np.sqrt(np.nanmean(np.square(self._level), axis=0))
+            warnings.simplefilter("ignore", RuntimeWarning)   # an all-missing period (or quarter)
+            sq = np.square(self._level)
+            level = np.sqrt(np.nanmean(sq, axis=0))
+            quarters = np.sqrt(np.stack([np.nanmean(q, axis=0) for q in np.array_split(sq, 4) if len(q)]))
+            self._quietest = np.nanmin(quarters, axis=0)
+        self._quiet = self._quietest < self.signal_floor      # NaN (no quarter received): not quiet
         self._level[:] = np.nan
         if transient:
             return level, np.zeros(self.C)

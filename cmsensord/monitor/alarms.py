@@ -20,7 +20,8 @@ the live run gave.  A change of the machine's operating state is an
 ``alarms.operating`` source the manager runs for it even without rules.  A rule level given
 as k x a baseline that ``alarms.baselines`` lacks for a channel is said once, with the first
 message: an ``alarm_no_baseline`` event (a warning) naming the rule and the channel.  A record
-whose ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline has no signal (a
+whose ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline (``alarms.baselines``,
+else the channel's ``monitor.baseline``) has no signal (a
 sensor fault, or the machine stopped): the channel's rules hold (not judged on it; a delay
 pending on it starts again with its next value), as its severity does (the ``signal_lost``
 event of :mod:`cmsensord.monitor.severity`).
@@ -136,6 +137,7 @@ class Alarms:
         self._kept: dict[str, dict[str, Any]] = {}        # what the store holds
         self._unsaved: dict[str, dict[str, Any]] | None = None   # what it could not take (retried)
         self._retry_ns = 0
+        self._no_signal: set[str] = set()     # channels whose last severity decision had no signal
 
     def keep(self, store: StateStore, saved: dict[str, dict[str, Any]]) -> list:
         """Keep the alarm state in ``store`` from now on and put ``saved`` (what it held) back
@@ -232,6 +234,7 @@ class Alarms:
             if mgr.operating.state != was:
                 return [self._state_event(stamp, was, mgr.operating.state, speed)] + self._after(stamp, tr)
         elif m.schema == "severity":
+            (self._no_signal.add if msg.get("signal_lost") else self._no_signal.discard)(ch)
             tr = mgr.values(stamp, ch, {"severity_index": float(msg["severity_index"])})
         else:
             tr = mgr.values(stamp, ch, _order_values(msg))
@@ -239,11 +242,14 @@ class Alarms:
 
     def _judged(self, ch: str, values: dict[str, float]) -> dict[str, float]:
         """``values`` of a record of ``ch``; none but the operating state's level when its
-        ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline (no signal: the
-        channel's alarms hold, as its severity does)."""
+        ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline, or the channel's
+        last severity decision had no signal (no signal: the channel's alarms hold, as its
+        severity does)."""
         mon = next((c.monitor for c in self.cfg.channels if c.name == ch), self.cfg.monitor)
-        base, level = self.rules.baseline(ch, "accel_rms"), values.get("accel_rms")
-        if not mon.signal_floor or not base or level is None or not level < mon.signal_floor * base:
+        base = self.rules.baseline(ch, "accel_rms") or mon.baseline     # else the bank's block RMS
+        level = values.get("accel_rms")
+        quiet = ch in self._no_signal or (level is not None and base is not None and level < mon.signal_floor * base)
+        if not mon.signal_floor or not quiet:
             return values
         keep = self.rules.operating.level_indicator if self.rules.operating.source == "level" else None
         return {k: v for k, v in values.items() if k == keep}

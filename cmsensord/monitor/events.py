@@ -69,7 +69,7 @@ LOG_LEVEL = {
     "alarm_alert": logging.WARNING, "alarm_danger": logging.ERROR, "alarm_clear": logging.WARNING,
     "alarm_ack": logging.WARNING, "alarm_no_baseline": logging.WARNING,
     "alarm_restored": logging.WARNING, "alarm_not_restored": logging.WARNING,
-    "alarm_state_error": logging.WARNING, "signal_lost": logging.WARNING,
+    "alarm_state_error": logging.WARNING, "signal_lost": logging.WARNING, "signal_back": logging.WARNING,
     "lines_unresolved": logging.WARNING,
 }
 
@@ -77,7 +77,7 @@ LOG_LEVEL = {
 UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failure",
                        "decision_rule", "anomaly_held", "severity_change",
                        "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack", "alarm_no_baseline",
-                       "alarm_restored", "alarm_not_restored", "capture"})
+                       "alarm_restored", "alarm_not_restored", "capture", "signal_lost", "signal_back"})
 #: records wait until the processed stream is this far past them (events reported late; the
 #: sink's log-time window learns this lateness, so it is also what a kill -9 may cost the log)
 HOLD_S = 1.0

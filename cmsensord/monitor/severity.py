@@ -47,6 +47,7 @@ class ChannelView:
     decisions: int = 0
     judged: int = 0               # decisions after the filters' transient
     failures: int = 0
+    no_signal: bool = False       # the last decision had no signal: its severity is held
     timeline: SeverityTimeline = field(default_factory=SeverityTimeline)
 
 
@@ -203,7 +204,9 @@ class SeverityChain:
         """``signal_lost`` when channel ``c``'s decision has no signal (its level below
         ``monitor.signal_floor``), ``signal_back`` when it has again."""
         name, ratio = self.channels[c].name, float(d.level[c])
-        lost = self.no_signal[c] = bool(d.no_signal is not None and d.no_signal[c])
+        lost = self.no_signal[c] = self.views[c].no_signal = bool(d.no_signal is not None and d.no_signal[c])
+        if lost and d.quietest is not None:
+            ratio = float(d.quietest[c])        # the quarter the signal went in
         what = {"level_ratio": ratio, "severity_index": sev}
         if lost:
             floor = self.channels[c].monitor.signal_floor

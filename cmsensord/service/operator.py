@@ -57,7 +57,8 @@ def _ask(args: argparse.Namespace, body: dict) -> dict | None:
         return request(path, body)
     except (OSError, ValueError) as exc:
         print(f"cmsensord: no daemon answers on {path}: {getattr(exc, 'strerror', None) or exc} "
-              "(is it running? give --config FILE or --socket PATH)", file=sys.stderr)
+              "(is it running? give --config FILE or --socket PATH; a daemon started with --out DIR "
+              "answers on --socket DIR/cmsensord.sock)", file=sys.stderr)
         return None
 
 

@@ -60,7 +60,8 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
             lines.append(f"  {v.name}: no decision (the recording is shorter than two decision periods "
                          f"of {period:.3g} s; the first is the filters' transient)")
             continue
-        lines.append(f"  {v.name}: final severity {v.severity:.1f}, max {v.max_severity:.1f}, "
+        held = " (held: no signal, see signal_lost)" if v.no_signal else ""
+        lines.append(f"  {v.name}: final severity {v.severity:.1f}{held}, max {v.max_severity:.1f}, "
                      f"{v.failures} failure event(s), {v.decisions} decisions")
         lines.append(f"  {v.name}: {v.timeline.render()}")
     lines += placed
