@@ -112,28 +112,20 @@ def test_rms_mode_captures_the_block_rms(tmp_path):
     assert not any(topic == "/cm/ch0/capture_envelope" for topic, _, _ in msgs)
 
 
-def test_a_bad_capture_setting_is_one_line(raw_cap, tmp_path):
+@pytest.mark.parametrize("triggers, said", [
+    ("alarm, failure", "unknown trigger 'alarm' (one of alarm_alert, alarm_danger, alarm_clear, severity_change, "
+     "anomaly_onset, failure, time_base, tacho_lost, operating_state, manual) (got 'alarm')"),
+    # order alarms are alarm-manager rules order_<name>: their events are alarm_alert and
+    # alarm_danger, so a capture on order_alarm would never be taken
+    ("failure, order_alarm", "order_alarm events are no longer written: order alarms are rules order_<name> "
+     "of the alarm manager, use alarm_alert / alarm_danger (got 'order_alarm')"),
+])
+def test_a_bad_capture_trigger_is_one_line(raw_cap, tmp_path, triggers, said):
     cfg = tmp_path / "bad.yaml"
-    cfg.write_text("capture:\n  triggers: [alarm, failure]\n")
+    cfg.write_text(f"capture:\n  triggers: [{triggers}]\n")
     p = cmsensord("replay", str(raw_cap), "--config", str(cfg), "--out", str(tmp_path))
     assert p.returncode == 78                            # EXIT_CONFIG
-    assert p.stderr.strip().splitlines() == [
-        f"cmsensord: configuration error: {cfg}: capture.triggers: unknown trigger 'alarm' (one of alarm_alert, "
-        "alarm_danger, alarm_clear, severity_change, anomaly_onset, failure, time_base, tacho_lost, "
-        "operating_state, manual) (got 'alarm')"]
-
-
-def test_an_order_alarm_trigger_is_refused_as_no_event_is_written_of_that_kind(raw_cap, tmp_path):
-    """Order alarms are alarm-manager rules order_<name>: their events are alarm_alert and
-    alarm_danger, so a capture on order_alarm would never be taken."""
-    cfg = tmp_path / "order.yaml"
-    cfg.write_text("capture:\n  triggers: [failure, order_alarm]\n")
-    p = cmsensord("replay", str(raw_cap), "--config", str(cfg), "--out", str(tmp_path))
-    assert p.returncode == 78                            # EXIT_CONFIG
-    assert p.stderr.strip().splitlines() == [
-        f"cmsensord: configuration error: {cfg}: capture.triggers: order_alarm events are no longer written: "
-        "order alarms are rules order_<name> of the alarm manager, use alarm_alert / alarm_danger "
-        "(got 'order_alarm')"]
+    assert p.stderr.strip().splitlines() == [f"cmsensord: configuration error: {cfg}: capture.triggers: {said}"]
 
 
 @pytest.mark.parametrize("carrier, band", [(5000.0, None), (1500.0, (1000.0, 2000.0))])
