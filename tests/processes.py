@@ -94,6 +94,22 @@ def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subproce
                  stderr=subprocess.PIPE, text=True)
 
 
+def daemon_on_short_board(tmp_path, *extra) -> tuple[subprocess.Popen, str]:
+    """A healthy board of 3 s at 1x (flow control; it holds its pty after) and the daemon on it
+    (``extra`` arguments), stopped a second after the board has sent everything: the daemon
+    (exited 0, no traceback) and its stderr."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--duration", "3", "--link", str(link), "--flow-control")
+    d = start_daemon(tmp_path, link, *extra)
+    json.loads(sim.stdout.readline())                # the board has sent everything
+    time.sleep(1.0)
+    err = stop(d)
+    sim.terminate()
+    sim.wait(timeout=5)
+    assert d.returncode == 0 and "Traceback" not in err, err
+    return d, err
+
+
 def board_then_daemon(tmp_path, *board_args, config: str = "") -> dict:
     """firmware_sim on a pty (``board_args``; published at tmp_path/ttyBOARD, with flow control,
     so a daemon slow to start loses no byte) and the daemon on it, its bytes captured to

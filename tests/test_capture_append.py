@@ -3,25 +3,14 @@ captured (a service restart does not overwrite it), says so, and a replay reads 
 
 from __future__ import annotations
 
-import json
 import re
-import time
 
-from processes import cmsensord, start_board, start_daemon, stop
+from processes import cmsensord, daemon_on_short_board
 
 
 def _run(tmp_path, cap) -> str:
     """One board of 3 s at 1x (it holds its pty after), the daemon capturing it: its stderr."""
-    link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--duration", "3", "--link", str(link), "--flow-control")
-    d = start_daemon(tmp_path, link, "--capture", str(cap))
-    json.loads(sim.stdout.readline())                # the board has sent everything
-    time.sleep(1.0)
-    err = stop(d)
-    sim.terminate()
-    sim.wait(timeout=5)
-    assert d.returncode == 0 and "Traceback" not in err, err
-    return err
+    return daemon_on_short_board(tmp_path, "--capture", str(cap))[1]
 
 
 def test_a_restarted_daemon_appends_to_its_capture(tmp_path):

@@ -4,25 +4,14 @@ empty configuration file in every command that reads one."""
 
 from __future__ import annotations
 
-import json
-import time
-
 from cmsensord.sinks.mcap_sink import read_messages
-from processes import cmsensord, run_module, start_board, start_daemon, stop
+from processes import cmsensord, daemon_on_short_board, run_module
 
 
 def test_the_daemon_writes_to_out_and_traces_with_akf_trace(tmp_path):
     """`cmsensord --config FILE --out DIR --akf-trace`: its logs in DIR (not output.dir), with
     /cm/<ch>/akf, as --simulate and replay do with the same options."""
-    link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--duration", "3", "--link", str(link), "--flow-control")
-    d = start_daemon(tmp_path, link, "--out", str(tmp_path / "out"), "--akf-trace")
-    json.loads(sim.stdout.readline())                # the board has sent everything
-    time.sleep(1.0)
-    err = stop(d)
-    sim.terminate()
-    sim.wait(timeout=5)
-    assert d.returncode == 0 and "Traceback" not in err, err
+    _, err = daemon_on_short_board(tmp_path, "--out", str(tmp_path / "out"), "--akf-trace")
     assert not (tmp_path / "logs").exists()                                 # the config's output.dir
     (log,) = (tmp_path / "out").glob("*.mcap")
     assert f"MCAP log: {log}" in err.splitlines()
