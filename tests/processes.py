@@ -94,13 +94,15 @@ def start_daemon(tmp_path, port, *extra, config="", max_drift_s=0.0) -> subproce
                  stderr=subprocess.PIPE, text=True)
 
 
-def daemon_on_short_board(tmp_path, *extra) -> tuple[subprocess.Popen, str]:
-    """A healthy board of 3 s at 1x (flow control; it holds its pty after) and the daemon on it
-    (``extra`` arguments), stopped a second after the board has sent everything: the daemon
+def daemon_on_short_board(tmp_path, *extra, config: str = "",
+                          board: tuple[str, ...] = ("--duration", "3")) -> tuple[subprocess.Popen, str]:
+    """A healthy board (``board``: firmware_sim's arguments, default 3 s at 1x; flow control; it
+    holds its pty after) and the daemon on it (``extra`` arguments, ``config`` as for
+    :func:`start_daemon`), stopped a second after the board has sent everything: the daemon
     (exited 0, no traceback) and its stderr."""
     link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--duration", "3", "--link", str(link), "--flow-control")
-    d = start_daemon(tmp_path, link, *extra)
+    sim = start_board("--scenario", "healthy", *board, "--link", str(link), "--flow-control")
+    d = start_daemon(tmp_path, link, *extra, config=config)
     json.loads(sim.stdout.readline())                # the board has sent everything
     time.sleep(1.0)
     err = stop(d)

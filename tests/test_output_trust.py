@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 from cmsensord.sinks.mcap_read import read_messages
 from cmsensord.sinks.mcap_sink import McapSink
 from fakes import FakeClock
-from processes import ENV, ROOT, board_on_pty, start_daemon, stop
+from processes import ENV, ROOT, board_on_pty, daemon_on_short_board, start_daemon, stop
 
 T0 = 1_700_000_000_000_000_000
 STEM = "cmsensord-20231114T221320Z"
@@ -132,11 +132,8 @@ def test_an_unreachable_free_space_floor_keeps_the_history_and_says_so(tmp_path)
     McapSink(logs, wall_clock=lambda: 1_577_836_800.0).close()
     old = logs / "cmsensord-20200101T000000Z.mcap"
     assert old.exists()
-    cfg = tmp_path / "cmsensord.yaml"
-    cfg.write_text("output:\n  min_free_mb: 1000000000\n  status_line: false\n")
-    run = _simulate(tmp_path, "--config", str(cfg))
-    assert run.returncode == 0, run.stderr
-    (line,) = _lines(run.stderr, "disk_error")
+    _, err = daemon_on_short_board(tmp_path, config="  min_free_mb: 1000000000\n")
+    (line,) = _lines(err, "disk_error")
     assert re.fullmatch(
         rf"ERROR disk_error: {re.escape(str(logs))}: [0-9.]+ MB free, below min_free_mb = "
         r"1e\+09 MB, which deleting the 0 older finished log\(s\) of prefix 'cmsensord' "

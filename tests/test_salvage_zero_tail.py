@@ -24,7 +24,7 @@ from mcap.opcode import Opcode
 from cmsensord.sinks.mcap_records import RecordWalker
 from cmsensord.sinks.mcap_salvage import salvage
 from cmsensord.sinks.mcap_sink import log_files
-from processes import ENV, board_on_pty, cmsensord, spawn, stop
+from processes import ENV, board_on_pty, cmsensord, daemon_on_short_board, spawn, stop
 
 pytestmark = pytest.mark.process
 SIZE = 3_000_000      # the .part's size after the power cut
@@ -119,11 +119,8 @@ def test_kept_damaged_and_unreadable_copies_count_in_retain_mb_and_go_first(tmp_
     sim = tmp_path / "s"
     assert cmsensord("--simulate", "--duration", "2", "--speed", "20", "--out", str(sim)).returncode == 0
     shutil.copy(log_files(sim, "cmsensord")[0][0], newer)         # a real log, 0.1 MB at most
-    cfg = tmp_path / "c.yaml"
-    cfg.write_text("output:\n  rotate_mb: 0.2\n  retain_mb: 1\n  min_free_mb: 0\n  status_line: false\n")
-    p = cmsensord("--simulate", "--duration", "2", "--speed", "20", "--config", str(cfg), "--out", str(logs))
-    assert p.returncode == 0, p.stderr[-3000:]
+    _, err = daemon_on_short_board(tmp_path, config="  rotate_mb: 0.2\n  retain_mb: 1\n  min_free_mb: 0\n")
     assert (f"INFO disk_error: retention: deleted the 2 oldest log file(s) (3.0 MB: {damaged.name}, "
             f"{unreadable.name}) to keep this prefix's files under retain_mb = 1 MB (now 0.0 MB)"
-            in p.stderr.splitlines()), p.stderr[-3000:]
+            in err.splitlines()), err[-3000:]
     assert newer.exists() and not damaged.exists() and not unreadable.exists()

@@ -200,18 +200,21 @@ def can_wait(frames: list[Frame], start: int, wake: int | None, far: int) -> boo
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None, open_port: Callable | None = None,
-             keep_alarms: bool = True) -> int:
+             simulated: bool = False) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
     how the reader opens the port, default pyserial's ``Serial``), the output directory held
     against a second daemon (:mod:`.instance`) from before its sink salvages what it finds there.
-    ``keep_alarms``: the alarm state is restored from and kept in the output directory's state
-    file (:mod:`.alarm_store`), by the daemon holding the directory's lock only."""
+    The alarm state is restored from and kept in the output directory's state file
+    (:mod:`.alarm_store`) by the daemon holding the directory's lock only, and a capture is
+    appended to; ``simulated`` (``--simulate``: a simulated board, not the machine): neither, and
+    retention counts and deletes only this run's files (the machine's logs of the prefix are
+    left alone)."""
     fd = claim_output_dir(cfg.output.dir)
     held = HeldDir(cfg.output.dir, fd) if fd is not None else None
     try:
         return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
                          capture_path=capture_path, metadata=metadata, open_port=open_port,
-                         keep_alarms=keep_alarms, held=held)
+                         simulated=simulated, held=held)
     finally:
         if held is not None:
             held.close()
@@ -219,14 +222,15 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
 
 def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim_done: threading.Event | None,
               capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None,
-              keep_alarms: bool, held: HeldDir | None) -> int:
+              simulated: bool, held: HeldDir | None) -> int:
     keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
     stop.install_reopen()
-    keep_alarms = keep_alarms and held is not None
+    keep_alarms = not simulated and held is not None
     capture = _open_capture(capture_path, append=keep_alarms)
-    sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon")
+    sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon",
+                     own_files=simulated)
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)
     queue = source.queue
     sink.wake = queue.poke              # a salvage event is made durable at once, not a batch later

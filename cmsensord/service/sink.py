@@ -30,14 +30,16 @@ def run_id() -> str:
 
 
 def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool = False,
-              publish: bool = False, command: str = "this run", max_lag_s: float | None = None) -> RotatingSink:
+              publish: bool = False, command: str = "this run", max_lag_s: float | None = None,
+              own_files: bool | None = None) -> RotatingSink:
     """The rotating MCAP sink of ``cfg.output``; SinkError if the directory is unusable (for the
     daemon a read-only one is not: it logs nothing until it is writable, :class:`RotatingSink`),
     InstanceError if a running daemon holds it and ``command`` is not the daemon. A
     ``command`` that is not the daemon holds the directory's lock while it writes (a daemon
     started meanwhile is refused; ``release`` after ``close`` lets it go), and its retention
     counts and deletes its own files only, said in one WARNING line when the directory holds
-    other logs of the prefix (:func:`_say_own_retention`).
+    other logs of the prefix (:func:`_say_own_retention`); so does the daemon on a simulated
+    board (``own_files``: True).
     ``background_salvage``: leftover ``.part`` files are salvaged by a thread (the daemon).
     With an ``mqtt`` section and ``publish`` (the daemon, ``--simulate``, a ``--publish``
     option), a :class:`TeeSink` that also publishes (its thread started; its ``close`` stops
@@ -50,11 +52,12 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     :mod:`~cmsensord.sinks.reorder_lag`)."""
     daemon = command == "the daemon"
     held = None if daemon else hold_output_dir(cfg.output.dir, command)   # the daemon's is run_live's
-    if not daemon:
-        _say_own_retention(cfg, command)
+    own = not daemon if own_files is None else own_files
+    if own:
+        _say_own_retention(cfg, "simulated run" if daemon else command)
     try:
         sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage,
-                            max_lag_s=max_lag_s, own_files=not daemon, wait_for_disk=daemon)
+                            max_lag_s=max_lag_s, own_files=own, wait_for_disk=daemon)
     except BaseException:
         if held is not None:
             held.close()
