@@ -46,6 +46,18 @@ def test_on_delay_needs_the_level_held_continuously():
     assert ev == [(7, "alarm_alert", "vel/ch0")]
 
 
+def test_on_delay_restarts_when_the_value_falls_inside_the_deadband():
+    """2.05 reaches 2.0; 1.95 is under it (inside the 5 % deadband): the delay starts again."""
+    m = manager([{**RULE, "on_delay_s": 2}])
+    assert run(m, [2.05, 1.95, 1.95, 1.95, 2.05, 2.05, 2.05]) == [(6, "alarm_alert", "vel/ch0")]
+    m = manager([{**RULE, "on_delay_s": 2, "vote": 2}], channels=("a", "b"))
+    out = []
+    for k, v in enumerate([2.05, 1.95, 1.95, 1.95, 2.05, 2.05, 2.05]):
+        for ch in "ab":
+            out += [(k, t.kind) for t in m.record(k * S, ch, {"velocity_rms_mm_s": v})]
+    assert out == [(6, "alarm_alert")]
+
+
 def test_off_delay_holds_the_alarm():
     m = manager([{**RULE, "off_delay_s": 2}])
     ev = run(m, [3, 1, 3, 1, 1, 1, 1])

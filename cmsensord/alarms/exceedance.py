@@ -2,7 +2,9 @@
 
 Per level: exceeded once the value reaches it, and still exceeded until the value
 falls below level x (1 - deadband).  The exceedance level is 2 (danger exceeded),
-1 (alert exceeded) or 0.  A level that is None is never exceeded.
+1 (alert exceeded) or 0; ``reached`` is the level the latest value itself is at or above (no
+deadband): an alarm's on-delay counts that, its off-delay the exceedance level
+(:class:`~cmsensord.alarms.state.AlarmState`).  A level that is None is never exceeded.
 """
 
 from __future__ import annotations
@@ -16,9 +18,11 @@ __all__ = ["Exceedance"]
 class Exceedance:
     deadband: float = 0.05          # fraction of the level
     over: list[bool] = field(default_factory=lambda: [False, False])
+    reached: int = 0                # the level the latest value is at or above, no deadband
 
     def step(self, value: float, alert: float | None, danger: float | None) -> int:
-        """The exceedance level of ``value`` (see module docstring)."""
+        """The exceedance level of ``value`` (see module docstring); ``reached`` set too."""
+        self.reached = 2 if danger is not None and value >= danger else 1 if alert is not None and value >= alert else 0
         for i, level in enumerate((alert, danger)):
             if level is None:
                 self.over[i] = False
@@ -30,3 +34,4 @@ class Exceedance:
 
     def reset(self) -> None:
         self.over = [False, False]
+        self.reached = 0

@@ -60,7 +60,7 @@ class Alarm:
     state: AlarmState
     value: float | None = None
     levels: tuple[float | None, float | None] = (None, None)
-    inputs: dict[str, int] = field(default_factory=dict)   # voting: each channel's exceedance
+    inputs: dict[str, tuple[int, int]] = field(default_factory=dict)   # voting: each channel's (exceedance, reached)
     latest: dict[str, float] = field(default_factory=dict)  # each channel's newest value (shown: the highest)
 
     def row(self) -> dict:
@@ -81,6 +81,11 @@ class Alarm:
         if s.changed_ns is not None:
             out["since"] = {"sec": s.changed_ns // 1_000_000_000, "nsec": s.changed_ns % 1_000_000_000}
         return out
+
+
+def _voted(levels: list[int], vote: int) -> int:
+    """The highest level at least ``vote`` of the channels' ``levels`` are at (0: none)."""
+    return max((lv for lv in (2, 1) if sum(v >= lv for v in levels) >= vote), default=0)
 
 
 class AlarmManager:
@@ -151,12 +156,13 @@ class AlarmManager:
                 a.value, a.levels = max(a.latest.values()), levels
                 if not running:
                     continue
-                x = self.exceed[(r.name, channel)].step(value, *levels)
+                exceed = self.exceed[(r.name, channel)]
+                x, reached = exceed.step(value, *levels), exceed.reached
                 if a.channel is None:
-                    a.inputs[channel] = x
-                    x = max((lv for lv in (2, 1) if sum(v >= lv for v in a.inputs.values()) >= r.vote), default=0)
+                    a.inputs[channel] = (x, reached)
+                    x, reached = (_voted([v[k] for v in a.inputs.values()], r.vote) for k in (0, 1))
                 before = a.state.level
-                out += self._apply(a, t_ns, before, a.state.step(t_ns, x))
+                out += self._apply(a, t_ns, before, a.state.step(t_ns, x, reached))
         return out
 
     def _operate(self, t_ns: int, channel: str, values: dict[str, float],

@@ -1,15 +1,15 @@
 """One alarm's state: the exceedance level in, the alarm level out, with delays and latching.
 
-Levels: 0 normal, 1 alert, 2 danger.  For each level L the alarm turns on once
-the input has been at or above L for ``on_delay_s`` of stream time, and off once
-it has been below L for ``off_delay_s``; the output is the highest level that is
-on.  A latching alarm shows the highest level it reached until acknowledged; an
-acknowledgement then drops it to the level that is on now.  While suppressed
-(machine not running) nothing turns on, the timers restart, and the non-latched
-level is off.  A delay counts the stream's own time: when the stamps are re-anchored (a step
-of the wall clock) :meth:`AlarmState.shift` moves its timers with them, so a delay straddling the
-step lasts as if there had been none; an input stamped before the start of a delay (stamps gone
-back unannounced) restarts it there, never measuring a negative time.
+Levels: 0 normal, 1 alert, 2 danger. For each level L the alarm turns on once the value has
+reached L (the input ``reached``, no deadband) for ``on_delay_s`` of stream time without a
+break, and off once the input (the exceedance level, with its deadband) has been below L for
+``off_delay_s``; the output is the highest level that is on. A latching alarm shows the highest
+level it reached until acknowledged; an acknowledgement then drops it to the level that is on
+now. While suppressed (machine not running) nothing turns on, the timers restart, and the
+non-latched level is off. A delay counts the stream's own time: when the stamps are re-anchored
+(a step of the wall clock) :meth:`AlarmState.shift` moves its timers with them, so a delay
+straddling the step lasts as if there had been none; an input stamped before the start of a
+delay (stamps gone back unannounced) restarts it there, never measuring a negative time.
 
 :meth:`AlarmState.resume` puts back what a saved state held (a daemon's restart:
 :mod:`.saved`): the latch, the acknowledgement, and the live level at the stop as a
@@ -61,11 +61,12 @@ class AlarmState:
         one until confirmed."""
         return max(self.live, self.latched, self.restored)
 
-    def step(self, t_ns: int, x: int) -> int:
-        """The input level ``x`` at ``t_ns``; returns the level shown after it."""
+    def step(self, t_ns: int, x: int, reached: int | None = None) -> int:
+        """The input level ``x`` at ``t_ns`` (``reached``: the level the value itself reached,
+        default ``x``; see module docstring); returns the level shown after it."""
         before = self.level
         for i in (0, 1):
-            want = x >= i + 1
+            want = (x if self.on[i] or reached is None else reached) >= i + 1
             if want == self.on[i]:
                 self.since[i] = None
                 continue
