@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from cmsensord.alarms import AlarmManager
+from cmsensord.alarms.state import AlarmState
 from cmsensord.config import ConfigError, config_from_dict
 
 S = 1_000_000_000
@@ -88,10 +89,32 @@ def test_ack_of_an_active_alarm_keeps_it_and_marks_it():
     t = m.ack(2 * S, "vel/ch0")
     assert [(x.kind, x.level) for x in t] == [("alarm_ack", 1), ("alarm_alert", 1)]
     row = m.alarms["vel/ch0"].row()
-    assert (row["level"], row["acknowledged"], row["latched"]) == ("alert", True, True)
+    assert (row["level"], row["acknowledged"], row["latched"]) == ("alert", True, False)
     with pytest.raises(KeyError):
         m.ack(3 * S, "nope")
     assert m.ack(4 * S) == []            # `ack --all` again: nothing left to acknowledge, no second event
+
+
+def test_an_alarm_acknowledged_while_active_clears_when_the_value_falls_and_latches_a_new_rise():
+    m = manager([{**RULE, "latch": True}])
+    run(m, [5])
+    assert [x.kind for x in m.ack(1 * S, "vel/ch0")] == ["alarm_ack"]       # danger, still on
+    out = [(k, t.kind) for k, v in enumerate([5, 1, 3, 1], start=2)
+           for t in m.record(k * S, "ch0", {"velocity_rms_mm_s": v})]
+    assert out == [(3, "alarm_clear"), (4, "alarm_alert")]
+    row = m.alarms["vel/ch0"].row()
+    assert (row["level"], row["live"], row["latched"], row["acknowledged"]) == ("alert", "normal", True, False)
+
+
+def test_a_saved_acknowledged_latch_is_not_put_back_as_a_latch():
+    """A state file saying an acknowledged alarm is latched at danger (as written while an alarm
+    acknowledged on could re-latch) resumes as the acknowledged live level, not a latch."""
+    s = AlarmState(latch=True)
+    s.resume(0, 2, True, 5 * S)
+    assert (s.level, s.latched, s.acknowledged) == (0, 0, False)
+    s = AlarmState(latch=True)
+    s.resume(0, 2, False, 5 * S)
+    assert (s.level, s.latched) == (2, 2)
 
 
 def test_startup_suppression_by_speed():

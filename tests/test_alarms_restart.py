@@ -268,3 +268,28 @@ def test_a_latch_raised_on_a_full_disk_is_saved_once_space_returns(small_fs, tmp
     assert f"INFO alarm state: written to {logs / 'cmsensord-alarms.json'} again" in err, err[-3000:]
     saved = json.loads((logs / "cmsensord-alarms.json").read_text())["alarms"]
     assert saved["sev/ch0"]["latched"] == "danger", saved
+
+
+def test_a_latched_alarm_acknowledged_while_active_clears_when_the_value_falls_and_stays_cleared(tmp_path):
+    """`cmsensord ack` while the latched danger is still on (the operator's usual action); the
+    faulty board swapped for a healthy one: the alarm clears (before, it stayed at danger,
+    'acknowledged', refusing any further ack, over a restart too)."""
+    link = tmp_path / "ttyBOARD"
+    cfg = str(tmp_path / "cmsensord.yaml")
+    board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
+    d = start_daemon(tmp_path, link, config=LATCHED)
+    try:
+        wait_row(tmp_path, lambda r: r["live"] == "danger")
+        acked = run_module("cmsensord", "ack", "--all", "--config", cfg)
+        assert acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
+        board.terminate()
+        board.wait(timeout=5)
+        board = start_board("--scenario", "healthy", "--speed", "20", "--link", str(link))
+        row = wait_row(tmp_path, lambda r: r["live"] == "normal")
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert (row["level"], row["latched"], row["acknowledged"]) == ("normal", False, False), row
+    assert [m["kind"] for m in alarm_events(tmp_path / "logs")][-2:] == ["alarm_ack", "alarm_clear"], err[-3000:]
+    assert json.loads((tmp_path / "logs" / "cmsensord-alarms.json").read_text())["alarms"] == {}

@@ -5,11 +5,13 @@ reached L (the input ``reached``, no deadband) for ``on_delay_s`` of stream time
 break, and off once the input (the exceedance level, with its deadband) has been below L for
 ``off_delay_s``; the output is the highest level that is on. A latching alarm shows the highest
 level it reached until acknowledged; an acknowledgement then drops it to the level that is on
-now. While suppressed (machine not running) nothing turns on, the timers restart, and the
-non-latched level is off. A delay counts the stream's own time: when the stamps are re-anchored
-(a step of the wall clock) :meth:`AlarmState.shift` moves its timers with them, so a delay
-straddling the step lasts as if there had been none; an input stamped before the start of a
-delay (stamps gone back unannounced) restarts it there, never measuring a negative time.
+now, and that episode latches nothing more: it clears when the value falls, and a rise past the
+acknowledged level latches again. While suppressed (machine not running) nothing turns on, the
+timers restart, and the non-latched level is off. A delay counts the stream's own time: when the
+stamps are re-anchored (a step of the wall clock) :meth:`AlarmState.shift` moves its timers with
+them, so a delay straddling the step lasts as if there had been none; an input stamped before
+the start of a delay (stamps gone back unannounced) restarts it there, never measuring a
+negative time.
 
 :meth:`AlarmState.resume` puts back what a saved state held (a daemon's restart:
 :mod:`.saved`): the latch, the acknowledgement, and the live level at the stop as a
@@ -121,17 +123,19 @@ class AlarmState:
         """Put back a saved state: the level ``live`` as the restored level (see module docstring),
         the latch at ``latched``, the acknowledgement (and its time and user)."""
         self.restored, self.restored_until = live, None
-        self.latched, self.changed_ns = latched, changed_ns
+        self.latched, self.changed_ns = (0 if acknowledged else latched), changed_ns
         self.acknowledged = acknowledged and self.level > 0
         self.acked_ns, self.acked_by = acked if self.acknowledged else (None, None)
 
     def _shown(self, t_ns: int, before: int) -> int:
-        if self.latch:
+        if self.latch and not self.acknowledged:   # an acknowledged episode latches nothing more
             self.latched = max(self.latched, self.live)
         now = self.level
         if now > before or now == 0:
             self.acknowledged = False
             self.acked_ns = self.acked_by = None
+            if self.latch:                          # a rise past the acknowledged level latches again
+                self.latched = max(self.latched, self.live)
         if now != before:
             self.changed_ns = t_ns
         return now
