@@ -65,6 +65,8 @@ PROCESS_MODULES = frozenset({
     "test_acoustic_calib_command.py",
     "test_indicators_daemon.py",
     "test_mqtt.py",
+    "test_mqtt_config.py",
+    "test_mqtt_runs.py",
     "test_retention_process.py",
     "test_output_dir_held.py",
     "test_short_logs.py",

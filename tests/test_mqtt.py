@@ -16,9 +16,10 @@ from pathlib import Path
 import pytest
 
 from cmsensord.publish.disk_queue import DiskQueue
+from cmsensord.publish.publisher import MAX_INFLIGHT, POLL_S
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, read_messages
 from mosquitto import Broker, Subscriber, free_port, needs_mosquitto, tls_broker
-from processes import ENV, cmsensord, spawn, start_daemon
+from processes import ENV, board_on_pty, cmsensord, spawn, start_daemon, stop
 
 pytestmark = needs_mosquitto
 PUBLISHED = ("severity", "indicators", "events", "diagnostics")
@@ -164,6 +165,51 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
         board2.wait(timeout=5)
         sub.close()
         broker.stop()
+
+
+def test_a_kill_9_repeats_the_in_flight_and_what_was_acknowledged_since_the_position_was_written(
+        tmp_path, broker):
+    """README (``seq``): the restarted daemon sends again from the acknowledged position on disk,
+    written every ``fsync_s`` (checked each POLL_S), so it repeats at most the MAX_INFLIGHT in
+    flight plus what the broker acknowledged in the last fsync_s + POLL_S before the kill."""
+    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8").split())
+    assert (f"Repeats after a kill -9: the restarted daemon sends from the acknowledged position on disk, "
+            f"which it writes with each sync of the queue, every `fsync_s` (1 s, checked every {POLL_S:g} s), "
+            f"so at most the {MAX_INFLIGHT} in flight plus the messages the broker acknowledged in the last "
+            f"`fsync_s` + {POLL_S:g} s before the kill") in readme
+    fsync_s = 2.0
+    yaml = mqtt_yaml(broker.port, f"queue_dir: {tmp_path / 'queue'}", f"fsync_s: {fsync_s}")
+    sub = Subscriber(broker.port)
+    got: list[tuple[float, int]] = []             # (when received, seq)
+
+    def stamped(client, userdata, msg) -> None:
+        if msg.payload.startswith(b"{") and b'"seq":' in msg.payload:
+            got.append((time.monotonic(), json.loads(msg.payload)["seq"]))
+
+    sub.client.on_message = stamped
+    board = ("--scenario", "healthy", "--channels", "4", "--speed", "10", "--duration", "600")
+    try:
+        with board_on_pty(*board) as pty:
+            daemon = start_daemon(tmp_path, pty, config=yaml)
+            time.sleep(4 * fsync_s)
+            killed = time.monotonic()
+            daemon.send_signal(signal.SIGKILL)
+            daemon.wait(timeout=10)
+        time.sleep(0.5)                             # what the broker had goes on to the subscriber
+        before = list(got)
+        first_run = {s for _, s in before}
+        window = fsync_s + POLL_S + 0.3             # + the subscriber's lag behind the acknowledgement
+        recent = sum(1 for when, _ in before if when > killed - window)
+        assert len(first_run) > 200, len(first_run)                  # ~80 a second
+        with board_on_pty(*board) as pty:
+            daemon = start_daemon(tmp_path, pty, config=yaml)
+            assert sub.wait_for(lambda: max(s for _, s in got) > max(first_run) + 50)
+            stop(daemon)
+        repeats = [s for _, s in got[len(before):] if s in first_run]
+        assert len(repeats) <= MAX_INFLIGHT + recent, (len(repeats), recent)
+        assert {s for _, s in got} >= set(range(1, max(first_run) + 1))     # and no gap
+    finally:
+        sub.close()
 
 
 def test_the_queue_bound_drops_the_oldest_messages_with_an_event(tmp_path):

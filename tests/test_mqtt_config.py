@@ -1,26 +1,30 @@
 """The ``mqtt`` section's errors a user meets at start, through ``cmsensord --config FILE``: a
-host written as a URL, and TLS files that are not what their setting is for. Each is one
-line naming the key and the file, exit status 78, before any connection is tried."""
+host written as a URL, TLS files that are not what their setting is for, and files it cannot
+read (under systemd, with how to pass them as credentials). Each is one line naming the key and
+the file, exit status 78, before any connection is tried."""
 
 from __future__ import annotations
 
+import os
+import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from mosquitto import make_certificates
-from processes import cmsensord
+from processes import ENV, cmsensord
 
 EXIT_CONFIG = 78
 
 
-def config_error(tmp_path: Path, mqtt: str, host: str = "127.0.0.1") -> str:
-    """The one stderr line of ``cmsensord --config`` with this mqtt section (exit 78), less its
-    ``cmsensord: configuration error: FILE: `` head."""
+def config_error(tmp_path: Path, mqtt: str, host: str = "127.0.0.1", env: dict | None = None) -> str:
+    """The one stderr line of ``cmsensord --config`` with this mqtt section (exit 78, ``env``: the
+    environment, default ENV), less its ``cmsensord: configuration error: FILE: `` head."""
     cfg = tmp_path / "c.yaml"
     cfg.write_text(f"output:\n  dir: {tmp_path / 'logs'}\nmqtt:\n  host: {host}\n{mqtt}")
-    p = cmsensord("--config", str(cfg), timeout=30)   # a config that passes starts the daemon
+    p = cmsensord("--config", str(cfg), timeout=30, env=env)   # a config that passes starts the daemon
     assert p.returncode == EXIT_CONFIG, p.stderr
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1, p.stderr
@@ -93,3 +97,50 @@ def test_a_client_certificate_or_key_file_holding_the_wrong_thing_is_named(tmp_p
                                                                            line):
     mqtt = f"  ca_file: {certs}/ca.pem\n  certfile: {certs}/{certfile}\n  keyfile: {certs}/{keyfile}\n"
     assert config_error(tmp_path, mqtt) == line.format(certs=certs)
+
+
+def without_root_override() -> list[str]:
+    """The command prefix that runs a process unable to read a mode-0 file it owns, as the
+    service's transient user cannot read root's 0600 file: as root, setpriv drops the two
+    capabilities that override file permissions; else none is needed."""
+    if os.geteuid() != 0:
+        return []
+    if shutil.which("setpriv") is None:
+        pytest.skip("setpriv (util-linux) is not installed")
+    return ["setpriv", "--bounding-set=-dac_override,-dac_read_search"]
+
+
+@pytest.mark.parametrize("key", ["password_file", "keyfile"])
+def test_a_file_the_service_user_cannot_read_says_under_systemd_how_to_pass_it(tmp_path, certs, key):
+    """README "The password and a client key under systemd": exit 78, and under systemd
+    (INVOCATION_ID) the line names the LoadCredential= line and the credential's path."""
+    secret = tmp_path / ("mqtt.password" if key == "password_file" else "mqtt.key")
+    secret.write_bytes(b"pw\n" if key == "password_file" else (certs / "client.key").read_bytes())
+    secret.chmod(0)
+    mqtt = (f"  username: rig\n  password_file: {secret}\n" if key == "password_file" else
+            f"  ca_file: {certs}/ca.pem\n  certfile: {certs}/client.pem\n  keyfile: {secret}\n")
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"output:\n  dir: {tmp_path / 'logs'}\nmqtt:\n  host: 127.0.0.1\n{mqtt}")
+    plain = f"mqtt.{key}: cannot read: Permission denied"
+    for env, line in (
+            ({}, plain),
+            ({"INVOCATION_ID": "5f3c0e1a9b7d4c2e8a6f1b3d5c7e9a0b"},
+             f"{plain}; the service's user cannot read it: give it to the service with LoadCredential="
+             f"{secret.name}:{secret} (systemd/cmsensord-mqtt.conf) and set mqtt.{key}: "
+             f"/run/credentials/cmsensord.service/{secret.name}")):
+        run_env = {k: v for k, v in ENV.items() if k != "INVOCATION_ID"} | env
+        p = subprocess.run([*without_root_override(), sys.executable, "-m", "cmsensord", "--config", str(cfg)],
+                           capture_output=True, text=True, env=run_env, timeout=60)
+        assert p.returncode == EXIT_CONFIG, p.stderr
+        (got,) = p.stderr.strip().splitlines()              # " (got '<path>')" cut short when long
+        assert got.rpartition(" (got ")[0] == f"cmsensord: configuration error: {cfg}: {line}", got
+
+
+def test_a_credential_the_unit_does_not_load_is_named_under_systemd(tmp_path):
+    missing = "/run/credentials/cmsensord-test-absent.service/mqtt.password"
+    env = dict(ENV, INVOCATION_ID="5f3c0e1a9b7d4c2e8a6f1b3d5c7e9a0b")
+    line = config_error(tmp_path, f"  username: rig\n  password_file: {missing}\n", env=env)
+    assert line.rpartition(" (got ")[0] == (
+        "mqtt.password_file: cannot read: No such file or directory; the unit loads no credential "
+        "mqtt.password: add LoadCredential=mqtt.password:<the file> to its drop-in "
+        "(systemd/cmsensord-mqtt.conf)")

@@ -123,9 +123,48 @@ def test_without_alarm_rules_no_worst_alarm_is_announced_or_published(tmp_path, 
         severity = "homeassistant/sensor/rig1_ch0_severity/config"
         assert sub.wait_for(lambda: any(t == severity for t, _, _ in sub.got))
         assert sub.wait_for(lambda: sub.messages("/ch0/severity"))
-        assert not [t for t, _, _ in sub.got if "worst_alarm" in t]    # it would stay "unknown"
+        assert not [t for t, body, _ in sub.got if "worst_alarm" in t and body]   # it would stay "unknown"
     finally:
         sub.close()
+
+
+def retain(port: int, topic: str, body: str) -> None:
+    """``body`` retained at ``topic`` on the broker, as an earlier run left it."""
+    import paho.mqtt.client as mqtt
+
+    client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="earlier-run")
+    client.connect("127.0.0.1", port)
+    client.loop_start()
+    try:
+        client.publish(topic, body, qos=1, retain=True).wait_for_publish(timeout=10)
+    finally:
+        client.loop_stop()
+        client.disconnect()
+
+
+def test_discovery_announces_only_the_sensors_whose_state_is_published(tmp_path, broker):
+    """``publish: [alarms, events]``: no severity sensor (nothing is ever sent on its state topic,
+    so it would stay "unknown"), and the one an earlier configuration announced is removed from
+    the broker; the worst alarm sensor of each channel is announced and gets its state."""
+    earlier = "homeassistant/sensor/rig1_ch0_severity/config"
+    retain(broker.port, earlier, json.dumps({"name": "ch0 severity", "state_topic": "cmsensord/rig1/ch0/severity"}))
+    yaml = mqtt_yaml(broker.port, "discovery: true", publish=("alarms", "events")) + LATCHED
+    p = subprocess.run(simulate(tmp_path, yaml, duration=20), capture_output=True, text=True, env=ENV,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    late = Subscriber(broker.port, "homeassistant/#", client_id="late")     # what the broker keeps
+    states = Subscriber(broker.port, "cmsensord/rig1/#", client_id="late-states")
+    try:
+        assert late.wait_for(lambda: late.got, timeout=5)
+        time.sleep(0.5)                             # every retained message delivered
+        kept = {t: json.loads(body) for t, body, retained in late.got if retained}
+        assert kept and all(t.endswith("_worst_alarm/config") for t in kept), sorted(kept)
+        assert earlier not in kept
+        assert states.wait_for(lambda: {c["state_topic"] for c in kept.values()} <= {t for t, _, _ in states.got})
+        assert not [t for t, _, _ in states.got if t.endswith("/severity")]
+    finally:
+        late.close()
+        states.close()
 
 
 def test_live_messages_are_not_held_to_the_backlog_rate_and_the_summary_counts_them(tmp_path, broker):

@@ -1,5 +1,6 @@
 """systemd/: the unit passes ``systemd-analyze verify`` silently and ``security`` at exposure <= 2.0,
-keeps the hardening the serial link needs, and agrees with the example config and udev rule."""
+keeps the hardening the serial link needs, and agrees with the example config, the udev rule and
+the README's MQTT set-up (its root-only files reach the transient user as credentials)."""
 
 from __future__ import annotations
 
@@ -11,8 +12,10 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
 from cmsensord.config import load_config
+from cmsensord.config.mqtt import CREDENTIALS
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = ROOT / "systemd" / "cmsensord.service"
@@ -159,3 +162,26 @@ def test_systemd_analyze_with_the_mqtt_drop_in_verifies_and_stays_at_most_2(tmp_
     m = re.search(r"Overall exposure level for cmsensord\.service: (\d+\.\d+)", r.stdout)
     assert m, r.stdout + r.stderr
     assert float(m.group(1)) <= MAX_EXPOSURE, r.stdout
+
+
+def credentials(text: str) -> dict[str, str]:
+    """Credential id -> source file of each ``LoadCredential=`` line, commented out or not."""
+    return dict(m.groups() for m in re.finditer(r"^#?LoadCredential=([^:\s]+):(\S+)$", text, re.M))
+
+
+def test_the_readme_mqtt_setup_passes_the_root_only_files_as_credentials():
+    """The service's transient user (DynamicUser=) cannot read the 0600 password file the README
+    installs: the drop-in loads it as a credential and the README's config names the credential's
+    path; a client key likewise (the drop-in's commented line, the README's keyfile)."""
+    section = (ROOT / "README.md").read_text(encoding="utf-8").split("## A fleet on one broker", 1)[1]
+    installed = re.search(r"sudo install -m 0600 /dev/stdin (\S+)", section).group(1)
+    mqtt = yaml.safe_load(section.split("```yaml\n", 1)[1].split("```", 1)[0])["mqtt"]
+    assert settings(UNIT.read_text())["DynamicUser"] == ["yes"]
+    loaded = settings(with_drop_in(UNIT.read_text()))["LoadCredential"]
+    assert loaded == [f"mqtt.password:{installed}"]
+    run_dir = f"/run/credentials/{UNIT.name}"
+    assert CREDENTIALS == run_dir                        # the path the daemon's hint names
+    assert mqtt["password_file"] == f"{run_dir}/mqtt.password"
+    key = credentials(DROP_IN.read_text())["mqtt.key"]
+    assert f"sudo install -m 0600 client.key {key}" in section
+    assert f"keyfile: {run_dir}/mqtt.key" in " ".join(section.split())

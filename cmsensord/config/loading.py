@@ -27,7 +27,7 @@ from .alarms import AlarmRuleConfig, AlarmsConfig, BaselineConfig, OperatingConf
 from .capture import CaptureConfig
 from .channel_refs import check_channel_refs
 from .indicators import BandConfig, BearingConfig, IndicatorsConfig
-from .mqtt import MqttConfig
+from .mqtt import MqttConfig, unreadable
 from .settings import (
     MAX_CHANNELS,
     AcousticConfig,
@@ -251,7 +251,7 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
                 with open(path, "rb"):
                     pass
             except OSError as err:
-                raise ConfigError(source, f"mqtt.{key}", f"cannot read: {err.strerror or err}", path) from None
+                raise ConfigError(source, f"mqtt.{key}", unreadable(key, path, err), path) from None
     from .mqtt_tls import TlsFileError, tls_context  # ssl only with an mqtt section (2 MB of RSS)
 
     try:

@@ -4,6 +4,7 @@ disk-backed store-and-forward queue (:mod:`cmsensord.publish`)."""
 from __future__ import annotations
 
 import dataclasses
+import errno
 import os
 import socket
 from dataclasses import dataclass
@@ -11,7 +12,7 @@ from typing import Any, ClassVar
 
 from .validation import Rule, at_most, setting, validate
 
-__all__ = ["MqttConfig", "PUBLISHABLE", "RETAINED"]
+__all__ = ["CREDENTIALS", "MqttConfig", "PUBLISHABLE", "RETAINED", "unreadable"]
 
 #: what can be published: the last part of an MCAP topic (/cm/<channel>/<kind> or /cm/<kind>)
 PUBLISHABLE = ("severity", "indicators", "alarms", "events", "diagnostics", "orders",
@@ -30,6 +31,30 @@ def _publish_known(obj: Any) -> tuple[str, str, Any] | None:
         if item not in PUBLISHABLE:
             return "publish", f"unknown kind {item!r}; choose from {', '.join(PUBLISHABLE)}", item
     return None
+
+
+#: where systemd puts the shipped unit's credentials (LoadCredential=, systemd/cmsensord-mqtt.conf)
+CREDENTIALS = "/run/credentials/cmsensord.service"
+
+
+def unreadable(key: str, path: str, err: OSError) -> str:
+    """Why the file of setting ``key`` cannot be used, one line: ``cannot read: <strerror>``.
+    Under systemd (``INVOCATION_ID`` set) it adds how to pass the file: one the service's
+    transient user may not read (EACCES) through ``LoadCredential=`` and its path under
+    :data:`CREDENTIALS`; a missing one under ``/run/credentials/`` through the unit's
+    ``LoadCredential=``."""
+    reason = f"cannot read: {err.strerror or err}"
+    if "INVOCATION_ID" not in os.environ:
+        return reason
+    name = os.path.basename(path)
+    if err.errno == errno.EACCES:
+        return (f"{reason}; the service's user cannot read it: give it to the service with "
+                f"LoadCredential={name}:{path} (systemd/cmsensord-mqtt.conf) and set mqtt.{key}: "
+                f"{CREDENTIALS}/{name}")
+    if err.errno == errno.ENOENT and path.startswith("/run/credentials/"):
+        return (f"{reason}; the unit loads no credential {name}: add LoadCredential={name}:<the file> "
+                "to its drop-in (systemd/cmsensord-mqtt.conf)")
+    return reason
 
 
 #: schemes of a broker URL that mean TLS
@@ -101,8 +126,10 @@ class MqttConfig:
                                     "(default: <output.dir>/mqtt-queue)", nonempty=True, **_A_PATH)
     queue_mb: float = setting(64.0, "bound of the on-disk queue; the oldest messages are dropped "
                               "beyond it", gt=0)
-    fsync_s: float = setting(1.0, "seconds between fsyncs of the queue (a kill -9 loses at most "
-                             "this much)", gt=0, le=60)
+    fsync_s: float = setting(1.0, "seconds between fsyncs of the queue and writes of its acknowledged "
+                             "position (a kill -9 loses at most this much, and its restart repeats "
+                             "what the broker acknowledged in this much + 0.2 s, and the 20 in "
+                             "flight)", gt=0, le=60)
     resend_per_s: float = setting(200.0, "rate limit of the backlog sent after a reconnection "
                                   "[messages/s]", gt=0)
     reconnect_min_s: float = setting(1.0, "first reconnect back-off", gt=0)

@@ -1,8 +1,11 @@
 """Home Assistant MQTT discovery (``mqtt.discovery``): per monitored channel (the Processor's,
-once the board says which), a sensor for its severity
-index and, when ``alarms`` is published and there are alarm rules, one for its worst alarm.
+once the board says which), a sensor for its severity index when ``severity`` is published
+and, when ``alarms`` is published and there are alarm rules, one for its worst alarm: each
+sensor only when its state topic is published, else it would stay "unknown".
 
-Each message is retained at ``<discovery_prefix>/sensor/<client>_<channel>_<what>/config``.
+Each message is retained at ``<discovery_prefix>/sensor/<client>_<channel>_<what>/config``;
+a sensor not announced gets an empty retained message there, which removes one an earlier
+configuration announced (from the broker and from Home Assistant).
 The severity sensor reads ``severity_index`` from ``<prefix>/<channel>/severity``; the worst
 alarm sensor reads ``level`` (normal, alert, danger) from ``<prefix>/<channel>/worst_alarm``,
 a retained state derived from each ``/cm/alarms`` table by :class:`WorstAlarms` (the table is
@@ -22,8 +25,9 @@ from cmsensord.publish.topics import TopicMap
 
 
 def discovery_messages(cfg: MqttConfig, channels: tuple[str, ...], worst_alarm: bool = True) -> list[tuple[str, str]]:
-    """(topic, JSON) of the discovery message of each channel's severity sensor and, when
-    ``worst_alarm`` and ``alarms`` is in ``cfg.publish``, of its worst alarm sensor."""
+    """(topic, JSON) of the discovery message of each channel's severity sensor when
+    ``severity`` is in ``cfg.publish`` and of its worst alarm sensor when ``worst_alarm`` and
+    ``alarms`` is; (topic, ``""``) for each sensor not announced (its removal)."""
     topics = TopicMap(cfg)
     node = re.sub(r"[^A-Za-z0-9_-]", "_", cfg.client)
     common: dict[str, Any] = {"availability_topic": topics.status, "payload_available": "online",
@@ -32,9 +36,11 @@ def discovery_messages(cfg: MqttConfig, channels: tuple[str, ...], worst_alarm: 
                                          "name": f"cmsensord {cfg.client}", "manufacturer": "cmsensord"}}
     out = []
     for ch in channels:
-        sensors: dict[str, dict[str, Any]] = {"severity": {
-            "name": f"{ch} severity", "state_topic": f"{topics.prefix}/{ch}/severity",
-            "value_template": "{{ value_json.severity_index }}", "state_class": "measurement"}}
+        sensors: dict[str, dict[str, Any] | None] = {"severity": None, "worst_alarm": None}
+        if "severity" in cfg.publish:
+            sensors["severity"] = {"name": f"{ch} severity", "state_topic": f"{topics.prefix}/{ch}/severity",
+                                   "value_template": "{{ value_json.severity_index }}",
+                                   "state_class": "measurement"}
         if worst_alarm and "alarms" in cfg.publish:
             state = topics.worst_alarm(ch)
             sensors["worst_alarm"] = {"name": f"{ch} worst alarm", "state_topic": state,
@@ -43,8 +49,8 @@ def discovery_messages(cfg: MqttConfig, channels: tuple[str, ...], worst_alarm: 
                                       "options": list(LEVELS)}
         for what, body in sensors.items():
             uid = f"{node}_{ch}_{what}"
-            body = {**body, "unique_id": f"cmsensord_{uid}", **common}
-            out.append((f"{cfg.discovery_prefix}/sensor/{uid}/config", json.dumps(body)))
+            config = "" if body is None else json.dumps({**body, "unique_id": f"cmsensord_{uid}", **common})
+            out.append((f"{cfg.discovery_prefix}/sensor/{uid}/config", config))
     return out
 
 
