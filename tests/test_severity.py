@@ -56,6 +56,21 @@ def test_missing_slots_count_toward_the_period_and_are_reported():
     assert ds[1].missing[0] == 3 and ds[0].missing[0] == 0
 
 
+def test_a_period_lacking_more_than_half_its_observations_is_not_judged():
+    """F_a set in period 1; period 2 has 6 of 10 slots missing (no outlier counted): F_a and
+    S_idx held, no_data; period 3 has 5 missing (half): judged, and cleared (0 < c f_r)."""
+    d = AnomalyDecider(1, 2, f_r=5.0, c=0.4, period=10, transient_periods=0)
+    flags = np.zeros((30, 1, 2), dtype=np.uint8)
+    flags[:6, 0, :] = 1
+    valid = np.ones((30, 1), bool)
+    valid[10:16] = False
+    valid[20:25] = False
+    ds = d.update(flags, valid)
+    assert [x.anomaly[0].tolist() for x in ds] == [[1, 1], [1, 1], [0, 0]]
+    assert [float(x.severity[0]) for x in ds] == [1.0, 1.0, 0.0]
+    assert [bool(x.no_data[0]) for x in ds] == [False, True, False]
+
+
 @pytest.mark.parametrize("seed", range(12))
 def test_whole_periods_in_one_pass_decide_as_one_period_at_a_time(monkeypatch, seed):
     """AnomalyDecider.update decides a run of whole periods in one pass (issue 13): every
@@ -70,6 +85,8 @@ def test_whole_periods_in_one_pass_decide_as_one_period_at_a_time(monkeypatch, s
     rate = np.repeat(rnd.choice([0.05, 0.3, 0.45, 0.8], size=(T // P + 1, C, n)), P, axis=0)[:T]
     flags = (rnd.random((T, C, n)) < rate).astype(np.uint8)
     valid = rnd.random((T, C)) > rnd.choice([0.0, 0.05])
+    if seed % 3 == 0:                     # a link down: periods not judged (Decision.no_data)
+        valid[5 * P + 3:8 * P, int(rnd.integers(0, C))] = False
     flags[~valid] = 0
     cuts = np.sort(rnd.choice(np.arange(1, T), size=int(rnd.integers(0, 6)), replace=False)).tolist()
     f_rs = [None if rnd.random() < 0.6 else rnd.uniform(3.0, 12.0, size=C) for _ in range(len(cuts) + 1)]
@@ -95,4 +112,5 @@ def test_whole_periods_in_one_pass_decide_as_one_period_at_a_time(monkeypatch, s
         assert np.array_equal(getattr(d1, name), getattr(d0, name)), name
     assert (d1.periods, d1.slot, d1.phase) == (d0.periods, d0.slot, d0.phase)
     assert {0, 1} <= {int(v) for x in ref for v in x.anomaly.ravel()}          # flags set and clear
+    assert any(x.no_data is not None and x.no_data.any() for x in ref) == (seed % 3 == 0)
     assert any(x.held_max > 0 for x in ref)                                    # kept by hysteresis

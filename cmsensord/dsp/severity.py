@@ -45,6 +45,12 @@ sensor, cable or ADC fault, or the machine stopped), nor has a period with no ob
 at all after one such: its decision keeps F_a and S_idx as they were
 (``Decision.no_signal``), so a dead sensor does not read as a healed machine, and the
 period the signal goes (or comes back) in, half dead, is not judged either.
+
+Extension (not in the paper), in both modes: a period that lacks more than half of a channel's
+observations (frames lost, a link down, values the board could not have sent) is not judged
+for that channel: F_a and S_idx are kept as they were (``Decision.no_data``). Fig. 3 compares
+the outliers counted in a period with f_r; with most observations missing that count falls
+under c f_r whatever the machine does, and a failing channel would clear for the gap.
 """
 
 from __future__ import annotations
@@ -99,6 +105,7 @@ class Decision:
     held_max: int = 0         # the largest of ``held``
     no_signal: np.ndarray | None = None  # (C,) combined: no signal in the period, F_a and S_idx held
     quietest: np.ndarray | None = None   # (C,) combined: the lowest level ratio of the period's quarters
+    no_data: np.ndarray | None = None    # (C,) more than half the period missing: F_a and S_idx held
 
 
 class AnomalyDecider:
@@ -166,7 +173,8 @@ class AnomalyDecider:
         start = 0
         while start < T:
             if self.phase == 0 and (T - start) // self.period >= ONE_PASS_PERIODS and level is None \
-                    and not self.combined and self.periods >= self.transient_periods:
+                    and not self.combined and self.periods >= self.transient_periods \
+                    and self._all_judged(np.asarray(valid[start:start + (T - start) // self.period * self.period])):
                 k = (T - start) // self.period          # whole periods: decided in one pass
                 decisions += self._decide_many(outlier[start:start + k * self.period],
                                                np.asarray(valid[start:start + k * self.period], dtype=bool))
@@ -186,15 +194,26 @@ class AnomalyDecider:
                 decisions.append(self._decide())
         return decisions
 
+    def _all_judged(self, valid: np.ndarray) -> bool:
+        """No whole period of ``valid`` (K period, C) lacks more than half a channel's
+        observations (none held for ``no_data``)."""
+        if valid.all():
+            return True
+        P = self.period
+        return not ((~valid).reshape(-1, P, self.C).sum(axis=1) * 2 > P).any()
+
     def _decide(self) -> Decision:
         prev = self.anomaly.copy()
         transient = self.periods < self.transient_periods
         level, s_level = self._level_part(transient)
-        lost = None
+        lost = no_data = None
         if self.combined and not transient:     # no signal: a quiet quarter, or none at all while lost
             lost = self._quiet | (np.isnan(level) & self._lost)
             self._lost = lost
         if not transient:
+            no_data = self.missing * 2 > self.period
+            if no_data.any():
+                lost = no_data if lost is None else lost | no_data
             fr = self.f_r[:, None]
             set_ = self.cnt >= fr                       # cnt >= f_r  -> F_a = 1
             clear = self.cnt < self.c[:, None] * fr     # cnt < c f_r -> F_a = 0
@@ -215,8 +234,8 @@ class AnomalyDecider:
             severity=severity, prev_severity=self._last_severity.copy(),
             f_r=self.f_r.copy(), missing=self.missing.copy(),
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
-            held_max=int(self.held.max()), no_signal=lost,
-            quietest=self._quietest.copy() if self.combined else None,
+            held_max=int(self.held.max()), no_signal=self._lost.copy() if self.combined and not transient else None,
+            quietest=self._quietest.copy() if self.combined else None, no_data=no_data,
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0
@@ -255,6 +274,8 @@ class AnomalyDecider:
         prev_sev = np.concatenate((self._last_severity[None], s_akf[:-1]))
         held_max = held.reshape(K, -1).max(axis=1).tolist()
         nan = np.full(C, np.nan)
+        judged = np.zeros(C, dtype=bool)       # no period here lacks half its observations
+        judged.flags.writeable = False
         f_r = self.f_r.copy()
         out = []
         slot, period = self.slot, self.periods
@@ -265,7 +286,8 @@ class AnomalyDecider:
             slot += P
             out.append(Decision(slot=slot, period=period + k, transient=False, cnt=c_k, anomaly=a_k,
                                 prev_anomaly=pa_k, severity=s_k, prev_severity=ps_k, f_r=f_r, missing=m_k,
-                                severity_akf=s_k, level=nan, severity_level=nan, held=h_k, held_max=hm_k))
+                                severity_akf=s_k, level=nan, severity_level=nan, held=h_k, held_max=hm_k,
+                                no_data=judged))
         self.slot = slot
         self.periods += K
         self.anomaly, self.held = anomaly[-1].copy(), held[-1].copy()

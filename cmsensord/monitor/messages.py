@@ -72,8 +72,14 @@ def severity(stamp_ns: int, channel: str, d, c: int, R: np.ndarray, **extra: Any
         "channel": channel, "severity_index": sev, "level": int(round(sev * len(R))),
         "anomaly": anomaly, "outliers": d.cnt[c].tolist(), "f_r": float(d.f_r[c]),
         "r": R.tolist(), "failure": bool(anomaly[-1]) or sev >= 1.0, "missing": int(d.missing[c]),
-        "transient": d.transient, **extra,
+        "transient": d.transient, **_no_data(d, c), **extra,
     })
+
+
+def _no_data(d, c: int) -> dict[str, Any]:
+    """``{"no_data": True}`` when the decision ``d`` held channel column ``c`` for want of
+    observations (:attr:`~cmsensord.dsp.severity.Decision.no_data`), else {}."""
+    return {"no_data": True} if d.no_data is not None and d.no_data[c] else {}
 
 
 def severities(stamp_ns: int, channels: Sequence[str], d, R: np.ndarray | Sequence[list[float]],
@@ -95,6 +101,8 @@ def severities(stamp_ns: int, channels: Sequence[str], d, R: np.ndarray | Sequen
         msg = {"channel": channel, "severity_index": s, "level": round(s * n), "anomaly": a,
                "outliers": cnt[c], "f_r": f_r[c], "r": r.tolist() if isinstance(r, np.ndarray) else list(r),
                "failure": bool(a[-1]) or s >= 1.0, "missing": missing[c], "transient": transient}
+        if d.no_data is not None and d.no_data[c]:
+            msg["no_data"] = True
         if extras[c]:
             msg.update(extras[c])
         out.append(Message(topics[c], "severity", stamp_ns, msg))

@@ -302,6 +302,11 @@ SEVERITY = _obj(
             "description": "true while AKF_n (the largest R) is in anomaly, or the combined severity is 1",
         },
         "missing": _int("observations missing (lost frames) in this decision period"),
+        "no_data": {
+            "type": "boolean",
+            "description": "true when more than half the period's observations are missing: the "
+                           "period is not judged, severity_index and anomaly are the ones held",
+        },
         "transient": {
             "type": "boolean",
             "description": "true for the first decision period, while the filters converge",
