@@ -60,6 +60,7 @@ from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan
 from .dc import recording_means
 from .errors import ImportFailure, cannot_write
+from .quantisation import LevelTally
 from .recording import Recording
 from .tacho import block_edges, rpm_edges
 from .units import InG
@@ -114,8 +115,9 @@ def _tacho_frames(rec: Recording, plan: BlockPlan) -> tuple[np.ndarray, np.ndarr
 
 
 def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
-            progress: Callable[[int], None] | None) -> dict:
-    """Encode and write every frame; returns the counts of frames, clipped blocks and samples."""
+            progress: Callable[[int], None] | None, tally: LevelTally | None) -> dict:
+    """Encode and write every frame; returns the counts of frames, clipped blocks and samples;
+    each block's level goes to ``tally``."""
     C, L, fs = rec.n_channels, plan.block_len, rec.fs
     offset = np.full(C, OFFSET)
     tacho = _tacho_frames(rec, plan)
@@ -142,6 +144,8 @@ def _frames(rec: Recording, plan: BlockPlan, mode: str, scale: np.ndarray, f,
             xb = np.where(np.isnan(xb), 0.0, xb)
             if mode == "rms":
                 lost[:] = lost.any(axis=0)  # one RMS frame holds every channel's
+        if tally is not None:
+            tally.add(c0, xb, lost)
         counts = to_counts(xb, scale)
         edge = ((counts == 0) | (counts == ADC_MAX)) & ~lost[..., None]  # docs/PROTOCOL.md: clipped
         clip = edge.any(axis=-1)  # (C, nb)
@@ -222,8 +226,9 @@ def _sidecar(rec: Recording, plan: BlockPlan, mode: str, full_scale: list[float]
 
 def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw",
                   full_scale: list[float], extra: dict | None = None,
-                  progress: Callable[[int], None] | None = None) -> dict:
-    """Write ``out`` and ``out.json`` (the sidecar, also returned); nothing is left on error."""
+                  progress: Callable[[int], None] | None = None, tally: LevelTally | None = None) -> dict:
+    """Write ``out`` and ``out.json`` (the sidecar, also returned); nothing is left on error.
+    ``tally``: the level of each block goes to it (:mod:`.quantisation`)."""
     scale = np.array([scale_for(r) for r in full_scale])
     part = Path(f"{out}.part")
     side = sidecar_path(out)
@@ -231,7 +236,7 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
     try:
         try:
             with open(part, "wb") as f:
-                stats = _frames(rec, plan, mode, scale, f, progress)
+                stats = _frames(rec, plan, mode, scale, f, progress, tally)
             meta = _sidecar(rec, plan, mode, full_scale, scale, stats, out, extra or {})
             side_part.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
             os.replace(part, out)

@@ -6,7 +6,8 @@
 
 Errors the user can cause end in one line, ``cmsensord import: FILE: what; fix``,
 and exit status 2; nothing is written then. A progress bar shows on a terminal. Each channel's
-mean is taken out (:mod:`.dc`, one summary line a channel) unless ``--keep-dc``.
+mean is taken out (:mod:`.dc`, one summary line a channel) unless ``--keep-dc``. A channel whose
+range leaves snapshots (or seconds) under 10 counts RMS gets one WARNING line (:mod:`.quantisation`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from .capture_writer import choose_ranges, sidecar_path, write_capture
 from .dc import dc_lines, remove_dc
 from .errors import ImportFailure
 from .options import ImportOptions
+from .quantisation import LevelTally, quantised_lines
 from .recording import Recording
 from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
@@ -194,7 +196,8 @@ def _implausible(name: str, peak: float, unit: str) -> list[str]:
             "measures: is --unit right (values in mg given as g read 1000 x)?"]
 
 
-def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -> list[str]:
+def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str],
+            quiet: dict[int, str]) -> list[str]:
     C = len(meta["channel_names"])
     n_snap = len(meta["snapshots"])
     lines = [f"capture: {out} ({size:,} bytes, {meta['frames']:,} frames): "
@@ -214,6 +217,7 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str]) -
             lines.append(f"  WARNING {name}: its missing samples leave out {100 * lost / meta['blocks']:.0f} % of the "
                          f"blocks, every channel's (a frame holds them all); leave it out ({CHOOSE}) to keep them")
         lines += _implausible(name, peaks[c], u)
+        lines += [quiet[c]] if c in quiet else []
         if not peaks[c] > 0:
             same = "0" if not rec.samples.peak[c] > 0 else "the same, a constant offset"
             lines.append(f"  WARNING {name}: every value is {same} (no sensor on it?): calibrate cannot learn it; "
@@ -290,13 +294,17 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
     extra = {"scale_factor": _one_or_all(opts.scale_factor), "sensitivity_mv_per_g": _one_or_all(opts.sensitivity),
              "offset_counts": OFFSET, "notes": notes}
     bar = Bar(plan.n_blocks, f"import: writing {Path(opts.out).name}")
+    tally = LevelTally(rec.n_channels, plan, rec.fs)
     try:
         meta = write_capture(rec, plan, opts.out, mode=opts.mode, full_scale=full_scale, extra=extra,
-                             progress=bar)
+                             progress=bar, tally=tally)
     finally:
         bar.close()
     size = Path(opts.out).stat().st_size
-    print("\n".join(_report(meta, rec, opts.out, size, notes)), file=sys.stderr)
+    places = [f"{s['source']} at {s['pct_of_record']:.3g} % of the record" for s in meta["snapshots"]]
+    quiet = quantised_lines(tally, meta["channel_names"], rec.units, full_scale, meta["scale"], places,
+                            L / rec.fs, opts.mode)
+    print("\n".join(_report(meta, rec, opts.out, size, notes, quiet)), file=sys.stderr)
     return 0
 
 

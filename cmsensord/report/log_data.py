@@ -12,12 +12,22 @@ the largest processing lag and queue depth, and the files read. The link counter
 summed over the runs the files hold (:mod:`.link_runs`: told by each file's metadata, not by
 the order the files come in). Nothing grows with
 the length of the log beyond these bounds.
+
+Messages come with their log time (their stamp) and are kept at the time the report shows
+(:attr:`LogData.place`: local time, or the place in an imported recording). On the axis of an
+imported recording (:attr:`LogData.records_at_start`) an indicator record, stamped at the end of
+its interval, is kept at its interval's start (``stamp - interval_s``): a record of a snapshot at
+the snapshot's start, where the replay's summary names it (``OF.mat[0] (0.0 % of the record)``),
+not at the start of the next one; and so are the alarm transitions the record raised (an
+``alarm_alert``, ``alarm_danger`` or ``alarm_clear`` of its channel with its stamp, of a rule
+that watches a record's value).
 """
 
 from __future__ import annotations
 
 import json
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,7 +62,10 @@ _LINE = re.compile(rb'"([a-z0-9_]+)":\{[^{}]*?"amplitude":' + _NUM)
 MAX_VELOCITY_BANDS = 4
 _LEVEL = re.compile(rb'"(level_ratio|level_alert|level_danger)":' + _NUM)
 _DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s|uptime_s)":' + _NUM)
+_INTERVAL = re.compile(rb'"interval_s":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
+#: the alarm events that a value moved (kept where the record that moved them is)
+_TRANSITIONS = frozenset(("alarm_alert", "alarm_danger", "alarm_clear"))
 _TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
 _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
                   "capture_envelope": "envelope"}
@@ -119,7 +132,12 @@ class LogData:
         self.end_ns: int | None = None
         self.files: list[FileInfo] = []
         self.notes: list[str] = []      # lines on the logs left out (:mod:`.runs`)
-        self.axis = TimeAxis()          # how times are shown; messages are added in shown times
+        self.axis = TimeAxis()          # how times are shown
+        #: a log time to the time shown, ``begins``: a record's start (the file's :meth:`TimeAxis.shown`)
+        self.place: Callable[..., int] = lambda t_ns, begins=False: t_ns
+        #: records kept at their interval's start (an imported recording's axis: see module docstring)
+        self.records_at_start = False
+        self._records: dict[str, tuple[int, int]] = {}     # channel -> its newest record's (stamp, shown)
         self.link_runs = LinkRuns()
         self.max_lag_s = 0.0
         self.max_queue_depth = 0
@@ -136,9 +154,11 @@ class LogData:
         (its ``run`` tells the daemon run its link counters count)."""
         self.link_runs.begin(metadata)
 
-    def add(self, topic: str, t_ns: int, data: bytes) -> None:
-        """One message of any topic; topics the report does not draw only count."""
+    def add(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        """One message of any topic, at its log time ``stamp_ns``; topics the report does not draw
+        only count."""
         self.messages += 1
+        t_ns = self.place(stamp_ns)
         if self.start_ns is None or self.end_ns is None:
             self.start_ns = self.end_ns = t_ns
         elif t_ns > self.end_ns:
@@ -149,6 +169,8 @@ class LogData:
         kind = parts[-1]
         if kind in ("akf", "vibration_estimate"):
             return                      # 100 Hz traces: not drawn, not decoded
+        if kind == "indicators" and len(parts) == 4 and self.records_at_start:
+            t_ns = self._record_start(parts[2], stamp_ns, data)
         if topic == "/cm/diagnostics" or (kind in _FAST_KINDS and len(parts) == 4):
             self._scalar_message(parts, kind, t_ns, data)
             return
@@ -158,11 +180,32 @@ class LogData:
             self.undecodable += 1
             return
         if topic == "/cm/events":
-            self._event(t_ns, msg)
+            start = self._about_record(stamp_ns, msg)
+            self._event(t_ns if start is None else start, msg)
         elif topic == "/cm/alarms":
             self._alarms(msg)
         elif len(parts) == 4 and parts[1] == "cm":
             self._channel_message(parts[2], kind, t_ns, msg)
+
+    def _record_start(self, channel: str, stamp_ns: int, data: bytes) -> int:
+        """The shown time of the start of an indicator record of ``channel`` stamped ``stamp_ns``
+        (its end), noted for the alarm transitions it raises (:meth:`_about_record`)."""
+        m = _INTERVAL.search(data)
+        interval = _number(m.group(1)) if m is not None else None
+        start = self.place(stamp_ns - int(round(interval * 1e9)), begins=True) if interval else self.place(stamp_ns)
+        self._records[channel] = (stamp_ns, start)
+        return start
+
+    def _about_record(self, stamp_ns: int, msg: dict[str, Any]) -> int | None:
+        """The shown start of the indicator record an alarm transition ``msg`` is about (one of its
+        channel stamped as it, of a rule on a record's value), else None."""
+        newest = self._records.get(str(msg.get("channel")))
+        if newest is None or newest[0] != stamp_ns or msg.get("kind") not in _TRANSITIONS:
+            return None
+        ch = self.channels.get(str(msg.get("channel")))
+        rule = str(msg.get("alarm") or "").partition("/")[0]
+        watched = ch.alarm_levels.get(rule, ("",))[0] if ch is not None else ""
+        return None if watched == "severity_index" or watched.startswith("order.") else newest[1]
 
     def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
         """A severity, indicators or diagnostics message, read by the fields drawn."""

@@ -11,6 +11,7 @@ damage. Of an imported recording replayed more than once, only the newest replay
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import TextIO
 
@@ -28,7 +29,9 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
     """The messages of ``paths`` into one :class:`LogData`, a progress bar on a terminal; the
     messages of a replayed import in the recording's own time (:mod:`.time_axis`); of an import
     replayed more than once, only its newest replay (:mod:`.runs`; the others listed as left out).
-    Each message is placed at its publish time (its own stamp), the events listed in time order."""
+    Each message is placed at its publish time (its own stamp; on an imported recording's axis an
+    indicator record, and the alarm transitions it raised, at its interval's start:
+    :mod:`.log_data`), the events listed in time order."""
     data = LogData()
     heads = {p: head_metadata(p) for p in paths}
     plan = plan_logs(paths, [heads[p] for p in paths])
@@ -37,13 +40,15 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
     sizes = [p.stat().st_size for p in plan.paths]
     progress = Progress(sum(sizes), progress_stream)
     done = 0
+    data.records_at_start = data.axis.timeline is not None
     for path, size, zero in zip(plan.paths, sizes, plan.zeros):
         info = FileInfo(str(path), size)
         data.begin_file(heads[path].get("cmsensord", {}))
         scan = FastScan(path)
-        local = data.axis.timeline is None
+        if data.axis.timeline is not None:
+            data.place = partial(data.axis.shown, board_zero_ns=zero)
         for topic, t, raw, offset in scan.messages():
-            data.add(topic, t if local else data.axis.shown(t, zero), raw)
+            data.add(topic, t, raw)
             info.messages += 1
             if info.messages % 4096 == 0:
                 progress.update(done + offset)

@@ -27,6 +27,8 @@ __all__ = ["TimeAxis"]
 _HOUR_NS = 3_600_000_000_000
 #: a recording shorter than this is shown in seconds into it, a longer one in hours
 SECONDS_UNTIL_S = 600.0
+#: how much later than its board second the start of a record is placed (:meth:`TimeAxis.shown`)
+BEGINS_S = 1e-6
 
 
 class TimeAxis:
@@ -68,15 +70,21 @@ class TimeAxis:
             axis.note = f"A replay of an imported recording: times are {where}{gaps}.{fixed}"
         return axis
 
-    def shown(self, log_ns: int, board_zero_ns: int | None = None) -> int:
+    def shown(self, log_ns: int, board_zero_ns: int | None = None, *, begins: bool = False) -> int:
         """The time shown for a message logged at ``log_ns`` by a replay whose board second 0 was
         logged at ``board_zero_ns`` (default: the first log's): ns since the Unix epoch
         (``local``; ``recording``: the recording's clock read as UTC), ns into the recording
-        (``elapsed``), or 1e-9 % of the record (``record``)."""
+        (``elapsed``), or 1e-9 % of the record (``record``).  A board second on a snapshot's start
+        is the end of the snapshot before (:meth:`Timeline.at`); with ``begins`` (the start of an
+        indicator record) it is the start of that snapshot: taken ``BEGINS_S`` later, past the
+        microsecond the timeline's snapshot starts are rounded to and the nanosecond of a start
+        computed from an end (in seconds; % of the record runs on through the snapshots).  A time
+        before the recording's first sample is at that sample."""
         if self.timeline is None:
             return log_ns
         zero = self.board_zero_ns if board_zero_ns is None else board_zero_ns
-        s = float(self.timeline.at((log_ns - zero) / 1e9))
+        board_s = (log_ns - zero) / 1e9 + (BEGINS_S if begins and self.timeline.unit == "s" else 0.0)
+        s = float(self.timeline.at(max(board_s, float(self.timeline.start_s[0]))))
         return int(round((self._epoch_s + s) * 1e9))
 
     def text(self, ns: int | None, *, ms: bool = False) -> str:
