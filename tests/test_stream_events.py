@@ -130,7 +130,7 @@ def test_100_tacho_frames_of_1023_edges_are_summarised(tmp_path):
     assert len(extra) == 6 and extra[:5] == [
         f"tacho_extra_pulse | spurious tacho pulse removed at sample {x}"
         for x in ("50003.2", "50003.6", "50004.6", "50007.8", "50014.4")]
-    assert extra[5] == ("tacho_extra_pulse | 7825 more tacho_extra_pulse event(s) in 1 s (7825 in all): "
+    assert extra[5] == ("tacho_extra_pulse | 7825 more tacho_extra_pulse event(s) in 1 s (7825 pulse(s) between them): "
                         "at most 5 per 1 s are written one by one")
     assert len(events) == 33            # of 23,682 events (7,830 extra and 15,852 missed pulses)
 
@@ -263,6 +263,6 @@ def test_a_fault_that_never_stops_is_summarised_in_the_journal_every_ten_minutes
     journal = [ln for ln in (tmp_path / "stderr.txt").read_text().splitlines() if "WARNING frames_lost" in ln]
     summaries = [ln for ln in journal if "more frames_lost" in ln]
     assert (len(journal), len(summaries)) == (33, 3), journal
-    assert summaries[0] == ("WARNING frames_lost: 290 more frames_lost event(s) in 598 s (290 in all): "
+    assert summaries[0] == ("WARNING frames_lost: 290 more frames_lost event(s) in 598 s (290 frame(s) between them): "
                             "at most 10 per 600 s are written one by one")
     assert "frames_lost 650" in (tmp_path / "stderr.txt").read_text()     # the run's counts

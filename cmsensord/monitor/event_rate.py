@@ -10,6 +10,9 @@ interval is closed, by the next event of the (kind, channel) stamped outside it,
 :meth:`RateLimit.over` (the intervals a stamp is past) or :meth:`RateLimit.close_all`.
 :class:`RateLimits` chains limits (an event the first admits goes on to the next), with the
 same methods. Fed the same events in the same order, a limit admits and summarises the same ones.
+
+A summary's message names what its counts count: the events held back, and the sum of their
+``count`` fields in the unit :data:`COUNT_UNITS` gives the kind (frames, pulses, messages).
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["RATE_S", "RATE_BURST", "LONG_S", "LONG_BURST", "RateLimit", "RateLimits", "Summary"]
+__all__ = ["COUNT_UNITS", "RATE_S", "RATE_BURST", "LONG_S", "LONG_BURST", "RateLimit", "RateLimits",
+           "Summary"]
 
 #: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
 RATE_S = 1.0
@@ -25,6 +29,11 @@ RATE_BURST = 5
 #: ... and at most LONG_BURST of those in LONG_S
 LONG_S = 600.0
 LONG_BURST = 10
+#: what the ``count`` field of an event of a kind counts, where every event of it that has one
+#: counts the same thing; a summary of another kind writes the sum as "their counts add up to"
+COUNT_UNITS = {"frames_lost": "frame", "frames_repeated": "frame", "channels": "frame",
+               "queue_overflow": "frame", "tacho_extra_pulse": "pulse", "tacho_missed_pulse": "pulse",
+               "mqtt_queue": "message", "salvage": "message"}
 
 
 @dataclass
@@ -41,8 +50,12 @@ class Summary:
     burst: int = RATE_BURST
 
     def message(self) -> str:
+        """``n`` events held back, and the sum of their ``count`` fields in the kind's unit."""
+        unit = COUNT_UNITS.get(self.kind)
+        counted = (f" ({self.count} {unit}(s) between them)" if unit is not None
+                   else f" (their counts add up to {self.count})")
         return (f"{self.n} more {self.kind} event(s) in {(self.last_ns - self.since_ns) / 1e9:.3g} s"
-                + (f" ({self.count} in all)" if self.count else "")
+                + (counted if self.count else "")
                 + f": at most {self.burst} per {self.rate_s:g} s are written one by one")
 
     def fields(self) -> dict[str, Any]:
