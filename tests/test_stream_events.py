@@ -266,3 +266,36 @@ def test_a_fault_that_never_stops_is_summarised_in_the_journal_every_ten_minutes
     assert summaries[0] == ("WARNING frames_lost: 290 more frames_lost event(s) in 598 s (290 frame(s) between them): "
                             "at most 10 per 600 s are written one by one")
     assert "frames_lost 650" in (tmp_path / "stderr.txt").read_text()     # the run's counts
+
+
+def test_a_flood_that_never_stops_is_ten_journal_lines_and_a_summary_each_ten_minutes(tmp_path):
+    """650 s of RMS frames, every tenth followed by three copies of one RMS frame of a wrong
+    payload length (one decode_error and a frames_repeated of 2 frames: 10 a second of each).
+    The journal writes at most 10 lines of a kind in 600 s, the per-second summaries among them,
+    and one summary of the rest per window (before: a per-second summary of each kind every
+    second, 650 of them); every event is written one by one or counted in one summary, and a
+    summary names what its count counts (frames, not events).  /cm/events keeps its 5 a second."""
+    out = bytearray(status(0, 0, 1))
+    seq = 1
+    for k in range(65_000):
+        out += encode_rms(seq, k * L, [0.5])
+        for _ in range(3 if k % 10 == 0 else 0):
+            out += encode_frame(FrameType.RMS, seq + 1, k * L, 1, 0, bytes(12))   # 12 bytes, not 4
+            seq += 1
+        seq += 1
+    events = replay(tmp_path, bytes(out))
+    err = (tmp_path / "stderr.txt").read_text()
+    assert "decode_error 6500, frames_repeated 6500" in err              # the run's counts
+    for kind, frames in (("decode_error", None), ("frames_repeated", 2)):
+        journal = [ln for ln in err.splitlines() if ln.startswith(f"WARNING {kind}: ")]
+        more = [re.fullmatch(rf"WARNING {kind}: (\d+) more {kind} event\(s\) in [\d.]+ s \((.*)\): at most "
+                             r"(\d+) per (\d+) s are written one by one", ln) for ln in journal]
+        summaries = [m for m in more if m]
+        assert len(journal) == 2 * (10 + 1) and [m[4] for m in summaries] == ["1", "600"] * 2, journal
+        assert len(journal) - len(summaries) + sum(int(m[1]) for m in summaries) == 6500, journal
+        for m in summaries:
+            assert m[2] == (f"{frames * int(m[1])} frame(s) between them" if frames
+                            else f"their counts add up to {m[1]}"), m[0]
+        written = [e for e in events if e.startswith(f"{kind} |")]
+        per_second = [e for e in written if "at most 5 per 1 s" in e]
+        assert len(per_second) == 650 and len(written) == 650 * 6, written[:12]
