@@ -6,6 +6,7 @@ protocol encoder and replayed by a real ``cmsensord replay`` process, which must
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import pty
 import re
@@ -21,15 +22,17 @@ from cmsensord.protocol import (
     MODE_RMS,
     FrameType,
     Status,
+    decode_status,
     encode_frame,
     encode_raw,
     encode_rms,
     encode_status,
     encode_tacho,
+    iter_frames,
 )
 from cmsensord.service.live import DIAGNOSTICS_S
 from cmsensord.sinks.mcap_read import read_messages
-from processes import cmsensord, start_board, start_daemon, stop
+from processes import cmsensord, run_module, start_board, start_daemon, stop
 
 FS, L = 25000, 250
 
@@ -90,6 +93,48 @@ def test_a_board_swapped_from_4_to_2_channels_reports_the_channels_gone(tmp_path
 def test_a_board_swapped_from_2_to_4_channels_re_sets_auto_channels(tmp_path):
     events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300, {300: status(9999, 300 * L, 4)}))
     assert "channels | board now sends 4 channel(s), not 2: channels re-set to ch0, ch1, ch2, ch3" in events
+
+
+def test_the_exit_summary_covers_the_whole_run_of_a_channel_through_a_change_of_channels(tmp_path):
+    """A degrading 2-channel board reconfigured to 3 channels at 100 s of 120 (STATUS and RMS
+    frames of 3; ch2 copies ch0): ch0 and ch1 keep their names, so the exit summary counts their
+    decisions and failures of the whole run, as the log has them, and their timeline starts at
+    2 s with the first levels where the log has them; it says their filters restarted at 100 s.
+    Before, it counted the new chain's 20 decisions and 1 failure, its timeline '2-20 s'."""
+    cap = tmp_path / "deg2.bin"
+    assert run_module("firmware_sim", "--scenario", "degrading", "--channels", "2", "--duration", "120",
+                      "--out", str(cap)).returncode == 0
+    out = bytearray()
+    for f in iter_frames(cap.read_bytes())[0]:
+        if f.t0 < 100 * FS:
+            out += encode_frame(f.type, f.seq, f.t0, f.chan, f.flags, f.payload)
+        elif f.type == FrameType.STATUS:
+            st = decode_status(f.payload)
+            out += encode_status(f.seq, f.t0, dataclasses.replace(st, n_channels=3, scale=st.scale + st.scale[:1],
+                                                                  offset=st.offset + st.offset[:1]))
+        else:
+            v = np.frombuffer(f.payload, "<f4")
+            out += encode_rms(f.seq, f.t0, [v[0], v[1], v[0]])
+    events = replay(tmp_path, bytes(out))
+    assert "channels | board now sends 3 channel(s), not 2: channels re-set to ch0, ch1, ch2" in events
+    err = (tmp_path / "stderr.txt").read_text()
+    msgs = [(t, s, m) for f in (tmp_path / "out").glob("*.mcap") for t, s, m in read_messages(f)]
+    start = min(s for t, s, _ in msgs if t.endswith("/severity"))
+    for ch, restarted in (("ch0", True), ("ch1", True), ("ch2", False)):
+        sev = [(s, m["severity_index"]) for t, s, m in msgs if t == f"/cm/{ch}/severity"]
+        failures = [m for t, _, m in msgs if t == "/cm/events" and m["kind"] == "failure" and m["channel"] == ch]
+        line = re.search(rf"  {ch}: final severity ([\d.]+), max ([\d.]+), (\d+) failure event\(s\), "
+                         rf"(\d+) decisions(.*)", err)
+        assert line, err
+        assert (float(line[1]), float(line[2])) == (round(sev[-1][1], 1), round(max(v for _, v in sev), 1))
+        assert (int(line[3]), int(line[4])) == (len(failures), len(sev)), line[0]
+        assert line[5] == ("; its filters restarted at 100 s (a new set of channels)" if restarted else ""), line[0]
+        first = {lv: next((s - start) / 1e9 + 1 for s, v in sev if v >= lv - 1e-9) for lv in (0.1, 0.5, 1.0)}
+        timeline = re.search(rf"  {ch}: \|.*\| (\d+)-120 s; first 0.1 at (\d+) s, 0.5 at (\d+) s, 1 at (\d+) s", err)
+        assert timeline, err
+        assert [int(x) for x in timeline.groups()] == [102 if ch == "ch2" else 2, *map(round, first.values())], \
+            timeline[0]
+    assert len(failures) == 1 and len([m for t, _, m in msgs if t == "/cm/ch0/severity"]) == 120
 
 
 def test_new_board_channels_that_are_not_configured_are_named_as_not_monitored(tmp_path):
