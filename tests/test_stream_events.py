@@ -6,6 +6,7 @@ protocol encoder and replayed by a real ``cmsensord replay`` process, which must
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import pty
 import re
@@ -21,15 +22,17 @@ from cmsensord.protocol import (
     MODE_RMS,
     FrameType,
     Status,
+    decode_status,
     encode_frame,
     encode_raw,
     encode_rms,
     encode_status,
     encode_tacho,
+    iter_frames,
 )
 from cmsensord.service.live import DIAGNOSTICS_S
 from cmsensord.sinks.mcap_read import read_messages
-from processes import cmsensord, start_board, start_daemon, stop
+from processes import cmsensord, run_module, start_board, start_daemon, stop
 
 FS, L = 25000, 250
 
@@ -92,6 +95,48 @@ def test_a_board_swapped_from_2_to_4_channels_re_sets_auto_channels(tmp_path):
     assert "channels | board now sends 4 channel(s), not 2: channels re-set to ch0, ch1, ch2, ch3" in events
 
 
+def test_the_exit_summary_covers_the_whole_run_of_a_channel_through_a_change_of_channels(tmp_path):
+    """A degrading 2-channel board reconfigured to 3 channels at 100 s of 120 (STATUS and RMS
+    frames of 3; ch2 copies ch0): ch0 and ch1 keep their names, so the exit summary counts their
+    decisions and failures of the whole run, as the log has them, and their timeline starts at
+    2 s with the first levels where the log has them; it says their filters restarted at 100 s.
+    Before, it counted the new chain's 20 decisions and 1 failure, its timeline '2-20 s'."""
+    cap = tmp_path / "deg2.bin"
+    assert run_module("firmware_sim", "--scenario", "degrading", "--channels", "2", "--duration", "120",
+                      "--out", str(cap)).returncode == 0
+    out = bytearray()
+    for f in iter_frames(cap.read_bytes())[0]:
+        if f.t0 < 100 * FS:
+            out += encode_frame(f.type, f.seq, f.t0, f.chan, f.flags, f.payload)
+        elif f.type == FrameType.STATUS:
+            st = decode_status(f.payload)
+            out += encode_status(f.seq, f.t0, dataclasses.replace(st, n_channels=3, scale=st.scale + st.scale[:1],
+                                                                  offset=st.offset + st.offset[:1]))
+        else:
+            v = np.frombuffer(f.payload, "<f4")
+            out += encode_rms(f.seq, f.t0, [v[0], v[1], v[0]])
+    events = replay(tmp_path, bytes(out))
+    assert "channels | board now sends 3 channel(s), not 2: channels re-set to ch0, ch1, ch2" in events
+    err = (tmp_path / "stderr.txt").read_text()
+    msgs = [(t, s, m) for f in (tmp_path / "out").glob("*.mcap") for t, s, m in read_messages(f)]
+    start = min(s for t, s, _ in msgs if t.endswith("/severity"))
+    for ch, restarted in (("ch0", True), ("ch1", True), ("ch2", False)):
+        sev = [(s, m["severity_index"]) for t, s, m in msgs if t == f"/cm/{ch}/severity"]
+        failures = [m for t, _, m in msgs if t == "/cm/events" and m["kind"] == "failure" and m["channel"] == ch]
+        line = re.search(rf"  {ch}: final severity ([\d.]+), max ([\d.]+), (\d+) failure event\(s\), "
+                         rf"(\d+) decisions(.*)", err)
+        assert line, err
+        assert (float(line[1]), float(line[2])) == (round(sev[-1][1], 1), round(max(v for _, v in sev), 1))
+        assert (int(line[3]), int(line[4])) == (len(failures), len(sev)), line[0]
+        assert line[5] == ("; its filters restarted at 100 s (a new set of channels)" if restarted else ""), line[0]
+        first = {lv: next((s - start) / 1e9 + 1 for s, v in sev if v >= lv - 1e-9) for lv in (0.1, 0.5, 1.0)}
+        timeline = re.search(rf"  {ch}: \|.*\| (\d+)-120 s; first 0.1 at (\d+) s, 0.5 at (\d+) s, 1 at (\d+) s", err)
+        assert timeline, err
+        assert [int(x) for x in timeline.groups()] == [102 if ch == "ch2" else 2, *map(round, first.values())], \
+            timeline[0]
+    assert len(failures) == 1 and len([m for t, _, m in msgs if t == "/cm/ch0/severity"]) == 120
+
+
 def test_new_board_channels_that_are_not_configured_are_named_as_not_monitored(tmp_path):
     config = "channels:\n  - {name: a, index: 0}\n  - {name: b, index: 1}\n"
     events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300), config)
@@ -130,7 +175,7 @@ def test_100_tacho_frames_of_1023_edges_are_summarised(tmp_path):
     assert len(extra) == 6 and extra[:5] == [
         f"tacho_extra_pulse | spurious tacho pulse removed at sample {x}"
         for x in ("50003.2", "50003.6", "50004.6", "50007.8", "50014.4")]
-    assert extra[5] == ("tacho_extra_pulse | 7825 more tacho_extra_pulse event(s) in 1 s (7825 in all): "
+    assert extra[5] == ("tacho_extra_pulse | 7825 more tacho_extra_pulse event(s) in 1 s (7825 pulse(s) between them): "
                         "at most 5 per 1 s are written one by one")
     assert len(events) == 33            # of 23,682 events (7,830 extra and 15,852 missed pulses)
 
@@ -263,6 +308,39 @@ def test_a_fault_that_never_stops_is_summarised_in_the_journal_every_ten_minutes
     journal = [ln for ln in (tmp_path / "stderr.txt").read_text().splitlines() if "WARNING frames_lost" in ln]
     summaries = [ln for ln in journal if "more frames_lost" in ln]
     assert (len(journal), len(summaries)) == (33, 3), journal
-    assert summaries[0] == ("WARNING frames_lost: 290 more frames_lost event(s) in 598 s (290 in all): "
+    assert summaries[0] == ("WARNING frames_lost: 290 more frames_lost event(s) in 598 s (290 frame(s) between them): "
                             "at most 10 per 600 s are written one by one")
     assert "frames_lost 650" in (tmp_path / "stderr.txt").read_text()     # the run's counts
+
+
+def test_a_flood_that_never_stops_is_ten_journal_lines_and_a_summary_each_ten_minutes(tmp_path):
+    """650 s of RMS frames, every tenth followed by three copies of one RMS frame of a wrong
+    payload length (one decode_error and a frames_repeated of 2 frames: 10 a second of each).
+    The journal writes at most 10 lines of a kind in 600 s, the per-second summaries among them,
+    and one summary of the rest per window (before: a per-second summary of each kind every
+    second, 650 of them); every event is written one by one or counted in one summary, and a
+    summary names what its count counts (frames, not events).  /cm/events keeps its 5 a second."""
+    out = bytearray(status(0, 0, 1))
+    seq = 1
+    for k in range(65_000):
+        out += encode_rms(seq, k * L, [0.5])
+        for _ in range(3 if k % 10 == 0 else 0):
+            out += encode_frame(FrameType.RMS, seq + 1, k * L, 1, 0, bytes(12))   # 12 bytes, not 4
+            seq += 1
+        seq += 1
+    events = replay(tmp_path, bytes(out))
+    err = (tmp_path / "stderr.txt").read_text()
+    assert "decode_error 6500, frames_repeated 6500" in err              # the run's counts
+    for kind, frames in (("decode_error", None), ("frames_repeated", 2)):
+        journal = [ln for ln in err.splitlines() if ln.startswith(f"WARNING {kind}: ")]
+        more = [re.fullmatch(rf"WARNING {kind}: (\d+) more {kind} event\(s\) in [\d.]+ s \((.*)\): at most "
+                             r"(\d+) per (\d+) s are written one by one", ln) for ln in journal]
+        summaries = [m for m in more if m]
+        assert len(journal) == 2 * (10 + 1) and [m[4] for m in summaries] == ["1", "600"] * 2, journal
+        assert len(journal) - len(summaries) + sum(int(m[1]) for m in summaries) == 6500, journal
+        for m in summaries:
+            assert m[2] == (f"{frames * int(m[1])} frame(s) between them" if frames
+                            else f"their counts add up to {m[1]}"), m[0]
+        written = [e for e in events if e.startswith(f"{kind} |")]
+        per_second = [e for e in written if "at most 5 per 1 s" in e]
+        assert len(per_second) == 650 and len(written) == 650 * 6, written[:12]

@@ -22,6 +22,9 @@ the board has changed.  Fewer channels: the channels no longer sent are
 reported and observed as missing.  More channels: the channels are re-set (with
 ``auto_channels``, or when configured channels come back) and a new severity
 chain is made, or a ``channels`` event names the board channels not monitored.
+A new chain's filters start afresh; a channel that keeps its name keeps its
+:class:`~cmsensord.monitor.severity.ChannelView` (the run's decisions, failures, maximum and
+timeline, for the exit summary), which notes where its filters restarted.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from cmsensord.config.channel_refs import check_channel_refs
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
-from cmsensord.monitor.severity import SeverityChain
+from cmsensord.monitor.severity import ChannelView, SeverityChain
 from cmsensord.protocol import (
     MAX_BLOCKS_PER_S,
     MAX_RAW_BLOCK,
@@ -85,6 +88,7 @@ class ChannelSetup:
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
         self.odd_dropped = 0                    # odd frames dropped in all
+        self._views: dict[str, ChannelView] = {}    # each channel name's view, over every chain
         #: called with the monitored channels' names each time a chain is made for them (the sink's
         #: ``channels_known``: the MQTT publisher's discovery and worst alarms)
         self.on_channels = on_channels
@@ -240,8 +244,20 @@ class ChannelSetup:
             self.on_channels(tuple(ch.name for ch in usable))
         self.severity = SeverityChain(usable, fs=self.clock.fs, block_len=self.clock.block_len,
                                       trace_filter=self.cfg.output.akf_trace_filter)
+        self._keep_views(self.severity)
         self.log.add(self.severity.notes)
         self.severity.notes.clear()
         self.microphones, events = Microphones.create(self.cfg, usable, fs=self.clock.fs,
                                                       block_len=self.clock.block_len)
         self.log.add(events)
+
+    def _keep_views(self, chain: SeverityChain) -> None:
+        """The chain's channels take over the views of their names from the chains before it: the
+        run's figures go on; the latest decision's flags and signal are the new filters' (none
+        yet), and the view notes the restart at the ADC time now."""
+        for c, view in enumerate(chain.views):
+            kept = self._views.setdefault(view.name, view)
+            if kept is not view:
+                kept.anomaly, kept.outliers_first, kept.no_signal = view.anomaly, 0, False
+                kept.restarts.append(self.clock.adc_seconds)
+                chain.views[c] = kept

@@ -8,8 +8,16 @@ within it are admitted while fewer than ``burst`` were, and the rest are held ba
 counted, their ``count`` fields summed, and handed back as one :class:`Summary` when the
 interval is closed, by the next event of the (kind, channel) stamped outside it, by
 :meth:`RateLimit.over` (the intervals a stamp is past) or :meth:`RateLimit.close_all`.
-:class:`RateLimits` chains limits (an event the first admits goes on to the next), with the
-same methods. Fed the same events in the same order, a limit admits and summarises the same ones.
+:class:`RateLimits` chains limits, with the same methods: an event the first admits goes on to
+the next, and so does a summary a limit hands back (a line of its own, standing for the
+events it counts): a later limit that holds it back adds its events and counts to its own
+summary.  So the last limit bounds every line, summaries included: under a flood that never
+stops, ``LONG_BURST`` lines (events or per-second summaries) in each ``LONG_S`` and one summary
+of the rest, and each event is either admitted or counted in exactly one summary handed back.
+Fed the same events in the same order, a limit admits and summarises the same ones.
+
+A summary's message names what its counts count: the events held back, and the sum of their
+``count`` fields in the unit :data:`COUNT_UNITS` gives the kind (frames, pulses, messages).
 """
 
 from __future__ import annotations
@@ -17,14 +25,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["RATE_S", "RATE_BURST", "LONG_S", "LONG_BURST", "RateLimit", "RateLimits", "Summary"]
+__all__ = ["COUNT_UNITS", "RATE_S", "RATE_BURST", "LONG_S", "LONG_BURST", "RateLimit", "RateLimits",
+           "Summary"]
 
 #: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
 RATE_S = 1.0
 RATE_BURST = 5
-#: ... and at most LONG_BURST of those in LONG_S
+#: ... and at most LONG_BURST lines in LONG_S: events the first limit admits and its summaries
 LONG_S = 600.0
 LONG_BURST = 10
+#: what the ``count`` field of an event of a kind counts, where every event of it that has one
+#: counts the same thing; a summary of another kind writes the sum as "their counts add up to"
+COUNT_UNITS = {"frames_lost": "frame", "frames_repeated": "frame", "channels": "frame",
+               "queue_overflow": "frame", "tacho_extra_pulse": "pulse", "tacho_missed_pulse": "pulse",
+               "mqtt_queue": "message", "salvage": "message"}
 
 
 @dataclass
@@ -41,8 +55,12 @@ class Summary:
     burst: int = RATE_BURST
 
     def message(self) -> str:
+        """``n`` events held back, and the sum of their ``count`` fields in the kind's unit."""
+        unit = COUNT_UNITS.get(self.kind)
+        counted = (f" ({self.count} {unit}(s) between them)" if unit is not None
+                   else f" (their counts add up to {self.count})")
         return (f"{self.n} more {self.kind} event(s) in {(self.last_ns - self.since_ns) / 1e9:.3g} s"
-                + (f" ({self.count} in all)" if self.count else "")
+                + (counted if self.count else "")
                 + f": at most {self.burst} per {self.rate_s:g} s are written one by one")
 
     def fields(self) -> dict[str, Any]:
@@ -66,8 +84,10 @@ class RateLimit:
         self._rate_ns = int(rate_s * 1e9)
         self._open: dict[tuple[str, str | None], _Interval] = {}
 
-    def admit(self, kind: str, channel: str | None, stamp_ns: int, count: int) -> tuple[Summary | None, bool]:
-        """Whether the event is written one by one, and the summary of an interval it closes."""
+    def admit(self, kind: str, channel: str | None, stamp_ns: int, count: int,
+              n: int = 1) -> tuple[Summary | None, bool]:
+        """Whether the line (an event, or a summary of ``n`` events) is written, and the summary of
+        an interval it closes; held back, its ``n`` events and ``count`` go to the summary."""
         key = (kind, channel)
         h = self._open.get(key)
         if h is not None and 0 <= stamp_ns - h.since_ns < self._rate_ns:
@@ -75,7 +95,7 @@ class RateLimit:
             if h.admitted < self.burst:
                 h.admitted += 1
                 return None, True
-            h.n += 1
+            h.n += n
             h.count += count
             return None, False
         closed = self._close(key) if h is not None else None
@@ -98,26 +118,42 @@ class RateLimit:
 
 class RateLimits:
     """Limits in a chain (by default RATE_BURST in RATE_S, then LONG_BURST in LONG_S): an event is
-    written one by one when every limit admits it; each limit summarises what it held back."""
+    written one by one when every limit admits it; a limit's summary is written when every later
+    limit admits it, and is otherwise counted in the summary of the limit that held it back."""
 
     def __init__(self, limits: tuple[RateLimit, ...] | None = None) -> None:
         self.limits = limits or (RateLimit(), RateLimit(LONG_S, LONG_BURST))
 
     def admit(self, kind: str, channel: str | None, stamp_ns: int, count: int) -> tuple[list[Summary], bool]:
-        """Whether the event is written one by one, and the summaries of the intervals it closes."""
+        """Whether the event is written one by one, and the summaries to write of the intervals it
+        closes (oldest first)."""
         closed: list[Summary] = []
-        for limit in self.limits:
+        for i, limit in enumerate(self.limits):
             summary, ok = limit.admit(kind, channel, stamp_ns, count)
             if summary is not None:
-                closed.append(summary)
+                closed += self._onward(summary, i + 1)
             if not ok:
                 return closed, False
         return closed, True
 
     def over(self, now_ns: int) -> list[Summary]:
-        """The summaries of the intervals ``now_ns`` is outside of, in every limit."""
-        return [s for limit in self.limits for s in limit.over(now_ns)]
+        """The summaries to write of the intervals ``now_ns`` is outside of, in every limit."""
+        return [t for i, limit in enumerate(self.limits) for s in limit.over(now_ns)
+                for t in self._onward(s, i + 1)]
 
     def close_all(self) -> list[Summary]:
-        """The summaries of every interval of every limit."""
-        return [s for limit in self.limits for s in limit.close_all()]
+        """The summaries to write of every interval of every limit."""
+        return [t for i, limit in enumerate(self.limits) for s in limit.close_all()
+                for t in self._onward(s, i + 1)]
+
+    def _onward(self, s: Summary, first: int) -> list[Summary]:
+        """A summary through the limits from index ``first``: [] when one holds it back (its
+        events counted there), else [it], after the summaries of the intervals it closes."""
+        closed: list[Summary] = []
+        for i in range(first, len(self.limits)):
+            summary, ok = self.limits[i].admit(s.kind, s.channel, s.last_ns, s.count, s.n)
+            if summary is not None:
+                closed += self._onward(summary, i + 1)
+            if not ok:
+                return closed
+        return closed + [s]

@@ -8,10 +8,10 @@ that knows better (the sink about its own routine work) passes ``log_level``.
 
 Repeated events of one kind on one channel are rate-limited
 (:mod:`cmsensord.monitor.event_rate`): at most ``RATE_BURST`` in an interval of ``RATE_S``
-of event time starting at the first (and, in the journal, at most ``LONG_BURST`` in
-``LONG_S``: a fault that never stops is a few lines each ten minutes); the ones after
-them within an interval are counted (their ``count`` fields summed) and written as one
-summary event of that kind when it ends.  The limit
+of event time starting at the first (and, in the journal, at most ``LONG_BURST`` lines in
+``LONG_S``, the per-second summaries among them: a fault or a flood that never stops is a few
+lines each ten minutes); the ones after them within an interval are counted (their ``count``
+fields summed) and written as one summary event of that kind when it ends.  The limit
 of ``/cm/events`` and ``/cm/log`` is applied as the records are written, in stamp order (a
 stamp's records in the order of kind, channel and message), so which events are written one
 by one and what the summaries say depend on the stream only, not on how it was read (live

@@ -37,7 +37,9 @@ PENDING_DECISION_SLOTS = 500
 
 @dataclass
 class ChannelView:
-    """Latest per-channel figures for the status line and the exit summary."""
+    """Per-channel figures for the status line and the exit summary: the latest decision's, and
+    the counts, maximum and timeline of every decision of the run on the channel's name (a new
+    chain made for a new set of channels takes over the view of each name it keeps)."""
 
     name: str
     severity: float = 0.0
@@ -49,6 +51,7 @@ class ChannelView:
     failures: int = 0
     no_signal: bool = False       # the last decision had no signal: its severity is held
     timeline: SeverityTimeline = field(default_factory=SeverityTimeline)
+    restarts: list[float] = field(default_factory=list)   # ADC seconds where its filters started afresh
 
 
 class SeverityChain:
@@ -181,7 +184,8 @@ class SeverityChain:
         extras = [self._extra(d, c) for c in range(C)] if self.combined is not None else [{}] * C
         msgs = messages.severities(stamp, self._names, d, self._r_rows, extras, self._topics)
         prev, prev_sev = d.prev_anomaly.tolist(), d.prev_severity.tolist()
-        t_s, judged, held = d.slot / self.rate, not d.transient, d.held_max >= HOLD_EVENT_DECISIONS
+        t_s = ((self.start_slot or 0) + d.slot) / self.rate      # the run's ADC seconds, not the chain's
+        judged, held = not d.transient, d.held_max >= HOLD_EVENT_DECISIONS
         out: list = []
         for c, m in enumerate(msgs):
             out.append(m)

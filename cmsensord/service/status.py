@@ -61,8 +61,10 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
                          f"of {period:.3g} s; the first is the filters' transient)")
             continue
         held = " (held: no signal, see signal_lost)" if v.no_signal else ""
+        restarted = (f"; its filters restarted at {', '.join(f'{t:.0f} s' for t in v.restarts)} "
+                     "(a new set of channels)" if v.restarts else "")
         lines.append(f"  {v.name}: final severity {v.severity:.1f}{held}, max {v.max_severity:.1f}, "
-                     f"{v.failures} failure event(s), {v.decisions} decisions")
+                     f"{v.failures} failure event(s), {v.decisions} decisions{restarted}")
         lines.append(f"  {v.name}: {v.timeline.render()}")
     lines += placed
     if proc.event_counts:
