@@ -3,7 +3,8 @@ channel whose frames are lost for 5 s (a seq and t0 gap, as when a self-powered 
 pulled) keeps its severity and failure through the gap, its severity messages say
 ``no_data``, and no ``failure_clear`` comes of the gap (before, each empty second read as
 healthy: severity 1.00 -> 0.00 and a failure_clear, then FAILURE again after it).
-Through ``cmsensord replay`` of the board's capture with the frames cut out."""
+A failure raised by the level says so when it clears. Through ``cmsensord replay`` of the
+board's capture with the frames cut out."""
 
 from __future__ import annotations
 
@@ -51,3 +52,18 @@ def test_a_failing_channel_keeps_its_severity_through_seconds_without_data(gappe
     clears = [m for t, _, m in msgs if t == "/cm/events" and m["kind"] == "failure_clear" and m["channel"] == "ch1"
               and GAP[0] < m["timestamp"]["sec"] + m["timestamp"]["nsec"] / 1e9 - t0 <= GAP[1] + 1]
     assert clears == [], clears
+
+
+def test_a_failure_by_level_clears_by_level(gapped, tmp_path):
+    """A failure raised by the level (``level 4.02 x baseline >= level_danger``) says, when it
+    clears, that the level fell (it said ``AKF_10 back below c*f_r``, a flag never set)."""
+    (tmp_path / "c.yaml").write_text("monitor:\n  baseline: 0.7\n")
+    r = cmsensord("replay", str(gapped), "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "o"))
+    assert r.returncode == 0, r.stderr
+    (log,) = (tmp_path / "o").glob("*.mcap")
+    ev = [m["message"] for t, _, m in read_messages(log) if t == "/cm/events" and m.get("channel") == "ch1"
+          and m["kind"] in ("failure", "failure_clear")]
+    by_level = [i for i, msg in enumerate(ev) if "FAILURE: level" in msg]
+    assert by_level and by_level[0] + 1 < len(ev), ev
+    assert ev[by_level[0] + 1].startswith("ch1: failure condition cleared (level "), ev
+    assert ev[by_level[0] + 1].endswith(" x baseline below level_danger)"), ev

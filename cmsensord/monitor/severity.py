@@ -279,6 +279,7 @@ class SeverityChain:
                    f"level {float(d.level[c]):.2f} x baseline >= level_danger")
             events.append(Event("failure", name, f"{name}: FAILURE: {why}", stamp, where))
         elif was_failure and not failure:
-            events.append(Event("failure_clear", name, f"{name}: failure condition cleared "
-                                f"(AKF_{n} back below c*f_r)", stamp, where))
+            why = (f"AKF_{n} back below c*f_r" if prev[-1] else
+                   f"level {float(d.level[c]):.2f} x baseline below level_danger")
+            events.append(Event("failure_clear", name, f"{name}: failure condition cleared ({why})", stamp, where))
         return events
