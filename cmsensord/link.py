@@ -222,6 +222,7 @@ class SerialReader(threading.Thread):
         self.connected = threading.Event()
         self.ever_connected = False
         self.last_data = time.monotonic()
+        self.opened_at = self.last_data       # when the port was last opened (monotonic)
         self.failures = 0
         self.errors = 0                       # unexpected exceptions since the last bytes read
         self.error: str | None = None         # the last one, as reported
@@ -278,7 +279,7 @@ class SerialReader(threading.Thread):
             if (self.ever_connected or self.failures) and not self.errors and not self._reopens:
                 self._event("link_restored", f"{self.port} open again")
             self.ever_connected = True
-            self.last_data = time.monotonic()   # silence is counted from the open
+            self.last_data = self.opened_at = time.monotonic()   # silence is counted from the open
             self.failures = 0
             self._backoff = self.reconnect_min_s
             self.down = None
