@@ -84,7 +84,6 @@ _FRAME_HEAD = struct.Struct("<2sBBHIBBH")  # sync + header, for encoding
 # STATUS fixed part: fw u16, mode u8, C u8, fs u32, block_len u16, tacho u8, ppr u8,
 # overruns u32, uptime u32 (20 bytes), then C x (scale f32, offset f32).
 _STATUS = struct.Struct("<HBBIHBBII")
-_STATUS_MODE_FS = struct.Struct("<2xB1xI")  # mode and fs of the fixed part
 _U16 = struct.Struct("<H")
 
 _TYPE_BY_CODE = {int(t): t for t in FrameType}
@@ -210,12 +209,6 @@ def encode_tacho(seq: int, t0: int, chan: int, edges: Sequence[int] | np.ndarray
 
 
 # -- Payload decoding ------------------------------------------------------
-
-def status_mode_fs(payload: bytes) -> tuple[int, int] | None:
-    """The board mode and fs a STATUS payload names (None: too short for them), without
-    decoding the rest: a cheap look at a STATUS frame that repeats what is in force."""
-    return _STATUS_MODE_FS.unpack_from(payload) if len(payload) >= _STATUS_MODE_FS.size else None
-
 
 def decode_status(payload: bytes) -> Status:
     n = len(payload)
