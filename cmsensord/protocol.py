@@ -386,8 +386,7 @@ class Decoder:
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
         self._last_seq: int | None = None
-        self._last_t0 = 0
-        self._last_t0_unwrapped = 0
+        self._last_t0 = self._last_t0_unwrapped = 0
         self._repeats = Repeats(_make)
 
     def buffered(self) -> int:
@@ -411,6 +410,14 @@ class Decoder:
     def flush_batch(self) -> FrameBatch:
         """:meth:`flush`'s frames as a batch of columns."""
         return _batch(*self._scan_once(self._scanner, final=True))
+
+    def give_up(self) -> list[Frame]:
+        """A stalled link: incomplete candidates (a whole header) are no frames; the frames behind them."""
+        frames: list[Frame] = []
+        while len(self._buf) >= HEADER_LEN:     # rule 2: its first sync byte dropped, a CRC failure
+            self._done(1, _Tally(self._last_seq, self._last_t0, self._last_t0_unwrapped, discarded=1, crc_fail=1))
+            frames += self.feed(b"")
+        return frames
 
     def _feed(self, data: bytes | bytearray | memoryview, scan) -> list[tuple[list, bytes]]:
         """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""

@@ -1,5 +1,9 @@
 """A live daemon on a pty written here, at the board's pace: what a stall and a replug do.
 
+* A board that stops 1 s after line noise made a header claiming 4000 bytes: at the stall the
+  daemon gives that candidate up (a CRC failure) and decodes the second of frames behind it,
+  and the ``--capture`` file holds every byte, before anything stops the daemon (it is killed
+  with SIGKILL, which finishes nothing).
 * A board unplugged for 3 s and plugged back: its frames after ``link_restored`` are no
   ``link_stalled`` ("bytes but no valid frame") however long the unplug lasted.
 """
@@ -7,6 +11,8 @@
 from __future__ import annotations
 
 import os
+import signal
+import struct
 import time
 import tty
 from pathlib import Path
@@ -14,11 +20,16 @@ from pathlib import Path
 import pytest
 
 from cmsensord import __version__
+from cmsensord.sinks.mcap_sink import read_messages
 from processes import start_daemon, stop
 from test_link_faults import _opened
 from test_stream_time import rms_run, status
 
 pytestmark = pytest.mark.process
+
+#: a header line noise made: sync, version 1, type RMS, len 4000, and no frame behind it
+NOISE_HEADER = b"\xa5\x5a\x01\x02\x00\x00\x00\x00\x00\x00\x02\x00" + struct.pack("<H", 4000)
+
 
 class PtyBoard:
     """A board on a pty published at ``link``: it sends whole blocks in real time, and can be
@@ -91,6 +102,27 @@ def board(tmp_path):
     b = PtyBoard(tmp_path / "ttyBOARD")
     yield b
     b.close()
+
+
+def test_a_stall_after_a_noise_header_reports_the_frames_behind_it_before_any_stop(tmp_path, board):
+    """3 s of frames, the noise header 1 s before their end, then silence: 4 s later the log (read
+    after SIGKILL) has an observation of every frame and counts one CRC failure, and the capture
+    file is every byte fed, and link_stalled says no bytes came.  Before: the 100 frames behind the
+    candidate waited in the decoder for the 4000 bytes it claimed (200 of 300 observations, and
+    "bytes but no valid frame for 2.2 s"), and the capture file lacked its last 2178 bytes (its
+    buffer's)."""
+    d = start_daemon(tmp_path, board.link, "--capture", str(tmp_path / "cap.bin"))
+    assert _opened(d, board.name, 30.0), "the daemon did not open the port"
+    time.sleep(0.2)                         # pyserial discards what waits at its open
+    board.blocks(3.0, before_last_s=1.0, extra=NOISE_HEADER)
+    time.sleep(4.0)
+    d.send_signal(signal.SIGKILL)
+    _, err = d.communicate(timeout=10)
+    assert f"WARNING link_stalled: {board.link}: no bytes for 2 s" in event_lines(err), err
+    diag = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap.part")), lenient=True)
+            if t == "/cm/diagnostics"]
+    assert (diag[-1]["observations"], diag[-1]["link"]["crc_failures"]) == (300, 1), diag[-1]
+    assert (tmp_path / "cap.bin").read_bytes() == board.fed
 
 
 def test_frames_after_a_replug_are_no_stall(tmp_path, board):
