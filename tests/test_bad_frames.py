@@ -63,6 +63,23 @@ def test_data_frames_of_a_wrong_length_or_channel_are_one_event_each_at_their_t0
     assert [s for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"] == [f.t0 * 40_000 for f in changed]
 
 
+def test_impossible_rms_values_are_one_event_each_at_their_t0_at_any_read_size():
+    """Every 97th RMS frame carries NaN, every 89th -1 m/s² (a one-channel board): each is a missing
+    observation and one `decode_error` at its t0 (rms_bounds), read in any size.  Before: the NaN
+    ones were missing with no word, the negative ones observations."""
+    def change(i, f):
+        if f.type is FrameType.RMS and i % 97 == 5:
+            return f._replace(payload=struct.pack("<f", float("nan")))
+        if f.type is FrameType.RMS and i % 89 == 7:
+            return f._replace(payload=struct.pack("<f", -1.0))
+        return f
+
+    data, changed = rebuilt(board("rms", 16), change)
+    runs = same_at_every_read_size(data)
+    assert len(changed) >= 30 and [(s, m["channel"]) for s, m in runs[0]["/cm/events"]
+                                   if m["kind"] == "decode_error"] == [(f.t0 * 40_000, "ch0") for f in changed]
+
+
 def edge_outside(i, f):
     """Every 40th TACHO frame with one more edge, after its own, past its block: at 250 samples
     and 5/256 (the next block's first instant) or at 2^32 - 1 (11 minutes on)."""

@@ -64,6 +64,10 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
         lines.append(f"  {v.name}: final severity {v.severity:.1f}{held}, max {v.max_severity:.1f}, "
                      f"{v.failures} failure event(s), {v.decisions} decisions")
         lines.append(f"  {v.name}: {v.timeline.render()}")
+    bounds = getattr(proc, "rms_bounds", None)      # the Processor's (an imported recording's has none)
+    for name, n in (bounds.bad.items() if bounds is not None else ()):
+        lines.append(f"  {name}: {n} RMS value(s) the board cannot send (not finite, negative or past its "
+                     "ADC's range): missing observations, see the decode_error events")
     lines += placed
     if proc.event_counts:
         lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
