@@ -4,10 +4,13 @@ events and exit summary say what was dropped.
 
 * An RMS value that is not finite, negative or above what the 12-bit ADC gives at the channel's
   STATUS scale and offset is a missing observation and one ``decode_error`` at its frame's t0.
+* RMS frames that keep their channel count after a STATUS announced another are dropped, one
+  ``decode_error`` for each 100 in a row, as RMS frames of a board in RAW mode are.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import numpy as np
@@ -64,3 +67,25 @@ def test_impossible_rms_values_are_missing_observations_with_a_decode_error_each
             "observations, see the decode_error events")
     assert said == [f"  ch0: 3 {tail}", f"  ch1: 2 {tail}"], summary
     assert "  events: config 1, decode_error 5" in summary.splitlines(), summary
+
+
+@pytest.fixture
+def status_says_3_frames_carry_2() -> bytes:
+    """3 s of two channels, a STATUS saying 3 channels at 1 s and each second on, the RMS frames still of 2."""
+    three = dataclasses.replace(STATUS, n_channels=3, scale=STATUS.scale + (0.01,), offset=STATUS.offset + (2048.0,))
+    out, seq = bytearray(), 0
+    for k in range(300):
+        if k % 100 == 0:
+            out += encode_status(seq, k * L, STATUS if k == 0 else three)
+            seq += 1
+        out += encode_rms(seq, k * L, np.array((0.5, 0.7), dtype=np.float32))
+        seq += 1
+    return bytes(out)
+
+
+def test_rms_frames_disagreeing_with_the_status_channel_count_are_dropped_with_a_decode_error(
+        tmp_path, status_says_3_frames_carry_2):
+    events = replay(tmp_path, status_says_3_frames_carry_2)
+    assert [e for e in events if e.startswith("decode_error")] == [
+        "decode_error | 100 RMS frame(s) of 2 channel(s) dropped: the board's STATUS says 3 channel(s)"] * 2
+    assert summary_observations(tmp_path) == (200, 0)      # the first second's two channels

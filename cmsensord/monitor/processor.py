@@ -372,7 +372,7 @@ class Processor(Figures):
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
-        if not (self.setup.ready(C) and self.setup.accept(C, frames)):
+        if not (self.setup.agrees(C, frames) and self.setup.ready(C) and self.setup.accept(C, frames)):
             return
         self._board_channels(C)
         good = frames if np.all(lengths == 4 * C) else [f for f in frames if len(f.payload) == 4 * C]
