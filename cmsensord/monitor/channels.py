@@ -2,7 +2,9 @@
 
 A STATUS frame (docs/PROTOCOL.md type 1) that changes fs, block_len, the
 channel count or the mode is news: the block clock takes the new rate (and
-re-anchors its slots), and a ``config`` event says what the board sends.  The
+re-anchors its slots), so does the severity chain (a decision is ``decision_period_s`` of
+observations at it, with the ``decision_rule`` events of a board at that rate from the
+start), and a ``config`` event says what the board sends.  The
 channels come from the configuration, or from the board's first data frame's C
 when the configuration lists none (``auto_channels``); configured channels the
 board does not send are reported (a warning: their rules and bearings see no value)
@@ -143,12 +145,18 @@ class ChannelSetup:
         return bool(moved)
 
     def apply(self, f: Frame, st: Status) -> None:
-        """News from the board: the clock's rate, the channel count it announces, and the config event."""
+        """News from the board: the clock's and the severity chain's rate, the channel count it
+        announces, and the config event."""
         if self.status is None or st.n_channels != self.status.n_channels:
             self.announced = st.n_channels
+        rate = (st.fs, st.block_len) != (self.clock.fs, self.clock.block_len)
         if self.clock.set_rate(st.fs, st.block_len):
             self.log.emit("config", None, f"board changed fs/block_len to {st.fs}/{st.block_len}:"
                           " time base re-anchored")
+        if rate and self.severity is not None:  # decisions of decision_period_s at the new rate, as at the start
+            self.severity.set_rate(st.fs, st.block_len)
+            self.log.add(self.severity.notes)
+            self.severity.notes.clear()
         mode = {1: "RMS", 2: "RAW"}.get(st.mode, f"unknown({st.mode})")
         self.log.emit("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}"

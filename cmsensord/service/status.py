@@ -54,7 +54,7 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
              f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
              f"({proc.observations} observations, {proc.missing_observations} missing, "
              f"{proc.frames_lost} frames lost)"]
-    period = proc.severity.decider.period / proc.severity.rate if proc.severity is not None else 1.0
+    period = proc.severity.decider.nominal_period / proc.severity.rate if proc.severity is not None else 1.0
     for v in proc.views:
         if not v.judged:
             lines.append(f"  {v.name}: no decision (the recording is shorter than two decision periods "
