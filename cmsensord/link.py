@@ -29,7 +29,7 @@ except ImportError:                     # pragma: no cover - Windows
     PosixSerial = None
 
 from cmsensord.errors import LinkError
-from cmsensord.protocol import Decoder, Frame, FrameType
+from cmsensord.protocol import HEADER_LEN, Decoder, Frame, FrameType
 from cmsensord.read_pace import ReadPace
 
 log = logging.getLogger("cmsensord")
@@ -49,6 +49,9 @@ STEP_BYTES = 1 << 16
 PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 #: the module of pyserial's POSIX read: a port whose read is from elsewhere (wrapped) is read by it
 _POSIX_READ = "serial.serialposix"
+#: while bytes come, the ``--capture`` file's buffer is flushed at least this often (seconds); it is
+#: flushed at once when the link goes quiet
+CAPTURE_FLUSH_S = 1.0
 #: errors of a read of a non-blocking descriptor that mean "no bytes now" (pyserial's read ignores them)
 _NO_BYTES_NOW = (errno.EAGAIN, errno.EALREADY, errno.EWOULDBLOCK, errno.EINPROGRESS, errno.EINTR)
 
@@ -204,6 +207,11 @@ class SerialReader(threading.Thread):
     Link events (``link_lost``, ``link_restored``, ``reader_error``, ``reader_recovered``) are queued in ``events`` as
     (wall_ns, kind, message) for the processing loop to emit: only the loop
     writes to the sink.
+
+    When no byte comes, the capture file's buffered bytes are written out, and after ``give_up_s``
+    without one (0: never) an incomplete candidate frame the decoder holds is given up
+    (:meth:`~cmsensord.protocol.Decoder.give_up`): the frames that came behind it are queued then,
+    not when the board sends again.
     """
 
     def __init__(self, port: str, *, baud: int, read_size: int, queue: FrameQueue,
@@ -222,6 +230,7 @@ class SerialReader(threading.Thread):
         self.connected = threading.Event()
         self.ever_connected = False
         self.last_data = time.monotonic()
+        self.opened_at = self.last_data       # when the port was last opened (monotonic)
         self.failures = 0
         self.errors = 0                       # unexpected exceptions since the last bytes read
         self.error: str | None = None         # the last one, as reported
@@ -233,6 +242,10 @@ class SerialReader(threading.Thread):
         self._reopens = 0                     # reopens of this silence (0: bytes came since)
         self._backoff = reconnect_min_s
         self.capture_error: str | None = None
+        self._captured_at = 0.0               # when the capture file was last flushed (monotonic)
+        self._capture_dirty = False           # bytes written to it since
+        #: seconds without a byte before an incomplete candidate frame is given up (0: never)
+        self.give_up_s = 0.0
         self.pace = ReadPace()
         self.waited = False     # the last read waited for its first byte (it timed the arrival)
         self._named_last: int | None = None     # the block named last, and the step to it
@@ -278,7 +291,7 @@ class SerialReader(threading.Thread):
             if (self.ever_connected or self.failures) and not self.errors and not self._reopens:
                 self._event("link_restored", f"{self.port} open again")
             self.ever_connected = True
-            self.last_data = time.monotonic()   # silence is counted from the open
+            self.last_data = self.opened_at = time.monotonic()   # silence is counted from the open
             self.failures = 0
             self._backoff = self.reconnect_min_s
             self.down = None
@@ -299,12 +312,7 @@ class SerialReader(threading.Thread):
         if self._reopens:
             self._event("link_restored", f"{self.port}: bytes again after {self._reopens} reopen(s)")
             self._reopens = 0
-        if self.capture is not None and self.capture_error is None:
-            try:
-                self.capture.write(data)
-            except OSError as exc:
-                self.capture_error = f"capture file: {exc.strerror or exc}"
-                self._event("disk_error", self.capture_error + "; capture stopped")
+        self._tee(data, now)
         frames = self.decoder.feed(data)
         self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None, exact=self.waited)
         self.queue.named.clear()                # a wake_at from now on ends a named_wait
@@ -326,6 +334,7 @@ class SerialReader(threading.Thread):
         ``link_lost`` event, the next ones an INFO line; ``link_restored`` when bytes come."""
         wait = self._reopen_wait or self.reopen_s
         now = time.monotonic()
+        self._idle(now)
         if not wait or now - max(self.last_data, self._reopened_at) < wait:
             return ser
         self._reopen_wait = min(2 * wait, REOPEN_MAX_S)
@@ -340,6 +349,40 @@ class SerialReader(threading.Thread):
         self.connected.clear()
         _close_quietly(ser)
         return None
+
+    def _tee(self, data: bytes, now: float) -> None:
+        """``data`` to the capture file (if any), flushed when that was ``CAPTURE_FLUSH_S`` ago."""
+        if self.capture is None or self.capture_error is not None:
+            return
+        try:
+            self.capture.write(data)
+        except OSError as exc:
+            self._capture_failed(exc)
+            return
+        self._capture_dirty = True
+        if now - self._captured_at >= CAPTURE_FLUSH_S:
+            self._flush_capture(now)
+
+    def _flush_capture(self, now: float) -> None:
+        """The bytes the capture file buffers since its last flush, to it."""
+        if not self._capture_dirty or self.capture is None or self.capture_error is not None:
+            return
+        self._capture_dirty, self._captured_at = False, now
+        try:
+            self.capture.flush()
+        except OSError as exc:
+            self._capture_failed(exc)
+
+    def _capture_failed(self, exc: OSError) -> None:
+        self.capture_error = f"capture file: {exc.strerror or exc}"
+        self._event("disk_error", self.capture_error + "; capture stopped")
+
+    def _idle(self, now: float) -> None:
+        """A read brought no byte: the capture file's buffered bytes go to it, and after ``give_up_s``
+        without a byte the decoder's incomplete candidate is given up, the frames behind it queued."""
+        self._flush_capture(now)
+        if self.give_up_s and now - self.last_data >= self.give_up_s and self.decoder.buffered() >= HEADER_LEN:
+            self.queue.put(self.decoder.give_up())
 
     def _plan(self, now: float) -> tuple[float, bool]:
         """How long to wait as the pace allows (bytes gather in the port's buffer meanwhile),

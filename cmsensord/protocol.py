@@ -84,7 +84,6 @@ _FRAME_HEAD = struct.Struct("<2sBBHIBBH")  # sync + header, for encoding
 # STATUS fixed part: fw u16, mode u8, C u8, fs u32, block_len u16, tacho u8, ppr u8,
 # overruns u32, uptime u32 (20 bytes), then C x (scale f32, offset f32).
 _STATUS = struct.Struct("<HBBIHBBII")
-_STATUS_MODE_FS = struct.Struct("<2xB1xI")  # mode and fs of the fixed part
 _U16 = struct.Struct("<H")
 
 _TYPE_BY_CODE = {int(t): t for t in FrameType}
@@ -210,12 +209,6 @@ def encode_tacho(seq: int, t0: int, chan: int, edges: Sequence[int] | np.ndarray
 
 
 # -- Payload decoding ------------------------------------------------------
-
-def status_mode_fs(payload: bytes) -> tuple[int, int] | None:
-    """The board mode and fs a STATUS payload names (None: too short for them), without
-    decoding the rest: a cheap look at a STATUS frame that repeats what is in force."""
-    return _STATUS_MODE_FS.unpack_from(payload) if len(payload) >= _STATUS_MODE_FS.size else None
-
 
 def decode_status(payload: bytes) -> Status:
     n = len(payload)
@@ -393,8 +386,7 @@ class Decoder:
         self._buf = bytearray()
         self._base = 0  # stream offset of self._buf[0]
         self._last_seq: int | None = None
-        self._last_t0 = 0
-        self._last_t0_unwrapped = 0
+        self._last_t0 = self._last_t0_unwrapped = 0
         self._repeats = Repeats(_make)
 
     def buffered(self) -> int:
@@ -418,6 +410,14 @@ class Decoder:
     def flush_batch(self) -> FrameBatch:
         """:meth:`flush`'s frames as a batch of columns."""
         return _batch(*self._scan_once(self._scanner, final=True))
+
+    def give_up(self) -> list[Frame]:
+        """A stalled link: incomplete candidates (a whole header) are no frames; the frames behind them."""
+        frames: list[Frame] = []
+        while len(self._buf) >= HEADER_LEN:     # rule 2: its first sync byte dropped, a CRC failure
+            self._done(1, _Tally(self._last_seq, self._last_t0, self._last_t0_unwrapped, discarded=1, crc_fail=1))
+            frames += self.feed(b"")
+        return frames
 
     def _feed(self, data: bytes | bytearray | memoryview, scan) -> list[tuple[list, bytes]]:
         """The scans of ``data`` appended to the buffer (one, or one per ``max_buffer``)."""

@@ -200,6 +200,7 @@ class SerialSource(FrameSource):
                      capture=capture, reconnect_min_s=link.reconnect_min_s,
                      reconnect_max_s=link.reconnect_max_s, open_port=open_port)
         source.reader.reopen_s = link.reopen_s
+        source.reader.give_up_s = link.stall_s / 2      # the frames behind it are in before link_stalled
         pace = source.reader.pace           # a hold must not look like a silent link (link_stalled)
         pace.far_hold_s = min(pace.far_hold_s, link.stall_s / 2)
         return source

@@ -7,6 +7,7 @@ the end of a 16-s stream, stamped where each read size put it."""
 
 from __future__ import annotations
 
+import dataclasses
 import fcntl
 import os
 import struct
@@ -16,7 +17,7 @@ import tty
 
 import pytest
 
-from cmsensord.protocol import Decoder, FrameType, encode_frame
+from cmsensord.protocol import Decoder, FrameType, decode_status, encode_frame, encode_status
 from cmsensord.sinks.mcap_sink import read_messages
 from processes import start_daemon, stop
 from test_read_size import board, by_topic, same_at_every_read_size
@@ -61,6 +62,40 @@ def test_data_frames_of_a_wrong_length_or_channel_are_one_event_each_at_their_t0
         want = [f"RMS frame at t0 {f.t0} dropped: 2 bytes, not 4 x 1" for f in changed]
     assert len(changed) >= 20 and decode_errors(runs) == want
     assert [s for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"] == [f.t0 * 40_000 for f in changed]
+
+
+def test_impossible_rms_values_are_one_event_each_at_their_t0_at_any_read_size():
+    """Every 97th RMS frame carries NaN, every 89th -1 m/s² (a one-channel board): each is a missing
+    observation and one `decode_error` at its t0 (rms_bounds), read in any size.  Before: the NaN
+    ones were missing with no word, the negative ones observations."""
+    def change(i, f):
+        if f.type is FrameType.RMS and i % 97 == 5:
+            return f._replace(payload=struct.pack("<f", float("nan")))
+        if f.type is FrameType.RMS and i % 89 == 7:
+            return f._replace(payload=struct.pack("<f", -1.0))
+        return f
+
+    data, changed = rebuilt(board("rms", 16), change)
+    runs = same_at_every_read_size(data)
+    assert len(changed) >= 30 and [(s, m["channel"]) for s, m in runs[0]["/cm/events"]
+                                   if m["kind"] == "decode_error"] == [(f.t0 * 40_000, "ch0") for f in changed]
+
+
+def test_rms_frames_disagreeing_with_the_status_are_counted_alike_at_any_read_size():
+    """From 13 s on the board's STATUS says 2 channels while its RMS frames carry 1: each 100 of them
+    in a row is one `decode_error` at its first frame's t0, however the stream was read."""
+    def change(i, f):
+        if f.type is FrameType.STATUS and f.t0 >= 325_000:
+            st = decode_status(f.payload)
+            two = dataclasses.replace(st, n_channels=2, scale=st.scale * 2, offset=st.offset * 2)
+            return f._replace(payload=encode_status(f.seq, f.t0, two)[14:-4])
+        return f
+
+    data, _ = rebuilt(board("rms", 16), change)
+    runs = same_at_every_read_size(data)
+    told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+    assert told == [((325_000 + k * 25_000) * 40_000, "100 RMS frame(s) of 1 channel(s) dropped: the board's "
+                     "STATUS says 2 channel(s)") for k in range(3)]
 
 
 def edge_outside(i, f):

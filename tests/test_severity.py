@@ -114,3 +114,22 @@ def test_whole_periods_in_one_pass_decide_as_one_period_at_a_time(monkeypatch, s
     assert {0, 1} <= {int(v) for x in ref for v in x.anomaly.ravel()}          # flags set and clear
     assert any(x.no_data is not None and x.no_data.any() for x in ref) == (seed % 3 == 0)
     assert any(x.held_max > 0 for x in ref)                                    # kept by hysteresis
+
+
+@pytest.mark.parametrize("level", [False, True])
+def test_a_new_period_keeps_the_share_of_the_period_in_progress(level):
+    """100 slots a period, 60 in when the rate halves (set_period(50)): the period in progress ends
+    20 slots on (its 40 left at half the rate), the next ones are 50 long, in any parts; a level ratio
+    (combined mode) is kept across the change."""
+    d = AnomalyDecider(1, 1, f_r=5.0, c=0.4, period=100, level_alert=[2.0] if level else None)
+    flags = np.zeros((400, 1, 1), dtype=np.uint8)
+    valid = np.ones((400, 1), bool)
+    lv = np.ones((400, 1)) if level else None
+    out = d.update(flags[:160], valid[:160], level=None if lv is None else lv[:160])
+    d.set_period(50)
+    for a, b in ((160, 170), (170, 181), (181, 300)):
+        out += d.update(flags[a:b], valid[a:b], level=None if lv is None else lv[a:b])
+    assert [x.slot for x in out] == [100, 180, 230, 280]
+    assert (d.period, d.nominal_period, d.phase) == (50, 50, 20)
+    if level:
+        assert [float(x.level[0]) for x in out] == [1.0] * 4

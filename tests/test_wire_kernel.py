@@ -164,6 +164,24 @@ def test_a_bad_crc_drops_only_the_first_sync_byte_and_finds_the_frame_inside():
     assert c.crc_failures == 1 and c.bytes_discarded == len(outer) - len(inner)
 
 
+def test_a_stall_gives_up_incomplete_candidates_alike_on_every_path():
+    """Decoder.give_up (a stalled link): a noise header claiming 4000 bytes, another inside the
+    frames behind it, and half a header at the end: both candidates are CRC failures and the frames
+    behind them come out, the same on the three paths; the half header waits (the rest may come).
+    Before there was no way to have them but more bytes or the end of the stream."""
+    noise = b"\xa5\x5a\x01\x02\x00\x00\x00\x00\x00\x00\x02\x00" + struct.pack("<H", 4000)
+    frames = [encode_frame(FrameType.RMS, k, 250 * k, 1, 0, struct.pack("<f", 0.5)) for k in range(6)]
+    data = frames[0] + noise + b"".join(frames[1:3]) + noise + b"".join(frames[3:]) + noise[:5]
+    got = {}
+    for name, dec in decoders(65536).items():
+        assert [f.seq for f in dec.feed(data)] == [0]
+        got[name] = ([(f.seq, f.offset) for f in dec.give_up()], dec.counters.as_dict(), dec.buffered())
+    assert got["kernel"] == got["reference"] == got["numpy"]
+    seqs, c, left = got["reference"]
+    assert [s for s, _ in seqs] == [1, 2, 3, 4, 5] and left == 5
+    assert (c["crc_failures"], c["bytes_discarded"]) == (2, 2 * len(noise))
+
+
 def test_every_flipped_bit_of_a_frame_is_caught():
     """One bit flipped anywhere after the sync (header, payload or CRC): never a frame with the
     wrong bytes; a CRC failure, or a header reject when the header turns invalid (or, a length

@@ -123,7 +123,8 @@ class AnomalyDecider:
         self.C, self.n = n_channels, n_filters
         self.f_r = np.broadcast_to(np.asarray(f_r, dtype=np.float64), (n_channels,)).copy()
         self.c = np.broadcast_to(np.asarray(c, dtype=np.float64), (n_channels,)).copy()
-        self.period = int(period)
+        self.period = int(period)     # slots of the period in progress
+        self.nominal_period = self.period   # ... and of every period at the block rate now
         self.transient_periods = int(transient_periods)
         self.cnt = np.zeros((n_channels, n_filters), dtype=np.int64)
         self.anomaly = np.zeros((n_channels, n_filters), dtype=np.uint8)
@@ -145,6 +146,21 @@ class AnomalyDecider:
         self._quiet = np.zeros(n_channels, dtype=bool)   # a quarter of the period below signal_floor
         self._quietest = np.full(n_channels, np.nan)
         self._lost = np.zeros(n_channels, dtype=bool)    # the last decision had no signal
+
+    def set_period(self, period: int) -> None:
+        """Decide every ``period`` slots (the block rate changed): the period in progress keeps the
+        share of a period it had left, in slots at the new rate (at least one); the next are ``period`` long."""
+        if period < 1:
+            raise ValueError(f"period: expected >= 1 observation, got {period}")
+        left = self.period - self.phase
+        self._resize(self.phase + max(1, round(left * period / self.nominal_period)) if self.phase else period)
+        self.nominal_period = int(period)
+
+    def _resize(self, period: int) -> None:
+        """The period in progress is ``period`` slots (its level ratios so far kept)."""
+        level = np.full((period, self.C), np.nan)
+        level[:min(self.phase, period)] = self._level[:min(self.phase, period)]
+        self.period, self._level = period, level
 
     @property
     def combined(self) -> bool:
@@ -242,6 +258,8 @@ class AnomalyDecider:
         self.missing[:] = 0
         self.phase = 0
         self.periods += 1
+        if self.period != self.nominal_period:      # the period of a change of rate is over
+            self._resize(self.nominal_period)
         return d
 
     def _decide_many(self, outlier: np.ndarray, valid: np.ndarray) -> list[Decision]:

@@ -2,7 +2,9 @@
 
 A STATUS frame (docs/PROTOCOL.md type 1) that changes fs, block_len, the
 channel count or the mode is news: the block clock takes the new rate (and
-re-anchors its slots), and a ``config`` event says what the board sends.  The
+re-anchors its slots), so does the severity chain (a decision is ``decision_period_s`` of
+observations at it, with the ``decision_rule`` events of a board at that rate from the
+start), and a ``config`` event says what the board sends.  The
 channels come from the configuration, or from the board's first data frame's C
 when the configuration lists none (``auto_channels``); configured channels the
 board does not send are reported (a warning: their rules and bearings see no value)
@@ -14,6 +16,12 @@ A STATUS whose scale or offset is not finite, or whose scale is 0, is ignored
 with a ``decode_error`` event: the previous one (its calibration) is kept.  One that
 changes the scale or offset of a monitored channel that the configuration does not set
 is told with a ``config`` event (the RAW blocks before it keep the old calibration).
+
+An RMS frame carries as many values as STATUS says the board has channels (docs/PROTOCOL.md: its
+``chan`` is C).  RMS frames of a count other than the one a STATUS announced (its first, or one that
+changed the count) are dropped while that count is the chain's (or no chain is made yet): the
+board's STATUS and its frames disagree, one ``decode_error`` for each ``CHANGE_FRAMES`` of them
+in a row and for the rest of a run when it ends (:meth:`ChannelSetup.agrees`).
 
 A data frame whose channel count is not the board's (:meth:`ChannelSetup.accept`)
 is one odd frame, dropped and counted with a ``channels`` event, unless a
@@ -89,6 +97,10 @@ class ChannelSetup:
         self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
         self.odd_dropped = 0                    # odd frames dropped in all
         self._views: dict[str, ChannelView] = {}    # each channel name's view, over every chain
+        #: the channel count the newest STATUS announced (None: frames changed the board since)
+        self.announced: int | None = None
+        self._disagreeing = 0                   # RMS frames in a row disagreeing with it
+        self._disagreeing_first: tuple[int, int, int] = (0, 0, 0)   # the run's first t0, count, announced
         #: called with the monitored channels' names each time a chain is made for them (the sink's
         #: ``channels_known``: the MQTT publisher's discovery and worst alarms)
         self.on_channels = on_channels
@@ -137,10 +149,18 @@ class ChannelSetup:
         return bool(moved)
 
     def apply(self, f: Frame, st: Status) -> None:
-        """News from the board: the clock's rate, and the config event."""
+        """News from the board: the clock's and the severity chain's rate, the channel count it
+        announces, and the config event."""
+        if self.status is None or st.n_channels != self.status.n_channels:
+            self.announced = st.n_channels
+        rate = (st.fs, st.block_len) != (self.clock.fs, self.clock.block_len)
         if self.clock.set_rate(st.fs, st.block_len):
             self.log.emit("config", None, f"board changed fs/block_len to {st.fs}/{st.block_len}:"
                           " time base re-anchored")
+        if rate and self.severity is not None:  # decisions of decision_period_s at the new rate, as at the start
+            self.severity.set_rate(st.fs, st.block_len)
+            self.log.add(self.severity.notes)
+            self.severity.notes.clear()
         mode = {1: "RMS", 2: "RAW"}.get(st.mode, f"unknown({st.mode})")
         self.log.emit("config", None, f"board firmware {st.fw_version >> 8}.{st.fw_version & 0xFF}: "
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}"
@@ -180,6 +200,32 @@ class ChannelSetup:
                           total=self.odd_dropped)
         self._odd_run = 0
 
+    def agrees(self, n: int, frames: Sequence[Frame]) -> bool:
+        """RMS frames in a row of ``n`` channels: False when they are dropped as disagreeing with the
+        count the STATUS announced (module docstring); True to go on (:meth:`ready`, :meth:`accept`)."""
+        want = self.announced
+        if want is None or n == want or (self.severity is not None and n != self.n_board):
+            self.end_disagreeing()
+            return True
+        k = 0
+        while k < len(frames):
+            if not self._disagreeing:
+                self._disagreeing_first = (frames[k].t0_unwrapped, n, want)
+            take = min(len(frames) - k, CHANGE_FRAMES - self._disagreeing)
+            self._disagreeing += take
+            k += take
+            if self._disagreeing >= CHANGE_FRAMES:
+                self.end_disagreeing()
+        return False
+
+    def end_disagreeing(self) -> None:
+        """The run of RMS frames disagreeing with STATUS (if any) is over: its ``decode_error``, at its first."""
+        if self._disagreeing:
+            (t0, n, want), run = self._disagreeing_first, self._disagreeing
+            self.log.emit("decode_error", None, f"{run} RMS frame(s) of {n} channel(s) dropped: the board's STATUS "
+                          f"says {want} channel(s)", self.clock.stamp_ns(t0), count=run)
+        self._disagreeing = 0
+
     def changed(self, n_board: int) -> bool:
         """True when the board now sends ``n_board`` channels, not the chain's count: the
         caller drains the decisions of the chain, then calls :meth:`change`."""
@@ -188,6 +234,8 @@ class ChannelSetup:
     def change(self, n_board: int) -> None:
         """The board sends ``n_board`` channels from now on (see module docstring)."""
         old, self.n_board = self.n_board, n_board
+        if n_board != self.announced:           # not as STATUS said: its frames are believed
+            self.announced = None
         emit = self.log.emit
         if n_board < old:
             gone = [ch.name for ch in self.channels if ch.index >= n_board]

@@ -88,6 +88,7 @@ class BlockClock:
         self.t0_first: int | None = None       # t0_unwrapped of the first frame
         self.slot0_t0: int | None = None       # t0_unwrapped of slot 0
         self.next_slot = 0                     # next observation slot expected
+        self._rate_slot, self._adc_before = 0, 0.0   # the slot the rate took over at; ADC seconds before it
         self.last_stamp_ns = 0                 # stamp of the newest observation slot
         self.floor_ns = 0                      # no later stamp is before this (the end of the newest slot)
         self.stamp_fs = DEFAULT_FS             # board ticks per second of stamps (fs, or measured)
@@ -197,6 +198,7 @@ class BlockClock:
         if fs <= 0 or block_len <= 0 or (fs, block_len) == (self.fs, self.block_len):
             return False
         moved = self.slot0_t0 is not None
+        self._adc_before, self._rate_slot = self.adc_seconds, self.next_slot
         if self.next_slot:                      # stamps go on from the end of the newest slot,
             self.anchor_ns, self.t0_first = self.floor_ns, None     # from the next frame's t0
         self.slot0_t0 = None
@@ -266,8 +268,8 @@ class BlockClock:
 
     @property
     def adc_seconds(self) -> float:
-        """ADC time covered by the observations processed so far."""
-        return self.next_slot * self.block_len / self.fs
+        """ADC time covered by the observations processed so far, each stretch at its own rate."""
+        return self._adc_before + (self.next_slot - self._rate_slot) * self.block_len / self.fs
 
     # ---- slots -------------------------------------------------------------
     def begin(self, t0: int) -> None:

@@ -43,6 +43,7 @@ from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
 from cmsensord.monitor.output import Output
 from cmsensord.monitor.raw import RawBlocks, RawInput
+from cmsensord.monitor.rms_bounds import RmsBounds
 from cmsensord.monitor.segments import SCAN_MIN, WIRE_FLAGS, Segments
 from cmsensord.monitor.shaft import Shaft
 from cmsensord.monitor.slots import observation_rows
@@ -97,6 +98,7 @@ class Processor(Figures):
         self.log = EventLog(sink, lambda: self.clock.floor_ns or self.clock_ns(), on_event,
                             lambda: self.clock.seg_stamp_ns)
         self.raw = RawInput(cfg)
+        self.rms_bounds = RmsBounds()         # RMS values the board cannot send: missing, decode_error
         self.shaft = Shaft(cfg)
         self.orders: OrderChain | None = None   # once RAW blocks and a tacho come
         self._orders_refused: int | None = None  # the fs at which the order chain could not be made
@@ -372,7 +374,7 @@ class Processor(Figures):
             self._flush_rms(frames[:cut])
             self._flush_rms(frames[cut:])
             return
-        if not (self.setup.ready(C) and self.setup.accept(C, frames)):
+        if not (self.setup.agrees(C, frames) and self.setup.ready(C) and self.setup.accept(C, frames)):
             return
         self._board_channels(C)
         good = frames if np.all(lengths == 4 * C) else [f for f in frames if len(f.payload) == 4 * C]
@@ -386,6 +388,7 @@ class Processor(Figures):
             t0 = rms_fields(frames)[2]
         vals = decode_rms_rows(frames, C)
         self.clock.begin(int(t0[0]))            # the intervals it closes are stamped on its time base
+        self._out(self.rms_bounds.check(vals, t0, self.channels, self.setup.status, self.clock.stamp_ns))
         per_slot = self.cfg.output.akf_trace or self.setup.microphones is not None or self.captures is not None
         for a, b in output_pieces(t0, self.wake_t0, round(SPAN_S * self.clock.fs)) if per_slot else ((0, len(t0)),):
             self._observe(t0[a:b], vals[a:b], max(1, MAX_RMS_RUN // len(self.channels)),

@@ -327,6 +327,7 @@ class Segments:
         if self.ignored:
             self._report()
         self.setup.end_odd_run()
+        self.setup.end_disagreeing()
 
     def _report(self) -> None:
         st = self.setup.status

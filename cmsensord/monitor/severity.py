@@ -78,7 +78,9 @@ class SeverityChain:
         self.trace_i = min(trace_filter, n) - 1
         self.gate = SpeedGate(PENDING_DECISION_SLOTS)   # (outlier, valid[, level ratio]) per slot
         self.rate = fs / block_len
+        self._rate_slot, self._rate_s = 0, 0.0  # the chain slot the rate took over at, and its board second
         self.start_slot: int | None = None      # the block clock's slot of this chain's first observation
+        self._start_s = 0.0
         self.cfg_f_r = np.array([m.f_r for m in mons])
         self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
         self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
@@ -91,7 +93,7 @@ class SeverityChain:
     def _rate_notes(self, fs: int, block_len: int) -> list[Event]:
         """What the decision rule means at this block rate, when it is not the nominal one, and
         channels whose f_r no decision can reach."""
-        period, mon = self.decider.period, self.channels[0].monitor
+        period, mon = self.decider.nominal_period, self.channels[0].monitor
         notes = []
         if abs(self.rate - NOMINAL_RATE_HZ) > 1e-9:
             notes.append(Event("decision_rule", None, (
@@ -105,6 +107,20 @@ class SeverityChain:
                     f"{ch.name}: f_r {f_r:.4g} >= the {period} observations per decision at "
                     f"{self.rate:.4g} blocks/s: no decision can flag an anomaly (set f_r below {period})")))
         return notes
+
+    def set_rate(self, fs: int, block_len: int) -> None:
+        """The board's block rate changed (its decisions are all out): a decision is
+        ``decision_period_s`` of the new rate's observations from the period in progress on
+        (:meth:`AnomalyDecider.set_period`), told in :attr:`notes` as at the start."""
+        slot = self.decider.slot
+        self._rate_slot, self._rate_s = slot, self._seconds(slot)
+        self.rate = fs / block_len
+        self.decider.set_period(max(1, round(self.channels[0].monitor.decision_period_s * self.rate)))
+        self.notes += self._rate_notes(fs, block_len)
+
+    def _seconds(self, slot: int) -> float:
+        """The board seconds of the chain's first ``slot`` slots."""
+        return self._rate_s + (slot - self._rate_slot) / self.rate
 
     def checked_f_r(self, f_r: np.ndarray) -> np.ndarray:
         """The tacho's f_r, or the configured one where the tacho's is not below the observations
@@ -136,6 +152,7 @@ class SeverityChain:
             self.gate.restart(first_slot)
         if self.start_slot is None:
             self.start_slot = first_slot
+            self._start_s = first_slot / self.rate   # the run's ADC seconds at the chain's start
         if self.combined is None:
             self.gate.push(outlier, valid)
         else:
@@ -184,7 +201,7 @@ class SeverityChain:
         extras = [self._extra(d, c) for c in range(C)] if self.combined is not None else [{}] * C
         msgs = messages.severities(stamp, self._names, d, self._r_rows, extras, self._topics)
         prev, prev_sev = d.prev_anomaly.tolist(), d.prev_severity.tolist()
-        t_s = ((self.start_slot or 0) + d.slot) / self.rate      # the run's ADC seconds, not the chain's
+        t_s = self._start_s + self._seconds(d.slot)      # the run's ADC seconds, not the chain's
         judged, held = not d.transient, d.held_max >= HOLD_EVENT_DECISIONS
         out: list = []
         for c, m in enumerate(msgs):

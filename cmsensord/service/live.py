@@ -79,6 +79,11 @@ class _Watch:
         self.drops_seen = 0
         self.last_frame = time.monotonic()      # a valid frame, or the start
 
+    def frame_wait(self, now: float) -> float:
+        """Seconds without a valid frame: since the newest, or since the port was opened when that
+        is later (frames from before a replug say nothing of the bytes after it)."""
+        return now - max(self.last_frame, self.source.reader.opened_at)
+
     def link_events(self) -> None:
         """The reader's link events (stamped when they happened, on the stream's time base:
         :meth:`~cmsensord.monitor.diagnostics.Diagnostics.wall_stamp`) and the queue's drops become events."""
@@ -123,11 +128,11 @@ class _Watch:
             self.stalled, self.stall_why = True, "no bytes since the port opened"
             self.proc.event("link_stalled", None, f"{link.port}: open for {NEVER_S:g} s and no byte yet (is "
                             "the board powered and sending? the right port?)", self.proc.diag.wall_stamp())
-        elif now - self.last_frame > link.stall_s and now - last_bytes <= link.stall_s:
+        elif self.frame_wait(now) > link.stall_s and now - last_bytes <= link.stall_s:
             self.stalled, self.stall_why = True, "bytes but no valid frame"
             self.proc.link_quiet()
             self.proc.event("link_stalled", None, f"{link.port}: bytes but no valid frame for "
-                            f"{now - self.last_frame:.1f} s (wrong baud rate, or line noise?)",
+                            f"{self.frame_wait(now):.1f} s (wrong baud rate, or line noise?)",
                             self.proc.diag.wall_stamp())
             self.proc.write_diagnostics(self.proc.diag.wall_stamp())
         if self.stalled:

@@ -54,7 +54,7 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
              f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
              f"({proc.observations} observations, {proc.missing_observations} missing, "
              f"{proc.frames_lost} frames lost)"]
-    period = proc.severity.decider.period / proc.severity.rate if proc.severity is not None else 1.0
+    period = proc.severity.decider.nominal_period / proc.severity.rate if proc.severity is not None else 1.0
     for v in proc.views:
         if not v.judged:
             lines.append(f"  {v.name}: no decision (the recording is shorter than two decision periods "
@@ -66,6 +66,10 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
         lines.append(f"  {v.name}: final severity {v.severity:.1f}{held}, max {v.max_severity:.1f}, "
                      f"{v.failures} failure event(s), {v.decisions} decisions{restarted}")
         lines.append(f"  {v.name}: {v.timeline.render()}")
+    bounds = getattr(proc, "rms_bounds", None)      # the Processor's (an imported recording's has none)
+    for name, n in (bounds.bad.items() if bounds is not None else ()):
+        lines.append(f"  {name}: {n} RMS value(s) the board cannot send (not finite, negative or past its "
+                     "ADC's range): missing observations, see the decode_error events")
     lines += placed
     if proc.event_counts:
         lines.append("  events: " + ", ".join(f"{k} {n}" for k, n in sorted(proc.event_counts.items())))
