@@ -7,6 +7,8 @@
 
 The microphone channel's severity follows the degradation (before the calibration command
 fitted the block RMS where the model wants the mean square, and the microphone stayed at 0).
+The calibration's options each run as typed: `--mic-background` (a background recorded with the
+microphone on another channel) and `--a-rel-std` (the prior uncertainty of a).
 """
 
 from __future__ import annotations
@@ -77,3 +79,58 @@ def test_a_paired_capture_whose_board_restarts_is_one_line(tmp_path):
         2, f"acoustic_calib: error: {pair}: the board restarted its clock (t0 0 after 149750) at byte {first_data}: "
            "the acoustic calibration needs one board set-up for the whole capture (cut the capture at that byte)")
     assert not cal.exists()
+
+
+@pytest.fixture(scope="module")
+def short_captures(tmp_path_factory):
+    """8 s of the degrading motor with the microphone on channel 1, and 6 s of its background
+    (machine stopped) twice: beside the accelerometer (the microphone on channel 1) and from a
+    board with the microphone alone (on channel 0; the same sound for the same seed)."""
+    tmp = tmp_path_factory.mktemp("mic_short")
+    pair = board(tmp, "pair.bin", "--mode", "raw", "--seed", "1000", "--duration", "8")
+    bg = board(tmp, "bg.bin", "--mode", "raw", "--seed", "1001", "--duration", "6", "--param", "machine_off=1")
+    alone = tmp / "bg_mic_only.bin"
+    r = run_module("firmware_sim", "--scenario", "degrading_mic_only", "--channels", "1", "--mode", "raw",
+                   "--seed", "1001", "--duration", "6", "--param", "machine_off=1", "--out", str(alone))
+    assert r.returncode == 0, r.stderr
+    return pair, bg, alone
+
+
+def calib(*args):
+    return run_module("cmsensord.acoustic_calib", *map(str, args))
+
+
+def test_mic_background_names_the_background_captures_microphone_channel(short_captures, tmp_path):
+    """A background recorded with the microphone alone, on channel 0: `--mic-background 0` reads it
+    there and gives the calibration of the same background recorded beside the accelerometer (the
+    microphone on channel 1, the default `--mic`); without it the channel is missing, one line."""
+    pair, bg, alone = short_captures
+    r = calib("--paired", pair, "--background", bg, "--out", tmp_path / "beside.json")
+    assert r.returncode == 0, r.stderr
+    r = calib("--paired", pair, "--background", alone, "--mic-background", "0", "--out", tmp_path / "alone.json")
+    assert r.returncode == 0, r.stderr
+    beside, own = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("beside", "alone"))
+    assert own["model"] == beside["model"] and own["info"]["blocks_background"] == 600
+    assert own["info"]["background_var"] == beside["info"]["background_var"] > 0
+    r = calib("--paired", pair, "--background", alone, "--out", tmp_path / "none.json")
+    assert (r.returncode, r.stderr) == (2, f"acoustic_calib: error: {alone}: no blocks of channel(s) [1]\n")
+    assert not (tmp_path / "none.json").exists()
+
+
+def test_a_rel_std_sets_the_prior_uncertainty_of_a(short_captures, tmp_path):
+    """`--a-rel-std R`: the prior variance of the sound-vibration parameter is Γ_a = (R a0)^2 (docs/acoustic.md
+    §6, step 7; default R = 0.1); nothing else of the calibration changes. R must be > 0."""
+    pair, bg, _ = short_captures
+    models = {}
+    for rel in (None, "0.25"):
+        out = tmp_path / f"cal_{rel}.json"
+        r = calib("--paired", pair, "--background", bg, *(("--a-rel-std", rel) if rel else ()), "--out", out)
+        assert r.returncode == 0, r.stderr
+        models[rel] = json.loads(out.read_text())["model"]
+    default, wide = models[None], models["0.25"]
+    assert default["ga0"] == pytest.approx((0.1 * default["a0"]) ** 2, rel=1e-12)
+    assert wide["ga0"] == pytest.approx((0.25 * wide["a0"]) ** 2, rel=1e-12)
+    assert {k: v for k, v in wide.items() if k != "ga0"} == {k: v for k, v in default.items() if k != "ga0"}
+    r = calib("--paired", pair, "--background", bg, "--a-rel-std", "0", "--out", tmp_path / "zero.json")
+    assert (r.returncode, r.stderr) == (2, "acoustic_calib: error: a_rel_std must be > 0, got 0.0\n")
+    assert not (tmp_path / "zero.json").exists()

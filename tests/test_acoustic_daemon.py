@@ -17,9 +17,6 @@ from cmsensord.acoustic_calib import (
     load_calibration,
     save_calibration,
 )
-from cmsensord.acoustic_calib import (
-    main as calib_main,
-)
 from cmsensord.config import config_from_dict, config_to_dict
 from cmsensord.errors import ConfigError
 from cmsensord.sinks.mcap_read import read_messages
@@ -115,16 +112,21 @@ def test_calibration_from_captures_is_the_same_in_rms_and_raw_mode(tmp_path):
         assert f(m1) == pytest.approx(f(m0), rel=1e-9)
     # ... and the noise term carries the cross term
     assert m1.v2 - m0.v2 == pytest.approx(raw.info["cross_var"], rel=1e-9)
-    assert calib_main(["--paired", str(tmp_path / "none.bin"), "--background", str(paths["raw"][1]),
-                       "--out", str(tmp_path / "x.json")]) == 2
+    r = run_module("cmsensord.acoustic_calib", "--paired", str(tmp_path / "none.bin"), "--background",
+                   str(paths["raw"][1]), "--out", str(tmp_path / "x.json"))
+    assert r.returncode == 2 and r.stderr.startswith("acoustic_calib: error: ") and len(r.stderr.splitlines()) == 1
+    assert not (tmp_path / "x.json").exists()
 
 
-def test_command_line_calibration_estimates_the_cross_term_from_raw_captures(tmp_path, capsys):
+def test_command_line_calibration_estimates_the_cross_term_from_raw_captures(tmp_path):
+    """`python -m cmsensord.acoustic_calib` as typed, on RAW captures: the cross term from the
+    microphone's waveforms; on RMS captures, one warning line that it is missing."""
     (pair, bg), (pb, bb) = _captures(tmp_path, "raw")
     out = tmp_path / "cal.json"
-    assert calib_main(["--paired", str(pair), "--background", str(bg), "--accel", "0", "--mic", "1",
-                       "--out", str(out)]) == 0
-    assert "warning" not in capsys.readouterr().err
+    r = run_module("cmsensord.acoustic_calib", "--paired", str(pair), "--background", str(bg), "--accel", "0",
+                   "--mic", "1", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == "" and r.stdout.startswith(f"wrote {out}: 800 paired + 600 background blocks of 10 ms")
     doc = json.loads(out.read_text())
     model = load_calibration(out)
     # the same blocks, straight from the simulator's ADC counts: (count - offset) * scale
@@ -138,8 +140,9 @@ def test_command_line_calibration_estimates_the_cross_term_from_raw_captures(tmp
     assert model == fit_captures(pair, bg).model
     # RMS captures: the calibration goes on, and says in one line that the cross term is missing
     (pair_r, bg_r), _ = _captures(tmp_path, "rms")
-    assert calib_main(["--paired", str(pair_r), "--background", str(bg_r), "--out", str(out)]) == 0
-    err = capsys.readouterr().err.strip().splitlines()
+    r = run_module("cmsensord.acoustic_calib", "--paired", str(pair_r), "--background", str(bg_r), "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    err = r.stderr.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("acoustic_calib: warning: cross term not estimated")
     assert "less accurate" in err[0]
     assert json.loads(out.read_text())["info"]["cross_var"] == 0.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import time
 from pathlib import Path
@@ -160,6 +161,45 @@ def test_files_named_by_a_decimal_number_are_in_the_order_of_its_value(tmp_path,
     assert r.returncode == 0, r.stderr
     assert [s["source"] for s in sidecar(tmp_path / "w.bin")["snapshots"]] == order
 
+
+def _snapshot_files(d: Path, names: list[str], level: dict[str, float]) -> None:
+    """One four-sample snapshot file per name, written in the order of ``names``, each its own level."""
+    d.mkdir()
+    for name in names:
+        v = level[name]
+        (d / name).write_text(f"{v}\n{-v}\n{2 * v}\n{-2 * v}\n")
+
+
+@pytest.mark.parametrize("order, taken", [("name", "abc"), ("mtime", "cab"), ("given", "bca")])
+def test_order_option_takes_snapshot_files_by_name_mtime_or_as_given(tmp_path, order, taken):
+    """`--order`: natural name order (the default), the files' modification times (oldest first), or
+    the order they are given in; the sidecar lists the snapshots, and the capture holds their samples,
+    in that order.  Names a, b, c; modified c, then a, then b; given b, c, a."""
+    level = {"a.csv": 0.1, "b.csv": 0.2, "c.csv": 0.3}
+    _snapshot_files(tmp_path / "set", list(level), level)
+    for i, name in enumerate(("c.csv", "a.csv", "b.csv")):
+        os.utime(tmp_path / "set" / name, (1_600_000_000 + 60 * i,) * 2)
+    r = cmd("import", "set/b.csv", "set/c.csv", "set/a.csv", "--order", order, "--fs", "100", "--block-len", "2",
+            "--unit", "m/s2", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    want = [f"{k}.csv" for k in taken]
+    assert [s["source"] for s in sidecar(tmp_path / "o.bin")["snapshots"]] == want
+    x = np.concatenate([level[n] * np.array([1.0, -1.0, 2.0, -2.0]) for n in want])
+    assert_within_one_count(decode(tmp_path / "o.bin"), x[None])
+
+
+def test_given_order_takes_sources_in_turn_a_directorys_files_in_name_order(tmp_path):
+    """`--order given` with a directory and then a pattern: the pattern's files after the
+    directory's, the files of each in natural name order (not the order the file system lists
+    them in)."""
+    names = {d: [f"{d}_{k}.csv" for k in (5, 12, 1, 30, 2, 7)] for d in ("late", "early")}
+    for d, files in names.items():
+        _snapshot_files(tmp_path / d, files, dict.fromkeys(files, 0.1))
+    r = cmd("import", "late", "early/*.csv", "--order", "given", "--fs", "100", "--block-len", "2", "--unit", "m/s2",
+            "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert [s["source"] for s in sidecar(tmp_path / "o.bin")["snapshots"]] == [
+        f"{d}_{k}.csv" for d in ("late", "early") for k in (1, 2, 5, 7, 12, 30)]
 
 def _snapshot_dir(d: Path) -> None:
     """Two snapshot files as the XJTU-SY bearing set writes them, 1.csv and 2.csv."""

@@ -114,6 +114,17 @@ def test_rms_report_and_a_run_up(logs, tmp_path):
     assert rms_only["ch0-indicators"]["main"] == "accel_rms" and "ch0-orders" not in rms_only
 
 
+def test_title_option_heads_the_page_and_names_its_tab(logs, tmp_path):
+    """`--title` replaces the default (`cmsensord report` and the time span) in the browser's tab and
+    the page's heading, HTML-escaped."""
+    out = tmp_path / "titled.html"
+    p = cmsensord("report", str(logs["degrading_rms"]), "--out", str(out), "--title", 'Pump 3 <north> & "east"')
+    assert p.returncode == 0, p.stderr
+    page = out.read_text(encoding="utf-8")
+    escaped = "Pump 3 &lt;north&gt; &amp; &quot;east&quot;"
+    assert f"<title>{escaped}</title>" in page and f"<h1>{escaped}</h1>" in page
+    assert "cmsensord report" not in page and "<north>" not in page
+
 def test_events_table_in_local_time_and_link_summary(logs, tmp_path):
     _, page, _ = _report(tmp_path, logs["degrading_rms"])
     info = json.loads(cmsensord("summary", "--json", str(next(logs["degrading_rms"].glob("*.mcap")))).stdout)

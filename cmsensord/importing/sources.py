@@ -114,27 +114,28 @@ def _dir_files(d: Path, notes: list[str]) -> list[str]:
 
 
 def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str] | None = None) -> list[str]:
-    """The files named by ``srcs`` and ``globs``, in ``order``; what a directory left out is
-    appended to ``notes``."""
+    """The files named by ``srcs`` and ``globs``, in ``order`` (``given``: the sources in turn, a
+    directory's files and a pattern's matches each in natural name order); what a directory left
+    out is appended to ``notes``."""
     files: list[str] = []
     for src in srcs:
         p = Path(src)
         if p.is_dir():
-            files += _dir_files(p, [] if notes is None else notes)
+            files += sorted(_dir_files(p, [] if notes is None else notes), key=_natural_key)
         elif p.exists():
             files.append(src)
         elif globmod.has_magic(src):
             hit = [f for f in globmod.glob(src) if os.path.isfile(f)]
             if not hit:
                 raise ImportFailure(f"{src}: no file matches this pattern; check the path")
-            files += hit
+            files += sorted(hit, key=_natural_key)
         else:
             raise ImportFailure(f"{src}: no such file or directory")
     for pattern in globs:
         hit = [f for f in globmod.glob(pattern) if os.path.isfile(f)]
         if not hit:
             raise ImportFailure(f"--glob {pattern}: no file matches this pattern; check the path")
-        files += hit
+        files += sorted(hit, key=_natural_key)
     if not files:
         raise ImportFailure("no recording given; name files, a directory, or --glob PATTERN")
     if order == "name":
