@@ -19,9 +19,7 @@ from cmsensord.dsp.tacho.edges import (
     TachoCounters,
     TachoEvent,
     TachoUpdate,
-    tacho_frames_to_arrays,
 )
 from cmsensord.dsp.tacho.tracker import TachoTracker
 
-__all__ = ["TachoEvent", "TachoCounters", "TachoUpdate", "TachoTracker", "tacho_frames_to_arrays",
-           "LOST", "RESTORED", "MISSED", "EXTRA"]
+__all__ = ["TachoEvent", "TachoCounters", "TachoUpdate", "TachoTracker", "LOST", "RESTORED", "MISSED", "EXTRA"]

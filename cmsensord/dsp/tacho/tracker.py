@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -26,13 +25,8 @@ from cmsensord.dsp.tacho.edges import (
     TachoEvent,
     TachoUpdate,
     _kernel,
-    tacho_frames_to_arrays,
 )
 from cmsensord.dsp.tacho.smoothing import KnotSmoothing
-
-if TYPE_CHECKING:
-    from cmsensord.protocol import Frame
-
 
 _FEW_FRAMES = 64  # up to this many frames an update prepares its edges on Python ints
 
@@ -329,11 +323,6 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
                 self._edges(q, adv)             # lists: arrays only for enough edges
         self._advance(end)
         self._last_t0 = t0_last
-
-    def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
-        """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
-        t0, edges = tacho_frames_to_arrays(frames, chan)
-        return self.update(t0, edges)
 
     # ------------------------------------------------------------------ output
     @property
