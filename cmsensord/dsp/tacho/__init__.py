@@ -2,7 +2,7 @@
 
 The shaft reference of the order tracker: :class:`TachoTracker` turns the
 rising edges of the TACHO frames (docs/PROTOCOL.md), streaming, into the speed
-(Hz, rpm) and the shaft angle (turns) at any sample index, with a validity
+(Hz) and the shaft angle (turns) at any sample index, with a validity
 flag, events for lost/restored tacho and repaired pulses, and a causal speed.
 The method, its delays and its measured accuracy are in docs/tacho.md.
 

@@ -349,14 +349,6 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         """Shaft speed in Hz (revolutions per second) at the sample indices."""
         return self.evaluate(samples)[0]
 
-    def rpm_at(self, samples: npt.ArrayLike) -> FloatArray:
-        """Shaft speed in rpm at the sample indices."""
-        return 60.0 * self.evaluate(samples)[0]
-
-    def turns_at(self, samples: npt.ArrayLike) -> FloatArray:
-        """Shaft angle in revolutions since the first edge at the sample indices."""
-        return self.evaluate(samples)[1]
-
 
 def _checked(fs, ppr, block_len, half_window, tol, timeout_s, timeout_periods, max_timeout_s, history_s,
              causal_window) -> tuple[int, int]:
