@@ -1,7 +1,7 @@
 """The decoder's one-pass path for runs of back-to-back frames (cmsensord/frame_runs.py)
 equals the plain frame-by-frame receiver (``Decoder(runs=False)``, the reference) on random
 streams of valid and invalid frames: the same frames, offsets, seq gaps, unwrapped t0 and
-counters, whatever the reads (issue 13).  The numpy runs are the path without the compiled wire
+counters, whatever the reads.  The numpy runs are the path without the compiled wire
 kernel (``kernel=False``); tests/test_wire_kernel.py holds the kernel to the same reference."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Stream events (issue 11, items 2, 7, 8): a change of channel count, losses that are
+"""Stream events: a change of channel count, losses that are
 reported, and floods of events summarised — each fed by one small capture built with the
 protocol encoder and replayed by a real ``cmsensord replay`` process, which must finish
 (exit 0) with the exact event in its MCAP."""
