@@ -2,7 +2,7 @@
 
 The board sends a block's frames every 10 ms; read as they come, that is ~100 thread
 wake-ups, reads and decoder calls a second, which cost more than processing an RMS
-stream (issue 13).  The live loop takes the frames only when the block completing the
+stream.  The live loop takes the frames only when the block completing the
 next /orders block or decision is in (:meth:`FrameQueue.wake_at`), so the reader may let
 bytes gather in the port's kernel buffer meanwhile:
 
@@ -12,7 +12,7 @@ bytes gather in the port's kernel buffer meanwhile:
   at the board's rate as measured (board samples per wall second between reads
   ``window_s`` to twice that apart, from the frames' t0 and arrival times).  A block that
   comes by then is read with the backlog before it, in one read (one wake-up of the reader
-  per /orders block at 1x, not two: issue 13), at most 2 ms after it came at its earliest;
+  per /orders block at 1x, not two), at most 2 ms after it came at its earliest;
   one that comes later is waited for in the read after the backlog's, so the orders are
   not delayed by more than those 2 ms.  Only a read that waited for its bytes tells when a
   block arrived (``exact``): one after such a hold found them waiting, and taken as arrivals
@@ -56,7 +56,7 @@ from collections import deque
 MAX_HOLD_S = 0.1
 #: ... when that block is more than 2 MAX_HOLD_S off (a decision, RMS mode: once a second), the
 #: longest wait for it, held for as a late block (a 1-s decision's bytes and its block in one
-#: read: issue 13); the daemon makes it no longer than half the link's stall_s (a hold must not
+#: read); the daemon makes it no longer than half the link's stall_s (a hold must not
 #: look like a silent link)
 FAR_HOLD_S = 1.0
 #: ... while a read waited for its bytes in the last FAR_PROBE_S; else the read is at once, the

@@ -89,11 +89,11 @@ class Notifier:
 
     def ready(self, status: str | None = None) -> None:
         """READY=1 (and a STATUS line): start-up is complete."""
-        self._send("READY=1" + (f"\nSTATUS={_one_line(status)}" if status is not None else ""))
+        self._send("READY=1" + (f"\nSTATUS={_line_breaks_as_spaces(status)}" if status is not None else ""))
 
     def status(self, text: str) -> None:
         """STATUS=: the one-line state ``systemctl status`` shows."""
-        self._send(f"STATUS={_one_line(text)}")
+        self._send(f"STATUS={_line_breaks_as_spaces(text)}")
 
     def watchdog(self) -> None:
         """WATCHDOG=1 if the last ping is WATCHDOG_USEC/4 old; call it from the loop each iteration."""
@@ -106,7 +106,7 @@ class Notifier:
 
     def stopping(self, status: str | None = None) -> None:
         """STOPPING=1 (and a STATUS line): shutdown has begun."""
-        self._send("STOPPING=1" + (f"\nSTATUS={_one_line(status)}" if status is not None else ""))
+        self._send("STOPPING=1" + (f"\nSTATUS={_line_breaks_as_spaces(status)}" if status is not None else ""))
 
     def close(self) -> None:
         if self._sock is not None:
@@ -144,7 +144,7 @@ class Notifier:
             log.debug("sd_notify failed (%d): %s", self._errors, error)
 
 
-def _one_line(text: str) -> str:
+def _line_breaks_as_spaces(text: str) -> str:
     """A line break would end the STATUS assignment: each becomes a space."""
     return str(text).replace("\r\n", " ").replace("\n", " ").replace("\r", " ")
 

@@ -163,7 +163,7 @@ class SerialSource(FrameSource):
     stay queued (empty batches) until it is in or the oldest has waited ``hold_s``.
     Batching by time is what keeps the live daemon's cost near a replay's: the
     Processor's work is mostly per call, and one call per 10-ms block costs ~3x the
-    work of its frames (issue 13).  ``batch_frames=1`` yields as soon as any frame is
+    work of its frames.  ``batch_frames=1`` yields as soon as any frame is
     queued.  The loop names the block it waits for with :meth:`wake_at` (one far off, RMS
     mode's next decision: the wait lasts until just after it is due, one wake-up a decision)
     and leaves the frames past an output's block for the next batch with :meth:`keep`.

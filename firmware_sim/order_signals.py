@@ -166,5 +166,5 @@ def whirl(fs: float = 2000.0, *, noise: float = 0.0, seed: int = 0,
 def close_orders(fs: float = 2000.0, *, noise: float = 0.05, seed: int = 0,
                  duration_s: float | None = None) -> OrderSignal:
     """Signal 2 sampled at ``fs``, with white noise of std ``noise`` x the order-1 RMS
-    (5 % by default, issue 3 section 5)."""
+    (5 % by default, the noise level of Yeh, Pan & Le's section 5)."""
     return _record(close_orders_runup(), fs, noise, seed, duration_s)

@@ -1,4 +1,4 @@
-"""Microphone channels in the daemon (Orimoto, Ikuta & Wang; issue 5): configuration, calibration from
+"""Microphone channels in the daemon (Orimoto, Ikuta & Wang): configuration, calibration from
 captures, /cm/<ch>/vibration_estimate, and monitoring a degrading machine by sound alone."""
 
 from __future__ import annotations

@@ -31,19 +31,20 @@ def outliers_per_second(y, *, scaling, window=10, backend="numpy"):
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fig5_spikes_counted_once_each_with_scaling(seed, backend):
-    """Fig. 5: R = 1e-2; the AKF counts the 25 spikes of every second after the first."""
+    """Fig. 5: R = 1e-2; the AKF counts the 25 spikes of every second after the first, exactly."""
     y = spike_input(30, seed)
     counts = outliers_per_second(y, scaling=True, backend=backend)[1:]
-    assert counts.min() >= 23 and counts.max() <= 27, counts
+    assert (counts == 25).all(), counts
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fig5_without_scaling_counts_both_edges(seed):
-    """Fig. 5: with S(k) = 1 each spike gives an outlier at both edges (about twice as many)."""
+    """Fig. 5: with S(k) = 1 each spike gives an outlier at both edges: 50 in every second after
+    the first, where S(k) gives 25."""
     y = spike_input(30, seed)
     with_s = outliers_per_second(y, scaling=True)[1:]
     without = outliers_per_second(y, scaling=False)[1:]
-    assert without.min() >= 1.5 * with_s.max(), (without, with_s)
+    assert (with_s == 25).all() and (without == 50).all(), (without, with_s)
 
 
 def random_stream(rng, T, C, p_missing=0.05):

@@ -63,7 +63,7 @@ def test_a_rule_on_an_imported_channel_name_is_accepted_by_replay_and_calibrate(
 
 @pytest.mark.parametrize("command", ["replay", "calibrate"])
 def test_the_board_default_name_of_an_imported_channel_is_refused(tmp_path, imported, command):
-    """Before: `channels: [ch0]` was accepted and never evaluated (the channel is horizontal)."""
+    """`channels: [ch0]` is refused, not accepted and never evaluated (the channel is horizontal)."""
     p = run(command, imported, tmp_path, RULES % "ch0")
     assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: alarms.rules[0].channels: names no "
                                                          "channel (channels: horizontal) (got 'ch0')")

@@ -211,7 +211,7 @@ def test_replay_and_simulate_leave_the_state_file_alone(tmp_path):
 def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_comes(tmp_path):
     """Restarted with the board off: the alarms are made with the first data, but the status
     line and table already show the latched danger the last run saved, and `cmsensord ack` takes
-    it (before: nothing shown, `no alarm named 'sev/ch0'`)."""
+    it (guards against nothing shown and `no alarm named 'sev/ch0'`)."""
     link = tmp_path / "ttyBOARD"
     board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
     d = start_daemon(tmp_path, link, config=LATCHED)
@@ -272,7 +272,7 @@ def test_a_latch_raised_on_a_full_disk_is_saved_once_space_returns(small_fs, tmp
 
 def test_a_latched_alarm_acknowledged_while_active_clears_when_the_value_falls_and_stays_cleared(tmp_path):
     """`cmsensord ack` while the latched danger is still on (the operator's usual action); the
-    faulty board swapped for a healthy one: the alarm clears (before, it stayed at danger,
+    faulty board swapped for a healthy one: the alarm clears (guards against it staying at danger,
     'acknowledged', refusing any further ack, over a restart too)."""
     link = tmp_path / "ttyBOARD"
     cfg = str(tmp_path / "cmsensord.yaml")

@@ -39,16 +39,16 @@ def changes(a: Alarms, series: list[tuple[str, float | None]]) -> list[tuple[int
 def test_an_on_delay_starts_again_after_the_line_was_unavailable():
     a = alarms({"on_delay_s": 3})
     got = changes(a, [("ch0", 2.0)] + [("ch0", None)] * 4 + [("ch0", 2.0)] * 4)
-    assert got == [(8, "alarm_alert")]          # before: at 5, the 2.0 at 0 counted across the gap
+    assert got == [(8, "alarm_alert")]          # not at 5, the 2.0 at 0 counted across the gap
 
 
 def test_an_off_delay_starts_again_and_the_alarm_holds_through_the_gap():
     a = alarms({"off_delay_s": 3})
     got = changes(a, [("ch0", 2.0), ("ch0", 0.5)] + [("ch0", None)] * 4 + [("ch0", 0.5)] * 4)
-    assert got == [(0, "alarm_alert"), (9, "alarm_clear")]     # before: cleared at 6
+    assert got == [(0, "alarm_alert"), (9, "alarm_clear")]     # not cleared at 6
 
 
 def test_a_voting_alarm_counts_no_exceedance_of_a_channel_whose_line_is_unavailable():
     a = alarms({"vote": 2}, channels=("ch0", "ch1"))
     got = changes(a, [("ch0", 2.0), ("ch0", None), ("ch1", 2.0), ("ch1", 2.0), ("ch0", 2.0)])
-    assert got == [(4, "alarm_alert")]          # before: at 2, ch0's 2.0 of second 0 still voting
+    assert got == [(4, "alarm_alert")]          # not at 2, ch0's 2.0 of second 0 still voting

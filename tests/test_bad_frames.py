@@ -1,9 +1,9 @@
 """Frames with a good CRC but a bad body, in a healthy stream: each is one `decode_error` event,
-stamped at its own t0, and costs only itself, whatever the reads.  Before, the events counted
-the bad frames of each read ("14 RAW frame(s) with a channel >= 1 ..." in a 1 MiB read, fourteen
-events of one in reads of 997 bytes), and a TACHO edge outside its block (an offset past the
-block's samples) was taken where it said: "tacho restored at sample 16822216", 11 minutes past
-the end of a 16-s stream, stamped where each read size put it."""
+stamped at its own t0, and costs only itself, whatever the reads.  Guards against events that
+count the bad frames of each read ("14 RAW frame(s) with a channel >= 1 ..." in a 1 MiB read,
+fourteen events of one in reads of 997 bytes), and against a TACHO edge outside its block (an
+offset past the block's samples) taken where it says: "tacho restored at sample 16822216",
+11 minutes past the end of a 16-s stream, stamped where each read size puts it."""
 
 from __future__ import annotations
 
@@ -161,9 +161,9 @@ def test_a_malformed_tacho_payload_is_one_event_at_its_t0(mode):
 def test_rms_frames_of_another_channel_count_in_a_row_are_dropped_alike_at_any_read_size(first, count, dropped):
     """``count`` RMS frames in a row with two channels' values in a one-channel stream (no STATUS
     says so): fewer than 100 are odd frames, dropped, one `channels` event for the run at its
-    first frame; from the 100th on the board has changed and they are taken.  Before, the event
-    counted the odd frames of each read, and a read holding the 100th took the 99 before it too
-    (a large read took all 300, reads of 997 bytes dropped 99)."""
+    first frame; from the 100th on the board has changed and they are taken.  Guards against an event
+    counting the odd frames of each read, and a read holding the 100th taking the 99 before it too
+    (a large read taking all 300, reads of 997 bytes dropping 99)."""
     rms = [i for i, f in enumerate(Decoder().feed(board("rms", 16))) if f.type is FrameType.RMS]
     two = set(rms[first:first + count])
     data, changed = rebuilt(board("rms", 16), lambda i, f: f._replace(chan=2, payload=f.payload * 2)
@@ -177,7 +177,7 @@ def test_rms_frames_of_another_channel_count_in_a_row_are_dropped_alike_at_any_r
 @pytest.mark.parametrize("mode", ["raw", "rms"])
 def test_a_bad_status_is_one_event_at_its_t0(mode):
     """The STATUS frames at 4 s and 10 s are 3 bytes short, the one at 7 s names a NaN scale: each
-    is one `decode_error` stamped at its t0 (before: where the read had got to), the board's set-up
+    is one `decode_error` stamped at its t0 (not where the read has got to), the board's set-up
     stays."""
     def change(i, f):
         if f.type is FrameType.STATUS and f.t0 in (100_000, 250_000):
@@ -234,8 +234,8 @@ def flood(mode: str) -> tuple[bytes, list]:
 @pytest.mark.parametrize("mode", ["raw", "rms"])
 def test_a_flood_of_bad_frames_is_summarised_alike_at_any_read_size(mode):
     """:func:`flood`: the events written one by one are the first five of each second by stamp,
-    the rest summarised, at every read size (before: which ones and how many summaries followed
-    the reads, 63 / 105 / 99 records)."""
+    the rest summarised, at every read size (guards against which ones and how many summaries
+    following the reads, 63 / 105 / 99 records)."""
     data, changed = flood(mode)
     runs = same_at_every_read_size(data)
     errors = [(s, m) for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]

@@ -74,8 +74,8 @@ def test_a_reset_into_raw_with_a_tacho_says_the_order_tracker_at_the_reset(tmp_p
     """A 12.5-kHz RMS board (1 channel, no tacho) that fills replay's first read, reset into 2 RAW channels
     with a tacho whose second read holds 3.9 s of them, one TACHO frame 0.5 s in with an edge outside its
     block: the order tracker's config event is stamped at the reset, its first sample, and written before
-    that frame's decode_error.  Before, the tracker was made after the decisions of that read had let the
-    decode_error go, and was written late, at its stamp."""
+    that frame's decode_error.  Guards against the tracker being made after the decisions of that read have
+    let the decode_error go, and written late, at its stamp."""
     rms = frames_up_to(board("rms", 180, fs=12_500, tacho=False), REPLAY_CHUNK)
     raw = bytearray()
     for f in Decoder().feed(board("raw", 6, channels=2, fs=12_500)):
@@ -99,8 +99,8 @@ def test_a_reset_into_raw_with_a_tacho_says_the_order_tracker_at_the_reset(tmp_p
     (0, 2**32 - 67_296, "(t0 4294900000 after 49750)")])
 def test_the_time_base_event_names_the_t0_the_board_sent(tmp_path, before, after, told):
     """A board up 33 h reset to t0 0; a board reset to a t0 just before its 2^32 wrap (unwrapped, a step
-    back to -67296): the time_base event names the t0 fields as sent.  Before, the unwrapped ones:
-    "(t0 4294967296 after 3000049750)", "(t0 -67296 after 49750)"."""
+    back to -67296): the time_base event names the t0 fields as sent, not the unwrapped ones
+    ("(t0 4294967296 after 3000049750)", "(t0 -67296 after 49750)")."""
     _, msgs = replay(tmp_path, rms_board(2, before, seq=100) + rms_board(2, after))
     assert [m for _, k, m in events(msgs) if k == "time_base"] == [
         f"board clock restarted {told}: time segment 1 starts at the wall clock; the seq gap of 65234 in "
@@ -110,8 +110,8 @@ def test_the_time_base_event_names_the_t0_the_board_sent(tmp_path, before, after
 def test_a_t0_stepping_back_every_other_frame_is_rate_limited_like_any_event(tmp_path):
     """1 s of a board, then 2000 RMS frames whose t0 goes 0, 250, 0, 250 ... (a t0 field glitching): 1000
     board resets, each a time segment 20 ms on.  /cm/events keeps 5 time_base records a second of event
-    time and a summary of the rest each second, as the README promises.  Before, each reset ended the
-    limit's intervals, and all 1000 were written one by one (~48 a second)."""
+    time and a summary of the rest each second, as the README promises.  Guards against each reset ending
+    the limit's intervals, and all 1000 written one by one (~48 a second)."""
     glitch = b"".join(encode_rms(101 + k, (k % 2) * 250, [1.0]) for k in range(2000))
     _, msgs = replay(tmp_path, rms_board(1) + glitch)
     told = [(s, m) for t, s, m in msgs if t == "/cm/events" and m["kind"] == "time_base"]
@@ -137,8 +137,8 @@ def test_a_t0_a_few_samples_off_is_no_board_reset(tmp_path):
     """The RAW frame of every third block from 2 s on says a t0 7 samples late (docs/PROTOCOL.md: the
     frames of a block share its t0): the TACHO frame after it, 7 samples behind, is no board reset and the
     RAW samples follow on.  The replay tells what the board's own t0 gives, every observation and order
-    there.  Before, each such step back was a reset: 100 time segments in 3 s, each with an order tracker
-    made anew, and 100 missing observations."""
+    there.  Guards against each such step back being a reset: 100 time segments in 3 s, each with an order
+    tracker made anew, and 100 missing observations."""
     clean = board("raw", 5)
     err, msgs = replay(tmp_path / "clean", clean)
     jerr, jmsgs = replay(tmp_path / "jittered", jittered(clean))
@@ -155,8 +155,8 @@ def test_a_t0_a_few_samples_off_is_no_board_reset(tmp_path):
 def test_a_paced_replay_paces_each_segment_from_its_own_start(tmp_path, before):
     """``replay --speed 2`` of 2 s of a board, a reset to t0 0, 2 s more: 2 s of wall time whether the board
     had been up 33 h (t0 3e9: its unwrapped t0 then jumps on by 1.29e9 samples) or had just started (t0 back
-    by 2 s).  Before, the first slept 7.2 h at the reset (the run was killed at 60 s), and the second did not
-    pace the 2 s after the reset (1 s of wall time)."""
+    by 2 s).  Guards against the first sleeping 7.2 h at the reset (a run killed at 60 s), and the second not
+    pacing the 2 s after the reset (1 s of wall time)."""
     err, msgs = replay(tmp_path, rms_board(2, before, seq=100) + rms_board(2), "--speed", "2")
     wall = float(re.search(r"4\.0 s of ADC time in ([0-9.]+) s wall", err).group(1))
     assert 1.9 <= wall <= 3.5, err

@@ -46,8 +46,8 @@ def run_in(tmp_path_factory) -> Path:
 
 def test_the_run_in_decisions_are_checked_as_the_replay_grades_them(run_in, tmp_path):
     """The run-in is left out of the learning, but the monitor grades it: calibrate's margin and
-    its count of flagged healthy decisions take it in (before, 8 outliers at most and 0 flagged,
-    while the replay flagged 6-15 s), and say where they are; the replay flags exactly those."""
+    its count of flagged healthy decisions take it in (guards against 8 outliers at most and 0
+    flagged while the replay flags 6-15 s), and say where they are; the replay flags exactly those."""
     site = tmp_path / "site.yaml"
     p = cmsensord("calibrate", str(run_in), "--rpm", "1500", "--out", str(site))
     assert p.returncode == 0, p.stderr
@@ -62,7 +62,7 @@ def test_the_run_in_decisions_are_checked_as_the_replay_grades_them(run_in, tmp_
 
 
 def test_a_configured_indicators_rpm_is_the_shaft_speed_and_the_line_says_so(run_in, tmp_path):
-    """No tacho, no --rpm, no speed in the capture: indicators.rpm of --config is f_r (before, the
+    """No tacho, no --rpm, no speed in the capture: indicators.rpm of --config is f_r (not the
     default monitor.f_r 28.66 Hz, "nothing gave this machine's shaft speed"), so the site file
     grades at the speed its bearing lines are computed at; --rpm still comes first."""
     base = tmp_path / "base.yaml"
@@ -88,8 +88,8 @@ def _records(out_dir: Path, channel: str) -> list[dict]:
 
 def test_the_site_file_of_snapshots_leaves_their_record_length_to_the_capture(tmp_path):
     """FEMTO-like 0.1-s snapshots: calibrate learns with one record a snapshot, but the site file
-    does not carry indicators.interval_s 0.1 (before, it did, and the live daemon on the port
-    wrote 10 records a second, its velocity read high); a replay of the capture takes 0.1 s from
+    does not carry indicators.interval_s 0.1 (with it the live daemon on the port would write
+    10 records a second, its velocity read high); a replay of the capture takes 0.1 s from
     its sidecar again, a continuous stream gets the configured 1-s records."""
     x = np.random.default_rng(6).standard_normal((100, 2560, 1)).astype(np.float32)
     np.savez(tmp_path / "snaps.npz", acc=x, fs=25600.0, t_s=np.arange(100) * 10.0)
@@ -124,9 +124,9 @@ def two_channels(tmp_path_factory) -> Path:
 
 def test_a_configured_channel_the_capture_does_not_hold_is_said(two_channels, tmp_path):
     """BASE lists de, nde and fan; the capture holds two channels: calibrate says fan is not
-    learned and not in the site file (before, nothing was said), and the replay warns that it is
-    not monitored (before, an INFO event); a rule naming fan is an error naming BASE (before, one
-    naming calibrate's own temporary file and saying the channel was not defined)."""
+    learned and not in the site file (not silently), and the replay warns that it is not
+    monitored (a WARNING, not an INFO event); a rule naming fan is an error naming BASE (not
+    calibrate's own temporary file, nor saying the channel was not defined)."""
     base = tmp_path / "base.yaml"
     base.write_text("channels:\n  - name: de\n  - name: nde\n  - name: fan\n")
     site = tmp_path / "site.yaml"
@@ -154,7 +154,7 @@ def test_a_configured_channel_the_capture_does_not_hold_is_said(two_channels, tm
 def test_a_faulty_capture_that_does_not_fit_or_does_not_change_r_max_is_said(two_channels, tmp_path):
     """--faulty of another set-up (another fs and block rate) is not used, one that lacks the
     channels leaves them R_n = 4 x R_1, and one that flags nothing above R_1 changes nothing:
-    each said in one line (before, all accepted without a word); the site file's R_max is then
+    each said in one line (none accepted without a word); the site file's R_max is then
     the one learned without it."""
     rng = np.random.default_rng(8)
     np.save(tmp_path / "other.npy", rng.standard_normal((10 * 25600, 2)).astype(np.float32))
@@ -191,8 +191,8 @@ def test_a_faulty_capture_that_does_not_fit_or_does_not_change_r_max_is_said(two
 @pytest.mark.parametrize("n, faulty", [(3, False), (1, True)])
 def test_the_banks_r_1_is_the_one_calibrate_checked_and_reports(run_in, tmp_path, n, faulty):
     """Eq. (16) with few AKFs (n <= 4) or a --faulty R_max out of its reach: the site file's
-    R_min, R_max give AKF_1 the R_1 the table reports and the healthy check ran at (before: n 3
-    gave R_1 1.5 x the one reported; n 1 with --faulty stopped on a ZeroDivisionError)."""
+    R_min, R_max give AKF_1 the R_1 the table reports and the healthy check ran at (guards against
+    n 3 giving R_1 1.5 x the one reported, and n 1 with --faulty stopping on a ZeroDivisionError)."""
     from cmsensord.dsp.akf import bank_r
 
     base = tmp_path / "base.yaml"

@@ -156,6 +156,6 @@ def test_captured_spectra_are_rms_per_bin_and_the_envelope_demodulates_the_indic
         return max(m["amplitude"][k - 2:k + 3])
     assert peak(spec, 50) == pytest.approx(0.3 * g / np.sqrt(2), rel=0.01)
     assert env["band_hz"] == ind["envelope_band_hz"] == list(band or (0.08 * fs, 0.4 * fs))
-    # before: 4.903 (0-peak) at 5 kHz, and 0.0004 with the 1500-Hz carrier outside the default band
+    # RMS, not 4.903 (0-peak) at 5 kHz, nor 0.0004 with the 1500-Hz carrier outside the default band
     assert peak(env, 100) == pytest.approx(0.5 * g / np.sqrt(2), rel=0.01)
     assert peak(env, 100) == pytest.approx(ind["envelope_rms"], rel=0.01)

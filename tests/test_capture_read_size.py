@@ -1,14 +1,14 @@
 """Captures at any read size: a capture's messages, the shaft speed and lines marked on its
 spectra, and its events are those of the stream, not of how it was read.
 
-Before, a RAW capture was written as soon as the ring held its last sample, with the speed the
-tacho had reached by then (a large read: the whole window's; 997-byte reads: less of it), and
-its `capture` event, stamped at the trigger, came after the event log had written later
-records at some read sizes (then it took the newest stamp).  And the periodic ticks started
-their captures as the samples came, the events' triggers as the events came: in a large read
-of an RMS stream, whose decisions wait for the tacho, every tick of the read came before the
-decisions' events, so an anomaly's capture was skipped as "-19 s after the last one" (a replay
-lost the captures the live daemon made)."""
+Guards against a RAW capture written as soon as the ring holds its last sample, with the speed
+the tacho has reached by then (a large read: the whole window's; 997-byte reads: less of it),
+and its `capture` event, stamped at the trigger, coming after the event log has written later
+records at some read sizes (then taking the newest stamp).  And against the periodic ticks
+starting their captures as the samples come, the events' triggers as the events come: in a
+large read of an RMS stream, whose decisions wait for the tacho, every tick of the read would
+come before the decisions' events, so an anomaly's capture would be skipped as "-19 s after the
+last one" (a replay losing the captures the live daemon made)."""
 
 from __future__ import annotations
 

@@ -253,7 +253,7 @@ def test_the_report_marks_the_defect_lines_on_the_captured_spectra(tmp_path):
 
 def test_a_manual_capture_does_not_hold_back_the_triggers_after_it():
     """Someone's `capture-now` at 2 s, then the periodic trigger at 4 s with min_interval_s 60:
-    it is kept (before, it was skipped as '2 s after the last one', and so would an alarm's be)."""
+    it is kept (not skipped as '2 s after the last one', as an alarm's would then be too)."""
     from cmsensord.config import config_from_dict
     from cmsensord.monitor.processor import Processor
     from cmsensord.sinks.memory import ListSink

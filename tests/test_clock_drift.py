@@ -32,7 +32,7 @@ def board(blocks_per_look: int, looks: int, clock: BlockClock, wall_s: float, fo
 def test_a_board_at_twice_real_time_is_re_anchored_once_and_left_to_catch_up():
     """A board at 2x: one drift, ahead, at 5 s (the rate measured over 5 s); its stamps then run
     10 % slower than the board and come back to the wall clock, and no look starts another
-    segment while they do (before: another every 5 s, 4.65 s, 4.20 s, ... 2.83 s ahead)."""
+    segment while they do (not another every 5 s, 4.65 s, 4.20 s, ... 2.83 s ahead)."""
     clock, found = BlockClock(), []
     board(20, 350, clock, 0.0, found)
     [(at, offset, rate)] = found
@@ -43,8 +43,8 @@ def test_a_board_at_twice_real_time_is_re_anchored_once_and_left_to_catch_up():
 def test_a_backlog_after_a_silence_is_no_drift_and_the_board_time_goes_on():
     """A board in real time for 6 s, then a silence of 12 s (no look), then what it kept, in 2 s
     (the 12 s and the 2 s its clock ran on meanwhile), then real time: no drift, and the newest
-    stamp is the wall clock again (before: behind by 11.3 s at 9.3 kHz, the backlog stamped at
-    that rate, then ahead, and on)."""
+    stamp is the wall clock again (guards against behind by 11.3 s at 9.3 kHz, the backlog stamped
+    at that rate, then ahead, and on)."""
     clock, found = BlockClock(), []
     wall = board(10, 60, clock, 0.0, found)
     wall = board(70, 20, clock, wall + 12.0, found)     # 12 s of silence, then 7x real time

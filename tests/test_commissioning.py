@@ -47,7 +47,7 @@ def test_bank_limits_give_r1_and_span(r_1):
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 5])
 def test_bank_limits_keep_r1_for_small_banks(n):
-    """n <= SPAN: R_1 stays r_1 (before, n 2..4 gave AKF_1 a larger R than the one checked)."""
+    """n <= SPAN: R_1 stays r_1 (guards against n 2..4 giving AKF_1 a larger R than the one checked)."""
     r_min, r_max = bank_limits(2e-3, n)
     R = bank_r(r_min, r_max, n)
     assert R[0] == pytest.approx(2e-3, rel=1e-12) and 0 < r_min < r_max

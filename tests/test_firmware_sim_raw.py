@@ -34,6 +34,13 @@ FS = 25000
 L = 250
 
 
+def _tacho_arrays(frames, chan: int = 0) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(t0_unwrapped (F,), [edge offsets]) of the TACHO frames of input ``chan`` among ``frames``:
+    what TachoTracker.update takes."""
+    tacho = [f for f in frames if f.type == FrameType.TACHO and f.chan == chan]
+    return np.array([f.t0_unwrapped for f in tacho], dtype=np.int64), [decode_tacho(f.payload) for f in tacho]
+
+
 def _decode(data: bytes):
     frames, counters = iter_frames(data)
     assert counters.bytes_discarded == 0 and counters.crc_failures == 0 and counters.frames_lost == 0
@@ -170,7 +177,7 @@ def test_whirl_tacho_frames_give_the_runup_speed():
 
     def feed(frames):  # as the daemon will: query what became final after each update
         nonlocal done
-        u = tr.update_frames(frames)
+        u = tr.update(*_tacho_arrays(frames))
         s = grid[(grid >= done) & (grid < u.final_until)]
         parts.append((s, *tr.evaluate(s)))
         done = u.final_until

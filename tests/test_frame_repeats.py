@@ -1,7 +1,7 @@
 """Frames the link delivers twice (cmsensord/frame_repeats.py): dropped, counted, one event each.
 
-Before, a frame received again read as ~65,535 lost frames (its seq gap, rule 3 alone) and, its
-t0 behind the newest, as a board that restarted its clock: a `frames_lost` event of 65535, a
+Guards against a frame received again read as ~65,535 lost frames (its seq gap, rule 3 alone) and,
+its t0 behind the newest, as a board that restarted its clock: a `frames_lost` event of 65535, a
 `time_base` re-anchoring, the order tracker restarted, and other messages at other read sizes.
 """
 
@@ -135,9 +135,9 @@ def repeated(sent: list, seq: str) -> tuple[bytes, list, list[tuple[int, int]]]:
 def test_repeats_give_the_messages_of_the_stream_without_them_at_any_read_size(mode, seq):
     """Frames received again, under their seq or the next, change no data message at any read size:
     the messages of the stream without them, and one `frames_repeated` event where each run of
-    repeats was (before: under their seq a `frames_lost` of 65535 and a `time_base` re-anchoring
-    each; under the next a `config` re-anchoring, the block observed twice and, with RAW, the order
-    tracker restarted)."""
+    repeats was (guards against, under their seq, a `frames_lost` of 65535 and a `time_base`
+    re-anchoring each; under the next a `config` re-anchoring, the block observed twice and, with
+    RAW, the order tracker restarted)."""
     data, sent, runs = repeated(SENT if mode == "raw" else board_frames("rms"), seq)
     want = by_topic(wire([f._replace(seq=i) for i, f in enumerate(sent)]), 65_536)     # numbered on
     for read in READS:

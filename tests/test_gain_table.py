@@ -29,7 +29,7 @@ def _runup(fs: float, seconds: float, lo: float, hi: float):
 def test_table_memory_at_16_orders_on_a_full_run_up_is_at_most_20_mb(lag):
     """16 orders at 25 kHz (D = 5), the daemon's 300-3960 rpm table, a run-up from
     below min_rpm to above 1.1 max_rpm: every segment of the table is filled, and it
-    holds <= 20 MB (62 MB before: 3662 speeds, P and its differences always); what
+    holds <= 20 MB (62 MB with all 3662 speeds, P and its differences always); what
     the tracker keeps after the run (table + state, traced by tracemalloc) too.
     Without the smoother P is not kept at all: <= 1 MB."""
     y, rpm = _runup(25000.0, 2.0, 200.0, 4100.0)

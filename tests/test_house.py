@@ -1,5 +1,6 @@
 """The house rules, checked: no import cycle, no module over 600 lines, no function over 80
-lines except the justified hot loops named here (CONTRIBUTING.md)."""
+lines except the justified hot loops named here, no wire protocol or I/O module imported by the
+pure DSP of cmsensord/dsp (CONTRIBUTING.md)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ PACKAGES = ("cmsensord", "firmware_sim")
 #: functions allowed over 80 lines, each a hot loop whose docstring says why (none now: the
 #: decoder's loop, the last one, was split when the wire kernel took its place)
 LONG_FUNCTIONS: set[str] = set()
+#: the wire protocol and the I/O at the edges, which nothing in cmsensord/dsp may import
+WIRE_AND_IO = ("cmsensord.protocol", "cmsensord.link", "cmsensord.source", "cmsensord.sinks", "cmsensord.service")
 
 
 def _sources() -> dict[str, Path]:
@@ -23,13 +26,14 @@ def _sources() -> dict[str, Path]:
     return mods
 
 
-def _imports(name: str, path: Path, mods: dict[str, Path]) -> set[str]:
-    """The package modules ``name`` imports at run time (anywhere in the file, lazily or not)."""
+def _imports(name: str, path: Path, mods: dict[str, Path], annotations: bool = False) -> set[str]:
+    """The package modules ``name`` imports at run time (anywhere in the file, lazily or not);
+    with ``annotations``, also those imported for type checking only."""
     pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    typing_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
-                   and isinstance(block.test, ast.Name) and block.test.id == "TYPE_CHECKING"
-                   for n in ast.walk(block)}
+    typing_only = set() if annotations else {
+        id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
+        and isinstance(block.test, ast.Name) and block.test.id == "TYPE_CHECKING" for n in ast.walk(block)}
     out = set()
     for node in ast.walk(tree):
         if id(node) in typing_only:            # annotations only: not imported at run time
@@ -93,6 +97,16 @@ def test_no_import_cycle():
 
 def test_the_cycle_finder_finds_one():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == [["a", "b", "c"]]
+
+
+def test_dsp_imports_no_wire_protocol_and_no_io():
+    """Nothing under cmsensord/dsp imports the wire protocol, the link, the source, the sinks or
+    the service, not even for annotations: the DSP takes arrays, never frames or files."""
+    mods = _sources()
+    found = {f"{name} -> {dep}" for name, path in mods.items() if name.startswith("cmsensord.dsp")
+             for dep in _imports(name, path, mods, annotations=True)
+             if any(dep == w or dep.startswith(f"{w}.") for w in WIRE_AND_IO)}
+    assert found == set()
 
 
 def test_no_module_over_600_lines():

@@ -77,7 +77,7 @@ def test_a_file_whose_clock_does_not_run_evenly_leaves_the_snapshots_without_tim
 ])
 def test_files_whose_times_do_not_increase_in_their_order_leave_the_snapshots_without_times(tmp_path, starts, said):
     """Files named in another order than their times, or a logger that stamps every file alike:
-    no times (before, the sidecar held gaps of -3602 s), and a note names the first such file."""
+    no times (not gaps of -3602 s in the sidecar), and a note names the first such file."""
     femto_like(tmp_path / "b", starts)
     _, side, err = imported(tmp_path, "b", "--unit", "g")
     assert f"  note: {said}: the snapshots have no times; --snapshot-interval S gives them\n" in err

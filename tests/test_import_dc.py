@@ -22,8 +22,8 @@ def _run(*args) -> str:
 
 def test_an_offset_does_not_go_into_the_baseline_and_the_level(tmp_path):
     """A vibration that grows 2.5 x on an offset of 1.2 m/s2 (1.2 x its healthy RMS, as the
-    IMS rig's first test): the level reads 2.5 x the baseline (before: the baseline was the
-    RMS with the offset, 1.56, and the level 1.78 x, graded 0)."""
+    IMS rig's first test): the level reads 2.5 x the baseline (guards against a baseline
+    that is the RMS with the offset, 1.56, and a level of 1.78 x, graded 0)."""
     rng = np.random.default_rng(1)
     x = np.concatenate([rng.standard_normal(30 * FS), 2.5 * rng.standard_normal(30 * FS)]) + 1.2
     np.save(tmp_path / "x.npy", x)

@@ -39,7 +39,7 @@ def test_each_record_holds_one_snapshot_in_replay_and_in_the_site_file(tmp_path)
     err = _run("replay", cap, "--out", tmp_path / "out")
     assert f"  {said}\n" in err, err
     recs = _records(tmp_path / "out")
-    # before: records of 2000 samples, each with the start of the next snapshot (peaks 2, 3, 4, 4)
+    # not records of 2000 samples, each with the start of the next snapshot (peaks 2, 3, 4, 4)
     assert [(m["interval_s"], round(m["accel_peak"], 2), m["missing_fraction"]) for m in recs] == \
         [(0.95, 1.0, 0.0), (0.95, 2.0, 0.0), (0.95, 3.0, 0.0), (0.95, 4.0, 0.0)]
     site = tmp_path / "site.yaml"
@@ -66,7 +66,7 @@ def test_an_interval_the_configuration_sets_is_kept_and_said_to_straddle(tmp_pat
 
 def test_a_capture_longer_than_the_snapshots_is_said(tmp_path):
     """capture.pre_s + post_s of 2 s against snapshots of 0.95 s: one line says a capture joins
-    snapshots of other times (before, nothing: its spectra averaged across the joins); none with
+    snapshots of other times (its spectra would average across the joins); none with
     a capture within a snapshot."""
     cap = _capture(tmp_path)
     for span, said in ((1.0, True), (0.4, False)):

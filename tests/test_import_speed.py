@@ -29,7 +29,7 @@ def test_the_files_speed_is_the_indicators_speed(tmp_path):
     err = _run("replay", cap, "--config", tmp_path / "base.yaml", "--out", tmp_path / "out")
     assert f"  {said}\n" in err, err
     recs = _records(tmp_path / "out")
-    # before: no speed_rpm, bearing lines empty, unavailable ["speed"], the band 10-1000
+    # guards against no speed_rpm, bearing lines empty, unavailable ["speed"], the band 10-1000
     assert len(recs) == 4 and all(m["speed_rpm"] == 300 and m["speed_source"] == "config" for m in recs)
     assert all(m["velocity_band_hz"] == [2, 1000] for m in recs)
     # FTF at 2 Hz and 2 x FTF at 4 Hz stand fewer than 10 of the 1-Hz bins up: not resolved (resolution.py)
@@ -58,7 +58,7 @@ def test_files_of_different_speeds_give_none(tmp_path):
 
 def test_calibrates_rpm_is_the_site_files_speed(tmp_path):
     """``calibrate --rpm`` is the machine's speed: the site file's ``indicators.rpm`` is it, not
-    the speed the capture's import read (before, f_r at --rpm but the lines at the import's)."""
+    the speed the capture's import read (not f_r at --rpm but the lines at the import's)."""
     _npz(tmp_path / "r.npz", 300.0)
     cap = tmp_path / "r.bin"
     _run("import", tmp_path / "r.npz", "--unit", "m/s2", "--names", "ch", "--out", cap)

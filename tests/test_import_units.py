@@ -49,7 +49,7 @@ def test_an_accelerometer_and_a_microphone_in_one_wav_each_in_its_own_unit(tmp_p
     n = rms.shape[0]
     want = np.sqrt(np.stack([(x[:n * L].reshape(n, L) ** 2).mean(axis=1) for x in (acc, mic)], axis=1))
     np.testing.assert_allclose(rms, want, rtol=0.02, atol=2e-3)
-    # one unit for both (before, the only choice) scales the microphone as if in g: 9.8 x too large
+    # one unit for both scales the microphone as if in g: 9.8 x too large
     r = cmd("import", "pair.wav", "--unit", "g", "--scale-factor", f"{ACC_FS_G:g},{MIC_FS_PA:g}", "--out", "g.bin",
             cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -94,7 +94,7 @@ def test_units_and_values_per_channel_that_do_not_fit_are_one_line(tmp_path):
 
 
 def test_a_file_that_gives_its_columns_different_units_is_read_in_each_ones(tmp_path):
-    """`Acc (g)` beside `Mic (Pa)`: each column in its own unit (before: both taken as m/s2)."""
+    """`Acc (g)` beside `Mic (Pa)`: each column in its own unit (not both taken as m/s2)."""
     rng = np.random.default_rng(5)
     x = np.round(rng.normal(0.0, 0.5, (2000, 2)), 4)
     (tmp_path / "d.csv").write_text("Acc (g),Mic (Pa)\n" + "".join(f"{a},{b}\n" for a, b in x))

@@ -71,7 +71,7 @@ def test_the_simulated_outer_race_defect_shows_at_bpfo(simulated):
 
 def test_a_bearing_line_between_bins_reads_its_0_peak_amplitude(tmp_path):
     """An imported 1 g carrier at 5 kHz modulated 50 % at the BPFO of 1800 rpm (107.54 Hz, 0.46 of
-    a 1-Hz bin off): the line reads the modulation's 0-peak 0.5 g within 1 % (before: 4.279 m/s^2,
+    a 1-Hz bin off): the line reads the modulation's 0-peak 0.5 g within 1 % (not 4.279 m/s^2,
     -13 %, the Hann window's scalloping)."""
     fs, g = 25600, 9.80665
     t = np.arange(4 * fs) / fs

@@ -40,7 +40,7 @@ def replay_1x(work: Path, rpm: float, *, tacho: bool, site: str = "", seconds: i
 def test_a_tacho_speed_below_600_rpm_grades_the_velocity_over_2_to_1000_hz(tmp_path):
     recs = replay_1x(tmp_path, 300.0, tacho=True)[1:-1]
     assert recs and all(m["speed_source"] == "tacho" and m["speed_rpm"] == pytest.approx(300, rel=1e-3) for m in recs)
-    for m in recs:      # the 5-Hz 1x inside the band (before: 10-1000 Hz, 0.000 mm/s, zone A)
+    for m in recs:      # the 5-Hz 1x inside the band (not 10-1000 Hz: 0.000 mm/s, zone A)
         assert m["velocity_band_hz"] == [2.0, 1000.0] and m["zone"] == "C"
         assert m["velocity_rms_mm_s"] == pytest.approx(V_MM_S, rel=0.03)
 
@@ -48,7 +48,7 @@ def test_a_tacho_speed_below_600_rpm_grades_the_velocity_over_2_to_1000_hz(tmp_p
 def test_at_600_rpm_the_1x_is_inside_the_2_hz_band_not_on_the_10_hz_edge(tmp_path):
     recs = replay_1x(tmp_path, 600.0, tacho=False, site="indicators:\n  rpm: 600\n")[1:-1]
     assert recs
-    for m in recs:      # before: 10-1000 Hz, 3.588 mm/s (the Hann lobe's lower half cut off)
+    for m in recs:      # not 10-1000 Hz: 3.588 mm/s (the Hann lobe's lower half cut off)
         assert m["velocity_band_hz"] == [2.0, 1000.0] and m["speed_source"] == "config"
         assert m["velocity_rms_mm_s"] == pytest.approx(V_MM_S, rel=0.01)
 

@@ -1,5 +1,5 @@
 """compute_many(): several records' indicators with their real transforms in one call per
-length (issue 13: numpy's rfft costs ~0.1 ms a call on top of the transform at 25 000 points)
+length (numpy's rfft costs ~0.1 ms a call on top of the transform at 25 000 points)
 against compute() of each record, bit for bit: records of mixed lengths, channels with a
 bearing and bands or none, with and without a shaft speed, strided columns of an interval
 buffer; and the daemon's indicator messages of several intervals released at once."""

@@ -1,9 +1,9 @@
 """Bearing lines the envelope spectrum's bins cannot resolve are unavailable, not numbers.
 
 FEMTO's set-up in small: snapshots of 0.1 s (10-Hz bins) at 25.6 kHz, 1800 rpm, a bearing of
-13 balls of 3.5 mm on 25.6 mm (FTF 12.95, BPFO 168.3, BPFI 221.7, BSF 107.7 Hz).  Before, each
-line was the largest bin within ±max(2 %, 1 bin): FTF's ±10 Hz was ±77 %, FTF and 2 x FTF
-read the same bin, 2 x BSF and BPFI the 220-Hz one, and a rule on BPFO fired on noise.
+13 balls of 3.5 mm on 25.6 mm (FTF 12.95, BPFO 168.3, BPFI 221.7, BSF 107.7 Hz).  Guards
+against each line read as the largest bin within ±max(2 %, 1 bin): FTF's ±10 Hz is ±77 %, FTF
+and 2 x FTF read the same bin, 2 x BSF and BPFI the 220-Hz one, and a rule on BPFO fires on noise.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def test_replay_lists_unresolved_lines_unavailable_says_so_once_and_rules_on_the
     recs = _records(tmp_path / "out")
     assert len(recs) == 30 and all(m["interval_s"] == 0.1 for m in recs)
     for m in recs:
-        # before: every line a number, ftf and ftf_2x (bsf_2x and bpfi) often the same bin
+        # not every line a number: ftf and ftf_2x (bsf_2x and bpfi) would often read the same bin
         assert m["unavailable"] == UNRESOLVED
         assert set(m["bearings"][0]["lines"]) == {"bpfo", "bpfo_2x", "bpfi_2x", "bsf"}
     said = _said(err)
@@ -63,7 +63,7 @@ def test_replay_lists_unresolved_lines_unavailable_says_so_once_and_rules_on_the
     assert "bpfi, bsf_2x lie within the slip (±2 %) of another line of tb: no record length resolves them" in line
     problems, kinds = _validate(next((tmp_path / "out").glob("*.mcap")))    # against the schemas in the log
     assert problems == [] and kinds["lines_unresolved"] == 1
-    # the resolved line's rule fires; the unresolved one's never (before: alarm_alert bpfi/ch at once)
+    # the resolved line's rule fires; the unresolved one's never (not alarm_alert bpfi/ch at once)
     assert "bpfo/ch: tb.bpfo" in err and "bpfi/ch:" not in err, err
 
 
@@ -74,7 +74,7 @@ def test_calibrate_says_so_once_and_learns_no_baseline_of_them(tmp_path):
     said = _said(out)
     assert len(said) == 1 and said[0].startswith("note: bearing tb on ch: line(s) ftf 12.95 Hz"), out
     learned = {b["indicator"] for b in yaml.safe_load(site.read_text())["alarms"]["baselines"]}
-    # before: a baseline of every line, FTF's of whichever bin within ±77 % won
+    # not a baseline of every line (FTF's of whichever bin within ±77 % wins)
     assert {"tb.bpfo", "tb.bsf"} <= learned and not learned & set(UNRESOLVED)
 
 

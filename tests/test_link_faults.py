@@ -108,9 +108,9 @@ def test_unplugged_board_is_link_lost_then_restored_and_monitoring_goes_on(tmp_p
 
 
 def test_a_second_daemon_on_the_same_configuration_is_refused_and_the_first_loses_nothing(tmp_path):
-    """Started by hand beside the service: before, both read the port (each losing the other's
-    frames) and the second salvaged the first's open .part file. Now: one line, exit 78, and the
-    first daemon runs on without a lost frame. A replay into its directory (its logs, queue and
+    """Started by hand beside the service: one line, exit 78, and the first daemon runs on without
+    a lost frame (guards against both reading the port, each losing the other's frames, and the
+    second salvaging the first's open .part file). A replay into its directory (its logs, queue and
     state) is refused the same way; elsewhere it runs."""
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "healthy", "--speed", "2", "--link", str(link), "--flow-control")

@@ -1,9 +1,9 @@
 """A silent link is no slow board clock: live, with ``link.max_drift_s`` at its default, a
 link that says nothing for a while (a stalled reader, a USB cable pulled and put back) and
 then brings what the board kept starts no ``time_base`` segment, and the stamps stay on the
-wall clock.  Before: the drift check measured the board's rate over the silence (``board
-clock behind the wall clock by 11.0 s (it runs at 8817 Hz for fs 25000 Hz)``), stamped the
-frames after it at that rate and ran ahead (``ahead of the wall clock by 42.7 s``; a 40-s
+wall clock.  Guards against the drift check measuring the board's rate over the silence
+(``board clock behind the wall clock by 11.0 s (it runs at 8817 Hz for fs 25000 Hz)``), stamping
+the frames after it at that rate and running ahead (``ahead of the wall clock by 42.7 s``; a 40-s
 silence: 523 s), catching up 10 % of the wall time, for hours."""
 
 from __future__ import annotations
@@ -75,9 +75,9 @@ def test_a_backlog_coming_in_over_more_than_5_s_after_a_silence_is_no_drift(tmp_
     while its clock runs on and it keeps its blocks, then sends what it kept at 1.5 times real
     time until it has caught up (14 s), then in real time.  While the backlog comes in its
     stamps are behind the wall clock, more than 2 s for over 6 s, but on their way back: no
-    time_base event, and every stamp is the board's t0 on the first frame's anchor.  Before:
-    ``behind by 6.9 s`` at the first look after the silence; measuring the rate only from
-    there on, still ``behind by 3.9 s (it runs at 37416 Hz for fs 25000 Hz)`` 6 s later."""
+    time_base event, and every stamp is the board's t0 on the first frame's anchor.  Guards
+    against ``behind by 6.9 s`` at the first look after the silence and, measuring the rate only
+    from there on, still ``behind by 3.9 s (it runs at 37416 Hz for fs 25000 Hz)`` 6 s later."""
     master, slave = os.openpty()
     port = os.ttyname(slave)
     d = start_daemon(tmp_path, port, max_drift_s=2.0)

@@ -1,4 +1,4 @@
-"""The live loop batches frames by time (issue 13): the same messages as one frame per call.
+"""The live loop batches frames by time: the same messages as one frame per call.
 
 The serial source hands the Processor what the reader queued every ``BATCH_S``
 seconds (or once ``BATCH_FRAMES`` wait), not each read's few frames; the
@@ -225,7 +225,7 @@ def test_a_queue_told_the_block_to_wake_at_returns_when_its_tacho_frame_is_in():
 
 
 def test_rms_batches_take_one_call_per_decision_and_give_the_messages_of_one_frame_per_call():
-    """The loop's way with RMS frames (issue 13): frames wait in the queue for the block that
+    """The loop's way with RMS frames: frames wait in the queue for the block that
     completes the next decision, and a batch is handled in parts ending with such blocks: one
     Processor call per decision instead of one per 0.1 s, the messages (and their order in the
     file) those of one frame per call."""

@@ -43,8 +43,8 @@ def test_a_report_of_a_directory_reads_its_logs_in_the_order_they_were_opened(tm
 def test_retention_after_the_clock_stepped_back_deletes_the_files_opened_first(tmp_path):
     """The daemon (simulated board, a file every few kB, 0.05 MB kept) whose wall clock steps
     back an hour once two files are finished: the files kept are the newest, one after the other in
-    the data's time (before: the files opened after the step were named an hour earlier, and
-    each was deleted as "the oldest" once finished, the newest data)."""
+    the data's time (guards against the files opened after the step named an hour earlier, and
+    each deleted as "the oldest" once finished, the newest data)."""
     out = tmp_path / "out"
     (tmp_path / "c.yaml").write_text(f"output:\n  dir: {out}\n  rotate_mb: 0.005\n  retain_mb: 0.05\n"
                                      "  min_free_mb: 0\n  flush_s: 0.1\n")

@@ -537,7 +537,7 @@ def test_numbering_goes_on_after_the_newest_file_of_the_same_second(tmp_path):
 
 @pytest.mark.parametrize("n", [0, 1, 7, 500])
 def test_message_index_is_the_record_the_mcap_library_builds(n):
-    """The chunk writer packs each MessageIndex in one call (issue 13): the same bytes as
+    """The chunk writer packs each MessageIndex in one call: the same bytes as
     ``mcap.records.MessageIndex.write``."""
     from mcap.data_stream import RecordBuilder
     from mcap.records import MessageIndex

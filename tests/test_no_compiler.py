@@ -1,5 +1,5 @@
 """Without a C compiler (the kernels not built): the daemon runs its numpy fallbacks and
-never imports scipy (~70 MB resident), through the command a user types (issue 13)."""
+never imports scipy (~70 MB resident), through the command a user types."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """A decision period that lacks most of a channel's observations is not judged: a failing
 channel whose frames are lost for 5 s (a seq and t0 gap, as when a self-powered board's USB is
 pulled) keeps its severity and failure through the gap, its severity messages say
-``no_data``, and no ``failure_clear`` comes of the gap (before, each empty second read as
-healthy: severity 1.00 -> 0.00 and a failure_clear, then FAILURE again after it).
+``no_data``, and no ``failure_clear`` comes of the gap (guards against each empty second read
+as healthy: severity 1.00 -> 0.00 and a failure_clear, then FAILURE again after it).
 A failure raised by the level says so when it clears. Through ``cmsensord replay`` of the
 board's capture with the frames cut out."""
 

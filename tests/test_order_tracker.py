@@ -15,7 +15,6 @@ from hypothesis import strategies as st
 
 from cmsensord.dsp.order_tracker import (
     BlockStats,
-    OrderAlarm,
     OrderTracker,
     TrackedComponent,
     bandwidth_to_r,
@@ -161,32 +160,6 @@ def test_whirl_after_the_crossing_047_is_empty_and_47_hz_is_tracked(whirl_run):
     truth = true_block_rms(tr, out.blocks, sig.components["47 Hz"])
     rel = np.abs(out.blocks.rms[m, 0, 2] - truth[m]) / truth[m]
     assert rel.max() < 0.10, rel.max()
-
-
-def test_whirl_alarm_fires_at_3000_rpm(whirl_run):
-    """An RMS alarm on order 0.47 at 50 % of its 3000-rpm RMS: onset within
-    +-100 rpm of 3000 rpm, no earlier onset (order 1 does not leak into it),
-    and it clears once the whirl has stopped (above 6000 rpm)."""
-    _, _, out = whirl_run
-    alarm = OrderAlarm(WHIRL, {"order 0.47": 0.5 * np.sqrt(2.0)}, hysteresis=0.2)
-    ev = alarm.update(out.blocks)
-    onsets = [e for e in ev if e.kind == "onset"]
-    clears = [e for e in ev if e.kind == "clear"]
-    assert len(onsets) == 1 and abs(onsets[0].rpm - 3000.0) <= 100.0, ev
-    assert len(clears) == 1 and 6000.0 < clears[0].rpm < 6500.0, ev
-
-
-def test_order_alarm_hysteresis_and_gate():
-    comps = WHIRL[:2]
-    rms = np.array([0.1, 1.0, 0.9, 0.85, 0.7, 5.0, 0.5])[:, None, None] * np.ones((1, 1, 2))
-    valid = np.array([True, True, True, True, True, False, True])
-    blocks = BlockStats(start=np.arange(7) * 200, t_in=np.arange(7) * 200, rpm=np.arange(7) * 100.0,
-                        rms=rms, amplitude=rms, valid=valid)
-    alarm = OrderAlarm(comps, {"order 0.47": 1.0}, hysteresis=0.2)
-    ev = alarm.update(blocks)
-    assert [(e.kind, e.block_start, e.rpm) for e in ev] == [("onset", 200, 100.0), ("clear", 800, 400.0)]
-    with pytest.raises(ValueError, match="unknown components"):
-        OrderAlarm(comps, {"order 2": 1.0})
 
 
 # --------------------------------------------------------------------------

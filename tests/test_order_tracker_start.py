@@ -1,9 +1,9 @@
-"""The order tracker's start (issue 13: a replay's fixed cost): with the table's gains it
+"""The order tracker's start (a replay's fixed cost): with the table's gains it
 solves no bandwidth -> r at construction, and its first fill only at the grid points around
 its speeds (min_rpm, where the speed is not known yet, and the running speed, none between);
 once the speed moves to another segment the table's whole range comes in one batch.  The
-outputs are those of a tracker whose r grid was computed over the whole range up front (as
-it was before), bit for bit."""
+outputs are those of a tracker whose r grid was computed over the whole range up front,
+bit for bit."""
 
 from __future__ import annotations
 

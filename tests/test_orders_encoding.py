@@ -1,4 +1,4 @@
-"""The /orders messages' JSON made from the tracker's arrays in one pass (issue 13): the bytes
+"""The /orders messages' JSON made from the tracker's arrays in one pass: the bytes
 of the plain encoder, byte for byte, message for message.
 
 The order chain lays a call's numbers out in one array and fills a template of each

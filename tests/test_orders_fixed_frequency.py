@@ -39,8 +39,8 @@ def _whip(cap: Path, tmp: Path, whip: str) -> tuple[str, list[float]]:
 
 
 def test_a_fixed_frequency_component_takes_the_default_bandwidth_pct_of_its_frequency(whirl, tmp_path):
-    """Before, its r was solved for a bandwidth of None (NaN): two RuntimeWarnings on stderr and
-    no order amplitude at all in the log, of the whip nor of any other component."""
+    """Its r is solved for that bandwidth, not for a bandwidth of None (NaN: two RuntimeWarnings on
+    stderr and no order amplitude at all in the log, of the whip nor of any other component)."""
     err, rms = _whip(whirl, tmp_path / "pct", "{name: whip, freq_hz: 47.0}")
     assert "RuntimeWarning" not in err and "Warning:" not in err, err
     _, want = _whip(whirl, tmp_path / "hz", "{name: whip, freq_hz: 47.0, bandwidth_hz: 2.35}")   # 5 % of 47 Hz

@@ -14,8 +14,8 @@ S = 1_000_000_000
 
 def test_diagnostics_and_stop_during_an_outage_carry_the_time_they_were_written(tmp_path):
     """The board (real time, RMS) runs 4 s, then its process is killed; the daemon runs on 12 s
-    without it, then gets SIGTERM.  Before: the outage's diagnostics all had the newest
-    observation's stamp, and ``stop`` that stamp too (+4 s instead of +16 s)."""
+    without it, then gets SIGTERM: the outage's diagnostics and ``stop`` carry the time they were
+    written, not the newest observation's stamp (+4 s instead of +16 s)."""
     link = tmp_path / "ttyBOARD"
     sim = start_board("--scenario", "healthy", "--speed", "1", "--duration", "600", "--link", str(link),
                       "--flow-control")

@@ -47,9 +47,9 @@ def status_answers(cfg: Path, within_s: float = 15.0) -> subprocess.CompletedPro
 
 
 def test_a_replay_holds_the_directory_a_daemon_started_meanwhile_is_refused(tmp_path):
-    """Before, the replay only checked the lock: a daemon started on the service's configuration
-    while the replay wrote there ran beside it, both writing into the directory. Once the
-    replay has ended the directory is free again."""
+    """A replay holds its output directory, not only checks the lock: a daemon started on the
+    service's configuration while the replay writes there is refused, never running beside it with
+    both writing into the directory. Once the replay has ended the directory is free again."""
     logs, cfg, cap = tmp_path / "logs", tmp_path / "c.yaml", tmp_path / "cap.bin"
     cfg.write_text(f"link:\n  port: {tmp_path / 'ttyNONE'}\noutput:\n  dir: {logs}\n  status_line: false\n")
     assert run_module("firmware_sim", "--scenario", "healthy", "--duration", "60", "--out", str(cap)).returncode == 0
@@ -96,8 +96,9 @@ def _daemon_with_its_directory(tmp_path: Path, remove) -> tuple[subprocess.Popen
 
 
 def test_the_directory_deleted_under_the_daemon_its_lock_and_socket_are_made_again(tmp_path):
-    """``rm -rf logs``: before, ``cmsensord status`` said `no daemon answers on .../cmsensord.sock`
-    (exit 1) for good, and a second daemon started and read the port beside the first."""
+    """``rm -rf logs``: guards against ``cmsensord status`` saying `no daemon answers on
+    .../cmsensord.sock` (exit 1) for good, and a second daemon starting and reading the port beside
+    the first."""
     logs = tmp_path / "logs"
     first, err, second, answered = _daemon_with_its_directory(tmp_path, shutil.rmtree)
     assert answered.returncode == 0, answered.stderr

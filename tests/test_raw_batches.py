@@ -1,4 +1,4 @@
-"""The RAW path's batch shortcuts against their one-at-a-time references (issue 13).
+"""The RAW path's batch shortcuts against their one-at-a-time references.
 
 * a checked run of frames hands its TACHO frames to the shaft in one call and its RAW
   frames to the batch in one (:meth:`Processor._passed`): the same messages as one frame

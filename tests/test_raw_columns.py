@@ -1,6 +1,6 @@
 """A replay's RAW and TACHO frames stay columns (a :class:`FrameBatch`) from the decoder to the
-block conversion and the tacho (issue 13: building a frame tuple per RAW and TACHO frame was
-~0.8 µs each, 24 000 per 120 s of one channel): each columnar path against the list-of-frames
+block conversion and the tacho (a frame tuple per RAW and TACHO frame costs ~0.8 µs,
+24 000 per 120 s of one channel): each columnar path against the list-of-frames
 path it stands beside, on the same frames, with lost frames, frames of other lengths and
 channels, steps back and the newest block incomplete."""
 

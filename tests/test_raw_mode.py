@@ -60,7 +60,7 @@ def test_raw_frames_before_the_first_status_wait_for_it():
     data = board.generate(5.0)
     start = data.index(b"\xa5\x5a", 600)          # somewhere in the first second, after STATUS
     sink, proc = messages("raw", "healthy", seconds=5.0, channels=1, seed=0, skip_bytes=start)
-    assert proc.raw_dropped == 0
+    assert proc.raw.dropped == 0
     assert proc.observations == proc.next_slot     # every block from the first received on
 
 

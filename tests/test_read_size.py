@@ -3,9 +3,9 @@
 stream was read), and every RAW indicator interval and valid order its shaft speed.  Each stream holds what makes the
 chains wait for the speed or start again: a link loss of a minute, a board clock jumping a minute,
 board resets, a change of rate, a board slower than 25 kHz (one read then holds more board seconds
-than the 10 s a wait for the speed lasts).  Before, a large read let the waits end before the
-TACHO frames in front of them were fed: intervals and orders without a speed, or with one that
-decayed towards zero, and decisions on the configured f_r."""
+than the 10 s a wait for the speed lasts).  Guards against a large read letting the waits end
+before the TACHO frames in front of them are fed: intervals and orders without a speed, or with
+one that decays towards zero, and decisions on the configured f_r."""
 
 from __future__ import annotations
 
@@ -147,8 +147,8 @@ def same_at_every_read_size(data: bytes) -> list[dict[str, list]]:
 @pytest.mark.parametrize("make", [channel_change, mode_switch])
 def test_a_status_changing_the_channels_or_the_mode_gives_the_same_messages_at_any_read_size(make, mode):
     """A STATUS that changes the channel count or the mode (not the rate): the TACHO frames in
-    front of it are fed before the decisions and intervals it ends (before, a large read ended
-    them on a speed that had not seen those frames: 1612 or 478 rpm for 1720)."""
+    front of it are fed before the decisions and intervals it ends (a large read must not end
+    them on a speed that has not seen those frames: 1612 or 478 rpm for 1720)."""
     runs = same_at_every_read_size(make(mode))
     raw = [m["speed_rpm"] for _, m in runs[0]["/cm/ch0/indicators"] if m["mode"] == "raw"]
     rms_only = make is channel_change and mode == "rms"
@@ -158,9 +158,9 @@ def test_a_status_changing_the_channels_or_the_mode_gives_the_same_messages_at_a
 def test_a_status_changing_the_calibration_converts_the_raw_blocks_before_it_with_the_old_one():
     """The board's scale goes from +-20 g full scale to 0.02 m/s² per count at 6 s (its counts change, not the
     vibration): at any read size the RAW blocks in front of the STATUS are converted with the old scale, so each
-    interval's RMS is the board's own (RMS mode), and a config event tells the change.  Before, the blocks waiting
-    when it came were converted with the new one: the newest block at any read size (0.676 for 0.683 m/s²),
-    seconds of them in a large read (0.14)."""
+    interval's RMS is the board's own (RMS mode), and a config event tells the change.  Guards against the blocks
+    waiting when it comes being converted with the new one: the newest block at any read size (0.676 for
+    0.683 m/s²), seconds of them in a large read (0.14)."""
     raw, rms = (same_at_every_read_size(calibration_change(mode)) for mode in ("raw", "rms"))
     by_raw = {s: m["accel_rms"] for s, m in raw[0]["/cm/ch0/indicators"]}
     by_rms = {s: m["accel_rms"] for s, m in rms[0]["/cm/ch0/indicators"]}
@@ -177,8 +177,8 @@ def test_a_status_changing_the_calibration_converts_the_raw_blocks_before_it_wit
 def test_tacho_frames_that_stop_coming_are_told_and_give_no_speed(mode):
     """The board announces a tacho but its TACHO frames stop at 6 s (none lost: no seq gap): once the data
     runs 10 s past the last one a tacho_lost event says so, and the intervals and orders let go after the
-    longest wait have no speed (orders at 0 rpm, not valid).  Before, nothing was told and they carried the
-    tracker's extrapolation: a "tacho" speed decaying from 1720 to 461, 101 ... 11 rpm."""
+    longest wait have no speed (orders at 0 rpm, not valid), never the tracker's extrapolation (a "tacho" speed
+    decaying from 1720 to 461, 101 ... 11 rpm) with nothing told."""
     runs = same_at_every_read_size(tacho_stops(mode))
     lost = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if m["kind"] == "tacho_lost"]
     assert lost == [(16_000_000_000, "no TACHO frame of input 0 for 10 s of board time while the board sends data: "
@@ -194,9 +194,10 @@ def test_tacho_frames_that_stop_coming_are_told_and_give_no_speed(mode):
 def test_tacho_frames_that_come_again_after_a_silence_give_the_same_messages_at_any_read_size(mode):
     """The TACHO frames stop at 6 s and come again at 18 s.  A small read lets go what waited 10 s before
     they come, a large one after: the speed there is none either way (a silence of 10 s or more is no
-    speed whenever it is asked for), and the silence is told once, by the same event.  Before, the orders
-    of the half second after the last edge had 0 rpm in one and a decaying speed in the other (valid, 1573
-    to 395 rpm), a large read's intervals a decaying "tacho" speed, and the event was the tracker's or ours."""
+    speed whenever it is asked for), and the silence is told once, by the same event.  Guards against the
+    orders of the half second after the last edge having 0 rpm at one read size and a decaying speed at
+    another (valid, 1573 to 395 rpm), a large read's intervals a decaying "tacho" speed, and the event
+    being the tracker's at one read size and the shaft's at another."""
     runs = same_at_every_read_size(tacho_stops(mode, 24, resume_s=18))
     told = [(s, m["kind"]) for s, m in runs[0]["/cm/events"] if m["kind"].startswith("tacho")]
     assert [k for _, k in told] == ["tacho_lost", "tacho_restored"] and told[0][0] == 16_000_000_000
@@ -208,7 +209,7 @@ def test_tacho_frames_that_come_again_after_a_silence_give_the_same_messages_at_
 
 def test_a_tacho_input_the_board_does_not_use_is_told_with_the_inputs_it_does():
     """``tacho.input: 1`` on a board whose TACHO frames come on input 0: 10 s of board time on, one
-    tacho_lost event names both (before, nothing was told: no speed, and no word why)."""
+    tacho_lost event names both (guards against no speed and no word why)."""
     cfg = config_from_dict({"tacho": {"input": 1}})
     runs = [[(s, m["message"]) for t, s, m in run_processor(board("raw", 14), cfg, chunk=read)[0].messages
              if t == "/cm/events" and m["kind"] == "tacho_lost"] for read in READS]
@@ -219,8 +220,8 @@ def test_a_tacho_input_the_board_does_not_use_is_told_with_the_inputs_it_does():
 @pytest.mark.parametrize("mode", ["raw", "rms"])
 def test_a_status_announcing_no_tacho_ends_the_shaft_speed(mode):
     """The board says at 6 s that it has no tacho (and sends no TACHO frame): the shaft speed and the
-    order tracker end there, and an event says so; the intervals after it have no speed.  Before, the
-    tracker went on with no edge: intervals with a tacho speed decaying from 1720 to 461, 101, 60 rpm
+    order tracker end there, and an event says so; the intervals after it have no speed.  Guards against
+    the tracker going on with no edge: intervals with a tacho speed decaying from 1720 to 461, 101, 60 rpm
     and orders to the end of the stream."""
     runs = same_at_every_read_size(tacho_goes(mode))
     told = [(s, m["message"]) for s, m in runs[0]["/cm/events"] if "tacho now" in m["message"]]
@@ -236,7 +237,7 @@ def test_a_status_announcing_no_tacho_ends_the_shaft_speed(mode):
 @pytest.mark.parametrize(("before", "after"), [(1, 2), (2, 1)])
 def test_a_status_changing_the_tacho_pulses_per_revolution_starts_the_shaft_speed_again(mode, before, after):
     """The board's tacho goes from ``before`` to ``after`` pulses per revolution: the shaft speed starts
-    again counting ``after`` (before, it went on counting ``before``: every second pulse removed as spurious,
+    again counting ``after`` (guards against it going on counting ``before``: every second pulse removed as spurious,
     29 events a second, or a missed pulse every revolution), and the config event says so."""
     runs = same_at_every_read_size(ppr_change(mode, before, after))
     events = [m for _, m in runs[0]["/cm/events"]]
@@ -286,7 +287,7 @@ def test_raw_pieces_hold_the_blocks_of_the_whole(shuffled):
 def test_an_rms_block_again_under_its_t0_gives_the_same_messages_at_any_read_size():
     """RMS blocks whose t0 stuck (another RMS frame under the t0 of the one before): each is an
     observation of its own, a block later (one `config` event: the time base re-anchored), at
-    any read size, and the RMS indicators leave it out (before: a `missing_fraction` of -0.01,
+    any read size, and the RMS indicators leave it out (guards against a `missing_fraction` of -0.01,
     the block counted twice, and intervals stamped 10 ms apart at other read sizes)."""
     runs = same_at_every_read_size(stuck_blocks("rms"))
     jumps = [m for _, m in runs[0]["/cm/events"] if m["message"].startswith("board clock jumped")]
@@ -306,8 +307,8 @@ def reset_into_raw_and_back(rms_s: float = 10) -> bytes:
 def test_a_reset_into_raw_with_a_tacho_and_back_gives_the_same_messages_at_any_read_size():
     """Across two resets that change the mode and the channels, every topic's messages are alike at every
     read size, and the order tracker's config event is stamped at its first sample, the reset, ahead of
-    the anomaly events of the decisions after it.  Before, a 1-MiB read made the tracker after its first
-    blocks' decisions had let the events before them go: it was written at 13 s, after those events."""
+    the anomaly events of the decisions after it.  Guards against a 1-MiB read making the tracker after its
+    first blocks' decisions have let the events before them go: its event written at 13 s, after those."""
     runs = [by_topic(reset_into_raw_and_back(), read) for read in READS]
     assert runs[1] == runs[0] and runs[2] == runs[0]
     told = [(s, m["kind"], m["message"].split(":")[0]) for s, m in runs[0]["/cm/events"]]

@@ -1,4 +1,4 @@
-"""Fewer wake-ups of the serial reader at 1x (issue 13): the loop naming the block the reader
+"""Fewer wake-ups of the serial reader at 1x: the loop naming the block the reader
 expects next does not wake it (it sleeps until that block is due), any other naming does; and
 a burst larger than a tty's buffer is read in one step (the reader waits the fraction of a
 millisecond the rest takes to come), not in two steps with a decoder call and a queue put

@@ -53,11 +53,11 @@ def _iso(ns: int) -> str:
 
 
 def test_a_replay_with_the_akf_trace_writes_the_decisions_at_their_own_time(degrading, tmp_path):
-    """The trace of a read's 40 s used to go out before that read's decisions: 450 of 600 severity
-    messages and the failures were written up to 40 s after their stamp, and the summary said both
-    channels failed at +212.21 s.  The decisions come in their place among the trace, and every
-    event at its stamp, the first too (the sink is told the events' lag ahead, not learning it from
-    the first, which it wrote 0.99 s late)."""
+    """The decisions come in their place among the trace, and every event at its stamp, the first
+    too (the sink is told the events' lag ahead, not learning it from the first, which it would
+    write 0.99 s late).  Guards against the trace of a read's 40 s going out before that read's
+    decisions: 450 of 600 severity messages and the failures written up to 40 s after their stamp,
+    and the summary saying both channels failed at +212.21 s."""
     log = _replay(degrading, tmp_path / "akf", "--akf-trace")
     t0, rows = _times(log)
     assert _failures(rows) == FAILURES
@@ -72,7 +72,7 @@ def test_a_replay_with_the_akf_trace_writes_the_decisions_at_their_own_time(degr
 def test_a_replay_with_captures_writes_them_and_the_events_they_hold_at_their_own_time(degrading, tmp_path, post_s):
     """Captures (every 30 s and on severity changes and failures): the captures, and the events
     the event log holds back while a capture waits for its post_s, are written at their stamps
-    (before: 104 of 114 events up to 136 s late, every failure written at +290 s).  Their lag
+    (guards against 104 of 114 events up to 136 s late, every failure written at +290 s).  Their lag
     (post_s and 2 s, more than 10 s with the default post_s) is held in the replay's window."""
     cfg = tmp_path / "cap.yaml"
     cfg.write_text(f"capture:\n  triggers: [severity_change, failure]\n  every_s: 30\n  pre_s: 2\n"

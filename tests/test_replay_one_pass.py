@@ -1,4 +1,4 @@
-"""`cmsensord replay` with the one-pass paths of issue 13 (the wire kernel's scan of a read,
+"""`cmsensord replay` with its one-pass paths (the wire kernel's scan of a read,
 runs of frames decoded at once, regular tacho edges committed at once, long batches checked
 at once, RMS interval sums at once, frames as columns (FrameBatch) from the decoder to the
 banks, whole RMS intervals and decision periods at once, messages written in runs with a

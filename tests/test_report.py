@@ -271,7 +271,7 @@ def test_a_damaged_chunk_is_read_past_and_one_line_says_so(logs, tmp_path):
 
 def test_summary_and_the_lenient_reader_read_past_a_damaged_chunk(logs, tmp_path):
     """`cmsensord summary` of a log with its second chunk hit counts the messages of every intact
-    chunk, says what it skipped and that the file is complete (before, it ended at the damage:
+    chunk, says what it skipped and that the file is complete (guards against ending at the damage:
     the messages of the first chunk, "error: bad record ..."); read_messages(lenient=True) and
     the plain lenient reader give what the report's reader gives."""
     hit, start, kept = _hit(logs, tmp_path)
@@ -361,7 +361,7 @@ def _cut_replay(logs, tmp_path: Path) -> tuple[Path, str]:
 
 def test_a_replay_cut_short_is_one_line_and_exit_2_when_nothing_could_be_read(logs, tmp_path):
     """A finished log cut short (no footer, its one chunk cut off): one line naming the file and
-    what was lost; alone, that line is the error (exit 2, no page; before: an empty page, exit 0);
+    what was lost; alone, that line is the error (exit 2, no page; not an empty page, exit 0);
     beside a good log, the report goes on."""
     cut, lost = _cut_replay(logs, tmp_path)
     out = tmp_path / "cut.html"
@@ -375,7 +375,7 @@ def test_a_replay_cut_short_is_one_line_and_exit_2_when_nothing_could_be_read(lo
 
 
 def test_summary_of_a_replay_cut_short_says_what_was_lost(logs, tmp_path):
-    """`cmsensord summary` of the cut log: the error is the cut (before: `error: None`, exit 0),
+    """`cmsensord summary` of the cut log: the error is the cut (not `error: None`, exit 0),
     one line on stderr, exit 2 as nothing could be read; cut after its chunk, a warning, exit 0."""
     cut, lost = _cut_replay(logs, tmp_path)
     p = cmsensord("summary", str(cut))

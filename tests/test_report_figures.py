@@ -48,7 +48,7 @@ def report(tmp_path_factory) -> tuple[str, dict[str, dict], Path]:
 
 
 def test_the_legends_of_the_trends_are_beside_their_axes_not_over_the_data(report):
-    """Each legend of the severity and indicator figures lies right of its axes (before: at the
+    """Each legend of the severity and indicator figures lies right of its axes (not at the
     top left inside, over the severity's step to 1.0 and the level's start)."""
     _, metas, _ = report
     for fid in ("ch0-severity", "ch0-indicators"):
@@ -59,7 +59,7 @@ def test_the_legends_of_the_trends_are_beside_their_axes_not_over_the_data(repor
 
 def test_failure_and_alarm_danger_lines_are_told_apart_and_named(report):
     """The severity figure marks the failure (solid) and the alarm_danger (dash-dot) events in
-    colours of their own, each named in the legend (before: the same crimson dashes)."""
+    colours of their own, each named in the legend (not the same crimson dashes)."""
     _, metas, _ = report
     styles = metas["ch0-severity"]["axes"][0]["styles"]
     failure = styles["failure (the severity model: its last AKF flags)"]
@@ -70,8 +70,8 @@ def test_failure_and_alarm_danger_lines_are_told_apart_and_named(report):
 
 
 def test_capture_figures_write_m_s2_as_the_trends_do(report):
-    """The capture's messages carry m/s^2; every figure writes m/s² (before: m/s^2 on the capture,
-    m/s² on the trends)."""
+    """The capture's messages carry m/s^2; every figure writes m/s² (guards against m/s^2 on the
+    capture beside m/s² on the trends)."""
     _, metas, _ = report
     cap = metas["ch0-capture-0"]
     assert [ax["ylabel"] for ax in cap["axes"]] == ["waveform [m/s²]", "spectrum\nRMS per bin [m/s²]",
@@ -83,7 +83,7 @@ def test_capture_figures_write_m_s2_as_the_trends_do(report):
 def test_each_rules_alert_and_danger_levels_are_drawn_on_its_indicators_trend(report):
     """The alert and danger levels of de_velocity (alert_zone C: 2.8, danger 9.5) on the velocity
     trend, of de_kurtosis (6, 12) on the kurtosis one, as the log's /cm/alarms table gives them,
-    dashed and labelled with the rule's name (before: not drawn)."""
+    dashed and labelled with the rule's name."""
     from cmsensord.sinks.mcap_sink import read_messages
 
     _, metas, png = report

@@ -1,10 +1,10 @@
 """The report's link counters, summed over the runs its logs hold, whatever order the files come in.
 
 Each replay is a run: its last ``/cm/diagnostics`` counts every byte of its capture. Two
-replays into one directory total both captures (before: the first run was dropped when the
-second's first diagnostics already counted more bytes than its last); one replay rotated into
-many files, given newest first or shuffled, totals its capture once (before: every file
-boundary counted as a restart). Logs written before files named their run are grouped by
+replays into one directory total both captures (the first run is not dropped when the
+second's first diagnostics already count more bytes than its last); one replay rotated into
+many files, given newest first or shuffled, totals its capture once (a file boundary is no
+restart). Logs written before files named their run are grouped by
 ``source`` and by ``uptime_s`` and ``bytes_received`` going on (:mod:`cmsensord.report.link_runs`).
 """
 

@@ -293,8 +293,8 @@ def test_a_calibrated_replay_draws_the_level_against_its_baseline_under_the_seve
 def test_an_import_replayed_twice_into_one_directory_is_drawn_once_over_its_recording_time(tmp_path):
     """The same capture replayed again into the same directory (after a new calibration, say):
     the report draws the newest replay over the recording's time and says in one line that it
-    left the older one out (before: local time, "not all of one imported recording", and each
-    trace drawn back from the end of one replay to the start of the other)."""
+    left the older one out (guards against local time, "not all of one imported recording", and
+    each trace drawn back from the end of one replay to the start of the other)."""
     logs, _ = replayed_import(tmp_path)
     (first,) = logs.glob("*.mcap")
     p = cmsensord("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)

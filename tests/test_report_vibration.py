@@ -59,7 +59,7 @@ def report(tmp_path_factory) -> tuple[str, dict[str, dict], Path]:
 
 def test_a_captures_title_gives_its_time_in_the_recording_as_the_events_table_does(report):
     """Each capture's title: its time in hours into the recording, where the events table has
-    its trigger (before: the replay's clock read as hours, 498906.610 h)."""
+    its trigger (not the replay's clock read as hours, 498906.610 h)."""
     page, metas, _ = report
     rows = re.findall(r'<tr class="kind-([a-z_]+)"><td class="t">(\d+\.\d+) h</td><td>[^<]*</td>'
                       r'<td>[^<]*</td><td>([^<]*)</td>', page)
@@ -86,8 +86,8 @@ def _alarm_levels(work: Path) -> dict[str, tuple[str, float | None, float | None
 def test_raw_indicators_draw_accel_envelope_and_bearing_line_trends_with_their_rules_levels(report):
     """RAW mode: the acceleration RMS, the envelope RMS and the bearing's four defect lines each on
     axes of their own under the velocity, with the levels of the rules on them (rms_trend, env,
-    bpfo) as the log's alarm table gives them (before: velocity and shape only, those rules'
-    levels nowhere though their alarms fired)."""
+    bpfo) as the log's alarm table gives them (guards against velocity and shape only, those
+    rules' levels nowhere though their alarms fired)."""
     _, metas, work = report
     fig = metas["bearing-indicators"]
     assert fig["panels"] == [["velocity_rms_mm_s"], ["accel_rms"], ["envelope_rms"],
@@ -129,7 +129,7 @@ def test_the_bearing_lines_drawn_are_the_logs(report):
 
 def test_the_velocity_figure_states_the_iso_grading_the_records_carry(report):
     """Beside the velocity: the ISO 10816-3 zone boundaries the indicator records carry, the
-    machine group and foundation they belong to, and the velocity band (before: none of them)."""
+    machine group and foundation they belong to, and the velocity band."""
     page, metas, _ = report
     iso = "ISO 10816-3 zone boundaries A/B 1.4, B/C 2.8, C/D 4.5 mm/s: machine group 2 (medium, 15-300 kW), " \
           "rigid foundation"
@@ -155,7 +155,7 @@ def test_the_iso_line_names_a_group_and_foundation_only_as_far_as_the_boundaries
 
 def test_capture_spectra_say_they_are_rms_per_bin(report):
     """The capture's spectrum and envelope spectrum are RMS per bin (a sine of RMS a reads a),
-    the indicators' bearing lines 0-peak: each label says which (before: only the unit)."""
+    the indicators' bearing lines 0-peak: each label says which, not only the unit."""
     _, metas, _ = report
     cap = metas["bearing-capture-0"]
     assert [ax["ylabel"] for ax in cap["axes"]] == [

@@ -76,11 +76,11 @@ def test_a_log_retention_cannot_delete_is_one_event_passed_over_and_the_run_goes
 
 
 def test_a_replay_into_the_services_directory_deletes_none_of_its_logs_and_says_so(tmp_path):
-    """The service stopped, ``cmsensord replay CAP --config <its configuration>``: before, the
-    replay's retention counted the service's logs with its own and deleted the oldest, saying
-    nothing on the terminal (4 service logs gone for a replay's one). Now they are left alone,
-    one line says so, and the replay keeps its own files under retain_mb (it rotates at 0.05 MB
-    and deletes its oldest)."""
+    """The service stopped, ``cmsensord replay CAP --config <its configuration>``: the service's
+    logs are left alone, one line says so, and the replay keeps its own files under retain_mb (it
+    rotates at 0.05 MB and deletes its oldest).  Guards against the replay's retention counting the
+    service's logs with its own and deleting the oldest, saying nothing on the terminal (4 service
+    logs gone for a replay's one)."""
     out = tmp_path / "logs"
     out.mkdir()
     service = [out / f"cmsensord-20200101T00000{i}Z.mcap" for i in range(4)]

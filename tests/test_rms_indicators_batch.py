@@ -1,6 +1,6 @@
 """RMS-mode indicators: :meth:`RmsIndicators.add` sums the blocks of an interval in one pass;
-it equals the block-by-block loop it replaced (kept here as the reference) on random block
-times (gaps, steps back, repeats, misaligned starts), NaN values and batch splits (issue 13)."""
+it equals a block-by-block loop (kept here as the reference) on random block
+times (gaps, steps back, repeats, misaligned starts), NaN values and batch splits."""
 
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def test_one_pass_sums_equal_the_block_by_block_loop(seed):
 
 @pytest.mark.parametrize("seed", range(12))
 def test_whole_intervals_in_one_pass_equal_the_block_by_block_loop(monkeypatch, seed):
-    """Long runs of back-to-back blocks (whole intervals summed in one pass, issue 13), broken
+    """Long runs of back-to-back blocks (whole intervals summed in one pass), broken
     now and then by a gap, a step back or a misaligned block: the same records and state."""
     from cmsensord.monitor import indicators
 

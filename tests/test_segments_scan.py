@@ -1,4 +1,4 @@
-"""The Processor checks long batches in one pass (Segments.runs, issue 13): the same
+"""The Processor checks long batches in one pass (Segments.runs): the same
 messages and events as checking every frame (the reference: ``SCAN_MIN`` out of reach), on
 random streams with odd frames, stuck t0, resets, far jumps, steps back, seq gaps and
 restarts, mode changes by STATUS, and on a RAW capture with a tacho."""

@@ -73,7 +73,7 @@ def test_a_period_lacking_more_than_half_its_observations_is_not_judged():
 
 @pytest.mark.parametrize("seed", range(12))
 def test_whole_periods_in_one_pass_decide_as_one_period_at_a_time(monkeypatch, seed):
-    """AnomalyDecider.update decides a run of whole periods in one pass (issue 13): every
+    """AnomalyDecider.update decides a run of whole periods in one pass: every
     decision, field for field and type for type, and the state after, as the period-by-period
     loop gives; with hysteresis (set, kept, cleared), held flags, missing slots, the transient,
     a new f_r in some calls and blocks cut anywhere."""

@@ -1,5 +1,5 @@
 """A capture's sidecar that cannot be read (truncated, not an object) is said on one line,
-once, and the replay goes on with the capture alone (before: silently default names)."""
+once, and the replay goes on with the capture alone (not silently on default names)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """A channel whose level falls below ``monitor.signal_floor`` of its healthy baseline has no
 signal (a dead sensor, a cut cable, or the machine stopped): one ``signal_lost`` event, its
-severity and its alarms hold (before: the failure cleared and the alarms with it, a dead sensor
-read as a healed machine); ``signal_back`` when the level returns.  Through `cmsensord import`,
+severity and its alarms hold (guards against the failure clearing and the alarms with it, a dead
+sensor read as a healed machine); ``signal_back`` when the level returns.  Through `cmsensord import`,
 `calibrate` and `replay`, as a commissioning engineer runs them."""
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ def _capture(tmp_path: Path, fault_s: float) -> Path:
 @pytest.mark.parametrize("fault_s, absolute", [(6.0, False), (6.4, True)])
 def test_a_dead_sensor_holds_the_severity_and_the_alarms(tmp_path, fault_s, absolute):
     """6.4 s: the sensor dies 0.4 s into a decision period, whose level is then still 2-3 x the
-    baseline (before, that period cleared the failure just before the hold began); ``absolute``:
+    baseline (guards against that period clearing the failure just before the hold begins); ``absolute``:
     a rule of absolute levels and no ``alarms.baselines`` (the channel's baseline is the floor's)."""
     cap = _capture(tmp_path, fault_s)
     (tmp_path / "base.yaml").write_text(RULES)
@@ -78,7 +78,7 @@ def test_a_dead_sensor_holds_the_severity_and_the_alarms(tmp_path, fault_s, abso
 
 def test_a_period_with_no_observation_keeps_the_hold():
     """The decider: a period of lost frames (level NaN) after one with no signal keeps the hold
-    (before: it released it, severity 0, and the next quiet period held 0)."""
+    (guards against releasing it, severity 0, and the next quiet period holding 0)."""
     from cmsensord.dsp.severity import AnomalyDecider
 
     P = 10

@@ -68,7 +68,7 @@ def test_every_scenario_runs_with_its_defaults_and_loses_no_frame(tmp_path, cach
 
 
 def test_degrading_mic_with_no_flag_follows_the_accelerometer(tmp_path, cache_env):
-    """The issue's case: `cmsensord --simulate --scenario degrading_mic`, nothing else: two
+    """The bare command, `cmsensord --simulate --scenario degrading_mic`, nothing else: two
     channels, the microphone's vibration estimate on its own AKF bank, its level within one
     of the accelerometer's in >= 70 % of the 600 decisions (measured 0.72), 0 through the
     healthy part and a failure in the worst part, as the accelerometer."""

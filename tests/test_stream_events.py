@@ -1,4 +1,4 @@
-"""Stream events (issue 11, items 2, 7, 8): a change of channel count, losses that are
+"""Stream events: a change of channel count, losses that are
 reported, and floods of events summarised — each fed by one small capture built with the
 protocol encoder and replayed by a real ``cmsensord replay`` process, which must finish
 (exit 0) with the exact event in its MCAP."""
@@ -100,7 +100,7 @@ def test_the_exit_summary_covers_the_whole_run_of_a_channel_through_a_change_of_
     frames of 3; ch2 copies ch0): ch0 and ch1 keep their names, so the exit summary counts their
     decisions and failures of the whole run, as the log has them, and their timeline starts at
     2 s with the first levels where the log has them; it says their filters restarted at 100 s.
-    Before, it counted the new chain's 20 decisions and 1 failure, its timeline '2-20 s'."""
+    Guards against counting only the new chain's 20 decisions and 1 failure, its timeline '2-20 s'."""
     cap = tmp_path / "deg2.bin"
     assert run_module("firmware_sim", "--scenario", "degrading", "--channels", "2", "--duration", "120",
                       "--out", str(cap)).returncode == 0
@@ -317,7 +317,7 @@ def test_a_flood_that_never_stops_is_ten_journal_lines_and_a_summary_each_ten_mi
     """650 s of RMS frames, every tenth followed by three copies of one RMS frame of a wrong
     payload length (one decode_error and a frames_repeated of 2 frames: 10 a second of each).
     The journal writes at most 10 lines of a kind in 600 s, the per-second summaries among them,
-    and one summary of the rest per window (before: a per-second summary of each kind every
+    and one summary of the rest per window (not a per-second summary of each kind every
     second, 650 of them); every event is written one by one or counted in one summary, and a
     summary names what its count counts (frames, not events).  /cm/events keeps its 5 a second."""
     out = bytearray(status(0, 0, 1))

@@ -159,9 +159,9 @@ def raw_capture(tmp_path, seconds: float) -> bytes:
 
 def test_a_board_reset_restarts_the_shaft_speed_and_the_order_tracker(tmp_path):
     """A board with a tacho restarts (t0 and seq from 0): the shaft speed and the order tracker
-    start again with it, so the same 6 s sent again give the same orders and speeds.  Before:
-    every TACHO frame after the reset was dropped as "before the newest one in board time" until
-    the board's clock passed its uptime before the reset: no speed and no valid order for as
+    start again with it, so the same 6 s sent again give the same orders and speeds.  Guards
+    against every TACHO frame after the reset dropped as "before the newest one in board time" until
+    the board's clock passes its uptime before the reset: no speed and no valid order for as
     long as the board had run."""
     one = raw_capture(tmp_path, 6.0)
     p, msgs, rss = replay(tmp_path, one + one)
@@ -231,8 +231,8 @@ def board_goes_on(tmp_path, first_s: float, then_s: float, **status) -> bytes:
 
 def test_a_board_changing_its_scale_is_told_and_the_blocks_before_keep_the_old_one(tmp_path):
     """The board's gain changes at 6 s (STATUS scale 0.02 m/s² per count, its counts as before): the config
-    event names the change, the intervals before it keep the old scale (before, a replay converted the RAW
-    blocks waiting when it came with the new one: seconds of them) and those after take the new."""
+    event names the change, the intervals before it keep the old scale (guards against a replay converting the
+    RAW blocks waiting when it comes with the new one: seconds of them) and those after take the new."""
     p, msgs, _ = replay(tmp_path, board_goes_on(tmp_path, 6.0, 6.0, scale=(0.02,)))
     assert p.returncode == 0, p.stderr
     assert said(msgs, "config")[2:] == [
@@ -246,8 +246,8 @@ def test_a_board_changing_its_scale_is_told_and_the_blocks_before_keep_the_old_o
 
 def test_a_board_changing_its_tacho_pulses_per_revolution_starts_the_shaft_speed_again(tmp_path):
     """The board says at 6 s that its tacho gives 2 pulses a revolution (its edges as before: the shaft at half
-    the speed): the config event names it and the shaft speed starts again on 2 pulses (before, the tracker went
-    on counting 1: 1720 rpm)."""
+    the speed): the config event names it and the shaft speed starts again on 2 pulses (guards against the tracker
+    going on counting 1: 1720 rpm)."""
     p, msgs, _ = replay(tmp_path, board_goes_on(tmp_path, 6.0, 6.0, tacho_ppr=2))
     assert p.returncode == 0, p.stderr
     assert [m.split(", tacho of ")[1] for m in said(msgs, "config") if m.startswith("board firmware")] == [
@@ -261,8 +261,8 @@ def test_a_board_changing_its_tacho_pulses_per_revolution_starts_the_shaft_speed
 def test_a_board_changing_fs_restarts_the_shaft_speed_at_the_new_rate(tmp_path):
     """The board goes on at half the rate (STATUS fs 12500), its t0 counting on: the shaft speed
     and the order tracker start again at the new rate, so the same tacho edges in samples are
-    half the speed.  Before: the tracker made at 25 kHz went on reading them at 25 kHz (1720 rpm
-    where the board said 860) and the order chain kept its 25-kHz decimation."""
+    half the speed.  Guards against the tracker made at 25 kHz going on reading them at 25 kHz (1720 rpm
+    where the board says 860) and the order chain keeping its 25-kHz decimation."""
     first = raw_capture(tmp_path, 6.0)
     again = subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw",
                             "--tacho", "--duration", "6", "--t0-start", "150000", "--out", str(tmp_path / "b.bin")],
@@ -464,8 +464,8 @@ def test_random_time_keeps_the_replay_running_bounded_and_in_order(tmp_path):
 
 def test_tacho_frames_that_stop_coming_are_one_event_in_a_replay(tmp_path):
     """A RAW capture whose TACHO frames stop at 6 s, none lost (the seq numbers go on): `cmsensord replay`
-    tells it once, 10 s of board time on, and the intervals after it have no speed (before: no event, and a
-    "tacho" speed decaying from 1720 to 11 rpm)."""
+    tells it once, 10 s of board time on, and the intervals after it have no speed (guards against no event
+    and a "tacho" speed decaying from 1720 to 11 rpm)."""
     out, seq = bytearray(), 0
     for f in Decoder().feed(raw_capture(tmp_path, 20.0)):
         if f.type != FrameType.TACHO or f.t0 < 150_000:

@@ -1,4 +1,4 @@
-"""The tacho's one-pass paths equal the edge-by-edge ones they shortcut (issue 13): regular
+"""The tacho's one-pass paths equal the edge-by-edge ones they shortcut: regular
 edges committed in one pass (cmsensord/dsp/tacho/regular.py) against ``batch_edges = False``
 (every edge through the look-ahead repair), and ``update_flat`` (all edges in one array, as
 the daemon decodes them) against ``update`` (one array per frame), on random edge streams

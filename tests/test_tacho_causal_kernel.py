@@ -1,4 +1,4 @@
-"""The tacho's causal speed in the compiled kernel equals its numpy path, bit for bit (issue 13):
+"""The tacho's causal speed in the compiled kernel equals its numpy path, bit for bit:
 the segments of new edges (``_trackerkernel.causal_fit``: the weighted quadratic over the last
 ``causal_window`` committed edges, with numpy's order of summation) and the order tracker's
 speed at its samples (``_trackerkernel.causal_rpm``: the search, the extrapolation, the cap of

@@ -1,5 +1,5 @@
-"""The shaft's TACHO frame checks on Python ints (cmsensord/monitor/shaft.py, issue 13: a live
-call brings about ten frames) against the numpy code they replaced: which frames are kept
+"""The shaft's TACHO frame checks on Python ints (cmsensord/monitor/shaft.py: a live
+call brings about ten frames) against a numpy reference of the same checks: which frames are kept
 (those after the newest t0 fed so far: one step back, or a block's frame again under its t0), how
 many are dropped, and the gaps noted
 (lost frames), on random t0 sequences with steps back, repeats and gaps, fed in random

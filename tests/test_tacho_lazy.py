@@ -1,4 +1,4 @@
-"""The tacho's smoothed speed fitted when asked for (``TachoTracker.feed_flat``, issue 13): the
+"""The tacho's smoothed speed fitted when asked for (``TachoTracker.feed_flat``): the
 live Processor feeds the TACHO frames ten times a second and asks for the smoothed speed about
 once a second; the knots it then fits are those ``update_flat`` fits at every call, so every
 value is the same, bit for bit, on random edge streams with repairs and stops."""

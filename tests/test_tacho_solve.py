@@ -1,8 +1,8 @@
-"""The tacho's closed-form weighted quadratic fit (cmsensord/dsp/tacho/smoothing.py, issue 13:
-the cost of a 100-ms live call) against the numpy.linalg.solve of the normal equations it
-replaced, on random windows like those of the smoothing and the causal speed; and its Python
-float path (few rows, one live call) against its numpy path (many rows, replay), bit for bit,
-so that any split of the frames still gives the same knots and segments."""
+"""The tacho's closed-form weighted quadratic fit (cmsensord/dsp/tacho/smoothing.py: cheap
+enough for a 100-ms live call) against numpy.linalg.solve of the normal equations, on random
+windows like those of the smoothing and the causal speed; and its Python float path (few rows,
+one live call) against its numpy path (many rows, replay), bit for bit, so that any split of
+the frames still gives the same knots and segments."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ _HANKEL = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])
 
 def solve_reference(x: np.ndarray, y: np.ndarray, wgt: np.ndarray, npts: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """The former weighted_quadratic: normal equations by numpy.linalg.solve; and the moments."""
+    """The reference weighted quadratic: normal equations by numpy.linalg.solve; and the moments."""
     x2 = x * x
     wx, wx2 = wgt * x, wgt * x2
     mom = np.stack([wgt, wx, wx2, wx2 * x, wx2 * x2, wgt * y, wx * y, wx2 * y], axis=1).sum(axis=2)

@@ -60,9 +60,9 @@ def test_vkf_runs_on_every_raw_scenario(tmp_path, scenario):
 
 
 def test_vkf_on_the_whirl_runup_agrees_with_the_recursive_tracker(tmp_path):
-    """The issue's case: the whole 180-s whirl run-up with its components (order 1, the
-    whirl at 0.47, the 47-Hz whip).  Before: LinAlgError at every bandwidth (the tacho angle
-    of all but the last 60 s was unknown, so every order had phase 0 there).  Order 1, the
+    """The whole 180-s whirl run-up with its components (order 1, the whirl at 0.47, the 47-Hz
+    whip): no LinAlgError at any bandwidth (guards against a tacho angle known only over the last
+    60 s, every order at phase 0 before them).  Order 1, the
     component present throughout, agrees with the daemon's smoothed tracker block by block:
     median difference measured 0.7 % (95th percentile 2.1 %), asserted < 3 % (as tests/test_tracker_vs_batch.py)."""
     cap = capture(tmp_path, "whirl", 180.0)

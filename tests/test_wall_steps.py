@@ -1,8 +1,8 @@
 """The daemon live on a simulated board whose system clock steps (an NTP sync after a boot with
 a stale clock, a board without an RTC battery): one ``time_base`` event re-anchors the stamps
-to the new wall clock, forward or back, and the board-rate drift check stays quiet (before: a
-forward step was measured as a board at 4 Hz, then ``board clock ahead of the wall clock``
-every ~5 s for days; a step back gave no event and stamps an hour ahead)."""
+to the new wall clock, forward or back, and the board-rate drift check stays quiet (guards
+against a forward step measured as a board at 4 Hz, then ``board clock ahead of the wall clock``
+every ~5 s for days, and a step back giving no event and stamps an hour ahead)."""
 
 from __future__ import annotations
 
@@ -84,8 +84,8 @@ def test_a_backward_step_of_the_system_clock_re_anchors_the_stamps_in_a_new_file
 @pytest.mark.parametrize("step_s", [-3600, 86400])
 def test_a_rule_s_delay_runs_the_stream_s_time_across_a_step(tmp_path, step_s):
     """A rule's on-delay straddling a step counts the stream's own 3 s, each file's indicator
-    records in time order on their time base (before, a step back: every record after it kept
-    the stamp of the last one before it, and the alert never came)."""
+    records in time order on their time base (guards against a step back giving every record after
+    it the stamp of the last one before it, and the alert never coming)."""
     err, files = live_with_step(tmp_path, step_s, at_s=4.0, run_s=10.0, more=(
         "alarms:\n  rules:\n    - {name: acc, indicator: accel_rms, alert: 0.1, on_delay_s: 3}\n"))
     assert len(files) == (2 if step_s < 0 else 1), [len(m) for m in files]   # a step back: a new file

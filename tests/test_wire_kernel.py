@@ -4,7 +4,7 @@ numpy runs (``kernel=False``, the fallback without a compiler) give, read for re
 frames (types, payloads, byte offsets, seq gaps, unwrapped t0), the same counters and the same
 bytes left buffered, on random, corrupt, truncated and hostile byte streams split at random
 read boundaries; its CRC-32 is zlib's; and ``cmsensord replay`` of a noisy capture writes the
-same messages and link counters with and without it (issue 13)."""
+same messages and link counters with and without it."""
 
 from __future__ import annotations
 

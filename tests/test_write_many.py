@@ -1,4 +1,4 @@
-"""Messages written in runs (issue 13): ``write_many`` of the MCAP file and of the rotating
+"""Messages written in runs: ``write_many`` of the MCAP file and of the rotating
 sink, and a severity message's ``r`` encoded from a cache, give the bytes of one ``write``
 per message with the plain encoder: the same files, byte for byte, with flushes, full
 chunks, rotations by time and size, late messages held by the reorder window, events,

@@ -11,8 +11,9 @@ never fires: :func:`rules_see_indicators` refuses it with the names it could mea
 
 from __future__ import annotations
 
-import difflib
 from typing import Any
+
+from .validation import did_you_mean
 
 __all__ = ["RECORD_VALUES", "BEARING_LINES", "indicator_names", "unknown_indicator", "rules_see_indicators"]
 
@@ -65,8 +66,7 @@ def unknown_indicator(name: str, cfg: Any, *, records_only: bool = False,
     known = indicator_names(cfg, records_only=records_only)
     if name in known:
         return None
-    near = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
-    hint = f"did you mean {near[0]!r}?" if near else None
+    hint = did_you_mean(name, known)
     missing = None if records_only else _what_is_missing(name, cfg)
     if missing is not None:
         return f"{missing} {hint}" if missing.endswith(";") and hint else missing.rstrip(";")

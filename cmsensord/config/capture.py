@@ -26,7 +26,7 @@ OPERATING_STATES = ("stopped", "starting", "running", "coasting")
 
 def _known_triggers(obj: Any) -> tuple[str, str, Any] | None:
     for kind in obj.triggers:
-        if kind == "order_alarm":       # order alarms are alarm-manager rules (order_<name>) now
+        if kind == "order_alarm":       # a kind the daemon never writes: order alarms are alarm-manager rules
             return ("triggers", "order_alarm events are no longer written: order alarms are rules "
                     "order_<name> of the alarm manager, use alarm_alert / alarm_danger", kind)
         if kind not in TRIGGER_KINDS:

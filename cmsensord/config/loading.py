@@ -12,7 +12,6 @@ line naming the file and the key path.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import logging
 import os
 import re
@@ -41,7 +40,7 @@ from .settings import (
     TachoConfig,
     default_channels,
 )
-from .validation import ConfigError
+from .validation import ConfigError, did_you_mean
 
 _log = logging.getLogger("cmsensord")
 __all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict"]
@@ -69,9 +68,9 @@ def _reject_unknown(d: Mapping[Any, Any], known: Iterable[str], source: str, pre
         if key in known:
             continue
         reason = f"unknown key {key!r}"
-        near = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
-        if near:
-            reason += f" (did you mean {near[0]!r}?)"
+        hint = did_you_mean(str(key), known)
+        if hint:
+            reason += f" ({hint})"
         else:
             reason += f" (known keys: {', '.join(known)})"
         raise ConfigError(source, _join(prefix, key), reason)

@@ -20,13 +20,13 @@ import math
 import re
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import field
 from typing import Any
 
 from cmsensord.errors import ConfigError
 
-__all__ = ["ConfigError", "Rule", "setting", "validate", "greater", "at_most", "fmt_num"]
+__all__ = ["ConfigError", "Rule", "setting", "validate", "greater", "at_most", "fmt_num", "did_you_mean"]
 
 _CODE = "<code>"  # source name for objects built in code rather than read from a file
 
@@ -55,6 +55,13 @@ class _Invalid(Exception):
 def fmt_num(x: Any) -> str:
     """A bound or value as the messages show it (floats by repr, so 1.0 stays 1.0)."""
     return repr(x) if isinstance(x, float) else str(x)
+
+
+def did_you_mean(word: str, known: Iterable[str]) -> str | None:
+    """``did you mean 'x'?`` naming the entry x of ``known`` closest to ``word`` (difflib's
+    similarity ratio 0.6 or more, the highest), or None when none is that close."""
+    near = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
+    return f"did you mean {near[0]!r}?" if near else None
 
 
 def _as_bool(value: Any) -> bool:
@@ -120,9 +127,9 @@ def _check_rules(meta: Mapping[str, Any], value: Any) -> None:
         return
     if "choices" in meta and value not in meta["choices"]:
         reason = "must be one of " + ", ".join(str(c) for c in meta["choices"])
-        near = difflib.get_close_matches(str(value), [str(c) for c in meta["choices"]], n=1)
-        if near:
-            reason += f" (did you mean {near[0]!r}?)"
+        hint = did_you_mean(str(value), (str(c) for c in meta["choices"]))
+        if hint:
+            reason += f" ({hint})"
         raise _Invalid(reason, value)
     if meta.get("nonempty") and len(value) == 0:
         raise _Invalid("must not be empty", value)

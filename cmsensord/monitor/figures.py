@@ -66,11 +66,6 @@ class Figures:
         return self.log.counts
 
     @property
-    def raw_dropped(self) -> int:
-        """RAW frames dropped while no STATUS had come."""
-        return self.raw.dropped
-
-    @property
     def fs(self) -> int:
         """The board's samples per second."""
         return self.clock.fs

@@ -53,15 +53,10 @@ LOST_GAPS = 64
 FEW_TACHO = 32
 
 
-def decode_tacho_few(payloads: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray, list[tuple[int, str]]]:
-    """:func:`~cmsensord.protocol.decode_tacho_many` payload by payload (the same numbers and
-    messages): for a few payloads, cheaper than its array operations."""
-    counts, offsets, bad = decode_tacho_lists(payloads)
-    return np.array(counts, dtype=np.int64), np.array(offsets, dtype=np.uint32), bad
-
-
 def decode_tacho_lists(payloads: Sequence[bytes]) -> tuple[list[int], list[int], list[tuple[int, str]]]:
-    """:func:`decode_tacho_few` as Python lists (what a live call feeds the tracker): a list of
+    """The edge counts, the edge offsets (frame after frame) and the (index, message) of each
+    malformed payload of TACHO ``payloads``, as Python lists (what a live call feeds the
+    tracker; the numbers and messages of :func:`~cmsensord.protocol.decode_tacho_many`): a list of
     well-formed payloads in one compiled step (``_trackerkernel.tacho_payloads``) when the
     kernel is built, any other payload by payload (:func:`read_tacho_payloads`)."""
     if _kernel is not None and type(payloads) is list:

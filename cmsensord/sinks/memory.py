@@ -1,14 +1,6 @@
-"""The sink interface, and a sink that keeps messages in memory (tests, tools)."""
+"""A sink that keeps messages in memory (tests, tools)."""
 
 from __future__ import annotations
-
-from typing import Protocol
-
-
-class Sink(Protocol):
-    def write(self, topic: str, schema: str, stamp_ns: int, msg: dict) -> None: ...
-
-    def write_group(self, messages: list[tuple[str, str, int, dict]]) -> bool | None: ...
 
 
 class ListSink:

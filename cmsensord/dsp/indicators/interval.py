@@ -176,8 +176,9 @@ def compute(x: np.ndarray, setup: Setup, shaft_hz: float | None = None) -> Indic
     bins of the Hann power spectrum, :func:`~.spectrum.hann_power_bins`) and the envelope
     (:func:`~.envelope.envelope_of_rfft`); the envelope spectrum is computed only when a
     bearing's lines are read.  The numbers are those of :func:`~.statistics.waveform_stats`,
-    :func:`~.spectrum.power_spectrum`, :func:`~.envelope.envelope` and
-    :func:`~.envelope.envelope_spectrum` up to rounding (~1e-16 of the largest spectral bins)."""
+    the one-sided Hann power of the whole windowed record (:mod:`.spectrum`),
+    :func:`~.envelope.envelope` and :func:`~.envelope.envelope_spectrum` up to rounding
+    (~1e-16 of the largest spectral bins)."""
     d = _centred(x)
     X = np.fft.rfft(d)
     env = envelope_of_rfft(X, d.size, setup.fs, setup.envelope_band)

@@ -17,9 +17,9 @@ Hann window is three lines in frequency, so the windowed transform is
 
     Y_k = X_k / 2 - (X_{k-1} + X_{k+1}) / 4
 
-(X_{-k} = conj X_k, X_{N-k} = conj X_k), the same numbers as :func:`power_spectrum`
-up to rounding (~1e-16 of the spectrum's largest bins), at a few operations per bin
-read instead of a second transform of the whole record.
+(X_{-k} = conj X_k, X_{N-k} = conj X_k), the same numbers as the P_k above of the
+windowed record's transform up to rounding (~1e-16 of the spectrum's largest bins), at a
+few operations per bin read instead of a second transform of the whole record.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["hann", "hann_sums", "rfft_freqs", "power_spectrum", "band_mask", "bin_range", "hann_power_bins"]
+__all__ = ["hann", "hann_sums", "rfft_freqs", "band_mask", "bin_range", "hann_power_bins"]
 
 
 @lru_cache(maxsize=8)
@@ -55,22 +55,6 @@ def rfft_freqs(N: int, fs: float) -> np.ndarray:
     return f
 
 
-def power_spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """x (..., N) -> (f (N // 2 + 1,) Hz, P (..., N // 2 + 1) in x's unit squared): the
-    one-sided Hann power per bin, ``P.sum(-1)`` = the mean square of a stationary x."""
-    x = np.asarray(x, dtype=np.float64)
-    N = x.shape[-1]
-    w = hann(N)
-    d = x - x.mean(axis=-1, keepdims=True)
-    d *= w
-    X = np.fft.rfft(d, axis=-1)
-    P = X.real ** 2
-    P += X.imag ** 2                        # in place: the same sums, fewer temporaries
-    P /= N * hann_sums(N)[1]
-    P[..., 1:(N + 1) // 2] *= 2.0          # the negative frequencies (not DC, not Nyquist)
-    return rfft_freqs(N, float(fs)), P
-
-
 def band_mask(f: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Bins with lo <= f <= hi."""
     return (f >= lo) & (f <= hi)
@@ -84,8 +68,10 @@ def bin_range(f: np.ndarray, lo: float, hi: float) -> tuple[int, int]:
 
 
 def hann_power_bins(X: np.ndarray, N: int, a: int, b: int) -> np.ndarray:
-    """P_k (as :func:`power_spectrum`) for the bins k = a..b-1 (0 <= a <= b <= N // 2 + 1) of
-    the mean-removed record of N samples whose ``np.fft.rfft`` without a window is X."""
+    """The one-sided Hann power P_k = c_k |Y_k|^2 / (N sum(w^2)) (module docstring: the power
+    per bin of the mean-removed record with the periodic Hann window, summing to its mean
+    square) for the bins k = a..b-1 (0 <= a <= b <= N // 2 + 1) of the mean-removed record of
+    N samples whose ``np.fft.rfft`` without a window is X."""
     K = X.shape[-1]
     if a >= b:
         return np.zeros(0)

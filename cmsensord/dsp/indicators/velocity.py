@@ -37,7 +37,8 @@ def velocity_band(rpm: float | None, configured: tuple[float, float] | None = No
 
 def velocity_rms_mm_s(f: np.ndarray, P: np.ndarray, band: tuple[float, float]) -> np.ndarray:
     """Velocity RMS [mm/s] in ``band`` from the acceleration power spectrum P (..., bins) at
-    frequencies f (:func:`~.spectrum.power_spectrum`)."""
+    frequencies f: the one-sided Hann power per bin of :mod:`.spectrum` (m^2/s^4, summing to
+    the record's mean square), each bin with lo <= f <= hi and f > 0 weighted by 1 / (2 pi f)^2."""
     m = band_mask(f, band[0], band[1]) & (f > 0)
     w = 1.0 / (2.0 * np.pi * f[m]) ** 2
     return 1000.0 * np.sqrt((P[..., m] * w).sum(axis=-1))     # not @: no BLAS threads

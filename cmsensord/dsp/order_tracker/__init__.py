@@ -12,11 +12,11 @@ decimator's low-pass), :mod:`.design` (model matrices, steady-state gains), :mod
 gains tabulated against speed),
 :mod:`.bandwidth` (r <-> bandwidth), :mod:`.reference` (the per-sample
 reference), :mod:`.recursions` (the numpy recursions), :mod:`.state` (outputs
-and carried state), :mod:`.tracker` (:class:`OrderTracker`), :mod:`.alarm`
-(:class:`OrderAlarm`).  The compiled kernel is ``cmsensord.dsp._trackerkernel``.
+and carried state), :mod:`.tracker` (:class:`OrderTracker`).  The compiled kernel is
+``cmsensord.dsp._trackerkernel``.  Alarms on the tracked orders are the alarm manager's
+rules (``order_<component>`` on ``order.<component>``), not this package's.
 """
 
-from cmsensord.dsp.order_tracker.alarm import AlarmEvent, OrderAlarm
 from cmsensord.dsp.order_tracker.antialias import MISSING_TAIL
 from cmsensord.dsp.order_tracker.bandwidth import bandwidth_to_r, component_r, r_to_bandwidth, time_constant
 from cmsensord.dsp.order_tracker.components import DEFAULT_R, TrackedComponent
@@ -27,9 +27,7 @@ from cmsensord.dsp.order_tracker.tracker import OrderTracker, have_kernel
 __all__ = [
     "DEFAULT_R",
     "MISSING_TAIL",
-    "AlarmEvent",
     "BlockStats",
-    "OrderAlarm",
     "OrderTracker",
     "TrackedComponent",
     "TrackerOutput",

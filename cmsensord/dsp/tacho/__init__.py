@@ -2,7 +2,7 @@
 
 The shaft reference of the order tracker: :class:`TachoTracker` turns the
 rising edges of the TACHO frames (docs/PROTOCOL.md), streaming, into the speed
-(Hz, rpm) and the shaft angle (turns) at any sample index, with a validity
+(Hz) and the shaft angle (turns) at any sample index, with a validity
 flag, events for lost/restored tacho and repaired pulses, and a causal speed.
 The method, its delays and its measured accuracy are in docs/tacho.md.
 
@@ -19,9 +19,7 @@ from cmsensord.dsp.tacho.edges import (
     TachoCounters,
     TachoEvent,
     TachoUpdate,
-    tacho_frames_to_arrays,
 )
 from cmsensord.dsp.tacho.tracker import TachoTracker
 
-__all__ = ["TachoEvent", "TachoCounters", "TachoUpdate", "TachoTracker", "tacho_frames_to_arrays",
-           "LOST", "RESTORED", "MISSED", "EXTRA"]
+__all__ = ["TachoEvent", "TachoCounters", "TachoUpdate", "TachoTracker", "LOST", "RESTORED", "MISSED", "EXTRA"]

@@ -14,9 +14,8 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Iterable
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -27,9 +26,6 @@ try:  # the compiled step of a live call's regular edges is optional: the Python
     from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the build
     _kernel = None
-
-if TYPE_CHECKING:
-    from cmsensord.protocol import Frame
 
 SUB = 256  # edge resolution: 1/256 sample (docs/PROTOCOL.md, TACHO)
 
@@ -536,15 +532,3 @@ class EdgeRuns(TachoState):
             self._committed_key = key
         return arrays
 
-
-def tacho_frames_to_arrays(frames: Iterable[Frame], chan: int = 0) -> tuple[IntArray, list[npt.NDArray[np.uint32]]]:
-    """(t0_unwrapped (F,), [edge offsets]) of the TACHO frames of input ``chan`` among ``frames``."""
-    from cmsensord.protocol import FrameType, decode_tacho
-
-    t0: list[int] = []
-    edges: list[npt.NDArray[np.uint32]] = []
-    for f in frames:
-        if f.type == FrameType.TACHO and f.chan == chan:
-            t0.append(f.t0_unwrapped)
-            edges.append(decode_tacho(f.payload))
-    return np.asarray(t0, dtype=np.int64), edges

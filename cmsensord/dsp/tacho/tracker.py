@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -26,13 +25,8 @@ from cmsensord.dsp.tacho.edges import (
     TachoEvent,
     TachoUpdate,
     _kernel,
-    tacho_frames_to_arrays,
 )
 from cmsensord.dsp.tacho.smoothing import KnotSmoothing
-
-if TYPE_CHECKING:
-    from cmsensord.protocol import Frame
-
 
 _FEW_FRAMES = 64  # up to this many frames an update prepares its edges on Python ints
 
@@ -330,11 +324,6 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._advance(end)
         self._last_t0 = t0_last
 
-    def update_frames(self, frames: Iterable[Frame], chan: int = 0) -> TachoUpdate:
-        """Feed decoded :class:`cmsensord.protocol.Frame` objects (TACHO frames of input ``chan``; others ignored)."""
-        t0, edges = tacho_frames_to_arrays(frames, chan)
-        return self.update(t0, edges)
-
     # ------------------------------------------------------------------ output
     @property
     def valid(self) -> bool:
@@ -359,14 +348,6 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
     def speed_at(self, samples: npt.ArrayLike) -> FloatArray:
         """Shaft speed in Hz (revolutions per second) at the sample indices."""
         return self.evaluate(samples)[0]
-
-    def rpm_at(self, samples: npt.ArrayLike) -> FloatArray:
-        """Shaft speed in rpm at the sample indices."""
-        return 60.0 * self.evaluate(samples)[0]
-
-    def turns_at(self, samples: npt.ArrayLike) -> FloatArray:
-        """Shaft angle in revolutions since the first edge at the sample indices."""
-        return self.evaluate(samples)[1]
 
 
 def _checked(fs, ppr, block_len, half_window, tol, timeout_s, timeout_periods, max_timeout_s, history_s,
