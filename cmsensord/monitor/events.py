@@ -49,14 +49,11 @@ import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
 from cmsensord.monitor.event_rate import RateLimit, RateLimits, Summary
-
-if TYPE_CHECKING:
-    from cmsensord.config import Config
 
 log = logging.getLogger("cmsensord")
 
@@ -82,8 +79,7 @@ UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failu
                        "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack", "alarm_no_baseline",
                        "alarm_restored", "alarm_not_restored", "capture", "signal_lost", "signal_back"})
 #: records wait until the processed stream is this far past them (events reported late; the
-#: sink's log-time window holds this and a decision period, :func:`write_lag_s`, so it is also
-#: what a kill -9 may cost the log)
+#: sink's log-time window learns this lateness, so it is also what a kill -9 may cost the log)
 HOLD_S = 1.0
 #: events of the daemon and its surroundings, stamped by the wall clock: written at once
 WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_stalled", "reader_error",
@@ -93,15 +89,6 @@ WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_sta
 MAX_PENDING = 1000
 #: a record stamped further than this past the processed stream waits as if stamped there
 AHEAD_S = 600.0
-
-
-def write_lag_s(cfg: Config) -> float:
-    """How far behind the newest message written a record of the stream is written at most (the
-    sink's reorder window holds that long, so each goes into the file at its own stamp): ``HOLD_S``
-    behind the decision that releases it, which comes up to the longest decision period after the
-    messages before it (the decisions, and at the end of the run the last records after them)."""
-    period = max(cfg.monitor.decision_period_s, *(ch.monitor.decision_period_s for ch in cfg.channels))
-    return HOLD_S + period
 
 
 @dataclass

@@ -37,7 +37,7 @@ from cmsensord.monitor.alarms import Alarms
 from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.diagnostics import Diagnostics
-from cmsensord.monitor.events import Event, EventLog, write_lag_s
+from cmsensord.monitor.events import Event, EventLog
 from cmsensord.monitor.figures import Figures
 from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
@@ -93,8 +93,6 @@ class Processor(Figures):
         self.observe = observe        # (first_slot, y, valid) of each block the bank watches
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
-        if hasattr(sink, "expect_lag"):     # the events are written late: the sink's window holds them
-            sink.expect_lag(write_lag_s(cfg))
         self.log = EventLog(sink, lambda: self.clock.floor_ns or self.clock_ns(), on_event,
                             lambda: self.clock.seg_stamp_ns)
         self.raw = RawInput(cfg)
