@@ -144,3 +144,21 @@ def test_a_credential_the_unit_does_not_load_is_named_under_systemd(tmp_path):
         "mqtt.password_file: cannot read: No such file or directory; the unit loads no credential "
         "mqtt.password: add LoadCredential=mqtt.password:<the file> to its drop-in "
         "(systemd/cmsensord-mqtt.conf)")
+
+
+def test_the_services_credential_path_does_not_stop_a_command_run_by_hand(tmp_path):
+    """The README's MQTT setup names the password as the unit's credential (there only while
+    the service runs): `cmsensord replay --config <the service's configuration>` run by hand
+    replays, one line says the credential was not checked (it exited 78 on it)."""
+    cap = tmp_path / "cap.bin"
+    r = subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--duration", "3",
+                        "--out", str(cap)], env=ENV, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    path = "/run/credentials/cmsensord.service/mqtt.password"
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"mqtt:\n  host: 127.0.0.1\n  username: rig\n  password_file: {path}\n")
+    env = {k: v for k, v in ENV.items() if k != "INVOCATION_ID"}
+    p = cmsensord("replay", str(cap), "--config", str(cfg), "--out", str(tmp_path / "o"), env=env)
+    assert p.returncode == 0, p.stderr
+    assert (f"WARNING config: mqtt.password_file {path}: not checked: the service's credential(s), there only "
+            "while the unit runs") in p.stderr.splitlines(), p.stderr

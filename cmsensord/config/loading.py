@@ -12,6 +12,7 @@ line naming the file and the key path.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import logging
 import os
 import re
@@ -237,12 +238,18 @@ def _build_indicators(raw: Any, source: str) -> IndicatorsConfig:
 
 def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
     """The optional ``mqtt`` section; its files must be readable, its TLS files must hold what
-    they are for (:func:`~.mqtt_tls.tls_context`), and paho-mqtt must be installed."""
+    they are for (:func:`~.mqtt_tls.tls_context`), and paho-mqtt must be installed.
+
+    A file under ``/run/credentials/`` that is missing outside systemd (no ``INVOCATION_ID``:
+    ``replay``, ``status``, ``ack`` run by hand with the service's configuration) is a service
+    credential, there only while the unit runs: one warning line, not checked, and a command
+    that publishes then fails to connect with it."""
     if raw is None:
         return None
     values = _mapping(raw, source, "mqtt")
     _reject_unknown(values, [f.name for f in dataclasses.fields(MqttConfig)], source, "mqtt")
     cfg: MqttConfig = _build(MqttConfig, values, source, "mqtt")
+    absent = []
     for key in ("password_file", "ca_file", "certfile", "keyfile"):
         path = getattr(cfg, key)
         if path is not None:
@@ -250,11 +257,17 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
                 with open(path, "rb"):
                     pass
             except OSError as err:
-                raise ConfigError(source, f"mqtt.{key}", unreadable(key, path, err), path) from None
+                if not _service_credential(path, err):
+                    raise ConfigError(source, f"mqtt.{key}", unreadable(key, path, err), path) from None
+                absent.append(key)
+    if absent:
+        _log.warning("config: %s: not checked: the service's credential(s), there only while the unit runs",
+                     ", ".join(f"mqtt.{key} {getattr(cfg, key)}" for key in absent))
     from .mqtt_tls import TlsFileError, tls_context  # ssl only with an mqtt section (2 MB of RSS)
 
     try:
-        tls_context(cfg)
+        if absent in ([], ["password_file"]):       # a TLS file not there: its context is the service's
+            tls_context(cfg)
     except TlsFileError as err:
         raise ConfigError(source, f"mqtt.{err.key}", f"{err.path}: {err.reason}") from None
     import importlib.util
@@ -262,6 +275,12 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
     if importlib.util.find_spec("paho") is None or importlib.util.find_spec("paho.mqtt") is None:
         raise ConfigError(source, "mqtt", "publishing needs paho-mqtt: pip install 'cmsensord[mqtt]'")
     return cfg
+def _service_credential(path: str, err: OSError) -> bool:
+    """A missing file under ``/run/credentials/`` read outside systemd."""
+    return (err.errno == errno.ENOENT and path.startswith("/run/credentials/")
+            and "INVOCATION_ID" not in os.environ)
+
+
 def _build_alarms(raw: Any, source: str) -> AlarmsConfig:
     values = dict(_mapping(raw, source, "alarms"))
     _reject_unknown(values, [f.name for f in dataclasses.fields(AlarmsConfig)], source, "alarms")
