@@ -292,6 +292,7 @@ class ChannelSetup:
             self.on_channels(tuple(ch.name for ch in usable))
         self.severity = SeverityChain(usable, fs=self.clock.fs, block_len=self.clock.block_len,
                                       trace_filter=self.cfg.output.akf_trace_filter)
+        self.severity.adc_at = self.clock.seconds_at
         self._keep_views(self.severity)
         self.log.add(self.severity.notes)
         self.severity.notes.clear()

@@ -269,7 +269,12 @@ class BlockClock:
     @property
     def adc_seconds(self) -> float:
         """ADC time covered by the observations processed so far, each stretch at its own rate."""
-        return self._adc_before + (self.next_slot - self._rate_slot) * self.block_len / self.fs
+        return self.seconds_at(self.next_slot)
+
+    def seconds_at(self, slot: int) -> float:
+        """ADC time before ``slot`` (a slot of the current rate's stretch), each stretch at its
+        own rate."""
+        return self._adc_before + (slot - self._rate_slot) * self.block_len / self.fs
 
     # ---- slots -------------------------------------------------------------
     def begin(self, t0: int) -> None:

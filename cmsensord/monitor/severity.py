@@ -81,6 +81,8 @@ class SeverityChain:
         self._rate_slot, self._rate_s = 0, 0.0  # the chain slot the rate took over at, and its board second
         self.start_slot: int | None = None      # the block clock's slot of this chain's first observation
         self._start_s = 0.0
+        #: the run's ADC seconds before a block clock slot (the clock's, each rate's stretch at its rate)
+        self.adc_at: Callable[[int], float] = lambda slot: slot / self.rate
         self.cfg_f_r = np.array([m.f_r for m in mons])
         self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
         self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
@@ -152,7 +154,7 @@ class SeverityChain:
             self.gate.restart(first_slot)
         if self.start_slot is None:
             self.start_slot = first_slot
-            self._start_s = first_slot / self.rate   # the run's ADC seconds at the chain's start
+            self._start_s = self.adc_at(first_slot)  # the run's ADC seconds at the chain's start
         if self.combined is None:
             self.gate.push(outlier, valid)
         else:
