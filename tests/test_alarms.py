@@ -106,6 +106,18 @@ def test_an_alarm_acknowledged_while_active_clears_when_the_value_falls_and_latc
     assert (row["level"], row["live"], row["latched"], row["acknowledged"]) == ("alert", "normal", True, False)
 
 
+def test_a_new_danger_after_an_acknowledged_alert_latches_again():
+    """Danger, then alert (the latch shows danger), acknowledged at alert; danger again is a new
+    alarm: it latches, and stays when the value falls."""
+    m = manager([{**RULE, "latch": True}])
+    run(m, [5, 3])
+    assert [x.kind for x in m.ack(2 * S, "vel/ch0")] == ["alarm_ack", "alarm_alert"]
+    out = [(k, t.kind) for k, v in enumerate([5, 1], start=3) for t in m.record(k * S, "ch0", {"velocity_rms_mm_s": v})]
+    assert out == [(3, "alarm_danger")]
+    row = m.alarms["vel/ch0"].row()
+    assert (row["level"], row["live"], row["latched"], row["acknowledged"]) == ("danger", "normal", True, False)
+
+
 def test_a_saved_acknowledged_latch_is_not_put_back_as_a_latch():
     """A state file saying an acknowledged alarm is latched at danger (as written while an alarm
     acknowledged on could re-latch) resumes as the acknowledged live level, not a latch."""

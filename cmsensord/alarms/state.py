@@ -5,13 +5,13 @@ reached L (the input ``reached``, no deadband) for ``on_delay_s`` of stream time
 break, and off once the input (the exceedance level, with its deadband) has been below L for
 ``off_delay_s``; the output is the highest level that is on. A latching alarm shows the highest
 level it reached until acknowledged; an acknowledgement then drops it to the level that is on
-now, and that episode latches nothing more: it clears when the value falls, and a rise past the
-acknowledged level latches again. While suppressed (machine not running) nothing turns on, the
-timers restart, and the non-latched level is off. A delay counts the stream's own time: when the
-stamps are re-anchored (a step of the wall clock) :meth:`AlarmState.shift` moves its timers with
-them, so a delay straddling the step lasts as if there had been none; an input stamped before
-the start of a delay (stamps gone back unannounced) restarts it there, never measuring a
-negative time.
+now, and that episode latches nothing more: it clears when the value falls, and a rise of the
+level shown (a new alarm: danger again after an acknowledged danger fell to alert) latches
+again. While suppressed (machine not running) nothing turns on, the timers restart, and the
+non-latched level is off. A delay counts the stream's own time: when the stamps are re-anchored
+(a step of the wall clock) :meth:`AlarmState.shift` moves its timers with them, so a delay
+straddling the step lasts as if there had been none; an input stamped before the start of a
+delay (stamps gone back unannounced) restarts it there, never measuring a negative time.
 
 :meth:`AlarmState.resume` puts back what a saved state held (a daemon's restart:
 :mod:`.saved`): the latch, the acknowledgement, and the live level at the stop as a
@@ -134,7 +134,7 @@ class AlarmState:
         if now > before or now == 0:
             self.acknowledged = False
             self.acked_ns = self.acked_by = None
-            if self.latch:                          # a rise past the acknowledged level latches again
+            if self.latch:                          # a rise of the level shown (a new alarm) latches again
                 self.latched = max(self.latched, self.live)
         if now != before:
             self.changed_ns = t_ns
