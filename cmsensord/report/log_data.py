@@ -64,6 +64,9 @@ _LEVEL = re.compile(rb'"(level_ratio|level_alert|level_danger)":' + _NUM)
 _DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s|uptime_s)":' + _NUM)
 _INTERVAL = re.compile(rb'"interval_s":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
+#: indicator records kept per channel for the alarm transitions they raised (an event is written
+#: up to the reorder window's lag after its record: seconds, tens of records at most)
+RECORDS_KEPT = 256
 #: the alarm events that a value moved (kept where the record that moved them is)
 _TRANSITIONS = frozenset(("alarm_alert", "alarm_danger", "alarm_clear"))
 _TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
@@ -137,7 +140,7 @@ class LogData:
         self.place: Callable[..., int] = lambda t_ns, begins=False: t_ns
         #: records kept at their interval's start (an imported recording's axis: see module docstring)
         self.records_at_start = False
-        self._records: dict[str, tuple[int, int]] = {}     # channel -> its newest record's (stamp, shown)
+        self._records: dict[str, dict[int, int]] = {}      # channel -> its newest records' stamp -> shown start
         self.link_runs = LinkRuns()
         self.max_lag_s = 0.0
         self.max_queue_depth = 0
@@ -193,19 +196,23 @@ class LogData:
         m = _INTERVAL.search(data)
         interval = _number(m.group(1)) if m is not None else None
         start = self.place(stamp_ns - int(round(interval * 1e9)), begins=True) if interval else self.place(stamp_ns)
-        self._records[channel] = (stamp_ns, start)
+        kept = self._records.setdefault(channel, {})
+        kept[stamp_ns] = start
+        if len(kept) > RECORDS_KEPT:
+            del kept[next(iter(kept))]             # the oldest: its events came long ago
         return start
 
     def _about_record(self, stamp_ns: int, msg: dict[str, Any]) -> int | None:
         """The shown start of the indicator record an alarm transition ``msg`` is about (one of its
-        channel stamped as it, of a rule on a record's value), else None."""
-        newest = self._records.get(str(msg.get("channel")))
-        if newest is None or newest[0] != stamp_ns or msg.get("kind") not in _TRANSITIONS:
+        channel stamped as it, among its newest RECORDS_KEPT: the event may come after newer
+        records, written later by the reorder window; of a rule on a record's value), else None."""
+        start = self._records.get(str(msg.get("channel")), {}).get(stamp_ns)
+        if start is None or msg.get("kind") not in _TRANSITIONS:
             return None
         ch = self.channels.get(str(msg.get("channel")))
         rule = str(msg.get("alarm") or "").partition("/")[0]
         watched = ch.alarm_levels.get(rule, ("",))[0] if ch is not None else ""
-        return None if watched == "severity_index" or watched.startswith("order.") else newest[1]
+        return None if watched == "severity_index" or watched.startswith("order.") else start
 
     def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
         """A severity, indicators or diagnostics message, read by the fields drawn."""
