@@ -266,7 +266,7 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
     from .mqtt_tls import TlsFileError, tls_context  # ssl only with an mqtt section (2 MB of RSS)
 
     try:
-        if absent in ([], ["password_file"]):       # a TLS file not there: its context is the service's
+        if not set(absent) - {"password_file"}:     # a TLS file not there: its context is the service's
             tls_context(cfg)
     except TlsFileError as err:
         raise ConfigError(source, f"mqtt.{err.key}", f"{err.path}: {err.reason}") from None
@@ -275,6 +275,8 @@ def _build_mqtt(raw: Any, source: str) -> MqttConfig | None:
     if importlib.util.find_spec("paho") is None or importlib.util.find_spec("paho.mqtt") is None:
         raise ConfigError(source, "mqtt", "publishing needs paho-mqtt: pip install 'cmsensord[mqtt]'")
     return cfg
+
+
 def _service_credential(path: str, err: OSError) -> bool:
     """A missing file under ``/run/credentials/`` read outside systemd."""
     return (err.errno == errno.ENOENT and path.startswith("/run/credentials/")

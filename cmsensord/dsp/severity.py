@@ -188,14 +188,14 @@ class AnomalyDecider:
         decisions: list[Decision] = []
         start = 0
         while start < T:
-            if self.phase == 0 and (T - start) // self.period >= ONE_PASS_PERIODS and level is None \
-                    and not self.combined and self.periods >= self.transient_periods \
-                    and self._all_judged(np.asarray(valid[start:start + (T - start) // self.period * self.period])):
-                k = (T - start) // self.period          # whole periods: decided in one pass
-                decisions += self._decide_many(outlier[start:start + k * self.period],
-                                               np.asarray(valid[start:start + k * self.period], dtype=bool))
-                start += k * self.period
-                continue
+            k = (T - start) // self.period              # whole periods: decided in one pass
+            if self.phase == 0 and k >= ONE_PASS_PERIODS and level is None \
+                    and not self.combined and self.periods >= self.transient_periods:
+                whole = np.asarray(valid[start:start + k * self.period], dtype=bool)
+                if self._all_judged(whole):
+                    decisions += self._decide_many(outlier[start:start + k * self.period], whole)
+                    start += k * self.period
+                    continue
             take = min(T - start, self.period - self.phase)
             seg = slice(start, start + take)
             self.cnt += outlier[seg].sum(axis=0, dtype=np.int64)
@@ -222,35 +222,33 @@ class AnomalyDecider:
         prev = self.anomaly.copy()
         transient = self.periods < self.transient_periods
         level, s_level = self._level_part(transient)
-        lost = no_data = None
+        signal_lost = no_data = unjudged = None
         if self.combined and not transient:     # no signal: a quiet quarter, or none at all while lost
-            lost = self._quiet | (np.isnan(level) & self._lost)
-            self._lost = lost
+            signal_lost = self._lost = self._quiet | (np.isnan(level) & self._lost)
         if not transient:
             no_data = self.missing * 2 > self.period
-            if no_data.any():
-                lost = no_data if lost is None else lost | no_data
+            unjudged = no_data if signal_lost is None else signal_lost | no_data
             fr = self.f_r[:, None]
             set_ = self.cnt >= fr                       # cnt >= f_r  -> F_a = 1
             clear = self.cnt < self.c[:, None] * fr     # cnt < c f_r -> F_a = 0
             self.anomaly = np.where(set_, 1, np.where(clear, 0, self.anomaly)).astype(np.uint8)
             kept = (self.anomaly == 1) & ~set_
             held = np.where(kept, self.held + 1, 0)
-            if lost is not None and lost.any():         # no signal: F_a as it was
-                self.anomaly[lost] = prev[lost]
-                held[lost] = self.held[lost]
+            if unjudged.any():                          # no signal or no data: F_a as it was
+                self.anomaly[unjudged] = prev[unjudged]
+                held[unjudged] = self.held[unjudged]
             self.held = held
         s_akf = self.severity_of(self.anomaly)
         severity = np.maximum(s_akf, np.nan_to_num(s_level)) if self.combined else s_akf
-        if lost is not None and lost.any():
-            severity = np.where(lost, self._last_severity, severity)
+        if unjudged is not None and unjudged.any():
+            severity = np.where(unjudged, self._last_severity, severity)
         d = Decision(
             slot=self.slot, period=self.periods, transient=transient,
             cnt=self.cnt.copy(), anomaly=self.anomaly.copy(), prev_anomaly=prev,
             severity=severity, prev_severity=self._last_severity.copy(),
             f_r=self.f_r.copy(), missing=self.missing.copy(),
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
-            held_max=int(self.held.max()), no_signal=self._lost.copy() if self.combined and not transient else None,
+            held_max=int(self.held.max()), no_signal=signal_lost,
             quietest=self._quietest.copy() if self.combined else None, no_data=no_data,
         )
         self._last_severity = severity.copy()

@@ -101,8 +101,7 @@ def severities(stamp_ns: int, channels: Sequence[str], d, R: np.ndarray | Sequen
         msg = {"channel": channel, "severity_index": s, "level": round(s * n), "anomaly": a,
                "outliers": cnt[c], "f_r": f_r[c], "r": r.tolist() if isinstance(r, np.ndarray) else list(r),
                "failure": bool(a[-1]) or s >= 1.0, "missing": missing[c], "transient": transient}
-        if d.no_data is not None and d.no_data[c]:
-            msg["no_data"] = True
+        msg.update(_no_data(d, c))
         if extras[c]:
             msg.update(extras[c])
         out.append(Message(topics[c], "severity", stamp_ns, msg))
