@@ -291,5 +291,8 @@ def test_a_latched_alarm_acknowledged_while_active_clears_when_the_value_falls_a
         board.terminate()
         board.wait(timeout=5)
     assert (row["level"], row["latched"], row["acknowledged"]) == ("normal", False, False), row
-    assert [m["kind"] for m in alarm_events(tmp_path / "logs")][-2:] == ["alarm_ack", "alarm_clear"], err[-3000:]
+    kinds = [m["kind"] for m in alarm_events(tmp_path / "logs")]
+    after = kinds[len(kinds) - 1 - kinds[::-1].index("alarm_ack") + 1:]
+    # the healthy board's severity may pass through the alert band on its way down (eased to alert)
+    assert after in (["alarm_clear"], ["alarm_alert", "alarm_clear"]), err[-3000:]
     assert json.loads((tmp_path / "logs" / "cmsensord-alarms.json").read_text())["alarms"] == {}
