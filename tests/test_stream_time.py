@@ -29,7 +29,7 @@ from cmsensord.protocol import (
     encode_status,
 )
 from cmsensord.sinks.mcap_sink import read_messages
-from processes import ENV, start_board, start_daemon, stop
+from processes import ENV, run_module, start_board, start_daemon, stop
 from stream import run_processor
 
 MB = 1024          # ru_maxrss is in kB
@@ -334,6 +334,18 @@ def test_a_t0_stuck_at_one_value_does_not_end_the_replay(tmp_path):
     assert rss < 100 * MB
 
 
+def taken(tmp_path, adc_s: float, timeout: float = 60.0) -> bool:
+    """True once the daemon's status says it processed ``adc_s`` of ADC time and its queue is empty."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        time.sleep(0.5)
+        p = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml"))
+        m = re.match(r"\[ *([0-9.]+) s\].* q 0 ", p.stdout)
+        if m and float(m.group(1)) >= adc_s:
+            return True
+    return False
+
+
 def test_a_t0_stuck_at_one_value_does_not_end_the_daemon(tmp_path):
     """Live on a pty: 3000 frames with one t0 (and a STATUS every 100): the daemon runs on,
     stops cleanly on SIGTERM, and its decisions are stamped one after the other."""
@@ -345,7 +357,7 @@ def test_a_t0_stuck_at_one_value_does_not_end_the_daemon(tmp_path):
         for _ in range(30):
             data, seq = rms_run(seq, [1000] * 100, st=status())
             os.write(master, data)
-        time.sleep(1.5)
+        assert taken(tmp_path, 30.0), "the daemon did not take the 30 s of frames within 60 s"
         assert d.poll() is None
         err = stop(d)
     finally:
