@@ -89,6 +89,40 @@ def _num(x: float) -> float:
     return round(float(x), 9)
 
 
+def above_nyquist(cfg: Config, fs: float) -> list[tuple[str, tuple[float, float], tuple[str, ...]]]:
+    """The configured bands in Hz that start at or above fs/2, where a board sampling at ``fs``
+    has no content: (key, [lo, hi] Hz, the values they make unavailable).  Their values would
+    read 0 (zone A), so a record lists them unavailable instead."""
+    ic, half, out = cfg.indicators, fs / 2.0, []
+    for key, band, names in (("indicators.velocity_band_hz", ic.velocity_band_hz, ("velocity_rms_mm_s", "zone")),
+                             ("indicators.envelope_band_hz", ic.envelope_band_hz, ("envelope_rms", "bearings"))):
+        if band and band[0] >= half:
+            out.append((key, (float(band[0]), float(band[1])), names))
+    for i, b in enumerate(ic.bands):
+        if b.lo_hz is not None and b.hi_hz is not None and b.lo_hz >= half:
+            out.append((f"indicators.bands[{i}]", (float(b.lo_hz), float(b.hi_hz)), (f"band.{b.name}",)))
+    return out
+
+
+def nyquist_event(dead: list[tuple[str, tuple[float, float], tuple[str, ...]]], fs: float, stamp: int) -> Event:
+    """The warning that ``dead`` (:func:`above_nyquist`) bands lie past the board's Nyquist frequency."""
+    what = "; ".join(f"{key} {lo:g}-{hi:g} Hz" for key, (lo, hi), _ in dead)
+    names = ", ".join(n for _, _, ns in dead for n in ns)
+    return Event("band_above_nyquist", None, f"{what}: at or above the Nyquist frequency {fs / 2:g} Hz of the board's "
+                 f"{fs:g} Hz sampling, no signal there: {names} listed unavailable in the indicator records; "
+                 "set a band below it", stamp)
+
+
+def without_dead(fields: dict, dead: list[tuple[str, tuple[float, float], tuple[str, ...]]]) -> dict:
+    """A record's ``fields`` with the values of the ``dead`` bands left out and listed unavailable."""
+    names = [n for _, _, ns in dead for n in ns]
+    drop = set(names) | ({"velocity_alarm_mm_s"} if "zone" in names else set())
+    out = {k: v for k, v in fields.items() if k not in drop}
+    out["bands"] = [b for b in fields.get("bands", ()) if f"band.{b['name']}" not in drop]
+    out["unavailable"] = list(dict.fromkeys([*fields.get("unavailable", ()), *names]))
+    return out
+
+
 def record_fields(r: IndicatorRecord) -> dict:
     """The message fields of a RAW record (absent: not computed)."""
     out: dict = {}
@@ -164,6 +198,8 @@ class IndicatorChain:
         self.N = max(2, min(MAX_INTERVAL_SAMPLES, round(cfg.indicators.interval_s * fs)))
         self.index = [ch.index for ch in channels]
         self.setups = [channel_setup(cfg, ch, fs) for ch in channels]
+        #: the configured bands past fs/2 (:func:`above_nyquist`)
+        self.dead = above_nyquist(cfg, fs)
         self.buf = np.full((self.N, len(channels)), np.nan)
         self._dirty = False                     # samples written to buf since it was last NaN
         self.start: int | None = None          # board sample of the open interval's first sample
@@ -308,6 +344,11 @@ class IndicatorChain:
                 if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
                     fields["unavailable"] = ["speed"] + fields.get("unavailable", [])
                 out += _unresolved_notes(self.cfg, name, r, setup, self.fs / self.N, stamp, self.told)
+                if self.dead:
+                    fields = without_dead(fields, self.dead)
+                    if ("nyquist", self.fs) not in self.told:
+                        self.told.add(("nyquist", self.fs))
+                        out.append(nyquist_event(self.dead, self.fs, stamp))
             out.append(messages.indicators(stamp, name, {**head, "missing_fraction": _num(missing), **fields}))
         return out
 

@@ -130,6 +130,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "channels",
     "config",
     "lines_unresolved",
+    "band_above_nyquist",
     "start",
     "stop",
     "disk_error",

@@ -1,0 +1,47 @@
+"""A configured band at or above the board's Nyquist frequency (fs/2) holds no signal: its
+value would read 0 (zone A) and its alarm never fire.  `cmsensord replay` lists those values
+unavailable in the indicator records and says so once, naming the keys."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from cmsensord.sinks.mcap_sink import read_messages
+
+WARNING = ("WARNING band_above_nyquist: indicators.velocity_band_hz 13000-20000 Hz; indicators.envelope_band_hz "
+           "13000-20000 Hz; indicators.bands[0] 12600-14000 Hz: at or above the Nyquist frequency 12500 Hz of the "
+           "board's 25000 Hz sampling, no signal there: velocity_rms_mm_s, zone, envelope_rms, bearings, band.hf "
+           "listed unavailable in the indicator records; set a band below it")
+
+
+def _replay(tmp_path, yaml: str):
+    cap = tmp_path / "raw.bin"
+    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw", "--duration", "4",
+                    "--out", str(cap)], check=True, capture_output=True)
+    cfg = tmp_path / "site.yaml"
+    cfg.write_text(yaml)
+    p = subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--config", str(cfg),
+                        "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    recs = [m for t, _, m in read_messages(next((tmp_path / "out").glob("*.mcap"))) if t == "/cm/ch0/indicators"]
+    return p.stderr.splitlines(), recs
+
+
+def test_bands_past_fs_over_2_are_unavailable_and_said_once(tmp_path):
+    lines, recs = _replay(tmp_path, "indicators:\n  velocity_band_hz: [13000, 20000]\n"
+                                    "  envelope_band_hz: [13000, 20000]\n  bands:\n"
+                                    "    - {name: hf, lo_hz: 12600, hi_hz: 14000}\n"
+                                    "    - {name: lf, lo_hz: 10, hi_hz: 1000}\n")
+    assert [ln for ln in lines if ln.startswith("WARNING band_above_nyquist")] == [WARNING]
+    assert len(recs) >= 3
+    for r in recs:
+        assert r["unavailable"] == ["velocity_rms_mm_s", "zone", "envelope_rms", "bearings", "band.hf"], r
+        assert not {"velocity_rms_mm_s", "zone", "envelope_rms", "bearings"} & set(r), r
+        assert [b["name"] for b in r["bands"]] == ["lf"] and r["bands"][0]["rms"] > 0, r
+
+
+def test_bands_below_fs_over_2_read_as_before(tmp_path):
+    lines, recs = _replay(tmp_path, "indicators:\n  velocity_band_hz: [10, 1000]\n")
+    assert not [ln for ln in lines if "band_above_nyquist" in ln]
+    assert recs and all(r["velocity_rms_mm_s"] > 0 and "unavailable" not in r for r in recs), recs[0]
