@@ -93,7 +93,8 @@ def above_nyquist(cfg: Config, fs: float) -> list[tuple[str, tuple[float, float]
     """The configured bands in Hz that start at or above fs/2, where a board sampling at ``fs``
     has no content: (key, [lo, hi] Hz, the values they make unavailable).  Their values would
     read 0 (zone A), so a record lists them unavailable instead."""
-    ic, half, out = cfg.indicators, fs / 2.0, []
+    ic, half = cfg.indicators, fs / 2.0
+    out: list[tuple[str, tuple[float, float], tuple[str, ...]]] = []
     for key, band, names in (("indicators.velocity_band_hz", ic.velocity_band_hz, ("velocity_rms_mm_s", "zone")),
                              ("indicators.envelope_band_hz", ic.envelope_band_hz, ("envelope_rms", "bearings"))):
         if band and band[0] >= half:
