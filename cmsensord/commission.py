@@ -22,7 +22,9 @@ import numpy as np
 import yaml
 
 from cmsensord.argtypes import board_time, positive
+from cmsensord.base_changes import replaced_baselines, unlisted_channels
 from cmsensord.config import Config, ConfigError, load_config
+from cmsensord.config.alarm_indicators import indicator_names
 from cmsensord.config.channel_refs import channel_refs_error
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
@@ -307,11 +309,16 @@ def _indicators_yaml(settings: dict[str, float], base: dict[str, Any], why: dict
     return out + ["indicators:"] + [f"  {(k + ': ' + repr(float(v))):<26} # {why[k]}" for k, v in kept.items()]
 
 
+def _baseline_rows(obs: Observations) -> list[dict[str, Any]]:
+    """The ``alarms.baselines`` rows: each channel's indicator medians over the healthy period."""
+    return [{"channel": ch, "indicator": k, "value": float(_g(v))}
+            for ch in obs.names for k, v in sorted(obs.indicators.get(ch, {}).items())]
+
+
 def _alarms_yaml(obs: Observations, base_alarms: Any) -> list[str]:
     """The ``alarms`` section: BASE's, with ``baselines`` = each indicator's median over the
     healthy period (rules with ``alert_x_baseline`` / ``danger_x_baseline`` use them)."""
-    rows = [{"channel": ch, "indicator": k, "value": float(_g(v))}
-            for ch in obs.names for k, v in sorted(obs.indicators.get(ch, {}).items())]
+    rows = _baseline_rows(obs)
     if not rows and not base_alarms:
         return []
     rest = {k: v for k, v in (base_alarms if isinstance(base_alarms, dict) else {}).items() if k != "baselines"}
@@ -381,6 +388,13 @@ def run_calibrate(args: argparse.Namespace) -> int:
         print(line)
     if absent:
         print(absent)
+    if not auto:
+        listed = [(ch.name, ch.index) for ch in cfg.channels]
+        for line in [unlisted_channels(listed, obs.board_channels, Path(args.capture).name, args.config, out.name),
+                     *replaced_baselines(base, [(r.name, r.model.baseline) for r in results], _baseline_rows(obs),
+                                         out.name)]:
+            if line:
+                print(line)
     for note in obs.notes:
         print(f"note: {note}")
     if "interval_s" in obs.settings:
@@ -496,6 +510,23 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
                      "its levels are within what this machine did then: check the rule's levels, or whether "
                      "the period was healthy")
         lines += [ln.strip() for ln in origin_lines(obs.meta, [], {alarm: firsts})] if firsts else []
-    rules = len(site.alarms.rules) + len(order_rules(site))
-    return lines or [f"alarms: none of the {rules} rule(s) shown within the healthy period (replayed with the "
-                     "site file)"]
+    unjudged = _unjudged_rules(site, obs)
+    rules = len(site.alarms.rules) + len(order_rules(site)) - len(unjudged)
+    if not lines and rules:
+        lines = [f"alarms: none of the {rules}{' judged' if unjudged else ''} rule(s) shown within the healthy "
+                 "period (replayed with the site file)"]
+    if unjudged:
+        lines.append(f"alarms: rule(s) {', '.join(r.name for r in unjudged)} not judged: the capture's indicator "
+                     f"records carry no {', '.join(dict.fromkeys(r.indicator for r in unjudged))} (an RMS-mode "
+                     "board's carry accel_rms alone)")
+    return lines
+
+
+def _unjudged_rules(site: Config, obs: Observations) -> list[Any]:
+    """The rules of ``site`` on an indicator record's value that no record of the healthy period
+    carried (the zone counts as carried with the velocity RMS)."""
+    carried = {k for values in obs.indicators.values() for k in values}
+    if "velocity_rms_mm_s" in carried:
+        carried.add("zone")
+    records = set(indicator_names(site, records_only=True))
+    return [r for r in site.alarms.rules if r.indicator in records and r.indicator not in carried]

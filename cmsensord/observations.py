@@ -53,6 +53,7 @@ class Observations:
     notes: tuple[str, ...] = ()   # what the command says of the window (--to past the end, missing data)
     settings: dict[str, float] = field(default_factory=dict)  # indicators.* the sidecar gave (capture_settings)
     fs: float = 0.0               # the board's samples per second
+    board_channels: int = 0       # the channels the board sent (the configuration may list fewer)
 
     @property
     def end_s(self) -> float:
@@ -123,7 +124,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s)
                         + _unresolved(sink),
-                        settings=settings, fs=float(proc.fs))
+                        settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board)
 
 
 def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:
