@@ -19,7 +19,11 @@ are ignored: each run of them is counted in one ``decode_error`` event when it e
 
 A break in the link in front of a frame, a seq gap or frames the receiver dropped as
 repeats (:mod:`cmsensord.frame_repeats`), is a ``frames_lost`` or ``frames_repeated``
-event (:meth:`Segments.gaps`).
+event (:meth:`Segments.gaps`).  A seq gap counts its frames mod 65536 (docs/PROTOCOL.md
+rule 3), and the u16 seq wraps every 65536 frames: 131 s of RAW 4 channels and a tacho.
+An outage longer than that hides whole wraps, which the t0 gap shows: the frames the board
+sends in it (STATUS: blocks a second times frames a block, and a STATUS a second) less the
+seq gap, in whole wraps, are lost too (an extension of rule 3).
 """
 
 from __future__ import annotations
@@ -107,6 +111,8 @@ class Segments:
         self.ignored_total = 0
         self.hit = False                    # the last frame checked needs :meth:`start`
         self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
+        self.seq_wraps = 0                  # frames lost in whole seq wraps the t0 gaps show
+        self.before_t0: int | None = None   # t0_unwrapped of the frame before the one checked
         self._marked: tuple | None = None   # (cols, mode, fs, bad, status) of :meth:`_marks`
         self.wall = WallSteps()
 
@@ -231,7 +237,7 @@ class Segments:
         if self.ignored:
             self._report()
         t, last = f.t0_unwrapped, self.last_t0
-        self.last_t0 = t
+        self.last_t0, self.before_t0 = t, last
         if last is not None and self.clock.is_reset(t, last):
             self.previous_t0 = last
             return True
@@ -266,15 +272,31 @@ class Segments:
                           "same frames as already received): dropped", stamp, count=n)
         if stamp is None or not f.lost_before:
             return 0
-        self.log.emit("frames_lost", None, f"{f.lost_before} frame(s) lost before seq {f.seq} (seq gap)",
-                      stamp, count=f.lost_before)
-        return f.lost_before
+        wraps = self._wraps(f)
+        lost = f.lost_before + wraps * 65536
+        self.seq_wraps += wraps * 65536
+        said = "seq gap" if not wraps else (f"seq gap of {f.lost_before} and {wraps} whole wrap(s) of the seq: t0 "
+                                            f"jumped {(f.t0_unwrapped - (self.before_t0 or 0)) / self.clock.fs:.1f} s")
+        self.log.emit("frames_lost", None, f"{lost} frame(s) lost before seq {f.seq} ({said})", stamp, count=lost)
+        return lost
+
+    def _wraps(self, f: Frame) -> int:
+        """The whole wraps of the u16 seq in the gap in front of ``f``: the frames the board sends
+        (by its STATUS) over the t0 gap, less the seq gap, in whole 65536s (0 without a STATUS)."""
+        st = self.setup.status
+        if st is None or self.before_t0 is None or st.fs <= 0 or st.block_len <= 0:
+            return 0
+        per_block = (1 if st.mode == 1 else st.n_channels) + st.tacho_inputs
+        sent = (f.t0_unwrapped - self.before_t0) / st.block_len * per_block \
+            + (f.t0_unwrapped - self.before_t0) / st.fs
+        return max(0, round((sent - f.lost_before) / 65536))
 
     def link(self, counters: dict) -> dict:
         """The link's ``counters``; a seq gap in front of a board reset is no loss (the board
-        restarted its seq), so ``frames_lost`` leaves it out."""
+        restarted its seq), so ``frames_lost`` leaves it out, and adds the whole seq wraps the t0
+        gaps show (:meth:`_wraps`)."""
         if "frames_lost" in counters:
-            counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts}
+            counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts + self.seq_wraps}
         return counters
 
     def check_wall(self, now_ns: int, max_drift_s: float, hand_over: Callable[[], None],

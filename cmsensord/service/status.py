@@ -18,8 +18,9 @@ def status_line(proc, source=None) -> str:
         parts.append(alarm)
     if source is not None:
         c = source.counters
+        lost = proc.segments.link({"frames_lost": c.frames_lost})["frames_lost"]
         parts.append(f"| rx {c.bytes_received} B, frames {sum(c.frames.values())}, "
-                     f"lost {c.frames_lost - proc.segments.seq_restarts}, crc {c.crc_failures}")
+                     f"lost {lost}, crc {c.crc_failures}")
         queue = source.queue
         parts.append(f"q {len(queue)} drop {queue.drops}")
         if source.link_down:
