@@ -18,6 +18,9 @@ from cmsensord.sinks.mcap_file import fsync_dir, log_files
 if TYPE_CHECKING:
     from cmsensord.sinks.rotating import RotatingSink
 
+#: a pass each time the file being written grows by this share of ``retain_mb`` (so the prefix's
+#: files, that file included, pass the cap by at most that share between rotations)
+PASS_EVERY = 1 / 64
 #: the kind of retention and disk events (``details["action"]`` tells them apart)
 DISK_EVENT = "disk_error"
 MB = 1_000_000
@@ -39,6 +42,8 @@ class RetentionTold:
 
     low_space: bool = False
     refused: dict[str, tuple[str | None, int]] = field(default_factory=dict)
+    #: the next pass when the file being written holds this many bytes (:data:`PASS_EVERY` of the cap on)
+    next_bytes: float = float("inf")
 
     def refuse(self, path: str, code: str | None) -> bool:
         """A pass failed on ``path`` with errno ``code``: True when that is news (to be told),
@@ -83,7 +88,8 @@ def _retained(sink: RotatingSink) -> set[Path] | None:
 
 
 def apply_retention(sink: RotatingSink) -> None:
-    """Delete the oldest finished files (and kept ``.part`` copies) while over ``retain_mb`` or
+    """Delete the oldest finished files (and kept ``.part`` copies) while over ``retain_mb`` (the
+    file being written counted: a pass runs each time it grows by :data:`PASS_EVERY` of the cap) or
     under ``min_free_mb``: of the prefix, or with the sink's ``own_files`` (a replay) of this run
     only, counting only its files (:func:`_retained`).
 
@@ -99,6 +105,9 @@ def apply_retention(sink: RotatingSink) -> None:
     floor = o.min_free_mb * MB if o.min_free_mb else None
     if cap is None and floor is None:
         return
+    cur = sink.current
+    sink.retention.next_bytes = (cur.bytes_written if cur is not None else 0) + max(
+        16_384, (cap if cap is not None else floor or 0) * PASS_EVERY)
     try:
         finished, parts = log_files(o.dir, o.prefix, kept=True)
         free = free_bytes(o.dir) if floor is not None else 0

@@ -336,6 +336,8 @@ class RotatingSink(ReorderLag):
             self.rotate()
         elif self._pending:
             self._deliver()
+        if cur.bytes_written >= self.retention.next_bytes:     # the cap holds the growing file too
+            self._retention()
 
     def release_held(self) -> None:
         """The stream paused (the link went quiet): what the reorder window holds is written
