@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import pwd
+import re
 import subprocess
 import sys
 import time
@@ -79,9 +80,11 @@ def test_a_latched_alarm_stays_latched_over_a_restart(tmp_path):
         err = stop(d)
         board.terminate()
         board.wait(timeout=5)
-    assert lines(err, "alarm_restored") == [
-        f"WARNING alarm_restored: sev/ch0: danger latched since {when(before['since']['sec'])} "
-        f"(not acknowledged), from {state}"]
+    # the faulty board's value may have eased to the alert band by the time the daemon stopped
+    [restored] = lines(err, "alarm_restored")
+    assert re.fullmatch(re.escape(f"WARNING alarm_restored: sev/ch0: danger latched since "
+                                  f"{when(before['since']['sec'])}") + r"(, alert at the stop)?"
+                        + re.escape(f" (not acknowledged), from {state}"), restored), restored
     assert lines(err, "alarm_danger") == [] and lines(err, "alarm_not_restored") == []
     assert [(m["kind"], m["alarm"]) for m in alarm_events(tmp_path / "logs")] == [
         ("alarm_restored", "sev/ch0"), ("alarm_ack", "sev/ch0"), ("alarm_clear", "sev/ch0")]

@@ -25,9 +25,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["COUNT_UNITS", "RATE_S", "RATE_BURST", "LONG_S", "LONG_BURST", "RateLimit", "RateLimits",
+__all__ = ["ALARM_KINDS", "COUNT_UNITS", "RATE_S", "RATE_BURST", "LONG_S", "LONG_BURST", "RateLimit", "RateLimits",
            "Summary"]
 
+#: the alarm transitions, limited per alarm and in the journal only (:mod:`.events`)
+ALARM_KINDS = frozenset({"alarm_alert", "alarm_danger", "alarm_clear"})
 #: at most RATE_BURST events of a kind per channel in RATE_S seconds of event time; then a summary
 RATE_S = 1.0
 RATE_BURST = 5
@@ -59,9 +61,13 @@ class Summary:
         unit = COUNT_UNITS.get(self.kind)
         counted = (f" ({self.count} {unit}(s) between them)" if unit is not None
                    else f" (their counts add up to {self.count})")
-        return (f"{self.n} more {self.kind} event(s) in {(self.last_ns - self.since_ns) / 1e9:.3g} s"
+        text = (f"{self.n} more {self.kind} event(s) in {(self.last_ns - self.since_ns) / 1e9:.3g} s"
                 + (counted if self.count else "")
                 + f": at most {self.burst} per {self.rate_s:g} s are written one by one")
+        if self.kind in ALARM_KINDS:        # keyed by the alarm, limited in the journal alone
+            return (f"{self.channel}: {text} in the journal, all in /cm/events; an alarm that changes this "
+                    "often chatters: an on_delay_s or off_delay_s on its rule steadies it")
+        return text
 
     def fields(self) -> dict[str, Any]:
         return {"summarised": self.n, **({"count": self.count} if self.count else {})}

@@ -22,8 +22,10 @@ list and ``on_event`` get the events as they come, limited in that order (their 
 with the next event of the kind after the interval, or at the end of the run:
 :meth:`EventLog.summarise`).  Every occurrence stays in :attr:`EventLog.counts`.  Kinds in
 ``UNLIMITED`` (start and stop, the severity chain's paired onsets and clears, failures and
-decisions' notes, the alarm manager's transitions, which its delays already bound, and the
-captures written, which their budget bounds) are never held back.
+decisions' notes, the alarm manager's transitions, and the captures written, which their
+budget bounds) are never held back from ``/cm/events``; the alarm transitions
+(``JOURNAL_LIMITED``) are limited in the journal all the same, per alarm: a rule without
+delays on a value hovering at its level changes each second.
 
 ``/cm/events`` goes forward in time: an event carries the stamp of what it is
 about (a frame, a tacho edge, a decision), and parts of the chain report late
@@ -53,7 +55,7 @@ from typing import Any
 
 from cmsensord.journal import VERBOSE
 from cmsensord.monitor import messages
-from cmsensord.monitor.event_rate import RateLimit, RateLimits, Summary
+from cmsensord.monitor.event_rate import ALARM_KINDS, RateLimit, RateLimits, Summary
 
 log = logging.getLogger("cmsensord")
 
@@ -78,6 +80,10 @@ UNLIMITED = frozenset({"start", "stop", "anomaly_onset", "anomaly_clear", "failu
                        "decision_rule", "anomaly_held", "severity_change",
                        "alarm_alert", "alarm_danger", "alarm_clear", "alarm_ack", "alarm_no_baseline",
                        "alarm_restored", "alarm_not_restored", "capture", "signal_lost", "signal_back"})
+#: kinds of UNLIMITED that the journal limits all the same: an alarm's transitions (each is in
+#: /cm/events and /cm/alarms), keyed by the alarm; a rule without delays on a value hovering at
+#: its level makes one a second (a chattering alarm)
+JOURNAL_LIMITED = ALARM_KINDS
 #: records wait until the processed stream is this far past them (events reported late; the
 #: sink's log-time window learns this lateness, so it is also what a kill -9 may cost the log)
 HOLD_S = 1.0
@@ -161,14 +167,15 @@ class EventLog:
         self.counts[kind] = self.counts.get(kind, 0) + 1
         told = written = True
         count = int(extra.get("count", 0) or 0)
-        if kind not in UNLIMITED:
-            closed, told = self._told.admit(kind, channel, stamp, count)
+        if kind not in UNLIMITED or kind in JOURNAL_LIMITED:
+            key = extra.get("alarm", channel) if kind in JOURNAL_LIMITED else channel
+            closed, told = self._told.admit(kind, key, stamp, count)
             for s in closed:
                 self._tell_summary(s)
-            if kind in WALL_KINDS:
-                closed, written = self._wall.admit(kind, channel, stamp, count)
-                for s in closed:
-                    self._put_summary(s)
+        if kind not in UNLIMITED and kind in WALL_KINDS:
+            closed, written = self._wall.admit(kind, channel, stamp, count)
+            for s in closed:
+                self._put_summary(s)
         m = messages.event(stamp, kind, channel, message, extra)
         level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind in WALL_KINDS:
