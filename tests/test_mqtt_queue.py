@@ -1,6 +1,6 @@
 """The store-and-forward queue of the MQTT publisher (cmsensord/publish/disk_queue.py): order,
-acknowledgements, a torn record after a crash, a damaged record mid-segment, the bound, a full
-disk (/dev/full under its file)."""
+acknowledgements, a torn record after a crash, a damaged record mid-segment, the acknowledgement
+cursor unreadable or behind, the bound, a full disk (/dev/full under its file)."""
 
 from __future__ import annotations
 
@@ -116,6 +116,41 @@ def test_zeros_over_records_mid_segment_are_skipped(tmp_path):
     assert (q.damaged_bytes, q.damaged_records) == (3 * size, 3)
     assert [r.seq for r in q.next_batch(20)] == [1, 2, 3, 7, 8, 9, 10]
     q.close()
+
+
+def test_a_cursor_behind_the_oldest_segment_moves_up_to_it(tmp_path):
+    """A kill -9 after acknowledged segments were deleted and before the cursor was saved: the
+    records before the oldest segment are not counted as queued, and acknowledgements move the
+    cursor on."""
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=1000)
+    fill(q, 30)
+    for seq in range(1, 21):
+        q.ack(seq)
+    oldest = q.segments[0].first
+    q.close()
+    (tmp_path / "acked").write_text("3\n")
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=1000)
+    assert q.cursor_error is None and q.acked == oldest - 1 and q.depth == 30 - q.acked
+    for seq in range(oldest, 31):
+        q.ack(seq)
+    assert q.acked == 30 and q.depth == 0
+    q.close()
+
+
+@pytest.mark.parametrize(("text", "why"), [("garbage\n", "not a number: 'garbage'"), ("", "empty"),
+                                           ("-4\n", "not a number: '-4'")])
+def test_an_unreadable_cursor_is_said_and_rewritten(tmp_path, text, why):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 5)
+    q.ack(1)
+    q.close()
+    (tmp_path / "acked").write_text(text)
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.cursor_error == why and q.acked == 0 and q.depth == 5      # from the oldest kept
+    assert q.append("t", lambda seq: b"{}", False) == 6
+    q.close()
+    assert (tmp_path / "acked").read_text() == "0\n"
+    assert DiskQueue(tmp_path, max_bytes=1 << 20).cursor_error is None
 
 
 def test_a_corrupt_record_ends_the_segment_there(tmp_path):

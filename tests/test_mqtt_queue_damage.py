@@ -1,7 +1,7 @@
 """A store-and-forward queue an earlier run left, damaged, through ``cmsensord replay --publish``
 against a real Mosquitto broker (tests/mosquitto.py): a bad byte in the middle of a segment
 costs its record only, the messages after it are sent and their seq numbers are not used
-again."""
+again; an unreadable acknowledgement cursor sends everything kept, saying so."""
 
 from __future__ import annotations
 
@@ -89,5 +89,27 @@ def test_a_bad_byte_mid_segment_costs_its_record_only(tmp_path, earlier, broker)
         assert sent > earlier[1]
         assert sub.wait_for(lambda: len(set(seqs(sub))) >= sent)
         assert sorted(set(seqs(sub))) == [s for s in range(1, sent + 2) if s != lost]
+    finally:
+        sub.close()
+
+
+def test_an_unreadable_acknowledgement_cursor_is_said_and_everything_kept_is_sent(tmp_path, earlier, broker):  # noqa: F811
+    """One warning, counted as an event, says the cursor is unreadable and that what is kept is
+    sent again; the cursor is written again once the broker has acknowledged them."""
+    queue = tmp_path / "q"
+    shutil.copytree(earlier[0], queue)
+    (queue / "acked").write_text("garbage\n")
+    sub = Subscriber(broker.port)
+    try:
+        p = _replay(tmp_path, broker.port, queue, "-v")
+        said = [ln for ln in p.stderr.splitlines() if " mqtt_queue: " in ln]
+        assert said == [f"WARNING mqtt_queue: store-and-forward queue: the acknowledgement cursor {queue / 'acked'} "
+                        f"is unreadable (not a number: 'garbage'): the {earlier[1]} queued message(s) are sent from "
+                        "the oldest kept, some perhaps a second time (delivery is at least once)"], p.stderr
+        assert ", mqtt_queue 1" in p.stderr, p.stderr
+        sent = _all_sent(p, broker.port)
+        assert sub.wait_for(lambda: len(set(seqs(sub))) >= sent)
+        assert sorted(set(seqs(sub))) == list(range(1, sent + 1))
+        assert (queue / "acked").read_text() == f"{sent}\n"
     finally:
         sub.close()

@@ -9,7 +9,8 @@ valid record (the next offset where a length and a CRC check out, with a higher 
 damaged record costs itself only; damaged bytes at the end of a segment are cut off (at the
 end of the newest, a torn record: what a crash while writing leaves). The seq of a damaged
 record is neither sent nor used again; the acknowledged cursor moves over it. Only files
-named ``q-<20 digits>.seg`` are read as segments.
+named ``q-<20 digits>.seg`` are read as segments. An ``acked`` file that cannot be read is
+:attr:`DiskQueue.cursor_error`: everything kept is sent again, from the oldest segment.
 The broker's acknowledgements move the ``acked`` cursor (file ``acked``, written with each sync);
 segments wholly acknowledged are deleted. Beyond ``max_bytes`` the oldest segment is dropped
 and its unsent records counted. Sending reads from the send cursor (:meth:`next_batch`), which a
@@ -165,11 +166,13 @@ class DiskQueue:
         self._acked_ids: set[int] = set()
         self._gaps: list[range] = []    # seqs above the cursor that no record holds (damaged, torn)
         self._cache: tuple[Path | None, int, list[Record]] = (None, 0, [])
-        self.acked = self._read_acked()
-        self._acked_written = self.acked
+        self.acked, self.cursor_error = self._read_acked()
+        self._acked_written = self.acked if self.cursor_error is None else -1    # rewritten at the first sync
         self.next_seq = max(self._open_segments(), self.acked + 1)
         self.send_seq = self.acked + 1
-        self._move_acked(self.acked)            # over the seqs right after it that no record holds
+        # what precedes the oldest segment was acknowledged or dropped: a cursor behind it moves up
+        floor = min(self.segments[0].named, self.segments[0].first) - 1 if self.segments else 0
+        self._move_acked(max(self.acked, floor))
 
     # -- opening ---------------------------------------------------------------------------
     def _unless_waiting(self, err: OSError) -> None:
@@ -177,11 +180,22 @@ class DiskQueue:
         if not (self._wait_for_disk and err.errno in DISK_FAULTS):
             raise err
 
-    def _read_acked(self) -> int:
+    def _read_acked(self) -> tuple[int, str | None]:
+        """The acknowledged cursor (file ``acked``; 0 before there is one) and, when the file
+        cannot be read as one, why (the cursor is then 0: the queue sends from its oldest)."""
         try:
-            return int((self.dir / "acked").read_text().strip() or 0)
-        except (OSError, ValueError):
-            return 0
+            text = (self.dir / "acked").read_text(encoding="ascii").strip()
+        except FileNotFoundError:
+            return 0, None
+        except OSError as err:
+            return 0, err.strerror or str(err)
+        except ValueError:                      # not ASCII
+            return 0, "not a number"
+        if not text:
+            return 0, "empty"
+        if not re.fullmatch(r"[0-9]+", text):
+            return 0, f"not a number: {text[:20]!r}"
+        return int(text), None
 
     def _segment_paths(self) -> list[Path]:
         """The segment files, oldest first."""

@@ -94,7 +94,7 @@ class Publisher:
 
     def _say_how_the_queue_opened(self) -> None:
         """The queue's state at start, as events: damaged records skipped and a torn tail cut
-        off (one line), and what an earlier run left to send."""
+        off (one line), an unreadable acknowledgement cursor, or what an earlier run left to send."""
         q = self.queue
         said = []
         if q.damaged_bytes:
@@ -106,7 +106,16 @@ class Publisher:
             self._event("mqtt_queue", "store-and-forward queue: " + "; ".join(said), logging.WARNING,
                         action="damaged" if q.damaged_bytes else "truncated",
                         bytes=q.damaged_bytes + q.truncated_bytes, count=q.damaged_records)
-        if q.depth:
+        if q.cursor_error is not None:
+            cursor = q.dir / "acked"
+            self._event("mqtt_queue", f"store-and-forward queue: the acknowledgement cursor {cursor} is "
+                        f"unreadable ({q.cursor_error}): " + (
+                            f"the {q.depth} queued message(s) are sent from the oldest kept, some perhaps a "
+                            "second time (delivery is at least once)" if q.depth else
+                            f"nothing is queued and seq numbering starts again at {q.next_seq}"),
+                        logging.WARNING, action="cursor_unreadable", count=q.depth, reason=q.cursor_error,
+                        details={"file": str(cursor)})
+        elif q.depth:
             self._event("mqtt_queue", f"store-and-forward queue: {q.depth} message(s) from an earlier run "
                         "wait for the broker", logging.INFO, action="resumed", count=q.depth)
 
