@@ -1,6 +1,7 @@
 """The store-and-forward queue of the MQTT publisher (cmsensord/publish/disk_queue.py): order,
 acknowledgements, a torn record after a crash, a damaged record mid-segment, the acknowledgement
-cursor unreadable or behind, the bound, a full disk (/dev/full under its file)."""
+cursor unreadable or behind, entries named like segments, the bound, a full disk (/dev/full
+under its file)."""
 
 from __future__ import annotations
 
@@ -151,6 +152,24 @@ def test_an_unreadable_cursor_is_said_and_rewritten(tmp_path, text, why):
     q.close()
     assert (tmp_path / "acked").read_text() == "0\n"
     assert DiskQueue(tmp_path, max_bytes=1 << 20).cursor_error is None
+
+
+def test_entries_named_like_segments_that_are_not_are_left_alone(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 5)
+    q.close()
+    (tmp_path / "q-00000000000000000006.seg").mkdir()          # the name of the next segment
+    os.mkfifo(tmp_path / "q-00000000000000000009.seg")
+    (tmp_path / "q-notes.seg").write_text("mine\n")
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert [(p.name, what) for p, what in q.strays] == [
+        ("q-00000000000000000006.seg", "a directory"),
+        ("q-00000000000000000009.seg", "a special file (FIFO, socket or device)"),
+        ("q-notes.seg", "named unlike its segments (q-<first seq in 20 digits>.seg)")]
+    assert q.append("t", lambda seq: b"{}", False) == 7        # 6: its segment's name is taken
+    assert q.depth == 6 and [r.seq for r in q.next_batch(10)] == [1, 2, 3, 4, 5, 7]
+    q.close()
+    assert (tmp_path / "q-notes.seg").read_text() == "mine\n"
 
 
 def test_a_corrupt_record_ends_the_segment_there(tmp_path):

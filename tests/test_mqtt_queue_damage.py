@@ -1,7 +1,9 @@
 """A store-and-forward queue an earlier run left, damaged, through ``cmsensord replay --publish``
 against a real Mosquitto broker (tests/mosquitto.py): a bad byte in the middle of a segment
 costs its record only, the messages after it are sent and their seq numbers are not used
-again; an unreadable acknowledgement cursor sends everything kept, saying so."""
+again; an unreadable acknowledgement cursor sends everything kept, saying so; an entry named
+like a segment that is not a file is left alone; a queue directory that cannot be used names
+the setting to change."""
 
 from __future__ import annotations
 
@@ -113,3 +115,46 @@ def test_an_unreadable_acknowledgement_cursor_is_said_and_everything_kept_is_sen
         assert (queue / "acked").read_text() == f"{sent}\n"
     finally:
         sub.close()
+
+
+def test_a_directory_named_like_a_segment_is_left_alone(tmp_path, earlier, broker):  # noqa: F811
+    """Said and skipped, not a reason to stop (exit 78: a daemon under systemd is not restarted):
+    the queue's own segments are all it reads."""
+    queue = tmp_path / "q"
+    shutil.copytree(earlier[0], queue)
+    stray = queue / "q-00000000000000000000.seg"
+    stray.mkdir()
+    sub = Subscriber(broker.port)
+    try:
+        p = _replay(tmp_path, broker.port, queue)
+        assert (f"WARNING mqtt_queue: store-and-forward queue: {stray} is a directory, not one of its segment "
+                "files: left alone") in p.stderr.splitlines(), p.stderr
+        sent = _all_sent(p, broker.port)
+        assert sent > earlier[1]
+        assert sub.wait_for(lambda: len(set(seqs(sub))) >= sent)
+        assert sorted(set(seqs(sub))) == list(range(1, sent + 1))
+        assert stray.is_dir()
+    finally:
+        sub.close()
+
+
+@pytest.mark.parametrize("setting", ["mqtt.queue_dir", "output.dir"])
+def test_a_queue_directory_that_is_a_file_names_the_setting_to_change(tmp_path, setting):
+    """Exit 78 with one line: 'not a directory', and ``mqtt.queue_dir`` when that is set (else
+    output.dir or --out, where the queue is)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    queue = tmp_path / "q" if setting == "mqtt.queue_dir" else out / "mqtt-queue"
+    queue.write_text("not a directory\n")
+    cfg = tmp_path / "site.yaml"
+    cfg.write_text(mqtt_yaml(free_port(), *([f"queue_dir: {queue}"] if setting == "mqtt.queue_dir" else [])))
+    p = cmsensord("replay", str(_capture(tmp_path / "cap.bin", 5)), "--config", str(cfg), "--out", str(out),
+                  "--publish")
+    assert p.returncode == 78, p.stderr
+    if setting == "mqtt.queue_dir":
+        want = (f"cmsensord: configuration error: {cfg}: mqtt.queue_dir: {queue}: cannot use the MQTT queue "
+                "directory: not a directory (set mqtt.queue_dir to a directory it can write)")
+    else:
+        want = (f"cmsensord: output error: {queue}: cannot use the MQTT queue directory: not a directory (set "
+                "output.dir or --out to a writable directory)")
+    assert p.stderr.splitlines() == [want], p.stderr

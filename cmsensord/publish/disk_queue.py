@@ -8,8 +8,9 @@ opened, a record that fails its length or CRC check is skipped and reading goes 
 valid record (the next offset where a length and a CRC check out, with a higher seq), so a
 damaged record costs itself only; damaged bytes at the end of a segment are cut off (at the
 end of the newest, a torn record: what a crash while writing leaves). The seq of a damaged
-record is neither sent nor used again; the acknowledged cursor moves over it. Only files
-named ``q-<20 digits>.seg`` are read as segments. An ``acked`` file that cannot be read is
+record is neither sent nor used again; the acknowledged cursor moves over it. Only regular
+files named ``q-<20 digits>.seg`` are segments: another entry so named (a directory) is left
+alone and listed in :attr:`DiskQueue.strays`. An ``acked`` file that cannot be read is
 :attr:`DiskQueue.cursor_error`: everything kept is sent again, from the oldest segment.
 The broker's acknowledgements move the ``acked`` cursor (file ``acked``, written with each sync);
 segments wholly acknowledged are deleted. Beyond ``max_bytes`` the oldest segment is dropped
@@ -30,6 +31,7 @@ import bisect
 import errno
 import os
 import re
+import stat
 import struct
 import time
 import zlib
@@ -66,6 +68,20 @@ class _Segment:
     size: int
     last: int           # seq of its last record (first - 1 when empty)
     named: int          # the seq its name gives (its first record's, unless that was damaged)
+
+
+def _not_a_segment(path: Path) -> str | None:
+    """What ``path`` is when it is not a segment file (a regular file named as the queue names
+    them), else None."""
+    if not _SEGMENT_NAME.fullmatch(path.name):
+        return "named unlike its segments (q-<first seq in 20 digits>.seg)"
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "a broken symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    return None if stat.S_ISREG(mode) else "a special file (FIFO, socket or device)"
 
 
 def _encode(rec: Record) -> bytes:
@@ -159,6 +175,8 @@ class DiskQueue:
         self.truncated_bytes = 0        # a torn tail of the newest segment, cut off at open
         self.damaged_bytes = 0          # other damaged bytes skipped at open (see _open_segments)
         self.damaged_records = 0        # the records they held: seqs missing between valid ones
+        self.strays: list[tuple[Path, str]] = []    # entries named like segments that are not one, and what
+        self._taken: set[int] = set()   # the first seqs of segment names a stray holds
         self.dropped = 0                # records dropped by the bound, since start
         self._fd: int | None = None
         self._dirty = False
@@ -169,6 +187,9 @@ class DiskQueue:
         self.acked, self.cursor_error = self._read_acked()
         self._acked_written = self.acked if self.cursor_error is None else -1    # rewritten at the first sync
         self.next_seq = max(self._open_segments(), self.acked + 1)
+        while self.next_seq in self._taken:     # the first segment's name is a stray's: the seq is skipped
+            self._lose(self.next_seq, self.next_seq + 1, False)
+            self.next_seq += 1
         self.send_seq = self.acked + 1
         # what precedes the oldest segment was acknowledged or dropped: a cursor behind it moves up
         floor = min(self.segments[0].named, self.segments[0].first) - 1 if self.segments else 0
@@ -198,8 +219,18 @@ class DiskQueue:
         return int(text), None
 
     def _segment_paths(self) -> list[Path]:
-        """The segment files, oldest first."""
-        return sorted(p for p in self.dir.glob("q-*.seg") if _SEGMENT_NAME.fullmatch(p.name))
+        """The segment files, oldest first; an entry named like one that is not (a directory, a
+        broken link, a FIFO, a file named otherwise) is left alone and listed in :attr:`strays`."""
+        paths = []
+        for path in sorted(self.dir.glob("q-*.seg")):
+            what = _not_a_segment(path)
+            if what is None:
+                paths.append(path)
+                continue
+            self.strays.append((path, what))
+            if _SEGMENT_NAME.fullmatch(path.name):
+                self._taken.add(int(path.name[2:22]))
+        return paths
 
     def _open_segments(self) -> int:
         """Read the segments, oldest first, and return the next seq. A damaged record is
@@ -266,7 +297,7 @@ class DiskQueue:
         seq = self.next_seq
         data = _encode(Record(seq, topic, payload_of(seq), retain))
         seg = self.segments[-1] if self.segments and self._fd is not None else None
-        if seg is None or seg.size >= self.segment_bytes:
+        if seg is None or (seg.size >= self.segment_bytes and seq not in self._taken):
             seg = self._new_segment(seq)
         written = os.write(self._fd, data)      # type: ignore[arg-type]  # opened by _new_segment
         if written != len(data):                # a short write on a full disk: cut it off again

@@ -93,9 +93,13 @@ class Publisher:
         self._say_how_the_queue_opened()
 
     def _say_how_the_queue_opened(self) -> None:
-        """The queue's state at start, as events: damaged records skipped and a torn tail cut
-        off (one line), an unreadable acknowledgement cursor, or what an earlier run left to send."""
+        """The queue's state at start, as events: entries left alone, damaged records skipped
+        and a torn tail cut off (one line), an unreadable acknowledgement cursor, or what an
+        earlier run left to send."""
         q = self.queue
+        for path, what in q.strays:
+            self._event("mqtt_queue", f"store-and-forward queue: {path} is {what}, not one of its segment "
+                        "files: left alone", logging.WARNING, action="skipped", details={"file": str(path)})
         said = []
         if q.damaged_bytes:
             said.append(f"skipped {q.damaged_bytes} damaged byte(s) in its segments ({q.damaged_records} "
