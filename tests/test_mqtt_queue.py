@@ -1,5 +1,7 @@
 """The store-and-forward queue of the MQTT publisher (cmsensord/publish/disk_queue.py): order,
-acknowledgements, a torn record after a crash, the bound, a full disk (/dev/full under its file)."""
+acknowledgements, a torn record after a crash, a damaged record mid-segment, the acknowledgement
+cursor unreadable or behind, entries named like segments, the bound, a full disk (/dev/full
+under its file)."""
 
 from __future__ import annotations
 
@@ -44,10 +46,130 @@ def test_a_torn_record_is_cut_off_and_numbering_goes_on_after_a_restart(tmp_path
     whole = seg.read_bytes()
     seg.write_bytes(whole + whole[:40])         # a crash in the middle of the next record
     q = DiskQueue(tmp_path, max_bytes=1 << 20)
-    assert q.truncated_bytes == 40 and seg.stat().st_size == len(whole)
-    assert q.acked == 1 and [r.seq for r in q.next_batch(10)] == [2, 3, 4, 5]
+    assert q.truncated_bytes == 40 and q.damaged_bytes == 0 and seg.stat().st_size == len(whole)
+    assert q.acked == 1 and q.depth == 4 and [r.seq for r in q.next_batch(10)] == [2, 3, 4, 5]
+    assert q.append("t", lambda seq: b"{}", False) == 7     # 6 was the torn record's: maybe sent
+    for seq in (2, 3, 4, 5, 7):
+        q.ack(seq)
+    assert q.acked == 7 and q.depth == 0
+    q.close()
+
+
+def _flip(path, at: int) -> None:
+    data = bytearray(path.read_bytes())
+    data[at] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("where", [0, 5, 10, 25, -1], ids=["length", "crc", "seq", "topic", "payload"])
+def test_a_damaged_record_mid_segment_costs_itself_only(tmp_path, where):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 10)
+    q.close()
+    seg = sorted(tmp_path.glob("q-*.seg"))[-1]
+    size = seg.stat().st_size // 10             # the 10 records are of one size
+    _flip(seg, 3 * size + (where % size))       # in the 4th record
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert (q.damaged_bytes, q.damaged_records, q.truncated_bytes) == (size, 1, 0)
+    assert q.depth == 9 and [r.seq for r in q.next_batch(20)] == [1, 2, 3, 5, 6, 7, 8, 9, 10]
+    assert q.append("t", lambda seq: b"{}", False) == 11
+    for seq in (1, 2, 3, 5, 6, 7, 8, 9, 10):   # the cursor moves over the damaged record
+        q.ack(seq)
+    assert q.acked == 10 and q.depth == 1
+    q.close()
+
+
+def test_damage_in_acknowledged_records_changes_no_count(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 10)
+    for seq in range(1, 11):
+        q.ack(seq)
+    q.close()
+    seg = sorted(tmp_path.glob("q-*.seg"))[-1]
+    _flip(seg, seg.stat().st_size // 2)
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.damaged_records == 1 and q.acked == 10 and q.depth == 0 and not q.segments
+    assert q.append("t", lambda seq: b"{}", False) == 11 and q.depth == 1
+    q.close()
+
+
+def test_the_bound_counts_only_the_records_it_drops(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=1000)
+    fill(q, 30)
+    q.close()
+    _flip(sorted(tmp_path.glob("q-*.seg"))[0], 200)             # the 2nd record
+    q = DiskQueue(tmp_path, max_bytes=3000, segment_bytes=1000)
+    assert q.damaged_records == 1 and q.depth == 29
+    fill(q, 10)
+    assert q.dropped > 0 and q.dropped + q.depth == 29 + 10
+    q.close()
+
+
+def test_zeros_over_records_mid_segment_are_skipped(tmp_path):
+    """A run of zeros, as a power cut can leave, over the 4th and 5th records and into the 6th."""
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 10)
+    q.close()
+    seg = sorted(tmp_path.glob("q-*.seg"))[-1]
+    data, size = seg.read_bytes(), seg.stat().st_size // 10
+    seg.write_bytes(data[:3 * size] + bytes(2 * size + 30) + data[5 * size + 30:])
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert (q.damaged_bytes, q.damaged_records) == (3 * size, 3)
+    assert [r.seq for r in q.next_batch(20)] == [1, 2, 3, 7, 8, 9, 10]
+    q.close()
+
+
+def test_a_cursor_behind_the_oldest_segment_moves_up_to_it(tmp_path):
+    """A kill -9 after acknowledged segments were deleted and before the cursor was saved: the
+    records before the oldest segment are not counted as queued, and acknowledgements move the
+    cursor on."""
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=1000)
+    fill(q, 30)
+    for seq in range(1, 21):
+        q.ack(seq)
+    oldest = q.segments[0].first
+    q.close()
+    (tmp_path / "acked").write_text("3\n")
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=1000)
+    assert q.cursor_error is None and q.acked == oldest - 1 and q.depth == 30 - q.acked
+    for seq in range(oldest, 31):
+        q.ack(seq)
+    assert q.acked == 30 and q.depth == 0
+    q.close()
+
+
+@pytest.mark.parametrize(("text", "why"), [("garbage\n", "not a number: 'garbage'"), ("", "empty"),
+                                           ("-4\n", "not a number: '-4'")])
+def test_an_unreadable_cursor_is_said_and_rewritten(tmp_path, text, why):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 5)
+    q.ack(1)
+    q.close()
+    (tmp_path / "acked").write_text(text)
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.cursor_error == why and q.acked == 0 and q.depth == 5      # from the oldest kept
     assert q.append("t", lambda seq: b"{}", False) == 6
     q.close()
+    assert (tmp_path / "acked").read_text() == "0\n"
+    assert DiskQueue(tmp_path, max_bytes=1 << 20).cursor_error is None
+
+
+def test_entries_named_like_segments_that_are_not_are_left_alone(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 5)
+    q.close()
+    (tmp_path / "q-00000000000000000006.seg").mkdir()          # the name of the next segment
+    os.mkfifo(tmp_path / "q-00000000000000000009.seg")
+    (tmp_path / "q-notes.seg").write_text("mine\n")
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert [(p.name, what) for p, what in q.strays] == [
+        ("q-00000000000000000006.seg", "a directory"),
+        ("q-00000000000000000009.seg", "a special file (FIFO, socket or device)"),
+        ("q-notes.seg", "named unlike its segments (q-<first seq in 20 digits>.seg)")]
+    assert q.append("t", lambda seq: b"{}", False) == 7        # 6: its segment's name is taken
+    assert q.depth == 6 and [r.seq for r in q.next_batch(10)] == [1, 2, 3, 4, 5, 7]
+    q.close()
+    assert (tmp_path / "q-notes.seg").read_text() == "mine\n"
 
 
 def test_a_corrupt_record_ends_the_segment_there(tmp_path):

@@ -3,8 +3,15 @@
 Append-only segment files ``q-<first seq>.seg`` hold records
 ``<u32 body length><u32 CRC-32 of body>`` + body ``<u64 seq><u8 retain><u16 topic length>
 topic payload``. Appends reach the OS at once and are fsync'd every ``fsync_s`` by
-:meth:`DiskQueue.sync`, so a kill -9 (or power loss) loses at most that much; a torn record at
-the end of a segment fails its length or CRC check and is cut off when the queue is opened.
+:meth:`DiskQueue.sync`, so a kill -9 (or power loss) loses at most that much. When the queue is
+opened, a record that fails its length or CRC check is skipped and reading goes on at the next
+valid record (the next offset where a length and a CRC check out, with a higher seq), so a
+damaged record costs itself only; damaged bytes at the end of a segment are cut off (at the
+end of the newest, a torn record: what a crash while writing leaves). The seq of a damaged
+record is neither sent nor used again; the acknowledged cursor moves over it. Only regular
+files named ``q-<20 digits>.seg`` are segments: another entry so named (a directory) is left
+alone and listed in :attr:`DiskQueue.strays`. An ``acked`` file that cannot be read is
+:attr:`DiskQueue.cursor_error`: everything kept is sent again, from the oldest segment.
 The broker's acknowledgements move the ``acked`` cursor (file ``acked``, written with each sync);
 segments wholly acknowledged are deleted. Beyond ``max_bytes`` the oldest segment is dropped
 and its unsent records counted. Sending reads from the send cursor (:meth:`next_batch`), which a
@@ -20,8 +27,11 @@ stays for the next start.
 
 from __future__ import annotations
 
+import bisect
 import errno
 import os
+import re
+import stat
 import struct
 import time
 import zlib
@@ -32,8 +42,11 @@ from cmsensord.sinks.mcap_file import fsync_dir, make_dirs
 
 _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
 _BODY = struct.Struct("<QBH")         # seq, retain, topic length
-#: no record body is larger than this (a torn length field reads as garbage beyond it)
+#: every record body is smaller than this (a torn length field reads as garbage beyond it)
 MAX_RECORD = 16 << 20
+#: the name of a segment: ``q-<the seq of its first record, 20 digits>.seg``
+_SEGMENT_NAME = re.compile(r"q-([0-9]{20})\.seg")
+_NONZERO = re.compile(rb"[^\0]")
 #: errno values of a full, failing or read-only file system (``wait_for_disk``: no error at start)
 DISK_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
 
@@ -54,6 +67,21 @@ class _Segment:
     path: Path
     size: int
     last: int           # seq of its last record (first - 1 when empty)
+    named: int          # the seq its name gives (its first record's, unless that was damaged)
+
+
+def _not_a_segment(path: Path) -> str | None:
+    """What ``path`` is when it is not a segment file (a regular file named as the queue names
+    them), else None."""
+    if not _SEGMENT_NAME.fullmatch(path.name):
+        return "named unlike its segments (q-<first seq in 20 digits>.seg)"
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "a broken symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    return None if stat.S_ISREG(mode) else "a special file (FIFO, socket or device)"
 
 
 def _encode(rec: Record) -> bytes:
@@ -62,22 +90,69 @@ def _encode(rec: Record) -> bytes:
     return _HEAD.pack(len(body), zlib.crc32(body)) + body
 
 
-def _read_records(data: bytes) -> tuple[list[tuple[int, Record]], int]:
-    """The valid records of a segment's bytes with their offsets, and where the valid part ends."""
-    out, pos = [], 0
-    while pos + _HEAD.size <= len(data):
-        length, crc = _HEAD.unpack_from(data, pos)
-        end = pos + _HEAD.size + length
-        if length < _BODY.size or length > MAX_RECORD or end > len(data):
-            break
-        body = data[pos + _HEAD.size:end]
-        if zlib.crc32(body) != crc:
-            break
-        seq, retain, tlen = _BODY.unpack_from(body)
-        topic = body[_BODY.size:_BODY.size + tlen].decode(errors="replace")
-        out.append((pos, Record(seq, topic, body[_BODY.size + tlen:], bool(retain))))
-        pos = end
-    return out, pos
+def _record_at(data: bytes, pos: int) -> tuple[Record, int] | None:
+    """The record whose header is at ``pos`` and where it ends, or None when its length or
+    CRC check fails there."""
+    if pos + _HEAD.size > len(data):
+        return None
+    length, crc = _HEAD.unpack_from(data, pos)
+    end = pos + _HEAD.size + length
+    if length < _BODY.size or length >= MAX_RECORD or end > len(data):
+        return None
+    body = data[pos + _HEAD.size:end]
+    if zlib.crc32(body) != crc:
+        return None
+    seq, retain, tlen = _BODY.unpack_from(body)
+    topic = body[_BODY.size:_BODY.size + tlen].decode(errors="replace")
+    return Record(seq, topic, body[_BODY.size + tlen:], bool(retain)), end
+
+
+def _resync(data: bytes, start: int, after: int) -> int:
+    """The offset of the first valid record at or after ``start`` whose seq is above ``after``
+    (past a damaged one), else the end of ``data``. A record's length is below
+    :data:`MAX_RECORD` and above 0, so its fourth byte is 0 and one of the three before is
+    not: only those offsets are tried (a run of zeros, as a power cut can leave, is skipped)."""
+    zero = data.find(b"\0", start + 3)
+    while zero != -1:
+        if data[zero - 3:zero] == b"\0\0\0":
+            more = _NONZERO.search(data, zero)
+            zero = data.find(b"\0", more.start()) if more else -1
+            continue
+        found = _record_at(data, zero - 3)
+        if found is not None and found[0].seq > after:
+            return zero - 3
+        zero = data.find(b"\0", zero + 1)
+    return len(data)
+
+
+@dataclass
+class _Scan:
+    """A segment's bytes read: its valid records with their offsets, its damaged spans
+    ``(start, end)`` (a record failing its length or CRC check up to the next valid record,
+    or to the end of the data), and where its last valid record ends."""
+
+    records: list[tuple[int, Record]]
+    damaged: list[tuple[int, int]]
+    valid: int
+
+
+def _read_records(data: bytes, after: int = 0) -> _Scan:
+    """The records of a segment's bytes whose first seq is above ``after``: a damaged record
+    is skipped, reading on from the next valid record (its length and CRC right, its seq
+    above the last one read)."""
+    out: list[tuple[int, Record]] = []
+    damaged: list[tuple[int, int]] = []
+    pos = valid = 0
+    while pos < len(data):
+        found = _record_at(data, pos)
+        if found is None:
+            end = _resync(data, pos + 1, out[-1][1].seq if out else after)
+            damaged.append((pos, end))
+            pos = end
+            continue
+        out.append((pos, found[0]))
+        pos = valid = found[1]
+    return _Scan(out, damaged, valid)
 
 
 class DiskQueue:
@@ -97,19 +172,28 @@ class DiskQueue:
         self._new_name = False
         self.segment_bytes = segment_bytes or max(4096, min(1 << 20, max_bytes // 8))
         self.segments: list[_Segment] = []
-        self.truncated_bytes = 0        # torn tails cut off at open
+        self.truncated_bytes = 0        # a torn tail of the newest segment, cut off at open
+        self.damaged_bytes = 0          # other damaged bytes skipped at open (see _open_segments)
+        self.damaged_records = 0        # the records they held: seqs missing between valid ones
+        self.strays: list[tuple[Path, str]] = []    # entries named like segments that are not one, and what
+        self._taken: set[int] = set()   # the first seqs of segment names a stray holds
         self.dropped = 0                # records dropped by the bound, since start
         self._fd: int | None = None
         self._dirty = False
         self._synced_at = time.monotonic()
         self._acked_ids: set[int] = set()
+        self._gaps: list[range] = []    # seqs above the cursor that no record holds (damaged, torn)
         self._cache: tuple[Path | None, int, list[Record]] = (None, 0, [])
-        self.acked = self._read_acked()
-        self._acked_written = self.acked
-        self._open_segments()
-        last = self.segments[-1].last if self.segments else 0
-        self.next_seq = max(last, self.acked) + 1
+        self.acked, self.cursor_error = self._read_acked()
+        self._acked_written = self.acked if self.cursor_error is None else -1    # rewritten at the first sync
+        self.next_seq = max(self._open_segments(), self.acked + 1)
+        while self.next_seq in self._taken:     # the first segment's name is a stray's: the seq is skipped
+            self._lose(self.next_seq, self.next_seq + 1, False)
+            self.next_seq += 1
         self.send_seq = self.acked + 1
+        # what precedes the oldest segment was acknowledged or dropped: a cursor behind it moves up
+        floor = min(self.segments[0].named, self.segments[0].first) - 1 if self.segments else 0
+        self._move_acked(max(self.acked, floor))
 
     # -- opening ---------------------------------------------------------------------------
     def _unless_waiting(self, err: OSError) -> None:
@@ -117,30 +201,94 @@ class DiskQueue:
         if not (self._wait_for_disk and err.errno in DISK_FAULTS):
             raise err
 
-    def _read_acked(self) -> int:
+    def _read_acked(self) -> tuple[int, str | None]:
+        """The acknowledged cursor (file ``acked``; 0 before there is one) and, when the file
+        cannot be read as one, why (the cursor is then 0: the queue sends from its oldest)."""
         try:
-            return int((self.dir / "acked").read_text().strip() or 0)
-        except (OSError, ValueError):
-            return 0
+            text = (self.dir / "acked").read_text(encoding="ascii").strip()
+        except FileNotFoundError:
+            return 0, None
+        except OSError as err:
+            return 0, err.strerror or str(err)
+        except ValueError:                      # not ASCII
+            return 0, "not a number"
+        if not text:
+            return 0, "empty"
+        if not re.fullmatch(r"[0-9]+", text):
+            return 0, f"not a number: {text[:20]!r}"
+        return int(text), None
 
-    def _open_segments(self) -> None:
+    def _segment_paths(self) -> list[Path]:
+        """The segment files, oldest first; an entry named like one that is not (a directory, a
+        broken link, a FIFO, a file named otherwise) is left alone and listed in :attr:`strays`."""
+        paths = []
         for path in sorted(self.dir.glob("q-*.seg")):
-            data = path.read_bytes()
-            records, valid = _read_records(data)
-            if valid < len(data):               # a torn or corrupt tail: cut it off
-                self.truncated_bytes += len(data) - valid
-                try:                            # else never appended to (a new segment is) nor read
-                    with open(path, "r+b") as f:
-                        f.truncate(valid)
-                except OSError as err:
-                    self._unless_waiting(err)
-            if not records or records[-1][1].seq <= self.acked:
-                try:
-                    path.unlink()
-                except OSError as err:
-                    self._unless_waiting(err)
+            what = _not_a_segment(path)
+            if what is None:
+                paths.append(path)
                 continue
-            self.segments.append(_Segment(records[0][1].seq, path, valid, records[-1][1].seq))
+            self.strays.append((path, what))
+            if _SEGMENT_NAME.fullmatch(path.name):
+                self._taken.add(int(path.name[2:22]))
+        return paths
+
+    def _open_segments(self) -> int:
+        """Read the segments, oldest first, and return the next seq. A damaged record is
+        skipped, the valid ones after it kept: its bytes count in :attr:`damaged_bytes` and the
+        seqs missing where it was in :attr:`damaged_records`. Damaged bytes after the last valid
+        record are cut off: at the end of the newest segment a torn record (what a crash while
+        writing leaves; :attr:`truncated_bytes`), whose seq is not used again. Seqs no record
+        holds are never sent; a segment with nothing unacknowledged is deleted."""
+        paths = self._segment_paths()
+        expect, hurt = 0, False                 # the next seq; damage since the last valid record
+        for i, path in enumerate(paths):
+            named = int(path.name[2:22])
+            if expect and named > expect:       # the end of the segment before was damaged
+                self._lose(expect, named, hurt)
+                hurt = False
+            expect = max(expect, named)
+            data = path.read_bytes()
+            scan = _read_records(data, named - 1)
+            ends = {end for _, end in scan.damaged}
+            for offset, rec in scan.records:
+                hurt = hurt or offset in ends
+                self._lose(expect, rec.seq, hurt)
+                hurt, expect = False, max(expect, rec.seq + 1)
+            tail = len(data) - scan.valid
+            damaged = sum(end - start for start, end in scan.damaged)
+            newest = i == len(paths) - 1
+            self.truncated_bytes += tail if newest else 0
+            self.damaged_bytes += damaged - (tail if newest else 0)
+            hurt = hurt or tail > 0
+            self._keep(path, scan, named, tail)
+        if hurt:                                # a torn record's seq: it may have been sent
+            self._lose(expect, expect + 1, False)
+            expect += 1
+        return expect or 1
+
+    def _lose(self, start: int, stop: int, damaged: bool) -> None:
+        """Seqs ``start`` to ``stop`` - 1 are held by no record; ``damaged``: by damaged ones."""
+        if stop > start:
+            self._gaps.append(range(start, stop))
+            self.damaged_records += (stop - start) * damaged
+
+    def _keep(self, path: Path, scan: _Scan, named: int, tail: int) -> None:
+        """A segment read: its damaged tail cut off, then deleted if nothing in it is unacknowledged,
+        else kept."""
+        if tail:
+            try:                                # else never appended to (a new segment is) nor read
+                with open(path, "r+b") as f:
+                    f.truncate(scan.valid)
+            except OSError as err:
+                self._unless_waiting(err)
+        records = scan.records
+        if not records or records[-1][1].seq <= self.acked:
+            try:
+                path.unlink()
+            except OSError as err:
+                self._unless_waiting(err)
+            return
+        self.segments.append(_Segment(records[0][1].seq, path, scan.valid, records[-1][1].seq, named))
 
     # -- writing ---------------------------------------------------------------------------
     def append(self, topic: str, payload_of, retain: bool) -> int:
@@ -149,7 +297,7 @@ class DiskQueue:
         seq = self.next_seq
         data = _encode(Record(seq, topic, payload_of(seq), retain))
         seg = self.segments[-1] if self.segments and self._fd is not None else None
-        if seg is None or seg.size >= self.segment_bytes:
+        if seg is None or (seg.size >= self.segment_bytes and seq not in self._taken):
             seg = self._new_segment(seq)
         written = os.write(self._fd, data)      # type: ignore[arg-type]  # opened by _new_segment
         if written != len(data):                # a short write on a full disk: cut it off again
@@ -168,7 +316,7 @@ class DiskQueue:
         if not self.dir.is_dir():               # not made at start (wait_for_disk), or removed since
             self._new_dirs += make_dirs(self.dir)
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_CLOEXEC", 0), 0o600)
-        seg = _Segment(first, path, os.fstat(self._fd).st_size, first - 1)
+        seg = _Segment(first, path, os.fstat(self._fd).st_size, first - 1, first)
         self.segments.append(seg)
         self._new_name = True               # its directory entry is made durable at the next sync
         return seg
@@ -184,8 +332,7 @@ class DiskQueue:
         """Drop the oldest segments while the queue is larger than max_bytes (never the open one)."""
         while len(self.segments) > 1 and self.size_bytes > self.max_bytes:
             seg = self.segments.pop(0)
-            unacked = seg.last - max(seg.first, self.acked + 1) + 1
-            self.dropped += max(0, unacked)
+            self.dropped += max(0, seg.last - self.acked - self._missing(seg.last))
             self._move_acked(max(self.acked, seg.last))
             seg.path.unlink(missing_ok=True)
 
@@ -225,7 +372,11 @@ class DiskQueue:
     @property
     def depth(self) -> int:
         """Messages not yet acknowledged."""
-        return self.next_seq - 1 - self.acked
+        return self.next_seq - 1 - self.acked - self._missing(self.next_seq)
+
+    def _missing(self, last: int) -> int:
+        """How many seqs above the cursor and up to ``last`` no record holds."""
+        return sum(len(gap[:max(0, last - gap.start + 1)]) for gap in self._gaps)
 
     def rewind(self) -> None:
         """Send again from the first unacknowledged record (after a reconnection)."""
@@ -240,7 +391,7 @@ class DiskQueue:
             if seg.last < self.send_seq:
                 continue
             records = self._records(seg)
-            start = max(0, self.send_seq - seg.first)      # seqs are contiguous in a segment
+            start = bisect.bisect_left(records, self.send_seq, key=lambda r: r.seq)
             for rec in records[start:start + n - len(out)]:
                 out.append(rec)
                 self.send_seq = rec.seq + 1
@@ -255,9 +406,9 @@ class DiskQueue:
         if done < seg.size:
             with open(seg.path, "rb") as f:
                 f.seek(done)
-                more, valid = _read_records(f.read(seg.size - done))
-            records.extend(r for _, r in more)
-            done += valid
+                scan = _read_records(f.read(seg.size - done), records[-1].seq if records else seg.named - 1)
+            records.extend(r for _, r in scan.records)
+            done += scan.valid
         self._cache = (path, done, records)
         return records
 
@@ -267,15 +418,23 @@ class DiskQueue:
         if seq <= self.acked:
             return
         self._acked_ids.add(seq)
-        acked = self.acked
+        acked = self._over_gaps(self.acked)
         while acked + 1 in self._acked_ids:
-            acked += 1
-            self._acked_ids.discard(acked)
+            acked = self._over_gaps(acked + 1)
         self._move_acked(acked)
 
+    def _over_gaps(self, acked: int) -> int:
+        """``acked`` moved over the seqs right after it that no record holds (none is sent)."""
+        for gap in self._gaps:
+            if gap.start > acked + 1:
+                break
+            acked = max(acked, gap.stop - 1)
+        return acked
+
     def _move_acked(self, acked: int) -> None:
-        self.acked = acked
+        self.acked = acked = self._over_gaps(acked)
         self._acked_ids = {s for s in self._acked_ids if s > acked}
+        self._gaps = [gap[max(0, acked + 1 - gap.start):] for gap in self._gaps if gap.stop - 1 > acked]
         self.send_seq = max(self.send_seq, acked + 1)
         while self.segments and self.segments[0].last <= acked and (
                 len(self.segments) > 1 or self._fd is None):

@@ -90,14 +90,38 @@ class Publisher:
         self._worst: WorstAlarms | None = None    # each channel's worst alarm, for discovery
         if cfg.discovery and "alarms" in cfg.publish and alarm_rules:
             self._worst = WorstAlarms(channels)
-        if self.queue.truncated_bytes:
-            self._event("mqtt_queue", f"store-and-forward queue: cut {self.queue.truncated_bytes} "
-                        "byte(s) of a torn record at its end (a crash while writing)",
-                        logging.WARNING, action="truncated", bytes=self.queue.truncated_bytes)
-        if self.queue.depth:
-            self._event("mqtt_queue", f"store-and-forward queue: {self.queue.depth} message(s) "
-                        "from an earlier run wait for the broker", logging.INFO, action="resumed",
-                        count=self.queue.depth)
+        self._say_how_the_queue_opened()
+
+    def _say_how_the_queue_opened(self) -> None:
+        """The queue's state at start, as events: entries left alone, damaged records skipped
+        and a torn tail cut off (one line), an unreadable acknowledgement cursor, or what an
+        earlier run left to send."""
+        q = self.queue
+        for path, what in q.strays:
+            self._event("mqtt_queue", f"store-and-forward queue: {path} is {what}, not one of its segment "
+                        "files: left alone", logging.WARNING, action="skipped", details={"file": str(path)})
+        said = []
+        if q.damaged_bytes:
+            said.append(f"skipped {q.damaged_bytes} damaged byte(s) in its segments ({q.damaged_records} "
+                        "message(s) lost); the messages after them are kept")
+        if q.truncated_bytes:
+            said.append(f"cut {q.truncated_bytes} byte(s) of a torn record at its end (a crash while writing)")
+        if said:
+            self._event("mqtt_queue", "store-and-forward queue: " + "; ".join(said), logging.WARNING,
+                        action="damaged" if q.damaged_bytes else "truncated",
+                        bytes=q.damaged_bytes + q.truncated_bytes, count=q.damaged_records)
+        if q.cursor_error is not None:
+            cursor = q.dir / "acked"
+            self._event("mqtt_queue", f"store-and-forward queue: the acknowledgement cursor {cursor} is "
+                        f"unreadable ({q.cursor_error}): " + (
+                            f"the {q.depth} queued message(s) are sent from the oldest kept, some perhaps a "
+                            "second time (delivery is at least once)" if q.depth else
+                            f"nothing is queued and seq numbering starts again at {q.next_seq}"),
+                        logging.WARNING, action="cursor_unreadable", count=q.depth, reason=q.cursor_error,
+                        details={"file": str(cursor)})
+        elif q.depth:
+            self._event("mqtt_queue", f"store-and-forward queue: {q.depth} message(s) from an earlier run "
+                        "wait for the broker", logging.INFO, action="resumed", count=q.depth)
 
     # -- the caller's side ---------------------------------------------------------------------
     def start(self) -> None:

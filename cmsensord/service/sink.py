@@ -7,10 +7,11 @@ import secrets
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TextIO
 
 from cmsensord.config import Config
-from cmsensord.errors import SinkError
+from cmsensord.errors import CmsensordError, ConfigError, SinkError
 from cmsensord.monitor.events import EventLog
 from cmsensord.service.instance import hold_output_dir
 from cmsensord.sinks.mcap_file import log_files
@@ -79,12 +80,25 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
                               wait_when_full=command != "the daemon", wait_for_disk=command == "the daemon")
     except OSError as exc:
         sink.close()
-        raise SinkError(f"{queue_dir}: cannot use the MQTT queue directory: {exc.strerror or exc}") from None
+        raise _queue_dir_error(cfg, queue_dir, exc) from None
     publisher.start()
     if command != "the daemon":
         log.info("mqtt: %s publishes to %s:%d as client_id %s under %s/", command, cfg.mqtt.host,
                  cfg.mqtt.port, cfg.mqtt.client, cfg.mqtt.prefix)
     return TeeSink(sink, publisher)  # type: ignore[return-value]  # a RotatingSink to its callers
+
+
+def _queue_dir_error(cfg: Config, queue_dir: str, exc: OSError) -> CmsensordError:
+    """The error of a queue directory that cannot be used, naming the entry at fault: a
+    ConfigError of ``mqtt.queue_dir`` when that is set, else a SinkError (the directory is in
+    the output directory: output.dir or --out)."""
+    why = "not a directory" if isinstance(exc, FileExistsError) else exc.strerror or str(exc)
+    if exc.filename is not None and Path(exc.filename) != Path(queue_dir):
+        why = f"{exc.filename}: {why}"
+    reason = f"{queue_dir}: cannot use the MQTT queue directory: {why}"
+    if cfg.mqtt is not None and cfg.mqtt.queue_dir is not None:
+        return ConfigError("<code>", "mqtt.queue_dir", f"{reason} (set mqtt.queue_dir to a directory it can write)")
+    return SinkError(reason)
 
 
 def _say_own_retention(cfg: Config, command: str) -> None:
