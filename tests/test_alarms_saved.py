@@ -93,6 +93,12 @@ def test_a_latch_of_a_rule_that_no_longer_latches_is_dropped_and_said():
     ({"vel/ch0": {"rule": "vel"}}, "alarm 'vel/ch0': indicator missing or not a str"),
     ({"vel/ch0": {"rule": "vel", "indicator": "x", "latch": True, "levels": {}, "acknowledged": False,
                   "level": "red", "live": "normal", "latched": "normal"}}, "alarm 'vel/ch0': level is not one of"),
+    ({"vel/ch0": {"rule": "vel", "indicator": "x", "latch": True, "levels": {}, "acknowledged": False,
+                  "level": "alert", "live": "normal", "latched": "alert", "since_ns": 10**30}},
+     "alarm 'vel/ch0': since_ns 1000000000000000000000000000000 is out of range"),
+    ({"vel/ch0": {"rule": "vel", "indicator": "x", "latch": True, "levels": {}, "acknowledged": True,
+                  "level": "alert", "live": "alert", "latched": "normal", "acked_ns": -1}},
+     "alarm 'vel/ch0': acked_ns -1 is out of range"),
 ])
 def test_records_that_are_not_saved_alarms_are_refused(bad, why):
     with pytest.raises(ValueError, match=why):
