@@ -2,7 +2,7 @@
 types: a learned baseline that is no number or of no indicator a rule could watch, a rule on the
 indicator records or the orders turned off, a level above what its indicator reaches and an
 ``anomaly_akf`` past the bank are each a one-line configuration error (exit 78) of `cmsensord
-replay`."""
+replay`; rules an RMS-mode board leaves blind are one warning."""
 
 from __future__ import annotations
 
@@ -126,3 +126,33 @@ def test_an_anomaly_akf_past_the_bank_is_refused(tmp_path, captures):
         "trigger never fires (got 5)")
     p = replay(tmp_path, captures["raw"], "capture: {triggers: [anomaly_onset], anomaly_akf: 10}\n")
     assert p.returncode == 0, p.stderr
+
+
+RMS_RULES = """\
+bearings: [{name: de, channel: ch0, elements: 8, ball_diameter: 17.462, pitch_diameter: 72.5}]
+orders: {components: [{name: 1x, order: 1, alarm_rms: 1}]}
+alarms:
+  rules:
+    - {name: k, indicator: kurtosis, alert: 5}
+    - {name: a, indicator: accel_rms, alert: 5}
+    - {name: s, indicator: severity_index, alert: 0.5}
+    - {name: o, indicator: de.bpfo, alert: 5}
+"""
+RMS_WARNING = ("WARNING config: the board is in RMS mode, whose indicator records carry accel_rms only and no shaft "
+               "speed (RAW mode gives the rest): alarm rule(s) k (kurtosis), o (de.bpfo), order_1x (order.1x) never "
+               "fire")
+
+
+def test_rules_an_rms_mode_board_leaves_blind_are_one_warning(tmp_path, captures):
+    """Rules on indicators the RMS path does not give were evaluated never, and nothing said so."""
+    p = replay(tmp_path, captures["rms"], RMS_RULES)
+    assert p.returncode == 0, p.stderr
+    assert [ln for ln in p.stderr.splitlines() if ln.startswith("WARNING config")] == [RMS_WARNING]
+    p = replay(tmp_path, captures["raw"], RMS_RULES)                      # a RAW board gives them all
+    assert p.returncode == 0 and "WARNING config" not in p.stderr, p.stderr
+    p = replay(tmp_path, captures["rms"], "alarms: {operating: {source: speed, running_above: 600}, rules: "
+               "[{name: a, indicator: accel_rms, alert: 5}]}\n")
+    assert [ln for ln in p.stderr.splitlines() if ln.startswith("WARNING config")] == [
+        "WARNING config: the board is in RMS mode, whose indicator records carry accel_rms only and no shaft speed "
+        "(RAW mode gives the rest): alarms.operating.source speed gets no shaft speed: the machine is never seen "
+        "running, no rule fires"]
