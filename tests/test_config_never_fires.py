@@ -2,7 +2,8 @@
 types: a learned baseline that is no number or of no indicator a rule could watch, a rule on the
 indicator records or the orders turned off, a level above what its indicator reaches and an
 ``anomaly_akf`` past the bank are each a one-line configuration error (exit 78) of `cmsensord
-replay`; rules an RMS-mode board leaves blind are one warning."""
+replay`; rules an RMS-mode board leaves blind are one warning; `cmsensord ack` given both an alarm
+and --all says so."""
 
 from __future__ import annotations
 
@@ -156,3 +157,11 @@ def test_rules_an_rms_mode_board_leaves_blind_are_one_warning(tmp_path, captures
         "WARNING config: the board is in RMS mode, whose indicator records carry accel_rms only and no shaft speed "
         "(RAW mode gives the rest): alarms.operating.source speed gets no shaft speed: the machine is never seen "
         "running, no rule fires"]
+
+
+def test_ack_given_a_name_and_all_says_not_both(tmp_path):
+    p = run_module("cmsensord", "ack", "--all", "lat/ch0", "--socket", str(tmp_path / "none.sock"))
+    assert (p.returncode, p.stdout, p.stderr) == (
+        2, "", "cmsensord: ack: give an alarm name or --all, not both (see cmsensord ack --help)\n")
+    p = run_module("cmsensord", "ack", "--socket", str(tmp_path / "none.sock"))
+    assert (p.returncode, p.stderr) == (2, "cmsensord: ack: give an alarm name or --all (see cmsensord ack --help)\n")
