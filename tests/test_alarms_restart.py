@@ -315,8 +315,8 @@ def run_healthy(tmp_path: Path, config: str, ok=lambda r: "value" in r) -> tuple
 
 
 def test_a_stamp_out_of_range_in_the_state_file_is_one_warning_and_the_daemon_runs_on(tmp_path):
-    """since_ns 10**30 (or acked_ns -10**20) crashed the daemon with an OverflowError at every
-    restart, the file left in place."""
+    """since_ns 10**30 (or acked_ns -10**20): guards against an OverflowError ending the daemon at
+    every restart, the file left in place."""
     (tmp_path / "logs").mkdir()
     state = tmp_path / "logs" / "cmsensord-alarms.json"
     for key, stamp in (("since_ns", 10**30), ("acked_ns", -10**20)):
@@ -339,8 +339,8 @@ BASELINE = ("alarms:\n  rules:\n    - {name: base, indicator: accel_rms, alert_x
 
 def test_an_alert_of_a_baseline_level_is_judged_afresh_after_a_new_baseline(tmp_path):
     """The alert above 2 x 0.1 at the stop; restarted with the baseline 1.0 learned since (the
-    healthy board's 0.69 m/s² is below 2 x 1.0): not the same episode, said, and normal.  Before,
-    only the multiplier was compared: restored as the same alert, no word of the new level."""
+    healthy board's 0.69 m/s² is below 2 x 1.0): not the same episode, said, and normal (guards
+    against the multiplier alone compared: the same alert restored, no word of the new level)."""
     state = tmp_path / "logs" / "cmsensord-alarms.json"
     before, _ = run_healthy(tmp_path, BASELINE % "0.1", lambda r: r["level"] == "alert")
     saved = json.loads(state.read_text())["alarms"]["base/ch0"]

@@ -52,7 +52,7 @@ BASELINE_RULE = "alarms:\n  rules: [{name: r, indicator: accel_rms, alert_x_base
     (".nan", "value: expected a finite number (got nan)"),
 ])
 def test_a_baseline_that_is_no_number_is_refused(tmp_path, captures, value, reason):
-    """A string baseline gave a TypeError traceback at the first indicator record."""
+    """Guards against a string baseline accepted and a TypeError traceback at the first indicator record."""
     line = refused(tmp_path, captures["raw"], BASELINE_RULE + f"  baselines: [{{channel: ch0, indicator: accel_rms, "
                    f"value: {value}}}]\n")
     assert line == ERROR + "b.yaml: alarms.baselines[0]." + reason
@@ -86,7 +86,7 @@ def test_a_baseline_of_no_indicator_a_rule_could_watch_is_refused(tmp_path, capt
      "the machine would never be seen running", "'speed'"),
 ])
 def test_a_rule_on_what_the_configuration_turns_off_is_refused(tmp_path, captures, config, reason, got):
-    """Accepted without a word before, and never fired."""
+    """Guards against such a rule accepted without a word and never firing."""
     assert refused(tmp_path, captures["raw"], config) == ERROR + f"b.yaml: {reason} (got {got})"
 
 
@@ -116,7 +116,7 @@ def test_the_top_levels_themselves_are_accepted(tmp_path, captures):
 
 
 def test_an_anomaly_akf_past_the_bank_is_refused(tmp_path, captures):
-    """anomaly_akf: 11 of a bank of 10 was accepted, and the trigger never fired."""
+    """Guards against anomaly_akf: 11 of a bank of 10 accepted, a trigger that never fires."""
     capture = "capture: {triggers: [anomaly_onset], anomaly_akf: 11}\n"
     assert refused(tmp_path, captures["raw"], capture) == ERROR + (
         "b.yaml: capture.anomaly_akf: must be <= monitor.n = 10: the bank has no AKF_11, so the anomaly_onset "
@@ -145,7 +145,7 @@ RMS_WARNING = ("WARNING config: the board is in RMS mode, whose indicator record
 
 
 def test_rules_an_rms_mode_board_leaves_blind_are_one_warning(tmp_path, captures):
-    """Rules on indicators the RMS path does not give were evaluated never, and nothing said so."""
+    """Guards against rules on indicators the RMS path does not give never evaluated, and nothing said."""
     p = replay(tmp_path, captures["rms"], RMS_RULES)
     assert p.returncode == 0, p.stderr
     assert [ln for ln in p.stderr.splitlines() if ln.startswith("WARNING config")] == [RMS_WARNING]
