@@ -75,6 +75,7 @@ PROCESS_MODULES = frozenset({
     "test_log_times.py",
     "test_replay_log_times.py",
     "test_outage_stamps.py",
+    "test_config_never_fires.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

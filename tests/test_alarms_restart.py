@@ -299,3 +299,75 @@ def test_a_latched_alarm_acknowledged_while_active_clears_when_the_value_falls_a
     # the healthy board's severity may pass through the alert band on its way down (eased to alert)
     assert after in (["alarm_clear"], ["alarm_alert", "alarm_clear"]), err[-3000:]
     assert json.loads((tmp_path / "logs" / "cmsensord-alarms.json").read_text())["alarms"] == {}
+
+
+def run_healthy(tmp_path: Path, config: str, ok=lambda r: "value" in r) -> tuple[dict, str]:
+    """A daemon with ``config`` on the healthy board until its first alarm row is ``ok``: that row
+    and its stderr (it exited 0, no traceback)."""
+    link = tmp_path / "ttyBOARD"
+    board = start_board("--scenario", "healthy", "--speed", "20", "--link", str(link))
+    try:
+        d = start_daemon(tmp_path, link, config=config)
+        row = wait_row(tmp_path, ok)
+    finally:
+        err = stop(d)
+        board.terminate()
+        board.wait(timeout=5)
+    assert d.returncode == 0 and "Traceback" not in err, err[-3000:]
+    return row, err
+
+
+def test_a_stamp_out_of_range_in_the_state_file_is_one_warning_and_the_daemon_runs_on(tmp_path):
+    """since_ns 10**30 (or acked_ns -10**20): guards against an OverflowError ending the daemon at
+    every restart, the file left in place."""
+    (tmp_path / "logs").mkdir()
+    state = tmp_path / "logs" / "cmsensord-alarms.json"
+    for key, stamp in (("since_ns", 10**30), ("acked_ns", -10**20)):
+        rec = {**saved_latch("sev", "alert", 1_700_000_000 * S, alert=0.3, danger=0.6), key: stamp}
+        if key == "acked_ns":
+            rec.update(latched="normal", live="alert", acknowledged=True)
+        held = json.dumps({"format": "cmsensord-alarms", "version": 1, "alarms": {"sev/ch0": rec}})
+        state.write_text(held)
+        row, err = run_healthy(tmp_path, LATCHED)
+        assert lines(err, "alarm_state_error") == [
+            f"WARNING alarm_state_error: {state}: alarm 'sev/ch0': {key} {stamp} is out of range (a stamp in ns, "
+            "1970 to 2262): kept as cmsensord-alarms.json.bad; no latch or acknowledgement is restored"]
+        assert lines(err, "alarm_restored") == [] and row["level"] == "normal"
+        assert (tmp_path / "logs" / "cmsensord-alarms.json.bad").read_text() == held
+
+
+BASELINE = ("alarms:\n  rules:\n    - {name: base, indicator: accel_rms, alert_x_baseline: 2}\n"
+            "  baselines: [{channel: ch0, indicator: accel_rms, value: %s}]\n")
+
+
+def test_an_alert_of_a_baseline_level_is_judged_afresh_after_a_new_baseline(tmp_path):
+    """The alert above 2 x 0.1 at the stop; restarted with the baseline 1.0 learned since (the
+    healthy board's 0.69 m/s² is below 2 x 1.0): not the same episode, said, and normal (guards
+    against the multiplier alone compared: the same alert restored, no word of the new level)."""
+    state = tmp_path / "logs" / "cmsensord-alarms.json"
+    before, _ = run_healthy(tmp_path, BASELINE % "0.1", lambda r: r["level"] == "alert")
+    saved = json.loads(state.read_text())["alarms"]["base/ch0"]
+    row, err = run_healthy(tmp_path, BASELINE % "1.0", lambda r: r.get("alert_level") == 2.0)
+    assert lines(err, "alarm_not_restored") == [
+        f"WARNING alarm_not_restored: base/ch0: alert since {when(before['since']['sec'])} (not acknowledged) not "
+        f"restored: its levels changed since (baseline on ch0 0.1 -> 1.0): judged afresh against them, from {state}"]
+    assert lines(err, "alarm_restored") == [] and lines(err, "alarm_alert") == []
+    assert (row["level"], "restored" in row) == ("normal", False)
+    assert saved["levels"] == {"alert_x_baseline": 2.0, "baselines": {"ch0": 0.1}}
+
+
+def test_a_baseline_alert_saved_without_its_baseline_is_restored_as_the_same_episode(tmp_path):
+    """A state file whose records do not hold the baselines their levels were resolved against is
+    taken as resolved against the present ones: the alert is restored, the rule confirms it, and
+    no alarm_alert is raised anew."""
+    (tmp_path / "logs").mkdir()
+    state = tmp_path / "logs" / "cmsensord-alarms.json"
+    since = (int(time.time()) - 600) * S
+    state.write_text(json.dumps({"format": "cmsensord-alarms", "version": 1, "alarms": {"base/ch0": {
+        "rule": "base", "indicator": "accel_rms", "latch": False, "levels": {"alert_x_baseline": 2.0},
+        "level": "alert", "live": "alert", "latched": "normal", "acknowledged": False, "since_ns": since}}}))
+    row, err = run_healthy(tmp_path, BASELINE % "0.1", lambda r: r["live"] == "alert")
+    assert lines(err, "alarm_restored") == [
+        f"WARNING alarm_restored: base/ch0: alert since {when(since // S)} (not acknowledged), from {state}"]
+    assert lines(err, "alarm_alert") == [] and row["since"]["sec"] == since // S
+    assert json.loads(state.read_text())["alarms"]["base/ch0"]["levels"]["baselines"] == {"ch0": 0.1}

@@ -93,7 +93,29 @@ def test_a_latch_of_a_rule_that_no_longer_latches_is_dropped_and_said():
     ({"vel/ch0": {"rule": "vel"}}, "alarm 'vel/ch0': indicator missing or not a str"),
     ({"vel/ch0": {"rule": "vel", "indicator": "x", "latch": True, "levels": {}, "acknowledged": False,
                   "level": "red", "live": "normal", "latched": "normal"}}, "alarm 'vel/ch0': level is not one of"),
+    ({"vel/ch0": {"rule": "vel", "indicator": "x", "latch": True, "levels": {}, "acknowledged": False,
+                  "level": "alert", "live": "normal", "latched": "alert", "since_ns": 10**30}},
+     "alarm 'vel/ch0': since_ns 1000000000000000000000000000000 is out of range"),
+    ({"vel/ch0": {"rule": "vel", "indicator": "x", "latch": True, "levels": {}, "acknowledged": True,
+                  "level": "alert", "live": "alert", "latched": "normal", "acked_ns": -1}},
+     "alarm 'vel/ch0': acked_ns -1 is out of range"),
 ])
 def test_records_that_are_not_saved_alarms_are_refused(bad, why):
     with pytest.raises(ValueError, match=why):
         check(bad)
+
+
+def test_other_zone_boundaries_are_a_change_of_zone_levels():
+    """alert_zone C is 2.8 mm/s for group 2 rigid, 4.5 for group 2 flexible: the alarm active
+    at the stop is judged afresh against the other boundaries, and said."""
+    rule = {"name": "iso", "indicator": "velocity_rms_mm_s", "alert_zone": "C"}
+    m = manager([rule])
+    feed(m, [3.0, 3.0])
+    cfg = config_from_dict({"alarms": {"rules": [rule]}})
+    m2 = AlarmManager(cfg.alarms, ("ch0",), (2.3, 4.5, 7.1))
+    said = resume(m2, check(snapshot(m)))
+    assert [(r.restored, r.message.split(" not restored: ")[1]) for r in said] == [
+        (False, "its levels changed since (zone boundaries 1.4/2.8/4.5 -> 2.3/4.5/7.1 mm/s): judged afresh against "
+                "them")]
+    m3 = manager([rule])                                    # the same boundaries: the same episode
+    assert [r.restored for r in resume(m3, check(snapshot(m)))] == [True]

@@ -3,18 +3,23 @@
 :func:`snapshot` gives, per alarm showing a level or holding a latch, what an operator
 relies on: the shown, live and latched level, since when the shown level holds, whether it
 is acknowledged (when, by whom), and the rule it was judged by (its name, indicator, latch
-and level settings).  :func:`check` refuses a record that is not such a one (ValueError).
+and level settings, with what those levels are resolved against: the learned baseline of
+each channel for levels given as k x a baseline, the zone boundaries for levels at a zone
+boundary).  :func:`check` refuses a record that is not such a one (ValueError), a stamp
+outside 1970..2262 (:data:`MAX_STAMP_NS`) included.
 
 :func:`resume` puts saved records back into a new manager.  A saved alarm is restored when
 the manager has an alarm of that name on the same rule and indicator, and the rule still
 latches if the saved alarm was latched: its latch (level and since when), its
 acknowledgement, and its live level as a restored level that the rule confirms or drops
 (:mod:`.state`): the same episode is not raised again, an acknowledged one stays
-acknowledged.  When the rule's level settings changed since, a latch is restored (the levels then
-were exceeded: someone still has to look) but the live level is judged afresh; a saved
-alarm with no latch is then not restored.  Anything not restored is said: one
-:class:`Resumed` record per saved alarm, restored or not.  Times are stamps [ns] (of the
-live stream: the wall clock).
+acknowledged.  When the rule's levels changed since (its settings, or the baseline or zone
+boundaries they are resolved against: a new calibration), a latch is restored (the levels
+then were exceeded: someone still has to look) but the live level is judged afresh; a saved
+alarm with no latch is then not restored.  A record without the baselines or zone
+boundaries (written by a daemon that did not save them) is taken as resolved against the
+present ones.  Anything not restored is said: one :class:`Resumed` record per saved alarm,
+restored or not.  Times are stamps [ns] (of the live stream: the wall clock).
 """
 
 from __future__ import annotations
@@ -27,11 +32,13 @@ from typing import Any
 
 from cmsensord.config.alarms import AlarmRuleConfig
 
-from .manager import AlarmManager
+from .manager import Alarm, AlarmManager
 from .state import LEVELS
 
-__all__ = ["Resumed", "snapshot", "check", "resume", "level_settings"]
+__all__ = ["Resumed", "snapshot", "check", "resume", "level_settings", "resolved_against", "MAX_STAMP_NS"]
 
+#: the latest stamp a record may hold: the ns an int64 holds (2262-04-11)
+MAX_STAMP_NS = 2**63 - 1
 _LEVEL_KEYS = ("alert", "danger", "alert_zone", "danger_zone", "alert_x_baseline", "danger_x_baseline")
 
 
@@ -45,12 +52,26 @@ class Resumed:
     message: str
 
 
-def level_settings(rule: AlarmRuleConfig) -> dict[str, Any]:
-    """The rule's level settings as JSON gives them back (those given, and its speed bands)."""
+def level_settings(rule: AlarmRuleConfig, resolved: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The rule's level settings as JSON gives them back (those given, and its speed bands), with
+    ``resolved`` (:func:`resolved_against`)."""
     out: dict[str, Any] = {k: getattr(rule, k) for k in _LEVEL_KEYS if getattr(rule, k) is not None}
     if rule.bands:
         out["bands"] = [{k: v for k, v in dataclasses.asdict(b).items() if v is not None} for b in rule.bands]
-    return json.loads(json.dumps(out))
+    return json.loads(json.dumps({**out, **(resolved or {})}))
+
+
+def resolved_against(mgr: AlarmManager, a: Alarm) -> dict[str, Any]:
+    """What the levels of ``a``'s rule are resolved against: ``baselines``, the learned baseline
+    of its indicator on each of its channels (None: not learned), when a level is given as k x a
+    baseline; ``zone_boundaries`` [mm/s], when one is at a zone boundary."""
+    srcs = (a.rule, *a.rule.bands)
+    out: dict[str, Any] = {}
+    if any(getattr(src, k) is not None for src in srcs for k in ("alert_x_baseline", "danger_x_baseline")):
+        out["baselines"] = {ch: mgr.cfg.baseline(ch, a.rule.indicator) for ch in a.channels}
+    if any(getattr(src, k) is not None for src in srcs for k in ("alert_zone", "danger_zone")):
+        out["zone_boundaries"] = [float(z) for z in mgr.zones]
+    return out
 
 
 def snapshot(mgr: AlarmManager) -> dict[str, dict[str, Any]]:
@@ -62,7 +83,7 @@ def snapshot(mgr: AlarmManager) -> dict[str, dict[str, Any]]:
         if s.level == 0 and s.latched == 0:
             continue
         rec: dict[str, Any] = {"rule": a.rule.name, "indicator": a.rule.indicator, "latch": a.rule.latch,
-                               "levels": level_settings(a.rule), "level": LEVELS[s.level],
+                               "levels": level_settings(a.rule, resolved_against(mgr, a)), "level": LEVELS[s.level],
                                "live": LEVELS[max(s.live, s.restored)], "latched": LEVELS[s.latched],
                                "acknowledged": s.acknowledged}
         for key, value in (("since_ns", s.changed_ns), ("acked_ns", s.acked_ns), ("acked_by", s.acked_by)):
@@ -90,6 +111,9 @@ def check(alarms: Any) -> dict[str, dict[str, Any]]:
         for key, kind in (("since_ns", int), ("acked_ns", int), ("acked_by", str)):
             if key in rec and (not isinstance(rec[key], kind) or isinstance(rec[key], bool)):
                 raise ValueError(f"alarm {name!r}: {key} is not a {kind.__name__}")
+        for key in ("since_ns", "acked_ns"):
+            if key in rec and not 0 <= rec[key] <= MAX_STAMP_NS:
+                raise ValueError(f"alarm {name!r}: {key} {rec[key]} is out of range (a stamp in ns, 1970 to 2262)")
     return alarms
 
 
@@ -113,8 +137,25 @@ def describe(name: str, rec: dict[str, Any]) -> str:
 
 
 def _changed(old: dict[str, Any], new: dict[str, Any]) -> str:
+    """How the levels ``new`` differ from the saved ``old`` (empty: not at all): the settings, and
+    what they are resolved against where both hold it."""
     keys = [k for k in (*_LEVEL_KEYS, "bands") if old.get(k) != new.get(k)]
-    return ", ".join(f"{k} {json.dumps(old.get(k))} -> {json.dumps(new.get(k))}" for k in keys)
+    out = [f"{k} {json.dumps(old.get(k))} -> {json.dumps(new.get(k))}" for k in keys]
+    was, now = old.get("baselines"), new.get("baselines")
+    if isinstance(was, dict) and isinstance(now, dict):
+        out += [f"baseline on {ch} {_number(was.get(ch))} -> {_number(now.get(ch))}"
+                for ch in dict.fromkeys([*was, *now]) if was.get(ch) != now.get(ch)]
+    was, now = old.get("zone_boundaries"), new.get("zone_boundaries")
+    if was is not None and now is not None and was != now:
+        out.append(f"zone boundaries {_number(was)} -> {_number(now)} mm/s")
+    return ", ".join(out)
+
+
+def _number(x: Any) -> str:
+    """A saved baseline (none: not learned) or zone boundaries (B/C/D) as the messages show them."""
+    if isinstance(x, list):
+        return "/".join(_number(v) for v in x)
+    return "none" if x is None else json.dumps(x)
 
 
 def _refused(mgr: AlarmManager, name: str, rec: dict[str, Any]) -> str | None:
@@ -143,7 +184,8 @@ def resume(mgr: AlarmManager, saved: dict[str, dict[str, Any]]) -> list[Resumed]
         a = mgr.alarms.get(name)
         said = describe(name, rec)
         why = _refused(mgr, name, rec)
-        changed = _changed(rec["levels"], level_settings(a.rule)) if a is not None and why is None else ""
+        changed = (_changed(rec["levels"], level_settings(a.rule, resolved_against(mgr, a)))
+                   if a is not None and why is None else "")
         if changed and rec["latched"] == "normal":
             why = f"its levels changed since ({changed}): judged afresh against them"
         if a is None or why is not None:

@@ -4,9 +4,16 @@ A rule watches a value under its stable name (:mod:`cmsensord.monitor.alarms` re
 an indicator record's :data:`RECORD_VALUES` (``zone`` as 0-3), a configured bearing's lines
 (``<bearing>.bpfo``, ... and their ``_2x``: :data:`BEARING_LINES`), a configured band
 (``band.<name>``), the severity index (``severity_index``) or a configured order component's
-RMS (``order.<component>``).  A rule naming anything else would never see a value, so it
-never fires: :func:`rules_see_indicators` refuses it with the names it could mean (and
-``alarms.operating.level_indicator``, which an indicator record must carry, likewise).
+RMS (``order.<component>``).  The indicator records are written only with ``indicators.enabled``,
+the orders only with ``orders.enabled``.  A rule naming anything else would never see a value,
+so it never fires: :func:`rules_see_indicators` refuses it with the names it could mean (and
+``alarms.operating.level_indicator``, which an indicator record must carry, likewise; and
+``source: speed``, whose speed comes with the indicator records).  A learned baseline
+(``alarms.baselines``) must name an indicator a rule could watch under the configured bearings,
+bands and components, else no rule can use it.
+
+An RMS-mode board's indicator records carry ``accel_rms`` only (:data:`RMS_MODE_VALUES`, beside
+the severity index); :func:`raw_only_rules` names the rules that then never fire.
 """
 
 from __future__ import annotations
@@ -15,22 +22,31 @@ from typing import Any
 
 from .validation import did_you_mean
 
-__all__ = ["RECORD_VALUES", "BEARING_LINES", "indicator_names", "unknown_indicator", "rules_see_indicators"]
+__all__ = ["RECORD_VALUES", "BEARING_LINES", "RMS_MODE_VALUES", "indicator_names", "unknown_indicator",
+           "rules_see_indicators", "raw_only_rules"]
 
 #: the scalar values of a /cm/<ch>/indicators record a rule can watch (zone A-D as 0-3)
 RECORD_VALUES = ("velocity_rms_mm_s", "accel_rms", "accel_peak", "crest_factor", "kurtosis",
                  "envelope_rms", "zone")
 #: a bearing's lines: each defect frequency and its second harmonic
 BEARING_LINES = tuple(f"{d}{h}" for d in ("ftf", "bpfo", "bpfi", "bsf") for h in ("", "_2x"))
+#: the values a rule can watch on an RMS-mode board: its records' overall RMS, the severity index
+RMS_MODE_VALUES = ("accel_rms", "severity_index")
 
 
-def indicator_names(cfg: Any, *, records_only: bool = False) -> list[str]:
-    """Every name a rule of ``cfg`` can watch (``records_only``: those of the indicator records)."""
-    names = list(RECORD_VALUES)
-    names += [f"{b.name}.{line}" for b in cfg.bearings for line in BEARING_LINES]
-    names += [f"band.{b.name}" for b in cfg.indicators.bands]
+def indicator_names(cfg: Any, *, records_only: bool = False, written: bool = True) -> list[str]:
+    """Every name a rule of ``cfg`` can watch (``records_only``: those of the indicator records);
+    ``written``: only those the chain writes, none of the records with ``indicators.enabled``
+    false, no order with ``orders.enabled`` false."""
+    names = []
+    if cfg.indicators.enabled or not written:
+        names += list(RECORD_VALUES)
+        names += [f"{b.name}.{line}" for b in cfg.bearings for line in BEARING_LINES]
+        names += [f"band.{b.name}" for b in cfg.indicators.bands]
     if not records_only:
-        names += ["severity_index"] + [f"order.{c.name}" for c in cfg.orders.components]
+        names += ["severity_index"]
+        if cfg.orders.enabled or not written:
+            names += [f"order.{c.name}" for c in cfg.orders.components]
     return names
 
 
@@ -58,15 +74,19 @@ def _what_is_missing(name: str, cfg: Any) -> str | None:
     return f"{line!r} is not a line of bearing {bearing} (lines: {', '.join(BEARING_LINES)});"
 
 
-def unknown_indicator(name: str, cfg: Any, *, records_only: bool = False,
+def unknown_indicator(name: str, cfg: Any, *, records_only: bool = False, written: bool = True,
                       effect: str = "a rule on it never fires") -> str | None:
     """Why ``name`` is no indicator a rule of ``cfg`` can watch (``records_only``: no indicator
-    record carries), with the closest valid name or the valid ones, and ``effect``; None when it
-    is one."""
-    known = indicator_names(cfg, records_only=records_only)
+    record carries; ``written``: as :func:`indicator_names`), with the closest valid name or the
+    valid ones, or the setting that turns it off, and ``effect``; None when it is one."""
+    known = indicator_names(cfg, records_only=records_only, written=written)
     if name in known:
         return None
-    hint = did_you_mean(name, known)
+    if name in indicator_names(cfg, records_only=records_only, written=False):
+        off = ("orders.enabled is false: no order is tracked" if name.startswith("order.")
+               else "indicators.enabled is false: no indicator record is written")
+        return f"{off}, {effect}"
+    hint = did_you_mean(name, indicator_names(cfg, records_only=records_only, written=False))
     missing = None if records_only else _what_is_missing(name, cfg)
     if missing is not None:
         return f"{missing} {hint}" if missing.endswith(";") and hint else missing.rstrip(";")
@@ -77,16 +97,35 @@ def unknown_indicator(name: str, cfg: Any, *, records_only: bool = False,
 
 
 def rules_see_indicators(cfg: Any) -> tuple[str, str, Any] | None:
-    """Config rule: every alarm rule's indicator (and ``alarms.operating.level_indicator``) is one
-    that the chain writes under this configuration."""
+    """Config rule: every alarm rule's indicator (and ``alarms.operating.level_indicator``, the
+    speed of ``source: speed``) is one that the chain writes under this configuration; every
+    learned baseline's, one a rule could watch."""
     for i, r in enumerate(cfg.alarms.rules):
         why = unknown_indicator(r.indicator, cfg)
         if why is not None:
             return f"alarms.rules[{i}].indicator", why, r.indicator
+    if not cfg.orders.enabled:
+        for i, c in enumerate(cfg.orders.components):
+            if c.alarm_rms is not None:
+                return (f"orders.components[{i}].alarm_rms", "orders.enabled is false: no order is tracked, "
+                        "this order alarm never fires", c.alarm_rms)
     op = cfg.alarms.operating
     if op.source == "level":
         why = unknown_indicator(op.level_indicator, cfg, records_only=True,
                                 effect="the machine would never be seen running")
         if why is not None:
             return "alarms.operating.level_indicator", why, op.level_indicator
+    if op.source == "speed" and not cfg.indicators.enabled:
+        return ("alarms.operating.source", "the shaft speed comes with the indicator records, and "
+                "indicators.enabled is false: the machine would never be seen running", op.source)
+    for i, b in enumerate(cfg.alarms.baselines):
+        why = unknown_indicator(b.indicator, cfg, written=False, effect="no rule can use this baseline")
+        if why is not None:
+            return f"alarms.baselines[{i}].indicator", why, b.indicator
     return None
+
+
+def raw_only_rules(rules: Any) -> list[str]:
+    """``<rule> (<indicator>)`` of each of ``rules`` whose indicator an RMS-mode board does not
+    give (:data:`RMS_MODE_VALUES`): such a rule never fires there."""
+    return [f"{r.name} ({r.indicator})" for r in rules if r.indicator not in RMS_MODE_VALUES]

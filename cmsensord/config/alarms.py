@@ -79,6 +79,25 @@ def _levels_rise(obj: Any) -> tuple[str, str, Any] | None:
     return None
 
 
+#: indicators whose values have a top, what it is, and the absolute levels above it that never fire
+_TOPS = {"severity_index": (1.0, "the severity index is 0 to 1"), "zone": (3.0, "zone is 0-3 for zones A-D")}
+
+
+def _levels_reachable(obj: Any) -> tuple[str, str, Any] | None:
+    """Rule: an absolute level of an indicator with a top (:data:`_TOPS`) is at most that top (in
+    the rule and in each of its bands): a higher one is never reached."""
+    if obj.indicator not in _TOPS:
+        return None
+    top, why = _TOPS[obj.indicator]
+    for where, src in (("", obj), *((f"bands[{j}].", b) for j, b in enumerate(obj.bands))):
+        for key in ("alert", "danger"):
+            value = getattr(src, key)
+            if value is not None and value > top:
+                return (f"{where}{key}", f"must be <= {top:g} ({why}): a level above it is never reached",
+                        value)
+    return None
+
+
 def _zone_needs_velocity(obj: Any) -> tuple[str, str, Any] | None:
     for key in ("alert_zone", "danger_zone"):
         if getattr(obj, key) is not None and obj.indicator != "velocity_rms_mm_s":
@@ -139,7 +158,8 @@ class AlarmRuleConfig:
                         "exceed the level", ge=1, le=8)
     bands: tuple[SpeedBandConfig, ...] = field(default=(), metadata={"help": "level sets per speed band"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True), _levels_rise, _zone_needs_velocity, _vote_fits)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_levels(True), _levels_rise, _levels_reachable, _zone_needs_velocity,
+                                          _vote_fits)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -181,6 +201,9 @@ class BaselineConfig:
     channel: str = setting(dataclasses.MISSING, "channel name", **_NAME)
     indicator: str = setting(dataclasses.MISSING, "indicator name", **_INDICATOR)
     value: float = setting(dataclasses.MISSING, "its healthy value [the indicator's unit]", ge=0)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 def _unique_rules(obj: Any) -> tuple[str, str, Any] | None:

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 from .validation import Rule, setting, validate
 
-__all__ = ["CaptureConfig", "TRIGGER_KINDS", "OPERATING_STATES", "capture_sees_operating"]
+__all__ = ["CaptureConfig", "TRIGGER_KINDS", "OPERATING_STATES", "capture_sees_operating", "capture_akf_in_bank"]
 
 #: event kinds that can trigger a capture (the alarm manager's kinds included), and ``manual``
 #: (only ``cmsensord capture-now``: it keeps the ring without any event triggering)
@@ -71,4 +71,20 @@ def capture_sees_operating(cfg: Any) -> tuple[str, str, Any] | None:
                                                        or not cfg.alarms.enabled):
         return ("capture.triggers", "operating_state needs alarms.operating.source speed or level "
                 "(and alarms.enabled)", "operating_state")
+    return None
+
+
+def capture_akf_in_bank(cfg: Any) -> tuple[str, str, Any] | None:
+    """Config rule: with an ``anomaly_onset`` trigger, ``anomaly_akf`` names an AKF of the bank
+    (at most ``monitor.n``, and each channel's ``n``); AKF_n of a larger n is never flagged, so
+    the trigger would never fire.  Without that trigger the setting is not used."""
+    k = cfg.capture.anomaly_akf
+    if "anomaly_onset" not in cfg.capture.triggers or not k:
+        return None
+    never = f"the bank has no AKF_{k}, so the anomaly_onset trigger never fires"
+    if k > cfg.monitor.n:
+        return "capture.anomaly_akf", f"must be <= monitor.n = {cfg.monitor.n}: {never}", k
+    for i, ch in enumerate(cfg.channels):
+        if k > ch.monitor.n:
+            return "capture.anomaly_akf", f"must be <= channels[{i}].n = {ch.monitor.n}: {never}", k
     return None

@@ -48,13 +48,13 @@ from typing import Any, Protocol
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
 from cmsensord.alarms.saved import ack_saved, resume, saved_rows, shown, snapshot
 from cmsensord.config import Config
-from cmsensord.config.alarm_indicators import RECORD_VALUES
+from cmsensord.config.alarm_indicators import RECORD_VALUES, RMS_MODE_VALUES, raw_only_rules
 from cmsensord.config.alarms import AlarmRuleConfig
 from cmsensord.dsp.indicators.iso_zones import boundaries
 from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 
-__all__ = ["Alarms", "indicator_values", "unknown_values", "order_rules"]
+__all__ = ["Alarms", "indicator_values", "unknown_values", "order_rules", "blind_in_rms_mode"]
 
 log = logging.getLogger("cmsensord")
 
@@ -111,6 +111,28 @@ def order_rules(cfg: Config) -> tuple[AlarmRuleConfig, ...]:
                                        on_delay_s=o.alarm_on_delay_s, off_delay_s=o.alarm_off_delay_s,
                                        deadband_pct=round(100.0 * (1.0 - o.alarm_clear), 9)))
     return tuple(out)
+
+
+def blind_in_rms_mode(cfg: Config) -> str | None:
+    """What never fires on an RMS-mode board, whose indicator records carry ``accel_rms`` only and
+    no shaft speed (beside them the severity index: :data:`RMS_MODE_VALUES`): the rules on any
+    other indicator, and every rule when the operating state is taken from the shaft speed or from
+    another indicator's level; None when nothing is so (or ``alarms.enabled`` is false)."""
+    if not cfg.alarms.enabled:
+        return None
+    never = []
+    rules = raw_only_rules(cfg.alarms.rules + order_rules(cfg))
+    if rules:
+        never.append(f"alarm rule(s) {', '.join(rules)} never fire")
+    op = cfg.alarms.operating
+    if op.source == "speed" or (op.source == "level" and op.level_indicator not in RMS_MODE_VALUES):
+        what = "shaft speed" if op.source == "speed" else f"level of {op.level_indicator}"
+        never.append(f"alarms.operating.source {op.source} gets no {what}: the machine is never seen "
+                     "running, no rule fires")
+    if not never:
+        return None
+    return ("the board is in RMS mode, whose indicator records carry accel_rms only and no shaft speed (RAW "
+            "mode gives the rest): " + "; ".join(never))
 
 
 def has_alarm_rules(cfg: Config) -> bool:

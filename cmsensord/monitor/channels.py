@@ -8,7 +8,10 @@ start), and a ``config`` event says what the board sends.  The
 channels come from the configuration, or from the board's first data frame's C
 when the configuration lists none (``auto_channels``); configured channels the
 board does not send are reported (a warning: their rules and bearings see no value)
-and left out.  With the first data, the severity chain (and the microphone estimator)
+and left out.  A board in RMS mode leaves the alarms on any indicator but ``accel_rms`` and
+the severity index blind (and those of an operating state from the shaft speed): one
+``config`` warning names them (:func:`~cmsensord.monitor.alarms.blind_in_rms_mode`), once a
+run.  With the first data, the severity chain (and the microphone estimator)
 of the usable channels is made.  Then the channels' names are known: an alarm rule or a bearing naming none of them is a
 :class:`~cmsensord.errors.ConfigError` (:mod:`cmsensord.config.channel_refs`).
 
@@ -43,6 +46,7 @@ from collections.abc import Callable, Sequence
 
 from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
 from cmsensord.config.channel_refs import check_channel_refs
+from cmsensord.monitor.alarms import blind_in_rms_mode
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
@@ -92,6 +96,7 @@ class ChannelSetup:
         self.severity: SeverityChain | None = None
         self.microphones: Microphones | None = None
         self._no_channels = False
+        self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
@@ -166,6 +171,10 @@ class ChannelSetup:
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}"
                       + (f", tacho of {st.tacho_ppr} pulse(s) per revolution" if st.tacho_inputs else ""),
                       self.clock.stamp_ns(f.t0_unwrapped))
+        blind = blind_in_rms_mode(self.cfg) if st.mode == MODE_RMS and not self._rms_told else None
+        if blind is not None:
+            self._rms_told = True
+            self.log.emit("config", None, blind, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
 
     def _odd(self, n: int) -> bool:
         """Whether data frames of ``n`` channels are odd: not the board's count, nor announced."""

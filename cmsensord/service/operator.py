@@ -64,7 +64,8 @@ def _ask(args: argparse.Namespace, body: dict) -> dict | None:
 
 def run_ack(args: argparse.Namespace) -> int:
     if bool(args.alarm) == bool(args.all):
-        print("cmsensord: ack: give an alarm name or --all (see cmsensord ack --help)", file=sys.stderr)
+        both = ", not both" if args.all else ""
+        print(f"cmsensord: ack: give an alarm name or --all{both} (see cmsensord ack --help)", file=sys.stderr)
         return 2
     answer = _ask(args, {"cmd": "ack", "alarm": None if args.all else args.alarm})
     if answer is None:
