@@ -80,7 +80,7 @@ class FrameQueue:
     last is in: the loop names the next one once it has handled that block), but one naming the
     block the reader said it expects next (``expect``): the reader then sleeps until that block
     is due, and a naming that tells it nothing new does not wake it (one wake-up of the reader
-    per /orders block less at 1x, issue 13).
+    per /orders block less at 1x).
     """
 
     def __init__(self, maxlen: int):
