@@ -35,7 +35,8 @@ from cmsensord.config.alarms import AlarmRuleConfig
 from .manager import Alarm, AlarmManager
 from .state import LEVELS
 
-__all__ = ["Resumed", "snapshot", "check", "resume", "level_settings", "resolved_against", "MAX_STAMP_NS"]
+__all__ = ["Resumed", "snapshot", "check", "resume", "level_settings", "resolved_against", "MAX_STAMP_NS",
+           "latch_or_ack_changed"]
 
 #: the latest stamp a record may hold: the ns an int64 holds (2262-04-11)
 MAX_STAMP_NS = 2**63 - 1
@@ -91,6 +92,21 @@ def snapshot(mgr: AlarmManager) -> dict[str, dict[str, Any]]:
                 rec[key] = value
         out[a.id] = rec
     return out
+
+
+#: what a saved alarm keeps that its next values cannot give back: the latch and the acknowledgement
+_LASTING = (("latched", "normal"), ("acknowledged", False), ("acked_ns", None), ("acked_by", None))
+
+
+def latch_or_ack_changed(old: dict[str, dict[str, Any]], new: dict[str, dict[str, Any]]) -> bool:
+    """True when an alarm's latch or acknowledgement differs between two snapshots (an alarm
+    absent from one counts as normal, not latched, not acknowledged); False when only levels
+    that the next values judge again changed."""
+    for name in old.keys() | new.keys():
+        a, b = old.get(name, {}), new.get(name, {})
+        if any(a.get(k, d) != b.get(k, d) for k, d in _LASTING):
+            return True
+    return False
 
 
 def check(alarms: Any) -> dict[str, dict[str, Any]]:

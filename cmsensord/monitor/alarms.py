@@ -46,7 +46,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from cmsensord.alarms import LEVELS, AlarmManager, Transition
-from cmsensord.alarms.saved import ack_saved, resume, saved_rows, shown, snapshot
+from cmsensord.alarms.saved import ack_saved, latch_or_ack_changed, resume, saved_rows, shown, snapshot
 from cmsensord.config import Config
 from cmsensord.config.alarm_indicators import RECORD_VALUES, RMS_MODE_VALUES, raw_only_rules
 from cmsensord.config.alarms import AlarmRuleConfig
@@ -60,6 +60,11 @@ log = logging.getLogger("cmsensord")
 
 #: a state the store could not take is tried again this often (seconds of stream time)
 SAVE_RETRY_S = 10.0
+#: a change of levels alone (no latch or acknowledgement changed) is saved at most this often
+#: (seconds of stream time) and at the stop: a chattering alarm does not rewrite the file each
+#: second (an SD card's wear); a kill -9 may lose that long of such changes, which the next
+#: values judge again
+SAVE_LEVELS_S = 60.0
 #: the message kinds the alarm manager reads
 WATCHED = frozenset({"indicators", "severity", "orders"})
 #: the measured values of a record (the names rules may watch: the zone is graded, below)
@@ -159,6 +164,8 @@ class Alarms:
         self._kept: dict[str, dict[str, Any]] = {}        # what the store holds
         self._unsaved: dict[str, dict[str, Any]] | None = None   # what it could not take (retried)
         self._retry_ns = 0
+        self._deferred: dict[str, dict[str, Any]] | None = None  # levels not saved yet (SAVE_LEVELS_S)
+        self._levels_due_ns = 0
         self._no_signal: set[str] = set()     # channels whose last severity decision had no signal
 
     def keep(self, store: StateStore, saved: dict[str, dict[str, Any]]) -> list:
@@ -187,6 +194,8 @@ class Alarms:
             return []
         if self._unsaved is not None and m.stamp_ns >= self._retry_ns:
             self._persist(m.stamp_ns, self._unsaved)
+        elif self._deferred is not None and m.stamp_ns >= self._levels_due_ns:
+            self._persist(m.stamp_ns, self._deferred)
         first = self.manager is None
         back = self._resume(m.stamp_ns) if first else []
         out = self._see(m)
@@ -207,6 +216,7 @@ class Alarms:
         """``now`` into the store if it holds something else; an ``alarm_state_error`` event if
         it cannot be written (then tried again, silently, with the messages at least every
         SAVE_RETRY_S of stream time, until it is written)."""
+        self._deferred = None
         if self.store is None or now == self._kept:
             self._unsaved = None
             return []
@@ -324,8 +334,17 @@ class Alarms:
         if sig != self._signature:
             self._signature = sig
             out.append(messages.alarms(stamp, self.table()))
-            out += self._persist(stamp, snapshot(mgr))
+            now = snapshot(mgr)
+            if self._unsaved is None and stamp < self._levels_due_ns and not latch_or_ack_changed(self._kept, now):
+                self._deferred = now            # levels alone: saved with the next due message or the stop
+            else:
+                self._levels_due_ns = stamp + int(SAVE_LEVELS_S * 1e9)
+                out += self._persist(stamp, now)
         return out
+
+    def finish(self) -> list:
+        """The stop: the levels not saved yet (:data:`SAVE_LEVELS_S`) into the store."""
+        return self._persist(self.newest_ns, self._deferred) if self._deferred is not None else []
 
     def table(self) -> dict:
         """The /cm/alarms message body: operating state, worst level, every alarm's row (before

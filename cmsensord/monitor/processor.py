@@ -320,6 +320,7 @@ class Processor(Figures):
         self._out(self.indicators.take(None))
         if self.captures is not None:
             self.captures.finish(self._out, self.log.release)
+        self._out(self.alarms.finish())
         self.log.summarise(final=True)
         self.log.flush()
         self.log.hold = False
