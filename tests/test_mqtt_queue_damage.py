@@ -95,6 +95,36 @@ def test_a_bad_byte_mid_segment_costs_its_record_only(tmp_path, earlier, broker)
         sub.close()
 
 
+def test_records_a_power_cut_zeroed_at_the_end_give_their_seqs_to_no_new_message(tmp_path, earlier, broker):  # noqa: F811
+    """The last records of the newest segment zero-filled (a power cut within ``fsync_s`` of
+    their writes; they may have been sent from the page cache): every seq they held is retired,
+    so a subscriber de-duplicating by seq drops no new message as a repeat."""
+    queue = tmp_path / "q"
+    shutil.copytree(earlier[0], queue)
+    segment = queue / "q-00000000000000000001.seg"
+    data = bytearray(segment.read_bytes())
+    starts = [0]
+    while starts[-1] < len(data):
+        starts.append(starts[-1] + 8 + struct.unpack_from("<I", data, starts[-1])[0])
+    cut = starts[-5]                                    # the last four records
+    data[cut:] = bytes(len(data) - cut)
+    segment.write_bytes(bytes(data))
+    sub = Subscriber(broker.port)
+    try:
+        p = _replay(tmp_path, broker.port, queue)
+        torn = -(-(len(data) - cut) // 19)
+        assert (f"WARNING mqtt_queue: store-and-forward queue: cut {len(data) - cut} byte(s) of torn record(s) at "
+                f"its end (a crash or a power cut while writing; the {torn} seq(s) they could hold are not used "
+                "again)") in p.stderr.splitlines(), p.stderr
+        sent = _all_sent(p, broker.port)
+        assert sub.wait_for(lambda: len(set(seqs(sub))) >= sent)
+        got = sorted(set(seqs(sub)))
+        assert got[:earlier[1] - 4] == list(range(1, earlier[1] - 3)), got[:earlier[1]]
+        assert got[earlier[1] - 4] == earlier[1] - 3 + torn, got[earlier[1] - 6:earlier[1]]   # 4 used before
+    finally:
+        sub.close()
+
+
 def test_an_unreadable_acknowledgement_cursor_is_said_and_everything_kept_is_sent(tmp_path, earlier, broker):  # noqa: F811
     """One warning, counted as an event, says the cursor is unreadable and that what is kept is
     sent again; the cursor is written again once the broker has acknowledged them."""

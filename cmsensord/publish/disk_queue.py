@@ -6,12 +6,13 @@ topic payload``. Appends reach the OS at once and are fsync'd every ``fsync_s`` 
 :meth:`DiskQueue.sync`, so a kill -9 (or power loss) loses at most that much. When the queue is
 opened, a record that fails its length or CRC check is skipped and reading goes on at the next
 valid record (the next offset where a length and a CRC check out, with a higher seq), so a
-damaged record costs itself only; damaged bytes at the end of a segment are cut off (at the
-end of the newest, a torn record: what a crash while writing leaves). The seq of a damaged
-record is neither sent nor used again; the acknowledged cursor moves over it. Only regular
-files named ``q-<20 digits>.seg`` are segments: another entry so named (a directory) is left
-alone and listed in :attr:`DiskQueue.strays`. An ``acked`` file that cannot be read is
-:attr:`DiskQueue.cursor_error`: everything kept is sent again, from the oldest segment.
+damaged record costs itself only; damaged bytes at the end of a segment are cut off (at the end
+of the newest, a torn record: what a crash while writing leaves; every seq its bytes could have
+held is retired). The seq of a damaged record is neither sent nor used again; the acknowledged
+cursor moves over it. Only regular files named ``q-<20 digits>.seg`` are segments: another
+entry so named (a directory) is left alone and listed in :attr:`DiskQueue.strays`. An ``acked``
+file that cannot be read is :attr:`DiskQueue.cursor_error`: everything kept is sent again, from
+the oldest segment.
 The broker's acknowledgements move the ``acked`` cursor (file ``acked``, written with each sync);
 segments wholly acknowledged are deleted. Beyond ``max_bytes`` the oldest segment is dropped
 and its unsent records counted. Sending reads from the send cursor (:meth:`next_batch`), which a
@@ -44,6 +45,8 @@ _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
 _BODY = struct.Struct("<QBH")         # seq, retain, topic length
 #: every record body is smaller than this (a torn length field reads as garbage beyond it)
 MAX_RECORD = 16 << 20
+#: the fewest bytes a record takes (an empty topic and payload)
+_SHORTEST = _HEAD.size + _BODY.size
 #: the name of a segment: ``q-<the seq of its first record, 20 digits>.seg``
 _SEGMENT_NAME = re.compile(r"q-([0-9]{20})\.seg")
 _NONZERO = re.compile(rb"[^\0]")
@@ -173,6 +176,7 @@ class DiskQueue:
         self.segment_bytes = segment_bytes or max(4096, min(1 << 20, max_bytes // 8))
         self.segments: list[_Segment] = []
         self.truncated_bytes = 0        # a torn tail of the newest segment, cut off at open
+        self.torn_seqs = 0              # the seqs retired with it (as many as it could hold records)
         self.damaged_bytes = 0          # other damaged bytes skipped at open (see _open_segments)
         self.damaged_records = 0        # the records they held: seqs missing between valid ones
         self.strays: list[tuple[Path, str]] = []    # entries named like segments that are not one, and what
@@ -237,10 +241,12 @@ class DiskQueue:
         skipped, the valid ones after it kept: its bytes count in :attr:`damaged_bytes` and the
         seqs missing where it was in :attr:`damaged_records`. Damaged bytes after the last valid
         record are cut off: at the end of the newest segment a torn record (what a crash while
-        writing leaves; :attr:`truncated_bytes`), whose seq is not used again. Seqs no record
+        writing leaves; :attr:`truncated_bytes`), whose seqs are not used again: as many as the
+        tail could hold records (a power cut may zero-fill the records of the last ``fsync_s``,
+        sent already from the page cache). Seqs no record
         holds are never sent; a segment with nothing unacknowledged is deleted."""
         paths = self._segment_paths()
-        expect, hurt = 0, False                 # the next seq; damage since the last valid record
+        expect, hurt, tail = 0, False, 0        # the next seq; damage since the last valid record
         for i, path in enumerate(paths):
             named = int(path.name[2:22])
             if expect and named > expect:       # the end of the segment before was damaged
@@ -261,9 +267,10 @@ class DiskQueue:
             self.damaged_bytes += damaged - (tail if newest else 0)
             hurt = hurt or tail > 0
             self._keep(path, scan, named, tail)
-        if hurt:                                # a torn record's seq: it may have been sent
-            self._lose(expect, expect + 1, False)
-            expect += 1
+        if hurt:                                # the torn records' seqs: they may have been sent
+            self.torn_seqs = max(1, -(-tail // _SHORTEST))
+            self._lose(expect, expect + self.torn_seqs, False)
+            expect += self.torn_seqs
         return expect or 1
 
     def _lose(self, start: int, stop: int, damaged: bool) -> None:

@@ -105,7 +105,8 @@ class Publisher:
             said.append(f"skipped {q.damaged_bytes} damaged byte(s) in its segments ({q.damaged_records} "
                         "message(s) lost); the messages after them are kept")
         if q.truncated_bytes:
-            said.append(f"cut {q.truncated_bytes} byte(s) of a torn record at its end (a crash while writing)")
+            said.append(f"cut {q.truncated_bytes} byte(s) of torn record(s) at its end (a crash or a power cut "
+                        f"while writing; the {q.torn_seqs} seq(s) they could hold are not used again)")
         if said:
             self._event("mqtt_queue", "store-and-forward queue: " + "; ".join(said), logging.WARNING,
                         action="damaged" if q.damaged_bytes else "truncated",
