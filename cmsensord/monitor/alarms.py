@@ -192,14 +192,22 @@ class Alarms:
         not learned (:meth:`_unlearned`)."""
         if m.schema not in WATCHED or not self.watching:
             return []
-        if self._unsaved is not None and m.stamp_ns >= self._retry_ns:
-            self._persist(m.stamp_ns, self._unsaved)
-        elif self._deferred is not None and m.stamp_ns >= self._levels_due_ns:
-            self._persist(m.stamp_ns, self._deferred)
+        out = self.tick(m.stamp_ns)
         first = self.manager is None
         back = self._resume(m.stamp_ns) if first else []
-        out = self._see(m)
+        out += self._see(m)
         return self._unlearned(m.stamp_ns) + back + out if first else out
+
+    def tick(self, stamp: int) -> list:
+        """At stream time ``stamp`` (a message, or a wake-up of an idle link): the state the store
+        could not take, tried again every SAVE_RETRY_S, or the levels not saved yet, once
+        SAVE_LEVELS_S after the last save, into the store; the ``alarm_state_error`` event of
+        the first save that fails."""
+        if self._unsaved is not None and stamp >= self._retry_ns:
+            return self._persist(stamp, self._unsaved)
+        if self._deferred is not None and stamp >= self._levels_due_ns:
+            return self._persist(stamp, self._deferred)
+        return []
 
     def _resume(self, stamp: int) -> list:
         """The saved alarms put back into the manager just made: an event for each."""
@@ -299,6 +307,10 @@ class Alarms:
         stamps move with them (:meth:`AlarmManager.shift`), so a delay counts the stream's time."""
         if self.newest_ns:
             self.newest_ns += shift_ns
+        if self._levels_due_ns:
+            self._levels_due_ns += shift_ns
+        if self._retry_ns:
+            self._retry_ns += shift_ns
         if self.manager is not None:
             self.manager.shift(shift_ns)
 
@@ -343,8 +355,10 @@ class Alarms:
         return out
 
     def finish(self) -> list:
-        """The stop: the levels not saved yet (:data:`SAVE_LEVELS_S`) into the store."""
-        return self._persist(self.newest_ns, self._deferred) if self._deferred is not None else []
+        """The stop: the levels not saved yet (:data:`SAVE_LEVELS_S`), or the state the store could
+        not take, into the store."""
+        now = self._deferred if self._deferred is not None else self._unsaved
+        return self._persist(self.newest_ns, now) if now is not None else []
 
     def table(self) -> dict:
         """The /cm/alarms message body: operating state, worst level, every alarm's row (before

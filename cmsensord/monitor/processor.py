@@ -128,9 +128,12 @@ class Processor(Figures):
         """Per board channel scale/offset: STATUS, overridden by the configuration."""
         return self.raw.calibration(self.status)
 
-    def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
-              **extra: Any) -> None:
+    def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, **extra: Any) -> None:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
+
+    def idle(self, stamp_ns: int) -> None:
+        """A wake-up without frames at stream time ``stamp_ns``: the alarm state's saves due by then."""
+        self._out(self.alarms.tick(stamp_ns))
 
     def ack(self, which: str | None, by: str | None = None) -> None:
         """Acknowledge alarm ``which`` (None: all) by user ``by``, stamped with the newest alarm

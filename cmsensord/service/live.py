@@ -343,6 +343,7 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
     if not frames and not source.waiting:       # no data moves the events' release on: the wall clock does
+        proc.idle(proc.diag.wall_stamp())       # nor the alarm state's saves
         proc.log.release(time.time_ns())
 
 
