@@ -56,6 +56,7 @@ def open_sink(cfg: Config, metadata: dict[str, str], *, background_salvage: bool
     own = not daemon if own_files is None else own_files
     if own:
         _say_own_retention(cfg, "simulated run" if daemon else command)
+    _say_tight_cap(cfg)
     try:
         sink = RotatingSink(cfg.output, metadata={**metadata, "run": run_id()}, background_salvage=background_salvage,
                             max_lag_s=max_lag_s, own_files=own, wait_for_disk=daemon)
@@ -99,6 +100,16 @@ def _queue_dir_error(cfg: Config, queue_dir: str, exc: OSError) -> CmsensordErro
     if cfg.mqtt is not None and cfg.mqtt.queue_dir is not None:
         return ConfigError("<code>", "mqtt.queue_dir", f"{reason} (set mqtt.queue_dir to a directory it can write)")
     return SinkError(reason)
+
+
+def _say_tight_cap(cfg: Config) -> None:
+    """One WARNING line when ``retain_mb`` cannot hold the file being written (up to ``rotate_mb``)
+    and a finished one beside it: then, as that file grows, at times no finished log is kept."""
+    o = cfg.output
+    if o.retain_mb and o.retain_mb < 2 * o.rotate_mb:
+        log.warning("retention: retain_mb = %g MB counts the file being written (up to rotate_mb = %g MB) too: "
+                    "below 2 x rotate_mb, at times no finished log is kept; set retain_mb >= %g or rotate_mb "
+                    "<= %g", o.retain_mb, o.rotate_mb, 2 * o.rotate_mb, o.retain_mb / 2)
 
 
 def _say_own_retention(cfg: Config, command: str) -> None:
