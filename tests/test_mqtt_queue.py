@@ -1,7 +1,7 @@
 """The store-and-forward queue of the MQTT publisher (cmsensord/publish/disk_queue.py): order,
 acknowledgements, a torn record after a crash, a damaged record mid-segment, the acknowledgement
 cursor unreadable or behind, entries named like segments, the bound, a full disk (/dev/full
-under its file)."""
+under its file: the records held in memory and sent from there)."""
 
 from __future__ import annotations
 
@@ -196,25 +196,44 @@ def test_the_bound_drops_the_oldest_segment_and_counts_its_unsent_records(tmp_pa
     q.close()
 
 
-def test_a_full_disk_raises_and_leaves_the_queue_as_it_was(tmp_path):
+def test_a_full_disk_holds_the_records_in_memory_sends_them_and_writes_them_when_it_takes_data(tmp_path):
     q = DiskQueue(tmp_path, max_bytes=1 << 20)
     fill(q, 2)
     saved = os.dup(q._fd)
     full = os.open("/dev/full", os.O_WRONLY)
     os.dup2(full, q._fd)
     try:
-        with pytest.raises(OSError):
-            q.append("t", lambda seq: b"{}", False)
-        assert q.next_seq == 3 and q.depth == 2
+        assert fill(q, 3) == [3, 4, 5]
+        assert q.write_error is not None and q.write_error.errno == 28
+        assert q.depth == 5 and [r.seq for r in q.next_batch(10)] == [1, 2, 3, 4, 5]     # sent from memory
+        q.ack(1)
+        q.ack(3)
+        q.write_held()
+        assert q.write_error is not None and q.held_unsent == 3
     finally:
         os.dup2(saved, q._fd)
         os.close(full)
         os.close(saved)
-    assert q.append("t", lambda seq: b"{}", False) == 3
+    q.write_held()
+    assert q.write_error is None and q.held_unsent == 0
+    q.ack(2)                                    # the cursor moves to 3: the rest on the disk
+    q.close()
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.acked == 3 and [r.seq for r in q.next_batch(10)] == [4, 5] and q.next_seq == 6
     q.close()
 
 
-def test_the_publisher_reports_a_full_disk_once_keeps_the_messages_and_resumes(tmp_path):
+def test_records_held_past_the_memory_bound_are_dropped_and_counted(tmp_path, monkeypatch):
+    monkeypatch.setattr("cmsensord.publish.disk_queue.HOLD_BYTES", 1000)
+    q = DiskQueue(tmp_path / "q", max_bytes=1 << 20)
+    (tmp_path / "q").rmdir()
+    (tmp_path / "q").write_text("not a directory")       # the disk refuses every record
+    fill(q, 30)                                 # ~101 payload bytes each: 9 fit in 1000
+    assert q.write_error is not None
+    assert q.dropped == 21 and q.depth == 9 and [r.seq for r in q.next_batch(20)] == list(range(22, 31))
+
+
+def test_the_publisher_reports_a_full_disk_once_sends_from_memory_and_resumes(tmp_path):
     pytest.importorskip("paho.mqtt")
     from cmsensord.publish.publisher import Publisher
 
@@ -232,11 +251,11 @@ def test_the_publisher_reports_a_full_disk_once_keeps_the_messages_and_resumes(t
         time.sleep(0.3)
         errors = [e for e in list(pub.events) if e[0] == "mqtt_queue"]
         assert [e[1] for e in errors] == [f"store-and-forward queue {tmp_path / 'q'}: cannot write "
-                                          "(No space left on device); new messages wait in memory "
-                                          "(10000 at most)"]
-        assert len(pub.handover) == 5
+                                          "(No space left on device); new messages are sent from memory, up to "
+                                          "4 MB kept until it takes them"]
+        assert len(pub.handover) == 0 and pub.queue.next_seq == 7 and pub.queue.held_unsent == 5
         os.dup2(saved, pub.queue._fd)
-        assert _wait(lambda: pub.queue.next_seq == 7)
+        assert _wait(lambda: pub.queue.held_unsent == 0)
         assert [e[3].get("action") for e in list(pub.events) if e[0] == "mqtt_queue"] == \
             ["write_error", "resumed"]
         os.close(full)

@@ -17,18 +17,22 @@ The broker's acknowledgements move the ``acked`` cursor (file ``acked``, written
 segments wholly acknowledged are deleted. Beyond ``max_bytes`` the oldest segment is dropped
 and its unsent records counted. Sending reads from the send cursor (:meth:`next_batch`), which a
 reconnection rewinds to the first unacknowledged record, so every record is delivered in order,
-at least once.
+at least once. A record the disk refuses (full, failing, read-only) is held in memory, sent
+from there, and written before any later one once the disk takes data again
+(:data:`HOLD_BYTES` at most, the oldest dropped and counted); held records not written by
+:meth:`DiskQueue.close` are lost, and a run started before the disk takes data again may
+give their seqs to new messages.
 
 With ``wait_for_disk`` (the daemon), a directory on a full, failing or read-only file system
 (:data:`DISK_FAULTS`) is no error at start: the queue opens with what it can read, and its
-first append fails as on a disk that failed later (the publisher keeps messages in memory
-until the directory takes them); a torn tail or an acknowledged segment it cannot remove
+appends are held in memory as on a disk that failed later; a torn tail or an acknowledged segment it cannot remove
 stays for the next start.
 """
 
 from __future__ import annotations
 
 import bisect
+import collections
 import errno
 import os
 import re
@@ -45,6 +49,8 @@ _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
 _BODY = struct.Struct("<QBH")         # seq, retain, topic length
 #: every record body is smaller than this (a torn length field reads as garbage beyond it)
 MAX_RECORD = 16 << 20
+#: the most payload bytes held in memory while the disk refuses them (and at most ``max_bytes``)
+HOLD_BYTES = 4 << 20
 #: the fewest bytes a record takes (an empty topic and payload)
 _SHORTEST = _HEAD.size + _BODY.size
 #: the name of a segment: ``q-<the seq of its first record, 20 digits>.seg``
@@ -188,6 +194,9 @@ class DiskQueue:
         self._acked_ids: set[int] = set()
         self._gaps: list[range] = []    # seqs above the cursor that no record holds (damaged, torn)
         self._cache: tuple[Path | None, int, list[Record]] = (None, 0, [])
+        self._held: collections.deque[Record] = collections.deque()    # appended, not on the disk yet
+        self._held_bytes = 0
+        self.write_error: OSError | None = None     # why the disk refused the oldest held record
         self.acked, self.cursor_error = self._read_acked()
         self._acked_written = self.acked if self.cursor_error is None else -1    # rewritten at the first sync
         self.next_seq = max(self._open_segments(), self.acked + 1)
@@ -299,23 +308,56 @@ class DiskQueue:
 
     # -- writing ---------------------------------------------------------------------------
     def append(self, topic: str, payload_of, retain: bool) -> int:
-        """Queue one message; ``payload_of(seq)`` gives its payload bytes. Returns its seq.
-        OSError (a full disk) leaves the queue as it was."""
+        """Queue one message; ``payload_of(seq)`` gives its payload bytes. Returns its seq. It is
+        held in memory until the disk takes it (:meth:`write_held`): sent from there meanwhile."""
         seq = self.next_seq
-        data = _encode(Record(seq, topic, payload_of(seq), retain))
+        rec = Record(seq, topic, payload_of(seq), retain)
+        self.next_seq = seq + 1
+        self._held.append(rec)
+        self._held_bytes += len(rec.payload)
+        self._bound_held()
+        self.write_held()
+        return seq
+
+    def write_held(self) -> None:
+        """The records held in memory to the disk, oldest first (those acknowledged meanwhile need
+        it no more), until it refuses one: :attr:`write_error` is then why (else None)."""
+        held = self._held
+        try:
+            while held:
+                if held[0].seq > self.acked:
+                    self._write(held[0])
+                self._held_bytes -= len(held.popleft().payload)
+        except OSError as err:
+            self.write_error = err
+            return
+        self.write_error = None
+
+    def _bound_held(self) -> None:
+        """Drop the oldest held records, counted, while they take more than :data:`HOLD_BYTES`
+        (and ``max_bytes``): a disk refusing them for long."""
+        while self._held_bytes > min(HOLD_BYTES, self.max_bytes) and len(self._held) > 1:
+            rec = self._held.popleft()
+            self._held_bytes -= len(rec.payload)
+            if rec.seq > self.acked:
+                self.dropped += 1
+                self._lose(rec.seq, rec.seq + 1, False)
+
+    def _write(self, rec: Record) -> None:
+        """``rec`` appended to the newest segment (a new one when it is full); OSError (a full
+        disk) leaves the segment as it was."""
+        data = _encode(rec)
         seg = self.segments[-1] if self.segments and self._fd is not None else None
-        if seg is None or (seg.size >= self.segment_bytes and seq not in self._taken):
-            seg = self._new_segment(seq)
+        if seg is None or (seg.size >= self.segment_bytes and rec.seq not in self._taken):
+            seg = self._new_segment(rec.seq)
         written = os.write(self._fd, data)      # type: ignore[arg-type]  # opened by _new_segment
         if written != len(data):                # a short write on a full disk: cut it off again
             os.ftruncate(self._fd, seg.size)    # type: ignore[arg-type]
             raise OSError(28, "No space left on device")
         seg.size += len(data)
-        seg.last = seq
-        self.next_seq = seq + 1
+        seg.last = rec.seq
         self._dirty = True
         self._bound()
-        return seq
 
     def _new_segment(self, first: int) -> _Segment:
         self._close_fd()
@@ -364,9 +406,15 @@ class DiskQueue:
             self._new_dirs = []
             fsync_dir(self.dir)
 
+    @property
+    def held_unsent(self) -> int:
+        """Held records the broker has not acknowledged: lost at the stop if the disk refuses them."""
+        return sum(rec.seq > self.acked for rec in self._held)
+
     def close(self) -> None:
-        """Sync and close."""
+        """Write what is held, sync and close."""
         try:
+            self.write_held()
             self.sync(force=True)
         finally:
             self._close_fd()
@@ -400,6 +448,12 @@ class DiskQueue:
             records = self._records(seg)
             start = bisect.bisect_left(records, self.send_seq, key=lambda r: r.seq)
             for rec in records[start:start + n - len(out)]:
+                out.append(rec)
+                self.send_seq = rec.seq + 1
+        for rec in self._held:
+            if len(out) >= n:
+                break
+            if rec.seq >= self.send_seq:
                 out.append(rec)
                 self.send_seq = rec.seq + 1
         return out
@@ -443,6 +497,8 @@ class DiskQueue:
         self._acked_ids = {s for s in self._acked_ids if s > acked}
         self._gaps = [gap[max(0, acked + 1 - gap.start):] for gap in self._gaps if gap.stop - 1 > acked]
         self.send_seq = max(self.send_seq, acked + 1)
+        while self._held and self._held[0].seq <= acked:       # needs the disk no more
+            self._held_bytes -= len(self._held.popleft().payload)
         while self.segments and self.segments[0].last <= acked and (
                 len(self.segments) > 1 or self._fd is None):
             self.segments.pop(0).path.unlink(missing_ok=True)

@@ -27,7 +27,7 @@ from typing import Any
 from cmsensord.config.mqtt import MqttConfig
 from cmsensord.config.mqtt_tls import tls_context
 from cmsensord.publish.discovery import WorstAlarms, discovery_messages
-from cmsensord.publish.disk_queue import DiskQueue
+from cmsensord.publish.disk_queue import HOLD_BYTES, DiskQueue
 from cmsensord.publish.topics import TopicMap, payload
 from cmsensord.sinks.alarm_schema import TOPIC_ALARMS
 from cmsensord.sinks.mcap_encoding import ns_to_stamp
@@ -52,7 +52,8 @@ def _password(path: str | None) -> str | None:
 class Publisher:
     """Publishes what :meth:`offer` is given to the broker of ``cfg``; ``queue_dir`` holds the
     disk queue (OSError if it cannot be created; with ``wait_for_disk``, the daemon, not for a
-    full, failing or read-only disk: messages then wait in memory as after a write error).
+    full, failing or read-only disk: messages are then held in memory and sent from there, as
+after a write error).
     ``alarm_rules``: alarms are evaluated, so with discovery and ``alarms`` published, each
     channel's worst alarm is derived, published and announced (without rules it would stay
     unknown)."""
@@ -210,7 +211,9 @@ class Publisher:
         line = (f"  mqtt: {self.sent} message(s) sent to {cfg.host}:{cfg.port} as client_id {cfg.client}, "
                 f"{self.acked_total} acknowledged{f', {dropped} dropped' if dropped else ''}; {q.depth} left "
                 f"unacknowledged in {q.dir}")
-        return line + (": the next run publishing from this queue sends them first" if q.depth else "")
+        held = q.held_unsent
+        lost = f" ({held} of them lost: held in memory, the disk refused them)" if held else ""
+        return line + lost + (": the next run publishing from this queue sends them first" if q.depth > held else "")
 
     def status(self) -> str:
         """The status line's part: ``mqtt connected q 0``."""
@@ -372,31 +375,23 @@ class Publisher:
             self.acked_total += 1
 
     def _to_disk(self) -> None:
-        """Offered messages -> the disk queue, numbered; a full disk is one event per outage."""
+        """Offered messages -> the disk queue, numbered (held in memory and sent from there while
+        the disk refuses them); a disk that refuses them is one event per outage."""
+        q = self.queue
+        q.write_held()
         while self.handover:
-            (mqtt_topic, retain), topic, stamp_ns, msg = self.handover[0]
+            (mqtt_topic, retain), topic, stamp_ns, msg = self.handover.popleft()
             try:
-                body = payload(topic, stamp_ns, msg, self.queue.next_seq)
-                seq = self.queue.append(mqtt_topic, lambda _, body=body: body, retain)
-                if retain:
-                    self._retained[mqtt_topic] = (seq, body)
-            except OSError as err:
-                reason = err.strerror or str(err)
-                if self._queue_error != reason:
-                    self._queue_error = reason
-                    self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: cannot write "
-                                f"({reason}); new messages wait in memory ({self.handover.maxlen} at most)",
-                                logging.ERROR, action="write_error", reason=reason)
-                return
+                body = payload(topic, stamp_ns, msg, q.next_seq)
             except Exception as err:                # noqa: BLE001 - a message JSON cannot carry
                 self._event("mqtt_queue", f"{topic}: not published: {err}", logging.WARNING,
                             action="encode_error")
-            self.handover.popleft()
+                continue
+            seq = q.append(mqtt_topic, lambda _, body=body: body, retain)
+            if retain:
+                self._retained[mqtt_topic] = (seq, body)
             self.moved += 1
-            if self._queue_error is not None:
-                self._queue_error = None
-                self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO,
-                            action="resumed")
+        self._say_disk(q.write_error)
         if self.handover_drops != self._handover_seen:
             n, self._handover_seen = self.handover_drops - self._handover_seen, self.handover_drops
             self._event("mqtt_queue", f"the publisher fell behind: dropped the {n} oldest message(s) "
@@ -405,9 +400,24 @@ class Publisher:
         if self.queue.dropped != self._dropped_seen:
             n = self.queue.dropped - self._dropped_seen
             self._dropped_seen = self.queue.dropped
-            self._event("mqtt_queue", f"store-and-forward queue over {self.cfg.queue_mb:g} MB: dropped "
+            where = f"over {self.cfg.queue_mb:g} MB" if q.write_error is None else \
+                f"the disk refusing them, over {HOLD_BYTES >> 20} MB in memory"
+            self._event("mqtt_queue", f"store-and-forward queue {where}: dropped "
                         f"the {n} oldest unsent message(s) ({self.queue.dropped} in all)",
                         logging.WARNING, action="dropped", count=n, total=self.queue.dropped)
+
+    def _say_disk(self, err: OSError | None) -> None:
+        """The disk queue's write error as an event when it starts, and when it is over."""
+        if err is not None:
+            reason = err.strerror or str(err)
+            if self._queue_error != reason:
+                self._queue_error = reason
+                self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: cannot write ({reason}); "
+                            f"new messages are sent from memory, up to {HOLD_BYTES >> 20} MB kept until it "
+                            "takes them", logging.ERROR, action="write_error", reason=reason)
+        elif self._queue_error is not None:
+            self._queue_error = None
+            self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO, action="resumed")
 
     def _sync(self, force: bool = False) -> None:
         try:
