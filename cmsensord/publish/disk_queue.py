@@ -408,8 +408,10 @@ class DiskQueue:
 
     @property
     def held_unsent(self) -> int:
-        """Held records the broker has not acknowledged: lost at the stop if the disk refuses them."""
-        return sum(rec.seq > self.acked for rec in self._held)
+        """Held records the broker has not acknowledged: lost at the stop if the disk refuses them
+        (read from any thread: the deque copied at once)."""
+        acked = self.acked
+        return sum(rec.seq > acked for rec in list(self._held))
 
     def close(self) -> None:
         """Write what is held, sync and close."""
