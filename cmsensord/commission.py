@@ -490,7 +490,7 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
         said = (t, level, m["message"].removeprefix(alarm + ": "))
         if level == "clear":
             standing.pop(alarm, None)
-        elif t < obs.start_s - 1e-3:
+        elif t <= obs.start_s + 1e-3:            # its record ended by the period's start: judged before it
             standing[alarm] = said
         else:
             seen.setdefault(alarm, []).append(said)

@@ -295,6 +295,28 @@ def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
     assert "alarms: none of the 1 rule(s) shown within the healthy period (replayed with the site file)\n" in p.stdout
 
 
+def test_an_alarm_of_the_record_ending_at_the_periods_start_is_not_said_to_be_shown_within_it(tmp_path):
+    """--from at a snapshot's end: the alarm the snapshot before the period raises is stamped at
+    the period's start; it is the snapshot's, not the healthy period's (calibrate advised to
+    check the rule's levels, of a rule the healthy snapshots never come near)."""
+    x = np.random.default_rng(5).standard_normal((60, 5120, 1))
+    x[:6] *= 3.0
+    x[5] *= 3.0                                 # the last loud snapshot, 9 x: danger there only
+    np.savez(tmp_path / "start.npz", acc=x, fs=5120.0, t_s=np.arange(60) * 600.0)
+    cap = tmp_path / "start.bin"
+    p = run("cmsensord", "import", str(tmp_path / "start.npz"), "--unit", "g", "--names", "pump", "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    base = tmp_path / "base.yaml"
+    base.write_text("alarms:\n  rules:\n    - {name: rms_x2, indicator: accel_rms, alert_x_baseline: 2, "
+                    "danger_x_baseline: 6}\n")
+    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--from", "10%", "--config", str(base),
+            "--out", str(tmp_path / "site.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "healthy period in the recording: start.npz[6] (10.0 % of the record" in p.stdout, p.stdout
+    assert "alarms: none of the 1 rule(s) shown within the healthy period (replayed with the site file)\n" \
+        in p.stdout, p.stdout
+
+
 def test_what_the_healthy_period_lacks_is_said(degrading, tmp_path):
     """A --to past the end, blocks missing in the period, and a period of a few decisions are
     each one line; the site file is still written."""
