@@ -184,8 +184,23 @@ def test_order_option_takes_snapshot_files_by_name_mtime_or_as_given(tmp_path, o
     assert r.returncode == 0, r.stderr
     want = [f"{k}.csv" for k in taken]
     assert [s["source"] for s in sidecar(tmp_path / "o.bin")["snapshots"]] == want
+    said = [ln.strip() for ln in (r.stdout + r.stderr).splitlines() if "order given" in ln]
+    assert said == (["note: the files are taken in name order: a.csv before b.csv, not in the order given "
+                     "(--order given keeps it)"] if order == "name" else []), r.stdout + r.stderr
     x = np.concatenate([level[n] * np.array([1.0, -1.0, 2.0, -2.0]) for n in want])
     assert_within_one_count(decode(tmp_path / "o.bin"), x[None])
+
+
+def test_files_a_shell_pattern_expanded_are_taken_in_name_order_without_a_note(tmp_path):
+    """The shell lists ``acc_*.csv`` by character (acc_10 before acc_2): name order puts them in
+    their numbers' order, which the user meant, so nothing is said."""
+    names = [f"acc_{k}.csv" for k in (1, 10, 2)]
+    _snapshot_files(tmp_path / "set", names, dict.fromkeys(names, 0.1))
+    r = cmd("import", *[f"set/{n}" for n in names], "--fs", "100", "--block-len", "2", "--unit", "m/s2",
+            "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert [s["source"] for s in sidecar(tmp_path / "o.bin")["snapshots"]] == ["acc_1.csv", "acc_2.csv", "acc_10.csv"]
+    assert "order given" not in r.stdout + r.stderr
 
 
 def test_given_order_takes_sources_in_turn_a_directorys_files_in_name_order(tmp_path):

@@ -118,12 +118,14 @@ def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str
     directory's files and a pattern's matches each in natural name order); what a directory left
     out is appended to ``notes``."""
     files: list[str] = []
+    named: list[str] = []                       # the files named one by one, as given
     for src in srcs:
         p = Path(src)
         if p.is_dir():
             files += sorted(_dir_files(p, [] if notes is None else notes), key=_natural_key)
         elif p.exists():
             files.append(src)
+            named.append(src)
         elif globmod.has_magic(src):
             hit = [f for f in globmod.glob(src) if os.path.isfile(f)]
             if not hit:
@@ -140,9 +142,22 @@ def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str
         raise ImportFailure("no recording given; name files, a directory, or --glob PATTERN")
     if order == "name":
         files.sort(key=_natural_key)
+        if notes is not None:
+            notes += _reordered(named)
     elif order == "mtime":
         files.sort(key=lambda f: (os.path.getmtime(f), _natural_key(f)))
     return files
+
+
+def _reordered(named: list[str]) -> list[str]:
+    """A note when name order puts files named one by one out of the order they were given in,
+    unless that order was the shell's (a pattern it expanded: sorted by character)."""
+    ordered = sorted(named, key=_natural_key)
+    if ordered == named or named == sorted(named):
+        return []
+    i = next(k for k, (a, b) in enumerate(zip(ordered, named)) if a != b)
+    return [f"the files are taken in name order: {Path(ordered[i]).name} before {Path(named[i]).name}, not in the "
+            "order given (--order given keeps it)"]
 
 
 def read_table(path: str, opts: ImportOptions, progress: Callable[[float], None] | None = None) -> Table:
