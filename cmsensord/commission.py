@@ -170,6 +170,8 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
                          f"{100 * STOPPED_SHARE:g} % of its running level), starting or stopping: not learned from")
         if m.level_flagged:
             lines.append(_level_warning(r, obs))
+        if m.rise_at >= 0:
+            lines.append(_rise_warning(r, obs))
         if r.f_r_source == "config":
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
                          "machine's shaft speed (no tacho, no --rpm, no indicators.rpm, no rpm in the capture); "
@@ -221,6 +223,19 @@ def _level_warning(r: ChannelResult, obs: Observations) -> str:
         advice = f"its steady stretch to the end begins at --from {bound[1]:g} {within}"
     return (f"{r.name}: warning: {m.level_flagged} decision(s) of the healthy period are already at "
             f">= {r.level_alert:g} x its baseline (level_alert: severity 0.5) in {span}: {what}; {advice}")
+
+
+def _rise_warning(r: ChannelResult, obs: Observations) -> str:
+    """A level rising through the healthy period below the alert level (:func:`level_rise`):
+    where, and the ``--to`` that ends the period before it."""
+    m, dec = r.model, r.decision_s
+    at = obs.start_s + m.rise_at * dec
+    where = span_line(obs.meta, at, at + dec)
+    to = math.floor(round(10 * at, 6)) / 10
+    return (f"{r.name}: warning: the level rises through the healthy period: its last quarter's median is "
+            f"{m.rise:.2f} x its first quarter's, rising from {at:.1f} board s" + (f" ({where})" if where else "") +
+            ": wear or a fault starting, or a change of load; learned from, it raises the baseline and widens every "
+            f"margin: a period ending before it learns the machine's own level (--to {to:g})")
 
 
 def _steady_bound(r: ChannelResult, obs: Observations) -> tuple[str, float] | None:

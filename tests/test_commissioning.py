@@ -13,6 +13,7 @@ from cmsensord.dsp.commissioning import (
     held_flags,
     idle_periods,
     learn_healthy,
+    level_rise,
     period_counts,
     run_in_periods,
     steady_length,
@@ -236,3 +237,28 @@ def test_held_counts_decisions_kept_by_hysteresis_alone():
     some[:5] = 0                                              # cnt 5: 4 <= 5 < 10, kept
     assert [dec.update(some, valid)[0].held[0, 0] for _ in range(3)] == [1, 2, 3]
     assert dec.update(one, valid)[0].held[0, 0] == 0
+
+
+def test_a_level_rising_through_the_period_is_found_where_it_starts():
+    """Flat at 1 for 60 decisions, then a ramp to 1.8 over the last 40: the last quarter is
+    well above the first, and the rise is placed at the start of the first quarter-long window
+    that holds enough of it: before the ramp, never after its start (a --to there ends the
+    period before it); a flat series and a run-in are no rise."""
+    rng = np.random.default_rng(2)
+    flat = 1.0 + 0.02 * rng.standard_normal(100)
+    ramp = flat.copy()
+    ramp[60:] += np.linspace(0.0, 0.8, 40)
+    rise = level_rise(ramp, 0, 0.02)
+    assert rise is not None and 1.5 < rise[0] < 1.6 and 35 <= rise[1] <= 60, rise
+    assert level_rise(flat, 0, 0.02) is None
+    runin = flat.copy()
+    runin[:20] *= 1.5                                   # loud at the start: the run-in rule's, not a rise
+    assert level_rise(runin, 0, 0.02) is None
+
+
+def test_a_rise_within_the_noise_of_quarter_medians_is_no_rise():
+    """Decisions scattered by 60 % about their level: quarter medians of 5 decisions differ by
+    25 % by chance, which the healthy spread says; the same step in a quiet series is a rise."""
+    step = np.r_[np.ones(10), np.full(10, 1.3)]
+    assert level_rise(step, 0, 0.6) is None
+    assert level_rise(step, 0, 0.02) is not None

@@ -48,7 +48,7 @@ from cmsensord.dsp.akf import AkfBank
 
 __all__ = [
     "MARGIN", "R_GRID", "SPAN", "HealthyModel", "bank_limits", "critical_r", "held_flags",
-    "learn_healthy", "period_counts", "r_from_faulty", "run_in_periods",
+    "learn_healthy", "level_rise", "period_counts", "r_from_faulty", "run_in_periods",
 ]
 
 #: candidate R values (in units of baseline²): 1e-7 .. 1e2, 20 per decade
@@ -93,6 +93,8 @@ class HealthyModel:
     r1_first: int = -1         # the first and last decision R_1 flags (decision periods from the
     r1_last: int = -1          # healthy period's start, 0 = the filters' transient); -1: none
     faulty_r: float = float("nan")  # with faulty data: the largest R that flags half its decisions (NaN: none)
+    rise: float = 1.0          # the learned decisions' last quarter median level / their first's (:func:`level_rise`)
+    rise_at: int = -1          # where that rise passes half way (decision periods from the start); -1: no rise
 
 
 def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
@@ -206,6 +208,28 @@ def idle_periods(level: np.ndarray) -> np.ndarray:
     return idle
 
 
+def level_rise(ratio: np.ndarray, skip: int, spread: float) -> tuple[float, int] | None:
+    """A level that rises through the learned decisions (``ratio``: each decision's level /
+    baseline, NaN where not learned from; the first ``skip``, the run-in, left out): (the last
+    quarter's median / the first quarter's, the first decision of the first quarter-long window
+    whose median is above the first quarter's by more than the noise: where the rise starts) when
+    the last quarter is RUNIN_LEVEL x the first or more, the mirror of the run-in rule, and beyond
+    the noise of two quarter medians (three standard errors of their difference, from the healthy
+    ``spread``); else None."""
+    at = np.flatnonzero(np.isfinite(ratio[skip:])) + skip
+    q = at.size // 4
+    if q < 2:
+        return None
+    v = ratio[at]
+    first, last = float(np.median(v[:q])), float(np.median(v[-q:]))
+    noise = 3.0 * 1.2533 * spread * np.sqrt(2.0 / q)
+    if not (first > 0 and last >= RUNIN_LEVEL * first and last - first > noise):
+        return None
+    running = np.median(np.lib.stride_tricks.sliding_window_view(v, q), axis=1)
+    j = int(np.argmax(running > first + noise))
+    return last / first, int(at[j])
+
+
 def steady_length(level: np.ndarray, alert: float, max_rounds: int = 100) -> int:
     """How many of the per-decision ``level`` values, from the first, make a steady healthy period:
     none of them at ``alert`` x their own median (NaN: missing).
@@ -280,11 +304,13 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     med = np.nanmedian(running / baseline)
     spread = float(1.4826 * np.nanmedian(np.abs(running / baseline - med)))
     check = _check_period(counts_of(y, np.array([r_1]))[:, 0], level_raw / baseline, f_r, c, skip, level_alert)
+    rise = level_rise(running / baseline, skip, spread)
     return HealthyModel(
         baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
         healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
         rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule, faulty_r=r_f,
         idle_periods=int(np.count_nonzero(idle)), learned=int(np.count_nonzero(~np.isnan(rstar))), **check,
+        rise=rise[0] if rise else 1.0, rise_at=rise[1] + 1 if rise else -1,
     )
 
 
