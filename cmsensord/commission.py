@@ -32,7 +32,7 @@ from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.monitor.alarms import order_rules
 from cmsensord.observations import Observations, alarm_events, read_observations, sidecar
 from cmsensord.out_paths import overwritten_input, with_sidecars
-from cmsensord.service.origin import origin_lines, span_line
+from cmsensord.service.origin import delay_lines, origin_lines, span_line
 
 __all__ = ["ChannelResult", "add_calibrate_parser", "alarm_lines", "calibrate", "format_table", "run_calibrate",
            "site_yaml"]
@@ -530,6 +530,7 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
     if not lines and rules:
         lines = [f"alarms: none of the {rules}{' judged' if unjudged else ''} rule(s) shown within the healthy "
                  "period (replayed with the site file)"]
+    lines += [f"note: {ln.strip()}" for ln in delay_lines(obs.meta, site)]
     if unjudged:
         lines.append(f"alarms: rule(s) {', '.join(r.name for r in unjudged)} not judged: the capture's indicator "
                      f"records carry no {', '.join(dict.fromkeys(r.indicator for r in unjudged))} (an RMS-mode "
