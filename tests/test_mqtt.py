@@ -17,6 +17,7 @@ import pytest
 
 from cmsensord.publish.disk_queue import DiskQueue
 from cmsensord.publish.publisher import MAX_INFLIGHT, POLL_S
+from cmsensord.publish.seq_lease import LEASE
 from cmsensord.sinks.mcap_sink import iter_messages_lenient, read_messages
 from mosquitto import Broker, Subscriber, free_port, needs_mosquitto, tls_broker
 from processes import ENV, board_on_pty, cmsensord, spawn, start_daemon, stop
@@ -132,10 +133,12 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
         with_board.terminate()
         with_board.wait(timeout=5)
     q = DiskQueue(tmp_path / "queue", max_bytes=64_000_000)
-    queued = q.next_seq - 1
-    on_disk = {(r.topic, r.payload.rsplit(b',"seq":', 1)[0] + b"}") for r in q.next_batch(queued)}
+    kept = q.next_batch(1 << 20)
+    queued, resume = len(kept), q.next_seq
+    on_disk = {(r.topic, r.payload.rsplit(b',"seq":', 1)[0] + b"}") for r in kept}
     q.close()
-    assert queued >= 20
+    assert queued >= 20 and [r.seq for r in kept] == list(range(1, queued + 1))
+    assert resume == LEASE + 1                  # the killed run leased 1..LEASE: none of them is used again
     # the queue lost at most the last second: it holds every message of the (flushed) MCAP log
     # but those of the last wall second (SPEED board seconds) before the kill
     (part,) = (tmp_path / "logs").glob("*.mcap.part")
@@ -151,13 +154,13 @@ def test_messages_queued_while_the_broker_is_down_survive_a_kill_9(tmp_path):
                               stdout=subprocess.PIPE, text=True, env=ENV)
     daemon = start_daemon(tmp_path, board2.stdout.readline().strip(), config=yaml)
     try:
-        assert sub.wait_for(lambda: set(seqs(sub)) >= set(range(1, queued + 2)))
+        assert sub.wait_for(lambda: set(seqs(sub)) >= set(range(1, queued + 1)) | {resume})
         got = sub.messages()
         first = {m["seq"]: m for _, m in got if "seq" in m}
         assert first[1]["kind"] == "start"                      # the killed run's first event
-        assert first[queued + 1]["kind"] == "start"             # the new run goes on numbering
+        assert first[resume]["kind"] == "start"                 # the new run numbers above the lease
         assert first_occurrences([m["seq"] for _, m in got if "seq" in m])[:queued + 1] == \
-            list(range(1, queued + 2))
+            list(range(1, queued + 1)) + [resume]
     finally:
         daemon.terminate()
         daemon.communicate(timeout=20)

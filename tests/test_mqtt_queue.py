@@ -5,13 +5,16 @@ under its file: the records held in memory and sent from there)."""
 
 from __future__ import annotations
 
+import errno
 import os
 import time
+from pathlib import Path
 
 import pytest
 
 from cmsensord.config.mqtt import MqttConfig
 from cmsensord.publish.disk_queue import DiskQueue
+from cmsensord.publish.seq_lease import LEASE
 from cmsensord.publish.topics import TopicMap, payload
 
 
@@ -223,14 +226,69 @@ def test_a_full_disk_holds_the_records_in_memory_sends_them_and_writes_them_when
     q.close()
 
 
+def test_a_run_after_a_crash_numbers_above_the_seq_lease_and_after_a_clean_stop_goes_on(tmp_path):
+    """Records sent before they were durable (a power cut takes them, or the disk refused them):
+    the next run gives none of their seqs to a new message; after a clean stop, no gap."""
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    fill(q, 5)
+    assert [r.seq for r in q.next_batch(10)] == [1, 2, 3, 4, 5]
+    seg = sorted(tmp_path.glob("q-*.seg"))[-1]
+    seg.write_bytes(seg.read_bytes()[:0])       # a power cut: nothing of them reached the disk
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)  # the crashed run never closed
+    assert q.next_seq == LEASE + 1 and q.depth == 0
+    assert q.append("t", lambda seq: b"{}", False) == LEASE + 1
+    q.ack(LEASE + 1)
+    assert q.acked == LEASE + 1
+    q.close()
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.next_seq == LEASE + 2              # a clean stop: numbering goes on
+    q.close()
+
+
+def test_a_disk_that_refuses_is_one_error_until_it_takes_a_record(tmp_path, monkeypatch):
+    """Held records the broker acknowledged need the disk no more: that is no sign it takes data
+    again; a segment it cannot delete, and a stop it cannot sync, are no errors."""
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=200)
+    fill(q, 3)
+    full = os.open("/dev/full", os.O_WRONLY)
+    saved = os.dup(q._fd)
+    os.dup2(full, q._fd)
+    try:
+        fill(q, 2)
+        assert q.write_error is not None
+        for rec in q.next_batch(10):
+            q.ack(rec.seq)
+        q.write_held()
+        assert q.held_unsent == 0 and q.write_error is not None
+    finally:
+        os.dup2(saved, q._fd)
+        os.close(full)
+        os.close(saved)
+
+    def read_only(self, missing_ok=False):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(Path, "unlink", read_only)
+    fill(q, 3)                                  # a new segment; the acknowledged ones stay on the disk
+    assert q.write_error is None
+    for rec in q.next_batch(10):
+        q.ack(rec.seq)
+    assert q.acked == 8
+    (tmp_path / "acked.tmp").mkdir()            # the cursor cannot be written
+    q.close()
+    assert isinstance(q.write_error, IsADirectoryError)
+
+
 def test_records_held_past_the_memory_bound_are_dropped_and_counted(tmp_path, monkeypatch):
     monkeypatch.setattr("cmsensord.publish.disk_queue.HOLD_BYTES", 1000)
     q = DiskQueue(tmp_path / "q", max_bytes=1 << 20)
     (tmp_path / "q").rmdir()
     (tmp_path / "q").write_text("not a directory")       # the disk refuses every record
-    fill(q, 30)                                 # ~101 payload bytes each: 9 fit in 1000
+    fill(q, 30)                                 # ~320 bytes each held (payload, topic, objects): 3 fit in 1000
     assert q.write_error is not None
-    assert q.dropped == 21 and q.depth == 9 and [r.seq for r in q.next_batch(20)] == list(range(22, 31))
+    assert q.dropped == 27 and q.depth == 3 and [r.seq for r in q.next_batch(20)] == [28, 29, 30]
+    q.close()
+    assert len(q._gaps) == 1                    # the dropped seqs: one range, however many
 
 
 def test_the_publisher_reports_a_full_disk_once_sends_from_memory_and_resumes(tmp_path):

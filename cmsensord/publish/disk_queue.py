@@ -20,8 +20,8 @@ reconnection rewinds to the first unacknowledged record, so every record is deli
 at least once. A record the disk refuses (full, failing, read-only) is held in memory, sent
 from there, and written before any later one once the disk takes data again
 (:data:`HOLD_BYTES` at most, the oldest dropped and counted); held records not written by
-:meth:`DiskQueue.close` are lost, and a run started before the disk takes data again may
-give their seqs to new messages.
+:meth:`DiskQueue.close` are lost. Seqs are leased ahead on disk (:mod:`.seq_lease`): a run
+never gives a seq a run before it may have sent to another message.
 
 With ``wait_for_disk`` (the daemon), a directory on a full, failing or read-only file system
 (:data:`DISK_FAULTS`) is no error at start: the queue opens with what it can read, and its
@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import bisect
 import collections
+import contextlib
 import errno
 import os
 import re
@@ -43,6 +44,7 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from cmsensord.publish.seq_lease import SeqLease
 from cmsensord.sinks.mcap_file import fsync_dir, make_dirs
 
 _HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
@@ -91,6 +93,11 @@ def _not_a_segment(path: Path) -> str | None:
     if stat.S_ISDIR(mode):
         return "a directory"
     return None if stat.S_ISREG(mode) else "a special file (FIFO, socket or device)"
+
+
+def _held_size(rec: Record) -> int:
+    """What a record held in memory takes, about: its payload and topic, and the objects'."""
+    return len(rec.payload) + len(rec.topic) + 200
 
 
 def _encode(rec: Record) -> bytes:
@@ -200,6 +207,10 @@ class DiskQueue:
         self.acked, self.cursor_error = self._read_acked()
         self._acked_written = self.acked if self.cursor_error is None else -1    # rewritten at the first sync
         self.next_seq = max(self._open_segments(), self.acked + 1)
+        self.lease = SeqLease(self.dir)         # seqs a run before may have sent from memory
+        if self.lease.upto >= self.next_seq:
+            self._lose(self.next_seq, self.lease.upto + 1, False)
+            self.next_seq = self.lease.upto + 1
         while self.next_seq in self._taken:     # the first segment's name is a stray's: the seq is skipped
             self._lose(self.next_seq, self.next_seq + 1, False)
             self.next_seq += 1
@@ -285,7 +296,10 @@ class DiskQueue:
     def _lose(self, start: int, stop: int, damaged: bool) -> None:
         """Seqs ``start`` to ``stop`` - 1 are held by no record; ``damaged``: by damaged ones."""
         if stop > start:
-            self._gaps.append(range(start, stop))
+            if self._gaps and self._gaps[-1].stop == start:         # one range for a run of them
+                self._gaps[-1] = range(self._gaps[-1].start, stop)
+            else:
+                self._gaps.append(range(start, stop))
             self.damaged_records += (stop - start) * damaged
 
     def _keep(self, path: Path, scan: _Scan, named: int, tail: int) -> None:
@@ -311,37 +325,43 @@ class DiskQueue:
         """Queue one message; ``payload_of(seq)`` gives its payload bytes. Returns its seq. It is
         held in memory until the disk takes it (:meth:`write_held`): sent from there meanwhile."""
         seq = self.next_seq
+        self.lease.cover(seq)
         rec = Record(seq, topic, payload_of(seq), retain)
         self.next_seq = seq + 1
         self._held.append(rec)
-        self._held_bytes += len(rec.payload)
+        self._held_bytes += _held_size(rec)
         self._bound_held()
         self.write_held()
         return seq
 
     def write_held(self) -> None:
         """The records held in memory to the disk, oldest first (those acknowledged meanwhile need
-        it no more), until it refuses one: :attr:`write_error` is then why (else None)."""
+        it no more), until it refuses one: :attr:`write_error` is then why (None once it takes one)."""
         held = self._held
-        try:
-            while held:
-                if held[0].seq > self.acked:
+        while held:
+            if held[0].seq > self.acked:
+                try:
                     self._write(held[0])
-                self._held_bytes -= len(held.popleft().payload)
-        except OSError as err:
-            self.write_error = err
-            return
-        self.write_error = None
+                except OSError as err:
+                    self.write_error = err
+                    return
+                self.write_error = None
+            self._held_bytes -= _held_size(held.popleft())
 
     def _bound_held(self) -> None:
         """Drop the oldest held records, counted, while they take more than :data:`HOLD_BYTES`
         (and ``max_bytes``): a disk refusing them for long."""
-        while self._held_bytes > min(HOLD_BYTES, self.max_bytes) and len(self._held) > 1:
+        while self.held_full and len(self._held) > 1:
             rec = self._held.popleft()
-            self._held_bytes -= len(rec.payload)
+            self._held_bytes -= _held_size(rec)
             if rec.seq > self.acked:
-                self.dropped += 1
+                self.dropped += rec.seq >= self.send_seq        # not sent yet (else: in flight)
                 self._lose(rec.seq, rec.seq + 1, False)
+
+    @property
+    def held_full(self) -> bool:
+        """The records held in memory take :data:`HOLD_BYTES` (or ``max_bytes``) or more."""
+        return self._held_bytes >= min(HOLD_BYTES, self.max_bytes)
 
     def _write(self, rec: Record) -> None:
         """``rec`` appended to the newest segment (a new one when it is full); OSError (a full
@@ -383,13 +403,15 @@ class DiskQueue:
             seg = self.segments.pop(0)
             self.dropped += max(0, seg.last - self.acked - self._missing(seg.last))
             self._move_acked(max(self.acked, seg.last))
-            seg.path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):      # a read-only disk: left for the next start
+                seg.path.unlink(missing_ok=True)
 
-    def sync(self, force: bool = False) -> None:
-        """fsync the open segment and write the acked cursor, at most every ``fsync_s``."""
+    def sync(self, force: bool = False) -> bool:
+        """fsync the open segment and write the acked cursor, at most every ``fsync_s``: whether
+        it did (OSError: it could not)."""
         now = time.monotonic()
         if not force and now - self._synced_at < self.fsync_s:
-            return
+            return False
         self._synced_at = now
         if self._dirty and self._fd is not None:
             os.fsync(self._fd)
@@ -405,6 +427,7 @@ class DiskQueue:
                 fsync_dir(new.parent)
             self._new_dirs = []
             fsync_dir(self.dir)
+        return True
 
     @property
     def held_unsent(self) -> int:
@@ -414,12 +437,18 @@ class DiskQueue:
         return sum(rec.seq > acked for rec in list(self._held))
 
     def close(self) -> None:
-        """Write what is held, sync and close."""
+        """Write what is held, sync, bring the seq lease down to what was used, and close; a disk
+        that refuses it is no error here (:attr:`write_error` says why, :attr:`held_unsent` what
+        is lost)."""
         try:
             self.write_held()
             self.sync(force=True)
+        except OSError as err:
+            self.write_error = err
         finally:
-            self._close_fd()
+            self.lease.close(self.next_seq)
+            with contextlib.suppress(OSError):
+                self._close_fd()
 
     # -- sending ---------------------------------------------------------------------------
     @property
@@ -500,7 +529,8 @@ class DiskQueue:
         self._gaps = [gap[max(0, acked + 1 - gap.start):] for gap in self._gaps if gap.stop - 1 > acked]
         self.send_seq = max(self.send_seq, acked + 1)
         while self._held and self._held[0].seq <= acked:       # needs the disk no more
-            self._held_bytes -= len(self._held.popleft().payload)
+            self._held_bytes -= _held_size(self._held.popleft())
         while self.segments and self.segments[0].last <= acked and (
                 len(self.segments) > 1 or self._fd is None):
-            self.segments.pop(0).path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):      # a read-only disk: left for the next start
+                self.segments.pop(0).path.unlink(missing_ok=True)

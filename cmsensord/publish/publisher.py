@@ -78,7 +78,8 @@ after a write error).
         self._backlog_end = 1                     # seqs below it were queued before this connection
         self._refused: str | None = None          # the reason of the last refusal (one event each)
         self._down_reported = False               # this outage has had its event
-        self._queue_error: str | None = None
+        self._queue_error: str | None = None     # why the disk queue refuses records (None: it takes them)
+        self._sync_error: str | None = None      # why it cannot make them durable (None: it can)
         self._dropped_seen = self._handover_seen = 0
         self._connecting_since = 0.0
         self._dialing: threading.Thread | None = None
@@ -376,10 +377,11 @@ after a write error).
 
     def _to_disk(self) -> None:
         """Offered messages -> the disk queue, numbered (held in memory and sent from there while
-        the disk refuses them); a disk that refuses them is one event per outage."""
+        the disk refuses them; a replay's wait while they fill the memory bound); a disk that
+        refuses them is one event per outage."""
         q = self.queue
         q.write_held()
-        while self.handover:
+        while self.handover and not (self.wait_when_full and q.held_full):     # a replay waits for room
             (mqtt_topic, retain), topic, stamp_ns, msg = self.handover.popleft()
             try:
                 body = payload(topic, stamp_ns, msg, q.next_seq)
@@ -420,14 +422,19 @@ after a write error).
             self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO, action="resumed")
 
     def _sync(self, force: bool = False) -> None:
+        """The queue's fsync and cursor, at most every ``fsync_s``; a failure is one event until
+        a sync goes through again (none while the queue's write error is said: the same outage)."""
         try:
-            self.queue.sync(force)
+            synced = self.queue.sync(force)
         except OSError as err:
             reason = err.strerror or str(err)
-            if self._queue_error != reason:
-                self._queue_error = reason
-                self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: fsync failed "
+            if self._sync_error != reason and self._queue_error is None:
+                self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: cannot make it durable "
                             f"({reason})", logging.ERROR, action="write_error", reason=reason)
+            self._sync_error = reason
+            return
+        if synced:
+            self._sync_error = None
 
     def _send(self, now: float) -> None:
         """From the queue's send cursor, at most ``MAX_INFLIGHT`` unacknowledged: the backlog
@@ -442,7 +449,12 @@ after a write error).
             room = min(room, int(self._tokens), backlog)
         if room <= 0:
             return
-        for rec in self.queue.next_batch(room):
+        try:
+            batch = self.queue.next_batch(room)
+        except OSError as err:                  # a segment that cannot be read: tried again at the next poll
+            self._say_disk(err)
+            return
+        for rec in batch:
             info = self._client.publish(rec.topic, rec.payload, qos=self.cfg.qos, retain=rec.retain)
             self._inflight[info.mid] = rec.seq
             self._tokens -= rec.seq < self._backlog_end
