@@ -1,11 +1,11 @@
 """The alarm manager: the configured rules over the channels, the alarm table, acknowledgements.
 
-Each rule watches one indicator on its channels (default: every vibration
-channel given).  With ``vote: 1`` each channel has its own alarm, named
-``<rule>/<channel>``; with ``vote: N`` the rule is one alarm, named ``<rule>``,
-whose input is the highest level that at least N of its channels exceed.  Per
-channel the value is compared with the rule's levels at the current speed
-(:mod:`.levels`) with the rule's deadband (:mod:`.exceedance`); the alarm applies
+Each rule watches one indicator on its channels (default: a bearing's line on the
+bearing's channel, any other indicator on every vibration channel given).  With
+``vote: 1`` each channel has its own alarm, named ``<rule>/<channel>``; with ``vote: N``
+the rule is one alarm, named ``<rule>``, whose input is the highest level that at least
+N of its channels exceed.  Per channel the value is compared with the rule's levels at
+the current speed (:mod:`.levels`) with the rule's deadband (:mod:`.exceedance`); the alarm applies
 the delays and the latch (:mod:`.state`).  A value not given is no reading: its
 alarms hold their levels (one said to be unknown, :meth:`AlarmManager.unknown`, also
 restarts the delays pending on it).  Alarms are evaluated while the
@@ -21,9 +21,12 @@ stream time it was given; :meth:`AlarmManager.table` is the alarm table.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from cmsensord.config.alarms import AlarmRuleConfig, AlarmsConfig
+from cmsensord.config.channel_refs import rule_channels
 
 from .exceedance import Exceedance
 from .levels import rule_levels
@@ -91,9 +94,12 @@ def _voted(levels: list[int], vote: int) -> int:
 class AlarmManager:
     """Rules over channels (see module docstring).  ``channels``: the vibration channels'
     names (the default set of each rule); ``zones``: the ISO 10816-3 boundaries A/B, B/C,
-    C/D of the configured machine [mm/s]."""
+    C/D of the configured machine [mm/s]; ``bearings``: the configured bearings
+    (:class:`~cmsensord.config.indicators.BearingConfig`), whose channel is the default set of
+    a rule on one of their lines."""
 
-    def __init__(self, cfg: AlarmsConfig, channels: tuple[str, ...], zones: tuple[float, float, float]):
+    def __init__(self, cfg: AlarmsConfig, channels: tuple[str, ...], zones: tuple[float, float, float],
+                 bearings: Sequence[Any] = ()):
         self.cfg, self.zones = cfg, zones
         self.operating = Operating(cfg.operating)
         self.speed_rpm: float | None = None
@@ -104,7 +110,7 @@ class AlarmManager:
         #: levels were put back from a saved state and no operating reading has come since
         self.resumed = False
         for r in cfg.rules:
-            watched = r.channels or channels
+            watched = rule_channels(r, channels, bearings)
             self.by_indicator.setdefault(r.indicator, []).append(r)
             if r.vote > 1:
                 self._add(r.name, r, tuple(watched), None)

@@ -142,7 +142,8 @@ class AlarmRuleConfig:
     indicator: str = setting(dataclasses.MISSING, "indicator: a /cm/<ch>/indicators name (velocity_rms_mm_s, "
                              "accel_rms, kurtosis, envelope_rms, zone, <bearing>.bpfo, band.<name>, ...), "
                              "severity_index, or order.<component> (order RMS)", **_INDICATOR)
-    channels: tuple[str, ...] = setting((), "channels watched (default: every vibration channel)")
+    channels: tuple[str, ...] = setting((), "channels watched (default: every vibration channel; a bearing's "
+                                        "line: the bearing's channel)")
     alert: float | None = _level("alert")
     danger: float | None = _level("danger")
     alert_zone: str | None = _level("alert_zone")

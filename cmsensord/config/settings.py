@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 from .alarm_indicators import rules_see_indicators
 from .alarms import AlarmsConfig, rules_levels_rise
 from .capture import CaptureConfig, capture_akf_in_bank, capture_sees_operating
+from .channel_refs import rules_on_bearing_channels
 from .indicators import BearingConfig, IndicatorsConfig, bearings_unique
 from .mqtt import MqttConfig
 from .validation import Rule, at_most, fmt_num, greater, setting, validate
@@ -403,7 +404,8 @@ class Config:
     alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_unique, rules_see_indicators,
-                                          rules_levels_rise, capture_sees_operating, capture_akf_in_bank)
+                                          rules_on_bearing_channels, rules_levels_rise, capture_sees_operating,
+                                          capture_akf_in_bank)
 
     def __post_init__(self) -> None:
         validate(self)

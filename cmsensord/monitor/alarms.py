@@ -183,7 +183,8 @@ class Alarms:
     def _manager(self) -> AlarmManager:
         if self.manager is None:
             ic = self.cfg.indicators
-            self.manager = AlarmManager(self.rules, self.channels(), boundaries(ic.machine_group, ic.foundation))
+            self.manager = AlarmManager(self.rules, self.channels(), boundaries(ic.machine_group, ic.foundation),
+                                        self.cfg.bearings)
         return self.manager
 
     def see(self, m: messages.Message) -> list:
