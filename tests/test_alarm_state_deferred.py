@@ -39,7 +39,7 @@ def _alert_then_danger(start: int = 0):
     a, store = alarms({"danger": 2.0}), Store()
     a.keep(store, {})
     assert _kinds(a, [1.5] * 3 + [2.5] * 2, start) == [(start, "alarm_alert"), (start + 3, "alarm_danger")]
-    assert store.saves == [{"bpfo/ch0": "alert"}]
+    assert store.saves == [{"r/ch0": "alert"}]
     return a, store
 
 
@@ -53,9 +53,9 @@ def test_a_deferred_save_that_fails_first_is_said():
 
 def test_an_idle_link_saves_the_waiting_levels_when_they_fall_due():
     a, store = _alert_then_danger()
-    assert a.tick(30 * S) == [] and store.saves == [{"bpfo/ch0": "alert"}]     # not due yet
+    assert a.tick(30 * S) == [] and store.saves == [{"r/ch0": "alert"}]     # not due yet
     assert a.tick(int(SAVE_LEVELS_S) * S) == []
-    assert store.saves[-1] == {"bpfo/ch0": "danger"}
+    assert store.saves[-1] == {"r/ch0": "danger"}
 
 
 def test_a_wall_clock_step_back_moves_when_the_waiting_levels_fall_due():
@@ -63,7 +63,7 @@ def test_a_wall_clock_step_back_moves_when_the_waiting_levels_fall_due():
     a.restepped(-86_400 * S)                        # the stamps step back a day with the wall clock
     start = 100_005 - 86_400
     _kinds(a, [2.5] * int(SAVE_LEVELS_S), start)
-    assert store.saves[-1] == {"bpfo/ch0": "danger"}, store.saves
+    assert store.saves[-1] == {"r/ch0": "danger"}, store.saves
 
 
 def test_the_stop_writes_what_the_store_could_not_take():
@@ -73,4 +73,4 @@ def test_the_stop_writes_what_the_store_could_not_take():
     assert [k for _, k in _kinds(a, [1.5], 0)] == ["alarm_alert", "alarm_state_error"]
     store.fail = False                              # the disk is back before the next retry
     a.finish()
-    assert store.saves == [{"bpfo/ch0": "alert"}]
+    assert store.saves == [{"r/ch0": "alert"}]

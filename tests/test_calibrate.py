@@ -303,16 +303,21 @@ def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
     assert "alarms: none of the 1 rule(s) shown within the healthy period (replayed with the site file)\n" in p.stdout
 
 
+def _calibrate_with_rule(tmp_path, capture, start: str, more: str) -> subprocess.CompletedProcess:
+    """``calibrate --from start`` of ``capture`` with one rule, accel_rms at 2 x its baseline and ``more``."""
+    base = tmp_path / "base.yaml"
+    base.write_text(f"alarms:\n  rules:\n    - {{name: rms_x2, indicator: accel_rms, alert_x_baseline: 2, {more}}}\n")
+    p = run("cmsensord", "calibrate", str(capture), "--rpm", "600", "--from", start, "--config", str(base),
+            "--out", str(tmp_path / "site.yaml"))
+    assert p.returncode == 0, p.stderr
+    return p
+
+
 def test_alarm_delays_that_span_much_of_an_imported_recording_are_said(loud_start, tmp_path):
     """Snapshots of 1 s every 600 s laid end to end: a rule's 3-s on-delay needs 3 snapshots in
     a row, 30 minutes of the machine's life; calibrate says so as it writes the rules, as the
     replay's summary does."""
-    base = tmp_path / "base.yaml"
-    base.write_text("alarms:\n  rules:\n    - {name: rms_x2, indicator: accel_rms, alert_x_baseline: 2, "
-                    "on_delay_s: 3}\n")
-    p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--config", str(base),
-            "--out", str(tmp_path / "site.yaml"))
-    assert p.returncode == 0, p.stderr
+    p = _calibrate_with_rule(tmp_path, loud_start, "6", "on_delay_s: 3")
     assert ("note: alarm delays count the capture's seconds, one of which is 602 s of the recording here (its "
             "snapshots end to end): a delay of 3 s spans 1,807 s of it\n") in p.stdout, p.stdout
 
@@ -328,12 +333,7 @@ def test_an_alarm_of_the_record_ending_at_the_periods_start_is_not_said_to_be_sh
     cap = tmp_path / "start.bin"
     p = run("cmsensord", "import", str(tmp_path / "start.npz"), "--unit", "g", "--names", "pump", "--out", str(cap))
     assert p.returncode == 0, p.stderr
-    base = tmp_path / "base.yaml"
-    base.write_text("alarms:\n  rules:\n    - {name: rms_x2, indicator: accel_rms, alert_x_baseline: 2, "
-                    "danger_x_baseline: 6}\n")
-    p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--from", "10%", "--config", str(base),
-            "--out", str(tmp_path / "site.yaml"))
-    assert p.returncode == 0, p.stderr
+    p = _calibrate_with_rule(tmp_path, cap, "10%", "danger_x_baseline: 6")
     assert "healthy period in the recording: start.npz[6] (10.0 % of the record" in p.stdout, p.stdout
     assert "alarms: none of the 1 rule(s) shown within the healthy period (replayed with the site file)\n" \
         in p.stdout, p.stdout

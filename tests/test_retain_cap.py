@@ -8,15 +8,20 @@ import subprocess
 import sys
 
 
-def test_a_replay_keeps_its_files_within_retain_mb(tmp_path):
+def _replay(tmp_path, scenario: str, duration: str, output: str, *more: str) -> subprocess.CompletedProcess:
+    """``cmsensord replay`` of a simulated capture with ``output`` as its output section."""
     cap = tmp_path / "a.bin"
-    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "degrading", "--duration", "600",
+    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", scenario, "--duration", duration,
                     "--out", str(cap)], check=True, capture_output=True)
     cfg = tmp_path / "ret.yaml"
-    cfg.write_text("output:\n  rotate_mb: 0.5\n  retain_mb: 1.5\n  min_free_mb: 0\n")
+    cfg.write_text(f"output:\n{output}  min_free_mb: 0\n")
+    return subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--config", str(cfg), *more,
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=300)
+
+
+def test_a_replay_keeps_its_files_within_retain_mb(tmp_path):
+    p = _replay(tmp_path, "degrading", "600", "  rotate_mb: 0.5\n  retain_mb: 1.5\n", "--akf-trace")
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--config", str(cfg), "--akf-trace",
-                        "--out", str(out)], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     files = sorted(out.glob("*.mcap"))
     assert len(files) >= 2, files                       # a finished file kept beside the newest
@@ -25,13 +30,7 @@ def test_a_replay_keeps_its_files_within_retain_mb(tmp_path):
 
 
 def test_a_cap_below_twice_rotate_mb_is_said_at_start(tmp_path):
-    cap = tmp_path / "a.bin"
-    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--duration", "5",
-                    "--out", str(cap)], check=True, capture_output=True)
-    cfg = tmp_path / "ret.yaml"
-    cfg.write_text("output:\n  rotate_mb: 1\n  retain_mb: 1.9\n  min_free_mb: 0\n")
-    p = subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--config", str(cfg),
-                        "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
+    p = _replay(tmp_path, "healthy", "5", "  rotate_mb: 1\n  retain_mb: 1.9\n")
     assert p.returncode == 0, p.stderr
     said = [ln for ln in p.stderr.splitlines() if "retention: retain_mb" in ln]
     assert said == ["WARNING retention: retain_mb = 1.9 MB counts the file being written (up to rotate_mb = 1 MB) "
