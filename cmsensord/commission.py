@@ -232,10 +232,13 @@ def _rise_warning(r: ChannelResult, obs: Observations) -> str:
     at = obs.start_s + m.rise_at * dec
     where = span_line(obs.meta, at, at + dec)
     to = math.floor(round(10 * at, 6)) / 10
+    before = m.rise_at - m.runin_periods - 1            # decisions learned from before the rise
+    advice = (f"a period ending before it learns the machine's own level (--to {to:g})" if before >= FEW_DECISIONS
+              else f"only {max(0, before)} decision(s) before it: choose a steady period of this machine (--from/--to)")
     return (f"{r.name}: warning: the level rises through the healthy period: its last quarter's median is "
             f"{m.rise:.2f} x its first quarter's, rising from {at:.1f} board s" + (f" ({where})" if where else "") +
-            ": wear or a fault starting, or a change of load; learned from, it raises the baseline and widens every "
-            f"margin: a period ending before it learns the machine's own level (--to {to:g})")
+            f": wear or a fault starting, or a change of load; learned from, it raises the baseline and widens every "
+            f"margin: {advice}")
 
 
 def _steady_bound(r: ChannelResult, obs: Observations) -> tuple[str, float] | None:

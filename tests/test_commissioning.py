@@ -248,17 +248,28 @@ def test_a_level_rising_through_the_period_is_found_where_it_starts():
     flat = 1.0 + 0.02 * rng.standard_normal(100)
     ramp = flat.copy()
     ramp[60:] += np.linspace(0.0, 0.8, 40)
-    rise = level_rise(ramp, 0, 0.02)
+    rise = level_rise(ramp, 0)
     assert rise is not None and 1.5 < rise[0] < 1.6 and 35 <= rise[1] <= 60, rise
-    assert level_rise(flat, 0, 0.02) is None
+    assert level_rise(flat, 0) is None
     runin = flat.copy()
     runin[:20] *= 1.5                                   # loud at the start: the run-in rule's, not a rise
-    assert level_rise(runin, 0, 0.02) is None
+    assert level_rise(runin, 0) is None
 
 
 def test_a_rise_within_the_noise_of_quarter_medians_is_no_rise():
     """Decisions scattered by 60 % about their level: quarter medians of 5 decisions differ by
-    25 % by chance, which the healthy spread says; the same step in a quiet series is a rise."""
+    25 % by chance, which their scatter from one decision to the next says; the same step in a
+    quiet series is a rise."""
+    rng = np.random.default_rng(4)
     step = np.r_[np.ones(10), np.full(10, 1.3)]
-    assert level_rise(step, 0, 0.6) is None
-    assert level_rise(step, 0, 0.02) is not None
+    assert level_rise(step * np.exp(0.6 * rng.standard_normal(20)), 0) is None
+    assert level_rise(step * (1.0 + 0.01 * rng.standard_normal(20)), 0) is not None
+
+
+def test_a_ramp_from_the_start_is_placed_near_its_start():
+    """The scatter is taken from one decision to the next: a steady ramp is no part of it, so the
+    rise is found where it starts, not half way."""
+    rng = np.random.default_rng(3)
+    ramp = np.linspace(1.0, 2.0, 60) * (1.0 + 0.02 * rng.standard_normal(60))
+    rise = level_rise(ramp, 0)
+    assert rise is not None and rise[1] <= 5, rise

@@ -203,6 +203,21 @@ def test_files_a_shell_pattern_expanded_are_taken_in_name_order_without_a_note(t
     assert "order given" not in r.stdout + r.stderr
 
 
+@pytest.mark.parametrize("given, said", [
+    (["set/B.csv", "set/a.csv"], "a.csv before B.csv"),                         # character order, not the shell's
+    (["run2/data.csv", "run1/data.csv"], "run1/data.csv before run2/data.csv"),  # one name, two directories
+])
+def test_files_given_out_of_name_order_are_named_in_the_note(tmp_path, given, said):
+    for path in given:
+        (tmp_path / path).parent.mkdir(exist_ok=True)
+        (tmp_path / path).write_text("0.1\n-0.1\n0.2\n-0.2\n")
+    r = cmd("import", *given, "--fs", "100", "--block-len", "2", "--unit", "m/s2", "--out", "o.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    notes = [ln.strip() for ln in (r.stdout + r.stderr).splitlines() if "order given" in ln]
+    assert notes == [f"note: the files are taken in name order: {said}, not in the order given (--order given "
+                     "keeps it)"], r.stdout + r.stderr
+
+
 def test_given_order_takes_sources_in_turn_a_directorys_files_in_name_order(tmp_path):
     """`--order given` with a directory and then a pattern: the pattern's files after the
     directory's, the files of each in natural name order (not the order the file system lists

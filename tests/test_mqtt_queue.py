@@ -373,3 +373,90 @@ def test_a_full_hand_over_queue_drops_the_oldest_with_an_event(tmp_path):
         assert b'"message":"4"' in pub.queue.next_batch(1)[0].payload       # 0..3 were dropped
     finally:
         pub.close()
+
+
+def _publisher(tmp_path):
+    pytest.importorskip("paho.mqtt")
+    from cmsensord.publish.publisher import Publisher
+
+    return Publisher(MqttConfig(host="127.0.0.1", port=9, client_id="t", publish=("events",)), str(tmp_path / "q"))
+
+
+def test_a_segment_that_cannot_be_read_is_one_error_until_it_can(tmp_path, monkeypatch):
+    """The publisher thread's passes (each POLL_S) with the queue unreadable: one read_error, no
+    write error, and one INFO when it reads again."""
+    pub = _publisher(tmp_path)
+    pub.offer("/cm/events", 10**18, {"kind": "start", "message": "x"})
+    pub._to_disk()
+    sent = []
+
+    class Client:
+        def publish(self, topic, payload, qos, retain):
+            sent.append(topic)
+            return type("Info", (), {"mid": len(sent)})()
+
+    pub._client, pub.state = Client(), "connected"
+    read = pub.queue.next_batch
+
+    def unreadable(n):
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(pub.queue, "next_batch", unreadable)
+    for _ in range(5):                          # what _run does each pass
+        pub._to_disk()
+        pub._send(0.0)
+    monkeypatch.setattr(pub.queue, "next_batch", read)
+    pub._to_disk()
+    pub._send(0.0)
+    said = [(e[3]["action"], e[1]) for e in pub.events if e[0] == "mqtt_queue"]
+    assert said == [("read_error", f"store-and-forward queue {tmp_path / 'q'}: cannot read (Input/output error); "
+                                   "sending waits until it can"),
+                    ("resumed", "store-and-forward queue readable again")], said
+    assert sent == ["cmsensord/t/events"]
+    pub.queue.close()
+
+
+def test_a_seq_lease_that_cannot_be_written_is_said(tmp_path):
+    pub = _publisher(tmp_path)
+    (tmp_path / "q" / "seq-lease.tmp").mkdir()  # a stray: the lease alone cannot be written
+    pub.offer("/cm/events", 10**18, {"kind": "start", "message": "x"})
+    pub._to_disk()
+    said = [e[1] for e in pub.events if e[0] == "mqtt_queue"]
+    assert said == [f"store-and-forward queue {tmp_path / 'q'}: cannot write its seq lease (Is a directory): after "
+                    "a crash, seqs may be used again"], said
+    pub.queue.close()
+
+
+def test_a_segment_deleted_under_the_queue_is_counted_and_sending_goes_on(tmp_path):
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=300)
+    fill(q, 9)                                  # three segments of three records
+    first, second = sorted(tmp_path.glob("q-*.seg"))[:2]
+    q.close()
+    q = DiskQueue(tmp_path, max_bytes=1 << 20, segment_bytes=300)
+    second.unlink()
+    assert [r.seq for r in q.next_batch(10)] == [1, 2, 3, 7, 8, 9] and q.dropped == 3
+    for seq in (1, 2, 3, 7, 8, 9):
+        q.ack(seq)
+    assert q.acked == 9 and q.depth == 0        # the cursor moves over the lost seqs
+    q.close()
+
+
+def test_a_held_record_dropped_in_flight_is_counted(tmp_path, monkeypatch):
+    """Sent from memory, not acknowledged, then dropped by the bound: a rewind cannot send it again."""
+    monkeypatch.setattr("cmsensord.publish.disk_queue.HOLD_BYTES", 1000)
+    q = DiskQueue(tmp_path / "q", max_bytes=1 << 20)
+    (tmp_path / "q").rmdir()
+    (tmp_path / "q").write_text("not a directory")
+    fill(q, 3)
+    assert [r.seq for r in q.next_batch(10)] == [1, 2, 3]       # in flight
+    fill(q, 3)
+    assert q.dropped == 3
+    q.rewind()
+    assert [r.seq for r in q.next_batch(10)] == [4, 5, 6]
+
+
+def test_a_seq_lease_beyond_a_u64_is_no_lease(tmp_path):
+    (tmp_path / "seq-lease").write_text("99999999999999999999999\n")
+    q = DiskQueue(tmp_path, max_bytes=1 << 20)
+    assert q.append("t", lambda seq: b"{}", False) == 1
+    q.close()

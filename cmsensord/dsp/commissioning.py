@@ -208,21 +208,22 @@ def idle_periods(level: np.ndarray) -> np.ndarray:
     return idle
 
 
-def level_rise(ratio: np.ndarray, skip: int, spread: float) -> tuple[float, int] | None:
+def level_rise(ratio: np.ndarray, skip: int) -> tuple[float, int] | None:
     """A level that rises through the learned decisions (``ratio``: each decision's level /
     baseline, NaN where not learned from; the first ``skip``, the run-in, left out): (the last
     quarter's median / the first quarter's, the first decision of the first quarter-long window
     whose median is above the first quarter's by more than the noise: where the rise starts) when
     the last quarter is RUNIN_LEVEL x the first or more, the mirror of the run-in rule, and beyond
-    the noise of two quarter medians (three standard errors of their difference, from the healthy
-    ``spread``); else None."""
+    the noise of two quarter medians (three standard errors of their difference, the decisions'
+    scatter taken from one to the next, so that a slow rise is no part of it); else None."""
     at = np.flatnonzero(np.isfinite(ratio[skip:])) + skip
     q = at.size // 4
     if q < 2:
         return None
     v = ratio[at]
     first, last = float(np.median(v[:q])), float(np.median(v[-q:]))
-    noise = 3.0 * 1.2533 * spread * np.sqrt(2.0 / q)
+    scatter = 1.4826 * float(np.median(np.abs(np.diff(v)))) / np.sqrt(2.0)
+    noise = 3.0 * 1.2533 * scatter * np.sqrt(2.0 / q)
     if not (first > 0 and last >= RUNIN_LEVEL * first and last - first > noise):
         return None
     running = np.median(np.lib.stride_tricks.sliding_window_view(v, q), axis=1)
@@ -304,7 +305,7 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     med = np.nanmedian(running / baseline)
     spread = float(1.4826 * np.nanmedian(np.abs(running / baseline - med)))
     check = _check_period(counts_of(y, np.array([r_1]))[:, 0], level_raw / baseline, f_r, c, skip, level_alert)
-    rise = level_rise(running / baseline, skip, spread)
+    rise = level_rise(running / baseline, skip)
     return HealthyModel(
         baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
         healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),

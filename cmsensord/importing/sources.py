@@ -151,13 +151,16 @@ def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str
 
 def _reordered(named: list[str]) -> list[str]:
     """A note when name order puts files named one by one out of the order they were given in,
-    unless that order was the shell's (a pattern it expanded: sorted by character)."""
+    unless that order was a shell's (a pattern it expanded: sorted by character, case aside)."""
     ordered = sorted(named, key=_natural_key)
-    if ordered == named or named == sorted(named):
+    if ordered == named or named == sorted(named, key=str.casefold):
         return []
     i = next(k for k, (a, b) in enumerate(zip(ordered, named)) if a != b)
-    return [f"the files are taken in name order: {Path(ordered[i]).name} before {Path(named[i]).name}, not in the "
-            "order given (--order given keeps it)"]
+    first, then = Path(ordered[i]).name, Path(named[i]).name
+    if first == then:                           # the same name in two directories
+        first, then = ordered[i], named[i]
+    return [f"the files are taken in name order: {first} before {then}, not in the order given (--order given "
+            "keeps it)"]
 
 
 def read_table(path: str, opts: ImportOptions, progress: Callable[[float], None] | None = None) -> Table:

@@ -296,10 +296,13 @@ class DiskQueue:
     def _lose(self, start: int, stop: int, damaged: bool) -> None:
         """Seqs ``start`` to ``stop`` - 1 are held by no record; ``damaged``: by damaged ones."""
         if stop > start:
-            if self._gaps and self._gaps[-1].stop == start:         # one range for a run of them
-                self._gaps[-1] = range(self._gaps[-1].start, stop)
+            gaps = self._gaps                   # in order of their starts (:meth:`_over_gaps`)
+            if gaps and gaps[-1].stop == start:         # one range for a run of them
+                gaps[-1] = range(gaps[-1].start, stop)
+            elif not gaps or gaps[-1].start < start:
+                gaps.append(range(start, stop))
             else:
-                self._gaps.append(range(start, stop))
+                bisect.insort(gaps, range(start, stop), key=lambda g: g.start)
             self.damaged_records += (stop - start) * damaged
 
     def _keep(self, path: Path, scan: _Scan, named: int, tail: int) -> None:
@@ -354,8 +357,8 @@ class DiskQueue:
         while self.held_full and len(self._held) > 1:
             rec = self._held.popleft()
             self._held_bytes -= _held_size(rec)
-            if rec.seq > self.acked:
-                self.dropped += rec.seq >= self.send_seq        # not sent yet (else: in flight)
+            if rec.seq > self.acked:            # unacknowledged: a rewind cannot send it again
+                self.dropped += 1
                 self._lose(rec.seq, rec.seq + 1, False)
 
     @property
@@ -471,12 +474,16 @@ class DiskQueue:
     def next_batch(self, n: int) -> list[Record]:
         """Up to ``n`` records from the send cursor, in order; the cursor moves past them."""
         out: list[Record] = []
-        for seg in self.segments:
+        for seg in list(self.segments):         # a copy: a segment found gone is taken out (:meth:`_gone`)
             if len(out) >= n:
                 break
             if seg.last < self.send_seq:
                 continue
-            records = self._records(seg)
+            try:
+                records = self._records(seg)
+            except FileNotFoundError:           # deleted under the daemon: its records are lost
+                self._gone(seg)
+                continue
             start = bisect.bisect_left(records, self.send_seq, key=lambda r: r.seq)
             for rec in records[start:start + n - len(out)]:
                 out.append(rec)
@@ -488,6 +495,18 @@ class DiskQueue:
                 out.append(rec)
                 self.send_seq = rec.seq + 1
         return out
+
+    def _gone(self, seg: _Segment) -> None:
+        """Segment ``seg`` deleted from under the queue: its unacknowledged records counted as
+        dropped, their seqs as held by no record."""
+        newest = seg is self.segments[-1]
+        self.segments.remove(seg)
+        self.dropped += max(0, seg.last - max(self.acked, seg.first - 1) - self._missing(seg.last))
+        self._lose(max(self.acked + 1, seg.first), seg.last + 1, False)
+        if newest and self._fd is not None:     # the next record starts a new segment
+            with contextlib.suppress(OSError):
+                os.close(self._fd)
+            self._fd = None
 
     def _records(self, seg: _Segment) -> list[Record]:
         """The records of ``seg``, parsed once: the last segment read is kept, and only what

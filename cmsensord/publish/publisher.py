@@ -78,8 +78,7 @@ after a write error).
         self._backlog_end = 1                     # seqs below it were queued before this connection
         self._refused: str | None = None          # the reason of the last refusal (one event each)
         self._down_reported = False               # this outage has had its event
-        self._queue_error: str | None = None     # why the disk queue refuses records (None: it takes them)
-        self._sync_error: str | None = None      # why it cannot make them durable (None: it can)
+        self._errors: dict[str, str] = {}        # the disk queue's conditions said (write, sync, read, lease): why
         self._dropped_seen = self._handover_seen = 0
         self._connecting_since = 0.0
         self._dialing: threading.Thread | None = None
@@ -393,7 +392,10 @@ after a write error).
             if retain:
                 self._retained[mqtt_topic] = (seq, body)
             self.moved += 1
-        self._say_disk(q.write_error)
+        self._say("write", q.write_error, "cannot write ({}); new messages are sent from memory, up to "
+                  f"{HOLD_BYTES >> 20} MB kept until it takes them", "writable again")
+        self._say("lease", q.lease.error, "cannot write its seq lease ({}): after a crash, seqs may be used again",
+                  "seq lease written again")
         if self.handover_drops != self._handover_seen:
             n, self._handover_seen = self.handover_drops - self._handover_seen, self.handover_drops
             self._event("mqtt_queue", f"the publisher fell behind: dropped the {n} oldest message(s) "
@@ -408,33 +410,31 @@ after a write error).
                         f"the {n} oldest unsent message(s) ({self.queue.dropped} in all)",
                         logging.WARNING, action="dropped", count=n, total=self.queue.dropped)
 
-    def _say_disk(self, err: OSError | None) -> None:
-        """The disk queue's write error as an event when it starts, and when it is over."""
-        if err is not None:
-            reason = err.strerror or str(err)
-            if self._queue_error != reason:
-                self._queue_error = reason
-                self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: cannot write ({reason}); "
-                            f"new messages are sent from memory, up to {HOLD_BYTES >> 20} MB kept until it "
-                            "takes them", logging.ERROR, action="write_error", reason=reason)
-        elif self._queue_error is not None:
-            self._queue_error = None
-            self._event("mqtt_queue", "store-and-forward queue writable again", logging.INFO, action="resumed")
+    def _say(self, key: str, err: OSError | None, text: str, over: str | None = None) -> None:
+        """Condition ``key`` of the disk queue as events: one ERROR (``text``, the reason in its
+        ``{}``) when ``err`` starts it or changes its reason, one INFO (``over``) when it ends."""
+        reason = None if err is None else err.strerror or str(err)
+        if self._errors.get(key) == reason:
+            return
+        if reason is None:
+            del self._errors[key]
+            if over is not None:
+                self._event("mqtt_queue", f"store-and-forward queue {over}", logging.INFO, action="resumed")
+            return
+        self._errors[key] = reason
+        self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: {text.format(reason)}", logging.ERROR,
+                    action="read_error" if key == "read" else "write_error", reason=reason)
 
     def _sync(self, force: bool = False) -> None:
         """The queue's fsync and cursor, at most every ``fsync_s``; a failure is one event until
-        a sync goes through again (none while the queue's write error is said: the same outage)."""
+        a sync goes through again (none while its write error is said: the same outage)."""
         try:
             synced = self.queue.sync(force)
         except OSError as err:
-            reason = err.strerror or str(err)
-            if self._sync_error != reason and self._queue_error is None:
-                self._event("mqtt_queue", f"store-and-forward queue {self.queue.dir}: cannot make it durable "
-                            f"({reason})", logging.ERROR, action="write_error", reason=reason)
-            self._sync_error = reason
+            self._say("sync", None if "write" in self._errors else err, "cannot make it durable ({})")
             return
         if synced:
-            self._sync_error = None
+            self._say("sync", None, "")
 
     def _send(self, now: float) -> None:
         """From the queue's send cursor, at most ``MAX_INFLIGHT`` unacknowledged: the backlog
@@ -452,8 +452,9 @@ after a write error).
         try:
             batch = self.queue.next_batch(room)
         except OSError as err:                  # a segment that cannot be read: tried again at the next poll
-            self._say_disk(err)
+            self._say("read", err, "cannot read ({}); sending waits until it can", "readable again")
             return
+        self._say("read", None, "", "readable again")
         for rec in batch:
             info = self._client.publish(rec.topic, rec.payload, qos=self.cfg.qos, retain=rec.retain)
             self._inflight[info.mid] = rec.seq

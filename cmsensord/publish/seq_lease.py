@@ -41,7 +41,7 @@ class SeqLease:
             text = self.path.read_text(encoding="ascii").strip()
         except (OSError, ValueError):
             return 0
-        return int(text) if text.isdigit() else 0
+        return int(text) if text.isdigit() and int(text) < 1 << 63 else 0    # beyond a u64 seq: garbage
 
     def cover(self, seq: int) -> None:
         """Seqs up to ``seq`` leased durably before it is used: the lease moved :data:`LEASE`

@@ -62,14 +62,15 @@ def _snapshots(meta: dict) -> tuple[list[dict], list[float]] | None:
 
 def span_line(meta: dict, start_s: float, end_s: float) -> str | None:
     """``in the recording: SNAPSHOT (...) to SNAPSHOT (...)``: the snapshots a span of board
-    seconds begins and ends in (calibrate's healthy period); None unless ``meta`` is an
+    seconds begins and ends in (one, named once, when it begins and ends in the same; calibrate's
+    healthy period); None unless ``meta`` is an
     import's sidecar of several snapshots."""
     found = _snapshots(meta)
     if found is None:
         return None
     snaps, starts = found
-    return (f"in the recording: {_where(meta, snaps, starts, start_s, ending=False)} to "
-            f"{_where(meta, snaps, starts, end_s)}")
+    first, last = _where(meta, snaps, starts, start_s, ending=False), _where(meta, snaps, starts, end_s)
+    return f"in the recording: {first}" if first == last else f"in the recording: {first} to {last}"
 
 
 def origin_lines(meta: dict, views, alarms: dict[str, dict[str, float]] | None = None) -> list[str]:

@@ -387,9 +387,9 @@ EVENT = _obj(
         "state": _str("mqtt_link: the link's state (connected, disconnected, refused, failed)"),
         "queued": _int("mqtt_link: messages in the store-and-forward queue"),
         "action": _str("mqtt_queue: what happened (truncated, damaged, cursor_unreadable, skipped, resumed, "
-                       "write_error, encode_error, handover_dropped, dropped, dropping)"),
+                       "write_error, read_error, encode_error, handover_dropped, dropped, dropping)"),
         "bytes": _int("mqtt_queue (truncated, damaged): bytes cut from the queue's end or skipped as damaged"),
-        "reason": _str("mqtt_queue (write_error): why the queue cannot be written"),
+        "reason": _str("mqtt_queue (write_error, read_error): why the queue cannot be written or read"),
         "total": _int("mqtt_queue: messages dropped since start"),
         "count": _int("how many (frames lost, bytes discarded, queue drops, ...)"),
         "summarised": _int("a summary of this many events of the kind held back (at most 5 a "
