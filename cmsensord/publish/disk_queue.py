@@ -25,8 +25,8 @@ never gives a seq a run before it may have sent to another message.
 
 With ``wait_for_disk`` (the daemon), a directory on a full, failing or read-only file system
 (:data:`DISK_FAULTS`) is no error at start: the queue opens with what it can read, and its
-appends are held in memory as on a disk that failed later; a torn tail or an acknowledged segment it cannot remove
-stays for the next start.
+appends are held in memory as on a disk that failed later; a torn tail or an acknowledged
+segment it cannot remove stays for the next start.
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ class Publisher:
     """Publishes what :meth:`offer` is given to the broker of ``cfg``; ``queue_dir`` holds the
     disk queue (OSError if it cannot be created; with ``wait_for_disk``, the daemon, not for a
     full, failing or read-only disk: messages are then held in memory and sent from there, as
-after a write error).
+    after a write error).
     ``alarm_rules``: alarms are evaluated, so with discovery and ``alarms`` published, each
     channel's worst alarm is derived, published and announced (without rules it would stay
     unknown)."""
