@@ -300,7 +300,7 @@ def test_the_publisher_reports_a_full_disk_once_sends_from_memory_and_resumes(tm
     pub.start()
     try:
         pub.offer("/cm/events", 10**18, {"kind": "start", "message": "first"})
-        assert _wait(lambda: pub.queue.next_seq == 2)
+        assert _wait(lambda: pub.queue.next_seq == 2 and pub.queue._fd is not None)     # numbered, then written
         saved, full = os.dup(pub.queue._fd), os.open("/dev/full", os.O_WRONLY)
         os.dup2(full, pub.queue._fd)
         for i in range(5):

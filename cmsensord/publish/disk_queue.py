@@ -328,13 +328,13 @@ class DiskQueue:
         """Queue one message; ``payload_of(seq)`` gives its payload bytes. Returns its seq. It is
         held in memory until the disk takes it (:meth:`write_held`): sent from there meanwhile."""
         seq = self.next_seq
-        self.lease.cover(seq)
         rec = Record(seq, topic, payload_of(seq), retain)
         self.next_seq = seq + 1
         self._held.append(rec)
         self._held_bytes += _held_size(rec)
         self._bound_held()
-        self.write_held()
+        self.write_held()                       # the directory made again, if it must be
+        self.lease.cover(seq)                   # before anything sends it
         return seq
 
     def write_held(self) -> None:

@@ -394,8 +394,8 @@ class Publisher:
             self.moved += 1
         self._say("write", q.write_error, "cannot write ({}); new messages are sent from memory, up to "
                   f"{HOLD_BYTES >> 20} MB kept until it takes them", "writable again")
-        self._say("lease", q.lease.error, "cannot write its seq lease ({}): after a crash, seqs may be used again",
-                  "seq lease written again")
+        self._say("lease", None if "write" in self._errors else q.lease.error,     # else the same outage
+                  "cannot write its seq lease ({}): after a crash, seqs may be used again", "seq lease written again")
         if self.handover_drops != self._handover_seen:
             n, self._handover_seen = self.handover_drops - self._handover_seen, self.handover_drops
             self._event("mqtt_queue", f"the publisher fell behind: dropped the {n} oldest message(s) "

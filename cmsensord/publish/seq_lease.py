@@ -16,15 +16,12 @@ same (the messages matter more than their numbers): such seqs may be used again 
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 
 from cmsensord.sinks.mcap_file import fsync_dir
 
 #: how far ahead of use the lease is written (one durable write per this many messages)
 LEASE = 1 << 14
-#: after a lease write fails, seconds before the next try
-RETRY_S = 1.0
 
 
 class SeqLease:
@@ -34,7 +31,6 @@ class SeqLease:
         self.path = directory / "seq-lease"
         self.upto = self._read()
         self.error: OSError | None = None       # why the last write failed (None: written)
-        self._retry_at = 0.0
 
     def _read(self) -> int:
         try:
@@ -44,15 +40,15 @@ class SeqLease:
         return int(text) if text.isdigit() and int(text) < 1 << 63 else 0    # beyond a u64 seq: garbage
 
     def cover(self, seq: int) -> None:
-        """Seqs up to ``seq`` leased durably before it is used: the lease moved :data:`LEASE`
-        past it when ``seq`` is beyond it (a refusing disk: :attr:`error`, tried again after
-        :data:`RETRY_S`)."""
-        if seq <= self.upto or time.monotonic() < self._retry_at:
+        """Seqs up to ``seq`` leased durably before it is sent: the lease moved :data:`LEASE`
+        past it when ``seq`` is beyond it (a refusing disk: :attr:`error`, tried again with the
+        next seq)."""
+        if seq <= self.upto:
             return
         try:
             self._write(seq - 1 + LEASE)
         except OSError as err:
-            self.error, self._retry_at = err, time.monotonic() + RETRY_S
+            self.error = err
             return
         self.upto, self.error = seq - 1 + LEASE, None
 
