@@ -72,12 +72,15 @@ class Broker:
 
 class Subscriber:
     """A paho client subscribed to ``topic`` (QoS 1, persistent session) that reconnects by itself:
-    :attr:`got` is every (topic, payload bytes, retained) received, in order."""
+    :attr:`got` is every (topic, payload bytes, retained) received, in order; :attr:`again`, in
+    step with it, whether the broker sent that message again itself: from its retained store as
+    the subscriber (re)subscribed, or as a DUP of its own unacknowledged delivery."""
 
     def __init__(self, port: int, topic: str = "#", client_id: str = "test-subscriber") -> None:
         import paho.mqtt.client as mqtt
 
         self.got: list[tuple[str, bytes, bool]] = []
+        self.again: list[bool] = []
         self.lock = threading.Lock()
         self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
                                   clean_session=False)
@@ -90,11 +93,13 @@ class Subscriber:
     def _message(self, client, userdata, msg) -> None:
         with self.lock:
             self.got.append((msg.topic, msg.payload, bool(msg.retain)))
+            self.again.append(bool(msg.retain) or bool(msg.dup))
 
-    def messages(self, suffix: str = "") -> list[tuple[str, dict]]:
-        """(topic, decoded JSON) of the JSON messages received on topics ending in ``suffix``."""
+    def messages(self, suffix: str = "", forwarded: bool = False) -> list[tuple[str, dict]]:
+        """(topic, decoded JSON) of the JSON messages received on topics ending in ``suffix``;
+        ``forwarded``: only those the broker forwarded as a publisher sent them (not :attr:`again`)."""
         with self.lock:
-            got = list(self.got)
+            got = [g for g, again in zip(self.got, self.again) if not (forwarded and again)]
         out = []
         for topic, body, _ in got:
             if topic.endswith(suffix) and body.startswith(b"{"):

@@ -99,7 +99,7 @@ def test_a_broker_outage_loses_nothing_and_delivers_in_order(tmp_path, broker):
     daemon = spawn(simulate(tmp_path, mqtt_yaml(broker.port), duration=300),
                               stderr=subprocess.PIPE, text=True, env=ENV)
     try:
-        assert sub.wait_for(lambda: len(seqs(sub)) >= 20)
+        assert sub.wait_for(lambda: len(seqs(sub)) >= 200)     # a wrong rewind would repeat many
         broker.stop()
         time.sleep(3.0)                         # 60 s of the board's time at 20x
         broker.start()
@@ -110,9 +110,12 @@ def test_a_broker_outage_loses_nothing_and_delivers_in_order(tmp_path, broker):
         got = seqs(sub)
         assert first_occurrences(got) == list(range(1, len(want) + 1))    # in order, no gap
         # QoS 1 resends only the unacknowledged window; the connection also publishes again the
-        # latest message of each retained topic the broker had acknowledged (README, `seq`)
+        # latest message of each retained topic the broker had acknowledged (README, `seq`). The
+        # broker's own repeats to the subscriber (its retained store at the subscriber's
+        # subscribing again after the restart, its unacknowledged deliveries) are not the daemon's.
         retained = {t for t, m in sub.messages() if "seq" in m and t.rsplit("/", 1)[-1] in RETAINED}
-        assert len(got) - len(want) <= MAX_INFLIGHT + len(retained), (len(got) - len(want), retained)
+        forwarded = [m["seq"] for _, m in sub.messages(forwarded=True) if "seq" in m]
+        assert len(forwarded) - len(want) <= MAX_INFLIGHT + len(retained), (len(forwarded) - len(want), retained)
         assert len(re.findall(r"mqtt_link: lost the broker 127\.0\.0\.1:\d+", err)) == 1, err
         assert "cannot connect" not in err      # the retries of one outage are one event
         assert len(re.findall(r"mqtt_link: connected to 127\.0\.0\.1", err)) == 2, err
