@@ -134,3 +134,35 @@ def test_a_queue_that_cannot_be_written_does_not_hang_the_replay(tmp_path):
     said = re.search(r"  mqtt: 0 message\(s\) sent to .*, 0 acknowledged; (\d+) left unacknowledged in \S+ \((\d+) "
                      r"of them lost: held in memory, the disk refused them\): the next run", p.stderr)
     assert said and 0 < int(said[2]) < int(said[1]), p.stderr
+
+
+
+@pytest.mark.parametrize("fsize", [None, 3_000], ids=["queue_bound", "memory_bound"])
+def test_a_replay_waits_for_room_where_the_queue_s_bounds_would_drop(tmp_path, broker, fsize):  # noqa: F811
+    """An unpaced replay offers its messages far faster than the broker acknowledges them: it
+    waits while the queue is at ``queue_mb`` (0.1 MB: ~200 messages), or, the disk refusing
+    writes (a file size limit under a segment's size), while the messages held in memory fill
+    their bound (``queue_mb`` too: 0.02 MB), so the bounds drop none and the subscriber gets
+    every seq (it dropped 2,496 of a 900-s capture's 2,736 at 0.1 MB)."""
+    def limit():
+        if fsize:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+
+    sub = Subscriber(broker.port)
+    try:
+        args = _replay(tmp_path, broker.port, f"queue_mb: {0.02 if fsize else 0.1}")
+        p = subprocess.run(args, capture_output=True, text=True, timeout=120, preexec_fn=limit)
+        assert p.returncode == 0, p.stderr
+        refused = [ln for ln in p.stderr.splitlines() if " mqtt_queue: " in ln and "cannot write" in ln]
+        assert len(refused) == bool(fsize), p.stderr
+        assert not fsize or refused[0].endswith("new messages are sent from memory, up to 0.02 MB kept until it "
+                                                "takes them"), p.stderr
+        assert "dropped" not in p.stderr and "fell behind" not in p.stderr, p.stderr
+        said = re.search(r"  mqtt: (\d+) message\(s\) sent to .*, (\d+) acknowledged; 0 left unacknowledged", p.stderr)
+        assert said and said[1] == said[2], p.stderr
+        n = int(said[2])
+        assert n > 800, n                               # several times what either bound holds
+        assert sub.wait_for(lambda: len(set(seqs(sub))) >= n)
+        assert sorted(set(seqs(sub))) == list(range(1, n + 1))
+    finally:
+        sub.close()

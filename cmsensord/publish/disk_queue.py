@@ -324,15 +324,18 @@ class DiskQueue:
         self.segments.append(_Segment(records[0][1].seq, path, scan.valid, records[-1][1].seq, named))
 
     # -- writing ---------------------------------------------------------------------------
-    def append(self, topic: str, payload_of, retain: bool) -> int:
+    def append(self, topic: str, payload_of, retain: bool, bound: bool = True) -> int:
         """Queue one message; ``payload_of(seq)`` gives its payload bytes. Returns its seq. It is
-        held in memory until the disk takes it (:meth:`write_held`): sent from there meanwhile."""
+        held in memory until the disk takes it (:meth:`write_held`): sent from there meanwhile;
+        ``bound``: the oldest held records are dropped past their bound (a caller that waits
+        while the queue is :attr:`full` passes False: it may pass the bound by this record)."""
         seq = self.next_seq
         rec = Record(seq, topic, payload_of(seq), retain)
         self.next_seq = seq + 1
         self._held.append(rec)
         self._held_bytes += _held_size(rec)
-        self._bound_held()
+        if bound:
+            self._bound_held()
         self.write_held()                       # the directory made again, if it must be
         self.lease.cover(seq)                   # before anything sends it
         return seq
@@ -365,6 +368,12 @@ class DiskQueue:
     def held_full(self) -> bool:
         """The records held in memory take :data:`HOLD_BYTES` (or ``max_bytes``) or more."""
         return self._held_bytes >= min(HOLD_BYTES, self.max_bytes)
+
+    @property
+    def full(self) -> bool:
+        """Another record could make the bounds drop an unacknowledged one: the held records at
+        their bound, or the segments within one segment of ``max_bytes`` while any is unacknowledged."""
+        return self.held_full or (self.depth > 0 and self.size_bytes + self.segment_bytes > self.max_bytes)
 
     def _write(self, rec: Record) -> None:
         """``rec`` appended to the newest segment (a new one when it is full); OSError (a full

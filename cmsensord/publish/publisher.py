@@ -376,11 +376,13 @@ class Publisher:
 
     def _to_disk(self) -> None:
         """Offered messages -> the disk queue, numbered (held in memory and sent from there while
-        the disk refuses them; a replay's wait while they fill the memory bound); a disk that
-        refuses them is one event per outage."""
+        the disk refuses them); a replay's messages wait while the queue is full, where the
+        daemon's drop the oldest; a disk that refuses them is one event per outage."""
         q = self.queue
         q.write_held()
-        while self.handover and not (self.wait_when_full and q.held_full):     # a replay waits for room
+        hold_mb = min(HOLD_BYTES >> 20, self.cfg.queue_mb)
+        waits = self.wait_when_full and not self.give_up.is_set()
+        while self.handover and not (waits and q.full):                        # a replay waits for room
             (mqtt_topic, retain), topic, stamp_ns, msg = self.handover.popleft()
             try:
                 body = payload(topic, stamp_ns, msg, q.next_seq)
@@ -388,12 +390,12 @@ class Publisher:
                 self._event("mqtt_queue", f"{topic}: not published: {err}", logging.WARNING,
                             action="encode_error")
                 continue
-            seq = q.append(mqtt_topic, lambda _, body=body: body, retain)
+            seq = q.append(mqtt_topic, lambda _, body=body: body, retain, bound=not waits)
             if retain:
                 self._retained[mqtt_topic] = (seq, body)
             self.moved += 1
         self._say("write", q.write_error, "cannot write ({}); new messages are sent from memory, up to "
-                  f"{HOLD_BYTES >> 20} MB kept until it takes them", "writable again")
+                  f"{hold_mb:g} MB kept until it takes them", "writable again")
         self._say("lease", None if "write" in self._errors else q.lease.error,     # else the same outage
                   "cannot write its seq lease ({}): after a crash, seqs may be used again", "seq lease written again")
         if self.handover_drops != self._handover_seen:
@@ -405,7 +407,7 @@ class Publisher:
             n = self.queue.dropped - self._dropped_seen
             self._dropped_seen = self.queue.dropped
             where = f"over {self.cfg.queue_mb:g} MB" if q.write_error is None else \
-                f"the disk refusing them, over {HOLD_BYTES >> 20} MB in memory"
+                f"the disk refusing them, over {hold_mb:g} MB in memory"
             self._event("mqtt_queue", f"store-and-forward queue {where}: dropped "
                         f"the {n} oldest unsent message(s) ({self.queue.dropped} in all)",
                         logging.WARNING, action="dropped", count=n, total=self.queue.dropped)
