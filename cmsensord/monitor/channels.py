@@ -95,7 +95,7 @@ class ChannelSetup:
         self.channels: tuple[ChannelConfig, ...] = cfg.channels
         self.severity: SeverityChain | None = None
         self.microphones: Microphones | None = None
-        self._no_channels = False
+        self._missing_said: int | None = None     # the board's channel count the missing ones were said for
         self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
@@ -283,18 +283,17 @@ class ChannelSetup:
         named = self.channels if self.auto_channels else self.cfg.channels
         check_channel_refs(self.cfg, named)
         usable = tuple(ch for ch in self.channels if ch.index < n_board)
-        if len(usable) < len(self.channels):
-            missing = [f"{ch.name} (index {ch.index})" for ch in self.channels if ch.index >= n_board]
-            emit("config", None, f"board sends {n_board} channel(s); configured channel(s) "
-                 f"{', '.join(missing)} not in the stream: not monitored, their alarm rules and bearings "
-                 "see no value", log_level=logging.WARNING)
+        if len(usable) < len(self.channels) and self._missing_said != n_board:
+            self._missing_said = n_board
+            missing = ", ".join(f"{ch.name} (index {ch.index})" for ch in self.channels if ch.index >= n_board)
+            indexes = "0" if n_board == 1 else f"0 to {n_board - 1}"
+            emit("config", None, f"board sends {n_board} channel(s); configured channel(s) {missing} not in "
+                 "the stream: not monitored, their alarm rules and bearings see no value" if usable else
+                 f"board sends {n_board} channel(s) (index {indexes}); none of the configured channels is "
+                 f"among them ({missing}): nothing is monitored until it sends them", log_level=logging.WARNING)
         if not usable:
-            if not self._no_channels:
-                self._no_channels = True
-                emit("config", None, f"none of the configured channels is among the board's "
-                     f"{n_board}: observations are not monitored until it sends them")
             return
-        self._no_channels = False
+        self._missing_said = None
         self.n_board = n_board
         self.channels = usable
         if self.on_channels is not None:
