@@ -3,7 +3,8 @@
 They talk to the daemon's control socket (:mod:`.control`): the one in the
 output directory of ``--config FILE``, the one given by ``--socket``, or by
 default the systemd unit's ``/var/lib/cmsensord/cmsensord.sock`` (root only:
-the state directory is mode 0700).  ``status`` prints the daemon's status line
+the state directory is mode 0700), or, when that is not there, the one of a daemon
+started in the current directory with the default ``output.dir``.  ``status`` prints the daemon's status line
 and its alarm table; ``ack ALARM`` acknowledges one alarm, ``ack --all`` every
 alarm showing a level.  ``capture-now [--channel CH]`` has the daemon keep a capture
 (trigger ``manual``) of the channel, or of every channel, around the newest sample it
@@ -19,6 +20,7 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+from cmsensord.config.settings import OutputConfig
 from cmsensord.service.control import SOCKET_NAME, STATE_DIR, request, socket_path
 
 __all__ = ["add_operator_parsers", "run_ack", "run_status", "run_capture_now", "format_table"]
@@ -39,16 +41,29 @@ def add_operator_parsers(sub) -> None:
     for p in (a, s, c):
         p.add_argument("--config", dest="sub_config", metavar="FILE",
                        help="the daemon's configuration (its socket is in output.dir)")
-        p.add_argument("--socket", metavar="PATH", help=f"the control socket (default {STATE_DIR / SOCKET_NAME})")
+        p.add_argument("--socket", metavar="PATH", help=f"the control socket (default {STATE_DIR / SOCKET_NAME}, "
+                       f"or, without it, {Path(OutputConfig().dir) / SOCKET_NAME} here)")
 
 
 def _path(args: argparse.Namespace) -> Path:
+    """``--socket``; the socket of ``--config``'s output directory; the service's; else, when
+    the service's is not there, that of a daemon started here with the default ``output.dir``
+    (``cmsensord --simulate``) if there is one."""
     if args.socket:
         return Path(args.socket)
     if args.sub_config:
         from cmsensord.config import load_config
         return socket_path(load_config(args.sub_config).output.dir)
-    return STATE_DIR / SOCKET_NAME
+    here = socket_path(OutputConfig().dir)
+    service = STATE_DIR / SOCKET_NAME
+    return here if not _exists(service) and here.is_socket() else service
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError:                         # the state directory mode 0700 to another user
+        return True
 
 
 def _ask(args: argparse.Namespace, body: dict) -> dict | None:
