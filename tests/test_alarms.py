@@ -106,6 +106,44 @@ def test_an_alarm_acknowledged_while_active_clears_when_the_value_falls_and_latc
     assert (row["level"], row["live"], row["latched"], row["acknowledged"]) == ("alert", "normal", True, False)
 
 
+def test_an_ack_while_the_value_is_back_above_the_level_within_its_on_delay_holds_the_level():
+    """A latched alert, a dip under the deadband (live normal), the value back at 6x the level,
+    its on-delay running: the acknowledgement keeps the alert, acknowledged (it said "now normal"
+    and "alert cleared (3.5)", and raised the alert again when the delay ran out); once the delay
+    has run, the same episode goes on, no new alarm; a fall then clears it."""
+    m = manager([{**RULE, "latch": True, "on_delay_s": 5}])
+    seen = run(m, [3] * 6 + [1] + [3] * 3)
+    assert seen == [(5, "alarm_alert", "vel/ch0")]
+    row = m.alarms["vel/ch0"].row()
+    assert (row["level"], row["live"]) == ("alert", "normal")
+    acks = [(t.kind, t.level, t.message) for t in m.ack(10 * S, "vel/ch0")]
+    assert acks == [("alarm_ack", 1, "vel/ch0 acknowledged (alert)")]
+    row = m.alarms["vel/ch0"].row()
+    assert (row["level"], row["acknowledged"]) == ("alert", True)
+    out = [(k, t.kind) for k, v in enumerate([3, 3, 3, 3, 1], start=10)
+           for t in m.record(k * S, "ch0", {"velocity_rms_mm_s": v})]
+    assert out == [(14, "alarm_clear")]
+    assert m.alarms["vel/ch0"].row()["level"] == "normal"
+
+
+def test_an_ack_holds_a_pending_level_only_while_the_value_stays_at_it():
+    m = manager([{**RULE, "latch": True, "on_delay_s": 5}])
+    run(m, [3] * 6 + [1, 3])
+    assert [t.kind for t in m.ack(8 * S, "vel/ch0")] == ["alarm_ack"]
+    out = [(k, t.kind) for k, v in enumerate([1, 3, 3], start=8)
+           for t in m.record(k * S, "ch0", {"velocity_rms_mm_s": v})]
+    assert out == [(8, "alarm_clear")]               # the dip ends the hold; a new rise waits its delay
+
+
+def test_an_ack_with_no_value_at_the_level_clears_the_latch():
+    s = AlarmState(on_delay_s=5, latch=True)
+    for k in range(6):
+        s.step(k * S, 1)
+    s.step(6 * S, 0)
+    assert (s.level, s.pending) == (1, 0)
+    assert s.ack(7 * S) == 0 and not s.acknowledged
+
+
 def test_a_new_danger_after_an_acknowledged_alert_latches_again():
     """Danger, then alert (the latch shows danger), acknowledged at alert; danger again is a new
     alarm: it latches, and stays when the value falls."""

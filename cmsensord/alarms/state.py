@@ -5,13 +5,15 @@ reached L (the input ``reached``, no deadband) for ``on_delay_s`` of stream time
 break, and off once the input (the exceedance level, with its deadband) has been below L for
 ``off_delay_s``; the output is the highest level that is on. A latching alarm shows the highest
 level it reached until acknowledged; an acknowledgement then drops it to the level that is on
-now, and that episode latches nothing more: it clears when the value falls, and a rise of the
-level shown (a new alarm: danger again after an acknowledged danger fell to alert) latches
-again. While suppressed (machine not running) nothing turns on, the timers restart, and the
-non-latched level is off. A delay counts the stream's own time: when the stamps are re-anchored
-(a step of the wall clock) :meth:`AlarmState.shift` moves its timers with them, so a delay
-straddling the step lasts as if there had been none; an input stamped before the start of a
-delay (stamps gone back unannounced) restarts it there, never measuring a negative time.
+now, or that the value is back at within its on-delay (a dip cleared the level a moment before:
+the machine is not back to normal), held while that delay runs, and that episode latches
+nothing more: it clears when the value falls, and a rise of the level shown (a new alarm:
+danger again after an acknowledged danger fell to alert) latches again. While suppressed
+(machine not running) nothing turns on, the timers restart, and the non-latched level is off. A
+delay counts the stream's own time: when the stamps are re-anchored (a step of the wall clock)
+:meth:`AlarmState.shift` moves its timers with them, so a delay straddling the step lasts as if
+there had been none; an input stamped before the start of a delay (stamps gone back
+unannounced) restarts it there, never measuring a negative time.
 
 :meth:`AlarmState.resume` puts back what a saved state held (a daemon's restart:
 :mod:`.saved`): the latch, the acknowledgement, and the live level at the stop as a
@@ -58,6 +60,12 @@ class AlarmState:
         return 2 if self.on[1] else 1 if self.on[0] else 0
 
     @property
+    def pending(self) -> int:
+        """The highest level whose on-delay is running (the value at it, the level not on yet)."""
+        return 2 if self.since[1] is not None and not self.on[1] else \
+            1 if self.since[0] is not None and not self.on[0] else 0
+
+    @property
     def level(self) -> int:
         """The level shown: the live level, or the latched one until acknowledged, or the restored
         one until confirmed."""
@@ -84,6 +92,8 @@ class AlarmState:
                 self.restored_until = t_ns + round(max(RESUME_S + self.on_delay_s, self.off_delay_s) * 1e9)
             if self.live >= self.restored or t_ns >= self.restored_until:
                 self.restored, self.restored_until = 0, None
+        if self.acknowledged and self.latched:      # held while its on-delay runs (see ack)
+            self.latched = min(self.latched, max(self.live, self.pending))
         return self._shown(t_ns, before)
 
     def shift(self, shift_ns: int) -> None:
@@ -106,15 +116,17 @@ class AlarmState:
         before = self.level
         self.on = [False, False]
         self.since = [None, None]
+        if self.acknowledged:                   # a hold of an on-delay (see ack), which restarts
+            self.latched = 0
         self.restored, self.restored_until = 0, None
         return self._shown(t_ns, before)
 
     def ack(self, t_ns: int, by: str | None = None) -> int:
-        """Acknowledged at ``t_ns`` (by user ``by``): the latch drops to the live level; returns the
-        level shown."""
+        """Acknowledged at ``t_ns`` (by user ``by``): the latch drops to the live level, or to the
+        level whose on-delay runs, held while it does; returns the level shown."""
         before = self.level
-        self.latched = 0
-        self.acknowledged = max(self.live, self.restored) > 0
+        self.latched = min(self.latched, self.pending) if self.latch else 0
+        self.acknowledged = max(self.live, self.latched, self.restored) > 0
         self.acked_ns, self.acked_by = (t_ns, by) if self.acknowledged else (None, None)
         return self._shown(t_ns, before)
 
