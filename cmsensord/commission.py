@@ -156,7 +156,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
               if r.model.r_max_rule == "span" and r.model.r_max < SPAN * r.model.r_1 * (1 - 1e-9)]
     for r in results:
         m = r.model
-        margin = f"margin {r.f_r / m.max_cnt:.2g}x" if m.max_cnt else "no outlier at all"
+        margin = f"margin {r.f_r / m.max_cnt:.2f}x" if m.max_cnt else "no outlier at all"
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} ({margin}); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))

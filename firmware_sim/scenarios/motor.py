@@ -332,8 +332,8 @@ class DegradingMotor(MotorScenario):
     """
 
     name = "degrading"
-    description = ("healthy -> faulty (at 60 %) -> 40 % worse (at 80 %) -> easing below the faulty "
-                   "level by the end of --duration (Kim et al. 2023, Figs. 14-16)")
+    description = ("healthy to 25 %, then rising to faulty (at 60 %) -> 40 % worse (at 80 %) -> easing below "
+                   "the faulty level by the end of --duration (Kim et al. 2023, Figs. 14-16)")
 
     def __init__(self, *, onset: float = 0.25, faulty_at: float = 0.6, peak_at: float = 0.8,
                  peak_level: float = 1.4, end_level: float = 0.7, **kwargs):
