@@ -36,6 +36,7 @@ from cmsensord.errors import LinkError
 from cmsensord.link import FrameQueue, SerialReader
 from cmsensord.monitor.clock import DEFAULT_BLOCK_LEN, DEFAULT_FS, is_reset
 from cmsensord.protocol import Decoder, Frame, FrameType, LinkCounters, decode_status
+from cmsensord.sinks.mcap_chunks import MAGIC as MCAP_MAGIC
 
 __all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced"]
 
@@ -144,7 +145,13 @@ class CaptureSource(ByteStreamSource):
 
 def _open_capture(p: Path) -> BinaryIO:
     try:
-        return open(p, "rb")
+        f = open(p, "rb")
+        if f.peek(len(MCAP_MAGIC))[:len(MCAP_MAGIC)] == MCAP_MAGIC:
+            f.close()
+            raise LinkError(f"{p}: an MCAP log (cmsensord's output), not a capture of the board's serial stream: "
+                            "`cmsensord summary` and `cmsensord report` read it; replay, calibrate and vkf read a "
+                            "capture (`--capture`, `cmsensord record`, `cmsensord import`)")
+        return f
     except FileNotFoundError:
         raise LinkError(f"{p}: capture file not found") from None
     except IsADirectoryError:
