@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import os
 import sys
@@ -271,6 +272,7 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
     """SITE.yaml text: BASE's settings (if any) with the learned channels, commented.  A
     speed given to calibrate (``rpm``, ``--rpm``) replaces the one the capture's import read."""
     base = dict(base or {})
+    base.pop("commissioned", None)
     base_alarms = base.pop("alarms", None) or {}
     base_channels = {ch.get("name"): ch for ch in base.pop("channels", None) or [] if isinstance(ch, dict)}
     out = [
@@ -301,7 +303,14 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
         out += [f"    {(k + ': ' + _g(v)):<28}# {why}" for k, v, why in rows]
         for k, v in entry.items():
             out.append(f"    {k}: {yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}")
-    return "\n".join(out + _alarms_yaml(obs, base_alarms)) + "\n"
+    return "\n".join(out + _alarms_yaml(obs, base_alarms) + _commissioned_yaml(obs, source)) + "\n"
+
+
+def _commissioned_yaml(obs: Observations, source: str) -> list[str]:
+    """The ``commissioned`` section: the capture and its board's rate (a board at another is warned of)."""
+    return ["# What the baselines were learned from: a board streaming at another rate is warned of.",
+            "commissioned:", f"  capture: {json.dumps(source)}", f"  fs_hz: {obs.fs:g}",
+            f"  block_len: {round(obs.fs / obs.rate_hz)}"]
 
 
 _SETTING_WHY = {"rpm": "the speed the import read from the recording (no tacho in the capture)"}

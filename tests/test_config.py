@@ -196,7 +196,7 @@ BAD_DICTS = [
     ({"channels": ["a"]}, "channels[0]: expected a mapping (name: ..., index: ...) (got 'a')"),
     ({"monitor": [1, 2]}, "cfg.yaml: monitor: expected a mapping of keys to values (got [1, 2])"),
     ([1, 2], "cfg.yaml: top level must be a mapping of the sections link, output, monitor, channels, tacho, orders, "
-             "acoustic, indicators, bearings, capture, mqtt, alarms (got [1, 2])"),
+             "acoustic, indicators, bearings, capture, mqtt, alarms, commissioned (got [1, 2])"),
     ("text", "cfg.yaml: top level must be a mapping"),
 ]
 
@@ -217,7 +217,7 @@ BAD_FILES = [
     ("monitor:\n  n: 3\n    z_c: 2\n", "YAML syntax error at line 3, column 8: mapping values are not allowed here"),
     ("monitor:\n  r_max: 0.1\n  r_max: 0.2\n", "YAML syntax error at line 3, column 3: found duplicate key 'r_max'"),
     ("- monitor\n- link\n", "top level must be a mapping of the sections link, output, monitor, channels, tacho, "
-                            "orders, acoustic, indicators, bearings, capture, mqtt, alarms (got ['monitor', 'link'])"),
+                            "orders, acoustic, indicators, bearings, capture, mqtt, alarms, commissioned (got ['monitor', 'link'])"),
     ("monitor:\n\tn: 3\n", "YAML syntax error at line 2, column 1: found character '\\t' that cannot start any token: "
                           "indent with spaces, not tabs"),
     ("42\n", "top level must be a mapping"),

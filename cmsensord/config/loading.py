@@ -32,6 +32,7 @@ from .settings import (
     MAX_CHANNELS,
     AcousticConfig,
     ChannelConfig,
+    CommissionedConfig,
     ComponentConfig,
     Config,
     LinkConfig,
@@ -47,7 +48,8 @@ _log = logging.getLogger("cmsensord")
 __all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict"]
 
 _SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
-                              "tacho": TachoConfig, "acoustic": AcousticConfig, "capture": CaptureConfig}
+                              "tacho": TachoConfig, "acoustic": AcousticConfig, "capture": CaptureConfig,
+                              "commissioned": CommissionedConfig}
 _MONITOR_KEYS = tuple(f.name for f in dataclasses.fields(MonitorConfig))
 _CHANNEL_OWN_KEYS = tuple(
     f.name for f in dataclasses.fields(ChannelConfig) if f.name != "monitor"
@@ -514,6 +516,7 @@ def config_to_dict(cfg: Config) -> dict[str, Any]:
         **({"mqtt": {**dataclasses.asdict(cfg.mqtt), "publish": list(cfg.mqtt.publish)}}
            if cfg.mqtt is not None else {}),
         "alarms": _alarms_dict(cfg.alarms),
+        "commissioned": dataclasses.asdict(cfg.commissioned),
     }
 
 

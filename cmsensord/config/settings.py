@@ -30,6 +30,7 @@ __all__ = [
     "OrdersConfig",
     "TachoConfig",
     "AcousticConfig",
+    "CommissionedConfig",
     "Config",
     "default_channels",
 ]
@@ -380,6 +381,19 @@ def default_channels(n: int, monitor: MonitorConfig | None = None) -> tuple[Chan
 
 
 @dataclass(frozen=True)
+class CommissionedConfig:
+    """What ``cmsensord calibrate`` learned the baselines from (it writes this section): a
+    board streaming at another sample rate or block length is warned of."""
+
+    capture: str | None = setting(None, "the capture the baselines were learned from", nonempty=True)
+    fs_hz: float | None = setting(None, "its board's samples per second", gt=0)
+    block_len: int | None = setting(None, "its board's samples per block (one RMS value)", ge=1)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole configuration. ``monitor`` is the default for every channel."""
 
@@ -402,6 +416,8 @@ class Config:
                                    metadata={"help": "event-triggered captures of the signal"})
     mqtt: MqttConfig | None = field(default=None, metadata={"help": "publishing to an MQTT broker"})
     alarms: AlarmsConfig = field(default_factory=AlarmsConfig, metadata={"help": "alarm manager"})
+    commissioned: CommissionedConfig = field(default_factory=CommissionedConfig,
+                                             metadata={"help": "what calibrate learned the baselines from"})
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_config_rules, bearings_unique, rules_see_indicators,
                                           rules_on_bearing_channels, rules_levels_rise, capture_sees_operating,

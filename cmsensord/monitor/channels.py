@@ -97,6 +97,7 @@ class ChannelSetup:
         self.microphones: Microphones | None = None
         self._missing_said: int | None = None     # the board's channel count the missing ones were said for
         self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
+        self._unlike_said: tuple[int, int] | None = None    # the rate unlike the commissioned one said
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
@@ -171,10 +172,27 @@ class ChannelSetup:
                       f"{mode} mode, {st.n_channels} channel(s), fs {st.fs} Hz, block {st.block_len}"
                       + (f", tacho of {st.tacho_ppr} pulse(s) per revolution" if st.tacho_inputs else ""),
                       self.clock.stamp_ns(f.t0_unwrapped))
+        self._unlike_commissioned(f, st)
         blind = blind_in_rms_mode(self.cfg) if st.mode == MODE_RMS and not self._rms_told else None
         if blind is not None:
             self._rms_told = True
             self.log.emit("config", None, blind, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
+
+    def _unlike_commissioned(self, f: Frame, st: Status) -> None:
+        """A WARNING, once per rate, when the board streams at another sample rate or block length
+        than the capture the baselines were learned from (``commissioned``: another machine's
+        site file, or a board set up anew)."""
+        learned = self.cfg.commissioned
+        rate = (st.fs, st.block_len)
+        if learned.fs_hz is None or rate == self._unlike_said or (
+                abs(st.fs - learned.fs_hz) <= 1e-3 * learned.fs_hz and learned.block_len in (None, st.block_len)):
+            return
+        self._unlike_said = rate
+        self.log.emit("config", None, f"the baselines were learned from {learned.capture or 'a capture'} at fs "
+                      f"{learned.fs_hz:g} Hz, block {learned.block_len}; this board sends fs {st.fs} Hz, block "
+                      f"{st.block_len}: they and the alarm levels on them may not fit it (cmsensord calibrate "
+                      "on this machine's healthy period)", self.clock.stamp_ns(f.t0_unwrapped),
+                      log_level=logging.WARNING)
 
     def _odd(self, n: int) -> bool:
         """Whether data frames of ``n`` channels are odd: not the board's count, nor announced."""
