@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import struct
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -49,7 +50,10 @@ def read_npz(path: str, array: tuple[str, ...] | None, slow: str | None = None) 
     with _load(path) as z:
         try:
             arrays = {k: z[k] if (m := _mapped(path, z.zip, k)) is None else m for k in z.files}
-        except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        except (OSError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
+            raise ImportFailure(f"{path}: an array cannot be read ({' '.join(str(exc).split())}): the archive is "
+                                "corrupt or cut short; copy it again") from None
+        except ValueError as exc:
             raise ImportFailure(f"{path}: an array cannot be read ({' '.join(str(exc).split())}); "
                                 "save the archive with numeric arrays only") from None
     data, columns, note = selected(path, arrays, array, "--array", "array", slow)

@@ -23,12 +23,17 @@ __all__ = ["read_mat"]
 def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = None) -> Table:
     """The variables ``variable`` of a .mat file side by side (``slow``: the speed column,
     :func:`~.variables.selected`), and the rate and speed it names."""
+    import zlib
+
     import scipy.io  # 0.3 s to import: only when a .mat file is read
 
     try:
         m = scipy.io.loadmat(path)
     except NotImplementedError:
         m = _read_v73(path)
+    except zlib.error as exc:
+        raise ImportFailure(f"{path}: a compressed variable is damaged ({exc}): the file is corrupt or cut "
+                            "short; copy it again") from None
     except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as exc:
         raise ImportFailure(f"{path}: not a readable MATLAB file ({' '.join(str(exc).split())})") from None
     arrays = flatten({k: v for k, v in m.items() if not k.startswith("__")})
