@@ -119,3 +119,16 @@ def test_other_zone_boundaries_are_a_change_of_zone_levels():
                 "them")]
     m3 = manager([rule])                                    # the same boundaries: the same episode
     assert [r.restored for r in resume(m3, check(snapshot(m)))] == [True]
+
+
+def test_an_acknowledged_level_held_in_its_on_delay_is_restored_acknowledged():
+    """A latched alert acknowledged while the value is back at it within its on-delay (held, see
+    AlarmState.ack), then a restart: the alert is restored, acknowledged, and the rule confirming
+    it raises no new alarm."""
+    m, said = restarted([{**RULE, "latch": True, "on_delay_s": 5}], [3] * 6 + [1] + [3] * 3, ack=True)
+    assert [(r.alarm, r.restored) for r in said] == [("vel/ch0", True)]
+    row = m.alarms["vel/ch0"].row()
+    assert (row["level"], row["acknowledged"]) == ("alert", True)
+    assert feed(m, [3] * 7, t0=100) == []
+    row = m.alarms["vel/ch0"].row()
+    assert (row["level"], row["live"], row["acknowledged"]) == ("alert", "alert", True)

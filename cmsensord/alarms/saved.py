@@ -77,15 +77,17 @@ def resolved_against(mgr: AlarmManager, a: Alarm) -> dict[str, Any]:
 
 def snapshot(mgr: AlarmManager) -> dict[str, dict[str, Any]]:
     """The saved record of each alarm showing a level or holding a latch, by alarm name (its live
-    level: a restored one the rule has not confirmed yet counts, so a second restart keeps it)."""
+    level: a restored one the rule has not confirmed yet counts, so a second restart keeps it, and
+    so does an acknowledged one held while its on-delay runs)."""
     out: dict[str, dict[str, Any]] = {}
     for a in mgr.alarms.values():
         s = a.state
         if s.level == 0 and s.latched == 0:
             continue
+        live = max(s.live, s.restored, s.latched if s.acknowledged else 0)
         rec: dict[str, Any] = {"rule": a.rule.name, "indicator": a.rule.indicator, "latch": a.rule.latch,
                                "levels": level_settings(a.rule, resolved_against(mgr, a)), "level": LEVELS[s.level],
-                               "live": LEVELS[max(s.live, s.restored)], "latched": LEVELS[s.latched],
+                               "live": LEVELS[live], "latched": LEVELS[s.latched],
                                "acknowledged": s.acknowledged}
         for key, value in (("since_ns", s.changed_ns), ("acked_ns", s.acked_ns), ("acked_by", s.acked_by)):
             if value is not None:
