@@ -1,5 +1,6 @@
 """`cmsensord replay` of captures whose TACHO frames carry many edges: memory stays bounded
-however long the dense tacho goes on, and a dense encoder's speed is read right."""
+however long the dense tacho goes on, a dense encoder's speed is read right, and a burst of
+edges at one instant is said as bad input and leaves the speed of the tacho after it right."""
 
 from __future__ import annotations
 
@@ -69,3 +70,18 @@ def test_a_dense_tacho_holds_bounded_memory_and_its_speed(tmp_path):
         assert [round(m["speed_rpm"], 1) for m in ind[1:]] == [23529.4] * (seconds - 1), err
         peaks.append(peak)
     assert peaks[1] - peaks[0] < 10, peaks
+
+
+def test_a_burst_of_impossible_edges_is_bad_input_and_the_speed_comes_back(tmp_path):
+    """3 s of one edge every 500 samples (3000 rpm), 1 s of 1023 edges a block, 1 s of 1023 edges
+    a block all at one offset, then the 3000-rpm tacho again: the frames with edges at one
+    instant are decode errors, dropped; the tacho is lost in the silence they leave and, restored,
+    reads 3000 rpm (taking their first edges as a pulse a block had the tacho read 6000 rpm, a
+    missed pulse after every real one, for as long as it went on)."""
+    normal = [np.array([12 * 256 + 128]) if b % 2 == 0 else np.zeros(0) for b in range(100)]
+    tacho = normal * 3 + [np.arange(1023) * 62] * 100 + [np.full(1023, 100)] * 100 + normal * 6
+    err, _, ind = replay(capture(tmp_path / "burst.bin", tacho, ppr=1), tmp_path / "out")
+    assert [round(m["speed_rpm"]) for m in ind[:3] + ind[5:]] == [3000] * 9, err
+    (line,) = [x.strip() for x in err.splitlines() if x.strip().startswith("events:")]
+    assert "decode_error 100," in line and "tacho_lost 1, tacho_restored 1" in line, line
+    assert "tacho_missed_pulse" not in line, line
