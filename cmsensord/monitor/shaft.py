@@ -377,11 +377,11 @@ class Shaft:
 
 
 def _repeats(counts: list[int], offsets: list[int]) -> bool:
-    """Whether a frame (``counts`` edges each, their ``offsets`` frame after frame) has two
-    edges at the same offset."""
+    """Whether a frame (``counts`` edges each, their ``offsets`` frame after frame) has at least
+    half of its edges at the offset of another edge of it (:func:`_distinct` drops it)."""
     pos = 0
     for n in counts:
-        if n > 1 and len(set(offsets[pos:pos + n])) < n:
+        if n > 1 and 2 * (n - len(set(offsets[pos:pos + n]))) >= n:
             return True
         pos += n
     return False
@@ -389,20 +389,24 @@ def _repeats(counts: list[int], offsets: list[int]) -> bool:
 
 def _distinct(counts: np.ndarray, offsets: np.ndarray, t0s: list[int], clock: BlockClock,
               events: list[Event]) -> tuple[np.ndarray, np.ndarray]:
-    """The frames whose edges are at distinct offsets, per frame (``counts``) and flat
-    (``offsets``); a frame with two edges at the same offset is dropped whole, with a
-    ``decode_error`` event at its t0 (a timer capture gives one rising edge an instant: such a
-    frame is broken or hostile, and its edges would be read as a pulse a block)."""
+    """The edges of the frames (``counts`` edges each, their ``offsets`` frame after frame) but
+    those of a frame with at least half of its edges at the offset of another edge of it: per
+    frame and flat; each such frame dropped whole, with a ``decode_error`` event at its t0 (a
+    timer capture gives one rising edge an instant: the frame is broken or hostile, and its
+    edges would be read as a pulse a block).  An edge here and there at the offset of another
+    (the tracker ignores it) keeps its frame."""
     frame = np.repeat(np.arange(len(counts)), counts)
     order = np.lexsort((offsets, frame))
     f, o = frame[order], offsets[order]
     same = (f[1:] == f[:-1]) & (o[1:] == o[:-1])
-    if not same.any():
+    repeats = np.bincount(f[1:][same], minlength=len(counts))
+    drop = np.flatnonzero((repeats > 0) & (2 * repeats >= counts))
+    if not drop.size:
         return counts, offsets
-    drop = np.unique(f[1:][same])
     for i in drop.tolist():
-        events.append(Event("decode_error", None, f"TACHO frame at t0 {t0s[i]}: {int(counts[i])} edges, "
-                            "some at the same offset (one rising edge an instant): dropped", clock.stamp_ns(t0s[i])))
+        events.append(Event("decode_error", None, f"TACHO frame at t0 {t0s[i]}: {int(repeats[i])} of its "
+                            f"{int(counts[i])} edges at the offset of another (one rising edge an instant): dropped",
+                            clock.stamp_ns(t0s[i])))
     keep = np.ones(len(counts), dtype=bool)
     keep[drop] = False
     return np.where(keep, counts, 0), offsets[keep[frame]]
