@@ -172,7 +172,7 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     # the whole record's speed and angle stay queryable (the daemon keeps 60 s of knots; behind
     # them the angle is unknown, which made every order's phase 0 there, all orders alike)
     tacho = TachoTracker(fs, cfg.tacho.ppr or st.tacho_ppr, block_len=L, timeout_s=cfg.tacho.timeout_s,
-                         history_s=n / fs + 60.0)
+                         history_s=n / fs + 60.0, history_max=None)
     tacho.update(np.array(col.tacho_t0, dtype=np.int64), col.tacho_edges)
     comps = cfg.orders.components
     q = _decimation(cfg, fs)

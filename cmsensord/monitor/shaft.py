@@ -234,11 +234,16 @@ class Shaft:
             if offsets and max(offsets) >= limit:
                 c, o = _inside(np.array(counts), np.array(offsets, dtype=np.int64), limit, t0s, clock, events)
                 counts, offsets = c.tolist(), o.tolist()
+            if len(offsets) > len(counts) and _repeats(counts, offsets):
+                c, o = _distinct(np.array(counts), np.array(offsets, dtype=np.int64), t0s, clock, events)
+                counts, offsets = c.tolist(), o.tolist()
             fed = tracker.feed_few(t0s, counts, offsets)
         else:
             counts_a, offsets_a, bad = decode_tacho_many(payloads)
             if offsets_a.size and int(offsets_a.max()) >= limit:
                 counts_a, offsets_a = _inside(counts_a, offsets_a.astype(np.int64), limit, t0s, clock, events)
+            if offsets_a.size > counts_a.size:
+                counts_a, offsets_a = _distinct(counts_a, offsets_a, t0s, clock, events)
             fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}",
@@ -369,6 +374,42 @@ class Shaft:
         if ok.mean() < 0.5:
             return cfg_f_r
         return np.full(len(cfg_f_r), float(np.mean(hz[ok])))
+
+
+def _repeats(counts: list[int], offsets: list[int]) -> bool:
+    """Whether a frame (``counts`` edges each, their ``offsets`` frame after frame) has at least
+    half of its edges at the offset of another edge of it (:func:`_distinct` drops it)."""
+    pos = 0
+    for n in counts:
+        if n > 1 and 2 * (n - len(set(offsets[pos:pos + n]))) >= n:
+            return True
+        pos += n
+    return False
+
+
+def _distinct(counts: np.ndarray, offsets: np.ndarray, t0s: list[int], clock: BlockClock,
+              events: list[Event]) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of the frames (``counts`` edges each, their ``offsets`` frame after frame) but
+    those of a frame with at least half of its edges at the offset of another edge of it: per
+    frame and flat; each such frame dropped whole, with a ``decode_error`` event at its t0 (a
+    timer capture gives one rising edge an instant: the frame is broken or hostile, and its
+    edges would be read as a pulse a block).  An edge here and there at the offset of another
+    (the tracker ignores it) keeps its frame."""
+    frame = np.repeat(np.arange(len(counts)), counts)
+    order = np.lexsort((offsets, frame))
+    f, o = frame[order], offsets[order]
+    same = (f[1:] == f[:-1]) & (o[1:] == o[:-1])
+    repeats = np.bincount(f[1:][same], minlength=len(counts))
+    drop = np.flatnonzero((repeats > 0) & (2 * repeats >= counts))
+    if not drop.size:
+        return counts, offsets
+    for i in drop.tolist():
+        events.append(Event("decode_error", None, f"TACHO frame at t0 {t0s[i]}: {int(repeats[i])} of its "
+                            f"{int(counts[i])} edges at the offset of another (one rising edge an instant): dropped",
+                            clock.stamp_ns(t0s[i])))
+    keep = np.ones(len(counts), dtype=bool)
+    keep[drop] = False
+    return np.where(keep, counts, 0), offsets[keep[frame]]
 
 
 def _inside(counts: np.ndarray, offsets: np.ndarray, limit: int, t0s: list[int], clock: BlockClock,

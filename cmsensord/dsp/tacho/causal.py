@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from cmsensord.dsp.tacho.edges import BoolArray, FloatArray, TachoState
-from cmsensord.dsp.tacho.smoothing import make_room, weighted_quadratic
+from cmsensord.dsp.tacho.smoothing import bounded_lo, make_room, weighted_quadratic
 
 try:  # the compiled fit and speed are optional: numpy is the fallback (same results)
     from cmsensord.dsp import _trackerkernel as _kernel  # type: ignore[attr-defined]
@@ -42,13 +42,13 @@ class CausalSpeed(TachoState):
             return
         self._seg_todo = []
         if _kernel is not None and self.causal_kernel:     # the same operations, in C, into the buffer
-            buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, len(todo))
-            self._sbuf = buf
+            buf = self._segment_room(len(todo))
             # the committed edges from the first window's on (not the run's whole list)
             lo = max(self._c0, todo[0][0] - self.causal_window + 1)
             _kernel.causal_fit(self._cT[lo - self._c0:], self._cn[lo - self._c0:], todo, self._ckernel, lo,
                                float(self.ppr), buf, self._shi)
             self._shi += len(todo)
+            self._slo = bounded_lo(self._slo, self._shi, 0, self.history_max)
             return
         Tc, nc = self._committed()
         c0 = self._c0
@@ -84,11 +84,20 @@ class CausalSpeed(TachoState):
     def _append_segments(self, key: FloatArray, T: FloatArray, speed: FloatArray, acc: FloatArray,
                          valid: FloatArray) -> None:
         n = key.size
-        buf, self._slo, self._shi = make_room(self._sbuf, self._slo, self._shi, n)
-        self._sbuf = buf
+        buf = self._segment_room(n)
         for row, v in enumerate((key, T, speed, acc, valid)):
             buf[row, self._shi:self._shi + n] = v
         self._shi += n
+        self._slo = bounded_lo(self._slo, self._shi, 0, self.history_max)
+
+    def _segment_room(self, n: int) -> FloatArray:
+        """The segment buffer with room for n more segments after ``_shi``; beyond ``history_max``
+        segments the oldest are dropped (queries behind them: NaN, as behind ``history_s``)."""
+        lo = bounded_lo(self._slo, self._shi, n, self.history_max)
+        if lo != self._slo:
+            self._pruned = True
+        self._sbuf, self._slo, self._shi = make_room(self._sbuf, lo, self._shi, n)
+        return self._sbuf
 
     def evaluate_causal(self, samples: npt.ArrayLike) -> tuple[FloatArray, BoolArray]:
         """(speed in Hz, valid) at sample indices from the edges up to each sample only.

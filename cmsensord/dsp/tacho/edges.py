@@ -117,6 +117,7 @@ class TachoState(ABC):
     timeout_periods: float
     max_timeout_s: float
     history_s: float
+    history_max: int | None  # knots (and causal segments) kept at most; None: no bound
     causal_window: int
     use_kernel: bool
     _timeout_hi: int  # 1/256 sample

@@ -4,7 +4,7 @@ Steps 4-5 of docs/tacho.md: at every committed edge a local weighted
 least-squares quadratic of pulse count vs edge time gives a knot (time, angle,
 speed); between knots the speed is interpolated linearly and the angle by a
 cubic Hermite; after a run's last edge the speed decays as one pulse over the
-elapsed time.  Knots older than ``history_s`` are dropped.  The fit of the knots
+elapsed time.  Knots older than ``history_s``, or beyond the newest ``history_max``, are dropped.  The fit of the knots
 and the loop between them also run in the compiled ``cmsensord.dsp._trackerkernel``
 (bit for bit).
 """
@@ -96,6 +96,14 @@ def _eliminate(s0: Any, s1: Any, s2: Any, a02: Any, a12: Any, a22: Any, b0: Any,
     c1 = (e1 - d12 * c2) / d11
     c0 = (b0 - s1 * c1 - a02 * c2) / s0
     return c0, c1, c2
+
+
+def bounded_lo(lo: int, hi: int, n: int, most: int | None) -> int:
+    """The first live column of a buffer whose live columns are [lo, hi) once n more are
+    added and at most ``most`` (None: no bound) are kept: the oldest go first."""
+    if most is None or hi - lo + n <= most:
+        return lo
+    return min(hi, hi + n - most)
 
 
 def make_room(buf: FloatArray, lo: int, hi: int, n: int) -> tuple[FloatArray, int, int]:
@@ -305,14 +313,20 @@ class KnotSmoothing(TachoState):
         return self._prov
 
     def _append_knots(self, T: FloatArray, th: FloatArray, w: FloatArray, rid: int) -> None:
+        """Append final knots; beyond ``history_max`` knots the oldest are dropped (queries
+        behind them: NaN, as behind ``history_s``)."""
         n = T.size
-        buf, self._klo, self._khi = make_room(self._kbuf, self._klo, self._khi, n)
+        lo = bounded_lo(self._klo, self._khi, n, self.history_max)
+        if lo != self._klo:
+            self._pruned = True
+        buf, self._klo, self._khi = make_room(self._kbuf, lo, self._khi, n)
         self._kbuf = buf
         buf[0, self._khi:self._khi + n] = T
         buf[1, self._khi:self._khi + n] = th
         buf[2, self._khi:self._khi + n] = w
         buf[3, self._khi:self._khi + n] = rid
         self._khi += n
+        self._klo = bounded_lo(self._klo, self._khi, 0, self.history_max)
 
     def _knots(self, t_min: float = -math.inf, t_max: float = math.inf
                ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray]:

@@ -29,6 +29,9 @@ from cmsensord.dsp.tacho.edges import (
 from cmsensord.dsp.tacho.smoothing import KnotSmoothing
 
 _FEW_FRAMES = 64  # up to this many frames an update prepares its edges on Python ints
+#: knots (and causal segments) kept at most: 60 s of 2184 pulses a second (255 ppr at 514 rpm),
+#: 1.3 s of the densest tacho a board sends (1023 edges a block); about 10 MB of buffers
+HISTORY_MAX = 1 << 17
 
 
 class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
@@ -46,6 +49,9 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         max(timeout_s, timeout_periods x last interval), capped at max_timeout_s
         (and max_timeout_s after a single edge).
     history_s : seconds of knots kept for queries behind the newest one.
+    history_max : at most this many knots, and as many causal segments, are kept, however
+        dense the edges (a bound on memory; None: no bound, for a whole record held offline).
+        The default keeps history_s of a tacho up to HISTORY_MAX / history_s pulses a second.
     causal_window : committed edges in the one-sided fit of the causal speed
         (default 16 ppr, within 3..64).
 
@@ -63,9 +69,11 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
     def __init__(self, fs: float, ppr: int, *, block_len: int = 250, half_window: int | None = None,
                  tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
                  max_timeout_s: float = 10.0, history_s: float = 60.0,
-                 causal_window: int | None = None):
+                 causal_window: int | None = None, history_max: int | None = HISTORY_MAX):
         h, m = _checked(fs, ppr, block_len, half_window, tol, timeout_s, timeout_periods, max_timeout_s,
                         history_s, causal_window)
+        if history_max is not None and not (isinstance(history_max, (int, np.integer)) and history_max >= 16):
+            raise ValueError(f"history_max must be an integer >= 16 or None, got {history_max!r}")
         self.fs = float(fs)
         self.ppr = int(ppr)
         self.block_len = int(block_len)
@@ -75,6 +83,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self.timeout_periods = float(timeout_periods)
         self.max_timeout_s = float(max_timeout_s)
         self.history_s = float(history_s)
+        self.history_max = None if history_max is None else int(history_max)
         self.causal_window = int(m)
         self._timeout_hi = int(round(self.max_timeout_s * self.fs * SUB))  # 1/256 sample
         self._timeout_lo = int(round(self.timeout_s * self.fs * SUB))

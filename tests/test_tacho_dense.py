@@ -1,0 +1,87 @@
+"""`cmsensord replay` of captures whose TACHO frames carry many edges: memory stays bounded
+however long the dense tacho goes on, a dense encoder's speed is read right, and a burst of
+edges at one instant is said as bad input and leaves the speed of the tacho after it right."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from cmsensord.protocol import MODE_RAW, Status, encode_raw, encode_status, encode_tacho
+from cmsensord.sinks.mcap_read import read_messages
+from processes import ENV
+
+L = 250
+
+
+def capture(path: Path, tacho: list[np.ndarray], ppr: int) -> Path:
+    """A RAW capture of one channel (a 50-Hz sine) with one TACHO frame a block, the edge offsets
+    ``tacho[b]`` (1/256 sample) in block b, a STATUS every second announcing ``ppr``."""
+    st = Status(0x0100, MODE_RAW, 1, 25000, L, 1, ppr, 0, 0, (0.0958,), (2048.0,))
+    parts, seq = [], 0
+    for b, edges in enumerate(tacho):
+        t0 = b * L
+        if b % 100 == 0:
+            parts.append(encode_status(seq, t0, st))
+            seq += 1
+        x = 2048 + 400 * np.sin(2 * np.pi * 50 * (t0 + np.arange(L)) / 25000)
+        parts.append(encode_raw(seq, t0, 0, x.astype(np.uint16)))
+        parts.append(encode_tacho(seq + 1, t0, 0, np.asarray(edges, dtype=np.uint32)))
+        seq += 2
+    path.write_bytes(b"".join(parts))
+    return path
+
+
+#: ``cmsensord replay ARGV`` as the command runs it, then its own peak resident memory (VmHWM)
+_PEAK = """import atexit, sys
+def _peak():
+    kb = next(line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM:'))
+    sys.stderr.write(f'\\nVmHWM {kb}\\n')
+atexit.register(_peak)
+from cmsensord.cli import main
+sys.exit(main(['replay', *sys.argv[1:]]))
+"""
+
+
+def replay(cap: Path, out: Path) -> tuple[str, float, list[dict]]:
+    """(stderr, peak resident memory in MB, the /cm/ch0/indicators messages) of ``cmsensord replay``."""
+    p = subprocess.run([sys.executable, "-c", _PEAK, str(cap), "--out", str(out)], stdout=subprocess.DEVNULL,
+                       stderr=subprocess.PIPE, text=True, timeout=300, env=ENV)
+    err, _, peak = p.stderr.rpartition("\nVmHWM ")
+    assert p.returncode == 0, err
+    (log,) = out.glob("*.mcap")
+    return err, int(peak) / 1024, [m for t, _, m in read_messages(log) if t == "/cm/ch0/indicators"]
+
+
+#: 1000 edges a block, a quarter sample apart: 100 000 pulses a second, a 255-ppr encoder at 23 529 rpm
+DENSE = np.arange(1000) * 64
+
+
+def test_a_dense_tacho_holds_bounded_memory_and_its_speed(tmp_path):
+    """Three times the seconds of the densest tacho cost no more memory (keeping 60 s of its
+    knots and causal segments would grow the peak by about 10 MB a second), and the speed is its own."""
+    peaks = []
+    for seconds in (4, 12):
+        cap = capture(tmp_path / f"dense{seconds}.bin", [DENSE] * (100 * seconds), ppr=255)
+        err, peak, ind = replay(cap, tmp_path / f"out{seconds}")
+        assert [round(m["speed_rpm"], 1) for m in ind[1:]] == [23529.4] * (seconds - 1), err
+        peaks.append(peak)
+    assert peaks[1] - peaks[0] < 10, peaks
+
+
+def test_a_burst_of_impossible_edges_is_bad_input_and_the_speed_comes_back(tmp_path):
+    """3 s of one edge every 500 samples (3000 rpm), 1 s of 1023 edges a block, 1 s of 1023 edges
+    a block all at one offset, then the 3000-rpm tacho again: the frames with edges at one
+    instant are decode errors, dropped; the tacho is lost in the silence they leave and, restored,
+    reads 3000 rpm (taking their first edges as a pulse a block had the tacho read 6000 rpm, a
+    missed pulse after every real one, for as long as it went on)."""
+    normal = [np.array([12 * 256 + 128]) if b % 2 == 0 else np.zeros(0) for b in range(100)]
+    tacho = normal * 3 + [np.arange(1023) * 62] * 100 + [np.full(1023, 100)] * 100 + normal * 6
+    err, _, ind = replay(capture(tmp_path / "burst.bin", tacho, ppr=1), tmp_path / "out")
+    assert [round(m["speed_rpm"]) for m in ind[:3] + ind[5:]] == [3000] * 9, err
+    (line,) = [x.strip() for x in err.splitlines() if x.strip().startswith("events:")]
+    assert "decode_error 100," in line and "tacho_lost 1, tacho_restored 1" in line, line
+    assert "tacho_missed_pulse" not in line, line
