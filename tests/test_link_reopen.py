@@ -14,18 +14,19 @@ from processes import run_module, spawn, start_board, stop
 
 def test_a_silent_open_port_is_said_stalled_and_reopened(tmp_path):
     link = tmp_path / "ttyBOARD"
-    sim = start_board("--scenario", "healthy", "--duration", "4", "--speed", "2", "--link", str(link))
+    sim = start_board("--scenario", "healthy", "--duration", "4", "--speed", "2", "--link", str(link),
+                      "--flow-control")                # a daemon slow to start still gets the 2 s
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text(f"link:\n  port: {link}\n  max_drift_s: 0\n  stall_s: 1.0\n  reopen_s: 3.0\n"
                    f"output:\n  dir: {tmp_path / 'logs'}\n  status_line: false\n")
     d = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)], stderr=subprocess.PIPE, text=True)
     try:
         status = ""
-        deadline = time.monotonic() + 20             # the board's 2 s of signal, then silence
+        deadline = time.monotonic() + 40             # the board's 2 s of signal, then silence
         while "stalled, no bytes for" not in status and time.monotonic() < deadline:
             time.sleep(0.5)
             status = run_module("cmsensord", "status", "--config", str(cfg)).stdout
-        time.sleep(11.0)                             # reopened after 3 s, then after 6 s more
+        time.sleep(12.0)                             # reopened after 3 s, then after 6 s more
     finally:
         err = stop(d)
         sim.terminate()
