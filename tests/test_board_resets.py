@@ -2,9 +2,9 @@
 first sample a frame covers, shared by the frames of a block and restarted with the board): each case
 is one small capture replayed by a real process, checked by the exact events in its MCAP.  A reset into
 RAW mode with a tacho says the order tracker at its first sample whatever the read size; the time_base
-event names the t0 the board sent; resets are rate-limited like any event, and so are odd frames off in t0
-between the blocks, with their resets; a t0 a few samples off is no reset; a paced replay paces each
-segment from its own start."""
+event, and the config event of a jump of the board clock, name the t0 the board sent; resets are
+rate-limited like any event, and so are odd frames off in t0 between the blocks, with their resets; a t0
+a few samples off is no reset; a paced replay paces each segment from its own start."""
 
 from __future__ import annotations
 
@@ -122,6 +122,28 @@ def test_a_t0_stepping_back_every_other_frame_is_rate_limited_like_any_event(tmp
     assert (len(one), len(summaries)) == (100, 20)
     assert all(sum(0 <= t - s < 1e9 for t in one) <= 5 for s in one)
     assert summaries[0][2] == "45 more time_base event(s) in 0.98 s: at most 5 per 1 s are written one by one"
+
+
+WRAP = 2**32
+
+
+@pytest.mark.parametrize(("parts", "told"), [
+    ([(WRAP - 12_500, 1.5), (15_000_000, 1.5)], "jumped 599.0 s ahead (t0 15000000 after 24750)"),
+    ([(0, 1), (WRAP - 17_500_000, 1), (WRAP - 2_500_000, 1)], "jumped 599.0 s ahead (t0 4292467296 after 4277492046)"),
+    ([(0, 1.5), (37_400, 1.5)], "did not advance a block (t0 37400 after 37250)")])
+def test_a_jump_of_the_board_clock_names_the_t0_the_board_sent(tmp_path, parts, told):
+    """A t0 that jumps 599 s ahead (no reset: within 600 s) across the board's 2^32 wrap, or under it after
+    a reset back across it (unwrapped, below 0), and one that steps back 100 samples (less than a block):
+    the config event names the t0 fields as sent and the seconds past the block expected next.  Guards
+    against the unwrapped t0 and an internal slot ("t0 4309967296 after slot 149", "t0 -2500000 after slot
+    199")."""
+    data, seq = bytearray(), 0
+    for t0, seconds in parts:
+        data += rms_board(seconds, t0, seq=seq)
+        seq += round(seconds * 100) + -(-round(seconds * 100) // 100)
+    _, msgs = replay(tmp_path, bytes(data))
+    assert [m for _, k, m in events(msgs) if "board clock" in m and k == "config"] == [
+        f"board clock {told}: time base re-anchored"]
 
 
 def jittered(data: bytes, every: int = 3, off: int = 7) -> bytes:
