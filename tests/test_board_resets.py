@@ -2,8 +2,9 @@
 first sample a frame covers, shared by the frames of a block and restarted with the board): each case
 is one small capture replayed by a real process, checked by the exact events in its MCAP.  A reset into
 RAW mode with a tacho says the order tracker at its first sample whatever the read size; the time_base
-event names the t0 the board sent; resets are rate-limited like any event; a t0 a few samples off is no
-reset; a paced replay paces each segment from its own start."""
+event, and the config event of a jump of the board clock, name the t0 the board sent; resets are
+rate-limited like any event, and so are odd frames off in t0 between the blocks, with their resets; a t0
+a few samples off is no reset; a paced replay paces each segment from its own start."""
 
 from __future__ import annotations
 
@@ -123,6 +124,28 @@ def test_a_t0_stepping_back_every_other_frame_is_rate_limited_like_any_event(tmp
     assert summaries[0][2] == "45 more time_base event(s) in 0.98 s: at most 5 per 1 s are written one by one"
 
 
+WRAP = 2**32
+
+
+@pytest.mark.parametrize(("parts", "told"), [
+    ([(WRAP - 12_500, 1.5), (15_000_000, 1.5)], "jumped 599.0 s ahead (t0 15000000 after 24750)"),
+    ([(0, 1), (WRAP - 17_500_000, 1), (WRAP - 2_500_000, 1)], "jumped 599.0 s ahead (t0 4292467296 after 4277492046)"),
+    ([(0, 1.5), (37_400, 1.5)], "did not advance a block (t0 37400 after 37250)")])
+def test_a_jump_of_the_board_clock_names_the_t0_the_board_sent(tmp_path, parts, told):
+    """A t0 that jumps 599 s ahead (no reset: within 600 s) across the board's 2^32 wrap, or under it after
+    a reset back across it (unwrapped, below 0), and one that steps back 100 samples (less than a block):
+    the config event names the t0 fields as sent and the seconds past the block expected next.  Guards
+    against the unwrapped t0 and an internal slot ("t0 4309967296 after slot 149", "t0 -2500000 after slot
+    199")."""
+    data, seq = bytearray(), 0
+    for t0, seconds in parts:
+        data += rms_board(seconds, t0, seq=seq)
+        seq += round(seconds * 100) + -(-round(seconds * 100) // 100)
+    _, msgs = replay(tmp_path, bytes(data))
+    assert [m for _, k, m in events(msgs) if "board clock" in m and k == "config"] == [
+        f"board clock {told}: time base re-anchored"]
+
+
 def jittered(data: bytes, every: int = 3, off: int = 7) -> bytes:
     """``data`` with the RAW frame of every ``every``-th block from 2 s on under a t0 ``off`` samples
     late (the TACHO frame after it, and the blocks after, under their own)."""
@@ -131,6 +154,45 @@ def jittered(data: bytes, every: int = 3, off: int = 7) -> bytes:
         late = f.type == FrameType.RAW and f.t0 >= 50_000 and (f.t0 // 250) % every == 0
         out += encode_frame(f.type, f.seq, f.t0 + off * late, f.chan, f.flags, f.payload)
     return bytes(out)
+
+
+@pytest.mark.parametrize(("off", "resets", "held", "span_s"), [
+    (2**31, 399, [15] * 19 + [14], 21), (30 * 25_000, 199, [5] * 19 + [3], 51)])
+def test_odd_frames_off_in_t0_between_the_blocks_are_rate_limited_with_their_resets(tmp_path, off, resets, held,
+                                                                                    span_s):
+    """20 s of a 1-channel board and, after every 10th block, one CRC-valid RMS frame of 3 channels whose t0
+    is ``off`` samples ahead of the block's (garbage on the link): 2^31, two board resets each; 30 s, one
+    (the block after it steps back).  /cm/events keeps 5 ``channels`` and 5 ``time_base`` records a second
+    and a summary of the rest each second, every event counted once; the journal (-v) says 10 lines of
+    each kind (a per-second summary among them) and one summary of the rest.  Guards against the odd
+    frame's event being stamped by the next segment's clock (a day ahead: the log's events 600 s off its
+    data), and records of one kind stamped seconds from another's ending each other's intervals: all 200
+    channels records written one by one, 10 a second."""
+    st = Status(0x0100, MODE_RMS, 1, 25_000, 250, 0, 1, 0, 0, (0.0958,), (2048.0,))
+    out, seq = bytearray(), 0
+    for k in range(2000):
+        if k % 100 == 0:
+            out += encode_status(seq, 250 * k, st)
+            seq += 1
+        out += encode_rms(seq, 250 * k, [1.0])
+        seq += 1
+        if k % 10 == 9:
+            out += encode_rms(seq, (250 * k + off) & 0xFFFFFFFF, [1.0] * 3)
+            seq += 1
+    err, msgs = replay(tmp_path, bytes(out), "-v")
+    assert f"events: channels 200, config 1, time_base {resets}" in err
+    for kind, summarised in (("channels", [5] * 20), ("time_base", held)):
+        told = [(s, m) for t, s, m in msgs if t == "/cm/events" and m["kind"] == kind]
+        one = [s for s, m in told if "summarised" not in m]
+        assert len(one) + sum(summarised) == (200 if kind == "channels" else resets)
+        assert [m["summarised"] for _, m in told if "summarised" in m] == summarised
+        assert max(sum(0 <= t - s < 1e9 for t in one) for s in one) == 5
+    stamps = [s for t, s, _ in msgs if t in ("/cm/events", "/cm/ch0/severity")]
+    assert stamps[-1] - stamps[0] < span_s * 1e9
+    lines = err.splitlines()
+    assert sum(x.startswith("INFO channels: ") for x in lines) == 11
+    assert "INFO channels: 186 more channels event(s) in 19.9 s (186 frame(s) between them): at most 10 per " \
+           "600 s are written one by one" in lines
 
 
 def test_a_t0_a_few_samples_off_is_no_board_reset(tmp_path):

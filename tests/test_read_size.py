@@ -290,7 +290,7 @@ def test_an_rms_block_again_under_its_t0_gives_the_same_messages_at_any_read_siz
     any read size, and the RMS indicators leave it out (guards against a `missing_fraction` of -0.01,
     the block counted twice, and intervals stamped 10 ms apart at other read sizes)."""
     runs = same_at_every_read_size(stuck_blocks("rms"))
-    jumps = [m for _, m in runs[0]["/cm/events"] if m["message"].startswith("board clock jumped")]
+    jumps = [m for _, m in runs[0]["/cm/events"] if m["message"].endswith("time base re-anchored")]
     assert len(jumps) == 10
     missing = [m["missing_fraction"] for _, m in runs[0]["/cm/ch0/indicators"]]
     assert len(missing) >= 13 and all(0.0 <= v <= 1.0 for v in missing), missing

@@ -163,6 +163,36 @@ def tacho_stream(lose: int | None = None, flood: range = range(0)) -> bytes:
     return bytes(out)
 
 
+def seq_stream(seqs: list[int]) -> bytes:
+    """A STATUS, then one 1-channel RMS frame a block under ``seqs[k]`` for block k (t0 going on)."""
+    return status(0, 0, 1) + b"".join(encode_rms(q, k * L, [0.5]) for k, q in enumerate(seqs))
+
+
+@pytest.mark.parametrize(("seqs", "said", "lost"), [
+    ([*range(1, 151), *range(150, 300)], ["seq 150 after seq 150 while t0 went on 250 sample(s) (0.01 s): the seq "
+                                          "did not go on with t0 (a seq glitch, or a frame sent again with new "
+                                          "content); not counted as 65535 frame(s) lost"], 0),
+    ([*range(1, 151), 30_000, *range(151, 300)], ["seq 30000 after seq 150 while t0 went on 250 sample(s) (0.01 s): "
+                                                  "the seq did not go on with t0 (a seq glitch); not counted as 29849 "
+                                                  "frame(s) lost",
+                                                  "seq 151 after seq 30000 while t0 went on 250 sample(s) (0.01 s): "
+                                                  "the seq did not go on with t0 (a seq glitch, or a frame sent again "
+                                                  "with new content); not counted as 35686 frame(s) lost"], 0),
+    ([*range(1, 151), *range(152, 302)], ["1 frame(s) lost before seq 152 (seq gap)"], 1)])
+def test_a_seq_that_does_not_go_on_with_t0_is_no_frame_loss(tmp_path, seqs, said, lost):
+    """300 blocks of a 1-channel RMS board whose t0 goes on a block a frame: the seq steps back by one at
+    block 150 (the same seq again, new values), or one frame's seq is off by 30,000: a ``decode_error``
+    naming the seqs and the t0 step, nothing counted lost (exit summary, diagnostics).  A seq gap of one
+    with t0 going on is the frame lost it may be.  Guards against '65535 frame(s) lost before seq 150' and
+    the summary's 65535 frames lost (as many for the glitch, in two gaps) with 0 missing observations."""
+    events = replay(tmp_path, seq_stream(seqs))
+    assert [e.split(" | ")[1] for e in events if e.startswith(("decode_error", "frames_lost"))] == said
+    assert summary_observations(tmp_path) == (300, 0)
+    assert f", {lost} frames lost)" in (tmp_path / "stderr.txt").read_text()
+    diag = [m for f in (tmp_path / "out").glob("*.mcap") for t, _, m in read_messages(f) if t == "/cm/diagnostics"]
+    assert diag[-1]["link"]["frames_lost"] == lost
+
+
 def test_a_lost_tacho_frame_is_a_frame_loss_not_a_missed_pulse(tmp_path):
     events = replay(tmp_path, tacho_stream(lose=201))
     assert "frames_lost | 1 frame(s) lost before seq 405 (seq gap)" in events

@@ -100,7 +100,7 @@ class ChannelSetup:
         self._unlike_said: tuple[int, int] | None = None    # the rate unlike the commissioned one said
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
-        self._odd_first: tuple[int, int] = (0, 0)   # the t0 and channel count of the run's first
+        self._odd_first: tuple[int, int] = (0, 0)   # the stamp and channel count of the run's first
         self.odd_dropped = 0                    # odd frames dropped in all
         self._views: dict[str, ChannelView] = {}    # each channel name's view, over every chain
         #: the channel count the newest STATUS announced (None: frames changed the board since)
@@ -212,8 +212,8 @@ class ChannelSetup:
         if not self._odd(n) or self._odd_run + len(frames) >= CHANGE_FRAMES:
             self.end_odd_run()
             return True
-        if not self._odd_run:
-            self._odd_first = (frames[0].t0_unwrapped, n)
+        if not self._odd_run:       # stamped now, in the time segment the frame came in
+            self._odd_first = (self.clock.stamp_ns(frames[0].t0_unwrapped), n)
         self._odd_run += len(frames)
         self.odd_dropped += len(frames)
         return False
@@ -221,9 +221,9 @@ class ChannelSetup:
     def end_odd_run(self) -> None:
         """The run of odd frames (if any) is over: its ``channels`` event, at its first frame."""
         if self._odd_run:
-            (t0, n), run = self._odd_first, self._odd_run
+            (stamp, n), run = self._odd_first, self._odd_run
             self.log.emit("channels", None, f"{run} RMS frame(s) of {n} channel(s) in a {self.n_board}-channel "
-                          f"stream dropped ({self.odd_dropped} in all)", self.clock.stamp_ns(t0), count=run,
+                          f"stream dropped ({self.odd_dropped} in all)", stamp, count=run,
                           total=self.odd_dropped)
         self._odd_run = 0
 

@@ -303,6 +303,19 @@ class BlockClock:
         n = int(bad[0]) if bad.size else len(t0)
         return slots[:n], n
 
+    def jump_words(self, t0: int) -> str:
+        """What the block at ``t0`` that :meth:`place` stopped at does to the board's clock, in the
+        board's own t0 fields (as sent, 32 bits) and seconds: ``board clock jumped 599.0 s ahead (t0
+        15000000 after 14987750)``, the seconds past the block expected next; ``board clock did not
+        advance a block (t0 500 after 500)`` for a t0 less than a block after the newest block's."""
+        if self.slot0_t0 is None or not self.next_slot:
+            return f"board clock jumped (t0 {t0 & 0xFFFFFFFF})"
+        prev = self.slot_t0(self.next_slot - 1)
+        told = f"(t0 {t0 & 0xFFFFFFFF} after {prev & 0xFFFFFFFF})"
+        if t0 - prev < self.block_len:
+            return f"board clock did not advance a block {told}"
+        return f"board clock jumped {(t0 - prev - self.block_len) / self.fs:.1f} s ahead {told}"
+
     def reanchor(self, t0: int) -> None:
         """The block starting at ``t0`` takes the next slot; when ``t0`` is not after the
         newest slot's (a duplicate, a stuck t0), it is stamped one block after the newest stamp."""

@@ -4,10 +4,11 @@ seconds is a few lines in ten minutes, not 50,000 a day in the journal).
 
 A :class:`RateLimit` is fed events one by one (:meth:`RateLimit.admit`).  The first event of
 a (kind, channel) opens an interval of ``rate_s`` of event time at its stamp; events stamped
-within it are admitted while fewer than ``burst`` were, and the rest are held back:
-counted, their ``count`` fields summed, and handed back as one :class:`Summary` when the
-interval is closed, by the next event of the (kind, channel) stamped outside it, by
-:meth:`RateLimit.over` (the intervals a stamp is past) or :meth:`RateLimit.close_all`.
+before its end (before its start too: a stamp that jumps back, a board reset, a late report,
+opens no interval of its own) are admitted while fewer than ``burst`` were, and the rest are
+held back: counted, their ``count`` fields summed, and handed back as one :class:`Summary` when
+the interval is closed, by the next event of the (kind, channel) stamped at or past its end, by
+:meth:`RateLimit.over` (the intervals a stamp is past the end of) or :meth:`RateLimit.close_all`.
 :class:`RateLimits` chains limits, with the same methods: an event the first admits goes on to
 the next, and so does a summary a limit hands back (a line of its own, standing for the
 events it counts): a later limit that holds it back adds its events and counts to its own
@@ -96,7 +97,7 @@ class RateLimit:
         an interval it closes; held back, its ``n`` events and ``count`` go to the summary."""
         key = (kind, channel)
         h = self._open.get(key)
-        if h is not None and 0 <= stamp_ns - h.since_ns < self._rate_ns:
+        if h is not None and stamp_ns - h.since_ns < self._rate_ns:
             h.last_ns = max(h.last_ns, stamp_ns)
             if h.admitted < self.burst:
                 h.admitted += 1
@@ -109,9 +110,9 @@ class RateLimit:
         return closed, True
 
     def over(self, now_ns: int) -> list[Summary]:
-        """The summaries of the intervals ``now_ns`` is outside of (closed)."""
+        """The summaries of the intervals ``now_ns`` is at or past the end of (closed)."""
         return [s for key, h in list(self._open.items())
-                if not 0 <= now_ns - h.since_ns < self._rate_ns and (s := self._close(key)) is not None]
+                if now_ns - h.since_ns >= self._rate_ns and (s := self._close(key)) is not None]
 
     def close_all(self) -> list[Summary]:
         """The summaries of every interval (all closed)."""
@@ -143,7 +144,7 @@ class RateLimits:
         return closed, True
 
     def over(self, now_ns: int) -> list[Summary]:
-        """The summaries to write of the intervals ``now_ns`` is outside of, in every limit."""
+        """The summaries to write of the intervals ``now_ns`` is past, in every limit."""
         return [t for i, limit in enumerate(self.limits) for s in limit.over(now_ns)
                 for t in self._onward(s, i + 1)]
 

@@ -235,8 +235,10 @@ class EventLog:
 
     def went_back(self) -> None:
         """The time base went back (the wall clock stepped back): every waiting record is
-        written, and the records after may be stamped before them."""
+        written, every interval of the rate limits ends (its summary written), and the records
+        after may be stamped before them."""
         self.flush()
+        self.summarise(final=True)
         self._newest = 0
 
     def _write_upto(self, upto_ns: int | None, floored: bool = False) -> None:
@@ -259,14 +261,18 @@ class EventLog:
 
     def _write_group(self, key: int, group: list[tuple[int, int, messages.Message, int]]) -> None:
         """The records of one stamp, in the order they came; which of the rate-limited ones are
-        written is decided in the order of kind, channel and message (the stream's, not the reads')."""
-        for s in self._written.over(key):
+        written is decided in the order of kind, channel and message (the stream's, not the reads'),
+        by the stamp they are written at (:meth:`_put`): the limit holds in the log's time, whatever
+        the stamps the records were made with (one stamped ahead of the stream holds the ones after
+        it at its stamp, and they count in its second)."""
+        at = max(key, self._newest, self.segment_start())
+        for s in self._written.over(at):
             self._put_summary(s)
         skip = set()
         for _, n, m, _ in sorted(group, key=_by_content):
             ev = m.msg
             if ev["kind"] not in UNLIMITED:
-                closed, ok = self._written.admit(ev["kind"], ev["channel"], m.stamp_ns, int(ev.get("count", 0) or 0))
+                closed, ok = self._written.admit(ev["kind"], ev["channel"], at, int(ev.get("count", 0) or 0))
                 for s in closed:
                     self._put_summary(s)
                 if not ok:

@@ -500,12 +500,12 @@ class Processor(Figures):
                 a = b
             if n == len(t0):
                 return
-            old, at = self.clock.next_slot, int(t0[n])
+            at = int(t0[n])
             if self.shaft.waits_before(at):     # the speed in front of the jump, on the old anchor
                 self._feed_tacho(before=at)
+            said = self.clock.jump_words(at)
             self.clock.reanchor(at)
-            self.event("config", None, f"board clock jumped (t0 {at} after slot {old - 1}): "
-                       "time base re-anchored", self.clock.stamp_ns(at))
+            self.event("config", None, f"{said}: time base re-anchored", self.clock.stamp_ns(at))
             t0, vals = t0[n:], vals[n:]
 
     def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:

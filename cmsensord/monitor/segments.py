@@ -23,11 +23,15 @@ event (:meth:`Segments.gaps`).  A seq gap counts its frames mod 65536 (docs/PROT
 rule 3), and the u16 seq wraps every 65536 frames: 131 s of RAW 4 channels and a tacho.
 An outage longer than that hides whole wraps, which the t0 gap shows: the frames the board
 sends in it (STATUS: blocks a second times frames a block, and a STATUS a second) less the
-seq gap, in whole wraps, are lost too (an extension of rule 3).
+seq gap, in whole wraps, are lost too (an extension of rule 3).  A seq gap larger than the
+frames the board sends over the t0 gap (the seq stepping back while t0 goes on, a seq field
+off) is no loss t0 could hold: it is a ``decode_error`` event naming the seqs and the t0 step,
+and no frame is counted lost for it.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Callable, Iterator, Sequence
 from operator import attrgetter, sub
@@ -112,6 +116,7 @@ class Segments:
         self.hit = False                    # the last frame checked needs :meth:`start`
         self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
         self.seq_wraps = 0                  # frames lost in whole seq wraps the t0 gaps show
+        self.seq_off = 0                    # frames the link counted lost in seq gaps t0 cannot hold
         self.before_t0: int | None = None   # t0_unwrapped of the frame before the one checked
         self._marked: tuple | None = None   # (cols, mode, fs, bad, status) of :meth:`_marks`
         self.wall = WallSteps()
@@ -272,6 +277,15 @@ class Segments:
                           "same frames as already received): dropped", stamp, count=n)
         if stamp is None or not f.lost_before:
             return 0
+        room = self._room(f)
+        if room is not None and f.lost_before > room:
+            self.seq_off += f.lost_before
+            step = f.t0_unwrapped - (self.before_t0 or 0)
+            again = ", or a frame sent again with new content" if f.lost_before >= 0x8000 else ""
+            self.log.emit("decode_error", None, f"seq {f.seq} after seq {(f.seq - f.lost_before - 1) & 0xFFFF} "
+                          f"while t0 went on {step} sample(s) ({step / self.clock.fs:.2f} s): the seq did not go "
+                          f"on with t0 (a seq glitch{again}); not counted as {f.lost_before} frame(s) lost", stamp)
+            return 0
         wraps = self._wraps(f)
         lost = f.lost_before + wraps * 65536
         self.seq_wraps += wraps * 65536
@@ -279,6 +293,16 @@ class Segments:
                                             f"jumped {(f.t0_unwrapped - (self.before_t0 or 0)) / self.clock.fs:.1f} s")
         self.log.emit("frames_lost", None, f"{lost} frame(s) lost before seq {f.seq} ({said})", stamp, count=lost)
         return lost
+
+    def _room(self, f: Frame) -> int | None:
+        """The most frames the board (by its STATUS) sends between the frame before ``f`` and
+        ``f``, with a frame of slack: the seq gaps t0 can hold (None without a STATUS)."""
+        st = self.setup.status
+        if st is None or self.before_t0 is None or st.fs <= 0 or st.block_len <= 0:
+            return None
+        per_block = (1 if st.mode == 1 else st.n_channels) + st.tacho_inputs
+        step = max(0, f.t0_unwrapped - self.before_t0)
+        return math.ceil((step / st.block_len + 1) * per_block + step / st.fs) + 1
 
     def _wraps(self, f: Frame) -> int:
         """The whole wraps of the u16 seq in the gap in front of ``f``: the frames the board sends
@@ -293,10 +317,11 @@ class Segments:
 
     def link(self, counters: dict) -> dict:
         """The link's ``counters``; a seq gap in front of a board reset is no loss (the board
-        restarted its seq), so ``frames_lost`` leaves it out, and adds the whole seq wraps the t0
-        gaps show (:meth:`_wraps`)."""
+        restarted its seq), nor is one t0 cannot hold (:meth:`_room`), so ``frames_lost`` leaves
+        them out, and adds the whole seq wraps the t0 gaps show (:meth:`_wraps`)."""
         if "frames_lost" in counters:
-            counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts + self.seq_wraps}
+            counters = {**counters, "frames_lost": counters["frames_lost"] - self.seq_restarts - self.seq_off
+                        + self.seq_wraps}
         return counters
 
     def check_wall(self, now_ns: int, max_drift_s: float, hand_over: Callable[[], None],
