@@ -177,3 +177,24 @@ def drain(fd: int) -> bytes:
         if not chunk:
             return out
         out += chunk
+
+
+#: ``cmsensord COMMAND ARGV`` as the command runs it, then its own peak resident memory (VmHWM,
+#: which starts afresh at exec: a child's ru_maxrss starts at its parent's peak, this test
+#: process's, which would hide any command's smaller than that)
+_PEAK = """import atexit, sys
+def _peak():
+    kb = next(line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM:'))
+    sys.stderr.write(f'\\nVmHWM {kb}\\n')
+atexit.register(_peak)
+from cmsensord.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def peak_rss_mb(*args, cwd=None, timeout=300) -> tuple[int, str, float]:
+    """(exit status, stderr, peak resident memory in MB) of ``cmsensord ARGS``."""
+    p = subprocess.run([sys.executable, "-c", _PEAK, *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.PIPE, text=True, timeout=timeout, env=ENV)
+    err, _, peak = p.stderr.rpartition("\nVmHWM ")
+    return p.returncode, err, int(peak) / 1024

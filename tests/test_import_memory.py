@@ -15,6 +15,7 @@ import pytest
 
 from cmsensord.importing.errors import ImportFailure
 from cmsensord.importing.samples import SampleStore
+from processes import peak_rss_mb
 
 FS = 25600
 
@@ -27,25 +28,9 @@ def write_files(d: Path, n: int, seed: int = 0) -> None:
         np.save(d / f"snap_{k:04d}.npy", 0.1 * rng.standard_normal((FS, 4)))
 
 
-#: ``cmsensord import ARGV`` as the command runs it, then its own peak resident memory (VmHWM,
-#: which starts afresh at exec: a child's ru_maxrss starts at its parent's peak, this test
-#: process's, which would hide any import's smaller than that)
-_PEAK = """import atexit, sys
-def _peak():
-    kb = next(line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM:'))
-    sys.stderr.write(f'\\nVmHWM {kb}\\n')
-atexit.register(_peak)
-from cmsensord.cli import main
-sys.exit(main(['import', *sys.argv[1:]]))
-"""
-
-
 def import_rss_mb(*args: str | Path, cwd: Path) -> tuple[int, str, float]:
     """(exit status, stderr, peak resident memory in MB) of ``cmsensord import ARGS``."""
-    p = subprocess.run([sys.executable, "-c", _PEAK, *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL,
-                       stderr=subprocess.PIPE, text=True, timeout=300)
-    err, _, peak = p.stderr.rpartition("\nVmHWM ")
-    return p.returncode, err, int(peak) / 1024
+    return peak_rss_mb("import", *args, cwd=cwd)
 
 
 def test_memory_does_not_grow_with_the_number_of_files(tmp_path):

@@ -4,15 +4,13 @@ edges at one instant is said as bad input and leaves the speed of the tacho afte
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from cmsensord.protocol import MODE_RAW, Status, encode_raw, encode_status, encode_tacho
 from cmsensord.sinks.mcap_read import read_messages
-from processes import ENV
+from processes import peak_rss_mb
 
 L = 250
 
@@ -35,25 +33,12 @@ def capture(path: Path, tacho: list[np.ndarray], ppr: int) -> Path:
     return path
 
 
-#: ``cmsensord replay ARGV`` as the command runs it, then its own peak resident memory (VmHWM)
-_PEAK = """import atexit, sys
-def _peak():
-    kb = next(line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM:'))
-    sys.stderr.write(f'\\nVmHWM {kb}\\n')
-atexit.register(_peak)
-from cmsensord.cli import main
-sys.exit(main(['replay', *sys.argv[1:]]))
-"""
-
-
 def replay(cap: Path, out: Path) -> tuple[str, float, list[dict]]:
     """(stderr, peak resident memory in MB, the /cm/ch0/indicators messages) of ``cmsensord replay``."""
-    p = subprocess.run([sys.executable, "-c", _PEAK, str(cap), "--out", str(out)], stdout=subprocess.DEVNULL,
-                       stderr=subprocess.PIPE, text=True, timeout=300, env=ENV)
-    err, _, peak = p.stderr.rpartition("\nVmHWM ")
-    assert p.returncode == 0, err
+    code, err, peak = peak_rss_mb("replay", cap, "--out", out)
+    assert code == 0, err
     (log,) = out.glob("*.mcap")
-    return err, int(peak) / 1024, [m for t, _, m in read_messages(log) if t == "/cm/ch0/indicators"]
+    return err, peak, [m for t, _, m in read_messages(log) if t == "/cm/ch0/indicators"]
 
 
 #: 1000 edges a block, a quarter sample apart: 100 000 pulses a second, a 255-ppr encoder at 23 529 rpm
