@@ -4,19 +4,16 @@ reads it, exit 2, no output (a replay wrote an empty log and a decode_error; cal
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
 
-from processes import ENV, cmsensord
+from processes import cmsensord, run_module
 
 
 @pytest.fixture(scope="module")
 def log(tmp_path_factory):
     work = tmp_path_factory.mktemp("mcap")
-    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--duration", "3", "--out",
-                    str(work / "cap.bin")], check=True, capture_output=True, env=ENV, timeout=60)
+    sim = run_module("firmware_sim", "--scenario", "healthy", "--duration", "3", "--out", work / "cap.bin")
+    assert sim.returncode == 0, sim.stderr
     p = cmsensord("replay", str(work / "cap.bin"), "--out", str(work / "logs"))
     assert p.returncode == 0, p.stderr
     (path,) = (work / "logs").glob("*.mcap")

@@ -5,12 +5,10 @@ one a batch (the daemon said it ~200 times a second, 1,409 config events in 7 s)
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 
 import pytest
 
-from processes import ENV, cmsensord, daemon_on_short_board
+from processes import cmsensord, daemon_on_short_board, run_module
 
 NONE = ("WARNING config: board sends 1 channel(s) (index 0); none of the configured channels is among "
         "them (de (index 1)): nothing is monitored until it sends them")
@@ -29,8 +27,8 @@ def test_a_daemon_on_a_board_without_the_configured_channel_says_so_once(tmp_pat
 ], ids=["some", "none"])
 def test_a_replay_says_once_which_configured_channels_the_capture_lacks(tmp_path, indexes, said):
     cap = tmp_path / "cap.bin"
-    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--channels", "2",
-                    "--duration", "20", "--out", str(cap)], check=True, capture_output=True, env=ENV, timeout=60)
+    sim = run_module("firmware_sim", "--scenario", "healthy", "--channels", "2", "--duration", "20", "--out", cap)
+    assert sim.returncode == 0, sim.stderr
     cfg = tmp_path / "site.yaml"
     cfg.write_text("channels:\n" + "".join(f"  - {{name: {name}, index: {i}}}\n"
                                            for name, i in zip(("de", "nde", "fan"), indexes)))

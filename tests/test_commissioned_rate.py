@@ -5,21 +5,18 @@ so once, at the STATUS, and a re-calibration on top writes its own."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 import yaml
 
-from processes import ENV, cmsensord
+from processes import cmsensord, run_module
 
 
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
     d = tmp_path_factory.mktemp("commissioned")
-    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--duration", "60", "--out",
-                    str(d / "motor.bin")], check=True, capture_output=True, env=ENV, timeout=60)
+    sim = run_module("firmware_sim", "--scenario", "healthy", "--duration", "60", "--out", d / "motor.bin")
+    assert sim.returncode == 0, sim.stderr
     p = cmsensord("calibrate", str(d / "motor.bin"), "--out", str(d / "site.yaml"))
     assert p.returncode == 0, p.stderr
     import scipy.io.wavfile

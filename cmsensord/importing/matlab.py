@@ -13,6 +13,8 @@ them. Axes: see :func:`.table.as_snapshot_array`.
 
 from __future__ import annotations
 
+import zlib
+
 from .errors import ImportFailure
 from .table import FS_KEYS, Table
 from .variables import flatten, rpm_named, scalar_named, selected
@@ -23,8 +25,6 @@ __all__ = ["read_mat"]
 def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = None) -> Table:
     """The variables ``variable`` of a .mat file side by side (``slow``: the speed column,
     :func:`~.variables.selected`), and the rate and speed it names."""
-    import zlib
-
     import scipy.io  # 0.3 s to import: only when a .mat file is read
 
     try:

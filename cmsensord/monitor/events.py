@@ -265,7 +265,7 @@ class EventLog:
         by the stamp they are written at (:meth:`_put`): the limit holds in the log's time, whatever
         the stamps the records were made with (one stamped ahead of the stream holds the ones after
         it at its stamp, and they count in its second)."""
-        at = max(key, self._newest, self.segment_start())
+        at = self._written_at(key)
         for s in self._written.over(at):
             self._put_summary(s)
         skip = set()
@@ -285,9 +285,14 @@ class EventLog:
         self._put(messages.event(s.last_ns, s.kind, s.channel, s.message(), s.fields()), s.last_ns,
                   LOG_LEVEL.get(s.kind, logging.INFO))
 
+    def _written_at(self, stamp: int) -> int:
+        """The stamp a record of ``stamp`` is written at: never before the newest written, nor
+        before the current segment's start."""
+        return max(stamp, self._newest, self.segment_start())
+
     def _put(self, m: messages.Message, stamp: int, level: int) -> None:
         """The event at ``stamp`` (or the newest stamp written), and its foxglove.Log copy."""
-        at = max(stamp, self._newest, self.segment_start())
+        at = self._written_at(stamp)
         self.sink.write(*(m if at == m.stamp_ns else m._replace(stamp_ns=at)))
         ev = m.msg
         self.sink.write(*messages.log(at, level, ev["kind"], ev.get("channel"), ev["message"]))

@@ -4,8 +4,8 @@ They talk to the daemon's control socket (:mod:`.control`): the one in the
 output directory of ``--config FILE``, the one given by ``--socket``, or by
 default the systemd unit's ``/var/lib/cmsensord/cmsensord.sock`` (root only:
 the state directory is mode 0700), or, when that is not there, the one of a daemon
-started in the current directory with the default ``output.dir``.  ``status`` prints the daemon's status line
-and its alarm table; ``ack ALARM`` acknowledges one alarm, ``ack --all`` every
+started in the current directory with the default ``output.dir``.  ``status`` prints
+the daemon's status line and its alarm table; ``ack ALARM`` acknowledges one alarm, ``ack --all`` every
 alarm showing a level.  ``capture-now [--channel CH]`` has the daemon keep a capture
 (trigger ``manual``) of the channel, or of every channel, around the newest sample it
 has: ``capture.pre_s`` from its ring, ``capture.post_s`` still to come; it prints per
