@@ -48,7 +48,6 @@ class CausalSpeed(TachoState):
             _kernel.causal_fit(self._cT[lo - self._c0:], self._cn[lo - self._c0:], todo, self._ckernel, lo,
                                float(self.ppr), buf, self._shi)
             self._shi += len(todo)
-            self._slo = bounded_lo(self._slo, self._shi, 0, self.history_max)
             return
         Tc, nc = self._committed()
         c0 = self._c0
@@ -88,7 +87,6 @@ class CausalSpeed(TachoState):
         for row, v in enumerate((key, T, speed, acc, valid)):
             buf[row, self._shi:self._shi + n] = v
         self._shi += n
-        self._slo = bounded_lo(self._slo, self._shi, 0, self.history_max)
 
     def _segment_room(self, n: int) -> FloatArray:
         """The segment buffer with room for n more segments after ``_shi``; beyond ``history_max``

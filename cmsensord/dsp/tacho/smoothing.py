@@ -326,7 +326,6 @@ class KnotSmoothing(TachoState):
         buf[2, self._khi:self._khi + n] = w
         buf[3, self._khi:self._khi + n] = rid
         self._khi += n
-        self._klo = bounded_lo(self._klo, self._khi, 0, self.history_max)
 
     def _knots(self, t_min: float = -math.inf, t_max: float = math.inf
                ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray]:
