@@ -46,15 +46,16 @@ DENSE = np.arange(1000) * 64
 
 
 def test_a_dense_tacho_holds_bounded_memory_and_its_speed(tmp_path):
-    """Three times the seconds of the densest tacho cost no more memory (keeping 60 s of its
-    knots and causal segments would grow the peak by about 10 MB a second), and the speed is its own."""
+    """Three times the seconds of the densest tacho cost well under the 80 MB that keeping 60 s
+    of its knots and causal segments would add (about 10 MB a second; the peak of one length
+    varies by up to 15 MB from run to run), and the speed is its own."""
     peaks = []
     for seconds in (4, 12):
         cap = capture(tmp_path / f"dense{seconds}.bin", [DENSE] * (100 * seconds), ppr=255)
         err, peak, ind = replay(cap, tmp_path / f"out{seconds}")
         assert [round(m["speed_rpm"], 1) for m in ind[1:]] == [23529.4] * (seconds - 1), err
         peaks.append(peak)
-    assert peaks[1] - peaks[0] < 10, peaks
+    assert peaks[1] - peaks[0] < 40, peaks
 
 
 def test_a_burst_of_impossible_edges_is_bad_input_and_the_speed_comes_back(tmp_path):
@@ -70,3 +71,15 @@ def test_a_burst_of_impossible_edges_is_bad_input_and_the_speed_comes_back(tmp_p
     (line,) = [x.strip() for x in err.splitlines() if x.strip().startswith("events:")]
     assert "decode_error 100," in line and "tacho_lost 1, tacho_restored 1" in line, line
     assert "tacho_missed_pulse" not in line, line
+
+
+def test_frames_of_two_edges_at_one_offset_in_a_slow_tacho_are_bad_input(tmp_path):
+    """A slow tacho (one edge every other block) with 1 s of frames each of two edges at one
+    offset: a batch holds no more edges than frames, and the broken frames are still decode
+    errors, dropped (fed to the tracker they read 6000 rpm, a missed pulse after every real one)."""
+    normal = [np.array([12 * 256 + 128]) if b % 2 == 0 else np.zeros(0) for b in range(100)]
+    tacho = normal * 3 + [np.array([100, 100])] * 100 + normal * 6
+    err, _, ind = replay(capture(tmp_path / "pairs.bin", tacho, ppr=1), tmp_path / "out")
+    assert [round(m["speed_rpm"]) for m in ind[:3] + ind[5:]] == [3000] * 8, err
+    (line,) = [x.strip() for x in err.splitlines() if x.strip().startswith("events:")]
+    assert "decode_error 100," in line and "tacho_missed_pulse" not in line, line

@@ -234,7 +234,7 @@ class Shaft:
             if offsets and max(offsets) >= limit:
                 c, o = _inside(np.array(counts), np.array(offsets, dtype=np.int64), limit, t0s, clock, events)
                 counts, offsets = c.tolist(), o.tolist()
-            if len(offsets) > len(counts) and _repeats(counts, offsets):
+            if max(counts, default=0) > 1 and _repeats(counts, offsets):
                 c, o = _distinct(np.array(counts), np.array(offsets, dtype=np.int64), t0s, clock, events)
                 counts, offsets = c.tolist(), o.tolist()
             fed = tracker.feed_few(t0s, counts, offsets)
@@ -242,7 +242,7 @@ class Shaft:
             counts_a, offsets_a, bad = decode_tacho_many(payloads)
             if offsets_a.size and int(offsets_a.max()) >= limit:
                 counts_a, offsets_a = _inside(counts_a, offsets_a.astype(np.int64), limit, t0s, clock, events)
-            if offsets_a.size > counts_a.size:
+            if counts_a.size and int(counts_a.max()) > 1:
                 counts_a, offsets_a = _distinct(counts_a, offsets_a, t0s, clock, events)
             fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
         for i, message in bad:
