@@ -76,6 +76,22 @@ def test_without_a_broker_it_stops_waiting_after_10_s_and_keeps_the_queue(tmp_pa
     assert 10 <= waited < 60
 
 
+def test_a_full_queue_at_the_end_drops_the_oldest_and_counts_them(tmp_path):
+    """No broker, ``queue_mb`` 0.1 MB (~250 messages): when the replay stops waiting, what it
+    offered past the bound goes in as the daemon's does, the oldest dropped and counted, so
+    dropped and left add up to every message (it threw 681 of 924 away, uncounted)."""
+    out = tmp_path / "out"
+    p = subprocess.run(_replay(tmp_path, free_port(), "queue_mb: 0.1"), capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    n = len(expected(out))
+    said = re.search(r"  mqtt: 0 message\(s\) sent to .*, 0 acknowledged, (\d+) dropped; (\d+) left "
+                     r"unacknowledged in ", p.stderr)
+    assert said and int(said[1]) + int(said[2]) == n and 0 < int(said[2]) < 400, p.stderr
+    assert (f"WARNING mqtt_queue: store-and-forward queue over 0.1 MB: dropped the {said[1]} oldest unsent "
+            f"message(s) ({said[1]} in all)") in p.stderr.splitlines(), p.stderr
+
+
 def test_ctrl_c_stops_waiting_and_the_run_ends_with_its_summary(tmp_path):
     port = free_port()
     proc = spawn(_replay(tmp_path, port), stderr=subprocess.PIPE, text=True)

@@ -470,7 +470,9 @@ class Publisher:
         self._client.publish(self.topics.heartbeat, json.dumps(beat), qos=0, retain=False)
 
     def _finish(self) -> None:
-        """At stop: queue what was offered; send for up to a second; ``offline``; disconnect."""
+        """At stop: queue what was offered (a replay's messages no longer wait for room: the
+        queue's bounds drop the oldest, counted); send for up to a second; ``offline``; disconnect."""
+        self.give_up.set()
         self._to_disk()
         end = time.monotonic() + 1.0
         while self._client is not None and self.state == "connected" and time.monotonic() < end \
