@@ -46,6 +46,12 @@ at all after one such: its decision keeps F_a and S_idx as they were
 (``Decision.no_signal``), so a dead sensor does not read as a healed machine, and the
 period the signal goes (or comes back) in, half dead, is not judged either.
 
+Extension (not in the paper), in both modes, selected by ``flat_signal`` (RAW blocks): a
+period with a quarter in which every block of a channel that came is flat (all its samples
+one ADC count: a dead sensor, a cut cable, an input pinned at a rail; a real accelerometer
+through a real ADC always moves by a count or so) has no signal in the same way, with or
+without a baseline: ``Decision.no_signal``, and ``Decision.flat`` says which counts.
+
 Extension (not in the paper), in both modes: a period that lacks more than half of a channel's
 observations (frames lost, a link down, values the board could not have sent) is not judged
 for that channel: F_a and S_idx are kept as they were (``Decision.no_data``). Fig. 3 compares
@@ -106,6 +112,7 @@ class Decision:
     no_signal: np.ndarray | None = None  # (C,) combined: no signal in the period, F_a and S_idx held
     quietest: np.ndarray | None = None   # (C,) combined: the lowest level ratio of the period's quarters
     no_data: np.ndarray | None = None    # (C,) more than half the period missing: F_a and S_idx held
+    flat: np.ndarray | None = None       # (C, 3) flat_signal: lowest, highest count of the flat blocks, how many
 
 
 class AnomalyDecider:
@@ -117,7 +124,8 @@ class AnomalyDecider:
     """
 
     def __init__(self, n_channels: int, n_filters: int, *, f_r, c, period: int = 100,
-                 transient_periods: int = 1, level_alert=None, level_danger=None, signal_floor=0.0):
+                 transient_periods: int = 1, level_alert=None, level_danger=None, signal_floor=0.0,
+                 flat_signal=None):
         if period < 1:
             raise ValueError(f"period: expected >= 1 observation, got {period}")
         self.C, self.n = n_channels, n_filters
@@ -146,6 +154,13 @@ class AnomalyDecider:
         self._quiet = np.zeros(n_channels, dtype=bool)   # a quarter of the period below signal_floor
         self._quietest = np.full(n_channels, np.nan)
         self._lost = np.zeros(n_channels, dtype=bool)    # the last decision had no signal
+        #: the channels whose flat blocks are no signal (None: flat blocks not looked at)
+        self.flat_signal = None if flat_signal is None else np.broadcast_to(
+            np.asarray(flat_signal, dtype=bool), (n_channels,)).copy()
+        self._flat = np.full((self.period, n_channels), np.nan)   # per slot: a flat block's count, else NaN
+        self._came = np.zeros((self.period, n_channels), dtype=bool)   # per slot: an observation came
+        self._flat_seen = False                                   # a flat block in the period
+        self._flat_quarter = np.zeros(n_channels, dtype=bool)     # the period had a flat quarter
 
     def set_period(self, period: int) -> None:
         """Decide every ``period`` slots (the block rate changed): the period in progress keeps the
@@ -158,9 +173,11 @@ class AnomalyDecider:
 
     def _resize(self, period: int) -> None:
         """The period in progress is ``period`` slots (its level ratios so far kept)."""
-        level = np.full((period, self.C), np.nan)
-        level[:min(self.phase, period)] = self._level[:min(self.phase, period)]
-        self.period, self._level = period, level
+        keep = min(self.phase, period)
+        level, flat = np.full((period, self.C), np.nan), np.full((period, self.C), np.nan)
+        came = np.zeros((period, self.C), dtype=bool)
+        level[:keep], flat[:keep], came[:keep] = self._level[:keep], self._flat[:keep], self._came[:keep]
+        self.period, self._level, self._flat, self._came = period, level, flat, came
 
     @property
     def combined(self) -> bool:
@@ -172,13 +189,16 @@ class AnomalyDecider:
         return (anomaly * self.level_weights).max(axis=-1)
 
     def update(self, outlier: np.ndarray, valid: np.ndarray, f_r=None,
-               level: np.ndarray | None = None) -> list[Decision]:
+               level: np.ndarray | None = None, flat: np.ndarray | None = None) -> list[Decision]:
         """Count a block of T observation slots; return the decisions it completes.
 
         outlier: (T, C, n) flags; valid: (T, C) False for missing observations.
         f_r: optional (C,) rotation frequency for decisions in this block (tacho).
         level: (T, C) level ratios y/baseline (combined mode; NaN = missing).
+        flat: (T, C) the count of each flat block (all samples that count), NaN where it moves.
         """
+        if self.flat_signal is None:
+            flat = None
         outlier = np.asarray(outlier)
         T = outlier.shape[0]
         if outlier.shape[1:] != (self.C, self.n):
@@ -190,7 +210,8 @@ class AnomalyDecider:
         while start < T:
             k = (T - start) // self.period              # whole periods: decided in one pass
             if self.phase == 0 and k >= ONE_PASS_PERIODS and level is None \
-                    and not self.combined and self.periods >= self.transient_periods:
+                    and not self.combined and self.periods >= self.transient_periods \
+                    and (flat is None or self._moving(flat[start:start + k * self.period])):
                 whole = np.asarray(valid[start:start + k * self.period], dtype=bool)
                 if self._all_judged(whole):
                     decisions += self._decide_many(outlier[start:start + k * self.period], whole)
@@ -203,12 +224,23 @@ class AnomalyDecider:
             if level is not None:
                 lv = np.where(np.asarray(valid[seg], dtype=bool), level[seg], np.nan)
                 self._level[self.phase:self.phase + take] = lv
+            if flat is not None:
+                self._flat[self.phase:self.phase + take] = part = flat[seg]
+                self._came[self.phase:self.phase + take] = valid[seg]
+                self._flat_seen = self._flat_seen or not np.isnan(part).all()
+            elif self.flat_signal is not None:          # slots of no flat block
+                self._came[self.phase:self.phase + take] = False
             self.phase += take
             self.slot += take
             start += take
             if self.phase == self.period:
                 decisions.append(self._decide())
         return decisions
+
+    def _moving(self, flat: np.ndarray) -> bool:
+        """No block of ``flat`` is flat and no channel is without signal (the periods may be
+        decided in one pass)."""
+        return not self._lost.any() and bool(np.isnan(flat).all())
 
     def _all_judged(self, valid: np.ndarray) -> bool:
         """No whole period of ``valid`` (K period, C) lacks more than half a channel's
@@ -223,8 +255,11 @@ class AnomalyDecider:
         transient = self.periods < self.transient_periods
         level, s_level = self._level_part(transient)
         signal_lost = no_data = unjudged = None
-        if self.combined and not transient:     # no signal: a quiet quarter, or none at all while lost
-            signal_lost = self._lost = self._quiet | (np.isnan(level) & self._lost)
+        flat = self._flat_part() if self.flat_signal is not None else None
+        if (self.combined or self.flat_signal is not None) and not transient:
+            # no signal: a quiet or flat quarter, or no observation at all while lost
+            quiet = self._quiet if self.combined else False
+            signal_lost = self._lost = quiet | self._flat_quarter | ((self.missing >= self.period) & self._lost)
         if not transient:
             no_data = self.missing * 2 > self.period
             unjudged = no_data if signal_lost is None else signal_lost | no_data
@@ -249,7 +284,7 @@ class AnomalyDecider:
             f_r=self.f_r.copy(), missing=self.missing.copy(),
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
             held_max=int(self.held.max()), no_signal=signal_lost,
-            quietest=self._quietest.copy() if self.combined else None, no_data=no_data,
+            quietest=self._quietest.copy() if self.combined else None, no_data=no_data, flat=flat,
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0
@@ -310,6 +345,26 @@ class AnomalyDecider:
         self._last_severity = s_akf[-1].copy()
         return out
 
+    def _flat_part(self) -> np.ndarray | None:
+        """(C, 3) the lowest and highest count of the period's flat blocks (NaN: none) and how
+        many there were (None: none at all); sets the channels with a flat quarter (every block
+        that came in it flat, one at least, ``flat_signal`` on) in ``_flat_quarter``."""
+        if not self._flat_seen:
+            self._flat_quarter = np.zeros(self.C, dtype=bool)
+            return None
+        f, came = self._flat, self._came
+        is_flat = came & ~np.isnan(f)
+        moved = came & ~is_flat
+        quarters = [(came[a:b].any(axis=0) & ~moved[a:b].any(axis=0))
+                    for a, b in _quarters(len(f))]
+        assert self.flat_signal is not None
+        self._flat_quarter = np.any(quarters, axis=0) & self.flat_signal
+        self._flat_seen = False
+        n = is_flat.sum(axis=0)
+        lo = np.where(is_flat, f, np.inf).min(axis=0)
+        hi = np.where(is_flat, f, -np.inf).max(axis=0)
+        return np.stack([np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan), n], axis=1)
+
     def _level_part(self, transient: bool) -> tuple[np.ndarray, np.ndarray]:
         """(level ratio, S_level) of the period; NaN in the paper's mode. The ratio is the
         period's RMS over the baseline: the root mean square of its block ratios (received)."""
@@ -328,3 +383,9 @@ class AnomalyDecider:
             return level, np.zeros(self.C)
         assert self.level_alert is not None and self.level_danger is not None
         return level, level_severity(level, self.n, self.level_alert, self.level_danger)
+
+
+def _quarters(n: int) -> list[tuple[int, int]]:
+    """(start, end) of the quarters of ``n`` slots (as :func:`numpy.array_split`; none empty)."""
+    edges = [n * k // 4 for k in range(5)]
+    return [(a, b) for a, b in zip(edges, edges[1:]) if b > a]

@@ -24,7 +24,9 @@ whose ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline (``
 else the channel's ``monitor.baseline``) has no signal (a
 sensor fault, or the machine stopped): the channel's rules hold (not judged on it; a delay
 pending on it starts again with its next value), as its severity does (the ``signal_lost``
-event of :mod:`cmsensord.monitor.severity`).
+event of :mod:`cmsensord.monitor.severity`); so do they on a record marked ``signal_lost`` (the
+severity decision it goes out with has no signal) and after a severity decision with no signal,
+for any reason (also RAW blocks whose samples are all one count, ``monitor.flat_signal``).
 
 The live daemon keeps the alarm state an operator relies on over a restart (:meth:`Alarms.keep`:
 a store, :mod:`cmsensord.service.alarm_store`, and what it held): the saved alarms go back
@@ -269,7 +271,7 @@ class Alarms:
             speed = msg.get("speed_rpm")
             was = mgr.operating.state
             values = indicator_values(msg)
-            judged = self._judged(ch, values)           # no signal: none judged, their delays restart
+            judged = self._judged(ch, values, bool(msg.get("signal_lost")))  # no signal: none judged
             unknown = unknown_values(msg) + tuple(k for k in values if k not in judged)
             tr = mgr.record(stamp, ch, judged, None if speed is None else float(speed), unknown)
             if mgr.operating.state != was:
@@ -281,16 +283,18 @@ class Alarms:
             tr = mgr.values(stamp, ch, _order_values(msg))
         return self._after(stamp, tr)
 
-    def _judged(self, ch: str, values: dict[str, float]) -> dict[str, float]:
+    def _judged(self, ch: str, values: dict[str, float], lost: bool = False) -> dict[str, float]:
         """``values`` of a record of ``ch``; none but the operating state's level when its
-        ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline, or the channel's
-        last severity decision had no signal (no signal: the channel's alarms hold, as its
-        severity does)."""
+        ``accel_rms`` is below ``monitor.signal_floor`` x its learned baseline, or the record is
+        marked ``lost`` (its decision has no signal) or the channel's last severity decision had
+        no signal (that, or flat RAW blocks: ``monitor.flat_signal``; no signal: the channel's
+        alarms hold, their delays start again, as its severity does)."""
         mon = next((c.monitor for c in self.cfg.channels if c.name == ch), self.cfg.monitor)
         base = self.rules.baseline(ch, "accel_rms") or mon.baseline     # else the bank's block RMS
         level = values.get("accel_rms")
-        quiet = ch in self._no_signal or (level is not None and base is not None and level < mon.signal_floor * base)
-        if not mon.signal_floor or not quiet:
+        quiet = lost or ch in self._no_signal or bool(mon.signal_floor and level is not None and base is not None
+                                              and level < mon.signal_floor * base)
+        if not quiet:
             return values
         keep = self.rules.operating.level_indicator if self.rules.operating.source == "level" else None
         return {k: v for k, v in values.items() if k == keep}

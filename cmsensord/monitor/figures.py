@@ -99,3 +99,7 @@ class Figures:
         """Wall-clock lag of the newest processed observation (live mode)."""
         last = self.clock.last_stamp_ns
         return max(0.0, (self.clock_ns() - last) / 1e9) if last else 0.0
+
+    def raw_calibration(self):
+        """Per board channel scale/offset: STATUS, overridden by the configuration."""
+        return self.raw.calibration(self.status)

@@ -34,11 +34,11 @@ MAX_HELD_SLOTS = 1000
 
 
 class Held:
-    """Observation rows (first slot, y, valid) for the banks and RAW blocks for the
-    indicators, in order, until :meth:`take_rows` and :meth:`take_blocks`."""
+    """Observation rows (first slot, y, valid, flat counts or None) for the banks and RAW
+    blocks for the indicators, in order, until :meth:`take_rows` and :meth:`take_blocks`."""
 
     def __init__(self) -> None:
-        self.rows: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.rows: list[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]] = []
         self.blocks: list[RawBlocks] = []
         self.n_rows = 0
 
@@ -48,10 +48,11 @@ class Held:
     def full(self) -> bool:
         return self.n_rows >= MAX_HELD_SLOTS
 
-    def add_rows(self, first: int, y: np.ndarray, valid: np.ndarray) -> None:
-        """Observations (T, C) of the slots ``first``.. (following those held)."""
+    def add_rows(self, first: int, y: np.ndarray, valid: np.ndarray, flat: np.ndarray | None = None) -> None:
+        """Observations (T, C) of the slots ``first``.. (following those held), and the counts of
+        their flat blocks (NaN: not flat; None: not looked for)."""
         assert not self.rows or self.rows[-1][0] + len(self.rows[-1][1]) == first, "slots in order"
-        self.rows.append((first, y, valid))
+        self.rows.append((first, y, valid, flat))
         self.n_rows += len(y)
 
     def decision_due(self, sev: SeverityChain, tacho: TachoTracker, clock: BlockClock, bounded: bool) -> bool:
@@ -74,7 +75,8 @@ class Held:
         rows = self.take_rows()
         if rows is not None:
             assert sev is not None
-            sev.observe(*rows)
+            first, y, valid, flat = rows
+            sev.observe(first, y, valid, flat=flat)
         blocks = self.take_blocks()
         if blocks is not None:
             indicators.raw(channels, blocks)
@@ -90,14 +92,16 @@ class Held:
             start += len(t0)
         return placed
 
-    def take_rows(self) -> tuple[int, np.ndarray, np.ndarray] | None:
-        """The rows held, joined (None: none)."""
+    def take_rows(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None] | None:
+        """The rows held, joined (None: none); their flat counts NaN where a part has none."""
         rows, self.rows, self.n_rows = self.rows, [], 0
         if not rows:
             return None
         if len(rows) == 1:
             return rows[0]
-        return rows[0][0], np.concatenate([r[1] for r in rows]), np.concatenate([r[2] for r in rows])
+        flat = None if all(r[3] is None for r in rows) else \
+            np.concatenate([np.full(r[1].shape, np.nan) if r[3] is None else r[3] for r in rows])
+        return rows[0][0], np.concatenate([r[1] for r in rows]), np.concatenate([r[2] for r in rows]), flat
 
     def take_blocks(self) -> RawBlocks | None:
         """The blocks held, joined in one :class:`RawBlocks` (None: none)."""
@@ -112,7 +116,8 @@ def join_blocks(parts: list[RawBlocks]) -> RawBlocks:
     C = parts[0].n_channels
     assert all(p.n_channels == C for p in parts), "one channel count"
     offsets = np.cumsum([0] + [len(p.t0) for p in parts[:-1]])
+    flat = None if any(p.flat is None for p in parts) else np.concatenate([p.flat for p in parts])
     return RawBlocks(np.concatenate([p.t0 for p in parts]),
                      np.concatenate([p.row + k for p, k in zip(parts, offsets.tolist())]),
                      np.concatenate([p.chan for p in parts]),
-                     np.concatenate([p.x for p in parts]), C)
+                     np.concatenate([p.x for p in parts]), C, flat)

@@ -124,10 +124,6 @@ class Processor(Figures):
     def stamp_ns(self, t0_unwrapped: int) -> int:
         return self.clock.stamp_ns(t0_unwrapped)
 
-    def raw_calibration(self):
-        """Per board channel scale/offset: STATUS, overridden by the configuration."""
-        return self.raw.calibration(self.status)
-
     def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None, **extra: Any) -> None:
         self.log.emit(kind, channel, message, stamp_ns, **extra)
 
@@ -425,7 +421,7 @@ class Processor(Figures):
         base waits in :attr:`held` until before the next decision: its records go out ahead of the
         decisions after them, however the stream was cut into calls), captures, orders."""
         orders = self._order_chain(int(blocks.t0[0]))     # made before the decisions the blocks release
-        self._observe(blocks.t0, blocks.rms(), placed=self.held.placer(blocks))
+        self._observe(blocks.t0, blocks.rms(), placed=self.held.placer(blocks), flat=blocks.flat_counts())
         if not self.held.rows:                  # the banks wait for no decision: nor do the indicators
             self._hand_over()
         if self.captures is not None:
@@ -483,10 +479,11 @@ class Processor(Figures):
 
     # ---- observations and decisions -----------------------------------------
     def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS,
-                 placed: Callable[[np.ndarray, np.ndarray], None] | None = None) -> None:
-        """Observations (n, C_board) of the blocks starting at t0 -> slots -> the chain, at
-        most ``max_slots`` slots (received or missing) a call; ``placed`` is first given each run
-        of blocks on one time base (before the next re-anchoring)."""
+                 placed: Callable[[np.ndarray, np.ndarray], None] | None = None,
+                 flat: np.ndarray | None = None) -> None:
+        """Observations (n, C_board) of the blocks starting at t0 (RAW: with their ``flat`` counts) -> slots
+        -> the chain, at most ``max_slots`` slots (received or missing) a call; ``placed`` is first given
+        each run of blocks on one time base (before the next re-anchoring)."""
         self._out(self.shaft.check_silent(self.clock, t0))
         while len(t0):
             slots, n = self.clock.place(t0)
@@ -496,7 +493,7 @@ class Processor(Figures):
             while a < n:                        # bounded memory: at most max_slots slots a run
                 top = self.clock.next_slot + max_slots
                 b = n if slots[n - 1] < top else a + int(np.searchsorted(slots[a:n], top))
-                self._run(slots[a:b], vals[a:b])
+                self._run(slots[a:b], vals[a:b], None if flat is None else flat[a:b])
                 a = b
             if n == len(t0):
                 return
@@ -506,13 +503,14 @@ class Processor(Figures):
             said = self.clock.jump_words(at)
             self.clock.reanchor(at)
             self.event("config", None, f"{said}: time base re-anchored", self.clock.stamp_ns(at))
-            t0, vals = t0[n:], vals[n:]
+            t0, vals, flat = t0[n:], vals[n:], None if flat is None else flat[n:]
 
-    def _run(self, slots: np.ndarray, vals: np.ndarray) -> None:
-        """Observations on their slots -> the banks (or what waits for a decision); with the channels known."""
+    def _run(self, slots: np.ndarray, vals: np.ndarray, flat: np.ndarray | None = None) -> None:
+        """Observations (RAW: and flat counts) on their slots -> the banks (or what waits for a decision)."""
         first, sev = self.clock.next_slot, self.setup.severity
         assert sev is not None, "observations before the board's channels are known"
         y, valid = observation_rows(first, slots, vals, sev.index)
+        flat = None if flat is None else observation_rows(first, slots, flat, sev.index)[0]
         T = len(y)
         mics, trace = self.setup.microphones, self.cfg.output.akf_trace
         stamps = [self.clock.slot_stamp_ns(first + k) for k in range(T)] if mics or trace else []
@@ -525,11 +523,11 @@ class Processor(Figures):
         self.observations += n_valid
         self.missing_observations += valid.size - n_valid
         if self._holding(mics is None and not trace):
-            self.held.add_rows(first, y, valid)
+            self.held.add_rows(first, y, valid, flat)
             self._release_decisions(final=False)
             return
         self._hand_over()
-        y, out = sev.observe(first, y, valid, full=trace)
+        y, out = sev.observe(first, y, valid, full=trace, flat=flat)
         if out is not None:
             self._out(sev.trace(stamps, y, valid, out))
         self._release_decisions(final=False)
@@ -561,7 +559,7 @@ class Processor(Figures):
                 sev.notes.clear()
             self.log.release(stamp)             # events well before it, at a point set by the stream
             out = sev.decision(d, stamp)
-            records = self.indicators.take(stamp)
+            records = sev.mark_no_signal(self.indicators.take(stamp), d)
             run += records + out
             if self.diagnostics is None:        # nothing in it depends on what is written
                 run.append(self.diag.message(stamp))

@@ -7,7 +7,8 @@ frames can straddle a read).  :meth:`RawInput.blocks` turns ready frames into
 :class:`RawBlocks`: m/s² per frame, ``(count - offset) * scale`` with the
 STATUS calibration overridden by the configuration (:mod:`cmsensord.dsp.rms`),
 from which both the severity chain's block RMS and the order chain's samples
-come.
+come; with ``monitor.flat_signal``, also each block's count where all its samples
+are that one count (peak-to-peak 0: no signal, :meth:`RawBlocks.flat_counts`).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class RawBlocks:
     chan: np.ndarray        # (F,) the board channel of each frame
     x: np.ndarray           # (F, block_len) float64 m/s²
     n_channels: int         # C of the board
+    flat: np.ndarray | None = None  # (F,) float32 the count of a frame whose samples are all it, else NaN
     # worked out once (the arrays are not changed after construction; each chain asks)
     _complete_memo: bool | None = field(default=None, init=False, repr=False, compare=False)
     _runs_memo: list[tuple[int, int]] | None = field(default=None, init=False, repr=False, compare=False)
@@ -50,6 +52,17 @@ class RawBlocks:
             return physical_rms(self.x).reshape(len(self.t0), self.n_channels)
         vals = np.full((len(self.t0), self.n_channels), np.nan, dtype=np.float32)
         vals[self.row, self.chan] = physical_rms(self.x)
+        return vals
+
+    def flat_counts(self) -> np.ndarray | None:
+        """float32 (B, C): the count of each board channel's block whose samples all are that
+        count, NaN where they move or the frame is missing (None: not looked for)."""
+        if self.flat is None:
+            return None
+        if self._complete():
+            return self.flat.reshape(len(self.t0), self.n_channels)
+        vals = np.full((len(self.t0), self.n_channels), np.nan, dtype=np.float32)
+        vals[self.row, self.chan] = self.flat
         return vals
 
     def samples(self, index: list[int]) -> np.ndarray:
@@ -95,9 +108,11 @@ class RawBlocks:
             ordered = row.size < 2 or bool((row[1:] >= row[:-1]).all())
         if ordered:
             i, j = row.searchsorted([a, b]).tolist()
-            return RawBlocks(self.t0[a:b], row[i:j] - a, self.chan[i:j], self.x[i:j], self.n_channels)
+            return RawBlocks(self.t0[a:b], row[i:j] - a, self.chan[i:j], self.x[i:j], self.n_channels,
+                             None if self.flat is None else self.flat[i:j])
         sel = (row >= a) & (row < b)
-        return RawBlocks(self.t0[a:b], row[sel] - a, self.chan[sel], self.x[sel], self.n_channels)
+        return RawBlocks(self.t0[a:b], row[sel] - a, self.chan[sel], self.x[sel], self.n_channels,
+                         None if self.flat is None else self.flat[sel])
 
     def pieces(self, most: int) -> list[RawBlocks]:
         """The runs of consecutive blocks (:meth:`runs`), each cut into pieces of at most
@@ -123,6 +138,8 @@ class RawInput:
         self.waiting = Pending()        # RAW frames in order (lists, or batches kept as columns)
         self.dropped = 0
         self._calibrated: tuple[Status | None, np.ndarray, np.ndarray] | None = None
+        #: look for flat blocks (monitor.flat_signal of any channel)
+        self.flat = any(ch.monitor.flat_signal for ch in cfg.channels) if cfg.channels else cfg.monitor.flat_signal
 
     def add(self, frames: Sequence[Frame]) -> None:
         self.waiting.extend(frames)
@@ -205,10 +222,11 @@ class RawInput:
             return None, events
         # uint16 counts (each payload 2 L bytes), read in place: rows_physical converts them
         counts = np.frombuffer(b"".join(payloads), dtype="<u2").reshape(n, L)
-        if counts.max() > COUNT_MAX:            # not 12-bit: a frame the protocol does not allow
-            keep = counts.max(axis=1) <= COUNT_MAX
+        top = counts.max(axis=1)                # per frame: the 12-bit check and the flat blocks'
+        if top.max() > COUNT_MAX:               # not 12-bit: a frame the protocol does not allow
+            keep = top <= COUNT_MAX
             events += _over_12_bits(counts, t0, chan, keep, stamp_ns)
-            counts, t0, chan = counts[keep], t0[keep], chan[keep]
+            counts, t0, chan, top = counts[keep], t0[keep], chan[keep], top[keep]
             n = len(t0)
             if not n:
                 return None, events
@@ -235,7 +253,9 @@ class RawInput:
             blocks = blocks[order]
             row = np.argsort(order)[row]
         scale, offset = self.calibration(status)
-        out = RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C)
+        flat = np.where(counts.min(axis=1) == top, top.astype(np.float32), np.nan).astype(np.float32) \
+            if self.flat else None
+        out = RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C, flat)
         if single and C == 1:                   # every block's one channel, in order
             out._complete_memo = not (chan.any() if chl is None else any(chl))
         return out, events

@@ -13,6 +13,11 @@ combined severity (``monitor.severity``) also grades the period's level against
 it (:func:`~cmsensord.dsp.severity.level_severity`); its severity messages then
 carry ``severity_akf``, ``severity_level``, ``level_ratio`` and the channel's ``level_alert`` and
 ``level_danger``.
+
+A decision with no signal (:class:`~cmsensord.dsp.severity.Decision` ``no_signal``: its level
+below ``monitor.signal_floor`` of the baseline, or, RAW with ``monitor.flat_signal``, blocks
+whose samples are all one ADC count) carries ``signal_lost: true`` in its message, and its
+change is a ``signal_lost`` or ``signal_back`` event naming why.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.speed_gate import SpeedGate
 from cmsensord.monitor.timeline import SeverityTimeline
+from cmsensord.protocol import COUNT_MAX
 from cmsensord.sinks.schemas import severity_topic
 
 #: observation slots whose decisions may wait for a final tacho speed (5 s at 100 Hz)
@@ -72,7 +78,8 @@ class SeverityChain:
         self.decider = AnomalyDecider(
             len(channels), n, f_r=[m.f_r for m in mons], c=[m.c for m in mons], period=period,
             level_alert=[m.level_alert for m in mons] if any(combined) else None,
-            level_danger=[m.level_danger for m in mons], signal_floor=[m.signal_floor for m in mons])
+            level_danger=[m.level_danger for m in mons], signal_floor=[m.signal_floor for m in mons],
+            flat_signal=[m.flat_signal for m in mons] if any(m.flat_signal for m in mons) else None)
         self.index = np.array([ch.index for ch in channels])     # board column of each channel
         self.views = [ChannelView(name=ch.name, anomaly=[0] * n) for ch in channels]
         self.trace_i = min(trace_filter, n) - 1
@@ -138,11 +145,12 @@ class SeverityChain:
         self._tacho_too_fast = fast
         return np.where(fast, self.cfg_f_r, f_r)
 
-    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray,
-                full: bool = False) -> tuple[np.ndarray, AkfBlock | None]:
+    def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray, full: bool = False,
+                flat: np.ndarray | None = None) -> tuple[np.ndarray, AkfBlock | None]:
         """Observations (T, C) of slots first_slot.. / baseline through the banks; their flags
-        (and level ratios, combined severity) wait. Returns what the banks watched, and with
-        ``full`` their every output (for the AKF trace; else None: only the flags are formed)."""
+        (and level ratios, combined severity; the counts of flat RAW blocks, NaN where they move
+        or none were looked at) wait. Returns what the banks watched, and with ``full`` their
+        every output (for the AKF trace; else None: only the flags are formed)."""
         y = y / self.baseline
         out = None
         if full:
@@ -155,10 +163,12 @@ class SeverityChain:
         if self.start_slot is None:
             self.start_slot = first_slot
             self._start_s = self.adc_at(first_slot)  # the run's ADC seconds at the chain's start
-        if self.combined is None:
-            self.gate.push(outlier, valid)
-        else:
-            self.gate.push(outlier, valid, np.where(self.combined, y, np.nan))
+        rows = [outlier, valid]
+        if self.decider.flat_signal is not None:
+            rows.append(np.full(y.shape, np.nan) if flat is None else flat)
+        if self.combined is not None:
+            rows.append(np.where(self.combined, y, np.nan))
+        self.gate.push(*rows)
         return y, out
 
     def release(self, upto: int, *, final: bool, bounded: bool,
@@ -168,12 +178,13 @@ class SeverityChain:
         got = self.gate.release(upto, final=final, bounded=bounded)
         if got is None:
             return []
-        first, (outl, valid, *lv) = got
-        level = lv[0] if lv else None
-        n = outl.shape[0]
+        first, (outl, valid, *rest) = got
         d = self.decider
+        flat = rest.pop(0) if d.flat_signal is not None else None
+        level = rest[0] if rest else None
+        n = outl.shape[0]
         if f_r is None:                         # the configured f_r: every period in one call
-            return d.update(outl, valid, level=level)
+            return d.update(outl, valid, level=level, flat=flat)
         decisions = []
         pos = 0
         while pos < n:                          # one call per decision period: its own f_r
@@ -182,7 +193,8 @@ class SeverityChain:
             if fr is not None:
                 fr = self.checked_f_r(np.asarray(fr, dtype=np.float64))
             part = None if level is None else level[pos:pos + take]
-            decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr, level=part)
+            decisions += d.update(outl[pos:pos + take], valid[pos:pos + take], f_r=fr, level=part,
+                                  flat=None if flat is None else flat[pos:pos + take])
             pos += take
         return decisions
 
@@ -201,6 +213,8 @@ class SeverityChain:
         """Per channel: its severity message, then the events of what changed."""
         C = len(self.channels)
         extras = [self._extra(d, c) for c in range(C)] if self.combined is not None else [{}] * C
+        if d.no_signal is not None and d.no_signal.any():
+            extras = [{**e, "signal_lost": True} if lost else e for e, lost in zip(extras, d.no_signal.tolist())]
         msgs = messages.severities(stamp, self._names, d, self._r_rows, extras, self._topics)
         prev, prev_sev = d.prev_anomaly.tolist(), d.prev_severity.tolist()
         t_s = self._start_s + self._seconds(d.slot)      # the run's ADC seconds, not the chain's
@@ -223,14 +237,31 @@ class SeverityChain:
                 out += self._note(c, d, msg, stamp, prev[c], prev_sev[c])
         return out
 
+    def mark_no_signal(self, records: list, d: Decision) -> list:
+        """``records`` (the indicator records that go out with decision ``d``), those of a channel
+        whose decision has no signal marked ``signal_lost: true`` (the alarms do not judge them:
+        the record the signal goes in is held with its decision)."""
+        if d.no_signal is not None and d.no_signal.any():
+            lost = {name for name, x in zip(self._names, d.no_signal.tolist()) if x}
+            for m in records:
+                if getattr(m, "schema", None) == "indicators" and m.msg.get("channel") in lost:
+                    m.msg["signal_lost"] = True
+        return records
+
     def _signal_event(self, c: int, d: Decision, stamp: int, sev: float) -> Event:
         """``signal_lost`` when channel ``c``'s decision has no signal (its level below
-        ``monitor.signal_floor``), ``signal_back`` when it has again."""
+        ``monitor.signal_floor``, or flat blocks: :meth:`_flat_event`), ``signal_back`` when it
+        has again."""
         name, ratio = self.channels[c].name, float(d.level[c])
         lost = self.no_signal[c] = self.views[c].no_signal = bool(d.no_signal is not None and d.no_signal[c])
+        if lost and d.flat is not None and d.flat[c, 2] > 0:
+            return self._flat_event(c, d, stamp, sev)
         if lost and d.quietest is not None:
             ratio = float(d.quietest[c])        # the quarter the signal went in
         what = {"level_ratio": ratio, "severity_index": sev}
+        if not lost and not np.isfinite(ratio):     # no baseline: back from flat blocks
+            return Event("signal_back", name, f"{name}: signal back: its samples move again; severity and "
+                         "alarms judged again", stamp, {"severity_index": sev})
         if lost:
             floor = self.channels[c].monitor.signal_floor
             return Event("signal_lost", name, (
@@ -239,6 +270,21 @@ class SeverityChain:
                 f"stopped; severity {sev:.2f} and the channel's alarms held until it is back"), stamp, what)
         return Event("signal_back", name, f"{name}: signal back: level {ratio:.3g} x the healthy baseline; "
                      "severity and alarms judged again", stamp, what)
+
+    def _flat_event(self, c: int, d: Decision, stamp: int, sev: float) -> Event:
+        """``signal_lost`` of channel ``c``, whose decision has flat blocks (``monitor.flat_signal``):
+        the count they sit at (the ADC's rail: 0 or its full scale) and for how long."""
+        name = self.channels[c].name
+        lo, hi, n = d.flat[c].tolist() if d.flat is not None else (0.0, 0.0, 0.0)
+        if lo == hi:
+            rail = " (the ADC's rail)" if lo in (0, COUNT_MAX) else " (no noise at all)"
+            what = f"every sample at {lo:.0f} counts{rail}"
+        else:
+            what = f"every block flat, at {lo:.0f} to {hi:.0f} counts"
+        return Event("signal_lost", name, (
+            f"{name}: no signal: {what} for {n / self.rate:.3g} s of the decision: a sensor, cable or ADC "
+            f"fault (monitor.flat_signal); severity {sev:.2f} and the channel's alarms held until it is back"),
+            stamp, {"severity_index": sev})
 
     def _extra(self, d: Decision, c: int) -> dict:
         """The combined severity's fields of channel ``c``'s message (none in the paper's mode)."""
@@ -250,8 +296,6 @@ class SeverityChain:
                  "level_alert": float(dec.level_alert[c]), "level_danger": float(dec.level_danger[c])}
         if np.isfinite(d.level[c]):
             extra["level_ratio"] = float(d.level[c])
-        if d.no_signal is not None and d.no_signal[c]:
-            extra["signal_lost"] = True
         return extra
 
     def _held(self, c: int, d: Decision, stamp: int) -> list[Event]:

@@ -103,6 +103,10 @@ def indicators_schema(time: dict[str, Any], obj: Callable[..., dict]) -> dict[st
                                            "(<bearing>.<line>) its envelope spectrum's bins do not resolve: "
                                            "a window of +/-max(slip, 1 bin) wider than +/-10 % of the line, "
                                            "or overlapping another line's of the bearing"},
+            "signal_lost": {"type": "boolean",
+                            "description": "true when the severity decision this record goes out with has no "
+                                           "signal (monitor.signal_floor, monitor.flat_signal): the alarms "
+                                           "do not judge it"},
         },
         ["timestamp", "channel", "mode", "interval_s", "missing_fraction"],
     )

@@ -319,8 +319,10 @@ SEVERITY = _obj(
         "level_danger": _num("combined: the level_ratio graded 1 (monitor.level_danger)", nullable=False),
         "signal_lost": {
             "type": "boolean",
-            "description": "combined: true when level_ratio is below monitor.signal_floor (no signal: a "
-                           "sensor fault or the machine stopped); severity_index is then the one held",
+            "description": "true when the decision has no signal (a sensor, cable or ADC fault, or the "
+                           "machine stopped): combined, level_ratio below monitor.signal_floor; RAW, blocks "
+                           "whose samples are all one ADC count (monitor.flat_signal); severity_index is "
+                           "then the one held",
         },
     },
     [
