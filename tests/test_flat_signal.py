@@ -19,6 +19,7 @@ import pytest
 from cmsensord.protocol import COUNT_MAX
 from cmsensord.sinks.mcap_sink import read_messages
 from processes import cmsensord, run_module
+from test_read_size import by_topic
 
 FS = 25000          # the simulated board's sampling rate
 SIGNAL = ("signal_lost", "signal_back")
@@ -126,3 +127,15 @@ def test_the_simulated_daemon_reads_no_flat_signal(tmp_path):
     msgs = read_messages(next(tmp_path.glob("*.mcap")))
     assert not [m for t, _, m in msgs if t == "/cm/events" and m["kind"] in SIGNAL]
     assert len([m for t, _, m in msgs if t == "/cm/ch1/severity"]) >= 6
+
+
+def test_the_flat_signal_is_alike_however_the_stream_is_read(tmp_path):
+    """A channel dead at mid-scale, then alive again, read in 997-byte, 64-kB and 1-MiB reads:
+    every topic's messages (not /cm/diagnostics, which tells how the stream was read) are alike,
+    the one signal_lost and signal_back among them."""
+    cap = _pinned(_board(tmp_path, "--tacho"), tmp_path / "dead.bin", 1, 4.6, 9.3, 2048)
+    two = {"channels": [{"name": "ch0"}, {"name": "ch1"}]}
+    runs = [by_topic(cap.read_bytes(), read, two) for read in (997, 65_536, 1 << 20)]
+    assert runs[0] == runs[1] == runs[2]
+    said = [m["kind"] for _, m in runs[0]["/cm/events"] if m["kind"] in SIGNAL]
+    assert said == list(SIGNAL), said
