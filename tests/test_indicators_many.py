@@ -66,7 +66,7 @@ def test_envelopes_of_one_band_in_one_call_equal_one_at_a_time_bit_for_bit():
         for g, (x, s, f) in zip(got, some):
             w = compute(x, s, f)
             assert same(g, w) and g.values() == w.values()
-    assert compute_many(items[4:5])[0].envelope_rms == 0.0
+    assert np.isnan(compute_many(items[4:5])[0].envelope_rms)      # nothing to read: no value
 
 
 @pytest.mark.parametrize("N", [2, 3, 777, 12500, 25000])

@@ -82,11 +82,13 @@ def plain_record(x, setup, shaft_hz):
     rms, peak, crest, kurt = plain_stats(x)
     f, P = plain_power(x)
     vm = (f >= setup.velocity_band[0]) & (f <= setup.velocity_band[1]) & (f > 0)
-    out = {"accel_rms": rms, "accel_peak": peak, "crest_factor": crest, "kurtosis": kurt,
-           "velocity_rms_mm_s": 1000 * np.sqrt(np.sum(P[vm] / (2 * np.pi * f[vm]) ** 2))}
+    out = {"accel_rms": rms, "accel_peak": peak, "crest_factor": crest, "kurtosis": kurt}
+    if vm.any():                                        # a band that holds no bin has no value
+        out["velocity_rms_mm_s"] = 1000 * np.sqrt(np.sum(P[vm] / (2 * np.pi * f[vm]) ** 2))
     env = envelope(x, FS, setup.envelope_band)
     e = env.env - env.env.mean()
-    out["envelope_rms"] = np.sqrt(np.mean(e ** 2))
+    if env.band[0] <= env.band[1]:
+        out["envelope_rms"] = np.sqrt(np.mean(e ** 2))
     if shaft_hz is not None:
         A = np.abs(np.fft.rfft(e * hann(e.size))) * 2 / hann(e.size).sum()
         fe = np.fft.rfftfreq(e.size, 1 / env.fs_env)
@@ -102,7 +104,8 @@ def plain_record(x, setup, shaft_hz):
         if band.orders and shaft_hz is None:
             continue
         lo, hi = (band.lo * shaft_hz, band.hi * shaft_hz) if band.orders else (band.lo, band.hi)
-        out[f"band.{band.name}"] = np.sqrt(np.sum(P[(f >= lo) & (f <= hi)]))
+        if ((f >= lo) & (f <= hi)).any():
+            out[f"band.{band.name}"] = np.sqrt(np.sum(P[(f >= lo) & (f <= hi)]))
     return out
 
 

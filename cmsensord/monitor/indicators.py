@@ -53,6 +53,7 @@ from cmsensord.dsp.indicators.resolution import line_freqs, unresolved_line
 from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.empty_bands import empty_band_events, empty_bands
 from cmsensord.monitor.events import Event
 from cmsensord.sinks.schemas import indicators_topic
 
@@ -345,6 +346,10 @@ class IndicatorChain:
                 if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
                     fields["unavailable"] = ["speed"] + fields.get("unavailable", [])
                 out += _unresolved_notes(self.cfg, name, r, setup, self.fs / self.N, stamp, self.told)
+                empty = empty_bands(r)
+                if empty:
+                    fields = without_dead(fields, empty)
+                    out += empty_band_events(name, empty, self.N / self.fs, stamp, self.told)
                 if self.dead:
                     fields = without_dead(fields, self.dead)
                     if ("nyquist", self.fs) not in self.told:

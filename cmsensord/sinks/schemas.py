@@ -131,6 +131,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "config",
     "lines_unresolved",
     "band_above_nyquist",
+    "band_too_narrow",
     "start",
     "stop",
     "disk_error",
@@ -255,7 +256,9 @@ _DETAILS: dict[str, Any] = {
         "bearing": _str("lines_unresolved: the configured bearing"),
         "lines": {"type": "array", "items": {"type": "string"},
                   "description": "lines_unresolved: its lines the envelope spectrum's bins do not resolve"},
-        "bin_hz": {"type": "number", "description": "lines_unresolved: the envelope spectrum's bin width [Hz]"},
+        "bin_hz": {"type": "number", "description": "lines_unresolved: the envelope spectrum's bin width [Hz]; "
+                   "band_too_narrow: the record's spectral bin width [Hz]"},
+        "band": _str("band_too_narrow: the configured band that holds no bin"),
     },
 }
 

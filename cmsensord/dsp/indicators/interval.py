@@ -30,6 +30,9 @@ from .spectrum import bin_range, hann_power_bins, rfft_freqs
 from .statistics import WaveformStats, centred_stats, centred_stats_rows
 from .velocity import velocity_band
 
+#: a value with nothing to read (a band that holds no bin of the record's spectrum)
+NAN = float("nan")
+
 __all__ = ["Band", "Bearing", "Setup", "BearingLines", "IndicatorRecord", "compute", "compute_many"]
 
 @dataclass(frozen=True)
@@ -87,21 +90,21 @@ class IndicatorRecord:
     accel: WaveformStats
     velocity_rms_mm_s: float
     velocity_band: tuple[float, float]
-    zone: str
+    zone: str                                   # "" without a velocity (its band holds no bin)
     zone_boundaries_mm_s: tuple[float, float, float]
     velocity_alarm_mm_s: float | None
-    envelope_rms: float
+    envelope_rms: float                         # NaN when the envelope band holds no bin
     envelope_band: tuple[float, float]
     shaft_hz: float | None
     bearings: list[BearingLines]
-    bands: list[tuple[Band, tuple[float, float], float]]   # band, its Hz edges, RMS
+    bands: list[tuple[Band, tuple[float, float], float]]   # band, its Hz edges, RMS (NaN: no bin)
 
     def values(self) -> dict[str, float]:
         """Every number under a stable name (what an alarm manager compares with its levels)."""
         out = {"accel_rms": self.accel.rms, "accel_peak": self.accel.peak,
                "crest_factor": self.accel.crest_factor, "kurtosis": self.accel.kurtosis,
                "velocity_rms_mm_s": self.velocity_rms_mm_s, "envelope_rms": self.envelope_rms,
-               "zone": float(ZONES.index(self.zone))}
+               "zone": float(ZONES.index(self.zone)) if self.zone else NAN}
         for b in self.bearings:
             out.update({f"{b.name}.{k}": p.amplitude for k, p in b.lines.items()})
         out.update({f"band.{band.name}": rms for band, _, rms in self.bands})
@@ -141,14 +144,15 @@ def _hz_bands(setup: Setup, shaft_hz: float | None) -> list[tuple[Band, tuple[fl
 def _spectral_sums(X: np.ndarray, N: int, f: np.ndarray, setup: Setup, vband: tuple[float, float],
                    bands: list[tuple[Band, tuple[float, float]]]) -> tuple[float, list[float]]:
     """Velocity RMS [mm/s] over ``vband`` and band RMS from the Hann power of the bins they
-    read, computed once over the span of those bins (:func:`~.spectrum.hann_power_bins`)."""
+    read, computed once over the span of those bins (:func:`~.spectrum.hann_power_bins`); NaN
+    for a band that holds no bin (narrower than the record's 1/T Hz bins: nothing to read)."""
     va, vb = _velocity_bins(N, float(setup.fs), *vband)
     ranges = [bin_range(f, *edges) for _, edges in bands]
     used = [r for r in [(va, vb)] + ranges if r[1] > r[0]]
     k0 = min((a for a, _ in used), default=0)
     P = hann_power_bins(X, N, k0, max((b for _, b in used), default=0))
-    v = 1000.0 * np.sqrt((P[va - k0:vb - k0] * _velocity_weights(N, float(setup.fs), va, vb)).sum()) if vb > va else 0.0
-    return float(v), [float(np.sqrt(P[a - k0:b - k0].sum())) if b > a else 0.0 for a, b in ranges]
+    v = 1000.0 * np.sqrt((P[va - k0:vb - k0] * _velocity_weights(N, float(setup.fs), va, vb)).sum()) if vb > va else NAN
+    return float(v), [float(np.sqrt(P[a - k0:b - k0].sum())) if b > a else NAN for a, b in ranges]
 
 
 @lru_cache(maxsize=16)
@@ -242,10 +246,13 @@ def _record(N: int, X: np.ndarray, setup: Setup, shaft_hz: float | None, stats: 
     alarm = (baseline_alarm_mm_s(setup.velocity_baseline_mm_s, setup.group, setup.foundation)
              if setup.velocity_baseline_mm_s is not None else None)
     bearings = [BearingLines(b.name, None) for b in setup.bearings]
-    if setup.bearings and shaft_hz is not None and shaft_hz > 0:
+    env_band = env.band
+    if env_band[1] < env_band[0]:               # the envelope band holds no bin: no envelope
+        env_rms, env_band = NAN, setup.envelope_band
+    elif setup.bearings and shaft_hz is not None and shaft_hz > 0:
         fe, A = centred_envelope_spectrum(env.env, env.fs_env)
         bearings = [_bearing_lines(setup, b, shaft_hz, fe, A) for b in setup.bearings]
     return IndicatorRecord(stats, v, (vband[0], min(vband[1], setup.fs / 2)),
-                           ZONES[zone_index(v, setup.group, setup.foundation)], bounds, alarm,
-                           env_rms, env.band, shaft_hz,
+                           ZONES[zone_index(v, setup.group, setup.foundation)] if v == v else "", bounds, alarm,
+                           env_rms, env_band, shaft_hz,
                            bearings, [(band, edges, r) for (band, edges), r in zip(bands, band_values)])

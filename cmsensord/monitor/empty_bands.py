@@ -1,0 +1,52 @@
+"""Bands that hold no bin of a record's spectrum: their values left out, listed unavailable, said once.
+
+A record of T s has spectral bins 1/T Hz apart (1 Hz at the default ``indicators.interval_s``,
+10 Hz for a capture of 0.1-s snapshots).  A band narrower than that may hold no bin at all: the
+velocity band, the envelope band, a band of ``indicators.bands`` (one in orders narrows with
+the speed).  Its value has nothing to read (it would read 0: a velocity of 0 mm/s, zone A, on
+a machine in zone D), so the record leaves it out and names it in ``unavailable``
+(:func:`~cmsensord.monitor.indicators.without_dead`, as for a band past Nyquist), and one
+``band_too_narrow`` warning per channel, band and bin width says which band and what would do.
+"""
+
+from __future__ import annotations
+
+from cmsensord.dsp.indicators import IndicatorRecord
+from cmsensord.monitor.events import Event
+
+__all__ = ["empty_bands", "empty_band_events"]
+
+#: (the band's configuration key, its [lo, hi] Hz in the record, the values it leaves unavailable)
+EmptyBand = tuple[str, tuple[float, float], tuple[str, ...]]
+
+
+def empty_bands(r: IndicatorRecord) -> list[EmptyBand]:
+    """The bands of record ``r`` that held no bin (their values NaN)."""
+    out: list[EmptyBand] = []
+    if r.velocity_rms_mm_s != r.velocity_rms_mm_s:
+        out.append(("indicators.velocity_band_hz", r.velocity_band, ("velocity_rms_mm_s", "zone")))
+    if r.envelope_rms != r.envelope_rms:
+        out.append(("indicators.envelope_band_hz", r.envelope_band, ("envelope_rms", "bearings")))
+    for band, edges, rms in r.bands:
+        if rms != rms:
+            unit = f" ({band.lo:g}-{band.hi:g} orders)" if band.orders else ""
+            out.append((f"indicators.bands {band.name}{unit}", edges, (f"band.{band.name}",)))
+    return out
+
+
+def empty_band_events(channel: str, empty: list[EmptyBand], record_s: float, stamp: int,
+                      told: set) -> list[Event]:
+    """A ``band_too_narrow`` warning for each of the ``empty`` bands of a record of ``record_s``
+    seconds of ``channel`` not said yet at that bin width (``told``: what was said)."""
+    df = 1.0 / record_s
+    out = []
+    for key, (lo, hi), names in empty:
+        if (channel, key, round(df, 9)) in told:
+            continue
+        told.add((channel, key, round(df, 9)))
+        out.append(Event("band_too_narrow", channel, (
+            f"{channel}: {key} {lo:g}-{hi:g} Hz holds no bin of the record's spectrum ({df:g}-Hz bins, "
+            f"records of {record_s:g} s): {', '.join(names)} listed unavailable; widen the band to at "
+            f"least {df:g} Hz, or lengthen indicators.interval_s"), stamp,
+            {"details": {"band": key, "bin_hz": round(df, 9)}}))
+    return out
