@@ -26,15 +26,13 @@ from .adc import ADC_MAX, OFFSET, nice_range
 from .blocks import choose_block_len, plan_blocks, remainder_note
 from .capture_writer import choose_ranges, sidecar_path, write_capture
 from .dc import dc_lines, remove_dc
-from .errors import ImportFailure
+from .errors import CHOOSE, ImportFailure
 from .options import ImportOptions
 from .quantisation import LevelTally, quantised_lines
 from .recording import Recording
 from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
 from .units import UNITS, G, InG, unit_of
-
-CHOOSE = "--channels, or --array / --variable for .npz / .mat"
 
 __all__ = ["add_import_parser", "run_import", "options_from_args"]
 
