@@ -56,7 +56,7 @@ from cmsensord.protocol import (
     encode_tacho,
 )
 
-from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
+from .adc import ADC_MAX, HEADROOM, MAX_RANGE, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan
 from .dc import recording_means
 from .errors import CHOOSE, ImportFailure, cannot_write
@@ -91,7 +91,16 @@ def choose_ranges(rec: Recording, requested: tuple[float, ...] | None) -> list[f
             if unit == "Pa" and isinstance(r, InG):
                 raise ImportFailure(f"--range: {name} is a microphone's channel, in Pa: give its range in Pa, "
                                     "not in g (one per channel: --range 50g,20)")
+        for r in ranges:
+            if r > MAX_RANGE:
+                raise ImportFailure(f"--range {r:g}: past the largest full scale the board's STATUS carries "
+                                    f"(+-{MAX_RANGE:.3g}: its scale, a count's value, is a float32)")
         return [float(v) for v in ranges]
+    for name, unit, peak in zip(rec.names, rec.units, rec.peak):
+        if not peak <= MAX_RANGE / HEADROOM:
+            raise ImportFailure(f"{name}: peak {peak:.4g} {unit}, past the largest full scale the board's STATUS "
+                                f"carries (+-{MAX_RANGE:.3g} {unit}: its scale is a float32); check --unit and "
+                                "--scale-factor, or a logger's no-value mark (1.8e308) in the file")
     return [nice_range(p) for p in rec.peak]
 
 
