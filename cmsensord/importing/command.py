@@ -284,8 +284,12 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
     if rem:
         notes.append(rem)
     if plan.n_blocks == 0:
-        raise ImportFailure(f"{files[0]}: {rec.n_samples} sample(s) fill no {L}-sample block; "
-                            "give a smaller --block-len")
+        longest = max(s.length for s in rec.snapshots)
+        if opts.snapshot_len:
+            raise ImportFailure(f"--snapshot-len {opts.snapshot_len}: snapshots of {longest} sample(s) fill no "
+                                f"{L}-sample block; give a --snapshot-len of {L} or more, or a smaller --block-len")
+        what = f"{rec.n_samples} sample(s)" if len(rec.snapshots) == 1 else f"snapshots of at most {longest} sample(s)"
+        raise ImportFailure(f"{files[0]}: {what} fill no {L}-sample block; give a smaller --block-len")
     if not opts.keep_dc:
         remove_dc(rec)                      # before the ranges: they fit the signal without its mean
     full_scale = choose_ranges(rec, opts.full_scale)

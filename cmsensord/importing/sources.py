@@ -223,6 +223,10 @@ class _Layout:
         if opts.channels:
             option = "--columns" if t.kind == "column" else "--channels"  # the same option
             self.idx = [_column(t, tok, option) for tok in opts.channels]
+            twice = next((i for k, i in enumerate(self.idx) if i in self.idx[:k]), None)
+            if twice is not None:
+                raise ImportFailure(f"{option} {','.join(opts.channels)}: {t.kind} {t.columns[twice]!r} ({twice}) "
+                                    "given twice; give each once")
         else:
             self.idx = [i for i in range(len(t.columns)) if i != self.tacho and i not in t.time_columns]
         if not self.idx:
