@@ -23,10 +23,12 @@ import math
 
 import numpy as np
 
-__all__ = ["ADC_MAX", "OFFSET", "HEADROOM", "nice_range", "scale_for", "to_counts", "clipped"]
+__all__ = ["ADC_MAX", "OFFSET", "HEADROOM", "MAX_RANGE", "nice_range", "scale_for", "to_counts", "clipped"]
 
 ADC_MAX = 4095
 OFFSET = 2048.0
+#: the largest full scale whose scale STATUS carries (a float32, m/s² a count)
+MAX_RANGE = float(np.finfo(np.float32).max) * OFFSET
 HEADROOM = 1.25
 _NICE = (1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)
 
@@ -52,7 +54,8 @@ def scale_for(full_scale: float) -> float:
 def to_counts(x: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """uint16 counts of ``x`` (C, ...) in m/s² with per-channel ``scale`` (C,) and offset 2048."""
     s = np.asarray(scale, dtype=np.float64).reshape((-1,) + (1,) * (x.ndim - 1))
-    y = x / s
+    with np.errstate(over="ignore"):     # a value far past the range: clipped as any past it
+        y = x / s
     y += OFFSET
     np.rint(y, out=y)
     np.clip(y, 0, ADC_MAX, out=y)

@@ -29,6 +29,9 @@ def choose_block_len(fs: int, requested: int | None, mode: str) -> tuple[int, st
         note = None
     else:
         L = max(1, int(round(fs / 100)))
+        if L > 0xFFFF:
+            raise ImportFailure(f"fs {fs} Hz: blocks of fs/100 = {L:,} samples, more than STATUS carries (65535); "
+                                "give --block-len")
         note = None if fs % 100 == 0 else (
             f"block_len {L} (fs/100 = {fs / 100:g} is not whole): {fs / L:.3f} blocks per second")
     if mode == "raw" and L > MAX_RAW_BLOCK:

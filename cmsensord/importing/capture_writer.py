@@ -56,10 +56,10 @@ from cmsensord.protocol import (
     encode_tacho,
 )
 
-from .adc import ADC_MAX, OFFSET, nice_range, scale_for, to_counts
+from .adc import ADC_MAX, HEADROOM, MAX_RANGE, OFFSET, nice_range, scale_for, to_counts
 from .blocks import BlockPlan
 from .dc import recording_means
-from .errors import ImportFailure, cannot_write
+from .errors import CHOOSE, ImportFailure, cannot_write
 from .quantisation import LevelTally
 from .recording import Recording
 from .tacho import block_edges, rpm_edges
@@ -91,7 +91,16 @@ def choose_ranges(rec: Recording, requested: tuple[float, ...] | None) -> list[f
             if unit == "Pa" and isinstance(r, InG):
                 raise ImportFailure(f"--range: {name} is a microphone's channel, in Pa: give its range in Pa, "
                                     "not in g (one per channel: --range 50g,20)")
+        for r in ranges:
+            if r > MAX_RANGE:
+                raise ImportFailure(f"--range {r:g}: past the largest full scale the board's STATUS carries "
+                                    f"(+-{MAX_RANGE:.3g}: its scale, a count's value, is a float32)")
         return [float(v) for v in ranges]
+    for name, unit, peak in zip(rec.names, rec.units, rec.peak):
+        if not peak <= MAX_RANGE / HEADROOM:
+            raise ImportFailure(f"{name}: peak {peak:.4g} {unit}, past the largest full scale the board's STATUS "
+                                f"carries (+-{MAX_RANGE:.3g} {unit}: its scale is a float32); check --unit and "
+                                "--scale-factor, or a logger's no-value mark (1.8e308) in the file")
     return [nice_range(p) for p in rec.peak]
 
 
@@ -237,6 +246,7 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
         try:
             with open(part, "wb") as f:
                 stats = _frames(rec, plan, mode, scale, f, progress, tally)
+            _refuse_lost(rec, plan, stats["missing_blocks"])
             meta = _sidecar(rec, plan, mode, full_scale, scale, stats, out, extra or {})
             side_part.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
             os.replace(part, out)
@@ -248,6 +258,17 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
             p.unlink(missing_ok=True)
         raise
     return meta
+
+
+def _refuse_lost(rec: Recording, plan: BlockPlan, missing_blocks: list[int]) -> None:
+    """An ImportFailure when a channel lost every block to missing values (one NaN or inf in
+    each): its capture would hold none of its samples."""
+    lost = [name for name, n in zip(rec.names, missing_blocks) if plan.n_blocks and n == plan.n_blocks]
+    if lost:
+        kept = [name for name in rec.names if name not in lost]
+        keep = f"import only {', '.join(kept)} ({CHOOSE})" if kept else "clean the file"
+        raise ImportFailure(f"{', '.join(lost)}: a missing value (NaN, inf or empty) in every one of the "
+                            f"{plan.n_blocks:,} block(s): no block of it could be written; {keep}")
 
 
 def _one_or_each(units: list[str]) -> str | list[str]:

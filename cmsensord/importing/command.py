@@ -26,15 +26,13 @@ from .adc import ADC_MAX, OFFSET, nice_range
 from .blocks import choose_block_len, plan_blocks, remainder_note
 from .capture_writer import choose_ranges, sidecar_path, write_capture
 from .dc import dc_lines, remove_dc
-from .errors import ImportFailure
+from .errors import CHOOSE, ImportFailure
 from .options import ImportOptions
 from .quantisation import LevelTally, quantised_lines
 from .recording import Recording
 from .samples import MEMORY_MB
 from .sources import build_recording, collect_files
 from .units import UNITS, G, InG, unit_of
-
-CHOOSE = "--channels, or --array / --variable for .npz / .mat"
 
 __all__ = ["add_import_parser", "run_import", "options_from_args"]
 
@@ -286,8 +284,12 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
     if rem:
         notes.append(rem)
     if plan.n_blocks == 0:
-        raise ImportFailure(f"{files[0]}: {rec.n_samples} sample(s) fill no {L}-sample block; "
-                            "give a smaller --block-len")
+        longest = max(s.length for s in rec.snapshots)
+        if opts.snapshot_len:
+            raise ImportFailure(f"--snapshot-len {opts.snapshot_len}: snapshots of {longest} sample(s) fill no "
+                                f"{L}-sample block; give a --snapshot-len of {L} or more, or a smaller --block-len")
+        what = f"{rec.n_samples} sample(s)" if len(rec.snapshots) == 1 else f"snapshots of at most {longest} sample(s)"
+        raise ImportFailure(f"{files[0]}: {what} fill no {L}-sample block; give a smaller --block-len")
     if not opts.keep_dc:
         remove_dc(rec)                      # before the ranges: they fit the signal without its mean
     full_scale = choose_ranges(rec, opts.full_scale)

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 from cmsensord.errors import CmsensordError
 
-__all__ = ["ImportFailure", "cannot_write", "no_room"]
+__all__ = ["CHOOSE", "ImportFailure", "cannot_write", "no_room"]
+
+#: how an import leaves channels out
+CHOOSE = "--channels, or --array / --variable for .npz / .mat"
 
 
 class ImportFailure(CmsensordError):

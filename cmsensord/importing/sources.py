@@ -46,6 +46,8 @@ __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_
 
 EXTENSIONS = (".wav", ".csv", ".tsv", ".txt", ".lvm", ".npy", ".npz", ".mat", ".tdms")
 MAX_CHANNELS = 8
+#: the largest sampling rate STATUS carries (its fs field: 32 bits)
+MAX_FS = 0xFFFF_FFFF
 #: samples a channel converted at a time (2 MB of float64 each)
 READ_SAMPLES = 1 << 18
 
@@ -221,6 +223,10 @@ class _Layout:
         if opts.channels:
             option = "--columns" if t.kind == "column" else "--channels"  # the same option
             self.idx = [_column(t, tok, option) for tok in opts.channels]
+            twice = next((i for k, i in enumerate(self.idx) if i in self.idx[:k]), None)
+            if twice is not None:
+                raise ImportFailure(f"{option} {','.join(opts.channels)}: {t.kind} {t.columns[twice]!r} ({twice}) "
+                                    "given twice; give each once")
         else:
             self.idx = [i for i in range(len(t.columns)) if i != self.tacho and i not in t.time_columns]
         if not self.idx:
@@ -330,14 +336,15 @@ def _channels(t: Table, layout: _Layout, factor: np.ndarray, notes: list[str]) -
             x = np.empty((len(layout.idx), min(n_, a + READ_SAMPLES) - a))
             for c, i in enumerate(layout.idx):
                 x[c] = t.data[s, a:a + x.shape[1], i]
+            if t.zero:
+                x -= t.zero
+            with np.errstate(over="ignore"):    # a value the factor takes past float64: missing
+                x *= t.gain * factor
             bad = ~np.isfinite(x)
             if bad.any():
                 missing += bad.sum(axis=1)
                 first = first or (s, a + int(np.flatnonzero(bad.any(axis=0))[0]))
                 x[bad] = np.nan
-            if t.zero:
-                x -= t.zero
-            x *= t.gain * factor
             yield x
     note = _missing_note(t, [t.columns[i] for i in layout.idx], missing, first)
     if note:
@@ -439,6 +446,10 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     fs = layout.fs
     if not (np.isfinite(fs) and fs > 0):
         raise ImportFailure(f"{files[0]}: the sampling rate the file gives, {fs:g} Hz, is not a rate; give --fs HZ")
+    if fs > MAX_FS:
+        given = f"--fs {fs:g}" if opts.fs is not None else f"{files[0]}: sampling rate {fs:g} Hz"
+        raise ImportFailure(f"{given}: more than the board protocol carries (STATUS fs: at most {MAX_FS:,} Hz); "
+                            "check --fs")
     if fs != round(fs):
         raise ImportFailure(f"{files[0]}: sampling rate {fs:g} Hz; the board protocol carries a whole "
                             "number of Hz (--fs); resample the recording or give --fs with the rate rounded")

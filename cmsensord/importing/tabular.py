@@ -162,6 +162,8 @@ def _numbers(src: str | io.StringIO, sep: str | None, skip: int, line0: int, dat
                     src.seek(0)
                 a = _loadtxt(src, sep, skip, cols, _cell)   # cell by cell: slower, only for such a file
             return np.column_stack([_dates(src, sep, skip, line0), a]) if dated else a
+    except UnicodeDecodeError:
+        raise
     except ValueError as exc:
         raise ValueError(_loadtxt_message(str(exc), line0)) from None
 
@@ -283,6 +285,19 @@ class LongText:
     progress: Callable[[float], None] | None = None
 
 
+def _read_numbers(path: str, sep: str | None, skip: int, decimal_comma: bool, dated: bool, cols: range | None,
+                  long: LongText | None, cut: str | None, encoding: str) -> np.ndarray:
+    """The table's numbers, its text read in ``encoding`` (a UnicodeDecodeError when it is not)."""
+    if long is not None and Path(path).stat().st_size > long.memory_mb * 1e6:
+        return _numbers_in_chunks(path, sep, skip, decimal_comma, dated, cols, long, cut is not None, encoding)
+    src: str | io.StringIO = path
+    if decimal_comma or cut is not None or encoding != "utf-8-sig":
+        text = Path(path).read_text(encoding=encoding, errors="strict" if encoding == "utf-8-sig" else "replace")
+        text = text[:text.rfind("\n") + 1] if cut is not None else text
+        src = io.StringIO(text.replace(",", ".") if decimal_comma else text)
+    return _numbers(src, sep, skip, skip, dated, cols)
+
+
 def read_tabular(path: str, separator: str | None = None, header: bool | None = None,
                  long: LongText | None = None) -> Table:
     """The text table's numbers; with ``long``, a file larger than ``long.memory_mb`` is read a
@@ -297,16 +312,13 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     width = len(first) - trailing               # lines that end with the separator: no last column
     cols = range(1 if dated else 0, width) if dated or trailing else None   # a date column: read apart
     cut = _cut_short(path, sep, width)
+    notes = [cut] if cut else []
     try:
-        if long is not None and Path(path).stat().st_size > long.memory_mb * 1e6:
-            a = _numbers_in_chunks(path, sep, skip, decimal_comma, dated, cols, long, cut is not None, encoding)
-        else:
-            src: str | io.StringIO = path
-            if decimal_comma or cut is not None or encoding == UTF16:
-                text = Path(path).read_text(encoding=encoding, errors="replace")
-                text = text[:text.rfind("\n") + 1] if cut is not None else text
-                src = io.StringIO(text.replace(",", ".") if decimal_comma else text)
-            a = _numbers(src, sep, skip, skip, dated, cols)
+        try:
+            a = _read_numbers(path, sep, skip, decimal_comma, dated, cols, long, cut, encoding)
+        except UnicodeDecodeError:
+            a = _read_numbers(path, sep, skip, decimal_comma, dated, cols, long, cut, "latin-1")
+            notes.append(f"{Path(path).name}: not UTF-8 text: read as Latin-1 (ISO 8859-1)")
     except ValueError as exc:                       # its message names the line (_numbers)
         raise ImportFailure(f"{path}: {exc} (separator {_SEP_NAMES.get(sep, repr(sep))}, "
                             f"{'a header line' if header_line is not None else 'no header'}); fix the file, "
@@ -314,7 +326,6 @@ def read_tabular(path: str, separator: str | None = None, header: bool | None = 
     if a.shape[0] == 0:
         raise ImportFailure(f"{path}: a header but no rows of numbers")
     names = None
-    notes = [cut] if cut else []
     units = unit_fields(header_line, sep) if header_line is not None and head.preamble else None
     if units is not None and len(split(head.preamble[-1], sep)) == len(units):
         header_line, head = head.preamble[-1], head.names_above()   # names, then units

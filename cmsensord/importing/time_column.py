@@ -35,7 +35,8 @@ by at most two: the time base too, and without a gap its rate is fitted to the r
 values change (each a rounding boundary).
 The import then takes every other column as a channel by default and needs no ``--fs``
 (:class:`~.table.Table` ``time_columns`` and ``fs``). Unevenly spaced times (gaps, a restart)
-still mark the time base, without a rate: ``--fs`` gives it.
+still mark the time base, without a rate: ``--fs`` gives it; so does a column labelled as time
+whose values step back at a few places (a logger's clock set back), with a note naming the first.
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def with_time_column(t: Table, has_header: bool, dated: bool = False) -> Table:
         return replace(t, time_columns=cols, fs=t.fs or rate, time_note=note, times=of_day[:1], clock=True)
     found = _labelled(t) if has_header else (0, 1.0) if _even(t.data[0, :, 0]) else None
     if found is None:
-        return t
+        return (_set_back(t) if has_header else None) or t
     col, unit_s = found
     return _time_base(t, col, np.multiply(t.data[0, :, col], unit_s, dtype=np.float64), "is the time base", "its")
 
@@ -165,6 +166,25 @@ def _labelled(t: Table, start: int = 0) -> tuple[int, float] | None:
         m = _LABEL.fullmatch(name)
         if m and (_increasing(t.data[0, :, i]) or _printed(t.data[0, :, i]) is not None):
             return i, _UNIT_S.get((m[2] or "s").lower(), 1.0)
+    return None
+
+
+def _set_back(t: Table) -> Table | None:
+    """``t`` with its first column labelled as time whose values increase but for a few steps
+    back (a logger's clock set back) marked its time base, without a rate, and a note naming
+    the first step back; None when it has none."""
+    for i, name in enumerate(t.columns):
+        if not _LABEL.fullmatch(name):
+            continue
+        x = np.asarray(t.data[0, :, i], dtype=np.float64)
+        d = np.diff(x)
+        back = np.flatnonzero(d < 0)
+        if 0 < back.size <= max(1, x.size // 1000) and int((d > 0).sum()) * 2 > d.size:
+            k = int(back[0])
+            note = (f"column {name!r} ({i}) is named as time but steps back {back.size} time(s), the first after row "
+                    f"{k + 1} ({x[k]:g} -> {x[k + 1]:g}): not a time base that gives the rate; it is not imported "
+                    "as a channel")
+            return replace(t, time_columns=(i,), time_note=note)
     return None
 
 
