@@ -152,16 +152,16 @@ class ControlServer:
         """One connection, in a thread of its own: its line read, its answer sent."""
         deadline = time.monotonic() + REPLY_S
         try:
-            try:
-                line = _read_line(conn, deadline)
-            except OSError:
-                conn.close()
-                return
-            if line is None:
-                answer = {"ok": False, "error": f"no request line within {REPLY_S:g} s"}
-            else:
-                answer = self._answer(line, _peer(conn), deadline)
-            _send(conn, answer)
+            with conn:
+                try:
+                    line = _read_line(conn, deadline)
+                except OSError:
+                    return
+                if line is None:
+                    answer = {"ok": False, "error": f"no request line within {REPLY_S:g} s"}
+                else:
+                    answer = self._answer(line, _peer(conn), deadline)
+                _send(conn, answer)
         finally:
             self._slots.release()
 
