@@ -111,10 +111,17 @@ def _long_enough(obs: Observations, c: int, period: int) -> None:
     n = int(np.count_nonzero(np.isfinite(obs.y[:, c])))
     if n < 2 * period:
         need = 2 * period / obs.rate_hz
+        end = obs.capture_s
+        if end is None or round(obs.start_s + need, 6) <= round(end, 6):
+            fix = f"give a longer one (--to {obs.start_s + need:g} or later)"
+        elif end >= need:
+            fix = f"give a longer one (--from {math.floor(round(10 * (end - need), 6)) / 10:g} or earlier)"
+        else:
+            fix = f"the capture holds only {end:.1f} s: record a longer one"
         raise CmsensordError(
             f"calibrate: channel {obs.names[c]}: the healthy period holds {n} observation(s) ({n / obs.rate_hz:.3g} "
             f"s), fewer than the 2 decision periods learning needs ({2 * period}, {need:g} s: the first is the "
-            f"filters' transient); give a longer one (--to {obs.start_s + need:g} or later)")
+            f"filters' transient); {fix}")
 
 
 def _from_word(source: str) -> str:

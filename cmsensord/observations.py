@@ -54,6 +54,7 @@ class Observations:
     settings: dict[str, float] = field(default_factory=dict)  # indicators.* the sidecar gave (capture_settings)
     fs: float = 0.0               # the board's samples per second
     board_channels: int = 0       # the channels the board sent (the configuration may list fewer)
+    capture_s: float | None = None  # the capture's board seconds (None: read only up to the window's end)
 
     @property
     def end_s(self) -> float:
@@ -101,14 +102,15 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
         raise CmsensordError(f"calibrate: {said[0]}; calibrate learns it from such a --config BASE.yaml")
     cfg, settings, set_lines = capture_settings(cfg, meta)     # as a replay of the capture runs
     collect = _Collect()
-    proc, sink = _replay(capture, cfg, auto_channels, None if isinstance(from_s, Percent) else to_s, collect)
+    upto = None if isinstance(from_s, Percent) or isinstance(to_s, Percent) else to_s
+    proc, sink = _replay(capture, cfg, auto_channels, upto, collect)
     if not collect.blocks:
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
     y = np.concatenate([b for _, b in collect.blocks])
     total = y.shape[0] / rate
-    first = int(np.floor(_seconds(from_s, total) * rate))
-    last = y.shape[0] if to_s is None else min(y.shape[0], int(np.floor(_seconds(to_s, total) * rate)))
+    first = int(np.floor(min(_seconds(from_s, total), total) * rate))
+    last = y.shape[0] if to_s is None else int(np.floor(min(_seconds(to_s, total), total) * rate))
     if last <= first:
         end = "the end" if to_s is None else _said(to_s)
         raise CmsensordError(f"calibrate: {capture}: no observations between {_said(from_s)} and {end} "
@@ -124,7 +126,8 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s)
                         + _unresolved(sink),
-                        settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board)
+                        settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board,
+                        capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None)
 
 
 def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:

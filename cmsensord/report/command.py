@@ -69,9 +69,10 @@ def run_report(args: argparse.Namespace) -> int:
 
 def _tell_unreadable(data: Any) -> None:
     """One line on stderr for each file with damage read past (a bad chunk, intact ones after
-    it) and each whose read ended at damage (not MCAP, no intact chunk after it, cut short:
-    what that lost). When no message could be read at all, a user error (no report): the
-    first file's damage, or that it holds no message."""
+    it), each whose read ended at damage (not MCAP, no intact chunk after it, cut short:
+    what that lost) and each with messages left out (on topics not cmsensord's, or not its
+    JSON: :meth:`FileInfo.not_read`). When no message could be read at all, a user error (no
+    report): the first file's damage, or that it holds no message, or none of cmsensord's."""
     read = [f for f in data.files if f.left_out is None]
     bad = [f for f in read if f.error]
     if not data.messages:
@@ -80,6 +81,11 @@ def _tell_unreadable(data: Any) -> None:
                                  + (f" ({read[0].cut})" if read[0].cut else ""))
         more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
         raise CmsensordError(f"{bad[0].path}: {bad[0].error}{more}")
+    if all(f.messages == f.foreign + f.unreadable for f in read):
+        alien = [f for f in read if f.messages]
+        more = f" (and {len(alien) - 1} more file(s) like it)" if len(alien) > 1 else ""
+        raise CmsensordError(f"{alien[0].path}: no cmsensord message in it to report: of its {alien[0].messages:,} "
+                             f"message(s), {alien[0].not_read()}{more}")
     for f in read:
         if f.skipped:
             print(f"cmsensord: report: {f.path}: {len(f.skipped)} damaged stretch(es) skipped (the first: "
@@ -88,6 +94,9 @@ def _tell_unreadable(data: Any) -> None:
         if f.error:
             print(f"cmsensord: report: {f.path}: {f.error}; the report holds its {f.messages:,} message(s) "
                   "before that", file=sys.stderr)
+        if f.not_read():
+            print(f"cmsensord: report: {f.path}: of its {f.messages:,} message(s), {f.not_read()}: left out",
+                  file=sys.stderr)
 
 
 def _draw(data: Any) -> list[tuple[str, list[Any]]]:

@@ -71,6 +71,12 @@ def _events_table(data: LogData) -> str:
 def _file_state(f: Any) -> str:
     if f.left_out:
         return html.escape(f.left_out)
+    if f.not_read():
+        return html.escape(f"messages left out: {f.not_read()}; ") + _read_state(f)
+    return _read_state(f)
+
+
+def _read_state(f: Any) -> str:
     skipped = f"damaged: {len(f.skipped)} stretch(es) skipped (the first: {f.skipped[0]}); " if f.skipped else ""
     if f.error:
         return html.escape(f"{skipped}{'' if f.error == f.cut else 'damaged: '}{f.error}; read up to there")

@@ -70,6 +70,8 @@ RECORDS_KEPT = 256
 #: the alarm events that a value moved (kept where the record that moved them is)
 _TRANSITIONS = frozenset(("alarm_alert", "alarm_danger", "alarm_clear"))
 _TRENDS = frozenset(name for name, _ in INDICATOR_FIELDS)
+#: topics not cmsensord's named in a line about a file
+SHOWN_TOPICS = 3
 _CAPTURE_PARTS = {"capture_waveform": "waveform", "capture_spectrum": "spectrum",
                   "capture_envelope": "envelope"}
 
@@ -116,6 +118,20 @@ class FileInfo:
     path: str
     bytes: int
     messages: int = 0
+    unreadable: int = 0             # of them, on cmsensord's topics but not its JSON objects
+    foreign: int = 0                # of them, on topics not cmsensord's
+    foreign_topics: list[str] = field(default_factory=list)     # (a few of) those topics
+
+    def not_read(self) -> str:
+        """Its messages left out and why, in words; "" when none is."""
+        parts = []
+        if self.foreign:
+            more = ", ..." if len(self.foreign_topics) > SHOWN_TOPICS else ""
+            parts.append(f"{self.foreign:,} on topics not cmsensord's "
+                         f"({', '.join(self.foreign_topics[:SHOWN_TOPICS])}{more})")
+        if self.unreadable:
+            parts.append(f"{self.unreadable:,} on cmsensord's topics that are not its JSON objects")
+        return "; ".join(parts)
     complete: bool = False
     error: str | None = None
     skipped: list[str] = field(default_factory=list)
@@ -144,7 +160,11 @@ class LogData:
         self.link_runs = LinkRuns()
         self.max_lag_s = 0.0
         self.max_queue_depth = 0
-        self.undecodable = 0
+        #: of the file being read (:meth:`begin_file`): messages on cmsensord's topics (``/cm/...``)
+        #: that are not its JSON objects, messages on other topics, and (a few of) those topics
+        self.unreadable = 0
+        self.foreign = 0
+        self.foreign_topics: list[str] = []
 
     def channel(self, name: str) -> ChannelData:
         ch = self.channels.get(name)
@@ -156,11 +176,21 @@ class LogData:
         """The messages added next are of a file whose ``cmsensord`` metadata is ``metadata``
         (its ``run`` tells the daemon run its link counters count)."""
         self.link_runs.begin(metadata)
+        self.unreadable = self.foreign = 0
+        self.foreign_topics = []
 
     def add(self, topic: str, stamp_ns: int, data: bytes) -> None:
         """One message of any topic, at its log time ``stamp_ns``; topics the report does not draw
-        only count."""
+        only count; one on a topic not cmsensord's (not ``/cm/...``), or on cmsensord's that is
+        not a JSON object, counts as such (:attr:`foreign`, :attr:`unreadable`) and is not drawn
+        (one whose channel record was lost to damage, ``<channel N>``, only counts: the line on
+        the damage covers it)."""
         self.messages += 1
+        if not topic.startswith(("/cm/", "<channel ")):
+            self.foreign += 1
+            if topic not in self.foreign_topics and len(self.foreign_topics) <= SHOWN_TOPICS:
+                self.foreign_topics.append(topic)
+            return
         t_ns = self.place(stamp_ns)
         if self.start_ns is None or self.end_ns is None:
             self.start_ns = self.end_ns = t_ns
@@ -170,17 +200,22 @@ class LogData:
             self.start_ns = t_ns
         parts = topic.split("/")
         kind = parts[-1]
-        if kind in ("akf", "vibration_estimate"):
-            return                      # 100 Hz traces: not drawn, not decoded
+        if kind in ("akf", "vibration_estimate") or len(parts) == 1:
+            return                      # 100 Hz traces: not drawn, not decoded; or its topic lost
         if kind == "indicators" and len(parts) == 4 and self.records_at_start:
             t_ns = self._record_start(parts[2], stamp_ns, data)
         if topic == "/cm/diagnostics" or (kind in _FAST_KINDS and len(parts) == 4):
-            self._scalar_message(parts, kind, t_ns, data)
+            if data[:1] != b"{":                # read by its fields: what is surely no JSON object
+                self.unreadable += 1
+            else:
+                self._scalar_message(parts, kind, t_ns, data)
             return
         try:
             msg = json.loads(data)
-        except ValueError:
-            self.undecodable += 1
+        except (ValueError, RecursionError):
+            msg = None
+        if not isinstance(msg, dict):
+            self.unreadable += 1
             return
         if topic == "/cm/events":
             start = self._about_record(stamp_ns, msg)

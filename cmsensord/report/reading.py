@@ -53,6 +53,7 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> LogData:
             if info.messages % 4096 == 0:
                 progress.update(done + offset)
         info.complete, info.error, info.skipped, info.cut = scan.complete, scan.error, scan.skipped, scan.cut
+        info.unreadable, info.foreign, info.foreign_topics = data.unreadable, data.foreign, data.foreign_topics
         data.files.append(info)
         done += size
     progress.close()

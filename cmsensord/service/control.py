@@ -8,14 +8,18 @@ One request per connection, one JSON line each way::
     {"cmd": "status"}
     {"cmd": "capture", "channel": "ch0"}       ("channel": null or absent: every channel)
 
-A small thread (:class:`ControlServer`) accepts connections and queues the
-requests; the processing loop answers them between batches
-(:meth:`ControlServer.apply`), so an acknowledgement is applied in the stream's
-order, stamped with stream time, and nothing else touches the Processor from
-another thread.  The thread waits at most ``REPLY_S`` for the loop.  An
-acknowledgement is recorded with the user the connecting process runs as (the
-socket's peer credentials).
-"""
+A small thread (:class:`ControlServer`) accepts connections and hands each to a
+thread of its own (at most ``MAX_CLIENTS`` at once; one more is answered
+``busy`` at once), so a client that is slow to send, or sends nothing, holds up
+no other.  Each connection has ``REPLY_S`` from its accept to send its line and
+get its answer.  The requests are queued; the processing loop answers them
+between batches (:meth:`ControlServer.apply`), so an acknowledgement is applied
+in the stream's order, stamped with stream time, and nothing else touches the
+Processor from another thread.  A request the loop has not taken when its
+connection's time is up is answered as not applied, and the loop skips it: no
+client is told a request failed that is then applied.  An acknowledgement is
+recorded with the user the connecting process runs as (the socket's peer
+credentials).  Idle, the server is one thread blocked in accept."""
 
 from __future__ import annotations
 
@@ -27,19 +31,25 @@ import queue
 import socket
 import struct
 import threading
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ControlServer", "SOCKET_NAME", "socket_path", "request"]
+from cmsensord.config.loading import MAX_CONFIG_BYTES
+
+__all__ = ["ControlServer", "NoAnswer", "SOCKET_NAME", "socket_path", "request"]
 
 SOCKET_NAME = "cmsensord.sock"
 #: the unit's state directory: where the client looks without --config or --socket
 STATE_DIR = Path("/var/lib/cmsensord")
-#: seconds the server thread waits for the loop's answer, and a client for the server's
+#: seconds a connection has, from its accept, to send its line and get the answer
 REPLY_S = 5.0
-MAX_REQUEST = 4096
+#: longest request line read: one naming an alarm or channel as long as a configuration file can be
+MAX_REQUEST = MAX_CONFIG_BYTES + 4096
+#: connections served at once
+MAX_CLIENTS = 8
 
 
 def socket_path(output_dir: str | os.PathLike) -> Path:
@@ -53,6 +63,16 @@ class _Request:
     by: str | None = None           # the user the client runs as
     done: threading.Event = field(default_factory=threading.Event)
     reply: dict | None = None
+    state: str = "queued"           # then "taken" (the loop applies it) or "dropped" (its time is up)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def settle(self, state: str) -> bool:
+        """Move a queued request to ``state``; False (nothing changed) if it is taken or dropped."""
+        with self.lock:
+            if self.state != "queued":
+                return False
+            self.state = state
+            return True
 
 
 class ControlServer:
@@ -64,6 +84,7 @@ class ControlServer:
         self.wake: Callable[[], None] | None = None     # wakes the processing loop for a request
         self.status_line: Callable[[], str] | None = None    # the daemon's whole status line (STATUS=)
         self._stop = threading.Event()
+        self._slots = threading.BoundedSemaphore(MAX_CLIENTS)
         self.sock, self._ident = self._bind()
         self.thread = self._start()
 
@@ -117,14 +138,41 @@ class ControlServer:
                 conn, _ = sock.accept()
             except OSError:
                 return
-            with conn, contextlib.suppress(OSError):
-                conn.settimeout(REPLY_S)
-                conn.sendall(json.dumps(self._answer(_read_line(conn), _peer(conn))).encode() + b"\n")
+            if not self._slots.acquire(blocking=False):
+                _send(conn, {"ok": False, "error": f"busy: {MAX_CLIENTS} connections are open"})
+                continue
+            try:
+                threading.Thread(target=self._client, args=(conn,), name="cmsensord-control-client",
+                                 daemon=True).start()
+            except RuntimeError:            # no thread to be had
+                self._slots.release()
+                _send(conn, {"ok": False, "error": "busy: no thread for the connection"})
 
-    def _answer(self, line: bytes, by: str | None = None) -> dict:
+    def _client(self, conn: socket.socket) -> None:
+        """One connection, in a thread of its own: its line read, its answer sent."""
+        deadline = time.monotonic() + REPLY_S
+        try:
+            with conn:
+                try:
+                    line = _read_line(conn, deadline)
+                except OSError:
+                    return
+                if line is None:
+                    answer = {"ok": False, "error": f"no request line within {REPLY_S:g} s"}
+                else:
+                    answer = self._answer(line, _peer(conn), deadline)
+                _send(conn, answer)
+        finally:
+            self._slots.release()
+
+    def _answer(self, line: bytes, by: str | None = None, deadline: float | None = None) -> dict:
+        """The answer to one request line: from the loop if it takes the request by ``deadline``
+        (default: ``REPLY_S`` from now), else that it is not applied."""
+        if len(line) > MAX_REQUEST:
+            return {"ok": False, "error": f"the request is longer than {MAX_REQUEST} bytes"}
         try:
             body = json.loads(line)
-        except ValueError:
+        except (ValueError, RecursionError):       # RecursionError: arrays nested a thousand deep
             return {"ok": False, "error": "the request is not one JSON line"}
         if not isinstance(body, dict) or body.get("cmd") not in ("ack", "status", "capture"):
             return {"ok": False, "error": "unknown request (cmd: ack, status or capture)"}
@@ -135,8 +183,11 @@ class ControlServer:
             return {"ok": False, "error": "busy: too many requests waiting"}
         if self.wake is not None:
             self.wake()
-        if not req.done.wait(REPLY_S):
-            return {"ok": False, "error": f"the processing loop did not answer within {REPLY_S:g} s"}
+        left = (time.monotonic() + REPLY_S if deadline is None else deadline) - time.monotonic()
+        if not req.done.wait(max(left, 0.0)) and req.settle("dropped"):
+            return {"ok": False, "error": f"the processing loop did not answer within {REPLY_S:g} s "
+                    "(the request is not applied)"}
+        req.done.wait()                     # taken by the loop: its answer comes
         return req.reply or {"ok": False, "error": "no answer"}
 
     # ---------------------------------------------------------- processing loop
@@ -147,6 +198,8 @@ class ControlServer:
                 req = self.requests.get_nowait()
             except queue.Empty:
                 return
+            if not req.settle("taken"):
+                continue                    # its connection's time is up: not applied
             try:
                 req.reply = handle(proc, req.body, self.status_line, req.by)
             finally:
@@ -223,14 +276,30 @@ def _peer(conn: socket.socket) -> str | None:
         return f"uid {uid}"
 
 
-def _read_line(conn: socket.socket) -> bytes:
+def _read_line(conn: socket.socket, deadline: float) -> bytes | None:
+    """The request line (without its newline; all that came, if the client closed first or it
+    grew past MAX_REQUEST); None if it did not come by ``deadline`` (time.monotonic)."""
     buf = b""
-    while b"\n" not in buf and len(buf) < MAX_REQUEST:
-        chunk = conn.recv(MAX_REQUEST)
+    while b"\n" not in buf and len(buf) <= MAX_REQUEST:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return None
+        conn.settimeout(left)
+        try:
+            chunk = conn.recv(65536)
+        except TimeoutError:
+            return None
         if not chunk:
             break
         buf += chunk
     return buf.split(b"\n", 1)[0]
+
+
+def _send(conn: socket.socket, answer: dict) -> None:
+    """Send ``answer`` (one JSON line) and close ``conn``; a client gone is no error."""
+    with conn, contextlib.suppress(OSError):
+        conn.settimeout(REPLY_S)
+        conn.sendall(json.dumps(answer).encode() + b"\n")
 
 
 #: longest socket path bind() and connect() take as it is (sun_path holds 108 bytes)
@@ -261,17 +330,36 @@ def _answers(path: Path) -> bool:
     return True
 
 
+class NoAnswer(Exception):
+    """A daemon took the connection, but its answer did not come (in time, or at all)."""
+
+
 def request(path: Path, body: dict, timeout: float = REPLY_S + 2.0) -> dict:
-    """Send one request to the daemon at ``path``; its answer.  OSError when none answers."""
+    """Send one request to the daemon at ``path``; its answer.  OSError when nothing takes the
+    connection; NoAnswer when the answer does not come within ``timeout`` s (the daemon
+    answers within ``REPLY_S``) or the daemon closes the connection without one."""
+    deadline = time.monotonic() + timeout
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(timeout)
         with _short(path) as name:
             s.connect(name)
-        s.sendall(json.dumps(body).encode() + b"\n")
+        with contextlib.suppress(OSError):          # a daemon that answered at once (busy) and closed
+            s.sendall(json.dumps(body, ensure_ascii=False).encode(errors="backslashreplace") + b"\n")
         buf = b""
-        while not buf.endswith(b"\n"):
-            chunk = s.recv(65536)
-            if not chunk:
-                break
-            buf += chunk
-    return json.loads(buf)
+        try:
+            while not buf.endswith(b"\n"):
+                s.settimeout(max(deadline - time.monotonic(), 0.001))
+                chunk = s.recv(65536)
+                if not chunk:
+                    break
+                buf += chunk
+        except TimeoutError:
+            raise NoAnswer(f"the daemon took the request but did not answer within {timeout:g} s: it may "
+                           "have been applied (see cmsensord status)") from None
+        except OSError as exc:
+            raise NoAnswer(f"the connection broke before the daemon's answer ({exc.strerror or exc}): the "
+                           "request may have been applied (see cmsensord status)") from None
+    try:
+        return json.loads(buf)
+    except ValueError:
+        raise NoAnswer("the daemon closed the connection without an answer") from None

@@ -9,7 +9,9 @@ the daemon's status line and its alarm table; ``ack ALARM`` acknowledges one ala
 alarm showing a level.  ``capture-now [--channel CH]`` has the daemon keep a capture
 (trigger ``manual``) of the channel, or of every channel, around the newest sample it
 has: ``capture.pre_s`` from its ring, ``capture.post_s`` still to come; it prints per
-channel what will be kept (or why not).  No daemon answering: a one-line error, exit 1.
+channel what will be kept (or why not).  No daemon answering: a one-line error, exit 1; one
+that took the request but whose answer did not come in time says so (the request may have been
+applied), exit 1.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from datetime import datetime
 from pathlib import Path
 
 from cmsensord.config.settings import OutputConfig
-from cmsensord.service.control import SOCKET_NAME, STATE_DIR, request, socket_path
+from cmsensord.service.control import SOCKET_NAME, STATE_DIR, NoAnswer, request, socket_path
 
 __all__ = ["add_operator_parsers", "run_ack", "run_status", "run_capture_now", "format_table"]
 
@@ -66,10 +68,17 @@ def _exists(path: Path) -> bool:
         return True
 
 
+#: the command a user typed, by the request it sends
+_COMMAND = {"ack": "ack", "status": "status", "capture": "capture-now"}
+
+
 def _ask(args: argparse.Namespace, body: dict) -> dict | None:
     path = _path(args)
     try:
         return request(path, body)
+    except NoAnswer as exc:
+        print(f"cmsensord: {_COMMAND[body['cmd']]}: {exc}", file=sys.stderr)
+        return None
     except (OSError, ValueError) as exc:
         print(f"cmsensord: no daemon answers on {path}: {getattr(exc, 'strerror', None) or exc} "
               "(is it running? give --config FILE or --socket PATH; a daemon started with --out DIR "
@@ -100,6 +109,9 @@ def run_ack(args: argparse.Namespace) -> int:
 def run_status(args: argparse.Namespace) -> int:
     answer = _ask(args, {"cmd": "status"})
     if answer is None:
+        return EXIT_NO_DAEMON
+    if not answer.get("ok") and not args.json:
+        print(f"cmsensord: status: {answer.get('error')}", file=sys.stderr)
         return EXIT_NO_DAEMON
     if args.json:
         print(json.dumps(answer, indent=1))
