@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import difflib
 import os
 import sys
 from collections.abc import Sequence
@@ -68,12 +69,39 @@ def _scenarios_help() -> str:
     return "scenarios (--scenario):\n" + "\n".join(lines)
 
 
+#: options users reach for that are another's name here
+_SYNONYMS = {"--seconds": "--duration", "--time": "--duration"}
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and the pointer to --help), exit 2."""
+    """argparse, but a usage error is one line (and the pointer to --help), exit 2; an option
+    it does not know whose value it took for the subcommand is named as the error."""
+
+    _argv: list[str] = []
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str):
         prefix = "<3>" if isinstance(sys.stderr, JournalStream) else ""
+        unknown = self._unknown_option() if "invalid choice" in message else None
+        if unknown:
+            message = f"unrecognized argument {unknown}"
+            like = _SYNONYMS.get(unknown) or next(iter(difflib.get_close_matches(
+                unknown, [o for o in self._option_string_actions if o.startswith("--")], 1)), None)
+            message += f" (did you mean {like}?)" if like else ""
         self.exit(EXIT_USAGE, f"{prefix}{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def _unknown_option(self) -> str | None:
+        """The first ``--option`` of the command line this parser does not know (None: none)."""
+        for arg in self._argv:
+            if arg == "--":
+                return None
+            name = arg.split("=", 1)[0]
+            if name.startswith("--") and name not in self._option_string_actions:
+                return name
+        return None
 
 
 # --------------------------------------------------------------------------- argparse

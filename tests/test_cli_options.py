@@ -65,3 +65,16 @@ def test_a_baud_rate_out_of_range_is_a_usage_line(tmp_path):
     assert p.stderr.splitlines() == ["cmsensord record: error: argument --baud: expected an integer 1..12000000, "
                                      "got -5 (see cmsensord record --help)"]
     assert not (tmp_path / "r.bin").exists()
+
+
+def test_an_unknown_option_whose_value_reads_as_the_subcommand_is_named():
+    """`cmsensord --simulate --seconds 5`: argparse took 5 for the subcommand ("invalid choice:
+    '5'"); the one line names the option and the one meant, exit 2."""
+    for args, meant in ((("--simulate", "--seconds", "5"), "--duration"),
+                        (("--simulate", "--duraton", "5"), "--duration")):
+        p = cmsensord(*args)
+        assert p.returncode == 2, p.stderr
+        assert p.stderr == (f"cmsensord: error: unrecognized argument {args[1].split('=')[0]} (did you mean "
+                            f"{meant}?) (see cmsensord --help)\n"), p.stderr
+    p = cmsensord("frobnicate")                         # a subcommand mistyped is still said as one
+    assert p.returncode == 2 and "invalid choice: 'frobnicate'" in p.stderr, p.stderr
