@@ -27,6 +27,7 @@ from cmsensord.base_changes import replaced_baselines, unlisted_channels
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.config.alarm_indicators import indicator_names
 from cmsensord.config.channel_refs import channel_refs_error
+from cmsensord.config.settings import MAX_DECISION_PERIOD_S
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
@@ -83,12 +84,15 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
         period = obs.period(mon.decision_period_s)
         f_r, source = _f_r(obs, c, cfg, rpm)
         if f_r >= period:
+            longer = math.floor(f_r / obs.rate_hz) + 1
+            advice = (f"for a machine this fast give a longer decision: monitor: {{decision_period_s: {longer:g}}} "
+                      "in --config BASE.yaml") if longer <= MAX_DECISION_PERIOD_S else (
+                f"no decision_period_s up to {MAX_DECISION_PERIOD_S:g} fits a machine this fast (f_r below "
+                f"{MAX_DECISION_PERIOD_S * obs.rate_hz:g} Hz, {MAX_DECISION_PERIOD_S * obs.rate_hz * 60:g} rpm)")
             raise ConfigError(
                 "calibrate", f"{name}.f_r",
                 f"{f_r:.4g} Hz must be below the {period} observations per decision "
-                f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g}); for a machine "
-                f"this fast give a longer decision: monitor: {{decision_period_s: "
-                f"{math.floor(f_r / obs.rate_hz) + 1:g}}} in --config BASE.yaml")
+                f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g}); {advice}")
         _long_enough(obs, c, period)
         fy = faulty.y[:, faulty.names.index(name)] if faulty is not None and name in faulty.names else None
         alert = None if mon.severity == "paper" else mon.level_alert

@@ -110,6 +110,11 @@ def _zone_needs_velocity(obj: Any) -> tuple[str, str, Any] | None:
 
 
 def _vote_fits(obj: Any) -> tuple[str, str, Any] | None:
+    """AlarmRuleConfig: each channel listed once, and a vote of at most the channels listed."""
+    for i, ch in enumerate(obj.channels):
+        if ch in obj.channels[:i]:
+            return (f"channels[{i}]", f"duplicate channel (also channels[{obj.channels.index(ch)}]): a rule "
+                    "watches each channel once", ch)
     if obj.vote > 1 and obj.channels and obj.vote > len(obj.channels):
         return "vote", f"must be at most the {len(obj.channels)} channel(s) listed", obj.vote
     return None
@@ -212,6 +217,12 @@ def _unique_rules(obj: Any) -> tuple[str, str, Any] | None:
     for i, n in enumerate(names):
         if n in names[:i]:
             return f"rules[{i}].name", "duplicate alarm name", n
+    seen: dict[tuple[str, str], int] = {}
+    for i, b in enumerate(obj.baselines):
+        j = seen.setdefault((b.channel, b.indicator), i)
+        if j != i:
+            return (f"baselines[{i}]", f"duplicate baseline of {b.indicator} on {b.channel} (also baselines[{j}])",
+                    b.value)
     return None
 
 

@@ -14,12 +14,19 @@ from typing import Any, ClassVar
 
 from .validation import Rule, setting, validate
 
-__all__ = ["CaptureConfig", "TRIGGER_KINDS", "OPERATING_STATES", "capture_sees_operating", "capture_akf_in_bank"]
+__all__ = ["CaptureConfig", "MIN_EVERY_S", "MAX_EVERY_S", "TRIGGER_KINDS", "OPERATING_STATES",
+           "capture_sees_operating", "capture_akf_in_bank"]
 
 #: event kinds that can trigger a capture (the alarm manager's kinds included), and ``manual``
 #: (only ``cmsensord capture-now``: it keeps the ring without any event triggering)
 TRIGGER_KINDS = ("alarm_alert", "alarm_danger", "alarm_clear", "severity_change", "anomaly_onset",
                  "failure", "time_base", "tacho_lost", "operating_state", "manual")
+#: the shortest periodic capture interval [s]: one sample at the board's 25000 Hz (docs/PROTOCOL.md);
+#: a stream slower than one tick a sample ticks once a sample (RMS mode: once a block)
+MIN_EVERY_S = 1 / 25000
+#: the longest periodic capture interval [s]: a year
+MAX_EVERY_S = 365 * 86400
+
 #: the operating states an ``operating_state`` trigger may be restricted to
 OPERATING_STATES = ("stopped", "starting", "running", "coasting")
 
@@ -38,6 +45,13 @@ def _known_triggers(obj: Any) -> tuple[str, str, Any] | None:
     return None
 
 
+def _every_s_a_step(obj: Any) -> tuple[str, str, Any] | None:
+    if 0 < obj.every_s < MIN_EVERY_S:
+        return ("every_s", f"must be 0 (none) or at least {MIN_EVERY_S:g} (one sample at the board's 25000 Hz)",
+                obj.every_s)
+    return None
+
+
 @dataclass(frozen=True)
 class CaptureConfig:
     """Which events trigger a capture, how long it is and how much may be kept."""
@@ -47,14 +61,14 @@ class CaptureConfig:
     operating_states: tuple[str, ...] = setting(
         (), "operating_state triggers only on entering these states (stopped, starting, running, "
         "coasting); none: every change")
-    every_s: float = setting(0.0, "also a periodic capture every this many seconds of board time; 0: none",
-                             ge=0)
+    every_s: float = setting(0.0, "also a periodic capture every this many seconds of board time, at "
+                             "least one sample (4e-05 s) and at most a year; 0: none", ge=0, le=MAX_EVERY_S)
     pre_s: float = setting(10.0, "seconds kept before the trigger", gt=0, le=120)
     post_s: float = setting(10.0, "seconds kept after the trigger", gt=0, le=120)
     min_interval_s: float = setting(60.0, "at most one capture per channel in this many seconds", ge=0)
     max_mb_per_hour: float = setting(200.0, "captures written per hour of board time at most [MB]", gt=0)
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_known_triggers,)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_known_triggers, _every_s_a_step)
 
     def __post_init__(self) -> None:
         validate(self)

@@ -11,6 +11,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from cmsensord.dsp.tacho.tracker import MAX_TIMEOUT_S
+
 from .alarm_indicators import rules_see_indicators
 from .alarms import AlarmsConfig, rules_levels_rise
 from .capture import CaptureConfig, capture_akf_in_bank, capture_sees_operating
@@ -21,6 +23,8 @@ from .validation import Rule, at_most, fmt_num, greater, setting, validate
 
 __all__ = [
     "MAX_CHANNELS",
+    "MAX_COMPONENTS",
+    "MAX_DECISION_PERIOD_S",
     "NOMINAL_RATE_HZ",
     "MonitorConfig",
     "ChannelConfig",
@@ -49,15 +53,29 @@ _A_PATH: dict[str, Any] = {"pattern": r"[^\x00]*", "pattern_reason": "must not c
 #: observations per second of board time the decision rule is written for (100 Hz RMS frames)
 NOMINAL_RATE_HZ = 100.0
 
+#: the longest decision period [s]: an hour (the decision's buffers grow with it: 1e5 s held
+#: 120 MB of one channel, 1e7 s 7.8 GB)
+MAX_DECISION_PERIOD_S = 3600
+
+
+def _longer_decision(f_r: float, rate_hz: float) -> str:
+    """The advice for an ``f_r`` [Hz] at or above the observations of a decision at ``rate_hz``:
+    the ``decision_period_s`` that fits it, or, when none up to :data:`MAX_DECISION_PERIOD_S`
+    does, the highest f_r any decision takes."""
+    longer = int(f_r // rate_hz) + 1
+    if longer > MAX_DECISION_PERIOD_S:
+        return (f"no decision_period_s up to {MAX_DECISION_PERIOD_S:g} fits a machine this fast: f_r "
+                f"must be below {MAX_DECISION_PERIOD_S * rate_hz:g} Hz")
+    return f"for a machine this fast give decision_period_s: {longer}"
+
 
 def _f_r_below_decision_size(obj: Any) -> tuple[str, str, Any] | None:
     per_decision = obj.decision_period_s * NOMINAL_RATE_HZ
     if not obj.f_r < per_decision:
-        longer = int(obj.f_r // NOMINAL_RATE_HZ) + 1
         return "f_r", (f"must be below the {per_decision:g} observations per decision "
                        f"(decision_period_s {obj.decision_period_s:g} x {NOMINAL_RATE_HZ:g} blocks/s): "
-                       "at or above it no decision can flag an anomaly; for a machine this fast give "
-                       f"decision_period_s: {longer}"), obj.f_r
+                       "at or above it no decision can flag an anomaly; "
+                       + _longer_decision(obj.f_r, NOMINAL_RATE_HZ)), obj.f_r
     return None
 
 
@@ -78,7 +96,8 @@ class MonitorConfig:
     c: float = setting(0.4, "hysteresis: an anomaly clears when cnt < c*f_r (Fig. 3)", gt=0, lt=1)
     f_r: float = setting(28.66, "rotation frequency [Hz] compared with cnt each decision", gt=0)
     window: int = setting(10, "N, sliding window of eqs. 11 and 14", ge=2, le=1000)
-    decision_period_s: float = setting(1.0, "seconds between anomaly decisions", gt=0)
+    decision_period_s: float = setting(1.0, "seconds between anomaly decisions (at most an hour)", gt=0,
+                                       le=MAX_DECISION_PERIOD_S)
     p0: float = setting(1.0, "initial error variance P(0)", gt=0)
     q0: float = setting(1e-3, "initial process noise estimate Q^(0)", ge=0)
     baseline: float | None = setting(
@@ -113,6 +132,24 @@ class MonitorConfig:
         validate(self)
 
 
+#: the range of a channel's ``scale`` [unit per ADC count], by magnitude: a sensor's lies far inside
+#: it (0.0024 m/s^2 for 1 g in 4095 counts), and (count - offset) x scale of any 16-bit count, and
+#: its square, stay well inside float32, which the block RMS and the records hold
+SCALE_RANGE = (1e-9, 1e6)
+#: the largest ``offset`` [ADC counts] by magnitude (a 16-bit ADC counts 0..65535)
+MAX_OFFSET = 1e6
+
+
+def _calibration_in_range(obj: Any) -> tuple[str, str, Any] | None:
+    """ChannelConfig: scale and offset within :data:`SCALE_RANGE` and :data:`MAX_OFFSET`."""
+    lo, hi = SCALE_RANGE
+    if obj.scale is not None and not lo <= abs(obj.scale) <= hi:
+        return "scale", f"must be between {lo:g} and {hi:g} (or -{hi:g} and -{lo:g}) per ADC count", obj.scale
+    if obj.offset is not None and not abs(obj.offset) <= MAX_OFFSET:
+        return "offset", f"must be between -{MAX_OFFSET:g} and {MAX_OFFSET:g} ADC counts", obj.offset
+    return None
+
+
 #: the unit of each channel kind (ChannelConfig.unit, the simulated board's channels)
 KIND_UNITS = {"accelerometer": "m/s^2", "microphone": "Pa"}
 
@@ -135,9 +172,10 @@ class ChannelConfig:
     )
     monitor: MonitorConfig = setting(dataclasses.MISSING, "monitor settings of this channel")
     scale: float | None = setting(
-        None, "m/s^2 per ADC count, overriding STATUS (RAW mode)", nonzero=True
+        None, "m/s^2 per ADC count, overriding STATUS (RAW mode); 1e-9 <= |scale| <= 1e6", nonzero=True
     )
-    offset: float | None = setting(None, "ADC counts at 0 m/s^2, overriding STATUS (RAW mode)")
+    offset: float | None = setting(None, "ADC counts at 0 m/s^2, overriding STATUS (RAW mode); "
+                                   "|offset| <= 1e6")
     kind: str = setting("accelerometer", "what the channel measures: accelerometer (m/s^2), or "
                          "microphone (Pa): its sound is turned into a vibration estimate (Orimoto, Ikuta & Wang) "
                          "that the AKF bank watches", choices=("accelerometer", "microphone"))
@@ -146,6 +184,8 @@ class ChannelConfig:
     unit: str | None = setting(None, "what the channel's values are in: m/s^2 (an accelerometer) "
                                "or Pa (a microphone); null: its kind's; one that does not fit the "
                                "kind is refused", choices=("m/s^2", "Pa"))
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_calibration_in_range,)
 
     @property
     def physical_unit(self) -> str:
@@ -183,6 +223,20 @@ class LinkConfig:
         validate(self)
 
 
+#: the longest output.prefix: the rest of the longest log file name
+#: (``-20261130T132741Z-123456.salvaged.mcap.part.unreadable``, 54 characters) and of the alarm
+#: state's temporary file fits beside it in the 255 bytes of a file name
+MAX_PREFIX_LEN = 128
+
+
+def _prefix_fits(obj: Any) -> tuple[str, str, Any] | None:
+    """OutputConfig: a prefix that leaves room in a file name for the rest of the log's name."""
+    if len(obj.prefix) > MAX_PREFIX_LEN:
+        return ("prefix", f"must be at most {MAX_PREFIX_LEN} characters ({len(obj.prefix)} given): the "
+                "log file names add up to 54 more, and a file name holds at most 255 bytes", obj.prefix)
+    return None
+
+
 def _cap_holds_a_file(obj: Any) -> tuple[str, str, Any] | None:
     """OutputConfig: a retention cap below one file would delete every finished file."""
     if obj.retain_mb and obj.retain_mb < obj.rotate_mb:
@@ -218,10 +272,23 @@ class OutputConfig:
     akf_trace_filter: int = setting(10, "which AKF of the bank (1..n) the trace shows", ge=1)
     status_line: bool = setting(True, "print a one-line status to stderr")
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (_cap_holds_a_file,)
+    _RULES: ClassVar[tuple[Rule, ...]] = (_prefix_fits, _cap_holds_a_file)
 
     def __post_init__(self) -> None:
         validate(self)
+
+
+#: the least order, fixed frequency [Hz] and bandwidth [% of the frequency] of a component, and the
+#: least orders.min_rpm: far below any machine's, far above the tiny numbers whose frequencies,
+#: bandwidths and decimation factors overflow the tracker's design
+MIN_ORDER = 0.01
+MIN_FREQ_HZ = 0.01
+MIN_BANDWIDTH_PCT = 0.01
+MIN_RPM = 1.0
+#: the most components the tracker follows: its cost grows with about the cube of their count (one RAW
+#: channel of 10 s at 25 kHz took 0.5 s with 32 components, 2.7 s with 64, 10 s with 100 and 62 s
+#: with 200 on a 2-core machine), so 32 keep a live daemon well within real time
+MAX_COMPONENTS = 32
 
 
 def _one_frequency(obj: Any) -> tuple[str, str, Any] | None:
@@ -241,12 +308,12 @@ class ComponentConfig:
     name: str = setting(dataclasses.MISSING, "component name, e.g. 1x, whirl, whip",
                          pattern=r"[A-Za-z0-9_.]+",
                          pattern_reason="must contain only letters, digits, _ and .")
-    order: float | None = setting(None, "multiple of the shaft speed (e.g. 1, 2, 0.47)", gt=0)
-    freq_hz: float | None = setting(None, "fixed frequency [Hz] (e.g. a 47 Hz resonance)", gt=0)
+    order: float | None = setting(None, "multiple of the shaft speed (e.g. 1, 2, 0.47)", ge=MIN_ORDER)
+    freq_hz: float | None = setting(None, "fixed frequency [Hz] (e.g. a 47 Hz resonance)", ge=MIN_FREQ_HZ)
     r: float | None = setting(None, "the paper's weighting factor r (eq. 25)", gt=0)
     bandwidth_hz: float | None = setting(None, "-3 dB bandwidth [Hz] instead of r", gt=0)
     bandwidth_pct: float | None = setting(None, "-3 dB bandwidth in % of the component's "
-                                           "frequency instead of r", gt=0, le=100)
+                                           "frequency instead of r", ge=MIN_BANDWIDTH_PCT, le=100)
     alarm_rms: float | None = setting(None, "order alarm (the alarm manager's rule order_<name>): "
                                        "alert when the RMS rises above this [m/s^2]", gt=0)
 
@@ -254,6 +321,15 @@ class ComponentConfig:
 
     def __post_init__(self) -> None:
         validate(self)
+
+
+def _few_components(obj: Any) -> tuple[str, str, Any] | None:
+    """OrdersConfig: at most :data:`MAX_COMPONENTS` components."""
+    if len(obj.components) > MAX_COMPONENTS:
+        return ("components", f"at most {MAX_COMPONENTS} components: the tracker's cost grows with about "
+                "the cube of their count, and more fall behind real time",
+                len(obj.components))
+    return None
 
 
 def _default_components() -> tuple[ComponentConfig, ...]:
@@ -267,10 +343,11 @@ class OrdersConfig:
     enabled: bool = setting(True, "track orders when the board sends RAW blocks and a tacho")
     q1: float = setting(0.1, "process noise q1 of the structural equation (Q1 = q1 I, eq. 25)", gt=0)
     bandwidth_pct: float = setting(5.0, "default -3 dB bandwidth in % of each component's "
-                                    "frequency (for components without r/bandwidth)", gt=0, le=100)
+                                    "frequency (for components without r/bandwidth)",
+                                    ge=MIN_BANDWIDTH_PCT, le=100)
     max_rpm: float = setting(3600.0, "highest shaft speed expected: sets the tracker's "
                               "decimation and gain table", gt=0)
-    min_rpm: float = setting(300.0, "no order output below this shaft speed", gt=0)
+    min_rpm: float = setting(300.0, "no order output below this shaft speed", ge=MIN_RPM)
     smoother_lag_s: float = setting(0.0, "fixed-lag RTS smoother lag (0: the plain recursive "
                                      "filter)", ge=0, le=0.2)
     output_rate_hz: float = setting(10.0, "order RMS/amplitude messages per second", ge=1, le=100)
@@ -284,9 +361,9 @@ class OrdersConfig:
                                        ge=0)
     components: tuple[ComponentConfig, ...] = field(
         default_factory=_default_components,
-        metadata={"help": "components to track (default: orders 1, 2, 3, 4)"})
+        metadata={"help": f"components to track (default: orders 1, 2, 3, 4), at most {MAX_COMPONENTS}"})
 
-    _RULES: ClassVar[tuple[Rule, ...]] = (greater("max_rpm", "min_rpm"),)
+    _RULES: ClassVar[tuple[Rule, ...]] = (greater("max_rpm", "min_rpm"), _few_components)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -299,7 +376,8 @@ class TachoConfig:
     input: int = setting(0, "tacho input index (TACHO chan) to use", ge=0, le=255)
     ppr: int | None = setting(None, "pulses per revolution (default: the board's STATUS)",
                                ge=1, le=255)
-    timeout_s: float = setting(0.5, "no edge for this long -> tacho_lost event, speed invalid", gt=0)
+    timeout_s: float = setting(0.5, "no edge for this long -> tacho_lost event, speed invalid (at most "
+                               "the tracker's longest run timeout)", gt=0, le=MAX_TIMEOUT_S)
     smoothing_revs: float = setting(2.0, "revolutions each side of the least-squares fit that "
                                      "smooths edge jitter; the speed is final this many "
                                      "revolutions (+1 pulse) later (f_r of the decisions; the "

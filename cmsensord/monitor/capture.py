@@ -6,7 +6,8 @@ seconds of every channel, indexed by board sample (RAW: the sample counter t0;
 RMS: t0 / block length), and beyond it, up to ``MAX_KEPT_BYTES``, the samples a trigger
 not taken yet may need. An event record whose kind is in ``capture.triggers``
 (:meth:`watch`, called by the event log for every event it writes, in stamp order) or a
-periodic tick every ``capture.every_s`` of board time (queued as the samples pass it and
+periodic tick every ``capture.every_s`` of board time (every sample when that is shorter than
+one, said by a ``config`` event at the stream's start; queued as the samples pass it and
 taken by :meth:`settle`, which the event log calls before it writes the records from a
 stamp on) starts a capture of its channel (of every channel for an event without one), so
 ticks and events are taken in stamp order whatever the reads: the samples from ``pre_s``
@@ -144,6 +145,7 @@ class Captures:
         self.last_ns: dict[str, int] = {}
         self.budget: deque[tuple[int, int]] = deque()             # (stamp_ns, bytes) of the last hour
         self.next_tick: int | None = None
+        self.step = 1                       # indices between periodic ticks (at least one)
         self.ticks_due: deque[tuple[int, int]] = deque()          # (index, stamp_ns) of ticks not taken yet
         self.first_idx: int | None = None                         # the stream's first index
         self.settled_ns: int | None = None                        # triggers up to it are taken
@@ -294,6 +296,7 @@ class Captures:
         self.settled_ns = self.settled_idx = None
         self.anchors.clear()
         self.next_tick = None
+        self.step = max(1, round(self.cfg.every_s * rate))
         self.ticks_due.clear()
         self.first_idx = None
         for p in self.pending:
@@ -309,12 +312,15 @@ class Captures:
         self.anchors.append((idx, stamp))
         self.ring.add(idx, x, self._keep_from())
         if self.cfg.every_s > 0:
-            step = round(self.cfg.every_s * self.rate)
             if self.next_tick is None:
-                self.next_tick = idx + step
+                self.next_tick = idx + self.step
+                if self.cfg.every_s * self.rate < 0.5:
+                    self._event("config", None, f"capture.every_s {self.cfg.every_s:g} is shorter than "
+                                f"one sample of the {self.source.upper()} stream ({1 / self.rate:g} s): a "
+                                "periodic tick every sample", stamp)
             while self.next_tick < idx + len(x):
                 self.ticks_due.append((self.next_tick, self.stamp_of(self.next_tick * self.ticks)))
-                self.next_tick += step
+                self.next_tick += self.step
 
     def _keep_from(self) -> int | None:
         """The first sample a capture may still need: its pre_s before the earliest trigger

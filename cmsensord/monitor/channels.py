@@ -181,17 +181,21 @@ class ChannelSetup:
     def _unlike_commissioned(self, f: Frame, st: Status) -> None:
         """A WARNING, once per rate, when the board streams at another sample rate or block length
         than the capture the baselines were learned from (``commissioned``: another machine's
-        site file, or a board set up anew)."""
+        site file, or a board set up anew); of the two, those the section gives are compared and
+        named."""
         learned = self.cfg.commissioned
         rate = (st.fs, st.block_len)
-        if learned.fs_hz is None or rate == self._unlike_said or (
-                abs(st.fs - learned.fs_hz) <= 1e-3 * learned.fs_hz and learned.block_len in (None, st.block_len)):
+        given = [(f"fs {learned.fs_hz:g} Hz", f"fs {st.fs} Hz",
+                  abs(st.fs - learned.fs_hz) > 1e-3 * learned.fs_hz)] if learned.fs_hz is not None else []
+        if learned.block_len is not None:
+            given.append((f"block {learned.block_len}", f"block {st.block_len}", learned.block_len != st.block_len))
+        if rate == self._unlike_said or not any(unlike for _, _, unlike in given):
             return
         self._unlike_said = rate
-        self.log.emit("config", None, f"the baselines were learned from {learned.capture or 'a capture'} at fs "
-                      f"{learned.fs_hz:g} Hz, block {learned.block_len}; this board sends fs {st.fs} Hz, block "
-                      f"{st.block_len}: they and the alarm levels on them may not fit it (cmsensord calibrate "
-                      "on this machine's healthy period)", self.clock.stamp_ns(f.t0_unwrapped),
+        then, now = ", ".join(g[0] for g in given), ", ".join(g[1] for g in given)
+        self.log.emit("config", None, f"the baselines were learned from {learned.capture or 'a capture'} at "
+                      f"{then}; this board sends {now}: they and the alarm levels on them may not fit it "
+                      "(cmsensord calibrate on this machine's healthy period)", self.clock.stamp_ns(f.t0_unwrapped),
                       log_level=logging.WARNING)
 
     def _odd(self, n: int) -> bool:

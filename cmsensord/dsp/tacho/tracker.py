@@ -32,6 +32,8 @@ _FEW_FRAMES = 64  # up to this many frames an update prepares its edges on Pytho
 #: knots (and causal segments) kept at most: 60 s of 2184 pulses a second (255 ppr at 514 rpm),
 #: 1.3 s of the densest tacho a board sends (1023 edges a block); about 10 MB of buffers
 HISTORY_MAX = 1 << 17
+#: the longest run timeout [s] (and the longest ``timeout_s``: the configuration's bound)
+MAX_TIMEOUT_S = 10
 
 
 class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
@@ -68,7 +70,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
 
     def __init__(self, fs: float, ppr: int, *, block_len: int = 250, half_window: int | None = None,
                  tol: float = 0.25, timeout_s: float = 0.5, timeout_periods: float = 3.0,
-                 max_timeout_s: float = 10.0, history_s: float = 60.0,
+                 max_timeout_s: float = MAX_TIMEOUT_S, history_s: float = 60.0,
                  causal_window: int | None = None, history_max: int | None = HISTORY_MAX):
         h, m = _checked(fs, ppr, block_len, half_window, tol, timeout_s, timeout_periods, max_timeout_s,
                         history_s, causal_window)
