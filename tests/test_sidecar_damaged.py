@@ -83,7 +83,7 @@ def test_calibrate_leaves_out_a_speed_that_is_not_a_number(imported, tmp_path):
     p = run_module("cmsensord", "calibrate", str(cap), "--to", "50%", "--out", str(tmp_path / "site.yaml"))
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     assert _warnings(p.stdout + p.stderr) == [f"warning: {cap}.json: the capture's sidecar's rpm is \"1800 rpm\" "
-                                              "(not a positive number): its speed is not used"], p.stderr
+                                              "(not a speed in rpm): its speed is not used"], p.stderr
 
 
 def test_the_status_frames_rate_is_used_over_the_sidecars(imported, tmp_path):
@@ -112,3 +112,25 @@ def test_snapshots_that_rest_on_another_rate_are_left_out(imported, tmp_path):
         "is used",
         f"warning: {cap}.json: the capture's sidecar's snapshots[1].start_s is 0.5 (snapshot 0 of 2000 samples from "
         f"0 s ends at 1 s at 2000 Hz): {SNAPSHOTS}"], p.stderr
+
+
+def test_what_the_importer_writes_is_never_warned_of(tmp_path):
+    """A file cut shorter than a block among the snapshots (a snapshot of length 0) and a speed
+    column stopped most of the time (no median speed) are what the importer writes: their
+    replay says nothing of the sidecar, and takes the records from the snapshots."""
+    d = tmp_path / "rig"
+    d.mkdir()
+    rng = np.random.default_rng(1)
+    for k, n in enumerate((200, 200, 7, 200)):             # 0.1-s snapshots, as FEMTO's
+        np.savetxt(d / f"acc_{k}.csv", rng.standard_normal(n), fmt="%.5f")
+    run = np.where(np.arange(4 * N) < 2.4 * N, 0.0, 1200.0)
+    np.savetxt(tmp_path / "runup.csv", np.c_[rng.standard_normal(4 * N), run], fmt="%.5f", delimiter=",",
+               header="acc,speed", comments="")
+    for args in ((str(d), "--snapshot-interval", "10"),
+                 (str(tmp_path / "runup.csv"), "--channels", "acc", "--speed-column", "speed")):
+        cap = tmp_path / "c.bin"
+        p = run_module("cmsensord", "import", *args, "--fs", str(FS), "--unit", "m/s2", "--out", str(cap))
+        assert p.returncode == 0, p.stderr
+        p = run_module("cmsensord", "replay", str(cap), "--out", str(tmp_path / "out"))
+        assert p.returncode == 0 and not _warnings(p.stderr), p.stderr
+        assert args[1] != "--snapshot-interval" or "(200 samples, one record a snapshot)" in p.stderr, p.stderr

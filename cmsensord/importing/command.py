@@ -228,7 +228,8 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str],
         if meta["tacho_from"] == "rpm":
             what = f"constant {meta['rpm']:g} rpm"
         elif meta["tacho_from"] == "speed":
-            what = f"speed column {meta['tacho']} (median {meta['rpm']:g} rpm)"
+            what = f"speed column {meta['tacho']} " + (f"(median {meta['rpm']:g} rpm)" if meta["rpm"] else
+                                                          "(stopped half the time or more: no median speed)")
         else:
             what = f"column {meta['tacho']}"
         lines.append(f"  tacho: {what}, {meta['tacho_edges']} edge(s), {meta['ppr']} a revolution")

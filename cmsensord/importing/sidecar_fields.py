@@ -88,7 +88,8 @@ _FIELDS: dict[str, tuple[Callable[[object], str | None], str]] = {
                       "its length is not used"),
     "channel_names": (_text_list, "its channel names are not used"),
     "unit": (_optional(_units), "its units are not used"),
-    "rpm": (_optional(_positive), "its speed is not used"),
+    "rpm": (_optional(lambda v: None if _number(v) and v >= 0 else "not a speed in rpm"),  # type: ignore[operator]
+            "its speed is not used"),                                       # 0: none known
     "rpm_source": (_optional(_text), "where its speed came from is not said"),
     "notes": (_optional(_text_list), "its notes are not used"),
     "source_start": (_optional(_text), "its date is not used"),
@@ -102,7 +103,7 @@ def _snapshot(s: object) -> tuple[str, str] | None:
         return "", "not an object"
     for key, why in (("start_s", None if _number(s.get("start_s")) and s["start_s"] >= 0 else "not a board second"),
                      ("length", None if isinstance(s.get("length"), int) and not isinstance(s["length"], bool)
-                      and s["length"] > 0 else "not a number of samples"),
+                      and s["length"] >= 0 else "not a number of samples"),   # 0: shorter than a block
                      ("source", _text(s.get("source"))),
                      ("pct_of_record", None if _number(s.get("pct_of_record")) else "not a number"),
                      ("source_time_s", None if s.get("source_time_s") is None or _number(s["source_time_s"])

@@ -521,7 +521,8 @@ def _tacho(rec: Recording, column: np.ndarray, name: str, opts: ImportOptions) -
     if opts.speed_column:
         rec.tacho_edges = speed_edges(column, bounds, rec.fs, rec.ppr)
         rec.tacho_source, rec.tacho_from = name, "speed"
-        rec.rpm, rec.rpm_source = float(np.median(column)), f"column {name} (median)"
+        median = float(np.median(column))       # a machine stopped most of the time: no speed
+        rec.rpm, rec.rpm_source = (median, f"column {name} (median)") if median > 0 else (None, None)
     else:
         rec.tacho_edges = every_kth(pulse_edges(column, bounds, opts.tacho_threshold), bounds, opts.ppr // rec.ppr)
         rec.tacho_source, rec.tacho_from = name, "pulses"
