@@ -109,6 +109,19 @@ def test_flat_signal_false_turns_it_off_and_a_bad_value_is_one_line(tmp_path):
     assert "monitor.flat_signal: expected true or false (got 'yes')" in p.stderr, p.stderr
 
 
+def test_a_channel_held_by_signal_floor_alone_is_said_so(tmp_path):
+    """With a baseline and ``flat_signal: false`` on the dead channel, its hold is signal_floor's:
+    the event names the level and signal_floor, not flat_signal (it named flat_signal)."""
+    cap = _pinned(_board(tmp_path, "--tacho"), tmp_path / "dead.bin", 1, 4.6, 9.3, 2048)
+    config = ("monitor:\n  baseline: 0.6\nchannels:\n  - {name: ch0, index: 0}\n"
+              "  - {name: ch1, index: 1, flat_signal: false}\n")
+    events, _, out = _replay(tmp_path, cap, config)
+    said = [e for e in events if e["kind"] in SIGNAL]
+    assert [e["kind"] for e in said] == list(SIGNAL), out
+    assert said[0]["message"].startswith("ch1: no signal: level ") and "monitor.signal_floor" in said[0]["message"]
+    assert "flat_signal" not in said[0]["message"], said[0]
+
+
 @pytest.mark.parametrize("scenario, board, seconds", [
     ("healthy", ("--tacho",), 14), ("close_orders", ("--tacho",), 5), ("whirl", ("--tacho",), 30),
 ])

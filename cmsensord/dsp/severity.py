@@ -113,6 +113,7 @@ class Decision:
     quietest: np.ndarray | None = None   # (C,) combined: the lowest level ratio of the period's quarters
     no_data: np.ndarray | None = None    # (C,) more than half the period missing: F_a and S_idx held
     flat: np.ndarray | None = None       # (C, 3) flat_signal: lowest, highest count of the flat blocks, how many
+    flat_quarter: np.ndarray | None = None   # (C,) flat_signal: a quarter of flat blocks (no signal for it)
 
 
 class AnomalyDecider:
@@ -285,6 +286,7 @@ class AnomalyDecider:
             severity_akf=s_akf, level=level, severity_level=s_level, held=self.held.copy(),
             held_max=int(self.held.max()), no_signal=signal_lost,
             quietest=self._quietest.copy() if self.combined else None, no_data=no_data, flat=flat,
+            flat_quarter=None if flat is None else self._flat_quarter.copy(),
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0
@@ -386,6 +388,8 @@ class AnomalyDecider:
 
 
 def _quarters(n: int) -> list[tuple[int, int]]:
-    """(start, end) of the quarters of ``n`` slots (as :func:`numpy.array_split`; none empty)."""
-    edges = [n * k // 4 for k in range(5)]
+    """(start, end) of the quarters of ``n`` slots, the slots of :func:`numpy.array_split`'s four
+    parts (the first ``n % 4`` one longer; none empty), as the quiet quarters are taken."""
+    size, extra = divmod(n, 4)
+    edges = [k * size + min(k, extra) for k in range(5)]
     return [(a, b) for a, b in zip(edges, edges[1:]) if b > a]

@@ -254,7 +254,7 @@ class SeverityChain:
         has again."""
         name, ratio = self.channels[c].name, float(d.level[c])
         lost = self.no_signal[c] = self.views[c].no_signal = bool(d.no_signal is not None and d.no_signal[c])
-        if lost and d.flat is not None and d.flat[c, 2] > 0:
+        if lost and d.flat_quarter is not None and d.flat_quarter[c]:
             return self._flat_event(c, d, stamp, sev)
         if lost and d.quietest is not None:
             ratio = float(d.quietest[c])        # the quarter the signal went in
