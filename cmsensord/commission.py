@@ -555,9 +555,11 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
                  "period (replayed with the site file)"]
     lines += [f"note: {ln.strip()}" for ln in delay_lines(obs.meta, site)]
     if unjudged:
+        raw = any(set(medians) - {"accel_rms"} for medians in obs.indicators.values())
+        why = ("listed unavailable: a band past Nyquist, or one that holds no bin of the records' spectrum" if raw
+               else "an RMS-mode board's carry accel_rms alone")
         lines.append(f"alarms: rule(s) {', '.join(r.name for r in unjudged)} not judged: the capture's indicator "
-                     f"records carry no {', '.join(dict.fromkeys(r.indicator for r in unjudged))} (an RMS-mode "
-                     "board's carry accel_rms alone)")
+                     f"records carry no {', '.join(dict.fromkeys(r.indicator for r in unjudged))} ({why})")
     return lines
 
 

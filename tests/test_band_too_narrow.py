@@ -51,3 +51,20 @@ def test_bands_narrower_than_a_bin_are_unavailable_and_said_once(tmp_path):
         assert not {"velocity_rms_mm_s", "zone", "envelope_rms"} & set(r), r
         assert r["envelope_band_hz"] == [2000.2, 2000.7], r
         assert [b["name"] for b in r["bands"]] == ["wide"] and r["bands"][0]["rms"] > 0, r
+
+
+def test_calibrate_says_why_a_rule_on_such_a_band_is_not_judged(tmp_path):
+    """A rule on the velocity of a band that holds no bin: calibrate's line gives that as the
+    reason (it gave an RMS-mode board's, of a RAW capture)."""
+    cap = tmp_path / "raw.bin"
+    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw", "--duration", "8",
+                    "--out", str(cap)], check=True, capture_output=True)
+    base = tmp_path / "base.yaml"
+    base.write_text("indicators:\n  velocity_band_hz: [10.2, 10.8]\nalarms:\n  rules:\n"
+                    "    - {name: vel, indicator: velocity_rms_mm_s, alert: 4.5}\n")
+    p = subprocess.run([sys.executable, "-m", "cmsensord", "calibrate", str(cap), "--config", str(base),
+                        "--out", str(tmp_path / "site.yaml")], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert ("alarms: rule(s) vel not judged: the capture's indicator records carry no velocity_rms_mm_s (listed "
+            "unavailable: a band past Nyquist, or one that holds no bin of the records' spectrum)"
+            ) in p.stdout.splitlines(), p.stdout
