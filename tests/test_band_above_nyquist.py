@@ -15,10 +15,12 @@ WARNING = ("WARNING band_above_nyquist: indicators.velocity_band_hz 13000-20000 
            "listed unavailable in the indicator records; set a band below it")
 
 
-def _replay(tmp_path, yaml: str):
+def _replay(tmp_path, yaml: str, *board: str):
+    """(the output lines, the /cm/ch0/indicators records) of `cmsensord replay` with ``yaml`` of a
+    RAW capture of the simulated board (4 s of the healthy motor, or as the ``board`` options say)."""
     cap = tmp_path / "raw.bin"
     subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "healthy", "--mode", "raw", "--duration", "4",
-                    "--out", str(cap)], check=True, capture_output=True)
+                    *board, "--out", str(cap)], check=True, capture_output=True)
     cfg = tmp_path / "site.yaml"
     cfg.write_text(yaml)
     p = subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--config", str(cfg),

@@ -9,7 +9,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from cmsensord.sinks.mcap_sink import read_messages
+from test_band_above_nyquist import _replay
 
 NARROW = ("indicators:\n  velocity_band_hz: [10.2, 10.8]\n  envelope_band_hz: [2000.2, 2000.7]\n  bands:\n"
           "    - {name: narrow, lo_hz: 100.2, hi_hz: 100.8}\n    - {name: one_x, lo_order: 1.0, hi_order: 1.008}\n"
@@ -18,21 +18,8 @@ TOLD = "holds no bin of the record's spectrum (1-Hz bins, records of 1 s): {} li
        "to at least 1 Hz, or lengthen indicators.interval_s"
 
 
-def _replay(tmp_path, yaml: str):
-    cap = tmp_path / "raw.bin"
-    subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "faulty", "--mode", "raw", "--tacho",
-                    "--duration", "5", "--out", str(cap)], check=True, capture_output=True)
-    cfg = tmp_path / "site.yaml"
-    cfg.write_text(yaml)
-    p = subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--config", str(cfg),
-                        "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
-    assert p.returncode == 0, p.stderr
-    recs = [m for t, _, m in read_messages(next((tmp_path / "out").glob("*.mcap"))) if t == "/cm/ch0/indicators"]
-    return p.stderr.splitlines(), recs
-
-
 def test_bands_narrower_than_a_bin_are_unavailable_and_said_once(tmp_path):
-    lines, recs = _replay(tmp_path, NARROW)
+    lines, recs = _replay(tmp_path, NARROW, "--scenario", "faulty", "--tacho", "--duration", "5")
     told = [ln for ln in lines if ln.startswith("WARNING band_too_narrow: ")]
     shaft = [r for r in recs if "speed_rpm" in r]
     assert len(shaft) >= 3, recs
