@@ -36,10 +36,12 @@ def test_bands_past_fs_over_2_are_unavailable_and_said_once(tmp_path):
                                     "    - {name: hf, lo_hz: 12600, hi_hz: 14000}\n"
                                     "    - {name: lf, lo_hz: 10, hi_hz: 1000}\n")
     assert [ln for ln in lines if ln.startswith("WARNING band_above_nyquist")] == [WARNING]
+    assert not [ln for ln in lines if "band_too_narrow" in ln], lines      # past Nyquist: said as that alone
     assert len(recs) >= 3
     for r in recs:
         assert r["unavailable"] == ["velocity_rms_mm_s", "zone", "envelope_rms", "bearings", "band.hf"], r
         assert not {"velocity_rms_mm_s", "zone", "envelope_rms", "bearings"} & set(r), r
+        assert r["velocity_band_hz"] == [13000, 20000], r          # as configured, not cut to a band backwards
         assert [b["name"] for b in r["bands"]] == ["lf"] and r["bands"][0]["rms"] > 0, r
 
 

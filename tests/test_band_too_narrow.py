@@ -29,9 +29,11 @@ def test_bands_narrower_than_a_bin_are_unavailable_and_said_once(tmp_path):
             "velocity_rms_mm_s, zone"),
         "WARNING band_too_narrow: ch0: indicators.envelope_band_hz 2000.2-2000.7 Hz " + TOLD.format(
             "envelope_rms, bearings"),
-        "WARNING band_too_narrow: ch0: indicators.bands narrow 100.2-100.8 Hz " + TOLD.format("band.narrow")], lines
+        "WARNING band_too_narrow: ch0: indicators.bands[0] (narrow) 100.2-100.8 Hz " + TOLD.format(
+            "band.narrow")], lines
     assert len(told) == 4 and told[3].startswith(
-        f"WARNING band_too_narrow: ch0: indicators.bands one_x (1-1.008 orders) {lo:g}-{hi:g} Hz holds no bin"), told
+        f"WARNING band_too_narrow: ch0: indicators.bands[1] (one_x, 1-1.008 orders) {lo:g}-{hi:g} Hz holds no "
+        "bin"), told
     for r in shaft:
         assert r["unavailable"] == ["velocity_rms_mm_s", "zone", "envelope_rms", "bearings", "band.narrow",
                                     "band.one_x"], r

@@ -11,7 +11,7 @@ a machine in zone D), so the record leaves it out and names it in ``unavailable`
 
 from __future__ import annotations
 
-from cmsensord.dsp.indicators import IndicatorRecord
+from cmsensord.dsp.indicators import IndicatorRecord, Setup
 from cmsensord.monitor.events import Event
 
 __all__ = ["empty_bands", "empty_band_events"]
@@ -20,17 +20,20 @@ __all__ = ["empty_bands", "empty_band_events"]
 EmptyBand = tuple[str, tuple[float, float], tuple[str, ...]]
 
 
-def empty_bands(r: IndicatorRecord) -> list[EmptyBand]:
-    """The bands of record ``r`` that held no bin (their values NaN)."""
+def empty_bands(r: IndicatorRecord, setup: Setup) -> list[EmptyBand]:
+    """The bands of record ``r`` (of ``setup``) that held no bin (their values NaN), but those
+    at or past the Nyquist frequency (said as such: :func:`~cmsensord.monitor.indicators.above_nyquist`)."""
+    half = setup.fs / 2.0
     out: list[EmptyBand] = []
-    if r.velocity_rms_mm_s != r.velocity_rms_mm_s:
+    if r.velocity_rms_mm_s != r.velocity_rms_mm_s and r.velocity_band[0] < half:
         out.append(("indicators.velocity_band_hz", r.velocity_band, ("velocity_rms_mm_s", "zone")))
-    if r.envelope_rms != r.envelope_rms:
+    if r.envelope_rms != r.envelope_rms and r.envelope_band[0] < half:
         out.append(("indicators.envelope_band_hz", r.envelope_band, ("envelope_rms", "bearings")))
+    index = {b.name: i for i, b in enumerate(setup.bands)}
     for band, edges, rms in r.bands:
-        if rms != rms:
-            unit = f" ({band.lo:g}-{band.hi:g} orders)" if band.orders else ""
-            out.append((f"indicators.bands {band.name}{unit}", edges, (f"band.{band.name}",)))
+        if rms != rms and edges[0] < half:
+            unit = f", {band.lo:g}-{band.hi:g} orders" if band.orders else ""
+            out.append((f"indicators.bands[{index[band.name]}] ({band.name}{unit})", edges, (f"band.{band.name}",)))
     return out
 
 

@@ -346,7 +346,7 @@ class IndicatorChain:
                 if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
                     fields["unavailable"] = ["speed"] + fields.get("unavailable", [])
                 out += _unresolved_notes(self.cfg, name, r, setup, self.fs / self.N, stamp, self.told)
-                empty = empty_bands(r)
+                empty = empty_bands(r, setup)
                 if empty:
                     fields = without_dead(fields, empty)
                     out += empty_band_events(name, empty, self.N / self.fs, stamp, self.told)

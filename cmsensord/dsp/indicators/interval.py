@@ -252,7 +252,8 @@ def _record(N: int, X: np.ndarray, setup: Setup, shaft_hz: float | None, stats: 
     elif setup.bearings and shaft_hz is not None and shaft_hz > 0:
         fe, A = centred_envelope_spectrum(env.env, env.fs_env)
         bearings = [_bearing_lines(setup, b, shaft_hz, fe, A) for b in setup.bearings]
-    return IndicatorRecord(stats, v, (vband[0], min(vband[1], setup.fs / 2)),
+    top = min(vband[1], setup.fs / 2) if vband[0] < setup.fs / 2 else vband[1]   # past Nyquist: as configured
+    return IndicatorRecord(stats, v, (vband[0], top),
                            ZONES[zone_index(v, setup.group, setup.foundation)] if v == v else "", bounds, alarm,
                            env_rms, env_band, shaft_hz,
                            bearings, [(band, edges, r) for (band, edges), r in zip(bands, band_values)])
