@@ -65,3 +65,16 @@ def test_snapshots_shorter_than_a_block_name_snapshot_len(tmp_path):
     assert (r.returncode, r.stdout, r.stderr) == (
         2, "", "cmsensord import: --snapshot-len 7: snapshots of 7 sample(s) fill no 10-sample block; give a "
                "--snapshot-len of 10 or more, or a smaller --block-len\n")
+
+
+def test_a_constant_column_in_g_is_said_constant_not_quantised(tmp_path):
+    """A temperature column of 25.0 imported in g: removing its mean (245.2 m/s2) left ~1e-13 of
+    rounding, read as a peak: full scale +-1.2e-13 m/s2 and no word that it never moves."""
+    (tmp_path / "log.csv").write_text("acc,temp\n" + "\n".join(f"{a:.5f},25.0" for a in X) + "\n")
+    p = _import(tmp_path, "log.csv", "--fs", "1000", "--unit", "g")
+    assert p.returncode == 0, p.stderr
+    lines = [ln for ln in (p.stdout + p.stderr).splitlines() if "temp" in ln]
+    assert lines[0] == "  temp: full scale +-1 m/s2 (0.0004883 m/s2 a count), peak 0 m/s2, no clipping", lines
+    assert ("  WARNING temp: every value is the same, a constant offset (no sensor on it?): calibrate cannot learn "
+            "it; leave it out with --channels") in lines, lines
+    assert not [ln for ln in lines if "counts RMS" in ln], lines

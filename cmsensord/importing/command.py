@@ -215,7 +215,7 @@ def _report(meta: dict, rec: Recording, out: str, size: int, notes: list[str],
             lines.append(f"  WARNING {name}: its missing samples leave out {100 * lost / meta['blocks']:.0f} % of the "
                          f"blocks, every channel's (a frame holds them all); leave it out ({CHOOSE}) to keep them")
         lines += _implausible(name, peaks[c], u)
-        lines += [quiet[c]] if c in quiet else []
+        lines += [quiet[c]] if c in quiet and peaks[c] > 0 else []      # a constant: said below
         if not peaks[c] > 0:
             same = "0" if not rec.samples.peak[c] > 0 else "the same, a constant offset"
             lines.append(f"  WARNING {name}: every value is {same} (no sensor on it?): calibrate cannot learn it; "

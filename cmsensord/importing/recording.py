@@ -79,5 +79,8 @@ class Recording:
     @property
     def peak(self) -> np.ndarray:
         """Each channel's largest |x|, m/s², of the samples without their mean when it is
-        removed (:mod:`.dc`)."""
-        return self.samples.peak if self.dc_peak is None else self.dc_peak
+        removed (:mod:`.dc`); 0 where that leaves only the rounding of a constant's mean (under
+        1e-9 of its values)."""
+        if self.dc_peak is None:
+            return self.samples.peak
+        return np.where(self.dc_peak > 1e-9 * self.samples.peak, self.dc_peak, 0.0)
