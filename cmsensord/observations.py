@@ -55,6 +55,8 @@ class Observations:
     fs: float = 0.0               # the board's samples per second
     board_channels: int = 0       # the channels the board sent (the configuration may list fewer)
     capture_s: float | None = None  # the capture's board seconds (None: read only up to the window's end)
+    #: channel -> why it has no signal (its signal_lost event's), for one with a decision of none in the window
+    no_signal: dict[str, str] = field(default_factory=dict)
 
     @property
     def end_s(self) -> float:
@@ -127,7 +129,8 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s)
                         + _unresolved(sink),
                         settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board,
-                        capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None)
+                        capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None,
+                        no_signal=_no_signal(sink, proc, first / rate, last / rate))
 
 
 def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:
@@ -244,3 +247,19 @@ def _shaft_hz(sink: ListSink, proc: Processor, start: float, end: float) -> floa
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return float(np.nanmedian(vals))
+
+
+def _no_signal(sink: ListSink, proc: Processor, start: float, end: float) -> dict[str, str]:
+    """Per channel with a decision of no signal ending in [start, end] board seconds (its samples
+    flat, or its level under the floor): why, as the ``signal_lost`` event said it."""
+    if proc.clock.slot0_t0 is None:
+        return {}
+    t0 = proc.clock.slot_stamp_ns(0)
+    lost = {m["channel"] for topic, stamp, m in sink.messages if topic.endswith("/severity")
+            and m.get("signal_lost") and start - 1e-3 <= (stamp - t0) / 1e9 <= end + 1e-3}
+    said: dict[str, str] = {}
+    for topic, stamp, m in sink.messages:
+        if topic == "/cm/events" and m.get("kind") == "signal_lost" and m.get("channel") in lost \
+                and (stamp - t0) / 1e9 <= end + 1e-3:
+            said[m["channel"]] = m["message"].partition("no signal: ")[2].partition(": a sensor")[0]
+    return {ch: said.get(ch) or "no signal" for ch in lost}           # the last said before the window's end

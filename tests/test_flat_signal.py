@@ -152,3 +152,18 @@ def test_the_flat_signal_is_alike_however_the_stream_is_read(tmp_path):
     assert runs[0] == runs[1] == runs[2]
     said = [m["kind"] for _, m in runs[0]["/cm/events"] if m["kind"] in SIGNAL]
     assert said == list(SIGNAL), said
+
+
+def test_calibrate_refuses_a_channel_pinned_at_a_rail_in_the_healthy_period(tmp_path):
+    """A channel pinned at 4095 all through the capture read as healthy to calibrate (a baseline
+    of 196 m/s2: a 4x rise of the repaired channel then read 0.55 x baseline): refused in one
+    line naming the count, exit 2; its working neighbour alone is learned with a --config."""
+    cap = _pinned(_board(tmp_path), tmp_path / "pinned.bin", 1, 0.0, 15.0, COUNT_MAX)
+    p = cmsensord("calibrate", str(cap), "--out", str(tmp_path / "site.yaml"))
+    assert (p.returncode, p.stderr.strip()) == (2, (
+        "cmsensord: calibrate: channel ch1: no signal in the healthy period: every sample at 4095 counts (the "
+        "ADC's rail) for 1 s of the decision: nothing to learn; choose a period where it works, or leave it out "
+        "(import --channels, or a --config BASE.yaml listing the channels to learn)")), p.stderr
+    (tmp_path / "base.yaml").write_text("channels:\n  - {name: ch0, index: 0}\n")
+    p = cmsensord("calibrate", str(cap), "--config", str(tmp_path / "base.yaml"), "--out", str(tmp_path / "site.yaml"))
+    assert p.returncode == 0, p.stderr
