@@ -83,3 +83,15 @@ def test_frames_of_two_edges_at_one_offset_in_a_slow_tacho_are_bad_input(tmp_pat
     assert [round(m["speed_rpm"]) for m in ind[:3] + ind[5:]] == [3000] * 8, err
     (line,) = [x.strip() for x in err.splitlines() if x.strip().startswith("events:")]
     assert "decode_error 100," in line and "tacho_missed_pulse" not in line, line
+
+
+def test_the_pulses_of_dropped_frames_are_no_missed_pulses(tmp_path):
+    """1500 rpm on 2 pulses a revolution (an edge every other block), five frames of the edge
+    twice: dropped as decode errors, and their pulses not said again as the encoder's missed
+    pulses, as those of lost frames are not (it said 'tacho_missed_pulse 1': 5 pulses inserted)."""
+    tacho = [np.array([64] * (2 if 300 <= b < 310 else 1)) if b % 2 == 0 else np.zeros(0) for b in range(1000)]
+    err, _, ind = replay(capture(tmp_path / "dup.bin", tacho, ppr=2), tmp_path / "out")
+    (line,) = [x.strip() for x in err.splitlines() if x.strip().startswith("events:")]
+    assert "decode_error 5" in line and "tacho_missed_pulse" not in line, line
+    speeds = [round(m["speed_rpm"]) for m in ind]
+    assert speeds[:3] + speeds[4:] == [1500] * 9 and abs(speeds[3] - 1500) < 100, speeds   # 3 s: the dropped

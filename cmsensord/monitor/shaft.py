@@ -231,6 +231,7 @@ class Shaft:
         limit = clock.block_len * 256           # an edge is inside its block (docs/PROTOCOL.md, TACHO)
         if len(payloads) <= FEW_TACHO:          # a live call's few: on Python ints
             counts, offsets, bad = decode_tacho_lists(payloads)
+            sent = counts
             if offsets and max(offsets) >= limit:
                 c, o = _inside(np.array(counts), np.array(offsets, dtype=np.int64), limit, t0s, clock, events)
                 counts, offsets = c.tolist(), o.tolist()
@@ -238,17 +239,21 @@ class Shaft:
                 c, o = _distinct(np.array(counts), np.array(offsets, dtype=np.int64), t0s, clock, events)
                 counts, offsets = c.tolist(), o.tolist()
             fed = tracker.feed_few(t0s, counts, offsets)
+            broken = [t for t, a, b in zip(t0s, sent, counts) if b < a] if events else []
         else:
             counts_a, offsets_a, bad = decode_tacho_many(payloads)
+            sent_a = counts_a
             if offsets_a.size and int(offsets_a.max()) >= limit:
                 counts_a, offsets_a = _inside(counts_a, offsets_a.astype(np.int64), limit, t0s, clock, events)
             if counts_a.size and int(counts_a.max()) > 1:
                 counts_a, offsets_a = _distinct(counts_a, offsets_a, t0s, clock, events)
             fed = tracker.feed_flat(np.array(t0s, dtype=np.int64), counts_a, offsets_a)
+            broken = np.asarray(t0s)[counts_a < sent_a].tolist() if events else []
         for i, message in bad:
             events.append(Event("decode_error", None, f"bad TACHO payload at byte {frames[i].offset}: {message}",
                                 clock.stamp_ns(t0s[i])))
         self._note_gaps(t0s, clock.block_len, round(SILENT_S * clock.fs))
+        self._note_broken(broken, clock.block_len)
         told = self._silent_since is not None and t0s[-1] >= self._silent_since    # frames again after it
         if told:
             self._silent_since = None
@@ -338,6 +343,15 @@ class Shaft:
                     self._silences.append((prev + L, t))
             prev = t
         self._prev_t0 = t0[-1]
+
+    def _note_broken(self, t0: list[int], L: int) -> None:
+        """The blocks of TACHO frames whose edges were dropped as bad input: gaps as lost frames
+        are (the pulses the tracker misses in them are no encoder's), a run of them one gap."""
+        for t in t0:
+            if self._gaps and self._gaps[-1][0] <= t <= self._gaps[-1][1] + L:      # a block apart: one run
+                self._gaps[-1] = (self._gaps[-1][0], max(self._gaps[-1][1], t + L))
+            else:
+                self._gaps.append((t, t + L))
 
     def uncovered(self, samples: np.ndarray) -> np.ndarray:
         """Which board ``samples`` (ascending) no TACHO frame covers: after the newest, or in a
