@@ -52,8 +52,10 @@ _COMPONENTS = "".join(f"    - {{name: o{i}, order: {1 + i * 0.01:.2f}}}\n" for i
 
 @pytest.mark.parametrize("text, message", [
     ("capture:\n  every_s: 1.0e-5\n",
-     "capture.every_s: must be 0 (none) or at least 4e-05 (one sample at the board's 25000 Hz) (got 1e-05)"),
-    ("capture:\n  every_s: 1.0e+308\n", "capture.every_s: must be >= 0 and <= 31536000 (got 1e+308)"),
+     "capture.every_s: must be 0 (none) or from 4e-05 s (one sample at the board's 25000 Hz) to 31,536,000 s (a "
+     "year) (got 1e-05)"),
+    ("capture:\n  every_s: 1.0e+308\n", "capture.every_s: must be 0 (none) or from 4e-05 s (one sample at the "
+     "board's 25000 Hz) to 31,536,000 s (a year) (got 1e+308)"),
     ("monitor:\n  decision_period_s: 1.0e+9\n",
      "monitor.decision_period_s: must be > 0 and <= 3600 (got 1000000000.0)"),
     ("monitor:\n  decision_period_s: 1.0e+308\n", "monitor.decision_period_s: must be > 0 and <= 3600 (got 1e+308)"),

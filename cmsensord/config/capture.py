@@ -46,9 +46,9 @@ def _known_triggers(obj: Any) -> tuple[str, str, Any] | None:
 
 
 def _every_s_a_step(obj: Any) -> tuple[str, str, Any] | None:
-    if 0 < obj.every_s < MIN_EVERY_S:
-        return ("every_s", f"must be 0 (none) or at least {MIN_EVERY_S:g} (one sample at the board's 25000 Hz)",
-                obj.every_s)
+    if 0 < obj.every_s < MIN_EVERY_S or obj.every_s > MAX_EVERY_S:
+        return ("every_s", f"must be 0 (none) or from {MIN_EVERY_S:g} s (one sample at the board's 25000 Hz) "
+                f"to {MAX_EVERY_S:,.0f} s (a year)", obj.every_s)
     return None
 
 
@@ -62,7 +62,7 @@ class CaptureConfig:
         (), "operating_state triggers only on entering these states (stopped, starting, running, "
         "coasting); none: every change")
     every_s: float = setting(0.0, "also a periodic capture every this many seconds of board time, at "
-                             "least one sample (4e-05 s) and at most a year; 0: none", ge=0, le=MAX_EVERY_S)
+                             "least one sample (4e-05 s) and at most a year; 0: none", ge=0)
     pre_s: float = setting(10.0, "seconds kept before the trigger", gt=0, le=120)
     post_s: float = setting(10.0, "seconds kept after the trigger", gt=0, le=120)
     min_interval_s: float = setting(60.0, "at most one capture per channel in this many seconds", ge=0)
