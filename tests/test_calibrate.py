@@ -487,9 +487,9 @@ def test_a_channel_with_no_sensor_is_said_at_import_and_calibrate_names_the_way_
     site = tmp_path / "s.yaml"
     p = run("cmsensord", "calibrate", str(cap), "--out", str(site))
     assert (p.returncode, p.stderr.strip()) == (2, (
-        "cmsensord: calibrate: channel Spare_g: no signal in the healthy period: every sample at 2048 counts (no "
-        "noise at all) for 1 s of the decision: nothing to learn; choose a period where it works, or leave it out "
-        "(import --channels, or a --config BASE.yaml listing the channels to learn)"))
+        "cmsensord: calibrate: channel Spare_g: the healthy period's block RMS is zero: no signal on this channel "
+        "(no sensor on it?): leave it out (import --channels, or a --config BASE.yaml listing the channels to "
+        "learn)"))
     base = tmp_path / "base.yaml"
     base.write_text("channels:\n  - {name: Acc_X_g, index: 0}\n  - {name: Acc_Y_g, index: 2}\n")
     p = run("cmsensord", "calibrate", str(cap), "--config", str(base), "--out", str(site))

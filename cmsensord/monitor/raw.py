@@ -28,6 +28,9 @@ from cmsensord.protocol import COUNT_MAX, Frame, Status
 #: a field of every frame of a batch, in one C-level pass (map) rather than a generator
 _CHAN, _PAYLOAD, _T0 = attrgetter("chan"), attrgetter("payload"), attrgetter("t0_unwrapped")
 
+#: the fewest samples a block whose samples are all one count is flat in (a block of a few
+#: samples of a slow import, one at 100 Hz, is one count by its length, not by a dead sensor)
+FLAT_MIN_SAMPLES = 16
 #: RAW frames held while waiting for the first STATUS (its scale/offset): 2 s of 4 channels
 RAW_WAIT_FRAMES = 800
 
@@ -254,7 +257,7 @@ class RawInput:
             row = np.argsort(order)[row]
         scale, offset = self.calibration(status)
         flat = np.where(counts.min(axis=1) == top, top.astype(np.float32), np.nan).astype(np.float32) \
-            if self.flat else None
+            if self.flat and L >= FLAT_MIN_SAMPLES else None
         out = RawBlocks(blocks, row, chan, rows_physical(counts, scale[chan], offset[chan]), C, flat)
         if single and C == 1:                   # every block's one channel, in order
             out._complete_memo = not (chan.any() if chl is None else any(chl))
