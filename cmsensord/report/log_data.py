@@ -121,6 +121,11 @@ class FileInfo:
     unreadable: int = 0             # of them, on cmsensord's topics but not its JSON objects
     foreign: int = 0                # of them, on topics not cmsensord's
     foreign_topics: list[str] = field(default_factory=list)     # (a few of) those topics
+    complete: bool = False
+    error: str | None = None
+    skipped: list[str] = field(default_factory=list)
+    left_out: str | None = None
+    cut: str | None = None          # what ending before the footer lost (a .part's too)
 
     def not_read(self) -> str:
         """Its messages left out and why, in words; "" when none is."""
@@ -132,11 +137,6 @@ class FileInfo:
         if self.unreadable:
             parts.append(f"{self.unreadable:,} on cmsensord's topics that are not its JSON objects")
         return "; ".join(parts)
-    complete: bool = False
-    error: str | None = None
-    skipped: list[str] = field(default_factory=list)
-    left_out: str | None = None
-    cut: str | None = None          # what ending before the footer lost (a .part's too)
 
 
 class LogData:
