@@ -27,7 +27,7 @@ from cmsensord.base_changes import replaced_baselines, unlisted_channels
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.config.alarm_indicators import indicator_names
 from cmsensord.config.channel_refs import channel_refs_error
-from cmsensord.config.settings import MAX_DECISION_PERIOD_S
+from cmsensord.config.settings import MAX_DECISION_PERIOD_S, decision_period_for
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
 from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
@@ -84,9 +84,9 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
         period = obs.period(mon.decision_period_s)
         f_r, source = _f_r(obs, c, cfg, rpm)
         if f_r >= period:
-            longer = math.floor(f_r / obs.rate_hz) + 1
+            longer = decision_period_for(f_r, obs.rate_hz)
             advice = (f"for a machine this fast give a longer decision: monitor: {{decision_period_s: {longer:g}}} "
-                      "in --config BASE.yaml") if longer <= MAX_DECISION_PERIOD_S else (
+                      "in --config BASE.yaml") if longer is not None else (
                 f"no decision_period_s up to {MAX_DECISION_PERIOD_S:g} fits a machine this fast (f_r below "
                 f"{MAX_DECISION_PERIOD_S * obs.rate_hz:g} Hz, {MAX_DECISION_PERIOD_S * obs.rate_hz * 60:g} rpm)")
             raise ConfigError(

@@ -25,6 +25,7 @@ __all__ = [
     "MAX_CHANNELS",
     "MAX_COMPONENTS",
     "MAX_DECISION_PERIOD_S",
+    "decision_period_for",
     "NOMINAL_RATE_HZ",
     "MonitorConfig",
     "ChannelConfig",
@@ -58,12 +59,19 @@ NOMINAL_RATE_HZ = 100.0
 MAX_DECISION_PERIOD_S = 3600
 
 
+def decision_period_for(f_r: float, rate_hz: float) -> int | None:
+    """The shortest whole ``decision_period_s`` whose observations at ``rate_hz`` outnumber
+    ``f_r`` [Hz] (a decision can flag an anomaly), or None when none up to
+    :data:`MAX_DECISION_PERIOD_S` does."""
+    longer = int(f_r // rate_hz) + 1
+    return longer if longer <= MAX_DECISION_PERIOD_S else None
+
+
 def _longer_decision(f_r: float, rate_hz: float) -> str:
     """The advice for an ``f_r`` [Hz] at or above the observations of a decision at ``rate_hz``:
-    the ``decision_period_s`` that fits it, or, when none up to :data:`MAX_DECISION_PERIOD_S`
-    does, the highest f_r any decision takes."""
-    longer = int(f_r // rate_hz) + 1
-    if longer > MAX_DECISION_PERIOD_S:
+    the ``decision_period_s`` that fits it, or, when none does, the highest f_r any decision takes."""
+    longer = decision_period_for(f_r, rate_hz)
+    if longer is None:
         return (f"no decision_period_s up to {MAX_DECISION_PERIOD_S:g} fits a machine this fast: f_r "
                 f"must be below {MAX_DECISION_PERIOD_S * rate_hz:g} Hz")
     return f"for a machine this fast give decision_period_s: {longer}"
