@@ -100,6 +100,31 @@ def test_capture_now_keeps_pre_and_post_seconds_around_the_newest_sample(tmp_pat
         assert [(k["label"], k["freq_hz"]) for k in s["marks"]] == [(n, pytest.approx(hz, abs=1e-5)) for n, hz in want]
 
 
+def test_capture_now_before_pre_s_is_held_says_when_to_try_again(tmp_path):
+    """`cmsensord capture-now` with less than pre_s of samples received since the daemon started:
+    not captured, saying why and in how many seconds of samples one can be (exit 1)."""
+    cfg = tmp_path / "cmsensord.yaml"
+    conf = "capture:\n  triggers: [manual]\n  pre_s: 30\n  post_s: 1\n"
+    with board_on_pty("--scenario", "healthy", "--mode", "raw", "--duration", "30", "--flow-control") as port:
+        d = start_daemon(tmp_path, port, config=conf)
+        try:
+            deadline = time.monotonic() + 60
+            p = None
+            while time.monotonic() < deadline:
+                if (tmp_path / "logs" / SOCKET_NAME).exists():
+                    p = run_module("cmsensord", "capture-now", "--config", str(cfg))
+                    if "no samples received yet" not in p.stderr:
+                        break
+                time.sleep(0.2)
+        finally:
+            stop(d)
+    assert p is not None and p.returncode == 1 and p.stderr == "", p
+    m = re.fullmatch(r"ch0: not captured: its pre_s reaches back before the stream's start; "
+                     r"try again in (\S+) s\n", p.stdout)
+    assert m, p.stdout
+    assert 20 < float(m.group(1)) <= 30
+
+
 def test_capture_now_without_a_daemon_is_a_one_line_error(tmp_path):
     p = run_module("cmsensord", "capture-now", "--socket", str(tmp_path / "none.sock"))
     assert p.returncode == 1 and p.stdout == "" and p.stderr.count("\n") == 1

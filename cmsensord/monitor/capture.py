@@ -71,6 +71,8 @@ HOLD_S = 20.0
 MAX_KEPT_BYTES = 32e6
 #: a stamp past any stream's: the event log released to the end
 _END = 1 << 62
+#: why a capture whose pre_s reaches back before the stream's first sample is skipped
+TOO_EARLY = "its pre_s reaches back before the stream's start"
 #: JSON bytes per sample counted against max_mb_per_hour
 BYTES_PER_SAMPLE = 12
 #: the envelope spectrum is kept up to this frequency [Hz]
@@ -201,7 +203,7 @@ class Captures:
         idx = ring.newest_end
         stamp = self.stamp_of(idx * self.ticks)
         before = len(self.pending)
-        self._trigger(channel, idx, stamp, {"kind": "manual", "message": "cmsensord capture-now"})
+        skipped = self._trigger(channel, idx, stamp, {"kind": "manual", "message": "cmsensord capture-now"})
         started = {p.channel: p for p in self.pending[before:]}
         rows: list[dict[str, Any]] = []
         for name in self.channels:
@@ -209,8 +211,9 @@ class Captures:
                 continue
             p = started.get(name)
             if p is None:
-                why = next((e.message for e in reversed(self.out) if isinstance(e, Event)
-                            and e.kind == "capture_skipped" and e.channel == name), "skipped")
+                why = skipped.get(name, "skipped")
+                if why == TOO_EARLY:        # the seconds of samples still to come before pre_s is held
+                    why += f"; try again in {self._wait_s(idx):.3g} s"
                 rows.append({"channel": name, "skipped": why})
             else:
                 rows.append({"channel": name, "stamp_ns": stamp, "first_sample": p.start,
@@ -229,22 +232,37 @@ class Captures:
             return None
         return best[0] + round((stamp_ns - best[1]) * self.rate / 1e9)
 
-    def _trigger(self, channel: str | None, idx: int, stamp_ns: int, trigger: dict[str, str]) -> None:
+    def _trigger(self, channel: str | None, idx: int, stamp_ns: int, trigger: dict[str, str]) -> dict[str, str]:
+        """Captures of ``channel`` (None: each) around board index ``idx`` started (pending), or a
+        ``capture_skipped`` event for each refused; returns why, per channel refused."""
         pre, post = round(self.cfg.pre_s * self.rate), round(self.cfg.post_s * self.rate)
+        skipped: dict[str, str] = {}
         for col, name in enumerate(self.channels):
             if channel not in (None, name):
                 continue
-            why = "its pre_s reaches back before the stream's start" \
-                if self.first_idx is not None and idx - pre < self.first_idx \
-                else self._refusal(name, stamp_ns, pre + post, trigger["kind"] == "manual")
+            why = self._too_early(idx - pre) \
+                or self._refusal(name, stamp_ns, pre + post, trigger["kind"] == "manual")
             if why is not None:
                 self._event("capture_skipped", name, f"{name}: capture on {trigger['kind']} skipped: {why}",
                             stamp_ns)
+                skipped[name] = why
                 continue
             if trigger["kind"] != "manual":     # someone's look does not hold back the next alarm's
                 self.last_ns[name] = stamp_ns
             self.budget.append((stamp_ns, (pre + post) * BYTES_PER_SAMPLE))
             self.pending.append(_Pending(name, col, idx - pre, idx + post, idx, stamp_ns, trigger))
+        return skipped
+
+    def _wait_s(self, idx: int) -> float:
+        """Seconds of samples still to come after board index ``idx`` before a capture's pre_s is held."""
+        return ((self.first_idx or 0) + round(self.cfg.pre_s * self.rate) - idx) / self.rate
+
+    def _too_early(self, start: int) -> str | None:
+        """Why a capture from board index ``start`` cannot be: it begins before the stream's first
+        sample; else None."""
+        if self.first_idx is None or start >= self.first_idx:
+            return None
+        return TOO_EARLY
 
     def _refusal(self, name: str, stamp_ns: int, n: int, manual: bool = False) -> str | None:
         last = self.last_ns.get(name)
@@ -355,7 +373,7 @@ class Captures:
         still = []
         for p in self.pending:
             if oldest is not None and p.start < oldest:
-                why = "its pre_s reaches back before the stream's start" if p.start < (self.first_idx or 0) else \
+                why = TOO_EARLY if p.start < (self.first_idx or 0) else \
                     "its first samples are no longer held"
                 self._event("capture_skipped", p.channel, f"{p.channel}: capture on {p.trigger['kind']} "
                             f"skipped: {why}", p.stamp_ns)
