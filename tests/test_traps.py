@@ -48,6 +48,14 @@ def test_a_board_rate_other_than_100_hz_is_said(tmp_path):
             "observations is 0.125 s") in lines
 
 
+def test_a_board_rate_within_one_percent_of_100_hz_is_not_a_warning(tmp_path):
+    """The default import of 20480 Hz (blocks of 205: 99.9 blocks/s) keeps the decision rule's
+    counts within 0.1 % of the paper's times: no decision_rule warning."""
+    lines = replay(imported(tmp_path), tmp_path)
+    assert any(line.startswith("  ch0: final severity") for line in lines), lines
+    assert not [line for line in lines if "decision_rule" in line], lines
+
+
 def test_f_r_no_decision_can_reach_at_the_board_rate_is_said(tmp_path):
     cfg = tmp_path / "fr.yaml"
     cfg.write_text("monitor:\n  f_r: 90\n")
