@@ -57,9 +57,9 @@ def test_data_frames_of_a_wrong_length_or_channel_are_one_event_each_at_their_t0
     runs = same_at_every_read_size(data)
     if mode == "raw":
         want = [f"RAW frame of channel {f.chan} at t0 {f.t0} skipped: "
-                + ("channel >= 1" if f.chan else "400 bytes, not 250 samples") for f in changed]
+                + ("channel >= 1" if f.chan else "400 bytes, not 500 (250 samples of 2 bytes)") for f in changed]
     else:
-        want = [f"RMS frame at t0 {f.t0} dropped: 2 bytes, not 4 x 1" for f in changed]
+        want = [f"RMS frame at t0 {f.t0} dropped: 2 bytes, not 4 (1 channel(s) of 4 bytes)" for f in changed]
     assert len(changed) >= 20 and decode_errors(runs) == want
     assert [s for s, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"] == [f.t0 * 40_000 for f in changed]
 
@@ -134,7 +134,7 @@ def test_a_replay_tells_each_bad_frame(tmp_path):
     data, changed = rebuilt(board("raw", 8), change)
     events = replay(tmp_path, data)
     assert [e for e in events if e.startswith("decode_error")] == [
-        f"decode_error | RAW frame of channel 0 at t0 {f.t0} skipped: 400 bytes, not 250 samples"
+        f"decode_error | RAW frame of channel 0 at t0 {f.t0} skipped: 400 bytes, not 500 (250 samples of 2 bytes)"
         if f.type is FrameType.RAW else
         f"decode_error | TACHO frame at t0 {f.t0}: 1 edge(s) outside its block (offsets of 250 samples or more) "
         "dropped" for f in sorted(changed, key=lambda f: (f.t0, f.type))]

@@ -218,7 +218,7 @@ def test_one_rms_frame_of_a_wrong_payload_length_costs_only_that_frame(tmp_path)
         data += encode_frame(FrameType.RMS, k + 1, k * L, 4, 0, payload[:12] if k == 200 else payload)
     events = replay(tmp_path, bytes(data))
     assert [e for e in events if e.startswith("decode_error")] == [
-        f"decode_error | RMS frame at t0 {200 * L} dropped: 12 bytes, not 4 x 4"]
+        f"decode_error | RMS frame at t0 {200 * L} dropped: 12 bytes, not 16 (4 channel(s) of 4 bytes)"]
     obs = summary_observations(tmp_path)
     assert obs == (399 * 4, 4)            # (observations, missing): the frame's 4 only
 

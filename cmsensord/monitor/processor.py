@@ -378,8 +378,8 @@ class Processor(Figures):
         good = frames if np.all(lengths == 4 * C) else [f for f in frames if len(f.payload) == 4 * C]
         if len(good) < len(frames):             # only those frames are lost, each told at its t0
             for f in (f for f in frames if len(f.payload) != 4 * C):
-                self.event("decode_error", None, f"RMS frame at t0 {f.t0_unwrapped} dropped: {len(f.payload)} "
-                           f"bytes, not 4 x {C}", self.clock.stamp_ns(f.t0_unwrapped), count=1)
+                self.event("decode_error", None, f"RMS frame at t0 {f.t0_unwrapped} dropped: {len(f.payload)} bytes, "
+                           f"not {4 * C} ({C} channel(s) of 4 bytes)", self.clock.stamp_ns(f.t0_unwrapped), count=1)
             if not good:
                 return
             frames = good

@@ -218,7 +218,8 @@ class RawInput:
         if n < len(frames):
             for f in frames:
                 if f.chan >= C or len(f.payload) != 2 * L:
-                    why = f"channel >= {C}" if f.chan >= C else f"{len(f.payload)} bytes, not {L} samples"
+                    why = f"channel >= {C}" if f.chan >= C else \
+                        f"{len(f.payload)} bytes, not {2 * L} ({L} samples of 2 bytes)"
                     events.append(Event("decode_error", None, f"RAW frame of channel {f.chan} at t0 {f.t0_unwrapped} "
                                         f"skipped: {why}", stamp_ns(f.t0_unwrapped) if stamp_ns else None))
         if not n:
