@@ -6,7 +6,8 @@ Each bound and why: ``capture.every_s`` at least one sample at the board's 25 kH
 a year (a shorter one at a slower stream ticks once a sample, said by a ``config`` event);
 ``monitor.decision_period_s`` at most an hour (its buffers grow with it) and calibrate's
 advice within it; ``tacho.timeout_s`` at most the tracker's longest run timeout; the order
-tracker's least order, frequency, bandwidth and min_rpm, and at most 32 components (its cost
+tracker's least order, frequency, bandwidth and min_rpm, the range of r and q1 (beyond, its
+design overflows in float64), and at most 32 components (its cost
 grows with about their cube); ``output.prefix`` short enough for the log's file names; a
 channel's ``scale`` and ``offset`` within what float32 carries through the RMS; each channel
 once in an alarm rule and each baseline once; a partly filled ``commissioned`` section
@@ -74,6 +75,14 @@ _COMPONENTS = "".join(f"    - {{name: o{i}, order: {1 + i * 0.01:.2f}}}\n" for i
      "orders.components[0].freq_hz: must be >= 0.01 (got 5e-324)"),
     ("orders: {components: [{name: a, order: 1, bandwidth_pct: 5.0e-324}]}\n",
      "orders.components[0].bandwidth_pct: must be >= 0.01 and <= 100 (got 5e-324)"),
+    ("orders: {components: [{name: a, order: 1, r: 5.0e-324}]}\n",
+     "orders.components[0].r: must be >= 1e-06 and <= 1000000000000.0 (got 5e-324)"),
+    ("orders: {components: [{name: a, order: 1, r: 1.0e+300}]}\n",
+     "orders.components[0].r: must be >= 1e-06 and <= 1000000000000.0 (got 1e+300)"),
+    ("orders: {components: [{name: a, order: 1, bandwidth_hz: 5.0e-324}]}\n",
+     "orders.components[0].bandwidth_hz: must be >= 0.001 (got 5e-324)"),
+    ("orders: {q1: 5.0e-324}\n", "orders.q1: must be >= 1e-12 and <= 1000000000000.0 (got 5e-324)"),
+    ("orders: {q1: 1.0e+300}\n", "orders.q1: must be >= 1e-12 and <= 1000000000000.0 (got 1e+300)"),
     ("orders:\n  components:\n" + _COMPONENTS,
      "orders.components: at most 32 components: the tracker's cost grows with about the cube of their count, "
      "and more fall behind real time (got 33)"),
@@ -94,7 +103,8 @@ _COMPONENTS = "".join(f"    - {{name: o{i}, order: {1 + i * 0.01:.2f}}}\n" for i
      "alarms.baselines[2]: duplicate baseline of accel_rms on ch0 (also baselines[0]) (got 1.0)"),
 ], ids=["every_s-below-a-sample", "every_s-overflows", "decision-1e9", "decision-1e308", "channel-decision",
         "f_r-beyond-any-decision", "tacho-timeout", "min_rpm-denormal", "bandwidth_pct-denormal",
-        "order-denormal", "freq_hz-denormal", "component-bandwidth_pct-denormal", "33-components",
+        "order-denormal", "freq_hz-denormal", "component-bandwidth_pct-denormal", "r-denormal", "r-1e300",
+        "bandwidth_hz-denormal", "q1-denormal", "q1-1e300", "33-components",
         "prefix-240", "scale-beyond-float32", "scale-below-float32", "offset-beyond-float32",
         "rule-repeats-a-channel", "baseline-twice"])
 def test_a_value_out_of_bounds_is_one_line_config_error(tmp_path, text, message):
@@ -106,9 +116,10 @@ def test_the_bounds_themselves_load():
         "capture": {"every_s": 1 / 25000}, "monitor": {"decision_period_s": 3600}, "tacho": {"timeout_s": 10},
         "output": {"prefix": "p" * 128},
         "channels": [{"name": "de", "scale": -1e6, "offset": 1e6}, {"name": "nde", "scale": 1e-9, "offset": -1e6}],
-        "orders": {"min_rpm": 1, "bandwidth_pct": 0.01,
-                   "components": [{"name": f"o{i}", "order": 0.01 + i} for i in range(31)]
-                   + [{"name": "f", "freq_hz": 0.01, "bandwidth_pct": 0.01}]}})
+        "orders": {"min_rpm": 1, "bandwidth_pct": 0.01, "q1": 1e-12,
+                   "components": [{"name": f"o{i}", "order": 0.01 + i} for i in range(29)]
+                   + [{"name": "f", "freq_hz": 0.01, "bandwidth_pct": 0.01}, {"name": "r", "order": 1, "r": 1e12},
+                      {"name": "b", "order": 2, "bandwidth_hz": 0.001}]}})
     assert len(cfg.orders.components) == 32 and cfg.tacho.timeout_s == 10
 
 

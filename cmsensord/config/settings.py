@@ -293,6 +293,12 @@ MIN_ORDER = 0.01
 MIN_FREQ_HZ = 0.01
 MIN_BANDWIDTH_PCT = 0.01
 MIN_RPM = 1.0
+#: the least -3 dB bandwidth [Hz] of a component (a 1000-s response), and the range of the paper's
+#: weighting factor r and of q1: far beyond any tracker's use, within what its design squares and
+#: inverts in float64 (the gain depends on r alone: q1 scales Q1 and Q2 together)
+MIN_BANDWIDTH_HZ = 0.001
+R_RANGE = (1e-6, 1e12)
+Q1_RANGE = (1e-12, 1e12)
 #: the most components the tracker follows: its cost grows with about the cube of their count (one RAW
 #: channel of 10 s at 25 kHz took 0.5 s with 32 components, 2.7 s with 64, 10 s with 100 and 62 s
 #: with 200 on a 2-core machine), so 32 keep a live daemon well within real time
@@ -318,8 +324,8 @@ class ComponentConfig:
                          pattern_reason="must contain only letters, digits, _ and .")
     order: float | None = setting(None, "multiple of the shaft speed (e.g. 1, 2, 0.47)", ge=MIN_ORDER)
     freq_hz: float | None = setting(None, "fixed frequency [Hz] (e.g. a 47 Hz resonance)", ge=MIN_FREQ_HZ)
-    r: float | None = setting(None, "the paper's weighting factor r (eq. 25)", gt=0)
-    bandwidth_hz: float | None = setting(None, "-3 dB bandwidth [Hz] instead of r", gt=0)
+    r: float | None = setting(None, "the paper's weighting factor r (eq. 25)", ge=R_RANGE[0], le=R_RANGE[1])
+    bandwidth_hz: float | None = setting(None, "-3 dB bandwidth [Hz] instead of r", ge=MIN_BANDWIDTH_HZ)
     bandwidth_pct: float | None = setting(None, "-3 dB bandwidth in % of the component's "
                                            "frequency instead of r", ge=MIN_BANDWIDTH_PCT, le=100)
     alarm_rms: float | None = setting(None, "order alarm (the alarm manager's rule order_<name>): "
@@ -349,7 +355,8 @@ class OrdersConfig:
     """The recursive Vold-Kalman order tracker of Yeh, Pan & Le on RAW channels with a tacho."""
 
     enabled: bool = setting(True, "track orders when the board sends RAW blocks and a tacho")
-    q1: float = setting(0.1, "process noise q1 of the structural equation (Q1 = q1 I, eq. 25)", gt=0)
+    q1: float = setting(0.1, "process noise q1 of the structural equation (Q1 = q1 I, eq. 25)",
+                        ge=Q1_RANGE[0], le=Q1_RANGE[1])
     bandwidth_pct: float = setting(5.0, "default -3 dB bandwidth in % of each component's "
                                     "frequency (for components without r/bandwidth)",
                                     ge=MIN_BANDWIDTH_PCT, le=100)
