@@ -250,16 +250,21 @@ def _shaft_hz(sink: ListSink, proc: Processor, start: float, end: float) -> floa
 
 
 def _no_signal(sink: ListSink, proc: Processor, start: float, end: float) -> dict[str, str]:
-    """Per channel with a decision of no signal ending in [start, end] board seconds (its samples
-    flat, or its level under the floor): why, as the ``signal_lost`` event said it."""
+    """Per channel with a decision ending in (start, end] board seconds that had no signal because
+    its samples were flat (``monitor.flat_signal``): why, as its ``signal_lost`` event said it. A
+    level under ``monitor.signal_floor`` is left out: the machine may have stopped, and the
+    stopped decisions are not learned from anyway (:func:`idle_periods`)."""
     if proc.clock.slot0_t0 is None:
         return {}
     t0 = proc.clock.slot_stamp_ns(0)
-    lost = {m["channel"] for topic, stamp, m in sink.messages if topic.endswith("/severity")
-            and m.get("signal_lost") and start - 1e-3 <= (stamp - t0) / 1e9 <= end + 1e-3}
-    said: dict[str, str] = {}
-    for topic, stamp, m in sink.messages:
-        if topic == "/cm/events" and m.get("kind") == "signal_lost" and m.get("channel") in lost \
-                and (stamp - t0) / 1e9 <= end + 1e-3:
-            said[m["channel"]] = m["message"].partition("no signal: ")[2].partition(": a sensor")[0]
-    return {ch: said.get(ch) or "no signal" for ch in lost}           # the last said before the window's end
+    said: dict[str, dict] = {}                  # per channel: its last signal_lost event so far
+    out: dict[str, str] = {}
+    for topic, stamp, m in sorted(sink.messages, key=lambda x: (x[1], x[0] != "/cm/events")):
+        if topic == "/cm/events" and m.get("kind") == "signal_lost":
+            said[str(m.get("channel"))] = m
+        elif topic.endswith("/severity") and m.get("signal_lost") \
+                and start + 1e-3 < (stamp - t0) / 1e9 <= end + 1e-3:
+            why = said.get(m["channel"])
+            if why is not None and "level_ratio" not in why:        # flat, not quiet
+                out[m["channel"]] = why["message"].partition("no signal: ")[2].partition(": a sensor")[0]
+    return out

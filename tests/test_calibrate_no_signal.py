@@ -1,0 +1,68 @@
+"""Which decisions with no signal make `cmsensord calibrate` refuse a channel: only those whose
+samples were flat (a dead sensor, monitor.flat_signal) and that lie in the healthy window. A
+level under monitor.signal_floor of a BASE config's baseline is a machine that may have
+stopped: its decisions are not learned from, as without a baseline; a flat stretch ending
+where the window begins is outside it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from processes import cmsensord
+
+FS, BLOCK = 5120, 64
+
+
+def _imported(tmp_path: Path, x: np.ndarray, name: str, *options: str) -> Path:
+    """The samples ``x`` (in g) of channel ``name`` at 5120 Hz, imported in blocks of 64."""
+    npy, cap = tmp_path / f"{name}.npy", tmp_path / f"{name}.bin"
+    np.save(npy, x.astype(np.float32))
+    p = cmsensord("import", str(npy), "--fs", str(FS), "--block-len", str(BLOCK), "--unit", "g",
+                  "--names", name, *options, "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    return cap
+
+
+def _machine(seconds: float) -> tuple[np.ndarray, np.ndarray]:
+    """Board seconds and the vibration of a machine at 1500 rpm (1x and broadband)."""
+    t = np.arange(int(seconds * FS)) / FS
+    return t, np.sin(2 * np.pi * 25 * t) * 2 + np.random.default_rng(1).standard_normal(t.size)
+
+
+def test_recalibrating_a_machine_that_stops_with_its_site_file_as_base(tmp_path):
+    """A pump stopped for three stretches: calibrate learns it from its running time; again with
+    that site file as --config BASE.yaml (its baseline then puts the stops under signal_floor:
+    signal_lost) it does the same, not 'no signal in the healthy period'."""
+    t, x = _machine(200)
+    for a, b in ((10, 40), (50, 80), (90, 110)):
+        x[(t >= a) & (t < b)] *= 0.01
+    cap = _imported(tmp_path, x, "pump")
+    runs = []
+    for base in ((), ("--config", str(tmp_path / "site.yaml"))):
+        out = tmp_path / f"site{len(runs)}.yaml"
+        p = cmsensord("calibrate", str(cap), "--to", "120", "--rpm", "1500", *base, "--out", str(out))
+        assert p.returncode == 0, p.stderr
+        (tmp_path / "site.yaml").write_bytes(out.read_bytes())
+        runs.append(p.stdout)
+    for said in runs:
+        assert "pump: 86 decision(s) with the machine stopped (level below 10 % of its running level), " \
+               "starting or stopping: not learned from" in said, said
+
+
+def test_a_flat_stretch_ending_where_the_window_begins_is_outside_it(tmp_path):
+    """A sensor flat for the first 5 s, working after: calibrate --from 5 (and 5.01, floored to
+    the same block) learns it; --from 4 takes in a flat decision and refuses it."""
+    t, x = _machine(60)
+    x[t < 5] = 0.0
+    cap = _imported(tmp_path, x, "de", "--keep-dc")
+    for start in ("5", "5.01"):
+        p = cmsensord("calibrate", str(cap), "--from", start, "--to", "60", "--rpm", "1500",
+                      "--out", str(tmp_path / "site.yaml"))
+        assert p.returncode == 0, (start, p.stderr)
+    p = cmsensord("calibrate", str(cap), "--from", "4", "--to", "60", "--rpm", "1500",
+                  "--out", str(tmp_path / "site.yaml"))
+    assert p.returncode == 2 and p.stderr.startswith(
+        "cmsensord: calibrate: channel de: no signal in the healthy period: every sample at 2048 counts (no "
+        "noise at all) for 1 s of the decision: nothing to learn"), p.stderr
