@@ -22,7 +22,8 @@ EmptyBand = tuple[str, tuple[float, float], tuple[str, ...]]
 
 def empty_bands(r: IndicatorRecord, setup: Setup) -> list[EmptyBand]:
     """The bands of record ``r`` (of ``setup``) that held no bin (their values NaN), but those
-    at or past the Nyquist frequency (said as such: :func:`~cmsensord.monitor.indicators.above_nyquist`)."""
+    in Hz at or past the Nyquist frequency (said once at the start:
+    :func:`~cmsensord.monitor.indicators.above_nyquist`); a band in orders is there at any speed."""
     half = setup.fs / 2.0
     out: list[EmptyBand] = []
     if r.velocity_rms_mm_s != r.velocity_rms_mm_s and r.velocity_band[0] < half:
@@ -31,22 +32,32 @@ def empty_bands(r: IndicatorRecord, setup: Setup) -> list[EmptyBand]:
         out.append(("indicators.envelope_band_hz", r.envelope_band, ("envelope_rms", "bearings")))
     index = {b.name: i for i, b in enumerate(setup.bands)}
     for band, edges, rms in r.bands:
-        if rms != rms and edges[0] < half:
+        if rms != rms and (edges[0] < half or band.orders):
             unit = f", {band.lo:g}-{band.hi:g} orders" if band.orders else ""
             out.append((f"indicators.bands[{index[band.name]}] ({band.name}{unit})", edges, (f"band.{band.name}",)))
     return out
 
 
-def empty_band_events(channel: str, empty: list[EmptyBand], record_s: float, stamp: int,
+def empty_band_events(channel: str, empty: list[EmptyBand], record_s: float, fs: float, stamp: int,
                       told: set) -> list[Event]:
     """A ``band_too_narrow`` warning for each of the ``empty`` bands of a record of ``record_s``
-    seconds of ``channel`` not said yet at that bin width (``told``: what was said)."""
+    seconds of ``channel`` not said yet at that bin width (``told``: what was said); a
+    ``band_above_nyquist`` warning, once per channel and band, for one at or past ``fs`` / 2
+    (a band in orders at a high speed)."""
     df = 1.0 / record_s
     out = []
     for key, (lo, hi), names in empty:
-        if (channel, key, round(df, 9)) in told:
+        told_as = (channel, key, "nyquist" if lo >= fs / 2 else round(df, 9))
+        if told_as in told:
             continue
-        told.add((channel, key, round(df, 9)))
+        told.add(told_as)
+        if lo >= fs / 2:
+            out.append(Event("band_above_nyquist", channel, (
+                f"{channel}: {key} {lo:g}-{hi:g} Hz at this speed: at or above the Nyquist frequency "
+                f"{fs / 2:g} Hz of the board's {fs:g} Hz sampling, no signal there: {', '.join(names)} "
+                "listed unavailable while it is; set the band's orders lower"), stamp,
+                {"details": {"band": key}}))
+            continue
         out.append(Event("band_too_narrow", channel, (
             f"{channel}: {key} {lo:g}-{hi:g} Hz holds no bin of the record's spectrum ({df:g}-Hz bins, "
             f"records of {record_s:g} s): {', '.join(names)} listed unavailable; widen the band to at "

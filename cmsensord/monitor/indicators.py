@@ -349,7 +349,7 @@ class IndicatorChain:
                 empty = empty_bands(r, setup)
                 if empty:
                     fields = without_dead(fields, empty)
-                    out += empty_band_events(name, empty, self.N / self.fs, stamp, self.told)
+                    out += empty_band_events(name, empty, self.N / self.fs, self.fs, stamp, self.told)
                 if self.dead:
                     fields = without_dead(fields, self.dead)
                     if ("nyquist", self.fs) not in self.told:
