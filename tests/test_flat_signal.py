@@ -19,7 +19,7 @@ import pytest
 from cmsensord.protocol import COUNT_MAX
 from cmsensord.sinks.mcap_sink import read_messages
 from processes import cmsensord, run_module
-from test_read_size import by_topic
+from test_read_size import board, by_topic, frames
 
 FS = 25000          # the simulated board's sampling rate
 SIGNAL = ("signal_lost", "signal_back")
@@ -36,14 +36,16 @@ def _board(tmp_path: Path, *extra: str, scenario: str = "healthy", seconds: floa
     return cap
 
 
-def _pinned(src: Path, dst: Path, chan: int, start_s: float, end_s: float, count: int) -> Path:
-    """``src`` with every sample of channel ``chan``'s RAW blocks in [start_s, end_s) at ``count``,
-    the clipped flag not set (a board that does not flag it), each frame's CRC made anew."""
+def _pinned(src: Path, dst: Path, chan: int, start_s: float, end_s: float, count: int, every: int = 1) -> Path:
+    """``src`` with every sample of channel ``chan``'s RAW blocks in [start_s, end_s) at ``count``
+    (with ``every``, those of every ``every``-th block only; start_s and end_s in 25-kHz samples /
+    25000 whatever the board's rate), the clipped flag not set (a board that does not flag it), each
+    frame's CRC made anew."""
     buf, pos = bytearray(src.read_bytes()), 0
     while pos < len(buf):
         assert buf[pos:pos + 2] == b"\xa5\x5a", pos
         kind, t0, ch, n = buf[pos + 3], *struct.unpack_from("<IBxH", buf, pos + 6)
-        if kind == 3 and ch == chan and start_s * FS <= t0 < end_s * FS:
+        if kind == 3 and ch == chan and start_s * FS <= t0 < end_s * FS and (t0 // (n // 2)) % every == 0:
             buf[pos + 11] = 0
             buf[pos + 14:pos + 14 + n] = np.full(n // 2, count, dtype="<u2").tobytes()
             struct.pack_into("<I", buf, pos + 14 + n, zlib.crc32(bytes(buf[pos + 2:pos + 14 + n])))
@@ -98,6 +100,88 @@ def test_a_channel_whose_samples_do_not_move_has_no_signal(tmp_path, count, star
     assert alarms == ["alarm_danger"], out
 
 
+@pytest.mark.parametrize("config", ["", "monitor:\n  baseline: 0.6\n"])
+def test_a_channel_flat_every_other_block_has_no_signal_not_a_failure(tmp_path, config):
+    """Every other block of ch1 pinned at 4095 from 5 s to 9.5 s (an intermittent connector): no
+    quarter is all flat, yet half its blocks say nothing about the machine.  The flat blocks are no
+    observation for the banks, and each decision with a quarter of its blocks flat has no signal,
+    the event naming how many (it read as a FAILURE of the AKF bank, with no signal_lost)."""
+    cap = _pinned(_board(tmp_path), tmp_path / "loose.bin", 1, 5.0, 9.5, COUNT_MAX, every=2)
+    events, sev, out = _replay(tmp_path, cap, RULES + config)
+    said = [(e["kind"], e["message"]) for e in events if e["kind"] in SIGNAL]
+    assert said == [
+        ("signal_lost", "ch1: no signal: 50 of 100 blocks flat (intermittent), every sample at 4095 counts (the "
+         "ADC's rail), for 0.5 s of the decision: a sensor, cable or ADC fault (monitor.flat_signal); severity "
+         "0.00 and the channel's alarms held until it is back"),
+        ("signal_back", said[1][1])], out
+    assert said[1][1] == "ch1: signal back: its samples move again; severity and alarms judged again" if not config \
+        else said[1][1].startswith("ch1: signal back: level "), said
+    assert [i for i, m in enumerate(sev["ch1"]) if m.get("signal_lost")] == [5, 6, 7, 8, 9], sev["ch1"]
+    assert not [e for e in events if e["kind"] in ("failure", "severity_change", "anomaly_onset")], out
+    assert max(m["severity_index"] for m in sev["ch1"]) == 0.0
+    alarms = [e["kind"] for e in events if e["kind"].startswith("alarm_") and "rms/ch1" in e["message"]]
+    assert alarms == ["alarm_danger"], out
+
+
+def test_a_few_flat_blocks_are_no_observation_and_raise_no_alarm(tmp_path):
+    """One block in eight of ch1 at 4095 (fewer than a quarter: not a decision of no signal): its
+    severity is judged on the blocks that move, and the indicator records holding the flat blocks
+    are not judged by the alarms (marked signal_lost; the rail's samples made an accel_rms of 64
+    m/s2: alarm_danger)."""
+    cap = _pinned(_board(tmp_path), tmp_path / "loose.bin", 1, 5.0, 9.5, COUNT_MAX, every=8)
+    rules = "alarms:\n  rules:\n    - {name: rms, indicator: accel_rms, alert: 2, danger: 5}\n"
+    events, sev, out = _replay(tmp_path, cap, rules)
+    assert not [e for e in events if e["kind"] in SIGNAL or e["kind"].startswith(("alarm_", "failure"))], out
+    assert not [m for m in sev["ch1"] if m.get("signal_lost")] and max(m["severity_index"] for m in sev["ch1"]) == 0
+    records = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    marked = [m for t, _, m in records if t == "/cm/ch1/indicators" and m.get("signal_lost")]
+    assert len(marked) == 5 and min(m["accel_rms"] for m in marked) > 5, marked
+
+
+def _stretches(tmp_path: Path, *parts: tuple[str, float, int]) -> Path:
+    """A capture of the simulated healthy board, 2 channels, no tacho, in stretches of (mode, seconds,
+    fs), each with its STATUS, the board's t0 and seq going on."""
+    out, t0, seq = b"", 0, 0
+    for mode, seconds, fs in parts:
+        data = board(mode, seconds, fs=fs, t0=t0, seq=seq, channels=2, tacho=False)
+        out, t0, seq = out + data, t0 + round(seconds * fs), seq + frames(data)
+    cap = tmp_path / "stretches.bin"
+    cap.write_bytes(out)
+    return cap
+
+
+def test_the_flat_time_counts_each_block_at_its_rate(tmp_path):
+    """6.5 s at 25 kHz, then the board's STATUS halves the rate (50 blocks a second): ch1 pinned from
+    6.2 s on.  The decision of 6-7 s holds 30 flat blocks of 10 ms and 25 of 20 ms: 0.8 s (it said
+    55 blocks at the new rate, 1.1 s)."""
+    cap = _pinned(_stretches(tmp_path, ("raw", 6.5, 25_000), ("raw", 6, 12_500)), tmp_path / "dead.bin", 1, 6.2,
+                  1e6, COUNT_MAX)
+    events, sev, out = _replay(tmp_path, cap)
+    said = [(e["kind"], e["message"]) for e in events if e["kind"] in SIGNAL]
+    assert said == [("signal_lost", "ch1: no signal: every sample at 4095 counts (the ADC's rail) for 0.8 s of the "
+                     "decision: a sensor, cable or ADC fault (monitor.flat_signal); severity 0.00 and the channel's "
+                     "alarms held until it is back")], out
+
+
+def test_a_flat_channel_stays_held_while_the_board_sends_rms_frames(tmp_path):
+    """ch1 pinned from 5 s until the board switches to RMS frames at 6.5 s, back to RAW (moving) at
+    10.5 s: the RMS frames show nothing of its samples, so the hold lasts until the RAW blocks move
+    (it said ``signal back: its samples move again`` at the first decision of RMS frames)."""
+    cap = _pinned(_stretches(tmp_path, ("raw", 6.5, 25_000), ("rms", 4, 25_000), ("raw", 4, 25_000)),
+                  tmp_path / "dead.bin", 1, 5.0, 6.5, COUNT_MAX)
+    events, sev, out = _replay(tmp_path, cap)
+    said = [e for e in events if e["kind"] in SIGNAL]
+    assert [(e["kind"], e["message"]) for e in said] == [
+        ("signal_lost", "ch1: no signal: every sample at 4095 counts (the ADC's rail) for 1 s of the decision: a "
+         "sensor, cable or ADC fault (monitor.flat_signal); severity 0.00 and the channel's alarms held until it "
+         "is back"),
+        ("signal_back", "ch1: signal back: its samples move again; severity and alarms judged again")], out
+    lost, back = (e["timestamp"]["sec"] + e["timestamp"]["nsec"] / 1e9 for e in said)
+    assert round(back - lost, 3) == 5.0
+    assert [i for i, m in enumerate(sev["ch1"]) if m.get("signal_lost")] == [5, 6, 7, 8, 9], sev["ch1"]
+    assert not [e for e in events if e["kind"] in ("failure", "severity_change")], out
+
+
 def test_flat_signal_false_turns_it_off_and_a_bad_value_is_one_line(tmp_path):
     cap = _pinned(_board(tmp_path), tmp_path / "dead.bin", 1, 5.0, 9.5, COUNT_MAX)
     events, sev, out = _replay(tmp_path, cap, "monitor:\n  flat_signal: false\n")
@@ -142,11 +226,12 @@ def test_the_simulated_daemon_reads_no_flat_signal(tmp_path):
     assert len([m for t, _, m in msgs if t == "/cm/ch1/severity"]) >= 6
 
 
-def test_the_flat_signal_is_alike_however_the_stream_is_read(tmp_path):
-    """A channel dead at mid-scale, then alive again, read in 997-byte, 64-kB and 1-MiB reads:
-    every topic's messages (not /cm/diagnostics, which tells how the stream was read) are alike,
-    the one signal_lost and signal_back among them."""
-    cap = _pinned(_board(tmp_path, "--tacho"), tmp_path / "dead.bin", 1, 4.6, 9.3, 2048)
+@pytest.mark.parametrize("every", [1, 2])
+def test_the_flat_signal_is_alike_however_the_stream_is_read(tmp_path, every):
+    """A channel dead at mid-scale (or flat every other block), then alive again, read in 997-byte,
+    64-kB and 1-MiB reads: every topic's messages (not /cm/diagnostics, which tells how the stream
+    was read) are alike, the one signal_lost and signal_back among them."""
+    cap = _pinned(_board(tmp_path, "--tacho"), tmp_path / "dead.bin", 1, 4.6, 9.3, 2048, every)
     two = {"channels": [{"name": "ch0"}, {"name": "ch1"}]}
     runs = [by_topic(cap.read_bytes(), read, two) for read in (997, 65_536, 1 << 20)]
     assert runs[0] == runs[1] == runs[2]

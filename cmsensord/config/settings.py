@@ -123,9 +123,10 @@ class MonitorConfig:
     signal_floor: float = setting(0.05, "combined: a decision's level / baseline below this is no "
                                   "signal (sensor fault or machine stopped): severity and alarms held; "
                                   "0: off", ge=0, lt=1)
-    flat_signal: bool = setting(True, "RAW: a quarter of a decision in which each block of a channel "
-                                "is one ADC count (a dead sensor, cut cable or input pinned at a rail) "
-                                "is no signal, with or without a baseline: severity and alarms held")
+    flat_signal: bool = setting(True, "RAW: a block of a channel all one ADC count (a dead sensor, cut "
+                                "cable or input pinned at a rail) is no observation; a decision with a "
+                                "quarter of its blocks so, or a quarter all so, is no signal, with or "
+                                "without a baseline: severity and alarms held")
 
     _RULES: ClassVar[tuple[Rule, ...]] = (greater("r_max", "r_min"),
                                           greater("level_danger", "level_alert"),

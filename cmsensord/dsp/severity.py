@@ -46,11 +46,22 @@ at all after one such: its decision keeps F_a and S_idx as they were
 (``Decision.no_signal``), so a dead sensor does not read as a healed machine, and the
 period the signal goes (or comes back) in, half dead, is not judged either.
 
-Extension (not in the paper), in both modes, selected by ``flat_signal`` (RAW blocks): a
-period with a quarter in which every block of a channel that came is flat (all its samples
-one ADC count: a dead sensor, a cut cable, an input pinned at a rail; a real accelerometer
-through a real ADC always moves by a count or so) has no signal in the same way, with or
-without a baseline: ``Decision.no_signal``, and ``Decision.flat`` says which counts.
+Extension (not in the paper), in both modes, selected by ``flat_signal`` (RAW blocks): a flat
+block (all its samples one ADC count: a dead sensor, a cut cable, an input pinned at a rail; a
+real accelerometer through a real ADC always moves by a count or so) is no evidence about the
+machine: the chain gives it to the banks as no observation (no outlier, no level ratio), as a
+lost one, though it is not counted ``missing``.  A period has no signal in the same way, with or
+without a baseline (``Decision.no_signal``; ``Decision.flat`` says which counts, how many of
+the blocks looked at):
+
+* with a quarter in which every block of a channel that came is flat (the channel dies or
+  comes back in it: ``Decision.flat_quarter``);
+* with flat blocks at least a quarter of the channel's blocks looked at, wherever they lie
+  (intermittent: an input that drops to a rail and back, block by block, as a loose connector;
+  ``Decision.flat_share``);
+* after a period with no signal for flat blocks, with no block of the channel looked at (lost
+  frames, or the board sends RMS frames, whose samples cannot be seen move): nothing shows the
+  samples move again.
 
 Extension (not in the paper), in both modes: a period that lacks more than half of a channel's
 observations (frames lost, a link down, values the board could not have sent) is not judged
@@ -66,7 +77,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HOLD_EVENT_DECISIONS", "AnomalyDecider", "Decision", "level_severity"]
+__all__ = ["HOLD_EVENT_DECISIONS", "NOT_LOOKED", "AnomalyDecider", "Decision", "level_severity"]
 
 #: whole periods in one :meth:`AnomalyDecider.update` call from which they are decided in one
 #: pass (:meth:`AnomalyDecider._decide_many`; the same decisions as one period at a time)
@@ -75,6 +86,10 @@ ONE_PASS_PERIODS = 1
 #: consecutive decisions a flag may be held by the hysteresis alone
 #: (c f_r <= cnt < f_r) before the monitor reports it
 HOLD_EVENT_DECISIONS = 60
+
+#: the flat count of a slot whose block was not looked at for flatness (an RMS frame's value, a
+#: RAW block too short to tell): neither flat nor moving (NaN: looked at, and it moves)
+NOT_LOOKED = -1.0
 
 
 def level_severity(ratio, n: int, alert, danger) -> np.ndarray:
@@ -112,8 +127,11 @@ class Decision:
     no_signal: np.ndarray | None = None  # (C,) combined: no signal in the period, F_a and S_idx held
     quietest: np.ndarray | None = None   # (C,) combined: the lowest level ratio of the period's quarters
     no_data: np.ndarray | None = None    # (C,) more than half the period missing: F_a and S_idx held
-    flat: np.ndarray | None = None       # (C, 3) flat_signal: lowest, highest count of the flat blocks, how many
+    #: (C, 4) flat_signal: lowest, highest count of the flat blocks (NaN: none), how many, of how many looked at
+    flat: np.ndarray | None = None
     flat_quarter: np.ndarray | None = None   # (C,) flat_signal: a quarter of flat blocks (no signal for it)
+    flat_share: np.ndarray | None = None     # (C,) flat_signal: a quarter of the blocks looked at flat (no signal)
+    flat_slots: np.ndarray | None = None     # (period, C) flat_signal: the slots whose block was flat
 
 
 class AnomalyDecider:
@@ -162,6 +180,9 @@ class AnomalyDecider:
         self._came = np.zeros((self.period, n_channels), dtype=bool)   # per slot: an observation came
         self._flat_seen = False                                   # a flat block in the period
         self._flat_quarter = np.zeros(n_channels, dtype=bool)     # the period had a flat quarter
+        self._flat_share = np.zeros(n_channels, dtype=bool)       # ... a quarter of its blocks flat
+        self._unlooked = np.zeros(n_channels, dtype=bool)         # ... no block looked at
+        self._lost_flat = np.zeros(n_channels, dtype=bool)        # the last decision: no signal for flat blocks
 
     def set_period(self, period: int) -> None:
         """Decide every ``period`` slots (the block rate changed): the period in progress keeps the
@@ -196,7 +217,8 @@ class AnomalyDecider:
         outlier: (T, C, n) flags; valid: (T, C) False for missing observations.
         f_r: optional (C,) rotation frequency for decisions in this block (tacho).
         level: (T, C) level ratios y/baseline (combined mode; NaN = missing).
-        flat: (T, C) the count of each flat block (all samples that count), NaN where it moves.
+        flat: (T, C) the count of each flat block (all samples that count), NaN where it moves,
+        :data:`NOT_LOOKED` where the block was not looked at.
         """
         if self.flat_signal is None:
             flat = None
@@ -228,7 +250,7 @@ class AnomalyDecider:
             if flat is not None:
                 self._flat[self.phase:self.phase + take] = part = flat[seg]
                 self._came[self.phase:self.phase + take] = valid[seg]
-                self._flat_seen = self._flat_seen or not np.isnan(part).all()
+                self._flat_seen = self._flat_seen or bool((part >= 0).any())
             elif self.flat_signal is not None:          # slots of no flat block
                 self._came[self.phase:self.phase + take] = False
             self.phase += take
@@ -241,7 +263,7 @@ class AnomalyDecider:
     def _moving(self, flat: np.ndarray) -> bool:
         """No block of ``flat`` is flat and no channel is without signal (the periods may be
         decided in one pass)."""
-        return not self._lost.any() and bool(np.isnan(flat).all())
+        return not self._lost.any() and not bool((flat >= 0).any())
 
     def _all_judged(self, valid: np.ndarray) -> bool:
         """No whole period of ``valid`` (K period, C) lacks more than half a channel's
@@ -256,11 +278,14 @@ class AnomalyDecider:
         transient = self.periods < self.transient_periods
         level, s_level = self._level_part(transient)
         signal_lost = no_data = unjudged = None
-        flat = self._flat_part() if self.flat_signal is not None else None
+        flat, flat_slots = self._flat_part() if self.flat_signal is not None else (None, None)
         if (self.combined or self.flat_signal is not None) and not transient:
-            # no signal: a quiet or flat quarter, or no observation at all while lost
+            # no signal: a quiet or flat quarter, a quarter of the blocks flat, no block looked at while
+            # lost for flat blocks, or no observation at all while lost
             quiet = self._quiet if self.combined else False
-            signal_lost = self._lost = quiet | self._flat_quarter | ((self.missing >= self.period) & self._lost)
+            by_flat = self._flat_quarter | self._flat_share | (self._unlooked & self._lost_flat)
+            signal_lost = self._lost = quiet | by_flat | ((self.missing >= self.period) & self._lost)
+            self._lost_flat = by_flat
         if not transient:
             no_data = self.missing * 2 > self.period
             unjudged = no_data if signal_lost is None else signal_lost | no_data
@@ -287,6 +312,7 @@ class AnomalyDecider:
             held_max=int(self.held.max()), no_signal=signal_lost,
             quietest=self._quietest.copy() if self.combined else None, no_data=no_data, flat=flat,
             flat_quarter=None if flat is None else self._flat_quarter.copy(),
+            flat_share=None if flat is None else self._flat_share.copy(), flat_slots=flat_slots,
         )
         self._last_severity = severity.copy()
         self.cnt[:] = 0
@@ -347,25 +373,32 @@ class AnomalyDecider:
         self._last_severity = s_akf[-1].copy()
         return out
 
-    def _flat_part(self) -> np.ndarray | None:
-        """(C, 3) the lowest and highest count of the period's flat blocks (NaN: none) and how
-        many there were (None: none at all); sets the channels with a flat quarter (every block
-        that came in it flat, one at least, ``flat_signal`` on) in ``_flat_quarter``."""
-        if not self._flat_seen:
-            self._flat_quarter = np.zeros(self.C, dtype=bool)
-            return None
+    def _flat_part(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(C, 4) the lowest and highest count of the period's flat blocks (NaN: none), how many
+        there were and how many blocks were looked at, and (period, C) which slots were flat (None,
+        None: no flat block, and no channel without signal for them).  Sets, with ``flat_signal``
+        on, the channels with a flat quarter (every block that came in it flat, one at least) in
+        ``_flat_quarter``, those whose flat blocks are at least a quarter of the blocks looked at in
+        ``_flat_share``, and those with no block looked at in ``_unlooked``."""
+        C = self.C
+        if not self._flat_seen and not self._lost_flat.any():
+            self._flat_quarter, self._flat_share, self._unlooked = (np.zeros(C, dtype=bool) for _ in range(3))
+            return None, None
         f, came = self._flat, self._came
-        is_flat = came & ~np.isnan(f)
-        moved = came & ~is_flat
-        quarters = [(came[a:b].any(axis=0) & ~moved[a:b].any(axis=0))
+        looked = came & (f != NOT_LOOKED)
+        is_flat = looked & (f >= 0)
+        moved = looked & ~is_flat
+        quarters = [(came[a:b].any(axis=0) & ~moved[a:b].any(axis=0) & is_flat[a:b].any(axis=0))
                     for a, b in _quarters(len(f))]
         assert self.flat_signal is not None
+        n, seen = is_flat.sum(axis=0), looked.sum(axis=0)
         self._flat_quarter = np.any(quarters, axis=0) & self.flat_signal
+        self._flat_share = (n > 0) & (4 * n >= seen) & self.flat_signal
+        self._unlooked = seen == 0
         self._flat_seen = False
-        n = is_flat.sum(axis=0)
         lo = np.where(is_flat, f, np.inf).min(axis=0)
         hi = np.where(is_flat, f, -np.inf).max(axis=0)
-        return np.stack([np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan), n], axis=1)
+        return np.stack([np.where(n > 0, lo, np.nan), np.where(n > 0, hi, np.nan), n, seen], axis=1), is_flat.copy()
 
     def _level_part(self, transient: bool) -> tuple[np.ndarray, np.ndarray]:
         """(level ratio, S_level) of the period; NaN in the paper's mode. The ratio is the

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cmsensord.dsp.severity import NOT_LOOKED
 from cmsensord.monitor.raw import RawBlocks
 
 if TYPE_CHECKING:
@@ -93,14 +94,15 @@ class Held:
         return placed
 
     def take_rows(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None] | None:
-        """The rows held, joined (None: none); their flat counts NaN where a part has none."""
+        """The rows held, joined (None: none); their flat counts :data:`NOT_LOOKED` where a part
+        has none."""
         rows, self.rows, self.n_rows = self.rows, [], 0
         if not rows:
             return None
         if len(rows) == 1:
             return rows[0]
         flat = None if all(r[3] is None for r in rows) else \
-            np.concatenate([np.full(r[1].shape, np.nan) if r[3] is None else r[3] for r in rows])
+            np.concatenate([np.full(r[1].shape, NOT_LOOKED) if r[3] is None else r[3] for r in rows])
         return rows[0][0], np.concatenate([r[1] for r in rows]), np.concatenate([r[2] for r in rows]), flat
 
     def take_blocks(self) -> RawBlocks | None:

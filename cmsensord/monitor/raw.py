@@ -8,7 +8,8 @@ frames can straddle a read).  :meth:`RawInput.blocks` turns ready frames into
 STATUS calibration overridden by the configuration (:mod:`cmsensord.dsp.rms`),
 from which both the severity chain's block RMS and the order chain's samples
 come; with ``monitor.flat_signal``, also each block's count where all its samples
-are that one count (peak-to-peak 0: no signal, :meth:`RawBlocks.flat_counts`).
+are that one count (peak-to-peak 0: no observation for the severity chain and, enough of them, no
+signal: :meth:`RawBlocks.flat_counts`).
 """
 
 from __future__ import annotations

@@ -17,11 +17,15 @@ carry ``severity_akf``, ``severity_level``, ``level_ratio`` and the channel's ``
 A decision with no signal (:class:`~cmsensord.dsp.severity.Decision` ``no_signal``: its level
 below ``monitor.signal_floor`` of the baseline, or, RAW with ``monitor.flat_signal``, blocks
 whose samples are all one ADC count) carries ``signal_lost: true`` in its message, and its
-change is a ``signal_lost`` or ``signal_back`` event naming why.
+change is a ``signal_lost`` or ``signal_back`` event naming why.  With ``monitor.flat_signal``
+a flat block goes to the banks as no observation (it says nothing about the machine), and the
+event says for how many board seconds the blocks were flat, each block at the rate it came at
+(a STATUS can change the rate inside a decision).
 """
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -29,7 +33,7 @@ import numpy as np
 
 from cmsensord.config import NOMINAL_RATE_HZ, ChannelConfig
 from cmsensord.dsp.akf import AkfBank, AkfBlock, bank_r
-from cmsensord.dsp.severity import HOLD_EVENT_DECISIONS, AnomalyDecider, Decision
+from cmsensord.dsp.severity import HOLD_EVENT_DECISIONS, NOT_LOOKED, AnomalyDecider, Decision
 from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.speed_gate import SpeedGate
@@ -88,7 +92,9 @@ class SeverityChain:
         self.trace_i = min(trace_filter, n) - 1
         self.gate = SpeedGate(PENDING_DECISION_SLOTS)   # (outlier, valid[, level ratio]) per slot
         self.rate = fs / block_len
-        self._rate_slot, self._rate_s = 0, 0.0  # the chain slot the rate took over at, and its board second
+        #: (the chain slot a rate took over at, its board second, the rate), oldest first: the rates
+        #: of the decision in progress's slots on
+        self._rates: list[tuple[int, float, float]] = [(0, 0.0, self.rate)]
         self.start_slot: int | None = None      # the block clock's slot of this chain's first observation
         self._start_s = 0.0
         #: the run's ADC seconds before a block clock slot (the clock's, each rate's stretch at its rate)
@@ -126,14 +132,25 @@ class SeverityChain:
         ``decision_period_s`` of the new rate's observations from the period in progress on
         (:meth:`AnomalyDecider.set_period`), told in :attr:`notes` as at the start."""
         slot = self.decider.slot
-        self._rate_slot, self._rate_s = slot, self._seconds(slot)
+        seconds = self._seconds(slot)
+        first = bisect.bisect_right(self._rates, slot - self.decider.phase, key=lambda r: r[0]) - 1
         self.rate = fs / block_len
+        self._rates = [*self._rates[max(first, 0):], (slot, seconds, self.rate)]
         self.decider.set_period(max(1, round(self.channels[0].monitor.decision_period_s * self.rate)))
         self.notes += self._rate_notes(fs, block_len)
 
     def _seconds(self, slot: int) -> float:
-        """The board seconds of the chain's first ``slot`` slots."""
-        return self._rate_s + (slot - self._rate_slot) / self.rate
+        """The board seconds of the chain's first ``slot`` slots (a slot of the decision in
+        progress or later)."""
+        start, seconds, rate = self._rates[max(0, bisect.bisect_right(self._rates, slot, key=lambda r: r[0]) - 1)]
+        return seconds + (slot - start) / rate
+
+    def _slots_seconds(self, slots: np.ndarray) -> float:
+        """The board seconds of the chain slots ``slots`` (of the decision just made or later),
+        each at the rate its block came at."""
+        starts = np.array([r[0] for r in self._rates])
+        rates = np.array([r[2] for r in self._rates])
+        return float((1.0 / rates[np.maximum(np.searchsorted(starts, slots, side="right") - 1, 0)]).sum())
 
     def checked_f_r(self, f_r: np.ndarray) -> np.ndarray:
         """The tacho's f_r, or the configured one where the tacho's is not below the observations
@@ -157,21 +174,25 @@ class SeverityChain:
         every output (for the AKF trace; else None: only the flags are formed)."""
         y = y / self.baseline
         out = None
+        flat_on = self.decider.flat_signal
+        seen = valid                            # flat blocks are no observation for the banks
+        if flat_on is not None and flat is not None and (dead := (flat >= 0) & flat_on).any():
+            seen = valid & ~dead
         if full:
-            out = self.bank.process(y, valid)
+            out = self.bank.process(y, seen)
             outlier = out.outlier
         else:
-            outlier = self.bank.outliers(y, valid)[0]
+            outlier = self.bank.outliers(y, seen)[0]
         if self.gate.end is None:
             self.gate.restart(first_slot)
         if self.start_slot is None:
             self.start_slot = first_slot
             self._start_s = self.adc_at(first_slot)  # the run's ADC seconds at the chain's start
         rows = [outlier, valid]
-        if self.decider.flat_signal is not None:
-            rows.append(np.full(y.shape, np.nan) if flat is None else flat)
+        if flat_on is not None:
+            rows.append(np.full(y.shape, NOT_LOOKED) if flat is None else flat)
         if self.combined is not None:
-            rows.append(np.where(self.combined, y, np.nan))
+            rows.append(np.where(self.combined & seen, y, np.nan))
         self.gate.push(*rows)
         return y, out
 
@@ -243,10 +264,16 @@ class SeverityChain:
 
     def mark_no_signal(self, records: list, d: Decision) -> list:
         """``records`` (the indicator records that go out with decision ``d``), those of a channel
-        whose decision has no signal marked ``signal_lost: true`` (the alarms do not judge them:
-        the record the signal goes in is held with its decision)."""
-        if d.no_signal is not None and d.no_signal.any():
-            lost = {name for name, x in zip(self._names, d.no_signal.tolist()) if x}
+        whose decision has no signal, or a flat block (``monitor.flat_signal``: fewer than make it
+        one of no signal, but their samples, a rail's, would count in the record's waveform), marked
+        ``signal_lost: true`` (the alarms do not judge them: the record the signal goes in is held
+        with its decision)."""
+        lost_c = None if d.no_signal is None else d.no_signal
+        if d.flat is not None and self.decider.flat_signal is not None:
+            flat = (d.flat[:, 2] > 0) & self.decider.flat_signal
+            lost_c = flat if lost_c is None else lost_c | flat
+        if lost_c is not None and lost_c.any():
+            lost = {name for name, x in zip(self._names, lost_c.tolist()) if x}
             for m in records:
                 if getattr(m, "schema", None) == "indicators" and m.msg.get("channel") in lost:
                     m.msg["signal_lost"] = True
@@ -258,7 +285,7 @@ class SeverityChain:
         has again."""
         name, ratio = self.channels[c].name, float(d.level[c])
         lost = self.no_signal[c] = self.views[c].no_signal = bool(d.no_signal is not None and d.no_signal[c])
-        if lost and d.flat_quarter is not None and d.flat_quarter[c]:
+        if lost and d.flat_quarter is not None and d.flat_share is not None and (d.flat_quarter[c] or d.flat_share[c]):
             return self._flat_event(c, d, stamp, sev)
         if lost and d.quietest is not None:
             ratio = float(d.quietest[c])        # the quarter the signal went in
@@ -277,16 +304,21 @@ class SeverityChain:
 
     def _flat_event(self, c: int, d: Decision, stamp: int, sev: float) -> Event:
         """``signal_lost`` of channel ``c``, whose decision has flat blocks (``monitor.flat_signal``):
-        the count they sit at (the ADC's rail: 0 or its full scale) and for how long."""
+        the count they sit at (the ADC's rail: 0 or its full scale), for how long (each block at its
+        rate), and, with no quarter all flat, how many of the blocks looked at were (intermittent)."""
         name = self.channels[c].name
-        lo, hi, n = d.flat[c].tolist() if d.flat is not None else (0.0, 0.0, 0.0)
+        lo, hi, n, seen = d.flat[c].tolist() if d.flat is not None else (0.0, 0.0, 0.0, 0.0)
         if lo == hi:
             rail = " (the ADC's rail)" if lo in (0, COUNT_MAX) else " (no noise at all)"
             what = f"every sample at {lo:.0f} counts{rail}"
         else:
             what = f"every block flat, at {lo:.0f} to {hi:.0f} counts"
+        if d.flat_quarter is not None and not d.flat_quarter[c]:
+            what = f"{n:.0f} of {seen:.0f} blocks flat (intermittent), {what.removeprefix('every block flat, ')},"
+        slots = d.flat_slots
+        secs = 0.0 if slots is None else self._slots_seconds(d.slot - len(slots) + np.flatnonzero(slots[:, c]))
         return Event("signal_lost", name, (
-            f"{name}: no signal: {what} for {n / self.rate:.3g} s of the decision: a sensor, cable or ADC "
+            f"{name}: no signal: {what} for {secs:.3g} s of the decision: a sensor, cable or ADC "
             f"fault (monitor.flat_signal); severity {sev:.2f} and the channel's alarms held until it is back"),
             stamp, {"severity_index": sev})
 

@@ -105,8 +105,9 @@ def indicators_schema(time: dict[str, Any], obj: Callable[..., dict]) -> dict[st
                                            "or overlapping another line's of the bearing"},
             "signal_lost": {"type": "boolean",
                             "description": "true when the severity decision this record goes out with has no "
-                                           "signal (monitor.signal_floor, monitor.flat_signal): the alarms "
-                                           "do not judge it"},
+                                           "signal (monitor.signal_floor, monitor.flat_signal), or a block of "
+                                           "the channel whose samples are all one count (monitor.flat_signal): "
+                                           "the alarms do not judge it"},
         },
         ["timestamp", "channel", "mode", "interval_s", "missing_fraction"],
     )
