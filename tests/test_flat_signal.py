@@ -132,6 +132,10 @@ def test_a_few_flat_blocks_are_no_observation_and_raise_no_alarm(tmp_path):
     rules = "alarms:\n  rules:\n    - {name: rms, indicator: accel_rms, alert: 2, danger: 5}\n"
     events, sev, out = _replay(tmp_path, cap, rules)
     assert not [e for e in events if e["kind"] in SIGNAL or e["kind"].startswith(("alarm_", "failure"))], out
+    assert [e["message"] for e in events if e["kind"] == "flat_blocks"] == [
+        "ch1: 12 of 100 blocks flat (intermittent: a loose connector or cable?), at 4095 counts: left out of the "
+        "severity, and the channel's indicator records holding them are not judged by the alarms; a quarter of a "
+        "decision's blocks flat is no signal"], out
     assert not [m for m in sev["ch1"] if m.get("signal_lost")] and max(m["severity_index"] for m in sev["ch1"]) == 0
     records = read_messages(next((tmp_path / "logs").glob("*.mcap")))
     marked = [m for t, _, m in records if t == "/cm/ch1/indicators" and m.get("signal_lost")]

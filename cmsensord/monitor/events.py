@@ -73,7 +73,7 @@ LOG_LEVEL = {
     "alarm_restored": logging.WARNING, "alarm_not_restored": logging.WARNING,
     "alarm_state_error": logging.WARNING, "signal_lost": logging.WARNING, "signal_back": logging.WARNING,
     "lines_unresolved": logging.WARNING, "band_above_nyquist": logging.WARNING,
-    "band_too_narrow": logging.WARNING,
+    "band_too_narrow": logging.WARNING, "flat_blocks": logging.WARNING,
 }
 
 #: kinds never rate-limited: made once, in pairs, or at most once per decision period

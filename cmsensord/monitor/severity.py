@@ -103,6 +103,7 @@ class SeverityChain:
         self.notes: list[Event] = self._rate_notes(fs, block_len)  # events for the processor to emit
         self._tacho_too_fast = np.zeros(len(channels), dtype=bool)
         self.no_signal = [False] * len(channels)   # the last decision had no signal (held)
+        self.flat_said = [False] * len(channels)   # a flat_blocks event said since a decision without
         # what every severity message of a channel repeats: its name, topic and the bank's R
         self._names = [ch.name for ch in channels]
         self._topics = [severity_topic(ch.name) for ch in channels]
@@ -258,6 +259,7 @@ class SeverityChain:
                 v.timeline.add(t_s, sev)
             if d.no_signal is not None and bool(d.no_signal[c]) != self.no_signal[c]:
                 out.append(self._signal_event(c, d, stamp, sev))
+            out += self._flat_note(c, d, stamp)
             if held or anomaly != prev[c] or sev != prev_sev[c]:    # else no event (no failure change)
                 out += self._note(c, d, msg, stamp, prev[c], prev_sev[c])
         return out
@@ -301,6 +303,24 @@ class SeverityChain:
                 f"stopped; severity {sev:.2f} and the channel's alarms held until it is back"), stamp, what)
         return Event("signal_back", name, f"{name}: signal back: level {ratio:.3g} x the healthy baseline; "
                      "severity and alarms judged again", stamp, what)
+
+    def _flat_note(self, c: int, d: Decision, stamp: int) -> list[Event]:
+        """A ``flat_blocks`` warning when channel ``c``'s decision has flat blocks, fewer than make
+        it one of no signal, and none was said since a decision without (once an episode: the
+        records holding them go unjudged by the alarms, which should not pass unsaid)."""
+        counts = None if d.flat is None or (d.no_signal is not None and d.no_signal[c]) else d.flat[c].tolist()
+        flat = counts is not None and counts[2] > 0
+        if counts is None or not flat or self.flat_said[c]:
+            self.flat_said[c] = flat
+            return []
+        self.flat_said[c] = True
+        name = self.channels[c].name
+        lo, hi, n, seen = counts
+        at = f"{lo:.0f} counts" if lo == hi else f"{lo:.0f} to {hi:.0f} counts"
+        return [Event("flat_blocks", name, (
+            f"{name}: {n:.0f} of {seen:.0f} blocks flat (intermittent: a loose connector or cable?), at {at}: "
+            "left out of the severity, and the channel's indicator records holding them are not judged by "
+            "the alarms; a quarter of a decision's blocks flat is no signal"), stamp, {"count": int(n)})]
 
     def _flat_event(self, c: int, d: Decision, stamp: int, sev: float) -> Event:
         """``signal_lost`` of channel ``c``, whose decision has flat blocks (``monitor.flat_signal``):

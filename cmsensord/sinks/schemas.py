@@ -117,6 +117,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "failure_clear",
     "signal_lost",
     "signal_back",
+    "flat_blocks",
     "frames_lost",
     "frames_repeated",
     "link_lost",
