@@ -159,6 +159,14 @@ def main() -> int:
     ap.add_argument("--axis", choices=tuple(AXES), default="horizontal",
                     help="the FEMTO accelerometer (the rules were developed on the horizontal one)")
     args = ap.parse_args()
+    need = [args.data / "femto" / f"Bearing{b}.npz" for b in args.bearings]
+    need += [] if args.no_ims else [args.data / "ims"]
+    missing = [p for p in need if not p.exists()]
+    if missing:
+        print(f"bench_realdata: {missing[0]}: no such file or directory: give --data DIR holding femto/Bearing<n>.npz "
+              "and ims/*.mat (the development tree's realdata; docs/references.md says where the sets come from)",
+              file=sys.stderr)
+        return 2
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench_realdata_") as tmp:
         work = Path(tmp)
