@@ -23,6 +23,8 @@ EMPTY = "empty file (0 bytes): no MCAP data"
 #: bytes of the cut record that :func:`cut_text` reads: its opcode and length, a chunk's times
 CUT_HEAD = 9 + 16
 _OP_CHUNK = 0x06
+#: a chunk whose messages span less than this [ns] holds one moment's (a capture, a decision)
+MOMENT_NS = 50_000_000
 
 
 def cut_text(head: bytes, pos: int, size: int) -> str:
@@ -41,8 +43,12 @@ def cut_text(head: bytes, pos: int, size: int) -> str:
     if len(head) < CUT_HEAD:
         return f"{at}, inside the chunk at byte {pos:,} ({part}; all its messages lost), no footer"
     first, last = struct.unpack_from("<QQ", head, 9)
-    span = f"{(last - first) / 1e9:.1f} s" if last >= first else "an unknown span"
-    return f"{at}, inside the chunk at byte {pos:,} ({part}; its messages over {span} of log time lost), no footer"
+    if 0 <= last - first < MOMENT_NS:
+        lost = "its messages of one moment of log time lost (a capture's waveform and spectra, say)"
+    else:
+        lost = f"its messages over {(last - first) / 1e9:.1f} s of log time lost" if last >= first else \
+            "its messages over an unknown span of log time lost"
+    return f"{at}, inside the chunk at byte {pos:,} ({part}; {lost}), no footer"
 
 
 def short_text(head: bytes) -> str:
