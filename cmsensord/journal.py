@@ -31,6 +31,8 @@ import os
 import sys
 from typing import TextIO
 
+from cmsensord.terminal_bar import erase_line
+
 __all__ = ["VERBOSE", "PRIORITY", "under_journal", "setup_logging", "error_line", "JournalStream"]
 
 #: between INFO and DEBUG: what ``-v`` adds to the daemon's log
@@ -105,6 +107,14 @@ class _PrefixFormatter(logging.Formatter):
         return "\n".join(prefix + line for line in text.split("\n"))
 
 
+class _BarHandler(logging.StreamHandler):
+    """Records to a stream, each on a line of its own: a progress bar's line is erased first."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        erase_line()
+        super().emit(record)
+
+
 def level_for(verbose: int, daemon: bool) -> int:
     """The logging level for ``verbose`` (the count of ``-v``) of the daemon or a subcommand."""
     if daemon:
@@ -117,7 +127,7 @@ def setup_logging(verbose: int, daemon: bool = True) -> bool:
     docstring); under the journal with priority prefixes, and sys.stderr wrapped in a
     :class:`JournalStream`. Returns whether stderr is the journal."""
     journal = under_journal()
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _BarHandler(sys.stderr)
     fmt = "%(levelname)s %(message)s"
     handler.setFormatter(_PrefixFormatter(fmt) if journal else logging.Formatter(fmt))
     root = logging.getLogger()

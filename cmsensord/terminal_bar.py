@@ -1,14 +1,29 @@
 """One-line progress bars for long work in a command: ``label [#####...]  45.0%`` on stderr
 when it is a terminal, silent otherwise. :class:`Bar` (an import, sending a replay's MQTT
 backlog) erases its line when done; :class:`Progress` (reading a capture) adds the rate in
-MB/s and keeps its line."""
+MB/s and keeps its line. A log record written while a bar shows starts on a line of its own
+(:func:`erase_line`, called by the log's handler)."""
 
 from __future__ import annotations
 
 import sys
 import time
 
-__all__ = ["Bar", "Progress"]
+__all__ = ["Bar", "Progress", "erase_line"]
+
+#: the bar whose line is on the terminal now (None: none)
+_shown: Bar | None = None
+
+
+def erase_line() -> None:
+    """Erase the line of the bar on the terminal, if any, so that a line written next (a log
+    record's) starts at the line's start; the bar draws itself again at its next call."""
+    global _shown
+    bar, _shown = _shown, None
+    if bar is not None and bar.enabled:
+        bar.stream.write("\r\033[K")
+        bar.stream.flush()
+        bar._last = 0.0
 
 
 class Bar:
@@ -32,8 +47,13 @@ class Bar:
         frac = min(1.0, done / self.total)
         self.stream.write(f"\r{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%{suffix}")
         self.stream.flush()
+        global _shown
+        _shown = self
 
     def close(self) -> None:
+        global _shown
+        if _shown is self:
+            _shown = None
         if self.enabled:
             self.stream.write("\r\033[K")
             self.stream.flush()
@@ -55,6 +75,9 @@ class Progress(Bar):
 
     def close(self) -> None:
         """End the bar's line (once)."""
+        global _shown
+        if _shown is self:
+            _shown = None
         if self.enabled:
             self.stream.write("\n")
             self.stream.flush()

@@ -41,6 +41,24 @@ def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
     assert comparable(a) == comparable(b)
 
 
+def test_a_warning_during_a_replay_on_a_terminal_starts_a_line_of_its_own(tmp_path):
+    """The whirl run-up's tacho passes the observations per decision at 117 s of 180: its
+    decision_rule warning came on the bar's line (`... 117 sWARNING decision_rule: ...`); the
+    bar's line is erased first, and the bar drawn again after it."""
+    cap = tmp_path / "whirl.bin"
+    p = subprocess.run([sys.executable, "-m", "firmware_sim", "--scenario", "whirl", "--mode", "raw", "--tacho",
+                        "--out", str(cap)], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    status, out = on_terminal([sys.executable, "-m", "cmsensord", "replay", str(cap), "--out", str(tmp_path / "o")],
+                              stdout=subprocess.DEVNULL)
+    text = out.decode(errors="replace")
+    assert status == 0, text
+    warning = text.index("WARNING decision_rule: ch0: tacho f_r")
+    assert "replay whirl.bin [" in text[:warning], text             # a bar was on the line
+    assert text[warning - 4:warning] == "\r\x1b[K", text[:warning + 20]
+    assert "replay whirl.bin [" in text[warning:], text              # and drawn again after
+
+
 def per_topic(messages):
     """comparable() messages grouped by topic (and order-tracker method), each in file order:
     in RAW mode with a tacho, how the topics interleave follows the reads; each topic's own
