@@ -28,8 +28,8 @@ def raw_frames(n_channels: int, seconds: float, seed: int) -> list[Frame]:
 
 
 def with_faults(frames: list[Frame], rng: np.random.Generator) -> list[Frame]:
-    """Seq gaps (frames left out), a stuck t0, RMS frames of the other mode, a reset (t0 back)
-    and a jump far ahead, each here and there."""
+    """Seq gaps (frames left out), a stuck t0, RMS frames of the other mode, a reset (t0 back),
+    a jump far ahead and RAW frames off the block grid (strays), each here and there."""
     out: list[Frame] = []
     shift = 0
     rms = iter_frames(encode_rms(0, 0, [1.0]))[0][0]
@@ -46,6 +46,8 @@ def with_faults(frames: list[Frame], rng: np.random.Generator) -> list[Frame]:
         out.append(f)
         if k > 200 and r > 0.997:
             out.append(f if f.type is FrameType.RAW else rms._replace(t0_unwrapped=f.t0_unwrapped))
+        elif k > 200 and r > 0.994 and f.type is FrameType.RAW:
+            out.append(f._replace(t0_unwrapped=f.t0_unwrapped + int(rng.integers(1, 250))))
     return out
 
 
@@ -83,6 +85,7 @@ def test_a_calls_frames_checked_in_one_step_give_the_messages_of_checks_one_by_o
     assert sum(took) > 0.5 * len(took) and not all(took)    # most calls in one step, some not
     assert got == ref and counts == ref_counts
     assert ref_counts.get("time_base", 0) >= 2 and ref_counts.get("frames_lost", 0) > 0
+    assert "a stray frame: the time base is kept" in ref
     assert "/cm/ch0/orders" in ref
 
 

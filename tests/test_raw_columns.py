@@ -90,6 +90,39 @@ def test_raw_input_reads_a_batch_as_it_reads_its_frames(C, with_status):
             same_blocks(g[4], r[4])
 
 
+@pytest.mark.parametrize("C", [1, 3])
+def test_raw_input_drops_the_same_stray_frames_off_the_grid_from_a_batch_as_from_its_frames(C):
+    """The frames above with RAW frames off the block grid here and there (before, among or after a block's
+    frames, a few samples or most of a block off), read in two parts against a block clock: a batch and its
+    frames give the same frames, the same strays dropped and the same events."""
+    rng = np.random.default_rng(10 + C)
+    st, dropped = status(C), 0
+    for trial in range(120):
+        frames = raw_frames(rng, C, trial)
+        for _ in range(int(rng.integers(0, 4))):
+            if frames:
+                i = int(rng.integers(0, len(frames)))
+                f = frames[i]
+                t = f.t0_unwrapped + int(rng.integers(-L + 1, L))
+                frames.insert(int(rng.integers(0, len(frames) + 1)), f._replace(t0=t, t0_unwrapped=t))
+        if not frames:
+            continue
+        cut = int(rng.integers(0, len(frames) + 1))
+        got, ref = [], []
+        for as_batch, res in ((True, got), (False, ref)):
+            raw, clock = RawInput(default_config(C)), BlockClock()
+            clock.set_rate(25000, L)
+            clock.anchor(frames[0].t0_unwrapped, 0)
+            for part in (frames[:cut], frames[cut:]):
+                raw.add(FrameBatch.of(part, _make) if as_batch else part)
+                for final in (False, True):
+                    ready, CC, events = raw.ready(st, final, clock)
+                    res.append((list(ready), CC, events, raw.strays))
+        assert got == ref
+        dropped += ref[-1][-1]
+    assert dropped > 20
+
+
 def tacho_frames(rng: random.Random, n: int) -> list[Frame]:
     """TACHO frames of one input (and a few of another) at 1720 rpm, ppr 1, with steps back,
     repeats and lost frames (random_t0), one malformed payload."""

@@ -322,3 +322,43 @@ def test_a_reset_into_raw_with_a_tacho_and_back_gives_the_same_messages_at_any_r
                          (13_000_000_000, "anomaly_onset", "ch0")]
     assert [(s, m) for s, k, m in told if k == "time_base"][1][0] == 16_000_000_000
     assert sum(m["valid"] for _, m in runs[0]["/cm/ch0/orders"]) == 59
+
+
+def off_grid(data: bytes, strays: dict[int, tuple[str, int]]) -> bytes:
+    """``data`` with a RAW frame of channel 0 (counts of garbage) under a t0 off the block grid at each block k of
+    ``strays``: (where, off) puts it ``off`` samples past block k's t0, ``after`` the block's RAW frames (of 2
+    channels), ``between`` its channels 0 and 1, or ``before`` them; the frames numbered on (no seq gap)."""
+    rng = np.random.default_rng(5)
+    frames = []
+    for f in Decoder().feed(data):
+        where, off = strays.get(f.t0 // 250, ("", 0)) if f.type == FrameType.RAW else ("", 0)
+        stray = (FrameType.RAW, f.t0 + off, 0, 0, rng.integers(0, 4096, 250).astype("<u2").tobytes())
+        frames += [stray] * (where == "before" and f.chan == 0) + [(f.type, f.t0, f.chan, f.flags, f.payload)]
+        frames += [stray] * (where == "between" and f.chan == 0 or where == "after" and f.chan == 1)
+    return b"".join(encode_frame(kind, seq & 0xFFFF, *rest) for seq, (kind, *rest) in enumerate(frames))
+
+
+def test_stray_raw_frames_off_the_grid_give_the_boards_messages_at_any_read_size():
+    """12 s of a 2-channel RAW board with a tacho and valid-CRC RAW frames of garbage off the block grid: half a
+    block past a block's t0 after its frames, 3 samples before it between its channels, half a block past it
+    before them (ahead of the block's own frames): each is dropped with its decode_error at every read size,
+    and every other topic is the board's without them (a frame a call, about, too, as live).  Guards against
+    the blocks it splits or precedes being taken in two parts at some read sizes, and each re-anchoring the
+    time base."""
+    clean = board("raw", 12, channels=2)
+    strays = {150: ("after", 125), 350: ("between", -3), 550: ("before", 125)}
+    data = off_grid(clean, strays)
+    runs = same_at_every_read_size(data)
+    one = by_topic(data, 300)                           # a RAW frame a call, about
+    assert one == runs[0]
+    ref = by_topic(clean, READS[0])
+    assert {t: m for t, m in runs[0].items() if t not in ("/cm/events", "/cm/log")} == \
+        {t: m for t, m in ref.items() if t not in ("/cm/events", "/cm/log")}
+    said = [m["message"] for _, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+    assert said == [
+        "RAW frame of channel 0 at t0 37625 dropped: t0 off the block grid by +125 sample(s) and in block 37500, "
+        "the newest block taken (a stray frame: the time base is kept)",
+        "RAW frame of channel 0 at t0 87497 dropped: t0 off the block grid by -3 sample(s) and in block 87250, "
+        "behind the newest block 87500 (a stray frame: the time base is kept)",
+        "RAW frame of channel 0 at t0 137625 dropped: t0 off the block grid by +125 sample(s) and in block 137500, "
+        "which has frames on the grid (a stray frame: the time base is kept)"]

@@ -399,7 +399,7 @@ class Processor(Figures):
     def _flush_raw(self, frames: Sequence[Frame], final: bool = False) -> None:
         """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
         self.raw.add(frames)
-        ready, C, events = self.raw.ready(self.setup.status, final)
+        ready, C, events = self.raw.ready(self.setup.status, final, self.clock)
         self._out(events)
         if not ready or not self.setup.ready(C):
             return

@@ -16,14 +16,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from itertools import compress
 from operator import attrgetter, lt
 
 import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.dsp.rms import physical_rms, rows_physical
-from cmsensord.frame_batch import FrameBatch, Pending
+from cmsensord.frame_batch import Columns, FrameBatch, Pending
+from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import Event
+from cmsensord.monitor.raw_grid import grid_of, hold_from, strays
 from cmsensord.protocol import COUNT_MAX, Frame, Status
 
 #: a field of every frame of a batch, in one C-level pass (map) rather than a generator
@@ -141,6 +144,7 @@ class RawInput:
         self.cfg = cfg
         self.waiting = Pending()        # RAW frames in order (lists, or batches kept as columns)
         self.dropped = 0
+        self.strays = 0                 # RAW frames off the block grid dropped (:mod:`.raw_grid`)
         self._calibrated: tuple[Status | None, np.ndarray, np.ndarray] | None = None
         #: look for flat blocks (monitor.flat_signal of any channel)
         self.flat = any(ch.monitor.flat_signal for ch in cfg.channels) if cfg.channels else cfg.monitor.flat_signal
@@ -151,9 +155,13 @@ class RawInput:
     def _overrides_complete(self) -> bool:
         return all(ch.scale is not None and ch.offset is not None for ch in self.cfg.channels)
 
-    def ready(self, status: Status | None, final: bool) -> tuple[Sequence[Frame], int, list[Event]]:
+    def ready(self, status: Status | None, final: bool,
+              clock: BlockClock | None = None) -> tuple[Sequence[Frame], int, list[Event]]:
         """The frames that can be converted now and the board's channel count C (with
-        ``final``, also the newest block's however many channels came)."""
+        ``final``, also the newest block's however many channels came).  With the block
+        ``clock``, stray frames off its grid are dropped, each with a ``decode_error`` event at
+        its block's stamp (:mod:`.raw_grid`)."""
+        grid = None if clock is None else grid_of(clock)
         if not self.waiting:
             return [], 0, []
         frames = self.waiting.joined()
@@ -186,10 +194,31 @@ class RawInput:
             if len(frames) - k > 1:             # the newest block: from a channel that came again
                 tail = cols.chan[k:].tolist() if cols is not None else list(map(_CHAN, frames[k:]))
                 k += block_starts([0] * len(tail), tail)[-1]     # one t0: where a channel came again
-            if len(frames) - k < C:
+            if len(frames) - k >= C:
+                k = len(frames)
+            held = None if grid is None else hold_from(*self._t0_chan(frames, cols), C, grid)
+            if held is not None:                # a block with a frame off the grid waits for its others
+                k = held
+            if k < len(frames):
                 frames, rest = frames[:k], frames[k:]
                 self.waiting.extend(rest)
-        return frames, C, []
+        if grid is None or not frames:
+            return frames, C, []
+        keep, events = strays(*self._t0_chan(frames, frames.cols if type(frames) is FrameBatch else None),
+                              grid, clock.stamp_ns if clock is not None else None)
+        if keep is not None:
+            self.strays += len(keep) - int(keep.sum())
+            frames = frames.take(np.flatnonzero(keep)) if type(frames) is FrameBatch \
+                else list(compress(frames, keep.tolist()))
+        return frames, C, events
+
+    @staticmethod
+    def _t0_chan(frames: Sequence[Frame], cols: Columns | None) -> tuple[np.ndarray, np.ndarray]:
+        """The frames' unwrapped t0 and channels as int64 arrays (``cols``: a batch's columns)."""
+        if cols is not None:
+            return cols.t0_unwrapped, cols.chan
+        return (np.fromiter(map(_T0, frames), dtype=np.int64, count=len(frames)),
+                np.fromiter(map(_CHAN, frames), dtype=np.int64, count=len(frames)))
 
     def blocks(self, frames: Sequence[Frame], C: int, L: int, status: Status | None,
                stamp_ns: Callable[[int], int] | None = None) -> tuple[RawBlocks | None, list[Event]]:
