@@ -93,12 +93,12 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
                 "calibrate", f"{name}.f_r",
                 f"{f_r:.4g} Hz must be below the {period} observations per decision "
                 f"({obs.rate_hz:.4g} blocks/s x decision_period_s {mon.decision_period_s:g}); {advice}")
-        _long_enough(obs, c, period)
         if name in obs.no_signal:
             raise CmsensordError(
                 f"calibrate: channel {name}: no signal in the healthy period: {obs.no_signal[name]}: nothing to "
                 "learn; choose a period where it works, or leave it out (import --channels, or a --config "
                 "BASE.yaml listing the channels to learn)")
+        _long_enough(obs, c, period)
         fy = faulty.y[:, faulty.names.index(name)] if faulty is not None and name in faulty.names else None
         alert = None if mon.severity == "paper" else mon.level_alert
         try:

@@ -78,11 +78,16 @@ def _quiet(logger: logging.Logger):
 
 
 class _Collect:
+    """The observations the banks watch, NaN where none came or the block was flat (no
+    observation of the machine), and where none came."""
+
     def __init__(self) -> None:
         self.blocks: list[tuple[int, np.ndarray]] = []
+        self.lost: list[np.ndarray] = []
 
-    def __call__(self, first_slot: int, y: np.ndarray, valid: np.ndarray) -> None:
-        self.blocks.append((first_slot, np.where(valid, y, np.nan)))
+    def __call__(self, first_slot: int, y: np.ndarray, valid: np.ndarray, seen: np.ndarray) -> None:
+        self.blocks.append((first_slot, np.where(seen, y, np.nan)))
+        self.lost.append(~valid)
 
 
 def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool = True,
@@ -109,7 +114,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     if not collect.blocks:
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
-    y = np.concatenate([b for _, b in collect.blocks])
+    y, lost = np.concatenate([b for _, b in collect.blocks]), np.concatenate(collect.lost)
     total = y.shape[0] / rate
     first = int(np.floor(min(_seconds(from_s, total), total) * rate))
     last = y.shape[0] if to_s is None else int(np.floor(min(_seconds(to_s, total), total) * rate))
@@ -126,31 +131,32 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
-                        notes=tuple(set_lines) + _window_notes(y[first:last], rate, total, to_s)
+                        notes=tuple(set_lines) + _window_notes(lost[first:last], rate, total, to_s)
                         + _unresolved(sink),
                         settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board,
                         capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None,
                         no_signal=_no_signal(sink, proc, first / rate, last / rate))
 
 
-def _window_notes(y: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:
+def _window_notes(lost: np.ndarray, rate: float, total: float, to_s: float | None) -> tuple[str, ...]:
     """A line when ``--to`` is past the capture's end, and one on the observations the window
-    misses (blocks the board lost, or an import left out)."""
+    misses (``lost``: blocks the board lost, or an import left out)."""
     notes = []
     if to_s is not None and not isinstance(to_s, Percent) and to_s > total + 1.0 / rate:
         notes.append(f"--to {to_s:g} is past the capture's end ({total:.1f} board s): the healthy period ends there")
-    missing = int(np.count_nonzero(np.isnan(y).any(axis=1)))
+    missing = int(np.count_nonzero(lost.any(axis=1)))
     if missing:
-        notes.append(f"the healthy period misses {missing / rate:.1f} s of its {y.shape[0] / rate:.1f} s (blocks the "
-                     f"board lost, or the import left out): learned from the rest")
+        notes.append(f"the healthy period misses {missing / rate:.1f} s of its {lost.shape[0] / rate:.1f} s "
+                     "(blocks the board lost, or the import left out): learned from the rest")
     return tuple(notes)
 
 
 def _unresolved(sink: ListSink) -> tuple[str, ...]:
     """The ``lines_unresolved`` events of the replay (each once: bearing lines the envelope
-    spectrum's bins do not resolve, so the site file has no baseline of them)."""
+    spectrum's bins do not resolve, so the site file has no baseline of them), and its
+    ``flat_blocks`` ones (blocks not learned from)."""
     return tuple(m["message"] for topic, _, m in sink.messages
-                 if topic == TOPIC_EVENTS and m.get("kind") == "lines_unresolved")
+                 if topic == TOPIC_EVENTS and m.get("kind") in ("lines_unresolved", "flat_blocks"))
 
 
 def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,

@@ -79,8 +79,8 @@ class Processor(Figures):
     ``auto_channels``: the channel list follows the board (the first RMS frame's
     C) instead of the configuration (used when the file lists no channels).
     ``diagnostics``: callable returning extra fields for ``/cm/diagnostics``
-    (queue depth, drops, lag) — supplied by the live loop.  ``observe``: called with
-    (first_slot, y, valid) of each block of observations before the banks (commissioning).
+    (queue depth, drops, lag) — supplied by the live loop.  ``observe``: called with (first_slot,
+    y, valid, seen: valid and not flat) of each block of observations before the banks.
     """
 
     def __init__(self, cfg: Config, sink, *, auto_channels: bool = False,
@@ -88,9 +88,9 @@ class Processor(Figures):
                  diagnostics: Callable[[], dict] | None = None,
                  link_counters: Callable[[], dict] | None = None,
                  on_event: Callable[[dict], None] | None = None,
-                 observe: Callable[[int, np.ndarray, np.ndarray], None] | None = None):
+                 observe: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None):
         self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
-        self.observe = observe        # (first_slot, y, valid) of each block the bank watches
+        self.observe = observe        # (first_slot, y, valid, seen: valid and not flat) of each block
         self.diagnostics, self.link_counters = diagnostics, link_counters
         self.clock = BlockClock()
         self.log = EventLog(sink, lambda: self.clock.floor_ns or self.clock_ns(), on_event,
@@ -517,7 +517,7 @@ class Processor(Figures):
         if mics is not None:
             self._out(mics.step(y, valid, stamps))
         if self.observe is not None:
-            self.observe(first, y, valid)
+            self.observe(first, y, valid, sev.seen(valid, flat))
         self.clock.advance(T)
         n_valid = int(np.count_nonzero(valid))
         self.observations += n_valid

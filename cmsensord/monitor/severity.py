@@ -176,9 +176,7 @@ class SeverityChain:
         y = y / self.baseline
         out = None
         flat_on = self.decider.flat_signal
-        seen = valid                            # flat blocks are no observation for the banks
-        if flat_on is not None and flat is not None and (dead := (flat >= 0) & flat_on).any():
-            seen = valid & ~dead
+        seen = self.seen(valid, flat)
         if full:
             out = self.bank.process(y, seen)
             outlier = out.outlier
@@ -223,6 +221,14 @@ class SeverityChain:
                                   flat=None if flat is None else flat[pos:pos + take])
             pos += take
         return decisions
+
+    def seen(self, valid: np.ndarray, flat: np.ndarray | None) -> np.ndarray:
+        """``valid`` (T, C) without the flat blocks (``flat``: their counts, ``monitor.flat_signal``
+        on): the observations that say something about the machine."""
+        on = self.decider.flat_signal
+        if on is None or flat is None or not (dead := (flat >= 0) & on).any():
+            return valid
+        return valid & ~dead
 
     def trace(self, stamps: list[int], y: np.ndarray, valid: np.ndarray, out: AkfBlock) -> list:
         """``/cm/<channel>/akf`` messages of one AKF per channel (output.akf_trace_filter), in
