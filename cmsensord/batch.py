@@ -37,7 +37,7 @@ from cmsensord.dsp.rms import rows_physical
 from cmsensord.errors import CmsensordError
 from cmsensord.monitor import messages
 from cmsensord.one_setup import OneSetup
-from cmsensord.protocol import MODE_RAW, FrameType, decode_raw, decode_tacho
+from cmsensord.protocol import MAX_FRAME, MODE_RAW, Decoder, FrameType, decode_raw, decode_tacho
 from cmsensord.source import CaptureSource
 
 
@@ -85,6 +85,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
+    _tacho_first(capture, cfg.tacho.input)
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
     sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
@@ -133,6 +134,30 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
     summary["mqtt"] = publish_lines(sink)
     return sink.paths, summary
+
+
+def _tacho_first(capture: str, tacho_input: int) -> None:
+    """CmsensordError, before the replay, when the capture holds RAW frames but no TACHO frame of
+    ``tacho_input``, with how to give it the shaft speed; the frames are scanned as columns
+    (decoded, not processed) up to the first such TACHO frame.  A capture without RAW frames is
+    left to the replay's own check (an RMS-mode board is said at its first STATUS)."""
+    from cmsensord.importing.sidecar import sidecar
+
+    chunk = 1 << 20
+    raw = False
+    with CaptureSource(capture, chunk=chunk, decoder=Decoder(max_buffer=chunk + MAX_FRAME), batches=True) as scan:
+        for batch in scan:
+            code, chan = batch.cols.code, batch.cols.chan
+            if np.any((code == FrameType.TACHO) & (chan == tacho_input)):
+                return
+            raw = raw or bool(np.any(code == FrameType.RAW))
+    if raw:
+        meta = sidecar(capture)
+        rpm = meta.get("rpm") if not meta.get("rpm_differs") else None
+        raise CmsensordError(
+            f"{capture}: no TACHO frames: the batch VKF needs the shaft speed: re-import the recording with its "
+            f"speed (cmsensord import SRC... --rpm {f'{rpm:g}' if rpm else 'RPM'} --out {capture}, which also "
+            "sends TACHO frames) or record with a tacho")
 
 
 def describe(info: dict, *, bandwidth_hz: float, poles: int) -> str:

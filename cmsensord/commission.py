@@ -24,6 +24,7 @@ import yaml
 
 from cmsensord.argtypes import board_time, positive
 from cmsensord.base_changes import replaced_baselines, unlisted_channels
+from cmsensord.calibrate_bounds import FEW_DECISIONS, every_channels_bound, level_warning, rise_warning
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.config.alarm_indicators import indicator_names
 from cmsensord.config.channel_refs import channel_refs_error
@@ -110,10 +111,6 @@ def calibrate(obs: Observations, cfg: Config, *, faulty: Observations | None = N
     return results
 
 
-#: fewer decisions learned from than this: calibrate warns that the healthy fluctuation is a guess
-FEW_DECISIONS = 10
-
-
 def _long_enough(obs: Observations, c: int, period: int) -> None:
     """A one-line error, with the period that would do, when channel ``c`` holds fewer than the
     two decision periods learning needs (the first is the filters' transient)."""
@@ -186,9 +183,9 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
             lines.append(f"{r.name}: {m.idle_periods} decision(s) with the machine stopped (level below "
                          f"{100 * STOPPED_SHARE:g} % of its running level), starting or stopping: not learned from")
         if m.level_flagged:
-            lines.append(_level_warning(r, obs))
+            lines.append(level_warning(r, obs))
         if m.rise_at >= 0:
-            lines.append(_rise_warning(r, obs))
+            lines.append(rise_warning(r, obs))
         if r.f_r_source == "config":
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz is the configuration's monitor.f_r: nothing gave this "
                          "machine's shaft speed (no tacho, no --rpm, no indicators.rpm, no rpm in the capture); "
@@ -196,7 +193,7 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
         elif r.f_r_source.startswith("indicators.rpm"):
             lines.append(f"{r.name}: f_r {r.f_r:.4g} Hz from the configuration's {r.f_r_source} (no tacho, no "
                          "--rpm): the decisions at the speed of the indicators' bearing lines and bands")
-    every = _every_channels_bound(results, obs)
+    every = every_channels_bound(results, obs)
     return "\n".join(lines + ([every] if every else []))
 
 
@@ -218,68 +215,6 @@ def _r1_line(r: ChannelResult, obs: Observations) -> str:
         line += (f"; {m.runin_flagged} of them in its run-in ({a:.1f}-{b:.1f} board s), which is not learned "
                  "from but is graded all the same")
     return line
-
-
-def _level_warning(r: ChannelResult, obs: Observations) -> str:
-    """What the decisions of the healthy period that are already at the alert level mean, where
-    they are, and the ``--to`` or ``--from`` of its longest steady stretch (:func:`_steady_bound`)."""
-    m, dec = r.model, r.decision_s
-    first, last = obs.start_s + m.level_first * dec, obs.start_s + (m.level_last + 1) * dec
-    mid = (obs.start_s + obs.end_s) / 2
-    where = span_line(obs.meta, first, last)
-    span = f"{first:.1f}-{last:.1f} board s" + (f", {where}" if where else "")
-    what = ("the machine may already be changing there (a fault starting)" if first >= mid else
-            "a start-up or a disturbance" if last <= mid else "the level is not steady over the healthy period")
-    within = f"(levels within {r.level_alert:g} x its own median)"
-    bound = _steady_bound(r, obs)
-    if bound is None:
-        advice = "no stretch of it is steady: choose another healthy period with --from/--to"
-    elif bound[0] == "--to":
-        advice = f"its steady stretch from the start ends at --to {bound[1]:g} {within}"
-    else:
-        advice = f"its steady stretch to the end begins at --from {bound[1]:g} {within}"
-    return (f"{r.name}: warning: {m.level_flagged} decision(s) of the healthy period are already at "
-            f">= {r.level_alert:g} x its baseline (level_alert: severity 0.5) in {span}: {what}; {advice}")
-
-
-def _rise_warning(r: ChannelResult, obs: Observations) -> str:
-    """A level rising through the healthy period below the alert level (:func:`level_rise`):
-    where, and the ``--to`` that ends the period before it."""
-    m, dec = r.model, r.decision_s
-    at = obs.start_s + m.rise_at * dec
-    where = span_line(obs.meta, at, at + dec)
-    to = math.floor(round(10 * at, 6)) / 10
-    before = m.rise_at - m.runin_periods - 1            # decisions learned from before the rise
-    advice = (f"a period ending before it learns the machine's own level (--to {to:g})" if before >= FEW_DECISIONS
-              else f"only {max(0, before)} decision(s) before it: choose a steady period of this machine (--from/--to)")
-    return (f"{r.name}: warning: the level rises through the healthy period: its last quarter's median is "
-            f"{m.rise:.2f} x its first quarter's, rising from {at:.1f} board s" + (f" ({where})" if where else "") +
-            f": wear or a fault starting, or a change of load; learned from, it raises the baseline and widens every "
-            f"margin: {advice}")
-
-
-def _steady_bound(r: ChannelResult, obs: Observations) -> tuple[str, float] | None:
-    """(``--to``, board s) of the healthy period's longest steady stretch from its start, or
-    (``--from``, board s) of the one to its end, to a tenth of a second within it; None when
-    neither is two decisions long."""
-    m, dec = r.model, r.decision_s
-    if max(m.steady_head, m.steady_tail) < 2:
-        return None
-    if m.steady_head >= m.steady_tail:
-        return "--to", math.floor(round(10 * (obs.start_s + (m.steady_head + 1) * dec), 6)) / 10
-    periods = m.periods + m.runin_periods + 1          # with the transient's
-    return "--from", math.ceil(round(10 * (obs.start_s + (periods - m.steady_tail) * dec), 6)) / 10
-
-
-def _every_channels_bound(results: list[ChannelResult], obs: Observations) -> str | None:
-    """With several channels warned of, the one ``--to`` (the earliest) or ``--from`` (the
-    latest) that keeps each one's steady stretch, when they agree on which."""
-    bounds = [b for r in results if r.model.level_flagged and (b := _steady_bound(r, obs)) is not None]
-    if len(bounds) < 2 or len({kind for kind, _ in bounds}) != 1:
-        return None
-    kind = bounds[0][0]
-    at = min(v for _, v in bounds) if kind == "--to" else max(v for _, v in bounds)
-    return f"every channel's steady stretch: {kind} {at:g}"
 
 
 def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,

@@ -201,16 +201,26 @@ def test_calibrate_table_keeps_its_columns_under_a_long_channel_name(tmp_path):
 
 def test_a_healthy_period_that_holds_the_fault_is_said_with_where_a_steady_one_ends(degrading, tmp_path):
     """The whole run to failure given as healthy: calibrate says which of its decisions are
-    already at level_alert x the baseline (the replay grades them 0.5) and the --to of its
-    steady stretch; calibrated to that --to, nothing is said and no level is graded in the period
-    (its AKF part is the R_1 check's, as before)."""
+    already at level_alert x the baseline (the replay grades them 0.5) and, as the level rises
+    well before them, one --to: the rise's, the earlier, said why once (the steady stretch within
+    2 x its own median, to 266 s, learns the rise: 21 of its decisions flagged by R_1); calibrated
+    to it, nothing is said.  Calibrated to 266, no level is graded in the period, and the rise
+    is said with its --to."""
     p = run("cmsensord", "calibrate", str(degrading), "--out", str(tmp_path / "all.yaml"))
     assert p.returncode == 0, p.stderr
     assert ("ch0: warning: 141 decision(s) of the healthy period are already at >= 2 x its baseline "
             "(level_alert: severity 0.5) in 391.0-541.0 board s: the machine may already be changing there "
-            "(a fault starting); its steady stretch from the start ends at --to 266 (levels within 2 x its "
-            "own median)\n") in p.stdout
+            "(a fault starting); the level already rises before them (next warning)\n"
+            "ch0: warning: the level rises through the healthy period: its last quarter's median is 6.44 x its first "
+            "quarter's, rising from 85.0 board s: wear or a fault starting, or a change of load; learned from, it "
+            "raises the baseline and widens every margin: a period ending before it learns the machine's own level "
+            "(--to 85); the steady stretch from the start, whose levels stay within 2 x its own median, runs on past "
+            "the rise and would learn it\n") in p.stdout
+    assert re.findall(r"--to (\d+)", p.stdout) == ["85"], p.stdout
     assert "would be flagged (0 by R_1, 141 by their level >= 2 x baseline)" in p.stdout
+    p = run("cmsensord", "calibrate", str(degrading), "--to", "85", "--out", str(tmp_path / "advised.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert "warning" not in p.stdout and "; 0 healthy decision(s) would be flagged\n" in p.stdout
     out = tmp_path / "all"
     assert run("cmsensord", "replay", str(degrading), "--config", str(tmp_path / "all.yaml"),
                "--out", str(out)).returncode == 0
@@ -220,7 +230,8 @@ def test_a_healthy_period_that_holds_the_fault_is_said_with_where_a_steady_one_e
     site = tmp_path / "site.yaml"
     p = run("cmsensord", "calibrate", str(degrading), "--to", "266", "--out", str(site))
     assert p.returncode == 0, p.stderr
-    assert "already at" not in p.stdout and ", 0 by their level >= 2 x baseline)\n" in p.stdout
+    assert "already at" not in p.stdout
+    assert "; 21 healthy decision(s) would be flagged (21 by R_1, 0 by their level >= 2 x baseline)\n" in p.stdout
     # below 2 x, the level still rises through 0-266 s (the fault's onset, at 150 s): said, with the --to before it
     assert ("ch0: warning: the level rises through the healthy period: its last quarter's median is 1.56 x its first "
             "quarter's, rising from 111.0 board s: wear or a fault starting, or a change of load; learned from, it "
@@ -451,7 +462,8 @@ def test_a_machine_too_fast_for_one_second_decisions_calibrates_with_the_decisio
 
 def test_with_several_channels_warned_of_one_bound_keeps_each_ones_steady_stretch(tmp_path):
     """Two bearings whose level triples from snapshot 48 and 52 of 60: each channel's --to, then
-    the one that keeps both steady; calibrated to it, nothing is said."""
+    the one that keeps both steady, and no other --to (the rise each shows is its step);
+    calibrated to it, nothing is said."""
     x = np.random.default_rng(3).standard_normal((60, 5120, 2))
     x[48:, :, 0] *= 3.0
     x[52:, :, 1] *= 3.0
@@ -465,6 +477,12 @@ def test_with_several_channels_warned_of_one_bound_keeps_each_ones_steady_stretc
     assert "its steady stretch from the start ends at --to 48 (" in p.stdout
     assert "its steady stretch from the start ends at --to 52 (" in p.stdout
     assert "\nevery channel's steady stretch: --to 48\n" in p.stdout
+    # the rise the whole period shows is the step: the steady stretch holds none, its --to is the one given
+    assert ("de: warning: the level rises through the healthy period: its last quarter's median is 2.99 x its first "
+            "quarter's, rising from 41.0 board s (in the recording: two.npz[41] (68.3 % of the record, 6.833 h in)): "
+            "wear or a fault starting, or a change of load; learned from, it raises the baseline and widens every "
+            "margin: the --to of the warning above leaves it out\n") in p.stdout
+    assert re.findall(r"--to (\d+)", p.stdout) == ["48", "52", "48"], p.stdout
     p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", "--to", "48", "--out", str(tmp_path / "s.yaml"))
     assert p.returncode == 0, p.stderr
     assert "warning" not in p.stdout and "every channel" not in p.stdout

@@ -83,6 +83,44 @@ def test_degrading_mic_with_no_flag_follows_the_accelerometer(tmp_path, cache_en
     assert sum(1 for t, _, _ in msgs if t == "/cm/ch1/vibration_estimate") == 60000
 
 
+def test_whirl_past_the_decision_size_names_the_longer_decision_that_takes_it(tmp_path, cache_env):
+    """`cmsensord --simulate --scenario whirl`: the run-up's tacho passes 100 Hz, the 100
+    observations of a 1-s decision; the warning names the decision_period_s that takes it.  A
+    --config of that line alone (no orders of its own) keeps the scenario's orders, whirl alarm
+    included, and nothing is warned of."""
+    p, _ = run_scenario(tmp_path, cache_env, "whirl")
+    assert ("WARNING decision_rule: ch0: tacho f_r 100.1 Hz >= the 100 observations per decision: using the "
+            "configured f_r 28.66; for a machine this fast give a longer decision: monitor: {decision_period_s: 2} "
+            "in --config (the tacho's f_r below 200 Hz, 12,000 rpm)") in p.stderr.splitlines()
+    cfg = tmp_path / "longer.yaml"
+    cfg.write_text("monitor: {decision_period_s: 2}\n")
+    p, msgs = run_scenario(tmp_path / "longer", cache_env, "whirl", "--config", str(cfg))
+    assert "decision_rule" not in p.stderr
+    assert [m["name"] for m in next(m for t, _, m in msgs if t == "/cm/ch0/orders")["orders"]] == [
+        "o1", "whirl", "whip"]
+    assert "WARNING alarm_alert: order_whirl/ch0: order.whirl 1.456 reached the alert level 0.7" in p.stderr
+
+
+def test_making_the_acoustic_calibration_is_said_before_it_starts(tmp_path):
+    """With no calibration cached, the first microphone run says it is making one, from what and
+    roughly how long it takes, before the seconds it takes (then how long it took, and where it
+    is kept); the next run takes the cached file, in one line."""
+    env = dict(ENV, XDG_CACHE_HOME=str(tmp_path / "cache"))
+    p, _ = run_scenario(tmp_path / "first", env, "degrading_mic", "--duration", "5")
+    said = [ln for ln in p.stderr.splitlines() if ln.startswith("acoustic calibration of the simulated motor: ")]
+    (path,) = (tmp_path / "cache" / "cmsensord").glob("acoustic-simulated-motor-*.json")
+    assert said[0] == (
+        "acoustic calibration of the simulated motor: none cached yet: making it once (about 4-30 s, longer on a "
+        "small board) from 300 s of degrading_mic (seed 1000) and 60 s of its background (seed 1001), as python -m "
+        "cmsensord.acoustic_calib does"), p.stderr
+    assert len(said) == 2 and re.fullmatch(
+        rf"acoustic calibration of the simulated motor: made in \d+\.\d s; kept in {re.escape(str(path))}",
+        said[1]), p.stderr
+    p, _ = run_scenario(tmp_path / "again", env, "degrading_mic", "--duration", "5")
+    assert [ln for ln in p.stderr.splitlines() if ln.startswith("acoustic calibration of the simulated motor: ")] == [
+        f"acoustic calibration of the simulated motor: {path} (cached)"]
+
+
 def test_a_config_whose_channel_kind_does_not_fit_the_board_is_one_line(tmp_path, cache_env):
     """degrading_mic sends pascals on channel 1: a configuration taking it as an
     accelerometer is a configuration error (exit 78) naming the key, before anything runs."""

@@ -67,7 +67,8 @@ def test_f_r_no_decision_can_reach_at_the_board_rate_is_said(tmp_path):
 def test_a_tacho_faster_than_the_decision_size_falls_back_to_the_configured_f_r(tmp_path):
     lines = replay(imported(tmp_path, "--rpm", "7200"), tmp_path)
     assert ("WARNING decision_rule: ch0: tacho f_r 120 Hz >= the 100 observations per decision: "
-            "using the configured f_r 28.66") in lines
+            "using the configured f_r 28.66; for a machine this fast give a longer decision: monitor: "
+            "{decision_period_s: 2} in --config (the tacho's f_r below 200 Hz, 12,000 rpm)") in lines
 
 
 @pytest.fixture

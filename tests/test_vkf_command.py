@@ -160,6 +160,33 @@ def test_vkf_of_an_imported_capture_names_its_channels_as_replay_does(tmp_path):
     assert yaml.safe_load((tmp_path / "site.yaml").read_text())["channels"][0]["name"] == "drive_end"
 
 
+def test_vkf_of_a_capture_without_tacho_frames_refuses_at_once_with_the_fix(tmp_path):
+    """A RAW capture without a tacho (the degrading motor, which fails within it): one line naming
+    the fix, before any replay (no warning of the replay's failure, no file); an import that read
+    the speed from its files names it, and re-imported with that --rpm the capture runs."""
+    cap = tmp_path / "notacho.bin"
+    r = run_module("firmware_sim", "--scenario", "degrading", "--mode", "raw", "--duration", "60", "--out", str(cap))
+    assert r.returncode == 0, r.stderr
+    r = cmsensord("vkf", str(cap), "--out", str(tmp_path / "out"))
+    assert (r.returncode, r.stderr) == (2, (
+        f"cmsensord: {cap}: no TACHO frames: the batch VKF needs the shaft speed: re-import the recording with its "
+        f"speed (cmsensord import SRC... --rpm RPM --out {cap}, which also sends TACHO frames) or record with a "
+        "tacho\n"))
+    assert not (tmp_path / "out").exists()
+
+    x = np.random.default_rng(1).standard_normal((3, 25600, 1))
+    np.savez(tmp_path / "m.npz", acc=x, fs=25600.0, rpm=1800.0)
+    assert cmsensord("import", "m.npz", "--unit", "g", "--out", "m.bin", cwd=tmp_path).returncode == 0
+    r = cmsensord("vkf", "m.bin", "--out", "out", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, (
+        "cmsensord: m.bin: no TACHO frames: the batch VKF needs the shaft speed: re-import the recording with its "
+        "speed (cmsensord import SRC... --rpm 1800 --out m.bin, which also sends TACHO frames) or record with a "
+        "tacho\n"))
+    assert cmsensord("import", "m.npz", "--unit", "g", "--rpm", "1800", "--out", "m.bin", cwd=tmp_path).returncode == 0
+    r = cmsensord("vkf", "m.bin", "--out", "out", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+
+
 def test_poles_set_the_roll_off_outside_the_band(tmp_path):
     """`--poles` is s of the structural equation (14): at the same -3 dB bandwidth B, a tone Δf
     off order 1 leaks into its envelope with the gain of (R2), H_s = 1 / (1 + (√2 - 1) (Δf / (B/2))^2s)

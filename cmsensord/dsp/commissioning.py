@@ -95,6 +95,7 @@ class HealthyModel:
     faulty_r: float = float("nan")  # with faulty data: the largest R that flags half its decisions (NaN: none)
     rise: float = 1.0          # the learned decisions' last quarter median level / their first's (:func:`level_rise`)
     rise_at: int = -1          # where that rise passes half way (decision periods from the start); -1: no rise
+    steady_rise: bool = False  # the steady stretch from the start (``steady_head``) holds such a rise of its own
 
 
 def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
@@ -306,12 +307,14 @@ def learn_healthy(y: np.ndarray, *, f_r: float, period: int, n: int, window: int
     spread = float(1.4826 * np.nanmedian(np.abs(running / baseline - med)))
     check = _check_period(counts_of(y, np.array([r_1]))[:, 0], level_raw / baseline, f_r, c, skip, level_alert)
     rise = level_rise(running / baseline, skip)
+    head = check["steady_head"] if check["level_flagged"] else 0
     return HealthyModel(
         baseline=baseline, spread=spread, r_min=float(r_min), r_max=float(r_max), r_1=float(r_1),
         healthy_r=H, periods=int(rstar.size), runin_periods=int(skip),
         rstar_median=float(np.median(rstar[np.isfinite(rstar)])), r_max_rule=rule, faulty_r=r_f,
         idle_periods=int(np.count_nonzero(idle)), learned=int(np.count_nonzero(~np.isnan(rstar))), **check,
         rise=rise[0] if rise else 1.0, rise_at=rise[1] + 1 if rise else -1,
+        steady_rise=level_rise((running / baseline)[:head], skip) is not None,
     )
 
 

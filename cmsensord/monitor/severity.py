@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cmsensord.config import NOMINAL_RATE_HZ, ChannelConfig
+from cmsensord.config.settings import MAX_DECISION_PERIOD_S, decision_period_for
 from cmsensord.dsp.akf import AkfBank, AkfBlock, bank_r
 from cmsensord.dsp.severity import HOLD_EVENT_DECISIONS, NOT_LOOKED, AnomalyDecider, Decision
 from cmsensord.monitor import messages
@@ -161,11 +162,22 @@ class SeverityChain:
         for c in np.flatnonzero(fast != self._tacho_too_fast):
             name = self.channels[c].name
             msg = (f"{name}: tacho f_r {f_r[c]:.4g} Hz >= the {period} observations per decision: "
-                   f"using the configured f_r {self.cfg_f_r[c]:.4g}" if fast[c] else
+                   f"using the configured f_r {self.cfg_f_r[c]:.4g}; {self._longer_decision(f_r[c])}" if fast[c] else
                    f"{name}: tacho f_r {f_r[c]:.4g} Hz below the {period} observations per decision again")
             self.notes.append(Event("decision_rule", name, msg))
         self._tacho_too_fast = fast
         return np.where(fast, self.cfg_f_r, f_r)
+
+    def _longer_decision(self, f_r: float) -> str:
+        """The ``decision_period_s`` whose decisions at this block rate outnumber a tacho's ``f_r``
+        [Hz], and the speeds it takes; or that none up to the longest does."""
+        longer = decision_period_for(f_r, self.rate)
+        if longer is None:
+            return (f"no decision_period_s up to {MAX_DECISION_PERIOD_S:g} fits a machine this fast (f_r below "
+                    f"{MAX_DECISION_PERIOD_S * self.rate:.4g} Hz)")
+        top = round(longer * self.rate)
+        return (f"for a machine this fast give a longer decision: monitor: {{decision_period_s: {longer}}} "
+                f"in --config (the tacho's f_r below {top} Hz, {60 * top:,} rpm)")
 
     def observe(self, first_slot: int, y: np.ndarray, valid: np.ndarray, full: bool = False,
                 flat: np.ndarray | None = None) -> tuple[np.ndarray, AkfBlock | None]:

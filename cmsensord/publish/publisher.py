@@ -173,6 +173,14 @@ class Publisher:
         """Offered messages the broker has not acknowledged yet."""
         return len(self.handover) + self.queue.depth
 
+    def backlog(self) -> int | None:
+        """While connected, the messages queued before this connection not sent yet (the only
+        ones paced, at ``resend_per_s``; the rest go as fast as the broker takes them); None when
+        not connected: what is queued is the next connection's backlog."""
+        if self.state != "connected":
+            return None
+        return max(0, self._backlog_end - self.queue.send_seq)
+
     def drain(self, idle_s: float = CONNACK_S, progress: Callable[[int], None] | None = None) -> int:
         """Wait until the broker has acknowledged every offered message, until it has
         acknowledged none for ``idle_s`` (not connected, gone), refused the connection, or

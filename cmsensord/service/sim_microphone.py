@@ -38,6 +38,11 @@ RECIPE: dict[str, Any] = {"scenario": "degrading_mic", "paired_seed": 1000, "pai
           "background_seed": 1001, "background_s": 60.0, "mode": "raw", "accel": 0, "mic": 1}
 
 
+#: how long making the calibration takes, said before it starts (3.9-6.1 s measured on a 2-core
+#: x86 machine, longer with other work on it)
+MAKING_S = "about 4-30 s, longer on a small board"
+
+
 def cache_dir() -> Path:
     """Where the simulator's calibration is kept: $XDG_CACHE_HOME/cmsensord or ~/.cache/cmsensord."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
@@ -46,8 +51,10 @@ def cache_dir() -> Path:
 
 def simulator_calibration(fallback_dir: Path | None = None) -> Path:
     """The acoustic calibration of the simulated motor: the cached file, made first if missing
-    (10-30 s); a line on stderr says which and how.  Where the cache directory cannot be made,
-    the file goes into ``fallback_dir`` (the run's output directory)."""
+    (:data:`MAKING_S`), with a line on stderr before (what it is made from, how long it takes)
+    and one after (the time it took, where it is kept); a cached one is one line.  Where the
+    cache directory cannot be made, the file goes into ``fallback_dir`` (the run's output
+    directory)."""
     key = hashlib.sha256(repr((sorted(RECIPE.items()), __version__)).encode()).hexdigest()[:12]
     path = cache_dir() / f"acoustic-simulated-motor-{key}.json"
     if path.is_file():
@@ -60,17 +67,19 @@ def simulator_calibration(fallback_dir: Path | None = None) -> Path:
         if fallback_dir is None:
             raise
         path = fallback_dir / path.name
+    r = RECIPE
+    print(f"acoustic calibration of the simulated motor: none cached yet: making it once ({MAKING_S}) from "
+          f"{r['paired_s']:g} s of {r['scenario']} (seed {r['paired_seed']}) and {r['background_s']:g} s of its "
+          f"background (seed {r['background_seed']}), as python -m cmsensord.acoustic_calib does",
+          file=sys.stderr, flush=True)
     with tempfile.TemporaryDirectory(dir=path.parent) as tmp:
         cal = _fit(Path(tmp))
         from cmsensord.acoustic_calib import save_calibration
         part = Path(tmp) / "mic.json"
         save_calibration(cal, str(part))
         os.replace(part, path)                     # complete or absent, also for a parallel run
-    r = RECIPE
-    print(f"acoustic calibration of the simulated motor: made in {time.monotonic() - t:.1f} s from "
-          f"{r['paired_s']:g} s of {r['scenario']} (seed {r['paired_seed']}) and {r['background_s']:g} s "
-          f"of its background (seed {r['background_seed']}), as python -m cmsensord.acoustic_calib "
-          f"does; kept in {path}", file=sys.stderr)
+    print(f"acoustic calibration of the simulated motor: made in {time.monotonic() - t:.1f} s; kept in {path}",
+          file=sys.stderr)
     return path
 
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import serial
+import yaml
 
 from cmsensord.config import config_from_dict, default_config, load_config
 from cmsensord.errors import ConfigError, SinkError
@@ -120,8 +121,9 @@ def simulate(opt: SimulateOptions) -> int:
     runup = opt.scenario in RUNUP_ORDERS
     mode = opt.mode
     tacho = opt.tacho or runup
-    if runup and not opt.config:
-        # the paper's validation signals: track their components (Yeh, Pan & Le, section 4.1)
+    if runup and not _sets_key(opt.config, "orders"):
+        # the paper's validation signals: track their components (Yeh, Pan & Le, section 4.1),
+        # unless the configuration file gives orders of its own
         cfg = dataclasses.replace(cfg, orders=config_from_dict(
             {"orders": RUNUP_ORDERS[opt.scenario]}, source="--scenario").orders)
     out_dir = opt.out or cfg.output.dir
@@ -157,6 +159,15 @@ def simulate(opt: SimulateOptions) -> int:
                                   "duration_s": str(opt.duration)}, simulated=True)
     finally:
         _end(sim)
+
+
+def _sets_key(path: str | None, key: str) -> bool:
+    """Whether the configuration file ``path`` (None: none; already loaded, so readable and
+    valid) sets ``key`` at its top level."""
+    if path is None:
+        return False
+    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    return isinstance(data, dict) and key in data
 
 
 def _sim_env() -> dict[str, str]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import secrets
 import sys
 import time
@@ -159,8 +160,8 @@ def send_queued(sink: RotatingSink, stream: TextIO | None = None,
             sink.drain_events()
 
     try:                                # the line in it: a Ctrl-C right after it is one too
-        print(f"mqtt: sending {n:,} message(s) to {cfg.host}:{cfg.port} before exiting (the backlog at "
-              f"{cfg.resend_per_s:g} a second, mqtt.resend_per_s); Ctrl-C stops waiting, they stay queued", file=out)
+        print(f"mqtt: sending {n:,} message(s) to {cfg.host}:{cfg.port} before exiting ({_pace(publisher, n)}); "
+              "Ctrl-C stops waiting, they stay queued", file=out)
         left = publisher.drain(progress=progress)
     except KeyboardInterrupt:
         left = -1
@@ -176,6 +177,21 @@ def send_queued(sink: RotatingSink, stream: TextIO | None = None,
     elif left:
         print(f"mqtt: the broker acknowledged nothing for {CONNACK_S:g} s: stopped waiting", file=out)
     return left < 0
+
+
+def _pace(publisher, n: int) -> str:
+    """How the ``n`` waiting messages go, and how long the paced ones take: as fast as the broker
+    takes them while connected, but for a backlog queued before the connection, at
+    ``resend_per_s``; all of them at that pace once a publisher not connected yet connects."""
+    per_s = publisher.cfg.resend_per_s
+    rate = f"{per_s:g} a second, mqtt.resend_per_s"
+    backlog = publisher.backlog()
+    if backlog is None:
+        return f"not connected: once it is, they are its backlog, sent at {rate}: about {math.ceil(n / per_s):,} s"
+    if backlog:
+        return (f"the {backlog:,} queued before the connection at {rate}, about {math.ceil(backlog / per_s):,} s; "
+                "the rest as fast as the broker takes them")
+    return "as fast as the broker takes them"
 
 
 def publisher_of(sink: RotatingSink):
