@@ -97,3 +97,40 @@ def test_a_lone_frame_a_few_samples_off_the_grid_is_dropped_and_the_stamps_stay(
                          f"and in block {t0 - t0 % 250}, {newest} (a stray frame: the time base is kept)")]
     assert [m for _, k, m in events(smsgs) if k == "config"] == [m for _, k, m in events(msgs) if k == "config"]
     assert topics(smsgs) == topics(msgs)
+
+
+def _moved(data: bytes, first_stray: bool = False, shift: dict[int, int] | None = None) -> bytes:
+    """``data`` with each RAW frame of block k moved ``shift[k]`` samples (all its channels: the board
+    sent that block under a t0 a few samples off), and with ``first_stray``, a RAW frame of garbage half a
+    block past the first block's t0 sent before it; the frames numbered anew."""
+    rng = np.random.default_rng(0)
+    frames, done = [], not first_stray
+    for f in Decoder().feed(data):
+        if f.type == FrameType.RAW and not done:
+            frames.append((FrameType.RAW, f.t0 + 125, 0, 0, rng.integers(0, 4096, 250).astype("<u2").tobytes()))
+            done = True
+        moved = (shift or {}).get(f.t0 // 250, 0) if f.type == FrameType.RAW else 0
+        frames.append((f.type, f.t0 + moved, f.chan, f.flags, f.payload))
+    return b"".join(encode_frame(k, s & 0xFFFF, *rest) for s, (k, *rest) in enumerate(frames))
+
+
+def test_both_channels_of_a_block_a_few_samples_off_are_its_own(tmp_path):
+    """A 2-channel board sends block 150 under t0 + 3, both its frames: taken as the block's (1200
+    observations, no event), as the module says; its second channel was dropped as a stray (1199, one
+    missing)."""
+    clean = board("raw", 6, channels=2)
+    err, msgs = replay(tmp_path / "moved", _moved(clean, shift={150: 3}))
+    assert "(1200 observations, 0 missing, 0 frames lost)" in err, err
+    assert [k for _, k, _ in events(msgs)] == ["config", "config"]
+
+
+def test_a_stray_first_frame_does_not_set_the_grid(tmp_path):
+    """A garbage RAW frame half a block past the first block's t0, sent before it, on a 2-channel board:
+    one decode_error, and the board's frames all taken (1200 observations); it set the grid, every frame of
+    the board's was off it and each block's second channel dropped (599 observations, 599 missing)."""
+    clean = board("raw", 6, channels=2)
+    err, msgs = replay(tmp_path / "first", _moved(clean, first_stray=True))
+    assert "(1200 observations, 0 missing, 0 frames lost)" in err, err
+    assert [m for _, k, m in events(msgs) if k == "decode_error"] == [
+        "RAW frame of channel 0 at t0 125 dropped: t0 off the block grid by +125 sample(s) and in block 0, which "
+        "has frames on the grid (a stray frame: the time base is kept)"]

@@ -362,3 +362,16 @@ def test_stray_raw_frames_off_the_grid_give_the_boards_messages_at_any_read_size
         "behind the newest block 87500 (a stray frame: the time base is kept)",
         "RAW frame of channel 0 at t0 137625 dropped: t0 off the block grid by +125 sample(s) and in block 137500, "
         "which has frames on the grid (a stray frame: the time base is kept)"]
+
+
+def test_a_jump_of_the_board_clock_off_the_grid_keeps_every_frame_at_any_read_size():
+    """A 2-channel RAW board whose clock jumps 60 s and 100 samples (off the old grid, past the gap a block
+    clock fills): the messages are alike at every read size, no decode_error and none missing; judged against
+    the old grid, each block's second channel was a stray (1, 20 or 301 dropped as the reads went)."""
+    first = board("raw", 6, channels=2)
+    data = first + board("raw", 6, channels=2, t0=150_000 + 60 * 25_000 + 100, seq=frames(first))
+    runs = same_at_every_read_size(data)
+    assert not [m for _, m in runs[0]["/cm/events"] if m["kind"] == "decode_error"]
+    for read in READS:
+        proc = run_processor(data, config_from_dict({}), chunk=read)[1]
+        assert (proc.observations, proc.missing_observations) == (1200, 0), read
