@@ -84,10 +84,12 @@ class _Collect:
     def __init__(self) -> None:
         self.blocks: list[tuple[int, np.ndarray]] = []
         self.lost: list[np.ndarray] = []
+        self.flat: list[np.ndarray] = []
 
     def __call__(self, first_slot: int, y: np.ndarray, valid: np.ndarray, seen: np.ndarray) -> None:
         self.blocks.append((first_slot, np.where(seen, y, np.nan)))
         self.lost.append(~valid)
+        self.flat.append(valid & ~seen)
 
 
 def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool = True,
@@ -115,6 +117,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
         raise CmsensordError(f"calibrate: {capture}: no observations (no RMS or RAW frames)")
     rate = proc.fs / proc.block_len
     y, lost = np.concatenate([b for _, b in collect.blocks]), np.concatenate(collect.lost)
+    flat = np.concatenate(collect.flat)
     total = y.shape[0] / rate
     first = int(np.floor(min(_seconds(from_s, total), total) * rate))
     last = y.shape[0] if to_s is None else int(np.floor(min(_seconds(to_s, total), total) * rate))
@@ -132,7 +135,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(lost[first:last], rate, total, to_s)
-                        + _unresolved(sink),
+                        + _unresolved(sink) + _flat_notes(flat[first:last], names),
                         settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board,
                         capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None,
                         no_signal=_no_signal(sink, proc, first / rate, last / rate))
@@ -153,10 +156,16 @@ def _window_notes(lost: np.ndarray, rate: float, total: float, to_s: float | Non
 
 def _unresolved(sink: ListSink) -> tuple[str, ...]:
     """The ``lines_unresolved`` events of the replay (each once: bearing lines the envelope
-    spectrum's bins do not resolve, so the site file has no baseline of them), and its
-    ``flat_blocks`` ones (blocks not learned from)."""
+    spectrum's bins do not resolve, so the site file has no baseline of them)."""
     return tuple(m["message"] for topic, _, m in sink.messages
-                 if topic == TOPIC_EVENTS and m.get("kind") in ("lines_unresolved", "flat_blocks"))
+                 if topic == TOPIC_EVENTS and m.get("kind") == "lines_unresolved")
+
+
+def _flat_notes(flat: np.ndarray, names: list[str]) -> tuple[str, ...]:
+    """A line per channel with flat blocks (``flat``: (T, C) of the healthy period), not learned
+    from (``monitor.flat_signal``)."""
+    return tuple(f"{name}: {n} flat block(s) in the healthy period (every sample one ADC count: a loose "
+                 "connector or cable?): not learned from" for name, n in zip(names, flat.sum(axis=0).tolist()) if n)
 
 
 def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,

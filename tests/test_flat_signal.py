@@ -142,6 +142,26 @@ def test_a_few_flat_blocks_are_no_observation_and_raise_no_alarm(tmp_path):
     assert len(marked) == 5 and min(m["accel_rms"] for m in marked) > 5, marked
 
 
+def test_a_channel_with_the_check_off_says_nothing_of_its_flat_blocks(tmp_path):
+    """ch1 with monitor.flat_signal false and one block in eight at 4095: its blocks are judged as
+    any (the rail's accel_rms raises the alarm), and nothing says they are left out (a flat_blocks
+    warning said so while the alarms fired)."""
+    cap = _pinned(_board(tmp_path), tmp_path / "loose.bin", 1, 5.0, 9.5, COUNT_MAX, every=8)
+    events, _, out = _replay(tmp_path, cap, "channels:\n  - {name: ch0, index: 0}\n"
+                             "  - {name: ch1, index: 1, flat_signal: false}\nalarms:\n  rules:\n"
+                             "    - {name: rms, indicator: accel_rms, alert: 2, danger: 5}\n")
+    assert not [e for e in events if e["kind"] in SIGNAL or e["kind"] == "flat_blocks"], out
+    assert [e["kind"] for e in events if e["kind"].startswith("alarm_")] == ["alarm_danger", "alarm_clear"], out
+
+
+def test_a_channel_flat_from_the_start_is_said_lost_not_intermittent(tmp_path):
+    """ch1 pinned at 4095 from the first block: one signal_lost, no flat_blocks warning (the first
+    decision, the filters' transient, said '100 of 100 blocks flat (intermittent ...)')."""
+    cap = _pinned(_board(tmp_path), tmp_path / "dead.bin", 1, 0.0, 1e6, COUNT_MAX)
+    events, _, out = _replay(tmp_path, cap)
+    assert [e["kind"] for e in events if e["kind"] in SIGNAL or e["kind"] == "flat_blocks"] == ["signal_lost"], out
+
+
 def _stretches(tmp_path: Path, *parts: tuple[str, float, int]) -> Path:
     """A capture of the simulated healthy board, 2 channels, no tacho, in stretches of (mode, seconds,
     fs), each with its STATUS, the board's t0 and seq going on."""

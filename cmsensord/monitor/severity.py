@@ -323,10 +323,13 @@ class SeverityChain:
                      "severity and alarms judged again", stamp, what)
 
     def _flat_note(self, c: int, d: Decision, stamp: int) -> list[Event]:
-        """A ``flat_blocks`` warning when channel ``c``'s decision has flat blocks, fewer than make
-        it one of no signal, and none was said since a decision without (once an episode: the
-        records holding them go unjudged by the alarms, which should not pass unsaid)."""
-        counts = None if d.flat is None or (d.no_signal is not None and d.no_signal[c]) else d.flat[c].tolist()
+        """A ``flat_blocks`` warning when channel ``c``'s decision (past the transient, with
+        ``monitor.flat_signal`` on for it) has flat blocks, fewer than make it one of no signal,
+        and none was said since a decision without (once an episode: the records holding them go
+        unjudged by the alarms, which should not pass unsaid)."""
+        on = self.decider.flat_signal
+        lost = any(x is not None and x[c] for x in (d.no_signal, d.flat_quarter, d.flat_share))
+        counts = None if d.flat is None or on is None or not on[c] or d.transient or lost else d.flat[c].tolist()
         flat = counts is not None and counts[2] > 0
         if counts is None or not flat or self.flat_said[c]:
             self.flat_said[c] = flat
