@@ -35,6 +35,7 @@ class Bar:
         self.stream = stream or sys.stderr
         self.enabled = self.stream.isatty() if hasattr(self.stream, "isatty") else False
         self._last = 0.0
+        self._text = ""                 # the line last drawn
 
     def __call__(self, done: float) -> None:
         self._draw(done, "")
@@ -45,7 +46,8 @@ class Bar:
             return
         self._last = now
         frac = min(1.0, done / self.total)
-        self.stream.write(f"\r{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%{suffix}")
+        self._text = f"{self.label} [{'#' * int(frac * 30):<30}] {frac * 100:5.1f}%{suffix}"
+        self.stream.write("\r" + self._text)
         self.stream.flush()
         global _shown
         _shown = self
@@ -74,11 +76,10 @@ class Progress(Bar):
         self._draw(done, f" {rate:6.1f} MB/s {extra}")
 
     def close(self) -> None:
-        """End the bar's line (once)."""
+        """End the bar's line (once), drawn again if a log record erased it since."""
         global _shown
-        if _shown is self:
-            _shown = None
+        erased, _shown = _shown is not self, None if _shown is self else _shown
         if self.enabled:
-            self.stream.write("\n")
+            self.stream.write(("\r" + self._text if erased and self._text else "") + "\n")
             self.stream.flush()
             self.enabled = False
