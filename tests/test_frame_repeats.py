@@ -186,6 +186,22 @@ def test_replay_of_a_capture_whose_board_sent_blocks_twice(tmp_path, new_seq):
         == comparable([m for m in runs["clean"][1] if m[0] != "/cm/diagnostics"])
 
 
+@pytest.mark.parametrize("mode", ["rms", "raw"])
+def test_frames_received_again_at_the_end_of_a_capture_are_told(tmp_path, mode):
+    """A capture whose last three frames came twice (a retried write at the end): one event at the
+    end of the stream naming them; no frame came after them to carry the count, and nothing said so
+    (the link counted them, the events did not)."""
+    frames = board_frames(mode, 5)
+    cap = tmp_path / "twice.bin"
+    cap.write_bytes(wire(frames) + wire(frames[-3:]))
+    r = cmsensord("replay", str(cap), "--out", str(tmp_path / "logs"))
+    assert r.returncode == 0, r.stderr
+    events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap"))) if t == "/cm/events"]
+    assert [m["message"] for m in events if m["kind"] == "frames_repeated"] == [
+        "3 frame(s) received again at the end of the stream (the same frames as already received): dropped"]
+    assert "3 frame(s) received twice)" in r.stderr and not [m for m in events if m["kind"] == "frames_lost"]
+
+
 @pytest.mark.parametrize("new_seq", [False, True])
 def test_a_live_board_sending_blocks_twice_is_told_and_replay_matches_live(tmp_path, new_seq):
     """firmware_sim on a real pty sends blocks 1550 and 2250 (an RMS frame each) and 2800 (a STATUS

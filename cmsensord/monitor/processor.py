@@ -308,7 +308,7 @@ class Processor(Figures):
     def finish(self) -> None:
         """End of the stream: process what still waits (an incomplete last RAW block,
         samples waiting for a final tacho speed)."""
-        self.segments.finish()
+        self.segments.finish(self.link_counters() if self.link_counters else None)
         self._flush_raw([], final=True)
         self._feed_tacho(end=True)
         if self.orders is not None:

@@ -117,6 +117,7 @@ class Segments:
         self.seq_restarts = 0               # frames the link counted lost in seq gaps at resets
         self.seq_wraps = 0                  # frames lost in whole seq wraps the t0 gaps show
         self.seq_off = 0                    # frames the link counted lost in seq gaps t0 cannot hold
+        self.repeats_told = 0               # repeats the frames after them carried (frames_repeated events)
         self.before_t0: int | None = None   # t0_unwrapped of the frame before the one checked
         self._marked: tuple | None = None   # (cols, mode, fs, bad, status) of :meth:`_marks`
         self.wall = WallSteps()
@@ -273,6 +274,7 @@ class Segments:
         its seq gap unless it starts a new segment (``stamp`` None, the gap is no loss); the frames lost."""
         n = repeats_before(f.flags)
         if n:
+            self.repeats_told += n
             self.log.emit("frames_repeated", None, f"{n} frame(s) received again before seq {f.seq} (the "
                           "same frames as already received): dropped", stamp, count=n)
         if stamp is None or not f.lost_before:
@@ -368,11 +370,17 @@ class Segments:
                         stamp, details={"segment": self.clock.segment, "reason": "drift",
                                         "offset_s": round(offset_s, 3), "rate_hz": rate})
 
-    def finish(self) -> None:
+    def finish(self, counters: dict | None = None) -> None:
         """End of the stream: a run of frames of the other mode, or of another channel count, is
-        reported."""
+        reported, and the repeats after the last frame (the link's ``counters`` count them; no
+        frame after them carried them)."""
         if self.ignored:
             self._report()
+        n = (counters or {}).get("frames_repeated", 0) - self.repeats_told
+        if n > 0:
+            self.repeats_told += n
+            self.log.emit("frames_repeated", None, f"{n} frame(s) received again at the end of the stream (the "
+                          "same frames as already received): dropped", count=n)
         self.setup.end_odd_run()
         self.setup.end_disagreeing()
 
