@@ -172,8 +172,9 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, 
     assert parts == [] and (tmp_path / "other-20200101T000000Z.mcap").exists()
     kept = [m["i"] for p in finished for _, _, m in read_messages(p)]
     assert kept == list(range(200 - len(kept), 200)) and len(kept) > 15  # the newest, in order
-    retention = [f for kind, f in events if kind == "disk_error"]
+    retention = [f for kind, f in events if kind == "retention"]
     assert retention and all(f["details"]["action"] == "retention" for f in retention)
+    assert "disk_error" not in [kind for kind, _ in events]
     deleted = [name for f in retention for name in f["details"]["files"]]
     assert sorted(deleted + [p.name for p in finished]) == sorted(
         p.name for p in rotated + [sink.paths[-1]])      # every finished file: kept or deleted once
@@ -244,7 +245,8 @@ def test_a_file_retention_keeps_failing_on_is_told_once_and_its_repeats_when_it_
     sink.rotate()                                        # the fourth deletes it, and says what came before
     sink.close()
     assert not files[0].exists()
-    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed", "retention"]
+    assert [(k, f["details"]["action"]) for k, _, f in events] == [("disk_error", "retention_failed"),
+                                                                   ("retention", "retention")]
     assert events[1][1].endswith("; the 3 pass(es) before this one failed (told once)"), events[1][1]
 
 
@@ -287,7 +289,8 @@ def test_a_file_refused_for_a_reason_of_its_own_is_passed_over_and_told_once(tmp
     assert [f["details"]["files"] for _, _, f in events[1:]] == [[files[1].name]]
     rotated = [sink.rotate() for _ in range(3)]          # each pass meets the same refusal first
     sink.close()
-    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed", "retention"]
+    assert [(k, f["details"]["action"]) for k, _, f in events] == [("disk_error", "retention_failed"),
+                                                                   ("retention", "retention")]
     assert sink.disk_errors == 4 and files[0].exists() and files[2].exists()
     assert all(p is not None and p.exists() for p in rotated), rotated
 
