@@ -16,8 +16,8 @@ from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS, schema_bytes
 
 
-def event(i):
-    return {"kind": "config", "channel": None, "message": f"message {i}"}
+def event(i, kind="config"):
+    return {"kind": kind, "channel": None, "message": f"message {i}"}
 
 
 def test_rotation_by_time_keeps_every_message(tmp_path, clock):
@@ -80,13 +80,18 @@ def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs, cl
     clock.t += 0.1
     sink.tick()
     assert fsyncs == [d]                                 # no event, fsync_s not reached
-    for i in range(3):
-        sink.write(TOPIC_EVENTS, "event", 10**18 + i, event(i))
+    for i in range(3):                                   # routine events: they ride fsync_s
+        sink.write(TOPIC_EVENTS, "event", 10**18 + i, event(i, "frames_lost"))
     clock.t += 0.1
     sink.tick()
-    assert fsyncs == [d, ino]                            # one fsync for the three events
+    assert fsyncs == [d]
+    for i in range(3):
+        sink.write(TOPIC_EVENTS, "event", 10**18 + 3 + i, event(i, "failure"))
+    clock.t += 0.1
+    sink.tick()
+    assert fsyncs == [d, ino]                            # one fsync for the three failures
     on_disk = summarize(sink.current.part_path)
-    assert on_disk["event_counts"] == {"config": 3} and on_disk["messages"] == 4
+    assert on_disk["event_counts"] == {"frames_lost": 3, "failure": 3} and on_disk["messages"] == 7
     clock.t += 0.1
     sink.tick()
     assert fsyncs == [d, ino]                            # nothing new: no fsync
@@ -101,11 +106,11 @@ def test_an_event_queued_between_ticks_is_fsynced_by_the_first_tick(tmp_path, fs
     ino, d = os.fstat(sink.current.fileno()).st_ino, tmp_path.stat().st_ino
     sink.on_event = lambda kind, message, **fields: sink.write(
         TOPIC_EVENTS, "event", 10**18, {"kind": kind, "channel": None, "message": message})
-    sink.emit("salvage", "old.mcap.part: salvaged 3 message(s)")    # as the salvage thread does
-    clock.t += 0.1
+    sink.emit("disk_error", "old.mcap.part: cannot read: Input/output error; left for the next start")
+    clock.t += 0.1                                       # as the salvage thread does
     sink.tick()
     assert fsyncs == [d, ino]                            # the directory once the file was made
-    assert summarize(sink.current.part_path)["event_counts"] == {"salvage": 1}
+    assert summarize(sink.current.part_path)["event_counts"] == {"disk_error": 1}
     sink.close()
 
 

@@ -20,11 +20,11 @@ the live loop does):
 * the open chunk is written to the kernel early enough that a kill -9 loses at
   most the messages of the last ``flush_s``, though a loaded machine delays ticks
   and the reorder window holds messages (:mod:`cmsensord.sinks.flush_margin`);
-* the file is fsynced every ``fsync_s``, and at the first tick after any
-  message on ``/cm/events``: an event is on stable storage by the end of the
-  loop iteration that wrote it, or of the next one when it was raised after
-  that iteration's tick (at most one fsync per iteration, so a burst of events
-  costs one fsync);
+* the file is fsynced every ``fsync_s``, and at the first tick after an event
+  of :data:`~cmsensord.sinks.durable.FSYNC_AT_ONCE` (failures, alarms, the disk ...;
+  routine ones ride ``fsync_s``): it is on stable storage by the end of the loop
+  iteration that wrote it, or of the next one when raised after that iteration's
+  tick (at most one fsync per iteration, so a burst of events costs one fsync);
 * a new file's directory is fsynced once it is created (its name is durable before its data);
   a finished file is fsynced, renamed and its directory fsynced.
 
@@ -77,12 +77,12 @@ from cmsensord.config import OutputConfig
 from cmsensord.errors import SinkError
 from cmsensord.sinks import disk_events
 from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event kinds: disk_events)
+from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
 from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention
-from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 log = logging.getLogger("cmsensord")
 
@@ -148,7 +148,7 @@ class RotatingSink(ReorderLag):
         self._delivering = False
         self._closed = False
         self._current: McapSink | None = None
-        self._event_dirty = False            # an event was written since the last fsync
+        self._event_dirty = False            # an urgent event was written since the last fsync
         self._need_sync = False              # fsync at the next tick (a new file after an error)
         now = clock()
         self._last_sync = now
@@ -267,7 +267,7 @@ class RotatingSink(ReorderLag):
             self._failed(err, cur)
             self._deliver()
             return
-        if topic == TOPIC_EVENTS:
+        if urgent(topic, msg):
             self._event_dirty = True
         self._written(cur)
 
@@ -288,7 +288,7 @@ class RotatingSink(ReorderLag):
                 j = cur.write_many(messages, i)
             except SinkError as err:        # counted as write() counts, the failing one too
                 j = cur.batch_at
-                self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+                self._event_dirty |= urgent_in(messages, i, j)
                 self.messages_written += j + 1 - i
                 if not isinstance(err, SinkIOError):
                     raise
@@ -296,7 +296,7 @@ class RotatingSink(ReorderLag):
                 self._deliver()
                 i = j + 1
                 continue
-            self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+            self._event_dirty |= urgent_in(messages, i, j)
             self.messages_written += j - i
             i = j
             self._written(cur)
@@ -381,7 +381,7 @@ class RotatingSink(ReorderLag):
         self._deliver()
 
     def flush(self) -> None:
-        """Write the open chunk; fsync when fsync_s has passed or an event is pending."""
+        """Write the open chunk; fsync when fsync_s has passed or an urgent event is pending."""
         cur = self._current
         if cur is None:
             self._retry_if_due()
