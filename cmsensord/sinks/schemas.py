@@ -232,7 +232,7 @@ _DETAILS: dict[str, Any] = {
     "properties": {
         "action": _str("disk_error, retention, salvage: what happened (abandoned, resumed, removed, "
                        "retention, retention_failed, low_space, salvage_failed, dir_fsync_failed, relocked, "
-                       "relock_failed; salvaged, "
+                       "relock_failed, relock_waiting; salvaged, "
                        "deleted, unreadable, ...)"),
         "op": _str("disk_error: the failed operation (open, write, fsync, close, read)"),
         "errno": _str("disk_error: the OS error's name (ENOSPC, EIO, ...)"),
