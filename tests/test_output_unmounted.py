@@ -7,7 +7,8 @@ is salvaged.
 
 A real daemon on a simulated board over a pty; the file system a tmpfs bind-mounted at the
 output directory's parent, unmounted (``umount -l``: the daemon's open files stay on it) and
-bind-mounted again (the same device). Root only (mounts), skipped elsewhere; ``.ci/run`` is root.
+bind-mounted again (the same device), or a new tmpfs with a copy of its files (another device).
+Root only (mounts), skipped elsewhere; ``.ci/run`` is root.
 """
 
 from __future__ import annotations
@@ -58,7 +59,11 @@ def disk(tmp_path):
         _umount(store)
 
 
-def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk, tmp_path):
+@pytest.mark.parametrize("back", ["same", "another"])
+def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk, tmp_path, back):
+    """``back``: the file system comes back at its place on its device (bound again), or on
+    another device holding its files (a disk re-plugged under another device number: a new
+    tmpfs with a copy of them)."""
     store, usb = disk
     logs, link = usb / "logs", tmp_path / "ttyBOARD"
     board = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link), "--flow-control")
@@ -72,7 +77,12 @@ def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk
         _umount(usb)                                       # the disk goes away
         time.sleep(4.0)                                    # retry_s 1; the guard looks every 2 s
         under = sorted(p.name for p in usb.iterdir())      # the root file system under the mount point
-        assert _mount("--bind", str(store), str(usb)).returncode == 0     # back, the same device
+        if back == "same":
+            assert _mount("--bind", str(store), str(usb)).returncode == 0
+        else:
+            assert _mount("-t", "tmpfs", "-o", "size=16m", "tmpfs", str(usb)).returncode == 0
+            subprocess.run(["cp", "-a", str(store / "logs"), str(usb)], check=True, timeout=10)
+            store = usb                                    # where the files are from now on
         time.sleep(4.0)
         err = stop(daemon, timeout=30)
     finally:
@@ -92,7 +102,9 @@ def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk
     assert [line for line in lines if re.fullmatch(
         rf"WARNING disk_error: {gone}; its lock file and control socket too \(cmsensord status, ack and "
         r"capture-now cannot reach this daemon meanwhile\)", line)], lines[-30:]
-    assert not [line for line in lines if "removed while open" in line or "taken again" in line]
+    assert not [line for line in lines if "removed while open" in line]
+    taken = [line for line in lines if "taken again" in line]      # the lock and socket on the other device
+    assert len(taken) == (back == "another"), taken
     resumed = [line for line in lines if line.startswith("INFO disk_error: logging resumed in cmsensord-")]
     assert len(resumed) == 1, lines[-30:]
     assert [line for line in lines if re.match(r"INFO salvage: .*cmsensord-\S+\.mcap\.part", line)], lines[-30:]
