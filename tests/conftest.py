@@ -71,6 +71,8 @@ PROCESS_MODULES = frozenset({
     "test_output_dir_held.py",
     "test_short_logs.py",
     "test_dir_fsync.py",
+    "test_fsync_noise.py",
+    "test_output_unmounted.py",
     "test_report_link_totals.py",
     "test_log_times.py",
     "test_replay_log_times.py",

@@ -117,9 +117,34 @@ def test_configured_channel_not_in_the_stream_is_an_event_not_a_crash():
     assert not sink.topic("/cm/motor/severity")
 
 
+def test_a_summary_is_logged_at_the_highest_level_of_the_events_it_counts(caplog):
+    """The journal's summary of the lines of a kind held back is at the highest level among
+    them: routine INFO lines of a kind whose own level is ERROR are summarised at INFO, and one
+    ERROR among them makes the summary an ERROR; /cm/log's copy has that level too."""
+    import logging
+
+    from cmsensord.monitor.events import EventLog
+
+    for levels, expected in (([logging.INFO] * 8, logging.INFO),
+                             ([logging.INFO] * 7 + [logging.ERROR], logging.ERROR)):
+        sink = ListSink()
+        log = EventLog(sink, default_stamp=lambda: 0)
+        caplog.clear()
+        with caplog.at_level(logging.INFO, logger="cmsensord"):
+            for i, level in enumerate(levels):          # one second: 5 told one by one, 3 held back
+                log.emit("disk_error", None, f"routine {i}", stamp_ns=i, log_level=level)
+            log.summarise(final=True)
+        told = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "cmsensord"]
+        assert len(told) == 6 and "3 more disk_error event(s)" in told[-1][1], told
+        assert told[-1][0] == expected, told
+        [summary] = [m for m in sink.topic("/cm/log") if "more disk_error" in m["message"]]
+        assert summary["level"] == {logging.INFO: 2, logging.ERROR: 4}[expected]
+
+
 def test_routine_disk_events_are_not_logged_as_errors(caplog):
-    """Retention and "logging resumed" are disk_error events (details.action) for the
-    record, but the sink reports them at INFO in the journal; a real disk error stays an ERROR."""
+    """Retention's deletions are retention events, INFO; "logging resumed" is a disk_error event
+    (details.action) for the record, but the sink reports it at INFO in the journal; a real disk
+    error stays an ERROR."""
     import logging
 
     from cmsensord.service.sink import route_sink_events
@@ -131,10 +156,10 @@ def test_routine_disk_events_are_not_logged_as_errors(caplog):
     proc = Processor(default_config(1), sink, clock_ns=lambda: 0)
     route_sink_events(sink, proc.log)
     with caplog.at_level(logging.INFO, logger="cmsensord"):
-        sink.on_event("disk_error", "deleted 2 old files", details={"action": "retention"})
+        sink.on_event("retention", "deleted 2 old files", details={"action": "retention"})
         sink.on_event("disk_error", "logging resumed", details={"action": "resumed"})
         sink.on_event("disk_error", "No space left on device", details={"action": "abandoned"})
         proc.event("disk_error", None, "capture file: No space left on device")
     levels = [r.levelno for r in caplog.records if r.name == "cmsensord"]
     assert levels == [logging.INFO, logging.INFO, logging.ERROR, logging.ERROR]
-    assert [m["kind"] for m in sink.topic("/cm/events")] == ["disk_error"] * 4
+    assert [m["kind"] for m in sink.topic("/cm/events")] == ["retention"] + ["disk_error"] * 3

@@ -53,7 +53,8 @@ def test_older_logs_over_retain_mb_are_deleted_with_one_event(tmp_path):
     plant(other, 1.5)
     _, events = daemon_into(tmp_path)
     assert not (out / OLD).exists() and (out / NEWER).exists() and other.exists()
-    [ev] = [e for e in events if e["kind"] == "disk_error"]
+    [ev] = [e for e in events if e["kind"] == "retention"]
+    assert not [e for e in events if e["kind"] == "disk_error"]
     assert ev["message"].startswith(f"retention: deleted the 1 oldest log file(s) (1.5 MB: {OLD}) "
                                     "to keep this prefix's files under retain_mb = 1 MB (now 0.2 MB)")
 
@@ -66,13 +67,14 @@ def test_a_log_retention_cannot_delete_is_one_event_passed_over_and_the_run_goes
     err, events = daemon_into(tmp_path)
     message = f"{out / OLD}: retention cannot delete: Is a directory"
     assert f"ERROR disk_error: {message}" in err.splitlines()
-    told = [e["message"] for e in events if e["kind"] == "disk_error"]
+    told = [e["message"] for e in events if e["kind"] in ("disk_error", "retention")]
     assert told[0] == message and len(told) == 2, told
+    assert [e["kind"] for e in events if e["message"] in told] == ["disk_error", "retention"]
     assert re.fullmatch(rf"retention: deleted the 1 oldest log file\(s\) \(1\.5 MB: {NEWER}\) to keep this "
                         r"prefix's files under retain_mb = 1 MB \(now [0-9.]+ MB, besides 0\.0 MB in 1 "
                         r"file\(s\) passed over\)( and at least min_free_mb = .*)?", told[1]), told[1]
     assert (out / OLD / "kept").exists() and not (out / NEWER).exists()   # the next oldest went
-    assert "disk_error 2" in err
+    assert "disk_error 1" in err and "retention 1" in err
 
 
 def test_a_replay_into_the_services_directory_deletes_none_of_its_logs_and_says_so(tmp_path):
@@ -113,7 +115,7 @@ def test_a_log_retention_keeps_failing_on_is_one_event_over_many_rotations(tmp_p
                                    "  flush_s: 0.1\n", board=("--duration", "20", "--speed", "10"))
     message = f"{out / OLD}: retention cannot delete: Is a directory"
     assert [line for line in err.splitlines() if "cannot delete" in line] == [f"ERROR disk_error: {message}"]
-    deleted = re.findall(r"INFO disk_error: retention: deleted the 1 oldest log file\(s\) \([0-9.]+ MB: "
+    deleted = re.findall(r"INFO retention: retention: deleted the 1 oldest log file\(s\) \([0-9.]+ MB: "
                          r"(cmsensord-\S+\.mcap)\)", err)
     logs = sorted(p.name for p in out.glob("cmsensord-*.mcap") if p.name != OLD)
     assert len(deleted) >= 3 and not set(deleted) & set(logs), (deleted, logs)   # one a rotation
@@ -139,5 +141,5 @@ def test_a_simulated_board_into_the_services_directory_deletes_none_of_its_logs_
             "run's: left alone; it counts and deletes only its own under retain_mb and min_free_mb"
             in r.stderr.splitlines()), r.stderr[-3000:]
     assert all(p.exists() for p in service)
-    assert re.search(r"INFO disk_error: retention: deleted the 1 oldest log file\(s\) .* to keep this run's "
+    assert re.search(r"INFO retention: retention: deleted the 1 oldest log file\(s\) .* to keep this run's "
                      r"files under retain_mb = 0\.03 MB", r.stderr), r.stderr[-3000:]

@@ -16,8 +16,8 @@ from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS, schema_bytes
 
 
-def event(i):
-    return {"kind": "config", "channel": None, "message": f"message {i}"}
+def event(i, kind="config"):
+    return {"kind": kind, "channel": None, "message": f"message {i}"}
 
 
 def test_rotation_by_time_keeps_every_message(tmp_path, clock):
@@ -80,13 +80,18 @@ def test_an_event_is_fsynced_at_the_next_tick_once_per_tick(tmp_path, fsyncs, cl
     clock.t += 0.1
     sink.tick()
     assert fsyncs == [d]                                 # no event, fsync_s not reached
-    for i in range(3):
-        sink.write(TOPIC_EVENTS, "event", 10**18 + i, event(i))
+    for i in range(3):                                   # routine events: they ride fsync_s
+        sink.write(TOPIC_EVENTS, "event", 10**18 + i, event(i, "frames_lost"))
     clock.t += 0.1
     sink.tick()
-    assert fsyncs == [d, ino]                            # one fsync for the three events
+    assert fsyncs == [d]
+    for i in range(3):
+        sink.write(TOPIC_EVENTS, "event", 10**18 + 3 + i, event(i, "failure"))
+    clock.t += 0.1
+    sink.tick()
+    assert fsyncs == [d, ino]                            # one fsync for the three failures
     on_disk = summarize(sink.current.part_path)
-    assert on_disk["event_counts"] == {"config": 3} and on_disk["messages"] == 4
+    assert on_disk["event_counts"] == {"frames_lost": 3, "failure": 3} and on_disk["messages"] == 7
     clock.t += 0.1
     sink.tick()
     assert fsyncs == [d, ino]                            # nothing new: no fsync
@@ -101,11 +106,11 @@ def test_an_event_queued_between_ticks_is_fsynced_by_the_first_tick(tmp_path, fs
     ino, d = os.fstat(sink.current.fileno()).st_ino, tmp_path.stat().st_ino
     sink.on_event = lambda kind, message, **fields: sink.write(
         TOPIC_EVENTS, "event", 10**18, {"kind": kind, "channel": None, "message": message})
-    sink.emit("salvage", "old.mcap.part: salvaged 3 message(s)")    # as the salvage thread does
-    clock.t += 0.1
+    sink.emit("disk_error", "old.mcap.part: cannot read: Input/output error; left for the next start")
+    clock.t += 0.1                                       # as the salvage thread does
     sink.tick()
     assert fsyncs == [d, ino]                            # the directory once the file was made
-    assert summarize(sink.current.part_path)["event_counts"] == {"salvage": 1}
+    assert summarize(sink.current.part_path)["event_counts"] == {"disk_error": 1}
     sink.close()
 
 
@@ -172,8 +177,9 @@ def test_retention_keeps_the_newest_files_under_the_cap_and_only_ours(tmp_path, 
     assert parts == [] and (tmp_path / "other-20200101T000000Z.mcap").exists()
     kept = [m["i"] for p in finished for _, _, m in read_messages(p)]
     assert kept == list(range(200 - len(kept), 200)) and len(kept) > 15  # the newest, in order
-    retention = [f for kind, f in events if kind == "disk_error"]
+    retention = [f for kind, f in events if kind == "retention"]
     assert retention and all(f["details"]["action"] == "retention" for f in retention)
+    assert "disk_error" not in [kind for kind, _ in events]
     deleted = [name for f in retention for name in f["details"]["files"]]
     assert sorted(deleted + [p.name for p in finished]) == sorted(
         p.name for p in rotated + [sink.paths[-1]])      # every finished file: kept or deleted once
@@ -244,7 +250,8 @@ def test_a_file_retention_keeps_failing_on_is_told_once_and_its_repeats_when_it_
     sink.rotate()                                        # the fourth deletes it, and says what came before
     sink.close()
     assert not files[0].exists()
-    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed", "retention"]
+    assert [(k, f["details"]["action"]) for k, _, f in events] == [("disk_error", "retention_failed"),
+                                                                   ("retention", "retention")]
     assert events[1][1].endswith("; the 3 pass(es) before this one failed (told once)"), events[1][1]
 
 
@@ -287,7 +294,8 @@ def test_a_file_refused_for_a_reason_of_its_own_is_passed_over_and_told_once(tmp
     assert [f["details"]["files"] for _, _, f in events[1:]] == [[files[1].name]]
     rotated = [sink.rotate() for _ in range(3)]          # each pass meets the same refusal first
     sink.close()
-    assert [f["details"]["action"] for _, _, f in events] == ["retention_failed", "retention"]
+    assert [(k, f["details"]["action"]) for k, _, f in events] == [("disk_error", "retention_failed"),
+                                                                   ("retention", "retention")]
     assert sink.disk_errors == 4 and files[0].exists() and files[2].exists()
     assert all(p is not None and p.exists() for p in rotated), rotated
 

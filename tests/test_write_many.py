@@ -130,7 +130,8 @@ def test_a_message_that_cannot_be_encoded_fails_the_run_where_write_would(tmp_pa
     rnd = random.Random(1)
     good = [message(rnd, k, 10**9 * (k + 1)) for k in range(6)]
     bad = ("/cm/events", "event", 10**9 * 7, {"kind": "config", "channel": None, "message": object()})
-    run = good[:3] + [("/cm/events", "event", 10**9 * 4, good[0][3]), bad] + good[3:]
+    urgent = ("/cm/events", "event", 10**9 * 4, {"kind": "failure", "channel": "ch0", "message": "failure"})
+    run = good[:3] + [urgent, bad] + good[3:]
     with pytest.raises(SinkError, match="cannot be encoded"):
         for m in run:
             sinks[0].write(*m)

@@ -56,6 +56,7 @@ class Summary:
     count: int              # their ``count`` fields, summed
     rate_s: float = RATE_S  # the limit that held them back
     burst: int = RATE_BURST
+    level: int = 0          # the highest journal level among them (their line's level)
 
     def message(self) -> str:
         """``n`` events held back, and the sum of their ``count`` fields in the kind's unit."""
@@ -81,6 +82,7 @@ class _Interval:
     admitted: int = 1
     n: int = 0
     count: int = 0
+    level: int = 0
 
 
 class RateLimit:
@@ -92,9 +94,10 @@ class RateLimit:
         self._open: dict[tuple[str, str | None], _Interval] = {}
 
     def admit(self, kind: str, channel: str | None, stamp_ns: int, count: int,
-              n: int = 1) -> tuple[Summary | None, bool]:
-        """Whether the line (an event, or a summary of ``n`` events) is written, and the summary of
-        an interval it closes; held back, its ``n`` events and ``count`` go to the summary."""
+              n: int = 1, level: int = 0) -> tuple[Summary | None, bool]:
+        """Whether the line (an event, or a summary of ``n`` events) of journal ``level`` is
+        written, and the summary of an interval it closes; held back, its ``n`` events and
+        ``count`` go to the summary, whose level is the highest of the lines it stands for."""
         key = (kind, channel)
         h = self._open.get(key)
         if h is not None and stamp_ns - h.since_ns < self._rate_ns:
@@ -104,6 +107,7 @@ class RateLimit:
                 return None, True
             h.n += n
             h.count += count
+            h.level = max(h.level, level)
             return None, False
         closed = self._close(key) if h is not None else None
         self._open[key] = _Interval(stamp_ns, stamp_ns)
@@ -120,7 +124,8 @@ class RateLimit:
 
     def _close(self, key: tuple[str, str | None]) -> Summary | None:
         h = self._open.pop(key)
-        return Summary(key[0], key[1], h.since_ns, h.last_ns, h.n, h.count, self.rate_s, self.burst) if h.n else None
+        return (Summary(key[0], key[1], h.since_ns, h.last_ns, h.n, h.count, self.rate_s, self.burst, h.level)
+                if h.n else None)
 
 
 class RateLimits:
@@ -131,12 +136,13 @@ class RateLimits:
     def __init__(self, limits: tuple[RateLimit, ...] | None = None) -> None:
         self.limits = limits or (RateLimit(), RateLimit(LONG_S, LONG_BURST))
 
-    def admit(self, kind: str, channel: str | None, stamp_ns: int, count: int) -> tuple[list[Summary], bool]:
-        """Whether the event is written one by one, and the summaries to write of the intervals it
-        closes (oldest first)."""
+    def admit(self, kind: str, channel: str | None, stamp_ns: int, count: int,
+              level: int = 0) -> tuple[list[Summary], bool]:
+        """Whether the event (of journal ``level``) is written one by one, and the summaries to
+        write of the intervals it closes (oldest first)."""
         closed: list[Summary] = []
         for i, limit in enumerate(self.limits):
-            summary, ok = limit.admit(kind, channel, stamp_ns, count)
+            summary, ok = limit.admit(kind, channel, stamp_ns, count, level=level)
             if summary is not None:
                 closed += self._onward(summary, i + 1)
             if not ok:
@@ -158,7 +164,7 @@ class RateLimits:
         events counted there), else [it], after the summaries of the intervals it closes."""
         closed: list[Summary] = []
         for i in range(first, len(self.limits)):
-            summary, ok = self.limits[i].admit(s.kind, s.channel, s.last_ns, s.count, s.n)
+            summary, ok = self.limits[i].admit(s.kind, s.channel, s.last_ns, s.count, s.n, s.level)
             if summary is not None:
                 closed += self._onward(summary, i + 1)
             if not ok:

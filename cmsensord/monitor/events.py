@@ -66,7 +66,7 @@ LOG_LEVEL = {
     "failure": logging.WARNING, "frames_lost": logging.WARNING, "frames_repeated": logging.WARNING,
     "link_lost": logging.WARNING,
     "decode_error": logging.WARNING, "queue_overflow": logging.WARNING,
-    "disk_error": logging.ERROR, "link_stalled": logging.WARNING,
+    "disk_error": logging.ERROR, "retention": logging.INFO, "link_stalled": logging.WARNING,
     "decision_rule": logging.WARNING, "time_base": logging.WARNING, "anomaly_held": logging.WARNING,
     "alarm_alert": logging.WARNING, "alarm_danger": logging.ERROR, "alarm_clear": logging.WARNING,
     "alarm_ack": logging.WARNING, "alarm_no_baseline": logging.WARNING,
@@ -90,8 +90,8 @@ JOURNAL_LIMITED = ALARM_KINDS
 HOLD_S = 1.0
 #: events of the daemon and its surroundings, stamped by the wall clock: written at once
 WALL_KINDS = frozenset({"start", "stop", "link_lost", "link_restored", "link_stalled", "reader_error",
-                        "reader_recovered", "reader_died", "queue_overflow", "disk_error", "salvage",
-                        "mqtt_link", "mqtt_queue"})
+                        "reader_recovered", "reader_died", "queue_overflow", "disk_error", "retention",
+                        "salvage", "mqtt_link", "mqtt_queue"})
 #: most records waiting (a stream with no decisions)
 MAX_PENDING = 1000
 #: a record stamped further than this past the processed stream waits as if stamped there
@@ -168,17 +168,17 @@ class EventLog:
         self.counts[kind] = self.counts.get(kind, 0) + 1
         told = written = True
         count = int(extra.get("count", 0) or 0)
+        level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind not in UNLIMITED or kind in JOURNAL_LIMITED:
             key = extra.get("alarm", channel) if kind in JOURNAL_LIMITED else channel
-            closed, told = self._told.admit(kind, key, stamp, count)
+            closed, told = self._told.admit(kind, key, stamp, count, level)
             for s in closed:
                 self._tell_summary(s)
         if kind not in UNLIMITED and kind in WALL_KINDS:
-            closed, written = self._wall.admit(kind, channel, stamp, count)
+            closed, written = self._wall.admit(kind, channel, stamp, count, level)
             for s in closed:
                 self._put_summary(s)
         m = messages.event(stamp, kind, channel, message, extra)
-        level = LOG_LEVEL.get(kind, logging.INFO) if log_level is None else log_level
         if kind in WALL_KINDS:
             if written:
                 self._put(m, m.stamp_ns, level)
@@ -188,10 +188,10 @@ class EventLog:
             self._tell(m, level)
 
     def _tell_summary(self, s: Summary) -> None:
-        """A summary of the events not told: to the journal (a WALL_KINDS kind's to the sink are
-        its own limit's)."""
+        """A summary of the events not told: to the journal at the highest level among them (a
+        WALL_KINDS kind's to the sink are its own limit's)."""
         m = messages.event(s.last_ns, s.kind, s.channel, s.message(), s.fields())
-        self._tell(m, LOG_LEVEL.get(s.kind, logging.INFO))
+        self._tell(m, _summary_level(s))
 
     def _hold(self, m: messages.Message, level: int) -> None:
         """A record of the stream into the reorder buffer (written at once after the run)."""
@@ -270,10 +270,11 @@ class EventLog:
         for s in self._written.over(at):
             self._put_summary(s)
         skip = set()
-        for _, n, m, _ in sorted(group, key=_by_content):
+        for _, n, m, level in sorted(group, key=_by_content):
             ev = m.msg
             if ev["kind"] not in UNLIMITED:
-                closed, ok = self._written.admit(ev["kind"], ev["channel"], at, int(ev.get("count", 0) or 0))
+                closed, ok = self._written.admit(ev["kind"], ev["channel"], at, int(ev.get("count", 0) or 0),
+                                                 level)
                 for s in closed:
                     self._put_summary(s)
                 if not ok:
@@ -284,7 +285,7 @@ class EventLog:
 
     def _put_summary(self, s: Summary) -> None:
         self._put(messages.event(s.last_ns, s.kind, s.channel, s.message(), s.fields()), s.last_ns,
-                  LOG_LEVEL.get(s.kind, logging.INFO))
+                  _summary_level(s))
 
     def _written_at(self, stamp: int) -> int:
         """The stamp a record of ``stamp`` is written at: never before the newest written, nor
@@ -301,6 +302,12 @@ class EventLog:
         if self.watch is not None:
             extra = {k: v for k, v in ev.items() if k not in ("kind", "channel", "message")}
             self.watch(ev["kind"], ev["channel"], ev["message"], m.stamp_ns, extra)
+
+
+def _summary_level(s: Summary) -> int:
+    """The journal level of a summary: the highest among the events it counts (a summary of
+    routine INFO lines of a kind is no ERROR), the kind's when it does not say."""
+    return s.level or LOG_LEVEL.get(s.kind, logging.INFO)
 
 
 def _by_content(entry: tuple[int, int, messages.Message, int]) -> tuple[str, str, str]:

@@ -6,7 +6,10 @@ again for its next file, but ``cmsensord status``, ``ack`` and ``capture-now`` f
 and a second daemon on the same configuration found no lock and read the port beside the first.
 :class:`DirGuard` looks every :data:`CHECK_S` seconds (a stat of each file) and takes the lock
 again and binds the socket again, with one ``disk_error`` event (``details.action``
-``relocked``, a journal WARNING) saying what was gone and is back.
+``relocked``, a journal WARNING) saying what was gone and is back. A directory no longer on the
+device it was on at start (its file system unmounted: :mod:`cmsensord.sinks.log_dir`) gets
+neither made on the file system under it: one ``relock_waiting`` event says so, and they are
+looked at again once it is back.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from collections.abc import Callable
 
 from cmsensord.service.control import ControlServer
 from cmsensord.service.instance import LOCK_NAME, HeldDir
+from cmsensord.sinks.log_dir import device_of, off_device
 from cmsensord.sinks.retention import DISK_EVENT
 
 __all__ = ["CHECK_S", "DirGuard"]
@@ -34,6 +38,7 @@ class DirGuard:
         self.held, self.control, self.emit = held, control, emit
         self._next = now + CHECK_S
         self._told = ""                 # the failure said last (not repeated while it lasts)
+        self.device = device_of(self._dir()) if held is not None or control is not None else None
 
     def check(self, now: float) -> None:
         """Every CHECK_S: a lock file or socket gone is taken or bound again, said in one event;
@@ -46,6 +51,14 @@ class DirGuard:
         sock_gone = control is not None and control.gone()
         if not (lock_gone or sock_gone):
             self._told = ""
+            return
+        away = off_device(self._dir(), self.device)
+        if away is not None:            # unmounted: nothing made on the file system under it
+            if self._told != away:
+                self.emit(DISK_EVENT, f"{self._dir()}: {away}; its lock file and control socket too (cmsensord "
+                          "status, ack and capture-now cannot reach this daemon meanwhile)", logging.WARNING,
+                          {"action": "relock_waiting"})
+            self._told = away
             return
         back, failed = [], ""
         if held is not None and lock_gone:

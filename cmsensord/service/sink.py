@@ -20,8 +20,8 @@ from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.tee import TeeSink
 from cmsensord.terminal_bar import Bar
 
-#: disk_error events that report routine work or a recovery (details.action): INFO in the journal
-_DISK_NEWS = frozenset({"resumed", "retention", "salvaged"})
+#: disk_error events that report a recovery (details.action): INFO in the journal
+_DISK_NEWS = frozenset({"resumed", "salvaged"})
 
 log = logging.getLogger("cmsensord")
 
@@ -200,8 +200,8 @@ def publisher_of(sink: RotatingSink):
 
 
 def sink_log_level(kind: str, fields: dict) -> int | None:
-    """The journal level of a sink event: INFO for its routine work and recoveries (retention,
-    logging resumed, salvage), None (the kind's level) otherwise."""
+    """The journal level of a sink event: INFO for a disk_error that reports a recovery (logging
+    resumed, salvage), None (the kind's level) otherwise (retention's deletions: INFO, its kind's)."""
     if kind == "disk_error" and (fields.get("details") or {}).get("action") in _DISK_NEWS:
         return logging.INFO
     return None

@@ -115,7 +115,10 @@ class ChunkWriter:
         self._data_crc = 0
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
-        self._chunk_indexes: list[ChunkIndex] = []
+        # the summary's ChunkIndex records of the chunks written, serialised as they are written:
+        # ~190 bytes a chunk of 11 channels (mcap's objects, a dict each: ~1.3 KB)
+        self._chunk_index_raw = bytearray()
+        self._chunk_count = 0
         self._metadata_indexes: list[MetadataIndex] = []
         self._channel_counts: dict[int, int] = {}
         self._message_count = 0
@@ -255,7 +258,7 @@ class ChunkWriter:
             size += len(parts[-1])
             self._channel_counts[channel_id] = self._channel_counts.get(channel_id, 0) + len(records)
         index_raw = b"".join(parts)
-        self._chunk_indexes.append(
+        self._chunk_index_raw += build_records(
             ChunkIndex(
                 message_start_time=t0,
                 message_end_time=t1,
@@ -268,6 +271,7 @@ class ChunkWriter:
                 uncompressed_size=chunk.uncompressed_size,
             )
         )
+        self._chunk_count += 1
         if n:
             if self._message_count:
                 self._start_time = min(self._start_time, t0)
@@ -297,22 +301,25 @@ class ChunkWriter:
                         channel_count=len(self._channels),
                         attachment_count=0,
                         metadata_count=len(self._metadata_indexes),
-                        chunk_count=len(self._chunk_indexes),
+                        chunk_count=self._chunk_count,
                         message_start_time=self._start_time,
                         message_end_time=self._end_time,
                         channel_message_counts=dict(self._channel_counts),
                     )
                 ],
             ),
-            (Opcode.CHUNK_INDEX, self._chunk_indexes),
+            (Opcode.CHUNK_INDEX, self._chunk_index_raw),
             (Opcode.METADATA_INDEX, self._metadata_indexes),
         )
         for opcode, records in groups:
             if not records:
                 continue
             group_start = builder.count
-            for record in records:
-                record.write(builder)
+            if isinstance(records, bytearray):   # records serialised already
+                builder.write(records)
+            else:
+                for record in records:
+                    record.write(builder)
             offsets.append(
                 SummaryOffset(
                     group_opcode=opcode,

@@ -28,6 +28,7 @@ what to do after an error are the caller's policy
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import os
 import time
@@ -37,6 +38,7 @@ from pathlib import Path
 from cmsensord import __version__
 from cmsensord.errors import SinkError
 from cmsensord.sinks.json_templates import TEMPLATES
+from cmsensord.sinks.log_dir import off_device
 from cmsensord.sinks.log_names import log_files, next_name, salvaged_path
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import REPEATED, ChannelRegistry, encode_message
@@ -49,6 +51,7 @@ __all__ = [
     "fsync_dir",
     "log_files",
     "make_dirs",
+    "moved_error",
     "os_error_text",
     "salvaged_path",
 ]
@@ -116,6 +119,15 @@ def fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+def moved_error(out_dir: str | Path, device: int | None) -> SinkIOError | None:
+    """None while ``out_dir`` is on ``device`` (:func:`~cmsensord.sinks.log_dir.off_device`; None:
+    any); else the error of opening a file there (``op="open"``, ENODEV): its file system is gone."""
+    why = off_device(out_dir, device)
+    if why is None:
+        return None
+    return SinkIOError(f"{out_dir}: {why}", op="open", err=OSError(errno.ENODEV, why), path=Path(out_dir))
+
+
 def make_dirs(path: Path) -> list[Path]:
     """``mkdir -p path``: the directories it created, outermost first (OSError as mkdir's).
     Their parents are to be fsynced (:func:`fsync_dir`) for the new names to survive a power cut."""
@@ -150,6 +162,8 @@ class McapSink:
             (:class:`~cmsensord.sinks.reorder.ReorderWindow`; 0: nothing held, a late
             message gets the newest log time written).
         reorder_horizon_ns: the window's horizon to start with (the previous file's).
+        device: the device ``out_dir`` must be on (None: any); elsewhere nothing is made and
+            the file is not opened (:func:`moved_error`).
 
     Raises:
         SinkError: an argument is invalid; :class:`SinkIOError` (a SinkError,
@@ -179,6 +193,7 @@ class McapSink:
         chunk_size: int = 1024 * 1024,
         reorder_s: float = MAX_S,
         reorder_horizon_ns: int = 0,
+        device: int | None = None,
     ) -> None:
         if compression not in _COMPRESSION:
             raise SinkError(
@@ -195,6 +210,9 @@ class McapSink:
         self._closed = False
         self._failed = False
 
+        moved = moved_error(self.out_dir, device)
+        if moved is not None:
+            raise moved
         try:
             created = make_dirs(self.out_dir)
         except OSError as err:

@@ -21,8 +21,13 @@ if TYPE_CHECKING:
 #: a pass each time the file being written grows by this share of ``retain_mb`` (so the prefix's
 #: files, that file included, pass the cap by at most that share between rotations)
 PASS_EVERY = 1 / 64
-#: the kind of retention and disk events (``details["action"]`` tells them apart)
+#: the kind of disk events (``details["action"]`` tells them apart): retention's refusals and a
+#: floor out of reach among them
 DISK_EVENT = "disk_error"
+#: the kind of retention's routine deletions (INFO in the journal; ``details["action"]``
+#: ``retention``): its own, so that they neither use up the journal's budget of ``disk_error``
+#: lines nor stand among real disk errors
+RETENTION_EVENT = "retention"
 MB = 1_000_000
 
 #: unlink errors of the file itself, not of its directory or file system: a directory under a
@@ -214,9 +219,9 @@ def _refused(sink: RotatingSink, path: Path, err: OSError) -> None:
 
 def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: int, free: int,
                    repeats: int = 0, kept: tuple[int, int] = (0, 0)) -> None:
-    """The ``retention`` event of the files ``deleted`` (``freed`` bytes; ``total`` left, ``free``);
-    ``repeats``: the passes that failed again as the last ``retention_failed`` event told;
-    ``kept``: (files, bytes) passed over, which ``total`` leaves out."""
+    """The ``retention`` event (kind :data:`RETENTION_EVENT`) of the files ``deleted`` (``freed``
+    bytes; ``total`` left, ``free``); ``repeats``: the passes that failed again as the last
+    ``retention_failed`` event told; ``kept``: (files, bytes) passed over, which ``total`` leaves out."""
     o = sink.output
     why = []
     if o.retain_mb:
@@ -228,7 +233,7 @@ def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: i
                    f"(now {free / MB:.1f} MB)")
     names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
     again = f"; the {repeats + 1} pass(es) before this one failed (told once)" if repeats else ""
-    sink.emit(DISK_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
+    sink.emit(RETENTION_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
               f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}{again}",
               count=len(deleted), details={"action": "retention",
                                            "files": [p.name for p in deleted],

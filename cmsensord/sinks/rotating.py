@@ -1,18 +1,16 @@
 """The daemon's log writer: MCAP files rotated, flushed, fsynced, salvaged and kept within bounds.
 
 Owns the policy of ``output`` in the configuration; each file is an
-:class:`~cmsensord.sinks.mcap_file.McapSink` (``*.mcap.part``, renamed to
-``*.mcap`` when finished). Rotation happens between messages, so no message
-is split across files; a file opened by a rotation that gets no message
-before :meth:`RotatingSink.close` is deleted, never finished empty. Each file
-is in log-time order (:mod:`cmsensord.sinks.reorder`: late messages are held
-back up to the lag they come with, at most 10 s unless a longer one is expected
-in a replay; the lag carries over to the next file, :mod:`.reorder_lag`).
-Messages held there are not yet in the file: what the durability rules below
-say of "the messages of the last second" covers them only in a stream that
-comes in order (RMS mode); in RAW mode with order tracking add the orders' lag
-(a few seconds), with captures their ``post_s`` and 2 s, except while the link
-is quiet (:meth:`RotatingSink.release_held`).
+:class:`~cmsensord.sinks.mcap_file.McapSink` (``*.mcap.part``, renamed to ``*.mcap`` when
+finished). Rotation happens between messages, so no message is split across files; a file
+opened by a rotation that gets no message before :meth:`RotatingSink.close` is deleted, never
+finished empty. Each file is in log-time order (:mod:`cmsensord.sinks.reorder`: late messages
+are held back up to the lag they come with, at most 10 s unless a longer one is expected in a
+replay; the lag carries over to the next file, :mod:`.reorder_lag`). Messages held there are
+not yet in the file: what the durability rules below say of "the messages of the last second"
+covers them only in a stream that comes in order (RMS mode); in RAW mode with order tracking add
+the orders' lag (a few seconds), with captures their ``post_s`` and 2 s, except while the link is
+quiet (:meth:`RotatingSink.release_held`).
 
 Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
@@ -20,28 +18,22 @@ the live loop does):
 * the open chunk is written to the kernel early enough that a kill -9 loses at
   most the messages of the last ``flush_s``, though a loaded machine delays ticks
   and the reorder window holds messages (:mod:`cmsensord.sinks.flush_margin`);
-* the file is fsynced every ``fsync_s``, and at the first tick after any
-  message on ``/cm/events``: an event is on stable storage by the end of the
-  loop iteration that wrote it, or of the next one when it was raised after
-  that iteration's tick (at most one fsync per iteration, so a burst of events
-  costs one fsync);
+* the file is fsynced every ``fsync_s``, and at the first tick after an event
+  of :data:`~cmsensord.sinks.durable.FSYNC_AT_ONCE` (failures, alarms, the disk ...;
+  routine ones ride ``fsync_s``): it is on stable storage by the end of the loop
+  iteration that wrote it, or of the next one when raised after that iteration's
+  tick (at most one fsync per iteration, so a burst of events costs one fsync);
 * a new file's directory is fsynced once it is created (its name is durable before its data);
   a finished file is fsynced, renamed and its directory fsynced.
 
-Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk
-error) are salvaged (:func:`~cmsensord.sinks.mcap_salvage.salvage`) into
-``<stem>.salvaged.mcap`` before the first file is opened, or, with
-``background_salvage``, by a thread while the first file is written (the
-daemon: start-up never waits for it); then retention runs.
-:meth:`RotatingSink.stop_salvage` (the daemon on SIGTERM) stops that thread
-between two records and leaves the ``.part`` it was reading as it was, for
-the next start; :meth:`RotatingSink.close` waits for the thread.
+Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk error) are salvaged
+(:func:`~cmsensord.sinks.mcap_salvage.salvage`) into ``<stem>.salvaged.mcap`` before the first
+file is opened, or, with ``background_salvage``, by a thread while the first file is written (the
+daemon: start-up never waits for it); then retention runs. :meth:`RotatingSink.stop_salvage` (the
+daemon on SIGTERM) stops that thread between two records and leaves the ``.part`` it was reading
+as it was, for the next start; :meth:`RotatingSink.close` waits for the thread.
 
-Retention (after each rotation, at start and on a full disk): the oldest
-finished files of this prefix (and ``.part`` copies salvage kept) are deleted while this prefix's files take
-more than ``retain_mb`` or the file system has less than ``min_free_mb``
-free; never the file being written, never a ``.part`` file, never another
-prefix's file.
+Retention (after each rotation, at start and on a full disk): :mod:`cmsensord.sinks.retention`.
 
 Disk errors: no OSError ever leaves this class. A failing operation (open, write, flush,
 fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
@@ -51,7 +43,9 @@ A failed fsync is never retried on the same file. A new file is tried at once, t
 not be written, are counted in :attr:`dropped`. Logging counts as back when a new file
 has been fsynced. One ``disk_error`` event per outage, one when logging resumes (the count).
 A full or failing disk at start (for the daemon, ``wait_for_disk``, a read-only one too) is
-such an outage; any other reason the first file cannot be opened is a SinkError.
+such an outage, and so is, at any time, the output directory off the device it was on at start
+(unmounted: nothing is made on the file system under it, :mod:`cmsensord.sinks.log_dir`); any
+other reason the first file cannot be opened is a SinkError.
 
 Events go to :attr:`RotatingSink.on_event` (``on_event(kind, message, **fields)``,
 settable after construction: the Processor that turns them into ``/cm/events`` messages
@@ -77,12 +71,13 @@ from cmsensord.config import OutputConfig
 from cmsensord.errors import SinkError
 from cmsensord.sinks import disk_events
 from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event kinds: disk_events)
+from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
-from cmsensord.sinks.mcap_file import McapSink, SinkIOError
+from cmsensord.sinks.log_dir import device_of
+from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
 from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention
-from cmsensord.sinks.schemas import TOPIC_EVENTS
 
 log = logging.getLogger("cmsensord")
 
@@ -148,7 +143,7 @@ class RotatingSink(ReorderLag):
         self._delivering = False
         self._closed = False
         self._current: McapSink | None = None
-        self._event_dirty = False            # an event was written since the last fsync
+        self._event_dirty = False            # an urgent event was written since the last fsync
         self._need_sync = False              # fsync at the next tick (a new file after an error)
         now = clock()
         self._last_sync = now
@@ -160,6 +155,7 @@ class RotatingSink(ReorderLag):
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []
         self.retention = RetentionTold()    # what retention said once and does not repeat
+        self.device = device_of(output.dir)  # files are made on this device only
 
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
@@ -223,7 +219,8 @@ class RotatingSink(ReorderLag):
     def _open(self) -> McapSink:
         o = self.output
         sink = self._window_of(McapSink(o.dir, prefix=o.prefix, compression=o.compression, flush_s=o.flush_s,
-                                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock))
+                                        clock=self.clock, metadata=self.metadata, wall_clock=self.wall_clock,
+                                        device=self.device))
         if sink.dir_sync_error is not None:
             disk_events.dir_fsync_failed(self, sink.dir_sync_error, sink.part_path)
         self._opened = self.clock()
@@ -267,7 +264,7 @@ class RotatingSink(ReorderLag):
             self._failed(err, cur)
             self._deliver()
             return
-        if topic == TOPIC_EVENTS:
+        if urgent(topic, msg):
             self._event_dirty = True
         self._written(cur)
 
@@ -288,7 +285,7 @@ class RotatingSink(ReorderLag):
                 j = cur.write_many(messages, i)
             except SinkError as err:        # counted as write() counts, the failing one too
                 j = cur.batch_at
-                self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+                self._event_dirty |= urgent_in(messages, i, j)
                 self.messages_written += j + 1 - i
                 if not isinstance(err, SinkIOError):
                     raise
@@ -296,7 +293,7 @@ class RotatingSink(ReorderLag):
                 self._deliver()
                 i = j + 1
                 continue
-            self._event_dirty |= TOPIC_EVENTS in [m[0] for m in messages[i:j]]
+            self._event_dirty |= urgent_in(messages, i, j)
             self.messages_written += j - i
             i = j
             self._written(cur)
@@ -381,7 +378,7 @@ class RotatingSink(ReorderLag):
         self._deliver()
 
     def flush(self) -> None:
-        """Write the open chunk; fsync when fsync_s has passed or an event is pending."""
+        """Write the open chunk; fsync when fsync_s has passed or an urgent event is pending."""
         cur = self._current
         if cur is None:
             self._retry_if_due()
@@ -501,7 +498,8 @@ class RotatingSink(ReorderLag):
     def _check_present(self, cur: McapSink) -> bool:
         """After each flush: True while the open file is still in the output directory; a file
         (or directory) removed under the daemon is reported, with every message written to
-        it as lost, and logging goes on in a new file (the directory made again)."""
+        it as lost, and logging goes on in a new file (the directory made again); a directory
+        no longer on its device (unmounted) is an outage until it is back."""
         try:
             os.stat(cur.part_path)
             return True
@@ -509,6 +507,10 @@ class RotatingSink(ReorderLag):
             pass
         except OSError:
             return True                      # not known to be gone: the next write tells
+        moved = moved_error(self.output.dir, self.device)
+        if moved is not None:                # its file system is gone: the file kept for salvage
+            self._failed(moved, cur)
+            return False
         lost = cur.messages_written
         cur.abandon()
         self._current = None

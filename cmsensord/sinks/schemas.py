@@ -136,6 +136,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "start",
     "stop",
     "disk_error",
+    "retention",
     "salvage",
     "time_base",
     "capture",
@@ -229,9 +230,9 @@ _DETAILS: dict[str, Any] = {
     "type": "object",
     "description": "further fields, by kind; only those that apply are present",
     "properties": {
-        "action": _str("disk_error, salvage: what happened (abandoned, resumed, removed, retention, "
-                       "retention_failed, low_space, salvage_failed, dir_fsync_failed, relocked, "
-                       "relock_failed; salvaged, "
+        "action": _str("disk_error, retention, salvage: what happened (abandoned, resumed, removed, "
+                       "retention, retention_failed, low_space, salvage_failed, dir_fsync_failed, relocked, "
+                       "relock_failed, relock_waiting; salvaged, "
                        "deleted, unreadable, ...)"),
         "op": _str("disk_error: the failed operation (open, write, fsync, close, read)"),
         "errno": _str("disk_error: the OS error's name (ENOSPC, EIO, ...)"),

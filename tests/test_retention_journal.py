@@ -1,0 +1,73 @@
+"""Retention's routine deletions are ``retention`` events (INFO), not ``disk_error`` ones: a
+daemon rotating every few kB deletes a log at each rotation, and the journal's budget of 10 lines
+of a kind in 600 s is retention's own, so a real disk error after them (the file system filled by
+another program: ENOSPC) is still an ERROR line of its own; a summary of the lines held back
+is at the highest level among them (retention's: INFO, never ERROR).
+
+A real daemon on a simulated board over a pty, its logs on a small tmpfs (``small_fs``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import time
+
+from processes import spawn, start_board, stop
+
+CONFIG = ("  compression: none\n  rotate_mb: 0.02\n  retain_mb: 0.1\n  min_free_mb: 0\n  flush_s: 0.1\n"
+          "  retry_s: 1\n")
+
+
+def _wait_for(predicate, timeout: float) -> None:
+    end = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.2)
+
+
+def test_a_disk_error_after_many_retention_passes_is_its_own_error_line(small_fs, tmp_path):
+    logs = small_fs / "logs"
+    link = tmp_path / "ttyBOARD"
+    board = start_board("--scenario", "healthy", "--channels", "4", "--speed", "20", "--link", str(link),
+                        "--flow-control")
+    cfg = tmp_path / "cmsensord.yaml"
+    cfg.write_text(f"link:\n  port: {link}\n  max_drift_s: 0\noutput:\n  dir: {logs}\n  status_line: false\n{CONFIG}")
+    daemon = spawn([sys.executable, "-m", "cmsensord", "--config", str(cfg)], stderr=subprocess.PIPE, text=True)
+    try:
+        rotated: set[str] = set()
+
+        def rotations() -> bool:                  # each rotation's retention deletes the oldest log
+            rotated.update(p.name for p in logs.glob("*.mcap"))
+            return len(rotated) >= 16
+
+        _wait_for(rotations, 60)
+        filler = small_fs / "other-program.bin"   # another program fills the file system
+        with open(filler, "wb") as f:
+            try:
+                while True:
+                    f.write(b"\0" * 16384)
+                    f.flush()
+            except OSError:
+                pass
+        time.sleep(2.0)
+        os.unlink(filler)
+        time.sleep(3.0)                           # retry_s 1: logging resumes
+        err = stop(daemon, timeout=30)
+    finally:
+        board.terminate()
+        board.wait(timeout=5)
+    assert daemon.returncode == 0 and "Traceback" not in err, err[-3000:]
+    lines = err.splitlines()
+    errors = [line for line in lines if line.startswith("ERROR")]
+    assert len(errors) == 1 and re.match(r"ERROR disk_error: \S+\.mcap\.part: (write failed|cannot finish MCAP "
+                                         r"file): No space left on device; ", errors[0]), errors
+    deleted = [line for line in lines if re.match(r"INFO retention: retention: deleted the 1 oldest log file\(s\) "
+                                                  r"\([0-9.]+ MB: cmsensord-\S+\.mcap\) to keep this prefix's", line)]
+    assert len(deleted) == 10, lines[-40:]                       # the journal's budget of its kind
+    assert [line for line in lines if line.startswith("INFO disk_error: logging resumed in ")], lines[-40:]
+    summaries = [line for line in lines if "more retention event(s)" in line]
+    assert summaries and all(line.startswith("INFO retention: ") for line in summaries), summaries
+    assert not [line for line in lines if line.startswith("ERROR") and "retention" in line]
