@@ -351,8 +351,11 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
     if not frames and not source.waiting:       # no data moves the events' release on: the wall clock does
-        proc.idle(proc.diag.wall_stamp())       # nor the alarm state's saves
-        proc.log.release(time.time_ns())
+        if watch.sim_done is None:
+            proc.check_wall(cfg.link.max_drift_s, idle=True)    # a step of it in an outage, at once
+        now_ns = proc.diag.wall_stamp()         # the wall clock on the stream's time base
+        proc.idle(now_ns)                       # nor the alarm state's saves
+        proc.log.release(now_ns)
 
 
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
