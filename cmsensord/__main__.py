@@ -1,6 +1,6 @@
-"""`python -m cmsensord` = the `cmsensord` command."""
+"""`python -m cmsensord` = the `cmsensord` command (:mod:`cmsensord.entry`)."""
 import sys
 
-from cmsensord.cli import main
+from cmsensord.entry import main
 
 sys.exit(main())

@@ -24,7 +24,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from cmsensord import __version__
+from cmsensord import __version__, hangup
 from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
 from cmsensord.config import Config, default_config, load_config
@@ -362,6 +362,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     helping = "-h" in argv or "--help" in argv
     parser = replay_parser() if argv[:1] == ["replay"] and not helping else build_parser(with_scenarios=helping)
     args = parser.parse_args(argv)
+    if args.command is not None:        # not the daemon: SIGHUP as the entry point found it
+        hangup.release()
     setup_logging(args.verbose, daemon=args.command is None)
     try:
         return _dispatch(args)

@@ -4,8 +4,9 @@ clock find (tests/test_link_silence.py and test_stream_time.py run the daemon it
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from cmsensord.monitor.clock import BlockClock
+from cmsensord.monitor.clock import CATCH_UP, BlockClock
 
 S = 1_000_000_000
 WALL0 = 1_700_000_000 * S
@@ -51,3 +52,35 @@ def test_a_backlog_after_a_silence_is_no_drift_and_the_board_time_goes_on():
     wall = board(10, 100, clock, wall, found)
     assert found == []
     assert abs(clock.last_stamp_ns - (WALL0 + round(wall * S))) < 0.2 * S
+
+
+def _fast_board(fast: float, seconds: float) -> tuple[BlockClock, list, list[int], float]:
+    """A board ``fast`` times real time (its crystal fast) looked at every 0.1 s for ``seconds``,
+    whole blocks before each look (on average 10 ``fast`` of them): the clock, the drifts found,
+    the newest stamp at each look less the wall clock then (ns), and the wall clock at the end."""
+    clock, found, off = BlockClock(), [], []
+    wall, owed = 0.0, 0.0
+    for _ in range(round(seconds * 10)):
+        owed += 10 * fast
+        n = int(owed)
+        owed -= n
+        wall = board(n, 1, clock, wall, found)
+        off.append(clock.last_stamp_ns - (WALL0 + round(wall * S)))
+    return clock, found, off, wall
+
+
+@pytest.mark.parametrize("fast, seconds, at", [(1.05, 150, 38.4), (1.001, 3000, 1910.1)])
+def test_a_fast_crystal_is_re_anchored_once_and_its_stamps_stay_on_the_wall_clock(fast, seconds, at):
+    """A board whose crystal runs fast (5 %, and 1000 ppm): one drift, ahead by 2 s; its stamps
+    then run 10 % slower than its rate until they meet the wall clock, and from there on at its
+    measured rate: they stay on the wall clock, with no second drift, long after the catch-up
+    would have overshot (guards against the catch-up going on, a false ``behind the wall clock
+    by 2.0 s`` 44 s after the first, at 81.4 s and 1954.1 s, and a jump of the stamps)."""
+    clock, found, off, wall = _fast_board(fast, seconds)
+    [(when, offset, rate)] = found
+    assert when == at and 2.0 < offset < 2.1
+    assert abs(rate / 25000 - fast) < 0.003
+    assert clock.stamp_fs == rate and clock.segment == 1          # back on the measured rate
+    caught = next(i for i, o in enumerate(off) if i / 10 > at and o <= 0) / 10
+    assert caught - at < 2.0 / CATCH_UP * (1 + CATCH_UP) + 0.5     # 22 s after the drift
+    assert max(abs(o) for o in off[round(caught * 10):]) < 0.5 * S  # on the wall clock after it

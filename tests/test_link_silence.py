@@ -111,3 +111,35 @@ def test_a_backlog_coming_in_over_more_than_5_s_after_a_silence_is_no_drift(tmp_
     first = decisions[0]
     assert [s - first for s in decisions] == [k * S for k in range(25)]     # on the board's clock
     assert abs(decisions[-1] - term) < 3 * S, (decisions[-1] - term) / S
+
+
+def test_a_daemon_frozen_while_the_board_sends_says_no_stall(tmp_path):
+    """The daemon's whole process frozen (SIGSTOP/SIGCONT: a paused VM, a machine stuck on swap)
+    six times for 2.5 s while the simulated board (real time) goes on sending: what it sent
+    waits in the port, and the daemon reads it when it runs again.  No event but the start, the
+    board's config and the stop; the decisions go on a second apart on the board's clock.
+    Guards against ``link_stalled: ...: no bytes for 2 s`` at nearly every thaw, the loop
+    judging the link before the reader had read again."""
+    link = tmp_path / "ttyBOARD"
+    sim = start_board("--scenario", "healthy", "--link", str(link))
+    d = start_daemon(tmp_path, link, max_drift_s=2.0)
+    try:
+        time.sleep(5.0)
+        for _ in range(6):
+            d.send_signal(signal.SIGSTOP)
+            time.sleep(2.5)
+            d.send_signal(signal.SIGCONT)
+            time.sleep(1.5)
+        err = stop(d)
+    finally:
+        d.send_signal(signal.SIGCONT)
+        sim.terminate()
+        sim.wait(timeout=5)
+    assert d.returncode == 0 and "Traceback" not in err, err
+    assert warnings_and_infos(err) == [f"INFO start: cmsensord {__version__} on {link}",
+                                       "INFO config: board firmware 1.0: RMS mode, 1 channel(s), fs 25000 Hz, "
+                                       "block 250",
+                                       "INFO stop: cmsensord stopping (signal SIGTERM)"], err
+    msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
+    decisions = [s for t, s, _ in msgs if t.endswith("/severity")]
+    assert len(decisions) >= 25 and [b - a for a, b in zip(decisions, decisions[1:])] == [S] * (len(decisions) - 1)

@@ -7,6 +7,7 @@ import signal
 
 import pytest
 
+from cmsensord import hangup
 from cmsensord.service.signals import StopFlag
 
 
@@ -30,3 +31,14 @@ def test_each_signal_sets_its_flag_and_wakes_the_loop(restored_handlers, sig):
         assert stop.reopen and not stop.event.is_set()
     else:
         assert stop.event.is_set() and not stop.reopen and stop.signal == sig
+
+
+def test_a_sighup_held_from_the_entry_point_is_a_reopen_once_the_loop_takes_it(restored_handlers):
+    hangup.hold()
+    os.kill(os.getpid(), signal.SIGHUP)  # before the loop's handler: held, not the end of the process
+    stop = StopFlag()
+    stop.install_reopen()
+    assert stop.reopen and not stop.event.is_set()
+    again = StopFlag()
+    again.install_reopen()               # taken once
+    assert not again.reopen

@@ -103,3 +103,40 @@ def test_a_rule_s_delay_runs_the_stream_s_time_across_a_step(tmp_path, step_s):
     alerts = [s for msgs in files for t, s, m in msgs if t == "/cm/events" and m["kind"] == "alarm_alert"]
     assert due >= len(old) and alerts == [records[due]], (alerts, records, err)   # 3 s after the first
     assert [m["worst"] for t, _, m in files[-1] if t == "/cm/alarms"][-1] == "alert"
+
+
+def test_a_step_back_while_the_board_is_gone_keeps_the_outage_in_the_log(tmp_path):
+    """The board gone 4 s in, the system clock stepped back an hour 8 s in, the daemon killed
+    (SIGKILL: a power cut) 20 s in, its log salvaged: the step is one time_base event at once,
+    ``link_lost`` is in the log (written with the file the step finished), and the outage's
+    diagnostics after the step are each at its own time on the new wall clock, 5 s apart.
+    Guards against the step going unnoticed until the board came back, the outage's events
+    held back meanwhile (lost to the kill), and every diagnostics of the outage one stamp."""
+    from cmsensord.sinks.mcap_salvage import salvage_leftovers
+
+    link = tmp_path / "tty"
+    sim = start_board("--scenario", "healthy", "--link", str(link))
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"link:\n  port: {link}\n  max_drift_s: 2.0\noutput:\n  dir: {tmp_path / 'logs'}\n"
+                   "  status_line: false\n")
+    d = spawn([sys.executable, str(ROOT / "tests" / "wall_step.py"), "8", "-3600", "--config", str(cfg)],
+              stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(4.0)
+        sim.terminate()
+        sim.wait(timeout=5)
+        time.sleep(16.0)
+        d.kill()
+        err = d.communicate(timeout=10)[1]
+    finally:
+        sim.kill()
+        sim.wait()
+    assert "WARNING time_base: the system clock stepped -3600.0 s (NTP?); re-anchored: time segment 1 " \
+           "stamped from the new wall clock" in err.splitlines(), err
+    salvage_leftovers(tmp_path / "logs", "cmsensord")
+    msgs = [m for p in sorted((tmp_path / "logs").glob("*.mcap")) for m in read_messages(p, lenient=True)]
+    events = {m["kind"]: s for t, s, m in msgs if t == "/cm/events"}
+    assert {"start", "config", "link_lost", "time_base"} <= set(events), events
+    after = [s for t, s, _ in msgs if t == "/cm/diagnostics" and events["time_base"] <= s < events["start"]]
+    assert len(after) >= 2 and all(4.5e9 < b - a < 5.5e9 for a, b in zip(after, after[1:])), after
+    assert abs(after[-1] / 1e9 - time.time() + 3600) < 7                # on the new wall clock

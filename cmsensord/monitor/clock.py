@@ -17,7 +17,8 @@ anchored to the wall clock at the reset but never before the end of the newest s
 (:meth:`BlockClock.new_segment`), so stamps never go backwards.  Live, the
 board's clock is compared with the wall clock (:meth:`BlockClock.drift`); one
 running fast or slow by more than ``link.max_drift_s`` starts a new segment whose
-stamps follow the board's measured rate.  A silent link is no slow board: the wall time
+stamps follow the board's measured rate (ahead: slower until they meet the wall clock, then
+at the rate, :meth:`BlockClock.rebase`).  A silent link is no slow board: the wall time
 without frames is no board time, and the frames after it may be a backlog (a buffer on the
 way, a board that kept what it could not send), old when they come in.  So the board's rate
 is measured from the first look after a silence on, and stamps behind the wall clock that
@@ -100,6 +101,8 @@ class BlockClock:
         self.win_wall_ns = 0                   # wall clock and t0 where the rate is measured from
         self.win_t0 = 0                        # (the segment's start, or the first look after a silence)
         self.looked_ns = 0                     # wall clock at the last look (:meth:`drift`)
+        self.catching_up = False               # stamps slower than the board's rate, ahead of the wall clock
+        self.rate_s = 0.0                      # wall seconds the measured rate was measured over
         #: (first slot, anchor_ns, t0_first, slot0_t0, block_len, stamp_fs) of each time base
         self._epochs: list[tuple[int, int, int, int, int, int]] = []
         #: called with the shift [ns] of the stamps at each :meth:`restep` (a step of the wall clock)
@@ -123,6 +126,7 @@ class BlockClock:
         self.t0_first = t0_unwrapped
         self.seg_wall_ns, self.seg_t0 = self.win_wall_ns, self.win_t0 = wall_ns, t0_unwrapped
         self.stamp_fs = stamp_fs or self.fs
+        self.catching_up = False
         self.segment += 1
         if self.slot0_t0 is not None:
             self.slot0_t0 = t0_unwrapped - self.next_slot * self.block_len
@@ -153,6 +157,8 @@ class BlockClock:
         if looked and wall_ns - looked > quiet_s * 1e9:
             self.win_wall_ns, self.win_t0 = wall_ns, self.slot_t0(self.next_slot)
             return None
+        if self.catching_up and self.last_stamp_ns <= wall_ns:
+            self._caught_up(wall_ns)
         offset = (self.last_stamp_ns - wall_ns) / 1e9
         wall_s = (wall_ns - self.win_wall_ns) / 1e9
         if abs(offset) <= max_drift_s or wall_s < DRIFT_MIN_WALL_S:
@@ -163,15 +169,34 @@ class BlockClock:
         rate = max(1, round(ticks / wall_s))
         if rate > self.stamp_fs if offset < 0 else rate < self.stamp_fs:
             return None                         # on its way back to the wall clock
+        self.rate_s = wall_s
         return offset, rate
 
     def rebase(self, wall_ns: int, offset_s: float, rate: int) -> int:
         """A new segment after a drift of ``offset_s`` (see :meth:`drift`): stamps from the
-        wall clock at the next slot, at the measured ``rate`` (slower by ``CATCH_UP`` while
-        the board is ahead, so the stamps never go back yet meet the wall clock)."""
+        wall clock at the next slot, at the measured ``rate``.  While the board is ahead they run
+        slower by ``CATCH_UP``, so they never go back yet meet the wall clock; the first look
+        that finds them there (:meth:`drift`) puts them back on ``rate`` from the next slot on,
+        without a jump, so they stay with the wall clock instead of falling behind it."""
         stamp_fs = round(rate * (1 + CATCH_UP)) if offset_s > 0 else rate
         self.rate = rate
-        return self.new_segment(self.slot_t0(self.next_slot), wall_ns, stamp_fs)
+        stamp = self.new_segment(self.slot_t0(self.next_slot), wall_ns, stamp_fs)
+        self.catching_up = offset_s > 0
+        return stamp
+
+    def _caught_up(self, wall_ns: int) -> None:
+        """The stamps of a segment catching up (:meth:`rebase`) have met the wall clock ``wall_ns``:
+        from the next slot on they run at the board's measured rate, the next slot keeping its
+        stamp (the same segment, a new time base for the slots to come).  The rate is measured
+        again over the catch-up when that is longer than what the drift's rate was measured over
+        (a few seconds after a start, whose first reads may bring what waited in the port)."""
+        t0 = self.slot_t0(self.next_slot)
+        wall_s, ticks = (wall_ns - self.win_wall_ns) / 1e9, t0 - self.win_t0
+        if wall_s > self.rate_s and ticks > 0:
+            self.rate, self.rate_s = max(1, round(ticks / wall_s)), wall_s
+        self.anchor_ns, self.t0_first = self.stamp_ns(t0), t0
+        self.stamp_fs = self.rate or self.fs
+        self.catching_up = False
 
     def restep(self, wall_ns: int) -> int:
         """The wall clock stepped (:class:`WallSteps`): a new segment whose next slot is stamped
@@ -205,6 +230,7 @@ class BlockClock:
         self.fs, self.block_len = fs, block_len
         self.stamp_fs = fs
         self.rate = 0
+        self.catching_up = False
         return moved
 
     # ---- stamps ------------------------------------------------------------

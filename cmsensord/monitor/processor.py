@@ -587,11 +587,11 @@ class Processor(Figures):
         """The link's counters (:meth:`Segments.link`)."""
         return self.segments.link(self.link_counters() if self.link_counters else {})
 
-    def check_wall(self, max_drift_s: float) -> None:
-        """Live, with the queue drained: a step of the wall clock re-anchors the stamps to it, a
-        board clock off it by more than ``max_drift_s`` starts a new segment at its measured
-        rate, measured since the link's last silence (:meth:`Segments.check_wall`)."""
-        self.segments.check_wall(self.clock_ns(), max_drift_s, self._hand_over, self.cfg.link.stall_s)
+    def check_wall(self, max_drift_s: float, *, idle: bool = False) -> None:
+        """Live, with the queue drained: a step of the wall clock re-anchors the stamps to it, a board
+        clock off it by more than ``max_drift_s`` starts a new segment at its measured rate, measured
+        since the link's last silence; ``idle`` (no frames came): the step only (:meth:`Segments.check_wall`)."""
+        self.segments.check_wall(self.clock_ns(), max_drift_s, self._hand_over, self.cfg.link.stall_s, idle=idle)
 
     def wake_t0(self) -> int | None:
         """t0 of the board block whose frames complete the next output (:mod:`.wake`)."""

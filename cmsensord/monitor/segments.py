@@ -327,22 +327,32 @@ class Segments:
         return counters
 
     def check_wall(self, now_ns: int, max_drift_s: float, hand_over: Callable[[], None],
-                   quiet_s: float = QUIET_S) -> None:
+                   quiet_s: float = QUIET_S, *, idle: bool = False) -> None:
         """Live, the wall clock now ``now_ns``: a step of it since the last look re-anchors the
         time base (:meth:`stepped`); else a board clock off it by more than ``max_drift_s`` (0:
         not checked) and not on its way back to it starts a new segment at its measured rate
         (:meth:`drifted`); a look more than ``quiet_s`` (``link.stall_s``) after the one before
         follows a silent link, and the rate is measured from it on (:meth:`BlockClock.drift`).
-        ``hand_over`` first writes what waits, stamped in the segment it came in."""
-        step = self.wall.step(now_ns)
-        if step is not None:
-            hand_over()
-            self.stepped(now_ns, step)
+        ``hand_over`` first writes what waits, stamped in the segment it came in.  ``idle`` (no
+        frames came: the board gone): the step only (:meth:`check_step`)."""
+        if self.check_step(now_ns, hand_over) or idle:
             return
         drift = self.clock.drift(now_ns, max_drift_s, quiet_s) if max_drift_s else None
         if drift is not None:
             hand_over()
             self.drifted(now_ns, *drift)
+
+    def check_step(self, now_ns: int, hand_over: Callable[[], None]) -> bool:
+        """Live, the wall clock now ``now_ns``: True when it stepped since the last look, the time
+        base then re-anchored (:meth:`stepped`, ``hand_over`` first).  Also while no frames come
+        (the board gone): the board's drift is looked at only after frames (:meth:`check_wall`).
+        Before the first frame, nothing (the stamps are the wall clock's then)."""
+        step = self.wall.step(now_ns) if self.clock.anchor_ns is not None else None
+        if step is None:
+            return False
+        hand_over()
+        self.stepped(now_ns, step)
+        return True
 
     def stepped(self, now_ns: int, step_ns: int) -> None:
         """The wall clock stepped by ``step_ns``: the next slot is stamped ``now_ns``

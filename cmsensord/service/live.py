@@ -26,7 +26,7 @@ from cmsensord.service.instance import HeldDir, claim_output_dir
 from cmsensord.service.signals import StopFlag
 from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events
 from cmsensord.service.status import StatusPace, run_summary, status_line
-from cmsensord.source import BATCH_S, HOLD_S, SerialSource
+from cmsensord.source import BATCH_S, FAR_WAKE_S, HOLD_S, SerialSource
 
 log = logging.getLogger("cmsensord")
 
@@ -67,7 +67,11 @@ def _open_capture(path: str | None, *, append: bool):
 
 class _Watch:
     """What the loop notices besides frames: queue drops, a stalled link (no bytes, or bytes but
-    no valid frame, for ``link.stall_s``), the end of a simulation."""
+    no valid frame, for ``link.stall_s``), the end of a simulation.  A turn of the loop that
+    comes longer than ``link.stall_s`` (and the loop's longest wait) after the one before
+    follows a freeze of the process (SIGSTOP, a paused VM, a machine stuck on I/O): the reader
+    stood still too, and what the board sent meanwhile waits in the port, so the link is judged
+    at the next turn, once the reader has had the loop's wait to read it."""
 
     def __init__(self, cfg: Config, proc: Processor, source: SerialSource,
                  duration_s: float | None, sim_done: threading.Event | None):
@@ -78,6 +82,7 @@ class _Watch:
         self.idle_since: float | None = None
         self.drops_seen = 0
         self.last_frame = time.monotonic()      # a valid frame, or the start
+        self.turned = self.last_frame           # the loop's newest turn (:meth:`done`)
 
     def frame_wait(self, now: float) -> float:
         """Seconds without a valid frame: since the newest, or since the port was opened when that
@@ -103,6 +108,7 @@ class _Watch:
 
     def done(self, got_frames: bool, now: float) -> bool:
         """True when the run is over (simulated board finished); notes a stalled link."""
+        gap, self.turned = now - self.turned, now
         if self.duration_s is not None and self.proc.board_seconds >= self.duration_s:
             return True                 # the simulated board's clock reached the end of the run
         if got_frames:
@@ -116,6 +122,8 @@ class _Watch:
         reader, link = self.source.reader, self.cfg.link
         if self.stalled or not reader.connected.is_set():
             return False
+        if gap > max(link.stall_s, FAR_WAKE_S):
+            return False                # frozen: the reader's turn to read what came first
         # link_quiet first: what the board sent is in the file before the event (and its journal
         # line) says the link stalled; the one after the event makes the event durable too
         last_bytes = self.source.last_bytes
@@ -343,8 +351,11 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
         proc.check_wall(cfg.link.max_drift_s)   # not behind: the lag is the board's clock
     watch.link_events()
     if not frames and not source.waiting:       # no data moves the events' release on: the wall clock does
-        proc.idle(proc.diag.wall_stamp())       # nor the alarm state's saves
-        proc.log.release(time.time_ns())
+        if watch.sim_done is None:
+            proc.check_wall(cfg.link.max_drift_s, idle=True)    # a step of it in an outage, at once
+        now_ns = proc.diag.wall_stamp()         # the wall clock on the stream's time base
+        proc.idle(now_ns)                       # nor the alarm state's saves
+        proc.log.release(now_ns)
 
 
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,

@@ -7,6 +7,8 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from cmsensord import hangup
+
 
 class StopFlag:
     """SIGINT/SIGTERM set a flag the loop checks, and call ``wake`` (if set: what ends the
@@ -25,8 +27,11 @@ class StopFlag:
 
     def install_reopen(self) -> None:
         """SIGHUP sets ``reopen`` and calls ``wake``; the loop then reopens the logs at once
-        (for log rotation tools), not at its next wake-up."""
+        (for log rotation tools), not at its next wake-up.  One that came while the entry point
+        held SIGHUP (:func:`cmsensord.hangup.hold`) sets ``reopen`` now."""
         signal.signal(signal.SIGHUP, self._hup)
+        if hangup.take():
+            self.reopen = True
 
     def why(self) -> str:
         """Why the loop ended: the signal's name, or the end of the run."""
