@@ -318,6 +318,19 @@ def test_frames_the_loop_keeps_come_first_in_the_next_batch_and_wait_as_queued_o
     assert [[f.seq for f in b] for b in batches] == [[6]]
 
 
+def moving_clock():
+    """A wall clock at 10**18 ns when first read, going on with the monotonic one from there (a
+    wall clock that stood still while time went on is a step back to the daemon's loop)."""
+    start: list[int] = []
+
+    def now() -> int:
+        m = time.monotonic_ns()
+        if not start:
+            start.append(m)
+        return 10**18 + m - start[0]
+    return now
+
+
 def test_the_loop_takes_one_call_per_rms_decision_and_gives_the_messages_of_one_frame_per_call():
     """The daemon's own batch step (live._process) on RMS frames: one Processor call per
     decision (the frames past its block wait for the next decision's, source.keep), the
@@ -335,7 +348,7 @@ def test_the_loop_takes_one_call_per_rms_decision_and_gives_the_messages_of_one_
     one = one_frame_per_call(frames, cfg)
 
     batched, calls = ListSink(), []
-    proc = Processor(cfg, batched, clock_ns=lambda: 10**18)
+    proc = Processor(cfg, batched, clock_ns=moving_clock())     # the loop looks for wall-clock steps
     handle = proc.handle
     proc.handle = lambda part: (calls.append(len(part)), handle(part))   # type: ignore[method-assign]
     step = len(data) // 23                          # reads of ~0.35 s, cut anywhere
