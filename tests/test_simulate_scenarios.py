@@ -88,13 +88,13 @@ def test_whirl_past_the_decision_size_names_the_longer_decision_that_takes_it(tm
     observations of a 1-s decision; the warning names the decision_period_s that takes it.  A
     --config of that line alone (no orders of its own) keeps the scenario's orders, whirl alarm
     included, and nothing is warned of."""
-    p, _ = run_scenario(tmp_path, cache_env, "whirl")
+    p, _ = run_scenario(tmp_path, cache_env, "whirl", "--speed", "30")
     assert ("WARNING decision_rule: ch0: tacho f_r 100.1 Hz >= the 100 observations per decision: using the "
             "configured f_r 28.66; for a machine this fast give a longer decision: monitor: {decision_period_s: 2} "
             "in --config (the tacho's f_r below 200 Hz, 12,000 rpm)") in p.stderr.splitlines()
     cfg = tmp_path / "longer.yaml"
     cfg.write_text("monitor: {decision_period_s: 2}\n")
-    p, msgs = run_scenario(tmp_path / "longer", cache_env, "whirl", "--config", str(cfg))
+    p, msgs = run_scenario(tmp_path / "longer", cache_env, "whirl", "--speed", "30", "--config", str(cfg))
     assert "decision_rule" not in p.stderr
     assert [m["name"] for m in next(m for t, _, m in msgs if t == "/cm/ch0/orders")["orders"]] == [
         "o1", "whirl", "whip"]
