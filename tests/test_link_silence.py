@@ -115,7 +115,7 @@ def test_a_backlog_coming_in_over_more_than_5_s_after_a_silence_is_no_drift(tmp_
 
 def test_a_daemon_frozen_while_the_board_sends_says_no_stall(tmp_path):
     """The daemon's whole process frozen (SIGSTOP/SIGCONT: a paused VM, a machine stuck on swap)
-    six times for 2.5 s while the simulated board (real time) goes on sending: what it sent
+    three times for 2.5 s while the simulated board (real time) goes on sending: what it sent
     waits in the port, and the daemon reads it when it runs again.  No event but the start, the
     board's config and the stop; the decisions go on a second apart on the board's clock.
     Guards against ``link_stalled: ...: no bytes for 2 s`` at nearly every thaw, the loop
@@ -125,7 +125,7 @@ def test_a_daemon_frozen_while_the_board_sends_says_no_stall(tmp_path):
     d = start_daemon(tmp_path, link, max_drift_s=2.0)
     try:
         time.sleep(5.0)
-        for _ in range(6):
+        for _ in range(3):
             d.send_signal(signal.SIGSTOP)
             time.sleep(2.5)
             d.send_signal(signal.SIGCONT)
@@ -142,4 +142,4 @@ def test_a_daemon_frozen_while_the_board_sends_says_no_stall(tmp_path):
                                        "INFO stop: cmsensord stopping (signal SIGTERM)"], err
     msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
     decisions = [s for t, s, _ in msgs if t.endswith("/severity")]
-    assert len(decisions) >= 25 and [b - a for a, b in zip(decisions, decisions[1:])] == [S] * (len(decisions) - 1)
+    assert len(decisions) >= 13 and [b - a for a, b in zip(decisions, decisions[1:])] == [S] * (len(decisions) - 1)
