@@ -146,11 +146,14 @@ def test_starting_on_a_full_disk_runs_without_a_file_and_retries(small_fs, clock
     filler.unlink()
     clock.t += 5.0
     sink.tick()                                  # retry: open
-    sink.tick()                                  # fsync: resumed
+    sink.tick()                                  # fsync of a header alone: not back yet (a full disk takes one)
+    assert not sink.logging and rec.actions() == ["abandoned"]
+    sink.write("/cm/ch0/severity", "severity", T0 + 10, {"severity_index": 0.1, "i": 10})
+    sink.tick()                                  # fsync with a message in the file: resumed
     assert sink.logging and rec.actions() == ["abandoned", "resumed"]
     assert rec.events[1][2]["count"] == 11
     path = sink.close()
-    assert [m["details"]["action"] for _t, _s, m in read_messages(path)] == ["resumed"]
+    assert [m.get("i", m.get("details", {}).get("action")) for _t, _s, m in read_messages(path)] == [10, "resumed"]
     assert not list(logs.glob("*.part"))
 
 

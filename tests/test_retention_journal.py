@@ -2,7 +2,9 @@
 daemon rotating every few kB deletes a log at each rotation, and the journal's budget of 10 lines
 of a kind in 600 s is retention's own, so a real disk error after them (the file system filled by
 another program: ENOSPC) is still an ERROR line of its own; a summary of the lines held back
-is at the highest level among them (retention's: INFO, never ERROR).
+is at the highest level among them (retention's: INFO, never ERROR).  The other program fills
+the disk to its last block, which still takes a new file's header: one outage, not one a
+retry (each new file fsynced with its header alone said logging resumed, then failed again).
 
 A real daemon on a simulated board over a pty, its logs on a small tmpfs (``small_fs``).
 """

@@ -31,9 +31,8 @@ Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk error) a
 file is opened, or, with ``background_salvage``, by a thread while the first file is written (the
 daemon: start-up never waits for it); then retention runs. :meth:`RotatingSink.stop_salvage` (the
 daemon on SIGTERM) stops that thread between two records and leaves the ``.part`` it was reading
-as it was, for the next start; :meth:`RotatingSink.close` waits for the thread.
-
-Retention (after each rotation, at start and on a full disk): :mod:`cmsensord.sinks.retention`.
+as it was, for the next start; :meth:`RotatingSink.close` waits for the thread. Retention (after
+each rotation, at start and on a full disk): :mod:`cmsensord.sinks.retention`.
 
 Disk errors: no OSError ever leaves this class. A failing operation (open, write, flush,
 fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
@@ -41,7 +40,8 @@ holds complete chunks (salvaged when logging is back, or at the next start), els
 A failed fsync is never retried on the same file. A new file is tried at once, then every
 ``retry_s``; messages written while no file is open, and those of the chunk that could
 not be written, are counted in :attr:`dropped`. Logging counts as back when a new file
-has been fsynced. One ``disk_error`` event per outage, one when logging resumes (the count).
+has been fsynced with messages in it (a full disk takes a header). One ``disk_error`` event per
+outage, one when logging resumes (the count).
 A full or failing disk at start (for the daemon, ``wait_for_disk``, a read-only one too) is
 such an outage, and so is, at any time, the output directory off the device it was on at start
 (unmounted: nothing is made on the file system under it, :mod:`cmsensord.sinks.log_dir`); any
@@ -405,9 +405,9 @@ class RotatingSink(ReorderLag):
             return
         if not self._check_present(cur):
             return
-        self._last_sync = self.clock()
-        self._event_dirty = self._need_sync = False
-        if self._outage is not None:
+        self._last_sync, self._event_dirty = self.clock(), False
+        self._need_sync = self._outage is not None and not cur.persisted   # back once messages are on it
+        if self._outage is not None and cur.persisted:
             self._resumed()
 
     def rotate(self) -> Path | None:
