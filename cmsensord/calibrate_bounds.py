@@ -54,7 +54,7 @@ def rise_warning(r: ChannelResult, obs: Observations) -> str:
     at = obs.start_s + m.rise_at * dec
     where = span_line(obs.meta, at, at + dec)
     to = _rise_to(r, obs)
-    steady = _steady_bound(r, obs) if m.level_flagged else None
+    steady = _flagged_steady(r, obs)
     if to is None:
         before = m.rise_at - m.runin_periods - 1
         advice = f"only {max(0, before)} decision(s) before it: choose a steady period of this machine (--from/--to)"
@@ -84,7 +84,7 @@ def _rise_first(r: ChannelResult, obs: Observations) -> bool:
     """Whether both warnings give a ``--to`` and the rise's is the one advised: the steady stretch
     from the start (levels within level_alert x their own median) holds a rise of its own, and the
     rise's ``--to`` is the earlier."""
-    to, steady = _rise_to(r, obs), _steady_bound(r, obs) if r.model.level_flagged else None
+    to, steady = _rise_to(r, obs), _flagged_steady(r, obs)
     return (to is not None and steady is not None and steady[0] == "--to" and r.model.steady_rise
             and to < steady[1])
 
@@ -93,11 +93,17 @@ def _advised_bound(r: ChannelResult, obs: Observations) -> tuple[str, float] | N
     """The one bound calibrate advises for channel ``r``: the rise's ``--to`` when it comes first
     (:func:`_rise_first`) or no steady stretch is given, else the steady stretch's; None when
     neither is."""
-    steady = _steady_bound(r, obs) if r.model.level_flagged else None
+    steady = _flagged_steady(r, obs)
     to = _rise_to(r, obs)
     if to is not None and (steady is None or _rise_first(r, obs)):
         return "--to", to
     return steady
+
+
+def _flagged_steady(r: ChannelResult, obs: Observations) -> tuple[str, float] | None:
+    """The steady stretch's bound (:func:`_steady_bound`) when the level check gives one (decisions
+    of the healthy period at level_alert), else None."""
+    return _steady_bound(r, obs) if r.model.level_flagged else None
 
 
 def _steady_bound(r: ChannelResult, obs: Observations) -> tuple[str, float] | None:

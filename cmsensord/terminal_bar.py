@@ -78,7 +78,9 @@ class Progress(Bar):
     def close(self) -> None:
         """End the bar's line (once), drawn again if a log record erased it since."""
         global _shown
-        erased, _shown = _shown is not self, None if _shown is self else _shown
+        erased = _shown is not self
+        if not erased:
+            _shown = None
         if self.enabled:
             self.stream.write(("\r" + self._text if erased and self._text else "") + "\n")
             self.stream.flush()
