@@ -137,9 +137,13 @@ class BlockClock:
         first stamp as it is from the wall clock at the segment's start (the stamps of a board in
         step with the wall clock), never before the end of the newest slot; ``wall_ns`` itself
         before the first frame."""
-        if self.anchor_ns is None:
-            return wall_ns
-        return max(self.floor_ns, wall_ns + self.seg_stamp_ns - self.seg_wall_ns)
+        return wall_ns if self.anchor_ns is None else max(self.floor_ns, self.on_base_ns(wall_ns))
+
+    def on_base_ns(self, wall_ns: int) -> int:
+        """The wall clock ``wall_ns`` on the stream's time base, as far from the current segment's
+        first stamp as it is from the wall clock at the segment's start, whatever the stamps
+        processed (a board sent faster than real time runs ahead of it)."""
+        return wall_ns + self.seg_stamp_ns - self.seg_wall_ns
 
     def drift(self, wall_ns: int, max_drift_s: float = 2.0,
               quiet_s: float = QUIET_S) -> tuple[float, int] | None:

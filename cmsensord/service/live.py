@@ -353,9 +353,10 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
     if not frames and not source.waiting:       # no data moves the events' release on: the wall clock does
         if watch.sim_done is None:
             proc.check_wall(cfg.link.max_drift_s, idle=True)    # a step of it in an outage, at once
-        now_ns = proc.diag.wall_stamp()         # the wall clock on the stream's time base
-        proc.idle(now_ns)                       # nor the alarm state's saves
-        proc.log.release(now_ns)
+        proc.idle(proc.diag.wall_stamp())       # nor the alarm state's saves
+        # the wall clock on the stream's time base (re-anchored at a step of it), not the newest
+        # stamp: a board ahead of the wall clock releases its events with its decisions, as a replay
+        proc.log.release(proc.clock.on_base_ns(proc.clock_ns()))
 
 
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
