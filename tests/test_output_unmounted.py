@@ -59,13 +59,15 @@ def disk(tmp_path):
         _umount(store)
 
 
-@pytest.mark.parametrize("back", ["same", "another"])
-def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk, tmp_path, back):
+@pytest.mark.parametrize("back, sub", [("same", "logs"), ("another", "logs"), ("another", "")])
+def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk, tmp_path, back, sub):
     """``back``: the file system comes back at its place on its device (bound again), or on
     another device holding its files (a disk re-plugged under another device number: a new
-    tmpfs with a copy of them)."""
+    tmpfs with a copy of them).  ``sub``: ``output.dir`` in a directory of the file system, or
+    (``""``) its mount point itself, whose empty directory an unmount leaves on the root file
+    system."""
     store, usb = disk
-    logs, link = usb / "logs", tmp_path / "ttyBOARD"
+    logs, link = usb / sub if sub else usb, tmp_path / "ttyBOARD"
     board = start_board("--scenario", "healthy", "--speed", "5", "--link", str(link), "--flow-control")
     cfg = tmp_path / "cmsensord.yaml"
     cfg.write_text(f"link:\n  port: {link}\n  max_drift_s: 0\noutput:\n  dir: {logs}\n  status_line: false\n"
@@ -81,7 +83,7 @@ def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk
             assert _mount("--bind", str(store), str(usb)).returncode == 0
         else:
             assert _mount("-t", "tmpfs", "-o", "size=16m", "tmpfs", str(usb)).returncode == 0
-            subprocess.run(["cp", "-a", str(store / "logs"), str(usb)], check=True, timeout=10)
+            subprocess.run(["cp", "-a", f"{store}/.", str(usb)], check=True, timeout=10)
             store = usb                                    # where the files are from now on
         time.sleep(4.0)
         err = stop(daemon, timeout=30)
@@ -94,7 +96,8 @@ def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk
     errors = [line for line in lines if line.startswith("ERROR")]
     gone = (re.escape(f"{logs}: not on its file system any more (device ")
             + r"\d+:\d+; the path is now on device \d+:\d+ \("
-            + re.escape(f"{usb}: the directory is not there): unmounted? a disk pulled?); nothing is made "
+            + re.escape(f"{usb}: " + ("the directory is not there" if sub else f"on the file system under its "
+                                      f"mount point {usb}") + "): unmounted? a disk pulled?); nothing is made "
                         "there, logging waits for it to be back"))
     assert len(errors) == 1 and re.fullmatch(
         rf"ERROR disk_error: {gone}; file kept as cmsensord-\S+\.mcap\.part for salvage; \d+ message\(s\) lost; "
@@ -108,7 +111,7 @@ def test_an_unmounted_log_file_system_is_an_outage_nothing_is_made_under_it(disk
     resumed = [line for line in lines if line.startswith("INFO disk_error: logging resumed in cmsensord-")]
     assert len(resumed) == 1, lines[-30:]
     assert [line for line in lines if re.match(r"INFO salvage: .*cmsensord-\S+\.mcap\.part", line)], lines[-30:]
-    names = sorted(p.name for p in (store / "logs").iterdir() if not p.name.startswith("."))
+    names = sorted(p.name for p in (store / sub).iterdir() if not p.name.startswith("."))
     assert not [n for n in names if n.endswith(".part")], names
     assert [n for n in names if n.endswith(".salvaged.mcap")] and len(names) >= 2, names
     _umount(usb)

@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 from cmsensord.service.control import ControlServer
 from cmsensord.service.instance import LOCK_NAME, HeldDir
-from cmsensord.sinks.log_dir import device_of, off_device
+from cmsensord.sinks.log_dir import off_device, place_of
 from cmsensord.sinks.retention import DISK_EVENT
 
 __all__ = ["CHECK_S", "DirGuard"]
@@ -38,7 +38,7 @@ class DirGuard:
         self.held, self.control, self.emit = held, control, emit
         self._next = now + CHECK_S
         self._told = ""                 # the failure said last (not repeated while it lasts)
-        self.device = device_of(self._dir()) if held is not None or control is not None else None
+        self.device = place_of(self._dir()) if held is not None or control is not None else None
 
     def check(self, now: float) -> None:
         """Every CHECK_S: a lock file or socket gone is taken or bound again, said in one event;

@@ -38,7 +38,7 @@ from pathlib import Path
 from cmsensord import __version__
 from cmsensord.errors import SinkError
 from cmsensord.sinks.json_templates import TEMPLATES
-from cmsensord.sinks.log_dir import off_device
+from cmsensord.sinks.log_dir import Place, off_device
 from cmsensord.sinks.log_names import log_files, next_name, salvaged_path
 from cmsensord.sinks.mcap_chunks import ChunkWriter
 from cmsensord.sinks.mcap_encoding import REPEATED, ChannelRegistry, encode_message
@@ -119,9 +119,9 @@ def fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def moved_error(out_dir: str | Path, device: int | None) -> SinkIOError | None:
-    """None while ``out_dir`` is on ``device`` (:func:`~cmsensord.sinks.log_dir.off_device`; None:
-    any); else the error of opening a file there (``op="open"``, ENODEV): its file system is gone."""
+def moved_error(out_dir: str | Path, device: Place | None) -> SinkIOError | None:
+    """None while ``out_dir`` is at ``device`` (:func:`~cmsensord.sinks.log_dir.off_device`; None:
+    anywhere); else the error of opening a file there (``op="open"``, ENODEV): its file system is gone."""
     why = off_device(out_dir, device)
     if why is None:
         return None
@@ -162,7 +162,7 @@ class McapSink:
             (:class:`~cmsensord.sinks.reorder.ReorderWindow`; 0: nothing held, a late
             message gets the newest log time written).
         reorder_horizon_ns: the window's horizon to start with (the previous file's).
-        device: the device ``out_dir`` must be on (None: any); elsewhere nothing is made and
+        device: the device and mount ``out_dir`` must be on (None: any); elsewhere nothing is made and
             the file is not opened (:func:`moved_error`).
 
     Raises:
@@ -193,7 +193,7 @@ class McapSink:
         chunk_size: int = 1024 * 1024,
         reorder_s: float = MAX_S,
         reorder_horizon_ns: int = 0,
-        device: int | None = None,
+        device: Place | None = None,
     ) -> None:
         if compression not in _COMPRESSION:
             raise SinkError(

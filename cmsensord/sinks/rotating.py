@@ -73,7 +73,7 @@ from cmsensord.sinks import disk_events
 from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event kinds: disk_events)
 from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
-from cmsensord.sinks.log_dir import device_of
+from cmsensord.sinks.log_dir import place_of
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
@@ -155,7 +155,7 @@ class RotatingSink(ReorderLag):
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []
         self.retention = RetentionTold()    # what retention said once and does not repeat
-        self.device = device_of(output.dir)  # files are made on this device only
+        self.device = place_of(output.dir)   # files are made on this device only
 
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
