@@ -54,19 +54,23 @@ def test_a_backlog_after_a_silence_is_no_drift_and_the_board_time_goes_on():
     assert abs(clock.last_stamp_ns - (WALL0 + round(wall * S))) < 0.2 * S
 
 
-def _fast_board(fast: float, seconds: float) -> tuple[BlockClock, list, list[int], float]:
+def _fast_board(fast: float, seconds: float) -> tuple[BlockClock, list, list[int], float, list[int]]:
     """A board ``fast`` times real time (its crystal fast) looked at every 0.1 s for ``seconds``,
     whole blocks before each look (on average 10 ``fast`` of them): the clock, the drifts found,
-    the newest stamp at each look less the wall clock then (ns), and the wall clock at the end."""
-    clock, found, off = BlockClock(), [], []
+    the newest stamp at each look less the wall clock then (ns), the wall clock at the end, and
+    the wall clock on the stream's time base (``on_base_ns``) at each look less the next block's
+    stamp."""
+    clock, found, off, base = BlockClock(), [], [], []
     wall, owed = 0.0, 0.0
     for _ in range(round(seconds * 10)):
         owed += 10 * fast
         n = int(owed)
         owed -= n
         wall = board(n, 1, clock, wall, found)
-        off.append(clock.last_stamp_ns - (WALL0 + round(wall * S)))
-    return clock, found, off, wall
+        now = WALL0 + round(wall * S)
+        off.append(clock.last_stamp_ns - now)
+        base.append(clock.on_base_ns(now) - clock.stamp_ns(clock.slot_t0(clock.next_slot)))
+    return clock, found, off, wall, base
 
 
 @pytest.mark.parametrize("fast, seconds, at", [(1.05, 150, 38.4), (1.001, 3000, 1910.1)])
@@ -75,8 +79,13 @@ def test_a_fast_crystal_is_re_anchored_once_and_its_stamps_stay_on_the_wall_cloc
     then run 10 % slower than its rate until they meet the wall clock, and from there on at its
     measured rate: they stay on the wall clock, with no second drift, long after the catch-up
     would have overshot (guards against the catch-up going on, a false ``behind the wall clock
-    by 2.0 s`` 44 s after the first, at 81.4 s and 1954.1 s, and a jump of the stamps)."""
-    clock, found, off, wall = _fast_board(fast, seconds)
+    by 2.0 s`` 44 s after the first, at 81.4 s and 1954.1 s, and a jump of the stamps).  The wall
+    clock on the stream's time base (what the idle loop releases events by, and the stamp of an
+    event the board's frames do not time) follows the stamps from the re-anchoring through the
+    catch-up, and the wall clock after it
+    (guards against it staying ahead by the drift: a ``link_stalled`` or ``stop`` stamped 2 s in
+    the future, events released that much early)."""
+    clock, found, off, wall, base = _fast_board(fast, seconds)
     [(when, offset, rate)] = found
     assert when == at and 2.0 < offset < 2.1
     assert abs(rate / 25000 - fast) < 0.003
@@ -84,3 +93,7 @@ def test_a_fast_crystal_is_re_anchored_once_and_its_stamps_stay_on_the_wall_cloc
     caught = next(i for i, o in enumerate(off) if i / 10 > at and o <= 0) / 10
     assert caught - at < 2.0 / CATCH_UP * (1 + CATCH_UP) + 0.5     # 22 s after the drift
     assert max(abs(o) for o in off[round(caught * 10):]) < 0.5 * S  # on the wall clock after it
+    catching = base[round(at * 10) - 1:round(caught * 10)]          # from the look that re-anchored
+    assert max(abs(b) for b in catching) < 0.1 * S, (min(catching) / S, max(catching) / S)
+    on_wall = [b + o for b, o in zip(base[round(caught * 10):], off[round(caught * 10):])]
+    assert max(abs(w) for w in on_wall) < 0.05 * S, (min(on_wall) / S, max(on_wall) / S)

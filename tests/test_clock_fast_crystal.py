@@ -28,7 +28,8 @@ def test_a_fast_board_is_re_anchored_once_and_never_said_to_be_behind(tmp_path):
     measured rate.  One time_base line, ahead; the decisions' stamps go on ~0.8 s apart, never a
     jump, and end on the wall clock.  Guards against the catch-up going on past the wall clock:
     ``board clock behind the wall clock by 1.0 s`` ~11 s after it met it, with a jump of the
-    stamps by that second."""
+    stamps by that second, and against the wall clock on the stream's time base staying ahead by
+    the drift once the stamps met the wall clock: ``stop`` stamped ~1 s after the daemon stopped."""
     sim = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--start-on-stdin",
                  "--scenario", "healthy", "--speed", "1.2"],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
@@ -42,6 +43,7 @@ def test_a_fast_board_is_re_anchored_once_and_never_said_to_be_behind(tmp_path):
         time.sleep(33.0)
         term = time.time_ns()
         err = stop(d)
+        done = time.time_ns()
     finally:
         sim.terminate()
         sim.wait(timeout=5)
@@ -55,3 +57,5 @@ def test_a_fast_board_is_re_anchored_once_and_never_said_to_be_behind(tmp_path):
     steps = [round((b - a) / S, 3) for a, b in zip(decisions, decisions[1:])]
     assert len(decisions) > 35 and 0.7 < min(steps) and max(steps) < 1.05, steps
     assert abs(decisions[-1] - term) < 1.5 * S, (decisions[-1] - term) / S
+    [stopped] = [s for t, s, m in msgs if t == "/cm/events" and m["kind"] == "stop"]
+    assert term - 0.1 * S <= stopped <= done + 0.3 * S, ((stopped - term) / S, (done - term) / S)

@@ -95,9 +95,9 @@ class BlockClock:
         self.stamp_fs = DEFAULT_FS             # board ticks per second of stamps (fs, or measured)
         self.rate = 0                          # the board's measured ticks per wall second (0: fs)
         self.segment = 0                       # segments started after the first
-        self.seg_wall_ns = 0                   # wall clock and t0 at the segment's start (drift)
-        self.seg_t0 = 0
         self.seg_stamp_ns = 0                  # the first stamp of the current segment
+        self.base_wall_ns = 0                  # a wall clock and its stamp: the stream's time base
+        self.base_stamp_ns = 0                 # (:meth:`on_base_ns`) from there on
         self.win_wall_ns = 0                   # wall clock and t0 where the rate is measured from
         self.win_t0 = 0                        # (the segment's start, or the first look after a silence)
         self.looked_ns = 0                     # wall clock at the last look (:meth:`drift`)
@@ -111,8 +111,9 @@ class BlockClock:
     def anchor(self, t0_unwrapped: int, wall_ns: int) -> None:
         """The first frame: its t0 is ``wall_ns``."""
         if self.anchor_ns is None:
-            self.anchor_ns = self.seg_wall_ns = self.seg_stamp_ns = self.win_wall_ns = wall_ns
-            self.t0_first = self.seg_t0 = self.win_t0 = t0_unwrapped
+            self.anchor_ns = self.seg_stamp_ns = self.win_wall_ns = wall_ns
+            self.base_wall_ns = self.base_stamp_ns = wall_ns
+            self.t0_first = self.win_t0 = t0_unwrapped
 
     def is_reset(self, t0_unwrapped: int, last_t0: int) -> bool:
         """:func:`is_reset` at this clock's fs and block length."""
@@ -124,7 +125,8 @@ class BlockClock:
         at ``stamp_fs`` board ticks per second (default fs).  Returns its stamp."""
         self.anchor_ns = self.floor_ns = self.seg_stamp_ns = max(wall_ns, self.floor_ns)
         self.t0_first = t0_unwrapped
-        self.seg_wall_ns, self.seg_t0 = self.win_wall_ns, self.win_t0 = wall_ns, t0_unwrapped
+        self.win_wall_ns, self.win_t0 = wall_ns, t0_unwrapped
+        self.base_wall_ns, self.base_stamp_ns = wall_ns, self.anchor_ns
         self.stamp_fs = stamp_fs or self.fs
         self.catching_up = False
         self.segment += 1
@@ -133,17 +135,21 @@ class BlockClock:
         return self.anchor_ns
 
     def wall_stamp_ns(self, wall_ns: int) -> int:
-        """The wall clock ``wall_ns`` on the stream's time base: as far from the current segment's
-        first stamp as it is from the wall clock at the segment's start (the stamps of a board in
-        step with the wall clock), never before the end of the newest slot; ``wall_ns`` itself
-        before the first frame."""
+        """The wall clock ``wall_ns`` on the stream's time base (:meth:`on_base_ns`: the stamps of a
+        board in step with the wall clock), never before the end of the newest slot; ``wall_ns``
+        itself before the first frame."""
         return wall_ns if self.anchor_ns is None else max(self.floor_ns, self.on_base_ns(wall_ns))
 
     def on_base_ns(self, wall_ns: int) -> int:
-        """The wall clock ``wall_ns`` on the stream's time base, as far from the current segment's
-        first stamp as it is from the wall clock at the segment's start, whatever the stamps
-        processed (a board sent faster than real time runs ahead of it)."""
-        return wall_ns + self.seg_stamp_ns - self.seg_wall_ns
+        """The wall clock ``wall_ns`` on the stream's time base, whatever the stamps processed (a
+        board sent faster than real time runs ahead of it): as far from the current segment's
+        first stamp as it is from the wall clock at the segment's start; while a segment catches
+        up with the wall clock (:meth:`rebase`), that far times the stamps' slowing; once it has,
+        as far from the stamp it met the wall clock at."""
+        since = wall_ns - self.base_wall_ns
+        if self.catching_up and self.rate:
+            since = since * self.rate // self.stamp_fs
+        return self.base_stamp_ns + since
 
     def drift(self, wall_ns: int, max_drift_s: float = 2.0,
               quiet_s: float = QUIET_S) -> tuple[float, int] | None:
@@ -199,6 +205,7 @@ class BlockClock:
         if wall_s > self.rate_s and ticks > 0:
             self.rate, self.rate_s = max(1, round(ticks / wall_s)), wall_s
         self.anchor_ns, self.t0_first = self.stamp_ns(t0), t0
+        self.base_wall_ns, self.base_stamp_ns = wall_ns, self.anchor_ns
         self.stamp_fs = self.rate or self.fs
         self.catching_up = False
 
@@ -210,7 +217,8 @@ class BlockClock:
         was = self.floor_ns if self.slot0_t0 is None else self.stamp_ns(self.slot_t0(self.next_slot))
         self.floor_ns = min(self.floor_ns, wall_ns)
         if self.slot0_t0 is None:               # after a rate change, before its first block
-            self.anchor_ns = self.floor_ns = self.seg_stamp_ns = self.seg_wall_ns = self.win_wall_ns = wall_ns
+            self.anchor_ns = self.floor_ns = self.seg_stamp_ns = self.win_wall_ns = wall_ns
+            self.base_wall_ns = self.base_stamp_ns = wall_ns
             self.segment += 1
         else:
             self.new_segment(self.slot_t0(self.next_slot), wall_ns, self.rate or self.fs)
