@@ -63,6 +63,39 @@ class Recorder:
         return [f.get("details", {}).get("action") for _k, _m, f in self.events]
 
 
+def test_a_disk_back_with_nothing_to_log_is_not_fsynced_at_every_tick(small_fs, clock, monkeypatch):
+    """Space back while nothing comes to be logged (the board gone too): the new file takes its
+    header and is fsynced once, not at every tick until a message comes (an SD card's wear: one
+    fsync per loop turn for as long as the board is gone); logging resumes, said once, with the
+    first message fsynced on it."""
+    logs = small_fs / "logs"
+    events: list = []
+    sink = RotatingSink(output(logs, flush_s=1.0, fsync_s=30.0, retry_s=1.0), clock=clock,
+                        on_event=lambda kind, message, **fields: events.append(fields.get("details", {})))
+    filler = fill(small_fs, leave=24 * 1024)
+    n = 0
+    while sink.current is not None:
+        sink.write("/cm/ch0/severity", "severity", T0 + n, {"severity_index": 0.1, "i": n, "pad": PAD})
+        n += 1
+        clock.t += 0.25
+        sink.tick()
+        assert n < 500, "the disk never filled up"
+    filler.unlink()
+    calls = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (calls.append(fd), real(fd))[1])
+    for _ in range(100):                         # 10 s of loop turns, nothing to log
+        clock.t += 0.1
+        sink.tick()
+    assert sink.current is not None and not sink.logging
+    assert len(calls) <= 3, len(calls)           # the new file and its directory
+    sink.write("/cm/ch0/severity", "severity", T0 + n, {"severity_index": 0.1, "i": n, "pad": PAD})
+    clock.t += 0.1
+    sink.tick()
+    assert sink.logging and [e.get("action") for e in events].count("resumed") == 1
+    sink.close()
+
+
 def logged(paths):
     """(severity indices i, events) in the finished files, read with mcap's reader (CRCs checked)."""
     ii, events = [], []

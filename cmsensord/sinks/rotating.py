@@ -8,9 +8,9 @@ finished empty. Each file is in log-time order (:mod:`cmsensord.sinks.reorder`: 
 are held back up to the lag they come with, at most 10 s unless a longer one is expected in a
 replay; the lag carries over to the next file, :mod:`.reorder_lag`). Messages held there are
 not yet in the file: what the durability rules below say of "the messages of the last second"
-covers them only in a stream that comes in order (RMS mode); in RAW mode with order tracking add
-the orders' lag (a few seconds), with captures their ``post_s`` and 2 s, except while the link is
-quiet (:meth:`RotatingSink.release_held`).
+covers them only in a stream that comes in order (RMS mode); in RAW mode with order tracking add the
+orders' lag (a few seconds), with captures their ``post_s`` and 2 s, except while the link is quiet
+(:meth:`RotatingSink.release_held`).
 
 Durability (with :meth:`RotatingSink.tick` called once per loop iteration, as
 the live loop does):
@@ -39,9 +39,10 @@ fsync, close) abandons the file: closed without another byte, kept as ``.part`` 
 holds complete chunks (salvaged when logging is back, or at the next start), else deleted.
 A failed fsync is never retried on the same file. A new file is tried at once, then every
 ``retry_s``; messages written while no file is open, and those of the chunk that could
-not be written, are counted in :attr:`dropped`. Logging counts as back when a new file
-has been fsynced with messages in it (a full disk takes a header). One ``disk_error`` event per
-outage, one when logging resumes (the count).
+not be written, are counted in :attr:`dropped`. Logging counts as back when a new file has been
+fsynced with messages in it (a full disk takes a header; a file of a header alone is fsynced once,
+then at the next tick after a message). One ``disk_error`` event per outage, one when logging
+resumes (the count).
 A full or failing disk at start (for the daemon, ``wait_for_disk``, a read-only one too) is
 such an outage, and so is, at any time, the output directory off the device it was on at start
 (unmounted: nothing is made on the file system under it, :mod:`cmsensord.sinks.log_dir`); any
@@ -125,18 +126,14 @@ class RotatingSink(ReorderLag):
         self.own_files = own_files           # retention counts and deletes this run's files only
         self.lock: Any = None                # the output directory's hold (a replay's): release lets it go
         self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
-        self.metadata = metadata or {}
-        self.clock = clock
-        self.wall_clock = wall_clock
-        self.on_rotate = on_rotate
+        self.metadata, self.clock, self.wall_clock, self.on_rotate = metadata or {}, clock, wall_clock, on_rotate
         self.paths: list[Path] = []          # finished files, oldest first
         self.salvaged: list[SalvageResult] = []
         self.messages_written = 0            # messages handed to write()
         self.dropped = 0                     # ... of which not in any file (disk errors)
         self.disk_errors = 0                 # failed operations, retries included
         self._rotate_bytes = int(output.rotate_mb * MB)
-        self._pending: collections.deque[tuple[str, str, dict]] = collections.deque(
-            maxlen=_QUEUED_EVENTS)
+        self._pending: collections.deque[tuple[str, str, dict]] = collections.deque(maxlen=_QUEUED_EVENTS)
         self._on_event = on_event
         #: called when an event is queued (a salvage thread's): the live loop wakes and ticks
         self.wake: Callable[[], Any] | None = None
@@ -156,7 +153,6 @@ class RotatingSink(ReorderLag):
         self._abandoned: list[Path] = []
         self.retention = RetentionTold()    # what retention said once and does not repeat
         self.device = place_of(output.dir)   # files are made on this device only
-
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
         if salvage and not background_salvage:
@@ -327,7 +323,9 @@ class RotatingSink(ReorderLag):
         return cur
 
     def _written(self, cur: McapSink) -> None:
-        """After messages went to ``cur``: rotate by time or size, or deliver the sink's events."""
+        """After messages went to ``cur``: fsynced at the next tick during an outage (logging back
+        once they are on it), rotated by time or size, or the sink's events delivered."""
+        self._need_sync |= self._outage is not None
         if (self.clock() - self._opened >= self.output.rotate_s
                 or cur.bytes_written >= self._rotate_bytes):
             self.rotate()
@@ -406,7 +404,7 @@ class RotatingSink(ReorderLag):
         if not self._check_present(cur):
             return
         self._last_sync, self._event_dirty = self.clock(), False
-        self._need_sync = self._outage is not None and not cur.persisted   # back once messages are on it
+        self._need_sync = self._outage is not None and not cur.persisted and cur.messages_written > 0
         if self._outage is not None and cur.persisted:
             self._resumed()
 
