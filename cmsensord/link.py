@@ -13,7 +13,6 @@ import errno
 import logging
 import os
 import select
-import termios
 import threading
 import time
 import traceback
@@ -28,9 +27,9 @@ try:                                    # the port class of pyserial on Linux, m
 except ImportError:                     # pragma: no cover - Windows
     PosixSerial = None
 
-from cmsensord.errors import LinkError
 from cmsensord.protocol import HEADER_LEN, Decoder, Frame, FrameType
 from cmsensord.read_pace import ReadPace
+from cmsensord.serial_port import PORT_ERRORS, cannot_open, is_held, open_serial, why
 
 log = logging.getLogger("cmsensord")
 
@@ -45,8 +44,6 @@ TTY_READ_MAX = 4095
 TTY_REFILL_S = 0.005
 #: the most bytes one step of the reader takes from the port before decoding them
 STEP_BYTES = 1 << 16
-#: what pyserial and the OS really raise when a port goes away
-PORT_ERRORS = (serial.SerialException, OSError, termios.error)
 #: the module of pyserial's POSIX read: a port whose read is from elsewhere (wrapped) is read by it
 _POSIX_READ = "serial.serialposix"
 #: while bytes come, the ``--capture`` file's buffer is flushed at least this often (seconds); it is
@@ -208,6 +205,11 @@ class SerialReader(threading.Thread):
     (wall_ns, kind, message) for the processing loop to emit: only the loop
     writes to the sink.
 
+    The port is opened exclusively (:func:`~cmsensord.serial_port.open_serial`, also when it is
+    opened again): one another process holds (``cmsensord record``) is a port that does not open,
+    retried with the back-off; its ``link_lost`` event names the holder, and one more comes
+    when the reason an open fails turns to, or from, the port being held.
+
     When no byte comes, the capture file's buffered bytes are written out, and after ``give_up_s``
     without one (0: never) an incomplete candidate frame the decoder holds is given up
     (:meth:`~cmsensord.protocol.Decoder.give_up`): the frames that came behind it are queued then,
@@ -224,7 +226,7 @@ class SerialReader(threading.Thread):
         self.decoder = decoder or Decoder()
         self.capture = capture
         self.reconnect_min_s, self.reconnect_max_s = reconnect_min_s, reconnect_max_s
-        self._open_port = open_port or (lambda: serial.Serial(self.port, self.baud, timeout=0.05))
+        self._open_port = open_port or (lambda: open_serial(self.port, self.baud, timeout=0.05))
         self._stop_event = threading.Event()
         self.events: deque[tuple[int, str, str]] = deque(maxlen=1000)
         self.connected = threading.Event()
@@ -232,6 +234,7 @@ class SerialReader(threading.Thread):
         self.last_data = time.monotonic()
         self.opened_at = self.last_data       # when the port was last opened (monotonic)
         self.failures = 0
+        self._held = False                    # the last open failed as another process holds the port
         self.errors = 0                       # unexpected exceptions since the last bytes read
         self.error: str | None = None         # the last one, as reported
         self.down: str | None = None          # why the port is not open now (None: it is)
@@ -283,8 +286,9 @@ class SerialReader(threading.Thread):
                 ser = self._open_port()
             except PORT_ERRORS as exc:
                 self.down = f"{self.port}: {cannot_open(self.port, exc)}; retrying"
-                if self.failures == 0:
+                if self.failures == 0 or is_held(exc) != self._held:
                     self._event("link_lost", self.down)
+                self._held = is_held(exc)
                 self.failures += 1
                 self._wait_backoff()
                 return None
@@ -292,7 +296,7 @@ class SerialReader(threading.Thread):
                 self._event("link_restored", f"{self.port} open again")
             self.ever_connected = True
             self.last_data = self.opened_at = time.monotonic()   # silence is counted from the open
-            self.failures = 0
+            self.failures, self._held = 0, False
             self._backoff = self.reconnect_min_s
             self.down = None
             self.connected.set()
@@ -301,8 +305,8 @@ class SerialReader(threading.Thread):
             if not data:
                 return self._quiet(ser)
         except PORT_ERRORS as exc:
-            self._event("link_lost", f"{self.port}: {_why(exc)}; reconnecting")
-            self.down = f"{self.port}: {_why(exc)}; reconnecting"
+            self._event("link_lost", f"{self.port}: {why(exc)}; reconnecting")
+            self.down = f"{self.port}: {why(exc)}; reconnecting"
             self.connected.clear()
             self.failures = 1
             _close_quietly(ser)
@@ -557,32 +561,7 @@ def _one_line_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}{': ' + text if text else ''}{where}"
 
 
-def _why(exc: BaseException) -> str:
-    if isinstance(exc, OSError) and exc.errno is not None:
-        return f"{errno.errorcode.get(exc.errno, exc.errno)} {exc.strerror}"
-    return str(exc) or type(exc).__name__
-
-
 def _close_quietly(ser) -> None:
     with contextlib.suppress(*PORT_ERRORS):
         ser.close()
 
-
-def open_port_checked(port: str, baud: int) -> serial.Serial:
-    """Open a serial port or raise LinkError with a one-line reason and the fix."""
-    if not os.path.exists(port):
-        raise LinkError(f"{port}: {cannot_open(port, None)}")
-    try:
-        return serial.Serial(port, baud, timeout=0.1)
-    except PORT_ERRORS as exc:
-        raise LinkError(f"{port}: {cannot_open(port, exc)}") from None
-
-
-def cannot_open(port: str, exc: BaseException | None) -> str:
-    """Why ``port`` did not open (``exc``: the error of the open), with the fix."""
-    if not os.path.exists(port):
-        return "no such device (is the board plugged in? check `ls /dev/tty*`)"
-    hint = (" (add the user to the dialout group)" if "ermission" in str(exc)
-            else " (is it a serial port? give the board's tty, e.g. /dev/ttyACM0)"
-            if "ioctl" in str(exc) else "")
-    return f"cannot open: {_why(exc) if exc is not None else 'no reason given'}{hint}"

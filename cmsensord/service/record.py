@@ -1,4 +1,11 @@
-"""``cmsensord record``: the bytes of a serial port into a capture file (docs/PROTOCOL.md)."""
+"""``cmsensord record``: the bytes of a serial port into a capture file (docs/PROTOCOL.md).
+
+The port is opened exclusively (:mod:`cmsensord.serial_port`): a port another process reads
+(the daemon, another ``record``) is refused with one line naming that process, as two readers
+would each lose the frames the other read.  The frames lost in seq gaps (docs/PROTOCOL.md
+rule 3, counted by the decoder) are on every status line and on the last one, so a capture
+missing frames says so.
+"""
 
 from __future__ import annotations
 
@@ -6,15 +13,20 @@ import sys
 import time
 
 from cmsensord.errors import LinkError
-from cmsensord.link import open_port_checked
+from cmsensord.protocol import LinkCounters
+from cmsensord.serial_port import open_port_checked
 from cmsensord.service.signals import StopFlag
 from cmsensord.source import SerialSource
+
+#: what ``record`` says after the line of a port another process holds
+HELD_HINT = ("; stop it first, or, if it is the daemon, use its captures (`cmsensord capture-now`, "
+             "or its --capture FILE for the port's bytes)")
 
 
 def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
     """Capture the bytes of ``port`` to ``out`` until ``duration_s``, a signal, or the port goes
-    away; a status line per second says what is being captured."""
-    ser = open_port_checked(port, baud)     # a missing or wrong device: LinkError, nothing written
+    away; a status line per second says what is being captured, and the last line what was."""
+    ser = open_port_checked(port, baud, held_hint=HELD_HINT)    # LinkError, nothing written
     try:
         f = open(out, "wb")
     except OSError as exc:
@@ -33,12 +45,19 @@ def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
                 break
             if time.monotonic() >= next_status:
                 next_status += 1.0
-                c = source.counters
-                print(f"recorded {c.bytes_received} B, {sum(c.frames.values())} frames, "
-                      f"crc errors {c.crc_failures}", file=sys.stderr, flush=True)
+                print(f"recorded {_tally(source.counters)}", file=sys.stderr, flush=True)
         source.stop()
-    print(f"capture: {out} ({source.counters.bytes_received} bytes)", file=sys.stderr)
+    c = source.counters
+    print(f"capture: {out} ({_tally(c)})"
+          + ("; incomplete: frames the board sent are missing (another program reading the port, "
+             "or a link losing bytes?)" if c.frames_lost else ""), file=sys.stderr)
     return 0
+
+
+def _tally(c: LinkCounters) -> str:
+    """``N B, N frames, crc errors N, N frames lost (seq gaps)``: what the decoder counted."""
+    return (f"{c.bytes_received} B, {sum(c.frames.values())} frames, crc errors {c.crc_failures}, "
+            f"{c.frames_lost} frames lost (seq gaps)")
 
 
 def _once(ser):

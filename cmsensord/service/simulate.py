@@ -25,6 +25,7 @@ import yaml
 
 from cmsensord.config import config_from_dict, default_config, load_config
 from cmsensord.errors import ConfigError, SinkError
+from cmsensord.serial_port import open_serial
 from cmsensord.service.live import run_live
 from cmsensord.service.sim_microphone import microphone_config
 
@@ -184,12 +185,12 @@ def _sim_env() -> dict[str, str]:
 
 
 def _start_on_open(sim: subprocess.Popen, port: str, baud: int) -> Callable[[], serial.Serial]:
-    """How the reader opens the simulator's pty: then the simulator starts its stream
-    (``--start-on-stdin``: EOF on its stdin), so none of it is written before pyserial's
-    open, which discards what waits in the port, and a simulated run is whole from its
-    first block."""
+    """How the reader opens the simulator's pty (exclusively, as every port): then the
+    simulator starts its stream (``--start-on-stdin``: EOF on its stdin), so none of it is
+    written before pyserial's open, which discards what waits in the port, and a simulated
+    run is whole from its first block."""
     def open_port() -> serial.Serial:
-        ser = serial.Serial(port, baud, timeout=0.05)
+        ser = open_serial(port, baud, timeout=0.05)
         if sim.stdin is not None and not sim.stdin.closed:
             with contextlib.suppress(OSError):      # the simulator has gone: the reader sees it
                 sim.stdin.close()
