@@ -32,6 +32,7 @@ from cmsensord.config.settings import MAX_BAUD
 from cmsensord.errors import (
     EXIT_CONFIG,
     EXIT_USAGE,
+    CaptureFileError,
     CmsensordError,
     ConfigError,
     InstanceError,
@@ -342,7 +343,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             out=args.out, capture=args.capture, akf_trace=args.akf_trace, publish=args.publish))
     if args.config:
         cfg, auto = _config_for(args.config)
-        return run_live(_with_output(cfg, args.out, args.akf_trace), auto_channels=auto, capture_path=args.capture)
+        return run_live(_with_output(cfg, args.out, args.akf_trace), auto_channels=auto, capture_path=args.capture,
+                        inputs=[args.config])
     error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
                "(see cmsensord --help)")
     return EXIT_USAGE
@@ -375,6 +377,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         error_line(f"cmsensord: configuration error: {exc}")
         return EXIT_CONFIG
     except InstanceError as exc:        # another daemon on this output directory
+        error_line(f"cmsensord: {exc}")
+        return EXIT_CONFIG
+    except CaptureFileError as exc:     # the daemon's --capture
         error_line(f"cmsensord: {exc}")
         return EXIT_CONFIG
     except SinkError as exc:            # the output directory is a setting (output.dir / --out)

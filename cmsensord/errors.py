@@ -155,6 +155,10 @@ class SinkError(CmsensordError):
     """An output (MCAP file, directory) that cannot be written."""
 
 
+class CaptureFileError(SinkError):
+    """A daemon's ``--capture`` file that cannot be written, or must not be (exit 78)."""
+
+
 class InstanceError(CmsensordError):
     """Another daemon already runs on this output directory (exit 78: systemd does not restart)."""
 

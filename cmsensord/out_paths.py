@@ -1,26 +1,45 @@
 """An ``--out`` that names one of the command's own inputs is refused before anything is read:
-writing it would destroy the input (an import over its WAV, a report over its log)."""
+writing it would destroy the input (an import over its WAV, a report over its log); so is a
+daemon's ``--capture`` that names its configuration, or a file that is no regular file (the
+port's bytes appended to a device)."""
 
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Iterable
 
-__all__ = ["overwritten_input", "with_sidecars"]
+__all__ = ["capture_refused", "overwritten_input", "with_sidecars"]
 
 
-def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]) -> str | None:
-    """One line saying that ``out`` is one of ``inputs`` (the same file, by any path or link),
-    or None when it is none of them."""
+def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike],
+                      option: str = "--out") -> str | None:
+    """One line saying that ``out`` (given as ``option``) is one of ``inputs`` (the same file, by
+    any path or link), or None when it is none of them."""
     for src in inputs:
         try:
             same = os.path.samefile(out, src)
         except OSError:                     # one of them does not exist: not the same file
             continue
         if same:
-            return (f"{out}: is the input {src}: writing it would destroy it; give --out another "
+            return (f"{out}: is the input {src}: writing it would destroy it; give {option} another "
                     "file name")
     return None
+
+
+def capture_refused(path: str, inputs: Iterable[str | os.PathLike]) -> str | None:
+    """One line saying why the ``--capture`` file ``path`` (the port's bytes appended to it) is
+    refused: one of ``inputs`` (the configuration and the files it names), or there and no
+    regular file (a device, a directory, a FIFO); None when it is neither."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:                         # not there: made by the open (which says why it cannot)
+        return None
+    if not stat.S_ISREG(mode):
+        kind = ("a directory" if stat.S_ISDIR(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+                else "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a file")
+        return f"{path}: is {kind}, not a regular file: --capture takes a file to append the port's bytes to"
+    return overwritten_input(path, inputs, option="--capture")
 
 
 def with_sidecars(captures: Iterable[str]) -> list[str]:

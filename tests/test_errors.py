@@ -31,7 +31,17 @@ CASES = [
     (["--simulate", "--duration", "1", "--out", "afile/logs"], CONFIG,
      "set output.dir or --out to a writable directory"),
     (["--config", "port.yaml", "--capture", "afile/cap.bin"], CONFIG,
-     "afile/cap.bin: cannot write the capture file"),
+     "cmsensord: afile/cap.bin: cannot write the capture file: Not a directory; give --capture a file in a "
+     "writable directory"),
+    (["--config", "port.yaml", "--capture", "./port.yaml"], CONFIG,
+     "cmsensord: ./port.yaml: is the input port.yaml: writing it would destroy it; give --capture another "
+     "file name"),
+    (["--config", "port.yaml", "--capture", "capdir"], CONFIG,
+     "cmsensord: capdir: is a directory, not a regular file: --capture takes a file to append the port's "
+     "bytes to"),
+    (["--config", "port.yaml", "--capture", "/dev/null"], CONFIG,
+     "cmsensord: /dev/null: is a device, not a regular file: --capture takes a file to append the port's "
+     "bytes to"),
     (["replay", "capture.bin", "--config", "unit.yaml"], CONFIG,
      "unit.yaml: channels[1].unit: Pa is not what a channel of kind accelerometer measures (m/s^2): "
      "set kind: microphone (got 'Pa')"),

@@ -8,14 +8,15 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 from cmsensord import __version__
 from cmsensord.config import Config, config_to_dict
-from cmsensord.errors import ConfigError, SinkError
+from cmsensord.errors import CaptureFileError, ConfigError
 from cmsensord.journal import under_journal
 from cmsensord.kernels import fallback_note, fallback_warning
 from cmsensord.monitor.processor import Processor
+from cmsensord.out_paths import capture_refused
 from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.alarm_store import keep_alarm_state
@@ -47,22 +48,35 @@ NEVER_S = 10.0
 DIAGNOSTICS_S = 5.0
 
 
-def _open_capture(path: str | None, *, append: bool):
+def _open_capture(path: str | None, *, append: bool, inputs: Sequence[str] = ()):
     """The ``--capture`` file (None without one), opened before the sink (a bad path leaves
-    nothing behind). The daemon (``append``) adds to what an earlier run captured there, with a
-    line saying so (a replay reads the daemon's restart as a gap of lost frames); a simulated
-    run writes it afresh."""
+    nothing behind), refused when it is one of ``inputs`` (the configuration and the files it
+    names) or no regular file (CaptureFileError, :func:`~cmsensord.out_paths.capture_refused`).
+    The daemon (``append``) adds to what an earlier run captured there, with a line saying so (a
+    replay reads the daemon's restart as a gap of lost frames); a simulated run writes it afresh."""
     if not path:
         return None
+    refused = capture_refused(path, inputs)
+    if refused is not None:
+        raise CaptureFileError(refused)
     try:
         before = os.path.getsize(path) if append and os.path.isfile(path) else 0
         capture = open(path, "ab" if append else "wb")
     except OSError as exc:
-        raise SinkError(f"{path}: cannot write the capture file: {exc.strerror or exc}") from None
+        raise CaptureFileError(f"{path}: cannot write the capture file: {exc.strerror or exc}; give --capture "
+                               "a file in a writable directory") from None
     if before:
         log.info("capture: appending to %s (%.1f MB captured there before: a replay reads this restart "
                  "as a gap)", path, before / 1e6)
     return capture
+
+
+def named_files(cfg: Config) -> list[str]:
+    """The files ``cfg`` names: microphone calibrations, MQTT credentials and TLS files."""
+    files = [ch.calibration for ch in cfg.channels] + [cfg.acoustic.calibration]
+    if cfg.mqtt is not None:
+        files += [getattr(cfg.mqtt, key) for key in ("password_file", "ca_file", "certfile", "keyfile")]
+    return [str(f) for f in files if f]
 
 
 class _Watch:
@@ -213,9 +227,10 @@ def can_wait(frames: list[Frame], start: int, wake: int | None, far: int) -> boo
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None, open_port: Callable | None = None,
-             simulated: bool = False) -> int:
+             simulated: bool = False, inputs: Sequence[str] = ()) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
-    how the reader opens the port, default pyserial's ``Serial``), the output directory held
+    how the reader opens the port, default pyserial's ``Serial``; ``inputs``: the configuration's
+    files, which the ``--capture`` file must not be, nor one ``cfg`` names), the output directory held
     against a second daemon (:mod:`.instance`) from before its sink salvages what it finds there.
     The alarm state is restored from and kept in the output directory's state file
     (:mod:`.alarm_store`) by the daemon holding the directory's lock only, and a capture is
@@ -227,7 +242,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     try:
         return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
                          capture_path=capture_path, metadata=metadata, open_port=open_port,
-                         simulated=simulated, held=held)
+                         simulated=simulated, held=held, inputs=[*inputs, *named_files(cfg)])
     finally:
         if held is not None:
             held.close()
@@ -235,13 +250,13 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
 
 def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim_done: threading.Event | None,
               capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None,
-              simulated: bool, held: HeldDir | None) -> int:
+              simulated: bool, held: HeldDir | None, inputs: Sequence[str]) -> int:
     keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
     stop.install_reopen()
     keep_alarms = not simulated and held is not None
-    capture = _open_capture(capture_path, append=keep_alarms)
+    capture = _open_capture(capture_path, append=keep_alarms, inputs=inputs)
     sink = open_sink(cfg, metadata or {}, background_salvage=True, publish=True, command="the daemon",
                      own_files=simulated)
     source = SerialSource.from_link(cfg.link, capture=capture, open_port=open_port)

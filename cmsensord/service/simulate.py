@@ -157,7 +157,8 @@ def simulate(opt: SimulateOptions) -> int:
         return run_live(cfg, auto_channels=False, duration_s=opt.duration, sim_done=_watch(sim),
                         capture_path=opt.capture, open_port=_start_on_open(sim, line, cfg.link.baud),
                         metadata={"scenario": opt.scenario, "seed": str(opt.seed),
-                                  "duration_s": str(opt.duration)}, simulated=True)
+                                  "duration_s": str(opt.duration)}, simulated=True,
+                        inputs=[opt.config] if opt.config else [])
     finally:
         _end(sim)
 
