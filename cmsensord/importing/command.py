@@ -119,7 +119,7 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--unit", dest="imp_unit", type=_units, default=None, metavar="UNIT[,UNIT]",
                    help=f"unit of the values, one or one per channel: {', '.join(UNITS)} (Pa: a microphone; "
                         "default: the units the file gives its columns, in a units line, the column names or "
-                        "TDMS unit_string; else m/s2; V needs --sensitivity)")
+                        "TDMS unit_string, or a name's ending (acc_mg); else m/s2; V needs --sensitivity)")
     p.add_argument("--sensitivity", dest="imp_sensitivity", type=_numbers(positive), metavar="MV_PER_G[,...]",
                    help="accelerometer sensitivity in mV/g, for the channels in V (one, or one per channel)")
     p.add_argument("--scale-factor", dest="imp_scale_factor", type=_numbers(nonzero),

@@ -40,7 +40,7 @@ from .table import Table
 from .tabular import LongText, is_text_table, read_tabular
 from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
 from .tdms import read_tdms
-from .units import per_channel, resolve_units, to_ms2_factor, unit_in_name, unit_of
+from .units import per_channel, resolve_units, to_ms2_factor, unit_in_name, unit_in_suffix, unit_of
 from .wav import read_wav
 
 __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
@@ -251,7 +251,11 @@ class _Layout:
         self.fs: float = fs
         self.file_fs = t.fs
         said = [(t.columns[i], unit_of(t.units[i]) if t.units else unit_in_name(t.columns[i])) for i in self.idx]
-        self.units, unit_notes = resolve_units(opts.unit, said)
+        suffix = {c: s for c, u in said if u is None and not t.units and (s := unit_in_suffix(c))}
+        said = [(c, suffix[c][0] if c in suffix else u) for c, u in said]
+        named = {c: s[1] for c, s in suffix.items()}
+        what = {".npz": "array", ".npy": "array", ".mat": "variable"}.get(Path(t.path).suffix.lower(), t.kind)
+        self.units, unit_notes = resolve_units(opts.unit, said, named, what)
         self.notes += unit_notes
         in_volts = [c for (c, _), u in zip(said, self.units) if u == "V"]
         if opts.unit is None and in_volts and opts.sensitivity is None:
