@@ -1,10 +1,14 @@
 """`cmsensord import` of channels in different units: an accelerometer beside a microphone in
 one recording (a field recorder's WAV: each channel its own full scale), as the acoustic
-calibration needs them, each in its own physical unit (m/s², Pa)."""
+calibration needs them, each in its own physical unit (m/s², Pa); the unit an array's or a
+variable's name ends with (FEMTO's ``acc_mg``)."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
+import scipy.io
 from scipy.io import wavfile
 
 from cmsensord.acoustic_calib import blocks_from_capture
@@ -190,3 +194,41 @@ def test_a_unit_as_files_spell_it_and_a_peak_no_sensor_sees(tmp_path):
                    "--out", str(tmp_path / "ms2.bin"))
     assert p.returncode == 0, p.stderr
     assert sidecar(tmp_path / "ms2.bin")["source_unit"] == "m/s2"
+
+
+def _femto_like(path) -> None:
+    """FEMTO's archive layout: ``acc_mg`` int32 (snapshots, 2560, 2) in milli-g, peak 800 mg."""
+    t = np.arange(2560) / 25600
+    x = np.round(800 * np.sin(2 * np.pi * 160 * t)).astype(np.int32)
+    np.savez(path, acc_mg=np.stack([np.stack([x, x // 2], axis=1)] * 3), fs_hz=np.array(25600),
+             t_s=np.arange(3) * 10.0)
+
+
+def test_the_unit_an_array_name_ends_with_is_taken_and_said_and_a_given_unit_wins(tmp_path):
+    """``acc_mg`` holds milli-g: without --unit it is read as mg (not m/s², ~100 x off), with a
+    note naming the array; a --unit given is taken, with the note that the name says otherwise."""
+    _femto_like(tmp_path / "b.npz")
+    r = cmd("import", "b.npz", "--channels", "0", "--out", "b.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  note: unit mg taken from the array name acc_mg; --unit sets another\n" in r.stderr
+    assert "assumed" not in r.stderr and "WARNING" not in r.stderr
+    meta = sidecar(tmp_path / "b.bin")
+    assert meta["source_unit"] == "mg" and meta["channel_names"] == ["acc_mg_0"]
+    assert re.search(r"acc_mg_0: full scale \+-\S+ m/s2 \(\S+ m/s2 a count\), peak 7\.84\d+ m/s2", r.stderr)
+    r = cmd("import", "b.npz", "--channels", "0", "--unit", "g", "--out", "g.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert sidecar(tmp_path / "g.bin")["source_unit"] == "g"
+    assert ("  note: --unit g given, but the array name says mg (acc_mg_0): the values are taken as g; "
+            "check --unit\n") in r.stderr
+
+
+def test_a_variable_name_ending_in_a_unit_gives_it_and_a_velocity_or_an_axis_does_not(tmp_path):
+    x = np.sin(np.arange(4096) / 3.0)
+    scipy.io.savemat(tmp_path / "v.mat", {"de_ms2": x[:, None], "fe_mm_s": x[:, None], "acc_v": x[:, None]})
+    r = cmd("import", "v.mat", "--variable", "de_ms2", "--fs", "4096", "--out", "a.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "  note: unit m/s2 taken from the variable name de_ms2; --unit sets another\n" in r.stderr
+    for var in ("fe_mm_s", "acc_v"):
+        r = cmd("import", "v.mat", "--variable", var, "--fs", "4096", "--out", f"{var}.bin", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        assert "  note: unit m/s2 assumed: the file does not say its unit; give --unit" in r.stderr

@@ -1,6 +1,6 @@
 """``cmsensord report`` of a replayed import: drawn over the recording's own time (its date and
 time from the file names, or hours into it), gaps between snapshots included; the timeline the
-replay writes into the log; logs of different recordings stay in local time and say why."""
+replay writes into the log; logs of different recordings drawn apart, each over its own time."""
 
 from __future__ import annotations
 
@@ -93,7 +93,7 @@ def test_an_import_without_a_date_is_drawn_in_hours_into_the_recording(tmp_path)
     assert all(re.fullmatch(r"\d\.\d{5} h", t) for _, t in event_rows(page))
 
 
-def test_logs_of_an_import_and_of_a_board_stay_in_local_time_and_say_why(tmp_path):
+def test_logs_of_an_import_and_of_a_board_are_drawn_apart_each_in_its_own_time(tmp_path):
     logs, _ = replayed_import(tmp_path)
     p = run_module("firmware_sim", "--scenario", "healthy", "--out", str(tmp_path / "sim.cap"),
                    "--duration", "5")
@@ -101,9 +101,14 @@ def test_logs_of_an_import_and_of_a_board_stay_in_local_time_and_say_why(tmp_pat
     p = cmsensord("replay", "sim.cap", "--out", "sim", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     page, metas = report(tmp_path, logs, tmp_path / "sim")
-    assert "The logs are not all of one imported recording: local time is shown." in page
-    assert metas["bearing-severity"]["axes"][-1]["xlabel"].startswith("local time (UTC")
-    assert "<th>local time</th>" in page
+    assert ("these logs hold 2 different recordings, drawn apart, each over its own time: r.bin (1 file(s)), "
+            "board logs (1 file(s)).") in html.unescape(page)
+    assert "not all of one imported recording" not in page
+    assert metas["r.bin-bearing-severity"]["axes"][-1]["xlabel"] == "recording time (from the import)"
+    assert metas["board-logs-ch0-severity"]["axes"][-1]["xlabel"].startswith("local time (UTC")
+    recording, board = page.split('<h2 class="recording" id="board-logs-recording">Logs of a board (no imported '
+                                  'recording)</h2>')
+    assert "<th>recording time</th>" in recording and "<th>local time</th>" in board
 
 
 def test_the_replay_writes_the_timeline_and_stamps_board_zero_at_it(tmp_path):
@@ -318,3 +323,58 @@ def test_an_import_replayed_twice_into_one_directory_is_drawn_once_over_its_reco
     assert sev["points"] == alone["bearing-severity"]["points"]
     assert [ax["xlim"] for ax in sev["axes"]] == [ax["xlim"] for ax in alone["bearing-severity"]["axes"]]
     assert f"<title>cmsensord report {clock(0)[:16]} – {clock(39, 1)[:16]}</title>" in page
+
+
+def _two_machines(tmp_path: Path) -> dict[str, Path]:
+    """Two machines' recordings, each its own import with the channel named alike (a quiet one of
+    12 snapshots, a loud one of 8, one every 10 minutes), replayed into one directory, the first
+    twice: the log of each replay that the report draws, by capture."""
+    rng = np.random.default_rng(1)
+    logs = tmp_path / "mix"
+    drawn = {}
+    for name, n, g in (("quiet", 12, 0.05), ("loud", 8, 0.5), ("quiet", 12, 0.05)):
+        if not (tmp_path / f"{name}.bin").exists():
+            np.savez(tmp_path / f"{name}.npz", acc=g * rng.standard_normal((n, 2560, 1)), fs_hz=np.array(2560.0),
+                     t_s=np.arange(n) * 600.0)
+            p = cmsensord("import", f"{name}.npz", *R2F, "--out", f"{name}.bin", cwd=tmp_path)
+            assert p.returncode == 0, p.stderr
+        before = set(logs.glob("*.mcap"))
+        p = cmsensord("replay", f"{name}.bin", "--out", "mix", cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+        (drawn[name],) = set(logs.glob("*.mcap")) - before
+    return drawn
+
+
+def test_replays_of_two_machines_in_one_directory_are_drawn_apart_each_over_its_own_time(tmp_path):
+    """Two imports whose channel has one name, replayed into one directory: a part of the page
+    each, its figures, events and files its own, over its own recording time (not one trace
+    running back and forth between the machines over overlapping times)."""
+    drawn = _two_machines(tmp_path)
+    alone = {name: report(tmp_path, log)[1]["bearing-severity"] for name, log in drawn.items()}
+    out = tmp_path / "mix.html"
+    p = cmsensord("report", "mix", "--out", str(out), "--png", "png", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    lines = p.stderr.splitlines()
+    assert lines[0] == ("cmsensord: report: these logs hold 2 different recordings, drawn apart, each over its "
+                        "own time: quiet.bin (1 file(s)), loud.bin (1 file(s)).")
+    assert lines[1].startswith("cmsensord: report: quiet.bin was replayed 2 times into these logs: the report "
+                               f"draws the newest replay ({drawn['quiet'].name})")
+    page = out.read_text(encoding="utf-8")
+    metas = {m["id"]: m for m in json.loads(re.search(
+        r'<script type="application/json" id="figures">(.*?)</script>', page, re.S).group(1))}
+    assert {"quiet.bin-bearing-severity", "loud.bin-bearing-severity"} <= set(metas)
+    assert not any(fid.startswith("bearing-") for fid in metas)
+    assert {f.name for f in (tmp_path / "png").glob("*severity.png")} == {
+        "quiet.bin-bearing-severity.png", "loud.bin-bearing-severity.png"}
+    for name, fig in alone.items():
+        mine = metas[f"{name}.bin-bearing-severity"]
+        assert mine["title"] == f"{name}.bin bearing: severity index"
+        assert mine["points"] == fig["points"] and mine["axes"][0]["xlim"] == fig["axes"][0]["xlim"]
+        assert mine["axes"][-1]["xlabel"] == "hours into the recording"
+    assert page.count("times are hours into the recording") == 2
+    quiet, loud = page.split('<h2 class="recording" id="loud.bin-recording">Recording loud.bin</h2>')
+    assert '<h2 class="recording" id="quiet.bin-recording">Recording quiet.bin</h2>' in quiet
+    def cell(log: Path) -> str:
+        return f"<td>mix/{log.name}</td>"
+    assert cell(drawn["loud"]) not in quiet and cell(drawn["quiet"]) in quiet and cell(drawn["loud"]) in loud
+    assert "<h2>Events of quiet.bin</h2>" in quiet and "<h2>Events of loud.bin</h2>" in loud

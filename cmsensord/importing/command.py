@@ -119,7 +119,7 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--unit", dest="imp_unit", type=_units, default=None, metavar="UNIT[,UNIT]",
                    help=f"unit of the values, one or one per channel: {', '.join(UNITS)} (Pa: a microphone; "
                         "default: the units the file gives its columns, in a units line, the column names or "
-                        "TDMS unit_string; else m/s2; V needs --sensitivity)")
+                        "TDMS unit_string, or a name's ending (acc_mg); else m/s2; V needs --sensitivity)")
     p.add_argument("--sensitivity", dest="imp_sensitivity", type=_numbers(positive), metavar="MV_PER_G[,...]",
                    help="accelerometer sensitivity in mV/g, for the channels in V (one, or one per channel)")
     p.add_argument("--scale-factor", dest="imp_scale_factor", type=_numbers(nonzero),
@@ -152,6 +152,9 @@ def add_import_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"hold at most MB of samples in memory (default {MEMORY_MB:g}); a longer recording "
                         "waits on disk beside --out while the capture is written (8 bytes a sample a "
                         "channel)")
+    p.add_argument("--join-recordings", dest="imp_join", action="store_true",
+                   help="lay several files of many snapshots each (whole recordings) end to end as one "
+                        "machine's history; without it such files are refused, to be imported one by one")
     p.add_argument("--ppr", dest="imp_ppr", type=count(1, 1 << 16), default=1, metavar="N",
                    help="tacho pulses per revolution (default 1); above 255 (an encoder's) every k-th "
                         "edge is kept, 255 or fewer a revolution")
@@ -172,7 +175,7 @@ def options_from_args(args: argparse.Namespace) -> ImportOptions:
         snapshot_len=args.imp_snapshot_len, snapshot_interval=args.imp_snapshot_interval,
         order=args.imp_order, tacho_column=args.imp_tacho_column, speed_column=args.imp_speed_column,
         tacho_threshold=args.imp_tacho_threshold, ppr=args.imp_ppr, rpm=args.imp_rpm,
-        keep_dc=args.imp_keep_dc, memory_mb=args.imp_memory_mb)
+        keep_dc=args.imp_keep_dc, memory_mb=args.imp_memory_mb, join_recordings=args.imp_join)
 
 
 #: peaks past these are more than a machine's accelerometer or microphone measures: a unit

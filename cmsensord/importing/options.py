@@ -35,3 +35,4 @@ class ImportOptions:
     rpm: float | None = None  # synthesise TACHO frames at this constant speed
     keep_dc: bool = False  # keep each channel's mean (default: taken out, as the board's offset: .dc)
     memory_mb: float = MEMORY_MB  # samples held in memory at most; beyond, on disk beside ``out``
+    join_recordings: bool = False  # lay files of many snapshots each end to end (:func:`.sources.build_recording`)

@@ -5,7 +5,8 @@ extension, or its text tables of numbers under other names: the IMS rig's files 
 named by date and time) or a glob pattern (also ``--glob``). They are taken in natural
 name order (``acc_2`` before ``acc_10``, ``20.0704.csv`` before ``20.48.csv``) unless
 ``order`` is ``mtime`` (modification time) or ``given`` (as listed). Every file is one contiguous snapshot, or
-several (a 3-D array, or ``snapshot_len``); the snapshots are laid end to end.
+several (a 3-D array, or ``snapshot_len``); the snapshots are laid end to end. Two files or
+more of many snapshots of their own are whole recordings, refused unless ``join_recordings``.
 Snapshot times come from ``snapshot_interval``, else the files themselves, else the
 files' names (:mod:`.name_times`).
 
@@ -39,7 +40,7 @@ from .table import Table
 from .tabular import LongText, is_text_table, read_tabular
 from .tacho import MAX_PPR, board_ppr, every_kth, pulse_edges, speed_edges
 from .tdms import read_tdms
-from .units import per_channel, resolve_units, to_ms2_factor, unit_in_name, unit_of
+from .units import per_channel, resolve_units, to_ms2_factor, unit_in_name, unit_in_suffix, unit_of
 from .wav import read_wav
 
 __all__ = ["EXTENSIONS", "collect_files", "read_table", "build_recording", "MAX_CHANNELS"]
@@ -250,7 +251,11 @@ class _Layout:
         self.fs: float = fs
         self.file_fs = t.fs
         said = [(t.columns[i], unit_of(t.units[i]) if t.units else unit_in_name(t.columns[i])) for i in self.idx]
-        self.units, unit_notes = resolve_units(opts.unit, said)
+        suffix = {c: s for c, u in said if u is None and not t.units and (s := unit_in_suffix(c))}
+        said = [(c, suffix[c][0] if c in suffix else u) for c, u in said]
+        named = {c: s[1] for c, s in suffix.items()}
+        what = {".npz": "array", ".npy": "array", ".mat": "variable"}.get(Path(t.path).suffix.lower(), t.kind)
+        self.units, unit_notes = resolve_units(opts.unit, said, named, what)
         self.notes += unit_notes
         in_volts = [c for (c, _), u in zip(said, self.units) if u == "V"]
         if opts.unit is None and in_volts and opts.sensitivity is None:
@@ -412,8 +417,10 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     pos = 0
     origins: list[tuple[int, int]] = []     # per snapshot: (its file, its first sample in the file)
     own_times = clock = dated = False       # a file gave its snapshots' times (of day, or dated)
+    whole: list[tuple[str, int]] = []       # the files of many snapshots of their own, and how many
     for fi, path in enumerate(files):
         t = read_table(path, opts, _within(progress, fi))
+        _whole_recordings(whole, path, t.data.shape[0], files, opts)
         if layout is None:
             layout = _Layout(t, opts)
             factor = layout.factors(opts)
@@ -468,6 +475,26 @@ def _build(files: list[str], opts: ImportOptions, progress, stores: list[SampleS
     rec.notes += differ
     rec.rpm_differs = bool(differ)
     return rec
+
+
+def _whole_recordings(whole: list[tuple[str, int]], path: str, n: int, files: list[str],
+                      opts: ImportOptions) -> None:
+    """Refuse a second file of many snapshots of its own (``n``; ``whole``: those read before):
+    such a file is a whole recording (FEMTO's archive of a bearing's life), and files of several
+    machines laid end to end would be taken as one machine's history, a commissioning on its
+    first share judging the others; ``--join-recordings`` lays them end to end on purpose. A
+    directory of one-snapshot files (the IMS rig's, FEMTO's CSVs) is one recording."""
+    if n < 2 or opts.join_recordings:
+        return
+    whole.append((path, n))
+    if len(whole) < 2:
+        return
+    (first, n0), (second, n1) = whole
+    stem = Path(first).stem
+    raise ImportFailure(
+        f"{Path(first).name} ({n0:,} snapshots) and {Path(second).name} ({n1:,}) each hold a whole recording; "
+        f"import each of the {len(files)} files on its own (cmsensord import {first} ... --out {stem}.bin), "
+        "or give --join-recordings to lay them end to end as one machine's history")
 
 
 def _speeds_differ(rpms: list[tuple[float, str]]) -> list[str]:

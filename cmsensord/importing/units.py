@@ -12,7 +12,7 @@ import re
 from .errors import ImportFailure
 
 __all__ = ["G", "UNITS", "InG", "per_channel", "physical_unit", "resolve_units", "to_ms2_factor", "unit_in_name",
-           "unit_of"]
+           "unit_of", "unit_in_suffix"]
 
 #: standard gravity, m/s^2 per g
 G = 9.80665
@@ -85,32 +85,54 @@ def unit_in_name(name: str) -> str | None:
     return unit_of(m.group(1)) if m else None
 
 
-def resolve_units(given: tuple[str, ...] | None, said: list[tuple[str, str | None]]) -> tuple[list[str], list[str]]:
+#: a unit at the end of an array's, a variable's or a column's name after ``_`` (``acc_mg``, and
+#: ``acc_mg_0``, a column of the array ``acc_mg``): the units the import takes (a velocity's
+#: ``_mm_s`` is none, nor is ``_v``, a vertical axis as often as volts)
+_SUFFIX = re.compile(r"^(.*?_(g|mg|ms2|m_s2|mps2|mm_s2|mms2|pa))(?:_\d+)?$", re.IGNORECASE)
+_SUFFIX_UNITS = {"g": "g", "mg": "mg", "ms2": "m/s2", "m_s2": "m/s2", "mps2": "m/s2", "mm_s2": "mm/s2",
+                 "mms2": "mm/s2", "pa": "Pa"}
+
+
+def unit_in_suffix(name: str) -> tuple[str, str] | None:
+    """The unit a name ends with after ``_`` and the name up to it (``acc_mg_0`` -> ``mg``,
+    ``acc_mg``), or None."""
+    m = _SUFFIX.match(name)
+    return (_SUFFIX_UNITS[m.group(2).lower()], m.group(1)) if m else None
+
+
+def resolve_units(given: tuple[str, ...] | None, said: list[tuple[str, str | None]],
+                  named: dict[str, str] | None = None, what: str = "column") -> tuple[list[str], list[str]]:
     """(each imported column's unit, notes) from ``--unit`` (``given``: one unit, or one per
     column; None: not given) and what the file says of each (``said``: (column, UNITS key or
-    None)). Not given: each column's own unit where the file says it, else m/s², with a note;
-    given, a note on each column the file says another unit of."""
+    None); ``named``: the columns whose unit their ``what``'s name gives, :func:`unit_in_suffix`,
+    to that name). Not given: each column's own unit where the file says it, else m/s², with a
+    note; given, a note on each column the file says another unit of."""
     if given is not None and len(given) not in (1, len(said)):
         raise ImportFailure(f"--unit gives {len(given)} units for {len(said)} channel(s); give one unit, or one "
                             "per imported channel")
     if given is None:
-        return _from_file(said)
+        return _from_file(said, named or {}, what)
     units = list(given) * len(said) if len(given) == 1 else list(given)
     other = [(c, u, g) for (c, u), g in zip(said, units) if u is not None and u != g]
     if not other:
         return units, []
     gave = ", ".join(sorted({g for _, _, g in other}))
     says = ", ".join(sorted({u for _, u, _ in other if u}))
-    return units, [f"--unit {gave} given, but the file says {says} ({', '.join(c for c, _, _ in other)}): the values "
+    who = f"the {what} name says" if all(c in (named or {}) for c, _, _ in other) else "the file says"
+    return units, [f"--unit {gave} given, but {who} {says} ({', '.join(c for c, _, _ in other)}): the values "
                    f"are taken as {gave}; check --unit"]
 
 
-def _from_file(said: list[tuple[str, str | None]]) -> tuple[list[str], list[str]]:
+def _from_file(said: list[tuple[str, str | None]], named: dict[str, str], what: str) -> tuple[list[str], list[str]]:
     """Each column's unit as the file says it (m/s² where it says none), and a note."""
     units = [u or "m/s2" for _, u in said]
     known = {u for _, u in said if u is not None}
     if not known:
         return units, [f"unit m/s2 assumed: the file does not say its unit; give --unit ({', '.join(UNITS)})"]
+    if all(c in named for c, _ in said) and len(known) == 1:
+        names = list(dict.fromkeys(named[c] for c, _ in said))
+        return units, [f"unit {units[0]} taken from the {what} name{'s' if len(names) > 1 else ''} "
+                       f"{', '.join(names)}; --unit sets another"]
     if all(u is not None for _, u in said) and len(known) == 1:
         return units, [f"unit {units[0]} from the file ({', '.join(c for c, _ in said)}); --unit sets another"]
     listed = ", ".join(f"{c}: {u or 'none, taken as m/s2'}" for c, u in said)

@@ -42,40 +42,55 @@ def run_report(args: argparse.Namespace) -> int:
     same = overwritten_input(args.sub_out, paths)
     if same:
         raise CmsensordError(same)
-    data = read_logs(paths, sys.stderr)
-    _tell_unreadable(data)
-    for note in data.notes:
+    parts = read_logs(paths, sys.stderr)
+    _tell_unreadable([f for data in parts for f in data.files], sum(data.messages for data in parts))
+    lead = recordings_line(parts)
+    for note in [lead] * bool(lead) + [note for data in parts for note in data.notes]:
         print(f"cmsensord: report: {note}", file=sys.stderr)
-    sections = _draw(data)
+    drawn = [(data, _draw(data)) for data in parts]
     from cmsensord.report.html_page import render_page
-    title = args.title or (f"cmsensord report {data.axis.text(data.start_ns)[:16]} – "
-                           f"{data.axis.text(data.end_ns)[:16]}")
     out = Path(args.sub_out)
     try:
-        out.write_text(render_page(data, sections, title), encoding="utf-8")
+        out.write_text(render_page(drawn, args.title or _title(parts), lead), encoding="utf-8")
         if args.png:
             png_dir = Path(args.png)
             png_dir.mkdir(parents=True, exist_ok=True)
-            for _, figs in sections:
-                for fig in figs:
-                    (png_dir / f"{fig.meta['id']}.png").write_bytes(fig.png)
+            for fig in (fig for _, sections in drawn for _, figs in sections for fig in figs):
+                (png_dir / f"{fig.meta['id']}.png").write_bytes(fig.png)
     except OSError as err:
         raise CmsensordError(f"{err.filename}: cannot write: {err.strerror}") from None
-    n = sum(len(f) for _, f in sections)
-    read = sum(f.left_out is None for f in data.files)
-    print(f"report: {out} ({n} figures, {data.messages:,} messages from {read} file(s))", file=sys.stderr)
+    n = sum(len(figs) for _, sections in drawn for _, figs in sections)
+    read = sum(f.left_out is None for data in parts for f in data.files)
+    messages = sum(data.messages for data in parts)
+    print(f"report: {out} ({n} figures, {messages:,} messages from {read} file(s))", file=sys.stderr)
     return 0
 
 
-def _tell_unreadable(data: Any) -> None:
+def recordings_line(parts: list[Any]) -> str:
+    """The line on logs of several recordings (:mod:`.runs`), each drawn on its own; "" for one."""
+    if len(parts) < 2:
+        return ""
+    names = ", ".join(f"{data.recording} ({sum(f.left_out is None for f in data.files)} file(s))" for data in parts)
+    return f"these logs hold {len(parts)} different recordings, drawn apart, each over its own time: {names}."
+
+
+def _title(parts: list[Any]) -> str:
+    """The page's title: the time span of one recording, the names of several."""
+    if len(parts) > 1:
+        return "cmsensord report: " + ", ".join(data.recording for data in parts)
+    data = parts[0]
+    return f"cmsensord report {data.axis.text(data.start_ns)[:16]} – {data.axis.text(data.end_ns)[:16]}"
+
+
+def _tell_unreadable(files: list[Any], messages: int) -> None:
     """One line on stderr for each file with damage read past (a bad chunk, intact ones after
     it), each whose read ended at damage (not MCAP, no intact chunk after it, cut short:
     what that lost) and each with messages left out (on topics not cmsensord's, or not its
-    JSON: :meth:`FileInfo.not_read`). When no message could be read at all, a user error (no
-    report): the first file's damage, or that it holds no message, or none of cmsensord's."""
-    read = [f for f in data.files if f.left_out is None]
+    JSON: :meth:`FileInfo.not_read`). When no message could be read at all (``messages``), a user
+    error (no report): the first file's damage, or that it holds no message, or none of cmsensord's."""
+    read = [f for f in files if f.left_out is None]
     bad = [f for f in read if f.error]
-    if not data.messages:
+    if not messages:
         if not bad:
             raise CmsensordError(f"{read[0].path}: no complete message in it to report"
                                  + (f" ({read[0].cut})" if read[0].cut else ""))
@@ -100,7 +115,8 @@ def _tell_unreadable(data: Any) -> None:
 
 
 def _draw(data: Any) -> list[tuple[str, list[Any]]]:
-    """(heading, figures) per channel, in channel-name order."""
+    """(heading, figures) per channel, in channel-name order (the heading names the recording
+    among several)."""
     from cmsensord.report import figures
     sections = []
     for name in sorted(data.channels):
@@ -113,5 +129,5 @@ def _draw(data: Any) -> list[tuple[str, list[Any]]]:
             if fig is not None:
                 figs.append(fig)
         figs.extend(figures.capture_figure(cap, i, data.axis) for i, cap in enumerate(ch.captures))
-        sections.append((f"Channel {name}", figs))
+        sections.append((f"Channel {name}" + (f" of {data.recording}" if data.recording else ""), figs))
     return sections

@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 from cmsensord.dsp.indicators.iso_zones import BOUNDARIES_MM_S  # noqa: E402
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
 from cmsensord.report.marks import alarm_levels, event_lines  # noqa: E402
+from cmsensord.report.runs import ident  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 from cmsensord.sinks.indicator_schema import DEFECT_LINES  # noqa: E402
 
@@ -100,6 +101,19 @@ def _finish(fig: Any, meta: dict[str, Any], axes: list[Any], time_axis: TimeAxis
     return Figure(meta, buf.getvalue())
 
 
+def _who(of: ChannelData | Capture) -> str:
+    """A channel as the titles name it: after its recording's name, among several recordings."""
+    name = of.name if isinstance(of, ChannelData) else of.channel
+    return f"{of.recording} {name}" if of.recording else name
+
+
+def _ident(of: ChannelData | Capture) -> str:
+    """The start of a figure's id (and its PNG's name): the channel, after its recording's
+    (:func:`.runs.ident`) among several recordings."""
+    name = of.name if isinstance(of, ChannelData) else of.channel
+    return f"{ident(of.recording)}-{name}" if of.recording else name
+
+
 def legend_outside(ax: Any, pad: float = 0.01) -> None:
     """The axes' legend to the right of it, clear of the data (the constrained layout makes room)."""
     ax.legend(loc="upper left", bbox_to_anchor=(1 + pad, 1.0), fontsize=8, borderaxespad=0.0)
@@ -134,13 +148,13 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     if x.size:
         ax.set_xlim(x[0], x[-1] if x[-1] > x[0] else x[0] + (1 / 86400 if data.axis.is_dates() else 1 / 3600))
     ax.set_ylabel("severity index")
-    ax.set_title(f"{ch.name}: severity index (Kim et al. 2023)")
+    ax.set_title(f"{_who(ch)}: severity index (Kim et al. 2023)")
     ax.grid(alpha=0.3)
     legend_outside(ax)
     if levels:
         _level_axes(axes[1, 0], data, ch)
-    meta = {"id": f"{ch.name}-severity", "kind": "severity", "channel": ch.name,
-            "title": f"{ch.name}: severity index", "points": int(ch.severity.count), "alarm_levels": drawn}
+    meta = {"id": f"{_ident(ch)}-severity", "kind": "severity", "channel": ch.name,
+            "title": f"{_who(ch)}: severity index", "points": int(ch.severity.count), "alarm_levels": drawn}
     return _finish(fig, meta, list(axes[:, 0]), time_axis=data.axis)
 
 
@@ -164,7 +178,7 @@ def _level_axes(ax: Any, data: LogData, ch: ChannelData) -> None:
     ax.yaxis.set_minor_formatter(mticker.NullFormatter())
     ax.set_yticks([y for y in (0.5, 1, 2, 4, 8, 16, 32, 64) if lo <= y <= hi])
     ax.set_ylabel("level / baseline")
-    ax.set_title(f"{ch.name}: decision level / healthy baseline (the 2 x baseline rule)")
+    ax.set_title(f"{_who(ch)}: decision level / healthy baseline (the 2 x baseline rule)")
     ax.grid(alpha=0.3, which="both")
     legend_outside(ax)
 
@@ -246,17 +260,17 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
                 ax.plot(_times(tk, axis), vk, color=colour, lw=1, label=k)
             drawn += alarm_levels(ax, ch, names)
             ax.set_ylabel("kurtosis, crest factor")
-            ax.set_title(f"{ch.name}: kurtosis and crest factor", fontsize=9.5)
+            ax.set_title(f"{_who(ch)}: kurtosis and crest factor", fontsize=9.5)
         else:
             drawn += _trend_axes(ax, ch, axis, kind, names)
         legend_outside(ax, 0.03)                # right of the zones' letters
         ax.grid(alpha=0.3)
     iso = iso_text(ch)
-    meta = {"id": f"{ch.name}-indicators", "kind": "indicators", "channel": ch.name,
-            "title": f"{ch.name}: indicators", "main": panels[0][0], "panels": [list(n) for _, n in panels],
+    meta = {"id": f"{_ident(ch)}-indicators", "kind": "indicators", "channel": ch.name,
+            "title": f"{_who(ch)}: indicators", "main": panels[0][0], "panels": [list(n) for _, n in panels],
             "zones": bool(ch.zone_boundaries), "iso": iso, "alarm_levels": drawn}
     if iso:
-        meta["caption"] = f"{ch.name}: indicators. Velocity RMS{_band_text(ch)}; {iso}."
+        meta["caption"] = f"{_who(ch)}: indicators. Velocity RMS{_band_text(ch)}; {iso}."
     return _finish(fig, meta, used, time_axis=axis)
 
 
@@ -275,7 +289,7 @@ def _velocity_axes(ax: Any, ch: ChannelData, axis: TimeAxis) -> list[dict[str, A
     ax.set_ylim(0, top)
     ax.set_ylabel("velocity RMS [mm/s]")
     iso = iso_text(ch)
-    ax.set_title(f"{ch.name}: velocity RMS{_band_text(ch)}, ISO 10816-3 zones A-D shaded"
+    ax.set_title(f"{_who(ch)}: velocity RMS{_band_text(ch)}, ISO 10816-3 zones A-D shaded"
                  + (f"\n{iso}" if iso else ""), fontsize=9.5)
     return drawn
 
@@ -307,7 +321,7 @@ def _trend_axes(ax: Any, ch: ChannelData, axis: TimeAxis, kind: str, names: tupl
     else:
         ax.set_ylim(0, top * 1.1)
     title, ylabel = _TREND_TEXTS[kind]
-    ax.set_title(f"{ch.name}: {title.format(names[0].rpartition('.')[0])}", fontsize=9.5)
+    ax.set_title(f"{_who(ch)}: {title.format(names[0].rpartition('.')[0])}", fontsize=9.5)
     ax.set_ylabel(ylabel)
     return drawn
 
@@ -325,7 +339,7 @@ def orders_figure(ch: ChannelData) -> Figure | None:
         means = [sum(v[0] for v in ch.orders[n].values()) / sum(v[1] for v in ch.orders[n].values()) for n in names]
         ax.bar(names, means, color="#1f4e99", label=f"{lo:.0f}-{hi:.0f} rpm")
         ax.set_xlabel("order")
-        ax.set_title(f"{ch.name}: order RMS at {lo:.0f}-{hi:.0f} rpm (constant speed; Yeh, Pan & Le)")
+        ax.set_title(f"{_who(ch)}: order RMS at {lo:.0f}-{hi:.0f} rpm (constant speed; Yeh, Pan & Le)")
     else:
         for name, bins in ch.orders.items():
             keys = sorted(bins)
@@ -333,12 +347,12 @@ def orders_figure(ch: ChannelData) -> Figure | None:
             rms = np.array([bins[k][0] / bins[k][1] for k in keys])
             ax.plot(rpm, rms, marker=".", ms=3, lw=1, label=f"order {name}")
         ax.set_xlabel("shaft speed [rpm]")
-        ax.set_title(f"{ch.name}: order RMS versus speed (Yeh, Pan & Le)")
+        ax.set_title(f"{_who(ch)}: order RMS versus speed (Yeh, Pan & Le)")
         ax.legend(loc="upper left", fontsize=8, ncols=4)
     ax.set_ylabel("order RMS [m/s²]")
     ax.grid(alpha=0.3)
-    meta = {"id": f"{ch.name}-orders", "kind": "orders", "channel": ch.name,
-            "title": f"{ch.name}: order RMS versus speed", "speed_rpm": [lo, hi], "orders": list(ch.orders)}
+    meta = {"id": f"{_ident(ch)}-orders", "kind": "orders", "channel": ch.name,
+            "title": f"{_who(ch)}: order RMS versus speed", "speed_rpm": [lo, hi], "orders": list(ch.orders)}
     return _finish(fig, meta, [ax])
 
 
@@ -364,11 +378,11 @@ def campbell_figure(ch: ChannelData) -> Figure | None:
     ax.set_xlabel("shaft speed [rpm]")
     ax.set_ylabel("frequency [Hz]")
     ax.set_ylim(0, max(freq) * 1.08 if freq else 1.0)
-    ax.set_title(f"{ch.name}: Campbell diagram, order frequency over speed coloured by order RMS")
+    ax.set_title(f"{_who(ch)}: Campbell diagram, order frequency over speed coloured by order RMS")
     ax.grid(alpha=0.3)
     lo, hi = keys_all[0] * SPEED_BIN_RPM, (keys_all[-1] + 1) * SPEED_BIN_RPM
-    meta = {"id": f"{ch.name}-campbell", "kind": "campbell", "channel": ch.name,
-            "title": f"{ch.name}: Campbell diagram (order RMS over speed and frequency)",
+    meta = {"id": f"{_ident(ch)}-campbell", "kind": "campbell", "channel": ch.name,
+            "title": f"{_who(ch)}: Campbell diagram (order RMS over speed and frequency)",
             "speed_rpm": [lo, hi], "freq_hz": [min(freq), max(freq)], "rms": [min(rms), max(rms)],
             "orders": list(ch.campbell), "points": len(rpm)}
     return _finish(fig, meta, [ax])
@@ -461,11 +475,11 @@ def capture_figure(cap: Capture, index: int, axis: TimeAxis | None = None) -> Fi
             _spectrum(ax, cap.parts[part], "spectrum", log_f="envelope" in cap.parts, legend=False)  # RAW
         else:                                   # with a zoom below, its legend says what the lines are
             _spectrum(ax, cap.parts[part], "envelope spectrum", legend=zoom is None)
-    heading = (f"{cap.channel}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
+    heading = (f"{_who(cap)}: capture at {(axis or TimeAxis()).text(cap.time_ns)}"
                f" — trigger {trigger.get('kind', '?')}: {trigger.get('message', '')}")
     fig.suptitle(heading, fontsize=11)
-    meta = {"id": f"{cap.channel}-capture-{index}", "kind": "capture", "channel": cap.channel,
-            "title": f"{cap.channel}: capture {index}, on {trigger.get('kind', '?')}", "heading": heading,
+    meta = {"id": f"{_ident(cap)}-capture-{index}", "kind": "capture", "channel": cap.channel,
+            "title": f"{_who(cap)}: capture {index}, on {trigger.get('kind', '?')}", "heading": heading,
             "trigger": trigger.get("kind"),
             "parts": parts,
             "marks": [m["label"] for m in cap.parts.get("spectrum", {}).get("marks", [])]}

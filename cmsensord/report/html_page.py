@@ -3,7 +3,9 @@
 Each figure is a ``<figure class="plot" data-meta="...">`` whose ``data-meta``
 attribute holds its metadata as JSON (:class:`~cmsensord.report.figures.Figure`);
 the same list is in ``<script type="application/json" id="figures">``.
-Times are local times (ISO 8601 with the UTC offset).
+Times are local times (ISO 8601 with the UTC offset), or an imported recording's own
+(:mod:`.time_axis`). Logs of several recordings (:mod:`.runs`) give a part each, under the
+recording's name: its cards, channels, events, link and disk, over its own time.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import json
 from typing import Any
 
 from cmsensord.report.log_data import MAX_EVENTS, LogData
+from cmsensord.report.runs import BOARD_LOGS, ident
 
 __all__ = ["render_page"]
 
@@ -21,7 +24,8 @@ _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:0 auto;max-width:1150px;padding:0 16px 40px;
 color:#1d1d1f;background:#fff}
 h1{font-size:1.6em;margin:18px 0 4px}h2{font-size:1.25em;border-bottom:2px solid #1f4e99;padding-bottom:3px;
-margin-top:30px}h3{font-size:1.05em;margin:18px 0 6px}
+margin-top:30px}h2.recording{font-size:1.5em;border-bottom-width:5px;margin-top:48px}
+h3{font-size:1.05em;margin:18px 0 6px}
 .sub{color:#555;margin:0 0 12px}
 table{border-collapse:collapse;font-size:.9em;margin:6px 0 14px}
 td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
@@ -63,9 +67,19 @@ def _events_table(data: LogData) -> str:
         for t, ev in data.events)
     more = sum(data.event_counts.values()) - len(data.events)
     note = f"<p>The first {MAX_EVENTS} events are listed; {more} more are counted above.</p>" if more > 0 else ""
-    return (f"<h2>Events</h2><p>By kind: {counts or 'none'}</p>{note}"
-            f'<table class="events" id="events"><tr><th>{data.axis.column}</th><th>kind</th><th>channel</th>'
-            f"<th>message</th></tr>{rows}</table>")
+    return (f"<h2>Events{_of(data)}</h2><p>By kind: {counts or 'none'}</p>{note}"
+            f'<table class="events" id="{_id(data, "events")}"><tr><th>{data.axis.column}</th><th>kind</th>'
+            f"<th>channel</th><th>message</th></tr>{rows}</table>")
+
+
+def _of(data: LogData) -> str:
+    """After a heading: whose it is, among several recordings."""
+    return f" of {html.escape(data.recording)}" if data.recording else ""
+
+
+def _id(data: LogData, name: str) -> str:
+    """An element's id, after its recording's among several recordings."""
+    return html.escape(f"{ident(data.recording)}-{name}" if data.recording else name)
 
 
 def _file_state(f: Any) -> str:
@@ -94,27 +108,37 @@ def _diagnostics_table(data: LogData) -> str:
         f'<tr><td>{html.escape(f.path)}</td><td class="n">{f.bytes:,}</td><td class="n">{f.messages:,}</td>'
         f'<td>{_file_state(f)}</td></tr>'
         for f in data.files)
-    return ("<h2>Link and disk</h2><h3>Link counters and processing</h3>"
-            f'<table id="link"><tr><th>counter</th><th>total</th></tr>{rows}</table>'
-            f'<p id="runs">Link counters summed over {data.runs()} run(s) (a daemon start, a replay).</p>'
-            f"<h3>Disk</h3><p>disk_error events: {disk['disk_error']}, salvaged files: {disk['salvage']}</p>"
-            f'<table id="files"><tr><th>file</th><th>bytes</th><th>messages</th><th>state</th></tr>{files}</table>')
+    return (f"<h2>Link and disk{_of(data)}</h2><h3>Link counters and processing</h3>"
+            f'<table id="{_id(data, "link")}"><tr><th>counter</th><th>total</th></tr>{rows}</table>'
+            f'<p id="{_id(data, "runs")}">Link counters summed over {data.runs()} run(s) (a daemon start, a '
+            f"replay).</p><h3>Disk</h3><p>disk_error events: {disk['disk_error']}, salvaged files: "
+            f"{disk['salvage']}</p>"
+            f'<table id="{_id(data, "files")}"><tr><th>file</th><th>bytes</th><th>messages</th><th>state</th></tr>'
+            f"{files}</table>")
 
 
-def render_page(data: LogData, sections: list[tuple[str, list[Any]]], title: str) -> str:
-    """The whole page: overview cards, a section of figures per channel, events, link and disk."""
-    body = [f"<h1>{html.escape(title)}</h1>",
-            f'<p class="sub">{html.escape(data.axis.caption(data.start_ns))}</p>',
-            *(f'<p class="sub note">{html.escape(note)}</p>' for note in data.notes),
-            _cards(data)]
-    for heading, figs in sections:
-        body.append(f"<h2>{html.escape(heading)}</h2>")
-        body.extend(_figure_html(f) for f in figs)
-        if not figs:
-            body.append("<p>Nothing to draw for this channel.</p>")
-    body.append(_events_table(data))
-    body.append(_diagnostics_table(data))
-    metas = json.dumps([f.meta for _, figs in sections for f in figs]).replace("</", "<\\/")
+def render_page(parts: list[tuple[LogData, list[tuple[str, list[Any]]]]], title: str, lead: str = "") -> str:
+    """The whole page: of each recording (``parts``: its data and its (heading, figures) sections;
+    ``lead``: the line on them, when there are several) its overview cards, a section of figures
+    per channel, events, link and disk."""
+    body = [f"<h1>{html.escape(title)}</h1>"]
+    if lead:
+        body.append(f'<p class="sub note" id="recordings">{html.escape(lead)}</p>')
+    for data, sections in parts:
+        if data.recording:
+            name = "Logs of a board (no imported recording)" if data.recording == BOARD_LOGS \
+                else f"Recording {data.recording}"
+            body.append(f'<h2 class="recording" id="{_id(data, "recording")}">{html.escape(name)}</h2>')
+        body += [f'<p class="sub">{html.escape(data.axis.caption(data.start_ns))}</p>',
+                 *(f'<p class="sub note">{html.escape(note)}</p>' for note in data.notes), _cards(data)]
+        for heading, figs in sections:
+            body.append(f"<h2>{html.escape(heading)}</h2>")
+            body.extend(_figure_html(f) for f in figs)
+            if not figs:
+                body.append("<p>Nothing to draw for this channel.</p>")
+        body.append(_events_table(data))
+        body.append(_diagnostics_table(data))
+    metas = json.dumps([f.meta for _, sections in parts for _, figs in sections for f in figs]).replace("</", "<\\/")
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>\n"
             + "\n".join(body)

@@ -85,6 +85,7 @@ class Capture:
     channel: str
     time_ns: int
     parts: dict[str, dict[str, Any]] = field(default_factory=dict)
+    recording: str = ""             # its recording's name, among others (:attr:`LogData.recording`)
 
 
 @dataclass
@@ -92,6 +93,7 @@ class ChannelData:
     """Per channel: severity, anomaly flags, indicators, orders versus speed, captures."""
 
     name: str
+    recording: str = ""             # its recording's name, among others (:attr:`LogData.recording`)
     severity: Trend = field(default_factory=Trend)
     anomaly: Trend = field(default_factory=Trend)
     level: Trend = field(default_factory=Trend)      # the combined severity's level / baseline
@@ -151,6 +153,8 @@ class LogData:
         self.end_ns: int | None = None
         self.files: list[FileInfo] = []
         self.notes: list[str] = []      # lines on the logs left out (:mod:`.runs`)
+        #: the recording's name when the logs hold more than one (:mod:`.runs`), else ""
+        self.recording = ""
         self.axis = TimeAxis()          # how times are shown
         #: a log time to the time shown, ``begins``: a record's start (the file's :meth:`TimeAxis.shown`)
         self.place: Callable[..., int] = lambda t_ns, begins=False: t_ns
@@ -169,7 +173,7 @@ class LogData:
     def channel(self, name: str) -> ChannelData:
         ch = self.channels.get(name)
         if ch is None:
-            ch = self.channels[name] = ChannelData(name)
+            ch = self.channels[name] = ChannelData(name, self.recording)
         return ch
 
     def begin_file(self, metadata: dict[str, str]) -> None:
@@ -384,7 +388,7 @@ class LogData:
         if len(ch.captures) >= MAX_CAPTURES:
             ch.captures_omitted += part == "waveform"
             return
-        ch.captures.append(Capture(ch.name, t_ns, {part: msg}))
+        ch.captures.append(Capture(ch.name, t_ns, {part: msg}, ch.recording))
 
 
 def _bearing_lines(msg: dict[str, Any]) -> dict[str, float]:

@@ -8,9 +8,10 @@ recording's date (the import read it from the file names) the times are that dat
 (``recording``, as the file names give them: not converted to this machine's zone, nor
 shifted by its daylight saving); without it, time into the recording (``elapsed``: hours, or
 seconds for a recording shorter than ten minutes); for snapshots without times, the share of
-the recorded signal (``record``: % of the record, the snapshots end to end). Logs of
-different recordings, or some of an import and some not, stay in local time, and
-:attr:`TimeAxis.note` says why.
+the recorded signal (``record``: % of the record, the snapshots end to end). The report
+draws each recording's logs apart (:mod:`.runs`), each on its own axis; logs given together
+whose timelines differ, or some of an import and some not, or a timeline that cannot be read,
+stay in local time, and :attr:`TimeAxis.note` says why.
 """
 
 from __future__ import annotations
