@@ -2,7 +2,8 @@
 
 A rule watches a value under its stable name (:mod:`cmsensord.monitor.alarms` reads them):
 an indicator record's :data:`RECORD_VALUES` (``zone`` as 0-3), a configured bearing's lines
-(``<bearing>.bpfo``, ... and their ``_2x``: :data:`BEARING_LINES`), a configured band
+(``<bearing>.bpfo``, ... and their ``_2x``: :data:`BEARING_LINES`; each line's amplitude, and
+with ``_ratio`` how far it stands out of the envelope spectrum around it: :data:`BEARING_VALUES`), a configured band
 (``band.<name>``), the severity index (``severity_index``) or a configured order component's
 RMS (``order.<component>``).  The indicator records are written only with ``indicators.enabled``,
 the orders only with ``orders.enabled``.  A rule naming anything else would never see a value,
@@ -22,14 +23,17 @@ from typing import Any
 
 from .validation import did_you_mean
 
-__all__ = ["RECORD_VALUES", "BEARING_LINES", "RMS_MODE_VALUES", "indicator_names", "unknown_indicator",
-           "rules_see_indicators", "raw_only_rules"]
+__all__ = ["RECORD_VALUES", "BEARING_LINES", "BEARING_VALUES", "RMS_MODE_VALUES", "indicator_names",
+           "unknown_indicator", "rules_see_indicators", "raw_only_rules"]
 
 #: the scalar values of a /cm/<ch>/indicators record a rule can watch (zone A-D as 0-3)
 RECORD_VALUES = ("velocity_rms_mm_s", "accel_rms", "accel_peak", "crest_factor", "kurtosis",
                  "envelope_rms", "zone")
 #: a bearing's lines: each defect frequency and its second harmonic
 BEARING_LINES = tuple(f"{d}{h}" for d in ("ftf", "bpfo", "bpfi", "bsf") for h in ("", "_2x"))
+#: a bearing's values a rule can watch: each line's amplitude [m/s^2] (``bpfo``) and its ratio to
+#: the median of the envelope spectrum from 0.5 to 1.5 x the line (``bpfo_ratio``, unitless)
+BEARING_VALUES = BEARING_LINES + tuple(f"{line}_ratio" for line in BEARING_LINES)
 #: the values a rule can watch on an RMS-mode board: its records' overall RMS, the severity index
 RMS_MODE_VALUES = ("accel_rms", "severity_index")
 
@@ -41,7 +45,7 @@ def indicator_names(cfg: Any, *, records_only: bool = False, written: bool = Tru
     names = []
     if cfg.indicators.enabled or not written:
         names += list(RECORD_VALUES)
-        names += [f"{b.name}.{line}" for b in cfg.bearings for line in BEARING_LINES]
+        names += [f"{b.name}.{line}" for b in cfg.bearings for line in BEARING_VALUES]
         names += [f"band.{b.name}" for b in cfg.indicators.bands]
     if not records_only:
         names += ["severity_index"]
@@ -71,7 +75,8 @@ def _what_is_missing(name: str, cfg: Any) -> str | None:
     if bearing not in bearings:
         return (f"names no bearing {bearing!r} (bearings: {_listed(bearings)}): add it under bearings "
                 "(name, channel, geometry) or name one of them;")
-    return f"{line!r} is not a line of bearing {bearing} (lines: {', '.join(BEARING_LINES)});"
+    return (f"{line!r} is not a line of bearing {bearing} (lines: {', '.join(BEARING_LINES)}; each also "
+            "as <line>_ratio);")
 
 
 def unknown_indicator(name: str, cfg: Any, *, records_only: bool = False, written: bool = True,

@@ -82,21 +82,26 @@ class StateStore(Protocol):
 
 
 def indicator_values(msg: dict) -> dict[str, float]:
-    """The values of an indicators message under the stable names (zone A-D as 0-3)."""
+    """The values of an indicators message under the stable names (zone A-D as 0-3; a bearing
+    line's amplitude as ``<bearing>.<line>``, its ratio as ``<bearing>.<line>_ratio``)."""
     out = {k: float(msg[k]) for k in _SCALARS if k in msg}
     if "zone" in msg:
         out["zone"] = float("ABCD".index(msg["zone"]))
     for b in msg.get("bearings", ()):
         out.update({f"{b['name']}.{k}": float(p["amplitude"]) for k, p in b.get("lines", {}).items()})
+        out.update({f"{b['name']}.{k}_ratio": float(p["ratio"]) for k, p in b.get("lines", {}).items()
+                    if "ratio" in p})
     out.update({f"band.{b['name']}": float(b["rms"]) for b in msg.get("bands", ())})
     return out
 
 
 def unknown_values(msg: dict) -> tuple[str, ...]:
     """The values an indicators message names unavailable one by one (``<bearing>.<line>``:
-    a line its envelope spectrum does not resolve); not the groups (``speed``, ``bearings``,
-    ``bands``) nor the spectral indicators of an interval with lost samples, whose delays go on."""
-    return tuple(k for k in msg.get("unavailable", ()) if "." in k)
+    a line its envelope spectrum does not resolve, and so its ``<bearing>.<line>_ratio``); not
+    the groups (``speed``, ``bearings``, ``bands``) nor the spectral indicators of an interval
+    with lost samples, whose delays go on."""
+    named = [k for k in msg.get("unavailable", ()) if "." in k]
+    return tuple(named) + tuple(f"{k}_ratio" for k in named if not k.startswith("band."))
 
 
 def _order_values(msg: dict) -> dict[str, float]:
