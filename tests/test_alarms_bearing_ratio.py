@@ -6,6 +6,7 @@ holds 3 x BPFO, said once at the start."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -61,8 +62,10 @@ def test_an_outer_race_fault_raises_the_outer_race_ratio_alarm_only(replayed):
     _, stderr = replayed
     alarms = [ln for ln in stderr.splitlines() if "alarm_" in ln and ln.startswith(("WARNING", "ERROR"))]
     assert alarms == [
-        "WARNING alarm_alert: de_inner_amplitude/ch0: de.bpfi 0.2739 reached the alert level 0.04832",
-        "WARNING alarm_alert: de_outer_race/ch0: de.bpfo_ratio 5.793 reached the alert level 4.064",
+        "WARNING alarm_alert: de_inner_amplitude/ch0: de.bpfi 0.2739 m/s² (BPFI of bearing de, envelope 0-pk) "
+        "reached the alert level 0.04832 m/s²",
+        "WARNING alarm_alert: de_outer_race/ch0: de.bpfo_ratio 5.793 (BPFO of bearing de over the envelope "
+        "spectrum around it) reached the alert level 4.064",
     ]
 
 
@@ -71,3 +74,23 @@ def test_a_line_window_holding_another_line_harmonic_is_said_once(replayed):
     said = [ln for ln in stderr.splitlines() if "line_harmonics:" in ln]
     assert said == ["WARNING line_harmonics: bearing de on ch0: bpfi_2x's window (311.4 Hz ±2 %) holds 3 x bpfo "
                     "(306.8 Hz): a defect at bpfo raises de.bpfi_2x too (judge bpfi by de.bpfi_ratio)"]
+
+
+def test_the_units_the_alarm_lines_give_are_those_of_the_indicator_records():
+    """One table of units (config.alarm_indicators.QUANTITIES): each record value's unit is the one
+    its field's description in the /cm/<ch>/indicators schema gives, and a bearing line's too."""
+    from cmsensord.config.alarm_indicators import RECORD_VALUES, unit_of
+    from cmsensord.sinks.schemas import SCHEMAS
+
+    props = SCHEMAS["indicators"]["properties"]
+    line = props["bearings"]["items"]["properties"]["lines"]["properties"]["bpfo"]["properties"]
+
+    def bracket(description: str) -> str:
+        found = re.search(r"\[([^\]]+)\]", description)
+        return found.group(1).replace("^2", "²") if found else ""
+
+    for name in RECORD_VALUES:
+        if name != "zone":
+            assert unit_of(name) == bracket(props[name]["description"]), name
+    assert unit_of("de.bpfo") == bracket(line["amplitude"]["description"]) == "m/s²"
+    assert unit_of("de.bpfo_ratio") == ""

@@ -13,6 +13,9 @@ so it never fires: :func:`rules_see_indicators` refuses it with the names it cou
 (``alarms.baselines``) must name an indicator a rule could watch under the configured bearings,
 bands and components, else no rule can use it.
 
+:func:`unit_of` and :func:`what_is` give each name's unit and what it is, for the lines that quote
+a value (alarm events, ``cmsensord status``): the one table of them, :data:`QUANTITIES`.
+
 An RMS-mode board's indicator records carry ``accel_rms`` only (:data:`RMS_MODE_VALUES`, beside
 the severity index); :func:`raw_only_rules` names the rules that then never fire.
 """
@@ -24,7 +27,7 @@ from typing import Any
 from .validation import did_you_mean
 
 __all__ = ["RECORD_VALUES", "BEARING_LINES", "BEARING_VALUES", "RMS_MODE_VALUES", "indicator_names",
-           "unknown_indicator", "rules_see_indicators", "raw_only_rules"]
+           "unknown_indicator", "rules_see_indicators", "raw_only_rules", "QUANTITIES", "unit_of", "what_is"]
 
 #: the scalar values of a /cm/<ch>/indicators record a rule can watch (zone A-D as 0-3)
 RECORD_VALUES = ("velocity_rms_mm_s", "accel_rms", "accel_peak", "crest_factor", "kurtosis",
@@ -34,6 +37,53 @@ BEARING_LINES = tuple(f"{d}{h}" for d in ("ftf", "bpfo", "bpfi", "bsf") for h in
 #: a bearing's values a rule can watch: each line's amplitude [m/s^2] (``bpfo``) and its ratio to
 #: the median of the envelope spectrum from 0.5 to 1.5 x the line (``bpfo_ratio``, unitless)
 BEARING_VALUES = BEARING_LINES + tuple(f"{line}_ratio" for line in BEARING_LINES)
+#: (unit, what it is) of each name a rule can watch, by its form: a record value's own name;
+#: ``<bearing>.<line>``, ``<bearing>.<line>_ratio``, ``band.<name>``, ``order.<name>`` by the key
+#: in brackets ({b} the bearing, {line} the line, {n} the band or component); "" unitless
+QUANTITIES = {
+    "velocity_rms_mm_s": ("mm/s", "velocity RMS"),
+    "accel_rms": ("m/s²", "acceleration RMS"),
+    "accel_peak": ("m/s²", "acceleration 0-pk"),
+    "crest_factor": ("", "crest factor"),
+    "kurtosis": ("", "kurtosis"),
+    "envelope_rms": ("m/s²", "envelope RMS"),
+    "zone": ("", "ISO 10816-3 zone, A-D as 0-3"),
+    "severity_index": ("", "severity index, 0-1"),
+    "[line]": ("m/s²", "{line} of bearing {b}, envelope 0-pk"),
+    "[ratio]": ("", "{line} of bearing {b} over the envelope spectrum around it"),
+    "[band]": ("m/s²", "acceleration RMS in band {n}"),
+    "[order]": ("m/s²", "order {n} RMS"),
+}
+
+
+def _quantity(name: str) -> tuple[str, str]:
+    """(unit, what it is) of indicator ``name`` from :data:`QUANTITIES`; ("", "") for none of its forms."""
+    if name in QUANTITIES:
+        return QUANTITIES[name]
+    head, _, rest = name.partition(".")
+    if head in ("band", "order") and rest:
+        unit, what = QUANTITIES[f"[{head}]"]
+        return unit, what.format(n=rest)
+    bearing, _, line = name.rpartition(".")
+    if bearing and line in BEARING_VALUES:
+        key = "[ratio]" if line.endswith("_ratio") else "[line]"
+        base = line.removesuffix("_ratio")
+        shown = base.upper() if "_" not in base else f"{base.split('_')[1]} {base.split('_')[0].upper()}"
+        unit, what = QUANTITIES[key]
+        return unit, what.format(line=shown, b=bearing)
+    return "", ""
+
+
+def unit_of(name: str) -> str:
+    """The unit of indicator ``name`` (``mm/s``, ``m/s²``; "" when it has none)."""
+    return _quantity(name)[0]
+
+
+def what_is(name: str) -> str:
+    """What indicator ``name`` is, in words (``velocity RMS``, ``BPFO of bearing de, envelope 0-pk``)."""
+    return _quantity(name)[1]
+
+
 #: the values a rule can watch on an RMS-mode board: its records' overall RMS, the severity index
 RMS_MODE_VALUES = ("accel_rms", "severity_index")
 
