@@ -400,15 +400,21 @@ class Alarms:
         return out
 
     def summary(self) -> str | None:
-        """The worst active alarm for the status line ("ALARM danger vel/ch0 +1"), None if none;
-        before the first value, the worst alarm saved by the last run, said to be so."""
+        """The worst active alarm for the status line, and how many others show a level ("ALARM
+        danger vel/ch0 and 1 more at alert or danger"), None if none; before the first value, the
+        worst alarm saved by the last run, said to be so."""
         if self.manager is None:
             return _saved_summary(self._saved)
         worst = self.manager.worst()
         if worst is None:
             return None
         n = sum(a.state.level > 0 for a in self.manager.alarms.values())
-        return f"ALARM {LEVELS[worst.state.level]} {worst.id}" + (f" +{n - 1}" if n > 1 else "")
+        return f"ALARM {LEVELS[worst.state.level]} {worst.id}{_more(n - 1)}"
+
+
+def _more(others: int) -> str:
+    """The other alarms showing a level, after the worst one's name ("" when none)."""
+    return f" and {others} more at alert or danger" if others else ""
 
 
 def _saved_summary(saved: dict[str, dict[str, Any]]) -> str | None:
@@ -418,5 +424,4 @@ def _saved_summary(saved: dict[str, dict[str, Any]]) -> str | None:
     if not levels:
         return None
     name = max(levels, key=lambda k: levels[k])
-    more = f" +{len(levels) - 1}" if len(levels) > 1 else ""
-    return f"ALARM {LEVELS[levels[name]]} {name}{more} (saved by the last run; waiting for data)"
+    return f"ALARM {LEVELS[levels[name]]} {name}{_more(len(levels) - 1)} (saved by the last run; waiting for data)"
