@@ -255,17 +255,26 @@ def replay_parser() -> argparse.ArgumentParser:
 
 
 def _config_for(path: str | None) -> tuple[Config, bool]:
-    """Load a config (an empty one said in a warning line, by load_config); auto_channels when the
-    file does not list channels."""
+    """Load a config (an empty one said in a warning line, by load_config; ISO zones of a machine
+    class it does not set, in a note: :func:`~cmsensord.config.indicators.zones_assumed`);
+    auto_channels when the file does not list channels."""
+    from cmsensord.config.indicators import zones_assumed
+
+    raw: object = None
     if path is None:
-        return default_config(1), True
-    cfg = load_config(path)
-    import yaml  # only to see whether the file lists channels
-    try:
-        raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError):
-        raw = {}
-    return cfg, not (isinstance(raw, dict) and raw.get("channels"))
+        cfg = default_config(1)
+    else:
+        cfg = load_config(path)
+        import yaml  # only to see whether the file lists channels and sets the machine class
+        try:
+            raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+        except (OSError, yaml.YAMLError):
+            raw = {}
+    given = raw if isinstance(raw, dict) else {}
+    note = zones_assumed(cfg.indicators, given.get("indicators"))
+    if note:
+        print(note, file=sys.stderr)
+    return cfg, path is None or not given.get("channels")
 
 
 def _with_output(cfg: Config, out: str | None, akf_trace: bool) -> Config:

@@ -40,5 +40,6 @@ def test_a_spike_then_values_in_the_deadband_raise_nothing_a_sustained_exceedanc
     assert p.returncode == 0, p.stderr
     raised = [line for line in p.stderr.splitlines() if " alarm_alert: " in line]
     assert len(raised) == 1, p.stderr[-3000:]
-    value = float(re.search(r"accel_rms ([0-9.]+) reached the alert level", raised[0]).group(1))
+    value = float(re.search(r"accel_rms ([0-9.]+) m/s² \(acceleration RMS\) reached the alert level",
+                            raised[0]).group(1))
     assert value >= LEVEL, raised[0]

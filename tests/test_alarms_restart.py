@@ -238,7 +238,7 @@ def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_com
     assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text
     assert "worst: danger (sev/ch0)" in text and text.rstrip().endswith("latched saved"), text
     assert acked.returncode == 0 and acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
-    assert after.rstrip().endswith("danger  normal           -        -        -  acknowledged saved"), after
+    assert after.rstrip().endswith("danger  normal           -        -        - -      acknowledged saved"), after
     user = pwd.getpwuid(os.getuid()).pw_name
     assert lines(err, "alarm_ack") == [f"WARNING alarm_ack: sev/ch0 acknowledged by {user} (danger, saved by the "
                                        "last run; danger at its stop, judged again when data comes)"], err

@@ -58,7 +58,7 @@ BEARING = {"name": "motor_de", "channel": "ch0", "elements": 9, "ball_diameter":
     ("de.bpfo", "names no bearing 'de' (bearings: motor_de): add it under bearings (name, channel, geometry) "
      "or name one of them; did you mean 'motor_de.bpfo'?"),
     ("motor_de.bpfx", "'bpfx' is not a line of bearing motor_de (lines: ftf, ftf_2x, bpfo, bpfo_2x, bpfi, "
-     "bpfi_2x, bsf, bsf_2x); did you mean 'motor_de.bpfo'?"),
+     "bpfi_2x, bsf, bsf_2x; each also as <line>_ratio); did you mean 'motor_de.bpfo'?"),
     ("band.high", "no band 'high' in indicators.bands (bands: low)"),
     ("order.whirl", "no component 'whirl' in orders.components (components: 1x, 2x, 3x, 4x)"),
     ("sevrity_index", "unknown indicator (did you mean 'severity_index'?): a rule on it never fires"),

@@ -292,7 +292,8 @@ def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
     p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--config", str(base), "--out", str(site))
     assert p.returncode == 0, p.stderr
     assert ("alarm rms_x2/pump: warning: shown within the healthy period, raised 1 time(s): alert at 1.0 board s "
-            "(accel_rms 29.64 reached the alert level 19.64); its levels are within what this machine did then: "
+            "(accel_rms 29.64 m/s² (acceleration RMS) reached the alert level 19.64 m/s²); its levels are within "
+            "what this machine did then: "
             "check the rule's levels, or whether the period was healthy\n"
             "alarm rms_x2/pump: in the recording: alert at start.npz[0] (0.0 % of the record, 0 h in)\n"
             ) in p.stdout        # the first record is the first snapshot (indicators.interval_s 0.996)
@@ -306,7 +307,8 @@ def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
     assert p.returncode == 0, p.stderr
     assert "alarm rms_x2" not in p.stdout          # raised before the period, cleared in it
     assert ("alarm iso/pump: warning: shown within the healthy period: danger since 1.0 board s, before the "
-            "period, and all through it (velocity_rms_mm_s 27.87 reached the danger level 4.5); ") in p.stdout
+            "period, and all through it (velocity_rms_mm_s 27.87 mm/s (velocity RMS) reached the danger level "
+            "4.5 mm/s); ") in p.stdout
     base.write_text(RULES.splitlines(keepends=True)[0] + "".join(RULES.splitlines(keepends=True)[1:3]))
     p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--config", str(base),
             "--out", str(site))

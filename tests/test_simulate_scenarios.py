@@ -98,7 +98,8 @@ def test_whirl_past_the_decision_size_names_the_longer_decision_that_takes_it(tm
     assert "decision_rule" not in p.stderr
     assert [m["name"] for m in next(m for t, _, m in msgs if t == "/cm/ch0/orders")["orders"]] == [
         "o1", "whirl", "whip"]
-    assert "WARNING alarm_alert: order_whirl/ch0: order.whirl 1.456 reached the alert level 0.7" in p.stderr
+    assert ("WARNING alarm_alert: order_whirl/ch0: order.whirl 1.456 m/s² (order whirl RMS) reached the alert "
+            "level 0.7 m/s²\n") in p.stderr
 
 
 def test_making_the_acoustic_calibration_is_said_before_it_starts(tmp_path):

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from cmsensord.config.alarm_indicators import unit_of, what_is
 from cmsensord.config.alarms import AlarmRuleConfig, AlarmsConfig
 from cmsensord.config.channel_refs import rule_channels
 
@@ -222,10 +223,16 @@ class AlarmManager:
         """The transition of ``a`` from the shown level ``prev`` to ``after`` (none if equal)."""
         if after == prev:
             return []
-        what = f"{a.rule.indicator} {a.value:.4g}" if a.value is not None else a.rule.indicator
+        name = a.rule.indicator
+        unit = f" {unit_of(name)}" if unit_of(name) else ""
+        what = f"{name} {a.value:.4g}{unit}" if a.value is not None else name
         lv = a.levels[after - 1] if after > 0 else a.levels[prev - 1]
+        said = what_is(name)
+        if said and said.replace(" ", "_") != name:     # kurtosis is just that
+            what += f" ({said})" if after > prev else ""
         if after > prev:
-            msg = f"{a.id}: {what} reached the {LEVELS[after]} level" + (f" {lv:.4g}" if lv is not None else "")
+            msg = (f"{a.id}: {what} reached the {LEVELS[after]} level"
+                   + (f" {lv:.4g}{unit}" if lv is not None else ""))
         elif after == 0:
             msg = f"{a.id}: {LEVELS[prev]} cleared ({what})"
         else:

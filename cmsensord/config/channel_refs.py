@@ -11,10 +11,10 @@ channels there are, and the monitoring chain's channel set-up checks them then
 raises a one-line :class:`~cmsensord.errors.ConfigError`; and for a rule whose ``vote`` is
 more than the channels it watches (:func:`rule_channels`), whose alarm would never rise.
 
-A bearing's lines (``<bearing>.<line>``) are computed on the bearing's ``channel`` only: a rule
-on one watches that channel when it lists no ``channels`` (:func:`rule_channels`), and a rule
-listing another channel is refused on loading, by :func:`rules_on_bearing_channels`, whatever
-the channels are called.
+A bearing's lines (``<bearing>.<line>``, and their ratios ``<bearing>.<line>_ratio``) are
+computed on the bearing's ``channel`` only: a rule on one watches that channel when it lists no
+``channels`` (:func:`rule_channels`), and a rule listing another channel is refused on loading,
+by :func:`rules_on_bearing_channels`, whatever the channels are called.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from .alarm_indicators import BEARING_LINES
+from .alarm_indicators import BEARING_VALUES
 from .validation import ConfigError
 
 __all__ = ["channel_refs_error", "check_channel_refs", "bearing_of", "rule_channels", "rules_on_bearing_channels"]
@@ -34,7 +34,7 @@ def bearing_of(indicator: str, bearings: Sequence[Any]) -> Any | None:
     """The bearing of ``bearings`` (:class:`~.indicators.BearingConfig`) whose line ``indicator``
     is (``<bearing>.<line>``), or None when it is no configured bearing's line."""
     name, dot, line = indicator.rpartition(".")
-    if not dot or line not in BEARING_LINES:
+    if not dot or line not in BEARING_VALUES:
         return None
     return next((b for b in bearings if b.name == name), None)
 

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 from .validation import Rule, fmt_num, greater, setting, validate
 
-__all__ = ["BandConfig", "IndicatorsConfig", "BearingConfig", "bearings_unique"]
+__all__ = ["BandConfig", "IndicatorsConfig", "BearingConfig", "bearings_unique", "zones_assumed"]
 
 _NAME: dict[str, Any] = {"pattern": r"[A-Za-z0-9_.]+", "pattern_reason": "must contain only letters, digits, _ and ."}
 
@@ -124,3 +124,22 @@ def bearings_unique(cfg: Any) -> tuple[str, str, Any] | None:
             return f"bearings[{i}].name", "duplicate bearing name", b.name
         seen.append(b.name)
     return None
+
+
+def zones_assumed(ind: IndicatorsConfig, given: Any) -> str | None:
+    """The note that the ISO 10816-3 zones are graded for a machine class the configuration
+    does not set (``given``: its ``indicators`` mapping as written, None without one): which
+    group and foundation are assumed, their boundaries, and the keys that set them; None when
+    both are set or no indicator record is written."""
+    from cmsensord.dsp.indicators.iso_zones import boundaries
+
+    keys = given if isinstance(given, dict) else {}
+    unset = [k for k in ("machine_group", "foundation") if k not in keys]
+    if not ind.enabled or not unset:
+        return None
+    size = "> 300 kW" if ind.machine_group == 1 else "15-300 kW"
+    edges = "/".join(f"{b:g}" for b in boundaries(ind.machine_group, ind.foundation))
+    return (f"note: ISO 10816-3 zones graded for machine group {ind.machine_group} ({size}) on a "
+            f"{ind.foundation} foundation ({edges} mm/s), {' and '.join(unset)} not set: the standard covers "
+            "machines above 15 kW; set indicators.machine_group (1: > 300 kW, 2: 15-300 kW) and "
+            "indicators.foundation (rigid, flexible) for this machine")

@@ -82,21 +82,26 @@ class StateStore(Protocol):
 
 
 def indicator_values(msg: dict) -> dict[str, float]:
-    """The values of an indicators message under the stable names (zone A-D as 0-3)."""
+    """The values of an indicators message under the stable names (zone A-D as 0-3; a bearing
+    line's amplitude as ``<bearing>.<line>``, its ratio as ``<bearing>.<line>_ratio``)."""
     out = {k: float(msg[k]) for k in _SCALARS if k in msg}
     if "zone" in msg:
         out["zone"] = float("ABCD".index(msg["zone"]))
     for b in msg.get("bearings", ()):
         out.update({f"{b['name']}.{k}": float(p["amplitude"]) for k, p in b.get("lines", {}).items()})
+        out.update({f"{b['name']}.{k}_ratio": float(p["ratio"]) for k, p in b.get("lines", {}).items()
+                    if "ratio" in p})
     out.update({f"band.{b['name']}": float(b["rms"]) for b in msg.get("bands", ())})
     return out
 
 
 def unknown_values(msg: dict) -> tuple[str, ...]:
     """The values an indicators message names unavailable one by one (``<bearing>.<line>``:
-    a line its envelope spectrum does not resolve); not the groups (``speed``, ``bearings``,
-    ``bands``) nor the spectral indicators of an interval with lost samples, whose delays go on."""
-    return tuple(k for k in msg.get("unavailable", ()) if "." in k)
+    a line its envelope spectrum does not resolve, and so its ``<bearing>.<line>_ratio``); not
+    the groups (``speed``, ``bearings``, ``bands``) nor the spectral indicators of an interval
+    with lost samples, whose delays go on."""
+    named = [k for k in msg.get("unavailable", ()) if "." in k]
+    return tuple(named) + tuple(f"{k}_ratio" for k in named if not k.startswith("band."))
 
 
 def _order_values(msg: dict) -> dict[str, float]:
@@ -395,15 +400,21 @@ class Alarms:
         return out
 
     def summary(self) -> str | None:
-        """The worst active alarm for the status line ("ALARM danger vel/ch0 +1"), None if none;
-        before the first value, the worst alarm saved by the last run, said to be so."""
+        """The worst active alarm for the status line, and how many others show a level ("ALARM
+        danger vel/ch0 and 1 more at alert or danger"), None if none; before the first value, the
+        worst alarm saved by the last run, said to be so."""
         if self.manager is None:
             return _saved_summary(self._saved)
         worst = self.manager.worst()
         if worst is None:
             return None
         n = sum(a.state.level > 0 for a in self.manager.alarms.values())
-        return f"ALARM {LEVELS[worst.state.level]} {worst.id}" + (f" +{n - 1}" if n > 1 else "")
+        return f"ALARM {LEVELS[worst.state.level]} {worst.id}{_more(n - 1)}"
+
+
+def _more(others: int) -> str:
+    """The other alarms showing a level, after the worst one's name ("" when none)."""
+    return f" and {others} more at alert or danger" if others else ""
 
 
 def _saved_summary(saved: dict[str, dict[str, Any]]) -> str | None:
@@ -413,5 +424,4 @@ def _saved_summary(saved: dict[str, dict[str, Any]]) -> str | None:
     if not levels:
         return None
     name = max(levels, key=lambda k: levels[k])
-    more = f" +{len(levels) - 1}" if len(levels) > 1 else ""
-    return f"ALARM {LEVELS[levels[name]]} {name}{more} (saved by the last run; waiting for data)"
+    return f"ALARM {LEVELS[levels[name]]} {name}{_more(len(levels) - 1)} (saved by the last run; waiting for data)"

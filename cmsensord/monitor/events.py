@@ -72,7 +72,7 @@ LOG_LEVEL = {
     "alarm_ack": logging.WARNING, "alarm_no_baseline": logging.WARNING,
     "alarm_restored": logging.WARNING, "alarm_not_restored": logging.WARNING,
     "alarm_state_error": logging.WARNING, "signal_lost": logging.WARNING, "signal_back": logging.WARNING,
-    "lines_unresolved": logging.WARNING, "band_above_nyquist": logging.WARNING,
+    "lines_unresolved": logging.WARNING, "line_harmonics": logging.WARNING, "band_above_nyquist": logging.WARNING,
     "band_too_narrow": logging.WARNING, "flat_blocks": logging.WARNING,
 }
 

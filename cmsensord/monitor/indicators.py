@@ -49,12 +49,12 @@ from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
 from cmsensord.dsp.indicators.envelope import envelope_band
-from cmsensord.dsp.indicators.resolution import line_freqs, unresolved_line
 from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.empty_bands import empty_band_events, empty_bands
 from cmsensord.monitor.events import Event
+from cmsensord.monitor.line_notes import line_notes
 from cmsensord.sinks.schemas import indicators_topic
 
 if TYPE_CHECKING:
@@ -146,28 +146,6 @@ def record_fields(r: IndicatorRecord) -> dict:
     return out
 
 
-def _unresolved_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, df: float, stamp: int,
-                      told: set) -> list[Event]:
-    """A ``lines_unresolved`` event (a warning) for each bearing of record ``r`` of ``channel``
-    with lines its envelope spectrum's bins of ``df`` Hz do not resolve, the first time that
-    set of lines is (``told``: the (channel, bearing, lines) said already): the one line of
-    :func:`~cmsensord.dsp.indicators.resolution.unresolved_line`, naming the rules on them."""
-    out = []
-    for b in r.bearings:
-        key = (channel, b.name, b.unresolved)
-        if not b.unresolved or b.freqs is None or key in told:
-            continue
-        told.add(key)
-        names = {f"{b.name}.{k}" for k in b.unresolved}
-        rules = tuple(dict.fromkeys(rule.name for rule in cfg.alarms.rules if rule.indicator in names
-                                    and (not rule.channels or channel in rule.channels)))
-        text = unresolved_line(b.name, channel, b.unresolved, line_freqs(b.freqs), setup.slip, df, rules,
-                               MAX_INTERVAL_SAMPLES / setup.fs)
-        out.append(Event("lines_unresolved", channel, text, stamp,
-                         {"details": {"bearing": b.name, "lines": list(b.unresolved), "bin_hz": _num(df)}}))
-    return out
-
-
 def _bearing(b) -> dict:
     d: dict = {"name": b.name}
     if b.freqs is not None:
@@ -194,7 +172,7 @@ class IndicatorChain:
                  tacho: Callable[[], TachoTracker | None],
                  uncovered: Callable[[np.ndarray], np.ndarray] | None = None, told: set | None = None):
         self.cfg, self.channels, self.fs, self.clock, self.tacho = cfg, channels, fs, clock, tacho
-        #: the unresolved bearing lines said already (:func:`_unresolved_notes`)
+        #: the unresolved bearing lines said already (:func:`~.line_notes.line_notes`)
         self.told: set = set() if told is None else told
         self.uncovered = uncovered or self._after_newest
         self.N = max(2, min(MAX_INTERVAL_SAMPLES, round(cfg.indicators.interval_s * fs)))
@@ -314,7 +292,7 @@ class IndicatorChain:
         """The messages of the intervals ``ready`` (start, samples, stamp, finite mask or None),
         in order, channel by channel; the complete records' indicators computed together
         (:func:`compute_many`: the numbers of one :func:`compute` per record); before a record, the
-        ``lines_unresolved`` events of its bearing lines not said yet (:func:`_unresolved_notes`)."""
+        ``lines_unresolved`` events of its bearing lines not said yet (:func:`~.line_notes.line_notes`)."""
         rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
         todo: list = []                 # (x, setup, shaft_hz) of the complete records
         for (_, x, stamp, finite), (shaft_hz, source) in zip(ready, self._speeds(ready, tacho)):
@@ -345,7 +323,8 @@ class IndicatorChain:
                 fields = record_fields(r)
                 if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
                     fields["unavailable"] = ["speed"] + fields.get("unavailable", [])
-                out += _unresolved_notes(self.cfg, name, r, setup, self.fs / self.N, stamp, self.told)
+                out += line_notes(self.cfg, name, r, setup, self.fs / self.N, stamp, self.told,
+                                  MAX_INTERVAL_SAMPLES / setup.fs)
                 empty = empty_bands(r, setup)
                 if empty:
                     fields = without_dead(fields, empty)

@@ -22,6 +22,7 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+from cmsensord.config.alarm_indicators import unit_of
 from cmsensord.config.settings import OutputConfig
 from cmsensord.service.control import SOCKET_NAME, STATE_DIR, NoAnswer, request, socket_path
 
@@ -143,17 +144,20 @@ def run_capture_now(args: argparse.Namespace) -> int:
 
 
 def format_table(t: dict) -> str:
-    """The alarm table as text, one alarm a line."""
+    """The alarm table as text, one alarm a line: the value and the levels in the indicator's unit
+    (UNIT; "-": none, a ratio, a kurtosis, the severity index)."""
     head = f"operating state: {t['operating_state']}, worst: {t['worst']}"
     if "worst_alarm" in t:
         head += f" ({t['worst_alarm']})"
     if "speed_rpm" in t:
         head += f", speed {t['speed_rpm']:.0f} rpm"
-    lines = [head, f"{'ALARM':24} {'LEVEL':7} {'LIVE':7} {'VALUE':>10} {'ALERT':>8} {'DANGER':>8}  FLAGS"]
+    lines = [head, f"{'ALARM':24} {'LEVEL':7} {'LIVE':7} {'VALUE':>10} {'ALERT':>8} {'DANGER':>8} {'UNIT':5}  FLAGS"]
     for a in t["alarms"]:
         num = [f"{a[k]:.4g}" if k in a else "-" for k in ("value", "alert_level", "danger_level")]
         flags = " ".join(f for f, on in (("latched", a["latched"]), ("acknowledged", a["acknowledged"]),
                                          ("restored", a.get("restored", False)),
                                          ("saved", a.get("saved", False))) if on)
-        lines.append(f"{a['id']:24} {a['level']:7} {a['live']:7} {num[0]:>10} {num[1]:>8} {num[2]:>8}  {flags}")
+        unit = unit_of(str(a.get("indicator", ""))) or "-"
+        lines.append(f"{a['id']:24} {a['level']:7} {a['live']:7} {num[0]:>10} {num[1]:>8} {num[2]:>8} {unit:5}  "
+                     f"{flags}".rstrip())
     return "\n".join(lines)

@@ -24,6 +24,7 @@ import serial
 import yaml
 
 from cmsensord.config import config_from_dict, default_config, load_config
+from cmsensord.config.indicators import zones_assumed
 from cmsensord.errors import ConfigError, SinkError
 from cmsensord.serial_port import open_serial
 from cmsensord.service.live import run_live
@@ -114,6 +115,9 @@ def simulate(opt: SimulateOptions) -> int:
                           f"{max(run.microphones)}: give at least {max(run.microphones) + 1} channels",
                           opt.channels)
     cfg = load_config(opt.config, n_channels=opt.channels) if opt.config else default_config(opt.channels)
+    note = zones_assumed(cfg.indicators, _section(opt.config, "indicators"))
+    if note:
+        print(note, file=sys.stderr)
     if cfg.mqtt is not None and not opt.publish:
         log.warning("mqtt: the mqtt section is ignored: a simulated board would publish as client_id %s "
                     "under %s/, the live daemon's (its retained alarms, its dashboards); give --publish "
@@ -170,6 +174,15 @@ def _sets_key(path: str | None, key: str) -> bool:
         return False
     data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     return isinstance(data, dict) and key in data
+
+
+def _section(path: str | None, key: str) -> object:
+    """The top-level section ``key`` of the configuration file ``path`` as written (None: no file,
+    or no such section)."""
+    if not _sets_key(path, key):
+        return None
+    assert path is not None
+    return yaml.safe_load(Path(path).read_text(encoding="utf-8"))[key]
 
 
 def _sim_env() -> dict[str, str]:

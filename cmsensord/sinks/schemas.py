@@ -131,6 +131,7 @@ EVENT_KINDS: tuple[str, ...] = (
     "channels",
     "config",
     "lines_unresolved",
+    "line_harmonics",
     "band_above_nyquist",
     "band_too_narrow",
     "start",
@@ -255,9 +256,11 @@ _DETAILS: dict[str, Any] = {
         "state": _str("operating_state: the machine's new operating state (stopped, starting, running, "
                       "coasting)"),
         "previous": _str("operating_state: the state before"),
-        "bearing": _str("lines_unresolved: the configured bearing"),
-        "lines": {"type": "array", "items": {"type": "string"},
-                  "description": "lines_unresolved: its lines the envelope spectrum's bins do not resolve"},
+        "bearing": _str("lines_unresolved, line_harmonics: the configured bearing"),
+        "lines": {"type": "array", "items": {"type": "string"}, "description": "lines_unresolved: its lines the "
+                  "bins do not resolve; line_harmonics: its lines whose window holds 3 x another defect frequency"},
+        "harmonic_of": {"type": "array", "items": {"type": "string"}, "description": "line_harmonics: per line, "
+                        "the defect frequency whose third harmonic its window holds"},
         "bin_hz": {"type": "number", "description": "lines_unresolved: the envelope spectrum's bin width [Hz]; "
                    "band_too_narrow: the record's spectral bin width [Hz]"},
         "band": _str("band_too_narrow: the configured band that holds no bin"),

@@ -299,8 +299,9 @@ class FaultyMotor(MotorScenario):
     """
 
     name = "faulty"
-    description = ("the same motor with unbalance/looseness (~8.3 mm/s velocity RMS > 7.1) and an "
-                   "outer-race bearing defect (impacts at BPFO = 3.58 f_r ringing at 3 kHz)")
+    description = ("the same motor with unbalance/looseness (~8.3 mm/s velocity RMS: zone D above 4.5 of the "
+                   "default ISO 10816-3 group 2, rigid) and an outer-race bearing defect (impacts at BPFO = "
+                   "3.58 f_r ringing at 3 kHz)")
 
     def __init__(self, *, level: float = 1.0, **kwargs):
         if not level >= 0:

@@ -8,7 +8,7 @@ the channel, the envelope spectrum's lines at the defect frequencies and their
 second harmonics (:mod:`.envelope`, :mod:`.bearings`), and the band RMS
 (:mod:`.bands`).  :meth:`IndicatorRecord.values` flattens the numbers under
 stable names (``accel_rms``, ``velocity_rms_mm_s``, ``<bearing>.bpfi``,
-``band.<name>`` ...); what cannot be computed (no speed for an order band or a
+``<bearing>.bpfi_ratio``, ``band.<name>`` ...); what cannot be computed (no speed for an order band or a
 bearing) is absent, never NaN, and so is a bearing line the envelope spectrum's bins do
 not resolve (:mod:`.resolution`: named in :attr:`BearingLines.unresolved`).
 """
@@ -100,13 +100,16 @@ class IndicatorRecord:
     bands: list[tuple[Band, tuple[float, float], float]]   # band, its Hz edges, RMS (NaN: no bin)
 
     def values(self) -> dict[str, float]:
-        """Every number under a stable name (what an alarm manager compares with its levels)."""
+        """Every number under a stable name (what an alarm manager compares with its levels): a
+        bearing line's amplitude as ``<bearing>.<line>``, how far it stands out of the envelope
+        spectrum around it (:attr:`~.envelope.LinePeak.ratio`) as ``<bearing>.<line>_ratio``."""
         out = {"accel_rms": self.accel.rms, "accel_peak": self.accel.peak,
                "crest_factor": self.accel.crest_factor, "kurtosis": self.accel.kurtosis,
                "velocity_rms_mm_s": self.velocity_rms_mm_s, "envelope_rms": self.envelope_rms,
                "zone": float(ZONES.index(self.zone)) if self.zone else NAN}
         for b in self.bearings:
             out.update({f"{b.name}.{k}": p.amplitude for k, p in b.lines.items()})
+            out.update({f"{b.name}.{k}_ratio": p.ratio for k, p in b.lines.items()})
         out.update({f"band.{band.name}": rms for band, _, rms in self.bands})
         return {k: v for k, v in out.items() if v == v}
 

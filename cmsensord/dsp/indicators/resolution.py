@@ -22,6 +22,13 @@ line is *unresolved*, and given no number, when
 
 :func:`unresolved` gives the lines so judged; :func:`record_s_to_resolve` the shortest record
 that resolves a line; :func:`unresolved_line` the one line that tells an operator.
+
+A line's window can also hold a harmonic of another defect frequency of the same bearing that is
+not read as a line itself: the third (the second of each is its ``_2x`` line, whose window
+overlapping is the case above).  A 6206's 2 x BPFI (10.84 x f_r) lies 0.9 % above 3 x BPFO
+(10.74 x f_r): an outer-race defect raises ``bpfi_2x`` as much as ``bpfo_2x``.  The lines are all
+in proportion to the shaft speed, so this holds at every speed: :func:`harmonic_overlaps` finds
+them, :func:`harmonic_line` tells an operator once.
 """
 
 from __future__ import annotations
@@ -30,12 +37,15 @@ import math
 
 from .bearings import DEFECTS, DefectFrequencies
 
-__all__ = ["WIDEST", "line_freqs", "unresolved", "record_s_to_resolve", "unresolved_line"]
+__all__ = ["WIDEST", "line_freqs", "unresolved", "record_s_to_resolve", "unresolved_line", "harmonic_overlaps",
+           "harmonic_line"]
 
 #: the widest a window widened to a bin may be, as a fraction of the line's frequency
 WIDEST = 0.10
 #: harmonics of each defect frequency read from the envelope spectrum
 HARMONICS = (1, 2)
+#: the harmonic of a defect frequency looked for in other lines' windows (the next one not read)
+UNREAD_HARMONIC = 3
 
 
 def line_freqs(freqs: DefectFrequencies) -> dict[str, float]:
@@ -103,3 +113,33 @@ def unresolved_line(bearing: str, channel: str, names: tuple[str, ...], lines: d
         out += (f"; {', '.join(never)} lie within the slip (±{slip * 100:g} %) of another line of {bearing}: no "
                 "record length resolves them")
     return out
+
+
+def harmonic_overlaps(freqs: DefectFrequencies, slip: float,
+                      skip: tuple[str, ...] = ()) -> list[tuple[str, str, float]]:
+    """(line, defect, its harmonic's Hz) for each line of ``freqs`` (not in ``skip``) whose
+    window of +/- ``slip`` holds :data:`UNREAD_HARMONIC` x another defect frequency of them."""
+    out = []
+    for name, f0 in line_freqs(freqs).items():
+        if name in skip:
+            continue
+        for defect, f1 in zip(DEFECTS, freqs):
+            h = UNREAD_HARMONIC * f1
+            if not name.startswith(defect) and abs(h - f0) <= slip * f0:
+                out.append((name, defect, h))
+    return out
+
+
+def harmonic_line(bearing: str, channel: str, overlaps: list[tuple[str, str, float]],
+                  lines: dict[str, float], slip: float, rules: tuple[str, ...] = ()) -> str:
+    """The line that tells an operator that the windows of bearing ``bearing``'s lines on
+    ``channel`` hold the harmonics ``overlaps`` (:func:`harmonic_overlaps`) of other lines,
+    with the ``rules`` on those lines."""
+    said = []
+    for name, defect, h in overlaps:
+        base = name.removesuffix("_2x")
+        judge = f" (judge {base} by {bearing}.{base}_ratio)" if base != name else ""
+        said.append(f"{name}'s window ({lines[name]:.4g} Hz ±{slip * 100:g} %) holds {UNREAD_HARMONIC} x {defect} "
+                    f"({h:.4g} Hz): a defect at {defect} raises {bearing}.{name} too{judge}")
+    watch = f"; rule(s) {', '.join(rules)} on it fire on that defect as well" if rules else ""
+    return f"bearing {bearing} on {channel}: {'; '.join(said)}{watch}"

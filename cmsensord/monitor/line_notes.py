@@ -1,0 +1,67 @@
+"""What an indicator chain says once about a channel's bearing lines, with its first record.
+
+:func:`line_notes` gives, per bearing of a record, a ``lines_unresolved`` event (a warning) for the
+lines its envelope spectrum's bins do not resolve (:mod:`cmsensord.dsp.indicators.resolution`), the
+first time that set of lines is, and a ``line_harmonics`` event (a warning) when a line's window
+holds the third harmonic of another defect frequency of the bearing
+(:func:`~cmsensord.dsp.indicators.resolution.harmonic_overlaps`: at every speed alike, so once per
+channel and bearing); each names the alarm rules on those lines (their amplitudes and ratios).
+"""
+
+from __future__ import annotations
+
+from cmsensord.config import Config
+from cmsensord.dsp.indicators import IndicatorRecord, Setup
+from cmsensord.dsp.indicators.resolution import harmonic_line, harmonic_overlaps, line_freqs, unresolved_line
+from cmsensord.monitor.events import Event
+
+__all__ = ["line_notes"]
+
+
+def _num(x: float) -> float:
+    return round(float(x), 9)
+
+
+def line_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, df: float, stamp: int,
+               told: set, longest_s: float) -> list[Event]:
+    """A ``lines_unresolved`` event (a warning) for each bearing of record ``r`` of ``channel``
+    with lines its envelope spectrum's bins of ``df`` Hz do not resolve, the first time that
+    set of lines is (``told``: the (channel, bearing, lines) said already): the one line of
+    :func:`~cmsensord.dsp.indicators.resolution.unresolved_line`, naming the rules on them
+    (``longest_s``: the longest record the set-up can have); then those of :func:`_harmonic_notes`."""
+    out = []
+    for b in r.bearings:
+        key = (channel, b.name, b.unresolved)
+        if not b.unresolved or b.freqs is None or key in told:
+            continue
+        told.add(key)
+        names = {f"{b.name}.{k}{ratio}" for k in b.unresolved for ratio in ("", "_ratio")}
+        rules = tuple(dict.fromkeys(rule.name for rule in cfg.alarms.rules if rule.indicator in names
+                                    and (not rule.channels or channel in rule.channels)))
+        text = unresolved_line(b.name, channel, b.unresolved, line_freqs(b.freqs), setup.slip, df, rules,
+                               longest_s)
+        out.append(Event("lines_unresolved", channel, text, stamp,
+                         {"details": {"bearing": b.name, "lines": list(b.unresolved), "bin_hz": _num(df)}}))
+    return out + _harmonic_notes(cfg, channel, r, setup, stamp, told)
+
+
+def _harmonic_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, stamp: int,
+                    told: set) -> list[Event]:
+    """A ``line_harmonics`` event (a warning) for each bearing of record ``r`` of ``channel``
+    whose lines' windows hold a harmonic of another of its lines (at every speed alike: said
+    once per channel and bearing), naming the rules on those lines."""
+    out = []
+    for b in r.bearings:
+        if b.freqs is None or (channel, b.name, "harmonics") in told:
+            continue
+        told.add((channel, b.name, "harmonics"))
+        overlaps = harmonic_overlaps(b.freqs, setup.slip, b.unresolved)
+        if overlaps:
+            names = {f"{b.name}.{k}{ratio}" for k, _, _ in overlaps for ratio in ("", "_ratio")}
+            rules = tuple(rule.name for rule in cfg.alarms.rules if rule.indicator in names
+                          and (not rule.channels or channel in rule.channels))
+            text = harmonic_line(b.name, channel, overlaps, line_freqs(b.freqs), setup.slip, rules)
+            out.append(Event("line_harmonics", channel, text, stamp, {"details": {
+                "bearing": b.name, "lines": [k for k, _, _ in overlaps],
+                "harmonic_of": [d for _, d, _ in overlaps]}}))
+    return out

@@ -1,0 +1,52 @@
+"""The ISO 10816-3 machine class the zones are graded for, said once at the start of a replay or
+a simulated board when the configuration does not set it; `cmsensord --simulate --help` gives the
+faulty motor's zone as the daemon grades it."""
+
+from __future__ import annotations
+
+import pytest
+
+from processes import run_module
+
+NOTE = ("note: ISO 10816-3 zones graded for machine group 2 (15-300 kW) on a rigid foundation (1.4/2.8/4.5 mm/s), "
+        "machine_group and foundation not set: the standard covers machines above 15 kW; set "
+        "indicators.machine_group (1: > 300 kW, 2: 15-300 kW) and indicators.foundation (rigid, flexible) for "
+        "this machine")
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    work = tmp_path_factory.mktemp("zones_note")
+    p = run_module("firmware_sim", "--scenario", "healthy", "--mode", "raw", "--duration", "2",
+                   "--out", str(work / "h.bin"))
+    assert p.returncode == 0, p.stderr
+    return work / "h.bin"
+
+
+def test_replay_without_a_machine_class_says_the_one_assumed(tmp_path, capture):
+    p = run_module("cmsensord", "replay", str(capture), "--out", str(tmp_path / "a"))
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == NOTE
+    (tmp_path / "one.yaml").write_text("indicators: {machine_group: 1}\n")
+    p = run_module("cmsensord", "replay", str(capture), "--config", str(tmp_path / "one.yaml"),
+                   "--out", str(tmp_path / "b"))
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == NOTE.replace("group 2 (15-300 kW)", "group 1 (> 300 kW)").replace(
+        "1.4/2.8/4.5", "2.3/4.5/7.1").replace("machine_group and foundation not set", "foundation not set")
+
+
+def test_replay_with_the_machine_class_set_says_nothing_of_it(tmp_path, capture):
+    (tmp_path / "set.yaml").write_text("indicators: {machine_group: 2, foundation: flexible}\n")
+    p = run_module("cmsensord", "replay", str(capture), "--config", str(tmp_path / "set.yaml"),
+                   "--out", str(tmp_path / "c"))
+    assert p.returncode == 0, p.stderr
+    assert "ISO 10816-3" not in p.stderr
+
+
+def test_simulate_says_the_machine_class_and_its_help_the_zone_it_grades(tmp_path):
+    p = run_module("cmsensord", "--simulate", "--duration", "1", "--out", str(tmp_path))
+    assert p.returncode == 0, p.stderr
+    assert p.stderr.splitlines()[0] == NOTE
+    h = run_module("cmsensord", "--simulate", "--help")
+    assert ("faulty              the same motor with unbalance/looseness (~8.3 mm/s velocity RMS: zone D above "
+            "4.5 of the default ISO 10816-3 group 2, rigid) and an outer-race bearing defect") in h.stdout
