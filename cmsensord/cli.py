@@ -254,10 +254,11 @@ def replay_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _config_for(path: str | None) -> tuple[Config, bool]:
+def _config_for(path: str | None, capture: str | None = None) -> tuple[Config, bool]:
     """Load a config (an empty one said in a warning line, by load_config; ISO zones of a machine
-    class it does not set, in a note: :func:`~cmsensord.config.indicators.zones_assumed`);
-    auto_channels when the file does not list channels."""
+    class it does not set, in a note for a ``capture`` of RAW frames, whose records carry a zone:
+    :func:`~cmsensord.config.indicators.zones_assumed`); auto_channels when the file does not list
+    channels."""
     from cmsensord.config.indicators import zones_assumed
 
     raw: object = None
@@ -272,9 +273,21 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
             raw = {}
     given = raw if isinstance(raw, dict) else {}
     note = zones_assumed(cfg.indicators, given.get("indicators"))
-    if note:
+    if note and capture is not None and _holds_raw(capture):
         print(note, file=sys.stderr)
     return cfg, path is None or not given.get("channels")
+
+
+def _holds_raw(capture: str) -> bool:
+    """Whether the first 256 KB of the file ``capture`` hold a RAW frame (False: none, or unreadable)."""
+    from cmsensord.protocol import FrameType, iter_frames
+
+    try:
+        with open(capture, "rb") as f:
+            head = f.read(1 << 18)
+    except OSError:
+        return False
+    return any(f.type == FrameType.RAW for f in iter_frames(head)[0])
 
 
 def _with_output(cfg: Config, out: str | None, akf_trace: bool) -> Config:
@@ -289,7 +302,7 @@ def _run_vkf(args: argparse.Namespace) -> int:
     """``cmsensord vkf``: the batch orders of a capture."""
     from cmsensord.batch import batch_orders, describe
 
-    cfg, auto = _config_for(args.sub_config)
+    cfg, auto = _config_for(args.sub_config, args.capture)
     if args.sub_out:
         cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
     paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles, auto_channels=auto,
@@ -304,7 +317,7 @@ def _run_vkf(args: argparse.Namespace) -> int:
 
 def _run_replay(args: argparse.Namespace) -> int:
     """``cmsensord replay``: a capture through the daemon's Processor."""
-    cfg, auto = _config_for(args.sub_config)
+    cfg, auto = _config_for(args.sub_config, args.capture)
     cfg = _with_output(cfg, args.sub_out, args.sub_trace)
     return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed, publish=args.sub_publish)[0]
 

@@ -1,6 +1,7 @@
 """The ISO 10816-3 machine class the zones are graded for, said once at the start of a replay or
-a simulated board when the configuration does not set it; `cmsensord --simulate --help` gives the
-faulty motor's zone as the daemon grades it."""
+a simulated board in RAW mode (an RMS-mode board's records carry no zone) when the configuration
+does not set it; `cmsensord --simulate --help` gives the faulty motor's zone as the daemon grades
+it."""
 
 from __future__ import annotations
 
@@ -43,8 +44,20 @@ def test_replay_with_the_machine_class_set_says_nothing_of_it(tmp_path, capture)
     assert "ISO 10816-3" not in p.stderr
 
 
-def test_simulate_says_the_machine_class_and_its_help_the_zone_it_grades(tmp_path):
-    p = run_module("cmsensord", "--simulate", "--duration", "1", "--out", str(tmp_path))
+def test_a_replay_of_an_rms_capture_says_nothing_of_it(tmp_path):
+    p = run_module("firmware_sim", "--scenario", "healthy", "--duration", "2", "--out", str(tmp_path / "r.bin"))
+    assert p.returncode == 0, p.stderr
+    p = run_module("cmsensord", "replay", str(tmp_path / "r.bin"), "--out", str(tmp_path / "d"))
+    assert p.returncode == 0, p.stderr
+    assert "ISO 10816-3" not in p.stderr
+
+
+def test_simulate_says_the_machine_class_in_raw_mode_and_its_help_the_zone_it_grades(tmp_path):
+    p = run_module("cmsensord", "--simulate", "--duration", "1", "--out", str(tmp_path / "rms"))
+    assert p.returncode == 0, p.stderr
+    assert "ISO 10816-3" not in p.stderr
+    p = run_module("cmsensord", "--simulate", "--scenario", "healthy", "--mode", "raw", "--duration", "1",
+                   "--out", str(tmp_path / "raw"))
     assert p.returncode == 0, p.stderr
     assert p.stderr.splitlines()[0] == NOTE
     h = run_module("cmsensord", "--simulate", "--help")

@@ -116,7 +116,7 @@ def simulate(opt: SimulateOptions) -> int:
                           opt.channels)
     cfg = load_config(opt.config, n_channels=opt.channels) if opt.config else default_config(opt.channels)
     note = zones_assumed(cfg.indicators, _section(opt.config, "indicators"))
-    if note:
+    if note and opt.mode == "raw":          # an RMS-mode board's records carry no zone
         print(note, file=sys.stderr)
     if cfg.mqtt is not None and not opt.publish:
         log.warning("mqtt: the mqtt section is ignored: a simulated board would publish as client_id %s "
