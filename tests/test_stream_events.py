@@ -13,6 +13,7 @@ import re
 import shutil
 import threading
 import time
+import tty
 
 import numpy as np
 import pytest
@@ -30,6 +31,7 @@ from cmsensord.protocol import (
     encode_tacho,
     iter_frames,
 )
+from cmsensord.service.control import SOCKET_NAME
 from cmsensord.service.live import DIAGNOSTICS_S
 from cmsensord.sinks.mcap_read import read_messages
 from processes import cmsensord, run_module, start_board, start_daemon, stop
@@ -135,6 +137,103 @@ def test_the_exit_summary_covers_the_whole_run_of_a_channel_through_a_change_of_
         assert [int(x) for x in timeline.groups()] == [102 if ch == "ch2" else 2, *map(round, first.values())], \
             timeline[0]
     assert len(failures) == 1 and len([m for t, _, m in msgs if t == "/cm/ch0/severity"]) == 120
+
+
+def level_stream(segments: list[tuple[int, int]], spiking: int = 2) -> bytes:
+    """Per segment (seconds, channels): RMS frames of 1.0 +- 5 % per channel, a STATUS announcing
+    the count each second; channel ``spiking`` has 6.0 more in 40 % of its blocks from 2 s into
+    its first segment on (outliers in every AKF: a failure), and none later."""
+    rng = np.random.default_rng(1)
+    out, seq, k = bytearray(), 0, 0
+    spiked = False
+    for seconds, n in segments:
+        spikes = not spiked and n > spiking
+        spiked |= spikes
+        for b in range(seconds * 100):
+            if b % 100 == 0:
+                out += status(seq, k * L, n)
+                seq += 1
+            v = rng.normal(1.0, 0.05, n)
+            if spikes and b > 200 and rng.random() < 0.4:
+                v[spiking] += 6.0
+            out += encode_rms(seq, k * L, np.abs(v))
+            seq, k = seq + 1, k + 1
+    return bytes(out)
+
+
+def channel_lines(tmp_path, marks: dict[str, str]) -> tuple[list[str], list[str]]:
+    """(the replay's exit summary lines of the channels' figures, those the log's severity
+    messages and failure events make with ``marks``: what each channel's line ends with)."""
+    msgs = [(t, m) for f in (tmp_path / "out").glob("*.mcap") for t, _, m in read_messages(f)]
+    want = []
+    for ch, mark in marks.items():
+        sev = [m["severity_index"] for t, m in msgs if t == f"/cm/{ch}/severity"]
+        failures = sum(t == "/cm/events" and m["kind"] == "failure" and m["channel"] == ch for t, m in msgs)
+        want.append(f"  {ch}: final severity {sev[-1]:.1f}, max {max(sev):.1f}, {failures} failure event(s), "
+                    f"{len(sev)} decisions{mark}")
+    err = (tmp_path / "stderr.txt").read_text()
+    return [ln for ln in err.splitlines() if re.match(r"  ch\d: final severity", ln)], want
+
+
+def test_the_exit_summary_keeps_the_channels_that_left_the_stream(tmp_path):
+    """2 channels 5 s, 4 for 10 s (ch2 fails), 1 for 3 s, 2 for 3 s (the channels re-set to ch0,
+    ch1): the exit summary still has ch2, with its failure and decisions as the log has them, and
+    ch3, each saying since when it is not in the stream; ch1 says it was not 15-18 s.  Guards
+    against a summary of the last set of channels only (ch2's failure counted in `events:` but no
+    line of it)."""
+    replay(tmp_path, level_stream([(5, 2), (10, 4), (3, 1), (3, 2)]))
+    restarted = "; its filters restarted at 5 s, 18 s (a new set of channels)"
+    got, want = channel_lines(tmp_path, {"ch0": restarted, "ch1": f"{restarted}; not in the stream 15-18 s",
+                                         "ch2": "; not in the stream since 15 s",
+                                         "ch3": "; not in the stream since 15 s"})
+    assert got == want
+    assert want[2].startswith("  ch2: final severity 1.0, max 1.0, 1 failure event(s), 13 decisions"), want
+
+
+def test_a_channel_back_in_the_stream_goes_on_with_its_figures(tmp_path):
+    """As above, then 4 channels again for 3 s: ch2 and ch3 come back under their names and go on
+    with their decisions, maximum and failures of the run (ch2: 16 decisions, max 1.0, its one
+    failure), saying when they were not in the stream."""
+    replay(tmp_path, level_stream([(5, 2), (10, 4), (3, 1), (3, 2), (3, 4)]))
+    restarted = "; its filters restarted at 5 s, 18 s, 21 s (a new set of channels)"
+    back = "; its filters restarted at 21 s (a new set of channels); not in the stream 15-21 s"
+    got, want = channel_lines(tmp_path, {"ch0": restarted, "ch1": f"{restarted}; not in the stream 15-18 s",
+                                         "ch2": back, "ch3": back})
+    assert got == want
+    assert want[2].startswith("  ch2: final severity 0.0, max 1.0, 1 failure event(s), 16 decisions"), want
+
+
+def test_the_daemon_says_which_channels_left_the_stream_in_its_status_and_exit_summary(tmp_path):
+    """The stream of the test above, written to a pty with the daemon on it: ``cmsensord status``
+    names ch2 and ch3 as not in the stream after ch0 and ch1, and the daemon's exit summary has the
+    lines of the replay's."""
+    data = level_stream([(5, 2), (10, 4), (3, 1), (3, 2)])
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    d = start_daemon(tmp_path, os.ttyname(slave))
+    sock = str(tmp_path / "logs" / SOCKET_NAME)
+    try:
+        time.sleep(1.0)
+        for i in range(0, len(data), 997):
+            os.write(master, data[i:i + 997])
+            time.sleep(0.002)
+        line = ""
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and not line.startswith("[    21.0 s]"):
+            time.sleep(0.2)
+            line = cmsensord("status", "--socket", sock).stdout.strip()
+    finally:
+        err = stop(d)
+        os.close(master)
+        os.close(slave)
+    assert d.returncode == 0 and "Traceback" not in err, err
+    assert re.fullmatch(r"\[    21\.0 s\] ch0 S=0\.0 out/s= +\d+ F=[01]+ ch1 S=0\.0 out/s= +\d+ F=[01]+ "
+                        r"ch2 \(not in the stream\) ch3 \(not in the stream\)( \| .*)?", line), line
+    (tmp_path / "replay").mkdir()
+    replay(tmp_path / "replay", data)
+    said = [ln for ln in (tmp_path / "replay" / "stderr.txt").read_text().splitlines() if re.match(r"  ch\d: ", ln)]
+    assert [ln for ln in err.splitlines() if re.match(r"  ch\d: ", ln)] == said
+    assert len(said) == 8 and said[4].endswith("; not in the stream since 15 s"), said
 
 
 def test_new_board_channels_that_are_not_configured_are_named_as_not_monitored(tmp_path):

@@ -35,7 +35,10 @@ reported and observed as missing.  More channels: the channels are re-set (with
 chain is made, or a ``channels`` event names the board channels not monitored.
 A new chain's filters start afresh; a channel that keeps its name keeps its
 :class:`~cmsensord.monitor.severity.ChannelView` (the run's decisions, failures, maximum and
-timeline, for the exit summary), which notes where its filters restarted.
+timeline, for the exit summary), which notes where its filters restarted.  The view of every
+name monitored in the run is kept (:attr:`ChannelSetup.views`), also of a channel no longer in
+the stream (a count that dropped below its index, or channels re-set without it): it notes the
+ADC seconds it left the stream, and came back, under its name.
 """
 
 from __future__ import annotations
@@ -273,6 +276,7 @@ class ChannelSetup:
             emit("channels", None, f"board now sends {n_board} channel(s), not {old}"
                  + (f": channel(s) {', '.join(gone)} not in the stream (observations missing)"
                     if gone else ""), n_channels=n_board)
+            self._mark_stream()
             return
         wanted = (default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor) if self.auto_channels
                   else tuple(ch for ch in self.cfg.channels if ch.index < n_board))
@@ -286,6 +290,7 @@ class ChannelSetup:
         if idle:
             emit("channels", None, f"board now sends {n_board} channel(s), not {old}: board "
                  f"channel(s) {', '.join(idle)} not configured, not monitored", n_channels=n_board)
+        self._mark_stream()
 
     def ready(self, n_board: int) -> bool:
         """True when the severity chain exists (made now for a board sending ``n_board``
@@ -324,6 +329,7 @@ class ChannelSetup:
                                       trace_filter=self.cfg.output.akf_trace_filter)
         self.severity.adc_at = self.clock.seconds_at
         self._keep_views(self.severity)
+        self._mark_stream()
         self.log.add(self.severity.notes)
         self.severity.notes.clear()
         self.microphones, events = Microphones.create(self.cfg, usable, fs=self.clock.fs,
@@ -340,3 +346,20 @@ class ChannelSetup:
                 kept.anomaly, kept.outliers_first, kept.no_signal = view.anomaly, 0, False
                 kept.restarts.append(self.clock.adc_seconds)
                 chain.views[c] = kept
+
+    @property
+    def views(self) -> list[ChannelView]:
+        """The view of every channel name monitored in the run, in the order first monitored."""
+        return list(self._views.values())
+
+    def _mark_stream(self) -> None:
+        """Each view notes whether its channel is in the board's stream (a channel of the chain
+        whose index the board sends): the ADC second it left, or the absence it came back from."""
+        now = self.clock.adc_seconds
+        sent = {ch.name for ch in self.channels if ch.index < self.n_board} if self.severity is not None else set()
+        for name, view in self._views.items():
+            if name not in sent and view.left_s is None:
+                view.left_s = now
+            elif name in sent and view.left_s is not None:
+                view.absences.append((view.left_s, now))
+                view.left_s = None

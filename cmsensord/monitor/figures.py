@@ -47,8 +47,9 @@ class Figures:
 
     @property
     def views(self) -> list[ChannelView]:
-        """Each monitored channel's newest severity figures."""
-        return self.setup.severity.views if self.setup.severity else []
+        """The severity figures of every channel monitored in the run, in the order first
+        monitored, also of those no longer in the board's stream (:attr:`ChannelView.left_s`)."""
+        return self.setup.views
 
     @property
     def tacho(self) -> TachoTracker | None:

@@ -53,7 +53,9 @@ RATE_NOTE_TOLERANCE = 0.01
 class ChannelView:
     """Per-channel figures for the status line and the exit summary: the latest decision's, and
     the counts, maximum and timeline of every decision of the run on the channel's name (a new
-    chain made for a new set of channels takes over the view of each name it keeps)."""
+    chain made for a new set of channels takes over the view of each name it keeps), and when
+    the channel was not in the board's stream (:class:`~cmsensord.monitor.channels.ChannelSetup`
+    keeps those)."""
 
     name: str
     severity: float = 0.0
@@ -66,6 +68,8 @@ class ChannelView:
     no_signal: bool = False       # the last decision had no signal: its severity is held
     timeline: SeverityTimeline = field(default_factory=SeverityTimeline)
     restarts: list[float] = field(default_factory=list)   # ADC seconds where its filters started afresh
+    left_s: float | None = None   # the ADC second it left the board's stream (None: in it)
+    absences: list[tuple[float, float]] = field(default_factory=list)   # (left, back) ADC seconds, ended ones
 
 
 class SeverityChain:

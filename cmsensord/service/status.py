@@ -7,10 +7,13 @@ from pathlib import Path
 
 
 def status_line(proc, source=None) -> str:
-    """ADC time, each channel's severity and flags, the worst active alarm, and (live) the link
-    and queue counters."""
+    """ADC time, each channel's severity and flags (a channel of the run no longer in the board's
+    stream: that it is not), the worst active alarm, and (live) the link and queue counters."""
     parts = [f"[{proc.adc_seconds:8.1f} s]"]
     for v in proc.views:
+        if v.left_s is not None:
+            parts.append(f"{v.name} (not in the stream)")
+            continue
         flags = "".join(str(a) for a in v.anomaly)
         parts.append(f"{v.name} S={v.severity:.1f} out/s={v.outliers_first:3d} F={flags}")
     alarm = proc.alarms.summary() if getattr(proc, "alarms", None) is not None else None
@@ -57,15 +60,17 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
              f"{proc.frames_lost} frames lost)"]
     period = proc.severity.decider.nominal_period / proc.severity.rate if proc.severity is not None else 1.0
     for v in proc.views:
+        absent = absent_note(v)
         if not v.judged:
-            lines.append(f"  {v.name}: no decision (the recording is shorter than two decision periods "
-                         f"of {period:.3g} s; the first is the filters' transient)")
+            span = "it was in the stream for less" if absent else "the recording is shorter"
+            lines.append(f"  {v.name}: no decision ({span} than two decision periods "
+                         f"of {period:.3g} s; the first is the filters' transient){absent}")
             continue
         held = " (held: no signal, see signal_lost)" if v.no_signal else ""
         restarted = (f"; its filters restarted at {', '.join(f'{t:.0f} s' for t in v.restarts)} "
                      "(a new set of channels)" if v.restarts else "")
         lines.append(f"  {v.name}: final severity {v.severity:.1f}{held}, max {v.max_severity:.1f}, "
-                     f"{v.failures} failure event(s), {v.decisions} decisions{restarted}")
+                     f"{v.failures} failure event(s), {v.decisions} decisions{restarted}{absent}")
         lines.append(f"  {v.name}: {v.timeline.render()}")
     bounds = getattr(proc, "rms_bounds", None)      # the Processor's (an imported recording's has none)
     for name, n in (bounds.bad.items() if bounds is not None else ()):
@@ -78,6 +83,15 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
     if link:
         lines.append(link)
     return "\n".join(lines)
+
+
+def absent_note(view) -> str:
+    """``; not in the stream 40-50 s, since 70 s``: the ADC seconds the channel of ``view`` was
+    not in the board's stream (and has not been since); "" when it always was."""
+    spans = [f"{a:.0f}-{b:.0f} s" for a, b in view.absences]
+    if view.left_s is not None:
+        spans.append(f"since {view.left_s:.0f} s")
+    return f"; not in the stream {', '.join(spans)}" if spans else ""
 
 
 def link_line(counters: dict[str, int]) -> str:
