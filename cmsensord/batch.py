@@ -38,7 +38,7 @@ from cmsensord.errors import CmsensordError
 from cmsensord.monitor import messages
 from cmsensord.one_setup import OneSetup
 from cmsensord.protocol import MAX_FRAME, MODE_RAW, Decoder, FrameType, decode_raw, decode_tacho
-from cmsensord.source import CaptureSource
+from cmsensord.source import CaptureSource, require_frames
 
 
 class _Collector:
@@ -85,6 +85,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
+    require_frames(capture, "vkf")
     _tacho_first(capture, cfg.tacho.input)
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
