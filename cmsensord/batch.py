@@ -34,7 +34,7 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
-from cmsensord.errors import CmsensordError
+from cmsensord.errors import CmsensordError, Interrupted
 from cmsensord.monitor import messages
 from cmsensord.one_setup import OneSetup
 from cmsensord.protocol import MAX_FRAME, MODE_RAW, Decoder, FrameType, decode_raw, decode_tacho
@@ -76,47 +76,27 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     A capture or a bandwidth the batch filter cannot handle (no RAW blocks or no tacho, a
     bandwidth too narrow for double precision, a record too large for memory) raises
     CmsensordError with one line, and the files this run wrote are deleted: nothing is left
-    behind."""
-    from cmsensord.importing.capture_settings import capture_settings
-    from cmsensord.importing.channel_names import capture_channels
-    from cmsensord.importing.sidecar import sidecar
-    from cmsensord.monitor.processor import Processor
+    behind. Ctrl-C before the log is complete does the same, raising
+    :class:`~cmsensord.errors.Interrupted` that says how far the run got."""
     from cmsensord.service.sink import open_sink, publish_lines, send_queued
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
-    require_frames(capture, "vkf")
-    _tacho_first(capture, cfg.tacho.input)
+    try:
+        require_frames(capture, "vkf")
+        _tacho_first(capture, cfg.tacho.input)
+    except KeyboardInterrupt:
+        raise Interrupted(f"vkf: interrupted (Ctrl-C) reading {capture}, before its replay: nothing "
+                          "written") from None
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
+    done = replayed = False
     sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
                      publish=publish, command="vkf")
-    sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
-    done = False
     try:
-        meta = sidecar(capture)
-        cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
-        cfg, _, said = capture_settings(cfg, meta)
-        for warning in warnings + said:
-            logging.getLogger("cmsensord").warning("%s", warning)
-        proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
-        col = _Collector()
-        with source:
-            for frames in source:
-                col.add(frames, cfg.tacho.input)
-                if col.setup.status is not None and col.setup.status.mode != MODE_RAW and not col.raw:
-                    raise CmsensordError(f"{capture}: the board is in RMS mode (its first STATUS): the "
-                                         "batch VKF needs a capture in RAW mode")
-                proc.handle(frames)
-        proc.finish()
-        if not col.raw or col.setup.status is None:
-            raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
-                                 "capture in RAW mode")
-        if col.setup.changed:
-            raise CmsensordError(f"{capture}: the board {col.setup.changed}: the batch VKF needs one "
-                                 "board set-up for the whole record (cut the capture at that byte)")
-        if not col.tacho_t0:
-            raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
+        sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
+        cfg, proc, col = _replay(capture, cfg, source, sink, auto_channels)
+        replayed = True
         try:
             summary = _track(col, cfg, proc, sink, bandwidth_hz, poles)
         except (ValueError, np.linalg.LinAlgError) as exc:
@@ -127,6 +107,13 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
                                  "(shorten the capture or track fewer components)") from None
         done = True
         send_queued(sink)
+    except KeyboardInterrupt:
+        if done:
+            raise
+        where = ("in the batch VKF, after the replay" if replayed else
+                 f"at {source.bytes_read / max(source.size, 1):.0%} of the replay")
+        raise Interrupted(f"vkf: interrupted (Ctrl-C) {where} of {capture}: nothing written (the batch "
+                          "orders need the whole record)") from None
     finally:
         sink.close()
         sink.release()                  # the directory's lock: a daemon may start now
@@ -135,6 +122,41 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
     summary["mqtt"] = publish_lines(sink)
     return sink.paths, summary
+
+
+def _replay(capture: str, cfg: Config, source: CaptureSource, sink, auto_channels: bool):
+    """The capture through the daemon's Processor, its RAW blocks and tacho edges collected:
+    (the configuration with the capture's channels and settings, the Processor, the
+    :class:`_Collector`); a CmsensordError for a capture the batch VKF cannot take."""
+    from cmsensord.importing.capture_settings import capture_settings
+    from cmsensord.importing.channel_names import capture_channels
+    from cmsensord.importing.sidecar import sidecar
+    from cmsensord.monitor.processor import Processor
+
+    meta = sidecar(capture)
+    cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
+    cfg, _, said = capture_settings(cfg, meta)
+    for warning in warnings + said:
+        logging.getLogger("cmsensord").warning("%s", warning)
+    proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
+    col = _Collector()
+    with source:
+        for frames in source:
+            col.add(frames, cfg.tacho.input)
+            if col.setup.status is not None and col.setup.status.mode != MODE_RAW and not col.raw:
+                raise CmsensordError(f"{capture}: the board is in RMS mode (its first STATUS): the "
+                                     "batch VKF needs a capture in RAW mode")
+            proc.handle(frames)
+    proc.finish()
+    if not col.raw or col.setup.status is None:
+        raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
+                             "capture in RAW mode")
+    if col.setup.changed:
+        raise CmsensordError(f"{capture}: the board {col.setup.changed}: the batch VKF needs one "
+                             "board set-up for the whole record (cut the capture at that byte)")
+    if not col.tacho_t0:
+        raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
+    return cfg, proc, col
 
 
 def _tacho_first(capture: str, tacho_input: int) -> None:

@@ -31,10 +31,12 @@ from cmsensord.config import Config, default_config, load_config
 from cmsensord.config.settings import MAX_BAUD
 from cmsensord.errors import (
     EXIT_CONFIG,
+    EXIT_INTERRUPTED,
     EXIT_USAGE,
     CmsensordError,
     ConfigError,
     InstanceError,
+    Interrupted,
     LinkError,
     SinkError,
 )
@@ -383,11 +385,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LinkError as exc:
         error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
+    except Interrupted as exc:          # Ctrl-C in a one-shot command: what it left on disk
+        error_line(f"cmsensord: {exc}")
+        return EXIT_INTERRUPTED
     except CmsensordError as exc:
         error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:             # `cmsensord ... | head -1`: the reader is gone
         return _quiet_broken_pipe()
 

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from cmsensord.config import Config, ConfigError
+from cmsensord.errors import EXIT_INTERRUPTED
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
@@ -24,9 +25,6 @@ from cmsensord.source import CaptureSource, Paced, require_frames
 from cmsensord.terminal_bar import Progress
 
 log = logging.getLogger("cmsensord")
-
-#: the exit status of a run stopped by Ctrl-C, as a shell reports one ended by SIGINT
-EXIT_INTERRUPTED = 130
 
 #: bytes per read of an unpaced replay: 192 KiB (3.9 s of 1 RAW channel, 1 s of 4); with the
 #: heap keeping freed memory a larger read is faster still, but at 256 KiB a 4-channel RAW
