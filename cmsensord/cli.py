@@ -76,14 +76,26 @@ _SYNONYMS = {"--seconds": "--duration", "--time": "--duration"}
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and the pointer to --help), exit 2; an option
-    it does not know whose value it took for the subcommand is named as the error."""
+    """argparse, but a usage error is one line (and the pointer to the --help of the command or
+    subcommand whose line it is on), exit 2; an option it does not know whose value it took for
+    the subcommand is named as the error."""
 
     _argv: list[str] = []
 
     def parse_known_args(self, args=None, namespace=None):
         self._argv = list(sys.argv[1:] if args is None else args)
         return super().parse_known_args(args, namespace)
+
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, but arguments left over after a subcommand are its usage error (they are
+        on its command line: its --help is the one that helps)."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            subs = [a for a in self._actions if isinstance(a, argparse._SubParsersAction)]
+            command = getattr(ns, subs[0].dest, None) if subs else None
+            parser = subs[0].choices[command] if command in (subs[0].choices if subs else {}) else self
+            parser.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
 
     def error(self, message: str):
         prefix = "<3>" if isinstance(sys.stderr, JournalStream) else ""

@@ -80,6 +80,7 @@ PROCESS_MODULES = frozenset({
     "test_config_never_fires.py",
     "test_capture_not_mcap.py",
     "test_interrupted.py",
+    "test_cli_options.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").
