@@ -17,9 +17,11 @@ Whatever it cannot handle (no RAW blocks or tacho, a board that changes its rate
 calibration or tacho pulses, or restarts, mid-record, a bandwidth too narrow for double
 precision or not below the tracked rate, a record too large for memory) is one
 CmsensordError line, and the files of the run are deleted: nothing is left behind.
-This is an offline tool: it holds the whole record in memory (about 8 bytes
-per sample and channel at 25 kHz, plus ~1 kB per decimated sample for the
-solve with 2 poles and 3 components).
+This is an offline tool: it holds the whole record in memory (about 11 bytes
+per sample and channel at 25 kHz, plus ~1.6 kB per decimated sample for the
+solve with 2 poles and 4 components); :func:`memory_need` estimates it from the
+capture's size before the replay, and a record that cannot fit in the memory
+available is refused then. On a terminal, progress bars show the replay and the solve.
 """
 
 from __future__ import annotations
@@ -34,11 +36,21 @@ import numpy as np
 
 from cmsensord.config import Config
 from cmsensord.dsp.rms import rows_physical
-from cmsensord.errors import CmsensordError
+from cmsensord.errors import CmsensordError, Interrupted
 from cmsensord.monitor import messages
 from cmsensord.one_setup import OneSetup
-from cmsensord.protocol import MAX_FRAME, MODE_RAW, Decoder, FrameType, decode_raw, decode_tacho
-from cmsensord.source import CaptureSource
+from cmsensord.protocol import (
+    HEADER_LEN,
+    MAX_FRAME,
+    MODE_RAW,
+    Decoder,
+    FrameType,
+    decode_raw,
+    decode_status,
+    decode_tacho,
+)
+from cmsensord.source import CaptureSource, require_frames
+from cmsensord.terminal_bar import Bar, Progress
 
 
 class _Collector:
@@ -76,56 +88,48 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     A capture or a bandwidth the batch filter cannot handle (no RAW blocks or no tacho, a
     bandwidth too narrow for double precision, a record too large for memory) raises
     CmsensordError with one line, and the files this run wrote are deleted: nothing is left
-    behind."""
-    from cmsensord.importing.capture_settings import capture_settings
-    from cmsensord.importing.channel_names import capture_channels
-    from cmsensord.importing.sidecar import sidecar
-    from cmsensord.monitor.processor import Processor
+    behind. Ctrl-C before the log is complete does the same, raising
+    :class:`~cmsensord.errors.Interrupted` that says how far the run got."""
     from cmsensord.service.sink import open_sink, publish_lines, send_queued
 
     t_start = time.monotonic()
     source = CaptureSource(capture, chunk=1 << 20)      # LinkError before any output file exists
-    _tacho_first(capture, cfg.tacho.input)
+    try:
+        require_frames(capture, "vkf")
+        _tacho_first(capture, cfg.tacho.input)
+        cfg, auto_channels = _capture_config(capture, cfg, auto_channels)
+        _room_for(capture, cfg, poles, auto_channels)
+    except KeyboardInterrupt:
+        raise Interrupted(f"vkf: interrupted (Ctrl-C) reading {capture}, before its replay: nothing "
+                          "written") from None
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
+    done = replayed = False
     sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
                      publish=publish, command="vkf")
-    sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
-    done = False
     try:
-        meta = sidecar(capture)
-        cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
-        cfg, _, said = capture_settings(cfg, meta)
-        for warning in warnings + said:
-            logging.getLogger("cmsensord").warning("%s", warning)
-        proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
-        col = _Collector()
-        with source:
-            for frames in source:
-                col.add(frames, cfg.tacho.input)
-                if col.setup.status is not None and col.setup.status.mode != MODE_RAW and not col.raw:
-                    raise CmsensordError(f"{capture}: the board is in RMS mode (its first STATUS): the "
-                                         "batch VKF needs a capture in RAW mode")
-                proc.handle(frames)
-        proc.finish()
-        if not col.raw or col.setup.status is None:
-            raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
-                                 "capture in RAW mode")
-        if col.setup.changed:
-            raise CmsensordError(f"{capture}: the board {col.setup.changed}: the batch VKF needs one "
-                                 "board set-up for the whole record (cut the capture at that byte)")
-        if not col.tacho_t0:
-            raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
+        sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
+        proc, col = _replay(capture, cfg, source, sink, auto_channels)
+        replayed = True
+        bar = Bar(1 + sum(ch.kind != "microphone" for ch in proc.channels), f"vkf {Path(capture).name}: batch VKF")
         try:
-            summary = _track(col, cfg, proc, sink, bandwidth_hz, poles)
+            summary = _track(col, cfg, proc, sink, bandwidth_hz, poles, bar)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise CmsensordError(f"{capture}: batch VKF at {bandwidth_hz:g} Hz, {poles} pole(s): "
                                  f"{exc}") from None
         except MemoryError:
-            raise CmsensordError(f"{capture}: batch VKF: not enough memory for the whole record "
-                                 "(shorten the capture or track fewer components)") from None
+            raise _no_memory(capture) from None
+        finally:
+            bar.close()
         done = True
         send_queued(sink)
+    except KeyboardInterrupt:
+        if done:
+            raise
+        where = ("in the batch VKF, after the replay" if replayed else
+                 f"at {source.bytes_read / max(source.size, 1):.0%} of the replay")
+        raise Interrupted(f"vkf: interrupted (Ctrl-C) {where} of {capture}: nothing written (the batch "
+                          "orders need the whole record)") from None
     finally:
         sink.close()
         sink.release()                  # the directory's lock: a daemon may start now
@@ -134,6 +138,161 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     summary["wall_s"] = round(time.monotonic() - t_start, 3)
     summary["mqtt"] = publish_lines(sink)
     return sink.paths, summary
+
+
+def _capture_config(capture: str, cfg: Config, auto_channels: bool) -> tuple[Config, bool]:
+    """``cfg`` with the capture's channels and settings (an import's sidecar, as ``cmsensord
+    replay`` takes them), their warnings logged; and whether the channels are the board's."""
+    from cmsensord.importing.capture_settings import capture_settings
+    from cmsensord.importing.channel_names import capture_channels
+    from cmsensord.importing.sidecar import sidecar
+
+    meta = sidecar(capture)
+    cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
+    cfg, _, said = capture_settings(cfg, meta)
+    for warning in warnings + said:
+        logging.getLogger("cmsensord").warning("%s", warning)
+    return cfg, auto_channels
+
+
+def _replay(capture: str, cfg: Config, source: CaptureSource, sink, auto_channels: bool):
+    """The capture through the daemon's Processor, its RAW blocks and tacho edges collected,
+    with a progress bar on a terminal: (the Processor, the :class:`_Collector`); a
+    CmsensordError for a capture the batch VKF cannot take."""
+    from cmsensord.monitor.processor import Processor
+
+    proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
+    col = _Collector()
+    progress = Progress(source.size, f"vkf {Path(capture).name}: replay")
+    try:
+        with source:
+            for frames in source:
+                col.add(frames, cfg.tacho.input)
+                if col.setup.status is not None and col.setup.status.mode != MODE_RAW and not col.raw:
+                    raise CmsensordError(f"{capture}: the board is in RMS mode (its first STATUS): the "
+                                         "batch VKF needs a capture in RAW mode")
+                proc.handle(frames)
+                progress.update(source.bytes_read, f"{proc.adc_seconds:.0f} s")
+        proc.finish()
+    finally:
+        progress.close()
+    if not col.raw or col.setup.status is None:
+        raise CmsensordError(f"{capture}: no RAW blocks with a STATUS: the batch VKF needs a "
+                             "capture in RAW mode")
+    if col.setup.changed:
+        raise CmsensordError(f"{capture}: the board {col.setup.changed}: the batch VKF needs one "
+                             "board set-up for the whole record (cut the capture at that byte)")
+    if not col.tacho_t0:
+        raise CmsensordError(f"{capture}: no TACHO frames: the batch VKF needs the shaft speed")
+    return proc, col
+
+
+def _no_memory(capture: str, need: int | None = None, room: int | None = None) -> CmsensordError:
+    """The error of a record too large for the memory there is (``need``, ``room``: the bytes
+    estimated and available, when known)."""
+    known = f": it needs about {_mb(need)}, {_mb(room)} available" if need and room is not None else ""
+    return CmsensordError(f"{capture}: batch VKF: not enough memory for the whole record{known} (shorten "
+                          "the capture or track fewer components)")
+
+
+def _mb(n: int) -> str:
+    return f"{n / 1e9:.1f} GB" if n >= 1e10 else f"{n / 1e6:,.0f} MB"
+
+
+def _room_for(capture: str, cfg: Config, poles: int, auto_channels: bool) -> None:
+    """:func:`_no_memory`, before the replay, when the batch VKF of a RAW capture needs more memory
+    than there is (:func:`memory_need` from its size and first STATUS, :func:`available_memory`)."""
+    status = None
+    with CaptureSource(capture) as scan:
+        for frames in scan:
+            status = next((decode_status(f.payload) for f in frames if f.type == FrameType.STATUS), None)
+            if status is not None:
+                break
+    # the run imports these anyway: what they take is in use when the room is measured
+    import scipy.signal  # noqa: F401
+
+    import cmsensord.monitor.processor  # noqa: F401
+
+    room = available_memory()
+    if status is None or status.mode != MODE_RAW or room is None:
+        return                          # the replay says what is wrong with such a capture
+    channels = status.n_channels if auto_channels else min(len(cfg.channels), status.n_channels)
+    need = memory_need(cfg, status, scan.size, channels, poles)
+    if need > room:
+        raise _no_memory(capture, need, room)
+
+
+#: bytes :class:`_Collector` holds for a RAW frame beside its payload: the payload's bytes object
+#: header, the (t0, chan, payload) tuple, t0's int and the list's pointer
+_FRAME_HELD = 33 + 64 + 32 + 8
+#: arrays of the shape of the unknowns (N, 2K) the solve holds beside the normal matrix (g, the
+#: right-hand side and its transposed copy, z, and the refinement's residual, correction and
+#: structural terms: :func:`cmsensord.dsp.vkf_normal.solve`)
+_SOLVE_ARRAYS = 9
+#: bytes of one message the sink holds to the end of the run (``hold_all``): the /orders
+#: messages (recursive, smoothed and batch, each block of each channel) are most of them
+_HELD_MESSAGE = 700
+
+
+def memory_need(cfg: Config, status, size: int, channels: int, poles: int) -> int:
+    """Bytes the batch VKF of a RAW capture of ``size`` bytes holds at its peak beside what the
+    process holds before it, from its first STATUS (``status``: rate, block length, the board's
+    channels) and the ``channels`` it tracks: its blocks from the size (a RAW frame per board
+    channel and a TACHO frame a block), the RAW frames :class:`_Collector` keeps, the record
+    :func:`_record` makes of them (float64 values, a bool per sample lost), the decimated
+    arrays of :func:`_track` (sample indices, speed, turns, valid, phases, the channels) and one
+    channel's solve: the banded normal matrix ((2Ks + 1) rows of 2K N doubles) and
+    ``_SOLVE_ARRAYS`` arrays of the unknowns' shape."""
+    L, board = status.block_len, status.n_channels
+    blocks = size // (board * (HEADER_LEN + 4 + 2 * L) + HEADER_LEN + 4)
+    n = blocks * L
+    nd = -(-n // _decimation(cfg, status.fs))
+    k = len(cfg.orders.components)
+    unknowns = 2 * k
+    held = blocks * board * (2 * L + _FRAME_HELD)
+    record = n * channels * (8 + 1)
+    track = nd * (8 * 3 + 1 + 8 * k + 8 * channels)
+    solve = nd * 8 * unknowns * (unknowns * poles + 1 + _SOLVE_ARRAYS)
+    messages = 3 * cfg.orders.output_rate_hz * (n / status.fs) * channels * _HELD_MESSAGE
+    return int(held + record + track + solve + messages)
+
+
+def available_memory() -> int | None:
+    """Bytes this process may still take: the least of the system's available memory and free
+    swap (``/proc/meminfo``), its cgroup's limit less its use (cgroup v2, each level up to the
+    root) and its address-space limit (RLIMIT_AS) less its size; None where none is known."""
+    import resource
+
+    room: list[int] = []
+    info = _kib_fields("/proc/meminfo")
+    if "MemAvailable" in info:
+        room.append(1024 * (info["MemAvailable"] + info.get("SwapFree", 0)))
+    limit, _ = resource.getrlimit(resource.RLIMIT_AS)
+    size = _kib_fields("/proc/self/status").get("VmSize")
+    if limit != resource.RLIM_INFINITY and size is not None:
+        room.append(limit - 1024 * size)
+    with contextlib.suppress(OSError, ValueError, StopIteration):
+        line = next(x for x in Path("/proc/self/cgroup").read_text().splitlines() if x.startswith("0::"))
+        group = Path("/sys/fs/cgroup") / line[3:].strip("/")
+        for d in (group, *group.parents):
+            cap = (d / "memory.max").read_text().strip() if (d / "memory.max").exists() else "max"
+            if cap != "max":
+                room.append(int(cap) - int((d / "memory.current").read_text()))
+            if d == Path("/sys/fs/cgroup"):
+                break
+    return max(0, min(room)) if room else None
+
+
+def _kib_fields(path: str) -> dict[str, int]:
+    """The ``Name: N kB`` lines of a /proc file, in KiB ({}: unreadable)."""
+    out = {}
+    with contextlib.suppress(OSError):
+        for line in Path(path).read_text().splitlines():
+            name, _, value = line.partition(":")
+            parts = value.split()
+            if len(parts) == 2 and parts[1] == "kB" and parts[0].isdigit():
+                out[name] = int(parts[0])
+    return out
 
 
 def _tacho_first(capture: str, tacho_input: int) -> None:
@@ -182,8 +341,9 @@ def _remove(paths: list[Path], made_dir: Path | None) -> None:
             made_dir.rmdir()
 
 
-def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
-    """The whole record -> speed and angle -> decimation -> coupled solve -> 0.1 s blocks."""
+def _track(col, cfg, proc, sink, bandwidth_hz, poles, bar: Bar) -> dict:
+    """The whole record -> speed and angle -> decimation -> coupled solve -> 0.1 s blocks; ``bar``
+    (on a terminal) counts a step for the record and one for each channel solved."""
     from scipy.signal import decimate  # offline tool: scipy.signal is fine here
 
     from cmsensord.dsp.tacho import TachoTracker
@@ -192,6 +352,8 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     st = col.setup.status
     fs, L = st.fs, st.block_len
     channels = proc.channels
+    solved = [ci for ci, ch in enumerate(channels) if ch.kind != "microphone"]  # orders are the vibration
+    bar(0)                                                                       # channels', as the daemon's
     s0, y, lost = _record(col, proc)
     n = len(y)
     # the whole record's speed and angle stay queryable (the daemon keeps 60 s of knots; behind
@@ -219,15 +381,17 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles) -> dict:
     heads = _block_heads(comps, [proc.stamp_ns(int(idx[(b + 1) * block - 1])) for b in range(nb)],
                          rpm_blocks, ok_blocks)
     written, ridge = 0, []
-    for ci, ch in enumerate(channels):
-        if ch.kind == "microphone":         # orders are the vibration channels', as the daemon tracks them
-            continue
+    bar(1)
+    for done, ci in enumerate(solved, start=2):
+        ch = channels[ci]
         res = vkf2(yd[:, ci], ph, r, poles=poles)
         ridge.append(res.ridge)
         w = res.waveforms[:, :nb * block].reshape(len(comps), nb, block)
         rms = np.sqrt(np.mean(w * w, axis=2))
         amp = res.amplitude[:, :nb * block].reshape(len(comps), nb, block).mean(axis=2)
+        del res, w                          # not held through the next channel's solve
         written += _write_blocks(sink, comps, ch.name, heads, rms, amp, gone[:, ci])
+        bar(done)
     return {"samples": n, "decimation": q, "fs_tracked": fs_d, "blocks": written,
             "components": [c.name for c in comps], "r": [float(v) for v in r],
             "ridge": [float(f"{m:.3g}") for m in ridge]}

@@ -31,11 +31,13 @@ from cmsensord.config import Config, default_config, load_config
 from cmsensord.config.settings import MAX_BAUD
 from cmsensord.errors import (
     EXIT_CONFIG,
+    EXIT_INTERRUPTED,
     EXIT_USAGE,
     CaptureFileError,
     CmsensordError,
     ConfigError,
     InstanceError,
+    Interrupted,
     LinkError,
     SinkError,
 )
@@ -75,14 +77,26 @@ _SYNONYMS = {"--seconds": "--duration", "--time": "--duration"}
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and the pointer to --help), exit 2; an option
-    it does not know whose value it took for the subcommand is named as the error."""
+    """argparse, but a usage error is one line (and the pointer to the --help of the command or
+    subcommand whose line it is on), exit 2; an option it does not know whose value it took for
+    the subcommand is named as the error."""
 
     _argv: list[str] = []
 
     def parse_known_args(self, args=None, namespace=None):
         self._argv = list(sys.argv[1:] if args is None else args)
         return super().parse_known_args(args, namespace)
+
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, but arguments left over after a subcommand are its usage error (they are
+        on its command line: its --help is the one that helps)."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            subs = [a for a in self._actions if isinstance(a, argparse._SubParsersAction)]
+            command = getattr(ns, subs[0].dest, None) if subs else None
+            parser = subs[0].choices[command] if command in (subs[0].choices if subs else {}) else self
+            parser.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
 
     def error(self, message: str):
         prefix = "<3>" if isinstance(sys.stderr, JournalStream) else ""
@@ -410,11 +424,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LinkError as exc:
         error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
+    except Interrupted as exc:          # Ctrl-C in a one-shot command: what it left on disk
+        error_line(f"cmsensord: {exc}")
+        return EXIT_INTERRUPTED
     except CmsensordError as exc:
         error_line(f"cmsensord: {exc}")
         return EXIT_USAGE
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:             # `cmsensord ... | head -1`: the reader is gone
         return _quiet_broken_pipe()
 

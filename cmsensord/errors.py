@@ -17,14 +17,18 @@ __all__ = [
     "SinkError",
     "InstanceError",
     "LinkError",
+    "Interrupted",
     "EXIT_USAGE",
     "EXIT_CONFIG",
+    "EXIT_INTERRUPTED",
 ]
 
 #: Exit code for a command-line usage error (as argparse uses).
 EXIT_USAGE = 2
 #: Exit code for a configuration error (EX_CONFIG of sysexits.h).
 EXIT_CONFIG = 78
+#: Exit code of a command stopped by Ctrl-C, as a shell reports a process ended by SIGINT.
+EXIT_INTERRUPTED = 130
 
 _NO_VALUE = object()
 _MAX_VALUE_REPR = 60
@@ -165,3 +169,8 @@ class InstanceError(CmsensordError):
 
 class LinkError(CmsensordError):
     """A serial link or capture file that cannot be opened or read."""
+
+
+class Interrupted(CmsensordError):
+    """A one-shot command stopped by Ctrl-C (SIGINT); ``str()`` is one line saying how far it got
+    and what it left on disk; exit status :data:`EXIT_INTERRUPTED`."""

@@ -31,7 +31,7 @@ from cmsensord.importing.sidecar import sidecar
 from cmsensord.monitor.processor import Processor
 from cmsensord.sinks.memory import ListSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
-from cmsensord.source import CaptureSource
+from cmsensord.source import CaptureSource, require_frames
 from cmsensord.terminal_bar import Progress
 
 __all__ = ["Observations", "alarm_events", "read_observations", "sidecar"]
@@ -105,6 +105,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
             and to_s <= from_s:
         raise CmsensordError(f"calibrate: --to {_said(to_s)} is not after --from {_said(from_s)}: the healthy "
                              "period runs from --from to --to (board seconds, or % of the capture)")
+    require_frames(capture, "calibrate")
     meta = sidecar(capture)
     cfg, auto_channels, said = capture_channels(cfg, meta, auto_channels)
     if said:

@@ -35,10 +35,10 @@ from typing import BinaryIO
 from cmsensord.errors import LinkError
 from cmsensord.link import FrameQueue, SerialReader
 from cmsensord.monitor.clock import DEFAULT_BLOCK_LEN, DEFAULT_FS, is_reset
-from cmsensord.protocol import Decoder, Frame, FrameType, LinkCounters, decode_status
+from cmsensord.protocol import MAX_FRAME, Decoder, Frame, FrameType, LinkCounters, decode_status
 from cmsensord.sinks.mcap_chunks import MAGIC as MCAP_MAGIC
 
-__all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced"]
+__all__ = ["FrameSource", "ByteStreamSource", "CaptureSource", "SerialSource", "Paced", "require_frames"]
 
 Batch = Sequence[Frame]
 
@@ -141,6 +141,25 @@ class CaptureSource(ByteStreamSource):
 
     def close(self) -> None:
         self._file.close()
+
+
+def require_frames(path: str | Path, command: str) -> None:
+    """LinkError (one line, naming ``command`` and the file) when the capture at ``path`` holds no
+    frame the decoder takes: the wrong file given (a YAML file, a sidecar, a WAV), or a capture
+    whose every frame fails its CRC check (said so, with their count).  The file is scanned up to
+    its first good frame (a capture's first read), before the command makes any output."""
+    chunk = 1 << 20
+    with CaptureSource(path, chunk=chunk, decoder=Decoder(max_buffer=chunk + MAX_FRAME), batches=True) as scan:
+        for _ in scan:
+            if any(scan.counters.frames.values()):
+                return
+        counters = scan.counters
+    head = f"{command}: no frame in {path} ({counters.bytes_received} bytes)"
+    if counters.crc_failures:
+        raise LinkError(f"{head}: all {counters.crc_failures} frame(s) in it failed their CRC check: a damaged "
+                        "capture (copied as text?): copy or record it again")
+    raise LinkError(f"{head}: not a capture of the board's serial stream? (`cmsensord import` makes one from "
+                    "other recordings)")
 
 
 def _open_capture(p: Path) -> BinaryIO:

@@ -78,6 +78,9 @@ PROCESS_MODULES = frozenset({
     "test_replay_log_times.py",
     "test_outage_stamps.py",
     "test_config_never_fires.py",
+    "test_capture_not_mcap.py",
+    "test_interrupted.py",
+    "test_cli_options.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

@@ -267,7 +267,7 @@ def test_a_loud_start_of_the_healthy_period_is_said_with_where_the_steady_stretc
     assert p.returncode == 0, p.stderr
     assert ("pump: warning: 5 decision(s) of the healthy period are already at >= 2 x its baseline "
             "(level_alert: severity 0.5) in 1.0-6.0 board s, in the recording: start.npz[1] (1.7 % of the "
-            "record, 0.1667 h in) to start.npz[5] (8.3 % of the record, 0.8333 h in): a start-up or a "
+            "record, 0.1667 h in) to the end of start.npz[5] (10.0 % of the record, 0.8336 h in): a start-up or a "
             "disturbance; its steady stretch to the end begins at --from 6 (levels within 2 x its own "
             "median)\n") in p.stdout
     p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--out", str(tmp_path / "s.yaml"))
@@ -515,3 +515,33 @@ def test_a_channel_with_no_sensor_is_said_at_import_and_calibrate_names_the_way_
     p = run("cmsensord", "calibrate", str(cap), "--config", str(base), "--out", str(site))
     assert p.returncode == 0, p.stderr
     assert [ch["name"] for ch in yaml.safe_load(site.read_text())["channels"]] == ["Acc_X_g", "Acc_Y_g"]
+
+
+def test_the_healthy_periods_end_is_placed_where_it_ends_in_the_recording(tmp_path):
+    """A period that runs to a snapshot's last sample ends at the end of it, at its end's share of
+    the record and time (it named the last snapshot at its start: `to snaps.npz[11] (91.7 % of the
+    record, ...)` for the whole record); one cut inside a snapshot, where the cut is; a plain
+    capture has no snapshots to place it in."""
+    x = np.random.default_rng(5).standard_normal((12, 5120, 1))
+    np.savez(tmp_path / "snaps.npz", acc=x, fs=5120.0, t_s=np.arange(12) * 600.0)
+    cap = tmp_path / "snaps.bin"
+    p = run("cmsensord", "import", str(tmp_path / "snaps.npz"), "--unit", "g", "--names", "pump", "--out", str(cap))
+    assert p.returncode == 0, p.stderr
+    said = {}
+    for window in ((), ("--to", "50%"), ("--from", "2.5", "--to", "7.5")):
+        p = run("cmsensord", "calibrate", str(cap), "--rpm", "600", *window, "--out", str(tmp_path / "site.yaml"))
+        assert p.returncode == 0, p.stderr
+        said[window] = [line for line in p.stdout.splitlines() if line.startswith("healthy period in")]
+    start = "healthy period in the recording: snaps.npz[0] (0.0 % of the record, 0 h in) to "
+    assert said[()] == [start + "the end of snaps.npz[11] (100.0 % of the record, 1.834 h in)"]  # 11 x 600 s + 0.996
+    assert said[("--to", "50%")] == [start + "the end of snaps.npz[5] (50.0 % of the record, 0.8336 h in)"]
+    assert said[("--from", "2.5", "--to", "7.5")] == [
+        "healthy period in the recording: snaps.npz[2] (20.8 % of the record, 0.3335 h in) to snaps.npz[7] "
+        "(62.7 % of the record, 1.167 h in)"]
+    plain = tmp_path / "plain.bin"
+    assert run("firmware_sim", "--scenario", "healthy", "--duration", "5", "--out",
+               str(plain)).returncode == 0
+    p = run("cmsensord", "calibrate", str(plain), "--out", str(tmp_path / "plain.yaml"))
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.splitlines()[0] == "healthy period: 0.0-5.0 board s, 100 blocks/s"
+    assert "in the recording" not in p.stdout

@@ -78,3 +78,17 @@ def test_an_unknown_option_whose_value_reads_as_the_subcommand_is_named():
                             f"{meant}?) (see cmsensord --help)\n"), p.stderr
     p = cmsensord("frobnicate")                         # a subcommand mistyped is still said as one
     assert p.returncode == 2 and "invalid choice: 'frobnicate'" in p.stderr, p.stderr
+
+
+def test_arguments_left_over_after_a_subcommand_point_at_its_help():
+    """`replay a.bin b.bin`, `calibrate x.bin --to 20 %`: the arguments argparse could not place
+    are on the subcommand's line, so its --help is the one named (it named `cmsensord --help`);
+    without a subcommand, the command's."""
+    for args, command, extra in ((("replay", "a.bin", "b.bin"), "cmsensord replay", "b.bin"),
+                                 (("calibrate", "x.bin", "--to", "20", "%", "--out", "s.yaml"),
+                                  "cmsensord calibrate", "%"),
+                                 (("-v", "vkf", "x.bin", "--bogus"), "cmsensord vkf", "--bogus"),
+                                 (("--verbose", "--bogus"), "cmsensord", "--bogus")):
+        p = cmsensord(*args)
+        assert (p.returncode, p.stdout) == (2, ""), p.stderr
+        assert p.stderr == f"{command}: error: unrecognized arguments: {extra} (see {command} --help)\n"

@@ -303,11 +303,11 @@ def test_replay_says_where_in_the_recording_each_severity_level_was_first_reache
     assert r.returncode == 0, r.stderr
     r = cmd("calibrate", "r.bin", "--to", "25%", "--out", "site.yaml", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    # 25 % of the 40 one-second snapshots: the first ten
-    last = "2004-02-12 12:10:00" if times == "names" else "1.5 h in"
+    # 25 % of the 40 one-second snapshots: the first ten, to the end of the tenth
+    last = "2004-02-12 12:10:01" if times == "names" else "1.5 h in"
     first = "2004-02-12 10:40:00" if times == "names" else "0 h in"
     assert (f"healthy period in the recording: 2004.02.12.10.40.00 (0.0 % of the record, {first}) to "
-            f"2004.02.12.12.10.00 (22.5 % of the record, {last})\n") in r.stdout
+            f"the end of 2004.02.12.12.10.00 (25.0 % of the record, {last})\n") in r.stdout
     r = cmd("replay", "r.bin", "--config", "site.yaml", "--out", "logs", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     firsts = re.search(r"  bearing: \|.*\| [\d-]+ s; first (.*)\n", r.stderr)

@@ -107,27 +107,6 @@ def test_raw_capture_with_line_noise_replays_to_the_live_messages(tmp_path):
             assert a[topic] == b[topic], topic
 
 
-def test_a_file_that_is_no_capture_replays_to_one_event_that_says_so(tmp_path):
-    """The wrong file replayed (a WAV, say): exit 0, the link line counts every byte as in no
-    frame, and one decode_error event, on stderr and in the log beside the link's counters,
-    names the file and what to do."""
-    junk = tmp_path / "song.wav"
-    junk.write_bytes(b"RIFF" + bytes(range(256)) * 8)   # no sync (A5 5A) anywhere
-    r = cmsensord("replay", str(junk), "--out", str(tmp_path / "out"))
-    assert r.returncode == 0, r.stderr
-    lines = r.stderr.splitlines()
-    assert "  link: 2052 of 2052 bytes in no frame (0 CRC failure(s), 0 bad header(s))" in lines
-    message = (f"replay: no frame in {junk} (2052 bytes): not a capture of the board's serial "
-               "stream? (`cmsensord import` makes one from other recordings)")
-    assert [x for x in lines if "no frame in" in x] == [f"WARNING decode_error: {message}"]
-    assert "  events: decode_error 1" in lines
-    [log] = (tmp_path / "out").glob("*.mcap")
-    written = [(t, m) for t, _, m in read_messages(log)]
-    assert [m["message"] for t, m in written if t == "/cm/events"] == [message]
-    [link] = [m for t, m in written if t == "/cm/diagnostics"]
-    assert (link["link"]["bytes_received"], link["link"]["bytes_discarded"]) == (2052, 2052)
-
-
 def test_junk_in_front_of_a_capture_is_counted_in_the_summary(tmp_path):
     """A capture with 1000 bytes of line junk before its first frame: replayed whole, the
     summary's link line counts exactly those bytes, and no 'no frame' line."""

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import json
 import re
+import resource
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -20,7 +23,7 @@ from cmsensord.service.simulate import RUNUP_ORDERS
 from cmsensord.sinks.mcap_sink import read_messages
 from firmware_sim.board import Board, BoardConfig
 from firmware_sim.scenarios import SCENARIOS, make_scenario
-from processes import cmsensord, run_module
+from processes import ENV, cmsensord, on_terminal, run_module
 
 #: seconds of each scenario's capture: the run-ups whole, the motors long enough for 1-s decisions
 SECONDS = {"whirl": 180.0, "close_orders": 5.0}
@@ -217,3 +220,43 @@ def test_poles_set_the_roll_off_outside_the_band(tmp_path):
     for poles, measured in ripple.items():
         h = 1.0 / (1.0 + (np.sqrt(2) - 1) * 16.0 ** poles)
         assert measured == pytest.approx(0.4 * h * np.sinc(0.2), rel=0.15), (poles, ripple)
+
+
+def test_vkf_shows_its_progress_on_a_terminal(tmp_path):
+    """A bar for the replay (as replay's: bytes, MB/s, board seconds; its line kept) and one for
+    the batch solve (a step for the record, one per channel; erased when done), on a terminal
+    only (a 600-s capture of 2 channels was 13 s of silence)."""
+    cap = tmp_path / "co.bin"
+    r = run_module("firmware_sim", "--scenario", "close_orders", "--mode", "raw", "--tacho", "--channels", "2",
+                   "--duration", "20", "--out", str(cap))
+    assert r.returncode == 0, r.stderr
+    status, out = on_terminal([sys.executable, "-m", "cmsensord", "vkf", str(cap), "--out", str(tmp_path / "t")],
+                              stdout=subprocess.DEVNULL)
+    text = out.decode(errors="replace")
+    assert status == 0, text
+    assert re.search(r"\rvkf co\.bin: replay \[#{30}\] 100\.0% +[\d.]+ MB/s 20 s\r\n", text), text
+    solve = text[text.index("vkf co.bin: batch VKF ["):]
+    assert "[" + "#" * 30 + "] 100.0%\r\x1b[KMCAP log: " in solve, solve
+    piped = cmsensord("vkf", str(cap), "--out", str(tmp_path / "p"))
+    assert piped.returncode == 0 and "%" not in piped.stderr, piped.stderr
+
+
+def test_a_record_too_large_for_memory_is_refused_before_the_replay(tmp_path):
+    """600 s of RAW (about 1.5 GB to track) in a process limited to 1 GiB of address space: the
+    estimate from the capture's size and first STATUS refuses it at once, in one line with the
+    figures, before any output (it replayed the whole capture first, then ran out)."""
+    cap = capture(tmp_path, "close_orders", 600)
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))
+
+    p = subprocess.run([sys.executable, "-m", "cmsensord", "vkf", str(cap), "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=limited)
+    assert p.returncode == 2, p.stderr
+    said = re.fullmatch(rf"cmsensord: {re.escape(str(cap))}: batch VKF: not enough memory for the whole record: "
+                        r"it needs about ([\d,]+) MB, ([\d,]+) MB available \(shorten the capture or track fewer "
+                        r"components\)\n", p.stderr)
+    assert said, p.stderr
+    need, room = (int(x.replace(",", "")) for x in said.groups())
+    assert 1300 < need < 1700 and room < 1024, p.stderr       # measured: a peak 1,510 MB above its start
+    assert not (tmp_path / "out").exists()

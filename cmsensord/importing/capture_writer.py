@@ -36,10 +36,12 @@ error, so no partial capture is left behind.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
-from collections.abc import Callable
+import signal
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -249,8 +251,9 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
             _refuse_lost(rec, plan, stats["missing_blocks"])
             meta = _sidecar(rec, plan, mode, full_scale, scale, stats, out, extra or {})
             side_part.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
-            os.replace(part, out)
-            os.replace(side_part, side)
+            with _sigint_held():             # capture and sidecar renamed both, or neither
+                os.replace(part, out)
+                os.replace(side_part, side)
         except OSError as exc:
             raise cannot_write(out, exc.strerror or str(exc)) from None
     except BaseException:
@@ -258,6 +261,16 @@ def write_capture(rec: Recording, plan: BlockPlan, out: str, *, mode: str = "raw
             p.unlink(missing_ok=True)
         raise
     return meta
+
+
+@contextlib.contextmanager
+def _sigint_held() -> Iterator[None]:
+    """SIGINT held (blocked) for the block, delivered at its end: a Ctrl-C inside it comes after."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def _refuse_lost(rec: Recording, plan: BlockPlan, missing_blocks: list[int]) -> None:

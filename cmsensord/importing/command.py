@@ -5,7 +5,8 @@
   cmsensord import IMS/2nd_test --fs 20480 --unit g --channels 0 --out b1.bin   (files named by time)
 
 Errors the user can cause end in one line, ``cmsensord import: FILE: what; fix``,
-and exit status 2; nothing is written then. A progress bar shows on a terminal. Each channel's
+and exit status 2; nothing is written then. Ctrl-C is one line too, saying what it left at
+``--out``, and exit status 130. A progress bar shows on a terminal. Each channel's
 mean is taken out (:mod:`.dc`, one summary line a channel) unless ``--keep-dc``. A channel whose
 range leaves snapshots (or seconds) under 10 counts RMS gets one WARNING line (:mod:`.quantisation`).
 """
@@ -18,7 +19,7 @@ import sys
 from pathlib import Path
 
 from cmsensord.argtypes import comma_list, count, nonnegative, nonzero, positive, real
-from cmsensord.errors import EXIT_USAGE
+from cmsensord.errors import EXIT_INTERRUPTED, EXIT_USAGE
 from cmsensord.out_paths import overwritten_input
 from cmsensord.terminal_bar import Bar
 
@@ -315,9 +316,28 @@ def _write(rec: Recording, opts: ImportOptions, files: list[str], left: list[str
 
 
 def run_import(args: argparse.Namespace) -> int:
-    """The ``import`` sub-command: 0 on success, 2 with a one-line message on a usage or input error."""
+    """The ``import`` sub-command: 0 on success, 2 with a one-line message on a usage or input
+    error, 130 with one on Ctrl-C (what is at ``--out`` then: nothing, the file there before, or
+    the capture complete when the Ctrl-C came after it was written)."""
+    before = _file_id(args.imp_out)
     try:
         return _run(options_from_args(args), list(args.src), list(args.imp_glob))
     except ImportFailure as exc:
         print(f"cmsensord import: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:
+        out, now = args.imp_out, _file_id(args.imp_out)
+        left = (f"nothing written ({out} not made)" if now is None else
+                f"nothing written ({out} left as it was)" if now == before else
+                f"after {out} was written: it and its sidecar {sidecar_path(out)} are complete")
+        print(f"cmsensord import: interrupted (Ctrl-C): {left}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _file_id(path: str) -> tuple[int, int] | None:
+    """(device, inode) of the file at ``path`` (None: none): a capture written there is a new file."""
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino

@@ -61,16 +61,19 @@ def _snapshots(meta: dict) -> tuple[list[dict], list[float]] | None:
 
 
 def span_line(meta: dict, start_s: float, end_s: float) -> str | None:
-    """``in the recording: SNAPSHOT (...) to SNAPSHOT (...)``: the snapshots a span of board
-    seconds begins and ends in (one, named once, when it begins and ends in the same; calibrate's
-    healthy period); None unless ``meta`` is an
-    import's sidecar of several snapshots."""
+    """``in the recording: SNAPSHOT (...) to [the end of] SNAPSHOT (...)``: the snapshots a span of
+    board seconds begins and ends in, each with where in the record and when the span begins and
+    ends (:func:`_point`; calibrate's healthy period); one snapshot, named once, when it begins and
+    ends in the same; None unless ``meta`` is an import's sidecar of several snapshots."""
     found = _snapshots(meta)
     if found is None:
         return None
     snaps, starts = found
-    first, last = _where(meta, snaps, starts, start_s, ending=False), _where(meta, snaps, starts, end_s)
-    return f"in the recording: {first}" if first == last else f"in the recording: {first} to {last}"
+    first = _where(meta, snaps, starts, start_s, ending=False)
+    if first == _where(meta, snaps, starts, end_s):
+        return f"in the recording: {first}"
+    return (f"in the recording: {_point(meta, snaps, starts, start_s, ending=False)} to "
+            f"{_point(meta, snaps, starts, end_s, ending=True)}")
 
 
 def origin_lines(meta: dict, views, alarms: dict[str, dict[str, float]] | None = None) -> list[str]:
@@ -102,17 +105,45 @@ def _placed(meta: dict, snaps: list[dict], starts: list[float], firsts: list[tup
     return "; ".join(f"{' and '.join(levels)} at {where}" for where, levels in at.items())
 
 
+def _snapshot_of(starts: list[float], t_s: float, ending: bool) -> int:
+    """The index of the snapshot whose samples end what ends at board second ``t_s``, or with
+    ``ending`` False begin what begins there."""
+    return max(0, bisect.bisect_right(starts, t_s - 1e-6 if ending else t_s + 1e-6) - 1)
+
+
 def _where(meta: dict, snaps: list[dict], starts: list[float], t_s: float, ending: bool = True) -> str:
     """The snapshot whose samples end what ends at board second ``t_s`` (a decision, an
-    indicator interval), or with ``ending`` False begin what begins there."""
-    s = snaps[max(0, bisect.bisect_right(starts, t_s - 1e-6 if ending else t_s + 1e-6) - 1)]
-    when = f"{s['pct_of_record']:.1f} % of the record"
+    indicator interval), or with ``ending`` False begin what begins there: its name, where it
+    starts in the record and when."""
+    s = snaps[_snapshot_of(starts, t_s, ending)]
+    return f"{s['source']} ({_when(meta, s, float(s['pct_of_record']), 0.0)})"
+
+
+def _point(meta: dict, snaps: list[dict], starts: list[float], t_s: float, ending: bool) -> str:
+    """Board second ``t_s`` where a span begins (``ending`` False) or ends: the snapshot it lies in,
+    and where ``t_s`` is in the record and when; a span that ends with a snapshot's last sample is
+    said to end at ``the end of`` it.  The snapshot's start where the sidecar gives no rate,
+    length or record length."""
+    k = _snapshot_of(starts, t_s, ending)
+    s, offset = snaps[k], t_s - starts[k]
+    fs, total = meta.get("fs"), meta.get("board_seconds")
+    if not (isinstance(fs, (int, float)) and fs > 0 and isinstance(total, (int, float)) and total > 0
+            and isinstance(s.get("length"), (int, float))):
+        return f"{s['source']} ({_when(meta, s, float(s['pct_of_record']), 0.0)})"
+    whole = ending and offset >= s["length"] / fs - 1e-6
+    return f"{'the end of ' if whole else ''}{s['source']} ({_when(meta, s, 100.0 * t_s / total, offset)})"
+
+
+def _when(meta: dict, s: dict, pct: float, offset: float) -> str:
+    """``P % of the record``, and the time in the recording (its date and time, or the hours
+    into it) ``offset`` seconds into snapshot ``s``, when the sidecar knows its time."""
+    when = f"{pct:.1f} % of the record"
     if s.get("source_time_s") is not None:
         start = meta.get("source_start")
-        at = timedelta(seconds=float(s["source_time_s"]))
+        at = timedelta(seconds=float(s["source_time_s"]) + offset)
         clock = (datetime.fromisoformat(start) + at).strftime("%Y-%m-%d %H:%M:%S") if start else None
         when += f", {clock}" if clock else f", {at.total_seconds() / 3600:.4g} h in"
-    return f"{s['source']} ({when})"
+    return when
 
 
 def delay_lines(meta: dict, cfg) -> list[str]:

@@ -9,24 +9,22 @@ import time
 from pathlib import Path
 
 from cmsensord.config import Config, ConfigError
+from cmsensord.errors import EXIT_INTERRUPTED
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
 from cmsensord.importing.timeline import Timeline
 from cmsensord.monitor.processor import Processor
-from cmsensord.protocol import MAX_FRAME, Decoder, LinkCounters
+from cmsensord.protocol import MAX_FRAME, Decoder
 from cmsensord.service.heap import keep_freed_memory
 from cmsensord.service.origin import FirstAlarms, delay_lines, origin_lines
 from cmsensord.service.signals import Interrupt
 from cmsensord.service.sink import open_sink, publish_lines, publisher_of, route_sink_events, send_queued
 from cmsensord.service.status import run_summary
-from cmsensord.source import CaptureSource, Paced
+from cmsensord.source import CaptureSource, Paced, require_frames
 from cmsensord.terminal_bar import Progress
 
 log = logging.getLogger("cmsensord")
-
-#: the exit status of a run stopped by Ctrl-C, as a shell reports one ended by SIGINT
-EXIT_INTERRUPTED = 130
 
 #: bytes per read of an unpaced replay: 192 KiB (3.9 s of 1 RAW channel, 1 s of 4); with the
 #: heap keeping freed memory a larger read is faster still, but at 256 KiB a 4-channel RAW
@@ -54,6 +52,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     # the partial frame before it, so each read is one scan (one batch, nothing joined)
     capture = CaptureSource(path, chunk=REPLAY_CHUNK if speed is None else 1 << 12,   # LinkError before any output
                             decoder=Decoder(max_buffer=REPLAY_CHUNK + MAX_FRAME), batches=True)
+    require_frames(path, "replay")      # the wrong file given: one line, exit 2, no log
     meta = sidecar(path)                # an import's: its channels' names, its snapshots
     cfg, auto_channels, warnings = capture_channels(cfg, meta, auto_channels)
     for warning in warnings:
@@ -84,8 +83,6 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
                 progress.update(capture.bytes_read, f"{proc.adc_seconds:.0f} s")
                 if interrupt.seen:
                     break
-        if not interrupt.seen:
-            _no_frame(proc, path, capture.counters)
         proc.finish()
         progress.close()
         if send_queued(sink, interrupted=lambda: interrupt.seen):
@@ -114,14 +111,3 @@ def _interrupted(interrupt: Interrupt, capture: CaptureSource) -> list[str]:
     return [f"  interrupted (Ctrl-C) at {done:.0%} of the capture ({capture.bytes_read:,} of {capture.size:,} "
             "bytes): the log holds what was replayed"]
 
-
-def _no_frame(proc: Processor, path: str, counters: LinkCounters) -> None:
-    """When the capture held no frame at all (the wrong file replayed): a ``decode_error``
-    event that names the file and what to do (in the log and the journal), and the link's
-    counters in one ``/cm/diagnostics`` message, so the log says why it is empty."""
-    if sum(counters.frames.values()):
-        return
-    now = time.time_ns()
-    proc.event("decode_error", None, f"replay: no frame in {path} ({counters.bytes_received} bytes): not a "
-               "capture of the board's serial stream? (`cmsensord import` makes one from other recordings)", now)
-    proc.write_diagnostics(now)
