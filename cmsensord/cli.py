@@ -270,7 +270,7 @@ def replay_parser() -> argparse.ArgumentParser:
 
 def _config_for(path: str | None, capture: str | None = None) -> tuple[Config, bool]:
     """Load a config (an empty one said in a warning line, by load_config; ISO zones of a machine
-    class it does not set, in a note for a ``capture`` of RAW frames, whose records carry a zone:
+    class it does not set, in a note for a ``capture`` replayed of RAW frames, whose records carry a zone:
     :func:`~cmsensord.config.indicators.zones_assumed`); auto_channels when the file does not list
     channels."""
     from cmsensord.config.indicators import zones_assumed
@@ -316,7 +316,7 @@ def _run_vkf(args: argparse.Namespace) -> int:
     """``cmsensord vkf``: the batch orders of a capture."""
     from cmsensord.batch import batch_orders, describe
 
-    cfg, auto = _config_for(args.sub_config, args.capture)
+    cfg, auto = _config_for(args.sub_config)
     if args.sub_out:
         cfg = dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, dir=args.sub_out))
     paths, info = batch_orders(args.capture, cfg, bandwidth_hz=args.bandwidth, poles=args.poles, auto_channels=auto,
