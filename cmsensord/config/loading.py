@@ -23,6 +23,8 @@ from typing import Any
 
 import yaml
 
+from cmsensord.errors import file_kind
+
 from .alarms import AlarmRuleConfig, AlarmsConfig, BaselineConfig, OperatingConfig, SpeedBandConfig
 from .capture import CaptureConfig
 from .channel_refs import check_channel_refs
@@ -376,7 +378,7 @@ def _read_text(path: str | Path, source: str) -> str:
         os.close(fd)
         if stat.S_ISDIR(mode):
             raise ConfigError(source, None, "is a directory, not a file")
-        raise ConfigError(source, None, f"not a regular file (a {_file_kind(mode)}); "
+        raise ConfigError(source, None, f"not a regular file (a {file_kind(mode)}); "
                           "give the path of a YAML file")
     with os.fdopen(fd, "rb") as f:
         try:
@@ -389,14 +391,6 @@ def _read_text(path: str | Path, source: str) -> str:
         return data.decode("utf-8")
     except UnicodeDecodeError as err:
         raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
-
-
-def _file_kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"),
-                       (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket")):
-        if test(mode):
-            return name
-    return "special file"
 
 
 class _TooLarge(Exception):
