@@ -334,6 +334,18 @@ class _StrictLoader(yaml.SafeLoader):
                     )
         return super().construct_mapping(node, deep=deep)
 
+    def construct_object(self, node: Any, deep: bool = False) -> Any:
+        """A node's value; a scalar Python cannot make one of (a whole number of more than
+        4,300 digits, a date with month 13) is refused with its place in the file."""
+        try:
+            return super().construct_object(node, deep=deep)
+        except (ValueError, OverflowError) as err:
+            mark = node.start_mark
+            why = (f"number too large (a whole number of {len(node.value):,} characters)"
+                   if node.tag == "tag:yaml.org,2002:int" else
+                   f"not a date ({err})" if node.tag == "tag:yaml.org,2002:timestamp" else str(err))
+            raise _TooLarge(f"line {mark.line + 1}, column {mark.column + 1}: {why}") from None
+
 
 _StrictLoader.add_constructor(
     yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _StrictLoader.construct_mapping
@@ -394,7 +406,8 @@ def _read_text(path: str | Path, source: str) -> str:
 
 
 class _TooLarge(Exception):
-    """Internal: the YAML document stands for too many nodes (aliases), or refers to itself."""
+    """Internal: the YAML document stands for too many nodes (aliases), or refers to itself,
+    or holds a value Python cannot make (a whole number past 4,300 digits, an impossible date)."""
 
 
 def _expanded_nodes(root: yaml.Node) -> int:
