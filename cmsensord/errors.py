@@ -8,6 +8,7 @@ prints that line and exits with a non-zero code instead of a traceback.
 
 from __future__ import annotations
 
+import stat
 from collections.abc import Iterator
 from typing import Any
 
@@ -15,12 +16,14 @@ __all__ = [
     "CmsensordError",
     "ConfigError",
     "SinkError",
+    "CaptureFileError",
     "InstanceError",
     "LinkError",
     "Interrupted",
     "EXIT_USAGE",
     "EXIT_CONFIG",
     "EXIT_INTERRUPTED",
+    "file_kind",
 ]
 
 #: Exit code for a command-line usage error (as argparse uses).
@@ -94,6 +97,16 @@ def _repr_pieces(value: Any, inside: set[int]) -> Iterator[str]:
             yield ","
     yield closing
     inside.discard(id(value))
+
+
+def file_kind(mode: int) -> str:
+    """What a file that is not a regular one is (``st_mode``), for the line refusing it: a FIFO, a
+    character device (/dev/zero), ..."""
+    for test, name in ((stat.S_ISDIR, "directory"), (stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"),
+                       (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket")):
+        if test(mode):
+            return name
+    return "special file"
 
 
 class CmsensordError(Exception):

@@ -9,6 +9,8 @@ import os
 import stat
 from collections.abc import Iterable
 
+from cmsensord.errors import file_kind
+
 __all__ = ["capture_refused", "overwritten_input", "with_sidecars"]
 
 
@@ -36,9 +38,8 @@ def capture_refused(path: str, inputs: Iterable[str | os.PathLike]) -> str | Non
     except OSError:                         # not there: made by the open (which says why it cannot)
         return None
     if not stat.S_ISREG(mode):
-        kind = ("a directory" if stat.S_ISDIR(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
-                else "a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a file")
-        return f"{path}: is {kind}, not a regular file: --capture takes a file to append the port's bytes to"
+        return (f"{path}: is a {file_kind(mode)}, not a regular file: --capture takes a file to append the "
+                "port's bytes to")
     return overwritten_input(path, inputs, option="--capture")
 
 

@@ -27,12 +27,14 @@ every source.
 
 from __future__ import annotations
 
+import os
+import stat
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
-from cmsensord.errors import LinkError
+from cmsensord.errors import LinkError, file_kind
 from cmsensord.link import FrameQueue, SerialReader
 from cmsensord.monitor.clock import DEFAULT_BLOCK_LEN, DEFAULT_FS, is_reset
 from cmsensord.protocol import MAX_FRAME, Decoder, Frame, FrameType, LinkCounters, decode_status
@@ -163,8 +165,18 @@ def require_frames(path: str | Path, command: str) -> None:
 
 
 def _open_capture(p: Path) -> BinaryIO:
+    """The capture file open for reading; LinkError for one that is not there, not readable, no
+    regular file (a FIFO is refused, never waited on) or an MCAP log."""
     try:
-        f = open(p, "rb")
+        f = open(os.open(p, os.O_RDONLY | os.O_NONBLOCK), "rb")
+        mode = os.fstat(f.fileno()).st_mode
+        if not stat.S_ISREG(mode):
+            f.close()
+            if stat.S_ISDIR(mode):
+                raise IsADirectoryError
+            raise LinkError(f"{p}: not a regular file (a {file_kind(mode)}): replay, calibrate and vkf read a "
+                            "capture file (`--capture`, `cmsensord record`, `cmsensord import`)")
+        os.set_blocking(f.fileno(), True)
         if f.peek(len(MCAP_MAGIC))[:len(MCAP_MAGIC)] == MCAP_MAGIC:
             f.close()
             raise LinkError(f"{p}: an MCAP log (cmsensord's output), not a capture of the board's serial stream: "

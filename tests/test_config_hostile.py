@@ -44,11 +44,25 @@ def _refused(tmp_path, config, timeout=30) -> str:
     ('link:\n  port: "/dev/tty\\0"\n', "link.port: must not contain a NUL byte (got '/dev/tty\\x00')"),
     ("link:\n  baud: 99999999999\n", "link.baud: must be > 0 and <= 12000000 (got 99999999999)"),
     ("#" * (MAX_CONFIG_BYTES + 1), f"larger than {MAX_CONFIG_BYTES} bytes: not a configuration file"),
-], ids=["alias-bomb", "recursive-alias", "nul-in-output-dir", "nul-in-port", "baud-too-large", "too-large"])
+    ("link:\n  baud: " + "9" * 5000 + "\n", "line 2, column 9: number too large (a whole number of 5,000 characters)"),
+    ("link: {port: /dev/ttyACM0, baud: -" + "9" * 5000 + "}\n",
+     "line 1, column 34: number too large (a whole number of 5,001 characters)"),
+    ("commissioned:\n  date: 2024-13-45\n", "line 2, column 9: not a date (month must be in 1..12)"),
+], ids=["alias-bomb", "recursive-alias", "nul-in-output-dir", "nul-in-port", "baud-too-large", "too-large",
+        "int-past-4300-digits", "negative-int-past-4300-digits", "impossible-date"])
 def test_hostile_file_is_one_line_config_error(tmp_path, text, message):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(text)
     assert _refused(tmp_path, cfg) == f"cmsensord: configuration error: {cfg}: {message}"
+
+
+def test_the_daemon_refuses_a_number_past_4300_digits_in_one_line(tmp_path):
+    """``cmsensord --config`` as ``replay --config``: exit 78, not Python's ValueError (exit 1)."""
+    cfg = tmp_path / "big.yaml"
+    cfg.write_text("link:\n  baud: " + "9" * 5000 + "\n")
+    run = cmsensord("--config", str(cfg), timeout=30, cwd=tmp_path)
+    assert (run.returncode, run.stderr) == (EXIT_CONFIG, f"cmsensord: configuration error: {cfg}: line 2, column 9: "
+                                            "number too large (a whole number of 5,000 characters)\n")
 
 
 def test_fifo_is_refused_without_waiting_for_a_writer(tmp_path):

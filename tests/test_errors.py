@@ -40,8 +40,8 @@ CASES = [
      "cmsensord: capdir: is a directory, not a regular file: --capture takes a file to append the port's "
      "bytes to"),
     (["--config", "port.yaml", "--capture", "/dev/null"], CONFIG,
-     "cmsensord: /dev/null: is a device, not a regular file: --capture takes a file to append the port's "
-     "bytes to"),
+     "cmsensord: /dev/null: is a character device, not a regular file: --capture takes a file to append the "
+     "port's bytes to"),
     (["replay", "capture.bin", "--config", "unit.yaml"], CONFIG,
      "unit.yaml: channels[1].unit: Pa is not what a channel of kind accelerometer measures (m/s^2): "
      "set kind: microphone (got 'Pa')"),

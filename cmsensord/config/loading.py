@@ -23,6 +23,8 @@ from typing import Any
 
 import yaml
 
+from cmsensord.errors import file_kind
+
 from .alarms import AlarmRuleConfig, AlarmsConfig, BaselineConfig, OperatingConfig, SpeedBandConfig
 from .capture import CaptureConfig
 from .channel_refs import check_channel_refs
@@ -332,6 +334,18 @@ class _StrictLoader(yaml.SafeLoader):
                     )
         return super().construct_mapping(node, deep=deep)
 
+    def construct_object(self, node: Any, deep: bool = False) -> Any:
+        """A node's value; a scalar Python cannot make one of (a whole number of more than
+        4,300 digits, a date with month 13) is refused with its place in the file."""
+        try:
+            return super().construct_object(node, deep=deep)
+        except (ValueError, OverflowError) as err:
+            mark = node.start_mark
+            why = (f"number too large (a whole number of {len(node.value):,} characters)"
+                   if node.tag == "tag:yaml.org,2002:int" else
+                   f"not a date ({err})" if node.tag == "tag:yaml.org,2002:timestamp" else str(err))
+            raise _TooLarge(f"line {mark.line + 1}, column {mark.column + 1}: {why}") from None
+
 
 _StrictLoader.add_constructor(
     yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _StrictLoader.construct_mapping
@@ -376,7 +390,7 @@ def _read_text(path: str | Path, source: str) -> str:
         os.close(fd)
         if stat.S_ISDIR(mode):
             raise ConfigError(source, None, "is a directory, not a file")
-        raise ConfigError(source, None, f"not a regular file (a {_file_kind(mode)}); "
+        raise ConfigError(source, None, f"not a regular file (a {file_kind(mode)}); "
                           "give the path of a YAML file")
     with os.fdopen(fd, "rb") as f:
         try:
@@ -391,16 +405,9 @@ def _read_text(path: str | Path, source: str) -> str:
         raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
 
 
-def _file_kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"),
-                       (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket")):
-        if test(mode):
-            return name
-    return "special file"
-
-
 class _TooLarge(Exception):
-    """Internal: the YAML document stands for too many nodes (aliases), or refers to itself."""
+    """Internal: the YAML document stands for too many nodes (aliases), or refers to itself,
+    or holds a value Python cannot make (a whole number past 4,300 digits, an impossible date)."""
 
 
 def _expanded_nodes(root: yaml.Node) -> int:

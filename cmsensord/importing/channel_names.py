@@ -26,13 +26,17 @@ NAME_RULE = re.compile(next(f.metadata["pattern"] for f in dataclasses.fields(Ch
 def channel_names(labels: list[str]) -> tuple[list[str], list[str]]:
     """Names from column labels, and a note for each label that had to change."""
     names: list[str] = []
+    taken: set[str] = set()
+    suffix: dict[str, int] = {}     # base -> the next _k to try: each label costs one look-up or so
     notes = []
     for i, label in enumerate(labels):
         base = re.sub(r"[^A-Za-z0-9_]+", "_", label).strip("_") or f"ch{i}"
-        name, k = base, 2
-        while name in names:
+        name, k = base, suffix.get(base, 2)
+        while name in taken:
             name, k = f"{base}_{k}", k + 1
+        suffix[base] = k
         names.append(name)
+        taken.add(name)
         if name != label:
             notes.append(f"channel {label!r} is named {name} (letters, digits and _ only: the MCAP topics "
                          f"/cm/{name}/...); --names sets other names")

@@ -6,39 +6,66 @@ one that is not usable is left out with a one-line warning, and the run goes on.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
-from .sidecar_fields import checked, status_fs
+from .sidecar_fields import capture_status, checked
 
-__all__ = ["channel_units", "sidecar"]
+__all__ = ["MAX_SIDECAR_BYTES", "channel_units", "sidecar"]
 
+
+#: the largest sidecar read: an import's holds ~320 bytes a snapshot (IMS's 6,324 snapshots of 4
+#: channels: 2 MB), so 64 MiB is some 200,000 snapshots, 30 times IMS's, read in ~150 MB
+MAX_SIDECAR_BYTES = 64 << 20
 
 _said: set[tuple[str, str]] = set()
 
 
 def sidecar(path: str | Path) -> dict:
     """The capture's metadata written by ``cmsensord import`` (CAPTURE.json beside it), or {}
-    when there is none, or when it cannot be read (truncated, not JSON, not an object): then a
-    one-line warning on stderr, once a process for that file. A field it cannot use is left
-    out, and an ``fs`` its STATUS frames contradict is theirs, with a one-line warning each
+    when there is none, or when it cannot be read (truncated, not JSON, not an object, nested
+    past the parser's depth, larger than ``MAX_SIDECAR_BYTES``: refused before it is read):
+    then a one-line warning on stderr, once a process for that file. A field it cannot use is
+    left out, and an ``fs`` its STATUS frames contradict is theirs, with a one-line warning each
     (:func:`~.sidecar_fields.checked`)."""
     p = Path(str(path) + ".json")
     if not p.is_file():
         return {}
     try:
-        meta = json.loads(p.read_text(encoding="utf-8"))
+        meta = json.loads(_text(p), parse_int=_whole)
         why = "" if isinstance(meta, dict) else "not a JSON object"
     except (OSError, ValueError) as exc:
         why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    except RecursionError:
+        why = "nested too deeply"
     if why:
         _warn(p, f"the capture's sidecar cannot be read ({why}): its channel names, units, speed and time line "
                  "are not used")
         return {}
-    meta, lines = checked(meta, status_fs(path))
+    meta, lines = checked(meta, capture_status(path))
     for line in lines:
         _warn(p, f"the capture's sidecar's {line}")
     return meta
+
+
+def _text(p: Path) -> str:
+    """The sidecar's text; ValueError (the reason) when it is larger than ``MAX_SIDECAR_BYTES``,
+    said from its size before a byte is read."""
+    with open(p, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if size > MAX_SIDECAR_BYTES:
+            raise ValueError(f"{size:,} bytes, over the {MAX_SIDECAR_BYTES:,} read of a sidecar: not an import's")
+        return f.read(MAX_SIDECAR_BYTES + 1).decode("utf-8")
+
+
+def _whole(digits: str) -> int | float:
+    """A JSON whole number: an int, or past the digits Python converts to one, a float (then
+    +-inf: no number a sidecar field can use)."""
+    try:
+        return int(digits)
+    except ValueError:
+        return float(digits)
 
 
 def _warn(p: Path, line: str) -> None:

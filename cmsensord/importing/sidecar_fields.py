@@ -7,20 +7,25 @@ and fit their lengths, a date that is a date), and a field that is not is left o
 line naming it; the run goes on with the rest. The capture's STATUS frames, not the sidecar,
 say its sampling rate: a sidecar ``fs`` that differs is replaced by the STATUS rate, with a
 line naming both; the snapshots are kept when their board starts fit their lengths at that
-rate (an ``fs`` edited alone), else left out too (they rest on another rate).
+rate (an ``fs`` edited alone), else left out too (they rest on another rate). They say how many
+channels it holds too: ``channel_names`` past that count (past a board's 8 when no STATUS
+frame is read) name no channel of it, and are left out with one line.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 from collections.abc import Callable
 from datetime import datetime, timedelta
 from pathlib import Path
 
-from cmsensord.protocol import Decoder, FrameType, decode_status
+from cmsensord.config import MAX_CHANNELS
+from cmsensord.protocol import Decoder, FrameType, Status, decode_status
 
-__all__ = ["CAPTURE_UNITS", "checked", "status_fs"]
+__all__ = ["CAPTURE_UNITS", "capture_status", "checked"]
 
 #: the units a capture holds its channels in (an accelerometer's, a microphone's)
 CAPTURE_UNITS = ("m/s2", "Pa")
@@ -28,23 +33,26 @@ CAPTURE_UNITS = ("m/s2", "Pa")
 _HEAD_BYTES = 1 << 16
 #: seconds in the recording past which a time is no time (about 3,000 years)
 _MAX_S = 1e11
+#: samples past which a snapshot's length is no length (the most a float holds exactly)
+_MAX_SAMPLES = 1 << 53
 
 
-def status_fs(capture: str | Path) -> int | None:
-    """The sampling rate the capture's first STATUS frame names (None: no readable one in its
-    first ``_HEAD_BYTES``)."""
+def capture_status(capture: str | Path) -> Status | None:
+    """The capture's first STATUS frame with a positive rate (None: no readable one in its first
+    ``_HEAD_BYTES``, or the capture is no regular file: a FIFO is not read, never waited on)."""
     try:
-        with open(capture, "rb") as f:
-            head = f.read(_HEAD_BYTES)
-    except OSError:
+        fd = os.open(capture, os.O_RDONLY | os.O_NONBLOCK)
+        with open(fd, "rb") as f:
+            head = f.read(_HEAD_BYTES) if stat.S_ISREG(os.fstat(fd).st_mode) else b""
+    except (OSError, ValueError):
         return None
     for frame in Decoder().feed(head):
         if frame.type == FrameType.STATUS:
             try:
-                fs = decode_status(frame.payload).fs
+                status = decode_status(frame.payload)
             except ValueError:
                 continue
-            return fs if fs > 0 else None
+            return status if status.fs > 0 else None
     return None
 
 
@@ -55,7 +63,13 @@ def _shown(value: object) -> str:
 
 
 def _number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """Whether ``value`` is a finite number (a whole number past a float's range is not)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _positive(value: object) -> str | None:
@@ -101,9 +115,10 @@ def _snapshot(s: object) -> tuple[str, str] | None:
     """(the bad field of one snapshot, why), or None when it is usable."""
     if not isinstance(s, dict):
         return "", "not an object"
-    for key, why in (("start_s", None if _number(s.get("start_s")) and s["start_s"] >= 0 else "not a board second"),
+    for key, why in (("start_s", None if _number(s.get("start_s")) and 0 <= s["start_s"] < _MAX_S
+                      else "not a board second"),
                      ("length", None if isinstance(s.get("length"), int) and not isinstance(s["length"], bool)
-                      and s["length"] >= 0 else "not a number of samples"),   # 0: shorter than a block
+                      and 0 <= s["length"] <= _MAX_SAMPLES else "not a number of samples"),   # 0: shorter than a block
                      ("source", _text(s.get("source"))),
                      ("pct_of_record", None if _number(s.get("pct_of_record")) else "not a number"),
                      ("source_time_s", None if s.get("source_time_s") is None or _number(s["source_time_s"])
@@ -151,16 +166,30 @@ def _date(meta: dict) -> str | None:
     return f"source_start is {_shown(start)} ({why}): {_FIELDS['source_start'][1]}"
 
 
-def checked(meta: dict, fs: int | None) -> tuple[dict, list[str]]:
-    """``meta`` without the fields it cannot use, ``fs`` (the capture's STATUS rate; None: not
-    known) as its ``fs``, and one line on each field left out or replaced (see the module
-    docstring)."""
+def _names_past(meta: dict, status: Status | None) -> str | None:
+    """A line when ``channel_names`` names more channels than the capture holds (``status``: its
+    first STATUS frame; None: a board's most), which are then cut to that many."""
+    names, held = meta["channel_names"], MAX_CHANNELS if status is None else status.n_channels
+    if len(names) <= held:
+        return None
+    meta["channel_names"] = names[:held]
+    holds = f"its STATUS frames' {held} channel(s)" if status else f"more than a board's {held} channels"
+    return f"channel_names holds {len(names)} names, {holds}: the names past the first {held} are not used"
+
+
+def checked(meta: dict, status: Status | None) -> tuple[dict, list[str]]:
+    """``meta`` without the fields it cannot use, the rate of ``status`` (the capture's first
+    STATUS frame; None: not known) as its ``fs``, its channel names no more than that frame's
+    channels, and one line on each field left out, replaced or cut (see the module docstring)."""
     meta, lines = dict(meta), []
+    fs = None if status is None else status.fs
     for key, (check, lost) in _FIELDS.items():
         why = check(meta[key]) if key in meta else None
         if why:
             lost = f"the STATUS frames' {fs} Hz is used" if key == "fs" and fs is not None else lost
             lines.append(f"{key} is {_shown(meta.pop(key))} ({why}): {lost}")
+    line = _names_past(meta, status) if "channel_names" in meta else None
+    lines += [line] if line else []
     if fs is not None and "fs" in meta and meta["fs"] != fs:
         lines.append(f"fs is {_shown(meta['fs'])} Hz, its STATUS frames' {fs} Hz: the STATUS rate is used")
     if fs is not None:

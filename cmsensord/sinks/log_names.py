@@ -19,7 +19,7 @@ import os
 import re
 from pathlib import Path
 
-from cmsensord.errors import CmsensordError
+from cmsensord.errors import CmsensordError, file_kind
 
 __all__ = ["KEPT", "SALVAGED", "log_files", "log_name", "log_paths", "next_name", "order_key", "salvaged_path"]
 
@@ -107,8 +107,8 @@ def salvaged_path(part: str | Path) -> Path:
 def log_paths(names: list[str]) -> list[Path]:
     """The files of ``names`` (files, or directories of logs), in order, each once.
 
-    Raises CmsensordError (one line) for a name that does not exist or a
-    directory without logs.
+    Raises CmsensordError (one line) for a name that does not exist, is no regular file
+    (a FIFO is never opened: nothing waits for a writer) or a directory without logs.
     """
     out: list[Path] = []
     for name in names:
@@ -122,6 +122,15 @@ def log_paths(names: list[str]) -> list[Path]:
         elif p.is_file():
             out.append(p)
         else:
-            raise CmsensordError(f"{name}: file not found")
+            raise CmsensordError(_not_a_log(name))
     seen: set[Path] = set()
     return [p for p in out if not (p.resolve() in seen or seen.add(p.resolve()))]   # type: ignore[func-returns-value]
+
+
+def _not_a_log(name: str) -> str:
+    """The line on ``name``, neither a directory nor a regular file: not there, or what it is."""
+    try:
+        mode = os.stat(name).st_mode
+    except (OSError, ValueError):
+        return f"{name}: file not found"
+    return f"{name}: not a regular file (a {file_kind(mode)}): give an MCAP log or a directory of them"
