@@ -268,40 +268,40 @@ def replay_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _config_for(path: str | None, capture: str | None = None) -> tuple[Config, bool]:
-    """Load a config (an empty one said in a warning line, by load_config; ISO zones of a machine
-    class it does not set, in a note for a ``capture`` replayed of RAW frames, whose records carry a zone:
-    :func:`~cmsensord.config.indicators.zones_assumed`); auto_channels when the file does not list
-    channels."""
-    from cmsensord.config.indicators import zones_assumed
-
-    raw: object = None
+def _config_for(path: str | None) -> tuple[Config, bool]:
+    """Load a config (an empty one said in a warning line, by load_config); auto_channels when the
+    file does not list channels."""
     if path is None:
-        cfg = default_config(1)
-    else:
-        cfg = load_config(path)
-        import yaml  # only to see whether the file lists channels and sets the machine class
-        try:
-            raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-        except (OSError, yaml.YAMLError):
-            raw = {}
-    given = raw if isinstance(raw, dict) else {}
-    note = zones_assumed(cfg.indicators, given.get("indicators"))
-    if note and capture is not None and _holds_raw(capture):
-        print(note, file=sys.stderr)
-    return cfg, path is None or not given.get("channels")
+        return default_config(1), True
+    cfg = load_config(path)
+    return cfg, not _section(path, "channels")
 
 
-def _holds_raw(capture: str) -> bool:
-    """Whether the first 256 KB of the file ``capture`` hold a RAW frame (False: none, or unreadable)."""
-    from cmsensord.protocol import FrameType, iter_frames
+def _section(path: str | None, key: str) -> object:
+    """The top-level section ``key`` of the configuration file ``path`` as written (None: no file,
+    no such section, or not readable as YAML: load_config has said why)."""
+    import yaml  # only to see what the file itself sets
 
+    if path is None:
+        return None
     try:
-        with open(capture, "rb") as f:
-            head = f.read(1 << 18)
-    except OSError:
-        return False
-    return any(f.type == FrameType.RAW for f in iter_frames(head)[0])
+        raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    except (OSError, yaml.YAMLError):
+        return None
+    return raw.get(key) if isinstance(raw, dict) else None
+
+
+def _zones_note(cfg: Config, path: str | None, proc) -> None:
+    """After a replay whose board was in RAW mode (its records carry a zone), the note that the
+    ISO 10816-3 zones were graded for a machine class the configuration does not set
+    (:func:`~cmsensord.config.indicators.zones_assumed`)."""
+    from cmsensord.config.indicators import zones_assumed
+    from cmsensord.protocol import MODE_RAW
+
+    st = proc.setup.status
+    note = zones_assumed(cfg.indicators, _section(path, "indicators")) if st is not None else None
+    if note and st.mode == MODE_RAW:
+        print(note, file=sys.stderr)
 
 
 def _with_output(cfg: Config, out: str | None, akf_trace: bool) -> Config:
@@ -331,9 +331,11 @@ def _run_vkf(args: argparse.Namespace) -> int:
 
 def _run_replay(args: argparse.Namespace) -> int:
     """``cmsensord replay``: a capture through the daemon's Processor."""
-    cfg, auto = _config_for(args.sub_config, args.capture)
+    cfg, auto = _config_for(args.sub_config)
     cfg = _with_output(cfg, args.sub_out, args.sub_trace)
-    return replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed, publish=args.sub_publish)[0]
+    code, _, proc = replay(args.capture, cfg, auto_channels=auto, speed=args.sub_speed, publish=args.sub_publish)
+    _zones_note(cfg, args.sub_config, proc)
+    return code
 
 
 def _print_default_config() -> int:

@@ -1,7 +1,7 @@
-"""The ISO 10816-3 machine class the zones are graded for, said once at the start of a replay or
-a simulated board in RAW mode (an RMS-mode board's records carry no zone) when the configuration
-does not set it; `cmsensord --simulate --help` gives the faulty motor's zone as the daemon grades
-it."""
+"""The ISO 10816-3 machine class the zones are graded for, said once after a replay's summary or
+at the start of a simulated board, in RAW mode (an RMS-mode board's records carry no zone), when
+the configuration does not set it; `cmsensord --simulate --help` gives the faulty motor's zone as
+the daemon grades it."""
 
 from __future__ import annotations
 
@@ -27,12 +27,12 @@ def capture(tmp_path_factory):
 def test_replay_without_a_machine_class_says_the_one_assumed(tmp_path, capture):
     p = run_module("cmsensord", "replay", str(capture), "--out", str(tmp_path / "a"))
     assert p.returncode == 0, p.stderr
-    assert p.stderr.splitlines()[0] == NOTE
+    assert p.stderr.splitlines()[-1] == NOTE
     (tmp_path / "one.yaml").write_text("indicators: {machine_group: 1}\n")
     p = run_module("cmsensord", "replay", str(capture), "--config", str(tmp_path / "one.yaml"),
                    "--out", str(tmp_path / "b"))
     assert p.returncode == 0, p.stderr
-    assert p.stderr.splitlines()[0] == NOTE.replace("group 2 (15-300 kW)", "group 1 (> 300 kW)").replace(
+    assert p.stderr.splitlines()[-1] == NOTE.replace("group 2 (15-300 kW)", "group 1 (> 300 kW)").replace(
         "1.4/2.8/4.5", "2.3/4.5/7.1").replace("machine_group and foundation not set", "foundation not set")
 
 
