@@ -366,6 +366,11 @@ def _track(col, cfg, proc, sink, bandwidth_hz, poles, bar: Bar) -> dict:
     fs_d = fs / q
     idx = s0 + np.arange(0, n, q)
     hz, turns, valid = tacho.evaluate(idx)
+    if not valid.any() and any(c.order is not None for c in cfg.orders.components):
+        edges = sum(len(e) for e in col.tacho_edges)
+        raise ValueError(f"the tacho gives no shaft speed anywhere in the record ({edges} edge(s) in "
+                         f"{n / fs:.1f} s): the orders have no shaft angle to follow; give a record with the "
+                         "shaft turning")
     yd = decimate(y, q, ftype="fir", axis=0, zero_phase=True) if q > 1 else y
     yd = yd[:len(idx)]
     spec = [c.order if c.order is not None else Hz(c.freq_hz) for c in comps]

@@ -103,6 +103,22 @@ def test_a_bandwidth_the_filter_cannot_handle_is_one_line_and_leaves_nothing(tmp
     assert not out.exists()
 
 
+def test_a_record_of_a_shaft_at_a_standstill_is_one_line_naming_the_tacho(tmp_path):
+    """The first second of the whirl run-up (one tacho edge: no speed anywhere): the orders have
+    no shaft angle (guards against every order's phase 0, the solve's "phase rows 0 and 1 are
+    identical: one component asked for twice", blaming the components)."""
+    whole = capture(tmp_path, "whirl", 3.0)
+    cap = tmp_path / "standstill.bin"
+    cap.write_bytes(whole.read_bytes()[:54000])
+    out = tmp_path / "out"
+    r = cmsensord("vkf", str(cap), "--out", str(out))
+    assert r.returncode == 2 and not out.exists(), r.stderr
+    assert r.stderr.strip().splitlines()[-1] == (
+        f"cmsensord: {cap}: batch VKF at 1 Hz, 2 pole(s): the tacho gives no shaft speed anywhere in the "
+        "record (1 edge(s) in 1.0 s): the orders have no shaft angle to follow; give a record with the shaft "
+        "turning")
+
+
 def test_failed_vkf_leaves_an_existing_output_directory_as_it_was(tmp_path):
     cap = capture(tmp_path, "close_orders", 5.0)
     out = tmp_path / "out"
