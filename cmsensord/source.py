@@ -322,6 +322,10 @@ class SerialSource(FrameSource):
         self.stop()
 
 
+#: a paced frame is handed on at most this long (s, wall clock) before it is due
+SLICE_S = 0.02
+
+
 class Paced(FrameSource):
     """``source`` at ``speed`` times the board's clock (1: real time).
 
@@ -330,9 +334,11 @@ class Paced(FrameSource):
     first frame of its time segment, plus the board time of the segments before it: a
     board reset (:func:`~cmsensord.monitor.clock.is_reset`, as the daemon's segments
     decide one) starts a segment, paced from its own first frame (a board up for days
-    that resets is not slept through the days its t0 goes back or on).  After the
-    consumer is done with a batch, the wrapper sleeps until ``clock()`` reaches the
-    start time plus that board time / speed.  ``clock`` and ``sleep`` are injectable.
+    that resets is not slept through the days its t0 goes back or on).  A frame is handed
+    on once ``clock()`` is within ``SLICE_S`` of the start time plus its board time / speed:
+    a batch (a read of the file: seconds of an RMS board) is handed on in slices, each when
+    its first frame is due, the wrapper sleeping between them, and after the last slice until
+    the batch's last frame is due.  ``clock`` and ``sleep`` are injectable.
     """
 
     def __init__(self, source: FrameSource, speed: float, *,
@@ -356,19 +362,25 @@ class Paced(FrameSource):
         first = last = 0                    # t0_unwrapped of the segment's first frame, of the newest
         seen = False
         for frames in self.source:
-            yield frames
-            if not frames:
-                continue
-            for f in frames:
+            start = 0                       # the first frame of the batch not handed on yet
+            for i, f in enumerate(frames):
                 t = f.t0_unwrapped
                 if not seen or is_reset(t, last, self.fs, self.block_len):
                     done_s += (last - first) / self.fs
                     first, seen = t, True
                 last = t
+                wait = t_start + (done_s + (t - first) / self.fs) / self.speed - self.clock()
+                if wait > SLICE_S and i > start:    # due later: the frames before it go now
+                    yield frames[start:i]
+                    start = i
+                    wait = t_start + (done_s + (t - first) / self.fs) / self.speed - self.clock()
+                if wait > SLICE_S:
+                    self.sleep(wait)
                 if f.type == FrameType.STATUS:      # after its own check, as the daemon takes it
                     self._status(f.payload)
-            wait = t_start + (done_s + (last - first) / self.fs) / self.speed - self.clock()
-            if wait > 0:
+            yield frames[start:]
+            wait = t_start + (done_s + (last - first) / self.fs) / self.speed - self.clock() if frames else 0.0
+            if wait > 0:                    # the batch's last frame is due: the run ends on time
                 self.sleep(wait)
 
     def _status(self, payload: bytes) -> None:

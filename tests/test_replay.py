@@ -4,6 +4,7 @@ with line noise (real processes on a real pty)."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -39,6 +40,23 @@ def test_replay_paced_with_speed_shows_a_progress_bar_on_a_terminal(tmp_path):
     a = read_messages(next((tmp_path / "fast").glob("*.mcap")))
     b = read_messages(next((tmp_path / "paced").glob("*.mcap")))
     assert comparable(a) == comparable(b)
+
+
+def test_a_paced_replay_interrupted_has_replayed_what_its_pace_allows(tmp_path):
+    """A 20-s RMS capture (one read of the file holds all of it) at --speed 4, Ctrl-C after 2 s:
+    about 8 s of board time replayed, not the whole read (guards against 20.0 s of ADC time in
+    2.0 s wall: the read handed on at once, the replay 12 s ahead of its pace)."""
+    cap = tmp_path / "cap.bin"
+    Board(make_scenario("healthy", n_channels=1, duration_s=20.0, seed=0), BoardConfig(n_channels=1)).write_capture(
+        cap, 20.0)
+    p = spawn([sys.executable, "-m", "cmsensord", "replay", str(cap), "--speed", "4", "--out", str(tmp_path / "o")],
+              stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)
+    p.send_signal(signal.SIGINT)
+    err = p.communicate(timeout=30)[1]
+    assert p.returncode == 130, err
+    adc, wall = (float(x) for x in re.search(r"([\d.]+) s of ADC time in ([\d.]+) s wall", err).groups())
+    assert 4 * wall - 2.0 <= adc <= 4 * wall + 0.5, err
 
 
 def test_a_warning_during_a_replay_on_a_terminal_starts_a_line_of_its_own(tmp_path):

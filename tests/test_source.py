@@ -102,6 +102,20 @@ def test_paced_source_follows_the_board_clock_at_speed(speed):
     assert all(s > 0 for s in clock.sleeps)
 
 
+@pytest.mark.parametrize("speed", [1.0, 4.0])
+def test_a_paced_batch_of_seconds_is_handed_on_as_its_frames_are_due(speed):
+    """2 s of board time in one read (an RMS capture's chunk holds tens of seconds): each frame
+    is handed on at most 20 ms (``SLICE_S``) before its board time / speed (guards against the
+    whole read handed on at once, the replay seconds ahead of --realtime)."""
+    clock = FakeClock()
+    src = Paced(ByteStreamSource.of(rms_stream(seconds=2), 1 << 20), speed, clock=clock, sleep=clock.sleep)
+    early = []
+    for batch in src:
+        early += [(f.t0_unwrapped / 25000 / speed) - (clock.t - 100.0) for f in batch]
+    assert len(early) == 202 and max(early) <= 0.02 + 1e-9, max(early)
+    assert clock.t - 100.0 == pytest.approx(199 * 250 / 25000 / speed)
+
+
 def test_paced_source_does_not_sleep_when_processing_is_slower():
     clock = FakeClock()
     src = Paced(ByteStreamSource.of(rms_stream(seconds=1), 500), 1.0, clock=clock, sleep=clock.sleep)
