@@ -217,6 +217,11 @@ def test_glob_of_snapshot_files_in_natural_order_with_gaps_and_remainders(tmp_pa
             "dropped (500 samples in all, 10.00 %); --block-len 100 (a divisor of 1000) keeps them") in err
     meta = sidecar(out)
     assert [s["dropped"] for s in meta["snapshots"]] == [100] * 5 and meta["blocks"] == 15
+    # the divisor that keeps them gives another block rate than 100 a second: said beside it
+    assert run(str(d), "--fs", "12800", "--channels", "3", "--out", tmp_path / "rate.bin") == 0
+    assert ("each 1000-sample snapshot ends with 104 sample(s) that do not fill a 128-sample block: dropped "
+            "(520 samples in all, 10.40 %); --block-len 125 (a divisor of 1000) keeps them (102.4 blocks a second, "
+            "not 100: a replay's decision_rule warning says what that changes)") in capsys.readouterr().err
     keep = np.concatenate([x[0, k * 1000:k * 1000 + 900] for k in range(5)])
     assert_within_one_count(decode(out), np.round(keep[None], 5))
 

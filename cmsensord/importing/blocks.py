@@ -99,7 +99,10 @@ def remainder_note(rec: Recording, plan: BlockPlan) -> str | None:
     if len(lengths) == 1:
         n = lengths.pop()
         d = _divisor_near(n, rec.fs / 100)
-        fix = f"; --block-len {d} (a divisor of {n}) keeps them" if d else ""
+        rate = rec.fs / d if d else 100.0
+        off = (f" ({rate:.4g} blocks a second, not 100: a replay's decision_rule warning says what that changes)"
+               if abs(rate - 100.0) > 1.0 else "")
+        fix = f"; --block-len {d} (a divisor of {n}) keeps them{off}" if d else ""
         what = "the recording" if len(rec.snapshots) == 1 else f"each {n}-sample snapshot"
         return (f"{what} ends with {n % L} sample(s) that do not fill a {L}-sample block: dropped "
                 f"({total} samples in all, {pct:.2f} %){fix}")
