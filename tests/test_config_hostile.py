@@ -48,8 +48,14 @@ def _refused(tmp_path, config, timeout=30) -> str:
     ("link: {port: /dev/ttyACM0, baud: -" + "9" * 5000 + "}\n",
      "line 1, column 34: number too large (a whole number of 5,001 characters)"),
     ("commissioned:\n  date: 2024-13-45\n", "line 2, column 9: not a date (month must be in 1..12)"),
+    ('link:\n  baud: !!int ""\n', "line 2, column 9: not a whole number ('')"),
+    ('link:\n  baud: !!int "12abc"\n', "line 2, column 9: not a whole number ('12abc')"),
+    ('link:\n  baud: !!float ""\n', "line 2, column 9: not a number ('')"),
+    ('commissioned:\n  date: !!timestamp ""\n', "line 2, column 9: not a date ('')"),
+    ('output:\n  status_line: !!bool "maybe"\n', "line 2, column 16: not true or false ('maybe')"),
 ], ids=["alias-bomb", "recursive-alias", "nul-in-output-dir", "nul-in-port", "baud-too-large", "too-large",
-        "int-past-4300-digits", "negative-int-past-4300-digits", "impossible-date"])
+        "int-past-4300-digits", "negative-int-past-4300-digits", "impossible-date", "empty-tagged-int",
+        "tagged-int-not-digits", "empty-tagged-float", "empty-tagged-date", "tagged-bool-not-a-bool"])
 def test_hostile_file_is_one_line_config_error(tmp_path, text, message):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(text)

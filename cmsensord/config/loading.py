@@ -336,15 +336,28 @@ class _StrictLoader(yaml.SafeLoader):
 
     def construct_object(self, node: Any, deep: bool = False) -> Any:
         """A node's value; a scalar Python cannot make one of (a whole number of more than
-        4,300 digits, a date with month 13) is refused with its place in the file."""
+        4,300 digits, a date with month 13, an empty ``!!int``) is refused with its place in the
+        file (:func:`_unmade`)."""
         try:
             return super().construct_object(node, deep=deep)
-        except (ValueError, OverflowError) as err:
+        except (ValueError, OverflowError, IndexError, KeyError, AttributeError, TypeError) as err:
+            if not isinstance(node, yaml.ScalarNode):
+                raise
             mark = node.start_mark
-            why = (f"number too large (a whole number of {len(node.value):,} characters)"
-                   if node.tag == "tag:yaml.org,2002:int" else
-                   f"not a date ({err})" if node.tag == "tag:yaml.org,2002:timestamp" else str(err))
-            raise _TooLarge(f"line {mark.line + 1}, column {mark.column + 1}: {why}") from None
+            raise _TooLarge(f"line {mark.line + 1}, column {mark.column + 1}: {_unmade(node, err)}") from None
+
+
+def _unmade(node: yaml.ScalarNode, err: Exception) -> str:
+    """Why the scalar ``node`` (its tag, as written or resolved) makes no value: a whole number
+    past the digits Python converts, or the value is not what its tag says."""
+    value, kind = str(node.value), node.tag.rpartition(":")[2]
+    shown = repr(value if len(value) <= 40 else value[:37] + "...")
+    if kind == "int" and value.lstrip("+-").replace("_", "").isdigit():
+        return f"number too large (a whole number of {len(value):,} characters)"
+    if kind == "timestamp" and isinstance(err, ValueError) and str(err):
+        return f"not a date ({err})"
+    what = {"int": "a whole number", "float": "a number", "timestamp": "a date", "bool": "true or false"}
+    return f"not {what.get(kind, f'a YAML {kind}')} ({shown})"
 
 
 _StrictLoader.add_constructor(
