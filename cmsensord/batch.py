@@ -4,7 +4,10 @@
 the file holds the recursive orders, severity and events as a replay would)
 and, beside them, the zero-phase second-generation VKF of the whole record
 (``dsp.vkf_batch.vkf2``, all components coupled) on ``/cm/<channel>/orders``
-with ``method: "batch"``, in the same 0.1 s blocks and on the same time base.
+with ``method: "batch"``, in the same 0.1 s blocks and on the same time base. Of an import,
+its log says the capture and the recording's timeline as a replay's does, board second 0 at
+the run's start (:class:`~cmsensord.service.replay.RecordingHead`): a report draws it in that
+recording, over its time.
 
 Steps: RAW counts -> m/s² (STATUS scale/offset or the configuration), the
 tacho's shaft angle at every sample (``dsp.tacho``, fed the whole record and
@@ -90,6 +93,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     CmsensordError with one line, and the files this run wrote are deleted: nothing is left
     behind. Ctrl-C before the log is complete does the same, raising
     :class:`~cmsensord.errors.Interrupted` that says how far the run got."""
+    from cmsensord.service.replay import RecordingHead
     from cmsensord.service.sink import open_sink, publish_lines, send_queued
 
     t_start = time.monotonic()
@@ -97,7 +101,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     try:
         require_frames(capture, "vkf")
         _tacho_first(capture, cfg.tacho.input)
-        cfg, auto_channels = _capture_config(capture, cfg, auto_channels)
+        cfg, auto_channels, meta = _capture_config(capture, cfg, auto_channels)
         _room_for(capture, cfg, poles, auto_channels)
     except KeyboardInterrupt:
         raise Interrupted(f"vkf: interrupted (Ctrl-C) reading {capture}, before its replay: nothing "
@@ -105,11 +109,12 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
     done = replayed = False
-    sink = open_sink(cfg, {"source": str(capture), "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
+    head = RecordingHead(capture, meta)     # an import's: on its recording's time, as its replays
+    sink = open_sink(cfg, {**head.metadata, "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
                      publish=publish, command="vkf")
     try:
         sink.hold_all()     # the batch orders come after the whole run: held to write the file in log-time order
-        proc, col = _replay(capture, cfg, source, sink, auto_channels)
+        proc, col = _replay(capture, cfg, source, sink, auto_channels, head)
         replayed = True
         bar = Bar(1 + sum(ch.kind != "microphone" for ch in proc.channels), f"vkf {Path(capture).name}: batch VKF")
         try:
@@ -140,9 +145,10 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     return sink.paths, summary
 
 
-def _capture_config(capture: str, cfg: Config, auto_channels: bool) -> tuple[Config, bool]:
+def _capture_config(capture: str, cfg: Config, auto_channels: bool) -> tuple[Config, bool, dict]:
     """``cfg`` with the capture's channels and settings (an import's sidecar, as ``cmsensord
-    replay`` takes them), their warnings logged; and whether the channels are the board's."""
+    replay`` takes them), their warnings logged; whether the channels are the board's; the
+    sidecar."""
     from cmsensord.importing.capture_settings import capture_settings
     from cmsensord.importing.channel_names import capture_channels
     from cmsensord.importing.sidecar import sidecar
@@ -152,16 +158,19 @@ def _capture_config(capture: str, cfg: Config, auto_channels: bool) -> tuple[Con
     cfg, _, said = capture_settings(cfg, meta)
     for warning in warnings + said:
         logging.getLogger("cmsensord").warning("%s", warning)
-    return cfg, auto_channels
+    return cfg, auto_channels, meta
 
 
-def _replay(capture: str, cfg: Config, source: CaptureSource, sink, auto_channels: bool):
+def _replay(capture: str, cfg: Config, source: CaptureSource, sink, auto_channels: bool, head):
     """The capture through the daemon's Processor, its RAW blocks and tacho edges collected,
     with a progress bar on a terminal: (the Processor, the :class:`_Collector`); a
-    CmsensordError for a capture the batch VKF cannot take."""
+    CmsensordError for a capture the batch VKF cannot take. ``head``: the log's
+    :class:`~cmsensord.service.replay.RecordingHead`, whose board second 0 the Processor's clock
+    is anchored at (an import's, as ``cmsensord replay`` does)."""
     from cmsensord.monitor.processor import Processor
 
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict)
+    head.anchor(proc)
     col = _Collector()
     progress = Progress(source.size, f"vkf {Path(capture).name}: replay")
     try:

@@ -212,7 +212,8 @@ def test_the_summary_of_a_replayed_import_gives_each_event_its_time_in_the_recor
     assert changes and all(re.fullmatch(r"  \S+ \(2004-02-12 \d\d:\d0:01 in the recording\) severity_change .*", ln)
                            for ln in changes), changes
     assert [ln for ln in lines if re.fullmatch(re.escape(
-        "  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshots over 6.5 h of the recording "
+        f"  cmsensord: {{'source': '{tmp_path.resolve() / 'r.bin'}', 'recording_timeline': '40 snapshots over 6.5 h "
+        "of the recording "
         "from 2004-02-12T10:40:00', 'run': '") + RUN + "'}", ln)], lines
     assert max(map(len, lines)) < 300                    # no 60-kB line of the timeline
 
@@ -258,7 +259,8 @@ def test_snapshots_without_times_are_drawn_in_percent_of_the_record_not_the_repl
     lines = cmsensord("summary", str(log), cwd=tmp_path).stdout.splitlines()
     assert any(re.fullmatch(r"end: \S+ \(100\.0 % of the record\)", ln) for ln in lines), lines
     assert [ln for ln in lines if re.fullmatch(re.escape(
-        "  cmsensord: {'source': 'r.bin', 'recording_timeline': '40 snapshot(s) without times, "
+        f"  cmsensord: {{'source': '{tmp_path.resolve() / 'r.bin'}', 'recording_timeline': '40 snapshot(s) "
+        "without times, "
         "40 s of signal end to end', 'run': '") + RUN + "'}", ln)], lines
 
 

@@ -26,7 +26,6 @@ import numpy as np  # noqa: E402
 from cmsensord.dsp.indicators.iso_zones import BOUNDARIES_MM_S  # noqa: E402
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
 from cmsensord.report.marks import alarm_levels, event_lines  # noqa: E402
-from cmsensord.report.runs import ident  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 from cmsensord.sinks.indicator_schema import DEFECT_LINES  # noqa: E402
 
@@ -109,9 +108,9 @@ def _who(of: ChannelData | Capture) -> str:
 
 def _ident(of: ChannelData | Capture) -> str:
     """The start of a figure's id (and its PNG's name): the channel, after its recording's
-    (:func:`.runs.ident`) among several recordings."""
+    (its :attr:`.runs.Recording.ident`) among several recordings."""
     name = of.name if isinstance(of, ChannelData) else of.channel
-    return f"{ident(of.recording)}-{name}" if of.recording else name
+    return f"{of.recording_id}-{name}" if of.recording else name
 
 
 def legend_outside(ax: Any, pad: float = 0.01) -> None:

@@ -16,7 +16,7 @@ import json
 from typing import Any
 
 from cmsensord.report.log_data import MAX_EVENTS, LogData
-from cmsensord.report.runs import BOARD_LOGS, ident
+from cmsensord.report.runs import BOARD_LOGS
 
 __all__ = ["render_page"]
 
@@ -78,13 +78,15 @@ def _of(data: LogData) -> str:
 
 
 def _id(data: LogData, name: str) -> str:
-    """An element's id, after its recording's among several recordings."""
-    return html.escape(f"{ident(data.recording)}-{name}" if data.recording else name)
+    """An element's id, after its recording's (:attr:`.runs.Recording.ident`) among several recordings."""
+    return html.escape(f"{data.recording_id}-{name}" if data.recording else name)
 
 
 def _file_state(f: Any) -> str:
     if f.left_out:
         return html.escape(f.left_out)
+    if f.batch_only:
+        return "read for its batch VKF orders only (the rest repeats the replay's); " + _read_state(f)
     if f.not_read():
         return html.escape(f"messages left out: {f.not_read()}; ") + _read_state(f)
     return _read_state(f)

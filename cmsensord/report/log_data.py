@@ -86,6 +86,7 @@ class Capture:
     time_ns: int
     parts: dict[str, dict[str, Any]] = field(default_factory=dict)
     recording: str = ""             # its recording's name, among others (:attr:`LogData.recording`)
+    recording_id: str = ""          # and its ident (:attr:`LogData.recording_id`)
 
 
 @dataclass
@@ -94,6 +95,7 @@ class ChannelData:
 
     name: str
     recording: str = ""             # its recording's name, among others (:attr:`LogData.recording`)
+    recording_id: str = ""          # and its ident (:attr:`LogData.recording_id`)
     severity: Trend = field(default_factory=Trend)
     anomaly: Trend = field(default_factory=Trend)
     level: Trend = field(default_factory=Trend)      # the combined severity's level / baseline
@@ -115,7 +117,8 @@ class ChannelData:
 class FileInfo:
     """One file read: its path, size and how far it could be read (``skipped``: the damage
     read past; ``error``: the damage that ended the read, ``cut``: what ending before the footer lost);
-    ``left_out``: why it was not read."""
+    ``left_out``: why it was not read; ``batch_only``: only its batch VKF orders were read (a
+    ``vkf`` run beside a replay of its recording: :mod:`.runs`)."""
 
     path: str
     bytes: int
@@ -128,6 +131,7 @@ class FileInfo:
     skipped: list[str] = field(default_factory=list)
     left_out: str | None = None
     cut: str | None = None          # what ending before the footer lost (a .part's too)
+    batch_only: bool = False
 
     def not_read(self) -> str:
         """Its messages left out and why, in words; "" when none is."""
@@ -155,6 +159,8 @@ class LogData:
         self.notes: list[str] = []      # lines on the logs left out (:mod:`.runs`)
         #: the recording's name when the logs hold more than one (:mod:`.runs`), else ""
         self.recording = ""
+        #: its ident among several recordings (:attr:`.runs.Recording.ident`: ids, PNG names), else ""
+        self.recording_id = ""
         self.axis = TimeAxis()          # how times are shown
         #: a log time to the time shown, ``begins``: a record's start (the file's :meth:`TimeAxis.shown`)
         self.place: Callable[..., int] = lambda t_ns, begins=False: t_ns
@@ -173,7 +179,7 @@ class LogData:
     def channel(self, name: str) -> ChannelData:
         ch = self.channels.get(name)
         if ch is None:
-            ch = self.channels[name] = ChannelData(name, self.recording)
+            ch = self.channels[name] = ChannelData(name, self.recording, self.recording_id)
         return ch
 
     def begin_file(self, metadata: dict[str, str]) -> None:
@@ -388,7 +394,7 @@ class LogData:
         if len(ch.captures) >= MAX_CAPTURES:
             ch.captures_omitted += part == "waveform"
             return
-        ch.captures.append(Capture(ch.name, t_ns, {part: msg}, ch.recording))
+        ch.captures.append(Capture(ch.name, t_ns, {part: msg}, ch.recording, ch.recording_id))
 
 
 def _bearing_lines(msg: dict[str, Any]) -> dict[str, float]:

@@ -7,12 +7,14 @@ files included), in the order they were opened
 reader (:class:`~cmsensord.report.fast_read.FastScan`), so a ``.part``
 file of a crashed daemon or a damaged file gives what it holds up to the
 damage. The logs of each recording are read apart (:mod:`.runs`: each imported recording, and
-the logs that are no replay of an import); of an imported recording replayed more than once,
-only the newest replay.
+the logs that are no run of an import); of an imported recording replayed more than once,
+only the newest replay; of its ``vkf`` runs the newest, beside a replay only its batch orders
+(the rest of its log repeats the replay's).
 """
 
 from __future__ import annotations
 
+import json
 from functools import partial
 from pathlib import Path
 from typing import TextIO
@@ -53,20 +55,23 @@ def _read_recording(rec: Recording, heads: dict[Path, dict[str, dict[str, str]]]
     ``named``: one of several recordings, which its name tells apart)."""
     data = LogData()
     data.recording = rec.name if named else ""
+    data.recording_id = rec.ident if named else ""
     data.axis = TimeAxis.of_logs([heads[p] for p in rec.paths])
     data.notes = rec.notes
     data.records_at_start = data.axis.timeline is not None
     for path, zero in zip(rec.paths, rec.zeros):
-        info = FileInfo(str(path), sizes[path])
+        info = FileInfo(str(path), sizes[path], batch_only=path in rec.batch_only)
         data.begin_file(heads[path].get("cmsensord", {}))
         scan = FastScan(path)
         if data.axis.timeline is not None:
             data.place = partial(data.axis.shown, board_zero_ns=zero)
-        for topic, t, raw, offset in scan.messages():
+        for seen, (topic, t, raw, offset) in enumerate(scan.messages(), start=1):
+            if seen % 4096 == 0:
+                progress.update(done + offset)
+            if info.batch_only and not _batch_orders(topic, raw):
+                continue
             data.add(topic, t, raw)
             info.messages += 1
-            if info.messages % 4096 == 0:
-                progress.update(done + offset)
         info.complete, info.error, info.skipped, info.cut = scan.complete, scan.error, scan.skipped, scan.cut
         info.unreadable, info.foreign, info.foreign_topics = data.unreadable, data.foreign, data.foreign_topics
         data.files.append(info)
@@ -74,3 +79,14 @@ def _read_recording(rec: Recording, heads: dict[Path, dict[str, dict[str, str]]]
     data.events.sort(key=lambda e: e[0])
     data.files.extend(FileInfo(str(path), path.stat().st_size, left_out=why) for path, why in rec.left_out)
     return data
+
+
+def _batch_orders(topic: str, raw: bytes) -> bool:
+    """Whether a message is one of the batch VKF's /orders (``method`` "batch")."""
+    if not topic.endswith("/orders") or b'"batch"' not in raw:
+        return False
+    try:
+        msg = json.loads(raw)
+    except (ValueError, RecursionError):
+        return False
+    return isinstance(msg, dict) and msg.get("method") == "batch"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -58,16 +59,13 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     for warning in warnings:
         log.warning("%s", warning)
     cfg, _, said = capture_settings(cfg, meta)     # the snapshots' record length, the files' speed
-    timeline = Timeline.from_sidecar(meta)
-    board_zero_ns = time.time_ns()
-    extra = {"recording_timeline": timeline.to_json(board_zero_ns)} if timeline else {}
+    head = RecordingHead(path, meta)
     # the lag a capture's post_s gives is held however long (no kill -9 to lose it to): the log
     # times are the messages' own, as a daemon's are within 10 s
-    sink = open_sink(cfg, {"source": str(path), **(metadata or {}), **extra}, publish=publish,
+    sink = open_sink(cfg, {**head.metadata, **(metadata or {})}, publish=publish,
                      command="replay", max_lag_s=math.inf)
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=capture.counters.as_dict)
-    if timeline:
-        proc.clock.anchor(0, board_zero_ns)     # the import's board clock starts at 0
+    head.anchor(proc)
     route_sink_events(sink, proc.log)
     alarms = FirstAlarms(proc.log)
     progress = Progress(capture.size, f"replay {Path(path).name}")
@@ -101,6 +99,27 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
             + delay_lines(meta, cfg) + publish_lines(sink) + _interrupted(interrupt, capture)
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return (EXIT_INTERRUPTED if interrupt.seen else 0), out, proc
+
+
+class RecordingHead:
+    """What a log of a capture run through the Processor (``replay``, ``vkf``) says of it in its
+    ``cmsensord`` metadata, by which a report tells the recording it holds (:mod:`cmsensord.report.runs`):
+    the capture's real path (``source``: one capture however its path was spelled) and, of an
+    import, its :class:`~cmsensord.importing.timeline.Timeline` (``recording_timeline``) with
+    the log time of board second 0 (``board_zero_ns``: when the run began), where
+    :meth:`anchor` stamps the Processor's board second 0."""
+
+    def __init__(self, path: str, meta: dict) -> None:
+        self.timeline = Timeline.from_sidecar(meta)
+        self.board_zero_ns = time.time_ns()
+        self.metadata = {"source": os.path.realpath(path)}
+        if self.timeline:
+            self.metadata["recording_timeline"] = self.timeline.to_json(self.board_zero_ns)
+
+    def anchor(self, proc: Processor) -> None:
+        """An import's board clock starts at 0: its second 0 at :attr:`board_zero_ns`."""
+        if self.timeline:
+            proc.clock.anchor(0, self.board_zero_ns)
 
 
 def _interrupted(interrupt: Interrupt, capture: CaptureSource) -> list[str]:
