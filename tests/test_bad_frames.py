@@ -20,6 +20,7 @@ import pytest
 from cmsensord.protocol import Decoder, FrameType, decode_status, encode_frame, encode_status
 from cmsensord.sinks.mcap_sink import read_messages
 from processes import start_daemon, stop
+from test_link_faults import _opened
 from test_read_size import board, by_topic, same_at_every_read_size
 from test_stream_events import replay
 
@@ -254,7 +255,8 @@ def test_a_flood_of_bad_frames_on_a_pty_is_summarised_as_its_replay(tmp_path):
     tty.setraw(slave)
     d = start_daemon(tmp_path, os.ttyname(slave), "--capture", str(tmp_path / "cap.bin"))
     try:
-        time.sleep(1.0)
+        assert _opened(d, os.ttyname(slave), 30.0), "the daemon did not open the port"
+        time.sleep(0.2)                     # pyserial discards what waits at its open
         for i in range(0, len(data), 997):
             os.write(master, data[i:i + 997])
             time.sleep(0.002)
