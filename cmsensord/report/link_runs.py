@@ -9,19 +9,20 @@ they are given. A file without it (written before there was one) starts a new ru
 taking such files in the order of their first diagnostics, it continues the one before: the
 same ``source``, and neither ``uptime_s`` nor ``bytes_received`` went back.
 
-Only two diagnostics messages per file are kept (its first and its newest), so memory does not
-grow with the length of the log.
+Only the counters of two diagnostics messages per file are kept (its first and its newest), so
+memory does not grow with the length of the log.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 
 __all__ = ["LinkRuns"]
 
 
-_Entry = tuple[float, float, int, bytes]      # (uptime_s, bytes_received, t_ns, the message)
+#: a diagnostics message's link counters and queue drops
+Counters = tuple[dict[str, float], float]
+_Entry = tuple[float, float, int, Counters]     # (uptime_s, bytes_received, t_ns, its counters)
 
 
 @dataclass
@@ -45,19 +46,20 @@ class LinkRuns:
         run = metadata.get("run")
         self._files.append(_File(run or None, metadata.get("source", "")))
 
-    def add(self, t_ns: int, uptime_s: float, received: float, data: bytes) -> None:
-        """One diagnostics message of the current file (its ``uptime_s``, ``bytes_received``)."""
+    def add(self, t_ns: int, uptime_s: float, received: float, counters: Counters) -> None:
+        """One diagnostics message of the current file (its ``uptime_s``, ``bytes_received``, its
+        link counters and queue drops)."""
         if not self._files:
             self.begin({})
         f = self._files[-1]
-        entry = (uptime_s, received, t_ns, data)
+        entry = (uptime_s, received, t_ns, counters)
         if f.first is None:
             f.first = entry
         if f.last is None or entry[:2] >= f.last[:2]:
             f.last = entry
 
-    def runs(self) -> list[bytes]:
-        """The newest diagnostics message of each run."""
+    def runs(self) -> list[Counters]:
+        """The counters of the newest diagnostics message of each run."""
         newest: dict[tuple[str, str | int], _Entry] = {}
         legacy: list[tuple[_File, _Entry, _Entry]] = []
         for f in self._files:
@@ -80,12 +82,10 @@ class LinkRuns:
         link: dict[str, int] = {}
         drops = 0
         runs = self.runs()
-        for data in runs:
-            msg = json.loads(data)
-            for k, v in (msg.get("link") or {}).items():
-                if isinstance(v, int | float):
-                    link[k] = link.get(k, 0) + int(v)
-            drops += int(msg.get("queue_drops") or 0)
+        for counters, dropped in runs:
+            for k, v in counters.items():
+                link[k] = link.get(k, 0) + int(v)
+            drops += int(dropped)
         return link, drops, len(runs)
 
 

@@ -8,7 +8,9 @@ boundaries, the velocity bands and the alarm level, each alarm rule's newest ale
 danger levels, the order RMS per 10-rpm speed bin, and at most ``MAX_CAPTURES``
 captured waveforms with their spectra; for the whole log: the events (the first
 ``MAX_EVENTS``, counts of all), the link counters (summed over daemon runs),
-the largest processing lag and queue depth, and the files read. The link counters are
+the largest processing lag and queue depth, and the files read. The fields drawn are read from
+each message by :mod:`.fields`, which checks their types: a message with one of a wrong type
+is left out and counted, as one that is no JSON object is (:class:`FileInfo`). The link counters are
 summed over the runs the files hold (:mod:`.link_runs`: told by each file's metadata, not by
 the order the files come in). Nothing grows with
 the length of the log beyond these bounds.
@@ -26,13 +28,11 @@ that watches a record's value).
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
+from cmsensord.report import fields
 from cmsensord.report.link_runs import LinkRuns
 from cmsensord.report.time_axis import TimeAxis
 from cmsensord.report.trend import Trend
@@ -45,24 +45,8 @@ SPEED_BIN_RPM = 10.0
 #: indicator fields drawn as trends (name, unit)
 INDICATOR_FIELDS = (("velocity_rms_mm_s", "mm/s"), ("accel_rms", "m/s²"), ("envelope_rms", "m/s²"),
                     ("kurtosis", ""), ("crest_factor", ""))
-# The 1-Hz topics are read by the few fields drawn, not decoded whole: json.loads of
-# every message costs more than the rest of a week's report together.
-_NUM = rb'(-?[0-9][0-9.eE+-]*|null)'
-_SEVERITY = re.compile(rb'"severity_index":' + _NUM)
-_ANOMALY = re.compile(rb'"anomaly":\[([^\]]*)\]')
-_INDICATOR = re.compile(rb'"(velocity_rms_mm_s|accel_rms|envelope_rms|kurtosis|crest_factor|velocity_alarm_mm_s)":'
-                        + _NUM)
-_ZONES = re.compile(rb'"zone_boundaries_mm_s":\[([^\]]*)\]')
-_VBAND = re.compile(rb'"velocity_band_hz":\[([^\]]*)\]')
-# a bearing of "bearings" (its name and its "lines" object: one level of objects inside), and
-# a line's amplitude in that object; bearing names are letters, digits, _ and . (the config's)
-_BEARING = re.compile(rb'\{"name":"([A-Za-z0-9_.]+)"[^{}\[\]]*"lines":\{((?:[^{}]|\{[^{}]*\})*)\}')
-_LINE = re.compile(rb'"([a-z0-9_]+)":\{[^{}]*?"amplitude":' + _NUM)
 #: the most velocity bands a channel keeps (one per speed range: 2-1000 or 10-1000 Hz)
 MAX_VELOCITY_BANDS = 4
-_LEVEL = re.compile(rb'"(level_ratio|level_alert|level_danger)":' + _NUM)
-_DIAG = re.compile(rb'"(bytes_received|queue_depth|lag_s|uptime_s)":' + _NUM)
-_INTERVAL = re.compile(rb'"interval_s":' + _NUM)
 _FAST_KINDS = frozenset(("severity", "indicators"))
 #: indicator records kept per channel for the alarm transitions they raised (an event is written
 #: up to the reorder window's lag after its record: seconds, tens of records at most)
@@ -123,7 +107,7 @@ class FileInfo:
     path: str
     bytes: int
     messages: int = 0
-    unreadable: int = 0             # of them, on cmsensord's topics but not its JSON objects
+    unreadable: int = 0             # of them, on cmsensord's topics but not its JSON objects (:mod:`.fields`)
     foreign: int = 0                # of them, on topics not cmsensord's
     foreign_topics: list[str] = field(default_factory=list)     # (a few of) those topics
     complete: bool = False
@@ -192,42 +176,33 @@ class LogData:
     def add(self, topic: str, stamp_ns: int, data: bytes) -> None:
         """One message of any topic, at its log time ``stamp_ns``; topics the report does not draw
         only count; one on a topic not cmsensord's (not ``/cm/...``), or on cmsensord's that is
-        not a JSON object, counts as such (:attr:`foreign`, :attr:`unreadable`) and is not drawn
-        (one whose channel record was lost to damage, ``<channel N>``, only counts: the line on
-        the damage covers it)."""
+        not a JSON object or has a field drawn of a wrong type (:mod:`.fields`), counts as such
+        (:attr:`foreign`, :attr:`unreadable`) and is not drawn (one whose channel record was lost
+        to damage, ``<channel N>``, only counts: the line on the damage covers it)."""
         self.messages += 1
         if not topic.startswith(("/cm/", "<channel ")):
             self.foreign += 1
             if topic not in self.foreign_topics and len(self.foreign_topics) <= SHOWN_TOPICS:
                 self.foreign_topics.append(topic)
             return
-        t_ns = self.place(stamp_ns)
-        if self.start_ns is None or self.end_ns is None:
-            self.start_ns = self.end_ns = t_ns
-        elif t_ns > self.end_ns:
-            self.end_ns = t_ns
-        elif t_ns < self.start_ns:
-            self.start_ns = t_ns
         parts = topic.split("/")
         kind = parts[-1]
         if kind in ("akf", "vibration_estimate") or len(parts) == 1:
+            self._span(self.place(stamp_ns))
             return                      # 100 Hz traces: not drawn, not decoded; or its topic lost
-        if kind == "indicators" and len(parts) == 4 and self.records_at_start:
-            t_ns = self._record_start(parts[2], stamp_ns, data)
         if topic == "/cm/diagnostics" or (kind in _FAST_KINDS and len(parts) == 4):
-            if data[:1] != b"{":                # read by its fields: what is surely no JSON object
-                self.unreadable += 1
-            else:
-                self._scalar_message(parts, kind, t_ns, data)
+            self._scalar_message(parts, kind, stamp_ns, data)
             return
         try:
             msg = json.loads(data)
         except (ValueError, RecursionError):
             msg = None
-        if not isinstance(msg, dict):
+        msg = fields.checked(kind, msg) if isinstance(msg, dict) else None
+        t_ns = self.place(stamp_ns)
+        self._span(t_ns)
+        if msg is None:
             self.unreadable += 1
-            return
-        if topic == "/cm/events":
+        elif topic == "/cm/events":
             start = self._about_record(stamp_ns, msg)
             self._event(t_ns if start is None else start, msg)
         elif topic == "/cm/alarms":
@@ -235,11 +210,19 @@ class LogData:
         elif len(parts) == 4 and parts[1] == "cm":
             self._channel_message(parts[2], kind, t_ns, msg)
 
-    def _record_start(self, channel: str, stamp_ns: int, data: bytes) -> int:
+    def _span(self, t_ns: int) -> None:
+        """The time span of the messages, to one at ``t_ns`` (as shown)."""
+        if self.start_ns is None or self.end_ns is None:
+            self.start_ns = self.end_ns = t_ns
+        elif t_ns > self.end_ns:
+            self.end_ns = t_ns
+        elif t_ns < self.start_ns:
+            self.start_ns = t_ns
+
+    def _record_start(self, channel: str, stamp_ns: int, interval: float | None) -> int:
         """The shown time of the start of an indicator record of ``channel`` stamped ``stamp_ns``
-        (its end), noted for the alarm transitions it raises (:meth:`_about_record`)."""
-        m = _INTERVAL.search(data)
-        interval = _number(m.group(1)) if m is not None else None
+        (its end) over ``interval`` seconds, noted for the alarm transitions it raises
+        (:meth:`_about_record`)."""
         start = self.place(stamp_ns - int(round(interval * 1e9)), begins=True) if interval else self.place(stamp_ns)
         kept = self._records.setdefault(channel, {})
         kept[stamp_ns] = start
@@ -259,40 +242,30 @@ class LogData:
         watched = ch.alarm_levels.get(rule, ("",))[0] if ch is not None else ""
         return None if watched == "severity_index" or watched.startswith("order.") else start
 
-    def _scalar_message(self, parts: list[str], kind: str, t_ns: int, data: bytes) -> None:
-        """A severity, indicators or diagnostics message, read by the fields drawn."""
-        if kind == "diagnostics":
-            self._diagnostics(t_ns, data)
+    def _scalar_message(self, parts: list[str], kind: str, stamp_ns: int, data: bytes) -> None:
+        """A severity, indicators or diagnostics message, read by the fields drawn (:mod:`.fields`);
+        counted as :attr:`unreadable` when it is surely no JSON object or one of them has a wrong type."""
+        read = fields.diagnostics if kind == "diagnostics" else fields.severity if kind == "severity" \
+            else fields.indicators
+        got = read(data) if data[:1] == b"{" else None
+        t_ns = self.place(stamp_ns)
+        self._span(t_ns)
+        if got is not None and kind == "indicators" and self.records_at_start:
+            t_ns = self._record_start(parts[2], stamp_ns, got.get("interval_s"))
+        if got is None:
+            self.unreadable += 1
+        elif kind == "diagnostics":
+            self._diagnostics(t_ns, got)
         elif kind == "severity":
             ch = self.channel(parts[2])
-            m = _SEVERITY.search(data)
-            ch.severity.add(t_ns, _number(m.group(1)) if m is not None else None)
-            m = _ANOMALY.search(data)
-            ch.anomaly.add(t_ns, 1.0 if m is not None and b"1" in m.group(1) else 0.0)
-            if b'"level_' in data:
-                _level(ch, t_ns, {k.decode(): _number(v) for k, v in _LEVEL.findall(data)})
+            ch.severity.add(t_ns, got.get("severity_index"))
+            ch.anomaly.add(t_ns, got.get("anomaly", 0.0))
+            _level(ch, t_ns, got)
         else:
-            fields: dict[str, Any] = {k.decode(): _number(v) for k, v in _INDICATOR.findall(data)}
-            m = _ZONES.search(data)
-            if m is not None and m.group(1):
-                fields["zone_boundaries_mm_s"] = [float(x) for x in m.group(1).split(b",")]
-            m = _VBAND.search(data)
-            if m is not None and m.group(1):
-                fields["velocity_band_hz"] = [float(x) for x in m.group(1).split(b",")]
-            if b'"bearings":[{' in data:
-                fields.update((f"{name.decode()}.{line.decode()}", _number(v))
-                              for name, lines in _BEARING.findall(data) for line, v in _LINE.findall(lines))
-            self._indicators(self.channel(parts[2]), t_ns, fields)
+            self._indicators(self.channel(parts[2]), t_ns, got)
 
     def _channel_message(self, name: str, kind: str, t_ns: int, msg: dict[str, Any]) -> None:
-        if kind == "severity":
-            ch = self.channel(name)
-            ch.severity.add(t_ns, msg.get("severity_index"))
-            ch.anomaly.add(t_ns, 1.0 if any(msg.get("anomaly") or ()) else 0.0)
-            _level(ch, t_ns, msg)
-        elif kind == "indicators":
-            self._indicators(self.channel(name), t_ns, {**msg, **_bearing_lines(msg)})
-        elif kind == "orders":
+        if kind == "orders":
             self._orders(self.channel(name), msg)
         elif kind in _CAPTURE_PARTS:
             self._capture(self.channel(name), _CAPTURE_PARTS[kind], t_ns, msg)
@@ -320,12 +293,14 @@ class LogData:
                 levels = (given[0] if given[0] is not None else old[0], given[1] if given[1] is not None else old[1])
                 ch.alarm_levels[row["rule"]] = (str(row.get("indicator")), levels)
 
-    def _diagnostics(self, t_ns: int, data: bytes) -> None:
-        """Largest lag and queue depth; the message to the link counters of its run."""
-        fields = {k: _number(v) for k, v in _DIAG.findall(data)}
-        self.link_runs.add(t_ns, fields.get(b"uptime_s") or 0.0, fields.get(b"bytes_received") or 0.0, data)
-        self.max_lag_s = max(self.max_lag_s, fields.get(b"lag_s") or 0.0)
-        self.max_queue_depth = max(self.max_queue_depth, int(fields.get(b"queue_depth") or 0))
+    def _diagnostics(self, t_ns: int, got: dict[str, Any]) -> None:
+        """Largest lag and queue depth; the message's counters (:func:`.fields.diagnostics`) to
+        those of its run."""
+        link = got.get("link", {})
+        self.link_runs.add(t_ns, got.get("uptime_s", 0.0), link.get("bytes_received", 0.0),
+                           (link, got.get("queue_drops", 0.0)))
+        self.max_lag_s = max(self.max_lag_s, got.get("lag_s", 0.0))
+        self.max_queue_depth = max(self.max_queue_depth, int(got.get("queue_depth", 0)))
 
     def link_counters(self) -> dict[str, int]:
         """The link counters over the whole log (summed over the daemon runs: :mod:`.link_runs`)."""
@@ -382,9 +357,6 @@ class LogData:
 
     @staticmethod
     def _capture(ch: ChannelData, part: str, t_ns: int, msg: dict[str, Any]) -> None:
-        for key in ("samples", "amplitude"):     # as float32 arrays: 2 MB, not 16, for 20 s at 25 kHz
-            if isinstance(msg.get(key), list):
-                msg[key] = np.array([np.nan if v is None else v for v in msg[key]], dtype=np.float32)
         kind = (msg.get("trigger") or {}).get("kind")
         for cap in ch.captures:
             first = next(iter(cap.parts.values()))
@@ -395,23 +367,6 @@ class LogData:
             ch.captures_omitted += part == "waveform"
             return
         ch.captures.append(Capture(ch.name, t_ns, {part: msg}, ch.recording, ch.recording_id))
-
-
-def _bearing_lines(msg: dict[str, Any]) -> dict[str, float]:
-    """A decoded indicator record's bearing-line amplitudes under the alarm rules' names
-    (``<bearing>.<line>``: ``de.bpfo``, ``de.bpfo_2x``)."""
-    out = {}
-    for b in msg.get("bearings") or ():
-        lines = b.get("lines") if isinstance(b, dict) else None
-        for line, peak in (lines or {}).items() if isinstance(lines, dict) else ():
-            if isinstance(peak, dict) and isinstance(peak.get("amplitude"), int | float):
-                out[f"{b.get('name')}.{line}"] = float(peak["amplitude"])
-    return out
-
-
-def _number(v: bytes) -> float | None:
-    """A JSON number or null as a float or None."""
-    return None if v == b"null" else float(v)
 
 
 def _level(ch: ChannelData, t_ns: int, msg: dict[str, Any]) -> None:
