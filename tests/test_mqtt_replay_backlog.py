@@ -27,7 +27,7 @@ SENDING = "mqtt: sending {n:,} message(s) to 127.0.0.1:{port} before exiting ({p
           "stay queued"
 #: how the waiting messages go: unpaced while connected, but for the backlog queued before the connection
 UNPACED = "as fast as the broker takes them"
-BACKLOG = "the {b:,} queued before the connection at 2000 a second, mqtt.resend_per_s, about {s} s; " + UNPACED
+BACKLOG = "the {b:,} queued before the connection at 2000 a second, mqtt.resend_per_s, about {s} s; the rest " + UNPACED
 NOT_CONNECTED = "not connected: once it is, they are its backlog, sent at 2000 a second, mqtt.resend_per_s: about {s} s"
 
 
