@@ -149,8 +149,8 @@ def require_frames(path: str | Path, command: str) -> None:
     """LinkError (one line, naming ``command`` and the file) when the capture at ``path`` holds no
     frame the decoder takes: the wrong file given (a YAML file, a sidecar, a WAV), or a capture
     whose every frame fails its CRC check (said so, with their count).  The file is scanned up to
-    its first good frame (a capture's first read), before the command makes any output."""
-    chunk = 1 << 20
+    its first good frame (in its first 64 KB read, for a capture), before the command makes any output."""
+    chunk = 1 << 16
     with CaptureSource(path, chunk=chunk, decoder=Decoder(max_buffer=chunk + MAX_FRAME), batches=True) as scan:
         for _ in scan:
             if any(scan.counters.frames.values()):
