@@ -22,12 +22,11 @@ import difflib
 import os
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 from cmsensord import __version__, hangup
 from cmsensord.argtypes import count, positive
 from cmsensord.commission import add_calibrate_parser, run_calibrate
-from cmsensord.config import Config, default_config, load_config
+from cmsensord.config import Config, as_written, default_config, load_config
 from cmsensord.config.settings import MAX_BAUD
 from cmsensord.errors import (
     EXIT_CONFIG,
@@ -273,22 +272,7 @@ def _config_for(path: str | None) -> tuple[Config, bool]:
     file does not list channels."""
     if path is None:
         return default_config(1), True
-    cfg = load_config(path)
-    return cfg, not _section(path, "channels")
-
-
-def _section(path: str | None, key: str) -> object:
-    """The top-level section ``key`` of the configuration file ``path`` as written (None: no file,
-    no such section, or not readable as YAML: load_config has said why)."""
-    import yaml  # only to see what the file itself sets
-
-    if path is None:
-        return None
-    try:
-        raw = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError):
-        return None
-    return raw.get(key) if isinstance(raw, dict) else None
+    return load_config(path), not as_written(path).get("channels")
 
 
 def _zones_note(cfg: Config, path: str | None, proc) -> None:
@@ -299,7 +283,7 @@ def _zones_note(cfg: Config, path: str | None, proc) -> None:
     from cmsensord.protocol import MODE_RAW
 
     st = proc.setup.status
-    note = zones_assumed(cfg.indicators, _section(path, "indicators")) if st is not None else None
+    note = zones_assumed(cfg.indicators, as_written(path).get("indicators")) if st is not None else None
     if note and st.mode == MODE_RAW:
         print(note, file=sys.stderr)
 

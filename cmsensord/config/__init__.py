@@ -23,7 +23,7 @@ file, the key path and the reason.
 
 from __future__ import annotations
 
-from .loading import config_from_dict, config_to_dict, default_config, load_config
+from .loading import as_written, config_from_dict, config_to_dict, default_config, load_config
 from .settings import (
     MAX_CHANNELS,
     NOMINAL_RATE_HZ,
@@ -51,6 +51,7 @@ __all__ = [
     "AcousticConfig",
     "Config",
     "ConfigError",
+    "as_written",
     "MAX_CHANNELS",
     "NOMINAL_RATE_HZ",
     "load_config",

@@ -47,7 +47,7 @@ from .settings import (
 from .validation import ConfigError, did_you_mean
 
 _log = logging.getLogger("cmsensord")
-__all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict"]
+__all__ = ["load_config", "config_from_dict", "default_config", "config_to_dict", "as_written"]
 
 _SECTIONS: dict[str, type] = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig,
                               "tacho": TachoConfig, "acoustic": AcousticConfig, "capture": CaptureConfig,
@@ -489,6 +489,19 @@ def load_config(path: str | Path | None, *, n_channels: int | None = None) -> Co
         _log.warning("config: %s holds no settings (empty, or comments only): every setting is its default",
                      source)
     return cfg
+
+
+def as_written(path: str | Path | None) -> dict[str, Any]:
+    """The top-level mapping of the configuration file ``path`` as written, before defaults (what
+    it sets itself); {} without a file, or for one that is not a YAML mapping (:func:`load_config`
+    says why)."""
+    if path is None:
+        return {}
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError, yaml.YAMLError):
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 def default_config(n_channels: int = 1) -> Config:

@@ -21,9 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import serial
-import yaml
 
-from cmsensord.config import config_from_dict, default_config, load_config
+from cmsensord.config import as_written, config_from_dict, default_config, load_config
 from cmsensord.config.indicators import zones_assumed
 from cmsensord.errors import ConfigError, SinkError
 from cmsensord.serial_port import open_serial
@@ -115,7 +114,7 @@ def simulate(opt: SimulateOptions) -> int:
                           f"{max(run.microphones)}: give at least {max(run.microphones) + 1} channels",
                           opt.channels)
     cfg = load_config(opt.config, n_channels=opt.channels) if opt.config else default_config(opt.channels)
-    note = zones_assumed(cfg.indicators, _section(opt.config, "indicators"))
+    note = zones_assumed(cfg.indicators, as_written(opt.config).get("indicators"))
     if note and opt.mode == "raw":          # an RMS-mode board's records carry no zone
         print(note, file=sys.stderr)
     if cfg.mqtt is not None and not opt.publish:
@@ -126,7 +125,7 @@ def simulate(opt: SimulateOptions) -> int:
     runup = opt.scenario in RUNUP_ORDERS
     mode = opt.mode
     tacho = opt.tacho or runup
-    if runup and not _sets_key(opt.config, "orders"):
+    if runup and "orders" not in as_written(opt.config):
         # the paper's validation signals: track their components (Yeh, Pan & Le, section 4.1),
         # unless the configuration file gives orders of its own
         cfg = dataclasses.replace(cfg, orders=config_from_dict(
@@ -165,24 +164,6 @@ def simulate(opt: SimulateOptions) -> int:
                         inputs=[opt.config] if opt.config else [])
     finally:
         _end(sim)
-
-
-def _sets_key(path: str | None, key: str) -> bool:
-    """Whether the configuration file ``path`` (None: none; already loaded, so readable and
-    valid) sets ``key`` at its top level."""
-    if path is None:
-        return False
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    return isinstance(data, dict) and key in data
-
-
-def _section(path: str | None, key: str) -> object:
-    """The top-level section ``key`` of the configuration file ``path`` as written (None: no file,
-    or no such section)."""
-    if not _sets_key(path, key):
-        return None
-    assert path is not None
-    return yaml.safe_load(Path(path).read_text(encoding="utf-8"))[key]
 
 
 def _sim_env() -> dict[str, str]:
