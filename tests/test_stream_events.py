@@ -92,6 +92,14 @@ def test_a_board_swapped_from_4_to_2_channels_reports_the_channels_gone(tmp_path
             "stream (observations missing)") in events
 
 
+def test_channels_that_come_back_into_the_stream_are_said_to_be_in_it(tmp_path):
+    events = replay(tmp_path, rms_stream([4] * 300 + [2] * 300 + [4] * 300))
+    said = [e for e in events if e.startswith("channels | board now sends")]
+    assert said == ["channels | board now sends 2 channel(s), not 4: channel(s) ch2, ch3 not in the stream "
+                    "(observations missing)",
+                    "channels | board now sends 4 channel(s), not 2: channel(s) ch2, ch3 now in the stream"], said
+
+
 def test_a_board_swapped_from_2_to_4_channels_re_sets_auto_channels(tmp_path):
     events = replay(tmp_path, rms_stream([2] * 300 + [4] * 300, {300: status(9999, 300 * L, 4)}))
     assert "channels | board now sends 4 channel(s), not 2: channels re-set to ch0, ch1, ch2, ch3" in events

@@ -32,7 +32,8 @@ STATUS announces that count or ``CHANGE_FRAMES`` such frames come in a row: then
 the board has changed.  Fewer channels: the channels no longer sent are
 reported and observed as missing.  More channels: the channels are re-set (with
 ``auto_channels``, or when configured channels come back) and a new severity
-chain is made, or a ``channels`` event names the board channels not monitored.
+chain is made, or a ``channels`` event names the board channels not monitored, or
+one names the monitored channels the count brings (back) into the stream.
 A new chain's filters start afresh; a channel that keeps its name keeps its
 :class:`~cmsensord.monitor.severity.ChannelView` (the run's decisions, failures, maximum and
 timeline, for the exit summary), which notes where its filters restarted.  The view of every
@@ -280,7 +281,8 @@ class ChannelSetup:
             return
         wanted = (default_channels(min(n_board, MAX_CHANNELS), self.cfg.monitor) if self.auto_channels
                   else tuple(ch for ch in self.cfg.channels if ch.index < n_board))
-        if [ch.name for ch in wanted] != [ch.name for ch in self.channels]:
+        re_set = [ch.name for ch in wanted] != [ch.name for ch in self.channels]
+        if re_set:
             self.severity, self.channels = None, wanted
             self._setup(n_board)
             emit("channels", None, f"board now sends {n_board} channel(s), not {old}: channels "
@@ -290,6 +292,10 @@ class ChannelSetup:
         if idle:
             emit("channels", None, f"board now sends {n_board} channel(s), not {old}: board "
                  f"channel(s) {', '.join(idle)} not configured, not monitored", n_channels=n_board)
+        back = [ch.name for ch in self.channels if old <= ch.index < n_board]
+        if not (re_set or idle):
+            emit("channels", None, f"board now sends {n_board} channel(s), not {old}"
+                 + (f": channel(s) {', '.join(back)} now in the stream" if back else ""), n_channels=n_board)
         self._mark_stream()
 
     def ready(self, n_board: int) -> bool:
