@@ -92,6 +92,9 @@ def test_a_vkf_run_of_an_import_is_drawn_in_its_recording_on_its_time_beside_the
     assert sev["axes"][-1]["xlabel"] == "hours into the recording"
     assert sev["points"] == alone["bearing-severity"]["points"]
     assert [ax["xlim"] for ax in sev["axes"]] == [ax["xlim"] for ax in alone["bearing-severity"]["axes"]]
+    # the replay's recursive orders and the vkf run's batch orders of one order, apart
+    names = alone["bearing-orders"]["orders"]
+    assert metas["bearing-orders"]["orders"] == names + [f"{n} (batch)" for n in names] and names
     # the vkf log alone: all of it, on the recording's time (its board second 0 anchored as a replay's)
     lines, page, metas = report(tmp_path, str(vkf))
     assert lines == [f"report: r.html (3 figures, {len(read_messages(vkf)):,} messages from 1 file(s))"]

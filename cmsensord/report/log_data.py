@@ -88,7 +88,8 @@ class ChannelData:
     zone_boundaries: list[float] | None = None
     velocity_bands: list[tuple[float, float]] = field(default_factory=list)   # each one the log gave
     velocity_alarm: float | None = None
-    orders: dict[str, dict[int, list[float]]] = field(default_factory=dict)   # name -> bin -> [sum, n]
+    # order name ("1x"; "1x (batch)", "1x (smoothed)" for those methods) -> speed bin -> [sum, n]
+    orders: dict[str, dict[int, list[float]]] = field(default_factory=dict)
     # name -> speed bin -> [sum of freq_hz, sum of rms, n]: the Campbell diagram
     campbell: dict[str, dict[int, list[float]]] = field(default_factory=dict)
     captures: list[Capture] = field(default_factory=list)
@@ -341,16 +342,19 @@ class LogData:
         if not msg.get("valid") or not isinstance(speed, int | float):
             return
         b = int(speed // SPEED_BIN_RPM)
+        method = msg.get("method")
+        tail = f" ({method})" if isinstance(method, str) and method != "recursive" else ""
         for order in msg.get("orders") or ():
             rms = order.get("rms")
             if isinstance(rms, int | float):
-                bins = ch.orders.setdefault(str(order.get("name")), {})
+                name = f"{order.get('name')}{tail}"
+                bins = ch.orders.setdefault(name, {})
                 acc = bins.setdefault(b, [0.0, 0.0])
                 acc[0] += rms
                 acc[1] += 1
                 freq = order.get("freq_hz")
                 if isinstance(freq, int | float):
-                    cell = ch.campbell.setdefault(str(order.get("name")), {}).setdefault(b, [0.0, 0.0, 0.0])
+                    cell = ch.campbell.setdefault(name, {}).setdefault(b, [0.0, 0.0, 0.0])
                     cell[0] += freq
                     cell[1] += rms
                     cell[2] += 1
