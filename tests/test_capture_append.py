@@ -8,17 +8,19 @@ import re
 from processes import cmsensord, daemon_on_short_board
 
 
-def _run(tmp_path, cap) -> str:
-    """One board of 3 s at 1x (it holds its pty after), the daemon capturing it: its stderr."""
-    return daemon_on_short_board(tmp_path, "--capture", str(cap))[1]
+def _run(tmp_path, cap, seed: int) -> str:
+    """One board of 3 s at 1x (it holds its pty after; its noise from ``seed``), the daemon
+    capturing it: its stderr.  Two runs of one seed send the same frames: a first run that
+    the daemon joined late (fewer than 256 frames) would make the second's frames repeats."""
+    return daemon_on_short_board(tmp_path, "--capture", str(cap), board=("--duration", "3", "--seed", str(seed)))[1]
 
 
 def test_a_restarted_daemon_appends_to_its_capture(tmp_path):
     cap = tmp_path / "cap.bin"
-    first = _run(tmp_path, cap)
+    first = _run(tmp_path, cap, 1)
     size = cap.stat().st_size
     assert size > 0 and "appending to" not in first
-    second = _run(tmp_path, cap)
+    second = _run(tmp_path, cap, 2)
     assert f"INFO capture: appending to {cap} ({size / 1e6:.1f} MB captured there before: a replay reads " \
            "this restart as a gap)" in second, second
     assert cap.stat().st_size > size
