@@ -97,6 +97,16 @@ def test_user_error_is_one_line_with_its_exit_status(scratch, args, code, text):
     assert text in lines[0], lines[0]
 
 
+def test_a_refused_capture_makes_no_output_directory(scratch):
+    """A daemon's --capture naming its own configuration is refused before output.dir is made:
+    the directory and its lock file were left behind by a daemon that never ran."""
+    (scratch / "own.yaml").write_text("link:\n  port: /dev/nonexistent-tty\noutput:\n  dir: never_made\n")
+    p = cmsensord("--config", "own.yaml", "--capture", "own.yaml", cwd=scratch)
+    assert (p.returncode, p.stderr) == (CONFIG, "cmsensord: own.yaml: is the input own.yaml: writing it would "
+                                                "destroy it; give --capture another file name\n")
+    assert not (scratch / "never_made").exists()
+
+
 def test_summary_into_a_closed_pipe_is_quiet(scratch):
     """`cmsensord summary FILE | head -1`: the reader closes the pipe early; no traceback."""
     import subprocess

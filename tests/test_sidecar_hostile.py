@@ -66,6 +66,16 @@ def test_json_nested_past_the_parser_s_depth_is_not_read(imported, tmp_path):
                               f"{UNREAD}"], err
 
 
+@pytest.mark.parametrize("depth", [40, 985])
+def test_a_field_nested_within_the_parser_s_depth_is_not_read(imported, tmp_path, depth):
+    """A field nested deeper than any import writes is the same one line, whatever the depth:
+    985 parsed within the parser's depth, and the warning quoting the field ran out of stack
+    (a RecursionError traceback, exit 1); 40 was quoted as a field that is no number."""
+    cap, err = _replayed(imported, tmp_path, '{"fs": ' + "[" * depth + "]" * depth + "}")
+    assert _warnings(err) == [f"warning: {cap}.json: the capture's sidecar cannot be read (nested too deeply): "
+                              f"{UNREAD}"], err
+
+
 BIG = 10 ** 309     # past a float's range
 SHOWN = "1" + "0" * 36 + "..."
 

@@ -12,12 +12,17 @@ from pathlib import Path
 
 from .sidecar_fields import capture_status, checked
 
-__all__ = ["MAX_SIDECAR_BYTES", "channel_units", "sidecar"]
+__all__ = ["MAX_SIDECAR_BYTES", "MAX_SIDECAR_DEPTH", "channel_units", "sidecar"]
 
 
 #: the largest sidecar read: an import's holds ~320 bytes a snapshot (IMS's 6,324 snapshots of 4
 #: channels: 2 MB), so 64 MiB is some 200,000 snapshots, 30 times IMS's, read in ~150 MB
 MAX_SIDECAR_BYTES = 64 << 20
+#: the deepest nesting of arrays and objects read: an import's sidecar nests 3 deep (its object,
+#: the snapshots' array, a snapshot's object); a bound of its own, not the parser's, which hangs
+#: on the depth of the stack it is called at, so that a value just within the parser's depth
+#: could still overflow the stack where it is quoted in a warning
+MAX_SIDECAR_DEPTH = 32
 
 _said: set[tuple[str, str]] = set()
 
@@ -25,7 +30,7 @@ _said: set[tuple[str, str]] = set()
 def sidecar(path: str | Path) -> dict:
     """The capture's metadata written by ``cmsensord import`` (CAPTURE.json beside it), or {}
     when there is none, or when it cannot be read (truncated, not JSON, not an object, nested
-    past the parser's depth, larger than ``MAX_SIDECAR_BYTES``: refused before it is read):
+    deeper than ``MAX_SIDECAR_DEPTH``, larger than ``MAX_SIDECAR_BYTES``: refused before it is read):
     then a one-line warning on stderr, once a process for that file. A field it cannot use is
     left out, and an ``fs`` its STATUS frames contradict is theirs, with a one-line warning each
     (:func:`~.sidecar_fields.checked`)."""
@@ -34,7 +39,8 @@ def sidecar(path: str | Path) -> dict:
         return {}
     try:
         meta = json.loads(_text(p), parse_int=_whole)
-        why = "" if isinstance(meta, dict) else "not a JSON object"
+        why = ("not a JSON object" if not isinstance(meta, dict)
+               else "nested too deeply" if _depth(meta) > MAX_SIDECAR_DEPTH else "")
     except (OSError, ValueError) as exc:
         why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
     except RecursionError:
@@ -57,6 +63,20 @@ def _text(p: Path) -> str:
         if size > MAX_SIDECAR_BYTES:
             raise ValueError(f"{size:,} bytes, over the {MAX_SIDECAR_BYTES:,} read of a sidecar: not an import's")
         return f.read(MAX_SIDECAR_BYTES + 1).decode("utf-8")
+
+
+def _depth(value: object) -> int:
+    """How deep ``value``'s arrays and objects nest (1: an object of scalars), without recursion."""
+    deepest, todo = 0, [(value, 1)]
+    while todo:
+        v, d = todo.pop()
+        items = v.values() if isinstance(v, dict) else v if isinstance(v, list) else None
+        if items is None:
+            continue
+        deepest = max(deepest, d)
+        if d <= MAX_SIDECAR_DEPTH:          # deeper is too deep however deep
+            todo.extend((x, d + 1) for x in items)
+    return deepest
 
 
 def _whole(digits: str) -> int | float:

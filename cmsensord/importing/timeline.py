@@ -88,24 +88,25 @@ class Timeline:
     def from_json(cls, text: str) -> tuple[Timeline, int] | None:
         """(timeline, log time of board second 0) from :meth:`to_json`'s text; None when the
         text is not one (a damaged or foreign log: board starts that go back, times past
-        ``MAX_S``)."""
+        ``MAX_S``, a field of another type or past a float's range, JSON nested past the
+        parser's depth)."""
         try:
             d = json.loads(text)
             start = np.asarray(d["start_s"], dtype=np.float64)
             times = np.asarray(d["source_time_s"], dtype=np.float64)
             zero = int(d["board_zero_ns"])
             unit, end = d.get("unit", "s"), float(d.get("end_s") or 0.0)
+            repaired = int(d.get("repaired") or 0)
             ok = (start.ndim == 1 and start.shape == times.shape and start.size >= 1
                   and unit in ("s", "%") and 0 <= end < MAX_S and (unit == "s" or end > 0)
                   and bool(np.all(np.isfinite(start)) and np.all(np.isfinite(times)))
                   and bool(np.all(np.diff(start) >= 0)) and float(np.abs(times).max()) < MAX_S
                   and float(np.abs(start).max()) < MAX_S and abs(zero) < 2 ** 63)
-        except (ValueError, TypeError, KeyError):
+        except (ValueError, TypeError, KeyError, AttributeError, OverflowError, RecursionError):
             return None
         if not ok:
             return None
-        return cls(start, np.maximum.accumulate(times), _date(d.get("source_start")),
-                   int(d.get("repaired") or 0), unit, end), zero
+        return cls(start, np.maximum.accumulate(times), _date(d.get("source_start")), repaired, unit, end), zero
 
 
 def _in_order(times: np.ndarray) -> tuple[np.ndarray, int]:

@@ -103,8 +103,12 @@ def plan_logs(paths: list[Path], metadata: list[dict[str, dict[str, str]]]) -> l
 
 
 def _real(source: str) -> str:
-    """A capture's path as one text however it was spelled (relative, through a link)."""
-    return os.path.realpath(source) if source else ""
+    """A capture's path as one text however it was spelled (relative, through a link); one that
+    is no path (a NUL in a damaged log's text) as it is."""
+    try:
+        return os.path.realpath(source) if source else ""
+    except ValueError:
+        return source
 
 
 def _number_idents(recordings: list[Recording]) -> None:

@@ -49,8 +49,8 @@ DIAGNOSTICS_S = 5.0
 
 
 def _open_capture(path: str | None, *, append: bool, inputs: Sequence[str] = ()):
-    """The ``--capture`` file (None without one), opened before the sink (a bad path leaves
-    nothing behind), refused when it is one of ``inputs`` (the configuration and the files it
+    """The ``--capture`` file (None without one), opened before the sink (a path that cannot be
+    written leaves no log behind), refused when it is one of ``inputs`` (the configuration and the files it
     names) or no regular file (CaptureFileError, :func:`~cmsensord.out_paths.capture_refused`).
     The daemon (``append``) adds to what an earlier run captured there, with a line saying so (a
     replay reads the daemon's restart as a gap of lost frames); a simulated run writes it afresh."""
@@ -236,13 +236,18 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     (:mod:`.alarm_store`) by the daemon holding the directory's lock only, and a capture is
     appended to; ``simulated`` (``--simulate``: a simulated board, not the machine): neither, and
     retention counts and deletes only this run's files (the machine's logs of the prefix are
-    left alone)."""
+    left alone).  A refused ``--capture`` (:func:`~cmsensord.out_paths.capture_refused`) raises
+    CaptureFileError before the output directory is made or locked."""
+    inputs = [*inputs, *named_files(cfg)]
+    refused = capture_refused(capture_path, inputs) if capture_path else None
+    if refused is not None:             # before the directory and its lock are made
+        raise CaptureFileError(refused)
     fd = claim_output_dir(cfg.output.dir)
     held = HeldDir(cfg.output.dir, fd) if fd is not None else None
     try:
         return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
                          capture_path=capture_path, metadata=metadata, open_port=open_port,
-                         simulated=simulated, held=held, inputs=[*inputs, *named_files(cfg)])
+                         simulated=simulated, held=held, inputs=inputs)
     finally:
         if held is not None:
             held.close()
