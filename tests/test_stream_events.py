@@ -211,6 +211,27 @@ def test_a_channel_back_in_the_stream_goes_on_with_its_figures(tmp_path):
     assert want[2].startswith("  ch2: final severity 0.0, max 1.0, 1 failure event(s), 16 decisions"), want
 
 
+def test_a_channel_in_and_out_of_the_stream_many_times_has_its_newest_absences_said_and_the_rest_counted(tmp_path):
+    """4 channels for 3 s, then 2 and 4 for 2 s each, 7 times, then 2: ch2 and ch3 leave the
+    stream 8 times; the exit summary names the newest 5 ended absences and the one since 31 s,
+    and counts the 2 before them, so a board doing this for months does not grow the line (nor
+    the daemon's memory) without bound."""
+    replay(tmp_path, level_stream([(3, 4)] + [(2, 2), (2, 4)] * 7 + [(2, 2)], spiking=9))
+    absent = "; not in the stream 11-13 s, 15-17 s, 19-21 s, 23-25 s, 27-29 s, since 31 s, and 2 time(s) before"
+    got, want = channel_lines(tmp_path, {"ch0": "", "ch1": "", "ch2": absent, "ch3": absent})
+    assert got == want
+
+
+def test_a_channel_whose_filters_restarted_many_times_has_the_newest_restarts_said_and_the_rest_counted(tmp_path):
+    """4 channels, then 1, 2 and 4 for 2 s each, 3 times: ch0's filters restart at each new set
+    of channels (2 -> 1 -> 2 re-sets to ch0, ch1; then to ch0-ch3), 6 times; the exit summary
+    names the newest 5 and counts the one before."""
+    replay(tmp_path, level_stream([(2, 4)] + [(2, 1), (2, 2), (2, 4)] * 3, spiking=9))
+    got, _ = channel_lines(tmp_path, {})
+    assert got[0].endswith("; its filters restarted at 6 s, 10 s, 12 s, 16 s, 18 s and 1 time(s) before "
+                           "(a new set of channels)"), got
+
+
 def test_the_daemon_says_which_channels_left_the_stream_in_its_status_and_exit_summary(tmp_path):
     """The stream of the test above, written to a pty with the daemon on it: ``cmsensord status``
     names ch2 and ch3 as not in the stream after ch0 and ch1, and the daemon's exit summary has the

@@ -350,7 +350,7 @@ class ChannelSetup:
             kept = self._views.setdefault(view.name, view)
             if kept is not view:
                 kept.anomaly, kept.outliers_first, kept.no_signal = view.anomaly, 0, False
-                kept.restarts.append(self.clock.adc_seconds)
+                kept.restarted(self.clock.adc_seconds)
                 chain.views[c] = kept
 
     @property
@@ -367,5 +367,4 @@ class ChannelSetup:
             if name not in sent and view.left_s is None:
                 view.left_s = now
             elif name in sent and view.left_s is not None:
-                view.absences.append((view.left_s, now))
-                view.left_s = None
+                view.came_back(now)

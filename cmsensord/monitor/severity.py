@@ -47,6 +47,9 @@ PENDING_DECISION_SLOTS = 500
 #: a block rate within this fraction of the nominal 100 Hz gets no ``decision_rule`` note (an
 #: import at 20480 Hz in blocks of 205: 99.9 blocks/s, its counts within 0.1 % of the paper's times)
 RATE_NOTE_TOLERANCE = 0.01
+#: the newest restarts and absences a channel's view keeps for the exit summary (a board whose
+#: channel count goes up and down for months keeps the count of the older ones only)
+KEPT_SPANS = 5
 
 
 @dataclass
@@ -70,6 +73,25 @@ class ChannelView:
     restarts: list[float] = field(default_factory=list)   # ADC seconds where its filters started afresh
     left_s: float | None = None   # the ADC second it left the board's stream (None: in it)
     absences: list[tuple[float, float]] = field(default_factory=list)   # (left, back) ADC seconds, ended ones
+    restarts_before: int = 0      # restarts older than the newest KEPT_SPANS, counted only
+    absences_before: int = 0      # absences older than the newest KEPT_SPANS, counted only
+
+    def restarted(self, t_s: float) -> None:
+        """Its filters started afresh at ADC second ``t_s`` (the newest :data:`KEPT_SPANS` kept)."""
+        self.restarts.append(t_s)
+        if len(self.restarts) > KEPT_SPANS:
+            del self.restarts[0]
+            self.restarts_before += 1
+
+    def came_back(self, t_s: float) -> None:
+        """Its channel is in the board's stream again at ADC second ``t_s``, since :attr:`left_s`
+        (the newest :data:`KEPT_SPANS` absences kept)."""
+        if self.left_s is not None:
+            self.absences.append((self.left_s, t_s))
+            self.left_s = None
+        if len(self.absences) > KEPT_SPANS:
+            del self.absences[0]
+            self.absences_before += 1
 
 
 class SeverityChain:

@@ -67,7 +67,8 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
                          f"of {period:.3g} s; the first is the filters' transient){absent}")
             continue
         held = " (held: no signal, see signal_lost)" if v.no_signal else ""
-        restarted = (f"; its filters restarted at {', '.join(f'{t:.0f} s' for t in v.restarts)} "
+        before = f" and {v.restarts_before} time(s) before" if v.restarts_before else ""
+        restarted = (f"; its filters restarted at {', '.join(f'{t:.0f} s' for t in v.restarts)}{before} "
                      "(a new set of channels)" if v.restarts else "")
         lines.append(f"  {v.name}: final severity {v.severity:.1f}{held}, max {v.max_severity:.1f}, "
                      f"{v.failures} failure event(s), {v.decisions} decisions{restarted}{absent}")
@@ -87,11 +88,13 @@ def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = 
 
 def absent_note(view) -> str:
     """``; not in the stream 40-50 s, since 70 s``: the ADC seconds the channel of ``view`` was
-    not in the board's stream (and has not been since); "" when it always was."""
+    not in the board's stream (and has not been since), the older ones past those its view keeps
+    counted (``... since 70 s, and 12 time(s) before``); "" when it always was."""
     spans = [f"{a:.0f}-{b:.0f} s" for a, b in view.absences]
     if view.left_s is not None:
         spans.append(f"since {view.left_s:.0f} s")
-    return f"; not in the stream {', '.join(spans)}" if spans else ""
+    before = f", and {view.absences_before} time(s) before" if view.absences_before else ""
+    return f"; not in the stream {', '.join(spans)}{before}" if spans else ""
 
 
 def link_line(counters: dict[str, int]) -> str:
