@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cmsensord.alarm_margins import thin_margins
 from cmsensord.argtypes import board_time, positive
 from cmsensord.base_changes import replaced_baselines, unlisted_channels
 from cmsensord.calibrate_bounds import FEW_DECISIONS, every_channels_bound, level_warning, rise_warning
@@ -458,12 +459,15 @@ def _absent_channels(cfg: Config, obs: Observations, base_path: str, capture: st
 
 def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
     """A warning per alarm of ``site`` that a replay raises within the healthy period itself, or
-    that stands all through it from before: its levels are within what the machine did then."""
+    that stands all through it from before: its levels are within what the machine did then; and
+    per alarm whose values there reach its level without raising it, held back by its on-delay
+    alone (:func:`~cmsensord.alarm_margins.thin_margins`)."""
     if not (site.alarms.enabled and (site.alarms.rules or order_rules(site))):
         return []
     standing: dict[str, tuple[float, str, str]] = {}     # alarm -> (since, level, message) all through
     seen: dict[str, list[tuple[float, str, str]]] = {}   # alarm -> its rises within the period
-    for t, m in alarm_events(capture, site, obs.end_s):
+    judged: list = []
+    for t, m in alarm_events(capture, site, obs.end_s, judged):
         alarm, level = str(m.get("alarm")), m["kind"].removeprefix("alarm_")
         said = (t, level, m["message"].removeprefix(alarm + ": "))
         if level == "clear":
@@ -493,6 +497,8 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
     if not lines and rules:
         lines = [f"alarms: none of the {rules}{' judged' if unjudged else ''} rule(s) shown within the healthy "
                  "period (replayed with the site file)"]
+    lines += thin_margins(judged, {r.name: r for r in (*site.alarms.rules, *order_rules(site))}, obs.start_s,
+                          obs.end_s, {*standing, *seen})
     lines += [f"note: {ln.strip()}" for ln in delay_lines(obs.meta, site)]
     if unjudged:
         raw = any(set(medians) - {"accel_rms"} for medians in obs.indicators.values())

@@ -110,6 +110,9 @@ class AlarmManager:
         self.by_indicator: dict[str, list[AlarmRuleConfig]] = {}
         #: levels were put back from a saved state and no operating reading has come since
         self.resumed = False
+        #: when a list: every value judged while running, as (stamp, alarm id, value, (alert, danger)
+        #: levels) (``cmsensord calibrate``'s check of the alarm levels against the healthy period)
+        self.judged: list[tuple[int, str, float, tuple[float | None, float | None]]] | None = None
         for r in cfg.rules:
             watched = rule_channels(r, channels, bearings)
             self.by_indicator.setdefault(r.indicator, []).append(r)
@@ -163,6 +166,8 @@ class AlarmManager:
                 a.value, a.levels = max(a.latest.values()), levels
                 if not running:
                     continue
+                if self.judged is not None:
+                    self.judged.append((t_ns, a.id, value, levels))
                 exceed = self.exceed[(r.name, channel)]
                 x, reached = exceed.step(value, *levels), exceed.reached
                 if a.channel is None:

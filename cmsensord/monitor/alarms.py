@@ -174,6 +174,8 @@ class Alarms:
         self._deferred: dict[str, dict[str, Any]] | None = None  # levels not saved yet (SAVE_LEVELS_S)
         self._levels_due_ns = 0
         self._no_signal: set[str] = set()     # channels whose last severity decision had no signal
+        #: a list: the manager keeps every value it judges in it (:attr:`AlarmManager.judged`)
+        self.judged: list | None = None
 
     def keep(self, store: StateStore, saved: dict[str, dict[str, Any]]) -> list:
         """Keep the alarm state in ``store`` from now on and put ``saved`` (what it held) back
@@ -192,6 +194,7 @@ class Alarms:
             ic = self.cfg.indicators
             self.manager = AlarmManager(self.rules, self.channels(), boundaries(ic.machine_group, ic.foundation),
                                         self.cfg.bearings)
+            self.manager.judged = self.judged
         return self.manager
 
     def see(self, m: messages.Message) -> list:

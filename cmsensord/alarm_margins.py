@@ -1,0 +1,105 @@
+"""``cmsensord calibrate``: alarm levels the healthy period itself reaches, held back by a delay.
+
+Calibrate replays the healthy period with the site file it wrote and warns of each alarm
+raised there.  An alarm with an ``on_delay_s`` can stay quiet over a period whose values
+reach its level again and again, each time for less than the delay: its level then sits
+inside the machine's healthy scatter, and the first healthy run as long as the delay raises
+it (FEMTO Bearing1_1's BPFO ratio at 2 x its median over 0.1-s records: 3.6 % of the healthy
+records reach it, one at a time, against the 3 in a row of a 0.3-s delay; raised at 39.5 % of
+life, on records like the healthy ones).  :func:`thin_margins` says so, per alarm, with what
+the healthy values reached and the level above them.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SCATTER_SHARE", "thin_margins"]
+
+#: a level more of the healthy values reach than this share sits inside the machine's healthy
+#: scatter (a statistical alarm level is above at least 99 % of them: mean + 2.3 standard
+#: deviations of a normal scatter)
+SCATTER_SHARE = 0.01
+
+
+def _runs(over: np.ndarray) -> int:
+    """The longest run of True in ``over``."""
+    best = run = 0
+    for x in over.tolist():
+        run = run + 1 if x else 0
+        best = max(best, run)
+    return best
+
+
+def _level_of(rule: Any, alert: float | None, danger: float | None) -> tuple[str, float, float | None] | None:
+    """(which, level, k) of the lowest level in force: alert, else danger; ``k`` the rule's
+    multiple of the baseline when it gives that level so (no speed bands), else None."""
+    which, level = ("alert", alert) if alert is not None else ("danger", danger)
+    if level is None:
+        return None
+    k = getattr(rule, f"{which}_x_baseline")
+    return which, float(level), (float(k) if k is not None and not rule.bands else None)
+
+
+def _suggest(which: str, value: float, base: float | None) -> str:
+    """The level to set above ``value``: as a multiple of the baseline (to a tenth, above it) when
+    the rule gives one."""
+    if not base:
+        return f"{which} above {value:.4g}"
+    k = np.ceil(value / base * 10) / 10
+    return f"{which}_x_baseline {k + 0.1 if k * base <= value else k:.1f} or more"
+
+
+def _line(alarm: str, rule: Any, t: np.ndarray, v: np.ndarray, which: str, level: float,
+          k: float | None) -> str | None:
+    """The warning of ``alarm`` whose healthy values ``v`` (at board seconds ``t``) reach ``level``
+    (None: its margin is not thin, see :func:`thin_margins`)."""
+    over = v >= level
+    n, longest = int(np.count_nonzero(over)), _runs(over)
+    step = float(np.median(np.diff(np.unique(t)))) if np.unique(t).size > 1 else 0.0
+    need = int(np.ceil(rule.on_delay_s / step - 1e-9)) if step > 0 else 1
+    scatter = n > SCATTER_SHARE * v.size
+    if not (scatter or longest >= need - 1):
+        return None
+    base = level / k if k else None
+    top = float(v.max())
+    high = float(np.sort(v)[v.size - 1 - int(SCATTER_SHARE * v.size)])   # a level above it: <= the share
+    where = (f"within the healthy period's scatter (more than {100 * SCATTER_SHARE:g} % of its values reach it)"
+             if scatter else "reached by a healthy run one value short of its on-delay")
+    fix = (f"above {100 * (1 - SCATTER_SHARE):g} % of the healthy values ({_suggest(which, high, base)})" if scatter
+           else f"above the healthy period's highest ({_suggest(which, top, base)})")
+    return (f"alarm {alarm}: warning: thin margin: its {which} level {level:.4g}"
+            + (f" ({k:g} x baseline)" if k else "") + f" is {where}: {n} of {v.size} value(s) there "
+            f"({100.0 * n / v.size:.1f} %), the highest {top:.4g}" + (f" ({top / base:.3g} x baseline)" if base else "")
+            + f", in runs of up to {longest} of the {need} in a row its on_delay_s {rule.on_delay_s:g} needs: only "
+            "the delay kept it quiet, and a healthy day with a longer run raises it; set the level " + fix
+            + ", or a longer on_delay_s")
+
+
+def thin_margins(judged: list[tuple[float, str, float, tuple[float | None, float | None]]],
+                 rules: dict[str, Any], start_s: float, end_s: float, warned: set[str]) -> list[str]:
+    """A warning per alarm not in ``warned`` (those raised or standing in the healthy period,
+    said already) whose values judged in the healthy period (start_s, end_s] board seconds
+    (``judged``: (board second, alarm, value, (alert, danger)); ``rules``: by name) reach its
+    lowest level in force, held back by its ``on_delay_s`` alone, and either more than
+    SCATTER_SHARE of them do (the level is inside the healthy scatter) or a run of them came
+    within one value of the delay."""
+    by_alarm: dict[str, list[tuple[float, float, tuple[float | None, float | None]]]] = {}
+    for t, alarm, value, levels in judged:
+        if start_s + 1e-3 < t <= end_s + 1e-3 and alarm not in warned:
+            by_alarm.setdefault(alarm, []).append((t, value, levels))
+    lines = []
+    for alarm, rows in by_alarm.items():
+        rule = rules.get(alarm.split("/")[0])
+        found = _level_of(rule, *rows[-1][2]) if rule is not None else None
+        if found is None:
+            continue
+        which, level, k = found
+        at = np.array([r[0] for r in rows])
+        vals = np.array([r[1] for r in rows])
+        line = _line(alarm, rule, at, vals, which, level, k) if np.any(vals >= level) else None
+        if line:
+            lines.append(line)
+    return lines
