@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from cmsensord.alarms import Judged
+
 __all__ = ["SCATTER_SHARE", "thin_margins"]
 
 #: a level more of the healthy values reach than this share sits inside the machine's healthy
@@ -26,11 +28,8 @@ SCATTER_SHARE = 0.01
 
 def _runs(over: np.ndarray) -> int:
     """The longest run of True in ``over``."""
-    best = run = 0
-    for x in over.tolist():
-        run = run + 1 if x else 0
-        best = max(best, run)
-    return best
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], over.astype(np.int8), [0]))))
+    return int((edges[1::2] - edges[::2]).max()) if edges.size else 0
 
 
 def _level_of(rule: Any, alert: float | None, danger: float | None) -> tuple[str, float, float | None] | None:
@@ -78,27 +77,22 @@ def _line(alarm: str, rule: Any, t: np.ndarray, v: np.ndarray, which: str, level
             + ", or a longer on_delay_s")
 
 
-def thin_margins(judged: list[tuple[float, str, float, tuple[float | None, float | None]]],
-                 rules: dict[str, Any], start_s: float, end_s: float, warned: set[str]) -> list[str]:
+def thin_margins(judged: Judged, rules: dict[str, Any], start_s: float, end_s: float, warned: set[str]) -> list[str]:
     """A warning per alarm not in ``warned`` (those raised or standing in the healthy period,
     said already) whose values judged in the healthy period (start_s, end_s] board seconds
-    (``judged``: (board second, alarm, value, (alert, danger)); ``rules``: by name) reach its
-    lowest level in force, held back by its ``on_delay_s`` alone, and either more than
-    SCATTER_SHARE of them do (the level is inside the healthy scatter) or a run of them came
-    within one value of the delay."""
-    by_alarm: dict[str, list[tuple[float, float, tuple[float | None, float | None]]]] = {}
-    for t, alarm, value, levels in judged:
-        if start_s + 1e-3 < t <= end_s + 1e-3 and alarm not in warned:
-            by_alarm.setdefault(alarm, []).append((t, value, levels))
+    (``judged``; ``rules``: by name) reach its lowest level in force, held back by its
+    ``on_delay_s`` alone, and either more than SCATTER_SHARE of them do (the level is inside the
+    healthy scatter) or a run of them came within one value of the delay."""
     lines = []
-    for alarm, rows in by_alarm.items():
+    for alarm, stamps in judged.stamps.items():
         rule = rules.get(alarm.split("/")[0])
-        found = _level_of(rule, *rows[-1][2]) if rule is not None else None
+        found = _level_of(rule, *judged.levels[alarm]) if rule is not None and alarm not in warned else None
         if found is None:
             continue
+        at = (np.frombuffer(stamps, np.int64) - judged.origin_ns) / 1e9
+        keep = (at > start_s + 1e-3) & (at <= end_s + 1e-3)
+        at, vals = at[keep], np.frombuffer(judged.values[alarm], np.float64)[keep]
         which, level, k = found
-        at = np.array([r[0] for r in rows])
-        vals = np.array([r[1] for r in rows])
         line = _line(alarm, rule, at, vals, which, level, k) if np.any(vals >= level) else None
         if line:
             lines.append(line)

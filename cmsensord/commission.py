@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 
 from cmsensord.alarm_margins import thin_margins
+from cmsensord.alarms import Judged
 from cmsensord.argtypes import board_time, positive
 from cmsensord.base_changes import replaced_baselines, unlisted_channels
 from cmsensord.calibrate_bounds import FEW_DECISIONS, every_channels_bound, level_warning, rise_warning
@@ -466,7 +467,7 @@ def alarm_lines(capture: str, site: Config, obs: Observations) -> list[str]:
         return []
     standing: dict[str, tuple[float, str, str]] = {}     # alarm -> (since, level, message) all through
     seen: dict[str, list[tuple[float, str, str]]] = {}   # alarm -> its rises within the period
-    judged: list = []
+    judged = Judged()
     for t, m in alarm_events(capture, site, obs.end_s, judged):
         alarm, level = str(m.get("alarm")), m["kind"].removeprefix("alarm_")
         said = (t, level, m["message"].removeprefix(alarm + ": "))

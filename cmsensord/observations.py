@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cmsensord.alarms import Judged
 from cmsensord.argtypes import Percent
 from cmsensord.config import Config
 from cmsensord.dsp.commissioning import idle_periods
@@ -171,11 +172,11 @@ def _flat_notes(flat: np.ndarray, names: list[str]) -> tuple[str, ...]:
 
 def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float | None,
             observe: _Collect | None = None, finish: bool = False,
-            what: str = "the healthy period", judged: list | None = None) -> tuple[Processor, ListSink]:
+            what: str = "the healthy period", judged: Judged | None = None) -> tuple[Processor, ListSink]:
     """The Processor after a replay of ``capture`` up to ``to_s`` board seconds (and 2 s more;
     a :class:`~cmsensord.argtypes.Percent` or None: all of it), and the messages it wrote.
     ``finish``: also after a stop short of the end (what the stream left pending is written).
-    ``judged``: a list the alarm manager fills with every value it judges
+    ``judged``: the alarm manager keeps every value it judges in it
     (:attr:`~cmsensord.alarms.manager.AlarmManager.judged`).
     On a terminal a progress bar says how far it is (``what``: of what)."""
     cfg = replace(cfg, output=replace(cfg.output, akf_trace=False, status_line=False))
@@ -201,22 +202,20 @@ def _replay(capture: str | Path, cfg: Config, auto_channels: bool, to_s: float |
 
 
 def alarm_events(capture: str | Path, cfg: Config, end_s: float,
-                 judged: list | None = None) -> list[tuple[float, dict]]:
+                 judged: Judged | None = None) -> list[tuple[float, dict]]:
     """The alarm events (``alarm_alert``, ``alarm_danger``, ``alarm_clear``) that a replay of
     ``capture`` with ``cfg`` (a site configuration: its channels named) writes up to ``end_s``
     board seconds, each with its board second, in order; with the indicator settings the
     capture's sidecar gives, as ``cmsensord replay`` of it runs
-    (:func:`~cmsensord.importing.capture_settings.capture_settings`).  ``judged``: a list that
-    gets every value the alarm manager judged up to ``end_s``, as (board second, alarm, value,
-    (alert, danger) levels)."""
+    (:func:`~cmsensord.importing.capture_settings.capture_settings`).  ``judged``: gets every
+    value the alarm manager judged, its ``origin_ns`` the stamp of board second 0."""
     cfg, _, _ = capture_settings(cfg, sidecar(capture))
-    seen: list = []
-    proc, sink = _replay(capture, cfg, False, end_s, finish=True, what="its alarms", judged=seen)
+    proc, sink = _replay(capture, cfg, False, end_s, finish=True, what="its alarms", judged=judged)
     if proc.clock.slot0_t0 is None:
         return []
     t0 = proc.clock.slot_stamp_ns(0)
     if judged is not None:
-        judged += [((t - t0) / 1e9, *rest) for t, *rest in seen if (t - t0) / 1e9 <= end_s + 1e-3]
+        judged.origin_ns = t0
     changes = [((stamp - t0) / 1e9, m) for topic, stamp, m in sink.messages
                if topic == TOPIC_EVENTS and m.get("kind") in ("alarm_alert", "alarm_danger", "alarm_clear")]
     return [(t, m) for t, m in changes if t <= end_s + 1e-3]

@@ -14,7 +14,7 @@ The monitoring chain feeds it (:mod:`cmsensord.monitor.alarms`); every time is a
 stamp of the stream, so a replay raises the same alarms as the live run.
 """
 
-from .manager import AlarmManager, Transition
+from .manager import AlarmManager, Judged, Transition
 from .state import LEVELS
 
-__all__ = ["AlarmManager", "Transition", "LEVELS"]
+__all__ = ["AlarmManager", "Judged", "Transition", "LEVELS"]

@@ -47,7 +47,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from cmsensord.alarms import LEVELS, AlarmManager, Transition
+from cmsensord.alarms import LEVELS, AlarmManager, Judged, Transition
 from cmsensord.alarms.saved import ack_saved, latch_or_ack_changed, resume, saved_rows, shown, snapshot
 from cmsensord.config import Config
 from cmsensord.config.alarm_indicators import RECORD_VALUES, RMS_MODE_VALUES, raw_only_rules
@@ -174,8 +174,8 @@ class Alarms:
         self._deferred: dict[str, dict[str, Any]] | None = None  # levels not saved yet (SAVE_LEVELS_S)
         self._levels_due_ns = 0
         self._no_signal: set[str] = set()     # channels whose last severity decision had no signal
-        #: a list: the manager keeps every value it judges in it (:attr:`AlarmManager.judged`)
-        self.judged: list | None = None
+        #: when given: the manager keeps every value it judges in it (:attr:`AlarmManager.judged`)
+        self.judged: Judged | None = None
 
     def keep(self, store: StateStore, saved: dict[str, dict[str, Any]]) -> list:
         """Keep the alarm state in ``store`` from now on and put ``saved`` (what it held) back
