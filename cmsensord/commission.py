@@ -173,6 +173,9 @@ def format_table(results: list[ChannelResult], obs: Observations) -> str:
     for r in results:
         m = r.model
         margin = f"margin {r.f_r / m.max_cnt:.2f}x" if m.max_cnt else "no outlier at all"
+        if m.max_cnt > m.max_cnt_after and m.runin_periods:
+            after = f"{m.max_cnt_after}, margin {r.f_r / m.max_cnt_after:.2f}x" if m.max_cnt_after else "no outlier"
+            margin += f", in the run-in (graded, not learned from); after it {after}"
         lines.append(f"{r.name}: highest outlier count per decision on the healthy period at R_1: "
                      f"{m.max_cnt} against f_r {r.f_r:.3g} ({margin}); "
                      f"{m.any_flagged} healthy decision(s) would be flagged" + _by_what(r))

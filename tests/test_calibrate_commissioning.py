@@ -47,12 +47,14 @@ def run_in(tmp_path_factory) -> Path:
 def test_the_run_in_decisions_are_checked_as_the_replay_grades_them(run_in, tmp_path):
     """The run-in is left out of the learning, but the monitor grades it: calibrate's margin and
     its count of flagged healthy decisions take it in (guards against 8 outliers at most and 0
-    flagged while the replay flags 6-15 s), and say where they are; the replay flags exactly those."""
+    flagged while the replay flags 6-15 s), and say where they are, with the margin after the run-in;
+    the replay flags exactly those."""
     site = tmp_path / "site.yaml"
     p = cmsensord("calibrate", str(run_in), "--rpm", "1500", "--out", str(site))
     assert p.returncode == 0, p.stderr
     assert ("de: highest outlier count per decision on the healthy period at R_1: 37 against f_r 25 (margin "
-            "0.68x); 9 healthy decision(s) would be flagged (9 by R_1, 0 by their level >= 2 x baseline)\n"
+            "0.68x, in the run-in (graded, not learned from); after it 8, margin 3.12x); 9 healthy decision(s) "
+            "would be flagged (9 by R_1, 0 by their level >= 2 x baseline)\n"
             "de: R_1 flags 9 decision(s) of the healthy period, in 6.0-15.0 board s; 9 of them in its run-in "
             "(1.0-15.0 board s), which is not learned from but is graded all the same\n") in p.stdout
     p = cmsensord("replay", str(run_in), "--config", str(site), "--out", str(tmp_path / "logs"))

@@ -96,6 +96,7 @@ class HealthyModel:
     rise: float = 1.0          # the learned decisions' last quarter median level / their first's (:func:`level_rise`)
     rise_at: int = -1          # where that rise passes half way (decision periods from the start); -1: no rise
     steady_rise: bool = False  # the steady stretch from the start (``steady_head``) holds such a rise of its own
+    max_cnt_after: int = 0     # highest outlier count at R_1 of a graded decision after the run-in
 
 
 def period_counts(y: np.ndarray, grid: np.ndarray, *, period: int, window: int, z_c: float,
@@ -346,7 +347,8 @@ def _check_period(at_r1: np.ndarray, ratio: np.ndarray, f_r: float, c: float, sk
             steady = (steady_length(ratio, level_alert), steady_length(ratio[::-1], level_alert))
     flagged[loud] = True
     return dict(
-        max_cnt=int(at_r1.max()), flagged=int(r1_at.size), runin_flagged=int(np.count_nonzero(by_r1[:skip])),
+        max_cnt=int(at_r1.max()), max_cnt_after=int(at_r1[skip:].max()) if at_r1.size > skip else 0,
+        flagged=int(r1_at.size), runin_flagged=int(np.count_nonzero(by_r1[:skip])),
         r1_first=int(r1_at[0]) + 1 if r1_at.size else -1, r1_last=int(r1_at[-1]) + 1 if r1_at.size else -1,
         level_flagged=int(loud.size), level_first=int(loud[0]) + 1 if loud.size else -1,
         level_last=int(loud[-1]) + 1 if loud.size else -1, any_flagged=int(np.count_nonzero(flagged)),
