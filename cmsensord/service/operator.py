@@ -167,7 +167,8 @@ def run_capture_now(args: argparse.Namespace) -> int:
 
 def format_table(t: dict) -> str:
     """The alarm table as text, one alarm a line: the value and the levels in the indicator's unit
-    (UNIT; "-": none, a ratio, a kurtosis, the severity index)."""
+    (UNIT; "-": none, a ratio, a kurtosis, the severity index); LIVE "-": not known (a saved alarm
+    before the first value)."""
     head = f"operating state: {t['operating_state']}, worst: {t['worst']}"
     if "worst_alarm" in t:
         head += f" ({t['worst_alarm']})"
@@ -179,7 +180,7 @@ def format_table(t: dict) -> str:
         flags = " ".join(f for f, on in (("latched", a["latched"]), ("acknowledged", a["acknowledged"]),
                                          ("restored", a.get("restored", False)),
                                          ("saved", a.get("saved", False))) if on)
-        unit = unit_of(str(a.get("indicator", ""))) or "-"
-        lines.append(f"{a['id']:24} {a['level']:7} {a['live']:7} {num[0]:>10} {num[1]:>8} {num[2]:>8} {unit:5}  "
+        unit, live = unit_of(str(a.get("indicator", ""))) or "-", a.get("live", "-")
+        lines.append(f"{a['id']:24} {a['level']:7} {live:7} {num[0]:>10} {num[1]:>8} {num[2]:>8} {unit:5}  "
                      f"{flags}".rstrip())
     return "\n".join(lines)
