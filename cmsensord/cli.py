@@ -41,6 +41,7 @@ from cmsensord.errors import (
     SinkError,
 )
 from cmsensord.journal import JournalStream, error_line, setup_logging, under_journal
+from cmsensord.service.config_file import ConfigFile
 from cmsensord.service.live import run_live
 from cmsensord.service.record import record
 from cmsensord.service.replay import replay
@@ -366,7 +367,7 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.config:
         cfg, auto = _config_for(args.config)
         return run_live(_with_output(cfg, args.out, args.akf_trace), auto_channels=auto, capture_path=args.capture,
-                        inputs=[args.config])
+                        inputs=[args.config], config_file=ConfigFile(args.config, cfg))
     error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
                "(see cmsensord --help)")
     return EXIT_USAGE

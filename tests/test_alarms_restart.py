@@ -238,7 +238,7 @@ def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_com
     assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text
     assert "worst: danger (sev/ch0)" in text and text.rstrip().endswith("latched saved"), text
     assert acked.returncode == 0 and acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
-    assert after.rstrip().endswith("danger  normal           -        -        - -      acknowledged saved"), after
+    assert after.rstrip().endswith("danger  -                -        -        - -      acknowledged saved"), after
     user = pwd.getpwuid(os.getuid()).pw_name
     assert lines(err, "alarm_ack") == [f"WARNING alarm_ack: sev/ch0 acknowledged by {user} (danger, saved by the "
                                        "last run; danger at its stop, judged again when data comes)"], err
@@ -371,3 +371,29 @@ def test_a_baseline_alert_saved_without_its_baseline_is_restored_as_the_same_epi
         f"WARNING alarm_restored: base/ch0: alert since {when(since // S)} (not acknowledged), from {state}"]
     assert lines(err, "alarm_alert") == [] and row["since"]["sec"] == since // S
     assert json.loads(state.read_text())["alarms"]["base/ch0"]["levels"]["baselines"] == {"ch0": 0.1}
+
+
+def test_a_saved_alarm_waiting_for_data_shows_no_live_level(tmp_path):
+    """Restarted with the board off, a latched danger the last run saved (danger too at its stop):
+    `cmsensord status` shows the latch, and its live level as not known ("-", absent in --json),
+    not "normal" (guards against the table saying the value is back to normal with no value yet)."""
+    (tmp_path / "logs").mkdir()
+    rec = {**saved_latch("sev", "danger", (int(time.time()) - 60) * S, alert=0.3, danger=0.6), "live": "danger"}
+    (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
+        {"format": "cmsensord-alarms", "version": 1, "alarms": {"sev/ch0": rec}}))
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=LATCHED)
+    cfg = str(tmp_path / "cmsensord.yaml")
+    try:
+        end, p = time.monotonic() + 20, None
+        while time.monotonic() < end:
+            time.sleep(0.3)
+            p = run_module("cmsensord", "status", "--config", cfg)
+            if p.returncode == 0:
+                break
+        answer = json.loads(run_module("cmsensord", "status", "--config", cfg, "--json").stdout)
+    finally:
+        stop(d)
+    assert p is not None and p.returncode == 0, p and p.stderr
+    row = "sev/ch0                  danger  -                -        -        - -      latched saved"
+    assert p.stdout.splitlines()[-1] == row, p.stdout
+    assert "live" not in answer["alarms"][0] and answer["alarms"][0]["saved"] is True, answer

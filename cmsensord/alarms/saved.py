@@ -225,12 +225,12 @@ def shown(rec: dict[str, Any]) -> str:
 
 def saved_rows(saved: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """Rows of the alarm table for saved records not put back yet (no data has come): flag
-    ``saved``, the live level not known."""
+    ``saved``, and no ``live`` level: with no value yet it is not known (absent, as every value
+    not known)."""
     rows = []
     for name, rec in saved.items():
         row = {"id": name, "rule": rec["rule"], "indicator": rec["indicator"], "level": shown(rec),
-               "live": "normal", "latched": rec["latched"] != "normal", "acknowledged": rec["acknowledged"],
-               "saved": True}
+               "latched": rec["latched"] != "normal", "acknowledged": rec["acknowledged"], "saved": True}
         if "since_ns" in rec:
             row["since"] = {"sec": rec["since_ns"] // 1_000_000_000, "nsec": rec["since_ns"] % 1_000_000_000}
         rows.append(row)

@@ -20,6 +20,7 @@ from cmsensord.out_paths import capture_refused
 from cmsensord.protocol import Frame, FrameType
 from cmsensord.sdnotify import Notifier
 from cmsensord.service.alarm_store import keep_alarm_state
+from cmsensord.service.config_file import ConfigFile
 from cmsensord.service.control import ControlServer, socket_path
 from cmsensord.service.dir_guard import DirGuard
 from cmsensord.service.heap import keep_freed_memory
@@ -227,7 +228,7 @@ def can_wait(frames: list[Frame], start: int, wake: int | None, far: int) -> boo
 def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = None,
              sim_done: threading.Event | None = None, capture_path: str | None = None,
              metadata: dict[str, str] | None = None, open_port: Callable | None = None,
-             simulated: bool = False, inputs: Sequence[str] = ()) -> int:
+             simulated: bool = False, inputs: Sequence[str] = (), config_file: ConfigFile | None = None) -> int:
     """The real-time loop: reader thread -> bounded queue -> Processor -> MCAP (``open_port``:
     how the reader opens the port, default pyserial's ``Serial``; ``inputs``: the configuration's
     files, which the ``--capture`` file must not be, nor one ``cfg`` names), the output directory held
@@ -237,7 +238,9 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     appended to; ``simulated`` (``--simulate``: a simulated board, not the machine): neither, and
     retention counts and deletes only this run's files (the machine's logs of the prefix are
     left alone).  A refused ``--capture`` (:func:`~cmsensord.out_paths.capture_refused`) raises
-    CaptureFileError before the output directory is made or locked."""
+    CaptureFileError before the output directory is made or locked.  ``config_file``: the daemon's
+    configuration file, read again at a SIGHUP to say whether it holds other settings than the
+    running ones (:mod:`.config_file`)."""
     inputs = [*inputs, *named_files(cfg)]
     refused = capture_refused(capture_path, inputs) if capture_path else None
     if refused is not None:             # before the directory and its lock are made
@@ -247,7 +250,7 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
     try:
         return _run_live(cfg, auto_channels=auto_channels, duration_s=duration_s, sim_done=sim_done,
                          capture_path=capture_path, metadata=metadata, open_port=open_port,
-                         simulated=simulated, held=held, inputs=inputs)
+                         simulated=simulated, held=held, inputs=inputs, config_file=config_file)
     finally:
         if held is not None:
             held.close()
@@ -255,7 +258,8 @@ def run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None = Non
 
 def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim_done: threading.Event | None,
               capture_path: str | None, metadata: dict[str, str] | None, open_port: Callable | None,
-              simulated: bool, held: HeldDir | None, inputs: Sequence[str]) -> int:
+              simulated: bool, held: HeldDir | None, inputs: Sequence[str],
+              config_file: ConfigFile | None) -> int:
     keep_freed_memory()                 # each call's arrays from the heap, not fresh zeroed pages
     stop = StopFlag()
     stop.install()
@@ -291,7 +295,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
     with source:
         try:
             _loop(cfg, proc, sink, source, stop, _Watch(cfg, proc, source, duration_s, sim_done), control,
-                  DirGuard(held, control, _emitter(proc), time.monotonic()))
+                  DirGuard(held, control, _emitter(proc), time.monotonic()), config_file)
         except ReaderDied as died:
             proc.event("reader_died", None, str(died), log_level=logging.ERROR)
             status = EXIT_READER_DIED
@@ -380,7 +384,7 @@ def _process(cfg: Config, proc: Processor, source: SerialSource, watch: _Watch,
 
 
 def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFlag,
-          watch: _Watch, control: ControlServer | None, guard: DirGuard) -> None:
+          watch: _Watch, control: ControlServer | None, guard: DirGuard, config_file: ConfigFile | None) -> None:
     notify = Notifier()                 # systemd Type=notify; does nothing without NOTIFY_SOCKET
     reader = source.reader
 
@@ -425,6 +429,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
             if stop.reopen:             # SIGHUP: finish the current file, start a new one
                 stop.reopen = False
                 sink.reopen()
+                _reload_note(proc, config_file)
             # frames held for the block completing the next output are frames that came; a stall
             # noticed here (its partial interval written) is made durable by this tick, not the next
             over = watch.done(bool(frames) or bool(source.waiting), now) or stop.event.is_set()
@@ -438,6 +443,14 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
                 _status(cfg, notify, line_now, service_state, pace.due(now))
     finally:
         notify.stopping("stopping: closing the MCAP log")
+
+
+def _reload_note(proc: Processor, config_file: ConfigFile | None) -> None:
+    """At a SIGHUP, a ``config`` warning when the configuration file holds other settings than
+    the running ones, or does not load (a reload applies none of it: :mod:`.config_file`)."""
+    note = config_file.on_reload() if config_file is not None else None
+    if note is not None:
+        proc.event("config", None, note, proc.diag.wall_stamp(), log_level=logging.WARNING)
 
 
 def _status(cfg: Config, notify: Notifier, line_now: Callable[[], str],

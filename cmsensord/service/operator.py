@@ -4,7 +4,9 @@ They talk to the daemon's control socket (:mod:`.control`): the one in the
 output directory of ``--config FILE``, the one given by ``--socket``, or by
 default the systemd unit's ``/var/lib/cmsensord/cmsensord.sock`` (root only:
 the state directory is mode 0700), or, when that is not there, the one of a daemon
-started in the current directory with the default ``output.dir``.  ``status`` prints
+started in the current directory with the default ``output.dir`` (a relative ``output.dir`` of
+``--config`` is taken in the current directory, else, when only there, in the service's working
+directory, ``/var/lib/cmsensord``, where the unit's daemon put it).  ``status`` prints
 the daemon's status line and its alarm table; ``ack ALARM`` acknowledges one alarm, ``ack --all`` every
 alarm showing a level.  ``capture-now [--channel CH]`` has the daemon keep a capture
 (trigger ``manual``) of the channel, or of every channel, around the newest sample it
@@ -48,18 +50,39 @@ def add_operator_parsers(sub) -> None:
                        f"or, without it, {Path(OutputConfig().dir) / SOCKET_NAME} here)")
 
 
-def _path(args: argparse.Namespace) -> Path:
-    """``--socket``; the socket of ``--config``'s output directory; the service's; else, when
-    the service's is not there, that of a daemon started here with the default ``output.dir``
-    (``cmsensord --simulate``) if there is one."""
+def _path(args: argparse.Namespace) -> tuple[Path, str]:
+    """The socket to ask and what to try when no daemon answers there: ``--socket``; the socket of
+    ``--config``'s output directory (a relative one here, else, when only there, under the
+    service's working directory, the state directory, where the unit's daemon resolves it); the
+    service's; else, when the service's is not there, that of a daemon started here with the
+    default ``output.dir`` (``cmsensord --simulate``) if there is one."""
     if args.socket:
-        return Path(args.socket)
+        return Path(args.socket), _NEXT
     if args.sub_config:
         from cmsensord.config import load_config
-        return socket_path(load_config(args.sub_config).output.dir)
+        out_dir = load_config(args.sub_config).output.dir
+        here, service = socket_path(out_dir), STATE_DIR / out_dir / SOCKET_NAME
+        if Path(out_dir).is_absolute():
+            return here, f"is the daemon of {args.sub_config} running? see systemctl status cmsensord; {_OUT}"
+        if not _is_socket(here) and _is_socket(service):
+            return service, f"is the service running? see systemctl status cmsensord; {_OUT}"
+        return here, (f"output.dir {out_dir} of {args.sub_config} is relative, taken here; the service "
+                      f"runs in {STATE_DIR}, its daemon answers on --socket {service}; {_OUT}")
     here = socket_path(OutputConfig().dir)
     service = STATE_DIR / SOCKET_NAME
-    return here if not _exists(service) and here.is_socket() else service
+    return (here if not _exists(service) and here.is_socket() else service), _NEXT
+
+
+#: what to try when no daemon answers on the socket asked
+_OUT = "a daemon started with --out DIR answers on --socket DIR/cmsensord.sock"
+_NEXT = f"is it running? give --config FILE or --socket PATH; {_OUT}"
+
+
+def _is_socket(path: Path) -> bool:
+    try:
+        return path.is_socket()
+    except OSError:                         # the state directory mode 0700 to another user
+        return False
 
 
 def _exists(path: Path) -> bool:
@@ -74,16 +97,15 @@ _COMMAND = {"ack": "ack", "status": "status", "capture": "capture-now"}
 
 
 def _ask(args: argparse.Namespace, body: dict) -> dict | None:
-    path = _path(args)
+    path, then = _path(args)
     try:
         return request(path, body)
     except NoAnswer as exc:
         print(f"cmsensord: {_COMMAND[body['cmd']]}: {exc}", file=sys.stderr)
         return None
     except (OSError, ValueError) as exc:
-        print(f"cmsensord: no daemon answers on {path}: {getattr(exc, 'strerror', None) or exc} "
-              "(is it running? give --config FILE or --socket PATH; a daemon started with --out DIR "
-              "answers on --socket DIR/cmsensord.sock)", file=sys.stderr)
+        print(f"cmsensord: no daemon answers on {path}: {getattr(exc, 'strerror', None) or exc} ({then})",
+              file=sys.stderr)
         return None
 
 
@@ -145,7 +167,8 @@ def run_capture_now(args: argparse.Namespace) -> int:
 
 def format_table(t: dict) -> str:
     """The alarm table as text, one alarm a line: the value and the levels in the indicator's unit
-    (UNIT; "-": none, a ratio, a kurtosis, the severity index)."""
+    (UNIT; "-": none, a ratio, a kurtosis, the severity index); LIVE "-": not known (a saved alarm
+    before the first value)."""
     head = f"operating state: {t['operating_state']}, worst: {t['worst']}"
     if "worst_alarm" in t:
         head += f" ({t['worst_alarm']})"
@@ -157,7 +180,7 @@ def format_table(t: dict) -> str:
         flags = " ".join(f for f, on in (("latched", a["latched"]), ("acknowledged", a["acknowledged"]),
                                          ("restored", a.get("restored", False)),
                                          ("saved", a.get("saved", False))) if on)
-        unit = unit_of(str(a.get("indicator", ""))) or "-"
-        lines.append(f"{a['id']:24} {a['level']:7} {a['live']:7} {num[0]:>10} {num[1]:>8} {num[2]:>8} {unit:5}  "
+        unit, live = unit_of(str(a.get("indicator", ""))) or "-", a.get("live", "-")
+        lines.append(f"{a['id']:24} {a['level']:7} {live:7} {num[0]:>10} {num[1]:>8} {num[2]:>8} {unit:5}  "
                      f"{flags}".rstrip())
     return "\n".join(lines)

@@ -1,0 +1,75 @@
+"""``systemctl reload`` (SIGHUP) after editing the configuration: the daemon starts a new log
+file and applies no setting, and says so in one warning line naming what changed and how to apply
+it, or that the edited file does not load (a restart would stop the daemon on it)."""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+
+import pytest
+
+from processes import start_daemon
+
+pytestmark = pytest.mark.process
+
+RULES = "alarms:\n  rules:\n    - name: rms\n      indicator: accel_rms\n      alert: 3.0\n      danger: 6.0\n"
+
+
+class _Lines:
+    """The daemon's stderr lines as they come (a reader thread)."""
+
+    def __init__(self, proc):
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=self._read, args=(proc.stderr,), daemon=True)
+        self._thread.start()
+
+    def _read(self, pipe) -> None:
+        for line in pipe:
+            self.lines.append(line.rstrip("\n"))
+
+    def count(self, prefix: str) -> int:
+        return sum(line.startswith(prefix) for line in self.lines)
+
+    def wait(self, prefix: str, n: int, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while self.count(prefix) < n:
+            assert time.monotonic() < deadline, f"no {n}th {prefix!r} line:\n" + "\n".join(self.lines)
+            time.sleep(0.02)
+
+    def join(self) -> None:
+        self._thread.join(timeout=10)
+
+
+def test_a_reload_says_the_edited_configuration_is_not_applied(tmp_path):
+    """Three reloads of a daemon (its board unplugged: the loop turns all the same): the file as
+    it started, no config line; a level edited, one warning naming it and the restart that applies
+    it; the file broken, one warning with its error, before a restart stops the daemon on it."""
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=RULES)
+    out = _Lines(d)
+    cfg = tmp_path / "cmsensord.yaml"
+    try:
+        out.wait("INFO effective settings:", 1)
+        for n, edit in enumerate((None, ("alert: 3.0", "alert: 4.0"), ("alert: 4.0", "alert: four")), 1):
+            if edit is not None:
+                cfg.write_text(cfg.read_text().replace(*edit))
+            d.send_signal(signal.SIGHUP)
+            out.wait("INFO reopen:", n)
+            time.sleep(0.1)                 # the line after the reopen's, if one comes
+        d.send_signal(signal.SIGTERM)
+        assert d.wait(timeout=10) == 0
+    finally:
+        if d.poll() is None:
+            d.kill()
+        out.join()
+    said = [line for line in out.lines if line.startswith(("INFO reopen:", "WARNING config:"))]
+    assert [line.split(":")[0] for line in said] == ["INFO reopen", "INFO reopen", "WARNING config",
+                                                     "INFO reopen", "WARNING config"], out.lines
+    assert said[2] == (f"WARNING config: {cfg} changed since the daemon started (alarms.rules[0].alert 3.0 -> 4.0): "
+                       "not applied, a reload only starts a new log file; restart the daemon to apply it "
+                       "(systemctl restart cmsensord: alarm latches and acknowledgements are kept)")
+    assert said[4] == (f"WARNING config: {cfg} changed since the daemon started and does not load: "
+                       "alarms.rules[0].alert: expected a number (got 'four'); a reload applies no setting, "
+                       "and a restart would stop the daemon (exit 78): fix the file first")
+    assert not any("Traceback" in line for line in out.lines)
