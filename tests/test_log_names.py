@@ -53,7 +53,7 @@ def test_retention_after_the_clock_stepped_back_deletes_the_files_opened_first(t
                         "--config", str(tmp_path / "c.yaml")], capture_output=True, text=True, env=ENV,
                        timeout=120)
     assert r.returncode == 0, r.stderr
-    deleted = [name for names in re.findall(r"INFO retention: retention: deleted the \d oldest log file\(s\) "
+    deleted = [name for names in re.findall(r"INFO retention: deleted the \d oldest log file\(s\) "
                                             r"\([0-9.]+ MB: (cmsensord-[^ )]+\.mcap(?:, cmsensord-[^ )]+\.mcap)*)\)",
                                             r.stderr) for name in names.split(", ")]
     kept, _ = log_files(out, "cmsensord")

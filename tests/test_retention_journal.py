@@ -65,7 +65,7 @@ def test_a_disk_error_after_many_retention_passes_is_its_own_error_line(small_fs
     errors = [line for line in lines if line.startswith("ERROR")]
     assert len(errors) == 1 and re.match(r"ERROR disk_error: \S+\.mcap\.part: (write failed|cannot finish MCAP "
                                          r"file): No space left on device; ", errors[0]), errors
-    deleted = [line for line in lines if re.match(r"INFO retention: retention: deleted the 1 oldest log file\(s\) "
+    deleted = [line for line in lines if re.match(r"INFO retention: deleted the 1 oldest log file\(s\) "
                                                   r"\([0-9.]+ MB: cmsensord-\S+\.mcap\) to keep this prefix's", line)]
     assert len(deleted) == 10, lines[-40:]                       # the journal's budget of its kind
     assert [line for line in lines if line.startswith("INFO disk_error: logging resumed in ")], lines[-40:]

@@ -55,7 +55,7 @@ def test_older_logs_over_retain_mb_are_deleted_with_one_event(tmp_path):
     assert not (out / OLD).exists() and (out / NEWER).exists() and other.exists()
     [ev] = [e for e in events if e["kind"] == "retention"]
     assert not [e for e in events if e["kind"] == "disk_error"]
-    assert ev["message"].startswith(f"retention: deleted the 1 oldest log file(s) (1.5 MB: {OLD}) "
+    assert ev["message"].startswith(f"deleted the 1 oldest log file(s) (1.5 MB: {OLD}) "
                                     "to keep this prefix's files under retain_mb = 1 MB (now 0.2 MB)")
 
 
@@ -70,7 +70,7 @@ def test_a_log_retention_cannot_delete_is_one_event_passed_over_and_the_run_goes
     told = [e["message"] for e in events if e["kind"] in ("disk_error", "retention")]
     assert told[0] == message and len(told) == 2, told
     assert [e["kind"] for e in events if e["message"] in told] == ["disk_error", "retention"]
-    assert re.fullmatch(rf"retention: deleted the 1 oldest log file\(s\) \(1\.5 MB: {NEWER}\) to keep this "
+    assert re.fullmatch(rf"deleted the 1 oldest log file\(s\) \(1\.5 MB: {NEWER}\) to keep this "
                         r"prefix's files under retain_mb = 1 MB \(now [0-9.]+ MB, besides 0\.0 MB in 1 "
                         r"file\(s\) passed over\)( and at least min_free_mb = .*)?", told[1]), told[1]
     assert (out / OLD / "kept").exists() and not (out / NEWER).exists()   # the next oldest went
@@ -100,7 +100,7 @@ def test_a_replay_into_the_services_directory_deletes_none_of_its_logs_and_says_
     assert all(p.exists() for p in service)
     own = [p for p in out.glob("cmsensord-*.mcap") if p not in service]
     events = [m["message"] for p in own for t, _, m in read_messages(p) if t == "/cm/events"]
-    assert any(m.startswith("retention: deleted the 1 oldest log file(s)") and "to keep this run's files under "
+    assert any(m.startswith("deleted the 1 oldest log file(s)") and "to keep this run's files under "
                "retain_mb = 0.15 MB" in m for m in events), events
     assert 0 < sum(p.stat().st_size for p in own) < 0.3e6, own
 
@@ -115,7 +115,7 @@ def test_a_log_retention_keeps_failing_on_is_one_event_over_many_rotations(tmp_p
                                    "  flush_s: 0.1\n", board=("--duration", "20", "--speed", "10"))
     message = f"{out / OLD}: retention cannot delete: Is a directory"
     assert [line for line in err.splitlines() if "cannot delete" in line] == [f"ERROR disk_error: {message}"]
-    deleted = re.findall(r"INFO retention: retention: deleted the 1 oldest log file\(s\) \([0-9.]+ MB: "
+    deleted = re.findall(r"INFO retention: deleted the 1 oldest log file\(s\) \([0-9.]+ MB: "
                          r"(cmsensord-\S+\.mcap)\)", err)
     logs = sorted(p.name for p in out.glob("cmsensord-*.mcap") if p.name != OLD)
     assert len(deleted) >= 3 and not set(deleted) & set(logs), (deleted, logs)   # one a rotation
@@ -141,5 +141,5 @@ def test_a_simulated_board_into_the_services_directory_deletes_none_of_its_logs_
             "run's: left alone; it counts and deletes only its own under retain_mb and min_free_mb"
             in r.stderr.splitlines()), r.stderr[-3000:]
     assert all(p.exists() for p in service)
-    assert re.search(r"INFO retention: retention: deleted the 1 oldest log file\(s\) .* to keep this run's "
+    assert re.search(r"INFO retention: deleted the 1 oldest log file\(s\) .* to keep this run's "
                      r"files under retain_mb = 0\.03 MB", r.stderr), r.stderr[-3000:]

@@ -233,7 +233,7 @@ def test_a_file_retention_cannot_delete_is_one_event_and_ends_the_pass(tmp_path,
     assert not files[0].exists() and not files[1].exists()
     assert len(events) == 1 and events[0][2]["details"]["files"][:2] == [files[0].name, files[1].name]
     a, b = (re.escape(p.name) for p in files[:2])
-    assert re.fullmatch(rf"retention: deleted the \d oldest log file\(s\) \([0-9.]+ MB: {a}, {b}.*\) to keep "
+    assert re.fullmatch(rf"deleted the \d oldest log file\(s\) \([0-9.]+ MB: {a}, {b}.*\) to keep "
                         rf"this prefix's files under retain_mb = {cap_mb:g} MB \(now [0-9.]+ MB\)",
                         events[0][1]), events[0][1]
 

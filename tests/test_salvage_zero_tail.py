@@ -123,7 +123,7 @@ def test_kept_damaged_and_unreadable_copies_count_in_retain_mb_and_go_first(tmp_
     assert cmsensord("--simulate", "--duration", "2", "--speed", "20", "--out", str(sim)).returncode == 0
     shutil.copy(log_files(sim, "cmsensord")[0][0], newer)         # a real log, 0.1 MB at most
     _, err = daemon_on_short_board(tmp_path, config="  rotate_mb: 0.2\n  retain_mb: 1\n  min_free_mb: 0\n")
-    assert (f"INFO retention: retention: deleted the 2 oldest log file(s) (3.0 MB: {damaged.name}, "
+    assert (f"INFO retention: deleted the 2 oldest log file(s) (3.0 MB: {damaged.name}, "
             f"{unreadable.name}) to keep this prefix's files under retain_mb = 1 MB (now 0.0 MB)"
             in err.splitlines()), err[-3000:]
     assert newer.exists() and not damaged.exists() and not unreadable.exists()

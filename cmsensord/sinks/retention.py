@@ -233,7 +233,7 @@ def _deleted_event(sink: RotatingSink, deleted: list[Path], freed: int, total: i
                    f"(now {free / MB:.1f} MB)")
     names = ", ".join(p.name for p in deleted[:3]) + (" ..." if len(deleted) > 3 else "")
     again = f"; the {repeats + 1} pass(es) before this one failed (told once)" if repeats else ""
-    sink.emit(RETENTION_EVENT, f"retention: deleted the {len(deleted)} oldest log file(s) "
+    sink.emit(RETENTION_EVENT, f"deleted the {len(deleted)} oldest log file(s) "
               f"({freed / MB:.1f} MB: {names}) to keep {' and '.join(why)}{again}",
               count=len(deleted), details={"action": "retention",
                                            "files": [p.name for p in deleted],
