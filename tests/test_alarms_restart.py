@@ -75,7 +75,7 @@ def test_a_latched_alarm_stays_latched_over_a_restart(tmp_path):
         text = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml")).stdout
         assert "ALARM danger sev/ch0" in text and text.rstrip().endswith("latched"), text
         p = run_module("cmsensord", "ack", "--all", "--config", str(tmp_path / "cmsensord.yaml"))
-        assert p.stdout.strip() == "acknowledged 1 alarm(s)", p.stdout + p.stderr
+        assert p.stdout.strip() == "acknowledged 1 alarm(s): sev/ch0", p.stdout + p.stderr
     finally:
         err = stop(d)
         board.terminate()
@@ -103,7 +103,7 @@ def test_an_acknowledged_danger_is_not_raised_again_after_a_restart(tmp_path):
         d = start_daemon(tmp_path, link, config=PLAIN)
         wait_row(tmp_path, lambda r: r["level"] == "danger")
         p = run_module("cmsensord", "ack", "sev/ch0", "--config", str(tmp_path / "cmsensord.yaml"))
-        assert p.stdout.strip() == "acknowledged 1 alarm(s)", p.stdout + p.stderr
+        assert p.stdout.strip() == "acknowledged 1 alarm(s): sev/ch0", p.stdout + p.stderr
         acked = wait_row(tmp_path, lambda r: r["acknowledged"])
         stop(d)
         d = start_daemon(tmp_path, link, config=PLAIN)
@@ -237,7 +237,7 @@ def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_com
         err = stop(d)
     assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text
     assert "worst: danger (sev/ch0)" in text and text.rstrip().endswith("latched saved"), text
-    assert acked.returncode == 0 and acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
+    assert (acked.returncode, acked.stdout) == (0, "acknowledged 1 alarm(s): sev/ch0\n"), acked.stdout + acked.stderr
     assert after.rstrip().endswith("danger  -                -        -        - -      acknowledged saved"), after
     user = pwd.getpwuid(os.getuid()).pw_name
     assert lines(err, "alarm_ack") == [f"WARNING alarm_ack: sev/ch0 acknowledged by {user} (danger, saved by the "
@@ -284,7 +284,7 @@ def test_a_latched_alarm_acknowledged_while_active_clears_when_the_value_falls_a
     try:
         wait_row(tmp_path, lambda r: r["live"] == "danger")
         acked = run_module("cmsensord", "ack", "--all", "--config", cfg)
-        assert acked.stdout.strip() == "acknowledged 1 alarm(s)", acked.stdout + acked.stderr
+        assert acked.stdout.strip() == "acknowledged 1 alarm(s): sev/ch0", acked.stdout + acked.stderr
         board.terminate()
         board.wait(timeout=5)
         board = start_board("--scenario", "healthy", "--speed", "20", "--link", str(link))

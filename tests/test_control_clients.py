@@ -78,7 +78,7 @@ def test_idle_and_trickling_clients_hold_up_no_ack(tmp_path):
             assert before.returncode == 0, before.stderr
             assert [ln.split()[-1] for ln in before.stdout.splitlines() if ln.startswith("lat/ch0")] == ["latched"]
             ack = cmsensord("ack", "--all", "--socket", sock)
-            assert (ack.returncode, ack.stdout, ack.stderr) == (0, "acknowledged 1 alarm(s)\n", "")
+            assert (ack.returncode, ack.stdout, ack.stderr) == (0, "acknowledged 1 alarm(s): lat/ch0\n", "")
             after = cmsensord("status", "--socket", sock)
             assert [ln.split()[-1] for ln in after.stdout.splitlines() if ln.startswith("lat/ch0")] == \
                 ["acknowledged"], after.stdout
@@ -100,7 +100,7 @@ def test_an_ack_of_the_longest_alarm_name(tmp_path):
     d, sock = daemon(tmp_path, f"    - {{name: {LONG}, indicator: accel_rms, alert: 0.5, latch: true}}\n")
     try:
         ack = cmsensord("ack", f"{LONG}/ch0", "--socket", sock)
-        assert (ack.returncode, ack.stdout, ack.stderr) == (0, "acknowledged 1 alarm(s)\n", "")
+        assert (ack.returncode, ack.stdout, ack.stderr) == (0, f"acknowledged 1 alarm(s): {LONG}/ch0\n", "")
     finally:
         stop(d)
 

@@ -131,10 +131,12 @@ class Processor(Figures):
         """A wake-up without frames at stream time ``stamp_ns``: the alarm state's saves due by then."""
         self._out(self.alarms.tick(stamp_ns))
 
-    def ack(self, which: str | None, by: str | None = None) -> None:
+    def ack(self, which: str | None, by: str | None = None) -> list[str]:
         """Acknowledge alarm ``which`` (None: all) by user ``by``, stamped with the newest alarm
-        input's stamp; KeyError for an unknown alarm."""
-        self._out(self.alarms.ack(which, by))
+        input's stamp: the names of the alarms acknowledged; KeyError for an unknown alarm."""
+        out = self.alarms.ack(which, by)
+        self._out(out)
+        return [e.fields["alarm"] for e in out if isinstance(e, Event) and e.kind == "alarm_ack"]
 
     # ---- frames ------------------------------------------------------------
     def handle(self, frames: Sequence[Frame]) -> None:

@@ -242,13 +242,12 @@ def handle(proc, body: dict, line: Callable[[], str] | None = None, by: str | No
         return {"ok": False, "error": "alarm must be a name or null"}
     if not alarms.active:
         return {"ok": False, "error": "no alarm rules are configured (alarms.rules)"}
-    before = proc.event_counts.get("alarm_ack", 0)
     try:
-        proc.ack(which, by)
+        done = proc.ack(which, by)
     except KeyError:
         names = ", ".join(alarms.manager.alarms if alarms.manager else alarms.saved_names())
         return {"ok": False, "error": f"no alarm named {which!r} (alarms: {names})"}
-    return {"ok": True, "acknowledged": proc.event_counts.get("alarm_ack", 0) - before}
+    return {"ok": True, "acknowledged": len(done), "alarms": done}
 
 
 def _capture(proc, body: dict) -> dict:

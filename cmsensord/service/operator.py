@@ -121,7 +121,8 @@ def run_ack(args: argparse.Namespace) -> int:
         print(f"cmsensord: ack: {answer.get('error')}", file=sys.stderr)
         return EXIT_NO_DAEMON
     if answer["acknowledged"]:
-        print(f"acknowledged {answer['acknowledged']} alarm(s)")
+        names = answer.get("alarms")
+        print(f"acknowledged {answer['acknowledged']} alarm(s)" + (f": {', '.join(names)}" if names else ""))
     elif args.all:
         print("nothing to acknowledge: no alarm shows a level not acknowledged yet")
     else:
