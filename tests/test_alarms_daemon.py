@@ -139,7 +139,7 @@ def test_latched_alarm_acknowledged_over_the_control_socket(tmp_path):
             assert "| rx " in after["status"] and " frames " in after["status"], after["status"]   # the whole line
             again = run_module("cmsensord", "ack", "de_kurtosis/ch0", "--config", str(cfg))
             assert again.returncode == 0 and again.stdout.strip() == (
-                "nothing to acknowledge: de_kurtosis/ch0 is at normal or acknowledged already"), again.stdout
+                "nothing to acknowledge: de_kurtosis/ch0 shows no level (normal)"), again.stdout
             bad = run_module("cmsensord", "ack", "nope", "--config", str(cfg))
             assert bad.returncode == 1 and "no alarm named 'nope'" in bad.stderr
         finally:

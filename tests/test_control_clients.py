@@ -82,6 +82,9 @@ def test_idle_and_trickling_clients_hold_up_no_ack(tmp_path):
             after = cmsensord("status", "--socket", sock)
             assert [ln.split()[-1] for ln in after.stdout.splitlines() if ln.startswith("lat/ch0")] == \
                 ["acknowledged"], after.stdout
+            again = cmsensord("ack", "lat/ch0", "--socket", sock)     # the faulty motor stays above 0.5
+            assert (again.returncode, again.stdout) == (
+                0, "nothing to acknowledge: lat/ch0 is acknowledged already (it shows alert)\n"), after.stdout
             for s in idle:
                 assert answer(s) == {"ok": False, "error": f"no request line within {REPLY_S:g} s"}
             assert answer(slow) == {"ok": False, "error": f"no request line within {REPLY_S:g} s"}

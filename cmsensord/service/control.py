@@ -247,7 +247,11 @@ def handle(proc, body: dict, line: Callable[[], str] | None = None, by: str | No
     except KeyError:
         names = ", ".join(alarms.manager.alarms if alarms.manager else alarms.saved_names())
         return {"ok": False, "error": f"no alarm named {which!r} (alarms: {names})"}
-    return {"ok": True, "acknowledged": len(done), "alarms": done}
+    out = {"ok": True, "acknowledged": len(done), "alarms": done}
+    row = next((r for r in alarms.table()["alarms"] if r["id"] == which), None) if which and not done else None
+    if row is not None:             # why there was nothing to acknowledge: the level it shows
+        out["level"] = row["level"]
+    return out
 
 
 def _capture(proc, body: dict) -> dict:

@@ -125,8 +125,10 @@ def run_ack(args: argparse.Namespace) -> int:
         print(f"acknowledged {answer['acknowledged']} alarm(s)" + (f": {', '.join(names)}" if names else ""))
     elif args.all:
         print("nothing to acknowledge: no alarm shows a level not acknowledged yet")
+    elif answer.get("level", "normal") == "normal":
+        print(f"nothing to acknowledge: {args.alarm} shows no level (normal)")
     else:
-        print(f"nothing to acknowledge: {args.alarm} is at normal or acknowledged already")
+        print(f"nothing to acknowledge: {args.alarm} is acknowledged already (it shows {answer['level']})")
     return 0
 
 
