@@ -109,7 +109,7 @@ def batch_orders(capture: str, cfg: Config, *, bandwidth_hz: float = 1.0, poles:
     out_dir = Path(cfg.output.dir)
     made_dir = not out_dir.exists()
     done = replayed = False
-    head = RecordingHead(capture, meta)     # an import's: on its recording's time, as its replays
+    head = RecordingHead(capture, meta, cfg.commissioned)     # an import's: on its recording's time, as its replays
     sink = open_sink(cfg, {**head.metadata, "batch_vkf": f"{poles} poles, {bandwidth_hz:g} Hz"},
                      publish=publish, command="vkf")
     try:

@@ -225,15 +225,16 @@ def _r1_line(r: ChannelResult, obs: Observations) -> str:
 def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
               base: dict[str, Any] | None = None, base_path: str | None = None,
               rpm: float | None = None) -> str:
-    """SITE.yaml text: BASE's settings (if any) with the learned channels, commented.  A
-    speed given to calibrate (``rpm``, ``--rpm``) replaces the one the capture's import read."""
+    """SITE.yaml text: BASE's settings (if any) with the learned channels, commented, learned from
+    the capture at ``source`` (its real path, :func:`_commissioned_yaml`).  A speed given to
+    calibrate (``rpm``, ``--rpm``) replaces the one the capture's import read."""
     base = dict(base or {})
     base.pop("commissioned", None)
     base_alarms = base.pop("alarms", None) or {}
     base_channels = {ch.get("name"): ch for ch in base.pop("channels", None) or [] if isinstance(ch, dict)}
     out = [
         "# cmsensord site configuration written by `cmsensord calibrate`; re-run it to regenerate.",
-        f"# learned from {source}, board seconds {obs.start_s:.1f}-{obs.end_s:.1f} (the healthy period)"
+        f"# learned from {Path(source).name}, board seconds {obs.start_s:.1f}-{obs.end_s:.1f} (the healthy period)"
         + (f", on top of {base_path}" if base_path else ""),
         "# Per channel: baseline = median RMS of the healthy period's decisions; the AKF bank watches",
         "# block RMS / baseline, so r_min and r_max are in units of baseline^2; the severity also",
@@ -263,10 +264,15 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
 
 
 def _commissioned_yaml(obs: Observations, source: str) -> list[str]:
-    """The ``commissioned`` section: the capture and its board's rate (a board at another is warned of)."""
-    return ["# What the baselines were learned from: a board streaming at another rate is warned of.",
+    """The ``commissioned`` section: the capture (``source``, its real path, as a replay's log
+    names its ``source``), its board's rate (a board at another is warned of) and the healthy
+    period in its board seconds (a replay of that capture writes it into its log, where the
+    report shades it)."""
+    return ["# What the baselines were learned from: a board streaming at another rate is warned of; a replay",
+            "# of this capture marks the healthy period (board seconds) in its log and its report.",
             "commissioned:", f"  capture: {json.dumps(source)}", f"  fs_hz: {obs.fs:g}",
-            f"  block_len: {round(obs.fs / obs.rate_hz)}"]
+            f"  block_len: {round(obs.fs / obs.rate_hz)}",
+            f"  from_s: {round(float(obs.start_s), 6)!r}", f"  to_s: {round(float(obs.end_s), 6)!r}"]
 
 
 _SETTING_WHY = {"rpm": "the speed the import read from the recording (no tacho in the capture)"}
@@ -388,7 +394,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     where = span_line(obs.meta, obs.start_s, obs.end_s)
     if where:
         print(f"healthy period {where}")
-    text = site_yaml(results, obs, source=Path(args.capture).name, base=base, base_path=args.config, rpm=speed)
+    text = site_yaml(results, obs, source=os.path.realpath(args.capture), base=base, base_path=args.config, rpm=speed)
     tmp = out.with_name(out.name + ".part")
     try:
         tmp.write_text(text)

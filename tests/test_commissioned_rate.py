@@ -1,9 +1,11 @@
-"""calibrate writes what it learned the baselines from (``commissioned``: the capture, its
-board's fs and block length); a replay or a daemon on a board at another rate (another
-machine's site file: a FEMTO recording at 25.6 kHz replayed with the simulated motor's) says
-so once, at the STATUS, and a re-calibration on top writes its own."""
+"""calibrate writes what it learned the baselines from (``commissioned``: the capture's real path,
+its board's fs and block length, the healthy period in its board seconds); a replay or a daemon
+on a board at another rate (another machine's site file: a FEMTO recording at 25.6 kHz replayed
+with the simulated motor's) says so once, at the STATUS, and a re-calibration on top writes its own."""
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 import pytest
@@ -34,7 +36,8 @@ def said(stderr: str) -> list[str]:
 
 def test_calibrate_writes_the_capture_and_its_rate(work):
     assert yaml.safe_load((work / "site.yaml").read_text())["commissioned"] == {
-        "capture": "motor.bin", "fs_hz": 25000, "block_len": 250}
+        "capture": os.path.realpath(work / "motor.bin"), "fs_hz": 25000, "block_len": 250, "from_s": 0.0,
+        "to_s": 60.0}
 
 
 def test_a_replay_of_the_same_board_says_nothing(work, tmp_path):
@@ -57,7 +60,8 @@ def test_a_calibration_on_top_of_a_site_file_writes_its_own(work, tmp_path):
                   "--out", str(tmp_path / "site2.yaml"))
     assert p.returncode == 0, p.stderr
     assert yaml.safe_load((tmp_path / "site2.yaml").read_text())["commissioned"] == {
-        "capture": "other.bin", "fs_hz": 20480, "block_len": 205}
+        "capture": os.path.realpath(work / "other.bin"), "fs_hz": 20480, "block_len": 205, "from_s": 0.0,
+        "to_s": 19.999512}     # its 1998 whole blocks of 205 samples
     p = cmsensord("replay", str(work / "other.bin"), "--config", str(tmp_path / "site2.yaml"), "--out",
                   str(tmp_path / "logs"))
     assert said(p.stderr) == [], p.stderr

@@ -477,14 +477,32 @@ def default_channels(n: int, monitor: MonitorConfig | None = None) -> tuple[Chan
     return tuple(ChannelConfig(name=f"ch{i}", index=i, monitor=mon) for i in range(n))
 
 
+def _period_whole(obj: Any) -> tuple[str, str, Any] | None:
+    """Rule: the healthy period's ``from_s`` and ``to_s`` come together, ``from_s`` before ``to_s``."""
+    if (obj.from_s is None) != (obj.to_s is None):
+        given, missing = ("from_s", "to_s") if obj.to_s is None else ("to_s", "from_s")
+        return given, f"the healthy period needs {missing} too (its two ends, as calibrate writes them)", \
+            getattr(obj, given)
+    if obj.from_s is not None and not obj.from_s < obj.to_s:
+        return "to_s", f"must be greater than from_s = {fmt_num(obj.from_s)}", obj.to_s
+    return None
+
+
 @dataclass(frozen=True)
 class CommissionedConfig:
     """What ``cmsensord calibrate`` learned the baselines from (it writes this section): a
-    board streaming at another sample rate or block length is warned of."""
+    board streaming at another sample rate or block length is warned of; a replay of the same
+    capture (its real path) writes the healthy period [``from_s``, ``to_s``] (board seconds of
+    the capture) into its log, where ``cmsensord report`` shades it."""
 
-    capture: str | None = setting(None, "the capture the baselines were learned from", nonempty=True)
+    capture: str | None = setting(None, "the capture the baselines were learned from (its real path)",
+                                  nonempty=True)
     fs_hz: float | None = setting(None, "its board's samples per second", gt=0)
     block_len: int | None = setting(None, "its board's samples per block (one RMS value)", ge=1)
+    from_s: float | None = setting(None, "the healthy period's start, board seconds of the capture", ge=0)
+    to_s: float | None = setting(None, "the healthy period's end, board seconds of the capture", ge=0)
+
+    _RULES: ClassVar[tuple[Rule, ...]] = (_period_whole,)
 
     def __post_init__(self) -> None:
         validate(self)

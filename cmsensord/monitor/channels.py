@@ -197,7 +197,8 @@ class ChannelSetup:
             return
         self._unlike_said = rate
         then, now = ", ".join(g[0] for g in given), ", ".join(g[1] for g in given)
-        self.log.emit("config", None, f"the baselines were learned from {learned.capture or 'a capture'} at "
+        learned_from = (learned.capture.rpartition("/")[2] or learned.capture) if learned.capture else "a capture"
+        self.log.emit("config", None, f"the baselines were learned from {learned_from} at "
                       f"{then}; this board sends {now}: they and the alarm levels on them may not fit it "
                       "(cmsensord calibrate on this machine's healthy period)", self.clock.stamp_ns(f.t0_unwrapped),
                       log_level=logging.WARNING)

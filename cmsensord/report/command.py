@@ -124,7 +124,7 @@ def _draw(data: Any) -> list[tuple[str, list[Any]]]:
         figs = []
         if ch.severity:
             figs.append(figures.severity_figure(data, ch))
-        for fig in (figures.indicators_figure(ch, data.axis), figures.orders_figure(ch),
+        for fig in (figures.indicators_figure(ch, data.axis, data.healthy), figures.orders_figure(ch),
                     figures.campbell_figure(ch)):
             if fig is not None:
                 figs.append(fig)

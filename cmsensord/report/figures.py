@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from cmsensord.dsp.indicators.iso_zones import BOUNDARIES_MM_S  # noqa: E402
 from cmsensord.report.log_data import SPEED_BIN_RPM, Capture, ChannelData, LogData  # noqa: E402
-from cmsensord.report.marks import alarm_levels, event_lines  # noqa: E402
+from cmsensord.report.marks import alarm_levels, event_lines, healthy_span  # noqa: E402
 from cmsensord.report.time_axis import TimeAxis  # noqa: E402
 from cmsensord.sinks.indicator_schema import DEFECT_LINES  # noqa: E402
 
@@ -59,8 +59,8 @@ def _times(t_ns: np.ndarray, axis: TimeAxis) -> np.ndarray:
 
 def _axes_meta(ax: Any, time_axis: TimeAxis | None = None) -> dict[str, Any]:
     """An axes' labels, limits and labelled lines (``styles``: each one's colour and line style);
-    its legend's box in axes fractions (left, bottom, right, top: outside the axes when right of
-    1), laid out as saved."""
+    its legend's entries (``legend``: lines, bands and all) and box in axes fractions (left,
+    bottom, right, top: outside the axes when right of 1), laid out as saved."""
     xlim, ylim = [float(x) for x in ax.get_xlim()], [float(y) for y in ax.get_ylim()]
     lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
     out: dict[str, Any] = {"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
@@ -69,6 +69,7 @@ def _axes_meta(ax: Any, time_axis: TimeAxis | None = None) -> dict[str, Any]:
                            "styles": {ln.get_label(): [mcolors.to_hex(ln.get_color()), ln.get_linestyle()]
                                       for ln in lines}}
     if ax.get_legend() is not None:
+        out["legend"] = [text.get_text() for text in ax.get_legend().get_texts()]
         box = ax.get_legend().get_window_extent().transformed(ax.transAxes.inverted())
         out["legend_box"] = [round(float(v), 3) for v in (box.x0, box.y0, box.x1, box.y1)]
     if time_axis is not None and time_axis.is_dates():
@@ -125,8 +126,21 @@ def _event_lines(ax: Any, data: LogData, channel: str) -> None:
     event_lines(ax, [(float(xi), kind) for xi, (_, kind) in zip(x, mine)])
 
 
+def _healthy(axes: list[Any], healthy: tuple[int, int] | None, axis: TimeAxis) -> dict[str, Any]:
+    """The healthy period (shown times, :mod:`.healthy`) shaded on each of ``axes``; its metadata
+    (``healthy_period``: x from and to on the axes, as ``xlim``; ``healthy_period_shown``: as
+    the page writes times), {} without one."""
+    if healthy is None:
+        return {}
+    x0, x1 = (float(x) for x in _times(np.array(healthy, dtype=np.int64), axis))
+    for ax in axes:
+        healthy_span(ax, x0, x1)
+    return {"healthy_period": [x0, x1], "healthy_period_shown": [axis.text(t) for t in healthy]}
+
+
 def severity_figure(data: LogData, ch: ChannelData) -> Figure:
-    """The severity index S_idx over time, anomaly periods shaded, channel events as lines, the
+    """The severity index S_idx over time, anomaly periods shaded, the healthy period the
+    baselines were learned from shaded (:func:`_healthy`), channel events as lines, the
     levels of alarm rules on ``severity_index``;
     under it, when the log has the combined severity's level, the level / healthy baseline
     with its alert and danger ratios (the analysts' 2 x baseline rule)."""
@@ -134,6 +148,7 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     fig, axes = plt.subplots(2 if levels else 1, 1, figsize=(11, 5.6 if levels else 3.2), sharex=True,
                              layout="constrained", squeeze=False, height_ratios=[1, 0.8] if levels else None)
     ax = axes[0, 0]
+    shaded = _healthy(list(axes[:, 0]), data.healthy, data.axis)
     t, s = ch.severity.arrays()
     x = _times(t, data.axis)
     ax.step(x, s, where="post", color="#1f4e99", lw=1.4, label="severity index")
@@ -153,7 +168,8 @@ def severity_figure(data: LogData, ch: ChannelData) -> Figure:
     if levels:
         _level_axes(axes[1, 0], data, ch)
     meta = {"id": f"{_ident(ch)}-severity", "kind": "severity", "channel": ch.name,
-            "title": f"{_who(ch)}: severity index", "points": int(ch.severity.count), "alarm_levels": drawn}
+            "title": f"{_who(ch)}: severity index", "points": int(ch.severity.count), "alarm_levels": drawn,
+            **shaded}
     return _finish(fig, meta, list(axes[:, 0]), time_axis=data.axis)
 
 
@@ -234,13 +250,15 @@ def _panels(ch: ChannelData) -> list[tuple[str, tuple[str, ...]]]:
     return panels + ([("shape", shape)] if shape else [])
 
 
-def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure | None:
+def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None,
+                      healthy: tuple[int, int] | None = None) -> Figure | None:
     """The channel's indicator trends over ``axis`` (default: local time), each on axes of its
     own: velocity RMS with the ISO 10816-3 zones shaded and their boundaries, machine group and
     foundation in its title (:func:`iso_text`), acceleration RMS (the only one in RMS mode),
     envelope RMS, each bearing's defect lines (0-peak amplitudes in the envelope spectrum), and
     kurtosis and crest factor; on each, the alert and danger levels of the alarm rules watching
-    an indicator drawn there (``alarm_levels`` in the metadata). None without a velocity or
+    an indicator drawn there (``alarm_levels`` in the metadata), and the ``healthy`` period the
+    baselines were learned from shaded (:func:`_healthy`). None without a velocity or
     acceleration RMS."""
     axis = axis or TimeAxis()
     panels = _panels(ch)
@@ -249,6 +267,7 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
     fig, axes = plt.subplots(len(panels), 1, figsize=(11, 0.4 + 2.5 * len(panels)), sharex=True,
                              layout="constrained", squeeze=False)
     used = [a[0] for a in axes]
+    shaded = _healthy(used, healthy, axis)
     drawn: list[dict[str, Any]] = []
     for ax, (kind, names) in zip(used, panels):
         if kind == "velocity_rms_mm_s":
@@ -267,7 +286,7 @@ def indicators_figure(ch: ChannelData, axis: TimeAxis | None = None) -> Figure |
     iso = iso_text(ch)
     meta = {"id": f"{_ident(ch)}-indicators", "kind": "indicators", "channel": ch.name,
             "title": f"{_who(ch)}: indicators", "main": panels[0][0], "panels": [list(n) for _, n in panels],
-            "zones": bool(ch.zone_boundaries), "iso": iso, "alarm_levels": drawn}
+            "zones": bool(ch.zone_boundaries), "iso": iso, "alarm_levels": drawn, **shaded}
     if iso:
         meta["caption"] = f"{_who(ch)}: indicators. Velocity RMS{_band_text(ch)}; {iso}."
     return _finish(fig, meta, used, time_axis=axis)

@@ -147,6 +147,8 @@ class LogData:
         #: its ident among several recordings (:attr:`.runs.Recording.ident`: ids, PNG names), else ""
         self.recording_id = ""
         self.axis = TimeAxis()          # how times are shown
+        #: the healthy period the baselines were learned from, as shown (:mod:`.healthy`), or None
+        self.healthy: tuple[int, int] | None = None
         #: a log time to the time shown, ``begins``: a record's start (the file's :meth:`TimeAxis.shown`)
         self.place: Callable[..., int] = lambda t_ns, begins=False: t_ns
         #: records kept at their interval's start (an imported recording's axis: see module docstring)

@@ -1,10 +1,13 @@
-"""What the report draws over its trends: channel events as vertical lines, alarm levels as horizontal ones.
+"""What the report draws over its trends: channel events as vertical lines, alarm levels as horizontal
+ones, the healthy period the baselines were learned from as a shaded band.
 
 Each marked event kind has its own colour and line style and a legend label saying what it is
 (:data:`EVENT_STYLES`): a ``failure`` (the severity model's last AKF flags) is a solid line, an
 ``alarm_danger`` (a configured rule's danger level reached) a dash-dot one. The alert and
 danger levels of the alarm rules, as the log's ``/cm/alarms`` table last gave them, are drawn
-on the trend of the indicator each rule watches (:func:`alarm_levels`).
+on the trend of the indicator each rule watches (:func:`alarm_levels`). The healthy period
+(:mod:`.healthy`) is a grey hatched band under the trends, on every time axes of its recording
+(:func:`healthy_span`): the stretch the baselines and the levels on them were learned from.
 """
 
 from __future__ import annotations
@@ -13,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from cmsensord.report.healthy import LEGEND
 from cmsensord.report.log_data import ChannelData
 
-__all__ = ["EVENT_STYLES", "LEVEL_COLOURS", "event_lines", "alarm_levels"]
+__all__ = ["EVENT_STYLES", "LEVEL_COLOURS", "HEALTHY_COLOUR", "event_lines", "alarm_levels", "healthy_span"]
 
 #: channel events drawn as vertical lines: kind -> (colour, line style, legend label)
 EVENT_STYLES: dict[str, tuple[str, str, str]] = {
@@ -30,6 +34,15 @@ EVENT_STYLES: dict[str, tuple[str, str, str]] = {
 }
 #: the colour of a rule's alert and danger level
 LEVEL_COLOURS = {"alert": "#e08a00", "danger": "#b00020"}
+#: the colour of the healthy period's band (grey: not a zone, an alarm or an anomaly)
+HEALTHY_COLOUR = "#607d8b"
+
+
+def healthy_span(ax: Any, x0: float, x1: float) -> None:
+    """The healthy period from ``x0`` to ``x1`` shaded on ``ax``, under its trends (above the ISO
+    zones' colours), with the legend entry :data:`.healthy.LEGEND`."""
+    ax.axvspan(x0, x1, facecolor=HEALTHY_COLOUR, alpha=0.16, edgecolor=HEALTHY_COLOUR, hatch="//", lw=0,
+               zorder=0.5, label=LEGEND)
 
 
 def event_lines(ax: Any, events: list[tuple[float, str]]) -> None:

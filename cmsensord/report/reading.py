@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TextIO
 
 from cmsensord.report.fast_read import FastScan, head_metadata
+from cmsensord.report.healthy import healthy_period
 from cmsensord.report.log_data import FileInfo, LogData
 from cmsensord.report.progress import Progress
 from cmsensord.report.runs import Recording, plan_logs
@@ -33,7 +34,8 @@ def read_logs(paths: list[Path], progress_stream: TextIO) -> list[LogData]:
     """The messages of ``paths``, one :class:`LogData` a recording (:mod:`.runs`), in the order
     of their first files, a progress bar on a terminal; the messages of a replayed import in the
     recording's own time (:mod:`.time_axis`); of an import replayed more than once, only its
-    newest replay (the others listed as left out). Each message is placed at its publish time (its
+    newest replay (the others listed as left out); the healthy period its baselines were learned
+    from, when its replay names it (:mod:`.healthy`). Each message is placed at its publish time (its
     own stamp; on an imported recording's axis an indicator record, and the alarm transitions it
     raised, at its interval's start: :mod:`.log_data`), the events listed in time order."""
     heads = {p: head_metadata(p) for p in paths}
@@ -57,6 +59,7 @@ def _read_recording(rec: Recording, heads: dict[Path, dict[str, dict[str, str]]]
     data.recording = rec.name if named else ""
     data.recording_id = rec.ident if named else ""
     data.axis = TimeAxis.of_logs([heads[p] for p in rec.paths])
+    data.healthy = healthy_period(rec, heads, data.axis)
     data.notes = rec.notes
     data.records_at_start = data.axis.timeline is not None
     for path, zero in zip(rec.paths, rec.zeros):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -9,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from cmsensord.config import Config, ConfigError
+from cmsensord.config import CommissionedConfig, Config, ConfigError
 from cmsensord.errors import EXIT_INTERRUPTED
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
@@ -59,7 +60,7 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
     for warning in warnings:
         log.warning("%s", warning)
     cfg, _, said = capture_settings(cfg, meta)     # the snapshots' record length, the files' speed
-    head = RecordingHead(path, meta)
+    head = RecordingHead(path, meta, cfg.commissioned)
     # the lag a capture's post_s gives is held however long (no kill -9 to lose it to): the log
     # times are the messages' own, as a daemon's are within 10 s
     sink = open_sink(cfg, {**head.metadata, **(metadata or {})}, publish=publish,
@@ -107,14 +108,20 @@ class RecordingHead:
     the capture's real path (``source``: one capture however its path was spelled) and, of an
     import, its :class:`~cmsensord.importing.timeline.Timeline` (``recording_timeline``) with
     the log time of board second 0 (``board_zero_ns``: when the run began), where
-    :meth:`anchor` stamps the Processor's board second 0."""
+    :meth:`anchor` stamps the Processor's board second 0; and, when the configuration was
+    commissioned on this capture (``commissioned.capture`` is its real path), the healthy period
+    the baselines were learned from, in its board seconds (``healthy_period``: JSON
+    ``{"from_s": ..., "to_s": ...}``), which the report shades (:mod:`cmsensord.report.healthy`)."""
 
-    def __init__(self, path: str, meta: dict) -> None:
+    def __init__(self, path: str, meta: dict, commissioned: CommissionedConfig | None = None) -> None:
         self.timeline = Timeline.from_sidecar(meta)
         self.board_zero_ns = time.time_ns()
         self.metadata = {"source": os.path.realpath(path)}
         if self.timeline:
             self.metadata["recording_timeline"] = self.timeline.to_json(self.board_zero_ns)
+        learned = commissioned or CommissionedConfig()
+        if learned.capture == self.metadata["source"] and learned.from_s is not None and learned.to_s is not None:
+            self.metadata["healthy_period"] = json.dumps({"from_s": learned.from_s, "to_s": learned.to_s})
 
     def anchor(self, proc: Processor) -> None:
         """An import's board clock starts at 0: its second 0 at :attr:`board_zero_ns`."""
