@@ -51,30 +51,65 @@ def _suggest(which: str, value: float, base: float | None) -> str:
     return f"{which}_x_baseline {k + 0.1 if k * base <= value else k:.1f} or more"
 
 
-def _line(alarm: str, rule: Any, t: np.ndarray, v: np.ndarray, which: str, level: float,
+def _series(judged: Judged, alarm: str, vote: int, start_s: float, end_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(board seconds, multiples of the level in force) of ``alarm`` in the healthy period (start_s,
+    end_s]: one channel's values as judged; of a vote-N alarm, at each stamp the N-th highest of its
+    channels' newest values (its vote reaches the level where that one does)."""
+    kept = []
+    for ch, stamps in judged.stamps[alarm].items():
+        at = (np.frombuffer(stamps, np.int64) - judged.origin_ns) / 1e9
+        keep = (at > start_s + 1e-3) & (at <= end_s + 1e-3)
+        r = np.frombuffer(judged.ratios[alarm][ch], np.float64)[keep]
+        kept.append((at[keep], np.where(np.isnan(r), -np.inf, r)))
+    if vote <= 1 or len(kept) < vote:
+        return (kept[0] if len(kept) == 1 and vote <= 1 else (np.empty(0), np.empty(0)))
+    t = np.unique(np.concatenate([at for at, _ in kept]))
+    newest = np.full((t.size, len(kept)), -np.inf)
+    for j, (at, r) in enumerate(kept):
+        i = np.searchsorted(at, t, side="right") - 1
+        newest[i >= 0, j] = r[i[i >= 0]]
+    return t, np.sort(newest, axis=1)[:, -vote]
+
+
+def _shown(rule: Any, which: str, level: float, k: float | None) -> tuple[str, float, Any, Any]:
+    """How a warning of ``rule`` says its level and values: (its level, the value of a multiple 1
+    of the level, a value as text, the level to set above a value)."""
+    vote = f", reached on {rule.vote} of its channels at once," if rule.vote > 1 else ""
+    if rule.bands:                      # the level in force goes with the speed
+        return (f"its {which} levels (by speed band){vote}", 1.0, lambda v: f"{v:.3g} x the level in force",
+                lambda v: f"{which} levels {np.floor(v * 10) / 10 + 0.1:.1f} times as high or more")
+    if rule.vote > 1 and k:             # each channel against its own baseline
+        return (f"its {which} level ({k:g} x each channel's baseline){vote}", k, lambda v: f"{v:.3g} x baseline",
+                lambda v: _suggest(which, v, 1.0))
+    base = level / k if k else None
+    return (f"its {which} level {level:.4g}" + (f" ({k:g} x baseline)" if k else "") + vote, level,
+            lambda v: f"{v:.4g}" + (f" ({v / base:.3g} x baseline)" if base else ""),
+            lambda v: _suggest(which, v, base))
+
+
+def _line(alarm: str, rule: Any, t: np.ndarray, r: np.ndarray, which: str, level: float,
           k: float | None) -> str | None:
-    """The warning of ``alarm`` whose healthy values ``v`` (at board seconds ``t``) reach ``level``
-    (None: its margin is not thin, see :func:`thin_margins`)."""
-    over = v >= level
+    """The warning of ``alarm`` whose healthy values ``r`` (multiples of the level in force, at
+    board seconds ``t``) reach ``level`` (None: its margin is not thin, see :func:`thin_margins`)."""
+    over = r >= 1.0
     n, longest = int(np.count_nonzero(over)), _runs(over)
     step = float(np.median(np.diff(np.unique(t)))) if np.unique(t).size > 1 else 0.0
     need = int(np.ceil(rule.on_delay_s / step - 1e-9)) if step > 0 else 1
-    scatter = n > SCATTER_SHARE * v.size
+    scatter = n > SCATTER_SHARE * r.size
     if not (scatter or longest >= need - 1):
         return None
-    base = level / k if k else None
-    top = float(v.max())
-    high = float(np.sort(v)[v.size - 1 - int(SCATTER_SHARE * v.size)])   # a level above it: <= the share
-    where = (f"within the healthy period's scatter (more than {100 * SCATTER_SHARE:g} % of its values reach it)"
+    said, unit, text, fix_at = _shown(rule, which, level, k)
+    noun = "time(s)" if rule.vote > 1 else "value(s)"
+    top = float(r.max()) * unit
+    high = float(np.sort(r)[r.size - 1 - int(SCATTER_SHARE * r.size)]) * unit   # a level above it: <= the share
+    where = (f"within the healthy period's scatter (more than {100 * SCATTER_SHARE:g} % of its {noun[:-3]}s reach it)"
              if scatter else "reached by a healthy run one value short of its on-delay")
-    fix = (f"above {100 * (1 - SCATTER_SHARE):g} % of the healthy values ({_suggest(which, high, base)})" if scatter
-           else f"above the healthy period's highest ({_suggest(which, top, base)})")
-    return (f"alarm {alarm}: warning: thin margin: its {which} level {level:.4g}"
-            + (f" ({k:g} x baseline)" if k else "") + f" is {where}: {n} of {v.size} value(s) there "
-            f"({100.0 * n / v.size:.1f} %), the highest {top:.4g}" + (f" ({top / base:.3g} x baseline)" if base else "")
-            + f", in runs of up to {longest} of the {need} in a row its on_delay_s {rule.on_delay_s:g} needs: only "
-            "the delay kept it quiet, and a healthy day with a longer run raises it; set the level " + fix
-            + ", or a longer on_delay_s")
+    fix = (f"above {100 * (1 - SCATTER_SHARE):g} % of the healthy {noun[:-3]}s ({fix_at(high)})" if scatter
+           else f"above the healthy period's highest ({fix_at(top)})")
+    return (f"alarm {alarm}: warning: thin margin: {said} is {where}: {n} of {r.size} {noun} there "
+            f"({100.0 * n / r.size:.1f} %), the highest {text(top)}, in runs of up to {longest} of the {need} in a "
+            f"row its on_delay_s {rule.on_delay_s:g} needs: only the delay kept it quiet, and a healthy day with a "
+            "longer run raises it; set the level " + fix + ", or a longer on_delay_s")
 
 
 def thin_margins(judged: Judged, rules: dict[str, Any], start_s: float, end_s: float, warned: set[str]) -> list[str]:
@@ -82,18 +117,17 @@ def thin_margins(judged: Judged, rules: dict[str, Any], start_s: float, end_s: f
     said already) whose values judged in the healthy period (start_s, end_s] board seconds
     (``judged``; ``rules``: by name) reach its lowest level in force, held back by its
     ``on_delay_s`` alone, and either more than SCATTER_SHARE of them do (the level is inside the
-    healthy scatter) or a run of them came within one value of the delay."""
+    healthy scatter) or a run of them came within one value of the delay.  Each value is judged
+    against the level in force for it (its channel's baseline, its speed band); a vote-N alarm's
+    at each time by the N-th highest of its channels."""
     lines = []
-    for alarm, stamps in judged.stamps.items():
+    for alarm in judged.stamps:
         rule = rules.get(alarm.split("/")[0])
         found = _level_of(rule, *judged.levels[alarm]) if rule is not None and alarm not in warned else None
-        if found is None:
+        if rule is None or found is None:
             continue
-        at = (np.frombuffer(stamps, np.int64) - judged.origin_ns) / 1e9
-        keep = (at > start_s + 1e-3) & (at <= end_s + 1e-3)
-        at, vals = at[keep], np.frombuffer(judged.values[alarm], np.float64)[keep]
-        which, level, k = found
-        line = _line(alarm, rule, at, vals, which, level, k) if np.any(vals >= level) else None
+        t, r = _series(judged, alarm, rule.vote, start_s, end_s)
+        line = _line(alarm, rule, t, r, *found) if np.any(r >= 1.0) else None
         if line:
             lines.append(line)
     return lines

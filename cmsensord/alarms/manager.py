@@ -94,22 +94,26 @@ def _voted(levels: list[int], vote: int) -> int:
 
 
 class Judged:
-    """Every value an :class:`AlarmManager` judged while running, per alarm: its stamps [ns] and
-    values in compact arrays (16 bytes a value: a week of 1-s records of 20 alarms in 190 MB, not
-    the ~2 GB of a tuple each), and the alert and danger levels last in force."""
+    """Every value an :class:`AlarmManager` judged while running, per alarm and channel: its stamps
+    [ns] and the values as multiples of the lowest level in force when each was judged (alert, else
+    danger; NaN without one), in compact arrays (16 bytes a value: a week of 1-s records of 20
+    alarms in 190 MB, not the ~2 GB of a tuple each): a channel's own baseline level, or a speed
+    band's, judges its values as the alarm judged them; and the alert and danger levels last in force."""
 
     def __init__(self) -> None:
-        self.stamps: dict[str, array] = {}
-        self.values: dict[str, array] = {}
+        self.stamps: dict[str, dict[str, array]] = {}
+        self.ratios: dict[str, dict[str, array]] = {}
         self.levels: dict[str, tuple[float | None, float | None]] = {}
         self.origin_ns = 0          # the stamp the reader counts seconds from (board second 0)
 
-    def add(self, t_ns: int, alarm: str, value: float, levels: tuple[float | None, float | None]) -> None:
-        """Alarm ``alarm`` judged ``value`` at stamp ``t_ns`` against ``levels`` (alert, danger)."""
-        if alarm not in self.stamps:
-            self.stamps[alarm], self.values[alarm] = array("q"), array("d")
-        self.stamps[alarm].append(t_ns)
-        self.values[alarm].append(value)
+    def add(self, t_ns: int, alarm: str, channel: str, value: float,
+            levels: tuple[float | None, float | None]) -> None:
+        """Alarm ``alarm`` judged ``value`` of ``channel`` at stamp ``t_ns`` against ``levels`` (alert, danger)."""
+        low = levels[0] if levels[0] is not None else levels[1]
+        if channel not in self.stamps.setdefault(alarm, {}):
+            self.stamps[alarm][channel], self.ratios.setdefault(alarm, {})[channel] = array("q"), array("d")
+        self.stamps[alarm][channel].append(t_ns)
+        self.ratios[alarm][channel].append(value / low if low else float("nan"))
         self.levels[alarm] = levels
 
 
@@ -188,7 +192,7 @@ class AlarmManager:
                 if not running:
                     continue
                 if self.judged is not None:
-                    self.judged.add(t_ns, a.id, value, levels)
+                    self.judged.add(t_ns, a.id, channel, value, levels)
                 exceed = self.exceed[(r.name, channel)]
                 x, reached = exceed.step(value, *levels), exceed.reached
                 if a.channel is None:
