@@ -367,7 +367,7 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.config:
         cfg, auto = _config_for(args.config)
         return run_live(_with_output(cfg, args.out, args.akf_trace), auto_channels=auto, capture_path=args.capture,
-                        inputs=[args.config], config_file=ConfigFile(args.config, cfg))
+                        inputs=[args.config], config_file=ConfigFile.at_start(args.config, cfg))
     error_line("cmsensord: nothing to do: give --simulate, --config FILE or a subcommand "
                "(see cmsensord --help)")
     return EXIT_USAGE

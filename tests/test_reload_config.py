@@ -73,3 +73,37 @@ def test_a_reload_says_the_edited_configuration_is_not_applied(tmp_path):
                        "alarms.rules[0].alert: expected a number (got 'four'); a reload applies no setting, "
                        "and a restart would stop the daemon (exit 78): fix the file first")
     assert not any("Traceback" in line for line in out.lines)
+
+
+def test_a_reload_of_an_unchanged_configuration_whose_named_file_broke_does_not_call_it_changed(tmp_path):
+    """The configuration file as it started, the MQTT password file it names removed: the warning
+    says the file is unchanged and what no longer loads (the file it names), not that it changed;
+    the file put back, a reload says nothing again."""
+    pw = tmp_path / "password"
+    pw.write_text("secret\n")
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=(
+        f"mqtt:\n  host: 127.0.0.1\n  port: 9\n  username: rig\n  password_file: {pw}\n"))
+    out = _Lines(d)
+    cfg = tmp_path / "cmsensord.yaml"
+    try:
+        out.wait("INFO effective settings:", 1)
+        for n, present in enumerate((False, True), 1):
+            if present:
+                pw.write_text("secret\n")
+            else:
+                pw.unlink()
+            d.send_signal(signal.SIGHUP)
+            out.wait("INFO reopen:", n)
+            time.sleep(0.1)                 # the line after the reopen's, if one comes
+        d.send_signal(signal.SIGTERM)
+        assert d.wait(timeout=10) == 0
+    finally:
+        if d.poll() is None:
+            d.kill()
+        out.join()
+    said = [line for line in out.lines if line.startswith(("INFO reopen:", "WARNING config:"))]
+    assert [line.split(":")[0] for line in said] == ["INFO reopen", "WARNING config", "INFO reopen"], out.lines
+    assert said[1].startswith(f"WARNING config: {cfg} is unchanged since the daemon started but no longer loads: "
+                              "mqtt.password_file: cannot read: No such file or directory (got '"), said[1]
+    assert said[1].endswith("); a reload applies no setting, and a restart would stop the daemon (exit 78): put "
+                            "back or fix the file it names first"), said[1]

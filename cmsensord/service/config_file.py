@@ -6,8 +6,9 @@ nothing happen and take the old thresholds for the new ones.  :meth:`ConfigFile.
 the file again and says, in one warning line, what it finds: settings that differ from the running
 ones (named, up to :data:`SHOWN`) and how to apply them (a restart, which keeps alarm latches and
 acknowledgements), or a file that does not load, whose error a restart would stop the daemon on
-(exit 78, not restarted by the unit), to be fixed first.  A file whose settings are the running
-ones (an edited comment, no edit) is not mentioned.
+(exit 78), to be fixed first: the file itself when it was edited, else a file it names (an MQTT
+password or TLS file, a microphone calibration) that broke since, the configuration's text
+unchanged.  A file whose settings are the running ones (an edited comment, no edit) is not mentioned.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ __all__ = ["ConfigFile", "changed_settings"]
 
 #: changed settings named in the warning line; more are counted
 SHOWN = 3
+#: the most of the file's text kept at start (a configuration is a few kB; a longer one is not compared)
+MAX_TEXT = 1 << 20
 
 
 def _flat(value: Any, path: str = "") -> Iterator[tuple[str, Any]]:
@@ -57,19 +60,32 @@ def _text(value: Any) -> str:
 
 @dataclass(frozen=True)
 class ConfigFile:
-    """The ``--config`` file of the daemon and the settings it held at start."""
+    """The ``--config`` file of the daemon, the settings it held at start and its text then
+    (None: not read)."""
 
     path: str
     loaded: Config
+    text: bytes | None = None
+
+    @classmethod
+    def at_start(cls, path: str, loaded: Config) -> ConfigFile:
+        """The file at ``path`` as the daemon loaded it (``loaded``), its text read now (None past
+        :data:`MAX_TEXT`)."""
+        text = _text_of(path, MAX_TEXT + 1)
+        return cls(path, loaded, text if text is not None and len(text) <= MAX_TEXT else None)
 
     def on_reload(self) -> str | None:
         """The warning line for a SIGHUP (None: the file holds the running settings)."""
         try:
             now = load_config(self.path)
         except ConfigError as exc:
-            return (f"{self.path} changed since the daemon started and does not load: "
-                    f"{str(exc).removeprefix(exc.source + ': ')}; a reload applies no setting, and a restart "
-                    "would stop the daemon (exit 78): fix the file first")
+            error = str(exc).removeprefix(exc.source + ": ")
+            if self.text is not None and _text_of(self.path, len(self.text) + 1) == self.text:
+                return (f"{self.path} is unchanged since the daemon started but no longer loads: {error}; a reload "
+                        "applies no setting, and a restart would stop the daemon (exit 78): put back or fix the "
+                        "file it names first")
+            return (f"{self.path} changed since the daemon started and does not load: {error}; a reload applies "
+                    "no setting, and a restart would stop the daemon (exit 78): fix the file first")
         changes = changed_settings(config_to_dict(self.loaded), config_to_dict(now))
         if not changes:
             return None
@@ -77,3 +93,12 @@ class ConfigFile:
         return (f"{self.path} changed since the daemon started ({', '.join(changes[:SHOWN])}{more}): not "
                 "applied, a reload only starts a new log file; restart the daemon to apply it "
                 "(systemctl restart cmsensord: alarm latches and acknowledgements are kept)")
+
+
+def _text_of(path: str, most: int = MAX_TEXT) -> bytes | None:
+    """The bytes of the file at ``path``, at most ``most`` of them; None when it cannot be read."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(most)
+    except (OSError, ValueError):
+        return None
