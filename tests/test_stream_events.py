@@ -502,3 +502,15 @@ def test_a_flood_that_never_stops_is_ten_journal_lines_and_a_summary_each_ten_mi
         written = [e for e in events if e.startswith(f"{kind} |")]
         per_second = [e for e in written if "at most 5 per 1 s" in e]
         assert len(per_second) == 650 and len(written) == 650 * 6, written[:12]
+
+
+def test_a_configured_channel_back_in_the_stream_is_said_beside_a_board_channel_not_configured(tmp_path):
+    """ch0-ch2 configured, the board at 4, then 2, then 4 again: coming back, ch2 is said to be in
+    the stream again with board channel 3 not monitored, not the idle channel alone."""
+    events = replay(tmp_path, rms_stream([4] * 300 + [2] * 300 + [4] * 300),
+                    "channels:\n  - {name: ch0, index: 0}\n  - {name: ch1, index: 1}\n  - {name: ch2, index: 2}\n")
+    said = [e for e in events if e.startswith("channels | board now sends")]
+    assert said == ["channels | board now sends 2 channel(s), not 4: channel(s) ch2 not in the stream "
+                    "(observations missing)",
+                    "channels | board now sends 4 channel(s), not 2: channel(s) ch2 now in the stream; board "
+                    "channel(s) 3 not configured, not monitored"], said

@@ -32,8 +32,9 @@ STATUS announces that count or ``CHANGE_FRAMES`` such frames come in a row: then
 the board has changed.  Fewer channels: the channels no longer sent are
 reported and observed as missing.  More channels: the channels are re-set (with
 ``auto_channels``, or when configured channels come back) and a new severity
-chain is made, or a ``channels`` event names the board channels not monitored, or
-one names the monitored channels the count brings (back) into the stream.
+chain is made (a ``channels`` event says so), and a ``channels`` event names the
+monitored channels the count brings (back) into the stream and the board channels not
+monitored, in one line.
 A new chain's filters start afresh; a channel that keeps its name keeps its
 :class:`~cmsensord.monitor.severity.ChannelView` (the run's decisions, failures, maximum and
 timeline, for the exit summary), which notes where its filters restarted.  The view of every
@@ -290,13 +291,12 @@ class ChannelSetup:
                  f"re-set to {', '.join(ch.name for ch in self.channels)}", n_channels=n_board)
         known = {ch.index for ch in self.channels}
         idle = [str(i) for i in range(n_board) if i not in known]
-        if idle:
-            emit("channels", None, f"board now sends {n_board} channel(s), not {old}: board "
-                 f"channel(s) {', '.join(idle)} not configured, not monitored", n_channels=n_board)
-        back = [ch.name for ch in self.channels if old <= ch.index < n_board]
-        if not (re_set or idle):
+        back = [ch.name for ch in self.channels if old <= ch.index < n_board] if not re_set else []
+        said = ([f"channel(s) {', '.join(back)} now in the stream"] if back else []) + (
+            [f"board channel(s) {', '.join(idle)} not configured, not monitored"] if idle else [])
+        if said or not re_set:
             emit("channels", None, f"board now sends {n_board} channel(s), not {old}"
-                 + (f": channel(s) {', '.join(back)} now in the stream" if back else ""), n_channels=n_board)
+                 + (f": {'; '.join(said)}" if said else ""), n_channels=n_board)
         self._mark_stream()
 
     def ready(self, n_board: int) -> bool:
