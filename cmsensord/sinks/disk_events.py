@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from cmsensord.sinks.mcap_file import SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage
-from cmsensord.sinks.retention import DISK_EVENT, errno_name
+from cmsensord.sinks.retention import DISK_EVENT, errno_name, still_there
 
 if TYPE_CHECKING:
     from cmsensord.sinks.rotating import RotatingSink
@@ -84,7 +84,7 @@ def salvage_abandoned(sink: RotatingSink, parts: list[Path]) -> None:
             result = err
         salvage_result(sink, result)
         if isinstance(result, SalvageResult) and result.path is not None and result.action == "salvaged":
-            sink.paths.append(result.path)
+            sink.paths = [*still_there(sink.paths), result.path]
 
 
 def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> None:
