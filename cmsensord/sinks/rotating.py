@@ -76,7 +76,7 @@ from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.log_dir import place_of
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
-from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
+from cmsensord.sinks.mcap_salvage import salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
 from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention, still_there
 
@@ -128,7 +128,6 @@ class RotatingSink(ReorderLag):
         self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
         self.metadata, self.clock, self.wall_clock, self.on_rotate = metadata or {}, clock, wall_clock, on_rotate
         self.paths: list[Path] = []          # finished files still there, oldest first
-        self.salvaged: list[SalvageResult] = []
         self.messages_written = 0            # messages handed to write()
         self.dropped = 0                     # ... of which not in any file (disk errors)
         self.disk_errors = 0                 # failed operations, retries included
