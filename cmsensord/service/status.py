@@ -51,10 +51,24 @@ class StatusPace:
         return True
 
 
+#: the newest MCAP logs of a run the exit summary names (the older ones counted): a daemon
+#: rotating every hour for months keeps its summary short
+NAMED_LOGS = 5
+
+
+def log_lines(paths: Sequence[Path]) -> list[str]:
+    """``MCAP log: PATH`` of the newest :data:`NAMED_LOGS` of ``paths`` (oldest first), after a
+    line counting the older ones when there are more."""
+    older = len(paths) - NAMED_LOGS
+    head = ([f"MCAP logs: {older} older one(s) of this run in {paths[0].parent}; the newest {NAMED_LOGS}:"]
+            if older > 0 else [])
+    return head + [f"MCAP log: {p}" for p in paths[max(older, 0):]]
+
+
 def run_summary(proc, paths: list[Path], wall_s: float, placed: Sequence[str] = ()) -> str:
     """What a run wrote and saw, printed at its end (``placed``: lines after the channels', where
     an imported recording's severity levels and alarms came: :mod:`cmsensord.service.origin`)."""
-    lines = [f"MCAP log: {p}" for p in paths] + [
+    lines = log_lines(paths) + [
              f"  {proc.adc_seconds:.1f} s of ADC time in {wall_s:.1f} s wall "
              f"({proc.observations} observations, {proc.missing_observations} missing, "
              f"{proc.frames_lost} frames lost)"]

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from cmsensord.sinks.mcap_file import SinkIOError
 from cmsensord.sinks.mcap_salvage import SalvageResult, salvage
-from cmsensord.sinks.retention import DISK_EVENT, errno_name
+from cmsensord.sinks.retention import DISK_EVENT, errno_name, still_there
 
 if TYPE_CHECKING:
     from cmsensord.sinks.rotating import RotatingSink
@@ -84,13 +84,13 @@ def salvage_abandoned(sink: RotatingSink, parts: list[Path]) -> None:
             result = err
         salvage_result(sink, result)
         if isinstance(result, SalvageResult) and result.path is not None and result.action == "salvaged":
-            sink.paths.append(result.path)
+            sink.paths = [*still_there(sink.paths), result.path]
 
 
 def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> None:
-    """A salvage's result as the ``sink``'s event (queued, thread-safe): a ``salvage`` event
-    (the result joins ``sink.salvaged``) or a ``disk_error`` one; none for a file another
-    writer has open, nor for a salvage a stop interrupted (the journal says so)."""
+    """A salvage's result as the ``sink``'s event (queued, thread-safe): a ``salvage`` event or a
+    ``disk_error`` one; none for a file another writer has open, nor for a salvage a stop
+    interrupted (the journal says so)."""
     if isinstance(result, SinkIOError):
         sink.disk_errors += 1
         sink.emit(DISK_EVENT, f"{result}; left for the next start",
@@ -101,5 +101,4 @@ def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> N
     if result.action == "interrupted":   # stopping: the journal says so, the file is intact
         log.info("%s", result.message())
         return
-    sink.salvaged.append(result)
     sink.emit(SALVAGE_EVENT, result.message(), count=result.messages, details=result.event_details())

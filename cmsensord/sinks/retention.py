@@ -77,6 +77,22 @@ def errno_name(code: int | None) -> str | None:
     return errno.errorcode.get(code, str(code)) if code is not None else None
 
 
+def still_there(paths: list[Path]) -> list[Path]:
+    """Those of ``paths`` still in their directory: a log moved away or deleted by another
+    program (an archiver, an operator) is no longer one of the run's, so a daemon running for
+    months holds no more of them than the directory does."""
+    kept = []
+    for path in paths:
+        try:
+            os.lstat(path)
+        except FileNotFoundError:
+            continue
+        except OSError:
+            pass                         # unreadable now (a failing disk): still counted
+        kept.append(path)
+    return kept
+
+
 def free_bytes(path: str | Path) -> int:
     """Bytes free for an unprivileged writer on the file system of ``path``."""
     st = os.statvfs(path)

@@ -76,9 +76,9 @@ from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.log_dir import place_of
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
-from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
+from cmsensord.sinks.mcap_salvage import salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
-from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention
+from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention, still_there
 
 log = logging.getLogger("cmsensord")
 
@@ -127,8 +127,7 @@ class RotatingSink(ReorderLag):
         self.lock: Any = None                # the output directory's hold (a replay's): release lets it go
         self.max_lag_s = self.max_lag_s if max_lag_s is None else max_lag_s
         self.metadata, self.clock, self.wall_clock, self.on_rotate = metadata or {}, clock, wall_clock, on_rotate
-        self.paths: list[Path] = []          # finished files, oldest first
-        self.salvaged: list[SalvageResult] = []
+        self.paths: list[Path] = []          # finished files still there, oldest first
         self.messages_written = 0            # messages handed to write()
         self.dropped = 0                     # ... of which not in any file (disk errors)
         self.disk_errors = 0                 # failed operations, retries included
@@ -441,7 +440,7 @@ class RotatingSink(ReorderLag):
 
     def close(self) -> Path | None:
         """Finish the current file; returns its path (None if it could not be
-        finished). Every finished file is in ``paths``. Idempotent."""
+        finished). Every finished file still in the directory is in ``paths``. Idempotent."""
         if self._closed:
             return self.paths[-1] if self.paths else None
         self._closed = True                  # first: a failure now must not open a new file
@@ -485,7 +484,7 @@ class RotatingSink(ReorderLag):
                 self._failed(err, cur)
                 return None
         self._current = None
-        self.paths.append(done)
+        self.paths = [*still_there(self.paths), done]
         self._event_dirty = self._need_sync = False
         if self._outage is not None:
             self._resumed()                  # close fsyncs: the disk takes data again
