@@ -63,12 +63,16 @@ def test_a_disk_error_after_many_retention_passes_is_its_own_error_line(small_fs
     assert daemon.returncode == 0 and "Traceback" not in err, err[-3000:]
     lines = err.splitlines()
     errors = [line for line in lines if line.startswith("ERROR")]
-    assert len(errors) == 1 and re.match(r"ERROR disk_error: \S+\.mcap\.part: (write failed|cannot finish MCAP "
-                                         r"file): No space left on device; ", errors[0]), errors
+    # one error line an outage, each ended by its "logging resumed" line: the file the daemon gives
+    # up frees its bytes, so a retry can get in before the other program takes them and the disk
+    # fills again (a second outage: seen on a loaded machine)
+    resumed = [line for line in lines if line.startswith("INFO disk_error: logging resumed in ")]
+    assert errors and len(errors) == len(resumed) and all(
+        re.match(r"ERROR disk_error: \S+\.mcap\.part: (write failed|cannot finish MCAP file): No space left on "
+                 r"device; ", e) for e in errors), (errors, resumed)
     deleted = [line for line in lines if re.match(r"INFO retention: deleted the 1 oldest log file\(s\) "
                                                   r"\([0-9.]+ MB: cmsensord-\S+\.mcap\) to keep this prefix's", line)]
     assert len(deleted) == 10, lines[-40:]                       # the journal's budget of its kind
-    assert [line for line in lines if line.startswith("INFO disk_error: logging resumed in ")], lines[-40:]
     summaries = [line for line in lines if "more retention event(s)" in line]
     assert summaries and all(line.startswith("INFO retention: ") for line in summaries), summaries
     assert not [line for line in lines if line.startswith("ERROR") and "retention" in line]
