@@ -42,18 +42,14 @@ class _Lines:
         self._thread.join(timeout=10)
 
 
-def test_a_reload_says_the_edited_configuration_is_not_applied(tmp_path):
-    """Three reloads of a daemon (its board unplugged: the loop turns all the same): the file as
-    it started, no config line; a level edited, one warning naming it and the restart that applies
-    it; the file broken, one warning with its error, before a restart stops the daemon on it."""
-    d = start_daemon(tmp_path, tmp_path / "no-board", config=RULES)
+def reloads(d, edits) -> list[str]:
+    """SIGHUP the daemon ``d`` once after each of ``edits`` (callables changing its files), then
+    stop it: its stderr lines (the reopen of each reload waited for, and the line after it)."""
     out = _Lines(d)
-    cfg = tmp_path / "cmsensord.yaml"
     try:
         out.wait("INFO effective settings:", 1)
-        for n, edit in enumerate((None, ("alert: 3.0", "alert: 4.0"), ("alert: 4.0", "alert: four")), 1):
-            if edit is not None:
-                cfg.write_text(cfg.read_text().replace(*edit))
+        for n, edit in enumerate(edits, 1):
+            edit()
             d.send_signal(signal.SIGHUP)
             out.wait("INFO reopen:", n)
             time.sleep(0.1)                 # the line after the reopen's, if one comes
@@ -63,16 +59,29 @@ def test_a_reload_says_the_edited_configuration_is_not_applied(tmp_path):
         if d.poll() is None:
             d.kill()
         out.join()
-    said = [line for line in out.lines if line.startswith(("INFO reopen:", "WARNING config:"))]
+    return out.lines
+
+
+def test_a_reload_says_the_edited_configuration_is_not_applied(tmp_path):
+    """Three reloads of a daemon (its board unplugged: the loop turns all the same): the file as
+    it started, no config line; a level edited, one warning naming it and the restart that applies
+    it; the file broken, one warning with its error, before a restart stops the daemon on it."""
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=RULES)
+    cfg = tmp_path / "cmsensord.yaml"
+
+    def edit(old: str, new: str):
+        return lambda: cfg.write_text(cfg.read_text().replace(old, new))
+    lines = reloads(d, (lambda: None, edit("alert: 3.0", "alert: 4.0"), edit("alert: 4.0", "alert: four")))
+    said = [line for line in lines if line.startswith(("INFO reopen:", "WARNING config:"))]
     assert [line.split(":")[0] for line in said] == ["INFO reopen", "INFO reopen", "WARNING config",
-                                                     "INFO reopen", "WARNING config"], out.lines
+                                                     "INFO reopen", "WARNING config"], lines
     assert said[2] == (f"WARNING config: {cfg} changed since the daemon started (alarms.rules[0].alert 3.0 -> 4.0): "
                        "not applied, a reload only starts a new log file; restart the daemon to apply it "
                        "(systemctl restart cmsensord: alarm latches and acknowledgements are kept)")
     assert said[4] == (f"WARNING config: {cfg} changed since the daemon started and does not load: "
                        "alarms.rules[0].alert: expected a number (got 'four'); a reload applies no setting, "
                        "and a restart would stop the daemon (exit 78): fix the file first")
-    assert not any("Traceback" in line for line in out.lines)
+    assert not any("Traceback" in line for line in lines)
 
 
 def test_a_reload_of_an_unchanged_configuration_whose_named_file_broke_does_not_call_it_changed(tmp_path):
@@ -83,26 +92,10 @@ def test_a_reload_of_an_unchanged_configuration_whose_named_file_broke_does_not_
     pw.write_text("secret\n")
     d = start_daemon(tmp_path, tmp_path / "no-board", config=(
         f"mqtt:\n  host: 127.0.0.1\n  port: 9\n  username: rig\n  password_file: {pw}\n"))
-    out = _Lines(d)
     cfg = tmp_path / "cmsensord.yaml"
-    try:
-        out.wait("INFO effective settings:", 1)
-        for n, present in enumerate((False, True), 1):
-            if present:
-                pw.write_text("secret\n")
-            else:
-                pw.unlink()
-            d.send_signal(signal.SIGHUP)
-            out.wait("INFO reopen:", n)
-            time.sleep(0.1)                 # the line after the reopen's, if one comes
-        d.send_signal(signal.SIGTERM)
-        assert d.wait(timeout=10) == 0
-    finally:
-        if d.poll() is None:
-            d.kill()
-        out.join()
-    said = [line for line in out.lines if line.startswith(("INFO reopen:", "WARNING config:"))]
-    assert [line.split(":")[0] for line in said] == ["INFO reopen", "WARNING config", "INFO reopen"], out.lines
+    lines = reloads(d, (pw.unlink, lambda: pw.write_text("secret\n")))
+    said = [line for line in lines if line.startswith(("INFO reopen:", "WARNING config:"))]
+    assert [line.split(":")[0] for line in said] == ["INFO reopen", "WARNING config", "INFO reopen"], lines
     assert said[1].startswith(f"WARNING config: {cfg} is unchanged since the daemon started but no longer loads: "
                               "mqtt.password_file: cannot read: No such file or directory (got '"), said[1]
     assert said[1].endswith("); a reload applies no setting, and a restart would stop the daemon (exit 78): put "
