@@ -63,11 +63,11 @@ def test_a_disk_error_after_many_retention_passes_is_its_own_error_line(small_fs
     assert daemon.returncode == 0 and "Traceback" not in err, err[-3000:]
     lines = err.splitlines()
     errors = [line for line in lines if line.startswith("ERROR")]
-    # one error line an outage, each ended by its "logging resumed" line: the file the daemon gives
-    # up frees its bytes, so a retry can get in before the other program takes them and the disk
-    # fills again (a second outage: seen on a loaded machine)
+    # one error line an outage, each but the newest ended by its "logging resumed" line: the file the
+    # daemon gives up frees its bytes, so a retry can get in before the other program takes them and
+    # the disk fills again (more outages, the newest maybe still open at the stop: a loaded machine)
     resumed = [line for line in lines if line.startswith("INFO disk_error: logging resumed in ")]
-    assert errors and len(errors) == len(resumed) and all(
+    assert errors and resumed and len(errors) - 1 <= len(resumed) <= len(errors) and all(
         re.match(r"ERROR disk_error: \S+\.mcap\.part: (write failed|cannot finish MCAP file): No space left on "
                  r"device; ", e) for e in errors), (errors, resumed)
     deleted = [line for line in lines if re.match(r"INFO retention: deleted the 1 oldest log file\(s\) "
