@@ -87,7 +87,7 @@ def plain_record(x, setup, shaft_hz):
         out["velocity_rms_mm_s"] = 1000 * np.sqrt(np.sum(P[vm] / (2 * np.pi * f[vm]) ** 2))
     env = envelope(x, FS, setup.envelope_band)
     e = env.env - env.env.mean()
-    if env.band[0] <= env.band[1]:
+    if env.band[0] < env.band[1]:                       # one bin is a tone: a constant envelope, none
         out["envelope_rms"] = np.sqrt(np.mean(e ** 2))
     if shaft_hz is not None:
         A = np.abs(np.fft.rfft(e * hann(e.size))) * 2 / hann(e.size).sum()

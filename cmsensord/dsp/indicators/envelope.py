@@ -12,7 +12,11 @@ filter design):
    (a frequency shift leaves the magnitude unchanged) and the inverse FFT has only
    M = 2 x (bins in the band) points, rounded up to a fast length: the envelope
    comes out decimated to fs_env = M / T (T = N / fs), with room for its own
-   spectrum up to fs_env / 2 ~ the bandwidth;
+   spectrum up to fs_env / 2 ~ the bandwidth.  A band of one bin is a single tone, whose
+   analytic signal has a constant magnitude whatever the signal: it carries no modulation (the
+   envelope spectrum of a band reaches no further than its width, Randall & Antoni 2011), and
+   the indicators give no envelope of it, as of a band of none (``IndicatorRecord.envelope_rms``
+   NaN);
 3. envelope RMS: the RMS of the envelope minus its mean (m/s^2);
 4. envelope spectrum: Hann-windowed amplitude spectrum of the envelope minus its
    mean, scaled so that a modulation m cos(2 pi f t) of the envelope reads m at f

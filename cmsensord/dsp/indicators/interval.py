@@ -93,7 +93,7 @@ class IndicatorRecord:
     zone: str                                   # "" without a velocity (its band holds no bin)
     zone_boundaries_mm_s: tuple[float, float, float]
     velocity_alarm_mm_s: float | None
-    envelope_rms: float                         # NaN when the envelope band holds no bin
+    envelope_rms: float                         # NaN when the envelope band holds fewer than two bins
     envelope_band: tuple[float, float]
     shaft_hz: float | None
     bearings: list[BearingLines]
@@ -250,7 +250,7 @@ def _record(N: int, X: np.ndarray, setup: Setup, shaft_hz: float | None, stats: 
              if setup.velocity_baseline_mm_s is not None else None)
     bearings = [BearingLines(b.name, None) for b in setup.bearings]
     env_band = env.band
-    if env_band[1] < env_band[0]:               # the envelope band holds no bin: no envelope
+    if env_band[1] <= env_band[0]:              # fewer than two bins: no modulation to read
         env_rms, env_band = NAN, setup.envelope_band
     elif setup.bearings and shaft_hz is not None and shaft_hz > 0:
         fe, A = centred_envelope_spectrum(env.env, env.fs_env)
