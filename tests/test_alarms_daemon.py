@@ -72,13 +72,14 @@ def test_replay_raises_the_alarms_of_the_degrading_motor(degrading):
     assert stamp(events[3]) == below + 2 * S
     # the kurtosis alert at once, with the first record over 6
     assert stamp(events[1]) == next(stamp(r) for r in recs if r["kurtosis"] >= 6)
-    # each line names the quantity, its value with the unit and what it is, the level with the unit
+    # each line names the quantity, its value with the unit and what it is (the velocity RMS: over which
+    # band), the level with the unit
     assert [ln for ln in stderr.splitlines() if ln.startswith(("WARNING alarm_", "ERROR alarm_"))] == [
-        "WARNING alarm_alert: de_velocity/ch0: velocity_rms_mm_s 5.122 mm/s (velocity RMS) reached the alert "
-        "level 2.8 mm/s",
+        "WARNING alarm_alert: de_velocity/ch0: velocity_rms_mm_s 5.122 mm/s (velocity RMS, 10-1000 Hz) reached the "
+        "alert level 2.8 mm/s",
         "WARNING alarm_alert: de_kurtosis/ch0: kurtosis 16.81 reached the alert level 6",
-        "ERROR alarm_danger: de_velocity/ch0: velocity_rms_mm_s 10.68 mm/s (velocity RMS) reached the danger "
-        "level 9.5 mm/s",
+        "ERROR alarm_danger: de_velocity/ch0: velocity_rms_mm_s 10.68 mm/s (velocity RMS, 10-1000 Hz) reached the "
+        "danger level 9.5 mm/s",
         "WARNING alarm_alert: de_velocity/ch0: eased from danger to alert (velocity_rms_mm_s 6.338 mm/s)"]
 
 

@@ -307,8 +307,8 @@ def test_alarms_the_healthy_period_itself_shows_are_said(loud_start, tmp_path):
     assert p.returncode == 0, p.stderr
     assert "alarm rms_x2" not in p.stdout          # raised before the period, cleared in it
     assert ("alarm iso/pump: warning: shown within the healthy period: danger since 1.0 board s, before the "
-            "period, and all through it (velocity_rms_mm_s 27.87 mm/s (velocity RMS) reached the danger level "
-            "4.5 mm/s); ") in p.stdout
+            "period, and all through it (velocity_rms_mm_s 27.87 mm/s (velocity RMS, 10-1000 Hz) reached "
+            "the danger level 4.5 mm/s); ") in p.stdout
     base.write_text(RULES.splitlines(keepends=True)[0] + "".join(RULES.splitlines(keepends=True)[1:3]))
     p = run("cmsensord", "calibrate", str(loud_start), "--rpm", "600", "--from", "6", "--config", str(base),
             "--out", str(site))

@@ -129,6 +129,9 @@ class AlarmManager:
         self.cfg, self.zones = cfg, zones
         self.operating = Operating(cfg.operating)
         self.speed_rpm: float | None = None
+        #: channel -> the velocity band [Hz] of its newest indicator record, said with a value
+        #: of the velocity RMS or its zone (a velocity RMS means nothing without its band)
+        self.velocity_bands: dict[str, tuple[float, float]] = {}
         self.levels_seen: dict[str, float] = {}          # channel -> the level indicator's newest value
         self.alarms: dict[str, Alarm] = {}
         self.exceed: dict[tuple[str, str], Exceedance] = {}
@@ -154,9 +157,14 @@ class AlarmManager:
 
     # ---------------------------------------------------------------- input
     def record(self, t_ns: int, channel: str, values: dict[str, float],
-               speed_rpm: float | None = None, unknown: tuple[str, ...] = ()) -> list[Transition]:
+               speed_rpm: float | None = None, unknown: tuple[str, ...] = (),
+               velocity_band: tuple[float, float] | None = None) -> list[Transition]:
         """One indicator record of ``channel`` at ``t_ns``: the operating state, then the rules;
-        ``unknown``: indicators the record says it cannot give (:meth:`unknown`)."""
+        ``unknown``: indicators the record says it cannot give (:meth:`unknown`);
+        ``velocity_band``: the band [Hz] of its velocity RMS, which an alarm line on the velocity
+        or its zone names."""
+        if velocity_band is not None:
+            self.velocity_bands[channel] = velocity_band
         out = self._operate(t_ns, channel, values, speed_rpm)
         self.unknown(channel, unknown)
         return out + self.values(t_ns, channel, values)
@@ -257,7 +265,7 @@ class AlarmManager:
         unit = f" {unit_of(name)}" if unit_of(name) else ""
         what = f"{name} {a.value:.4g}{unit}" if a.value is not None else name
         lv = a.levels[after - 1] if after > 0 else a.levels[prev - 1]
-        said = what_is(name)
+        said = what_is(name) + self._band_said(a, name)
         if said and said.replace(" ", "_") != name:     # kurtosis is just that
             what += f" ({said})" if after > prev else ""
         if after > prev:
@@ -268,6 +276,20 @@ class AlarmManager:
         else:
             msg = f"{a.id}: eased from {LEVELS[prev]} to {LEVELS[after]} ({what})"
         return [Transition(KIND[after], a.id, a.channel, after, prev, t_ns, msg)]
+
+    def _band_said(self, a: Alarm, name: str) -> str:
+        """``, 10-1000 Hz`` (of the velocity RMS: ``, of the velocity RMS over 10-1000 Hz``): the
+        velocity band of the channel whose value ``a`` shows, for an alarm on ``name``
+        ``velocity_rms_mm_s`` or ``zone`` (ISO 10816-3 grades the RMS over a stated band: 10-1000 Hz,
+        2-1000 Hz for machines at or below 600 r/min); "" for another indicator or no band known."""
+        if name not in ("velocity_rms_mm_s", "zone"):
+            return ""
+        ch = a.channel if a.channel is not None else max(a.latest, key=a.latest.__getitem__, default=None)
+        band = self.velocity_bands.get(ch) if ch is not None else None
+        if band is None:
+            return ""
+        hz = f"{band[0]:g}-{band[1]:g} Hz"
+        return f", {hz}" if name == "velocity_rms_mm_s" else f", of the velocity RMS over {hz}"
 
     def shift(self, shift_ns: int) -> None:
         """The stamps were re-anchored by ``shift_ns`` (a step of the wall clock): the delays, the

@@ -281,7 +281,9 @@ class Alarms:
             values = indicator_values(msg)
             judged = self._judged(ch, values, bool(msg.get("signal_lost")))  # no signal: none judged
             unknown = unknown_values(msg) + tuple(k for k in values if k not in judged)
-            tr = mgr.record(stamp, ch, judged, None if speed is None else float(speed), unknown)
+            band = msg.get("velocity_band_hz")
+            tr = mgr.record(stamp, ch, judged, None if speed is None else float(speed), unknown,
+                            (float(band[0]), float(band[1])) if band else None)
             if mgr.operating.state != was:
                 return [self._state_event(stamp, was, mgr.operating.state, speed)] + self._after(stamp, tr)
         elif m.schema == "severity":
