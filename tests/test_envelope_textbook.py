@@ -9,7 +9,9 @@ tau)^2) at k x BPFO: the documented reading of a line (a modulation m cos(2 pi f
 reads m).  A second channel carries the same signal twice as large: every envelope figure doubles.
 
 An envelope band of one bin is a single tone, whose envelope is a constant: it read envelope_rms 0.0
-under these 1 g impacts, and the bearing lines were silently absent."""
+under these 1 g impacts, and the bearing lines were silently absent.  The envelope of a band carries
+modulation up to about the band's width: the lines of a bearing above it were left out of the records
+without a word (and an alarm rule on them never fired)."""
 
 from __future__ import annotations
 
@@ -67,14 +69,14 @@ def line_amplitude(e: np.ndarray, f0: float) -> float:
     return 2 * abs(np.sum(e * w * np.exp(-2j * np.pi * f0 * n / FS))) / w.sum()
 
 
-def _replay(tmp_path, indicators: str) -> tuple[list[str], dict[str, list[dict]]]:
+def _replay(tmp_path, indicators: str, rules: str = "") -> tuple[list[str], dict[str, list[dict]]]:
     x = _signal()
     np.save(tmp_path / "x.npy", np.stack([x, 2 * x], axis=1))
     p = run_module("cmsensord", "import", str(tmp_path / "x.npy"), "--fs", str(FS), "--unit", "g", "--names", "a,b",
                    "--out", str(tmp_path / "x.bin"))
     assert p.returncode == 0, p.stderr
     (tmp_path / "site.yaml").write_text(f"output:\n  status_line: false\nindicators:\n  rpm: {RPM:g}\n{indicators}"
-                                        f"bearings:\n{BEARINGS}")
+                                        f"bearings:\n{BEARINGS}{rules}")
     p = run_module("cmsensord", "replay", str(tmp_path / "x.bin"), "--config", str(tmp_path / "site.yaml"),
                    "--out", str(tmp_path / "out"))
     assert p.returncode == 0, p.stderr
@@ -138,3 +140,20 @@ def test_an_envelope_band_of_one_bin_is_unavailable_and_said(tmp_path):
         "indicators.interval_s" for c in ("a", "b")], lines
     for m in recs["a"] + recs["b"]:
         assert "envelope_rms" not in m and m["unavailable"] == ["envelope_rms", "bearings"], m
+
+
+def test_lines_past_the_envelope_of_a_narrow_band_are_unavailable_and_said(tmp_path):
+    rule = "alarms:\n  rules:\n    - {name: bp, indicator: de.bpfo, alert: 1.0}\n"
+    lines, recs = _replay(tmp_path, "  envelope_band_hz: [4000, 4050]\n", rule)
+    past = "bpfo 107.5 Hz, bpfo_2x 215.1 Hz, bpfi 162.5 Hz, bpfi_2x 324.9 Hz, bsf 70.7 Hz, bsf_2x 141.4 Hz"
+    told = [ln for ln in lines if ln.startswith("WARNING band_too_narrow: ")]
+    assert told == [
+        f"WARNING band_too_narrow: {c}: indicators.envelope_band_hz 4000-4050 Hz is too narrow for bearing {b}'s "
+        f"line(s) {past}: the envelope of a band carries modulation up to about its width; listed unavailable in "
+        f"/cm/{c}/indicators, no number; {fire}; widen the band to a width of at least 357 Hz"
+        for c, b, fire in (("a", "de", "rule(s) bp on them do not fire"),
+                           ("b", "de2", "an alarm rule on them would never fire"))], lines
+    for c, b in (("a", "de"), ("b", "de2")):
+        for m in recs[c]:
+            assert m["unavailable"] == [f"{b}.{k}" for k in ("bpfo", "bpfo_2x", "bpfi", "bpfi_2x", "bsf", "bsf_2x")]
+            assert set(m["bearings"][0]["lines"]) == {"ftf", "ftf_2x"} and m["envelope_rms"] > 0, m

@@ -140,7 +140,7 @@ def record_fields(r: IndicatorRecord) -> dict:
     out["bearings"] = [_bearing(b) for b in r.bearings]
     out["bands"] = [{"name": band.name, "lo_hz": _num(lo), "hi_hz": _num(hi), "rms": _num(rms)}
                     for band, (lo, hi), rms in r.bands]
-    unresolved = [f"{b.name}.{k}" for b in r.bearings for k in b.unresolved]
+    unresolved = [f"{b.name}.{k}" for b in r.bearings for k in b.unresolved + b.beyond]
     if unresolved:
         out["unavailable"] = unresolved
     return out

@@ -2,8 +2,9 @@
 
 :func:`line_notes` gives, per bearing of a record, a ``lines_unresolved`` event (a warning) for the
 lines its envelope spectrum's bins do not resolve (:mod:`cmsensord.dsp.indicators.resolution`), the
-first time that set of lines is, and a ``line_harmonics`` event (a warning) when a line's window
-holds the third harmonic of another defect frequency of the bearing
+first time that set of lines is, a ``band_too_narrow`` event (a warning) for the lines past the
+envelope spectrum, which reaches about the envelope band's width, and a ``line_harmonics`` event
+(a warning) when a line's window holds the third harmonic of another defect frequency of the bearing
 (:func:`~cmsensord.dsp.indicators.resolution.harmonic_overlaps`: at every speed alike, so once per
 channel and bearing); each names the alarm rules on those lines (their amplitudes and ratios).
 """
@@ -42,7 +43,40 @@ def line_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, df: 
                                longest_s)
         out.append(Event("lines_unresolved", channel, text, stamp,
                          {"details": {"bearing": b.name, "lines": list(b.unresolved), "bin_hz": _num(df)}}))
-    return out + _harmonic_notes(cfg, channel, r, setup, stamp, told)
+    return out + _beyond_notes(cfg, channel, r, stamp, told) + _harmonic_notes(cfg, channel, r, setup, stamp, told)
+
+
+def _rules_on(cfg: Config, channel: str, bearing: str, lines: tuple[str, ...]) -> tuple[str, ...]:
+    """The alarm rules of ``cfg`` on ``channel`` that watch one of ``lines`` of ``bearing`` (their
+    amplitudes or ratios)."""
+    names = {f"{bearing}.{k}{ratio}" for k in lines for ratio in ("", "_ratio")}
+    return tuple(dict.fromkeys(rule.name for rule in cfg.alarms.rules if rule.indicator in names
+                               and (not rule.channels or channel in rule.channels)))
+
+
+def _beyond_notes(cfg: Config, channel: str, r: IndicatorRecord, stamp: int, told: set) -> list[Event]:
+    """A ``band_too_narrow`` warning for each bearing of record ``r`` of ``channel`` with lines
+    past its envelope spectrum, which reaches about the envelope band's width (Randall & Antoni
+    2011: the envelope of a band carries modulation up to its width), the first time that set of
+    lines is: they are unavailable, the rules on them do not fire, and the width that reads them."""
+    out = []
+    for b in r.bearings:
+        key = (channel, b.name, "beyond", b.beyond)
+        if not b.beyond or b.freqs is None or key in told:
+            continue
+        told.add(key)
+        lines = line_freqs(b.freqs)
+        lo, hi = r.envelope_band
+        rules = _rules_on(cfg, channel, b.name, b.beyond)
+        what = f"rule(s) {', '.join(rules)} on them do not fire" if rules else "an alarm rule on them would never fire"
+        need = max(lines[k] for k in b.beyond) * 1.1
+        out.append(Event("band_too_narrow", channel, (
+            f"{channel}: indicators.envelope_band_hz {lo:g}-{hi:g} Hz is too narrow for bearing {b.name}'s line(s) "
+            f"{', '.join(f'{k} {lines[k]:.4g} Hz' for k in b.beyond)}: the envelope of a band carries modulation up "
+            f"to about its width; listed unavailable in /cm/{channel}/indicators, no number; {what}; widen the band "
+            f"to a width of at least {need:.3g} Hz"), stamp,
+            {"details": {"band": "indicators.envelope_band_hz", "bearing": b.name, "lines": list(b.beyond)}}))
+    return out
 
 
 def _harmonic_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, stamp: int,
@@ -55,7 +89,7 @@ def _harmonic_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup,
         if b.freqs is None or (channel, b.name, "harmonics") in told:
             continue
         told.add((channel, b.name, "harmonics"))
-        overlaps = harmonic_overlaps(b.freqs, setup.slip, b.unresolved)
+        overlaps = harmonic_overlaps(b.freqs, setup.slip, b.unresolved + b.beyond)
         if overlaps:
             names = {f"{b.name}.{k}{ratio}" for k, _, _ in overlaps for ratio in ("", "_ratio")}
             rules = tuple(rule.name for rule in cfg.alarms.rules if rule.indicator in names

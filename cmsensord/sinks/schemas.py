@@ -256,9 +256,9 @@ _DETAILS: dict[str, Any] = {
         "state": _str("operating_state: the machine's new operating state (stopped, starting, running, "
                       "coasting)"),
         "previous": _str("operating_state: the state before"),
-        "bearing": _str("lines_unresolved, line_harmonics: the configured bearing"),
-        "lines": {"type": "array", "items": {"type": "string"}, "description": "lines_unresolved: its lines the "
-                  "bins do not resolve; line_harmonics: its lines whose window holds 3 x another defect frequency"},
+        "bearing": _str("lines_unresolved, line_harmonics, band_too_narrow: the configured bearing"),
+        "lines": {"type": "array", "items": {"type": "string"}, "description": "its lines: lines_unresolved: "
+                  "not resolved; band_too_narrow: past the envelope; line_harmonics: window holds 3 x another"},
         "harmonic_of": {"type": "array", "items": {"type": "string"}, "description": "line_harmonics: per line, "
                         "the defect frequency whose third harmonic its window holds"},
         "bin_hz": {"type": "number", "description": "lines_unresolved: the envelope spectrum's bin width [Hz]; "

@@ -83,6 +83,9 @@ class BearingLines:
     lines: dict[str, LinePeak] = field(default_factory=dict)   # "bpfo", "bpfo_2x", ...
     #: the lines the envelope spectrum's bins do not resolve (:mod:`.resolution`): not read
     unresolved: tuple[str, ...] = ()
+    #: the lines whose window reaches past the envelope spectrum (which goes up to about the
+    #: envelope band's width, Randall & Antoni 2011): not read
+    beyond: tuple[str, ...] = ()
 
 
 @dataclass
@@ -119,17 +122,23 @@ def _bearing_lines(setup: Setup, b: Bearing, shaft_hz: float | None, f: np.ndarr
     """Bearing ``b``'s lines in the envelope spectrum (f, A) at ``shaft_hz``: each read
     (:func:`~.envelope.line_peak`) unless the spectrum's bins do not resolve it
     (:func:`~.resolution.unresolved`: then named in ``unresolved``) or its window reaches
-    beyond the spectrum."""
+    beyond the spectrum (an envelope band narrower than the line: named in ``beyond``)."""
     if shaft_hz is None or not shaft_hz > 0:
         return BearingLines(b.name, None)
     freqs = defect_frequencies(b.geometry, shaft_hz)
     lines = line_freqs(freqs)
     df = float(f[1] - f[0]) if f.size > 1 else 0.0
     out = BearingLines(b.name, freqs, unresolved=unresolved(lines, setup.slip, df) if df > 0 else ())
+    beyond = []
     for name, f0 in lines.items():
-        p = None if name in out.unresolved else line_peak(f, A, f0, setup.slip)
-        if p is not None:
+        if name in out.unresolved:
+            continue
+        p = line_peak(f, A, f0, setup.slip)         # None: f0 > 0 and df > 0, so past the spectrum
+        if p is None:
+            beyond.append(name)
+        else:
             out.lines[name] = p
+    out.beyond = tuple(beyond)
     return out
 
 
