@@ -89,6 +89,18 @@ def test_the_report_shades_the_healthy_period_of_its_capture_and_no_other(work):
         assert "healthy_period" not in plain and not any(LEGEND in ax["legend"] for ax in plain["axes"]), kind
 
 
+def test_the_summary_says_the_healthy_period_in_one_line(work):
+    """`cmsensord summary` of r.bin's replay: the healthy period as a line of board seconds and of
+    the recording (where the report shades it), not left in the metadata as JSON."""
+    log = _replay(work, "r.bin", "site.yaml", "summary_logs")
+    p = cmsensord("summary", str(log), cwd=work)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    assert lines[-1] == ("  healthy period (baselines): 0.0-6.0 board s of the capture, 0.000 h to 0.334 h in the "
+                         "recording (the site file's commissioned section)"), lines
+    assert lines[-2].startswith("  cmsensord: {'source': ") and "'healthy_period'" not in lines[-2], lines
+
+
 @pytest.mark.parametrize("period, message", [
     ("from_s: 6.0\n  to_s: 2.0", "commissioned.to_s: must be greater than from_s = 6.0 (got 2.0)"),
     ("to_s: 6.0", "commissioned.to_s: the healthy period needs from_s too (its two ends, as calibrate writes "
