@@ -6,8 +6,8 @@ nothing happen and take the old thresholds for the new ones.  :meth:`ConfigFile.
 the file again and says, in one warning line, what it finds: settings that differ from the running
 ones (named, up to :data:`SHOWN`) and how to apply them (a restart, which keeps alarm latches and
 acknowledgements; a microphone calibration the configuration names, edited since the daemon
-read it, is such a setting too), or a file that does not load, whose error a restart would stop the daemon on
-(exit 78), to be fixed first: the file itself when it was edited, else a file it names (an MQTT
+read it, is such a setting too), or a file that does not load, whose error a restart would stop
+the daemon on (exit 78), to be fixed first: the file itself when it was edited, else a file it names (an MQTT
 password or TLS file, a microphone calibration) that broke since, the configuration's text
 unchanged.  A file whose settings are the running ones (an edited comment, no edit) is not mentioned.
 """
@@ -109,7 +109,15 @@ def _edited_calibrations(cfg: Config, running: Mapping[str, Any]) -> list[str]:
 
     named = dict.fromkeys(str(ch.calibration or cfg.acoustic.calibration) for ch in cfg.channels
                           if ch.kind == "microphone")
-    return [path for path in named if path in running and load_calibration(path) != running[path]]
+    edited = []
+    for path in (p for p in named if p in running):
+        try:
+            now = load_calibration(path)
+        except ConfigError:             # broken since the configuration was read, a moment ago
+            now = None
+        if now != running[path]:
+            edited.append(path)
+    return edited
 
 
 def _text_of(path: str, most: int = MAX_TEXT) -> bytes | None:
