@@ -7,8 +7,8 @@ and level settings, with what those levels are resolved against: the learned bas
 each channel for levels given as k x a baseline, the zone boundaries for levels at a zone
 boundary), and the alert and danger levels in force at its last value (``alert_level``,
 ``danger_level``; a speed band's, a channel's baseline level), which the alarm table shows
-until data comes (:func:`saved_rows`).  :func:`check` refuses a record that is not such a one (ValueError), a stamp
-outside 1970..2262 (:data:`MAX_STAMP_NS`) included.
+until data comes (:func:`saved_rows`).  :func:`check` refuses a record that is not such a one
+(ValueError), a stamp outside 1970..2262 (:data:`MAX_STAMP_NS`) included.
 
 :func:`resume` puts saved records back into a new manager.  A saved alarm is restored when
 the manager has an alarm of that name on the same rule and indicator, and the rule still
