@@ -27,6 +27,7 @@ from cmsensord.alarms import Judged
 from cmsensord.argtypes import board_time, positive
 from cmsensord.base_changes import replaced_baselines, unlisted_channels
 from cmsensord.calibrate_bounds import FEW_DECISIONS, every_channels_bound, level_warning, rise_warning
+from cmsensord.capture_print import capture_print
 from cmsensord.config import Config, ConfigError, load_config
 from cmsensord.config.alarm_indicators import indicator_names
 from cmsensord.config.channel_refs import channel_refs_error
@@ -265,12 +266,16 @@ def site_yaml(results: list[ChannelResult], obs: Observations, *, source: str,
 
 def _commissioned_yaml(obs: Observations, source: str) -> list[str]:
     """The ``commissioned`` section: the capture (``source``, its real path, as a replay's log
-    names its ``source``), its board's rate (a board at another is warned of) and the healthy
-    period in its board seconds (a replay of that capture writes it into its log, where the
-    report shades it)."""
+    names its ``source``; its size and the digest of its ends, by which a replay knows it moved or
+    renamed: :mod:`cmsensord.capture_print`), its board's rate (a board at another is warned of)
+    and the healthy period in its board seconds (a replay of that capture writes it into its log,
+    where the report shades it)."""
+    size, digest = capture_print(source)
     return ["# What the baselines were learned from: a board streaming at another rate is warned of; a replay",
-            "# of this capture marks the healthy period (board seconds) in its log and its report.",
-            "commissioned:", f"  capture: {json.dumps(source)}", f"  fs_hz: {obs.fs:g}",
+            "# of this capture (here, or moved: the same size and ends) marks the healthy period (board seconds)",
+            "# in its log and its report.",
+            "commissioned:", f"  capture: {json.dumps(source)}", f"  capture_bytes: {size}",
+            f"  capture_ends_sha256: {digest}", f"  fs_hz: {obs.fs:g}",
             f"  block_len: {round(obs.fs / obs.rate_hz)}",
             f"  from_s: {round(float(obs.start_s), 6)!r}", f"  to_s: {round(float(obs.end_s), 6)!r}"]
 

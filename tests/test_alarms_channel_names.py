@@ -65,34 +65,47 @@ def test_a_rule_on_an_imported_channel_name_is_accepted_by_replay_and_calibrate(
 def test_the_board_default_name_of_an_imported_channel_is_refused(tmp_path, imported, command):
     """`channels: [ch0]` is refused, not accepted and never evaluated (the channel is horizontal)."""
     p = run(command, imported, tmp_path, RULES % "ch0")
-    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: alarms.rules[0].channels: names no "
-                                                         "channel (channels: horizontal) (got 'ch0')")
+    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: alarms.rules[0].channels: rule a "
+                                                         "names no channel (channels: horizontal) (got 'ch0')")
     p = run(command, imported, tmp_path, BEARING % "ch0")
-    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: bearings[0].channel: names no "
+    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: bearings[0].channel: bearing de names no "
                                                          "channel (channels: horizontal) (got 'ch0')")
 
 
 def test_with_a_channel_list_only_its_names_are_accepted(tmp_path, imported):
     listed = "channels: [{name: horizontal, index: 0}]\n"
     p = run("replay", imported, tmp_path, listed + RULES % "ch0")
-    assert (p.returncode, p.stderr) == (78, ERROR + "t.yaml: alarms.rules[0].channels: names no channel "
+    assert (p.returncode, p.stderr) == (78, ERROR + "t.yaml: alarms.rules[0].channels: rule a names no channel "
                                         "(channels: horizontal) (got 'ch0')\n")
     assert not (tmp_path / "logs").exists()                 # refused on loading: nothing read
     with pytest.raises(ConfigError) as err:
         config_from_dict({"channels": [{"name": "horizontal"}], "bearings": [
             {"name": "de", "channel": "ch0", "elements": 8, "ball_diameter": 17.462, "pitch_diameter": 72.5}]},
             source="f.yaml")
-    assert str(err.value) == "f.yaml: bearings[0].channel: names no channel (channels: horizontal) (got 'ch0')"
+    assert str(err.value) == ("f.yaml: bearings[0].channel: bearing de names no channel (channels: horizontal) "
+                              "(got 'ch0')")
+
+
+def test_the_daemon_with_a_channel_list_refuses_a_rule_on_no_channel_at_start(tmp_path):
+    """`cmsensord --config` with a channel list: the rule naming no channel of it is refused before
+    the port is opened, in one line naming the rule and the channels there are (exit 78)."""
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=(
+        "channels: [{name: horizontal, index: 0}, {name: vertical, index: 1}]\n"
+        "alarms:\n  rules:\n    - {name: bearing_hot, indicator: accel_rms, alert: 1, channels: [ch0]}\n"))
+    err = d.communicate(timeout=30)[1]
+    assert (d.returncode, err) == (78, ERROR + f"{tmp_path / 'cmsensord.yaml'}: alarms.rules[0].channels: rule "
+                                   "bearing_hot names no channel (channels: horizontal, vertical) (got 'ch0')\n")
+    assert not (tmp_path / "logs").exists()
 
 
 def test_a_board_channel_that_is_not_there_is_refused_by_replay(tmp_path, board_capture):
     """Without a list, `channel: ch5` was accepted on a one-channel board."""
     p = run("replay", board_capture, tmp_path, BEARING % "ch5")
-    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: bearings[0].channel: names no "
+    assert (p.returncode, p.stderr.splitlines()[-1]) == (78, ERROR + "t.yaml: bearings[0].channel: bearing de names no "
                                                          "channel (channels: ch0) (got 'ch5')")
     events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap"))) if t == "/cm/events"]
-    assert ("config", "configuration error: bearings[0].channel: names no channel (channels: ch0) (got 'ch5')") \
-        in [(m["kind"], m["message"]) for m in events]            # the short log says why it ends
+    assert ("config", "configuration error: bearings[0].channel: bearing de names no channel (channels: ch0) "
+            "(got 'ch5')") in [(m["kind"], m["message"]) for m in events]            # the short log says why it ends
     p = run("replay", board_capture, tmp_path, RULES % "ch0" + BEARING % "ch0")
     assert p.returncode == 0, p.stderr
 
@@ -107,11 +120,11 @@ def test_the_daemon_refuses_a_rule_on_no_channel_of_the_board(tmp_path):
         finally:
             err = stop(d) if d.poll() is None else d.communicate()[1]
     assert d.returncode == 78, err
-    assert err.splitlines()[-1] == (ERROR + f"{tmp_path / 'cmsensord.yaml'}: alarms.rules[0].channels: names no "
+    assert err.splitlines()[-1] == (ERROR + f"{tmp_path / 'cmsensord.yaml'}: alarms.rules[0].channels: rule a names no "
                                     "channel (channels: ch0) (got 'ch3')")
     events = [m for t, _, m in read_messages(next((tmp_path / "logs").glob("*.mcap"))) if t == "/cm/events"]
     assert events[-1]["kind"] == "stop"
-    assert ("config", "configuration error: alarms.rules[0].channels: names no channel (channels: ch0) "
+    assert ("config", "configuration error: alarms.rules[0].channels: rule a names no channel (channels: ch0) "
             "(got 'ch3')") in [(m["kind"], m["message"]) for m in events]
 
 

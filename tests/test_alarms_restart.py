@@ -238,12 +238,13 @@ def test_a_latch_saved_by_the_last_run_is_shown_and_acknowledged_before_data_com
     assert "ALARM danger sev/ch0 (saved by the last run; waiting for data)" in text, text
     assert "worst: danger (sev/ch0)" in text and text.rstrip().endswith("latched saved"), text
     assert (acked.returncode, acked.stdout) == (0, "acknowledged 1 alarm(s): sev/ch0\n"), acked.stdout + acked.stderr
-    assert after.rstrip().endswith("danger  -                -        -        - -      acknowledged saved"), after
+    assert after.rstrip().endswith("danger  -                -      0.3      0.6 -      acknowledged saved"), after
     user = pwd.getpwuid(os.getuid()).pw_name
     assert lines(err, "alarm_ack") == [f"WARNING alarm_ack: sev/ch0 acknowledged by {user} (danger, saved by the "
                                        "last run; danger at its stop, judged again when data comes)"], err
     rec = json.loads((tmp_path / "logs" / "cmsensord-alarms.json").read_text())["alarms"]["sev/ch0"]
     assert (rec["latched"], rec["level"], rec["acknowledged"]) == ("normal", "danger", True)
+    assert (rec["alert_level"], rec["danger_level"]) == (0.3, 0.6)        # the levels in force, saved
 
 
 def test_a_latch_raised_on_a_full_disk_is_saved_once_space_returns(small_fs, tmp_path):
@@ -375,8 +376,9 @@ def test_a_baseline_alert_saved_without_its_baseline_is_restored_as_the_same_epi
 
 def test_a_saved_alarm_waiting_for_data_shows_no_live_level(tmp_path):
     """Restarted with the board off, a latched danger the last run saved (danger too at its stop):
-    `cmsensord status` shows the latch, and its live level as not known ("-", absent in --json),
-    not "normal" (guards against the table saying the value is back to normal with no value yet)."""
+    `cmsensord status` shows the latch, its levels (the rule's saved settings), and its live level
+    as not known ("-", absent in --json), not "normal" (guards against the table saying the value
+    is back to normal with no value yet)."""
     (tmp_path / "logs").mkdir()
     rec = {**saved_latch("sev", "danger", (int(time.time()) - 60) * S, alert=0.3, danger=0.6), "live": "danger"}
     (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
@@ -394,6 +396,56 @@ def test_a_saved_alarm_waiting_for_data_shows_no_live_level(tmp_path):
     finally:
         stop(d)
     assert p is not None and p.returncode == 0, p and p.stderr
-    row = "sev/ch0                  danger  -                -        -        - -      latched saved"
+    row = "sev/ch0                  danger  -                -      0.3      0.6 -      latched saved"
     assert p.stdout.splitlines()[-1] == row, p.stdout
     assert "live" not in answer["alarms"][0] and answer["alarms"][0]["saved"] is True, answer
+
+
+BANDS = ("alarms:\n  rules:\n"
+         "    - {name: band, indicator: accel_rms, alert: 0.3, danger: 0.6, latch: true,\n"
+         "       bands: [{below_rpm: 600, alert: 0.1, danger: 0.2}]}\n"
+         "    - {name: slow, indicator: accel_rms, alert: 0.3, danger: 0.6, latch: true,\n"
+         "       bands: [{below_rpm: 600, alert: 0.1, danger: 0.2}]}\n"
+         "    - {name: base, indicator: accel_rms, alert_x_baseline: 2.0, danger_x_baseline: 4.0, latch: true}\n"
+         "    - {name: old, indicator: accel_rms, alert_x_baseline: 2.0, latch: true}\n")
+
+
+def test_saved_alarms_waiting_for_data_show_the_levels_they_were_judged_by(tmp_path):
+    """Restarted with the board off, `cmsensord status` shows each saved alarm's alert and danger
+    levels as a live row would: those in force when saved (a speed band's 0.1/0.2, not the rule's
+    0.3/0.6), a baseline level from the saved baseline; where the record holds no such number,
+    what the level depends on (`by speed`, `2xbase`), never "-" for a level the rule has."""
+    (tmp_path / "logs").mkdir()
+    since = (int(time.time()) - 60) * S
+    bands = {"alert": 0.3, "danger": 0.6, "bands": [{"below_rpm": 600, "alert": 0.1, "danger": 0.2}]}
+    recs = {"band/ch0": {**saved_latch("band", "alert", since), "levels": bands, "alert_level": 0.1,
+                         "danger_level": 0.2},
+            "slow/ch0": {**saved_latch("slow", "alert", since), "levels": bands},
+            "base/ch0": {**saved_latch("base", "alert", since),
+                         "levels": {"alert_x_baseline": 2.0, "danger_x_baseline": 4.0, "baselines": {"ch0": 0.25}}},
+            "old/ch0": {**saved_latch("old", "alert", since), "levels": {"alert_x_baseline": 2.0}}}
+    recs = {name: {**rec, "indicator": "accel_rms"} for name, rec in recs.items()}
+    (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
+        {"format": "cmsensord-alarms", "version": 1, "alarms": recs}))
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=BANDS)
+    cfg = str(tmp_path / "cmsensord.yaml")
+    try:
+        end, p = time.monotonic() + 20, None
+        while time.monotonic() < end:
+            time.sleep(0.3)
+            p = run_module("cmsensord", "status", "--config", cfg)
+            if p.returncode == 0:
+                break
+        answer = json.loads(run_module("cmsensord", "status", "--config", cfg, "--json").stdout)
+    finally:
+        stop(d)
+    assert p is not None and p.returncode == 0, p and p.stderr
+    assert p.stdout.splitlines()[-4:] == [
+        "band/ch0                 alert   -                -      0.1      0.2 m/s²   latched saved",
+        "slow/ch0                 alert   -                - by speed by speed m/s²   latched saved",
+        "base/ch0                 alert   -                -      0.5        1 m/s²   latched saved",
+        "old/ch0                  alert   -                -   2xbase        - m/s²   latched saved"], p.stdout
+    rows = {r["id"]: r for r in answer["alarms"]}
+    assert (rows["band/ch0"]["alert_level"], rows["band/ch0"]["danger_level"]) == (0.1, 0.2)
+    assert (rows["slow/ch0"]["alert_on"], rows["slow/ch0"]["danger_on"]) == ("by speed", "by speed")
+    assert rows["old/ch0"]["alert_on"] == "2xbase" and "danger_level" not in rows["old/ch0"], rows

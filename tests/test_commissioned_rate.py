@@ -5,6 +5,7 @@ with the simulated motor's) says so once, at the STATUS, and a re-calibration on
 
 from __future__ import annotations
 
+import hashlib
 import os
 
 import numpy as np
@@ -30,13 +31,21 @@ def work(tmp_path_factory):
     return d
 
 
+def _print(path) -> dict:
+    """The size and the SHA-256 of the first and last 64 KiB calibrate writes of a capture."""
+    data = path.read_bytes()
+    ends = data[:1 << 16] + data[max(1 << 16, len(data) - (1 << 16)):]
+    return {"capture_bytes": len(data), "capture_ends_sha256": hashlib.sha256(ends).hexdigest()}
+
+
 def said(stderr: str) -> list[str]:
     return [ln for ln in stderr.splitlines() if "baselines were learned from" in ln]
 
 
 def test_calibrate_writes_the_capture_and_its_rate(work):
     assert yaml.safe_load((work / "site.yaml").read_text())["commissioned"] == {
-        "capture": os.path.realpath(work / "motor.bin"), "fs_hz": 25000, "block_len": 250, "from_s": 0.0,
+        "capture": os.path.realpath(work / "motor.bin"), **_print(work / "motor.bin"), "fs_hz": 25000,
+        "block_len": 250, "from_s": 0.0,
         "to_s": 60.0}
 
 
@@ -60,7 +69,8 @@ def test_a_calibration_on_top_of_a_site_file_writes_its_own(work, tmp_path):
                   "--out", str(tmp_path / "site2.yaml"))
     assert p.returncode == 0, p.stderr
     assert yaml.safe_load((tmp_path / "site2.yaml").read_text())["commissioned"] == {
-        "capture": os.path.realpath(work / "other.bin"), "fs_hz": 20480, "block_len": 205, "from_s": 0.0,
+        "capture": os.path.realpath(work / "other.bin"), **_print(work / "other.bin"), "fs_hz": 20480,
+        "block_len": 205, "from_s": 0.0,
         "to_s": 19.999512}     # its 1998 whole blocks of 205 samples
     p = cmsensord("replay", str(work / "other.bin"), "--config", str(tmp_path / "site2.yaml"), "--out",
                   str(tmp_path / "logs"))

@@ -49,7 +49,7 @@ def test_a_full_section_round_trips():
     ({"indicators": {"intervall_s": 1}},
      "f.yaml: indicators.intervall_s: unknown key 'intervall_s' (did you mean 'interval_s'?)"),
     ({"channels": [{"name": "ch0"}], "bearings": [{**ZA2115, "channel": "motor"}]},
-     "f.yaml: bearings[0].channel: names no channel (channels: ch0) (got 'motor')"),
+     "f.yaml: bearings[0].channel: bearing de names no channel (channels: ch0) (got 'motor')"),
     ({"bearings": [{**ZA2115, "ball_diameter": 3.0}]},
      "f.yaml: bearings[0].pitch_diameter: must be greater than ball_diameter = 3.0 (got 2.815)"),
     ({"bearings": [{k: v for k, v in ZA2115.items() if k != "elements"}]},

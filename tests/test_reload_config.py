@@ -4,13 +4,15 @@ it, or that the edited file does not load (a restart would stop the daemon on it
 
 from __future__ import annotations
 
+import json
 import signal
 import threading
 import time
 
+import numpy as np
 import pytest
 
-from processes import start_daemon
+from processes import start_board, start_daemon
 
 pytestmark = pytest.mark.process
 
@@ -42,10 +44,11 @@ class _Lines:
         self._thread.join(timeout=10)
 
 
-def reloads(d, edits) -> list[str]:
+def reloads(d, edits, out: _Lines | None = None) -> list[str]:
     """SIGHUP the daemon ``d`` once after each of ``edits`` (callables changing its files), then
-    stop it: its stderr lines (the reopen of each reload waited for, and the line after it)."""
-    out = _Lines(d)
+    stop it: its stderr lines (the reopen of each reload waited for, and the line after it;
+    ``out``: the reader of its stderr already started)."""
+    out = out or _Lines(d)
     try:
         out.wait("INFO effective settings:", 1)
         for n, edit in enumerate(edits, 1):
@@ -100,3 +103,48 @@ def test_a_reload_of_an_unchanged_configuration_whose_named_file_broke_does_not_
                               "mqtt.password_file: cannot read: No such file or directory (got '"), said[1]
     assert said[1].endswith("); a reload applies no setting, and a restart would stop the daemon (exit 78): put "
                             "back or fix the file it names first"), said[1]
+
+
+def _calibration(path) -> None:
+    """A microphone calibration of a made-up machine (sound energy 2 x the vibration's) at ``path``."""
+    from cmsensord.acoustic_calib import fit_model, save_calibration
+
+    r = np.random.default_rng(0)
+    x = 0.1 * np.exp(r.normal(0.0, 0.5, 3000))
+    save_calibration(fit_model(x, 2 * x + 0.05 + 0.01 * r.standard_normal(3000) ** 2,
+                               0.05 + 0.01 * r.standard_normal(1000) ** 2), path)
+
+
+def test_a_reload_says_an_edited_microphone_calibration_is_not_applied(tmp_path):
+    """A daemon watching a microphone (a board sending it): the calibration file's note edited, no
+    line (the model it runs on is the same); its model edited, one warning naming the file, as an
+    edited setting is (guards against a silent reload that leaves the old model running)."""
+    mic = tmp_path / "mic.json"
+    _calibration(mic)
+    link = tmp_path / "ttyBOARD"
+    board = start_board("--scenario", "healthy_mic", "--channels", "2", "--speed", "5", "--link", str(link))
+    try:
+        d = start_daemon(tmp_path, link, config=(
+            f"channels:\n  - {{name: acc, index: 0}}\n  - {{name: mic, index: 1, kind: microphone}}\n"
+            f"acoustic:\n  calibration: {mic}\n"))
+
+        def edit(key: str, change):
+            def do() -> None:
+                doc = json.loads(mic.read_text())
+                doc[key] = change(doc[key])
+                mic.write_text(json.dumps(doc))
+            return do
+        out = _Lines(d)
+        out.wait("INFO config: board firmware", 1, timeout=20)
+        time.sleep(1.0)                         # the first data: the microphone's chain reads its calibration
+        lines = reloads(d, (edit("info", lambda i: {**i, "note": "edited"}),
+                            edit("model", lambda m: {**m, "F": m["F"] * 0.9})), out)
+    finally:
+        board.terminate()
+        board.wait(timeout=5)
+    said = [line for line in lines if line.startswith("INFO reopen:") or "since the daemon" in line]
+    assert [line.split(":")[0] for line in said] == ["INFO reopen", "INFO reopen", "WARNING config"], lines
+    assert said[2] == (f"WARNING config: the microphone calibration {mic} changed since the daemon read it: not "
+                       "applied, a reload only starts a new log file; restart the daemon to apply it (systemctl "
+                       "restart cmsensord: alarm latches and acknowledgements are kept)"), lines
+    assert not any("Traceback" in line for line in lines)

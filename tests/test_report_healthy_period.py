@@ -2,14 +2,17 @@
 --to 50%`` writes it into the site file's ``commissioned`` section (board seconds, beside the
 capture's real path), a replay of that capture (however its path is spelled) writes it into its
 log's metadata, and ``cmsensord report`` shades it on the recording's time figures, over the
-recording's own time; a replay of another capture with the same site file has none. A period
-that is none is refused in one line."""
+recording's own time; a replay of another capture with the same site file has none. The capture
+moved since is known by its size and the digest of its ends; a replay that cannot know it says
+why. A period that is none is refused in one line."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -64,9 +67,58 @@ def _figures(work: Path, logs: str) -> dict[str, dict]:
     return {m["id"]: m for m in metas}
 
 
+def _ends_sha256(path: Path) -> str:
+    """SHA-256 of the first and last 64 KiB of ``path`` (the whole, when shorter than 64 KiB)."""
+    data = path.read_bytes()
+    return hashlib.sha256(data[:1 << 16] + data[max(1 << 16, len(data) - (1 << 16)):]).hexdigest()
+
+
 def test_calibrate_writes_the_healthy_period_beside_the_captures_real_path(work):
+    r = work / "r.bin"
     assert yaml.safe_load((work / "site.yaml").read_text())["commissioned"] == {
-        "capture": os.path.realpath(work / "r.bin"), "fs_hz": 2560, "block_len": 32, "from_s": 0.0, "to_s": 6.0}
+        "capture": os.path.realpath(r), "capture_bytes": r.stat().st_size, "capture_ends_sha256": _ends_sha256(r),
+        "fs_hz": 2560, "block_len": 32, "from_s": 0.0, "to_s": 6.0}
+
+
+def _moved(work: Path, tmp_path: Path) -> Path:
+    """r.bin calibrated as a.bin in ``tmp_path`` (site.yaml there), then moved to moved/b.bin
+    with its sidecar: the site file's ``commissioned.capture`` no longer exists."""
+    for suffix in ("", ".json"):
+        shutil.copy(work / f"r.bin{suffix}", tmp_path / f"a.bin{suffix}")
+    p = cmsensord("calibrate", "a.bin", "--to", "50%", "--out", "site.yaml", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    (tmp_path / "moved").mkdir()
+    for suffix in ("", ".json"):
+        (tmp_path / f"a.bin{suffix}").rename(tmp_path / "moved" / f"b.bin{suffix}")
+    return tmp_path / "site.yaml"
+
+
+def test_a_capture_moved_since_calibrate_still_gets_its_healthy_period(work, tmp_path):
+    """The commissioned capture moved and renamed: its replay is known by its size and ends and
+    writes the healthy period, saying nothing of it; a replay of another capture with that site
+    file says in one line why none is shaded (guards against a silent replay without it)."""
+    site = _moved(work, tmp_path)
+    mine = _replay(tmp_path, "moved/b.bin", str(site), "logs")
+    assert json.loads(head_metadata(mine)["cmsensord"]["healthy_period"]) == {"from_s": 0.0, "to_s": 6.0}
+    p = cmsensord("replay", str(work / "o.bin"), "--config", str(site), "--out", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    assert [ln for ln in p.stderr.splitlines() if "healthy period" in ln] == [
+        f"  note: the healthy period is not shaded: its commissioned capture {tmp_path.resolve() / 'a.bin'} is not "
+        "found, and o.bin is not it (other first or last bytes)"], p.stderr
+
+
+def test_a_site_file_without_the_captures_digest_says_why_its_moved_capture_is_not_shaded(work, tmp_path):
+    """A site file written before calibrate kept the capture's size and digest still loads; its
+    commissioned capture moved, the replay says in one line that it cannot know it."""
+    site = _moved(work, tmp_path)
+    site.write_text("".join(ln for ln in site.read_text().splitlines(keepends=True)
+                            if not ln.startswith(("  capture_bytes:", "  capture_ends_sha256:"))))
+    p = cmsensord("replay", "moved/b.bin", "--config", str(site), "--out", "logs", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert [ln for ln in p.stderr.splitlines() if "healthy period" in ln] == [
+        f"  note: the healthy period is not shaded: its commissioned capture {tmp_path.resolve() / 'a.bin'} is not "
+        "found, and the site file has no size and digest to know it moved by (if this is it: set "
+        f"commissioned.capture to {tmp_path.resolve() / 'moved' / 'b.bin'}, or calibrate again)"], p.stderr
 
 
 def test_the_report_shades_the_healthy_period_of_its_capture_and_no_other(work):
@@ -87,6 +139,18 @@ def test_the_report_shades_the_healthy_period_of_its_capture_and_no_other(work):
         assert all(ax["legend"][0] == LEGEND for ax in shaded["axes"]), kind
         plain = metas[f"o.bin-bearing-{kind}"]
         assert "healthy_period" not in plain and not any(LEGEND in ax["legend"] for ax in plain["axes"]), kind
+
+
+def test_the_summary_says_the_healthy_period_in_one_line(work):
+    """`cmsensord summary` of r.bin's replay: the healthy period as a line of board seconds and of
+    the recording (where the report shades it), not left in the metadata as JSON."""
+    log = _replay(work, "r.bin", "site.yaml", "summary_logs")
+    p = cmsensord("summary", str(log), cwd=work)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    assert lines[-1] == ("  healthy period (baselines): 0.0-6.0 board s of the capture, 0.000 h to 0.334 h in the "
+                         "recording (the site file's commissioned section)"), lines
+    assert lines[-2].startswith("  cmsensord: {'source': ") and "'healthy_period'" not in lines[-2], lines
 
 
 @pytest.mark.parametrize("period, message", [

@@ -214,8 +214,10 @@ def test_the_summary_of_a_replayed_import_gives_each_event_its_time_in_the_recor
     assert [ln for ln in lines if re.fullmatch(re.escape(
         f"  cmsensord: {{'source': '{tmp_path.resolve() / 'r.bin'}', 'recording_timeline': '40 snapshots over 6.5 h "
         "of the recording "
-        "from 2004-02-12T10:40:00', 'healthy_period': '{\"from_s\": 0.0, \"to_s\": 10.0}', 'run': '") + RUN + "'}",
+        "from 2004-02-12T10:40:00', 'run': '") + RUN + "'}",
         ln)], lines
+    assert lines[-1] == ("  healthy period (baselines): 0.0-10.0 board s of the capture, 2004-02-12 10:40:00 to "
+                         "2004-02-12 12:10:01 in the recording (the site file's commissioned section)"), lines
     assert max(map(len, lines)) < 300                    # no 60-kB line of the timeline
 
 
@@ -262,8 +264,10 @@ def test_snapshots_without_times_are_drawn_in_percent_of_the_record_not_the_repl
     assert [ln for ln in lines if re.fullmatch(re.escape(
         f"  cmsensord: {{'source': '{tmp_path.resolve() / 'r.bin'}', 'recording_timeline': '40 snapshot(s) "
         "without times, "
-        "40 s of signal end to end', 'healthy_period': '{\"from_s\": 0.0, \"to_s\": 10.0}', 'run': '") + RUN + "'}",
+        "40 s of signal end to end', 'run': '") + RUN + "'}",
         ln)], lines
+    assert lines[-1] == ("  healthy period (baselines): 0.0-10.0 board s of the capture, 0.0 % to 25.0 % of the "
+                         "record (the site file's commissioned section)"), lines
 
 
 def test_one_continuous_file_is_drawn_in_seconds_into_it(tmp_path):

@@ -5,8 +5,10 @@ relies on: the shown, live and latched level, since when the shown level holds, 
 is acknowledged (when, by whom), and the rule it was judged by (its name, indicator, latch
 and level settings, with what those levels are resolved against: the learned baseline of
 each channel for levels given as k x a baseline, the zone boundaries for levels at a zone
-boundary).  :func:`check` refuses a record that is not such a one (ValueError), a stamp
-outside 1970..2262 (:data:`MAX_STAMP_NS`) included.
+boundary), and the alert and danger levels in force at its last value (``alert_level``,
+``danger_level``; a speed band's, a channel's baseline level), which the alarm table shows
+until data comes (:func:`saved_rows`).  :func:`check` refuses a record that is not such a one
+(ValueError), a stamp outside 1970..2262 (:data:`MAX_STAMP_NS`) included.
 
 :func:`resume` puts saved records back into a new manager.  A saved alarm is restored when
 the manager has an alarm of that name on the same rule and indicator, and the rule still
@@ -26,11 +28,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from cmsensord.config.alarms import AlarmRuleConfig
+from cmsensord.config.alarms import LEVEL_KEYS, AlarmRuleConfig
 
 from .manager import Alarm, AlarmManager
 from .state import LEVELS
@@ -89,7 +92,8 @@ def snapshot(mgr: AlarmManager) -> dict[str, dict[str, Any]]:
                                "levels": level_settings(a.rule, resolved_against(mgr, a)), "level": LEVELS[s.level],
                                "live": LEVELS[live], "latched": LEVELS[s.latched],
                                "acknowledged": s.acknowledged}
-        for key, value in (("since_ns", s.changed_ns), ("acked_ns", s.acked_ns), ("acked_by", s.acked_by)):
+        for key, value in (("since_ns", s.changed_ns), ("acked_ns", s.acked_ns), ("acked_by", s.acked_by),
+                           ("alert_level", a.levels[0]), ("danger_level", a.levels[1])):
             if value is not None:
                 rec[key] = value
         out[a.id] = rec
@@ -132,6 +136,10 @@ def check(alarms: Any) -> dict[str, dict[str, Any]]:
         for key in ("since_ns", "acked_ns"):
             if key in rec and not 0 <= rec[key] <= MAX_STAMP_NS:
                 raise ValueError(f"alarm {name!r}: {key} {rec[key]} is out of range (a stamp in ns, 1970 to 2262)")
+        for key in ("alert_level", "danger_level"):
+            if key in rec and (not isinstance(rec[key], (int, float)) or isinstance(rec[key], bool)
+                               or not math.isfinite(rec[key])):
+                raise ValueError(f"alarm {name!r}: {key} is not a finite number")
     return alarms
 
 
@@ -223,14 +231,50 @@ def shown(rec: dict[str, Any]) -> str:
     return LEVELS[max(LEVELS.index(rec["level"]), LEVELS.index(rec["latched"]))]
 
 
+def _saved_level(rec: dict[str, Any], which: str) -> float | str | None:
+    """The ``which`` (alert, danger) level of a saved alarm as the table shows it: the one in
+    force at its last value when saved, else the one its settings give with what they were resolved
+    against (a zone boundary, its channel's baseline), else what it depends on (``by speed``: a
+    rule with speed bands; ``2xbase``, ``zone C``: a baseline or zone boundaries not saved); None:
+    no such level (none given, or its baseline not learned)."""
+    if f"{which}_level" in rec:
+        return float(rec[f"{which}_level"])
+    levels = rec["levels"]
+    value, zone, k = (levels.get(key) for key in LEVEL_KEYS[which])
+    if levels.get("bands"):
+        return "by speed"
+    if isinstance(value, (int, float)):
+        return float(value)
+    bounds, baselines = levels.get("zone_boundaries"), levels.get("baselines")
+    if zone in ("B", "C", "D"):
+        ok = isinstance(bounds, list) and len(bounds) == 3 and all(isinstance(b, (int, float)) for b in bounds)
+        return float(bounds["BCD".index(zone)]) if ok else f"zone {zone}"
+    if isinstance(k, (int, float)):
+        # the baseline of each of the alarm's channels (None: not learned, no level): one, or a
+        # voting alarm's, all the same
+        base = list(baselines.values()) if isinstance(baselines, dict) else []
+        one = base[0] if base and all(b == base[0] for b in base) else ""
+        if one is None:
+            return None
+        return k * one if isinstance(one, (int, float)) and not isinstance(one, bool) else f"{k:g}xbase"
+    return None
+
+
 def saved_rows(saved: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """Rows of the alarm table for saved records not put back yet (no data has come): flag
-    ``saved``, and no ``live`` level: with no value yet it is not known (absent, as every value
-    not known)."""
+    ``saved``; no ``live`` level (with no value yet it is not known: absent, as every value not
+    known); the alert and danger levels as :func:`_saved_level` gives them (``alert_level``,
+    ``danger_level`` a number as a live row's; a text, what it depends on, as ``alert_on``,
+    ``danger_on``)."""
     rows = []
     for name, rec in saved.items():
         row = {"id": name, "rule": rec["rule"], "indicator": rec["indicator"], "level": shown(rec),
                "latched": rec["latched"] != "normal", "acknowledged": rec["acknowledged"], "saved": True}
+        for which in ("alert", "danger"):
+            lv = _saved_level(rec, which)
+            if lv is not None:
+                row[f"{which}_level" if isinstance(lv, float) else f"{which}_on"] = \
+                    round(lv, 9) if isinstance(lv, float) else lv
         if "since_ns" in rec:
             row["since"] = {"sec": rec["since_ns"] // 1_000_000_000, "nsec": rec["since_ns"] % 1_000_000_000}
         rows.append(row)

@@ -66,21 +66,21 @@ def rules_on_bearing_channels(cfg: Any) -> tuple[str, str, Any] | None:
 
 def channel_refs_error(cfg: Any, channels: Sequence[Any]) -> tuple[str, str, Any] | None:
     """(key path, reason, value) of the first rule or bearing naming none of ``channels``
-    (:class:`~.settings.ChannelConfig`), or rule whose ``vote`` is more than the channels it
-    watches (:func:`rule_channels`)."""
+    (:class:`~.settings.ChannelConfig`; the reason names the rule or bearing and the channels),
+    or rule whose ``vote`` is more than the channels it watches (:func:`rule_channels`)."""
     names = [ch.name for ch in channels]
     have = f"names no channel (channels: {', '.join(names)})"
     for i, r in enumerate(cfg.alarms.rules):
         for c in r.channels:
             if c not in names:
-                return f"alarms.rules[{i}].channels", have, c
+                return f"alarms.rules[{i}].channels", f"rule {r.name} {have}", c
         watched = rule_channels(r, [ch.name for ch in channels if ch.kind != "microphone"], cfg.bearings)
         if r.vote > len(watched):
             return (f"alarms.rules[{i}].vote", f"must be at most the {len(watched)} channel(s) the rule "
                     f"watches ({', '.join(watched)}): that many never exceed the level together", r.vote)
     for i, b in enumerate(cfg.bearings):
         if b.channel not in names:
-            return f"bearings[{i}].channel", have, b.channel
+            return f"bearings[{i}].channel", f"bearing {b.name} {have}", b.channel
     return None
 
 

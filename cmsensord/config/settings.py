@@ -492,8 +492,9 @@ def _period_whole(obj: Any) -> tuple[str, str, Any] | None:
 class CommissionedConfig:
     """What ``cmsensord calibrate`` learned the baselines from (it writes this section): a
     board streaming at another sample rate or block length is warned of; a replay of the same
-    capture (its real path) writes the healthy period [``from_s``, ``to_s``] (board seconds of
-    the capture) into its log, where ``cmsensord report`` shades it."""
+    capture (its real path; moved or renamed since, its size and the digest of its ends:
+    :mod:`cmsensord.capture_print`) writes the healthy period [``from_s``, ``to_s``] (board
+    seconds of the capture) into its log, where ``cmsensord report`` shades it."""
 
     capture: str | None = setting(None, "the capture the baselines were learned from (its real path)",
                                   nonempty=True)
@@ -501,6 +502,10 @@ class CommissionedConfig:
     block_len: int | None = setting(None, "its board's samples per block (one RMS value)", ge=1)
     from_s: float | None = setting(None, "the healthy period's start, board seconds of the capture", ge=0)
     to_s: float | None = setting(None, "the healthy period's end, board seconds of the capture", ge=0)
+    capture_bytes: int | None = setting(None, "the capture's size [bytes], to know it again once moved", ge=0)
+    capture_ends_sha256: str | None = setting(
+        None, "SHA-256 of the capture's first and last 64 KiB, to know it again once moved",
+        pattern=r"[0-9a-f]{64}", pattern_reason="must be 64 lowercase hex digits (as calibrate writes it)")
 
     _RULES: ClassVar[tuple[Rule, ...]] = (_period_whole,)
 

@@ -48,6 +48,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from cmsensord.config import MAX_CHANNELS, ChannelConfig, Config, default_channels
 from cmsensord.config.channel_refs import check_channel_refs
@@ -66,6 +67,9 @@ from cmsensord.protocol import (
     Status,
     decode_status,
 )
+
+if TYPE_CHECKING:
+    from cmsensord.dsp.acoustic.model import AcousticModel
 
 #: data frames of another channel count in a row that mean the board changed (1 s of RMS blocks)
 CHANGE_FRAMES = 100
@@ -100,6 +104,8 @@ class ChannelSetup:
         self.channels: tuple[ChannelConfig, ...] = cfg.channels
         self.severity: SeverityChain | None = None
         self.microphones: Microphones | None = None
+        #: the microphone calibrations the chains run on, by path (read once: :meth:`Microphones.create`)
+        self.calibrations: dict[str, AcousticModel] = {}
         self._missing_said: int | None = None     # the board's channel count the missing ones were said for
         self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
         self._unlike_said: tuple[int, int] | None = None    # the rate unlike the commissioned one said
@@ -340,7 +346,7 @@ class ChannelSetup:
         self.log.add(self.severity.notes)
         self.severity.notes.clear()
         self.microphones, events = Microphones.create(self.cfg, usable, fs=self.clock.fs,
-                                                      block_len=self.clock.block_len)
+                                                      block_len=self.clock.block_len, loaded=self.calibrations)
         self.log.add(events)
 
     def _keep_views(self, chain: SeverityChain) -> None:

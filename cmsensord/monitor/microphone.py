@@ -9,11 +9,16 @@ and ``/cm/<channel>/vibration_estimate`` is written per block.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from cmsensord.config import ChannelConfig, Config
 from cmsensord.monitor import messages
 from cmsensord.monitor.events import Event
+
+if TYPE_CHECKING:
+    from cmsensord.dsp.acoustic.model import AcousticModel
 
 
 class Microphones:
@@ -25,10 +30,13 @@ class Microphones:
         self.cols = cols
 
     @classmethod
-    def create(cls, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int,
-               block_len: int) -> tuple[Microphones | None, list[Event]]:
+    def create(cls, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
+               loaded: dict[str, AcousticModel] | None = None) -> tuple[Microphones | None, list[Event]]:
         """The estimator of the microphone channels among ``channels`` (None when there is
-        none), and an event per calibration made with another block length."""
+        none), and an event per calibration made with another block length. ``loaded``: the
+        calibrations read before, by path: a file is read once, at the first chain that needs
+        it, and a chain made again (a board reset, a new set of channels) runs on the same
+        calibration, as every setting is read once; a file read now is added to it."""
         cols = [c for c, ch in enumerate(channels) if ch.kind == "microphone"]
         if not cols:
             return None, []
@@ -39,8 +47,10 @@ class Microphones:
         block_s = block_len / fs
         for c in cols:
             ch = channels[c]
-            path = ch.calibration or cfg.acoustic.calibration
-            model = load_calibration(path)
+            path = str(ch.calibration or cfg.acoustic.calibration)     # the configuration checked it is set
+            model = (loaded or {}).get(path) or load_calibration(path)
+            if loaded is not None:
+                loaded[path] = model
             if abs(model.block_s - block_s) > 1e-9:
                 events.append(Event("config", ch.name, f"{ch.name}: acoustic calibration {path} was made "
                                     f"with {model.block_s * 1e3:g} ms blocks, the board sends "

@@ -5,15 +5,16 @@ configuration once, at start.  An operator who edited the file and reloaded woul
 nothing happen and take the old thresholds for the new ones.  :meth:`ConfigFile.on_reload` reads
 the file again and says, in one warning line, what it finds: settings that differ from the running
 ones (named, up to :data:`SHOWN`) and how to apply them (a restart, which keeps alarm latches and
-acknowledgements), or a file that does not load, whose error a restart would stop the daemon on
-(exit 78), to be fixed first: the file itself when it was edited, else a file it names (an MQTT
+acknowledgements; a microphone calibration the configuration names, edited since the daemon
+read it, is such a setting too), or a file that does not load, whose error a restart would stop
+the daemon on (exit 78), to be fixed first: the file itself when it was edited, else a file it names (an MQTT
 password or TLS file, a microphone calibration) that broke since, the configuration's text
 unchanged.  A file whose settings are the running ones (an edited comment, no edit) is not mentioned.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -74,8 +75,11 @@ class ConfigFile:
         text = _text_of(path, MAX_TEXT + 1)
         return cls(path, loaded, text if text is not None and len(text) <= MAX_TEXT else None)
 
-    def on_reload(self) -> str | None:
-        """The warning line for a SIGHUP (None: the file holds the running settings)."""
+    def on_reload(self, calibrations: Mapping[str, Any] | None = None) -> str | None:
+        """The warning line for a SIGHUP (None: the file holds the running settings).
+        ``calibrations``: the microphone calibrations the daemon runs on, by path (read once, at
+        the first data: :meth:`cmsensord.monitor.microphone.Microphones.create`); one the
+        configuration still names that now holds another model is not applied either."""
         try:
             now = load_config(self.path)
         except ConfigError as exc:
@@ -87,12 +91,33 @@ class ConfigFile:
             return (f"{self.path} changed since the daemon started and does not load: {error}; a reload applies "
                     "no setting, and a restart would stop the daemon (exit 78): fix the file first")
         changes = changed_settings(config_to_dict(self.loaded), config_to_dict(now))
-        if not changes:
+        edited = _edited_calibrations(now, calibrations or {})
+        if not changes and not edited:
             return None
         more = f" and {len(changes) - SHOWN} more" if len(changes) > SHOWN else ""
-        return (f"{self.path} changed since the daemon started ({', '.join(changes[:SHOWN])}{more}): not "
-                "applied, a reload only starts a new log file; restart the daemon to apply it "
-                "(systemctl restart cmsensord: alarm latches and acknowledgements are kept)")
+        said = [f"{self.path} changed since the daemon started ({', '.join(changes[:SHOWN])}{more})"] if changes else []
+        said += [f"the microphone calibration {', '.join(edited)} changed since the daemon read it"] if edited else []
+        return (f"{'; '.join(said)}: not applied, a reload only starts a new log file; restart the daemon to apply "
+                "it (systemctl restart cmsensord: alarm latches and acknowledgements are kept)")
+
+
+def _edited_calibrations(cfg: Config, running: Mapping[str, Any]) -> list[str]:
+    """The microphone calibration files ``cfg`` names whose model is another than the one the
+    daemon runs on (``running``, by path); the MQTT files it names are not among them: the
+    publisher reads them again at each connection."""
+    from cmsensord.acoustic_model import load_calibration
+
+    named = dict.fromkeys(str(ch.calibration or cfg.acoustic.calibration) for ch in cfg.channels
+                          if ch.kind == "microphone")
+    edited = []
+    for path in (p for p in named if p in running):
+        try:
+            now = load_calibration(path)
+        except ConfigError:             # broken since the configuration was read, a moment ago
+            now = None
+        if now != running[path]:
+            edited.append(path)
+    return edited
 
 
 def _text_of(path: str, most: int = MAX_TEXT) -> bytes | None:

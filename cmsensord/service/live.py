@@ -448,7 +448,7 @@ def _loop(cfg: Config, proc: Processor, sink, source: SerialSource, stop: StopFl
 def _reload_note(proc: Processor, config_file: ConfigFile | None) -> None:
     """At a SIGHUP, a ``config`` warning when the configuration file holds other settings than
     the running ones, or does not load (a reload applies none of it: :mod:`.config_file`)."""
-    note = config_file.on_reload() if config_file is not None else None
+    note = config_file.on_reload(proc.setup.calibrations) if config_file is not None else None
     if note is not None:
         proc.event("config", None, note, proc.diag.wall_stamp(), log_level=logging.WARNING)
 

@@ -171,7 +171,8 @@ def run_capture_now(args: argparse.Namespace) -> int:
 def format_table(t: dict) -> str:
     """The alarm table as text, one alarm a line: the value and the levels in the indicator's unit
     (UNIT; "-": none, a ratio, a kurtosis, the severity index); LIVE "-": not known (a saved alarm
-    before the first value)."""
+    before the first value); a saved alarm's level it cannot give as a number, what it depends on
+    (``by speed``, ``2xbase``: :func:`cmsensord.alarms.saved.saved_rows`)."""
     head = f"operating state: {t['operating_state']}, worst: {t['worst']}"
     if "worst_alarm" in t:
         head += f" ({t['worst_alarm']})"
@@ -179,7 +180,8 @@ def format_table(t: dict) -> str:
         head += f", speed {t['speed_rpm']:.0f} rpm"
     lines = [head, f"{'ALARM':24} {'LEVEL':7} {'LIVE':7} {'VALUE':>10} {'ALERT':>8} {'DANGER':>8} {'UNIT':5}  FLAGS"]
     for a in t["alarms"]:
-        num = [f"{a[k]:.4g}" if k in a else "-" for k in ("value", "alert_level", "danger_level")]
+        num = [f"{a[k]:.4g}" if k in a else str(a.get(on, "-"))
+               for k, on in (("value", ""), ("alert_level", "alert_on"), ("danger_level", "danger_on"))]
         flags = " ".join(f for f, on in (("latched", a["latched"]), ("acknowledged", a["acknowledged"]),
                                          ("restored", a.get("restored", False)),
                                          ("saved", a.get("saved", False))) if on)

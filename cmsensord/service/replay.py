@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+from cmsensord.capture_print import commissioned_on
 from cmsensord.config import CommissionedConfig, Config, ConfigError
 from cmsensord.errors import EXIT_INTERRUPTED
 from cmsensord.importing.capture_settings import capture_settings
@@ -97,7 +98,8 @@ def replay(path: str, cfg: Config, *, auto_channels: bool, metadata: dict[str, s
         interrupt.restore()
     if not quiet:
         placed = [f"  {line}" for line in said] + origin_lines(meta, proc.views, alarms.board_s(proc.clock.anchor_ns)) \
-            + delay_lines(meta, cfg) + publish_lines(sink) + _interrupted(interrupt, capture)
+            + delay_lines(meta, cfg) + publish_lines(sink) + _interrupted(interrupt, capture) \
+            + ([head.note] if head.note else [])
         print(run_summary(proc, sink.paths, time.monotonic() - t0, placed), file=sys.stderr)
     return (EXIT_INTERRUPTED if interrupt.seen else 0), out, proc
 
@@ -109,9 +111,12 @@ class RecordingHead:
     import, its :class:`~cmsensord.importing.timeline.Timeline` (``recording_timeline``) with
     the log time of board second 0 (``board_zero_ns``: when the run began), where
     :meth:`anchor` stamps the Processor's board second 0; and, when the configuration was
-    commissioned on this capture (``commissioned.capture`` is its real path), the healthy period
-    the baselines were learned from, in its board seconds (``healthy_period``: JSON
-    ``{"from_s": ..., "to_s": ...}``), which the report shades (:mod:`cmsensord.report.healthy`)."""
+    commissioned on this capture (``commissioned.capture`` is its real path, or names a capture no
+    longer found of the same size and ends: :func:`~cmsensord.capture_print.commissioned_on`),
+    the healthy period the baselines were learned from, in its board seconds (``healthy_period``:
+    JSON ``{"from_s": ..., "to_s": ...}``), which the report shades
+    (:mod:`cmsensord.report.healthy`); :attr:`note` says why it is not written when the
+    commissioned capture is not found and this one is not known to be it."""
 
     def __init__(self, path: str, meta: dict, commissioned: CommissionedConfig | None = None) -> None:
         self.timeline = Timeline.from_sidecar(meta)
@@ -120,7 +125,10 @@ class RecordingHead:
         if self.timeline:
             self.metadata["recording_timeline"] = self.timeline.to_json(self.board_zero_ns)
         learned = commissioned or CommissionedConfig()
-        if learned.capture == self.metadata["source"] and learned.from_s is not None and learned.to_s is not None:
+        same, why = commissioned_on(path, learned) if learned.from_s is not None else (False, "")
+        #: the line on a healthy period not written though the configuration names one (empty: none)
+        self.note = f"  note: the healthy period is not shaded: {why}" if why else ""
+        if same and learned.from_s is not None and learned.to_s is not None:
             self.metadata["healthy_period"] = json.dumps({"from_s": learned.from_s, "to_s": learned.to_s})
 
     def anchor(self, proc: Processor) -> None:

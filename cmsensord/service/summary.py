@@ -89,7 +89,11 @@ def format_summary(info: dict) -> str:
             lines.extend(f"  {event_line(e, axis)}" for e in v)
         elif k == "metadata":
             lines.append("metadata:")
-            lines.extend(f"  {name}: {_metadata(values, axis)}" for name, values in v.items())
+            for name, values in v.items():
+                healthy = _healthy_line(values, axis) if name == "cmsensord" else ""
+                shown = {kk: vv for kk, vv in values.items() if kk != "healthy_period"} if healthy else values
+                lines.append(f"  {name}: {_metadata(shown, axis)}")
+                lines.extend([f"  {healthy}"] if healthy else [])
         elif k == "cut" and v == info.get("error"):
             continue                    # said as the error
         elif isinstance(v, dict):
@@ -111,6 +115,26 @@ def _in_recording(axis: TimeAxis, ns: int | None) -> str:
     if axis.timeline is None or ns is None:
         return ""
     return f" ({axis.text(axis.shown(int(ns)))} {'of the record' if axis.kind == 'record' else 'in the recording'})"
+
+
+def _healthy_line(values: dict, axis: TimeAxis) -> str:
+    """The healthy period a replay's ``cmsensord`` metadata names (``healthy_period``, the
+    commissioned one: :class:`~cmsensord.service.replay.RecordingHead`) as a line: its board
+    seconds of the capture and, for an import, its ends in the recording (as the report shades
+    it); empty when it names none or one that is no period (then shown as it is)."""
+    from cmsensord.report.healthy import LEGEND, board_period
+
+    period = board_period(values.get("healthy_period"))
+    if period is None:
+        return ""
+    line = f"{LEGEND}: {round(period[0], 3)}-{round(period[1], 3)} board s of the capture"
+    said = " (the site file's commissioned section)"
+    if axis.timeline is None:
+        return line + said
+    start = axis.shown(axis.board_zero_ns + int(round(period[0] * 1e9)), begins=True)
+    end = axis.shown(axis.board_zero_ns + int(round(period[1] * 1e9)))
+    where = "of the record" if axis.kind == "record" else "in the recording"
+    return line + f", {axis.text(start)} to {axis.text(end)} {where}{said}"
 
 
 def _metadata(values: dict, axis: TimeAxis) -> dict:
