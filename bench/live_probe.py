@@ -278,11 +278,11 @@ def _thread_rates(samples: list, window: float) -> dict:
 def _install(state: dict) -> None:
     """The latency probes: frames put in the queue (arrivals, the newest frame), the board
     clock's first anchor, the Processors made, and the sink's /orders writes, noted in ``state``."""
-    from cmsensord import link
+    from cmsensord import frame_queue
     from cmsensord.monitor import clock, processor
     from cmsensord.service import live
 
-    put = link.FrameQueue.put
+    put = frame_queue.FrameQueue.put
 
     def probed_put(self, frames):
         if frames:
@@ -309,7 +309,7 @@ def _install(state: dict) -> None:
     def probed_open_sink(*a, **kw):
         return _probe_sink(open_sink(*a, **kw), state)
 
-    link.FrameQueue.put = probed_put            # type: ignore[method-assign]
+    frame_queue.FrameQueue.put = probed_put            # type: ignore[method-assign]
     clock.BlockClock.anchor = probed_anchor     # type: ignore[method-assign]
     processor.Processor.__init__ = probed_init  # type: ignore[method-assign]
     live.open_sink = probed_open_sink

@@ -12,7 +12,7 @@ reads frames this way, so they all decode bytes the same way:
   serial log"), read in chunks; a missing or unreadable file raises
   :class:`~cmsensord.errors.LinkError` when the source is made;
 * :class:`SerialSource` — the serial port: a reader thread (reconnecting with
-  back-off) and a bounded :class:`~cmsensord.link.FrameQueue`; iteration
+  back-off) and a bounded :class:`~cmsensord.frame_queue.FrameQueue`; iteration
   yields what is queued every ``timeout`` seconds, or as soon as ``batch_frames``
   wait or the block the loop named (``wake_at``) is in (empty batches included,
   so the loop can do its periodic work; while that block is still to come, frames wait
@@ -35,7 +35,8 @@ from pathlib import Path
 from typing import BinaryIO
 
 from cmsensord.errors import LinkError, file_kind
-from cmsensord.link import FrameQueue, SerialReader
+from cmsensord.frame_queue import FrameQueue
+from cmsensord.link import SerialReader
 from cmsensord.monitor.clock import DEFAULT_BLOCK_LEN, DEFAULT_FS, is_reset
 from cmsensord.protocol import MAX_FRAME, Decoder, Frame, FrameType, LinkCounters, decode_status
 from cmsensord.sinks.mcap_chunks import MAGIC as MCAP_MAGIC

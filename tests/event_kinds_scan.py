@@ -27,7 +27,7 @@ EMITTERS_AT = {"messages.event": 1}
 #: (module, function) -> the names there that pass on kinds made elsewhere
 FORWARDS = {
     ("cmsensord/service/live.py", "link_events"): {"kind"},     # the link reader's (link.py _event)
-    ("cmsensord/sinks/rotating.py", "_deliver"): {"kind"},      # its own emit()'s, queued
+    ("cmsensord/sinks/sink_events.py", "_deliver"): {"kind"},   # the sink's own emit()'s, queued
     ("cmsensord/sinks/tee.py", "drain_events"): {"kind"},       # the publisher's (publisher.py _event)
 }
 

@@ -11,7 +11,7 @@ import os
 import pytest
 
 from cmsensord.config import load_config
-from cmsensord.config.loading import MAX_CONFIG_BYTES
+from cmsensord.config.yaml_file import MAX_CONFIG_BYTES
 from cmsensord.errors import EXIT_CONFIG, ConfigError, _short_repr
 from processes import cmsensord
 

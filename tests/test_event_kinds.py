@@ -19,7 +19,8 @@ from cmsensord.alarms.manager import KIND as ALARM_KINDS
 from cmsensord.config.capture import TRIGGER_KINDS
 from cmsensord.monitor.events import LOG_LEVEL, UNLIMITED, WALL_KINDS
 from cmsensord.report.marks import EVENT_STYLES
-from cmsensord.sinks.schemas import EVENT_KINDS, SCHEMAS
+from cmsensord.sinks.event_schema import EVENT_KINDS
+from cmsensord.sinks.schemas import SCHEMAS
 from event_kinds_scan import scan
 from foxglove_schema import message_problems
 from processes import cmsensord, run_module

@@ -7,7 +7,8 @@ import threading
 import time
 import tty
 
-from cmsensord.link import FrameQueue, SerialReader
+from cmsensord.frame_queue import FrameQueue
+from cmsensord.link import SerialReader
 from cmsensord.protocol import Frame, FrameType, encode_rms
 
 

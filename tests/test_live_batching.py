@@ -15,7 +15,7 @@ import threading
 import time
 
 from cmsensord.config import default_config
-from cmsensord.link import FrameQueue
+from cmsensord.frame_queue import FrameQueue
 from cmsensord.monitor.processor import Processor
 from cmsensord.protocol import Frame, FrameType, iter_frames
 from cmsensord.service.live import output_parts

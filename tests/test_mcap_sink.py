@@ -15,9 +15,9 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.stream_reader import StreamReader
 
 from cmsensord.errors import SinkError
+from cmsensord.sinks.event_schema import EVENT_KINDS
 from cmsensord.sinks.mcap_sink import McapSink, ns_to_stamp, read_messages, summarize
 from cmsensord.sinks.schemas import (
-    EVENT_KINDS,
     LINK_COUNTERS,
     SCHEMAS,
     TOPIC_DIAGNOSTICS,

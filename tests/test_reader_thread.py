@@ -14,8 +14,8 @@ import subprocess
 import sys
 
 from cmsensord.errors import EXIT_CONFIG
+from cmsensord.sinks.event_schema import EVENT_KINDS
 from cmsensord.sinks.mcap_sink import read_messages
-from cmsensord.sinks.schemas import EVENT_KINDS
 from processes import ENV, board_on_pty, spawn, stop
 
 INJECT = '''\

@@ -17,7 +17,8 @@ import pytest
 import serial
 
 from cmsensord import link
-from cmsensord.link import TTY_READ_MAX, TTY_REFILL_S, FrameQueue, SerialReader
+from cmsensord.frame_queue import FrameQueue
+from cmsensord.link import TTY_READ_MAX, TTY_REFILL_S, SerialReader
 from cmsensord.protocol import encode_rms
 
 

@@ -12,8 +12,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from cmsensord.sinks.event_schema import LOG_LEVELS
 from cmsensord.sinks.schemas import (
-    LOG_LEVELS,
     TOPIC_ALARMS,
     TOPIC_DIAGNOSTICS,
     TOPIC_EVENTS,

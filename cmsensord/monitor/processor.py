@@ -17,13 +17,14 @@ hand it the same :class:`~cmsensord.protocol.Frame` batches
 * indicator records, decisions and order blocks -> the alarm manager (:mod:`.alarms`):
   alarm events and /cm/alarms right after the message that caused them.
 
+The Processor routes the frames by type into waiting batches; the RAW stage is
+:mod:`.raw_stage`'s, the observations and decisions :mod:`.observing`'s (its bases).
 Every message is built in :mod:`.messages`; every event goes through the
 :class:`~cmsensord.monitor.events.EventLog`; both leave through :mod:`.output`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from functools import partial
@@ -38,15 +39,15 @@ from cmsensord.monitor.channels import ChannelSetup
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.diagnostics import Diagnostics
 from cmsensord.monitor.events import Event, EventLog
-from cmsensord.monitor.figures import Figures
 from cmsensord.monitor.held import Held
 from cmsensord.monitor.indicators import Indicators
+from cmsensord.monitor.observing import Observing
 from cmsensord.monitor.output import Output
-from cmsensord.monitor.raw import RawBlocks, RawInput
+from cmsensord.monitor.raw import RawInput
+from cmsensord.monitor.raw_stage import RawStage
 from cmsensord.monitor.rms_bounds import RmsBounds
 from cmsensord.monitor.segments import SCAN_MIN, WIRE_FLAGS, Segments
 from cmsensord.monitor.shaft import Shaft
-from cmsensord.monitor.slots import observation_rows
 from cmsensord.monitor.wake import SPAN_S, output_pieces, wake_t0
 from cmsensord.protocol import Frame, FrameType, Status, decode_rms_rows
 
@@ -62,18 +63,9 @@ MAX_BATCH = 1000
 MAX_RMS_BATCH = 4000
 #: most observations (slots x channels) in one call of the banks from RMS frames (diagnostics count in these)
 MAX_RMS_RUN = 8000
-#: most observation slots (received or missing) in one call: gaps inside a batch cannot inflate it
-MAX_RUN_SLOTS = 2 * MAX_BATCH
-#: most messages of a replay's decisions handed to the sink together (a release may hold thousands)
-MAX_RUN_MESSAGES = 256
-#: indicator records waiting for the decision of their stamp at most (then written anyway)
-MAX_RECORDS = 1000
-#: RAW blocks go through the chains in pieces of at most this many board seconds, each after the TACHO
-#: frames in front of it: any read gives what small reads give (a wait for the speed lasts 10 s)
-PIECE_S = 2.0
 
 
-class Processor(Figures):
+class Processor(RawStage, Observing):
     """Frames in, messages out (see module docstring).
 
     ``auto_channels``: the channel list follows the board (the first RMS frame's
@@ -398,43 +390,6 @@ class Processor(Figures):
                 self._out(self.captures.rms([ch.name for ch in vib], t0[a:b], vals[a:b, [ch.index for ch in vib]],
                                             self.clock.fs, self.clock.block_len))
 
-    def _flush_raw(self, frames: Sequence[Frame], final: bool = False) -> None:
-        """RAW blocks -> m/s² -> block RMS observations, and samples to the order chain."""
-        self.raw.add(frames)
-        ready, C, events = self.raw.ready(self.setup.status, final, self.clock)
-        self._out(events)
-        if not ready or not self.setup.ready(C):
-            return
-        self._board_channels(C)
-        blocks, events = self.raw.blocks(ready, C, self.clock.block_len, self.setup.status, self.clock.stamp_ns)
-        self._out(events)
-        if blocks is None:
-            return
-        if not (self.shaft.waiting and self.shaft.ensure(self.status, self.clock)):
-            self._raw_blocks(blocks)
-            return
-        for piece in blocks.pieces(max(1, round(PIECE_S * self.clock.fs) // self.clock.block_len)):
-            if self.shaft.waits_before(start := int(piece.t0[0])):     # the TACHO frames in front of it first
-                self._feed_tacho(before=start)
-            self._raw_blocks(piece)
-
-    def _raw_blocks(self, blocks: RawBlocks) -> None:
-        """Converted RAW blocks through the chains: observations, indicators (each run on one time
-        base waits in :attr:`held` until before the next decision: its records go out ahead of the
-        decisions after them, however the stream was cut into calls), captures, orders."""
-        orders = self._order_chain(int(blocks.t0[0]))     # made before the decisions the blocks release
-        self._observe(blocks.t0, blocks.rms(), placed=self.held.placer(blocks), flat=blocks.flat_counts())
-        if not self.held.rows:                  # the banks wait for no decision: nor do the indicators
-            self._hand_over()
-        if self.captures is not None:
-            self._out(self.captures.raw(self.channels, blocks.t0,
-                                        blocks.samples([ch.index for ch in self.channels]), self.clock.fs))
-        if orders is not None:
-            index = [ch.index for ch in orders.channels]
-            y = blocks.samples(index)
-            for a, b in blocks.runs():          # consecutive except across lost blocks
-                self._out(orders.add_samples(int(blocks.t0[a]), y[a:b].reshape(-1, len(index))))
-
     def _board_channels(self, C: int) -> None:
         """The board now sends C channels: a new chain drains the old one's decisions first."""
         if self.setup.changed(C):
@@ -444,141 +399,6 @@ class Processor(Figures):
                 self._release_decisions(final=True)
             self._hand_over()
             self.setup.change(C)
-
-    def _order_chain(self, start: int) -> OrderChain | None:
-        """The order chain of the vibration channels, created with the first RAW blocks, from board
-        sample ``start`` on, and said at once (None while there is none to make)."""
-        if self.orders is None:
-            vib = tuple(ch for ch in self.channels if ch.kind != "microphone")
-            if not (vib and self.cfg.orders.enabled and self.severity is not None
-                    and self.shaft.ensure(self.status, self.clock)) or self._orders_refused == self.clock.fs:
-                return None
-            from cmsensord.monitor.orders import OrderChain  # scipy is loaded only for the raw chain
-            try:
-                self.orders = OrderChain(self.cfg, vib, self.shaft.tracker(), fs=self.clock.fs, clock=self.clock,
-                                         uncovered=self.shaft.uncovered)
-            except ValueError as exc:           # a rate the tracked orders do not fit in
-                self._orders_refused = self.clock.fs
-                self.event("config", None, f"order tracker not started at fs {self.clock.fs} Hz: {exc}")
-                return None
-            expect_lag = getattr(self.sink, "expect_lag", None)
-            if expect_lag is not None:          # orders come seconds behind: the file's order waits
-                expect_lag()
-            self._out(self.orders.begin(start))
-        return self.orders
-
-    def _feed_tacho(self, end: bool = False, before: int | None = None) -> None:
-        """TACHO frames (``before``: those in front of the first at or after that t0) -> shaft
-        speed, then what waited for a final speed (at most as long as the speed gates allow,
-        except at the ``end`` where the order chain drains anyway)."""
-        fed = bool(self.shaft.waiting) and self.shaft.ensure(self.setup.status, self.clock)
-        if fed:
-            self._out(self.shaft.feed(self.clock, before))
-        if self.orders is not None and (fed or not end):
-            self._out(self.orders.release(bounded=not end))
-        self.indicators.release()
-        self._release_decisions(final=False, bounded=True)
-
-    # ---- observations and decisions -----------------------------------------
-    def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = MAX_RUN_SLOTS,
-                 placed: Callable[[np.ndarray, np.ndarray], None] | None = None,
-                 flat: np.ndarray | None = None) -> None:
-        """Observations (n, C_board) of the blocks starting at t0 (RAW: with their ``flat`` counts) -> slots
-        -> the chain, at most ``max_slots`` slots (received or missing) a call; ``placed`` is first given
-        each run of blocks on one time base (before the next re-anchoring)."""
-        self._out(self.shaft.check_silent(self.clock, t0))
-        while len(t0):
-            slots, n = self.clock.place(t0)
-            if placed is not None:
-                placed(t0[:n], vals[:n])
-            a = 0
-            while a < n:                        # bounded memory: at most max_slots slots a run
-                top = self.clock.next_slot + max_slots
-                b = n if slots[n - 1] < top else a + int(np.searchsorted(slots[a:n], top))
-                self._run(slots[a:b], vals[a:b], None if flat is None else flat[a:b])
-                a = b
-            if n == len(t0):
-                return
-            at = int(t0[n])
-            if self.shaft.waits_before(at):     # the speed in front of the jump, on the old anchor
-                self._feed_tacho(before=at)
-            said = self.clock.jump_words(at)
-            self.clock.reanchor(at)
-            self.event("config", None, f"{said}: time base re-anchored", self.clock.stamp_ns(at))
-            t0, vals, flat = t0[n:], vals[n:], None if flat is None else flat[n:]
-
-    def _run(self, slots: np.ndarray, vals: np.ndarray, flat: np.ndarray | None = None) -> None:
-        """Observations (RAW: and flat counts) on their slots -> the banks (or what waits for a decision)."""
-        first, sev = self.clock.next_slot, self.setup.severity
-        assert sev is not None, "observations before the board's channels are known"
-        y, valid = observation_rows(first, slots, vals, sev.index)
-        flat = None if flat is None else observation_rows(first, slots, flat, sev.index)[0]
-        T = len(y)
-        mics, trace = self.setup.microphones, self.cfg.output.akf_trace
-        stamps = [self.clock.slot_stamp_ns(first + k) for k in range(T)] if mics or trace else []
-        if mics is not None:
-            self._out(mics.step(y, valid, stamps))
-        if self.observe is not None:
-            self.observe(first, y, valid, sev.seen(valid, flat))
-        self.clock.advance(T)
-        n_valid = int(np.count_nonzero(valid))
-        self.observations += n_valid
-        self.missing_observations += valid.size - n_valid
-        if self._holding(mics is None and not trace):
-            self.held.add_rows(first, y, valid, flat)
-            self._release_decisions(final=False)
-            return
-        self._hand_over()
-        y, out = sev.observe(first, y, valid, full=trace, flat=flat)
-        if out is not None:
-            self._out(sev.trace(stamps, y, valid, out))
-        self._release_decisions(final=False)
-
-    def _release_decisions(self, final: bool, bounded: bool = False) -> None:
-        """Decisions of the slots whose tacho speed is final (f_r: the period's mean speed);
-        with ``bounded``, also those waiting longer than the speed gate allows."""
-        sev = self.setup.severity
-        waiting = self.indicators.records
-        if sev is None or len(waiting) > MAX_RECORDS:       # no decision to wait for / bounded
-            self._out(self.indicators.take(None if sev is None else waiting[-MAX_RECORDS].stamp_ns))
-        if sev is None or not (sev.gate.waiting or self.held.rows):
-            return
-        tacho = self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
-        if tacho and not final and not self.held.decision_due(sev, self.shaft.tracker(), self.clock, bounded):
-            return
-        self._hand_over()
-        upto = self.shaft.final_slot(self.clock) if tacho and not final else self.clock.next_slot
-        cfg_f_r = np.array([ch.monitor.f_r for ch in self.channels])
-        f_r = (lambda end: self.shaft.period_f_r(self.clock, cfg_f_r, end, sev.decider.period)) if tacho else None
-        run: list = []      # a replay's decisions (nothing watching the writes) go out together up to events
-        together = self.diagnostics is None and not self.alarms.watching and self.captures is None
-        for d in sev.release(upto, final=final, bounded=bounded, f_r=f_r):
-            stamp = self.clock.slot_end_ns((sev.start_slot or 0) + d.slot - 1)   # d.slot: from the chain's start
-            if run and (sev.notes or self.log.due(stamp)):    # events to write before it
-                run = self._out(run)
-            if sev.notes:
-                self._out([dataclasses.replace(e, stamp_ns=stamp) for e in sev.notes])
-                sev.notes.clear()
-            self.log.release(stamp)             # events well before it, at a point set by the stream
-            out = sev.decision(d, stamp)
-            records = sev.mark_no_signal(self.indicators.take(stamp), d)
-            run += records + out
-            if self.diagnostics is None:        # nothing in it depends on what is written
-                run.append(self.diag.message(stamp))
-            if not together or len(run) >= MAX_RUN_MESSAGES or Event in map(type, out) \
-                    or Event in map(type, records):         # events: to the log first
-                run = self._out(run)
-            if self.diagnostics is not None:    # the live loop's figures after the writes
-                self.write_diagnostics(stamp)
-        self._out(run)
-
-    def _holding(self, plain: bool) -> bool:
-        """Whether a call's observations wait in :attr:`held` (``plain``: no microphone or AKF
-        trace): RAW with orders and the tacho's f_r, no observer or captures, the banks started."""
-        sev = self.setup.severity
-        return (plain and self.orders is not None and self.observe is None and self.captures is None
-                and self.cfg.tacho.f_r_from_tacho and self.shaft.tacho is not None
-                and sev is not None and sev.gate.end is not None)
 
     def write_diagnostics(self, stamp_ns: int) -> None:
         """One ``/cm/diagnostics`` message (with each decision; the live loop also writes one,

@@ -2,7 +2,7 @@
 
 Append-only segment files ``q-<first seq>.seg`` hold records
 ``<u32 body length><u32 CRC-32 of body>`` + body ``<u64 seq><u8 retain><u16 topic length>
-topic payload``. Appends reach the OS at once and are fsync'd every ``fsync_s`` by
+topic payload`` (:mod:`.queue_records`). Appends reach the OS at once and are fsync'd every ``fsync_s`` by
 :meth:`DiskQueue.sync`, so a kill -9 (or power loss) loses at most that much. When the queue is
 opened, a record that fails its length or CRC check is skipped and reading goes on at the next
 valid record (the next offset where a length and a CRC check out, with a higher seq), so a
@@ -38,38 +38,20 @@ import errno
 import os
 import re
 import stat
-import struct
 import time
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from cmsensord.publish.queue_records import SHORTEST, Record, Scan, encode, read_records
 from cmsensord.publish.seq_lease import SeqLease
 from cmsensord.sinks.mcap_file import fsync_dir, make_dirs
 
-_HEAD = struct.Struct("<II")          # body length, CRC-32 of the body
-_BODY = struct.Struct("<QBH")         # seq, retain, topic length
-#: every record body is smaller than this (a torn length field reads as garbage beyond it)
-MAX_RECORD = 16 << 20
 #: the most payload bytes held in memory while the disk refuses them (and at most ``max_bytes``)
 HOLD_BYTES = 4 << 20
-#: the fewest bytes a record takes (an empty topic and payload)
-_SHORTEST = _HEAD.size + _BODY.size
 #: the name of a segment: ``q-<the seq of its first record, 20 digits>.seg``
 _SEGMENT_NAME = re.compile(r"q-([0-9]{20})\.seg")
-_NONZERO = re.compile(rb"[^\0]")
 #: errno values of a full, failing or read-only file system (``wait_for_disk``: no error at start)
 DISK_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
-
-
-@dataclass(frozen=True)
-class Record:
-    """One queued message."""
-
-    seq: int
-    topic: str
-    payload: bytes
-    retain: bool
 
 
 @dataclass
@@ -99,76 +81,6 @@ def _held_size(rec: Record) -> int:
     """What a record held in memory takes, about: its payload and topic, and the objects'."""
     return len(rec.payload) + len(rec.topic) + 200
 
-
-def _encode(rec: Record) -> bytes:
-    topic = rec.topic.encode()
-    body = _BODY.pack(rec.seq, int(rec.retain), len(topic)) + topic + rec.payload
-    return _HEAD.pack(len(body), zlib.crc32(body)) + body
-
-
-def _record_at(data: bytes, pos: int) -> tuple[Record, int] | None:
-    """The record whose header is at ``pos`` and where it ends, or None when its length or
-    CRC check fails there."""
-    if pos + _HEAD.size > len(data):
-        return None
-    length, crc = _HEAD.unpack_from(data, pos)
-    end = pos + _HEAD.size + length
-    if length < _BODY.size or length >= MAX_RECORD or end > len(data):
-        return None
-    body = data[pos + _HEAD.size:end]
-    if zlib.crc32(body) != crc:
-        return None
-    seq, retain, tlen = _BODY.unpack_from(body)
-    topic = body[_BODY.size:_BODY.size + tlen].decode(errors="replace")
-    return Record(seq, topic, body[_BODY.size + tlen:], bool(retain)), end
-
-
-def _resync(data: bytes, start: int, after: int) -> int:
-    """The offset of the first valid record at or after ``start`` whose seq is above ``after``
-    (past a damaged one), else the end of ``data``. A record's length is below
-    :data:`MAX_RECORD` and above 0, so its fourth byte is 0 and one of the three before is
-    not: only those offsets are tried (a run of zeros, as a power cut can leave, is skipped)."""
-    zero = data.find(b"\0", start + 3)
-    while zero != -1:
-        if data[zero - 3:zero] == b"\0\0\0":
-            more = _NONZERO.search(data, zero)
-            zero = data.find(b"\0", more.start()) if more else -1
-            continue
-        found = _record_at(data, zero - 3)
-        if found is not None and found[0].seq > after:
-            return zero - 3
-        zero = data.find(b"\0", zero + 1)
-    return len(data)
-
-
-@dataclass
-class _Scan:
-    """A segment's bytes read: its valid records with their offsets, its damaged spans
-    ``(start, end)`` (a record failing its length or CRC check up to the next valid record,
-    or to the end of the data), and where its last valid record ends."""
-
-    records: list[tuple[int, Record]]
-    damaged: list[tuple[int, int]]
-    valid: int
-
-
-def _read_records(data: bytes, after: int = 0) -> _Scan:
-    """The records of a segment's bytes whose first seq is above ``after``: a damaged record
-    is skipped, reading on from the next valid record (its length and CRC right, its seq
-    above the last one read)."""
-    out: list[tuple[int, Record]] = []
-    damaged: list[tuple[int, int]] = []
-    pos = valid = 0
-    while pos < len(data):
-        found = _record_at(data, pos)
-        if found is None:
-            end = _resync(data, pos + 1, out[-1][1].seq if out else after)
-            damaged.append((pos, end))
-            pos = end
-            continue
-        out.append((pos, found[0]))
-        pos = valid = found[1]
-    return _Scan(out, damaged, valid)
 
 
 class DiskQueue:
@@ -274,7 +186,7 @@ class DiskQueue:
                 hurt = False
             expect = max(expect, named)
             data = path.read_bytes()
-            scan = _read_records(data, named - 1)
+            scan = read_records(data, named - 1)
             ends = {end for _, end in scan.damaged}
             for offset, rec in scan.records:
                 hurt = hurt or offset in ends
@@ -288,7 +200,7 @@ class DiskQueue:
             hurt = hurt or tail > 0
             self._keep(path, scan, named, tail)
         if hurt:                                # the torn records' seqs: they may have been sent
-            self.torn_seqs = max(1, -(-tail // _SHORTEST))
+            self.torn_seqs = max(1, -(-tail // SHORTEST))
             self._lose(expect, expect + self.torn_seqs, False)
             expect += self.torn_seqs
         return expect or 1
@@ -305,7 +217,7 @@ class DiskQueue:
                 bisect.insort(gaps, range(start, stop), key=lambda g: g.start)
             self.damaged_records += (stop - start) * damaged
 
-    def _keep(self, path: Path, scan: _Scan, named: int, tail: int) -> None:
+    def _keep(self, path: Path, scan: Scan, named: int, tail: int) -> None:
         """A segment read: its damaged tail cut off, then deleted if nothing in it is unacknowledged,
         else kept."""
         if tail:
@@ -378,7 +290,7 @@ class DiskQueue:
     def _write(self, rec: Record) -> None:
         """``rec`` appended to the newest segment (a new one when it is full); OSError (a full
         disk) leaves the segment as it was."""
-        data = _encode(rec)
+        data = encode(rec)
         seg = self.segments[-1] if self.segments and self._fd is not None else None
         if seg is None or (seg.size >= self.segment_bytes and rec.seq not in self._taken):
             seg = self._new_segment(rec.seq)
@@ -526,7 +438,7 @@ class DiskQueue:
         if done < seg.size:
             with open(seg.path, "rb") as f:
                 f.seek(done)
-                scan = _read_records(f.read(seg.size - done), records[-1].seq if records else seg.named - 1)
+                scan = read_records(f.read(seg.size - done), records[-1].seq if records else seg.named - 1)
             records.extend(r for _, r in scan.records)
             done += scan.valid
         self._cache = (path, done, records)

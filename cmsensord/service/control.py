@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cmsensord.config.loading import MAX_CONFIG_BYTES
+from cmsensord.config.yaml_file import MAX_CONFIG_BYTES
 
 __all__ = ["ControlServer", "NoAnswer", "SOCKET_NAME", "socket_path", "request"]
 

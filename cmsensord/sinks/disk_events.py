@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from cmsensord.sinks.rotating import RotatingSink
 
 log = logging.getLogger("cmsensord")
-#: the kind of a salvage's event (a value of ``schemas.EVENT_KINDS``); outages and their end are
+#: the kind of a salvage's event (a value of ``event_schema.EVENT_KINDS``); outages and their end are
 #: ``disk_error`` events told apart by ``details["action"]``, retention's deletions ``retention`` ones
 SALVAGE_EVENT = "salvage"
 

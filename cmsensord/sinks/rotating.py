@@ -34,25 +34,8 @@ daemon on SIGTERM) stops that thread between two records and leaves the ``.part`
 as it was, for the next start; :meth:`RotatingSink.close` waits for the thread. Retention (after
 each rotation, at start and on a full disk): :mod:`cmsensord.sinks.retention`.
 
-Disk errors: no OSError ever leaves this class. A failing operation (open, write, flush,
-fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
-holds complete chunks (salvaged when logging is back, or at the next start), else deleted.
-A failed fsync is never retried on the same file. A new file is tried at once, then every
-``retry_s``; messages written while no file is open, and those of the chunk that could
-not be written, are counted in :attr:`dropped`. Logging counts as back when a new file has been
-fsynced with messages in it (a full disk takes a header; a file of a header alone is fsynced once,
-then at the next tick after a message). One ``disk_error`` event per outage, one when logging
-resumes (the count).
-A full or failing disk at start (for the daemon, ``wait_for_disk``, a read-only one too) is
-such an outage, and so is, at any time, the output directory off the device it was on at start
-(unmounted: nothing is made on the file system under it, :mod:`cmsensord.sinks.log_dir`); any
-other reason the first file cannot be opened is a SinkError.
-
-Events go to :attr:`RotatingSink.on_event` (``on_event(kind, message, **fields)``,
-settable after construction: the Processor that turns them into ``/cm/events`` messages
-and journal lines is created after the sink); until it is set they are queued. They are
-delivered at the end of the public call that raised them, never from inside another
-delivery, so an event written while the disk fails cannot loop: it is counted as dropped.
+Disk errors: no OSError ever leaves this class; a failing disk is an outage
+(:mod:`cmsensord.sinks.disk_outage`). The sink's events: :mod:`cmsensord.sinks.sink_events`.
 """
 
 from __future__ import annotations
@@ -61,7 +44,6 @@ import collections
 import contextlib
 import errno
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -72,13 +54,15 @@ from cmsensord.config import OutputConfig
 from cmsensord.errors import SinkError
 from cmsensord.sinks import disk_events
 from cmsensord.sinks.disk_events import SALVAGE_EVENT  # noqa: F401  (the event kinds: disk_events)
+from cmsensord.sinks.disk_outage import DiskOutages
 from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.log_dir import place_of
-from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
+from cmsensord.sinks.mcap_file import McapSink, SinkIOError
 from cmsensord.sinks.mcap_salvage import salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
-from cmsensord.sinks.retention import DISK_EVENT, MB, RetentionTold, apply_retention, still_there
+from cmsensord.sinks.retention import MB, RetentionTold, apply_retention, still_there
+from cmsensord.sinks.sink_events import SinkEvents
 
 log = logging.getLogger("cmsensord")
 
@@ -88,11 +72,10 @@ _TRANSIENT = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO})
 #: ... with ``wait_for_disk`` (the daemon), a read-only file system too (an SD card the kernel
 #: remounted read-only after errors: it must not keep the service from restarting)
 _WAITED = _TRANSIENT | {errno.EROFS}
-_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
 _QUEUED_EVENTS = 1000
 
 
-class RotatingSink(ReorderLag):
+class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
     """``write``/``flush``/``close`` like McapSink, over a sequence of files; never raises
     an OSError (see the module docstring).
 
@@ -175,40 +158,6 @@ class RotatingSink(ReorderLag):
                                         stop=self._salvage_stop):
             disk_events.salvage_result(self, result)
 
-    # -- events ------------------------------------------------------------
-
-    @property
-    def on_event(self) -> Callable[..., Any] | None:
-        return self._on_event
-
-    @on_event.setter
-    def on_event(self, callback: Callable[..., Any] | None) -> None:
-        self._on_event = callback
-        self._deliver()
-
-    @property
-    def pending_events(self) -> list[tuple[str, str, dict]]:
-        """Events not delivered yet (no on_event): (kind, message, fields)."""
-        return list(self._pending)
-
-    def emit(self, kind: str, message: str, **fields: Any) -> None:
-        """Queue an event of the sink (delivered to ``on_event`` in order, or kept in
-        :attr:`pending_events`), and wake whoever waits for it."""
-        self._pending.append((kind, message, fields))
-        if self.wake is not None:
-            self.wake()
-
-    def _deliver(self) -> None:
-        if self._delivering or self._on_event is None:
-            return
-        self._delivering = True
-        try:
-            while self._pending:
-                kind, message, fields = self._pending.popleft()
-                self._on_event(kind, message, **fields)
-        finally:
-            self._delivering = False
-
     # -- files -------------------------------------------------------------
 
     def _open(self) -> McapSink:
@@ -231,15 +180,6 @@ class RotatingSink(ReorderLag):
     def path(self) -> Path | None:
         """The file being written (its final name), or None while the disk fails."""
         return self._current.path if self._current is not None else None
-
-    @property
-    def logging(self) -> bool:
-        """A file is open and no outage is in progress."""
-        return self._current is not None and self._outage is None
-
-    def outage_state(self) -> str:
-        """"" while logging; during a disk outage, one phrase for the status line."""
-        return "" if self._outage is None else disk_events.outage_state(self._outage, self.clock())
 
     # -- writing -----------------------------------------------------------
 
@@ -344,11 +284,6 @@ class RotatingSink(ReorderLag):
                 self._failed(err, cur)
                 return
             self.flush()
-
-    def _drop(self, n: int) -> None:
-        self.dropped += n
-        if self._outage is not None:
-            self._outage["dropped"] += n
 
     def tick(self) -> None:
         """Once per loop iteration: make pending events durable, flush at least every
@@ -489,105 +424,6 @@ class RotatingSink(ReorderLag):
         if self._outage is not None:
             self._resumed()                  # close fsyncs: the disk takes data again
         return done
-
-    # -- disk errors -------------------------------------------------------
-
-    def _check_present(self, cur: McapSink) -> bool:
-        """After each flush: True while the open file is still in the output directory; a file
-        (or directory) removed under the daemon is reported, with every message written to
-        it as lost, and logging goes on in a new file (the directory made again); a directory
-        no longer on its device (unmounted) is an outage until it is back."""
-        try:
-            os.stat(cur.part_path)
-            return True
-        except FileNotFoundError:
-            pass
-        except OSError:
-            return True                      # not known to be gone: the next write tells
-        moved = moved_error(self.output.dir, self.device)
-        if moved is not None:                # its file system is gone: the file kept for salvage
-            self._failed(moved, cur)
-            return False
-        lost = cur.messages_written
-        cur.abandon()
-        self._current = None
-        self._drop(lost)
-        self._event_dirty = self._need_sync = False
-        text, fields = disk_events.removed(cur.part_path, lost)
-        self.emit(DISK_EVENT, text, **fields)
-        self._next_retry = self.clock()
-        self._retry_if_due()
-        return False
-
-    def _failed(self, err: SinkIOError, cur: McapSink | None) -> None:
-        """Abandon ``cur`` (if any) after ``err``; event at the start of an outage; retry."""
-        self.disk_errors += 1
-        self._last_errno = err.errno
-        now = self.clock()
-        lost = unsure = 0
-        kept: Path | None = None
-        if cur is not None:
-            lost = cur.unpersisted
-            unsure = cur.unsynced if err.op == "fsync" else 0
-            persisted = cur.persisted
-            part = cur.abandon()
-            if self._current is cur:
-                self._current = None
-            if persisted:
-                kept = part
-                self._abandoned.append(part)
-            else:
-                try:                         # a header alone: nothing to salvage
-                    part.unlink(missing_ok=True)
-                except OSError:
-                    kept = part
-        self._event_dirty = self._need_sync = False
-        first = self._outage is None
-        if self._outage is None:
-            self._outage = {"start": now, "dropped": 0, "errors": 0, "error": str(err)}
-        outage = self._outage
-        self._drop(lost)
-        outage["errors"] += 1
-        if first:
-            text, fields = disk_events.abandoned(err, kept, cur is not None, lost, unsure, self.output.retry_s)
-            self.emit(DISK_EVENT, text, **fields)
-        if err.errno in _FULL:
-            self._retention()
-        # a new file at once at the start of an outage (a failed fsync needs nothing
-        # else), then every retry_s: a disk that keeps failing gets one file per retry_s
-        self._next_retry = now if first else now + self.output.retry_s
-        self._retry_if_due()
-
-    def _retry_if_due(self) -> None:
-        if self._closed or self._current is not None:
-            return
-        now = self.clock()
-        if now < self._next_retry:
-            return
-        self._next_retry = now + self.output.retry_s
-        if self._last_errno in _FULL:
-            self._retention()
-        try:
-            self._current = self._open()
-        except SinkIOError as err:
-            self.disk_errors += 1
-            self._last_errno = err.errno
-            if self._outage is not None:
-                self._outage["errors"] += 1
-            else:                            # cannot happen: a file was lost before
-                self._failed(err, None)
-            return
-        self._need_sync = True               # logging is back once this file is fsynced
-
-    def _resumed(self) -> None:
-        outage, self._outage = self._outage, None
-        assert outage is not None
-        self._last_errno = None
-        where = self.path.name if self.path is not None else "the log"
-        text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
-        self.emit(DISK_EVENT, text, **fields)
-        abandoned, self._abandoned = self._abandoned, []
-        disk_events.salvage_abandoned(self, abandoned)
 
     # -- retention ---------------------------------------------------------
 

@@ -30,6 +30,8 @@ topic                      schema name             rate
 /cm/diagnostics            cmsensord.Diagnostics   1 Hz
 =========================  ======================  =================================
 
+The schemas of /cm/events and /cm/log, with every kind of event and the log levels, are
+:mod:`.event_schema`'s; the building blocks of every schema, :mod:`.schema_parts`'.
 ``/cm/<channel>/indicators`` (cmsensord.Indicators, :mod:`.indicator_schema`) once per
 ``indicators.interval_s``, and, for a microphone channel (Orimoto, Ikuta & Wang), ``/cm/<channel>/vibration_estimate``
 (cmsensord.VibrationEstimate) once per block (100 Hz).
@@ -45,19 +47,19 @@ from typing import Any
 
 from cmsensord.sinks.alarm_schema import TOPIC_ALARMS, alarms_schema
 from cmsensord.sinks.capture_schema import capture_spectrum_schema, capture_waveform_schema
+from cmsensord.sinks.event_schema import EVENT, LOG
 from cmsensord.sinks.indicator_schema import indicators_schema
+from cmsensord.sinks.schema_parts import _CHANNEL, _int, _num, _obj, _time
 
 __all__ = [
     "SCHEMA_ENCODING",
     "MESSAGE_ENCODING",
     "SCHEMAS",
     "SCHEMA_NAMES",
-    "EVENT_KINDS",
     "LINK_COUNTERS",
     "TOPIC_EVENTS",
     "TOPIC_DIAGNOSTICS",
     "TOPIC_LOG",
-    "LOG_LEVELS",
     "TOPIC_ALARMS",
     "severity_topic",
     "akf_topic",
@@ -70,14 +72,10 @@ __all__ = [
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
-_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 TOPIC_EVENTS = "/cm/events"
 TOPIC_DIAGNOSTICS = "/cm/diagnostics"
 TOPIC_LOG = "/cm/log"
-
-#: foxglove.LogLevel: name -> value
-LOG_LEVELS: dict[str, int] = {"UNKNOWN": 0, "DEBUG": 1, "INFO": 2, "WARNING": 3, "ERROR": 4, "FATAL": 5}
 
 
 def severity_topic(channel: str) -> str:
@@ -100,61 +98,6 @@ def vibration_estimate_topic(channel: str) -> str:
     return f"/cm/{channel}/vibration_estimate"
 
 
-#: Every value of Event.kind.
-EVENT_KINDS: tuple[str, ...] = (
-    "anomaly_onset",
-    "anomaly_clear",
-    "anomaly_held",
-    "decision_rule",
-    "order_alarm",
-    "order_alarm_clear",
-    "tacho_lost",
-    "tacho_restored",
-    "tacho_missed_pulse",
-    "tacho_extra_pulse",
-    "severity_change",
-    "failure",
-    "failure_clear",
-    "signal_lost",
-    "signal_back",
-    "flat_blocks",
-    "frames_lost",
-    "frames_repeated",
-    "link_lost",
-    "link_restored",
-    "link_stalled",
-    "reader_error",
-    "reader_recovered",
-    "reader_died",
-    "queue_overflow",
-    "decode_error",
-    "channels",
-    "config",
-    "lines_unresolved",
-    "line_harmonics",
-    "band_above_nyquist",
-    "band_too_narrow",
-    "start",
-    "stop",
-    "disk_error",
-    "retention",
-    "salvage",
-    "time_base",
-    "capture",
-    "capture_skipped",
-    "mqtt_link",
-    "mqtt_queue",
-    "alarm_alert",
-    "alarm_danger",
-    "alarm_clear",
-    "alarm_ack",
-    "alarm_no_baseline",
-    "alarm_restored",
-    "alarm_not_restored",
-    "alarm_state_error",
-    "operating_state",
-)
-
 #: The integer counters of Diagnostics.link (docs/PROTOCOL.md, receiver rule 5).
 LINK_COUNTERS: tuple[str, ...] = (
     "bytes_received",
@@ -169,103 +112,6 @@ LINK_COUNTERS: tuple[str, ...] = (
     "overruns",
     "frames_repeated",
 )
-
-# ---------------------------------------------------------------------------
-# building blocks
-# ---------------------------------------------------------------------------
-
-
-def _time() -> dict[str, Any]:
-    return {
-        "type": "object",
-        "title": "time",
-        "description": "Time of the message: seconds and nanoseconds since the Unix epoch.",
-        "properties": {
-            "sec": {"type": "integer", "minimum": 0, "description": "whole seconds"},
-            "nsec": {
-                "type": "integer",
-                "minimum": 0,
-                "maximum": 999_999_999,
-                "description": "nanoseconds within the second",
-            },
-        },
-        "required": ["sec", "nsec"],
-    }
-
-
-def _num(description: str, nullable: bool = True) -> dict[str, Any]:
-    """A number; ``nullable``: absent from a message when missing or not finite (so not required)."""
-    if nullable:
-        return {"type": "number", "description": description + " (absent when missing or not finite)"}
-    return {"type": "number", "description": description}
-
-
-def _int(description: str, minimum: int | None = 0) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": "integer", "description": description}
-    if minimum is not None:
-        out["minimum"] = minimum
-    return out
-
-
-def _obj(title: str, description: str, properties: dict[str, Any], required: list[str]) -> dict:
-    missing = set(required) - set(properties)
-    assert not missing, missing  # a schema must describe what it requires
-    return {
-        "$schema": _DIALECT,
-        "title": title,
-        "description": description,
-        "type": "object",
-        "properties": properties,
-        "required": required,
-    }
-
-
-_CHANNEL = {"type": "string", "description": "configured channel name (ch0, ch1, ... by default)"}
-
-def _str(description: str) -> dict[str, Any]:
-    return {"type": "string", "description": description}
-
-
-#: Event.details: further fields by kind (disk_error and salvage by ``action``, time_base)
-_DETAILS: dict[str, Any] = {
-    "type": "object",
-    "description": "further fields, by kind; only those that apply are present",
-    "properties": {
-        "action": _str("disk_error, retention, salvage: what happened (abandoned, resumed, removed, "
-                       "retention, retention_failed, low_space, salvage_failed, dir_fsync_failed, relocked, "
-                       "relock_failed, relock_waiting; salvaged, "
-                       "deleted, unreadable, ...)"),
-        "op": _str("disk_error: the failed operation (open, write, fsync, close, read)"),
-        "errno": _str("disk_error: the OS error's name (ENOSPC, EIO, ...)"),
-        "file": _str("the file concerned"),
-        "source": _str("salvage: the .part file read"),
-        "kept": _str("salvage: where a damaged or unreadable file was kept"),
-        "files": {"type": "array", "items": {"type": "string"},
-                  "description": "retention: the files deleted"},
-        "bytes": _int("retention: bytes freed; low_space: bytes free"),
-        "unsynced": _int("disk_error: messages written since the last good fsync"),
-        "errors": _int("disk_error (resumed): failed disk operations during the outage"),
-        "chunks": _int("salvage: chunks recovered"),
-        "dropped_bytes": _int("salvage: bytes that were not a complete chunk"),
-        "lost_chunks": _int("salvage: damaged chunks skipped"),
-        "lost_messages": _int("salvage: messages of the damaged chunks"),
-        "segment": _int("time_base: the new time segment"),
-        "reason": _str("time_base: reset (the board's clock restarted) or drift"),
-        "offset_s": {"type": "number", "description": "time_base (drift): board clock minus wall clock [s]"},
-        "rate_hz": _int("time_base (drift): the board clock's measured rate [Hz]"),
-        "state": _str("operating_state: the machine's new operating state (stopped, starting, running, "
-                      "coasting)"),
-        "previous": _str("operating_state: the state before"),
-        "bearing": _str("lines_unresolved, line_harmonics, band_too_narrow: the configured bearing"),
-        "lines": {"type": "array", "items": {"type": "string"}, "description": "its lines: lines_unresolved: "
-                  "not resolved; band_too_narrow: past the envelope; line_harmonics: window holds 3 x another"},
-        "harmonic_of": {"type": "array", "items": {"type": "string"}, "description": "line_harmonics: per line, "
-                        "the defect frequency whose third harmonic its window holds"},
-        "bin_hz": {"type": "number", "description": "lines_unresolved: the envelope spectrum's bin width [Hz]; "
-                   "band_too_narrow: the record's spectral bin width [Hz]"},
-        "band": _str("band_too_narrow: the configured band that holds no bin"),
-    },
-}
 
 # ---------------------------------------------------------------------------
 # the schemas
@@ -369,45 +215,6 @@ AKF_TRACE = _obj(
         },
     },
     ["timestamp", "channel", "filter", "outlier", "missing"],
-)
-
-EVENT = _obj(
-    "cmsensord.Event",
-    "Something that happened: an anomaly decision changing, a link fault, start and stop.",
-    {
-        "timestamp": _time(),
-        "kind": {"type": "string", "enum": list(EVENT_KINDS), "description": "what happened"},
-        "channel": {
-            "type": "string",
-            "description": "channel name; absent for an event of the link or the daemon",
-        },
-        "message": {"type": "string", "description": "human-readable, one line"},
-        "filter": _int("1-based AKF index the event is about", minimum=1),
-        "severity_index": _num("S_idx after the event (eq. 17)"),
-        "level": _int("round(S_idx * n) after the event"),
-        "alarm": _str("alarm_*: the alarm's name (rule/channel)"),
-        "alarm_level": {"type": "string", "enum": ["normal", "alert", "danger"],
-                        "description": "alarm_*: the alarm's level after the transition"},
-        "previous_level": {"type": "string", "enum": ["normal", "alert", "danger"],
-                           "description": "alarm_*: the alarm's level before it"},
-        "filters": {"type": "array", "items": {"type": "integer"},
-                    "description": "anomaly_held: the AKFs (1-based) whose flags the hysteresis holds"},
-        "samples": _int("capture, capture_skipped: samples in the capture"),
-        "n_channels": _int("channels: the channel count the board sends now", minimum=0),
-        "state": _str("mqtt_link: the link's state (connected, disconnected, refused, failed)"),
-        "queued": _int("mqtt_link: messages in the store-and-forward queue"),
-        "action": _str("mqtt_queue: what happened (truncated, damaged, cursor_unreadable, skipped, resumed, "
-                       "write_error, read_error, encode_error, handover_dropped, dropped, dropping)"),
-        "bytes": _int("mqtt_queue (truncated, damaged): bytes cut from the queue's end or skipped as damaged"),
-        "reason": _str("mqtt_queue (write_error, read_error): why the queue cannot be written or read"),
-        "total": _int("mqtt_queue: messages dropped since start"),
-        "count": _int("how many (frames lost, bytes discarded, queue drops, ...)"),
-        "summarised": _int("a summary of this many events of the kind held back (at most 5 a "
-                           "second are written one by one)"),
-        "raw_total": _int("queue_overflow: RAW frames dropped from the queue since start"),
-        "details": _DETAILS,
-    },
-    ["timestamp", "kind", "message"],
 )
 
 DIAGNOSTICS = _obj(
@@ -514,62 +321,6 @@ VIBRATION_ESTIMATE = _obj(
     },
     ["timestamp", "channel", "missing"],
 )
-
-#: foxglove.Log, as published by Foxglove (foxglove-sdk ``schemas/jsonschema/Log.json``): the
-#: events again, for Foxglove's Log panel
-def _ref(title: str, description: str, what: str) -> dict[str, Any]:
-    return {"title": title, "description": description, "type": "object", "properties": {
-        "topic": {"type": "string", "description": f"Topic name of the {what} message"},
-        "message_id": {"type": "string", "description": f"Unique identifier of the {what} message "
-                                                        "(e.g., UUID7, ULID, or custom format)"}},
-        "required": ["topic", "message_id"]}
-
-
-LOG = {
-    "title": "foxglove.Log",
-    "description": "A log message",
-    "$comment": "Generated by https://github.com/foxglove/foxglove-sdk",
-    "type": "object",
-    "properties": {
-        "timestamp": {
-            "type": "object",
-            "title": "time",
-            "properties": {
-                "sec": {"type": "integer", "minimum": 0},
-                "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
-            },
-            "description": "Timestamp of log message",
-        },
-        "level": {
-            "title": "foxglove.LogLevel",
-            "description": "Log level",
-            "oneOf": [{"title": name, "const": value,
-                       "description": f"{name.capitalize()} log level"} for name, value in LOG_LEVELS.items()],
-        },
-        "message": {"type": "string", "description": "Log message"},
-        "name": {"type": "string", "description": "Process or node name"},
-        "file": {"type": "string", "description": "Filename"},
-        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
-        "message_id": {"type": "string",
-                       "description": "Unique identifier for this message (e.g., UUID7, ULID, or custom format)"},
-        "lineage": {
-            "title": "foxglove.LineageInfo",
-            "description": "Lineage information for tracking data provenance",
-            "type": "object",
-            "properties": {
-                "inputs": {"type": "array", "items": _ref(
-                    "foxglove.InputReference", "Reference to an input message used in lineage tracking",
-                    "input"), "description": "References to input messages that contributed to this message"},
-                "processing_node": {"type": "string",
-                                    "description": "Name of the processing node that produced this message"},
-                "state": _ref("foxglove.StateReference",
-                              "Optional reference to the state of the processing node", "state"),
-            },
-            "required": ["inputs", "processing_node"],
-        },
-    },
-    "required": ["timestamp", "level", "message", "name", "file", "line"],
-}
 
 #: kind key -> JSON schema.
 SCHEMAS: dict[str, dict[str, Any]] = {

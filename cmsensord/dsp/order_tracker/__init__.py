@@ -12,7 +12,9 @@ decimator's low-pass), :mod:`.design` (model matrices, steady-state gains), :mod
 gains tabulated against speed),
 :mod:`.bandwidth` (r <-> bandwidth), :mod:`.reference` (the per-sample
 reference), :mod:`.recursions` (the numpy recursions), :mod:`.state` (outputs
-and carried state), :mod:`.tracker` (:class:`OrderTracker`).  The compiled kernel is
+and carried state), :mod:`.decimation` (the input decimated, its missing samples),
+:mod:`.blocks` (per-block outputs), :mod:`.smoother` (the fixed-lag smoother),
+:mod:`.tracker` (:class:`OrderTracker`).  The compiled kernel is
 ``cmsensord.dsp._trackerkernel``.  Alarms on the tracked orders are the alarm manager's
 rules (``order_<component>`` on ``order.<component>``), not this package's.
 """

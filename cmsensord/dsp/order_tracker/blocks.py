@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cmsensord.dsp.order_tracker.state import BlockStats, TrackerState
+from cmsensord.dsp.order_tracker.state import BlockStats, TrackerState, miss_blocks, with_carry
 
 if TYPE_CHECKING:
     from cmsensord.dsp.order_tracker.tracker import OrderTracker
@@ -83,3 +83,28 @@ def block_stats(starts, rms: np.ndarray, amp: np.ndarray, rmean: np.ndarray, val
         missing = np.count_nonzero(miss, axis=1).astype(np.int64)
     return BlockStats(start=starts, t_in=t_in, rpm=rmean, rms=rms, amplitude=amp, valid=valid,
                       missing=missing)
+
+
+def causal_blocks(tr: OrderTracker, n0, wave, env, rd, miss) -> BlockStats:
+    """The causal blocks this call completes: its tracker samples after those carried from
+    the last call, the statistics of the whole blocks; the rest is carried (``pend``)."""
+    st = tr.state
+    B = tr.block
+    C, K = tr.C, tr.K
+    if miss is None and not (len(st.pend["rpm"]) if st.pend else 0) and not len(rd) % B:
+        nb = len(rd) // B                   # whole blocks, nothing carried (a live call): as below
+        st.pend = {}
+        return tr._block_stats(n0 + B * np.arange(nb), wave.reshape(nb, B, C, K),
+                                 env.reshape(nb, B, C, K), rd.reshape(nb, B), None)
+    cur = with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, tr.C)
+    first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
+    nb = len(cur["rpm"]) // B
+    used = nb * B
+    st.pend = {k: v[used:].copy() for k, v in cur.items()}
+    if "miss" in st.pend and not st.pend["miss"].any():
+        del st.pend["miss"]
+    return tr._block_stats(first + B * np.arange(nb),
+                             cur["wave"][:used].reshape(nb, B, C, K),
+                             cur["env"][:used].reshape(nb, B, C, K),
+                             cur["rpm"][:used].reshape(nb, B),
+                             miss_blocks(cur.get("miss"), used, nb, B))

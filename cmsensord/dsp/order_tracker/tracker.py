@@ -1,4 +1,5 @@
-"""The streaming order tracker: decimation, gains, filter, per-block outputs, smoother.
+"""The streaming order tracker: gains, filter, per-block outputs (the input's decimation:
+:mod:`.decimation`; the smoother: :mod:`.smoother`; the blocks' statistics: :mod:`.blocks`).
 
 :class:`OrderTracker` runs the recursive angular-velocity Vold-Kalman order
 tracker of Yeh, Pan & Le (eqs. (10)-(25)) for the channels of one machine,
@@ -16,29 +17,28 @@ import numpy as np
 
 from cmsensord.dsp.order_tracker.antialias import cheb2ord, cheby2_sos, missing_window_of, sos_dc_delay
 from cmsensord.dsp.order_tracker.bandwidth import component_r, describe
-from cmsensord.dsp.order_tracker.blocks import block_stats, fused_blocks, stats_numpy
+from cmsensord.dsp.order_tracker.blocks import block_stats, causal_blocks, fused_blocks, stats_numpy
 from cmsensord.dsp.order_tracker.components import Omegas, TrackedComponent, model_speed, omega
+from cmsensord.dsp.order_tracker.decimation import _NO_MISS, decimate, missing
 from cmsensord.dsp.order_tracker.design import q_diag, riccati_doubling
 from cmsensord.dsp.order_tracker.gain_table import GainTable, choose_grid, weakly
 from cmsensord.dsp.order_tracker.live import LiveCall
 from cmsensord.dsp.order_tracker.recursions import (
     CHUNK,
-    backward_numpy,
     envelope,
     forward_numpy,
     mask_groups,
     riccati_numpy,
 )
+from cmsensord.dsp.order_tracker.smoother import smooth
 from cmsensord.dsp.order_tracker.sos_blocks import SosBlocks
-from cmsensord.dsp.order_tracker.speed_line import SpeedAt, delayed, delayed_at, piece_of
+from cmsensord.dsp.order_tracker.speed_line import SpeedAt, piece_of
 from cmsensord.dsp.order_tracker.state import (
     BlockStats,
     TrackerOutput,
     TrackerState,
     cat_miss,
     join_outputs,
-    miss_blocks,
-    with_carry,
 )
 
 try:  # the compiled kernel is optional: numpy is the fallback
@@ -46,7 +46,6 @@ try:  # the compiled kernel is optional: numpy is the fallback
 except ImportError:  # pragma: no cover - depends on the build
     _trackerkernel = None
 
-_NO_MISS = -(1 << 62)   # last_miss of a channel that has not missed an input yet
 PIECE_BYTES = 8 << 20   # a call is tracked in pieces whose per-sample arrays take about this
 
 
@@ -319,7 +318,7 @@ class OrderTracker:
         gone_in = None
         if y.size and np.isnan(y.min()):               # min() propagates NaN; cheaper than isnan
             gone_in = np.isnan(y)
-        miss, last_miss = self._missing(gone_in, y.shape[0])
+        miss, last_miss = missing(self, gone_in, y.shape[0])
         if (miss is not None and self.gains == "exact" and self.C > 1
                 and (miss != miss[:, :1]).any()):
             raise ValueError("gains='exact': the channels must miss the same samples (the exact "
@@ -327,7 +326,7 @@ class OrderTracker:
                              "channels only: use gains='table' or one tracker per channel")
         if gone_in is not None:
             y = np.where(gone_in, 0.0, y)                # the anti-alias filter takes zeros
-        yd, rd = self._decimate(y, rpm)
+        yd, rd = decimate(self, _trackerkernel, y, rpm)
         st.last_miss = last_miss
         return st.n_track, yd, rd, miss
 
@@ -340,63 +339,13 @@ class OrderTracker:
         xf, zp, e, c, k, S, P = self._filter(yd, rd, miss)
         wave = np.ascontiguousarray(xf[:, :, 1::2])
         env = self._envelope(xf, c)
-        blocks = self._causal_blocks(n0, wave, env, rd, miss)
+        blocks = causal_blocks(self, n0, wave, env, rd, miss)
         out = TrackerOutput(index=index, t_in=t_in, rpm=rd, waveform=wave, blocks=blocks,
                             missing=miss if miss is not None else np.zeros((N, self.C), dtype=bool))
         if self.lag is not None:
-            self._smooth(out, self.lag, n0, rd, c, k, S, P, zp, e, miss)
+            smooth(self, _trackerkernel, out, self.lag, n0, rd, c, k, S, P, zp, e, miss)
         st.n_track = n0 + N
         return out
-
-    def _missing(self, gone_in, T):
-        """Tracker samples of this call without a measurement, (N, C) bool or None (none),
-        and the new ``last_miss``: tracker sample j (input jD, filtered) is missing when
-        an input in (jD - W, jD] is, W = ``missing_window`` (the state carries the last
-        missing input per channel across calls).  Changes no state.  (None, not an
-        array of False, is what the rest passes on when nothing is missing: no
-        per-call cost on the common path.)"""
-        st = self.state
-        W = self.missing_window
-        n0 = st.n_in
-        last = st.last_miss
-        first = st.skip if self.sos is not None else 0
-        if gone_in is None and n0 + first - int(last.max()) >= W:
-            return None, last                       # the common case: nothing missing near
-        take = np.arange(first, T, self.decimate)
-        pos = n0 + take
-        if gone_in is None:
-            m = (pos[:, None] - last[None, :]) < W
-            return (m if m.any() else None), last
-        idx = np.where(gone_in, (n0 + np.arange(T))[:, None], _NO_MISS)
-        lm = np.maximum(np.maximum.accumulate(idx, axis=0), last[None, :])
-        m = (pos[:, None] - lm[take]) < W
-        return (m if m.any() else None), lm[-1].copy()
-
-    def _decimate(self, y, rpm):
-        st = self.state
-        if callable(rpm) and (self.sos is None or y.shape[0] == 0):
-            rpm = np.asarray(rpm(np.arange(y.shape[0])), dtype=np.float64)
-        if self.sos is None:
-            st.n_in += y.shape[0]
-            return y, rpm
-        if y.shape[0] == 0:
-            return y, rpm
-        take = np.arange(st.skip, y.shape[0], self.decimate)
-        if self.backend == "c":           # filter and keep every D-th sample in one pass
-            yd = np.empty((len(take), self.C))
-            _trackerkernel.sosfilt(self.sos, np.ascontiguousarray(y), st.zi, yd, st.skip,
-                                   self.decimate)
-        else:                             # the numpy path: the kept outputs by blocks, no scipy
-            if self._sos_blocks is None:
-                self._sos_blocks = SosBlocks(self.sos, self.decimate)
-            yd, st.zi, st.aa_part = self._sos_blocks(y, st.zi, st.aa_part)
-        if callable(rpm):
-            rd = delayed_at(st, self.delay_in, self.decimate, rpm, y.shape[0], take)
-        else:
-            rd = delayed(st, self.delay_in, rpm, take) if self.delay_in else rpm[take]
-        st.skip = int((st.skip - y.shape[0]) % self.decimate)
-        st.n_in += y.shape[0]
-        return yd, rd
 
     def _envelope(self, xs: np.ndarray, c: np.ndarray) -> np.ndarray:
         """:func:`envelope` (N, C, K) of the states xs (N, C, 2K) at c (N, K): in the compiled
@@ -513,87 +462,3 @@ class OrderTracker:
     def _block_stats_numpy(self, wave, env, rpm):
         """rms, amplitude (E, C, K), mean speed and validity (E,) of whole blocks."""
         return stats_numpy(wave, env, rpm, self.min_rpm, self.top_order, self.fs_track)
-
-    def _causal_blocks(self, n0, wave, env, rd, miss) -> BlockStats:
-        st = self.state
-        B = self.block
-        C, K = self.C, self.K
-        if miss is None and not (len(st.pend["rpm"]) if st.pend else 0) and not len(rd) % B:
-            nb = len(rd) // B                   # whole blocks, nothing carried (a live call): as below
-            st.pend = {}
-            return self._block_stats(n0 + B * np.arange(nb), wave.reshape(nb, B, C, K),
-                                     env.reshape(nb, B, C, K), rd.reshape(nb, B), None)
-        cur = with_carry(st.pend, {"wave": wave, "env": env, "rpm": rd}, miss, self.C)
-        first = n0 - (len(cur["rpm"]) - len(rd))          # index of cur[0], a block start
-        nb = len(cur["rpm"]) // B
-        used = nb * B
-        st.pend = {k: v[used:].copy() for k, v in cur.items()}
-        if "miss" in st.pend and not st.pend["miss"].any():
-            del st.pend["miss"]
-        return self._block_stats(first + B * np.arange(nb),
-                                 cur["wave"][:used].reshape(nb, B, C, K),
-                                 cur["env"][:used].reshape(nb, B, C, K),
-                                 cur["rpm"][:used].reshape(nb, B),
-                                 miss_blocks(cur.get("miss"), used, nb, B))
-
-    # --------------------------------------------------------------- smoother
-    def _smooth(self, out: TrackerOutput, L: int, n0, rd, c, k, S, P, zp, e, miss) -> None:
-        st = self.state
-        B = self.block
-        cur = with_carry(st.hist, {"rpm": rd, "c": c, "k": k, "S": S, "P": P, "zp": zp, "e": e},
-                         miss, self.C)
-        h0 = st.next_smooth * B                              # index of cur[0]
-        n_end = n0 + len(rd)
-        jb = st.next_smooth
-        n_emit = max(0, (n_end - L) // B - jb)
-        W = B + L
-        d = 2 * self.K
-        if n_emit:
-            starts = (np.arange(n_emit) * B).tolist()        # positions in cur
-            if self.backend == "c":
-                xs = np.empty((n_emit, B, self.C, d))
-                some = "miss" in cur
-                for i, s0 in enumerate(starts):
-                    sl = slice(s0, s0 + W)
-                    args: tuple[np.ndarray | int, ...] = (
-                        np.ascontiguousarray(cur["c"][sl]), np.ascontiguousarray(cur["k"][sl]),
-                        np.ascontiguousarray(cur["S"][sl]), np.ascontiguousarray(cur["P"][sl]),
-                        np.ascontiguousarray(cur["zp"][sl]), np.ascontiguousarray(cur["e"][sl]),
-                        xs[i], self.K)
-                    if some and cur["miss"][sl].any():
-                        args += (np.ascontiguousarray(cur["miss"][sl]).view(np.uint8),)
-                    _trackerkernel.backward(*args)
-            else:                     # per mask pattern, as in _filter: k = 0 where missing
-                acc: np.ndarray | None = None
-                for chans, m in mask_groups(cur.get("miss")):
-                    kg = cur["k"] if m is None else np.where(m[:, None], 0.0, cur["k"])
-                    res = backward_numpy(cur["c"], kg, cur["S"], cur["P"], cur["zp"], cur["e"],
-                                         starts, W, B)
-                    if acc is None:
-                        acc = res
-                    else:
-                        acc[:, :, chans] = res[:, :, chans]
-                assert acc is not None  # mask_groups returns at least one group
-                xs = acc
-            used = n_emit * B
-            cb = cur["c"][:used].reshape(n_emit, B, self.K)
-            wave = xs[..., 1::2]
-            env = self._envelope(xs.reshape(used, self.C, d), cb.reshape(used, self.K)).reshape(
-                n_emit, B, self.C, self.K)
-            out.smoothed_index = h0 + np.arange(used)
-            out.smoothed_waveform = np.ascontiguousarray(wave.reshape(used, self.C, self.K))
-            out.smoothed_blocks = self._block_stats(h0 + B * np.arange(n_emit), wave, env,
-                                                    cur["rpm"][:used].reshape(n_emit, B),
-                                                    miss_blocks(cur.get("miss"), used, n_emit, B))
-        else:
-            used = 0
-            out.smoothed_index = np.zeros(0, dtype=np.int64)
-            out.smoothed_waveform = np.zeros((0, self.C, self.K))
-            out.smoothed_blocks = self._block_stats(np.zeros(0, np.int64),
-                                                    np.zeros((0, B, self.C, self.K)),
-                                                    np.zeros((0, B, self.C, self.K)),
-                                                    np.zeros((0, B)), None)
-        st.next_smooth = jb + n_emit
-        st.hist = {key: v[used:].copy() for key, v in cur.items()}
-        if "miss" in st.hist and not st.hist["miss"].any():
-            del st.hist["miss"]

@@ -1,0 +1,173 @@
+"""The rotating sink's disk outages (a base of :class:`~cmsensord.sinks.rotating.RotatingSink`).
+
+Disk errors: no OSError ever leaves the sink. A failing operation (open, write, flush,
+fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
+holds complete chunks (salvaged when logging is back, or at the next start), else deleted.
+A failed fsync is never retried on the same file. A new file is tried at once, then every
+``retry_s``; messages written while no file is open, and those of the chunk that could
+not be written, are counted in :attr:`dropped`. Logging counts as back when a new file has been
+fsynced with messages in it (a full disk takes a header; a file of a header alone is fsynced once,
+then at the next tick after a message). One ``disk_error`` event per outage, one when logging
+resumes (the count).
+A full or failing disk at start (for the daemon, ``wait_for_disk``, a read-only one too) is
+such an outage, and so is, at any time, the output directory off the device it was on at start
+(unmounted: nothing is made on the file system under it, :mod:`cmsensord.sinks.log_dir`); any
+other reason the first file cannot be opened is a SinkError.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+from cmsensord.config import OutputConfig
+from cmsensord.sinks import disk_events
+from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
+from cmsensord.sinks.retention import DISK_EVENT
+
+if TYPE_CHECKING:
+    from cmsensord.sinks.rotating import RotatingSink
+
+__all__ = ["DiskOutages"]
+
+_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+
+class DiskOutages:
+    """A failing disk: the file abandoned, one event per outage, a new file tried at once and
+    then every ``retry_s``, logging back once a new file is fsynced with messages in it."""
+
+    output: OutputConfig
+    clock: Callable[[], float]
+    device: Any
+    dropped: int
+    disk_errors: int
+    _current: McapSink | None
+    _closed: bool
+    _event_dirty: bool
+    _need_sync: bool
+    _outage: dict[str, Any] | None
+    _next_retry: float
+    _last_errno: int | None
+    _abandoned: list[Path]
+
+    if TYPE_CHECKING:
+        def emit(self, kind: str, message: str, **fields: Any) -> None: ...
+        def _open(self) -> McapSink: ...
+        def _retention(self) -> None: ...
+        @property
+        def path(self) -> Path | None: ...
+
+    @property
+    def logging(self) -> bool:
+        """A file is open and no outage is in progress."""
+        return self._current is not None and self._outage is None
+
+    def outage_state(self) -> str:
+        """"" while logging; during a disk outage, one phrase for the status line."""
+        return "" if self._outage is None else disk_events.outage_state(self._outage, self.clock())
+
+    def _drop(self, n: int) -> None:
+        self.dropped += n
+        if self._outage is not None:
+            self._outage["dropped"] += n
+
+    def _check_present(self, cur: McapSink) -> bool:
+        """After each flush: True while the open file is still in the output directory; a file
+        (or directory) removed under the daemon is reported, with every message written to
+        it as lost, and logging goes on in a new file (the directory made again); a directory
+        no longer on its device (unmounted) is an outage until it is back."""
+        try:
+            os.stat(cur.part_path)
+            return True
+        except FileNotFoundError:
+            pass
+        except OSError:
+            return True                      # not known to be gone: the next write tells
+        moved = moved_error(self.output.dir, self.device)
+        if moved is not None:                # its file system is gone: the file kept for salvage
+            self._failed(moved, cur)
+            return False
+        lost = cur.messages_written
+        cur.abandon()
+        self._current = None
+        self._drop(lost)
+        self._event_dirty = self._need_sync = False
+        text, fields = disk_events.removed(cur.part_path, lost)
+        self.emit(DISK_EVENT, text, **fields)
+        self._next_retry = self.clock()
+        self._retry_if_due()
+        return False
+
+    def _failed(self, err: SinkIOError, cur: McapSink | None) -> None:
+        """Abandon ``cur`` (if any) after ``err``; event at the start of an outage; retry."""
+        self.disk_errors += 1
+        self._last_errno = err.errno
+        now = self.clock()
+        lost = unsure = 0
+        kept: Path | None = None
+        if cur is not None:
+            lost = cur.unpersisted
+            unsure = cur.unsynced if err.op == "fsync" else 0
+            persisted = cur.persisted
+            part = cur.abandon()
+            if self._current is cur:
+                self._current = None
+            if persisted:
+                kept = part
+                self._abandoned.append(part)
+            else:
+                try:                         # a header alone: nothing to salvage
+                    part.unlink(missing_ok=True)
+                except OSError:
+                    kept = part
+        self._event_dirty = self._need_sync = False
+        first = self._outage is None
+        if self._outage is None:
+            self._outage = {"start": now, "dropped": 0, "errors": 0, "error": str(err)}
+        outage = self._outage
+        self._drop(lost)
+        outage["errors"] += 1
+        if first:
+            text, fields = disk_events.abandoned(err, kept, cur is not None, lost, unsure, self.output.retry_s)
+            self.emit(DISK_EVENT, text, **fields)
+        if err.errno in _FULL:
+            self._retention()
+        # a new file at once at the start of an outage (a failed fsync needs nothing
+        # else), then every retry_s: a disk that keeps failing gets one file per retry_s
+        self._next_retry = now if first else now + self.output.retry_s
+        self._retry_if_due()
+
+    def _retry_if_due(self) -> None:
+        if self._closed or self._current is not None:
+            return
+        now = self.clock()
+        if now < self._next_retry:
+            return
+        self._next_retry = now + self.output.retry_s
+        if self._last_errno in _FULL:
+            self._retention()
+        try:
+            self._current = self._open()
+        except SinkIOError as err:
+            self.disk_errors += 1
+            self._last_errno = err.errno
+            if self._outage is not None:
+                self._outage["errors"] += 1
+            else:                            # cannot happen: a file was lost before
+                self._failed(err, None)
+            return
+        self._need_sync = True               # logging is back once this file is fsynced
+
+    def _resumed(self) -> None:
+        outage, self._outage = self._outage, None
+        assert outage is not None
+        self._last_errno = None
+        where = self.path.name if self.path is not None else "the log"
+        text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
+        self.emit(DISK_EVENT, text, **fields)
+        abandoned, self._abandoned = self._abandoned, []
+        disk_events.salvage_abandoned(cast("RotatingSink", self), abandoned)
