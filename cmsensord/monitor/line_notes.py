@@ -19,10 +19,6 @@ from cmsensord.monitor.events import Event
 __all__ = ["line_notes"]
 
 
-def _num(x: float) -> float:
-    return round(float(x), 9)
-
-
 def line_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, df: float, stamp: int,
                told: set, longest_s: float) -> list[Event]:
     """A ``lines_unresolved`` event (a warning) for each bearing of record ``r`` of ``channel``
@@ -42,7 +38,7 @@ def line_notes(cfg: Config, channel: str, r: IndicatorRecord, setup: Setup, df: 
         text = unresolved_line(b.name, channel, b.unresolved, line_freqs(b.freqs), setup.slip, df, rules,
                                longest_s)
         out.append(Event("lines_unresolved", channel, text, stamp,
-                         {"details": {"bearing": b.name, "lines": list(b.unresolved), "bin_hz": _num(df)}}))
+                         {"details": {"bearing": b.name, "lines": list(b.unresolved), "bin_hz": round(float(df), 9)}}))
     return out + _beyond_notes(cfg, channel, r, stamp, told) + _harmonic_notes(cfg, channel, r, setup, stamp, told)
 
 
