@@ -5,7 +5,8 @@ Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
 (YAML syntax), ``unit.yaml`` (a unit that does not fit the channel's kind), ``nocal.yaml`` (a
 microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text),
-``capdir/`` (a directory), ``afile`` (a regular file, so ``afile/logs`` cannot be a directory).
+``capdir/`` (a directory), ``logdir/`` (a directory of logs), ``afile`` (a regular file, so
+``afile/logs`` cannot be a directory).
 """
 
 from __future__ import annotations
@@ -49,7 +50,18 @@ CASES = [
      "nocal.yaml: channels[0].kind: a microphone channel needs an acoustic calibration file"),
     # -- usage (2)
     (["replay", "missing.bin"], USAGE, "missing.bin: capture file not found"),
-    (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file"),
+    (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file: replay, calibrate and vkf read a "
+                                  "capture file (`--capture`, `cmsensord record`, `cmsensord import`)"),
+    # a directory of logs where a capture is expected, and a capture where logs are: what reads each
+    (["replay", "logdir"], USAGE, "cmsensord: logdir: a directory of MCAP logs (cmsensord's output), not a "
+                                  "capture file: `cmsensord summary` and `cmsensord report` read it; replay, "
+                                  "calibrate and vkf read a capture file"),
+    (["calibrate", "logdir", "--out", "site.yaml"], USAGE, "logdir: a directory of MCAP logs"),
+    (["summary", "capture.bin"], USAGE, "cmsensord: capture.bin: a capture of the board's serial stream, not an "
+                                        "MCAP log: `cmsensord replay capture.bin --out DIR` processes it into the "
+                                        "logs that summary and report read"),
+    (["report", "capture.bin", "--out", "r.html"], USAGE, "cmsensord: capture.bin: a capture of the board's "
+                                                          "serial stream, not an MCAP log: `cmsensord replay"),
     (["summary", "notmcap.mcap"], USAGE, "notmcap.mcap: not an MCAP file"),
     (["summary", "missing.mcap"], USAGE, "missing.mcap: file not found"),
     (["record", "--port", "/dev/nonexistent-tty", "--out", "x.bin", "--duration", "1"], USAGE,
@@ -77,6 +89,8 @@ def scratch(tmp_path_factory):
     (d / "port.yaml").write_text("link:\n  port: /dev/nonexistent-tty\noutput:\n  dir: logs\n")
     (d / "notmcap.mcap").write_text("not an mcap file\n")
     (d / "capdir").mkdir()
+    (d / "logdir").mkdir()
+    (d / "logdir" / "cmsensord-20261201T120000Z.mcap").write_bytes(b"\x89MCAP0\r\n")
     (d / "afile").write_text("")
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario

@@ -15,6 +15,7 @@ from typing import Any
 
 from cmsensord.errors import EXIT_USAGE, CmsensordError
 from cmsensord.out_paths import overwritten_input
+from cmsensord.sinks.mcap_records import NOT_MCAP, not_mcap_text
 
 __all__ = ["add_report_parser", "run_report", "MISSING_MATPLOTLIB"]
 
@@ -95,7 +96,8 @@ def _tell_unreadable(files: list[Any], messages: int) -> None:
             raise CmsensordError(f"{read[0].path}: no complete message in it to report"
                                  + (f" ({read[0].cut})" if read[0].cut else ""))
         more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
-        raise CmsensordError(f"{bad[0].path}: {bad[0].error}{more}")
+        error = not_mcap_text(bad[0].path) if bad[0].error == NOT_MCAP else bad[0].error
+        raise CmsensordError(f"{bad[0].path}: {error}{more}")
     if all(f.messages == f.foreign + f.unreadable for f in read):
         alien = [f for f in read if f.messages]
         more = f" (and {len(alien) - 1} more file(s) like it)" if len(alien) > 1 else ""
