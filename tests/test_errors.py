@@ -68,6 +68,17 @@ CASES = [
      "/dev/nonexistent-tty: no such device (is the board plugged in?"),
     (["record", "--port", "/dev/null", "--out", "x.bin", "--duration", "1"], USAGE,
      "is it a serial port?"),
+    # an --out file where a directory is, or in one that is not there; a directory as the port
+    (["record", "--port", "capdir", "--out", "x.bin", "--duration", "1"], USAGE,
+     "cmsensord: capdir: is a directory, not a serial port: give the board's tty, e.g. /dev/ttyACM0"),
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "capdir", "--duration", "1"], USAGE,
+     "cmsensord: capdir: is a directory; give --out a file name, e.g. capdir/capture.bin"),
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "nodir/x.bin", "--duration", "1"], USAGE,
+     "cmsensord: nodir/x.bin: no directory nodir: give --out a file in a directory that exists"),
+    (["report", "logdir", "--out", "capdir"], USAGE,
+     "cmsensord: capdir: is a directory; give --out a file name, e.g. capdir/report.html"),
+    (["report", "logdir", "--out", "nodir/r.html"], USAGE,
+     "cmsensord: nodir/r.html: no directory nodir: give --out a file in a directory that exists"),
     (["vkf", "capture.bin"], USAGE, "capture.bin: the board is in RMS mode (its first STATUS): the batch VKF "
                                     "needs a capture in RAW mode"),
     (["vkf", "degrading.bin"], USAGE, "degrading.bin: the board is in RMS mode (its first STATUS)"),

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from cmsensord.errors import EXIT_USAGE, CmsensordError
-from cmsensord.out_paths import overwritten_input
+from cmsensord.out_paths import out_file_refused, overwritten_input
 from cmsensord.sinks.mcap_records import NOT_MCAP, not_mcap_text
 
 __all__ = ["add_report_parser", "run_report", "MISSING_MATPLOTLIB"]
@@ -40,9 +40,9 @@ def run_report(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     from cmsensord.report.reading import log_paths, read_logs
     paths = log_paths(args.logs)
-    same = overwritten_input(args.sub_out, paths)
-    if same:
-        raise CmsensordError(same)
+    refused = overwritten_input(args.sub_out, paths) or out_file_refused(args.sub_out, "report.html")
+    if refused:
+        raise CmsensordError(refused)
     parts = read_logs(paths, sys.stderr)
     _tell_unreadable([f for data in parts for f in data.files], sum(data.messages for data in parts))
     lead = recordings_line(parts)
