@@ -68,6 +68,9 @@ CASES = [
      "/dev/nonexistent-tty: no such device (is the board plugged in?"),
     (["record", "--port", "/dev/null", "--out", "x.bin", "--duration", "1"], USAGE,
      "is it a serial port?"),
+    (["import", "capture.bin", "--out", "x.bin"], USAGE,
+     "cmsensord import: capture.bin: a capture of the board's serial stream already (cmsensord's input): "
+     "replay, calibrate and vkf read it as it is (`cmsensord replay capture.bin --out DIR`)"),
     # an --out file where a directory is, or in one that is not there; a directory as the port
     (["record", "--port", "capdir", "--out", "x.bin", "--duration", "1"], USAGE,
      "cmsensord: capdir: is a directory, not a serial port: give the board's tty, e.g. /dev/ttyACM0"),
