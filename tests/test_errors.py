@@ -25,6 +25,14 @@ CASES = [
     (["--config", "broken.yaml"], CONFIG, "broken.yaml: YAML syntax error at line 2"),
     (["--config", "missing.yaml"], CONFIG, "missing.yaml: file not found"),
     (["replay", "notmcap.mcap", "--config", "bad.yaml"], CONFIG, "monitor.r_max"),
+    # a capture or a log given as the configuration: what reads it, and what --config takes
+    (["--config", "capture.bin"], CONFIG,
+     "cmsensord: configuration error: capture.bin: a capture of the board's serial stream, not a configuration: "
+     "replay, calibrate and vkf read it (`cmsensord replay capture.bin --config site.yaml`); --config takes a "
+     "YAML site file (`cmsensord config --default > site.yaml` writes one)"),
+    (["replay", "capture.bin", "--config", "logdir/cmsensord-20261201T120000Z.mcap"], CONFIG,
+     "cmsensord: configuration error: logdir/cmsensord-20261201T120000Z.mcap: an MCAP log (cmsensord's output), "
+     "not a configuration: `cmsensord summary` and `cmsensord report` read it; --config takes a YAML site file"),
     (["replay", "capture.bin", "--out", "afile/logs"], CONFIG,
      "afile/logs: cannot create output directory"),
     (["replay", "capture.bin", "--out", "afile"], CONFIG,
