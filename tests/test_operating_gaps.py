@@ -1,8 +1,9 @@
 """Frames lost for less than ``tacho.timeout_s`` (a UART dropping bytes) are no coast-down.
 
-The record spanning such a gap carries the tacho's speed extrapolated over it, which came out
-10 % and more below the shaft's (1582 rpm of 1720); the operating state took it as a coast-down
-and cleared a danger alarm whose value stood at 7.9 mm/s, twice the danger level.  A record with
+The record spanning such a gap carries the tacho's speed extrapolated over it, up to 10 % off
+either way (a high one raises the running value the coast-down is measured from, a low one
+then falls below it: 1582 rpm of 1720); the operating state took it as a coast-down and cleared
+a danger alarm whose value stood at 7.9 mm/s, near twice the danger level.  A record with
 lost samples gives the operating state no reading (it keeps its state), as a record without a
 speed does.
 """
