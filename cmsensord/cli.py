@@ -193,13 +193,21 @@ def _add_simulation_args(sim) -> None:
 
 
 def _add_record_parser(sub) -> None:
-    rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file")
+    rec = sub.add_parser("record", help="capture the raw bytes of a serial port to a file",
+                         description="Capture the bytes of the board's serial port, as read, to a file "
+                                     "(for replay, calibrate and vkf), with a line a second and what it "
+                                     "captured at the end.")
     rec.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyACM0")
     rec.add_argument("--out", dest="sub_out", required=True, metavar="FILE", help="capture file to write")
     rec.add_argument("--baud", type=count(1, MAX_BAUD), default=921600,
                      help=f"UART baud (default 921600, at most {MAX_BAUD}; a USB CDC port or a pty ignores it)")
     rec.add_argument("--duration", dest="sub_duration", type=positive, metavar="S",
                      help="seconds (default: until Ctrl-C)")
+
+
+#: --out of replay and vkf: where their logs go without it
+_OUT_DIR_HELP = ("MCAP output directory (default: output.dir of --config, else cmsensord-logs here, where "
+                 "--simulate writes too: give each run its own)")
 
 
 def _add_vkf_parser(sub) -> None:
@@ -210,7 +218,7 @@ def _add_vkf_parser(sub) -> None:
                                    "Vold-Kalman orders (Tůma) of the whole record, computed in memory.")
     v.add_argument("capture", help="capture file in RAW mode with a tacho")
     v.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration (orders)")
-    v.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
+    v.add_argument("--out", dest="sub_out", metavar="DIR", help=_OUT_DIR_HELP)
     v.add_argument("--bandwidth", type=positive, default=1.0,
                    help="-3 dB bandwidth [Hz] of the batch filter for every component (default 1)")
     v.add_argument("--poles", type=int, choices=(1, 2), default=2, help="1 or 2 poles (default 2)")
@@ -244,7 +252,7 @@ def _add_replay_parser(sub) -> None:
                                    "possible or paced (--realtime, --speed X), and print its summary.")
     r.add_argument("capture", help="capture file (the bytes as read from the port)")
     r.add_argument("--config", dest="sub_config", metavar="FILE", help="YAML configuration")
-    r.add_argument("--out", dest="sub_out", metavar="DIR", help="MCAP output directory")
+    r.add_argument("--out", dest="sub_out", metavar="DIR", help=_OUT_DIR_HELP)
     r.add_argument("--akf-trace", dest="sub_trace", action="store_true",
                    help="write /cm/<ch>/akf per observation")
     _add_publish_arg(r)

@@ -1,17 +1,19 @@
 """An ``--out`` that names one of the command's own inputs is refused before anything is read:
 writing it would destroy the input (an import over its WAV, a report over its log); so is a
 daemon's ``--capture`` that names its configuration, or a file that is no regular file (the
-port's bytes appended to a device)."""
+port's bytes appended to a device), and an ``--out`` file that cannot be made where it is named
+(a directory given, or a directory that does not exist)."""
 
 from __future__ import annotations
 
 import os
 import stat
 from collections.abc import Iterable
+from pathlib import Path
 
 from cmsensord.errors import file_kind
 
-__all__ = ["capture_refused", "overwritten_input", "with_sidecars"]
+__all__ = ["capture_refused", "out_file_refused", "overwritten_input", "with_sidecars"]
 
 
 def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike],
@@ -26,6 +28,18 @@ def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike
         if same:
             return (f"{out}: is the input {src}: writing it would destroy it; give {option} another "
                     "file name")
+    return None
+
+
+def out_file_refused(out: str | os.PathLike, example: str, option: str = "--out") -> str | None:
+    """One line saying why the file ``out`` (given as ``option``) cannot be written where it is
+    named: it is a directory (the fix names ``example`` in it), or its directory does not exist;
+    None otherwise."""
+    path = Path(out)
+    if path.is_dir():
+        return f"{out}: is a directory; give {option} a file name, e.g. {path / example}"
+    if not path.parent.is_dir():
+        return f"{out}: no directory {path.parent}: give {option} a file in a directory that exists"
     return None
 
 

@@ -54,6 +54,8 @@ def cannot_open(port: str, exc: BaseException | None) -> str:
     """Why ``port`` did not open (``exc``: the error of the open), with the fix."""
     if not os.path.exists(port):
         return "no such device (is the board plugged in? check `ls /dev/tty*`)"
+    if os.path.isdir(port):
+        return "is a directory, not a serial port: give the board's tty, e.g. /dev/ttyACM0"
     if is_held(exc):
         return (f"held by another process{holder(port)}: two readers of one port each lose the "
                 "frames the other reads")

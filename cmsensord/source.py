@@ -187,9 +187,23 @@ def _open_capture(p: Path) -> BinaryIO:
     except FileNotFoundError:
         raise LinkError(f"{p}: capture file not found") from None
     except IsADirectoryError:
-        raise LinkError(f"{p}: is a directory, not a capture file") from None
+        raise LinkError(_directory_text(p)) from None
     except OSError as exc:
         raise LinkError(f"{p}: cannot read capture: {exc.strerror or exc}") from None
+
+
+def _directory_text(p: Path) -> str:
+    """The line refusing the directory ``p`` given as a capture: one of MCAP logs (what reads
+    them), or another (what replay, calibrate and vkf read)."""
+    readers = "replay, calibrate and vkf read a capture file (`--capture`, `cmsensord record`, `cmsensord import`)"
+    try:
+        logs = any(n.endswith((".mcap", ".mcap.part")) for n in os.listdir(p))
+    except OSError:
+        logs = False
+    if logs:
+        return (f"{p}: a directory of MCAP logs (cmsensord's output), not a capture file: `cmsensord summary` "
+                f"and `cmsensord report` read it; {readers}")
+    return f"{p}: is a directory, not a capture file: {readers}"
 
 
 class SerialSource(FrameSource):

@@ -98,8 +98,10 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="seconds to generate; also the scenario's time axis (degrading). "
                         "Default: 3600 for --out (a run-up: its own length, whirl 180 s, "
                         "close_orders 5 s), endless for --pty")
-    p.add_argument("--mode", choices=("rms", "raw"), default="rms", help="RMS frames or RAW blocks")
-    p.add_argument("--tacho", action="store_true", help="send a TACHO frame per block")
+    p.add_argument("--mode", choices=("rms", "raw"), default="rms",
+                   help="RMS frames or RAW blocks (default rms, for every scenario: the run-ups' orders "
+                   "need --mode raw --tacho, which cmsensord --simulate gives them)")
+    p.add_argument("--tacho", action="store_true", help="send a TACHO frame per block (default: none)")
     p.add_argument("--ppr", type=int, default=1, help="tacho pulses per revolution, 1..255 (default 1)")
     p.add_argument("--tacho-missed", type=_fault, default=0.0, metavar="P|M,M,..",
                    help="encoder fault: probability a pulse is missed (0.01), or the pulse indices "

@@ -92,3 +92,21 @@ def test_arguments_left_over_after_a_subcommand_point_at_its_help():
         p = cmsensord(*args)
         assert (p.returncode, p.stdout) == (2, ""), p.stderr
         assert p.stderr == f"{command}: error: unrecognized arguments: {extra} (see {command} --help)\n"
+
+
+def test_replay_and_vkf_help_give_the_out_default_they_use(tmp_path):
+    """`--out` left out writes where the help says: cmsensord-logs in the current directory (that
+    of --simulate too), or output.dir of --config."""
+    said = ("--out DIR MCAP output directory (default: output.dir of --config, else cmsensord-logs here, "
+            "where --simulate writes too: give each run its own)")
+    for sub in ("replay", "vkf"):
+        assert said in " ".join(cmsensord(sub, "--help").stdout.split()), sub
+    cap = tmp_path / "h.bin"
+    assert run_module("firmware_sim", "--out", str(cap), "--scenario", "healthy", "--duration", "2").returncode == 0
+    p = cmsensord("replay", "h.bin", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert len(list((tmp_path / "cmsensord-logs").glob("cmsensord-*.mcap"))) == 1
+    (tmp_path / "site.yaml").write_text("output:\n  dir: site-logs\n")
+    p = cmsensord("replay", "h.bin", "--config", "site.yaml", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert len(list((tmp_path / "site-logs").glob("cmsensord-*.mcap"))) == 1

@@ -415,3 +415,61 @@ def test_orders_round_trip():
     cfg = config_from_dict(d)
     assert config_from_dict(config_to_dict(cfg)) == cfg
     assert cfg.orders.components[1].freq_hz == 47.0 and cfg.tacho.ppr == 4
+
+
+# --- the ranges `cmsensord config --default` states are the ones loading enforces --------------
+
+_NUMBER = re.compile(r"(?<![\w])[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+#: a bound of 0 said by a relation to another key (``> r_min``: r_min is > 0 itself)
+_RELATIVE = {"monitor.r_max": "> r_min", "orders.max_rpm": "> min_rpm", "commissioned.to_s": "> from_s"}
+
+
+def _key_comment(lines: list[str], section: str, key: str) -> str:
+    """The comment of ``key`` in ``section`` of the default file: its line's and the comment lines
+    after it (the mqtt section is commented out: its keys' lines start with ``#``)."""
+    start = next(i for i, ln in enumerate(lines) if re.match(rf"#? ?{section}:", ln))
+    for i in range(start + 1, len(lines)):
+        m = re.match(rf"#?\s+{key}:[^#]*#?(.*)", lines[i])
+        if m:
+            more = []
+            for ln in lines[i + 1:]:
+                cont = re.match(r"#?\s+#(.*)", ln)
+                if not cont:
+                    break
+                more.append(cont.group(1))
+            return " ".join([m.group(1), *more])
+    raise AssertionError(f"{section}.{key}: no line in the default file")
+
+
+def test_default_file_states_every_bound_loading_enforces():
+    """Each numeric range of a setting (gt/ge/lt/le of its field) is written in its comment in
+    what `cmsensord config --default` prints, so a user editing a site file from it meets no
+    refusal the file did not state (an integer's ``> 0`` may read ``1..``)."""
+    from cmsensord.config.capture import CaptureConfig
+    from cmsensord.config.indicators import IndicatorsConfig
+    from cmsensord.config.mqtt import MqttConfig
+    from cmsensord.config.settings import AcousticConfig, CommissionedConfig, OrdersConfig, TachoConfig
+    from processes import cmsensord
+
+    p = cmsensord("config", "--default")
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    sections = {"link": LinkConfig, "output": OutputConfig, "monitor": MonitorConfig, "tacho": TachoConfig,
+                "orders": OrdersConfig, "acoustic": AcousticConfig, "indicators": IndicatorsConfig,
+                "capture": CaptureConfig, "mqtt": MqttConfig, "commissioned": CommissionedConfig}
+    unstated = []
+    for section, cls in sections.items():
+        for f in dataclasses.fields(cls):
+            comment = _key_comment(lines, section, f.name)
+            stated = {float(x) for x in _NUMBER.findall(comment)}
+            integer = f.type in ("int", "int | None")
+            for rule in ("gt", "ge", "lt", "le"):
+                if rule not in f.metadata:
+                    continue
+                bound = float(f.metadata[rule])
+                said = {bound} | ({bound + 1} if integer and rule == "gt" else set())
+                if f"{section}.{f.name}" in _RELATIVE and bound == 0 and _RELATIVE[f"{section}.{f.name}"] in comment:
+                    continue
+                if not said & stated:
+                    unstated.append(f"{section}.{f.name} {rule} {bound:g}")
+    assert unstated == []

@@ -5,7 +5,8 @@ Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
 (YAML syntax), ``unit.yaml`` (a unit that does not fit the channel's kind), ``nocal.yaml`` (a
 microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text),
-``capdir/`` (a directory), ``afile`` (a regular file, so ``afile/logs`` cannot be a directory).
+``capdir/`` (a directory), ``logdir/`` (a directory of logs), ``afile`` (a regular file, so
+``afile/logs`` cannot be a directory).
 """
 
 from __future__ import annotations
@@ -24,6 +25,14 @@ CASES = [
     (["--config", "broken.yaml"], CONFIG, "broken.yaml: YAML syntax error at line 2"),
     (["--config", "missing.yaml"], CONFIG, "missing.yaml: file not found"),
     (["replay", "notmcap.mcap", "--config", "bad.yaml"], CONFIG, "monitor.r_max"),
+    # a capture or a log given as the configuration: what reads it, and what --config takes
+    (["--config", "capture.bin"], CONFIG,
+     "cmsensord: configuration error: capture.bin: a capture of the board's serial stream, not a configuration: "
+     "replay, calibrate and vkf read it (`cmsensord replay capture.bin --config site.yaml`); --config takes a "
+     "YAML site file (`cmsensord config --default > site.yaml` writes one)"),
+    (["replay", "capture.bin", "--config", "logdir/cmsensord-20261201T120000Z.mcap"], CONFIG,
+     "cmsensord: configuration error: logdir/cmsensord-20261201T120000Z.mcap: an MCAP log (cmsensord's output), "
+     "not a configuration: `cmsensord summary` and `cmsensord report` read it; --config takes a YAML site file"),
     (["replay", "capture.bin", "--out", "afile/logs"], CONFIG,
      "afile/logs: cannot create output directory"),
     (["replay", "capture.bin", "--out", "afile"], CONFIG,
@@ -49,13 +58,38 @@ CASES = [
      "nocal.yaml: channels[0].kind: a microphone channel needs an acoustic calibration file"),
     # -- usage (2)
     (["replay", "missing.bin"], USAGE, "missing.bin: capture file not found"),
-    (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file"),
+    (["replay", "capdir"], USAGE, "capdir: is a directory, not a capture file: replay, calibrate and vkf read a "
+                                  "capture file (`--capture`, `cmsensord record`, `cmsensord import`)"),
+    # a directory of logs where a capture is expected, and a capture where logs are: what reads each
+    (["replay", "logdir"], USAGE, "cmsensord: logdir: a directory of MCAP logs (cmsensord's output), not a "
+                                  "capture file: `cmsensord summary` and `cmsensord report` read it; replay, "
+                                  "calibrate and vkf read a capture file"),
+    (["calibrate", "logdir", "--out", "site.yaml"], USAGE, "logdir: a directory of MCAP logs"),
+    (["summary", "capture.bin"], USAGE, "cmsensord: capture.bin: a capture of the board's serial stream, not an "
+                                        "MCAP log: `cmsensord replay capture.bin --out DIR` processes it into the "
+                                        "logs that summary and report read"),
+    (["report", "capture.bin", "--out", "r.html"], USAGE, "cmsensord: capture.bin: a capture of the board's "
+                                                          "serial stream, not an MCAP log: `cmsensord replay"),
     (["summary", "notmcap.mcap"], USAGE, "notmcap.mcap: not an MCAP file"),
     (["summary", "missing.mcap"], USAGE, "missing.mcap: file not found"),
     (["record", "--port", "/dev/nonexistent-tty", "--out", "x.bin", "--duration", "1"], USAGE,
      "/dev/nonexistent-tty: no such device (is the board plugged in?"),
     (["record", "--port", "/dev/null", "--out", "x.bin", "--duration", "1"], USAGE,
      "is it a serial port?"),
+    (["import", "capture.bin", "--out", "x.bin"], USAGE,
+     "cmsensord import: capture.bin: a capture of the board's serial stream already (cmsensord's input): "
+     "replay, calibrate and vkf read it as it is (`cmsensord replay capture.bin --out DIR`)"),
+    # an --out file where a directory is, or in one that is not there; a directory as the port
+    (["record", "--port", "capdir", "--out", "x.bin", "--duration", "1"], USAGE,
+     "cmsensord: capdir: is a directory, not a serial port: give the board's tty, e.g. /dev/ttyACM0"),
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "capdir", "--duration", "1"], USAGE,
+     "cmsensord: capdir: is a directory; give --out a file name, e.g. capdir/capture.bin"),
+    (["record", "--port", "/dev/nonexistent-tty", "--out", "nodir/x.bin", "--duration", "1"], USAGE,
+     "cmsensord: nodir/x.bin: no directory nodir: give --out a file in a directory that exists"),
+    (["report", "logdir", "--out", "capdir"], USAGE,
+     "cmsensord: capdir: is a directory; give --out a file name, e.g. capdir/report.html"),
+    (["report", "logdir", "--out", "nodir/r.html"], USAGE,
+     "cmsensord: nodir/r.html: no directory nodir: give --out a file in a directory that exists"),
     (["vkf", "capture.bin"], USAGE, "capture.bin: the board is in RMS mode (its first STATUS): the batch VKF "
                                     "needs a capture in RAW mode"),
     (["vkf", "degrading.bin"], USAGE, "degrading.bin: the board is in RMS mode (its first STATUS)"),
@@ -77,6 +111,8 @@ def scratch(tmp_path_factory):
     (d / "port.yaml").write_text("link:\n  port: /dev/nonexistent-tty\noutput:\n  dir: logs\n")
     (d / "notmcap.mcap").write_text("not an mcap file\n")
     (d / "capdir").mkdir()
+    (d / "logdir").mkdir()
+    (d / "logdir" / "cmsensord-20261201T120000Z.mcap").write_bytes(b"\x89MCAP0\r\n")
     (d / "afile").write_text("")
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario

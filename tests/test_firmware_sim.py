@@ -512,3 +512,17 @@ def test_pty_board_with_start_on_stdin_sends_nothing_before_its_stdin_ends():
     waiting.stdout.readline()
     waiting.terminate()
     assert waiting.wait(timeout=5) == 0
+
+
+def test_help_gives_the_mode_every_scenario_defaults_to(tmp_path):
+    """`python -m firmware_sim --scenario whirl --out f.bin` writes RMS frames without a tacho, as
+    its --help says (cmsensord --simulate, not firmware_sim, runs the run-ups in RAW mode)."""
+    from processes import run_module
+
+    text = " ".join(run_module("firmware_sim", "--help").stdout.split())
+    assert ("--mode {rms,raw} RMS frames or RAW blocks (default rms, for every scenario: the run-ups' orders "
+            "need --mode raw --tacho, which cmsensord --simulate gives them)") in text
+    assert "--tacho send a TACHO frame per block (default: none)" in text
+    p = run_module("firmware_sim", "--scenario", "close_orders", "--duration", "1", "--out", str(tmp_path / "c.bin"))
+    assert p.returncode == 0, p.stderr
+    assert ", 1 ch, rms, 1 s, 100 blocks, 101 frames," in p.stdout, p.stdout

@@ -36,4 +36,4 @@ def test_a_device_or_a_directory_given_as_a_capture_is_said_to_be_one(tmp_path):
     assert (p.returncode, p.stderr) == (2, f"cmsensord: /dev/zero: not a regular file (a character device): "
                                            f"{CAPTURE}\n")
     p = cmsensord("replay", ".", "--out", "o", timeout=20, cwd=tmp_path)
-    assert (p.returncode, p.stderr) == (2, "cmsensord: .: is a directory, not a capture file\n")
+    assert (p.returncode, p.stderr) == (2, f"cmsensord: .: is a directory, not a capture file: {CAPTURE}\n")

@@ -131,7 +131,23 @@ def _read_text(path: str | Path, source: str) -> str:
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise ConfigError(source, None, f"not UTF-8 text (byte offset {err.start})") from None
+        raise ConfigError(source, None, _not_text(source, data, err.start)) from None
+
+
+def _not_text(source: str, data: bytes, start: int) -> str:
+    """Why the configuration file ``source`` (its bytes ``data``) is no text: an MCAP log or a
+    capture given as the configuration, with what reads it, or the first byte that is not UTF-8."""
+    from cmsensord.sinks.mcap_chunks import MAGIC
+    from cmsensord.sinks.mcap_records import is_capture
+
+    site = "--config takes a YAML site file (`cmsensord config --default > site.yaml` writes one)"
+    if data.startswith(MAGIC):
+        return (f"an MCAP log (cmsensord's output), not a configuration: `cmsensord summary` and "
+                f"`cmsensord report` read it; {site}")
+    if is_capture(source):
+        return (f"a capture of the board's serial stream, not a configuration: replay, calibrate and vkf read "
+                f"it (`cmsensord replay {source} --config site.yaml`); {site}")
+    return f"not UTF-8 text (byte offset {start})"
 
 
 class _TooLarge(Exception):

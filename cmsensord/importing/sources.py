@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cmsensord.sinks.mcap_records import is_capture
+
 from .arrays import read_npy, read_npz
 from .channel_names import channel_names, checked_names
 from .columns import Columns
@@ -191,6 +193,9 @@ def _read_by_extension(path: str, opts: ImportOptions, progress: Callable[[float
         return read_tdms(path, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)
         return read_tabular(path, opts.separator, opts.header, _long_text(opts, progress))
+    if is_capture(path):
+        raise ImportFailure(f"{path}: a capture of the board's serial stream already (cmsensord's input): "
+                            f"replay, calibrate and vkf read it as it is (`cmsensord replay {path} --out DIR`)")
     raise ImportFailure(f"{path}: unknown file type {ext or '(no extension)'}, and not a text table of "
                         f"numbers; supported: {', '.join(EXTENSIONS)}")
 

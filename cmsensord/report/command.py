@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from cmsensord.errors import EXIT_USAGE, CmsensordError
-from cmsensord.out_paths import overwritten_input
+from cmsensord.out_paths import out_file_refused, overwritten_input
+from cmsensord.sinks.mcap_records import NOT_MCAP, not_mcap_text
 
 __all__ = ["add_report_parser", "run_report", "MISSING_MATPLOTLIB"]
 
@@ -39,9 +40,9 @@ def run_report(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     from cmsensord.report.reading import log_paths, read_logs
     paths = log_paths(args.logs)
-    same = overwritten_input(args.sub_out, paths)
-    if same:
-        raise CmsensordError(same)
+    refused = overwritten_input(args.sub_out, paths) or out_file_refused(args.sub_out, "report.html")
+    if refused:
+        raise CmsensordError(refused)
     parts = read_logs(paths, sys.stderr)
     _tell_unreadable([f for data in parts for f in data.files], sum(data.messages for data in parts))
     lead = recordings_line(parts)
@@ -95,7 +96,8 @@ def _tell_unreadable(files: list[Any], messages: int) -> None:
             raise CmsensordError(f"{read[0].path}: no complete message in it to report"
                                  + (f" ({read[0].cut})" if read[0].cut else ""))
         more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
-        raise CmsensordError(f"{bad[0].path}: {bad[0].error}{more}")
+        error = not_mcap_text(bad[0].path) if bad[0].error == NOT_MCAP else bad[0].error
+        raise CmsensordError(f"{bad[0].path}: {error}{more}")
     if all(f.messages == f.foreign + f.unreadable for f in read):
         alien = [f for f in read if f.messages]
         more = f" (and {len(alien) - 1} more file(s) like it)" if len(alien) > 1 else ""

@@ -13,6 +13,7 @@ import sys
 import time
 
 from cmsensord.errors import LinkError
+from cmsensord.out_paths import out_file_refused
 from cmsensord.protocol import LinkCounters
 from cmsensord.serial_port import open_port_checked
 from cmsensord.service.signals import StopFlag
@@ -26,6 +27,9 @@ HELD_HINT = ("; stop it first, or, if it is the daemon, use its captures (`cmsen
 def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
     """Capture the bytes of ``port`` to ``out`` until ``duration_s``, a signal, or the port goes
     away; a status line per second says what is being captured, and the last line what was."""
+    refused = out_file_refused(out, "capture.bin")
+    if refused:
+        raise LinkError(refused)
     ser = open_port_checked(port, baud, held_hint=HELD_HINT)    # LinkError, nothing written
     try:
         f = open(out, "wb")

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from cmsensord.errors import EXIT_USAGE, CmsensordError
 from cmsensord.report.localtime import iso_local
 from cmsensord.sinks.log_names import log_paths
+from cmsensord.sinks.mcap_records import not_mcap_text
 from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
 
 if TYPE_CHECKING:
@@ -41,7 +42,7 @@ def summary_of(names: list[str], *, as_json: bool = False) -> int:
 
 
 def _not_mcap(path: str) -> int:
-    print(f"cmsensord: {path}: {NOT_MCAP}", file=sys.stderr)
+    print(f"cmsensord: {path}: {not_mcap_text(path)}", file=sys.stderr)
     return EXIT_USAGE
 
 

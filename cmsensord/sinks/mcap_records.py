@@ -8,6 +8,7 @@ the chunk check and the lenient readers (:mod:`cmsensord.sinks.mcap_read`) walk 
 from __future__ import annotations
 
 import io
+import os
 import struct
 from collections.abc import Iterator
 from typing import Any, BinaryIO
@@ -17,10 +18,34 @@ from mcap.stream_reader import StreamReader
 
 from cmsensord.sinks.mcap_chunks import MAGIC
 
-__all__ = ["NOT_MCAP", "RECORD_LIMIT", "KNOWN_OPCODES", "RecordWalker", "parse_record"]
+__all__ = ["NOT_MCAP", "RECORD_LIMIT", "KNOWN_OPCODES", "RecordWalker", "is_capture", "not_mcap_text", "parse_record"]
 
 #: summarize()'s ``error`` for a file that does not start with the MCAP magic
 NOT_MCAP = "not an MCAP file (bad magic)"
+
+
+def is_capture(path: str | os.PathLike[str]) -> bool:
+    """Whether the file at ``path`` is a capture of the board's serial stream: its first 64 KB hold
+    a frame the decoder takes (False for a file that cannot be read)."""
+    from cmsensord.protocol import Decoder
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(1 << 16)
+    except OSError:
+        return False
+    return bool(Decoder().feed(head))
+
+
+def not_mcap_text(path: str | os.PathLike[str]) -> str:
+    """What a file without the MCAP magic is, for the line that refuses it: :data:`NOT_MCAP`, or,
+    for a capture (:func:`is_capture`), that it is one and the command that makes logs of it."""
+    if not is_capture(path):
+        return NOT_MCAP
+    return (f"a capture of the board's serial stream, not an MCAP log: `cmsensord replay {path} --out DIR` "
+            "processes it into the logs that summary and report read")
+
+
 # A record longer than this in a file we wrote means corruption, not data
 # (chunks are ~1 MiB); reading it would only waste memory.
 RECORD_LIMIT = 256 * 1024 * 1024
