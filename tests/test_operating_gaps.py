@@ -48,6 +48,6 @@ def test_frames_lost_shorter_than_the_tacho_timeout_keep_the_machine_running(tmp
     assert sum(ln.startswith("WARNING frames_lost: ") for ln in lines) == 7, p.stderr
     assert [ln for ln in lines if ln.startswith(("INFO operating_state", "ERROR alarm_", "WARNING alarm_"))] == [
         "INFO operating_state: operating state stopped -> running (speed 1720 rpm)",
-        "ERROR alarm_danger: velocity/ch0: velocity_rms_mm_s 7.891 mm/s (velocity RMS) reached the danger level "
-        "4.5 mm/s",
+        "ERROR alarm_danger: velocity/ch0: velocity_rms_mm_s 7.891 mm/s (velocity RMS, 10-1000 Hz) reached the "
+        "danger level 4.5 mm/s",
     ]
