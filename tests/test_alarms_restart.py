@@ -69,7 +69,7 @@ def test_a_latched_alarm_stays_latched_over_a_restart(tmp_path):
         d = start_daemon(tmp_path, link, config=LATCHED)
         # the healthy board's values do not confirm the danger active at the stop: after its wait
         # (30 s of stream time) the restored level goes, the latch stays
-        row = wait_row(tmp_path, lambda r: r["value"] == 0.0 and "restored" not in r)
+        row = wait_row(tmp_path, lambda r: r.get("value") == 0.0 and "restored" not in r)
         assert (row["level"], row["live"], row["latched"], row["acknowledged"]) == ("danger", "normal", True, False)
         assert row["since"] == before["since"]
         text = run_module("cmsensord", "status", "--config", str(tmp_path / "cmsensord.yaml")).stdout
@@ -107,7 +107,7 @@ def test_an_acknowledged_danger_is_not_raised_again_after_a_restart(tmp_path):
         acked = wait_row(tmp_path, lambda r: r["acknowledged"])
         stop(d)
         d = start_daemon(tmp_path, link, config=PLAIN)
-        row = wait_row(tmp_path, lambda r: r["live"] == "danger")
+        row = wait_row(tmp_path, lambda r: r.get("live") == "danger")
     finally:
         err = stop(d)
         board.terminate()
@@ -283,13 +283,13 @@ def test_a_latched_alarm_acknowledged_while_active_clears_when_the_value_falls_a
     board = start_board("--scenario", "faulty", "--speed", "20", "--link", str(link))
     d = start_daemon(tmp_path, link, config=LATCHED)
     try:
-        wait_row(tmp_path, lambda r: r["live"] == "danger")
+        wait_row(tmp_path, lambda r: r.get("live") == "danger")
         acked = run_module("cmsensord", "ack", "--all", "--config", cfg)
         assert acked.stdout.strip() == "acknowledged 1 alarm(s): sev/ch0", acked.stdout + acked.stderr
         board.terminate()
         board.wait(timeout=5)
         board = start_board("--scenario", "healthy", "--speed", "20", "--link", str(link))
-        row = wait_row(tmp_path, lambda r: r["live"] == "normal")
+        row = wait_row(tmp_path, lambda r: r.get("live") == "normal")
     finally:
         err = stop(d)
         board.terminate()
@@ -367,7 +367,7 @@ def test_a_baseline_alert_saved_without_its_baseline_is_restored_as_the_same_epi
     state.write_text(json.dumps({"format": "cmsensord-alarms", "version": 1, "alarms": {"base/ch0": {
         "rule": "base", "indicator": "accel_rms", "latch": False, "levels": {"alert_x_baseline": 2.0},
         "level": "alert", "live": "alert", "latched": "normal", "acknowledged": False, "since_ns": since}}}))
-    row, err = run_healthy(tmp_path, BASELINE % "0.1", lambda r: r["live"] == "alert")
+    row, err = run_healthy(tmp_path, BASELINE % "0.1", lambda r: r.get("live") == "alert")
     assert lines(err, "alarm_restored") == [
         f"WARNING alarm_restored: base/ch0: alert since {when(since // S)} (not acknowledged), from {state}"]
     assert lines(err, "alarm_alert") == [] and row["since"]["sec"] == since // S
