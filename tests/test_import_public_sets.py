@@ -1,13 +1,14 @@
 """`cmsensord import` of small look-alikes of public bearing data sets' files, run as a newcomer
-runs it: first with no options, then with the ones the line asks for. The elements of an array
-of structs that share a name (Paderborn's) each keep their fields."""
+runs it: first with no options, then with the ones the line asks for. The files do not say their
+rate: the line names the one the data set publishes (CWRU, Paderborn, XJTU-SY, the IMS rig);
+the elements of an array of structs that share a name (Paderborn's) each keep their fields."""
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.io
 
-from tests.test_import import assert_within_one_count, cmd, decode, sidecar
+from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
 
 
 def paderborn_with_rasters(path, seed: int) -> dict:
@@ -48,3 +49,53 @@ def test_elements_of_an_array_of_structs_that_share_a_name_each_keep_their_field
     r = cmd("import", "N15_M07_F10_K001_1.mat", "--variable", "*Time.Data", "--fs", "1600", "--out", "p.bin",
             cwd=tmp_path)
     assert r.returncode == 2 and "--variable *Time.Data: no variable matches it" in r.stderr, r.stderr
+
+
+def test_the_rate_a_public_data_set_publishes_is_named_where_its_files_do_not_carry_it(tmp_path):
+    x = np.round(np.random.default_rng(2).normal(0.0, 0.2, (2, 2400)), 3)
+    scipy.io.savemat(tmp_path / "105.mat", {"X105_DE_time": x[0][:, None], "X105_FE_time": x[1][:, None],
+                                            "X105RPM": np.array([[1797]])})
+    paderborn_with_rasters(tmp_path / "N15_M07_F10_K001_1.mat", 1)
+    (tmp_path / "ims").mkdir()
+    (tmp_path / "ims" / "2004.02.12.10.32.39").write_text("".join(f"{a:.3f}\t{b:.3f}\n" for a, b in x.T))
+    xjtu = tmp_path / "Bearing1_1"
+    xjtu.mkdir()
+    for k in (1, 2, 3):
+        (xjtu / f"{k}.csv").write_text("Horizontal_vibration_signals,Vertical_vibration_signals\n"
+                                       + "".join(f"{a:.3f},{b:.3f}\n" for a, b in x.T[(k - 1) * 512:k * 512]))
+    cases = {
+        ("105.mat", "--variable", "*_DE_time,*_FE_time"):
+            "105.mat: the file does not say its sampling rate; give --fs HZ (named as the CWRU bearing data "
+            "centre's variables: --fs 12000 for its 12k data, --fs 48000 for its 48k data; the page the file "
+            "came from says which)",
+        ("N15_M07_F10_K001_1.mat", "--variable", "*vibration_1.Data,*speed.Data", "--speed-column", "speed.Data"):
+            "N15_M07_F10_K001_1.mat: the file does not say its sampling rate; give --fs HZ (named as the "
+            "Paderborn bearing data centre's signals: --fs 64000, its vibration's and motor currents' rate; its "
+            "speed, torque and force are sampled at 4000 Hz)",
+        ("Bearing1_1",):
+            "Bearing1_1/1.csv: the file does not say its sampling rate; give --fs HZ (named as the XJTU-SY "
+            "bearing data set's columns: --fs 25600, and --snapshot-interval 60 for its one file a minute)",
+        ("ims",):
+            "ims/2004.02.12.10.32.39: the file does not say its sampling rate; give --fs HZ (named as the IMS "
+            "bearing rig's files: --fs 20480)",
+    }
+    for args, message in cases.items():
+        r = cmd("import", *args, "--out", "o.bin", cwd=tmp_path)
+        assert (r.returncode, r.stdout, r.stderr) == (2, "", f"cmsensord import: {message}\n"), args
+    # as the line says: the rate, and the snapshots a minute apart in the recording
+    r = cmd("import", "Bearing1_1", "--fs", "25600", "--snapshot-interval", "60", "--unit", "g", "--keep-dc",
+            "--out", "x.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    meta = sidecar(tmp_path / "x.bin")
+    assert meta["fs"] == 25600 and meta["channel_names"] == ["Horizontal_vibration_signals",
+                                                             "Vertical_vibration_signals"]
+    assert [(s["source"], s["source_time_s"]) for s in meta["snapshots"]] == [("1.csv", 0), ("2.csv", 60),
+                                                                               ("3.csv", 120)]
+    assert_within_one_count(decode(tmp_path / "x.bin"), x[:, :1536] * G)
+    # without --snapshot-interval the files give no times, and the import says so
+    r = cmd("import", "Bearing1_1", "--fs", "25600", "--unit", "g", "--out", "y.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  note: the 3 files carry no times (no time column, no date and time in their names): their "
+            "snapshots lie end to end, the time between them in the recording unknown; --snapshot-interval S "
+            "gives it\n") in r.stderr
+    assert [s["source_time_s"] for s in sidecar(tmp_path / "y.bin")["snapshots"]] == [None, None, None]
