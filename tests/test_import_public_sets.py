@@ -99,3 +99,21 @@ def test_the_rate_a_public_data_set_publishes_is_named_where_its_files_do_not_ca
             "snapshots lie end to end, the time between them in the recording unknown; --snapshot-interval S "
             "gives it\n") in r.stderr
     assert [s["source_time_s"] for s in sidecar(tmp_path / "y.bin")["snapshots"]] == [None, None, None]
+
+
+def test_a_structs_rate_beside_its_sampling_rate_is_the_shaft_speed_in_hz(tmp_path):
+    """MFPT's bearing files hold the shaft's speed in Hz as ``bearing.rate`` beside the sampling
+    rate ``bearing.sr``: the capture's speed is 60 x it, said; --rpm gives another, no note."""
+    gs = np.round(np.random.default_rng(3).normal(0.0, 1.0, 4883), 4)
+    scipy.io.savemat(tmp_path / "OuterRaceFault_1.mat", {"bearing": {"sr": 48828, "gs": gs[:, None], "load": 270,
+                                                                     "rate": 25}})
+    r = cmd("import", "OuterRaceFault_1.mat", "--unit", "g", "--out", "m.bin", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert ("  speed: 1500 rpm from OuterRaceFault_1.mat (no TACHO frames: replay takes it as indicators.rpm; "
+            "--rpm 1500 also sends TACHO frames)\n  note: bearing.rate 25 beside the sampling rate bearing.sr: taken "
+            "as the shaft's speed in Hz, 1500 rpm (the MFPT bearing files' layout); --rpm gives another\n") in r.stderr
+    meta = sidecar(tmp_path / "m.bin")
+    assert (meta["fs"], meta["rpm"], meta["rpm_source"]) == (48828, 1500.0, "OuterRaceFault_1.mat")
+    r = cmd("import", "OuterRaceFault_1.mat", "--unit", "g", "--rpm", "1480", "--out", "n.bin", cwd=tmp_path)
+    assert r.returncode == 0 and "bearing.rate" not in r.stderr, r.stderr
+    assert sidecar(tmp_path / "n.bin")["rpm"] == 1480.0

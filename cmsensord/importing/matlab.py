@@ -3,7 +3,8 @@
 Without ``--variable`` the one numeric variable with at least two elements is
 the data; a struct's fields are variables ``struct.field``; scalars named like a
 sampling rate (``fs``, ``Fs``, ``sample_rate``, ``sr``) or a speed (``rpm``,
-``X097RPM``) are read as such (:mod:`.variables`, also for ``--variable A,B``
+``X097RPM``; a struct's ``rate`` beside its ``sr``, the shaft's Hz as MFPT's) are read as
+such (:mod:`.variables`, also for ``--variable A,B``
 and patterns such as ``*_DE_time``). v7.3 files are HDF5, which scipy does not
 read: with the optional ``mat73`` extra (h5py) their numeric variables and structs' fields
 are read as loadmat would give the same variables of a v7 file (MATLAB stores them
@@ -17,14 +18,15 @@ import zlib
 
 from .errors import ImportFailure
 from .table import FS_KEYS, Table
-from .variables import flatten, rpm_named, scalar_named, selected
+from .variables import flatten, rpm_named, scalar_named, selected, shaft_rate
 
 __all__ = ["read_mat"]
 
 
-def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = None) -> Table:
+def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = None, rpm_given: bool = False) -> Table:
     """The variables ``variable`` of a .mat file side by side (``slow``: the speed column,
-    :func:`~.variables.selected`), and the rate and speed it names."""
+    :func:`~.variables.selected`), and the rate and speed it names (a speed read from a struct's
+    ``rate`` with a note, unless ``rpm_given``: ``--rpm`` gives it)."""
     import scipy.io  # 0.3 s to import: only when a .mat file is read
 
     try:
@@ -38,8 +40,16 @@ def read_mat(path: str, variable: tuple[str, ...] | None, slow: str | None = Non
         raise ImportFailure(f"{path}: not a readable MATLAB file ({' '.join(str(exc).split())})") from None
     arrays = flatten({k: v for k, v in m.items() if not k.startswith("__")})
     data, columns, note = selected(path, arrays, variable, "--variable", "variable", slow)
+    fs_keys = tuple(k.lower() for k in FS_KEYS)
+    rpm = rpm_named(arrays, path)
+    if rpm is None and (shaft := shaft_rate(arrays, fs_keys)) is not None:
+        name, hz, sr = shaft
+        rpm = 60.0 * hz
+        said = (f"{name} {hz:g} beside the sampling rate {sr}: taken as the shaft's speed in Hz, {rpm:g} rpm "
+                "(the MFPT bearing files' layout); --rpm gives another")
+        note = note if rpm_given else f"{note}; {said}" if note else said
     return Table(path=path, data=data, columns=columns, kind="column", layout_note=note,
-                 fs=scalar_named(arrays, tuple(k.lower() for k in FS_KEYS)), rpm=rpm_named(arrays, path))
+                 fs=scalar_named(arrays, fs_keys), rpm=rpm)
 
 
 def _read_v73(path: str) -> dict:

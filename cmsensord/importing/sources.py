@@ -187,7 +187,7 @@ def _read_by_extension(path: str, opts: ImportOptions, progress: Callable[[float
     if ext == ".npz":
         return read_npz(path, opts.array, opts.speed_column)
     if ext == ".mat":
-        return read_mat(path, opts.variable, opts.speed_column)
+        return read_mat(path, opts.variable, opts.speed_column, opts.rpm is not None)
     if ext == ".tdms":
         return read_tdms(path, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)

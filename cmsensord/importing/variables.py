@@ -17,7 +17,8 @@
   bearing files hold ``bearing.gs``, the signal, and ``bearing.sr``, its rate), an array of
   structs' ``struct.NAME.field`` (Paderborn: ``'*vibration_1.Data'``).
 * Scalars (:func:`scalar_named`) are found by the last part of their name; the speed also
-  by a name that ends in ``rpm`` (CWRU: ``X097RPM``).
+  by a name that ends in ``rpm`` (CWRU: ``X097RPM``), or as a struct's ``rate`` in Hz beside
+  its sampling rate (MFPT: ``bearing.rate``, :func:`shaft_rate`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import numpy as np
 from .errors import ImportFailure
 from .table import RPM_KEYS, as_snapshot_array
 
-__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "selected", "stretched"]
+__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "shaft_rate", "selected", "stretched"]
 
 #: how deep :func:`flatten` looks into structs within structs
 MAX_DEPTH = 3
@@ -88,6 +89,23 @@ def rpm_named(arrays: dict, path: str = "") -> float | None:
     named = [k for k in arrays if k.rsplit(".", 1)[-1].lower().endswith("rpm")]
     own = _of_the_file(path, named) if len(named) > 1 else []
     return _scalar({k: arrays[k] for k in own or named}, lambda name: True)
+
+
+def shaft_rate(arrays: dict, fs_keys: tuple[str, ...]) -> tuple[str, float, str] | None:
+    """(its name, its value in Hz, the sampling rate's name) of a scalar named ``rate`` in a
+    struct that also holds the sampling rate, a positive number below half that rate: the
+    shaft's speed in Hz, as the MFPT bearing files hold it (``bearing.rate`` 25 beside
+    ``bearing.sr`` 97656); else None."""
+    for name, v in arrays.items():
+        head, _, last = name.rpartition(".")
+        if last.lower() != "rate" or not head:
+            continue
+        sr = next((k for k in arrays if k.rpartition(".")[0] == head and k.rpartition(".")[2].lower() in fs_keys),
+                  None)
+        hz, fs = _scalar({name: v}, lambda _: True), _scalar({sr: arrays[sr]}, lambda _: True) if sr else None
+        if hz is not None and fs is not None and 0 < hz < fs / 2:
+            return name, hz, str(sr)
+    return None
 
 
 def _scalar(arrays: dict, match) -> float | None:
