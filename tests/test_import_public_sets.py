@@ -6,6 +6,7 @@ the elements of an array of structs that share a name (Paderborn's) each keep th
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.io
 
 from tests.test_import import G, assert_within_one_count, cmd, decode, sidecar
@@ -117,3 +118,51 @@ def test_a_structs_rate_beside_its_sampling_rate_is_the_shaft_speed_in_hz(tmp_pa
     r = cmd("import", "OuterRaceFault_1.mat", "--unit", "g", "--rpm", "1480", "--out", "n.bin", cwd=tmp_path)
     assert r.returncode == 0 and "bearing.rate" not in r.stderr, r.stderr
     assert sidecar(tmp_path / "n.bin")["rpm"] == 1480.0
+
+
+def paderborn_v73(path, signals: dict) -> None:
+    """A Paderborn-like file as MATLAB saves it with -v7.3: the struct named after the file, its
+    Y an array of structs whose fields (Name, Data) hold references to each element's value
+    (text as uint16 characters), each array stored transposed."""
+    h5py = pytest.importorskip("h5py", reason="the mat73 extra")
+    with h5py.File(path, "w", userblock_size=512) as f:
+        refs = f.create_group("#refs#")
+        top = f.create_group(path.stem)
+        top.attrs["MATLAB_class"] = np.bytes_("struct")
+        y = top.create_group("Y")
+        y.attrs["MATLAB_class"] = np.bytes_("struct")
+        fields = {k: y.create_dataset(k, (len(signals), 1), dtype=h5py.ref_dtype) for k in ("Name", "Data")}
+        for i, (name, data) in enumerate(signals.items()):
+            text = refs.create_dataset(f"n{i}", data=np.array([[ord(c) for c in name]], dtype=np.uint16).T)
+            text.attrs["MATLAB_class"] = np.bytes_("char")
+            values = refs.create_dataset(f"d{i}", data=data[None, :].T)
+            values.attrs["MATLAB_class"] = np.bytes_("double")
+            fields["Name"][i, 0], fields["Data"][i, 0] = text.ref, values.ref
+    head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 30 08:00:00 2026 HDF5 schema 1.00 ."
+    with open(path, "r+b") as f:
+        f.write(head.ljust(116, b" ") + b"\0" * 8 + b"\x00\x02IM")
+
+
+def test_an_array_of_structs_in_a_matlab_v73_file_imports_as_its_v7_copy(tmp_path):
+    rng = np.random.default_rng(8)
+    signals = {"speed": 1500.0 + rng.normal(0.0, 1.0, 100), "vibration_1": np.round(rng.normal(0.0, 1.0, 1600), 4)}
+    (tmp_path / "v5").mkdir()
+    (tmp_path / "v73").mkdir()
+    y = np.zeros((1, 2), dtype=[("Name", "O"), ("Data", "O")])
+    for i, (name, data) in enumerate(signals.items()):
+        y[0, i] = (name, data[None, :])
+    top = np.zeros((1, 1), dtype=[("Y", "O")])
+    top[0, 0] = (y,)
+    scipy.io.savemat(tmp_path / "v5" / "N15_M07_F10_K001_1.mat", {"N15_M07_F10_K001_1": top})
+    paderborn_v73(tmp_path / "v73" / "N15_M07_F10_K001_1.mat", signals)
+    r = cmd("import", "v73", "--out", "p.bin", cwd=tmp_path)
+    assert (r.returncode, r.stderr) == (2, (
+        "cmsensord import: v73/N15_M07_F10_K001_1.mat: several variables to import (variables: "
+        "N15_M07_F10_K001_1.Y.speed.Data (1, 100), N15_M07_F10_K001_1.Y.vibration_1.Data (1, 1600); 2 of text or "
+        "other types not listed); choose one with --variable (several: --variable A,B)\n")), r.stderr
+    for name in ("v5", "v73"):
+        r = cmd("import", name, "--variable", "*vibration_1.Data,*speed.Data", "--speed-column", "speed.Data",
+                "--fs", "1600", "--unit", "g", "--out", f"{name}.bin", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+    assert (tmp_path / "v5.bin").read_bytes() == (tmp_path / "v73.bin").read_bytes()
+    assert sidecar(tmp_path / "v73.bin")["tacho_edges"] > 0
