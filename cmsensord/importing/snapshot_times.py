@@ -4,7 +4,8 @@ In order of precedence: every ``--snapshot-interval``; the files' time columns
 (:mod:`.time_column`: times of day, or dates and times), counted from the first snapshot;
 the dates and times in the files' names (:mod:`.name_times`) when no file gave its own;
 else the times the files gave (an archive's ``t_s``), or none. Each source but the interval
-leaves a note that says where the times came from and their span.
+leaves a note that says where the times came from and their span; several files with none
+leave a note that says so and which option gives them.
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ def retimed(snaps: list[Snapshot], origins: list[tuple[int, int]], files: list[s
         return _from_clock(snaps, origins, fs, notes, clock == "date")
     named = None if own_times else times_from_names(files)
     if named is None:
+        if not own_times and len(files) > 1:
+            notes.append(f"the {len(files)} files carry no times (no time column, no date and time in their "
+                         "names): their snapshots lie end to end, the time between them in the recording "
+                         "unknown; --snapshot-interval S gives it")
         return snaps, None
     notes.append(named.note())
     return [Snapshot(s.source, s.start, s.length, named.seconds[fi] + a / fs)

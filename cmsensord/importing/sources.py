@@ -33,6 +33,7 @@ from .arrays import read_npy, read_npz
 from .channel_names import channel_names, checked_names
 from .columns import Columns
 from .errors import ImportFailure
+from .known_sets import rate_hint
 from .matlab import read_mat
 from .options import ImportOptions
 from .recording import Recording, Snapshot
@@ -188,7 +189,7 @@ def _read_by_extension(path: str, opts: ImportOptions, progress: Callable[[float
     if ext == ".npz":
         return read_npz(path, opts.array, opts.speed_column)
     if ext == ".mat":
-        return read_mat(path, opts.variable, opts.speed_column)
+        return read_mat(path, opts.variable, opts.speed_column, opts.rpm is not None)
     if ext == ".tdms":
         return read_tdms(path, opts.speed_column)
     if is_text_table(path):                 # a text table under another name (IMS: a date and time)
@@ -252,7 +253,8 @@ class _Layout:
         fs = opts.fs if opts.fs is not None else t.fs
         if fs is None:
             why = f": {t.time_note}" if t.time_note else ""
-            raise ImportFailure(f"{t.path}: the file does not say its sampling rate{why}; give --fs HZ")
+            raise ImportFailure(f"{t.path}: the file does not say its sampling rate{why}; give --fs HZ"
+                                f"{rate_hint(t.path, [t.columns[i] for i in self.idx])}")
         self.fs: float = fs
         self.file_fs = t.fs
         said = [(t.columns[i], unit_of(t.units[i]) if t.units else unit_in_name(t.columns[i])) for i in self.idx]

@@ -17,7 +17,8 @@
   bearing files hold ``bearing.gs``, the signal, and ``bearing.sr``, its rate), an array of
   structs' ``struct.NAME.field`` (Paderborn: ``'*vibration_1.Data'``).
 * Scalars (:func:`scalar_named`) are found by the last part of their name; the speed also
-  by a name that ends in ``rpm`` (CWRU: ``X097RPM``).
+  by a name that ends in ``rpm`` (CWRU: ``X097RPM``), or as a struct's ``rate`` in Hz beside
+  its sampling rate (MFPT: ``bearing.rate``, :func:`shaft_rate`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import numpy as np
 from .errors import ImportFailure
 from .table import RPM_KEYS, as_snapshot_array
 
-__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "selected", "stretched"]
+__all__ = ["flatten", "pick_data", "scalar_named", "rpm_named", "shaft_rate", "selected", "stretched"]
 
 #: how deep :func:`flatten` looks into structs within structs
 MAX_DEPTH = 3
@@ -41,7 +42,9 @@ def flatten(arrays: dict, depth: int = MAX_DEPTH) -> dict:
     """``arrays`` with each MATLAB struct (a record array, as ``scipy.io.loadmat`` returns it)
     replaced by its fields: ``struct.field`` for a 1 x 1 struct; for an array of structs,
     ``struct.LABEL.field``, LABEL the element's ``Name`` field where it holds one word (the
-    Paderborn bearing files: ``...Y.vibration_1.Data``), else ``[i]``."""
+    Paderborn bearing files: ``...Y.vibration_1.Data``), followed by ``_i`` where other
+    elements hold the same word, so that no element's fields hide another's (``X.Time_0``,
+    ``X.Time_1``); else ``[i]``; ``i`` the element's index from 0."""
     out: dict = {}
     for name, v in arrays.items():
         names = getattr(getattr(v, "dtype", None), "names", None)
@@ -49,8 +52,11 @@ def flatten(arrays: dict, depth: int = MAX_DEPTH) -> dict:
             out[name] = v
             continue
         recs = v.reshape(-1)
-        for i, rec in enumerate(recs):
-            at = name if recs.size == 1 else f"{name}.{_label(rec, names, i)}"
+        labels = [_label(rec, names, i) for i, rec in enumerate(recs)]
+        labels = [lab if labels.count(lab) == 1 or lab.startswith("[") else f"{lab}_{i}"
+                  for i, lab in enumerate(labels)]
+        for lab, rec in zip(labels, recs):
+            at = name if recs.size == 1 else f"{name}.{lab}"
             out.update(flatten({f"{at}.{f}": rec[f] for f in names}, depth - 1))
     return out
 
@@ -85,6 +91,23 @@ def rpm_named(arrays: dict, path: str = "") -> float | None:
     return _scalar({k: arrays[k] for k in own or named}, lambda name: True)
 
 
+def shaft_rate(arrays: dict, fs_keys: tuple[str, ...]) -> tuple[str, float, str] | None:
+    """(its name, its value in Hz, the sampling rate's name) of a scalar named ``rate`` in a
+    struct that also holds the sampling rate, a positive number below half that rate: the
+    shaft's speed in Hz, as the MFPT bearing files hold it (``bearing.rate`` 25 beside
+    ``bearing.sr`` 97656); else None."""
+    for name, v in arrays.items():
+        head, _, last = name.rpartition(".")
+        if last.lower() != "rate" or not head:
+            continue
+        sr = next((k for k in arrays if k.rpartition(".")[0] == head and k.rpartition(".")[2].lower() in fs_keys),
+                  None)
+        hz, fs = _scalar({name: v}, lambda _: True), _scalar({sr: arrays[sr]}, lambda _: True) if sr else None
+        if hz is not None and fs is not None and 0 < hz < fs / 2:
+            return name, hz, str(sr)
+    return None
+
+
 def _scalar(arrays: dict, match) -> float | None:
     for name, v in arrays.items():
         if match(name.rsplit(".", 1)[-1].lower()):
@@ -94,8 +117,12 @@ def _scalar(arrays: dict, match) -> float | None:
     return None
 
 
-def _listing(arrays: dict) -> str:
-    return ", ".join(f"{k} {tuple(np.shape(v))}" for k, v in arrays.items()) or "none"
+def _listing(arrays: dict, shapes: bool = True) -> str:
+    """The numeric arrays' names (and shapes); the others (a struct's text fields) counted."""
+    numeric = [f"{k} {tuple(np.shape(v))}" if shapes else k for k, v in arrays.items() if _numeric(v)]
+    other = len(arrays) - len(numeric)
+    return ", ".join(numeric) + (f"{'; ' if numeric else ''}{other} of text or other types not listed" if other
+                                 else "" if numeric else "none")
 
 
 def pick_data(path: str, arrays: dict, option: str, what: str) -> str:
@@ -116,14 +143,14 @@ def _one(path: str, arrays: dict, item: str, option: str, what: str) -> tuple[st
     if item in arrays:
         return item, item
     if not any(c in item for c in "*?["):
-        raise ImportFailure(f"{path}: no {what} {item!r} ({what}s: {', '.join(arrays) or 'none'}); "
+        raise ImportFailure(f"{path}: no {what} {item!r} ({what}s: {_listing(arrays, False)}); "
                             f"use {option}")
     hits = [k for k in arrays if fnmatch.fnmatchcase(k, item)]
     if len(hits) > 1:
         hits = _of_the_file(path, hits) or hits
     if len(hits) != 1:
         found = f"{len(hits)} {what}s match it ({', '.join(hits)})" if hits else f"no {what} matches it"
-        raise ImportFailure(f"{path}: {option} {item}: {found} ({what}s: {', '.join(arrays)}); "
+        raise ImportFailure(f"{path}: {option} {item}: {found} ({what}s: {_listing(arrays, False)}); "
                             "give a pattern that matches one")
     return hits[0], re.sub(r"[*?]|\[[^]]*\]", "", item).strip("_.") or "data"
 
