@@ -14,7 +14,6 @@ import dataclasses
 import json
 import math
 import os
-import stat
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,11 +32,11 @@ from cmsensord.config.alarm_indicators import indicator_names
 from cmsensord.config.channel_refs import channel_refs_error
 from cmsensord.config.settings import MAX_DECISION_PERIOD_S, decision_period_for
 from cmsensord.dsp.commissioning import MARGIN, SPAN, STOPPED_SHARE, HealthyModel, learn_healthy
-from cmsensord.errors import CmsensordError, file_kind
+from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.monitor.alarms import order_rules
 from cmsensord.observations import Observations, alarm_events, read_observations, sidecar
-from cmsensord.out_paths import overwritten_input, with_sidecars
+from cmsensord.out_paths import not_a_file, overwritten_input, with_sidecars
 from cmsensord.service.origin import delay_lines, origin_lines, span_line
 
 __all__ = ["ChannelResult", "add_calibrate_parser", "alarm_lines", "calibrate", "format_table", "run_calibrate",
@@ -345,13 +344,9 @@ def _writable_out(out: Path) -> Path:
     a special file (a device or FIFO there would be replaced by the site file)."""
     if out.is_dir():
         raise CmsensordError(f"calibrate: {out}: is a directory; give --out a file name, e.g. {out / 'site.yaml'}")
-    try:
-        mode = os.stat(out).st_mode
-    except OSError:                         # not there (or not to be looked at): the write says why
-        mode = stat.S_IFREG
-    if not stat.S_ISREG(mode):
-        raise CmsensordError(f"calibrate: {out}: is a {file_kind(mode)}, not a regular file: the site file would "
-                             "replace it; give --out a file name")
+    special = not_a_file(out, "the site file")
+    if special:
+        raise CmsensordError(f"calibrate: {special}")
     if not out.parent.is_dir():
         raise CmsensordError(f"calibrate: {out}: cannot write the site file: no directory {out.parent}")
     return out

@@ -11,7 +11,7 @@ from collections.abc import Iterable
 
 from cmsensord.errors import file_kind
 
-__all__ = ["capture_refused", "overwritten_input", "with_sidecars"]
+__all__ = ["capture_refused", "not_a_file", "overwritten_input", "with_sidecars"]
 
 
 def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike],
@@ -27,6 +27,19 @@ def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike
             return (f"{out}: is the input {src}: writing it would destroy it; give {option} another "
                     "file name")
     return None
+
+
+def not_a_file(out: str | os.PathLike, what: str) -> str | None:
+    """One line saying that ``out`` is there and no regular file (a device, a FIFO; a directory is
+    the caller's), which ``what``, written beside it and renamed over it, would replace; None
+    when it is a regular file or not there."""
+    try:
+        mode = os.stat(out).st_mode
+    except OSError:                         # not there (or not to be looked at): the write says why
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return f"{out}: is a {file_kind(mode)}, not a regular file: {what} would replace it; give --out a file name"
 
 
 def capture_refused(path: str, inputs: Iterable[str | os.PathLike]) -> str | None:
