@@ -37,7 +37,7 @@ from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.monitor.alarms import order_rules
 from cmsensord.observations import Observations, alarm_events, read_observations, sidecar
-from cmsensord.out_paths import overwritten_input, with_sidecars
+from cmsensord.out_paths import not_a_file, overwritten_input, with_sidecars
 from cmsensord.service.origin import delay_lines, origin_lines, span_line
 
 __all__ = ["ChannelResult", "add_calibrate_parser", "alarm_lines", "calibrate", "format_table", "run_calibrate",
@@ -345,9 +345,13 @@ def add_calibrate_parser(sub) -> argparse.ArgumentParser:
 
 
 def _writable_out(out: Path) -> Path:
-    """``--out`` checked before the capture is read: a file name in a directory that exists."""
+    """``--out`` checked before the capture is read: a file name in a directory that exists, not
+    a special file (a device or FIFO there would be replaced by the site file)."""
     if out.is_dir():
         raise CmsensordError(f"calibrate: {out}: is a directory; give --out a file name, e.g. {out / 'site.yaml'}")
+    special = not_a_file(out, "the site file")
+    if special:
+        raise CmsensordError(f"calibrate: {special}")
     if not out.parent.is_dir():
         raise CmsensordError(f"calibrate: {out}: cannot write the site file: no directory {out.parent}")
     return out

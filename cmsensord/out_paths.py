@@ -1,8 +1,9 @@
 """An ``--out`` that names one of the command's own inputs is refused before anything is read:
 writing it would destroy the input (an import over its WAV, a report over its log); so is a
 daemon's ``--capture`` that names its configuration, or a file that is no regular file (the
-port's bytes appended to a device), and an ``--out`` file that cannot be made where it is named
-(a directory given, or a directory that does not exist)."""
+port's bytes appended to a device), an ``--out`` file that cannot be made where it is named
+(a directory given, or a directory that does not exist), and one that is a device or a FIFO
+(a file written beside it and renamed over it would replace it)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 
 from cmsensord.errors import file_kind
 
-__all__ = ["capture_refused", "out_file_refused", "overwritten_input", "with_sidecars"]
+__all__ = ["capture_refused", "not_a_file", "out_file_refused", "overwritten_input", "with_sidecars"]
 
 
 def overwritten_input(out: str | os.PathLike, inputs: Iterable[str | os.PathLike],
@@ -41,6 +42,19 @@ def out_file_refused(out: str | os.PathLike, example: str, option: str = "--out"
     if not path.parent.is_dir():
         return f"{out}: no directory {path.parent}: give {option} a file in a directory that exists"
     return None
+
+
+def not_a_file(out: str | os.PathLike, what: str) -> str | None:
+    """One line saying that ``out`` is there and no regular file (a device, a FIFO; a directory is
+    the caller's), which ``what``, written beside it and renamed over it, would replace; None
+    when it is a regular file or not there."""
+    try:
+        mode = os.stat(out).st_mode
+    except OSError:                         # not there (or not to be looked at): the write says why
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return f"{out}: is a {file_kind(mode)}, not a regular file: {what} would replace it; give --out a file name"
 
 
 def capture_refused(path: str, inputs: Iterable[str | os.PathLike]) -> str | None:

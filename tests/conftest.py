@@ -81,6 +81,7 @@ PROCESS_MODULES = frozenset({
     "test_capture_not_mcap.py",
     "test_interrupted.py",
     "test_cli_options.py",
+    "test_operator_answers.py",
 })
 
 #: Tests that start processes or open ptys, in modules of fast unit tests ("module::function").

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -133,6 +135,19 @@ def test_calibrate_to_an_output_it_cannot_write_is_one_line_before_the_read(tmp_
     assert p.returncode == 2
     assert p.stderr.strip() == line.format(tmp=tmp_path)
     assert sorted(tmp_path.iterdir()) == []
+
+
+def test_calibrate_to_a_fifo_leaves_it_and_is_one_line(tmp_path):
+    """--out naming a FIFO (or a device: /dev/full, as root) is refused before the capture is read:
+    the site file written beside it and renamed over it replaced it with a regular file."""
+    cap = tmp_path / "cap.bin"
+    assert run("firmware_sim", "--scenario", "healthy", "--duration", "5", "--out", str(cap)).returncode == 0
+    out = tmp_path / "site.yaml"
+    os.mkfifo(out)
+    p = run("cmsensord", "calibrate", str(cap), "--out", str(out))
+    assert (p.returncode, p.stderr) == (2, f"cmsensord: calibrate: {out}: is a FIFO, not a regular file: the site "
+                                           "file would replace it; give --out a file name\n")
+    assert stat.S_ISFIFO(os.lstat(out).st_mode)
 
 
 def test_calibrate_when_the_site_file_cannot_be_written_is_one_line(degrading):

@@ -118,6 +118,19 @@ def test_record_captures_the_bytes_of_a_port(tmp_path):
         assert counters.crc_failures == 0 and counters.frames_lost == 0
 
 
+def test_record_onto_a_full_disk_says_so_and_exits_1(tmp_path):
+    """`record --out /dev/full` (every write: no space left): the error said once as it happens
+    and in the last line, exit 1 (the buffered bytes' write at the file's close raised a traceback)."""
+    with board_on_pty("--scenario", "healthy", "--speed", "10", "--duration", "60") as port:
+        r = cmsensord("record", "--port", port, "--out", "/dev/full", "--duration", "1.5")
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    lines = r.stderr.splitlines()
+    assert lines[-2] == "cmsensord record: capture file: No space left on device; stopping", r.stderr
+    assert lines[-1].startswith("capture: /dev/full (") and lines[-1].endswith(
+        "); incomplete: capture file: No space left on device (the bytes before it are in the file; free space "
+        "or give another --out, and record again)"), r.stderr
+
+
 def test_daemon_runs_on_the_configured_port_and_follows_the_board(tmp_path):
     """`cmsensord --config FILE` on a board's pty: channels from the board, clean SIGTERM."""
     with board_on_pty("--scenario", "faulty", "--channels", "3", "--speed", "10") as port:

@@ -5,7 +5,9 @@ silent, and a user's mistakes are one-line errors that leave nothing behind."""
 from __future__ import annotations
 
 import json
+import os
 import re
+import stat
 import subprocess
 import sys
 import wave
@@ -451,3 +453,16 @@ def test_a_rate_or_speed_in_the_file_that_is_not_a_number(tmp_path):
     assert run(tmp_path / "inf.npz", "--out", tmp_path / "o.bin") == 0
     meta = json.loads((tmp_path / "o.bin.json").read_text(), parse_constant=lambda word: word + " in the sidecar")
     assert (meta["rpm"], meta["rpm_source"]) == (None, None)
+
+
+def test_an_out_that_is_a_fifo_is_left_and_said_in_one_line(tmp_path):
+    """--out naming a FIFO (or a device: /dev/full, as root) is refused before the recording is read:
+    the capture written beside it and renamed over it replaced it with a regular file."""
+    wav = tmp_path / "a.wav"
+    wavfile.write(wav, 25_000, (signal(25_000, 1)[0] * 1000).astype(np.int16))
+    out = tmp_path / "cap.bin"
+    os.mkfifo(out)
+    p = cmd("import", str(wav), "--out", str(out), cwd=tmp_path)
+    assert (p.returncode, p.stderr) == (2, f"cmsensord import: {out}: is a FIFO, not a regular file: the capture "
+                                           "would replace it; give --out a file name\n")
+    assert stat.S_ISFIFO(os.lstat(out).st_mode) and not (tmp_path / "cap.bin.json").exists()

@@ -186,6 +186,13 @@ def test_missing_log_is_one_line(tmp_path):
     assert p.stderr.strip() == f"cmsensord: {tmp_path}: no MCAP logs (*.mcap, *.mcap.part) in this directory"
 
 
+def test_a_report_onto_a_full_disk_names_its_file(logs):
+    """/dev/full (every write: no space left): the line names the page (a write error of a full
+    disk carries no file name: it said 'None: cannot write')."""
+    p = cmsensord("report", str(logs["faulty_raw"]), "--out", "/dev/full")
+    assert (p.returncode, p.stderr) == (2, "cmsensord: /dev/full: cannot write: No space left on device\n")
+
+
 def test_a_file_that_is_not_mcap_is_one_line_and_no_report(tmp_path):
     junk = tmp_path / "song.wav"
     junk.write_bytes(b"RIFF" + bytes(range(256)) * 8)

@@ -4,13 +4,16 @@ edges at one instant is said as bad input and leaves the speed of the tacho afte
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cmsensord.protocol import MODE_RAW, Status, encode_raw, encode_status, encode_tacho
 from cmsensord.sinks.mcap_read import read_messages
-from processes import peak_rss_mb
+from processes import ENV, peak_rss_mb
 
 L = 250
 
@@ -95,3 +98,47 @@ def test_the_pulses_of_dropped_frames_are_no_missed_pulses(tmp_path):
     assert "decode_error 5" in line and "tacho_missed_pulse" not in line, line
     speeds = [round(m["speed_rpm"]) for m in ind]
     assert speeds[:3] + speeds[4:] == [1500] * 9 and abs(speeds[3] - 1500) < 100, speeds   # 3 s: the dropped
+
+
+@pytest.mark.process
+def test_a_second_of_noise_on_the_tacho_line_is_said_as_it_was(tmp_path):
+    """1 s of 1023 edges a block at random offsets (noise on the tacho input) between 2 s of a
+    3000-rpm tacho on each side, through `cmsensord replay`: the edges are said as they were,
+    missed and extra pulses, and the replay ends."""
+    cap = capture(tmp_path / "noise.bin", noisy_second(), ppr=1)
+    run = subprocess.run([sys.executable, "-m", "cmsensord", "replay", str(cap), "--out", str(tmp_path / "out")],
+                         capture_output=True, text=True, env=ENV, timeout=120)
+    assert run.returncode == 0 and "Traceback" not in run.stderr, run.stderr
+    (line,) = [x.strip() for x in run.stderr.splitlines() if x.strip().startswith("events:")]
+    assert line == "events: config 2, decision_rule 2, tacho_extra_pulse 7997, tacho_missed_pulse 15734", line
+
+
+def noisy_second() -> list[np.ndarray]:
+    """2 s of a 3000-rpm tacho (ppr 1), 1 s of 1023 edges a block at random offsets, 2 s of it again."""
+    rng = np.random.default_rng(0)
+    normal = [np.array([12 * 256 + 128]) if b % 2 == 0 else np.zeros(0) for b in range(100)]
+    noise = [np.sort(rng.integers(0, L * 256, 1023)) for _ in range(100)]
+    return normal * 2 + noise + normal * 2
+
+
+def test_edges_that_are_not_regular_cost_a_bounded_look_ahead_each(tmp_path, monkeypatch, capsys):
+    """The same noisy second through `cmsensord replay` (in this process): the one-pass checks of
+    regular edges look at a bounded number of edges per edge (each looked at every edge of the
+    batch still to come after each edge that was not regular: quadratic, 20 s of processor time
+    for this second, 80 s for two; a daemon behind takes larger batches and fell further behind)."""
+    from cmsensord.cli import main
+    from cmsensord.dsp.tacho import edges
+
+    looked = []
+    plain = edges.regular_prefix
+
+    def counted(st, q, *args):
+        looked.append(len(q))
+        return plain(st, q, *args)
+
+    monkeypatch.setattr(edges, "regular_prefix", counted)
+    tacho = noisy_second()
+    cap = capture(tmp_path / "noise.bin", tacho, ppr=1)
+    assert main(["replay", str(cap), "--out", str(tmp_path / "out")]) == 0
+    n = sum(len(e) for e in tacho)
+    assert looked and sum(looked) <= (edges.SPAN_START + 2) * n, (sum(looked), n)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from cmsensord.argtypes import comma_list, count, nonnegative, nonzero, positive, real
 from cmsensord.errors import EXIT_INTERRUPTED, EXIT_USAGE
-from cmsensord.out_paths import overwritten_input
+from cmsensord.out_paths import not_a_file, overwritten_input
 from cmsensord.terminal_bar import Bar
 
 from .adc import ADC_MAX, OFFSET, nice_range
@@ -252,7 +252,7 @@ def _run(opts: ImportOptions, srcs: list[str], globs: list[str]) -> int:
     if Path(opts.out).is_dir():
         raise ImportFailure(f"{opts.out}: is a directory; give --out a file name, e.g. "
                             f"{Path(opts.out) / 'capture.bin'}")
-    same = overwritten_input(opts.out, files)
+    same = overwritten_input(opts.out, files) or not_a_file(opts.out, "the capture")
     if same:
         raise ImportFailure(same)
     bar = Bar(len(files), f"import: reading {len(files)} file(s)")

@@ -51,15 +51,17 @@ def run_report(args: argparse.Namespace) -> int:
     drawn = [(data, _draw(data)) for data in parts]
     from cmsensord.report.html_page import render_page
     out = Path(args.sub_out)
+    writing = out                           # the file a write error is of (a full disk's names none)
     try:
         out.write_text(render_page(drawn, args.title or _title(parts), lead), encoding="utf-8")
         if args.png:
             png_dir = Path(args.png)
             png_dir.mkdir(parents=True, exist_ok=True)
             for fig in (fig for _, sections in drawn for _, figs in sections for fig in figs):
-                (png_dir / f"{fig.meta['id']}.png").write_bytes(fig.png)
+                writing = png_dir / f"{fig.meta['id']}.png"
+                writing.write_bytes(fig.png)
     except OSError as err:
-        raise CmsensordError(f"{err.filename}: cannot write: {err.strerror}") from None
+        raise CmsensordError(f"{err.filename or writing}: cannot write: {err.strerror or err}") from None
     n = sum(len(figs) for _, sections in drawn for _, figs in sections)
     read = sum(f.left_out is None for data in parts for f in data.files)
     messages = sum(data.messages for data in parts)

@@ -50,6 +50,8 @@ REPLY_S = 5.0
 MAX_REQUEST = MAX_CONFIG_BYTES + 4096
 #: connections served at once
 MAX_CLIENTS = 8
+#: longest answer a client reads: a status of as many alarms, named as long, as a configuration holds
+MAX_ANSWER = 16 * MAX_CONFIG_BYTES
 
 
 def socket_path(output_dir: str | os.PathLike) -> Path:
@@ -340,7 +342,8 @@ class NoAnswer(Exception):
 def request(path: Path, body: dict, timeout: float = REPLY_S + 2.0) -> dict:
     """Send one request to the daemon at ``path``; its answer.  OSError when nothing takes the
     connection; NoAnswer when the answer does not come within ``timeout`` s (the daemon
-    answers within ``REPLY_S``) or the daemon closes the connection without one."""
+    answers within ``REPLY_S``), the daemon closes the connection without one, or what comes is
+    not a daemon's answer (longer than ``MAX_ANSWER``, not a JSON object)."""
     deadline = time.monotonic() + timeout
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(timeout)
@@ -348,14 +351,20 @@ def request(path: Path, body: dict, timeout: float = REPLY_S + 2.0) -> dict:
             s.connect(name)
         with contextlib.suppress(OSError):          # a daemon that answered at once (busy) and closed
             s.sendall(json.dumps(body, ensure_ascii=False).encode(errors="backslashreplace") + b"\n")
-        buf = b""
+        buf = bytearray()
         try:
             while not buf.endswith(b"\n"):
-                s.settimeout(max(deadline - time.monotonic(), 0.001))
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError
+                s.settimeout(left)
                 chunk = s.recv(65536)
                 if not chunk:
                     break
                 buf += chunk
+                if len(buf) > MAX_ANSWER:
+                    raise NoAnswer(f"the answer is longer than {MAX_ANSWER} bytes: not a cmsensord daemon "
+                                   "on this socket?")
         except TimeoutError:
             raise NoAnswer(f"the daemon took the request but did not answer within {timeout:g} s: it may "
                            "have been applied (see cmsensord status)") from None
@@ -363,6 +372,10 @@ def request(path: Path, body: dict, timeout: float = REPLY_S + 2.0) -> dict:
             raise NoAnswer(f"the connection broke before the daemon's answer ({exc.strerror or exc}): the "
                            "request may have been applied (see cmsensord status)") from None
     try:
-        return json.loads(buf)
-    except ValueError:
+        answer = json.loads(buf)
+    except (ValueError, RecursionError):
         raise NoAnswer("the daemon closed the connection without an answer") from None
+    if not isinstance(answer, dict):
+        raise NoAnswer(f"the answer is not a cmsensord daemon's (a JSON {type(answer).__name__}, not an object): "
+                       "not a cmsensord daemon on this socket?")
+    return answer

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 
@@ -120,16 +121,33 @@ def run_ack(args: argparse.Namespace) -> int:
     if not answer.get("ok"):
         print(f"cmsensord: ack: {answer.get('error')}", file=sys.stderr)
         return EXIT_NO_DAEMON
+    return _shown("ack", lambda: _ack_text(args, answer))
+
+
+def _ack_text(args: argparse.Namespace, answer: dict) -> tuple[str, int]:
     if answer["acknowledged"]:
         names = answer.get("alarms")
-        print(f"acknowledged {answer['acknowledged']} alarm(s)" + (f": {', '.join(names)}" if names else ""))
-    elif args.all:
-        print("nothing to acknowledge: no alarm shows a level not acknowledged yet")
-    elif answer.get("level", "normal") == "normal":
-        print(f"nothing to acknowledge: {args.alarm} shows no level (normal)")
-    else:
-        print(f"nothing to acknowledge: {args.alarm} is acknowledged already (it shows {answer['level']})")
-    return 0
+        return f"acknowledged {answer['acknowledged']} alarm(s)" + (f": {', '.join(names)}" if names else ""), 0
+    if args.all:
+        return "nothing to acknowledge: no alarm shows a level not acknowledged yet", 0
+    if answer.get("level", "normal") == "normal":
+        return f"nothing to acknowledge: {args.alarm} shows no level (normal)", 0
+    return f"nothing to acknowledge: {args.alarm} is acknowledged already (it shows {answer['level']})", 0
+
+
+def _shown(command: str, text: Callable[[], tuple[str, int]]) -> int:
+    """Print what ``text`` makes of the daemon's answer, and return its exit status; an answer
+    without the fields this cmsensord reads (a daemon of another version, another program's
+    socket) is one line on stderr instead, exit 1."""
+    try:
+        out, code = text()
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
+        what = f"no field {exc}" if isinstance(exc, KeyError) else f"a field of a wrong type ({exc})"
+        print(f"cmsensord: {command}: the daemon's answer is not one this cmsensord reads ({what}): a daemon "
+              "of another cmsensord version? `cmsensord status --json` prints the answer as it came", file=sys.stderr)
+        return EXIT_NO_DAEMON
+    print(out)
+    return code
 
 
 def run_status(args: argparse.Namespace) -> int:
@@ -139,13 +157,12 @@ def run_status(args: argparse.Namespace) -> int:
     if not answer.get("ok") and not args.json:
         print(f"cmsensord: status: {answer.get('error')}", file=sys.stderr)
         return EXIT_NO_DAEMON
+    code = 0 if answer.get("ok") else EXIT_NO_DAEMON
     if args.json:
         print(json.dumps(answer, indent=1))
-    else:
-        print(answer.get("status", ""))
-        if "alarms" in answer:
-            print(format_table(answer))
-    return 0 if answer.get("ok") else EXIT_NO_DAEMON
+        return code
+    table = (lambda: "\n" + format_table(answer)) if "alarms" in answer else (lambda: "")
+    return _shown("status", lambda: (f"{answer.get('status', '')}{table()}", code))
 
 
 def run_capture_now(args: argparse.Namespace) -> int:
@@ -155,17 +172,21 @@ def run_capture_now(args: argparse.Namespace) -> int:
     if not answer.get("ok"):
         print(f"cmsensord: capture-now: {answer.get('error')}", file=sys.stderr)
         return EXIT_NO_DAEMON
-    kept = 0
+    return _shown("capture-now", lambda: _capture_text(answer))
+
+
+def _capture_text(answer: dict) -> tuple[str, int]:
+    lines = []
     for row in answer["captures"]:
         if "skipped" in row:
-            print(f"{row['channel']}: not captured: {row['skipped']}")
+            lines.append(f"{row['channel']}: not captured: {row['skipped']}")
             continue
-        kept += 1
         at = datetime.fromtimestamp(row["stamp_ns"] / 1e9).isoformat(timespec="milliseconds")
-        print(f"{row['channel']}: capturing {row['pre_s']:g} s before and {row['post_s']:g} s after {at} "
-              f"({row['source'].upper()}, from board index {row['first_sample']}); written to the log "
-              f"in {row['post_s']:g} s")
-    return 0 if kept else EXIT_NO_DAEMON
+        lines.append(f"{row['channel']}: capturing {row['pre_s']:g} s before and {row['post_s']:g} s after {at} "
+                     f"({row['source'].upper()}, from board index {row['first_sample']}); written to the log "
+                     f"in {row['post_s']:g} s")
+    kept = sum(1 for row in answer["captures"] if "skipped" not in row)
+    return "\n".join(lines), 0 if kept else EXIT_NO_DAEMON
 
 
 def format_table(t: dict) -> str:

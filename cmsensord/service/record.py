@@ -26,7 +26,8 @@ HELD_HINT = ("; stop it first, or, if it is the daemon, use its captures (`cmsen
 
 def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
     """Capture the bytes of ``port`` to ``out`` until ``duration_s``, a signal, or the port goes
-    away; a status line per second says what is being captured, and the last line what was."""
+    away; a status line per second says what is being captured, and the last line what was.
+    Exit status 1 when the capture file could not be written (a full disk): the last line says so."""
     refused = out_file_refused(out, "capture.bin")
     if refused:
         raise LinkError(refused)
@@ -41,17 +42,29 @@ def record(port: str, out: str, *, baud: int, duration_s: float | None) -> int:
     source = SerialSource(port, baud=baud, capture=f, open_port=_once(ser))
     t0 = time.monotonic()
     next_status = t0 + 1.0
-    with f, source:
-        for _ in source:                    # the frames only feed the counters shown
-            if stop.event.is_set() or (duration_s is not None and time.monotonic() - t0 >= duration_s):
-                break
-            if _lost(source):
-                break
-            if time.monotonic() >= next_status:
-                next_status += 1.0
-                print(f"recorded {_tally(source.counters)}", file=sys.stderr, flush=True)
-        source.stop()
+    failed: str | None = None
+    try:
+        with source:
+            for _ in source:                    # the frames only feed the counters shown
+                if stop.event.is_set() or (duration_s is not None and time.monotonic() - t0 >= duration_s):
+                    break
+                failed, lost = _lost(source)
+                if lost:
+                    break
+                if time.monotonic() >= next_status:
+                    next_status += 1.0
+                    print(f"recorded {_tally(source.counters)}", file=sys.stderr, flush=True)
+            source.stop()
+    finally:
+        try:
+            f.close()                           # its buffered bytes written: a full disk says so here too
+        except OSError as exc:
+            failed = failed or f"capture file: {exc.strerror or exc}"
     c = source.counters
+    if failed is not None:
+        print(f"capture: {out} ({_tally(c)}); incomplete: {failed} (the bytes before it are in the file; "
+              "free space or give another --out, and record again)", file=sys.stderr)
+        return 1
     print(f"capture: {out} ({_tally(c)})"
           + ("; incomplete: frames the board sent are missing (another program reading the port, "
              "or a link losing bytes?)" if c.frames_lost else ""), file=sys.stderr)
@@ -75,10 +88,12 @@ def _once(ser):
     return open_port
 
 
-def _lost(source: SerialSource) -> bool:
-    """The port went away or the capture file cannot be written: say so and stop."""
+def _lost(source: SerialSource) -> tuple[str | None, bool]:
+    """The port went away or the capture file cannot be written: say so and stop (True); the
+    capture file's error, if that is why."""
     for _, kind, message in list(source.events):
         if kind in ("link_lost", "disk_error"):
-            print(f"cmsensord record: {message.split('; ')[0]}; stopping", file=sys.stderr)
-            return True
-    return False
+            why = message.split("; ")[0]
+            print(f"cmsensord record: {why}; stopping", file=sys.stderr)
+            return (why if kind == "disk_error" else None), True
+    return None, False

@@ -36,6 +36,10 @@ EXTRA = "tacho_extra_pulse"
 
 _MAX_MISSED_RUN = 8  # at most this many consecutive pulses repaired as missed
 PREDICT_INTERVALS = 4  # committed intervals behind the predicted next interval
+#: edges the first pass of regular ones looks ahead (doubled while they all are regular)
+SPAN_START = 256
+#: edges the first step of the compiled kernel is handed (doubled while they all are regular)
+FEW_SPAN_START = 16
 
 
 @dataclass(frozen=True)
@@ -233,13 +237,17 @@ class EdgeRuns(TachoState):
         """The edges q (1/256 sample) in arrival order, each after advancing the coverage to
         adv (samples; -1: no advance before it), as :meth:`_advance` and :meth:`_edge` one
         after the other would; runs of regular edges are committed in one pass
-        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge.  q and adv: arrays or
+        (:mod:`cmsensord.dsp.tacho.regular`), the rest edge by edge.  Each pass looks at most
+        ``span`` edges ahead (``SPAN_START``, doubled while every edge it looked at was regular),
+        so edges that are not regular (noise on the tacho line: a thousand a block) cost a
+        bounded pass each, not one over all the edges still to come.  q and adv: arrays or
         Python lists (a live call's few edges: arrays only when there are enough for the pass)."""
         ql = q if isinstance(q, list) else q.tolist()
         al = adv if isinstance(adv, list) else adv.tolist()
         j, m = 0, len(ql)
         qa: IntArray | None = None
         aa: IntArray | None = None
+        span = SPAN_START
         while j < m:
             n_scalar = 1
             st = self._regular_state() if self.batch_edges and m - j >= MIN_EDGES else None
@@ -247,10 +255,11 @@ class EdgeRuns(TachoState):
                 if qa is None or aa is None:
                     qa, aa = np.asarray(q, dtype=np.int64), np.asarray(adv, dtype=np.int64)
                 now = self._now if self._now is not None else 0
-                a = aa[j:]
+                a = aa[j:j + span]
                 adv_q = np.where(a >= 0, np.maximum(a, now) * SUB, -1)
-                k = regular_prefix(st, qa[j:], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
+                k = regular_prefix(st, qa[j:j + span], adv_q, self.tol, self.timeout_periods, self._timeout_lo,
                                    self._timeout_hi)
+                span = 2 * span if k == a.size else SPAN_START     # a pass costs what it commits, or SPAN_START
                 if k:
                     self._commit_regular(qa[j:j + k], a[:k])
                     j += k
@@ -272,16 +281,25 @@ class EdgeRuns(TachoState):
         """:meth:`_edges` of a live call's few edges (Python lists): with the compiled kernel,
         each stretch of regular edges in one step (:meth:`_regular_run`), the edge that stops
         it as :meth:`_edges` takes it; without the kernel (or ``edge_kernel`` False),
-        :meth:`_edges`.  The same state after it either way."""
+        :meth:`_edges`.  The same state after it either way.  Each step is handed at most
+        ``span`` edges (``FEW_SPAN_START``, doubled while it commits them all): the kernel
+        checks every edge it is handed, so edges that are not regular cost a bounded step
+        each, not one over all the edges still to come."""
         if _kernel is None or not (self.edge_kernel and self.batch_edges):
             self._edges(q, adv)
             return
         j, m = 0, len(q)
+        span = FEW_SPAN_START
         while j < m:
-            j += self._regular_run(q, adv, j)
-            if j < m:
-                self._one_edge(q[j], adv[j])
-                j += 1
+            n = min(span, m - j)
+            k = self._regular_run(q, adv, 0) if n == m else self._regular_run(q[j:j + n], adv[j:j + n], 0)
+            j += k
+            if k == n:
+                span *= 2
+                continue
+            span = FEW_SPAN_START
+            self._one_edge(q[j], adv[j])
+            j += 1
 
     def _regular_run(self, q: list[int], adv: list[int], j: int) -> int:
         """:meth:`_regular_edge` of the edges q[j], q[j + 1], ... as long as each is regular,
