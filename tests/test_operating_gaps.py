@@ -1,11 +1,13 @@
 """Frames lost for less than ``tacho.timeout_s`` (a UART dropping bytes) are no coast-down.
 
-The record spanning such a gap carries the tacho's speed extrapolated over it, up to 10 % off
-either way (a high one raises the running value the coast-down is measured from, a low one
-then falls below it: 1582 rpm of 1720); the operating state took it as a coast-down and cleared
-a danger alarm whose value stood at 7.9 mm/s, near twice the danger level.  A record with
-lost samples gives the operating state no reading (it keeps its state), as a record without a
-speed does.
+The record spanning such a gap carried a speed up to 10 % off either way (a high one raised the
+running value the coast-down is measured from, a low one then fell below it: 1582 rpm of 1720);
+the operating state took it as a coast-down and cleared a danger alarm whose value stood at
+7.9 mm/s, near twice the danger level.  The tacho counts the pulses of the lost frames when the
+speed on both sides says how many, else starts again after the gap (cmsensord/dsp/tacho/gaps.py),
+so such a record carries the speed of the samples it holds, and the operating state reads it as
+it reads any record's: on a link that loses a frame in every record it still sees the machine
+start.
 """
 
 from __future__ import annotations
@@ -51,3 +53,27 @@ def test_frames_lost_shorter_than_the_tacho_timeout_keep_the_machine_running(tmp
         "ERROR alarm_danger: velocity/ch0: velocity_rms_mm_s 7.891 mm/s (velocity RMS, 10-1000 Hz) reached the "
         "danger level 4.5 mm/s",
     ]
+
+
+def test_a_link_losing_frames_in_every_record_still_shows_the_machine_start(tmp_path):
+    """close_orders (0 -> 3000 rpm in 5 s) with 1000 bytes lost every 25,000 (~20 ms every 0.46 s):
+    every record has lost samples.  Their speeds are the machine's (tests/test_tacho_gaps.py), and
+    the operating state reads them: it stayed stopped when a record with lost samples gave it no
+    speed."""
+    whole = tmp_path / "c.bin"
+    p = run_module("firmware_sim", "--scenario", "close_orders", "--mode", "raw", "--tacho", "--out", str(whole))
+    assert p.returncode == 0, p.stderr
+    data = whole.read_bytes()
+    cut, pos = bytearray(), 0
+    for at in range(20000, len(data), 25000):
+        cut += data[pos:at]
+        pos = at + 1000
+    cut += data[pos:]
+    (tmp_path / "lossy.bin").write_bytes(bytes(cut))
+    (tmp_path / "op.yaml").write_text(CONFIG)
+    p = cmsensord("replay", "lossy.bin", "--config", "op.yaml", "--out", "o", "-v", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    lines = p.stderr.splitlines()
+    assert sum(ln.startswith("WARNING frames_lost: ") for ln in lines) == 10, p.stderr
+    assert [ln for ln in lines if ln.startswith("INFO operating_state")] == [
+        "INFO operating_state: operating state stopped -> running (speed 889 rpm)"], p.stderr

@@ -276,9 +276,7 @@ class Alarms:
         mgr = self._manager()
         ch = msg["channel"]
         if m.schema == "indicators":
-            # over lost frames the tacho's speed is an extrapolation (off by 10 % and more after a
-            # gap shorter than tacho.timeout_s): no reading of the operating state, which keeps it
-            speed = None if msg.get("missing_fraction") else msg.get("speed_rpm")
+            speed = msg.get("speed_rpm")
             was = mgr.operating.state
             values = indicator_values(msg)
             judged = self._judged(ch, values, bool(msg.get("signal_lost")))  # no signal: none judged

@@ -7,8 +7,10 @@ the speed is read by the order chain and, as the decisions' f_r, by the
 severity chain (:meth:`Shaft.period_f_r`).
 
 A TACHO frame lost on the link (a gap in the input's t0 sequence) is a frame
-loss, reported as such by the decoder's ``frames_lost``: pulses the tracker
-inserts in it are not reported as ``tacho_missed_pulse`` (counted in
+loss, reported as such by the decoder's ``frames_lost``: the tracker counts the
+pulses in it, or starts again after it, without an event (:mod:`cmsensord.dsp.tacho.gaps`),
+and a missed pulse it finds next to lost frames, or in frames whose edges were dropped as
+bad input, is not reported as ``tacho_missed_pulse`` (counted in
 :attr:`Shaft.missed_in_lost_frames`).  TACHO frames that stop coming while the
 data goes on (none lost) are told once, ``SILENT_S`` of board time on
 (:meth:`Shaft.check_silent`); a STATUS announcing no tacho, or other pulses per

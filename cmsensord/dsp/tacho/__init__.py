@@ -6,9 +6,9 @@ rising edges of the TACHO frames (docs/PROTOCOL.md), streaming, into the speed
 flag, events for lost/restored tacho and repaired pulses, and a causal speed.
 The method, its delays and its measured accuracy are in docs/tacho.md.
 
-Modules: :mod:`.edges` (edge times, runs, pulse repair, events),
-:mod:`.smoothing` (least-squares knots, speed and angle at every sample),
-:mod:`.causal` (the causal speed), :mod:`.tracker` (:class:`TachoTracker`).
+Modules: :mod:`.edges` (edge times, runs, pulse repair, events), :mod:`.gaps`
+(intervals across lost TACHO frames), :mod:`.smoothing` (least-squares knots, speed and
+angle at every sample), :mod:`.causal` (the causal speed), :mod:`.tracker` (:class:`TachoTracker`).
 """
 
 from cmsensord.dsp.tacho.edges import (

@@ -16,7 +16,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from cmsensord.dsp.tacho.edges import BoolArray, FloatArray, TachoState
+from cmsensord.dsp.tacho.edges import SUB, BoolArray, FloatArray, TachoState
 from cmsensord.dsp.tacho.smoothing import bounded_lo, make_room, weighted_quadratic
 
 try:  # the compiled fit and speed are optional: numpy is the fallback (same results)
@@ -33,14 +33,44 @@ class CausalSpeed(TachoState):
 
     causal_kernel = True  # the fit of new edges and causal_rpm in the compiled kernel when it is built
 
-    def _flush_segments(self) -> None:
+    def _flush_segments(self, upto: int | None = None) -> None:
         """Fit the causal segments of the edges committed since the last call (see
-        "Causal speed"): a one-sided weighted quadratic over the last ``causal_window``
-        committed edges of the run at each, vectorised over the new edges."""
+        "Causal speed"), in time order with a segment for each stretch of lost frames
+        (``_marks``) that the edges up to ``upto`` have passed (1/256 sample; default: the edge
+        being handled or the coverage, whichever is later)."""
         todo = self._seg_todo
+        marks = self._marks
+        if marks:
+            due = upto if upto is not None else max(self._known_q, SUB * (self._now or 0))
+            while marks and marks[0][0] <= due:
+                a, b = marks.popleft()
+                i = next((i for i, t in enumerate(todo) if t[1] * SUB >= a), len(todo))
+                if i:
+                    self._seg_todo = []
+                    self._fit_segments(todo[:i])
+                    todo = todo[i:]
+                self._over_hole(a / SUB, b / SUB)
         if not todo:
             return
         self._seg_todo = []
+        self._fit_segments(todo)
+
+    def _over_hole(self, a: float, b: float) -> None:
+        """Lost frames from sample ``a`` to ``b``: no edge could be seen there, so the segment
+        before goes on, extrapolated, with its cap counting the pulse periods without an edge
+        from b on (a segment keyed at a whose reference time is b), while that one is valid
+        (the run goes on)."""
+        hi = self._shi
+        if hi <= self._slo or not self._sbuf[4, hi - 1] > 0:
+            return
+        _, T, w, acc, _ = self._sbuf[:, hi - 1].tolist()
+        self._append_segments(np.array([a]), np.array([b]), np.array([w + acc * (b - T)]), np.array([acc]),
+                              np.ones(1))
+
+    def _fit_segments(self, todo: list[tuple[int, float]]) -> None:
+        """The causal segments of the committed edges ``todo`` (committed index, known at): a
+        one-sided weighted quadratic over the last ``causal_window`` committed edges of the run
+        at each, vectorised over them."""
         if _kernel is not None and self.causal_kernel:     # the same operations, in C, into the buffer
             buf = self._segment_room(len(todo))
             # the committed edges from the first window's on (not the run's whole list)

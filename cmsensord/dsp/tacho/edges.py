@@ -3,7 +3,8 @@
 Steps 1-3 of docs/tacho.md: each edge becomes an absolute time in 1/256 sample;
 edges form runs that end at a timeout (``tacho_lost``, ``tacho_restored``); an
 interval that is a whole multiple of the predicted one counts missed pulses, a
-short one followed by a regular one is a spurious edge and is removed.  The
+short one followed by a regular one is a spurious edge and is removed; a long one
+across lost frames follows :mod:`cmsensord.dsp.tacho.gaps`.  The
 committed edges feed the smoothing and the causal speed.  Also the event and
 counter types of :class:`~cmsensord.dsp.tacho.TachoTracker`, and
 :class:`TachoState`, the state its parts share.
@@ -65,6 +66,8 @@ class TachoCounters:
     out_of_order: int = 0  # edges earlier than one already received (ignored)
     lost: int = 0  # tacho_lost transitions
     restored: int = 0  # tacho_restored transitions
+    gap_pulses: int = 0  # pulses counted in lost TACHO frames (the speed before and after says how many)
+    gap_breaks: int = 0  # intervals across lost TACHO frames not taken (their pulses unknown): a new run after
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -152,6 +155,8 @@ class TachoState(ABC):
     _committed_arrays: tuple[FloatArray, FloatArray] | None
     _pending: deque[int]  # edges of the current run not yet classified
     _hist: deque[tuple[float, float]]  # (mid q, pulses/q)
+    _holes: deque[tuple[int, int]]  # stretches no TACHO frame covers (lost frames), 1/256 sample
+    _marks: deque[tuple[int, int]]  # the same, for the causal speed (a segment each once the edges pass it)
     # knots: finalised ones of all runs (rows time, turns, speed, run id; live columns
     # [_klo, _khi)), the provisional ones of the current run
     _final: int
@@ -189,7 +194,12 @@ class TachoState(ABC):
         """Speed after a run's last edge and its integral (``KnotSmoothing``)."""
 
     @abstractmethod
-    def _flush_segments(self) -> None:
+    def _across_gap(self, run: Run, q: int, P: float | None, final: bool) -> bool | None:
+        """Pending edge q across lost frames (``LostFrames``): None when not, else whether the
+        classification goes on."""
+
+    @abstractmethod
+    def _flush_segments(self, upto: int | None = None) -> None:
         """Fit the causal segments of the newly committed edges (``CausalSpeed``)."""
 
     @abstractmethod
@@ -475,6 +485,11 @@ class EdgeRuns(TachoState):
             q = self._pending[0]
             P = self._predict()
             cq_last = self._cq_last
+            across = self._across_gap(run, q, P, final) if self._holes else None
+            if across is not None:      # an interval across lost frames (gaps.py)
+                if across:
+                    continue
+                return
             if P is None or cq_last is None:  # a prediction implies a committed edge
                 self._pending.popleft()
                 self._commit(run, q, 1)
@@ -512,15 +527,18 @@ class EdgeRuns(TachoState):
                 c.irregular += 1
             self._commit(run, q, 1)
 
-    def _end_run(self, run: Run, stop_q: int) -> None:
-        """End ``run`` (the current one) at its timeout ``stop_q`` (1/256 sample)."""
-        self._known_q = stop_q
+    def _end_run(self, run: Run, stop_q: int, silent: bool = False, known_q: int | None = None) -> None:
+        """End ``run`` (the current one) at its timeout ``stop_q`` (1/256 sample); ``silent``:
+        where lost frames began (``LostFrames``), no ``tacho_lost`` (the link said it), its
+        causal speed 0 from ``known_q`` on, where that was decided (default: ``stop_q``)."""
+        key_q = stop_q if known_q is None else known_q
+        self._known_q = key_q
         self._classify(run, final=True)
         run.ended = True
         run.stop = stop_q / SUB
-        self._flush_segments()
-        self._append_segments(np.array([run.stop]), np.array([run.stop]), np.zeros(1), np.zeros(1),
-                              np.zeros(1))
+        self._flush_segments(key_q)
+        key = np.array([key_q / SUB])
+        self._append_segments(key, key, np.zeros(1), np.zeros(1), np.zeros(1))
         self._finalise(ended=True)
         self._prov = None
         if run.valid:
@@ -529,11 +547,12 @@ class EdgeRuns(TachoState):
             _, dturn = self._tail(np.array([w_last]), np.array([run.stop - T_last]), 1.0 / self.ppr)
             run.end_turns = float(th_last + dturn[0])
             self._held = run.end_turns
-            self._had_loss = True
-            self.counters.lost += 1
-            self._events.append(TachoEvent(LOST, run.stop, 1,
-                                           f"tacho lost at sample {run.stop:.0f}: no edge for "
-                                           f"{(stop_q - run.last_raw_q) / SUB / self.fs:.3g} s"))
+            if not silent:
+                self._had_loss = True
+                self.counters.lost += 1
+                self._events.append(TachoEvent(LOST, run.stop, 1,
+                                               f"tacho lost at sample {run.stop:.0f}: no edge for "
+                                               f"{(stop_q - run.last_raw_q) / SUB / self.fs:.3g} s"))
         else:
             # a single edge: no speed; the angle stays where it was
             self._runs.pop(run.rid, None)

@@ -19,13 +19,13 @@ from cmsensord.dsp.tacho.causal import CausalSpeed
 from cmsensord.dsp.tacho.edges import (
     PREDICT_INTERVALS,
     SUB,
-    EdgeRuns,
     FloatArray,
     TachoCounters,
     TachoEvent,
     TachoUpdate,
     _kernel,
 )
+from cmsensord.dsp.tacho.gaps import LostFrames
 from cmsensord.dsp.tacho.smoothing import KnotSmoothing
 
 _FEW_FRAMES = 64  # up to this many frames an update prepares its edges on Python ints
@@ -36,7 +36,7 @@ HISTORY_MAX = 1 << 17
 MAX_TIMEOUT_S = 10
 
 
-class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
+class TachoTracker(LostFrames, KnotSmoothing, CausalSpeed):
     """Streaming tacho processing: edges in, speed and angle at any sample out.
 
     Parameters
@@ -111,6 +111,8 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._n_last = 0
         self._pending = deque()  # edges of the current run not yet classified
         self._hist = deque(maxlen=PREDICT_INTERVALS)  # (mid q, pulses/q)
+        self._holes = deque()  # stretches no TACHO frame covers after the last committed edge
+        self._marks = deque()  # the same, not yet in the causal segments
         self._final = 0  # knots finalised in the current run (centres 0 .. _final-1)
         # final knots of all runs: times (samples), turns, speed (turns/sample), run id
         self._kbuf = np.empty((4, 1024))  # rows: time, turns, speed, run id; live columns [_klo, _khi)
@@ -199,6 +201,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         self._events = []
         if lists is not None:
             q, adv, end = lists
+            self._note_holes_list(t0_unwrapped)
             self._take_edges(q, adv, end, t0_unwrapped[-1], one_step=True)
         ev, self._events = self._events, []
         self._unsettled = True          # as _settled in feed_flat: the knots fitted when asked for
@@ -248,6 +251,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         if not (few and self._few_frames(t0.tolist(), sizes.tolist(), off.tolist())):
             full = np.flatnonzero(sizes)
             ends = np.maximum.accumulate(t0[:n_ok] + self.block_len) if n_ok else t0[:0]
+            self._note_holes_array(t0[:n_ok])            # lost frames, before their edges are judged
             if full.size:                                # all edges at once: q in 1/256 sample
                 frame = np.repeat(full, sizes[full])
                 out = (off < 0) | (off > 0xFFFFFFFF)     # u32 offsets, else an error at that frame
@@ -298,6 +302,7 @@ class TachoTracker(EdgeRuns, KnotSmoothing, CausalSpeed):
         not u32 (the array code reports it)."""
         if off and (min(off) < 0 or max(off) > 0xFFFFFFFF):
             return False
+        self._note_holes_list(t0)
         self._take_edges(*self._edge_lists(t0, sizes, off), t0[-1])
         return True
 
