@@ -153,6 +153,25 @@ def has_alarm_rules(cfg: Config) -> bool:
     return cfg.alarms.enabled and bool(cfg.alarms.rules or order_rules(cfg))
 
 
+#: lost samples worth fewer shaft turns than this (all of a record's gaps together) leave its speed a
+#: reading of the operating state: over such a gap the tacho misses an edge or two and its speed
+#: is as without the gap; over a longer one its speed is an extrapolation, off by 10 % either way
+#: after 0.14-0.28 s at 1720 rpm (tests/test_operating_gaps.py)
+LOST_TURNS_READ = 2.0
+
+
+def state_speed(msg: dict) -> float | None:
+    """The shaft speed [rpm] an indicator record gives the operating state: its ``speed_rpm``,
+    None when it has none or when its lost samples (``missing_fraction`` x ``interval_s``) span
+    :data:`LOST_TURNS_READ` turns of the shaft or more (the state keeps what it is)."""
+    speed = msg.get("speed_rpm")
+    lost = msg.get("missing_fraction") or 0.0
+    if speed is None or not lost:
+        return speed
+    turns = float(lost) * float(msg["interval_s"]) * float(speed) / 60.0
+    return speed if turns < LOST_TURNS_READ else None
+
+
 class Alarms:
     """Messages -> alarm events and /cm/alarms (see module docstring).  ``channels``: the
     vibration channels' names when the first watched message comes."""
@@ -276,9 +295,7 @@ class Alarms:
         mgr = self._manager()
         ch = msg["channel"]
         if m.schema == "indicators":
-            # over lost frames the tacho's speed is an extrapolation (off by 10 % and more after a
-            # gap shorter than tacho.timeout_s): no reading of the operating state, which keeps it
-            speed = None if msg.get("missing_fraction") else msg.get("speed_rpm")
+            speed = state_speed(msg)
             was = mgr.operating.state
             values = indicator_values(msg)
             judged = self._judged(ch, values, bool(msg.get("signal_lost")))  # no signal: none judged
