@@ -5,7 +5,8 @@ Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
 (YAML syntax), ``unit.yaml`` (a unit that does not fit the channel's kind), ``nocal.yaml`` (a
 microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text),
-``capdir/`` (a directory), ``logdir/`` (a directory of logs), ``afile`` (a regular file, so
+``capdir/`` (a directory), ``logdir/`` (a directory of logs), ``loop.mcap``, ``loop.tty`` (symlink
+loops), ``dangling.mcap`` (a symlink to nothing), ``afile`` (a regular file, so
 ``afile/logs`` cannot be a directory).
 """
 
@@ -90,6 +91,16 @@ CASES = [
      "cmsensord: capdir: is a directory; give --out a file name, e.g. capdir/report.html"),
     (["report", "logdir", "--out", "nodir/r.html"], USAGE,
      "cmsensord: nodir/r.html: no directory nodir: give --out a file in a directory that exists"),
+    # a symlink that leads nowhere: a loop is said as one, not as a file or device not there
+    (["summary", "loop.mcap"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels of symbolic links): "
+                                      "point it at the real file"),
+    (["report", "loop.mcap", "--out", "r.html"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels"),
+    (["summary", "dangling.mcap"], USAGE, "cmsensord: dangling.mcap: a symlink to gone.mcap, which is not there"),
+    (["record", "--port", "loop.tty", "--out", "x.bin", "--duration", "1"], USAGE,
+     "cmsensord: loop.tty: a symlink loop (too many levels of symbolic links): point it at the board's tty, "
+     "e.g. /dev/ttyACM0"),
+    (["replay", "loop.mcap"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels of symbolic links): "
+                                     "point it at the capture"),
     (["vkf", "capture.bin"], USAGE, "capture.bin: the board is in RMS mode (its first STATUS): the batch VKF "
                                     "needs a capture in RAW mode"),
     (["vkf", "degrading.bin"], USAGE, "degrading.bin: the board is in RMS mode (its first STATUS)"),
@@ -114,6 +125,9 @@ def scratch(tmp_path_factory):
     (d / "logdir").mkdir()
     (d / "logdir" / "cmsensord-20261201T120000Z.mcap").write_bytes(b"\x89MCAP0\r\n")
     (d / "afile").write_text("")
+    (d / "loop.mcap").symlink_to("loop.mcap")
+    (d / "loop.tty").symlink_to("loop.tty")
+    (d / "dangling.mcap").symlink_to("gone.mcap")
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario
 

@@ -19,7 +19,7 @@ import os
 import re
 from pathlib import Path
 
-from cmsensord.errors import CmsensordError, file_kind
+from cmsensord.errors import CmsensordError, bad_link, file_kind
 
 __all__ = ["KEPT", "SALVAGED", "empty_files", "log_files", "log_name", "log_paths", "next_name", "order_key",
            "salvaged_path"]
@@ -145,5 +145,5 @@ def _not_a_log(name: str) -> str:
     try:
         mode = os.stat(name).st_mode
     except (OSError, ValueError):
-        return f"{name}: file not found"
+        return f"{name}: {bad_link(name) or 'file not found'}"
     return f"{name}: not a regular file (a {file_kind(mode)}): give an MCAP log or a directory of them"
