@@ -185,3 +185,16 @@ def test_an_empty_config_file_is_said(scratch):
     assert p.returncode == 0, p.stderr
     assert p.stderr.splitlines()[0] == ("WARNING config: empty.yaml holds no settings (empty, or comments only): "
                                         "every setting is its default")
+
+
+def test_import_of_a_fifo_or_a_device_is_one_line_not_a_wait(tmp_path):
+    # a FIFO was opened to be read as a text table (and as a capture): the import waited for a
+    # writer, without end
+    import os
+
+    os.mkfifo(tmp_path / "fifo")
+    for name, kind in ((str(tmp_path / "fifo"), "FIFO"), ("/dev/zero", "character device")):
+        p = cmsensord("import", name, "--out", str(tmp_path / "x.bin"), timeout=20)
+        assert (p.returncode, p.stderr) == (2, f"cmsensord import: {name}: not a regular file (a {kind}): import "
+                                               "reads the files of a recording (.wav, .csv, .tsv, .txt, .lvm, .npy, "
+                                               ".npz, .mat, .tdms, or text tables of numbers)\n")
