@@ -99,6 +99,8 @@ CASES = [
     (["record", "--port", "loop.tty", "--out", "x.bin", "--duration", "1"], USAGE,
      "cmsensord: loop.tty: a symlink loop (too many levels of symbolic links): point it at the board's tty, "
      "e.g. /dev/ttyACM0"),
+    (["import", "loop.mcap", "--out", "x.bin"], USAGE, "cmsensord import: loop.mcap: a symlink loop (too many "
+                                                       "levels of symbolic links): point it at the recording"),
     (["replay", "loop.mcap"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels of symbolic links): "
                                      "point it at the capture"),
     (["vkf", "capture.bin"], USAGE, "capture.bin: the board is in RMS mode (its first STATUS): the batch VKF "

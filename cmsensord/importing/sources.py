@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cmsensord.errors import file_kind
+from cmsensord.errors import bad_link, file_kind
 from cmsensord.sinks.mcap_records import is_capture
 
 from .arrays import read_npy, read_npz
@@ -140,7 +140,7 @@ def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str
                 raise ImportFailure(f"{src}: no file matches this pattern; check the path")
             files += sorted(hit, key=_natural_key)
         else:
-            raise ImportFailure(f"{src}: no such file or directory")
+            raise ImportFailure(f"{src}: {bad_link(src, 'the recording') or 'no such file or directory'}")
     for pattern in globs:
         hit = [f for f in globmod.glob(pattern) if os.path.isfile(f)]
         if not hit:
