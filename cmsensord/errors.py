@@ -8,6 +8,8 @@ prints that line and exits with a non-zero code instead of a traceback.
 
 from __future__ import annotations
 
+import errno
+import os
 import stat
 from collections.abc import Iterator
 from typing import Any
@@ -107,6 +109,23 @@ def file_kind(mode: int) -> str:
         if test(mode):
             return name
     return "special file"
+
+
+def bad_link(name: str | os.PathLike[str], real: str = "the real file") -> str:
+    """What is wrong with ``name`` when it is a symbolic link that leads nowhere: "a symlink loop
+    (...): point it at ``real``" when following it comes back to itself, "a symlink to X, which is
+    not there" when its target is missing; "" when it is no such link (not there at all, or a link
+    that resolves)."""
+    try:
+        os.stat(name)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"a symlink loop (too many levels of symbolic links): point it at {real}"
+        if os.path.islink(name):
+            return f"a symlink to {os.readlink(name)}, which is not there"
+    except ValueError:
+        pass
+    return ""
 
 
 class CmsensordError(Exception):

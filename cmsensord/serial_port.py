@@ -18,7 +18,7 @@ import termios
 
 import serial
 
-from cmsensord.errors import LinkError
+from cmsensord.errors import LinkError, bad_link
 
 #: the errors of a lock another process holds (flock with LOCK_NB)
 _HELD_ERRNOS = (errno.EAGAIN, errno.EWOULDBLOCK)
@@ -53,7 +53,10 @@ def open_port_checked(port: str, baud: int, *, held_hint: str = "") -> serial.Se
 def cannot_open(port: str, exc: BaseException | None) -> str:
     """Why ``port`` did not open (``exc``: the error of the open), with the fix."""
     if not os.path.exists(port):
-        return "no such device (is the board plugged in? check `ls /dev/tty*`)"
+        link = bad_link(port, "the board's tty, e.g. /dev/ttyACM0")
+        if link.startswith("a symlink loop"):
+            return link
+        return f"{link + ': ' if link else ''}no such device (is the board plugged in? check `ls /dev/tty*`)"
     if os.path.isdir(port):
         return "is a directory, not a serial port: give the board's tty, e.g. /dev/ttyACM0"
     if is_held(exc):

@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
-from cmsensord.errors import LinkError, file_kind
+from cmsensord.errors import LinkError, bad_link, file_kind
 from cmsensord.frame_queue import FrameQueue
 from cmsensord.link import SerialReader
 from cmsensord.monitor.clock import DEFAULT_BLOCK_LEN, DEFAULT_FS, is_reset
@@ -185,11 +185,11 @@ def _open_capture(p: Path) -> BinaryIO:
                             "capture (`--capture`, `cmsensord record`, `cmsensord import`)")
         return f
     except FileNotFoundError:
-        raise LinkError(f"{p}: capture file not found") from None
+        raise LinkError(f"{p}: {bad_link(p, 'the capture') or 'capture file not found'}") from None
     except IsADirectoryError:
         raise LinkError(_directory_text(p)) from None
     except OSError as exc:
-        raise LinkError(f"{p}: cannot read capture: {exc.strerror or exc}") from None
+        raise LinkError(f"{p}: {bad_link(p, 'the capture') or f'cannot read capture: {exc.strerror or exc}'}") from None
 
 
 def _directory_text(p: Path) -> str:

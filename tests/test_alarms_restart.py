@@ -407,7 +407,8 @@ BANDS = ("alarms:\n  rules:\n"
          "    - {name: slow, indicator: accel_rms, alert: 0.3, danger: 0.6, latch: true,\n"
          "       bands: [{below_rpm: 600, alert: 0.1, danger: 0.2}]}\n"
          "    - {name: base, indicator: accel_rms, alert_x_baseline: 2.0, danger_x_baseline: 4.0, latch: true}\n"
-         "    - {name: old, indicator: accel_rms, alert_x_baseline: 2.0, latch: true}\n")
+         "    - {name: old, indicator: accel_rms, alert_x_baseline: 2.0, latch: true}\n"
+         "  baselines: [{channel: ch0, indicator: accel_rms, value: 0.25}]\n")
 
 
 def test_saved_alarms_waiting_for_data_show_the_levels_they_were_judged_by(tmp_path):
@@ -449,3 +450,40 @@ def test_saved_alarms_waiting_for_data_show_the_levels_they_were_judged_by(tmp_p
     assert (rows["band/ch0"]["alert_level"], rows["band/ch0"]["danger_level"]) == (0.1, 0.2)
     assert (rows["slow/ch0"]["alert_on"], rows["slow/ch0"]["danger_on"]) == ("by speed", "by speed")
     assert rows["old/ch0"]["alert_on"] == "2xbase" and "danger_level" not in rows["old/ch0"], rows
+
+
+def test_a_saved_alarm_of_a_rule_edited_since_shows_the_levels_in_force_now(tmp_path):
+    """Restarted with the board off after the rule's levels were edited (0.3/0.6 -> 0.5/1.0) and a
+    baseline learned again (0.25 -> 0.4): `cmsensord status` showed the levels saved, which are no
+    longer in force (its next value is judged against the new ones); it shows the rule's levels
+    now. A saved alarm of a rule no longer configured shows none."""
+    (tmp_path / "logs").mkdir()
+    since = (int(time.time()) - 60) * S
+    recs = {"sev/ch0": {**saved_latch("sev", "danger", since, alert=0.3, danger=0.6), "alert_level": 0.3,
+                        "danger_level": 0.6},
+            "base/ch0": {**saved_latch("base", "alert", since), "alert_level": 0.5, "danger_level": 1.0,
+                         "levels": {"alert_x_baseline": 2.0, "danger_x_baseline": 4.0, "baselines": {"ch0": 0.25}}},
+            "gone/ch0": {**saved_latch("gone", "alert", since, alert=0.3), "alert_level": 0.3}}
+    recs = {name: {**rec, "indicator": "accel_rms"} for name, rec in recs.items()}
+    (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
+        {"format": "cmsensord-alarms", "version": 1, "alarms": recs}))
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=(
+        "alarms:\n  rules:\n"
+        "    - {name: sev, indicator: accel_rms, alert: 0.5, danger: 1.0, latch: true}\n"
+        "    - {name: base, indicator: accel_rms, alert_x_baseline: 2.0, danger_x_baseline: 4.0, latch: true}\n"
+        "  baselines: [{channel: ch0, indicator: accel_rms, value: 0.4}]\n"))
+    cfg = str(tmp_path / "cmsensord.yaml")
+    try:
+        end, p = time.monotonic() + 20, None
+        while time.monotonic() < end:
+            time.sleep(0.3)
+            p = run_module("cmsensord", "status", "--config", cfg)
+            if p.returncode == 0:
+                break
+    finally:
+        stop(d)
+    assert p is not None and p.returncode == 0, p and p.stderr
+    assert p.stdout.splitlines()[-3:] == [
+        "sev/ch0                  danger  -                -      0.5        1 m/s²   latched saved",
+        "base/ch0                 alert   -                -      0.8      1.6 m/s²   latched saved",
+        "gone/ch0                 alert   -                -        -        - m/s²   latched saved"], p.stdout

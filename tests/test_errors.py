@@ -5,7 +5,8 @@ Each case runs the real command line in a scratch directory holding:
 ``bad.yaml`` (an out-of-range value), ``typo.yaml`` (a misspelt key), ``broken.yaml``
 (YAML syntax), ``unit.yaml`` (a unit that does not fit the channel's kind), ``nocal.yaml`` (a
 microphone without a calibration), ``port.yaml`` (a valid config), ``notmcap.mcap`` (text),
-``capdir/`` (a directory), ``logdir/`` (a directory of logs), ``afile`` (a regular file, so
+``capdir/`` (a directory), ``logdir/`` (a directory of logs), ``loop.mcap``, ``loop.tty`` (symlink
+loops), ``dangling.mcap`` (a symlink to nothing), ``afile`` (a regular file, so
 ``afile/logs`` cannot be a directory).
 """
 
@@ -90,6 +91,18 @@ CASES = [
      "cmsensord: capdir: is a directory; give --out a file name, e.g. capdir/report.html"),
     (["report", "logdir", "--out", "nodir/r.html"], USAGE,
      "cmsensord: nodir/r.html: no directory nodir: give --out a file in a directory that exists"),
+    # a symlink that leads nowhere: a loop is said as one, not as a file or device not there
+    (["summary", "loop.mcap"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels of symbolic links): "
+                                      "point it at the real file"),
+    (["report", "loop.mcap", "--out", "r.html"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels"),
+    (["summary", "dangling.mcap"], USAGE, "cmsensord: dangling.mcap: a symlink to gone.mcap, which is not there"),
+    (["record", "--port", "loop.tty", "--out", "x.bin", "--duration", "1"], USAGE,
+     "cmsensord: loop.tty: a symlink loop (too many levels of symbolic links): point it at the board's tty, "
+     "e.g. /dev/ttyACM0"),
+    (["import", "loop.mcap", "--out", "x.bin"], USAGE, "cmsensord import: loop.mcap: a symlink loop (too many "
+                                                       "levels of symbolic links): point it at the recording"),
+    (["replay", "loop.mcap"], USAGE, "cmsensord: loop.mcap: a symlink loop (too many levels of symbolic links): "
+                                     "point it at the capture"),
     (["vkf", "capture.bin"], USAGE, "capture.bin: the board is in RMS mode (its first STATUS): the batch VKF "
                                     "needs a capture in RAW mode"),
     (["vkf", "degrading.bin"], USAGE, "degrading.bin: the board is in RMS mode (its first STATUS)"),
@@ -114,6 +127,9 @@ def scratch(tmp_path_factory):
     (d / "logdir").mkdir()
     (d / "logdir" / "cmsensord-20261201T120000Z.mcap").write_bytes(b"\x89MCAP0\r\n")
     (d / "afile").write_text("")
+    (d / "loop.mcap").symlink_to("loop.mcap")
+    (d / "loop.tty").symlink_to("loop.tty")
+    (d / "dangling.mcap").symlink_to("gone.mcap")
     from firmware_sim.board import Board, BoardConfig
     from firmware_sim.scenarios import make_scenario
 
@@ -171,3 +187,16 @@ def test_an_empty_config_file_is_said(scratch):
     assert p.returncode == 0, p.stderr
     assert p.stderr.splitlines()[0] == ("WARNING config: empty.yaml holds no settings (empty, or comments only): "
                                         "every setting is its default")
+
+
+def test_import_of_a_fifo_or_a_device_is_one_line_not_a_wait(tmp_path):
+    # a FIFO was opened to be read as a text table (and as a capture): the import waited for a
+    # writer, without end
+    import os
+
+    os.mkfifo(tmp_path / "fifo")
+    for name, kind in ((str(tmp_path / "fifo"), "FIFO"), ("/dev/zero", "character device")):
+        p = cmsensord("import", name, "--out", str(tmp_path / "x.bin"), timeout=20)
+        assert (p.returncode, p.stderr) == (2, f"cmsensord import: {name}: not a regular file (a {kind}): import "
+                                               "reads the files of a recording (.wav, .csv, .tsv, .txt, .lvm, .npy, "
+                                               ".npz, .mat, .tdms, or text tables of numbers)\n")

@@ -84,3 +84,15 @@ def test_an_endless_answer_is_cut_at_its_bound(tmp_path):
         code, err = ask(sock, ("status",))
     assert (code, err) == (1, "cmsensord: status: the answer is longer than 16777216 bytes: not a cmsensord "
                               "daemon on this socket?\n")
+
+
+@pytest.mark.parametrize("answer", [b'{"ok": false}\n', b'{"ok": false, "error": null}\n',
+                                    b'{"ok": false, "error": ["x"]}\n'], ids=["none", "null", "list"])
+@pytest.mark.parametrize("command", COMMANDS, ids=lambda c: c[0])
+def test_a_refusal_without_an_error_text_says_no_reason_was_given(tmp_path, command, answer):
+    # the line was "cmsensord: ack: None" (or the field's repr)
+    with answering(tmp_path / "refusing.sock", answer) as sock:
+        code, err = ask(sock, command)
+    assert (code, err) == (1, f"cmsensord: {command[0]}: the daemon refused the request without saying why (no "
+                              "'error' text in its answer): a daemon of another cmsensord version? `cmsensord "
+                              "status --json` prints the answer as it came\n")

@@ -107,6 +107,28 @@ def test_a_capture_moved_since_calibrate_still_gets_its_healthy_period(work, tmp
         "found, and o.bin is not it (other first or last bytes)"], p.stderr
 
 
+def test_a_capture_appended_to_since_calibrate_is_still_it_and_another_at_its_path_is_not(work, tmp_path):
+    """A capture a daemon's --capture went on appending to after calibrate read it, then moved, is
+    the commissioned one (its first bytes are: it was 'another size' and lost its healthy period);
+    another capture written to the commissioned path is not (it took the healthy period of the
+    capture calibrate read, shading the wrong stretch of another recording)."""
+    site = _moved(work, tmp_path)
+    with open(tmp_path / "moved" / "b.bin", "ab") as f:
+        f.write((work / "o.bin").read_bytes()[:100_000])
+    mine = _replay(tmp_path, "moved/b.bin", str(site), "logs")
+    assert json.loads(head_metadata(mine)["cmsensord"]["healthy_period"]) == {"from_s": 0.0, "to_s": 6.0}
+    for suffix in ("", ".json"):
+        shutil.copy(work / f"o.bin{suffix}", tmp_path / f"a.bin{suffix}")
+    before = set((tmp_path / "again").glob("*.mcap"))
+    p = cmsensord("replay", "a.bin", "--config", str(site), "--out", "again", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    (log,) = set((tmp_path / "again").glob("*.mcap")) - before
+    assert "healthy_period" not in head_metadata(log)["cmsensord"]
+    assert [ln for ln in p.stderr.splitlines() if "healthy period" in ln] == [
+        "  note: the healthy period is not shaded: a.bin, at the commissioned path, is not the capture calibrate "
+        "read (other first or last bytes): a capture written again to that name? calibrate again on it"], p.stderr
+
+
 def test_a_site_file_without_the_captures_digest_says_why_its_moved_capture_is_not_shaded(work, tmp_path):
     """A site file written before calibrate kept the capture's size and digest still loads; its
     commissioned capture moved, the replay says in one line that it cannot know it."""

@@ -58,9 +58,11 @@ def test_report_beside_a_log_says_that_line_on_each_and_goes_on(logs, tmp_path):
     out = tmp_path / "r.html"
     p = cmsensord("report", str(logs), "--out", str(out))
     assert p.returncode == 0, p.stderr
+    empty = [name for name, (data, _) in SHORT.items() if not data]     # said together (summary_many)
     assert [line for line in p.stderr.splitlines() if line.startswith("cmsensord:")] == [
+        f"cmsensord: report: 1 empty file(s) (0 bytes): {logs / empty[0]}: left out"] + [
         f"cmsensord: report: {logs / name}: {text}; the report holds its 0 message(s) before that"
-        for name, (_, text) in SHORT.items()]
+        for name, (data, text) in SHORT.items() if data]
     page = out.read_text(encoding="utf-8")
     for name, (data, text) in SHORT.items():
         state = f"{'damaged: ' if data == b'junk' else ''}{text}; read up to there"

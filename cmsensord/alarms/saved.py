@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from cmsensord.config.alarms import LEVEL_KEYS, AlarmRuleConfig
+from cmsensord.config.alarms import LEVEL_KEYS, AlarmRuleConfig, AlarmsConfig
 
 from .manager import Alarm, AlarmManager
 from .state import LEVELS
@@ -260,17 +260,46 @@ def _saved_level(rec: dict[str, Any], which: str) -> float | str | None:
     return None
 
 
-def saved_rows(saved: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+def _as_configured(name: str, rec: dict[str, Any], cfg: AlarmsConfig) -> dict[str, Any] | None:
+    """``rec`` with the levels the configuration ``cfg`` gives its rule now: itself when the rule's
+    level settings and the baselines they are resolved against are those saved; else its levels
+    replaced by the rule's (its saved levels in force dropped: the rule was edited between the
+    runs, and its next value is judged against the new ones); None when ``cfg`` has no rule of that
+    name on that indicator (the alarm is not restored: it has no level)."""
+    rule = next((r for r in cfg.rules if r.name == rec["rule"]), None)
+    if rule is None or rule.indicator != rec["indicator"]:
+        return None
+    saved = rec["levels"]
+    resolved: dict[str, Any] = {}
+    keys = ("alert_x_baseline", "danger_x_baseline")
+    if any(getattr(src, k) is not None for src in (rule, *rule.bands) for k in keys):
+        was = saved.get("baselines")
+        channels = list(was) if isinstance(was, dict) and was else [name.rpartition("/")[2]]
+        resolved["baselines"] = {ch: cfg.baseline(ch, rule.indicator) for ch in channels}
+    if "zone_boundaries" in saved:
+        resolved["zone_boundaries"] = saved["zone_boundaries"]
+    now = level_settings(rule, resolved)
+    # an older file holds no baselines: what it holds is compared
+    compared = (*_LEVEL_KEYS, "bands", *(["baselines"] if "baselines" in saved else []))
+    if all(now.get(k) == saved.get(k) for k in compared):
+        return rec
+    return {k: v for k, v in rec.items() if k not in ("alert_level", "danger_level")} | {"levels": now}
+
+
+def saved_rows(saved: dict[str, dict[str, Any]], cfg: AlarmsConfig | None = None) -> list[dict[str, Any]]:
     """Rows of the alarm table for saved records not put back yet (no data has come): flag
     ``saved``; no ``live`` level (with no value yet it is not known: absent, as every value not
     known); the alert and danger levels as :func:`_saved_level` gives them (``alert_level``,
     ``danger_level`` a number as a live row's; a text, what it depends on, as ``alert_on``,
-    ``danger_on``)."""
+    ``danger_on``), under the configuration ``cfg`` when given (:func:`_as_configured`: a rule
+    edited between the runs shows its levels now, a rule gone none)."""
     rows = []
-    for name, rec in saved.items():
+    for name, saved_rec in saved.items():
+        now = saved_rec if cfg is None else _as_configured(name, saved_rec, cfg)
+        rec = saved_rec if now is None else now
         row = {"id": name, "rule": rec["rule"], "indicator": rec["indicator"], "level": shown(rec),
                "latched": rec["latched"] != "normal", "acknowledged": rec["acknowledged"], "saved": True}
-        for which in ("alert", "danger"):
+        for which in ("alert", "danger") if now is not None else ():
             lv = _saved_level(rec, which)
             if lv is not None:
                 row[f"{which}_level" if isinstance(lv, float) else f"{which}_on"] = \

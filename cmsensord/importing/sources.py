@@ -21,12 +21,14 @@ import fnmatch
 import glob as globmod
 import os
 import re
+import stat
 from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
+from cmsensord.errors import bad_link, file_kind
 from cmsensord.sinks.mcap_records import is_capture
 
 from .arrays import read_npy, read_npz
@@ -138,7 +140,7 @@ def collect_files(srcs: list[str], globs: list[str], order: str, notes: list[str
                 raise ImportFailure(f"{src}: no file matches this pattern; check the path")
             files += sorted(hit, key=_natural_key)
         else:
-            raise ImportFailure(f"{src}: no such file or directory")
+            raise ImportFailure(f"{src}: {bad_link(src, 'the recording') or 'no such file or directory'}")
     for pattern in globs:
         hit = [f for f in globmod.glob(pattern) if os.path.isfile(f)]
         if not hit:
@@ -171,8 +173,13 @@ def _reordered(named: list[str]) -> list[str]:
 
 def read_table(path: str, opts: ImportOptions, progress: Callable[[float], None] | None = None) -> Table:
     """The file's table, by its extension (``progress(fraction)`` while a long text file is read);
-    an unreadable file is a one-line ImportFailure."""
+    an unreadable file, or one that is not a regular file (a FIFO would wait for a writer, a
+    device give bytes without end), is a one-line ImportFailure."""
     try:
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode) and not stat.S_ISDIR(mode):
+            raise ImportFailure(f"{path}: not a regular file (a {file_kind(mode)}): import reads the files of a "
+                                f"recording ({', '.join(EXTENSIONS)}, or text tables of numbers)")
         return _read_by_extension(path, opts, progress)
     except OSError as exc:
         raise ImportFailure(f"{path}: cannot read: {exc.strerror or exc}") from None

@@ -396,7 +396,7 @@ class Alarms:
         return list(self._saved)
 
     def _saved_table(self) -> dict:
-        rows = saved_rows(self._saved)
+        rows = saved_rows(self._saved, self.rules)
         top = max(rows, key=lambda r: LEVELS.index(r["level"]), default=None)
         out = {"operating_state": "running" if self.rules.operating.source == "none" else "stopped",
                "worst": top["level"] if top else "normal", "alarms": rows}

@@ -15,6 +15,8 @@ from typing import Any
 
 from cmsensord.errors import EXIT_USAGE, CmsensordError
 from cmsensord.out_paths import out_file_refused, overwritten_input
+from cmsensord.sinks.log_names import empty_files
+from cmsensord.sinks.mcap_cut import EMPTY
 from cmsensord.sinks.mcap_records import NOT_MCAP, not_mcap_text
 
 __all__ = ["add_report_parser", "run_report", "MISSING_MATPLOTLIB"]
@@ -63,7 +65,7 @@ def run_report(args: argparse.Namespace) -> int:
     except OSError as err:
         raise CmsensordError(f"{err.filename or writing}: cannot write: {err.strerror or err}") from None
     n = sum(len(figs) for _, sections in drawn for _, figs in sections)
-    read = sum(f.left_out is None for data in parts for f in data.files)
+    read = sum(f.left_out is None and f.error != EMPTY for data in parts for f in data.files)
     messages = sum(data.messages for data in parts)
     print(f"report: {out} ({n} figures, {messages:,} messages from {read} file(s))", file=sys.stderr)
     return 0
@@ -97,6 +99,8 @@ def _tell_unreadable(files: list[Any], messages: int) -> None:
         if not bad:
             raise CmsensordError(f"{read[0].path}: no complete message in it to report"
                                  + (f" ({read[0].cut})" if read[0].cut else ""))
+        if len(bad) > 1 and all(f.error == EMPTY for f in bad):
+            raise CmsensordError(f"{empty_files([f.path for f in bad])}: no MCAP data in them")
         more = f" (and {len(bad) - 1} more file(s) like it)" if len(bad) > 1 else ""
         error = not_mcap_text(bad[0].path) if bad[0].error == NOT_MCAP else bad[0].error
         raise CmsensordError(f"{bad[0].path}: {error}{more}")
@@ -105,7 +109,12 @@ def _tell_unreadable(files: list[Any], messages: int) -> None:
         more = f" (and {len(alien) - 1} more file(s) like it)" if len(alien) > 1 else ""
         raise CmsensordError(f"{alien[0].path}: no cmsensord message in it to report: of its {alien[0].messages:,} "
                              f"message(s), {alien[0].not_read()}{more}")
+    empty = [f.path for f in read if f.error == EMPTY]
+    if empty:
+        print(f"cmsensord: report: {empty_files(empty)}: left out", file=sys.stderr)
     for f in read:
+        if f.error == EMPTY:
+            continue
         if f.skipped:
             print(f"cmsensord: report: {f.path}: {len(f.skipped)} damaged stretch(es) skipped (the first: "
                   f"{f.skipped[0]}); the report holds the {f.messages:,} message(s) of its intact chunks",

@@ -119,8 +119,7 @@ def run_ack(args: argparse.Namespace) -> int:
     if answer is None:
         return EXIT_NO_DAEMON
     if not answer.get("ok"):
-        print(f"cmsensord: ack: {answer.get('error')}", file=sys.stderr)
-        return EXIT_NO_DAEMON
+        return _refused("ack", answer)
     return _shown("ack", lambda: _ack_text(args, answer))
 
 
@@ -133,6 +132,17 @@ def _ack_text(args: argparse.Namespace, answer: dict) -> tuple[str, int]:
     if answer.get("level", "normal") == "normal":
         return f"nothing to acknowledge: {args.alarm} shows no level (normal)", 0
     return f"nothing to acknowledge: {args.alarm} is acknowledged already (it shows {answer['level']})", 0
+
+
+def _refused(command: str, answer: dict) -> int:
+    """The daemon's refusal (an answer not ``ok``) as one line on stderr, exit 1: its ``error``, or,
+    when it gives none (or no text), that it gave no reason."""
+    error = answer.get("error")
+    if not isinstance(error, str) or not error.strip():
+        error = ("the daemon refused the request without saying why (no 'error' text in its answer): a "
+                 "daemon of another cmsensord version? `cmsensord status --json` prints the answer as it came")
+    print(f"cmsensord: {command}: {error}", file=sys.stderr)
+    return EXIT_NO_DAEMON
 
 
 def _shown(command: str, text: Callable[[], tuple[str, int]]) -> int:
@@ -155,8 +165,7 @@ def run_status(args: argparse.Namespace) -> int:
     if answer is None:
         return EXIT_NO_DAEMON
     if not answer.get("ok") and not args.json:
-        print(f"cmsensord: status: {answer.get('error')}", file=sys.stderr)
-        return EXIT_NO_DAEMON
+        return _refused("status", answer)
     code = 0 if answer.get("ok") else EXIT_NO_DAEMON
     if args.json:
         print(json.dumps(answer, indent=1))
@@ -170,8 +179,7 @@ def run_capture_now(args: argparse.Namespace) -> int:
     if answer is None:
         return EXIT_NO_DAEMON
     if not answer.get("ok"):
-        print(f"cmsensord: capture-now: {answer.get('error')}", file=sys.stderr)
-        return EXIT_NO_DAEMON
+        return _refused("capture-now", answer)
     return _shown("capture-now", lambda: _capture_text(answer))
 
 

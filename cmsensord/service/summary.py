@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from cmsensord.errors import EXIT_USAGE, CmsensordError
 from cmsensord.report.localtime import iso_local
-from cmsensord.sinks.log_names import log_paths
+from cmsensord.sinks.log_names import empty_files, log_paths
 from cmsensord.sinks.mcap_records import not_mcap_text
 from cmsensord.sinks.mcap_sink import NOT_MCAP, summarize
 
@@ -22,12 +22,22 @@ def summary_of(names: list[str], *, as_json: bool = False) -> int:
     """The summary of each log of ``names`` (files, or directories of logs: a rotated set, in
     the order its files were opened), each after a ``== FILE`` line when there are several
     (JSON: a list of them); the exit status is the worst. A name that is neither is one line
-    and exit status 2."""
+    and exit status 2. Among several, the empty files (0 bytes) are left out, said in one line
+    (:func:`~cmsensord.sinks.log_names.empty_files`); all of them empty, that line is the error."""
     try:
         paths = [str(p) for p in log_paths(names)]
     except CmsensordError as exc:
         print(f"cmsensord: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if len(paths) > 1:
+        empty = [p for p in paths if _empty(p)]
+        gone = set(empty)
+        if len(empty) == len(paths):
+            print(f"cmsensord: {empty_files(empty)}: no MCAP data in them", file=sys.stderr)
+            return EXIT_USAGE
+        if empty:
+            print(f"cmsensord: summary: {empty_files(empty)}: left out", file=sys.stderr)
+            paths = [p for p in paths if p not in gone]
     if len(paths) == 1:
         return summary(paths[0], as_json=as_json)
     if as_json:
@@ -39,6 +49,14 @@ def summary_of(names: list[str], *, as_json: bool = False) -> int:
         print(("\n" if k else "") + f"== {p}", flush=True)
         status = max(status, summary(p))
     return status
+
+
+def _empty(path: str) -> bool:
+    """``path`` holds no byte (gone since it was listed: not empty, its summary says so)."""
+    try:
+        return os.stat(path).st_size == 0
+    except OSError:
+        return False
 
 
 def _not_mcap(path: str) -> int:

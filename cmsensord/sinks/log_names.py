@@ -19,9 +19,10 @@ import os
 import re
 from pathlib import Path
 
-from cmsensord.errors import CmsensordError, file_kind
+from cmsensord.errors import CmsensordError, bad_link, file_kind
 
-__all__ = ["KEPT", "SALVAGED", "log_files", "log_name", "log_paths", "next_name", "order_key", "salvaged_path"]
+__all__ = ["KEPT", "SALVAGED", "empty_files", "log_files", "log_name", "log_paths", "next_name", "order_key",
+           "salvaged_path"]
 
 SALVAGED = ".salvaged"
 _STAMP = r"\d{8}T\d{6}Z"
@@ -127,10 +128,22 @@ def log_paths(names: list[str]) -> list[Path]:
     return [p for p in out if not (p.resolve() in seen or seen.add(p.resolve()))]   # type: ignore[func-returns-value]
 
 
+#: the names a line on empty files gives before the count of the rest
+EMPTY_SHOWN = 5
+
+
+def empty_files(paths: list[str]) -> str:
+    """One phrase on the empty files ``paths`` (0 bytes, no MCAP data): their count and the first
+    :data:`EMPTY_SHOWN` names (``3,000 empty file(s) (0 bytes): a.mcap, b.mcap, ... (2,995 more)``);
+    thousands of them (a crash loop that opened a log each time) are one line, not one each."""
+    more = f", ... ({len(paths) - EMPTY_SHOWN:,} more)" if len(paths) > EMPTY_SHOWN else ""
+    return f"{len(paths):,} empty file(s) (0 bytes): {', '.join(map(str, paths[:EMPTY_SHOWN]))}{more}"
+
+
 def _not_a_log(name: str) -> str:
     """The line on ``name``, neither a directory nor a regular file: not there, or what it is."""
     try:
         mode = os.stat(name).st_mode
     except (OSError, ValueError):
-        return f"{name}: file not found"
+        return f"{name}: {bad_link(name) or 'file not found'}"
     return f"{name}: not a regular file (a {file_kind(mode)}): give an MCAP log or a directory of them"

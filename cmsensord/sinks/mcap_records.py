@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import os
+import stat
 import struct
 from collections.abc import Iterator
 from typing import Any, BinaryIO
@@ -26,14 +27,22 @@ NOT_MCAP = "not an MCAP file (bad magic)"
 
 def is_capture(path: str | os.PathLike[str]) -> bool:
     """Whether the file at ``path`` is a capture of the board's serial stream: its first 64 KB hold
-    a frame the decoder takes (False for a file that cannot be read)."""
+    a frame the decoder takes (False for a file that cannot be read, and for one that is not a
+    regular file: a FIFO, opened without waiting for a writer, and a device are not read)."""
     from cmsensord.protocol import Decoder
 
     try:
-        with open(path, "rb") as f:
-            head = f.read(1 << 16)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except (OSError, ValueError):
+        return False
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        head = os.read(fd, 1 << 16)
     except OSError:
         return False
+    finally:
+        os.close(fd)
     return bool(Decoder().feed(head))
 
 
