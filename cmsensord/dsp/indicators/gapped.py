@@ -49,10 +49,10 @@ def taper(ok: np.ndarray, n: int) -> np.ndarray:
     """The weights g of the samples (1-D mask ``ok``: the samples present): 0 in the gaps, a
     raised-cosine ramp over the n samples on each side of a gap, 1 elsewhere."""
     g = ok.astype(np.float64)
-    if n < 1:
+    miss = np.flatnonzero(~ok)
+    if n < 1 or not miss.size:
         return g
     idx = np.arange(ok.size)
-    miss = np.flatnonzero(~ok)
     # the distance of each sample to the nearest missing one
     pos = np.searchsorted(miss, idx)
     before = np.where(pos > 0, idx - miss[np.maximum(pos - 1, 0)], n + 1)
