@@ -62,7 +62,10 @@ def test_raw_records_carry_every_indicator_with_the_tacho_speed(raw6):
     assert all(not m2["bearings"] for t, _, m2 in recs if t == "/cm/ch1/indicators")   # no bearing on ch1
 
 
-def test_a_lost_raw_frame_leaves_its_interval_with_the_waveform_statistics_only(raw6):
+def test_a_lost_raw_frame_leaves_its_interval_with_every_indicator_of_the_samples_it_has(raw6):
+    """1 % of the interval lost (under indicators.max_missing_fraction): the spectral indicators
+    from the samples it has (dsp/indicators/gapped.py), as those of the intact stream; with
+    max_missing_fraction 0, the waveform statistics only."""
     from cmsensord.protocol import Decoder, FrameType
 
     dec = Decoder()
@@ -70,11 +73,19 @@ def test_a_lost_raw_frame_leaves_its_interval_with_the_waveform_statistics_only(
     victim = next(f for f in frames if f.type == FrameType.RAW and f.chan == 0 and f.t0_unwrapped >= 25000 * 2)
     data = raw6[:victim.offset] + raw6[victim.offset + 18 + len(victim.payload):]   # sync+header+CRC: 18 bytes
     recs = [m for t, _, m in indicators(data, chunk=50_000) if t == "/cm/ch0/indicators"]
-    hit = recs[2]
+    whole = [m for t, _, m in indicators(raw6, chunk=50_000) if t == "/cm/ch0/indicators"]
+    hit, ref = recs[2], whole[2]
     assert hit["missing_fraction"] == pytest.approx(250 / 25000)
+    assert "unavailable" not in hit and hit["zone"] == ref["zone"]
+    assert hit["velocity_rms_mm_s"] == pytest.approx(ref["velocity_rms_mm_s"], rel=0.02)
+    assert hit["envelope_rms"] == pytest.approx(ref["envelope_rms"], rel=0.05)
+    assert hit["bearings"][0]["lines"]["bpfo"]["amplitude"] == pytest.approx(
+        ref["bearings"][0]["lines"]["bpfo"]["amplitude"], rel=0.05)
+    assert recs[1] == whole[1] and recs[3] == whole[3]
+    strict = {**CFG, "indicators": {**CFG["indicators"], "max_missing_fraction": 0.0}}
+    hit = [m for t, _, m in indicators(data, chunk=50_000, cfg=strict) if t == "/cm/ch0/indicators"][2]
     assert "velocity_rms_mm_s" not in hit and "velocity_rms_mm_s" in hit["unavailable"]
     assert hit["accel_rms"] > 0 and "kurtosis" in hit
-    assert "velocity_rms_mm_s" in recs[1] and "velocity_rms_mm_s" in recs[3]
 
 
 def test_rms_mode_reports_the_overall_rms_and_the_rest_unavailable():

@@ -84,6 +84,9 @@ class IndicatorsConfig:
         "600 rpm, else 10-1000)")
     envelope_band_hz: tuple[float, ...] | None = setting(
         None, "[lo, hi] Hz demodulated (default: 0.08-0.4 fs, 2-10 kHz at 25 kHz)")
+    max_missing_fraction: float = setting(
+        0.05, "share of a record's samples that may be missing (lost frames) with its spectral "
+        "indicators still given, from the samples it has; 0: only from complete records", ge=0, le=0.5)
     slip_pct: float = setting(2.0, "search window +/- % around each defect frequency", ge=0, le=10)
     velocity_baseline_mm_s: float | None = setting(
         None, "healthy velocity RMS [mm/s]: the ISO alarm level is baseline + 0.25 x B/C "

@@ -14,8 +14,11 @@ once TACHO frames cover the interval's end; at most ``MAX_WAIT_S``), then
   without a tacho, ``indicators.rpm``.  The velocity band (none configured) follows that
   speed, else ``indicators.rpm`` (:meth:`~cmsensord.dsp.indicators.Setup.band_at`).
 * An interval with missing samples (lost RAW frames, a gap, the end of the stream)
-  gives the waveform statistics of the samples it has, with ``missing_fraction``;
-  the spectral indicators, which need all N samples, are listed as unavailable.
+  gives the waveform statistics of the samples it has, with ``missing_fraction``.  Missing
+  at most ``indicators.max_missing_fraction`` of them, it gives the spectral indicators too,
+  from the samples it has (:func:`~cmsensord.dsp.indicators.gapped.compute_gapped`: the gaps
+  zero, the window's energy over the samples present corrected for); missing more, those
+  are listed as unavailable.
 * A bearing line that the envelope spectrum's bins (1 / the interval's length) do not resolve
   (:mod:`cmsensord.dsp.indicators.resolution`) is left out and listed as unavailable, as
   ``<bearing>.<line>``; the first record with such a set of lines of a bearing comes after a
@@ -49,6 +52,7 @@ from cmsensord.config import ChannelConfig, Config
 from cmsensord.dsp.indicators import Band, Bearing, IndicatorRecord, Setup, compute_many
 from cmsensord.dsp.indicators.bearings import Geometry
 from cmsensord.dsp.indicators.envelope import envelope_band
+from cmsensord.dsp.indicators.gapped import compute_gapped
 from cmsensord.dsp.indicators.statistics import waveform_stats
 from cmsensord.monitor import messages
 from cmsensord.monitor.clock import BlockClock
@@ -293,7 +297,7 @@ class IndicatorChain:
         in order, channel by channel; the complete records' indicators computed together
         (:func:`compute_many`: the numbers of one :func:`compute` per record); before a record, the
         ``lines_unresolved`` events of its bearing lines not said yet (:func:`~.line_notes.line_notes`)."""
-        rows: list = []                 # (stamp, channel, head, missing, fields or None: computed)
+        rows: list = []                 # (stamp, channel, head, missing, fields, a record or None: computed)
         todo: list = []                 # (x, setup, shaft_hz) of the complete records
         for (_, x, stamp, finite), (shaft_hz, source) in zip(ready, self._speeds(ready, tacho)):
             head = {"mode": "raw", "interval_s": self.N / self.fs}
@@ -311,15 +315,20 @@ class IndicatorChain:
                 ok = finite[:, c]
                 if not ok.any():
                     continue
+                missing = 1.0 - float(ok.mean())
+                if missing <= self.cfg.indicators.max_missing_fraction and ok.sum() >= 2:
+                    rows.append((stamp, ch.name, head, missing, compute_gapped(xc, ok, self.setups[c], shaft_hz),
+                                 self.setups[c], shaft_hz))
+                    continue
                 st = waveform_stats(xc)
                 fields: dict = {k: _num(v) for k, v in zip(("accel_rms",) + WAVEFORM, st) if v == v}
                 fields["unavailable"] = list(SPECTRAL)
-                rows.append((stamp, ch.name, head, 1.0 - float(ok.mean()), fields, self.setups[c], shaft_hz))
+                rows.append((stamp, ch.name, head, missing, fields, self.setups[c], shaft_hz))
         records = iter(compute_many(todo))
         out = []
         for stamp, name, head, missing, fields, setup, shaft_hz in rows:
-            if fields is None:
-                r = next(records)
+            if not isinstance(fields, dict):        # computed: by compute_many (None) or gapped
+                r = next(records) if fields is None else fields
                 fields = record_fields(r)
                 if shaft_hz is None and (setup.bearings or any(b.orders for b in setup.bands)):
                     fields["unavailable"] = ["speed"] + fields.get("unavailable", [])

@@ -9,7 +9,8 @@ Per channel and interval (:mod:`.interval` puts them together):
 * :mod:`.iso_zones` -- ISO 10816-3 / 20816-3 zones A-D and the baseline-relative alarm;
 * :mod:`.envelope` -- acceleration enveloping, envelope RMS, envelope spectrum lines;
 * :mod:`.bearings` -- the defect frequencies FTF, BPFO, BPFI, BSF of a bearing;
-* :mod:`.bands` -- band RMS in Hz or in orders.
+* :mod:`.bands` -- band RMS in Hz or in orders;
+* :mod:`.gapped` -- all of them of a record missing a small share of its samples.
 
 numpy only (no scipy): the daemon imports this.
 """
