@@ -8,6 +8,17 @@ it (FEMTO Bearing1_1's BPFO ratio at 2 x its median over 0.1-s records: 3.6 % of
 records reach it, one at a time, against the 3 in a row of a 0.3-s delay; raised at 39.5 % of
 life, on records like the healthy ones).  :func:`thin_margins` says so, per alarm, with what
 the healthy values reached and the level above them.
+
+The level it advises is judged over a year of running, not over the healthy period: a rule
+whose on-delay needs k values in a row at its level raises a false alarm wherever k healthy
+values in a row reach it.  Taking the values as independent, with a share p of them at the level,
+such runs come about N p^k times in the N values of a year; a false alarm in a year is kept below
+a probability of FALSE_ALARMS_A_YEAR (10 %) by p <= (0.1 / N)^(1/k).  With an on-delay of one to
+three values that share is far below 1 % (1-s records: 3 values 0.15 %, 2 values 0.006 %), so
+a level above 99 % of the healthy values still raises a false alarm every few days; the level
+advised is above that share of the healthy values, at most SCATTER_SHARE, and the highest healthy
+value when the period holds too few values to show a share that small (n values vouch for no
+share below 1 / (n + 1), the chance that a value to come exceeds the highest of n).
 """
 
 from __future__ import annotations
@@ -18,12 +29,17 @@ import numpy as np
 
 from cmsensord.alarms import Judged
 
-__all__ = ["SCATTER_SHARE", "thin_margins"]
+__all__ = ["FALSE_ALARMS_A_YEAR", "SCATTER_SHARE", "thin_margins"]
 
 #: a level more of the healthy values reach than this share sits inside the machine's healthy
 #: scatter (a statistical alarm level is above at least 99 % of them: mean + 2.3 standard
 #: deviations of a normal scatter)
 SCATTER_SHARE = 0.01
+#: the expected false alarms a year of running that a level advised keeps below (a 10 % chance
+#: of one in a year), with the healthy values taken as independent
+FALSE_ALARMS_A_YEAR = 0.1
+#: seconds of running a year
+YEAR_S = 365.0 * 86400.0
 
 
 def _runs(over: np.ndarray) -> int:
@@ -87,29 +103,54 @@ def _shown(rule: Any, which: str, level: float, k: float | None) -> tuple[str, f
             lambda v: _suggest(which, v, base))
 
 
+def _yearly(share: float, need: int, step: float) -> float:
+    """Runs of ``need`` values in a row at the level in a year of values every ``step`` s, a
+    ``share`` of them at it, taken as independent (N p^k)."""
+    return YEAR_S / step * share ** need
+
+
+def _allowed(need: int, step: float) -> float:
+    """The share of values at a level that keeps its runs of ``need`` below FALSE_ALARMS_A_YEAR in a
+    year (:func:`_yearly` solved for p), and at most SCATTER_SHARE."""
+    return min(SCATTER_SHARE, (FALSE_ALARMS_A_YEAR * step / YEAR_S) ** (1.0 / need))
+
+
 def _line(alarm: str, rule: Any, t: np.ndarray, r: np.ndarray, which: str, level: float,
           k: float | None) -> str | None:
     """The warning of ``alarm`` whose healthy values ``r`` (multiples of the level in force, at
-    board seconds ``t``) reach ``level`` (None: its margin is not thin, see :func:`thin_margins`)."""
+    board seconds ``t``) reach ``level`` (None: its margin is not thin, see :func:`thin_margins`):
+    more than SCATTER_SHARE of them do, or so many that runs of its on-delay's values come
+    FALSE_ALARMS_A_YEAR times a year or more, or a run came within one value of the delay."""
     over = r >= 1.0
     n, longest = int(np.count_nonzero(over)), _runs(over)
     step = float(np.median(np.diff(np.unique(t)))) if np.unique(t).size > 1 else 0.0
     need = int(np.ceil(rule.on_delay_s / step - 1e-9)) if step > 0 else 1
+    need = max(need, 1)
     scatter = n > SCATTER_SHARE * r.size
-    if not (scatter or longest >= need - 1):
+    yearly = _yearly(n / r.size, need, step) if step > 0 else 0.0
+    if not (scatter or yearly >= FALSE_ALARMS_A_YEAR or longest >= need - 1):
         return None
     said, unit, text, fix_at = _shown(rule, which, level, k)
     noun = "time(s)" if rule.vote > 1 else "value(s)"
     top = float(r.max()) * unit
-    high = float(np.sort(r)[r.size - 1 - int(SCATTER_SHARE * r.size)]) * unit   # a level above it: <= the share
+    share = _allowed(need, step) if step > 0 else SCATTER_SHARE
+    above = int(share * r.size)                       # healthy values a level may leave above it
+    high = float(np.sort(r)[r.size - 1 - above]) * unit
     where = (f"within the healthy period's scatter (more than {100 * SCATTER_SHARE:g} % of its {noun[:-3]}s reach it)"
-             if scatter else "reached by a healthy run one value short of its on-delay")
-    fix = (f"above {100 * (1 - SCATTER_SHARE):g} % of the healthy {noun[:-3]}s ({fix_at(high)})" if scatter
-           else f"above the healthy period's highest ({fix_at(top)})")
+             if scatter else f"reached by {100.0 * n / r.size:.2g} % of the healthy {noun[:-3]}s"
+             if yearly >= FALSE_ALARMS_A_YEAR else "reached by a healthy run one value short of its on-delay")
+    runs = f" (as independent values, {yearly:.2g} such runs a year)" if step > 0 else ""
+    if above:
+        fix = f"above {100 * (1 - share):.4g} % of the healthy {noun[:-3]}s ({fix_at(high)})"
+    else:
+        fix = (f"above the healthy period's highest ({fix_at(top)})" + (
+            f"; {r.size} healthy {noun[:-3]}s cannot show the level {need} in a row needs (reached by under "
+            f"{100 * share:.2g} % of them, for under {FALSE_ALARMS_A_YEAR:g} false alarms a year): a longer healthy "
+            "period shows it" if share * r.size < 1 and (scatter or yearly >= FALSE_ALARMS_A_YEAR) else ""))
     return (f"alarm {alarm}: warning: thin margin: {said} is {where}: {n} of {r.size} {noun} there "
             f"({100.0 * n / r.size:.1f} %), the highest {text(top)}, in runs of up to {longest} of the {need} in a "
-            f"row its on_delay_s {rule.on_delay_s:g} needs: only the delay kept it quiet, and a healthy day with a "
-            "longer run raises it; set the level " + fix + ", or a longer on_delay_s")
+            f"row its on_delay_s {rule.on_delay_s:g} needs{runs}: only the delay kept it quiet, and a healthy day with "
+            "a longer run raises it; set the level " + fix + ", or a longer on_delay_s")
 
 
 def thin_margins(judged: Judged, rules: dict[str, Any], start_s: float, end_s: float, warned: set[str]) -> list[str]:
