@@ -374,16 +374,13 @@ def test_a_baseline_alert_saved_without_its_baseline_is_restored_as_the_same_epi
     assert json.loads(state.read_text())["alarms"]["base/ch0"]["levels"]["baselines"] == {"ch0": 0.1}
 
 
-def test_a_saved_alarm_waiting_for_data_shows_no_live_level(tmp_path):
-    """Restarted with the board off, a latched danger the last run saved (danger too at its stop):
-    `cmsensord status` shows the latch, its levels (the rule's saved settings), and its live level
-    as not known ("-", absent in --json), not "normal" (guards against the table saying the value
-    is back to normal with no value yet)."""
-    (tmp_path / "logs").mkdir()
-    rec = {**saved_latch("sev", "danger", (int(time.time()) - 60) * S, alert=0.3, danger=0.6), "live": "danger"}
+def status_before_data(tmp_path: Path, recs: dict, config: str) -> tuple[subprocess.CompletedProcess, dict]:
+    """The daemon started with the board off and ``recs`` in its alarm state file: the text of
+    `cmsensord status` once it answers, and its --json answer."""
+    (tmp_path / "logs").mkdir(exist_ok=True)
     (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
-        {"format": "cmsensord-alarms", "version": 1, "alarms": {"sev/ch0": rec}}))
-    d = start_daemon(tmp_path, tmp_path / "no-board", config=LATCHED)
+        {"format": "cmsensord-alarms", "version": 1, "alarms": recs}))
+    d = start_daemon(tmp_path, tmp_path / "no-board", config=config)
     cfg = str(tmp_path / "cmsensord.yaml")
     try:
         end, p = time.monotonic() + 20, None
@@ -396,6 +393,16 @@ def test_a_saved_alarm_waiting_for_data_shows_no_live_level(tmp_path):
     finally:
         stop(d)
     assert p is not None and p.returncode == 0, p and p.stderr
+    return p, answer
+
+
+def test_a_saved_alarm_waiting_for_data_shows_no_live_level(tmp_path):
+    """Restarted with the board off, a latched danger the last run saved (danger too at its stop):
+    `cmsensord status` shows the latch, its levels (the rule's saved settings), and its live level
+    as not known ("-", absent in --json), not "normal" (guards against the table saying the value
+    is back to normal with no value yet)."""
+    rec = {**saved_latch("sev", "danger", (int(time.time()) - 60) * S, alert=0.3, danger=0.6), "live": "danger"}
+    p, answer = status_before_data(tmp_path, {"sev/ch0": rec}, LATCHED)
     row = "sev/ch0                  danger  -                -      0.3      0.6 -      latched saved"
     assert p.stdout.splitlines()[-1] == row, p.stdout
     assert "live" not in answer["alarms"][0] and answer["alarms"][0]["saved"] is True, answer
@@ -416,7 +423,6 @@ def test_saved_alarms_waiting_for_data_show_the_levels_they_were_judged_by(tmp_p
     levels as a live row would: those in force when saved (a speed band's 0.1/0.2, not the rule's
     0.3/0.6), a baseline level from the saved baseline; where the record holds no such number,
     what the level depends on (`by speed`, `2xbase`), never "-" for a level the rule has."""
-    (tmp_path / "logs").mkdir()
     since = (int(time.time()) - 60) * S
     bands = {"alert": 0.3, "danger": 0.6, "bands": [{"below_rpm": 600, "alert": 0.1, "danger": 0.2}]}
     recs = {"band/ch0": {**saved_latch("band", "alert", since), "levels": bands, "alert_level": 0.1,
@@ -426,21 +432,7 @@ def test_saved_alarms_waiting_for_data_show_the_levels_they_were_judged_by(tmp_p
                          "levels": {"alert_x_baseline": 2.0, "danger_x_baseline": 4.0, "baselines": {"ch0": 0.25}}},
             "old/ch0": {**saved_latch("old", "alert", since), "levels": {"alert_x_baseline": 2.0}}}
     recs = {name: {**rec, "indicator": "accel_rms"} for name, rec in recs.items()}
-    (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
-        {"format": "cmsensord-alarms", "version": 1, "alarms": recs}))
-    d = start_daemon(tmp_path, tmp_path / "no-board", config=BANDS)
-    cfg = str(tmp_path / "cmsensord.yaml")
-    try:
-        end, p = time.monotonic() + 20, None
-        while time.monotonic() < end:
-            time.sleep(0.3)
-            p = run_module("cmsensord", "status", "--config", cfg)
-            if p.returncode == 0:
-                break
-        answer = json.loads(run_module("cmsensord", "status", "--config", cfg, "--json").stdout)
-    finally:
-        stop(d)
-    assert p is not None and p.returncode == 0, p and p.stderr
+    p, answer = status_before_data(tmp_path, recs, BANDS)
     assert p.stdout.splitlines()[-4:] == [
         "band/ch0                 alert   -                -      0.1      0.2 m/s²   latched saved",
         "slow/ch0                 alert   -                - by speed by speed m/s²   latched saved",
@@ -457,7 +449,6 @@ def test_a_saved_alarm_of_a_rule_edited_since_shows_the_levels_in_force_now(tmp_
     baseline learned again (0.25 -> 0.4): `cmsensord status` showed the levels saved, which are no
     longer in force (its next value is judged against the new ones); it shows the rule's levels
     now. A saved alarm of a rule no longer configured shows none."""
-    (tmp_path / "logs").mkdir()
     since = (int(time.time()) - 60) * S
     recs = {"sev/ch0": {**saved_latch("sev", "danger", since, alert=0.3, danger=0.6), "alert_level": 0.3,
                         "danger_level": 0.6},
@@ -465,24 +456,11 @@ def test_a_saved_alarm_of_a_rule_edited_since_shows_the_levels_in_force_now(tmp_
                          "levels": {"alert_x_baseline": 2.0, "danger_x_baseline": 4.0, "baselines": {"ch0": 0.25}}},
             "gone/ch0": {**saved_latch("gone", "alert", since, alert=0.3), "alert_level": 0.3}}
     recs = {name: {**rec, "indicator": "accel_rms"} for name, rec in recs.items()}
-    (tmp_path / "logs" / "cmsensord-alarms.json").write_text(json.dumps(
-        {"format": "cmsensord-alarms", "version": 1, "alarms": recs}))
-    d = start_daemon(tmp_path, tmp_path / "no-board", config=(
+    p, _ = status_before_data(tmp_path, recs, (
         "alarms:\n  rules:\n"
         "    - {name: sev, indicator: accel_rms, alert: 0.5, danger: 1.0, latch: true}\n"
         "    - {name: base, indicator: accel_rms, alert_x_baseline: 2.0, danger_x_baseline: 4.0, latch: true}\n"
         "  baselines: [{channel: ch0, indicator: accel_rms, value: 0.4}]\n"))
-    cfg = str(tmp_path / "cmsensord.yaml")
-    try:
-        end, p = time.monotonic() + 20, None
-        while time.monotonic() < end:
-            time.sleep(0.3)
-            p = run_module("cmsensord", "status", "--config", cfg)
-            if p.returncode == 0:
-                break
-    finally:
-        stop(d)
-    assert p is not None and p.returncode == 0, p and p.stderr
     assert p.stdout.splitlines()[-3:] == [
         "sev/ch0                  danger  -                -      0.5        1 m/s²   latched saved",
         "base/ch0                 alert   -                -      0.8      1.6 m/s²   latched saved",
