@@ -6,14 +6,18 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from cmsensord.config import ChannelConfig
+    from cmsensord.config import ChannelConfig, Config
     from cmsensord.dsp.tacho import TachoTracker
+    from cmsensord.monitor.capture import Captures
     from cmsensord.monitor.channels import ChannelSetup
     from cmsensord.monitor.clock import BlockClock
     from cmsensord.monitor.events import EventLog
+    from cmsensord.monitor.held import Held
+    from cmsensord.monitor.indicators import Indicators
+    from cmsensord.monitor.orders import OrderChain
     from cmsensord.monitor.raw import RawInput
     from cmsensord.monitor.severity import ChannelView, SeverityChain
     from cmsensord.monitor.shaft import Shaft
@@ -104,3 +108,22 @@ class Figures:
     def raw_calibration(self):
         """Per board channel scale/offset: STATUS, overridden by the configuration."""
         return self.raw.calibration(self.status)
+
+
+class Stage(Figures):
+    """What the Processor's stages (:class:`~cmsensord.monitor.raw_stage.RawStage`,
+    :class:`~cmsensord.monitor.observing.Observing`) use of it, declared once: its configuration,
+    sink and parts, and the calls they make of it."""
+
+    cfg: Config
+    sink: Any
+    held: Held
+    indicators: Indicators
+    captures: Captures | None
+    orders: OrderChain | None
+    _out: Callable[..., list]
+    _hand_over: Callable[[], Any]
+
+    if TYPE_CHECKING:
+        def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
+                  **extra: Any) -> None: ...

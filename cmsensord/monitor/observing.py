@@ -8,22 +8,15 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cmsensord.config import Config
 from cmsensord.monitor.alarms import Alarms
 from cmsensord.monitor.diagnostics import Diagnostics
 from cmsensord.monitor.events import Event
-from cmsensord.monitor.figures import Figures
-from cmsensord.monitor.held import Held
-from cmsensord.monitor.indicators import Indicators
+from cmsensord.monitor.figures import Stage
 from cmsensord.monitor.slots import observation_rows
-
-if TYPE_CHECKING:
-    from cmsensord.monitor.capture import Captures
-    from cmsensord.monitor.orders import OrderChain
 
 __all__ = ["Observing", "MAX_RUN_SLOTS"]
 
@@ -36,17 +29,9 @@ MAX_RUN_MESSAGES = 256
 MAX_RECORDS = 1000
 
 
-class Observing(Figures):
+class Observing(Stage):
     """Observations through the banks, decisions released (see the module docstring)."""
 
-    cfg: Config
-    sink: Any
-    held: Held
-    indicators: Indicators
-    captures: Captures | None
-    orders: OrderChain | None
-    _out: Callable[..., list]
-    _hand_over: Callable[[], Any]
     observe: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None
     diagnostics: Callable[[], dict] | None
     observations: int
@@ -55,8 +40,6 @@ class Observing(Figures):
     diag: Diagnostics
 
     if TYPE_CHECKING:
-        def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
-                  **extra: Any) -> None: ...
         def _feed_tacho(self, end: bool = False, before: int | None = None) -> None: ...
         def write_diagnostics(self, stamp_ns: int) -> None: ...
 

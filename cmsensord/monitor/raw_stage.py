@@ -6,19 +6,15 @@ after the TACHO frames in front of it; the TACHO frames -> shaft speed, then wha
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cmsensord.config import Config
-from cmsensord.monitor.figures import Figures
-from cmsensord.monitor.held import Held
-from cmsensord.monitor.indicators import Indicators
+from cmsensord.monitor.figures import Stage
 from cmsensord.monitor.raw import RawBlocks
 from cmsensord.protocol import Frame
 
 if TYPE_CHECKING:
-    from cmsensord.monitor.capture import Captures
     from cmsensord.monitor.orders import OrderChain
 
 __all__ = ["RawStage", "PIECE_S"]
@@ -28,22 +24,12 @@ __all__ = ["RawStage", "PIECE_S"]
 PIECE_S = 2.0
 
 
-class RawStage(Figures):
+class RawStage(Stage):
     """RAW frames and the shaft speed through the chains (see the module docstring)."""
 
-    cfg: Config
-    sink: Any
-    held: Held
-    indicators: Indicators
-    captures: Captures | None
-    orders: OrderChain | None
-    _out: Callable[..., list]
-    _hand_over: Callable[[], Any]
     _orders_refused: int | None
 
     if TYPE_CHECKING:
-        def event(self, kind: str, channel: str | None, message: str, stamp_ns: int | None = None,
-                  **extra: Any) -> None: ...
         def _board_channels(self, C: int) -> None: ...
         def _observe(self, t0: np.ndarray, vals: np.ndarray, max_slots: int = ...,
                      placed: Callable[[np.ndarray, np.ndarray], None] | None = None,
