@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import fnmatch
 import re
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +54,8 @@ def flatten(arrays: dict, depth: int = MAX_DEPTH) -> dict:
             continue
         recs = v.reshape(-1)
         labels = [_label(rec, names, i) for i, rec in enumerate(recs)]
-        labels = [lab if labels.count(lab) == 1 or lab.startswith("[") else f"{lab}_{i}"
+        times = Counter(labels)
+        labels = [lab if times[lab] == 1 or lab.startswith("[") else f"{lab}_{i}"
                   for i, lab in enumerate(labels)]
         for lab, rec in zip(labels, recs):
             at = name if recs.size == 1 else f"{name}.{lab}"
