@@ -366,3 +366,74 @@ def test_enospc_while_finishing_keeps_the_part_and_the_next_start_salvages_it(tm
     again.close()
     finished, parts = log_files(tmp_path, "cmsensord")
     assert parts == [] and sorted(logged(finished)[0]) == list(range(6))
+
+
+def _salvage_refused(small_fs: Path, clock) -> tuple[RotatingSink, Recorder, Path, Path]:
+    """A file abandoned (ENOSPC under its descriptor) whose salvage, when logging resumes in a
+    new file on a disk filled to a few kB, the full disk refuses: (sink, recorder, part, filler)."""
+    sink = RotatingSink(output(small_fs / "logs", flush_s=1.0, retry_s=1.0), clock=clock)
+    rec = Recorder(sink, clock)
+    rec.events.clear()                           # a salvage at start (a previous part's)
+    for i in range(120):
+        sink.write("/cm/ch0/severity", "severity", T0 + i, {"severity_index": 0.1, "i": i, "pad": PAD})
+    sink.flush()
+    part = sink.current.part_path
+    filler = fill(small_fs, leave=40 * 1024)     # room for a new file and a rotation, not for the part's copy
+    _swap_fd(sink, "/dev/full")
+    sink.write("/cm/ch0/severity", "severity", T0 + 120, {"severity_index": 0.1, "i": 120})
+    clock.t += 1.0
+    sink.tick()                                  # ENOSPC: abandoned, a new file at once
+    sink.tick()                                  # the new file fsynced: resumed, salvage refused
+    assert rec.actions()[:3] == ["abandoned", "resumed", "salvage_failed"]
+    kind, message, fields = rec.events[2]
+    assert (kind, message) == ("disk_error", f"{part}: cannot salvage: No space left on device; "
+                                             "tried again after the next rotation")
+    assert fields["details"]["errno"] == "ENOSPC" and part.exists()
+    return sink, rec, part, filler
+
+
+def test_a_salvage_the_full_disk_refuses_is_tried_again_after_a_rotation(small_fs, clock, caplog, monkeypatch):
+    """A salvage refused for want of room keeps the file, said once: a rotation on a disk still
+    full tries it again when the free space seems to hold it (refused again: counted, not said
+    again), else leaves it waiting untried; the first rotation with room salvages it."""
+    sink, rec, part, filler = _salvage_refused(small_fs, clock)
+    errors = sink.disk_errors
+    with monkeypatch.context() as m:             # the free space misread as ample: tried, refused
+        m.setattr("cmsensord.sinks.disk_outage.free_bytes", lambda path: 1 << 40)
+        sink.rotate()
+    assert rec.actions().count("salvage_failed") == 1 and part.exists() and sink.disk_errors == errors + 1
+    sink.rotate()                                # less room than the part: not tried
+    assert rec.actions().count("salvage_failed") == 1 and part.exists() and sink.disk_errors == errors + 1
+    filler.unlink()
+    sink.rotate()                                # the disk took a whole file: salvaged now
+    assert rec.actions().count("salvage_failed") == 1 and rec.actions().count("salvaged") == 1
+    kind, message, fields = next(e for e in rec.events if e[2]["details"]["action"] == "salvaged")
+    salvaged = small_fs / "logs" / part.name.replace(".mcap.part", ".salvaged.mcap")
+    assert kind == "salvage" and fields["count"] == 120 and message.startswith(f"{part.name}: salvaged 120 message(s)")
+    assert not part.exists() and salvaged in sink.paths
+    sink.rotate()                                # nothing waits: nothing tried, nothing said
+    sink.close()
+    assert rec.actions().count("salvaged") == 1 and "left for the next start" not in caplog.text
+    finished, parts = log_files(small_fs / "logs", "cmsensord")
+    assert parts == [] and sorted(logged([salvaged])[0]) == list(range(120))
+
+
+def test_a_file_waiting_for_salvage_is_left_for_the_next_start_or_dropped_when_gone(small_fs, clock, caplog):
+    """At close a file still waiting for room is left for the next start, one journal line; a
+    waiting file removed by hand is dropped from the list, quietly (never tried again)."""
+    caplog.set_level("INFO", logger="cmsensord")
+    sink, rec, part, filler = _salvage_refused(small_fs, clock)
+    sink.close()
+    assert [r.getMessage() for r in caplog.records if "left for the next start" in r.getMessage()] == [
+        f"1 log file(s) kept for salvage and not salvaged yet: {part.name}; left for the next start"]
+    assert part.exists()
+    filler.unlink()
+    caplog.clear()
+    sink, rec, part, filler = _salvage_refused(small_fs, clock)   # the next start salvaged the first
+    part.unlink()                                # an operator makes room
+    filler.unlink()
+    errors, actions = sink.disk_errors, rec.actions()
+    sink.rotate()
+    sink.close()
+    assert rec.actions()[:len(actions)] == actions and "salvage_failed" not in rec.actions()[len(actions):]
+    assert sink.disk_errors == errors and "left for the next start" not in caplog.text

@@ -3,6 +3,10 @@ the text and fields of a file abandoned after an error, a file removed while ope
 resumed, a failed disk operation and a salvage's result; retention's are
 :mod:`cmsensord.sinks.retention`'s.
 
+A salvage of an abandoned file that the full disk refuses (:data:`FULL`) does not give the file
+up: it waits in the sink's list of abandoned files and is tried again when logging resumes and
+after each rotation (:func:`salvage_abandoned`); at a stop it is left for the next start.
+
 A disk event is a ``disk_error`` event (:data:`~cmsensord.sinks.retention.DISK_EVENT`) told
 apart by ``details["action"]``; a function here returns ``(message, fields)`` for the sink's
 ``emit``, but :func:`salvage_result`, which queues its event on the sink itself.
@@ -10,6 +14,7 @@ apart by ``details["action"]``; a function here returns ``(message, fields)`` fo
 
 from __future__ import annotations
 
+import errno
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +30,8 @@ log = logging.getLogger("cmsensord")
 #: the kind of a salvage's event (a value of ``event_schema.EVENT_KINDS``); outages and their end are
 #: ``disk_error`` events told apart by ``details["action"]``, retention's deletions ``retention`` ones
 SALVAGE_EVENT = "salvage"
+#: errno values of a full disk: a file abandoned for them is salvaged again once there is room
+FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
 
 
 def error_details(action: str, err: SinkIOError, file: Path | str, **more: Any) -> dict[str, Any]:
@@ -74,17 +81,39 @@ def outage_state(outage: dict[str, Any], now: float) -> str:
             f"{outage['dropped']} message(s) dropped")
 
 
-def salvage_abandoned(sink: RotatingSink, parts: list[Path]) -> None:
+def salvage_abandoned(sink: RotatingSink, parts: list[Path]) -> list[Path]:
     """Salvage the files an outage abandoned, once logging is back: each one's event, and a
-    salvaged file joins ``sink.paths``."""
-    for part in parts:
+    salvaged file joins ``sink.paths``. Returns those a full disk refused (:data:`FULL`): they
+    wait, tried again later; each failure is counted in ``sink.disk_errors``, the first of a
+    file is an event. A file no longer there (an operator removed it) is dropped, quietly."""
+    waiting = []
+    for part in still_there(parts):
         try:
             result: SalvageResult | SinkIOError = salvage(part)
         except SinkIOError as err:
             result = err
+        if isinstance(result, SinkIOError) and result.errno in FULL and still_there([part]):
+            waiting.append(part)
+            sink.disk_errors += 1
+            if part not in sink._salvage_told:
+                sink._salvage_told.add(part)
+                sink.emit(DISK_EVENT, f"{result}; tried again after the next rotation",
+                          details=error_details("salvage_failed", result, part))
+            continue
         salvage_result(sink, result)
         if isinstance(result, SalvageResult) and result.path is not None and result.action == "salvaged":
             sink.paths = [*still_there(sink.paths), result.path]
+    sink._salvage_told.difference_update(set(parts) - set(waiting))
+    return waiting
+
+
+def left_waiting(parts: list[Path]) -> None:
+    """At a stop: the abandoned files not salvaged yet (``parts``, those still there), one
+    journal line; the next start salvages them."""
+    parts = still_there(parts)
+    if parts:
+        log.info("%d log file(s) kept for salvage and not salvaged yet: %s; left for the next start",
+                 len(parts), ", ".join(p.name for p in parts))
 
 
 def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> None:

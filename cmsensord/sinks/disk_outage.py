@@ -2,7 +2,10 @@
 
 Disk errors: no OSError ever leaves the sink. A failing operation (open, write, flush,
 fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
-holds complete chunks (salvaged when logging is back, or at the next start), else deleted.
+holds complete chunks (salvaged when logging is back, or at the next start), else deleted. A
+salvage the still-full disk refuses (ENOSPC, EDQUOT) is tried again after each rotation, once
+the free space holds the file (:meth:`DiskOutages._salvage_waiting`); at a stop what still waits
+is left for the next start, one journal line.
 A failed fsync is never retried on the same file. A new file is tried at once, then every
 ``retry_s``; messages written while no file is open, and those of the chunk that could
 not be written, are counted in :attr:`dropped`. Logging counts as back when a new file has been
@@ -17,7 +20,6 @@ other reason the first file cannot be opened is a SinkError.
 
 from __future__ import annotations
 
-import errno
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -26,14 +28,14 @@ from typing import TYPE_CHECKING, Any, cast
 from cmsensord.config import OutputConfig
 from cmsensord.sinks import disk_events
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
-from cmsensord.sinks.retention import DISK_EVENT
+from cmsensord.sinks.retention import DISK_EVENT, free_bytes
 
 if TYPE_CHECKING:
     from cmsensord.sinks.rotating import RotatingSink
 
 __all__ = ["DiskOutages"]
 
-_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
+_FULL = disk_events.FULL
 
 
 class DiskOutages:
@@ -53,6 +55,7 @@ class DiskOutages:
     _next_retry: float
     _last_errno: int | None
     _abandoned: list[Path]
+    _salvage_told: set[Path]
 
     if TYPE_CHECKING:
         def emit(self, kind: str, message: str, **fields: Any) -> None: ...
@@ -170,4 +173,28 @@ class DiskOutages:
         text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
         self.emit(DISK_EVENT, text, **fields)
         abandoned, self._abandoned = self._abandoned, []
-        disk_events.salvage_abandoned(cast("RotatingSink", self), abandoned)
+        waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), abandoned)
+        self._abandoned = [*waiting, *self._abandoned]
+
+    def _salvage_waiting(self) -> None:
+        """After a rotation finished a file (the disk took a whole file, and retention made room):
+        the abandoned files a full disk refused to salvage, tried again; one larger than the free
+        space (its copy would not fit) waits, untried. None during an outage or after close."""
+        if self._closed or self._outage is not None or not self._abandoned:
+            return
+        try:
+            free: int | None = free_bytes(self.output.dir)
+        except OSError:
+            free = None                      # not known: tried
+        tried = [p for p in self._abandoned if free is None or _size(p) <= free]
+        if tried:
+            waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), tried)
+            self._abandoned = [p for p in self._abandoned if p not in tried or p in waiting]
+
+
+def _size(path: Path) -> int:
+    """``path``'s size; 0 when it cannot be read (gone: salvage drops it)."""
+    try:
+        return path.lstat().st_size
+    except OSError:
+        return 0

@@ -132,7 +132,8 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._outage: dict[str, Any] | None = None
         self._next_retry = now
         self._last_errno: int | None = None
-        self._abandoned: list[Path] = []
+        self._abandoned: list[Path] = []      # kept for salvage: an outage's, or waiting for room
+        self._salvage_told: set[Path] = set()   # ... whose salvage the full disk refused, said once
         self.retention = RetentionTold()    # what retention said once and does not repeat
         self.device = place_of(output.dir)   # files are made on this device only
         self._salvage_stop = threading.Event()
@@ -345,6 +346,7 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
     def rotate(self) -> Path | None:
         """Finish the current file and start the next; returns the finished path
         (None if it could not be finished: it is then kept as ``.part``)."""
+        was_out = self._outage is not None   # ends in _finish_current: salvaged there
         done = self._finish_current()      # on failure a new file is already being tried
         if not self._closed and self._current is None and self._outage is None:
             try:
@@ -353,6 +355,8 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
                 self._failed(err, None)
         if not self._closed:
             self._retention()
+            if done is not None and not was_out:
+                self._salvage_waiting()
         if done is not None and self.on_rotate is not None:
             self.on_rotate(done)
         self._deliver()
@@ -375,7 +379,8 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
 
     def close(self) -> Path | None:
         """Finish the current file; returns its path (None if it could not be
-        finished). Every finished file still in the directory is in ``paths``. Idempotent."""
+        finished). Every finished file still in the directory is in ``paths``; files kept for
+        salvage and not salvaged yet are left for the next start (one journal line). Idempotent."""
         if self._closed:
             return self.paths[-1] if self.paths else None
         self._closed = True                  # first: a failure now must not open a new file
@@ -388,9 +393,11 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
             part = cur.abandon()
             with contextlib.suppress(OSError):   # a header alone: salvage deletes it at the next start
                 part.unlink()
-            return self.paths[-1]
-        done = self._finish_current()
-        self._deliver()
+            done: Path | None = self.paths[-1]
+        else:
+            done = self._finish_current()
+            self._deliver()
+        disk_events.left_waiting(self._abandoned)
         return done
 
     def release(self) -> None:
