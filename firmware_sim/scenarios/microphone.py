@@ -61,6 +61,7 @@ from collections import OrderedDict
 import numpy as np
 
 from .base import FULL_SCALE_MS2, keyword_params
+from .iir import lfilter
 from .motor import DegradingMotor, FaultyMotor, HealthyMotor, MotorScenario
 from .noise import MACHINE_STREAM, SlotDraws, cubic_bspline, gauss, generator
 
@@ -177,8 +178,6 @@ class BackgroundNoise:
 
     # -- carriers: unit-RMS noises, low-passed with the previous segment's memory --
     def _lowpassed(self, draws: SlotDraws, stream: str, k: int, rho: float, g: float, L: int) -> np.ndarray:
-        from scipy.signal import lfilter
-
         W = self.warmup
         cur = gauss(generator(draws.seed, MIC_STREAMS[stream], k), L)
         prev = gauss(generator(draws.seed, MIC_STREAMS[stream], k - 1), L)[L - W:] if k > 0 else np.zeros(W)

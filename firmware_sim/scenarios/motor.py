@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from .base import ConstantSpeed, Scenario
+from .iir import lfilter
 from .noise import MACHINE_STREAM, PRE_BOOT, cubic_bspline, gauss, generator
 
 __all__ = ["MotorScenario", "HealthyMotor", "FaultyMotor", "DegradingMotor", "velocity_rms"]
@@ -191,8 +192,6 @@ class MotorScenario(ConstantSpeed, Scenario):
         self._warmup = int(math.ceil(25.0 * tau))  # e^-25: the ringing carried across a boundary
         if self._warmup > L:
             raise ValueError(f"resonance_zeta={zeta} rings longer than a segment; use >= {25 / (wn * L):.2g}")
-        from scipy.signal import lfilter
-
         h = lfilter(self._res_b, self._res_a, np.r_[1.0, np.zeros(self._warmup * 2)])
         self._res_noise_gain = self.resonance_noise_rms / math.sqrt(float(np.sum(h * h)))
 
@@ -262,8 +261,6 @@ class MotorScenario(ConstantSpeed, Scenario):
         u = np.concatenate([prev["white"][L - W:], cur["white"]])
         u *= self._res_noise_gain
         u += imp
-        from scipy.signal import lfilter
-
         machine += lfilter(self._res_b, self._res_a, u)[W:]
         out = np.empty((self.n_channels, L))
         for c in range(self.n_channels):
