@@ -6,7 +6,7 @@ more than ``indicators.max_missing_fraction`` lists them unavailable.
 The same stationary signal (4 mm/s at 50 Hz, an impact train at the BPFO of 107.5 Hz, noise)
 imported twice, whole and with one 10-ms block missing in each 1-s record (the last but one
 missing exactly the default limit of 5 %, the last 20 %), and replayed.  Measured: velocity RMS
-within 0.44 %, envelope RMS within 0.14 %, the BPFO line's amplitude within 0.31 % of the
+within 0.44 %, envelope RMS within 0.14 %, the BPFO line's amplitude within 0.43 % of the
 records without gaps.
 """
 
