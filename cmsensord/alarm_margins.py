@@ -5,16 +5,18 @@ raised there.  An alarm with an ``on_delay_s`` can stay quiet over a period whos
 reach its level again and again, each time for less than the delay: its level then sits
 inside the machine's healthy scatter, and the first healthy run as long as the delay raises
 it (FEMTO Bearing1_1's BPFO ratio at 2 x its median over 0.1-s records: 3.6 % of the healthy
-records reach it, one at a time, against the 3 in a row of a 0.3-s delay; raised at 39.5 % of
+records reach it, one at a time, against the 4 in a row of a 0.3-s delay; raised at 39.5 % of
 life, on records like the healthy ones).  :func:`thin_margins` says so, per alarm, with what
 the healthy values reached and the level above them.
 
 The level it advises is judged over a year of running, not over the healthy period: a rule
-whose on-delay needs k values in a row at its level raises a false alarm wherever k healthy
-values in a row reach it.  Taking the values as independent, with a share p of them at the level,
+whose on-delay needs k values in a row at its level (the delay runs from the first of them: k is
+the on-delay over the values' interval, plus one) raises a false alarm wherever k healthy values
+in a row reach it.  Taking the values as independent, with a share p of them at the level,
 such runs come about N p^k times in the N values of a year; a false alarm in a year is kept below
-a probability of FALSE_ALARMS_A_YEAR (10 %) by p <= (0.1 / N)^(1/k).  With an on-delay of one to
-three values that share is far below 1 % (1-s records: 3 values 0.15 %, 2 values 0.006 %), so
+a probability of FALSE_ALARMS_A_YEAR (10 %) by p <= (0.1 / N)^(1/k).  With an on-delay that needs two
+to four values that share is below 1 % (1-s records: 4 values 0.75 %, 3 values 0.15 %, 2 values
+0.006 %), so
 a level above 99 % of the healthy values still raises a false alarm every few days; the level
 advised is above that share of the healthy values, at most SCATTER_SHARE, and the highest healthy
 value when the period holds too few values to show a share that small (n values vouch for no
@@ -124,8 +126,8 @@ def _line(alarm: str, rule: Any, t: np.ndarray, r: np.ndarray, which: str, level
     over = r >= 1.0
     n, longest = int(np.count_nonzero(over)), _runs(over)
     step = float(np.median(np.diff(np.unique(t)))) if np.unique(t).size > 1 else 0.0
-    need = int(np.ceil(rule.on_delay_s / step - 1e-9)) if step > 0 else 1
-    need = max(need, 1)
+    # the delay runs from the first value at the level: it is over at the value on_delay_s after it
+    need = int(np.ceil(rule.on_delay_s / step - 1e-9)) + 1 if step > 0 else 1
     scatter = n > SCATTER_SHARE * r.size
     yearly = _yearly(n / r.size, need, step) if step > 0 else 0.0
     if not (scatter or yearly >= FALSE_ALARMS_A_YEAR or longest >= need - 1):

@@ -42,10 +42,10 @@ def test_a_level_inside_the_healthy_scatter_held_back_by_the_delay_alone_is_said
     assert "alarms: none of the 2 rule(s) shown within the healthy period (replayed with the site file)\n" in out
     assert ("alarm crest/de: warning: thin margin: its alert level 4.825 (1.5 x baseline) is within the healthy "
             "period's scatter (more than 1 % of its values reach it): 10 of 200 value(s) there (5.0 %), the highest "
-            "18.31 (5.69 x baseline), in runs of up to 1 of the 3 in a row its on_delay_s 0.3 needs (as independent "
-            "values, 3.9e+04 such runs a year): only the delay kept it quiet, and a healthy day with a longer run "
+            "18.31 (5.69 x baseline), in runs of up to 1 of the 4 in a row its on_delay_s 0.3 needs (as independent "
+            "values, 2e+03 such runs a year): only the delay kept it quiet, and a healthy day with a longer run "
             "raises it; set the level above the healthy period's highest (alert_x_baseline 5.7 or more); 200 healthy "
-            "values cannot show the level 3 in a row needs (reached by under 0.068 % of them, for under 0.1 false "
+            "values cannot show the level 4 in a row needs (reached by under 0.42 % of them, for under 0.1 false "
             "alarms a year): a longer healthy period shows it, or a longer on_delay_s\n") in out
     assert "alarm rms/de" not in out              # its level stays above every healthy record
     out = _calibrate(tmp_path, rough, 5.8)        # the level it gave: quiet
@@ -84,8 +84,8 @@ def test_a_voting_alarm_is_judged_on_its_channels_together_each_against_its_own_
     assert warned == [
         "alarm crest: warning: thin margin: its alert level (1.5 x each channel's baseline), reached on 2 of its "
         "channels at once, is within the healthy period's scatter (more than 1 % of its times reach it): 10 of 200 "
-        "time(s) there (5.0 %), the highest 3.04 x baseline, in runs of up to 1 of the 3 in a row its on_delay_s 0.3 "
-        "needs (as independent values, 3.9e+04 such runs a year): only the delay kept it quiet, and a healthy day "
+        "time(s) there (5.0 %), the highest 3.04 x baseline, in runs of up to 1 of the 4 in a row its on_delay_s 0.3 "
+        "needs (as independent values, 2e+03 such runs a year): only the delay kept it quiet, and a healthy day "
         "with a longer run raises it; set the level above the healthy period's highest (alert_x_baseline 3.1 or "
-        "more); 200 healthy times cannot show the level 3 in a row needs (reached by under 0.068 % of them, for "
+        "more); 200 healthy times cannot show the level 4 in a row needs (reached by under 0.42 % of them, for "
         "under 0.1 false alarms a year): a longer healthy period shows it, or a longer on_delay_s"], p.stdout

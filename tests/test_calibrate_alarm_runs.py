@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cmsensord.alarms.state import AlarmState
 from processes import cmsensord
 
 
@@ -41,17 +42,24 @@ def _warned(tmp_path: Path, capture: Path, crest_x: float) -> list[str]:
 
 def test_a_level_under_one_percent_of_the_healthy_values_with_a_short_delay_is_said(rare, tmp_path):
     """3 of 400 records (0.75 %, under the 1 % of a statistical level: the two impacts and one of
-    the noise) reach 1.5 x the crest factor's baseline, one at a time; its on-delay needs 3 in a
-    row: 0.0075^3 x 315 million records of 0.1 s a year, about 130 false alarms a year.  The level
-    advised is above every healthy value (400 values show no share as small as the 0.068 % three
-    in a row allow), and at it calibrate is quiet."""
+    the noise) reach 1.5 x the crest factor's baseline, one at a time; its on-delay of 0.3 s needs 4
+    records of 0.1 s in a row (the delay runs from the first: the alarm state raises at the fourth,
+    not the third): 0.0075^4 x 315 million records a year, about one false alarm a year.  The level
+    advised is above the 0.42 % of the values that four in a row allow (all but the highest of
+    400), and at it calibrate is quiet."""
     warned = _warned(tmp_path, rare, 1.5)
     assert warned == [
         "alarm crest/de: warning: thin margin: its alert level 4.815 (1.5 x baseline) is reached by 0.75 % of the "
         "healthy values: 3 of 400 value(s) there (0.8 %), the highest 18.42 (5.74 x baseline), in runs of up to 1 of "
-        "the 3 in a row its on_delay_s 0.3 needs (as independent values, 1.3e+02 such runs a year): only the delay "
-        "kept it quiet, and a healthy day with a longer run raises it; set the level above the healthy period's "
-        "highest (alert_x_baseline 5.8 or more); 400 healthy values cannot show the level 3 in a row needs "
-        "(reached by under 0.068 % of them, for under 0.1 false alarms a year): a longer healthy period shows it, "
-        "or a longer on_delay_s"], warned
-    assert _warned(tmp_path, rare, 5.8) == []
+        "the 4 in a row its on_delay_s 0.3 needs (as independent values, 1 such runs a year): only the delay kept it "
+        "quiet, and a healthy day with a longer run raises it; set the level above 99.58 % of the healthy values "
+        "(alert_x_baseline 5.7 or more), or a longer on_delay_s"], warned
+    assert _warned(tmp_path, rare, 5.7) == []
+
+
+def test_the_values_in_a_row_the_warning_names_are_those_the_alarm_state_needs():
+    """An on-delay of 0.3 s over values 0.1 s apart: 3 values in a row at the level raise nothing,
+    4 raise the alarm (the delay is measured from the first value's stamp), as the warning says."""
+    for n, raised in ((3, 0), (4, 1)):
+        s = AlarmState(on_delay_s=0.3)
+        assert max(s.step(k * 100_000_000, int(1 <= k <= n)) for k in range(8)) == raised

@@ -4,9 +4,10 @@ so the ISO velocity alarm and the bearing lines keep working on such a link; a r
 more than ``indicators.max_missing_fraction`` lists them unavailable.
 
 The same stationary signal (4 mm/s at 50 Hz, an impact train at the BPFO of 107.5 Hz, noise)
-imported twice, whole and with one 10-ms block missing in each 1-s record (the last record
-missing 20 %), and replayed.  Measured: velocity RMS within 0.44 %, envelope RMS within 0.14 %,
-the BPFO line's amplitude within 0.31 % of the records without gaps.
+imported twice, whole and with one 10-ms block missing in each 1-s record (the last but one
+missing exactly the default limit of 5 %, the last 20 %), and replayed.  Measured: velocity RMS
+within 0.44 %, envelope RMS within 0.14 %, the BPFO line's amplitude within 0.43 % of the
+records without gaps.
 """
 
 from __future__ import annotations
@@ -69,12 +70,14 @@ def test_a_record_missing_one_block_gives_its_spectral_indicators_as_a_whole_one
     for k in range(SECONDS - 1):            # one 10-ms block (200 samples) a record, here and there in it
         at = k * FS + (37 + 29 * k) % 100 * 200
         gapped[at:at + 200] = np.nan
+    at = (SECONDS - 2) * FS + 7000
+    gapped[at:at + 800] = np.nan            # the last but one misses 5 % (1000 samples): the default limit
     last = (SECONDS - 1) * FS
     gapped[last + 1000:last + 5000] = np.nan    # the last record misses 20 %
     whole, alarms_whole = _replay(tmp_path, "whole", x)
     holed, alarms_holed = _replay(tmp_path, "holed", gapped)
     assert len(whole) == len(holed) == SECONDS
-    assert [m["missing_fraction"] for m in holed] == [0.01] * (SECONDS - 1) + [0.2]
+    assert [m["missing_fraction"] for m in holed] == [0.01] * (SECONDS - 2) + [0.05, 0.2]
     for w, g in zip(whole[:-1], holed[:-1]):
         assert "unavailable" not in g, g
         assert g["zone"] == w["zone"] == "C"

@@ -315,7 +315,7 @@ class IndicatorChain:
                 ok = finite[:, c]
                 if not ok.any():
                     continue
-                missing = 1.0 - float(ok.mean())
+                missing = float(np.count_nonzero(~ok)) / ok.size     # exact at the limit (1 - 0.95 > 0.05)
                 if missing <= self.cfg.indicators.max_missing_fraction and ok.sum() >= 2:
                     rows.append((stamp, ch.name, head, missing, compute_gapped(xc, ok, self.setups[c], shaft_hz),
                                  self.setups[c], shaft_hz))
