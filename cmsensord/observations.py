@@ -6,7 +6,8 @@ clock with its missing slots, the tacho) and keeps, per channel, the block RMS o
 every observation slot in [from, to] board seconds (NaN where an observation is
 missing), the board's block rate and the shaft speed, and the median of each
 indicator (``/cm/<ch>/indicators``, under the alarm manager's names) over the
-records inside the window (a bearing line the envelope spectrum does not resolve has none:
+records inside the window that miss at most ``indicators.max_missing_fraction`` of their
+samples, as the daemon gives their spectral indicators (a bearing line the envelope spectrum does not resolve has none:
 the replay's ``lines_unresolved`` events are among the notes).  Commissioning learns from exactly what the daemon
 will see.
 """
@@ -130,14 +131,14 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
     shaft = _shaft_hz(sink, proc, first / rate, last / rate)
     rpm = meta.get("rpm")
     names = [ch.name for ch in proc.channels]
-    medians = _indicator_medians(sink, proc, first / rate, last / rate)   # by the Processor's names
+    medians, lossy = _indicator_medians(sink, proc, first / rate, last / rate)   # by the Processor's names
     return Observations(names=names, indices=[ch.index for ch in proc.channels],
                         y=y[first:last], rate_hz=rate, start_s=first / rate, shaft_hz=shaft,
                         rpm=float(rpm) if rpm else None,
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(lost[first:last], rate, total, to_s)
-                        + _unresolved(sink) + _flat_notes(flat[first:last], names),
+                        + lossy + _unresolved(sink) + _flat_notes(flat[first:last], names),
                         settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board,
                         capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None,
                         no_signal=_no_signal(sink, proc, first / rate, last / rate))
@@ -230,25 +231,38 @@ def _said(at: float) -> str:
     return str(at) if isinstance(at, Percent) else f"{at:g}"
 
 
-def _indicator_medians(sink: ListSink, proc: Processor, start: float, end: float) -> dict[str, dict[str, float]]:
-    """Per channel, the median of each indicator over the complete records in [start, end]
-    board seconds (the zone left out: it is graded, not measured), the machine running: the
-    records whose ``accel_rms`` says it stopped, and its starts and stops beside them
+def _indicator_medians(sink: ListSink, proc: Processor, start: float,
+                       end: float) -> tuple[dict[str, dict[str, float]], tuple[str, ...]]:
+    """Per channel, the median of each indicator over the records in [start, end] board seconds
+    that miss at most ``indicators.max_missing_fraction`` of their samples (the limit up to which
+    the daemon gives a record's spectral indicators), of the values each record carries (the zone
+    left out: it is graded, not measured), the machine running: the records whose ``accel_rms``
+    says it stopped, and its starts and stops beside them
     (:func:`~cmsensord.dsp.commissioning.idle_periods`), are left out, as calibrate leaves them
-    out of the severity's model."""
+    out of the severity's model.  With them, the line on the records left out for lost samples
+    (:func:`_lossy_notes`)."""
     from cmsensord.monitor.alarms import indicator_values
 
     if proc.clock.slot0_t0 is None:
-        return {}
+        return {}, ()
     t0 = proc.clock.slot_stamp_ns(0)
+    limit = proc.cfg.indicators.max_missing_fraction
     records: dict[str, list[dict[str, float]]] = {}
+    counts: dict[str, list[int]] = {}            # channel -> [left out, in the period]
     for topic, stamp, m in sink.messages:
-        if not topic.endswith("/indicators") or m.get("missing_fraction", 1.0) > 0:
+        if not topic.endswith("/indicators"):
             continue
         t_end = (stamp - t0) / 1e9
         if t_end - m["interval_s"] < start - 1e-3 or t_end > end + 1e-3:
             continue
-        records.setdefault(m["channel"], []).append({k: v for k, v in indicator_values(m).items() if k != "zone"})
+        count = counts.setdefault(m["channel"], [0, 0])
+        count[1] += 1
+        if not m.get("missing_fraction", 1.0) <= limit:
+            count[0] += 1
+            continue
+        records.setdefault(m["channel"], []).append(
+            {k: v for k, v in indicator_values({k: v for k, v in m.items() if v is not None}).items()
+             if k != "zone" and np.isfinite(v)})
     out = {}
     for ch, recs in records.items():
         idle = idle_periods(np.array([r.get("accel_rms", np.nan) for r in recs], dtype=np.float64))
@@ -258,7 +272,29 @@ def _indicator_medians(sink: ListSink, proc: Processor, start: float, end: float
             for k, v in r.items():
                 values.setdefault(k, []).append(v)
         out[ch] = {k: float(np.median(v)) for k, v in values.items()}
-    return out
+    return out, _lossy_notes(counts, limit)
+
+
+def _lossy_notes(counts: dict[str, list[int]], limit: float) -> tuple[str, ...]:
+    """The line on the indicator records of the healthy period left out for missing more than
+    ``limit`` of their samples (``counts``: channel -> [left out, records]), per channel when the
+    channels differ, naming the channels left with no record at all (no indicator baseline) and
+    what gives them one."""
+    lossy = {ch: c for ch, c in counts.items() if c[0]}
+    if not lossy:
+        return ()
+    why = f"more than {100 * limit:g} % of their samples lost (indicators.max_missing_fraction {limit:g})"
+    if len({tuple(c) for c in counts.values()}) == 1:
+        left, total = next(iter(lossy.values()))
+        said = f"{left} of {total} indicator record(s) of the healthy period left out: {why}"
+    else:
+        said = f"indicator records of the healthy period left out, {why}: " + ", ".join(
+            f"{ch} {c[0]} of {c[1]}" for ch, c in lossy.items())
+    empty = [ch for ch, c in lossy.items() if c[0] == c[1]]
+    if empty:
+        said += (f"; so no indicator baseline for {', '.join(empty)}: calibrate on a healthy period from a "
+                 "better link, or give a higher indicators.max_missing_fraction in --config BASE.yaml")
+    return (said,)
 
 
 def _shaft_hz(sink: ListSink, proc: Processor, start: float, end: float) -> float | None:
