@@ -8,7 +8,8 @@ missing), the board's block rate and the shaft speed, and the median of each
 indicator (``/cm/<ch>/indicators``, under the alarm manager's names) over the
 records inside the window that miss at most ``indicators.max_missing_fraction`` of their
 samples, as the daemon gives their spectral indicators (a bearing line the envelope spectrum does not resolve has none:
-the replay's ``lines_unresolved`` events are among the notes).  Commissioning learns from exactly what the daemon
+the replay's ``lines_unresolved`` events are among the notes, and so is the line that a RAW board's
+records are shorter than ``indicators.interval_s``, when they are).  Commissioning learns from exactly what the daemon
 will see.
 """
 
@@ -30,7 +31,9 @@ from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
+from cmsensord.monitor.indicators import capped_interval
 from cmsensord.monitor.processor import Processor
+from cmsensord.protocol import MODE_RAW
 from cmsensord.sinks.memory import ListSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 from cmsensord.source import CaptureSource, require_frames
@@ -138,7 +141,7 @@ def read_observations(capture: str | Path, cfg: Config, *, auto_channels: bool =
                         indicators={name: medians[ch.name] for name, ch in zip(names, proc.channels)
                                     if ch.name in medians}, meta=meta,
                         notes=tuple(set_lines) + _window_notes(lost[first:last], rate, total, to_s)
-                        + lossy + _unresolved(sink) + _flat_notes(flat[first:last], names),
+                        + lossy + _capped(cfg, proc) + _unresolved(sink) + _flat_notes(flat[first:last], names),
                         settings=settings, fs=float(proc.fs), board_channels=proc.setup.n_board,
                         capture_s=total if upto is None or proc.adc_seconds <= upto + 2.0 else None,
                         no_signal=_no_signal(sink, proc, first / rate, last / rate))
@@ -155,6 +158,15 @@ def _window_notes(lost: np.ndarray, rate: float, total: float, to_s: float | Non
         notes.append(f"the healthy period misses {missing / rate:.1f} s of its {lost.shape[0] / rate:.1f} s "
                      "(blocks the board lost, or the import left out): learned from the rest")
     return tuple(notes)
+
+
+def _capped(cfg: Config, proc: Processor) -> tuple[str, ...]:
+    """The line that the RAW board's records are shorter than ``indicators.interval_s`` (more
+    samples than a record holds at its rate: :func:`~cmsensord.monitor.indicators.capped_interval`),
+    so the indicator baselines are medians over records of that length."""
+    st = proc.setup.status
+    line = capped_interval(cfg, st.fs) if st is not None and st.mode == MODE_RAW else None
+    return (line,) if line else ()
 
 
 def _unresolved(sink: ListSink) -> tuple[str, ...]:

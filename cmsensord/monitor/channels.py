@@ -11,7 +11,10 @@ board does not send are reported (a warning: their rules and bearings see no val
 and left out.  A board in RMS mode leaves the alarms on any indicator but ``accel_rms`` and
 the severity index blind (and those of an operating state from the shaft speed): one
 ``config`` warning names them (:func:`~cmsensord.monitor.alarms.blind_in_rms_mode`), once a
-run.  With the first data, the severity chain (and the microphone estimator)
+run; a board in RAW mode at a rate whose records cannot be ``indicators.interval_s`` long (more
+than :data:`~cmsensord.monitor.indicators.MAX_INTERVAL_SAMPLES` samples) gets one ``config``
+warning giving the record length it gets instead (:func:`~cmsensord.monitor.indicators.capped_interval`),
+once per rate.  With the first data, the severity chain (and the microphone estimator)
 of the usable channels is made.  Then the channels' names are known: an alarm rule or a bearing naming none of them is a
 :class:`~cmsensord.errors.ConfigError` (:mod:`cmsensord.config.channel_refs`).
 
@@ -55,6 +58,7 @@ from cmsensord.config.channel_refs import check_channel_refs
 from cmsensord.monitor.alarms import blind_in_rms_mode
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
+from cmsensord.monitor.indicators import capped_interval
 from cmsensord.monitor.microphone import Microphones
 from cmsensord.monitor.severity import ChannelView, SeverityChain
 from cmsensord.protocol import (
@@ -109,6 +113,7 @@ class ChannelSetup:
         self._missing_said: int | None = None     # the board's channel count the missing ones were said for
         self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
         self._unlike_said: tuple[int, int] | None = None    # the rate unlike the commissioned one said
+        self._capped_said: int | None = None    # the RAW rate whose record cap on interval_s was said
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the stamp and channel count of the run's first
@@ -184,6 +189,10 @@ class ChannelSetup:
                       + (f", tacho of {st.tacho_ppr} pulse(s) per revolution" if st.tacho_inputs else ""),
                       self.clock.stamp_ns(f.t0_unwrapped))
         self._unlike_commissioned(f, st)
+        capped = capped_interval(self.cfg, st.fs) if st.mode == MODE_RAW and st.fs != self._capped_said else None
+        if capped is not None:
+            self._capped_said = st.fs
+            self.log.emit("config", None, capped, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
         blind = blind_in_rms_mode(self.cfg) if st.mode == MODE_RMS and not self._rms_told else None
         if blind is not None:
             self._rms_told = True

@@ -43,6 +43,7 @@ in time order on the new time base, back or forward.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -163,6 +164,22 @@ def _bearing(b) -> dict:
 #: most samples in one interval (a board far faster than the TM4C's 25 kHz gets shorter
 #: intervals, so memory stays bounded: a copy per interval waits for the shaft speed)
 MAX_INTERVAL_SAMPLES = 1 << 16
+
+
+def capped_interval(cfg: Config, fs: int) -> str | None:
+    """The line that ``indicators.interval_s`` is longer than a RAW record holds at ``fs`` Hz
+    (:data:`MAX_INTERVAL_SAMPLES`), with the record length given instead and the longest
+    setting that fits; None when it fits or no indicator record is written.  RMS mode has no
+    such bound (its records sum block RMS values, no samples are kept)."""
+    ind = cfg.indicators
+    if not ind.enabled or fs < 1 or round(ind.interval_s * fs) <= MAX_INTERVAL_SAMPLES:
+        return None
+    cap = MAX_INTERVAL_SAMPLES / fs
+    step = 10.0 ** (math.floor(math.log10(cap)) - 2)      # 3 significant figures, rounded down: it fits
+    fits = math.floor(cap / step + 1e-9) * step
+    return (f"indicators.interval_s {ind.interval_s:g} s is longer than a RAW record holds at {fs} Hz "
+            f"({MAX_INTERVAL_SAMPLES:,} samples, {cap:.3g} s): indicator records are {cap:.3g} s; set "
+            f"indicators.interval_s {fits:.3g} or less")
 
 
 class IndicatorChain:
