@@ -22,7 +22,7 @@ from mcap.reader import make_reader
 
 from cmsensord.config import OutputConfig
 from cmsensord.errors import SinkError
-from cmsensord.sinks.mcap_sink import log_files, read_messages, summarize
+from cmsensord.sinks.mcap_sink import McapSink, log_files, read_messages, summarize
 from cmsensord.sinks.rotating import RotatingSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 from fakes import FakeClock
@@ -437,3 +437,57 @@ def test_a_file_waiting_for_salvage_is_left_for_the_next_start_or_dropped_when_g
     sink.close()
     assert rec.actions()[:len(actions)] == actions and "salvage_failed" not in rec.actions()[len(actions):]
     assert sink.disk_errors == errors and "left for the next start" not in caplog.text
+
+
+def _wait_until(predicate, timeout: float) -> bool:
+    """Whether ``predicate()`` came true within ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_a_leftover_the_full_disk_refuses_at_start_is_salvaged_after_a_rotation_with_room(small_fs, tmp_path):
+    """The daemon (background salvage) started on a disk too full to copy an earlier run's
+    ``.part``: the refusal is one line, the file waits; once another program's file is removed,
+    the next rotation salvages it, all its messages. Not 'left for the next start': a daemon runs
+    for months."""
+    logs = small_fs / "logs"
+    logs.mkdir()
+    src = McapSink(tmp_path / "src", compression="none", clock=FakeClock(), wall_clock=lambda: 1_700_000_000.0)
+    for i in range(300):                         # ~150 kB: a third of the tmpfs
+        src.write("/cm/ch0/severity", "severity", T0 + i, {"severity_index": 0.1, "i": i, "pad": PAD})
+    src.flush()
+    part = logs / src.part_path.name
+    part.write_bytes(src.part_path.read_bytes())  # as a kill leaves it
+    src.close()
+    filler = fill(small_fs, leave=part.stat().st_size * 2 // 3)   # room for the daemon's files, not the copy
+    cfg = tmp_path / "cmsensord.yaml"
+    cfg.write_text("output:\n  rotate_s: 1.0\n  retain_mb: 0\n  min_free_mb: 0\n  status_line: false\n")
+    journal = tmp_path / "stderr"
+    with open(journal, "w") as err_file:
+        d = spawn([sys.executable, "-m", "cmsensord", "--simulate", "--config", str(cfg), "--out", str(logs),
+                   "--duration", "3600", "--speed", "5"], stderr=err_file, stdout=subprocess.DEVNULL, env=ENV)
+    refused = f"ERROR disk_error: {part}: cannot salvage: No space left on device; tried again after the next rotation"
+    try:
+        assert _wait_until(lambda: "cannot salvage" in journal.read_text(), 30), journal.read_text()
+        filler.unlink()                          # another program's file removed: room
+        _wait_until(lambda: not part.exists() or d.poll() is not None, 5)   # rotate_s 1: salvaged
+        d.send_signal(signal.SIGTERM)
+        d.wait(timeout=20)
+    finally:
+        if d.poll() is None:
+            d.kill()
+            d.wait()
+    lines = journal.read_text().splitlines()
+    assert d.returncode == 0 and "Traceback" not in "\n".join(lines), lines[-30:]
+    salvaged = logs / part.name.replace(".mcap.part", ".salvaged.mcap")
+    assert [ln for ln in lines if part.name in ln] == [
+        refused, f"INFO salvage: {part.name}: salvaged 300 message(s) from 1 complete chunk(s) into {salvaged.name}"]
+    assert not part.exists() and [m["i"] for _t, _s, m in read_messages(salvaged)] == list(range(300))
+    finished, parts = log_files(logs, "cmsensord")
+    events = [m for p in finished for t, _s, m in read_messages(p) if t == TOPIC_EVENTS and part.name in m["message"]]
+    assert [(e["kind"], e["details"]["action"], e.get("count")) for e in events] == [
+        ("disk_error", "salvage_failed", None), ("salvage", "salvaged", 300)], events

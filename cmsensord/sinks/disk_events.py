@@ -3,9 +3,10 @@ the text and fields of a file abandoned after an error, a file removed while ope
 resumed, a failed disk operation and a salvage's result; retention's are
 :mod:`cmsensord.sinks.retention`'s.
 
-A salvage of an abandoned file that the full disk refuses (:data:`FULL`) does not give the file
-up: it waits in the sink's list of abandoned files and is tried again when logging resumes and
-after each rotation (:func:`salvage_abandoned`); at a stop it is left for the next start.
+A salvage that the full disk refuses (:data:`FULL`), of a file abandoned during this run or of an
+earlier run's leftover at start, does not give the file up: it waits in the sink's list of
+abandoned files and is tried again when logging resumes and after each rotation
+(:func:`salvage_abandoned`, :func:`refused`); at a stop it is left for the next start.
 
 A disk event is a ``disk_error`` event (:data:`~cmsensord.sinks.retention.DISK_EVENT`) told
 apart by ``details["action"]``; a function here returns ``(message, fields)`` for the sink's
@@ -94,17 +95,23 @@ def salvage_abandoned(sink: RotatingSink, parts: list[Path]) -> list[Path]:
             result = err
         if isinstance(result, SinkIOError) and result.errno in FULL and still_there([part]):
             waiting.append(part)
-            sink.disk_errors += 1
-            if part not in sink._salvage_told:
-                sink._salvage_told.add(part)
-                sink.emit(DISK_EVENT, f"{result}; tried again after the next rotation",
-                          details=error_details("salvage_failed", result, part))
+            refused(sink, result, part)
             continue
         salvage_result(sink, result)
         if isinstance(result, SalvageResult) and result.path is not None and result.action == "salvaged":
             sink.paths = [*still_there(sink.paths), result.path]
     sink._salvage_told.difference_update(set(parts) - set(waiting))
     return waiting
+
+
+def refused(sink: RotatingSink, err: SinkIOError, part: Path) -> None:
+    """The full disk refused ``part``'s salvage (``err``, :data:`FULL`), which waits: counted in
+    ``sink.disk_errors``; the first refusal of a file is an event, the next ones are not."""
+    sink.disk_errors += 1
+    if part not in sink._salvage_told:
+        sink._salvage_told.add(part)
+        sink.emit(DISK_EVENT, f"{err}; tried again after the next rotation",
+                  details=error_details("salvage_failed", err, part))
 
 
 def left_waiting(parts: list[Path]) -> None:

@@ -3,9 +3,10 @@
 Disk errors: no OSError ever leaves the sink. A failing operation (open, write, flush,
 fsync, close) abandons the file: closed without another byte, kept as ``.part`` when it
 holds complete chunks (salvaged when logging is back, or at the next start), else deleted. A
-salvage the still-full disk refuses (ENOSPC, EDQUOT) is tried again after each rotation, once
-the free space holds the file (:meth:`DiskOutages._salvage_waiting`); at a stop what still waits
-is left for the next start, one journal line.
+salvage the still-full disk refuses (ENOSPC, EDQUOT), of such a file or of an earlier run's
+leftover at start, is tried again after each rotation, once the free space holds the file
+(:meth:`DiskOutages._salvage_waiting`); at a stop what still waits is left for the next start,
+one journal line.
 A failed fsync is never retried on the same file. A new file is tried at once, then every
 ``retry_s``; messages written while no file is open, and those of the chunk that could
 not be written, are counted in :attr:`dropped`. Logging counts as back when a new file has been
@@ -20,6 +21,7 @@ other reason the first file cannot be opened is a SinkError.
 
 from __future__ import annotations
 
+import collections
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -56,6 +58,7 @@ class DiskOutages:
     _last_errno: int | None
     _abandoned: list[Path]
     _salvage_told: set[Path]
+    _refused: collections.deque[SinkIOError]
 
     if TYPE_CHECKING:
         def emit(self, kind: str, message: str, **fields: Any) -> None: ...
@@ -172,6 +175,7 @@ class DiskOutages:
         where = self.path.name if self.path is not None else "the log"
         text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
         self.emit(DISK_EVENT, text, **fields)
+        self._take_refused()
         abandoned, self._abandoned = self._abandoned, []
         waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), abandoned)
         self._abandoned = [*waiting, *self._abandoned]
@@ -180,6 +184,7 @@ class DiskOutages:
         """After a rotation finished a file (the disk took a whole file, and retention made room):
         the abandoned files a full disk refused to salvage, tried again; one larger than the free
         space (its copy would not fit) waits, untried. None during an outage or after close."""
+        self._take_refused()
         if self._closed or self._outage is not None or not self._abandoned:
             return
         try:
@@ -190,6 +195,22 @@ class DiskOutages:
         if tried:
             waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), tried)
             self._abandoned = [p for p in self._abandoned if p not in tried or p in waiting]
+
+    def _take_refused(self) -> None:
+        """The leftovers of an earlier run whose salvage at start the full disk refused join the
+        abandoned files (each counted and said once, :func:`~.disk_events.refused`), those still
+        there. Called by the thread that writes (a tick, a rotation, logging resumed, close),
+        never by the salvage thread: that thread only appends its refusals to :attr:`_refused`, a
+        deque (append and popleft are atomic), so it never touches ``_abandoned``,
+        ``_salvage_told`` or ``disk_errors``, which this thread iterates and updates with no lock
+        (a lock would have to be taken around every use of them, salvages of minutes included)."""
+        while self._refused:
+            err = self._refused.popleft()
+            if not err.path.exists():        # removed meanwhile: a failed salvage, said as such
+                disk_events.salvage_result(cast("RotatingSink", self), err)
+                continue
+            self._abandoned.append(err.path)
+            disk_events.refused(cast("RotatingSink", self), err, err.path)
 
 
 def _size(path: Path) -> int:

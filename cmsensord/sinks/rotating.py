@@ -29,10 +29,12 @@ the live loop does):
 Start: leftover ``<prefix>-*.mcap.part`` files (a crash, a kill, a disk error) are salvaged
 (:func:`~cmsensord.sinks.mcap_salvage.salvage`) into ``<stem>.salvaged.mcap`` before the first
 file is opened, or, with ``background_salvage``, by a thread while the first file is written (the
-daemon: start-up never waits for it); then retention runs. :meth:`RotatingSink.stop_salvage` (the
-daemon on SIGTERM) stops that thread between two records and leaves the ``.part`` it was reading
-as it was, for the next start; :meth:`RotatingSink.close` waits for the thread. Retention (after
-each rotation, at start and on a full disk): :mod:`cmsensord.sinks.retention`.
+daemon: start-up never waits for it); then retention runs. A leftover whose salvage the full disk
+refuses waits for room like a file abandoned during the run (:mod:`cmsensord.sinks.disk_outage`).
+:meth:`RotatingSink.stop_salvage` (the daemon on SIGTERM) stops that thread between two records and
+leaves the ``.part`` it was reading as it was, for the next start; :meth:`RotatingSink.close` waits
+for the thread. Retention (after each rotation, at start and on a full disk):
+:mod:`cmsensord.sinks.retention`.
 
 Disk errors: no OSError ever leaves this class; a failing disk is an outage
 (:mod:`cmsensord.sinks.disk_outage`). The sink's events: :mod:`cmsensord.sinks.sink_events`.
@@ -134,12 +136,14 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []      # kept for salvage: an outage's, or waiting for room
         self._salvage_told: set[Path] = set()   # ... whose salvage the full disk refused, said once
+        self._refused: collections.deque[SinkIOError] = collections.deque()   # leftovers' (_take_refused)
         self.retention = RetentionTold()    # what retention said once and does not repeat
         self.device = place_of(output.dir)   # files are made on this device only
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
         if salvage and not background_salvage:
             self._salvage_leftovers()
+            self._take_refused()
         self._retention()
         try:
             self._current = self._open()
@@ -154,10 +158,17 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._deliver()
 
     def _salvage_leftovers(self) -> None:
-        """Salvage the leftover ``.part`` files; their events are queued (thread-safe)."""
+        """Salvage the leftover ``.part`` files; their events are queued (thread-safe). One the
+        full disk refused is handed to the writing thread (:attr:`_refused`), where it waits for
+        room like an abandoned file (:meth:`_take_refused`)."""
         for result in salvage_leftovers(self.output.dir, self.output.prefix,
                                         stop=self._salvage_stop):
-            disk_events.salvage_result(self, result)
+            if isinstance(result, SinkIOError) and result.errno in disk_events.FULL:
+                self._refused.append(result)
+                if self.wake is not None:
+                    self.wake()              # the live loop ticks: its line comes at once
+            else:
+                disk_events.salvage_result(self, result)
 
     # -- files -------------------------------------------------------------
 
@@ -294,6 +305,8 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         this call makes them durable. Cheap when there is nothing to do; at most one fsync
         per call.
         """
+        if self._refused:
+            self._take_refused()
         self._deliver()
         now = self.clock()
         self._margin.tick(now, self._current.reorder if self._current is not None else None)
@@ -386,6 +399,7 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._closed = True                  # first: a failure now must not open a new file
         if self._salvager is not None:
             self._salvager.join()
+            self._take_refused()
             self._deliver()                  # its events, into the file still open
         cur = self._current
         if cur is not None and cur.messages_written == 0 and self.paths:
