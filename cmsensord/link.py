@@ -97,6 +97,8 @@ class SerialReader(threading.Thread):
         self.ever_connected = False
         self.last_data = time.monotonic()
         self.opened_at = self.last_data       # when the port was last opened (monotonic)
+        #: (t0_unwrapped, wall clock ns) of the newest frame read, when it was read
+        self.newest: tuple[int, int] | None = None
         self.failures = 0
         self._held = False                    # the last open failed as another process holds the port
         self.errors = 0                       # unexpected exceptions since the last bytes read
@@ -182,6 +184,8 @@ class SerialReader(threading.Thread):
             self._reopens = 0
         self._tee(data, now)
         frames = self.decoder.feed(data)
+        if frames:
+            self.newest = (frames[-1].t0_unwrapped, time.time_ns())
         self.pace.arrived(now, len(data), frames[-1].t0_unwrapped if frames else None, exact=self.waited)
         self.queue.named.clear()                # a wake_at from now on ends a named_wait
         # the pause is planned before the loop gets the frames (it wakes on them, and would wait

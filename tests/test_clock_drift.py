@@ -12,10 +12,12 @@ S = 1_000_000_000
 WALL0 = 1_700_000_000 * S
 
 
-def board(blocks_per_look: int, looks: int, clock: BlockClock, wall_s: float, found: list) -> float:
+def board(blocks_per_look: int, looks: int, clock: BlockClock, wall_s: float, found: list,
+          max_drift_s: float = 2.0) -> float:
     """``looks`` looks 0.1 s apart from ``wall_s`` on, ``blocks_per_look`` blocks of 250 samples
-    (fs 25000: 100 a second) before each; a drift found is rebased as the live loop does and kept
-    in ``found`` as (wall s, offset s, rate).  Returns the wall clock after the last look."""
+    (fs 25000: 100 a second) before each; a drift (by more than ``max_drift_s``) found is rebased
+    as the live loop does and kept in ``found`` as (wall s, offset s, rate).  Returns the wall
+    clock after the last look."""
     for _ in range(looks):
         wall_s += 0.1
         t0 = clock.slot_t0(clock.next_slot) if clock.slot0_t0 is not None else 0
@@ -23,7 +25,7 @@ def board(blocks_per_look: int, looks: int, clock: BlockClock, wall_s: float, fo
         clock.place(np.arange(t0, t0 + 250 * blocks_per_look, 250, dtype=np.int64))
         clock.advance(blocks_per_look)
         now = WALL0 + round(wall_s * S)
-        drift = clock.drift(now)
+        drift = clock.drift(now, max_drift_s)
         if drift is not None:
             found.append((round(wall_s, 1), *drift))
             clock.rebase(now, *drift)
@@ -97,3 +99,25 @@ def test_a_fast_crystal_is_re_anchored_once_and_its_stamps_stay_on_the_wall_cloc
     assert max(abs(b) for b in catching) < 0.1 * S, (min(catching) / S, max(catching) / S)
     on_wall = [b + o for b, o in zip(base[round(caught * 10):], off[round(caught * 10):])]
     assert max(abs(w) for w in on_wall) < 0.05 * S, (min(on_wall) / S, max(on_wall) / S)
+
+
+def test_a_fast_board_handled_late_at_first_is_measured_at_its_rate():
+    """A board at 1.2x whose frames are read as they come (every 0.1 s) but handled first 0.8 s
+    after the first came, all at once (a loaded board computer at the daemon's start),
+    ``max_drift_s`` 1 (tests/test_clock_fast_crystal.py live): the frames are stamped when
+    they came, so one drift, ahead by ~1.0 s, at 30000 Hz, 5 s after the newest frame read
+    then, and its stamps catch up at 1.1 times that rate.  Guards against the first frame
+    anchored when handled: ahead by 2.0 s at 34500 Hz, the catch-up's stamps of 25000 board
+    samples 0.658 s apart, not 0.758."""
+    clock, found = BlockClock(), []
+    t0, newest = 0, None
+    for look in range(1, 9):                   # read, not handled: 12 blocks a look
+        t0 += 12 * 250
+        newest = (t0 - 250, WALL0 + round(look * 0.1 * S))
+    clock.anchor(0, WALL0 + round(0.8 * S), newest)
+    clock.place(np.arange(0, t0, 250, dtype=np.int64))
+    clock.advance(t0 // 250)
+    board(12, 120, clock, 0.8, found, max_drift_s=1.0)
+    [(at, offset, rate)] = found
+    assert 5.8 <= at <= 6.0 and 1.0 < offset < 1.1 and abs(rate - 30000) < 100
+    assert clock.stamp_fs == round(rate * (1 + CATCH_UP))

@@ -71,7 +71,9 @@ class Processor(RawStage, Observing):
     ``auto_channels``: the channel list follows the board (the first RMS frame's
     C) instead of the configuration (used when the file lists no channels).
     ``diagnostics``: callable returning extra fields for ``/cm/diagnostics``
-    (queue depth, drops, lag) — supplied by the live loop.  ``observe``: called with (first_slot,
+    (queue depth, drops, lag) — supplied by the live loop.  ``arrived``: (t0_unwrapped, wall clock ns)
+    of the newest frame read, when it was read (the live reader's), which anchors the first frame
+    (:meth:`BlockClock.anchor`).  ``observe``: called with (first_slot,
     y, valid, seen: valid and not flat) of each block of observations before the banks.
     """
 
@@ -80,10 +82,11 @@ class Processor(RawStage, Observing):
                  diagnostics: Callable[[], dict] | None = None,
                  link_counters: Callable[[], dict] | None = None,
                  on_event: Callable[[dict], None] | None = None,
+                 arrived: Callable[[], tuple[int, int] | None] | None = None,
                  observe: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None):
         self.cfg, self.sink, self.clock_ns = cfg, sink, clock_ns
         self.observe = observe        # (first_slot, y, valid, seen: valid and not flat) of each block
-        self.diagnostics, self.link_counters = diagnostics, link_counters
+        self.diagnostics, self.link_counters, self.arrived = diagnostics, link_counters, arrived
         self.clock = BlockClock()
         self.log = EventLog(sink, lambda: self.clock.floor_ns or self.clock_ns(), on_event,
                             lambda: self.clock.seg_stamp_ns)
@@ -136,7 +139,7 @@ class Processor(RawStage, Observing):
         if not frames:
             return
         if self.clock.anchor_ns is None:
-            self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns())
+            self.clock.anchor(frames[0].t0_unwrapped, self.clock_ns(), self.arrived() if self.arrived else None)
         if len(frames) < SCAN_MIN or type(frames) is list and len(frames) < MAX_BATCH:   # a live call
             self._few(frames)
         else:

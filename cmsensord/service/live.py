@@ -275,6 +275,7 @@ def _run_live(cfg: Config, *, auto_channels: bool, duration_s: float | None, sim
     proc: Processor
     publisher = publisher_of(sink)
     proc = Processor(cfg, sink, auto_channels=auto_channels, link_counters=source.counters.as_dict,
+                     arrived=lambda: source.reader.newest,
                      diagnostics=lambda: {"queue_depth": len(queue), "queue_drops": queue.drops,
                                           "lag_s": round(proc.lag_s(), 3),
                                           **({"mqtt": publisher.diagnostics()} if publisher else {})})
