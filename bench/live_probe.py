@@ -293,10 +293,10 @@ def _install(state: dict) -> None:
 
     anchor = clock.BlockClock.anchor
 
-    def probed_anchor(self, t0, wall_ns):
+    def probed_anchor(self, t0, wall_ns, *newest):         # newest: the live reader's, where the tree has it
         if state["anchor"] is None:
             state["anchor"] = (t0, wall_ns)
-        return anchor(self, t0, wall_ns)
+        return anchor(self, t0, wall_ns, *newest)
 
     init = processor.Processor.__init__
 

@@ -30,12 +30,13 @@ def test_a_fast_board_is_re_anchored_once_and_never_said_to_be_behind(tmp_path):
     ``board clock behind the wall clock by 1.0 s`` ~11 s after it met it, with a jump of the
     stamps by that second, and against the wall clock on the stream's time base staying ahead by
     the drift once the stamps met the wall clock: ``stop`` stamped ~1 s after the daemon stopped.
+    The first frame is stamped when the loop handles it, as a replay stamps it: ahead by the
+    board's ~1 s and that delay (0.1-0.9 s on a loaded 2-core machine at the daemon's start).
     The rate is 30000 Hz measured over at least 5 s of wall clock from when the newest frame
     read at the first frame's handling came, each end of it a read or a look up to ~75 ms late
     on a loaded machine: within 3 %, 29100-30899 Hz, and the catch-up's stamps 25000 / (1.1 x
-    that) = 0.74-0.78 s apart.  Guards against the first frames stamped when handled (up to ~0.8 s after they came
-    on a loaded 2-core machine at the daemon's start): ahead by 2.0 s at 34700 Hz, the
-    catch-up's stamps 0.655 s apart."""
+    that) = 0.74-0.78 s apart.  Guards against the rate measured from the first frame's handling:
+    34700 Hz at a 0.8-s delay, the catch-up's stamps 0.655 s apart."""
     sim = spawn([sys.executable, "-m", "firmware_sim", "--pty", "--hold", "--start-on-stdin",
                  "--scenario", "healthy", "--speed", "1.2"],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=ENV)
@@ -56,7 +57,7 @@ def test_a_fast_board_is_re_anchored_once_and_never_said_to_be_behind(tmp_path):
     assert d.returncode == 0 and "Traceback" not in err, err
     lines = [line for line in warnings_and_infos(err) if "time_base" in line]
     assert len(lines) == 1 and re.fullmatch(
-        r"WARNING time_base: board clock ahead of the wall clock by 1\.\d s \(it runs at "
+        r"WARNING time_base: board clock ahead of the wall clock by (1\.\d|2\.0) s \(it runs at "
         r"(29[1-9]|30[0-8])\d\d Hz for fs 25000 Hz\): time segment 1 re-anchored to the wall clock", lines[0]), lines
     msgs = read_messages(next((tmp_path / "logs").glob("*.mcap")))
     decisions = [s for t, s, _ in msgs if t.endswith("/severity")]

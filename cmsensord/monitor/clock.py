@@ -109,25 +109,22 @@ class BlockClock:
         self.steps: list[Callable[[int], None]] = []
 
     def anchor(self, t0_unwrapped: int, wall_ns: int, newest: tuple[int, int] | None = None) -> None:
-        """The first frame: its t0 is ``wall_ns``, the wall clock when it is handled.  Live,
-        ``newest`` is (t0_unwrapped, wall clock ns) of the newest frame read, when it was read: that
-        frame is stamped the wall clock it came at, the frames before it back from there at fs
-        (never after ``wall_ns``; one at most ``MAX_FILL_S`` after the first), and the board's rate
-        is measured from it (:meth:`drift`).  Frames read before the loop handles them (the first
-        reads' backlog, a loaded machine) are stamped when they came, not when handled: stamps
-        late by that much would put the board ahead by it, and the rate measured from the first
-        frame too fast by it over ``DRIFT_MIN_WALL_S`` (by the board time between it and the
-        newest frame less their wall time, were it measured from the first frame's estimated
-        wall clock)."""
+        """The first frame: its t0 is ``wall_ns``, the wall clock when it is handled (live as in a
+        replay of the capture, so their stamps agree).  Live, ``newest`` is (t0_unwrapped, wall
+        clock ns) of the newest frame read, when it was read (one at most ``MAX_FILL_S`` after
+        the first, and not after ``wall_ns``): the board's rate is measured from that frame
+        (:meth:`drift`), not from the first one's handling.  The first reads' backlog, handled
+        late on a loaded machine, would otherwise shorten the wall time of the measurement by
+        the delay and give a rate too fast by it over ``DRIFT_MIN_WALL_S`` (34,700 Hz for a board
+        at 30,000 Hz handled 0.8 s late), and the catch-up's stamps a step too short."""
         if self.anchor_ns is not None:
             return
-        win = (t0_unwrapped, wall_ns)
-        if newest is not None and newest[1] <= wall_ns and 0 <= newest[0] - t0_unwrapped <= MAX_FILL_S * self.fs:
-            wall_ns, win = newest[1] - (newest[0] - t0_unwrapped) * 1_000_000_000 // self.fs, newest
         self.anchor_ns = self.seg_stamp_ns = wall_ns
         self.base_wall_ns = self.base_stamp_ns = wall_ns
         self.t0_first = t0_unwrapped
-        self.win_t0, self.win_wall_ns = win
+        self.win_t0, self.win_wall_ns = t0_unwrapped, wall_ns
+        if newest is not None and newest[1] <= wall_ns and 0 <= newest[0] - t0_unwrapped <= MAX_FILL_S * self.fs:
+            self.win_t0, self.win_wall_ns = newest
 
     def is_reset(self, t0_unwrapped: int, last_t0: int) -> bool:
         """:func:`is_reset` at this clock's fs and block length."""
