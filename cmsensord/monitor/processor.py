@@ -72,8 +72,8 @@ class Processor(RawStage, Observing):
     C) instead of the configuration (used when the file lists no channels).
     ``diagnostics``: callable returning extra fields for ``/cm/diagnostics``
     (queue depth, drops, lag) — supplied by the live loop.  ``arrived``: (t0_unwrapped, wall clock ns)
-    of the newest frame read, when it was read (the live reader's), which anchors the first frame
-    (:meth:`BlockClock.anchor`).  ``observe``: called with (first_slot,
+    of the newest frame read, when it was read (the live reader's): the board's rate is first
+    measured from it (:meth:`BlockClock.anchor`).  ``observe``: called with (first_slot,
     y, valid, seen: valid and not flat) of each block of observations before the banks.
     """
 
