@@ -5,8 +5,10 @@ on truncated and non-MCAP files."""
 from __future__ import annotations
 
 import dataclasses
+import errno
 import io
 import random
+import threading
 from pathlib import Path
 
 import pytest
@@ -15,6 +17,8 @@ from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from cmsensord.config import OutputConfig
+from cmsensord.sinks import disk_events, mcap_salvage
+from cmsensord.sinks.mcap_file import SinkIOError
 from cmsensord.sinks.mcap_sink import (
     McapSink,
     log_files,
@@ -284,6 +288,42 @@ def test_rotating_sink_salvages_at_start_and_queues_the_event_until_routed(tmp_p
     assert len(_read_all(logs / f"{STEM}.salvaged.mcap")) == n_complete
     assert not list(logs.glob("*.part"))
 
+
+
+def test_a_background_salvage_s_results_are_counted_and_said_by_the_writing_thread(tmp_path, monkeypatch):
+    """The daemon's salvage thread hands every result over: a leftover it cannot read (EACCES)
+    is counted in ``disk_errors`` and said by the thread that writes (no count lost to a
+    read-modify-write racing the writer's), its one line as before."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    part = logs / f"{STEM}.mcap.part"
+    part.write_bytes(_part_bytes(tmp_path)[0])
+
+    real_open = mcap_salvage._open_regular
+
+    def unreadable(path, result):                # the leftover only: the open file is busy, skipped
+        if path == part:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, result)
+
+    monkeypatch.setattr(mcap_salvage, "_open_regular", unreadable)
+    said_by = []
+    real = disk_events.salvage_result
+    def said(sink, result):
+        if isinstance(result, SinkIOError):
+            said_by.append((threading.current_thread().name, result.path))
+        real(sink, result)
+
+    monkeypatch.setattr(disk_events, "salvage_result", said)
+    sink = RotatingSink(dataclasses.replace(OutputConfig(), dir=str(logs)), background_salvage=True)
+    assert sink._salvager is not None
+    sink._salvager.join()
+    sink.tick()
+    assert said_by == [("MainThread", part)] and sink.disk_errors == 1
+    assert [(k, m, f["details"]["action"]) for k, m, f in sink.pending_events] == [
+        ("disk_error", f"{part}: cannot read: Permission denied; left for the next start", "salvage_failed")]
+    sink.close()
+    assert part.exists() and said_by == [("MainThread", part)] and sink.disk_errors == 1
 
 # --- cmsensord summary ------------------------------------------------------------
 

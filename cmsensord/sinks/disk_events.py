@@ -124,9 +124,10 @@ def left_waiting(parts: list[Path]) -> None:
 
 
 def salvage_result(sink: RotatingSink, result: SalvageResult | SinkIOError) -> None:
-    """A salvage's result as the ``sink``'s event (queued, thread-safe): a ``salvage`` event or a
-    ``disk_error`` one; none for a file another writer has open, nor for a salvage a stop
-    interrupted (the journal says so)."""
+    """A salvage's result as the ``sink``'s event: a ``salvage`` event or a ``disk_error`` one
+    (counted in ``sink.disk_errors``); none for a file another writer has open, nor for a salvage
+    a stop interrupted (the journal says so). Called by the thread that writes only (the salvage
+    thread hands its results over, :meth:`~.disk_outage.DiskOutages._take_salvaged`)."""
     if isinstance(result, SinkIOError):
         sink.disk_errors += 1
         sink.emit(DISK_EVENT, f"{result}; left for the next start",

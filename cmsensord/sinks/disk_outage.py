@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, cast
 from cmsensord.config import OutputConfig
 from cmsensord.sinks import disk_events
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
+from cmsensord.sinks.mcap_salvage import SalvageResult
 from cmsensord.sinks.retention import DISK_EVENT, free_bytes
 
 if TYPE_CHECKING:
@@ -58,7 +59,7 @@ class DiskOutages:
     _last_errno: int | None
     _abandoned: list[Path]
     _salvage_told: set[Path]
-    _refused: collections.deque[SinkIOError]
+    _salvaged: collections.deque[SalvageResult | SinkIOError]
 
     if TYPE_CHECKING:
         def emit(self, kind: str, message: str, **fields: Any) -> None: ...
@@ -175,7 +176,7 @@ class DiskOutages:
         where = self.path.name if self.path is not None else "the log"
         text, fields = disk_events.resumed(where, outage, self.clock() - outage["start"])
         self.emit(DISK_EVENT, text, **fields)
-        self._take_refused()
+        self._take_salvaged()
         abandoned, self._abandoned = self._abandoned, []
         waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), abandoned)
         self._abandoned = [*waiting, *self._abandoned]
@@ -184,7 +185,7 @@ class DiskOutages:
         """After a rotation finished a file (the disk took a whole file, and retention made room):
         the abandoned files a full disk refused to salvage, tried again; one larger than the free
         space (its copy would not fit) waits, untried. None during an outage or after close."""
-        self._take_refused()
+        self._take_salvaged()
         if self._closed or self._outage is not None or not self._abandoned:
             return
         try:
@@ -196,22 +197,24 @@ class DiskOutages:
             waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), tried)
             self._abandoned = [p for p in self._abandoned if p not in tried or p in waiting]
 
-    def _take_refused(self) -> None:
-        """The leftovers of an earlier run whose salvage at start the full disk refused join the
-        abandoned files (each counted and said once, :func:`~.disk_events.refused`), those still
-        there. Called by the thread that writes (a tick, a rotation, logging resumed, close),
-        never by the salvage thread: that thread only appends its refusals to :attr:`_refused`, a
-        deque (append and popleft are atomic), so it never touches ``_abandoned``,
-        ``_salvage_told`` or ``disk_errors``, which this thread iterates and updates with no lock
-        (a lock would have to be taken around every use of them, salvages of minutes included)."""
-        while self._refused:
-            err = self._refused.popleft()
-            if not err.path.exists():        # removed meanwhile: a failed salvage, said as such
-                disk_events.salvage_result(cast("RotatingSink", self), err)
-                continue
-            self._abandoned.append(err.path)
-            disk_events.refused(cast("RotatingSink", self), err, err.path)
-
+    def _take_salvaged(self) -> None:
+        """The results of the salvage of an earlier run's leftovers, in order: each one's event
+        and count (:func:`~.disk_events.salvage_result`), but a leftover the full disk refused,
+        still there, joins the abandoned files (counted and said once, :func:`~.disk_events.refused`).
+        Called by the thread that writes (a tick, a rotation, logging resumed, close, the start
+        after a salvage in the foreground), never by the salvage thread: that thread only appends
+        its results to :attr:`_salvaged`, a deque (append and popleft are atomic), so it never
+        touches ``_abandoned``, ``_salvage_told``, ``disk_errors`` or the events, which this thread
+        reads and updates with no lock (a lock would have to be taken around every use of them,
+        salvages of minutes included)."""
+        sink = cast("RotatingSink", self)
+        while self._salvaged:
+            result = self._salvaged.popleft()
+            if isinstance(result, SinkIOError) and result.errno in _FULL and result.path.exists():
+                self._abandoned.append(result.path)
+                disk_events.refused(sink, result, result.path)
+            else:                            # a refused file removed meanwhile: a failed salvage
+                disk_events.salvage_result(sink, result)
 
 def _size(path: Path) -> int:
     """``path``'s size; 0 when it cannot be read (gone: salvage drops it)."""

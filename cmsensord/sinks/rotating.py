@@ -61,7 +61,7 @@ from cmsensord.sinks.durable import urgent, urgent_in
 from cmsensord.sinks.flush_margin import FlushMargin
 from cmsensord.sinks.log_dir import place_of
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError
-from cmsensord.sinks.mcap_salvage import salvage_leftovers
+from cmsensord.sinks.mcap_salvage import SalvageResult, salvage_leftovers
 from cmsensord.sinks.reorder_lag import ReorderLag
 from cmsensord.sinks.retention import MB, RetentionTold, apply_retention, still_there
 from cmsensord.sinks.sink_events import SinkEvents
@@ -119,7 +119,8 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._rotate_bytes = int(output.rotate_mb * MB)
         self._pending: collections.deque[tuple[str, str, dict]] = collections.deque(maxlen=_QUEUED_EVENTS)
         self._on_event = on_event
-        #: called when an event is queued (a salvage thread's): the live loop wakes and ticks
+        #: called when an event is queued or the salvage thread hands its results over: the live
+        #: loop wakes and ticks
         self.wake: Callable[[], Any] | None = None
         self._delivering = False
         self._closed = False
@@ -136,14 +137,15 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._last_errno: int | None = None
         self._abandoned: list[Path] = []      # kept for salvage: an outage's, or waiting for room
         self._salvage_told: set[Path] = set()   # ... whose salvage the full disk refused, said once
-        self._refused: collections.deque[SinkIOError] = collections.deque()   # leftovers' (_take_refused)
+        #: the leftovers' salvage results, handed to the writing thread (:meth:`_take_salvaged`)
+        self._salvaged: collections.deque[SalvageResult | SinkIOError] = collections.deque()
         self.retention = RetentionTold()    # what retention said once and does not repeat
         self.device = place_of(output.dir)   # files are made on this device only
         self._salvage_stop = threading.Event()
         self._salvager: threading.Thread | None = None
         if salvage and not background_salvage:
             self._salvage_leftovers()
-            self._take_refused()
+            self._take_salvaged()
         self._retention()
         try:
             self._current = self._open()
@@ -158,17 +160,14 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._deliver()
 
     def _salvage_leftovers(self) -> None:
-        """Salvage the leftover ``.part`` files; their events are queued (thread-safe). One the
-        full disk refused is handed to the writing thread (:attr:`_refused`), where it waits for
-        room like an abandoned file (:meth:`_take_refused`)."""
-        for result in salvage_leftovers(self.output.dir, self.output.prefix,
-                                        stop=self._salvage_stop):
-            if isinstance(result, SinkIOError) and result.errno in disk_events.FULL:
-                self._refused.append(result)
-                if self.wake is not None:
-                    self.wake()              # the live loop ticks: its line comes at once
-            else:
-                disk_events.salvage_result(self, result)
+        """Salvage the leftover ``.part`` files (in the background salvage thread, or at start).
+        Each result is handed to the writing thread (:attr:`_salvaged`), which makes it an event
+        and counts it (:meth:`_take_salvaged`); this method touches nothing else of the sink."""
+        results = salvage_leftovers(self.output.dir, self.output.prefix, stop=self._salvage_stop)
+        for result in results:
+            self._salvaged.append(result)
+        if results and self.wake is not None:
+            self.wake()                      # the live loop ticks: the lines come at once
 
     # -- files -------------------------------------------------------------
 
@@ -301,12 +300,13 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         """Once per loop iteration: make pending events durable, flush at least every
         ``flush_s``, fsync every ``fsync_s``, rotate by time, retry after a disk error.
 
-        Events queued before the call (:meth:`emit`: a salvage's) are delivered first, so
-        this call makes them durable. Cheap when there is nothing to do; at most one fsync
+        The background salvage's results handed over before the call become events
+        (:meth:`_take_salvaged`), and events queued before it are delivered first, so this call
+        makes them durable. Cheap when there is nothing to do; at most one fsync
         per call.
         """
-        if self._refused:
-            self._take_refused()
+        if self._salvaged:
+            self._take_salvaged()
         self._deliver()
         now = self.clock()
         self._margin.tick(now, self._current.reorder if self._current is not None else None)
@@ -399,7 +399,7 @@ class RotatingSink(SinkEvents, DiskOutages, ReorderLag):
         self._closed = True                  # first: a failure now must not open a new file
         if self._salvager is not None:
             self._salvager.join()
-            self._take_refused()
+            self._take_salvaged()
             self._deliver()                  # its events, into the file still open
         cur = self._current
         if cur is not None and cur.messages_written == 0 and self.paths:

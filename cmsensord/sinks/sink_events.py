@@ -22,7 +22,8 @@ class SinkEvents:
 
     _pending: collections.deque[tuple[str, str, dict]]
     _on_event: Callable[..., Any] | None
-    #: called when an event is queued (a salvage thread's): the live loop wakes and ticks
+    #: called when an event is queued or the salvage thread hands its results over: the live loop
+    #: wakes and ticks
     wake: Callable[[], Any] | None
     _delivering: bool
 
