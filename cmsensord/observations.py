@@ -9,8 +9,8 @@ indicator (``/cm/<ch>/indicators``, under the alarm manager's names) over the
 records inside the window that miss at most ``indicators.max_missing_fraction`` of their
 samples, as the daemon gives their spectral indicators (a bearing line the envelope spectrum does not resolve has none:
 the replay's ``lines_unresolved`` events are among the notes, and so is the line that a RAW board's
-records are shorter than ``indicators.interval_s``, when they are).  Commissioning learns from exactly what the daemon
-will see.
+records are shorter than ``indicators.interval_s``, or an RMS board's not that long, when they
+are).  Commissioning learns from exactly what the daemon will see.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ from cmsensord.errors import CmsensordError
 from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
-from cmsensord.monitor.indicators import capped_interval
 from cmsensord.monitor.processor import Processor
-from cmsensord.protocol import MODE_RAW
+from cmsensord.monitor.record_length import capped_interval, rounded_interval
+from cmsensord.protocol import MODE_RAW, MODE_RMS
 from cmsensord.sinks.memory import ListSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 from cmsensord.source import CaptureSource, require_frames
@@ -162,10 +162,13 @@ def _window_notes(lost: np.ndarray, rate: float, total: float, to_s: float | Non
 
 def _capped(cfg: Config, proc: Processor) -> tuple[str, ...]:
     """The line that the RAW board's records are shorter than ``indicators.interval_s`` (more
-    samples than a record holds at its rate: :func:`~cmsensord.monitor.indicators.capped_interval`),
-    so the indicator baselines are medians over records of that length."""
+    samples than a record holds at its rate: :func:`~cmsensord.monitor.record_length.capped_interval`),
+    or the RMS board's not that long (not a whole number of its blocks:
+    :func:`~cmsensord.monitor.record_length.rounded_interval`), so the indicator baselines are
+    medians over records of that length."""
     st = proc.setup.status
-    line = capped_interval(cfg, st.fs) if st is not None and st.mode == MODE_RAW else None
+    line = None if st is None else capped_interval(cfg, st.fs) if st.mode == MODE_RAW \
+        else rounded_interval(cfg, st.fs, st.block_len) if st.mode == MODE_RMS else None
     return (line,) if line else ()
 
 

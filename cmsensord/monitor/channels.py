@@ -12,9 +12,11 @@ and left out.  A board in RMS mode leaves the alarms on any indicator but ``acce
 the severity index blind (and those of an operating state from the shaft speed): one
 ``config`` warning names them (:func:`~cmsensord.monitor.alarms.blind_in_rms_mode`), once a
 run; a board in RAW mode at a rate whose records cannot be ``indicators.interval_s`` long (more
-than :data:`~cmsensord.monitor.indicators.MAX_INTERVAL_SAMPLES` samples) gets one ``config``
-warning giving the record length it gets instead (:func:`~cmsensord.monitor.indicators.capped_interval`),
-once per rate.  With the first data, the severity chain (and the microphone estimator)
+than :data:`~cmsensord.monitor.record_length.MAX_INTERVAL_SAMPLES` samples) gets one ``config``
+warning giving the record length it gets instead (:func:`~cmsensord.monitor.record_length.capped_interval`),
+once per rate, and so does a board in RMS mode whose blocks ``indicators.interval_s`` is not a
+whole number of (:func:`~cmsensord.monitor.record_length.rounded_interval`), once per
+fs/block_len.  With the first data, the severity chain (and the microphone estimator)
 of the usable channels is made.  Then the channels' names are known: an alarm rule or a bearing naming none of them is a
 :class:`~cmsensord.errors.ConfigError` (:mod:`cmsensord.config.channel_refs`).
 
@@ -58,8 +60,8 @@ from cmsensord.config.channel_refs import check_channel_refs
 from cmsensord.monitor.alarms import blind_in_rms_mode
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
-from cmsensord.monitor.indicators import capped_interval
 from cmsensord.monitor.microphone import Microphones
+from cmsensord.monitor.record_length import capped_interval, rounded_interval
 from cmsensord.monitor.severity import ChannelView, SeverityChain
 from cmsensord.protocol import (
     MAX_BLOCKS_PER_S,
@@ -114,6 +116,7 @@ class ChannelSetup:
         self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
         self._unlike_said: tuple[int, int] | None = None    # the rate unlike the commissioned one said
         self._capped_said: int | None = None    # the RAW rate whose record cap on interval_s was said
+        self._rounded_said: tuple[int, int] | None = None   # the RMS fs/block_len interval_s was rounded to, said
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the stamp and channel count of the run's first
@@ -189,14 +192,24 @@ class ChannelSetup:
                       + (f", tacho of {st.tacho_ppr} pulse(s) per revolution" if st.tacho_inputs else ""),
                       self.clock.stamp_ns(f.t0_unwrapped))
         self._unlike_commissioned(f, st)
-        capped = capped_interval(self.cfg, st.fs) if st.mode == MODE_RAW and st.fs != self._capped_said else None
-        if capped is not None:
-            self._capped_said = st.fs
-            self.log.emit("config", None, capped, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
+        self._interval_unlike_records(f, st)
         blind = blind_in_rms_mode(self.cfg) if st.mode == MODE_RMS and not self._rms_told else None
         if blind is not None:
             self._rms_told = True
             self.log.emit("config", None, blind, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
+
+    def _interval_unlike_records(self, f: Frame, st: Status) -> None:
+        """A WARNING when the board's records cannot be ``indicators.interval_s`` long: a RAW
+        record's sample cap, once per rate; an RMS record's whole blocks, once per fs/block_len."""
+        line = None
+        if st.mode == MODE_RAW and st.fs != self._capped_said:
+            line = capped_interval(self.cfg, st.fs)
+            self._capped_said = st.fs if line is not None else self._capped_said
+        elif st.mode == MODE_RMS and (st.fs, st.block_len) != self._rounded_said:
+            line = rounded_interval(self.cfg, st.fs, st.block_len)
+            self._rounded_said = (st.fs, st.block_len) if line is not None else self._rounded_said
+        if line is not None:
+            self.log.emit("config", None, line, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
 
     def _unlike_commissioned(self, f: Frame, st: Status) -> None:
         """A WARNING, once per rate, when the board streams at another sample rate or block length

@@ -27,7 +27,9 @@ once TACHO frames cover the interval's end; at most ``MAX_WAIT_S``), then
 
 RMS mode (:class:`RmsIndicators`): the board's 100 Hz block RMS supports the
 overall acceleration RMS only, sqrt(mean(block RMS^2)) over the interval (the
-board's RMS keeps any DC offset); every other indicator is listed unavailable.
+board's RMS keeps any DC offset); every other indicator is listed unavailable.  An
+interval is a whole number of blocks, ``indicators.interval_s`` rounded to the nearest
+(half to even), at least one (:func:`~cmsensord.monitor.record_length.rms_blocks`).
 
 :class:`Indicators` is what the Processor holds: it makes the chains for the
 vibration channels (again when the rate or the channels change, the old one
@@ -43,7 +45,6 @@ in time order on the new time base, back or forward.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -60,6 +61,7 @@ from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.empty_bands import empty_band_events, empty_bands
 from cmsensord.monitor.events import Event
 from cmsensord.monitor.line_notes import line_notes
+from cmsensord.monitor.record_length import MAX_INTERVAL_SAMPLES, rms_blocks
 from cmsensord.sinks.schemas import indicators_topic
 
 if TYPE_CHECKING:
@@ -159,27 +161,6 @@ def _bearing(b) -> dict:
                       **({"ratio": _num(p.ratio)} if p.ratio == p.ratio else {})}
                   for k, p in b.lines.items()}
     return d
-
-
-#: most samples in one interval (a board far faster than the TM4C's 25 kHz gets shorter
-#: intervals, so memory stays bounded: a copy per interval waits for the shaft speed)
-MAX_INTERVAL_SAMPLES = 1 << 16
-
-
-def capped_interval(cfg: Config, fs: int) -> str | None:
-    """The line that ``indicators.interval_s`` is longer than a RAW record holds at ``fs`` Hz
-    (:data:`MAX_INTERVAL_SAMPLES`), with the record length given instead and the longest
-    setting that fits; None when it fits or no indicator record is written.  RMS mode has no
-    such bound (its records sum block RMS values, no samples are kept)."""
-    ind = cfg.indicators
-    if not ind.enabled or fs < 1 or round(ind.interval_s * fs) <= MAX_INTERVAL_SAMPLES:
-        return None
-    cap = MAX_INTERVAL_SAMPLES / fs
-    step = 10.0 ** (math.floor(math.log10(cap)) - 2)      # 3 significant figures, rounded down: it fits
-    fits = math.floor(cap / step + 1e-9) * step
-    return (f"indicators.interval_s {ind.interval_s:g} s is longer than a RAW record holds at {fs} Hz "
-            f"({MAX_INTERVAL_SAMPLES:,} samples, {cap:.3g} s): indicator records are {cap:.3g} s; set "
-            f"indicators.interval_s {fits:.3g} or less")
 
 
 class IndicatorChain:
@@ -372,7 +353,7 @@ class RmsIndicators:
     def __init__(self, cfg: Config, channels: tuple[ChannelConfig, ...], *, fs: int, block_len: int,
                  clock: BlockClock):
         self.channels, self.clock, self.fs, self.L = channels, clock, fs, block_len
-        self.per = max(1, round(cfg.indicators.interval_s * fs / block_len))   # blocks per interval
+        self.per = rms_blocks(cfg.indicators.interval_s, fs, block_len)   # blocks per interval
         self.N = self.per * block_len
         self.start: int | None = None
         self.newest: int | None = None          # t0 of the newest block taken
