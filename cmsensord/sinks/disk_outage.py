@@ -31,7 +31,7 @@ from cmsensord.config import OutputConfig
 from cmsensord.sinks import disk_events
 from cmsensord.sinks.mcap_file import McapSink, SinkIOError, moved_error
 from cmsensord.sinks.mcap_salvage import SalvageResult
-from cmsensord.sinks.retention import DISK_EVENT, free_bytes
+from cmsensord.sinks.retention import DISK_EVENT, file_sizes, free_bytes
 
 if TYPE_CHECKING:
     from cmsensord.sinks.rotating import RotatingSink
@@ -192,7 +192,8 @@ class DiskOutages:
             free: int | None = free_bytes(self.output.dir)
         except OSError:
             free = None                      # not known: tried
-        tried = [p for p in self._abandoned if free is None or _size(p) <= free]
+        sizes = file_sizes(self._abandoned)      # one gone is tried: salvage drops it
+        tried = [p for p in self._abandoned if free is None or sizes.get(p, 0) <= free]
         if tried:
             waiting = disk_events.salvage_abandoned(cast("RotatingSink", self), tried)
             self._abandoned = [p for p in self._abandoned if p not in tried or p in waiting]
@@ -215,10 +216,3 @@ class DiskOutages:
                 disk_events.refused(sink, result, result.path)
             else:                            # a refused file removed meanwhile: a failed salvage
                 disk_events.salvage_result(sink, result)
-
-def _size(path: Path) -> int:
-    """``path``'s size; 0 when it cannot be read (gone: salvage drops it)."""
-    try:
-        return path.lstat().st_size
-    except OSError:
-        return 0

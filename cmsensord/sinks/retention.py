@@ -137,7 +137,7 @@ def apply_retention(sink: RotatingSink) -> None:
     own = _retained(sink)                # a replay's: its own files only, never the daemon's
     if own is not None:
         finished, parts = [p for p in finished if p in own], [p for p in parts if p in own]
-    sizes = _sizes(finished + parts)
+    sizes = file_sizes(finished + parts)
     oldest = [p for p in finished if p in sizes]    # in the order they were opened (log_names)
     older = sum(sizes[p] for p in oldest[:-1])       # what the floor may delete
     told = sink.retention
@@ -166,7 +166,7 @@ def _whose(sink: RotatingSink) -> str:
     return "this run" if sink.own_files else f"prefix {sink.output.prefix!r}"
 
 
-def _sizes(paths: list[Path]) -> dict[Path, int]:
+def file_sizes(paths: list[Path]) -> dict[Path, int]:
     """The size of each of ``paths`` still there; a planted link's own, never its target's."""
     sizes = {}
     for path in paths:
