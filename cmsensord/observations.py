@@ -32,8 +32,7 @@ from cmsensord.importing.capture_settings import capture_settings
 from cmsensord.importing.channel_names import capture_channels
 from cmsensord.importing.sidecar import sidecar
 from cmsensord.monitor.processor import Processor
-from cmsensord.monitor.record_length import capped_interval, rounded_interval
-from cmsensord.protocol import MODE_RAW, MODE_RMS
+from cmsensord.monitor.record_length import interval_note
 from cmsensord.sinks.memory import ListSink
 from cmsensord.sinks.schemas import TOPIC_EVENTS
 from cmsensord.source import CaptureSource, require_frames
@@ -167,8 +166,7 @@ def _capped(cfg: Config, proc: Processor) -> tuple[str, ...]:
     :func:`~cmsensord.monitor.record_length.rounded_interval`), so the indicator baselines are
     medians over records of that length."""
     st = proc.setup.status
-    line = None if st is None else capped_interval(cfg, st.fs) if st.mode == MODE_RAW \
-        else rounded_interval(cfg, st.fs, st.block_len) if st.mode == MODE_RMS else None
+    line = None if st is None else interval_note(cfg, st.mode, st.fs, st.block_len)
     return (line,) if line else ()
 
 

@@ -61,7 +61,7 @@ from cmsensord.monitor.alarms import blind_in_rms_mode
 from cmsensord.monitor.clock import BlockClock
 from cmsensord.monitor.events import EventLog
 from cmsensord.monitor.microphone import Microphones
-from cmsensord.monitor.record_length import capped_interval, rounded_interval
+from cmsensord.monitor.record_length import interval_note
 from cmsensord.monitor.severity import ChannelView, SeverityChain
 from cmsensord.protocol import (
     MAX_BLOCKS_PER_S,
@@ -115,8 +115,7 @@ class ChannelSetup:
         self._missing_said: int | None = None     # the board's channel count the missing ones were said for
         self._rms_told = False                  # the alarms an RMS-mode board leaves blind were named
         self._unlike_said: tuple[int, int] | None = None    # the rate unlike the commissioned one said
-        self._capped_said: int | None = None    # the RAW rate whose record cap on interval_s was said
-        self._rounded_said: tuple[int, int] | None = None   # the RMS fs/block_len interval_s was rounded to, said
+        self._interval_said: dict[int, str] = {}   # per mode, the last record-length line said
         self.n_board = 0                        # the board's channel count the chain was made for
         self._odd_run = 0                       # data frames of another count in a row
         self._odd_first: tuple[int, int] = (0, 0)   # the stamp and channel count of the run's first
@@ -201,14 +200,9 @@ class ChannelSetup:
     def _interval_unlike_records(self, f: Frame, st: Status) -> None:
         """A WARNING when the board's records cannot be ``indicators.interval_s`` long: a RAW
         record's sample cap, once per rate; an RMS record's whole blocks, once per fs/block_len."""
-        line = None
-        if st.mode == MODE_RAW and st.fs != self._capped_said:
-            line = capped_interval(self.cfg, st.fs)
-            self._capped_said = st.fs if line is not None else self._capped_said
-        elif st.mode == MODE_RMS and (st.fs, st.block_len) != self._rounded_said:
-            line = rounded_interval(self.cfg, st.fs, st.block_len)
-            self._rounded_said = (st.fs, st.block_len) if line is not None else self._rounded_said
-        if line is not None:
+        line = interval_note(self.cfg, st.mode, st.fs, st.block_len)
+        if line is not None and self._interval_said.get(st.mode) != line:
+            self._interval_said[st.mode] = line
             self.log.emit("config", None, line, self.clock.stamp_ns(f.t0_unwrapped), log_level=logging.WARNING)
 
     def _unlike_commissioned(self, f: Frame, st: Status) -> None:

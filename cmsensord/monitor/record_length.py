@@ -15,6 +15,8 @@ import dataclasses
 import math
 from typing import TYPE_CHECKING
 
+from cmsensord.protocol import MODE_RAW, MODE_RMS
+
 if TYPE_CHECKING:
     from cmsensord.config import Config
 
@@ -65,3 +67,12 @@ def rounded_interval(cfg: Config, fs: int, block_len: int) -> str | None:
             f"({block_len} samples at {fs} Hz, {block_len / fs:.12g} s): indicator records are {per} "
             f"block{'s' if per > 1 else ''}, {per * block_len / fs:.12g} s; set indicators.interval_s "
             + " or ".join(f"{n * block_len / fs:.12g}" for n in near))
+
+
+def interval_note(cfg: Config, mode: int, fs: int, block_len: int) -> str | None:
+    """The line that a board in ``mode`` at ``fs`` Hz and ``block_len`` samples a block gives
+    records of another length than ``indicators.interval_s``: :func:`capped_interval` in RAW
+    mode, :func:`rounded_interval` in RMS mode; None when they are that long."""
+    if mode == MODE_RAW:
+        return capped_interval(cfg, fs)
+    return rounded_interval(cfg, fs, block_len) if mode == MODE_RMS else None
